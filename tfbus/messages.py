@@ -1,0 +1,131 @@
+"""Message value types with ROS field names (geometry_msgs, std_msgs, tf2_msgs).
+
+All are immutable ``NamedTuple``s: cheap to create (a lookup returns one per call),
+hashable, unpackable (``x, y, z = v``) and with readable ``repr``s. Units are metres for
+translations and points; quaternions are (x, y, z, w), w last, as in ROS messages.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+from tfbus.time import Time
+
+__all__ = [
+    "Header",
+    "Point",
+    "PointStamped",
+    "Pose",
+    "PoseStamped",
+    "Quaternion",
+    "TFMessage",
+    "Transform",
+    "TransformStamped",
+    "Vector3",
+    "Vector3Stamped",
+]
+
+
+class Vector3(NamedTuple):
+    """geometry_msgs/Vector3: a direction or translation, metres."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+class Point(NamedTuple):
+    """geometry_msgs/Point: a position, metres."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+class Quaternion(NamedTuple):
+    """geometry_msgs/Quaternion in (x, y, z, w) order, w last; identity by default.
+
+    tf2 does not normalise quaternions; neither does tfbus (see ``BufferCore``).
+    """
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    w: float = 1.0
+
+
+_ZERO_VECTOR = Vector3()
+_IDENTITY_QUATERNION = Quaternion()
+
+
+class Transform(NamedTuple):
+    """geometry_msgs/Transform: ``translation`` (metres) then ``rotation`` (x, y, z, w).
+
+    Maps a point p in the child frame to the parent frame: ``R(rotation) p + translation``.
+    """
+
+    translation: Vector3 = _ZERO_VECTOR
+    rotation: Quaternion = _IDENTITY_QUATERNION
+
+
+class Pose(NamedTuple):
+    """geometry_msgs/Pose: ``position`` (metres) and ``orientation`` (x, y, z, w)."""
+
+    position: Point = Point()
+    orientation: Quaternion = _IDENTITY_QUATERNION
+
+
+_ZERO_TIME = Time(0)
+
+
+class Header(NamedTuple):
+    """std_msgs/Header: ``stamp`` (:class:`~tfbus.time.Time`) and ``frame_id``."""
+
+    stamp: Time = _ZERO_TIME
+    frame_id: str = ""
+
+
+_EMPTY_HEADER = Header()
+
+
+class TransformStamped(NamedTuple):
+    """geometry_msgs/TransformStamped: the pose of ``child_frame_id`` in ``header.frame_id``.
+
+    ``header.frame_id`` is the parent frame, ``child_frame_id`` the child frame,
+    ``header.stamp`` the time the transform is valid at.
+    """
+
+    header: Header = _EMPTY_HEADER
+    child_frame_id: str = ""
+    transform: Transform = Transform()
+
+
+class PointStamped(NamedTuple):
+    """geometry_msgs/PointStamped: a point (metres) in ``header.frame_id`` at ``header.stamp``."""
+
+    header: Header = _EMPTY_HEADER
+    point: Point = Point()
+
+
+class PoseStamped(NamedTuple):
+    """geometry_msgs/PoseStamped: a pose in ``header.frame_id`` at ``header.stamp``."""
+
+    header: Header = _EMPTY_HEADER
+    pose: Pose = Pose()
+
+
+class Vector3Stamped(NamedTuple):
+    """geometry_msgs/Vector3Stamped: a direction in ``header.frame_id``.
+
+    Transforming it rotates it only; translation does not apply (tf2_geometry_msgs).
+    """
+
+    header: Header = _EMPTY_HEADER
+    vector: Vector3 = _ZERO_VECTOR
+
+
+class TFMessage(NamedTuple):
+    """tf2_msgs/TFMessage: the message carried on ``/tf`` and ``/tf_static``."""
+
+    transforms: Sequence[TransformStamped] = ()
