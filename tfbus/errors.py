@@ -46,7 +46,18 @@ class ExtrapolationException(TransformException):
 class InvalidArgumentException(TransformException):
     """Malformed input: an empty or '/'-prefixed frame id in a query, or a transform with
     a NaN, an infinite value, a denormalised quaternion, an empty id or a self transform
-    (``tf2::InvalidArgumentException``)."""
+    (``tf2::InvalidArgumentException``).
+
+    Attributes:
+        codes: for a rejected transform, tf2's ``TF_*`` codes in tf2's order
+            (``TF_SELF_TRANSFORM``, ``TF_NO_CHILD_FRAME_ID``, ``TF_NO_FRAME_ID``,
+            ``TF_NAN_INPUT``, then tfbus's ``TF_INF_INPUT``, then
+            ``TF_DENORMALIZED_QUATERNION``); empty for invalid query arguments.
+    """
+
+    def __init__(self, message: str = "", codes: tuple[str, ...] = ()) -> None:
+        super().__init__(message)
+        self.codes = codes
 
 
 class TimeoutException(TransformException):
