@@ -27,12 +27,13 @@ from __future__ import annotations
 import math
 import struct
 from bisect import bisect_left
+from math import acos, nan, sin, sqrt
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._tf2math import Tf7, lerp_ratio, slerp
+from tfbus._tf2math import Tf7
 
 __all__ = ["OK", "OLD_DATA", "REPEATED_DATA", "StaticCache", "TimeCache", "format_sec"]
 
@@ -243,6 +244,7 @@ class TimeCache:
         if tail == head:
             return ""
         smv = self._smv
+        vmv = self._vmv
         parents = self._parents
         if time == 0:
             i = tail - 1
@@ -263,23 +265,44 @@ class TimeCache:
                     i0 = i - 1
                     p0 = self._parent if parents is None else int(parents[i0])
                     if parents is not None and int(parents[i]) != p0:
-                        return p0, _ROW.unpack_from(self._vmv, i0 * _ROW_BYTES)
+                        return p0, _ROW.unpack_from(vmv, i0 * _ROW_BYTES)
                     t0 = smv[i0]
                     ax, ay, az, aqx, aqy, aqz, aqw, bx, by, bz, bqx, bqy, bqz, bqw = (
-                        _ROW.unpack_from(self._vmv, i0 * _ROW_BYTES)
-                        + _ROW.unpack_from(self._vmv, i * _ROW_BYTES)
+                        _ROW.unpack_from(vmv, i0 * _ROW_BYTES)
+                        + _ROW.unpack_from(vmv, i * _ROW_BYTES)
                     )
-                    r = lerp_ratio(time, t0, smv[i])
+                    # TimeCache::interpolate. The ratio is correctly rounded from integer
+                    # ns (tf2 divides double seconds; the two differ by < 1e-15 relative).
+                    r = (time - t0) / (smv[i] - t0)
                     s = 1.0 - r
+                    # tf2 slerp (Quaternion.h), inlined: this is the lookup hot path.
+                    dot = aqx * bqx + aqy * bqy + aqz * bqz + aqw * bqw
+                    if dot < 0.0:
+                        dot = -dot
+                        bqx, bqy, bqz, bqw = -bqx, -bqy, -bqz, -bqw
+                    c = dot / sqrt(
+                        (aqx * aqx + aqy * aqy + aqz * aqz + aqw * aqw)
+                        * (bqx * bqx + bqy * bqy + bqz * bqz + bqw * bqw)
+                    )
+                    if c == 1.0:  # acos(c) == 0: tf2 returns the older rotation unchanged
+                        return p0, (s * ax + r * bx, s * ay + r * by, s * az + r * bz,
+                                    aqx, aqy, aqz, aqw)
+                    theta = acos(c) if c < 1.0 else nan  # C acos gives NaN above 1
+                    d = 1.0 / sin(theta)
+                    s0 = sin(s * theta) * d
+                    s1 = sin(r * theta) * d
                     return p0, (
                         s * ax + r * bx,
                         s * ay + r * by,
                         s * az + r * bz,
-                        *slerp(aqx, aqy, aqz, aqw, bqx, bqy, bqz, bqw, r),
+                        aqx * s0 + bqx * s1,
+                        aqy * s0 + bqy * s1,
+                        aqz * s0 + bqz * s1,
+                        aqw * s0 + bqw * s1,
                     )
         return (
             self._parent if parents is None else int(parents[i]),
-            _ROW.unpack_from(self._vmv, i * _ROW_BYTES),
+            _ROW.unpack_from(vmv, i * _ROW_BYTES),
         )
 
     def sample_at(self, index: int) -> Tf7:
