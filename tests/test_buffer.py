@@ -1,0 +1,239 @@
+"""Awaitable Buffer: event-driven waits, timeouts on the buffer's clock, cancellation,
+clock jumps; on asyncio and trio (anyio's pytest plugin), driven by ManualClock."""
+
+from __future__ import annotations
+
+import math
+
+import anyio
+import pytest
+
+from tfbus import (
+    ExtrapolationException,
+    Header,
+    InvalidArgumentException,
+    Point,
+    PointStamped,
+    Quaternion,
+    Time,
+    TimeoutException,
+    Transform,
+    TransformStamped,
+    Vector3,
+    Vector3Stamped,
+)
+from tfbus.buffer import Buffer
+from tfbus.clock import ManualClock
+
+pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+T0 = Time(1000)
+
+
+async def settle() -> None:
+    """Let every task run until blocked (ManualClock.advance(0) does exactly that)."""
+    await ManualClock().advance(0)
+
+
+def tf(parent: str, child: str, stamp: Time, x: float = 0.0, yaw: float = 0.0) -> TransformStamped:
+    q = Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+    return TransformStamped(Header(stamp, parent), child, Transform(Vector3(x, 0.0, 0.0), q))
+
+
+async def test_wait_before_any_data_returns_when_data_arrives() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    result: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        result.append(await buf.lookup_transform_async("base_link", "base_laser", Time(0)))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        assert not result and buf.pending_waits == 1
+        buf.set_transform(tf("odom", "base_link", T0, x=5.0))  # unrelated to the path
+        await settle()
+        assert not result
+        buf.set_transform(tf("base_link", "base_laser", T0, x=0.1))
+    assert result[0].transform.translation.x == pytest.approx(0.1)
+    assert result[0].header.stamp == T0
+    assert buf.pending_waits == 0
+
+
+async def test_future_time_resolves_with_interpolation_once_bracketed() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    buf.set_transform(tf("a", "b", Time(1000), x=0.0, yaw=0.0))
+    target = Time(1000, 500_000_000)  # 1000.5 s: in the future of the data
+    got: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        got.append(await buf.lookup_transform_async("a", "b", target, timeout=5.0))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        assert not got
+        buf.set_transform(tf("a", "b", Time(1001), x=2.0, yaw=math.pi / 2))
+    ts = got[0]
+    assert ts.header.stamp == target
+    assert ts.transform.translation.x == pytest.approx(1.0)
+    # halfway along the geodesic: yaw pi/4
+    q = ts.transform.rotation
+    assert 2 * math.atan2(q.z, q.w) == pytest.approx(math.pi / 4)
+
+
+async def test_timeout_on_the_buffer_clock_names_what_is_missing() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    buf.set_transform(tf("a", "b", T0))
+    errors: list[BaseException] = []
+
+    async def waiter() -> None:
+        try:
+            await buf.lookup_transform_async("a", "c", Time(0), timeout=2.0)
+        except TimeoutException as exc:
+            errors.append(exc)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await clock.advance(1.999)
+        assert not errors
+        await clock.advance(0.001)
+    assert len(errors) == 1
+    message = str(errors[0])
+    assert "Timed out after 2 s" in message
+    assert "canTransform: source_frame c does not exist." in message
+    assert buf.pending_waits == 0
+
+
+async def test_cancel_scopes_work_and_leave_nothing_registered() -> None:
+    buf = Buffer(clock=ManualClock(T0))
+    for _ in range(10_000):
+        with anyio.CancelScope() as scope:
+            scope.cancel()
+            await buf.wait_for_transform("map", "base_link", Time(0))
+        assert scope.cancelled_caught
+    assert buf.pending_waits == 0
+    assert not buf._index
+
+    # and cancellation of a wait that is really pending
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(buf.wait_for_transform, "map", "base_link", Time(0))
+        await settle()
+        assert buf.pending_waits == 1
+        tg.cancel_scope.cancel()
+    assert buf.pending_waits == 0 and not buf._index
+
+
+async def test_many_cancelled_pending_waits_leave_no_waiter() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    async with anyio.create_task_group() as tg:
+        for i in range(2_000):
+            tg.start_soon(buf.wait_for_transform, "map", f"f{i % 7}", Time(0), 100.0)
+        await settle()
+        assert buf.pending_waits == 2_000
+        tg.cancel_scope.cancel()
+    assert buf.pending_waits == 0 and not buf._index
+
+
+async def test_wait_for_time_out_of_cache_window_fails_at_once() -> None:
+    buf = Buffer(cache_time=10.0, clock=ManualClock(T0))
+    buf.set_transform(tf("a", "b", Time(1000)))
+    buf.set_transform(tf("a", "b", Time(1020)))
+    with pytest.raises(ExtrapolationException, match="Lookup would require extrapolation"):
+        await buf.wait_for_transform("a", "b", Time(1005))
+
+
+async def test_invalid_ids_raise_at_once() -> None:
+    buf = Buffer(clock=ManualClock(T0))
+    with pytest.raises(InvalidArgumentException):
+        await buf.wait_for_transform("/a", "b", Time(0))
+    with pytest.raises(InvalidArgumentException):
+        await buf.wait_for_transform("a", "", Time(0))
+
+
+async def test_can_transform_async_is_a_bool() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    out: list[bool] = []
+
+    async def ask() -> None:
+        out.append(await buf.can_transform_async("a", "b", Time(0), timeout=1.0))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(ask)
+        await clock.advance(1.0)
+    assert out == [False]
+    buf.set_transform(tf("a", "b", T0))
+    assert await buf.can_transform_async("a", "b", Time(0), timeout=1.0)
+
+
+async def test_transform_point_vector_and_the_tutorial_numbers() -> None:
+    buf = Buffer(clock=ManualClock(T0))
+    laser = TransformStamped(
+        Header(T0, "base_link"), "base_laser", Transform(Vector3(0.1, 0.0, 0.2), Quaternion())
+    )
+    buf.set_transform(laser)
+    p = PointStamped(Header(Time(0), "base_laser"), Point(1.0, 0.2, 0.0))
+    out = await buf.transform(p, "base_link")
+    assert out.header.frame_id == "base_link"
+    assert out.header.stamp == T0
+    assert tuple(out.point) == pytest.approx((1.1, 0.2, 0.2))
+    v = await buf.transform(
+        Vector3Stamped(Header(Time(0), "base_laser"), Vector3(1, 0, 0)), "base_link"
+    )
+    assert tuple(v.vector) == pytest.approx((1.0, 0.0, 0.0))  # rotation only
+    with pytest.raises(TypeError):
+        await buf.transform("not a message", "base_link")  # type: ignore[call-overload]
+
+
+async def test_backward_clock_jump_clears_and_reevaluates_waits() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    buf.set_transform(tf("a", "b", Time(999)))
+    buf.set_transform(tf("a", "b", Time(1000)))
+    assert buf.can_transform("a", "b", Time(999, 500_000_000))
+    results: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        results.append(await buf.lookup_transform_async("a", "c", Time(0)))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        await clock.set(Time(500))  # jump back
+        assert not buf.can_transform("a", "b", Time(999, 500_000_000))
+        assert buf.pending_waits == 1  # still waiting, re-evaluated
+        buf.set_transform(tf("a", "b", Time(500)))
+        buf.set_transform(tf("b", "c", Time(500), x=1.0))
+    assert results[0].header.stamp == Time(500)
+
+
+async def test_full_lookup_waits_for_both_legs() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    got: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        got.append(
+            await buf.lookup_transform_full_async("b", Time(1005), "b", Time(1000), "a", 10.0)
+        )
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        buf.set_transform(tf("a", "b", Time(1000), x=1.0))
+        await settle()
+        assert not got
+        buf.set_transform(tf("a", "b", Time(1005), x=3.0))
+    # b moved from x=1 to x=3 in the fixed frame a: a point fixed in a seen from b moved by -2
+    assert got[0].transform.translation.x == pytest.approx(-2.0)

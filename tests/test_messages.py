@@ -1,0 +1,136 @@
+"""Tests for tfbus.messages: ROS-named, immutable value types."""
+
+from __future__ import annotations
+
+import pickle
+
+import pytest
+
+import tfbus
+from tfbus.messages import (
+    Header,
+    Point,
+    PointStamped,
+    Pose,
+    PoseStamped,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+    Vector3Stamped,
+)
+from tfbus.time import Time
+
+ALL_TYPES = (
+    Header,
+    Point,
+    PointStamped,
+    Pose,
+    PoseStamped,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+    Vector3Stamped,
+)
+
+
+def sample() -> TransformStamped:
+    return TransformStamped(
+        header=Header(stamp=Time(1_700_000_000, 5), frame_id="base_link"),
+        child_frame_id="base_laser",
+        transform=Transform(
+            translation=Vector3(0.1, 0.0, 0.2), rotation=Quaternion(0.0, 0.0, 0.6, 0.8)
+        ),
+    )
+
+
+def test_defaults() -> None:
+    assert Vector3() == (0.0, 0.0, 0.0)
+    assert Point() == (0.0, 0.0, 0.0)
+    assert Quaternion() == (0.0, 0.0, 0.0, 1.0)  # identity, w last
+    assert Transform() == (Vector3(), Quaternion())
+    assert Pose() == (Point(), Quaternion())
+    assert Header() == (Time(0), "")
+    assert Header().stamp.is_zero()
+    ts = TransformStamped()
+    assert (ts.header, ts.child_frame_id, ts.transform) == (Header(), "", Transform())
+    assert PointStamped() == (Header(), Point())
+    assert PoseStamped() == (Header(), Pose())
+    assert Vector3Stamped() == (Header(), Vector3())
+    assert tuple(TFMessage().transforms) == ()
+
+
+def test_ros_field_names_and_order() -> None:
+    assert Vector3._fields == ("x", "y", "z")
+    assert Point._fields == ("x", "y", "z")
+    assert Quaternion._fields == ("x", "y", "z", "w")
+    assert Transform._fields == ("translation", "rotation")
+    assert Pose._fields == ("position", "orientation")
+    assert Header._fields == ("stamp", "frame_id")
+    assert TransformStamped._fields == ("header", "child_frame_id", "transform")
+    assert PointStamped._fields == ("header", "point")
+    assert PoseStamped._fields == ("header", "pose")
+    assert Vector3Stamped._fields == ("header", "vector")
+    assert TFMessage._fields == ("transforms",)
+    q = Quaternion(1.0, 2.0, 3.0, 4.0)
+    assert (q.x, q.y, q.z, q.w) == (1.0, 2.0, 3.0, 4.0)
+    x, y, z = Vector3(1.0, 2.0, 3.0)
+    assert (x, y, z) == (1.0, 2.0, 3.0)
+
+
+def test_immutable() -> None:
+    ts = sample()
+    with pytest.raises(AttributeError):
+        ts.child_frame_id = "other"  # type: ignore[misc]
+    with pytest.raises(AttributeError):
+        ts.transform.translation.x = 1.0  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        ts.header.frame_id[0] = "x"  # type: ignore[index]
+    moved = ts._replace(child_frame_id="other")
+    assert moved.child_frame_id == "other"
+    assert ts.child_frame_id == "base_laser"
+
+
+def test_default_instances_are_shared_safely() -> None:
+    # Shared default values are immutable, so sharing them cannot leak changes.
+    assert Transform().translation is Transform().translation
+    a = TransformStamped()
+    b = a._replace(header=a.header._replace(frame_id="map"))
+    assert TransformStamped().header.frame_id == ""
+    assert b.header.frame_id == "map"
+
+
+def test_equality_and_hashing() -> None:
+    assert sample() == sample()
+    assert hash(sample()) == hash(sample())
+    assert len({sample(), sample()}) == 1
+    assert sample() != sample()._replace(header=Header(Time(1_700_000_000, 6), "base_link"))
+    assert hash(TFMessage(transforms=(sample(),))) == hash(TFMessage(transforms=(sample(),)))
+
+
+def test_repr_is_readable_and_round_trips() -> None:
+    ts = sample()
+    text = repr(ts)
+    assert text == (
+        "TransformStamped(header=Header(stamp=Time(sec=1700000000, nanosec=5), "
+        "frame_id='base_link'), child_frame_id='base_laser', "
+        "transform=Transform(translation=Vector3(x=0.1, y=0.0, z=0.2), "
+        "rotation=Quaternion(x=0.0, y=0.0, z=0.6, w=0.8)))"
+    )
+    namespace = {name: getattr(tfbus, name) for name in tfbus.__all__}
+    assert eval(text, namespace) == ts
+    for cls in ALL_TYPES:
+        assert eval(repr(cls()), namespace) == cls()
+
+
+def test_pickle_round_trip() -> None:
+    msg = TFMessage(transforms=(sample(), sample()._replace(child_frame_id="b")))
+    assert pickle.loads(pickle.dumps(msg)) == msg
+
+
+def test_exported_from_package() -> None:
+    for cls in ALL_TYPES:
+        assert getattr(tfbus, cls.__name__) is cls

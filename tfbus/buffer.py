@@ -1,0 +1,387 @@
+"""Buffer: a BufferCore whose lookups you can ``await`` until the data arrives.
+
+The async surface over the sans-I/O core, as tf2_ros's ``Buffer`` is over tf2's
+``BufferCore``. Waiting is event-driven, never polled (tf2_ros polls at 20 Hz): a waiter
+is indexed by the names of the frames its answer depends on — the source and target
+(and fixed) frames and their ancestors, both by each link's newest parent and by its
+parent at the requested time — and re-checked only when a transform for one of those
+frames is stored. A wait for a time in the future resolves as soon as data covering that
+time arrives. A wait whose time has fallen out of the cache window fails at once, as
+tf2's transformable requests do (``BufferCore::addTransformableRequest``,
+``testTransformableRequests``). A clock that jumps backwards clears the buffer (tf2_ros
+``Buffer`` on a time jump back) and pending waits are re-evaluated.
+
+``timeout=`` arguments are measured on the buffer's clock (so a ``ManualClock`` drives
+them in tests); anyio cancel scopes (``fail_after``, ``move_on_after``) work as well. A
+cancelled or timed-out wait leaves nothing registered.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable
+from typing import TypeVar, overload
+
+import anyio
+
+from tfbus.clock import Clock, SystemClock
+from tfbus.core import BufferCore, SetResult, _strip_slash
+from tfbus.errors import ExtrapolationException, TimeoutException, TransformException
+from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
+from tfbus.messages import PointStamped, PoseStamped, TransformStamped, Vector3Stamped
+from tfbus.time import Duration, Time
+
+__all__ = ["Buffer"]
+
+_log = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
+_Stamped = TypeVar("_Stamped", PointStamped, PoseStamped, Vector3Stamped)
+
+
+class _Waiter:
+    """One pending wait: ``check()`` returns the answer, or None while unavailable, or
+    raises to fail the wait. Indexed under ``frames`` (from ``frames_fn()``) while
+    pending."""
+
+    __slots__ = ("check", "error", "event", "frames", "frames_fn", "result")
+
+    def __init__(
+        self, check: Callable[[], object | None], frames_fn: Callable[[], frozenset[str]]
+    ) -> None:
+        self.check = check
+        self.frames_fn = frames_fn
+        self.event = anyio.Event()
+        self.frames: frozenset[str] = frozenset()
+        self.result: object | None = None
+        self.error: BaseException | None = None
+
+
+class Buffer(BufferCore):
+    """A :class:`~tfbus.core.BufferCore` plus awaitable lookups (tf2_ros ``Buffer``).
+
+    Args:
+        cache_time: history kept per dynamic link, seconds or a Duration.
+        clock: time source for timeouts and for detecting backward jumps; defaults to
+            :class:`~tfbus.clock.SystemClock`.
+
+    Every synchronous method of BufferCore is available unchanged. Use from one event
+    loop (the one that runs its waits); not thread-safe.
+    """
+
+    def __init__(self, cache_time: float | Duration = 10.0, *, clock: Clock | None = None) -> None:
+        super().__init__(cache_time)
+        self.clock: Clock = clock if clock is not None else SystemClock()
+        self._index: dict[str, set[_Waiter]] = {}
+        self._unregister_jump = self.clock.on_jump(self._on_jump)
+
+    # ------------------------------------------------------------------ notification
+
+    def _insert(self, ts: TransformStamped, authority: str, is_static: bool) -> SetResult:
+        result = super()._insert(ts, authority, is_static)
+        if self._index and result is SetResult.STORED:
+            self._recheck_frames(
+                (_strip_slash(ts.child_frame_id), _strip_slash(ts.header.frame_id))
+            )
+        return result
+
+    def _recheck_frames(self, names: Iterable[str]) -> None:
+        due: set[_Waiter] = set()
+        for name in names:
+            waiters = self._index.get(name)
+            if waiters:
+                due.update(waiters)
+        for waiter in due:
+            self._recheck(waiter)
+
+    def _recheck(self, waiter: _Waiter) -> None:
+        try:
+            result = waiter.check()
+        except TransformException as exc:
+            waiter.error = exc
+        else:
+            if result is None:
+                self._reindex(waiter, waiter.frames_fn())  # the path may have changed
+                return
+            waiter.result = result
+        self._unindex(waiter)
+        waiter.event.set()
+
+    def _on_jump(self, old: Time, new: Time) -> None:
+        _log.warning(
+            "Detected jump back in time of %.3f s. Clearing TF buffer.", (old.ns - new.ns) / 1e9
+        )
+        self.clear()
+        pending = {w for ws in self._index.values() for w in ws}
+        for waiter in pending:
+            self._recheck(waiter)
+
+    @property
+    def pending_waits(self) -> int:
+        """How many waits are currently registered (0 once every wait has ended)."""
+        return len({w for ws in self._index.values() for w in ws})
+
+    def close(self) -> None:
+        """Stop following the clock's jumps. Pending waits are unaffected."""
+        self._unregister_jump()
+
+    # ------------------------------------------------------------------ indexing
+
+    def _frames_of(self, frames: Iterable[str], time_ns: int) -> frozenset[str]:
+        names = self._frame_names
+        out: set[str] = set()
+        at = Time.from_ns(time_ns)
+        for frame in frames:
+            out.add(frame)
+            out.update(names[i] for i in self._chain_ids(frame))
+            # Also the ancestors by the parent valid at the requested time (re-parenting).
+            parent = self.get_parent(frame, at) if time_ns else None
+            seen = 0
+            while parent is not None and parent not in out and seen <= 1000:
+                out.add(parent)
+                out.update(names[i] for i in self._chain_ids(parent))
+                parent = self.get_parent(parent, at)
+                seen += 1
+        return frozenset(out)
+
+    def _reindex(self, waiter: _Waiter, frames: frozenset[str]) -> None:
+        self._unindex(waiter)
+        waiter.frames = frames
+        for name in frames:
+            self._index.setdefault(name, set()).add(waiter)
+
+    def _unindex(self, waiter: _Waiter) -> None:
+        for name in waiter.frames:
+            waiters = self._index.get(name)
+            if waiters is not None:
+                waiters.discard(waiter)
+                if not waiters:
+                    del self._index[name]
+        waiter.frames = frozenset()
+
+    # ------------------------------------------------------------------ waiting
+
+    def _check_ids(self, *args: tuple[str, str]) -> None:
+        """Raise tf2's InvalidArgumentException for an empty or '/'-prefixed id (unknown
+        ids are fine: they may yet arrive)."""
+        for arg, frame in args:
+            if not frame or frame[0] == "/":
+                self._validate(f"lookupTransform argument {arg}", frame)
+
+    def _out_of_window(self, target: str, source: str, time_ns: int) -> bool:
+        """tf2's test: the request time is older than latest common time - cache_time."""
+        if time_ns == 0:
+            return False
+        try:
+            latest = self.get_latest_common_time(target, source).ns
+        except TransformException:
+            return False
+        return latest != 0 and time_ns + self.cache_time_ns < latest
+
+    def _try_lookup(self, target: str, source: str, time: Time) -> TransformStamped | None:
+        ok, _ = self._can_transform(target, source, time.ns)
+        if ok:
+            return self.lookup_transform(target, source, time)
+        if self._out_of_window(target, source, time.ns):
+            self.lookup_transform(target, source, time)  # raises tf2's extrapolation error
+            raise ExtrapolationException(  # pragma: no cover - lookup raised above
+                f"Transform from [{source}] to [{target}] at {time} left the cache window"
+            )
+        return None
+
+    async def _wait(
+        self,
+        check: Callable[[], _T | None],
+        frames: Callable[[], frozenset[str]],
+        timeout: float | Duration | None,
+        describe: Callable[[], str],
+    ) -> _T:
+        result = check()
+        if result is not None:
+            return result
+        waiter = _Waiter(check, frames)
+        self._reindex(waiter, frames())
+        try:
+            if timeout is None:
+                await waiter.event.wait()
+            else:
+                await self._wait_with_timeout(waiter, timeout, describe)
+        finally:
+            self._unindex(waiter)
+        if waiter.error is not None:
+            raise waiter.error
+        return waiter.result  # type: ignore[return-value]
+
+    async def _wait_with_timeout(
+        self, waiter: _Waiter, timeout: float | Duration, describe: Callable[[], str]
+    ) -> None:
+        seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
+        timed_out = False
+        async with anyio.create_task_group() as tg:
+
+            async def expire() -> None:
+                nonlocal timed_out
+                await self.clock.sleep(seconds)
+                timed_out = True
+                tg.cancel_scope.cancel()
+
+            tg.start_soon(expire)
+            await waiter.event.wait()
+            tg.cancel_scope.cancel()
+        if timed_out and not waiter.event.is_set():
+            raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
+
+    def _describe(self, target: str, source: str, time: Time) -> str:
+        _, reason = self._can_transform(target, source, time.ns)
+        what = f"transform from [{source}] to [{target}] at time {time.ns / 1e9:.9f}"
+        return f"{what}: {reason}" if reason else what
+
+    async def wait_for_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+    ) -> TransformStamped:
+        """Wait until ``lookup_transform(target_frame, source_frame, time)`` can succeed,
+        and return its result. ``time`` may lie in the future; ``Time(0)`` waits until
+        the two frames are connected with data.
+
+        Args:
+            timeout: seconds (or a Duration) of the buffer's clock; None waits forever.
+
+        Raises:
+            TimeoutException: not available within ``timeout``; the message says what
+                was missing (tf2's reason).
+            ExtrapolationException: ``time`` is older than the cache window of the path
+                (it can never become available).
+            InvalidArgumentException: a frame id is empty or starts with '/'.
+            LookupException: the path between the frames contains a loop.
+        """
+        if target_frame != source_frame:
+            self._check_ids(("target_frame", target_frame), ("source_frame", source_frame))
+        return await self._wait(
+            lambda: self._try_lookup(target_frame, source_frame, time),
+            lambda: self._frames_of((target_frame, source_frame), time.ns),
+            timeout,
+            lambda: self._describe(target_frame, source_frame, time),
+        )
+
+    async def lookup_transform_async(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+    ) -> TransformStamped:
+        """:meth:`lookup_transform`, waiting up to ``timeout`` for the data.
+
+        Raises: as :meth:`wait_for_transform`.
+        """
+        return await self.wait_for_transform(target_frame, source_frame, time, timeout)
+
+    async def lookup_transform_full_async(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+    ) -> TransformStamped:
+        """:meth:`lookup_transform_full` (time travel through ``fixed_frame``), waiting up
+        to ``timeout`` for both legs' data.
+
+        Raises:
+            TimeoutException: not available within ``timeout``.
+            ExtrapolationException: a leg's time fell out of the cache window.
+            InvalidArgumentException: a frame id is empty or starts with '/'.
+        """
+        self._check_ids(
+            ("target_frame", target_frame),
+            ("source_frame", source_frame),
+            ("fixed_frame", fixed_frame),
+        )
+
+        def check() -> TransformStamped | None:
+            if self._try_lookup(fixed_frame, source_frame, source_time) is None:
+                return None
+            if self._try_lookup(target_frame, fixed_frame, target_time) is None:
+                return None
+            return self.lookup_transform_full(
+                target_frame, target_time, source_frame, source_time, fixed_frame
+            )
+
+        def frames() -> frozenset[str]:
+            return self._frames_of((fixed_frame, source_frame), source_time.ns) | self._frames_of(
+                (target_frame, fixed_frame), target_time.ns
+            )
+
+        def describe() -> str:
+            return (
+                f"{self._describe(fixed_frame, source_frame, source_time)}; "
+                f"{self._describe(target_frame, fixed_frame, target_time)}"
+            )
+
+        return await self._wait(check, frames, timeout, describe)
+
+    async def can_transform_async(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+    ) -> bool:
+        """Whether the transform becomes available within ``timeout`` (tf2_ros
+        ``can_transform`` with a timeout). Never raises a TransformException."""
+        try:
+            await self.wait_for_transform(target_frame, source_frame, time, timeout)
+        except TransformException:
+            return False
+        return True
+
+    @overload
+    async def transform(
+        self, obj: PointStamped, target_frame: str, timeout: float | Duration | None = None
+    ) -> PointStamped: ...
+    @overload
+    async def transform(
+        self, obj: PoseStamped, target_frame: str, timeout: float | Duration | None = None
+    ) -> PoseStamped: ...
+    @overload
+    async def transform(
+        self, obj: Vector3Stamped, target_frame: str, timeout: float | Duration | None = None
+    ) -> Vector3Stamped: ...
+    async def transform(
+        self,
+        obj: PointStamped | PoseStamped | Vector3Stamped,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+    ) -> PointStamped | PoseStamped | Vector3Stamped:
+        """Express a stamped point, pose or vector in ``target_frame`` (tf2_ros
+        ``Buffer.transform`` with tf2_geometry_msgs): looks up ``target_frame ←
+        obj.header.frame_id`` at ``obj.header.stamp`` (``Time(0)``: latest), waiting up to
+        ``timeout``. Vectors are rotated only.
+
+        Returns:
+            The same message type with ``header.frame_id == target_frame`` and
+            ``header.stamp`` the lookup's stamp (the time actually used).
+
+        Raises:
+            TypeError: ``obj`` is not a PointStamped, PoseStamped or Vector3Stamped.
+            TimeoutException, ExtrapolationException, InvalidArgumentException,
+            LookupException: as :meth:`wait_for_transform`.
+        """
+        if not isinstance(obj, PointStamped | PoseStamped | Vector3Stamped):
+            raise TypeError(
+                "Buffer.transform takes PointStamped, PoseStamped or Vector3Stamped, "
+                f"not {type(obj).__name__}"
+            )
+        ts = await self.wait_for_transform(
+            target_frame, obj.header.frame_id, obj.header.stamp, timeout
+        )
+        if isinstance(obj, PointStamped):
+            return do_transform_point(obj, ts)
+        if isinstance(obj, PoseStamped):
+            return do_transform_pose(obj, ts)
+        return do_transform_vector3(obj, ts)
