@@ -57,11 +57,6 @@ def test_from_sec_is_within_float_precision_at_epoch_scale() -> None:
     assert abs(t.ns - EPOCH_NS) < 512
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug in time.py: from_sec rounds sec*1e9 in float first, so it is up to "
-    "~128 ns away from the float's nearest nanosecond at epoch scale",
-)
 def test_from_sec_rounds_to_nearest_nanosecond() -> None:
     x = 1_700_000_000.123456789
     assert Time.from_sec(x).ns == round(Fraction(x) * NSEC_PER_SEC)
@@ -137,21 +132,11 @@ def test_numpy_scalars_accepted() -> None:
     assert type(Time.from_ns(np.int64(5)).ns) is int
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug in time.py: numpy integer seconds take the float branch of _ns_from and "
-    "overflow (np.uint32 ROS1 stamps silently give a wrong Time)",
-)
 def test_numpy_uint32_seconds() -> None:
     with np.errstate(over="ignore"):
         assert Time(np.uint32(1_700_000_000)) == Time(1_700_000_000)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug in time.py: comparisons don't return NotImplemented for other types "
-    "(Time < 5 raises AttributeError; Time < Duration silently compares nanoseconds)",
-)
 def test_ordering_against_other_types_raises_type_error() -> None:
     with pytest.raises(TypeError):
         Time(1) < 5  # type: ignore[operator]  # noqa: B015

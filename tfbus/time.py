@@ -8,6 +8,10 @@ tf2 (``tf2/src/buffer_core.cpp``, ``BufferCore::lookupTransform``).
 
 from __future__ import annotations
 
+import math
+import operator
+from fractions import Fraction
+from numbers import Integral
 from typing import Final, overload
 
 __all__ = ["NSEC_PER_SEC", "Duration", "Time"]
@@ -15,10 +19,21 @@ __all__ = ["NSEC_PER_SEC", "Duration", "Time"]
 NSEC_PER_SEC: Final = 1_000_000_000
 
 
+def _sec_to_ns(sec: float) -> int:
+    """Float seconds to the nearest integer nanosecond of the float's exact value (the
+    product ``sec * 1e9`` would round in float first, off by up to ~128 ns at 1.7e9 s)."""
+    if not math.isfinite(sec):
+        raise ValueError(f"time in seconds must be finite, got {sec!r}")
+    return round(Fraction(sec) * NSEC_PER_SEC)
+
+
 def _ns_from(sec: int | float, nanosec: int) -> int:
-    if isinstance(sec, int):
-        return sec * NSEC_PER_SEC + int(nanosec)
-    return round(sec * NSEC_PER_SEC) + int(nanosec)
+    # numpy integers (e.g. ROS1 uint32 stamps) are converted exactly, never multiplied in
+    # their own fixed width.
+    ns = operator.index(nanosec)
+    if isinstance(sec, Integral):
+        return operator.index(sec) * NSEC_PER_SEC + ns
+    return _sec_to_ns(float(sec)) + ns
 
 
 class Duration:
@@ -33,6 +48,7 @@ class Duration:
     _ns: int
 
     def __init__(self, sec: int | float = 0, nanosec: int = 0) -> None:
+        """``sec`` (int, numpy integer or float seconds) plus ``nanosec`` (integer)."""
         self._ns = _ns_from(sec, nanosec)
 
     @classmethod
@@ -45,7 +61,7 @@ class Duration:
     @classmethod
     def from_sec(cls, sec: float) -> Duration:
         """Build a Duration from float seconds, rounded to the nearest nanosecond."""
-        return cls.from_ns(round(sec * NSEC_PER_SEC))
+        return cls.from_ns(_sec_to_ns(sec))
 
     @property
     def ns(self) -> int:
@@ -83,16 +99,24 @@ class Duration:
         return isinstance(other, Duration) and self._ns == other._ns
 
     def __lt__(self, other: Duration) -> bool:
-        return self._ns < other._ns
+        if isinstance(other, Duration):
+            return self._ns < other._ns
+        return NotImplemented
 
     def __le__(self, other: Duration) -> bool:
-        return self._ns <= other._ns
+        if isinstance(other, Duration):
+            return self._ns <= other._ns
+        return NotImplemented
 
     def __gt__(self, other: Duration) -> bool:
-        return self._ns > other._ns
+        if isinstance(other, Duration):
+            return self._ns > other._ns
+        return NotImplemented
 
     def __ge__(self, other: Duration) -> bool:
-        return self._ns >= other._ns
+        if isinstance(other, Duration):
+            return self._ns >= other._ns
+        return NotImplemented
 
     def __hash__(self) -> int:
         return hash(("Duration", self._ns))
@@ -142,9 +166,9 @@ class Time:
         """Build a Time from float seconds, rounded to the nearest nanosecond.
 
         Raises:
-            ValueError: if ``sec`` is negative.
+            ValueError: if ``sec`` is negative or not finite.
         """
-        return cls.from_ns(round(sec * NSEC_PER_SEC))
+        return cls.from_ns(_sec_to_ns(sec))
 
     @property
     def ns(self) -> int:
@@ -191,16 +215,24 @@ class Time:
         return isinstance(other, Time) and self._ns == other._ns
 
     def __lt__(self, other: Time) -> bool:
-        return self._ns < other._ns
+        if isinstance(other, Time):
+            return self._ns < other._ns
+        return NotImplemented
 
     def __le__(self, other: Time) -> bool:
-        return self._ns <= other._ns
+        if isinstance(other, Time):
+            return self._ns <= other._ns
+        return NotImplemented
 
     def __gt__(self, other: Time) -> bool:
-        return self._ns > other._ns
+        if isinstance(other, Time):
+            return self._ns > other._ns
+        return NotImplemented
 
     def __ge__(self, other: Time) -> bool:
-        return self._ns >= other._ns
+        if isinstance(other, Time):
+            return self._ns >= other._ns
+        return NotImplemented
 
     def __hash__(self) -> int:
         return hash(self._ns)
