@@ -1,0 +1,319 @@
+"""Tests for tfbus/broadcaster.py and tfbus/listener.py (with the real BufferCore)."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import anyio
+import pytest
+
+from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
+from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, MemoryTransport
+from tfbus.clock import ManualClock, every
+from tfbus.core import BufferCore
+from tfbus.errors import ExtrapolationException, LookupException
+from tfbus.listener import ListenerStatistics, TransformListener
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
+from tfbus.time import Duration, Time
+
+pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+T0 = Time(1_248_138_528)
+IDENTITY = Quaternion()
+
+
+def ts(
+    child: str,
+    x: float = 0.1,
+    parent: str = "base_link",
+    stamp: Time = T0,
+    rotation: Quaternion = IDENTITY,
+) -> TransformStamped:
+    return TransformStamped(Header(stamp, parent), child, Transform(Vector3(x, 0.0, 0.2), rotation))
+
+
+async def settle(clock: ManualClock) -> None:
+    """Let every task run until blocked (advance(0) does exactly that, on both backends)."""
+    await clock.advance(0)
+
+
+async def test_broadcaster_publishes_one_tfmessage_per_call() -> None:
+    async with Bus() as bus:
+        sub = bus.subscribe(TF_TOPIC)
+        br = TransformBroadcaster(bus)
+        assert br.bus is bus
+        await br.send_transform(ts("laser"))
+        br.send_transform_nowait([ts("a"), ts("b")])
+        br.send_transform_nowait(t for t in [ts("c")])  # any iterable
+        br.send_transform_nowait([])  # nothing
+        await br.send_transform(())
+        msgs = [sub.receive_nowait() for _ in range(3)]
+        assert all(isinstance(m, TFMessage) for m in msgs)
+        assert [[t.child_frame_id for t in m.transforms] for m in msgs] == [
+            ["laser"],
+            ["a", "b"],
+            ["c"],
+        ]
+        with pytest.raises(anyio.WouldBlock):
+            sub.receive_nowait()
+        assert br.sent == 4
+        with pytest.raises(TypeError):
+            br.send_transform_nowait([ts("a"), "not a transform"])  # type: ignore[list-item]
+        with pytest.raises(TypeError):
+            await br.send_transform(42)  # type: ignore[arg-type]
+        assert bus.statistics()[TF_TOPIC].published == 3
+
+
+async def test_static_broadcaster_is_latched() -> None:
+    async with Bus() as bus:
+        sbr = StaticTransformBroadcaster(bus)
+        await sbr.send_transform(ts("laser", 1.0))
+        sbr.send_transform_nowait([ts("laser", 2.0), ts("camera")])
+        assert TF_TOPIC not in bus.statistics()
+        late = bus.subscribe(TF_STATIC_TOPIC)
+        msg = late.receive_nowait()
+        assert {t.child_frame_id: t.transform.translation.x for t in msg.transforms} == {
+            "laser": 2.0,
+            "camera": 0.1,
+        }
+
+
+async def test_listener_feeds_buffer() -> None:
+    clock = ManualClock(T0)
+    core = BufferCore()
+    async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
+        await TransformBroadcaster(bus).send_transform(ts("base_laser"))
+        await StaticTransformBroadcaster(bus).send_transform(ts("base_link", parent="odom"))
+        await settle(clock)
+        out = core.lookup_transform("base_link", "base_laser", Time(0))
+        assert out.transform.translation == Vector3(0.1, 0.0, 0.2)
+        assert core.can_transform("odom", "base_link", T0 + Duration(100))  # static
+        assert listener.statistics() == ListenerStatistics(
+            messages=2, stored=2, refused=0, invalid=0, malformed=0, dropped=0
+        )
+        assert listener.buffer is core
+        assert "default_authority" in core.all_frames_as_yaml()
+
+
+async def test_latched_statics_are_stored_before_aenter_returns() -> None:
+    core = BufferCore()
+    async with Bus() as bus:
+        StaticTransformBroadcaster(bus).send_transform_nowait([ts("base_laser"), ts("camera", 0.5)])
+        async with TransformListener(core, bus, authority="me") as listener:
+            # no checkpoint needed: the latched message was handled inside __aenter__
+            assert core.can_transform("base_link", "camera", Time(0))
+            assert core.can_transform("base_link", "base_laser", Time(0))
+            assert listener.statistics().stored == 2
+        assert "me" in core.all_frames_as_yaml()
+
+
+async def test_listener_stores_valid_transforms_beside_invalid_ones(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    clock = ManualClock(T0)
+    core = BufferCore()
+    caplog.set_level(logging.WARNING, logger="tfbus.listener")
+    async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
+        br = TransformBroadcaster(bus)
+        bad = [
+            ts("nan_frame", math.nan),
+            ts("bad_quat", rotation=Quaternion(0.0, 0.0, 0.0, 2.0)),
+            ts("base_link"),  # self transform
+        ]
+        await br.send_transform([ts("a"), bad[0], ts("b"), bad[1], bad[2], ts("c")])
+        await settle(clock)
+        for child in ("a", "b", "c"):
+            assert core.can_transform("base_link", child, T0)
+        for child in ("nan_frame", "bad_quat"):
+            with pytest.raises((LookupException, ExtrapolationException)):
+                core.lookup_transform("base_link", child, T0)
+        stats = listener.statistics()
+        assert stats.stored == 3
+        assert stats.invalid == 3
+        # rate-limited: one warning for the burst of invalid transforms
+        warnings = [r for r in caplog.records if r.name == "tfbus.listener"]
+        assert len(warnings) == 1
+        assert "nan_frame" in warnings[0].getMessage()
+
+        # after the log period, the next one is logged and mentions the suppressed ones
+        await clock.advance(10.0)
+        await br.send_transform(ts("nan2", math.inf))
+        await settle(clock)
+        warnings = [r for r in caplog.records if r.name == "tfbus.listener"]
+        assert len(warnings) == 2
+        assert "2 more like this suppressed" in warnings[1].getMessage()
+        assert listener.statistics().invalid == 4
+
+
+async def test_listener_counts_refused_old_and_repeated_data() -> None:
+    clock = ManualClock(T0)
+    core = BufferCore(cache_time=10.0)
+    async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
+        br = TransformBroadcaster(bus)
+        br.send_transform_nowait(ts("laser", stamp=T0 + Duration(20)))
+        br.send_transform_nowait(
+            [
+                ts("laser", stamp=T0 + Duration(20)),  # repeated stamp
+                ts("laser", stamp=T0),  # older than cache_time: TF_OLD_DATA
+                ts("laser", stamp=T0 + Duration(21)),  # fine
+            ]
+        )
+        await settle(clock)
+        stats = listener.statistics()
+        assert (stats.stored, stats.refused, stats.invalid) == (2, 2, 0)
+
+
+async def test_listener_survives_junk_on_the_topics(caplog: pytest.LogCaptureFixture) -> None:
+    clock = ManualClock(T0)
+    core = BufferCore()
+    caplog.set_level(logging.WARNING, logger="tfbus.listener")
+    async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
+        bus.deliver_nowait(TF_TOPIC, "not a TFMessage")  # e.g. a confused transport
+        bus.deliver_nowait(TF_STATIC_TOPIC, {"transforms": []})
+        bus.deliver_nowait(TF_TOPIC, TFMessage(42))  # type: ignore[arg-type]
+        bus.deliver_nowait(TF_TOPIC, TFMessage(("junk", ts("ok"))))  # type: ignore[arg-type]
+        broken = TransformStamped(Header(T0, "base_link"), "weird", "no transform")  # type: ignore[arg-type]
+        bus.deliver_nowait(TF_TOPIC, TFMessage((broken,)))
+        await settle(clock)
+        TransformBroadcaster(bus).send_transform_nowait(ts("later", stamp=T0 + Duration(1)))
+        await settle(clock)
+        assert core.can_transform("base_link", "ok", T0)
+        assert core.can_transform("base_link", "later", T0 + Duration(1))
+        stats = listener.statistics()
+        assert stats.malformed == 5
+        assert stats.stored == 2
+        assert stats.messages == 6
+
+
+class _ExplodingBuffer:
+    def __init__(self) -> None:
+        self.stored: list[str] = []
+
+    def set_transform(self, transform: TransformStamped, authority: str) -> bool:
+        if transform.child_frame_id == "boom":
+            raise RuntimeError("buffer bug")
+        self.stored.append(transform.child_frame_id)
+        return True
+
+    def set_transform_static(self, transform: TransformStamped, authority: str) -> bool:
+        return self.set_transform(transform, authority)
+
+
+async def test_listener_accepts_any_buffer_like_object_and_survives_its_errors() -> None:
+    clock = ManualClock(T0)
+    buf = _ExplodingBuffer()
+    async with Bus() as bus, TransformListener(buf, bus, clock=clock) as listener:
+        TransformBroadcaster(bus).send_transform_nowait([ts("a"), ts("boom"), ts("b")])
+        await settle(clock)
+    assert buf.stored == ["a", "b"]
+    assert listener.statistics().malformed == 1
+
+
+async def test_listener_exit_and_cancellation_leave_no_subscription_behind() -> None:
+    core = BufferCore()
+    async with Bus() as bus:
+        async with TransformListener(core, bus):
+            stats = bus.statistics()
+            assert stats[TF_TOPIC].subscribers == 1
+            assert stats[TF_STATIC_TOPIC].subscribers == 1
+        stats = bus.statistics()
+        assert stats[TF_TOPIC].subscribers == 0
+        assert stats[TF_STATIC_TOPIC].subscribers == 0
+
+        async def listen_forever() -> None:
+            async with TransformListener(core, bus):
+                await anyio.sleep_forever()
+
+        async with anyio.create_task_group() as tg:
+            for _ in range(20):
+                tg.start_soon(listen_forever)
+            await anyio.wait_all_tasks_blocked()
+            assert bus.statistics()[TF_TOPIC].subscribers == 20
+            tg.cancel_scope.cancel()
+        stats = bus.statistics()
+        assert stats[TF_TOPIC].subscribers == 0
+        assert stats[TF_STATIC_TOPIC].subscribers == 0
+
+        listener = TransformListener(core, bus)
+        async with listener:
+            pass
+        with pytest.raises(RuntimeError):
+            await listener.__aenter__()
+
+
+async def test_listener_ends_quietly_when_the_bus_closes_first() -> None:
+    core = BufferCore()
+    bus_open = anyio.Event()
+    close_bus = anyio.Event()
+    bus_closed = anyio.Event()
+    bus = Bus()
+
+    async def run_bus() -> None:
+        async with bus:
+            bus_open.set()
+            await close_bus.wait()
+        bus_closed.set()
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(run_bus)
+        await bus_open.wait()
+        async with TransformListener(core, bus) as listener:
+            TransformBroadcaster(bus).send_transform_nowait(ts("laser"))
+            close_bus.set()
+            await bus_closed.wait()
+            await anyio.wait_all_tasks_blocked()
+    assert core.can_transform("base_link", "laser", T0)
+    assert listener.statistics().stored == 1
+
+
+async def test_slow_listener_drops_oldest_but_broadcaster_keeps_100hz() -> None:
+    clock = ManualClock(T0)
+    sent = 0
+
+    class SlowCore(BufferCore):
+        pass
+
+    core = SlowCore()
+
+    async def broadcaster(bus: Bus) -> None:
+        nonlocal sent
+        br = TransformBroadcaster(bus)
+        async for tick in every(0.01, clock=clock):
+            await br.send_transform(ts("base_laser", stamp=tick.expected))
+            sent += 1
+
+    async with Bus() as bus, TransformListener(core, bus, clock=clock, queue_size=5) as listener:
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(broadcaster, bus)
+            # Hog: a subscriber that never reads must not slow anyone down either.
+            hog = bus.subscribe(TF_TOPIC, queue_size=1)
+            await clock.advance(1.0)
+            tg.cancel_scope.cancel()
+        assert sent == 100
+        assert listener.statistics().stored == 100  # the listener keeps up
+        assert hog.statistics().dropped == 99
+        latest = core.lookup_transform("base_link", "base_laser", Time(0))
+        assert latest.header.stamp == T0 + Duration(1)
+
+
+async def test_end_to_end_across_a_memory_transport() -> None:
+    clock = ManualClock(T0)
+    a_end, b_end = MemoryTransport.pair()
+    core = BufferCore()
+    async with (
+        Bus(transport=a_end) as a,
+        Bus(transport=b_end) as b,
+        TransformListener(core, b, clock=clock),
+    ):
+        await StaticTransformBroadcaster(a).send_transform(ts("camera", parent="base_laser"))
+        await TransformBroadcaster(a).send_transform(ts("base_laser"))
+        await settle(clock)
+        out = core.lookup_transform("base_link", "camera", Time(0))
+        assert out.transform.translation.x == pytest.approx(0.2)

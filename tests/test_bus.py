@@ -1,0 +1,351 @@
+"""Tests for tfbus/bus.py: Bus, Subscription, MemoryTransport, latching, statistics."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import anyio
+import anyio.abc
+import pytest
+
+from tfbus.bus import (
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+    Bus,
+    MemoryTransport,
+    Subscription,
+    SubscriptionStatistics,
+    TopicStatistics,
+    Transport,
+)
+from tfbus.clock import ManualClock, every
+from tfbus.messages import Header, TFMessage, Transform, TransformStamped, Vector3
+from tfbus.time import Time
+
+pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+def ts(child: str, x: float = 0.0, parent: str = "base_link", sec: int = 1) -> TransformStamped:
+    return TransformStamped(
+        Header(Time(sec), parent), child, Transform(translation=Vector3(x, 0.0, 0.0))
+    )
+
+
+async def test_publish_and_receive() -> None:
+    async with Bus() as bus:
+        with bus.subscribe("/chat") as sub:
+            with pytest.raises(anyio.WouldBlock):
+                sub.receive_nowait()
+            await bus.publish("/chat", "hello")
+            bus.publish_nowait("/chat", {"any": "object"})
+            bus.publish_nowait("/other", "not for us")
+            assert await sub.receive() == "hello"
+            assert sub.receive_nowait() == {"any": "object"}
+            assert sub.topic == "/chat"
+            assert sub.queue_size == 100
+
+
+async def test_receive_waits_for_publish() -> None:
+    async with Bus() as bus, bus.subscribe("/chat") as sub, anyio.create_task_group() as tg:
+        got: list[Any] = []
+
+        async def consumer() -> None:
+            got.append(await sub.receive())
+
+        tg.start_soon(consumer)
+        await anyio.wait_all_tasks_blocked()  # trio: instant; asyncio: fine here
+        assert sub.statistics().tasks_waiting_receive == 1
+        bus.publish_nowait("/chat", 42)
+    assert got == [42]
+
+
+async def test_drop_oldest_and_counters() -> None:
+    async with Bus(queue_size=10) as bus:
+        small = bus.subscribe("/n", queue_size=3)
+        big = bus.subscribe("/n")
+        for i in range(5):
+            bus.publish_nowait("/n", i)
+        assert [small.receive_nowait() for _ in range(3)] == [2, 3, 4]  # oldest dropped
+        assert small.statistics() == SubscriptionStatistics(
+            topic="/n",
+            queue_size=3,
+            queued=0,
+            delivered=5,
+            received=3,
+            dropped=2,
+            tasks_waiting_receive=0,
+        )
+        assert big.statistics().queued == 5
+        assert big.statistics().dropped == 0
+        assert bus.statistics()["/n"] == TopicStatistics(
+            topic="/n", published=5, remote=0, delivered=10, dropped=2, subscribers=2
+        )
+        big.close()
+        assert bus.statistics()["/n"].subscribers == 1
+
+
+async def test_queue_size_validation() -> None:
+    with pytest.raises(ValueError):
+        Bus(queue_size=0)
+    async with Bus() as bus:
+        with pytest.raises(ValueError):
+            bus.subscribe("/x", queue_size=0)
+
+
+async def test_slow_subscriber_drops_but_publisher_keeps_100hz() -> None:
+    clock = ManualClock(Time(1000))
+    ticks = 0
+    overruns = -1
+    slow_got: list[int] = []
+    fast_got: list[int] = []
+
+    async def publisher(bus: Bus) -> None:
+        nonlocal ticks, overruns
+        async for tick in every(0.01, clock=clock):
+            await bus.publish(TF_TOPIC, TFMessage((ts("laser", sec=tick.index + 1),)))
+            ticks += 1
+            overruns = tick.overruns
+
+    async def slow(sub: Subscription[TFMessage]) -> None:
+        async for msg in sub:
+            slow_got.append(msg.transforms[0].header.stamp.sec)
+            await clock.sleep(0.1)  # 10x slower than the publisher
+
+    async def fast(sub: Subscription[TFMessage]) -> None:
+        async for msg in sub:
+            fast_got.append(msg.transforms[0].header.stamp.sec)
+
+    async with Bus() as bus:
+        slow_sub = bus.subscribe(TF_TOPIC, queue_size=2)
+        fast_sub = bus.subscribe(TF_TOPIC)
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(publisher, bus)
+            tg.start_soon(slow, slow_sub)
+            tg.start_soon(fast, fast_sub)
+            await clock.advance(1.0)
+            tg.cancel_scope.cancel()
+        assert ticks == 100
+        assert overruns == 0
+        assert fast_got == list(range(1, 101))
+        assert len(slow_got) < 15
+        stats = slow_sub.statistics()
+        assert stats.dropped > 80
+        assert stats.delivered == stats.received + stats.dropped + stats.queued == 100
+        assert bus.statistics()[TF_TOPIC].published == 100
+        assert bus.statistics()[TF_TOPIC].dropped == stats.dropped
+
+
+async def test_tf_topics_require_tfmessage() -> None:
+    async with Bus() as bus:
+        with pytest.raises(TypeError):
+            bus.publish_nowait(TF_TOPIC, [ts("a")])
+        with pytest.raises(TypeError):
+            await bus.publish(TF_STATIC_TOPIC, ts("a"))
+
+
+async def test_late_subscriber_gets_latched_statics_per_child() -> None:
+    async with Bus() as bus:
+        early = bus.subscribe(TF_STATIC_TOPIC)
+        assert bus.latched_statics() == TFMessage(())
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("laser", 1.0), ts("camera", 2.0))))
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("laser", 3.0),)))  # replaces laser
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("imu", 4.0),)))
+        assert early.statistics().queued == 3  # early subscribers see every message
+
+        late = bus.subscribe(TF_STATIC_TOPIC)
+        msg = late.receive_nowait()  # at once, before any further publish
+        assert isinstance(msg, TFMessage)
+        by_child = {t.child_frame_id: t.transform.translation.x for t in msg.transforms}
+        assert by_child == {"laser": 3.0, "camera": 2.0, "imu": 4.0}
+        assert len(msg.transforms) == 3
+        with pytest.raises(anyio.WouldBlock):
+            late.receive_nowait()
+        # /tf is not latched
+        tf_sub = bus.subscribe(TF_TOPIC)
+        bus.publish_nowait(TF_TOPIC, TFMessage((ts("x"),)))
+        assert bus.subscribe(TF_TOPIC).statistics().queued == 0
+        assert tf_sub.statistics().queued == 1
+        stats = bus.statistics()[TF_STATIC_TOPIC]
+        assert stats.published == 3
+        assert stats.delivered == 3 + 1  # early x3, late's snapshot x1
+        assert stats.subscribers == 2
+
+
+async def test_statistics_lists_every_topic() -> None:
+    async with Bus() as bus:
+        bus.subscribe("/a")
+        bus.publish_nowait("/b", 1)
+        stats = bus.statistics()
+        assert set(stats) == {"/a", "/b"}
+        assert stats["/a"].subscribers == 1
+        assert stats["/b"] == TopicStatistics("/b", 1, 0, 0, 0, 0)
+
+
+async def test_cancellation_leaves_no_subscription_behind() -> None:
+    async with Bus() as bus:
+
+        async def waiter_async_with() -> None:
+            async with bus.subscribe("/x") as sub:
+                await sub.receive()
+
+        async def waiter_iter() -> None:
+            with bus.subscribe("/x") as sub:
+                async for _ in sub:
+                    pass
+
+        async with anyio.create_task_group() as tg:
+            for _ in range(100):
+                tg.start_soon(waiter_async_with)
+                tg.start_soon(waiter_iter)
+            await anyio.wait_all_tasks_blocked()
+            assert bus.statistics()["/x"].subscribers == 200
+            tg.cancel_scope.cancel()
+        assert bus.statistics()["/x"].subscribers == 0
+        with anyio.move_on_after(0):
+            async with bus.subscribe("/y") as sub:
+                await sub.receive()
+        assert bus.statistics()["/y"].subscribers == 0
+
+
+async def test_close_wakes_receiver_and_ends_iteration() -> None:
+    async with Bus() as bus:
+        sub = bus.subscribe("/x")
+        bus.publish_nowait("/x", 1)
+        sub.close()
+        sub.close()  # idempotent
+        assert sub.closed
+        with pytest.raises(anyio.ClosedResourceError):
+            sub.receive_nowait()
+        assert [m async for m in sub] == []
+
+        sub2 = bus.subscribe("/x")
+        outcome: list[str] = []
+
+        async def receiver() -> None:
+            try:
+                await sub2.receive()
+            except anyio.ClosedResourceError:
+                outcome.append("closed")
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(receiver)
+            await anyio.wait_all_tasks_blocked()
+            await sub2.aclose()
+        assert outcome == ["closed"]
+
+
+async def test_bus_close_ends_subscriptions_after_draining() -> None:
+    got: list[int] = []
+    async with Bus() as bus:
+        sub = bus.subscribe("/x")
+        bus.publish_nowait("/x", 1)
+        bus.publish_nowait("/x", 2)
+    async for m in sub:
+        got.append(m)
+    assert got == [1, 2]
+    with pytest.raises(anyio.EndOfStream):
+        sub.receive_nowait()
+    with pytest.raises(anyio.ClosedResourceError):
+        bus.publish_nowait("/x", 3)
+    with pytest.raises(anyio.ClosedResourceError):
+        bus.subscribe("/x")
+    with pytest.raises(RuntimeError):
+        await bus.__aenter__()
+
+
+async def test_bus_must_be_open() -> None:
+    bus = Bus()
+    with pytest.raises(RuntimeError):
+        bus.publish_nowait("/x", 1)
+    with pytest.raises(RuntimeError):
+        bus.subscribe("/x")
+    with pytest.raises(RuntimeError):
+        bus.deliver_nowait("/x", 1)
+
+
+async def test_memory_transport_links_two_buses() -> None:
+    a_end, b_end = MemoryTransport.pair()
+    assert isinstance(a_end, Transport)
+    async with Bus(transport=a_end) as a, Bus(transport=b_end) as b:
+        assert a.transport is a_end
+        a_sub = a.subscribe(TF_TOPIC)
+        b_sub = b.subscribe(TF_TOPIC)
+        msg = TFMessage((ts("laser"),))
+        a.publish_nowait(TF_TOPIC, msg)
+        with anyio.fail_after(5):
+            assert await b_sub.receive() is msg
+        assert a_sub.receive_nowait() is msg
+        # delivered remote messages are not sent back out: nothing echoes to a
+        a_chat = a.subscribe("/chat")
+        b.publish_nowait("/chat", "from b")
+        b.publish_nowait("/chat", "again")
+        with anyio.fail_after(5):
+            assert await a_chat.receive() == "from b"
+            assert await a_chat.receive() == "again"
+        await anyio.wait_all_tasks_blocked()
+        assert a.statistics()[TF_TOPIC].published == 1
+        assert b.statistics()[TF_TOPIC] == TopicStatistics(TF_TOPIC, 1, 1, 1, 0, 1)
+        assert a_end.sent == 1 and b_end.sent == 2
+        assert a_end.delivered == 2 and b_end.delivered == 1
+        assert a_sub.statistics().queued == 0
+
+        # statics delivered remotely are latched on the receiving bus
+        a.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("camera", 5.0),)))
+        b_static = b.subscribe("/tf_static/probe")  # any topic: just to wait for delivery
+        a.publish_nowait("/tf_static/probe", None)
+        with anyio.fail_after(5):
+            await b_static.receive()
+        late = b.subscribe(TF_STATIC_TOPIC)
+        assert late.receive_nowait().transforms[0].child_frame_id == "camera"
+
+
+async def test_memory_transport_drops_when_full_and_unlinked() -> None:
+    lonely = MemoryTransport()
+    lonely.send_nowait("/x", 1)
+    assert lonely.dropped == 1
+    a_end, b_end = MemoryTransport.pair(max_buffer_size=2)
+    async with Bus(transport=a_end) as a:  # b's bus never opens: its buffer fills up
+        for i in range(5):
+            a.publish_nowait("/x", i)
+    assert a_end.sent == 2
+    assert a_end.dropped == 3
+    del b_end
+
+
+async def test_deliver_many_nowait() -> None:
+    async with Bus() as bus:
+        sub = bus.subscribe("/x")
+        bus.deliver_many_nowait("/x", [1, 2, 3])
+        bus.deliver_nowait(TF_STATIC_TOPIC, "junk is delivered, not latched")
+        assert [sub.receive_nowait() for _ in range(3)] == [1, 2, 3]
+        assert bus.statistics()["/x"].remote == 3
+        assert bus.latched_statics() == TFMessage(())
+
+
+class _FailingTransport:
+    async def run(
+        self, bus: Bus, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED
+    ) -> None:
+        raise OSError("cannot connect")
+
+    def send_nowait(self, topic: str, message: object) -> None:
+        raise AssertionError("never called")
+
+
+async def test_transport_failing_to_start_fails_bus_open() -> None:
+    with pytest.raises(OSError, match="cannot connect"):
+        async with Bus(transport=_FailingTransport()):
+            pass
+
+
+async def test_running_transport_end_twice_fails() -> None:
+    a_end, _ = MemoryTransport.pair()
+    async with Bus(transport=a_end):
+        with pytest.raises(RuntimeError):
+            async with Bus(transport=a_end):
+                pass

@@ -1,0 +1,106 @@
+"""Publishers of transforms: ``TransformBroadcaster`` (``/tf``) and
+``StaticTransformBroadcaster`` (``/tf_static``), as in tf2_ros.
+
+::
+
+    await TransformBroadcaster(bus).send_transform(ts)            # one or a sequence
+    StaticTransformBroadcaster(bus).send_transform_nowait([a, b])
+
+Each call publishes one :class:`~tfbus.messages.TFMessage` holding all the transforms
+given (batching many transforms in one message is much cheaper than one message each).
+tf2_ros's C++ static broadcaster re-sends every static it ever sent because its topic
+latches only the last message; tfbus's bus latches ``/tf_static`` per child frame, so
+sending just the new ones is enough.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import ClassVar
+
+from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
+from tfbus.messages import TFMessage, TransformStamped
+
+__all__ = ["StaticTransformBroadcaster", "TransformBroadcaster"]
+
+
+def _as_message(transform: TransformStamped | Iterable[TransformStamped]) -> TFMessage:
+    if isinstance(transform, TransformStamped):
+        return TFMessage((transform,))
+    try:
+        transforms = tuple(transform)
+    except TypeError:
+        raise TypeError(
+            f"expected a TransformStamped or a sequence of them, not {type(transform).__name__}"
+        ) from None
+    for ts in transforms:
+        if not isinstance(ts, TransformStamped):
+            raise TypeError(f"expected TransformStamped, not {type(ts).__name__}")
+    return TFMessage(transforms)
+
+
+class TransformBroadcaster:
+    """Publishes dynamic transforms on ``/tf`` (tf2_ros ``TransformBroadcaster``)."""
+
+    topic: ClassVar[str] = TF_TOPIC
+
+    def __init__(self, bus: Bus) -> None:
+        """Broadcast on ``bus``."""
+        self._bus = bus
+        self.sent = 0
+        """Transforms sent so far."""
+
+    @property
+    def bus(self) -> Bus:
+        """The bus published on."""
+        return self._bus
+
+    def send_transform_nowait(
+        self, transform: TransformStamped | Iterable[TransformStamped]
+    ) -> None:
+        """Publish ``transform`` (one or a sequence) as one TFMessage; never blocks.
+
+        An empty sequence publishes nothing. Transforms are not validated here: the
+        receiving buffers do that (and a listener counts the bad ones).
+
+        Raises:
+            TypeError: if ``transform`` is not a TransformStamped or an iterable of them.
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+        """
+        message = _as_message(transform)
+        if not message.transforms:
+            return
+        self._bus.publish_nowait(self.topic, message)
+        self.sent += len(message.transforms)
+
+    async def send_transform(
+        self, transform: TransformStamped | Iterable[TransformStamped]
+    ) -> None:
+        """:meth:`send_transform_nowait` plus a checkpoint; never waits for subscribers.
+
+        Raises:
+            TypeError: if ``transform`` is not a TransformStamped or an iterable of them.
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+            anyio.get_cancelled_exc_class(): if cancelled (before publishing).
+        """
+        message = _as_message(transform)
+        if not message.transforms:
+            return
+        await self._bus.publish(self.topic, message)
+        self.sent += len(message.transforms)
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.topic} sent={self.sent}>"
+
+
+class StaticTransformBroadcaster(TransformBroadcaster):
+    """Publishes static transforms on ``/tf_static`` (tf2_ros
+    ``StaticTransformBroadcaster``).
+
+    The bus latches them per child frame: subscribers that arrive later still get the
+    current static transform of every child, and re-sending a child replaces it.
+    """
+
+    topic: ClassVar[str] = TF_STATIC_TOPIC

@@ -1,0 +1,644 @@
+"""The in-process message bus: topics, subscriptions with bounded queues, latching.
+
+::
+
+    async with Bus() as bus:
+        async with bus.subscribe("/tf") as sub:
+            bus.publish_nowait("/tf", TFMessage([ts]))
+            msg = await sub.receive()
+
+Publishing never blocks and never waits for subscribers: every :class:`Subscription`
+has its own bounded queue and, when it is full, the *oldest* queued message is dropped
+and counted (the newest data is what a transform consumer wants). A slow subscriber
+therefore never slows a publisher or the other subscribers.
+
+``/tf`` and ``/tf_static`` carry :class:`~tfbus.messages.TFMessage`. ``/tf_static`` is
+latched per child frame: the bus keeps the latest static transform of every
+``child_frame_id`` (a re-send replaces that child's entry) and a new subscriber to
+``/tf_static`` immediately receives one ``TFMessage`` holding all of them.
+
+A :class:`Transport` (``MemoryTransport`` here, Zenoh in ``tfbus.transports``) carries
+messages between buses: the bus runs ``transport.run(bus)`` in its task group, hands
+every local publish to ``transport.send_nowait``, and the transport injects remote
+messages with :meth:`Bus.deliver_nowait`, which never sends them back out.
+
+Like anyio's memory object streams, every awaitable operation has a ``*_nowait`` twin
+and both :class:`Bus` and :class:`Subscription` report ``statistics()``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Final, Generic, Protocol, TypeVar, runtime_checkable
+
+import anyio
+import anyio.abc
+import anyio.lowlevel
+
+from tfbus.messages import TFMessage, TransformStamped
+
+__all__ = [
+    "TF_STATIC_TOPIC",
+    "TF_TOPIC",
+    "Bus",
+    "MemoryTransport",
+    "Subscription",
+    "SubscriptionStatistics",
+    "TopicStatistics",
+    "Transport",
+]
+
+TF_TOPIC: Final = "/tf"
+"""The topic of dynamic transforms (``TFMessage``)."""
+TF_STATIC_TOPIC: Final = "/tf_static"
+"""The topic of static transforms (``TFMessage``), latched per child frame."""
+
+_TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
+
+T = TypeVar("T")
+
+
+@runtime_checkable
+class Transport(Protocol):
+    """Carries topics between buses (processes, machines). Fixed contract.
+
+    A bus calls ``await tg.start(transport.run, bus)`` when it opens and cancels it when
+    it closes; it calls ``send_nowait`` for every locally published message.
+    """
+
+    async def run(
+        self,
+        bus: Bus,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Connect; ``task_status.started()``; then inject remote messages with
+        ``bus.deliver_nowait(topic, message)`` until cancelled."""
+        ...
+
+    def send_nowait(self, topic: str, message: object) -> None:
+        """Carry a locally published message to remote peers. Must never block."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class TopicStatistics:
+    """Counters of one topic on one bus (``Bus.statistics()``).
+
+    Attributes:
+        topic: the topic name.
+        published: messages that entered the topic here (local publishes + remote).
+        remote: of those, how many came in through the transport (``deliver_nowait``).
+        delivered: message copies put into subscription queues (one per subscriber),
+            including latched ``/tf_static`` snapshots given to late subscribers.
+        dropped: copies evicted unread from a full subscription queue (drop-oldest).
+        subscribers: subscriptions open now.
+    """
+
+    topic: str
+    published: int
+    remote: int
+    delivered: int
+    dropped: int
+    subscribers: int
+
+
+@dataclass(frozen=True, slots=True)
+class SubscriptionStatistics:
+    """Counters of one subscription (``Subscription.statistics()``).
+
+    ``delivered == received + dropped + queued`` at all times.
+
+    Attributes:
+        topic: the topic subscribed to.
+        queue_size: the queue's capacity.
+        queued: messages waiting in the queue now.
+        delivered: messages put into the queue.
+        received: messages taken out by ``receive``/``receive_nowait``/iteration.
+        dropped: messages evicted unread because the queue was full (oldest first).
+        tasks_waiting_receive: tasks blocked in ``receive()`` now.
+    """
+
+    topic: str
+    queue_size: int
+    queued: int
+    delivered: int
+    received: int
+    dropped: int
+    tasks_waiting_receive: int
+
+
+class _TopicCounters:
+    __slots__ = ("delivered", "dropped", "published", "remote")
+
+    def __init__(self) -> None:
+        self.published = 0
+        self.remote = 0
+        self.delivered = 0
+        self.dropped = 0
+
+
+class Subscription(Generic[T]):
+    """A bounded, drop-oldest queue of the messages published on one topic.
+
+    Made by :meth:`Bus.subscribe`; registered from creation until closed. Use it as a
+    context manager (``async with`` or ``with``) so that leaving the block, by any route
+    including cancellation, unregisters it. Iterate with ``async for msg in sub``
+    (ends when the subscription or the bus closes), or call :meth:`receive` /
+    :meth:`receive_nowait`.
+    """
+
+    def __init__(self, bus: Bus, topic: str, queue_size: int) -> None:
+        """Use :meth:`Bus.subscribe` rather than building one directly."""
+        self._bus = bus
+        self._topic = topic
+        self._queue_size = queue_size
+        self._queue: deque[T] = deque()
+        self._counters = bus._counters(topic)
+        self._event: anyio.Event | None = None
+        self._waiting = 0
+        self._delivered = 0
+        self._received = 0
+        self._dropped = 0
+        self._closed = False  # closed by its owner: receive raises ClosedResourceError
+        self._ended = False  # the bus closed: receive drains, then raises EndOfStream
+
+    @property
+    def topic(self) -> str:
+        """The topic subscribed to."""
+        return self._topic
+
+    @property
+    def queue_size(self) -> int:
+        """The queue's capacity."""
+        return self._queue_size
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` was called."""
+        return self._closed
+
+    # -- fed by the bus ---------------------------------------------------------------
+
+    def _put(self, message: T) -> None:
+        queue = self._queue
+        if len(queue) >= self._queue_size:
+            queue.popleft()
+            self._dropped += 1
+            self._counters.dropped += 1
+        queue.append(message)
+        self._delivered += 1
+        self._counters.delivered += 1
+        event = self._event
+        if event is not None:
+            self._event = None
+            event.set()
+
+    def _end(self) -> None:
+        self._ended = True
+        self._wake()
+
+    def _wake(self) -> None:
+        event = self._event
+        if event is not None:
+            self._event = None
+            event.set()
+
+    # -- consumer side ----------------------------------------------------------------
+
+    def receive_nowait(self) -> T:
+        """Take the oldest queued message.
+
+        Raises:
+            anyio.ClosedResourceError: if this subscription was closed.
+            anyio.EndOfStream: if the bus closed and the queue is empty.
+            anyio.WouldBlock: if the queue is empty.
+        """
+        if self._closed:
+            raise anyio.ClosedResourceError
+        if self._queue:
+            self._received += 1
+            return self._queue.popleft()
+        if self._ended:
+            raise anyio.EndOfStream
+        raise anyio.WouldBlock
+
+    async def receive(self) -> T:
+        """Wait for and take the oldest queued message (always a checkpoint).
+
+        Raises:
+            anyio.ClosedResourceError: if this subscription is or gets closed.
+            anyio.EndOfStream: if the bus closed and the queue is empty.
+            anyio.get_cancelled_exc_class(): if the calling task is cancelled.
+        """
+        await anyio.lowlevel.checkpoint()
+        while True:
+            try:
+                return self.receive_nowait()
+            except anyio.WouldBlock:
+                pass
+            if self._event is None:
+                self._event = anyio.Event()
+            event = self._event
+            self._waiting += 1
+            try:
+                await event.wait()
+            finally:
+                self._waiting -= 1
+
+    def __aiter__(self) -> Subscription[T]:
+        return self
+
+    async def __anext__(self) -> T:
+        """The next message; iteration stops when the subscription or the bus closes.
+
+        Raises:
+            anyio.get_cancelled_exc_class(): if the calling task is cancelled.
+        """
+        try:
+            return await self.receive()
+        except (anyio.EndOfStream, anyio.ClosedResourceError):
+            raise StopAsyncIteration from None
+
+    def close(self) -> None:
+        """Unregister from the bus and discard queued messages (idempotent).
+
+        Tasks blocked in :meth:`receive` raise ``anyio.ClosedResourceError`` (an
+        ``async for`` just ends).
+        """
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.clear()
+        self._bus._unsubscribe(self)
+        self._wake()
+
+    async def aclose(self) -> None:
+        """:meth:`close`, then a cancel-shielded checkpoint (anyio's ``aclose`` style)."""
+        self.close()
+        await anyio.lowlevel.cancel_shielded_checkpoint()
+
+    def statistics(self) -> SubscriptionStatistics:
+        """A snapshot of this subscription's counters."""
+        return SubscriptionStatistics(
+            topic=self._topic,
+            queue_size=self._queue_size,
+            queued=len(self._queue),
+            delivered=self._delivered,
+            received=self._received,
+            dropped=self._dropped,
+            tasks_waiting_receive=self._waiting,
+        )
+
+    def __enter__(self) -> Subscription[T]:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    async def __aenter__(self) -> Subscription[T]:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "ended" if self._ended else "open"
+        return (
+            f"<Subscription {self._topic!r} {state} queued={len(self._queue)}/"
+            f"{self._queue_size} dropped={self._dropped}>"
+        )
+
+
+class Bus:
+    """Topics with subscriptions, ``/tf_static`` latching and an optional transport.
+
+    ``Bus(transport=None, queue_size=100)``; ``queue_size`` is the default capacity of
+    each subscription's queue. Open it with ``async with Bus() as bus:``; the bus owns a
+    task group running the transport, and closing it stops the transport and ends every
+    subscription (queued messages can still be read, then ``EndOfStream``).
+    """
+
+    def __init__(self, transport: Transport | None = None, queue_size: int = 100) -> None:
+        """Create a bus (not yet open).
+
+        Raises:
+            ValueError: if ``queue_size`` is less than 1.
+        """
+        if queue_size < 1:
+            raise ValueError(f"queue_size must be at least 1, got {queue_size!r}")
+        self._transport = transport
+        self._queue_size = queue_size
+        self._subscriptions: dict[str, list[Subscription[Any]]] = {}
+        self._topic_counters: dict[str, _TopicCounters] = {}
+        self._statics: dict[str, TransformStamped] = {}
+        self._task_group: anyio.abc.TaskGroup | None = None
+        self._state = "new"  # "new" -> "open" -> "closed"
+
+    @property
+    def transport(self) -> Transport | None:
+        """The transport given at construction, if any."""
+        return self._transport
+
+    # -- lifecycle --------------------------------------------------------------------
+
+    async def __aenter__(self) -> Bus:
+        """Open the bus and start the transport (``await tg.start(transport.run, bus)``).
+
+        Raises:
+            RuntimeError: if the bus was already opened.
+            Exception: whatever ``transport.run`` raises before it reports started.
+        """
+        if self._state != "new":
+            raise RuntimeError("a Bus can be opened only once")
+        tg = anyio.create_task_group()
+        await tg.__aenter__()
+        self._task_group = tg
+        self._state = "open"
+        if self._transport is not None:
+            try:
+                await tg.start(self._transport.run, self)
+            except BaseException as exc:
+                self._shutdown()
+                tg.cancel_scope.cancel()
+                await tg.__aexit__(None, None, None)
+                raise exc
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        """Close the bus: end all subscriptions and cancel the transport task.
+
+        Raises:
+            BaseExceptionGroup: if the transport task failed.
+        """
+        self._shutdown()
+        tg = self._task_group
+        assert tg is not None
+        tg.cancel_scope.cancel()
+        return await tg.__aexit__(exc_type, exc, tb)
+
+    def _shutdown(self) -> None:
+        self._state = "closed"
+        for subs in self._subscriptions.values():
+            for sub in subs:
+                sub._end()
+
+    def _check_open(self) -> None:
+        if self._state == "open":
+            return
+        if self._state == "closed":
+            raise anyio.ClosedResourceError("the bus is closed")
+        raise RuntimeError("the bus is not open: use 'async with Bus() as bus:'")
+
+    def _counters(self, topic: str) -> _TopicCounters:
+        counters = self._topic_counters.get(topic)
+        if counters is None:
+            counters = self._topic_counters[topic] = _TopicCounters()
+        return counters
+
+    # -- subscribing --------------------------------------------------------------------
+
+    def subscribe(self, topic: str, queue_size: int | None = None) -> Subscription[Any]:
+        """Subscribe to ``topic``; the subscription is live as soon as this returns.
+
+        A subscription to ``/tf_static`` starts with one ``TFMessage`` holding every
+        latched static transform (if there are any).
+
+        Args:
+            topic: the topic name.
+            queue_size: this subscription's queue capacity (default: the bus's).
+
+        Raises:
+            ValueError: if ``queue_size`` is less than 1.
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+        """
+        self._check_open()
+        size = self._queue_size if queue_size is None else queue_size
+        if size < 1:
+            raise ValueError(f"queue_size must be at least 1, got {size!r}")
+        sub: Subscription[Any] = Subscription(self, topic, size)
+        subs = self._subscriptions.get(topic)
+        if subs is None:
+            self._subscriptions[topic] = [sub]
+        else:
+            # Copy-on-write: a delivery loop in progress keeps its own list.
+            self._subscriptions[topic] = [*subs, sub]
+        if topic == TF_STATIC_TOPIC and self._statics:
+            sub._put(self.latched_statics())
+        return sub
+
+    def _unsubscribe(self, sub: Subscription[Any]) -> None:
+        subs = self._subscriptions.get(sub.topic)
+        if subs is None or sub not in subs:
+            return
+        self._subscriptions[sub.topic] = [s for s in subs if s is not sub]
+
+    # -- publishing ---------------------------------------------------------------------
+
+    def publish_nowait(self, topic: str, message: object) -> None:
+        """Deliver ``message`` to every subscriber of ``topic`` here and to the transport.
+
+        Never blocks: full subscription queues drop their oldest message.
+
+        Raises:
+            TypeError: if ``topic`` is ``/tf`` or ``/tf_static`` and ``message`` is not a
+                ``TFMessage``.
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+            Exception: whatever ``transport.send_nowait`` raises (after local delivery).
+        """
+        self._check_open()
+        if topic in _TF_TOPICS and not isinstance(message, TFMessage):
+            raise TypeError(f"{topic} carries TFMessage, not {type(message).__name__}")
+        self._deliver(topic, message)
+        if self._transport is not None:
+            self._transport.send_nowait(topic, message)
+
+    async def publish(self, topic: str, message: object) -> None:
+        """:meth:`publish_nowait` plus a checkpoint; never waits for subscribers.
+
+        Raises:
+            TypeError: if ``topic`` is ``/tf`` or ``/tf_static`` and ``message`` is not a
+                ``TFMessage``.
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+            Exception: whatever ``transport.send_nowait`` raises (after local delivery).
+            anyio.get_cancelled_exc_class(): if cancelled (before publishing).
+        """
+        await anyio.lowlevel.checkpoint_if_cancelled()
+        self.publish_nowait(topic, message)
+        await anyio.lowlevel.cancel_shielded_checkpoint()
+
+    def deliver_nowait(self, topic: str, message: object) -> None:
+        """Deliver a *remote* message to local subscribers (for transports).
+
+        Latches ``/tf_static`` like a local publish but does not send the message back to
+        the transport, and does not type-check it (a listener guards against junk).
+
+        Raises:
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+        """
+        self._check_open()
+        self._counters(topic).remote += 1
+        self._deliver(topic, message)
+
+    def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None:
+        """:meth:`deliver_nowait` for each of ``messages``, in order.
+
+        Raises:
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+        """
+        self._check_open()
+        for message in messages:
+            self._counters(topic).remote += 1
+            self._deliver(topic, message)
+
+    def _deliver(self, topic: str, message: object) -> None:
+        if topic == TF_STATIC_TOPIC:
+            self._latch(message)
+        self._counters(topic).published += 1
+        subs = self._subscriptions.get(topic)
+        if subs:
+            for sub in subs:
+                sub._put(message)
+
+    def _latch(self, message: object) -> None:
+        if not isinstance(message, TFMessage):
+            return
+        try:
+            items = list(message.transforms)
+        except TypeError:
+            return
+        statics = self._statics
+        for ts in items:
+            if isinstance(ts, TransformStamped) and isinstance(ts.child_frame_id, str):
+                statics[ts.child_frame_id] = ts
+
+    def latched_statics(self) -> TFMessage:
+        """One ``TFMessage`` of the latest static transform of every child frame.
+
+        This is what a late ``/tf_static`` subscriber receives first; a transport may
+        also send it to newly connected peers.
+        """
+        return TFMessage(tuple(self._statics.values()))
+
+    # -- statistics ---------------------------------------------------------------------
+
+    def statistics(self) -> dict[str, TopicStatistics]:
+        """Per topic (every topic published or subscribed to so far): its counters."""
+        return {
+            topic: TopicStatistics(
+                topic=topic,
+                published=c.published,
+                remote=c.remote,
+                delivered=c.delivered,
+                dropped=c.dropped,
+                subscribers=len(self._subscriptions.get(topic, ())),
+            )
+            for topic, c in self._topic_counters.items()
+        }
+
+    def __repr__(self) -> str:
+        subs = sum(len(s) for s in self._subscriptions.values())
+        return f"<Bus {self._state} topics={len(self._topic_counters)} subscriptions={subs}>"
+
+
+class MemoryTransport:
+    """An in-memory transport: one end of a linked pair (httpx ``MockTransport``-style).
+
+    ``a, b = MemoryTransport.pair()``; ``Bus(transport=a)`` and ``Bus(transport=b)``
+    then see each other's publishes. Each end buffers messages for its peer in a memory
+    object stream of ``max_buffer_size``; when that is full, ``send_nowait`` drops the
+    message and counts it in :attr:`dropped` (it never blocks). Messages sent before the
+    peer's bus opens wait in the buffer.
+    """
+
+    def __init__(self, max_buffer_size: float = math.inf) -> None:
+        """Create an unlinked end; use :meth:`pair` (or :meth:`link`)."""
+        send, receive = anyio.create_memory_object_stream[tuple[str, object]](max_buffer_size)
+        self._inbox_send = send
+        self._inbox_receive = receive
+        self._peer: MemoryTransport | None = None
+        self._running = False
+        self.sent = 0
+        """Messages handed to the peer."""
+        self.dropped = 0
+        """Messages dropped because the peer's buffer was full or closed."""
+        self.delivered = 0
+        """Messages injected into this end's bus."""
+
+    @classmethod
+    def pair(cls, max_buffer_size: float = math.inf) -> tuple[MemoryTransport, MemoryTransport]:
+        """Two linked ends."""
+        a, b = cls(max_buffer_size), cls(max_buffer_size)
+        a.link(b)
+        return a, b
+
+    def link(self, peer: MemoryTransport) -> None:
+        """Link this end and ``peer`` both ways."""
+        self._peer = peer
+        peer._peer = self
+
+    async def run(
+        self,
+        bus: Bus,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Inject messages from the peer into ``bus`` until cancelled.
+
+        Raises:
+            RuntimeError: if this end is already running.
+        """
+        if self._running:
+            raise RuntimeError("this MemoryTransport end is already running")
+        self._running = True
+        try:
+            task_status.started()
+            receive = self._inbox_receive
+            while True:
+                topic, message = await receive.receive()
+                self.delivered += 1
+                bus.deliver_nowait(topic, message)
+        finally:
+            self._running = False
+
+    def send_nowait(self, topic: str, message: object) -> None:
+        """Hand ``message`` to the peer's buffer; drop and count it if that is full."""
+        peer = self._peer
+        if peer is None:
+            self.dropped += 1
+            return
+        try:
+            peer._inbox_send.send_nowait((topic, message))
+        except (anyio.WouldBlock, anyio.BrokenResourceError, anyio.ClosedResourceError):
+            self.dropped += 1
+        else:
+            self.sent += 1
+
+    def __repr__(self) -> str:
+        return (
+            f"<MemoryTransport sent={self.sent} delivered={self.delivered} dropped={self.dropped}>"
+        )
