@@ -24,7 +24,7 @@ test: lint
 	$(BIN)/python -m pytest -q
 
 demo: $(STAMP)
-	$(BIN)/python -m tfbus.demo --duration 10
+	$(BIN)/python demos/robot_setup_tf.py --duration 10
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py

@@ -1,5 +1,19 @@
-"""tfbus: ROS tf2's coordinate-frame machinery for plain async Python."""
+"""tfbus: ROS tf2's coordinate-frame machinery for plain async Python.
 
+Layers (each imports only those below it; see DESIGN notes in the README):
+
+* values — :class:`Time`, message types (x, y, z, w quaternions), :mod:`tfbus.geometry`;
+* :class:`BufferCore` — tf2's transform buffer, synchronous and sans-I/O;
+* :class:`Bus`, clocks (:mod:`tfbus.clock`) — topics with bounded queues and latching;
+* :class:`Buffer`, :class:`TransformListener`, broadcasters — awaitable lookups;
+* :mod:`tfbus.bag`, :mod:`tfbus.transports`, the ``tfbus`` command line.
+"""
+
+from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus, MemoryTransport, Subscription, Transport
+from tfbus.clock import Clock, ManualClock, SystemClock, every
+from tfbus.core import BufferCore, SetResult
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -8,6 +22,7 @@ from tfbus.errors import (
     TimeoutException,
     TransformException,
 )
+from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
     Point,
@@ -23,24 +38,40 @@ from tfbus.messages import (
 )
 from tfbus.time import Duration, Time
 
+__version__ = "0.1.0"
+
 __all__ = [
+    "Buffer",
+    "BufferCore",
+    "Bus",
+    "Clock",
     "ConnectivityException",
     "Duration",
     "ExtrapolationException",
     "Header",
     "InvalidArgumentException",
     "LookupException",
+    "ManualClock",
+    "MemoryTransport",
     "Point",
     "PointStamped",
     "Pose",
     "PoseStamped",
     "Quaternion",
+    "SetResult",
+    "StaticTransformBroadcaster",
+    "Subscription",
+    "SystemClock",
     "TFMessage",
     "Time",
     "TimeoutException",
     "Transform",
+    "TransformBroadcaster",
     "TransformException",
+    "TransformListener",
     "TransformStamped",
+    "Transport",
     "Vector3",
     "Vector3Stamped",
+    "every",
 ]

@@ -1,0 +1,234 @@
+"""The seed demo: ROS's "Setting up your robot using tf" tutorial on a tfbus bus.
+
+A mobile base ``base_link`` carries a laser ``base_laser`` mounted 10 cm forward and
+20 cm up. Two timed tasks share one bus, as the tutorial's two nodes share ROS:
+
+* the **broadcaster** (``robot_tf_publisher``) sends base_link → base_laser, translation
+  (0.1, 0.0, 0.2) m, identity rotation, stamped with the clock's now, at 100 Hz;
+* the **listener** (``robot_tf_listener``) every second transforms the point
+  (1.0, 0.2, 0.0) in base_laser at ``Time(0)`` (latest) into base_link and prints::
+
+    [ INFO] 1248138528.200823000: base_laser: (1.00, 0.20. 0.00) -----> base_link: (1.10, 0.20, 0.20) at time 1248138528.19
+
+  (the tutorial's typo ``0.20. 0.00`` kept), or, when the transform is not available::
+
+    [ERROR] ...: Received an exception trying to transform a point from "base_laser" to "base_link": <tf2 message>
+
+Run it with ``tfbus demo``, ``make demo`` or ``python demos/robot_setup_tf.py``;
+``--duration`` (default: until Ctrl-C, which exits cleanly), ``--rate``, ``--listen-rate``.
+On exit it prints one summary line: transforms sent, measured broadcast rate, and the
+broadcaster's timer jitter (p50/p99 lateness of its ticks).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import anyio
+
+from tfbus.broadcaster import TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.clock import Clock, SystemClock, every
+from tfbus.errors import TransformException
+from tfbus.geometry import do_transform_point
+from tfbus.listener import TransformListener
+from tfbus.messages import (
+    Header,
+    Point,
+    PointStamped,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
+from tfbus.time import Time
+
+__all__ = [
+    "BroadcasterStats",
+    "broadcaster_node",
+    "format_error",
+    "format_info",
+    "listener_node",
+    "main",
+    "run_demo",
+]
+
+LASER_OFFSET = Transform(Vector3(0.1, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0))
+"""base_laser in base_link: 10 cm forward, 20 cm up, no rotation (metres)."""
+
+LASER_POINT = Point(1.0, 0.2, 0.0)
+"""The point the tutorial's listener transforms, in base_laser (metres)."""
+
+
+def _stamp(t: Time) -> str:
+    return f"{t.sec}.{t.nanosec:09d}"
+
+
+def format_info(now: Time, laser: PointStamped, base: PointStamped) -> str:
+    """The tutorial listener's success line (``ROS_INFO`` in robot_tf_listener), typo kept."""
+    p, q = laser.point, base.point
+    return (
+        f"[ INFO] {_stamp(now)}: base_laser: ({p.x:.2f}, {p.y:.2f}. {p.z:.2f}) -----> "
+        f"base_link: ({q.x:.2f}, {q.y:.2f}, {q.z:.2f}) at time {base.header.stamp.to_sec():.2f}"
+    )
+
+
+def format_error(now: Time, error: TransformException) -> str:
+    """The tutorial listener's failure line (``ROS_ERROR`` in robot_tf_listener)."""
+    return (
+        f"[ERROR] {_stamp(now)}: Received an exception trying to transform a point from "
+        f'"base_laser" to "base_link": {error}'
+    )
+
+
+@dataclass
+class BroadcasterStats:
+    """What the broadcaster did: transforms ``sent``, clock times of the first and last
+    send (ns), and each tick's lateness (ns) — the timer's jitter."""
+
+    sent: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+    lateness_ns: list[int] = field(default_factory=list)
+
+    def rate(self) -> float:
+        """Measured broadcast rate in Hz (sends per second of clock time)."""
+        if self.first_ns is None or self.last_ns is None or self.last_ns == self.first_ns:
+            return 0.0
+        return (self.sent - 1) / ((self.last_ns - self.first_ns) / 1e9)
+
+    def jitter_ms(self, quantile: float) -> float:
+        """A quantile (0..1) of tick lateness, in milliseconds."""
+        if not self.lateness_ns:
+            return 0.0
+        ordered = sorted(self.lateness_ns)
+        return ordered[min(len(ordered) - 1, int(quantile * len(ordered)))] / 1e6
+
+    def summary(self) -> str:
+        """The one line printed on exit."""
+        return (
+            f"[ INFO] summary: {self.sent} transforms sent, broadcast rate "
+            f"{self.rate():.2f} Hz, timer jitter p50 {self.jitter_ms(0.5):.3f} ms, "
+            f"p99 {self.jitter_ms(0.99):.3f} ms"
+        )
+
+
+async def broadcaster_node(
+    bus: Bus, clock: Clock, rate: float = 100.0, stats: BroadcasterStats | None = None
+) -> None:
+    """The tutorial's ``robot_tf_publisher``: base_link → base_laser at ``rate`` Hz,
+    stamped with ``clock.now()``, on absolute deadlines. Runs until cancelled."""
+    broadcaster = TransformBroadcaster(bus)
+    stats = stats if stats is not None else BroadcasterStats()
+    async for tick in every(1.0 / rate, clock=clock, immediate=True):
+        now = clock.now()
+        await broadcaster.send_transform(
+            TransformStamped(Header(now, "base_link"), "base_laser", LASER_OFFSET)
+        )
+        stats.sent += 1
+        if stats.first_ns is None:
+            stats.first_ns = now.ns
+        stats.last_ns = now.ns
+        stats.lateness_ns.append(tick.lateness.ns)
+
+
+async def listener_node(
+    buffer: Buffer, clock: Clock, listen_rate: float = 1.0, out: Callable[[str], None] = print
+) -> None:
+    """The tutorial's ``robot_tf_listener``: every ``1/listen_rate`` s, transform
+    (1.0, 0.2, 0.0) in base_laser at Time(0) (latest) into base_link and print the
+    tutorial's line through ``out``. Runs until cancelled."""
+    laser_point = PointStamped(Header(Time(0), "base_laser"), LASER_POINT)
+    async for _ in every(1.0 / listen_rate, clock=clock):
+        now = clock.now()
+        try:
+            ts = buffer.lookup_transform("base_link", "base_laser", laser_point.header.stamp)
+        except TransformException as exc:
+            out(format_error(now, exc))
+        else:
+            out(format_info(now, laser_point, do_transform_point(laser_point, ts)))
+
+
+async def run_demo(
+    *,
+    clock: Clock | None = None,
+    duration: float | None = None,
+    rate: float = 100.0,
+    listen_rate: float = 1.0,
+    out: Callable[[str], None] = print,
+    handle_signals: bool = False,
+) -> BroadcasterStats:
+    """Run both nodes on one bus for ``duration`` seconds of ``clock`` time (None:
+    until cancelled, or until SIGINT/SIGTERM when ``handle_signals``), print the summary
+    line through ``out`` and return the broadcaster's statistics."""
+    clock = clock if clock is not None else SystemClock()
+    stats = BroadcasterStats()
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    try:
+        async with (
+            Bus() as bus,
+            TransformListener(buffer, bus, clock=clock),
+            anyio.create_task_group() as tg,
+        ):
+            tg.start_soon(broadcaster_node, bus, clock, rate, stats)
+            tg.start_soon(listener_node, buffer, clock, listen_rate, out)
+            if handle_signals:
+                tg.start_soon(_cancel_on_signal, tg.cancel_scope)
+            if duration is not None:
+                await clock.sleep(duration)
+                tg.cancel_scope.cancel()
+    finally:
+        buffer.close()
+        out(stats.summary())
+    return stats
+
+
+async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async for _ in signals:
+            scope.cancel()
+            return
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Command-line options of the demo."""
+    parser = argparse.ArgumentParser(
+        prog="robot_setup_tf",
+        description="The ROS 'Setting up your robot using tf' tutorial on a tfbus bus.",
+    )
+    parser.add_argument(
+        "--duration", type=float, default=None, help="seconds to run (default: until Ctrl-C)"
+    )
+    parser.add_argument("--rate", type=float, default=100.0, help="broadcast rate, Hz")
+    parser.add_argument("--listen-rate", type=float, default=1.0, help="listener rate, Hz")
+    parser.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the demo from the command line; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    for name in ("rate", "listen_rate"):
+        if getattr(args, name) <= 0:
+            print(f"error: --{name.replace('_', '-')} must be positive", file=sys.stderr)
+            return 2
+    anyio.run(
+        lambda: run_demo(
+            duration=args.duration,
+            rate=args.rate,
+            listen_rate=args.listen_rate,
+            handle_signals=True,
+            out=lambda line: print(line, flush=True),
+        ),
+        backend=args.backend,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
