@@ -187,17 +187,14 @@ class BufferCore:
         return self._insert(transform, authority, is_static)
 
     def _insert(self, ts: TransformStamped, authority: str, is_static: bool) -> SetResult:
-        header, child, tf = ts
+        header, child, ((x, y, z), (qx, qy, qz, qw)) = ts
         parent = header.frame_id
         if parent[:1] == "/":
             parent = parent[1:]
         if child[:1] == "/":
             child = child[1:]
-        translation, rotation = tf
-        x, y, z = translation
-        qx, qy, qz, qw = rotation
-        values: Tf7 = (float(x), float(y), float(z), float(qx), float(qy), float(qz), float(qw))
-        # Fast check: `v - v == 0` fails for NaN and ±Inf alike.
+        # Fast check: `v - v == 0` fails for NaN and ±Inf alike. Non-numbers raise
+        # TypeError here (or struct.error on storing).
         norm2 = qx * qx + qy * qy + qz * qz + qw * qw
         if (
             child == parent
@@ -208,8 +205,9 @@ class BufferCore:
             or z - z != 0.0
             or not abs(norm2 - 1.0) < 0.01
         ):
-            self._reject(parent, child, values, authority)
-        stamp = header.stamp.ns
+            self._reject(parent, child, (x, y, z, qx, qy, qz, qw), authority)
+        values: Tf7 = (x, y, z, qx, qy, qz, qw)
+        stamp = header.stamp._ns
         self._generation += 1
         frame_ids = self._frame_ids
         child_id = frame_ids.get(child)
