@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 install: $(STAMP)
 
 lint: $(STAMP)
-	$(BIN)/ruff check tfbus tests benchmarks demos
+	$(BIN)/ruff check .
 	$(BIN)/mypy --strict tfbus
 
 test: lint
