@@ -211,8 +211,8 @@ class TimeCache:
 
     def _make_room(self) -> None:
         """Storage is full at the top: slide the live samples down if at least 1/16 of the
-        capacity is free below them, else grow by 1/8 (amortised O(1) inserts, ≤ ~12 %
-        slack, which keeps a steady stream near 64-72 bytes per sample)."""
+        capacity is free below them, else grow by 1/16 (amortised O(1) inserts; a steady
+        stream settles at ~7 % slack, i.e. ~68 bytes per sample)."""
         head, tail, cap = self._head, self._tail, self._cap
         n = tail - head
         if head >= cap // 16 and head > 0:
@@ -221,7 +221,7 @@ class TimeCache:
             if self._parents is not None:
                 self._parents[:n] = self._parents[head:tail]
         else:
-            new_cap = max(_MIN_CAPACITY, n + max(n // 8, 4))
+            new_cap = max(_MIN_CAPACITY, n + max(n // 16, 4))
             stamps, values, parents = self._stamps, self._values, self._parents
             self._alloc(new_cap)
             self._stamps[:n] = stamps[head:tail]

@@ -306,7 +306,7 @@ class BufferCore:
     def _validate(self, function: str, frame_id: str) -> int:
         """tf2 ``validateFrameId``: id of a known frame, else raise."""
         fid = self._frame_ids.get(frame_id)
-        if fid:  # known, and not NO_PARENT (0)
+        if fid and frame_id[0] != "/":  # known, not NO_PARENT (0), not "/x" (from "//x")
             return fid
         if not frame_id:
             raise InvalidArgumentException(
@@ -597,8 +597,10 @@ class BufferCore:
         if err:
             raise _ERRORS[err](result)
         out = _stamped(target_frame, source_frame, result, used)  # type: ignore[arg-type]
-        if len(self._memo) < _MEMO_SIZE:
-            self._memo[key] = out
+        memo = self._memo
+        if len(memo) >= _MEMO_SIZE:
+            memo.clear()
+        memo[key] = out
         return out
 
     def lookup_transform_full(

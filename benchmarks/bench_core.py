@@ -1,0 +1,299 @@
+"""Benchmark tfbus's BufferCore against the real tf2 (``tf2_py``) in the same run.
+
+    .venv/bin/python benchmarks/bench_core.py [--quick] [--no-tf2]
+
+Prints, on this machine:
+
+* lookup latency (µs per call) for chains of depth 1, 2, 8 and 32 (root <- leaf), at
+  time 0, at interpolated times that vary from call to call (so no result caching can
+  help), and at one fixed interpolated time;
+* ``set_transform`` rate (single calls, 100 Hz samples of many frames, cache pruning on);
+* memory per cached sample (1000 frames x 10 s x 100 Hz = 1M samples): tracemalloc and
+  RSS growth for tfbus, RSS growth for tf2 (C++ allocations are invisible to tracemalloc).
+
+The tf2 half runs ``benchmarks/_tf2_side.py`` under ``/usr/bin/python3`` (Debian
+``python3-tf2``); the scenario (stamps, query times, sizes) is handed over as JSON so both
+sides do exactly the same work. Targets (issue 2): lookups no slower than tf2_py,
+set_transform at least half of tf2_py's rate, at most 72 bytes per cached sample.
+Figures only: nothing here asserts a timing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import subprocess
+import sys
+import time
+import tracemalloc
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.core import BufferCore
+
+NS = 1_000_000_000
+TF2_PYTHON = "/usr/bin/python3"
+TF2_SIDE = Path(__file__).with_name("_tf2_side.py")
+MEMORY_TARGET = 72  # bytes per cached sample
+
+
+def scenario(quick: bool) -> dict[str, Any]:
+    """Everything both sides need, so that they run identical workloads."""
+    period = NS // 100  # 100 Hz
+    t0 = 1_700_000_000 * NS  # epoch-sized stamps, like a real robot
+    n_chain = 1001  # 10 s at 100 Hz on every link: [t0, t0 + 10 s]
+    span = (n_chain - 1) * period
+    # Varying query times strictly between samples, spread over the whole history, and
+    # never repeated (not across calls, not across repeats): no result memo can help.
+    calls = 5_000 if quick else 20_000
+    repeats = 3 if quick else 5
+    queries: list[int] = []
+    seen: set[int] = set()
+    k = 0
+    while len(queries) < calls * repeats:
+        q = t0 + 1 + (k * 2_654_435_761) % (span - 2)
+        k += 1
+        if (q - t0) % period and q not in seen:
+            seen.add(q)
+            queries.append(q)
+    return {
+        "cache_time_s": 10.0,
+        "period_ns": period,
+        "chain_stamps": [t0 + k * period for k in range(n_chain)],
+        "depths": [1, 2, 8, 32],
+        "query_ns": queries,
+        "fixed_ns": t0 + span // 2 + period // 3,
+        "calls": calls,
+        "repeats": repeats,
+        "set_t0_ns": t0,
+        "set_frames": 100,
+        "set_stamps": 500 if quick else 2_000,  # 20 s at 100 Hz: pruning is active
+        "mem_frames": 100 if quick else 1_000,
+        "mem_samples": 1_000,  # 10 s at 100 Hz, all within cache_time
+    }
+
+
+def _transform(k: int) -> Transform:
+    s = 0.01 * (k % 11)
+    return Transform(
+        Vector3(1.0 + 0.001 * (k % 7), 0.5, -0.25), Quaternion(s, 0.0, 0.0, (1.0 - s * s) ** 0.5)
+    )
+
+
+def _message(parent: str, child: str, stamp_ns: int, k: int) -> TransformStamped:
+    return TransformStamped(Header(Time.from_ns(stamp_ns), parent), child, _transform(k))
+
+
+def _chain(sc: dict[str, Any], depth: int) -> BufferCore:
+    core = BufferCore(cache_time=sc["cache_time_s"])
+    for k, stamp in enumerate(sc["chain_stamps"]):
+        for i in range(depth):
+            core.set_transform(_message(f"f{i}", f"f{i + 1}", stamp, k + i), "bench")
+    return core
+
+
+def _best_per_call(fn: Callable[[Time], object], runs: Sequence[Sequence[Time]]) -> float:
+    """Fastest run's seconds per call; each run calls ``fn`` on its own arguments."""
+    best = float("inf")
+    for args in runs:
+        start = time.perf_counter()
+        for a in args:
+            fn(a)
+        best = min(best, (time.perf_counter() - start) / len(args))
+    return best
+
+
+def _fresh_zero(core: BufferCore, leaf: str, sc: dict[str, Any]) -> float:
+    """Time-0 lookups each right after an insert on an unrelated link (so no memo can
+    serve them), minus the cost of the inserts alone (best of each)."""
+    calls, period = sc["calls"], sc["period_ns"]
+    stamps = iter(range(sc["set_t0_ns"], 1 << 62, period))  # 100 Hz on the x <- y link
+    zero = Time(0)
+    lookup = core.lookup_transform
+    setter = core.set_transform
+    for _ in range(2 * calls):  # reach the steady state: a full cache, pruning on insert
+        setter(_message("x", "y", next(stamps), 0), "bench")
+    best_both: float = float("inf")
+    best_alone: float = float("inf")
+    for _ in range(sc["repeats"]):
+        msgs = [_message("x", "y", next(stamps), k) for k in range(calls)]
+        start = time.perf_counter()
+        for m in msgs:
+            setter(m, "bench")
+        best_alone = min(best_alone, time.perf_counter() - start)
+        msgs = [_message("x", "y", next(stamps), k) for k in range(calls)]
+        start = time.perf_counter()
+        for m in msgs:
+            setter(m, "bench")
+            lookup("f0", leaf, zero)
+        best_both = min(best_both, time.perf_counter() - start)
+    best: float = (best_both - best_alone) / calls
+    return best
+
+
+def tfbus_lookups(sc: dict[str, Any]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    calls, repeats = sc["calls"], sc["repeats"]
+    varying = [Time.from_ns(ns) for ns in sc["query_ns"]]
+    for depth in sc["depths"]:
+        core = _chain(sc, depth)
+        leaf = f"f{depth}"
+
+        def fn(t: Time, lookup: Any = core.lookup_transform, leaf: str = leaf) -> object:
+            return lookup("f0", leaf, t)
+
+        # Repeated queries first (a result memo, if any, may serve them), then queries
+        # that are never repeated, then time 0 right after inserts.
+        out[f"{depth}/zero"] = _best_per_call(fn, [[Time(0)] * calls] * repeats)
+        out[f"{depth}/fixed"] = _best_per_call(
+            fn, [[Time.from_ns(sc["fixed_ns"])] * calls] * repeats
+        )
+        out[f"{depth}/interp"] = _best_per_call(
+            fn, [varying[r * calls : (r + 1) * calls] for r in range(repeats)]
+        )
+        out[f"{depth}/zero_fresh"] = _fresh_zero(core, leaf, sc)
+    return out
+
+
+def tfbus_set_rate(sc: dict[str, Any]) -> float:
+    core = BufferCore(cache_time=sc["cache_time_s"])
+    frames = sc["set_frames"]
+    msgs = [
+        _message("root", f"c{f}", sc["set_t0_ns"] + k * sc["period_ns"], k)
+        for k in range(sc["set_stamps"])
+        for f in range(frames)
+    ]
+    setter = core.set_transform
+    start = time.perf_counter()
+    for m in msgs:
+        setter(m, "bench")
+    return len(msgs) / (time.perf_counter() - start)
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096
+
+
+def _fill(core: BufferCore, sc: dict[str, Any]) -> None:
+    tf = _transform(3)
+    for f in range(sc["mem_frames"]):
+        child = f"c{f}"
+        for k in range(sc["mem_samples"]):
+            stamp = Time.from_ns(sc["set_t0_ns"] + k * sc["period_ns"])
+            core.set_transform(TransformStamped(Header(stamp, "root"), child, tf), "bench")
+
+
+def tfbus_memory(sc: dict[str, Any]) -> dict[str, float]:
+    samples = sc["mem_frames"] * sc["mem_samples"]
+    gc.collect()
+    before = _rss_bytes()
+    core = BufferCore(cache_time=sc["cache_time_s"])
+    _fill(core, sc)
+    gc.collect()
+    rss = (_rss_bytes() - before) / samples
+    del core
+    gc.collect()
+    tracemalloc.start()
+    core = BufferCore(cache_time=sc["cache_time_s"])
+    base, _ = tracemalloc.get_traced_memory()
+    _fill(core, sc)
+    gc.collect()
+    current, _ = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return {"traced_bytes_per_sample": (current - base) / samples, "rss_bytes_per_sample": rss}
+
+
+def tf2_side(sc: dict[str, Any]) -> dict[str, Any] | str:
+    """The tf2_py figures, or why there are none."""
+    probe = subprocess.run(
+        [TF2_PYTHON, "-c", "import tf2_py, rospy, geometry_msgs.msg"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if probe.returncode:
+        return f"tf2_py not importable by {TF2_PYTHON} (apt-get install python3-tf2)"
+    run = subprocess.run(
+        [TF2_PYTHON, str(TF2_SIDE)],
+        input=json.dumps(sc),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if run.returncode:
+        return f"tf2 side failed: {run.stderr.strip()[-500:]}"
+    result: dict[str, Any] = json.loads(run.stdout)
+    return result
+
+
+def _us(seconds: float | None) -> str:
+    return "—" if seconds is None else f"{seconds * 1e6:8.2f} µs"
+
+
+def report(sc: dict[str, Any], ours: dict[str, Any], ref: dict[str, Any] | str) -> None:
+    theirs = ref if isinstance(ref, dict) else {}
+    head = "lookup_transform(root, leaf, t)"
+    print(f"{head:36} {'tfbus':>12} {'tf2_py':>12} {'tfbus/tf2':>10}  target")
+    print("-" * 90)
+    labels = {
+        "interp": "interp. t, never repeated",
+        "zero_fresh": "time 0, after an insert",
+        "fixed": "interp. t, repeated",
+        "zero": "time 0, repeated",
+    }
+    for depth in sc["depths"]:
+        for key, label in labels.items():
+            name = f"{depth}/{key}"
+            a = ours["lookup_s"][name]
+            b = theirs.get("lookup_s", {}).get(name)
+            ratio = f"{a / b:9.2f}x" if b else ""
+            verdict = "" if b is None else ("ok" if a <= b else "SLOWER")
+            print(
+                f"depth {depth:>2}, {label:<25} {_us(a):>12} {_us(b):>12} {ratio:>10}"
+                f"  <= tf2_py  {verdict}"
+            )
+    a = ours["set_per_s"]
+    b = theirs.get("set_per_s")
+    ratio = f"{a / b:9.2f}x" if b else ""
+    verdict = "" if b is None else ("ok" if a >= b / 2 else "TOO SLOW")
+    print(
+        f"{'set_transform, single calls':36} {a / 1e6:8.3f} M/s "
+        f"{'—' if b is None else f'{b / 1e6:8.3f} M/s':>12} {ratio:>10}  >= 0.5x tf2_py  {verdict}"
+    )
+    traced = ours["traced_bytes_per_sample"]
+    verdict = "ok" if traced <= MEMORY_TARGET else "TOO BIG"
+    samples = sc["mem_frames"] * sc["mem_samples"]
+    tf2_rss = theirs.get("rss_bytes_per_sample")
+    print(
+        f"{f'memory/sample, {samples:,} (traced)':36} {traced:9.1f} B {'':>12} {'':>10}"
+        f"  <= {MEMORY_TARGET} B  {verdict}"
+    )
+    print(
+        f"{'memory/sample (RSS growth)':36} {ours['rss_bytes_per_sample']:9.1f} B "
+        f"{'—' if tf2_rss is None else f'{tf2_rss:9.1f} B':>12}"
+    )
+    if isinstance(ref, str):
+        print(f"\n(no tf2 comparison: {ref})")
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="smaller workloads (~20 s)")
+    parser.add_argument("--no-tf2", action="store_true", help="skip the tf2_py comparison")
+    args = parser.parse_args(argv)
+    sc = scenario(args.quick)
+    started = time.perf_counter()
+    print(f"tfbus BufferCore vs tf2_py — Python {sys.version.split()[0]}", flush=True)
+    ours: dict[str, Any] = {"lookup_s": tfbus_lookups(sc), "set_per_s": tfbus_set_rate(sc)}
+    ours.update(tfbus_memory(sc))
+    ref = "skipped (--no-tf2)" if args.no_tf2 else tf2_side(sc)
+    report(sc, ours, ref)
+    print(f"\n({time.perf_counter() - started:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()
