@@ -1,0 +1,376 @@
+"""The ``tfbus`` command line, through click's CliRunner, plus one run of the installed
+entry point. Bag data: tests/data/webviz_turtle_tf_example.bag (Apache-2.0)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("click")
+pytest.importorskip("rosbags")
+
+from click.testing import CliRunner
+
+from tfbus import Time
+from tfbus.bag import load_buffer, read_messages
+from tfbus.cli import cli, frames_dot, main, parse_static_args, parse_time
+
+DATA = Path(__file__).parent / "data"
+TURTLE = DATA / "webviz_turtle_tf_example.bag"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
+COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay", "demo"]
+
+
+def run(*args: str) -> tuple[int, str, str]:
+    result = CliRunner().invoke(cli, list(args), catch_exceptions=False)
+    return result.exit_code, result.stdout, result.stderr
+
+
+def assert_usage_error(code: int, err: str, *needles: str) -> None:
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert re.match(r"^tfbus( [a-z-]+)?: error: ", lines[0]), lines[0]
+    for needle in needles:
+        assert needle in lines[0]
+
+
+# --------------------------------------------------------------------------- help
+
+
+def test_group_help_lists_commands() -> None:
+    code, out, _ = run("--help")
+    assert code == 0
+    for name in COMMANDS:
+        assert name in out
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_every_command_has_help_with_examples(command: str) -> None:
+    code, out, _ = run(command, "--help")
+    assert code == 0
+    assert "Examples:" in out and f"tfbus {command}" in out
+
+
+def test_unknown_command_and_option_are_one_line() -> None:
+    code, _, err = run("nope")
+    assert_usage_error(code, err, "nope")
+    code, _, err = run("bag-info", "--bogus", str(TURTLE))
+    assert_usage_error(code, err, "--bogus")
+
+
+# --------------------------------------------------------------------------- bag-info
+
+
+def test_bag_info() -> None:
+    code, out, _ = run("bag-info", str(TURTLE))
+    assert code == 0
+    assert "ros1" in out
+    assert "/tf 2688, /tf_static 1" in out
+    assert "1396293888.046138414" in out and "21.499 s" in out
+    assert "4 (1 static links, 2 dynamic links, 2689 transforms)" in out
+    rows = {line.split()[0]: line for line in out.splitlines() if "│" in line}
+    assert "world" in rows["turtle1"] and "dynamic" in rows["turtle1"]
+    assert "1344" in rows["turtle1"] and "62.50" in rows["turtle1"]
+    assert "/turtle1_tf_broadcaster" in rows["turtle1"]
+    assert "static" in rows["carrot"] and "turtle1" in rows["carrot"]
+
+
+@pytest.mark.skipif(not NAV2.exists(), reason="../shared/data (GPL evo data) absent")
+def test_bag_info_mcap() -> None:
+    code, out, _ = run("bag-info", str(NAV2))
+    assert code == 0
+    assert "mcap" in out and "34 (29 static links, 4 dynamic links, 7313 transforms)" in out
+
+
+def test_bag_info_errors(tmp_path: Path) -> None:
+    code, _, err = run("bag-info", str(tmp_path / "missing.bag"))
+    assert_usage_error(code, err, "missing.bag")
+    junk = tmp_path / "junk.bag"
+    junk.write_text("not a bag")
+    code, _, err = run("bag-info", str(junk))
+    assert_usage_error(code, err, "unknown format")
+
+
+def test_bag_info_truncated_shows_prefix_and_warns(tmp_path: Path) -> None:
+    cut = tmp_path / "cut.bag"
+    data = TURTLE.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    code, out, err = run("bag-info", str(cut))
+    assert code == 1
+    assert "turtle1" in out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "warning" in lines[0] and "reading stopped" in lines[0]
+
+
+# --------------------------------------------------------------------------- echo
+
+
+def _numbers(line: str) -> list[float]:
+    return [float(x) for x in re.findall(r"-?\d+\.\d+", line)]
+
+
+def test_echo_at_time_matches_buffer() -> None:
+    t = "1396293900.5"
+    code, out, _ = run("echo", "world", "carrot", "--bag", str(TURTLE), "--time", t,
+                       "--matrix", "-p", "6")
+    assert code == 0
+    expect = load_buffer(TURTLE).lookup_transform("world", "carrot", parse_time(t))
+    lines = out.splitlines()
+    assert lines[0] == "At time 1396293900.500000000"
+    tr = _numbers(lines[1])
+    assert tr == pytest.approx(list(expect.transform.translation), abs=1e-6)
+    q = _numbers(lines[2])
+    assert q == pytest.approx(list(expect.transform.rotation), abs=1e-6)
+    x, y, z, w = expect.transform.rotation
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    assert _numbers(lines[3])[2] == pytest.approx(yaw, abs=1e-6)
+    assert _numbers(lines[4])[2] == pytest.approx(math.degrees(yaw), abs=1e-5)
+    assert lines[5] == "- Matrix:"
+    row0 = _numbers(lines[6])
+    assert row0[0] == pytest.approx(math.cos(yaw), abs=1e-6)
+    assert row0[3] == pytest.approx(expect.transform.translation.x, abs=1e-6)
+
+
+def test_echo_steps_through_bag() -> None:
+    code, out, _ = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--rate", "2",
+                       "-n", "5")
+    assert code == 0
+    stamps = [line.split()[-1] for line in out.splitlines() if line.startswith("At time")]
+    assert len(stamps) == 5
+    secs = [Time(int(s.split(".")[0]), int(s.split(".")[1])).ns for s in stamps]
+    assert all(b - a == 500_000_000 for a, b in itertools.pairwise(secs))
+    first = next(iter(read_messages(TURTLE, topics=["/tf"])))
+    assert secs[0] >= first.message.transforms[0].header.stamp.ns
+
+
+def test_echo_static_pair_prints_once() -> None:
+    code, out, _ = run("echo", "turtle1", "carrot", "--bag", str(TURTLE))
+    assert code == 0 and out.count("At time") == 1
+    assert "- Translation: [1.000, 0.000, 0.000]" in out
+
+
+def test_echo_failure_and_bad_arguments() -> None:
+    code, out, _ = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--time", "100")
+    assert code == 1 and "Failure at" in out and "Exception thrown" in out
+    code, _, err = run("echo", "world", "nope", "--bag", str(TURTLE))
+    assert_usage_error(code, err, "'nope'")
+    code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--time", "soon")
+    assert_usage_error(code, err, "soon")
+    code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--rate", "0")
+    assert_usage_error(code, err, "--rate")
+    code, _, err = run("echo", "world", "turtle1")
+    assert_usage_error(code, err, "--bag")
+
+
+def test_parse_time() -> None:
+    assert parse_time("latest") == Time(0)
+    assert parse_time("1396293909.544282913") == Time(1396293909, 544282913)
+    assert parse_time("12.5") == Time(12, 500_000_000)
+    assert parse_time("1e3") == Time(1000)
+    assert parse_time("42ns") == Time.from_ns(42)
+    for bad in ("-1", "abc", "nan"):
+        with pytest.raises(ValueError):
+            parse_time(bad)
+
+
+# --------------------------------------------------------------------------- monitor
+
+
+def test_monitor() -> None:
+    code, out, _ = run("monitor", "--bag", str(TURTLE))
+    assert code == 0
+    assert "RESULTS: for all Frames" in out
+    rows = {line.split()[0]: line for line in out.splitlines() if "│" in line}
+    assert "/turtle1_tf_broadcaster" in rows["turtle1"]
+    assert _numbers(rows["turtle1"])[0] == pytest.approx(62.5, abs=0.05)
+    assert "static" in rows["carrot"]
+    assert "/turtle2_tf_broadcaster" in rows
+    code, out, _ = run("monitor", "world", "carrot", "--bag", str(TURTLE))
+    assert code == 0 and "turtle2 " not in out.split("All Broadcasters")[0]
+    code, _, err = run("monitor", "world", "--bag", str(TURTLE))
+    assert_usage_error(code, err, "two")
+
+
+# --------------------------------------------------------------------------- frames
+
+
+def test_frames_dot_text(tmp_path: Path) -> None:
+    out = tmp_path / "tree.gv"
+    code, stdout, _ = run("frames", "--bag", str(TURTLE), "-o", str(out))
+    assert code == 0 and str(out) in stdout
+    dot = out.read_text()
+    assert dot.startswith("digraph G {")
+    assert "world -> turtle1" in dot and "world -> turtle2" in dot and "turtle1 -> carrot" in dot
+    assert "Broadcaster: /turtle1_tf_broadcaster" in dot
+    assert "Most recent transform: 1396293909.544" in dot
+    assert "Oldest transform: 1396293888.056" in dot
+    assert "Average rate: static" in dot
+    assert "view_frames Result" in dot
+    assert frames_dot(load_buffer(TURTLE)) == dot
+
+
+def test_frames_pdf_renders_or_explains(tmp_path: Path) -> None:
+    out = tmp_path / "frames.pdf"
+    code, _, err = run("frames", "--bag", str(TURTLE), "-o", str(out))
+    assert (tmp_path / "frames.gv").exists()
+    if shutil.which("dot"):
+        assert code == 0 and out.read_bytes().startswith(b"%PDF")
+    else:
+        assert code == 1 and "'dot' not found" in err and len(err.strip().splitlines()) == 1
+
+
+def test_frames_bad_output() -> None:
+    code, _, err = run("frames", "--bag", str(TURTLE), "-o", "frames.jpg")
+    assert_usage_error(code, err, "frames.jpg")
+
+
+# --------------------------------------------------------------------------- static-transform
+
+
+def test_parse_static_args_rpy_and_quaternion() -> None:
+    ts = parse_static_args(["0.1", "0", "0.2", "1.5707963267948966", "0", "0", "a", "b"])
+    assert ts.header.frame_id == "a" and ts.child_frame_id == "b"
+    assert tuple(ts.transform.translation) == (0.1, 0.0, 0.2)
+    q = ts.transform.rotation  # yaw 90 deg about Z
+    assert (q.x, q.y, q.z, q.w) == pytest.approx((0, 0, math.sqrt(0.5), math.sqrt(0.5)))
+    ts = parse_static_args(["0", "0", "0", "0", "0.5", "0", "a", "b"])  # pitch about Y
+    assert tuple(ts.transform.rotation) == pytest.approx((0, math.sin(0.25), 0, math.cos(0.25)))
+    ts = parse_static_args(["0", "0", "0", "0", "0", "0.5", "a", "b"])  # roll about X
+    assert tuple(ts.transform.rotation) == pytest.approx((math.sin(0.25), 0, 0, math.cos(0.25)))
+    ts = parse_static_args(["1", "2", "3", "0", "0", "0", "2", "p", "c"])  # quaternion, scaled
+    assert tuple(ts.transform.rotation) == (0.0, 0.0, 0.0, 1.0)
+    ts = parse_static_args(["0", "0", "0", "0", "0", "0", "p", "c", "100"])  # ROS 1 period
+    assert ts.child_frame_id == "c"
+    for bad in (["1", "2"], ["x", "0", "0", "0", "0", "0", "a", "b"],
+                ["0", "0", "0", "0", "0", "0", "a", "a"],
+                ["0", "0", "0", "0", "0", "0", "0", "a", "b"]):
+        with pytest.raises(ValueError):
+            parse_static_args(bad)
+
+
+def test_static_transform_publishes_once() -> None:
+    code, out, _ = run("static-transform", "-1", "0", "0.2", "0", "0", "0",
+                       "base_link", "base_laser", "--once")
+    assert code == 0
+    assert "base_link -> base_laser" in out and "(-1.0, 0.0, 0.2)" in out
+
+
+def test_static_transform_publishes_on_bus(monkeypatch: pytest.MonkeyPatch) -> None:
+    import tfbus.cli as tcli
+
+    seen = []
+
+    async def fake(ts: object, once: bool) -> None:
+        seen.append((ts, once))
+
+    monkeypatch.setattr(tcli, "_publish_static", fake)
+    code, _, _ = run("static-transform", "0", "0", "1", "0", "0", "0", "1", "world", "cam")
+    assert code == 0 and len(seen) == 1 and seen[0][1] is False
+
+
+async def _published_static() -> list[object]:
+    from tfbus.broadcaster import StaticTransformBroadcaster
+    from tfbus.bus import Bus
+
+    ts = parse_static_args(["0", "0", "1", "0", "0", "0", "world", "cam"])
+    async with Bus() as bus:
+        await StaticTransformBroadcaster(bus).send_transform(ts)
+        with bus.subscribe("/tf_static") as sub:
+            return list(sub.receive_nowait().transforms)
+
+
+def test_static_transform_message_is_latched() -> None:
+    import anyio
+
+    (ts,) = anyio.run(_published_static)
+    assert ts.child_frame_id == "cam"  # type: ignore[attr-defined]
+
+
+def test_static_transform_bad_arguments() -> None:
+    code, _, err = run("static-transform", "1", "2", "3")
+    assert_usage_error(code, err, "expected 8 arguments")
+    code, _, err = run("static-transform", "1", "2", "x", "0", "0", "0", "a", "b")
+    assert_usage_error(code, err, "'x' is not a number")
+
+
+# --------------------------------------------------------------------------- replay
+
+
+def test_replay_fast() -> None:
+    code, out, _ = run("replay", str(TURTLE), "--rate", "0", "-q")
+    assert code == 0 and "replayed 2689 messages" in out
+    code, out, _ = run("replay", str(TURTLE), "--rate", "0", "-q",
+                       "--start", "1396293900", "--stop", "1396293901")
+    assert code == 0
+    n = int(re.search(r"replayed (\d+)", out).group(1))  # type: ignore[union-attr]
+    assert n == 1 + len(list(read_messages(TURTLE, start=Time(1396293900),
+                                           stop=Time(1396293901), latched=False)))
+
+
+def test_replay_progress_bar() -> None:
+    code, _, err = run("replay", str(TURTLE), "--rate", "0")
+    assert code == 0 and "2689/2689" in err
+
+
+def test_replay_truncated_and_bad_args(tmp_path: Path) -> None:
+    cut = tmp_path / "cut.bag"
+    data = TURTLE.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    code, _, err = run("replay", str(cut), "--rate", "0", "-q")
+    assert code == 1 and "reading stopped" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run("replay", str(TURTLE), "--rate", "-2")
+    assert_usage_error(code, err, "--rate")
+
+
+# --------------------------------------------------------------------------- demo
+
+
+def test_demo_forwards_options(monkeypatch: pytest.MonkeyPatch) -> None:
+    import tfbus.demo
+
+    calls: list[list[str] | None] = []
+
+    def fake_main(argv: list[str] | None = None) -> int:
+        calls.append(argv)
+        return 0
+
+    monkeypatch.setattr(tfbus.demo, "main", fake_main)
+    code, _, _ = run("demo", "--duration", "3", "--rate", "50", "--listen-rate", "2")
+    assert code == 0
+    assert calls == [["--duration", "3.0", "--rate", "50.0", "--listen-rate", "2.0"]]
+    code, _, err = run("demo", "--rate", "-5")
+    assert_usage_error(code, err, "--rate")
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def test_main_returns_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bag-info", str(TURTLE)]) == 0
+    assert main(["echo", "world"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines()[-1].startswith("tfbus echo: error: ")
+    assert main(["--help"]) == 0
+
+
+def test_installed_entry_point() -> None:
+    exe = Path(sys.executable).parent / "tfbus"
+    if not exe.exists():
+        pytest.skip("the tfbus entry point is not installed in this environment")
+    proc = subprocess.run([str(exe), "bag-info", str(TURTLE)], capture_output=True,
+                          text=True, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert "/tf 2688, /tf_static 1" in proc.stdout
+    proc = subprocess.run([str(exe), "echo", "world"], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "tfbus echo: error: Missing argument 'TARGET'."
