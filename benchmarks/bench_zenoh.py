@@ -1,0 +1,181 @@
+"""Cross-process benchmark of the Zenoh transport (prints figures, asserts nothing).
+
+Two processes on 127.0.0.1: this one (the receiver: Bus + TransformListener + Buffer)
+and a child it starts (the sender: Bus + TransformBroadcaster).
+
+1. One-way latency: the sender calls ``send_transform`` for probe ``i`` (stamp ``i`` ns,
+   translation.x = its ``time.monotonic_ns()``) about every ms; the receiver has
+   ``await buffer.wait_for_transform("world", "probe", Time.from_ns(i))`` pending and
+   takes ``monotonic_ns()`` when it returns (CLOCK_MONOTONIC is system-wide on Linux).
+2. Throughput: the sender publishes TFMessages of ``--batch`` transforms as fast as it
+   can for ``--seconds``; the receiver counts transforms stored in its Buffer.
+
+Usage: ``python benchmarks/bench_zenoh.py [--probes 2000] [--batch 100] [--seconds 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import anyio
+import anyio.lowlevel
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tfbus.broadcaster import TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.listener import TransformListener
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import Time
+from tfbus.transports.zenoh import ZenohTransport
+
+
+def _ts(child: str, ns: int, x: float) -> TransformStamped:
+    return TransformStamped(
+        Header(Time.from_ns(ns), "world"), child, Transform(Vector3(x, 0.0, 0.0), Quaternion())
+    )
+
+
+async def sender(args: argparse.Namespace) -> None:
+    transport = ZenohTransport(connect=args.endpoint, name="bench-sender", express=args.express)
+    async with Bus(transport=transport) as bus:
+        with anyio.fail_after(10):
+            while not transport.alive():
+                await anyio.sleep(0.01)
+        await anyio.sleep(0.5)
+        tf = TransformBroadcaster(bus)
+        for i in range(1, args.probes + 1):
+            await tf.send_transform(_ts("probe", i, float(time.monotonic_ns())))
+            await anyio.sleep(0.001)
+        await anyio.sleep(0.5)
+        children = [f"f{k}" for k in range(args.batch)]
+        stamp = 0
+        end = time.monotonic() + args.seconds
+        sent = 0
+        while time.monotonic() < end:
+            for _ in range(10):
+                stamp += 1
+                tf.send_transform_nowait([_ts(c, stamp, 1.0) for c in children])
+                sent += args.batch
+            await anyio.lowlevel.checkpoint()
+        bus.publish_nowait("/bench/done", sent)
+        await anyio.sleep(1.0)
+
+
+async def receiver(args: argparse.Namespace, endpoint: str) -> None:
+    transport = ZenohTransport(listen=endpoint, name="bench-receiver")
+    buffer = Buffer(cache_time=3600.0)
+    async with Bus(transport=transport, queue_size=10_000) as bus:
+        done = bus.subscribe("/bench/done")
+        listener = TransformListener(buffer, bus, queue_size=10_000)
+        async with listener:
+            child = subprocess.Popen(
+                [
+                    sys.executable,
+                    __file__,
+                    "--role",
+                    "sender",
+                    "--endpoint",
+                    endpoint,
+                    "--probes",
+                    str(args.probes),
+                    "--batch",
+                    str(args.batch),
+                    "--seconds",
+                    str(args.seconds),
+                ]
+                + (["--express"] if args.express else []),
+                env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)},
+            )
+            try:
+                lat: list[float] = []
+                timeouts = 0
+                with anyio.fail_after(30):
+                    await buffer.wait_for_transform("world", "probe", Time.from_ns(1))
+                for i in range(1, args.probes + 1):
+                    try:
+                        ts = await buffer.wait_for_transform(
+                            "world", "probe", Time.from_ns(i), timeout=1.0
+                        )
+                    except Exception:
+                        timeouts += 1
+                        continue
+                    now = time.monotonic_ns()
+                    if ts.header.stamp.ns == i:
+                        lat.append((now - ts.transform.translation.x) / 1e3)
+                lat.sort()
+                print(
+                    f"one-way latency send_transform -> awaiting wait_for_transform, "
+                    f"{len(lat)} probes ({timeouts} timed out):"
+                )
+                print(
+                    f"  median {statistics.median(lat):.1f} us   "
+                    f"p99 {lat[int(len(lat) * 0.99) - 1]:.1f} us   max {lat[-1]:.1f} us"
+                )
+                # throughput
+                t_first = None
+                stored0 = listener.statistics().stored
+                last_stored, t_last = stored0, time.perf_counter()
+                sent = None
+                with anyio.fail_after(args.seconds + 30):
+                    while True:
+                        await anyio.sleep(0.005)
+                        s = listener.statistics().stored
+                        now_p = time.perf_counter()
+                        if s != last_stored:
+                            if t_first is None:
+                                t_first = now_p
+                                stored0 = last_stored
+                            last_stored, t_last = s, now_p
+                        with contextlib.suppress(anyio.WouldBlock):
+                            sent = done.receive_nowait()
+                        if sent is not None and now_p - t_last > 0.3:
+                            break
+                got = last_stored - stored0
+                span = t_last - (t_first or t_last)
+                stats = transport.statistics()
+                print(
+                    f"throughput, batches of {args.batch} transforms into the Buffer: "
+                    f"{got / span / 1e6:.3f} M transforms/s "
+                    f"({got} of {sent} sent in {span:.2f} s; lost {stats.lost} messages, "
+                    f"{stats.batches} wake-ups for {stats.received} payloads)"
+                )
+            finally:
+                child.kill()
+                child.wait(timeout=10)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--role", default="receiver", choices=["receiver", "sender"])
+    parser.add_argument("--endpoint", default="")
+    parser.add_argument("--probes", type=int, default=2000)
+    parser.add_argument("--batch", type=int, default=100)
+    parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--express", action="store_true")
+    parser.add_argument("--backend", default="asyncio")
+    args = parser.parse_args()
+    if args.role == "sender":
+        anyio.run(sender, args, backend=args.backend)
+        return
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    print(
+        f"bench_zenoh: backend={args.backend} express={args.express} (2 processes, "
+        f"127.0.0.1:{port})"
+    )
+    anyio.run(receiver, args, f"tcp/127.0.0.1:{port}", backend=args.backend)
+
+
+if __name__ == "__main__":
+    main()
