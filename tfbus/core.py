@@ -28,7 +28,7 @@ import time as _wallclock
 from collections.abc import Iterable
 from typing import Final
 
-from tfbus._tf2math import Tf7
+from tfbus._tf2math import IDENTITY, Tf7
 from tfbus.cache import OK, OLD_DATA, StaticCache, TimeCache
 from tfbus.errors import (
     ConnectivityException,
@@ -59,6 +59,12 @@ _NO_ERROR: Final = 0
 _LOOKUP_ERROR: Final = 1
 _CONNECTIVITY_ERROR: Final = 2
 _EXTRAPOLATION_ERROR: Final = 3
+
+# outcomes of BufferCore._climb
+_CLIMB_STOPPED: Final = 0  # reached the stop frame, or a frame without a link
+_CLIMB_EARLY: Final = 1  # reached the other frame of the lookup
+_CLIMB_FAILED: Final = 2  # a link had no data at the time
+_CLIMB_LOOP: Final = 3  # longer than MAX_GRAPH_DEPTH
 
 _ERRORS: Final[dict[int, type[TransformException]]] = {
     _LOOKUP_ERROR: LookupException,
@@ -384,6 +390,59 @@ class BufferCore:
                 break
         return _NO_ERROR, 0 if common == big else common
 
+    def _climb(
+        self, frame: int, stop: int, early: int, time: int
+    ) -> tuple[int, int, Tf7, str]:
+        """One half of tf2's ``walkToTopParent``: walk up from ``frame`` gathering each
+        link at ``time`` and accumulating ``frame -> current`` (``TransformAccum::accum``:
+        ``t = quatRotate(q_link, t) + t_link``, ``q = q_link ⊗ q``).
+
+        Stops at ``stop`` (not gathered), at a frame without a link, at a link with no
+        data (``_CLIMB_FAILED`` with tf2's detail; a link to NO_PARENT has an empty
+        detail), or at ``early`` once its link gathered (``_CLIMB_EARLY``; that link is
+        not accumulated). Returns ``(outcome, frame reached, accumulated up to that
+        frame, detail)``.
+        """
+        caches = self._caches
+        ax = ay = az = aqx = aqy = aqz = 0.0
+        aqw = 1.0
+        first = True
+        depth = 0
+        while frame != stop:
+            cache = caches[frame]
+            if cache is None:
+                break
+            r = cache.gather(time)
+            if isinstance(r, str) or r[0] == 0:
+                detail = r if isinstance(r, str) else ""
+                return _CLIMB_FAILED, frame, (ax, ay, az, aqx, aqy, aqz, aqw), detail
+            parent, st = r
+            if frame == early:
+                return _CLIMB_EARLY, frame, (ax, ay, az, aqx, aqy, aqz, aqw), ""
+            if first:
+                ax, ay, az, aqx, aqy, aqz, aqw = st
+                first = False
+            else:
+                x, y, z, qx, qy, qz, qw = st
+                tx = qw * ax + qy * az - qz * ay
+                ty = qw * ay + qz * ax - qx * az
+                tz = qw * az + qx * ay - qy * ax
+                tw = -qx * ax - qy * ay - qz * az
+                ax = -tw * qx + tx * qw - ty * qz + tz * qy + x
+                ay = -tw * qy + ty * qw - tz * qx + tx * qz + y
+                az = -tw * qz + tz * qw - tx * qy + ty * qx + z
+                aqx, aqy, aqz, aqw = (
+                    qw * aqx + qx * aqw + qy * aqz - qz * aqy,
+                    qw * aqy + qy * aqw + qz * aqx - qx * aqz,
+                    qw * aqz + qz * aqw + qx * aqy - qy * aqx,
+                    qw * aqw - qx * aqx - qy * aqy - qz * aqz,
+                )
+            frame = parent
+            depth += 1
+            if depth > MAX_GRAPH_DEPTH:
+                return _CLIMB_LOOP, frame, IDENTITY, self._loop_message()
+        return _CLIMB_STOPPED, frame, (ax, ay, az, aqx, aqy, aqz, aqw), ""
+
     def _walk(self, target_id: int, source_id: int, time: int) -> tuple[int, Tf7 | str, int]:
         """tf2 ``walkToTopParent`` with ``TransformAccum``.
 
@@ -391,119 +450,44 @@ class BufferCore:
         The transform maps source coordinates into target coordinates.
         """
         if source_id == target_id:
-            return _NO_ERROR, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0), time
+            return _NO_ERROR, IDENTITY, time
         if time == 0:
             err, resolved = self._common_time(target_id, source_id)
             if err:
                 return err, resolved, 0  # type: ignore[return-value]
             time = resolved  # type: ignore[assignment]
-        caches = self._caches
 
-        # Source side: accumulate source -> top.
-        sx = sy = sz = sqx = sqy = sqz = 0.0
-        sqw = 1.0
-        first = True
-        frame = source_id
-        top = frame
-        depth = 0
-        src_error: str | None = None
-        while frame != 0:
-            cache = caches[frame]
-            if cache is None:
-                top = frame
-                break
-            r = cache.gather(time)
-            if isinstance(r, str):
-                top = frame
-                src_error = r
-                break
-            parent, st = r
-            if parent == 0:
-                top = frame
-                src_error = ""
-                break
-            if frame == target_id:  # TargetParentOfSource: target is an ancestor of source
-                return _NO_ERROR, (sx, sy, sz, sqx, sqy, sqz, sqw), time
-            if first:
-                sx, sy, sz, sqx, sqy, sqz, sqw = st
-                first = False
-            else:
-                x, y, z, qx, qy, qz, qw = st
-                # s_vec = q ⊗ s_vec ⊗ q* + t ; s_q = q ⊗ s_q   (tf2 quatRotate, operator*)
-                tx = qw * sx + qy * sz - qz * sy
-                ty = qw * sy + qz * sx - qx * sz
-                tz = qw * sz + qx * sy - qy * sx
-                tw = -qx * sx - qy * sy - qz * sz
-                sx = -tw * qx + tx * qw - ty * qz + tz * qy + x
-                sy = -tw * qy + ty * qw - tz * qx + tx * qz + y
-                sz = -tw * qz + tz * qw - tx * qy + ty * qx + z
-                sqx, sqy, sqz, sqw = (
-                    qw * sqx + qx * sqw + qy * sqz - qz * sqy,
-                    qw * sqy + qy * sqw + qz * sqx - qx * sqz,
-                    qw * sqz + qz * sqw + qx * sqy - qy * sqx,
-                    qw * sqw - qx * sqx - qy * sqy - qz * sqz,
-                )
-            top = frame
-            frame = parent
-            depth += 1
-            if depth > MAX_GRAPH_DEPTH:
-                return _LOOKUP_ERROR, self._loop_message(), 0
+        # Source side: source -> top. A failure here is only remembered: the path may
+        # still close below it (only links between the two frames must be valid).
+        outcome, top, src, src_error = self._climb(source_id, 0, target_id, time)
+        if outcome == _CLIMB_EARLY:  # TargetParentOfSource
+            return _NO_ERROR, src, time
+        if outcome == _CLIMB_LOOP:
+            return _LOOKUP_ERROR, src_error, 0
+        failed = outcome == _CLIMB_FAILED
 
-        # Target side: accumulate target -> top.
-        gx = gy = gz = gqx = gqy = gqz = 0.0
-        gqw = 1.0
-        first = True
-        frame = target_id
-        depth = 0
-        while frame != top:
-            cache = caches[frame]
-            if cache is None:
-                break
-            r = cache.gather(time)
-            if isinstance(r, str) or r[0] == 0:  # no data, or a link to NO_PARENT
-                detail = r if isinstance(r, str) else ""
-                message = self._extrapolation_message(detail, source_id, target_id)
-                return _EXTRAPOLATION_ERROR, message, 0
-            parent, st = r
-            if frame == source_id:  # source is an ancestor of target
-                break
-            if first:
-                gx, gy, gz, gqx, gqy, gqz, gqw = st
-                first = False
-            else:
-                x, y, z, qx, qy, qz, qw = st
-                tx = qw * gx + qy * gz - qz * gy
-                ty = qw * gy + qz * gx - qx * gz
-                tz = qw * gz + qx * gy - qy * gx
-                tw = -qx * gx - qy * gy - qz * gz
-                gx = -tw * qx + tx * qw - ty * qz + tz * qy + x
-                gy = -tw * qy + ty * qw - tz * qx + tx * qz + y
-                gz = -tw * qz + tz * qw - tx * qy + ty * qx + z
-                gqx, gqy, gqz, gqw = (
-                    qw * gqx + qx * gqw + qy * gqz - qz * gqy,
-                    qw * gqy + qy * gqw + qz * gqx - qx * gqz,
-                    qw * gqz + qz * gqw + qx * gqy - qy * gqx,
-                    qw * gqw - qx * gqx - qy * gqy - qz * gqz,
-                )
-            frame = parent
-            depth += 1
-            if depth > MAX_GRAPH_DEPTH:
-                return _LOOKUP_ERROR, self._loop_message(), 0
-
-        if frame != top and frame != source_id:
-            if src_error is not None:
+        # Target side: target -> top. A failure here is reported at once.
+        outcome, frame, tgt, detail = self._climb(target_id, top, source_id, time)
+        if outcome == _CLIMB_FAILED:
+            return _EXTRAPOLATION_ERROR, self._extrapolation_message(
+                detail, source_id, target_id
+            ), 0
+        if outcome == _CLIMB_LOOP:
+            return _LOOKUP_ERROR, detail, 0
+        if outcome == _CLIMB_EARLY:  # SourceParentOfTarget: the source side is unused
+            src = IDENTITY
+        elif frame != top:
+            if failed:
                 return _EXTRAPOLATION_ERROR, self._extrapolation_message(
                     src_error, source_id, target_id
                 ), 0
             return _CONNECTIVITY_ERROR, self._connectivity_message(source_id, target_id), 0
 
-        if frame == source_id and frame != top:
-            # SourceParentOfTarget: the source-side accumulation is unused.
-            sx = sy = sz = sqx = sqy = sqz = 0.0
-            sqw = 1.0
-        # FullPath: result = inv(target_to_top) ∘ source_to_top, with inv = (conj q, q*(-t)q).
+        # FullPath: inv(target -> top) ∘ (source -> top), inv = (conj q, conj q * (-t)).
+        sx, sy, sz, sqx, sqy, sqz, sqw = src
+        gx, gy, gz, gqx, gqy, gqz, gqw = tgt
         iqx, iqy, iqz, iqw = -gqx, -gqy, -gqz, gqw
-        # v = s_vec - g_vec, rotated by the conjugate: q*(s) + q*(-g) = q*(s - g)
+        # conj(q) applied to (s - g): quatRotate(q*, s) + quatRotate(q*, -g)
         vx, vy, vz = sx - gx, sy - gy, sz - gz
         tx = iqw * vx + iqy * vz - iqz * vy
         ty = iqw * vy + iqz * vx - iqx * vz
