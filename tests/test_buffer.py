@@ -237,3 +237,11 @@ async def test_full_lookup_waits_for_both_legs() -> None:
         buf.set_transform(tf("a", "b", Time(1005), x=3.0))
     # b moved from x=1 to x=3 in the fixed frame a: a point fixed in a seen from b moved by -2
     assert got[0].transform.translation.x == pytest.approx(-2.0)
+
+
+async def test_timeout_with_the_system_clock_uses_real_time() -> None:
+    # A tiny real-time timeout (no sleep in the test: the wait itself times out).
+    buf = Buffer()
+    with pytest.raises(TimeoutException, match=r"Timed out after 0\.001 s waiting for"):
+        await buf.lookup_transform_async("a", "b", Time(0), timeout=0.001)
+    assert buf.pending_waits == 0

@@ -1,0 +1,551 @@
+"""Benchmark the async half of tfbus: Bus, TransformBroadcaster, TransformListener, Buffer.
+
+    .venv/bin/python benchmarks/bench_bus.py [--quick] [--backend asyncio|trio|both]
+                                             [--profile]
+
+Prints, on this machine, for asyncio and trio (``anyio.run(..., backend=...)``):
+
+1. **Wake-up latency**: one task awaits ``buffer.lookup_transform_async("world", "probe",
+   t, timeout=T)`` for a stamp ``t`` the buffer does not hold yet (one ms after its
+   newest sample, an hour ahead of the wall clock); another task then sends the
+   transform stamped ``t`` through TransformBroadcaster -> Bus -> TransformListener ->
+   Buffer. The latency is ``time.perf_counter_ns()`` taken right before
+   ``send_transform`` to ``perf_counter_ns()`` taken right after the awaiting task's
+   ``await`` returns. Shown for ``timeout=None``, 1 s and 10 s, with a ``SystemClock``
+   (real time). Targets (issue 3): median <= 0.1 ms, p99 <= 1 ms, whatever the
+   timeout. For reference, tf2_ros polls: 0.5-23 ms.
+2. **Bus throughput**, transforms/s through broadcaster -> bus -> listener -> buffer:
+   TFMessages of 100 transforms (100 child frames, one stamp per message, 100 Hz of
+   stamps) and of 1 transform (the same frames round-robin). Two publisher styles:
+   ``await send_transform`` per message (a checkpoint each time), and bursts of
+   ``send_transform_nowait`` with one checkpoint per burst (a burst never exceeds the
+   subscription queue). Only transforms the buffer actually stored are counted
+   (``listener.statistics().stored``, cross-checked against the buffer's newest stamp
+   and sample count per frame); drops are reported. Target: >= 1 M/s batched.
+3. **CPU share of the demo** (``tfbus.demo.run_demo``, 100 Hz broadcaster + 1 Hz
+   listener, SystemClock, output discarded): process CPU time / wall time, plus the
+   demo's own summary (measured broadcast rate, timer jitter p50/p99).
+
+Every figure is the median over repeats (other work may share this 2-core machine).
+``--quick`` runs fewer samples (~20 s); the full run takes under 3 minutes.
+``--profile`` adds a cProfile of the batched throughput and the latency loop (asyncio).
+Figures only: nothing here asserts a timing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import gc
+import io
+import pstats
+import statistics
+import sys
+import time
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Literal
+
+import anyio
+import anyio.lowlevel
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tfbus.broadcaster import TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.clock import SystemClock
+from tfbus.demo import run_demo
+from tfbus.listener import TransformListener
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import Time
+
+NS = 1_000_000_000
+MS = 1_000_000
+BACKENDS = ("asyncio", "trio")
+LATENCY_TIMEOUTS: tuple[float | None, ...] = (None, 1.0, 10.0)
+LATENCY_MEDIAN_TARGET_MS = 0.1
+LATENCY_P99_TARGET_MS = 1.0
+THROUGHPUT_TARGET = 1_000_000  # transforms/s, batched
+N_CHILDREN = 100  # frames per batched message
+STAMP_PERIOD = 10 * MS  # 100 Hz
+QUEUE_SIZE = 1024  # listener subscription queue (the bus default is 100)
+BURST = 256  # messages per send_transform_nowait burst (< QUEUE_SIZE: no drops)
+
+Mode = Literal["await", "burst"]
+
+
+@dataclass(frozen=True)
+class Config:
+    """Sizes of one run (``--quick`` or full)."""
+
+    latency_samples: int
+    latency_warmup: int
+    latency_repeats: int
+    batched_messages: int  # of N_CHILDREN transforms each
+    single_messages: int  # of 1 transform each
+    throughput_repeats: int
+    demo_seconds: float
+
+
+FULL = Config(
+    latency_samples=2000,
+    latency_warmup=200,
+    latency_repeats=5,
+    batched_messages=3000,
+    single_messages=60_000,
+    throughput_repeats=5,
+    demo_seconds=5.0,
+)
+QUICK = Config(
+    latency_samples=1000,
+    latency_warmup=100,
+    latency_repeats=1,
+    batched_messages=1000,
+    single_messages=20_000,
+    throughput_repeats=2,
+    demo_seconds=3.0,
+)
+
+
+def _percentile(ordered: Sequence[int | float], q: float) -> float:
+    """Nearest-rank percentile (``q`` in 0..1) of an already sorted sequence."""
+    return float(ordered[min(len(ordered) - 1, max(0, round(q * len(ordered)) - 1))])
+
+
+def _fmt_rate(per_s: float) -> str:
+    return f"{per_s / 1e6:6.3f} M/s" if per_s >= 1e5 else f"{per_s / 1e3:6.1f} k/s"
+
+
+# --------------------------------------------------------------------------- 1. latency
+
+
+@dataclass(frozen=True)
+class LatencyResult:
+    """One latency run: samples in ns (warm-up excluded); for an instrumented run, the
+    median of each stage in µs (send -> store starts, store + waking the waiter, waiter
+    resumes)."""
+
+    samples_ns: list[int]
+    stages_us: tuple[float, float, float] | None = None
+
+    @property
+    def median_ms(self) -> float:
+        return statistics.median(self.samples_ns) / MS
+
+    @property
+    def p99_ms(self) -> float:
+        return _percentile(sorted(self.samples_ns), 0.99) / MS
+
+    @property
+    def max_ms(self) -> float:
+        return max(self.samples_ns) / MS
+
+
+def _probe(stamp_ns: int) -> TransformStamped:
+    return TransformStamped(
+        Header(Time.from_ns(stamp_ns), "world"),
+        "probe",
+        Transform(Vector3(1.0, 0.0, 0.0), Quaternion()),
+    )
+
+
+async def latency_run(
+    samples: int, warmup: int, timeout: float | None, instrument: bool = False
+) -> LatencyResult:
+    """``warmup + samples`` wake-ups; returns the last ``samples`` latencies.
+
+    ``instrument`` wraps this buffer's public ``set_transform`` (which the listener
+    calls) to time the stages: bus delivery and the listener task getting scheduled;
+    the store itself, which re-checks the waiter and sets its event; and the awaiting
+    task resuming (returning through ``lookup_transform_async``).
+    """
+    total = warmup + samples
+    clock = SystemClock()
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    store_in: list[int] = []
+    store_out: list[int] = []
+    if instrument:
+        untimed = buffer.set_transform
+
+        def timed(transform: TransformStamped, authority: str = "default") -> bool:
+            store_in.append(time.perf_counter_ns())
+            ok = untimed(transform, authority)
+            store_out.append(time.perf_counter_ns())
+            return ok
+
+        buffer.set_transform = timed  # type: ignore[method-assign]
+    t0 = clock.now().ns + 3600 * NS  # an hour ahead: a future time in every sense
+    messages = [_probe(t0 + i * MS) for i in range(total + 1)]
+    sent_at = [0] * (total + 1)
+    woke_at = [0] * (total + 1)
+    done = 0  # samples the waiter has finished
+    try:
+        async with (
+            Bus() as bus,
+            TransformListener(buffer, bus, clock=clock, queue_size=QUEUE_SIZE),
+            anyio.create_task_group() as tg,
+        ):
+            broadcaster = TransformBroadcaster(bus)
+            await broadcaster.send_transform(messages[0])  # the link exists; newest = t0
+            while not buffer.can_transform("world", "probe", Time.from_ns(t0)):
+                await anyio.lowlevel.checkpoint()
+
+            async def waiter() -> None:
+                nonlocal done
+                for i in range(1, total + 1):
+                    await buffer.lookup_transform_async(
+                        "world", "probe", Time.from_ns(t0 + i * MS), timeout=timeout
+                    )
+                    woke_at[i] = time.perf_counter_ns()
+                    done = i  # the next lookup registers before this task yields again
+
+            tg.start_soon(waiter)
+            gc.collect()
+            for i in range(1, total + 1):
+                # Wait until the waiter finished sample i-1 and is blocked on sample i.
+                while done != i - 1 or buffer.pending_waits != 1:
+                    await anyio.lowlevel.checkpoint()
+                for _ in range(3):  # let the timeout task (if any) arm its sleep
+                    await anyio.lowlevel.checkpoint()
+                sent_at[i] = time.perf_counter_ns()
+                await broadcaster.send_transform(messages[i])
+            while done != total:
+                await anyio.lowlevel.checkpoint()
+    finally:
+        buffer.close()
+    kept = range(warmup + 1, total + 1)
+    stages = None
+    if instrument and len(store_in) == total + 1:  # message 0 is the seed
+        stages = (
+            statistics.median(store_in[i] - sent_at[i] for i in kept) / 1e3,
+            statistics.median(store_out[i] - store_in[i] for i in kept) / 1e3,
+            statistics.median(woke_at[i] - store_out[i] for i in kept) / 1e3,
+        )
+    return LatencyResult([woke_at[i] - sent_at[i] for i in kept], stages)
+
+
+def bench_latency(backend: str, cfg: Config) -> None:
+    print(f"\n[{backend}] wake-up latency, send_transform -> awaiting lookup_transform_async")
+    print(
+        f"  {cfg.latency_samples} samples x {cfg.latency_repeats} repeats "
+        f"(+{cfg.latency_warmup} warm-up); targets: median <= {LATENCY_MEDIAN_TARGET_MS} ms, "
+        f"p99 <= {LATENCY_P99_TARGET_MS} ms"
+    )
+    print(f"  {'timeout':>9} {'median ms':>10} {'p99 ms':>9} {'max ms':>9}   per repeat (med/p99)")
+    for timeout in LATENCY_TIMEOUTS:
+        runs = [
+            anyio.run(
+                latency_run, cfg.latency_samples, cfg.latency_warmup, timeout, backend=backend
+            )
+            for _ in range(cfg.latency_repeats)
+        ]
+        med = statistics.median(r.median_ms for r in runs)
+        p99 = statistics.median(r.p99_ms for r in runs)
+        mx = statistics.median(r.max_ms for r in runs)
+        each = " ".join(f"{r.median_ms:.3f}/{r.p99_ms:.2f}" for r in runs)
+        label = "None" if timeout is None else f"{timeout:g} s"
+        ok = "ok" if med <= LATENCY_MEDIAN_TARGET_MS and p99 <= LATENCY_P99_TARGET_MS else "MISS"
+        print(f"  {label:>9} {med:10.4f} {p99:9.3f} {mx:9.3f}   {each}   [{ok}]")
+    print("  stages (one more run, instrumented; medians, us): send->store | store+wake | resume")
+    for timeout in LATENCY_TIMEOUTS:
+        r = anyio.run(
+            latency_run, cfg.latency_samples, cfg.latency_warmup, timeout, True, backend=backend
+        )
+        label = "None" if timeout is None else f"{timeout:g} s"
+        if r.stages_us is None:
+            print(f"  {label:>9}   (not measured)")
+            continue
+        a, b, c = r.stages_us
+        print(f"  {label:>9}   {a:6.1f} | {b:6.1f} | {c:6.1f}   (total {r.median_ms * 1e3:.1f})")
+
+
+# --------------------------------------------------------------------------- 2. throughput
+
+
+@dataclass(frozen=True)
+class ThroughputResult:
+    """One throughput run."""
+
+    sent: int  # transforms handed to the broadcaster
+    stored: int  # transforms the listener stored in the buffer
+    refused: int
+    invalid: int
+    dropped_messages: int
+    seconds: float
+    cpu_seconds: float
+    verified: bool  # buffer contents agree with what was stored
+
+    @property
+    def rate(self) -> float:
+        return self.stored / self.seconds
+
+
+_TRANSFORMS = [
+    Transform(Vector3(0.01 * k, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0)) for k in range(7)
+]
+
+
+def batched_messages(n_messages: int, t0: int) -> list[tuple[TransformStamped, ...]]:
+    """Message k: N_CHILDREN transforms world -> f0..f99, all stamped t0 + k * 10 ms."""
+    children = [f"f{c}" for c in range(N_CHILDREN)]
+    out: list[tuple[TransformStamped, ...]] = []
+    for k in range(n_messages):
+        header = Header(Time.from_ns(t0 + k * STAMP_PERIOD), "world")
+        tf = _TRANSFORMS[k % len(_TRANSFORMS)]
+        out.append(tuple(TransformStamped(header, child, tf) for child in children))
+    return out
+
+
+def single_messages(n_messages: int, t0: int) -> list[tuple[TransformStamped, ...]]:
+    """Message k: one transform world -> f(k % 100) stamped t0 + (k // 100) * 10 ms."""
+    out: list[tuple[TransformStamped, ...]] = []
+    header = Header()
+    for k in range(n_messages):
+        c, r = k % N_CHILDREN, k // N_CHILDREN
+        if c == 0:
+            header = Header(Time.from_ns(t0 + r * STAMP_PERIOD), "world")
+        out.append((TransformStamped(header, f"f{c}", _TRANSFORMS[r % len(_TRANSFORMS)]),))
+    return out
+
+
+def _verify(buffer: Buffer, messages: Sequence[tuple[TransformStamped, ...]], stored: int) -> bool:
+    """Each child's newest stamp is the last one sent to it, and when nothing was
+    dropped the samples held add up to what the cache window keeps."""
+    last: dict[str, int] = {}
+    for message in messages:
+        for ts in message:
+            last[ts.child_frame_id] = ts.header.stamp.ns
+    info = {child: (n, newest) for child, _, _, _, n, _, newest in buffer.frame_info()}
+    if any(info.get(child, (0, -1))[1] != ns for child, ns in last.items()):
+        return False
+    sent = sum(len(m) for m in messages)
+    if stored != sent:
+        return True  # something was dropped; the newest stamps are all we can check
+    window = buffer.cache_time_ns // STAMP_PERIOD + 1  # samples within cache_time
+    per_child = -(-sent // len(last))
+    return all(n <= window and n >= min(per_child, window) - 1 for n, _ in info.values())
+
+
+def buffer_only_rate(messages: Sequence[tuple[TransformStamped, ...]]) -> float:
+    """Transforms/s of a plain ``Buffer.set_transform`` loop (no bus, no listener): the
+    ceiling the whole pipeline can reach."""
+    buffer = Buffer(cache_time=10.0, clock=SystemClock())
+    store = buffer.set_transform
+    gc.collect()
+    t0 = time.perf_counter()
+    stored = sum(store(ts, "bench") for message in messages for ts in message)
+    seconds = time.perf_counter() - t0
+    buffer.close()
+    return stored / seconds
+
+
+async def throughput_run(
+    messages: Sequence[tuple[TransformStamped, ...]], mode: Mode
+) -> ThroughputResult:
+    clock = SystemClock()
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    n_messages = len(messages)
+    try:
+        async with (
+            Bus(queue_size=QUEUE_SIZE) as bus,
+            TransformListener(buffer, bus, clock=clock, queue_size=QUEUE_SIZE) as listener,
+        ):
+            broadcaster = TransformBroadcaster(bus)
+            gc.collect()
+            cpu0, t0 = time.process_time(), time.perf_counter()
+            if mode == "await":
+                for message in messages:
+                    await broadcaster.send_transform(message)
+            else:
+                send = broadcaster.send_transform_nowait
+                for start in range(0, n_messages, BURST):
+                    for message in messages[start : start + BURST]:
+                        send(message)
+                    await anyio.lowlevel.checkpoint()
+            while True:
+                s = listener.statistics()
+                if s.messages + s.dropped >= n_messages:
+                    break
+                await anyio.lowlevel.checkpoint()
+            t1, cpu1 = time.perf_counter(), time.process_time()
+            s = listener.statistics()
+            result = ThroughputResult(
+                sent=broadcaster.sent,
+                stored=s.stored,
+                refused=s.refused,
+                invalid=s.invalid + s.malformed,
+                dropped_messages=s.dropped,
+                seconds=t1 - t0,
+                cpu_seconds=cpu1 - cpu0,
+                verified=_verify(buffer, messages, s.stored),
+            )
+    finally:
+        buffer.close()
+    return result
+
+
+def bench_throughput(backend: str, cfg: Config) -> None:
+    print(f"\n[{backend}] bus throughput, broadcaster -> bus -> listener -> buffer (stored/s)")
+    print(
+        f"  subscription queue {QUEUE_SIZE}, bursts of {BURST} messages; "
+        f"target >= {THROUGHPUT_TARGET / 1e6:g} M/s batched; {cfg.throughput_repeats} repeats"
+    )
+    print(
+        f"  {'transforms/msg':>14} {'publisher':>26} {'stored/s':>11} {'us/transform':>13} "
+        f"{'stored':>9} {'drops':>6} {'refused':>7} {'ok':>3}"
+    )
+    t0 = 1_700_000_000 * NS
+    cases: list[tuple[int, list[tuple[TransformStamped, ...]]]] = [
+        (N_CHILDREN, batched_messages(cfg.batched_messages, t0)),
+        (1, single_messages(cfg.single_messages, t0)),
+    ]
+    modes: list[tuple[Mode, str]] = [
+        ("await", "await send_transform"),
+        ("burst", f"{BURST} x send_transform_nowait"),
+    ]
+    for per_message, messages in cases:
+        for mode, label in modes:
+            runs = [
+                anyio.run(throughput_run, messages, mode, backend=backend)
+                for _ in range(cfg.throughput_repeats)
+            ]
+            rate = statistics.median(r.rate for r in runs)
+            r = runs[0]
+            us = 1e6 / rate if rate else float("nan")
+            drops = sum(x.dropped_messages for x in runs)
+            refused = sum(x.refused + x.invalid for x in runs)
+            ok = "yes" if all(x.verified for x in runs) else "NO"
+            print(
+                f"  {per_message:>14} {label:>26} {_fmt_rate(rate):>11} {us:13.3f} "
+                f"{r.stored:>9} {drops:>6} {refused:>7} {ok:>3}"
+            )
+    rate = statistics.median(buffer_only_rate(cases[0][1]) for _ in range(cfg.throughput_repeats))
+    print(
+        f"  {'(no bus)':>14} {'Buffer.set_transform loop':>26} {_fmt_rate(rate):>11} "
+        f"{1e6 / rate:13.3f}   <- ceiling: the same batched transforms, stored directly"
+    )
+
+
+# --------------------------------------------------------------------------- 3. demo
+
+
+def bench_demo(backend: str, cfg: Config) -> None:
+    lines: list[str] = []
+
+    def discard(line: str) -> None:
+        lines.append(line)
+
+    gc.collect()
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    stats = anyio.run(partial(run_demo, duration=cfg.demo_seconds, out=discard), backend=backend)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    errors = sum(line.startswith("[ERROR]") for line in lines)
+    print(
+        f"\n[{backend}] demo in real time ({cfg.demo_seconds:g} s, 100 Hz broadcaster, "
+        f"1 Hz listener, SystemClock)"
+    )
+    print(
+        f"  CPU {cpu * 1e3:.0f} ms / wall {wall:.2f} s = {100 * cpu / wall:.2f} % of one core; "
+        f"{1e6 * cpu / max(stats.sent, 1):.0f} us CPU per broadcast tick"
+    )
+    print(
+        f"  summary: {stats.sent} sent, rate {stats.rate():.2f} Hz, jitter p50 "
+        f"{stats.jitter_ms(0.5):.3f} ms, p99 {stats.jitter_ms(0.99):.3f} ms; "
+        f"{len(lines) - 1} listener lines ({errors} errors)"
+    )
+
+
+# --------------------------------------------------------------------------- profile
+
+
+def _profile(
+    label: str,
+    fn: Callable[[], Awaitable[object]],
+    sort: str = "tottime",
+    restrict: str | None = None,
+    lines: int = 14,
+) -> None:
+    profiler = cProfile.Profile()
+    profiler.enable()
+    anyio.run(fn, backend="asyncio")
+    profiler.disable()
+    out = io.StringIO()
+    stats = pstats.Stats(profiler, stream=out).sort_stats(sort)
+    if restrict is None:
+        stats.print_stats(lines)
+    else:
+        stats.print_stats(restrict, lines)
+    body = out.getvalue()
+    start = body.find("   ncalls")
+    print(f"\n[profile, asyncio] {label} (sorted by {sort})")
+    print(body[start:].rstrip() if start >= 0 else body.rstrip())
+
+
+def profile(cfg: Config) -> None:
+    """cProfile the batched and single-transform throughput runs (own time) and the
+    latency loop with and without a timeout (cumulative time in tfbus and anyio)."""
+    t0 = 1_700_000_000 * NS
+    messages = batched_messages(cfg.batched_messages, t0)
+    _profile(
+        f"batched throughput, {len(messages)} x {N_CHILDREN} transforms, await send_transform",
+        partial(throughput_run, messages, "await"),
+    )
+    del messages
+    single = single_messages(cfg.single_messages, t0)
+    _profile(
+        f"single-transform throughput, {len(single)} messages, await send_transform",
+        partial(throughput_run, single, "await"),
+    )
+    del single
+    for timeout in (None, 1.0):
+        _profile(
+            f"latency loop, {cfg.latency_samples} wake-ups, timeout={timeout}",
+            partial(latency_run, cfg.latency_samples, 0, timeout),
+            sort="cumulative",
+            restrict=r"tfbus/(buffer|listener|bus|broadcaster)\.py|anyio/_backends",
+            lines=12,
+        )
+
+
+# --------------------------------------------------------------------------- main
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("--quick", action="store_true", help="fewer samples (~20 s)")
+    parser.add_argument("--backend", choices=(*BACKENDS, "both"), default="both")
+    parser.add_argument(
+        "--only",
+        choices=("latency", "throughput", "demo"),
+        action="append",
+        help="run only these parts (repeatable; default: all)",
+    )
+    parser.add_argument("--profile", action="store_true", help="also cProfile (asyncio)")
+    args = parser.parse_args(argv)
+    cfg = QUICK if args.quick else FULL
+    backends = BACKENDS if args.backend == "both" else (args.backend,)
+    parts = args.only or ["latency", "throughput", "demo"]
+    started = time.perf_counter()
+    print(
+        f"tfbus bus benchmark ({'quick' if args.quick else 'full'}); Python "
+        f"{sys.version.split()[0]}; median over repeats"
+    )
+    for backend in backends:
+        if "latency" in parts:
+            bench_latency(backend, cfg)
+        if "throughput" in parts:
+            bench_throughput(backend, cfg)
+    if "demo" in parts:
+        for backend in backends:
+            bench_demo(backend, cfg)
+    if args.profile:
+        profile(cfg)
+    print(f"\ntotal {time.perf_counter() - started:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
