@@ -3,6 +3,7 @@ entry point. Bag data: tests/data/webviz_turtle_tf_example.bag (Apache-2.0)."""
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 import math
 import re
@@ -349,6 +350,143 @@ def test_demo_forwards_options(monkeypatch: pytest.MonkeyPatch) -> None:
     assert calls == [["--duration", "3.0", "--rate", "50.0", "--listen-rate", "2.0"]]
     code, _, err = run("demo", "--rate", "-5")
     assert_usage_error(code, err, "--rate")
+
+
+def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
+    import tfbus.demo
+
+    calls: list[list[str] | None] = []
+
+    def fake_main(argv: list[str] | None = None) -> int:
+        calls.append(argv)
+        return 0
+
+    monkeypatch.setattr(tfbus.demo, "main", fake_main)
+    code, _, _ = run("demo", "listener", "--bus", "zenoh?port=9000", "--duration", "2")
+    assert code == 0
+    code, _, _ = run("demo", "--duration", "3", "broadcaster", "--rate", "50")  # inherited
+    assert code == 0
+    assert calls == [
+        ["listener", "--bus", "zenoh?port=9000", "--duration", "2.0"],
+        ["broadcaster", "--duration", "3.0", "--rate", "50.0"],
+    ]
+    code, _, err = run("demo", "broadcaster", "--listen-rate", "2")  # not a broadcaster's
+    assert code == 2 and "--listen-rate" in err
+    if importlib.util.find_spec("zenoh") is not None:
+        code, _, err = run("demo", "listener", "--bus", "zenoh?bogus=1")
+        assert code == 2 and err.strip() == (
+            "tfbus demo listener: error: unknown bus option 'bogus' (known: config, connect, "
+            "express, listen, name, namespace, port, prefix)"
+        )
+    assert len(calls) == 2
+
+
+@pytest.mark.parametrize("role", ["broadcaster", "listener"])
+def test_demo_role_help(role: str) -> None:
+    code, out, _ = run("demo", role, "--help")
+    assert code == 0
+    assert "Examples:" in out and f"tfbus demo {role}" in out and "--bus" in out
+
+
+# --------------------------------------------------------------------------- live --bus
+
+
+@pytest.mark.parametrize("command", ["echo", "monitor", "frames"])
+def test_bus_option_is_documented(command: str) -> None:
+    code, out, _ = run(command, "--help")
+    assert code == 0
+    assert "--bus SPEC" in out and "--bus zenoh" in out and "--duration" in out
+
+
+def test_bus_argument_errors() -> None:
+    pytest.importorskip("zenoh")
+    code, _, err = run("monitor", "--bag", str(TURTLE), "--bus", "zenoh")
+    assert_usage_error(code, err, "not both")
+    code, _, err = run("echo", "a", "b", "--bus", "carrier-pigeon")
+    assert_usage_error(code, err, "unsupported bus")
+    code, _, err = run("monitor", "--bus", "zenoh?bogus=1")
+    assert_usage_error(code, err, "bogus")
+    code, _, err = run("monitor", "--bag", str(TURTLE), "--duration", "1")
+    assert_usage_error(code, err, "--duration applies to --bus")
+    code, _, err = run("frames", "--bag", str(TURTLE), "--wait", "1", "-o", "x.gv")
+    assert_usage_error(code, err, "--bus")
+    code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--duration", "1")
+    assert_usage_error(code, err, "--bus")
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.anyio
+async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> None:
+    """BusSource in process, against a broadcaster on a second Zenoh session (127.0.0.1
+    only, bounded waits); the subprocess versions are in tests/test_three_terminals.py."""
+    pytest.importorskip("zenoh")
+    import anyio
+    import anyio.abc
+
+    from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
+    from tfbus.bus import Bus
+    from tfbus.cli import BusSource, _liveliness_table
+    from tfbus.messages import Header, Transform, TransformStamped, Vector3
+    from tfbus.transports.zenoh import ZenohTransport
+
+    port = _free_port()
+    events: list[tuple[str, str]] = []
+    src = BusSource(f"zenoh?connect=tcp/127.0.0.1:{port}", name="test-monitor")
+    assert src.options.name == "test-monitor" and src.label.startswith("the bus")
+    publisher = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot_tf_publisher")
+    stop = anyio.Event()
+
+    async def broadcaster(*, task_status: anyio.abc.TaskStatus[Bus]) -> None:
+        async with Bus(transport=publisher) as bus:
+            await StaticTransformBroadcaster(bus).send_transform(
+                parse_static_args(["0", "0", "1", "0", "0", "0", "base_link", "camera"])
+            )
+            task_status.started(bus)
+            await stop.wait()
+
+    async with anyio.create_task_group() as tg:
+        bus: Bus = await tg.start(broadcaster)
+        async with src.attach(lambda what, info: events.append((what, info.name))):
+            tf = TransformBroadcaster(bus)
+
+            def laser(ns: int) -> TransformStamped:
+                return TransformStamped(Header(Time.from_ns(ns), "base_link"), "base_laser",
+                                        Transform(Vector3(0.1, 0.0, 0.2)))
+
+            with anyio.fail_after(15):
+                ns = 1
+                while ("alive", "robot_tf_publisher") not in events or not src.buffer(
+                ).can_transform("camera", "base_laser", Time(0)):
+                    await tf.send_transform(laser(ns))
+                    ns += 1
+                    await anyio.sleep(0.02)
+                for _ in range(30):  # now attributed: the majority is the broadcaster
+                    await tf.send_transform(laser(ns))
+                    ns += 1
+                    await anyio.sleep(0.005)
+                while src.summary().frames["base_laser"].count < ns - 1 - 5:
+                    await anyio.sleep(0.02)
+            s = src.summary()
+            assert s.frames["base_laser"].authority == "robot_tf_publisher"
+            assert s.frames["camera"].static
+            got = src.buffer().lookup_transform("base_link", "base_laser", Time(0))
+            assert got.transform.translation.z == 0.2
+            assert [p.name for p in src.alive_broadcasters().values()] == ["robot_tf_publisher"]
+            stop.set()  # the broadcaster goes away
+            with anyio.fail_after(10):
+                while ("gone", "robot_tf_publisher") not in events:
+                    await anyio.sleep(0.02)
+            assert not src.alive_broadcasters()
+            assert [p.name for p in src.gone.values()] == ["robot_tf_publisher"]
+            assert _liveliness_table(src).row_count == 1
+    assert src.transport is None and not src.alive_broadcasters()
 
 
 # --------------------------------------------------------------------------- entry points

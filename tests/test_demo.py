@@ -87,3 +87,91 @@ async def test_listener_without_broadcaster_prints_the_error_line() -> None:
 def test_main_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--rate", "0"]) == 2
     assert "--rate must be positive" in capsys.readouterr().err
+
+
+# -- the tutorial's terminals: one node per bus (two linked in-memory buses stand in for
+#    two processes; tests/test_three_terminals.py runs them over Zenoh for real)
+
+
+async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
+    from tfbus.bus import MemoryTransport
+    from tfbus.demo import run_broadcaster, run_listener
+
+    clock = ManualClock(START)
+    a, b = MemoryTransport.pair()
+    lines: list[str] = []
+    bsummary: list[str] = []
+    async with (
+        Bus(transport=a) as listener_bus,
+        Bus(transport=b) as broadcaster_bus,
+        anyio.create_task_group() as tg,
+    ):
+        done = anyio.Event()
+
+        async def listener() -> None:
+            await run_listener(listener_bus, clock=clock, duration=4.5, out=lines.append)
+            done.set()
+
+        tg.start_soon(listener)
+        await clock.advance(2.0)  # the listener alone: two ERROR lines
+        assert [line[:7] for line in lines] == ["[ERROR]", "[ERROR]"]
+        tg.start_soon(
+            lambda: run_broadcaster(
+                broadcaster_bus, clock=clock, duration=2.0, out=bsummary.append
+            )
+        )
+        await clock.advance(2.5)
+        await done.wait()
+    assert [line[:7] for line in lines[:4]] == ["[ERROR]"] * 2 + ["[ INFO]"] * 2
+    for line in lines[2:4]:
+        assert INFO.match(line), line
+    assert lines[-1] == "[ INFO] summary: 4 lookups, 2 transformed, 2 failed"
+    assert bsummary == [
+        "[ INFO] summary: 200 transforms sent, broadcast rate 100.00 Hz, "
+        "timer jitter p50 0.000 ms, p99 0.000 ms"
+    ]
+
+
+def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
+    import tfbus.demo as demo
+
+    opened: list[tuple[str, str | None]] = []
+    calls: list[tuple[str, dict[str, object]]] = []
+
+    def fake_open_bus(spec: str = "zenoh", *, name: str | None = None) -> Bus:
+        opened.append((spec, name))
+        return Bus()
+
+    async def fake_broadcaster(bus: Bus, **kwargs: object) -> BroadcasterStats:
+        calls.append(("broadcaster", kwargs))
+        return BroadcasterStats()
+
+    async def fake_listener(bus: Bus, **kwargs: object) -> object:
+        calls.append(("listener", kwargs))
+        return None
+
+    monkeypatch.setattr(demo, "open_bus", fake_open_bus)
+    monkeypatch.setattr(demo, "run_broadcaster", fake_broadcaster)
+    monkeypatch.setattr(demo, "run_listener", fake_listener)
+    assert main(["broadcaster", "--rate", "50", "--duration", "3"]) == 0
+    assert main(["listener", "--bus", "zenoh?port=9000", "--backend", "trio"]) == 0
+    assert opened == [("zenoh", "robot_tf_publisher"), ("zenoh?port=9000", "robot_tf_listener")]
+    assert [c[0] for c in calls] == ["broadcaster", "listener"]
+    assert calls[0][1]["rate"] == 50.0 and calls[0][1]["duration"] == 3.0
+    assert calls[0][1]["handle_signals"] is True
+    assert calls[1][1]["listen_rate"] == 1.0 and calls[1][1]["duration"] is None
+
+
+def test_main_rejects_a_bad_bus(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("zenoh")
+    assert main(["listener", "--bus", "carrier-pigeon"]) == 2
+    assert "unsupported bus" in capsys.readouterr().err
+
+
+def test_open_bus_names_the_node_unless_the_spec_does() -> None:
+    pytest.importorskip("zenoh")
+    from tfbus.demo import open_bus
+
+    named = open_bus("zenoh", name="robot_tf_listener").transport
+    assert getattr(named, "name", None) == "robot_tf_listener"
+    assert getattr(open_bus("zenoh?name=mine", name="x").transport, "name", None) == "mine"

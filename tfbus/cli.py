@@ -10,23 +10,29 @@
     tfbus static-transform x y z qx qy qz qw parent child
     tfbus replay PATH --rate 2                publish a bag on the bus, with a progress bar
     tfbus demo --duration 10                  the seed demo (tfbus.demo)
+    tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
+    tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus
 
 Every command has ``--help`` with examples. A bad argument prints one line,
 ``tfbus <command>: error: ...``, and exits with status 2; a damaged bag prints what was
 readable, a one-line warning, and exits with status 1.
 
-Sources: echo, monitor and frames read a :class:`TfSource`; today that is a bag
-(``--bag``); a live ``--bus`` source (another process, over a transport) plugs in there.
+Sources: echo, monitor and frames read a :class:`TfSource`: a bag (``--bag``,
+:class:`BagSource`) or a live bus carried over Zenoh (``--bus SPEC``, :class:`BusSource`,
+which collects what other processes broadcast while it is attached). Live commands are
+bounded by ``--duration`` (and echo by ``-n``); Ctrl-C / SIGTERM end them cleanly.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib
 import math
 import shutil
+import signal
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
@@ -36,12 +42,26 @@ from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vect
 from tfbus.time import NSEC_PER_SEC, Time
 
 if TYPE_CHECKING:
+    import anyio
     from rich.console import Console
+    from rich.table import Table
 
     from tfbus.bag import BagSummary
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Subscription
     from tfbus.core import BufferCore
+    from tfbus.transports.zenoh import PeerEvent, PeerInfo, ZenohOptions, ZenohTransport
 
-__all__ = ["cli", "frames_dot", "main", "parse_static_args", "parse_time"]
+__all__ = [
+    "BagSource",
+    "BusSource",
+    "TfSource",
+    "cli",
+    "frames_dot",
+    "main",
+    "parse_static_args",
+    "parse_time",
+]
 
 
 # --------------------------------------------------------------------------- plumbing
@@ -151,8 +171,8 @@ def _bag_path() -> click.Path:
 class TfSource:
     """Where echo / monitor / frames get their transforms.
 
-    :class:`BagSource` is the one implementation today; a live-bus source (listening to
-    another process through a transport) implements the same three methods.
+    :class:`BagSource` reads a recording; :class:`BusSource` listens to a live bus (other
+    processes, over Zenoh) and fills the same two structures while it is attached.
     """
 
     label: str = ""
@@ -213,22 +233,248 @@ class BagSource(TfSource):
         return self._problem
 
 
+_UNKNOWN_AUTHORITY = "unknown"
+_SHARED_AUTHORITY = "unattributed"
+
+
+class BusSource(TfSource):
+    """Transforms from a live bus carried over Zenoh (``--bus SPEC``).
+
+    While :meth:`attach` is open, every ``/tf`` and ``/tf_static`` message other
+    processes broadcast is stored in :meth:`buffer` (a :class:`~tfbus.buffer.Buffer`, so
+    lookups can be awaited) and accounted in :meth:`summary` (receive time = wall clock,
+    delay = receive time - header stamp, as tf_monitor measures it), and liveliness
+    changes of broadcasters are tracked (:attr:`gone`).
+
+    Authority: the wire format does not say which node sent a message, so a message is
+    attributed to the one live broadcaster publishing its topic (``"unknown"`` before
+    any is known, ``"unattributed"`` when several publish it).
+
+    Args:
+        spec: a ``--bus`` value (:func:`tfbus.transports.zenoh.parse_bus_spec`).
+        name: this node's name unless ``spec`` gives one (``zenoh?name=...``).
+        cache_time: seconds of history the buffer keeps.
+    """
+
+    def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0) -> None:
+        from tfbus.bag import BagSummary
+        from tfbus.buffer import Buffer
+        from tfbus.clock import SystemClock
+
+        try:
+            zenoh_module = importlib.import_module("tfbus.transports.zenoh")
+        except ImportError as err:
+            _fail(f"--bus needs the Zenoh transport (pip install 'tfbus[zenoh]'): {err}")
+        try:
+            options: ZenohOptions = zenoh_module.parse_bus_spec(spec)
+        except ValueError as err:
+            _fail(_one_line(str(err)))
+        if options.name is None:
+            options = dataclasses.replace(options, name=name)
+        self.spec = spec
+        self.options = options
+        self.label = f"the bus {spec!r}"
+        self.clock = SystemClock()
+        self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
+        self._summary: BagSummary = BagSummary()
+        self.transport: ZenohTransport | None = None
+        self.broadcasters_seen: dict[str, PeerInfo] = {}
+        """Every broadcaster heard of through liveliness, by node id."""
+        self.gone: dict[str, PeerInfo] = {}
+        """Broadcasters whose liveliness went away (exited, killed or unreachable)."""
+        self.invalid = 0
+        """Transforms the buffer rejected (NaN, bad quaternion, bad frame ids)."""
+        self._problem: str | None = None
+
+    def buffer(self) -> Buffer:
+        return self._buffer
+
+    def summary(self) -> BagSummary:
+        return self._summary
+
+    @property
+    def problem(self) -> str | None:
+        return self._problem
+
+    def report_problem(self, message: str) -> None:
+        """Record a one-line warning (printed at the end, exit status 1)."""
+        self._problem = message
+
+    def alive_broadcasters(self) -> dict[str, PeerInfo]:
+        """The live broadcasters now (``transport.broadcasters()``), empty when detached."""
+        return self.transport.broadcasters() if self.transport is not None else {}
+
+    @contextlib.asynccontextmanager
+    async def attach(
+        self, on_peer: Callable[[str, PeerInfo], None] | None = None
+    ) -> AsyncIterator[BusSource]:
+        """Open the bus and collect until the block ends.
+
+        ``on_peer(what, info)`` is called with ``what`` = ``"alive"`` when a node starts
+        broadcasting (its first ``/tf`` or ``/tf_static``) and ``"gone"`` when a known
+        broadcaster's liveliness disappears.
+
+        Raises:
+            zenoh.ZError: if the session cannot be opened (endpoint in use, bad config).
+        """
+        import anyio
+
+        from tfbus.bus import Bus
+        from tfbus.transports.zenoh import PEERS_TOPIC
+
+        transport = self.options.transport()
+        async with Bus(transport=transport, queue_size=10_000) as bus:
+            self.transport = transport
+            tf = bus.subscribe("/tf")
+            tf_static = bus.subscribe("/tf_static")
+            peers = bus.subscribe(PEERS_TOPIC, queue_size=1000)
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(self._feed, tf, False)
+                tg.start_soon(self._feed, tf_static, True)
+                tg.start_soon(self._watch, peers, on_peer)
+                try:
+                    yield self
+                finally:
+                    tg.cancel_scope.cancel()
+        self.transport = None
+
+    def _authority(self, topic: str) -> str:
+        names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
+        if len(names) == 1:
+            return names.pop()
+        return _SHARED_AUTHORITY if names else _UNKNOWN_AUTHORITY
+
+    async def _feed(self, sub: Subscription[Any], static: bool) -> None:
+        from tfbus.bag import BagMessage
+        from tfbus.errors import TransformException
+        from tfbus.messages import TFMessage
+
+        buffer = self._buffer
+        store = buffer.set_transform_static if static else buffer.set_transform
+        async for msg in sub:
+            if not isinstance(msg, TFMessage):
+                continue
+            authority = self._authority(sub.topic)
+            self._summary.add(BagMessage(self.clock.now(), sub.topic, msg, authority))
+            for ts in msg.transforms:
+                try:
+                    store(ts, authority)
+                except TransformException:
+                    self.invalid += 1
+
+    async def _watch(
+        self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
+    ) -> None:
+        from tfbus.transports.zenoh import PeerInfo
+
+        async for event in sub:
+            ev: PeerEvent = event
+            known = self.broadcasters_seen.get(ev.node_id)
+            if ev.alive and ev.topic in ("/tf", "/tf_static"):
+                topics = (known.topics if known else frozenset()) | {ev.topic}
+                info = PeerInfo(ev.node_id, ev.name, topics)
+                self.broadcasters_seen[ev.node_id] = info
+                self.gone.pop(ev.node_id, None)
+                if known is None and on_peer is not None:
+                    on_peer("alive", info)
+            elif (
+                not ev.alive and not ev.topic and known is not None
+                and ev.node_id not in self.gone
+            ):
+                self.gone[ev.node_id] = known
+                if on_peer is not None:
+                    on_peer("gone", known)
+
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 
 def _source_options(f: F) -> F:
-    """``--bag PATH`` and ``--bus ENDPOINT``: the transform source of echo/monitor/frames."""
-    f = click.option("--bus", "bus", metavar="ENDPOINT", default=None, hidden=True,
-                     help="Attach to a live bus (comes with the transport).")(f)
+    """``--bag PATH`` and ``--bus SPEC``: the transform source of echo/monitor/frames."""
+    f = click.option(
+        "--bus", "bus", metavar="SPEC", default=None,
+        help="Attach to a live bus over Zenoh instead: 'zenoh' (this machine, no "
+             "configuration), 'zenoh:tcp/HOST:7448', 'zenoh?connect=...&namespace=...'.",
+    )(f)
     return click.option("--bag", type=_bag_path(), help="Read transforms from this bag.")(f)
 
 
-def _source(bag: Path | None, bus: str | None = None) -> TfSource:
+def _source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli") -> TfSource:
+    if bus is not None and bag is not None:
+        _fail("give --bag PATH or --bus SPEC, not both")
     if bus is not None:
-        _fail("live --bus sources come with the transport; use --bag PATH for now")
+        return BusSource(bus, name=name)
     if bag is None:
-        _fail("no transform source: pass --bag PATH (live --bus sources come later)")
+        _fail("no transform source: pass --bag PATH or --bus SPEC (e.g. --bus zenoh)")
     return BagSource(bag)
+
+
+def _positive_or_none(value: float | None, flag: str) -> None:
+    if value is not None and not value > 0:
+        _fail(f"{flag} must be positive")
+
+
+def _live_only(src: TfSource, **options: object) -> None:
+    """Options that only mean something on a live bus: an error with --bag."""
+    if not isinstance(src, BusSource):
+        for name, value in options.items():
+            if value is not None:
+                _fail(f"--{name.replace('_', '-')} applies to --bus sources only")
+
+
+def _run_live(main: Callable[[], Awaitable[None]]) -> int | None:
+    """``anyio.run(main)``; None when it ran, 1 (after a one-line error) when the bus
+    could not be opened, 130 on a Ctrl-C before the signal handler was installed."""
+    import anyio
+
+    try:
+        anyio.run(main)
+    except KeyboardInterrupt:  # Ctrl-C while the session was still opening
+        return 130
+    except Exception as err:
+        if not _is_bus_error(err):
+            raise
+        click.echo(f"{click.get_current_context().command_path}: error: cannot open the "
+                   f"bus: {_one_line(str(err))}", err=True)
+        return 1
+    return None
+
+
+def _is_bus_error(err: BaseException) -> bool:
+    return isinstance(err, OSError) or type(err).__module__.partition(".")[0] == "zenoh"
+
+
+async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
+    import anyio
+
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async for _ in signals:
+            scope.cancel()
+            return
+
+
+async def _live(
+    source: BusSource,
+    duration: float | None,
+    body: Callable[[], Awaitable[None]],
+    *,
+    on_peer: Callable[[str, PeerInfo], None] | None = None,
+    finish: Callable[[], None] | None = None,
+) -> None:
+    """Attach ``source`` and run ``body`` until it returns, ``duration`` seconds have
+    passed (None: no limit) or SIGINT/SIGTERM arrives; then call ``finish`` while still
+    attached (so liveliness is current) and detach."""
+    import anyio
+
+    async with source.attach(on_peer), anyio.create_task_group() as tg:
+        with anyio.CancelScope() as scope:
+            if duration is not None:
+                scope.deadline = anyio.current_time() + duration
+            tg.start_soon(_cancel_on_signal, scope)
+            await body()
+        if finish is not None:
+            finish()
+        tg.cancel_scope.cancel()
 
 
 def _finish(source: TfSource) -> int:
@@ -387,26 +633,36 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
 @click.option("-p", "--precision", type=click.IntRange(0, 12), default=3, show_default=True,
               help="Digits after the decimal point.")
 @click.option("-n", "--limit", type=click.IntRange(min=1), default=None,
-              help="Stop after this many lookups.")
+              help="Stop after this many lookups (with --bus: transforms printed).")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="With --bus: stop after this many seconds (default: -n, or Ctrl-C).")
 def echo(
     source: str, target: str, bag: Path | None, bus: str | None, rate: float, at: Time | None,
-    matrix: bool, precision: int, limit: int | None,
+    matrix: bool, precision: int, limit: int | None, duration: float | None,
 ) -> int:
     """Print the transform from SOURCE to TARGET, like tf2_echo.
 
     As tf2_echo, this is the pose of TARGET in SOURCE, i.e. lookup_transform(SOURCE,
     TARGET, t): it maps points in TARGET into SOURCE. With --bag and no --time, it steps
-    through the recording at --rate Hz of bag time.
+    through the recording at --rate Hz of bag time. With --bus it listens to a live bus
+    and prints the latest transform (or the one at --time) at --rate Hz of wall time,
+    saying on stderr what it is waiting for until the frames are connected.
 
     \b
     Examples:
       tfbus echo world turtle1 --bag turtle.bag
       tfbus echo world turtle1 --bag turtle.bag --time 1396293900.25 --matrix
       tfbus echo map base_link --bag nav2.mcap --rate 10 -n 5
+      tfbus echo base_link base_laser --bus zenoh -n 1
+      tfbus echo base_link base_laser --bus zenoh:tcp/192.168.1.10:7448 --duration 10
     """
     from tfbus.errors import TransformException
 
-    src = _source(bag, bus)
+    src = _source(bag, bus, name="tfbus-echo")
+    _live_only(src, duration=duration)
+    if isinstance(src, BusSource):
+        return _echo_live(src, source, target, rate=rate, at=at, matrix=matrix,
+                          precision=precision, limit=limit, duration=duration)
     core = src.buffer()
     for name in (source, target):
         if not core.frame_exists(name):
@@ -432,44 +688,118 @@ def echo(
     return code or (1 if failures and at is not None else 0)
 
 
+def _echo_live(
+    src: BusSource, source: str, target: str, *, rate: float, at: Time | None, matrix: bool,
+    precision: int, limit: int | None, duration: float | None,
+) -> int:
+    """echo --bus: look up at every tick of a ``rate`` Hz timer; when the transform is
+    not there yet, say why on stderr and wait for it up to the next tick."""
+    from tfbus.clock import every
+    from tfbus.errors import TransformException
+
+    out = _console()
+    buffer = src.buffer()
+    period = 1.0 / rate
+    when = at if at is not None else Time(0)
+    if at is not None and limit is None:
+        limit = 1  # one time, one answer
+    printed = 0
+
+    async def body() -> None:
+        nonlocal printed
+        async for _ in every(period, clock=src.clock, immediate=True):
+            try:
+                ts = buffer.lookup_transform(source, target, when)
+            except TransformException as err:
+                click.echo(f"Waiting for transform {source} -> {target}: "
+                           f"{_one_line(str(err))}", err=True)
+                try:
+                    ts = await buffer.lookup_transform_async(
+                        source, target, when, timeout=0.9 * period
+                    )
+                except TransformException:
+                    continue
+            out.print(_format_transform(ts, precision=precision, matrix=matrix))
+            printed += 1
+            if limit is not None and printed >= limit:
+                return
+
+    code = _run_live(lambda: _live(src, duration, body))
+    if code is not None:
+        return code
+    if printed == 0 or (limit is not None and printed < limit):
+        _warn(f"{printed} of {limit if limit is not None else 'any'} transform(s) from "
+              f"{source} to {target} received from {src.label}")
+        return 1
+    return 0
+
+
 # --------------------------------------------------------------------------- monitor
 
 
 @cli.command()
 @click.argument("frames", nargs=-1)
 @_source_options
-def monitor(frames: tuple[str, ...], bag: Path | None, bus: str | None) -> int:
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="With --bus: stop after this many seconds (default: Ctrl-C).")
+@click.option("--interval", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="With --bus: print the tables every this many seconds (default 1).")
+def monitor(
+    frames: tuple[str, ...], bag: Path | None, bus: str | None, duration: float | None,
+    interval: float | None,
+) -> int:
     """Per-frame rates, delays and broadcasters, like tf_monitor.
 
     Delay is receive (bag) time minus header stamp. With [SOURCE TARGET] only the
     frames on the chain between them are listed, as tf_monitor does.
 
+    With --bus it listens to a live bus: the tables (cumulative since it attached) are
+    printed every --interval seconds and on exit, with the broadcasters known through
+    Zenoh liveliness (alive / gone); a line is printed as soon as a broadcaster appears
+    ("[alive] ...") or its liveliness is lost because it exited or died ("[dead] ...").
+
     \b
     Examples:
       tfbus monitor --bag turtle.bag
       tfbus monitor world turtle1 --bag turtle.bag
+      tfbus monitor --bus zenoh
+      tfbus monitor base_link base_laser --bus zenoh --duration 10 --interval 5
     """
-    from rich.table import Table
-
     if len(frames) not in (0, 2):
         _fail("give no frames, or exactly two: SOURCE TARGET")
-    src = _source(bag, bus)
+    src = _source(bag, bus, name="tfbus-monitor")
+    _live_only(src, duration=duration, interval=interval)
+    if isinstance(src, BusSource):
+        return _monitor_live(src, frames, duration=duration, interval=interval or 1.0)
     s = src.summary()
+    for name in frames:
+        if name not in s.frames and all(f.parent != name for f in s.frames.values()):
+            _fail(f"frame {name!r} does not exist in {src.label}")
+    _print_monitor(_console(), s, frames)
+    return _finish(src)
+
+
+def _print_monitor(
+    out: Console, s: BagSummary, frames: Sequence[str], live: BusSource | None = None
+) -> None:
+    """tf_monitor's report: the frames table, the broadcasters table and, for a live
+    bus, the broadcasters known through liveliness."""
+    from rich.table import Table
+
     selected = list(s.frames.values())
     if frames:
         chain: set[str] = set()
         for name in frames:
-            if name not in s.frames and all(f.parent != name for f in s.frames.values()):
-                _fail(f"frame {name!r} does not exist in {src.label}")
             seen: set[str] = set()
             while name in s.frames and name not in seen:
                 seen.add(name)
                 chain.add(name)
                 name = s.frames[name].parent
         selected = [f for f in selected if f.child in chain]
-    out = _console()
     title = f"RESULTS: for {' to '.join(frames)}" if frames else "RESULTS: for all Frames"
-    out.print(title)
+    if live is not None:
+        title += f" (live, {s.duration:.1f} s, {sum(s.messages.values())} messages)"
+    out.print(title, markup=False)
     table = Table(title="Frames", show_edge=False, header_style="bold")
     for col in ("frame", "parent", "published by", "rate Hz", "avg delay s", "max delay s"):
         table.add_column(col, justify="left" if col in ("frame", "parent", "published by")
@@ -493,7 +823,51 @@ def monitor(frames: tuple[str, ...], bag: Path | None, bus: str | None) -> int:
             f"{a.delay_max:.6f}" if a.delay_count else "-",
         )
     out.print(btable)
-    return _finish(src)
+    if live is not None:
+        out.print(_liveliness_table(live))
+
+
+def _liveliness_table(src: BusSource) -> Table:
+    """Broadcasters by Zenoh liveliness: the alive ones (``transport.broadcasters()``)
+    and those whose liveliness went away while we listened."""
+    from rich.table import Table
+
+    table = Table(title="Broadcasters (liveliness)", show_edge=False, header_style="bold")
+    for col in ("node", "status", "node id", "topics"):
+        table.add_column(col)
+    alive = src.alive_broadcasters()
+    rows = [(info, "alive") for info in alive.values()]
+    rows += [(info, "gone") for nid, info in src.gone.items() if nid not in alive]
+    for info, status in sorted(rows, key=lambda r: (r[1], r[0].name, r[0].node_id)):
+        table.add_row(info.name, status, info.node_id, ", ".join(sorted(info.topics)))
+    return table
+
+
+def _monitor_live(
+    src: BusSource, frames: Sequence[str], *, duration: float | None, interval: float
+) -> int:
+    from tfbus.clock import every
+
+    out = _console()
+
+    def on_peer(what: str, info: PeerInfo) -> None:
+        if what == "alive":
+            out.print(f"[alive] broadcaster {info.name} (node {info.node_id}) publishes "
+                      f"{', '.join(sorted(info.topics))}", markup=False)
+        else:
+            out.print(f"[dead] broadcaster {info.name} (node {info.node_id}) is gone: "
+                      "liveliness lost (it exited, was killed or is unreachable)", markup=False)
+
+    def report() -> None:
+        _print_monitor(out, src.summary(), frames, live=src)
+
+    async def body() -> None:
+        async for _ in every(interval, clock=src.clock):
+            report()
+
+    out.print(f"listening to {src.label} ...", markup=False)
+    code = _run_live(lambda: _live(src, duration, body, on_peer=on_peer, finish=report))
+    return code if code is not None else 0
 
 
 # --------------------------------------------------------------------------- frames
@@ -534,25 +908,43 @@ def frames_dot(core: BufferCore, *, recorded_at: Time | None = None) -> str:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("frames.pdf"), show_default=True,
               help="Output file: .pdf, .svg, .png (rendered by Graphviz 'dot') or .gv/.dot.")
-def frames(bag: Path | None, bus: str | None, output: Path) -> int:
+@click.option("--duration", "--wait", "duration", default=None,
+              type=click.FloatRange(min=0, min_open=True),
+              help="With --bus: seconds to listen before drawing (default 5).")
+def frames(bag: Path | None, bus: str | None, output: Path, duration: float | None) -> int:
     """Draw the frame tree with Graphviz, like view_frames.
 
     Each edge is labelled with broadcaster, average rate, buffer length, most recent and
     oldest transform. .gv / .dot output is DOT text and needs nothing else; .pdf / .svg /
     .png need Graphviz's 'dot' program (without it the DOT text is written next to the
-    requested file and the exit status is 1).
+    requested file and the exit status is 1). With --bus it listens to a live bus for
+    --duration seconds first, as view_frames does (exit status 1 if nothing was heard).
 
     \b
     Examples:
       tfbus frames --bag turtle.bag               # frames.pdf
       tfbus frames --bag nav2.mcap -o tree.svg
       tfbus frames --bag turtle.bag -o tree.gv
+      tfbus frames --bus zenoh --duration 2 -o live.gv
     """
     fmt = output.suffix.lower().lstrip(".")
     if fmt not in ("pdf", "svg", "png", "gv", "dot"):
         _fail(f"unsupported output {output.name!r}: use .pdf, .svg, .png, .gv or .dot")
-    src = _source(bag, bus)
-    dot = frames_dot(src.buffer())
+    src = _source(bag, bus, name="tfbus-frames")
+    _live_only(src, duration=duration)
+    if isinstance(src, BusSource):
+        import anyio
+
+        seconds = duration if duration is not None else 5.0
+        click.echo(f"Listening to {src.label} for {seconds:g} s ...", err=True)
+        code = _run_live(lambda: _live(src, seconds, anyio.sleep_forever))
+        if code is not None:
+            return code
+        if not src.summary().messages:
+            src.report_problem(f"no transforms received from {src.label} in {seconds:g} s")
+        dot = frames_dot(src.buffer(), recorded_at=src.clock.now())
+    else:
+        dot = frames_dot(src.buffer())
     if fmt in ("gv", "dot"):
         output.write_text(dot)
         click.echo(f"wrote {output}")
@@ -766,38 +1158,137 @@ async def _replay(
 # --------------------------------------------------------------------------- demo
 
 
-@cli.command()
-@click.option("--duration", type=click.FloatRange(min=0), default=None,
-              help="Seconds to run (default: until Ctrl-C).")
-@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Broadcast rate, Hz (default 100).")
-@click.option("--listen-rate", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Listener rate, Hz (default 1).")
-@click.option("--backend", type=click.Choice(["asyncio", "trio"]), default=None,
-              help="Event loop (default asyncio).")
+def _demo_options(*, rate: bool, listen_rate: bool) -> Callable[[F], F]:
+    """The options of ``tfbus demo`` and its roles (all default to None: demo's own)."""
+
+    def decorate(f: F) -> F:
+        f = click.option("--backend", type=click.Choice(["asyncio", "trio"]), default=None,
+                         help="Event loop (default asyncio).")(f)
+        if listen_rate:
+            f = click.option("--listen-rate", type=click.FloatRange(min=0, min_open=True),
+                             default=None, help="Listener rate, Hz (default 1).")(f)
+        if rate:
+            f = click.option("--rate", type=click.FloatRange(min=0, min_open=True),
+                             default=None, help="Broadcast rate, Hz (default 100).")(f)
+        return click.option("--duration", type=click.FloatRange(min=0), default=None,
+                            help="Seconds to run (default: until Ctrl-C).")(f)
+
+    return decorate
+
+
+def _run_demo_main(role: str | None, bus: str | None, **options: Any) -> int:
+    """Forward to ``tfbus.demo.main`` (the same code as ``python demos/robot_setup_tf.py``)."""
+    try:
+        demo_module = importlib.import_module("tfbus.demo")
+    except ImportError as err:
+        raise click.ClickException(f"the demo is not available: {err}") from None
+    argv: list[str] = [role] if role is not None else []
+    if bus is not None:
+        argv += ["--bus", bus]
+    for name in ("duration", "rate", "listen_rate"):
+        value = options.get(name)
+        if value is not None:
+            argv += [f"--{name.replace('_', '-')}", repr(value)]
+    if options.get("backend") is not None:
+        argv += ["--backend", options["backend"]]
+    run: Callable[[list[str] | None], int] = demo_module.main
+    return int(run(argv) or 0)
+
+
+def _check_bus_spec(bus: str | None) -> None:
+    """A bad ``--bus`` of a demo role is a one-line usage error here, not in the demo."""
+    if bus is None:
+        return
+    try:
+        zenoh_module = importlib.import_module("tfbus.transports.zenoh")
+    except ImportError as err:
+        _fail(f"--bus needs the Zenoh transport (pip install 'tfbus[zenoh]'): {err}")
+    try:
+        zenoh_module.parse_bus_spec(bus)
+    except ValueError as err:
+        _fail(_one_line(str(err)))
+
+
+def _inherit(ctx: click.Context, **options: Any) -> dict[str, Any]:
+    """A role's options, falling back to those given to ``tfbus demo`` before the role."""
+    parent = ctx.parent.params if ctx.parent is not None else {}
+    return {k: v if v is not None else parent.get(k) for k, v in options.items()}
+
+
+_BUS_HELP = ("Bus to run on (default 'zenoh': this machine, no configuration), e.g. "
+             "'zenoh?listen=tcp/127.0.0.1:7500' or 'zenoh:tcp/192.168.1.10:7448'.")
+
+
+@cli.group(invoke_without_command=True)
+@_demo_options(rate=True, listen_rate=True)
+@click.pass_context
 def demo(
-    duration: float | None, rate: float | None, listen_rate: float | None, backend: str | None
+    ctx: click.Context, duration: float | None, rate: float | None,
+    listen_rate: float | None, backend: str | None,
 ) -> int:
     """Run the seed demo: a 100 Hz broadcaster and a 1 Hz listener on one bus.
+
+    Without a command both nodes run in this process. With 'broadcaster' or 'listener'
+    that node runs alone over Zenoh, as in the tutorial's separate terminals: the
+    listener prints the tutorial's ERROR line each second until a broadcaster is up,
+    then the INFO lines.
 
     \b
     Examples:
       tfbus demo --duration 10
       tfbus demo --rate 50 --listen-rate 2 --backend trio
+      tfbus demo listener                  # terminal 1
+      tfbus demo broadcaster               # terminal 2
+      tfbus monitor --bus zenoh            # terminal 3
     """
-    try:
-        demo_module = importlib.import_module("tfbus.demo")
-    except ImportError as err:
-        raise click.ClickException(f"the demo is not available: {err}") from None
-    argv: list[str] = []
-    for flag, value in (("--duration", duration), ("--rate", rate),
-                        ("--listen-rate", listen_rate)):
-        if value is not None:
-            argv += [flag, repr(value)]
-    if backend is not None:
-        argv += ["--backend", backend]
-    run: Callable[[list[str] | None], int] = demo_module.main
-    return int(run(argv) or 0)
+    if ctx.invoked_subcommand is not None:
+        return 0
+    return _run_demo_main(None, None, duration=duration, rate=rate,
+                          listen_rate=listen_rate, backend=backend)
+
+
+@demo.command("broadcaster")
+@click.option("--bus", metavar="SPEC", default=None, help=_BUS_HELP)
+@_demo_options(rate=True, listen_rate=False)
+@click.pass_context
+def demo_broadcaster(
+    ctx: click.Context, bus: str | None, duration: float | None, rate: float | None,
+    backend: str | None,
+) -> int:
+    """The tutorial's robot_tf_publisher alone: base_link -> base_laser over Zenoh.
+
+    It prints nothing but its summary line on exit (a startup note goes to stderr).
+
+    \b
+    Examples:
+      tfbus demo broadcaster
+      tfbus demo broadcaster --rate 50 --duration 30
+      tfbus demo broadcaster --bus 'zenoh?listen=tcp/127.0.0.1:7500'
+    """
+    _check_bus_spec(bus)
+    return _run_demo_main("broadcaster", bus, **_inherit(
+        ctx, duration=duration, rate=rate, backend=backend))
+
+
+@demo.command("listener")
+@click.option("--bus", metavar="SPEC", default=None, help=_BUS_HELP)
+@_demo_options(rate=False, listen_rate=True)
+@click.pass_context
+def demo_listener(
+    ctx: click.Context, bus: str | None, duration: float | None, listen_rate: float | None,
+    backend: str | None,
+) -> int:
+    """The tutorial's robot_tf_listener alone, over Zenoh: the tutorial's line each second.
+
+    \b
+    Examples:
+      tfbus demo listener
+      tfbus demo listener --listen-rate 2 --duration 10
+      tfbus demo listener --bus 'zenoh?connect=tcp/127.0.0.1:7500'
+    """
+    _check_bus_spec(bus)
+    return _run_demo_main("listener", bus, **_inherit(
+        ctx, duration=duration, listen_rate=listen_rate, backend=backend))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

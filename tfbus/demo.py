@@ -18,17 +18,31 @@ Run it with ``tfbus demo``, ``make demo`` or ``python demos/robot_setup_tf.py``;
 ``--duration`` (default: until Ctrl-C, which exits cleanly), ``--rate``, ``--listen-rate``.
 On exit it prints one summary line: transforms sent, measured broadcast rate, and the
 broadcaster's timer jitter (p50/p99 lateness of its ticks).
+
+The tutorial's three terminals -- the two nodes as separate processes, over Zenoh::
+
+    tfbus demo listener                 # prints the ERROR line each second ...
+    tfbus demo broadcaster              # ... until this one is up, then the INFO lines
+    tfbus monitor --bus zenoh           # a third terminal: rates, delays, live broadcasters
+
+(or ``python demos/robot_setup_tf.py listener``). ``--bus SPEC`` picks the bus
+(:func:`tfbus.transports.zenoh.parse_bus_spec`; default ``zenoh``: this machine, no
+configuration). :func:`run_broadcaster` and :func:`run_listener` run one node on any open
+bus; each prints its summary line on exit (Ctrl-C / SIGTERM exit cleanly).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
+from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
 import anyio
+import anyio.abc
 
 from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
@@ -49,14 +63,26 @@ from tfbus.messages import (
 from tfbus.time import Time
 
 __all__ = [
+    "BROADCASTER_NAME",
+    "LISTENER_NAME",
     "BroadcasterStats",
+    "ListenerStats",
     "broadcaster_node",
     "format_error",
     "format_info",
     "listener_node",
     "main",
+    "open_bus",
+    "run_broadcaster",
     "run_demo",
+    "run_listener",
 ]
+
+BROADCASTER_NAME = "robot_tf_publisher"
+"""The broadcaster node's name on a Zenoh bus (the tutorial's node name)."""
+
+LISTENER_NAME = "robot_tf_listener"
+"""The listener node's name on a Zenoh bus (the tutorial's node name)."""
 
 LASER_OFFSET = Transform(Vector3(0.1, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0))
 """base_laser in base_link: 10 cm forward, 20 cm up, no rotation (metres)."""
@@ -118,6 +144,23 @@ class BroadcasterStats:
         )
 
 
+@dataclass
+class ListenerStats:
+    """What the listener did: ``lookups`` attempted, of which ``transformed`` succeeded
+    and ``failed`` raised a TransformException."""
+
+    lookups: int = 0
+    transformed: int = 0
+    failed: int = 0
+
+    def summary(self) -> str:
+        """The one line printed on exit."""
+        return (
+            f"[ INFO] summary: {self.lookups} lookups, {self.transformed} transformed, "
+            f"{self.failed} failed"
+        )
+
+
 async def broadcaster_node(
     bus: Bus, clock: Clock, rate: float = 100.0, stats: BroadcasterStats | None = None
 ) -> None:
@@ -138,19 +181,27 @@ async def broadcaster_node(
 
 
 async def listener_node(
-    buffer: Buffer, clock: Clock, listen_rate: float = 1.0, out: Callable[[str], None] = print
+    buffer: Buffer,
+    clock: Clock,
+    listen_rate: float = 1.0,
+    out: Callable[[str], None] = print,
+    stats: ListenerStats | None = None,
 ) -> None:
     """The tutorial's ``robot_tf_listener``: every ``1/listen_rate`` s, transform
     (1.0, 0.2, 0.0) in base_laser at Time(0) (latest) into base_link and print the
     tutorial's line through ``out``. Runs until cancelled."""
+    stats = stats if stats is not None else ListenerStats()
     laser_point = PointStamped(Header(Time(0), "base_laser"), LASER_POINT)
     async for _ in every(1.0 / listen_rate, clock=clock):
         now = clock.now()
+        stats.lookups += 1
         try:
             ts = buffer.lookup_transform("base_link", "base_laser", laser_point.header.stamp)
         except TransformException as exc:
+            stats.failed += 1
             out(format_error(now, exc))
         else:
+            stats.transformed += 1
             out(format_info(now, laser_point, do_transform_point(laser_point, ts)))
 
 
@@ -162,30 +213,104 @@ async def run_demo(
     listen_rate: float = 1.0,
     out: Callable[[str], None] = print,
     handle_signals: bool = False,
+    bus: Bus | None = None,
 ) -> BroadcasterStats:
     """Run both nodes on one bus for ``duration`` seconds of ``clock`` time (None:
     until cancelled, or until SIGINT/SIGTERM when ``handle_signals``), print the summary
-    line through ``out`` and return the broadcaster's statistics."""
+    line through ``out`` and return the broadcaster's statistics.
+
+    ``bus`` is an open bus to run on (e.g. one carried over Zenoh); by default a new
+    in-process :class:`~tfbus.bus.Bus`.
+    """
     clock = clock if clock is not None else SystemClock()
     stats = BroadcasterStats()
     buffer = Buffer(cache_time=10.0, clock=clock)
     try:
         async with (
-            Bus() as bus,
-            TransformListener(buffer, bus, clock=clock),
+            Bus() if bus is None else _borrowed(bus) as the_bus,
+            TransformListener(buffer, the_bus, clock=clock),
             anyio.create_task_group() as tg,
         ):
-            tg.start_soon(broadcaster_node, bus, clock, rate, stats)
+            tg.start_soon(broadcaster_node, the_bus, clock, rate, stats)
             tg.start_soon(listener_node, buffer, clock, listen_rate, out)
-            if handle_signals:
-                tg.start_soon(_cancel_on_signal, tg.cancel_scope)
-            if duration is not None:
-                await clock.sleep(duration)
-                tg.cancel_scope.cancel()
+            await _stop_after(tg, clock, duration, handle_signals)
     finally:
         buffer.close()
         out(stats.summary())
     return stats
+
+
+async def run_broadcaster(
+    bus: Bus,
+    *,
+    clock: Clock | None = None,
+    duration: float | None = None,
+    rate: float = 100.0,
+    out: Callable[[str], None] = print,
+    handle_signals: bool = False,
+) -> BroadcasterStats:
+    """Run the broadcaster node alone on the open ``bus`` (one of the tutorial's
+    terminals) for ``duration`` seconds of ``clock`` time (None: until cancelled, or
+    until SIGINT/SIGTERM when ``handle_signals``); print its summary line through ``out``
+    and return its statistics. It prints nothing else, as ``robot_tf_publisher``.
+
+    Raises:
+        Exception: whatever publishing on ``bus`` raises (e.g. the bus was closed).
+    """
+    clock = clock if clock is not None else SystemClock()
+    stats = BroadcasterStats()
+    try:
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(broadcaster_node, bus, clock, rate, stats)
+            await _stop_after(tg, clock, duration, handle_signals)
+    finally:
+        out(stats.summary())
+    return stats
+
+
+async def run_listener(
+    bus: Bus,
+    *,
+    clock: Clock | None = None,
+    duration: float | None = None,
+    listen_rate: float = 1.0,
+    out: Callable[[str], None] = print,
+    handle_signals: bool = False,
+) -> ListenerStats:
+    """Run the listener node alone on the open ``bus``: a Buffer fed by a
+    TransformListener, and the tutorial's line (ERROR until a broadcaster is heard, then
+    INFO) every ``1/listen_rate`` s through ``out``. Stops after ``duration`` seconds of
+    ``clock`` time (None: when cancelled, or on SIGINT/SIGTERM when ``handle_signals``),
+    prints its summary line and returns its statistics.
+
+    Raises:
+        Exception: whatever subscribing on ``bus`` raises (e.g. the bus is not open).
+    """
+    clock = clock if clock is not None else SystemClock()
+    stats = ListenerStats()
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    try:
+        async with (
+            TransformListener(buffer, bus, clock=clock),
+            anyio.create_task_group() as tg,
+        ):
+            tg.start_soon(listener_node, buffer, clock, listen_rate, out, stats)
+            await _stop_after(tg, clock, duration, handle_signals)
+    finally:
+        buffer.close()
+        out(stats.summary())
+    return stats
+
+
+async def _stop_after(
+    tg: anyio.abc.TaskGroup, clock: Clock, duration: float | None, handle_signals: bool
+) -> None:
+    """Cancel ``tg`` after ``duration`` s of ``clock`` time and/or on SIGINT/SIGTERM."""
+    if handle_signals:
+        tg.start_soon(_cancel_on_signal, tg.cancel_scope)
+    if duration is not None:
+        await clock.sleep(duration)
+        tg.cancel_scope.cancel()
 
 
 async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
@@ -195,11 +320,49 @@ async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
             return
 
 
+@asynccontextmanager
+async def _borrowed(bus: Bus) -> AsyncIterator[Bus]:
+    """An already open bus, used as ``async with`` without closing it."""
+    yield bus
+
+
+def open_bus(spec: str = "zenoh", *, name: str | None = None) -> Bus:
+    """A new (not yet opened) bus carried over Zenoh, from a ``--bus`` value.
+
+    ``name`` is the node name used unless ``spec`` gives one (``zenoh?name=...``).
+
+    Raises:
+        ImportError: if the Zenoh transport is not installed (``tfbus[zenoh]``).
+        ValueError: if ``spec`` is not a valid bus spec.
+    """
+    from tfbus.transports.zenoh import parse_bus_spec, zenoh_bus_from_options
+
+    options = parse_bus_spec(spec)
+    if options.name is None and name is not None:
+        options = dataclasses.replace(options, name=name)
+    return zenoh_bus_from_options(options)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Command-line options of the demo."""
     parser = argparse.ArgumentParser(
         prog="robot_setup_tf",
-        description="The ROS 'Setting up your robot using tf' tutorial on a tfbus bus.",
+        description="The ROS 'Setting up your robot using tf' tutorial on a tfbus bus: both "
+        "nodes in one process, or one ROLE per process over Zenoh (the tutorial's terminals).",
+    )
+    parser.add_argument(
+        "role",
+        nargs="?",
+        choices=("both", "broadcaster", "listener"),
+        default="both",
+        help="which node(s) to run (default: both, on an in-process bus)",
+    )
+    parser.add_argument(
+        "--bus",
+        metavar="SPEC",
+        default=None,
+        help="bus to run on, e.g. 'zenoh' or 'zenoh?connect=tcp/127.0.0.1:7448' "
+        "(default: 'zenoh' for one role, an in-process bus for both)",
     )
     parser.add_argument(
         "--duration", type=float, default=None, help="seconds to run (default: until Ctrl-C)"
@@ -217,17 +380,72 @@ def main(argv: Sequence[str] | None = None) -> int:
         if getattr(args, name) <= 0:
             print(f"error: --{name.replace('_', '-')} must be positive", file=sys.stderr)
             return 2
-    anyio.run(
-        lambda: run_demo(
-            duration=args.duration,
-            rate=args.rate,
-            listen_rate=args.listen_rate,
-            handle_signals=True,
-            out=lambda line: print(line, flush=True),
-        ),
-        backend=args.backend,
-    )
+    if args.role == "both" and args.bus is None:
+        anyio.run(
+            lambda: run_demo(
+                duration=args.duration,
+                rate=args.rate,
+                listen_rate=args.listen_rate,
+                handle_signals=True,
+                out=_print_line,
+            ),
+            backend=args.backend,
+        )
+        return 0
+    spec = args.bus if args.bus is not None else "zenoh"
+    names = {"broadcaster": BROADCASTER_NAME, "listener": LISTENER_NAME}
+    try:
+        bus = open_bus(spec, name=names.get(args.role, "robot_setup_tf"))
+    except ImportError as err:
+        print(f"error: --bus needs the Zenoh transport (pip install 'tfbus[zenoh]'): {err}",
+              file=sys.stderr)
+        return 2
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except Exception as err:
+        if not _is_bus_error(err):
+            raise
+        print(f"error: cannot configure the bus {spec!r}: {err}", file=sys.stderr)
+        return 2
+    try:
+        anyio.run(_run_role, args, bus, spec, backend=args.backend)
+    except KeyboardInterrupt:  # Ctrl-C while the session was still opening
+        return 130
+    except Exception as err:
+        if not _is_bus_error(err):
+            raise
+        print(f"error: cannot open the bus {spec!r}: {err}", file=sys.stderr)
+        return 1
     return 0
+
+
+def _is_bus_error(err: BaseException) -> bool:
+    """Zenoh's own errors (an endpoint in use, an unreadable config file) and OS errors."""
+    return isinstance(err, OSError) or type(err).__module__.partition(".")[0] == "zenoh"
+
+
+def _print_line(line: str) -> None:
+    print(line, flush=True)
+
+
+async def _run_role(args: argparse.Namespace, bus: Bus, spec: str) -> None:
+    async with bus:
+        transport = bus.transport
+        node = getattr(transport, "node_id", "")
+        name = getattr(transport, "name", args.role)
+        print(f"[ INFO] {name}: running the {args.role} node on {spec} (node {node})",
+              file=sys.stderr, flush=True)
+        if args.role == "broadcaster":
+            await run_broadcaster(bus, duration=args.duration, rate=args.rate,
+                                  out=_print_line, handle_signals=True)
+        elif args.role == "listener":
+            await run_listener(bus, duration=args.duration, listen_rate=args.listen_rate,
+                               out=_print_line, handle_signals=True)
+        else:
+            await run_demo(duration=args.duration, rate=args.rate,
+                           listen_rate=args.listen_rate, out=_print_line,
+                           handle_signals=True, bus=bus)
 
 
 if __name__ == "__main__":

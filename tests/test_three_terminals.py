@@ -1,0 +1,258 @@
+"""The tutorial's three terminals as real processes: ``tfbus demo listener``,
+``tfbus demo broadcaster`` and ``tfbus echo/monitor/frames --bus`` over Zenoh.
+
+Every process runs on 127.0.0.1 with explicit endpoints on a free port (the transport's
+defaults keep multicast scouting off); every wait polls the children's output against a
+deadline (these are the only tests on wall-clock time, because they cross processes);
+children are killed in ``finally``.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("zenoh")
+pytest.importorskip("msgspec")
+pytest.importorskip("click")
+pytest.importorskip("rich")
+
+ROOT = Path(__file__).parent.parent
+
+INFO = re.compile(
+    r"^\[ INFO\] (\d+\.\d{9}): base_laser: \(1\.00, 0\.20\. 0\.00\) -----> "
+    r"base_link: \(1\.10, 0\.20, 0\.20\) at time (\d+\.\d\d)$"
+)
+ERROR = re.compile(
+    r'^\[ERROR\] (\d+\.\d{9}): Received an exception trying to transform a point from '
+    r'"base_laser" to "base_link": "base_link" passed to lookupTransform argument '
+    r"target_frame does not exist\. $"
+)
+LISTENER_SUMMARY = re.compile(
+    r"^\[ INFO\] summary: (\d+) lookups, (\d+) transformed, (\d+) failed$"
+)
+BROADCASTER_SUMMARY = re.compile(
+    r"^\[ INFO\] summary: (\d+) transforms sent, broadcast rate (\d+\.\d\d) Hz, "
+    r"timer jitter p50 \d+\.\d{3} ms, p99 \d+\.\d{3} ms$"
+)
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def listen_spec(port: int) -> str:
+    return f"zenoh?listen=tcp/127.0.0.1:{port}"
+
+
+def connect_spec(port: int) -> str:
+    return f"zenoh?connect=tcp/127.0.0.1:{port}"
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONUNBUFFERED"] = "1"
+    env["PYTHONIOENCODING"] = "utf-8"
+    env.pop("COLUMNS", None)
+    return env
+
+
+class Tfbus:
+    """A ``tfbus`` child process; its stdout and stderr lines are collected by threads."""
+
+    def __init__(self, *args: str) -> None:
+        self.args = args
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "tfbus.cli", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            encoding="utf-8",
+            env=_env(),
+            cwd=ROOT,
+        )
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.seen: list[str] = []
+        self.err: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+        threading.Thread(target=self._read_err, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.put(line.rstrip("\n"))
+
+    def _read_err(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.err.append(line.rstrip("\n"))
+
+    def _more(self, deadline: float) -> bool:
+        """Move one line into ``seen``; False when the deadline passed or stdout ended."""
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            try:
+                self.seen.append(self.lines.get(timeout=min(remaining, 0.2)))
+                return True
+            except queue.Empty:
+                if self.proc.poll() is not None and self.lines.empty():
+                    time.sleep(0.05)  # let the reader thread hand over the last lines
+                    if self.lines.empty():
+                        return False
+
+    def expect(
+        self, predicate: Callable[[str], bool], timeout: float = 15.0, start: int = 0
+    ) -> int:
+        """Index in ``seen`` of the first line from ``start`` on that matches."""
+        deadline = time.monotonic() + timeout
+        i = start
+        while True:
+            while i < len(self.seen):
+                if predicate(self.seen[i]):
+                    return i
+                i += 1
+            if not self._more(deadline):
+                raise AssertionError(self.describe("no matching line"))
+
+    def finish(self, sig: int | None = None, timeout: float = 15.0) -> int:
+        """Send ``sig`` (if still running), wait for the exit status and all output."""
+        if sig is not None and self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            code = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(self.describe("did not exit")) from None
+        deadline = time.monotonic() + 5.0
+        while self._more(deadline):
+            pass
+        return code
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(timeout=10)
+
+    def describe(self, what: str) -> str:
+        return (
+            f"tfbus {' '.join(self.args)}: {what} (exit {self.proc.poll()}); "
+            f"stdout tail {self.seen[-8:]}; stderr tail {self.err[-8:]}"
+        )
+
+
+@contextmanager
+def processes() -> Iterator[list[Tfbus]]:
+    started: list[Tfbus] = []
+    try:
+        yield started
+    finally:
+        for p in started:
+            p.kill()
+
+
+def _sec(stamp: str) -> float:
+    return float(stamp)
+
+
+def test_listener_first_prints_error_then_info_lines() -> None:
+    port = free_port()
+    with processes() as ps:
+        listener = Tfbus("demo", "listener", "--bus", connect_spec(port), "--duration", "40")
+        ps.append(listener)
+        # Nobody broadcasts yet: the tutorial's ERROR line, once a second.
+        first = listener.expect(lambda line: line.startswith("[ERROR]"))
+        second = listener.expect(lambda line: line.startswith("[ERROR]"), start=first + 1)
+        e1, e2 = (ERROR.match(listener.seen[i]) for i in (first, second))
+        assert e1 and e2, listener.seen[first : second + 1]
+        assert abs(_sec(e2.group(1)) - _sec(e1.group(1)) - 1.0) < 0.25
+        broadcaster = Tfbus("demo", "broadcaster", "--bus", listen_spec(port), "--duration", "40")
+        ps.append(broadcaster)
+        # ... then, once the broadcaster is up, the INFO lines, a second apart.
+        i = listener.expect(lambda line: line.startswith("[ INFO]"), timeout=20.0)
+        j = listener.expect(lambda line: line.startswith("[ INFO]"), start=i + 1)
+        m1, m2 = (INFO.match(listener.seen[k]) for k in (i, j))
+        assert m1 and m2, listener.seen[i : j + 1]
+        assert abs(_sec(m2.group(1)) - _sec(m1.group(1)) - 1.0) < 0.25
+        for m in (m1, m2):  # Time(0): the newest broadcast (stamp printed rounded to 10 ms)
+            assert -0.006 < _sec(m.group(1)) - _sec(m.group(2)) < 0.5
+        assert all(line.startswith("[ERROR]") for line in listener.seen[:i])
+        assert all(line.startswith("[ INFO]") for line in listener.seen[i : j + 1])
+        # Ctrl-C / SIGTERM: both exit cleanly with their summary lines.
+        assert listener.finish(signal.SIGINT) == 0
+        summary = LISTENER_SUMMARY.match(listener.seen[-1])
+        assert summary, listener.seen[-3:]
+        lookups, transformed, failed = (int(g) for g in summary.groups())
+        assert failed >= 2 and transformed >= 2 and lookups == failed + transformed
+        assert broadcaster.finish(signal.SIGTERM) == 0
+        assert broadcaster.seen and broadcaster.seen[:-1] == []  # nothing but the summary
+        bsummary = BROADCASTER_SUMMARY.match(broadcaster.seen[-1])
+        assert bsummary, broadcaster.seen
+        assert int(bsummary.group(1)) > 50
+
+
+def test_echo_and_frames_attach_to_a_running_broadcaster(tmp_path: Path) -> None:
+    port = free_port()
+    with processes() as ps:
+        broadcaster = Tfbus("demo", "broadcaster", "--bus", listen_spec(port), "--duration", "40")
+        ps.append(broadcaster)
+        echo = Tfbus(
+            "echo", "base_link", "base_laser", "--bus", connect_spec(port), "-n", "1",
+            "--duration", "20",
+        )
+        ps.append(echo)
+        assert echo.finish(timeout=25.0) == 0, echo.describe("failed")
+        assert echo.seen[0].startswith("At time ")
+        assert "- Translation: [0.100, 0.000, 0.200]" in echo.seen
+        assert "- Rotation: in Quaternion [0.000, 0.000, 0.000, 1.000]" in echo.seen
+        assert sum(line.startswith("At time") for line in echo.seen) == 1
+
+        out = tmp_path / "live.gv"
+        frames = Tfbus("frames", "--bus", connect_spec(port), "--duration", "1", "-o", str(out))
+        ps.append(frames)
+        assert frames.finish(timeout=25.0) == 0, frames.describe("failed")
+        dot = out.read_text()
+        assert "base_link -> base_laser" in dot
+        assert "Broadcaster: robot_tf_publisher" in dot
+
+
+def test_monitor_lists_the_broadcaster_alive_then_reports_it_dead() -> None:
+    port = free_port()
+    alive_row = re.compile(r"robot_tf_publisher\s*[│|]\s*alive\s*[│|]\s*[0-9a-f]+\s*[│|]\s*/tf")
+    gone_row = re.compile(r"robot_tf_publisher\s*[│|]\s*gone\s*[│|]")
+    frame_row = re.compile(
+        r"base_laser\s*[│|]\s*base_link\s*[│|]\s*robot_tf_publisher\s*[│|]\s*(\d+\.\d+)"
+    )
+    with processes() as ps:
+        broadcaster = Tfbus("demo", "broadcaster", "--bus", listen_spec(port), "--duration", "40")
+        ps.append(broadcaster)
+        monitor = Tfbus(
+            "monitor", "--bus", connect_spec(port), "--interval", "0.5", "--duration", "40"
+        )
+        ps.append(monitor)
+        monitor.expect(lambda line: line.startswith("[alive] broadcaster robot_tf_publisher"))
+        k = monitor.expect(lambda line: alive_row.search(line) is not None)
+        f = monitor.expect(lambda line: frame_row.search(line) is not None)
+        assert float(frame_row.search(monitor.seen[f]).group(1)) > 10  # type: ignore[union-attr]
+        broadcaster.kill()  # SIGKILL: no goodbye, Zenoh notices the link drop
+        d = monitor.expect(
+            lambda line: line.startswith("[dead] broadcaster robot_tf_publisher"), start=k
+        )
+        monitor.expect(lambda line: gone_row.search(line) is not None, start=d)
+        assert monitor.finish(signal.SIGINT) == 0
+        assert any(gone_row.search(line) for line in monitor.seen[-12:])  # final report
