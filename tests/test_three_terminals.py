@@ -89,7 +89,8 @@ class Tfbus:
         self.lines: queue.Queue[str] = queue.Queue()
         self.seen: list[str] = []
         self.err: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
         threading.Thread(target=self._read_err, daemon=True).start()
 
     def _read(self) -> None:
@@ -113,7 +114,8 @@ class Tfbus:
                 return True
             except queue.Empty:
                 if self.proc.poll() is not None and self.lines.empty():
-                    time.sleep(0.05)  # let the reader thread hand over the last lines
+                    # The process ended: wait for the reader to hand over its last lines.
+                    self._reader.join(timeout=max(0.0, deadline - time.monotonic()))
                     if self.lines.empty():
                         return False
 

@@ -383,7 +383,9 @@ def test_processes_exchange_late_joiner_gets_statics_kill_and_restart() -> None:
         b1 = Peer("broadcaster.py", "--listen", ep, "--name", "b1", "--rate", "100")
         ps.append(b1)
         b1.expect(lambda line: line.startswith("READY"))
-        time.sleep(0.3)  # the static was published before anyone listened
+        # Scenario set-up, not a wait for a result: let real time pass so that the static
+        # is published well before the listener process exists (a true late joiner).
+        time.sleep(0.3)
         lis = Peer(
             "listener.py",
             "--connect",
