@@ -25,7 +25,6 @@ __all__ = [
     "Tf7",
     "compose",
     "inverse",
-    "lerp_ratio",
     "quat_multiply",
     "quat_rotate",
     "slerp",
@@ -90,14 +89,6 @@ def inverse(a: Tf7) -> Tf7:
     tx, ty, tz, qx, qy, qz, qw = a
     rx, ry, rz = quat_rotate(-qx, -qy, -qz, qw, -tx, -ty, -tz)
     return (rx, ry, rz, -qx, -qy, -qz, qw)
-
-
-def lerp_ratio(t_ns: int, t0_ns: int, t1_ns: int) -> float:
-    """Interpolation ratio ``(t - t0) / (t1 - t0)`` computed as tf2 does, from durations
-    converted to double seconds (``TimeCache::interpolate``, ``ros::Duration::toSec``)."""
-    num_s, num_n = divmod(t_ns - t0_ns, 1_000_000_000)
-    den_s, den_n = divmod(t1_ns - t0_ns, 1_000_000_000)
-    return (num_s + 1e-9 * num_n) / (den_s + 1e-9 * den_n)
 
 
 def _acos(x: float) -> float:

@@ -9,7 +9,7 @@ Semantics are tf2's (geometry2 0.7.6, ``tf2/src/cache.cpp`` and ``static_cache.c
 * ``gather(t)``: t = 0 gives the newest sample; a single sample answers only at its exact
   stamp; otherwise t must lie in [oldest, newest] (no extrapolation, not even 1 ns);
   between two samples with the same parent the result is interpolated (linear
-  translation, tf2 slerp rotation, ratio from double seconds), between samples with
+  translation, tf2 slerp rotation, ratio from integer ns), between samples with
   different parents the older one is used (``TimeCache::findClosest`` / ``getData`` /
   ``interpolate``).
 * A static link holds one value, valid at every time; each insert overwrites it.
@@ -24,7 +24,6 @@ row with ``struct``.
 
 from __future__ import annotations
 
-import math
 import struct
 from bisect import bisect_left
 from math import acos, nan, sin, sqrt
@@ -363,8 +362,3 @@ class StaticCache:
 
     def clear(self) -> None:
         """No-op: ``BufferCore.clear()`` keeps static transforms, as in tf2."""
-
-
-def is_finite7(values: Tf7) -> bool:
-    """True when all seven numbers are finite (no NaN, no ±Inf)."""
-    return all(map(math.isfinite, values))
