@@ -26,7 +26,7 @@ import anyio
 
 from tfbus.clock import Clock, SystemClock
 from tfbus.core import BufferCore, SetResult, _strip_slash
-from tfbus.errors import ExtrapolationException, TimeoutException, TransformException
+from tfbus.errors import TimeoutException, TransformException
 from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
 from tfbus.messages import PointStamped, PoseStamped, TransformStamped, Vector3Stamped
 from tfbus.time import Duration, Time
@@ -112,14 +112,16 @@ class Buffer(BufferCore):
             "Detected jump back in time of %.3f s. Clearing TF buffer.", (old.ns - new.ns) / 1e9
         )
         self.clear()
-        pending = {w for ws in self._index.values() for w in ws}
-        for waiter in pending:
+        for waiter in self._pending():
             self._recheck(waiter)
+
+    def _pending(self) -> set[_Waiter]:
+        return {w for ws in self._index.values() for w in ws}
 
     @property
     def pending_waits(self) -> int:
         """How many waits are currently registered (0 once every wait has ended)."""
-        return len({w for ws in self._index.values() for w in ws})
+        return len(self._pending())
 
     def close(self) -> None:
         """Stop following the clock's jumps. Pending waits are unaffected."""
@@ -183,10 +185,8 @@ class Buffer(BufferCore):
         if ok:
             return self.lookup_transform(target, source, time)
         if self._out_of_window(target, source, time.ns):
-            self.lookup_transform(target, source, time)  # raises tf2's extrapolation error
-            raise ExtrapolationException(  # pragma: no cover - lookup raised above
-                f"Transform from [{source}] to [{target}] at {time} left the cache window"
-            )
+            # It can never become available: the lookup raises tf2's extrapolation error.
+            return self.lookup_transform(target, source, time)
         return None
 
     async def _wait(
