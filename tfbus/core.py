@@ -26,10 +26,18 @@ import logging
 import math
 import time as _wallclock
 from collections.abc import Iterable
-from typing import Final
+from typing import Final, NamedTuple
 
-from tfbus._tf2math import IDENTITY, Tf7
-from tfbus.cache import OK, OLD_DATA, StaticCache, TimeCache
+from tfbus._ccore import (
+    CONNECTIVITY_ERROR,
+    EXTRAPOLATION_ERROR,
+    LOOKUP_ERROR,
+    MAX_GRAPH_DEPTH,
+    NO_ERROR,
+    OLD_DATA,
+    CoreBase,
+)
+from tfbus._tf2math import Tf7
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -40,36 +48,19 @@ from tfbus.errors import (
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Duration, Time
 
-__all__ = ["MAX_GRAPH_DEPTH", "BufferCore", "SetResult"]
+__all__ = ["MAX_GRAPH_DEPTH", "BatchResult", "BufferCore", "SetResult"]
 
 logger = logging.getLogger("tfbus.core")
 
-MAX_GRAPH_DEPTH: Final = 1000
-"""Walks longer than this are taken to be loops (tf2 ``MAX_GRAPH_DEPTH``)."""
-
-NO_PARENT: Final = "NO_PARENT"
 _MAX_MESSAGE: Final = 999  # tf2_py reports exception texts through a char[1000]
 
-_Cache = TimeCache | StaticCache
 _LATEST: Final = Time(0)
 _MEMO_SIZE: Final = 4096
 
-# walk outcomes (tf2_msgs::TF2Error)
-_NO_ERROR: Final = 0
-_LOOKUP_ERROR: Final = 1
-_CONNECTIVITY_ERROR: Final = 2
-_EXTRAPOLATION_ERROR: Final = 3
-
-# outcomes of BufferCore._climb
-_CLIMB_STOPPED: Final = 0  # reached the stop frame, or a frame without a link
-_CLIMB_EARLY: Final = 1  # reached the other frame of the lookup
-_CLIMB_FAILED: Final = 2  # a link had no data at the time
-_CLIMB_LOOP: Final = 3  # longer than MAX_GRAPH_DEPTH
-
 _ERRORS: Final[dict[int, type[TransformException]]] = {
-    _LOOKUP_ERROR: LookupException,
-    _CONNECTIVITY_ERROR: ConnectivityException,
-    _EXTRAPOLATION_ERROR: ExtrapolationException,
+    LOOKUP_ERROR: LookupException,
+    CONNECTIVITY_ERROR: ConnectivityException,
+    EXTRAPOLATION_ERROR: ExtrapolationException,
 }
 
 
@@ -81,6 +72,22 @@ class SetResult(enum.Enum):
     """Refused: older than the link's newest stamp minus ``cache_time``."""
     REPEATED_DATA = "TF_REPEATED_DATA"
     """Refused: the link already has a sample with this stamp (the first one wins)."""
+
+
+_RESULTS: Final = (SetResult.STORED, SetResult.OLD_DATA, SetResult.REPEATED_DATA)
+
+
+class BatchResult(NamedTuple):
+    """What :meth:`BufferCore.set_transforms` did with a batch of transforms."""
+
+    stored: int
+    """How many were stored."""
+    refused: int
+    """How many the caches refused (TF_OLD_DATA, TF_REPEATED_DATA; logged)."""
+    errors: list[tuple[int, Exception]]
+    """``(index in the batch, exception)`` for each item that was not stored because it
+    is invalid (:class:`~tfbus.errors.InvalidArgumentException`) or is not a well-formed
+    :class:`~tfbus.messages.TransformStamped` (TypeError, ValueError, OverflowError)."""
 
 
 class _RateLimitedWarning:
@@ -116,7 +123,7 @@ def _seconds_to_ns(value: float | Duration) -> int:
     return round(value * 1_000_000_000)
 
 
-class BufferCore:
+class BufferCore(CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
     Args:
@@ -127,22 +134,23 @@ class BufferCore:
     Frame ids are arbitrary strings compared exactly. ``set_transform`` strips one
     leading ``/`` (tf2 ``stripSlash``); queries reject ids that start with ``/``.
     Not thread-safe: use it from one thread (or one event loop), as tfbus does.
+
+    Storage, insert and the walk are compiled (:mod:`tfbus._ccore`, Cython); this class
+    holds the API, validation of queries and tf2's messages.
     """
 
     def __init__(self, cache_time: float | Duration = 10.0) -> None:
         self.cache_time_ns: int = _seconds_to_ns(cache_time)
         if self.cache_time_ns < 0:
             raise ValueError(f"cache_time must be >= 0, got {cache_time!r}")
-        # Frame 0 is tf2's reserved NO_PARENT; it may get a cache of its own (tf2 quirk).
-        self._frame_ids: dict[str, int] = {NO_PARENT: 0}
-        self._frame_names: list[str] = [NO_PARENT]
-        self._caches: list[_Cache | None] = [None]
-        self._authority: dict[int, str] = {}
+        # CoreBase holds the frame table: _frame_ids, _frame_names, _caches (frame 0 is
+        # tf2's reserved NO_PARENT; it may get a cache of its own, a tf2 quirk) and
+        # _authority, and bumps _generation on every insert attempt.
+        self._set_cache_time_ns(self.cache_time_ns)
         self._warn = _RateLimitedWarning()
         # Exact memo of successful lookup_transform results, keyed by (target, source,
         # time ns). Any insert attempt or clear() bumps _generation, which empties it, so
         # it never serves data older than the buffer's state.
-        self._generation = 0
         self._memo: dict[tuple[str, str, int], TransformStamped] = {}
         self._memo_generation = 0
 
@@ -193,43 +201,26 @@ class BufferCore:
         return self._insert(transform, authority, is_static)
 
     def _insert(self, ts: TransformStamped, authority: str, is_static: bool) -> SetResult:
-        header, child, ((x, y, z), (qx, qy, qz, qw)) = ts
-        parent = header.frame_id
-        if parent[:1] == "/":
-            parent = parent[1:]
-        if child[:1] == "/":
-            child = child[1:]
-        # Fast check: `v - v == 0` fails for NaN and ±Inf alike. Non-numbers raise
-        # TypeError here (or struct.error on storing).
-        norm2 = qx * qx + qy * qy + qz * qz + qw * qw
-        if (
-            child == parent
-            or not child
-            or not parent
-            or x - x != 0.0
-            or y - y != 0.0
-            or z - z != 0.0
-            or not abs(norm2 - 1.0) < 0.01
-        ):
-            self._reject(parent, child, (x, y, z, qx, qy, qz, qw), authority)
-        values: Tf7 = (x, y, z, qx, qy, qz, qw)
-        stamp = header.stamp._ns
-        self._generation += 1
-        frame_ids = self._frame_ids
-        child_id = frame_ids.get(child)
-        if child_id is None:
-            child_id = self._register(child)
-        cache = self._caches[child_id]
-        if cache is None:
-            cache = StaticCache() if is_static else TimeCache(self.cache_time_ns)
-            self._caches[child_id] = cache
-        parent_id = frame_ids.get(parent)
-        if parent_id is None:
-            parent_id = self._register(parent)
-        code = cache.insert(stamp, parent_id, values)
-        if code == OK:
-            self._authority[child_id] = authority
-            return SetResult.STORED
+        return _RESULTS[self._insert_code(ts, authority, is_static)]
+
+    def set_transforms(
+        self,
+        transforms: Iterable[TransformStamped],
+        authority: str = "default",
+        is_static: bool = False,
+    ) -> BatchResult:
+        """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
+        listener uses, several times faster per transform than :meth:`set_transform`.
+
+        Each item is handled exactly as :meth:`set_transform` (or
+        :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
+        malformed item is reported in ``errors`` instead of raising, and never stops the
+        items after it. Refusals (TF_OLD_DATA, TF_REPEATED_DATA) are logged, rate-limited.
+        """
+        return BatchResult(*self._insert_many(transforms, authority, is_static, None))
+
+    def _refused(self, code: int, child: str, stamp: int, authority: str) -> None:
+        """Log a refusal by the cache (rate-limited), in tf2's words."""
         if code == OLD_DATA:
             self._warn(
                 "TF_OLD_DATA",
@@ -237,13 +228,12 @@ class BufferCore:
                 "http://wiki.ros.org/tf/Errors%20explained) for frame "
                 f"{child} at time {stamp / 1e9:f} according to authority {authority}",
             )
-            return SetResult.OLD_DATA
-        self._warn(
-            "TF_REPEATED_DATA",
-            f"TF_REPEATED_DATA ignoring data with redundant timestamp for frame {child} "
-            f"at time {stamp / 1e9:f} according to authority {authority}",
-        )
-        return SetResult.REPEATED_DATA
+        else:
+            self._warn(
+                "TF_REPEATED_DATA",
+                f"TF_REPEATED_DATA ignoring data with redundant timestamp for frame {child} "
+                f"at time {stamp / 1e9:f} according to authority {authority}",
+            )
 
     def _reject(self, parent: str, child: str, values: Tf7, authority: str) -> None:
         """Raise InvalidArgumentException listing every problem in tf2's order
@@ -292,13 +282,6 @@ class BufferCore:
             codes=tuple(codes),
         )
 
-    def _register(self, frame_id: str) -> int:
-        n = len(self._frame_names)
-        self._frame_ids[frame_id] = n
-        self._frame_names.append(frame_id)
-        self._caches.append(None)
-        return n
-
     def clear(self) -> None:
         """Drop all dynamic data; static transforms and known frame ids stay
         (tf2 ``BufferCore::clear``)."""
@@ -330,182 +313,31 @@ class BufferCore:
     # ------------------------------------------------------------------ the walk
 
     def _common_time(self, target_id: int, source_id: int) -> tuple[int, int | str]:
-        """tf2 ``getLatestCommonTime``: ``(_NO_ERROR, time ns)`` or ``(error, message)``."""
-        caches = self._caches
-        if source_id == target_id:
-            cache = caches[source_id]
-            return _NO_ERROR, cache.latest_stamp() if cache is not None else 0
-        big = 1 << 63
-        # Walk up from the source, remembering (stamp, parent) of each link.
-        lct: list[tuple[int, int]] = []
-        frame = source_id
-        common = big
-        depth = 0
-        while frame != 0:
-            cache = caches[frame]
-            if cache is None:
-                break
-            stamp, parent = cache.latest()
-            if parent == 0:
-                break
-            if stamp and stamp < common:
-                common = stamp
-            lct.append((stamp, parent))
-            frame = parent
-            if frame == target_id:
-                return _NO_ERROR, 0 if common == big else common
-            depth += 1
-            if depth > MAX_GRAPH_DEPTH:
-                return _LOOKUP_ERROR, self._loop_message()
-        # Walk up from the target until a parent seen on the source side.
-        frame = target_id
-        depth = 0
-        common = big
-        common_parent = 0
-        source_parents = {p for _, p in lct}
-        while True:
-            cache = caches[frame]
-            if cache is None:
-                break
-            stamp, parent = cache.latest()
-            if parent == 0:
-                break
-            if stamp and stamp < common:
-                common = stamp
-            if parent in source_parents:
-                common_parent = parent
-                break
-            frame = parent
-            if frame == source_id:
-                return _NO_ERROR, 0 if common == big else common
-            depth += 1
-            if depth > MAX_GRAPH_DEPTH:
-                return _LOOKUP_ERROR, self._loop_message()
-        if common_parent == 0:
-            return _CONNECTIVITY_ERROR, self._connectivity_message(source_id, target_id)
-        for stamp, parent in lct:
-            if stamp and stamp < common:
-                common = stamp
-            if parent == common_parent:
-                break
-        return _NO_ERROR, 0 if common == big else common
-
-    def _climb(
-        self, frame: int, stop: int, early: int, time: int
-    ) -> tuple[int, int, Tf7, str]:
-        """One half of tf2's ``walkToTopParent``: walk up from ``frame`` gathering each
-        link at ``time`` and accumulating ``frame -> current`` (``TransformAccum::accum``:
-        ``t = quatRotate(q_link, t) + t_link``, ``q = q_link ⊗ q``).
-
-        Stops at ``stop`` (not gathered), at a frame without a link, at a link with no
-        data (``_CLIMB_FAILED`` with tf2's detail; a link to NO_PARENT has an empty
-        detail), or at ``early`` once its link gathered (``_CLIMB_EARLY``; that link is
-        not accumulated). Returns ``(outcome, frame reached, accumulated up to that
-        frame, detail)``.
-        """
-        caches = self._caches
-        ax = ay = az = aqx = aqy = aqz = 0.0
-        aqw = 1.0
-        first = True
-        depth = 0
-        while frame != stop:
-            cache = caches[frame]
-            if cache is None:
-                break
-            r = cache.gather(time)
-            if isinstance(r, str) or r[0] == 0:
-                detail = r if isinstance(r, str) else ""
-                return _CLIMB_FAILED, frame, (ax, ay, az, aqx, aqy, aqz, aqw), detail
-            parent, st = r
-            if frame == early:
-                return _CLIMB_EARLY, frame, (ax, ay, az, aqx, aqy, aqz, aqw), ""
-            if first:
-                ax, ay, az, aqx, aqy, aqz, aqw = st
-                first = False
-            else:
-                x, y, z, qx, qy, qz, qw = st
-                tx = qw * ax + qy * az - qz * ay
-                ty = qw * ay + qz * ax - qx * az
-                tz = qw * az + qx * ay - qy * ax
-                tw = -qx * ax - qy * ay - qz * az
-                ax = -tw * qx + tx * qw - ty * qz + tz * qy + x
-                ay = -tw * qy + ty * qw - tz * qx + tx * qz + y
-                az = -tw * qz + tz * qw - tx * qy + ty * qx + z
-                aqx, aqy, aqz, aqw = (
-                    qw * aqx + qx * aqw + qy * aqz - qz * aqy,
-                    qw * aqy + qy * aqw + qz * aqx - qx * aqz,
-                    qw * aqz + qz * aqw + qx * aqy - qy * aqx,
-                    qw * aqw - qx * aqx - qy * aqy - qz * aqz,
-                )
-            frame = parent
-            depth += 1
-            if depth > MAX_GRAPH_DEPTH:
-                return _CLIMB_LOOP, frame, IDENTITY, self._loop_message()
-        return _CLIMB_STOPPED, frame, (ax, ay, az, aqx, aqy, aqz, aqw), ""
+        """tf2 ``getLatestCommonTime``: ``(NO_ERROR, time ns)`` or ``(error, message)``."""
+        err, t = self._ccommon_time(target_id, source_id)
+        if err == NO_ERROR:
+            return err, t
+        if err == LOOKUP_ERROR:
+            return err, self._loop_message()
+        return err, self._connectivity_message(source_id, target_id)
 
     def _walk(self, target_id: int, source_id: int, time: int) -> tuple[int, Tf7 | str, int]:
-        """tf2 ``walkToTopParent`` with ``TransformAccum``.
+        """tf2 ``walkToTopParent`` with ``TransformAccum`` (compiled, ``CoreBase._cwalk``).
 
-        Returns ``(_NO_ERROR, transform, time used)`` or ``(error code, message, 0)``.
+        Returns ``(NO_ERROR, transform, time used)`` or ``(error code, message, 0)``.
         The transform maps source coordinates into target coordinates.
         """
-        if source_id == target_id:
-            return _NO_ERROR, IDENTITY, time
-        if time == 0:
-            err, resolved = self._common_time(target_id, source_id)
-            if err:
-                return err, resolved, 0  # type: ignore[return-value]
-            time = resolved  # type: ignore[assignment]
-
-        # Source side: source -> top. A failure here is only remembered: the path may
-        # still close below it (only links between the two frames must be valid).
-        outcome, top, src, src_error = self._climb(source_id, 0, target_id, time)
-        if outcome == _CLIMB_EARLY:  # TargetParentOfSource
-            return _NO_ERROR, src, time
-        if outcome == _CLIMB_LOOP:
-            return _LOOKUP_ERROR, src_error, 0
-        failed = outcome == _CLIMB_FAILED
-
-        # Target side: target -> top. A failure here is reported at once.
-        outcome, frame, tgt, detail = self._climb(target_id, top, source_id, time)
-        if outcome == _CLIMB_FAILED:
-            return _EXTRAPOLATION_ERROR, self._extrapolation_message(
-                detail, source_id, target_id
-            ), 0
-        if outcome == _CLIMB_LOOP:
-            return _LOOKUP_ERROR, detail, 0
-        if outcome == _CLIMB_EARLY:  # SourceParentOfTarget: the source side is unused
-            src = IDENTITY
-        elif frame != top:
-            if failed:
-                return _EXTRAPOLATION_ERROR, self._extrapolation_message(
-                    src_error, source_id, target_id
-                ), 0
-            return _CONNECTIVITY_ERROR, self._connectivity_message(source_id, target_id), 0
-
-        # FullPath: inv(target -> top) ∘ (source -> top), inv = (conj q, conj q * (-t)).
-        sx, sy, sz, sqx, sqy, sqz, sqw = src
-        gx, gy, gz, gqx, gqy, gqz, gqw = tgt
-        iqx, iqy, iqz, iqw = -gqx, -gqy, -gqz, gqw
-        # conj(q) applied to (s - g): quatRotate(q*, s) + quatRotate(q*, -g)
-        vx, vy, vz = sx - gx, sy - gy, sz - gz
-        tx = iqw * vx + iqy * vz - iqz * vy
-        ty = iqw * vy + iqz * vx - iqx * vz
-        tz = iqw * vz + iqx * vy - iqy * vx
-        tw = -iqx * vx - iqy * vy - iqz * vz
-        return (
-            _NO_ERROR,
-            (
-                -tw * iqx + tx * iqw - ty * iqz + tz * iqy,
-                -tw * iqy + ty * iqw - tz * iqx + tx * iqz,
-                -tw * iqz + tz * iqw - tx * iqy + ty * iqx,
-                iqw * sqx + iqx * sqw + iqy * sqz - iqz * sqy,
-                iqw * sqy + iqy * sqw + iqz * sqx - iqx * sqz,
-                iqw * sqz + iqz * sqw + iqx * sqy - iqy * sqx,
-                iqw * sqw - iqx * sqx - iqy * sqy - iqz * sqz,
-            ),
-            time,
-        )
+        err, payload, used = self._cwalk(target_id, source_id, time)
+        if err == NO_ERROR:
+            return err, payload, used  # type: ignore[return-value]
+        if err == EXTRAPOLATION_ERROR:
+            cache = self._caches[payload]  # type: ignore[index]
+            detail = cache.gather(used) if cache is not None else ""
+            detail = detail if isinstance(detail, str) else ""  # a link to NO_PARENT
+            return err, self._extrapolation_message(detail, source_id, target_id), 0
+        if err == LOOKUP_ERROR:
+            return err, self._loop_message(), 0
+        return err, self._connectivity_message(source_id, target_id), 0
 
     # ------------------------------------------------------------------ messages
 
