@@ -67,6 +67,42 @@ async def test_wait_before_any_data_returns_when_data_arrives() -> None:
     assert buf.pending_waits == 0
 
 
+async def test_a_batch_insert_wakes_the_waits_it_completes_once() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    checks = 0
+    result: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        result.append(await buf.lookup_transform_async("map", "laser", T0))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        waiter_obj = next(iter(buf._pending()))
+        check = waiter_obj.check
+
+        def counting_check() -> TransformStamped | None:
+            nonlocal checks
+            checks += 1
+            return check()
+
+        waiter_obj.check = counting_check  # type: ignore[method-assign]
+        report = buf.set_transforms(
+            [
+                tf("map", "odom", T0, x=1.0),
+                tf("odom", "base", T0, x=2.0),
+                tf("odom", "bad", T0, x=math.nan),  # reported, does not stop the batch
+                tf("base", "laser", T0, x=0.5),
+            ],
+            "test",
+        )
+        assert (report.stored, report.refused, len(report.errors)) == (3, 0, 1)
+    assert checks == 1  # rechecked once, after the whole batch, not per transform
+    assert result[0].transform.translation.x == pytest.approx(3.5)
+    assert buf.pending_waits == 0
+
+
 async def test_future_time_resolves_with_interpolation_once_bracketed() -> None:
     clock = ManualClock(T0)
     buf = Buffer(clock=clock)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
-from typing import TypeVar, overload
+from typing import Any, TypeVar, overload
 
 import anyio
 
@@ -83,6 +83,20 @@ class Buffer(BufferCore):
             self._recheck_frames(
                 (_strip_slash(ts.child_frame_id), _strip_slash(ts.header.frame_id))
             )
+        return result
+
+    def _insert_many(
+        self,
+        transforms: Iterable[Any],
+        authority: str,
+        is_static: bool,
+        touched: set[str] | None = None,
+    ) -> tuple[int, int, list[tuple[int, Exception]]]:
+        # The batch form of _insert: waiters are rechecked once, after the whole batch.
+        touched = set() if self._index else None
+        result = super()._insert_many(transforms, authority, is_static, touched)
+        if touched:
+            self._recheck_frames(touched)
         return result
 
     def _recheck_frames(self, names: Iterable[str]) -> None:

@@ -14,6 +14,7 @@ counted and skipped. The listener never dies of bad input.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Protocol
@@ -32,7 +33,12 @@ _log = logging.getLogger(__name__)
 
 
 class TransformSink(Protocol):
-    """What a listener feeds: ``BufferCore`` and ``Buffer`` both qualify."""
+    """What a listener feeds: ``BufferCore`` and ``Buffer`` both qualify.
+
+    A sink that also has ``set_transforms(transforms, authority, is_static) -> (stored,
+    refused, [(index, exception)])`` (as :meth:`tfbus.core.BufferCore.set_transforms`)
+    gets each TFMessage in one call; otherwise the listener stores transform by transform.
+    """
 
     def set_transform(self, transform: TransformStamped, authority: str, /) -> bool:
         """Store a dynamic transform; False if refused (old or repeated)."""
@@ -43,6 +49,35 @@ class TransformSink(Protocol):
         ...
 
 
+_Errors = list[tuple[int, Exception]]
+_StoreMany = Callable[[Iterable[Any], str, bool], tuple[int, int, _Errors]]
+
+
+def _store_each(sink: TransformSink) -> _StoreMany:
+    """A batch store over a sink that only has the single-transform methods, with the
+    result and error contract of :meth:`tfbus.core.BufferCore.set_transforms`."""
+
+    def store_many(transforms: Iterable[Any], authority: str, is_static: bool) -> tuple[
+        int, int, _Errors
+    ]:
+        store = sink.set_transform_static if is_static else sink.set_transform
+        stored = refused = 0
+        errors: _Errors = []
+        for i, ts in enumerate(transforms):
+            try:
+                if not isinstance(ts, TransformStamped):
+                    raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
+                if store(ts, authority):
+                    stored += 1
+                else:
+                    refused += 1
+            except Exception as exc:
+                errors.append((i, exc))
+        return stored, refused, errors
+
+    return store_many
+
+
 @dataclass(frozen=True, slots=True)
 class ListenerStatistics:
     """Counters of a :class:`TransformListener`.
@@ -50,7 +85,7 @@ class ListenerStatistics:
     Attributes:
         messages: TFMessages handled (both topics).
         stored: transforms the buffer accepted.
-        refused: transforms the buffer refused (``set_transform`` returned False: data
+        refused: transforms the buffer refused (TF_OLD_DATA / TF_REPEATED_DATA: data
             older than the cache window, or a stamp it already has). ``BufferCore``
             itself logs these as TF_OLD_DATA / TF_REPEATED_DATA warnings.
         invalid: transforms the buffer rejected as malformed
@@ -105,8 +140,9 @@ class TransformListener:
     cancels the tasks and unregisters both subscriptions.
 
     Args:
-        buffer: anything with ``set_transform(ts, authority) -> bool`` and
-            ``set_transform_static(ts, authority) -> bool`` (``BufferCore``, ``Buffer``).
+        buffer: a ``BufferCore``, a ``Buffer``, or anything with their
+            ``set_transform(ts, authority) -> bool`` and ``set_transform_static`` (see
+            :class:`TransformSink`).
         bus: the bus to listen on (must be open).
         authority: the authority recorded with each transform (tf2_ros's Python
             listener uses ``"default_authority"``).
@@ -127,6 +163,10 @@ class TransformListener:
     ) -> None:
         """Create a listener (not yet listening; use ``async with``)."""
         self._buffer = buffer
+        # BufferCore and Buffer store a whole TFMessage in one compiled call.
+        self._store_many: _StoreMany = getattr(buffer, "set_transforms", None) or _store_each(
+            buffer
+        )
         self._bus = bus
         self._authority = authority
         self._queue_size = queue_size
@@ -213,31 +253,20 @@ class TransformListener:
                 topic,
             )
             return
-        store = self._buffer.set_transform_static if static else self._buffer.set_transform
-        authority = self._authority
         try:
             transforms = iter(message.transforms)
         except TypeError:
             self._malformed += 1
             self._log.warn("malformed", "ignoring a TFMessage on %s: not iterable", topic)
             return
-        for ts in transforms:
-            if not isinstance(ts, TransformStamped):
-                self._malformed += 1
-                self._log.warn(
-                    "malformed",
-                    "ignoring a %s in a TFMessage on %s: expected TransformStamped",
-                    type(ts).__name__,
-                    topic,
-                )
-                continue
-            try:
-                ok = store(ts, authority)
-            except TransformException as exc:
+        stored, refused, errors = self._store_many(transforms, self._authority, static)
+        self._stored += stored
+        self._refused += refused
+        for _, exc in errors:
+            if isinstance(exc, TransformException):
                 self._invalid += 1
                 self._log.warn("invalid", "ignoring a transform on %s: %s", topic, exc)
-                continue
-            except Exception as exc:
+            else:
                 self._malformed += 1
                 self._log.warn(
                     "malformed",
@@ -246,11 +275,6 @@ class TransformListener:
                     type(exc).__name__,
                     exc,
                 )
-                continue
-            if ok:
-                self._stored += 1
-            else:
-                self._refused += 1
 
     def statistics(self) -> ListenerStatistics:
         """A snapshot of the listener's counters."""

@@ -14,9 +14,18 @@ from fractions import Fraction
 from numbers import Integral
 from typing import Final, overload
 
-__all__ = ["NSEC_PER_SEC", "Duration", "Time"]
+__all__ = ["NSEC_PER_SEC", "TIME_MAX_NS", "Duration", "Time"]
 
 NSEC_PER_SEC: Final = 1_000_000_000
+TIME_MAX_NS: Final = 2**63 - 1
+"""The latest representable Time, in ns (int64 nanoseconds, as ``rcl_time_point_value_t``;
+ROS 1's uint32 seconds end well before it)."""
+
+
+def _out_of_range(ns: int) -> ValueError:
+    if ns < 0:
+        return ValueError(f"Time cannot be negative: {ns} ns")
+    return ValueError(f"Time beyond int64 nanoseconds (about year 2262): {ns} ns")
 
 
 def _sec_to_ns(sec: float) -> int:
@@ -135,7 +144,8 @@ class Time:
     immutable. ``Time(0)`` asks lookups for the latest available data (tf2 semantics).
 
     Raises:
-        ValueError: for a negative time (ROS times are unsigned).
+        ValueError: for a negative time (ROS times are unsigned), or one beyond
+            ``TIME_MAX_NS`` (int64 nanoseconds, as in ROS 2).
     """
 
     __slots__ = ("_ns",)
@@ -143,8 +153,8 @@ class Time:
 
     def __init__(self, sec: int | float = 0, nanosec: int = 0) -> None:
         ns = _ns_from(sec, nanosec)
-        if ns < 0:
-            raise ValueError(f"Time cannot be negative: {ns} ns")
+        if not 0 <= ns <= TIME_MAX_NS:
+            raise _out_of_range(ns)
         self._ns = ns
 
     @classmethod
@@ -152,11 +162,11 @@ class Time:
         """Build a Time of ``ns`` nanoseconds since the epoch.
 
         Raises:
-            ValueError: if ``ns`` is negative.
+            ValueError: if ``ns`` is negative or beyond ``TIME_MAX_NS``.
         """
         ns = int(ns)
-        if ns < 0:
-            raise ValueError(f"Time cannot be negative: {ns} ns")
+        if not 0 <= ns <= TIME_MAX_NS:
+            raise _out_of_range(ns)
         t = cls.__new__(cls)
         t._ns = ns
         return t
@@ -166,7 +176,7 @@ class Time:
         """Build a Time from float seconds, rounded to the nearest nanosecond.
 
         Raises:
-            ValueError: if ``sec`` is negative or not finite.
+            ValueError: if ``sec`` is negative, too large or not finite.
         """
         return cls.from_ns(_sec_to_ns(sec))
 
