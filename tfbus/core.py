@@ -55,7 +55,7 @@ logger = logging.getLogger("tfbus.core")
 _MAX_MESSAGE: Final = 999  # tf2_py reports exception texts through a char[1000]
 
 _LATEST: Final = Time(0)
-_MEMO_SIZE: Final = 4096
+_MEMO_SIZE: Final = 64  # small: a larger memo costs a never-repeated query ~1 µs of churn
 
 _ERRORS: Final[dict[int, type[TransformException]]] = {
     LOOKUP_ERROR: LookupException,
