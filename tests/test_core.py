@@ -120,3 +120,13 @@ def test_a_chain_of_1000_links_is_walked() -> None:
     out = core.lookup_transform("f0", "f1000", Time(0))
     assert out.transform.translation.x == 1000.0
     assert out.transform.rotation == Quaternion()
+
+
+def test_a_parent_id_outside_the_frame_table_is_a_missing_link_not_a_crash() -> None:
+    # Only reachable through private attributes; the compiled walk must still stay in
+    # bounds and answer as for a frame without a link.
+    core = BufferCore()
+    core.set_transform(ts("b", parent="a", sec=1.0), "x")
+    core._caches[core._frame_ids["b"]].insert(2 * 10**9, 10**6, (0.0,) * 6 + (1.0,))  # type: ignore[union-attr]
+    ok, message = core.can_transform("a", "b", Time(2), return_debug_tuple=True)  # type: ignore[misc]
+    assert not ok and "not part of the same tree" in message

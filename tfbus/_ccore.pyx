@@ -527,6 +527,14 @@ cdef inline void _identity(double* acc) noexcept nogil:
     acc[6] = 1.0
 
 
+cdef inline object _link(list caches, int frame):
+    """The link of ``frame``, or None; an id outside the table (only reachable by writing
+    bogus parent ids into a cache by hand) counts as a frame without a link."""
+    if frame < 0 or frame >= len(caches):
+        return None
+    return caches[frame]
+
+
 cdef int _climb(list caches, int frame, int stop, int early, int64_t time, double* acc,
                 int* reached) except -1:
     """One half of tf2's ``walkToTopParent``: walk up from ``frame`` gathering each link
@@ -544,7 +552,7 @@ cdef int _climb(list caches, int frame, int stop, int early, int64_t time, doubl
     cdef object obj
     _identity(acc)
     while frame != stop:
-        obj = caches[frame]
+        obj = _link(caches, frame)
         if obj is None:
             break
         if (<Link>obj).c_gather(time, st, &parent) != G_OK or parent == 0:
@@ -734,7 +742,7 @@ cdef class CoreBase:
         cdef bint have = False, found
         out[0] = 0
         if source == target:
-            obj = caches[source]
+            obj = _link(caches, source)
             if obj is not None:
                 (<Link>obj).c_latest(out)
             return NO_ERROR
@@ -743,7 +751,7 @@ cdef class CoreBase:
         common = INT64_MAX
         depth = 0
         while frame != 0:
-            obj = caches[frame]
+            obj = _link(caches, frame)
             if obj is None:
                 break
             parent = (<Link>obj).c_latest(&stamp)
@@ -769,7 +777,7 @@ cdef class CoreBase:
         common = INT64_MAX
         common_parent = 0
         while True:
-            obj = caches[frame]
+            obj = _link(caches, frame)
             if obj is None:
                 break
             parent = (<Link>obj).c_latest(&stamp)
