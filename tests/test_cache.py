@@ -80,6 +80,17 @@ def test_interpolation_between_parents_uses_the_older_sample() -> None:
     assert cache.gather(250) == (2, (3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
 
 
+def test_interpolating_nearly_equal_rotations_keeps_the_older_one() -> None:
+    # The normalised dot product of these two rounds to just above 1; tf2Acos clamps it
+    # (zero angle) and tf2 returns the older rotation. Recorded from tf2 by fuzzing.
+    a = (-0.10034160459801901, -0.48624984361471457, -0.22642117855190708, 0.8379893208594761)
+    b = (-0.10034160459799965, -0.48624984361470064, -0.2264211785518684, 0.837989320859497)
+    cache = TimeCache(10**10)
+    cache.insert(230134, 1, (0.0, 0.0, 0.0, *a))
+    cache.insert(232134, 1, (2.0, 0.0, 0.0, *b))
+    assert cache.gather(230272) == (1, (0.138, 0.0, 0.0, *a))
+
+
 def test_extrapolation_details_are_tf2s() -> None:
     cache = TimeCache(10**10)
     cache.insert(1_000_000_000, 1, row(0))

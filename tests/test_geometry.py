@@ -179,6 +179,23 @@ def test_slerp_known() -> None:
     np.testing.assert_array_equal(g.slerp_batch(YAW90, YAW90, 0.7), YAW90)
 
 
+# Two rotations 1e-14 apart whose normalised dot product rounds to just above 1 (from a
+# tf2 recording: tf2Acos clamps it, so the angle is 0 and the first rotation comes back).
+NEAR_A = (-0.10034160459801901, -0.48624984361471457, -0.22642117855190708, 0.8379893208594761)
+NEAR_B = (-0.10034160459799965, -0.48624984361470064, -0.2264211785518684, 0.837989320859497)
+
+
+def test_slerp_of_a_cosine_rounding_above_1_returns_the_first_rotation() -> None:
+    ax, ay, az, aw = NEAR_A
+    bx, by, bz, bw = NEAR_B
+    dot = ax * bx + ay * by + az * bz + aw * bw
+    norms = (ax * ax + ay * ay + az * az + aw * aw) * (bx * bx + by * by + bz * bz + bw * bw)
+    assert dot / math.sqrt(norms) > 1.0  # the case in point
+    assert _tf2math.slerp(*NEAR_A, *NEAR_B, 0.069) == NEAR_A
+    assert g.slerp(NEAR_A, NEAR_B, 0.069) == Quaternion(*NEAR_A)
+    np.testing.assert_array_equal(g.slerp_batch(NEAR_A, NEAR_B, [0.069, 0.5]), [NEAR_A] * 2)
+
+
 def test_slerp_batch_zero_quaternion_is_nan() -> None:
     out = g.slerp_batch([[0.0, 0.0, 0.0, 0.0], list(IDENTITY_Q)], YAW90, 0.5)
     assert np.isnan(out[0]).all()

@@ -36,7 +36,7 @@ conformance corpus, ``tests/test_conformance.py``).
 
 import numpy as np
 
-from libc.math cimport NAN, acos, fabs, sin, sqrt
+from libc.math cimport acos, fabs, sin, sqrt
 from libc.stdint cimport INT64_MAX, int32_t, int64_t
 from libc.string cimport memcpy, memmove
 
@@ -415,20 +415,22 @@ cdef class TimeCache(Link):
                     out[0] = s * a[0] + r * b[0]
                     out[1] = s * a[1] + r * b[1]
                     out[2] = s * a[2] + r * b[2]
-                    if c == 1.0:  # zero angle: tf2 returns the older rotation unchanged
+                    # tf2Acos clamps its argument to [-1, 1]: a cosine that rounds above
+                    # 1 is a zero angle, for which tf2 returns the older rotation as is.
+                    if c >= 1.0:
                         out[3] = a[3]
                         out[4] = a[4]
                         out[5] = a[5]
                         out[6] = a[6]
                         return G_OK
-                    theta = acos(c) if c < 1.0 else NAN
+                    theta = acos(c)  # NaN only for NaN input, as in tf2
                     d = 1.0 / sin(theta)
-                    s0 = sin(s * theta) * d
-                    s1 = sin(r * theta) * d
-                    out[3] = a[3] * s0 + bqx * s1
-                    out[4] = a[4] * s0 + bqy * s1
-                    out[5] = a[5] * s0 + bqz * s1
-                    out[6] = a[6] * s0 + bqw * s1
+                    s0 = sin(s * theta)
+                    s1 = sin(r * theta)
+                    out[3] = (a[3] * s0 + bqx * s1) * d
+                    out[4] = (a[4] * s0 + bqy * s1) * d
+                    out[5] = (a[5] * s0 + bqz * s1) * d
+                    out[6] = (a[6] * s0 + bqw * s1) * d
                     return G_OK
         parent[0] = self._parent if self._pa == NULL else self._pa[i]
         memcpy(out, &self._va[i * 7], 7 * sizeof(double))

@@ -92,8 +92,13 @@ def inverse(a: Tf7) -> Tf7:
 
 
 def _acos(x: float) -> float:
-    # C's acos returns NaN outside [-1, 1] (rounding can put a cosine there); Python raises.
-    return math.acos(x) if -1.0 <= x <= 1.0 else math.nan
+    """tf2's ``tf2Acos`` (``tf2/LinearMath/Scalar.h``): the argument is clamped to
+    [-1, 1] first, so a cosine that rounds just above 1 is a zero angle; NaN stays NaN."""
+    if x > 1.0:
+        x = 1.0
+    elif x < -1.0:
+        x = -1.0
+    return math.acos(x)
 
 
 def slerp(
@@ -110,7 +115,8 @@ def slerp(
     """tf2's shortest-path spherical interpolation from a (ratio 0) to b (ratio 1).
 
     Source: ``tf2/LinearMath/Quaternion.h`` ``Quaternion::slerp`` and
-    ``angleShortestPath``: half-angle ``θ = acos(|a·b| / sqrt(|a|²|b|²))``; if ``a·b < 0``
+    ``angleShortestPath``: half-angle ``θ = tf2Acos(|a·b| / sqrt(|a|²|b|²))`` (argument
+    clamped to [-1, 1]); if ``a·b < 0``
     it interpolates towards ``-b``; if θ is exactly 0 it returns ``a`` unchanged.
     Quaternions are (x, y, z, w) and are not normalised.
     """

@@ -284,9 +284,12 @@ class BufferCore(CoreBase):
 
     def clear(self) -> None:
         """Drop all dynamic data; static transforms and known frame ids stay
-        (tf2 ``BufferCore::clear``)."""
+        (tf2 ``BufferCore::clear``).
+
+        As in tf2, the reserved frame 0 (``NO_PARENT``) is skipped: a link stored with
+        child ``"NO_PARENT"`` keeps its samples."""
         self._generation += 1
-        for cache in self._caches:
+        for cache in self._caches[1:]:
             if cache is not None:
                 cache.clear()
 
@@ -401,8 +404,10 @@ class BufferCore(CoreBase):
             self._memo_generation = self._generation
         if target_frame == source_frame:
             if t == 0:
-                fid = self._frame_ids.get(target_frame)
-                cache = self._caches[fid] if fid is not None else None
+                # tf2 stamps the identity with the frame's newest sample; an unknown id
+                # maps to frame 0 (NO_PARENT), whose link exists only if "NO_PARENT" was
+                # stored as a child (lookupFrameNumber / getFrame).
+                cache = self._caches[self._frame_ids.get(target_frame, 0)]
                 t = cache.latest_stamp() if cache is not None else 0
             return TransformStamped(
                 Header(Time.from_ns(t), target_frame), source_frame, Transform()

@@ -379,8 +379,8 @@ def slerp_batch(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: npt.ArrayLike) -> A
             (ax * ax + ay * ay + az * az + aw * aw) * (bx * bx + by * by + bz * bz + bw * bw)
         )
         negative = dot < 0.0
-        # C's acos gives NaN outside [-1, 1]; so does np.arccos (warning silenced).
-        theta = np.arccos(np.where(negative, -dot, dot) / s)
+        # tf2Acos clamps to [-1, 1] (a cosine rounding above 1 is a zero angle); NaN stays.
+        theta = np.arccos(np.clip(np.where(negative, -dot, dot) / s, -1.0, 1.0))
         b = np.where(negative[..., None], -b, b)
         d = 1.0 / np.sin(theta)
         s0 = np.sin((1.0 - r) * theta)
