@@ -34,6 +34,7 @@ from conformance import (
 )
 
 CASES: Final = load_cases()
+REGRESSIONS: Final = load_cases(CORPUS.with_name("tf2_regressions.jsonl"))
 CASE_IDS: Final = [case["id"] for case in CASES]
 _BY_ID: Final = {case["id"]: case for case in CASES}
 
@@ -188,3 +189,12 @@ def test_rules_stamp_and_messages() -> None:
     assert compare(refused, {"accepted": False, "codes": None}, strict=True) is None
     assert compare(refused, {"accepted": False, "codes": ["TF_REPEATED_DATA"]}, strict=True)
     assert compare(refused, {"accepted": True}, strict=False)
+
+
+@pytest.mark.parametrize("case", REGRESSIONS, ids=[case["id"] for case in REGRESSIONS])
+def test_regression(case: dict[str, Any]) -> None:
+    """Cases recorded from tf2 where fuzzing once found tfbus different (levels 1 and 2)."""
+    for detailed in (False, True):
+        result = run_case(case, detailed=detailed)
+        if result.failures(strict=detailed):
+            pytest.fail(result.summary(strict=detailed), pytrace=False)
