@@ -1,8 +1,9 @@
 """BufferCore: the frame graph and its lookups — synchronous and sans-I/O.
 
 This is tf2's ``BufferCore`` (ROS 1 geometry2 0.7.6, ``tf2/src/buffer_core.cpp``)
-re-implemented in Python with the same semantics, checked against a corpus of
-vectors recorded from the real tf2 (``tests/data/public.jsonl.gz``):
+re-implemented with the same semantics (API and messages here; storage, insert and the
+walk compiled in ``tfbus/_ccore.pyx``), checked against vectors recorded from the real
+tf2 (``tests/data/public.jsonl.gz`` and ``tf2_regressions.jsonl``):
 
 * ``lookup_transform(target, source, t)`` returns the pose of ``source`` in ``target``
   (it maps points from source into target coordinates); ``header.stamp`` is the time used.
