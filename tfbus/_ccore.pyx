@@ -661,7 +661,8 @@ cdef class CoreBase:
         v[4] = (<tuple>rot)[1]
         v[5] = (<tuple>rot)[2]
         v[6] = (<tuple>rot)[3]
-        norm2 = v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]
+        # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
+        norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
         # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
         if (
             child == parent

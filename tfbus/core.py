@@ -271,7 +271,8 @@ class BufferCore(CoreBase):
             codes.append("TF_INF_INPUT")
             problems.extend(infs)
         qx, qy, qz, qw = values[3:]
-        norm2 = qx * qx + qy * qy + qz * qz + qw * qw
+        # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
+        norm2 = qw * qw + qx * qx + qy * qy + qz * qz
         if not abs(norm2 - 1.0) < 0.01:
             codes.append("TF_DENORMALIZED_QUATERNION")
             problems.append(
