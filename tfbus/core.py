@@ -606,16 +606,10 @@ class BufferCore(CoreBase):
     def all_frames_as_string(self) -> str:
         """One line ``Frame X exists with parent Y.`` per frame that has a link, in
         registration order (tf2 ``allFramesAsString``)."""
-        lines = []
-        names = self._frame_names
-        for fid in range(1, len(self._caches)):
-            cache = self._caches[fid]
-            if cache is None:
-                continue
-            r = cache.gather(0)
-            parent = 0 if isinstance(r, str) else r[0]
-            lines.append(f"Frame {names[fid]} exists with parent {names[parent]}.\n")
-        return "".join(lines)
+        return "".join(
+            f"Frame {child} exists with parent {parent}.\n"
+            for child, parent, *_ in self.frame_info()
+        )
 
     def all_frames_as_yaml(self, current_time: Time | None = None) -> str:
         """The frame tree as YAML in tf2's format (``allFramesAsYAML``): per child frame
@@ -623,19 +617,12 @@ class BufferCore(CoreBase):
         ``most_recent_transform``, ``oldest_transform``, ``buffer_length`` (seconds,
         3 decimals) and, when ``current_time`` is given, ``transform_delay``."""
         out: list[str] = []
-        names = self._frame_names
-        for fid in range(1, len(self._caches)):
-            cache = self._caches[fid]
-            if cache is None:
+        for child, parent, authority, _static, samples, oldest, newest in self.frame_info():
+            if not samples:  # a dynamic link emptied by clear(): tf2 lists only data
                 continue
-            r = cache.gather(0)
-            if isinstance(r, str):
-                continue
-            newest, oldest = cache.latest_stamp(), cache.oldest_stamp()
-            rate = len(cache) / max((newest - oldest) / 1e9, 0.0001)
-            out.append(f"{names[fid]}: \n")
-            out.append(f"  parent: '{names[r[0]]}'\n")
-            authority = self._authority.get(fid, "no recorded authority")
+            rate = samples / max((newest - oldest) / 1e9, 0.0001)
+            out.append(f"{child}: \n")
+            out.append(f"  parent: '{parent}'\n")
             out.append(f"  broadcaster: '{authority}'\n")
             out.append(f"  rate: {rate:.3f}\n")
             out.append(f"  most_recent_transform: {newest / 1e9:.3f}\n")
@@ -646,8 +633,10 @@ class BufferCore(CoreBase):
         return "".join(out) if out else "[]"
 
     def frame_info(self) -> Iterable[tuple[str, str, str, bool, int, int, int]]:
-        """Per linked frame: ``(child, parent, authority, is_static, samples, oldest ns,
-        newest ns)`` — the data behind ``all_frames_as_yaml``, for tools."""
+        """Per linked frame, in registration order: ``(child, parent, authority, is_static,
+        samples, oldest ns, newest ns)`` — the data behind ``all_frames_as_string`` and
+        ``all_frames_as_yaml``, for tools. The parent of an emptied link is
+        ``NO_PARENT``."""
         names = self._frame_names
         for fid in range(1, len(self._caches)):
             cache = self._caches[fid]
