@@ -9,9 +9,9 @@ def test_public_all_is_pinned() -> None:
         "ExtrapolationException", "Header", "InvalidArgumentException", "LookupException",
         "ManualClock", "MemoryTransport", "Point", "PointStamped", "Pose", "PoseStamped",
         "Quaternion", "SetResult", "StaticTransformBroadcaster", "Subscription",
-        "SystemClock", "TFMessage", "Time", "TimeoutException", "Transform",
+        "SystemClock", "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform",
         "TransformBroadcaster", "TransformException", "TransformListener",
-        "TransformStamped", "Transport", "Vector3", "Vector3Stamped", "every",
+        "TransformStamped", "Transport", "TransportError", "Vector3", "Vector3Stamped", "every",
     ]  # fmt: skip
     for name in tfbus.__all__:
         assert getattr(tfbus, name).__doc__, f"{name} has no docstring"
@@ -26,7 +26,19 @@ def test_exceptions_derive_from_transform_exception() -> None:
         "TimeoutException",
     ):
         assert issubclass(getattr(tfbus, name), tfbus.TransformException)
-    assert issubclass(tfbus.TransformException, Exception)
+    assert issubclass(tfbus.TransformException, tfbus.TfbusError)
+    assert issubclass(tfbus.TransportError, tfbus.TfbusError)
+
+
+def test_one_tree_for_bag_and_wire_errors() -> None:
+    from tfbus.bag import BagError, BagFormatError, BagNotFoundError
+    from tfbus.transports.wire import WireDecodeError
+
+    assert issubclass(BagError, tfbus.TfbusError)
+    assert issubclass(BagNotFoundError, FileNotFoundError)
+    assert issubclass(BagFormatError, ValueError)
+    assert issubclass(WireDecodeError, tfbus.TfbusError)
+    assert issubclass(WireDecodeError, ValueError)
 
 
 def test_buffer_is_a_buffer_core() -> None:

@@ -19,8 +19,10 @@ from tfbus.errors import (
     ExtrapolationException,
     InvalidArgumentException,
     LookupException,
+    TfbusError,
     TimeoutException,
     TransformException,
+    TransportError,
 )
 from tfbus.listener import TransformListener
 from tfbus.messages import (
@@ -63,6 +65,7 @@ __all__ = [
     "Subscription",
     "SystemClock",
     "TFMessage",
+    "TfbusError",
     "Time",
     "TimeoutException",
     "Transform",
@@ -71,6 +74,7 @@ __all__ = [
     "TransformListener",
     "TransformStamped",
     "Transport",
+    "TransportError",
     "Vector3",
     "Vector3Stamped",
     "every",

@@ -47,6 +47,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final, Literal, NamedTuple
 
+from tfbus.errors import BagError, BagFormatError, BagNotFoundError, BagReadError
 from tfbus.messages import (
     Header,
     Quaternion,
@@ -112,60 +113,6 @@ _SQLITE_MAGIC: Final = b"SQLite format 3\x00"
 
 
 # --------------------------------------------------------------------------- errors
-
-
-class BagError(Exception):
-    """Base of every error raised by :mod:`tfbus.bag`; ``path`` names the bag."""
-
-    def __init__(self, message: str, path: str | PathLike[str] | None = None) -> None:
-        super().__init__(message)
-        self.path = None if path is None else Path(path)
-
-
-class BagNotFoundError(BagError, FileNotFoundError):
-    """The bag path does not exist (also a :class:`FileNotFoundError`)."""
-
-
-class BagFormatError(BagError, ValueError):
-    """The path exists but is not a bag format tfbus reads (also a :class:`ValueError`)."""
-
-
-class BagReadError(BagError):
-    """A truncated or corrupt bag: reading stopped part-way.
-
-    Everything before the damage was returned (iterators) or stored (``partial``).
-
-    Attributes:
-        offset: byte offset in the file where reading stopped, when known.
-        last_time: bag time of the last message read before the damage, or ``None``.
-        messages_read: how many /tf and /tf_static messages were read before it.
-        partial: whatever the raising function had built from the readable part (the
-            :class:`~tfbus.core.BufferCore` for :func:`load_buffer`), else ``None``.
-    """
-
-    def __init__(
-        self,
-        message: str,
-        path: str | PathLike[str] | None = None,
-        *,
-        offset: int | None = None,
-        last_time: Time | None = None,
-        messages_read: int = 0,
-    ) -> None:
-        where = []
-        if offset is not None:
-            where.append(f"byte {offset}")
-        if last_time is not None:
-            where.append(f"after bag time {_fmt_time(last_time)}")
-        where.append(f"{messages_read} tf message(s) read")
-        super().__init__(
-            f"{path}: {message}; reading stopped ({', '.join(where)})", path
-        )
-        self.reason = message
-        self.offset = offset
-        self.last_time = last_time
-        self.messages_read = messages_read
-        self.partial: Any = None
 
 
 def _fmt_time(t: Time) -> str:

@@ -1,30 +1,67 @@
-"""The exception hierarchy, with tf2's names (``tf2/exceptions.h``, ``tf2_py``).
+"""The whole exception tree of tfbus, in one module (httpx's ``_exceptions.py`` style).
 
-::
+The transform family keeps tf2's names (``tf2/exceptions.h``, ``tf2_py``); recordings,
+the wire format and transports add their own branches under one base::
 
-    TransformException                 base of everything tfbus raises about transforms
-    ├── LookupException                a frame id is unknown, or the tree has a loop
-    ├── ConnectivityException          both frames known, but in different trees
-    ├── ExtrapolationException         a link on the path has no data at that time
-    ├── InvalidArgumentException       malformed input: bad frame id, NaN, ±Inf, bad quaternion
-    └── TimeoutException               an awaited transform did not arrive in time
+    TfbusError                         base of every error tfbus raises on purpose
+    ├── TransformException             base of everything about transforms (tf2's)
+    │   ├── LookupException            a frame id is unknown, or the tree has a loop
+    │   ├── ConnectivityException      both frames known, but in different trees
+    │   ├── ExtrapolationException     a link on the path has no data at that time
+    │   ├── InvalidArgumentException   malformed input: bad frame id, NaN, ±Inf, bad quaternion
+    │   └── TimeoutException           an awaited transform did not arrive in time
+    ├── BagError                       a recording cannot be read or written (``path``)
+    │   ├── BagNotFoundError           the path does not exist (also FileNotFoundError)
+    │   ├── BagFormatError             not a bag format tfbus reads (also ValueError)
+    │   └── BagReadError               truncated or corrupt: reading stopped part-way
+    ├── WireError                      a payload cannot be encoded/decoded (also ValueError)
+    │   ├── WireDecodeError            not a well-formed tfbus message
+    │   ├── WireVersionError           another wire format version
+    │   ├── WireLimitError             over a size/count/length bound
+    │   └── WireEncodeError            the message cannot be put on the wire
+    └── TransportError                 a transport cannot start or run (session, endpoint,
+                                       middleware errors mapped from Zenoh, DDS, ROS 1)
 
 Messages follow tf2's wording character for character where tf2 defines them.
+Code catching ``Exception`` from older tfbus versions keeps working: every class here is
+still an ``Exception`` (and the bag/wire ones keep their ``FileNotFoundError`` /
+``ValueError`` mix-ins).
 """
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+from typing import Any
+
+from .time import Time
+
 __all__ = [
+    "BagError",
+    "BagFormatError",
+    "BagNotFoundError",
+    "BagReadError",
     "ConnectivityException",
     "ExtrapolationException",
     "InvalidArgumentException",
     "LookupException",
+    "TfbusError",
     "TimeoutException",
     "TransformException",
+    "TransportError",
+    "WireDecodeError",
+    "WireEncodeError",
+    "WireError",
+    "WireLimitError",
+    "WireVersionError",
 ]
 
 
-class TransformException(Exception):
+class TfbusError(Exception):
+    """Base of every error tfbus raises on purpose (transforms, bags, wire, transports)."""
+
+
+class TransformException(TfbusError):
     """Base class of every transform error (``tf2::TransformException``)."""
 
 
@@ -63,3 +100,91 @@ class InvalidArgumentException(TransformException):
 class TimeoutException(TransformException):
     """An awaited transform did not become available within the timeout
     (``tf2::TimeoutException``)."""
+
+
+# --------------------------------------------------------------------------- recordings
+
+
+class BagError(TfbusError):
+    """Base of every error raised by :mod:`tfbus.bag`; ``path`` names the bag."""
+
+    def __init__(self, message: str, path: str | os.PathLike[str] | None = None) -> None:
+        super().__init__(message)
+        self.path = None if path is None else Path(path)
+
+
+class BagNotFoundError(BagError, FileNotFoundError):
+    """The bag path does not exist (also a :class:`FileNotFoundError`)."""
+
+
+class BagFormatError(BagError, ValueError):
+    """The path exists but is not a bag format tfbus reads (also a :class:`ValueError`)."""
+
+
+class BagReadError(BagError):
+    """A truncated or corrupt bag: reading stopped part-way.
+
+    Everything before the damage was returned (iterators) or stored (``partial``).
+
+    Attributes:
+        offset: byte offset in the file where reading stopped, when known.
+        last_time: bag time of the last message read before the damage, or ``None``.
+        messages_read: how many /tf and /tf_static messages were read before it.
+        partial: whatever the raising function had built from the readable part (the
+            :class:`~tfbus.core.BufferCore` for :func:`tfbus.bag.load_buffer`), else ``None``.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        path: str | os.PathLike[str] | None = None,
+        *,
+        offset: int | None = None,
+        last_time: Time | None = None,
+        messages_read: int = 0,
+    ) -> None:
+        where = []
+        if offset is not None:
+            where.append(f"byte {offset}")
+        if last_time is not None:
+            where.append(f"after bag time {last_time.sec}.{last_time.nanosec:09d}")
+        where.append(f"{messages_read} tf message(s) read")
+        super().__init__(f"{path}: {message}; reading stopped ({', '.join(where)})", path)
+        self.reason = message
+        self.offset = offset
+        self.last_time = last_time
+        self.messages_read = messages_read
+        self.partial: Any = None
+
+
+# --------------------------------------------------------------------------- wire format
+
+
+class WireError(TfbusError, ValueError):
+    """A payload could not be encoded or decoded (base class; also a :class:`ValueError`)."""
+
+
+class WireDecodeError(WireError):
+    """The payload is not a well-formed tfbus message (bad magic, msgpack or shape)."""
+
+
+class WireVersionError(WireError):
+    """The payload is a tfbus message of another wire format version."""
+
+
+class WireLimitError(WireError):
+    """The payload exceeds a :class:`~tfbus.transports.wire.WireLimits` bound."""
+
+
+class WireEncodeError(WireError):
+    """The message cannot be put on the wire (unsupported type, negative stamp, ...)."""
+
+
+# --------------------------------------------------------------------------- transports
+
+
+class TransportError(TfbusError):
+    """A transport could not start or keep running: its session, endpoint or middleware
+    failed (Zenoh's ``ZError``, a DDS or ROS 1 master error, ...), mapped to this class so
+    callers never match on another library's exception types. The original error is the
+    ``__cause__``."""

@@ -34,6 +34,13 @@ from typing import Annotated, Any, Final, NamedTuple
 import msgspec
 
 from tfbus import messages as _m
+from tfbus.errors import (
+    WireDecodeError,
+    WireEncodeError,
+    WireError,
+    WireLimitError,
+    WireVersionError,
+)
 from tfbus.time import Time
 
 __all__ = [
@@ -56,26 +63,6 @@ WIRE_VERSION: Final = 1
 _HEADER: Final = bytes((MAGIC, WIRE_VERSION))
 _TF_TAG: Final = "tf"
 _RAW_TAG: Final = ""
-
-
-class WireError(ValueError):
-    """A payload could not be encoded or decoded (base class)."""
-
-
-class WireDecodeError(WireError):
-    """The payload is not a well-formed tfbus message (bad magic, msgpack or shape)."""
-
-
-class WireVersionError(WireError):
-    """The payload is a tfbus message of another wire format version."""
-
-
-class WireLimitError(WireError):
-    """The payload exceeds a :class:`WireLimits` bound (size, transforms, frame id)."""
-
-
-class WireEncodeError(WireError):
-    """The message cannot be put on the wire (unsupported type, negative stamp, ...)."""
 
 
 @dataclass(frozen=True, slots=True)
