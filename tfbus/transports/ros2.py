@@ -34,16 +34,17 @@ make :meth:`Ros2Transport.send_nowait` raise :class:`~tfbus.errors.WireEncodeErr
 naming the transform and value; nothing of that message is sent. Received samples that do
 not decode are counted in ``malformed`` and dropped; the valid ones are delivered.
 
-**Network.** By default the transport binds the loopback interface only, with
-multicast off and unicast discovery to 127.0.0.1
+**Network.** By default the transport binds the loopback interface only, with multicast
+off and unicast discovery to 127.0.0.1
 (:func:`~tfbus.transports.ros2_wire.cyclone_config`): it reaches ROS 2 nodes on this
 machine that run with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (and, with Fast DDS, a
 loopback profile), and sends nothing to any other address. For a robot network pass
-``interfaces=["eth0"]`` (multicast discovery on those interfaces, optional unicast ``peers=``) or a complete
-Cyclone XML ``config=`` (file path, ``file://`` URI or XML text). Every generated
-configuration sets ``<Compatibility><IgnoreTypeInformation>1.15</IgnoreTypeInformation>``,
-without which Cyclone >= 11 never matches Fast DDS 3.x endpoints (ROS 2 Kilted's default
-rmw); keep it in your own file.
+``interfaces=["eth0"]`` (multicast discovery on those interfaces, optional unicast
+``peers=``) or a complete Cyclone XML ``config=`` (file path, ``file://`` URI or XML
+text). Every generated configuration sets
+``<Compatibility><IgnoreTypeInformation>1.15</IgnoreTypeInformation>``, without which
+Cyclone >= 11 never matches Fast DDS 3.x endpoints (ROS 2 Kilted's default rmw); keep it
+in your own file.
 
 **Threads.** Cyclone calls ``on_data_available`` on its receive thread; the callback only
 writes one byte to a socket pair (if no wake-up is pending). The event loop waits on that
