@@ -43,7 +43,7 @@ from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import SystemClock
 from tfbus.demo import broadcaster_node, run_listener
-from tfbus.errors import WireDecodeError, WireEncodeError
+from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
@@ -339,6 +339,18 @@ async def test_tfbus_to_tfbus(anyio_backend: str) -> None:
             assert a_t.matched_publishers("/tf") == 1
     assert b_t.statistics().malformed == 0
     assert not a_t.running and not b_t.running
+
+
+@pytest.mark.anyio
+async def test_one_cyclone_configuration_per_domain_in_a_process(anyio_backend: str) -> None:
+    d = new_domain()
+    async with Bus(transport=Ros2Transport(domain_id=d)):
+        other = Ros2Transport(domain_id=d, config=cyclone_config(max_participant_index=5))
+        with pytest.raises(TransportError, match=f"DDS domain {d} is already open"):
+            async with Bus(transport=other):
+                pass
+    async with Bus(transport=other):  # the domain was released: now it can be created
+        assert other.running
 
 
 def _raw_writer(domain_id: int, participant: DomainParticipant) -> DataWriter[TFMessage_]:

@@ -357,7 +357,8 @@ class Ros2Transport:
         self._wake_w = wake_w
         endpoints: _Endpoints | None = None
         try:
-            endpoints = await anyio.to_thread.run_sync(self._open)
+            with anyio.CancelScope(shield=True):  # a cancelled open must still be closed
+                endpoints = await anyio.to_thread.run_sync(self._open)
             self._endpoints = endpoints
             self._running = True
             if self._statics:
