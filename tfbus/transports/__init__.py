@@ -8,7 +8,8 @@
   ``cyclonedds``); :mod:`tfbus.transports.ros2_wire` -- ROS 2's TFMessage on the DDS wire.
 
 This package imports nothing optional itself: ``import tfbus.transports.zenoh`` is what
-pulls in Zenoh (``import tfbus.transports.ros2``: cyclonedds). The in-memory ``MemoryTransport`` lives in :mod:`tfbus.bus`.
+pulls in Zenoh (``import tfbus.transports.ros2``: cyclonedds). The in-memory
+``MemoryTransport`` lives in :mod:`tfbus.bus`.
 """
 
 __all__: list[str] = []

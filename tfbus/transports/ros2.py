@@ -359,6 +359,7 @@ class Ros2Transport:
         try:
             with anyio.CancelScope(shield=True):  # a cancelled open must still be closed
                 endpoints = await anyio.to_thread.run_sync(self._open)
+            assert endpoints is not None
             self._endpoints = endpoints
             self._running = True
             if self._statics:
