@@ -755,9 +755,12 @@ async def test_malformed_samples_beside_a_real_ros2_publisher(
 # -- the command line with --bus ros2 ------------------------------------------------------------
 
 
+TFBUS = Path(sys.executable).parent / "tfbus"  # the console script of this venv
+
+
 def _cli_lists_ros2() -> bool:
     out = subprocess.run(
-        [sys.executable, "-m", "tfbus.cli", "echo", "--help"],
+        [str(TFBUS), "echo", "--help"],
         capture_output=True, text=True, timeout=60, check=False,
     )  # fmt: skip
     return "ros2" in out.stdout
@@ -772,7 +775,7 @@ def tfbus_cmd(*args: str, domain: int) -> subprocess.Popen[str]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
     env.pop("CYCLONEDDS_URI", None)
     return subprocess.Popen(
-        [sys.executable, "-m", "tfbus.cli", *args],
+        [str(TFBUS), *args],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
 
