@@ -232,6 +232,27 @@ def _summary(r: dict[str, Any]) -> tuple[float, float, float]:
     return med, p99, tput
 
 
+def codec_figures(batch: int = 100, rounds: int = 200) -> None:
+    """Per-transform encode/decode time: this codec vs cyclonedds-python's serializer."""
+    from tfbus.transports.ros2_wire import TFMessage_, decode_tf_message, encode_tf_message
+
+    msg = _message("codec", batch)
+    data = encode_tf_message(msg.transforms)
+    ref = TFMessage_.deserialize(data)
+
+    def per_transform_us(fn: Callable[[], object]) -> float:
+        t0 = time.perf_counter()
+        for _ in range(rounds):
+            fn()
+        return (time.perf_counter() - t0) / rounds / batch * 1e6
+
+    print(f"codec, us per transform (batch {batch}): "
+          f"tfbus encode {per_transform_us(lambda: encode_tf_message(msg.transforms)):.2f}, "
+          f"decode {per_transform_us(lambda: decode_tf_message(data)):.2f}; "
+          f"cyclonedds serialize {per_transform_us(ref.serialize):.2f}, "
+          f"deserialize {per_transform_us(lambda: TFMessage_.deserialize(data)):.2f}")  # fmt: skip
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--role", choices=["send", "recv"])
@@ -251,6 +272,7 @@ def main() -> int:
     if not ROS_PYTHON.exists():
         print("the ROS 2 venv is missing: run scripts/install_ros2_env.sh", file=sys.stderr)
         return 2
+    codec_figures()
     print(f"{'path':<16}{'batch':>6}{'lat median ms':>15}{'lat p99 ms':>12}"
           f"{'transforms/s':>14}{'lat n':>7}")  # fmt: skip
     for batch in args.batches:

@@ -20,10 +20,10 @@ aligned to its size relative to the first byte after the 4-byte encapsulation he
 doubles to 8 (OMG DDS-XTypes 1.3, 7.4.3 "XCDR1"). :func:`encode_tf_message` writes exactly
 that; :func:`decode_tf_message` also reads big-endian CDR and XCDR2's plain form
 (``PLAIN_CDR2``, doubles aligned to 4) because a DDS peer may legally send them.
-cyclonedds-python's own (de)serializer walks the type in pure Python at ~35 µs per
-transform; this codec is ~25x faster (``benchmarks/bench_ros2.py``), which is what lets a
-tfbus listener keep up with an rclpy subscriber. It is checked byte for byte against
-cyclonedds' serializer in ``tests/test_ros2.py``.
+cyclonedds-python's own (de)serializer walks the type in pure Python; this codec is about
+9x faster (decode ~2 µs vs ~17 µs per transform, ``benchmarks/bench_ros2.py`` prints
+both), which is what lets a tfbus listener keep up with an rclpy subscriber. It is
+checked byte for byte against cyclonedds' serializer in ``tests/test_ros2.py``.
 
 **Stamps.** ``builtin_interfaces/Time.sec`` is an int32: a stamp at or after
 2038-01-19T03:14:08Z (``sec`` = 2**31) cannot be sent to ROS 2 and is refused with
@@ -221,6 +221,19 @@ _STRUCTS: Final = {
 }
 
 
+_ZERO_TIME: Final = Time(0)
+_STRING_CACHE: dict[bytes, str] = {}  # frame ids repeat in every message: decode each once
+_STRING_CACHE_MAX: Final = 4096
+
+
+def _intern(raw: bytes) -> str:
+    text = raw.decode("utf-8")  # UnicodeDecodeError: caught by decode_tf_message
+    if len(_STRING_CACHE) >= _STRING_CACHE_MAX:
+        _STRING_CACHE.clear()  # a flood of distinct ids: start over, stay bounded
+    _STRING_CACHE[raw] = text
+    return text
+
+
 def decode_tf_message(data: bytes, *, max_transforms: int = 100_000) -> TFMessage:
     """Parse a serialized ``tf2_msgs/msg/TFMessage`` (with its encapsulation header).
 
@@ -244,6 +257,10 @@ def decode_tf_message(data: bytes, *, max_transforms: int = 100_000) -> TFMessag
         raise WireDecodeError(f"unsupported CDR encapsulation 0x{kind:04x}")
     u32, stamp_len, seven, dalign = structs
     body = memoryview(data)[4:]
+    new = tuple.__new__  # the NamedTuples without their __new__ wrappers: ~2x faster
+    strings = _STRING_CACHE
+    last_stamp: tuple[int, int] | None = None
+    stamp = _ZERO_TIME
     try:
         (count,) = u32.unpack_from(body, 0)
         if count > max_transforms:
@@ -259,26 +276,35 @@ def decode_tf_message(data: bytes, *, max_transforms: int = 100_000) -> TFMessag
             end = pos + n
             if n < 1 or end > len(body) or body[end - 1] != 0:
                 raise WireDecodeError("TFMessage: header.frame_id is not a NUL-terminated string")
-            frame_id = str(body[pos : end - 1], "utf-8")
+            raw = bytes(body[pos : end - 1])
+            frame_id = strings.get(raw)
+            if frame_id is None:
+                frame_id = _intern(raw)
             pos = end + (-end % 4)
             (n,) = u32.unpack_from(body, pos)
             pos += 4
             end = pos + n
             if n < 1 or end > len(body) or body[end - 1] != 0:
                 raise WireDecodeError("TFMessage: child_frame_id is not a NUL-terminated string")
-            child = str(body[pos : end - 1], "utf-8")
+            raw = bytes(body[pos : end - 1])
+            child = strings.get(raw)
+            if child is None:
+                child = _intern(raw)
             pos = end + (-end % dalign)
             tx, ty, tz, qx, qy, qz, qw = seven.unpack_from(body, pos)
             pos += 56
-            if sec < 0:
-                raise WireDecodeError(f"TFMessage: header.stamp.sec={sec} is before 1970")
+            if (sec, nanosec) != last_stamp:  # a batch usually shares one stamp
+                if sec < 0:
+                    raise WireDecodeError(f"TFMessage: header.stamp.sec={sec} is before 1970")
+                stamp = Time.from_ns(sec * NSEC_PER_SEC + nanosec)
+                last_stamp = (sec, nanosec)
             out.append(
-                TransformStamped(
-                    Header(Time.from_ns(sec * NSEC_PER_SEC + nanosec), frame_id),
+                new(TransformStamped, (
+                    new(Header, (stamp, frame_id)),
                     child,
-                    Transform(Vector3(tx, ty, tz), Quaternion(qx, qy, qz, qw)),
-                )
-            )
+                    new(Transform, (new(Vector3, (tx, ty, tz)), new(Quaternion, (qx, qy, qz, qw)))),
+                ))
+            )  # fmt: skip
     except struct.error as exc:
         raise WireDecodeError(f"TFMessage sample truncated: {exc}") from None
     except UnicodeDecodeError as exc:
