@@ -33,10 +33,12 @@ rmw announces it. Other bus topics are not sent to ROS 2 (counted in ``not_mappe
 make :meth:`Ros2Transport.send_nowait` raise :class:`~tfbus.errors.WireEncodeError`
 naming the transform and value; nothing of that message is sent. Received samples that do
 not decode are counted in ``malformed`` and dropped; the valid ones are delivered.
-(Structurally invalid CDR -- truncated, wrong lengths -- never gets this far: Cyclone
-validates every serialized sample against the type when it arrives and drops it. What
-reaches the transport and is counted: frame ids that are not UTF-8, stamps before 1970,
-messages over ``max_transforms``.)
+(Structurally invalid CDR -- truncated, wrong lengths -- is meant never to get this far:
+cyclonedds-python's sertype normalizes serialized samples against the type with
+``dds_stream_normalize``; ``tests/test_ros2.py`` shows it refusing them on write. What
+valid CDR can carry and tfbus still refuses, and counts: frame ids that are not UTF-8,
+stamps before 1970, messages over ``max_transforms``. The decoder itself is hardened
+against every structural fault too.)
 
 **Network.** By default the transport binds the loopback interface only, with multicast
 off and unicast discovery to 127.0.0.1
