@@ -367,15 +367,25 @@ def cyclone_config(
             for n in interfaces
         ]
         peer_list = list(peers or ())
-    peers_xml = "".join(f'<Peer address="{_xml_attr(p)}"/>' for p in peer_list)
-    return (
-        '<CycloneDDS xmlns="https://cdds.io/config"><Domain Id="any">'
-        f"<General><Interfaces>{''.join(nics)}</Interfaces>"
-        f"<AllowMulticast>{'default' if allow_multicast else 'false'}</AllowMulticast>"
-        "</General>"
-        "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
-        f"<MaxAutoParticipantIndex>{max_participant_index}</MaxAutoParticipantIndex>"
-        f"{f'<Peers>{peers_xml}</Peers>' if peers_xml else ''}</Discovery>"
-        f"<Compatibility><IgnoreTypeInformation>{_FAST_DDS_VENDOR}</IgnoreTypeInformation>"
-        "</Compatibility></Domain></CycloneDDS>"
-    )
+    peers_xml = "".join(f'\n        <Peer address="{_xml_attr(p)}"/>' for p in peer_list)
+    if peers_xml:
+        peers_xml = f"\n      <Peers>{peers_xml}\n      </Peers>"
+    nics_xml = "".join(f"\n        {n}" for n in nics)
+    return f"""<CycloneDDS xmlns="https://cdds.io/config">
+  <Domain Id="any">
+    <General>
+      <Interfaces>{nics_xml}
+      </Interfaces>
+      <AllowMulticast>{"default" if allow_multicast else "false"}</AllowMulticast>
+    </General>
+    <Discovery>
+      <ParticipantIndex>auto</ParticipantIndex>
+      <MaxAutoParticipantIndex>{max_participant_index}</MaxAutoParticipantIndex>{peers_xml}
+    </Discovery>
+    <Compatibility>
+      <!-- match Fast DDS 3.x (vendor 1.15) endpoints by type name, as rmw does -->
+      <IgnoreTypeInformation>{_FAST_DDS_VENDOR}</IgnoreTypeInformation>
+    </Compatibility>
+  </Domain>
+</CycloneDDS>
+"""
