@@ -402,21 +402,27 @@ class Ros1Transport:
         return [list(v) for v in list(self._bus_info.values())]
 
     def subscriptions(self) -> Sequence[str]:
+        """``getSubscriptions``: the topics this node subscribes to."""
         return self._topics
 
     def publications(self) -> Sequence[str]:
+        """``getPublications``: the topics this node has published on so far."""
         return sorted(self._published)
 
     def tcpros_endpoint(self, topic: str) -> tuple[str, int] | None:
+        """``requestTopic``: (host, port) of this node's TCPROS server, or None when it
+        does not publish ``topic``."""
         return (self._host, self._tcp_port) if topic in self._published else None
 
     def on_publisher_update(self, topic: str, publishers: list[str]) -> None:
+        """``publisherUpdate``: connect to new publishers of ``topic``, drop gone ones."""
         portal = self._portal
         if portal is not None and topic in self._topics:
             with contextlib.suppress(RuntimeError):
                 portal.start_task_soon(self._publisher_update, topic, publishers)
 
     def on_shutdown(self, caller_id: str, message: str) -> None:
+        """``shutdown``: stop this node; :meth:`run` then raises TransportError."""
         portal = self._portal
         if portal is not None:
             self._shutdown_reason = f"{message} (from {caller_id})"

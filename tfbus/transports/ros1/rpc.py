@@ -135,36 +135,46 @@ class SlaveServer:
     # The ROS slave API, by its names (ROS wiki "ROS/Slave_API").
 
     def getBusStats(self, caller_id: str) -> list[object]:
+        """Empty statistics (publish, subscribe, service)."""
         return [1, "", [[], [], []]]
 
     def getBusInfo(self, caller_id: str) -> list[object]:
+        """One entry per TCPROS connection."""
         return [1, "", self._node.bus_info()]
 
     def getMasterUri(self, caller_id: str) -> list[object]:
+        """The master this node uses."""
         return [1, "", self._node.master_uri]
 
     def shutdown(self, caller_id: str, msg: str = "") -> list[object]:
+        """Another node took this name, or a tool asked: stop the node."""
         self._node.on_shutdown(str(caller_id), str(msg))
         return [1, "", 0]
 
     def getPid(self, caller_id: str) -> list[object]:
+        """This process id."""
         return [1, "", os.getpid()]
 
     def getSubscriptions(self, caller_id: str) -> list[object]:
+        """[[topic, type], ...] subscribed."""
         return [1, "", [[t, TF_TYPE] for t in self._node.subscriptions()]]
 
     def getPublications(self, caller_id: str) -> list[object]:
+        """[[topic, type], ...] published."""
         return [1, "", [[t, TF_TYPE] for t in self._node.publications()]]
 
     def paramUpdate(self, caller_id: str, key: str, value: object) -> list[object]:
+        """Accepted and ignored (this node has no parameters)."""
         return [1, "", 0]
 
     def publisherUpdate(self, caller_id: str, topic: str, publishers: list[str]) -> list[object]:
+        """The master's new list of publishers of ``topic``."""
         if isinstance(publishers, list):
             self._node.on_publisher_update(str(topic), [str(p) for p in publishers])
         return [1, "", 0]
 
     def requestTopic(self, caller_id: str, topic: str, protocols: list[Any]) -> list[object]:
+        """Where to connect for ``topic``: ``["TCPROS", host, port]``."""
         endpoint = self._node.tcpros_endpoint(str(topic))
         if endpoint is None:
             return [-1, f"not a publisher of {topic}", []]

@@ -38,7 +38,12 @@ class TFCodec:
     """ROS 1 (de)serialisation of ``tf2_msgs/TFMessage`` by rosbags' typestore."""
 
     def __init__(self) -> None:
-        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+        try:
+            from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+        except ImportError as exc:
+            raise ImportError(
+                "the ROS 1 transport needs rosbags: pip install 'tfbus[ros1]'"
+            ) from exc
 
         store = get_typestore(Stores.ROS1_NOETIC)
         store.register(
