@@ -437,3 +437,44 @@ async def test_latched_static_set_is_served_to_each_new_subscriber(master: Maste
             for child in ("s1", "s2"):
                 await buffer.wait_for_transform("base_link", child, Time(0), timeout=40.0)
             assert b.latched_statics().transforms  # latched on the receiving bus too
+
+
+async def test_two_publishers_and_a_restarted_publisher(
+    master: Master, tutorial_nodes: Path
+) -> None:
+    """Two publishers on /tf at once (the C++ tutorial broadcaster and tf's
+    static_transform_publisher, which re-sends on /tf every 10 ms); then the C++
+    broadcaster is stopped and started again (a new URI, announced by publisherUpdate)."""
+    transport = Ros1Transport(master_uri=master.uri)
+    buffer = Buffer(cache_time=10.0)
+    tf1 = master.run(
+        "rosrun",
+        "tf",
+        "static_transform_publisher",
+        "0",
+        "0",
+        "1",
+        "0",
+        "0",
+        "0",
+        "base_link",
+        "mast",
+        "10",
+    )
+    bc = master.run(str(tutorial_nodes / "tf_broadcaster"))
+    try:
+        async with Bus(transport=transport) as bus, TransformListener(buffer, bus):
+            await buffer.wait_for_transform("base_link", "base_laser", Time(0), timeout=40.0)
+            await buffer.wait_for_transform("base_link", "mast", Time(0), timeout=40.0)
+            assert transport.statistics().connections_opened >= 2
+            bc.stop()
+            last = buffer.get_latest_common_time("base_link", "base_laser")
+            bc = master.run(str(tutorial_nodes / "tf_broadcaster"))
+            await buffer.wait_for_transform(
+                "base_link", "base_laser", Time.from_ns(last.ns + 100_000_000), timeout=40.0
+            )
+            ts = buffer.lookup_transform("base_link", "mast", Time(0))
+            assert ts.transform.translation == Vector3(0.0, 0.0, 1.0)
+    finally:
+        bc.stop()
+        tf1.stop()
