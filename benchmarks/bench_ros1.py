@@ -1,10 +1,10 @@
 """ROS 1 interop speed: a C++ roscpp publisher on /tf, received at once by a C++ roscpp
 subscriber and by a tfbus process (``Bus(transport=Ros1Transport())``), same run.
 
-Prints, per scenario (rate × frames per message × seconds): one-way latency median and
-p99 (receive time − header.stamp, both on this machine's wall clock) for C++ and tfbus,
-their ratio (target: tfbus ≤ 1.5× C++), and messages/transforms received of those sent
-(target: none lost at 100 Hz × 50 frames for 60 s). Figures only; nothing is asserted.
+Prints, per scenario (rate x frames per message x seconds): one-way latency median and
+p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and tfbus,
+their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
+(target: none lost at 100 Hz x 50 frames for 60 s). Figures only; nothing is asserted.
 
 Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.0.1.
 
@@ -34,7 +34,9 @@ from ros1_harness import Master, Proc, free_port, master_env, ros1_missing  # no
 def build(out: Path) -> None:
     flags = subprocess.run(
         ["pkg-config", "--cflags", "--libs", "roscpp", "tf2_msgs"],
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
         env={**os.environ, "PATH": "/usr/bin:" + os.environ.get("PATH", "")},
     ).stdout.split()
     for name in ("bench_pub", "bench_sub"):
