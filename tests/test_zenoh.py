@@ -49,12 +49,12 @@ from tfbus.transports.zenoh import (  # noqa: E402
     PeerEvent,
     ZenohOptions,
     ZenohTransport,
-    _key_topic,
-    _topic_key,
     parse_bus_spec,
     zenoh_bus_from_options,
     zenoh_config,
 )
+from tfbus.transports.zenoh.keys import key_topic as _key_topic  # noqa: E402
+from tfbus.transports.zenoh.keys import topic_key as _topic_key  # noqa: E402
 
 HEAD = bytes([wire.MAGIC, wire.WIRE_VERSION])
 PEERS_DIR = Path(__file__).parent / "zenoh_peers"

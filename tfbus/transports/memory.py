@@ -9,15 +9,16 @@ optional dependency (anyio only). Also re-exported as ``tfbus.MemoryTransport``.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import anyio
 import anyio.abc
 
 if TYPE_CHECKING:
     from tfbus.bus import Bus
+    from tfbus.transports.spec import BusSpec
 
-__all__ = ["MemoryTransport"]
+__all__ = ["MemoryTransport", "transport_from_spec"]
 
 
 class MemoryTransport:
@@ -97,3 +98,10 @@ class MemoryTransport:
         return (
             f"<MemoryTransport sent={self.sent} delivered={self.delivered} dropped={self.dropped}>"
         )
+
+
+def transport_from_spec(spec: BusSpec, **overrides: Any) -> MemoryTransport:
+    """The ``memory`` bus spec (:mod:`tfbus.transports.spec`): an unlinked end, so the
+    bus is private to this process (what it sends is counted in ``dropped``).
+    ``overrides`` may give ``max_buffer_size``."""
+    return MemoryTransport(**overrides)
