@@ -31,6 +31,7 @@ msgspec = pytest.importorskip("msgspec")
 
 from tfbus.buffer import Buffer  # noqa: E402
 from tfbus.bus import Bus  # noqa: E402
+from tfbus.errors import TransportError  # noqa: E402
 from tfbus.listener import TransformListener  # noqa: E402
 from tfbus.messages import (  # noqa: E402
     Header,
@@ -57,6 +58,7 @@ from tfbus.transports.zenoh.keys import key_topic as _key_topic  # noqa: E402
 from tfbus.transports.zenoh.keys import topic_key as _topic_key  # noqa: E402
 
 HEAD = bytes([wire.MAGIC, wire.WIRE_VERSION])
+BLOCK = zenoh.CongestionControl.BLOCK
 PEERS_DIR = Path(__file__).parent / "zenoh_peers"
 ROOT = Path(__file__).parent.parent
 
@@ -197,8 +199,10 @@ async def test_in_process_api_unchanged_and_no_echo() -> None:
             assert (await sub.receive()).transforms[0].child_frame_id == "base"
             got = await buffer.lookup_transform_async("world", "base", Time(0), timeout=5)
         assert got.transform.translation.x == 2.0
-        await anyio.sleep(0.1)
-        assert sub.statistics().queued == 0  # no echo of our own publish
+        # No echo: Zenoh matches no subscriber to our publisher, our own included (it
+        # only takes remote samples), so nothing can come back.
+        assert transport.matching("/tf") is False
+        assert sub.statistics().queued == 0
         assert bus.statistics()["/tf"].remote == 0
         assert transport.statistics().sent == 1
     assert not transport.running
@@ -225,16 +229,25 @@ async def test_two_buses_exchange_in_order_and_statics_and_peers() -> None:
             await wait_until(lambda: any(p.name == "B" for p in ta.alive().values()))
             assert [p.name for p in tb.broadcasters().values()] == ["A"]
             done = b.subscribe("/done")
+            with anyio.fail_after(5):
+                await ta.wait_matching("/tf")  # B's subscriber is known to A's publisher
+
+            async def sync(mark: int) -> None:
+                """Wait until B got marker ``mark``: everything A sent before it has been
+                received or lost (one session, one link: FIFO). The marker may be dropped
+                too (CongestionControl.DROP), so it is repeated."""
+                with anyio.fail_after(10):
+                    while True:
+                        a.publish_nowait("/done", mark)
+                        with anyio.move_on_after(0.2):
+                            while (await done.receive()) != mark:
+                                pass
+                            return
+
             for chunk in range(20):
                 for i in range(chunk * 100 + 1, chunk * 100 + 101):
                     a.publish_nowait("/tf", TFMessage((ts("m", i),)))
-                await anyio.sleep(0.002)
-            await anyio.sleep(0.1)
-            with anyio.fail_after(10):  # the end marker may be dropped too: repeat it
-                while done.statistics().delivered == 0:
-                    a.publish_nowait("/done", True)
-                    with anyio.move_on_after(0.2):
-                        await done.receive()
+                await sync(chunk)  # paced by the receiver, not by a sleep
             stamps = []
             while sub.statistics().queued:
                 stamps.append(sub.receive_nowait().transforms[0].header.stamp.ns)
@@ -264,16 +277,15 @@ async def test_malformed_payloads_are_dropped_and_counted() -> None:
         sub = bus.subscribe("/tf")
         session = await anyio.to_thread.run_sync(zenoh.open, cfg)
         try:
-            await wait_until(lambda: bool(transport.alive()) or bool(session.info.peers_zid()))
-            await anyio.sleep(0.2)  # let the subscriber declaration reach the raw session
+            raw = session.declare_publisher("tfbus/tf", congestion_control=BLOCK)
+            await wait_until(lambda: raw.matching_status.matching)  # the victim subscribes
             codec = wire.WireCodec()
             good = codec.encode(TFMessage((ts("ok", 1),)), sender=5, seq=1)
             bad_version = bytes([wire.MAGIC, wire.WIRE_VERSION + 1]) + good[2:]
             too_many = codec.encode(TFMessage((ts("x", 1),) * 11), sender=6, seq=1)
             last = codec.encode(TFMessage((ts("ok", 2),)), sender=5, seq=2)
-            block = zenoh.CongestionControl.BLOCK
             for payload in [good, b"\x00garbage", good[:-3], bad_version, too_many, b"", last]:
-                session.put("tfbus/tf", payload, congestion_control=block)
+                raw.put(payload)
             with anyio.fail_after(5):
                 first = await sub.receive()
                 second = await sub.receive()
@@ -291,17 +303,22 @@ async def test_default_rendezvous_port_and_namespaces() -> None:
     t1 = ZenohTransport(port=port, name="first")
     t2 = ZenohTransport(port=port, name="second")  # port taken: falls back to ephemeral
     t3 = ZenohTransport(port=port, name="other-robot", namespace="robot2")
-    async with Bus(transport=t1) as b1, Bus(transport=t2) as b2, Bus(transport=t3) as b3:
-        s2 = b2.subscribe("/tf")
+    async with Bus(transport=t1) as b1, Bus(transport=t3) as b3:
         s3 = b3.subscribe("/tf")
-        await wait_until(lambda: any(p.name == "second" for p in t1.alive().values()))
-        await anyio.sleep(0.1)
-        b1.publish_nowait("/tf", TFMessage((ts("m", 1),)))
+        async with Bus(transport=t2) as b2:
+            s2 = b2.subscribe("/tf")
+            await wait_until(lambda: any(p.name == "second" for p in t1.alive().values()))
+            with anyio.fail_after(5):
+                await t1.wait_matching("/tf")
+            b1.publish_nowait("/tf", TFMessage((ts("m", 1),)))
+            with anyio.fail_after(5):
+                assert (await s2.receive()).transforms[0].child_frame_id == "m"
+            assert [p.name for p in t1.alive().values()] == ["second"]
+        # With "second" gone, nobody matches first's /tf publisher: the bus in namespace
+        # robot2 does not subscribe to it (an event, not a wait for nothing to happen).
         with anyio.fail_after(5):
-            assert (await s2.receive()).transforms[0].child_frame_id == "m"
-        await anyio.sleep(0.2)
-        assert s3.statistics().delivered == 0  # another namespace sees nothing
-        assert [p.name for p in t1.alive().values()] == ["second"]
+            await t1.wait_matching("/tf", matching=False)
+        assert s3.statistics().delivered == 0
 
 
 # -- real processes ----------------------------------------------------------------------
@@ -384,10 +401,9 @@ def test_processes_exchange_late_joiner_gets_statics_kill_and_restart() -> None:
     with peers() as ps:
         b1 = Peer("broadcaster.py", "--listen", ep, "--name", "b1", "--rate", "100")
         ps.append(b1)
+        # READY comes after the static publish: the listener started next is a true
+        # late joiner (it must get the static from the latch query, not the stream).
         b1.expect(lambda line: line.startswith("READY"))
-        # Scenario set-up, not a wait for a result: let real time pass so that the static
-        # is published well before the listener process exists (a true late joiner).
-        time.sleep(0.3)
         lis = Peer(
             "listener.py",
             "--connect",
@@ -592,3 +608,132 @@ def test_depth_walk_agrees_with_msgpack(value: Any) -> None:
 
     data = _packb(value)
     assert check_depth(data + b"\x01", 0, 1000) == len(data)
+
+
+# -- issue 11 through a real Bus --------------------------------------------------------
+
+
+@pytest.mark.anyio
+async def test_bus_survives_hostile_payloads() -> None:
+    """Issue 11 items 1-3 through a real Bus with ZenohTransport (loopback, explicit
+    endpoints): a 1 000-deep payload (RecursionError ended the Bus), stamps >= 2**63 ns
+    (crashed --bus commands later) and forged/negative sequence numbers (`lost` went to
+    9e18) are counted and dropped or reported; valid messages beside them arrive, and the
+    bus keeps running."""
+    port = free_port()
+    transport = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="victim")
+    cfg, _ = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
+    codec = wire.WireCodec()
+
+    def tf(stamp: int, seq: int, sender: int = 5) -> bytes:
+        return codec.encode(TFMessage((ts("ok", stamp),)), sender=sender, seq=seq)
+
+    huge_stamp = tf(7, 2).replace(b"\x07\xa5world", b"\xcf" + b"\xff" * 8 + b"\xa5world", 1)
+    hostile = [
+        _envelope(b"\xa2tf", b"\x91" * 1000 + b"\xc0"),  # item 1, TFMessage tag
+        _envelope(b"\xa0", b"\x91" * 1000 + b"\xc0"),  # item 1, plain value
+        _envelope(b"\xa7Vector3", b"\x81\x00" * 1000 + b"\xc0"),  # item 1, maps
+        huge_stamp,  # item 2
+        _envelope(b"\xa2tf", tf(1, 1)[8:], seq=b"\xff"),  # item 3: negative seq
+    ]
+    async with Bus(transport=transport) as bus:
+        sub = bus.subscribe("/tf")
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            raw = session.declare_publisher("tfbus/tf", congestion_control=BLOCK)
+            await wait_until(lambda: raw.matching_status.matching)
+            raw.put(tf(1, 1))
+            for payload in hostile:
+                raw.put(payload)
+            raw.put(tf(2, 2**63 - 1))  # forged: a reset, not 9e18 lost
+            raw.put(tf(3, 3))  # the real stream again: a reset
+            raw.put(tf(4, 4))
+            with anyio.fail_after(5):
+                got = [(await sub.receive()).transforms[0].header.stamp.ns for _ in range(4)]
+            assert got == [1, 2, 3, 4]
+            stats = transport.statistics()
+            assert (stats.malformed, stats.over_limit) == (3, 2)  # nesting: over the bound
+            assert stats.dropped == len(hostile)
+            assert (stats.lost, stats.resets, stats.delivered) == (0, 2, 4)
+            # the bus and the transport are alive: a local round trip still works
+            bus.publish_nowait("/tf", TFMessage((ts("local", 9),)))
+            assert sub.receive_nowait().transforms[0].child_frame_id == "local"
+            assert transport.running
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+
+
+@pytest.mark.anyio
+async def test_late_joiner_gets_the_valid_static_after_a_nan_resend() -> None:
+    """Issue 11 item 4 across processes' worth of transports: a NaN static re-sent by the
+    publisher no longer replaces the valid latched one that late joiners are served."""
+    port = free_port()
+    ta = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="A")
+    good = ts("laser", 1, 1.5)
+    nan = TransformStamped(
+        good.header, "/laser", Transform(Vector3(float("nan"), 0.0, 0.0), Quaternion())
+    )
+    async with Bus(transport=ta) as a:
+        a.publish_nowait("/tf_static", TFMessage((good,)))
+        a.publish_nowait("/tf_static", TFMessage((nan,)))
+        tb = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="B")
+        async with Bus(transport=tb) as b:
+            await wait_until(lambda: tb.statistics().latched_replies >= 1)
+            assert b.latched_statics() == TFMessage((good,))
+
+
+# -- bus specs and errors ----------------------------------------------------------------
+
+
+def test_bus_spec_grammar_and_scheme_table() -> None:
+    """One grammar for every transport (tfbus/transports/spec.py)."""
+    from tfbus.transports import spec
+
+    parsed = spec.parse_bus_spec("zenoh:connect=tcp/127.0.0.1:7447&name=p?listen=tcp/a:1,tcp/b:2")
+    assert parsed.scheme == "zenoh"
+    assert parsed.values("connect") == ("tcp/127.0.0.1:7447",)
+    assert parsed.values("listen") == ("tcp/a:1", "tcp/b:2")
+    assert parsed.value("name") == "p"
+    assert spec.parse_bus_spec("zenoh:tcp/10.0.0.2:7448").values("connect") == (
+        "tcp/10.0.0.2:7448",
+    )
+    assert spec.parse_bus_spec("memory").options == {}
+    assert parse_bus_spec("zenoh:connect=tcp/127.0.0.1:7447").connect == ("tcp/127.0.0.1:7447",)
+    for bad in ["nope", "memory:x", "memory?x=1", "zenoh:bogus=1", "", "zenoh?express=maybe"]:
+        with pytest.raises(ValueError):
+            spec.open_transport(bad)
+    assert set(spec.schemes()) >= {"memory", "zenoh"}
+    with pytest.raises(ValueError):
+        spec.register_scheme(spec.TransportScheme("zenoh", "x"))
+    # a scheme whose extra is missing: one clear error naming the extra
+    spec.register_scheme(
+        spec.TransportScheme("absent", "tfbus.nothing", extra="absent", requires=("no_such_mod",))
+    )
+    try:
+        with pytest.raises(TransportError, match=r"pip install 'tfbus\[absent\]'"):
+            spec.open_transport("absent")
+    finally:
+        spec._SCHEMES.pop("absent")
+    from tfbus.transports.memory import MemoryTransport
+
+    assert isinstance(spec.open_transport("memory"), MemoryTransport)
+    bus = spec.open_bus("zenoh?namespace=r3", name="x")
+    assert isinstance(bus.transport, ZenohTransport) and bus.transport.name == "x"
+
+
+@pytest.mark.anyio
+async def test_zenoh_errors_are_transport_errors(tmp_path: Path) -> None:
+    """Zenoh's own errors reach callers as tfbus.errors.TransportError (issue 10 section
+    3), with the ZError as the cause."""
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ this is not json5")
+    with pytest.raises(TransportError) as info:
+        ZenohTransport(config=str(bad))
+    assert isinstance(info.value.__cause__, zenoh.ZError)
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    async with Bus(transport=ZenohTransport(listen=ep, name="holder")):
+        with pytest.raises(TransportError) as info:
+            async with Bus(transport=ZenohTransport(listen=ep, name="second")):
+                pass
+    assert isinstance(info.value.__cause__, zenoh.ZError)

@@ -166,7 +166,7 @@ def schemes() -> dict[str, TransportScheme]:
 def _unknown(spec: str) -> ValueError:
     known = ", ".join(sorted(_SCHEMES))
     return ValueError(
-        f"unknown bus {spec!r}: expected one of {known}, optionally followed by "
+        f"unsupported bus {spec!r}: expected one of {known}, optionally followed by "
         "':key=value&...' or '?key=value&...' (e.g. 'zenoh:connect=tcp/10.0.0.2:7448')"
     )
 
@@ -198,7 +198,7 @@ def parse_bus_spec(spec: str) -> BusSpec:
     for key, value in pairs:
         if key not in info.keys:
             known = ", ".join(sorted(info.keys)) or "none"
-            raise ValueError(f"unknown bus option {key!r} for {info.scheme!r} (known: {known})")
+            raise ValueError(f"unknown bus option {key!r} (known: {known})")
         options[key] = options.get(key, ()) + tuple(v for v in value.split(",") if v)
     return BusSpec(info.scheme, options, spec)
 
