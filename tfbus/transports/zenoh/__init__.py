@@ -21,7 +21,8 @@ One module per concern (anyio's ``_core`` style; the public names are re-exporte
 * :mod:`~tfbus.transports.zenoh.peers` -- liveliness: :class:`PeerInfo`,
   :class:`PeerEvent` on :data:`PEERS_TOPIC`;
 * :mod:`~tfbus.transports.zenoh.transport` -- :class:`ZenohTransport` (threads, receive
-  path, late joiners, matching status) and :class:`ZenohStatistics`;
+  path, late joiners, matching status);
+* :mod:`~tfbus.transports.zenoh.counters` -- :class:`ZenohStatistics`;
 * :mod:`~tfbus.transports.zenoh.options` -- the ``zenoh`` bus spec of the command line
   (:class:`ZenohOptions`, :func:`parse_bus_spec`, :func:`zenoh_bus_from_options`).
 
@@ -30,6 +31,7 @@ Zenoh's own errors are raised as :class:`~tfbus.errors.TransportError`. See
 """
 
 from tfbus.transports.zenoh.config import DEFAULT_PORT, zenoh_config
+from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.options import (
     ZenohOptions,
@@ -38,7 +40,7 @@ from tfbus.transports.zenoh.options import (
     zenoh_bus_from_options,
 )
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerEvent, PeerInfo
-from tfbus.transports.zenoh.transport import ZenohStatistics, ZenohTransport
+from tfbus.transports.zenoh.transport import ZenohTransport
 
 __all__ = [
     "DEFAULT_PORT",
