@@ -14,6 +14,7 @@ that are not msgpack (truncated, reserved byte ``0xc1``) and
 
 from __future__ import annotations
 
+import re
 from typing import Final
 
 from tfbus.errors import WireDecodeError, WireLimitError
@@ -39,6 +40,10 @@ _CONTAINERS: Final[dict[int, tuple[int, int]]] = {
     0xDC: (2, 1), 0xDD: (4, 1),  # array 16/32
     0xDE: (2, 2), 0xDF: (4, 2),  # map 16/32: key and value
 }  # fmt: skip
+
+
+# A run of one-byte items (fixints, nil, false, true): skipped in one regex step.
+_ONE_BYTE_RUN: Final = re.compile(rb"[\x00-\x7f\xc0\xc2\xc3\xe0-\xff]+")
 
 
 def _truncated() -> WireDecodeError:
@@ -134,11 +139,15 @@ def check_depth(data: bytes, pos: int, max_depth: int) -> int:
         if pos >= n:
             raise _truncated()
         b = data[pos]
+        if b <= 0x7F or b >= 0xE0 or b in (0xC0, 0xC2, 0xC3):  # one-byte items: a run
+            match = _ONE_BYTE_RUN.match(data, pos)
+            assert match is not None
+            taken = min(match.end() - pos, left)
+            pos += taken
+            left -= taken
+            continue
         left -= 1
         count = 0
-        if b <= 0x7F or b >= 0xE0:  # positive / negative fixint
-            pos += 1
-            continue
         if b <= 0x8F:  # fixmap
             count = (b & 0x0F) * 2
             pos += 1
