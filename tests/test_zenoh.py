@@ -216,8 +216,11 @@ async def test_two_buses_exchange_in_order_and_statics_and_peers() -> None:
     async with Bus(transport=ta) as a:
         a.publish_nowait("/tf_static", TFMessage((ts("s1", 1), ts("s2", 1))))
         a.publish_nowait("/tf_static", TFMessage((ts("s1", 1, 9.0),)))  # replaces s1
+        # Subscribed before B exists: B's arrival is an event A must deliver. (B's own
+        # view of A, known from Zenoh's liveliness history as B's session opens, may be
+        # delivered before B's test code can subscribe: it is checked as state below.)
+        peers = a.subscribe(PEERS_TOPIC)
         async with Bus(transport=tb) as b:
-            peers = b.subscribe(PEERS_TOPIC)
             statics = b.subscribe("/tf_static")
             sub = b.subscribe("/tf", queue_size=5000)
             await wait_until(lambda: len(b.latched_statics().transforms) == 2)
@@ -225,8 +228,8 @@ async def test_two_buses_exchange_in_order_and_statics_and_peers() -> None:
             assert latched["s1"].transform.translation.x == 9.0
             with anyio.fail_after(5):
                 ev = await peers.receive()
-            assert isinstance(ev, PeerEvent) and ev.alive and ev.name == "A"
-            await wait_until(lambda: any(p.name == "B" for p in ta.alive().values()))
+            assert isinstance(ev, PeerEvent) and ev.alive and ev.name == "B"
+            await wait_until(lambda: any(p.name == "A" for p in tb.alive().values()))
             assert [p.name for p in tb.broadcasters().values()] == ["A"]
             done = b.subscribe("/done")
             with anyio.fail_after(5):

@@ -285,6 +285,7 @@ class ZenohTransport:
                 outlet.matching_listener = None
             self._node_id = ""
             self._peers.clear()
+            self._matching_changed = None  # bound to this event loop
             with anyio.CancelScope(shield=True):
                 await anyio.to_thread.run_sync(_close_session, session, declared)
             wake_r.close()
