@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import os
 import socket
 import statistics
 import subprocess
 import sys
 import time
+import timeit
+from collections.abc import Callable
 from pathlib import Path
 
 import anyio
@@ -159,10 +162,8 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> None:
                 child.wait(timeout=10)
 
 
-def _per_call_us(fn: object, number: int) -> float:
-    import timeit
-
-    return min(timeit.repeat(fn, number=number, repeat=5)) / number * 1e6  # type: ignore[arg-type]
+def _per_call_us(fn: Callable[[], object], number: int) -> float:
+    return min(timeit.repeat(fn, number=number, repeat=5)) / number * 1e6
 
 
 def wire_costs() -> None:
@@ -190,7 +191,7 @@ def wire_costs() -> None:
     print("wire decode, this process (min of 5 runs):")
     for label, payload in rows:
         number = 200 if len(payload) > 2000 else 5000
-        us = _per_call_us(lambda p=payload: decode_or_error(p), number)
+        us = _per_call_us(functools.partial(decode_or_error, payload), number)
         print(f"  {label:52s} {len(payload):6d} B  {us:9.2f} us")
 
 
