@@ -414,3 +414,20 @@ def test_memory_transport_keeps_its_old_import_paths() -> None:
         node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
     ] + [a.name for node in ast.walk(tree) if isinstance(node, ast.Import) for a in node.names]
     assert not [m for m in imported if m.startswith("tfbus.transports")]
+
+
+def test_static_latch_api() -> None:
+    """StaticLatch (tfbus/latch.py), the one latch of the bus and the transports."""
+    from tfbus.latch import StaticLatch
+
+    latch = StaticLatch()
+    assert len(latch) == 0 and latch.message() == TFMessage(())
+    assert latch.add("not a TFMessage") == 0
+    assert latch.add(TFMessage((ts("laser", 1.0), ts("cam", 2.0), ts("bad", float("nan"))))) == 2
+    assert "laser" in latch and "/laser" in latch and "bad" not in latch and 3 not in latch
+    first = latch.message()
+    assert latch.message() is first  # cached until the next change
+    assert latch.add(TFMessage((ts("/cam", 5.0),))) == 1
+    assert latch.message() == TFMessage((ts("laser", 1.0), ts("/cam", 5.0)))
+    latch.clear()
+    assert len(latch) == 0 and latch.message() == TFMessage(())
