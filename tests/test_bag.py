@@ -19,6 +19,7 @@ import pytest
 pytest.importorskip("rosbags")
 
 from tfbus import (
+    Duration,
     Header,
     Quaternion,
     Time,
@@ -213,9 +214,22 @@ def test_turtle_matches_rosbags_generic_deserializer() -> None:
 
 def test_generic_fallback_decoder_matches_fast_path(monkeypatch: pytest.MonkeyPatch) -> None:
     fast = [list(r.message.transforms) for r in read_messages(TURTLE)]
-    monkeypatch.setattr(tfbag, "_ROS1_TF_MD5", "not-the-standard-md5")
+    monkeypatch.setattr(tfbag.decode, "ROS1_TF_MD5", "not-the-standard-md5")
     slow = [list(r.message.transforms) for r in read_messages(TURTLE)]
     assert slow == fast
+
+
+@pytest.mark.parametrize("fmt", ["sqlite3", "mcap"])
+def test_generic_cdr_decoder_matches_fast_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, fmt: str
+) -> None:
+    original = list(read_messages(TURTLE))[:200]
+    write_bag(tmp_path / "b", original, format=fmt)
+    bare = next((tmp_path / "b").glob(f"*.{'db3' if fmt == 'sqlite3' else 'mcap'}"))
+    fast = [list(r.message.transforms) for r in read_messages(bare)]
+    monkeypatch.setattr(tfbag.decode, "ROS2_TF_RIHS01", "RIHS01_not-the-standard-hash")
+    slow = [list(r.message.transforms) for r in read_messages(bare)]
+    assert slow == fast == [list(r.message.transforms) for r in original]
 
 
 def test_summary_turtle() -> None:
@@ -547,26 +561,51 @@ async def test_replay_drives_clock_and_buffer_sees_bag_time() -> None:
     )
 
 
-async def test_replay_paces_at_rate() -> None:
+async def test_replay_paces_at_rate_on_its_pace_clock() -> None:
+    """Message i goes out when the pace clock reads p0 + (t_i - t_0) / rate, exactly
+    (ManualClock deadlines are stepped through one by one: no wall time)."""
     from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
 
-    sleeps: list[float] = []
-    now = [0.0]
-
-    async def fake_sleep(d: float) -> None:
-        sleeps.append(d)
-        now[0] += d
-
+    pace = ManualClock(start=Time(5000))
+    published: list[tuple[Time, Time]] = []  # (pace clock, bag time)
     start, stop = Time(1396293900), Time(1396293902)
+    done = anyio.Event()
     async with Bus() as bus:
-        n = await replay(TURTLE, bus, rate=4.0, start=start, stop=stop,
-                         sleep=fake_sleep, monotonic=lambda: now[0])
-        with pytest.raises(ValueError):
+
+        async def run() -> None:
+            n = await replay(TURTLE, bus, rate=4.0, start=start, stop=stop, pace_clock=pace,
+                             on_message=lambda rec: published.append((pace.now(), rec.time)))
+            assert n == len(published)
+            done.set()
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(run)
+            await pace.advance(10.0)  # more than the 2 s of bag time / 4
+            await done.wait()
+        with pytest.raises(ValueError, match="rate"):
             await replay(TURTLE, bus, rate=-1.0)
+        with pytest.raises(ValueError, match="rate"):
+            await replay(TURTLE, bus, rate=math.inf)
     recs = list(read_messages(TURTLE, start=start, stop=stop))
-    assert n == len(recs)
-    span = (recs[-1].time - recs[0].time).to_sec()
-    assert sum(sleeps) == pytest.approx(span / 4.0, abs=1e-6)  # recorded timing / rate
+    assert [t for _p, t in published] == [r.time for r in recs]
+    # The latched static (recorded 12 s before start) goes out at once; the window is
+    # paced from ``start``.
+    assert recs[0].time < start and published[0][0] == Time(5000)
+    for p, t in published:
+        assert p.ns == 5000 * 10**9 + max(round((t.ns - start.ns) / 4.0), 0)
+    assert published[-1][0] - published[1][0] > Duration(0, 490_000_000)  # ~2 s / 4
+
+
+async def test_replay_without_rate_never_sleeps() -> None:
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
+
+    pace = ManualClock()  # never advanced: any sleep on it would hang the test
+    async with Bus() as bus:
+        with anyio.fail_after(30):
+            n = await replay(TURTLE, bus, rate=None, pace_clock=pace)
+    assert n == 2689 and pace.pending == 0
 
 
 async def test_replay_publishes_latched_statics_first() -> None:
