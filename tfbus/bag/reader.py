@@ -228,6 +228,24 @@ def locate_damage(p: Path, fmt: BagFormat) -> int | None:
     return None
 
 
+def locate_message(
+    p: Path, fmt: BagFormat, topics: frozenset[str], stamp: int, raw: bytes | memoryview
+) -> int | None:
+    """Byte offset of the message with bag time ``stamp`` and payload ``raw``, found by a
+    record-by-record read (a compressed ROS 1 chunk gives the chunk's offset)."""
+    scan = _salvage(p, fmt, topics, stamp, stamp + 1)
+    if scan is None:
+        return None
+    want = bytes(raw)
+    try:
+        for _stamp, _src, data, offset in scan:
+            if bytes(data) == want:
+                return offset
+    except Exception:
+        return None
+    return None
+
+
 def _read(
     p: Path, fmt: BagFormat, topics: frozenset[str], lo: int | None, hi: int | None
 ) -> Iterator[BagMessage]:
@@ -268,7 +286,9 @@ def _read(
             message = BagMessage(Time.from_ns(stamp), src.topic, TFMessage(src.decode(raw)),
                                  src.authority)
         except Exception as err:
-            when = fmt_time(Time.from_ns(stamp)) if 0 <= stamp < 2**63 else str(stamp)
+            when = fmt_time(Time.from_ns(stamp)) if 0 <= stamp < 2**63 else f"{stamp} ns"
+            if offset is None:
+                offset = locate_message(p, fmt, topics, stamp, raw)
             raise fail(f"corrupt {src.topic} message at bag time {when}: {describe(err)}",
                        offset) from None
         yield message
