@@ -51,6 +51,8 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
 EVO_DIR = SHARED / "evo_tf_example"
 
+LASER = SHARED / "laser"
+needs_laser = pytest.mark.skipif(not LASER.exists(), reason="../shared/data/laser absent")
 needs_nav2 = pytest.mark.skipif(not NAV2.exists(), reason="../shared/data (GPL evo data) absent")
 needs_evo = pytest.mark.skipif(not EVO_DIR.exists(), reason="../shared/data (GPL evo data) absent")
 
@@ -383,6 +385,55 @@ def test_evo_sqlite_folder_and_bare_db3() -> None:
         )
     span = (recorded[-1].header.stamp - recorded[0].header.stamp).to_sec()
     assert span == pytest.approx(51.6, abs=0.2)
+
+
+# --------------------------------------------------------------------------- laser (ROS 1, bz2)
+
+#: From ../shared/data/SOURCES.md: /tf message counts and (parent, child, Hz) of the
+#: fastest frame of each recording (2014, no /tf_static, bz2-compressed chunks).
+LASER_BAGS = {
+    "drl_guardian_3.bag": (22_998, ("odom", "base_footprint", 120.0), 10),
+    "drl_jarvis_complex_path_fast.bag": (18_839, ("odom", "base_footprint", 25.0), 11),
+}
+
+
+@pytest.fixture(scope="module")
+def laser_reads() -> dict[str, list[BagMessage]]:
+    return {name: list(read_messages(LASER / name)) for name in LASER_BAGS}
+
+
+@needs_laser
+@pytest.mark.parametrize("name", sorted(LASER_BAGS))
+def test_laser_bags_tf_loads(name: str, laser_reads: dict[str, list[BagMessage]]) -> None:
+    count, (parent, child, hz), n_frames = LASER_BAGS[name]
+    recs = laser_reads[name]
+    assert len(recs) == count and {r.topic for r in recs} == {"/tf"}
+    core = load_buffer(LASER / name)
+    assert len(core.get_frame_names()) == n_frames
+    edge = [ts for r in recs for ts in r.message.transforms
+            if (ts.header.frame_id, ts.child_frame_id) == (parent, child)]
+    span = (edge[-1].header.stamp - edge[0].header.stamp).to_sec()
+    assert (len(edge) - 1) / span == pytest.approx(hz, rel=0.01)
+    for ts in edge[:: max(1, len(edge) // 20)]:
+        assert core.lookup_transform(parent, child, ts.header.stamp).transform == ts.transform
+
+
+@needs_laser
+def test_laser_bag_cut_is_salvaged_through_bz2_chunks(
+    tmp_path: Path, laser_reads: dict[str, list[BagMessage]]
+) -> None:
+    """A cut bz2 bag is read record by record (tfbus's ROS 1 scanner, bz2 chunks): the
+    same messages as rosbags' indexed read of the intact file, up to the damage."""
+    name = "drl_jarvis_complex_path_fast.bag"
+    full = laser_reads[name]
+    cut = _truncate(LASER / name, tmp_path / "cut.bag", 0.6)
+    got: list[BagMessage] = []
+    with pytest.raises(BagReadError) as e:
+        for rec in read_messages(cut):
+            got.append(rec)
+    assert 0.4 * len(full) < len(got) < 0.7 * len(full)
+    assert got == full[: len(got)]
+    assert e.value.offset is not None and e.value.offset < cut.stat().st_size
 
 
 # --------------------------------------------------------------------------- damage
