@@ -9,13 +9,13 @@ message and raise :class:`ScanError` with the byte offset where reading stopped.
 * MCAP: the format's own library (``mcap``, its ``StreamReader``) reads the records in
   order, with chunk CRCs checked; this module only tracks offsets and sorts each chunk's
   messages by log time.
-* ROS 1: no maintained library reads a bag without its index (rosbags refuses it; the
-  only reindexer, ``rosbag reindex``, is ROS 1's own Python 2/3 tool outside PyPI), so the
-  ROS 1 bag v2.0 records (``http://wiki.ros.org/Bags/Format/2.0``) are parsed here: bag
-  header, chunks (none / bz2 / lz4), connections and message data; index records are
-  skipped. A bag that ends at a record boundary but has no index (``index_pos`` 0 or
-  past the end) is truncated or was never closed: that is reported too, after its
-  messages.
+* ROS 1: no library on PyPI reads a bag without its index (rosbags refuses it: "Bag
+  index looks damaged"; ``rosbag reindex`` and the ``rosbag`` module bagpy wraps are ROS
+  1's own code, installed with ROS, not from PyPI), so the ROS 1 bag v2.0 records
+  (``http://wiki.ros.org/Bags/Format/2.0``) are parsed here: bag header, chunks (none /
+  bz2 / lz4), connections and message data; index records are skipped. A bag that ends
+  at a record boundary but has no index (``index_pos`` 0 or past the end) is truncated
+  or was never closed: that is reported too, after its messages.
 """
 
 from __future__ import annotations

@@ -218,7 +218,7 @@ class BagRecorder:
     Args:
         bus: the bus to record.
         path: ``*.bag`` (ROS 1) or a ROS 2 bag folder (``format`` ``"sqlite3"``/``"mcap"``).
-        clock: receive-time source (anything with ``now() -> Time``).
+        clock: receive-time source; only its ``now()`` is read.
         format: ``"ros1"``, ``"sqlite3"`` or ``"mcap"``; default from the suffix.
         topics: the topics to record.
         queue_size: subscription queue per topic (a full queue drops its oldest message).
