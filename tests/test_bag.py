@@ -158,6 +158,14 @@ def test_detect_format(tmp_path: Path) -> None:
         list(read_messages(old))
 
 
+def test_bag_format_is_a_str_enum() -> None:
+    """``BagFormat(str, Enum)`` (Python 3.10) behaves as the StrEnum it replaced."""
+    assert BagFormat("mcap") is BagFormat.MCAP and BagFormat.ROS1 == "ros1"
+    assert str(BagFormat.SQLITE3) == "sqlite3" and f"{BagFormat.MCAP}" == "mcap"
+    assert f"{BagFormat.ROS1:>6}" == "  ros1" and isinstance(BagFormat.ROS1, str)
+    assert [f.value for f in BagFormat] == ["ros1", "sqlite3", "mcap"]
+
+
 @needs_nav2
 @needs_evo
 def test_detect_format_ros2() -> None:

@@ -244,3 +244,35 @@ def test_fuzz_damaged_bags_raise_only_bag_errors(tmp_path: Path) -> None:
     whole = tmp_path / "whole.bag"
     whole.write_bytes(TURTLE.read_bytes())
     assert read_all(whole) == (list(read_messages(TURTLE)), None)
+
+
+@pytest.mark.parametrize("compression", ["BZ2", "LZ4"])
+def test_compressed_ros1_bag_cut_is_salvaged(tmp_path: Path, compression: str) -> None:
+    """A ROS 1 bag with bz2 / lz4 chunks (written by rosbags' Writer), cut: the complete
+    chunks before the cut are read record by record, the same messages as the intact
+    file, then a BagReadError at the cut chunk."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    path = tmp_path / f"{compression}.bag"
+    writer = Writer(path)
+    writer.set_compression(Writer.CompressionFormat[compression])
+    writer.chunk_threshold = 16 * 1024  # several chunks (rosbags: 1 MiB by default)
+    with Reader(TURTLE) as reader, writer:
+        conns = {}
+        tf = [c for c in reader.connections if c.topic in ("/tf", "/tf_static")]
+        for c in tf:
+            conns[c.id] = writer.add_connection(
+                c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
+                callerid=c.ext.callerid, latching=c.ext.latching,
+            )
+        for conn, t, raw in reader.messages(connections=tf):
+            writer.write(conns[conn.id], t, raw)
+    full = list(read_messages(path))
+    assert full == list(read_messages(TURTLE))
+    data = path.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    got, err = read_all(cut)
+    assert isinstance(err, BagReadError), repr(err)
+    assert len(full) // 4 < len(got) < len(full) and got == full[: len(got)]
+    assert err.offset is not None and err.offset < len(data) // 2
