@@ -44,12 +44,14 @@ def read_all(path: Path) -> tuple[list[BagMessage], BaseException | None]:
     return got, None
 
 
-def ros1_records(data: bytes) -> Iterator[tuple[int, int, dict[str, bytes]]]:
-    """(offset, end, header fields) of each top-level record of a ROS 1 bag v2.0, parsed
-    here from the format description (wiki.ros.org/Bags/Format/2.0), independently of
-    tfbus."""
-    off = len(b"#ROSBAG V2.0\n")
-    while off < len(data):
+def ros1_records(
+    data: bytes, start: int = len(b"#ROSBAG V2.0\n"), stop: int | None = None
+) -> Iterator[tuple[int, int, dict[str, bytes]]]:
+    """(offset, end, header fields) of each record of a ROS 1 bag v2.0 in
+    ``data[start:stop]``, parsed here from the format description
+    (wiki.ros.org/Bags/Format/2.0), independently of tfbus."""
+    off = start
+    while off < (len(data) if stop is None else stop):
         (hlen,) = struct.unpack_from("<I", data, off)
         raw = data[off + 4 : off + 4 + hlen]
         fields: dict[str, bytes] = {}
@@ -206,6 +208,24 @@ def test_item9_version_line_alone_is_not_an_empty_bag(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- fuzz
 
 
+def ros1_tf_message_ends(data: bytes) -> list[int]:
+    """File offset where each /tf or /tf_static message record ends, in file order, for
+    a bag with uncompressed chunks (parsed independently of tfbus)."""
+    tf_conns: set[bytes] = set()
+    ends = []
+    for _off, end, fields in ros1_records(data):
+        if fields.get("op") != b"\x05":
+            continue
+        assert fields["compression"] == b"none"
+        body = end - int.from_bytes(fields["size"], "little")
+        for _o, e, f in ros1_records(data, body, end):
+            if f.get("op") == b"\x07" and f["topic"] in (b"/tf", b"/tf_static"):
+                tf_conns.add(f["conn"])
+            elif f.get("op") == b"\x02" and f["conn"] in tf_conns:
+                ends.append(e)
+    return ends
+
+
 def _variants(data: bytes, rng: random.Random, n: int) -> Iterator[tuple[str, bytes]]:
     for k in range(n):
         if k % 2:
@@ -228,6 +248,8 @@ def test_fuzz_damaged_bags_raise_only_bag_errors(tmp_path: Path) -> None:
     for name, src in bags.items():
         data = src.read_bytes()
         full = list(read_messages(src))
+        ends = ros1_tf_message_ends(data) if src.suffix == ".bag" else None
+        assert ends is None or len(ends) == len(full)
         cuts: list[tuple[int, int]] = []
         for kind, damaged in _variants(data, rng, 16 if name == "turtle" else 50):
             f = tmp_path / f"fuzz{src.suffix}"
@@ -237,6 +259,8 @@ def test_fuzz_damaged_bags_raise_only_bag_errors(tmp_path: Path) -> None:
             if kind == "cut":
                 assert err is not None, (name, len(damaged))
                 assert got == full[: len(got)], (name, len(damaged))
+                if ends is not None:
+                    assert len(got) == sum(e <= len(damaged) for e in ends), (name, len(damaged))
                 cuts.append((len(damaged), len(got)))
         cuts.sort()
         counts = [n for _size, n in cuts]
