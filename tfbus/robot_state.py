@@ -62,7 +62,7 @@ from tfbus.messages import (
     Vector3,
 )
 from tfbus.time import Time
-from tfbus.urdf import Mimic, RobotModel, URDFError, load_urdf
+from tfbus.urdf import JointInfo, Mimic, RobotModel, URDFError, load_urdf
 
 __all__ = [
     "JOINT_STATES_TOPIC",
@@ -116,37 +116,75 @@ class RobotStateStatistics:
 
 def _quaternions(r: _F64) -> _F64:
     """(N, 3, 3) rotation matrices -> (N, 4) quaternions (x, y, z, w), with the branch
-    choice and signs of KDL ``Rotation::GetQuaternion`` (orocos_kdl ``frames.cpp``):
-    w > 0 when the trace exceeds 1e-12, else the component of the largest diagonal entry."""
+    choice and signs of KDL ``Rotation::GetQuaternion`` (orocos_kdl ``frames.cpp``,
+    Shepperd's method): w > 0 when the trace exceeds 1e-12, else the component of the
+    largest diagonal entry is positive."""
     out = np.empty((r.shape[0], 4))
     m00, m11, m22 = r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]
     trace = m00 + m11 + m22
+    sx = r[:, 2, 1] - r[:, 1, 2]  # 4 w x
+    sy = r[:, 0, 2] - r[:, 2, 0]  # 4 w y
+    sz = r[:, 1, 0] - r[:, 0, 1]  # 4 w z
+    pxy = r[:, 0, 1] + r[:, 1, 0]  # 4 x y
+    pxz = r[:, 0, 2] + r[:, 2, 0]  # 4 x z
+    pyz = r[:, 1, 2] + r[:, 2, 1]  # 4 y z
     a = trace > 1e-12
+    if a.all():
+        s = 0.5 / np.sqrt(trace + 1.0)
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = sx * s, sy * s, sz * s, 0.25 / s
+        return out
+    i = np.nonzero(a)[0]
+    s = 0.5 / np.sqrt(trace[i] + 1.0)
+    out[i] = np.stack([sx[i] * s, sy[i] * s, sz[i] * s, 0.25 / s], axis=1)
     bx = ~a & (m00 > m11) & (m00 > m22)
     by = ~a & ~bx & (m11 > m22)
     bz = ~a & ~bx & ~by
-    d10, d01 = r[:, 1, 0], r[:, 0, 1]
-    d20, d02 = r[:, 2, 0], r[:, 0, 2]
-    d21, d12 = r[:, 2, 1], r[:, 1, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = 0.5 / np.sqrt(np.where(a, trace + 1.0, 1.0))
-        out[a] = np.stack([(d21 - d12) * s, (d02 - d20) * s, (d10 - d01) * s, 0.25 / s],
-                          axis=1)[a]
-        s = 2.0 * np.sqrt(np.abs(1.0 + m00 - m11 - m22))
-        out[bx] = np.stack([0.25 * s, (d01 + d10) / s, (d02 + d20) / s, (d21 - d12) / s],
-                           axis=1)[bx]
-        s = 2.0 * np.sqrt(np.abs(1.0 + m11 - m00 - m22))
-        out[by] = np.stack([(d01 + d10) / s, 0.25 * s, (d12 + d21) / s, (d02 - d20) / s],
-                           axis=1)[by]
-        s = 2.0 * np.sqrt(np.abs(1.0 + m22 - m00 - m11))
-        out[bz] = np.stack([(d02 + d20) / s, (d12 + d21) / s, 0.25 * s, (d10 - d01) / s],
-                           axis=1)[bz]
+    for mask, d, rows in ((bx, m00 - m11 - m22, (None, pxy, pxz, sx)),
+                          (by, m11 - m00 - m22, (pxy, None, pyz, sy)),
+                          (bz, m22 - m00 - m11, (pxz, pyz, None, sz))):
+        i = np.nonzero(mask)[0]
+        if i.size:
+            s = 2.0 * np.sqrt(1.0 + d[i])
+            out[i] = np.stack([0.25 * s if v is None else v[i] / s for v in rows], axis=1)
     return out
 
 
 def _origin_rotation(rpy: tuple[float, float, float]) -> _F64:
     """URDF ``rpy`` (fixed axes x, y, z = transforms3d 'sxyz') -> 3x3 rotation matrix."""
     return np.asarray(quat2mat(euler2quat(rpy[0], rpy[1], rpy[2], "sxyz")), dtype=np.float64)
+
+
+def _kdl_flips(x: float, y: float, z: float, w: float) -> bool:
+    """Whether KDL's ``Rotation::GetQuaternion`` returns -q for the rotation of the
+    quaternion q: its branch is chosen on the matrix trace and diagonal (KDL's
+    ``Rotation::Quaternion`` formulas below), and the branch's component comes out
+    positive."""
+    xx, yy, zz, ww = x * x, y * y, z * z, w * w
+    if 3.0 * ww - xx - yy - zz > 1e-12:
+        return w < 0.0
+    m00, m11, m22 = ww + xx - yy - zz, ww - xx + yy - zz, ww - xx - yy + zz
+    if m00 > m11 and m00 > m22:
+        return x < 0.0
+    if m11 > m22:
+        return y < 0.0
+    return z < 0.0
+
+
+_MovingJoint = tuple[str, str, bool, Vector3, tuple[float, float, float], Quaternion]
+
+
+def _moving_joint(j: JointInfo, prefix: str) -> _MovingJoint:
+    """Precomputed per moving joint: frame ids, rotates?, origin translation, the unit
+    axis (in the joint frame for rotation, turned into the parent frame for translation,
+    as kdl_parser's ``origin.M * axis``) and the origin rotation (KDL signs)."""
+    basis = _origin_rotation(j.rpy)
+    axis = np.asarray(j.axis, dtype=np.float64) / math.hypot(*j.axis)
+    rotates = j.type != "prismatic"
+    if not rotates:
+        axis = basis @ axis
+    (rotation,) = _quaternions(basis[None]).tolist()
+    return (prefix + j.parent, prefix + j.child, rotates, Vector3(*j.xyz),
+            (float(axis[0]), float(axis[1]), float(axis[2])), Quaternion(*rotation))
 
 
 class RobotStatePublisher:
@@ -176,15 +214,7 @@ class RobotStatePublisher:
         self.statistics = RobotStateStatistics()
         """What :meth:`run` did so far."""
         moving = sorted((j for j in self.model.joints if j.movable), key=lambda j: j.name)
-        self._index = {j.name: i for i, j in enumerate(moving)}
-        self._frames = [(frame_prefix + j.parent, frame_prefix + j.child) for j in moving]
-        n = len(moving)
-        self._origin = np.array([j.xyz for j in moving], dtype=np.float64).reshape(n, 3)
-        self._basis = np.array([_origin_rotation(j.rpy) for j in moving]).reshape(n, 3, 3)
-        axes = np.einsum("nij,nj->ni", self._basis,
-                         np.array([j.axis for j in moving], dtype=np.float64).reshape(n, 3))
-        self._axis = axes / np.linalg.norm(axes, axis=1, keepdims=True)
-        self._rotates = np.array([j.type != "prismatic" for j in moving], dtype=bool)
+        self._moving = {j.name: _moving_joint(j, frame_prefix) for j in moving}
         self._mimic: list[tuple[str, Mimic]] = sorted(
             (j.name, j.mimic) for j in self.model.joints if j.mimic is not None)
         fixed = sorted((j for j in self.model.joints if j.type in ("fixed", "planar")),
@@ -250,59 +280,44 @@ class RobotStatePublisher:
         if not isinstance(stamp, Time):
             raise JointStateError(f"JointState header.stamp must be a Time, not {stamp!r}")
         positions = self.positions(joint_state)
-        index = self._index
-        rows: list[int] = []
-        values: list[float] = []
+        moving = self._moving
+        new = tuple.__new__
+        result: list[TransformStamped] = []
         refused: dict[str, object] = {}
-        for name in sorted(n for n in positions if n in index):
+        for name in sorted(n for n in positions if n in moving):
             raw = positions[name]
             try:
-                value = float(raw)  # type: ignore[arg-type]
+                q = float(raw)  # type: ignore[arg-type]
             except (TypeError, ValueError):
-                value = math.nan
-            if math.isfinite(value):
-                rows.append(index[name])
-                values.append(value)
-            else:
+                q = math.nan
+            if not math.isfinite(q):
                 refused[name] = raw
-        result = self._compute(stamp, rows, values)
+                continue
+            parent, child, rotates, tr, (ax, ay, az), rot = moving[name]
+            if rotates:
+                # origin rotation (x1, y1, z1, w1) times the rotation by q about the axis
+                x1, y1, z1, w1 = rot
+                h = 0.5 * q
+                sh = math.sin(h)
+                bx, by, bz, bw = ax * sh, ay * sh, az * sh, math.cos(h)
+                x = w1 * bx + x1 * bw + y1 * bz - z1 * by
+                y = w1 * by - x1 * bz + y1 * bw + z1 * bx
+                z = w1 * bz + x1 * by - y1 * bx + z1 * bw
+                w = w1 * bw - x1 * bx - y1 * by - z1 * bz
+                if _kdl_flips(x, y, z, w):
+                    x, y, z, w = -x, -y, -z, -w
+                transform = new(Transform, (tr, new(Quaternion, (x, y, z, w))))
+            else:
+                transform = new(Transform, (
+                    new(Vector3, (tr[0] + ax * q, tr[1] + ay * q, tr[2] + az * q)), rot))
+            result.append(new(TransformStamped,
+                              (new(Header, (stamp, parent)), child, transform)))
         if refused:
             shown = ", ".join(f"{name}={value!r}" for name, value in refused.items())
             raise JointStateError(f"joint position(s) must be finite numbers: {shown} (the "
                                   f"other {len(result)} joint(s) were computed)",
                                   refused, result)
         return result
-
-    def _compute(self, stamp: Time, rows: list[int], values: list[float]) -> list[TransformStamped]:
-        if not rows:
-            return []
-        idx = np.asarray(rows, dtype=np.intp)
-        q = np.asarray(values, dtype=np.float64)
-        rot = self._rotates[idx]
-        angle = np.where(rot, q, 0.0)
-        n = self._axis[idx]
-        # Rodrigues: R = cos I + sin [n]x + (1 - cos) n n^T  (KDL Rotation::Rot2)
-        c, s = np.cos(angle), np.sin(angle)
-        v = 1.0 - c
-        nx, ny, nz = n[:, 0], n[:, 1], n[:, 2]
-        r2 = np.empty((len(rows), 3, 3))
-        r2[:, 0, 0] = c + v * nx * nx
-        r2[:, 0, 1] = v * nx * ny - s * nz
-        r2[:, 0, 2] = v * nx * nz + s * ny
-        r2[:, 1, 0] = v * nx * ny + s * nz
-        r2[:, 1, 1] = c + v * ny * ny
-        r2[:, 1, 2] = v * ny * nz - s * nx
-        r2[:, 2, 0] = v * nx * nz - s * ny
-        r2[:, 2, 1] = v * ny * nz + s * nx
-        r2[:, 2, 2] = c + v * nz * nz
-        quats = _quaternions(r2 @ self._basis[idx]).tolist()
-        trans = (self._origin[idx] + n * np.where(rot, 0.0, q)[:, None]).tolist()
-        frames = self._frames
-        return [
-            TransformStamped(Header(stamp, frames[row][0]), frames[row][1],
-                             Transform(Vector3(*t), Quaternion(*qq)))
-            for row, t, qq in zip(rows, trans, quats, strict=True)
-        ]
 
     # -- the node ---------------------------------------------------------------------
 
