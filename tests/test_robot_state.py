@@ -490,3 +490,73 @@ def test_live_against_the_real_node(ros1_rsp: None, tmp_path: Path) -> None:
             except JointStateError as err:
                 assert_same(rows(err.transforms), finite(case["tf"]))
     assert len(list(tmp_path.glob("*.json.gz"))) == 2
+
+
+# --------------------------------------------------------------------------- the demo
+
+INFO = ("base_laser: (1.00, 0.20. 0.00) -----> base_link: (1.10, 0.20, 0.20) at time 0.00")
+
+
+def demo_module() -> Any:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("robot_state_demo",
+                                                  ROOT / "demos" / "robot_state.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_demo_urdf_is_the_tutorial_robot() -> None:
+    rsp = RobotStatePublisher(ROOT / "demos" / "robot.urdf")
+    (laser,) = rsp.static_transforms(T)
+    assert (laser.header.frame_id, laser.child_frame_id) == ("base_link", "base_laser")
+    assert laser.transform.translation == (0.1, 0.0, 0.2)
+    assert laser.transform.rotation == (0.0, 0.0, 0.0, 1.0)
+    assert sorted((j.name, j.type) for j in rsp.model.joints if j.movable) == [
+        ("left_wheel_joint", "continuous"), ("right_wheel_joint", "continuous")]
+
+
+async def test_demo_listener_keeps_printing_the_tutorial_line() -> None:
+    clock = ManualClock(Time(1_248_138_528))
+    lines: list[str] = []
+
+    async def run() -> Any:
+        return await demo_module().run_robot_state_demo(clock=clock, duration=3.45,
+                                                        out=lines.append)
+
+    async with anyio.create_task_group() as tg:
+        result: list[Any] = []
+        tg.start_soon(lambda: _collect(run, result))
+        await clock.advance(0)
+        for _ in range(35):
+            await clock.advance(0.1)
+    infos = [line for line in lines if line.startswith("[ INFO] 1248138")]
+    assert len(infos) == 3 and all(line.endswith(INFO) for line in infos), lines
+    assert lines[-1] == ("[ INFO] summary: robot_state_publisher published 70 wheel "
+                         "transforms from 35 joint states")  # 10 Hz, t = 0 .. 3.4 s
+    assert result[0].rate_limited == 0
+
+
+async def _collect(run: Any, result: list[Any]) -> None:
+    result.append(await run())
+
+
+def test_demo_script_exits_cleanly_on_ctrl_c() -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, str(ROOT / "demos" / "robot_state.py")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # the listener's first line, after ~1 s
+        assert first.rstrip("\n").endswith(INFO), first
+        proc.send_signal(2)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 0, err
+    assert out.strip().splitlines()[-1].startswith("[ INFO] summary: robot_state_publisher")
+    assert "Traceback" not in err
