@@ -10,6 +10,7 @@ is installed (installing it with scripts/install_ros1_rsp.sh if needed).
 
 from __future__ import annotations
 
+import functools
 import gzip
 import json
 import math
@@ -23,6 +24,8 @@ from typing import Any
 import anyio
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import ManualClock
@@ -31,6 +34,7 @@ from tfbus.messages import Header, JointState, Point, PointStamped, TransformSta
 from tfbus.robot_state import (
     JointStateError,
     RobotStatePublisher,
+    _quaternions,
     publish_joint_states,
     sinusoidal_joint_state,
 )
@@ -560,3 +564,102 @@ def test_demo_script_exits_cleanly_on_ctrl_c() -> None:
     assert proc.returncode == 0, err
     assert out.strip().splitlines()[-1].startswith("[ INFO] summary: robot_state_publisher")
     assert "Traceback" not in err
+
+
+# --------------------------------------------------------------------------- properties
+
+angles = st.floats(-4.0, 4.0, allow_nan=False)
+unit = st.floats(-1.0, 1.0, allow_nan=False)
+
+
+def _urdf_one(kind: str, rpy: tuple[float, float, float],
+              axis: tuple[float, float, float]) -> str:
+    limit = '<limit lower="-5" upper="5" effort="1" velocity="1"/>'
+    return (f'<robot name="p"><link name="a"/><link name="b"/><joint name="j" type="{kind}">'
+            f'<parent link="a"/><child link="b"/><origin xyz="0.1 0.2 0.3" '
+            f'rpy="{rpy[0]!r} {rpy[1]!r} {rpy[2]!r}"/><axis xyz="{axis[0]!r} {axis[1]!r} '
+            f'{axis[2]!r}"/>{limit}</joint></robot>')
+
+
+@settings(max_examples=150, deadline=None)
+@given(rpy=st.tuples(angles, angles, angles), axis=st.tuples(unit, unit, unit), q=angles)
+def test_joint_rotation_is_kdls_matrix_route(rpy: tuple[float, float, float],
+                                             axis: tuple[float, float, float],
+                                             q: float) -> None:
+    """The per-joint quaternion path equals KDL's route, Rot2(M a, q) * M then
+    GetQuaternion on the matrix, signs included; and it is a unit quaternion."""
+    from transforms3d.axangles import axangle2mat
+    from transforms3d.euler import euler2mat
+
+    if math.hypot(*axis) < 1e-3:
+        return
+    (t,) = RobotStatePublisher(_urdf_one("revolute", rpy, axis)).transforms(
+        JointState(Header(T), ["j"], [q]))
+    m = euler2mat(*rpy, "sxyz")
+    n = m @ np.asarray(axis) / math.hypot(*axis)
+    expected = _quaternions((axangle2mat(n, q) @ m)[None])[0]
+    got = np.asarray(t.transform.rotation)
+    if np.abs(got + expected).max() < 1e-9:
+        # -q is allowed only on KDL's branch boundaries (trace at 1e-12, diagonal ties),
+        # where rounding in either route may pick the other branch
+        r = axangle2mat(n, q) @ m
+        diag = np.sort(np.diag(r))
+        assert abs(np.trace(r) - 1e-12) < 1e-9 or diag[2] - diag[1] < 1e-9
+    else:
+        np.testing.assert_allclose(got, expected, atol=1e-12)
+    assert abs(float(np.linalg.norm(got)) - 1.0) < 1e-12
+    assert t.transform.translation == (0.1, 0.2, 0.3)
+
+
+@functools.cache
+def _pr2() -> RobotStatePublisher:
+    return RobotStatePublisher(SHARED_URDF / "rsp_pr2.urdf")
+
+
+@settings(max_examples=50, deadline=None)
+@given(q=st.lists(angles, min_size=40, max_size=40))
+def test_pr2_chain_equals_direct_forward_kinematics(q: list[float]) -> None:
+    """Through a BufferCore, the published links compose to the forward kinematics computed
+    independently with 4x4 matrices (URDF: T = origin * joint motion)."""
+    from transforms3d.axangles import axangle2mat
+    from transforms3d.euler import euler2mat
+
+    from tfbus.core import BufferCore
+
+    rsp = _pr2()
+    model = rsp.model
+    movable = [j for j in model.joints if j.movable]
+    positions = dict(zip((j.name for j in movable), q, strict=True))
+    core = BufferCore()
+    for t in rsp.static_transforms(T):
+        core.set_transform_static(t, "test")
+    for t in rsp.transforms(JointState(Header(T), list(positions), list(positions.values()))):
+        core.set_transform(t, "test")
+    parent = {j.child: j for j in model.joints}
+
+    def fk(link: str) -> np.ndarray:
+        out = np.eye(4)
+        while link in parent:
+            j = parent[link]
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = euler2mat(*j.rpy, "sxyz"), j.xyz
+            motion = np.eye(4)
+            if j.movable:
+                a = np.asarray(j.axis) / math.hypot(*j.axis)
+                if j.type == "prismatic":
+                    motion[:3, 3] = a * positions[j.name]
+                else:
+                    motion[:3, :3] = axangle2mat(a, positions[j.name])
+            out = m @ motion @ out
+            link = j.parent
+        return out
+
+    for tip in ("r_gripper_l_finger_tip_link", "l_forearm_cam_optical_frame",
+                "high_def_optical_frame", "torso_lift_link"):
+        got = core.lookup_transform(model.root, tip, Time(0)).transform
+        expected = fk(tip)
+        np.testing.assert_allclose(got.translation, expected[:3, 3], atol=1e-9)
+        qx, qy, qz, qw = got.rotation
+        from transforms3d.quaternions import quat2mat
+
+        np.testing.assert_allclose(quat2mat((qw, qx, qy, qz)), expected[:3, :3], atol=1e-9)
