@@ -663,3 +663,21 @@ def test_pr2_chain_equals_direct_forward_kinematics(q: list[float]) -> None:
         from transforms3d.quaternions import quat2mat
 
         np.testing.assert_allclose(quat2mat((qw, qx, qy, qz)), expected[:3, :3], atol=1e-9)
+
+
+def test_joint_state_message_and_its_wire_form() -> None:
+    pytest.importorskip("msgspec")
+    from tfbus.transports.wire import WireCodec, register_message_type
+
+    assert JointState()._fields == ("header", "name", "position", "velocity", "effort")
+    assert JointState() == JointState(Header(), (), (), (), ())
+    register_message_type(JointState)
+    msg = JointState(Header(Time(3, 4), "base"), ["a", "b"], [0.5, -1.0], [], [2.0, 3.0])
+    codec = WireCodec()
+    back = codec.decode(codec.encode(msg, sender=1, seq=1)).message
+    assert back == JointState(Header(Time(3, 4), "base"), ["a", "b"], [0.5, -1.0], [],
+                              [2.0, 3.0])
+
+
+def test_urdf_text_with_a_byte_order_mark() -> None:
+    assert load_urdf("\ufeff" + ARM) == load_urdf(ARM) == load_urdf(b"\xef\xbb\xbf" + ARM.encode())

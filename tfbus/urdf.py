@@ -128,7 +128,9 @@ def load_urdf(model: str | bytes | os.PathLike[str] | RobotModel | Any) -> Robot
     """
     if isinstance(model, RobotModel):
         return model
-    if isinstance(model, (str, bytes)) and model.lstrip()[:1] in ("<", b"<"):
+    if isinstance(model, str) and model.lstrip("\ufeff \t\r\n").startswith("<"):
+        return _from_text(model.lstrip("\ufeff"))
+    if isinstance(model, bytes) and model.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"<"):
         return _from_text(model)
     if isinstance(model, (str, os.PathLike)):
         path = Path(model)
