@@ -154,6 +154,17 @@ def _origin_rotation(rpy: tuple[float, float, float]) -> _F64:
     return np.asarray(quat2mat(euler2quat(rpy[0], rpy[1], rpy[2], "sxyz")), dtype=np.float64)
 
 
+def _shown(name: str) -> str:
+    """A joint name for a message: as is when printable, else its repr (no terminal escapes)."""
+    return name if name.isprintable() else repr(name)
+
+
+def _warn(count: int, message: str, *args: object) -> None:
+    """Log the 1st, 10th, 100th, ... occurrence only: a bad peer cannot flood the log."""
+    if count == 1 or str(count).rstrip("0") == "1":
+        _log.warning(message + " (%d so far)", *args, count)
+
+
 def _kdl_flips(x: float, y: float, z: float, w: float) -> bool:
     """Whether KDL's ``Rotation::GetQuaternion`` returns -q for the rotation of the
     quaternion q: its branch is chosen on the matrix trace and diagonal (KDL's
@@ -313,7 +324,7 @@ class RobotStatePublisher:
             result.append(new(TransformStamped,
                               (new(Header, (stamp, parent)), child, transform)))
         if refused:
-            shown = ", ".join(f"{name}={value!r}" for name, value in refused.items())
+            shown = ", ".join(f"{_shown(name)}={value!r}" for name, value in refused.items())
             raise JointStateError(f"joint position(s) must be finite numbers: {shown} (the "
                                   f"other {len(result)} joint(s) were computed)",
                                   refused, result)
@@ -352,7 +363,7 @@ class RobotStatePublisher:
         clock = clock if clock is not None else SystemClock()
         interval = round(1e9 / max(float(publish_frequency), 1.0))
         last_publish: dict[str, int] = {}
-        last_callback = 0
+        last_callback = refusals = 0
         stats = self.statistics
         with bus.subscribe(joint_states_topic) as sub:
             statics = self.static_transforms(clock.now())
@@ -363,8 +374,8 @@ class RobotStatePublisher:
                 stats.received += 1
                 if not isinstance(msg, JointState):
                     stats.invalid += 1
-                    _log.warning("ignored a %s on %s (expected JointState)",
-                                 type(msg).__name__, joint_states_topic)
+                    _warn(stats.invalid, "ignored a %s on %s (expected JointState)",
+                          type(msg).__name__, joint_states_topic)
                     continue
                 try:
                     stamp = msg.header.stamp.ns
@@ -375,8 +386,8 @@ class RobotStatePublisher:
                 if sizes[0] != sizes[1] or stamp < 0:
                     if sizes[1]:  # an empty position is ignored quietly, as ROS does
                         stats.invalid += 1
-                        _log.warning("ignored an invalid JointState on %s (%d names, %d "
-                                     "positions)", joint_states_topic, *sizes)
+                        _warn(stats.invalid, "ignored an invalid JointState on %s (%d names, "
+                              "%d positions)", joint_states_topic, *sizes)
                     continue
                 now = clock.now().ns
                 if last_callback > now:  # moved backwards in time: re-publish
@@ -392,7 +403,8 @@ class RobotStatePublisher:
                 except JointStateError as err:
                     stats.refused_positions += len(err.refused)
                     stats.invalid += not err.refused
-                    _log.warning("%s", err)
+                    refusals += 1
+                    _warn(refusals, "%s", err)
                     out = err.transforms
                 for n in keys:
                     last_publish[n] = stamp
