@@ -144,7 +144,8 @@ def tf_rows(msg) -> list:
               t.transform.rotation.w]] for t in msg.transforms]
 
 
-def record(urdfs: list[Path], out_dir: Path, seed: int, wait: float) -> list[Path]:
+def start_roscore() -> subprocess.Popen:
+    """A private roscore on 127.0.0.1 (free port, private ROS_HOME), up and answering."""
     port = free_port()
     home = Path(tempfile.mkdtemp(prefix="rsp_rec_"))
     os.environ.update(ROS_MASTER_URI=f"http://127.0.0.1:{port}", ROS_IP="127.0.0.1",
@@ -153,19 +154,55 @@ def record(urdfs: list[Path], out_dir: Path, seed: int, wait: float) -> list[Pat
     os.environ["PATH"] = "/usr/bin:" + os.environ.get("PATH", "")
     core = subprocess.Popen(["roscore", "-p", str(port)], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
-    written: list[Path] = []
+    import rosgraph
+
+    deadline = time.monotonic() + 30
+    while not rosgraph.is_master_online():
+        if time.monotonic() > deadline or core.poll() is not None:
+            stop(core)
+            raise RuntimeError("roscore did not come up within 30 s")
+        time.sleep(0.2)
+    return core
+
+
+def refusals(texts: dict[str, str], wait: float = 4.0) -> dict[str, list]:
+    """For each robot description: does the real node refuse it? [exit status or
+    "running" (still up after ``wait`` s), the node's first ERROR line]."""
+    core = start_roscore()
+    out: dict[str, list] = {}
     try:
         import rosgraph
+
+        master = rosgraph.Master("/rsp_refusals")
+        for name, text in texts.items():
+            master.setParam("/robot_description", text)
+            node = subprocess.Popen(["rosrun", "robot_state_publisher",
+                                     "robot_state_publisher"], stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True,
+                                    start_new_session=True)
+            try:
+                log, _ = node.communicate(timeout=wait)
+                status: object = node.returncode
+            except subprocess.TimeoutExpired:
+                node.send_signal(signal.SIGINT)
+                log, _ = node.communicate(timeout=15)
+                status = "running"
+            errors = [line for line in log.splitlines() if "[ERROR]" in line]
+            out[name] = [status, errors[0] if errors else ""]
+    finally:
+        stop(core)
+    return out
+
+
+def record(urdfs: list[Path], out_dir: Path, seed: int, wait: float) -> list[Path]:
+    core = start_roscore()
+    written: list[Path] = []
+    try:
         import rospy
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Header
         from tf2_msgs.msg import TFMessage
 
-        deadline = time.monotonic() + 30
-        while not rosgraph.is_master_online():
-            if time.monotonic() > deadline or core.poll() is not None:
-                raise RuntimeError("roscore did not come up within 30 s")
-            time.sleep(0.2)
         rospy.init_node("rsp_recorder", disable_signals=True)
         tf_q: queue.Queue = queue.Queue()
         static_q: queue.Queue = queue.Queue()
@@ -251,7 +288,13 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=15)
     parser.add_argument("--wait", type=float, default=1.5,
                         help="seconds to wait for the node's answer to one joint state")
+    parser.add_argument("--refusals", action="store_true",
+                        help="read {name: URDF text} as JSON on stdin, print {name: [exit "
+                             "status or 'running', first ERROR line]} of the node for each")
     args = parser.parse_args()
+    if args.refusals:
+        json.dump(refusals(json.load(sys.stdin)), sys.stdout)
+        return 0
     urdfs = args.urdf or [*sorted(DATA.glob("*.urdf")), EXTRA]
     args.out.mkdir(parents=True, exist_ok=True)
     for path in record(urdfs, args.out, args.seed, args.wait):

@@ -267,7 +267,7 @@ def test_invalid_joint_states() -> None:
 GOOD_JOINT = ('<joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>')
 
 
-@pytest.mark.parametrize(("text", "element", "message"), [
+MALFORMED = [
     ("<robot name='r'><link name='a'>", "line 1", "not well-formed XML"),
     ("<model name='r'/>", "robot", "root element is <model>"),
     ("<robot name='r'/>", "robot", "no <link>"),
@@ -305,7 +305,10 @@ GOOD_JOINT = ('<joint name="j" type="fixed"><parent link="a"/><child link="b"/><
      "joint 'j'", "invalid URDF at /robot"),
     ("<robot name='r'><link name='a'/><link name='b'/>"
      + GOOD_JOINT.replace('<parent link="a"/>', "") + "</robot>", "joint 'j'", "parent"),
-])
+]
+
+
+@pytest.mark.parametrize(("text", "element", "message"), MALFORMED)
 def test_malformed_urdf_gives_one_clear_error(text: str, element: str, message: str) -> None:
     with pytest.raises(URDFError, match=message) as info:
         RobotStatePublisher(text)
@@ -681,3 +684,22 @@ def test_joint_state_message_and_its_wire_form() -> None:
 
 def test_urdf_text_with_a_byte_order_mark() -> None:
     assert load_urdf("\ufeff" + ARM) == load_urdf(ARM) == load_urdf(b"\xef\xbb\xbf" + ARM.encode())
+
+
+def test_live_the_real_node_refuses_the_same_malformed_urdfs(ros1_rsp: None) -> None:
+    """Every description tfbus refuses makes ROS 1's node exit with an error too (or
+    crash: a link with two parents and a loop below it is a SIGSEGV in urdfdom 3.0),
+    except a zero-length axis: the node runs (and would publish NaN transforms)."""
+    texts = {f"{k}: {message}": text for k, (text, _, message) in enumerate(MALFORMED)}
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "VIRTUAL_ENV"))}
+    done = subprocess.run(
+        ["/usr/bin/python3", str(ROOT / "scripts" / "record_robot_state.py"), "--refusals"],
+        input=json.dumps(texts), capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    verdicts = json.loads(done.stdout)
+    for name, (status, error) in verdicts.items():
+        if "zero length" in name:
+            assert status == "running", (name, error)
+        else:
+            assert status not in (0, "running") and (error or status < 0), (name, status)
+    assert len(verdicts) == len(MALFORMED)

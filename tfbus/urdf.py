@@ -12,9 +12,11 @@ checks what the C++ ``urdfdom`` parser behind ROS's ``urdf::Model`` refuses
 here too, with one :class:`URDFError` naming the element: not well-formed XML, a root
 element other than ``<robot>``, duplicate link or joint names, a joint whose parent or
 child link is not defined, a link with two parent joints, loops, no root or two root
-links, unknown joint types, a revolute or prismatic joint without ``<limit>``. tfbus also
-refuses a zero-length ``<axis>`` and non-finite numbers in ``<origin>``/``<axis>``/
-``<mimic>``, which ROS accepts and then publishes as NaN transforms.
+links, unknown joint types, a revolute or prismatic joint without ``<limit>``, numbers
+that are not finite (urdfdom cannot parse ``nan``/``inf``). Each of these was checked to
+make ROS 1's robot_state_publisher 1.15 exit with an error. tfbus also refuses a
+zero-length ``<axis>`` on a moving joint, which the node accepts and then publishes as
+NaN transforms. A mimic of an unknown joint is accepted, as by the node (it never moves).
 
 ``<transmission>`` elements are dropped before parsing: ``urdf::Model`` ignores them and
 urdfdom-py rejects the pr2_mechanism ones (PR2's description has them); ``<gazebo>``
