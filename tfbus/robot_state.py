@@ -24,8 +24,13 @@ checked transform for transform against recordings of the real node
   a repeated name keeps its first position. Transforms come sorted by joint name.
 * a JointState whose ``position`` is empty is ignored; one with a different number of
   names and positions is refused (:class:`JointStateError`), as the node does.
-* quaternions (x, y, z, w) are extracted from the rotation matrix with KDL's
-  ``Rotation::GetQuaternion`` branches (Shepperd's method), so their signs match the node.
+* a quaternion (x, y, z, w) is the origin's rotation times the joint's rotation about its
+  axis, with the sign KDL's ``Rotation::GetQuaternion`` (Shepperd's method) gives: w > 0
+  up to 120 degrees of rotation, past that the largest of x, y, z positive. Values and
+  signs match the node to 1e-15 on every recorded case; the fixed joints' rotations are
+  extracted from the matrix exactly as KDL does.
+* all static transforms carry the one stamp given (the node reads its clock once per
+  fixed joint, microseconds apart).
 * ``frame_prefix`` is ROS 2's (``frame_prefix + link``, no separator added).
 
 tfbus refuses NaN/±Inf positions (the node publishes NaN transforms that every tf2
@@ -167,9 +172,9 @@ def _warn(count: int, message: str, *args: object) -> None:
 
 def _kdl_flips(x: float, y: float, z: float, w: float) -> bool:
     """Whether KDL's ``Rotation::GetQuaternion`` returns -q for the rotation of the
-    quaternion q: its branch is chosen on the matrix trace and diagonal (KDL's
-    ``Rotation::Quaternion`` formulas below), and the branch's component comes out
-    positive."""
+    quaternion q: its branch is chosen on the matrix trace and diagonal (written from q
+    with KDL's ``Rotation::Quaternion`` formulas), and the branch's component comes out
+    positive (w for a trace above 1e-12, else x, y or z for the largest diagonal entry)."""
     xx, yy, zz, ww = x * x, y * y, z * z, w * w
     if 3.0 * ww - xx - yy - zz > 1e-12:
         return w < 0.0
