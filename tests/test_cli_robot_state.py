@@ -18,14 +18,16 @@ from pathlib import Path
 
 import anyio
 import pytest
+
+pytest.importorskip("click")
+pytest.importorskip("urdf_parser_py")
+
 from click.testing import CliRunner
 
 from tfbus.buffer import Buffer
 from tfbus.cli_robot_state import joint_states_cmd, main, robot_state_publisher_cmd
 from tfbus.listener import TransformListener
 from tfbus.time import Time
-
-pytest.importorskip("urdf_parser_py")
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = ROOT / "demos" / "robot.urdf"
