@@ -129,3 +129,20 @@ class TFMessage(NamedTuple):
     """tf2_msgs/TFMessage: the message carried on ``/tf`` and ``/tf_static``."""
 
     transforms: Sequence[TransformStamped] = ()
+
+
+class JointState(NamedTuple):
+    """sensor_msgs/JointState: the state of a set of named joints at ``header.stamp``.
+
+    ``name[i]`` is described by ``position[i]`` (radians for revolute and continuous
+    joints, metres for prismatic ones), ``velocity[i]`` (rad/s or m/s) and ``effort[i]``
+    (N·m or N). As in sensor_msgs, any of the three arrays may be empty when that
+    quantity is not reported; otherwise it has one entry per name. ``header.frame_id``
+    is unused by robot_state_publisher.
+    """
+
+    header: Header = _EMPTY_HEADER
+    name: Sequence[str] = ()
+    position: Sequence[float] = ()
+    velocity: Sequence[float] = ()
+    effort: Sequence[float] = ()
