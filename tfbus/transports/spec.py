@@ -259,3 +259,25 @@ register_scheme(
         summary="Zenoh: this machine by default, or connect/listen endpoints",
     )
 )
+register_scheme(
+    TransportScheme(
+        "ros2",
+        "tfbus.transports.ros2",
+        keys=frozenset({"domain", "config", "interfaces", "peers"}),
+        default_key="domain",
+        extra="ros2",
+        requires=("cyclonedds",),
+        summary="ROS 2 over DDS (Cyclone): /tf and /tf_static with ROS 2 nodes, loopback",
+    )
+)
+register_scheme(
+    TransportScheme(
+        "ros1",
+        "tfbus.transports.ros1",
+        keys=frozenset({"master", "name", "host", "remote"}),
+        default_key="master",
+        extra="ros1",
+        requires=("rosbags",),
+        summary="ROS 1 node (TCPROS): ROS_MASTER_URI, else http://127.0.0.1:11311",
+    )
+)
