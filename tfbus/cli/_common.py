@@ -69,13 +69,18 @@ def one_line(text: str) -> str:
 
 def console(err: bool = False) -> Console:
     """A rich console that never interprets markup or emoji codes in what it prints
-    (ids are data, not markup); pipes and files get 200 columns instead of 80."""
+    (ids are data, not markup). In a terminal, table cells holding ids wrap at its width
+    (never cut off); pipes and files get the full width of every line instead."""
     from rich.console import Console
 
     out = Console(stderr=err, highlight=False, soft_wrap=True, markup=False, emoji=False)
     if not out.is_terminal:
-        out.width = 200
+        out.width = NON_TERMINAL_WIDTH
     return out
+
+
+NON_TERMINAL_WIDTH = 100_000
+"""Columns of a pipe or file: wide enough that no id is ever wrapped there."""
 
 
 # --------------------------------------------------------------------------- errors

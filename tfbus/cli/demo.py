@@ -3,7 +3,7 @@ parsed here, once; :mod:`tfbus.demo` holds the nodes and runners."""
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -47,8 +47,11 @@ def _inherit(ctx: click.Context, **options: Any) -> dict[str, Any]:
 
 def _backend(name: str | None) -> str:
     backend = name or "asyncio"
-    if backend == "trio" and importlib.util.find_spec("trio") is None:
-        fail("--backend trio needs the 'trio' package: pip install trio")
+    if backend == "trio":
+        try:
+            importlib.import_module("trio")
+        except ImportError:
+            fail("--backend trio needs the 'trio' package: pip install trio")
     return backend
 
 
