@@ -12,8 +12,8 @@ import pytest
 from tfbus import Time
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
-from tfbus.clock import ManualClock
 from tfbus.cli import main
+from tfbus.clock import ManualClock
 from tfbus.demo import BroadcasterStats, broadcaster_node, listener_node, run_demo
 from tfbus.listener import TransformListener
 

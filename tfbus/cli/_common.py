@@ -148,11 +148,14 @@ class _Group(click.Group):
             if standalone_mode:
                 sys.exit(err.exit_code)
             raise
-        except click.Abort:
-            click.echo("Aborted.", err=True)
-            if standalone_mode:
-                sys.exit(1)
-            raise
+        except click.Abort as err:
+            if isinstance(err.__cause__, KeyboardInterrupt):  # Ctrl-C or SIGTERM
+                rv = 130
+            else:
+                click.echo("Aborted.", err=True)
+                if standalone_mode:
+                    sys.exit(1)
+                raise
         except KeyboardInterrupt:
             rv = 130
         except ImportError as err:

@@ -370,11 +370,14 @@ def run_live(main: Callable[[], Awaitable[None]], *, backend: str = "asyncio") -
     return None
 
 
-async def cancel_on_signal(scope: anyio.CancelScope) -> None:
-    """Cancel ``scope`` at the first SIGINT or SIGTERM."""
+async def cancel_on_signal(scope: anyio.CancelScope, *, task_status: Any = None) -> None:
+    """Cancel ``scope`` at the first SIGINT or SIGTERM (``await tg.start(...)`` returns
+    once the handler is installed)."""
     import anyio
 
     with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        if task_status is not None:
+            task_status.started()
         async for _ in signals:
             scope.cancel()
             return
@@ -397,7 +400,7 @@ async def live(
         with anyio.CancelScope() as scope:
             if duration is not None:
                 scope.deadline = anyio.current_time() + duration
-            tg.start_soon(cancel_on_signal, scope)
+            await tg.start(cancel_on_signal, scope)
             await body()
         if finish is not None:
             finish()

@@ -153,7 +153,7 @@ def command(bag: Path | None, bus: str | None, output: Path, duration: float | N
         return 1
     graphviz = importlib.import_module("graphviz")
     try:
-        rendered = graphviz.Source(dot).pipe(format=fmt)
+        rendered = graphviz.Source(dot).pipe(format=fmt, quiet=True)
     except graphviz.CalledProcessError as err:
         stderr = err.stderr.decode("utf-8", "replace") if isinstance(err.stderr, bytes) else ""
         error(f"dot failed (exit status {err.returncode}): "

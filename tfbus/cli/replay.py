@@ -107,7 +107,9 @@ async def _replay(
             progress.update(task, advance=1, description=f"bag time {fmt_sec(rec.time.ns)}")
 
         async with bus, anyio.create_task_group() as tg:
-            tg.start_soon(cancel_on_signal, tg.cancel_scope)
+            await tg.start(cancel_on_signal, tg.cancel_scope)
+            if not quiet:
+                progress.console.print(f"replaying {literal(path)} ...")
             try:
                 result[0] = await replay(
                     path, bus, clock=clock, rate=rate or None, start=start, stop=stop,

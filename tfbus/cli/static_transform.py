@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Sequence
 
 import click
@@ -102,19 +103,22 @@ def command(args: tuple[str, ...], bus: str | None, local: bool, once: bool) -> 
     except ValueError as err:
         fail(str(err))
     open_bus = publish_bus(bus, local, name="static_transform_publisher")
-    out = console()
-    tr, q = ts.transform.translation, ts.transform.rotation
-    out.print(
-        f"publishing static transform {literal(ts.header.frame_id)} -> "
-        f"{literal(ts.child_frame_id)}: translation ({tr.x}, {tr.y}, {tr.z}), rotation "
-        f"({q.x:.9g}, {q.y:.9g}, {q.z:.9g}, {q.w:.9g})"
-    )
     code = run_live(lambda: _publish_static(open_bus, ts, once))
     return 0 if code in (None, 130) else code
 
 
+def _announce(ts: TransformStamped) -> None:
+    tr, q = ts.transform.translation, ts.transform.rotation
+    console().print(
+        f"publishing static transform {literal(ts.header.frame_id)} -> "
+        f"{literal(ts.child_frame_id)}: translation ({tr.x}, {tr.y}, {tr.z}), rotation "
+        f"({q.x:.9g}, {q.y:.9g}, {q.z:.9g}, {q.w:.9g})"
+    )
+
+
 async def _publish_static(open_bus: Callable[[], object], ts: TransformStamped,
                           once: bool) -> None:
+    """Open the bus, publish ``ts`` (latched), say so, and stay until a signal."""
     import anyio
 
     from tfbus.broadcaster import StaticTransformBroadcaster
@@ -123,9 +127,12 @@ async def _publish_static(open_bus: Callable[[], object], ts: TransformStamped,
     bus = open_bus()
     assert isinstance(bus, Bus)
     async with bus, anyio.create_task_group() as tg:
+        if not once:
+            await tg.start(cancel_on_signal, tg.cancel_scope)
         await StaticTransformBroadcaster(bus).send_transform(ts)
+        _announce(ts)
+        sys.stdout.flush()
         if once:
             tg.cancel_scope.cancel()
             return
-        tg.start_soon(cancel_on_signal, tg.cancel_scope)
         await anyio.sleep_forever()
