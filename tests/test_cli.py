@@ -496,6 +496,12 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
                 while src.statistics().frames["base_laser"].count < ns - 1 - 5:
                     await anyio.sleep(0.02)
             s = src.statistics()
+            # Issue 10 §3: the live source is a TransformListener feeding the Buffer and
+            # tfbus.monitor's statistics, not a second feed loop.
+            from tfbus.listener import TransformListener
+
+            assert isinstance(src.listener, TransformListener)
+            assert src.listener.statistics().stored >= s.transform_count - 1
             assert s.frames["base_laser"].authority == "robot_tf_publisher"
             assert s.frames["camera"].static
             got = src.buffer().lookup_transform("base_link", "base_laser", Time(0))
