@@ -281,3 +281,5 @@ RATE_HELP = (
     "repeated stamp counts once (tf2 keeps it once). The same definition in frames, "
     "monitor and bag-info."
 )
+"""The ``--help`` epilogue of frames, monitor and bag-info: the rate definition
+(:func:`tfbus.monitor.link_rate`), issue 11 item 22."""
