@@ -236,6 +236,7 @@ def test_item20_echo_on_two_trees_prints_tf2_echo_failure(two_trees_bag: Path) -
                           "same tree.Tf has two or more unconnected trees.\n"
                           "The current list of frames is:\n")
     assert "Frame b exists with parent a." in out and "Frame d exists with parent c." in out
+    assert out.endswith(".\n\n")  # tf_echo: allFramesAsString() << std::endl
 
 
 # --------------------------------------------------------------------------- item 21

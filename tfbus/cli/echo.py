@@ -61,7 +61,8 @@ def failure_text(t: Time, error: Exception, core: BufferCore) -> str:
         The current list of frames is:
         <allFramesAsString>
 
-    every line made literal (control characters escaped)."""
+    (tf_echo ends it with one more ``endl``: a blank line), every line made literal
+    (control characters escaped)."""
     return (
         f"Failure at {fmt_sec(t.ns)}\nException thrown:{literal(error)}\n"
         f"The current list of frames is:\n{literal_lines(core.all_frames_as_string())}"
@@ -168,7 +169,7 @@ def command(
             ts = core.lookup_transform(source_frame, target_frame, t)
         except TransformException as err:
             failures += 1
-            out.print(failure_text(t, err, core), end="")
+            out.print(failure_text(t, err, core))  # + tf_echo's blank line after the list
             continue
         out.print(format_transform(ts, precision=precision, matrix=matrix))
     code = finish_status(src.problem)
