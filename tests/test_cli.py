@@ -461,7 +461,7 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
     port = _free_port()
     events: list[tuple[str, str]] = []
     src = BusSource(f"zenoh?connect=tcp/127.0.0.1:{port}", name="test-monitor")
-    assert src.options.name == "test-monitor" and src.label.startswith("the bus")
+    assert src.name == "test-monitor" and src.label.startswith("the bus")
     publisher = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot_tf_publisher")
     stop = anyio.Event()
 

@@ -27,14 +27,13 @@ The tutorial's three terminals -- the two nodes as separate processes, over Zeno
     tfbus monitor --bus zenoh           # a third terminal: rates, delays, live broadcasters
 
 (or ``python demos/robot_setup_tf.py listener``). ``--bus SPEC`` picks the bus
-(:func:`tfbus.transports.zenoh.parse_bus_spec`; default ``zenoh``: this machine, no
+(:mod:`tfbus.transports.spec`: ``zenoh``, ``ros2``, ``ros1``; default ``zenoh``: this machine, no
 configuration). :func:`run_broadcaster` and :func:`run_listener` run one node on any open
 bus; each prints its summary line on exit (Ctrl-C / SIGTERM exit cleanly).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import signal
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -325,17 +324,15 @@ async def _borrowed(bus: Bus) -> AsyncIterator[Bus]:
 
 
 def open_bus(spec: str = "zenoh", *, name: str | None = None) -> Bus:
-    """A new (not yet opened) bus carried over Zenoh, from a ``--bus`` value.
+    """A new (not yet opened) bus from a ``--bus`` value (:mod:`tfbus.transports.spec`:
+    ``zenoh``, ``ros2``, ``ros1``, ``memory``, ...).
 
     ``name`` is the node name used unless ``spec`` gives one (``zenoh?name=...``).
 
     Raises:
-        ImportError: if the Zenoh transport is not installed (``tfbus[zenoh]``).
+        TransportError: if the scheme's extra is not installed (the message names it).
         ValueError: if ``spec`` is not a valid bus spec.
     """
-    from tfbus.transports.zenoh import parse_bus_spec, zenoh_bus_from_options
+    from tfbus.transports.spec import open_bus as open_spec_bus
 
-    options = parse_bus_spec(spec)
-    if options.name is None and name is not None:
-        options = dataclasses.replace(options, name=name)
-    return zenoh_bus_from_options(options)
+    return open_spec_bus(spec, default_name=name)

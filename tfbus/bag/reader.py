@@ -302,8 +302,8 @@ def _read(
     while True:
         try:
             item = next(items, None)
-        except BagError:
-            raise
+        except (BagError, ImportError):
+            raise  # an optional package missing is not damage: the caller names the extra
         except ScanError as err:
             raise fail(err.reason, err.offset) from None
         except Exception as err:
@@ -321,6 +321,8 @@ def _read(
         try:
             message = BagMessage(Time.from_ns(stamp), src.topic, TFMessage(src.decode(raw)),
                                  src.authority)
+        except ImportError:
+            raise
         except Exception as err:
             when = fmt_time(Time.from_ns(stamp)) if 0 <= stamp < 2**63 else f"{stamp} ns"
             if offset is None:

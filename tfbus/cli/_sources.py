@@ -3,15 +3,13 @@
 :class:`BagSource` reads a recording; :class:`BusSource` is a
 :class:`~tfbus.listener.TransformListener` feeding a :class:`~tfbus.buffer.Buffer` and
 :class:`~tfbus.monitor.TfStatistics` at once (:class:`~tfbus.monitor.MonitoredSink`), plus
-the Zenoh liveliness of broadcasters. Both offer :meth:`TfSource.buffer` and
+over Zenoh the liveliness of broadcasters. Both offer :meth:`TfSource.buffer` and
 :meth:`TfSource.statistics`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import importlib
 import logging
 import signal
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -26,11 +24,12 @@ if TYPE_CHECKING:
     import anyio
 
     from tfbus.buffer import Buffer
-    from tfbus.bus import Subscription
+    from tfbus.bus import Subscription, Transport
     from tfbus.core import BufferCore
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfStatistics
-    from tfbus.transports.zenoh import PeerEvent, PeerInfo, ZenohOptions, ZenohTransport
+    from tfbus.transports.spec import BusSpec
+    from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
 __all__ = ["BagSource", "BusSource", "TfSource", "is_bus_error", "live", "run_live",
            "source", "source_options"]
@@ -127,42 +126,54 @@ _UNKNOWN_AUTHORITY = "unknown"
 _SHARED_AUTHORITY = "unattributed"
 
 
-def _zenoh_options(spec: str) -> ZenohOptions:
-    """``--bus SPEC`` parsed (:func:`tfbus.transports.zenoh.parse_bus_spec`), or a usage
-    error naming the extra to install."""
+def parse_spec(spec: str) -> BusSpec:
+    """``--bus SPEC`` parsed by the scheme table (:mod:`tfbus.transports.spec`: ``zenoh``,
+    ``ros2``, ``ros1``, ``memory``, ...), or a one-line usage error."""
+    from tfbus.transports.spec import parse_bus_spec
+
     try:
-        zenoh_module = importlib.import_module("tfbus.transports.zenoh")
-    except ImportError as err:
-        fail(f"--bus needs the Zenoh transport: pip install 'tfbus[zenoh]' ({err})")
-    try:
-        options: ZenohOptions = zenoh_module.parse_bus_spec(spec)
+        return parse_bus_spec(spec)
     except ValueError as err:
         fail(str(err))
-    return options
+
+
+def open_spec_transport(spec: BusSpec, *, name: str) -> Transport:
+    """A new transport for ``spec``; ``name`` is this node's name unless the spec gives
+    one (:func:`tfbus.transports.spec.open_transport`'s ``default_name``).
+
+    Raises:
+        TransportError: the scheme's extra is not installed (named), or the transport
+            rejects its configuration.
+        ValueError: an option value the transport does not understand.
+    """
+    from tfbus.transports.spec import open_transport
+
+    return open_transport(spec, default_name=name)
 
 
 def check_bus_spec(bus: str | None) -> None:
     """A bad ``--bus`` is a one-line usage error here, before anything runs."""
     if bus is not None:
-        _zenoh_options(bus)
+        parse_spec(bus)
 
 
 class BusSource(TfSource):
-    """Transforms from a live bus carried over Zenoh (``--bus SPEC``).
+    """Transforms from a live bus (``--bus SPEC``: Zenoh, ROS 2, ROS 1, ...).
 
     While :meth:`attach` is open, a :class:`~tfbus.listener.TransformListener` stores every
     ``/tf`` and ``/tf_static`` message other processes broadcast in :meth:`buffer` (a
     :class:`~tfbus.buffer.Buffer`, so lookups can be awaited) through a
     :class:`~tfbus.monitor.MonitoredSink`, which accounts it in :meth:`statistics`
     (receive time = wall clock, delay = receive time - header stamp, as tf_monitor), and
-    liveliness changes of broadcasters are tracked (:attr:`gone`).
+    over Zenoh, liveliness changes of broadcasters are tracked (:attr:`gone`).
 
     Authority: the wire format does not say which node sent a message, so a message is
     attributed to the one live broadcaster publishing its topic (``"unknown"`` before
-    any is known, ``"unattributed"`` when several publish it).
+    any is known or on transports without liveliness, ``"unattributed"`` when several
+    publish it).
 
     Args:
-        spec: a ``--bus`` value (:func:`tfbus.transports.zenoh.parse_bus_spec`).
+        spec: a ``--bus`` value (:func:`tfbus.transports.spec.parse_bus_spec`).
         name: this node's name unless ``spec`` gives one (``zenoh?name=...``).
         cache_time: seconds of history the buffer keeps.
     """
@@ -172,17 +183,15 @@ class BusSource(TfSource):
         from tfbus.clock import SystemClock
         from tfbus.monitor import MonitoredSink, TfStatistics
 
-        options = _zenoh_options(spec)
-        if options.name is None:
-            options = dataclasses.replace(options, name=name)
         self.spec = spec
-        self.options = options
+        self.bus_spec = parse_spec(spec)
+        self.name = name
         self.label = f"the bus {spec!r}"
         self.clock = SystemClock()
         self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
         self._statistics = TfStatistics()
         self.sink = MonitoredSink(self._buffer, self._statistics, self.clock, self._authority)
-        self.transport: ZenohTransport | None = None
+        self.transport: Transport | None = None
         self.listener: TransformListener | None = None
         self.broadcasters_seen: dict[str, PeerInfo] = {}
         """Every broadcaster heard of through liveliness, by node id."""
@@ -210,8 +219,10 @@ class BusSource(TfSource):
         self._problem = message
 
     def alive_broadcasters(self) -> dict[str, PeerInfo]:
-        """The live broadcasters now (``transport.broadcasters()``), empty when detached."""
-        return self.transport.broadcasters() if self.transport is not None else {}
+        """The live broadcasters now (a Zenoh transport's ``broadcasters()``); empty when
+        detached or on a transport without liveliness."""
+        broadcasters = getattr(self.transport, "broadcasters", None)
+        return dict(broadcasters()) if callable(broadcasters) else {}
 
     @contextlib.asynccontextmanager
     async def attach(
@@ -224,23 +235,25 @@ class BusSource(TfSource):
         broadcaster's liveliness disappears.
 
         Raises:
-            TransportError, zenoh.ZError, OSError: the session cannot be opened
-                (endpoint in use, bad config).
+            TransportError, OSError: the transport cannot be opened (endpoint in use,
+                bad config, extra not installed).
         """
         import anyio
 
         from tfbus.bus import Bus
         from tfbus.listener import TransformListener
-        from tfbus.transports.zenoh import PEERS_TOPIC
 
-        transport = self.options.transport()
+        transport = open_spec_transport(self.bus_spec, name=self.name)
         with _literal_logging():
             async with Bus(transport=transport, queue_size=10_000) as bus:
                 self.transport = transport
-                peers = bus.subscribe(PEERS_TOPIC, queue_size=1000)
                 self.listener = TransformListener(self.sink, bus, clock=self.clock)
                 async with self.listener, anyio.create_task_group() as tg:
-                    tg.start_soon(self._watch, peers, on_peer)
+                    if self.bus_spec.scheme == "zenoh":
+                        from tfbus.transports.zenoh import PEERS_TOPIC
+
+                        peers = bus.subscribe(PEERS_TOPIC, queue_size=1000)
+                        tg.start_soon(self._watch, peers, on_peer)
                     try:
                         yield self
                     finally:
@@ -301,8 +314,10 @@ def source_options(f: F) -> F:
 
     f = click.option(
         "--bus", "bus", metavar="SPEC", default=None,
-        help="Attach to a live bus over Zenoh instead: 'zenoh' (this machine, no "
-             "configuration), 'zenoh:tcp/HOST:7448', 'zenoh?connect=...&namespace=...'.",
+        help="Attach to a live bus instead: 'zenoh' (this machine, no configuration), "
+             "'zenoh:tcp/HOST:7448', 'zenoh?connect=...&namespace=...', 'ros2' "
+             "(ROS 2 over DDS, 'ros2:domain=7'), 'ros1' (a ROS 1 master, "
+             "'ros1:http://127.0.0.1:11311').",
     )(f)
     return click.option("--bag", type=bag_path(), help="Read transforms from this bag.")(f)
 
@@ -327,18 +342,11 @@ def live_only(src: TfSource, **options: object) -> None:
 
 
 def is_bus_error(err: BaseException) -> bool:
-    """An error opening or using a transport: :class:`~tfbus.errors.TransportError`, an
-    ``OSError``, or Zenoh's own ``ZError`` (until the transport maps it)."""
+    """An error opening or using a transport: :class:`~tfbus.errors.TransportError` (every
+    transport maps its middleware's errors to it) or an ``OSError``."""
     from tfbus.errors import TransportError
 
-    if isinstance(err, (OSError, TransportError)):
-        return True
-    try:
-        zenoh = importlib.import_module("zenoh")
-    except ImportError:
-        return False
-    zerror = getattr(zenoh, "ZError", None)
-    return isinstance(zerror, type) and isinstance(err, zerror)
+    return isinstance(err, (OSError, TransportError))
 
 
 def _bus_error_in(err: BaseException) -> BaseException | None:
@@ -408,7 +416,8 @@ async def live(
 
 
 BUS_HELP = ("Bus to publish on (default 'zenoh': this machine, no configuration), e.g. "
-            "'zenoh?listen=tcp/127.0.0.1:7500' or 'zenoh:tcp/192.168.1.10:7448'.")
+            "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
+            "'ros2:domain=7', 'ros1', 'ros1:http://127.0.0.1:11311'.")
 
 
 def publish_options(f: F) -> F:
@@ -421,19 +430,16 @@ def publish_options(f: F) -> F:
 
 def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]:
     """A factory of the (unopened) bus the options name: in-process with ``--local``, else
-    Zenoh (``--bus``, default ``zenoh``). Bad options are a one-line usage error now."""
+    the ``--bus`` spec (default ``zenoh``). Bad options are a one-line usage error now."""
     from tfbus.bus import Bus
 
     if local:
         if bus is not None:
             fail("give --bus SPEC or --local, not both")
         return Bus
-    options = _zenoh_options(bus if bus is not None else "zenoh")
-    if options.name is None:
-        options = dataclasses.replace(options, name=name)
-    chosen = options
+    chosen = parse_spec(bus if bus is not None else "zenoh")
 
     def open_bus() -> Bus:
-        return Bus(transport=chosen.transport())
+        return Bus(transport=open_spec_transport(chosen, name=name))
 
     return open_bus

@@ -18,7 +18,8 @@ __all__ = ["command"]
 F = TypeVar("F", bound=Callable[..., Any])
 
 _BUS_HELP = ("Bus to run on (default 'zenoh': this machine, no configuration), e.g. "
-             "'zenoh?listen=tcp/127.0.0.1:7500' or 'zenoh:tcp/192.168.1.10:7448'.")
+             "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', "
+             "'ros2' (ROS 2 over DDS), 'ros1' (a ROS 1 master: ROS_MASTER_URI).")
 
 
 def _demo_options(*, rate: bool, listen_rate: bool) -> Callable[[F], F]:

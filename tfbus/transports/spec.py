@@ -203,10 +203,14 @@ def parse_bus_spec(spec: str) -> BusSpec:
     return BusSpec(info.scheme, options, spec)
 
 
-def open_transport(spec: BusSpec | str, **overrides: Any) -> Transport:
+def open_transport(
+    spec: BusSpec | str, *, default_name: str | None = None, **overrides: Any
+) -> Transport:
     """A new transport for ``spec`` (its scheme's module is imported now).
 
     ``overrides`` go to the scheme's factory (e.g. ``name="tfbus-monitor"`` for zenoh).
+    ``default_name`` is the node's name for the schemes whose nodes have one (a ``name``
+    key: zenoh, ros1) when neither the spec nor ``overrides`` gives one.
 
     Raises:
         ValueError: an invalid spec or option value.
@@ -227,14 +231,28 @@ def open_transport(spec: BusSpec | str, **overrides: Any) -> Transport:
             )
     module = importlib.import_module(info.module)
     factory = cast(Callable[..., Transport], getattr(module, info.factory))
+    if (
+        default_name is not None
+        and "name" in info.keys
+        and "name" not in overrides
+        and parsed.value("name") is None
+    ):
+        overrides["name"] = default_name
     return factory(parsed, **overrides)
 
 
-def open_bus(spec: BusSpec | str, *, queue_size: int = 100, **overrides: Any) -> Bus:
+def open_bus(
+    spec: BusSpec | str,
+    *,
+    queue_size: int = 100,
+    default_name: str | None = None,
+    **overrides: Any,
+) -> Bus:
     """A new, not yet opened :class:`~tfbus.bus.Bus` on ``spec``'s transport
     (``async with open_bus("zenoh") as bus:``). Raises as :func:`open_transport`, and
     ValueError for a ``queue_size`` below 1."""
-    return Bus(transport=open_transport(spec, **overrides), queue_size=queue_size)
+    transport = open_transport(spec, default_name=default_name, **overrides)
+    return Bus(transport=transport, queue_size=queue_size)
 
 
 # -- the built-in schemes: one row each ------------------------------------------------
