@@ -10,6 +10,7 @@ import anyio
 import pytest
 
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
+from tfbus.buffer import Buffer
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, MemoryTransport
 from tfbus.clock import ManualClock, every
 from tfbus.core import BatchResult, BufferCore
@@ -332,3 +333,45 @@ async def test_end_to_end_across_a_memory_transport() -> None:
         await settle(clock)
         out = core.lookup_transform("base_link", "camera", Time(0))
         assert out.transform.translation.x == pytest.approx(0.2)
+
+
+async def test_listener_clears_the_buffer_when_its_clock_jumps_back(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue 11 item 17: the listener reads the clock on each message, as tf2_ros's
+    TransformListener does, so a clock stepped back clears the buffer (here a BufferCore,
+    which has no clock of its own: only the listener can notice)."""
+    clock = ManualClock(T0)
+    core = BufferCore()
+    caplog.set_level(logging.WARNING, logger="tfbus.listener")
+    async with Bus() as bus, TransformListener(core, bus, clock=clock):
+        br = TransformBroadcaster(bus)
+        StaticTransformBroadcaster(bus).send_transform_nowait([ts("fixed")])
+        br.send_transform_nowait([ts("laser")])
+        await settle(clock)
+        assert core.can_transform("base_link", "laser", T0)
+        clock.set_nowait(Time(T0.sec - 3600))  # the wall clock is stepped back 1 h
+        br.send_transform_nowait([ts("other", stamp=Time(T0.sec - 3600))])
+        await settle(clock)
+        assert not core.can_transform("base_link", "laser", T0)  # cleared
+        assert core.can_transform("base_link", "fixed", T0)  # statics stay (tf2 clear)
+        assert core.can_transform("base_link", "other", Time(T0.sec - 3600))
+    assert any("jump back in time" in r.getMessage() for r in caplog.records)
+
+
+async def test_listener_on_a_buffer_reads_the_buffers_clock() -> None:
+    """Issue 11 item 17: with ``Buffer()`` + ``TransformListener`` (the README set-up) the
+    listener reads the buffer's own clock on each message; a jump back seen there clears
+    the buffer once (the Buffer's own jump handler)."""
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    async with Bus() as bus, TransformListener(buf, bus):
+        br = TransformBroadcaster(bus)
+        br.send_transform_nowait([ts("laser")])
+        await settle(clock)
+        assert buf.can_transform("base_link", "laser", T0)
+        clock.set_nowait(Time(T0.sec - 3600))
+        br.send_transform_nowait([ts("other", stamp=Time(T0.sec - 3600))])
+        await settle(clock)
+        assert not buf.can_transform("base_link", "laser", T0)
+    buf.close()
