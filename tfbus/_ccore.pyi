@@ -85,10 +85,11 @@ class CoreBase:
         self, transforms: Iterable[Any], authority: str, is_static: bool
     ) -> tuple[
         int,
-        list[tuple[int, str, int]],
+        int,
         list[tuple[int, Exception | tuple[str, str, _Tf7]]],
         set[str],
         bool,
+        list[tuple[int, str, int]],
     ]: ...
     def _id_status(self, frame_id: object) -> int: ...
     def _query(self, target: str, source: str, time: Time) -> TransformStamped | _Failure: ...

@@ -695,6 +695,7 @@ cdef extern from "Python.h":
     ctypedef struct PyTypeObject:
         pass
     PyObject* PyType_GenericAlloc(PyTypeObject* tp, Py_ssize_t n) except NULL
+    void PyObject_GC_UnTrack(void* op)
 
 
 cdef inline object _named(object cls, object a, object b):
@@ -725,6 +726,7 @@ cdef inline object _named3(object cls, object a, object b, object c):
 
 cdef inline object _named4(object cls, double a, double b, double c, double d):
     cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 4)
+    PyObject_GC_UnTrack(p)  # four floats: it can never be part of a reference cycle
     cdef object obj = <object>p
     cdef object fa = PyFloat_FromDouble(a)
     cdef object fb = PyFloat_FromDouble(b)
@@ -747,6 +749,7 @@ cdef object _stamped(object stamp, str target, str source, const double* v):
     Transform(Vector3(v[0:3]), Quaternion(v[3:7])))``, built in C."""
     cdef object vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
                               PyFloat_FromDouble(v[2]))
+    PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a reference cycle
     cdef object rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
     return _named3(
         TransformStamped, _named(Header, stamp, target), source, _named(Transform, vec, rot)
@@ -974,9 +977,10 @@ cdef class CoreBase:
         """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
         order; one bad item never stops the others. Calls nothing back.
 
-        Returns ``(stored, refusals, errors, touched, relinked)``:
+        Returns ``(stored, refused, errors, touched, relinked, refusals)`` (the first
+        five are ``BatchResult``'s fields):
 
-        * ``stored``: how many were stored;
+        * ``stored``: how many were stored; ``refused``: how many were refused;
         * ``refusals``: ``[(code, child, stamp ns)]`` for each refused by its cache
           (``OLD_DATA`` / ``REPEATED_DATA``);
         * ``errors``: ``[(index, problem)]``, ``problem`` either an exception
@@ -1013,7 +1017,7 @@ cdef class CoreBase:
                     refusals.append((code, out[1], out[2]._ns))
             del out[:]
             i += 1
-        return stored, refusals, errors, touched, relinked
+        return stored, len(refusals), errors, touched, relinked, refusals
 
     # ------------------------------------------------------------------ queries
 

@@ -60,6 +60,7 @@ _MAX_MESSAGE: Final = 999  # extrapolation messages only (tf2 0.7.6, measured wi
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
 _LATEST: Final = Time(0)
+_new: Final = tuple.__new__  # builds a NamedTuple without its Python-level __new__
 
 Tf7 = tuple[float, float, float, float, float, float, float]
 """A transform as ``(tx, ty, tz, qx, qy, qz, qw)``: metres; quaternion (x, y, z, w)."""
@@ -297,9 +298,10 @@ class BufferCore(CoreBase):
             A :class:`BatchResult`: counts, errors, and the frames it touched (what a
             subclass needs to react to the insert, e.g. ``Buffer``'s waits).
         """
-        stored, refusals, problems, touched, relinked = self._store(
-            transforms, authority, is_static
-        )
+        r = self._store(transforms, authority, is_static)
+        if not (r[2] or r[5]):  # the common case: nothing refused, nothing invalid
+            return _new(BatchResult, r[:5])
+        stored, _, problems, touched, relinked, refusals = r
         if refusals:
             self._log_refusals(refusals, authority)
         errors: list[tuple[int, Exception]] = [
