@@ -360,3 +360,16 @@ def test_a_loop_is_reported_by_lookup() -> None:
     core.set_transform(ts("e", parent="x"))
     with pytest.raises(LookupException, match="loop"):
         core.lookup_transform("e", "d", Time(0))
+
+
+def test_invalid_frame_id_checks_form_only() -> None:
+    core = BufferCore()
+    assert core.invalid_frame_id("unknown_yet") is None
+    error = core.invalid_frame_id("/x", "lookupTransform argument fixed_frame")
+    assert isinstance(error, InvalidArgumentException)
+    assert str(error) == (
+        'Invalid argument "/x" passed to lookupTransform argument fixed_frame in tf2 '
+        "frame_ids cannot start with a '/' like: "
+    )
+    assert isinstance(core.invalid_frame_id(""), InvalidArgumentException)
+    assert isinstance(core.invalid_frame_id(3), InvalidArgumentException)  # type: ignore[arg-type]

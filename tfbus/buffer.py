@@ -26,7 +26,7 @@ import anyio
 
 from tfbus.clock import Clock, SystemClock
 from tfbus.core import BatchResult, BufferCore
-from tfbus.errors import InvalidArgumentException, TimeoutException, TransformException
+from tfbus.errors import TimeoutException, TransformException
 from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
 from tfbus.messages import PointStamped, PoseStamped, TransformStamped, Vector3Stamped
 from tfbus.time import Duration, Time
@@ -277,9 +277,13 @@ class Buffer(BufferCore):
             ExtrapolationException: a leg's time fell out of the cache window.
             InvalidArgumentException: a frame id is empty or starts with '/'.
         """
-        for frame in (target_frame, source_frame, fixed_frame):
-            invalid = self.check_transform(frame, frame + "/", Time(1))
-            if isinstance(invalid, InvalidArgumentException):
+        for arg, frame in (
+            ("target_frame", target_frame),
+            ("source_frame", source_frame),
+            ("fixed_frame", fixed_frame),
+        ):
+            invalid = self.invalid_frame_id(frame, f"lookupTransform argument {arg}")
+            if invalid is not None:
                 raise invalid
 
         def check() -> TransformStamped | None:

@@ -380,6 +380,19 @@ class BufferCore(CoreBase):
             return _bad_frame(f"{function} argument target_frame", target, code)
         return _bad_frame(f"{function} argument source_frame", source, code)
 
+    def invalid_frame_id(
+        self, frame_id: str, argument: str = "lookupTransform argument frame_id"
+    ) -> InvalidArgumentException | None:
+        """tf2 ``validateFrameId``'s form check alone: the InvalidArgumentException a
+        query would raise for ``frame_id`` (empty, '/'-prefixed, not a string), naming
+        ``argument``; None for a well-formed id, known or not (what a wait needs: an
+        unknown id may still arrive)."""
+        if self._id_status(frame_id) == INVALID_ARGUMENT:
+            error = _bad_frame(argument, frame_id, INVALID_ARGUMENT)
+            assert isinstance(error, InvalidArgumentException)
+            return error
+        return None
+
     def _validate(self, label: str, frame_id: str) -> None:
         """tf2 ``validateFrameId``: raise for an empty, '/'-prefixed or unknown id."""
         code = self._id_status(frame_id)
