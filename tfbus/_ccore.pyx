@@ -27,11 +27,18 @@ conformance corpus, ``tests/test_conformance.py``).
 * :class:`StaticCache` — a static link (``tf2/src/static_cache.cpp``): one value, valid
   at every time; each insert overwrites it; its latest stamp is 0.
 
-* :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``:
-  ``_insert_code`` (``BufferCore::setTransformImpl``), ``_insert_many`` (the same over a
-  batch), ``_cwalk`` (``walkToTopParent`` with ``TransformAccum``) and
-  ``_ccommon_time`` (``getLatestCommonTime``). Error *messages* are built in Python by
-  ``tfbus.core`` from the codes returned here.
+* :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``: ``_store``
+  (``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
+  the frames it touched), ``_query`` (``lookupTransform`` in one call: checks, memo,
+  ``walkToTopParent`` with ``TransformAccum``, the TransformStamped built here; or a
+  failure tuple), ``_chain`` (the frames an answer depends on), ``_cwalk`` and
+  ``_ccommon_time`` (``getLatestCommonTime``). Nothing here calls into the Python
+  subclass: error *messages* and log lines are built by ``tfbus.core`` from the codes
+  returned here.
+
+* The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
+  ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
+  :mod:`tfbus.geometry`; ``tests/_tf2math.py`` is its pure-Python reference.
 """
 
 import numpy as np
