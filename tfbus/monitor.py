@@ -327,6 +327,8 @@ class _Store(Protocol):
 
     def set_transform_static(self, transform: TransformStamped, authority: str, /) -> bool: ...
 
+    def clear(self) -> None: ...
+
 
 class MonitoredSink:
     """A :class:`~tfbus.listener.TransformSink` that stores into ``buffer`` and accounts
@@ -379,3 +381,8 @@ class MonitoredSink:
         """Account for and store one static transform."""
         authority = self._account([transform], authority, True)
         return self.buffer.set_transform_static(transform, authority)
+
+    def clear(self) -> None:
+        """The clock jumped back (the listener asks): clear the buffer's dynamic data,
+        as tf2_ros does; the statistics keep what was seen."""
+        self.buffer.clear()
