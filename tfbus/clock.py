@@ -13,28 +13,51 @@ deterministically (the role trio's ``MockClock(autojump_threshold=0)`` plays for
     async for tick in every(0.01, clock=clock):    # 100 Hz, absolute deadlines
         ...
 
-Deadlines are ``first + index * period`` (no drift). A body that runs late does not
+Timer deadlines are ``first + index * period`` (no drift). A body that runs late does not
 shift the schedule: the timer fires once for the most recent deadline that has passed
 and skips older missed ones, counting them as overruns (as ``rcl_timer`` does; see
 :class:`Tick`). A backward clock jump re-anchors the schedule at the new time (as
 ``ros::Rate::sleep`` does).
+
+Deadlines and timeouts on a clock's time are cancel scopes: ``clock.move_on_after(s)``
+and ``clock.fail_after(s)`` are ``anyio.move_on_after`` / ``anyio.fail_after`` on a
+:class:`SystemClock`, and scopes that :meth:`ManualClock.advance` cancels when simulated
+time reaches the deadline on a :class:`ManualClock`::
+
+    with clock.move_on_after(2.0) as scope:     # 2 s of this clock's time
+        await something()
+    if scope.cancelled_caught:
+        ...                                      # timed out
+
+    with clock.fail_after(Duration(2)):         # TimeoutError when it expires
+        await something()
+
+Timeouts (``timeout=`` arguments anywhere in tfbus, and these scopes) mean the same on
+both clocks: ``None`` or ``math.inf`` = no deadline; a negative or zero timeout expires
+at the first checkpoint; a deadline beyond the end of :class:`~tfbus.time.Time`
+(``TIME_MAX_NS``, year 2262) never expires; ``nan`` is a ``ValueError``; a ``str`` or a
+``bool`` is a ``TypeError`` (checked before any arithmetic).
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 import sys
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from heapq import heapify, heappop, heappush
 from itertools import count
-from typing import Protocol, runtime_checkable
+from types import TracebackType
+from typing import Final, Protocol, runtime_checkable
 
 import anyio
 import anyio.lowlevel
 
-from tfbus.time import NSEC_PER_SEC, Duration, Time
+from tfbus.time import NSEC_PER_SEC, TIME_MAX_NS, Duration, Time, seconds_to_ns
 
 __all__ = [
     "Clock",
@@ -44,6 +67,7 @@ __all__ = [
     "SystemClock",
     "Tick",
     "every",
+    "timeout_ns",
 ]
 
 _log = logging.getLogger(__name__)
@@ -69,11 +93,14 @@ class Clock(Protocol):
         """
         ...
 
-    async def sleep(self, seconds: float) -> None:
-        """Sleep for ``seconds`` of this clock's time (``<= 0``: just a checkpoint).
+    async def sleep(self, seconds: float | Duration) -> None:
+        """Sleep for ``seconds`` of this clock's time (``<= 0``: just a checkpoint;
+        ``math.inf``: until cancelled).
 
         Raises:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled meanwhile.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
         """
         ...
 
@@ -81,11 +108,59 @@ class Clock(Protocol):
         """Register ``callback(old, new)`` for backward jumps; returns an unregister function."""
         ...
 
+    def move_on_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """A context manager that cancels its block after ``seconds`` of this clock's time.
 
-def _to_ns(d: float | Duration) -> int:
-    if isinstance(d, Duration):
-        return d.ns
-    return round(d * NSEC_PER_SEC)
+        Entering it gives the ``anyio.CancelScope`` of the block: after the block,
+        ``scope.cancelled_caught`` tells whether the deadline ended it. ``seconds``:
+        ``None`` or ``inf`` = no deadline, ``<= 0`` = at the first checkpoint. The
+        deadline is counted from the call.
+
+        Raises:
+            ValueError: ``seconds`` is NaN (at the call, before entering).
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        ...
+
+    def fail_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """As :meth:`move_on_after`, but raises ``TimeoutError`` when the deadline ends the
+        block (``anyio.fail_after`` on this clock's time).
+
+        Raises:
+            TimeoutError: on leaving the block, if the deadline cancelled it.
+            ValueError, TypeError: as :meth:`move_on_after`.
+        """
+        ...
+
+
+def timeout_ns(seconds: float | Duration | None, *, name: str = "timeout") -> int | None:
+    """A timeout in nanoseconds, or ``None`` for "no deadline", the same on every clock.
+
+    ``None``, ``math.inf`` -> ``None``; ``-math.inf`` -> ``0``; a finite number of seconds
+    or a Duration -> exact nanoseconds (:func:`tfbus.time.seconds_to_ns`; negative
+    values are kept: the caller expires them at once).
+
+    Raises:
+        ValueError: NaN.
+        TypeError: not a number, Duration or None (a ``str`` or ``bool`` included),
+            checked before any arithmetic.
+    """
+    if seconds is None:
+        return None
+    if isinstance(seconds, float) or (
+        isinstance(seconds, numbers.Real) and not isinstance(seconds, numbers.Rational)
+    ):
+        value = float(seconds)
+        if math.isnan(value):
+            raise ValueError(f"{name} must not be NaN")
+        if math.isinf(value):
+            return None if value > 0 else 0
+    return seconds_to_ns(seconds, name=name)
+
 
 
 class _JumpCallbacks:
@@ -167,13 +242,48 @@ class SystemClock:
             await anyio.sleep(min(remaining / NSEC_PER_SEC, self._max_sleep))
             remaining = t.ns - self.now().ns
 
-    async def sleep(self, seconds: float) -> None:
-        """Sleep ``seconds`` of monotonic time (``anyio.sleep``).
+    async def sleep(self, seconds: float | Duration) -> None:
+        """Sleep ``seconds`` of monotonic time (``anyio.sleep``; ``inf``: until cancelled).
 
         Raises:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled meanwhile.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
         """
-        await anyio.sleep(max(seconds, 0.0))
+        ns = timeout_ns(seconds, name="seconds")
+        if ns is None:
+            await anyio.sleep_forever()
+        else:
+            await anyio.sleep(max(ns, 0) / NSEC_PER_SEC)
+
+    def move_on_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> anyio.CancelScope:
+        """``anyio.move_on_after(seconds)``: a cancel scope with an event-loop deadline.
+
+        The deadline is on anyio's monotonic clock, as every ``SystemClock`` sleep;
+        ``None`` / ``inf`` = none. See :meth:`Clock.move_on_after`.
+
+        Raises:
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        ns = timeout_ns(seconds)
+        return anyio.move_on_after(None if ns is None else ns / NSEC_PER_SEC, shield=shield)
+
+    def fail_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """``anyio.fail_after(seconds)``: raises ``TimeoutError`` when the deadline ends
+        the block. See :meth:`Clock.fail_after`.
+
+        Raises:
+            TimeoutError: on leaving the block, if the deadline cancelled it.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        ns = timeout_ns(seconds)
+        return anyio.fail_after(None if ns is None else ns / NSEC_PER_SEC, shield=shield)
 
     def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when the wall clock is seen going back.
@@ -221,6 +331,56 @@ async def _wait_all_tasks_blocked() -> None:
         await anyio.lowlevel.checkpoint()
 
 
+_NEVER: Final = TIME_MAX_NS + 1
+"""A deadline no ManualClock can reach (time ends at TIME_MAX_NS)."""
+
+
+class _ManualDeadline:
+    """The context manager of :meth:`ManualClock.move_on_after` / ``fail_after``.
+
+    Entering opens an ``anyio.CancelScope`` and files its deadline among the clock's
+    sleepers; when simulated time reaches it, the clock cancels the scope (one step of
+    :meth:`ManualClock.advance`, like waking a sleeper). Leaving forgets the deadline.
+    """
+
+    __slots__ = ("_clock", "_deadline_ns", "_fail", "_fired", "_scope", "_seq")
+
+    def __init__(self, clock: ManualClock, deadline_ns: int, fail: bool, shield: bool) -> None:
+        self._clock = clock
+        self._deadline_ns = deadline_ns
+        self._fail = fail
+        self._fired = False
+        self._scope = anyio.CancelScope(shield=shield)
+        self._seq: int | None = None
+
+    def __enter__(self) -> anyio.CancelScope:
+        scope = self._scope.__enter__()
+        if self._deadline_ns <= self._clock._now_ns:
+            self._fire()
+        elif self._deadline_ns < _NEVER:
+            self._seq = self._clock._push(self._deadline_ns, self._fire)
+        return scope
+
+    def _fire(self) -> None:
+        self._fired = True
+        self._seq = None
+        self._scope.cancel()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool:
+        if self._seq is not None:
+            self._clock._forget(self._seq)
+            self._seq = None
+        suppressed = bool(self._scope.__exit__(exc_type, exc, tb))
+        if self._fail and self._fired and self._scope.cancelled_caught:
+            raise TimeoutError
+        return suppressed
+
+
 class ManualClock:
     """Simulated time, moved only by :meth:`advance` and :meth:`set` (tests, bag replay).
 
@@ -230,15 +390,26 @@ class ManualClock:
     blocked, repeat; so a 100 Hz timer advanced by one second ticks 100 times, instantly.
     Like trio's ``MockClock(autojump_threshold=0)`` in spirit, for asyncio and trio alike.
 
+    Deadlines (:meth:`move_on_after`, :meth:`fail_after`, and every ``timeout=`` of a
+    :class:`~tfbus.buffer.Buffer` on this clock) are sleepers too: when time reaches one,
+    its cancel scope is cancelled in the same step-by-step order. Nothing reads the wall
+    clock: a ManualClock can drive bag replay, timers and timeouts in zero wall time.
+
     A ``ManualClock`` must be used from one event loop; ``advance`` calls are serialised.
     """
 
     def __init__(self, start: Time = _TIME_ZERO) -> None:
-        """Create a clock reading ``start``."""
+        """Create a clock reading ``start``.
+
+        Raises:
+            TypeError: ``start`` is not a :class:`~tfbus.time.Time`.
+        """
+        if not isinstance(start, Time):
+            raise TypeError(f"start must be a Time, got {start!r} ({type(start).__name__})")
         self._now_ns = start.ns
-        # Heap of (deadline_ns, sequence, event). A cancelled sleeper's sequence goes into
+        # Heap of (deadline_ns, sequence, wake). A cancelled sleeper's sequence goes into
         # _dead and its entry is skipped when it surfaces (O(log n) cancellation).
-        self._sleepers: list[tuple[int, int, anyio.Event]] = []
+        self._sleepers: list[tuple[int, int, Callable[[], object]]] = []
         self._dead: set[int] = set()
         self._seq = count()
         self._jump = _JumpCallbacks()
@@ -257,26 +428,32 @@ class ManualClock:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled meanwhile
                 (the sleeper is then forgotten).
         """
-        if t.ns <= self._now_ns:
+        await self._sleep_until_ns(t.ns)
+
+    async def _sleep_until_ns(self, deadline_ns: int) -> None:
+        if deadline_ns <= self._now_ns:
             await anyio.lowlevel.checkpoint()
             return
         event = anyio.Event()
-        entry = (t.ns, next(self._seq), event)
-        heappush(self._sleepers, entry)
+        seq = self._push(deadline_ns, event.set)
         try:
             await event.wait()
         finally:
             if not event.is_set():
-                self._forget(entry[1])
+                self._forget(seq)
 
     async def sleep(self, seconds: float | Duration) -> None:
         """Sleep ``seconds`` (or a :class:`~tfbus.time.Duration`) of simulated time.
 
+        ``<= 0`` is a checkpoint; ``math.inf``, or a wake-up time past ``TIME_MAX_NS``,
+        sleeps until cancelled (counted in :attr:`pending`).
+
         Raises:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled meanwhile.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
         """
-        ns = _to_ns(seconds)
-        await self.sleep_until(Time.from_ns(self._now_ns + max(ns, 0)))
+        await self._sleep_until_ns(self._deadline_ns(timeout_ns(seconds, name="seconds")))
 
     def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when :meth:`set` moves time backwards.
@@ -286,43 +463,92 @@ class ManualClock:
         """
         return self._jump.add(callback)
 
+    def move_on_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """A cancel scope that this clock cancels ``seconds`` of simulated time from now.
+
+        Use as ``with clock.move_on_after(1.0) as scope:``; the scope is cancelled in
+        the :meth:`advance` step that reaches ``now + seconds`` (or at once if that is
+        not after ``now``). ``None``/``inf``/past ``TIME_MAX_NS``: never. The deadline is
+        absolute: a backward :meth:`set` leaves it where it is. See
+        :meth:`Clock.move_on_after`.
+
+        Raises:
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        deadline = self._deadline_ns(timeout_ns(seconds))
+        return _ManualDeadline(self, deadline, fail=False, shield=shield)
+
+    def fail_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """As :meth:`move_on_after`, raising ``TimeoutError`` if the deadline ends the block.
+
+        Raises:
+            TimeoutError: on leaving the block, if this clock's deadline cancelled it.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        deadline = self._deadline_ns(timeout_ns(seconds))
+        return _ManualDeadline(self, deadline, fail=True, shield=shield)
+
     # -- driving time ---------------------------------------------------------------
 
     @property
     def pending(self) -> int:
-        """How many tasks are sleeping on this clock."""
+        """How many sleepers and deadlines are waiting on this clock."""
         return len(self._sleepers) - len(self._dead)
 
     def next_deadline(self) -> Time | None:
-        """The earliest pending sleeper's deadline, or ``None`` when nobody sleeps."""
+        """The earliest pending sleeper's or deadline's time, or ``None`` when there is
+        none this clock can reach."""
         self._prune()
-        return Time.from_ns(self._sleepers[0][0]) if self._sleepers else None
+        if not self._sleepers or self._sleepers[0][0] >= _NEVER:
+            return None
+        return Time.from_ns(self._sleepers[0][0])
+
+    def _advance_ns(self, d: float | Duration) -> int:
+        ns = seconds_to_ns(d, name="d")
+        if ns < 0:
+            raise ValueError(f"cannot advance by a negative duration: {d!r}")
+        if self._now_ns + ns > TIME_MAX_NS:
+            raise ValueError(f"cannot advance by {d!r}: past the end of Time (TIME_MAX_NS)")
+        return ns
 
     async def advance(self, d: float | Duration) -> None:
         """Move time forward by ``d`` seconds (or a Duration), stepping through deadlines.
 
         First lets every task run until blocked (so tasks just started can go to sleep),
         then repeatedly: set ``now`` to the next pending deadline within reach, wake the
-        earliest sleeper (ties: first asleep first), and let every task run until
-        blocked. Ends at exactly ``now + d``, with all tasks blocked.
+        earliest sleeper or cancel the earliest deadline's scope (ties: first registered
+        first), and let every task run until blocked. Ends at exactly ``now + d``, with
+        all tasks blocked.
 
         Raises:
-            ValueError: if ``d`` is negative (use :meth:`set` to jump backwards).
+            ValueError: if ``d`` is negative (use :meth:`set` to jump backwards), infinite,
+                NaN, or would move time past ``TIME_MAX_NS``.
+            TypeError: if ``d`` is not a number nor a Duration (checked first).
         """
-        ns = _to_ns(d)
-        if ns < 0:
-            raise ValueError(f"cannot advance by a negative duration: {d!r}")
+        ns = self._advance_ns(d)
         async with self._get_lock():
-            await self._run_to(self._now_ns + ns)
+            await self._run_to(min(self._now_ns + ns, TIME_MAX_NS))
 
     async def set(self, t: Time) -> None:
         """Set the time to ``t``.
 
         Forward, this is :meth:`advance` by ``t - now`` (stepping through deadlines).
         Backward, it is a jump: ``now`` becomes ``t``, the ``on_jump`` callbacks get
-        ``(old, t)``, then every task runs until blocked. Sleepers keep their absolute
-        deadlines (they now have longer to wait); timers re-anchor via ``on_jump``.
+        ``(old, t)``, then every task runs until blocked. Sleepers and deadlines keep
+        their absolute times (they now have longer to wait); timers re-anchor via
+        ``on_jump``.
+
+        Raises:
+            TypeError: ``t`` is not a :class:`~tfbus.time.Time`.
         """
+        if not isinstance(t, Time):
+            raise TypeError(f"t must be a Time, got {t!r} ({type(t).__name__})")
         async with self._get_lock():
             if t.ns >= self._now_ns:
                 await self._run_to(t.ns)
@@ -333,21 +559,24 @@ class ManualClock:
     def advance_nowait(self, d: float | Duration) -> None:
         """Move time forward by ``d`` at once, waking every sleeper due by then.
 
-        Unlike :meth:`advance`, no task runs in between: all due sleepers wake together
-        (in deadline order) when the caller next yields, and a periodic timer sees the
-        deadlines it missed as overruns.
+        Unlike :meth:`advance`, no task runs in between: all due sleepers wake (and due
+        deadlines' scopes are cancelled) together, in deadline order, when the caller next
+        yields, and a periodic timer sees the deadlines it missed as overruns.
 
         Raises:
-            ValueError: if ``d`` is negative.
+            ValueError, TypeError: as :meth:`advance`.
         """
-        ns = _to_ns(d)
-        if ns < 0:
-            raise ValueError(f"cannot advance by a negative duration: {d!r}")
-        self._now_ns += ns
+        self._now_ns += self._advance_ns(d)
         self._wake_due()
 
     def set_nowait(self, t: Time) -> None:
-        """Set the time to ``t`` at once (see :meth:`advance_nowait`; backward: a jump)."""
+        """Set the time to ``t`` at once (see :meth:`advance_nowait`; backward: a jump).
+
+        Raises:
+            TypeError: ``t`` is not a :class:`~tfbus.time.Time`.
+        """
+        if not isinstance(t, Time):
+            raise TypeError(f"t must be a Time, got {t!r} ({type(t).__name__})")
         if t.ns >= self._now_ns:
             self._now_ns = t.ns
             self._wake_due()
@@ -355,6 +584,18 @@ class ManualClock:
             self._jump_to(t.ns)
 
     # -- internals ------------------------------------------------------------------
+
+    def _deadline_ns(self, ns: int | None) -> int:
+        """``now + ns`` as an absolute deadline; ``_NEVER`` for no deadline or past the
+        end of Time."""
+        if ns is None:
+            return _NEVER
+        return min(self._now_ns + max(ns, 0), _NEVER)
+
+    def _push(self, deadline_ns: int, wake: Callable[[], object]) -> int:
+        seq = next(self._seq)
+        heappush(self._sleepers, (deadline_ns, seq, wake))
+        return seq
 
     def _get_lock(self) -> anyio.Lock:
         if self._lock is None:
@@ -369,7 +610,7 @@ class ManualClock:
             # One sleeper per step, so ties wake in the order they went to sleep on every
             # backend (trio shuffles tasks woken in the same batch).
             self._now_ns = max(self._now_ns, sleepers[0][0])
-            heappop(sleepers)[2].set()
+            heappop(sleepers)[2]()
             await _wait_all_tasks_blocked()
             self._prune()
         self._now_ns = target_ns
@@ -380,7 +621,7 @@ class ManualClock:
         sleepers = self._sleepers
         self._prune()
         while sleepers and sleepers[0][0] <= now:
-            heappop(sleepers)[2].set()
+            heappop(sleepers)[2]()
             self._prune()
 
     def _jump_to(self, ns: int) -> None:
@@ -450,7 +691,7 @@ class PeriodicTimer:
         Raises:
             ValueError: if ``period`` is not positive.
         """
-        period_ns = _to_ns(period)
+        period_ns = seconds_to_ns(period, name="period")
         if period_ns <= 0:
             raise ValueError(f"period must be positive, got {period!r}")
         self._period_ns = period_ns
