@@ -673,7 +673,7 @@ cdef class CoreBase:
             or v[2] - v[2] != 0.0
             or not fabs(norm2 - 1.0) < 0.01
         ):
-            self._reject(parent, child, (<tuple>tr) + (<tuple>rot), authority)
+            self._reject(parent, child, (*tr, *rot), authority)
             raise AssertionError("_reject returned")  # pragma: no cover
         stamp_obj = header.stamp._ns
         stamp = stamp_obj
