@@ -28,11 +28,6 @@ from tfbus.clock import ManualClock
 pytestmark = pytest.mark.anyio
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 T0 = Time(1000)
 
 
