@@ -14,11 +14,14 @@ Two helpers are the one place for what used to be repeated across tfbus:
 * :func:`format_stamp` prints a stamp as ``SEC.NANOSEC`` with nine digits, exactly
   (``1700000000.123456789``), where ``f"{t.to_sec():.9f}"`` would print float noise.
 
-Both value types are dataclasses ordered by their nanoseconds (``order=True``: ``<``,
-``<=``, ``>``, ``>=`` between two ``Time`` or two ``Duration``; anything else is a
-``TypeError``), with ``__slots__``; they are treated as immutable. ``==`` and ``hash``
-are written out: the generated ``__eq__`` compares 1-tuples and costs 2-3x more, and
-stamps are compared and hashed often (``benchmarks/bench_clock.py`` prints both).
+Both value types are plain ``__slots__`` classes holding one ``int``, ordered by it
+(``<``, ``<=``, ``>``, ``>=`` between two ``Time`` or two ``Duration``; anything else is
+a ``TypeError``) and treated as immutable. They are deliberately *not* dataclasses
+(``@dataclass(order=True)`` was tried): serialisers that know dataclasses (msgspec on the
+Zenoh wire, ``dataclasses.asdict``) would then write a stamp as the record
+``{"_ns": n}`` instead of the integer nanoseconds the wire format specifies, bypassing
+its stamp validation; and the generated ``==``/``<`` cost 1.5-3x the written-out ones
+(``benchmarks/bench_clock.py``).
 """
 
 from __future__ import annotations
@@ -26,7 +29,6 @@ from __future__ import annotations
 import math
 import numbers
 import operator
-from dataclasses import dataclass, field
 from typing import Final, TypeGuard, overload
 
 __all__ = [
@@ -152,21 +154,20 @@ def _ns_from(sec: int | float, nanosec: int) -> int:
     return seconds_to_ns(sec, name="sec") + operator.index(nanosec)
 
 
-@dataclass(init=False, repr=False, eq=True, order=True, slots=True)
 class Duration:
     """A signed span of time in integer nanoseconds (like ``rclcpp::Duration``).
 
     ``Duration(sec=0, nanosec=0)``; ``Duration.from_ns(n)``; ``Duration.from_sec(s)``.
-    Supports ``+``, ``-``, unary ``-``, ``abs``, ordering (dataclass ``order=True`` on
-    the nanoseconds), multiplication by a real number (exact, rounded to the nearest
-    nanosecond) and hashing. Immutable by convention (no setter; slots only).
+    Supports ``+``, ``-``, unary ``-``, ``abs``, ordering, multiplication by a real
+    number (exact, rounded to the nearest nanosecond) and hashing. Immutable.
 
     Raises:
         TypeError: ``sec`` is not a real number or ``nanosec`` not an integer.
         ValueError: ``sec`` is infinite or NaN.
     """
 
-    _ns: int = field(default=0)
+    __slots__ = ("_ns",)
+    _ns: int
 
     def __init__(self, sec: int | float = 0, nanosec: int = 0) -> None:
         """``sec`` (int, numpy integer or float seconds) plus ``nanosec`` (integer)."""
@@ -234,8 +235,27 @@ class Duration:
     __rmul__ = __mul__
 
     def __eq__(self, other: object) -> bool:
-        # Written out (dataclass keeps it): 2-3x faster than the generated tuple compare.
         return isinstance(other, Duration) and self._ns == other._ns
+
+    def __lt__(self, other: Duration) -> bool:
+        if isinstance(other, Duration):
+            return self._ns < other._ns
+        return NotImplemented
+
+    def __le__(self, other: Duration) -> bool:
+        if isinstance(other, Duration):
+            return self._ns <= other._ns
+        return NotImplemented
+
+    def __gt__(self, other: Duration) -> bool:
+        if isinstance(other, Duration):
+            return self._ns > other._ns
+        return NotImplemented
+
+    def __ge__(self, other: Duration) -> bool:
+        if isinstance(other, Duration):
+            return self._ns >= other._ns
+        return NotImplemented
 
     def __hash__(self) -> int:
         return hash(("Duration", self._ns))
@@ -245,14 +265,13 @@ class Duration:
         return f"Duration(sec={sec}, nanosec={nsec})"
 
 
-@dataclass(init=False, repr=False, eq=True, order=True, slots=True)
 class Time:
     """A point in time: integer nanoseconds since the clock's epoch (ROS ``Time``).
 
     ``Time(sec=0, nanosec=0)``; ``Time.from_ns(n)``; ``Time.from_sec(s)``; ``t.ns``;
     ``t.sec`` / ``t.nanosec`` (ROS message fields); ``t.to_sec()``.
-    ``Time - Time -> Duration``; ``Time ± Duration -> Time``. Ordered (dataclass
-    ``order=True`` on the nanoseconds), hashable, immutable by convention.
+    ``Time - Time -> Duration``; ``Time ± Duration -> Time``. Ordered, hashable,
+    immutable.
     ``Time(0)`` asks lookups for the latest available data (tf2 semantics).
     :func:`format_stamp` prints one exactly.
 
@@ -262,7 +281,8 @@ class Time:
         TypeError: ``sec`` is not a real number or ``nanosec`` not an integer.
     """
 
-    _ns: int = field(default=0)
+    __slots__ = ("_ns",)
+    _ns: int
 
     def __init__(self, sec: int | float = 0, nanosec: int = 0) -> None:
         ns = _ns_from(sec, nanosec)
@@ -336,8 +356,27 @@ class Time:
         return NotImplemented
 
     def __eq__(self, other: object) -> bool:
-        # Written out (dataclass keeps it): 2-3x faster than the generated tuple compare.
         return isinstance(other, Time) and self._ns == other._ns
+
+    def __lt__(self, other: Time) -> bool:
+        if isinstance(other, Time):
+            return self._ns < other._ns
+        return NotImplemented
+
+    def __le__(self, other: Time) -> bool:
+        if isinstance(other, Time):
+            return self._ns <= other._ns
+        return NotImplemented
+
+    def __gt__(self, other: Time) -> bool:
+        if isinstance(other, Time):
+            return self._ns > other._ns
+        return NotImplemented
+
+    def __ge__(self, other: Time) -> bool:
+        if isinstance(other, Time):
+            return self._ns >= other._ns
+        return NotImplemented
 
     def __hash__(self) -> int:
         return hash(self._ns)
