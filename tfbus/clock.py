@@ -689,7 +689,8 @@ class PeriodicTimer:
         """See :func:`every`.
 
         Raises:
-            ValueError: if ``period`` is not positive.
+            ValueError: if ``period`` is not positive, or not finite.
+            TypeError: if ``period`` is not a number of seconds nor a Duration.
         """
         period_ns = seconds_to_ns(period, name="period")
         if period_ns <= 0:
@@ -787,6 +788,8 @@ def every(period: float | Duration, *, clock: Clock, immediate: bool = False) ->
     Returns a :class:`PeriodicTimer` (see it for the overrun and jump policies).
 
     Raises:
-        ValueError: if ``period`` is not positive.
+        ValueError: if ``period`` is not positive, or not finite.
+        TypeError: if ``period`` is not a number of seconds nor a Duration (a ``str``
+            is refused before any arithmetic).
     """
     return PeriodicTimer(period, clock=clock, immediate=immediate)
