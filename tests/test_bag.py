@@ -57,11 +57,6 @@ needs_nav2 = pytest.mark.skipif(not NAV2.exists(), reason="../shared/data (GPL e
 needs_evo = pytest.mark.skipif(not EVO_DIR.exists(), reason="../shared/data (GPL evo data) absent")
 
 
-@pytest.fixture(params=["asyncio", "trio"], scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 # --------------------------------------------------------------------------- helpers
 
 

@@ -22,11 +22,6 @@ from tfbus.time import Duration, Time
 pytestmark = pytest.mark.anyio
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 T0 = Time(1_248_138_528)
 IDENTITY = Quaternion()
 

@@ -30,11 +30,6 @@ from tfbus.core import MAX_GRAPH_DEPTH
 pytestmark = pytest.mark.anyio
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 T0 = Time(1000)
 
 

@@ -26,11 +26,6 @@ from tfbus.transports.memory import MemoryTransport
 pytestmark = pytest.mark.anyio
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 def ts(child: str, x: float = 0.0, parent: str = "base_link", sec: int = 1) -> TransformStamped:
     return TransformStamped(
         Header(Time(sec), parent), child, Transform(translation=Vector3(x, 0.0, 0.0))

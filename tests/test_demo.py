@@ -26,11 +26,6 @@ INFO = re.compile(
 )
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 async def test_demo_prints_the_tutorial_line_each_simulated_second() -> None:
     clock = ManualClock(START)
     lines: list[str] = []

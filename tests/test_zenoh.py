@@ -63,11 +63,6 @@ PEERS_DIR = Path(__file__).parent / "zenoh_peers"
 ROOT = Path(__file__).parent.parent
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))

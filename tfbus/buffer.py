@@ -20,15 +20,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
-from typing import Any, Generic, TypeVar, cast, overload
+from typing import Any, ClassVar, Generic, TypeVar, cast
 
 import anyio
 
-from tfbus.clock import Clock, SystemClock
+from tfbus.clock import Clock, SystemClock, timeout_ns
+from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import TimeoutException, TransformException
-from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
-from tfbus.messages import PointStamped, PoseStamped, TransformStamped, Vector3Stamped
+from tfbus.messages import Header, TransformStamped
 from tfbus.time import Duration, Time
 
 __all__ = ["Buffer"]
@@ -36,7 +36,7 @@ __all__ = ["Buffer"]
 _log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
-_Stamped = TypeVar("_Stamped", PointStamped, PoseStamped, Vector3Stamped)
+_M = TypeVar("_M")
 
 
 class _Waiter(Generic[_T]):
@@ -173,6 +173,8 @@ class Buffer(BufferCore):
         timeout: float | Duration | None,
         describe: Callable[[], str],
     ) -> _T:
+        if timeout is not None and timeout_ns(timeout) is None:
+            timeout = None  # inf: no deadline (and NaN or a str raised here, up front)
         result = check()
         if result is not None:
             return result
@@ -192,24 +194,12 @@ class Buffer(BufferCore):
     async def _wait_with_timeout(
         self, waiter: _Waiter[Any], timeout: float | Duration, describe: Callable[[], str]
     ) -> None:
-        seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
-        if isinstance(self.clock, SystemClock):
-            # Real time: a cancel-scope deadline of the event loop is the same measure,
-            # and much cheaper than a timer task (no task to cancel on wake-up).
-            with anyio.move_on_after(seconds):
-                await waiter.event.wait()
-        else:
-            # Other clocks (ManualClock, bag time): sleep on the clock in a timer task.
-            async with anyio.create_task_group() as tg:
-
-                async def expire() -> None:
-                    await self.clock.sleep(seconds)
-                    tg.cancel_scope.cancel()
-
-                tg.start_soon(expire)
-                await waiter.event.wait()
-                tg.cancel_scope.cancel()
+        # The clock's own deadline primitive: anyio.move_on_after on a SystemClock, a
+        # scope that ManualClock.advance cancels on a ManualClock.
+        with self.clock.move_on_after(timeout):
+            await waiter.event.wait()
         if not waiter.event.is_set():
+            seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
             raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
 
     def _describe(self, target: str, source: str, time: Time) -> str:
@@ -230,7 +220,8 @@ class Buffer(BufferCore):
         the two frames are connected with data.
 
         Args:
-            timeout: seconds (or a Duration) of the buffer's clock; None waits forever.
+            timeout: seconds (or a Duration) of the buffer's clock (``clock.move_on_after``);
+                None or ``inf`` waits forever; NaN is a ValueError, a str a TypeError.
 
         Raises:
             TimeoutException: not available within ``timeout``; the message says what
@@ -323,48 +314,79 @@ class Buffer(BufferCore):
             return False
         return True
 
-    @overload
+    registration: ClassVar[TransformRegistration] = TransformRegistration()
+    """The transform functions by type (tf2_ros ``BufferInterface.registration``), shared
+    process-wide: see :mod:`tfbus.convert` to register your own stamped types."""
+
     async def transform(
-        self, obj: PointStamped, target_frame: str, timeout: float | Duration | None = None
-    ) -> PointStamped: ...
-    @overload
-    async def transform(
-        self, obj: PoseStamped, target_frame: str, timeout: float | Duration | None = None
-    ) -> PoseStamped: ...
-    @overload
-    async def transform(
-        self, obj: Vector3Stamped, target_frame: str, timeout: float | Duration | None = None
-    ) -> Vector3Stamped: ...
-    async def transform(
-        self,
-        obj: PointStamped | PoseStamped | Vector3Stamped,
-        target_frame: str,
-        timeout: float | Duration | None = None,
-    ) -> PointStamped | PoseStamped | Vector3Stamped:
-        """Express a stamped point, pose or vector in ``target_frame`` (tf2_ros
-        ``Buffer.transform`` with tf2_geometry_msgs): looks up ``target_frame ←
-        obj.header.frame_id`` at ``obj.header.stamp`` (``Time(0)``: latest), waiting up to
-        ``timeout``. Vectors are rotated only.
+        self, obj: _M, target_frame: str, timeout: float | Duration | None = None
+    ) -> _M:
+        """Express a stamped object in ``target_frame`` (tf2_ros ``Buffer.transform``):
+        looks up ``target_frame <- obj.header.frame_id`` at ``obj.header.stamp``
+        (``Time(0)``: latest), waiting up to ``timeout``, and applies the function
+        registered for ``type(obj)`` in :mod:`tfbus.convert`.
+
+        Preregistered: PointStamped, PoseStamped, Vector3Stamped (rotated only) and
+        TransformStamped (tf2_geometry_msgs' ``doTransform``); register your own types
+        with :func:`tfbus.convert.register_transform`.
 
         Returns:
-            The same message type with ``header.frame_id == target_frame`` and
-            ``header.stamp`` the lookup's stamp (the time actually used).
+            What the registered function returns; for the preregistered types, the same
+            type with ``header.frame_id == target_frame`` and ``header.stamp`` the
+            lookup's stamp (the time actually used).
 
         Raises:
-            TypeError: ``obj`` is not a PointStamped, PoseStamped or Vector3Stamped.
+            TypeError: no transform function is registered for ``type(obj)`` (checked
+                before any wait).
             TimeoutException, ExtrapolationException, InvalidArgumentException,
             LookupException: as :meth:`wait_for_transform`.
         """
-        if not isinstance(obj, PointStamped | PoseStamped | Vector3Stamped):
-            raise TypeError(
-                "Buffer.transform takes PointStamped, PoseStamped or Vector3Stamped, "
-                f"not {type(obj).__name__}"
-            )
-        ts = await self.wait_for_transform(
-            target_frame, obj.header.frame_id, obj.header.stamp, timeout
+        do_transform = self.registration.get(type(obj))
+        header = _header_of(obj)
+        ts = await self.wait_for_transform(target_frame, header.frame_id, header.stamp, timeout)
+        result: _M = do_transform(obj, ts)
+        return result
+
+    async def transform_full(
+        self,
+        obj: _M,
+        target_frame: str,
+        target_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+    ) -> _M:
+        """Express a stamped object in ``target_frame`` at ``target_time``, through
+        ``fixed_frame`` (tf2_ros ``Buffer.transform_full``): the transform is
+        :meth:`lookup_transform_full_async` ``(target_frame, target_time,
+        obj.header.frame_id, obj.header.stamp, fixed_frame, timeout)``, applied by the
+        function registered for ``type(obj)``.
+
+        Returns:
+            What the registered function returns; for the preregistered types, the same
+            type in ``target_frame`` stamped ``target_time`` (the time actually used).
+
+        Raises:
+            TypeError: no transform function is registered for ``type(obj)``.
+            TimeoutException, ExtrapolationException, InvalidArgumentException: as
+                :meth:`lookup_transform_full_async`.
+        """
+        do_transform = self.registration.get(type(obj))
+        header = _header_of(obj)
+        ts = await self.lookup_transform_full_async(
+            target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout
         )
-        if isinstance(obj, PointStamped):
-            return do_transform_point(obj, ts)
-        if isinstance(obj, PoseStamped):
-            return do_transform_pose(obj, ts)
-        return do_transform_vector3(obj, ts)
+        result: _M = do_transform(obj, ts)
+        return result
+
+
+def _header_of(obj: object) -> Header:
+    """``obj.header``, checked enough to make a clear error of a malformed object."""
+    header = getattr(obj, "header", None)
+    frame_id = getattr(header, "frame_id", None)
+    stamp = getattr(header, "stamp", None)
+    if not isinstance(frame_id, str) or not isinstance(stamp, Time):
+        raise TypeError(
+            f"{type(obj).__name__} has no header with a str frame_id and a Time stamp "
+            f"(header={header!r})"
+        )
+    return Header(stamp, frame_id)
