@@ -25,9 +25,9 @@ LAYERS: dict[str, int] = {
     # 0: values, pure functions
     "messages": 0,
     "time": 0,
-    "geometry": 0,
+    "geometry": 1,
     "ratelimit": 0,
-    "convert": 0,
+    "convert": 1,
     # 1: the sans-I/O core
     "core": 1,
     "_ccore": 1,
