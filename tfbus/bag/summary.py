@@ -16,7 +16,6 @@ from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
-from typing import overload
 
 from tfbus.bag.formats import DEFAULT_TOPICS, BagFormat, BagMessage, detect_format
 from tfbus.bag.reader import read_messages
@@ -46,32 +45,11 @@ class BagSummary(TfStatistics):
     format: BagFormat | None = None
     error: BagReadError | None = None
 
-    @overload
-    def add(self, rec: BagMessage, /) -> None: ...
-
-    @overload
-    def add(
-        self,
-        time: Time,
-        transforms: Iterable[TransformStamped],
-        authority: str,
-        *,
-        static: bool,
-        topic: str | None = None,
-    ) -> None: ...
-
-    def add(
-        self,
-        time: Time | BagMessage,
-        transforms: Iterable[TransformStamped] = (),
-        authority: str = "",
-        *,
-        static: bool = False,
-        topic: str | None = None,
-    ) -> None:
-        """Account for one message: a :class:`BagMessage` (bag time, counted under its
-        own topic, static when it is ``/tf_static``), or the arguments of
-        :meth:`TfStatistics.add`."""
+    def add(self, time: Time | BagMessage, transforms: Iterable[TransformStamped] = (),
+            authority: str = "", *, static: bool = False, topic: str | None = None) -> None:
+        """Account for one message: ``add(rec)`` with a :class:`BagMessage` (at bag time,
+        counted under its own topic, static when it is ``/tf_static``), or the arguments
+        of :meth:`TfStatistics.add`."""
         if isinstance(time, BagMessage):
             rec = time
             super().add(rec.time, rec.message.transforms, rec.authority,
