@@ -22,6 +22,7 @@ from tfbus import (
     Duration,
     Header,
     Quaternion,
+    TFMessage,
     Time,
     Transform,
     TransformStamped,
@@ -250,6 +251,55 @@ def test_summary_turtle() -> None:
     assert s.messages == {"/tf": 2688, "/tf_static": 1}
     assert s.duration == pytest.approx(21.4986, abs=1e-3)
     assert s.transform_count == 2689
+
+
+def test_summary_is_the_monitors_statistics() -> None:
+    """bag-info, monitor and frames share one accounting: a BagSummary is tf_monitor's
+    TfStatistics with the bag's path, format and error (issue 11 item 22)."""
+    from tfbus.monitor import AuthorityStatistics, FrameStatistics, TfStatistics
+
+    assert tfbag.FrameSummary is FrameStatistics
+    assert tfbag.AuthoritySummary is AuthorityStatistics
+    s = summarize(TURTLE)
+    stats = TfStatistics()
+    for rec in read_messages(TURTLE):
+        stats.add(rec.time, rec.message.transforms, rec.authority, static=rec.is_static)
+    assert isinstance(s, TfStatistics) and s.path == TURTLE
+    assert s.frames == stats.frames and s.authorities == stats.authorities
+    assert (s.start, s.end, s.messages) == (stats.start, stats.end, stats.messages)
+
+
+def test_summary_rate_counts_distinct_stamps(tmp_path: Path) -> None:
+    """A frame's rate is (distinct stamps - 1) / (newest - oldest stamp): 11 stamps
+    0.1 s apart, each recorded twice (22 transforms), is 10 Hz -- not 21 Hz, what
+    (transforms - 1) / span gave before the statistics moved to tfbus.monitor."""
+    t0 = 1_700_000_000 * 10**9
+    messages = []
+    for i in range(22):
+        stamp = Time.from_ns(t0 + (i // 2) * 100_000_000)
+        ts = TransformStamped(Header(stamp, "odom"), "base_link",
+                              Transform(Vector3(0.1 * i, 0.0, 0.0), Quaternion(0, 0, 0, 1)))
+        messages.append(BagMessage(Time.from_ns(t0 + i * 50_000_000 + 1_000_000), "/tf",
+                                   TFMessage((ts,)), "/odom"))
+    write_bag(tmp_path / "repeated.bag", messages)
+    f = summarize(tmp_path / "repeated.bag").frames["base_link"]
+    assert (f.count, len(f.stamps)) == (22, 11)
+    assert f.rate == pytest.approx(10.0, rel=1e-12)
+    # delay = bag time - stamp: 1 ms for the first copy, 51 ms for the second
+    assert f.delay_avg == pytest.approx(0.026, abs=1e-9)
+    assert f.delay_max == pytest.approx(0.051, abs=1e-9)
+
+
+@needs_nav2
+def test_summary_of_a_sim_time_bag_measures_delay_against_bag_stamps() -> None:
+    """The nav2 bag's stamps are simulated time (~929 s) while its bag times are wall
+    time (~1.78e9 s): delays are measured against the newest stamp (tf_monitor's
+    definition in tfbus.monitor), not reported as 1.78e9 s as before."""
+    s = summarize(NAV2)
+    assert s.sim_time is True
+    dynamic = [f for f in s.frames.values() if not f.static]
+    assert dynamic and all(0.0 <= f.delay_avg <= f.delay_max < 2.0 for f in dynamic)
+    assert s.frames["odom"].delay_max == pytest.approx(1.679, abs=1e-9)
 
 
 def test_topic_filter_and_empty_filter_quirk() -> None:

@@ -27,7 +27,8 @@ DATA = Path(__file__).parent / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
-COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay", "demo"]
+COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay",
+            "robot-state-publisher", "joint-states", "demo"]
 
 
 def run(*args: str) -> tuple[int, str, str]:
@@ -59,6 +60,30 @@ def test_every_command_has_help_with_examples(command: str) -> None:
     code, out, _ = run(command, "--help")
     assert code == 0
     assert "Examples:" in out and f"tfbus {command}" in out
+
+
+def test_version() -> None:
+    from importlib.metadata import version
+
+    code, out, _ = run("--version")
+    assert code == 0
+    assert out == f"tfbus {version('tfbus')}\n"
+
+
+def test_version_of_a_source_tree_that_is_not_installed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import importlib.metadata
+
+    import tfbus
+
+    def not_installed(name: str) -> str:
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", not_installed)
+    monkeypatch.setattr(tfbus, "__version__", "9.8.7")
+    code, out, _ = run("--version")
+    assert (code, out) == (0, "tfbus 9.8.7\n")
 
 
 def test_unknown_command_and_option_are_one_line() -> None:

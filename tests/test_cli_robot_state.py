@@ -1,4 +1,5 @@
-"""Tests for tfbus/cli_robot_state.py: ``robot-state-publisher`` and ``joint-states``.
+"""Tests for ``tfbus robot-state-publisher`` and ``tfbus joint-states``
+(tfbus/cli/robot_state_publisher.py, tfbus/cli/joint_states.py).
 
 In-process with click's CliRunner, and as processes over Zenoh on 127.0.0.1 (explicit
 endpoints on a free port): joint-states -> robot-state-publisher -> a Buffer in this
@@ -25,7 +26,7 @@ pytest.importorskip("urdf_parser_py")
 from click.testing import CliRunner
 
 from tfbus.buffer import Buffer
-from tfbus.cli_robot_state import joint_states_cmd, main, robot_state_publisher_cmd
+from tfbus.cli import cli, main
 from tfbus.listener import TransformListener
 from tfbus.time import Time
 
@@ -40,12 +41,13 @@ JS_SUMMARY = re.compile(r"^\[ INFO\] summary: (\d+) joint states published$")
 
 def test_commands_run_for_a_duration_and_print_a_summary() -> None:
     runner = CliRunner()
-    out = runner.invoke(robot_state_publisher_cmd, [str(PR2), "--duration", "0",
-                                                    "--frame-prefix", "pr2/"])
+    out = runner.invoke(cli, ["robot-state-publisher", str(PR2), "--local", "--duration", "0",
+                              "--frame-prefix", "pr2/"])
     assert out.exit_code == 0, out.output
     assert RSP_SUMMARY.match(out.stdout.strip().splitlines()[-1])
     assert "pr2: 82 joints (40 moving), root base_footprint, on an in-process bus" in out.stderr
-    out = runner.invoke(joint_states_cmd, [str(ROBOT), "--duration", "0", "--rate", "5"])
+    out = runner.invoke(cli, ["joint-states", str(ROBOT), "--local", "--duration", "0",
+                              "--rate", "5"])
     assert out.exit_code == 0, out.output
     assert JS_SUMMARY.match(out.stdout.strip().splitlines()[-1])
     assert "tutorial_robot: 2 joints at 5 Hz" in out.stderr
@@ -54,12 +56,19 @@ def test_commands_run_for_a_duration_and_print_a_summary() -> None:
 @pytest.mark.parametrize(("args", "message"), [
     (["/no/such.urdf"], "cannot read the URDF file '/no/such.urdf'"),
     ([str(ROBOT), "--bus", "carrier-pigeon"], "unsupported bus 'carrier-pigeon'"),
+    ([str(ROBOT), "--bus", "zenoh", "--local"], "give --bus SPEC or --local, not both"),
     ([str(ROBOT), "--publish-frequency", "0"], "--publish-frequency"),
 ])
-def test_bad_arguments_are_one_line_errors(args: list[str], message: str) -> None:
-    out = CliRunner().invoke(robot_state_publisher_cmd, args)
-    assert out.exit_code == 2
-    assert message in out.output
+@pytest.mark.parametrize("command", ["robot-state-publisher", "joint-states"])
+def test_bad_arguments_are_one_line_errors(command: str, args: list[str], message: str,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    if command == "joint-states" and args[-2:] == ["--publish-frequency", "0"]:
+        args = [str(ROBOT), "--rate", "0"]
+        message = "--rate"
+    assert main([command, *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"tfbus {command}: error: "), err
+    assert message in err
 
 
 def test_a_hostile_urdf_cannot_reach_the_terminal(tmp_path: Path,
@@ -87,11 +96,11 @@ def free_port() -> int:
 
 
 class Child:
-    """``python -m tfbus.cli_robot_state ARGS``; output collected by threads."""
+    """``python -m tfbus.cli ARGS``; output collected by threads."""
 
     def __init__(self, *args: str) -> None:
         env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen([sys.executable, "-m", "tfbus.cli_robot_state", *args],
+        self.proc = subprocess.Popen([sys.executable, "-m", "tfbus.cli", *args],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env=env, cwd=ROOT)
         self.out: list[str] = []

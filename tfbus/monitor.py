@@ -227,16 +227,19 @@ class TfStatistics:
         authority: str,
         *,
         static: bool,
+        topic: str | None = None,
     ) -> None:
         """Account for one message received at ``time`` (bag time or clock time) from
-        ``authority``; items that are not ``TransformStamped`` with string frame ids
+        ``authority``, counted in :attr:`messages` under ``topic`` (default ``/tf`` or
+        ``/tf_static``); items that are not ``TransformStamped`` with string frame ids
         are skipped."""
         t = time.ns
         if self.start is None or t < self.start.ns:
             self.start = time
         if self.end is None or t > self.end.ns:
             self.end = time
-        topic = "/tf_static" if static else "/tf"
+        if topic is None:
+            topic = "/tf_static" if static else "/tf"
         self.messages[topic] = self.messages.get(topic, 0) + 1
         auth = self.authorities.get(authority)
         if auth is None:

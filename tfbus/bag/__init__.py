@@ -35,7 +35,7 @@ The package, one job per module:
 * :mod:`~tfbus.bag.loader`: :func:`load_buffer`;
 * :mod:`~tfbus.bag.playback`: :func:`replay`;
 * :mod:`~tfbus.bag.writer`: :func:`write_bag`, :class:`BagRecorder`;
-* :mod:`~tfbus.bag.summary`: :func:`summarize` and the tf_monitor statistics classes.
+* :mod:`~tfbus.bag.summary`: :func:`summarize` (tf_monitor statistics, :mod:`tfbus.monitor`).
 """
 
 from __future__ import annotations

@@ -8,12 +8,17 @@
     tfbus frames --bag PATH -o frames.pdf     like view_frames (Graphviz)
     tfbus static-transform x y z yaw pitch roll parent child     (on --bus, default zenoh)
     tfbus replay PATH --rate 2                publish a bag on --bus, with a progress bar
+    tfbus robot-state-publisher MODEL.urdf    robot_state_publisher (on --bus, default zenoh)
+    tfbus joint-states MODEL.urdf             joint_state_publisher, animated (--bus)
     tfbus demo --duration 10                  the seed demo (tfbus.demo)
+    tfbus demo laser                          a simulated laser projected three ways
     tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
     tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus
+    tfbus --version                           tfbus <version>
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
-group and shared plumbing in ``_common.py``, the transform sources in ``_sources.py``.
+group and shared plumbing in ``_common.py``, the transform sources and bus options in
+``_sources.py``, what the two robot commands share in ``_robot.py``.
 A command is registered by one line in :data:`COMMANDS`.
 
 Every command has ``--help`` with examples. A bad argument prints one line,
@@ -44,6 +49,8 @@ COMMANDS: tuple[str, ...] = (
     "frames",
     "static_transform",
     "replay",
+    "robot_state_publisher",
+    "joint_states",
     "demo",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""

@@ -110,7 +110,7 @@ def error(message: str) -> None:
 # Which extra brings which importable module (pyproject.toml [project.optional-dependencies]).
 _EXTRAS = {
     "click": "cli", "rich": "cli", "graphviz": "cli", "rosbags": "bag", "mcap": "bag",
-    "zenoh": "zenoh", "msgspec": "zenoh",
+    "zenoh": "zenoh", "msgspec": "zenoh", "urdf_parser_py": "robot", "lxml": "robot",
 }
 
 
@@ -169,8 +169,30 @@ class _Group(click.Group):
         return rv
 
 
+def version() -> str:
+    """tfbus's version: the installed distribution's (``importlib.metadata``), else
+    ``tfbus.__version__`` (a source tree that is not installed)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("tfbus")
+    except PackageNotFoundError:
+        import tfbus
+
+        return tfbus.__version__
+
+
+def _print_version(ctx: click.Context, param: click.Parameter, value: bool) -> None:
+    if not value or ctx.resilient_parsing:
+        return
+    click.echo(f"tfbus {version()}")
+    ctx.exit()
+
+
 @click.group("tfbus", cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="tfbus", prog_name="tfbus")
+@click.option("--version", is_flag=True, expose_value=False, is_eager=True,
+              callback=_print_version, help="Print 'tfbus <version>' and exit.")
 def cli() -> None:
     """tfbus: ROS tf2's tools for plain Python (bags, echo, monitor, view_frames).
 

@@ -14,8 +14,8 @@ receiver can detect gaps and keep per-publisher order. ``tag`` names the message
 * ``"tf"`` -- a :class:`~tfbus.messages.TFMessage`; ``body`` is the array of its
   transforms, each ``[[stamp_ns, frame_id], child_frame_id, [[x, y, z], [qx, qy, qz, qw]]]``
   (the NamedTuples' field order; stamps are integer nanoseconds, lengths metres).
-* a registered name (``"TransformStamped"``, ``"PointStamped"``, ... or anything added with
-  :func:`register_message_type`) -- that type, encoded field by field.
+* a registered name (``"TransformStamped"``, ``"PointStamped"``, ``"JointState"``, ... or
+  anything added with :func:`register_message_type`) -- that type, encoded field by field.
 * ``""`` -- a plain msgpack value (None, bool, int, float, str, bytes, list, dict).
 
 Decoding is defensive: a payload that is too large, not msgpack, of the wrong shape or
@@ -162,6 +162,7 @@ for _cls in (
     _m.PointStamped,
     _m.PoseStamped,
     _m.Vector3Stamped,
+    _m.JointState,
 ):
     register_message_type(_cls)
 
