@@ -52,7 +52,6 @@ LAYERS: dict[str, int] = {
     # 5: the command line and examples
     "cli": 5,
     "demo": 5,
-    "cli_robot_state": 5,
     "__main__": 5,
 }
 """Layer of each top-level module or package of ``tfbus`` (a package's submodules share
