@@ -30,6 +30,7 @@ LAYERS: dict[str, int] = {
     "convert": 1,
     # 1: the sans-I/O core
     "core": 1,
+    "core_text": 1,
     "_ccore": 1,
     "cache": 1,
     "errors": 1,
