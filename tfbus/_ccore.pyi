@@ -65,3 +65,13 @@ class CoreBase:
     # Defined by the Python subclass (tfbus.core.BufferCore), called from C.
     def _reject(self, parent: str, child: str, values: _Tf7, authority: str) -> None: ...
     def _refused(self, code: int, child: str, stamp: int, authority: str) -> None: ...
+
+# batched lookups (issue 12)
+def batch_walk(
+    core: CoreBase,
+    target_id: int,
+    source_id: int,
+    times: npt.NDArray[np.int64],
+    out: npt.NDArray[np.float64],
+    ok: npt.NDArray[np.int8],
+) -> int: ...

@@ -892,3 +892,269 @@ cdef class CoreBase:
             ),
             time,
         )
+
+
+# ===== batched lookups (issue 12) =====
+#
+# ``batch_walk`` answers ``lookup_transform`` for many times at once. The path between
+# the two frames is resolved once (the same climbs as ``_cwalk``, by each link's parent);
+# then every time is gathered and accumulated along it in C, in ``_cwalk``'s arithmetic
+# order, so a row is bit-for-bit the single lookup's (only the slerp angle and 1/sin of
+# an interval are reused between the times that fall in it). Rows the plan cannot answer exactly
+# (time 0, a gather that fails, a link with several parents, a span >= 2**53 ns) are
+# flagged and answered by the scalar walk in ``tfbus.batch``, which also raises tf2's
+# exception for them: the fast path never has to reproduce an error.
+
+from cpython.mem cimport PyMem_Free, PyMem_Malloc
+from libc.string cimport memset
+
+cdef struct _BLink:
+    const int64_t* st
+    const double* va
+    Py_ssize_t head
+    Py_ssize_t tail
+    double sv[7]  # a static link's value
+    bint is_static
+    bint check_only  # gathered (must succeed) but not accumulated: tf2's early exit
+    # Cache of the last interpolation interval [ci - 1, ci]: its slerp angle is reused.
+    Py_ssize_t ci
+    bint zero_angle
+    double theta
+    double d
+    double bq[4]
+
+
+cdef inline int _bgather(_BLink* L, int64_t t, double* out) noexcept nogil:
+    """``TimeCache::c_gather`` for a time != 0 on a single-parent link: 1 with ``out``
+    set, 0 when tf2's gather would fail, 2 when the row needs the scalar path."""
+    cdef Py_ssize_t head = L.head, tail = L.tail, i, i0
+    cdef const int64_t* st = L.st
+    cdef const double* a
+    cdef const double* b
+    cdef int64_t t0, span
+    cdef double r, s, dot, c, s0, s1, th
+    if L.is_static:
+        memcpy(out, L.sv, 7 * sizeof(double))
+        return 1
+    if tail == head:
+        return 0
+    if t == st[tail - 1]:
+        memcpy(out, &L.va[(tail - 1) * 7], 7 * sizeof(double))
+        return 1
+    if tail - head == 1 or t > st[tail - 1]:
+        return 0
+    i = L.ci
+    if not (i > head and i < tail and st[i - 1] < t and t <= st[i]):
+        i = _bisect_left(st, t, head, tail)
+    if st[i] == t:
+        memcpy(out, &L.va[i * 7], 7 * sizeof(double))
+        return 1
+    if i == head:
+        return 0
+    i0 = i - 1
+    a = &L.va[i0 * 7]
+    t0 = st[i0]
+    span = st[i] - t0
+    if span >= EXACT_SPAN:
+        return 2
+    if i != L.ci:
+        # tf2 slerp (Quaternion.h slerp / angleShortestPath), as TimeCache.c_gather.
+        b = &L.va[i * 7]
+        L.bq[0] = b[3]
+        L.bq[1] = b[4]
+        L.bq[2] = b[5]
+        L.bq[3] = b[6]
+        dot = a[3] * L.bq[0] + a[4] * L.bq[1] + a[5] * L.bq[2] + a[6] * L.bq[3]
+        if dot < 0.0:
+            dot = -dot
+            L.bq[0] = -L.bq[0]
+            L.bq[1] = -L.bq[1]
+            L.bq[2] = -L.bq[2]
+            L.bq[3] = -L.bq[3]
+        c = dot / sqrt(
+            (a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6])
+            * (L.bq[0] * L.bq[0] + L.bq[1] * L.bq[1] + L.bq[2] * L.bq[2]
+               + L.bq[3] * L.bq[3])
+        )
+        L.zero_angle = c >= 1.0
+        if not L.zero_angle:
+            L.theta = acos(c)
+            L.d = 1.0 / sin(L.theta)
+        L.ci = i
+    b = &L.va[i * 7]
+    r = <double>(t - t0) / <double>span
+    s = 1.0 - r
+    out[0] = s * a[0] + r * b[0]
+    out[1] = s * a[1] + r * b[1]
+    out[2] = s * a[2] + r * b[2]
+    if L.zero_angle:
+        out[3] = a[3]
+        out[4] = a[4]
+        out[5] = a[5]
+        out[6] = a[6]
+        return 1
+    th = L.theta
+    s0 = sin(s * th)
+    s1 = sin(r * th)
+    out[3] = (a[3] * s0 + L.bq[0] * s1) * L.d
+    out[4] = (a[4] * s0 + L.bq[1] * s1) * L.d
+    out[5] = (a[5] * s0 + L.bq[2] * s1) * L.d
+    out[6] = (a[6] * s0 + L.bq[3] * s1) * L.d
+    return 1
+
+
+cdef inline void _bfull(const double* src, const double* tgt, double* out) noexcept nogil:
+    """``_cwalk``'s FullPath step, same order: inv(target -> top) ∘ (source -> top)."""
+    cdef double sqx = src[3], sqy = src[4], sqz = src[5], sqw = src[6]
+    cdef double iqx = -tgt[3], iqy = -tgt[4], iqz = -tgt[5], iqw = tgt[6]
+    cdef double vx = src[0] - tgt[0], vy = src[1] - tgt[1], vz = src[2] - tgt[2]
+    cdef double tx = iqw * vx + iqy * vz - iqz * vy
+    cdef double ty = iqw * vy + iqz * vx - iqx * vz
+    cdef double tz = iqw * vz + iqx * vy - iqy * vx
+    cdef double tw = -iqx * vx - iqy * vy - iqz * vz
+    out[0] = -tw * iqx + tx * iqw - ty * iqz + tz * iqy
+    out[1] = -tw * iqy + ty * iqw - tz * iqx + tx * iqz
+    out[2] = -tw * iqz + tz * iqw - tx * iqy + ty * iqx
+    out[3] = iqw * sqx + iqx * sqw + iqy * sqz - iqz * sqy
+    out[4] = iqw * sqy + iqy * sqw + iqz * sqx - iqx * sqz
+    out[5] = iqw * sqz + iqz * sqw + iqx * sqy - iqy * sqx
+    out[6] = iqw * sqw - iqx * sqx - iqy * sqy - iqz * sqz
+
+
+cdef int _bplan_side(list caches, int frame, int stop, int early, _BLink* links,
+                     int* n, int* reached, bint* early_hit) except -1:
+    """The structure of one ``_climb`` (by each link's single parent): append its links
+    to ``links``. Returns 0, or 1 when no row can take the fast path (a link with no
+    data, several parents or NO_PARENT, or a loop)."""
+    cdef object obj
+    cdef int parent
+    cdef int depth = 0
+    cdef _BLink* L
+    early_hit[0] = False
+    while frame != stop:
+        obj = _link(caches, frame)
+        if obj is None:
+            break
+        if n[0] >= C_MAX_DEPTH:
+            return 1
+        L = &links[n[0]]
+        memset(L, 0, sizeof(_BLink))
+        L.ci = -1
+        if isinstance(obj, StaticCache):
+            L.is_static = True
+            memcpy(L.sv, (<StaticCache>obj)._v, 7 * sizeof(double))
+            parent = (<StaticCache>obj)._parent
+        elif isinstance(obj, TimeCache):
+            if (<TimeCache>obj)._pa != NULL or (<TimeCache>obj)._tail == (<TimeCache>obj)._head:
+                return 1
+            L.st = (<TimeCache>obj)._st
+            L.va = (<TimeCache>obj)._va
+            L.head = (<TimeCache>obj)._head
+            L.tail = (<TimeCache>obj)._tail
+            parent = (<TimeCache>obj)._parent
+        else:
+            return 1
+        if parent == 0:
+            return 1
+        n[0] += 1
+        if frame == early:
+            L.check_only = True
+            early_hit[0] = True
+            reached[0] = frame
+            return 0
+        frame = parent
+        depth += 1
+        if depth > C_MAX_DEPTH:
+            return 1
+    reached[0] = frame
+    return 0
+
+
+def batch_walk(CoreBase core, int target_id, int source_id, const int64_t[::1] times,
+               double[:, ::1] out, signed char[::1] ok):
+    """Many ``_cwalk``s at once (tfbus.batch's fast path; ``target_id != source_id``).
+
+    For each row r with ``ok[r] == 1`` on return, ``out[r]`` is the transform (tx, ty,
+    tz, qx, qy, qz, qw) mapping source into target at ``times[r]``, bit-for-bit what
+    ``_cwalk`` returns. Rows left at 0 must be answered by ``_cwalk`` (time 0, data
+    missing at that time, multi-parent links, a disconnected or looping tree).
+    Returns the number of rows answered. The per-time loop runs without the GIL, so two
+    threads may each take a slice of the rows; the buffer must not be written meanwhile
+    (BufferCore is single-threaded; tfbus.batch waits for its worker).
+    """
+    cdef list caches = core._caches
+    cdef Py_ssize_t n_rows = times.shape[0], r
+    cdef _BLink* src_links
+    cdef _BLink* tgt_links
+    cdef int ns = 0, nt = 0, top = 0, frame = 0, k, code
+    cdef bint src_early = False, tgt_early = False, good
+    cdef double acc_s[7]
+    cdef double acc_t[7]
+    cdef double st[7]
+    cdef Py_ssize_t answered = 0
+    cdef int64_t t
+    if out.shape[0] != n_rows or out.shape[1] != 7 or ok.shape[0] != n_rows:
+        raise ValueError("batch_walk: out must be (N, 7) and ok (N,) for N times")
+    ok[:] = 0
+    if n_rows == 0 or target_id == source_id:
+        return 0
+    src_links = <_BLink*>PyMem_Malloc(2 * (C_MAX_DEPTH + 1) * sizeof(_BLink))
+    if src_links == NULL:
+        raise MemoryError()
+    tgt_links = src_links + (C_MAX_DEPTH + 1)
+    try:
+        if _bplan_side(caches, source_id, 0, target_id, src_links, &ns, &top, &src_early):
+            return 0
+        if not src_early:
+            if _bplan_side(caches, target_id, top, source_id, tgt_links, &nt, &frame,
+                           &tgt_early):
+                return 0
+            if not tgt_early and frame != top:
+                return 0  # disconnected: the scalar walk reports it
+        with nogil:
+            for r in range(n_rows):
+                t = times[r]
+                if t == 0:
+                    continue
+                good = True
+                _identity(acc_s)
+                for k in range(ns):
+                    code = _bgather(&src_links[k], t, st)
+                    if code != 1:
+                        good = False
+                        break
+                    if src_links[k].check_only:
+                        continue
+                    if k == 0:
+                        memcpy(acc_s, st, 7 * sizeof(double))
+                    else:
+                        _accumulate(acc_s, st)
+                if not good:
+                    continue
+                if src_early:
+                    memcpy(&out[r, 0], acc_s, 7 * sizeof(double))
+                    ok[r] = 1
+                    answered += 1
+                    continue
+                _identity(acc_t)
+                for k in range(nt):
+                    code = _bgather(&tgt_links[k], t, st)
+                    if code != 1:
+                        good = False
+                        break
+                    if tgt_links[k].check_only:
+                        continue
+                    if k == 0:
+                        memcpy(acc_t, st, 7 * sizeof(double))
+                    else:
+                        _accumulate(acc_t, st)
+                if not good:
+                    continue
+                if tgt_early:
+                    _identity(acc_s)
+                _bfull(acc_s, acc_t, &out[r, 0])
+                ok[r] = 1
+                answered += 1
+    finally:
+        PyMem_Free(src_links)
+    return answered

@@ -39,6 +39,7 @@ from tfbus._ccore import (
     CoreBase,
 )
 from tfbus._tf2math import Tf7
+from tfbus.batch import BatchLookupMixin
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -125,7 +126,7 @@ def _seconds_to_ns(value: float | Duration) -> int:
     return round(value * 1_000_000_000)
 
 
-class BufferCore(CoreBase):
+class BufferCore(BatchLookupMixin, CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
     Args:
