@@ -89,14 +89,26 @@ def beam_time_offsets_ns(
     scan: LaserScan, indices: npt.ArrayLike | None = None
 ) -> npt.NDArray[np.int64]:
     """Time of beam i after the header stamp, ns, computed as laser_geometry computes the
-    last beam's: ``Duration::fromSec((float)i * time_increment)`` (float32 product).
+    last beam's: ``Duration::fromSec((float)i * time_increment)`` (float32 product, then
+    rostime's rounding, see :func:`_from_sec_ns`), vectorised.
 
     Returns:
         ``(M,) int64`` for the given beam indices (all beams when None).
+
+    Raises:
+        ValueError: a product is not finite or out of ros::Duration's range.
     """
     idx = np.arange(len(scan.ranges)) if indices is None else np.asarray(indices)
-    prod = idx.astype(np.float32) * np.float32(scan.time_increment)
-    return np.array([_from_sec_ns(float(v)) for v in prod.tolist()], dtype=np.int64)
+    with np.errstate(all="ignore"):
+        d = (idx.astype(np.float32) * np.float32(scan.time_increment)).astype(np.float64)
+        sec = np.floor(d)
+        if d.size and not (np.isfinite(d).all() and sec.min() >= -(2.0**31)
+                           and sec.max() <= 2.0**31 - 1):  # fmt: skip
+            raise ValueError("a beam's time offset is out of ros::Duration's range")
+        frac = (d - sec) * 1e9
+        nsec = np.where(frac < 0.5, 0.0, np.ceil(frac))
+        nsec -= (nsec != 0) & (nsec - frac > 0.5)
+    return sec.astype(np.int64) * 1_000_000_000 + nsec.astype(np.int64)
 
 
 def _end_time(scan: LaserScan) -> Time:
@@ -109,7 +121,8 @@ def _end_time(scan: LaserScan) -> Time:
 
 def _slerp_ratio(q1: tuple[float, ...], q2: tuple[float, ...], t: _F64) -> _F64:
     """tf2 ``Quaternion::slerp(q1, q2, t)`` for many t (``angleShortestPath`` with
-    ``tf2Acos``'s clamp; q1 returned unchanged for a zero angle). Returns ``(N, 4)``."""
+    ``tf2Acos``'s clamp; q1 returned unchanged for a zero angle). Returns ``(4, N)``
+    (component-major: x, y, z, w rows)."""
     x1, y1, z1, w1 = q1
     x2, y2, z2, w2 = q2
     dot = x1 * x2 + y1 * y2 + z1 * z2 + w1 * w2
@@ -117,37 +130,47 @@ def _slerp_ratio(q1: tuple[float, ...], q2: tuple[float, ...], t: _F64) -> _F64:
     c = (-dot) / s if dot < 0 else dot / s
     c = -1.0 if c < -1.0 else (1.0 if c > 1.0 else c)
     theta = (2.0 * math.acos(c)) / 2.0 if not math.isnan(c) else math.nan
-    out = np.empty((t.shape[0], 4))
+    a = np.array(q1)[:, None]
     if theta == 0.0:
-        out[:] = q1
-        return out
+        return np.repeat(a, t.shape[0], axis=1)
     d = 1.0 / math.sin(theta) if not math.isnan(theta) else math.nan
     s0 = np.sin((1.0 - t) * theta)
     s1 = np.sin(t * theta)
-    sign = -1.0 if dot < 0 else 1.0
-    out[:, 0] = (x1 * s0 + (sign * x2) * s1) * d
-    out[:, 1] = (y1 * s0 + (sign * y2) * s1) * d
-    out[:, 2] = (z1 * s0 + (sign * z2) * s1) * d
-    out[:, 3] = (w1 * s0 + (sign * w2) * s1) * d
+    b = (np.array(q2) if dot >= 0 else -np.array(q2))[:, None]
+    out: _F64 = (a * s0 + b * s1) * d
     return out
 
 
 def _apply_tf2(q: _F64, v: _F64, p: _F64) -> _F64:
     """tf2::Transform with ``setRotation(q)`` (its basis, in tf2's order) applied to
-    points: ``p.dot3(row0, row1, row2) + origin``. q ``(N, 4)``, v and p ``(N, 3)``."""
-    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    d = x * x + y * y + z * z + w * w
+    points: ``p.dot3(row0, row1, row2) + origin``. Component-major arrays: q ``(4, N)``,
+    v and p ``(3, N)``; returns ``(3, N)``. Element for element the same IEEE operations
+    as tf2's scalar code (``Matrix3x3::setRotation``, ``Transform::operator()``)."""
+    x, y, z, w = q
+    d = ((x * x + y * y) + z * z) + w * w
     s = 2.0 / d
-    xs, ys, zs = x * s, y * s, z * s
-    wx, wy, wz = w * xs, w * ys, w * zs
-    xx, xy, xz = x * xs, x * ys, x * zs
-    yy, yz, zz = y * ys, y * zs, z * zs
-    px, py, pz = p[:, 0], p[:, 1], p[:, 2]
-    out = np.empty_like(p)
-    out[:, 0] = (px * (1.0 - (yy + zz)) + py * (xy - wz) + pz * (xz + wy)) + v[:, 0]
-    out[:, 1] = (px * (xy + wz) + py * (1.0 - (xx + zz)) + pz * (yz - wx)) + v[:, 1]
-    out[:, 2] = (px * (xz - wy) + py * (yz + wx) + pz * (1.0 - (xx + yy))) + v[:, 2]
+    xyz_s = q[:3] * s  # xs, ys, zs
+    wx, wy, wz = w * xyz_s
+    xx, xy, xz = x * xyz_s
+    yy, yz = y * xyz_s[1:]
+    zz = z * xyz_s[2]
+    m = np.empty((3, 3, q.shape[1]))
+    m[0, 0] = 1.0 - (yy + zz)
+    m[0, 1] = xy - wz
+    m[0, 2] = xz + wy
+    m[1, 0] = xy + wz
+    m[1, 1] = 1.0 - (xx + zz)
+    m[1, 2] = yz - wx
+    m[2, 0] = xz - wy
+    m[2, 1] = yz + wx
+    m[2, 2] = 1.0 - (xx + yy)
+    terms = m * p  # terms[r, c] = p[c] * row_r[c]
+    out: _F64 = ((terms[:, 0] + terms[:, 1]) + terms[:, 2]) + v
     return out
+
+
+_INTENSITY, _INDEX, _DISTANCE, _TIMESTAMP, _VIEWPOINT = 0x01, 0x02, 0x04, 0x08, 0x10
+_FIELDS: dict[tuple[str, ...], list[PointField]] = {}  # PointField lists by layout
 
 
 class LaserProjection:
@@ -174,14 +197,14 @@ class LaserProjection:
         return self._cos, self._sin
 
     def _project(
-        self, scan: LaserScan, range_cutoff: float, channel_options: int
-    ) -> tuple[list[PointField], np.ndarray[Any, np.dtype[np.void]]]:
-        """laser_geometry ``projectLaser_`` (PointCloud2): the fields and the kept
-        points as a structured array (native little-endian float32 / int32)."""
+        self, scan: LaserScan, range_cutoff: float, opts: int
+    ) -> tuple[list[str], npt.NDArray[np.int64], npt.NDArray[np.float32]]:
+        """laser_geometry ``projectLaser_`` (PointCloud2): the field names, the kept beam
+        indices and the points as a ``(kept, fields)`` float32 matrix in the cloud's
+        layout (the ``index`` column holds int32 bits)."""
         ranges = scan.ranges
         n = len(ranges)
-        opts = int(channel_options)
-        has_intensity = bool(opts & ChannelOption.INTENSITY) and len(scan.intensities) > 0
+        has_intensity = bool(opts & _INTENSITY) and len(scan.intensities) > 0
         if has_intensity and len(scan.intensities) < n:
             raise ValueError(
                 f"LaserScan.intensities has {len(scan.intensities)} values for {n} ranges"
@@ -189,46 +212,52 @@ class LaserProjection:
         names = ["x", "y", "z"]
         if has_intensity:
             names.append("intensity")
-        if opts & ChannelOption.INDEX:
+        if opts & _INDEX:
             names.append("index")
-        if opts & ChannelOption.DISTANCE:
+        if opts & _DISTANCE:
             names.append("distances")
-        if opts & ChannelOption.TIMESTAMP:
+        if opts & _TIMESTAMP:
             names.append("stamps")
-        if opts & ChannelOption.VIEWPOINT:
+        if opts & _VIEWPOINT:
             names += ["vp_x", "vp_y", "vp_z"]
-        fields = [
-            PointField(name, 4 * k, PointField.INT32 if name == "index" else PointField.FLOAT32)
-            for k, name in enumerate(names)
-        ]
-        dtype = np.dtype([(name, "<i4" if name == "index" else "<f4") for name in names])
         cos, sin = self._table(scan)
         r64 = ranges.astype(np.float64)
         cutoff = float(scan.range_max) if range_cutoff < 0 else float(range_cutoff)
-        with np.errstate(invalid="ignore"):
-            keep = np.flatnonzero((r64 < cutoff) & (ranges >= np.float32(scan.range_min)))
-        pts = np.zeros(keep.shape[0], dtype=dtype)
+        # (callers hold np.errstate(all="ignore"): NaN / inf beams as in C++)
+        keep = np.flatnonzero((r64 < cutoff) & (ranges >= np.float32(scan.range_min)))
+        cols = np.zeros((keep.shape[0], len(names)), dtype=np.float32)
         rk = r64[keep]
-        with np.errstate(invalid="ignore", over="ignore"):
-            pts["x"] = rk * cos[keep]
-            pts["y"] = rk * sin[keep]
+        cols[:, 0] = rk * cos[keep]
+        cols[:, 1] = rk * sin[keep]
+        k = 3
         if has_intensity:
-            pts["intensity"] = scan.intensities[keep]
-        if "index" in names:
-            pts["index"] = keep
-        if "distances" in names:
-            pts["distances"] = ranges[keep]
-        if "stamps" in names:
-            with np.errstate(over="ignore", invalid="ignore"):
-                pts["stamps"] = keep.astype(np.float32) * np.float32(scan.time_increment)
-        return fields, pts
+            cols[:, k] = scan.intensities[keep]
+            k += 1
+        if opts & _INDEX:
+            cols.view(np.int32)[:, k] = keep
+            k += 1
+        if opts & _DISTANCE:
+            cols[:, k] = ranges[keep]
+            k += 1
+        if opts & _TIMESTAMP:
+            cols[:, k] = keep.astype(np.float32) * np.float32(scan.time_increment)
+        return names, keep, cols
 
     @staticmethod
-    def _cloud(header: Header, fields: list[PointField], pts: np.ndarray[Any, Any]) -> PointCloud2:
-        step = 4 * len(fields)
+    def _cloud(header: Header, names: list[str], cols: npt.NDArray[np.float32]) -> PointCloud2:
+        key = tuple(names)
+        fields = _FIELDS.get(key)
+        if fields is None:
+            fields = _FIELDS[key] = [
+                PointField(name, 4 * k, PointField.INT32 if name == "index" else PointField.FLOAT32)
+                for k, name in enumerate(names)
+            ]
+        step = 4 * len(names)
+        data = cols.astype("<f4", copy=False).tobytes()
         return PointCloud2(
-            header=header, height=1, width=len(pts), fields=fields, is_bigendian=False,
-            point_step=step, row_step=step * len(pts), data=pts.tobytes(), is_dense=False,
+            header=header, height=1, width=cols.shape[0], is_bigendian=False,
+            fields=list(fields), point_step=step, row_step=step * cols.shape[0], data=data,
+            is_dense=False,
         )  # fmt: skip
 
     def project_laser(
@@ -253,8 +282,9 @@ class LaserProjection:
             ValueError: the scan has intensities, fewer than its ranges (laser_geometry
                 would read out of bounds).
         """
-        fields, pts = self._project(scan, range_cutoff, channel_options)
-        return self._cloud(scan.header, fields, pts)
+        with np.errstate(all="ignore"):
+            names, _, cols = self._project(scan, range_cutoff, int(channel_options))
+        return self._cloud(scan.header, names, cols)
 
     # ------------------------------------------------------------------ transforming
 
@@ -295,16 +325,29 @@ class LaserProjection:
             InvalidArgumentException: from the lookups (tf2's messages).
             ValueError: bad ``interpolation`` or malformed scan.
         """
+        with np.errstate(all="ignore"):  # NaN / inf beams propagate as in C++
+            return self._transform(
+                target_frame, scan, buffer, range_cutoff, int(channel_options), interpolation,
+                fixed_frame,
+            )  # fmt: skip
+
+    def _transform(
+        self,
+        target_frame: str,
+        scan: LaserScan,
+        buffer: BufferCore,
+        range_cutoff: float,
+        opts: int,
+        interpolation: Interpolation,
+        fixed_frame: str | None,
+    ) -> PointCloud2:
         frame = scan.header.frame_id
         start = scan.header.stamp
-        requested_index = bool(int(channel_options) & ChannelOption.INDEX)
-        fields, pts = self._project(scan, range_cutoff, int(channel_options) | ChannelOption.INDEX)
+        names, keep, cols = self._project(scan, range_cutoff, opts | _INDEX)
         n = len(scan.ranges)
-        idx = pts["index"].astype(np.float64)
-        p = np.stack(
-            [pts["x"].astype(np.float64), pts["y"].astype(np.float64),
-             pts["z"].astype(np.float64)], axis=1,
-        )  # fmt: skip
+        p = cols[:, :3].T.astype(np.float64)  # (3, kept)
+        q: _F64
+        v: _F64
         if interpolation == "laser_geometry":
             end = _end_time(scan)
             ts0 = buffer.lookup_transform(target_frame, frame, start)
@@ -314,42 +357,31 @@ class LaserProjection:
                 ts1 = buffer.lookup_transform_full(target_frame, start, frame, end, fixed_frame)
             o0 = np.array(ts0.transform.translation)
             o1 = np.array(ts1.transform.translation)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = idx * (np.float64(1.0) / np.float64(float(n) - 1.0))  # n = 1: inf, as C++
-                s = 1.0 - ratio
-                v = s[:, None] * o0[None, :] + ratio[:, None] * o1[None, :]
-                q = _slerp_ratio(
-                    tuple(ts0.transform.rotation), tuple(ts1.transform.rotation), ratio
-                )
+            # n = 1: 1 / 0 = inf and a NaN ratio, as in C++
+            ratio = keep * (np.float64(1.0) / np.float64(float(n) - 1.0))
+            v = (1.0 - ratio) * o0[:, None] + ratio * o1[:, None]
+            q = _slerp_ratio(tuple(ts0.transform.rotation), tuple(ts1.transform.rotation), ratio)
         elif interpolation == "per_beam":
-            times = start.ns + beam_time_offsets_ns(scan, pts["index"])
+            times = start.ns + beam_time_offsets_ns(scan, keep)
             arr = buffer.lookup_transforms(target_frame, frame, times)
-            v, q = arr.translations, arr.rotations
+            v, q = arr.translations.T, arr.rotations.T
         elif interpolation == "stamp":
             ts0 = buffer.lookup_transform(target_frame, frame, start)
-            v = np.broadcast_to(np.array(ts0.transform.translation), p.shape)
-            q = np.broadcast_to(np.array(ts0.transform.rotation), (p.shape[0], 4))
+            v = np.array(ts0.transform.translation)[:, None]
+            q = np.repeat(np.array(ts0.transform.rotation)[:, None], p.shape[1], axis=1)
         else:
             raise ValueError(
                 "interpolation must be 'laser_geometry', 'per_beam' or 'stamp', "
                 f"got {interpolation!r}"
             )
-        with np.errstate(invalid="ignore", over="ignore"):
-            out = _apply_tf2(q, v, p)
-            pts["x"], pts["y"], pts["z"] = out[:, 0], out[:, 1], out[:, 2]
-            if "vp_x" in (pts.dtype.names or ()):
-                vp = _apply_tf2(q, v, np.zeros_like(p))
-                pts["vp_x"], pts["vp_y"], pts["vp_z"] = vp[:, 0], vp[:, 1], vp[:, 2]
-        if not requested_index:
-            keep = [f.name for f in fields if f.name != "index"]
-            fields = [
-                PointField(name, 4 * k, f.datatype)
-                for k, (name, f) in enumerate((f.name, f) for f in fields if f.name != "index")
-            ]
-            pts = np.ascontiguousarray(pts[keep]).astype(
-                np.dtype([(name, pts.dtype[name]) for name in keep])
-            )
-        return self._cloud(Header(start, target_frame), fields, pts)
+        cols[:, :3] = _apply_tf2(q, v, p).T
+        if opts & _VIEWPOINT:
+            cols[:, -3:] = _apply_tf2(q, v, np.zeros_like(p)).T
+        if not opts & _INDEX:
+            j = names.index("index")
+            names = names[:j] + names[j + 1 :]
+            cols = np.delete(cols, j, axis=1)
+        return self._cloud(Header(start, target_frame), names, cols)
 
     async def transform_laser_scan_to_point_cloud_async(
         self,
