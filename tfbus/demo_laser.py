@@ -193,7 +193,7 @@ async def _mapper(
 
 
 async def run_laser_demo(
-    duration: float,
+    duration: float | None,
     *,
     clock: Clock | None = None,
     out: Callable[[str], None] = print,
@@ -203,8 +203,8 @@ async def run_laser_demo(
     odom_rate: float = 50.0,
 ) -> LaserDemoStats:
     """Run the laser demo for ``duration`` seconds of ``clock`` time (default: the
-    system clock), print a line each second and a summary line through ``out``, and
-    return the statistics.
+    system clock; None: until cancelled), print a line each second and a summary line
+    through ``out``, and return the statistics.
 
     Args:
         bus: an open bus to run on; by default a new in-process Bus.
@@ -214,7 +214,7 @@ async def run_laser_demo(
     Raises:
         ValueError: a non-positive duration, rate or beam count.
     """
-    if duration <= 0 or beams < 2 or scan_rate <= 0 or odom_rate <= 0:
+    if (duration is not None and duration <= 0) or beams < 2 or scan_rate <= 0 or odom_rate <= 0:
         raise ValueError(
             f"duration, scan_rate and odom_rate must be > 0 and beams >= 2, got {duration}, "
             f"{scan_rate}, {odom_rate}, {beams}"
@@ -241,8 +241,9 @@ async def run_laser_demo(
                 epoch = clock.now().ns
                 tg.start_soon(_odometry, the_bus, clock, odom_rate, epoch)
                 tg.start_soon(_laser, the_bus, clock, beams, scan_rate, epoch)
-                await clock.sleep(duration)
-                tg.cancel_scope.cancel()
+                if duration is not None:
+                    await clock.sleep(duration)
+                    tg.cancel_scope.cancel()
         finally:
             if own:
                 await the_bus.__aexit__(None, None, None)
