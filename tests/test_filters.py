@@ -286,3 +286,22 @@ async def test_lookup_transforms_async_waits_for_the_latest_time() -> None:
     buf.set_transform(odom(30.0))
     with pytest.raises(ExtrapolationException):
         await lookup_transforms_async(buf, "odom", "laser", [at(1.0).ns, at(3.0).ns])
+
+
+async def test_async_batch_mixin_gives_buffer_methods() -> None:
+    from tfbus.batch_async import AsyncBatchMixin
+
+    class MixedBuffer(AsyncBatchMixin, Buffer):
+        pass
+
+    clock = ManualClock(Time(100))
+    buf = MixedBuffer(clock=clock)
+    buf.set_transform(odom(1.0))
+    buf.set_transform(odom(2.0))
+    times = [at(1.2).ns, at(1.8).ns]
+    got = await buf.lookup_transforms_async("odom", "base_link", times, timeout=1.0)
+    assert got.translations.tolist() == buf.lookup_transforms(
+        "odom", "base_link", times
+    ).translations.tolist()
+    pts = await buf.transform_points_async(np.zeros((2, 3)), "odom", "base_link", times)
+    assert pts[:, 0].tolist() == got.translations[:, 0].tolist()
