@@ -45,6 +45,7 @@ DEPTH = 8
 SAMPLES = 1001  # per link, 10 ms apart
 STEP_NS = 10_000_000
 BASE_NS = 1_000 * 1_000_000_000
+ROUNDS = 3  # alternating rounds of each side; the best of each is reported
 
 
 def _value(k: int, j: int) -> tuple[float, ...]:
@@ -116,19 +117,26 @@ def bench_lookups(n: int) -> None:
     print(f"\nlookup_transforms: N = {n} times, depth {DEPTH}, every link interpolated")
     core = chain_core()
     times = query_times(n)
-    ours = best(lambda: core.lookup_transforms("f0", f"f{DEPTH}", times), 7)
-    single = best(lambda: [core.lookup_transform("f0", f"f{DEPTH}", Time.from_ns(int(t)))
-                           for t in times[:2000]], 3) * n / 2000  # fmt: skip
-    print(f"  tfbus lookup_transforms     {ours * 1e3:8.2f} ms  {ours / n * 1e9:7.0f} ns/time")
-    print(f"  tfbus single-lookup loop    {single * 1e3:8.2f} ms  {single / n * 1e9:7.0f} ns/time")
     sc = {"depth": DEPTH, "samples": SAMPLES, "base": BASE_NS, "step": STEP_NS,
           "times": times.tolist()}  # fmt: skip
-    run = subprocess.run([TF2_PYTHON, "-c", TF2_SCRIPT], input=json.dumps(sc),
-                         capture_output=True, text=True, check=False)  # fmt: skip
-    if run.returncode:
-        print(f"  tf2_py: unavailable ({run.stderr.strip()[-200:]})")
+    # The machine may be shared: alternate the two sides and keep each one's best round.
+    ours = single = ref = math.inf
+    for _ in range(ROUNDS):
+        ours = min(ours, best(lambda: core.lookup_transforms("f0", f"f{DEPTH}", times), 7))
+        single = min(single, best(lambda: [
+            core.lookup_transform("f0", f"f{DEPTH}", Time.from_ns(int(t)))
+            for t in times[:2000]], 3) * n / 2000)  # fmt: skip
+        run = subprocess.run([TF2_PYTHON, "-c", TF2_SCRIPT], input=json.dumps(sc),
+                             capture_output=True, text=True, check=False)  # fmt: skip
+        if run.returncode:
+            print(f"  tf2_py: unavailable ({run.stderr.strip()[-200:]})")
+            ref = math.nan
+            break
+        ref = min(ref, json.loads(run.stdout)["loop_s"])
+    print(f"  tfbus lookup_transforms     {ours * 1e3:8.2f} ms  {ours / n * 1e9:7.0f} ns/time")
+    print(f"  tfbus single-lookup loop    {single * 1e3:8.2f} ms  {single / n * 1e9:7.0f} ns/time")
+    if math.isnan(ref):
         return
-    ref = json.loads(run.stdout)["loop_s"]
     print(f"  tf2_py lookup loop          {ref * 1e3:8.2f} ms  {ref / n * 1e9:7.0f} ns/time")
     print(f"  ratio tfbus batch / tf2_py loop: {ours / ref:.4f}x (target <= 0.03x)")
 
@@ -153,8 +161,11 @@ def _laser_core() -> BufferCore:
             Header(Time(1000) + _dur(t), "odom"), "base_link",
             Transform(Vector3(2 * math.cos(t), 2 * math.sin(t), 0.0),
                       Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))))  # fmt: skip
-    core.set_transform_static(TransformStamped(Header(Time(0), "base_link"), "base_laser",
-                                               Transform(Vector3(0.1, 0.0, 0.2))))
+    core.set_transform_static(
+        TransformStamped(
+            Header(Time(0), "base_link"), "base_laser", Transform(Vector3(0.1, 0.0, 0.2))
+        )
+    )
     return core
 
 
@@ -169,29 +180,63 @@ def bench_laser(beams: int, reps: int) -> None:
     core = _laser_core()
     scan = _scan(beams)
     proj = LaserProjection()
-    p = best(lambda: [proj.project_laser(scan) for _ in range(reps)], 5) / reps
-    t = best(lambda: [proj.transform_laser_scan_to_point_cloud("odom", scan, core)
-                      for _ in range(reps)], 5) / reps  # fmt: skip
-    pb = best(lambda: [proj.transform_laser_scan_to_point_cloud(
-        "odom", scan, core, interpolation="per_beam") for _ in range(reps)], 5) / reps
+    have_cpp = (
+        shutil.which("g++") is not None
+        and not subprocess.run(["pkg-config", "--exists", "laser_geometry"], check=False).returncode
+    )
+    p = t = pb = cp = ct = math.inf
+    with tempfile.TemporaryDirectory() as tmp:
+        exe = Path(tmp) / "bench"
+        if have_cpp:
+            flags = subprocess.run(
+                ["pkg-config", "--cflags", "--libs", "laser_geometry"],
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout.split()
+            subprocess.run(
+                ["g++", "-O2", "-o", str(exe), str(HERE / "laser_geometry_bench.cpp"), *flags],
+                check=True,
+            )
+        for _ in range(ROUNDS):  # alternate the sides; keep each one's best round
+            p = min(p, best(lambda: [proj.project_laser(scan) for _ in range(reps)], 5) / reps)
+            t = min(
+                t,
+                best(
+                    lambda: [
+                        proj.transform_laser_scan_to_point_cloud("odom", scan, core)
+                        for _ in range(reps)
+                    ],
+                    5,
+                )
+                / reps,
+            )
+            pb = min(
+                pb,
+                best(
+                    lambda: [
+                        proj.transform_laser_scan_to_point_cloud(
+                            "odom", scan, core, interpolation="per_beam"
+                        )
+                        for _ in range(reps)
+                    ],
+                    5,
+                )
+                / reps,
+            )
+            if have_cpp:
+                out = subprocess.run(
+                    [str(exe)], input=f"{beams} {reps}", capture_output=True, text=True, check=True
+                ).stdout.split()
+                figures = dict(zip(out[::2], out[1::2], strict=True))
+                cp = min(cp, float(figures["project_ns"]) / 1e9)
+                ct = min(ct, float(figures["transform_ns"]) / 1e9)  # fmt: skip
     print(f"  tfbus project_laser                      {p * 1e6:8.1f} µs")
     print(f"  tfbus transform (laser_geometry interp.) {t * 1e6:8.1f} µs")
     print(f"  tfbus transform (per_beam lookups)       {pb * 1e6:8.1f} µs")
-    if shutil.which("g++") is None or subprocess.run(
-        ["pkg-config", "--exists", "laser_geometry"], check=False
-    ).returncode:
+    if not have_cpp:
         print("  C++ laser_geometry: unavailable (bash scripts/install_laser_geometry.sh)")
         return
-    with tempfile.TemporaryDirectory() as tmp:
-        exe = Path(tmp) / "bench"
-        flags = subprocess.run(["pkg-config", "--cflags", "--libs", "laser_geometry"],
-                               capture_output=True, text=True, check=True).stdout.split()
-        subprocess.run(["g++", "-O2", "-o", str(exe), str(HERE / "laser_geometry_bench.cpp"),
-                        *flags], check=True)  # fmt: skip
-        out = subprocess.run([str(exe)], input=f"{beams} {reps}", capture_output=True,
-                             text=True, check=True).stdout.split()  # fmt: skip
-    figures = dict(zip(out[::2], out[1::2], strict=True))
-    cp, ct = float(figures["project_ns"]) / 1e9, float(figures["transform_ns"]) / 1e9
     print(f"  C++ laser_geometry projectLaser           {cp * 1e6:8.1f} µs   ratio {p / cp:.2f}x")
     print(f"  C++ laser_geometry transformLaserScan...  {ct * 1e6:8.1f} µs   ratio {t / ct:.2f}x"
           " (target <= 2x)")  # fmt: skip
