@@ -32,11 +32,12 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
 
+from tfbus.buffer import Buffer
 from tfbus.core import BufferCore
 from tfbus.messages import Header
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
@@ -387,7 +388,7 @@ class LaserProjection:
         self,
         target_frame: str,
         scan: LaserScan,
-        buffer: Any,
+        buffer: Buffer,
         range_cutoff: float = -1.0,
         channel_options: int = ChannelOption.DEFAULT,
         *,
