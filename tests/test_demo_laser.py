@@ -18,11 +18,6 @@ from tfbus.demo_laser import base_pose, run_laser_demo, simulate_scan, wall_erro
 pytestmark = pytest.mark.anyio
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 async def test_demo_reports_each_second_and_orders_the_methods() -> None:
     clock = ManualClock(Time(1000))
     lines: list[str] = []

@@ -278,11 +278,6 @@ def test_point_cloud2_helpers_round_trip() -> None:
 # --------------------------------------------------------------------------- awaiting
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
 @pytest.mark.anyio
 async def test_awaitable_projection_waits_for_the_last_beam() -> None:
     clock = ManualClock(Time(10))

@@ -9,9 +9,11 @@ Layers (each imports only those below it; see DESIGN notes in the README):
 * :mod:`tfbus.bag`, :mod:`tfbus.transports`, the ``tfbus`` command line.
 """
 
+from tfbus import bus as _bus
+from tfbus.batch import TransformArray
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
-from tfbus.bus import Bus, MemoryTransport, Subscription, Transport
+from tfbus.bus import Bus, Subscription, Transport
 from tfbus.clock import Clock, ManualClock, SystemClock, every
 from tfbus.core import BufferCore, SetResult
 from tfbus.errors import (
@@ -24,6 +26,8 @@ from tfbus.errors import (
     TransformException,
     TransportError,
 )
+from tfbus.filters import MessageFilter
+from tfbus.laser import LaserProjection
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
@@ -38,7 +42,13 @@ from tfbus.messages import (
     Vector3,
     Vector3Stamped,
 )
+from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
+from tfbus.transports.memory import MemoryTransport
+
+# MemoryTransport moved from tfbus.bus (layer 2) to tfbus.transports.memory (layer 4);
+# ``from tfbus.bus import MemoryTransport`` keeps working without bus.py importing up.
+setattr(_bus, "MemoryTransport", MemoryTransport)  # noqa: B010
 
 __version__ = "0.1.0"
 
@@ -52,10 +62,15 @@ __all__ = [
     "ExtrapolationException",
     "Header",
     "InvalidArgumentException",
+    "LaserProjection",
+    "LaserScan",
     "LookupException",
     "ManualClock",
     "MemoryTransport",
+    "MessageFilter",
     "Point",
+    "PointCloud2",
+    "PointField",
     "PointStamped",
     "Pose",
     "PoseStamped",
@@ -69,6 +84,7 @@ __all__ = [
     "Time",
     "TimeoutException",
     "Transform",
+    "TransformArray",
     "TransformBroadcaster",
     "TransformException",
     "TransformListener",

@@ -2,49 +2,62 @@
 
 ``lookup_transforms(core, target, source, times)`` answers ``lookup_transform`` for every
 time of an ``(N,)`` int64 nanosecond array in one call. The compiled core
-(``tfbus._ccore.batch_walk``) resolves the path between the two frames once and gathers
-and accumulates every link for every time in C, in the same arithmetic order as the
-single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then
+(``tfbus._ccore.batch_lookup``) resolves the path between the two frames once and
+gathers and accumulates every link for every time in C, in the same arithmetic order as
+the single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then
 ``TransformAccum``), so each row is the single lookup's result bit for bit. Rows the
-compiled plan cannot answer (time 0, a time some link has no data for, a link whose
-parent changed, a disconnected tree) are answered by the scalar walk, which also builds
-tf2's exception for them.
+compiled plan cannot take (time 0, a link whose parent changed) go through the core's
+scalar walk; for a row that cannot be answered at all, the single public
+``lookup_transform`` is asked, so the exception and its message are tf2's by
+construction.
 
 :class:`BatchLookupMixin` puts these functions on :class:`tfbus.core.BufferCore` as
-methods. This is layer 1 (sans-I/O): nothing here imports anyio; the awaitable twins are
-in :mod:`tfbus.batch_async`.
+methods; the functions take any object with the public lookups of BufferCore (this
+module does not import :mod:`tfbus.core`, which imports it). Layer 1 (sans-I/O): no
+threads, no event loop; the awaitable twins are in :mod:`tfbus.batch_async`.
 """
 
 from __future__ import annotations
 
 import math
-import os
-import threading
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
-from typing import TYPE_CHECKING, Literal, cast
+from typing import Literal, Protocol, cast
 
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._ccore import (
-    CONNECTIVITY_ERROR,
-    EXTRAPOLATION_ERROR,
-    LOOKUP_ERROR,
-    NO_ERROR,
-    batch_walk,
-)
-from tfbus.errors import (
-    ConnectivityException,
-    ExtrapolationException,
-    LookupException,
-    TransformException,
-)
+from tfbus._ccore import CoreBase, batch_lookup
+from tfbus.errors import TransformException
 from tfbus.geometry import apply_transform
+from tfbus.messages import TransformStamped
 from tfbus.time import Time
 
-if TYPE_CHECKING:
-    from tfbus.core import BufferCore
+
+class Lookups(Protocol):
+    """What the batched lookups need of a buffer: :class:`tfbus.core.BufferCore`'s
+    public single lookups (structural type, so this module needs no import of it)."""
+
+    def lookup_transform(
+        self, target_frame: str, source_frame: str, time: Time
+    ) -> TransformStamped: ...
+
+    def try_lookup_transform(
+        self, target_frame: str, source_frame: str, time: Time
+    ) -> TransformStamped | TransformException: ...
+
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+    ) -> TransformStamped: ...
+
+    def frame_exists(self, frame_id: str) -> bool: ...
+
+    def invalid_frame_id(self, frame_id: str, argument: str = ...) -> Exception | None: ...
+
 
 __all__ = [
     "BatchLookupMixin",
@@ -59,13 +72,6 @@ Errors = Literal["raise", "mask"]
 
 _F64 = npt.NDArray[np.float64]
 _I64 = npt.NDArray[np.int64]
-
-_ERRORS: dict[int, type[TransformException]] = {
-    LOOKUP_ERROR: LookupException,
-    CONNECTIVITY_ERROR: ConnectivityException,
-    EXTRAPOLATION_ERROR: ExtrapolationException,
-}
-
 
 class TransformArray:
     """N transforms between one pair of frames, one per time (the batched
@@ -189,52 +195,13 @@ def as_times(times: npt.ArrayLike | Sequence[Time] | Time | int, n: int | None =
     return np.ascontiguousarray(arr)
 
 
-_SPLIT_ROWS = 8192  # below this a second thread costs more than it saves
-_pool: ThreadPoolExecutor | None = None
-_pool_lock = threading.Lock()
-
-
-def _worker() -> ThreadPoolExecutor | None:
-    global _pool
-    if (os.cpu_count() or 1) < 2:
-        return None
-    with _pool_lock:
-        if _pool is None:
-            _pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="tfbus-batch")
-        return _pool
-
-
-def _walk_rows(
-    core: BufferCore,
-    target_id: int,
-    source_id: int,
-    t: _I64,
-    out: _F64,
-    ok: npt.NDArray[np.int8],
-) -> int:
-    """The compiled walk over all rows; large batches are split in two halves, one run
-    by a worker thread (the compiled loop releases the GIL), the caller waiting for it
-    before returning, so nothing can write the buffer meanwhile."""
-    n = t.shape[0]
-    pool = _worker() if n >= _SPLIT_ROWS else None
-    if pool is None:
-        return int(batch_walk(core, target_id, source_id, t, out, ok))
-    h = n // 2
-    future = pool.submit(batch_walk, core, target_id, source_id, t[h:], out[h:], ok[h:])
-    try:
-        first = int(batch_walk(core, target_id, source_id, t[:h], out[:h], ok[:h]))
-    finally:
-        second = int(future.result())
-    return first + second
-
-
 def _check_errors(errors: str) -> None:
     if errors not in ("raise", "mask"):
         raise ValueError(f"errors must be 'raise' or 'mask', got {errors!r}")
 
 
 def lookup_transforms(
-    core: BufferCore,
+    core: Lookups,
     target_frame: str,
     source_frame: str,
     times: npt.ArrayLike | Sequence[Time] | Time | int,
@@ -273,37 +240,33 @@ def lookup_transforms(
     stamps = t.copy()
     valid = np.ones(n, dtype=bool)
     if target_frame == source_frame:
+        # The single lookup validates nothing here; time 0 is stamped with the frame's
+        # newest sample: ask it once.
         out[:] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
         zero = t == 0
         if zero.any():
-            cache = core._caches[core._frame_ids.get(target_frame, 0)]
-            stamps[zero] = cache.latest_stamp() if cache is not None else 0
+            stamps[zero] = core.lookup_transform(target_frame, source_frame, Time()).header.stamp.ns
         return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame)
-    target_id = core._validate("lookupTransform argument target_frame", target_frame)
-    source_id = core._validate("lookupTransform argument source_frame", source_frame)
+    if not isinstance(core, CoreBase):
+        raise TypeError(f"core must be a tfbus BufferCore, got {type(core).__name__}")
     ok = np.empty(n, dtype=np.int8)
-    answered = _walk_rows(core, target_id, source_id, t, out, ok)
+    answered = batch_lookup(core, target_frame, source_frame, t, out, stamps, ok)
+    if answered < 0:
+        # An invalid or unknown frame id: the single lookup raises tf2's exception.
+        core.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[0]) if n else 0))
+        raise AssertionError("lookup_transform accepted an id batch_lookup refused")
     if answered != n:
-        scalar: dict[int, tuple[int, object, int]] = {}
-        for i in np.flatnonzero(ok == 0).tolist():
-            ti = int(t[i])
-            res = scalar.get(ti)
-            if res is None:
-                res = scalar[ti] = core._walk(target_id, source_id, ti)
-            err, payload, used = res
-            if err == NO_ERROR:
-                out[i] = cast("tuple[float, ...]", payload)
-                stamps[i] = used
-            elif errors == "raise":
-                raise _ERRORS[err](cast(str, payload))
-            else:
-                out[i] = math.nan
-                valid[i] = False
+        bad = np.flatnonzero(ok == 0)
+        if errors == "raise":
+            core.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[bad[0]])))
+            raise AssertionError("lookup_transform answered a time the walk could not")
+        out[bad] = math.nan
+        valid[bad] = False
     return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid)
 
 
 def lookup_transforms_full(
-    core: BufferCore,
+    core: Lookups,
     target_frame: str,
     target_times: npt.ArrayLike | Sequence[Time] | Time | int,
     source_frame: str,
@@ -329,12 +292,10 @@ def lookup_transforms_full(
         ValueError: the time arrays have different lengths, or are malformed.
     """
     _check_errors(errors)
-    for arg, frame in (
-        ("target_frame", target_frame),
-        ("source_frame", source_frame),
-        ("fixed_frame", fixed_frame),
-    ):
-        core._validate(f"lookupTransform argument {arg}", frame)
+    frames = (target_frame, source_frame, fixed_frame)
+    if not all(core.invalid_frame_id(f) is None and core.frame_exists(f) for f in frames):
+        # The single call validates the three ids first, in this order: let it raise.
+        core.lookup_transform_full(target_frame, Time(), source_frame, Time(), fixed_frame)
     tt = as_times(target_times)
     st = as_times(source_times)
     n = max(tt.shape[0], st.shape[0])
@@ -395,7 +356,7 @@ def lookup_transforms_full(
 
 
 def transform_points(
-    core: BufferCore,
+    core: Lookups,
     points: npt.ArrayLike,
     target_frame: str,
     source_frame: str,
@@ -443,7 +404,7 @@ class BatchLookupMixin:
     ) -> TransformArray:
         """:func:`tfbus.batch.lookup_transforms` on this buffer (see there)."""
         return lookup_transforms(
-            cast("BufferCore", self), target_frame, source_frame, times, errors=errors
+            cast(Lookups, self), target_frame, source_frame, times, errors=errors
         )
 
     def lookup_transforms_full(
@@ -458,7 +419,7 @@ class BatchLookupMixin:
     ) -> TransformArray:
         """:func:`tfbus.batch.lookup_transforms_full` on this buffer (see there)."""
         return lookup_transforms_full(
-            cast("BufferCore", self),
+            cast(Lookups, self),
             target_frame,
             target_times,
             source_frame,
@@ -478,5 +439,5 @@ class BatchLookupMixin:
     ) -> _F64:
         """:func:`tfbus.batch.transform_points` on this buffer (see there)."""
         return transform_points(
-            cast("BufferCore", self), points, target_frame, source_frame, times, errors=errors
+            cast(Lookups, self), points, target_frame, source_frame, times, errors=errors
         )

@@ -14,16 +14,35 @@ through :class:`AsyncBatchMixin` (``class Buffer(AsyncBatchMixin, BufferCore)``)
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, cast
+from typing import Protocol, cast
 
 import numpy as np
 import numpy.typing as npt
 
-from tfbus.batch import Errors, TransformArray, as_times, lookup_transforms, transform_points
+from tfbus.batch import (
+    Errors,
+    Lookups,
+    TransformArray,
+    as_times,
+    lookup_transforms,
+    transform_points,
+)
+from tfbus.messages import TransformStamped
 from tfbus.time import Duration, Time
 
-if TYPE_CHECKING:
-    from tfbus.buffer import Buffer
+
+class Buffer(Lookups, Protocol):
+    """What the awaitable batched lookups need: :class:`tfbus.buffer.Buffer`'s public
+    lookups and ``wait_for_transform`` (a structural type: :mod:`tfbus.buffer` imports
+    this module for :class:`AsyncBatchMixin`, so this module does not import it)."""
+
+    async def wait_for_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+    ) -> TransformStamped: ...
 
 __all__ = ["AsyncBatchMixin", "lookup_transforms_async", "transform_points_async"]
 
@@ -108,7 +127,7 @@ class AsyncBatchMixin:
     ) -> TransformArray:
         """:func:`tfbus.batch_async.lookup_transforms_async` on this buffer."""
         return await lookup_transforms_async(
-            cast("Buffer", self), target_frame, source_frame, times, timeout, errors=errors
+            cast(Buffer, self), target_frame, source_frame, times, timeout, errors=errors
         )
 
     async def transform_points_async(
@@ -123,7 +142,7 @@ class AsyncBatchMixin:
     ) -> npt.NDArray[np.float64]:
         """:func:`tfbus.batch_async.transform_points_async` on this buffer."""
         return await transform_points_async(
-            cast("Buffer", self),
+            cast(Buffer, self),
             points,
             target_frame,
             source_frame,

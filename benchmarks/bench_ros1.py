@@ -1,0 +1,151 @@
+"""ROS 1 interop speed: a C++ roscpp publisher on /tf, received at once by a C++ roscpp
+subscriber and by a tfbus process (``Bus(transport=Ros1Transport())``), same run.
+
+Prints, per scenario (rate x frames per message x seconds): one-way latency median and
+p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and tfbus,
+their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
+(target: none lost at 100 Hz x 50 frames for 60 s). Figures only; nothing is asserted.
+
+Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.0.1.
+
+    .venv/bin/python benchmarks/bench_ros1.py           # 10 s at 1 frame, 60 s at 50 frames
+    .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT / "tests"))
+
+from ros1_harness import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+
+
+def build(out: Path) -> None:
+    flags = subprocess.run(
+        ["pkg-config", "--cflags", "--libs", "roscpp", "tf2_msgs"],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "PATH": "/usr/bin:" + os.environ.get("PATH", "")},
+    ).stdout.split()
+    for name in ("bench_pub", "bench_sub"):
+        subprocess.run(
+            ["g++", "-O2", "-o", str(out / name), str(HERE / "ros1" / f"{name}.cpp"), *flags],
+            check=True,
+        )
+
+
+def tfbus_subscriber() -> None:
+    """The tfbus side (a child process): print READY, receive /tf until SIGINT/SIGTERM,
+    then the same report as bench_sub."""
+    import anyio
+
+    from tfbus import Bus
+    from tfbus.transports.ros1 import Ros1Transport
+
+    lat: list[float] = []
+    counts = [0, 0]
+
+    async def main() -> None:
+        async with Bus(transport=Ros1Transport(node_name="/tfbus_bench")) as bus:
+            sub = bus.subscribe("/tf", queue_size=100_000)
+            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async with anyio.create_task_group() as tg:
+
+                    async def stop() -> None:
+                        async for _ in signals:
+                            tg.cancel_scope.cancel()
+                            return
+
+                    tg.start_soon(stop)
+                    print("READY", flush=True)
+                    async for msg in sub:
+                        now = time.time_ns()
+                        counts[0] += 1
+                        counts[1] += len(msg.transforms)
+                        if msg.transforms:
+                            lat.append((now - msg.transforms[0].header.stamp.ns) / 1e3)
+
+    anyio.run(main)
+    print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
+    print("\n".join(f"{v:.3f}" for v in lat), flush=True)
+
+
+def report(proc: Proc) -> tuple[int, int, list[float]]:
+    proc.stop(signal.SIGINT, timeout=30.0)
+    lines = proc.drain()
+    i = next(k for k, line in enumerate(lines) if line.startswith("received "))
+    _, msgs, tfs = lines[i].split()
+    lat = [float(x) for x in lines[i + 2 :] if x.strip()]
+    return int(msgs), int(tfs), lat
+
+
+def pct(values: list[float], q: float) -> float:
+    s = sorted(values)
+    return s[min(len(s) - 1, int(q * len(s)))]
+
+
+def scenario(master: Master, bins: Path, rate: float, frames: int, seconds: float) -> None:
+    cpp = master.run(str(bins / "bench_sub"))
+    env = dict(master.env)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    tfb = Proc([sys.executable, __file__, "--tfbus-sub"], env)
+    cpp.wait_for("READY", 30)
+    tfb.wait_for("READY", 60)
+    pub = master.run(str(bins / "bench_pub"), str(rate), str(frames), str(seconds))
+    m = pub.wait_for(r"sent (\d+) (\d+)", seconds + 60)
+    pub.stop()
+    sent_msgs, sent_tfs = int(m.group(1)), int(m.group(2))
+    c_msgs, c_tfs, c_lat = report(cpp)
+    t_msgs, t_tfs, t_lat = report(tfb)
+    c50, c99 = statistics.median(c_lat), pct(c_lat, 0.99)
+    t50, t99 = statistics.median(t_lat), pct(t_lat, 0.99)
+    print(
+        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | "
+        f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
+        f"ratio {t50 / c50:4.2f} / {t99 / c99:4.2f} | "
+        f"received C++ {c_msgs}/{sent_msgs} msgs {c_tfs}/{sent_tfs} tfs, "
+        f"tfbus {t_msgs}/{sent_msgs} msgs {t_tfs}/{sent_tfs} tfs "
+        f"({t_tfs / seconds:,.0f} transforms/s)",
+        flush=True,
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="shorter runs")
+    parser.add_argument("--tfbus-sub", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.tfbus_sub:
+        tfbus_subscriber()
+        return
+    why = ros1_missing()
+    if why is not None:
+        sys.exit(f"ROS 1 unavailable: {why}")
+    with tempfile.TemporaryDirectory() as tmp:
+        bins = Path(tmp)
+        build(bins)
+        port = free_port()
+        master = Master(port, master_env(port, bins / "ros_home"))
+        master.start()
+        try:
+            print("latency median / p99, one-way, receive time - header.stamp (same run)")
+            scenario(master, bins, 100.0, 1, 5.0 if args.quick else 10.0)
+            scenario(master, bins, 100.0, 50, 10.0 if args.quick else 60.0)
+        finally:
+            master.stop()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""ROS 1 transport: tfbus takes part in a ROS 1 graph as a node (``/tf``, ``/tf_static``).
+
+``Bus(transport=Ros1Transport())`` registers with a ROS 1 master as publisher and
+subscriber of ``/tf`` and ``/tf_static`` (type ``tf2_msgs/TFMessage``, md5
+``94810edda583a504dfda3829e70d7eec``) and exchanges messages with other nodes over TCPROS,
+so the tutorial's C++ ``tf_broadcaster`` feeds a tfbus listener and a tfbus broadcaster
+feeds the C++ ``tf_listener``, ``tf_echo``, ``tf_monitor`` or ``rostopic hz``.
+
+What a node needs of ROS 1, and where it comes from (ROS wiki "ROS/Master_API",
+"ROS/Slave_API", "ROS/TCPROS", "ROS/Connection Header"; ros_comm's ``rospy/impl``):
+
+* master API (client): ``registerPublisher``, ``registerSubscriber``,
+  ``unregisterPublisher``, ``unregisterSubscriber``, ``lookupNode``, over XML-RPC with the
+  standard library's :mod:`xmlrpc.client`;
+* slave API (server, :mod:`xmlrpc.server` in a thread): ``requestTopic``,
+  ``publisherUpdate``, ``getPid``, ``getBusInfo``, ``getBusStats``, ``getMasterUri``,
+  ``getSubscriptions``, ``getPublications``, ``paramUpdate``, ``shutdown``;
+* TCPROS: connection headers (``callerid``, ``topic``, ``md5sum``, ``type``,
+  ``message_definition``, ``latching``, ``tcp_nodelay``), then length-prefixed messages.
+  Serialisation is rosbags' ROS 1 serialiser (``Typestore.serialize_ros1`` /
+  ``deserialize_ros1``), which also yields the message definition and its md5.
+
+Behaviour, as tf2_ros and roscpp do it:
+
+* ``/tf_static`` is latched: every static transform this transport ever sent is kept,
+  and each publish sends the full set in one message (tf2_ros's
+  ``StaticTransformBroadcaster``), which a subscriber connecting later receives first;
+* several publishers per topic; publishers that appear later (``publisherUpdate``); a
+  dropped connection is retried while its publisher is still registered; a restarted
+  master is noticed (``lookupNode`` every ``master_check_period``) and this node
+  registers again, without restarting tfbus;
+* bad input costs one connection at most: a malformed header, an oversized or
+  undecodable TCPROS frame closes that connection only and is counted in
+  :meth:`Ros1Transport.statistics`; every other connection keeps delivering;
+* loopback by default: the master defaults to ``http://127.0.0.1:11311`` and the node's
+  own servers bind ``127.0.0.1``; while this node's host is a loopback address it
+  connects to no publisher outside 127.0.0.0/8 (``allow_remote=True`` lifts that for a
+  robot network). ``ROS_MASTER_URI``, ``ROS_IP`` and ``ROS_HOSTNAME`` are honoured as ROS
+  does.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from .node import Ros1Statistics, Ros1Transport
+from .tcpros import TF_MD5SUM, TF_TYPE, TFCodec, decode_header, encode_header
+
+if TYPE_CHECKING:
+    from tfbus.transports.spec import BusSpec
+
+__all__ = [
+    "TF_MD5SUM",
+    "TF_TYPE",
+    "Ros1Statistics",
+    "Ros1Transport",
+    "TFCodec",
+    "decode_header",
+    "encode_header",
+    "ros1_transport_from_options",
+    "transport_from_spec",
+]
+
+
+def ros1_transport_from_options(options: Mapping[str, str]) -> Ros1Transport:
+    """Build a transport from a CLI bus spec's options (``ros1:master=http://...,name=/x``).
+
+    Keys: ``master`` (master URI), ``name`` (node name), ``host`` (address to bind and
+    advertise), ``remote`` (``1`` to contact publishers outside loopback).
+
+    Raises:
+        ValueError: an unknown key or a bad value, naming it.
+    """
+    known = {"master", "name", "host", "remote"}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(
+            f"unknown ros1 option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
+        )
+    remote = options.get("remote", "0")
+    if remote not in ("0", "1"):
+        raise ValueError(f"ros1 option remote must be 0 or 1, got {remote!r}")
+    return Ros1Transport(
+        master_uri=options.get("master"),
+        node_name=options.get("name"),
+        host=options.get("host"),
+        allow_remote=remote == "1",
+    )
+
+
+def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
+    """The ``ros1`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`):
+    ``ros1``, ``ros1:http://127.0.0.1:11311`` (master),
+    ``ros1:master=http://127.0.0.1:11311&name=/planner&host=127.0.0.1``.
+
+    ``overrides`` may carry ``name`` (a CLI's default node name; ``-`` becomes ``_``),
+    used when the spec gives none.
+
+    Raises:
+        ValueError: a value that is not understood (named).
+        TypeError: an override other than ``name``.
+    """
+    unknown = set(overrides) - {"name"}
+    if unknown:
+        raise TypeError(f"unexpected ros1 transport override(s): {', '.join(sorted(unknown))}")
+    options = {key: value for key in spec.options if (value := spec.value(key)) is not None}
+    default_name = overrides.get("name")
+    if "name" not in options and isinstance(default_name, str) and default_name:
+        options["name"] = f"{default_name.replace('-', '_')}_{os.getpid()}"
+    return ros1_transport_from_options(options)

@@ -1,0 +1,619 @@
+"""The ROS 1 node behind :class:`Ros1Transport`: registration with the master, TCPROS
+connections to publishers and from subscribers, the latched ``/tf_static`` set."""
+
+from __future__ import annotations
+
+import contextlib
+import ipaddress
+import logging
+import os
+import secrets
+import socket
+import struct
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, Final, Protocol
+from urllib.parse import urlsplit
+
+import anyio
+import anyio.abc
+from anyio.from_thread import BlockingPortal
+
+from tfbus.errors import TransportError
+from tfbus.messages import TFMessage, TransformStamped
+
+from .rpc import SlaveServer, call
+from .tcpros import (
+    MAX_HEADER_BYTES,
+    TF_MD5SUM,
+    TF_TYPE,
+    TFCodec,
+    decode_header,
+    encode_header,
+    frame,
+    read_frame,
+)
+
+__all__ = ["Ros1Statistics", "Ros1Transport"]
+
+_log = logging.getLogger("tfbus.transports.ros1")
+
+_TOPICS: Final = ("/tf", "/tf_static")
+_LATCHED: Final = frozenset({"/tf_static"})
+
+
+@dataclass
+class Ros1Statistics:
+    """Counters of one :class:`Ros1Transport` (monotonic since it was made).
+
+    Attributes:
+        received: TFMessages received and delivered to the bus.
+        malformed: frames or headers that could not be decoded (each closed its
+            connection).
+        sent: messages written to subscriber connections (one per connection).
+        send_dropped: messages dropped because a subscriber's queue was full (oldest first).
+        send_errors: messages that could not be serialised (e.g. a stamp before 1970).
+        connections_opened: TCPROS connections established, both directions.
+        connections_closed: TCPROS connections closed, both directions.
+        registrations: successful registrations with a master (more than one after a
+            master restart).
+        refused_hosts: publishers not contacted because they are outside loopback.
+    """
+
+    received: int = 0
+    malformed: int = 0
+    sent: int = 0
+    send_dropped: int = 0
+    send_errors: int = 0
+    connections_opened: int = 0
+    connections_closed: int = 0
+    registrations: int = 0
+    refused_hosts: int = 0
+
+
+class _BusLike(Protocol):
+    def deliver_nowait(self, topic: str, message: object) -> None: ...
+
+
+def _default_name() -> str:
+    return f"/tfbus_{os.getpid()}_{secrets.token_hex(3)}"
+
+
+def _resolve_host(host: str | None) -> str:
+    if host:
+        return host
+    return os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME") or "127.0.0.1"
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class _Outgoing:
+    """One subscriber connected to us: a bounded queue of frames (drop oldest)."""
+
+    def __init__(self, topic: str, peer: str, queue_size: int) -> None:
+        self.topic = topic
+        self.peer = peer
+        self.queue: deque[bytes] = deque(maxlen=queue_size)
+        self.wake = anyio.Event()
+        self.conn_id = 0
+
+
+class Ros1Transport:
+    """A :class:`~tfbus.bus.Transport` that is a ROS 1 node.
+
+    Args:
+        master_uri: the ROS master's XML-RPC URI; default ``ROS_MASTER_URI``, else
+            ``http://127.0.0.1:11311``.
+        node_name: this node's name (caller id); default ``/tfbus_<pid>_<random>``
+            (a master shuts down an older node of the same name).
+        host: the address this node's servers bind and advertise; default ``ROS_IP``,
+            else ``ROS_HOSTNAME``, else ``127.0.0.1``.
+        topics: the topics carried (default ``/tf`` and ``/tf_static``).
+        queue_size: frames queued per subscriber connection before the oldest is dropped.
+        max_message_bytes: largest accepted TCPROS frame; a larger one closes the
+            connection (counted as malformed).
+        master_timeout: seconds an XML-RPC call may take.
+        master_check_period: seconds between checks that the master still knows this
+            node (re-registration after a master restart).
+        allow_remote: contact publishers outside loopback even when ``host`` is loopback.
+
+    Raises:
+        ValueError: a ``master_uri`` that is not ``http://host:port``, or a node name that
+            is not a ROS graph name.
+    """
+
+    def __init__(
+        self,
+        master_uri: str | None = None,
+        node_name: str | None = None,
+        host: str | None = None,
+        *,
+        topics: Sequence[str] = _TOPICS,
+        queue_size: int = 100,
+        max_message_bytes: int = 16 * 1024 * 1024,
+        master_timeout: float = 2.0,
+        master_check_period: float = 1.0,
+        allow_remote: bool = False,
+    ) -> None:
+        uri = master_uri or os.environ.get("ROS_MASTER_URI") or "http://127.0.0.1:11311"
+        parts = urlsplit(uri)
+        if parts.scheme != "http" or not parts.hostname or parts.port is None:
+            raise ValueError(f"master_uri must be http://host:port, got {uri!r}")
+        name = node_name or _default_name()
+        if not name.startswith("/"):
+            name = "/" + name
+        if not all(c.isalnum() or c in "/_" for c in name) or "//" in name:
+            raise ValueError(f"node_name {name!r} is not a ROS graph name")
+        if queue_size < 1:
+            raise ValueError(f"queue_size must be >= 1, got {queue_size!r}")
+        self._master_uri = uri
+        self._name = name
+        self._host = _resolve_host(host)
+        self._topics = tuple(topics)
+        self._queue_size = queue_size
+        self._max_bytes = max_message_bytes
+        self._timeout = master_timeout
+        self._check_period = master_check_period
+        self._remote_ok = allow_remote or not _is_loopback(self._host)
+        self._codec = TFCodec()
+        self._stats = Ros1Statistics()
+        self._published: set[str] = set()
+        self._registered_pub: set[str] = set()
+        self._latched: dict[str, dict[str, TransformStamped]] = {}
+        self._latched_frame: dict[str, bytes] = {}
+        self._outgoing: dict[str, list[_Outgoing]] = {}
+        self._incoming: dict[tuple[str, str], anyio.CancelScope] = {}
+        self._bus_info: dict[int, list[Any]] = {}
+        self._next_conn = 0
+        self._tg: anyio.abc.TaskGroup | None = None
+        self._portal: BlockingPortal | None = None
+        self._tcp_port = 0
+        self._api_uri = ""
+        self._registered = False
+        self._need_register = anyio.Event()
+        self._shutdown_reason: str | None = None
+        self._running = False
+        self._bus: _BusLike | None = None
+
+    # -- public ------------------------------------------------------------------------
+
+    @property
+    def node_name(self) -> str:
+        """This node's caller id, e.g. ``/tfbus_1234_a1b2c3``."""
+        return self._name
+
+    @property
+    def master_uri(self) -> str:
+        """The master this node registers with."""
+        return self._master_uri
+
+    @property
+    def uri(self) -> str:
+        """This node's slave API URI (empty until running)."""
+        return self._api_uri
+
+    @property
+    def registered(self) -> bool:
+        """Whether the master currently knows this node's topics."""
+        return self._registered
+
+    def statistics(self) -> Ros1Statistics:
+        """A copy of the counters (see :class:`Ros1Statistics`)."""
+        return Ros1Statistics(**vars(self._stats))
+
+    def __repr__(self) -> str:
+        return f"Ros1Transport(master_uri={self._master_uri!r}, node_name={self._name!r})"
+
+    async def run(
+        self,
+        bus: _BusLike,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Serve TCPROS and the slave API, register with the master (retrying until it
+        answers), report started, then deliver remote messages until cancelled.
+
+        Unregisters from the master (best effort) and closes every connection on exit.
+
+        Raises:
+            RuntimeError: if this transport is already running.
+            TransportError: if this node's servers cannot bind ``host``, or the master
+                asked this node to shut down (another node took its name).
+        """
+        if self._running:
+            raise RuntimeError("this Ros1Transport is already running")
+        self._running = True
+        self._bus = bus
+        try:
+            listener = await anyio.create_tcp_listener(local_host=self._host, local_port=0)
+        except OSError as exc:
+            self._running = False
+            raise TransportError(f"cannot listen for TCPROS on {self._host}: {exc}") from exc
+        server: SlaveServer | None = None
+        try:
+            self._tcp_port = listener.extra(anyio.abc.SocketAttribute.local_port)
+            server = SlaveServer(self._host, self)
+            self._api_uri = server.uri
+            async with BlockingPortal() as portal, anyio.create_task_group() as tg:
+                self._portal = portal
+                self._tg = tg
+                server.start()
+                tg.start_soon(listener.serve, self._serve_subscriber)
+                tg.start_soon(self._master_loop, bus)
+                task_status.started()
+                await anyio.sleep_forever()
+        finally:
+            self._tg = None
+            self._portal = None
+            with anyio.CancelScope(shield=True):
+                if self._registered:
+                    await anyio.to_thread.run_sync(self._unregister_all)
+                if server is not None:
+                    await anyio.to_thread.run_sync(server.close)
+                await listener.aclose()
+            self._registered = False
+            self._registered_pub.clear()
+            self._incoming.clear()
+            self._outgoing.clear()
+            self._bus_info.clear()
+            self._running = False
+            if self._shutdown_reason is not None:
+                reason, self._shutdown_reason = self._shutdown_reason, None
+                raise TransportError(f"the ROS master asked {self._name} to shut down: {reason}")
+
+    def send_nowait(self, topic: str, message: object) -> None:
+        """Send a locally published ``TFMessage`` to every subscriber; never blocks.
+
+        ``/tf_static`` sends the full set of static transforms this transport has sent
+        so far (tf2_ros's ``StaticTransformBroadcaster``), and that set is what a later
+        subscriber receives on connecting. A message that cannot be serialised is dropped
+        and counted in ``send_errors``; a full subscriber queue drops its oldest frame.
+        """
+        if topic not in self._topics or not isinstance(message, TFMessage):
+            return
+        if topic not in self._published:
+            self._published.add(topic)
+            self._need_register.set()
+        transforms: Iterable[TransformStamped] = message.transforms
+        if topic in _LATCHED:
+            latched = self._latched.setdefault(topic, {})
+            new = dict(latched)
+            for ts in message.transforms:
+                if isinstance(ts, TransformStamped) and isinstance(ts.child_frame_id, str):
+                    new[ts.child_frame_id.lstrip("/")] = ts
+            transforms = new.values()
+        try:
+            payload = self._codec.encode(transforms)
+        except (ValueError, AttributeError, TypeError) as exc:
+            self._stats.send_errors += 1
+            _log.warning("ros1: dropping a message on %s: %s", topic, exc)
+            return
+        if topic in _LATCHED:
+            self._latched[topic] = new
+        framed = frame(payload)
+        if topic in _LATCHED:
+            self._latched_frame[topic] = framed
+        for out in self._outgoing.get(topic, ()):
+            if len(out.queue) == out.queue.maxlen:
+                self._stats.send_dropped += 1
+            out.queue.append(framed)
+            out.wake.set()
+
+    # -- master ------------------------------------------------------------------------
+
+    async def _master_loop(self, bus: _BusLike) -> None:
+        """Register, keep registered (a restarted master forgets us), follow publishers."""
+        warned = False
+        while True:
+            try:
+                if not self._registered or not await anyio.to_thread.run_sync(self._still_known):
+                    self._registered = False
+                    self._registered_pub.clear()
+                    publishers = await anyio.to_thread.run_sync(self._register_subscribers)
+                    self._registered = True
+                    self._stats.registrations += 1
+                    warned = False
+                    for topic, uris in publishers.items():
+                        self._update_publishers(bus, topic, uris)
+                for topic in sorted(self._published - self._registered_pub):
+                    await anyio.to_thread.run_sync(self._register_publisher, topic)
+            except TransportError as exc:
+                self._registered = False
+                if not warned:
+                    _log.warning(
+                        "ros1: master %s unreachable (%s); retrying", self._master_uri, exc
+                    )
+                    warned = True
+            self._need_register = anyio.Event()
+            with anyio.move_on_after(self._check_period):
+                await self._need_register.wait()
+
+    def _still_known(self) -> bool:
+        try:
+            uri = call(
+                self._master_uri, "lookupNode", self._name, self._name, timeout=self._timeout
+            )
+        except TransportError:
+            return False
+        return bool(uri == self._api_uri)
+
+    def _register_subscribers(self) -> dict[str, list[str]]:
+        out = {}
+        for topic in self._topics:
+            value = call(
+                self._master_uri,
+                "registerSubscriber",
+                self._name,
+                topic,
+                TF_TYPE,
+                self._api_uri,
+                timeout=self._timeout,
+            )
+            out[topic] = [str(u) for u in value] if isinstance(value, list) else []
+        return out
+
+    def _register_publisher(self, topic: str) -> None:
+        call(
+            self._master_uri,
+            "registerPublisher",
+            self._name,
+            topic,
+            TF_TYPE,
+            self._api_uri,
+            timeout=self._timeout,
+        )
+        self._registered_pub.add(topic)
+
+    def _unregister_all(self) -> None:
+        timeout = min(self._timeout, 0.5)
+        for topic in self._topics:
+            with contextlib.suppress(TransportError):
+                call(
+                    self._master_uri,
+                    "unregisterSubscriber",
+                    self._name,
+                    topic,
+                    self._api_uri,
+                    timeout=timeout,
+                )
+        for topic in list(self._registered_pub):
+            with contextlib.suppress(TransportError):
+                call(
+                    self._master_uri,
+                    "unregisterPublisher",
+                    self._name,
+                    topic,
+                    self._api_uri,
+                    timeout=timeout,
+                )
+
+    # -- slave API callbacks (rpc.SlaveNode; called from the server's threads) -----------
+
+    def bus_info(self) -> list[list[Any]]:
+        """``getBusInfo``: [id, peer, direction, transport, topic, connected] per link."""
+        return [list(v) for v in list(self._bus_info.values())]
+
+    def subscriptions(self) -> Sequence[str]:
+        """``getSubscriptions``: the topics this node subscribes to."""
+        return self._topics
+
+    def publications(self) -> Sequence[str]:
+        """``getPublications``: the topics this node has published on so far."""
+        return sorted(self._published)
+
+    def tcpros_endpoint(self, topic: str) -> tuple[str, int] | None:
+        """``requestTopic``: (host, port) of this node's TCPROS server, or None when it
+        does not publish ``topic``."""
+        return (self._host, self._tcp_port) if topic in self._published else None
+
+    def on_publisher_update(self, topic: str, publishers: list[str]) -> None:
+        """``publisherUpdate``: connect to new publishers of ``topic``, drop gone ones."""
+        portal = self._portal
+        if portal is not None and topic in self._topics:
+            with contextlib.suppress(RuntimeError):
+                portal.start_task_soon(self._publisher_update, topic, publishers)
+
+    def on_shutdown(self, caller_id: str, message: str) -> None:
+        """``shutdown``: stop this node; :meth:`run` then raises TransportError."""
+        portal = self._portal
+        if portal is not None:
+            self._shutdown_reason = f"{message} (from {caller_id})"
+            with contextlib.suppress(RuntimeError):
+                portal.start_task_soon(self._stop)
+
+    async def _stop(self) -> None:
+        if self._tg is not None:
+            self._tg.cancel_scope.cancel()
+
+    async def _publisher_update(self, topic: str, uris: list[str]) -> None:
+        bus = self._bus
+        if bus is not None:
+            self._update_publishers(bus, topic, uris)
+
+    # -- subscriber side: connect to publishers -------------------------------------------
+
+    def _update_publishers(self, bus: _BusLike, topic: str, uris: list[str]) -> None:
+        wanted = {u for u in uris if u != self._api_uri}
+        for key in [k for k in self._incoming if k[0] == topic and k[1] not in wanted]:
+            self._incoming.pop(key).cancel()
+        tg = self._tg
+        if tg is None:
+            return
+        for uri in sorted(wanted):
+            if (topic, uri) not in self._incoming:
+                scope = anyio.CancelScope()
+                self._incoming[(topic, uri)] = scope
+                tg.start_soon(self._subscribe, bus, topic, uri, scope)
+
+    async def _subscribe(
+        self, bus: _BusLike, topic: str, uri: str, scope: anyio.CancelScope
+    ) -> None:
+        """Keep one publisher connected: retry with back-off while it is still listed."""
+        with scope:
+            delay = 0.1
+            for _attempt in range(50):
+                try:
+                    await self._receive_from(bus, topic, uri)
+                    delay = 0.1  # a connection that ended cleanly: reconnect promptly
+                except (
+                    OSError,
+                    TransportError,
+                    anyio.EndOfStream,
+                    anyio.BrokenResourceError,
+                ) as exc:
+                    _log.debug("ros1: %s from %s: %s", topic, uri, exc)
+                except ValueError as exc:  # malformed header or frame: this connection only
+                    self._stats.malformed += 1
+                    _log.warning("ros1: closing %s from %s: %s", topic, uri, exc)
+                await anyio.sleep(delay)
+                delay = min(delay * 2, 2.0)
+        if self._incoming.get((topic, uri)) is scope:
+            del self._incoming[(topic, uri)]
+
+    async def _receive_from(self, bus: _BusLike, topic: str, uri: str) -> None:
+        reply = await anyio.to_thread.run_sync(
+            lambda: call(
+                uri, "requestTopic", self._name, topic, [["TCPROS"]], timeout=self._timeout
+            )
+        )
+        if not (isinstance(reply, list) and len(reply) >= 3 and reply[0] == "TCPROS"):
+            raise TransportError(f"requestTopic at {uri}: no TCPROS endpoint in {reply!r:.200}")
+        host, port = str(reply[1]), int(reply[2])
+        if not self._remote_ok and not _is_loopback(host):
+            self._stats.refused_hosts += 1
+            raise TransportError(
+                f"publisher {uri} offers {host}:{port}, outside loopback (allow_remote=False)"
+            )
+        with anyio.fail_after(max(self._timeout, 1.0)):
+            stream = await anyio.connect_tcp(host, port)
+        async with stream:
+            with contextlib.suppress(OSError):
+                stream.extra(anyio.abc.SocketAttribute.raw_socket).setsockopt(
+                    socket.IPPROTO_TCP, socket.TCP_NODELAY, 1
+                )
+            await stream.send(
+                encode_header(
+                    {
+                        "callerid": self._name,
+                        "topic": topic,
+                        "md5sum": TF_MD5SUM,
+                        "type": TF_TYPE,
+                        "message_definition": self._codec.definition,
+                        "tcp_nodelay": "1",
+                    }
+                )
+            )
+            with anyio.fail_after(max(self._timeout, 1.0)):
+                header = decode_header(
+                    await read_frame(stream, MAX_HEADER_BYTES, "connection header")
+                )
+            if "error" in header:
+                raise TransportError(f"publisher {uri} refused {topic}: {header['error']}")
+            if header.get("md5sum") not in (TF_MD5SUM, "*"):
+                raise ValueError(
+                    f"publisher {uri} sends md5sum {header.get('md5sum')!r} on {topic}"
+                )
+            peer = header.get("callerid", uri)
+            conn_id = self._open_conn(peer, "i", topic)
+            try:
+                while True:
+                    raw = await read_frame(stream, self._max_bytes, "message")
+                    transforms = self._codec.decode(raw)
+                    self._stats.received += 1
+                    bus.deliver_nowait(topic, TFMessage(tuple(transforms)))
+            finally:
+                self._close_conn(conn_id)
+
+    def _open_conn(self, peer: str, direction: str, topic: str) -> int:
+        self._next_conn += 1
+        self._bus_info[self._next_conn] = [self._next_conn, peer, direction, "TCPROS", topic, True]
+        self._stats.connections_opened += 1
+        return self._next_conn
+
+    def _close_conn(self, conn_id: int) -> None:
+        if self._bus_info.pop(conn_id, None) is not None:
+            self._stats.connections_closed += 1
+
+    # -- publisher side: subscribers connect to us ------------------------------------------
+
+    async def _serve_subscriber(self, stream: anyio.abc.SocketStream) -> None:
+        async with stream:
+            try:
+                with anyio.fail_after(max(self._timeout, 1.0)):
+                    header = decode_header(
+                        await read_frame(stream, MAX_HEADER_BYTES, "connection header")
+                    )
+            except (ValueError, struct.error) as exc:
+                self._stats.malformed += 1
+                _log.warning("ros1: bad connection header from a subscriber: %s", exc)
+                return
+            except (TimeoutError, OSError, anyio.EndOfStream, anyio.BrokenResourceError):
+                return
+            topic = header.get("topic", "")
+            md5 = header.get("md5sum", "")
+            if topic not in self._published or md5 not in (TF_MD5SUM, "*"):
+                why = (
+                    f"{self._name} does not publish {topic!r}"
+                    if topic not in self._published
+                    else f"md5sum mismatch: {md5!r} != {TF_MD5SUM}"
+                )
+                with contextlib.suppress(OSError, anyio.BrokenResourceError):
+                    await stream.send(encode_header({"error": why}))
+                return
+            if header.get("tcp_nodelay") == "1":
+                with contextlib.suppress(OSError):
+                    stream.extra(anyio.abc.SocketAttribute.raw_socket).setsockopt(
+                        socket.IPPROTO_TCP, socket.TCP_NODELAY, 1
+                    )
+            latching = topic in _LATCHED
+            reply = {
+                "callerid": self._name,
+                "md5sum": TF_MD5SUM,
+                "type": TF_TYPE,
+                "message_definition": self._codec.definition,
+                "latching": "1" if latching else "0",
+                "topic": topic,
+            }
+            try:
+                await stream.send(encode_header(reply))
+            except (OSError, anyio.BrokenResourceError):
+                return
+            if header.get("probe") == "1":
+                return
+            out = _Outgoing(topic, header.get("callerid", "?"), self._queue_size)
+            if latching and topic in self._latched_frame:
+                out.queue.append(self._latched_frame[topic])
+            out.conn_id = self._open_conn(out.peer, "o", topic)
+            self._outgoing.setdefault(topic, []).append(out)
+            try:
+                async with anyio.create_task_group() as conn_tg:
+                    conn_tg.start_soon(self._watch_closed, stream, conn_tg.cancel_scope)
+                    while True:
+                        while out.queue:
+                            await stream.send(out.queue.popleft())
+                            self._stats.sent += 1
+                        out.wake = anyio.Event()
+                        if not out.queue:
+                            await out.wake.wait()
+            except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
+                pass
+            finally:
+                with contextlib.suppress(ValueError):
+                    self._outgoing.get(topic, []).remove(out)
+                self._close_conn(out.conn_id)
+
+    @staticmethod
+    async def _watch_closed(stream: anyio.abc.SocketStream, scope: anyio.CancelScope) -> None:
+        """A subscriber sends nothing after its header: any read end means it left."""
+        with contextlib.suppress(Exception):
+            while True:
+                await stream.receive(4096)
+        scope.cancel()

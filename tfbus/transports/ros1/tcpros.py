@@ -1,0 +1,192 @@
+"""TCPROS for ``tf2_msgs/TFMessage``: connection headers, length-prefixed frames, and
+ROS 1 (de)serialisation by rosbags (ROS wiki "ROS/TCPROS", "ROS/Connection Header")."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Mapping
+from typing import Any, Final
+
+import anyio.abc
+
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import NSEC_PER_SEC, Time
+
+__all__ = [
+    "MAX_HEADER_BYTES",
+    "TF_MD5SUM",
+    "TF_TYPE",
+    "TFCodec",
+    "decode_header",
+    "encode_header",
+    "frame",
+    "read_frame",
+]
+
+TF_TYPE: Final = "tf2_msgs/TFMessage"
+"""The ROS 1 type of ``/tf`` and ``/tf_static``."""
+TF_MD5SUM: Final = "94810edda583a504dfda3829e70d7eec"
+"""md5 of ``tf2_msgs/TFMessage``'s full definition (checked against rosbags' at start)."""
+MAX_HEADER_BYTES: Final = 64 * 1024
+"""Largest connection header accepted from a peer."""
+
+_U32: Final = struct.Struct("<I")
+_UINT32_MAX: Final = 0xFFFFFFFF
+
+
+class TFCodec:
+    """ROS 1 (de)serialisation of ``tf2_msgs/TFMessage`` by rosbags' typestore."""
+
+    def __init__(self) -> None:
+        try:
+            from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+        except ImportError as exc:
+            raise ImportError(
+                "the ROS 1 transport needs rosbags: pip install 'tfbus[ros1]'"
+            ) from exc
+
+        store = get_typestore(Stores.ROS1_NOETIC)
+        store.register(
+            get_types_from_msg(
+                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
+            )
+        )
+        self._store = store
+        self._name = "tf2_msgs/msg/TFMessage"
+        definition, md5 = store.generate_msgdef(self._name, ros_version=1)
+        if md5 != TF_MD5SUM:  # pragma: no cover - a rosbags regression, not an input error
+            raise RuntimeError(f"rosbags gives md5 {md5} for {TF_TYPE}, expected {TF_MD5SUM}")
+        self.definition: str = definition
+        t = store.types
+        self._msg = t[self._name]
+        self._stamped = t["geometry_msgs/msg/TransformStamped"]
+        self._header = t["std_msgs/msg/Header"]
+        self._time = t["builtin_interfaces/msg/Time"]
+        self._transform = t["geometry_msgs/msg/Transform"]
+        self._vector = t["geometry_msgs/msg/Vector3"]
+        self._quat = t["geometry_msgs/msg/Quaternion"]
+
+    def encode(self, transforms: Iterable[TransformStamped]) -> bytes:
+        """Serialise transforms as one ROS 1 ``TFMessage``.
+
+        Raises:
+            ValueError: a stamp outside ROS 1's ``time`` (uint32 seconds) or a field of the
+                wrong type, naming the frame.
+        """
+        items = []
+        for ts in transforms:
+            ns = ts.header.stamp.ns
+            sec, nsec = divmod(ns, NSEC_PER_SEC)
+            if not 0 <= sec <= _UINT32_MAX:
+                raise ValueError(
+                    f"header.stamp {ns} ns of {ts.child_frame_id!r} is outside ROS 1's time "
+                    "(0 .. 2**32-1 s)"
+                )
+            tr, q = ts.transform.translation, ts.transform.rotation
+            items.append(
+                self._stamped(
+                    header=self._header(
+                        seq=0, stamp=self._time(sec=sec, nanosec=nsec), frame_id=ts.header.frame_id
+                    ),
+                    child_frame_id=ts.child_frame_id,
+                    transform=self._transform(
+                        translation=self._vector(x=float(tr.x), y=float(tr.y), z=float(tr.z)),
+                        rotation=self._quat(x=float(q.x), y=float(q.y), z=float(q.z), w=float(q.w)),
+                    ),
+                )
+            )
+        try:
+            return bytes(self._store.serialize_ros1(self._msg(transforms=items), self._name))
+        except (struct.error, UnicodeEncodeError, TypeError, AttributeError) as exc:
+            raise ValueError(f"cannot serialise a TFMessage for ROS 1: {exc}") from exc
+
+    def decode(self, raw: bytes) -> list[TransformStamped]:
+        """Deserialise one ROS 1 ``TFMessage``.
+
+        Raises:
+            ValueError: the bytes are not a whole ``TFMessage`` (short, bad UTF-8, trailing
+                garbage the length prefix does not account for).
+        """
+        try:
+            msg: Any = self._store.deserialize_ros1(raw, self._name)
+            out = []
+            for t in msg.transforms:
+                st = t.header.stamp
+                tr = t.transform.translation
+                q = t.transform.rotation
+                out.append(
+                    TransformStamped(
+                        Header(
+                            Time.from_ns(int(st.sec) * NSEC_PER_SEC + int(st.nanosec)),
+                            str(t.header.frame_id),
+                        ),
+                        str(t.child_frame_id),
+                        Transform(
+                            Vector3(float(tr.x), float(tr.y), float(tr.z)),
+                            Quaternion(float(q.x), float(q.y), float(q.z), float(q.w)),
+                        ),
+                    )
+                )
+        except Exception as exc:  # rosbags raises struct.error, UnicodeDecodeError, ...
+            raise ValueError(f"malformed {TF_TYPE}: {type(exc).__name__}: {exc}") from exc
+        return out
+
+
+def encode_header(fields: Mapping[str, str]) -> bytes:
+    """A TCPROS connection header: ``u32 total`` then ``u32 len`` + ``key=value`` per field
+    (ROS wiki "ROS/Connection Header")."""
+    body = b"".join(_U32.pack(len(f := f"{k}={v}".encode())) + f for k, v in fields.items())
+    return _U32.pack(len(body)) + body
+
+
+def decode_header(body: bytes) -> dict[str, str]:
+    """Parse the body of a connection header (without its total-length prefix).
+
+    Raises:
+        ValueError: a field runs past the end, has no ``=``, or is not UTF-8.
+    """
+    out: dict[str, str] = {}
+    off, n = 0, len(body)
+    while off < n:
+        if off + 4 > n:
+            raise ValueError(f"connection header: truncated field length at byte {off}")
+        (flen,) = _U32.unpack_from(body, off)
+        off += 4
+        if flen > n - off:
+            raise ValueError(
+                f"connection header: field of {flen} bytes at byte {off} runs past the end"
+            )
+        key, eq, value = body[off : off + flen].partition(b"=")
+        off += flen
+        if not eq:
+            raise ValueError("connection header: a field without '='")
+        try:
+            out[key.decode()] = value.decode()
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"connection header: not UTF-8 ({exc})") from exc
+    return out
+
+
+async def _read_exactly(stream: anyio.abc.ByteReceiveStream, n: int) -> bytes:
+    buf = bytearray()
+    while len(buf) < n:
+        chunk = await stream.receive(min(n - len(buf), 1 << 20))
+        buf += chunk
+    return bytes(buf)
+
+
+async def read_frame(stream: anyio.abc.ByteReceiveStream, limit: int, what: str) -> bytes:
+    """One length-prefixed frame; ``anyio.EndOfStream`` at a clean end.
+
+    Raises:
+        ValueError: the length prefix exceeds ``limit`` bytes.
+    """
+    (n,) = _U32.unpack(await _read_exactly(stream, 4))
+    if n > limit:
+        raise ValueError(f"{what} of {n} bytes exceeds the limit of {limit}")
+    return await _read_exactly(stream, n)
+
+
+def frame(payload: bytes) -> bytes:
+    """``payload`` with its TCPROS length prefix (u32, little endian)."""
+    return _U32.pack(len(payload)) + payload

@@ -1,0 +1,579 @@
+"""Carry a :class:`~tfbus.bus.Bus`'s ``/tf`` and ``/tf_static`` to and from ROS 2 over DDS.
+
+::
+
+    from tfbus.bus import Bus
+    from tfbus.transports.ros2 import Ros2Transport
+
+    async with Bus(transport=Ros2Transport(domain_id=0)) as bus:   # this machine only
+        ...
+
+A ROS 2 node publishing ``/tf`` or ``/tf_static`` (tf2_ros' ``TransformBroadcaster``,
+``StaticTransformBroadcaster``, ``robot_state_publisher`` ...) is heard on the bus as if it
+published here, and tfbus broadcasters are heard by ROS 2's ``tf2_ros.TransformListener``.
+No ROS installation is needed: DDS comes from the ``cyclonedds`` wheel
+(``pip install 'tfbus[ros2]'``, which bundles Cyclone DDS' C library).
+
+**Wire.** ROS 2's names and layout exactly (see :mod:`tfbus.transports.ros2_wire`): DDS
+topics ``rt/tf`` and ``rt/tf_static``, type ``tf2_msgs::msg::dds_::TFMessage_``, XCDR1
+little-endian, and the type hash ``RIHS01_e369d0f0...`` in the endpoints' user data as
+rmw announces it. Other bus topics are not sent to ROS 2 (counted in ``not_mapped``).
+
+**QoS** (``tf2_ros/qos.hpp``: ``DynamicBroadcasterQoS``, ``StaticBroadcasterQoS``,
+``DynamicListenerQoS``, ``StaticListenerQoS``):
+
+* ``/tf``: reliable, volatile, keep-last 100 (writer and reader);
+* ``/tf_static``: reliable, **transient-local**, keep-last **1** on the writer and 100 on
+  the reader. A listener that joins late still receives every static broadcaster's last
+  message. Because the writer keeps only its *last* message, this transport, like
+  tf2_ros' ``StaticTransformBroadcaster``, publishes the **full set** of the static
+  transforms it has sent (the latest per child frame) in every ``/tf_static`` message.
+
+**Stamps** that ROS 2 cannot represent (``sec`` outside int32: from 2038-01-19T03:14:08Z)
+make :meth:`Ros2Transport.send_nowait` raise :class:`~tfbus.errors.WireEncodeError`
+naming the transform and value; nothing of that message is sent. Received samples that do
+not decode are counted in ``malformed`` and dropped; the valid ones are delivered.
+(Structurally invalid CDR -- truncated, wrong lengths -- is meant never to get this far:
+cyclonedds-python's sertype normalizes serialized samples against the type with
+``dds_stream_normalize``; ``tests/test_ros2.py`` shows it refusing them on write. What
+valid CDR can carry and tfbus still refuses, and counts: frame ids that are not UTF-8,
+stamps before 1970, messages over ``max_transforms``. The decoder itself is hardened
+against every structural fault too.)
+
+**Network.** By default the transport binds the loopback interface only, with multicast
+off and unicast discovery to 127.0.0.1
+(:func:`~tfbus.transports.ros2_wire.cyclone_config`): it reaches ROS 2 nodes on this
+machine that run with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (and, with Fast DDS, a
+loopback profile), and sends nothing to any other address. For a robot network pass
+``interfaces=["eth0"]`` (multicast discovery on those interfaces, optional unicast
+``peers=``) or a complete Cyclone XML ``config=`` (file path, ``file://`` URI or XML
+text). Every generated configuration sets
+``<Compatibility><IgnoreTypeInformation>1.15</IgnoreTypeInformation>``, without which
+Cyclone >= 11 never matches Fast DDS 3.x endpoints (ROS 2 Kilted's default rmw); keep it
+in your own file.
+
+**Threads.** Cyclone calls ``on_data_available`` on its receive thread; the callback only
+writes one byte to a socket pair (if no wake-up is pending). The event loop waits on that
+socket (``anyio.wait_readable``: asyncio and trio), then takes the raw samples from the
+DDS readers (whose keep-last histories are the bounded queue, as in rclpy) and decodes and
+delivers them with ``bus.deliver_many_nowait`` -- one wake-up per burst, at most
+``max_batch`` samples per event-loop turn.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import threading
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final, Protocol
+
+import anyio
+import anyio.abc
+import anyio.lowlevel
+from cyclonedds import _clayer
+from cyclonedds.core import DDSException, InstanceState, Listener, SampleState, ViewState
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
+from tfbus.messages import TFMessage, TransformStamped
+from tfbus.transports.ros2_wire import (
+    DOMAIN_ID_MAX,
+    TF_STATIC_TOPIC_DDS,
+    TF_TOPIC_DDS,
+    TFMessage_,
+    cyclone_config,
+    decode_tf_message,
+    encode_tf_message,
+)
+
+if TYPE_CHECKING:
+    from tfbus.bus import Bus
+    from tfbus.transports.spec import BusSpec
+
+__all__ = [
+    "TF_TYPE_HASH",
+    "Ros2Statistics",
+    "Ros2Transport",
+    "cyclone_config",
+    "ros2_transport_from_options",
+    "transport_from_spec",
+]
+
+TF_TYPE_HASH: Final = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
+"""REP-2011 type hash of ``tf2_msgs/msg/TFMessage`` (ROS 2 Jazzy and later), as rmw
+puts it in the endpoints' user data (``typehash=...;``)."""
+
+_TOPICS: Final = {"/tf": TF_TOPIC_DDS, "/tf_static": TF_STATIC_TOPIC_DDS}
+_ANY_STATE: Final = SampleState.Any | ViewState.Any | InstanceState.Any
+_XCDR1: Final = Policy.DataRepresentation(use_cdrv0_representation=True)
+_USER_DATA: Final = Policy.Userdata(data=f"typehash={TF_TYPE_HASH};".encode())
+# send_nowait never blocks: a reliable write that would wait for acknowledgements fails
+# at once (counted in ``send_dropped``) instead of waiting up to Cyclone's 100 ms.
+_RELIABLE_WRITE: Final = Policy.Reliability.Reliable(max_blocking_time=0)
+_RELIABLE_READ: Final = Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100))
+
+TF_WRITER_QOS: Final = Qos(
+    _RELIABLE_WRITE, Policy.Durability.Volatile, Policy.History.KeepLast(100), _XCDR1, _USER_DATA
+)
+TF_READER_QOS: Final = Qos(
+    _RELIABLE_READ, Policy.Durability.Volatile, Policy.History.KeepLast(100), _XCDR1,
+    _USER_DATA, Policy.IgnoreLocal.Participant,
+)  # fmt: skip
+TF_STATIC_WRITER_QOS: Final = Qos(
+    _RELIABLE_WRITE, Policy.Durability.TransientLocal, Policy.History.KeepLast(1), _XCDR1,
+    _USER_DATA,
+)  # fmt: skip
+TF_STATIC_READER_QOS: Final = Qos(
+    _RELIABLE_READ, Policy.Durability.TransientLocal, Policy.History.KeepLast(100), _XCDR1,
+    _USER_DATA, Policy.IgnoreLocal.Participant,
+)  # fmt: skip
+
+
+class _BusLike(Protocol):
+    def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None: ...
+
+
+@dataclass(slots=True)
+class Ros2Statistics:
+    """Counters of one :class:`Ros2Transport` (:meth:`Ros2Transport.statistics`).
+
+    Attributes:
+        sent: TFMessages written to DDS.
+        send_errors: local messages refused (not a TFMessage, stamp outside int32, ...).
+        send_dropped: writes DDS refused (e.g. a reliable reader's window was full).
+        not_connected: ``/tf`` messages published while the transport was not running
+            (``/tf_static`` ones are kept and written once it runs).
+        not_mapped: messages on topics other than ``/tf`` and ``/tf_static`` (not sent).
+        received: samples taken from DDS (valid data only).
+        delivered: TFMessages delivered into the bus.
+        malformed: received samples dropped because they did not decode.
+        batches: event-loop wake-ups that took samples.
+    """
+
+    sent: int = 0
+    send_errors: int = 0
+    send_dropped: int = 0
+    not_connected: int = 0
+    not_mapped: int = 0
+    received: int = 0
+    delivered: int = 0
+    malformed: int = 0
+    batches: int = 0
+
+
+# -- one Cyclone domain per (process, domain id), shared by the transports on it ------------
+
+_domains_lock = threading.Lock()
+_domains: dict[int, tuple[Domain, str, int]] = {}
+
+
+def _acquire_domain(domain_id: int, config: str) -> None:
+    with _domains_lock:
+        entry = _domains.get(domain_id)
+        if entry is not None:
+            domain, known, users = entry
+            if known != config:
+                raise TransportError(
+                    f"DDS domain {domain_id} is already open in this process with another "
+                    "Cyclone configuration; all transports on one domain id share one"
+                )
+            _domains[domain_id] = (domain, known, users + 1)
+            return
+        try:
+            domain = Domain(domain_id, config)
+        except DDSException as exc:
+            raise TransportError(
+                f"cannot create DDS domain {domain_id} with this Cyclone configuration: {exc}"
+            ) from None
+        _domains[domain_id] = (domain, config, 1)
+
+
+def _release_domain(domain_id: int) -> None:
+    with _domains_lock:
+        entry = _domains.get(domain_id)
+        if entry is None:
+            return
+        domain, config, users = entry
+        if users > 1:
+            _domains[domain_id] = (domain, config, users - 1)
+            return
+        del _domains[domain_id]
+    _delete(domain)
+
+
+def _delete(entity: Any) -> None:
+    # cyclonedds deletes an entity (and its children) in __del__; calling it here closes
+    # the sockets and threads now instead of whenever the garbage collector runs.
+    with contextlib.suppress(Exception):
+        entity.__del__()
+
+
+def _resolve_config(config: str | os.PathLike[str]) -> str:
+    if isinstance(config, str) and config.lstrip().startswith("<"):
+        return config
+    path = os.fspath(config)
+    path = path.removeprefix("file://")
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"config: cannot read the Cyclone XML file {path!r}: {exc}") from None
+
+
+@dataclass(slots=True)
+class _Endpoints:
+    participant: DomainParticipant
+    readers: dict[str, DataReader[TFMessage_]]
+    writers: dict[str, DataWriter[TFMessage_]]
+
+
+class Ros2Transport:
+    """A :class:`~tfbus.bus.Transport` to ROS 2 over DDS (``Bus(transport=Ros2Transport())``).
+
+    Args:
+        domain_id: the ROS 2 domain (``ROS_DOMAIN_ID``); default: the ``ROS_DOMAIN_ID``
+            environment variable, else 0.
+        config: a complete Cyclone DDS XML configuration: file path, ``file://`` URI or
+            the XML text itself. Replaces the loopback default; keep
+            ``<IgnoreTypeInformation>1.15</IgnoreTypeInformation>`` in it for Fast DDS
+            peers.
+        interfaces: network interfaces (names like ``"eth0"`` or addresses) to use
+            instead of loopback, with multicast discovery: a robot network.
+        peers: unicast discovery peers (addresses), with ``interfaces``.
+        topics: which of ``/tf`` and ``/tf_static`` to receive (both by default).
+        max_batch: most samples delivered per event-loop turn before yielding.
+        max_transforms: received messages with more transforms are malformed.
+
+    Raises:
+        ValueError: if ``domain_id`` is not in 0..232, ``config`` is combined with
+            ``interfaces``/``peers`` or cannot be read, a topic is not ``/tf`` or
+            ``/tf_static``, or a bound is less than 1.
+    """
+
+    def __init__(
+        self,
+        *,
+        domain_id: int | None = None,
+        config: str | os.PathLike[str] | None = None,
+        interfaces: Sequence[str] | None = None,
+        peers: Sequence[str] | None = None,
+        topics: Iterable[str] = ("/tf", "/tf_static"),
+        max_batch: int = 256,
+        max_transforms: int = 100_000,
+    ) -> None:
+        if domain_id is None:
+            env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+            try:
+                domain_id = int(env) if env else 0
+            except ValueError:
+                raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {env!r}") from None
+        if isinstance(domain_id, bool) or not 0 <= domain_id <= DOMAIN_ID_MAX:
+            raise ValueError(f"domain_id must be in 0..{DOMAIN_ID_MAX}, got {domain_id!r}")
+        if config is not None and (interfaces is not None or peers is not None):
+            raise ValueError("give config= or interfaces=/peers=, not both")
+        if max_batch < 1 or max_transforms < 1:
+            raise ValueError("max_batch and max_transforms must be at least 1")
+        self._topics = tuple(topics)
+        for topic in self._topics:
+            if topic not in _TOPICS:
+                raise ValueError(f"topics: {topic!r} is not '/tf' or '/tf_static'")
+        self._domain_id = domain_id
+        self._config = (
+            _resolve_config(config)
+            if config is not None
+            else cyclone_config(interfaces=interfaces, peers=peers)
+        )
+        self._max_batch = max_batch
+        self._max_transforms = max_transforms
+        self._stats = Ros2Statistics()
+        self._statics: dict[str, TransformStamped] = {}
+        self._endpoints: _Endpoints | None = None
+        self._wake_w: socket.socket | None = None
+        self._wake_pending = False
+        self._running = False
+
+    # -- public information -----------------------------------------------------------------
+
+    @property
+    def domain_id(self) -> int:
+        """The DDS domain id (ROS_DOMAIN_ID)."""
+        return self._domain_id
+
+    @property
+    def config(self) -> str:
+        """The Cyclone DDS XML configuration in use."""
+        return self._config
+
+    @property
+    def running(self) -> bool:
+        """True between ``run``'s ``started()`` and its end."""
+        return self._running
+
+    def matched_publishers(self, topic: str = "/tf") -> int:
+        """How many DDS writers (ROS 2 publishers, other tfbus transports) on ``topic``
+        this transport's reader is matched with now (0 when not running).
+
+        Raises:
+            ValueError: if ``topic`` is not one this transport receives.
+        """
+        if topic not in self._topics:
+            raise ValueError(f"{topic!r} is not received by this transport")
+        endpoints = self._endpoints
+        if endpoints is None:
+            return 0
+        return len(endpoints.readers[topic].get_matched_publications())
+
+    def statistics(self) -> Ros2Statistics:
+        """A copy of the counters (see :class:`Ros2Statistics`)."""
+        s = self._stats
+        return Ros2Statistics(**{f.name: getattr(s, f.name) for f in fields(Ros2Statistics)})
+
+    def __repr__(self) -> str:
+        state = "running" if self._running else "stopped"
+        return f"<Ros2Transport {state} domain_id={self._domain_id}>"
+
+    # -- Transport contract -----------------------------------------------------------------
+
+    async def run(
+        self,
+        bus: Bus | _BusLike,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Join the DDS domain, report started, deliver ROS 2 samples until cancelled.
+
+        Static transforms sent before it started are written once the writer exists.
+        Leaves the domain (deleting this participant) on the way out.
+
+        Raises:
+            RuntimeError: if this transport is already running.
+            TransportError: if Cyclone refuses the configuration or the domain.
+        """
+        if self._running or self._endpoints is not None:
+            raise RuntimeError("this Ros2Transport is already running")
+        wake_r, wake_w = socket.socketpair()
+        wake_r.setblocking(False)
+        wake_w.setblocking(False)
+        self._wake_w = wake_w
+        endpoints: _Endpoints | None = None
+        try:
+            with anyio.CancelScope(shield=True):  # a cancelled open must still be closed
+                endpoints = await anyio.to_thread.run_sync(self._open)
+            assert endpoints is not None
+            self._endpoints = endpoints
+            self._running = True
+            if self._statics:
+                self._write("/tf_static", encode_tf_message(tuple(self._statics.values())))
+            task_status.started()
+            await self._pump(bus, wake_r, endpoints)
+        finally:
+            self._running = False
+            self._endpoints = None
+            self._wake_w = None
+            if endpoints is not None:
+                with anyio.CancelScope(shield=True):
+                    await anyio.to_thread.run_sync(self._close, endpoints)
+            wake_r.close()
+            wake_w.close()
+            self._wake_pending = False
+
+    def send_nowait(self, topic: str, message: object) -> None:
+        """Write a locally published ``/tf`` or ``/tf_static`` message to DDS; never blocks.
+
+        ``/tf_static``: the message's transforms are merged into the set this transport
+        has sent (latest per child frame) and the whole set is written (tf2_ros'
+        StaticTransformBroadcaster behaviour, needed with a keep-last-1 transient-local
+        writer). Other topics are not carried to ROS 2 (counted in ``not_mapped``).
+
+        Raises:
+            WireEncodeError: if the message is not a ``TFMessage`` of ``TransformStamped``
+                or a stamp's ``sec`` is outside int32 (ROS 2's ``builtin_interfaces/Time``);
+                nothing of the message is sent or remembered.
+        """
+        if topic not in _TOPICS:
+            self._stats.not_mapped += 1
+            return
+        if not isinstance(message, TFMessage):
+            self._stats.send_errors += 1
+            raise WireEncodeError(f"{topic} carries TFMessage, not {type(message).__name__}")
+        try:
+            transforms = tuple(message.transforms)
+            if topic == "/tf_static":
+                encode_tf_message(transforms)  # validate before merging
+                merged = dict(self._statics)
+                for ts in transforms:
+                    merged[ts.child_frame_id] = ts
+                payload = encode_tf_message(tuple(merged.values()))
+                self._statics = merged
+            else:
+                payload = encode_tf_message(transforms)
+        except (WireEncodeError, TypeError, AttributeError) as exc:
+            self._stats.send_errors += 1
+            if isinstance(exc, WireEncodeError):
+                raise
+            raise WireEncodeError(f"{topic}: not a TFMessage of TransformStamped: {exc}") from None
+        if self._endpoints is None:
+            if topic == "/tf":
+                self._stats.not_connected += 1
+            return
+        self._write(topic, payload)
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _write(self, topic: str, payload: bytes) -> None:
+        endpoints = self._endpoints
+        assert endpoints is not None
+        ret = _clayer.ddspy_write(endpoints.writers[topic]._ref, payload)
+        if isinstance(ret, int) and ret < 0:
+            self._stats.send_dropped += 1
+        else:
+            self._stats.sent += 1
+
+    def _on_data(self, _reader: object) -> None:
+        # Cyclone's receive thread: keep it short, never block.
+        if not self._wake_pending:
+            self._wake_pending = True
+            wake = self._wake_w
+            if wake is not None:
+                with contextlib.suppress(OSError):  # full buffer: a wake-up is queued
+                    wake.send(b"\0")
+
+    def _open(self) -> _Endpoints:
+        _acquire_domain(self._domain_id, self._config)
+        participant: DomainParticipant | None = None
+        try:
+            participant = DomainParticipant(self._domain_id)
+            listener = Listener(on_data_available=self._on_data)  # type: ignore[no-untyped-call]
+            readers: dict[str, DataReader[TFMessage_]] = {}
+            writers: dict[str, DataWriter[TFMessage_]] = {}
+            for topic, name in _TOPICS.items():
+                dds_topic = Topic(participant, name, TFMessage_)
+                static = topic == "/tf_static"
+                writers[topic] = DataWriter(
+                    participant, dds_topic, TF_STATIC_WRITER_QOS if static else TF_WRITER_QOS
+                )
+                if topic in self._topics:
+                    readers[topic] = DataReader(
+                        participant,
+                        dds_topic,
+                        TF_STATIC_READER_QOS if static else TF_READER_QOS,
+                        listener=listener,
+                    )
+            return _Endpoints(participant, readers, writers)
+        except DDSException as exc:
+            if participant is not None:
+                _delete(participant)
+            _release_domain(self._domain_id)
+            raise TransportError(f"cannot join DDS domain {self._domain_id}: {exc}") from None
+
+    def _close(self, endpoints: _Endpoints) -> None:
+        _delete(endpoints.participant)
+        _release_domain(self._domain_id)
+
+    async def _pump(self, bus: Bus | _BusLike, wake_r: socket.socket, ep: _Endpoints) -> None:
+        readers = list(ep.readers.items())
+        while True:
+            self._wake_pending = False
+            self._stats.batches += 1
+            more = True
+            while more:
+                more = False
+                for topic, reader in readers:
+                    if self._take(bus, topic, reader):
+                        more = True
+                if more:
+                    await anyio.lowlevel.checkpoint()
+            await anyio.wait_readable(wake_r)
+            with contextlib.suppress(BlockingIOError):
+                wake_r.recv(4096)
+
+    def _take(self, bus: Bus | _BusLike, topic: str, reader: DataReader[TFMessage_]) -> bool:
+        """Take, decode and deliver up to ``max_batch`` samples; True if it took that many."""
+        samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, self._max_batch)
+        if isinstance(samples, int) or not samples:
+            return False
+        stats = self._stats
+        out: list[object] = []
+        for data, info in samples:
+            if not info.valid_data:
+                continue  # a writer left (unregister/dispose): no data
+            stats.received += 1
+            try:
+                out.append(decode_tf_message(data, max_transforms=self._max_transforms))
+            except WireDecodeError:
+                stats.malformed += 1
+        if out:
+            bus.deliver_many_nowait(topic, out)
+            stats.delivered += len(out)
+        return len(samples) >= self._max_batch
+
+
+# -- process-side helper (for the CLI bus spec) ---------------------------------------------
+
+_SPEC_KEYS: Final = frozenset({"domain", "config", "interfaces", "peers"})
+
+
+def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros2Transport:
+    """The ``ros2`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`):
+    ``ros2``, ``ros2:7`` (domain), ``ros2:domain=7&interfaces=eth0,wlan0&peers=10.0.0.2``.
+
+    ``overrides`` may carry ``name`` (a CLI's node name), which DDS has no use for.
+
+    Raises:
+        ValueError: a value that is not understood (named).
+        TypeError: an override other than ``name``.
+    """
+    unknown = set(overrides) - {"name"}
+    if unknown:
+        raise TypeError(f"unexpected ros2 transport override(s): {', '.join(sorted(unknown))}")
+    options: dict[str, str] = {}
+    for key, values in spec.options.items():
+        if values:
+            options[key] = "+".join(v for value in values for v in value.split(","))
+    return ros2_transport_from_options(options)
+
+
+def ros2_transport_from_options(options: dict[str, str]) -> Ros2Transport:
+    """A :class:`Ros2Transport` from a bus spec's options (``ros2[:key=value,...]``).
+
+    Keys: ``domain`` (0..232; default ``ROS_DOMAIN_ID`` or 0), ``config`` (a Cyclone XML
+    file), ``interfaces`` and ``peers`` (``+``-separated lists, e.g.
+    ``interfaces=eth0+wlan0``: a robot network instead of loopback).
+
+    Raises:
+        ValueError: for an unknown key or a value that is not understood.
+    """
+    unknown = set(options) - _SPEC_KEYS
+    if unknown:
+        raise ValueError(
+            f"unknown ros2 bus option {sorted(unknown)[0]!r} "
+            f"(known: {', '.join(sorted(_SPEC_KEYS))})"
+        )
+    domain_text = options.get("domain")
+    domain_id: int | None = None
+    if domain_text is not None:
+        try:
+            domain_id = int(domain_text)
+        except ValueError:
+            raise ValueError(
+                f"ros2 bus option 'domain' must be an integer, got {domain_text!r}"
+            ) from None
+
+    def split(key: str) -> list[str] | None:
+        text = options.get(key)
+        return None if text is None else [v for v in text.split("+") if v]
+
+    return Ros2Transport(
+        domain_id=domain_id,
+        config=options.get("config"),
+        interfaces=split("interfaces"),
+        peers=split("peers"),
+    )
