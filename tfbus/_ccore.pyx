@@ -1354,7 +1354,22 @@ cdef class CoreBase:
 # go through ``CoreBase._walk``; rows that fail there too are left unanswered, and
 # ``tfbus.batch`` asks the single lookup for tf2's exception: no error is reproduced.
 
+import os
+
 from libc.string cimport memset
+from cpython.pythread cimport (
+    WAIT_LOCK,
+    PyThread_acquire_lock,
+    PyThread_allocate_lock,
+    PyThread_free_lock,
+    PyThread_release_lock,
+    PyThread_start_new_thread,
+    PyThread_type_lock,
+)
+
+cdef int _NCPU = os.cpu_count() or 1
+cdef Py_ssize_t _SPLIT_ROWS = 8192  # below this a second thread costs more than it saves
+
 
 cdef struct _BLink:
     const int64_t* st
@@ -1522,65 +1537,169 @@ cdef int _bplan_side(list caches, int frame, int stop, int early, _BLink* links,
     return 0
 
 
+cdef enum:
+    _BLOCK = 32  # rows gathered and composed together (independent work for the CPU)
+
+
+cdef inline void _bchain(_BLink* links, int n, const int64_t* times, int m,
+                         double acc[7][_BLOCK], double st[7][_BLOCK],
+                         signed char* good) noexcept nogil:
+    """One ``_climb`` for ``m`` rows at once, link by link: gather each row's sample into
+    ``st`` (``good[j] = 0`` where tf2's gather would fail or the row needs the scalar
+    walk), then ``acc = link ∘ acc`` for every row (``_compose``'s expressions, in its
+    order, so each row is bit-for-bit the scalar climb; rows no longer good compute
+    garbage that is never read)."""
+    cdef double v[7]
+    cdef int k, c, j
+    cdef double qx, qy, qz, qw, vx, vy, vz, tx, ty, tz, tw, bx, by, bz, bw
+    for j in range(m):
+        acc[0][j] = acc[1][j] = acc[2][j] = acc[3][j] = acc[4][j] = acc[5][j] = 0.0
+        acc[6][j] = 1.0
+    for k in range(n):
+        for j in range(m):
+            if good[j]:
+                if _bgather(&links[k], times[j], v) != 1:
+                    good[j] = 0
+                    continue
+                for c in range(7):
+                    st[c][j] = v[c]
+        if links[k].check_only:
+            continue
+        if k == 0:
+            for c in range(7):
+                for j in range(m):
+                    acc[c][j] = st[c][j]
+            continue
+        for j in range(m):
+            qx = st[3][j]
+            qy = st[4][j]
+            qz = st[5][j]
+            qw = st[6][j]
+            vx = acc[0][j]
+            vy = acc[1][j]
+            vz = acc[2][j]
+            tx = qw * vx + qy * vz - qz * vy
+            ty = qw * vy + qz * vx - qx * vz
+            tz = qw * vz + qx * vy - qy * vx
+            tw = -qx * vx - qy * vy - qz * vz
+            bx = acc[3][j]
+            by = acc[4][j]
+            bz = acc[5][j]
+            bw = acc[6][j]
+            acc[0][j] = (-tw * qx + tx * qw - ty * qz + tz * qy) + st[0][j]
+            acc[1][j] = (-tw * qy + ty * qw - tz * qx + tx * qz) + st[1][j]
+            acc[2][j] = (-tw * qz + tz * qw - tx * qy + ty * qx) + st[2][j]
+            acc[3][j] = qw * bx + qx * bw + qy * bz - qz * by
+            acc[4][j] = qw * by + qy * bw + qz * bx - qx * bz
+            acc[5][j] = qw * bz + qz * bw + qx * by - qy * bx
+            acc[6][j] = qw * bw - qx * bx - qy * by - qz * bz
+
+
 cdef Py_ssize_t _brows(const _BLink* src_proto, int ns, bint src_early,
                        const _BLink* tgt_proto, int nt, bint tgt_early,
                        const int64_t* times, Py_ssize_t n_rows, double* out,
                        signed char* ok) noexcept nogil:
-    """The per-time loop of :func:`batch_lookup` over ``n_rows`` rows (no GIL; each call
-    keeps its own copy of the links' interval caches)."""
+    """The per-time loop of :func:`batch_lookup` over ``n_rows`` rows, in blocks of
+    ``_BLOCK`` (no GIL; each call keeps its own copy of the links' interval caches)."""
     cdef _BLink src_links[C_MAX_DEPTH_BATCH]
     cdef _BLink tgt_links[C_MAX_DEPTH_BATCH]
-    cdef double acc_s[7]
-    cdef double acc_t[7]
-    cdef double st[7]
-    cdef Py_ssize_t r, answered = 0
-    cdef int k
-    cdef int64_t t
-    cdef bint good
+    cdef double acc_s[7][_BLOCK]
+    cdef double acc_t[7][_BLOCK]
+    cdef double st[7][_BLOCK]
+    cdef double a[7]
+    cdef double b[7]
+    cdef signed char good[_BLOCK]
+    cdef Py_ssize_t r0 = 0, answered = 0
+    cdef int m, j, c
     memcpy(src_links, src_proto, ns * sizeof(_BLink))
     memcpy(tgt_links, tgt_proto, nt * sizeof(_BLink))
-    for r in range(n_rows):
-        t = times[r]
-        if t == 0:
-            continue
-        good = True
-        _identity(acc_s)
-        for k in range(ns):
-            if _bgather(&src_links[k], t, st) != 1:
-                good = False
-                break
-            if src_links[k].check_only:
+    memset(st, 0, sizeof(st))
+    while r0 < n_rows:
+        m = <int>(n_rows - r0) if n_rows - r0 < _BLOCK else _BLOCK
+        for j in range(m):
+            good[j] = times[r0 + j] != 0
+        _bchain(src_links, ns, times + r0, m, acc_s, st, good)
+        if not src_early:
+            _bchain(tgt_links, nt, times + r0, m, acc_t, st, good)
+        for j in range(m):
+            if not good[j]:
                 continue
-            if k == 0:
-                memcpy(acc_s, st, 7 * sizeof(double))
+            for c in range(7):
+                a[c] = acc_s[c][j]
+            if src_early:
+                memcpy(&out[(r0 + j) * 7], a, 7 * sizeof(double))
             else:
-                _accumulate(acc_s, st)
-        if not good:
-            continue
-        if src_early:
-            memcpy(&out[r * 7], acc_s, 7 * sizeof(double))
-            ok[r] = 1
+                if tgt_early:
+                    _identity(a)
+                for c in range(7):
+                    b[c] = acc_t[c][j]
+                _bfull(a, b, &out[(r0 + j) * 7])
+            ok[r0 + j] = 1
             answered += 1
-            continue
-        _identity(acc_t)
-        for k in range(nt):
-            if _bgather(&tgt_links[k], t, st) != 1:
-                good = False
-                break
-            if tgt_links[k].check_only:
-                continue
-            if k == 0:
-                memcpy(acc_t, st, 7 * sizeof(double))
-            else:
-                _accumulate(acc_t, st)
-        if not good:
-            continue
-        if tgt_early:
-            _identity(acc_s)
-        _bfull(acc_s, acc_t, &out[r * 7])
-        ok[r] = 1
-        answered += 1
+        r0 += _BLOCK
     return answered
+
+
+cdef struct _BJob:
+    const _BLink* src
+    const _BLink* tgt
+    int ns
+    int nt
+    bint src_early
+    bint tgt_early
+    const int64_t* times
+    Py_ssize_t n_rows
+    double* out
+    signed char* ok
+    Py_ssize_t answered
+    PyThread_type_lock done
+
+
+cdef void _bjob(void* arg) noexcept nogil:
+    """A worker thread's share of the rows; releases ``done`` when finished."""
+    cdef _BJob* job = <_BJob*>arg
+    job.answered = _brows(job.src, job.ns, job.src_early, job.tgt, job.nt, job.tgt_early,
+                          job.times, job.n_rows, job.out, job.ok)
+    PyThread_release_lock(job.done)
+
+
+cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink* tgt,
+                        int nt, bint tgt_early, const int64_t* times, Py_ssize_t n_rows,
+                        double* out, signed char* ok) except -1:
+    """``_brows`` over all rows, the second half on a worker thread when it pays."""
+    cdef _BJob job
+    cdef Py_ssize_t h, first
+    if n_rows < _SPLIT_ROWS or _NCPU < 2:
+        with nogil:
+            first = _brows(src, ns, src_early, tgt, nt, tgt_early, times, n_rows, out, ok)
+        return first
+    h = n_rows // 2
+    job.src = src
+    job.tgt = tgt
+    job.ns = ns
+    job.nt = nt
+    job.src_early = src_early
+    job.tgt_early = tgt_early
+    job.times = times + h
+    job.n_rows = n_rows - h
+    job.out = out + h * 7
+    job.ok = ok + h
+    job.answered = 0
+    job.done = PyThread_allocate_lock()
+    if job.done == NULL:
+        raise MemoryError()
+    PyThread_acquire_lock(job.done, WAIT_LOCK)
+    if PyThread_start_new_thread(_bjob, &job) == -1:
+        PyThread_release_lock(job.done)
+        PyThread_free_lock(job.done)
+        with nogil:
+            first = _brows(src, ns, src_early, tgt, nt, tgt_early, times, n_rows, out, ok)
+        return first
+    with nogil:
+        first = _brows(src, ns, src_early, tgt, nt, tgt_early, times, h, out, ok)
+        PyThread_acquire_lock(job.done, WAIT_LOCK)
+    PyThread_free_lock(job.done)
+    return first + job.answered
 
 
 def batch_lookup(CoreBase core, object target_frame, object source_frame,
@@ -1601,7 +1720,9 @@ def batch_lookup(CoreBase core, object target_frame, object source_frame,
     The path is resolved once; each time is then gathered and accumulated along it in C
     (no GIL), in ``_walk``'s arithmetic order. Rows that plan cannot take (time 0,
     a link with several parents, a span >= 2**53 ns, a row missing data) go through
-    ``_walk`` itself.
+    ``_walk`` itself. From 8192 rows on a machine with several CPUs, a second thread
+    takes the second half of the rows (the caller holds the GIL and waits for it, so
+    nothing writes the buffer meanwhile).
     """
     cdef Py_ssize_t n_rows = times.shape[0], r, answered = 0
     cdef _BLink src_links[C_MAX_DEPTH_BATCH]
@@ -1627,9 +1748,8 @@ def batch_lookup(CoreBase core, object target_frame, object source_frame,
         if planned and not tgt_early and frame != top:
             planned = False  # disconnected: the scalar walk reports it
     if planned and n_rows:
-        with nogil:
-            answered = _brows(src_links, ns, src_early, tgt_links, nt, tgt_early,
-                              &times[0], n_rows, &out[0, 0], &ok[0])
+        answered = _bsplit(src_links, ns, src_early, tgt_links, nt, tgt_early,
+                           &times[0], n_rows, &out[0, 0], &ok[0])
     if answered == n_rows:
         return answered
     for r in range(n_rows):

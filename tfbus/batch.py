@@ -73,6 +73,7 @@ Errors = Literal["raise", "mask"]
 _F64 = npt.NDArray[np.float64]
 _I64 = npt.NDArray[np.int64]
 
+
 class TransformArray:
     """N transforms between one pair of frames, one per time (the batched
     ``TransformStamped``).

@@ -44,6 +44,7 @@ class Buffer(Lookups, Protocol):
         timeout: float | Duration | None = None,
     ) -> TransformStamped: ...
 
+
 __all__ = ["AsyncBatchMixin", "lookup_transforms_async", "transform_points_async"]
 
 _Times = npt.ArrayLike | Sequence[Time] | Time | int
