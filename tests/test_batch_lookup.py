@@ -77,7 +77,7 @@ def _query_times(draw: st.DrawFn, stamps: list[int]) -> list[int]:
     for s in stamps:
         picks += [s, s - 1, s + 1]
     chosen = draw(
-        st.lists(st.sampled_from(picks) | st.integers(0, 11_000_000_000), min_size=0, max_size=30)
+        st.lists(st.sampled_from(picks) | st.integers(0, 11_000_000_000), min_size=0, max_size=80)
     )
     return [t for t in chosen if t >= 0]
 
@@ -117,9 +117,8 @@ def test_rows_equal_single_lookups(data: st.DataObject) -> None:
         for i, ts in enumerate(singles):
             assert isinstance(ts, TransformStamped)
             assert got.stamps[i] == ts.header.stamp.ns
-            np.testing.assert_allclose(
-                np.r_[got.translations[i], got.rotations[i]], _row(ts), rtol=0, atol=1e-12
-            )
+            # bit-identical (the issue asks 1e-12; the compiled walk keeps tf2's order)
+            assert [*got.translations[i], *got.rotations[i]] == _row(ts)
     masked = (
         core.lookup_transforms(target, source, arr, errors="mask")
         if (
