@@ -111,3 +111,21 @@ def batch_lookup(
     stamps: npt.NDArray[np.int64],
     ok: npt.NDArray[np.int8],
 ) -> int: ...
+def slerp_rows(
+    a: Sequence[float],
+    b: Sequence[float],
+    ratios: npt.NDArray[np.float64],
+    out: npt.NDArray[np.float64],
+) -> None: ...
+def apply_transforms(
+    q: npt.NDArray[np.float64],
+    v: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    out: npt.NDArray[np.float64],
+) -> None: ...
+def lerp_rows(
+    a: Sequence[float],
+    b: Sequence[float],
+    ratios: npt.NDArray[np.float64],
+    out: npt.NDArray[np.float64],
+) -> None: ...

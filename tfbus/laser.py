@@ -37,6 +37,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from tfbus._ccore import apply_transforms, lerp_rows, slerp_rows
 from tfbus.buffer import Buffer
 from tfbus.core import BufferCore
 from tfbus.messages import Header
@@ -120,56 +121,6 @@ def _end_time(scan: LaserScan) -> Time:
     return Time.from_ns(scan.header.stamp.ns + _from_sec_ns(d))
 
 
-def _slerp_ratio(q1: tuple[float, ...], q2: tuple[float, ...], t: _F64) -> _F64:
-    """tf2 ``Quaternion::slerp(q1, q2, t)`` for many t (``angleShortestPath`` with
-    ``tf2Acos``'s clamp; q1 returned unchanged for a zero angle). Returns ``(4, N)``
-    (component-major: x, y, z, w rows)."""
-    x1, y1, z1, w1 = q1
-    x2, y2, z2, w2 = q2
-    dot = x1 * x2 + y1 * y2 + z1 * z2 + w1 * w2
-    s = math.sqrt((x1 * x1 + y1 * y1 + z1 * z1 + w1 * w1) * (x2 * x2 + y2 * y2 + z2 * z2 + w2 * w2))
-    c = (-dot) / s if dot < 0 else dot / s
-    c = -1.0 if c < -1.0 else (1.0 if c > 1.0 else c)
-    theta = (2.0 * math.acos(c)) / 2.0 if not math.isnan(c) else math.nan
-    a = np.array(q1)[:, None]
-    if theta == 0.0:
-        return np.repeat(a, t.shape[0], axis=1)
-    d = 1.0 / math.sin(theta) if not math.isnan(theta) else math.nan
-    s0 = np.sin((1.0 - t) * theta)
-    s1 = np.sin(t * theta)
-    b = (np.array(q2) if dot >= 0 else -np.array(q2))[:, None]
-    out: _F64 = (a * s0 + b * s1) * d
-    return out
-
-
-def _apply_tf2(q: _F64, v: _F64, p: _F64) -> _F64:
-    """tf2::Transform with ``setRotation(q)`` (its basis, in tf2's order) applied to
-    points: ``p.dot3(row0, row1, row2) + origin``. Component-major arrays: q ``(4, N)``,
-    v and p ``(3, N)``; returns ``(3, N)``. Element for element the same IEEE operations
-    as tf2's scalar code (``Matrix3x3::setRotation``, ``Transform::operator()``)."""
-    x, y, z, w = q
-    d = ((x * x + y * y) + z * z) + w * w
-    s = 2.0 / d
-    xyz_s = q[:3] * s  # xs, ys, zs
-    wx, wy, wz = w * xyz_s
-    xx, xy, xz = x * xyz_s
-    yy, yz = y * xyz_s[1:]
-    zz = z * xyz_s[2]
-    m = np.empty((3, 3, q.shape[1]))
-    m[0, 0] = 1.0 - (yy + zz)
-    m[0, 1] = xy - wz
-    m[0, 2] = xz + wy
-    m[1, 0] = xy + wz
-    m[1, 1] = 1.0 - (xx + zz)
-    m[1, 2] = yz - wx
-    m[2, 0] = xz - wy
-    m[2, 1] = yz + wx
-    m[2, 2] = 1.0 - (xx + yy)
-    terms = m * p  # terms[r, c] = p[c] * row_r[c]
-    out: _F64 = ((terms[:, 0] + terms[:, 1]) + terms[:, 2]) + v
-    return out
-
-
 _INTENSITY, _INDEX, _DISTANCE, _TIMESTAMP, _VIEWPOINT = 0x01, 0x02, 0x04, 0x08, 0x10
 _FIELDS: dict[tuple[str, ...], list[PointField]] = {}  # PointField lists by layout
 
@@ -182,7 +133,7 @@ class LaserProjection:
     """
 
     def __init__(self) -> None:
-        self._key: tuple[int, float, float] | None = None
+        self._key: tuple[int, float, float] | None = None  # beams, angle_min, increment
         self._cos = np.zeros(0)
         self._sin = np.zeros(0)
 
@@ -190,7 +141,7 @@ class LaserProjection:
 
     def _table(self, scan: LaserScan) -> tuple[_F64, _F64]:
         n = len(scan.ranges)
-        key = (n, scan.angle_min, scan.angle_max)
+        key = (n, scan.angle_min, scan.angle_increment)  # what the angles depend on
         if key != self._key:
             angles = scan.angle_min + np.arange(n, dtype=np.float64) * scan.angle_increment
             self._cos, self._sin = np.cos(angles), np.sin(angles)
@@ -227,9 +178,13 @@ class LaserProjection:
         # (callers hold np.errstate(all="ignore"): NaN / inf beams as in C++)
         keep = np.flatnonzero((r64 < cutoff) & (ranges >= np.float32(scan.range_min)))
         cols = np.zeros((keep.shape[0], len(names)), dtype=np.float32)
-        rk = r64[keep]
-        cols[:, 0] = rk * cos[keep]
-        cols[:, 1] = rk * sin[keep]
+        if keep.shape[0] == n:  # every beam kept (the usual case): no gathers
+            cols[:, 0] = r64 * cos
+            cols[:, 1] = r64 * sin
+        else:
+            rk = r64[keep]
+            cols[:, 0] = rk * cos[keep]
+            cols[:, 1] = rk * sin[keep]
         k = 3
         if has_intensity:
             cols[:, k] = scan.intensities[keep]
@@ -346,7 +301,7 @@ class LaserProjection:
         start = scan.header.stamp
         names, keep, cols = self._project(scan, range_cutoff, opts | _INDEX)
         n = len(scan.ranges)
-        p = cols[:, :3].T.astype(np.float64)  # (3, kept)
+        p = cols[:, :3].astype(np.float64)  # (kept, 3), the float32 points
         q: _F64
         v: _F64
         if interpolation == "laser_geometry":
@@ -356,28 +311,33 @@ class LaserProjection:
                 ts1 = buffer.lookup_transform(target_frame, frame, end)
             else:
                 ts1 = buffer.lookup_transform_full(target_frame, start, frame, end, fixed_frame)
-            o0 = np.array(ts0.transform.translation)
-            o1 = np.array(ts1.transform.translation)
             # n = 1: 1 / 0 = inf and a NaN ratio, as in C++
             ratio = keep * (np.float64(1.0) / np.float64(float(n) - 1.0))
-            v = (1.0 - ratio) * o0[:, None] + ratio * o1[:, None]
-            q = _slerp_ratio(tuple(ts0.transform.rotation), tuple(ts1.transform.rotation), ratio)
+            v = np.empty((ratio.shape[0], 3))
+            lerp_rows(ts0.transform.translation, ts1.transform.translation, ratio, v)
+            q = np.empty((ratio.shape[0], 4))
+            slerp_rows(ts0.transform.rotation, ts1.transform.rotation, ratio, q)
         elif interpolation == "per_beam":
             times = start.ns + beam_time_offsets_ns(scan, keep)
             arr = buffer.lookup_transforms(target_frame, frame, times)
-            v, q = arr.translations.T, arr.rotations.T
+            v, q = arr.translations, arr.rotations
         elif interpolation == "stamp":
             ts0 = buffer.lookup_transform(target_frame, frame, start)
-            v = np.array(ts0.transform.translation)[:, None]
-            q = np.repeat(np.array(ts0.transform.rotation)[:, None], p.shape[1], axis=1)
+            v = np.array([ts0.transform.translation])
+            q = np.array([ts0.transform.rotation])
         else:
             raise ValueError(
                 "interpolation must be 'laser_geometry', 'per_beam' or 'stamp', "
                 f"got {interpolation!r}"
             )
-        cols[:, :3] = _apply_tf2(q, v, p).T
+        out = np.empty_like(p)
+        apply_transforms(np.ascontiguousarray(q), np.ascontiguousarray(v), p, out)
+        cols[:, :3] = out
         if opts & _VIEWPOINT:
-            cols[:, -3:] = _apply_tf2(q, v, np.zeros_like(p)).T
+            apply_transforms(
+                np.ascontiguousarray(q), np.ascontiguousarray(v), np.zeros_like(p), out
+            )
+            cols[:, -3:] = out
         if not opts & _INDEX:
             j = names.index("index")
             names = names[:j] + names[j + 1 :]
