@@ -26,11 +26,12 @@ LAYERS: dict[str, int] = {
     "messages": 0,
     "sensor_msgs": 0,
     "time": 0,
-    "geometry": 1,
     "ratelimit": 0,
+    # 1: the sans-I/O core (geometry and convert call the compiled tf2 math in _ccore)
+    "geometry": 1,
     "convert": 1,
-    # 1: the sans-I/O core
     "core": 1,
+    "core_text": 1,
     "_ccore": 1,
     "cache": 1,
     "errors": 1,

@@ -178,9 +178,8 @@ def version() -> str:
     try:
         return dist_version("tfbus")
     except PackageNotFoundError:
-        import tfbus
-
-        return tfbus.__version__
+        # The package root is imported before any of its modules, so it is there.
+        return str(sys.modules["tfbus"].__version__)
 
 
 def _print_version(ctx: click.Context, param: click.Parameter, value: bool) -> None:
