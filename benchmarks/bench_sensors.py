@@ -16,6 +16,12 @@ Prints figures; asserts nothing. ``python benchmarks/bench_sensors.py [--quick]`
 
 from __future__ import annotations
 
+import os
+
+# Numpy's OpenBLAS worker threads spin on a 2-core machine and take the core the batched
+# lookup's second thread runs on; nothing here uses BLAS.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import json
 import math
