@@ -10,6 +10,7 @@ Layers (each imports only those below it; see DESIGN notes in the README):
 """
 
 from tfbus import bus as _bus
+from tfbus.batch import TransformArray
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus, Subscription, Transport
@@ -25,6 +26,8 @@ from tfbus.errors import (
     TransformException,
     TransportError,
 )
+from tfbus.filters import MessageFilter
+from tfbus.laser import LaserProjection
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
@@ -39,6 +42,7 @@ from tfbus.messages import (
     Vector3,
     Vector3Stamped,
 )
+from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
 from tfbus.transports.memory import MemoryTransport
 
@@ -58,10 +62,15 @@ __all__ = [
     "ExtrapolationException",
     "Header",
     "InvalidArgumentException",
+    "LaserProjection",
+    "LaserScan",
     "LookupException",
     "ManualClock",
     "MemoryTransport",
+    "MessageFilter",
     "Point",
+    "PointCloud2",
+    "PointField",
     "PointStamped",
     "Pose",
     "PoseStamped",
@@ -75,6 +84,7 @@ __all__ = [
     "Time",
     "TimeoutException",
     "Transform",
+    "TransformArray",
     "TransformBroadcaster",
     "TransformException",
     "TransformListener",
