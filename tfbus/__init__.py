@@ -9,6 +9,7 @@ Layers (each imports only those below it; see DESIGN notes in the README):
 * :mod:`tfbus.bag`, :mod:`tfbus.transports`, the ``tfbus`` command line.
 """
 
+from tfbus._version import __version__ as __version__
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus, MemoryTransport, Subscription, Transport
@@ -39,8 +40,6 @@ from tfbus.messages import (
     Vector3Stamped,
 )
 from tfbus.time import Duration, Time
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Buffer",
