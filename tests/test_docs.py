@@ -146,7 +146,8 @@ def test_example(example: Example, backend: str | None, monkeypatch: pytest.Monk
     monkeypatch.chdir(ROOT)
     if backend is not None:
         monkeypatch.setattr(anyio, "run", _forcing(anyio.run, backend))
-    code = compile(example.code, f"{example.page}:{example.line}", "exec")
+    # Padded so that line numbers in a traceback are the page's own lines.
+    code = compile("\n" * example.line + example.code, str(example.page), "exec")
     namespace: dict[str, Any] = {"__name__": "__docs_example__"}
     with _time_limit(EXAMPLE_TIMEOUT, example.id):
         exec(code, namespace)
