@@ -8,9 +8,8 @@
 and saves what it printed, with the date, Python and CPU count, in
 ``benchmarks/results/<name>.txt``. Without ``--run`` the saved outputs are used. The
 generated part of ``docs/performance.md`` lies between the ``perf-tables`` markers: for
-each saved output, its title line, when and where it was measured, and its figures
-table — as a Markdown table where the output is a ruled table (a header, a line of
-dashes, rows), verbatim otherwise. Benchmarks that could not run (a peer is missing)
+each saved output, the command, when and where it was measured, and the figures tables
+exactly as the benchmark printed them. Benchmarks that could not run (a peer is missing)
 are listed with the reason they printed. Nothing here judges a figure.
 """
 
@@ -20,7 +19,6 @@ import argparse
 import datetime
 import os
 import platform
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -64,71 +62,19 @@ def run_benchmark(name: str, quick: bool) -> None:
     (RESULTS / f"{name}.txt").write_text(header + out.rstrip() + "\n", encoding="utf-8")
 
 
-_RULE = re.compile(r"^-{10,}\s*$")
-
-
-def _columns(header: str) -> list[int]:
-    """Start offsets of the header's columns (a column starts after 2+ spaces)."""
-    starts = [0]
-    for m in re.finditer(r"\s{2,}(?=\S)", header):
-        starts.append(m.end())
-    return starts
-
-
-def _cut(line: str, starts: list[int]) -> list[str]:
-    """Cut a fixed-width line at the header's columns (right-aligned cells may start a
-    little before their header; each cell is taken up to the next column's start)."""
-    cells: list[str] = []
-    for i, start in enumerate(starts):
-        end = starts[i + 1] if i + 1 < len(starts) else len(line)
-        cells.append(line[start:end])
-    return [c.strip() for c in cells]
-
-
-def _md_cell(text: str) -> str:
-    return text.replace("|", "\\|") or " "
-
-
 def render(text: str) -> str:
-    """One saved output as Markdown: ruled tables become tables, the rest stays text."""
+    """One saved output as Markdown: where and when, then the figures as printed (the
+    benchmarks print aligned tables; they are kept verbatim, column for column)."""
     lines = text.rstrip("\n").splitlines()
     meta = [ln[2:] for ln in lines if ln.startswith("# ")]
-    body = [ln for ln in lines if not ln.startswith("# ")]
+    body = [ln.rstrip() for ln in lines if not ln.startswith("# ")]
+    while body and not body[0]:
+        body.pop(0)
     out: list[str] = []
     if meta:
-        out.append(f"`{meta[0]}` — measured {meta[1] if len(meta) > 1 else '?'}.")
-        out.append("")
-    i = 0
-    verbatim: list[str] = []
-
-    def flush() -> None:
-        while verbatim and not verbatim[-1].strip():
-            verbatim.pop()
-        while verbatim and not verbatim[0].strip():
-            verbatim.pop(0)
-        if verbatim:
-            out.extend(["```text", *verbatim, "```", ""])
-        verbatim.clear()
-
-    while i < len(body):
-        if i + 1 < len(body) and _RULE.match(body[i + 1]) and body[i].strip():
-            flush()
-            header = body[i]
-            starts = _columns(header)
-            head = [c or " " for c in _cut(header, starts)]
-            out.append("| " + " | ".join(_md_cell(c) for c in head) + " |")
-            out.append("|" + "---|" * len(head))
-            i += 2
-            while i < len(body) and body[i].strip() and not _RULE.match(body[i]):
-                cells = _cut(body[i].ljust(len(header)), starts)
-                out.append("| " + " | ".join(_md_cell(c) for c in cells) + " |")
-                i += 1
-            out.append("")
-            continue
-        verbatim.append(body[i])
-        i += 1
-    flush()
-    return "\n".join(out).rstrip() + "\n"
+        out += [f"`{meta[0].strip()}` — measured {meta[1] if len(meta) > 1 else '?'}.", ""]
+    out += ["```text", *body, "```", ""]
+    return "\n".join(out)
 
 
 def generated() -> str:

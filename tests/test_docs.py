@@ -333,3 +333,11 @@ def test_async_examples_cover_both_backends() -> None:
     """At least one example runs on each backend (the forcing of anyio.run is in use)."""
     backends = {b for page in _pages() for ex in extract(page) for b in ex.backends()}
     assert {"asyncio", "trio"} <= backends
+
+
+def test_performance_page_shows_the_saved_benchmark_output() -> None:
+    """docs/performance.md's tables are what scripts/perf_tables.py makes of
+    benchmarks/results/ (rerun the script after a benchmark run)."""
+    done = subprocess.run([sys.executable, str(ROOT / "scripts" / "perf_tables.py"), "--check"],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
