@@ -68,9 +68,11 @@ dist: $(DIST_STAMP)
 dist-check: $(DIST_STAMP)
 	$(BIN)/python scripts/check_dist.py
 
-# The suite on each of Python 3.10-3.13 found on this machine (nox, venv backend).
+# The suite on each of Python 3.10-3.13 found on this machine (nox, venv backend);
+# `make test-matrix PYTHONS="3.10 3.13"` for some of them.
+PYTHONS ?=
 test-matrix: $(DIST_STAMP)
-	$(BIN)/nox
+	$(BIN)/nox $(if $(PYTHONS),--python $(PYTHONS))
 
 clean:
 	rm -rf $(VENV) .nox .pytest_cache .mypy_cache .ruff_cache build dist site *.egg-info \

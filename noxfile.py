@@ -34,7 +34,7 @@ _bins = [str(exe.parent) for exe in find_pythons().values()]
 os.environ["PATH"] = os.pathsep.join([*dict.fromkeys(_bins), os.environ.get("PATH", "")])
 
 
-@nox.session(python=VERSIONS)
+@nox.session(python=VERSIONS, venv_backend="venv")
 def tests(session: nox.Session) -> None:
     """Install tfbus (compiled core, every extra) and run the whole suite."""
     session.install("--upgrade", "pip")
