@@ -9,6 +9,9 @@ plus one /tf_static), then timed:
 * ``read_messages``: tfbus.bag.read_messages (decoded to tfbus values);
 * ``load_buffer``: tfbus.bag.load_buffer (read + BufferCore.set_transform).
 
+A bare ``.mcap`` file is read by tfbus through the ``mcap`` package; its row shows that
+reader against rosbags' own MCAP reader on the same file.
+
 The real recordings in ../shared/data are timed too when present. Prints figures only.
 
     .venv/bin/python benchmarks/bench_bag.py [--transforms N]
@@ -119,6 +122,8 @@ def main() -> None:
         for label, (path, fmt) in targets.items():
             write_bag(path, msgs, format=fmt)
             report(label, path, args.repeat)
+        # A bare .mcap file is read by the mcap package (a bag folder by rosbags).
+        report("ROS 2 .mcap file (mcap pkg)", next((tmp / "s_mcap").glob("*.mcap")), args.repeat)
         print("real recordings (../shared/data):")
         for name in ("webviz_turtle_tf_example.bag", "evo_nav2_turtlebot.mcap", "evo_tf_example"):
             if (DATA / name).exists():

@@ -9,20 +9,27 @@ and a child it starts (the sender: Bus + TransformBroadcaster).
    takes ``monotonic_ns()`` when it returns (CLOCK_MONOTONIC is system-wide on Linux).
 2. Throughput: the sender publishes TFMessages of ``--batch`` transforms as fast as it
    can for ``--seconds``; the receiver counts transforms stored in its Buffer.
+3. Wire decoding in this process (first, no network): microseconds per payload for
+   valid TFMessages and for hostile payloads refused (issue 11: 1 000-deep nesting,
+   stamps beyond int64, a flat 16 KB list walked by the nesting bound).
 
-Usage: ``python benchmarks/bench_zenoh.py [--probes 2000] [--batch 100] [--seconds 3]``.
+Usage: ``python benchmarks/bench_zenoh.py [--probes 2000] [--batch 100] [--seconds 3]
+[--wire-only]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import os
 import socket
 import statistics
 import subprocess
 import sys
 import time
+import timeit
+from collections.abc import Callable
 from pathlib import Path
 
 import anyio
@@ -34,8 +41,9 @@ from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.listener import TransformListener
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
+from tfbus.transports.wire import WireCodec, WireError
 from tfbus.transports.zenoh import ZenohTransport
 
 
@@ -154,6 +162,39 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> None:
                 child.wait(timeout=10)
 
 
+def _per_call_us(fn: Callable[[], object], number: int) -> float:
+    return min(timeit.repeat(fn, number=number, repeat=5)) / number * 1e6
+
+
+def wire_costs() -> None:
+    codec = WireCodec()
+
+    def decode_or_error(payload: bytes) -> None:
+        with contextlib.suppress(WireError):
+            codec.decode(payload)
+
+    rows = []
+    for n in (1, 100):
+        msg = TFMessage(tuple(_ts(f"f{k}", 1_700_000_000_000_000_000 + k, 1.0) for k in range(n)))
+        payload = codec.encode(msg, sender=123456789, seq=5)
+        rows.append((f"valid TFMessage, {n} transform(s)", payload))
+    head = payload[:2] + b"\x94\x01\x01"
+    rows += [
+        ("1 000-deep nesting, tag tf (refused)", head + b"\xa2tf" + b"\x91" * 1000 + b"\xc0"),
+        ("1 000-deep nesting, plain (refused)", head + b"\xa0" + b"\x91" * 1000 + b"\xc0"),
+        ("flat list of 16 000 ints, plain (walked, decoded)", head + b"\xa0" + b"\xdc\x3e\x80"
+         + b"\x01" * 16_000),
+        ("stamp beyond int64 (refused)", rows[0][1].replace(
+            rows[0][1][rows[0][1].index(b"\xcf", 10) : rows[0][1].index(b"\xcf", 10) + 9],
+            b"\xcf" + b"\xff" * 8, 1)),
+    ]  # fmt: skip
+    print("wire decode, this process (min of 5 runs):")
+    for label, payload in rows:
+        number = 200 if len(payload) > 2000 else 5000
+        us = _per_call_us(functools.partial(decode_or_error, payload), number)
+        print(f"  {label:52s} {len(payload):6d} B  {us:9.2f} us")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--role", default="receiver", choices=["receiver", "sender"])
@@ -163,9 +204,13 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--express", action="store_true")
     parser.add_argument("--backend", default="asyncio")
+    parser.add_argument("--wire-only", action="store_true")
     args = parser.parse_args()
     if args.role == "sender":
         anyio.run(sender, args, backend=args.backend)
+        return
+    wire_costs()
+    if args.wire_only:
         return
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

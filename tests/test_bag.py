@@ -19,8 +19,10 @@ import pytest
 pytest.importorskip("rosbags")
 
 from tfbus import (
+    Duration,
     Header,
     Quaternion,
+    TFMessage,
     Time,
     Transform,
     TransformStamped,
@@ -50,13 +52,10 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
 EVO_DIR = SHARED / "evo_tf_example"
 
+LASER = SHARED / "laser"
+needs_laser = pytest.mark.skipif(not LASER.exists(), reason="../shared/data/laser absent")
 needs_nav2 = pytest.mark.skipif(not NAV2.exists(), reason="../shared/data (GPL evo data) absent")
 needs_evo = pytest.mark.skipif(not EVO_DIR.exists(), reason="../shared/data (GPL evo data) absent")
-
-
-@pytest.fixture(params=["asyncio", "trio"], scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -155,6 +154,14 @@ def test_detect_format(tmp_path: Path) -> None:
         list(read_messages(old))
 
 
+def test_bag_format_is_a_str_enum() -> None:
+    """``BagFormat(str, Enum)`` (Python 3.10) behaves as the StrEnum it replaced."""
+    assert BagFormat("mcap") is BagFormat.MCAP and BagFormat.ROS1 == "ros1"
+    assert str(BagFormat.SQLITE3) == "sqlite3" and f"{BagFormat.MCAP}" == "mcap"
+    assert f"{BagFormat.ROS1:>6}" == "  ros1" and isinstance(BagFormat.ROS1, str)
+    assert [f.value for f in BagFormat] == ["ros1", "sqlite3", "mcap"]
+
+
 @needs_nav2
 @needs_evo
 def test_detect_format_ros2() -> None:
@@ -213,9 +220,22 @@ def test_turtle_matches_rosbags_generic_deserializer() -> None:
 
 def test_generic_fallback_decoder_matches_fast_path(monkeypatch: pytest.MonkeyPatch) -> None:
     fast = [list(r.message.transforms) for r in read_messages(TURTLE)]
-    monkeypatch.setattr(tfbag, "_ROS1_TF_MD5", "not-the-standard-md5")
+    monkeypatch.setattr(tfbag.decode, "ROS1_TF_MD5", "not-the-standard-md5")
     slow = [list(r.message.transforms) for r in read_messages(TURTLE)]
     assert slow == fast
+
+
+@pytest.mark.parametrize("fmt", ["sqlite3", "mcap"])
+def test_generic_cdr_decoder_matches_fast_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, fmt: str
+) -> None:
+    original = list(read_messages(TURTLE))[:200]
+    write_bag(tmp_path / "b", original, format=fmt)
+    bare = next((tmp_path / "b").glob(f"*.{'db3' if fmt == 'sqlite3' else 'mcap'}"))
+    fast = [list(r.message.transforms) for r in read_messages(bare)]
+    monkeypatch.setattr(tfbag.decode, "ROS2_TF_RIHS01", "RIHS01_not-the-standard-hash")
+    slow = [list(r.message.transforms) for r in read_messages(bare)]
+    assert slow == fast == [list(r.message.transforms) for r in original]
 
 
 def test_summary_turtle() -> None:
@@ -231,6 +251,55 @@ def test_summary_turtle() -> None:
     assert s.messages == {"/tf": 2688, "/tf_static": 1}
     assert s.duration == pytest.approx(21.4986, abs=1e-3)
     assert s.transform_count == 2689
+
+
+def test_summary_is_the_monitors_statistics() -> None:
+    """bag-info, monitor and frames share one accounting: a BagSummary is tf_monitor's
+    TfStatistics with the bag's path, format and error (issue 11 item 22)."""
+    from tfbus.monitor import AuthorityStatistics, FrameStatistics, TfStatistics
+
+    assert tfbag.FrameSummary is FrameStatistics
+    assert tfbag.AuthoritySummary is AuthorityStatistics
+    s = summarize(TURTLE)
+    stats = TfStatistics()
+    for rec in read_messages(TURTLE):
+        stats.add(rec.time, rec.message.transforms, rec.authority, static=rec.is_static)
+    assert isinstance(s, TfStatistics) and s.path == TURTLE
+    assert s.frames == stats.frames and s.authorities == stats.authorities
+    assert (s.start, s.end, s.messages) == (stats.start, stats.end, stats.messages)
+
+
+def test_summary_rate_counts_distinct_stamps(tmp_path: Path) -> None:
+    """A frame's rate is (distinct stamps - 1) / (newest - oldest stamp): 11 stamps
+    0.1 s apart, each recorded twice (22 transforms), is 10 Hz -- not 21 Hz, what
+    (transforms - 1) / span gave before the statistics moved to tfbus.monitor."""
+    t0 = 1_700_000_000 * 10**9
+    messages = []
+    for i in range(22):
+        stamp = Time.from_ns(t0 + (i // 2) * 100_000_000)
+        ts = TransformStamped(Header(stamp, "odom"), "base_link",
+                              Transform(Vector3(0.1 * i, 0.0, 0.0), Quaternion(0, 0, 0, 1)))
+        messages.append(BagMessage(Time.from_ns(t0 + i * 50_000_000 + 1_000_000), "/tf",
+                                   TFMessage((ts,)), "/odom"))
+    write_bag(tmp_path / "repeated.bag", messages)
+    f = summarize(tmp_path / "repeated.bag").frames["base_link"]
+    assert (f.count, len(f.stamps)) == (22, 11)
+    assert f.rate == pytest.approx(10.0, rel=1e-12)
+    # delay = bag time - stamp: 1 ms for the first copy, 51 ms for the second
+    assert f.delay_avg == pytest.approx(0.026, abs=1e-9)
+    assert f.delay_max == pytest.approx(0.051, abs=1e-9)
+
+
+@needs_nav2
+def test_summary_of_a_sim_time_bag_measures_delay_against_bag_stamps() -> None:
+    """The nav2 bag's stamps are simulated time (~929 s) while its bag times are wall
+    time (~1.78e9 s): delays are measured against the newest stamp (tf_monitor's
+    definition in tfbus.monitor), not reported as 1.78e9 s as before."""
+    s = summarize(NAV2)
+    assert s.sim_time is True
+    dynamic = [f for f in s.frames.values() if not f.static]
+    assert dynamic and all(0.0 <= f.delay_avg <= f.delay_max < 2.0 for f in dynamic)
+    assert s.frames["odom"].delay_max == pytest.approx(1.679, abs=1e-9)
 
 
 def test_topic_filter_and_empty_filter_quirk() -> None:
@@ -369,6 +438,55 @@ def test_evo_sqlite_folder_and_bare_db3() -> None:
         )
     span = (recorded[-1].header.stamp - recorded[0].header.stamp).to_sec()
     assert span == pytest.approx(51.6, abs=0.2)
+
+
+# --------------------------------------------------------------------------- laser (ROS 1, bz2)
+
+#: From ../shared/data/SOURCES.md: /tf message counts and (parent, child, Hz) of the
+#: fastest frame of each recording (2014, no /tf_static, bz2-compressed chunks).
+LASER_BAGS = {
+    "drl_guardian_3.bag": (22_998, ("odom", "base_footprint", 120.0), 10),
+    "drl_jarvis_complex_path_fast.bag": (18_839, ("odom", "base_footprint", 25.0), 11),
+}
+
+
+@pytest.fixture(scope="module")
+def laser_reads() -> dict[str, list[BagMessage]]:
+    return {name: list(read_messages(LASER / name)) for name in LASER_BAGS}
+
+
+@needs_laser
+@pytest.mark.parametrize("name", sorted(LASER_BAGS))
+def test_laser_bags_tf_loads(name: str, laser_reads: dict[str, list[BagMessage]]) -> None:
+    count, (parent, child, hz), n_frames = LASER_BAGS[name]
+    recs = laser_reads[name]
+    assert len(recs) == count and {r.topic for r in recs} == {"/tf"}
+    core = load_buffer(LASER / name)
+    assert len(core.get_frame_names()) == n_frames
+    edge = [ts for r in recs for ts in r.message.transforms
+            if (ts.header.frame_id, ts.child_frame_id) == (parent, child)]
+    span = (edge[-1].header.stamp - edge[0].header.stamp).to_sec()
+    assert (len(edge) - 1) / span == pytest.approx(hz, rel=0.01)
+    for ts in edge[:: max(1, len(edge) // 20)]:
+        assert core.lookup_transform(parent, child, ts.header.stamp).transform == ts.transform
+
+
+@needs_laser
+def test_laser_bag_cut_is_salvaged_through_bz2_chunks(
+    tmp_path: Path, laser_reads: dict[str, list[BagMessage]]
+) -> None:
+    """A cut bz2 bag is read record by record (tfbus's ROS 1 scanner, bz2 chunks): the
+    same messages as rosbags' indexed read of the intact file, up to the damage."""
+    name = "drl_jarvis_complex_path_fast.bag"
+    full = laser_reads[name]
+    cut = _truncate(LASER / name, tmp_path / "cut.bag", 0.6)
+    got: list[BagMessage] = []
+    with pytest.raises(BagReadError) as e:
+        for rec in read_messages(cut):
+            got.append(rec)
+    assert 0.4 * len(full) < len(got) < 0.7 * len(full)
+    assert got == full[: len(got)]
+    assert e.value.offset is not None and e.value.offset < cut.stat().st_size
 
 
 # --------------------------------------------------------------------------- damage
@@ -547,26 +665,51 @@ async def test_replay_drives_clock_and_buffer_sees_bag_time() -> None:
     )
 
 
-async def test_replay_paces_at_rate() -> None:
+async def test_replay_paces_at_rate_on_its_pace_clock() -> None:
+    """Message i goes out when the pace clock reads p0 + (t_i - t_0) / rate, exactly
+    (ManualClock deadlines are stepped through one by one: no wall time)."""
     from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
 
-    sleeps: list[float] = []
-    now = [0.0]
-
-    async def fake_sleep(d: float) -> None:
-        sleeps.append(d)
-        now[0] += d
-
+    pace = ManualClock(start=Time(5000))
+    published: list[tuple[Time, Time]] = []  # (pace clock, bag time)
     start, stop = Time(1396293900), Time(1396293902)
+    done = anyio.Event()
     async with Bus() as bus:
-        n = await replay(TURTLE, bus, rate=4.0, start=start, stop=stop,
-                         sleep=fake_sleep, monotonic=lambda: now[0])
-        with pytest.raises(ValueError):
+
+        async def run() -> None:
+            n = await replay(TURTLE, bus, rate=4.0, start=start, stop=stop, pace_clock=pace,
+                             on_message=lambda rec: published.append((pace.now(), rec.time)))
+            assert n == len(published)
+            done.set()
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(run)
+            await pace.advance(10.0)  # more than the 2 s of bag time / 4
+            await done.wait()
+        with pytest.raises(ValueError, match="rate"):
             await replay(TURTLE, bus, rate=-1.0)
+        with pytest.raises(ValueError, match="rate"):
+            await replay(TURTLE, bus, rate=math.inf)
     recs = list(read_messages(TURTLE, start=start, stop=stop))
-    assert n == len(recs)
-    span = (recs[-1].time - recs[0].time).to_sec()
-    assert sum(sleeps) == pytest.approx(span / 4.0, abs=1e-6)  # recorded timing / rate
+    assert [t for _p, t in published] == [r.time for r in recs]
+    # The latched static (recorded 12 s before start) goes out at once; the window is
+    # paced from ``start``.
+    assert recs[0].time < start and published[0][0] == Time(5000)
+    for p, t in published:
+        assert p.ns == 5000 * 10**9 + max(round((t.ns - start.ns) / 4.0), 0)
+    assert published[-1][0] - published[1][0] > Duration(0, 490_000_000)  # ~2 s / 4
+
+
+async def test_replay_without_rate_never_sleeps() -> None:
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
+
+    pace = ManualClock()  # never advanced: any sleep on it would hang the test
+    async with Bus() as bus:
+        with anyio.fail_after(30):
+            n = await replay(TURTLE, bus, rate=None, pace_clock=pace)
+    assert n == 2689 and pace.pending == 0
 
 
 async def test_replay_publishes_latched_statics_first() -> None:

@@ -4,25 +4,22 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterable
 
 import anyio
 import pytest
 
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
+from tfbus.buffer import Buffer
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, MemoryTransport
 from tfbus.clock import ManualClock, every
-from tfbus.core import BufferCore
+from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import ExtrapolationException, LookupException
 from tfbus.listener import ListenerStatistics, TransformListener
 from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Duration, Time
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
 
 
 T0 = Time(1_248_138_528)
@@ -187,33 +184,47 @@ async def test_listener_survives_junk_on_the_topics(caplog: pytest.LogCaptureFix
         assert core.can_transform("base_link", "ok", T0)
         assert core.can_transform("base_link", "later", T0 + Duration(1))
         stats = listener.statistics()
-        assert stats.malformed == 5
+        # "junk" and four non-TFMessages are malformed; a TransformStamped whose transform
+        # field has the wrong type is an invalid transform (issue 11 item 13).
+        assert stats.malformed == 4
+        assert stats.invalid == 1
         assert stats.stored == 2
         assert stats.messages == 6
 
 
 class _ExplodingBuffer:
+    """A sink of the listener's protocol (set_transforms + clear) with a bug: a batch
+    holding "boom" raises instead of reporting."""
+
     def __init__(self) -> None:
         self.stored: list[str] = []
+        self.cleared = 0
 
-    def set_transform(self, transform: TransformStamped, authority: str) -> bool:
-        if transform.child_frame_id == "boom":
+    def set_transforms(
+        self, transforms: Iterable[TransformStamped], authority: str, is_static: bool
+    ) -> BatchResult:
+        batch = list(transforms)
+        if any(t.child_frame_id == "boom" for t in batch):
             raise RuntimeError("buffer bug")
-        self.stored.append(transform.child_frame_id)
-        return True
+        self.stored.extend(t.child_frame_id for t in batch)
+        return BatchResult(len(batch), 0, [])
 
-    def set_transform_static(self, transform: TransformStamped, authority: str) -> bool:
-        return self.set_transform(transform, authority)
+    def clear(self) -> None:
+        self.cleared += 1
 
 
-async def test_listener_accepts_any_buffer_like_object_and_survives_its_errors() -> None:
+async def test_listener_accepts_any_sink_and_survives_its_errors() -> None:
     clock = ManualClock(T0)
     buf = _ExplodingBuffer()
     async with Bus() as bus, TransformListener(buf, bus, clock=clock) as listener:
-        TransformBroadcaster(bus).send_transform_nowait([ts("a"), ts("boom"), ts("b")])
+        br = TransformBroadcaster(bus)
+        br.send_transform_nowait([ts("a")])
+        br.send_transform_nowait([ts("boom"), ts("x")])
+        br.send_transform_nowait([ts("b")])
         await settle(clock)
     assert buf.stored == ["a", "b"]
     assert listener.statistics().malformed == 1
+    assert buf.cleared == 0
 
 
 async def test_listener_exit_and_cancellation_leave_no_subscription_behind() -> None:
@@ -317,3 +328,45 @@ async def test_end_to_end_across_a_memory_transport() -> None:
         await settle(clock)
         out = core.lookup_transform("base_link", "camera", Time(0))
         assert out.transform.translation.x == pytest.approx(0.2)
+
+
+async def test_listener_clears_the_buffer_when_its_clock_jumps_back(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue 11 item 17: the listener reads the clock on each message, as tf2_ros's
+    TransformListener does, so a clock stepped back clears the buffer (here a BufferCore,
+    which has no clock of its own: only the listener can notice)."""
+    clock = ManualClock(T0)
+    core = BufferCore()
+    caplog.set_level(logging.WARNING, logger="tfbus.listener")
+    async with Bus() as bus, TransformListener(core, bus, clock=clock):
+        br = TransformBroadcaster(bus)
+        StaticTransformBroadcaster(bus).send_transform_nowait([ts("fixed")])
+        br.send_transform_nowait([ts("laser")])
+        await settle(clock)
+        assert core.can_transform("base_link", "laser", T0)
+        clock.set_nowait(Time(T0.sec - 3600))  # the wall clock is stepped back 1 h
+        br.send_transform_nowait([ts("other", stamp=Time(T0.sec - 3600))])
+        await settle(clock)
+        assert not core.can_transform("base_link", "laser", T0)  # cleared
+        assert core.can_transform("base_link", "fixed", T0)  # statics stay (tf2 clear)
+        assert core.can_transform("base_link", "other", Time(T0.sec - 3600))
+    assert any("jump back in time" in r.getMessage() for r in caplog.records)
+
+
+async def test_listener_on_a_buffer_reads_the_buffers_clock() -> None:
+    """Issue 11 item 17: with ``Buffer()`` + ``TransformListener`` (the README set-up) the
+    listener reads the buffer's own clock on each message; a jump back seen there clears
+    the buffer once (the Buffer's own jump handler)."""
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    async with Bus() as bus, TransformListener(buf, bus):
+        br = TransformBroadcaster(bus)
+        br.send_transform_nowait([ts("laser")])
+        await settle(clock)
+        assert buf.can_transform("base_link", "laser", T0)
+        clock.set_nowait(Time(T0.sec - 3600))
+        br.send_transform_nowait([ts("other", stamp=Time(T0.sec - 3600))])
+        await settle(clock)
+        assert not buf.can_transform("base_link", "laser", T0)
+    buf.close()

@@ -12,6 +12,7 @@ from tfbus import (
     ExtrapolationException,
     Header,
     InvalidArgumentException,
+    LookupException,
     Point,
     PointStamped,
     Quaternion,
@@ -24,13 +25,9 @@ from tfbus import (
 )
 from tfbus.buffer import Buffer
 from tfbus.clock import ManualClock
+from tfbus.core import MAX_GRAPH_DEPTH
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
 
 
 T0 = Time(1000)
@@ -281,3 +278,85 @@ async def test_timeout_with_the_system_clock_uses_real_time() -> None:
     with pytest.raises(TimeoutException, match=r"Timed out after 0\.001 s waiting for"):
         await buf.lookup_transform_async("a", "b", Time(0), timeout=0.001)
     assert buf.pending_waits == 0
+
+
+async def test_wait_across_a_loop_raises_lookup_exception_at_once() -> None:
+    """Issue 11 item 15: wait_for_transform across a loop (a -> b -> a) raises
+    LookupException at once, as its docstring says, instead of waiting."""
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("a", "b", T0))
+    buf.set_transform(tf("b", "a", T0))
+    buf.set_transform(tf("b", "d", T0))
+    buf.set_transform(tf("x", "e", T0))
+    outcomes: list[BaseException] = []
+
+    async def waiter(time: Time) -> None:
+        try:
+            await buf.wait_for_transform("e", "d", time)
+        except LookupException as exc:
+            outcomes.append(exc)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter, Time(0))
+        tg.start_soon(waiter, T0)
+        await settle()
+        tg.cancel_scope.cancel()  # a wait still pending here is the bug
+    assert len(outcomes) == 2
+    assert all("contains a loop" in str(exc) for exc in outcomes)
+    assert buf.pending_waits == 0
+
+
+async def test_a_wait_loop_appearing_later_fails_the_wait() -> None:
+    """Issue 11 item 15: a loop that forms while waiting fails the wait."""
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("a", "b", T0))
+    outcomes: list[BaseException] = []
+
+    async def waiter() -> None:
+        try:
+            await buf.wait_for_transform("c", "b", Time(0))
+        except LookupException as exc:
+            outcomes.append(exc)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        assert buf.pending_waits == 1
+        buf.set_transform(tf("b", "a", T0))  # a <-> b: a loop above b
+        buf.set_transform(tf("z", "c", T0))
+        await settle()
+        tg.cancel_scope.cancel()
+    assert len(outcomes) == 1 and "loop" in str(outcomes[0])
+
+
+async def test_waits_below_a_deep_chain_are_rechecked_without_rewalking_it() -> None:
+    """Issue 11 item 16: with waits below a 10 000-deep chain, an insert that does not
+    change the tree's shape rechecks each wait it touches with one query and does not
+    recompute the frames they depend on (O(waiters touched), not O(depth x waiters));
+    the frames a wait is indexed under are bounded by tf2's MAX_GRAPH_DEPTH."""
+    buf = Buffer(clock=ManualClock(T0))
+    depth = 10_000
+    buf.set_transforms(tf(f"f{k}", f"f{k + 1}", T0) for k in range(depth))
+    recomputed: list[str] = []
+    chain_frames = buf.chain_frames
+
+    def counting(target: str, source: str, time: Time = T0) -> list[str]:
+        recomputed.append(source)
+        frames = chain_frames(target, source, time)
+        assert len(frames) <= MAX_GRAPH_DEPTH + 3
+        return frames
+
+    buf.chain_frames = counting  # type: ignore[method-assign]
+
+    async with anyio.create_task_group() as tg:
+        for i in range(20):
+            tg.start_soon(buf.wait_for_transform, f"f{depth}", f"missing{i}", Time(0))
+        await settle()
+        assert buf.pending_waits == 20 and len(recomputed) == 20
+        for k in range(1, 50):  # new samples on the leaf link every wait depends on
+            buf.set_transform(tf(f"f{depth - 1}", f"f{depth}", Time(1000 + k)))
+        assert len(recomputed) == 20  # rechecked, not re-indexed
+        buf.set_transform(tf(f"f{depth}", "missing3", Time(1049)))  # a new link: re-index
+        await settle()
+        assert buf.pending_waits == 19
+        tg.cancel_scope.cancel()

@@ -1,4 +1,5 @@
-"""Tests for tfbus/bus.py: Bus, Subscription, MemoryTransport, latching, statistics."""
+"""Tests for tfbus/bus.py (Bus, Subscription, latching, statistics), tfbus/latch.py and
+tfbus/transports/memory.py (MemoryTransport)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ from tfbus.bus import (
     TF_STATIC_TOPIC,
     TF_TOPIC,
     Bus,
-    MemoryTransport,
     Subscription,
     SubscriptionStatistics,
     TopicStatistics,
@@ -21,13 +21,9 @@ from tfbus.bus import (
 from tfbus.clock import ManualClock, every
 from tfbus.messages import Header, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
+from tfbus.transports.memory import MemoryTransport
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
 
 
 def ts(child: str, x: float = 0.0, parent: str = "base_link", sec: int = 1) -> TransformStamped:
@@ -349,3 +345,84 @@ async def test_running_transport_end_twice_fails() -> None:
         with pytest.raises(RuntimeError):
             async with Bus(transport=a_end):
                 pass
+
+
+def _with(t: TransformStamped, **fields: Any) -> TransformStamped:
+    """``t`` with some of its translation/rotation/frame fields replaced."""
+    tr = t.transform.translation._replace(**{k: v for k, v in fields.items() if k in "xyz"})
+    rot = t.transform.rotation._replace(
+        **{k[1:]: v for k, v in fields.items() if k in ("qx", "qy", "qz", "qw")}
+    )
+    header = t.header._replace(frame_id=fields.get("parent", t.header.frame_id))
+    child = fields.get("child", t.child_frame_id)
+    return TransformStamped(header, child, Transform(tr, rot))
+
+
+async def test_latch_keeps_the_valid_static_when_an_invalid_one_is_resent() -> None:
+    """Issue 11 item 4: a NaN static re-sent by any publisher replaced the valid latched
+    /tf_static entry, so late joiners never got the valid one. The latch stores only
+    transforms the core would store (same validation)."""
+    good = ts("laser", 1.5)
+    bad = [
+        _with(good, x=float("nan")),
+        _with(good, y=float("inf")),
+        _with(good, qw=float("nan")),
+        _with(good, qw=2.0),  # denormalised quaternion
+        _with(good, parent="laser"),  # self transform
+        _with(good, parent=""),
+        _with(good, parent="/laser"),  # a self transform once the slash is stripped
+    ]
+    async with Bus() as bus:
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((good,)))
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage(tuple(bad)))  # local publisher
+        bus.deliver_nowait(TF_STATIC_TOPIC, TFMessage((bad[0],)))  # remote publisher
+        bus.deliver_nowait(TF_STATIC_TOPIC, TFMessage((ts("cam", 2.0), "junk", None)))
+        late = bus.subscribe(TF_STATIC_TOPIC)
+        assert late.receive_nowait() == TFMessage((good, ts("cam", 2.0)))
+        assert bus.latched_statics() == TFMessage((good, ts("cam", 2.0)))
+
+
+async def test_latch_key_is_the_normalised_child_id() -> None:
+    """Issue 11 item 4: ``laser`` and ``/laser`` are one latched entry (tf2 strips the
+    leading slash), the latest sent wins."""
+    async with Bus() as bus:
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("laser", 1.0), ts("cam", 2.0))))
+        bus.deliver_nowait(TF_STATIC_TOPIC, TFMessage((ts("/laser", 3.0),)))
+        assert bus.latched_statics() == TFMessage((ts("/laser", 3.0), ts("cam", 2.0)))
+        bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("laser", 4.0),)))
+        assert bus.latched_statics() == TFMessage((ts("laser", 4.0), ts("cam", 2.0)))
+
+
+def test_memory_transport_keeps_its_old_import_paths() -> None:
+    """MemoryTransport moved to tfbus.transports.memory (issue 10 section 3); the old
+    names still import, and bus.py itself imports nothing from the transports layer."""
+    import ast
+    from pathlib import Path
+
+    import tfbus
+    import tfbus.bus
+
+    assert tfbus.MemoryTransport is MemoryTransport
+    assert tfbus.bus.MemoryTransport is MemoryTransport  # type: ignore[attr-defined]
+    tree = ast.parse(Path(tfbus.bus.__file__).read_text())
+    imported = [
+        node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+    ] + [a.name for node in ast.walk(tree) if isinstance(node, ast.Import) for a in node.names]
+    assert not [m for m in imported if m.startswith("tfbus.transports")]
+
+
+def test_static_latch_api() -> None:
+    """StaticLatch (tfbus/latch.py), the one latch of the bus and the transports."""
+    from tfbus.latch import StaticLatch
+
+    latch = StaticLatch()
+    assert len(latch) == 0 and latch.message() == TFMessage(())
+    assert latch.add("not a TFMessage") == 0
+    assert latch.add(TFMessage((ts("laser", 1.0), ts("cam", 2.0), ts("bad", float("nan"))))) == 2
+    assert "laser" in latch and "/laser" in latch and "bad" not in latch and 3 not in latch
+    first = latch.message()
+    assert latch.message() is first  # cached until the next change
+    assert latch.add(TFMessage((ts("/cam", 5.0),))) == 1
+    assert latch.message() == TFMessage((ts("laser", 1.0), ts("/cam", 5.0)))
+    latch.clear()
+    assert len(latch) == 0 and latch.message() == TFMessage(())

@@ -27,7 +27,8 @@ DATA = Path(__file__).parent / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
-COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay", "demo"]
+COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay",
+            "robot-state-publisher", "joint-states", "demo"]
 
 
 def run(*args: str) -> tuple[int, str, str]:
@@ -59,6 +60,30 @@ def test_every_command_has_help_with_examples(command: str) -> None:
     code, out, _ = run(command, "--help")
     assert code == 0
     assert "Examples:" in out and f"tfbus {command}" in out
+
+
+def test_version() -> None:
+    from importlib.metadata import version
+
+    code, out, _ = run("--version")
+    assert code == 0
+    assert out == f"tfbus {version('tfbus')}\n"
+
+
+def test_version_of_a_source_tree_that_is_not_installed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import importlib.metadata
+
+    import tfbus
+
+    def not_installed(name: str) -> str:
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", not_installed)
+    monkeypatch.setattr(tfbus, "__version__", "9.8.7")
+    code, out, _ = run("--version")
+    assert (code, out) == (0, "tfbus 9.8.7\n")
 
 
 def test_unknown_command_and_option_are_one_line() -> None:
@@ -224,7 +249,8 @@ def test_frames_pdf_renders_or_explains(tmp_path: Path) -> None:
     code, _, err = run("frames", "--bag", str(TURTLE), "-o", str(out))
     assert (tmp_path / "frames.gv").exists()
     if shutil.which("dot"):
-        assert code == 0 and out.read_bytes().startswith(b"%PDF")
+        assert code == 0, f"Graphviz failed: {err}"  # issue 10 §4: its error text shown
+        assert out.read_bytes().startswith(b"%PDF")
     else:
         assert code == 1 and "'dot' not found" in err and len(err.strip().splitlines()) == 1
 
@@ -260,21 +286,22 @@ def test_parse_static_args_rpy_and_quaternion() -> None:
 
 def test_static_transform_publishes_once() -> None:
     code, out, _ = run("static-transform", "-1", "0", "0.2", "0", "0", "0",
-                       "base_link", "base_laser", "--once")
+                       "base_link", "base_laser", "--once", "--local")
     assert code == 0
     assert "base_link -> base_laser" in out and "(-1.0, 0.0, 0.2)" in out
 
 
 def test_static_transform_publishes_on_bus(monkeypatch: pytest.MonkeyPatch) -> None:
-    import tfbus.cli as tcli
+    import tfbus.cli.static_transform as tcli
 
     seen = []
 
-    async def fake(ts: object, once: bool) -> None:
+    async def fake(open_bus: object, ts: object, once: bool) -> None:
         seen.append((ts, once))
 
     monkeypatch.setattr(tcli, "_publish_static", fake)
-    code, _, _ = run("static-transform", "0", "0", "1", "0", "0", "0", "1", "world", "cam")
+    code, _, _ = run("static-transform", "0", "0", "1", "0", "0", "0", "1", "world", "cam",
+                     "--local")
     assert code == 0 and len(seen) == 1 and seen[0][1] is False
 
 
@@ -307,9 +334,9 @@ def test_static_transform_bad_arguments() -> None:
 
 
 def test_replay_fast() -> None:
-    code, out, _ = run("replay", str(TURTLE), "--rate", "0", "-q")
+    code, out, _ = run("replay", str(TURTLE), "--rate", "0", "-q", "--local")
     assert code == 0 and "replayed 2689 messages" in out
-    code, out, _ = run("replay", str(TURTLE), "--rate", "0", "-q",
+    code, out, _ = run("replay", str(TURTLE), "--rate", "0", "-q", "--local",
                        "--start", "1396293900", "--stop", "1396293901")
     assert code == 0
     n = int(re.search(r"replayed (\d+)", out).group(1))  # type: ignore[union-attr]
@@ -318,7 +345,7 @@ def test_replay_fast() -> None:
 
 
 def test_replay_progress_bar() -> None:
-    code, _, err = run("replay", str(TURTLE), "--rate", "0")
+    code, _, err = run("replay", str(TURTLE), "--rate", "0", "--local")
     assert code == 0 and "2689/2689" in err
 
 
@@ -326,7 +353,7 @@ def test_replay_truncated_and_bad_args(tmp_path: Path) -> None:
     cut = tmp_path / "cut.bag"
     data = TURTLE.read_bytes()
     cut.write_bytes(data[: len(data) // 2])
-    code, _, err = run("replay", str(cut), "--rate", "0", "-q")
+    code, _, err = run("replay", str(cut), "--rate", "0", "-q", "--local")
     assert code == 1 and "reading stopped" in err and len(err.strip().splitlines()) == 1
     code, _, err = run("replay", str(TURTLE), "--rate", "-2")
     assert_usage_error(code, err, "--rate")
@@ -335,40 +362,47 @@ def test_replay_truncated_and_bad_args(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- demo
 
 
-def test_demo_forwards_options(monkeypatch: pytest.MonkeyPatch) -> None:
-    import tfbus.demo
+def _fake_runners(monkeypatch: pytest.MonkeyPatch) -> list[tuple[object, ...]]:
+    import tfbus.cli.demo as cdemo
 
-    calls: list[list[str] | None] = []
+    calls: list[tuple[object, ...]] = []
 
-    def fake_main(argv: list[str] | None = None) -> int:
-        calls.append(argv)
+    def both(**options: object) -> int:
+        calls.append(("both", options))
         return 0
 
-    monkeypatch.setattr(tfbus.demo, "main", fake_main)
+    def role(name: str, spec: str, **options: object) -> int:
+        calls.append((name, spec, options))
+        return 0
+
+    monkeypatch.setattr(cdemo, "run_both", both)
+    monkeypatch.setattr(cdemo, "run_role", role)
+    return calls
+
+
+def test_demo_options_are_parsed_once_by_click(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 10 §3: the options reach the runners as values (no argv rebuilt for a second
+    parser)."""
+    calls = _fake_runners(monkeypatch)
     code, _, _ = run("demo", "--duration", "3", "--rate", "50", "--listen-rate", "2")
     assert code == 0
-    assert calls == [["--duration", "3.0", "--rate", "50.0", "--listen-rate", "2.0"]]
+    assert calls == [("both", {"duration": 3.0, "rate": 50.0, "listen_rate": 2.0,
+                               "backend": "asyncio"})]
     code, _, err = run("demo", "--rate", "-5")
     assert_usage_error(code, err, "--rate")
 
 
 def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
-    import tfbus.demo
-
-    calls: list[list[str] | None] = []
-
-    def fake_main(argv: list[str] | None = None) -> int:
-        calls.append(argv)
-        return 0
-
-    monkeypatch.setattr(tfbus.demo, "main", fake_main)
+    calls = _fake_runners(monkeypatch)
     code, _, _ = run("demo", "listener", "--bus", "zenoh?port=9000", "--duration", "2")
     assert code == 0
     code, _, _ = run("demo", "--duration", "3", "broadcaster", "--rate", "50")  # inherited
     assert code == 0
     assert calls == [
-        ["listener", "--bus", "zenoh?port=9000", "--duration", "2.0"],
-        ["broadcaster", "--duration", "3.0", "--rate", "50.0"],
+        ("listener", "zenoh?port=9000", {"duration": 2.0, "rate": 100.0, "listen_rate": 1.0,
+                                         "backend": "asyncio"}),
+        ("broadcaster", "zenoh", {"duration": 3.0, "rate": 50.0, "listen_rate": 1.0,
+                                  "backend": "asyncio"}),
     ]
     code, _, err = run("demo", "broadcaster", "--listen-rate", "2")  # not a broadcaster's
     assert code == 2 and "--listen-rate" in err
@@ -379,6 +413,18 @@ def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
             "express, listen, name, namespace, port, prefix)"
         )
     assert len(calls) == 2
+
+
+def test_demo_script_runs_the_click_command(tmp_path: Path) -> None:
+    """demos/robot_setup_tf.py stays runnable and parses with the same click command."""
+    script = Path(__file__).resolve().parents[1] / "demos" / "robot_setup_tf.py"
+    proc = subprocess.run([sys.executable, str(script), "--rate", "-1"], capture_output=True,
+                          text=True, timeout=120, check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().startswith("tfbus demo: error: ") and "--rate" in proc.stderr
+    proc = subprocess.run([sys.executable, str(script), "--help"], capture_output=True,
+                          text=True, timeout=120, check=False)
+    assert proc.returncode == 0 and "tfbus demo listener" in proc.stdout
 
 
 @pytest.mark.parametrize("role", ["broadcaster", "listener"])
@@ -432,14 +478,15 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
 
     from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
     from tfbus.bus import Bus
-    from tfbus.cli import BusSource, _liveliness_table
+    from tfbus.cli import BusSource
+    from tfbus.cli.monitor import liveliness_table
     from tfbus.messages import Header, Transform, TransformStamped, Vector3
     from tfbus.transports.zenoh import ZenohTransport
 
     port = _free_port()
     events: list[tuple[str, str]] = []
     src = BusSource(f"zenoh?connect=tcp/127.0.0.1:{port}", name="test-monitor")
-    assert src.options.name == "test-monitor" and src.label.startswith("the bus")
+    assert src.name == "test-monitor" and src.label.startswith("the bus")
     publisher = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot_tf_publisher")
     stop = anyio.Event()
 
@@ -471,9 +518,15 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
                     await tf.send_transform(laser(ns))
                     ns += 1
                     await anyio.sleep(0.005)
-                while src.summary().frames["base_laser"].count < ns - 1 - 5:
+                while src.statistics().frames["base_laser"].count < ns - 1 - 5:
                     await anyio.sleep(0.02)
-            s = src.summary()
+            s = src.statistics()
+            # Issue 10 §3: the live source is a TransformListener feeding the Buffer and
+            # tfbus.monitor's statistics, not a second feed loop.
+            from tfbus.listener import TransformListener
+
+            assert isinstance(src.listener, TransformListener)
+            assert src.listener.statistics().stored >= s.transform_count - 1
             assert s.frames["base_laser"].authority == "robot_tf_publisher"
             assert s.frames["camera"].static
             got = src.buffer().lookup_transform("base_link", "base_laser", Time(0))
@@ -485,7 +538,7 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
                     await anyio.sleep(0.02)
             assert not src.alive_broadcasters()
             assert [p.name for p in src.gone.values()] == ["robot_tf_publisher"]
-            assert _liveliness_table(src).row_count == 1
+            assert liveliness_table(src).row_count == 1
     assert src.transport is None and not src.alive_broadcasters()
 
 

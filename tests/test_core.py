@@ -63,7 +63,7 @@ def test_set_transforms_takes_any_iterable_and_static_flag() -> None:
     result = core.set_transforms(
         (ts(f"s{k}", sec=1.0 + k, x=float(k)) for k in range(3)), "me", is_static=True
     )
-    assert result == BatchResult(3, 0, [])
+    assert result == BatchResult(3, 0, [], {"base", "s0", "s1", "s2"}, True)
     # Static links answer at any time.
     assert core.lookup_transform("base", "s2", Time(1000)).transform.translation.x == 2.0
     assert "broadcaster: 'me'" in core.all_frames_as_yaml()
@@ -105,7 +105,7 @@ def test_set_transforms_is_set_transform_in_order(
 def test_times_beyond_int64_ns_cannot_be_made() -> None:
     with pytest.raises(ValueError, match="int64"):
         Time.from_ns(2**63)
-    core = BufferCore(cache_time=1e12)  # beyond int64 ns: keeps everything
+    core = BufferCore(cache_time=9.2e9)  # ~2**63 ns: keeps everything
     core.set_transform(ts("a", sec=1.0), "x")
     core.set_transform(ts("a", sec=9e9, x=3.0), "x")
     assert core.lookup_transform("base", "a", Time(1)).transform.translation.x == 1.0

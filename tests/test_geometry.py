@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import math
 
+import _tf2math
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from tfbus import _tf2math
 from tfbus import geometry as g
 from tfbus.messages import (
     Header,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pickle
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -134,3 +136,44 @@ def test_pickle_round_trip() -> None:
 def test_exported_from_package() -> None:
     for cls in ALL_TYPES:
         assert getattr(tfbus, cls.__name__) is cls
+
+
+def test_arithmetic_that_means_nothing_raises_type_error() -> None:
+    """Issue 11 item 18: ``Vector3(1, 2, 3) + Vector3(1, 1, 1)`` silently gave a 6-tuple
+    (tuple concatenation), ``Quaternion() * 2`` an 8-tuple. Every message type refuses
+    ``+`` and ``*`` on either side, and the error says how to build a changed copy."""
+    v = Vector3(1.0, 2.0, 3.0)
+    with pytest.raises(TypeError, match=r"Vector3 is an immutable message.*_replace"):
+        v + Vector3(1.0, 1.0, 1.0)
+    for msg in (*(t() for t in ALL_TYPES), sample()):
+        name = type(msg).__name__
+        ops: tuple[Callable[[Any], object], ...] = (
+            lambda m: m + m,
+            lambda m: m + (1.0,),  # noqa: RUF005 (the concatenation is the point)
+            lambda m: (1.0,) + m,  # noqa: RUF005
+            lambda m: m * 2,
+            lambda m: 2 * m,
+            lambda m: sum([m], ()),
+        )
+        for op in ops:
+            with pytest.raises(TypeError, match=f"{name} is an immutable message"):
+                op(msg)
+        with pytest.raises(TypeError, match=f"{name} is an immutable message"):
+            msg += msg
+    # Operations that mean something keep working: unpacking, indexing, numpy on fields.
+    x, y, z = v
+    assert (x, y, z) == (1.0, 2.0, 3.0) and v[2] == 3.0 and len(v) == 3
+    assert (*v, 4.0) == (1.0, 2.0, 3.0, 4.0)
+
+
+def test_replace_builds_a_modified_message_and_leaves_the_original() -> None:
+    """The documented way to 'mutate' a message, for users of tf2_ros's mutable ones."""
+    t = sample()
+    t2 = t._replace(header=t.header._replace(frame_id="map", stamp=Time(5)))
+    t3 = t2._replace(transform=t2.transform._replace(translation=Vector3(1.0, 0.0, 0.0)))
+    assert t3.header == Header(Time(5), "map")
+    assert t3.transform.translation == Vector3(1.0, 0.0, 0.0)
+    assert t3.transform.rotation == t.transform.rotation
+    assert t3.child_frame_id == t.child_frame_id
+    assert t.header.frame_id != "map" and t == sample()  # the original is unchanged
+    assert "_replace" in (tfbus.messages.__doc__ or "")

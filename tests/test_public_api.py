@@ -43,3 +43,35 @@ def test_one_tree_for_bag_and_wire_errors() -> None:
 
 def test_buffer_is_a_buffer_core() -> None:
     assert issubclass(tfbus.Buffer, tfbus.BufferCore)
+
+
+def test_time_clock_and_convert_modules_pin_their_names() -> None:
+    """The time layer's helpers beside the package's names: one exact seconds ->
+    nanoseconds conversion, one stamp formatter, the clocks' deadline primitive and the
+    transform registry (issue 10 §2-3)."""
+    import tfbus.clock
+    import tfbus.convert
+    import tfbus.time
+
+    assert set(tfbus.time.__all__) == {
+        "NSEC_PER_SEC", "TIME_MAX_NS", "Duration", "Time", "format_stamp", "seconds_to_ns",
+    }  # fmt: skip
+    assert set(tfbus.clock.__all__) == {
+        "Clock", "JumpCallback", "ManualClock", "PeriodicTimer", "SystemClock", "Tick",
+        "every", "timeout_ns",
+    }  # fmt: skip
+    assert set(tfbus.convert.__all__) == {
+        "TransformFunction", "TransformRegistration", "do_transform_transform",
+        "get_transform_function", "register_transform", "registered_types",
+    }  # fmt: skip
+    for module in (tfbus.time, tfbus.clock, tfbus.convert):
+        for name in module.__all__:
+            obj = getattr(module, name)
+            if callable(obj) and not name.startswith(("TransformFunction", "JumpCallback")):
+                assert obj.__doc__, f"{module.__name__}.{name} has no docstring"
+    for method in ("now", "sleep", "sleep_until", "on_jump", "move_on_after", "fail_after"):
+        for cls in (tfbus.Clock, tfbus.SystemClock, tfbus.ManualClock):
+            assert getattr(cls, method).__doc__, f"{cls.__name__}.{method} has no docstring"
+    assert isinstance(tfbus.ManualClock(), tfbus.Clock)
+    assert isinstance(tfbus.SystemClock(), tfbus.Clock)
+    assert tfbus.Buffer.transform_full.__doc__

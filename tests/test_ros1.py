@@ -11,8 +11,10 @@ each with a bound.
 from __future__ import annotations
 
 import re
+import signal
 import socket
 import struct
+import subprocess
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,8 +26,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures)
     Master,
+    Proc,
     master_fixture,
     ros1_fixture,
+    tfbus_cli,
     tutorial_nodes_fixture,
 )
 
@@ -478,3 +482,99 @@ async def test_two_publishers_and_a_restarted_publisher(
     finally:
         bc.stop()
         tf1.stop()
+
+
+# --------------------------------------------------------------------------- the CLI, --bus ros1
+
+
+def _cli_finish(proc: Proc, *, timeout: float = 60.0) -> list[str]:
+    """Wait for a CLI process that ends by itself (``--duration``, ``-n``), bounded."""
+    try:
+        proc.proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.stop(signal.SIGTERM)
+        raise AssertionError(
+            f"{proc.args} did not finish:\n" + "\n".join(proc.drain()[-20:])
+        ) from None
+    proc.stop()
+    return proc.drain()
+
+
+def test_cli_demo_listener_over_ros1(master: Master, tutorial_nodes: Path) -> None:
+    """The mixed three-terminal run: roscore, the real C++ broadcaster,
+    ``tfbus demo listener --bus ros1`` printing the tutorial's INFO line."""
+    bc = master.run(str(tutorial_nodes / "tf_broadcaster"))
+    try:
+        proc = tfbus_cli(master, "demo", "listener", "--bus", "ros1", "--duration", "30")
+        try:
+            proc.wait_for(INFO.pattern, 40.0)
+            proc.wait_for(INFO.pattern, 10.0)  # and again a second later
+        finally:
+            assert proc.stop(signal.SIGTERM) == 0
+    finally:
+        bc.stop()
+
+
+def test_cli_demo_broadcaster_over_ros1(master: Master, tutorial_nodes: Path) -> None:
+    """``tfbus demo broadcaster --bus ros1`` → the tutorial's C++ tf_listener."""
+    proc = tfbus_cli(master, "demo", "broadcaster", "--bus", "ros1", "--duration", "60")
+    listener = master.run(str(tutorial_nodes / "tf_listener"))
+    try:
+        listener.wait_for(CPP_INFO, 40.0)
+    finally:
+        listener.stop()
+        assert proc.stop(signal.SIGTERM) == 0
+
+
+def test_cli_echo_monitor_frames_over_ros1(
+    master: Master, tutorial_nodes: Path, tmp_path: Path
+) -> None:
+    bc = master.run(str(tutorial_nodes / "tf_broadcaster"))
+    try:
+        echo = tfbus_cli(
+            master,
+            "echo",
+            "base_link",
+            "base_laser",
+            "--bus",
+            "ros1",
+            "-n",
+            "1",
+            "--duration",
+            "30",
+        )
+        out = _cli_finish(echo)
+        assert any("Translation: [0.100, 0.000, 0.200]" in line for line in out), out
+        monitor = tfbus_cli(master, "monitor", "--bus", "ros1", "--duration", "6")
+        out = _cli_finish(monitor)
+        assert any("base_laser" in line for line in out), out
+        gv = tmp_path / "frames.gv"
+        frames = tfbus_cli(master, "frames", "--bus", "ros1", "--wait", "6", "-o", str(gv))
+        out = _cli_finish(frames)
+        assert gv.exists(), out
+        assert re.search(r'"?base_link"?\s*->\s*"?base_laser"?', gv.read_text())
+    finally:
+        bc.stop()
+
+
+def test_cli_static_transform_over_ros1_reaches_tf_echo(master: Master) -> None:
+    proc = tfbus_cli(
+        master,
+        "static-transform",
+        "1",
+        "2",
+        "3",
+        "0",
+        "0",
+        "0",
+        "base_link",
+        "camera",
+        "--bus",
+        "ros1",
+    )
+    echo = master.run("rosrun", "tf", "tf_echo", "base_link", "camera")
+    try:
+        echo.wait_for(r"Translation: \[1\.000, 2\.000, 3\.000\]", 40.0)
+    finally:
+        echo.stop()
+        assert proc.stop(signal.SIGTERM) == 0

@@ -761,19 +761,6 @@ async def test_malformed_samples_beside_a_real_ros2_publisher(
 TFBUS = Path(sys.executable).parent / "tfbus"  # the console script of this venv
 
 
-def _cli_lists_ros2() -> bool:
-    out = subprocess.run(
-        [str(TFBUS), "echo", "--help"],
-        capture_output=True, text=True, timeout=60, check=False,
-    )  # fmt: skip
-    return "ros2" in out.stdout
-
-
-needs_cli = pytest.mark.skipif(
-    not _cli_lists_ros2(), reason="needs --bus ros2 wiring (lead merge)"
-)
-
-
 def tfbus_cmd(*args: str, domain: int) -> subprocess.Popen[str]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
     env.pop("CYCLONEDDS_URI", None)
@@ -799,7 +786,6 @@ def tutorial_peer(peers: Callable[..., Peer], tmp_path: Path, d: int) -> Peer:
     return peers(["--dynamic", str(dyn), "--rate", "100"], d, SHARED_PEER)
 
 
-@needs_cli
 def test_cli_demo_listener_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> None:
     d = new_domain()
     tutorial_peer(peers, tmp_path, d)
@@ -809,7 +795,6 @@ def test_cli_demo_listener_over_ros2(peers: Callable[..., Peer], tmp_path: Path)
     assert "base_laser: (1.00, 0.20. 0.00) -----> base_link: (1.10, 0.20, 0.20)" in out, err
 
 
-@needs_cli
 def test_cli_demo_broadcaster_over_ros2(peers: Callable[..., Peer]) -> None:
     d = new_domain()
     echo = peers(["--echo"], d)
@@ -825,7 +810,6 @@ def test_cli_demo_broadcaster_over_ros2(peers: Callable[..., Peer]) -> None:
     )  # fmt: skip
 
 
-@needs_cli
 def test_cli_echo_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> None:
     d = new_domain()
     tutorial_peer(peers, tmp_path, d)
@@ -834,7 +818,6 @@ def test_cli_echo_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> None:
     assert "Translation: [0.100, 0.000, 0.200]" in out, err
 
 
-@needs_cli
 def test_cli_monitor_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> None:
     d = new_domain()
     tutorial_peer(peers, tmp_path, d)
@@ -843,7 +826,6 @@ def test_cli_monitor_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> No
     assert "base_laser" in out and "base_link" in out, err
 
 
-@needs_cli
 def test_cli_frames_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> None:
     d = new_domain()
     tutorial_peer(peers, tmp_path, d)
@@ -854,7 +836,6 @@ def test_cli_frames_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> Non
     assert re.search(r'"?base_link"?\s*->\s*"?base_laser"?', gv.read_text())
 
 
-@needs_cli
 def test_cli_static_transform_over_ros2(peers: Callable[..., Peer]) -> None:
     d = new_domain()
     proc = tfbus_cmd("static-transform", "0.1", "0", "0.2", "0", "0", "0", "base_link",

@@ -258,3 +258,33 @@ def test_monitor_lists_the_broadcaster_alive_then_reports_it_dead() -> None:
         monitor.expect(lambda line: gone_row.search(line) is not None, start=d)
         assert monitor.finish(signal.SIGINT) == 0
         assert any(gone_row.search(line) for line in monitor.seen[-12:])  # final report
+
+
+def test_item19_static_transform_and_replay_reach_echo_over_the_bus() -> None:
+    """Issue 11 item 19: ``tfbus static-transform --bus`` and ``tfbus replay --bus``
+    publish where ``tfbus echo --bus`` (another process) sees them; SIGTERM ends both
+    cleanly (issue 11 item 23)."""
+    turtle = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
+    port = free_port()
+    with processes() as ps:
+        static = Tfbus("static-transform", "0.1", "0", "0.2", "0", "0", "0", "base_link",
+                       "base_laser", "--bus", listen_spec(port))
+        ps.append(static)
+        static.expect(lambda line: line.startswith("publishing static transform"))
+        echo = Tfbus("echo", "base_link", "base_laser", "--bus", connect_spec(port), "-n", "1",
+                     "--duration", "20")
+        ps.append(echo)
+        assert echo.finish(timeout=25.0) == 0, echo.describe("failed")
+        assert "- Translation: [0.100, 0.000, 0.200]" in echo.seen
+        assert static.finish(signal.SIGTERM) == 0, static.describe("SIGTERM")
+
+        port = free_port()
+        replay = Tfbus("replay", str(turtle), "--bus", listen_spec(port))
+        ps.append(replay)
+        echo = Tfbus("echo", "turtle1", "carrot", "--bus", connect_spec(port), "-n", "1",
+                     "--duration", "20")
+        ps.append(echo)
+        assert echo.finish(timeout=25.0) == 0, echo.describe("failed")
+        assert "- Translation: [1.000, 0.000, 0.000]" in echo.seen  # the bag's static
+        assert replay.finish(signal.SIGTERM) == 130, replay.describe("SIGTERM")
+        assert any(line.endswith("(interrupted)") for line in replay.seen), replay.seen

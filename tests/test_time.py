@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from fractions import Fraction
 
 import numpy as np
@@ -9,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tfbus.time import NSEC_PER_SEC, Duration, Time
+from tfbus.time import NSEC_PER_SEC, TIME_MAX_NS, Duration, Time, format_stamp, seconds_to_ns
 
 EPOCH_NS = 1_700_000_000_123_456_789  # a 2023 wall-clock stamp with every digit significant
 
@@ -203,3 +205,107 @@ def test_duration_repr() -> None:
     assert repr(Duration(-1, -5)) == "Duration(sec=-2, nanosec=999999995)"
     assert eval(repr(Duration(-1, -5))) == Duration(-1, -5)
     assert repr(Duration(1, 5)) == "Duration(sec=1, nanosec=5)"
+
+
+# --------------------------------------------------------------------------- conversion
+
+
+@FAST
+@given(st.floats(allow_nan=False, allow_infinity=False, min_value=-1e12, max_value=1e12))
+def test_seconds_to_ns_is_exact_rounding_of_the_floats_value(sec: float) -> None:
+    assert seconds_to_ns(sec) == round(Fraction(sec) * NSEC_PER_SEC)
+
+
+def test_seconds_to_ns_accepts_every_real_kind() -> None:
+    assert seconds_to_ns(3) == 3 * NSEC_PER_SEC
+    assert seconds_to_ns(np.int64(3)) == 3 * NSEC_PER_SEC
+    assert seconds_to_ns(np.uint32(4_000_000_000)) == 4_000_000_000 * NSEC_PER_SEC
+    assert seconds_to_ns(np.float32(0.5)) == 500_000_000
+    assert seconds_to_ns(np.float64(1_700_000_000.123456789)) == round(
+        Fraction(1_700_000_000.123456789) * NSEC_PER_SEC
+    )
+    assert seconds_to_ns(Fraction(1, 3)) == 333_333_333  # type: ignore[arg-type]
+    assert seconds_to_ns(Fraction(5, 2 * NSEC_PER_SEC)) == 2  # type: ignore[arg-type]
+    assert seconds_to_ns(Duration(2, 7)) == 2_000_000_007
+    # 0.1 s is not exactly representable: the float's value is just above 0.1.
+    assert seconds_to_ns(0.1) == 100_000_000
+    # A float product rounds first (off by 32 ns here); the exact conversion does not.
+    x = 1700000000.1343641
+    assert round(x * 1e9) == 1_700_000_000_134_364_160
+    assert seconds_to_ns(x) == 1_700_000_000_134_364_128 == round(Fraction(x) * NSEC_PER_SEC)
+
+
+def test_seconds_to_ns_checks_types_first_and_names_the_argument() -> None:
+    class Poison(str):
+        def __mul__(self, other: object) -> str:
+            raise AssertionError("multiplied before the type check")
+
+    for bad in (Poison("10"), "10", None, True, 1j, [1.0], b"1"):
+        with pytest.raises(TypeError, match=r"cache_time must be a number of seconds"):
+            seconds_to_ns(bad, name="cache_time")  # type: ignore[arg-type]
+    for bad_value in (math.inf, -math.inf, math.nan, np.float64("nan")):
+        with pytest.raises(ValueError, match="period must be finite"):
+            seconds_to_ns(bad_value, name="period")
+
+
+def test_time_and_duration_refuse_strings_and_bools() -> None:
+    for bad in ("1", True, None):
+        with pytest.raises(TypeError):
+            Time(bad)  # type: ignore[arg-type]
+        with pytest.raises(TypeError):
+            Duration(bad)  # type: ignore[arg-type]
+        with pytest.raises(TypeError):
+            Time.from_sec(bad)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="nanosec must be an integer"):
+        Time(1, 0.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="nanosec must be an integer"):
+        Time(1, False)
+    with pytest.raises(TypeError):
+        Duration(1) * "3"  # type: ignore[operator]
+    with pytest.raises(TypeError):
+        Duration(1) * True
+
+
+def test_duration_multiplication_is_exact() -> None:
+    d = Duration.from_ns(1_700_000_000_123_456_789)
+    assert (d * 0.5).ns == 850_000_000_061_728_394  # ...394.5 rounds half to even
+    assert (d * 3).ns == 3 * d.ns
+    assert (d * Fraction(1, 3)).ns == round(Fraction(d.ns, 3))  # type: ignore[operator]
+    assert (d * np.float64(0.25)).ns == round(Fraction(d.ns) / 4)
+    with pytest.raises(ValueError, match="not finite"):
+        d * math.inf
+
+
+# --------------------------------------------------------------------------- formatting
+
+
+def test_format_stamp_is_exact_sec_dot_nine_digit_nanosec() -> None:
+    assert format_stamp(Time.from_ns(EPOCH_NS)) == "1700000000.123456789"
+    assert format_stamp(Time(0)) == "0.000000000"
+    assert format_stamp(Time(0, 5)) == "0.000000005"
+    assert format_stamp(Time.from_ns(TIME_MAX_NS)) == "9223372036.854775807"
+    assert format_stamp(EPOCH_NS) == "1700000000.123456789"
+    assert format_stamp(np.int64(EPOCH_NS)) == "1700000000.123456789"  # type: ignore[arg-type]
+    assert format_stamp(Duration.from_ns(-500_000_000)) == "-0.500000000"
+    assert format_stamp(Duration(-2, 1)) == "-1.999999999"
+    # a float print of the same stamp is wrong in the last digits
+    assert f"{Time.from_ns(EPOCH_NS).to_sec():.9f}" != format_stamp(Time.from_ns(EPOCH_NS))
+    for bad in (1.5, "1", True, None):
+        with pytest.raises(TypeError, match="format_stamp takes"):
+            format_stamp(bad)  # type: ignore[arg-type]
+
+
+@FAST
+@given(spans)
+def test_format_stamp_round_trips_through_fraction(ns: int) -> None:
+    assert Fraction(format_stamp(ns)) * NSEC_PER_SEC == ns
+
+
+def test_time_is_an_opaque_int_to_serialisers_not_a_record() -> None:
+    """Time stays a plain class (not a dataclass): msgspec, which the Zenoh wire uses,
+    would otherwise write ``{"_ns": n}`` and skip the wire's stamp checks."""
+    msgspec = pytest.importorskip("msgspec")
+    assert not dataclasses.is_dataclass(Time) and not dataclasses.is_dataclass(Duration)
+    enc = msgspec.msgpack.Encoder(enc_hook=lambda t: t.ns)
+    assert enc.encode(Time.from_ns(EPOCH_NS)) == enc.encode(EPOCH_NS)
+    assert not hasattr(Time(1), "__dict__")  # slots: one int per stamp

@@ -9,10 +9,11 @@ Layers (each imports only those below it; see DESIGN notes in the README):
 * :mod:`tfbus.bag`, :mod:`tfbus.transports`, the ``tfbus`` command line.
 """
 
+from tfbus import bus as _bus
 from tfbus._version import __version__ as __version__
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
-from tfbus.bus import Bus, MemoryTransport, Subscription, Transport
+from tfbus.bus import Bus, Subscription, Transport
 from tfbus.clock import Clock, ManualClock, SystemClock, every
 from tfbus.core import BufferCore, SetResult
 from tfbus.errors import (
@@ -40,6 +41,11 @@ from tfbus.messages import (
     Vector3Stamped,
 )
 from tfbus.time import Duration, Time
+from tfbus.transports.memory import MemoryTransport
+
+# MemoryTransport moved from tfbus.bus (layer 2) to tfbus.transports.memory (layer 4);
+# ``from tfbus.bus import MemoryTransport`` keeps working without bus.py importing up.
+setattr(_bus, "MemoryTransport", MemoryTransport)  # noqa: B010
 
 __all__ = [
     "Buffer",

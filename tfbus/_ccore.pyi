@@ -1,10 +1,13 @@
 """Type stubs for the compiled core (``tfbus/_ccore.pyx``)."""
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
+
+from tfbus.messages import TransformStamped
+from tfbus.time import Time
 
 OK: Final[int]
 OLD_DATA: Final[int]
@@ -14,10 +17,33 @@ LOOKUP_ERROR: Final[int]
 CONNECTIVITY_ERROR: Final[int]
 EXTRAPOLATION_ERROR: Final[int]
 MAX_GRAPH_DEPTH: Final[int]
+INVALID: Final[int]
+INVALID_ARGUMENT: Final[int]
+UNKNOWN_FRAME: Final[int]
 
 _Tf7 = tuple[float, float, float, float, float, float, float]
 
 def format_sec(ns: int) -> str: ...
+def quat_multiply(
+    ax: float, ay: float, az: float, aw: float, bx: float, by: float, bz: float, bw: float
+) -> tuple[float, float, float, float]: ...
+def quat_rotate(
+    qx: float, qy: float, qz: float, qw: float, vx: float, vy: float, vz: float
+) -> tuple[float, float, float]: ...
+def compose(a: Sequence[float], b: Sequence[float]) -> _Tf7: ...
+def inverse(a: Sequence[float]) -> _Tf7: ...
+def slerp(
+    ax: float,
+    ay: float,
+    az: float,
+    aw: float,
+    bx: float,
+    by: float,
+    bz: float,
+    bw: float,
+    ratio: float,
+) -> tuple[float, float, float, float]: ...
+def compose_full(leg2: Sequence[float], leg1: Sequence[float]) -> _Tf7: ...
 
 class Link:
     @property
@@ -42,6 +68,9 @@ class StaticCache(Link):
     def __init__(self) -> None: ...
     def stamp_sent(self) -> int: ...
 
+# A failed query: (code, ...) as documented on CoreBase._query.
+_Failure = tuple[int, ...]
+
 class CoreBase:
     _frame_ids: dict[str, int]
     _frame_names: list[str]
@@ -49,19 +78,25 @@ class CoreBase:
     _authority: dict[int, str]
     _generation: int
     def __init__(self, *args: Any, **kwargs: Any) -> None: ...
+    @property
+    def cache_time_ns(self) -> int: ...
     def _set_cache_time_ns(self, ns: int) -> None: ...
-    def _insert_code(self, ts: Any, authority: str, is_static: bool) -> int: ...
-    def _insert_many(
-        self,
-        transforms: Iterable[Any],
-        authority: str,
-        is_static: bool,
-        touched: set[str] | None = None,
-    ) -> tuple[int, int, list[tuple[int, Exception]]]: ...
+    def _store(
+        self, transforms: Iterable[Any], authority: str, is_static: bool
+    ) -> tuple[
+        int,
+        int,
+        list[tuple[int, Exception | tuple[str, str, _Tf7]]],
+        set[str],
+        bool,
+        list[tuple[int, str, int]],
+    ]: ...
+    def _id_status(self, frame_id: object) -> int: ...
+    def _query(self, target: str, source: str, time: Time) -> TransformStamped | _Failure: ...
+    def _chain(self, target_frame: str, source_frame: str, time: Time | None = None) -> list[
+        str
+    ]: ...
     def _ccommon_time(self, target_id: int, source_id: int) -> tuple[int, int]: ...
     def _cwalk(
         self, target_id: int, source_id: int, time: int
     ) -> tuple[int, _Tf7 | int | None, int]: ...
-    # Defined by the Python subclass (tfbus.core.BufferCore), called from C.
-    def _reject(self, parent: str, child: str, values: _Tf7, authority: str) -> None: ...
-    def _refused(self, code: int, child: str, stamp: int, authority: str) -> None: ...

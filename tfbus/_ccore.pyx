@@ -27,11 +27,18 @@ conformance corpus, ``tests/test_conformance.py``).
 * :class:`StaticCache` — a static link (``tf2/src/static_cache.cpp``): one value, valid
   at every time; each insert overwrites it; its latest stamp is 0.
 
-* :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``:
-  ``_insert_code`` (``BufferCore::setTransformImpl``), ``_insert_many`` (the same over a
-  batch), ``_cwalk`` (``walkToTopParent`` with ``TransformAccum``) and
-  ``_ccommon_time`` (``getLatestCommonTime``). Error *messages* are built in Python by
-  ``tfbus.core`` from the codes returned here.
+* :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``: ``_store``
+  (``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
+  the frames it touched), ``_query`` (``lookupTransform`` in one call: checks, memo,
+  ``walkToTopParent`` with ``TransformAccum``, the TransformStamped built here; or a
+  failure tuple), ``_chain`` (the frames an answer depends on), ``_cwalk`` and
+  ``_ccommon_time`` (``getLatestCommonTime``). Nothing here calls into the Python
+  subclass: error *messages* and log lines are built by ``tfbus.core`` from the codes
+  returned here.
+
+* The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
+  ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
+  :mod:`tfbus.geometry`; ``tests/_tf2math.py`` is its pure-Python reference.
 """
 
 import numpy as np
@@ -39,8 +46,14 @@ import numpy as np
 from libc.math cimport acos, fabs, sin, sqrt
 from libc.stdint cimport INT64_MAX, int32_t, int64_t
 from libc.string cimport memcpy, memmove
+from cpython.float cimport PyFloat_FromDouble
+from cpython.object cimport PyObject
+from cpython.ref cimport Py_DECREF, Py_INCREF
+from cpython.tuple cimport PyTuple_SET_ITEM
 
-from tfbus.messages import TransformStamped
+from tfbus.errors import InvalidArgumentException
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import Time
 
 # insert outcomes (tf2 cache insertData)
 OK = 0
@@ -359,8 +372,7 @@ cdef class TimeCache(Link):
         cdef const double* b
         cdef int64_t newest, t0, span
         cdef int p0
-        cdef double r, s, dot, c, theta, d, s0, s1
-        cdef double bqx, bqy, bqz, bqw
+        cdef double r, s
         if tail == head:
             return G_EMPTY
         if time == 0:
@@ -396,41 +408,10 @@ cdef class TimeCache(Link):
                     else:  # Python's int true division is correctly rounded at any size
                         r = (<object>(time - t0)) / (<object>span)
                     s = 1.0 - r
-                    # tf2 slerp (Quaternion.h slerp / angleShortestPath).
-                    bqx = b[3]
-                    bqy = b[4]
-                    bqz = b[5]
-                    bqw = b[6]
-                    dot = a[3] * bqx + a[4] * bqy + a[5] * bqz + a[6] * bqw
-                    if dot < 0.0:
-                        dot = -dot
-                        bqx = -bqx
-                        bqy = -bqy
-                        bqz = -bqz
-                        bqw = -bqw
-                    c = dot / sqrt(
-                        (a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6])
-                        * (bqx * bqx + bqy * bqy + bqz * bqz + bqw * bqw)
-                    )
                     out[0] = s * a[0] + r * b[0]
                     out[1] = s * a[1] + r * b[1]
                     out[2] = s * a[2] + r * b[2]
-                    # tf2Acos clamps its argument to [-1, 1]: a cosine that rounds above
-                    # 1 is a zero angle, for which tf2 returns the older rotation as is.
-                    if c >= 1.0:
-                        out[3] = a[3]
-                        out[4] = a[4]
-                        out[5] = a[5]
-                        out[6] = a[6]
-                        return G_OK
-                    theta = acos(c)  # NaN only for NaN input, as in tf2
-                    d = 1.0 / sin(theta)
-                    s0 = sin(s * theta)
-                    s1 = sin(r * theta)
-                    out[3] = (a[3] * s0 + bqx * s1) * d
-                    out[4] = (a[4] * s0 + bqy * s1) * d
-                    out[5] = (a[5] * s0 + bqz * s1) * d
-                    out[6] = (a[6] * s0 + bqw * s1) * d
+                    _slerp(&a[3], b[3], b[4], b[5], b[6], r, &out[3])
                     return G_OK
         parent[0] = self._parent if self._pa == NULL else self._pa[i]
         memcpy(out, &self._va[i * 7], 7 * sizeof(double))
@@ -505,23 +486,8 @@ cdef class StaticCache(Link):
 
 
 cdef inline void _accumulate(double* acc, const double* st) noexcept nogil:
-    """``acc = link ∘ acc`` (tf2 ``TransformAccum::accum``: ``t = quatRotate(q_link, t) +
-    t_link``, ``q = q_link ⊗ q``), in tf2's evaluation order."""
-    cdef double ax = acc[0], ay = acc[1], az = acc[2]
-    cdef double aqx = acc[3], aqy = acc[4], aqz = acc[5], aqw = acc[6]
-    cdef double x = st[0], y = st[1], z = st[2]
-    cdef double qx = st[3], qy = st[4], qz = st[5], qw = st[6]
-    cdef double tx = qw * ax + qy * az - qz * ay
-    cdef double ty = qw * ay + qz * ax - qx * az
-    cdef double tz = qw * az + qx * ay - qy * ax
-    cdef double tw = -qx * ax - qy * ay - qz * az
-    acc[0] = -tw * qx + tx * qw - ty * qz + tz * qy + x
-    acc[1] = -tw * qy + ty * qw - tz * qx + tx * qz + y
-    acc[2] = -tw * qz + tz * qw - tx * qy + ty * qx + z
-    acc[3] = qw * aqx + qx * aqw + qy * aqz - qz * aqy
-    acc[4] = qw * aqy + qy * aqw + qz * aqx - qx * aqz
-    acc[5] = qw * aqz + qz * aqw + qx * aqy - qy * aqx
-    acc[6] = qw * aqw - qx * aqx - qy * aqy - qz * aqz
+    """``acc = link ∘ acc`` (tf2 ``TransformAccum::accum``)."""
+    _compose(st, acc, acc)
 
 
 cdef inline void _identity(double* acc) noexcept nogil:
@@ -577,8 +543,302 @@ cdef int _climb(list caches, int frame, int stop, int early, int64_t time, doubl
     return CLIMB_STOPPED
 
 
+# ---------------------------------------------------------------------- scalar math
+
+# The scalar transform arithmetic of tf2 (``tf2/LinearMath/Quaternion.h``,
+# ``Vector3.h``; ``buffer_core.cpp`` ``TransformAccum``), once, in tf2's evaluation
+# order; the walk, the caches and the Python callers (:mod:`tfbus.geometry`) all use it.
+# Quaternions are (x, y, z, w) and never normalised: ``quat_rotate`` scales a vector by
+# |q|² for a non-unit q, exactly as tf2.
+
+cdef inline void _qrot(double qx, double qy, double qz, double qw, double vx, double vy,
+                       double vz, double* out) noexcept nogil:
+    """tf2 ``quatRotate``: ``q ⊗ (v, 0) ⊗ conj(q)``, vector part, into out[0:3]."""
+    cdef double tx = qw * vx + qy * vz - qz * vy
+    cdef double ty = qw * vy + qz * vx - qx * vz
+    cdef double tz = qw * vz + qx * vy - qy * vx
+    cdef double tw = -qx * vx - qy * vy - qz * vz
+    out[0] = -tw * qx + tx * qw - ty * qz + tz * qy
+    out[1] = -tw * qy + ty * qw - tz * qx + tx * qz
+    out[2] = -tw * qz + tz * qw - tx * qy + ty * qx
+
+
+cdef inline void _qmul(double ax, double ay, double az, double aw, double bx, double by,
+                       double bz, double bw, double* out) noexcept nogil:
+    """Hamilton product ``a ⊗ b`` (Quaternion.h ``operator*``), into out[0:4]."""
+    out[0] = aw * bx + ax * bw + ay * bz - az * by
+    out[1] = aw * by + ay * bw + az * bx - ax * bz
+    out[2] = aw * bz + az * bw + ax * by - ay * bx
+    out[3] = aw * bw - ax * bx - ay * by - az * bz
+
+
+cdef inline void _compose(const double* a, const double* b, double* out) noexcept nogil:
+    """``a ∘ b`` (apply b, then a): ``t = quatRotate(qa, tb) + ta``, ``q = qa ⊗ qb``
+    (``TransformAccum::accum``). ``out`` may alias ``b``."""
+    cdef double r[3]
+    cdef double q[4]
+    _qrot(a[3], a[4], a[5], a[6], b[0], b[1], b[2], r)
+    _qmul(a[3], a[4], a[5], a[6], b[3], b[4], b[5], b[6], q)
+    out[0] = r[0] + a[0]
+    out[1] = r[1] + a[1]
+    out[2] = r[2] + a[2]
+    out[3] = q[0]
+    out[4] = q[1]
+    out[5] = q[2]
+    out[6] = q[3]
+
+
+cdef inline void _slerp(const double* a, double bx, double by, double bz, double bw,
+                        double r, double* out) noexcept nogil:
+    """tf2's shortest-path slerp from a (r = 0) to b (r = 1) (Quaternion.h ``slerp`` /
+    ``angleShortestPath``; ``tf2Acos`` clamps to [-1, 1], so a cosine that rounds to 1 or
+    above is a zero angle, for which tf2 returns ``a`` unchanged). into out[0:4]."""
+    cdef double dot = a[0] * bx + a[1] * by + a[2] * bz + a[3] * bw
+    cdef double c, theta, d, s0, s1
+    if dot < 0.0:
+        dot = -dot
+        bx = -bx
+        by = -by
+        bz = -bz
+        bw = -bw
+    c = dot / sqrt(
+        (a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3])
+        * (bx * bx + by * by + bz * bz + bw * bw)
+    )
+    if c >= 1.0:
+        out[0] = a[0]
+        out[1] = a[1]
+        out[2] = a[2]
+        out[3] = a[3]
+        return
+    theta = acos(c)  # NaN only for NaN input, as in tf2
+    d = 1.0 / sin(theta)
+    s0 = sin((1.0 - r) * theta)
+    s1 = sin(r * theta)
+    out[0] = (a[0] * s0 + bx * s1) * d
+    out[1] = (a[1] * s0 + by * s1) * d
+    out[2] = (a[2] * s0 + bz * s1) * d
+    out[3] = (a[3] * s0 + bw * s1) * d
+
+
+def quat_multiply(double ax, double ay, double az, double aw,
+                  double bx, double by, double bz, double bw):
+    """Hamilton product ``a ⊗ b`` of two (x, y, z, w) quaternions, as ``(x, y, z, w)``
+    (tf2 ``Quaternion.h`` ``operator*``)."""
+    cdef double q[4]
+    _qmul(ax, ay, az, aw, bx, by, bz, bw, q)
+    return (q[0], q[1], q[2], q[3])
+
+
+def quat_rotate(double qx, double qy, double qz, double qw,
+                double vx, double vy, double vz):
+    """Vector ``(vx, vy, vz)`` rotated by quaternion q as ``q ⊗ (v, 0) ⊗ conj(q)`` (tf2
+    ``quatRotate``); scaled by ``|q|²`` for a non-unit q, exactly as tf2."""
+    cdef double r[3]
+    _qrot(qx, qy, qz, qw, vx, vy, vz, r)
+    return (r[0], r[1], r[2])
+
+
+def compose(a, b):
+    """``a ∘ b`` of two 7-tuples ``(tx, ty, tz, qx, qy, qz, qw)`` (metres; x, y, z, w):
+    apply b, then a (tf2 ``TransformAccum::accum``)."""
+    cdef double x[7]
+    cdef double y[7]
+    cdef int k
+    for k in range(7):
+        x[k] = a[k]
+        y[k] = b[k]
+    _compose(x, y, y)
+    return (y[0], y[1], y[2], y[3], y[4], y[5], y[6])
+
+
+def inverse(a):
+    """tf2's inverse of a 7-tuple: rotation ``conj(q)``, translation ``quatRotate(conj(q),
+    -t)`` (``TransformAccum::finalize``); exact for unit quaternions."""
+    cdef double r[3]
+    _qrot(-a[3], -a[4], -a[5], a[6], -a[0], -a[1], -a[2], r)
+    return (r[0], r[1], r[2], -a[3], -a[4], -a[5], a[6])
+
+
+def slerp(double ax, double ay, double az, double aw, double bx, double by, double bz,
+          double bw, double ratio):
+    """tf2's shortest-path spherical interpolation from a (ratio 0) to b (ratio 1) of two
+    (x, y, z, w) quaternions, not normalised (Quaternion.h ``slerp``)."""
+    cdef double a[4]
+    cdef double q[4]
+    a[0] = ax
+    a[1] = ay
+    a[2] = az
+    a[3] = aw
+    _slerp(a, bx, by, bz, bw, ratio, q)
+    return (q[0], q[1], q[2], q[3])
+
+
+def compose_full(leg2, leg1):
+    """tf2's time-travel composition ``leg2 ∘ leg1`` of two 7-tuples
+    (``lookupTransform`` with a fixed frame): both rotations are normalised first, as
+    ``tf2::Transform`` keeps a normalised rotation matrix, and so is the result's."""
+    cdef double a[7]
+    cdef double b[7]
+    cdef double n
+    cdef int k
+    for k in range(7):
+        a[k] = leg2[k]
+        b[k] = leg1[k]
+    n = sqrt(a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6])
+    for k in range(3, 7):
+        a[k] = a[k] / n
+    n = sqrt(b[3] * b[3] + b[4] * b[4] + b[5] * b[5] + b[6] * b[6])
+    for k in range(3, 7):
+        b[k] = b[k] / n
+    _compose(a, b, b)
+    n = sqrt(b[3] * b[3] + b[4] * b[4] + b[5] * b[5] + b[6] * b[6])
+    return (b[0], b[1], b[2], b[3] / n, b[4] / n, b[5] / n, b[6] / n)
+
+
+# ---------------------------------------------------------------------- results
+
+cdef extern from "Python.h":
+    ctypedef struct PyTypeObject:
+        pass
+    PyObject* PyType_GenericAlloc(PyTypeObject* tp, Py_ssize_t n) except NULL
+    void PyObject_GC_UnTrack(void* op)
+
+
+cdef inline object _named(object cls, object a, object b):
+    """``tuple.__new__(cls, (a, b))`` for a NamedTuple class, without its Python-level
+    ``__new__`` (what ``tuple_subtype_new`` does, minus the argument tuple)."""
+    cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 2)
+    cdef object obj = <object>p
+    Py_DECREF(obj)
+    Py_INCREF(a)
+    Py_INCREF(b)
+    PyTuple_SET_ITEM(obj, 0, a)
+    PyTuple_SET_ITEM(obj, 1, b)
+    return obj
+
+
+cdef inline object _named3(object cls, object a, object b, object c):
+    cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 3)
+    cdef object obj = <object>p
+    Py_DECREF(obj)
+    Py_INCREF(a)
+    Py_INCREF(b)
+    Py_INCREF(c)
+    PyTuple_SET_ITEM(obj, 0, a)
+    PyTuple_SET_ITEM(obj, 1, b)
+    PyTuple_SET_ITEM(obj, 2, c)
+    return obj
+
+
+cdef inline object _named4(object cls, double a, double b, double c, double d):
+    cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 4)
+    PyObject_GC_UnTrack(p)  # four floats: it can never be part of a reference cycle
+    cdef object obj = <object>p
+    cdef object fa = PyFloat_FromDouble(a)
+    cdef object fb = PyFloat_FromDouble(b)
+    cdef object fc = PyFloat_FromDouble(c)
+    cdef object fd = PyFloat_FromDouble(d)
+    Py_DECREF(obj)
+    Py_INCREF(fa)
+    Py_INCREF(fb)
+    Py_INCREF(fc)
+    Py_INCREF(fd)
+    PyTuple_SET_ITEM(obj, 0, fa)
+    PyTuple_SET_ITEM(obj, 1, fb)
+    PyTuple_SET_ITEM(obj, 2, fc)
+    PyTuple_SET_ITEM(obj, 3, fd)
+    return obj
+
+
+cdef object _stamped(object stamp, str target, str source, const double* v):
+    """The lookup result: ``TransformStamped(Header(stamp, target), source,
+    Transform(Vector3(v[0:3]), Quaternion(v[3:7])))``, built in C."""
+    cdef object vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
+                              PyFloat_FromDouble(v[2]))
+    PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a reference cycle
+    cdef object rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
+    return _named3(
+        TransformStamped, _named(Header, stamp, target), source, _named(Transform, vec, rot)
+    )
+
+
+cdef object _time_of(int64_t ns):
+    """``Time.from_ns(ns)`` for a valid ns, without re-validating it."""
+    cdef object t = Time.__new__(Time)
+    t._ns = ns
+    return t
+
+
+# Validation outcomes of an inserted transform (beyond the cache's OK / OLD / REPEATED).
+INVALID = 3
+"""``CoreBase._store``: the transform breaks one of tf2's rules (setTransformImpl)."""
+
+# Query failures beyond tf2's codes: a bad argument (empty or '/'-prefixed id).
+INVALID_ARGUMENT = 4
+UNKNOWN_FRAME = 5
+
+
+cdef inline str _as_str(object value):
+    """A frame id as the exact ``str`` it is (``numpy.str_`` or any ``str`` subclass is
+    accepted as its string value); None for anything that is not a string."""
+    if type(value) is str:
+        return <str>value
+    if isinstance(value, str):
+        return str.__str__(value)
+    return None
+
+
+cdef str _show(object value):
+    """``repr`` of a bad value for an error message, bounded in length."""
+    cdef str text
+    try:
+        text = repr(value)
+    except Exception:
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+cdef inline double _number(object value, str field) except? -1.0:
+    """A transform component as a double; anything but a real number (bool, None, str,
+    an int beyond double range, ...) is an InvalidArgumentException naming the field."""
+    if type(value) is float:
+        return <double>value
+    if not isinstance(value, (bool, np.bool_, str, bytes, complex)) and value is not None:
+        try:
+            return float(value)
+        except (OverflowError, TypeError, ValueError):
+            pass
+    raise InvalidArgumentException(f"{field} must be a real number, got {_show(value)}")
+
+
+cdef tuple _FIELDS = (
+    "transform.translation.x",
+    "transform.translation.y",
+    "transform.translation.z",
+    "transform.rotation.x",
+    "transform.rotation.y",
+    "transform.rotation.z",
+    "transform.rotation.w",
+)
+
+
+cdef tuple _bad_id(str frame_id, int which):
+    """The failure tuple of a query argument that is not a known frame (tf2
+    ``validateFrameId``): empty or '/'-prefixed ids are invalid, others unknown."""
+    if not frame_id or frame_id[0] == "/":
+        return (INVALID_ARGUMENT, which)
+    return (UNKNOWN_FRAME, which)
+
+
+cdef int MEMO_SIZE = 64  # small: a larger memo costs a never-repeated query ~1 µs of churn
+
+
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
+
+    Nothing here calls into the subclass: inserts and queries return codes and data, and
+    ``tfbus.core`` turns them into tf2's messages, exceptions and log lines.
 
     Attributes (for ``tfbus.core`` only): ``_frame_ids`` (frame id → int id; 0 is tf2's
     ``NO_PARENT``), ``_frame_names`` (int id → frame id), ``_caches`` (int id → link or
@@ -592,6 +852,8 @@ cdef class CoreBase:
     cdef public dict _authority
     cdef public long long _generation
     cdef int64_t _cache_ns
+    cdef dict _memo
+    cdef long long _memo_generation
 
     def __cinit__(self, *args, **kwargs):
         self._frame_ids = {"NO_PARENT": 0}
@@ -600,9 +862,19 @@ cdef class CoreBase:
         self._authority = {}
         self._generation = 0
         self._cache_ns = 0
+        self._memo = {}
+        self._memo_generation = -1
+
+    @property
+    def cache_time_ns(self):
+        """The history kept per dynamic link, nanoseconds (the one copy: every link is
+        created with it; read-only)."""
+        return self._cache_ns
 
     def _set_cache_time_ns(self, ns):
-        """Cache time (ns) given to links created from now on."""
+        """Set the cache time (ns); only before the first insert (``BufferCore.__init__``)."""
+        if len(self._frame_names) > 1:
+            raise RuntimeError("cache_time is fixed once transforms are stored")
         self._cache_ns = min(ns, INT64_MAX)
 
     cdef object _register(self, str frame_id):
@@ -614,53 +886,54 @@ cdef class CoreBase:
 
     # ------------------------------------------------------------------ insert
 
-    cdef int _insert_one(self, object ts, str authority, bint is_static,
-                         set touched) except -1:
-        """``BufferCore::setTransformImpl``: validate, register frames, store. Returns the
-        cache's OK / OLD_DATA / REPEATED_DATA; raises InvalidArgumentException (through
-        ``self._reject``) for a malformed transform and TypeError / ValueError for
-        something that is not shaped like a TransformStamped."""
-        cdef object header, child, parent, tf, tr, rot, stamp_obj
-        cdef object cid, pid, cache
+    cdef int _insert_one(self, object ts, str authority, bint is_static, list out) except -1:
+        """``BufferCore::setTransformImpl``: check, register frames, store.
+
+        Returns the cache's C_OK / C_OLD_DATA / C_REPEATED_DATA, or INVALID (a tf2 rule
+        is broken: ``out`` gets ``[parent, child, values]`` for the message). On C_OK and
+        refusals ``out`` gets ``[parent, child, stamp, relinked]``. A field of the wrong
+        type raises InvalidArgumentException naming it; nothing is stored or registered
+        before every check has passed (no half-stored frame)."""
+        cdef object header, tf, tr, rot, stamp_obj, cid, pid, cache
+        cdef str child, parent
         cdef double v[7]
         cdef double norm2
-        cdef int64_t stamp
-        cdef int code
-        if isinstance(ts, tuple) and len(<tuple>ts) == 3:
-            header = (<tuple>ts)[0]
-            child = (<tuple>ts)[1]
-            tf = (<tuple>ts)[2]
-        else:
-            header, child, tf = ts
-        if isinstance(tf, tuple) and len(<tuple>tf) == 2:
-            tr = (<tuple>tf)[0]
-            rot = (<tuple>tf)[1]
-        else:
-            tr, rot = tf
+        cdef int64_t stamp, old_stamp
+        cdef int code, k, old_parent
+        cdef bint relinked
+        header = (<tuple>ts)[0]
+        tf = (<tuple>ts)[2]
+        if not isinstance(header, Header):
+            raise InvalidArgumentException(f"header must be a Header, got {_show(header)}")
+        if not isinstance(tf, Transform):
+            raise InvalidArgumentException(f"transform must be a Transform, got {_show(tf)}")
+        tr = (<tuple>tf)[0]
+        rot = (<tuple>tf)[1]
         if not (isinstance(tr, tuple) and len(<tuple>tr) == 3):
-            tr = tuple(tr)
-            if len(<tuple>tr) != 3:
-                raise ValueError(f"transform.translation must have 3 values, got {len(tr)}")
+            raise InvalidArgumentException(
+                f"transform.translation must be a Vector3, got {_show(tr)}")
         if not (isinstance(rot, tuple) and len(<tuple>rot) == 4):
-            rot = tuple(rot)
-            if len(<tuple>rot) != 4:
-                raise ValueError(f"transform.rotation must have 4 values, got {len(rot)}")
-        parent = header.frame_id
-        if not isinstance(parent, str):
-            raise TypeError(f"header.frame_id must be a str, got {type(parent).__name__}")
-        if not isinstance(child, str):
-            raise TypeError(f"child_frame_id must be a str, got {type(child).__name__}")
-        if len(<str>parent) and (<str>parent)[0] == "/":
-            parent = (<str>parent)[1:]
-        if len(<str>child) and (<str>child)[0] == "/":
-            child = (<str>child)[1:]
-        v[0] = (<tuple>tr)[0]
-        v[1] = (<tuple>tr)[1]
-        v[2] = (<tuple>tr)[2]
-        v[3] = (<tuple>rot)[0]
-        v[4] = (<tuple>rot)[1]
-        v[5] = (<tuple>rot)[2]
-        v[6] = (<tuple>rot)[3]
+            raise InvalidArgumentException(
+                f"transform.rotation must be a Quaternion, got {_show(rot)}")
+        parent = _as_str((<tuple>header)[1])
+        if parent is None:
+            raise InvalidArgumentException(
+                f"header.frame_id must be a str, got {_show((<tuple>header)[1])}")
+        child = _as_str((<tuple>ts)[1])
+        if child is None:
+            raise InvalidArgumentException(
+                f"child_frame_id must be a str, got {_show((<tuple>ts)[1])}")
+        stamp_obj = (<tuple>header)[0]
+        if not isinstance(stamp_obj, Time):
+            raise InvalidArgumentException(f"header.stamp must be a Time, got {_show(stamp_obj)}")
+        for k in range(3):
+            v[k] = _number((<tuple>tr)[k], _FIELDS[k])
+        for k in range(4):
+            v[3 + k] = _number((<tuple>rot)[k], _FIELDS[3 + k])
+        if len(parent) and parent[0] == "/":
+            parent = parent[1:]
+        if len(child) and child[0] == "/":
+            child = child[1:]
         # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
         norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
         # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
@@ -673,10 +946,11 @@ cdef class CoreBase:
             or v[2] - v[2] != 0.0
             or not fabs(norm2 - 1.0) < 0.01
         ):
-            self._reject(parent, child, (<tuple>tr) + (<tuple>rot), authority)
-            raise AssertionError("_reject returned")  # pragma: no cover
-        stamp_obj = header.stamp._ns
-        stamp = stamp_obj
+            out.append(parent)
+            out.append(child)
+            out.append((v[0], v[1], v[2], v[3], v[4], v[5], v[6]))
+            return INVALID
+        stamp = stamp_obj._ns
         self._generation += 1
         cid = self._frame_ids.get(child)
         if cid is None:
@@ -688,48 +962,214 @@ cdef class CoreBase:
         pid = self._frame_ids.get(parent)
         if pid is None:
             pid = self._register(parent)
+        old_parent = (<Link>cache).c_latest(&old_stamp)
         code = (<Link>cache).c_insert(stamp, pid, v)
+        # The tree's shape may have changed: a new or emptied link, another parent, or a
+        # link that keeps one parent per sample.
+        relinked = False
+        if code == C_OK:
+            if old_parent != <int>pid:
+                relinked = True
+            elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
+                relinked = True
         if code == C_OK:
             self._authority[cid] = authority
-            if touched is not None:
-                touched.add(child)
-                touched.add(parent)
-        else:
-            self._refused(code, child, stamp_obj, authority)
+        out.append(parent)
+        out.append(child)
+        out.append(stamp_obj)
+        out.append(relinked)
         return code
 
-    def _insert_code(self, ts, str authority, bint is_static):
-        """Store one transform; returns ``OK``, ``OLD_DATA`` or ``REPEATED_DATA`` (refusals
-        are reported through ``self._refused``). Raises as ``BufferCore.set_transform``."""
-        return self._insert_one(ts, authority, is_static, None)
+    def _store(self, transforms, str authority, bint is_static):
+        """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
+        order; one bad item never stops the others. Calls nothing back.
 
-    def _insert_many(self, transforms, str authority, bint is_static, set touched=None):
-        """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``; one bad
-        item never stops the others.
+        Returns ``(stored, refused, errors, touched, relinked, refusals)`` (the first
+        five are ``BatchResult``'s fields):
 
-        Returns ``(stored, refused, errors)``: counts, and ``[(index, exception)]`` for
-        items that raised (InvalidArgumentException for an invalid transform, TypeError
-        for an item that is not a TransformStamped, TypeError / ValueError / OverflowError
-        for badly typed fields). The stripped child and parent frame ids of every stored
-        transform are added to ``touched`` when it is a set.
+        * ``stored``: how many were stored; ``refused``: how many were refused;
+        * ``refusals``: ``[(code, child, stamp ns)]`` for each refused by its cache
+          (``OLD_DATA`` / ``REPEATED_DATA``);
+        * ``errors``: ``[(index, problem)]``, ``problem`` either an exception
+          (InvalidArgumentException for a field of the wrong type, TypeError for an item
+          that is not a TransformStamped) or ``(parent, child, values)`` for a transform
+          that breaks a tf2 rule (the caller builds tf2's message);
+        * ``touched``: set of the (stripped) child and parent ids of every stored transform;
+        * ``relinked``: whether a stored transform may have changed the tree's shape.
         """
-        cdef Py_ssize_t stored = 0, refused = 0, i = 0
+        cdef Py_ssize_t stored = 0, i = 0
+        cdef list refusals = []
         cdef list errors = []
+        cdef set touched = set()
+        cdef bint relinked = False
+        cdef list out = []
         cdef int code
         for ts in transforms:
             try:
                 if not isinstance(ts, TransformStamped):
                     raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
-                code = self._insert_one(ts, authority, is_static, touched)
+                code = self._insert_one(ts, authority, is_static, out)
             except Exception as exc:
                 errors.append((i, exc))
             else:
                 if code == C_OK:
                     stored += 1
+                    touched.add(out[0])
+                    touched.add(out[1])
+                    if out[3]:
+                        relinked = True
+                elif code == INVALID:
+                    errors.append((i, (out[0], out[1], out[2])))
                 else:
-                    refused += 1
+                    refusals.append((code, out[1], out[2]._ns))
+            del out[:]
             i += 1
-        return stored, refused, errors
+        return stored, len(refusals), errors, touched, relinked, refusals
+
+    # ------------------------------------------------------------------ queries
+
+    def _id_status(self, frame_id):
+        """0 for a known, queryable frame id; else INVALID_ARGUMENT (not a string, empty,
+        '/'-prefixed) or UNKNOWN_FRAME (tf2 ``validateFrameId``)."""
+        cdef str name = _as_str(frame_id)
+        if name is None:
+            return INVALID_ARGUMENT
+        if self._frame(name) >= 0:
+            return 0
+        return _bad_id(name, 0)[0]
+
+    cdef inline int _frame(self, object frame_id) except -2:
+        """Id of a known, queryable frame, or -1 (empty, '/'-prefixed, unknown)."""
+        cdef object fid = self._frame_ids.get(frame_id)
+        if fid is None or <int>fid == 0:
+            return -1
+        if type(frame_id) is not str or not len(<str>frame_id) or (<str>frame_id)[0] == "/":
+            return -1
+        return <int>fid
+
+    def _query(self, object target, object source, time):
+        """``lookupTransform(target, source, time)`` in one call: the TransformStamped
+        (built here, memoised until the next insert or clear), or a failure tuple:
+
+        * ``(INVALID_ARGUMENT, 0 | 1)`` / ``(UNKNOWN_FRAME, 0 | 1)``: the target (0) or
+          source (1) id is empty / '/'-prefixed, or unknown;
+        * ``(LOOKUP_ERROR, 0)``: a loop; ``(CONNECTIVITY_ERROR, 0)``: two trees;
+        * ``(EXTRAPOLATION_ERROR, frame id, time ns, expired)``: the link of that frame has
+          no data at the time; ``expired`` when the time is older than the path's latest
+          common time minus cache_time (tf2's transformable-request test), i.e. waiting
+          cannot help.
+        """
+        cdef int64_t t = (<object>time)._ns
+        cdef int64_t used, lct
+        cdef int target_id, source_id, err, where = 0, gcode = 0
+        cdef double v[7]
+        cdef object key, hit, out, cache
+        cdef bint expired
+        cdef Link link
+        cdef double st[7]
+        cdef int p = 0
+        if type(target) is not str:
+            target = _as_str(target)
+            if target is None:
+                return (INVALID_ARGUMENT, 0)
+        if type(source) is not str:
+            source = _as_str(source)
+            if source is None:
+                return (INVALID_ARGUMENT, 1)
+        if self._memo_generation == self._generation:
+            key = (target, source, t)
+            hit = self._memo.get(key)
+            if hit is not None:
+                return hit
+        else:
+            self._memo.clear()
+            self._memo_generation = self._generation
+            key = (target, source, t)
+        if target == source:
+            if t == 0:
+                # tf2 stamps the identity with the frame's newest sample; an unknown id
+                # maps to frame 0 (NO_PARENT), whose link exists only if "NO_PARENT" was
+                # stored as a child (lookupFrameNumber / getFrame).
+                cache = self._caches[self._frame_ids.get(target, 0)]
+                if cache is not None:
+                    (<Link>cache).c_latest(&t)
+            _identity(v)
+            return _stamped(_time_of(t) if t != (<object>time)._ns else time, target, source, v)
+        target_id = self._frame(target)
+        if target_id < 0:
+            return _bad_id(<str>target, 0)
+        source_id = self._frame(source)
+        if source_id < 0:
+            return _bad_id(<str>source, 1)
+        used = t
+        err = self._walk(target_id, source_id, &used, v, &where)
+        if err != NO_ERROR:
+            if err != EXTRAPOLATION_ERROR:
+                return (err, 0)
+            expired = False
+            link = <Link>self._caches[where]
+            gcode = link.c_gather(used, st, &p)
+            if gcode != G_FUTURE and self._common(target_id, source_id, &lct) == NO_ERROR:
+                expired = lct != 0 and used < lct - self._cache_ns
+            return (err, where, used, expired)
+        out = _stamped(time if used == t and t != 0 else _time_of(used), target, source, v)
+        if len(self._memo) >= MEMO_SIZE:
+            self._memo.clear()
+        self._memo[key] = out
+        return out
+
+    def _chain(self, target_frame, source_frame, time=None):
+        """The frames an answer for ``lookup_transform(target_frame, source_frame, time)``
+        depends on, now and as data arrives: both ids, and the ancestors of each by its
+        link's newest parent and, for a time other than 0, by its parent at ``time`` (a
+        link re-parented over time), at most ``MAX_GRAPH_DEPTH + 1`` per chain (a longer
+        walk is tf2's loop error). Unknown ids are included as given (they may arrive).
+        Like tf2's ``_chainAsVector``, but as a set and for both parentage rules.
+
+        Returns:
+            A list of frame ids (no duplicates, in discovery order).
+        """
+        cdef int64_t t = 0 if time is None else (<object>time)._ns
+        cdef list names = self._frame_names
+        cdef list caches = self._caches
+        cdef set seen = set()
+        cdef list out = []
+        cdef list todo = [target_frame, source_frame]
+        cdef object name, fid, obj
+        cdef int frame, parent, depth, p2
+        cdef int64_t stamp
+        cdef double st[7]
+        while todo:
+            name = todo.pop()
+            if name in seen:
+                continue
+            seen.add(name)
+            out.append(name)
+            fid = self._frame_ids.get(name)
+            if fid is None:
+                continue
+            frame = <int>fid
+            depth = 0
+            while frame != 0 and depth <= C_MAX_DEPTH:
+                obj = _link(caches, frame)
+                if obj is None:
+                    break
+                if t != 0:
+                    p2 = 0
+                    if (<Link>obj).c_gather(t, st, &p2) == G_OK and p2 != 0:
+                        if names[p2] not in seen:
+                            todo.append(names[p2])
+                parent = (<Link>obj).c_latest(&stamp)
+                if parent == 0 or parent >= len(names):
+                    break
+                name = names[parent]
+                if name in seen:
+                    break
+                seen.add(name)
+                out.append(name)
+                frame = parent
+                depth += 1
+        return out
 
     # ------------------------------------------------------------------ the walk
 
@@ -822,73 +1262,82 @@ cdef class CoreBase:
         cdef int err = self._common(target_id, source_id, &t)
         return err, t
 
-    def _cwalk(self, int target_id, int source_id, int64_t time):
-        """tf2 ``walkToTopParent`` with ``TransformAccum``: the transform mapping source
-        coordinates into target coordinates at ``time`` (0 = latest common time).
-
-        Returns ``(NO_ERROR, 7-tuple, time used)``, ``(EXTRAPOLATION_ERROR, id of the
-        frame whose link had no data, time)``, ``(CONNECTIVITY_ERROR, None, 0)`` or
-        ``(LOOKUP_ERROR, None, 0)`` (a loop).
-        """
+    cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
+                   int* where) except -1:
+        """tf2 ``walkToTopParent`` with ``TransformAccum``: ``out`` = the transform mapping
+        source coordinates into target coordinates at ``time[0]`` (0 = latest common time,
+        replaced by the time used). Returns NO_ERROR, LOOKUP_ERROR (a loop),
+        CONNECTIVITY_ERROR, or EXTRAPOLATION_ERROR with ``where`` = the frame whose link had
+        no data."""
         cdef list caches = self._caches
         cdef double src[7]
         cdef double tgt[7]
+        cdef double r[3]
+        cdef double q[4]
         cdef int top = 0, frame = 0, src_failed_at = 0
         cdef int outcome, err
         cdef bint failed
-        cdef double sx, sy, sz, sqx, sqy, sqz, sqw, gx, gy, gz
-        cdef double iqx, iqy, iqz, iqw, vx, vy, vz, tx, ty, tz, tw
         if source_id == target_id:
-            return NO_ERROR, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0), time
-        if time == 0:
-            err = self._common(target_id, source_id, &time)
+            _identity(out)
+            return NO_ERROR
+        if time[0] == 0:
+            err = self._common(target_id, source_id, time)
             if err:
-                return err, None, 0
+                return err
 
         # Source side: source -> top. A failure here is only remembered: the path may
         # still close below it (only links between the two frames must be valid).
-        outcome = _climb(caches, source_id, 0, target_id, time, src, &top)
+        outcome = _climb(caches, source_id, 0, target_id, time[0], src, &top)
         if outcome == CLIMB_EARLY:  # TargetParentOfSource
-            return NO_ERROR, (src[0], src[1], src[2], src[3], src[4], src[5], src[6]), time
+            memcpy(out, src, 7 * sizeof(double))
+            return NO_ERROR
         if outcome == CLIMB_LOOP:
-            return LOOKUP_ERROR, None, 0
+            return LOOKUP_ERROR
         failed = outcome == CLIMB_FAILED
         if failed:
             src_failed_at = top
 
         # Target side: target -> top. A failure here is reported at once.
-        outcome = _climb(caches, target_id, top, source_id, time, tgt, &frame)
+        outcome = _climb(caches, target_id, top, source_id, time[0], tgt, &frame)
         if outcome == CLIMB_FAILED:
-            return EXTRAPOLATION_ERROR, frame, time
+            where[0] = frame
+            return EXTRAPOLATION_ERROR
         if outcome == CLIMB_LOOP:
-            return LOOKUP_ERROR, None, 0
+            return LOOKUP_ERROR
         if outcome == CLIMB_EARLY:  # SourceParentOfTarget: the source side is unused
             _identity(src)
         elif frame != top:
             if failed:
-                return EXTRAPOLATION_ERROR, src_failed_at, time
-            return CONNECTIVITY_ERROR, None, 0
+                where[0] = src_failed_at
+                return EXTRAPOLATION_ERROR
+            return CONNECTIVITY_ERROR
 
-        # FullPath: inv(target -> top) ∘ (source -> top), inv = (conj q, conj q * (-t)).
-        sx, sy, sz, sqx, sqy, sqz, sqw = src[0], src[1], src[2], src[3], src[4], src[5], src[6]
-        gx, gy, gz = tgt[0], tgt[1], tgt[2]
-        iqx, iqy, iqz, iqw = -tgt[3], -tgt[4], -tgt[5], tgt[6]
-        # conj(q) applied to (s - g): quatRotate(q*, s) + quatRotate(q*, -g)
-        vx, vy, vz = sx - gx, sy - gy, sz - gz
-        tx = iqw * vx + iqy * vz - iqz * vy
-        ty = iqw * vy + iqz * vx - iqx * vz
-        tz = iqw * vz + iqx * vy - iqy * vx
-        tw = -iqx * vx - iqy * vy - iqz * vz
-        return (
-            NO_ERROR,
-            (
-                -tw * iqx + tx * iqw - ty * iqz + tz * iqy,
-                -tw * iqy + ty * iqw - tz * iqx + tx * iqz,
-                -tw * iqz + tz * iqw - tx * iqy + ty * iqx,
-                iqw * sqx + iqx * sqw + iqy * sqz - iqz * sqy,
-                iqw * sqy + iqy * sqw + iqz * sqx - iqx * sqz,
-                iqw * sqz + iqz * sqw + iqx * sqy - iqy * sqx,
-                iqw * sqw - iqx * sqx - iqy * sqy - iqz * sqz,
-            ),
-            time,
-        )
+        # FullPath: inv(target -> top) ∘ (source -> top), inv = (conj q, conj q * (-t)):
+        # conj(q) applied to (s - g), then conj(q) ⊗ q_s.
+        _qrot(-tgt[3], -tgt[4], -tgt[5], tgt[6], src[0] - tgt[0], src[1] - tgt[1],
+              src[2] - tgt[2], r)
+        _qmul(-tgt[3], -tgt[4], -tgt[5], tgt[6], src[3], src[4], src[5], src[6], q)
+        out[0] = r[0]
+        out[1] = r[1]
+        out[2] = r[2]
+        out[3] = q[0]
+        out[4] = q[1]
+        out[5] = q[2]
+        out[6] = q[3]
+        return NO_ERROR
+
+    def _cwalk(self, int target_id, int source_id, int64_t time):
+        """tf2 ``walkToTopParent`` with ``TransformAccum`` (see ``_walk``).
+
+        Returns ``(NO_ERROR, 7-tuple, time used)``, ``(EXTRAPOLATION_ERROR, id of the
+        frame whose link had no data, time)``, ``(CONNECTIVITY_ERROR, None, 0)`` or
+        ``(LOOKUP_ERROR, None, 0)`` (a loop).
+        """
+        cdef double v[7]
+        cdef int where = 0
+        cdef int err = self._walk(target_id, source_id, &time, v, &where)
+        if err == NO_ERROR:
+            return NO_ERROR, (v[0], v[1], v[2], v[3], v[4], v[5], v[6]), time
+        if err == EXTRAPOLATION_ERROR:
+            return err, where, time
+        return err, None, 0

@@ -20,15 +20,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
-from typing import Any, TypeVar, overload
+from typing import Any, ClassVar, Generic, TypeVar, cast
 
 import anyio
 
-from tfbus.clock import Clock, SystemClock
-from tfbus.core import BufferCore, SetResult, _strip_slash
+from tfbus.clock import Clock, SystemClock, timeout_ns
+from tfbus.convert import TransformRegistration
+from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import TimeoutException, TransformException
-from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
-from tfbus.messages import PointStamped, PoseStamped, TransformStamped, Vector3Stamped
+from tfbus.messages import Header, TransformStamped
 from tfbus.time import Duration, Time
 
 __all__ = ["Buffer"]
@@ -36,10 +36,10 @@ __all__ = ["Buffer"]
 _log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
-_Stamped = TypeVar("_Stamped", PointStamped, PoseStamped, Vector3Stamped)
+_M = TypeVar("_M")
 
 
-class _Waiter:
+class _Waiter(Generic[_T]):
     """One pending wait: ``check()`` returns the answer, or None while unavailable, or
     raises to fail the wait. Indexed under ``frames`` (from ``frames_fn()``) while
     pending."""
@@ -47,13 +47,13 @@ class _Waiter:
     __slots__ = ("check", "error", "event", "frames", "frames_fn", "result")
 
     def __init__(
-        self, check: Callable[[], object | None], frames_fn: Callable[[], frozenset[str]]
+        self, check: Callable[[], _T | None], frames_fn: Callable[[], frozenset[str]]
     ) -> None:
         self.check = check
         self.frames_fn = frames_fn
         self.event = anyio.Event()
         self.frames: frozenset[str] = frozenset()
-        self.result: object | None = None
+        self.result: _T | None = None
         self.error: BaseException | None = None
 
 
@@ -72,50 +72,45 @@ class Buffer(BufferCore):
     def __init__(self, cache_time: float | Duration = 10.0, *, clock: Clock | None = None) -> None:
         super().__init__(cache_time)
         self.clock: Clock = clock if clock is not None else SystemClock()
-        self._index: dict[str, set[_Waiter]] = {}
+        self._index: dict[str, set[_Waiter[Any]]] = {}
         self._unregister_jump = self.clock.on_jump(self._on_jump)
 
     # ------------------------------------------------------------------ notification
 
-    def _insert(self, ts: TransformStamped, authority: str, is_static: bool) -> SetResult:
-        result = super()._insert(ts, authority, is_static)
-        if self._index and result is SetResult.STORED:
-            self._recheck_frames(
-                (_strip_slash(ts.child_frame_id), _strip_slash(ts.header.frame_id))
-            )
-        return result
-
-    def _insert_many(
+    def set_transforms(
         self,
-        transforms: Iterable[Any],
-        authority: str,
-        is_static: bool,
-        touched: set[str] | None = None,
-    ) -> tuple[int, int, list[tuple[int, Exception]]]:
-        # The batch form of _insert: waiters are rechecked once, after the whole batch.
-        touched = set() if self._index else None
-        result = super()._insert_many(transforms, authority, is_static, touched)
-        if touched:
-            self._recheck_frames(touched)
+        transforms: Iterable[TransformStamped],
+        authority: str = "default",
+        is_static: bool = False,
+    ) -> BatchResult:
+        """:meth:`BufferCore.set_transforms` (every insert goes through it), then the
+        waits that depend on the frames it touched are re-checked, once per batch."""
+        result = super().set_transforms(transforms, authority, is_static)
+        if self._index and result.touched:
+            self._recheck_frames(result.touched, result.relinked)
         return result
 
-    def _recheck_frames(self, names: Iterable[str]) -> None:
-        due: set[_Waiter] = set()
+    def _recheck_frames(self, names: Iterable[str], relinked: bool) -> None:
+        index = self._index
+        due: set[_Waiter[Any]] = set()
         for name in names:
-            waiters = self._index.get(name)
+            waiters = index.get(name)
             if waiters:
                 due.update(waiters)
         for waiter in due:
-            self._recheck(waiter)
+            self._recheck(waiter, relinked)
 
-    def _recheck(self, waiter: _Waiter) -> None:
+    def _recheck(self, waiter: _Waiter[Any], relinked: bool = True) -> None:
+        """One walk (the waiter's check); the frames it depends on are recomputed only if
+        the tree's shape may have changed, so an insert costs O(waiters it touches)."""
         try:
             result = waiter.check()
         except TransformException as exc:
             waiter.error = exc
         else:
             if result is None:
-                self._reindex(waiter, waiter.frames_fn())  # the path may have changed
+                if relinked:
+                    self._reindex(waiter, waiter.frames_fn())  # the path may have changed
                 return
             waiter.result = result
         self._unindex(waiter)
@@ -129,7 +124,7 @@ class Buffer(BufferCore):
         for waiter in self._pending():
             self._recheck(waiter)
 
-    def _pending(self) -> set[_Waiter]:
+    def _pending(self) -> set[_Waiter[Any]]:
         return {w for ws in self._index.values() for w in ws}
 
     @property
@@ -143,30 +138,13 @@ class Buffer(BufferCore):
 
     # ------------------------------------------------------------------ indexing
 
-    def _frames_of(self, frames: Iterable[str], time_ns: int) -> frozenset[str]:
-        names = self._frame_names
-        out: set[str] = set()
-        at = Time.from_ns(time_ns)
-        for frame in frames:
-            out.add(frame)
-            out.update(names[i] for i in self._chain_ids(frame))
-            # Also the ancestors by the parent valid at the requested time (re-parenting).
-            parent = self.get_parent(frame, at) if time_ns else None
-            seen = 0
-            while parent is not None and parent not in out and seen <= 1000:
-                out.add(parent)
-                out.update(names[i] for i in self._chain_ids(parent))
-                parent = self.get_parent(parent, at)
-                seen += 1
-        return frozenset(out)
-
-    def _reindex(self, waiter: _Waiter, frames: frozenset[str]) -> None:
+    def _reindex(self, waiter: _Waiter[Any], frames: frozenset[str]) -> None:
         self._unindex(waiter)
         waiter.frames = frames
         for name in frames:
             self._index.setdefault(name, set()).add(waiter)
 
-    def _unindex(self, waiter: _Waiter) -> None:
+    def _unindex(self, waiter: _Waiter[Any]) -> None:
         for name in waiter.frames:
             waiters = self._index.get(name)
             if waiters is not None:
@@ -177,31 +155,16 @@ class Buffer(BufferCore):
 
     # ------------------------------------------------------------------ waiting
 
-    def _check_ids(self, *args: tuple[str, str]) -> None:
-        """Raise tf2's InvalidArgumentException for an empty or '/'-prefixed id (unknown
-        ids are fine: they may yet arrive)."""
-        for arg, frame in args:
-            if not frame or frame[0] == "/":
-                self._validate(f"lookupTransform argument {arg}", frame)
-
-    def _out_of_window(self, target: str, source: str, time_ns: int) -> bool:
-        """tf2's test: the request time is older than latest common time - cache_time."""
-        if time_ns == 0:
-            return False
-        try:
-            latest = self.get_latest_common_time(target, source).ns
-        except TransformException:
-            return False
-        return latest != 0 and time_ns + self.cache_time_ns < latest
-
     def _try_lookup(self, target: str, source: str, time: Time) -> TransformStamped | None:
-        ok, _ = self._can_transform(target, source, time.ns)
-        if ok:
-            return self.lookup_transform(target, source, time)
-        if self._out_of_window(target, source, time.ns):
-            # It can never become available: the lookup raises tf2's extrapolation error.
-            return self.lookup_transform(target, source, time)
-        return None
+        """The transform, None while it may still arrive; raises when waiting cannot
+        help (:meth:`BufferCore.check_transform`: one walk)."""
+        result = self.check_transform(target, source, time)
+        if isinstance(result, TransformException):
+            raise result
+        return result
+
+    def _frames_of(self, target: str, source: str, time: Time) -> frozenset[str]:
+        return frozenset(self.chain_frames(target, source, time))
 
     async def _wait(
         self,
@@ -210,10 +173,12 @@ class Buffer(BufferCore):
         timeout: float | Duration | None,
         describe: Callable[[], str],
     ) -> _T:
+        if timeout is not None and timeout_ns(timeout) is None:
+            timeout = None  # inf: no deadline (and NaN or a str raised here, up front)
         result = check()
         if result is not None:
             return result
-        waiter = _Waiter(check, frames)
+        waiter: _Waiter[_T] = _Waiter(check, frames)
         self._reindex(waiter, frames())
         try:
             if timeout is None:
@@ -224,33 +189,22 @@ class Buffer(BufferCore):
             self._unindex(waiter)
         if waiter.error is not None:
             raise waiter.error
-        return waiter.result  # type: ignore[return-value]
+        return cast(_T, waiter.result)
 
     async def _wait_with_timeout(
-        self, waiter: _Waiter, timeout: float | Duration, describe: Callable[[], str]
+        self, waiter: _Waiter[Any], timeout: float | Duration, describe: Callable[[], str]
     ) -> None:
-        seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
-        if isinstance(self.clock, SystemClock):
-            # Real time: a cancel-scope deadline of the event loop is the same measure,
-            # and much cheaper than a timer task (no task to cancel on wake-up).
-            with anyio.move_on_after(seconds):
-                await waiter.event.wait()
-        else:
-            # Other clocks (ManualClock, bag time): sleep on the clock in a timer task.
-            async with anyio.create_task_group() as tg:
-
-                async def expire() -> None:
-                    await self.clock.sleep(seconds)
-                    tg.cancel_scope.cancel()
-
-                tg.start_soon(expire)
-                await waiter.event.wait()
-                tg.cancel_scope.cancel()
+        # The clock's own deadline primitive: anyio.move_on_after on a SystemClock, a
+        # scope that ManualClock.advance cancels on a ManualClock.
+        with self.clock.move_on_after(timeout):
+            await waiter.event.wait()
         if not waiter.event.is_set():
+            seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
             raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
 
     def _describe(self, target: str, source: str, time: Time) -> str:
-        _, reason = self._can_transform(target, source, time.ns)
+        answer = self.can_transform(target, source, time, return_debug_tuple=True)
+        reason = answer[1] if isinstance(answer, tuple) else ""
         what = f"transform from [{source}] to [{target}] at time {time.ns / 1e9:.9f}"
         return f"{what}: {reason}" if reason else what
 
@@ -266,7 +220,8 @@ class Buffer(BufferCore):
         the two frames are connected with data.
 
         Args:
-            timeout: seconds (or a Duration) of the buffer's clock; None waits forever.
+            timeout: seconds (or a Duration) of the buffer's clock (``clock.move_on_after``);
+                None or ``inf`` waits forever; NaN is a ValueError, a str a TypeError.
 
         Raises:
             TimeoutException: not available within ``timeout``; the message says what
@@ -276,11 +231,9 @@ class Buffer(BufferCore):
             InvalidArgumentException: a frame id is empty or starts with '/'.
             LookupException: the path between the frames contains a loop.
         """
-        if target_frame != source_frame:
-            self._check_ids(("target_frame", target_frame), ("source_frame", source_frame))
         return await self._wait(
             lambda: self._try_lookup(target_frame, source_frame, time),
-            lambda: self._frames_of((target_frame, source_frame), time.ns),
+            lambda: self._frames_of(target_frame, source_frame, time),
             timeout,
             lambda: self._describe(target_frame, source_frame, time),
         )
@@ -315,11 +268,14 @@ class Buffer(BufferCore):
             ExtrapolationException: a leg's time fell out of the cache window.
             InvalidArgumentException: a frame id is empty or starts with '/'.
         """
-        self._check_ids(
+        for arg, frame in (
             ("target_frame", target_frame),
             ("source_frame", source_frame),
             ("fixed_frame", fixed_frame),
-        )
+        ):
+            invalid = self.invalid_frame_id(frame, f"lookupTransform argument {arg}")
+            if invalid is not None:
+                raise invalid
 
         def check() -> TransformStamped | None:
             if self._try_lookup(fixed_frame, source_frame, source_time) is None:
@@ -331,8 +287,8 @@ class Buffer(BufferCore):
             )
 
         def frames() -> frozenset[str]:
-            return self._frames_of((fixed_frame, source_frame), source_time.ns) | self._frames_of(
-                (target_frame, fixed_frame), target_time.ns
+            return self._frames_of(fixed_frame, source_frame, source_time) | self._frames_of(
+                target_frame, fixed_frame, target_time
             )
 
         def describe() -> str:
@@ -358,48 +314,79 @@ class Buffer(BufferCore):
             return False
         return True
 
-    @overload
+    registration: ClassVar[TransformRegistration] = TransformRegistration()
+    """The transform functions by type (tf2_ros ``BufferInterface.registration``), shared
+    process-wide: see :mod:`tfbus.convert` to register your own stamped types."""
+
     async def transform(
-        self, obj: PointStamped, target_frame: str, timeout: float | Duration | None = None
-    ) -> PointStamped: ...
-    @overload
-    async def transform(
-        self, obj: PoseStamped, target_frame: str, timeout: float | Duration | None = None
-    ) -> PoseStamped: ...
-    @overload
-    async def transform(
-        self, obj: Vector3Stamped, target_frame: str, timeout: float | Duration | None = None
-    ) -> Vector3Stamped: ...
-    async def transform(
-        self,
-        obj: PointStamped | PoseStamped | Vector3Stamped,
-        target_frame: str,
-        timeout: float | Duration | None = None,
-    ) -> PointStamped | PoseStamped | Vector3Stamped:
-        """Express a stamped point, pose or vector in ``target_frame`` (tf2_ros
-        ``Buffer.transform`` with tf2_geometry_msgs): looks up ``target_frame ←
-        obj.header.frame_id`` at ``obj.header.stamp`` (``Time(0)``: latest), waiting up to
-        ``timeout``. Vectors are rotated only.
+        self, obj: _M, target_frame: str, timeout: float | Duration | None = None
+    ) -> _M:
+        """Express a stamped object in ``target_frame`` (tf2_ros ``Buffer.transform``):
+        looks up ``target_frame <- obj.header.frame_id`` at ``obj.header.stamp``
+        (``Time(0)``: latest), waiting up to ``timeout``, and applies the function
+        registered for ``type(obj)`` in :mod:`tfbus.convert`.
+
+        Preregistered: PointStamped, PoseStamped, Vector3Stamped (rotated only) and
+        TransformStamped (tf2_geometry_msgs' ``doTransform``); register your own types
+        with :func:`tfbus.convert.register_transform`.
 
         Returns:
-            The same message type with ``header.frame_id == target_frame`` and
-            ``header.stamp`` the lookup's stamp (the time actually used).
+            What the registered function returns; for the preregistered types, the same
+            type with ``header.frame_id == target_frame`` and ``header.stamp`` the
+            lookup's stamp (the time actually used).
 
         Raises:
-            TypeError: ``obj`` is not a PointStamped, PoseStamped or Vector3Stamped.
+            TypeError: no transform function is registered for ``type(obj)`` (checked
+                before any wait).
             TimeoutException, ExtrapolationException, InvalidArgumentException,
             LookupException: as :meth:`wait_for_transform`.
         """
-        if not isinstance(obj, PointStamped | PoseStamped | Vector3Stamped):
-            raise TypeError(
-                "Buffer.transform takes PointStamped, PoseStamped or Vector3Stamped, "
-                f"not {type(obj).__name__}"
-            )
-        ts = await self.wait_for_transform(
-            target_frame, obj.header.frame_id, obj.header.stamp, timeout
+        do_transform = self.registration.get(type(obj))
+        header = _header_of(obj)
+        ts = await self.wait_for_transform(target_frame, header.frame_id, header.stamp, timeout)
+        result: _M = do_transform(obj, ts)
+        return result
+
+    async def transform_full(
+        self,
+        obj: _M,
+        target_frame: str,
+        target_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+    ) -> _M:
+        """Express a stamped object in ``target_frame`` at ``target_time``, through
+        ``fixed_frame`` (tf2_ros ``Buffer.transform_full``): the transform is
+        :meth:`lookup_transform_full_async` ``(target_frame, target_time,
+        obj.header.frame_id, obj.header.stamp, fixed_frame, timeout)``, applied by the
+        function registered for ``type(obj)``.
+
+        Returns:
+            What the registered function returns; for the preregistered types, the same
+            type in ``target_frame`` stamped ``target_time`` (the time actually used).
+
+        Raises:
+            TypeError: no transform function is registered for ``type(obj)``.
+            TimeoutException, ExtrapolationException, InvalidArgumentException: as
+                :meth:`lookup_transform_full_async`.
+        """
+        do_transform = self.registration.get(type(obj))
+        header = _header_of(obj)
+        ts = await self.lookup_transform_full_async(
+            target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout
         )
-        if isinstance(obj, PointStamped):
-            return do_transform_point(obj, ts)
-        if isinstance(obj, PoseStamped):
-            return do_transform_pose(obj, ts)
-        return do_transform_vector3(obj, ts)
+        result: _M = do_transform(obj, ts)
+        return result
+
+
+def _header_of(obj: object) -> Header:
+    """``obj.header``, checked enough to make a clear error of a malformed object."""
+    header = getattr(obj, "header", None)
+    frame_id = getattr(header, "frame_id", None)
+    stamp = getattr(header, "stamp", None)
+    if not isinstance(frame_id, str) or not isinstance(stamp, Time):
+        raise TypeError(
+            f"{type(obj).__name__} has no header with a str frame_id and a Time stamp "
+            f"(header={header!r})"
+        )
+    return Header(stamp, frame_id)

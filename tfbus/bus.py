@@ -13,11 +13,13 @@ and counted (the newest data is what a transform consumer wants). A slow subscri
 therefore never slows a publisher or the other subscribers.
 
 ``/tf`` and ``/tf_static`` carry :class:`~tfbus.messages.TFMessage`. ``/tf_static`` is
-latched per child frame: the bus keeps the latest static transform of every
-``child_frame_id`` (a re-send replaces that child's entry) and a new subscriber to
-``/tf_static`` immediately receives one ``TFMessage`` holding all of them.
+latched per child frame (:class:`~tfbus.latch.StaticLatch`): the bus keeps the latest
+valid static transform of every ``child_frame_id`` (a re-send replaces that child's
+entry; ``laser`` and ``/laser`` are one child; an invalid transform never replaces a
+valid one) and a new subscriber to ``/tf_static`` immediately receives one
+``TFMessage`` holding all of them.
 
-A :class:`Transport` (``MemoryTransport`` here, Zenoh in ``tfbus.transports``) carries
+A :class:`Transport` (:mod:`tfbus.transports`: ``MemoryTransport``, Zenoh) carries
 messages between buses: the bus runs ``transport.run(bus)`` in its task group, hands
 every local publish to ``transport.send_nowait``, and the transport injects remote
 messages with :meth:`Bus.deliver_nowait`, which never sends them back out.
@@ -28,7 +30,6 @@ and both :class:`Bus` and :class:`Subscription` report ``statistics()``.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -39,13 +40,13 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
-from tfbus.messages import TFMessage, TransformStamped
+from tfbus.latch import StaticLatch
+from tfbus.messages import TFMessage
 
 __all__ = [
     "TF_STATIC_TOPIC",
     "TF_TOPIC",
     "Bus",
-    "MemoryTransport",
     "Subscription",
     "SubscriptionStatistics",
     "TopicStatistics",
@@ -345,7 +346,7 @@ class Bus:
         self._queue_size = queue_size
         self._subscriptions: dict[str, list[Subscription[Any]]] = {}
         self._topic_counters: dict[str, _TopicCounters] = {}
-        self._statics: dict[str, TransformStamped] = {}
+        self._latch = StaticLatch()
         self._task_group: anyio.abc.TaskGroup | None = None
         self._state = "new"  # "new" -> "open" -> "closed"
 
@@ -443,8 +444,8 @@ class Bus:
         else:
             # Copy-on-write: a delivery loop in progress keeps its own list.
             self._subscriptions[topic] = [*subs, sub]
-        if topic == TF_STATIC_TOPIC and self._statics:
-            sub._put(self.latched_statics())
+        if topic == TF_STATIC_TOPIC and self._latch:
+            sub._put(self._latch.message())
         return sub
 
     def _unsubscribe(self, sub: Subscription[Any]) -> None:
@@ -517,24 +518,12 @@ class Bus:
 
     def _deliver(self, topic: str, message: object) -> None:
         if topic == TF_STATIC_TOPIC:
-            self._latch(message)
+            self._latch.add(message)
         self._counters(topic).published += 1
         subs = self._subscriptions.get(topic)
         if subs:
             for sub in subs:
                 sub._put(message)
-
-    def _latch(self, message: object) -> None:
-        if not isinstance(message, TFMessage):
-            return
-        try:
-            items = list(message.transforms)
-        except TypeError:
-            return
-        statics = self._statics
-        for ts in items:
-            if isinstance(ts, TransformStamped) and isinstance(ts.child_frame_id, str):
-                statics[ts.child_frame_id] = ts
 
     def latched_statics(self) -> TFMessage:
         """One ``TFMessage`` of the latest static transform of every child frame.
@@ -542,7 +531,7 @@ class Bus:
         This is what a late ``/tf_static`` subscriber receives first; a transport may
         also send it to newly connected peers.
         """
-        return TFMessage(tuple(self._statics.values()))
+        return self._latch.message()
 
     # -- statistics ---------------------------------------------------------------------
 
@@ -563,82 +552,3 @@ class Bus:
     def __repr__(self) -> str:
         subs = sum(len(s) for s in self._subscriptions.values())
         return f"<Bus {self._state} topics={len(self._topic_counters)} subscriptions={subs}>"
-
-
-class MemoryTransport:
-    """An in-memory transport: one end of a linked pair (httpx ``MockTransport``-style).
-
-    ``a, b = MemoryTransport.pair()``; ``Bus(transport=a)`` and ``Bus(transport=b)``
-    then see each other's publishes. Each end buffers messages for its peer in a memory
-    object stream of ``max_buffer_size``; when that is full, ``send_nowait`` drops the
-    message and counts it in :attr:`dropped` (it never blocks). Messages sent before the
-    peer's bus opens wait in the buffer.
-    """
-
-    def __init__(self, max_buffer_size: float = math.inf) -> None:
-        """Create an unlinked end; use :meth:`pair` (or :meth:`link`)."""
-        send, receive = anyio.create_memory_object_stream[tuple[str, object]](max_buffer_size)
-        self._inbox_send = send
-        self._inbox_receive = receive
-        self._peer: MemoryTransport | None = None
-        self._running = False
-        self.sent = 0
-        """Messages handed to the peer."""
-        self.dropped = 0
-        """Messages dropped because the peer's buffer was full or closed."""
-        self.delivered = 0
-        """Messages injected into this end's bus."""
-
-    @classmethod
-    def pair(cls, max_buffer_size: float = math.inf) -> tuple[MemoryTransport, MemoryTransport]:
-        """Two linked ends."""
-        a, b = cls(max_buffer_size), cls(max_buffer_size)
-        a.link(b)
-        return a, b
-
-    def link(self, peer: MemoryTransport) -> None:
-        """Link this end and ``peer`` both ways."""
-        self._peer = peer
-        peer._peer = self
-
-    async def run(
-        self,
-        bus: Bus,
-        *,
-        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
-    ) -> None:
-        """Inject messages from the peer into ``bus`` until cancelled.
-
-        Raises:
-            RuntimeError: if this end is already running.
-        """
-        if self._running:
-            raise RuntimeError("this MemoryTransport end is already running")
-        self._running = True
-        try:
-            task_status.started()
-            receive = self._inbox_receive
-            while True:
-                topic, message = await receive.receive()
-                self.delivered += 1
-                bus.deliver_nowait(topic, message)
-        finally:
-            self._running = False
-
-    def send_nowait(self, topic: str, message: object) -> None:
-        """Hand ``message`` to the peer's buffer; drop and count it if that is full."""
-        peer = self._peer
-        if peer is None:
-            self.dropped += 1
-            return
-        try:
-            peer._inbox_send.send_nowait((topic, message))
-        except (anyio.WouldBlock, anyio.BrokenResourceError, anyio.ClosedResourceError):
-            self.dropped += 1
-        else:
-            self.sent += 1
-
-    def __repr__(self) -> str:
-        return (
-            f"<MemoryTransport sent={self.sent} delivered={self.delivered} dropped={self.dropped}>"
-        )

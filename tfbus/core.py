@@ -25,20 +25,22 @@ from __future__ import annotations
 import enum
 import logging
 import math
-import time as _wallclock
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from collections.abc import Set as AbstractSet
+from numbers import Real
 from typing import Final, NamedTuple
 
 from tfbus._ccore import (
     CONNECTIVITY_ERROR,
     EXTRAPOLATION_ERROR,
+    INVALID_ARGUMENT,
     LOOKUP_ERROR,
     MAX_GRAPH_DEPTH,
-    NO_ERROR,
     OLD_DATA,
+    UNKNOWN_FRAME,
     CoreBase,
+    compose_full,
 )
-from tfbus._tf2math import Tf7
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -47,22 +49,31 @@ from tfbus.errors import (
     TransformException,
 )
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
-from tfbus.time import Duration, Time
+from tfbus.ratelimit import CountLimitedLog
+from tfbus.time import TIME_MAX_NS, Duration, Time
 
-__all__ = ["MAX_GRAPH_DEPTH", "BatchResult", "BufferCore", "SetResult"]
+__all__ = ["MAX_GRAPH_DEPTH", "BatchResult", "BufferCore", "FrameInfo", "SetResult"]
 
 logger = logging.getLogger("tfbus.core")
 
 _MAX_MESSAGE: Final = 999  # extrapolation messages only (tf2 0.7.6, measured with tf2_py)
+_REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
 _LATEST: Final = Time(0)
-_MEMO_SIZE: Final = 64  # small: a larger memo costs a never-repeated query ~1 µs of churn
+_new: Final = tuple.__new__  # builds a NamedTuple without its Python-level __new__
 
-_ERRORS: Final[dict[int, type[TransformException]]] = {
-    LOOKUP_ERROR: LookupException,
-    CONNECTIVITY_ERROR: ConnectivityException,
-    EXTRAPOLATION_ERROR: ExtrapolationException,
-}
+Tf7 = tuple[float, float, float, float, float, float, float]
+"""A transform as ``(tx, ty, tz, qx, qy, qz, qw)``: metres; quaternion (x, y, z, w)."""
+
+_FIELDS: Final = (
+    "transform.translation.x",
+    "transform.translation.y",
+    "transform.translation.z",
+    "transform.rotation.x",
+    "transform.rotation.y",
+    "transform.rotation.z",
+    "transform.rotation.w",
+)
 
 
 class SetResult(enum.Enum):
@@ -75,9 +86,6 @@ class SetResult(enum.Enum):
     """Refused: the link already has a sample with this stamp (the first one wins)."""
 
 
-_RESULTS: Final = (SetResult.STORED, SetResult.OLD_DATA, SetResult.REPEATED_DATA)
-
-
 class BatchResult(NamedTuple):
     """What :meth:`BufferCore.set_transforms` did with a batch of transforms."""
 
@@ -87,31 +95,31 @@ class BatchResult(NamedTuple):
     """How many the caches refused (TF_OLD_DATA, TF_REPEATED_DATA; logged)."""
     errors: list[tuple[int, Exception]]
     """``(index in the batch, exception)`` for each item that was not stored because it
-    is invalid (:class:`~tfbus.errors.InvalidArgumentException`) or is not a well-formed
-    :class:`~tfbus.messages.TransformStamped` (TypeError, ValueError, OverflowError)."""
+    is invalid (:class:`~tfbus.errors.InvalidArgumentException`: a tf2 rule broken, or a
+    field of the wrong type) or is not a :class:`~tfbus.messages.TransformStamped`
+    (TypeError)."""
+    touched: AbstractSet[str] = frozenset()
+    """The (stripped) child and parent frame ids of every stored transform: the frames
+    whose lookups may have changed. ``tfbus.buffer.Buffer`` rechecks its waits from it."""
+    relinked: bool = False
+    """Whether a stored transform may have changed the tree's shape (a new link, a link
+    emptied by ``clear()`` refilled, or a link given another parent): which frames a
+    lookup depends on (:meth:`BufferCore.chain_frames`) may have changed."""
 
 
-class _RateLimitedWarning:
-    """Log a warning at most once per ``period`` seconds per key, counting the rest."""
+class FrameInfo(NamedTuple):
+    """One linked frame, as :meth:`BufferCore.frame_info` reports it."""
 
-    def __init__(self, period: float = 5.0) -> None:
-        self.period = period
-        self._last: dict[str, float] = {}
-        self._suppressed: dict[str, int] = {}
-
-    def __call__(self, key: str, message: str) -> None:
-        now = _wallclock.monotonic()
-        last = self._last.get(key)
-        if last is not None and now - last < self.period:
-            self._suppressed[key] = self._suppressed.get(key, 0) + 1
-            return
-        self._last[key] = now
-        n = self._suppressed.pop(key, 0)
-        logger.warning("%s%s", message, f" ({n} similar messages suppressed)" if n else "")
-
-
-def _strip_slash(frame_id: str) -> str:
-    return frame_id[1:] if frame_id.startswith("/") else frame_id
+    child: str
+    parent: str
+    """``NO_PARENT`` for a link emptied by ``clear()``."""
+    authority: str
+    is_static: bool
+    samples: int
+    oldest_ns: int
+    """Oldest stamp held, nanoseconds (0 when empty, and for a static link)."""
+    newest_ns: int
+    """Newest stamp held, nanoseconds (0 when empty, and for a static link)."""
 
 
 def _cap(message: str) -> str:
@@ -119,48 +127,108 @@ def _cap(message: str) -> str:
     return message[:_MAX_MESSAGE]
 
 
-def _seconds_to_ns(value: float | Duration) -> int:
+def _cache_time_ns(value: object) -> int:
+    """``cache_time`` (seconds or a Duration) as int nanoseconds, checked before use."""
     if isinstance(value, Duration):
-        return value.ns
-    return round(value * 1_000_000_000)
+        ns = value.ns
+    elif isinstance(value, Real) and not isinstance(value, bool):
+        seconds = float(value)
+        if not math.isfinite(seconds) or not 0.0 <= seconds <= TIME_MAX_NS / 1e9:
+            raise ValueError(
+                "cache_time must be finite seconds in [0, 9.2e9] (int64 nanoseconds), "
+                f"got {value!r}"
+            )
+        ns = Duration.from_sec(seconds).ns  # exact: the one seconds -> ns conversion
+    else:
+        raise TypeError(
+            f"cache_time must be seconds (a real number) or a Duration, got {value!r}"
+        )
+    if not 0 <= ns <= TIME_MAX_NS:
+        raise ValueError(f"cache_time must be in [0, 2**63 - 1] ns, got {ns} ns")
+    return ns
+
+
+_YAML_PLAIN_FIRST: Final = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_")
+_YAML_PLAIN_REST: Final = _YAML_PLAIN_FIRST | frozenset("0123456789./-")
+# YAML 1.1 / 1.2 booleans and null, compared in lower case
+_YAML_RESERVED: Final = frozenset(["y", "n", "yes", "no", "true", "false", "on", "off", "null"])
+
+
+def _yaml_plain(frame_id: str) -> bool:
+    """Whether ``frame_id`` reads back as the same string written plain in YAML (1.1 and
+    1.2): a letter or ``_`` first, then letters, digits, ``_ . / -``, and not a boolean or
+    null word."""
+    return (
+        bool(frame_id)
+        and frame_id[0] in _YAML_PLAIN_FIRST
+        and all(c in _YAML_PLAIN_REST for c in frame_id)
+        and frame_id.lower() not in _YAML_RESERVED
+    )
+
+
+def _yaml_quoted(text: str) -> str:
+    """``text`` as a YAML quoted scalar: single quotes (``'`` doubled), as tf2 writes
+    parents, unless it holds a character single quotes cannot carry (control characters,
+    line breaks, non-printables): then double quotes with escapes."""
+    if text.isprintable():
+        return "'" + text.replace("'", "''") + "'"
+    out = []
+    for c in text:
+        if c == '"' or c == "\\":
+            out.append("\\" + c)
+        elif c.isprintable():
+            out.append(c)
+        else:
+            code = ord(c)
+            if code < 0x100:
+                out.append(f"\\x{code:02x}")
+            elif code < 0x10000:
+                out.append(f"\\u{code:04x}")
+            else:
+                out.append(f"\\U{code:08x}")
+    return '"' + "".join(out) + '"'
+
+
+def _yaml_key(frame_id: str) -> str:
+    """A frame id as a YAML mapping key: plain as tf2 writes it when YAML reads it back
+    unchanged, else quoted (issue 11 item 7)."""
+    return frame_id if _yaml_plain(frame_id) else _yaml_quoted(frame_id)
 
 
 class BufferCore(CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
     Args:
-        cache_time: how long to keep each dynamic link's history, seconds (float) or a
-            :class:`~tfbus.time.Duration`. Expiry happens per link on insert, relative to
-            that link's newest stamp, exactly as in tf2 (no wall clock is involved).
+        cache_time: how long to keep each dynamic link's history, seconds (a real number,
+            not a bool) or a :class:`~tfbus.time.Duration`, in [0, 2**63 - 1] ns. Expiry
+            happens per link on insert, relative to that link's newest stamp, exactly as
+            in tf2 (no wall clock is involved).
 
-    Frame ids are arbitrary strings compared exactly. ``set_transform`` strips one
-    leading ``/`` (tf2 ``stripSlash``); queries reject ids that start with ``/``.
-    Not thread-safe: use it from one thread (or one event loop), as tfbus does.
+    Raises:
+        TypeError: ``cache_time`` is not a number or Duration (checked before anything is
+            allocated).
+        ValueError: ``cache_time`` is negative, infinite, NaN or beyond int64 ns.
 
-    Storage, insert and the walk are compiled (:mod:`tfbus._ccore`, Cython); this class
-    holds the API, validation of queries and tf2's messages.
+    Frame ids are arbitrary strings compared exactly (a ``str`` subclass such as
+    ``numpy.str_`` is taken as the string it is). ``set_transform`` strips one leading
+    ``/`` (tf2 ``stripSlash``); queries reject ids that start with ``/``. Not thread-safe:
+    use it from one thread (or one event loop), as tfbus does.
+
+    Storage, insert, the walk and building results are compiled (:mod:`tfbus._ccore`,
+    Cython) and report what they did as return values; this class turns those into
+    tf2's messages, exceptions and (count-limited) log lines.
     """
 
     def __init__(self, cache_time: float | Duration = 10.0) -> None:
-        self.cache_time_ns: int = _seconds_to_ns(cache_time)
-        if self.cache_time_ns < 0:
-            raise ValueError(f"cache_time must be >= 0, got {cache_time!r}")
-        # CoreBase holds the frame table: _frame_ids, _frame_names, _caches (frame 0 is
-        # tf2's reserved NO_PARENT; it may get a cache of its own, a tf2 quirk) and
-        # _authority, and bumps _generation on every insert attempt.
-        self._set_cache_time_ns(self.cache_time_ns)
-        self._warn = _RateLimitedWarning()
-        # Exact memo of successful lookup_transform results, keyed by (target, source,
-        # time ns). Any insert attempt or clear() bumps _generation, which empties it, so
-        # it never serves data older than the buffer's state.
-        self._memo: dict[tuple[str, str, int], TransformStamped] = {}
-        self._memo_generation = 0
+        self._set_cache_time_ns(_cache_time_ns(cache_time))
+        self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
+        self._last_refusal = SetResult.REPEATED_DATA  # what the last refusal was
 
     # ------------------------------------------------------------------ inserting
 
     @property
     def cache_time(self) -> Duration:
-        """The history kept per dynamic link."""
+        """The history kept per dynamic link (``cache_time_ns`` as a Duration)."""
         return Duration.from_ns(self.cache_time_ns)
 
     def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
@@ -174,15 +242,18 @@ class BufferCore(CoreBase):
         Returns:
             True when stored; False when the link's cache refused it — TF_OLD_DATA (older
             than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a sample
-            with this stamp exists) — which is logged as a rate-limited warning.
+            with this stamp exists) — which is logged (the first, then one per 1000).
 
         Raises:
             InvalidArgumentException: malformed transform — self transform, empty
                 frame id, NaN, ±Inf in the translation, or a quaternion whose squared
-                norm is not within 0.01 of 1. The message names each field and value;
-                ``.codes`` holds tf2's ``TF_*`` codes in tf2's order. Nothing is stored.
+                norm is not within 0.01 of 1; or a field of the wrong type (None, a str
+                or bool where a number belongs, an int beyond double range, ...). The
+                message names each field and value; ``.codes`` holds tf2's ``TF_*`` codes
+                in tf2's order. Nothing is stored, no frame is registered.
+            TypeError: ``transform`` is not a TransformStamped.
         """
-        return self._insert(transform, authority, False) is SetResult.STORED
+        return self.insert_transform(transform, authority, False) is SetResult.STORED
 
     def set_transform_static(
         self, transform: TransformStamped, authority: str = "default"
@@ -193,17 +264,20 @@ class BufferCore(CoreBase):
 
         Returns and raises as :meth:`set_transform`.
         """
-        return self._insert(transform, authority, True) is SetResult.STORED
+        return self.insert_transform(transform, authority, True) is SetResult.STORED
 
     def insert_transform(
         self, transform: TransformStamped, authority: str = "default", is_static: bool = False
     ) -> SetResult:
         """Like :meth:`set_transform` / :meth:`set_transform_static`, but tells why a
-        transform was refused. Raises as :meth:`set_transform`."""
-        return self._insert(transform, authority, is_static)
-
-    def _insert(self, ts: TransformStamped, authority: str, is_static: bool) -> SetResult:
-        return _RESULTS[self._insert_code(ts, authority, is_static)]
+        transform was refused. Raises as :meth:`set_transform`. Goes through
+        :meth:`set_transforms` (one place stores)."""
+        result = self.set_transforms((transform,), authority, is_static)
+        if result.errors:
+            raise result.errors[0][1]
+        if result.stored:
+            return SetResult.STORED
+        return self._last_refusal
 
     def set_transforms(
         self,
@@ -217,72 +291,49 @@ class BufferCore(CoreBase):
         Each item is handled exactly as :meth:`set_transform` (or
         :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
         malformed item is reported in ``errors`` instead of raising, and never stops the
-        items after it. Refusals (TF_OLD_DATA, TF_REPEATED_DATA) are logged, rate-limited.
+        items after it. Refusals (TF_OLD_DATA, TF_REPEATED_DATA) are logged, the first
+        of each kind then one per 1000.
+
+        Returns:
+            A :class:`BatchResult`: counts, errors, and the frames it touched (what a
+            subclass needs to react to the insert, e.g. ``Buffer``'s waits).
         """
-        return BatchResult(*self._insert_many(transforms, authority, is_static, None))
-
-    def _refused(self, code: int, child: str, stamp: int, authority: str) -> None:
-        """Log a refusal by the cache (rate-limited), in tf2's words."""
-        if code == OLD_DATA:
-            self._warn(
-                "TF_OLD_DATA",
-                "TF_OLD_DATA ignoring data from the past (Possible reasons are listed at "
-                "http://wiki.ros.org/tf/Errors%20explained) for frame "
-                f"{child} at time {stamp / 1e9:f} according to authority {authority}",
-            )
-        else:
-            self._warn(
-                "TF_REPEATED_DATA",
-                f"TF_REPEATED_DATA ignoring data with redundant timestamp for frame {child} "
-                f"at time {stamp / 1e9:f} according to authority {authority}",
-            )
-
-    def _reject(self, parent: str, child: str, values: Tf7, authority: str) -> None:
-        """Raise InvalidArgumentException listing every problem in tf2's order
-        (``BufferCore::setTransformImpl``) plus tfbus's TF_INF_INPUT."""
-        codes: list[str] = []
-        problems: list[str] = []
-        if child == parent:
-            codes.append("TF_SELF_TRANSFORM")
-            problems.append(f"header.frame_id and child_frame_id are the same ({child!r})")
-        if not child:
-            codes.append("TF_NO_CHILD_FRAME_ID")
-            problems.append("child_frame_id is empty")
-        if not parent:
-            codes.append("TF_NO_FRAME_ID")
-            problems.append("header.frame_id is empty")
-        fields = (
-            "transform.translation.x",
-            "transform.translation.y",
-            "transform.translation.z",
-            "transform.rotation.x",
-            "transform.rotation.y",
-            "transform.rotation.z",
-            "transform.rotation.w",
-        )
-        nans = [f"{name} = nan" for name, v in zip(fields, values, strict=True) if math.isnan(v)]
-        if nans:
-            codes.append("TF_NAN_INPUT")
-            problems.extend(nans)
-        infs = [
-            f"{name} = {v}" for name, v in zip(fields[:3], values[:3], strict=True) if math.isinf(v)
+        r = self._store(transforms, authority, is_static)
+        if not (r[2] or r[5]):  # the common case: nothing refused, nothing invalid
+            return _new(BatchResult, r[:5])
+        stored, _, problems, touched, relinked, refusals = r
+        if refusals:
+            self._log_refusals(refusals, authority)
+        errors: list[tuple[int, Exception]] = [
+            (i, p if isinstance(p, Exception) else _invalid(*p, authority))
+            for i, p in problems
         ]
-        if infs:
-            codes.append("TF_INF_INPUT")
-            problems.extend(infs)
-        qx, qy, qz, qw = values[3:]
-        # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
-        norm2 = qw * qw + qx * qx + qy * qy + qz * qz
-        if not abs(norm2 - 1.0) < 0.01:
-            codes.append("TF_DENORMALIZED_QUATERNION")
-            problems.append(
-                f"transform.rotation = ({qx}, {qy}, {qz}, {qw}) has squared norm {norm2}, "
-                "not within 0.01 of 1"
-            )
-        raise InvalidArgumentException(
-            f"Invalid transform for child_frame_id {child!r} from authority {authority!r}: "
-            + "; ".join(problems),
-            codes=tuple(codes),
+        return BatchResult(stored, len(refusals), errors, touched, relinked)
+
+    def _log_refusals(self, refusals: list[tuple[int, str, int]], authority: str) -> None:
+        """Log refusals by the caches in tf2's words (count-limited)."""
+        for code, child, stamp in refusals:
+            if code == OLD_DATA:
+                self._refusal_log.log(
+                    logging.WARNING,
+                    "TF_OLD_DATA ignoring data from the past (Possible reasons are listed at "
+                    "http://wiki.ros.org/tf/Errors%%20explained) for frame %s at time %f "
+                    "according to authority %s",
+                    child,
+                    stamp / 1e9,
+                    authority,
+                )
+            else:
+                self._refusal_log.log(
+                    logging.WARNING,
+                    "TF_REPEATED_DATA ignoring data with redundant timestamp for frame %s "
+                    "at time %f according to authority %s",
+                    child,
+                    stamp / 1e9,
+                    authority,
+                )
+        self._last_refusal = (
+            SetResult.OLD_DATA if refusals[-1][0] == OLD_DATA else SetResult.REPEATED_DATA
         )
 
     def clear(self) -> None:
@@ -296,76 +347,57 @@ class BufferCore(CoreBase):
             if cache is not None:
                 cache.clear()
 
-    # ------------------------------------------------------------------ validation
+    # ------------------------------------------------------------------ failures
 
-    def _validate(self, function: str, frame_id: str) -> int:
-        """tf2 ``validateFrameId``: id of a known frame, else raise."""
-        fid = self._frame_ids.get(frame_id)
-        if fid and frame_id[0] != "/":  # known, not NO_PARENT (0), not "/x" (from "//x")
-            return fid
-        if not frame_id:
-            raise InvalidArgumentException(
-                f"Invalid argument passed to {function} in tf2 frame_ids cannot be empty"
-            )
-        if frame_id[0] == "/":
-            raise InvalidArgumentException(
-                f'Invalid argument "{frame_id}" passed to {function} in tf2 frame_ids '
-                "cannot start with a '/' like: "
-            )
-        raise LookupException(f'"{frame_id}" passed to {function} does not exist. ')
-
-    # ------------------------------------------------------------------ the walk
-
-    def _common_time(self, target_id: int, source_id: int) -> tuple[int, int | str]:
-        """tf2 ``getLatestCommonTime``: ``(NO_ERROR, time ns)`` or ``(error, message)``."""
-        err, t = self._ccommon_time(target_id, source_id)
-        if err == NO_ERROR:
-            return err, t
-        if err == LOOKUP_ERROR:
-            return err, self._loop_message()
-        return err, self._connectivity_message(source_id, target_id)
-
-    def _walk(self, target_id: int, source_id: int, time: int) -> tuple[int, Tf7 | str, int]:
-        """tf2 ``walkToTopParent`` with ``TransformAccum`` (compiled, ``CoreBase._cwalk``).
-
-        Returns ``(NO_ERROR, transform, time used)`` or ``(error code, message, 0)``.
-        The transform maps source coordinates into target coordinates.
-        """
-        err, payload, used = self._cwalk(target_id, source_id, time)
-        if err == NO_ERROR:
-            return err, payload, used  # type: ignore[return-value]
-        if err == EXTRAPOLATION_ERROR:
-            cache = self._caches[payload]  # type: ignore[index]
+    def _failure(
+        self, function: str, target: str, source: str, failure: tuple[int, ...]
+    ) -> TransformException:
+        """tf2's exception for a failure tuple of the compiled query (``CoreBase._query``)."""
+        code = failure[0]
+        if code == EXTRAPOLATION_ERROR:
+            where, used = failure[1], failure[2]
+            cache = self._caches[where]
             detail = cache.gather(used) if cache is not None else ""
             detail = detail if isinstance(detail, str) else ""  # a link to NO_PARENT
-            return err, self._extrapolation_message(detail, source_id, target_id), 0
-        if err == LOOKUP_ERROR:
-            return err, self._loop_message(), 0
-        return err, self._connectivity_message(source_id, target_id), 0
+            return ExtrapolationException(
+                _cap(
+                    f"{detail}, when looking up transform from frame [{source}] "
+                    f"to frame [{target}]"
+                )
+            )
+        if code == CONNECTIVITY_ERROR:
+            return ConnectivityException(
+                f"Could not find a connection between '{target}' and '{source}' because "
+                "they are not part of the same tree.Tf has two or more unconnected trees."
+            )
+        if code == LOOKUP_ERROR:
+            return LookupException(
+                "The tf tree is invalid because it contains a loop.\n"
+                + self.all_frames_as_string()
+                + "\n"
+            )
+        if failure[1] == 0:
+            return _bad_frame(f"{function} argument target_frame", target, code)
+        return _bad_frame(f"{function} argument source_frame", source, code)
 
-    # ------------------------------------------------------------------ messages
+    def invalid_frame_id(
+        self, frame_id: str, argument: str = "lookupTransform argument frame_id"
+    ) -> InvalidArgumentException | None:
+        """tf2 ``validateFrameId``'s form check alone: the InvalidArgumentException a
+        query would raise for ``frame_id`` (empty, '/'-prefixed, not a string), naming
+        ``argument``; None for a well-formed id, known or not (what a wait needs: an
+        unknown id may still arrive)."""
+        if self._id_status(frame_id) == INVALID_ARGUMENT:
+            error = _bad_frame(argument, frame_id, INVALID_ARGUMENT)
+            assert isinstance(error, InvalidArgumentException)
+            return error
+        return None
 
-    def _connectivity_message(self, source_id: int, target_id: int) -> str:
-        names = self._frame_names
-        return (
-            f"Could not find a connection between '{names[target_id]}' and "
-            f"'{names[source_id]}' because they are not part of the same tree."
-            "Tf has two or more unconnected trees."
-        )
-
-    def _extrapolation_message(self, detail: str, source_id: int, target_id: int) -> str:
-        names = self._frame_names
-        return _cap(
-            f"{detail}, when looking up transform from frame [{names[source_id]}] "
-            f"to frame [{names[target_id]}]"
-        )
-
-    def _loop_message(self) -> str:
-        return (
-            "The tf tree is invalid because it contains a loop.\n"
-            + self.all_frames_as_string()
-            + "\n"
-        )
+    def _validate(self, label: str, frame_id: str) -> None:
+        """tf2 ``validateFrameId``: raise for an empty, '/'-prefixed or unknown id."""
+        code = self._id_status(frame_id)
+        if code:
+            raise _bad_frame(label, frame_id, code)
 
     # ------------------------------------------------------------------ lookups
 
@@ -391,39 +423,69 @@ class BufferCore(CoreBase):
             ConnectivityException: the frames are in different trees.
             ExtrapolationException: a link on the path has no data at ``time``.
 
-        Successful results are memoised until the next insert or ``clear()``, so repeating
-        a query (many objects at one stamp, time 0 between updates) costs a dict lookup.
+        One compiled call validates, walks and builds the result. Successful results are
+        memoised until the next insert or ``clear()``, so repeating a query (many objects
+        at one stamp, time 0 between updates) costs a dict lookup.
         """
-        t = time.ns
-        key = (target_frame, source_frame, t)
-        if self._memo_generation == self._generation:
-            hit = self._memo.get(key)
-            if hit is not None:
-                return hit
-        else:
-            self._memo.clear()
-            self._memo_generation = self._generation
-        if target_frame == source_frame:
-            if t == 0:
-                # tf2 stamps the identity with the frame's newest sample; an unknown id
-                # maps to frame 0 (NO_PARENT), whose link exists only if "NO_PARENT" was
-                # stored as a child (lookupFrameNumber / getFrame).
-                cache = self._caches[self._frame_ids.get(target_frame, 0)]
-                t = cache.latest_stamp() if cache is not None else 0
-            return TransformStamped(
-                Header(Time.from_ns(t), target_frame), source_frame, Transform()
+        out = self._query(target_frame, source_frame, time)
+        if isinstance(out, TransformStamped):
+            return out
+        raise self._failure("lookupTransform", target_frame, source_frame, out)
+
+    def try_lookup_transform(
+        self, target_frame: str, source_frame: str, time: Time
+    ) -> TransformStamped | TransformException:
+        """:meth:`lookup_transform` in one walk that returns instead of raising: the
+        transform, or the exception ``lookup_transform`` would raise (why not)."""
+        out = self._query(target_frame, source_frame, time)
+        if isinstance(out, TransformStamped):
+            return out
+        return self._failure("lookupTransform", target_frame, source_frame, out)
+
+    def check_transform(
+        self, target_frame: str, source_frame: str, time: Time
+    ) -> TransformStamped | TransformException | None:
+        """What a wait for ``lookup_transform(target_frame, source_frame, time)`` should do
+        now, in one walk (tf2's transformable requests, ``testTransformableRequests``):
+
+        Returns:
+            The transform when available; the exception when waiting cannot help — an
+            invalid id (InvalidArgumentException), a loop in the path (LookupException),
+            or ``time`` older than the path's latest common time minus ``cache_time``
+            (ExtrapolationException); None while it may still become available (unknown
+            frames, unconnected trees, no data yet at ``time``).
+        """
+        out = self._query(target_frame, source_frame, time)
+        if isinstance(out, TransformStamped):
+            return out
+        code = out[0]
+        if code in (INVALID_ARGUMENT, LOOKUP_ERROR) or (code == EXTRAPOLATION_ERROR and out[3]):
+            return self._failure("lookupTransform", target_frame, source_frame, out)
+        # An unknown target is reported first (tf2's order), but an invalid source makes
+        # the wait hopeless all the same.
+        if (
+            code == UNKNOWN_FRAME
+            and out[1] == 0
+            and self._id_status(source_frame) == INVALID_ARGUMENT
+        ):
+            return self._failure(
+                "lookupTransform", target_frame, source_frame, (INVALID_ARGUMENT, 1)
             )
-        target_id = self._validate("lookupTransform argument target_frame", target_frame)
-        source_id = self._validate("lookupTransform argument source_frame", source_frame)
-        err, result, used = self._walk(target_id, source_id, t)
-        if err:
-            raise _ERRORS[err](result)
-        out = _stamped(target_frame, source_frame, result, used)  # type: ignore[arg-type]
-        memo = self._memo
-        if len(memo) >= _MEMO_SIZE:
-            memo.clear()
-        memo[key] = out
-        return out
+        return None
+
+    def chain_frames(
+        self, target_frame: str, source_frame: str, time: Time = _LATEST
+    ) -> list[str]:
+        """The frame ids an answer for ``lookup_transform(target_frame, source_frame,
+        time)`` depends on, now and as data arrives (like tf2's ``_chainAsVector``): both
+        ids, their ancestors by each link's newest parent and, for ``time`` other than 0,
+        by the parent valid at ``time`` (a re-parented link), at most
+        ``MAX_GRAPH_DEPTH + 1`` per chain. Unknown ids are included as given.
+
+        Returns:
+            Frame ids, no duplicates, in discovery order.
+        """
+        return self._chain(target_frame, source_frame, time)
 
     def lookup_transform_full(
         self,
@@ -439,7 +501,8 @@ class BufferCore(CoreBase):
 
         Computed as ``lookup(target ← fixed @ target_time) ∘ lookup(fixed ← source @
         source_time)`` through rotation matrices, as tf2 does, so the returned rotation is
-        unit-norm. ``header.stamp`` is the stamp of the second leg (target at target_time).
+        unit-norm (:func:`tfbus._ccore.compose_full`). ``header.stamp`` is the stamp of
+        the second leg (target at target_time).
 
         Raises:
             InvalidArgumentException, LookupException, ConnectivityException,
@@ -451,33 +514,13 @@ class BufferCore(CoreBase):
         self._validate("lookupTransform argument fixed_frame", fixed_frame)
         leg1 = self.lookup_transform(fixed_frame, source_frame, source_time)
         leg2 = self.lookup_transform(target_frame, fixed_frame, target_time)
-        (x1, y1, z1), q1 = leg1.transform
-        (x2, y2, z2), (ax, ay, az, aw) = leg2.transform
-        # tf2::Transform keeps a normalised rotation matrix: normalise both quaternions.
-        n2 = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
-        ax, ay, az, aw = ax / n2, ay / n2, az / n2, aw / n2
-        bx, by, bz, bw = q1
-        n1 = math.sqrt(bx * bx + by * by + bz * bz + bw * bw)
-        bx, by, bz, bw = bx / n1, by / n1, bz / n1, bw / n1
-        tx = aw * x1 + ay * z1 - az * y1
-        ty = aw * y1 + az * x1 - ax * z1
-        tz = aw * z1 + ax * y1 - ay * x1
-        tw = -ax * x1 - ay * y1 - az * z1
-        qx = aw * bx + ax * bw + ay * bz - az * by
-        qy = aw * by + ay * bw + az * bx - ax * bz
-        qz = aw * bz + az * bw + ax * by - ay * bx
-        qw = aw * bw - ax * bx - ay * by - az * bz
-        n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
-        result: Tf7 = (
-            -tw * ax + tx * aw - ty * az + tz * ay + x2,
-            -tw * ay + ty * aw - tz * ax + tx * az + y2,
-            -tw * az + tz * aw - tx * ay + ty * ax + z2,
-            qx / n,
-            qy / n,
-            qz / n,
-            qw / n,
+        (t1, q1), (t2, q2) = leg1.transform, leg2.transform
+        v = compose_full((*t2, *q2), (*t1, *q1))
+        return TransformStamped(
+            Header(leg2.header.stamp, target_frame),
+            source_frame,
+            Transform(Vector3(*v[:3]), Quaternion(*v[3:])),
         )
-        return _stamped(target_frame, source_frame, result, leg2.header.stamp.ns)
 
     def can_transform(
         self,
@@ -494,27 +537,29 @@ class BufferCore(CoreBase):
             true (tf2_ros convention). The message is empty on success and for empty or
             '/'-prefixed ids.
         """
-        ok, msg = self._can_transform(target_frame, source_frame, time.ns)
+        ok, msg = self._can_transform(target_frame, source_frame, time)
         return (ok, msg) if return_debug_tuple else ok
 
-    def _can_transform(self, target_frame: str, source_frame: str, t: int) -> tuple[bool, str]:
-        if target_frame == source_frame:
+    def _can_transform(self, target_frame: str, source_frame: str, time: Time) -> tuple[
+        bool, str
+    ]:
+        out = self._query(target_frame, source_frame, time)
+        if isinstance(out, TransformStamped):
             return True, ""
-        if not target_frame or target_frame[0] == "/":
-            return False, ""
-        if not source_frame or source_frame[0] == "/":
-            return False, ""
-        target_id = self._frame_ids.get(target_frame, 0)
-        source_id = self._frame_ids.get(source_frame, 0)
-        if target_id == 0 or source_id == 0:
+        code = out[0]
+        if code in (INVALID_ARGUMENT, UNKNOWN_FRAME):
+            # tf2 canTransform: empty / '/'-prefixed ids first (no message), then both
+            # unknown ids named.
+            for frame in (target_frame, source_frame):
+                if not isinstance(frame, str) or not frame or frame[0] == "/":
+                    return False, ""
             msgs = []
-            if target_id == 0:
+            if not self.frame_exists(target_frame):
                 msgs.append(f"canTransform: target_frame {target_frame} does not exist.")
-            if source_id == 0:
+            if not self.frame_exists(source_frame):
                 msgs.append(f"canTransform: source_frame {source_frame} does not exist.")
             return False, " ".join(msgs)
-        err, result, _ = self._walk(target_id, source_id, t)
-        return (False, result) if err else (True, "")  # type: ignore[return-value]
+        return False, str(self._failure("lookupTransform", target_frame, source_frame, out))
 
     def can_transform_full(
         self,
@@ -533,35 +578,31 @@ class BufferCore(CoreBase):
         is appended when the *source* is unknown.
         """
         ok, msg = self._can_transform_full(
-            target_frame, target_time.ns, source_frame, source_time.ns, fixed_frame
+            target_frame, target_time, source_frame, source_time, fixed_frame
         )
         return (ok, msg) if return_debug_tuple else ok
 
     def _can_transform_full(
-        self, target: str, target_t: int, source: str, source_t: int, fixed: str
+        self, target: str, target_t: Time, source: str, source_t: Time, fixed: str
     ) -> tuple[bool, str]:
         for frame in (target, source, fixed):
-            if not frame or frame[0] == "/":
+            if not isinstance(frame, str) or not frame or frame[0] == "/":
                 return False, ""
-        ids = self._frame_ids
-        target_id, source_id, fixed_id = ids.get(target, 0), ids.get(source, 0), ids.get(fixed, 0)
-        if target_id == 0 or source_id == 0 or fixed_id == 0:
+        known = self.frame_exists
+        if not (known(target) and known(source) and known(fixed)):
             msg = ""
-            if target_id == 0:
+            if not known(target):
                 msg += f"canTransform: target_frame {target} does not exist."
-            if source_id == 0:
-                if target_id == 0:
+            if not known(source):
+                if not known(target):
                     msg += " "
                 msg += f"canTransform: source_frame {source} does not exist."
                 msg += f" fixed_frame: {fixed}does not exist."
             return False, msg
-        err, result, _ = self._walk(target_id, fixed_id, target_t)
-        if err:
-            return False, result  # type: ignore[return-value]
-        err, result, _ = self._walk(fixed_id, source_id, source_t)
-        if err:
-            return False, result  # type: ignore[return-value]
-        return True, ""
+        ok, msg = self._can_transform(target, fixed, target_t)
+        if not ok:
+            return ok, msg
+        return self._can_transform(fixed, source, source_t)
 
     def get_latest_common_time(self, target_frame: str, source_frame: str) -> Time:
         """The latest time at which the whole path between the two frames has data — what
@@ -574,12 +615,16 @@ class BufferCore(CoreBase):
             TransformException: the frames are not connected, or the path has a loop
                 (tf2_py raises the base class here).
         """
-        target_id = self._validate("get_latest_common_time", target_frame)
-        source_id = self._validate("get_latest_common_time", source_frame)
-        err, result = self._common_time(target_id, source_id)
+        self._validate("get_latest_common_time", target_frame)
+        self._validate("get_latest_common_time", source_frame)
+        err, t = self._ccommon_time(self._frame_ids[target_frame], self._frame_ids[source_frame])
+        if err == LOOKUP_ERROR:
+            raise TransformException(str(self._failure("", target_frame, source_frame, (err,))))
         if err:
-            raise TransformException(result)
-        return Time.from_ns(result)  # type: ignore[arg-type]
+            raise TransformException(
+                str(self._failure("", target_frame, source_frame, (CONNECTIVITY_ERROR,)))
+            )
+        return Time.from_ns(t)
 
     # ------------------------------------------------------------------ introspection
 
@@ -607,23 +652,28 @@ class BufferCore(CoreBase):
         """One line ``Frame X exists with parent Y.`` per frame that has a link, in
         registration order (tf2 ``allFramesAsString``)."""
         return "".join(
-            f"Frame {child} exists with parent {parent}.\n"
-            for child, parent, *_ in self.frame_info()
+            f"Frame {info.child} exists with parent {info.parent}.\n"
+            for info in self.frame_info()
         )
 
     def all_frames_as_yaml(self, current_time: Time | None = None) -> str:
         """The frame tree as YAML in tf2's format (``allFramesAsYAML``): per child frame
         its ``parent``, ``broadcaster`` (authority), ``rate`` (Hz, samples / span),
         ``most_recent_transform``, ``oldest_transform``, ``buffer_length`` (seconds,
-        3 decimals) and, when ``current_time`` is given, ``transform_delay``."""
+        3 decimals) and, when ``current_time`` is given, ``transform_delay``.
+
+        tf2's text, character for character, for ordinary ids; an id YAML would misread
+        (``a: b``, ``#x``, ``true``, quotes, line breaks, ...) is quoted, so the text is
+        always valid YAML that reads back every id unchanged.
+        """
         out: list[str] = []
         for child, parent, authority, _static, samples, oldest, newest in self.frame_info():
             if not samples:  # a dynamic link emptied by clear(): tf2 lists only data
                 continue
             rate = samples / max((newest - oldest) / 1e9, 0.0001)
-            out.append(f"{child}: \n")
-            out.append(f"  parent: '{parent}'\n")
-            out.append(f"  broadcaster: '{authority}'\n")
+            out.append(f"{_yaml_key(child)}: \n")
+            out.append(f"  parent: {_yaml_quoted(parent)}\n")
+            out.append(f"  broadcaster: {_yaml_quoted(authority)}\n")
             out.append(f"  rate: {rate:.3f}\n")
             out.append(f"  most_recent_transform: {newest / 1e9:.3f}\n")
             out.append(f"  oldest_transform: {oldest / 1e9:.3f}\n")
@@ -632,11 +682,11 @@ class BufferCore(CoreBase):
             out.append(f"  buffer_length: {(newest - oldest) / 1e9:.3f}\n")
         return "".join(out) if out else "[]"
 
-    def frame_info(self) -> Iterable[tuple[str, str, str, bool, int, int, int]]:
-        """Per linked frame, in registration order: ``(child, parent, authority, is_static,
-        samples, oldest ns, newest ns)`` — the data behind ``all_frames_as_string`` and
-        ``all_frames_as_yaml``, for tools. The parent of an emptied link is
-        ``NO_PARENT``."""
+    def frame_info(self) -> Iterator[FrameInfo]:
+        """Per linked frame, in registration order, a :class:`FrameInfo` ``(child,
+        parent, authority, is_static, samples, oldest_ns, newest_ns)`` — the data behind
+        ``all_frames_as_string`` and ``all_frames_as_yaml``, for tools. The parent of an
+        emptied link is ``NO_PARENT``."""
         names = self._frame_names
         for fid in range(1, len(self._caches)):
             cache = self._caches[fid]
@@ -644,7 +694,7 @@ class BufferCore(CoreBase):
                 continue
             r = cache.gather(0)
             parent = 0 if isinstance(r, str) else r[0]
-            yield (
+            yield FrameInfo(
                 names[fid],
                 names[parent],
                 self._authority.get(fid, "no recorded authority"),
@@ -654,21 +704,6 @@ class BufferCore(CoreBase):
                 cache.latest_stamp(),
             )
 
-    def _chain_ids(self, frame_id: str) -> list[int]:
-        """Ids of ``frame_id`` and its ancestors by each link's newest sample (for waiter
-        indexing; stops at loops)."""
-        fid = self._frame_ids.get(frame_id, 0)
-        out: list[int] = []
-        seen: set[int] = set()
-        while fid and fid not in seen:
-            seen.add(fid)
-            out.append(fid)
-            cache = self._caches[fid]
-            if cache is None:
-                break
-            fid = cache.latest()[1]
-        return out
-
     def __repr__(self) -> str:
         return (
             f"BufferCore(cache_time={self.cache_time_ns / 1e9:g}, "
@@ -676,17 +711,60 @@ class BufferCore(CoreBase):
         )
 
 
-_new = tuple.__new__
-
-
-def _stamped(target: str, source: str, v: Tf7, stamp_ns: int) -> TransformStamped:
-    """Build the result message; ``tuple.__new__`` skips NamedTuple's Python-level
-    ``__new__`` (half the cost of a lookup at depth 1)."""
-    return _new(
-        TransformStamped,
-        (
-            _new(Header, (Time.from_ns(stamp_ns), target)),
-            source,
-            _new(Transform, (_new(Vector3, v[:3]), _new(Quaternion, v[3:]))),
-        ),
+def _invalid(parent: str, child: str, values: Tf7, authority: str) -> InvalidArgumentException:
+    """InvalidArgumentException listing every problem of a transform in tf2's order
+    (``BufferCore::setTransformImpl``) plus tfbus's TF_INF_INPUT."""
+    codes: list[str] = []
+    problems: list[str] = []
+    if child == parent:
+        codes.append("TF_SELF_TRANSFORM")
+        problems.append(f"header.frame_id and child_frame_id are the same ({child!r})")
+    if not child:
+        codes.append("TF_NO_CHILD_FRAME_ID")
+        problems.append("child_frame_id is empty")
+    if not parent:
+        codes.append("TF_NO_FRAME_ID")
+        problems.append("header.frame_id is empty")
+    nans = [f"{name} = nan" for name, v in zip(_FIELDS, values, strict=True) if math.isnan(v)]
+    if nans:
+        codes.append("TF_NAN_INPUT")
+        problems.extend(nans)
+    infs = [
+        f"{name} = {v}" for name, v in zip(_FIELDS[:3], values[:3], strict=True) if math.isinf(v)
+    ]
+    if infs:
+        codes.append("TF_INF_INPUT")
+        problems.extend(infs)
+    qx, qy, qz, qw = values[3:]
+    # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
+    norm2 = qw * qw + qx * qx + qy * qy + qz * qz
+    if not abs(norm2 - 1.0) < 0.01:
+        codes.append("TF_DENORMALIZED_QUATERNION")
+        problems.append(
+            f"transform.rotation = ({qx}, {qy}, {qz}, {qw}) has squared norm {norm2}, "
+            "not within 0.01 of 1"
+        )
+    return InvalidArgumentException(
+        f"Invalid transform for child_frame_id {child!r} from authority {authority!r}: "
+        + "; ".join(problems),
+        codes=tuple(codes),
     )
+
+
+def _bad_frame(label: str, frame: object, code: int) -> TransformException:
+    """tf2 ``validateFrameId``'s exception for a query argument ``label`` (e.g.
+    ``lookupTransform argument target_frame``)."""
+    if not isinstance(frame, str):
+        return InvalidArgumentException(
+            f"Invalid argument {frame!r} passed to {label}: frame ids are strings"
+        )
+    if code == INVALID_ARGUMENT:
+        if not frame:
+            return InvalidArgumentException(
+                f"Invalid argument passed to {label} in tf2 frame_ids cannot be empty"
+            )
+        return InvalidArgumentException(
+            f'Invalid argument "{frame}" passed to {label} in tf2 frame_ids '
+            "cannot start with a '/' like: "
+        )
+    return LookupException(f'"{frame}" passed to {label} does not exist. ')

@@ -14,8 +14,9 @@ A mobile base ``base_link`` carries a laser ``base_laser`` mounted 10 cm forward
 
     [ERROR] ...: Received an exception trying to transform a point from "base_laser" to "base_link": <tf2 message>
 
-Run it with ``tfbus demo``, ``make demo`` or ``python demos/robot_setup_tf.py``;
-``--duration`` (default: until Ctrl-C, which exits cleanly), ``--rate``, ``--listen-rate``.
+Run it with ``tfbus demo``, ``make demo`` or ``python demos/robot_setup_tf.py`` (the same
+click command, :mod:`tfbus.cli.demo`, parses the options once); ``--duration`` (default:
+until Ctrl-C, which exits cleanly), ``--rate``, ``--listen-rate``.
 On exit it prints one summary line: transforms sent, measured broadcast rate, and the
 broadcaster's timer jitter (p50/p99 lateness of its ticks).
 
@@ -26,18 +27,15 @@ The tutorial's three terminals -- the two nodes as separate processes, over Zeno
     tfbus monitor --bus zenoh           # a third terminal: rates, delays, live broadcasters
 
 (or ``python demos/robot_setup_tf.py listener``). ``--bus SPEC`` picks the bus
-(:func:`tfbus.transports.zenoh.parse_bus_spec`; default ``zenoh``: this machine, no
+(:mod:`tfbus.transports.spec`: ``zenoh``, ``ros2``, ``ros1``; default ``zenoh``: this machine, no
 configuration). :func:`run_broadcaster` and :func:`run_listener` run one node on any open
 bus; each prints its summary line on exit (Ctrl-C / SIGTERM exit cleanly).
 """
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import signal
-import sys
-from collections.abc import AsyncIterator, Callable, Sequence
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
@@ -71,7 +69,6 @@ __all__ = [
     "format_error",
     "format_info",
     "listener_node",
-    "main",
     "open_bus",
     "run_broadcaster",
     "run_demo",
@@ -327,126 +324,15 @@ async def _borrowed(bus: Bus) -> AsyncIterator[Bus]:
 
 
 def open_bus(spec: str = "zenoh", *, name: str | None = None) -> Bus:
-    """A new (not yet opened) bus carried over Zenoh, from a ``--bus`` value.
+    """A new (not yet opened) bus from a ``--bus`` value (:mod:`tfbus.transports.spec`:
+    ``zenoh``, ``ros2``, ``ros1``, ``memory``, ...).
 
     ``name`` is the node name used unless ``spec`` gives one (``zenoh?name=...``).
 
     Raises:
-        ImportError: if the Zenoh transport is not installed (``tfbus[zenoh]``).
+        TransportError: if the scheme's extra is not installed (the message names it).
         ValueError: if ``spec`` is not a valid bus spec.
     """
-    from tfbus.transports.zenoh import parse_bus_spec, zenoh_bus_from_options
+    from tfbus.transports.spec import open_bus as open_spec_bus
 
-    options = parse_bus_spec(spec)
-    if options.name is None and name is not None:
-        options = dataclasses.replace(options, name=name)
-    return zenoh_bus_from_options(options)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """Command-line options of the demo."""
-    parser = argparse.ArgumentParser(
-        prog="robot_setup_tf",
-        description="The ROS 'Setting up your robot using tf' tutorial on a tfbus bus: both "
-        "nodes in one process, or one ROLE per process over Zenoh (the tutorial's terminals).",
-    )
-    parser.add_argument(
-        "role",
-        nargs="?",
-        choices=("both", "broadcaster", "listener"),
-        default="both",
-        help="which node(s) to run (default: both, on an in-process bus)",
-    )
-    parser.add_argument(
-        "--bus",
-        metavar="SPEC",
-        default=None,
-        help="bus to run on, e.g. 'zenoh' or 'zenoh?connect=tcp/127.0.0.1:7448' "
-        "(default: 'zenoh' for one role, an in-process bus for both)",
-    )
-    parser.add_argument(
-        "--duration", type=float, default=None, help="seconds to run (default: until Ctrl-C)"
-    )
-    parser.add_argument("--rate", type=float, default=100.0, help="broadcast rate, Hz")
-    parser.add_argument("--listen-rate", type=float, default=1.0, help="listener rate, Hz")
-    parser.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the demo from the command line; returns the exit status."""
-    args = build_parser().parse_args(argv)
-    for name in ("rate", "listen_rate"):
-        if getattr(args, name) <= 0:
-            print(f"error: --{name.replace('_', '-')} must be positive", file=sys.stderr)
-            return 2
-    if args.role == "both" and args.bus is None:
-        anyio.run(
-            lambda: run_demo(
-                duration=args.duration,
-                rate=args.rate,
-                listen_rate=args.listen_rate,
-                handle_signals=True,
-                out=_print_line,
-            ),
-            backend=args.backend,
-        )
-        return 0
-    spec = args.bus if args.bus is not None else "zenoh"
-    names = {"broadcaster": BROADCASTER_NAME, "listener": LISTENER_NAME}
-    try:
-        bus = open_bus(spec, name=names.get(args.role, "robot_setup_tf"))
-    except ImportError as err:
-        print(f"error: --bus needs the Zenoh transport (pip install 'tfbus[zenoh]'): {err}",
-              file=sys.stderr)
-        return 2
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except Exception as err:
-        if not _is_bus_error(err):
-            raise
-        print(f"error: cannot configure the bus {spec!r}: {err}", file=sys.stderr)
-        return 2
-    try:
-        anyio.run(_run_role, args, bus, spec, backend=args.backend)
-    except KeyboardInterrupt:  # Ctrl-C while the session was still opening
-        return 130
-    except Exception as err:
-        if not _is_bus_error(err):
-            raise
-        print(f"error: cannot open the bus {spec!r}: {err}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _is_bus_error(err: BaseException) -> bool:
-    """Zenoh's own errors (an endpoint in use, an unreadable config file) and OS errors."""
-    return isinstance(err, OSError) or type(err).__module__.partition(".")[0] == "zenoh"
-
-
-def _print_line(line: str) -> None:
-    print(line, flush=True)
-
-
-async def _run_role(args: argparse.Namespace, bus: Bus, spec: str) -> None:
-    async with bus:
-        transport = bus.transport
-        node = getattr(transport, "node_id", "")
-        name = getattr(transport, "name", args.role)
-        print(f"[ INFO] {name}: running the {args.role} node on {spec} (node {node})",
-              file=sys.stderr, flush=True)
-        if args.role == "broadcaster":
-            await run_broadcaster(bus, duration=args.duration, rate=args.rate,
-                                  out=_print_line, handle_signals=True)
-        elif args.role == "listener":
-            await run_listener(bus, duration=args.duration, listen_rate=args.listen_rate,
-                               out=_print_line, handle_signals=True)
-        else:
-            await run_demo(duration=args.duration, rate=args.rate,
-                           listen_rate=args.listen_rate, out=_print_line,
-                           handle_signals=True, bus=bus)
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return open_spec_bus(spec, default_name=name)

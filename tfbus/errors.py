@@ -34,7 +34,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from .time import Time
+from .time import Time, format_stamp
 
 __all__ = [
     "BagError",
@@ -147,7 +147,7 @@ class BagReadError(BagError):
         if offset is not None:
             where.append(f"byte {offset}")
         if last_time is not None:
-            where.append(f"after bag time {last_time.sec}.{last_time.nanosec:09d}")
+            where.append(f"after bag time {format_stamp(last_time)}")
         where.append(f"{messages_read} tf message(s) read")
         super().__init__(f"{path}: {message}; reading stopped ({', '.join(where)})", path)
         self.reason = message

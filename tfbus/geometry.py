@@ -17,11 +17,11 @@ Formulas:
 * :func:`compose`, :func:`inverse`, :func:`rotate_vectors`, :func:`apply_transform` and
   :func:`quat_multiply` evaluate tf2's expressions (``tf2/LinearMath/Quaternion.h``
   ``operator*`` and ``quatRotate``, ``tf2/src/buffer_core.cpp`` ``TransformAccum``) in the
-  same order as :mod:`tfbus._tf2math`: row by row, results are bit-for-bit equal to the
+  same order as :mod:`tfbus._ccore`'s scalar math: row by row, results are bit-for-bit equal to the
   scalar ones that :class:`~tfbus.core.BufferCore` computes. One quaternion against many
   vectors or points uses the equivalent 3x3 matrix instead (KDL's
   ``Rotation::Quaternion``, as tf2_geometry_msgs), ~5x faster and equal within a few ulp.
-* :func:`slerp` *is* tf2's ``Quaternion::slerp`` (:func:`tfbus._tf2math.slerp`);
+* :func:`slerp` *is* tf2's ``Quaternion::slerp`` (:func:`tfbus._ccore.slerp`);
   :func:`slerp_batch` repeats it with numpy and agrees to within a few ulp (numpy's
   ``arccos`` may round differently from the C library's ``acos``).
 * Matrices and Euler angles go through transforms3d (``quaternions.quat2mat`` /
@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from transforms3d import euler as _t3d_euler  # type: ignore[import-untyped]
 from transforms3d import quaternions as _t3d_quat
 
-from tfbus import _tf2math
+from tfbus import _ccore
 from tfbus.messages import (
     Point,
     PointStamped,
@@ -127,7 +127,7 @@ def _fit(arr: Array, n: int | None) -> Array:
 
 
 def _quat_multiply(a: Array, b: Array) -> Array:
-    # Quaternion.h operator* / _tf2math.quat_multiply, same evaluation order.
+    # Quaternion.h operator* / _ccore.quat_multiply, same evaluation order.
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return np.stack(
@@ -142,7 +142,7 @@ def _quat_multiply(a: Array, b: Array) -> Array:
 
 
 def _quat_rotate(q: Array, v: Array) -> Array:
-    # tf2 quatRotate: q ⊗ (v, 0) ⊗ conj(q), as _tf2math.quat_rotate, same evaluation order.
+    # tf2 quatRotate: q ⊗ (v, 0) ⊗ conj(q), as _ccore.quat_rotate, same evaluation order.
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
     tx = qw * vx + qy * vz - qz * vy
@@ -281,7 +281,7 @@ def compose(
         ValueError: wrong shapes, or batches of different N.
 
     Source: ``tf2/src/buffer_core.cpp`` ``TransformAccum::accum``;
-    :func:`tfbus._tf2math.compose` gives bit-identical numbers for one transform.
+    :func:`tfbus._ccore.compose` gives bit-identical numbers for one transform.
     """
     ta = _as_array(translation_a, 3, "translation_a")
     qa = _as_array(rotation_a, 4, "rotation_a")
@@ -306,7 +306,7 @@ def inverse(translation: npt.ArrayLike, rotation: npt.ArrayLike) -> tuple[Array,
         ValueError: wrong shapes, or batches of different N.
 
     Source: ``tf2/src/buffer_core.cpp`` ``TransformAccum::finalize``;
-    :func:`tfbus._tf2math.inverse`.
+    :func:`tfbus._ccore.inverse`.
     """
     t = _as_array(translation, 3, "translation")
     q = _as_array(rotation, 4, "rotation")
@@ -333,7 +333,7 @@ def slerp(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: float) -> Quaternion:
         ZeroDivisionError: if either quaternion is zero (tf2 would return NaN).
 
     Source: ``tf2/LinearMath/Quaternion.h`` ``Quaternion::slerp`` via
-    :func:`tfbus._tf2math.slerp`.
+    :func:`tfbus._ccore.slerp`.
     """
     a = np.asarray(q0, dtype=np.float64)
     b = np.asarray(q1, dtype=np.float64)
@@ -342,7 +342,7 @@ def slerp(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: float) -> Quaternion:
             raise ValueError(f"{name} must have shape (4,), got {arr.shape}")
     ax, ay, az, aw = (float(c) for c in a)
     bx, by, bz, bw = (float(c) for c in b)
-    return Quaternion(*_tf2math.slerp(ax, ay, az, aw, bx, by, bz, bw, float(ratio)))
+    return Quaternion(*_ccore.slerp(ax, ay, az, aw, bx, by, bz, bw, float(ratio)))
 
 
 def slerp_batch(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: npt.ArrayLike) -> Array:
@@ -556,7 +556,7 @@ def _point_through(
 ) -> tuple[float, float, float]:
     tr = ts.transform.translation
     q = ts.transform.rotation
-    rx, ry, rz = _tf2math.quat_rotate(q.x, q.y, q.z, q.w, x, y, z)
+    rx, ry, rz = _ccore.quat_rotate(q.x, q.y, q.z, q.w, x, y, z)
     return rx + tr.x, ry + tr.y, rz + tr.z
 
 
@@ -595,7 +595,7 @@ def do_transform_vector3(vector: Vector3Stamped, transform: TransformStamped) ->
     Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(Vector3Stamped)``.
     """
     q = transform.transform.rotation
-    x, y, z = _tf2math.quat_rotate(q.x, q.y, q.z, q.w, *vector.vector)
+    x, y, z = _ccore.quat_rotate(q.x, q.y, q.z, q.w, *vector.vector)
     return Vector3Stamped(transform.header, Vector3(x, y, z))
 
 
@@ -616,5 +616,5 @@ def do_transform_pose(pose: PoseStamped, transform: TransformStamped) -> PoseSta
     x, y, z = _point_through(transform, *p.position)
     q = transform.transform.rotation
     o = p.orientation
-    qx, qy, qz, qw = _tf2math.quat_multiply(q.x, q.y, q.z, q.w, o.x, o.y, o.z, o.w)
+    qx, qy, qz, qw = _ccore.quat_multiply(q.x, q.y, q.z, q.w, o.x, o.y, o.z, o.w)
     return PoseStamped(transform.header, Pose(Point(x, y, z), Quaternion(qx, qy, qz, qw)))

@@ -5,16 +5,18 @@
     async with Bus() as bus, TransformListener(buffer, bus):
         ...   # buffer fills up with every transform broadcast on bus
 
-Each transform of each message is stored on its own: one bad transform (invalid
-input, data older than the cache, a repeated stamp) is counted and logged (rate-limited)
-and the valid ones beside it are stored. Objects that are not ``TFMessage``s are
+Each message is stored with one ``set_transforms`` call; one bad transform (invalid
+input, data older than the cache, a repeated stamp) is counted and logged (rate-limited
+on the listener's clock, :mod:`tfbus.ratelimit`) and the valid ones beside it are
+stored. On each message the listener reads its clock and clears the buffer when time
+jumped back (tf2_ros ``TransformListener``). Objects that are not ``TFMessage``s are
 counted and skipped. The listener never dies of bad input.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Protocol
@@ -22,10 +24,13 @@ from typing import Any, Protocol
 import anyio
 import anyio.abc
 
+from tfbus.buffer import Buffer
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, Subscription
 from tfbus.clock import Clock, SystemClock
+from tfbus.core import BatchResult
 from tfbus.errors import TransformException
 from tfbus.messages import TFMessage, TransformStamped
+from tfbus.ratelimit import RateLimitedLog
 
 __all__ = ["ListenerStatistics", "TransformListener", "TransformSink"]
 
@@ -33,49 +38,24 @@ _log = logging.getLogger(__name__)
 
 
 class TransformSink(Protocol):
-    """What a listener feeds: ``BufferCore`` and ``Buffer`` both qualify.
+    """What a listener feeds: :class:`~tfbus.core.BufferCore` and
+    :class:`~tfbus.buffer.Buffer` both qualify.
 
-    A sink that also has ``set_transforms(transforms, authority, is_static) -> (stored,
-    refused, [(index, exception)])`` (as :meth:`tfbus.core.BufferCore.set_transforms`)
-    gets each TFMessage in one call; otherwise the listener stores transform by transform.
+    Each TFMessage is stored with one ``set_transforms`` call (as
+    :meth:`tfbus.core.BufferCore.set_transforms`: ``stored``, ``refused`` and
+    ``errors``, ``[(index, exception)]``, are read from its result); ``clear`` is called
+    when the clock jumps back (tf2_ros ``TransformListener``).
     """
 
-    def set_transform(self, transform: TransformStamped, authority: str, /) -> bool:
-        """Store a dynamic transform; False if refused (old or repeated)."""
+    def set_transforms(
+        self, transforms: Iterable[TransformStamped], authority: str, is_static: bool, /
+    ) -> BatchResult:
+        """Store a batch; report counts and per-item errors; never raise for bad items."""
         ...
 
-    def set_transform_static(self, transform: TransformStamped, authority: str, /) -> bool:
-        """Store a static transform; False if refused."""
+    def clear(self) -> None:
+        """Drop all dynamic data (static transforms stay)."""
         ...
-
-
-_Errors = list[tuple[int, Exception]]
-_StoreMany = Callable[[Iterable[Any], str, bool], tuple[int, int, _Errors]]
-
-
-def _store_each(sink: TransformSink) -> _StoreMany:
-    """A batch store over a sink that only has the single-transform methods, with the
-    result and error contract of :meth:`tfbus.core.BufferCore.set_transforms`."""
-
-    def store_many(transforms: Iterable[Any], authority: str, is_static: bool) -> tuple[
-        int, int, _Errors
-    ]:
-        store = sink.set_transform_static if is_static else sink.set_transform
-        stored = refused = 0
-        errors: _Errors = []
-        for i, ts in enumerate(transforms):
-            try:
-                if not isinstance(ts, TransformStamped):
-                    raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
-                if store(ts, authority):
-                    stored += 1
-                else:
-                    refused += 1
-            except Exception as exc:
-                errors.append((i, exc))
-        return stored, refused, errors
-
-    return store_many
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,31 +85,6 @@ class ListenerStatistics:
     dropped: int
 
 
-class _RateLimitedLog:
-    """At most one warning per reason per ``period`` seconds of clock time."""
-
-    __slots__ = ("_clock", "_last", "_period_ns", "_suppressed")
-
-    def __init__(self, clock: Clock, period: float) -> None:
-        self._clock = clock
-        self._period_ns = round(period * 1e9)
-        self._last: dict[str, int] = {}
-        self._suppressed: dict[str, int] = {}
-
-    def warn(self, reason: str, fmt: str, *args: object) -> None:
-        if not _log.isEnabledFor(logging.WARNING):
-            return
-        now = self._clock.now().ns
-        last = self._last.get(reason)
-        if last is not None and last <= now < last + self._period_ns:
-            self._suppressed[reason] = self._suppressed.get(reason, 0) + 1
-            return
-        self._last[reason] = now
-        suppressed = self._suppressed.pop(reason, 0)
-        more = f" ({suppressed} more like this suppressed)" if suppressed else ""
-        _log.warning(fmt + "%s", *args, more)
-
-
 class TransformListener:
     """Subscribes to ``/tf`` and ``/tf_static`` and stores every transform in a buffer.
 
@@ -141,12 +96,13 @@ class TransformListener:
 
     Args:
         buffer: a ``BufferCore``, a ``Buffer``, or anything with their
-            ``set_transform(ts, authority) -> bool`` and ``set_transform_static`` (see
-            :class:`TransformSink`).
+            ``set_transforms`` and ``clear`` (see :class:`TransformSink`).
         bus: the bus to listen on (must be open).
         authority: the authority recorded with each transform (tf2_ros's Python
             listener uses ``"default_authority"``).
-        clock: only used to rate-limit log messages (default: ``SystemClock()``).
+        clock: read on each message, as tf2_ros does: a time earlier than the last one
+            read is a jump back, which clears the buffer; also paces log messages.
+            Default: the buffer's clock for a ``Buffer``, else ``SystemClock()``.
         queue_size: queue capacity of each subscription (default: the bus's).
         log_period: seconds between two log messages for the same reason.
     """
@@ -163,14 +119,17 @@ class TransformListener:
     ) -> None:
         """Create a listener (not yet listening; use ``async with``)."""
         self._buffer = buffer
-        # BufferCore and Buffer store a whole TFMessage in one compiled call.
-        self._store_many: _StoreMany = getattr(buffer, "set_transforms", None) or _store_each(
-            buffer
-        )
         self._bus = bus
         self._authority = authority
         self._queue_size = queue_size
-        self._log = _RateLimitedLog(clock if clock is not None else SystemClock(), log_period)
+        if clock is None:
+            clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
+        self._clock = clock
+        # A Buffer reading its own clock clears itself on a jump back (Clock.on_jump);
+        # any other sink is cleared by the listener, as tf2_ros's listener does.
+        self._clears_sink = not (isinstance(buffer, Buffer) and buffer.clock is clock)
+        self._last_update = -1
+        self._log = RateLimitedLog(_log, log_period)
         self._task_group: anyio.abc.TaskGroup | None = None
         self._subs: list[Subscription[Any]] = []
         self._entered = False
@@ -241,13 +200,30 @@ class TransformListener:
                 return
             self._handle(message, static)
 
+    def _warn(self, msg: str, *args: object) -> None:
+        self._log.log(self._clock.now().ns / 1e9, logging.WARNING, msg, *args)
+
+    def _check_clock(self) -> None:
+        """tf2_ros ``TransformListener::subscription_callback_impl``: read the clock on
+        each message; a time earlier than the last one read is a jump back, which clears
+        the buffer (reading a ``SystemClock`` also fires its ``on_jump`` callbacks, which
+        is how a ``Buffer`` on that clock clears itself)."""
+        now = self._clock.now().ns
+        if now < self._last_update and self._clears_sink:
+            _log.warning(
+                "Detected jump back in time of %.3f s. Clearing TF buffer.",
+                (self._last_update - now) / 1e9,
+            )
+            self._buffer.clear()
+        self._last_update = now
+
     def _handle(self, message: object, static: bool) -> None:
         self._messages += 1
+        self._check_clock()
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         if not isinstance(message, TFMessage):
             self._malformed += 1
-            self._log.warn(
-                "malformed",
+            self._warn(
                 "ignoring a %s on %s: expected TFMessage",
                 type(message).__name__,
                 topic,
@@ -257,19 +233,23 @@ class TransformListener:
             transforms = iter(message.transforms)
         except TypeError:
             self._malformed += 1
-            self._log.warn("malformed", "ignoring a TFMessage on %s: not iterable", topic)
+            self._warn("ignoring a TFMessage on %s: not iterable", topic)
             return
-        stored, refused, errors = self._store_many(transforms, self._authority, static)
-        self._stored += stored
-        self._refused += refused
-        for _, exc in errors:
+        try:
+            result = self._buffer.set_transforms(transforms, self._authority, static)
+        except Exception as bug:  # a sink that breaks its contract: count, never die
+            self._malformed += 1
+            self._warn("ignoring a TFMessage on %s: %s: %s", topic, type(bug).__name__, bug)
+            return
+        self._stored += result.stored
+        self._refused += result.refused
+        for _, exc in result.errors:
             if isinstance(exc, TransformException):
                 self._invalid += 1
-                self._log.warn("invalid", "ignoring a transform on %s: %s", topic, exc)
+                self._warn("ignoring a transform on %s: %s", topic, exc)
             else:
                 self._malformed += 1
-                self._log.warn(
-                    "malformed",
+                self._warn(
                     "ignoring a malformed transform on %s: %s: %s",
                     topic,
                     type(exc).__name__,

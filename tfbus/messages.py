@@ -3,17 +3,36 @@
 All are immutable ``NamedTuple``s: cheap to create (a lookup returns one per call),
 hashable, unpackable (``x, y, z = v``) and with readable ``repr``s. Units are metres for
 translations and points; quaternions are (x, y, z, w), w last, as in ROS messages.
+
+They are messages, not vectors: ``+`` and ``*`` (which on a plain tuple would
+concatenate or repeat it, ``Vector3(1, 2, 3) + Vector3(1, 1, 1)`` giving a 6-tuple)
+raise ``TypeError`` on every type here. For arithmetic, use numpy on the fields
+(``np.add(v, w)``, ``np.asarray(v) * 2``) or :mod:`tfbus.geometry`.
+
+Coming from tf2_ros, where messages are mutable (``t.header.frame_id = "map"``): here
+you build a changed copy with ``_replace`` (``typing.NamedTuple``), nested for nested
+fields::
+
+    t2 = t._replace(child_frame_id="laser")
+    t3 = t._replace(header=t.header._replace(frame_id="map", stamp=Time(5)))
+    t4 = t._replace(
+        transform=t.transform._replace(translation=Vector3(1.0, 0.0, 0.0))
+    )
+
+The original is unchanged, so a message can be shared between tasks, latched on a bus
+or kept in a cache without copies.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, NoReturn
 
 from tfbus.time import Time
 
 __all__ = [
     "Header",
+    "JointState",
     "Point",
     "PointStamped",
     "Pose",
@@ -27,12 +46,27 @@ __all__ = [
 ]
 
 
+def _refused(msg: tuple[object, ...], op: str) -> TypeError:
+    """The TypeError for ``+``/``*`` on a message (tuple concatenation or repetition)."""
+    return TypeError(
+        f"unsupported operand for {op}: {type(msg).__name__} is an immutable message, "
+        f"not a vector (on a tuple, {op} would concatenate or repeat the fields). "
+        f"Compute on the fields (numpy, tfbus.geometry) and build a changed copy with "
+        f"msg._replace(field=value)"
+    )
+
+
 class Vector3(NamedTuple):
     """geometry_msgs/Vector3: a direction or translation, metres."""
 
     x: float = 0.0
     y: float = 0.0
     z: float = 0.0
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
 
 
 class Point(NamedTuple):
@@ -41,6 +75,11 @@ class Point(NamedTuple):
     x: float = 0.0
     y: float = 0.0
     z: float = 0.0
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
 
 
 class Quaternion(NamedTuple):
@@ -53,6 +92,11 @@ class Quaternion(NamedTuple):
     y: float = 0.0
     z: float = 0.0
     w: float = 1.0
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
 
 
 _ZERO_VECTOR = Vector3()
@@ -68,12 +112,22 @@ class Transform(NamedTuple):
     translation: Vector3 = _ZERO_VECTOR
     rotation: Quaternion = _IDENTITY_QUATERNION
 
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
 
 class Pose(NamedTuple):
     """geometry_msgs/Pose: ``position`` (metres) and ``orientation`` (x, y, z, w)."""
 
     position: Point = Point()
     orientation: Quaternion = _IDENTITY_QUATERNION
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
 
 
 _ZERO_TIME = Time(0)
@@ -84,6 +138,11 @@ class Header(NamedTuple):
 
     stamp: Time = _ZERO_TIME
     frame_id: str = ""
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
 
 
 _EMPTY_HEADER = Header()
@@ -100,6 +159,11 @@ class TransformStamped(NamedTuple):
     child_frame_id: str = ""
     transform: Transform = Transform()
 
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
 
 class PointStamped(NamedTuple):
     """geometry_msgs/PointStamped: a point (metres) in ``header.frame_id`` at ``header.stamp``."""
@@ -107,12 +171,22 @@ class PointStamped(NamedTuple):
     header: Header = _EMPTY_HEADER
     point: Point = Point()
 
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
 
 class PoseStamped(NamedTuple):
     """geometry_msgs/PoseStamped: a pose in ``header.frame_id`` at ``header.stamp``."""
 
     header: Header = _EMPTY_HEADER
     pose: Pose = Pose()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
 
 
 class Vector3Stamped(NamedTuple):
@@ -124,8 +198,40 @@ class Vector3Stamped(NamedTuple):
     header: Header = _EMPTY_HEADER
     vector: Vector3 = _ZERO_VECTOR
 
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
 
 class TFMessage(NamedTuple):
     """tf2_msgs/TFMessage: the message carried on ``/tf`` and ``/tf_static``."""
 
     transforms: Sequence[TransformStamped] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class JointState(NamedTuple):
+    """sensor_msgs/JointState: the state of a set of named joints at ``header.stamp``.
+
+    ``name[i]`` is described by ``position[i]`` (radians for revolute and continuous
+    joints, metres for prismatic ones), ``velocity[i]`` (rad/s or m/s) and ``effort[i]``
+    (N·m or N). As in sensor_msgs, any of the three arrays may be empty when that
+    quantity is not reported; otherwise it has one entry per name. ``header.frame_id``
+    is unused by robot_state_publisher.
+    """
+
+    header: Header = _EMPTY_HEADER
+    name: Sequence[str] = ()
+    position: Sequence[float] = ()
+    velocity: Sequence[float] = ()
+    effort: Sequence[float] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")

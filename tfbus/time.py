@@ -4,17 +4,41 @@ Float seconds near 1.7e9 cannot hold nanoseconds (a double has 53 bits), and tf2
 exact-stamp lookups must be exact, so tfbus keeps every stamp as an ``int`` of
 nanoseconds. ``Time(0)`` means "latest available" in lookups, as ``ros::Time(0)`` does in
 tf2 (``tf2/src/buffer_core.cpp``, ``BufferCore::lookupTransform``).
+
+Two helpers are the one place for what used to be repeated across tfbus:
+
+* :func:`seconds_to_ns` turns seconds (``int``, ``float``, ``Fraction``, numpy numbers)
+  or a :class:`Duration` into integer nanoseconds *exactly* (the float's exact binary
+  value times 10⁹, rounded half-to-even), checking the type first: a ``str`` is a
+  ``TypeError`` before any arithmetic (``'0.01' * 10**9`` would build a 10 GB string).
+* :func:`format_stamp` prints a stamp as ``SEC.NANOSEC`` with nine digits, exactly
+  (``1700000000.123456789``), where ``f"{t.to_sec():.9f}"`` would print float noise.
+
+Both value types are plain ``__slots__`` classes holding one ``int``, ordered by it
+(``<``, ``<=``, ``>``, ``>=`` between two ``Time`` or two ``Duration``; anything else is
+a ``TypeError``) and treated as immutable. They are deliberately *not* dataclasses
+(``@dataclass(order=True)`` was tried): serialisers that know dataclasses (msgspec on the
+Zenoh wire, ``dataclasses.asdict``) would then write a stamp as the record
+``{"_ns": n}`` instead of the integer nanoseconds the wire format specifies, bypassing
+its stamp validation; and the generated ``==``/``<`` cost 1.5-3x the written-out ones
+(``benchmarks/bench_clock.py``).
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 import operator
-from fractions import Fraction
-from numbers import Integral
-from typing import Final, overload
+from typing import Final, TypeGuard, overload
 
-__all__ = ["NSEC_PER_SEC", "TIME_MAX_NS", "Duration", "Time"]
+__all__ = [
+    "NSEC_PER_SEC",
+    "TIME_MAX_NS",
+    "Duration",
+    "Time",
+    "format_stamp",
+    "seconds_to_ns",
+]
 
 NSEC_PER_SEC: Final = 1_000_000_000
 TIME_MAX_NS: Final = 2**63 - 1
@@ -28,29 +52,118 @@ def _out_of_range(ns: int) -> ValueError:
     return ValueError(f"Time beyond int64 nanoseconds (about year 2262): {ns} ns")
 
 
-def _sec_to_ns(sec: float) -> int:
-    """Float seconds to the nearest integer nanosecond of the float's exact value (the
-    product ``sec * 1e9`` would round in float first, off by up to ~128 ns at 1.7e9 s)."""
-    if not math.isfinite(sec):
-        raise ValueError(f"time in seconds must be finite, got {sec!r}")
-    return round(Fraction(sec) * NSEC_PER_SEC)
+def _is_real(value: object) -> TypeGuard[numbers.Real]:
+    """A real number that is not a ``bool`` (``True`` is not a number of seconds)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _scale_exact(num: int, den: int, k: int) -> int:
+    """``round(num / den * k)`` in integers, ties to even (as ``round(Fraction)``)."""
+    q, r = divmod(num * k, den)
+    twice = 2 * r
+    if twice > den or (twice == den and q & 1):
+        q += 1
+    return q
+
+
+def seconds_to_ns(seconds: float | Duration, *, name: str = "seconds") -> int:
+    """Seconds, or a :class:`Duration`, as integer nanoseconds, exactly.
+
+    Args:
+        seconds: an ``int``, ``float``, ``fractions.Fraction``, numpy integer or float
+            (seconds), or a :class:`Duration` (its ``ns``).
+        name: the argument's name, used in error messages (``"cache_time"``,
+            ``"timeout"``, ``"period"``).
+
+    Returns:
+        ``int`` nanoseconds: integers are multiplied exactly; a float is taken at its
+        exact binary value (``float.as_integer_ratio``) times 10⁹ and rounded to the
+        nearest nanosecond, ties to even. ``1.7e9 * 1e9`` in float arithmetic would be off
+        by up to ~128 ns; this is not. Equal to ``round(Fraction(seconds) * 10**9)``.
+
+    Raises:
+        TypeError: ``seconds`` is not a real number nor a Duration (``str``, ``bool``,
+            ``None``, ``complex``, …); checked before any arithmetic.
+        ValueError: ``seconds`` is infinite or NaN.
+    """
+    # The common exact types first, with no ABC checks (a few hundred ns each).
+    if type(seconds) is float:
+        if not math.isfinite(seconds):
+            raise ValueError(f"{name} must be finite, got {seconds!r}")
+        num, den = seconds.as_integer_ratio()
+        return _scale_exact(num, den, NSEC_PER_SEC)
+    if type(seconds) is int:
+        return seconds * NSEC_PER_SEC
+    return _other_seconds_to_ns(seconds, name)
+
+
+def _other_seconds_to_ns(seconds: object, name: str) -> int:
+    if isinstance(seconds, Duration):
+        return seconds.ns
+    if not _is_real(seconds):
+        raise TypeError(
+            f"{name} must be a number of seconds or a Duration, "
+            f"got {seconds!r} ({type(seconds).__name__})"
+        )
+    if isinstance(seconds, numbers.Integral):
+        return operator.index(seconds) * NSEC_PER_SEC
+    if isinstance(seconds, numbers.Rational):
+        return _scale_exact(int(seconds.numerator), int(seconds.denominator), NSEC_PER_SEC)
+    value = float(seconds)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {seconds!r}")
+    num, den = value.as_integer_ratio()
+    return _scale_exact(num, den, NSEC_PER_SEC)
+
+
+def format_stamp(stamp: Time | Duration | int) -> str:
+    """A stamp (or span) as ``SEC.NANOSEC`` with exactly nine decimals, no float rounding.
+
+    Args:
+        stamp: a :class:`Time`, a :class:`Duration` or integer nanoseconds.
+
+    Returns:
+        e.g. ``"1700000000.123456789"`` for ``Time(1700000000, 123456789)``,
+        ``"-0.500000000"`` for ``Duration.from_ns(-500_000_000)``. The digits are those
+        of ``rosbag``/``tf_echo`` style ``sec.nsec`` stamps, exact at any magnitude.
+
+    Raises:
+        TypeError: ``stamp`` is none of the above (a ``bool`` included).
+    """
+    if isinstance(stamp, Time | Duration):
+        ns = stamp.ns
+    elif isinstance(stamp, numbers.Integral) and not isinstance(stamp, bool):
+        ns = operator.index(stamp)
+    else:
+        raise TypeError(
+            f"format_stamp takes a Time, a Duration or int nanoseconds, "
+            f"got {stamp!r} ({type(stamp).__name__})"
+        )
+    sign = "-" if ns < 0 else ""
+    sec, nsec = divmod(abs(ns), NSEC_PER_SEC)
+    return f"{sign}{sec}.{nsec:09d}"
 
 
 def _ns_from(sec: int | float, nanosec: int) -> int:
     # numpy integers (e.g. ROS1 uint32 stamps) are converted exactly, never multiplied in
     # their own fixed width.
-    ns = operator.index(nanosec)
-    if isinstance(sec, Integral):
-        return operator.index(sec) * NSEC_PER_SEC + ns
-    return _sec_to_ns(float(sec)) + ns
+    if type(nanosec) is not int and (
+        not isinstance(nanosec, numbers.Integral) or isinstance(nanosec, bool)
+    ):
+        raise TypeError(f"nanosec must be an integer, got {nanosec!r} ({type(nanosec).__name__})")
+    return seconds_to_ns(sec, name="sec") + operator.index(nanosec)
 
 
 class Duration:
     """A signed span of time in integer nanoseconds (like ``rclcpp::Duration``).
 
     ``Duration(sec=0, nanosec=0)``; ``Duration.from_ns(n)``; ``Duration.from_sec(s)``.
-    Supports ``+``, ``-``, unary ``-``, ``abs``, comparison, multiplication by a number
-    and hashing. Immutable.
+    Supports ``+``, ``-``, unary ``-``, ``abs``, ordering, multiplication by a real
+    number (exact, rounded to the nearest nanosecond) and hashing. Immutable.
+
+    Raises:
+        TypeError: ``sec`` is not a real number or ``nanosec`` not an integer.
+        ValueError: ``sec`` is infinite or NaN.
     """
 
     __slots__ = ("_ns",)
@@ -69,8 +182,12 @@ class Duration:
 
     @classmethod
     def from_sec(cls, sec: float) -> Duration:
-        """Build a Duration from float seconds, rounded to the nearest nanosecond."""
-        return cls.from_ns(_sec_to_ns(sec))
+        """Build a Duration from seconds, exactly rounded to the nearest nanosecond.
+
+        Raises:
+            TypeError, ValueError: as :func:`seconds_to_ns`.
+        """
+        return cls.from_ns(seconds_to_ns(sec, name="sec"))
 
     @property
     def ns(self) -> int:
@@ -98,9 +215,22 @@ class Duration:
         return Duration.from_ns(abs(self._ns))
 
     def __mul__(self, k: float) -> Duration:
-        if isinstance(k, int | float):
-            return Duration.from_ns(round(self._ns * k))
-        return NotImplemented
+        if type(k) is int:
+            return Duration.from_ns(self._ns * k)
+        if type(k) is float and math.isfinite(k):
+            num, den = k.as_integer_ratio()
+            return Duration.from_ns(_scale_exact(num, den, self._ns))
+        if not _is_real(k):
+            return NotImplemented
+        if isinstance(k, numbers.Integral):
+            return Duration.from_ns(self._ns * operator.index(k))
+        if isinstance(k, numbers.Rational):
+            return Duration.from_ns(_scale_exact(int(k.numerator), int(k.denominator), self._ns))
+        value = float(k)
+        if not math.isfinite(value):
+            raise ValueError(f"cannot multiply a Duration by {k!r}: not finite")
+        num, den = value.as_integer_ratio()
+        return Duration.from_ns(_scale_exact(num, den, self._ns))
 
     __rmul__ = __mul__
 
@@ -141,11 +271,14 @@ class Time:
     ``Time(sec=0, nanosec=0)``; ``Time.from_ns(n)``; ``Time.from_sec(s)``; ``t.ns``;
     ``t.sec`` / ``t.nanosec`` (ROS message fields); ``t.to_sec()``.
     ``Time - Time -> Duration``; ``Time ± Duration -> Time``. Ordered, hashable,
-    immutable. ``Time(0)`` asks lookups for the latest available data (tf2 semantics).
+    immutable.
+    ``Time(0)`` asks lookups for the latest available data (tf2 semantics).
+    :func:`format_stamp` prints one exactly.
 
     Raises:
         ValueError: for a negative time (ROS times are unsigned), or one beyond
-            ``TIME_MAX_NS`` (int64 nanoseconds, as in ROS 2).
+            ``TIME_MAX_NS`` (int64 nanoseconds, as in ROS 2); ``sec`` not finite.
+        TypeError: ``sec`` is not a real number or ``nanosec`` not an integer.
     """
 
     __slots__ = ("_ns",)
@@ -173,12 +306,13 @@ class Time:
 
     @classmethod
     def from_sec(cls, sec: float) -> Time:
-        """Build a Time from float seconds, rounded to the nearest nanosecond.
+        """Build a Time from seconds, exactly rounded to the nearest nanosecond.
 
         Raises:
             ValueError: if ``sec`` is negative, too large or not finite.
+            TypeError: if ``sec`` is not a real number.
         """
-        return cls.from_ns(_sec_to_ns(sec))
+        return cls.from_ns(seconds_to_ns(sec, name="sec"))
 
     @property
     def ns(self) -> int:

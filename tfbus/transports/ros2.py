@@ -97,6 +97,7 @@ from tfbus.transports.ros2_wire import (
 
 if TYPE_CHECKING:
     from tfbus.bus import Bus
+    from tfbus.transports.spec import BusSpec
 
 __all__ = [
     "TF_TYPE_HASH",
@@ -104,6 +105,7 @@ __all__ = [
     "Ros2Transport",
     "cyclone_config",
     "ros2_transport_from_options",
+    "transport_from_spec",
 ]
 
 TF_TYPE_HASH: Final = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
@@ -517,6 +519,26 @@ class Ros2Transport:
 # -- process-side helper (for the CLI bus spec) ---------------------------------------------
 
 _SPEC_KEYS: Final = frozenset({"domain", "config", "interfaces", "peers"})
+
+
+def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros2Transport:
+    """The ``ros2`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`):
+    ``ros2``, ``ros2:7`` (domain), ``ros2:domain=7&interfaces=eth0,wlan0&peers=10.0.0.2``.
+
+    ``overrides`` may carry ``name`` (a CLI's node name), which DDS has no use for.
+
+    Raises:
+        ValueError: a value that is not understood (named).
+        TypeError: an override other than ``name``.
+    """
+    unknown = set(overrides) - {"name"}
+    if unknown:
+        raise TypeError(f"unexpected ros2 transport override(s): {', '.join(sorted(unknown))}")
+    options: dict[str, str] = {}
+    for key, values in spec.options.items():
+        if values:
+            options[key] = "+".join(v for value in values for v in value.split(","))
+    return ros2_transport_from_options(options)
 
 
 def ros2_transport_from_options(options: dict[str, str]) -> Ros2Transport:

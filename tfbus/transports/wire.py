@@ -14,8 +14,8 @@ receiver can detect gaps and keep per-publisher order. ``tag`` names the message
 * ``"tf"`` -- a :class:`~tfbus.messages.TFMessage`; ``body`` is the array of its
   transforms, each ``[[stamp_ns, frame_id], child_frame_id, [[x, y, z], [qx, qy, qz, qw]]]``
   (the NamedTuples' field order; stamps are integer nanoseconds, lengths metres).
-* a registered name (``"TransformStamped"``, ``"PointStamped"``, ... or anything added with
-  :func:`register_message_type`) -- that type, encoded field by field.
+* a registered name (``"TransformStamped"``, ``"PointStamped"``, ``"JointState"``, ... or
+  anything added with :func:`register_message_type`) -- that type, encoded field by field.
 * ``""`` -- a plain msgpack value (None, bool, int, float, str, bytes, list, dict).
 
 Decoding is defensive: a payload that is too large, not msgpack, of the wrong shape or
@@ -29,7 +29,7 @@ from __future__ import annotations
 import secrets
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Annotated, Any, Final, NamedTuple
+from typing import Annotated, Any, Final, Literal, NamedTuple
 
 import msgspec
 
@@ -41,12 +41,14 @@ from tfbus.errors import (
     WireLimitError,
     WireVersionError,
 )
-from tfbus.time import Time
+from tfbus.time import TIME_MAX_NS, Time
+from tfbus.transports._msgpack import check_depth, read_head
 
 __all__ = [
     "MAGIC",
     "WIRE_VERSION",
     "Decoded",
+    "SequenceTracker",
     "WireCodec",
     "WireDecodeError",
     "WireEncodeError",
@@ -61,6 +63,8 @@ __all__ = [
 MAGIC: Final = 0xB7
 WIRE_VERSION: Final = 1
 _HEADER: Final = bytes((MAGIC, WIRE_VERSION))
+_INT64_MAX: Final = 2**63 - 1
+_ID: Final[Any] = Annotated[int, msgspec.Meta(ge=1, le=_INT64_MAX)]  # sender ids, seqs
 _TF_TAG: Final = "tf"
 _RAW_TAG: Final = ""
 
@@ -74,11 +78,15 @@ class WireLimits:
         max_transforms: most transforms in one TFMessage (default 100 000).
         max_frame_id_length: longest ``frame_id`` / ``child_frame_id``, characters
             (default 256).
+        max_depth: deepest nesting of msgpack arrays/maps in the body of a payload that
+            is not a TFMessage (default 64), checked before decoding it (a TFMessage has
+            a fixed shape and is decoded by a schema that refuses anything deeper).
     """
 
     max_payload_bytes: int = 16 * 1024 * 1024
     max_transforms: int = 100_000
     max_frame_id_length: int = 256
+    max_depth: int = 64
 
 
 class Decoded(NamedTuple):
@@ -87,13 +95,6 @@ class Decoded(NamedTuple):
     sender: int
     seq: int
     message: object
-
-
-class _Envelope(msgspec.Struct, array_like=True, frozen=True):
-    sender: int
-    seq: int
-    tag: str
-    body: msgspec.Raw
 
 
 class _OutEnvelope(msgspec.Struct, array_like=True):
@@ -116,8 +117,10 @@ def _enc_hook(obj: object) -> object:
 
 def _dec_hook(tp: type, obj: object) -> object:
     if tp is Time:
-        if type(obj) is not int or obj < 0:
-            raise ValueError("a stamp must be a non-negative integer of nanoseconds")
+        if type(obj) is not int or not 0 <= obj <= TIME_MAX_NS:
+            raise ValueError(
+                f"a stamp must be an integer of nanoseconds in [0, {TIME_MAX_NS}], got {obj!r}"
+            )
         t = Time.__new__(Time)
         t._ns = obj  # Time.from_ns without the re-validation: checked just above
         return t
@@ -159,6 +162,7 @@ for _cls in (
     _m.PointStamped,
     _m.PoseStamped,
     _m.Vector3Stamped,
+    _m.JointState,
 ):
     register_message_type(_cls)
 
@@ -173,13 +177,20 @@ class WireCodec:
     def __init__(self, limits: WireLimits | None = None) -> None:
         self.limits = limits or WireLimits()
         self._encoder = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
-        self._env_decoder = msgspec.msgpack.Decoder(_Envelope)
-        tf_type: Any = Annotated[
-            tuple[_m.TransformStamped, ...],
-            msgspec.Meta(max_length=self.limits.max_transforms),
-        ]
-        self._tf_decoder: msgspec.msgpack.Decoder[tuple[_m.TransformStamped, ...]] = (
-            msgspec.msgpack.Decoder(tf_type, dec_hook=_dec_hook)
+        tf_body = _tf_schema(self.limits)
+        self._tf_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(tf_body)
+        self._tf_envelope_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(
+            msgspec.defstruct(
+                "_WireTFEnvelope",
+                [
+                    ("sender", _ID),
+                    ("seq", _ID),
+                    ("tag", Literal["tf"]),
+                    ("body", tf_body),
+                ],
+                array_like=True,
+                gc=False,
+            )
         )
         self._raw_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder()
         self._typed: dict[str, Callable[[bytes | memoryview], object]] = {}
@@ -209,12 +220,19 @@ class WireCodec:
     # -- decoding -------------------------------------------------------------------
 
     def decode(self, payload: bytes | bytearray | memoryview) -> Decoded:
-        """Decode one payload.
+        """Decode one payload; nothing else than a :class:`WireError` ever escapes.
+
+        A TFMessage body is decoded by a fixed schema (no part of it is decoded
+        generically, so no nesting can make it recurse); any other body is first walked
+        without decoding and refused if nested deeper than ``limits.max_depth``.
 
         Raises:
-            WireDecodeError: bad magic byte, bad msgpack, wrong shape or field type.
+            WireDecodeError: bad magic byte, bad msgpack, wrong shape or field type, a
+                stamp outside [0, 2**63) ns, a sender id or sequence number outside
+                [1, 2**63), or any other failure of the decoder (issue 11, item 1).
             WireVersionError: a tfbus payload of another format version.
-            WireLimitError: payload too large, too many transforms, frame id too long.
+            WireLimitError: payload too large, too many transforms, frame id too long,
+                nesting too deep.
         """
         n = len(payload)
         if n > self.limits.max_payload_bytes:
@@ -225,32 +243,38 @@ class WireCodec:
             raise WireVersionError(
                 f"wire format version {payload[1]}, this tfbus speaks {WIRE_VERSION}"
             )
-        view = memoryview(payload)[2:]
+        data = payload if type(payload) is bytes else bytes(payload)
+        view = memoryview(data)
+        try:  # the fast path: a well-formed TFMessage, decoded by one typed schema
+            env = self._tf_envelope_decoder.decode(view[2:])
+        except Exception:  # anything else: the general path below, which says what is wrong
+            pass
+        else:
+            return Decoded(env.sender, env.seq, _m.TFMessage(_from_wire(env.body)))
         try:
-            env = self._env_decoder.decode(view)
-            tag = env.tag
+            sender, seq, tag, pos = read_head(data, 2)
+            if not (0 < sender <= _INT64_MAX and 0 < seq <= _INT64_MAX):
+                raise WireDecodeError(
+                    f"sender {sender} / sequence number {seq} outside [1, {_INT64_MAX}]"
+                )
+            body = view[pos:]
             if tag == _TF_TAG:
-                transforms = self._tf_decoder.decode(env.body)
-                limit = self.limits.max_frame_id_length
-                # A frame id longer than `limit` needs more than `limit` payload bytes.
-                if n > limit:
-                    for t in transforms:
-                        if len(t.header.frame_id) > limit or len(t.child_frame_id) > limit:
-                            raise WireLimitError(f"a frame id is longer than {limit} characters")
-                message: object = _m.TFMessage(transforms)
-            elif tag == _RAW_TAG:
-                message = self._raw_decoder.decode(env.body)
+                message: object = _m.TFMessage(_from_wire(self._tf_decoder.decode(body)))
             else:
-                message = self._typed_decoder(tag)(env.body)
+                check_depth(data, pos, self.limits.max_depth)
+                if tag == _RAW_TAG:
+                    message = self._raw_decoder.decode(body)
+                else:
+                    message = self._typed_decoder(tag)(body)
+        except WireError:
+            raise
         except msgspec.ValidationError as exc:
             if "of length <=" in str(exc):
                 raise WireLimitError(str(exc)) from exc
             raise WireDecodeError(str(exc)) from exc
-        except (msgspec.DecodeError, TypeError, ValueError) as exc:
-            if isinstance(exc, WireError):
-                raise
-            raise WireDecodeError(str(exc)) from exc
-        return Decoded(env.sender, env.seq, message)
+        except Exception as exc:  # msgspec.DecodeError, a dec_hook's ValueError, anything
+            raise WireDecodeError(f"undecodable payload ({type(exc).__name__}: {exc})") from exc
+        return Decoded(sender, seq, message)
 
     def _typed_decoder(self, tag: str) -> Callable[[bytes | memoryview], object]:
         dec = self._typed.get(tag)
@@ -261,3 +285,98 @@ class WireCodec:
             dec = msgspec.msgpack.Decoder(cls, dec_hook=_dec_hook).decode
             self._typed[tag] = dec
         return dec
+
+
+def _tf_schema(limits: WireLimits) -> Any:
+    """The msgspec type of a TFMessage body under ``limits``: every field typed (stamps as
+    int64 nanoseconds >= 0, frame ids bounded), so msgspec never decodes a part of it
+    generically and refuses a wrong shape at the first byte that does not fit."""
+    frame_id = Annotated[str, msgspec.Meta(max_length=limits.max_frame_id_length)]
+    header = msgspec.defstruct(
+        "_WireHeader",
+        [("stamp", Annotated[int, msgspec.Meta(ge=0, le=TIME_MAX_NS)]), ("frame_id", frame_id)],
+        array_like=True,
+        gc=False,
+    )
+    item: Any = msgspec.defstruct(
+        "_WireTransformStamped",
+        [("header", header), ("child_frame_id", frame_id), ("transform", _m.Transform)],
+        array_like=True,
+        gc=False,
+    )
+    return Annotated[tuple[item, ...], msgspec.Meta(max_length=limits.max_transforms)]
+
+
+_new = tuple.__new__
+_TransformStamped = _m.TransformStamped
+_Header = _m.Header
+
+
+def _from_wire(items: Any) -> tuple[_m.TransformStamped, ...]:
+    """The wire schema's items as TransformStamped NamedTuples (the values are already
+    checked: :class:`~tfbus.time.Time` is built without re-validating)."""
+    out: list[_m.TransformStamped] = []
+    append = out.append
+    for item in items:
+        header = item.header
+        stamp = Time.__new__(Time)
+        stamp._ns = header.stamp
+        append(
+            _new(
+                _TransformStamped,
+                (_new(_Header, (stamp, header.frame_id)), item.child_frame_id, item.transform),
+            )
+        )
+    return tuple(out)
+
+
+class SequenceTracker:
+    """Per-publisher sequence numbers of received payloads: messages lost, and resets.
+
+    Every ``(sender, topic)`` stream numbers its payloads 1, 2, ...; a receiver learns
+    from the gaps how many the network dropped. A forged or corrupted number must not
+    turn into billions of "lost" messages (issue 11, item 3): a forward jump of at most
+    ``max_gap`` counts as that many lost; anything else (a larger jump, a step back, a
+    repeat) is a *reset* -- reported, not counted as loss -- and the stream resumes from
+    the new number. The table keeps at most ``max_senders`` streams (it is cleared when
+    full, which only means the next payload of each stream starts it again).
+    """
+
+    def __init__(self, max_gap: int = 100_000, max_senders: int = 4096) -> None:
+        """Raises: ValueError: if ``max_gap`` or ``max_senders`` is less than 1."""
+        if max_gap < 1 or max_senders < 1:
+            raise ValueError("max_gap and max_senders must be at least 1")
+        self.max_gap = max_gap
+        self.max_senders = max_senders
+        self._last: dict[tuple[int, str], int] = {}
+
+    def observe(self, sender: int, topic: str, seq: int) -> tuple[int, bool]:
+        """Record ``seq`` of the stream ``(sender, topic)``: ``(lost, reset)``.
+
+        ``lost`` is how many numbers were skipped since the previous one (0 when in
+        order or at the stream's start); ``reset`` is True when the step is implausible.
+        """
+        key = (sender, topic)
+        table = self._last
+        last = table.get(key)
+        if last is None:
+            if len(table) >= self.max_senders:
+                table.clear()
+            table[key] = seq
+            return 0, False
+        table[key] = seq
+        step = seq - last
+        if step == 1:
+            return 0, False
+        if 1 < step <= self.max_gap + 1:
+            return step - 1, False
+        return 0, True
+
+    def forget(self, sender: int) -> None:
+        """Drop every stream of ``sender`` (e.g. when that node went away)."""
+        for key in [k for k in self._last if k[0] == sender]:
+            del self._last[key]
+
+    def __len__(self) -> int:
+        """The number of streams tracked now."""
+        return len(self._last)

@@ -41,10 +41,15 @@ Behaviour, as tf2_ros and roscpp do it:
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 from .node import Ros1Statistics, Ros1Transport
 from .tcpros import TF_MD5SUM, TF_TYPE, TFCodec, decode_header, encode_header
+
+if TYPE_CHECKING:
+    from tfbus.transports.spec import BusSpec
 
 __all__ = [
     "TF_MD5SUM",
@@ -55,6 +60,7 @@ __all__ = [
     "decode_header",
     "encode_header",
     "ros1_transport_from_options",
+    "transport_from_spec",
 ]
 
 
@@ -82,3 +88,25 @@ def ros1_transport_from_options(options: Mapping[str, str]) -> Ros1Transport:
         host=options.get("host"),
         allow_remote=remote == "1",
     )
+
+
+def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
+    """The ``ros1`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`):
+    ``ros1``, ``ros1:http://127.0.0.1:11311`` (master),
+    ``ros1:master=http://127.0.0.1:11311&name=/planner&host=127.0.0.1``.
+
+    ``overrides`` may carry ``name`` (a CLI's default node name; ``-`` becomes ``_``),
+    used when the spec gives none.
+
+    Raises:
+        ValueError: a value that is not understood (named).
+        TypeError: an override other than ``name``.
+    """
+    unknown = set(overrides) - {"name"}
+    if unknown:
+        raise TypeError(f"unexpected ros1 transport override(s): {', '.join(sorted(unknown))}")
+    options = {key: value for key in spec.options if (value := spec.value(key)) is not None}
+    default_name = overrides.get("name")
+    if "name" not in options and isinstance(default_name, str) and default_name:
+        options["name"] = f"{default_name.replace('-', '_')}_{os.getpid()}"
+    return ros1_transport_from_options(options)

@@ -1,4 +1,6 @@
-"""tf2's scalar transform arithmetic on plain float tuples: the core's hot path.
+"""tf2's scalar transform arithmetic on plain float tuples, in pure Python: the tests'
+reference for the compiled scalar math (``tfbus._ccore.compose`` / ``inverse`` /
+``quat_multiply`` / ``quat_rotate`` / ``slerp``) and the batched :mod:`tfbus.geometry`.
 
 A transform here is a 7-tuple ``(tx, ty, tz, qx, qy, qz, qw)``: translation in metres,
 rotation quaternion in (x, y, z, w) order. numpy's per-call overhead (~1 µs) dominates

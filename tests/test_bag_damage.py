@@ -1,0 +1,302 @@
+"""Damaged bags (issue 11, items 8 and 9, and the bag-reading fuzz test).
+
+Whatever the damage, a read returns every readable message first, then raises one
+``BagReadError`` naming the file and the byte offset where reading stopped; no other
+exception escapes (``ValueError``, ``UnicodeDecodeError``, rosbags' ``TypesysError`` did).
+"""
+
+from __future__ import annotations
+
+import random
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rosbags")
+pytest.importorskip("mcap")
+
+from tfbus.bag import (
+    BagError,
+    BagMessage,
+    BagReadError,
+    load_buffer,
+    read_messages,
+    summarize,
+    write_bag,
+)
+from tfbus.time import Time
+
+DATA = Path(__file__).parent / "data"
+TURTLE = DATA / "webviz_turtle_tf_example.bag"
+TURTLE_MESSAGES = 2689
+
+
+def read_all(path: Path) -> tuple[list[BagMessage], BaseException | None]:
+    """Every message a read yields, and the exception that ended it (or ``None``)."""
+    got: list[BagMessage] = []
+    try:
+        for rec in read_messages(path):
+            got.append(rec)
+    except Exception as err:
+        return got, err
+    return got, None
+
+
+def ros1_records(
+    data: bytes, start: int = len(b"#ROSBAG V2.0\n"), stop: int | None = None
+) -> Iterator[tuple[int, int, dict[str, bytes]]]:
+    """(offset, end, header fields) of each record of a ROS 1 bag v2.0 in
+    ``data[start:stop]``, parsed here from the format description
+    (wiki.ros.org/Bags/Format/2.0), independently of tfbus."""
+    off = start
+    while off < (len(data) if stop is None else stop):
+        (hlen,) = struct.unpack_from("<I", data, off)
+        raw = data[off + 4 : off + 4 + hlen]
+        fields: dict[str, bytes] = {}
+        i = 0
+        while i < len(raw):
+            (n,) = struct.unpack_from("<I", raw, i)
+            name, _, value = raw[i + 4 : i + 4 + n].partition(b"=")
+            fields[name.decode()] = value
+            i += 4 + n
+        (dlen,) = struct.unpack_from("<I", data, off + 4 + hlen)
+        end = off + 8 + hlen + dlen
+        yield off, end, fields
+        off = end
+
+
+def tfbus_bags(tmp_path: Path, messages: list[BagMessage]) -> dict[str, Path]:
+    """A ROS 1 .bag, a bare .db3 and a bare .mcap written by tfbus's own writer."""
+    write_bag(tmp_path / "w.bag", messages, format="ros1")
+    write_bag(tmp_path / "d", messages, format="sqlite3")
+    write_bag(tmp_path / "m", messages, format="mcap")
+    return {
+        "ros1": tmp_path / "w.bag",
+        "sqlite3": next((tmp_path / "d").glob("*.db3")),
+        "mcap": next((tmp_path / "m").glob("*.mcap")),
+    }
+
+
+def mcap_with(path: Path, source: Path, log_times: list[int], schema_text: bytes | None = None,
+              ) -> Path:
+    """An MCAP file (written with the ``mcap`` package) holding the first /tf payloads of
+    ``source`` at the given log times; ``schema_text`` replaces the stored definition."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with source.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        (schema,) = [s for s in summary.schemas.values() if s.name == "tf2_msgs/msg/TFMessage"]
+        payloads = [m.data for _s, c, m in reader.iter_messages(topics=["/tf"])]
+    with path.open("wb") as out:
+        w = Writer(out)
+        w.start("ros2", "tfbus-test")
+        sid = w.register_schema(schema.name, schema.encoding, schema_text or schema.data)
+        cid = w.register_channel("/tf", "cdr", sid)
+        for t, payload in zip(log_times, payloads, strict=False):
+            w.add_message(cid, t, payload, t)
+        w.finish()
+    return path
+
+
+# --------------------------------------------------------------------------- item 8
+
+
+def test_item8_log_time_beyond_int64_is_a_bag_read_error(tmp_path: Path) -> None:
+    """Item 8: an MCAP log time >= 2**63 ns raised ValueError (Time range) out of the
+    read; now the three messages before it are returned, then a BagReadError."""
+    bags = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:10])
+    bad = mcap_with(tmp_path / "huge.mcap", bags["mcap"], [10**18, 10**18 + 1, 10**18 + 2,
+                                                           2**64 - 1])
+    got, err = read_all(bad)
+    assert len(got) == 3
+    assert isinstance(err, BagReadError), repr(err)
+    assert err.messages_read == 3 and "huge.mcap" in str(err) and err.offset is not None
+    assert "\n" not in str(err)
+
+
+def test_item8_unreadable_schema_is_a_bag_read_error(tmp_path: Path) -> None:
+    """Item 8: a cut MCAP whose stored definition is mangled raised rosbags'
+    TypesysError; now a BagReadError naming the file and the offset."""
+    bags = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:40])
+    data = bags["mcap"].read_bytes()
+    sep = b"=" * 80
+    assert sep in data
+    mangled = data.replace(sep, b"=" * 14 + b"<" + b"=" * 65, 1)
+    cut = tmp_path / "schema.mcap"
+    cut.write_bytes(mangled[: len(mangled) * 9 // 10])
+    got, err = read_all(cut)
+    assert got == []
+    assert isinstance(err, BagReadError), repr(err)
+    assert err.offset is not None and 0 < err.offset < len(mangled) and "schema.mcap" in str(err)
+
+
+def test_item8_non_utf8_connection_header_is_a_bag_read_error(tmp_path: Path) -> None:
+    """Item 8: a ROS 1 bag without index whose connection topic is not UTF-8 raised
+    UnicodeDecodeError; now a BagReadError at that record's offset."""
+    path = tmp_path / "w.bag"
+    write_bag(path, list(read_messages(TURTLE))[:40])
+    data = bytearray(path.read_bytes())
+    conn = next(off for off, _end, f in ros1_records(bytes(data)) if f.get("op") == b"\x05")
+    at = data.index(b"topic=/tf", conn)
+    data[at + 6] = 0xFF  # "topic=\xfftf"
+    chunk_end = next(end for off, end, f in ros1_records(bytes(data)) if f.get("op") == b"\x05")
+    cut = tmp_path / "utf8.bag"
+    cut.write_bytes(bytes(data[:chunk_end]))
+    got, err = read_all(cut)
+    assert got == [] and isinstance(err, BagReadError), repr(err)
+    assert err.offset is not None and conn < err.offset < at
+    assert "utf8.bag" in str(err)
+
+
+def test_item8_every_bag_error_leaves_the_cli_helpers_one_line(tmp_path: Path) -> None:
+    """load_buffer and summarize on a damaged file: a BagReadError / a summary with its
+    error, never another exception."""
+    bags = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:10])
+    bad = mcap_with(tmp_path / "huge.mcap", bags["mcap"], [10**18, 2**64 - 1])
+    with pytest.raises(BagReadError) as e:
+        load_buffer(bad)
+    assert e.value.partial is not None
+    s = summarize(bad)
+    assert s.error is not None and s.messages == {"/tf": 1}
+
+
+# --------------------------------------------------------------------------- item 9
+
+
+def test_item9_ros1_cut_exactly_after_a_chunk_is_truncated(tmp_path: Path) -> None:
+    """Item 9: a 20 000-message bag cut right after a chunk (and its index records)
+    returned the first chunks' messages with no error; the missing index now says the
+    bag is truncated, after those messages."""
+    base = list(read_messages(TURTLE))
+    dyn = [m for m in base if m.topic == "/tf"]
+    t0 = dyn[0].time.ns
+    messages = [base[0]] + [
+        dyn[i % len(dyn)]._replace(time=Time.from_ns(t0 + i * 1_000_000)) for i in range(19_999)
+    ]
+    path = tmp_path / "big.bag"
+    assert write_bag(path, messages) == 20_000
+    data = path.read_bytes()
+    records = list(ros1_records(data))
+    chunks = [i for i, (_o, _e, f) in enumerate(records) if f.get("op") == b"\x05"]
+    assert len(chunks) >= 2
+    # After the first chunk come its index-data records (op 0x04); cut after them.
+    i = chunks[0] + 1
+    while records[i][2].get("op") == b"\x04":
+        i += 1
+    cut_at = records[i - 1][1]
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[:cut_at])
+    got, err = read_all(cut)
+    assert isinstance(err, BagReadError), repr(err)
+    assert 0 < len(got) < 20_000 and got == list(read_messages(path))[: len(got)]
+    assert err.offset == cut_at and "truncated" in err.reason
+
+
+def test_item9_version_line_alone_is_not_an_empty_bag(tmp_path: Path) -> None:
+    """Item 9: the 13-byte file ``#ROSBAG V2.0\\n`` read as an empty bag; it is an error."""
+    path = tmp_path / "v.bag"
+    path.write_bytes(b"#ROSBAG V2.0\n")
+    got, err = read_all(path)
+    assert got == [] and isinstance(err, BagReadError) and err.offset == 13
+
+
+# --------------------------------------------------------------------------- fuzz
+
+
+def ros1_tf_message_ends(data: bytes) -> list[int]:
+    """File offset where each /tf or /tf_static message record ends, in file order, for
+    a bag with uncompressed chunks (parsed independently of tfbus)."""
+    tf_conns: set[bytes] = set()
+    ends = []
+    for _off, end, fields in ros1_records(data):
+        if fields.get("op") != b"\x05":
+            continue
+        assert fields["compression"] == b"none"
+        body = end - int.from_bytes(fields["size"], "little")
+        for _o, e, f in ros1_records(data, body, end):
+            if f.get("op") == b"\x07" and f["topic"] in (b"/tf", b"/tf_static"):
+                tf_conns.add(f["conn"])
+            elif f.get("op") == b"\x02" and f["conn"] in tf_conns:
+                ends.append(e)
+    return ends
+
+
+def _variants(data: bytes, rng: random.Random, n: int) -> Iterator[tuple[str, bytes]]:
+    for k in range(n):
+        if k % 2:
+            yield "cut", data[: rng.randrange(len(data))]
+        else:
+            b = bytearray(data)
+            for _ in range(rng.choice((1, 1, 2, 8))):
+                b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
+            yield "flip", bytes(b)
+
+
+def test_fuzz_damaged_bags_raise_only_bag_errors(tmp_path: Path) -> None:
+    """Byte flips and truncations of the turtle bag and of tfbus-written .bag, .db3 and
+    .mcap files (seeded, bounded: 16 reads of the 850 KB turtle bag, 3 x 50 of the small
+    ones): only BagError escapes; a truncated file
+    returns a prefix of the intact file's messages, a longer cut never fewer, and the
+    intact length reads whole without error."""
+    bags = {"turtle": TURTLE, **tfbus_bags(tmp_path, list(read_messages(TURTLE))[:150])}
+    rng = random.Random(20261122)
+    for name, src in bags.items():
+        data = src.read_bytes()
+        full = list(read_messages(src))
+        ends = ros1_tf_message_ends(data) if src.suffix == ".bag" else None
+        assert ends is None or len(ends) == len(full)
+        cuts: list[tuple[int, int]] = []
+        for kind, damaged in _variants(data, rng, 16 if name == "turtle" else 50):
+            f = tmp_path / f"fuzz{src.suffix}"
+            f.write_bytes(damaged)
+            got, err = read_all(f)
+            assert err is None or isinstance(err, BagError), (name, kind, repr(err))
+            if kind == "cut":
+                assert err is not None, (name, len(damaged))
+                assert got == full[: len(got)], (name, len(damaged))
+                if ends is not None:
+                    assert len(got) == sum(e <= len(damaged) for e in ends), (name, len(damaged))
+                cuts.append((len(damaged), len(got)))
+        cuts.sort()
+        counts = [n for _size, n in cuts]
+        assert counts == sorted(counts), name  # a later cut never returns fewer
+    whole = tmp_path / "whole.bag"
+    whole.write_bytes(TURTLE.read_bytes())
+    assert read_all(whole) == (list(read_messages(TURTLE)), None)
+
+
+@pytest.mark.parametrize("compression", ["BZ2", "LZ4"])
+def test_compressed_ros1_bag_cut_is_salvaged(tmp_path: Path, compression: str) -> None:
+    """A ROS 1 bag with bz2 / lz4 chunks (written by rosbags' Writer), cut: the complete
+    chunks before the cut are read record by record, the same messages as the intact
+    file, then a BagReadError at the cut chunk."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    path = tmp_path / f"{compression}.bag"
+    writer = Writer(path)
+    writer.set_compression(Writer.CompressionFormat[compression])
+    writer.chunk_threshold = 16 * 1024  # several chunks (rosbags: 1 MiB by default)
+    with Reader(TURTLE) as reader, writer:
+        conns = {}
+        tf = [c for c in reader.connections if c.topic in ("/tf", "/tf_static")]
+        for c in tf:
+            conns[c.id] = writer.add_connection(
+                c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
+                callerid=c.ext.callerid, latching=c.ext.latching,
+            )
+        for conn, t, raw in reader.messages(connections=tf):
+            writer.write(conns[conn.id], t, raw)
+    full = list(read_messages(path))
+    assert full == list(read_messages(TURTLE))
+    data = path.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    got, err = read_all(cut)
+    assert isinstance(err, BagReadError), repr(err)
+    assert len(full) // 4 < len(got) < len(full) and got == full[: len(got)]
+    assert err.offset is not None and err.offset < len(data) // 2

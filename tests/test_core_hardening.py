@@ -1,0 +1,375 @@
+"""Issue 11, the core's part: wrong values given to the API never crash, never half-store,
+and are named in the error (items 7, 11, 13); plus the core's reporting contract of
+issue 10 §1 (the batch result names what it touched; the compiled base calls nothing
+back) and the scalar math's single home (§3)."""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import _tf2math
+import numpy as np
+import pytest
+import yaml
+
+from tfbus import (
+    Header,
+    InvalidArgumentException,
+    LookupException,
+    Quaternion,
+    Time,
+    Transform,
+    TransformStamped,
+    Vector3,
+    _ccore,
+)
+from tfbus.core import MAX_GRAPH_DEPTH, BufferCore, FrameInfo
+from tfbus.ratelimit import CountLimitedLog, RateLimitedLog
+
+T = Time(100)
+
+
+def ts(child: Any, parent: Any = "base", stamp: Any = T, x: Any = 1.0, w: Any = 1.0) -> Any:
+    return TransformStamped(
+        Header(stamp, parent), child, Transform(Vector3(x, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, w))
+    )
+
+
+# ----------------------------------------------------------------------------- item 7
+
+
+HOSTILE_IDS = [
+    "a: b",
+    "#comment",
+    "it's",
+    'say "hi"',
+    "true",
+    "null",
+    "Yes",
+    "- item",
+    "[x]",
+    "{x}",
+    "&anchor",
+    "*alias",
+    "!tag",
+    "%x",
+    "@x",
+    "`x",
+    "line\nbreak",
+    "tab\there",
+    "bell\x07",
+    "esc\x1b[2J",
+    "back\\slash\\",
+    " lead",
+    "trail ",
+    "ünï",
+    "123",
+    "1.5",
+    "0x10",
+    "~",
+    "?q",
+    "a,b",
+    "|",
+    ">",
+]
+
+
+def test_all_frames_as_yaml_quotes_hostile_ids_and_reads_back_every_id() -> None:
+    """Issue 11 item 7: ids YAML would misread are quoted; the text is valid YAML that
+    reads back every child, parent and broadcaster id unchanged."""
+    core = BufferCore()
+    for k, frame in enumerate(HOSTILE_IDS):
+        assert core.set_transform(ts(frame, parent=f"p{k}"), authority=frame)
+        assert core.set_transform(ts(f"c{k}", parent=frame), authority="x'y")
+    parsed = yaml.safe_load(core.all_frames_as_yaml())
+    assert isinstance(parsed, dict)
+    assert set(parsed) == set(HOSTILE_IDS) | {f"c{k}" for k in range(len(HOSTILE_IDS))}
+    for k, frame in enumerate(HOSTILE_IDS):
+        assert parsed[frame]["parent"] == f"p{k}"
+        assert parsed[frame]["broadcaster"] == frame
+        assert parsed[f"c{k}"]["parent"] == frame
+        assert parsed[f"c{k}"]["broadcaster"] == "x'y"
+
+
+def test_all_frames_as_yaml_keeps_tf2_text_for_ordinary_ids() -> None:
+    """Issue 11 item 7: ordinary ids are written exactly as tf2's allFramesAsYAML does."""
+    core = BufferCore()
+    core.set_transform(ts("base_laser", parent="base_link", stamp=Time(1)), "auth")
+    core.set_transform(ts("base_laser", parent="base_link", stamp=Time(3)), "auth")
+    core.set_transform(ts("cam/left-1.optical", parent="base_link", stamp=Time(2)), "me")
+    assert core.all_frames_as_yaml() == (
+        "base_laser: \n"
+        "  parent: 'base_link'\n"
+        "  broadcaster: 'auth'\n"
+        "  rate: 1.000\n"
+        "  most_recent_transform: 3.000\n"
+        "  oldest_transform: 1.000\n"
+        "  buffer_length: 2.000\n"
+        "cam/left-1.optical: \n"
+        "  parent: 'base_link'\n"
+        "  broadcaster: 'me'\n"
+        "  rate: 10000.000\n"
+        "  most_recent_transform: 2.000\n"
+        "  oldest_transform: 2.000\n"
+        "  buffer_length: 0.000\n"
+    )
+
+
+# ----------------------------------------------------------------------------- item 11
+
+
+def test_a_numpy_str_frame_id_is_the_string_it_is() -> None:
+    """Issue 11 item 11: numpy.str_ (any str subclass) ids are accepted as their string,
+    stored as plain ``str`` and found by plain strings (and the other way round)."""
+    core = BufferCore()
+    assert core.set_transform(ts(np.str_("laser"), parent=np.str_("/base")))
+    assert core.get_frame_names() == ["laser", "base"]
+    assert all(type(name) is str for name in core.get_frame_names())
+    out = core.lookup_transform(np.str_("base"), np.str_("laser"), T)  # type: ignore[arg-type]
+    assert out.transform.translation.x == 1.0
+    assert core.lookup_transform("base", "laser", T) == out
+
+    class Name(str):
+        pass
+
+    assert core.set_transform(ts(Name("cam"), parent=Name("laser")))
+    assert core.can_transform("base", Name("cam"), T)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        ts("ghost", parent=5),
+        ts(5, parent="ghost_parent"),
+        ts("ghost", x=None),
+        ts("ghost", w="1"),
+        ts("ghost", stamp=None),
+    ],
+)
+def test_a_rejected_transform_leaves_no_ghost_frame(bad: TransformStamped) -> None:
+    """Issue 11 item 11: nothing is ever half-stored: a transform that raises registers
+    no frame and changes nothing."""
+    core = BufferCore()
+    core.set_transform(ts("a"))
+    before = (core.get_frame_names(), list(core.frame_info()), core.all_frames_as_yaml())
+    with pytest.raises(InvalidArgumentException):
+        core.set_transform(bad)
+    result = core.set_transforms([bad])
+    assert result.stored == 0 and isinstance(result.errors[0][1], InvalidArgumentException)
+    assert (core.get_frame_names(), list(core.frame_info()), core.all_frames_as_yaml()) == before
+    assert not core.frame_exists("ghost") and not core.frame_exists("ghost_parent")
+
+
+# ----------------------------------------------------------------------------- item 13
+
+
+@pytest.mark.parametrize(
+    ("transform", "field", "shown"),
+    [
+        (ts("c", x=None), "transform.translation.x", "None"),
+        (ts("c", x="1.0"), "transform.translation.x", "'1.0'"),
+        (ts("c", x=True), "transform.translation.x", "True"),
+        (ts("c", x=np.bool_(True)), "transform.translation.x", "True"),
+        (ts("c", x=10**400), "transform.translation.x", "1000000000"),
+        (ts("c", x={}), "transform.translation.x", "{}"),
+        (ts("c", w=False), "transform.rotation.w", "False"),
+        (ts("c", w=[1.0]), "transform.rotation.w", "[1.0]"),
+        (ts(None), "child_frame_id", "None"),
+        (ts(b"c"), "child_frame_id", "b'c'"),
+        (ts("c", parent=None), "header.frame_id", "None"),
+        (ts("c", parent={"a": 1}), "header.frame_id", "{'a': 1}"),
+        (ts("c", stamp=5), "header.stamp", "5"),
+        (ts("c", stamp="now"), "header.stamp", "'now'"),
+        (TransformStamped(None, "c", Transform()), "header", "None"),  # type: ignore[arg-type]
+        (TransformStamped(Header(T, "b"), "c", {}), "transform", "{}"),  # type: ignore[arg-type]
+        (
+            TransformStamped(Header(T, "b"), "c", Transform(None, Quaternion())),  # type: ignore[arg-type]
+            "transform.translation",
+            "None",
+        ),
+        (
+            TransformStamped(Header(T, "b"), "c", Transform(Vector3(0, 0, 0), (0, 0, 1))),  # type: ignore[arg-type]
+            "transform.rotation",
+            "(0, 0, 1)",
+        ),
+    ],
+)
+def test_wrong_types_in_a_transform_are_named(
+    transform: TransformStamped, field: str, shown: str
+) -> None:
+    """Issue 11 item 13: a wrong type anywhere in a TransformStamped (None, str, bool,
+    huge int, dict) is an InvalidArgumentException naming the field and the value; bool
+    is not a number; nothing is stored."""
+    core = BufferCore()
+    with pytest.raises(InvalidArgumentException) as info:
+        core.set_transform(transform)
+    assert field in str(info.value) and shown in str(info.value)
+    (index, error), = core.set_transforms([transform]).errors
+    assert index == 0 and isinstance(error, InvalidArgumentException)
+    assert core.get_frame_names() == []
+
+
+def test_numbers_of_other_real_types_are_accepted() -> None:
+    """Issue 11 item 13 (the other side): ints and numpy floats are numbers."""
+    core = BufferCore()
+    assert core.set_transform(ts("c", x=np.float32(0.5), w=1))
+    assert core.set_transform(ts("d", x=3, w=np.float64(1.0)))
+    assert core.lookup_transform("base", "d", T).transform.translation.x == 3.0
+
+
+@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan, 1e300, -1.0])
+def test_cache_time_out_of_range_is_an_error_naming_it(value: float) -> None:
+    """Issue 11 item 13: cache_time inf / nan / 1e300 (and negative) raise an error that
+    names cache_time."""
+    with pytest.raises(ValueError, match="cache_time"):
+        BufferCore(cache_time=value)
+
+
+@pytest.mark.parametrize("value", ["10", True, None, [10.0]])
+def test_cache_time_of_the_wrong_type_is_a_type_error_naming_it(value: Any) -> None:
+    """Issue 11 items 12/13: a cache_time that is not a number is refused before anything
+    is allocated (and bool is not a number)."""
+    with pytest.raises(TypeError, match="cache_time"):
+        BufferCore(cache_time=value)
+
+
+# --------------------------------------------------------------------- issue 10 §1
+
+
+def test_cache_time_lives_in_one_place() -> None:
+    """Issue 10 §1: cache_time has one home; it cannot be changed behind the links'
+    backs (what is reported is what is kept)."""
+    core = BufferCore(cache_time=2.0)
+    assert core.cache_time_ns == 2_000_000_000
+    with pytest.raises(AttributeError):
+        core.cache_time_ns = 5  # type: ignore[misc]
+    core.set_transform(ts("a", stamp=Time(10)))
+    core.set_transform(ts("a", stamp=Time(12)))
+    core.set_transform(ts("a", stamp=Time(13)))
+    info = next(core.frame_info())
+    assert isinstance(info, FrameInfo)
+    assert (info.samples, info.oldest_ns) == (2, 12 * 10**9)
+
+
+def test_set_transforms_reports_the_frames_it_touched() -> None:
+    """Issue 10 §1: the batch result names the (stripped) frames of what was stored and
+    whether the tree's shape may have changed."""
+    core = BufferCore()
+    r = core.set_transforms([ts("/a", parent="/base"), ts("b", x=math.nan)])
+    assert r.touched == {"a", "base"} and r.relinked
+    r = core.set_transforms([ts("a", stamp=Time(101))])
+    assert r.touched == {"a", "base"} and not r.relinked  # same parent: same shape
+    r = core.set_transforms([ts("a", parent="other", stamp=Time(102))])
+    assert r.relinked
+    r = core.set_transforms([ts("a", stamp=Time(101))])  # refused (repeated)
+    assert r.stored == 0 and r.refused == 1 and not r.touched
+
+
+def test_the_compiled_base_calls_nothing_back(caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 10 §1: the compiled base reports codes; a subclass overriding the names the
+    old base called (``_reject``, ``_refused``) is never called."""
+    calls: list[str] = []
+
+    class Spy(BufferCore):
+        def _reject(self, *args: object) -> None:
+            calls.append("_reject")
+
+        def _refused(self, *args: object) -> None:
+            calls.append("_refused")
+
+    core = Spy()
+    caplog.set_level(logging.WARNING, logger="tfbus.core")
+    with pytest.raises(InvalidArgumentException, match="= nan"):
+        core.set_transform(ts("a", x=math.nan))
+    core.set_transform(ts("a"))
+    assert not core.set_transform(ts("a"))  # TF_REPEATED_DATA
+    assert calls == []
+    assert any("TF_REPEATED_DATA" in r.getMessage() for r in caplog.records)
+
+
+def test_chain_frames_is_bounded_by_the_graph_depth() -> None:
+    """Issue 11 item 16 (core part): the frames a wait depends on are at most
+    MAX_GRAPH_DEPTH + 1 per chain, whatever the depth of the tree."""
+    core = BufferCore()
+    depth = 3 * MAX_GRAPH_DEPTH
+    core.set_transforms(ts(f"f{k + 1}", parent=f"f{k}") for k in range(depth))
+    frames = core.chain_frames(f"f{depth}", "missing", T)
+    assert "missing" in frames and f"f{depth}" in frames
+    assert len(frames) <= MAX_GRAPH_DEPTH + 3
+    assert core.chain_frames("f2", "f0", Time(0)) == ["f0", "f2", "f1"]
+
+
+# --------------------------------------------------------------------- issue 10 §3
+
+
+def test_the_compiled_scalar_math_is_the_reference_math() -> None:
+    """Issue 10 §3: one home per formula: the compiled scalar math gives the
+    pure-Python reference's numbers bit for bit."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        a = tuple(float(v) for v in rng.normal(size=7))
+        b = tuple(float(v) for v in rng.normal(size=7))
+        r = float(rng.uniform())
+        assert _ccore.compose(a, b) == _tf2math.compose(a, b)  # type: ignore[arg-type]
+        assert _ccore.inverse(a) == _tf2math.inverse(a)  # type: ignore[arg-type]
+        assert _ccore.quat_multiply(*a[3:], *b[3:]) == _tf2math.quat_multiply(*a[3:], *b[3:])
+        assert _ccore.quat_rotate(*a[3:], *b[:3]) == _tf2math.quat_rotate(*a[3:], *b[:3])
+        assert _ccore.slerp(*a[3:], *b[3:], r) == _tf2math.slerp(*a[3:], *b[3:], r)
+
+
+# ------------------------------------------------------------------ rate-limited log
+
+
+def test_rate_limited_log_takes_time_from_the_caller(caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 10 §2: the helper reads no clock: ``now`` comes from the caller."""
+    log = RateLimitedLog(logging.getLogger("tfbus.test"), period=5.0)
+    caplog.set_level(logging.WARNING, logger="tfbus.test")
+    assert log.log(100.0, logging.WARNING, "x %s", 1)
+    assert not log.log(104.9, logging.WARNING, "x %s", 2)
+    assert not log.log(101.0, logging.WARNING, "x %s", 3)
+    assert log.log(99.0, logging.WARNING, "x %s", 4)  # clock went back: a new period
+    assert log.log(100.0, logging.WARNING, "y")  # another format string: its own limit
+    assert [r.getMessage() for r in caplog.records] == [
+        "x 1",
+        "x 4 (2 more like this suppressed)",
+        "y",
+    ]
+    with pytest.raises(ValueError):
+        RateLimitedLog(logging.getLogger("tfbus.test"), period=math.inf)
+
+
+def test_count_limited_log(caplog: pytest.LogCaptureFixture) -> None:
+    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=3)
+    caplog.set_level(logging.WARNING, logger="tfbus.test")
+    logged = [log.log(logging.WARNING, "z %d", k) for k in range(7)]
+    assert logged == [True, False, False, True, False, False, True]
+    assert [r.getMessage() for r in caplog.records] == [
+        "z 0",
+        "z 3 (2 more like this suppressed)",
+        "z 6 (2 more like this suppressed)",
+    ]
+
+
+def test_a_loop_is_reported_by_lookup() -> None:
+    core = BufferCore()
+    core.set_transform(ts("b", parent="a"))
+    core.set_transform(ts("a", parent="b"))
+    core.set_transform(ts("d", parent="b"))
+    core.set_transform(ts("e", parent="x"))
+    with pytest.raises(LookupException, match="loop"):
+        core.lookup_transform("e", "d", Time(0))
+
+
+def test_invalid_frame_id_checks_form_only() -> None:
+    core = BufferCore()
+    assert core.invalid_frame_id("unknown_yet") is None
+    error = core.invalid_frame_id("/x", "lookupTransform argument fixed_frame")
+    assert isinstance(error, InvalidArgumentException)
+    assert str(error) == (
+        'Invalid argument "/x" passed to lookupTransform argument fixed_frame in tf2 '
+        "frame_ids cannot start with a '/' like: "
+    )
+    assert isinstance(core.invalid_frame_id(""), InvalidArgumentException)
+    assert isinstance(core.invalid_frame_id(3), InvalidArgumentException)  # type: ignore[arg-type]

@@ -1,0 +1,300 @@
+"""The layer order of ``tfbus/`` (DESIGN.md "Layers"): no import runs up a layer, no
+import cycles, and every module has a place in the table.
+
+Imports are read with :mod:`ast` from every ``.py`` file under ``tfbus/`` (every
+``import`` node: module level, inside functions, under ``if TYPE_CHECKING``) and with a
+line scan from the compiled core's ``.pyx`` (Cython's ``cimport`` lines are C, not
+Python modules, and are skipped). Nothing is imported: the test reads source only.
+
+Adding a module? Put it in ``LAYERS`` below (and in ``docs/architecture.md`` /
+DESIGN.md's table): a module missing from the table fails :func:`test_every_module_has_a_layer`.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "tfbus"
+
+LAYERS: dict[str, int] = {
+    # 0: values, pure functions
+    "messages": 0,
+    "time": 0,
+    "geometry": 1,
+    "ratelimit": 0,
+    "_version": 0,  # the distribution's version from package metadata
+    "convert": 1,
+    # 1: the sans-I/O core
+    "core": 1,
+    "_ccore": 1,
+    "cache": 1,
+    "errors": 1,
+    # 2: the bus and time sources
+    "bus": 2,
+    "clock": 2,
+    "latch": 2,
+    # 3: awaitable tf2_ros pieces
+    "buffer": 3,
+    "listener": 3,
+    "broadcaster": 3,
+    # 4: recordings, statistics, sensors, transports (packages count as one entry)
+    "bag": 4,
+    "monitor": 4,
+    "filters": 4,
+    "laser": 4,
+    "robot_state": 4,
+    "urdf": 4,
+    "transports": 4,
+    # 5: the command line and examples
+    "cli": 5,
+    "demo": 5,
+    "__main__": 5,
+}
+"""Layer of each top-level module or package of ``tfbus`` (a package's submodules share
+its layer). ``tfbus/__init__.py`` is the facade above every layer."""
+
+ONLY_IMPORTS: dict[str, set[str]] = {
+    "errors": {"time"},  # the exception tree may name a Time, nothing else of tfbus
+}
+"""Modules allowed a narrower set of tfbus imports than their layer would give."""
+
+SANS_IO_FORBIDDEN = {"anyio", "asyncio", "trio", "sniffio", "time", "datetime", "threading"}
+"""What layers 0-1 must not import: no event loop, no wall clock (DESIGN.md "Sans-I/O
+core"). ``time`` is the standard library's (tfbus's own is ``tfbus.time``)."""
+
+WALL_CLOCK_PENDING: dict[str, str] = {
+}
+"""Known offenders of SANS_IO_FORBIDDEN being fixed elsewhere. An entry that no longer
+offends fails the test, so the list cannot go stale."""
+
+_PYX_IMPORT = re.compile(r"^\s*(?:from\s+([\w.]+)\s+import\s|import\s+([\w.]+))", re.MULTILINE)
+_PYX_CIMPORT = re.compile(r"^\s*(?:from\s+[\w.]+\s+cimport\s|cimport\s)")
+
+
+def _module_files() -> Iterator[tuple[str, Path]]:
+    """``(dotted name, path)`` of every Python or Cython module in the package."""
+    for path in sorted(PACKAGE.rglob("*")):
+        if path.suffix not in (".py", ".pyx") or "__pycache__" in path.parts:
+            continue
+        rel = path.relative_to(PACKAGE.parent).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        yield ".".join(parts), path
+
+
+MODULES: dict[str, Path] = dict(_module_files())
+
+
+def _is_package(name: str) -> bool:
+    return MODULES.get(name, Path()).name == "__init__.py"
+
+
+def _entry(module: str) -> str | None:
+    """The LAYERS key of a dotted tfbus module name (None for the package root)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def _resolve(importer: str, is_package: bool, level: int, target: str | None) -> str:
+    """Absolute module name of a (possibly relative) import in ``importer``."""
+    if level == 0:
+        return target or ""
+    base = importer.split(".")
+    if not is_package:
+        base = base[:-1]
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([target] if target else []))
+
+
+def _imports(module: str, path: Path) -> Iterator[tuple[str, int]]:
+    """``(absolute module name, line)`` for every import in a module's source."""
+    text = path.read_text(encoding="utf-8")
+    if path.suffix == ".pyx":
+        for match in _PYX_IMPORT.finditer(text):
+            line_start = text.rfind("\n", 0, match.start()) + 1
+            if _PYX_CIMPORT.match(text, line_start):
+                continue
+            yield match.group(1) or match.group(2), text.count("\n", 0, match.start()) + 1
+        return
+    for node in ast.walk(ast.parse(text, filename=str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            base = _resolve(module, _is_package(module), node.level, node.module)
+            for alias in node.names:
+                # ``from tfbus import clock`` imports the submodule tfbus.clock;
+                # ``from tfbus import Time`` imports (runs) the package tfbus itself.
+                sub = f"{base}.{alias.name}"
+                yield (sub if sub in MODULES else base), node.lineno
+
+
+def _tfbus_module(name: str) -> str | None:
+    """The tfbus module an import name lands in (its longest existing prefix)."""
+    if name != "tfbus" and not name.startswith("tfbus."):
+        return None
+    parts = name.split(".")
+    while parts and ".".join(parts) not in MODULES:
+        parts.pop()
+    return ".".join(parts) if parts else None
+
+
+def _graph() -> dict[str, dict[str, int]]:
+    """importer -> {imported tfbus module: first line}, for every tfbus module."""
+    graph: dict[str, dict[str, int]] = {}
+    for module, path in MODULES.items():
+        edges: dict[str, int] = {}
+        for name, line in _imports(module, path):
+            target = _tfbus_module(name)
+            if target is not None and target != module:
+                edges.setdefault(target, line)
+        graph[module] = edges
+    return graph
+
+
+def _where(module: str, line: int) -> str:
+    return f"{MODULES[module].relative_to(PACKAGE.parent)}:{line}"
+
+
+def test_the_package_is_found() -> None:
+    assert "tfbus.core" in MODULES and "tfbus._ccore" in MODULES and "tfbus" in MODULES
+    assert "tfbus.messages" in _graph()["tfbus._ccore"]  # the compiled core's import is seen
+
+
+def test_every_module_has_a_layer() -> None:
+    missing = sorted(
+        {entry for m in MODULES if (entry := _entry(m)) is not None and entry not in LAYERS}
+    )
+    assert not missing, (
+        f"tfbus module(s) {missing} have no layer: add each to LAYERS in "
+        f"tests/test_layers.py (and to the layer table of docs/architecture.md), at the "
+        f"lowest layer whose modules are all it imports"
+    )
+
+
+def test_no_import_runs_up_a_layer() -> None:
+    problems: list[str] = []
+    for importer, edges in _graph().items():
+        entry = _entry(importer)
+        if entry is None or entry not in LAYERS:
+            continue  # the facade; unplaced modules fail the test above
+        for target, line in edges.items():
+            target_entry = _entry(target)
+            if target_entry is None:
+                problems.append(
+                    f"{_where(importer, line)}: imports the package root 'tfbus' (which "
+                    f"imports every layer); import the module that defines the name"
+                )
+                continue
+            if target_entry == entry or target_entry not in LAYERS:
+                continue
+            if LAYERS[target_entry] > LAYERS[entry]:
+                problems.append(
+                    f"{_where(importer, line)}: {importer} (layer {LAYERS[entry]}) imports "
+                    f"{target} (layer {LAYERS[target_entry]})"
+                )
+            allowed = ONLY_IMPORTS.get(entry)
+            if allowed is not None and target_entry not in allowed:
+                problems.append(
+                    f"{_where(importer, line)}: {importer} may import only {sorted(allowed)} "
+                    f"of tfbus, not {target}"
+                )
+    assert not problems, "imports against the layer order:\n" + "\n".join(problems)
+
+
+def _cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, {}):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_cycles() -> None:
+    graph = _graph()
+    # The facade imports everything and nothing may import it (checked above); a package's
+    # own __init__ re-exporting its submodules is the package pattern, not a cycle.
+    graph = {
+        m: {t: ln for t, ln in edges.items() if t != "tfbus" and not m.startswith(f"{t}.")}
+        for m, edges in graph.items()
+        if m != "tfbus"
+    }
+    cycles = _cycles(graph)
+    described = [
+        " -> ".join(c) + "  (" + ", ".join(
+            f"{a} imports {b} at {_where(a, graph[a][b])}"
+            for a in c
+            for b in c
+            if b in graph[a]
+        ) + ")"
+        for c in cycles
+    ]
+    assert not cycles, "import cycles:\n" + "\n".join(described)
+
+
+def test_layers_0_and_1_are_sans_io() -> None:
+    """No event loop and no wall clock below layer 2 (time comes from the caller)."""
+    offenders: dict[str, list[str]] = {}
+    for module, path in MODULES.items():
+        entry = _entry(module)
+        if entry is None or LAYERS.get(entry, 99) > 1:
+            continue
+        for name, line in _imports(module, path):
+            if name.split(".")[0] in SANS_IO_FORBIDDEN:
+                offenders.setdefault(module, []).append(f"{_where(module, line)}: {name}")
+    unexpected = {m: v for m, v in offenders.items() if m not in WALL_CLOCK_PENDING}
+    assert not unexpected, "layers 0-1 must not import an event loop or a clock:\n" + "\n".join(
+        line for lines in unexpected.values() for line in lines
+    )
+    stale = sorted(m for m in WALL_CLOCK_PENDING if m in MODULES and m not in offenders)
+    assert not stale, f"{stale} no longer import a clock: remove them from WALL_CLOCK_PENDING"
+
+
+@pytest.mark.parametrize(
+    ("importer", "is_package", "level", "target", "expected"),
+    [
+        ("tfbus.errors", False, 1, "time", "tfbus.time"),
+        ("tfbus.bag", True, 1, "reader", "tfbus.bag.reader"),  # a package's own submodule
+        ("tfbus.bag.reader", False, 1, "formats", "tfbus.bag.formats"),
+        ("tfbus.bag.reader", False, 2, "time", "tfbus.time"),
+        ("tfbus.core", False, 0, "tfbus.messages", "tfbus.messages"),
+        ("tfbus.geometry", False, 1, None, "tfbus"),
+    ],
+)
+def test_relative_imports_resolve(
+    importer: str, is_package: bool, level: int, target: str | None, expected: str
+) -> None:
+    assert _resolve(importer, is_package, level, target) == expected

@@ -1,0 +1,303 @@
+"""Writing tf messages to new bags that the ROS tools read, and recording a bus.
+
+Through rosbags' writers: ROS 1 ``.bag`` (``rosbags.rosbag1.Writer``) and ROS 2 bag
+folders with sqlite3 or MCAP storage (``rosbags.rosbag2.Writer``, bag version 8).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterator, Sequence
+from os import PathLike
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+from tfbus.bag.decode import TF_MSGDEF
+from tfbus.bag.formats import DEFAULT_TOPICS, TF_STATIC_TOPIC, BagFormat, BagMessage
+from tfbus.bag.reader import describe
+from tfbus.errors import BagError, BagFormatError
+from tfbus.messages import TFMessage
+from tfbus.time import Time
+
+if TYPE_CHECKING:
+    from tfbus.bus import Bus, Subscription
+    from tfbus.clock import Clock
+
+__all__ = ["BagRecorder", "write_bag"]
+
+
+
+def _qos(static: bool) -> list[Any]:
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    never = QosTime(sec=9223372036, nsec=854775807)
+    return [
+        Qos(
+            history=QosHistory.KEEP_LAST,
+            depth=1 if static else 100,
+            reliability=QosReliability.RELIABLE,
+            durability=QosDurability.TRANSIENT_LOCAL if static else QosDurability.VOLATILE,
+            deadline=never,
+            lifespan=never,
+            liveliness=QosLiveliness.AUTOMATIC,
+            liveliness_lease_duration=never,
+            avoid_ros_namespace_conventions=False,
+        )
+    ]
+
+
+class _Writer:
+    """Synchronous bag writer for TFMessages: ROS 1 .bag or ROS 2 (sqlite3 / mcap)."""
+
+    def __init__(
+        self,
+        path: Path,
+        fmt: BagFormat,
+        callerid: str,
+    ) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
+        self.path = path
+        self.fmt = fmt
+        self.ros1 = fmt is BagFormat.ROS1
+        self.store = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.ROS2_HUMBLE)
+        if "tf2_msgs/msg/TFMessage" not in self.store.types:  # ROS1_NOETIC lacks tf2_msgs
+            from rosbags.typesys import get_types_from_msg
+
+            self.store.register(get_types_from_msg(TF_MSGDEF, "tf2_msgs/msg/TFMessage"))
+        self.callerid = callerid
+        self.conns: dict[str, Any] = {}
+        self.writer: Any = None
+        self.count = 0
+
+    def open(self) -> None:
+        try:
+            if self.ros1:
+                from rosbags.rosbag1 import Writer as Writer1
+
+                self.writer = Writer1(self.path)
+            else:
+                from rosbags.rosbag2 import StoragePlugin
+                from rosbags.rosbag2 import Writer as Writer2
+
+                plugin = (
+                    StoragePlugin.MCAP if self.fmt is BagFormat.MCAP else StoragePlugin.SQLITE3
+                )
+                self.writer = Writer2(self.path, version=8, storage_plugin=plugin)
+            self.writer.open()
+        except Exception as err:
+            raise BagError(f"{self.path}: cannot create bag: {describe(err)}", self.path) from None
+
+    def _conn(self, topic: str) -> Any:
+        conn = self.conns.get(topic)
+        if conn is None:
+            typ = "tf2_msgs/msg/TFMessage"
+            static = topic == TF_STATIC_TOPIC
+            if self.ros1:
+                conn = self.writer.add_connection(
+                    topic, typ, typestore=self.store, callerid=self.callerid,
+                    latching=1 if static else 0,
+                )
+            else:
+                conn = self.writer.add_connection(
+                    topic, typ, typestore=self.store, offered_qos_profiles=_qos(static)
+                )
+            self.conns[topic] = conn
+        return conn
+
+    def write(self, time: Time, topic: str, message: TFMessage) -> None:
+        s = self.store
+        T = s.types
+        Time_ = T["builtin_interfaces/msg/Time"]
+        Header_ = T["std_msgs/msg/Header"]
+        TS_ = T["geometry_msgs/msg/TransformStamped"]
+        Tr_ = T["geometry_msgs/msg/Transform"]
+        V_ = T["geometry_msgs/msg/Vector3"]
+        Q_ = T["geometry_msgs/msg/Quaternion"]
+        items = []
+        for ts in message.transforms:
+            st = ts.header.stamp
+            stamp = Time_(sec=st.sec, nanosec=st.nanosec)
+            head = (
+                Header_(seq=0, stamp=stamp, frame_id=ts.header.frame_id)
+                if self.ros1
+                else Header_(stamp=stamp, frame_id=ts.header.frame_id)
+            )
+            tr, q = ts.transform.translation, ts.transform.rotation
+            items.append(
+                TS_(
+                    header=head,
+                    child_frame_id=ts.child_frame_id,
+                    transform=Tr_(
+                        translation=V_(x=float(tr.x), y=float(tr.y), z=float(tr.z)),
+                        rotation=Q_(x=float(q.x), y=float(q.y), z=float(q.z), w=float(q.w)),
+                    ),
+                )
+            )
+        msg = T["tf2_msgs/msg/TFMessage"](transforms=items)
+        typ = "tf2_msgs/msg/TFMessage"
+        raw = s.serialize_ros1(msg, typ) if self.ros1 else s.serialize_cdr(msg, typ)
+        self.writer.write(self._conn(topic), time.ns, raw)
+        self.count += 1
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def _format_for(path: Path, fmt: str | BagFormat | None) -> BagFormat:
+    if fmt is not None:
+        try:
+            return BagFormat(fmt)
+        except ValueError:
+            raise BagFormatError(
+                f"unknown bag format {fmt!r} (use ros1, sqlite3 or mcap)", path
+            ) from None
+    if path.suffix == ".bag":
+        return BagFormat.ROS1
+    if path.suffix == ".mcap":
+        return BagFormat.MCAP
+    return BagFormat.SQLITE3
+
+
+def write_bag(
+    path: str | PathLike[str],
+    messages: Iterator[BagMessage] | Sequence[BagMessage],
+    *,
+    format: str | BagFormat | None = None,
+    callerid: str = "/tfbus_record",
+) -> int:
+    """Write tf messages to a new bag that ROS tools read.
+
+    ``/tf_static`` is written latched (ROS 1 ``latching=1``) / transient-local with depth
+    1 (ROS 2); ``/tf`` volatile, depth 100. The type is ``tf2_msgs/msg/TFMessage`` with
+    the standard message definition and hashes.
+
+    Args:
+        path: ``*.bag`` for ROS 1; otherwise a ROS 2 bag folder to create (``format``
+            ``"sqlite3"``, the default, or ``"mcap"``).
+        messages: :class:`BagMessage` records (time = bag time to write).
+        format: ``"ros1"``, ``"sqlite3"`` or ``"mcap"``; default from the path's suffix.
+        callerid: ROS 1 caller id stored on the connections.
+
+    Returns:
+        The number of messages written.
+
+    Raises:
+        BagError: the path exists already or cannot be created.
+        BagFormatError: unknown ``format``.
+    """
+    p = Path(path)
+    w = _Writer(p, _format_for(p, format), callerid)
+    w.open()
+    try:
+        for rec in messages:
+            w.write(rec.time, rec.topic, rec.message)
+    finally:
+        w.close()
+    return w.count
+
+
+class BagRecorder:
+    """Record a bus's ``/tf`` and ``/tf_static`` to a bag while the ``async with`` lasts.
+
+    Each message is written with the receive time read from ``clock`` (or the header
+    stamp of its first transform when no clock is given). On exit the messages already
+    delivered to the recorder are written and the bag is closed::
+
+        async with Bus() as bus, BagRecorder(bus, "session.bag", clock=clock) as rec:
+            ...
+        print(rec.count)
+
+    Args:
+        bus: the bus to record.
+        path: ``*.bag`` (ROS 1) or a ROS 2 bag folder (``format`` ``"sqlite3"``/``"mcap"``).
+        clock: receive-time source; only its ``now()`` is read.
+        format: ``"ros1"``, ``"sqlite3"`` or ``"mcap"``; default from the suffix.
+        topics: the topics to record.
+        queue_size: subscription queue per topic (a full queue drops its oldest message).
+
+    Raises:
+        BagError: the path exists already or cannot be created (on entry).
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        path: str | PathLike[str],
+        *,
+        clock: Clock | None = None,
+        format: str | BagFormat | None = None,
+        topics: Collection[str] = DEFAULT_TOPICS,
+        callerid: str = "/tfbus_record",
+        queue_size: int = 10_000,
+    ) -> None:
+        self.bus = bus
+        self.queue_size = queue_size
+        self.path = Path(path)
+        self.clock = clock
+        self.topics = tuple(topics)
+        self._writer = _Writer(self.path, _format_for(self.path, format), callerid)
+        self._subs: list[Subscription[Any]] = []
+
+    @property
+    def count(self) -> int:
+        """Messages written so far."""
+        return self._writer.count
+
+    async def __aenter__(self) -> BagRecorder:
+        import anyio
+
+        self._writer.open()
+        self._subs = [self.bus.subscribe(t, queue_size=self.queue_size) for t in self.topics]
+        self._tg = anyio.create_task_group()
+        await self._tg.__aenter__()
+        for sub in self._subs:
+            self._tg.start_soon(self._pump, sub)
+        return self
+
+    async def _pump(self, sub: Subscription[Any]) -> None:
+        async for msg in sub:
+            self._write(sub.topic, msg)
+
+    def _write(self, topic: str, msg: Any) -> None:
+        if not isinstance(msg, TFMessage):
+            return
+        if self.clock is not None:
+            t = self.clock.now()
+        elif msg.transforms:
+            t = msg.transforms[0].header.stamp
+        else:
+            return
+        self._writer.write(t, topic, msg)
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool | None:
+        import anyio
+
+        try:
+            self._tg.cancel_scope.cancel()
+            await self._tg.__aexit__(None, None, None)
+            # Write what was delivered but not yet taken by the pumps.
+            for sub in self._subs:
+                while True:
+                    try:
+                        msg = sub.receive_nowait()
+                    except (anyio.WouldBlock, anyio.EndOfStream, anyio.ClosedResourceError):
+                        break
+                    self._write(sub.topic, msg)
+        finally:
+            for sub in self._subs:
+                sub.close()
+            self._writer.close()
+        return None

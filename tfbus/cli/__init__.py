@@ -1,0 +1,108 @@
+"""The ``tfbus`` command line: the tf2 tools every tf user knows (layer 5).
+
+::
+
+    tfbus bag-info PATH                       frames, parents, rates, span, static/dynamic
+    tfbus echo SOURCE TARGET --bag PATH       like tf2_echo
+    tfbus monitor --bag PATH                  like tf_monitor
+    tfbus frames --bag PATH -o frames.pdf     like view_frames (Graphviz)
+    tfbus static-transform x y z yaw pitch roll parent child     (on --bus, default zenoh)
+    tfbus replay PATH --rate 2                publish a bag on --bus, with a progress bar
+    tfbus robot-state-publisher MODEL.urdf    robot_state_publisher (on --bus, default zenoh)
+    tfbus joint-states MODEL.urdf             joint_state_publisher, animated (--bus)
+    tfbus demo --duration 10                  the seed demo (tfbus.demo)
+    tfbus demo laser                          a simulated laser projected three ways
+    tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
+    tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus
+    tfbus --version                           tfbus <version>
+
+One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
+group and shared plumbing in ``_common.py``, the transform sources and bus options in
+``_sources.py``, what the two robot commands share in ``_robot.py``.
+A command is registered by one line in :data:`COMMANDS`.
+
+Every command has ``--help`` with examples. A bad argument prints one line,
+``tfbus <command>: error: ...``, and exits with status 2; a damaged bag prints what was
+readable, a one-line warning, and exits with status 1; a missing optional dependency is
+one line naming the extra to install. Ids from bags and peers are printed literally
+(control characters escaped, never rich markup). Ctrl-C and SIGTERM end every command
+cleanly.
+
+Importing this package needs nothing beyond tfbus's own dependencies: click and rich are
+imported when the command runs (:func:`main`), so ``tfbus`` without them says which
+extra to install.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+__all__ = ["COMMANDS", "cli", "frames_dot", "main", "parse_static_args", "parse_time"]
+
+COMMANDS: tuple[str, ...] = (
+    "bag_info",
+    "echo",
+    "monitor",
+    "frames",
+    "static_transform",
+    "replay",
+    "robot_state_publisher",
+    "joint_states",
+    "demo",
+)
+"""The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
+
+# Public names re-exported lazily (they need click), by the module defining them.
+_LAZY = {
+    "cli": "tfbus.cli._common",
+    "parse_time": "tfbus.cli._common",
+    "frames_dot": "tfbus.cli.frames",
+    "parse_static_args": "tfbus.cli.static_transform",
+    "BagSource": "tfbus.cli._sources",
+    "BusSource": "tfbus.cli._sources",
+    "TfSource": "tfbus.cli._sources",
+}
+
+_loaded = False
+
+
+def _load() -> Any:
+    """The click group with every command of :data:`COMMANDS` registered."""
+    global _loaded
+    common = importlib.import_module("tfbus.cli._common")
+    if not _loaded:
+        for name in COMMANDS:
+            common.cli.add_command(importlib.import_module(f"tfbus.cli.{name}").command)
+        _loaded = True
+    return common.cli
+
+
+def __getattr__(name: str) -> Any:
+    if name == "cli":
+        return _load()
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'tfbus.cli' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``tfbus`` command (``pyproject.toml``); returns the exit status.
+
+    Without click or rich installed it prints one line naming the extra (``tfbus[cli]``)
+    and returns 1."""
+    try:
+        _load()
+    except ImportError as err:
+        missing = (getattr(err, "name", None) or "").partition(".")[0]
+        if missing not in ("click", "rich"):
+            raise
+        print(f"tfbus: error: the command line needs the '{missing}' package: "
+              "pip install 'tfbus[cli]'", file=sys.stderr)
+        return 1
+    common = importlib.import_module("tfbus.cli._common")
+    code: int = common.run_main(argv)
+    return code

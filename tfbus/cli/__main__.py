@@ -1,0 +1,7 @@
+"""``python -m tfbus.cli``: the ``tfbus`` command."""
+
+import sys
+
+from tfbus.cli import main
+
+sys.exit(main())

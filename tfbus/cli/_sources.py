@@ -1,0 +1,445 @@
+"""Where echo, monitor and frames get their transforms: a bag or a live bus (layer 5).
+
+:class:`BagSource` reads a recording; :class:`BusSource` is a
+:class:`~tfbus.listener.TransformListener` feeding a :class:`~tfbus.buffer.Buffer` and
+:class:`~tfbus.monitor.TfStatistics` at once (:class:`~tfbus.monitor.MonitoredSink`), plus
+over Zenoh the liveliness of broadcasters. Both offer :meth:`TfSource.buffer` and
+:meth:`TfSource.statistics`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import click
+
+from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
+
+if TYPE_CHECKING:
+    import anyio
+
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Subscription, Transport
+    from tfbus.core import BufferCore
+    from tfbus.listener import TransformListener
+    from tfbus.monitor import TfStatistics
+    from tfbus.transports.spec import BusSpec
+    from tfbus.transports.zenoh import PeerEvent, PeerInfo
+
+__all__ = ["BagSource", "BusSource", "TfSource", "is_bus_error", "live", "run_live",
+           "source", "source_options"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+class TfSource:
+    """Where echo / monitor / frames get their transforms.
+
+    :class:`BagSource` reads a recording; :class:`BusSource` listens to a live bus (other
+    processes, over Zenoh) and fills the same two structures while it is attached.
+    """
+
+    label: str = ""
+
+    def buffer(self) -> BufferCore:
+        """A BufferCore holding the transforms (for lookups and the frame tree)."""
+        raise NotImplementedError
+
+    def statistics(self) -> TfStatistics:
+        """tf_monitor's per-frame and per-broadcaster statistics (:mod:`tfbus.monitor`)."""
+        raise NotImplementedError
+
+    @property
+    def problem(self) -> str | None:
+        """A one-line warning when the data was incomplete (a damaged bag)."""
+        return None
+
+
+def check_bag(path: Path) -> None:
+    """A usage error (one line) unless ``path`` is a bag of a known format."""
+    from tfbus.bag import BagError, detect_format
+
+    try:
+        detect_format(path)
+    except BagError as err:
+        fail(str(err))
+
+
+class BagSource(TfSource):
+    """Transforms from a bag file, loaded once (``tfbus.bag``)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.label = str(path)
+        self._buffer: BufferCore | None = None
+        self._statistics: TfStatistics | None = None
+        self._problem: str | None = None
+        self.chain: list[str] | None = None
+        """``[source, target]``: the chain whose net delay :meth:`statistics` measures
+        (set it, then :meth:`reset_statistics`)."""
+        check_bag(path)
+
+    def buffer(self) -> BufferCore:
+        from tfbus.bag import BagReadError, load_buffer
+
+        if self._buffer is None:
+            try:
+                self._buffer = load_buffer(self.path)
+            except BagReadError as err:
+                self._problem = one_line(str(err))
+                self._buffer = err.partial
+        assert self._buffer is not None
+        return self._buffer
+
+    def statistics(self) -> TfStatistics:
+        from tfbus.bag import BagReadError, read_messages
+        from tfbus.monitor import TfStatistics
+
+        if self._statistics is None:
+            stats = TfStatistics()
+            if self.chain is not None:
+                stats.watch_chain(self.chain[0], self.chain[1])
+            try:
+                for rec in read_messages(self.path):
+                    stats.add(rec.time, rec.message.transforms, rec.authority,
+                              static=rec.is_static)
+            except BagReadError as err:
+                self._problem = one_line(str(err))
+            self._statistics = stats
+        return self._statistics
+
+    def reset_statistics(self) -> None:
+        """Forget the statistics: the next :meth:`statistics` reads the bag again."""
+        self._statistics = None
+
+    @property
+    def problem(self) -> str | None:
+        return self._problem
+
+
+_UNKNOWN_AUTHORITY = "unknown"
+_SHARED_AUTHORITY = "unattributed"
+
+
+def parse_spec(spec: str) -> BusSpec:
+    """``--bus SPEC`` parsed by the scheme table (:mod:`tfbus.transports.spec`: ``zenoh``,
+    ``ros2``, ``ros1``, ``memory``, ...), or a one-line usage error."""
+    from tfbus.transports.spec import parse_bus_spec
+
+    try:
+        return parse_bus_spec(spec)
+    except ValueError as err:
+        fail(str(err))
+
+
+def open_spec_transport(spec: BusSpec, *, name: str) -> Transport:
+    """A new transport for ``spec``; ``name`` is this node's name unless the spec gives
+    one (:func:`tfbus.transports.spec.open_transport`'s ``default_name``).
+
+    Raises:
+        TransportError: the scheme's extra is not installed (named), or the transport
+            rejects its configuration.
+        ValueError: an option value the transport does not understand.
+    """
+    from tfbus.transports.spec import open_transport
+
+    return open_transport(spec, default_name=name)
+
+
+def check_bus_spec(bus: str | None) -> None:
+    """A bad ``--bus`` is a one-line usage error here, before anything runs."""
+    if bus is not None:
+        parse_spec(bus)
+
+
+class BusSource(TfSource):
+    """Transforms from a live bus (``--bus SPEC``: Zenoh, ROS 2, ROS 1, ...).
+
+    While :meth:`attach` is open, a :class:`~tfbus.listener.TransformListener` stores every
+    ``/tf`` and ``/tf_static`` message other processes broadcast in :meth:`buffer` (a
+    :class:`~tfbus.buffer.Buffer`, so lookups can be awaited) through a
+    :class:`~tfbus.monitor.MonitoredSink`, which accounts it in :meth:`statistics`
+    (receive time = wall clock, delay = receive time - header stamp, as tf_monitor), and
+    over Zenoh, liveliness changes of broadcasters are tracked (:attr:`gone`).
+
+    Authority: the wire format does not say which node sent a message, so a message is
+    attributed to the one live broadcaster publishing its topic (``"unknown"`` before
+    any is known or on transports without liveliness, ``"unattributed"`` when several
+    publish it).
+
+    Args:
+        spec: a ``--bus`` value (:func:`tfbus.transports.spec.parse_bus_spec`).
+        name: this node's name unless ``spec`` gives one (``zenoh?name=...``).
+        cache_time: seconds of history the buffer keeps.
+    """
+
+    def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0) -> None:
+        from tfbus.buffer import Buffer
+        from tfbus.clock import SystemClock
+        from tfbus.monitor import MonitoredSink, TfStatistics
+
+        self.spec = spec
+        self.bus_spec = parse_spec(spec)
+        self.name = name
+        self.label = f"the bus {spec!r}"
+        self.clock = SystemClock()
+        self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
+        self._statistics = TfStatistics()
+        self.sink = MonitoredSink(self._buffer, self._statistics, self.clock, self._authority)
+        self.transport: Transport | None = None
+        self.listener: TransformListener | None = None
+        self.broadcasters_seen: dict[str, PeerInfo] = {}
+        """Every broadcaster heard of through liveliness, by node id."""
+        self.gone: dict[str, PeerInfo] = {}
+        """Broadcasters whose liveliness went away (exited, killed or unreachable)."""
+        self._problem: str | None = None
+
+    def buffer(self) -> Buffer:
+        return self._buffer
+
+    def statistics(self) -> TfStatistics:
+        return self._statistics
+
+    @property
+    def invalid(self) -> int:
+        """Transforms the buffer rejected (NaN, bad quaternion, bad frame ids)."""
+        return self.listener.statistics().invalid if self.listener is not None else 0
+
+    @property
+    def problem(self) -> str | None:
+        return self._problem
+
+    def report_problem(self, message: str) -> None:
+        """Record a one-line warning (printed at the end, exit status 1)."""
+        self._problem = message
+
+    def alive_broadcasters(self) -> dict[str, PeerInfo]:
+        """The live broadcasters now (a Zenoh transport's ``broadcasters()``); empty when
+        detached or on a transport without liveliness."""
+        broadcasters = getattr(self.transport, "broadcasters", None)
+        return dict(broadcasters()) if callable(broadcasters) else {}
+
+    @contextlib.asynccontextmanager
+    async def attach(
+        self, on_peer: Callable[[str, PeerInfo], None] | None = None
+    ) -> AsyncIterator[BusSource]:
+        """Open the bus and collect until the block ends.
+
+        ``on_peer(what, info)`` is called with ``what`` = ``"alive"`` when a node starts
+        broadcasting (its first ``/tf`` or ``/tf_static``) and ``"gone"`` when a known
+        broadcaster's liveliness disappears.
+
+        Raises:
+            TransportError, OSError: the transport cannot be opened (endpoint in use,
+                bad config, extra not installed).
+        """
+        import anyio
+
+        from tfbus.bus import Bus
+        from tfbus.listener import TransformListener
+
+        transport = open_spec_transport(self.bus_spec, name=self.name)
+        with _literal_logging():
+            async with Bus(transport=transport, queue_size=10_000) as bus:
+                self.transport = transport
+                self.listener = TransformListener(self.sink, bus, clock=self.clock)
+                async with self.listener, anyio.create_task_group() as tg:
+                    if self.bus_spec.scheme == "zenoh":
+                        from tfbus.transports.zenoh import PEERS_TOPIC
+
+                        peers = bus.subscribe(PEERS_TOPIC, queue_size=1000)
+                        tg.start_soon(self._watch, peers, on_peer)
+                    try:
+                        yield self
+                    finally:
+                        tg.cancel_scope.cancel()
+        self.transport = None
+
+    def _authority(self, static: bool) -> str:
+        topic = "/tf_static" if static else "/tf"
+        names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
+        if len(names) == 1:
+            return names.pop()
+        return _SHARED_AUTHORITY if names else _UNKNOWN_AUTHORITY
+
+    async def _watch(
+        self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
+    ) -> None:
+        from tfbus.transports.zenoh import PeerInfo
+
+        async for event in sub:
+            ev: PeerEvent = event
+            known = self.broadcasters_seen.get(ev.node_id)
+            if ev.alive and ev.topic in ("/tf", "/tf_static"):
+                topics = (known.topics if known else frozenset()) | {ev.topic}
+                info = PeerInfo(ev.node_id, ev.name, topics)
+                self.broadcasters_seen[ev.node_id] = info
+                self.gone.pop(ev.node_id, None)
+                if known is None and on_peer is not None:
+                    on_peer("alive", info)
+            elif (
+                not ev.alive and not ev.topic and known is not None
+                and ev.node_id not in self.gone
+            ):
+                self.gone[ev.node_id] = known
+                if on_peer is not None:
+                    on_peer("gone", known)
+
+
+@contextlib.contextmanager
+def _literal_logging() -> Any:
+    """While attached, tfbus's log lines (a peer's bad transform, ...) go to stderr with
+    control characters escaped, instead of Python's raw last-resort handler."""
+    log = logging.getLogger("tfbus")
+    handler = logging.StreamHandler()
+    handler.setFormatter(SafeLogFormatter("%(name)s: %(levelname)s: %(message)s"))
+    previous = log.propagate
+    log.addHandler(handler)
+    log.propagate = False
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.propagate = previous
+
+
+def source_options(f: F) -> F:
+    """``--bag PATH`` and ``--bus SPEC``: the transform source of echo/monitor/frames."""
+    from tfbus.cli._common import bag_path
+
+    f = click.option(
+        "--bus", "bus", metavar="SPEC", default=None,
+        help="Attach to a live bus instead: 'zenoh' (this machine, no configuration), "
+             "'zenoh:tcp/HOST:7448', 'zenoh?connect=...&namespace=...', 'ros2' "
+             "(ROS 2 over DDS, 'ros2:domain=7'), 'ros1' (a ROS 1 master, "
+             "'ros1:http://127.0.0.1:11311').",
+    )(f)
+    return click.option("--bag", type=bag_path(), help="Read transforms from this bag.")(f)
+
+
+def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli") -> TfSource:
+    """The source the options name (a usage error for none or both)."""
+    if bus is not None and bag is not None:
+        fail("give --bag PATH or --bus SPEC, not both")
+    if bus is not None:
+        return BusSource(bus, name=name)
+    if bag is None:
+        fail("no transform source: pass --bag PATH or --bus SPEC (e.g. --bus zenoh)")
+    return BagSource(bag)
+
+
+def live_only(src: TfSource, **options: object) -> None:
+    """Options that only mean something on a live bus: an error with --bag."""
+    if not isinstance(src, BusSource):
+        for name, value in options.items():
+            if value is not None:
+                fail(f"--{name.replace('_', '-')} applies to --bus sources only")
+
+
+def is_bus_error(err: BaseException) -> bool:
+    """An error opening or using a transport: :class:`~tfbus.errors.TransportError` (every
+    transport maps its middleware's errors to it) or an ``OSError``."""
+    from tfbus.errors import TransportError
+
+    return isinstance(err, (OSError, TransportError))
+
+
+def _bus_error_in(err: BaseException) -> BaseException | None:
+    """The transport error in ``err`` or in an exception group around it."""
+    if is_bus_error(err):
+        return err
+    for inner in getattr(err, "exceptions", ()):
+        found = _bus_error_in(inner)
+        if found is not None:
+            return found
+    return None
+
+
+def run_live(main: Callable[[], Awaitable[None]], *, backend: str = "asyncio") -> int | None:
+    """``anyio.run(main)``; None when it ran, 1 (after a one-line error) when the bus
+    could not be opened, 130 on a Ctrl-C before the signal handler was installed."""
+    import anyio
+
+    try:
+        anyio.run(main, backend=backend)
+    except KeyboardInterrupt:  # Ctrl-C while the session was still opening
+        return 130
+    except Exception as err:
+        found = _bus_error_in(err)
+        if found is None:
+            raise
+        error(f"cannot open the bus: {found}")
+        return 1
+    return None
+
+
+async def cancel_on_signal(scope: anyio.CancelScope, *, task_status: Any = None) -> None:
+    """Cancel ``scope`` at the first SIGINT or SIGTERM (``await tg.start(...)`` returns
+    once the handler is installed)."""
+    import anyio
+
+    with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        if task_status is not None:
+            task_status.started()
+        async for _ in signals:
+            scope.cancel()
+            return
+
+
+async def live(
+    src: BusSource,
+    duration: float | None,
+    body: Callable[[], Awaitable[None]],
+    *,
+    on_peer: Callable[[str, PeerInfo], None] | None = None,
+    finish: Callable[[], None] | None = None,
+) -> None:
+    """Attach ``src`` and run ``body`` until it returns, ``duration`` seconds have
+    passed (None: no limit) or SIGINT/SIGTERM arrives; then call ``finish`` while still
+    attached (so liveliness is current) and detach."""
+    import anyio
+
+    async with src.attach(on_peer), anyio.create_task_group() as tg:
+        with anyio.CancelScope() as scope:
+            if duration is not None:
+                scope.deadline = anyio.current_time() + duration
+            await tg.start(cancel_on_signal, scope)
+            await body()
+        if finish is not None:
+            finish()
+        tg.cancel_scope.cancel()
+
+
+BUS_HELP = ("Bus to publish on (default 'zenoh': this machine, no configuration), e.g. "
+            "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
+            "'ros2:domain=7', 'ros1', 'ros1:http://127.0.0.1:11311'.")
+
+
+def publish_options(f: F) -> F:
+    """``--bus SPEC`` and ``--local``: where static-transform and replay publish."""
+    f = click.option("--local", is_flag=True,
+                     help="Publish on a private in-process bus instead (nobody else sees "
+                          "it: for trying the command out).")(f)
+    return click.option("--bus", "bus", metavar="SPEC", default=None, help=BUS_HELP)(f)
+
+
+def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]:
+    """A factory of the (unopened) bus the options name: in-process with ``--local``, else
+    the ``--bus`` spec (default ``zenoh``). Bad options are a one-line usage error now."""
+    from tfbus.bus import Bus
+
+    if local:
+        if bus is not None:
+            fail("give --bus SPEC or --local, not both")
+        return Bus
+    chosen = parse_spec(bus if bus is not None else "zenoh")
+
+    def open_bus() -> Bus:
+        return Bus(transport=open_spec_transport(chosen, name=name))
+
+    return open_bus

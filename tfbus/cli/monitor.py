@@ -1,0 +1,197 @@
+"""``tfbus monitor``: tf_monitor on a bag or a live bus (layer 5); the statistics are
+:mod:`tfbus.monitor`'s."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from tfbus.cli._common import RATE_HELP, console, error, fail, finish_status, literal
+from tfbus.cli._sources import (
+    BagSource,
+    BusSource,
+    live,
+    live_only,
+    run_live,
+    source,
+    source_options,
+)
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.table import Table
+
+    from tfbus.monitor import TfStatistics
+    from tfbus.transports.zenoh import PeerInfo
+
+__all__ = ["chain_lines", "command", "liveliness_table", "print_monitor"]
+
+
+def chain_lines(stats: TfStatistics, frames: Sequence[str]) -> list[str]:
+    """tf_monitor's lines for ``A B`` (ros/geometry ``tf/src/tf_monitor.cpp``, spin)::
+
+        Chain is: A -> ... -> B
+        Net delay     avg = <avg>: max = <max>
+
+    numbers as C++'s default ``ostream`` writes doubles (``%g``), names literal; tf_monitor's
+    waiting line while the two frames are not connected."""
+    source, target = frames
+    chain = next((c for c in stats.chains if (c.source, c.target) == (source, target)), None)
+    if chain is None or chain.frames is None:
+        return [f"Waiting for transform chain to become available between {literal(source)} "
+                f"and {literal(target)}"]
+    return [
+        "Chain is: " + " -> ".join(literal(f) for f in chain.frames),
+        f"Net delay     avg = {chain.delay_avg:g}: max = {chain.delay_max:g}",
+    ]
+
+
+def _table(title: str, names: Sequence[str], numbers: Sequence[str]) -> Table:
+    from rich.table import Table
+
+    table = Table(title=title, show_edge=False, header_style="bold")
+    for col in names:  # ids wrap, they are never cut off
+        table.add_column(col, overflow="fold")
+    for col in numbers:
+        table.add_column(col, justify="right", no_wrap=True, min_width=len(col))
+    return table
+
+
+def print_monitor(
+    out: Console, s: TfStatistics, frames: Sequence[str], live_src: BusSource | None = None
+) -> None:
+    """tf_monitor's report: ``RESULTS`` (and for ``A B`` the chain and its net delay),
+    the frames table, the broadcasters table and, for a live bus, the broadcasters known
+    through liveliness."""
+    selected = list(s.frames.values())
+    title = (f"RESULTS: for {literal(frames[0])} to {literal(frames[1])}" if frames
+             else "RESULTS: for all Frames")
+    if live_src is not None:
+        title += f" (live, {s.duration:.1f} s, {sum(s.messages.values())} messages)"
+    out.print(title)
+    if frames:
+        for line in chain_lines(s, frames):
+            out.print(line)
+        chain = s.chain(frames[0], frames[1]) or ()
+        selected = [f for f in selected if f.child in chain]
+    if s.sim_time:
+        out.print("note: header stamps are simulated time (far from the receive clock): "
+                  "delays are measured against the newest stamp received, not the clock")
+    table = _table("Frames", ("frame", "parent", "published by"),
+                   ("rate Hz", "avg delay s", "max delay s"))
+    for f in sorted(selected, key=lambda f: f.child):
+        dyn = not f.static
+        table.add_row(
+            literal(f.child), literal(f.parent), literal(f.authority),
+            f"{f.rate:.3f}" if dyn else "static",
+            f"{f.delay_avg:.6f}" if dyn else "-",
+            f"{f.delay_max:.6f}" if dyn and f.delay_count else "-",
+        )
+    out.print(table)
+    btable = _table("All Broadcasters", ("node",), ("rate Hz", "avg delay s", "max delay s"))
+    for a in sorted(s.authorities.values(), key=lambda a: a.authority):
+        btable.add_row(
+            literal(a.authority), f"{a.rate:.3f}",
+            f"{a.delay_avg:.6f}" if a.delay_count else "-",
+            f"{a.delay_max:.6f}" if a.delay_count else "-",
+        )
+    out.print(btable)
+    if live_src is not None:
+        out.print(liveliness_table(live_src))
+
+
+def liveliness_table(src: BusSource) -> Table:
+    """Broadcasters by Zenoh liveliness: the alive ones (``transport.broadcasters()``)
+    and those whose liveliness went away while we listened."""
+    table = _table("Broadcasters (liveliness)", ("node", "status", "node id", "topics"), ())
+    alive = src.alive_broadcasters()
+    rows = [(info, "alive") for info in alive.values()]
+    rows += [(info, "gone") for nid, info in src.gone.items() if nid not in alive]
+    for info, status in sorted(rows, key=lambda r: (r[1], r[0].name, r[0].node_id)):
+        table.add_row(literal(info.name), status, literal(info.node_id),
+                      ", ".join(literal(t) for t in sorted(info.topics)))
+    return table
+
+
+@click.command("monitor", epilog=RATE_HELP)
+@click.argument("frames", nargs=-1)
+@source_options
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="With --bus: stop after this many seconds (default: Ctrl-C).")
+@click.option("--interval", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="With --bus: print the tables every this many seconds (default 1).")
+def command(
+    frames: tuple[str, ...], bag: Path | None, bus: str | None, duration: float | None,
+    interval: float | None,
+) -> int:
+    """Per-frame rates, delays and broadcasters, like tf_monitor.
+
+    Delay is receive (bag) time minus header stamp. With [SOURCE TARGET] only the
+    frames on the chain between them are listed, after tf_monitor's "Chain is:" and
+    "Net delay avg/max" lines. On a bag recorded with simulated time (stamps far from
+    the recorder's clock) delays are measured against the newest stamp, with a note.
+
+    With --bus it listens to a live bus: the tables (cumulative since it attached) are
+    printed every --interval seconds and on exit, with the broadcasters known through
+    Zenoh liveliness (alive / gone); a line is printed as soon as a broadcaster appears
+    ("[alive] ...") or its liveliness is lost because it exited or died ("[dead] ...").
+
+    \b
+    Examples:
+      tfbus monitor --bag turtle.bag
+      tfbus monitor world turtle1 --bag turtle.bag
+      tfbus monitor --bus zenoh
+      tfbus monitor base_link base_laser --bus zenoh --duration 10 --interval 5
+    """
+    if len(frames) not in (0, 2):
+        fail("give no frames, or exactly two: SOURCE TARGET")
+    src = source(bag, bus, name="tfbus-monitor")
+    live_only(src, duration=duration, interval=interval)
+    if isinstance(src, BusSource):
+        if frames:
+            src.statistics().watch_chain(frames[0], frames[1])
+        return _monitor_live(src, frames, duration=duration, interval=interval or 1.0)
+    assert isinstance(src, BagSource)
+    if frames:
+        stats = src.statistics()
+        for name in frames:
+            if name not in stats.frames and all(f.parent != name for f in stats.frames.values()):
+                fail(f"frame {name!r} does not exist in {src.label}")
+        if stats.chain(frames[0], frames[1]) is None:
+            error(f"frames {frames[0]!r} and {frames[1]!r} are not connected in {src.label} "
+                  "(they are in different trees)")
+            return 1
+        src.chain = list(frames)
+        src.reset_statistics()
+    print_monitor(console(), src.statistics(), frames)
+    return finish_status(src.problem)
+
+
+def _monitor_live(
+    src: BusSource, frames: Sequence[str], *, duration: float | None, interval: float
+) -> int:
+    from tfbus.clock import every
+
+    out = console()
+
+    def on_peer(what: str, info: PeerInfo) -> None:
+        if what == "alive":
+            out.print(f"[alive] broadcaster {literal(info.name)} (node {literal(info.node_id)}) "
+                      f"publishes {', '.join(literal(t) for t in sorted(info.topics))}")
+        else:
+            out.print(f"[dead] broadcaster {literal(info.name)} (node {literal(info.node_id)}) "
+                      "is gone: liveliness lost (it exited, was killed or is unreachable)")
+
+    def report() -> None:
+        print_monitor(out, src.statistics(), frames, live_src=src)
+
+    async def body() -> None:
+        async for _ in every(interval, clock=src.clock):
+            report()
+
+    out.print(f"listening to {literal(src.label)} ...")
+    code = run_live(lambda: live(src, duration, body, on_peer=on_peer, finish=report))
+    return code if code is not None else 0

@@ -1,0 +1,72 @@
+"""``tfbus robot-state-publisher``: ROS's robot_state_publisher (layer 5).
+
+Fixed joints once on the latched /tf_static, moving joints on /tf from the JointStates on
+/joint_states (:class:`tfbus.robot_state.RobotStatePublisher`), until Ctrl-C or SIGTERM
+(or ``--duration``), then one summary line.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from tfbus.cli._common import literal
+from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
+from tfbus.cli._sources import publish_bus, publish_options
+
+if TYPE_CHECKING:
+    import anyio.abc
+
+    from tfbus.bus import Bus
+
+__all__ = ["command"]
+
+
+@click.command("robot-state-publisher")
+@model_argument
+@publish_options
+@click.option("--publish-frequency", type=click.FloatRange(min=0, min_open=True),
+              default=20.0, show_default=True,
+              help="Most /tf updates per joint per second of joint-state stamps (ROS's "
+                   "publish_frequency; below 1 Hz counts as 1).")
+@click.option("--frame-prefix", default="", metavar="P",
+              help="Prepended to every link name in frame ids (ROS 2's frame_prefix).")
+@duration_option
+def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
+            frame_prefix: str, duration: float | None) -> int:
+    """Publish a robot's links on /tf and /tf_static from its URDF and /joint_states,
+    like ROS's robot_state_publisher.
+
+    It runs on --bus (default 'zenoh', where 'tfbus joint-states' and 'tfbus echo --bus
+    zenoh' in other terminals meet it) until Ctrl-C or SIGTERM, then prints a summary.
+    The 'ros1' and 'ros2' buses carry /tf and /tf_static only, not /joint_states.
+
+    \b
+    Examples:
+      tfbus robot-state-publisher demos/robot.urdf
+      tfbus joint-states demos/robot.urdf                   # another terminal
+      tfbus echo base_link left_wheel --bus zenoh           # a third one
+      tfbus robot-state-publisher pr2.urdf --frame-prefix pr2/ --bus 'zenoh:tcp/10.0.0.2:7448'
+    """
+    from tfbus.robot_state import RobotStatePublisher
+
+    rsp = RobotStatePublisher(load_model(model), frame_prefix=frame_prefix)
+    open_bus = publish_bus(bus, local, name="robot_state_publisher")
+    moving = sum(j.movable for j in rsp.model.joints)
+
+    async def start(b: Bus, tg: anyio.abc.TaskGroup) -> None:
+        await tg.start(functools.partial(rsp.run, b, publish_frequency=publish_frequency))
+        click.echo(f"[ INFO] robot_state_publisher: {literal(rsp.model.name)}: "
+                   f"{len(rsp.model.joints)} joints ({moving} moving), root "
+                   f"{literal(rsp.model.root)}, on {bus_label(bus, local)}", err=True)
+
+    def finish(b: Bus) -> None:
+        s = rsp.statistics
+        click.echo(f"[ INFO] summary: {s.received} joint states received, {s.published} "
+                   f"published ({s.transforms} transforms), {s.rate_limited} rate-limited, "
+                   f"{s.invalid} invalid, {s.refused_positions} positions refused")
+
+    return serve(open_bus, duration, start, finish)

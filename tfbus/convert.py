@@ -1,0 +1,178 @@
+"""Which function transforms which stamped type: tf2_ros's ``TransformRegistration``.
+
+:meth:`Buffer.transform <tfbus.buffer.Buffer.transform>` and
+:meth:`~tfbus.buffer.Buffer.transform_full` look up the type of the object they are
+given here and call the registered function with the object and the transform that
+:meth:`~tfbus.core.BufferCore.lookup_transform` found, exactly as tf2_ros's
+``BufferInterface.transform`` calls ``self.registration.get(type(obj))(obj, transform)``
+(``tf2_ros/buffer_interface.py``)::
+
+    from tfbus.convert import register_transform
+
+    def do_transform_cloud(cloud: MyCloudStamped, transform: TransformStamped) -> MyCloudStamped:
+        points = tfbus.geometry.transform_points(transform, cloud.points)   # (N, 3)
+        return MyCloudStamped(transform.header, points)
+
+    register_transform(MyCloudStamped, do_transform_cloud)
+    cloud_in_map = await buffer.transform(cloud, "map", timeout=1.0)
+
+The function takes ``(obj, transform)`` in tf2_ros's order, where ``transform`` maps
+``obj.header.frame_id`` into the target frame, and returns the transformed object,
+whose header should be ``transform.header`` (the target frame and the stamp used), as
+tf2_geometry_msgs' ``do_transform_*`` do. The object only has to carry
+``header.frame_id`` (a ``str``) and ``header.stamp`` (a :class:`~tfbus.time.Time`).
+
+Preregistered (tf2_geometry_msgs): :class:`~tfbus.messages.PointStamped`,
+:class:`~tfbus.messages.PoseStamped`, :class:`~tfbus.messages.Vector3Stamped` (rotated
+only) and :class:`~tfbus.messages.TransformStamped` (:func:`do_transform_transform`).
+
+Lookup is by the object's exact type first, then by its base classes in method
+resolution order (a subclass of ``PointStamped`` is transformed as one); tf2_ros looks
+up the exact type only. There is one table per process, shared by every
+:class:`TransformRegistration` and every Buffer, as in tf2_ros (its map is a class
+attribute).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, ClassVar, TypeVar
+
+from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
+from tfbus.messages import (
+    Point,
+    PointStamped,
+    Pose,
+    PoseStamped,
+    Transform,
+    TransformStamped,
+    Vector3,
+    Vector3Stamped,
+)
+
+__all__ = [
+    "TransformFunction",
+    "TransformRegistration",
+    "do_transform_transform",
+    "get_transform_function",
+    "register_transform",
+    "registered_types",
+]
+
+_M = TypeVar("_M")
+
+TransformFunction = Callable[[Any, TransformStamped], Any]
+"""``(obj, transform) -> transformed obj``: tf2_ros's registered ``do_transform``."""
+
+
+class TransformRegistration:
+    """The registry of transform functions by type, with tf2_ros's method names.
+
+    ``TransformRegistration().add(MyStamped, fn)`` / ``.get(MyStamped)``; every
+    instance shares one table (tf2_ros ``TransformRegistration`` keeps its map on the
+    class). :func:`register_transform` and :func:`get_transform_function` are the same
+    operations as functions.
+    """
+
+    _table: ClassVar[dict[type, TransformFunction]] = {}
+
+    def add(self, key: type[_M], callback: Callable[[_M, TransformStamped], _M]) -> None:
+        """Register ``callback(obj, transform) -> obj`` for objects of type ``key``.
+
+        A later registration for the same type replaces the earlier one.
+
+        Raises:
+            TypeError: ``key`` is not a class, or ``callback`` is not callable.
+        """
+        if not isinstance(key, type):
+            raise TypeError(f"key must be a class, got {key!r}")
+        if not callable(callback):
+            raise TypeError(f"callback for {key.__name__} must be callable, got {callback!r}")
+        TransformRegistration._table[key] = callback
+
+    def get(self, key: type) -> TransformFunction:
+        """The function registered for ``key`` (or for its nearest registered base class).
+
+        Raises:
+            TypeError: nothing is registered for ``key`` nor its bases; the message
+                lists the registered types and says how to register one.
+        """
+        table = TransformRegistration._table
+        fn = table.get(key)
+        if fn is not None:
+            return fn
+        for base in getattr(key, "__mro__", ())[1:]:
+            fn = table.get(base)
+            if fn is not None:
+                return fn
+        known = ", ".join(sorted(t.__name__ for t in table))
+        name = getattr(key, "__name__", repr(key))
+        raise TypeError(
+            f"no transform function registered for type {name} (registered: {known}); "
+            f"register one with tfbus.convert.register_transform({name}, fn) where "
+            f"fn(obj, transform: TransformStamped) returns the transformed object"
+        )
+
+    def types(self) -> tuple[type, ...]:
+        """The registered types, in registration order."""
+        return tuple(TransformRegistration._table)
+
+
+def register_transform(key: type[_M], callback: Callable[[_M, TransformStamped], _M]) -> None:
+    """Register ``callback(obj, transform) -> obj`` for ``key`` (see the module docs).
+
+    Raises:
+        TypeError: ``key`` is not a class, or ``callback`` is not callable.
+    """
+    TransformRegistration().add(key, callback)
+
+
+def get_transform_function(key: type) -> TransformFunction:
+    """The function :meth:`Buffer.transform <tfbus.buffer.Buffer.transform>` uses for
+    objects of type ``key``.
+
+    Raises:
+        TypeError: no function is registered for ``key`` nor its bases.
+    """
+    return TransformRegistration().get(key)
+
+
+def registered_types() -> tuple[type, ...]:
+    """Every type with a registered transform function."""
+    return TransformRegistration().types()
+
+
+def do_transform_transform(
+    transform_in: TransformStamped, transform: TransformStamped
+) -> TransformStamped:
+    """Re-express a stamped transform in the transform's parent frame.
+
+    ``transform_in`` places ``transform_in.child_frame_id`` in
+    ``transform_in.header.frame_id``; ``transform`` maps that frame into a target frame.
+    The result places the same child in the target frame: translation ``q t q* + T``,
+    rotation ``q ⊗ r`` (tf2's ``Transform`` product ``transform * transform_in``), header
+    ``transform.header``, ``child_frame_id`` kept. Translations in metres, quaternions
+    (x, y, z, w), not normalised (tf2 goes through a rotation matrix and normalises: for
+    unit quaternions the two agree up to sign and rounding).
+
+    Raises:
+        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
+
+    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h``
+    ``doTransform(TransformStamped, TransformStamped, TransformStamped)``; the
+    arithmetic is :func:`tfbus.geometry.do_transform_pose`'s.
+    """
+    tr, rot = transform_in.transform
+    moved = do_transform_pose(PoseStamped(transform_in.header, Pose(Point(*tr), rot)), transform)
+    pose = moved.pose
+    return TransformStamped(
+        transform.header,
+        transform_in.child_frame_id,
+        Transform(Vector3(*pose.position), pose.orientation),
+    )
+
+
+register_transform(PointStamped, do_transform_point)
+register_transform(PoseStamped, do_transform_pose)
+register_transform(Vector3Stamped, do_transform_vector3)
+register_transform(TransformStamped, do_transform_transform)

@@ -1,0 +1,391 @@
+"""tf_monitor's statistics: per-frame rate and delay, per-broadcaster rate and delay, and
+the net delay of a chain, for bags and live buses alike (layer 4).
+
+::
+
+    stats = TfStatistics()
+    for rec in read_messages("turtle.bag"):               # a recording ...
+        stats.add(rec.time, rec.message.transforms, rec.authority, static=rec.is_static)
+    stats.frames["turtle1"].rate                          # Hz
+
+    sink = MonitoredSink(buffer, stats, clock)            # ... or a live bus:
+    async with TransformListener(sink, bus):              # the listener feeds the buffer
+        ...                                               # and the statistics at once
+
+Definitions (one for every tool: ``tfbus frames``, ``monitor`` and ``bag-info``):
+
+* **rate** of a frame: ``(distinct header stamps - 1) / (newest stamp - oldest stamp)``
+  in Hz. A repeated stamp counts once, as tf2 keeps it once (``TF_REPEATED_DATA``);
+  static frames and frames with a single stamp have no rate (0.0).
+* **delay** of a transform: receive time minus header stamp, in seconds, as
+  tf_monitor's ``callback`` measures it (``ros::Time::now() - stamp``); bag time is
+  the receive time of a recorded message. When the stamps are more than
+  :data:`SIM_TIME_GAP` seconds away from the receive clock (a bag recorded with
+  simulated time, stamps near 0 while the recorder's clock is near 1.7e9), delays are
+  measured against the newest stamp seen so far instead and :attr:`TfStatistics.sim_time`
+  is set, so that tools can say so.
+* **rate** of a broadcaster: ``(messages - 1) / (last - first receive time)``.
+* **net delay** of a chain (tf_monitor ``A B``): receive time minus the latest common
+  stamp of the chain's dynamic links (what ``lookupTransform(A, B, Time())`` returns),
+  sampled at every message that updates one of them.
+
+Source: ros/geometry ``tf/src/tf_monitor.cpp`` (TFMonitor::callback, outputFrameInfo,
+spin), tf2 ``BufferCore::_chainAsVector`` for the chain's order.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from tfbus.clock import Clock
+from tfbus.core import BatchResult
+from tfbus.messages import TransformStamped
+from tfbus.time import NSEC_PER_SEC, Time
+
+__all__ = [
+    "SIM_TIME_GAP",
+    "AuthorityStatistics",
+    "ChainDelay",
+    "FrameStatistics",
+    "MonitoredSink",
+    "TfStatistics",
+    "frame_chain",
+    "link_rate",
+]
+
+SIM_TIME_GAP = 86_400.0
+"""Seconds between a header stamp and its receive time beyond which the stamps are taken
+to be simulated time (see the module docstring)."""
+
+
+def link_rate(distinct_stamps: int, oldest_ns: int, newest_ns: int) -> float:
+    """The rate of a link in Hz: ``(distinct_stamps - 1) / (newest - oldest)`` seconds;
+    0.0 with fewer than two stamps or a zero span. The one definition used by
+    ``tfbus frames``, ``monitor`` and ``bag-info``."""
+    span = (newest_ns - oldest_ns) / NSEC_PER_SEC
+    if distinct_stamps < 2 or span <= 0:
+        return 0.0
+    return (distinct_stamps - 1) / span
+
+
+@dataclass
+class FrameStatistics:
+    """Statistics of one child frame: its parent, who sends it, its stamps and delays.
+
+    Stamps are header stamps in ns; delays are seconds (see the module docstring).
+    ``count`` counts every transform received, ``stamps`` the distinct stamps.
+    """
+
+    child: str
+    parent: str
+    static: bool
+    authorities: dict[str, int] = field(default_factory=dict)
+    count: int = 0
+    stamps: set[int] = field(default_factory=set, repr=False)
+    first_stamp: int | None = None
+    last_stamp: int | None = None
+    delay_sum: float = 0.0
+    delay_count: int = 0
+    delay_max: float = -math.inf
+
+    @property
+    def rate(self) -> float:
+        """Average rate in Hz (:func:`link_rate`; 0.0 for a static frame)."""
+        if self.static or self.first_stamp is None or self.last_stamp is None:
+            return 0.0
+        return link_rate(len(self.stamps), self.first_stamp, self.last_stamp)
+
+    @property
+    def authority(self) -> str:
+        """The broadcaster that sent most of this frame's transforms ("" if none)."""
+        return max(self.authorities, key=lambda a: self.authorities[a]) if self.authorities else ""
+
+    @property
+    def delay_avg(self) -> float:
+        """Average delay, seconds (0.0 when none was measured)."""
+        return self.delay_sum / self.delay_count if self.delay_count else 0.0
+
+    @property
+    def buffer_length(self) -> float:
+        """Seconds between the oldest and the most recent stamp."""
+        if self.first_stamp is None or self.last_stamp is None:
+            return 0.0
+        return (self.last_stamp - self.first_stamp) / NSEC_PER_SEC
+
+
+@dataclass
+class AuthorityStatistics:
+    """Per broadcaster (authority): messages received and their transforms' delays."""
+
+    authority: str
+    messages: int = 0
+    first: int | None = None
+    last: int | None = None
+    delay_sum: float = 0.0
+    delay_count: int = 0
+    delay_max: float = -math.inf
+
+    @property
+    def rate(self) -> float:
+        """Messages per second of receive time (0.0 with fewer than two messages)."""
+        if self.messages < 2 or self.first is None or self.last is None:
+            return 0.0
+        span = (self.last - self.first) / NSEC_PER_SEC
+        return (self.messages - 1) / span if span > 0 else 0.0
+
+    @property
+    def delay_avg(self) -> float:
+        """Average delay of its dynamic transforms, seconds."""
+        return self.delay_sum / self.delay_count if self.delay_count else 0.0
+
+
+def frame_chain(parents: dict[str, str], source: str, target: str) -> list[str] | None:
+    """The frames from ``source`` up to the lowest common ancestor and down to
+    ``target`` (tf2 ``_chainAsVector`` order, as tf_monitor prints it), given each child
+    frame's parent; None when the two frames are in different trees (or in a loop)."""
+
+    def up(frame: str) -> list[str]:
+        chain = [frame]
+        while chain[-1] in parents and parents[chain[-1]] not in chain:
+            chain.append(parents[chain[-1]])
+        return chain
+
+    if source == target:
+        return [source]
+    a, b = up(source), up(target)
+    in_b = set(b)
+    for i, frame in enumerate(a):
+        if frame in in_b:
+            j = b.index(frame)
+            return a[: i + 1] + b[:j][::-1]
+    return None
+
+
+@dataclass
+class ChainDelay:
+    """Net delay of the chain between ``source`` and ``target`` (tf_monitor ``A B``):
+    receive time minus the latest common stamp of the chain's dynamic links, in seconds.
+    The chain is found again at every sample, so it may appear while a bus is heard."""
+
+    source: str
+    target: str
+    frames: tuple[str, ...] | None = None
+    """The chain at the last sample (:func:`frame_chain`), None while not connected."""
+    delay_sum: float = 0.0
+    delay_count: int = 0
+    delay_max: float = 0.0
+
+    @property
+    def delay_avg(self) -> float:
+        """Average net delay, seconds (0.0 before any sample)."""
+        return self.delay_sum / self.delay_count if self.delay_count else 0.0
+
+
+@dataclass
+class TfStatistics:
+    """tf_monitor's tables, fed one message at a time by :meth:`add`.
+
+    ``start`` / ``end`` are the first and last receive times, ``messages`` counts
+    messages per topic, ``frames`` maps a child frame id to its statistics and
+    ``authorities`` a broadcaster to its own.
+    """
+
+    start: Time | None = None
+    end: Time | None = None
+    messages: dict[str, int] = field(default_factory=dict)
+    frames: dict[str, FrameStatistics] = field(default_factory=dict)
+    authorities: dict[str, AuthorityStatistics] = field(default_factory=dict)
+    sim_time: bool | None = None
+    """None before the first dynamic transform; True when delays are measured against
+    the newest stamp because the stamps are simulated time (module docstring)."""
+    chains: list[ChainDelay] = field(default_factory=list)
+    _newest_stamp: int = 0
+
+    def watch_chain(self, source: str, target: str) -> ChainDelay:
+        """Start measuring the net delay of the chain between two frames."""
+        chain = ChainDelay(source, target)
+        chain.frames = self.chain(source, target)
+        self.chains.append(chain)
+        return chain
+
+    def chain(self, source: str, target: str) -> tuple[str, ...] | None:
+        """The chain between two frames now (:func:`frame_chain`), None if unconnected."""
+        found = frame_chain(self.parents(), source, target)
+        return tuple(found) if found is not None else None
+
+    def parents(self) -> dict[str, str]:
+        """Each child frame's latest parent."""
+        return {child: f.parent for child, f in self.frames.items()}
+
+    def add(
+        self,
+        time: Time,
+        transforms: Iterable[TransformStamped],
+        authority: str,
+        *,
+        static: bool,
+        topic: str | None = None,
+    ) -> None:
+        """Account for one message received at ``time`` (bag time or clock time) from
+        ``authority``, counted in :attr:`messages` under ``topic`` (default ``/tf`` or
+        ``/tf_static``); items that are not ``TransformStamped`` with string frame ids
+        are skipped."""
+        t = time.ns
+        if self.start is None or t < self.start.ns:
+            self.start = time
+        if self.end is None or t > self.end.ns:
+            self.end = time
+        if topic is None:
+            topic = "/tf_static" if static else "/tf"
+        self.messages[topic] = self.messages.get(topic, 0) + 1
+        auth = self.authorities.get(authority)
+        if auth is None:
+            auth = self.authorities[authority] = AuthorityStatistics(authority)
+        auth.messages += 1
+        if auth.first is None:
+            auth.first = t
+        auth.last = t
+        touched = False
+        for ts in transforms:
+            if not (
+                isinstance(ts, TransformStamped)
+                and isinstance(ts.child_frame_id, str)
+                and isinstance(ts.header.frame_id, str)
+                and isinstance(ts.header.stamp, Time)
+            ):
+                continue
+            child = ts.child_frame_id
+            fs = self.frames.get(child)
+            if fs is None or fs.static != static:
+                fs = self.frames[child] = FrameStatistics(child, ts.header.frame_id, static)
+            fs.parent = ts.header.frame_id
+            fs.count += 1
+            fs.authorities[authority] = fs.authorities.get(authority, 0) + 1
+            ns = ts.header.stamp.ns
+            fs.stamps.add(ns)
+            if fs.first_stamp is None or ns < fs.first_stamp:
+                fs.first_stamp = ns
+            if fs.last_stamp is None or ns > fs.last_stamp:
+                fs.last_stamp = ns
+            if static:
+                continue
+            touched = True
+            if self.sim_time is None:
+                self.sim_time = abs(t - ns) / NSEC_PER_SEC > SIM_TIME_GAP
+            self._newest_stamp = max(self._newest_stamp, ns)
+            d = ((self._newest_stamp if self.sim_time else t) - ns) / NSEC_PER_SEC
+            fs.delay_sum += d
+            fs.delay_count += 1
+            fs.delay_max = max(fs.delay_max, d)
+            auth.delay_sum += d
+            auth.delay_count += 1
+            auth.delay_max = max(auth.delay_max, d)
+        if touched:
+            reference = self._newest_stamp if self.sim_time else t
+            for chain in self.chains:
+                self._sample_chain(chain, reference)
+
+    def _sample_chain(self, chain: ChainDelay, reference: int) -> None:
+        chain.frames = self.chain(chain.source, chain.target)
+        if chain.frames is None:
+            return
+        common: int | None = None
+        for frame in chain.frames:
+            fs = self.frames.get(frame)
+            # The chain's top frame: its own link is not on the way between the two.
+            if fs is None or fs.static or fs.last_stamp is None or fs.parent not in chain.frames:
+                continue
+            common = fs.last_stamp if common is None else min(common, fs.last_stamp)
+        if common is None:
+            return
+        d = (reference - common) / NSEC_PER_SEC
+        chain.delay_sum += d
+        chain.delay_count += 1
+        chain.delay_max = max(chain.delay_max, d)
+
+    @property
+    def duration(self) -> float:
+        """Seconds between the first and the last message received."""
+        if self.start is None or self.end is None:
+            return 0.0
+        return (self.end.ns - self.start.ns) / NSEC_PER_SEC
+
+    @property
+    def transform_count(self) -> int:
+        """Total number of transforms (every sample of every frame)."""
+        return sum(f.count for f in self.frames.values())
+
+
+class _Store(Protocol):
+    """The buffer methods :class:`MonitoredSink` forwards to (``BufferCore``'s)."""
+
+    def set_transforms(
+        self, transforms: Iterable[TransformStamped], authority: str, is_static: bool, /
+    ) -> BatchResult: ...
+
+    def set_transform(self, transform: TransformStamped, authority: str, /) -> bool: ...
+
+    def set_transform_static(self, transform: TransformStamped, authority: str, /) -> bool: ...
+
+    def clear(self) -> None: ...
+
+
+class MonitoredSink:
+    """A :class:`~tfbus.listener.TransformSink` that stores into ``buffer`` and accounts
+    every message in ``statistics`` (receive time = ``clock.now()``): a
+    ``TransformListener`` on it feeds the buffer and tf_monitor's tables at once.
+
+    Args:
+        buffer: the ``BufferCore`` or ``Buffer`` to store into.
+        statistics: where to account.
+        clock: the receive clock.
+        authority: ``authority(is_static) -> str`` names the sender of a message (the
+            wire format carries none); by default the listener's authority is used.
+    """
+
+    def __init__(
+        self,
+        buffer: _Store,
+        statistics: TfStatistics,
+        clock: Clock,
+        authority: Callable[[bool], str] | None = None,
+    ) -> None:
+        """Wrap ``buffer``."""
+        self.buffer = buffer
+        self.statistics = statistics
+        self._clock = clock
+        self._authority = authority
+
+    def _account(self, transforms: Sequence[TransformStamped], authority: str,
+                 static: bool) -> str:
+        if self._authority is not None:
+            authority = self._authority(static)
+        self.statistics.add(self._clock.now(), transforms, authority, static=static)
+        return authority
+
+    def set_transforms(
+        self, transforms: Iterable[TransformStamped], authority: str = "default",
+        is_static: bool = False,
+    ) -> BatchResult:
+        """Account for one message, then store it (``BufferCore.set_transforms``)."""
+        items = list(transforms)
+        authority = self._account(items, authority, is_static)
+        return self.buffer.set_transforms(items, authority, is_static)
+
+    def set_transform(self, transform: TransformStamped, authority: str, /) -> bool:
+        """Account for and store one dynamic transform."""
+        authority = self._account([transform], authority, False)
+        return self.buffer.set_transform(transform, authority)
+
+    def set_transform_static(self, transform: TransformStamped, authority: str, /) -> bool:
+        """Account for and store one static transform."""
+        authority = self._account([transform], authority, True)
+        return self.buffer.set_transform_static(transform, authority)
+
+    def clear(self) -> None:
+        """The clock jumped back (the listener asks): clear the buffer's dynamic data,
+        as tf2_ros does; the statistics keep what was seen."""
+        self.buffer.clear()

@@ -1,0 +1,108 @@
+"""Rate-limited logging: one helper for every component that may log the same problem
+many times a second (refused transforms, malformed messages from a peer).
+
+Layer 0: pure, synchronous, reads no clock. The caller says what time it is, in seconds
+of *its* clock (so a ``ManualClock`` drives it in tests), or uses the count-limited form,
+which needs no time at all (what the sans-I/O core uses)::
+
+    log = RateLimitedLog(logging.getLogger("tfbus.listener"), period=5.0)
+    log.log(clock.now().to_sec(), logging.WARNING, "ignoring a %s on %s", kind, topic)
+
+    counted = CountLimitedLog(logging.getLogger("tfbus.core"), every=1000)
+    counted.log(logging.WARNING, "TF_OLD_DATA ignoring data from the past ...")
+
+Messages are grouped by their format string (``msg``): the first of a group is logged,
+the next ones within the period (or the next ``every - 1``) are counted, and the next line
+logged for that group says how many were suppressed. Like ROS's ``ROS_WARN_THROTTLE``
+(``rosconsole``), which is per call site.
+"""
+
+from __future__ import annotations
+
+import logging
+
+__all__ = ["CountLimitedLog", "RateLimitedLog"]
+
+
+def _suffix(suppressed: int) -> str:
+    return f" ({suppressed} more like this suppressed)" if suppressed else ""
+
+
+class RateLimitedLog:
+    """At most one line per format string per ``period`` seconds of the caller's clock.
+
+    Args:
+        logger: where lines go.
+        period: seconds between two lines of the same format string (>= 0).
+
+    Raises:
+        ValueError: ``period`` is negative or not finite.
+    """
+
+    __slots__ = ("_last", "_logger", "_suppressed", "period")
+
+    def __init__(self, logger: logging.Logger, period: float = 5.0) -> None:
+        if not 0.0 <= period < float("inf"):
+            raise ValueError(f"period must be finite and >= 0 seconds, got {period!r}")
+        self._logger = logger
+        self.period = period
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+    def log(self, now: float, level: int, msg: str, *args: object) -> bool:
+        """Log ``msg % args`` at ``level`` unless a line with the same ``msg`` was logged
+        less than ``period`` seconds before ``now`` (seconds, from the caller's clock; a
+        clock that went backwards starts a new period).
+
+        Returns:
+            True when the line was logged, False when it was counted as suppressed (or
+            the logger does not log ``level``).
+        """
+        if not self._logger.isEnabledFor(level):
+            return False
+        last = self._last.get(msg)
+        if last is not None and last <= now < last + self.period:
+            self._suppressed[msg] = self._suppressed.get(msg, 0) + 1
+            return False
+        self._last[msg] = now
+        self._logger.log(level, msg + "%s", *args, _suffix(self._suppressed.pop(msg, 0)))
+        return True
+
+
+class CountLimitedLog:
+    """The first line of each format string, then one in every ``every`` (no clock).
+
+    Args:
+        logger: where lines go.
+        every: log one line per ``every`` calls with the same format string (>= 1).
+
+    Raises:
+        ValueError: ``every`` is smaller than 1.
+    """
+
+    __slots__ = ("_logger", "_suppressed", "every")
+
+    def __init__(self, logger: logging.Logger, every: int = 1000) -> None:
+        if every < 1:
+            raise ValueError(f"every must be >= 1, got {every!r}")
+        self._logger = logger
+        self.every = every
+        self._suppressed: dict[str, int] = {}
+
+    def log(self, level: int, msg: str, *args: object) -> bool:
+        """Log ``msg % args`` at ``level`` if it is the first call with this ``msg`` or
+        ``every - 1`` calls with it were suppressed since its last line.
+
+        Returns:
+            True when the line was logged, False when it was counted as suppressed (or
+            the logger does not log ``level``).
+        """
+        n = self._suppressed.get(msg)
+        if n is not None and n + 1 < self.every:
+            self._suppressed[msg] = n + 1
+            return False
+        self._suppressed[msg] = 0
+        if not self._logger.isEnabledFor(level):
+            return False
+        self._logger.log(level, msg + "%s", *args, _suffix(n or 0))
+        return True

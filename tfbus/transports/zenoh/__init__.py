@@ -1,0 +1,58 @@
+"""Carry a :class:`~tfbus.bus.Bus` across processes and machines over Zenoh.
+
+::
+
+    from tfbus.bus import Bus
+    from tfbus.transports.zenoh import ZenohTransport
+
+    async with Bus(transport=ZenohTransport()) as bus:   # one machine, no configuration
+        ...
+
+Every local publish goes to the other processes on the same *prefix/namespace*; their
+publishes are delivered to this bus's subscribers as if published here. In-process
+subscribers work exactly as without a transport. Needs the ``tfbus[zenoh]`` extra.
+
+One module per concern (anyio's ``_core`` style; the public names are re-exported here):
+
+* :mod:`~tfbus.transports.zenoh.keys` -- key expressions (data, latched queryables,
+  liveliness) and the topic <-> key mapping;
+* :mod:`~tfbus.transports.zenoh.config` -- the loopback-only defaults, config files and
+  overrides (:func:`zenoh_config`, :data:`DEFAULT_PORT`);
+* :mod:`~tfbus.transports.zenoh.peers` -- liveliness: :class:`PeerInfo`,
+  :class:`PeerEvent` on :data:`PEERS_TOPIC`;
+* :mod:`~tfbus.transports.zenoh.transport` -- :class:`ZenohTransport` (threads, receive
+  path, late joiners, matching status);
+* :mod:`~tfbus.transports.zenoh.counters` -- :class:`ZenohStatistics`;
+* :mod:`~tfbus.transports.zenoh.options` -- the ``zenoh`` bus spec of the command line
+  (:class:`ZenohOptions`, :func:`parse_bus_spec`, :func:`zenoh_bus_from_options`).
+
+Zenoh's own errors are raised as :class:`~tfbus.errors.TransportError`. See
+``docs/zenoh.md`` for multi-host set-ups, TLS and access control.
+"""
+
+from tfbus.transports.zenoh.config import DEFAULT_PORT, zenoh_config
+from tfbus.transports.zenoh.counters import ZenohStatistics
+from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
+from tfbus.transports.zenoh.options import (
+    ZenohOptions,
+    parse_bus_spec,
+    transport_from_spec,
+    zenoh_bus_from_options,
+)
+from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerEvent, PeerInfo
+from tfbus.transports.zenoh.transport import ZenohTransport
+
+__all__ = [
+    "DEFAULT_PORT",
+    "DEFAULT_PREFIX",
+    "PEERS_TOPIC",
+    "PeerEvent",
+    "PeerInfo",
+    "ZenohOptions",
+    "ZenohStatistics",
+    "ZenohTransport",
+    "parse_bus_spec",
+    "transport_from_spec",
+    "zenoh_bus_from_options",
+    "zenoh_config",
+]

@@ -1,0 +1,56 @@
+"""ZenohStatistics: the counters of one :class:`~tfbus.transports.zenoh.ZenohTransport`.
+
+Every received payload ends in exactly one of ``delivered`` or a drop counter
+(``malformed``, ``wrong_version``, ``over_limit``, ``overflow``); sequence numbers feed
+``lost`` (plausible gaps) and ``resets`` (implausible jumps), never both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["ZenohStatistics"]
+
+
+@dataclass(slots=True)
+class ZenohStatistics:
+    """Counters of one :class:`ZenohTransport` (:meth:`ZenohTransport.statistics`).
+
+    Attributes:
+        sent: messages put on the network.
+        send_errors: local messages that could not be sent (not encodable, Zenoh error).
+        not_connected: local messages published while the transport was not running.
+        received: payloads received (samples and latched replies).
+        delivered: messages delivered into the bus.
+        latched_replies: of ``received``, those that answered a late-joiner query.
+        malformed: payloads dropped because they were not well-formed tfbus messages
+            (any decode failure: bad bytes, shape, nesting, stamps, ids).
+        wrong_version: payloads dropped because of another wire format version.
+        over_limit: payloads dropped because they broke a bound of
+            :class:`~tfbus.transports.wire.WireLimits` (sizes, counts, nesting).
+        overflow: entries dropped (oldest first) because the inbound queue was full.
+        lost: gaps in publishers' sequence numbers (messages the network dropped);
+            only plausible gaps count (:class:`~tfbus.transports.wire.SequenceTracker`).
+        resets: implausible jumps of a publisher's sequence numbers (forged, corrupted
+            or a restarted stream): reported here, never counted in ``lost``.
+        batches: event-loop wake-ups that delivered queued entries.
+    """
+
+    sent: int = 0
+    send_errors: int = 0
+    not_connected: int = 0
+    received: int = 0
+    delivered: int = 0
+    latched_replies: int = 0
+    malformed: int = 0
+    wrong_version: int = 0
+    over_limit: int = 0
+    overflow: int = 0
+    lost: int = 0
+    resets: int = 0
+    batches: int = 0
+
+    @property
+    def dropped(self) -> int:
+        """All inbound payloads dropped: malformed + wrong_version + over_limit + overflow."""
+        return self.malformed + self.wrong_version + self.over_limit + self.overflow

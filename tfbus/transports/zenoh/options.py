@@ -1,0 +1,134 @@
+"""The ``zenoh`` bus spec: :class:`ZenohOptions` for command lines and scripts.
+
+Forms (the grammar is :mod:`tfbus.transports.spec`'s, shared by every transport)::
+
+    zenoh                                   one machine, no configuration
+    zenoh:tcp/10.0.0.2:7448                 shorthand for connect=...
+    zenoh:connect=tcp/10.0.0.2:7448,tcp/10.0.0.3:7448&name=planner
+    zenoh?listen=tcp/0.0.0.0:7448&namespace=robot1
+    zenoh?config=/etc/tfbus/zenoh.json5&name=planner
+
+Keys: ``connect``, ``listen`` (endpoint lists), ``config`` (JSON5 file), ``prefix``,
+``namespace``, ``name``, ``port`` (rendezvous port), ``express`` (``1``/``true``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from tfbus.transports.spec import BusSpec
+from tfbus.transports.spec import parse_bus_spec as _parse_any
+from tfbus.transports.zenoh.config import DEFAULT_PORT
+from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
+from tfbus.transports.zenoh.transport import ZenohTransport
+
+if TYPE_CHECKING:
+    from tfbus.bus import Bus
+
+__all__ = ["ZenohOptions", "parse_bus_spec", "transport_from_spec", "zenoh_bus_from_options"]
+
+
+@dataclass(frozen=True, slots=True)
+class ZenohOptions:
+    """Everything a command line needs to build a Zenoh-backed bus (see :func:`parse_bus_spec`).
+
+    Attributes mirror :class:`ZenohTransport`'s arguments of the same names.
+    """
+
+    connect: tuple[str, ...] | None = None
+    listen: tuple[str, ...] | None = None
+    config: str | None = None
+    prefix: str = DEFAULT_PREFIX
+    namespace: str = ""
+    name: str | None = None
+    port: int = DEFAULT_PORT
+    express: bool = False
+
+    @classmethod
+    def from_spec(cls, spec: BusSpec) -> ZenohOptions:
+        """The options of a parsed ``zenoh`` spec.
+
+        Raises:
+            ValueError: if the scheme is not ``zenoh`` or a value is not understood.
+        """
+        if spec.scheme != "zenoh":
+            raise ValueError(
+                f"unsupported bus {spec.text or spec.scheme!r}: expected 'zenoh' or "
+                "'zenoh?key=value&...'"
+            )
+        return cls(
+            connect=spec.values("connect"),
+            listen=spec.values("listen"),
+            config=spec.value("config"),
+            prefix=spec.value("prefix") or DEFAULT_PREFIX,
+            namespace=spec.value("namespace") or "",
+            name=spec.value("name"),
+            port=spec.integer("port", DEFAULT_PORT),
+            express=spec.boolean("express"),
+        )
+
+    def transport(self, **overrides: Any) -> ZenohTransport:
+        """A new :class:`ZenohTransport` from these options (``overrides`` win).
+
+        Raises:
+            ValueError: for an invalid prefix, namespace or name.
+            TransportError: for an unreadable or invalid config file.
+        """
+        kwargs: dict[str, Any] = {
+            "connect": self.connect,
+            "listen": self.listen,
+            "config": self.config,
+            "prefix": self.prefix,
+            "namespace": self.namespace,
+            "name": self.name,
+            "port": self.port,
+            "express": self.express,
+        }
+        kwargs.update(overrides)
+        return ZenohTransport(**kwargs)
+
+
+def parse_bus_spec(spec: str) -> ZenohOptions:
+    """Parse a ``zenoh`` ``--bus`` value into :class:`ZenohOptions`.
+
+    (For any scheme, use :func:`tfbus.transports.spec.parse_bus_spec`.)
+
+    Raises:
+        ValueError: if the scheme is not ``zenoh`` or a key/value is not understood.
+    """
+    return ZenohOptions.from_spec(_parse_any(spec))
+
+
+def transport_from_spec(spec: BusSpec, **overrides: Any) -> ZenohTransport:
+    """The ``zenoh`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`).
+
+    Raises:
+        ValueError: an option value that is not understood.
+        TransportError: an unreadable or invalid config file.
+    """
+    return ZenohOptions.from_spec(spec).transport(**overrides)
+
+
+def zenoh_bus_from_options(
+    options: ZenohOptions | str | None = None, *, queue_size: int = 100, **overrides: Any
+) -> Bus:
+    """A new (not yet opened) :class:`~tfbus.bus.Bus` carried over Zenoh.
+
+    ``options`` is a :class:`ZenohOptions`, a ``--bus`` string (:func:`parse_bus_spec`)
+    or None for the one-machine defaults; ``overrides`` are passed to
+    :class:`ZenohTransport` (e.g. ``name="tfbus-monitor"``). Use it with
+    ``async with zenoh_bus_from_options(spec) as bus:``; the transport is
+    ``bus.transport``.
+
+    Raises:
+        ValueError: for an invalid spec, prefix, namespace, name or ``queue_size``.
+        TransportError: for an unreadable or invalid config file.
+    """
+    from tfbus.bus import Bus
+
+    if options is None:
+        options = ZenohOptions()
+    elif isinstance(options, str):
+        options = parse_bus_spec(options)
+    return Bus(transport=options.transport(**overrides), queue_size=queue_size)

@@ -1,0 +1,120 @@
+"""Liveliness: which other tfbus nodes are alive, and which topics they publish.
+
+Every running :class:`~tfbus.transports.zenoh.ZenohTransport` declares a Zenoh
+liveliness token for itself and one per topic it has published
+(:class:`~tfbus.transports.zenoh.keys.KeySpace`). Zenoh drops the tokens of a node
+that closes, crashes or is killed (its TCP link closes; a silent partition is noticed
+after the lease, ``transport/link/tx/lease``, 10 s by default). :class:`PeerTable` turns
+those token events into :class:`PeerInfo` entries and :class:`PeerEvent` messages, which
+the transport delivers on the local bus topic :data:`PEERS_TOPIC`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final, NamedTuple
+
+from tfbus.transports.zenoh.keys import KeySpace
+
+__all__ = ["PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
+
+PEERS_TOPIC: Final = "/tfbus/peers"
+"""Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
+
+_TF_TOPICS: Final = frozenset({"/tf", "/tf_static"})
+
+
+class PeerEvent(NamedTuple):
+    """A remote node or one of its published topics appeared or disappeared.
+
+    Attributes:
+        alive: True when it appeared, False when it went away (closed or died).
+        node_id: the remote Zenoh session id (hex), unique per process run.
+        name: the node's name (``ZenohTransport(name=...)``, default ``prog-pid``).
+        topic: the topic the remote started/stopped publishing, or ``""`` for the node.
+    """
+
+    alive: bool
+    node_id: str
+    name: str
+    topic: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class PeerInfo:
+    """A live remote node (:meth:`ZenohTransport.alive`).
+
+    Attributes:
+        node_id: the remote Zenoh session id (hex).
+        name: its name.
+        topics: the topics it has published so far (a broadcaster has ``/tf`` and/or
+            ``/tf_static``).
+    """
+
+    node_id: str
+    name: str
+    topics: frozenset[str] = frozenset()
+
+    @property
+    def is_broadcaster(self) -> bool:
+        """True if it has published ``/tf`` or ``/tf_static``."""
+        return bool(self.topics & _TF_TOPICS)
+
+
+class PeerTable:
+    """The live remote nodes of one transport, updated from liveliness key events.
+
+    Args:
+        keys: the bus's key space (liveliness keys of other buses are ignored).
+        latched: the latched topics: a node that appears, or starts publishing one of
+            them, should be asked for its latched messages.
+    """
+
+    def __init__(self, keys: KeySpace, latched: frozenset[str]) -> None:
+        self._keys = keys
+        self._latched = latched
+        self._peers: dict[str, PeerInfo] = {}
+        self.own_id = ""
+        """This node's id (its own tokens are ignored)."""
+
+    def update(self, alive: bool, key: str) -> tuple[PeerEvent, bool] | None:
+        """Apply one liveliness event: ``(event, query_latched)`` or None to ignore it.
+
+        ``query_latched`` is True when the transport should query that node's latched
+        topics (it just appeared, or just started publishing a latched topic).
+        """
+        parsed = self._keys.parse_alive(key)
+        if parsed is None or parsed.node_id == self.own_id:
+            return None
+        node_id, name, topic = parsed
+        info = self._peers.get(node_id)
+        query = False
+        if alive:
+            if info is None:
+                info = PeerInfo(node_id, name)
+            if topic:
+                info = PeerInfo(node_id, name, info.topics | {topic})
+            self._peers[node_id] = info
+            query = not topic or topic in self._latched
+        elif not topic:
+            self._peers.pop(node_id, None)
+        elif info is not None:
+            self._peers[node_id] = PeerInfo(node_id, info.name, info.topics - {topic})
+        return PeerEvent(alive, node_id, name, topic), query
+
+    def alive(self) -> dict[str, PeerInfo]:
+        """The live nodes by node id (a snapshot)."""
+        return dict(self._peers)
+
+    def broadcasters(self) -> dict[str, PeerInfo]:
+        """The live nodes that have published ``/tf`` or ``/tf_static``."""
+        return {k: v for k, v in self._peers.items() if v.is_broadcaster}
+
+    def clear(self) -> None:
+        """Forget every node (the transport stopped)."""
+        self._peers.clear()
+        self.own_id = ""
+
+    def __len__(self) -> int:
+        """The number of live nodes."""
+        return len(self._peers)

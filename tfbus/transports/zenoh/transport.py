@@ -1,0 +1,560 @@
+"""ZenohTransport: a :class:`~tfbus.bus.Transport` carrying a bus over Zenoh.
+
+Threads: Zenoh calls back on its own threads. The callbacks only append
+``(kind, key, bytes)`` to a bounded deque and, if no wake-up is pending, write one byte to
+a socket pair; the event loop waits on that socket (``anyio.wait_readable``, which works
+on asyncio and trio), then decodes and delivers everything queued -- one wake-up per
+batch, never a blocked Zenoh thread, and per-publisher order kept (one FIFO). When the
+deque is full (``max_pending``), the oldest entries are dropped and counted.
+
+Received bytes never end the bus: every payload that does not decode, of any kind, is a
+counted, dropped message (:class:`ZenohStatistics`), and sequence numbers that jump
+implausibly are reported as resets, not as billions of lost messages (issue 11).
+
+Late joiners: each transport serves the latched topics it has *itself* published
+(``/tf_static`` merged per child frame by a :class:`~tfbus.latch.StaticLatch`) on a
+queryable; when a node appears (liveliness), the others query it, so a listener started
+after a static broadcaster -- or a broadcaster whose first publish raced the connection --
+still gets its static transforms.
+
+Errors of Zenoh itself (``zenoh.ZError``) are raised as
+:class:`~tfbus.errors.TransportError` with the ``ZError`` as ``__cause__``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import socket
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING, Any, Final, Protocol
+
+import anyio
+import anyio.abc
+import anyio.lowlevel
+import zenoh
+
+from tfbus.errors import TransportError, WireLimitError, WireVersionError
+from tfbus.latch import StaticLatch
+from tfbus.messages import TFMessage
+from tfbus.transports.wire import (
+    SequenceTracker,
+    WireCodec,
+    WireEncodeError,
+    WireLimits,
+    new_sender_id,
+)
+from tfbus.transports.zenoh.config import (
+    DEFAULT_PORT,
+    ZenohConfigSource,
+    default_name,
+    zenoh_config,
+)
+from tfbus.transports.zenoh.counters import ZenohStatistics
+from tfbus.transports.zenoh.keys import DEFAULT_PREFIX, KeySpace
+from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
+
+if TYPE_CHECKING:
+    from tfbus.bus import Bus
+
+__all__ = ["ZenohStatistics", "ZenohTransport"]
+
+log = logging.getLogger("tfbus.transports.zenoh")
+
+_LATCHED_DEFAULT: Final = ("/tf_static",)
+_SAMPLE: Final = 0
+_REPLY: Final = 1
+_ALIVE_PUT: Final = 2
+_ALIVE_DEL: Final = 3
+_MATCHING: Final = 4
+
+
+class _BusLike(Protocol):
+    def deliver_nowait(self, topic: str, message: object) -> None: ...
+    def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None: ...
+
+
+@dataclass(slots=True)
+class _Outlet:
+    topic: str
+    key: str
+    latched: bool
+    seq: int = 0
+    publisher: zenoh.Publisher | None = None
+    token: zenoh.LivelinessToken | None = None
+    matching_listener: Any = None
+    latch: StaticLatch = field(default_factory=StaticLatch)
+    latched_payload: bytes | None = None
+
+
+class ZenohTransport:
+    """A :class:`~tfbus.bus.Transport` over Zenoh (``Bus(transport=ZenohTransport())``).
+
+    Args:
+        connect: Zenoh endpoints to connect to, e.g. ``["tcp/192.168.1.10:7448"]``.
+        listen: endpoints to listen on, e.g. ``["tcp/0.0.0.0:7448"]``.
+        config: a Zenoh JSON5 config file path, a ``zenoh.Config`` or a mapping of config
+            paths to values (see :func:`~tfbus.transports.zenoh.zenoh_config`).
+        prefix: first key-expression chunk(s) (default ``"tfbus"``).
+        namespace: optional chunk(s) after the prefix (``"robot1"``): buses only see
+            buses with the same prefix and namespace.
+        name: this node's name as others see it (default ``"<program>-<pid>"``).
+        topics: the remote topics to receive (default: all under the namespace).
+        latched_topics: topics whose last message (``TFMessage``: last valid transform
+            per child frame) is served to late joiners (default ``("/tf_static",)``).
+        limits: wire-format bounds applied to received payloads.
+        max_pending: capacity of the inbound queue between Zenoh threads and the event
+            loop, entries; when full the oldest are dropped and counted.
+        max_batch: most entries delivered per event-loop turn before yielding.
+        port: the rendezvous port of the no-configuration default.
+        express: send each message at once instead of letting Zenoh batch small
+            messages (lower latency under load, lower peak throughput).
+
+    Raises:
+        ValueError: if ``prefix`` / ``namespace`` / ``name`` are not valid.
+        TransportError: if Zenoh rejects the configuration (e.g. an unreadable file).
+    """
+
+    def __init__(
+        self,
+        *,
+        connect: str | Sequence[str] | None = None,
+        listen: str | Sequence[str] | None = None,
+        config: ZenohConfigSource | None = None,
+        prefix: str = DEFAULT_PREFIX,
+        namespace: str = "",
+        name: str | None = None,
+        topics: Iterable[str] | None = None,
+        latched_topics: Iterable[str] = _LATCHED_DEFAULT,
+        limits: WireLimits | None = None,
+        max_pending: int = 50_000,
+        max_batch: int = 64,
+        port: int = DEFAULT_PORT,
+        express: bool = False,
+    ) -> None:
+        self._keys = KeySpace(prefix, namespace)
+        if max_pending < 1 or max_batch < 1:
+            raise ValueError("max_pending and max_batch must be at least 1")
+        self._name = name if name is not None else default_name()
+        if not self._name:
+            raise ValueError("name must not be empty")
+        self._config, self._fallback = zenoh_config(
+            connect=connect, listen=listen, config=config, port=port
+        )
+        self._topics = None if topics is None else tuple(topics)
+        self._latched = frozenset(latched_topics)
+        self._codec = WireCodec(limits)
+        self._sender = new_sender_id()
+        self._express = express
+        self._max_pending = max_pending
+        self._max_batch = max_batch
+        self._stats = ZenohStatistics()
+        self._outlets: dict[str, _Outlet] = {}
+        self._seqs = SequenceTracker()
+        self._peers = PeerTable(self._keys, self._latched)
+        self._inbox: deque[tuple[int, str, bytes]] = deque(maxlen=max_pending)
+        self._wake_pending = False
+        self._wake_w: socket.socket | None = None
+        self._wake_r: socket.socket | None = None
+        self._session: zenoh.Session | None = None
+        self._node_id = ""
+        self._running = False
+        self._warned: set[str] = set()
+        self._matching_changed: anyio.Event | None = None
+
+    # -- public information -----------------------------------------------------------
+
+    @property
+    def key_prefix(self) -> str:
+        """The key-expression base: ``prefix`` or ``prefix/namespace``."""
+        return self._keys.base
+
+    @property
+    def name(self) -> str:
+        """This node's name."""
+        return self._name
+
+    @property
+    def node_id(self) -> str:
+        """This node's Zenoh session id (hex) while running, else ``""``."""
+        return self._node_id
+
+    @property
+    def running(self) -> bool:
+        """True between ``run``'s ``started()`` and its end."""
+        return self._running
+
+    def alive(self) -> dict[str, PeerInfo]:
+        """The other live nodes on this prefix/namespace, by node id (a snapshot).
+
+        A node appears once Zenoh links to it and disappears when it closes, crashes or
+        is killed (its link drops; a silent network partition is detected after Zenoh's
+        lease, ``transport/link/tx/lease``, 10 s by default).
+        """
+        return self._peers.alive()
+
+    def broadcasters(self) -> dict[str, PeerInfo]:
+        """The live nodes that have published ``/tf`` or ``/tf_static``."""
+        return self._peers.broadcasters()
+
+    def matching(self, topic: str) -> bool:
+        """Whether a remote subscriber receives what this node publishes on ``topic``
+        now (Zenoh's matching status of this node's publisher; declared if needed).
+
+        Raises:
+            RuntimeError: if the transport is not running.
+        """
+        if not self._running:
+            raise RuntimeError("the ZenohTransport is not running")
+        publisher = self._outlet(topic).publisher
+        if publisher is None:
+            return False
+        status: Any = publisher.matching_status  # a MatchingStatus (the stub says bool)
+        return bool(status.matching)
+
+    async def wait_matching(self, topic: str, matching: bool = True) -> None:
+        """Wait until :meth:`matching` is ``matching`` for ``topic`` (Zenoh's matching
+        listener wakes it). Bound it with ``anyio.fail_after``.
+
+        Raises:
+            RuntimeError: if the transport is not running.
+            anyio.get_cancelled_exc_class(): if cancelled.
+        """
+        while True:
+            changed = self._matching_changed
+            if changed is None:
+                changed = self._matching_changed = anyio.Event()
+            if self.matching(topic) is matching:
+                return
+            await changed.wait()
+
+    def statistics(self) -> ZenohStatistics:
+        """A copy of the counters (see :class:`ZenohStatistics`)."""
+        s = self._stats
+        return ZenohStatistics(**{f.name: getattr(s, f.name) for f in fields(s)})
+
+    def __repr__(self) -> str:
+        state = "running" if self._running else "stopped"
+        return (
+            f"<ZenohTransport {state} base={self._keys.base!r} name={self._name!r} "
+            f"peers={len(self._peers)}>"
+        )
+
+    # -- Transport contract ------------------------------------------------------------
+
+    async def run(
+        self,
+        bus: Bus | _BusLike,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Open the Zenoh session, report started, deliver remote messages until cancelled.
+
+        Closes the session (undeclaring this node's liveliness tokens) on the way out.
+
+        Raises:
+            RuntimeError: if this transport is already running.
+            TransportError: if the session cannot be opened or declared (e.g. a listen
+                endpoint is in use); the ``zenoh.ZError`` is the ``__cause__``.
+        """
+        if self._running or self._session is not None:
+            raise RuntimeError("this ZenohTransport is already running")
+        session = await anyio.to_thread.run_sync(self._open_session)
+        wake_r, wake_w = socket.socketpair()
+        wake_r.setblocking(False)
+        wake_w.setblocking(False)
+        declared: list[Any] = []
+        try:
+            try:
+                self._declare(session, declared, wake_r, wake_w)
+            except zenoh.ZError as err:
+                raise TransportError(f"cannot declare on the Zenoh session: {err}") from err
+            self._running = True
+            task_status.started()
+            await self._pump(bus)
+        finally:
+            self._running = False
+            self._session = None
+            self._wake_w = None
+            self._wake_r = None
+            for outlet in self._outlets.values():
+                outlet.publisher = None
+                outlet.token = None
+                outlet.matching_listener = None
+            self._node_id = ""
+            self._peers.clear()
+            self._matching_changed = None  # bound to this event loop
+            with anyio.CancelScope(shield=True):
+                await anyio.to_thread.run_sync(_close_session, session, declared)
+            wake_r.close()
+            wake_w.close()
+            self._inbox.clear()
+            self._wake_pending = False
+
+    def send_nowait(self, topic: str, message: object) -> None:
+        """Put a locally published message on the network; never blocks, never raises.
+
+        A message that cannot be encoded is dropped and counted in ``send_errors``
+        (logged once per type); a message published while not running is counted in
+        ``not_connected`` (latched topics still remember it for later late joiners).
+        """
+        outlet = self._outlet(topic)
+        outlet.seq += 1
+        try:
+            payload = self._codec.encode(message, sender=self._sender, seq=outlet.seq)
+        except WireEncodeError as exc:
+            outlet.seq -= 1
+            self._stats.send_errors += 1
+            self._warn_once(type(message).__qualname__, "dropping a message on %s: %s", topic, exc)
+            return
+        if outlet.latched:
+            self._latch(outlet, message, payload)
+        publisher = outlet.publisher
+        if publisher is None:
+            if self._running:
+                self._stats.send_errors += 1
+            else:
+                self._stats.not_connected += 1
+            return
+        try:
+            publisher.put(payload)
+        except zenoh.ZError as exc:
+            self._stats.send_errors += 1
+            self._warn_once("put", "zenoh put on %s failed: %s", outlet.key, exc)
+            return
+        self._stats.sent += 1
+
+    # -- internals: session -----------------------------------------------------------
+
+    def _open_session(self) -> zenoh.Session:
+        try:
+            try:
+                return zenoh.open(self._config)
+            except zenoh.ZError:
+                if self._fallback is None:
+                    raise
+                log.debug("rendezvous port taken: listening on an ephemeral port")
+                return zenoh.open(self._fallback)
+        except zenoh.ZError as err:
+            raise TransportError(f"cannot open the Zenoh session: {err}") from err
+
+    def _declare(
+        self,
+        session: zenoh.Session,
+        declared: list[Any],
+        wake_r: socket.socket,
+        wake_w: socket.socket,
+    ) -> None:
+        keys = self._keys
+        self._node_id = str(session.zid())
+        self._peers.own_id = self._node_id
+        self._session = session
+        self._wake_w = wake_w
+        self._wake_r = wake_r
+        data_keys = (
+            [keys.all_data()] if self._topics is None else [keys.data(t) for t in self._topics]
+        )
+        for key in data_keys:
+            declared.append(
+                session.declare_subscriber(
+                    key, self._on_sample, allowed_origin=zenoh.Locality.REMOTE
+                )
+            )
+        declared.append(
+            session.declare_queryable(
+                keys.latch(self._node_id), self._on_query, allowed_origin=zenoh.Locality.REMOTE
+            )
+        )
+        liveliness = session.liveliness()
+        declared.append(liveliness.declare_token(keys.alive(self._node_id, self._name)))
+        for outlet in self._outlets.values():
+            self._declare_outlet(outlet)
+        declared.append(liveliness.declare_subscriber(keys.alive(), self._on_alive, history=True))
+
+    def _outlet(self, topic: str) -> _Outlet:
+        outlet = self._outlets.get(topic)
+        if outlet is None:
+            outlet = self._outlets[topic] = _Outlet(
+                topic, self._keys.data(topic), topic in self._latched
+            )
+            if self._session is not None:
+                try:
+                    self._declare_outlet(outlet)
+                except zenoh.ZError as exc:
+                    self._warn_once("declare", "cannot publish on %s: %s", outlet.key, exc)
+        return outlet
+
+    def _declare_outlet(self, outlet: _Outlet) -> None:
+        session = self._session
+        assert session is not None
+        publisher = session.declare_publisher(
+            outlet.key,
+            congestion_control=zenoh.CongestionControl.DROP,
+            allowed_destination=zenoh.Locality.REMOTE,
+            express=self._express,
+        )
+        topic = outlet.topic
+        outlet.matching_listener = publisher.declare_matching_listener(
+            lambda _status: self._push((_MATCHING, topic, b""))
+        )
+        outlet.publisher = publisher
+        outlet.token = session.liveliness().declare_token(
+            self._keys.alive(self._node_id, self._name, outlet.topic)
+        )
+
+    def _latch(self, outlet: _Outlet, message: object, payload: bytes) -> None:
+        if isinstance(message, TFMessage):
+            outlet.latch.add(message)
+            snapshot = outlet.latch.message()
+            payload = self._codec.encode(snapshot, sender=self._sender, seq=outlet.seq)
+        # One reference assignment: the queryable thread reads either old or new bytes.
+        outlet.latched_payload = payload
+
+    def _warn_once(self, what: str, fmt: str, *args: object) -> None:
+        if what not in self._warned:
+            self._warned.add(what)
+            log.warning(fmt, *args)
+
+    # -- internals: Zenoh threads (keep short, never block) ---------------------------
+
+    def _push(self, item: tuple[int, str, bytes]) -> None:
+        inbox = self._inbox
+        if len(inbox) >= self._max_pending:
+            self._stats.overflow += 1  # deque(maxlen) drops the oldest entry
+        inbox.append(item)
+        if not self._wake_pending:
+            self._wake_pending = True
+            wake = self._wake_w
+            if wake is not None:
+                with contextlib.suppress(OSError):  # full buffer: a wake-up is queued
+                    wake.send(b"\0")
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._push((_SAMPLE, str(sample.key_expr), sample.payload.to_bytes()))
+
+    def _on_reply(self, reply: zenoh.Reply) -> None:
+        sample = reply.ok
+        if sample is not None:
+            self._push((_REPLY, str(sample.key_expr), sample.payload.to_bytes()))
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        kind = _ALIVE_PUT if sample.kind == zenoh.SampleKind.PUT else _ALIVE_DEL
+        self._push((kind, str(sample.key_expr), b""))
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        with query:
+            for outlet in list(self._outlets.values()):
+                payload = outlet.latched_payload
+                if payload is not None:
+                    key = self._keys.latch(self._node_id, outlet.topic)
+                    if query.key_expr.intersects(key):
+                        query.reply(key, payload)
+
+    # -- internals: event loop ------------------------------------------------------------
+
+    async def _pump(self, bus: Bus | _BusLike) -> None:
+        reader = self._wake_r
+        assert reader is not None
+        while True:
+            await anyio.wait_readable(reader)
+            with contextlib.suppress(BlockingIOError):
+                reader.recv(4096)
+            self._wake_pending = False
+            self._stats.batches += 1
+            while self._drain(bus):
+                await anyio.lowlevel.checkpoint()
+
+    def _drain(self, bus: Bus | _BusLike) -> bool:
+        """Decode and deliver up to ``max_batch`` queued entries; True if more remain."""
+        inbox = self._inbox
+        run_topic: str | None = None
+        run: list[object] = []
+        for _ in range(min(len(inbox), self._max_batch)):
+            kind, key, payload = inbox.popleft()
+            if kind in (_SAMPLE, _REPLY):
+                topic = self._keys.topic_of(key, reply=kind == _REPLY)
+                message = self._receive(kind, topic, payload)
+                if message is None or topic is None:
+                    continue
+            elif kind == _MATCHING:
+                changed = self._matching_changed
+                self._matching_changed = None
+                if changed is not None:
+                    changed.set()
+                continue
+            else:
+                update = self._peers.update(kind == _ALIVE_PUT, key)
+                if update is None:
+                    continue
+                event, query = update
+                if query:
+                    self._query_latched(event.node_id)
+                topic, message = PEERS_TOPIC, event
+            if topic != run_topic:
+                if run:
+                    self._deliver(bus, run_topic, run)
+                    run = []
+                run_topic = topic
+            run.append(message)
+        if run:
+            self._deliver(bus, run_topic, run)
+        return bool(inbox)
+
+    def _receive(self, kind: int, topic: str | None, payload: bytes) -> object | None:
+        """Decode one received payload; None (counted) when it is dropped."""
+        stats = self._stats
+        stats.received += 1
+        if topic is None:
+            stats.malformed += 1
+            return None
+        try:
+            decoded = self._codec.decode(payload)
+        except WireVersionError:
+            stats.wrong_version += 1
+            return None
+        except WireLimitError:
+            stats.over_limit += 1
+            return None
+        except Exception:  # WireDecodeError -- or anything else: bytes never end the bus
+            stats.malformed += 1
+            return None
+        if kind == _SAMPLE:
+            lost, reset = self._seqs.observe(decoded.sender, topic, decoded.seq)
+            stats.lost += lost
+            stats.resets += reset
+        else:
+            stats.latched_replies += 1
+        return decoded.message
+
+    def _deliver(self, bus: Bus | _BusLike, topic: str | None, run: list[object]) -> None:
+        assert topic is not None
+        if len(run) == 1:
+            bus.deliver_nowait(topic, run[0])
+        else:
+            bus.deliver_many_nowait(topic, run)
+        self._stats.delivered += len(run)
+
+    def _query_latched(self, node_id: str) -> None:
+        session = self._session
+        if session is None:
+            return
+        try:
+            session.get(
+                self._keys.latch(node_id),
+                self._on_reply,
+                target=zenoh.QueryTarget.ALL,
+                timeout=5.0,
+            )
+        except zenoh.ZError as exc:
+            self._warn_once("query", "late-joiner query to %s failed: %s", node_id, exc)
+
+
+def _close_session(session: zenoh.Session, declared: list[Any]) -> None:
+    for entity in reversed(declared):
+        with contextlib.suppress(Exception):
+            entity.undeclare()
+    with contextlib.suppress(Exception):
+        session.close()  # type: ignore[no-untyped-call]
