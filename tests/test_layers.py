@@ -25,12 +25,13 @@ LAYERS: dict[str, int] = {
     # 0: values, pure functions
     "messages": 0,
     "time": 0,
-    "geometry": 1,
     "ratelimit": 0,
     "_version": 0,  # the distribution's version from package metadata
+    # 1: the sans-I/O core (geometry and convert call the compiled tf2 math in _ccore)
+    "geometry": 1,
     "convert": 1,
-    # 1: the sans-I/O core
     "core": 1,
+    "core_text": 1,
     "_ccore": 1,
     "cache": 1,
     "errors": 1,

@@ -33,10 +33,6 @@ import pytest
 
 pytest.importorskip("cyclonedds", reason="needs the ros2 extra: pip install 'tfbus[ros2]'")
 
-from cyclonedds import _clayer
-from cyclonedds.domain import DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.topic import Topic
 
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
@@ -55,7 +51,6 @@ from tfbus.messages import (
 )
 from tfbus.time import Time
 from tfbus.transports.ros2 import (
-    TF_WRITER_QOS,
     Ros2Transport,
     ros2_transport_from_options,
 )
@@ -353,8 +348,55 @@ async def test_one_cyclone_configuration_per_domain_in_a_process(anyio_backend: 
         assert other.running
 
 
-def _raw_writer(domain_id: int, participant: DomainParticipant) -> DataWriter[TFMessage_]:
-    return DataWriter(participant, Topic(participant, "rt/tf", TFMessage_), TF_WRITER_QOS)
+RAW_WRITER = ROOT / "tests" / "ros2_peers" / "raw_writer.py"
+
+
+class RawWriter:
+    """A raw DDS writer on rt/tf in its own process (tests/ros2_peers/raw_writer.py): a
+    writer and a listening reader in one process can deadlock inside Cyclone."""
+
+    def __init__(self, domain_id: int) -> None:
+        env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+        env.pop("CYCLONEDDS_URI", None)
+        self.proc = subprocess.Popen(
+            [sys.executable, str(RAW_WRITER), str(domain_id)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+        )  # fmt: skip
+        self.lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+        self._answer("READY")
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.put(line.strip())
+
+    def _answer(self, prefix: str) -> str:
+        try:
+            line = self.lines.get(timeout=WAIT)
+        except queue.Empty:
+            raise AssertionError(f"raw writer: no {prefix!r} in {WAIT} s") from None
+        assert line.startswith(prefix), line
+        return line[len(prefix):].strip()
+
+    def _ask(self, command: str, prefix: str) -> str:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(command + "\n")
+        self.proc.stdin.flush()
+        return self._answer(prefix)
+
+    async def write(self, data: bytes) -> int:
+        """Write one serialized sample; Cyclone's return code (0 written, < 0 refused)."""
+        return int(await anyio.to_thread.run_sync(self._ask, f"W {data.hex()}", "RC"))
+
+    def close(self) -> None:
+        if self.proc.stdin is not None:
+            self.proc.stdin.close()
+        try:
+            self.proc.wait(30)
+        except subprocess.TimeoutExpired:
+            self.proc.terminate()
+            self.proc.wait(10)
 
 
 # Structurally invalid CDR never leaves or enters Cyclone: it normalizes (validates) every
@@ -368,10 +410,6 @@ SEMANTIC = [
 ]
 
 
-def _write_raw(writer: DataWriter[TFMessage_], data: bytes) -> int:
-    return int(_clayer.ddspy_write(writer._ref, data.ljust((len(data) + 3) & ~3, b"\0")))
-
-
 @pytest.mark.anyio
 async def test_malformed_samples_are_counted_and_dropped(anyio_backend: str) -> None:
     """A raw DDS writer on rt/tf sends samples tfbus cannot decode between valid ones."""
@@ -379,24 +417,23 @@ async def test_malformed_samples_are_counted_and_dropped(anyio_backend: str) -> 
     transport = Ros2Transport(domain_id=d, max_transforms=4)
     async with Bus(transport=transport) as bus:
         tf = bus.subscribe("/tf")
-        participant = DomainParticipant(d)  # shares the transport's Cyclone domain
+        writer = await anyio.to_thread.run_sync(RawWriter, d)
         try:
-            writer = _raw_writer(d, participant)
             for name, junk in STRUCTURAL.items():
-                assert _write_raw(writer, junk) < 0, name  # refused by Cyclone itself
+                assert await writer.write(junk) < 0, name  # refused by Cyclone itself
             valid = encode_tf_message([ts("odom", "base_link", 1, 0, (1.0, 0.0, 0.0))])
             with anyio.fail_after(WAIT):
                 while transport.matched_publishers("/tf") == 0:
                     await anyio.sleep(0.01)  # polling a bounded condition, not a fixed wait
             for junk in SEMANTIC:
-                assert _write_raw(writer, junk) == 0
-                assert _write_raw(writer, valid) == 0
+                assert await writer.write(junk) == 0
+                assert await writer.write(valid) == 0
             msgs = [await receive_where(tf, lambda m: True) for _ in SEMANTIC]
             assert all(m.transforms[0].child_frame_id == "base_link" for m in msgs)
             stats = transport.statistics()
             assert (stats.received, stats.malformed, stats.delivered) == (6, 3, 3)
         finally:
-            participant.__del__()
+            writer.close()
 
 
 # -- real ROS 2 peers -----------------------------------------------------------------------------
@@ -733,22 +770,21 @@ async def test_malformed_samples_beside_a_real_ros2_publisher(
         with anyio.fail_after(WAIT):
             while transport.statistics().malformed == 0:  # the sec = -1 samples
                 await receive_where(tf, lambda m: True)
-        participant = DomainParticipant(d)
+        writer = await anyio.to_thread.run_sync(RawWriter, d)
         try:
-            writer = _raw_writer(d, participant)
             with anyio.fail_after(WAIT):
                 while transport.matched_publishers("/tf") < 3:
                     await receive_where(tf, lambda m: True)
             before = transport.statistics().malformed
             for junk in SEMANTIC[:2]:
-                assert _write_raw(writer, junk) == 0
-            assert _write_raw(writer, encode_tf_message([ts("odom", "marker")])) == 0
+                assert await writer.write(junk) == 0
+            assert await writer.write(encode_tf_message([ts("odom", "marker")])) == 0
             await receive_where(tf, lambda m: m.transforms[0].child_frame_id == "marker")
             assert transport.statistics().malformed >= before + 2
             # the rclpy stream still flows after the junk
             await receive_where(tf, lambda m: m.transforms == tuple(good))
         finally:
-            participant.__del__()
+            writer.close()
         delivered = [everything.receive_nowait() for _ in range(everything.statistics().queued)]
     assert everything.statistics().dropped == 0
     children = {x.child_frame_id for m in delivered for x in m.transforms}

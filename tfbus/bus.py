@@ -26,12 +26,20 @@ messages with :meth:`Bus.deliver_nowait`, which never sends them back out.
 
 Like anyio's memory object streams, every awaitable operation has a ``*_nowait`` twin
 and both :class:`Bus` and :class:`Subscription` report ``statistics()``.
+
+A :class:`CallbackSubscription` (:meth:`Bus.subscribe_callback`) is the other kind of
+subscriber: a plain function called inside each publish or delivery on its topic, with no
+queue and no task switch -- how a :class:`~tfbus.listener.TransformListener` stores
+transforms the moment they are published (tf2_ros's listener is a subscription callback
+too). Such a callback must be quick and must not raise: an exception is counted and
+logged, never passed to the publisher.
 """
 
 from __future__ import annotations
 
+import logging
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Final, Generic, Protocol, TypeVar, runtime_checkable
@@ -42,11 +50,13 @@ import anyio.lowlevel
 
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
+from tfbus.ratelimit import CountLimitedLog
 
 __all__ = [
     "TF_STATIC_TOPIC",
     "TF_TOPIC",
     "Bus",
+    "CallbackSubscription",
     "Subscription",
     "SubscriptionStatistics",
     "TopicStatistics",
@@ -57,6 +67,8 @@ TF_TOPIC: Final = "/tf"
 """The topic of dynamic transforms (``TFMessage``)."""
 TF_STATIC_TOPIC: Final = "/tf_static"
 """The topic of static transforms (``TFMessage``), latched per child frame."""
+
+_log = logging.getLogger(__name__)
 
 _TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
 
@@ -94,10 +106,11 @@ class TopicStatistics:
         topic: the topic name.
         published: messages that entered the topic here (local publishes + remote).
         remote: of those, how many came in through the transport (``deliver_nowait``).
-        delivered: message copies put into subscription queues (one per subscriber),
-            including latched ``/tf_static`` snapshots given to late subscribers.
+        delivered: message copies put into subscription queues or passed to callbacks
+            (one per subscriber), including latched ``/tf_static`` snapshots given to
+            late subscribers.
         dropped: copies evicted unread from a full subscription queue (drop-oldest).
-        subscribers: subscriptions open now.
+        subscribers: subscriptions (queued and callback) open now.
     """
 
     topic: str
@@ -325,6 +338,92 @@ class Subscription(Generic[T]):
         )
 
 
+class CallbackSubscription:
+    """A function called with every message delivered on one topic, inside the publish or
+    delivery itself (no queue, no task switch). Made by :meth:`Bus.subscribe_callback`;
+    registered until :meth:`close` (or ``with``-block exit) or until the bus closes.
+
+    The callback runs in the publisher's task (or the transport's): it must be quick and
+    must not block. An exception it raises is counted in :meth:`statistics` and logged
+    (by count), never passed to the publisher; the other subscribers still get the
+    message.
+    """
+
+    def __init__(self, bus: Bus, topic: str, callback: Callable[[Any], None]) -> None:
+        """Use :meth:`Bus.subscribe_callback` rather than building one directly."""
+        self._bus = bus
+        self._topic = topic
+        self._callback = callback
+        self._counters = bus._counters(topic)
+        self._delivered = 0
+        self._errors = 0
+        self._closed = False
+
+    @property
+    def topic(self) -> str:
+        """The topic subscribed to."""
+        return self._topic
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called or the bus closed."""
+        return self._closed
+
+    def _call(self, message: object) -> None:
+        self._delivered += 1
+        self._counters.delivered += 1
+        try:
+            self._callback(message)
+        except Exception as exc:  # never the publisher's problem
+            self._errors += 1
+            _CALLBACK_ERRORS.log(
+                logging.ERROR, "a %s callback raised %s: %s", self._topic, type(exc).__name__, exc
+            )
+
+    def close(self) -> None:
+        """Unregister (idempotent): the callback is not called again."""
+        if not self._closed:
+            self._closed = True
+            self._bus._unsubscribe_callback(self)
+
+    def statistics(self) -> CallbackStatistics:
+        """Messages passed to the callback, and how many times it raised."""
+        return CallbackStatistics(self._topic, self._delivered, self._errors)
+
+    def __enter__(self) -> CallbackSubscription:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else "open"
+        return f"<CallbackSubscription {self._topic} {state} delivered={self._delivered}>"
+
+
+@dataclass(frozen=True, slots=True)
+class CallbackStatistics:
+    """Counters of one :class:`CallbackSubscription`.
+
+    Attributes:
+        topic: the topic.
+        delivered: messages passed to the callback.
+        errors: calls that raised (counted and logged, not propagated).
+    """
+
+    topic: str
+    delivered: int
+    errors: int
+
+
+_CALLBACK_ERRORS: Final = CountLimitedLog(_log, 1000)
+
+
 class Bus:
     """Topics with subscriptions, ``/tf_static`` latching and an optional transport.
 
@@ -345,6 +444,7 @@ class Bus:
         self._transport = transport
         self._queue_size = queue_size
         self._subscriptions: dict[str, list[Subscription[Any]]] = {}
+        self._callbacks: dict[str, list[CallbackSubscription]] = {}
         self._topic_counters: dict[str, _TopicCounters] = {}
         self._latch = StaticLatch()
         self._task_group: anyio.abc.TaskGroup | None = None
@@ -402,6 +502,10 @@ class Bus:
         for subs in self._subscriptions.values():
             for sub in subs:
                 sub._end()
+        for callbacks in self._callbacks.values():
+            for cb in callbacks:
+                cb._closed = True
+        self._callbacks.clear()
 
     def _check_open(self) -> None:
         if self._state == "open":
@@ -447,6 +551,31 @@ class Bus:
         if topic == TF_STATIC_TOPIC and self._latch:
             sub._put(self._latch.message())
         return sub
+
+    def subscribe_callback(
+        self, topic: str, callback: Callable[[Any], None]
+    ) -> CallbackSubscription:
+        """Call ``callback(message)`` inside every publish and delivery on ``topic``,
+        from now on (see :class:`CallbackSubscription`). A callback on ``/tf_static`` is
+        first called, before this returns, with one ``TFMessage`` holding every latched
+        static transform (if there are any).
+
+        Raises:
+            RuntimeError: if the bus is not open yet.
+            anyio.ClosedResourceError: if the bus is closed.
+        """
+        self._check_open()
+        cb = CallbackSubscription(self, topic, callback)
+        # Copy-on-write: a delivery loop in progress keeps its own list.
+        self._callbacks[topic] = [*self._callbacks.get(topic, ()), cb]
+        if topic == TF_STATIC_TOPIC and self._latch:
+            cb._call(self._latch.message())
+        return cb
+
+    def _unsubscribe_callback(self, cb: CallbackSubscription) -> None:
+        callbacks = self._callbacks.get(cb.topic)
+        if callbacks is not None and cb in callbacks:
+            self._callbacks[cb.topic] = [c for c in callbacks if c is not cb]
 
     def _unsubscribe(self, sub: Subscription[Any]) -> None:
         subs = self._subscriptions.get(sub.topic)
@@ -524,6 +653,10 @@ class Bus:
         if subs:
             for sub in subs:
                 sub._put(message)
+        callbacks = self._callbacks.get(topic)
+        if callbacks:
+            for cb in callbacks:
+                cb._call(message)
 
     def latched_statics(self) -> TFMessage:
         """One ``TFMessage`` of the latest static transform of every child frame.
@@ -544,11 +677,13 @@ class Bus:
                 remote=c.remote,
                 delivered=c.delivered,
                 dropped=c.dropped,
-                subscribers=len(self._subscriptions.get(topic, ())),
+                subscribers=len(self._subscriptions.get(topic, ()))
+                + len(self._callbacks.get(topic, ())),
             )
             for topic, c in self._topic_counters.items()
         }
 
     def __repr__(self) -> str:
         subs = sum(len(s) for s in self._subscriptions.values())
+        subs += sum(len(c) for c in self._callbacks.values())
         return f"<Bus {self._state} topics={len(self._topic_counters)} subscriptions={subs}>"

@@ -41,6 +41,14 @@ from tfbus._ccore import (
     CoreBase,
     compose_full,
 )
+from tfbus.core_text import (
+    FrameInfo,
+    Tf7,
+    bad_frame_exception,
+    frames_as_string,
+    frames_as_yaml,
+    invalid_transform_exception,
+)
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -52,7 +60,7 @@ from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vect
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS, Duration, Time
 
-__all__ = ["MAX_GRAPH_DEPTH", "BatchResult", "BufferCore", "FrameInfo", "SetResult"]
+__all__ = ["MAX_GRAPH_DEPTH", "BatchResult", "BufferCore", "FrameInfo", "SetResult", "Tf7"]
 
 logger = logging.getLogger("tfbus.core")
 
@@ -62,18 +70,8 @@ _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 
 _LATEST: Final = Time(0)
 _new: Final = tuple.__new__  # builds a NamedTuple without its Python-level __new__
 
-Tf7 = tuple[float, float, float, float, float, float, float]
-"""A transform as ``(tx, ty, tz, qx, qy, qz, qw)``: metres; quaternion (x, y, z, w)."""
 
-_FIELDS: Final = (
-    "transform.translation.x",
-    "transform.translation.y",
-    "transform.translation.z",
-    "transform.rotation.x",
-    "transform.rotation.y",
-    "transform.rotation.z",
-    "transform.rotation.w",
-)
+
 
 
 class SetResult(enum.Enum):
@@ -107,21 +105,6 @@ class BatchResult(NamedTuple):
     lookup depends on (:meth:`BufferCore.chain_frames`) may have changed."""
 
 
-class FrameInfo(NamedTuple):
-    """One linked frame, as :meth:`BufferCore.frame_info` reports it."""
-
-    child: str
-    parent: str
-    """``NO_PARENT`` for a link emptied by ``clear()``."""
-    authority: str
-    is_static: bool
-    samples: int
-    oldest_ns: int
-    """Oldest stamp held, nanoseconds (0 when empty, and for a static link)."""
-    newest_ns: int
-    """Newest stamp held, nanoseconds (0 when empty, and for a static link)."""
-
-
 def _cap(message: str) -> str:
     """tf2 0.7.6 truncates extrapolation messages (only those) to 999 characters."""
     return message[:_MAX_MESSAGE]
@@ -146,53 +129,6 @@ def _cache_time_ns(value: object) -> int:
     if not 0 <= ns <= TIME_MAX_NS:
         raise ValueError(f"cache_time must be in [0, 2**63 - 1] ns, got {ns} ns")
     return ns
-
-
-_YAML_PLAIN_FIRST: Final = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_")
-_YAML_PLAIN_REST: Final = _YAML_PLAIN_FIRST | frozenset("0123456789./-")
-# YAML 1.1 / 1.2 booleans and null, compared in lower case
-_YAML_RESERVED: Final = frozenset(["y", "n", "yes", "no", "true", "false", "on", "off", "null"])
-
-
-def _yaml_plain(frame_id: str) -> bool:
-    """Whether ``frame_id`` reads back as the same string written plain in YAML (1.1 and
-    1.2): a letter or ``_`` first, then letters, digits, ``_ . / -``, and not a boolean or
-    null word."""
-    return (
-        bool(frame_id)
-        and frame_id[0] in _YAML_PLAIN_FIRST
-        and all(c in _YAML_PLAIN_REST for c in frame_id)
-        and frame_id.lower() not in _YAML_RESERVED
-    )
-
-
-def _yaml_quoted(text: str) -> str:
-    """``text`` as a YAML quoted scalar: single quotes (``'`` doubled), as tf2 writes
-    parents, unless it holds a character single quotes cannot carry (control characters,
-    line breaks, non-printables): then double quotes with escapes."""
-    if text.isprintable():
-        return "'" + text.replace("'", "''") + "'"
-    out = []
-    for c in text:
-        if c == '"' or c == "\\":
-            out.append("\\" + c)
-        elif c.isprintable():
-            out.append(c)
-        else:
-            code = ord(c)
-            if code < 0x100:
-                out.append(f"\\x{code:02x}")
-            elif code < 0x10000:
-                out.append(f"\\u{code:04x}")
-            else:
-                out.append(f"\\U{code:08x}")
-    return '"' + "".join(out) + '"'
-
-
-def _yaml_key(frame_id: str) -> str:
-    """A frame id as a YAML mapping key: plain as tf2 writes it when YAML reads it back
-    unchanged, else quoted (issue 11 item 7)."""
-    return frame_id if _yaml_plain(frame_id) else _yaml_quoted(frame_id)
 
 
 class BufferCore(CoreBase):
@@ -305,7 +241,7 @@ class BufferCore(CoreBase):
         if refusals:
             self._log_refusals(refusals, authority)
         errors: list[tuple[int, Exception]] = [
-            (i, p if isinstance(p, Exception) else _invalid(*p, authority))
+            (i, p if isinstance(p, Exception) else invalid_transform_exception(*p, authority))
             for i, p in problems
         ]
         return BatchResult(stored, len(refusals), errors, touched, relinked)
@@ -377,8 +313,8 @@ class BufferCore(CoreBase):
                 + "\n"
             )
         if failure[1] == 0:
-            return _bad_frame(f"{function} argument target_frame", target, code)
-        return _bad_frame(f"{function} argument source_frame", source, code)
+            return bad_frame_exception(f"{function} argument target_frame", target, code)
+        return bad_frame_exception(f"{function} argument source_frame", source, code)
 
     def invalid_frame_id(
         self, frame_id: str, argument: str = "lookupTransform argument frame_id"
@@ -388,7 +324,7 @@ class BufferCore(CoreBase):
         ``argument``; None for a well-formed id, known or not (what a wait needs: an
         unknown id may still arrive)."""
         if self._id_status(frame_id) == INVALID_ARGUMENT:
-            error = _bad_frame(argument, frame_id, INVALID_ARGUMENT)
+            error = bad_frame_exception(argument, frame_id, INVALID_ARGUMENT)
             assert isinstance(error, InvalidArgumentException)
             return error
         return None
@@ -397,7 +333,7 @@ class BufferCore(CoreBase):
         """tf2 ``validateFrameId``: raise for an empty, '/'-prefixed or unknown id."""
         code = self._id_status(frame_id)
         if code:
-            raise _bad_frame(label, frame_id, code)
+            raise bad_frame_exception(label, frame_id, code)
 
     # ------------------------------------------------------------------ lookups
 
@@ -651,10 +587,7 @@ class BufferCore(CoreBase):
     def all_frames_as_string(self) -> str:
         """One line ``Frame X exists with parent Y.`` per frame that has a link, in
         registration order (tf2 ``allFramesAsString``)."""
-        return "".join(
-            f"Frame {info.child} exists with parent {info.parent}.\n"
-            for info in self.frame_info()
-        )
+        return frames_as_string(self.frame_info())
 
     def all_frames_as_yaml(self, current_time: Time | None = None) -> str:
         """The frame tree as YAML in tf2's format (``allFramesAsYAML``): per child frame
@@ -666,21 +599,7 @@ class BufferCore(CoreBase):
         (``a: b``, ``#x``, ``true``, quotes, line breaks, ...) is quoted, so the text is
         always valid YAML that reads back every id unchanged.
         """
-        out: list[str] = []
-        for child, parent, authority, _static, samples, oldest, newest in self.frame_info():
-            if not samples:  # a dynamic link emptied by clear(): tf2 lists only data
-                continue
-            rate = samples / max((newest - oldest) / 1e9, 0.0001)
-            out.append(f"{_yaml_key(child)}: \n")
-            out.append(f"  parent: {_yaml_quoted(parent)}\n")
-            out.append(f"  broadcaster: {_yaml_quoted(authority)}\n")
-            out.append(f"  rate: {rate:.3f}\n")
-            out.append(f"  most_recent_transform: {newest / 1e9:.3f}\n")
-            out.append(f"  oldest_transform: {oldest / 1e9:.3f}\n")
-            if current_time is not None and current_time.ns > 0:
-                out.append(f"  transform_delay: {(current_time.ns - newest) / 1e9:.3f}\n")
-            out.append(f"  buffer_length: {(newest - oldest) / 1e9:.3f}\n")
-        return "".join(out) if out else "[]"
+        return frames_as_yaml(self.frame_info(), current_time)
 
     def frame_info(self) -> Iterator[FrameInfo]:
         """Per linked frame, in registration order, a :class:`FrameInfo` ``(child,
@@ -711,60 +630,3 @@ class BufferCore(CoreBase):
         )
 
 
-def _invalid(parent: str, child: str, values: Tf7, authority: str) -> InvalidArgumentException:
-    """InvalidArgumentException listing every problem of a transform in tf2's order
-    (``BufferCore::setTransformImpl``) plus tfbus's TF_INF_INPUT."""
-    codes: list[str] = []
-    problems: list[str] = []
-    if child == parent:
-        codes.append("TF_SELF_TRANSFORM")
-        problems.append(f"header.frame_id and child_frame_id are the same ({child!r})")
-    if not child:
-        codes.append("TF_NO_CHILD_FRAME_ID")
-        problems.append("child_frame_id is empty")
-    if not parent:
-        codes.append("TF_NO_FRAME_ID")
-        problems.append("header.frame_id is empty")
-    nans = [f"{name} = nan" for name, v in zip(_FIELDS, values, strict=True) if math.isnan(v)]
-    if nans:
-        codes.append("TF_NAN_INPUT")
-        problems.extend(nans)
-    infs = [
-        f"{name} = {v}" for name, v in zip(_FIELDS[:3], values[:3], strict=True) if math.isinf(v)
-    ]
-    if infs:
-        codes.append("TF_INF_INPUT")
-        problems.extend(infs)
-    qx, qy, qz, qw = values[3:]
-    # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
-    norm2 = qw * qw + qx * qx + qy * qy + qz * qz
-    if not abs(norm2 - 1.0) < 0.01:
-        codes.append("TF_DENORMALIZED_QUATERNION")
-        problems.append(
-            f"transform.rotation = ({qx}, {qy}, {qz}, {qw}) has squared norm {norm2}, "
-            "not within 0.01 of 1"
-        )
-    return InvalidArgumentException(
-        f"Invalid transform for child_frame_id {child!r} from authority {authority!r}: "
-        + "; ".join(problems),
-        codes=tuple(codes),
-    )
-
-
-def _bad_frame(label: str, frame: object, code: int) -> TransformException:
-    """tf2 ``validateFrameId``'s exception for a query argument ``label`` (e.g.
-    ``lookupTransform argument target_frame``)."""
-    if not isinstance(frame, str):
-        return InvalidArgumentException(
-            f"Invalid argument {frame!r} passed to {label}: frame ids are strings"
-        )
-    if code == INVALID_ARGUMENT:
-        if not frame:
-            return InvalidArgumentException(
-                f"Invalid argument passed to {label} in tf2 frame_ids cannot be empty"
-            )
-        return InvalidArgumentException(
-            f'Invalid argument "{frame}" passed to {label} in tf2 frame_ids '
-            "cannot start with a '/' like: "
-        )
-    return LookupException(f'"{frame}" passed to {label} does not exist. ')

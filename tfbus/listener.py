@@ -15,6 +15,7 @@ counted and skipped. The listener never dies of bad input.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -25,7 +26,7 @@ import anyio
 import anyio.abc
 
 from tfbus.buffer import Buffer
-from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, Subscription
+from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
 from tfbus.core import BatchResult
 from tfbus.errors import TransformException
@@ -89,10 +90,16 @@ class TransformListener:
     """Subscribes to ``/tf`` and ``/tf_static`` and stores every transform in a buffer.
 
     ``TransformListener(buffer, bus, *, authority="default_authority", clock=None,
-    queue_size=None, log_period=5.0)``. Use ``async with``: entering subscribes to both
-    topics and stores the latched static transforms before it returns (so a lookup right
-    after sees them), then runs one task per topic in its own task group; leaving
-    cancels the tasks and unregisters both subscriptions.
+    queue_size=None, log_period=5.0, inline=True)``. Use ``async with``: entering
+    subscribes to both topics and stores the latched static transforms before it returns
+    (so a lookup right after sees them); leaving unregisters both subscriptions.
+
+    Inline (the default, as tf2_ros's listener is a subscription callback): each message
+    is stored inside the publish or delivery that carries it
+    (:meth:`tfbus.bus.Bus.subscribe_callback`), so a waiting lookup is woken with no task
+    switch in between. With ``inline=False`` the listener reads bounded queues in one task
+    per topic instead (``queue_size``; a slow buffer then drops the oldest messages rather
+    than slowing publishers).
 
     Args:
         buffer: a ``BufferCore``, a ``Buffer``, or anything with their
@@ -103,8 +110,10 @@ class TransformListener:
         clock: read on each message, as tf2_ros does: a time earlier than the last one
             read is a jump back, which clears the buffer; also paces log messages.
             Default: the buffer's clock for a ``Buffer``, else ``SystemClock()``.
-        queue_size: queue capacity of each subscription (default: the bus's).
+        queue_size: with ``inline=False``, queue capacity of each subscription (default:
+            the bus's).
         log_period: seconds between two log messages for the same reason.
+        inline: store in the publisher's call (default) instead of in listener tasks.
     """
 
     def __init__(
@@ -116,12 +125,15 @@ class TransformListener:
         clock: Clock | None = None,
         queue_size: int | None = None,
         log_period: float = 5.0,
+        inline: bool = True,
     ) -> None:
         """Create a listener (not yet listening; use ``async with``)."""
         self._buffer = buffer
         self._bus = bus
         self._authority = authority
         self._queue_size = queue_size
+        self._inline = inline
+        self._callbacks: list[CallbackSubscription] = []
         if clock is None:
             clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
         self._clock = clock
@@ -145,7 +157,8 @@ class TransformListener:
         return self._buffer
 
     async def __aenter__(self) -> TransformListener:
-        """Subscribe, store the latched statics, start the listening tasks.
+        """Subscribe and store the latched statics (then, with ``inline=False``, start
+        the listening tasks).
 
         Raises:
             RuntimeError: if the listener was already entered, or the bus is not open.
@@ -154,6 +167,19 @@ class TransformListener:
         if self._entered:
             raise RuntimeError("a TransformListener can be entered only once")
         self._entered = True
+        if self._inline:
+            handle_static = functools.partial(self._handle, static=True)
+            self._callbacks = [self._bus.subscribe_callback(TF_STATIC_TOPIC, handle_static)]
+            try:
+                self._callbacks.append(
+                    self._bus.subscribe_callback(
+                        TF_TOPIC, functools.partial(self._handle, static=False)
+                    )
+                )
+            except BaseException:
+                self._callbacks[0].close()
+                raise
+            return self
         static = self._bus.subscribe(TF_STATIC_TOPIC, self._queue_size)
         try:
             dynamic = self._bus.subscribe(TF_TOPIC, self._queue_size)
@@ -175,9 +201,12 @@ class TransformListener:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
-        """Stop listening: cancel the tasks and unregister both subscriptions."""
+        """Stop listening: unregister both subscriptions (and cancel the tasks)."""
+        for cb in self._callbacks:
+            cb.close()
         tg = self._task_group
-        assert tg is not None
+        if tg is None:
+            return None
         try:
             tg.cancel_scope.cancel()
             return await tg.__aexit__(exc_type, exc, tb)

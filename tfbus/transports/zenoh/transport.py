@@ -39,6 +39,7 @@ import zenoh
 from tfbus.errors import TransportError, WireLimitError, WireVersionError
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
+from tfbus.ratelimit import CountLimitedLog
 from tfbus.transports.wire import (
     SequenceTracker,
     WireCodec,
@@ -161,7 +162,7 @@ class ZenohTransport:
         self._session: zenoh.Session | None = None
         self._node_id = ""
         self._running = False
-        self._warned: set[str] = set()
+        self._log = CountLimitedLog(log, 1000)  # first line of each kind, then 1 in 1000
         self._matching_changed: anyio.Event | None = None
 
     # -- public information -----------------------------------------------------------
@@ -307,7 +308,7 @@ class ZenohTransport:
         except WireEncodeError as exc:
             outlet.seq -= 1
             self._stats.send_errors += 1
-            self._warn_once(type(message).__qualname__, "dropping a message on %s: %s", topic, exc)
+            self._log.log(logging.WARNING, "dropping a message on %s: %s", topic, exc)
             return
         if outlet.latched:
             self._latch(outlet, message, payload)
@@ -322,7 +323,7 @@ class ZenohTransport:
             publisher.put(payload)
         except zenoh.ZError as exc:
             self._stats.send_errors += 1
-            self._warn_once("put", "zenoh put on %s failed: %s", outlet.key, exc)
+            self._log.log(logging.WARNING, "zenoh put on %s failed: %s", outlet.key, exc)
             return
         self._stats.sent += 1
 
@@ -383,7 +384,7 @@ class ZenohTransport:
                 try:
                     self._declare_outlet(outlet)
                 except zenoh.ZError as exc:
-                    self._warn_once("declare", "cannot publish on %s: %s", outlet.key, exc)
+                    self._log.log(logging.WARNING, "cannot publish on %s: %s", outlet.key, exc)
         return outlet
 
     def _declare_outlet(self, outlet: _Outlet) -> None:
@@ -411,11 +412,6 @@ class ZenohTransport:
             payload = self._codec.encode(snapshot, sender=self._sender, seq=outlet.seq)
         # One reference assignment: the queryable thread reads either old or new bytes.
         outlet.latched_payload = payload
-
-    def _warn_once(self, what: str, fmt: str, *args: object) -> None:
-        if what not in self._warned:
-            self._warned.add(what)
-            log.warning(fmt, *args)
 
     # -- internals: Zenoh threads (keep short, never block) ---------------------------
 
@@ -549,7 +545,7 @@ class ZenohTransport:
                 timeout=5.0,
             )
         except zenoh.ZError as exc:
-            self._warn_once("query", "late-joiner query to %s failed: %s", node_id, exc)
+            self._log.log(logging.WARNING, "late-joiner query to %s failed: %s", node_id, exc)
 
 
 def _close_session(session: zenoh.Session, declared: list[Any]) -> None:

@@ -1,0 +1,55 @@
+"""A raw DDS writer on rt/tf in its own process, for tests/test_ros2.py.
+
+Run with the tfbus venv's python: ``raw_writer.py DOMAIN``. Commands on stdin, one per
+line; one answer line each on stdout:
+
+* ``MATCH N`` -- wait (at most 20 s) until N readers match; answers ``MATCHED <count>``;
+* ``W <hex>`` -- write these bytes as one serialized sample; answers ``RC <return code>``
+  (0: written; negative: refused by Cyclone, which validates every sample).
+
+It is a separate process because a DDS writer and a listening reader in one process can
+deadlock (local delivery takes the reader's lock while holding the GIL; Cyclone's receive
+thread holds that lock while waiting for the GIL). Loopback only: the Cyclone
+configuration is tfbus's default one (127.0.0.1, no multicast).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from cyclonedds import _clayer
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.topic import Topic
+
+from tfbus.transports.ros2 import TF_WRITER_QOS, cyclone_config
+from tfbus.transports.ros2_wire import TFMessage_
+
+
+def main() -> None:
+    domain_id = int(sys.argv[1])
+    domain = Domain(domain_id, cyclone_config())
+    participant = DomainParticipant(domain_id)
+    writer = DataWriter(participant, Topic(participant, "rt/tf", TFMessage_), TF_WRITER_QOS)
+    print("READY", flush=True)
+    for line in sys.stdin:
+        cmd, _, arg = line.strip().partition(" ")
+        if cmd == "MATCH":
+            want, deadline = int(arg), time.monotonic() + 20.0
+            while time.monotonic() < deadline:
+                count = writer.get_publication_matched_status().current_count
+                if count >= want:
+                    break
+                time.sleep(0.01)  # bounded poll of a DDS status, not a fixed wait
+            print(f"MATCHED {writer.get_publication_matched_status().current_count}", flush=True)
+        elif cmd == "W":
+            data = bytes.fromhex(arg)
+            rc = _clayer.ddspy_write(writer._ref, data.ljust((len(data) + 3) & ~3, b"\0"))
+            print(f"RC {int(rc)}", flush=True)
+    time.sleep(0.5)  # let the reliable writer deliver what it wrote before leaving
+    del writer, participant, domain
+
+
+if __name__ == "__main__":
+    main()
