@@ -24,6 +24,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "tfbus"
 LAYERS: dict[str, int] = {
     # 0: values, pure functions
     "messages": 0,
+    "sensor_msgs": 0,
     "time": 0,
     "ratelimit": 0,
     "_version": 0,  # the distribution's version from package metadata
@@ -35,6 +36,7 @@ LAYERS: dict[str, int] = {
     "_ccore": 1,
     "cache": 1,
     "errors": 1,
+    "batch": 1,
     # 2: the bus and time sources
     "bus": 2,
     "clock": 2,
@@ -43,6 +45,7 @@ LAYERS: dict[str, int] = {
     "buffer": 3,
     "listener": 3,
     "broadcaster": 3,
+    "batch_async": 3,
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
     "monitor": 4,
@@ -54,6 +57,7 @@ LAYERS: dict[str, int] = {
     # 5: the command line and examples
     "cli": 5,
     "demo": 5,
+    "demo_laser": 5,
     "__main__": 5,
 }
 """Layer of each top-level module or package of ``tfbus`` (a package's submodules share

@@ -6,12 +6,13 @@ import tfbus
 def test_public_all_is_pinned() -> None:
     assert sorted(tfbus.__all__) == [
         "Buffer", "BufferCore", "Bus", "Clock", "ConnectivityException", "Duration",
-        "ExtrapolationException", "Header", "InvalidArgumentException", "LookupException",
-        "ManualClock", "MemoryTransport", "Point", "PointStamped", "Pose", "PoseStamped",
-        "Quaternion", "SetResult", "StaticTransformBroadcaster", "Subscription",
-        "SystemClock", "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform",
-        "TransformBroadcaster", "TransformException", "TransformListener",
-        "TransformStamped", "Transport", "TransportError", "Vector3", "Vector3Stamped", "every",
+        "ExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
+        "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
+        "Point", "PointCloud2", "PointField", "PointStamped", "Pose", "PoseStamped",
+        "Quaternion", "SetResult", "StaticTransformBroadcaster", "Subscription", "SystemClock",
+        "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform", "TransformArray",
+        "TransformBroadcaster", "TransformException", "TransformListener", "TransformStamped",
+        "Transport", "TransportError", "Vector3", "Vector3Stamped", "every",
     ]  # fmt: skip
     for name in tfbus.__all__:
         assert getattr(tfbus, name).__doc__, f"{name} has no docstring"

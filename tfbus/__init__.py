@@ -11,6 +11,7 @@ Layers (each imports only those below it; see DESIGN notes in the README):
 
 from tfbus import bus as _bus
 from tfbus._version import __version__ as __version__
+from tfbus.batch import TransformArray
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus, Subscription, Transport
@@ -26,6 +27,8 @@ from tfbus.errors import (
     TransformException,
     TransportError,
 )
+from tfbus.filters import MessageFilter
+from tfbus.laser import LaserProjection
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
@@ -40,6 +43,7 @@ from tfbus.messages import (
     Vector3,
     Vector3Stamped,
 )
+from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
 from tfbus.transports.memory import MemoryTransport
 
@@ -57,10 +61,15 @@ __all__ = [
     "ExtrapolationException",
     "Header",
     "InvalidArgumentException",
+    "LaserProjection",
+    "LaserScan",
     "LookupException",
     "ManualClock",
     "MemoryTransport",
+    "MessageFilter",
     "Point",
+    "PointCloud2",
+    "PointField",
     "PointStamped",
     "Pose",
     "PoseStamped",
@@ -74,6 +83,7 @@ __all__ = [
     "Time",
     "TimeoutException",
     "Transform",
+    "TransformArray",
     "TransformBroadcaster",
     "TransformException",
     "TransformListener",

@@ -100,3 +100,32 @@ class CoreBase:
     def _cwalk(
         self, target_id: int, source_id: int, time: int
     ) -> tuple[int, _Tf7 | int | None, int]: ...
+
+# batched lookups (issue 12)
+def batch_lookup(
+    core: CoreBase,
+    target_frame: str,
+    source_frame: str,
+    times: npt.NDArray[np.int64],
+    out: npt.NDArray[np.float64],
+    stamps: npt.NDArray[np.int64],
+    ok: npt.NDArray[np.int8],
+) -> int: ...
+def slerp_rows(
+    a: Sequence[float],
+    b: Sequence[float],
+    ratios: npt.NDArray[np.float64],
+    out: npt.NDArray[np.float64],
+) -> None: ...
+def apply_transforms(
+    q: npt.NDArray[np.float64],
+    v: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    out: npt.NDArray[np.float64],
+) -> None: ...
+def lerp_rows(
+    a: Sequence[float],
+    b: Sequence[float],
+    ratios: npt.NDArray[np.float64],
+    out: npt.NDArray[np.float64],
+) -> None: ...

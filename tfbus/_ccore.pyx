@@ -1341,3 +1341,541 @@ cdef class CoreBase:
         if err == EXTRAPOLATION_ERROR:
             return err, where, time
         return err, None, 0
+
+
+# ===== batched lookups (issue 12) =====
+#
+# ``batch_lookup`` answers ``lookup_transform`` for many times at once. The path between
+# the two frames is resolved once (the same climbs as ``_cwalk``, by each link's parent);
+# then every time is gathered and accumulated along it in C, in ``_cwalk``'s arithmetic
+# order, so a row is bit-for-bit the single lookup's (only the slerp angle and 1/sin of
+# # an interval are reused between the times that fall in it). Rows the plan cannot answer
+# exactly (time 0, a gather that fails, a link with several parents, a span >= 2**53 ns)
+# go through ``CoreBase._walk``; rows that fail there too are left unanswered, and
+# ``tfbus.batch`` asks the single lookup for tf2's exception: no error is reproduced.
+
+import os
+
+from libc.string cimport memset
+from cpython.pythread cimport (
+    WAIT_LOCK,
+    PyThread_acquire_lock,
+    PyThread_allocate_lock,
+    PyThread_free_lock,
+    PyThread_release_lock,
+    PyThread_start_new_thread,
+    PyThread_type_lock,
+)
+
+cdef int _NCPU = os.cpu_count() or 1
+cdef Py_ssize_t _SPLIT_ROWS = 8192  # below this a second thread costs more than it saves
+
+
+cdef struct _BLink:
+    const int64_t* st
+    const double* va
+    Py_ssize_t head
+    Py_ssize_t tail
+    double sv[7]  # a static link's value
+    bint is_static
+    bint check_only  # gathered (must succeed) but not accumulated: tf2's early exit
+    # Cache of the last interpolation interval [ci - 1, ci]: its slerp angle is reused.
+    Py_ssize_t ci
+    bint zero_angle
+    double theta
+    double d
+    double bq[4]
+
+
+cdef inline int _bgather(_BLink* L, int64_t t, double* out) noexcept nogil:
+    """``TimeCache::c_gather`` for a time != 0 on a single-parent link: 1 with ``out``
+    set, 0 when tf2's gather would fail, 2 when the row needs the scalar path."""
+    cdef Py_ssize_t head = L.head, tail = L.tail, i, i0
+    cdef const int64_t* st = L.st
+    cdef const double* a
+    cdef const double* b
+    cdef int64_t t0, span
+    cdef double r, s, dot, c, s0, s1, th
+    if L.is_static:
+        memcpy(out, L.sv, 7 * sizeof(double))
+        return 1
+    if tail == head:
+        return 0
+    if t == st[tail - 1]:
+        memcpy(out, &L.va[(tail - 1) * 7], 7 * sizeof(double))
+        return 1
+    if tail - head == 1 or t > st[tail - 1]:
+        return 0
+    i = L.ci
+    if not (i > head and i < tail and st[i - 1] < t and t <= st[i]):
+        i = _bisect_left(st, t, head, tail)
+    if st[i] == t:
+        memcpy(out, &L.va[i * 7], 7 * sizeof(double))
+        return 1
+    if i == head:
+        return 0
+    i0 = i - 1
+    a = &L.va[i0 * 7]
+    t0 = st[i0]
+    span = st[i] - t0
+    if span >= EXACT_SPAN:
+        return 2
+    if i != L.ci:
+        # tf2 slerp (Quaternion.h slerp / angleShortestPath), as TimeCache.c_gather.
+        b = &L.va[i * 7]
+        L.bq[0] = b[3]
+        L.bq[1] = b[4]
+        L.bq[2] = b[5]
+        L.bq[3] = b[6]
+        dot = a[3] * L.bq[0] + a[4] * L.bq[1] + a[5] * L.bq[2] + a[6] * L.bq[3]
+        if dot < 0.0:
+            dot = -dot
+            L.bq[0] = -L.bq[0]
+            L.bq[1] = -L.bq[1]
+            L.bq[2] = -L.bq[2]
+            L.bq[3] = -L.bq[3]
+        c = dot / sqrt(
+            (a[3] * a[3] + a[4] * a[4] + a[5] * a[5] + a[6] * a[6])
+            * (L.bq[0] * L.bq[0] + L.bq[1] * L.bq[1] + L.bq[2] * L.bq[2]
+               + L.bq[3] * L.bq[3])
+        )
+        L.zero_angle = c >= 1.0
+        if not L.zero_angle:
+            L.theta = acos(c)
+            L.d = 1.0 / sin(L.theta)
+        L.ci = i
+    b = &L.va[i * 7]
+    r = <double>(t - t0) / <double>span
+    s = 1.0 - r
+    out[0] = s * a[0] + r * b[0]
+    out[1] = s * a[1] + r * b[1]
+    out[2] = s * a[2] + r * b[2]
+    if L.zero_angle:
+        out[3] = a[3]
+        out[4] = a[4]
+        out[5] = a[5]
+        out[6] = a[6]
+        return 1
+    th = L.theta
+    s0 = sin(s * th)
+    s1 = sin(r * th)
+    out[3] = (a[3] * s0 + L.bq[0] * s1) * L.d
+    out[4] = (a[4] * s0 + L.bq[1] * s1) * L.d
+    out[5] = (a[5] * s0 + L.bq[2] * s1) * L.d
+    out[6] = (a[6] * s0 + L.bq[3] * s1) * L.d
+    return 1
+
+
+cdef inline void _bfull(const double* src, const double* tgt, double* out) noexcept nogil:
+    """``_cwalk``'s FullPath step, same order: inv(target -> top) ∘ (source -> top)."""
+    cdef double sqx = src[3], sqy = src[4], sqz = src[5], sqw = src[6]
+    cdef double iqx = -tgt[3], iqy = -tgt[4], iqz = -tgt[5], iqw = tgt[6]
+    cdef double vx = src[0] - tgt[0], vy = src[1] - tgt[1], vz = src[2] - tgt[2]
+    cdef double tx = iqw * vx + iqy * vz - iqz * vy
+    cdef double ty = iqw * vy + iqz * vx - iqx * vz
+    cdef double tz = iqw * vz + iqx * vy - iqy * vx
+    cdef double tw = -iqx * vx - iqy * vy - iqz * vz
+    out[0] = -tw * iqx + tx * iqw - ty * iqz + tz * iqy
+    out[1] = -tw * iqy + ty * iqw - tz * iqx + tx * iqz
+    out[2] = -tw * iqz + tz * iqw - tx * iqy + ty * iqx
+    out[3] = iqw * sqx + iqx * sqw + iqy * sqz - iqz * sqy
+    out[4] = iqw * sqy + iqy * sqw + iqz * sqx - iqx * sqz
+    out[5] = iqw * sqz + iqz * sqw + iqx * sqy - iqy * sqx
+    out[6] = iqw * sqw - iqx * sqx - iqy * sqy - iqz * sqz
+
+
+cdef enum:
+    C_MAX_DEPTH_BATCH = 64  # longer chains take the scalar walk
+
+
+cdef int _bplan_side(list caches, int frame, int stop, int early, _BLink* links,
+                     int* n, int* reached, bint* early_hit) except -1:
+    """The structure of one ``_climb`` (by each link's single parent): append its links
+    to ``links``. Returns 0, or 1 when no row can take the fast path (a link with no
+    data, several parents or NO_PARENT, or a loop)."""
+    cdef object obj
+    cdef int parent
+    cdef int depth = 0
+    cdef _BLink* L
+    early_hit[0] = False
+    while frame != stop:
+        obj = _link(caches, frame)
+        if obj is None:
+            break
+        if n[0] >= C_MAX_DEPTH_BATCH:
+            return 1
+        L = &links[n[0]]
+        memset(L, 0, sizeof(_BLink))
+        L.ci = -1
+        if isinstance(obj, StaticCache):
+            L.is_static = True
+            memcpy(L.sv, (<StaticCache>obj)._v, 7 * sizeof(double))
+            parent = (<StaticCache>obj)._parent
+        elif isinstance(obj, TimeCache):
+            if (<TimeCache>obj)._pa != NULL or (<TimeCache>obj)._tail == (<TimeCache>obj)._head:
+                return 1
+            L.st = (<TimeCache>obj)._st
+            L.va = (<TimeCache>obj)._va
+            L.head = (<TimeCache>obj)._head
+            L.tail = (<TimeCache>obj)._tail
+            parent = (<TimeCache>obj)._parent
+        else:
+            return 1
+        if parent == 0:
+            return 1
+        n[0] += 1
+        if frame == early:
+            L.check_only = True
+            early_hit[0] = True
+            reached[0] = frame
+            return 0
+        frame = parent
+        depth += 1
+        if depth > C_MAX_DEPTH:
+            return 1
+    reached[0] = frame
+    return 0
+
+
+cdef enum:
+    _BLOCK = 32  # rows gathered and composed together (independent work for the CPU)
+
+
+cdef inline void _bchain(_BLink* links, int n, const int64_t* times, int m,
+                         double acc[7][_BLOCK], double st[7][_BLOCK],
+                         signed char* good) noexcept nogil:
+    """One ``_climb`` for ``m`` rows at once, link by link: gather each row's sample into
+    ``st`` (``good[j] = 0`` where tf2's gather would fail or the row needs the scalar
+    walk), then ``acc = link ∘ acc`` for every row (``_compose``'s expressions, in its
+    order, so each row is bit-for-bit the scalar climb; rows no longer good compute
+    garbage that is never read)."""
+    cdef double v[7]
+    cdef int k, c, j
+    cdef double qx, qy, qz, qw, vx, vy, vz, tx, ty, tz, tw, bx, by, bz, bw
+    for j in range(m):
+        acc[0][j] = acc[1][j] = acc[2][j] = acc[3][j] = acc[4][j] = acc[5][j] = 0.0
+        acc[6][j] = 1.0
+    for k in range(n):
+        for j in range(m):
+            if good[j]:
+                if _bgather(&links[k], times[j], v) != 1:
+                    good[j] = 0
+                    continue
+                for c in range(7):
+                    st[c][j] = v[c]
+        if links[k].check_only:
+            continue
+        if k == 0:
+            for c in range(7):
+                for j in range(m):
+                    acc[c][j] = st[c][j]
+            continue
+        for j in range(m):
+            qx = st[3][j]
+            qy = st[4][j]
+            qz = st[5][j]
+            qw = st[6][j]
+            vx = acc[0][j]
+            vy = acc[1][j]
+            vz = acc[2][j]
+            tx = qw * vx + qy * vz - qz * vy
+            ty = qw * vy + qz * vx - qx * vz
+            tz = qw * vz + qx * vy - qy * vx
+            tw = -qx * vx - qy * vy - qz * vz
+            bx = acc[3][j]
+            by = acc[4][j]
+            bz = acc[5][j]
+            bw = acc[6][j]
+            acc[0][j] = (-tw * qx + tx * qw - ty * qz + tz * qy) + st[0][j]
+            acc[1][j] = (-tw * qy + ty * qw - tz * qx + tx * qz) + st[1][j]
+            acc[2][j] = (-tw * qz + tz * qw - tx * qy + ty * qx) + st[2][j]
+            acc[3][j] = qw * bx + qx * bw + qy * bz - qz * by
+            acc[4][j] = qw * by + qy * bw + qz * bx - qx * bz
+            acc[5][j] = qw * bz + qz * bw + qx * by - qy * bx
+            acc[6][j] = qw * bw - qx * bx - qy * by - qz * bz
+
+
+cdef Py_ssize_t _brows(const _BLink* src_proto, int ns, bint src_early,
+                       const _BLink* tgt_proto, int nt, bint tgt_early,
+                       const int64_t* times, Py_ssize_t n_rows, double* out,
+                       signed char* ok) noexcept nogil:
+    """The per-time loop of :func:`batch_lookup` over ``n_rows`` rows, in blocks of
+    ``_BLOCK`` (no GIL; each call keeps its own copy of the links' interval caches)."""
+    cdef _BLink src_links[C_MAX_DEPTH_BATCH]
+    cdef _BLink tgt_links[C_MAX_DEPTH_BATCH]
+    cdef double acc_s[7][_BLOCK]
+    cdef double acc_t[7][_BLOCK]
+    cdef double st[7][_BLOCK]
+    cdef double a[7]
+    cdef double b[7]
+    cdef signed char good[_BLOCK]
+    cdef Py_ssize_t r0 = 0, answered = 0
+    cdef int m, j, c
+    memcpy(src_links, src_proto, ns * sizeof(_BLink))
+    memcpy(tgt_links, tgt_proto, nt * sizeof(_BLink))
+    memset(st, 0, sizeof(st))
+    while r0 < n_rows:
+        m = <int>(n_rows - r0) if n_rows - r0 < _BLOCK else _BLOCK
+        for j in range(m):
+            good[j] = times[r0 + j] != 0
+        _bchain(src_links, ns, times + r0, m, acc_s, st, good)
+        if not src_early:
+            _bchain(tgt_links, nt, times + r0, m, acc_t, st, good)
+        for j in range(m):
+            if not good[j]:
+                continue
+            for c in range(7):
+                a[c] = acc_s[c][j]
+            if src_early:
+                memcpy(&out[(r0 + j) * 7], a, 7 * sizeof(double))
+            else:
+                if tgt_early:
+                    _identity(a)
+                for c in range(7):
+                    b[c] = acc_t[c][j]
+                _bfull(a, b, &out[(r0 + j) * 7])
+            ok[r0 + j] = 1
+            answered += 1
+        r0 += _BLOCK
+    return answered
+
+
+cdef struct _BJob:
+    const _BLink* src
+    const _BLink* tgt
+    int ns
+    int nt
+    bint src_early
+    bint tgt_early
+    const int64_t* times
+    Py_ssize_t n_rows
+    double* out
+    signed char* ok
+    Py_ssize_t answered
+    PyThread_type_lock done
+
+
+cdef void _bjob(void* arg) noexcept nogil:
+    """A worker thread's share of the rows; releases ``done`` when finished."""
+    cdef _BJob* job = <_BJob*>arg
+    job.answered = _brows(job.src, job.ns, job.src_early, job.tgt, job.nt, job.tgt_early,
+                          job.times, job.n_rows, job.out, job.ok)
+    PyThread_release_lock(job.done)
+
+
+cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink* tgt,
+                        int nt, bint tgt_early, const int64_t* times, Py_ssize_t n_rows,
+                        double* out, signed char* ok) except -1:
+    """``_brows`` over all rows, the second half on a worker thread when it pays."""
+    cdef _BJob job
+    cdef Py_ssize_t h, first
+    if n_rows < _SPLIT_ROWS or _NCPU < 2:
+        with nogil:
+            first = _brows(src, ns, src_early, tgt, nt, tgt_early, times, n_rows, out, ok)
+        return first
+    h = n_rows // 2
+    job.src = src
+    job.tgt = tgt
+    job.ns = ns
+    job.nt = nt
+    job.src_early = src_early
+    job.tgt_early = tgt_early
+    job.times = times + h
+    job.n_rows = n_rows - h
+    job.out = out + h * 7
+    job.ok = ok + h
+    job.answered = 0
+    job.done = PyThread_allocate_lock()
+    if job.done == NULL:
+        raise MemoryError()
+    PyThread_acquire_lock(job.done, WAIT_LOCK)
+    if PyThread_start_new_thread(_bjob, &job) == -1:
+        PyThread_release_lock(job.done)
+        PyThread_free_lock(job.done)
+        with nogil:
+            first = _brows(src, ns, src_early, tgt, nt, tgt_early, times, n_rows, out, ok)
+        return first
+    with nogil:
+        first = _brows(src, ns, src_early, tgt, nt, tgt_early, times, h, out, ok)
+        PyThread_acquire_lock(job.done, WAIT_LOCK)
+    PyThread_free_lock(job.done)
+    return first + job.answered
+
+
+def batch_lookup(CoreBase core, object target_frame, object source_frame,
+                 const int64_t[::1] times, double[:, ::1] out, int64_t[::1] stamps,
+                 signed char[::1] ok):
+    """``lookupTransform(target_frame, source_frame, t)`` for every t of ``times``, into
+    caller-owned arrays (the compiled entry of :func:`tfbus.batch.lookup_transforms`).
+
+    For each row r with ``ok[r] == 1`` on return, ``out[r]`` is the transform (tx, ty,
+    tz, qx, qy, qz, qw) mapping source into target and ``stamps[r]`` the time used
+    (the caller fills ``stamps`` with ``times``; only rows at time 0 change), bit-for-bit what ``lookup_transform`` returns for ``times[r]``. Rows left at 0 are
+    those the single lookup would fail for (the caller asks it for the exception).
+    Returns the number of rows answered, or -1 when a frame id is not a known,
+    queryable id (then no row is answered: the single lookup raises tf2's
+    InvalidArgument / Lookup exception). ``target_frame == source_frame`` is the
+    caller's (identity) case and returns -1 too.
+
+    The path is resolved once; each time is then gathered and accumulated along it in C
+    (no GIL), in ``_walk``'s arithmetic order. Rows that plan cannot take (time 0,
+    a link with several parents, a span >= 2**53 ns, a row missing data) go through
+    ``_walk`` itself. From 8192 rows on a machine with several CPUs, a second thread
+    takes the second half of the rows (the caller holds the GIL and waits for it, so
+    nothing writes the buffer meanwhile).
+    """
+    cdef Py_ssize_t n_rows = times.shape[0], r, answered = 0
+    cdef _BLink src_links[C_MAX_DEPTH_BATCH]
+    cdef _BLink tgt_links[C_MAX_DEPTH_BATCH]
+    cdef int ns = 0, nt = 0, top = 0, frame = 0, where = 0, err
+    cdef int target_id, source_id
+    cdef bint src_early = False, tgt_early = False, planned
+    cdef int64_t used
+    cdef list caches = core._caches
+    if (out.shape[0] != n_rows or out.shape[1] != 7 or ok.shape[0] != n_rows
+            or stamps.shape[0] != n_rows):
+        raise ValueError("batch_lookup: out must be (N, 7), stamps and ok (N,) for N times")
+    ok[:] = 0
+    target_id = core._frame(target_frame)
+    source_id = core._frame(source_frame)
+    if target_id < 0 or source_id < 0 or target_id == source_id:
+        return -1
+    planned = _bplan_side(caches, source_id, 0, target_id, src_links, &ns, &top,
+                          &src_early) == 0
+    if planned and not src_early:
+        planned = _bplan_side(caches, target_id, top, source_id, tgt_links, &nt, &frame,
+                              &tgt_early) == 0
+        if planned and not tgt_early and frame != top:
+            planned = False  # disconnected: the scalar walk reports it
+    if planned and n_rows:
+        answered = _bsplit(src_links, ns, src_early, tgt_links, nt, tgt_early,
+                           &times[0], n_rows, &out[0, 0], &ok[0])
+    if answered == n_rows:
+        return answered
+    for r in range(n_rows):
+        if ok[r]:
+            continue
+        used = times[r]
+        err = core._walk(target_id, source_id, &used, &out[r, 0], &where)
+        if err == NO_ERROR:
+            stamps[r] = used
+            ok[r] = 1
+            answered += 1
+    return answered
+
+
+# ----- per-point tf2 math for sensor data (issue 12: laser projection)
+
+
+def slerp_rows(a, b, const double[::1] ratios, double[:, ::1] out):
+    """tf2 ``Quaternion::slerp(a, b, r)`` for every r of ``ratios`` into ``out`` (N, 4)
+    (x, y, z, w): the angle (``angleShortestPath``, ``tf2Acos``'s clamp) and ``1/sin``
+    are computed once, each row as ``_slerp`` computes it (a zero angle returns ``a``;
+    laser_geometry ``transformLaserScanToPointCloud_`` calls this per beam)."""
+    cdef double qa[4]
+    cdef double qb[4]
+    cdef double dot, c, theta, d, s0, s1, r
+    cdef Py_ssize_t i, n = ratios.shape[0]
+    cdef int k
+    if out.shape[0] != n or out.shape[1] != 4:
+        raise ValueError("slerp_rows: out must be (N, 4) for N ratios")
+    for k in range(4):
+        qa[k] = a[k]
+        qb[k] = b[k]
+    dot = qa[0] * qb[0] + qa[1] * qb[1] + qa[2] * qb[2] + qa[3] * qb[3]
+    if dot < 0.0:
+        dot = -dot
+        for k in range(4):
+            qb[k] = -qb[k]
+    c = dot / sqrt(
+        (qa[0] * qa[0] + qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3])
+        * (qb[0] * qb[0] + qb[1] * qb[1] + qb[2] * qb[2] + qb[3] * qb[3])
+    )
+    with nogil:
+        if c >= 1.0:
+            for i in range(n):
+                for k in range(4):
+                    out[i, k] = qa[k]
+        else:
+            theta = acos(c)
+            d = 1.0 / sin(theta)
+            for i in range(n):
+                r = ratios[i]
+                s0 = sin((1.0 - r) * theta)
+                s1 = sin(r * theta)
+                for k in range(4):
+                    out[i, k] = (qa[k] * s0 + qb[k] * s1) * d
+
+
+def apply_transforms(const double[:, ::1] q, const double[:, ::1] v,
+                     const double[:, ::1] p, double[:, ::1] out):
+    """Point i mapped by the tf2::Transform with rotation ``q[i]`` (x, y, z, w) and origin
+    ``v[i]`` (metres), as tf2 computes it: ``Matrix3x3::setRotation`` (its basis, which
+    normalises q) then ``Transform::operator()`` (``p.dot3(row0, row1, row2) +
+    origin``), in tf2's evaluation order. ``q`` (N, 4) or (1, 4), ``v`` (N, 3) or
+    (1, 3), ``p`` and ``out`` (N, 3); a single row is used for every point."""
+    cdef Py_ssize_t i, n = p.shape[0], iq, iv
+    cdef bint one_q = q.shape[0] == 1, one_v = v.shape[0] == 1
+    cdef double x, y, z, w, s, xs, ys, zs, wx, wy, wz, xx, xy, xz, yy, yz, zz
+    cdef double m00, m01, m02, m10, m11, m12, m20, m21, m22, p0, p1, p2
+    if (p.shape[1] != 3 or out.shape[0] != n or out.shape[1] != 3 or q.shape[1] != 4
+            or v.shape[1] != 3 or not (one_q or q.shape[0] == n)
+            or not (one_v or v.shape[0] == n)):
+        raise ValueError("apply_transforms: q (N|1, 4), v (N|1, 3), p and out (N, 3)")
+    with nogil:
+        for i in range(n):
+            iq = 0 if one_q else i
+            iv = 0 if one_v else i
+            x = q[iq, 0]
+            y = q[iq, 1]
+            z = q[iq, 2]
+            w = q[iq, 3]
+            s = 2.0 / (((x * x + y * y) + z * z) + w * w)
+            xs = x * s
+            ys = y * s
+            zs = z * s
+            wx = w * xs
+            wy = w * ys
+            wz = w * zs
+            xx = x * xs
+            xy = x * ys
+            xz = x * zs
+            yy = y * ys
+            yz = y * zs
+            zz = z * zs
+            m00 = 1.0 - (yy + zz)
+            m01 = xy - wz
+            m02 = xz + wy
+            m10 = xy + wz
+            m11 = 1.0 - (xx + zz)
+            m12 = yz - wx
+            m20 = xz - wy
+            m21 = yz + wx
+            m22 = 1.0 - (xx + yy)
+            p0 = p[i, 0]
+            p1 = p[i, 1]
+            p2 = p[i, 2]
+            out[i, 0] = ((m00 * p0 + m01 * p1) + m02 * p2) + v[iv, 0]
+            out[i, 1] = ((m10 * p0 + m11 * p1) + m12 * p2) + v[iv, 1]
+            out[i, 2] = ((m20 * p0 + m21 * p1) + m22 * p2) + v[iv, 2]
+
+
+def lerp_rows(a, b, const double[::1] ratios, double[:, ::1] out):
+    """``(1 - r) * a + r * b`` per component for every r of ``ratios`` into ``out``
+    (N, 3): tf2 ``lerp`` of two origins (metres), as laser_geometry interpolates the
+    viewpoint between the first and last beam."""
+    cdef double va[3]
+    cdef double vb[3]
+    cdef double r
+    cdef Py_ssize_t i, n = ratios.shape[0]
+    cdef int k
+    if out.shape[0] != n or out.shape[1] != 3:
+        raise ValueError("lerp_rows: out must be (N, 3) for N ratios")
+    for k in range(3):
+        va[k] = a[k]
+        vb[k] = b[k]
+    with nogil:
+        for i in range(n):
+            r = ratios[i]
+            for k in range(3):
+                out[i, k] = (1.0 - r) * va[k] + r * vb[k]

@@ -24,6 +24,7 @@ from typing import Any, ClassVar, Generic, TypeVar, cast
 
 import anyio
 
+from tfbus.batch_async import AsyncBatchMixin
 from tfbus.clock import Clock, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore
@@ -57,7 +58,7 @@ class _Waiter(Generic[_T]):
         self.error: BaseException | None = None
 
 
-class Buffer(BufferCore):
+class Buffer(AsyncBatchMixin, BufferCore):
     """A :class:`~tfbus.core.BufferCore` plus awaitable lookups (tf2_ros ``Buffer``).
 
     Args:

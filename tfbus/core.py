@@ -41,6 +41,7 @@ from tfbus._ccore import (
     CoreBase,
     compose_full,
 )
+from tfbus.batch import BatchLookupMixin
 from tfbus.core_text import (
     FrameInfo,
     Tf7,
@@ -131,7 +132,7 @@ def _cache_time_ns(value: object) -> int:
     return ns
 
 
-class BufferCore(CoreBase):
+class BufferCore(BatchLookupMixin, CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
     Args:

@@ -19,6 +19,7 @@ from urllib.parse import urlsplit
 import anyio
 import anyio.abc
 from anyio.from_thread import BlockingPortal
+from anyio.streams.buffered import BufferedByteReceiveStream
 
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
@@ -467,10 +468,12 @@ class Ros1Transport:
                     OSError,
                     TransportError,
                     anyio.EndOfStream,
+                    anyio.IncompleteRead,
                     anyio.BrokenResourceError,
                 ) as exc:
                     _log.debug("ros1: %s from %s: %s", topic, uri, exc)
-                except ValueError as exc:  # malformed header or frame: this connection only
+                except (ValueError, TypeError) as exc:  # malformed reply, header or frame:
+                    # this connection only
                     self._stats.malformed += 1
                     _log.warning("ros1: closing %s from %s: %s", topic, uri, exc)
                 await anyio.sleep(delay)
@@ -499,6 +502,7 @@ class Ros1Transport:
                 stream.extra(anyio.abc.SocketAttribute.raw_socket).setsockopt(
                     socket.IPPROTO_TCP, socket.TCP_NODELAY, 1
                 )
+            buffered = BufferedByteReceiveStream(stream)
             await stream.send(
                 encode_header(
                     {
@@ -513,7 +517,7 @@ class Ros1Transport:
             )
             with anyio.fail_after(max(self._timeout, 1.0)):
                 header = decode_header(
-                    await read_frame(stream, MAX_HEADER_BYTES, "connection header")
+                    await read_frame(buffered, MAX_HEADER_BYTES, "connection header")
                 )
             if "error" in header:
                 raise TransportError(f"publisher {uri} refused {topic}: {header['error']}")
@@ -525,7 +529,7 @@ class Ros1Transport:
             conn_id = self._open_conn(peer, "i", topic)
             try:
                 while True:
-                    raw = await read_frame(stream, self._max_bytes, "message")
+                    raw = await read_frame(buffered, self._max_bytes, "message")
                     transforms = self._codec.decode(raw)
                     self._stats.received += 1
                     bus.deliver_nowait(topic, TFMessage(tuple(transforms)))
@@ -549,13 +553,23 @@ class Ros1Transport:
             try:
                 with anyio.fail_after(max(self._timeout, 1.0)):
                     header = decode_header(
-                        await read_frame(stream, MAX_HEADER_BYTES, "connection header")
+                        await read_frame(
+                            BufferedByteReceiveStream(stream),
+                            MAX_HEADER_BYTES,
+                            "connection header",
+                        )
                     )
             except (ValueError, struct.error) as exc:
                 self._stats.malformed += 1
                 _log.warning("ros1: bad connection header from a subscriber: %s", exc)
                 return
-            except (TimeoutError, OSError, anyio.EndOfStream, anyio.BrokenResourceError):
+            except (
+                TimeoutError,
+                OSError,
+                anyio.EndOfStream,
+                anyio.IncompleteRead,
+                anyio.BrokenResourceError,
+            ):
                 return
             topic = header.get("topic", "")
             md5 = header.get("md5sum", "")
