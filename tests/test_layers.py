@@ -41,6 +41,7 @@ LAYERS: dict[str, int] = {
     "bus": 2,
     "clock": 2,
     "latch": 2,
+    "subscription": 2,
     # 3: awaitable tf2_ros pieces
     "buffer": 3,
     "listener": 3,

@@ -44,7 +44,7 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
-from transforms3d import euler as _t3d_euler  # type: ignore[import-untyped]
+from transforms3d import euler as _t3d_euler
 from transforms3d import quaternions as _t3d_quat
 
 from tfbus import _ccore

@@ -51,8 +51,8 @@ import anyio
 import anyio.abc
 import numpy as np
 import numpy.typing as npt
-from transforms3d.euler import euler2quat  # type: ignore[import-untyped]
-from transforms3d.quaternions import quat2mat  # type: ignore[import-untyped]
+from transforms3d.euler import euler2quat
+from transforms3d.quaternions import quat2mat
 
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import Clock, SystemClock, every

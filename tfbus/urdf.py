@@ -147,9 +147,9 @@ def load_urdf(model: str | bytes | os.PathLike[str] | RobotModel | Any) -> Robot
 
 
 def _from_text(text: str | bytes) -> RobotModel:
-    from lxml import etree  # type: ignore[import-untyped]
-    from urdf_parser_py import urdf  # type: ignore[import-untyped]
-    from urdf_parser_py.xml_reflection import core  # type: ignore[import-untyped]
+    from lxml import etree
+    from urdf_parser_py import urdf
+    from urdf_parser_py.xml_reflection import core
 
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
                              remove_comments=True)
