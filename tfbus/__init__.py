@@ -10,6 +10,7 @@ Layers (each imports only those below it; see DESIGN notes in the README):
 """
 
 from tfbus import bus as _bus
+from tfbus._version import __version__ as __version__
 from tfbus.batch import TransformArray
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
@@ -49,8 +50,6 @@ from tfbus.transports.memory import MemoryTransport
 # MemoryTransport moved from tfbus.bus (layer 2) to tfbus.transports.memory (layer 4);
 # ``from tfbus.bus import MemoryTransport`` keeps working without bus.py importing up.
 setattr(_bus, "MemoryTransport", MemoryTransport)  # noqa: B010
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Buffer",

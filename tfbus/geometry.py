@@ -123,7 +123,8 @@ def _fit(arr: Array, n: int | None) -> Array:
     """Broadcast a result to ``(n, width)`` when the call was batched."""
     if n is None or arr.ndim == 2:
         return arr
-    return np.broadcast_to(arr, (n, arr.shape[-1])).copy()
+    out: Array = np.broadcast_to(arr, (n, arr.shape[-1])).copy()  # typed for Python 3.10
+    return out
 
 
 def _quat_multiply(a: Array, b: Array) -> Array:

@@ -110,7 +110,8 @@ def beam_time_offsets_ns(
         frac = (d - sec) * 1e9
         nsec = np.where(frac < 0.5, 0.0, np.ceil(frac))
         nsec -= (nsec != 0) & (nsec - frac > 0.5)
-    return sec.astype(np.int64) * 1_000_000_000 + nsec.astype(np.int64)
+    offsets: npt.NDArray[np.int64] = sec.astype(np.int64) * 1_000_000_000 + nsec.astype(np.int64)
+    return offsets
 
 
 def _end_time(scan: LaserScan) -> Time:

@@ -65,7 +65,7 @@ class BagMessage(NamedTuple):
         return self.topic == TF_STATIC_TOPIC
 
 
-class BagFormat(str, Enum):  # noqa: UP042 (StrEnum is Python 3.11+; tfbus supports 3.10)
+class BagFormat(str, Enum):  # not StrEnum: that is Python 3.11+, tfbus supports 3.10
     """On-disk formats: ``ros1`` (.bag), ``sqlite3`` (ROS 2 .db3), ``mcap``.
 
     A ``str`` enum: ``BagFormat.MCAP == "mcap"`` and ``str(BagFormat.MCAP) == "mcap"``.

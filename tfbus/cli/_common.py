@@ -170,16 +170,11 @@ class _Group(click.Group):
 
 
 def version() -> str:
-    """tfbus's version: the installed distribution's (``importlib.metadata``), else
-    ``tfbus.__version__`` (a source tree that is not installed)."""
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import version as dist_version
+    """tfbus's version: the installed distribution's (``importlib.metadata``, through
+    :mod:`tfbus._version`), ``0+unknown`` for a source tree that is not installed."""
+    from tfbus._version import __version__
 
-    try:
-        return dist_version("tfbus")
-    except PackageNotFoundError:
-        # The package root is imported before any of its modules, so it is there.
-        return str(sys.modules["tfbus"].__version__)
+    return __version__
 
 
 def _print_version(ctx: click.Context, param: click.Parameter, value: bool) -> None:

@@ -76,6 +76,7 @@ def zenoh_config(
     base_given = config is not None and not isinstance(config, Mapping)
 
     def build(listen_eps: list[str] | None, connect_eps: list[str] | None) -> zenoh.Config:
+        cfg: zenoh.Config  # (typed: zenoh's stubs leave these Any under Python 3.10)
         if isinstance(config, zenoh.Config):
             cfg = zenoh.Config.from_json5(str(config))
         elif config is not None and not isinstance(config, Mapping):

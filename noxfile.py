@@ -1,0 +1,43 @@
+"""``make test-matrix``: the test suite on every supported Python found on this machine.
+
+Each session makes a fresh venv with that interpreter's own ``venv`` module (nox's default
+backend), installs tfbus editable with its extras — which builds the compiled core for
+that interpreter beside the others (``tfbus/_ccore.cpython-3XY-*.so``) — and runs pytest.
+An interpreter that is not installed is skipped, not failed: the matrix runs "on each
+interpreter found" (``scripts/pythons.py`` looks on ``PATH`` and in pyenv's versions).
+
+    nox                      # every version found
+    nox -s tests-3.10        # one
+    nox -s tests-3.13 -- tests/test_core.py -x     # arguments after -- go to pytest
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import nox
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "scripts"))
+from pythons import VERSIONS, find_pythons
+
+nox.options.sessions = ["tests"]
+nox.options.error_on_missing_interpreters = False
+# Never fetch an interpreter from the network: test only what is installed.
+nox.options.download_python = "never"
+nox.options.reuse_existing_virtualenvs = True
+
+# pyenv's shim for `python3.X` fails unless that version is selected: put the real
+# interpreters' directories first on PATH so that nox's discovery finds them.
+_bins = [str(exe.parent) for exe in find_pythons().values()]
+os.environ["PATH"] = os.pathsep.join([*dict.fromkeys(_bins), os.environ.get("PATH", "")])
+
+
+@nox.session(python=VERSIONS, venv_backend="venv")
+def tests(session: nox.Session) -> None:
+    """Install tfbus (compiled core, every extra) and run the whole suite."""
+    session.install("--upgrade", "pip")
+    session.install("-e", ".[all,test,docs]")
+    session.run("python", "-c", "import sys, tfbus; print(sys.version, tfbus.__version__)")
+    session.run("python", "-m", "pytest", "-q", *session.posargs)

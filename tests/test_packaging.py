@@ -1,0 +1,128 @@
+"""Packaging: version, LICENSE, CHANGELOG, what the sdist carries, and the optional
+compiled core (a build without a C compiler, or with ``TFBUS_NO_EXTENSIONS=1``, gives a
+pure-Python wheel instead of failing).
+
+The wheel builds run ``pip wheel`` from the sdist (pip's build isolation fetches
+setuptools and Cython from the package index), each bounded in time. The full user
+journey — manylinux wheels in clean 3.10/3.13 venvs, the demo, the conformance corpus
+on the pure-Python core — is ``make dist && make dist-check``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import os
+import re
+import subprocess
+import sys
+import tarfile
+import zipfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+import tfbus
+
+ROOT = Path(__file__).resolve().parents[1]
+FALLBACK_MESSAGE = "tfbus: the compiled core (tfbus._ccore) could not be built"
+
+
+def _pyproject_version() -> str:
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    m = re.search(r'(?m)^version = "([^"]+)"$', text)
+    assert m, "pyproject.toml has no static version"
+    return m.group(1)
+
+
+def test_version_comes_from_the_metadata() -> None:
+    assert tfbus.__version__ == importlib.metadata.version("tfbus") == _pyproject_version()
+
+
+def test_changelog_has_the_current_version() -> None:
+    text = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    assert text.startswith("# Changelog")
+    assert re.search(rf"(?m)^## \[?{re.escape(_pyproject_version())}\]? - ", text)
+
+
+def test_license_is_the_apache_2_0_text_pyproject_declares() -> None:
+    text = (ROOT / "LICENSE").read_bytes()
+    # The standard text as the ASF distributes it (LICENSE-2.0.txt), byte for byte.
+    assert hashlib.md5(text).hexdigest() == "3b83ef96387f14655fc854ddc3c6bd57"
+    assert b"Apache License\n                           Version 2.0, January 2004" in text
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    assert 'license = "Apache-2.0"' in pyproject
+    assert 'license-files = ["LICENSE"]' in pyproject
+    meta = importlib.metadata.metadata("tfbus")
+    assert meta["License-Expression"] == "Apache-2.0"
+
+
+def _run(cmd: list[str], *, timeout: float, env: dict[str, str] | None = None,
+         cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    try:
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
+                              env=env, cwd=cwd, check=False)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f"{cmd[:4]}... timed out after {timeout} s: {exc.stdout!r}")
+
+
+@pytest.fixture(scope="module")
+def sdist(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    out = tmp_path_factory.mktemp("sdist")
+    done = _run([sys.executable, "-m", "build", "--sdist", "--outdir", str(out), str(ROOT)],
+                timeout=600)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    (path,) = out.glob("tfbus-*.tar.gz")
+    yield path
+
+
+def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
+    with tarfile.open(sdist) as tar:
+        names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
+    required = {
+        "pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "MANIFEST.in",
+        "tfbus/__init__.py", "tfbus/_ccore.pyx", "tfbus/_ccore.pyi", "tfbus/py.typed",
+        "tests/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
+        "docs/index.md", "mkdocs.yml",
+    }
+    assert required <= names, sorted(required - names)
+    # Never generated or built files: the C is regenerated from the .pyx by Cython.
+    assert not [n for n in names if n.endswith((".so", ".pyc", "_ccore.c"))]
+
+
+def _wheel(sdist: Path, out: Path, env: dict[str, str]) -> tuple[Path, str]:
+    done = _run([sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "--no-cache-dir",
+                 "-w", str(out), str(sdist)], timeout=900, env=env)
+    log = done.stdout + done.stderr
+    assert done.returncode == 0, log[-4000:]
+    (wheel,) = out.glob("tfbus-*.whl")
+    return wheel, log
+
+
+def _members(wheel: Path) -> list[str]:
+    with zipfile.ZipFile(wheel) as z:
+        return z.namelist()
+
+
+def test_without_a_c_compiler_the_sdist_builds_pure_python(
+    sdist: Path, tmp_path: Path
+) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("CC", "TFBUS_NO_EXTENSIONS")}
+    env["PATH"] = str(Path(sys.executable).parent)  # the configured compiler is not found
+    wheel, log = _wheel(sdist, tmp_path, env)
+    assert FALLBACK_MESSAGE in log
+    assert "pure-Python core" in log
+    members = _members(wheel)
+    assert "tfbus/core.py" in members
+    assert not [m for m in members if m.endswith(".so")]
+
+
+def test_tfbus_no_extensions_gives_a_pure_wheel(sdist: Path, tmp_path: Path) -> None:
+    env = dict(os.environ, TFBUS_NO_EXTENSIONS="1")
+    wheel, log = _wheel(sdist, tmp_path, env)
+    assert wheel.name.endswith("-py3-none-any.whl")
+    assert "TFBUS_NO_EXTENSIONS is set" in log
+    members = _members(wheel)
+    assert not [m for m in members if m.endswith((".so", ".pyx", ".c"))]
+    assert "tfbus/_ccore.pyi" in members and "tfbus/py.typed" in members
