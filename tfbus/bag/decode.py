@@ -33,6 +33,7 @@ __all__ = [
     "cdr_decoder",
     "decode_cdr",
     "decode_ros1",
+    "from_rosbags",
     "ros1_decoder",
 ]
 
@@ -134,7 +135,7 @@ def decode_cdr(raw: bytes | memoryview) -> list[TransformStamped]:
     return out
 
 
-def _from_rosbags(msg: Any) -> list[TransformStamped]:
+def from_rosbags(msg: Any) -> list[TransformStamped]:
     """Convert a rosbags-deserialized TFMessage object to tfbus values."""
     out = []
     for t in msg.transforms:
@@ -178,7 +179,7 @@ def ros1_decoder(msgtype: str, md5: str, msgdef: str) -> Decoder:
     store = _typestore(msgtype, msgdef, False, True)
 
     def ros1_generic(raw: bytes | memoryview) -> list[TransformStamped]:
-        return _from_rosbags(store.deserialize_ros1(raw, msgtype))
+        return from_rosbags(store.deserialize_ros1(raw, msgtype))
 
     return ros1_generic
 
@@ -203,7 +204,7 @@ def cdr_decoder(msgtype: str, msgdef: str, *, idl: bool, digest: str = "") -> De
         return decode_cdr
 
     def cdr_generic(raw: bytes | memoryview) -> list[TransformStamped]:
-        return _from_rosbags(store.deserialize_cdr(raw, msgtype))
+        return from_rosbags(store.deserialize_cdr(raw, msgtype))
 
     return cdr_generic
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable, Mapping
-from typing import Any, Final
+from typing import Final
 
 from anyio.streams.buffered import BufferedByteReceiveStream
 
-from tfbus.bag.decode import decode_ros1
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
-from tfbus.time import NSEC_PER_SEC, Time
+from tfbus.bag.decode import decode_ros1, from_rosbags
+from tfbus.messages import TransformStamped
+from tfbus.time import NSEC_PER_SEC
 
 __all__ = [
     "MAX_HEADER_BYTES",
@@ -124,28 +124,9 @@ class TFCodec:
             ValueError: the bytes are not a whole ``TFMessage``.
         """
         try:
-            msg: Any = self._store.deserialize_ros1(raw, self._name)
-            out = []
-            for t in msg.transforms:
-                st = t.header.stamp
-                tr = t.transform.translation
-                q = t.transform.rotation
-                out.append(
-                    TransformStamped(
-                        Header(
-                            Time.from_ns(int(st.sec) * NSEC_PER_SEC + int(st.nanosec)),
-                            str(t.header.frame_id),
-                        ),
-                        str(t.child_frame_id),
-                        Transform(
-                            Vector3(float(tr.x), float(tr.y), float(tr.z)),
-                            Quaternion(float(q.x), float(q.y), float(q.z), float(q.w)),
-                        ),
-                    )
-                )
+            return from_rosbags(self._store.deserialize_ros1(raw, self._name))
         except Exception as exc:  # rosbags raises struct.error, UnicodeDecodeError, ...
             raise ValueError(f"malformed {TF_TYPE}: {type(exc).__name__}: {exc}") from exc
-        return out
 
 
 def encode_header(fields: Mapping[str, str]) -> bytes:
