@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
-from typing import Any, ClassVar, Generic, TypeVar, cast
+from functools import partial
+from typing import Any, ClassVar, Generic, TypeVar
 
 import anyio
 
@@ -42,13 +43,15 @@ _M = TypeVar("_M")
 
 class _Waiter(Generic[_T]):
     """One pending wait: ``check()`` returns the answer, or None while unavailable, or
-    raises to fail the wait. Indexed under ``frames`` (from ``frames_fn()``) while
-    pending."""
+    returns or raises the TransformException that fails the wait. Indexed under
+    ``frames`` (from ``frames_fn()``) while pending."""
 
     __slots__ = ("check", "error", "event", "frames", "frames_fn", "result")
 
     def __init__(
-        self, check: Callable[[], _T | None], frames_fn: Callable[[], frozenset[str]]
+        self,
+        check: Callable[[], _T | TransformException | None],
+        frames_fn: Callable[[], frozenset[str]],
     ) -> None:
         self.check = check
         self.frames_fn = frames_fn
@@ -107,12 +110,14 @@ class Buffer(AsyncBatchMixin, BufferCore):
         try:
             result = waiter.check()
         except TransformException as exc:
-            waiter.error = exc
+            result = exc
+        if result is None:
+            if relinked:
+                self._reindex(waiter, waiter.frames_fn())  # the path may have changed
+            return
+        if isinstance(result, TransformException):
+            waiter.error = result
         else:
-            if result is None:
-                if relinked:
-                    self._reindex(waiter, waiter.frames_fn())  # the path may have changed
-                return
             waiter.result = result
         self._unindex(waiter)
         waiter.event.set()
@@ -169,7 +174,7 @@ class Buffer(AsyncBatchMixin, BufferCore):
 
     async def _wait(
         self,
-        check: Callable[[], _T | None],
+        check: Callable[[], _T | TransformException | None],
         frames: Callable[[], frozenset[str]],
         timeout: float | Duration | None,
         describe: Callable[[], str],
@@ -178,30 +183,37 @@ class Buffer(AsyncBatchMixin, BufferCore):
             timeout = None  # inf: no deadline (and NaN or a str raised here, up front)
         result = check()
         if result is not None:
+            if isinstance(result, TransformException):
+                raise result
             return result
         waiter: _Waiter[_T] = _Waiter(check, frames)
         self._reindex(waiter, frames())
+        event = waiter.event
         try:
             if timeout is None:
-                await waiter.event.wait()
+                await event.wait()
             else:
-                await self._wait_with_timeout(waiter, timeout, describe)
+                # The clock's deadline callback wakes the wait as the data would (no
+                # cancel scope to enter and leave); a clock that cannot schedule one in
+                # this loop (SystemClock under trio) gives its cancel scope instead.
+                cancel = self.clock.call_later(timeout, event.set)
+                if cancel is None:
+                    with self.clock.move_on_after(timeout):
+                        await event.wait()
+                else:
+                    try:
+                        await event.wait()
+                    finally:
+                        cancel()
         finally:
             self._unindex(waiter)
         if waiter.error is not None:
             raise waiter.error
-        return cast(_T, waiter.result)
-
-    async def _wait_with_timeout(
-        self, waiter: _Waiter[Any], timeout: float | Duration, describe: Callable[[], str]
-    ) -> None:
-        # The clock's own deadline primitive: anyio.move_on_after on a SystemClock, a
-        # scope that ManualClock.advance cancels on a ManualClock.
-        with self.clock.move_on_after(timeout):
-            await waiter.event.wait()
-        if not waiter.event.is_set():
+        if waiter.result is None:  # the deadline, not the data, ended the wait
+            assert timeout is not None
             seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
             raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
+        return waiter.result
 
     def _describe(self, target: str, source: str, time: Time) -> str:
         answer = self.can_transform(target, source, time, return_debug_tuple=True)
@@ -233,10 +245,10 @@ class Buffer(AsyncBatchMixin, BufferCore):
             LookupException: the path between the frames contains a loop.
         """
         return await self._wait(
-            lambda: self._try_lookup(target_frame, source_frame, time),
-            lambda: self._frames_of(target_frame, source_frame, time),
+            partial(self.check_transform, target_frame, source_frame, time),
+            partial(self._frames_of, target_frame, source_frame, time),
             timeout,
-            lambda: self._describe(target_frame, source_frame, time),
+            partial(self._describe, target_frame, source_frame, time),
         )
 
     async def lookup_transform_async(
@@ -250,7 +262,12 @@ class Buffer(AsyncBatchMixin, BufferCore):
 
         Raises: as :meth:`wait_for_transform`.
         """
-        return await self.wait_for_transform(target_frame, source_frame, time, timeout)
+        return await self._wait(  # wait_for_transform's body: one coroutine fewer
+            partial(self.check_transform, target_frame, source_frame, time),
+            partial(self._frames_of, target_frame, source_frame, time),
+            timeout,
+            partial(self._describe, target_frame, source_frame, time),
+        )
 
     async def lookup_transform_full_async(
         self,

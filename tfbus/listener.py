@@ -15,7 +15,6 @@ counted and skipped. The listener never dies of bad input.
 
 from __future__ import annotations
 
-import functools
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -168,14 +167,9 @@ class TransformListener:
             raise RuntimeError("a TransformListener can be entered only once")
         self._entered = True
         if self._inline:
-            handle_static = functools.partial(self._handle, static=True)
-            self._callbacks = [self._bus.subscribe_callback(TF_STATIC_TOPIC, handle_static)]
+            self._callbacks = [self._bus.subscribe_callback(TF_STATIC_TOPIC, self._handle_static)]
             try:
-                self._callbacks.append(
-                    self._bus.subscribe_callback(
-                        TF_TOPIC, functools.partial(self._handle, static=False)
-                    )
-                )
+                self._callbacks.append(self._bus.subscribe_callback(TF_TOPIC, self._handle_dynamic))
             except BaseException:
                 self._callbacks[0].close()
                 raise
@@ -245,6 +239,12 @@ class TransformListener:
             )
             self._buffer.clear()
         self._last_update = now
+
+    def _handle_static(self, message: object) -> None:
+        self._handle(message, True)
+
+    def _handle_dynamic(self, message: object) -> None:
+        self._handle(message, False)
 
     def _handle(self, message: object, static: bool) -> None:
         self._messages += 1

@@ -9,7 +9,13 @@ from contextlib import AbstractContextManager
 import anyio
 import anyio.lowlevel
 
-from tfbus.clock._base import JumpCallback, _JumpCallbacks, timeout_ns
+from tfbus.clock._base import (
+    JumpCallback,
+    _JumpCallbacks,
+    _noop,
+    running_asyncio_loop,
+    timeout_ns,
+)
 from tfbus.time import NSEC_PER_SEC, Duration, Time
 
 
@@ -104,6 +110,29 @@ class SystemClock:
         """
         ns = timeout_ns(seconds)
         return anyio.fail_after(None if ns is None else ns / NSEC_PER_SEC, shield=shield)
+
+    def call_later(
+        self, seconds: float | Duration, callback: Callable[[], object]
+    ) -> Callable[[], None] | None:
+        """On asyncio, ``loop.call_later(seconds, callback)`` (the loop's monotonic clock,
+        as :meth:`move_on_after`'s deadline); returns the handle's ``cancel``. Under trio,
+        which has no timer callbacks, ``None``: use :meth:`move_on_after`. See
+        :meth:`Clock.call_later`.
+
+        Raises:
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
+        """
+        ns = timeout_ns(seconds, name="seconds")
+        loop = running_asyncio_loop()
+        if loop is None:
+            return None
+        if ns is None:
+            return _noop
+        if ns <= 0:
+            callback()
+            return _noop
+        return loop.call_later(ns / NSEC_PER_SEC, callback).cancel
 
     def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when the wall clock is seen going back.
