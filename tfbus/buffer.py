@@ -19,19 +19,24 @@ cancelled or timed-out wait leaves nothing registered.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable
+import math
+from collections.abc import Awaitable, Callable, Iterable
 from functools import partial
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import anyio
 
 from tfbus.batch_async import AsyncBatchMixin
 from tfbus.clock import Clock, SystemClock, timeout_ns
+from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped
 from tfbus.time import Duration, Time
+
+if TYPE_CHECKING:
+    from asyncio import AbstractEventLoop, Future
 
 __all__ = ["Buffer"]
 
@@ -44,21 +49,49 @@ _M = TypeVar("_M")
 class _Waiter(Generic[_T]):
     """One pending wait: ``check()`` returns the answer, or None while unavailable, or
     returns or raises the TransformException that fails the wait. Indexed under
-    ``frames`` (from ``frames_fn()``) while pending."""
+    ``frames`` (from ``frames_fn()``) while pending. :meth:`wake` ends the wait (the
+    answer came, or the deadline).
 
-    __slots__ = ("check", "error", "event", "frames", "frames_fn", "result")
+    On asyncio the waiting task awaits a bare future of ``loop`` (what anyio's Event
+    wraps twice: ``anyio.Event`` -> ``asyncio.Event`` -> a future per waiter); elsewhere an
+    ``anyio.Event``. Either is cancelled like any anyio checkpoint.
+    """
+
+    __slots__ = ("check", "error", "event", "frames", "frames_fn", "future", "result")
 
     def __init__(
         self,
         check: Callable[[], _T | TransformException | None],
         frames_fn: Callable[[], frozenset[str]],
+        loop: AbstractEventLoop | None,
     ) -> None:
         self.check = check
         self.frames_fn = frames_fn
-        self.event = anyio.Event()
+        self.future: Future[None] | None = None
+        self.event: anyio.Event | None = None
+        if loop is not None:
+            self.future = loop.create_future()
+        else:
+            self.event = anyio.Event()
         self.frames: frozenset[str] = frozenset()
         self.result: _T | None = None
         self.error: BaseException | None = None
+
+    def wait(self) -> Awaitable[object]:
+        """What the waiting task awaits (once)."""
+        if self.future is not None:
+            return self.future
+        assert self.event is not None
+        return self.event.wait()
+
+    def wake(self) -> None:
+        """End the wait (idempotent; harmless after the task was cancelled)."""
+        future = self.future
+        if future is None:
+            assert self.event is not None
+            self.event.set()
+        elif not future.done():
+            future.set_result(None)
 
 
 class Buffer(AsyncBatchMixin, BufferCore):
@@ -119,8 +152,15 @@ class Buffer(AsyncBatchMixin, BufferCore):
             waiter.error = result
         else:
             waiter.result = result
-        self._unindex(waiter)
-        waiter.event.set()
+        index = self._index
+        for name in waiter.frames:  # _unindex, inlined: this is the wake-up path
+            waiters = index.get(name)
+            if waiters is not None:
+                waiters.discard(waiter)
+                if not waiters:
+                    del index[name]
+        waiter.frames = frozenset()
+        waiter.wake()
 
     def _on_jump(self, old: Time, new: Time) -> None:
         _log.warning(
@@ -179,34 +219,38 @@ class Buffer(AsyncBatchMixin, BufferCore):
         timeout: float | Duration | None,
         describe: Callable[[], str],
     ) -> _T:
-        if timeout is not None and timeout_ns(timeout) is None:
+        if (
+            timeout is not None
+            and not (type(timeout) is float and math.isfinite(timeout))  # the common case
+            and timeout_ns(timeout) is None
+        ):
             timeout = None  # inf: no deadline (and NaN or a str raised here, up front)
         result = check()
         if result is not None:
             if isinstance(result, TransformException):
                 raise result
             return result
-        waiter: _Waiter[_T] = _Waiter(check, frames)
+        waiter: _Waiter[_T] = _Waiter(check, frames, running_asyncio_loop())
         self._reindex(waiter, frames())
-        event = waiter.event
         try:
             if timeout is None:
-                await event.wait()
+                await waiter.wait()
             else:
                 # The clock's deadline callback wakes the wait as the data would (no
                 # cancel scope to enter and leave); a clock that cannot schedule one in
                 # this loop (SystemClock under trio) gives its cancel scope instead.
-                cancel = self.clock.call_later(timeout, event.set)
+                cancel = self.clock.call_later(timeout, waiter.wake)
                 if cancel is None:
                     with self.clock.move_on_after(timeout):
-                        await event.wait()
+                        await waiter.wait()
                 else:
                     try:
-                        await event.wait()
+                        await waiter.wait()
                     finally:
                         cancel()
         finally:
-            self._unindex(waiter)
+            if waiter.frames:  # not already unindexed by the recheck that woke it
+                self._unindex(waiter)
         if waiter.error is not None:
             raise waiter.error
         if waiter.result is None:  # the deadline, not the data, ended the wait

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import partial
 from types import TracebackType
 from typing import Any, Protocol
 
@@ -167,9 +168,13 @@ class TransformListener:
             raise RuntimeError("a TransformListener can be entered only once")
         self._entered = True
         if self._inline:
-            self._callbacks = [self._bus.subscribe_callback(TF_STATIC_TOPIC, self._handle_static)]
+            self._callbacks = [
+                self._bus.subscribe_callback(TF_STATIC_TOPIC, partial(self._handle, True))
+            ]
             try:
-                self._callbacks.append(self._bus.subscribe_callback(TF_TOPIC, self._handle_dynamic))
+                self._callbacks.append(
+                    self._bus.subscribe_callback(TF_TOPIC, partial(self._handle, False))
+                )
             except BaseException:
                 self._callbacks[0].close()
                 raise
@@ -210,7 +215,7 @@ class TransformListener:
 
     async def _run(self, sub: Subscription[Any], static: bool) -> None:
         async for message in sub:
-            self._handle(message, static)
+            self._handle(static, message)
             self._drain(sub, static)
 
     def _drain(self, sub: Subscription[Any], static: bool) -> None:
@@ -221,7 +226,7 @@ class TransformListener:
                 message = sub.receive_nowait()
             except (anyio.WouldBlock, anyio.EndOfStream, anyio.ClosedResourceError):
                 return
-            self._handle(message, static)
+            self._handle(static, message)
 
     def _warn(self, msg: str, *args: object) -> None:
         self._log.log(self._clock.now().ns / 1e9, logging.WARNING, msg, *args)
@@ -240,13 +245,7 @@ class TransformListener:
             self._buffer.clear()
         self._last_update = now
 
-    def _handle_static(self, message: object) -> None:
-        self._handle(message, True)
-
-    def _handle_dynamic(self, message: object) -> None:
-        self._handle(message, False)
-
-    def _handle(self, message: object, static: bool) -> None:
+    def _handle(self, static: bool, message: object) -> None:
         self._messages += 1
         self._check_clock()
         topic = TF_STATIC_TOPIC if static else TF_TOPIC

@@ -137,8 +137,9 @@ def _noop() -> None:
 
 
 def running_asyncio_loop() -> AbstractEventLoop | None:
-    """The running asyncio event loop when anyio runs on asyncio in this context, else
-    None (trio, including trio in guest mode on an asyncio host; no loop at all).
+    """The running asyncio event loop when the caller runs in one of its tasks (anyio on
+    asyncio), else None (trio, including trio in guest mode on an asyncio host, whose
+    tasks are not asyncio tasks; no loop at all).
 
     ``asyncio`` is looked up in ``sys.modules`` (it is necessarily loaded when an asyncio
     loop is running), never imported by tfbus.
@@ -148,10 +149,10 @@ def running_asyncio_loop() -> AbstractEventLoop | None:
         return None
     try:
         loop: AbstractEventLoop = asyncio.get_running_loop()
-        if anyio.get_cancelled_exc_class() is not asyncio.CancelledError:
-            return None  # another library (trio) runs here, hosted by an asyncio loop
-    except RuntimeError:  # no loop running, or no async library anyio knows
+    except RuntimeError:  # no asyncio loop running in this thread
         return None
+    if asyncio.current_task(loop) is None:
+        return None  # a callback of the loop, not a task: e.g. trio in guest mode
     return loop
 
 

@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import math
 import time
+import weakref
 from collections.abc import Callable
 from contextlib import AbstractContextManager
+from functools import partial
+from heapq import heapify, heappop, heappush
+from itertools import count
+from typing import TYPE_CHECKING, Any
 
 import anyio
 import anyio.lowlevel
@@ -17,6 +23,87 @@ from tfbus.clock._base import (
     timeout_ns,
 )
 from tfbus.time import NSEC_PER_SEC, Duration, Time
+
+if TYPE_CHECKING:
+    from asyncio import AbstractEventLoop, TimerHandle
+
+_COMPACT_AFTER = 64  # cancelled entries tolerated before they may be swept at once
+
+
+class _LoopTimers:
+    """The pending :meth:`SystemClock.call_later` callbacks in one asyncio loop.
+
+    A heap of ``[when, seq, callback]`` entries (loop time, as ``loop.call_at``) with one
+    loop timer armed at the earliest. Cancelling an entry only clears its callback: no
+    loop timer is cancelled per call (a ``TimerHandle`` per call, cancelled on every
+    wake-up, was most of what a ``timeout=`` added to a Buffer wait's wake-up). Cleared
+    entries are dropped when they reach the top of the heap, or all at once when they are
+    most of it, so nothing they referenced is kept for long.
+    """
+
+    __slots__ = ("_armed", "_armed_at", "_dead", "_heap", "_seq", "loop_ref")
+
+    def __init__(self, loop: AbstractEventLoop) -> None:
+        self.loop_ref = weakref.ref(loop)
+        self._heap: list[list[Any]] = []
+        self._seq = count()
+        self._armed: TimerHandle | None = None
+        self._armed_at = math.inf
+        self._dead = 0
+
+    def add(
+        self, loop: AbstractEventLoop, when: float, callback: Callable[[], object]
+    ) -> Callable[[], None]:
+        entry = [when, next(self._seq), callback]
+        heappush(self._heap, entry)
+        if when < self._armed_at:
+            if self._armed is not None:
+                self._armed.cancel()
+            self._armed = loop.call_at(when, self._fire)
+            self._armed_at = when
+        return partial(self._cancel, entry)
+
+    def _cancel(self, entry: list[Any]) -> None:
+        if entry[2] is None:  # already ran or cancelled
+            return
+        entry[2] = None
+        self._dead += 1
+        heap = self._heap
+        if self._dead > _COMPACT_AFTER and 2 * self._dead > len(heap):
+            heap[:] = [e for e in heap if e[2] is not None]
+            heapify(heap)
+            self._dead = 0
+            if not heap and self._armed is not None:
+                self._armed.cancel()
+                self._armed = None
+                self._armed_at = math.inf
+
+    def _fire(self) -> None:
+        loop = self.loop_ref()
+        assert loop is not None  # it is running this
+        due_at = max(loop.time(), self._armed_at)
+        self._armed = None
+        self._armed_at = math.inf
+        heap = self._heap
+        due: list[Callable[[], object]] = []
+        while heap and (heap[0][0] <= due_at or heap[0][2] is None):
+            entry = heappop(heap)
+            callback = entry[2]
+            if callback is None:
+                self._dead -= 1
+            else:
+                entry[2] = None
+                due.append(callback)
+        if heap:
+            self._armed_at = heap[0][0]
+            self._armed = loop.call_at(self._armed_at, self._fire)
+        for callback in due:
+            try:
+                callback()
+            except Exception as exc:  # reported as a loop callback's would be
+                loop.call_exception_handler(
+                    {"message": "SystemClock.call_later callback raised", "exception": exc}
+                )
 
 
 class SystemClock:
@@ -44,6 +131,7 @@ class SystemClock:
         self._max_sleep = max_sleep
         self._latest_ns = 0
         self._jump = _JumpCallbacks()
+        self._timers: _LoopTimers | None = None  # call_later's, in the latest loop used
 
     def now(self) -> Time:
         """The wall-clock time; fires the jump callbacks if it went backwards since last read."""
@@ -114,25 +202,32 @@ class SystemClock:
     def call_later(
         self, seconds: float | Duration, callback: Callable[[], object]
     ) -> Callable[[], None] | None:
-        """On asyncio, ``loop.call_later(seconds, callback)`` (the loop's monotonic clock,
-        as :meth:`move_on_after`'s deadline); returns the handle's ``cancel``. Under trio,
-        which has no timer callbacks, ``None``: use :meth:`move_on_after`. See
-        :meth:`Clock.call_later`.
+        """On asyncio, a callback at ``loop.time() + seconds`` (the loop's monotonic
+        clock, as :meth:`move_on_after`'s deadline; one loop timer serves every pending
+        call of this clock). Under trio, which has no timer callbacks, ``None``: use
+        :meth:`move_on_after`. See :meth:`Clock.call_later`.
 
         Raises:
             ValueError: ``seconds`` is NaN.
             TypeError: ``seconds`` is not a number nor a Duration.
         """
-        ns = timeout_ns(seconds, name="seconds")
+        if type(seconds) is float and 0.0 < seconds < math.inf:
+            delay = seconds  # the common case, already what the loop counts in
+        else:
+            ns = timeout_ns(seconds, name="seconds")
+            delay = math.inf if ns is None else ns / NSEC_PER_SEC
         loop = running_asyncio_loop()
         if loop is None:
             return None
-        if ns is None:
+        if delay == math.inf:
             return _noop
-        if ns <= 0:
+        if delay <= 0:
             callback()
             return _noop
-        return loop.call_later(ns / NSEC_PER_SEC, callback).cancel
+        timers = self._timers
+        if timers is None or timers.loop_ref() is not loop:
+            timers = self._timers = _LoopTimers(loop)
+        return timers.add(loop, loop.time() + delay, callback)
 
     def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when the wall clock is seen going back.
