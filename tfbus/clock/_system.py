@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import sys
 import time
 import weakref
 from collections.abc import Callable
@@ -29,39 +31,41 @@ if TYPE_CHECKING:
 
 _COMPACT_AFTER = 64  # cancelled entries tolerated before they may be swept at once
 
+_log = logging.getLogger("tfbus.clock")
 
-class _LoopTimers:
-    """The pending :meth:`SystemClock.call_later` callbacks in one asyncio loop.
 
-    A heap of ``[when, seq, callback]`` entries (loop time, as ``loop.call_at``) with one
-    loop timer armed at the earliest. Cancelling an entry only clears its callback: no
-    loop timer is cancelled per call (a ``TimerHandle`` per call, cancelled on every
-    wake-up, was most of what a ``timeout=`` added to a Buffer wait's wake-up). Cleared
-    entries are dropped when they reach the top of the heap, or all at once when they are
-    most of it, so nothing they referenced is kept for long.
+class _Timers:
+    """The pending :meth:`SystemClock.call_later` callbacks of one clock in one run.
+
+    A heap of ``[when, seq, callback]`` entries (the event loop's monotonic time) with
+    one wake-up armed at the earliest (:meth:`_arm`: a loop timer on asyncio, the
+    deadline of a timer task's cancel scope on trio). Cancelling an entry only clears its
+    callback: nothing is cancelled in the event loop per call (a loop timer or a cancel
+    scope per call, torn down on every wake-up, was most of what a ``timeout=`` added to
+    a Buffer wait's wake-up). Cleared entries are dropped when they reach the top of the
+    heap, or all at once when they are most of it, so nothing they referenced is kept for
+    long.
     """
 
-    __slots__ = ("_armed", "_armed_at", "_dead", "_heap", "_seq", "loop_ref")
+    __slots__ = ("_armed_at", "_dead", "_heap", "_seq")
 
-    def __init__(self, loop: AbstractEventLoop) -> None:
-        self.loop_ref = weakref.ref(loop)
+    def __init__(self) -> None:
         self._heap: list[list[Any]] = []
         self._seq = count()
-        self._armed: TimerHandle | None = None
         self._armed_at = math.inf
         self._dead = 0
 
-    def add(
-        self, loop: AbstractEventLoop, when: float, callback: Callable[[], object]
-    ) -> Callable[[], None]:
+    def add(self, when: float, callback: Callable[[], object]) -> Callable[[], None]:
         entry = [when, next(self._seq), callback]
         heappush(self._heap, entry)
         if when < self._armed_at:
-            if self._armed is not None:
-                self._armed.cancel()
-            self._armed = loop.call_at(when, self._fire)
             self._armed_at = when
+            self._arm(when)
         return partial(self._cancel, entry)
+
+    def _arm(self, when: float) -> None:
+        """Wake :meth:`_take_due` at ``when`` (``inf``: not at all), instead of before."""
+        raise NotImplementedError
 
     def _cancel(self, entry: list[Any]) -> None:
         if entry[2] is None:  # already ran or cancelled
@@ -73,20 +77,16 @@ class _LoopTimers:
             heap[:] = [e for e in heap if e[2] is not None]
             heapify(heap)
             self._dead = 0
-            if not heap and self._armed is not None:
-                self._armed.cancel()
-                self._armed = None
+            if not heap:
                 self._armed_at = math.inf
+                self._arm(math.inf)
 
-    def _fire(self) -> None:
-        loop = self.loop_ref()
-        assert loop is not None  # it is running this
-        due_at = max(loop.time(), self._armed_at)
-        self._armed = None
-        self._armed_at = math.inf
+    def _take_due(self, now: float) -> list[Callable[[], object]]:
+        """Pop the entries due by ``now`` (and cleared ones on top); the callbacks to run.
+        ``_armed_at`` becomes the next entry's time: the caller arms it."""
         heap = self._heap
         due: list[Callable[[], object]] = []
-        while heap and (heap[0][0] <= due_at or heap[0][2] is None):
+        while heap and (heap[0][0] <= now or heap[0][2] is None):
             entry = heappop(heap)
             callback = entry[2]
             if callback is None:
@@ -94,9 +94,35 @@ class _LoopTimers:
             else:
                 entry[2] = None
                 due.append(callback)
-        if heap:
-            self._armed_at = heap[0][0]
-            self._armed = loop.call_at(self._armed_at, self._fire)
+        self._armed_at = heap[0][0] if heap else math.inf
+        return due
+
+
+class _AsyncioTimers(_Timers):
+    """:class:`_Timers` of one asyncio loop: one ``loop.call_at`` handle."""
+
+    __slots__ = ("_handle", "loop_ref")
+
+    def __init__(self, loop: AbstractEventLoop) -> None:
+        super().__init__()
+        self.loop_ref = weakref.ref(loop)
+        self._handle: TimerHandle | None = None
+
+    def _arm(self, when: float) -> None:
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+        loop = self.loop_ref()
+        if when < math.inf and loop is not None:
+            self._handle = loop.call_at(when, self._fire)
+
+    def _fire(self) -> None:
+        loop = self.loop_ref()
+        assert loop is not None  # it is running this
+        self._handle = None
+        due = self._take_due(max(loop.time(), self._armed_at))
+        if self._armed_at < math.inf:
+            self._arm(self._armed_at)
         for callback in due:
             try:
                 callback()
@@ -104,6 +130,36 @@ class _LoopTimers:
                 loop.call_exception_handler(
                     {"message": "SystemClock.call_later callback raised", "exception": exc}
                 )
+
+
+class _TrioTimers(_Timers):
+    """:class:`_Timers` of one trio run: a system task sleeps in a cancel scope whose
+    deadline is the earliest entry's (trio has no timer callbacks)."""
+
+    __slots__ = ("_scope", "_trio")
+
+    def __init__(self, trio: Any) -> None:
+        super().__init__()
+        self._trio = trio
+        self._scope: Any = None  # trio.CancelScope while the task sleeps
+
+    def _arm(self, when: float) -> None:
+        if self._scope is not None:
+            self._scope.deadline = when
+
+    async def run(self) -> None:
+        """The timer task (a trio system task: cancelled when the run ends)."""
+        trio = self._trio
+        while True:
+            with trio.CancelScope(deadline=self._armed_at) as scope:
+                self._scope = scope
+                await trio.sleep_forever()
+            self._scope = None
+            for callback in self._take_due(trio.current_time()):
+                try:
+                    callback()
+                except Exception:  # a system task must not raise
+                    _log.exception("SystemClock.call_later callback %r raised", callback)
 
 
 class SystemClock:
@@ -131,7 +187,8 @@ class SystemClock:
         self._max_sleep = max_sleep
         self._latest_ns = 0
         self._jump = _JumpCallbacks()
-        self._timers: _LoopTimers | None = None  # call_later's, in the latest loop used
+        self._timers: _AsyncioTimers | None = None  # call_later's, in the latest loop used
+        self._trio_timers: Any = None  # trio.lowlevel.RunVar of this clock's _TrioTimers
 
     def now(self) -> Time:
         """The wall-clock time; fires the jump callbacks if it went backwards since last read."""
@@ -202,10 +259,11 @@ class SystemClock:
     def call_later(
         self, seconds: float | Duration, callback: Callable[[], object]
     ) -> Callable[[], None] | None:
-        """On asyncio, a callback at ``loop.time() + seconds`` (the loop's monotonic
-        clock, as :meth:`move_on_after`'s deadline; one loop timer serves every pending
-        call of this clock). Under trio, which has no timer callbacks, ``None``: use
-        :meth:`move_on_after`. See :meth:`Clock.call_later`.
+        """Call ``callback()`` at the event loop's monotonic time ``now + seconds`` (the
+        clock of :meth:`move_on_after`'s deadlines): on asyncio one loop timer, on trio
+        (no timer callbacks there) one system task sleeping in a cancel scope, serves
+        every pending call of this clock in that loop. ``None`` outside asyncio and trio
+        tasks. See :meth:`Clock.call_later`.
 
         Raises:
             ValueError: ``seconds`` is NaN.
@@ -218,7 +276,7 @@ class SystemClock:
             delay = math.inf if ns is None else ns / NSEC_PER_SEC
         loop = running_asyncio_loop()
         if loop is None:
-            return None
+            return self._trio_call_later(delay, callback)
         if delay == math.inf:
             return _noop
         if delay <= 0:
@@ -226,8 +284,33 @@ class SystemClock:
             return _noop
         timers = self._timers
         if timers is None or timers.loop_ref() is not loop:
-            timers = self._timers = _LoopTimers(loop)
-        return timers.add(loop, loop.time() + delay, callback)
+            timers = self._timers = _AsyncioTimers(loop)
+        return timers.add(loop.time() + delay, callback)
+
+    def _trio_call_later(
+        self, delay: float, callback: Callable[[], object]
+    ) -> Callable[[], None] | None:
+        trio = sys.modules.get("trio")
+        if trio is None:
+            return None
+        try:
+            trio.lowlevel.current_task()
+        except RuntimeError:  # not in a trio task either
+            return None
+        if delay == math.inf:
+            return _noop
+        if delay <= 0:
+            callback()
+            return _noop
+        var = self._trio_timers
+        if var is None:
+            var = self._trio_timers = trio.lowlevel.RunVar("tfbus.SystemClock.call_later")
+        timers: _TrioTimers | None = var.get(None)
+        if timers is None:
+            timers = _TrioTimers(trio)
+            trio.lowlevel.spawn_system_task(timers.run, name="tfbus SystemClock timers")
+            var.set(timers)
+        return timers.add(trio.current_time() + delay, callback)
 
     def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when the wall clock is seen going back.
