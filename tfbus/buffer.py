@@ -238,7 +238,7 @@ class Buffer(AsyncBatchMixin, BufferCore):
             else:
                 # The clock's deadline callback wakes the wait as the data would (no
                 # cancel scope to enter and leave); a clock that cannot schedule one in
-                # this loop (SystemClock under trio) gives its cancel scope instead.
+                # this loop (Clock.call_later returns None) gives its cancel scope instead.
                 cancel = self.clock.call_later(timeout, waiter.wake)
                 if cancel is None:
                     with self.clock.move_on_after(timeout):
@@ -277,7 +277,8 @@ class Buffer(AsyncBatchMixin, BufferCore):
         the two frames are connected with data.
 
         Args:
-            timeout: seconds (or a Duration) of the buffer's clock (``clock.move_on_after``);
+            timeout: seconds (or a Duration) of the buffer's clock (``clock.call_later``,
+                or ``clock.move_on_after`` for a clock that cannot schedule callbacks);
                 None or ``inf`` waits forever; NaN is a ValueError, a str a TypeError.
 
         Raises:

@@ -16,7 +16,7 @@ counted and skipped. The listener never dies of bad input.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import partial
 from types import TracebackType
@@ -137,6 +137,12 @@ class TransformListener:
         if clock is None:
             clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
         self._clock = clock
+        # The clock read on every message: its now_ns() when it has one (both tfbus
+        # clocks do; it builds no Time), else now().ns.
+        now_ns = getattr(clock, "now_ns", None)
+        self._now_ns: Callable[[], int] = (
+            now_ns if callable(now_ns) else lambda: self._clock.now().ns
+        )
         # A Buffer reading its own clock clears itself on a jump back (Clock.on_jump);
         # any other sink is cleared by the listener, as tf2_ros's listener does.
         self._clears_sink = not (isinstance(buffer, Buffer) and buffer.clock is clock)
@@ -236,7 +242,7 @@ class TransformListener:
         each message; a time earlier than the last one read is a jump back, which clears
         the buffer (reading a ``SystemClock`` also fires its ``on_jump`` callbacks, which
         is how a ``Buffer`` on that clock clears itself)."""
-        now = self._clock.now().ns
+        now = self._now_ns()
         if now < self._last_update and self._clears_sink:
             _log.warning(
                 "Detected jump back in time of %.3f s. Clearing TF buffer.",

@@ -134,9 +134,10 @@ class ManualClock:
     blocked, repeat; so a 100 Hz timer advanced by one second ticks 100 times, instantly.
     Like trio's ``MockClock(autojump_threshold=0)`` in spirit, for asyncio and trio alike.
 
-    Deadlines (:meth:`move_on_after`, :meth:`fail_after`, and every ``timeout=`` of a
-    :class:`~tfbus.buffer.Buffer` on this clock) are sleepers too: when time reaches one,
-    its cancel scope is cancelled in the same step-by-step order. Nothing reads the wall
+    Deadlines (:meth:`move_on_after`, :meth:`fail_after`, :meth:`call_later`, and so every
+    ``timeout=`` of a :class:`~tfbus.buffer.Buffer` on this clock) are sleepers too: when
+    time reaches one, its cancel scope is cancelled (or its callback called) in the same
+    step-by-step order. Nothing reads the wall
     clock: a ManualClock can drive bag replay, timers and timeouts in zero wall time.
 
     A ``ManualClock`` must be used from one event loop; ``advance`` calls are serialised.
@@ -164,6 +165,10 @@ class ManualClock:
     def now(self) -> Time:
         """The simulated current time."""
         return Time.from_ns(self._now_ns)
+
+    def now_ns(self) -> int:
+        """:meth:`now` as int nanoseconds."""
+        return self._now_ns
 
     async def sleep_until(self, t: Time) -> None:
         """Return once the clock has been moved to ``t`` or later.

@@ -192,12 +192,17 @@ class SystemClock:
 
     def now(self) -> Time:
         """The wall-clock time; fires the jump callbacks if it went backwards since last read."""
+        return Time.from_ns(self.now_ns())
+
+    def now_ns(self) -> int:
+        """:meth:`now` as int nanoseconds, without building a Time (a listener reads the
+        clock on every message)."""
         ns = time.time_ns()
         latest = self._latest_ns
         self._latest_ns = ns
         if ns < latest:
             self._jump.fire(Time.from_ns(latest), Time.from_ns(ns))
-        return Time.from_ns(ns)
+        return ns
 
     async def sleep_until(self, t: Time) -> None:
         """Return once the wall clock reads ``>= t``.
