@@ -453,3 +453,27 @@ async def test_a_clock_without_callbacks_times_out_through_its_cancel_scope() ->
     assert isinstance(outcome[0], TransformStamped)
     assert isinstance(outcome[1], TimeoutException)
     assert clock.pending == 0 and buf.pending_waits == 0
+
+
+@pytest.mark.parametrize("clock", [ManualClock(T0), SystemClock()], ids=["manual", "system"])
+async def test_a_zero_timeout_wait_is_still_a_checkpoint(clock: ManualClock | SystemClock) -> None:
+    """``timeout=0`` expires at once (the deadline callback runs before the wait), but
+    the wait still yields: a cancelled scope cancels it, and a ``timeout=0`` polling loop
+    lets other tasks run."""
+    buf = Buffer(clock=clock)
+    with anyio.CancelScope() as scope:
+        scope.cancel()
+        await buf.lookup_transform_async("a", "b", Time(0), timeout=0)
+    assert scope.cancelled_caught
+    ran = 0
+
+    async def other() -> None:
+        nonlocal ran
+        ran += 1
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(other)
+        for _ in range(3):
+            assert not await buf.can_transform_async("a", "b", Time(0), timeout=0.0)
+        assert ran == 1
+    assert buf.pending_waits == 0

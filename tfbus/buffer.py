@@ -25,6 +25,7 @@ from functools import partial
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import anyio
+import anyio.lowlevel
 
 from tfbus.batch_async import AsyncBatchMixin
 from tfbus.clock import Clock, SystemClock, timeout_ns
@@ -78,9 +79,11 @@ class _Waiter(Generic[_T]):
         self.error: BaseException | None = None
 
     def wait(self) -> Awaitable[object]:
-        """What the waiting task awaits (once)."""
-        if self.future is not None:
-            return self.future
+        """What the waiting task awaits (once): a checkpoint even if already woken (a
+        ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does)."""
+        future = self.future
+        if future is not None:
+            return anyio.lowlevel.checkpoint() if future.done() else future
         assert self.event is not None
         return self.event.wait()
 
