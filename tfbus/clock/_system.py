@@ -12,6 +12,7 @@ from contextlib import AbstractContextManager
 from functools import partial
 from heapq import heapify, heappop, heappush
 from itertools import count
+from operator import setitem
 from typing import TYPE_CHECKING, Any
 
 import anyio
@@ -29,7 +30,7 @@ from tfbus.time import NSEC_PER_SEC, Duration, Time
 if TYPE_CHECKING:
     from asyncio import AbstractEventLoop, TimerHandle
 
-_COMPACT_AFTER = 64  # cancelled entries tolerated before they may be swept at once
+_SWEEP_MIN = 128  # heap size below which cancelled entries are never swept at once
 
 _log = logging.getLogger("tfbus.clock")
 
@@ -40,46 +41,39 @@ class _Timers:
     A heap of ``[when, seq, callback]`` entries (the event loop's monotonic time) with
     one wake-up armed at the earliest (:meth:`_arm`: a loop timer on asyncio, the
     deadline of a timer task's cancel scope on trio). Cancelling an entry only clears its
-    callback: nothing is cancelled in the event loop per call (a loop timer or a cancel
-    scope per call, torn down on every wake-up, was most of what a ``timeout=`` added to
-    a Buffer wait's wake-up). Cleared entries are dropped when they reach the top of the
-    heap, or all at once when they are most of it, so nothing they referenced is kept for
-    long.
+    callback (``entry[2] = None``, no Python frame: it runs on every wake-up of a timed
+    Buffer wait): nothing is cancelled in the event loop per call (a loop timer or a
+    cancel scope per call, torn down on every wake-up, was most of what a ``timeout=``
+    added to a wake-up). Cleared entries are dropped when they reach the top of the heap,
+    and swept all at once whenever the heap has doubled since the last sweep, so the heap
+    stays within twice its live entries (plus ``_SWEEP_MIN``) and a cancelled callback
+    is never kept.
     """
 
-    __slots__ = ("_armed_at", "_dead", "_heap", "_seq")
+    __slots__ = ("_armed_at", "_heap", "_seq", "_sweep_at")
 
     def __init__(self) -> None:
         self._heap: list[list[Any]] = []
         self._seq = count()
         self._armed_at = math.inf
-        self._dead = 0
+        self._sweep_at = _SWEEP_MIN
 
     def add(self, when: float, callback: Callable[[], object]) -> Callable[[], None]:
+        heap = self._heap
+        if len(heap) >= self._sweep_at:
+            heap[:] = [e for e in heap if e[2] is not None]
+            heapify(heap)
+            self._sweep_at = max(_SWEEP_MIN, 2 * len(heap))
         entry = [when, next(self._seq), callback]
-        heappush(self._heap, entry)
+        heappush(heap, entry)
         if when < self._armed_at:
             self._armed_at = when
             self._arm(when)
-        return partial(self._cancel, entry)
+        return partial(setitem, entry, 2, None)
 
     def _arm(self, when: float) -> None:
         """Wake :meth:`_take_due` at ``when`` (``inf``: not at all), instead of before."""
         raise NotImplementedError
-
-    def _cancel(self, entry: list[Any]) -> None:
-        if entry[2] is None:  # already ran or cancelled
-            return
-        entry[2] = None
-        self._dead += 1
-        heap = self._heap
-        if self._dead > _COMPACT_AFTER and 2 * self._dead > len(heap):
-            heap[:] = [e for e in heap if e[2] is not None]
-            heapify(heap)
-            self._dead = 0
-            if not heap:
-                self._armed_at = math.inf
-                self._arm(math.inf)
 
     def _take_due(self, now: float) -> list[Callable[[], object]]:
         """Pop the entries due by ``now`` (and cleared ones on top); the callbacks to run.
@@ -87,12 +81,8 @@ class _Timers:
         heap = self._heap
         due: list[Callable[[], object]] = []
         while heap and (heap[0][0] <= now or heap[0][2] is None):
-            entry = heappop(heap)
-            callback = entry[2]
-            if callback is None:
-                self._dead -= 1
-            else:
-                entry[2] = None
+            callback = heappop(heap)[2]
+            if callback is not None:
                 due.append(callback)
         self._armed_at = heap[0][0] if heap else math.inf
         return due
