@@ -44,6 +44,7 @@ __all__ = ["Buffer"]
 _log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
+_NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
 
 
@@ -162,7 +163,7 @@ class Buffer(AsyncBatchMixin, BufferCore):
                 waiters.discard(waiter)
                 if not waiters:
                     del index[name]
-        waiter.frames = frozenset()
+        waiter.frames = _NO_FRAMES
         waiter.wake()
 
     def _on_jump(self, old: Time, new: Time) -> None:

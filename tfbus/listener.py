@@ -237,23 +237,25 @@ class TransformListener:
     def _warn(self, msg: str, *args: object) -> None:
         self._log.log(self._clock.now().ns / 1e9, logging.WARNING, msg, *args)
 
-    def _check_clock(self) -> None:
-        """tf2_ros ``TransformListener::subscription_callback_impl``: read the clock on
-        each message; a time earlier than the last one read is a jump back, which clears
-        the buffer (reading a ``SystemClock`` also fires its ``on_jump`` callbacks, which
-        is how a ``Buffer`` on that clock clears itself)."""
-        now = self._now_ns()
-        if now < self._last_update and self._clears_sink:
+    def _jumped_back(self, now: int) -> None:
+        """The clock read ``now`` (ns), earlier than the last reading: clear the sink, as
+        tf2_ros's listener does (unless it is a Buffer on this clock, which clears itself
+        through ``on_jump``; reading a ``SystemClock`` fires those callbacks)."""
+        if self._clears_sink:
             _log.warning(
                 "Detected jump back in time of %.3f s. Clearing TF buffer.",
                 (self._last_update - now) / 1e9,
             )
             self._buffer.clear()
-        self._last_update = now
 
     def _handle(self, static: bool, message: object) -> None:
         self._messages += 1
-        self._check_clock()
+        # tf2_ros TransformListener::subscription_callback_impl: read the clock on each
+        # message; a time earlier than the last one read is a jump back.
+        now = self._now_ns()
+        if now < self._last_update:
+            self._jumped_back(now)
+        self._last_update = now
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         if not isinstance(message, TFMessage):
             self._malformed += 1
