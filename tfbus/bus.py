@@ -86,10 +86,10 @@ if TYPE_CHECKING:
 
 
 class _ShieldedYield:
-    """``await shielded_yield``: anyio's ``cancel_shielded_checkpoint`` on asyncio
-    (let every other ready task run once, then resume; never raise anyio's
-    cancellation), without entering and leaving a ``CancelScope(shield=True)``, which
-    costs more than the rest of a publish.
+    """``await bus._after_publish()`` on asyncio: what anyio's
+    ``cancel_shielded_checkpoint`` does (let every other ready task run once, then
+    resume; never raise anyio's cancellation), without entering and leaving a
+    ``CancelScope(shield=True)``, which cost about as much as the rest of a publish.
 
     The task waits on a future that is already done (one per bus, done for good, so it
     serves every publish). asyncio resumes the task exactly as after
