@@ -242,8 +242,10 @@ class Buffer(AsyncBatchMixin, BufferCore):
             else:
                 # The clock's deadline callback wakes the wait as the data would (no
                 # cancel scope to enter and leave); a clock that cannot schedule one in
-                # this loop (Clock.call_later returns None) gives its cancel scope instead.
-                cancel = self.clock.call_later(timeout, waiter.wake)
+                # this loop (Clock.call_later returns None), or that predates call_later,
+                # gives its cancel scope instead.
+                call_later = getattr(self.clock, "call_later", None)
+                cancel = None if call_later is None else call_later(timeout, waiter.wake)
                 if cancel is None:
                     with self.clock.move_on_after(timeout):
                         await waiter.wait()
