@@ -289,6 +289,9 @@ def bench_latency(backend: str, cfg: Config) -> None:
         f"  bare anyio.Event set -> resume (the floor): median {floor_ms * 1e3:.1f} us; "
         f"target (issue 10): wake-up median <= {LATENCY_FLOOR_RATIO_TARGET:g}x the floor"
     )
+    if len(floors) > 1:
+        each_floor = " ".join(f"{r.median_ms * 1e3:.1f}" for r in floors)
+        print(f"  floor per repeat (us): {each_floor}")
     print(
         f"  {'timeout':>9} {'median ms':>10} {'p99 ms':>9} {'max ms':>9} {'x floor':>8}"
         "   per repeat (med/p99)"

@@ -12,7 +12,7 @@ import pytest
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, MemoryTransport
-from tfbus.clock import ManualClock, every
+from tfbus.clock import Clock, ManualClock, every
 from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import ExtrapolationException, LookupException
 from tfbus.listener import ListenerStatistics, TransformListener
@@ -330,16 +330,34 @@ async def test_end_to_end_across_a_memory_transport() -> None:
         assert out.transform.translation.x == pytest.approx(0.2)
 
 
+class _ProtocolOnlyClock:
+    """A Clock with nothing beyond the protocol (no ``now_ns``), over a ManualClock."""
+
+    def __init__(self, inner: ManualClock) -> None:
+        self.inner = inner
+        self.now = inner.now
+        self.sleep_until = inner.sleep_until
+        self.sleep = inner.sleep
+        self.on_jump = inner.on_jump
+        self.move_on_after = inner.move_on_after
+        self.fail_after = inner.fail_after
+        self.call_later = inner.call_later
+
+
+@pytest.mark.parametrize("protocol_only", [False, True])
 async def test_listener_clears_the_buffer_when_its_clock_jumps_back(
-    caplog: pytest.LogCaptureFixture,
+    caplog: pytest.LogCaptureFixture, protocol_only: bool
 ) -> None:
     """Issue 11 item 17: the listener reads the clock on each message, as tf2_ros's
     TransformListener does, so a clock stepped back clears the buffer (here a BufferCore,
-    which has no clock of its own: only the listener can notice)."""
+    which has no clock of its own: only the listener can notice). The listener reads a
+    clock's ``now_ns()`` (no Time built) and any other Clock's ``now()``."""
     clock = ManualClock(T0)
+    listened: Clock = _ProtocolOnlyClock(clock) if protocol_only else clock
+    assert isinstance(listened, Clock) and hasattr(listened, "now_ns") != protocol_only
     core = BufferCore()
     caplog.set_level(logging.WARNING, logger="tfbus.listener")
-    async with Bus() as bus, TransformListener(core, bus, clock=clock):
+    async with Bus() as bus, TransformListener(core, bus, clock=listened):
         br = TransformBroadcaster(bus)
         StaticTransformBroadcaster(bus).send_transform_nowait([ts("fixed")])
         br.send_transform_nowait([ts("laser")])

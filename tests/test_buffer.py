@@ -4,6 +4,7 @@ clock jumps; on asyncio and trio (anyio's pytest plugin), driven by ManualClock.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import anyio
 import pytest
@@ -24,8 +25,9 @@ from tfbus import (
     Vector3Stamped,
 )
 from tfbus.buffer import Buffer
-from tfbus.clock import ManualClock
+from tfbus.clock import ManualClock, SystemClock
 from tfbus.core import MAX_GRAPH_DEPTH
+from tfbus.time import Duration
 
 pytestmark = pytest.mark.anyio
 
@@ -360,3 +362,131 @@ async def test_waits_below_a_deep_chain_are_rechecked_without_rewalking_it() -> 
         await settle()
         assert buf.pending_waits == 19
         tg.cancel_scope.cancel()
+
+
+class _CountingClock(SystemClock):
+    """A SystemClock that counts its ``call_later`` deadlines and their cancellations."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.scheduled = 0
+        self.cancelled = 0
+
+    def call_later(
+        self, seconds: float | Duration, callback: Callable[[], object]
+    ) -> Callable[[], None] | None:
+        cancel = super().call_later(seconds, callback)
+        assert cancel is not None
+        self.scheduled += 1
+
+        def counted() -> None:
+            self.cancelled += 1
+            cancel()
+
+        return counted
+
+
+async def test_a_timed_wait_is_woken_by_a_clock_callback_and_cancels_it() -> None:
+    """Issue 10: a ``timeout=`` is the clock's ``call_later`` deadline (no cancel scope
+    per wait); a wait answered by the data cancels it, whatever ended the wait."""
+    clock = _CountingClock()
+    buf = Buffer(clock=clock)
+    got: list[TransformStamped] = []
+    async with anyio.create_task_group() as tg:
+
+        async def waiter() -> None:
+            got.append(await buf.lookup_transform_async("a", "b", Time(0), timeout=10.0))
+
+        tg.start_soon(waiter)
+        await anyio.wait_all_tasks_blocked()
+        assert (clock.scheduled, clock.cancelled, buf.pending_waits) == (1, 0, 1)
+        buf.set_transform(tf("a", "b", T0, x=1.0))
+    assert got[0].transform.translation.x == 1.0
+    assert (clock.scheduled, clock.cancelled, buf.pending_waits) == (1, 1, 0)
+    with pytest.raises(TimeoutException):  # the deadline itself, in real time
+        await buf.lookup_transform_async("a", "c", Time(0), timeout=0.001)
+    with anyio.CancelScope() as scope:  # and a cancelled wait cancels it too
+        scope.cancel()
+        await buf.lookup_transform_async("a", "c", Time(0), timeout=10.0)
+    assert (clock.scheduled, clock.cancelled, buf.pending_waits) == (3, 3, 0)
+
+
+async def test_timed_waits_on_a_manual_clock_leave_no_deadline_behind() -> None:
+    clock = ManualClock(T0)
+    buf = Buffer(clock=clock)
+    async with anyio.create_task_group() as tg:
+        for _ in range(100):
+            tg.start_soon(buf.lookup_transform_async, "a", "b", Time(0), 5.0)
+        await clock.advance(0)
+        assert clock.pending == 100 and buf.pending_waits == 100
+        buf.set_transform(tf("a", "b", T0, x=1.0))
+    assert clock.pending == 0 and buf.pending_waits == 0 and not buf._index
+
+
+class _NoCallbackClock(ManualClock):
+    """A clock that cannot schedule callbacks (``call_later`` gives None), as a
+    third-party Clock may: Buffer then times out through its ``move_on_after``."""
+
+    def call_later(  # type: ignore[override]
+        self, seconds: float | Duration, callback: Callable[[], object]
+    ) -> Callable[[], None] | None:
+        return None
+
+
+class _OldClock:
+    """A clock written before ``Clock.call_later`` existed (over a ManualClock)."""
+
+    def __init__(self, inner: ManualClock) -> None:
+        self.now = inner.now
+        self.sleep_until = inner.sleep_until
+        self.sleep = inner.sleep
+        self.on_jump = inner.on_jump
+        self.move_on_after = inner.move_on_after
+        self.fail_after = inner.fail_after
+
+
+@pytest.mark.parametrize("old", [False, True], ids=["call_later-None", "no-call_later"])
+async def test_a_clock_without_callbacks_times_out_through_its_cancel_scope(old: bool) -> None:
+    clock = _NoCallbackClock(T0)
+    buf = Buffer(clock=_OldClock(clock) if old else clock)  # type: ignore[arg-type]
+    outcome: list[object] = []
+
+    async def waiter(child: str) -> None:
+        try:
+            outcome.append(await buf.lookup_transform_async("a", child, Time(0), timeout=2.0))
+        except TimeoutException as exc:
+            outcome.append(exc)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter, "b")
+        tg.start_soon(waiter, "c")
+        await clock.advance(1.0)
+        buf.set_transform(tf("a", "b", T0, x=1.0))
+        await clock.advance(1.0)
+    assert isinstance(outcome[0], TransformStamped)
+    assert isinstance(outcome[1], TimeoutException)
+    assert clock.pending == 0 and buf.pending_waits == 0
+
+
+@pytest.mark.parametrize("clock", [ManualClock(T0), SystemClock()], ids=["manual", "system"])
+async def test_a_zero_timeout_wait_is_still_a_checkpoint(clock: ManualClock | SystemClock) -> None:
+    """``timeout=0`` expires at once (the deadline callback runs before the wait), but
+    the wait still yields: a cancelled scope cancels it, and a ``timeout=0`` polling loop
+    lets other tasks run."""
+    buf = Buffer(clock=clock)
+    with anyio.CancelScope() as scope:
+        scope.cancel()
+        await buf.lookup_transform_async("a", "b", Time(0), timeout=0)
+    assert scope.cancelled_caught
+    ran = 0
+
+    async def other() -> None:
+        nonlocal ran
+        ran += 1
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(other)
+        for _ in range(3):
+            assert not await buf.can_transform_async("a", "b", Time(0), timeout=0.0)
+        assert ran == 1
+    assert buf.pending_waits == 0

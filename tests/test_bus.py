@@ -7,6 +7,7 @@ from typing import Any
 
 import anyio
 import anyio.abc
+import anyio.lowlevel
 import pytest
 
 from tfbus.bus import (
@@ -426,3 +427,65 @@ def test_static_latch_api() -> None:
     assert latch.message() == TFMessage((ts("laser", 1.0), ts("/cam", 5.0)))
     latch.clear()
     assert len(latch) == 0 and latch.message() == TFMessage(())
+
+
+async def test_publish_checks_cancellation_before_publishing() -> None:
+    async with Bus() as bus:
+        got: list[object] = []
+        with bus.subscribe_callback("/x", got.append):
+            with anyio.CancelScope() as scope:
+                scope.cancel()
+                await bus.publish("/x", 1)
+            assert scope.cancelled_caught
+            assert got == []  # cancelled: not published
+
+
+async def test_publish_never_raises_cancellation_after_publishing() -> None:
+    """The checkpoint after a publish is cancel-shielded (issue 10: on asyncio a yield on
+    a done future, which anyio's cancel scopes do not interrupt; this holds anyio to it):
+    a scope cancelled while the publisher yields cancels it at its next checkpoint, not
+    inside the publish that already delivered the message."""
+    async with Bus() as bus:
+        got: list[object] = []
+        delivered = anyio.Event()
+        steps: list[str] = []
+
+        def on_message(message: object) -> None:
+            got.append(message)
+            delivered.set()
+
+        with bus.subscribe_callback("/x", on_message):
+            async with anyio.create_task_group() as tg:
+                scope = anyio.CancelScope()
+
+                async def canceller() -> None:
+                    await delivered.wait()  # runs while the publisher yields
+                    scope.cancel()
+                    steps.append("cancelled")
+
+                async def publisher() -> None:
+                    with scope:
+                        await bus.publish("/x", 1)
+                        steps.append("published")
+                        await anyio.lowlevel.checkpoint()
+                        steps.append("not reached")
+
+                tg.start_soon(canceller)
+                await anyio.wait_all_tasks_blocked()
+                tg.start_soon(publisher)
+            assert scope.cancelled_caught
+            assert got == [1]
+            assert "not reached" not in steps and "published" in steps
+            # Cancelling from inside the delivery (the publisher's own task) as well.
+            with anyio.CancelScope() as own:
+
+                def cancel_own(message: object) -> None:
+                    own.cancel()
+
+                with bus.subscribe_callback("/y", cancel_own):
+                    await bus.publish("/y", 2)
+                    steps.append("own published")
+                    await anyio.lowlevel.checkpoint()
+                    steps.append("own not reached")
+            assert own.cancelled_caught
+            assert steps[-1] == "own published"

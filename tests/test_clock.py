@@ -771,3 +771,130 @@ async def test_buffer_timeout_on_a_manual_clock_is_a_clock_deadline() -> None:
     assert len(errors) == 1
     assert errors[0].startswith("2000000000 Timed out after 2 s waiting for transform from [b]")
     assert clock.pending == 0 and buf.pending_waits == 0
+
+
+# -- Clock.call_later (issue 10: the deadline of a Buffer wait, with no cancel scope) -----
+
+
+async def test_manual_call_later_runs_in_deadline_order_among_sleepers() -> None:
+    clock = ManualClock(T0)
+    log: list[tuple[str, Time]] = []
+
+    async def sleeper() -> None:
+        await clock.sleep(0.2)
+        log.append(("sleeper", clock.now()))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(sleeper)
+        await clock.advance(0)
+        clock.call_later(0.3, lambda: log.append(("b", clock.now())))
+        clock.call_later(Duration.from_sec(0.1), lambda: log.append(("a", clock.now())))
+        cancel = clock.call_later(0.15, lambda: log.append(("cancelled", clock.now())))
+        assert clock.pending == 4
+        cancel()
+        assert clock.pending == 3
+        await clock.advance(1.0)
+    ms = Duration.from_sec(0.001)
+    assert log == [("a", T0 + ms * 100), ("sleeper", T0 + ms * 200), ("b", T0 + ms * 300)]
+    assert clock.pending == 0
+
+
+async def test_manual_call_later_edges() -> None:
+    clock = ManualClock(T0)
+    calls: list[str] = []
+    clock.call_later(0, lambda: calls.append("zero"))  # due now: called at once
+    clock.call_later(-1.0, lambda: calls.append("negative"))
+    assert calls == ["zero", "negative"]
+    never = clock.call_later(math.inf, lambda: calls.append("inf"))
+    assert clock.pending == 0
+    never()
+    cancel = clock.call_later(1.0, lambda: calls.append("one"))
+    await clock.advance(1.0)
+    assert calls[-1] == "one"
+    cancel()  # after it ran: harmless, and the count stays right
+    cancel()
+    assert clock.pending == 0
+    assert clock.call_later(1.0, lambda: None) is not None
+    with pytest.raises(ValueError):
+        clock.call_later(math.nan, lambda: None)
+    with pytest.raises(TypeError):
+        clock.call_later("1", lambda: None)  # type: ignore[arg-type]
+
+
+def _system_entries(clock: SystemClock) -> int:
+    """How many entries (live or cancelled) the clock's timer heap of this run holds."""
+    timers: Any = clock._timers
+    if clock._trio_timers is not None:
+        try:
+            timers = clock._trio_timers.get()
+        except LookupError:
+            timers = None
+    return 0 if timers is None else len(timers._heap)
+
+
+async def test_system_call_later_fires_in_order_and_cancelled_calls_never_run() -> None:
+    clock = SystemClock()
+    calls: list[str] = []
+    done = anyio.Event()
+    clock.call_later(0.003, lambda: (calls.append("last"), done.set()))
+    clock.call_later(0.002, lambda: calls.append("second"))
+    cancel = clock.call_later(0.001, lambda: calls.append("cancelled"))
+    clock.call_later(Duration.from_sec(0.0015), lambda: calls.append("first"))
+    cancel()
+    with anyio.fail_after(5):  # a bound, not a sleep: the callbacks end the wait
+        await done.wait()
+    assert calls == ["first", "second", "last"]
+    clock.call_later(0, lambda: calls.append("now"))  # due now: called at once
+    assert calls[-1] == "now"
+    assert clock.call_later(math.inf, lambda: calls.append("never")) is not None
+    with pytest.raises(ValueError):
+        clock.call_later(math.nan, lambda: None)
+
+
+async def test_system_call_later_sweeps_cancelled_entries() -> None:
+    clock = SystemClock()
+    for _ in range(10_000):
+        clock.call_later(1000.0, lambda: None)()  # scheduled, then cancelled at once
+    assert _system_entries(clock) <= 128  # not 10 000 entries kept for 1000 s
+
+
+async def test_system_call_later_reports_a_failing_callback_and_runs_the_rest(
+    anyio_backend: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    clock = SystemClock()
+    reported: list[BaseException] = []
+    if anyio_backend == "asyncio":
+        import asyncio
+
+        asyncio.get_running_loop().set_exception_handler(
+            lambda loop, context: reported.append(context["exception"])
+        )
+    done = anyio.Event()
+
+    def fail() -> None:
+        raise RuntimeError("boom")
+
+    clock.call_later(0.001, fail)
+    clock.call_later(0.002, done.set)
+    with anyio.fail_after(5):
+        await done.wait()
+    if anyio_backend == "asyncio":
+        assert [str(e) for e in reported] == ["boom"]
+    else:
+        assert "boom" in caplog.text
+
+
+def test_system_call_later_outside_an_event_loop_is_none() -> None:
+    assert SystemClock().call_later(1.0, lambda: None) is None
+
+
+async def test_running_asyncio_loop_only_in_asyncio_tasks(anyio_backend: str) -> None:
+    from tfbus.clock._base import running_asyncio_loop
+
+    loop = running_asyncio_loop()
+    if anyio_backend == "asyncio":
+        import asyncio
+
+        assert loop is asyncio.get_running_loop()
+    else:
+        assert loop is None

@@ -19,43 +19,83 @@ cancelled or timed-out wait leaves nothing registered.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable
-from typing import Any, ClassVar, Generic, TypeVar, cast
+import math
+from collections.abc import Awaitable, Callable, Iterable
+from functools import partial
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import anyio
+import anyio.lowlevel
 
 from tfbus.batch_async import AsyncBatchMixin
 from tfbus.clock import Clock, SystemClock, timeout_ns
+from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped
 from tfbus.time import Duration, Time
 
+if TYPE_CHECKING:
+    from asyncio import AbstractEventLoop, Future
+
 __all__ = ["Buffer"]
 
 _log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
+_NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
 
 
 class _Waiter(Generic[_T]):
     """One pending wait: ``check()`` returns the answer, or None while unavailable, or
-    raises to fail the wait. Indexed under ``frames`` (from ``frames_fn()``) while
-    pending."""
+    returns or raises the TransformException that fails the wait. Indexed under
+    ``frames`` (from ``frames_fn()``) while pending. :meth:`wake` ends the wait (the
+    answer came, or the deadline).
 
-    __slots__ = ("check", "error", "event", "frames", "frames_fn", "result")
+    On asyncio the waiting task awaits a bare future of ``loop`` (what anyio's Event
+    wraps twice: ``anyio.Event`` -> ``asyncio.Event`` -> a future per waiter); elsewhere an
+    ``anyio.Event``. Either is cancelled like any anyio checkpoint.
+    """
+
+    __slots__ = ("check", "error", "event", "frames", "frames_fn", "future", "result")
 
     def __init__(
-        self, check: Callable[[], _T | None], frames_fn: Callable[[], frozenset[str]]
+        self,
+        check: Callable[[], _T | TransformException | None],
+        frames_fn: Callable[[], frozenset[str]],
+        loop: AbstractEventLoop | None,
     ) -> None:
         self.check = check
         self.frames_fn = frames_fn
-        self.event = anyio.Event()
+        self.future: Future[None] | None = None
+        self.event: anyio.Event | None = None
+        if loop is not None:
+            self.future = loop.create_future()
+        else:
+            self.event = anyio.Event()
         self.frames: frozenset[str] = frozenset()
         self.result: _T | None = None
         self.error: BaseException | None = None
+
+    def wait(self) -> Awaitable[object]:
+        """What the waiting task awaits (once): a checkpoint even if already woken (a
+        ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does)."""
+        future = self.future
+        if future is not None:
+            return anyio.lowlevel.checkpoint() if future.done() else future
+        assert self.event is not None
+        return self.event.wait()
+
+    def wake(self) -> None:
+        """End the wait (idempotent; harmless after the task was cancelled)."""
+        future = self.future
+        if future is None:
+            assert self.event is not None
+            self.event.set()
+        elif not future.done():
+            future.set_result(None)
 
 
 class Buffer(AsyncBatchMixin, BufferCore):
@@ -107,15 +147,24 @@ class Buffer(AsyncBatchMixin, BufferCore):
         try:
             result = waiter.check()
         except TransformException as exc:
-            waiter.error = exc
+            result = exc
+        if result is None:
+            if relinked:
+                self._reindex(waiter, waiter.frames_fn())  # the path may have changed
+            return
+        if isinstance(result, TransformException):
+            waiter.error = result
         else:
-            if result is None:
-                if relinked:
-                    self._reindex(waiter, waiter.frames_fn())  # the path may have changed
-                return
             waiter.result = result
-        self._unindex(waiter)
-        waiter.event.set()
+        index = self._index
+        for name in waiter.frames:  # _unindex, inlined: this is the wake-up path
+            waiters = index.get(name)
+            if waiters is not None:
+                waiters.discard(waiter)
+                if not waiters:
+                    del index[name]
+        waiter.frames = _NO_FRAMES
+        waiter.wake()
 
     def _on_jump(self, old: Time, new: Time) -> None:
         _log.warning(
@@ -169,39 +218,52 @@ class Buffer(AsyncBatchMixin, BufferCore):
 
     async def _wait(
         self,
-        check: Callable[[], _T | None],
+        check: Callable[[], _T | TransformException | None],
         frames: Callable[[], frozenset[str]],
         timeout: float | Duration | None,
         describe: Callable[[], str],
     ) -> _T:
-        if timeout is not None and timeout_ns(timeout) is None:
+        if (
+            timeout is not None
+            and not (type(timeout) is float and math.isfinite(timeout))  # the common case
+            and timeout_ns(timeout) is None
+        ):
             timeout = None  # inf: no deadline (and NaN or a str raised here, up front)
         result = check()
         if result is not None:
+            if isinstance(result, TransformException):
+                raise result
             return result
-        waiter: _Waiter[_T] = _Waiter(check, frames)
+        waiter: _Waiter[_T] = _Waiter(check, frames, running_asyncio_loop())
         self._reindex(waiter, frames())
         try:
             if timeout is None:
-                await waiter.event.wait()
+                await waiter.wait()
             else:
-                await self._wait_with_timeout(waiter, timeout, describe)
+                # The clock's deadline callback wakes the wait as the data would (no
+                # cancel scope to enter and leave); a clock that cannot schedule one in
+                # this loop (Clock.call_later returns None), or that predates call_later,
+                # gives its cancel scope instead.
+                call_later = getattr(self.clock, "call_later", None)
+                cancel = None if call_later is None else call_later(timeout, waiter.wake)
+                if cancel is None:
+                    with self.clock.move_on_after(timeout):
+                        await waiter.wait()
+                else:
+                    try:
+                        await waiter.wait()
+                    finally:
+                        cancel()
         finally:
-            self._unindex(waiter)
+            if waiter.frames:  # not already unindexed by the recheck that woke it
+                self._unindex(waiter)
         if waiter.error is not None:
             raise waiter.error
-        return cast(_T, waiter.result)
-
-    async def _wait_with_timeout(
-        self, waiter: _Waiter[Any], timeout: float | Duration, describe: Callable[[], str]
-    ) -> None:
-        # The clock's own deadline primitive: anyio.move_on_after on a SystemClock, a
-        # scope that ManualClock.advance cancels on a ManualClock.
-        with self.clock.move_on_after(timeout):
-            await waiter.event.wait()
-        if not waiter.event.is_set():
+        if waiter.result is None:  # the deadline, not the data, ended the wait
+            assert timeout is not None
             seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
             raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
+        return waiter.result
 
     def _describe(self, target: str, source: str, time: Time) -> str:
         answer = self.can_transform(target, source, time, return_debug_tuple=True)
@@ -221,7 +283,8 @@ class Buffer(AsyncBatchMixin, BufferCore):
         the two frames are connected with data.
 
         Args:
-            timeout: seconds (or a Duration) of the buffer's clock (``clock.move_on_after``);
+            timeout: seconds (or a Duration) of the buffer's clock (``clock.call_later``,
+                or ``clock.move_on_after`` for a clock that cannot schedule callbacks);
                 None or ``inf`` waits forever; NaN is a ValueError, a str a TypeError.
 
         Raises:
@@ -233,10 +296,10 @@ class Buffer(AsyncBatchMixin, BufferCore):
             LookupException: the path between the frames contains a loop.
         """
         return await self._wait(
-            lambda: self._try_lookup(target_frame, source_frame, time),
-            lambda: self._frames_of(target_frame, source_frame, time),
+            partial(self.check_transform, target_frame, source_frame, time),
+            partial(self._frames_of, target_frame, source_frame, time),
             timeout,
-            lambda: self._describe(target_frame, source_frame, time),
+            partial(self._describe, target_frame, source_frame, time),
         )
 
     async def lookup_transform_async(
@@ -250,7 +313,12 @@ class Buffer(AsyncBatchMixin, BufferCore):
 
         Raises: as :meth:`wait_for_transform`.
         """
-        return await self.wait_for_transform(target_frame, source_frame, time, timeout)
+        return await self._wait(  # wait_for_transform's body: one coroutine fewer
+            partial(self.check_transform, target_frame, source_frame, time),
+            partial(self._frames_of, target_frame, source_frame, time),
+            timeout,
+            partial(self._describe, target_frame, source_frame, time),
+        )
 
     async def lookup_transform_full_async(
         self,

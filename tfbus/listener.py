@@ -15,10 +15,10 @@ counted and skipped. The listener never dies of bad input.
 
 from __future__ import annotations
 
-import functools
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import partial
 from types import TracebackType
 from typing import Any, Protocol
 
@@ -137,6 +137,12 @@ class TransformListener:
         if clock is None:
             clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
         self._clock = clock
+        # The clock read on every message: its now_ns() when it has one (both tfbus
+        # clocks do; it builds no Time), else now().ns.
+        now_ns = getattr(clock, "now_ns", None)
+        self._now_ns: Callable[[], int] = (
+            now_ns if callable(now_ns) else lambda: self._clock.now().ns
+        )
         # A Buffer reading its own clock clears itself on a jump back (Clock.on_jump);
         # any other sink is cleared by the listener, as tf2_ros's listener does.
         self._clears_sink = not (isinstance(buffer, Buffer) and buffer.clock is clock)
@@ -168,13 +174,12 @@ class TransformListener:
             raise RuntimeError("a TransformListener can be entered only once")
         self._entered = True
         if self._inline:
-            handle_static = functools.partial(self._handle, static=True)
-            self._callbacks = [self._bus.subscribe_callback(TF_STATIC_TOPIC, handle_static)]
+            self._callbacks = [
+                self._bus.subscribe_callback(TF_STATIC_TOPIC, partial(self._handle, True))
+            ]
             try:
                 self._callbacks.append(
-                    self._bus.subscribe_callback(
-                        TF_TOPIC, functools.partial(self._handle, static=False)
-                    )
+                    self._bus.subscribe_callback(TF_TOPIC, partial(self._handle, False))
                 )
             except BaseException:
                 self._callbacks[0].close()
@@ -216,7 +221,7 @@ class TransformListener:
 
     async def _run(self, sub: Subscription[Any], static: bool) -> None:
         async for message in sub:
-            self._handle(message, static)
+            self._handle(static, message)
             self._drain(sub, static)
 
     def _drain(self, sub: Subscription[Any], static: bool) -> None:
@@ -227,28 +232,30 @@ class TransformListener:
                 message = sub.receive_nowait()
             except (anyio.WouldBlock, anyio.EndOfStream, anyio.ClosedResourceError):
                 return
-            self._handle(message, static)
+            self._handle(static, message)
 
     def _warn(self, msg: str, *args: object) -> None:
         self._log.log(self._clock.now().ns / 1e9, logging.WARNING, msg, *args)
 
-    def _check_clock(self) -> None:
-        """tf2_ros ``TransformListener::subscription_callback_impl``: read the clock on
-        each message; a time earlier than the last one read is a jump back, which clears
-        the buffer (reading a ``SystemClock`` also fires its ``on_jump`` callbacks, which
-        is how a ``Buffer`` on that clock clears itself)."""
-        now = self._clock.now().ns
-        if now < self._last_update and self._clears_sink:
+    def _jumped_back(self, now: int) -> None:
+        """The clock read ``now`` (ns), earlier than the last reading: clear the sink, as
+        tf2_ros's listener does (unless it is a Buffer on this clock, which clears itself
+        through ``on_jump``; reading a ``SystemClock`` fires those callbacks)."""
+        if self._clears_sink:
             _log.warning(
                 "Detected jump back in time of %.3f s. Clearing TF buffer.",
                 (self._last_update - now) / 1e9,
             )
             self._buffer.clear()
-        self._last_update = now
 
-    def _handle(self, message: object, static: bool) -> None:
+    def _handle(self, static: bool, message: object) -> None:
         self._messages += 1
-        self._check_clock()
+        # tf2_ros TransformListener::subscription_callback_impl: read the clock on each
+        # message; a time earlier than the last one read is a jump back.
+        now = self._now_ns()
+        if now < self._last_update:
+            self._jumped_back(now)
+        self._last_update = now
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         if not isinstance(message, TFMessage):
             self._malformed += 1

@@ -38,6 +38,11 @@ time reaches the deadline on a :class:`ManualClock`::
     with clock.fail_after(Duration(2)):         # TimeoutError when it expires
         await something()
 
+``clock.call_later(s, callback)`` is the same deadline as a callback, with no cancel scope
+(what a :class:`~tfbus.buffer.Buffer`'s ``timeout=`` uses): one loop timer (asyncio) or
+one system task (trio) per :class:`SystemClock` serves all of them, and a
+:class:`ManualClock` files them among its sleepers.
+
 Timeouts (``timeout=`` arguments anywhere in tfbus, and these scopes) mean the same on
 both clocks: ``None`` or ``math.inf`` = no deadline; a negative or zero timeout expires
 at the first checkpoint; a deadline beyond the end of :class:`~tfbus.time.Time`

@@ -8,14 +8,18 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import sys
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from itertools import count
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import anyio
 
 from tfbus.time import Duration, Time, seconds_to_ns
+
+if TYPE_CHECKING:
+    from asyncio import AbstractEventLoop
 
 _log = logging.getLogger("tfbus.clock")
 
@@ -82,6 +86,26 @@ class Clock(Protocol):
         """
         ...
 
+    def call_later(
+        self, seconds: float | Duration, callback: Callable[[], object]
+    ) -> Callable[[], None] | None:
+        """Call ``callback()`` once ``seconds`` of this clock's time have passed, from the
+        running event loop: a deadline with no task and no cancel scope (how a
+        :class:`~tfbus.buffer.Buffer`'s ``timeout=`` wakes its wait). ``<= 0``: called at
+        once, before this returns; ``inf``: never. The deadline is counted from the call.
+
+        Returns:
+            A function that cancels the call (harmless once it ran or was cancelled), or
+            ``None`` when this clock cannot schedule callbacks in the running event loop
+            (:class:`~tfbus.clock.SystemClock` under trio, which has no timer callbacks):
+            the caller then uses :meth:`move_on_after`.
+
+        Raises:
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
+        """
+        ...
+
 
 def timeout_ns(seconds: float | Duration | None, *, name: str = "timeout") -> int | None:
     """A timeout in nanoseconds, or ``None`` for "no deadline", the same on every clock.
@@ -107,6 +131,29 @@ def timeout_ns(seconds: float | Duration | None, *, name: str = "timeout") -> in
             return None if value > 0 else 0
     return seconds_to_ns(seconds, name=name)
 
+
+def _noop() -> None:
+    """The canceller of a call that will never happen (or already did)."""
+
+
+def running_asyncio_loop() -> AbstractEventLoop | None:
+    """The running asyncio event loop when the caller runs in one of its tasks (anyio on
+    asyncio), else None (trio, including trio in guest mode on an asyncio host, whose
+    tasks are not asyncio tasks; no loop at all).
+
+    ``asyncio`` is looked up in ``sys.modules`` (it is necessarily loaded when an asyncio
+    loop is running), never imported by tfbus.
+    """
+    asyncio = sys.modules.get("asyncio")
+    if asyncio is None:
+        return None
+    try:
+        loop: AbstractEventLoop = asyncio.get_running_loop()
+    except RuntimeError:  # no asyncio loop running in this thread
+        return None
+    if asyncio.current_task(loop) is None:
+        return None  # a callback of the loop, not a task: e.g. trio in guest mode
+    return loop
 
 
 class _JumpCallbacks:

@@ -13,7 +13,13 @@ from typing import Final
 import anyio
 import anyio.lowlevel
 
-from tfbus.clock._base import JumpCallback, _JumpCallbacks, timeout_ns
+from tfbus.clock._base import (
+    JumpCallback,
+    _JumpCallbacks,
+    _noop,
+    running_asyncio_loop,
+    timeout_ns,
+)
 from tfbus.time import TIME_MAX_NS, Duration, Time, seconds_to_ns
 
 _TIME_ZERO = Time(0)
@@ -26,19 +32,14 @@ async def _wait_all_tasks_blocked() -> None:
     and instant. anyio's asyncio version sleeps 0.1 s of *wall time* each time it finds a
     runnable task, which would make every woken chain of tasks (timer -> bus ->
     subscriber) cost 100 ms; so on asyncio we do the same check with zero-length
-    checkpoints instead. ``asyncio`` is looked up in ``sys.modules`` (it is necessarily
-    loaded when an asyncio loop is running), never imported by tfbus.
+    checkpoints instead (:func:`~tfbus.clock._base.running_asyncio_loop`: asyncio is
+    never imported by tfbus).
     """
-    asyncio = sys.modules.get("asyncio")
-    loop = None
-    if asyncio is not None:
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:
-            loop = None
-    if asyncio is None or loop is None:
+    loop = running_asyncio_loop()
+    if loop is None:
         await anyio.wait_all_tasks_blocked()
         return
+    asyncio = sys.modules["asyncio"]
     this_task = asyncio.current_task()
     await anyio.lowlevel.checkpoint()
     while True:
@@ -103,6 +104,27 @@ class _ManualDeadline:
         return suppressed
 
 
+class _ManualCall:
+    """A callback filed among a :class:`ManualClock`'s sleepers by
+    :meth:`ManualClock.call_later`; :meth:`cancel` forgets it (harmless once it ran)."""
+
+    __slots__ = ("_callback", "_clock", "_seq")
+
+    def __init__(self, clock: ManualClock, callback: Callable[[], object]) -> None:
+        self._clock = clock
+        self._callback = callback
+        self._seq: int | None = None
+
+    def fire(self) -> None:
+        self._seq = None
+        self._callback()
+
+    def cancel(self) -> None:
+        if self._seq is not None:
+            self._clock._forget(self._seq)
+            self._seq = None
+
+
 class ManualClock:
     """Simulated time, moved only by :meth:`advance` and :meth:`set` (tests, bag replay).
 
@@ -112,9 +134,10 @@ class ManualClock:
     blocked, repeat; so a 100 Hz timer advanced by one second ticks 100 times, instantly.
     Like trio's ``MockClock(autojump_threshold=0)`` in spirit, for asyncio and trio alike.
 
-    Deadlines (:meth:`move_on_after`, :meth:`fail_after`, and every ``timeout=`` of a
-    :class:`~tfbus.buffer.Buffer` on this clock) are sleepers too: when time reaches one,
-    its cancel scope is cancelled in the same step-by-step order. Nothing reads the wall
+    Deadlines (:meth:`move_on_after`, :meth:`fail_after`, :meth:`call_later`, and so every
+    ``timeout=`` of a :class:`~tfbus.buffer.Buffer` on this clock) are sleepers too: when
+    time reaches one, its cancel scope is cancelled (or its callback called) in the same
+    step-by-step order. Nothing reads the wall
     clock: a ManualClock can drive bag replay, timers and timeouts in zero wall time.
 
     A ``ManualClock`` must be used from one event loop; ``advance`` calls are serialised.
@@ -142,6 +165,10 @@ class ManualClock:
     def now(self) -> Time:
         """The simulated current time."""
         return Time.from_ns(self._now_ns)
+
+    def now_ns(self) -> int:
+        """:meth:`now` as int nanoseconds."""
+        return self._now_ns
 
     async def sleep_until(self, t: Time) -> None:
         """Return once the clock has been moved to ``t`` or later.
@@ -215,6 +242,28 @@ class ManualClock:
         """
         deadline = self._deadline_ns(timeout_ns(seconds))
         return _ManualDeadline(self, deadline, fail=True, shield=shield)
+
+    def call_later(
+        self, seconds: float | Duration, callback: Callable[[], object]
+    ) -> Callable[[], None]:
+        """Call ``callback()`` in the :meth:`advance` step that reaches ``now + seconds``
+        (a sleeper like any other: same order, counted in :attr:`pending`); at once if
+        that is not after ``now``; never for ``inf`` or past ``TIME_MAX_NS``. Returns the
+        function that cancels it. See :meth:`Clock.call_later`.
+
+        Raises:
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
+        """
+        deadline = self._deadline_ns(timeout_ns(seconds, name="seconds"))
+        if deadline <= self._now_ns:
+            callback()
+            return _noop
+        if deadline >= _NEVER:
+            return _noop
+        call = _ManualCall(self, callback)
+        call._seq = self._push(deadline, call.fire)
+        return call.cancel
 
     # -- driving time ---------------------------------------------------------------
 
