@@ -77,12 +77,15 @@ def query_times(n: int) -> np.ndarray[Any, np.dtype[np.int64]]:
     return np.sort(rng.integers(lo, hi, n)).astype(np.int64)
 
 
-def best(fn: Any, repeat: int) -> float:
+def best(fn: Any, repeat: int, log: list[float] | None = None) -> float:
     out = math.inf
     for _ in range(repeat):
         t0 = time.perf_counter()
         fn()
-        out = min(out, time.perf_counter() - t0)
+        dt = time.perf_counter() - t0
+        out = min(out, dt)
+        if log is not None:
+            log.append(dt)
     return out
 
 
@@ -127,8 +130,10 @@ def bench_lookups(n: int) -> None:
           "times": times.tolist()}  # fmt: skip
     # The machine may be shared: alternate the two sides and keep each one's best round.
     ours = single = ref = math.inf
+    runs: list[float] = []
+    load0 = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
     for _ in range(ROUNDS):
-        ours = min(ours, best(lambda: core.lookup_transforms("f0", f"f{DEPTH}", times), 7))
+        ours = min(ours, best(lambda: core.lookup_transforms("f0", f"f{DEPTH}", times), 7, runs))
         single = min(single, best(lambda: [
             core.lookup_transform("f0", f"f{DEPTH}", Time.from_ns(int(t)))
             for t in times[:2000]], 3) * n / 2000)  # fmt: skip
@@ -139,12 +144,18 @@ def bench_lookups(n: int) -> None:
             ref = math.nan
             break
         ref = min(ref, json.loads(run.stdout)["loop_s"])
-    print(f"  tfbus lookup_transforms     {ours * 1e3:8.2f} ms  {ours / n * 1e9:7.0f} ns/time")
+    med = statistics.median(runs)
+    load1 = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+    print(f"  (load average {load0:.2f} -> {load1:.2f} on {os.cpu_count()} CPUs; best of each side"
+          " reported, medians in brackets where kept)")  # fmt: skip
+    print(f"  tfbus lookup_transforms     {ours * 1e3:8.2f} ms  {ours / n * 1e9:7.0f} ns/time"
+          f"  [median {med / n * 1e9:.0f} ns/time]")  # fmt: skip
     print(f"  tfbus single-lookup loop    {single * 1e3:8.2f} ms  {single / n * 1e9:7.0f} ns/time")
     if math.isnan(ref):
         return
     print(f"  tf2_py lookup loop          {ref * 1e3:8.2f} ms  {ref / n * 1e9:7.0f} ns/time")
-    print(f"  ratio tfbus batch / tf2_py loop: {ours / ref:.4f}x (target <= 0.03x)")
+    print(f"  ratio tfbus batch / tf2_py loop: {ours / ref:.4f}x (target <= 0.03x)"
+          f"  [our median / tf2_py best: {med / ref:.4f}x]")  # fmt: skip
 
 
 def _scan(beams: int) -> LaserScan:

@@ -3,15 +3,23 @@
 The oracle is the single lookup itself (checked bit for bit against tf2 by the
 conformance corpus): every row must equal it to 1e-12, every failure must raise the same
 exception with the same message as the single lookup for the first failing time.
+
+Each row comparison runs twice (fixture ``simd``): as shipped, where slerp's per-time
+sines may come from libmvec's vector sin (``_ccore._BATCH_VECTOR_SIN``; rows within the
+issue's 1e-12, a few ulp in practice), and with the batch forced onto its scalar loops
+(libm's sin), where every row must be the single lookup's bit for bit. Rows whose math
+has no per-time sine (exact stamps, statics, constant rotations) are bit-identical either
+way (``test_rows_without_sines_are_bit_exact_with_the_vector_sine``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tfbus import (
@@ -27,6 +35,7 @@ from tfbus import (
     TransformException,
     TransformStamped,
     Vector3,
+    _ccore,
 )
 from tfbus.batch import TransformArray, as_times
 
@@ -93,9 +102,30 @@ def _row(ts: TransformStamped) -> list[float]:
     return [*ts.transform.translation, *ts.transform.rotation]
 
 
-@settings(max_examples=200, deadline=None)
+@pytest.fixture(params=[True, False], ids=["as-shipped", "scalar"])
+def simd(request: pytest.FixtureRequest) -> Iterator[bool]:
+    """The batch as shipped, then forced onto its scalar loops; yields whether the
+    vector sine is in use (False: rows must be bit-identical)."""
+    try:
+        yield _ccore._batch_simd(request.param)
+    finally:
+        assert _ccore._batch_simd(True) == _ccore._BATCH_VECTOR_SIN
+
+
+def _check_row(got: TransformArray, i: int, ts: TransformStamped, vector_sin: bool) -> None:
+    row = [*got.translations[i], *got.rotations[i]]
+    if vector_sin:  # the issue's tolerance
+        np.testing.assert_allclose(row, _row(ts), rtol=0, atol=1e-12)
+    else:  # the scalar walk's arithmetic, bit for bit
+        assert row == _row(ts)
+    assert got.stamps[i] == ts.header.stamp.ns
+
+
+@settings(
+    max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(data=st.data())
-def test_rows_equal_single_lookups(data: st.DataObject) -> None:
+def test_rows_equal_single_lookups(simd: bool, data: st.DataObject) -> None:
     core, stamps = data.draw(buffers())
     target = data.draw(st.sampled_from(FRAMES))
     source = data.draw(st.sampled_from(FRAMES))
@@ -116,9 +146,7 @@ def test_rows_equal_single_lookups(data: st.DataObject) -> None:
         assert len(got) == len(times)
         for i, ts in enumerate(singles):
             assert isinstance(ts, TransformStamped)
-            assert got.stamps[i] == ts.header.stamp.ns
-            # bit-identical (the issue asks 1e-12; the compiled walk keeps tf2's order)
-            assert [*got.translations[i], *got.rotations[i]] == _row(ts)
+            _check_row(got, i, ts, simd)
     masked = (
         core.lookup_transforms(target, source, arr, errors="mask")
         if (
@@ -166,15 +194,14 @@ def _chain(depth: int, n: int = 101) -> BufferCore:
 @pytest.mark.parametrize(
     ("target", "source"), [("f0", "f8"), ("f8", "f0"), ("f3", "f7"), ("f7", "f3"), ("f5", "f5")]
 )
-def test_chain_bit_exact_and_split_in_two_threads(target: str, source: str) -> None:
+def test_chain_rows_and_split_in_two_threads(simd: bool, target: str, source: str) -> None:
     core = _chain(8)
     rng = np.random.default_rng(1)
     times = np.sort(rng.integers(10, 999_000_000, 20_000))  # above the two-thread split
     got = core.lookup_transforms(target, source, times)
     for i in range(20_000):  # every row: both threads, every block of 32 rows
         ts = core.lookup_transform(target, source, Time.from_ns(int(times[i])))
-        assert list(got.translations[i]) + list(got.rotations[i]) == _row(ts)
-        assert got.stamps[i] == ts.header.stamp.ns
+        _check_row(got, i, ts, simd and target != source)
     assert got.frame_id == target and got.child_frame_id == source
     assert got.valid.all()
 
@@ -280,3 +307,84 @@ def test_bad_times_are_refused_with_the_field_named() -> None:
     assert as_times([Time(1), Time(2)]).tolist() == [1_000_000_000, 2_000_000_000]
     assert len(core.lookup_transforms("f0", "f1", [])) == 0
     assert isinstance(core.lookup_transforms("f0", "f1", Time(0)), TransformArray)
+
+
+def _spin_chain(steps: list[float], n: int = 41) -> BufferCore:
+    """A chain f0 <- f1 <- ... whose link k turns by ``steps[k - 1]`` rad about a tilted
+    axis between consecutive samples (10 ms apart): slerp angles from ~1e-9 (a cosine
+    that may round to 1: tf2's zero angle) to beyond pi/2 between the quaternions (the
+    sign flip of b)."""
+    core = BufferCore(cache_time=100.0)
+    for k, step in enumerate(steps, start=1):
+        for j in range(n):
+            a = step * j
+            s = math.sin(a / 2)
+            core.set_transform(
+                _ts(f"f{k - 1}", f"f{k}", j * 10_000_000 + 3 * k,
+                    (0.5 * k, 0.01 * j, -0.1, 0.48 * s, 0.6 * s, 0.64 * s, math.cos(a / 2)))
+            )  # fmt: skip
+    return core
+
+
+def test_rows_over_every_slerp_angle(simd: bool) -> None:
+    steps = [1e-9, 3e-8, 1e-3, 0.05, 0.2, 0.3, 1.0, 4.0]
+    core = _spin_chain(steps)
+    rng = np.random.default_rng(5)
+    times = np.sort(rng.integers(10_000_000, 399_000_000, 9_000))
+    times[::97] = (times[::97] // 10_000_000) * 10_000_000 + 3  # exact stamps of link 1
+    shuffled = rng.permutation(times)  # the search cursor also meets unsorted times
+    for arr in (times, shuffled):
+        for target, source in [("f0", "f8"), ("f8", "f2")]:
+            got = core.lookup_transforms(target, source, arr)
+            for i in range(0, arr.shape[0], 7):
+                ts = core.lookup_transform(target, source, Time.from_ns(int(arr[i])))
+                _check_row(got, i, ts, simd)
+
+
+def test_rows_without_sines_are_bit_exact_with_the_vector_sine() -> None:
+    """As shipped (vector sine or not): rows at exact stamps of every dynamic link,
+    through static links, and rows interpolated on links whose rotation is constant
+    (tf2's zero slerp angle: no sine) are the single lookup's bit for bit."""
+    assert _ccore._batch_simd(True) == _ccore._BATCH_VECTOR_SIN
+    core = BufferCore(cache_time=100.0)
+    for k in range(1, 7):
+        parent, child = f"f{k - 1}", f"f{k}"
+        if k % 3 == 0:
+            core.set_transform_static(
+                _ts(parent, child, 0, (0.1 * k, 0.2, -0.3, 0.1, 0.2, 0.3, 0.9))
+            )
+            continue
+        for j in range(60):
+            a = 0.0 if k == 4 else 0.07 * j * k  # link 4: constant rotation, moving origin
+            v = (0.5 * k + 0.01 * j, -0.2, 0.3, 0.36 * math.sin(a), 0.48 * math.sin(a),
+                 0.8 * math.sin(a), math.cos(a))  # fmt: skip
+            core.set_transform(_ts(parent, child, j * 10_000_000, v))
+    stamps = np.arange(1, 59, dtype=np.int64) * 10_000_000
+    rng = np.random.default_rng(9)
+    times = np.sort(np.r_[np.repeat(stamps, 150), 0])  # > the two-thread split, with time 0
+    for target, source in [("f0", "f6"), ("f6", "f1"), ("f2", "f5")]:
+        got = core.lookup_transforms(target, source, times)
+        for i in rng.choice(times.shape[0], 600, replace=False):
+            ts = core.lookup_transform(target, source, Time.from_ns(int(times[i])))
+            _check_row(got, int(i), ts, vector_sin=False)
+    # link 4 alone between samples: a constant rotation, no sine
+    mid = stamps + 3_333_333
+    got = core.lookup_transforms("f3", "f4", mid)
+    for i in range(mid.shape[0]):
+        _check_row(got, i, core.lookup_transform("f3", "f4", Time.from_ns(int(mid[i]))), False)
+
+
+def test_compiled_batch_lookup_stays_bit_exact() -> None:
+    """``_ccore.batch_lookup`` (the entry the pure-Python core twins) keeps libm's sines
+    whatever the CPU: every row bit for bit the single lookup's, across both threads;
+    only ``lookup_transforms`` (``_batch_lookup_vector``) may vectorise them."""
+    assert _ccore._batch_simd(True) == _ccore._BATCH_VECTOR_SIN
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(3).integers(10, 999_000_000, 12_000))
+    out = np.zeros((times.shape[0], 7))
+    stamps = times.copy()
+    ok = np.zeros(times.shape[0], dtype=np.int8)
+    assert _ccore.batch_lookup(core, "f1", "f8", times, out, stamps, ok) == times.shape[0]
+    for i in range(times.shape[0]):
+        ts = core.lookup_transform("f1", "f8", Time.from_ns(int(times[i])))
+        assert out[i].tolist() == _row(ts)

@@ -20,6 +20,7 @@ MAX_GRAPH_DEPTH: Final[int]
 INVALID: Final[int]
 INVALID_ARGUMENT: Final[int]
 UNKNOWN_FRAME: Final[int]
+_BATCH_VECTOR_SIN: Final[bool]
 
 _Tf7 = tuple[float, float, float, float, float, float, float]
 
@@ -111,6 +112,15 @@ def batch_lookup(
     stamps: npt.NDArray[np.int64],
     ok: npt.NDArray[np.int8],
 ) -> int: ...
+def _batch_lookup_vector(
+    core: CoreBase,
+    target_frame: str,
+    source_frame: str,
+    times: npt.NDArray[np.int64],
+    out: npt.NDArray[np.float64],
+    stamps: npt.NDArray[np.int64],
+    ok: npt.NDArray[np.int8],
+) -> int: ...
 def slerp_rows(
     a: Sequence[float],
     b: Sequence[float],
@@ -129,3 +139,4 @@ def lerp_rows(
     ratios: npt.NDArray[np.float64],
     out: npt.NDArray[np.float64],
 ) -> None: ...
+def _batch_simd(enable: bool) -> bool: ...

@@ -5,7 +5,10 @@ time of an ``(N,)`` int64 nanosecond array in one call. The compiled core
 (``tfbus._ccore.batch_lookup``) resolves the path between the two frames once and
 gathers and accumulates every link for every time in C, in the same arithmetic order as
 the single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then
-``TransformAccum``), so each row is the single lookup's result bit for bit. Rows the
+``TransformAccum``), so each row is the single lookup's result: bit for bit, except that
+slerp's per-time sines may come from libmvec's vector sin
+(``tfbus._ccore._batch_lookup_vector``, if ``_BATCH_VECTOR_SIN``), a few ulp from libm's
+(rows within ~1e-14 of the single lookup; issue 12 allows 1e-12). Rows the
 compiled plan cannot take (time 0, a link whose parent changed) go through the core's
 scalar walk; for a row that cannot be answered at all, the single public
 ``lookup_transform`` is asked, so the exception and its message are tf2's by
@@ -26,7 +29,7 @@ from typing import Literal, Protocol, cast
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._ccore import CoreBase, batch_lookup
+from tfbus._ccore import CoreBase, _batch_lookup_vector
 from tfbus.errors import TransformException
 from tfbus.geometry import apply_transform
 from tfbus.messages import TransformStamped
@@ -221,7 +224,8 @@ def lookup_transforms(
 
     Returns:
         A :class:`TransformArray` whose row i equals ``lookup_transform`` at ``times[i]``
-        (same values to the bit, stamp = the time used).
+        (stamp = the time used; values to the bit, or within 1e-12 where slerp's sines
+        are vectorised: see the module docstring).
 
     Raises:
         InvalidArgumentException: a frame id is empty or starts with '/' (always, as the
@@ -251,7 +255,7 @@ def lookup_transforms(
     if not isinstance(core, CoreBase):
         raise TypeError(f"core must be a tfbus BufferCore, got {type(core).__name__}")
     ok = np.empty(n, dtype=np.int8)
-    answered = batch_lookup(core, target_frame, source_frame, t, out, stamps, ok)
+    answered = _batch_lookup_vector(core, target_frame, source_frame, t, out, stamps, ok)
     if answered < 0:
         # An invalid or unknown frame id: the single lookup raises tf2's exception.
         core.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[0]) if n else 0))
