@@ -1,10 +1,10 @@
 """Batched lookups: one path, many times (issue 12).
 
 ``lookup_transforms(core, target, source, times)`` answers ``lookup_transform`` for every
-time of an ``(N,)`` int64 nanosecond array in one call. The compiled core
-(``tfbus._ccore.batch_lookup``) resolves the path between the two frames once and
-gathers and accumulates every link for every time in C, in the same arithmetic order as
-the single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then
+time of an ``(N,)`` int64 nanosecond array in one call. The core's ``batch_lookup``
+(compiled: resolves the path between the two frames once and gathers and accumulates
+every link for every time in C; pure Python: the single walk per time) works in the same
+arithmetic order as the single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then
 ``TransformAccum``), so each row is the single lookup's result bit for bit. Rows the
 compiled plan cannot take (time 0, a link whose parent changed) go through the core's
 scalar walk; for a row that cannot be answered at all, the single public
@@ -26,7 +26,7 @@ from typing import Literal, Protocol, cast
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._ccore import CoreBase, batch_lookup
+from tfbus._backend import CoreBase, batch_lookup
 from tfbus.errors import TransformException
 from tfbus.geometry import apply_transform
 from tfbus.messages import TransformStamped
