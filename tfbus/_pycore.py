@@ -14,7 +14,9 @@ conformance corpus run against this core). That holds because:
   ``math.sin`` / ``math.acos`` / ``math.sqrt`` are the C library's functions the
   extension calls;
 * where Python raises and C does not (a division by zero, ``sin(±inf)``), the IEEE
-  result is produced instead (:func:`_div`, :func:`_sin`);
+  result is produced instead (:func:`_div`, :func:`_sin`); the sign and payload of a NaN
+  are not part of the contract (IEEE 754 leaves them unspecified, and the compiled
+  core's depend on the operand order its C compiler picks);
 * storage is the same: numpy arrays ``(cap,) int64`` stamps (ns), ``(cap, 7) float64``
   rows (tx, ty, tz, qx, qy, qz, qw) and, once a link has had two parents, ``(cap,)
   int32`` parent ids, with the same growth policy (so ``nbytes()`` agrees);
@@ -183,9 +185,9 @@ def _div(a: float, b: float) -> float:
     if b != 0.0 or b != b:
         return a / b
     if a != a:
-        return a + b  # a's NaN, as the FPU propagates it
+        return a + b  # NaN
     if a == 0.0:
-        return _INF - _INF  # 0/0: the platform's default NaN, as the FPU makes it
+        return _INF - _INF  # 0/0: NaN
     return math.copysign(_INF, a) * math.copysign(1.0, b)
 
 
