@@ -15,9 +15,10 @@ side by side in one process: same results bit for bit, same exceptions and messa
 Floats are compared by their IEEE bits (``struct``), so ``-0.0 != 0.0``; every NaN
 counts as equal to every NaN: IEEE 754 does not specify the sign and payload of a NaN
 produced from NaN operands, and the compiled core's depend on the operand order the C
-compiler picks (it may rewrite ``-a * b + c`` as ``c - a * b``). Plus: which core is loaded and why (``tfbus._backend``), and the suite's
-core-level tests and the tf2 conformance corpus run again in a subprocess with
-``TFBUS_PURE_PYTHON=1``.
+compiler picks (it may rewrite ``-a * b + c`` as ``c - a * b``).
+
+Plus: which core is loaded and why (``tfbus._backend``), and the suite's core-level tests
+and the tf2 conformance corpus run again in a subprocess with ``TFBUS_PURE_PYTHON=1``.
 """
 
 from __future__ import annotations
@@ -424,7 +425,9 @@ def test_buffers_bit_for_bit(ops: list[tuple[Any, ...]], cache_time: float) -> N
             same(lambda c, a=(target, source, times): _queries(bufs[c], *a))
 
 
-def _chain_buffers(depth: int, samples: int, reparent: bool) -> dict[str, BufferCore]:
+def _chain_buffers(depth: int, samples: int, reparent: str = "") -> dict[str, BufferCore]:
+    """Chains f0 -> f1 -> ... -> f{depth} -> top (static); with ``reparent``, every other
+    sample of f1's link has that parent instead ("f3": still a tree; "f0": a loop)."""
     bufs = {name: cls(1000.0) for name, cls in BUFFERS.items()}
     rng = np.random.default_rng(depth * 31 + samples)
     for buf in bufs.values():
@@ -433,7 +436,7 @@ def _chain_buffers(depth: int, samples: int, reparent: bool) -> dict[str, Buffer
             for d in range(depth):
                 q = rng.normal(size=4)
                 q /= np.linalg.norm(q)
-                parent = f"f{d + 1}" if not (reparent and d == 1 and k % 2) else "f0"
+                parent = f"f{d + 1}" if not (reparent and d == 1 and k % 2) else reparent
                 v = (*rng.normal(size=3).tolist(), *q.tolist())
                 buf.set_transform(_stamped(parent, f"f{d}", (k + 1) * NS * (d + 1), v))
         buf.set_transform_static(
@@ -442,22 +445,24 @@ def _chain_buffers(depth: int, samples: int, reparent: bool) -> dict[str, Buffer
     return bufs
 
 
-@pytest.mark.parametrize("reparent", [False, True])
-def test_batch_lookup_many_rows_bit_for_bit(reparent: bool) -> None:
+@pytest.mark.parametrize(("reparent", "rows"), [("", 9000), ("f3", 3000), ("f0", 200)])
+def test_batch_lookup_many_rows_bit_for_bit(reparent: str, rows: int) -> None:
     """Over 8192 rows the compiled core splits the rows between two threads; rows at
-    time 0, exact stamps, interpolated, out of range and re-parented links."""
+    time 0, exact stamps, interpolated, out of range, re-parented links and loops."""
     bufs = _chain_buffers(4, 40, reparent)
     rng = np.random.default_rng(1)
-    times = [*rng.integers(0, 45 * NS * 4, size=9000).tolist(), 0, NS, 2 * NS, 40 * NS]
+    times = [*rng.integers(0, 45 * NS * 4, size=rows).tolist(), 0, NS, 2 * NS, 40 * NS]
     for target, source in [("f0", "top"), ("top", "f0"), ("f1", "f3"), ("f4", "f0")]:
         n = same(lambda c, t=target, s=source: _batch(c, bufs[c], t, s, times))
         assert n[0] == "ok"
+        answered = n[1][1][0]
+        assert rows // 10 < answered < rows if reparent != "f0" else answered < rows // 2
     same(lambda c: _batch(c, bufs[c], "f0", "nope", times[:5]))
     same(lambda c: _batch(c, bufs[c], "f0", "f0", times[:5]))
 
 
 def test_batch_lookup_argument_errors_alike() -> None:
-    bufs = _chain_buffers(2, 3, False)
+    bufs = _chain_buffers(2, 3)
     good = (np.zeros(2, np.int64), np.zeros((2, 7)), np.zeros(2, np.int64), np.zeros(2, np.int8))
     cases: list[tuple[Any, ...]] = [
         (np.zeros(2, np.int32), *good[1:]),
@@ -593,12 +598,12 @@ PURE_SUITE = [
 def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path) -> None:
     """The tf2 conformance corpus (both levels) and the core-level tests, run by pytest
     in a subprocess with ``TFBUS_PURE_PYTHON=1``: the pure core must be the one loaded
-    (the report header says so), every test must pass, and the 400 cases of each level
-    must be among them."""
+    (the report header says so; ``-q`` would hide it), every test must pass, and the 400
+    cases of each level must be among them."""
     report = tmp_path / "pure.xml"
     env = dict(os.environ, TFBUS_PURE_PYTHON="1")
     done = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
          f"--junitxml={report}", *PURE_SUITE],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=1800,
     )  # fmt: skip
@@ -612,4 +617,4 @@ def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path)
             name = case.get("name", "").split("[")[0]
             passed[name] = passed.get(name, 0) + 1
     assert passed.get("test_level1") == 400 and passed.get("test_level2") == 400, passed
-    assert sum(passed.values()) > 1000, passed
+    assert sum(passed.values()) > 900, passed
