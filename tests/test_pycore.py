@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import shutil
 import struct
 import subprocess
 import sys
@@ -138,29 +139,50 @@ def test_the_loaded_core_is_reported() -> None:
     assert tfbus.core.COMPILED is (expected is _ccore)
 
 
+@pytest.fixture(scope="module")
+def no_extension(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the package without the compiled module: what an install without a C
+    compiler holds."""
+    where = tmp_path_factory.mktemp("pure-install")
+    shutil.copytree(
+        ROOT / "tfbus", where / "tfbus", ignore=shutil.ignore_patterns("*.so", "*.pyd", "*.c")
+    )
+    return where
+
+
 @pytest.mark.parametrize(
-    ("setup", "env", "compiled"),
+    ("installed", "env", "compiled"),
     [
-        ("", {}, True),
-        ("", {"TFBUS_PURE_PYTHON": "1"}, False),
-        ("", {"TFBUS_PURE_PYTHON": "0"}, True),
-        # what an install without a C compiler looks like: no tfbus._ccore module
-        ("import sys; sys.modules['tfbus._ccore'] = None; ", {}, False),
+        ("with", {}, True),
+        ("with", {"TFBUS_PURE_PYTHON": "1"}, False),
+        ("with", {"TFBUS_PURE_PYTHON": "0"}, True),
+        ("without", {}, False),
     ],
 )
-def test_backend_choice(setup: str, env: dict[str, str], compiled: bool) -> None:
+def test_backend_choice(
+    installed: str, env: dict[str, str], compiled: bool, no_extension: Path
+) -> None:
     code = (
-        setup + "import tfbus.core as c, tfbus.cache as k, tfbus.batch as b; "
+        # the copy without the extension only: no editable-install finder (which would
+        # find the extension in the source tree for a submodule the copy lacks)
+        "import sys; sys.meta_path[:] = [f for f in sys.meta_path "
+        "if not getattr(f, '__module__', '').startswith('__editable__')]; "
+        "import tfbus.core as c, tfbus.cache as k, tfbus.batch as b; "
         "print(c.COMPILED, c.BufferCore.__mro__[-2].__module__, "
-        "k.TimeCache.__module__, b.batch_lookup.__module__)"
+        "k.TimeCache.__module__, b.batch_lookup.__module__, c.__file__)"
     )
     environ = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"} | env
+    top = ROOT if installed == "with" else no_extension
+    environ["PYTHONPATH"] = str(top)
     done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=environ, timeout=120
-    )
+        [sys.executable, "-c", code], capture_output=True, text=True, env=environ, timeout=120,
+        cwd=top,
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     module = "tfbus._ccore" if compiled else "tfbus._pycore"
-    assert done.stdout.split() == [str(compiled), module, module, module]
+    assert done.stdout.split() == [
+        str(compiled), module, module, module, str(top / "tfbus" / "core.py")
+    ]  # fmt: skip
 
 
 def test_a_broken_compiled_core_is_an_error_not_a_fallback() -> None:

@@ -14,6 +14,8 @@ an error, never a silent fallback. ``COMPILED`` says which core is loaded (re-ex
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import os
 from types import ModuleType
 from typing import TYPE_CHECKING, Final
@@ -59,18 +61,12 @@ def pure_python_requested() -> bool:
 
 
 def _load() -> tuple[ModuleType, bool]:
-    """The core module to use and whether it is the compiled one."""
-    if not pure_python_requested():
-        try:
-            from tfbus import _ccore
-        except ModuleNotFoundError as exc:
-            if exc.name != "tfbus._ccore":
-                raise  # the extension exists but something it imports does not
-        else:
-            return _ccore, True
-    from tfbus import _pycore
-
-    return _pycore, False
+    """The core module to use and whether it is the compiled one. The compiled module is
+    looked for first (``find_spec``): absent, the pure core is loaded; present, it is
+    imported and any error importing it propagates."""
+    if not pure_python_requested() and importlib.util.find_spec("tfbus._ccore") is not None:
+        return importlib.import_module("tfbus._ccore"), True
+    return importlib.import_module("tfbus._pycore"), False
 
 
 IMPLEMENTATION, COMPILED = _load()
