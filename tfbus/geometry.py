@@ -17,11 +17,12 @@ Formulas:
 * :func:`compose`, :func:`inverse`, :func:`rotate_vectors`, :func:`apply_transform` and
   :func:`quat_multiply` evaluate tf2's expressions (``tf2/LinearMath/Quaternion.h``
   ``operator*`` and ``quatRotate``, ``tf2/src/buffer_core.cpp`` ``TransformAccum``) in the
-  same order as :mod:`tfbus._ccore`'s scalar math: row by row, results are bit-for-bit equal to the
+  same order as the core's scalar math (:mod:`tfbus._ccore` or :mod:`tfbus._pycore`): row
+  by row, results are bit-for-bit equal to the
   scalar ones that :class:`~tfbus.core.BufferCore` computes. One quaternion against many
   vectors or points uses the equivalent 3x3 matrix instead (KDL's
   ``Rotation::Quaternion``, as tf2_geometry_msgs), ~5x faster and equal within a few ulp.
-* :func:`slerp` *is* tf2's ``Quaternion::slerp`` (:func:`tfbus._ccore.slerp`);
+* :func:`slerp` *is* tf2's ``Quaternion::slerp`` (the core's ``slerp``);
   :func:`slerp_batch` repeats it with numpy and agrees to within a few ulp (numpy's
   ``arccos`` may round differently from the C library's ``acos``).
 * Matrices and Euler angles go through transforms3d (``quaternions.quat2mat`` /
