@@ -14,7 +14,6 @@ an error, never a silent fallback. ``COMPILED`` says which core is loaded (re-ex
 
 from __future__ import annotations
 
-import importlib
 import importlib.util
 import os
 from types import ModuleType
@@ -65,8 +64,12 @@ def _load() -> tuple[ModuleType, bool]:
     looked for first (``find_spec``): absent, the pure core is loaded; present, it is
     imported and any error importing it propagates."""
     if not pure_python_requested() and importlib.util.find_spec("tfbus._ccore") is not None:
-        return importlib.import_module("tfbus._ccore"), True
-    return importlib.import_module("tfbus._pycore"), False
+        from tfbus import _ccore
+
+        return _ccore, True
+    from tfbus import _pycore
+
+    return _pycore, False
 
 
 IMPLEMENTATION, COMPILED = _load()
