@@ -69,10 +69,12 @@ dist-check: $(DIST_STAMP)
 	$(BIN)/python scripts/check_dist.py
 
 # The suite on each of Python 3.10-3.13 found on this machine (nox, venv backend);
-# `make test-matrix PYTHONS="3.10 3.13"` for some of them.
+# `make test-matrix PYTHONS="3.10 3.13"` for some of them. NOX_ARGS go to nox first
+# (CI: --error-on-missing-interpreters).
 PYTHONS ?=
+NOX_ARGS ?=
 test-matrix: $(DIST_STAMP)
-	$(BIN)/nox $(if $(PYTHONS),--python $(PYTHONS))
+	$(BIN)/nox $(NOX_ARGS) $(if $(PYTHONS),--python $(PYTHONS))
 
 clean:
 	rm -rf $(VENV) .nox .pytest_cache .mypy_cache .ruff_cache build dist site *.egg-info \

@@ -39,5 +39,10 @@ def tests(session: nox.Session) -> None:
     """Install tfbus (compiled core, every extra) and run the whole suite."""
     session.install("--upgrade", "pip")
     session.install("-e", ".[all,test,docs]")
-    session.run("python", "-c", "import sys, tfbus; print(sys.version, tfbus.__version__)")
+    session.run(
+        "python",
+        "-c",
+        "import sys, tfbus, tfbus.core as c; "
+        "print(sys.version, tfbus.__version__, 'COMPILED =', c.COMPILED)",
+    )
     session.run("python", "-m", "pytest", "-q", *session.posargs)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 #: The Python versions tfbus supports (pyproject's ``requires-python`` and classifiers).
@@ -49,6 +50,34 @@ def find_pythons(versions: list[str] | None = None) -> dict[str, Path]:
     return found
 
 
-if __name__ == "__main__":
-    for version, exe in find_pythons().items():
+def where_looked(version: str) -> str:
+    """Where :func:`find_pythons` looked for ``version`` (for a clear "not found")."""
+    root = Path(os.environ.get("PYENV_ROOT", Path.home() / ".pyenv")) / "versions"
+    return f"python{version} on PATH, {root}/{version}.*/bin/python{version}"
+
+
+def main(argv: list[str]) -> int:
+    """``pythons.py``: list the interpreters found. ``pythons.py --require 3.10 3.13``:
+    the same for those versions, exit status 1 naming where each missing one was looked
+    for (CI runs the suite on them and must not skip one silently)."""
+    if argv[:1] == ["--require"]:
+        wanted = argv[1:]
+        found = find_pythons(wanted)
+        for version in wanted:
+            if version in found:
+                print(f"Python {version}: {found[version]}")
+            else:
+                print(
+                    f"Python {version}: NOT FOUND (looked for a working interpreter with "
+                    f"venv: {where_looked(version)}); install it, e.g. `pyenv install "
+                    f"{version}`",
+                    file=sys.stderr,
+                )
+        return 0 if len(found) == len(set(wanted)) else 1
+    for version, exe in find_pythons(argv or None).items():
         print(version, exe)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -4,6 +4,14 @@ from __future__ import annotations
 
 import pytest
 
+from tfbus import _backend
+
+
+def pytest_report_header() -> str:
+    """Which core the run uses (``TFBUS_PURE_PYTHON=1`` selects the pure-Python one)."""
+    kind = "compiled" if _backend.COMPILED else "pure-Python"
+    return f"tfbus core: {kind} ({_backend.IMPLEMENTATION.__name__}), COMPILED={_backend.COMPILED}"
+
 
 @pytest.fixture(params=["asyncio", "trio"], scope="module")
 def anyio_backend(request: pytest.FixtureRequest) -> str:

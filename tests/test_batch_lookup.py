@@ -5,7 +5,7 @@ conformance corpus): every row must equal it to 1e-12, every failure must raise 
 exception with the same message as the single lookup for the first failing time.
 
 Each row comparison runs twice (fixture ``simd``): as shipped, where slerp's per-time
-sines may come from libmvec's vector sin (``_ccore._BATCH_VECTOR_SIN``; rows within the
+sines may come from libmvec's vector sin (``tfbus._ccore._BATCH_VECTOR_SIN``; rows within the
 issue's 1e-12, a few ulp in practice), and with the batch forced onto its scalar loops
 (libm's sin), where every row must be the single lookup's bit for bit. Rows whose math
 has no per-time sine (exact stamps, statics, constant rotations) are bit-identical either
@@ -35,9 +35,21 @@ from tfbus import (
     TransformException,
     TransformStamped,
     Vector3,
-    _ccore,
 )
+from tfbus._backend import IMPLEMENTATION, batch_lookup
 from tfbus.batch import TransformArray, as_times
+from tfbus.core import COMPILED
+
+
+def _batch_simd(on: bool) -> bool:
+    """Turn the compiled batch's SIMD paths and vector sine on or off; whether the vector
+    sine is now in use. The pure-Python core (this file also runs against it, see
+    ``tests/test_pycore.py``) has neither: its rows are always the single walk's."""
+    return bool(IMPLEMENTATION._batch_simd(on)) if COMPILED else False
+
+
+def _vector_sin_available() -> bool:
+    return bool(IMPLEMENTATION._BATCH_VECTOR_SIN) if COMPILED else False
 
 FRAMES = ["a", "b", "c", "d", "e", "f"]
 
@@ -107,9 +119,9 @@ def simd(request: pytest.FixtureRequest) -> Iterator[bool]:
     """The batch as shipped, then forced onto its scalar loops; yields whether the
     vector sine is in use (False: rows must be bit-identical)."""
     try:
-        yield _ccore._batch_simd(request.param)
+        yield _batch_simd(request.param)
     finally:
-        assert _ccore._batch_simd(True) == _ccore._BATCH_VECTOR_SIN
+        assert _batch_simd(True) == _vector_sin_available()
 
 
 def _check_row(got: TransformArray, i: int, ts: TransformStamped, vector_sin: bool) -> None:
@@ -345,7 +357,7 @@ def test_rows_without_sines_are_bit_exact_with_the_vector_sine() -> None:
     """As shipped (vector sine or not): rows at exact stamps of every dynamic link,
     through static links, and rows interpolated on links whose rotation is constant
     (tf2's zero slerp angle: no sine) are the single lookup's bit for bit."""
-    assert _ccore._batch_simd(True) == _ccore._BATCH_VECTOR_SIN
+    assert _batch_simd(True) == _vector_sin_available()
     core = BufferCore(cache_time=100.0)
     for k in range(1, 7):
         parent, child = f"f{k - 1}", f"f{k}"
@@ -375,16 +387,16 @@ def test_rows_without_sines_are_bit_exact_with_the_vector_sine() -> None:
 
 
 def test_compiled_batch_lookup_stays_bit_exact() -> None:
-    """``_ccore.batch_lookup`` (the entry the pure-Python core twins) keeps libm's sines
+    """The core's ``batch_lookup`` (the entry the pure-Python core twins) keeps libm's sines
     whatever the CPU: every row bit for bit the single lookup's, across both threads;
     only ``lookup_transforms`` (``_batch_lookup_vector``) may vectorise them."""
-    assert _ccore._batch_simd(True) == _ccore._BATCH_VECTOR_SIN
+    assert _batch_simd(True) == _vector_sin_available()
     core = _chain(8)
     times = np.sort(np.random.default_rng(3).integers(10, 999_000_000, 12_000))
     out = np.zeros((times.shape[0], 7))
     stamps = times.copy()
     ok = np.zeros(times.shape[0], dtype=np.int8)
-    assert _ccore.batch_lookup(core, "f1", "f8", times, out, stamps, ok) == times.shape[0]
+    assert batch_lookup(core, "f1", "f8", times, out, stamps, ok) == times.shape[0]
     for i in range(times.shape[0]):
         ts = core.lookup_transform("f1", "f8", Time.from_ns(int(times[i])))
         assert out[i].tolist() == _row(ts)

@@ -1,7 +1,8 @@
 """Issue 11, the core's part: wrong values given to the API never crash, never half-store,
 and are named in the error (items 7, 11, 13); plus the core's reporting contract of
-issue 10 §1 (the batch result names what it touched; the compiled base calls nothing
-back) and the scalar math's single home (§3)."""
+issue 10 §1 (the batch result names what it touched; the core's base calls nothing
+back). The scalar math's single home (§3) is checked in ``test_pycore.py``: the two
+cores' scalar math, side by side, bit for bit."""
 
 from __future__ import annotations
 
@@ -9,7 +10,6 @@ import logging
 import math
 from typing import Any
 
-import _tf2math
 import numpy as np
 import pytest
 import yaml
@@ -23,7 +23,6 @@ from tfbus import (
     Transform,
     TransformStamped,
     Vector3,
-    _ccore,
 )
 from tfbus.core import MAX_GRAPH_DEPTH, BufferCore, FrameInfo
 from tfbus.ratelimit import CountLimitedLog, RateLimitedLog
@@ -299,24 +298,6 @@ def test_chain_frames_is_bounded_by_the_graph_depth() -> None:
     assert "missing" in frames and f"f{depth}" in frames
     assert len(frames) <= MAX_GRAPH_DEPTH + 3
     assert core.chain_frames("f2", "f0", Time(0)) == ["f0", "f2", "f1"]
-
-
-# --------------------------------------------------------------------- issue 10 §3
-
-
-def test_the_compiled_scalar_math_is_the_reference_math() -> None:
-    """Issue 10 §3: one home per formula: the compiled scalar math gives the
-    pure-Python reference's numbers bit for bit."""
-    rng = np.random.default_rng(7)
-    for _ in range(200):
-        a = tuple(float(v) for v in rng.normal(size=7))
-        b = tuple(float(v) for v in rng.normal(size=7))
-        r = float(rng.uniform())
-        assert _ccore.compose(a, b) == _tf2math.compose(a, b)  # type: ignore[arg-type]
-        assert _ccore.inverse(a) == _tf2math.inverse(a)  # type: ignore[arg-type]
-        assert _ccore.quat_multiply(*a[3:], *b[3:]) == _tf2math.quat_multiply(*a[3:], *b[3:])
-        assert _ccore.quat_rotate(*a[3:], *b[:3]) == _tf2math.quat_rotate(*a[3:], *b[:3])
-        assert _ccore.slerp(*a[3:], *b[3:], r) == _tf2math.slerp(*a[3:], *b[3:], r)
 
 
 # ------------------------------------------------------------------ rate-limited log

@@ -28,12 +28,15 @@ LAYERS: dict[str, int] = {
     "time": 0,
     "ratelimit": 0,
     "_version": 0,  # the distribution's version from package metadata
-    # 1: the sans-I/O core (geometry and convert call the compiled tf2 math in _ccore)
+    # 1: the sans-I/O core (geometry and convert call the tf2 scalar math of the core that
+    # _backend chose: compiled _ccore or pure-Python _pycore, same behaviour)
     "geometry": 1,
     "convert": 1,
     "core": 1,
     "core_text": 1,
+    "_backend": 1,
     "_ccore": 1,
+    "_pycore": 1,
     "cache": 1,
     "errors": 1,
     "batch": 1,
@@ -171,6 +174,8 @@ def _where(module: str, line: int) -> str:
 def test_the_package_is_found() -> None:
     assert "tfbus.core" in MODULES and "tfbus._ccore" in MODULES and "tfbus" in MODULES
     assert "tfbus.messages" in _graph()["tfbus._ccore"]  # the compiled core's import is seen
+    # the one selection point imports both cores
+    assert {"tfbus._ccore", "tfbus._pycore"} <= set(_graph()["tfbus._backend"])
 
 
 def test_every_module_has_a_layer() -> None:

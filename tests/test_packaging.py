@@ -83,6 +83,7 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
     required = {
         "pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "MANIFEST.in",
         "tfbus/__init__.py", "tfbus/_ccore.pyx", "tfbus/_ccore.pyi", "tfbus/py.typed",
+        "tfbus/_pycore.py", "tfbus/_backend.py",
         "tests/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
         "docs/index.md", "mkdocs.yml",
     }
@@ -114,7 +115,7 @@ def test_without_a_c_compiler_the_sdist_builds_pure_python(
     assert FALLBACK_MESSAGE in log
     assert "pure-Python core" in log
     members = _members(wheel)
-    assert "tfbus/core.py" in members
+    assert {"tfbus/core.py", "tfbus/_pycore.py", "tfbus/_backend.py"} <= set(members)
     assert not [m for m in members if m.endswith(".so")]
 
 

@@ -38,7 +38,7 @@ conformance corpus, ``tests/test_conformance.py``).
 
 * The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
   ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
-  :mod:`tfbus.geometry`; ``tests/_tf2math.py`` is its pure-Python reference.
+  :mod:`tfbus.geometry`; ``tfbus/_pycore.py`` is its pure-Python twin (same numbers).
 """
 
 import numpy as np

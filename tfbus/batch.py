@@ -1,14 +1,15 @@
 """Batched lookups: one path, many times (issue 12).
 
 ``lookup_transforms(core, target, source, times)`` answers ``lookup_transform`` for every
-time of an ``(N,)`` int64 nanosecond array in one call. The compiled core
-(``tfbus._ccore.batch_lookup``) resolves the path between the two frames once and
-gathers and accumulates every link for every time in C, in the same arithmetic order as
-the single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then
-``TransformAccum``), so each row is the single lookup's result: bit for bit, except that
-slerp's per-time sines may come from libmvec's vector sin
-(``tfbus._ccore._batch_lookup_vector``, if ``_BATCH_VECTOR_SIN``), a few ulp from libm's
-(rows within ~1e-14 of the single lookup; issue 12 allows 1e-12). Rows the
+time of an ``(N,)`` int64 nanosecond array in one call. The core's ``batch_lookup``
+(compiled: resolves the path between the two frames once and gathers and accumulates
+every link for every time in C; pure Python: the single walk per time) works in the same
+arithmetic order as the single lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped
+slerp, then ``TransformAccum``), so each row is the single lookup's result: bit for bit,
+except that the compiled core's ``lookup_transforms`` entry may take slerp's per-time
+sines from libmvec's vector sin (``tfbus._ccore._batch_lookup_vector``, if
+``_BATCH_VECTOR_SIN``), a few ulp from libm's (rows within ~1e-14 of the single lookup;
+issue 12 allows 1e-12). Rows the
 compiled plan cannot take (time 0, a link whose parent changed) go through the core's
 scalar walk; for a row that cannot be answered at all, the single public
 ``lookup_transform`` is asked, so the exception and its message are tf2's by
@@ -23,17 +24,24 @@ threads, no event loop; the awaitable twins are in :mod:`tfbus.batch_async`.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Literal, Protocol, cast
+from collections.abc import Callable, Sequence
+from typing import Final, Literal, Protocol, cast
 
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._ccore import CoreBase, _batch_lookup_vector
+from tfbus._backend import IMPLEMENTATION, CoreBase, batch_lookup
 from tfbus.errors import TransformException
 from tfbus.geometry import apply_transform
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
+
+#: The rows of :func:`lookup_transforms`: the compiled core's entry that may take slerp's
+#: per-time sines from libmvec (within 1e-12 of the single lookup), else the core's exact
+#: ``batch_lookup`` (the pure-Python core has only that one).
+_lookup_rows: Final[Callable[..., int]] = getattr(
+    IMPLEMENTATION, "_batch_lookup_vector", batch_lookup
+)
 
 
 class Lookups(Protocol):
@@ -255,7 +263,7 @@ def lookup_transforms(
     if not isinstance(core, CoreBase):
         raise TypeError(f"core must be a tfbus BufferCore, got {type(core).__name__}")
     ok = np.empty(n, dtype=np.int8)
-    answered = _batch_lookup_vector(core, target_frame, source_frame, t, out, stamps, ok)
+    answered = _lookup_rows(core, target_frame, source_frame, t, out, stamps, ok)
     if answered < 0:
         # An invalid or unknown frame id: the single lookup raises tf2's exception.
         core.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[0]) if n else 0))

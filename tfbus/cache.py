@@ -1,6 +1,7 @@
 """Per-link transform storage: ``TimeCache`` (dynamic) and ``StaticCache`` (static).
 
-Both are compiled (:mod:`tfbus._ccore`, Cython) and re-exported here. Semantics are tf2's
+Both come from the core (:mod:`tfbus._backend`: compiled :mod:`tfbus._ccore`, or the
+pure-Python :mod:`tfbus._pycore`) and are re-exported here. Semantics are tf2's
 (geometry2 0.7.6, ``tf2/src/cache.cpp`` and ``static_cache.cpp``):
 
 * ``insert``: refused as TF_OLD_DATA iff ``newest > stamp + cache_time``; refused as
@@ -18,11 +19,11 @@ Both are compiled (:mod:`tfbus._ccore`, Cython) and re-exported here. Semantics 
 Storage of a dynamic link: contiguous numpy arrays — stamps ``(cap,) int64`` (ns) and
 values ``(cap, 7) float64`` (tx, ty, tz, qx, qy, qz, qw) — holding the live samples
 sorted by stamp, plus a parent id per sample only once the link has had two different
-parents (64 bytes per sample otherwise), searched by binary search in C.
+parents (64 bytes per sample otherwise), searched by binary search.
 """
 
 from __future__ import annotations
 
-from tfbus._ccore import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache, format_sec
+from tfbus._backend import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache, format_sec
 
 __all__ = ["OK", "OLD_DATA", "REPEATED_DATA", "StaticCache", "TimeCache", "format_sec"]

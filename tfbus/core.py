@@ -2,8 +2,9 @@
 
 This is tf2's ``BufferCore`` (ROS 1 geometry2 0.7.6, ``tf2/src/buffer_core.cpp``)
 re-implemented with the same semantics (API and messages here; storage, insert and the
-walk compiled in ``tfbus/_ccore.pyx``), checked against vectors recorded from the real
-tf2 (``tests/data/public.jsonl.gz`` and ``tf2_regressions.jsonl``):
+walk in the core chosen by :mod:`tfbus._backend`: compiled from ``tfbus/_ccore.pyx``, or
+its pure-Python twin ``tfbus/_pycore.py``, bit for bit the same), checked against vectors
+recorded from the real tf2 (``tests/data/public.jsonl.gz`` and ``tf2_regressions.jsonl``):
 
 * ``lookup_transform(target, source, t)`` returns the pose of ``source`` in ``target``
   (it maps points from source into target coordinates); ``header.stamp`` is the time used.
@@ -30,7 +31,8 @@ from collections.abc import Set as AbstractSet
 from numbers import Real
 from typing import Final, NamedTuple
 
-from tfbus._ccore import (
+from tfbus._backend import (
+    COMPILED,
     CONNECTIVITY_ERROR,
     EXTRAPOLATION_ERROR,
     INVALID_ARGUMENT,
@@ -61,7 +63,15 @@ from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vect
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS, Duration, Time
 
-__all__ = ["MAX_GRAPH_DEPTH", "BatchResult", "BufferCore", "FrameInfo", "SetResult", "Tf7"]
+__all__ = [
+    "COMPILED",
+    "MAX_GRAPH_DEPTH",
+    "BatchResult",
+    "BufferCore",
+    "FrameInfo",
+    "SetResult",
+    "Tf7",
+]
 
 logger = logging.getLogger("tfbus.core")
 
@@ -151,8 +161,9 @@ class BufferCore(BatchLookupMixin, CoreBase):
     ``/`` (tf2 ``stripSlash``); queries reject ids that start with ``/``. Not thread-safe:
     use it from one thread (or one event loop), as tfbus does.
 
-    Storage, insert, the walk and building results are compiled (:mod:`tfbus._ccore`,
-    Cython) and report what they did as return values; this class turns those into
+    Storage, insert, the walk and building results are in the core (compiled from
+    :mod:`tfbus._ccore`, Cython, or the pure-Python :mod:`tfbus._pycore`; ``COMPILED``
+    says which) and report what they did as return values; this class turns those into
     tf2's messages, exceptions and (count-limited) log lines.
     """
 
@@ -438,7 +449,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
 
         Computed as ``lookup(target ← fixed @ target_time) ∘ lookup(fixed ← source @
         source_time)`` through rotation matrices, as tf2 does, so the returned rotation is
-        unit-norm (:func:`tfbus._ccore.compose_full`). ``header.stamp`` is the stamp of
+        unit-norm (``compose_full`` of the core). ``header.stamp`` is the stamp of
         the second leg (target at target_time).
 
         Raises:

@@ -17,11 +17,12 @@ Formulas:
 * :func:`compose`, :func:`inverse`, :func:`rotate_vectors`, :func:`apply_transform` and
   :func:`quat_multiply` evaluate tf2's expressions (``tf2/LinearMath/Quaternion.h``
   ``operator*`` and ``quatRotate``, ``tf2/src/buffer_core.cpp`` ``TransformAccum``) in the
-  same order as :mod:`tfbus._ccore`'s scalar math: row by row, results are bit-for-bit equal to the
+  same order as the core's scalar math (:mod:`tfbus._ccore` or :mod:`tfbus._pycore`): row
+  by row, results are bit-for-bit equal to the
   scalar ones that :class:`~tfbus.core.BufferCore` computes. One quaternion against many
   vectors or points uses the equivalent 3x3 matrix instead (KDL's
   ``Rotation::Quaternion``, as tf2_geometry_msgs), ~5x faster and equal within a few ulp.
-* :func:`slerp` *is* tf2's ``Quaternion::slerp`` (:func:`tfbus._ccore.slerp`);
+* :func:`slerp` *is* tf2's ``Quaternion::slerp`` (the core's ``slerp``);
   :func:`slerp_batch` repeats it with numpy and agrees to within a few ulp (numpy's
   ``arccos`` may round differently from the C library's ``acos``).
 * Matrices and Euler angles go through transforms3d (``quaternions.quat2mat`` /
@@ -47,7 +48,7 @@ from numpy.typing import NDArray
 from transforms3d import euler as _t3d_euler
 from transforms3d import quaternions as _t3d_quat
 
-from tfbus import _ccore
+from tfbus import _backend as _core
 from tfbus.messages import (
     Point,
     PointStamped,
@@ -343,7 +344,7 @@ def slerp(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: float) -> Quaternion:
             raise ValueError(f"{name} must have shape (4,), got {arr.shape}")
     ax, ay, az, aw = (float(c) for c in a)
     bx, by, bz, bw = (float(c) for c in b)
-    return Quaternion(*_ccore.slerp(ax, ay, az, aw, bx, by, bz, bw, float(ratio)))
+    return Quaternion(*_core.slerp(ax, ay, az, aw, bx, by, bz, bw, float(ratio)))
 
 
 def slerp_batch(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: npt.ArrayLike) -> Array:
@@ -557,7 +558,7 @@ def _point_through(
 ) -> tuple[float, float, float]:
     tr = ts.transform.translation
     q = ts.transform.rotation
-    rx, ry, rz = _ccore.quat_rotate(q.x, q.y, q.z, q.w, x, y, z)
+    rx, ry, rz = _core.quat_rotate(q.x, q.y, q.z, q.w, x, y, z)
     return rx + tr.x, ry + tr.y, rz + tr.z
 
 
@@ -596,7 +597,7 @@ def do_transform_vector3(vector: Vector3Stamped, transform: TransformStamped) ->
     Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(Vector3Stamped)``.
     """
     q = transform.transform.rotation
-    x, y, z = _ccore.quat_rotate(q.x, q.y, q.z, q.w, *vector.vector)
+    x, y, z = _core.quat_rotate(q.x, q.y, q.z, q.w, *vector.vector)
     return Vector3Stamped(transform.header, Vector3(x, y, z))
 
 
@@ -617,5 +618,5 @@ def do_transform_pose(pose: PoseStamped, transform: TransformStamped) -> PoseSta
     x, y, z = _point_through(transform, *p.position)
     q = transform.transform.rotation
     o = p.orientation
-    qx, qy, qz, qw = _ccore.quat_multiply(q.x, q.y, q.z, q.w, o.x, o.y, o.z, o.w)
+    qx, qy, qz, qw = _core.quat_multiply(q.x, q.y, q.z, q.w, o.x, o.y, o.z, o.w)
     return PoseStamped(transform.header, Pose(Point(x, y, z), Quaternion(qx, qy, qz, qw)))

@@ -37,7 +37,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._ccore import apply_transforms, lerp_rows, slerp_rows
+from tfbus._backend import apply_transforms, lerp_rows, slerp_rows
 from tfbus.buffer import Buffer
 from tfbus.core import BufferCore
 from tfbus.messages import Header

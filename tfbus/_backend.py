@@ -1,0 +1,112 @@
+"""The one place that chooses tfbus's core: compiled (:mod:`tfbus._ccore`, Cython) or
+pure Python (:mod:`tfbus._pycore`), same behaviour bit for bit.
+
+* The compiled core is loaded when it was built (wheels and installs with a C compiler).
+* The pure-Python core is loaded when the compiled module is absent (an install without
+  a C compiler, or with ``TFBUS_NO_EXTENSIONS=1``), or when the environment variable
+  ``TFBUS_PURE_PYTHON`` is set (to anything but ``""`` / ``"0"``) at import time: the
+  test suite uses that to run the tf2 conformance corpus against both cores.
+
+A compiled module that exists but fails to import (an ABI mismatch, a broken build) is
+an error, never a silent fallback. ``COMPILED`` says which core is loaded (re-exported as
+``tfbus.core.COMPILED``). Every other module imports the core's names from here.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from types import ModuleType
+from typing import TYPE_CHECKING, Final
+
+__all__ = [
+    "COMPILED",
+    "CONNECTIVITY_ERROR",
+    "ENV_PURE_PYTHON",
+    "EXTRAPOLATION_ERROR",
+    "INVALID",
+    "INVALID_ARGUMENT",
+    "LOOKUP_ERROR",
+    "MAX_GRAPH_DEPTH",
+    "NO_ERROR",
+    "OK",
+    "OLD_DATA",
+    "REPEATED_DATA",
+    "UNKNOWN_FRAME",
+    "CoreBase",
+    "Link",
+    "StaticCache",
+    "TimeCache",
+    "apply_transforms",
+    "batch_lookup",
+    "compose",
+    "compose_full",
+    "format_sec",
+    "inverse",
+    "lerp_rows",
+    "quat_multiply",
+    "quat_rotate",
+    "slerp",
+    "slerp_rows",
+]
+
+ENV_PURE_PYTHON: Final = "TFBUS_PURE_PYTHON"
+"""Set (not ``""`` / ``"0"``) at import time: load the pure-Python core."""
+
+
+def pure_python_requested() -> bool:
+    """Whether ``TFBUS_PURE_PYTHON`` asks for the pure-Python core."""
+    return os.environ.get(ENV_PURE_PYTHON, "").strip() not in ("", "0")
+
+
+def _load() -> tuple[ModuleType, bool]:
+    """The core module to use and whether it is the compiled one. The compiled module is
+    looked for first (``find_spec``): absent, the pure core is loaded; present, it is
+    imported and any error importing it propagates."""
+    if not pure_python_requested() and importlib.util.find_spec("tfbus._ccore") is not None:
+        from tfbus import _ccore
+
+        return _ccore, True
+    from tfbus import _pycore
+
+    return _pycore, False
+
+
+IMPLEMENTATION, COMPILED = _load()
+"""The loaded core module, and whether it is the compiled one."""
+
+if TYPE_CHECKING:
+    # Both cores export the same names; the compiled core's stub is the contract.
+    from tfbus._ccore import (
+        CONNECTIVITY_ERROR,
+        EXTRAPOLATION_ERROR,
+        INVALID,
+        INVALID_ARGUMENT,
+        LOOKUP_ERROR,
+        MAX_GRAPH_DEPTH,
+        NO_ERROR,
+        OK,
+        OLD_DATA,
+        REPEATED_DATA,
+        UNKNOWN_FRAME,
+        CoreBase,
+        Link,
+        StaticCache,
+        TimeCache,
+        apply_transforms,
+        batch_lookup,
+        compose,
+        compose_full,
+        format_sec,
+        inverse,
+        lerp_rows,
+        quat_multiply,
+        quat_rotate,
+        slerp,
+        slerp_rows,
+    )
+else:
+    for _name in __all__:
+        if _name not in ("COMPILED", "ENV_PURE_PYTHON"):
+            globals()[_name] = getattr(IMPLEMENTATION, _name)
+    del _name
