@@ -250,6 +250,12 @@ def test_scalar_math_special_cases() -> None:
         lambda m: m.quat_rotate(2**2000, 0, 0, 1, 0, 0, 0),
         lambda m: m.format_sec(-5),
         lambda m: m.format_sec(1_234_567_891_234),
+        # fewer than 7 values: an IndexError from both (the compiled core read past the
+        # end of the sequence before its accessors were bounds-checked)
+        lambda m: m.compose((0.0,) * 6, (0.0,) * 7),
+        lambda m: m.compose((0.0,) * 7, ()),
+        lambda m: m.inverse([1.0, 2.0]),
+        lambda m: m.compose_full((0.0,) * 7, (1.0,) * 3),
     ]
     for case in cases:
         same(lambda c, case=case: case(CORES[c]))

@@ -43,6 +43,7 @@ conformance corpus, ``tests/test_conformance.py``).
 
 import numpy as np
 
+cimport cython
 from libc.math cimport acos, fabs, sin, sqrt
 from libc.stdint cimport INT64_MAX, int32_t, int64_t
 from libc.string cimport memcpy, memmove
@@ -639,9 +640,14 @@ def quat_rotate(double qx, double qy, double qz, double qw,
     return (r[0], r[1], r[2])
 
 
+@cython.boundscheck(True)  # a sequence shorter than 7 is an IndexError, not a crash
 def compose(a, b):
     """``a ∘ b`` of two 7-tuples ``(tx, ty, tz, qx, qy, qz, qw)`` (metres; x, y, z, w):
-    apply b, then a (tf2 ``TransformAccum::accum``)."""
+    apply b, then a (tf2 ``TransformAccum::accum``).
+
+    Raises:
+        TypeError: a component is not a real number. IndexError: fewer than 7 values.
+    """
     cdef double x[7]
     cdef double y[7]
     cdef int k
@@ -652,9 +658,14 @@ def compose(a, b):
     return (y[0], y[1], y[2], y[3], y[4], y[5], y[6])
 
 
+@cython.boundscheck(True)  # a sequence shorter than 7 is an IndexError, not a crash
 def inverse(a):
     """tf2's inverse of a 7-tuple: rotation ``conj(q)``, translation ``quatRotate(conj(q),
-    -t)`` (``TransformAccum::finalize``); exact for unit quaternions."""
+    -t)`` (``TransformAccum::finalize``); exact for unit quaternions.
+
+    Raises:
+        TypeError: a component is not a real number. IndexError: fewer than 7 values.
+    """
     cdef double r[3]
     _qrot(-a[3], -a[4], -a[5], a[6], -a[0], -a[1], -a[2], r)
     return (r[0], r[1], r[2], -a[3], -a[4], -a[5], a[6])
@@ -674,10 +685,15 @@ def slerp(double ax, double ay, double az, double aw, double bx, double by, doub
     return (q[0], q[1], q[2], q[3])
 
 
+@cython.boundscheck(True)  # a sequence shorter than 7 is an IndexError, not a crash
 def compose_full(leg2, leg1):
     """tf2's time-travel composition ``leg2 ∘ leg1`` of two 7-tuples
     (``lookupTransform`` with a fixed frame): both rotations are normalised first, as
-    ``tf2::Transform`` keeps a normalised rotation matrix, and so is the result's."""
+    ``tf2::Transform`` keeps a normalised rotation matrix, and so is the result's.
+
+    Raises:
+        TypeError: a component is not a real number. IndexError: fewer than 7 values.
+    """
     cdef double a[7]
     cdef double b[7]
     cdef double n
