@@ -324,6 +324,27 @@ async def test_deliver_many_nowait() -> None:
         assert bus.latched_statics() == TFMessage(())
 
 
+async def test_remote_delivery_while_closing_is_dropped_not_raised() -> None:
+    """A transport whose task still runs once after the bus began closing (on asyncio,
+    anyio does not cancel a task whose awaited future is already done) delivers into a
+    closed bus: dropped, no ClosedResourceError that would fail the bus's task group (seen
+    with the ROS 2 transport at the end of ``tfbus frames --bus ros2``). Before opening,
+    delivery is still a usage error."""
+    bus = Bus()
+    with pytest.raises(RuntimeError, match="not open"):
+        bus.deliver_nowait("/x", 0)
+    with pytest.raises(RuntimeError, match="not open"):
+        bus.deliver_many_nowait("/x", [0])
+    async with bus:
+        sub = bus.subscribe("/x")
+        bus.deliver_nowait("/x", 1)
+    bus.deliver_nowait("/x", 2)
+    bus.deliver_many_nowait("/x", [3, 4])
+    bus.deliver_nowait(TF_STATIC_TOPIC, TFMessage(()))
+    assert bus.statistics()["/x"].remote == 1
+    assert sub.statistics().queued <= 1
+
+
 class _FailingTransport:
     async def run(
         self, bus: Bus, *, task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED

@@ -371,11 +371,18 @@ class Bus:
         Latches ``/tf_static`` like a local publish but does not send the message back to
         the transport, and does not type-check it (a listener guards against junk).
 
+        A message that arrives once the bus is closing is dropped, not an error: the
+        transport's task is being cancelled, and on asyncio it may still run once with
+        data it had already received before its cancellation is delivered (anyio does
+        not cancel a task whose awaited future is done).
+
         Raises:
             RuntimeError: if the bus is not open yet.
-            anyio.ClosedResourceError: if the bus is closed.
         """
-        self._check_open()
+        if self._state != "open":
+            if self._state == "closed":
+                return
+            self._check_open()
         self._counters(topic).remote += 1
         self._deliver(topic, message)
 
@@ -384,9 +391,11 @@ class Bus:
 
         Raises:
             RuntimeError: if the bus is not open yet.
-            anyio.ClosedResourceError: if the bus is closed.
         """
-        self._check_open()
+        if self._state != "open":
+            if self._state == "closed":
+                return  # closing: dropped, as in deliver_nowait
+            self._check_open()
         for message in messages:
             self._counters(topic).remote += 1
             self._deliver(topic, message)
