@@ -63,8 +63,42 @@ def _ts(ns: int, frame: str, child: str, v: tuple[float, ...]) -> TransformStamp
     )
 
 
+_new = tuple.__new__  # NamedTuple construction without the generated __new__'s call
+_STR_CACHE_MAX: Final = 4096
+_STR_CACHE_KEY_MAX: Final = 256
+_strings: dict[bytes, str] = {}
+"""Frame ids seen, as UTF-8 bytes -> ``str`` (a tf stream repeats the same few names)."""
+_tails: dict[int, Callable[[bytes, int], tuple[Any, ...]]] = {}
+"""Per child-id length: ``u32 len, child bytes, 7 doubles`` in one struct call."""
+
+
+def _text(raw: bytes) -> str:
+    """``raw`` decoded as UTF-8, remembered (bounded) so a repeated frame id costs one
+    dict lookup and every message shares one ``str`` per name."""
+    text = _strings.get(raw)
+    if text is None:
+        text = raw.decode()
+        if len(raw) <= _STR_CACHE_KEY_MAX and len(_strings) < _STR_CACHE_MAX:
+            _strings[raw] = text
+    return text
+
+
+def _tail(clen: int) -> Callable[[bytes, int], tuple[Any, ...]]:
+    unpack = _tails.get(clen)
+    if unpack is None:
+        unpack = struct.Struct(f"<4x{clen}s7d").unpack_from
+        if len(_tails) < _STR_CACHE_MAX:
+            _tails[clen] = unpack
+    return unpack
+
+
 def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
+
+    Transforms whose serialized header (seq, stamp, frame id) is byte-for-byte the one
+    before share one :class:`~tfbus.messages.Header` value (a broadcaster stamps a whole
+    message at once, as tf2_ros's ``TransformBroadcaster`` does); frame ids are decoded
+    once per name (a bounded cache). Values are immutable, so sharing is invisible.
 
     Raises:
         struct.error: the payload is shorter than its contents.
@@ -77,19 +111,35 @@ def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     append = out.append
     head = _ROS1_HEAD.unpack_from
     u32 = _U32.unpack_from
-    f7 = _F7LE.unpack_from
+    tails = _tails
+    starts = buf.startswith
+    new = _new
+    prev = b""  # the previous transform's serialized header
+    header = None
     for _ in range(n):
-        _seq, sec, nsec, flen = head(buf, off)
-        off += 16
-        frame = buf[off : off + flen].decode()
-        off += flen
+        if prev and starts(prev, off):
+            off += len(prev)
+        else:
+            _seq, sec, nsec, flen = head(buf, off)
+            end = off + 16 + flen
+            header = new(
+                Header, (Time.from_ns(sec * NSEC_PER_SEC + nsec), _text(buf[off + 16 : end]))
+            )
+            prev = buf[off:end]
+            off = end
         (clen,) = u32(buf, off)
-        off += 4
-        child = buf[off : off + clen].decode()
-        off += clen
-        v = f7(buf, off)
-        off += 56
-        append(_ts(sec * NSEC_PER_SEC + nsec, frame, child, v))
+        child, x, y, z, qx, qy, qz, qw = (tails.get(clen) or _tail(clen))(buf, off)
+        off += clen + 60
+        append(
+            new(
+                TransformStamped,
+                (
+                    header,
+                    _strings.get(child) or _text(child),
+                    new(Transform, (new(Vector3, (x, y, z)), new(Quaternion, (qx, qy, qz, qw)))),
+                ),
+            )
+        )
     if off > len(buf):
         raise struct.error("message shorter than its contents")
     return out
