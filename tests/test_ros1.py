@@ -181,6 +181,53 @@ def test_fast_decoder_shares_equal_headers_only(
     assert codec.decode(bytes(raw)) == msg
 
 
+@settings(max_examples=100, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["base_link", "odom", "ab"]),
+            st.sampled_from(["c0", "c1", "cc2", "ü3"]),
+            st.sampled_from([(0, 0), (1, 2), (2**31 - 1, 999_999_999)]),
+            st.tuples(*[_finite] * 7),
+        ),
+        min_size=12,
+        max_size=40,
+    )
+)
+def test_fast_decoder_layout_cache(
+    items: list[tuple[str, str, tuple[int, int], tuple[float, ...]]],
+) -> None:
+    """Messages of 12+ transforms: the first of a layout is walked, later ones of the same
+    count and size are unpacked whole; either way the values equal rosbags'."""
+    codec = TFCodec()
+    raw = codec.encode(
+        TransformStamped(
+            Header(Time(*stamp), parent), child, Transform(Vector3(*v[:3]), Quaternion(*v[3:]))
+        )
+        for parent, child, stamp, v in items
+    )
+    for _ in range(3):
+        assert codec.decode(raw) == codec.decode_generic(raw)
+
+
+def test_fast_decoder_layout_cache_checks_every_length() -> None:
+    """A message of the same count and size as a cached layout but other name lengths
+    (frame ``abc``/child ``de`` where the layout had ``ab``/``cde``) is not misread."""
+    codec = TFCodec()
+
+    def message(parent: str, child: str) -> bytes:
+        return codec.encode(
+            [_ts("base_link", f"k{i:02d}", (i, 0, 0), Time(7)) for i in range(12)]
+            + [_ts(parent, child, (1, 2, 3), Time(8))]
+        )
+
+    first, second = message("ab", "cde"), message("abc", "de")
+    assert len(first) == len(second)
+    for raw in (first, first, second, second, first):
+        assert codec.decode(raw) == codec.decode_generic(raw)
+    assert codec.decode(second)[-1].header.frame_id == "abc"
+
+
 def test_fast_decoder_bad_utf8_after_a_cached_name() -> None:
     codec = TFCodec()
     good = codec.encode([_ts("base_link", "a", (1, 2, 3), Time(1))])
