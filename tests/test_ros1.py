@@ -228,6 +228,22 @@ def test_fast_decoder_layout_cache_checks_every_length() -> None:
     assert codec.decode(second)[-1].header.frame_id == "abc"
 
 
+def test_fast_decoder_layout_cache_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Layouts are kept for a bounded number of transforms in all (a peer sending ever new
+    layouts cannot grow it); past the bound messages are still decoded, one at a time."""
+    from tfbus.bag import decode as dec
+
+    monkeypatch.setattr(dec, "_layouts", {})
+    monkeypatch.setattr(dec, "_layout_room", 40)
+    codec = TFCodec()
+    for size in range(1, 8):  # 7 layouts of 12 transforms: room for 3
+        raw = codec.encode(_ts("a" * size, f"c{i}", (i, 0, 0), Time(1)) for i in range(12))
+        for _ in range(2):
+            assert codec.decode(raw) == codec.decode_generic(raw)
+    assert len(dec._layouts) == 3
+    assert dec._layout_room == 40 - 36
+
+
 def test_fast_decoder_bad_utf8_after_a_cached_name() -> None:
     codec = TFCodec()
     good = codec.encode([_ts("base_link", "a", (1, 2, 3), Time(1))])

@@ -93,9 +93,12 @@ def _tail(clen: int) -> Callable[[bytes, int], tuple[Any, ...]]:
     return unpack
 
 
-_LAYOUTS_MAX: Final = 256
 _LAYOUT_MIN: Final = 12  # below, the walk is as fast (measured)
 _LAYOUT_MAX: Final = 4096
+_LAYOUT_BUDGET: Final = 16384
+"""Transforms over all cached layouts (a struct costs ~0.3 kB per transform: ~5 MB at
+most, whatever a peer sends)."""
+_layout_room = _LAYOUT_BUDGET
 _GROUP: Final = 14  # values per transform: seq sec nsec flen frame clen child x y z qx qy qz qw
 _layouts: dict[tuple[int, int], tuple[Callable[[bytes], tuple[Any, ...]], tuple[int, ...]]] = {}
 """(transform count, message size) -> one struct unpacking a whole message of that
@@ -107,11 +110,11 @@ def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
 
     A publisher sends the same frames message after message, so the same layout (count,
     size and the length of every frame id): after a message of 12 to 4096 transforms was
-    decoded one transform at a time, its layout is kept (up to 256 layouts) as a single
-    :class:`struct.Struct`; a later message of the same count and size is unpacked by it
-    in one call, used only if every length field it read equals the layout's (otherwise
-    the transform-at-a-time decoder runs), and its values are built column by column
-    (:func:`_columns`). Both paths give equal values.
+    decoded one transform at a time, its layout is kept as a single :class:`struct.Struct`
+    (16384 transforms over all layouts at most); a later message of the same count and
+    size is unpacked by it in one call, used only if every length field it read equals
+    the layout's (otherwise the transform-at-a-time decoder runs), and its values are
+    built column by column (:func:`_columns`). Both paths give equal values.
 
     Raises:
         struct.error: the payload is shorter than its contents.
@@ -129,7 +132,9 @@ def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
         if values[3::_GROUP] + values[5::_GROUP] == lengths:
             return _columns(values, n)
     out = _walk_ros1(buf, n)
-    if layout is None and len(_layouts) < _LAYOUTS_MAX:
+    global _layout_room
+    if layout is None and n <= _layout_room:
+        _layout_room -= n
         _layouts[key] = _layout(buf, n)
     return out
 
