@@ -4,12 +4,16 @@ subscriber and by a tfbus process (``Bus(transport=Ros1Transport())``), same run
 Prints, per scenario (rate x frames per message x seconds): one-way latency median and
 p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and tfbus,
 their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
-(target: none lost at 100 Hz x 50 frames for 60 s). Figures only; nothing is asserted.
+(target: none lost at 100 Hz x 50 frames for 60 s), with the 1-minute load average.
+``--repeat N`` runs each scenario N times (a fresh pair of subscribers each time) and
+adds the median of the per-run figures: on a shared machine one run is noisy. Figures
+only; nothing is asserted.
 
 Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.0.1.
 
     .venv/bin/python benchmarks/bench_ros1.py           # 10 s at 1 frame, 60 s at 50 frames
     .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
+    .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 5
 """
 
 from __future__ import annotations
@@ -96,7 +100,11 @@ def pct(values: list[float], q: float) -> float:
     return s[min(len(s) - 1, int(q * len(s)))]
 
 
-def scenario(master: Master, bins: Path, rate: float, frames: int, seconds: float) -> None:
+def scenario(
+    master: Master, bins: Path, rate: float, frames: int, seconds: float
+) -> tuple[float, float, float, float, bool]:
+    """One run: prints its line; returns C++ and tfbus median and p99, and whether
+    tfbus received every transform sent."""
     cpp = master.run(str(bins / "bench_sub"))
     env = dict(master.env)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
@@ -111,8 +119,9 @@ def scenario(master: Master, bins: Path, rate: float, frames: int, seconds: floa
     t_msgs, t_tfs, t_lat = report(tfb)
     c50, c99 = statistics.median(c_lat), pct(c_lat, 0.99)
     t50, t99 = statistics.median(t_lat), pct(t_lat, 0.99)
+    load = os.getloadavg()[0]
     print(
-        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | "
+        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | load {load:4.2f} | "
         f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
         f"ratio {t50 / c50:4.2f} / {t99 / c99:4.2f} | "
         f"received C++ {c_msgs}/{sent_msgs} msgs {c_tfs}/{sent_tfs} tfs, "
@@ -120,11 +129,32 @@ def scenario(master: Master, bins: Path, rate: float, frames: int, seconds: floa
         f"({t_tfs / seconds:,.0f} transforms/s)",
         flush=True,
     )
+    return c50, c99, t50, t99, t_msgs == sent_msgs and t_tfs == sent_tfs
+
+
+def repeated(
+    master: Master, bins: Path, rate: float, frames: int, seconds: float, repeat: int
+) -> None:
+    """``repeat`` runs of one scenario, then the medians of their figures."""
+    runs = [scenario(master, bins, rate, frames, seconds) for _ in range(repeat)]
+    if repeat < 2:
+        return
+    c50, c99, t50, t99 = (statistics.median(r[i] for r in runs) for i in range(4))
+    ratio = statistics.median(r[2] / r[0] for r in runs)
+    ratio99 = statistics.median(r[3] / r[1] for r in runs)
+    print(
+        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | median of {repeat} runs | "
+        f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
+        f"ratio {ratio:4.2f} / {ratio99:4.2f} (median of per-run ratios) | "
+        f"runs with every transform received: {sum(r[4] for r in runs)}/{repeat}",
+        flush=True,
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="shorter runs")
+    parser.add_argument("--repeat", type=int, default=1, help="runs per scenario (default 1)")
     parser.add_argument("--tfbus-sub", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.tfbus_sub:
@@ -141,8 +171,8 @@ def main() -> None:
         master.start()
         try:
             print("latency median / p99, one-way, receive time - header.stamp (same run)")
-            scenario(master, bins, 100.0, 1, 5.0 if args.quick else 10.0)
-            scenario(master, bins, 100.0, 50, 10.0 if args.quick else 60.0)
+            repeated(master, bins, 100.0, 1, 5.0 if args.quick else 10.0, args.repeat)
+            repeated(master, bins, 100.0, 50, 10.0 if args.quick else 60.0, args.repeat)
         finally:
             master.stop()
 

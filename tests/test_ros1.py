@@ -55,6 +55,7 @@ from tfbus.transports.ros1 import (
     encode_header,
     ros1_transport_from_options,
 )
+from tfbus.transports.ros1.tcpros import FrameSplitter
 
 pytestmark = pytest.mark.anyio
 
@@ -139,6 +140,153 @@ def test_fast_decoder_equals_rosbags(
     ]
     raw = codec.encode(msg)
     assert codec.decode(raw) == codec.decode_generic(raw) == msg
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["base_link", "odom", "", "bäse"]),
+            _ids,
+            st.sampled_from([(0, 0), (1, 2), (2**31 - 1, 999_999_999)]),
+            st.tuples(*[_finite] * 7),
+        ),
+        max_size=12,
+    ),
+    st.integers(0, 3),
+)
+def test_fast_decoder_shares_equal_headers_only(
+    items: list[tuple[str, str, tuple[int, int], tuple[float, ...]]], seq: int
+) -> None:
+    """Runs of equal headers (few parents and stamps, so consecutive transforms often
+    share one) decode as rosbags decodes them, whatever the seq numbers; a repeated
+    message decodes the same from the string cache."""
+    codec = TFCodec()
+    msg = [
+        TransformStamped(
+            Header(Time(*stamp), parent), child, Transform(Vector3(*v[:3]), Quaternion(*v[3:]))
+        )
+        for parent, child, stamp, v in items
+    ]
+    raw = bytearray(codec.encode(msg))
+    off = 4
+    for k in range(len(msg)):  # give some transforms a nonzero header.seq
+        if k % 4 == seq:
+            struct.pack_into("<I", raw, off, 0xFF if k == 0 else k + 1)
+        (flen,) = struct.unpack_from("<I", raw, off + 12)
+        off += 16 + flen
+        (clen,) = struct.unpack_from("<I", raw, off)
+        off += 4 + clen + 56
+    assert codec.decode(bytes(raw)) == codec.decode_generic(bytes(raw)) == msg
+    assert codec.decode(bytes(raw)) == msg
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["base_link", "odom", "ab"]),
+            st.sampled_from(["c0", "c1", "cc2", "ü3"]),
+            st.sampled_from([(0, 0), (1, 2), (2**31 - 1, 999_999_999)]),
+            st.tuples(*[_finite] * 7),
+        ),
+        min_size=12,
+        max_size=40,
+    )
+)
+def test_fast_decoder_layout_cache(
+    items: list[tuple[str, str, tuple[int, int], tuple[float, ...]]],
+) -> None:
+    """Messages of 12+ transforms: the first of a layout is walked, later ones of the same
+    count and size are unpacked whole; either way the values equal rosbags'."""
+    codec = TFCodec()
+    raw = codec.encode(
+        TransformStamped(
+            Header(Time(*stamp), parent), child, Transform(Vector3(*v[:3]), Quaternion(*v[3:]))
+        )
+        for parent, child, stamp, v in items
+    )
+    for _ in range(3):
+        assert codec.decode(raw) == codec.decode_generic(raw)
+
+
+def test_fast_decoder_layout_cache_checks_every_length() -> None:
+    """A message of the same count and size as a cached layout but other name lengths
+    (frame ``abc``/child ``de`` where the layout had ``ab``/``cde``) is not misread."""
+    codec = TFCodec()
+
+    def message(parent: str, child: str) -> bytes:
+        return codec.encode(
+            [_ts("base_link", f"k{i:02d}", (i, 0, 0), Time(7)) for i in range(12)]
+            + [_ts(parent, child, (1, 2, 3), Time(8))]
+        )
+
+    first, second = message("ab", "cde"), message("abc", "de")
+    assert len(first) == len(second)
+    for raw in (first, first, second, second, first):
+        assert codec.decode(raw) == codec.decode_generic(raw)
+    assert codec.decode(second)[-1].header.frame_id == "abc"
+
+
+def test_fast_decoder_layout_cache_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Layouts are kept for a bounded number of transforms in all (a peer sending ever new
+    layouts cannot grow it); past the bound messages are still decoded, one at a time."""
+    from tfbus.bag import decode as dec
+
+    monkeypatch.setattr(dec, "_layouts", {})
+    monkeypatch.setattr(dec, "_layout_room", 40)
+    codec = TFCodec()
+    for size in range(1, 8):  # 7 layouts of 12 transforms: room for 3
+        raw = codec.encode(_ts("a" * size, f"c{i}", (i, 0, 0), Time(1)) for i in range(12))
+        for _ in range(2):
+            assert codec.decode(raw) == codec.decode_generic(raw)
+    assert len(dec._layouts) == 3
+    assert dec._layout_room == 40 - 36
+
+
+def test_fast_decoder_bad_utf8_after_a_cached_name() -> None:
+    codec = TFCodec()
+    good = codec.encode([_ts("base_link", "a", (1, 2, 3), Time(1))])
+    assert codec.decode(good)[0].header.frame_id == "base_link"
+    bad = good.replace(b"base_link", b"base_lin\xff")
+    with pytest.raises(ValueError, match="UnicodeDecodeError"):
+        codec.decode(bad)
+    with pytest.raises(ValueError, match="malformed"):
+        codec.decode(good[:-1])
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.binary(max_size=70), min_size=1, max_size=20),
+    st.lists(st.integers(1, 90), min_size=1, max_size=40),
+)
+def test_frame_splitter_any_chunking(payloads: list[bytes], cuts: list[int]) -> None:
+    """Frames come out whole and in order however the byte stream is cut."""
+    out: list[bytes] = []
+    splitter = FrameSplitter(out.append, 100, 100)
+    data = b"".join(struct.pack("<I", len(p)) + p for p in payloads)
+    i = k = 0
+    while i < len(data):
+        step = cuts[k % len(cuts)]
+        splitter.feed(data[i : i + step])
+        i += step
+        k += 1
+    assert out == payloads
+
+
+def test_frame_splitter_limits() -> None:
+    """The first frame (connection header) has its own limit; an oversized length raises
+    after the whole frames before it were handed on, without waiting for its bytes."""
+    out: list[bytes] = []
+    splitter = FrameSplitter(out.append, 4, 10)
+    with pytest.raises(ValueError, match="connection header of 5 bytes"):
+        splitter.feed(struct.pack("<I", 5))
+    assert out == []
+    splitter = FrameSplitter(out.append, 4, 10)
+    data = struct.pack("<I", 4) + b"head" + struct.pack("<I", 10) + b"x" * 10
+    with pytest.raises(ValueError, match="message of 11 bytes exceeds the limit of 10"):
+        splitter.feed(data + struct.pack("<I", 11))
+    assert out == [b"head", b"x" * 10]
 
 
 def test_codec_round_trip_is_exact_and_refuses_unrepresentable_stamps() -> None:
@@ -459,6 +607,50 @@ async def test_malformed_frame_closes_only_its_connection(
     finally:
         bc.stop()
     assert transport.statistics().malformed >= 1
+
+
+class _TricklePublisher(_EvilPublisher):
+    """A fake publisher that sends its header and three messages one byte per send
+    (TCP_NODELAY), so frames arrive cut anywhere, headers included."""
+
+    def _serve(self) -> None:
+        conn, _ = self.tcp.accept()
+        with conn:
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.recv(65536)
+            data = encode_header(
+                {"callerid": "/trickle", "md5sum": TF_MD5SUM, "type": "tf2_msgs/TFMessage"}
+            )
+            codec = TFCodec()
+            for k in range(3):
+                msg = codec.encode(
+                    [
+                        _ts("map", f"trickle_{k}", (k, 0, 0), Time(1)),
+                        _ts("map", "x", (0, 0, 0), Time(2)),
+                    ]
+                )
+                data += struct.pack("<I", len(msg)) + msg
+            for i in range(len(data)):
+                conn.sendall(data[i : i + 1])
+            self.served.set()
+            conn.settimeout(5.0)
+            try:
+                while conn.recv(4096):
+                    pass
+            except OSError:
+                pass
+
+
+async def test_frames_cut_anywhere_are_reassembled(master: Master) -> None:
+    transport = Ros1Transport(master_uri=master.uri)
+    buffer = Buffer(cache_time=10.0)
+    async with Bus(transport=transport) as bus, TransformListener(buffer, bus):
+        with _TricklePublisher(master, b""):
+            for k in range(3):
+                await buffer.wait_for_transform("map", f"trickle_{k}", Time(0), timeout=40.0)
+    stats = transport.statistics()
+    assert stats.malformed == 0
+    assert stats.received >= 3
 
 
 async def test_latched_static_set_is_served_to_each_new_subscriber(master: Master) -> None:

@@ -13,8 +13,9 @@ into :class:`~tfbus.errors.BagReadError`.
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from contextlib import suppress
+from itertools import repeat
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
@@ -63,8 +64,57 @@ def _ts(ns: int, frame: str, child: str, v: tuple[float, ...]) -> TransformStamp
     )
 
 
+_new: Callable[..., Any] = tuple.__new__  # a NamedTuple without its generated __new__
+_STR_CACHE_MAX: Final = 4096
+_STR_CACHE_KEY_MAX: Final = 256
+_strings: dict[bytes, str] = {}
+"""Frame ids seen, as UTF-8 bytes -> ``str`` (a tf stream repeats the same few names)."""
+_tails: dict[int, Callable[[bytes, int], tuple[Any, ...]]] = {}
+"""Per child-id length: ``u32 len, child bytes, 7 doubles`` in one struct call."""
+
+
+def _text(raw: bytes) -> str:
+    """``raw`` decoded as UTF-8, remembered (bounded) so a repeated frame id costs one
+    dict lookup and every message shares one ``str`` per name."""
+    text = _strings.get(raw)
+    if text is None:
+        text = raw.decode()
+        if len(raw) <= _STR_CACHE_KEY_MAX and len(_strings) < _STR_CACHE_MAX:
+            _strings[raw] = text
+    return text
+
+
+def _tail(clen: int) -> Callable[[bytes, int], tuple[Any, ...]]:
+    unpack = _tails.get(clen)
+    if unpack is None:
+        unpack = struct.Struct(f"<4x{clen}s7d").unpack_from
+        if len(_tails) < _STR_CACHE_MAX:
+            _tails[clen] = unpack
+    return unpack
+
+
+_LAYOUT_MIN: Final = 12  # below, the walk is as fast (measured)
+_LAYOUT_MAX: Final = 4096
+_LAYOUT_BUDGET: Final = 16384
+"""Transforms over all cached layouts (a struct costs ~0.3 kB per transform: ~5 MB at
+most, whatever a peer sends)."""
+_layout_room = _LAYOUT_BUDGET
+_GROUP: Final = 14  # values per transform: seq sec nsec flen frame clen child x y z qx qy qz qw
+_layouts: dict[tuple[int, int], tuple[Callable[[bytes], tuple[Any, ...]], tuple[int, ...]]] = {}
+"""(transform count, message size) -> one struct unpacking a whole message of that
+layout, and the frame id lengths then child id lengths it assumes."""
+
+
 def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
+
+    A publisher sends the same frames message after message, so the same layout (count,
+    size and the length of every frame id): after a message of 12 to 4096 transforms was
+    decoded one transform at a time, its layout is kept as a single :class:`struct.Struct`
+    (16384 transforms over all layouts at most); a later message of the same count and
+    size is unpacked by it in one call, used only if every length field it read equals
+    the layout's (otherwise the transform-at-a-time decoder runs), and its values are
+    built column by column (:func:`_columns`). Both paths give equal values.
 
     Raises:
         struct.error: the payload is shorter than its contents.
@@ -72,24 +122,116 @@ def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     """
     buf = bytes(raw)
     (n,) = _U32.unpack_from(buf, 0)
+    if n < _LAYOUT_MIN or n > _LAYOUT_MAX:
+        return _walk_ros1(buf, n)
+    key = (n, len(buf))
+    layout = _layouts.get(key)
+    if layout is not None:
+        unpack, lengths = layout
+        values = unpack(buf)
+        if values[3::_GROUP] + values[5::_GROUP] == lengths:
+            return _columns(values, n)
+    out = _walk_ros1(buf, n)
+    global _layout_room
+    if layout is None and n <= _layout_room:
+        _layout_room -= n
+        _layouts[key] = _layout(buf, n)
+    return out
+
+
+def _layout(buf: bytes, n: int) -> tuple[Callable[[bytes], tuple[Any, ...]], tuple[int, ...]]:
+    """The struct of a whole message shaped like ``buf`` (already decoded, so whole)."""
+    frames, children, parts = [], [], ["<4x"]
+    off = 4
+    for _ in range(n):
+        (flen,) = _U32.unpack_from(buf, off + 12)
+        off += 16 + flen
+        (clen,) = _U32.unpack_from(buf, off)
+        off += 4 + clen + 56
+        frames.append(flen)
+        children.append(clen)
+        parts.append(f"IIII{flen}sI{clen}s7d")
+    return struct.Struct("".join(parts)).unpack_from, (*frames, *children)
+
+
+def _columns(values: tuple[Any, ...], n: int) -> list[TransformStamped]:
+    """Build the transforms from one flat unpack of ``n`` groups of :data:`_GROUP`
+    values, a column at a time (``map`` over ``tuple.__new__``: no Python frame per
+    value). Transforms of one stamp and frame id (the usual message) share a Header."""
+    new = _new
+    g = _GROUP
+    secs, nsecs, frames = values[1::g], values[2::g], values[4::g]
+    strings = _strings
+    children = [strings.get(c) or _text(c) for c in values[6::g]]
+    headers: Iterable[Header]
+    if secs.count(secs[0]) == n and nsecs.count(nsecs[0]) == n and frames.count(frames[0]) == n:
+        stamp = Time.from_ns(secs[0] * NSEC_PER_SEC + nsecs[0])
+        headers = repeat(new(Header, (stamp, _text(frames[0]))), n)
+    else:
+        headers = [
+            new(Header, (Time.from_ns(sec * NSEC_PER_SEC + nsec), _text(frame)))
+            for sec, nsec, frame in zip(secs, nsecs, frames, strict=True)
+        ]
+    vectors = map(
+        new, repeat(Vector3, n), zip(values[7::g], values[8::g], values[9::g], strict=True)
+    )
+    rotations = map(
+        new,
+        repeat(Quaternion, n),
+        zip(values[10::g], values[11::g], values[12::g], values[13::g], strict=True),
+    )
+    transforms = map(new, repeat(Transform, n), zip(vectors, rotations, strict=True))
+    return list(
+        map(new, repeat(TransformStamped, n), zip(headers, children, transforms, strict=True))
+    )
+
+
+def _walk_ros1(buf: bytes, n: int) -> list[TransformStamped]:
+    """Decode the ``n`` transforms of a ROS 1 TFMessage, one after the other.
+
+    Transforms whose serialized header (seq, stamp, frame id) is byte-for-byte the one
+    before share one :class:`~tfbus.messages.Header` value (a broadcaster stamps a whole
+    message at once, as tf2_ros's ``TransformBroadcaster`` does); frame ids are decoded
+    once per name (a bounded cache). Values are immutable, so sharing is invisible.
+
+    Raises:
+        struct.error: the payload is shorter than its contents.
+        UnicodeDecodeError: a frame id is not UTF-8.
+    """
     off = 4
     out: list[TransformStamped] = []
     append = out.append
     head = _ROS1_HEAD.unpack_from
     u32 = _U32.unpack_from
-    f7 = _F7LE.unpack_from
+    tails = _tails
+    starts = buf.startswith
+    new = _new
+    prev = b""  # the previous transform's serialized header
+    header = None
     for _ in range(n):
-        _seq, sec, nsec, flen = head(buf, off)
-        off += 16
-        frame = buf[off : off + flen].decode()
-        off += flen
+        if prev and starts(prev, off):
+            off += len(prev)
+        else:
+            _seq, sec, nsec, flen = head(buf, off)
+            end = off + 16 + flen
+            header = new(
+                Header, (Time.from_ns(sec * NSEC_PER_SEC + nsec), _text(buf[off + 16 : end]))
+            )
+            prev = buf[off:end]
+            off = end
         (clen,) = u32(buf, off)
-        off += 4
-        child = buf[off : off + clen].decode()
-        off += clen
-        v = f7(buf, off)
-        off += 56
-        append(_ts(sec * NSEC_PER_SEC + nsec, frame, child, v))
+        child, x, y, z, qx, qy, qz, qw = (tails.get(clen) or _tail(clen))(buf, off)
+        off += clen + 60
+        append(
+            new(
+                TransformStamped,
+                (
+                    header,
+                    _strings.get(child) or _text(child),
+                    new(Transform, (new(Vector3, (x, y, z)), new(Quaternion, (qx, qy, qz, qw)))),
+                ),
+            )
+        )
     if off > len(buf):
         raise struct.error("message shorter than its contents")
     return out

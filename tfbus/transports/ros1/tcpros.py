@@ -4,7 +4,7 @@ ROS 1 (de)serialisation by rosbags (ROS wiki "ROS/TCPROS", "ROS/Connection Heade
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Final
 
 from anyio.streams.buffered import BufferedByteReceiveStream
@@ -17,6 +17,7 @@ __all__ = [
     "MAX_HEADER_BYTES",
     "TF_MD5SUM",
     "TF_TYPE",
+    "FrameSplitter",
     "TFCodec",
     "decode_header",
     "encode_header",
@@ -175,6 +176,69 @@ async def read_frame(stream: BufferedByteReceiveStream, limit: int, what: str) -
     if n > limit:
         raise ValueError(f"{what} of {n} bytes exceeds the limit of {limit}")
     return await stream.receive_exactly(n)
+
+
+class FrameSplitter:
+    """TCPROS framing without I/O: bytes as they arrive go in, each whole frame (the
+    connection header first, then messages) goes to ``sink`` in order.
+
+    roscpp reads a frame as a 4-byte length, then that many bytes
+    (``TransportPublisherLink::onMessageLength`` / ``onMessage``, each a
+    ``Connection::read`` filled by ``Connection::readTransport``); here whatever one
+    receive returned is split at once, so a read of several frames costs one wake-up
+    and a frame that fits in one read is not copied into a buffer first.
+
+    Args:
+        sink: called with each frame's payload (without its length prefix); what it
+            raises propagates from :meth:`feed`, after the frames before it.
+        first_limit: largest first frame (the connection header).
+        limit: largest later frame (a message).
+    """
+
+    __slots__ = ("_buf", "_first", "_limit", "_need", "_rest", "_sink")
+
+    def __init__(self, sink: Callable[[bytes], object], first_limit: int, limit: int) -> None:
+        self._sink = sink
+        self._first = True
+        self._limit = first_limit
+        self._rest = limit
+        self._buf = bytearray()
+        self._need = 4  # bytes the buffered frame needs before it can be split
+
+    def feed(self, data: bytes) -> None:
+        """Add received bytes; hand every frame they complete to ``sink``.
+
+        Raises:
+            ValueError: a length prefix over the limit (after the frames before it);
+                the connection cannot be resynchronised and should be closed.
+        """
+        if self._buf:
+            self._buf += data
+            if len(self._buf) < self._need:
+                return
+            data, self._buf = bytes(self._buf), bytearray()
+        off, n = 0, len(data)
+        unpack = _U32.unpack_from
+        sink = self._sink
+        while n - off >= 4:
+            (size,) = unpack(data, off)
+            if size > self._limit:
+                what = "connection header" if self._first else "message"
+                raise ValueError(f"{what} of {size} bytes exceeds the limit of {self._limit}")
+            end = off + 4 + size
+            if end > n:
+                self._need = end - off
+                break
+            if self._first:
+                self._first = False
+                self._limit = self._rest
+            payload = data[off + 4 : end]
+            off = end
+            sink(payload)
+        else:
+            self._need = 4
+        if off < n:
+            self._buf += data[off:] if off else data
 
 
 def frame(payload: bytes) -> bytes:
