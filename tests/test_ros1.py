@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 import signal
 import socket
+import statistics
 import struct
 import subprocess
 import threading
@@ -380,7 +381,9 @@ async def test_tfbus_broadcaster_feeds_cpp_listener_at_100_hz(
             listener.stop()
             hz.stop()
         tg.cancel_scope.cancel()
-    assert 99.0 <= rates[-1] <= 101.0, rates
+    # rostopic hz times arrivals in its own (rospy) process: the median of its three
+    # reports, so that one late arrival there on a loaded machine does not decide it
+    assert 99.0 <= statistics.median(rates) <= 101.0, rates
     stats = transport.statistics()
     assert stats.sent > 0 and stats.send_errors == 0
 

@@ -17,8 +17,12 @@ What a node needs of ROS 1, and where it comes from (ROS wiki "ROS/Master_API",
   ``getSubscriptions``, ``getPublications``, ``paramUpdate``, ``shutdown``;
 * TCPROS: connection headers (``callerid``, ``topic``, ``md5sum``, ``type``,
   ``message_definition``, ``latching``, ``tcp_nodelay``), then length-prefixed messages.
-  Serialisation is rosbags' ROS 1 serialiser (``Typestore.serialize_ros1`` /
-  ``deserialize_ros1``), which also yields the message definition and its md5.
+  Messages are serialised by rosbags' ROS 1 serialiser (``Typestore.serialize_ros1``),
+  which also yields the message definition and its md5; received ones are decoded by the
+  bag reader's struct decoder (:func:`tfbus.bag.decode.decode_ros1`, tested equal to
+  rosbags' ``deserialize_ros1``). On asyncio, frames are split, decoded and delivered in
+  the event loop's read callback (an :class:`asyncio.BufferedProtocol`), as roscpp reads
+  in its poll thread; on trio, in the connection's task.
 
 Behaviour, as tf2_ros and roscpp do it:
 

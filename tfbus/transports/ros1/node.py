@@ -22,6 +22,7 @@ import anyio.abc
 from anyio.from_thread import BlockingPortal
 from anyio.streams.buffered import BufferedByteReceiveStream
 
+from tfbus.clock._base import running_asyncio_loop
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 
@@ -107,14 +108,6 @@ class _Outgoing:
         self.queue: deque[bytes] = deque(maxlen=queue_size)
         self.wake = anyio.Event()
         self.conn_id = 0
-
-
-def _running_asyncio_loop() -> asyncio.AbstractEventLoop | None:
-    """The running asyncio loop, or None on another anyio backend (trio)."""
-    try:
-        return asyncio.get_running_loop()
-    except RuntimeError:
-        return None
 
 
 def _set_nodelay(sock: socket.socket | None) -> None:
@@ -620,20 +613,22 @@ class Ros1Transport:
             }
         )
         try:
-            if _running_asyncio_loop() is not None:
-                await self._pump_asyncio(link, host, port, hello)
+            loop = running_asyncio_loop()  # None under trio, also in guest mode
+            if loop is not None:
+                await self._pump_asyncio(loop, link, host, port, hello)
             else:
                 await self._pump_stream(link, host, port, hello)
         finally:
             if link.conn_id:
                 self._close_conn(link.conn_id)
 
-    async def _pump_asyncio(self, link: _Inbound, host: str, port: int, hello: bytes) -> None:
+    async def _pump_asyncio(
+        self, loop: asyncio.AbstractEventLoop, link: _Inbound, host: str, port: int, hello: bytes
+    ) -> None:
         """On asyncio: an :class:`asyncio.Protocol` splits, decodes and delivers in the
         event loop's read callback (roscpp does its reads in the poll thread,
         ``Connection::readTransport``), so a message costs no task wake-up before the
         subscriber's own; this task only waits for the connection to end."""
-        loop = asyncio.get_running_loop()
         timeout = max(self._timeout, 1.0)
         ended = anyio.Event()
         with anyio.fail_after(timeout):

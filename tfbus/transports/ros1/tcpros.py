@@ -1,5 +1,6 @@
 """TCPROS for ``tf2_msgs/TFMessage``: connection headers, length-prefixed frames, and
-ROS 1 (de)serialisation by rosbags (ROS wiki "ROS/TCPROS", "ROS/Connection Header")."""
+ROS 1 serialisation by rosbags and decoding by the bag reader's struct decoder (ROS wiki
+"ROS/TCPROS", "ROS/Connection Header")."""
 
 from __future__ import annotations
 
