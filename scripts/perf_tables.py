@@ -37,6 +37,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "zenoh": ([], ["--probes", "500", "--seconds", "2"], 900),
     "ros2": ([], ["--lat-count", "100", "--flood-seconds", "2"], 1800),
     "ros1": ([], ["--quick"], 1800),
+    "sensors": ([], ["--quick"], 1800),
 }
 
 
