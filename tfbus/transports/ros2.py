@@ -329,7 +329,12 @@ class Ros2Transport:
         endpoints = self._endpoints
         if endpoints is None:
             return 0
-        return len(endpoints.readers[topic].get_matched_publications())
+        # The status's current_count, one C call: get_matched_publications() asks for the
+        # count, then for that many handles, and cyclonedds' Python binding indexes past
+        # its array when a writer matches in between (IndexError, seen in CI).
+        reader: Any = endpoints.readers[topic]  # the status getter is not annotated
+        status = reader.get_subscription_matched_status()
+        return int(status.current_count)
 
     def statistics(self) -> Ros2Statistics:
         """A copy of the counters (see :class:`Ros2Statistics`)."""
