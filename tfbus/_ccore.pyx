@@ -1993,6 +1993,22 @@ cdef enum:
     _W_ABANDONED = 2
 
 
+cdef inline int _bstore(_BJob* job, Py_ssize_t rb, int m, const signed char* good,
+                        double block[7][_BLOCK]) noexcept nogil:
+    """Write the good rows of a block (rows ``rb`` .. ``rb + m - 1``) to ``job.out`` and
+    mark them answered; how many were written."""
+    cdef int j, k, n = 0
+    cdef double* o
+    for j in range(m):
+        if good[j]:
+            o = &job.out[(rb + j) * 7]
+            for k in range(7):
+                o[k] = block[k][j]
+            job.ok[rb + j] = 1
+            n += 1
+    return n
+
+
 cdef Py_ssize_t _brows(_BJob* job) noexcept nogil:
     """The per-time loop of :func:`batch_lookup`: claims chunks of ``_CHUNK`` rows until
     none is left and walks each in blocks of ``_BLOCK`` (no GIL). Every chunk starts from
@@ -2007,7 +2023,6 @@ cdef Py_ssize_t _brows(_BJob* job) noexcept nogil:
     cdef signed char good[_BLOCK]
     cdef Py_ssize_t r0, r1, rb, answered = 0, n_rows = job.n_rows
     cdef const int64_t* times = job.times
-    cdef double* o
     cdef int m, j, ns = job.ns, nt = job.nt
     cdef bint src_early = job.src_early, tgt_early = job.tgt_early
     memset(st, 0, sizeof(st))
@@ -2026,35 +2041,13 @@ cdef Py_ssize_t _brows(_BJob* job) noexcept nogil:
                 good[j] = times[rb + j] != 0
             _bchain(src_links, ns, times + rb, m, acc_s, st, good, job.vector_sin)
             if src_early:
-                for j in range(m):
-                    if good[j]:
-                        o = &job.out[(rb + j) * 7]
-                        o[0] = acc_s[0][j]
-                        o[1] = acc_s[1][j]
-                        o[2] = acc_s[2][j]
-                        o[3] = acc_s[3][j]
-                        o[4] = acc_s[4][j]
-                        o[5] = acc_s[5][j]
-                        o[6] = acc_s[6][j]
-                        job.ok[rb + j] = 1
-                        answered += 1
+                answered += _bstore(job, rb, m, good, acc_s)
             else:
                 _bchain(tgt_links, nt, times + rb, m, acc_t, st, good, job.vector_sin)
                 if tgt_early:
                     _bidentity_block(acc_s)  # _cwalk's TargetParentOfSource: source = I
                 tfb_full_block(acc_s, acc_t, res)
-                for j in range(m):
-                    if good[j]:
-                        o = &job.out[(rb + j) * 7]
-                        o[0] = res[0][j]
-                        o[1] = res[1][j]
-                        o[2] = res[2][j]
-                        o[3] = res[3][j]
-                        o[4] = res[4][j]
-                        o[5] = res[5][j]
-                        o[6] = res[6][j]
-                        job.ok[rb + j] = 1
-                        answered += 1
+                answered += _bstore(job, rb, m, good, res)
             rb += _BLOCK
     return answered
 
