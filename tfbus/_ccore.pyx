@@ -1491,6 +1491,7 @@ cdef extern from *:
     #endif
 
     #include <math.h>
+    #include <stdint.h>
     #if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)
     #define TFB_X86_64 1
     #include <immintrin.h>
@@ -1540,12 +1541,13 @@ cdef extern from *:
     /* The SIMD kernels this CPU runs (x86-64: AVX2), checked once at import. */
     /* slerp's per-time sines in vector lanes: glibc's libmvec (_ZGVdN4v_sin, the AVX2
        variant of sin in the x86-64 vector function ABI; at most 4 ulp from the correctly
-       rounded sine, where libm's scalar sin is within 1 ulp), looked up at import with
-       dlopen/dlsym, so the extension neither links nor requires it. Without it (other
-       libc, other CPU), libm's sin is called per lane, bit for bit the scalar walk's. */
+       rounded sine, where libm's scalar sin is within 1 ulp). Its address is found at
+       import by ctypes (_libmvec_sin_address below) and handed over with tfb_vsin_set,
+       so the extension neither links libmvec nor calls dlopen itself (whose glibc 2.34
+       symbol version would lift the wheel's manylinux tag). Without it (other libc,
+       other CPU), libm's sin is called per lane, bit for bit the scalar walk's. */
     static int tfb_vsin_ok = 0;
     #if defined(TFB_X86_64) && defined(__linux__)
-    #include <dlfcn.h>
     typedef __m256d (*tfb_vsin_fn)(__m256d);
     static tfb_vsin_fn tfb_vsin = NULL;
     static __attribute__((target("avx2"))) void tfb_sin_lanes_vec(const double* x, double* y) {
@@ -1553,16 +1555,10 @@ cdef extern from *:
         for (j = 0; j < 2 * TFB_BLOCK; j += 4)
             _mm256_storeu_pd(y + j, tfb_vsin(_mm256_loadu_pd(x + j)));
     }
-    static void tfb_vsin_lookup(void) {
-        void* lib;
-        if (tfb_vsin != NULL)
-            return;
-        lib = dlopen("libmvec.so.1", RTLD_NOW | RTLD_LOCAL);  /* kept open */
-        if (lib != NULL)
-            tfb_vsin = (tfb_vsin_fn)dlsym(lib, "_ZGVdN4v_sin");
-    }
+    static void tfb_vsin_set(size_t address) { tfb_vsin = (tfb_vsin_fn)(uintptr_t)address; }
     #define TFB_SIN_LANES_VEC(x, y) (tfb_vsin_ok ? (tfb_sin_lanes_vec(x, y), 1) : 0)
     #else
+    static void tfb_vsin_set(size_t address) { (void)address; }
     #define TFB_SIN_LANES_VEC(x, y) 0
     #endif
 
@@ -1575,9 +1571,7 @@ cdef extern from *:
     #endif
     #if defined(TFB_X86_64) && defined(__linux__)
         /* libmvec's AVX2 variants also use FMA instructions */
-        if (tfb_avx2 && __builtin_cpu_supports("fma"))
-            tfb_vsin_lookup();
-        tfb_vsin_ok = tfb_avx2 && tfb_vsin != NULL;
+        tfb_vsin_ok = tfb_avx2 && __builtin_cpu_supports("fma") && tfb_vsin != NULL;
     #endif
         return tfb_vsin_ok;
     }
@@ -1585,6 +1579,7 @@ cdef extern from *:
     int tfb_avx2
     int tfb_vsin_ok
     int tfb_simd_init() noexcept nogil
+    void tfb_vsin_set(size_t address) noexcept nogil
     bint TFB_SIN_LANES_VEC(const double* x, double* y) noexcept nogil
     bint TFB_INTERP_RUN_AVX2(const double* a, const double* bq, double d, const double* rr,
                              const double* sy, int j0, int j1,
@@ -1601,6 +1596,22 @@ cdef enum:
     _CHUNK = 512  # rows a thread claims at a time (a multiple of _BLOCK)
 
 
+def _libmvec_sin_address():
+    """The address of glibc libmvec's ``_ZGVdN4v_sin`` (the x86-64 vector function ABI's
+    AVX2 sine of 4 doubles), or 0 where there is none (another libc, another system).
+    Found with :mod:`ctypes` (``dlopen``/``dlsym``), which keeps the library loaded."""
+    import ctypes
+
+    global _LIBMVEC
+    try:
+        _LIBMVEC = ctypes.CDLL("libmvec.so.1")
+        return ctypes.cast(_LIBMVEC._ZGVdN4v_sin, ctypes.c_void_p).value or 0
+    except (OSError, AttributeError):
+        return 0
+
+
+_LIBMVEC = None
+tfb_vsin_set(<size_t>_libmvec_sin_address())
 _BATCH_VECTOR_SIN = bool(tfb_simd_init())
 """True when :func:`_batch_lookup_vector` takes slerp's per-time sines from glibc's libmvec
 (``_ZGVdN4v_sin``, AVX2): its rows then agree with ``lookup_transform`` to within a few
