@@ -300,3 +300,70 @@ def test_compressed_ros1_bag_cut_is_salvaged(tmp_path: Path, compression: str) -
     assert isinstance(err, BagReadError), repr(err)
     assert len(full) // 4 < len(got) < len(full) and got == full[: len(got)]
     assert err.offset is not None and err.offset < len(data) // 2
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+def _index_entry_flipped(tmp_path: Path, row: int, bit: int) -> tuple[Path, list[BagMessage]]:
+    """A 20-message .db3 whose timestamp index entry for messages row ``row`` has bit
+    ``bit`` of its timestamp's serial type flipped. The entry is found in the file as the
+    second copy of the row's 8-byte big-endian timestamp (the first is in the table row),
+    preceded by the record header ``[size, type of timestamp, type of rowid]`` (sqlite's
+    file format, sqlite.org/fileformat2.html#record_format)."""
+    import sqlite3
+
+    path = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:20])["sqlite3"]
+    messages = list(read_messages(path))
+    with sqlite3.connect(path) as db:
+        (stamp,) = db.execute("SELECT timestamp FROM messages WHERE id = ?", (row,)).fetchone()
+    data = bytearray(path.read_bytes())
+    raw = stamp.to_bytes(8, "big")
+    first = data.index(raw)
+    entry = data.index(raw, first + 1)
+    assert data[entry - 2] == 6  # serial type 6: a 64-bit integer
+    data[entry - 2] ^= 1 << bit
+    bad = tmp_path / "flipped.db3"
+    bad.write_bytes(bytes(data))
+    return bad, messages
+
+
+def test_issue21_item8_db3_timestamp_read_as_a_blob_is_a_bag_read_error(tmp_path: Path) -> None:
+    """Issue 21, item 8: one flipped bit makes a timestamp a 1-byte BLOB (serial type 14):
+    read_messages leaked TypeError ('<=' between int and bytes); now the 9 messages
+    before it in time order, then a BagReadError naming the file and the row."""
+    bad, messages = _index_entry_flipped(tmp_path, 10, 3)
+    got, err = read_all(bad)
+    assert isinstance(err, BagReadError), repr(err)
+    assert got == messages[:9]
+    assert "flipped.db3" in str(err) and "messages row 10 of flipped.db3" in err.reason
+    assert "BLOB" in err.reason and "\n" not in str(err)
+
+
+def test_issue21_item8_db3_timestamp_out_of_order_is_a_bag_read_error(tmp_path: Path) -> None:
+    """Issue 21, item 8: a flip making the timestamp a 32-bit integer (serial type 4) read
+    the message "cleanly" at bag time 325100004 ns, out of order; a time-ordered read
+    going backwards is now damage."""
+    bad, messages = _index_entry_flipped(tmp_path, 10, 1)
+    got, err = read_all(bad)
+    assert isinstance(err, BagReadError), repr(err)
+    assert got == messages[:9] and "earlier than the previous message" in err.reason
+
+
+@pytest.mark.parametrize("command", [["bag-info"], ["echo", "world", "turtle1"], ["monitor"]])
+def test_issue21_item8_cli_on_a_flipped_db3_is_one_line(tmp_path: Path,
+                                                         command: list[str]) -> None:
+    """bag-info, echo and monitor on the flipped file printed a traceback; now one line
+    naming the file (exit status 1), after what was readable."""
+    from click.testing import CliRunner
+
+    from tfbus.cli import cli
+
+    bad, _ = _index_entry_flipped(tmp_path, 10, 3)
+    args = [command[0], str(bad), *command[1:]] if command[0] == "bag-info" else [
+        command[0], "--bag", str(bad), *command[1:]]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert "Traceback" not in result.stderr
+    lines = [x for x in result.stderr.splitlines() if "flipped.db3" in x]
+    assert len(lines) == 1 and "messages row 10" in lines[0], result.stderr
+    assert result.exit_code == 1

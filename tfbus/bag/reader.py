@@ -14,6 +14,7 @@ naming the file, the byte offset where known and the last bag time read.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import mmap
 import sqlite3
@@ -282,6 +283,40 @@ def locate_message(
     return None
 
 
+def _kind(value: object) -> str:
+    """What a damaged bag time is, for a message: ``a BLOB b'\\x01'``, ``a REAL 2.5``."""
+    kind = {bytes: "a BLOB", float: "a REAL", str: "a TEXT", type(None): "NULL"}.get(
+        type(value), f"a {type(value).__name__}")
+    text = repr(value)
+    return kind if value is None else f"{kind} {text[:40]}{'...' if len(text) > 40 else ''}"
+
+
+def _db3_files(p: Path) -> list[Path]:
+    """The sqlite3 files of a ROS 2 bag: ``p`` itself, or the ``*.db3`` in its folder."""
+    return [p] if p.is_file() else sorted(p.glob("*.db3"))
+
+
+def _sqlite_record(p: Path, fmt: BagFormat, stamp: object, raw: bytes | memoryview) -> str:
+    """`` (messages row N of FILE)``: the sqlite3 row holding the message with bag time
+    ``stamp`` and payload ``raw``, or ``""`` when it is not found (or not sqlite3)."""
+    if fmt is not BagFormat.SQLITE3:
+        return ""
+    want = bytes(raw)
+    for f in _db3_files(p):
+        try:
+            with contextlib.closing(sqlite3.connect(f"{f.resolve().as_uri()}?immutable=1",
+                                                    uri=True)) as db:
+                rows = db.execute("SELECT id, data FROM messages WHERE timestamp IS ? LIMIT 100",
+                                  (stamp,)).fetchall() or db.execute(
+                    "SELECT id, data FROM messages WHERE data = ? LIMIT 1", (want,)).fetchall()
+        except (sqlite3.Error, OSError, ValueError, OverflowError):
+            continue
+        for rowid, data in rows:
+            if data == want:
+                return f" (messages row {rowid} of {f.name})"
+    return ""
+
+
 def _read(
     p: Path, fmt: BagFormat, topics: frozenset[str], lo: int | None, hi: int | None
 ) -> Iterator[BagMessage]:
@@ -299,6 +334,10 @@ def _read(
 
     items = _indexed(p, fmt, topics, lo, hi)
     salvaging = False
+    # One .db3 is read in timestamp order (an ORDER BY on its index): a time going
+    # backwards is damage. (Several files are read one after the other; bags written
+    # record by record are read in file order.)
+    ordered = fmt is BagFormat.SQLITE3 and len(_db3_files(p)) == 1
     while True:
         try:
             item = next(items, None)
@@ -313,11 +352,19 @@ def _read(
                 raise fail(reason, locate_damage(p, fmt)) from None
             # No usable index / summary (a truncated file): read record by record.
             log.info("%s: index unreadable (%s); reading record by record", p, reason)
-            items, salvaging = fallback, True
+            items, salvaging, ordered = fallback, True, False
             continue
         if item is None:
             return
         stamp, src, raw, offset = item
+        if type(stamp) is not int:  # sqlite3: a damaged record or index (issue 21, item 8)
+            raise fail(f"corrupt {src.topic} message: its bag time is {_kind(stamp)}, not an "
+                       f"integer{_sqlite_record(p, fmt, stamp, raw)}", offset) from None
+        if ordered and last is not None and stamp < last:
+            raise fail(f"corrupt {src.topic} message: bag time {stamp} ns is earlier than "
+                       f"the previous message's, {last} ns, in a time-ordered read (a damaged "
+                       f"timestamp index)"
+                       f"{_sqlite_record(p, fmt, stamp, raw)}", offset) from None
         try:
             message = BagMessage(Time.from_ns(stamp), src.topic, TFMessage(src.decode(raw)),
                                  src.authority)
