@@ -181,7 +181,7 @@ def test_item6_dot_text_quotes_every_id(hostile_bag: Path) -> None:
 
     dot = frames_dot(load_buffer(hostile_bag))
     assert '\tworld -> "cam:left" [label=' in dot
-    assert '\tworld -> "back\\\\" [label=' in dot
+    assert '\tworld -> "back\\\\\\\\" [label=' in dot  # drawn back\\ (issue 21)
     assert '\tworld -> "<script>" [label=' in dot
     assert "\x1b" not in dot
 
@@ -512,3 +512,25 @@ def test_fuzz_every_command_on_hostile_ids(hostile_bag: Path, tmp_path: Path) ->
         code, out, err = run(*args)
         _check(args, code, out, err)
         assert code == 2
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+@pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is not installed")
+def test_issue21_item11_escaped_and_raw_ids_stay_two_nodes(tmp_path: Path) -> None:
+    """Issue 21, item 11: 'a\\nb' (a newline) and the text 'a\\x0ab' were both drawn
+    a\\x0ab, one DOT node for two frames (3 nodes for 4 frames); each frame is one node,
+    drawn as Python writes it, and the tree renders."""
+    ids = ["a\nb", "a\\x0ab", "c\\", "c\\\\"]
+    bag = tmp_path / "esc.bag"
+    write_bag(bag, [BagMessage(Time.from_ns(T0), "/tf",
+                               TFMessage([tf("world", i, T0) for i in ids]), "")])
+    out = tmp_path / "tree.svg"
+    code, _, err = run("frames", "--bag", str(bag), "-o", str(out))
+    assert code == 0, err
+    assert len(set(_svg_nodes(out))) == len(ids) + 2  # + world + the legend
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    drawn = [g.findtext("s:text", namespaces=ns) for g in ET.parse(out).getroot().iterfind(
+        ".//s:g", ns) if g.get("class") == "node"]
+    assert {"a\\x0ab", "a\\\\x0ab", "c\\\\", "c\\\\\\\\"} <= set(drawn)
