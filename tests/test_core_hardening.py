@@ -354,3 +354,23 @@ def test_invalid_frame_id_checks_form_only() -> None:
     )
     assert isinstance(core.invalid_frame_id(""), InvalidArgumentException)
     assert isinstance(core.invalid_frame_id(3), InvalidArgumentException)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+@pytest.mark.parametrize("time", [None, 5, 1.5, "0", 10**9])
+def test_issue21_lookup_time_of_the_wrong_type_is_a_type_error(time: Any) -> None:
+    """lookup_transform(..., time=None) (or an int) raised AttributeError: '_ns' from
+    the compiled query; every lookup now raises a TypeError naming the argument, and
+    the core goes on answering (run under both cores: TFBUS_PURE_PYTHON=1)."""
+    core = BufferCore()
+    core.set_transform(ts("child"), "a")
+    for call in (core.lookup_transform, core.try_lookup_transform, core.can_transform,
+                 core.check_transform):
+        with pytest.raises(TypeError, match=r"^time must be a tfbus\.Time .*, not "
+                                            rf"{type(time).__name__} "):
+            call("base", "child", time)
+    with pytest.raises(TypeError, match=r"time must be a tfbus\.Time"):
+        core.lookup_transform_full("base", time, "child", T, "base")
+    assert core.lookup_transform("base", "child", Time(0)).transform.translation.x == 1.0
