@@ -322,7 +322,7 @@ def test_rate_limited_log_takes_time_from_the_caller(caplog: pytest.LogCaptureFi
 
 
 def test_count_limited_log(caplog: pytest.LogCaptureFixture) -> None:
-    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=3)
+    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=3, period=0.0)  # count only
     caplog.set_level(logging.WARNING, logger="tfbus.test")
     logged = [log.log(logging.WARNING, "z %d", k) for k in range(7)]
     assert logged == [True, False, False, True, False, False, True]
@@ -374,3 +374,57 @@ def test_issue21_lookup_time_of_the_wrong_type_is_a_type_error(time: Any) -> Non
     with pytest.raises(TypeError, match=r"time must be a tfbus\.Time"):
         core.lookup_transform_full("base", time, "child", T, "base")
     assert core.lookup_transform("base", "child", Time(0)).transform.translation.x == 1.0
+
+
+def test_issue21_count_limited_log_is_limited_by_time_too(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Refusal logs were limited by count only (1 per 1000): a flood printed ~180 lines
+    a second. Now also at most one line per ``period`` seconds; the clock (injected
+    here) is read once per ``every`` calls, not on every call."""
+    now = [0.0]
+    reads = [0]
+
+    def clock() -> float:
+        reads[0] += 1
+        return now[0]
+
+    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=1000, period=5.0,
+                          clock=clock)
+    caplog.set_level(logging.WARNING, logger="tfbus.test")
+    lines = 0
+    for k in range(1_000_001):  # 10 s of a flood at 100 000 calls a second
+        now[0] = k / 100_000
+        lines += log.log(logging.WARNING, "w %d", k)
+    # at t = 0, then at the first 1000th call at or after 5 s and 10 s (count: 1000 lines)
+    assert [r.getMessage() for r in caplog.records] == [
+        "w 0",
+        "w 500000 (499999 more like this suppressed)",
+        "w 1000000 (499999 more like this suppressed)",
+    ]
+    assert lines == 3
+    assert reads[0] == 1 + 1000 + 2  # once per 1000 suppressed calls, once per line
+    with pytest.raises(ValueError):
+        CountLimitedLog(logging.getLogger("tfbus.test"), period=-1.0)
+
+
+def test_issue21_a_flood_of_refused_transforms_logs_a_few_lines(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The core's TF_REPEATED_DATA log under a flood: 50 000 repeated stamps over 10 s
+    of the core's log clock (patched) give 3 lines, not 51; every one is still
+    refused and the core goes on storing new data."""
+    import tfbus.ratelimit as ratelimit
+
+    now = [0.0]
+    monkeypatch.setattr(ratelimit, "_monotonic", lambda: now[0])
+    core = BufferCore()
+    caplog.set_level(logging.WARNING, logger="tfbus.core")
+    core.set_transform(ts("child"), "flood")
+    for k in range(50_001):
+        now[0] = k / 5000
+        core.set_transform(ts("child"), "flood")
+    lines = [r for r in caplog.records if "TF_REPEATED_DATA" in r.getMessage()]
+    assert len(lines) == 3, len(lines)
+    core.set_transform(ts("child", stamp=Time(101), x=2.0), "flood")
+    assert core.lookup_transform("base", "child", Time(0)).transform.translation.x == 2.0

@@ -1,9 +1,12 @@
 """Rate-limited logging: one helper for every component that may log the same problem
 many times a second (refused transforms, malformed messages from a peer).
 
-Layer 0: pure, synchronous, reads no clock. The caller says what time it is, in seconds
-of *its* clock (so a ``ManualClock`` drives it in tests), or uses the count-limited form,
-which needs no time at all (what the sans-I/O core uses)::
+Layer 0: pure and synchronous. The caller says what time it is, in seconds of *its*
+clock (so a ``ManualClock`` drives it in tests), or uses the count-limited form, which
+needs no time from the caller (what the sans-I/O core uses): it logs one line in every
+``every`` and, so that a flood of calls cannot print hundreds of lines a second either,
+at most one per ``period`` seconds of a monotonic clock (``time.monotonic``, read once per
+``every`` calls; injectable)::
 
     log = RateLimitedLog(logging.getLogger("tfbus.listener"), period=5.0)
     log.log(clock.now().to_sec(), logging.WARNING, "ignoring a %s on %s", kind, topic)
@@ -20,6 +23,9 @@ logged for that group says how many were suppressed. Like ROS's ``ROS_WARN_THROT
 from __future__ import annotations
 
 import logging
+import math
+import time
+from collections.abc import Callable
 
 __all__ = ["CountLimitedLog", "RateLimitedLog"]
 
@@ -69,39 +75,59 @@ class RateLimitedLog:
         return True
 
 
+_monotonic = time.monotonic  # CountLimitedLog's default clock (a module name: tests patch it)
+
+
 class CountLimitedLog:
-    """The first line of each format string, then one in every ``every`` (no clock).
+    """The first line of each format string, then one in every ``every`` calls, and at
+    most one per ``period`` seconds (the caller passes no time).
 
     Args:
         logger: where lines go.
         every: log one line per ``every`` calls with the same format string (>= 1).
+        period: seconds that must pass between two lines of the same format string
+            (>= 0; 0 limits by count only). The clock is read when a line is logged and
+            once per ``every`` suppressed calls, not on every call.
+        clock: seconds of a monotonic clock (default ``time.monotonic``).
 
     Raises:
-        ValueError: ``every`` is smaller than 1.
+        ValueError: ``every`` is smaller than 1, or ``period`` negative or not finite.
     """
 
-    __slots__ = ("_logger", "_suppressed", "every")
+    __slots__ = ("_clock", "_last", "_logger", "_suppressed", "every", "period")
 
-    def __init__(self, logger: logging.Logger, every: int = 1000) -> None:
+    def __init__(self, logger: logging.Logger, every: int = 1000, *, period: float = 5.0,
+                 clock: Callable[[], float] | None = None) -> None:
         if every < 1:
             raise ValueError(f"every must be >= 1, got {every!r}")
+        if not (period >= 0.0 and math.isfinite(period)):
+            raise ValueError(f"period must be finite and >= 0 seconds, got {period!r}")
         self._logger = logger
         self.every = every
+        self.period = period
+        self._clock = clock if clock is not None else _monotonic
         self._suppressed: dict[str, int] = {}
+        self._last: dict[str, float] = {}
 
     def log(self, level: int, msg: str, *args: object) -> bool:
-        """Log ``msg % args`` at ``level`` if it is the first call with this ``msg`` or
-        ``every - 1`` calls with it were suppressed since its last line.
+        """Log ``msg % args`` at ``level`` if it is the first call with this ``msg``, or
+        a multiple of ``every`` calls with it were suppressed since its last line and at
+        least ``period`` seconds have passed since that line.
 
         Returns:
             True when the line was logged, False when it was counted as suppressed (or
             the logger does not log ``level``).
         """
         n = self._suppressed.get(msg)
-        if n is not None and n + 1 < self.every:
-            self._suppressed[msg] = n + 1
-            return False
+        if n is not None:
+            if (n + 1) % self.every:
+                self._suppressed[msg] = n + 1
+                return False
+            if self.period and self._clock() - self._last[msg] < self.period:
+                self._suppressed[msg] = n + 1
+                return False
         self._suppressed[msg] = 0
+        self._last[msg] = self._clock() if self.period else 0.0
         if not self._logger.isEnabledFor(level):
             return False
         self._logger.log(level, msg + "%s", *args, _suffix(n or 0))
