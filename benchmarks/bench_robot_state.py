@@ -15,6 +15,9 @@ Prints, on this machine:
   published, serialisation and TCP included, from identical joint states sent at a steady
   rate; and tfbus's CPU per transform for the same work, with the ratio.
 
+* ``load_urdf`` on generated chains of 10^4 and 5x10^4 revolute joints: seconds and
+  links/s (issue 21: 1.4 s and 18.7 s before, quadratic in the number of elements).
+
 Target (issue 15): at least 100 000 joint transforms/s. Figures only: nothing here
 asserts a timing.
 """
@@ -108,11 +111,36 @@ def ros_side(msgs: list[JointState], rate: float) -> dict[str, Any] | str:
     return result
 
 
+def chain_urdf(n: int) -> str:
+    """A URDF chain of ``n`` links joined by revolute joints (generated, no file)."""
+    parts = ['<robot name="chain"><link name="l0"/>']
+    for i in range(1, n):
+        parts.append(f'<link name="l{i}"/><joint name="j{i}" type="revolute">'
+                     f'<parent link="l{i - 1}"/><child link="l{i}"/>'
+                     f'<origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>'
+                     f'<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>')
+    return "".join(parts) + "</robot>"
+
+
+def bench_load(sizes: Sequence[int]) -> None:
+    """Print load_urdf's time on a generated chain of each size (one run each)."""
+    from tfbus.urdf import load_urdf
+
+    for n in sizes:
+        text = chain_urdf(n)
+        t0 = time.perf_counter()
+        load_urdf(text)
+        seconds = time.perf_counter() - t0
+        print(f"load_urdf, chain of {n:>6,} links:      {seconds:8.2f} s "
+              f"({n / seconds:,.0f} links/s)", flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer messages")
     parser.add_argument("--no-ros", action="store_true", help="skip the real node")
     args = parser.parse_args(argv)
+    bench_load([10_000] if args.quick else [10_000, 50_000])
     n = 300 if args.quick else 2000
     rsp = RobotStatePublisher(PR2)
     full, few = states(rsp, n, None), states(rsp, n, 5)

@@ -181,7 +181,7 @@ def test_item6_dot_text_quotes_every_id(hostile_bag: Path) -> None:
 
     dot = frames_dot(load_buffer(hostile_bag))
     assert '\tworld -> "cam:left" [label=' in dot
-    assert '\tworld -> "back\\\\" [label=' in dot
+    assert '\tworld -> "back\\\\\\\\" [label=' in dot  # drawn back\\ (issue 21)
     assert '\tworld -> "<script>" [label=' in dot
     assert "\x1b" not in dot
 
@@ -512,3 +512,70 @@ def test_fuzz_every_command_on_hostile_ids(hostile_bag: Path, tmp_path: Path) ->
         code, out, err = run(*args)
         _check(args, code, out, err)
         assert code == 2
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+@pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is not installed")
+def test_issue21_item11_escaped_and_raw_ids_stay_two_nodes(tmp_path: Path) -> None:
+    """Issue 21, item 11: 'a\\nb' (a newline) and the text 'a\\x0ab' were both drawn
+    a\\x0ab, one DOT node for two frames (3 nodes for 4 frames); each frame is one node,
+    drawn as Python writes it, and the tree renders."""
+    ids = ["a\nb", "a\\x0ab", "c\\", "c\\\\"]
+    bag = tmp_path / "esc.bag"
+    write_bag(bag, [BagMessage(Time.from_ns(T0), "/tf",
+                               TFMessage([tf("world", i, T0) for i in ids]), "")])
+    out = tmp_path / "tree.svg"
+    code, _, err = run("frames", "--bag", str(bag), "-o", str(out))
+    assert code == 0, err
+    assert len(set(_svg_nodes(out))) == len(ids) + 2  # + world + the legend
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    drawn = [g.findtext("s:text", namespaces=ns) for g in ET.parse(out).getroot().iterfind(
+        ".//s:g", ns) if g.get("class") == "node"]
+    assert {"a\\x0ab", "a\\\\x0ab", "c\\\\", "c\\\\\\\\"} <= set(drawn)
+
+
+BAD_BUS_SPECS = [
+    ("zenoh?port=abc", "'port' must be an integer, got 'abc'"),
+    ("zenoh?port=99999", "'port' must be in 1..65535, got '99999'"),
+    ("zenoh?express=maybe", "'express' must be a boolean, got 'maybe'"),
+    ("zenoh?namespace=**", "namespace '**' must be"),
+    ("ros2:domain=999", "domain_id must be in 0..232, got 999"),
+    ("ros2:domain=abc", "'domain' must be an integer, got 'abc'"),
+    ("ros2:config=/nonexistent/tfbus-test.xml", "cannot read the Cyclone XML file"),
+    ("ros1:master=ftp://x", "master_uri must be http://host:port, got 'ftp://x'"),
+    ("ros1:name=bad name", "is not a ROS graph name"),
+    ("ros1:remote=2", "remote must be 0 or 1, got '2'"),
+]
+
+
+@pytest.mark.parametrize(("spec", "said"), BAD_BUS_SPECS)
+@pytest.mark.parametrize("command", [["monitor", "--duration", "0.1"],
+                                     ["echo", "a", "b", "--duration", "0.1"]])
+def test_issue21_item12_bad_bus_values_are_one_line_usage_errors(
+    spec: str, said: str, command: list[str]
+) -> None:
+    """Issue 21, item 12: a --bus value the transport refuses printed a traceback (exit
+    status 1) when the bus was opened, and port=99999 was accepted; each is now one
+    line naming the spec and the value, exit status 2, before anything runs."""
+    pytest.importorskip("zenoh" if spec.startswith("zenoh") else
+                        "cyclonedds" if spec.startswith("ros2") else "rosbags")
+    code, out, err = run(command[0], "--bus", spec, *command[1:])
+    assert code == 2, (out, err)
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"--bus {spec!r}: " in err and said in err, err
+
+
+def test_issue21_item12_zenoh_port_out_of_range_is_refused_by_the_library() -> None:
+    """The same check where the spec becomes options, for scripts: open_transport and
+    ZenohTransport refuse a port outside 1..65535 with a ValueError naming it."""
+    pytest.importorskip("zenoh")
+    from tfbus.transports.spec import open_transport
+    from tfbus.transports.zenoh import ZenohTransport
+
+    with pytest.raises(ValueError, match=r"'port' must be in 1\.\.65535, got '65536'"):
+        open_transport("zenoh?port=65536")
+    with pytest.raises(ValueError, match=r"port must be a TCP port number in 1\.\.65535"):
+        ZenohTransport(port=0)
+    assert open_transport("zenoh?port=65535") is not None

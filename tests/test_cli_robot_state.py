@@ -176,3 +176,22 @@ def test_joint_states_drive_the_publisher_across_processes() -> None:
     finally:
         for child in children:
             child.kill()
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e309"])
+def test_issue21_item10_a_limit_that_is_not_finite_is_one_line(
+    tmp_path: Path, value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 21, item 10: joint-states and robot-state-publisher took a URDF whose
+    <limit> is nan / inf and published NaN / inf positions; now one line naming the
+    joint and the attribute, exit status 2, as urdfdom refuses it."""
+    bad = tmp_path / "bad.urdf"
+    bad.write_text(f"""<robot name="r"><link name="a"/><link name="b"/>
+      <joint name="j" type="revolute"><parent link="a"/><child link="b"/>
+        <limit lower="{value}" upper="1" effort="1" velocity="1"/></joint></robot>""")
+    for command in ("joint-states", "robot-state-publisher"):
+        assert main([command, str(bad), "--local", "--duration", "0"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith(f"tfbus {command}: error: "), err
+        shown = "inf" if value == "1e309" else value  # read as a double: overflows to inf
+        assert f"joint 'j': <limit lower=\"{shown}\"> is not a finite number" in err, err

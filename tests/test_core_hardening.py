@@ -322,7 +322,7 @@ def test_rate_limited_log_takes_time_from_the_caller(caplog: pytest.LogCaptureFi
 
 
 def test_count_limited_log(caplog: pytest.LogCaptureFixture) -> None:
-    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=3)
+    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=3, period=0.0)  # count only
     caplog.set_level(logging.WARNING, logger="tfbus.test")
     logged = [log.log(logging.WARNING, "z %d", k) for k in range(7)]
     assert logged == [True, False, False, True, False, False, True]
@@ -354,3 +354,80 @@ def test_invalid_frame_id_checks_form_only() -> None:
     )
     assert isinstance(core.invalid_frame_id(""), InvalidArgumentException)
     assert isinstance(core.invalid_frame_id(3), InvalidArgumentException)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+@pytest.mark.parametrize("time", [None, 5, 1.5, "0", 10**9])
+def test_issue21_lookup_time_of_the_wrong_type_is_a_type_error(time: Any) -> None:
+    """lookup_transform(..., time=None) (or an int) raised AttributeError: '_ns' from
+    the compiled query; every lookup now raises a TypeError naming the argument, and
+    the core goes on answering (run under both cores: TFBUS_PURE_PYTHON=1)."""
+    core = BufferCore()
+    core.set_transform(ts("child"), "a")
+    for call in (core.lookup_transform, core.try_lookup_transform, core.can_transform,
+                 core.check_transform):
+        with pytest.raises(TypeError, match=r"^time must be a tfbus\.Time .*, not "
+                                            rf"{type(time).__name__} "):
+            call("base", "child", time)
+    with pytest.raises(TypeError, match=r"time must be a tfbus\.Time"):
+        core.lookup_transform_full("base", time, "child", T, "base")
+    assert core.lookup_transform("base", "child", Time(0)).transform.translation.x == 1.0
+
+
+def test_issue21_count_limited_log_is_limited_by_time_too(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Refusal logs were limited by count only (1 per 1000): a flood printed ~180 lines
+    a second. Now also at most one line per ``period`` seconds; the clock (injected
+    here) is read once per ``every`` calls, not on every call."""
+    now = [0.0]
+    reads = [0]
+
+    def clock() -> float:
+        reads[0] += 1
+        return now[0]
+
+    log = CountLimitedLog(logging.getLogger("tfbus.test"), every=1000, period=5.0,
+                          clock=clock)
+    caplog.set_level(logging.WARNING, logger="tfbus.test")
+    lines = 0
+    for k in range(1_000_001):  # 10 s of a flood at 100 000 calls a second
+        now[0] = k / 100_000
+        lines += log.log(logging.WARNING, "w %d", k)
+    # at t = 0, then at the first 1000th call at or after 5 s and 10 s (count: 1000 lines)
+    assert [r.getMessage() for r in caplog.records] == [
+        "w 0",
+        "w 500000 (499999 more like this suppressed)",
+        "w 1000000 (499999 more like this suppressed)",
+    ]
+    assert lines == 3
+    assert reads[0] == 1 + 1000  # at the first line, then once per 1000 calls
+    counted = CountLimitedLog(logging.getLogger("tfbus.test"), every=1000)  # no clock
+    assert sum(counted.log(logging.WARNING, "c %d", k) for k in range(10_000)) == 10
+    with pytest.raises(ValueError):
+        CountLimitedLog(logging.getLogger("tfbus.test"), period=-1.0)
+
+
+def test_issue21_a_flood_of_refused_transforms_logs_a_few_lines(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A Buffer's TF_REPEATED_DATA log under a flood: 50 000 repeated stamps over 10 s
+    of the buffer's clock (a ManualClock) give 3 lines, not 51 (the sans-I/O core
+    counts; the Buffer lends it its clock); every one is still refused and the buffer
+    goes on storing new data."""
+    from tfbus.buffer import Buffer
+    from tfbus.clock import ManualClock
+
+    clock = ManualClock(Time(1000))
+    buffer = Buffer(clock=clock)
+    caplog.set_level(logging.WARNING, logger="tfbus.core")
+    buffer.set_transform(ts("child"), "flood")
+    for k in range(50_001):
+        clock.set_nowait(Time.from_ns(1000 * 10**9 + k * 200_000))
+        buffer.set_transform(ts("child"), "flood")
+    lines = [r for r in caplog.records if "TF_REPEATED_DATA" in r.getMessage()]
+    assert len(lines) == 3, len(lines)
+    buffer.set_transform(ts("child", stamp=Time(101), x=2.0), "flood")
+    assert buffer.lookup_transform("base", "child", Time(0)).transform.translation.x == 2.0

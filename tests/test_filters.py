@@ -139,6 +139,7 @@ async def test_out_the_back_empty_frame_and_queue_full_are_counted_and_reported(
             FilterFailureReason.OUT_THE_BACK: 1,
             FilterFailureReason.TRANSFORM_FAILURE: 0,
             FilterFailureReason.QUEUE_FULL: 1,
+            FilterFailureReason.MALFORMED: 0,
         }
         assert s.incoming == s.passed + s.dropped_total + s.queued + s.ready == 5
         tg.cancel_scope.cancel()
@@ -298,3 +299,43 @@ async def test_buffer_has_the_awaitable_batched_lookups() -> None:
     ).translations.tolist()
     pts = await buf.transform_points_async(np.zeros((2, 3)), "odom", "base_link", times)
     assert pts[:, 0].tolist() == got.translations[:, 0].tolist()
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+async def test_issue21_malformed_messages_are_dropped_and_counted() -> None:
+    """One bad message (frame id None, an int stamp, no header, stamp + tolerance past
+    int64) ended the whole filter with its exception; each is now dropped and counted
+    as MALFORMED, reported to on_failure, and the good messages around it pass."""
+    buf, _ = make_buffer()
+    buf.set_transform(odom(1.0))
+    buf.set_transform(odom(2.0))
+    feed = anyio.create_memory_object_stream[object](100)
+    failures: list[tuple[object, FilterFailureReason]] = []
+    out: list[str] = []
+    bad: list[object] = [
+        Msg(Header(at(1.5), None)),  # type: ignore[arg-type]
+        Msg(Header(5, "laser")),  # type: ignore[arg-type]
+        Msg(Header(at(1.5), 7)),  # type: ignore[arg-type]
+        "no header",
+        None,
+        Msg(Header(Time.from_ns(2**63 - 1), "laser")),
+    ]
+    async with MessageFilter(buf, "odom", feed[1], tolerance=Duration(0, 1000),
+                             on_failure=lambda m, r: failures.append((m, r))) as mf, \
+            anyio.create_task_group() as tg:
+        tg.start_soon(_collect, mf, out)  # type: ignore[arg-type]
+        await feed[0].send(msg("before", 1.5))
+        for b in bad:
+            await feed[0].send(b)
+        await feed[0].send(msg("after", 1.6))
+        await settle()
+        assert out == ["before", "after"]
+        stats = mf.statistics()
+        assert stats.dropped[FilterFailureReason.MALFORMED] == len(bad)
+        assert (stats.incoming, stats.passed, stats.dropped_total) == (2 + len(bad), 2,
+                                                                       len(bad))
+        assert failures == [(b, FilterFailureReason.MALFORMED) for b in bad]
+        feed[0].close()
+    assert out == ["before", "after"]

@@ -350,3 +350,30 @@ def test_per_beam_kernels_match_the_scalar_tf2_math() -> None:
     np.testing.assert_allclose(out, [[10.0, 1.0, 0.5], [8.0, 0.0, 1.5]], atol=1e-15)
     with pytest.raises(ValueError, match="apply_transforms"):
         apply_transforms(np.zeros((2, 4)), np.zeros((1, 3)), pts[:1], out[:1])
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+@pytest.mark.parametrize(("ranges", "said"), [
+    (None, "must be one-dimensional, got shape () (None)"),
+    (5.0, "must be one-dimensional, got shape () (5.0)"),
+    ("3.0", "must be one-dimensional"),
+    (["1", "2"], "must hold numbers, got <U1 values"),
+    ([1.0, None], "must hold numbers, got object values"),
+    ([True, False], "must hold numbers, got bool values"),
+])
+def test_issue21_ranges_that_are_not_numbers_are_refused(ranges: object, said: str) -> None:
+    """LaserScan(ranges=None) became one NaN beam (np.ascontiguousarray makes any
+    scalar a 1-element array) and a scalar one beam; both, and strings, are now a
+    ValueError naming the field. Sequences and arrays of numbers are kept as float32."""
+    from tfbus.sensor_msgs import LaserScan
+
+    with pytest.raises(ValueError, match=r"^LaserScan\.ranges ") as err:
+        LaserScan(ranges=ranges)  # type: ignore[arg-type]
+    assert said in str(err.value)
+    with pytest.raises(ValueError, match=r"^LaserScan\.intensities "):
+        LaserScan(ranges=[1.0], intensities=None)  # type: ignore[arg-type]
+    for ok in ([], [1, 2], (1.5, float("nan")), np.arange(3, dtype=np.float64)):
+        scan = LaserScan(ranges=ok)  # type: ignore[arg-type]
+        assert scan.ranges.dtype == np.float32 and scan.ranges.shape == (len(ok),)

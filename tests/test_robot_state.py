@@ -703,3 +703,206 @@ def test_live_the_real_node_refuses_the_same_malformed_urdfs(ros1_rsp: None) -> 
         else:
             assert status not in (0, "running") and (error or status < 0), (name, status)
     assert len(verdicts) == len(MALFORMED)
+
+
+# --------------------------------------------------------------------------- issue 21
+
+
+def _arm_with_limit(lower: str, upper: str, effort: str = "1", velocity: str = "1") -> str:
+    return ARM.replace('<limit lower="-1" upper="1" effort="1" velocity="1"/>',
+                       f'<limit lower="{lower}" upper="{upper}" effort="{effort}" '
+                       f'velocity="{velocity}"/>', 1)
+
+
+@pytest.mark.parametrize(("limit", "what"), [
+    (("nan", "1"), "lower"), (("-1", "inf"), "upper"), (("-inf", "1"), "lower"),
+    (("-1", "1e309"), "upper"), (("-1", "1", "nan", "1"), "effort"),
+    (("-1", "1", "1", "-inf"), "velocity"),
+])
+def test_issue21_item10_limits_that_are_not_finite_are_refused(limit: tuple[str, ...],
+                                                               what: str) -> None:
+    """Issue 21, item 10: <limit> values urdfdom's strToDouble cannot read (nan, inf,
+    1e309, which overflows) were accepted; now a URDFError naming the joint and the
+    attribute, as urdfdom's parseJointLimits refuses them."""
+    with pytest.raises(URDFError, match=rf"joint 'shoulder': <limit {what}=") as err:
+        load_urdf(_arm_with_limit(*limit))
+    assert err.value.element == "joint 'shoulder'"
+
+
+def test_issue21_item10_huge_finite_limits_give_finite_joint_states() -> None:
+    """±1e308 is a double urdfdom reads; joint-states computed (upper - lower) / 2 = inf
+    and published inf / NaN positions. Every position is now finite and within limits,
+    and robot_state_publisher computes finite transforms from them (a prismatic joint
+    moved 1e308 m would overflow its translation: refused, named)."""
+    model = load_urdf(_arm_with_limit("-1e308", "1e308").replace(
+        '<limit lower="0" upper="0.5"', '<limit lower="-1.7e308" upper="1.7e308"'))
+    rsp = RobotStatePublisher(model)
+    shoulder = model.joint("shoulder")
+    assert (shoulder.lower, shoulder.upper) == (-1e308, 1e308)
+    seen = 0
+    for k in range(200):
+        js = sinusoidal_joint_state(model, Time(k), k * 0.37)
+        assert all(math.isfinite(q) for q in js.position), js.position
+        assert -1e308 <= js.position[0] <= 1e308 and -1.7e308 <= js.position[1] <= 1.7e308
+        try:
+            out = rsp.transforms(js)
+        except JointStateError as err:
+            # twin mimics shoulder: -2 x (up to 1e308) + 0.5 overflows to -inf: refused
+            assert set(err.refused) == {"twin"} and abs(js.position[0]) > 8.9e307
+            out = err.transforms
+        for t in out:
+            assert all(math.isfinite(v) for v in (*t.transform.translation,
+                                                  *t.transform.rotation))
+        seen += len(out)
+    assert seen >= 200
+
+
+def test_issue21_prismatic_translation_overflow_is_refused() -> None:
+    """A finite position whose translation overflows (rail moved 1.7e308 m along x from
+    an origin already 1.7e308 m along x) is refused by name, not published as inf."""
+    rsp = RobotStatePublisher(ARM.replace('<origin xyz="0 0 1" rpy="0 0 1.5707963267948966"/>',
+                                          '<origin xyz="1.7e308 0 0" rpy="0 0 0"/>'))
+    with pytest.raises(JointStateError, match=r"rail=1\.7e") as err:
+        rsp.transforms(JointState(Header(T), ["rail", "shoulder"], [1.7e308, 0.5]))
+    assert set(err.value.refused) == {"rail"}
+    assert [t.child_frame_id for t in err.value.transforms] == ["upper", "twin"]
+
+
+@pytest.mark.parametrize("bad", [
+    JointState(None, ["shoulder"], [0.1]),  # type: ignore[arg-type]
+    JointState(Header(T), None, [0.1]),  # type: ignore[arg-type]
+    JointState(Header(T), ["shoulder"], None),  # type: ignore[arg-type]
+    JointState(Header(5), ["shoulder"], [0.1]),  # type: ignore[arg-type]
+    None,
+])
+def test_issue21_malformed_joint_states_are_joint_state_errors(bad: Any) -> None:
+    """header=None / name=None raised AttributeError / TypeError out of transforms();
+    now JointStateError (nothing computed)."""
+    rsp = RobotStatePublisher(ARM)
+    with pytest.raises(JointStateError) as err:
+        rsp.transforms(bad)
+    assert err.value.transforms == []
+
+
+@pytest.mark.parametrize("value", ["0.1", True, b"0.1", None, [0.1]])
+def test_issue21_positions_that_are_not_numbers_are_refused(value: Any) -> None:
+    """A position given as "0.1" or True was turned into 0.1 / 1.0 by float(); a
+    position is a float64: anything but a real number is refused by name, the other
+    joints are computed, and a mimic of the refused joint is refused too."""
+    rsp = RobotStatePublisher(ARM)
+    with pytest.raises(JointStateError) as err:
+        rsp.transforms(JointState(Header(T), ["shoulder", "rail"], [value, 0.25]))
+    assert err.value.refused == {"shoulder": value, "twin": value}
+    assert [t.child_frame_id for t in err.value.transforms] == ["slide"]
+    ok = rsp.transforms(JointState(Header(T), ["shoulder", "rail"],
+                                   [np.float32(0.5), np.int64(0)]))
+    assert len(ok) == 3
+
+
+async def test_issue21_run_counts_bad_joint_states_and_goes_on() -> None:
+    """Through run(): a None header, None names, a str and a bool position are counted
+    (invalid / refused_positions) and the next good message is published."""
+    clock = ManualClock(Time(1000))
+    rsp = RobotStatePublisher(ARM, ignore_timestamp=True)
+    async with Bus() as bus, anyio.create_task_group() as tg:
+        tf = bus.subscribe(TF_TOPIC)
+        await tg.start(start_rsp(rsp, bus, clock))
+        for bad in (JointState(None, ["shoulder"], [0.1]),  # type: ignore[arg-type]
+                    JointState(Header(T), None, [0.1]),  # type: ignore[arg-type]
+                    JointState(Header(T), ["rail"], ["0.1"]),
+                    JointState(Header(T), ["rail"], [True])):
+            await bus.publish("/joint_states", bad)
+        await bus.publish("/joint_states", JointState(Header(T), ["rail"], [0.25]))
+        await clock.advance(0)
+        got = [m for m in iter(lambda: tf.receive_nowait() if tf.statistics().queued else None,
+                                None)]
+        tg.cancel_scope.cancel()
+    assert [[t.child_frame_id for t in m.transforms] for m in got] == [["slide"]]
+    st = rsp.statistics
+    assert (st.received, st.invalid, st.refused_positions, st.published) == (5, 2, 2, 1)
+
+
+async def test_issue21_rate_limit_memory_is_bounded() -> None:
+    """Every unknown joint name heard was kept for the rate limit (300 x 5 000 names:
+    +175 MB). 400 messages of 500 new names each (200 000 names) now leave the memory
+    traced while they are handled within 8 MB; the model's joints keep their limit."""
+    import gc
+    import tracemalloc
+
+    clock = ManualClock(Time(1000))
+    rsp = RobotStatePublisher(ARM)
+    async with Bus() as bus, anyio.create_task_group() as tg:
+        sub = bus.subscribe(TF_TOPIC)
+        await tg.start(start_rsp(rsp, bus, clock, publish_frequency=10.0))
+        gc.collect()
+        tracemalloc.start()
+        try:
+            base, _ = tracemalloc.get_traced_memory()
+            for k in range(400):
+                names = [f"ghost_{k}_{i:04d}" for i in range(500)]
+                await bus.publish("/joint_states", JointState(
+                    Header(Time(2000 + k)), names, [0.0] * 500))
+                await clock.advance(0)
+            del names
+            gc.collect()
+            grown = tracemalloc.get_traced_memory()[0] - base
+        finally:
+            tracemalloc.stop()
+        await clock.set(Time(4000))
+        await bus.publish("/joint_states", JointState(Header(Time(3000)), ["rail"], [0.1]))
+        await bus.publish("/joint_states", JointState(Header(Time(3000, 1)), ["rail"], [0.1]))
+        await clock.advance(0)
+        assert sub.statistics().queued == 1  # the second is within 100 ms: rate-limited
+        tg.cancel_scope.cancel()
+    assert grown < 8_000_000, grown
+    assert rsp.statistics.received == 402 and rsp.statistics.rate_limited == 1
+
+
+@pytest.mark.parametrize("model", [b"", b"   \n", "", "  ", b"robot"])
+def test_issue21_empty_description_is_a_urdf_error(model: Any) -> None:
+    """load_urdf(b"") raised TypeError ("expected URDF text, a path ..."); empty or
+    non-XML bytes and blank text are now URDFError saying so."""
+    with pytest.raises(URDFError, match=r"empty|not XML"):
+        load_urdf(model)
+
+
+def _chain(n: int) -> str:
+    parts = ['<robot name="chain"><link name="l0"/>']
+    for i in range(1, n):
+        parts.append(f'<link name="l{i}"/><joint name="j{i}" type="revolute">'
+                     f'<parent link="l{i - 1}"/><child link="l{i}"/><axis xyz="0 0 1"/>'
+                     f'<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>')
+    return "".join(parts) + "</robot>"
+
+
+def test_issue21_loading_does_not_pop_from_a_list_of_every_element(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A 5x10^4-link URDF took 18.7 s (10^4: 1.4 s): urdfdom-py's Reflection.set_from_xml
+    removes each child it reads from the front of a list of the <robot>'s children
+    (list.remove, O(length) each: quadratic), and a duplicate check searched a list. The
+    operation count here is the length of the lists it pops from, recorded on
+    urdfdom-py's Info: now bounded by one element's children, not the robot's 2n; and a
+    20 000-link chain loads whole (figures: benchmarks/bench_robot_state.py)."""
+    from urdf_parser_py.xml_reflection import core
+
+    longest = [0]
+    original = core.Info.__init__
+
+    def counting(self: Any, node: Any) -> None:
+        original(self, node)
+        longest[0] = max(longest[0], len(self.children))
+
+    monkeypatch.setattr(core.Info, "__init__", counting)
+    model = load_urdf(_chain(20_000))
+    assert longest[0] <= 4  # a joint's parent, child, axis, limit
+    assert (model.root, len(model.links), len(model.joints)) == ("l0", 20_000, 19_999)
+    assert model.joints[-1] == model.joint("j19999") and model.joints[-1].parent == "l19998"
+    with pytest.raises(URDFError, match="link 'l7' is defined twice"):
+        load_urdf(_chain(10).replace("</robot>", '<link name="l7"/></robot>'))
+    with pytest.raises(URDFError, match=r"invalid URDF at /robot\[@name='chain'\]/joint"
+                                        r"\[@name='j3'\]"):
+        load_urdf(_chain(10).replace('<limit lower="-1" upper="1" effort="1" velocity="1"/>'
+                                     '</joint><link name="l4"/>',
+                                     '<limit lower="x" upper="1" effort="1" velocity="1"/>'
+                                     '</joint><link name="l4"/>'))

@@ -113,6 +113,8 @@ class Buffer(AsyncBatchMixin, BufferCore):
     def __init__(self, cache_time: float | Duration = 10.0, *, clock: Clock | None = None) -> None:
         super().__init__(cache_time)
         self.clock: Clock = clock if clock is not None else SystemClock()
+        # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
+        self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
         self._unregister_jump = self.clock.on_jump(self._on_jump)
 

@@ -142,6 +142,15 @@ def _cache_time_ns(value: object) -> int:
     return ns
 
 
+def _not_a_time(time: object, err: AttributeError) -> Exception:
+    """The error for a lookup whose ``time`` is not a :class:`~tfbus.time.Time` (the
+    compiled query reads ``time._ns``): a TypeError naming the argument."""
+    if isinstance(time, Time):
+        return err
+    return TypeError(f"time must be a tfbus.Time (Time(0) for the latest data), not "
+                     f"{type(time).__name__} {time!r}")
+
+
 class BufferCore(BatchLookupMixin, CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
@@ -375,7 +384,10 @@ class BufferCore(BatchLookupMixin, CoreBase):
         memoised until the next insert or ``clear()``, so repeating a query (many objects
         at one stamp, time 0 between updates) costs a dict lookup.
         """
-        out = self._query(target_frame, source_frame, time)
+        try:
+            out = self._query(target_frame, source_frame, time)
+        except AttributeError as err:  # (no cost on the way through)
+            raise _not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         raise self._failure("lookupTransform", target_frame, source_frame, out)
@@ -385,7 +397,10 @@ class BufferCore(BatchLookupMixin, CoreBase):
     ) -> TransformStamped | TransformException:
         """:meth:`lookup_transform` in one walk that returns instead of raising: the
         transform, or the exception ``lookup_transform`` would raise (why not)."""
-        out = self._query(target_frame, source_frame, time)
+        try:
+            out = self._query(target_frame, source_frame, time)
+        except AttributeError as err:  # (no cost on the way through)
+            raise _not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         return self._failure("lookupTransform", target_frame, source_frame, out)
@@ -403,7 +418,10 @@ class BufferCore(BatchLookupMixin, CoreBase):
             (ExtrapolationException); None while it may still become available (unknown
             frames, unconnected trees, no data yet at ``time``).
         """
-        out = self._query(target_frame, source_frame, time)
+        try:
+            out = self._query(target_frame, source_frame, time)
+        except AttributeError as err:  # (no cost on the way through)
+            raise _not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         code = out[0]
@@ -491,7 +509,10 @@ class BufferCore(BatchLookupMixin, CoreBase):
     def _can_transform(self, target_frame: str, source_frame: str, time: Time) -> tuple[
         bool, str
     ]:
-        out = self._query(target_frame, source_frame, time)
+        try:
+            out = self._query(target_frame, source_frame, time)
+        except AttributeError as err:  # (no cost on the way through)
+            raise _not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return True, ""
         code = out[0]

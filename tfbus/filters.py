@@ -18,7 +18,9 @@ tf2_ros's ``MessageFilter`` (``tf2_ros/message_filter.h``, ROS 1 0.7.x / ROS 2):
   older than the cache can ever answer (``stamp + cache_time`` before the latest common
   time of the frames, tf2's ``addTransformableRequest`` test), decided on arrival; a
   transform failure — a queued message whose time fell out of the cache window while
-  it waited; a full queue — the oldest queued message is dropped to make room.
+  it waited; a full queue — the oldest queued message is dropped to make room; and
+  (tfbus's) a malformed message — no header, a frame id that is not a str, a stamp
+  that is not a Time: one bad message never ends the filter.
 
 Target frames can be changed while running (:meth:`MessageFilter.set_target_frames`):
 new messages use the new frames and every queued message is re-evaluated against them.
@@ -66,12 +68,19 @@ M = TypeVar("M", bound=Stamped)
 
 
 class FilterFailureReason(enum.Enum):
-    """Why a message was dropped (tf2_ros ``filter_failure_reasons``; ROS 2's names)."""
+    """Why a message was dropped (tf2_ros ``filter_failure_reasons``; ROS 2's names).
+
+    ``MALFORMED`` is tfbus's: a message whose header cannot be used (no ``header``, a
+    ``frame_id`` that is not a str, a ``stamp`` that is not a Time, ``stamp + tolerance``
+    beyond int64 nanoseconds) -- tf2_ros's typed messages cannot be built so. It is
+    dropped and counted like the others; the filter goes on.
+    """
 
     EMPTY_FRAME_ID = "empty frame id"
     OUT_THE_BACK = "out the back"
     TRANSFORM_FAILURE = "transform failure"
     QUEUE_FULL = "queue full"
+    MALFORMED = "malformed message"
 
 
 @dataclass(frozen=True)
@@ -254,12 +263,20 @@ class MessageFilter(Generic[M]):
         """Offer one message (what the reader does for each message of ``source``; also
         usable directly, tf2_ros ``MessageFilter::add``)."""
         self._incoming += 1
-        header = msg.header
-        frame = _strip(header.frame_id)
+        try:
+            header = msg.header
+            frame_id, stamp = header.frame_id, header.stamp
+            if not (isinstance(frame_id, str) and isinstance(stamp, Time)):
+                raise TypeError(frame_id, stamp)
+            self._times(stamp)  # stamp + tolerance must be a Time too
+        except (AttributeError, TypeError, ValueError, OverflowError):
+            self._drop(msg, FilterFailureReason.MALFORMED)
+            return
+        frame = _strip(frame_id)
         if not frame:
             self._drop(msg, FilterFailureReason.EMPTY_FRAME_ID)
             return
-        self._admit(_Entry(msg, frame, header.stamp))
+        self._admit(_Entry(msg, frame, stamp))
 
     def _times(self, stamp: Time) -> tuple[Time, ...]:
         if self._tolerance.ns:

@@ -34,14 +34,17 @@ checked transform for transform against recordings of the real node
 * ``frame_prefix`` is ROS 2's (``frame_prefix + link``, no separator added).
 
 tfbus refuses NaN/±Inf positions (the node publishes NaN transforms that every tf2
-listener then rejects): :class:`JointStateError` names them and carries the valid
-transforms computed beside them, which :meth:`RobotStatePublisher.run` still publishes.
+listener then rejects), positions that are not numbers (``"0.1"``, ``True``: a float64 in
+sensor_msgs) and prismatic moves whose translation overflows to ±Inf:
+:class:`JointStateError` names them and carries the valid transforms computed beside
+them, which :meth:`RobotStatePublisher.run` still publishes.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import numbers
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -86,6 +89,11 @@ JOINT_STATES_TOPIC = "/joint_states"
 """The topic robot_state_publisher reads :class:`~tfbus.messages.JointState` from."""
 
 _F64 = npt.NDArray[np.float64]
+
+_MAX_OTHER_NAMES = 1024
+"""Joint names not in the model that :meth:`RobotStatePublisher.run` remembers for its rate
+limit; past that they are all forgotten at once (and count as never published, as a name
+the node has not heard yet)."""
 
 
 class JointStateError(TfbusError, ValueError):
@@ -157,6 +165,16 @@ def _quaternions(r: _F64) -> _F64:
 def _origin_rotation(rpy: tuple[float, float, float]) -> _F64:
     """URDF ``rpy`` (fixed axes x, y, z = transforms3d 'sxyz') -> 3x3 rotation matrix."""
     return np.asarray(quat2mat(euler2quat(rpy[0], rpy[1], rpy[2], "sxyz")), dtype=np.float64)
+
+
+def _number(value: object) -> float:
+    """``value`` as a float when it is a real number (int, float, numpy scalar), else NaN:
+    a str such as ``"0.1"`` or a bool is not a joint position (sensor_msgs' ``float64[]``)."""
+    if type(value) is float:
+        return value
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return math.nan
+    return float(value)
 
 
 def _shown(name: str) -> str:
@@ -259,10 +277,17 @@ class RobotStatePublisher:
         Raises:
             JointStateError: if ``position`` is neither empty nor as long as ``name``.
         """
-        names, values = joint_state.name, joint_state.position
-        if len(values) == 0:
+        try:
+            names, values = joint_state.name, joint_state.position
+            sizes = (len(names), len(values))
+        except (AttributeError, TypeError):
+            raise JointStateError(
+                f"a JointState needs name and position sequences, got "
+                f"{type(getattr(joint_state, 'name', None)).__name__} and "
+                f"{type(getattr(joint_state, 'position', None)).__name__}") from None
+        if sizes[1] == 0:
             return {}
-        if len(names) != len(values):
+        if sizes[0] != sizes[1]:
             raise JointStateError(f"a JointState with {len(names)} names and {len(values)} "
                                   f"positions (refused whole, as robot_state_publisher does)")
         out: dict[str, object] = {}
@@ -271,10 +296,9 @@ class RobotStatePublisher:
                 out[name] = value
         for follower, mimic in self._mimic:
             if mimic.joint in out and follower not in out:
-                try:
-                    out[follower] = float(out[mimic.joint]) * mimic.multiplier + mimic.offset  # type: ignore[arg-type]
-                except (TypeError, ValueError):
-                    out[follower] = out[mimic.joint]
+                leader = out[mimic.joint]
+                q = _number(leader)
+                out[follower] = q * mimic.multiplier + mimic.offset if math.isfinite(q) else leader
         return out
 
     def transforms(self, joint_state: JointState) -> list[TransformStamped]:
@@ -292,7 +316,7 @@ class RobotStatePublisher:
                 positions are NaN, ±Inf or not numbers -- ``.refused`` names them and
                 ``.transforms`` holds the transforms of the other joints.
         """
-        stamp = joint_state.header.stamp
+        stamp = getattr(getattr(joint_state, "header", None), "stamp", None)
         if not isinstance(stamp, Time):
             raise JointStateError(f"JointState header.stamp must be a Time, not {stamp!r}")
         positions = self.positions(joint_state)
@@ -302,10 +326,7 @@ class RobotStatePublisher:
         refused: dict[str, object] = {}
         for name in sorted(n for n in positions if n in moving):
             raw = positions[name]
-            try:
-                q = float(raw)  # type: ignore[arg-type]
-            except (TypeError, ValueError):
-                q = math.nan
+            q = _number(raw)
             if not math.isfinite(q):
                 refused[name] = raw
                 continue
@@ -324,8 +345,11 @@ class RobotStatePublisher:
                     x, y, z, w = -x, -y, -z, -w
                 transform = new(Transform, (tr, new(Quaternion, (x, y, z, w))))
             else:
-                transform = new(Transform, (
-                    new(Vector3, (tr[0] + ax * q, tr[1] + ay * q, tr[2] + az * q)), rot))
+                x, y, z = tr[0] + ax * q, tr[1] + ay * q, tr[2] + az * q
+                if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+                    refused[name] = raw  # finite, but the translation overflows (1e308 m)
+                    continue
+                transform = new(Transform, (new(Vector3, (x, y, z)), rot))
             result.append(new(TransformStamped,
                               (new(Header, (stamp, parent)), child, transform)))
         if refused:
@@ -356,6 +380,8 @@ class RobotStatePublisher:
         1)`` seconds (unless ``ignore_timestamp``); a clock jump backwards resets that
         memory. Invalid messages are counted in :attr:`statistics` and logged, and
         never stop the node; with NaN/Inf positions the other joints are still published.
+        Publish times are kept for the model's joints and for at most 1 024 other names
+        (then those are forgotten at once), not for every name ever heard.
 
         Raises:
             ValueError: if ``publish_frequency`` is not a positive finite number.
@@ -368,6 +394,8 @@ class RobotStatePublisher:
         clock = clock if clock is not None else SystemClock()
         interval = round(1e9 / max(float(publish_frequency), 1.0))
         last_publish: dict[str, int] = {}
+        joints = frozenset(j.name for j in self.model.joints)
+        bound = len(joints) + _MAX_OTHER_NAMES
         last_callback = refusals = 0
         stats = self.statistics
         with bus.subscribe(joint_states_topic) as sub:
@@ -412,6 +440,12 @@ class RobotStatePublisher:
                     _warn(refusals, "%s", err)
                     out = err.transforms
                 for n in keys:
+                    if n not in last_publish and len(last_publish) >= bound and n not in joints:
+                        # The node keeps a time for every name it ever hears: a peer sending
+                        # new names would grow the map without bound. Past _MAX_OTHER_NAMES
+                        # names that are not the model's, those are forgotten (as not heard).
+                        for other in [k for k in last_publish if k not in joints]:
+                            del last_publish[other]
                     last_publish[n] = stamp
                 if out:
                     bus.publish_nowait(TF_TOPIC, TFMessage(tuple(out)))
@@ -434,9 +468,11 @@ def sinusoidal_joint_state(model: RobotModel, stamp: Time, seconds: float,
         lo, hi = joint.lower, joint.upper
         if joint.type == "continuous" or lo is None or hi is None or lo >= hi:
             lo, hi = (-math.pi, math.pi) if joint.type != "prismatic" else (0.0, 0.0)
-        mid, half = (lo + hi) / 2.0, (hi - lo) / 2.0
+        # Halved first: with limits of +-1e308, hi - lo would overflow to inf.
+        mid, half = lo / 2.0 + hi / 2.0, hi / 2.0 - lo / 2.0
         names.append(joint.name)
-        positions.append(mid + half * math.sin(2.0 * math.pi * seconds / period + k))
+        q = mid + half * math.sin(2.0 * math.pi * seconds / period + k)
+        positions.append(min(max(q, lo), hi))
     return JointState(Header(stamp, ""), tuple(names), tuple(positions))
 
 

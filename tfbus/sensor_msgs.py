@@ -34,10 +34,28 @@ _F32 = npt.NDArray[np.float32]
 
 
 def _float32_array(value: Any, name: str) -> _F32:
-    arr = np.ascontiguousarray(value, dtype=np.float32)
-    if arr.ndim != 1:
-        raise ValueError(f"LaserScan.{name} must be one-dimensional, got shape {arr.shape}")
-    return arr
+    """``value`` as a contiguous ``(N,) float32`` array: a sequence or array of real
+    numbers. ``np.ascontiguousarray`` alone makes ``None`` or a scalar one beam (NaN, or
+    the scalar), and parses strings: those are refused."""
+    if type(value) is np.ndarray and value.ndim == 1 and value.dtype.kind in "fiu":
+        return np.ascontiguousarray(value, dtype=np.float32)  # the usual case, at once
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"LaserScan.{name} must be a sequence of numbers, got "
+                         f"{_shown(value)} ({err})") from None
+    if raw.ndim != 1:
+        raise ValueError(f"LaserScan.{name} must be one-dimensional, got shape {raw.shape}"
+                         + (f" ({_shown(value)})" if raw.ndim == 0 else ""))
+    if raw.dtype.kind not in "fiu" and raw.size:
+        raise ValueError(f"LaserScan.{name} must hold numbers, got {raw.dtype} values "
+                         f"({_shown(value)})")
+    return np.ascontiguousarray(raw, dtype=np.float32)
+
+
+def _shown(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else f"a {type(value).__name__} ({text[:40]}...)"
 
 
 @dataclass(eq=False)
@@ -56,7 +74,8 @@ class LaserScan:
         intensities: ``(N,) float32`` or empty.
 
     Raises:
-        ValueError: ``ranges`` or ``intensities`` is not one-dimensional.
+        ValueError: ``ranges`` or ``intensities`` is not a one-dimensional sequence of
+            numbers (``None``, a scalar, strings, a 2-D array).
     """
 
     header: Header = field(default_factory=Header)

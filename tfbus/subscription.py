@@ -7,6 +7,7 @@ called inside each publish or delivery. Made by :meth:`~tfbus.bus.Bus.subscribe`
 from __future__ import annotations
 
 import logging
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -341,4 +342,4 @@ class CallbackStatistics:
     errors: int
 
 
-_CALLBACK_ERRORS: Final = CountLimitedLog(_log, 1000)
+_CALLBACK_ERRORS: Final = CountLimitedLog(_log, 1000, clock=time.monotonic)

@@ -13,10 +13,11 @@ here too, with one :class:`URDFError` naming the element: not well-formed XML, a
 element other than ``<robot>``, duplicate link or joint names, a joint whose parent or
 child link is not defined, a link with two parent joints, loops, no root or two root
 links, unknown joint types, a revolute or prismatic joint without ``<limit>``, numbers
-that are not finite (urdfdom cannot parse ``nan``/``inf``). Each of these was checked to
-make ROS 1's robot_state_publisher 1.15 exit with an error. tfbus also refuses a
-zero-length ``<axis>`` on a moving joint, which the node accepts and then publishes as
-NaN transforms. A mimic of an unknown joint is accepted, as by the node (it never moves).
+that are not finite in origins, axes, ``<limit>`` and ``<mimic>`` (urdfdom's ``strToDouble``
+cannot read ``nan``, ``inf`` or ``1e309``; ``1e308`` is a double and is accepted). Each
+of these was checked to make ROS 1's robot_state_publisher 1.15 exit with an error. tfbus
+also refuses a zero-length ``<axis>`` on a moving joint, which the node accepts and then publishes
+as NaN transforms. A mimic of an unknown joint is accepted, as by the node (it never moves).
 
 ``<transmission>`` elements are dropped before parsing: ``urdf::Model`` ignores them and
 urdfdom-py rejects the pr2_mechanism ones (PR2's description has them); ``<gazebo>``
@@ -132,8 +133,14 @@ def load_urdf(model: str | bytes | os.PathLike[str] | RobotModel | Any) -> Robot
         return model
     if isinstance(model, str) and model.lstrip("\ufeff \t\r\n").startswith("<"):
         return _from_text(model.lstrip("\ufeff"))
-    if isinstance(model, bytes) and model.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"<"):
-        return _from_text(model)
+    if isinstance(model, bytes):
+        if model.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"<"):
+            return _from_text(model)
+        start = model[:20]
+        raise URDFError("the robot description is empty" if not model.strip() else
+                        f"the robot description is not XML: it starts with {start!r}")
+    if isinstance(model, str) and not model.strip():
+        raise URDFError("the robot description is empty (neither URDF text nor a path)")
     if isinstance(model, (str, os.PathLike)):
         path = Path(model)
         try:
@@ -162,10 +169,16 @@ def _from_text(text: str | bytes) -> RobotModel:
                         f"{err.msg}", f"line {line}") from None
     if not isinstance(root.tag, str) or root.tag != "robot":
         raise URDFError(f"the root element is <{root.tag}>, a URDF's is <robot>")
+    # <link> and <joint> are taken out and read one by one below, as urdfdom-py's
+    # AggregateElement.add_from_xml reads them: its Reflection.set_from_xml removes each
+    # child it reads from the front of a list (list.remove), quadratic in their number.
+    parts: list[Any] = []
     for child in list(root):
-        if child.tag == "transmission":
+        if child.tag in ("transmission", "link", "joint"):
             root.remove(child)
-        elif child.tag == "joint":
+        if child.tag in ("link", "joint"):
+            parts.append(child)
+        if child.tag == "joint":
             kind = child.get("type")
             if kind not in JOINT_TYPES:
                 name = child.get("name")
@@ -175,7 +188,14 @@ def _from_text(text: str | bytes) -> RobotModel:
     saved = core.on_error
     core.on_error = warnings.append  # urdfdom-py reports unknown tags here; not fatal
     try:
-        robot = urdf.URDF.from_xml(root, core.Path("robot", tree=etree.ElementTree(root)))
+        path = core.Path("robot", tree=etree.ElementTree(root))
+        robot = urdf.URDF.from_xml(root, path)  # sets path.suffix to [@name='...']
+        elements = urdf.URDF.XML_REFL.element_map
+        count = {"link": 0, "joint": 0}
+        for child in parts:
+            count[child.tag] += 1
+            where = core.Path(child.tag, parent=path, suffix=f"[{count[child.tag]}]")
+            elements[child.tag].add_from_xml(robot, child, where)
     except Exception as err:
         what = str(getattr(err, "e", err)).strip().splitlines()
         where = str(getattr(err, "path", "robot"))
@@ -221,8 +241,17 @@ def _joint_info(j: Any) -> JointInfo:
     axis = _vector(j.axis, (1.0, 0.0, 0.0), "axis", element)
     lower = upper = None
     if j.limit is not None:
-        lower = float(j.limit.lower) if j.limit.lower is not None else 0.0
-        upper = float(j.limit.upper) if j.limit.upper is not None else 0.0
+        # urdfdom's parseJointLimits reads each with strToDouble (an istream), which
+        # refuses nan, inf and values beyond the double range (1e309 reads as inf here).
+        values = {}
+        for what in ("lower", "upper", "effort", "velocity"):
+            value = getattr(j.limit, what, None)
+            number = 0.0 if value is None else float(value)
+            if not math.isfinite(number):
+                raise URDFError(f"{element}: <limit {what}=\"{value!r}\"> is not a finite "
+                                f"number", element)
+            values[what] = number
+        lower, upper = values["lower"], values["upper"]
     elif kind in ("revolute", "prismatic"):
         # urdfdom's parseJoint: "Joint [..] is of type REVOLUTE but it does not specify limits"
         raise URDFError(f"{element} is {kind} but has no <limit>", element)
@@ -241,14 +270,15 @@ def _joint_info(j: Any) -> JointInfo:
 
 def _from_robot(robot: Any) -> RobotModel:
     links: list[str] = []
+    known: set[str] = set()
     for link in robot.links:
         name = str(link.name)
-        if name in links:
+        if name in known:
             raise URDFError(f"link {name!r} is defined twice", f"link {name!r}")
         links.append(name)
+        known.add(name)
     if not links:
         raise URDFError("the robot has no <link>")
-    known = set(links)
     joints: list[JointInfo] = []
     parent_joint: dict[str, str] = {}
     seen: set[str] = set()

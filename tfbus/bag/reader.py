@@ -7,13 +7,17 @@ Which library reads what:
   summary; a file written without a summary is read from the start).
 
 When the index or summary is unreadable (a truncated file), reading falls back to
-:mod:`tfbus.bag.salvage`, which returns everything before the damage. Whatever goes
+:mod:`tfbus.bag.salvage`, which returns everything before the damage. A ``.db3`` file
+shorter than its sqlite3 header says (which sqlite would read as zero-filled pages) is
+read up to its first damaged page of messages, in bag-time order, then reported as
+truncated; a timestamp that is not an integer or goes backwards is damage too. Whatever goes
 wrong, the caller gets every readable message first, then one :class:`BagReadError`
 naming the file, the byte offset where known and the last bag time read.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import mmap
 import sqlite3
@@ -128,12 +132,29 @@ def _raw_rosbags(
     from rosbags.rosbag2 import Reader as Reader2
 
     reader: Any
+    cut: tuple[Path, int, int, int] | None = None
     if fmt is BagFormat.ROS1:
         reader = Reader1(p)
     else:
         if p.is_file() and p.suffix != ".db3":
             raise BagFormatError(f"{p}: a {fmt.value} file must be named *.db3", p)
+        files = _db3_files(p)
+        cuts = [c for c in map(_db3_cut, files) if c is not None]
+        if cuts and len(files) > 1:
+            f, size, _pages, _page_size = cuts[0]
+            raise ScanError(f"{f.name} is truncated: {_cut_text(*cuts[0][1:])}", size)
+        cut = cuts[0] if cuts else None
         reader = Reader2(p)
+    if cut is not None:
+        try:  # the connections (topics, definitions: the first pages) through rosbags
+            with reader:
+                srcs = {c.topic: _rosbags_source(c) for c in reader.connections
+                        if c.topic in topics and c.msgtype in TF_MSGTYPES}
+        except Exception as err:
+            raise ScanError(f"truncated: {_cut_text(*cut[1:])} ({describe(err)})",
+                            cut[1]) from None
+        yield from _raw_db3_cut(cut, srcs, lo, hi)
+        return
     with reader:
         conns: Sequence[Connection] = [
             c for c in reader.connections if c.topic in topics and c.msgtype in TF_MSGTYPES
@@ -143,6 +164,126 @@ def _raw_rosbags(
         sources = {id(c): _rosbags_source(c) for c in conns}
         for conn, stamp, raw in reader.messages(connections=conns, start=lo, stop=hi):
             yield stamp, sources[id(conn)], raw, None
+
+
+# ------------------------------------------------------------- a truncated .db3 file
+#
+# sqlite reads the pages missing from a file cut short as zeros (a cut of 1-100 bytes
+# returned the last page's first-stored rows as garbage without an error). The file's
+# header says how long it must be (sqlite.org/fileformat2.html, "The Database Header":
+# page size at offset 16, in-header database size in pages at 28, valid when the change
+# counter at 24 equals the version-valid-for number at 92). A short file is read up to
+# the damage: the rows of the messages table stored on leaf pages before the first
+# damaged one (leaves in key order from sqlite's dbstat table, the last rowid of a leaf
+# from its cell pointer array), in bag-time order without the timestamp index (which may
+# be damaged too), then a ScanError says the file is truncated.
+
+
+def _db3_cut(f: Path) -> tuple[Path, int, int, int] | None:
+    """``(file, size, pages, page size)`` when ``f`` is shorter than its header says."""
+    try:
+        with f.open("rb") as fh:
+            head = fh.read(100)
+            size = fh.seek(0, 2)
+    except OSError:
+        return None
+    if len(head) < 100:
+        return (f, size, 1, 0)
+    page_size = int.from_bytes(head[16:18], "big")
+    page_size = 65536 if page_size == 1 else page_size
+    pages = int.from_bytes(head[28:32], "big")
+    if not pages or head[24:28] != head[92:96]:
+        return None  # a header from an older writer: the page count is not kept there
+    return (f, size, pages, page_size) if size < pages * page_size else None
+
+
+def _cut_text(size: int, pages: int, page_size: int) -> str:
+    if not page_size:
+        return f"{size} bytes, less than the 100-byte sqlite3 header"
+    return (f"{size} bytes of the {pages * page_size} its header gives ({pages} pages of "
+            f"{page_size} bytes)")
+
+
+def _varint(page: bytes, at: int) -> tuple[int, int]:
+    """An sqlite varint at ``page[at]``: (value, offset after it)."""
+    value = 0
+    for i in range(8):
+        byte = page[at + i]
+        value = (value << 7) | (byte & 0x7F)
+        if byte < 0x80:
+            return value, at + i + 1
+    return (value << 8) | page[at + 8], at + 9
+
+
+def _db3_last_intact_rowid(db: sqlite3.Connection, f: Path, intact: int,
+                           page_size: int) -> int | None:
+    """The last rowid of the messages table stored before its first damaged leaf page
+    (a page past ``intact``, or with an overflow page past it); None when there is none,
+    -1 when no leaf is damaged."""
+    leaves: list[tuple[str, int]] = []
+    damaged_leaf: set[str] = set()
+    for path, pageno, pagetype in db.execute(
+            "SELECT path, pageno, pagetype FROM dbstat WHERE name = 'messages'"):
+        if pagetype == "leaf":
+            leaves.append((path, pageno))
+        if pageno > intact:  # an overflow page belongs to the leaf its path starts with
+            damaged_leaf.add(path.split("+")[0] if pagetype == "overflow" else path)
+        if pagetype == "internal" and pageno > intact:
+            return None
+    first = next((i for i, (path, pageno) in enumerate(leaves) if path in damaged_leaf), None)
+    if first is None:
+        return -1
+    if first == 0:
+        return None
+    pageno = leaves[first - 1][1]
+    with f.open("rb") as fh:
+        fh.seek((pageno - 1) * page_size)
+        page = fh.read(page_size)
+    h = 100 if pageno == 1 else 0
+    ncell = int.from_bytes(page[h + 3 : h + 5], "big")
+    if page[h] != 0x0D or not ncell:
+        return None
+    cell = int.from_bytes(page[h + 8 + 2 * (ncell - 1) : h + 10 + 2 * (ncell - 1)], "big")
+    _payload, at = _varint(page, cell)
+    return _varint(page, at)[0]
+
+
+def _raw_db3_cut(
+    cut: tuple[Path, int, int, int], sources: dict[str, Source], lo: int | None,
+    hi: int | None,
+) -> Iterator[RawItem]:
+    """The messages of a truncated .db3 stored before the damage, in bag-time order,
+    then a ScanError at the end of the file."""
+    f, size, pages, page_size = cut
+    reason = f"truncated: {_cut_text(size, pages, page_size)}"
+    if not page_size:
+        raise ScanError(reason, size)
+    with contextlib.closing(sqlite3.connect(f"{f.resolve().as_uri()}?immutable=1",
+                                            uri=True)) as db:
+        try:
+            last = _db3_last_intact_rowid(db, f, size // page_size, page_size)
+        except (sqlite3.Error, IndexError):
+            last = None  # the table's tree itself is damaged: nothing can be trusted
+        if last is not None and sources:
+            by_id = {tid: sources[name] for tid, name in
+                     db.execute("SELECT id, name FROM topics") if name in sources}
+            query = ["SELECT id FROM messages NOT INDEXED WHERE topic_id IN (",
+                     ",".join("?" * len(by_id)), ")"]
+            args: list[int] = list(by_id)
+            for clause, value in (("id <= ?", None if last < 0 else last),
+                                  ("timestamp >= ?", lo), ("timestamp < ?", hi)):
+                if value is not None:
+                    query.append(f" AND {clause}")
+                    args.append(value)
+            rowids = [r for (r,) in db.execute("".join(query) + " ORDER BY timestamp, id",
+                                               args)]
+            for rowid in rowids:
+                tid, stamp, data = db.execute(
+                    "SELECT topic_id, timestamp, data FROM messages WHERE id = ?",
+                    (rowid,)).fetchone()
+                yield stamp, by_id[tid], data, None
+    raise ScanError(reason + ("" if last == -1 else "; the messages stored from there on "
+                              "are lost"), size)
 
 
 def _raw_mcap(
@@ -282,6 +423,40 @@ def locate_message(
     return None
 
 
+def _kind(value: object) -> str:
+    """What a damaged bag time is, for a message: ``a BLOB b'\\x01'``, ``a REAL 2.5``."""
+    kind = {bytes: "a BLOB", float: "a REAL", str: "a TEXT", type(None): "NULL"}.get(
+        type(value), f"a {type(value).__name__}")
+    text = repr(value)
+    return kind if value is None else f"{kind} {text[:40]}{'...' if len(text) > 40 else ''}"
+
+
+def _db3_files(p: Path) -> list[Path]:
+    """The sqlite3 files of a ROS 2 bag: ``p`` itself, or the ``*.db3`` in its folder."""
+    return [p] if p.is_file() else sorted(p.glob("*.db3"))
+
+
+def _sqlite_record(p: Path, fmt: BagFormat, stamp: object, raw: bytes | memoryview) -> str:
+    """`` (messages row N of FILE)``: the sqlite3 row holding the message with bag time
+    ``stamp`` and payload ``raw``, or ``""`` when it is not found (or not sqlite3)."""
+    if fmt is not BagFormat.SQLITE3:
+        return ""
+    want = bytes(raw)
+    for f in _db3_files(p):
+        try:
+            with contextlib.closing(sqlite3.connect(f"{f.resolve().as_uri()}?immutable=1",
+                                                    uri=True)) as db:
+                rows = db.execute("SELECT id, data FROM messages WHERE timestamp IS ? LIMIT 100",
+                                  (stamp,)).fetchall() or db.execute(
+                    "SELECT id, data FROM messages WHERE data = ? LIMIT 1", (want,)).fetchall()
+        except (sqlite3.Error, OSError, ValueError, OverflowError):
+            continue
+        for rowid, data in rows:
+            if data == want:
+                return f" (messages row {rowid} of {f.name})"
+    return ""
+
+
 def _read(
     p: Path, fmt: BagFormat, topics: frozenset[str], lo: int | None, hi: int | None
 ) -> Iterator[BagMessage]:
@@ -299,6 +474,10 @@ def _read(
 
     items = _indexed(p, fmt, topics, lo, hi)
     salvaging = False
+    # One .db3 is read in timestamp order (an ORDER BY on its index): a time going
+    # backwards is damage. (Several files are read one after the other; bags written
+    # record by record are read in file order.)
+    ordered = fmt is BagFormat.SQLITE3 and len(_db3_files(p)) == 1
     while True:
         try:
             item = next(items, None)
@@ -313,11 +492,19 @@ def _read(
                 raise fail(reason, locate_damage(p, fmt)) from None
             # No usable index / summary (a truncated file): read record by record.
             log.info("%s: index unreadable (%s); reading record by record", p, reason)
-            items, salvaging = fallback, True
+            items, salvaging, ordered = fallback, True, False
             continue
         if item is None:
             return
         stamp, src, raw, offset = item
+        if type(stamp) is not int:  # sqlite3: a damaged record or index (issue 21, item 8)
+            raise fail(f"corrupt {src.topic} message: its bag time is {_kind(stamp)}, not an "
+                       f"integer{_sqlite_record(p, fmt, stamp, raw)}", offset) from None
+        if ordered and last is not None and stamp < last:
+            raise fail(f"corrupt {src.topic} message: bag time {stamp} ns is earlier than "
+                       f"the previous message's, {last} ns, in a time-ordered read (a damaged "
+                       f"timestamp index)"
+                       f"{_sqlite_record(p, fmt, stamp, raw)}", offset) from None
         try:
             message = BagMessage(Time.from_ns(stamp), src.topic, TFMessage(src.decode(raw)),
                                  src.authority)

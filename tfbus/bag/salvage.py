@@ -73,14 +73,17 @@ def _ros1_header(data: bytes) -> dict[str, bytes]:
     return fields
 
 
-def _ros1_records(buf: bytes, base: int) -> Iterator[tuple[int, int, dict[str, bytes], bytes]]:
-    """(record offset, data offset, header fields, data) of each record in ``buf``.
+def _ros1_records(
+    buf: bytes | mmap.mmap, base: int, start: int = 0
+) -> Iterator[tuple[int, int, dict[str, bytes], bytes]]:
+    """(record offset, data offset, header fields, data) of each record in ``buf`` from
+    ``start``; only each record's own bytes are copied (``buf`` may map a whole file).
 
     ``base`` is the file offset of ``buf``. A record cut short raises :class:`ScanError`,
     except that an uncompressed chunk cut short is yielded first with the part present
     (its complete records are salvaged).
     """
-    off = 0
+    off = start
     while off < len(buf):
         if off + 4 > len(buf):
             raise ScanError("truncated record header", base + off)
@@ -106,8 +109,12 @@ def _decompress_ros1_chunk(head: dict[str, bytes], body: bytes, pos: int) -> byt
     compression = head.get("compression", b"none").decode(errors="replace")
     if compression == "none":
         return body
-    size = _U32.unpack(head["size"])[0] if len(head.get("size", b"")) == 4 else None
-    limit = -1 if size is None else size
+    if len(head.get("size", b"")) != 4:
+        # The format requires it (rosbag's ChunkHeader reads "size" as a required field);
+        # without it nothing would bound what a small compressed chunk expands to.
+        raise ScanError(f"corrupt {compression} chunk: no uncompressed size in its header",
+                        pos)
+    size = limit = _U32.unpack(head["size"])[0]
     try:
         if compression == "bz2":
             inner = bz2.BZ2Decompressor().decompress(body, max_length=limit)
@@ -120,7 +127,7 @@ def _decompress_ros1_chunk(head: dict[str, bytes], body: bytes, pos: int) -> byt
         raise
     except Exception:
         raise ScanError(f"corrupt {compression} chunk", pos) from None
-    if size is not None and len(inner) != size:
+    if len(inner) != size:
         raise ScanError(f"corrupt {compression} chunk (size differs from its header)", pos)
     return bytes(inner)
 
@@ -134,9 +141,21 @@ def scan_ros1(
     :class:`ScanError`: at the first damaged record, or at the end of the file when the
     bag has no index (truncated or never closed). A bag read to its end that has its
     index returns normally.
+
+    The file is memory-mapped and read one record at a time (only the record being read
+    is copied), never read into memory whole.
     """
-    data = p.read_bytes()
-    if not data.startswith(ROS1_MAGIC):
+    with p.open("rb") as f:
+        if p.stat().st_size < len(ROS1_MAGIC):
+            raise ScanError("not a ROS 1 bag", 0)
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            yield from _scan_ros1(mm, topics, lo, hi)
+
+
+def _scan_ros1(
+    data: mmap.mmap, topics: Collection[str], lo: int | None, hi: int | None
+) -> Iterator[RawItem]:
+    if data[: len(ROS1_MAGIC)] != ROS1_MAGIC:
         raise ScanError("not a ROS 1 bag", 0)
     sources: dict[int, Source | None] = {}
     index_pos: int | None = None
@@ -183,7 +202,7 @@ def scan_ros1(
             op = head.get("op", b"?").hex()
             raise ScanError(f"corrupt record (op 0x{op}): {_describe(err)}", pos) from None
 
-    for pos, dpos, head, body in _ros1_records(data[len(ROS1_MAGIC) :], len(ROS1_MAGIC)):
+    for pos, dpos, head, body in _ros1_records(data, 0, len(ROS1_MAGIC)):
         if head.get("op") != _OP_CHUNK:
             yield from guarded(pos, head, body)
             continue

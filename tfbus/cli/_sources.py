@@ -126,15 +126,30 @@ _UNKNOWN_AUTHORITY = "unknown"
 _SHARED_AUTHORITY = "unattributed"
 
 
-def parse_spec(spec: str) -> BusSpec:
+def parse_spec(spec: str, *, name: str = "tfbus-cli") -> BusSpec:
     """``--bus SPEC`` parsed by the scheme table (:mod:`tfbus.transports.spec`: ``zenoh``,
-    ``ros2``, ``ros1``, ``memory``, ...), or a one-line usage error."""
+    ``ros2``, ``ros1``, ``memory``, ...), or a one-line usage error (exit status 2).
+
+    Option values are checked here too, before anything runs: a transport is built from
+    the spec (not opened: no socket, no thread) and dropped, so a value its factory or
+    constructor refuses (``zenoh?port=abc``, ``ros2:domain=999``, ``ros1:name=bad name``,
+    an unreadable ``ros2:config`` file, ...) is the same one-line usage error. A missing
+    extra is left to the opening of the bus, which names it.
+    """
+    from tfbus.errors import TransportError
     from tfbus.transports.spec import parse_bus_spec
 
     try:
-        return parse_bus_spec(spec)
+        parsed = parse_bus_spec(spec)
     except ValueError as err:
         fail(str(err))
+    try:
+        open_spec_transport(parsed, name=name)
+    except ValueError as err:
+        fail(f"--bus {spec!r}: {err}")
+    except TransportError:
+        pass  # an extra not installed: said when the bus is opened (exit status 1)
+    return parsed
 
 
 def open_spec_transport(spec: BusSpec, *, name: str) -> Transport:
@@ -184,7 +199,7 @@ class BusSource(TfSource):
         from tfbus.monitor import MonitoredSink, TfStatistics
 
         self.spec = spec
-        self.bus_spec = parse_spec(spec)
+        self.bus_spec = parse_spec(spec, name=name)
         self.name = name
         self.label = f"the bus {spec!r}"
         self.clock = SystemClock()
@@ -437,7 +452,7 @@ def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]
         if bus is not None:
             fail("give --bus SPEC or --local, not both")
         return Bus
-    chosen = parse_spec(bus if bus is not None else "zenoh")
+    chosen = parse_spec(bus if bus is not None else "zenoh", name=name)
 
     def open_bus() -> Bus:
         return Bus(transport=open_spec_transport(chosen, name=name))

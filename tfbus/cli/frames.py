@@ -31,11 +31,14 @@ def _shorten(text: str) -> str:
 
 
 def dot_id(text: str) -> str:
-    """``text`` as one DOT identifier, drawn literally: controls escaped (:func:`literal`),
-    backslashes and ``<...>`` disarmed (``graphviz.escape``), quoted where DOT needs it
-    (``graphviz`` package quoting: ``cam:left`` is one node, not node ``cam`` port
-    ``left``); a very long id is shortened visibly, with a hash keeping it unique."""
-    shown = literal(text)
+    """``text`` as one DOT identifier, drawn literally: backslashes doubled and controls
+    escaped (:func:`literal`), as Python's ``repr`` writes them, so two ids never become
+    one node (``'a\\nb'`` is drawn ``a\\x0ab``, the 6-character text ``a\\x0ab`` is drawn
+    ``a\\\\x0ab``); backslashes and ``<...>`` disarmed for DOT (``graphviz.escape``),
+    quoted where DOT needs it (``graphviz`` package quoting: ``cam:left`` is one node,
+    not node ``cam`` port ``left``); a very long id is shortened visibly, with a hash
+    keeping it unique."""
+    shown = literal(text.replace("\\", "\\\\"))
     if len(shown) > LABEL_MAX:
         digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:12]
         shown = f"{_shorten(shown)} #{digest}"

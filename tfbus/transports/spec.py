@@ -82,19 +82,28 @@ class BusSpec:
             raise ValueError(f"bus option {key!r} given more than once")
         return values[0]
 
-    def integer(self, key: str, default: int) -> int:
-        """``key`` as an integer (``default`` when not given).
+    def integer(self, key: str, default: int, *, minimum: int | None = None,
+                maximum: int | None = None) -> int:
+        """``key`` as an integer (``default`` when not given), within ``minimum`` ..
+        ``maximum`` (inclusive) when they are given.
 
         Raises:
-            ValueError: if the value is not an integer (the message names the key).
+            ValueError: if the value is not an integer or out of range (the message
+                names the key, the value and the range).
         """
         text = self.value(key)
         if text is None:
             return default
         try:
-            return int(text)
+            number = int(text)
         except ValueError:
             raise ValueError(f"bus option {key!r} must be an integer, got {text!r}") from None
+        if (minimum is not None and number < minimum) or (maximum is not None
+                                                           and number > maximum):
+            low = "" if minimum is None else minimum
+            high = "" if maximum is None else maximum
+            raise ValueError(f"bus option {key!r} must be in {low}..{high}, got {text!r}")
+        return number
 
     def boolean(self, key: str, default: bool = False) -> bool:
         """``key`` as a boolean: ``1/true/yes/on`` or ``0/false/no/off``.

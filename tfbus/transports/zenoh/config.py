@@ -71,8 +71,11 @@ def zenoh_config(
 
     Raises:
         TransportError: if the file cannot be read or a value is rejected by Zenoh.
-        ValueError: if an endpoint list is empty where one is required.
+        ValueError: if an endpoint list is empty where one is required, or ``port`` is
+            not a TCP port (1..65535).
     """
+    if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
+        raise ValueError(f"port must be a TCP port number in 1..65535, got {port!r}")
     base_given = config is not None and not isinstance(config, Mapping)
 
     def build(listen_eps: list[str] | None, connect_eps: list[str] | None) -> zenoh.Config:

@@ -64,7 +64,7 @@ class ZenohOptions:
             prefix=spec.value("prefix") or DEFAULT_PREFIX,
             namespace=spec.value("namespace") or "",
             name=spec.value("name"),
-            port=spec.integer("port", DEFAULT_PORT),
+            port=spec.integer("port", DEFAULT_PORT, minimum=1, maximum=65535),
             express=spec.boolean("express"),
         )
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import socket
+import time
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, fields
@@ -162,7 +163,8 @@ class ZenohTransport:
         self._session: zenoh.Session | None = None
         self._node_id = ""
         self._running = False
-        self._log = CountLimitedLog(log, 1000)  # first line of each kind, then 1 in 1000
+        # first line of each kind, then 1 in 1000 and at most one per 5 s
+        self._log = CountLimitedLog(log, 1000, clock=time.monotonic)
         self._matching_changed: anyio.Event | None = None
 
     # -- public information -----------------------------------------------------------
