@@ -66,3 +66,25 @@ def test_readme_says_how_to_reach_the_venv_commands() -> None:
     assert "`.venv/bin/tfbus`" in text
     demo = makefile[makefile.index("\ndemo:"):].split("\n\n", 1)[0]
     assert "activate" in demo, "make demo does not say how to run the next commands"
+
+
+def test_the_trio_backend_the_readme_mentions_has_an_extra() -> None:
+    """``backend="trio"`` needs trio, which no core dependency brings: an extra does, the
+    README names it where it mentions the backend, and ``all`` includes it."""
+    from packaging.requirements import Requirement
+
+    reqs = [Requirement(r) for r in importlib.metadata.requires("tfbus") or ()]
+    trio_in = {
+        extra
+        for r in reqs if r.name == "trio" and r.marker is not None
+        for extra in _extras() if r.marker.evaluate({"extra": extra})
+    }
+    assert "trio" in trio_in, trio_in
+    everything = [r for r in reqs if r.name == "tfbus" and r.marker is not None
+                  and r.marker.evaluate({"extra": "all"})]
+    assert everything and "trio" in everything[0].extras, everything
+    assert not [r for r in reqs if r.name == "trio" and r.marker is None]
+    text = _readme()
+    use = text[text.index("## Use"):text.index("## Sensor streams")]
+    assert 'backend="trio"' in use
+    assert "`pip install '.[trio]'`" in use
