@@ -1,11 +1,19 @@
 """The README, read as a newcomer reads it: its install lines work from a clone, every
-extra it names exists, and it says how to reach the commands `make` installed."""
+extra it names exists, it says how to reach the commands `make` installed, and every
+python block runs as a script, pasted into a file as it is."""
 
 from __future__ import annotations
 
 import importlib.metadata
+import os
+import random
 import re
+import socket
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -88,3 +96,62 @@ def test_the_trio_backend_the_readme_mentions_has_an_extra() -> None:
     use = text[text.index("## Use"):text.index("## Sensor streams")]
     assert 'backend="trio"' in use
     assert "`pip install '.[trio]'`" in use
+
+
+def _python_blocks() -> list[tuple[int, str]]:
+    """(line of the opening fence, code) of every ```python block of the README."""
+    text = _readme()
+    return [
+        (text.count("\n", 0, m.start()) + 1, m.group(1))
+        for m in re.finditer(r"(?m)^```python\n(.*?)^```$", text, re.DOTALL)
+    ]
+
+
+def _closed_port() -> int:
+    """A 127.0.0.1 port nobody listens on (bound, then released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_readme_has_python_blocks() -> None:
+    assert len(_python_blocks()) >= 7
+
+
+@pytest.mark.parametrize(
+    ("line", "code"), [pytest.param(ln, c, id=f"README.md:{ln}") for ln, c in _python_blocks()]
+)
+def test_python_block_runs_as_a_script(line: int, code: str, tmp_path: Path) -> None:
+    """``python snippet.py`` with the block pasted in exits 0 (top-level ``await`` /
+    ``async with`` would be a SyntaxError). The ROS peers it may reach are isolated: a
+    random DDS domain on loopback, a ROS 1 master URI where nothing listens."""
+    script = tmp_path / f"readme_line_{line}.py"
+    script.write_text(code, encoding="utf-8")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)), ROS_IP="127.0.0.1",
+               ROS_MASTER_URI=f"http://127.0.0.1:{_closed_port()}")
+    try:
+        done = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env,
+                              capture_output=True, text=True, timeout=120, check=False)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"README.md:{line}: the block still runs after 120 s")
+    assert done.returncode == 0, f"README.md:{line}:\n{done.stderr[-3000:]}"
+
+
+def test_use_block_prints_what_its_comment_says(tmp_path: Path) -> None:
+    """The comment under the Use example's ``print`` is its output, character for character."""
+    text = _readme()
+    use = text[text.index("## Use"):text.index("## Sensor streams")]
+    line = text.count("\n", 0, text.index("## Use")) + 1
+    m = re.search(r"(?m)^```python\n(.*?)^```$", use, re.DOTALL)
+    assert m is not None, "no python block in the Use section"
+    code = m.group(1)
+    lines = code.splitlines()
+    at = next(i for i, ln in enumerate(lines) if "print(" in ln)
+    expected = lines[at + 1].strip()
+    assert expected.startswith("# "), f"README.md:{line}: no comment under the print"
+    script = tmp_path / "use.py"
+    script.write_text(code, encoding="utf-8")
+    done = subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout == expected.removeprefix("# ") + "\n"
