@@ -155,3 +155,28 @@ def test_use_block_prints_what_its_comment_says(tmp_path: Path) -> None:
                           text=True, timeout=120, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout == expected.removeprefix("# ") + "\n"
+
+
+# What each installer the tests may run puts on the machine, as the README must name it.
+INSTALLERS = {
+    "install_chromium.sh": "Chromium",
+    "install_laser_geometry.sh": "laser_geometry",
+    "install_ros1.sh": "ROS 1",
+    "install_ros1_rsp.sh": "ROS 1",
+    "install_ros2_env.sh": "ROS 2",
+}
+
+
+def test_readme_names_everything_make_test_installs() -> None:
+    """Each ``scripts/install_*.sh`` the tests run (as root they apt-get install) is named
+    in the README's comment on ``make test``."""
+    used = set()
+    for path in (ROOT / "tests").rglob("*.py"):
+        used |= set(re.findall(r"install_[a-z0-9_]+\.sh", path.read_text(encoding="utf-8")))
+    assert used, "no installer found in tests/"
+    unknown = sorted(used - set(INSTALLERS))
+    assert not unknown, f"installers not in INSTALLERS: {unknown}"
+    text = _readme()
+    block = text[text.index("make test "):text.index("```", text.index("make test "))]
+    missing = sorted(INSTALLERS[s] for s in used if INSTALLERS[s] not in block)
+    assert not missing, f"README: `make test` does not say it installs {missing}"
