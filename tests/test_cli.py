@@ -202,8 +202,44 @@ def test_echo_failure_and_bad_arguments() -> None:
     assert_usage_error(code, err, "soon")
     code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--rate", "0")
     assert_usage_error(code, err, "--rate")
-    code, _, err = run("echo", "world", "turtle1")
-    assert_usage_error(code, err, "--bag")
+    code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--bus", "zenoh")
+    assert_usage_error(code, err, "--bag", "--bus")
+
+
+@pytest.mark.parametrize("command", ["echo", "monitor", "frames"])
+def test_readers_listen_on_the_default_bus_without_a_source(
+    command: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Issue 20, 2.6: ``tfbus echo base_link base_laser`` with no --bag/--bus listens to
+    the bus the publishers publish on by default, as tf2_echo listens to the running
+    graph (no usage error). The live session is replaced by a Ctrl-C (exit 130)."""
+    import importlib
+
+    import tfbus.cli._sources as sources
+
+    parsed: list[str] = []
+    real_parse = sources.parse_spec
+
+    def parse(spec: str):  # type: ignore[no-untyped-def]
+        parsed.append(spec)
+        return real_parse(spec)
+
+    monkeypatch.setattr(sources, "parse_spec", parse)
+    module = importlib.import_module(f"tfbus.cli.{command}")
+    opened: list[object] = []
+
+    def interrupted(main: object, **_: object) -> int:
+        opened.append(main)
+        return 130
+
+    monkeypatch.setattr(module, "run_live", interrupted)
+    args = {"echo": ["base_link", "base_laser"], "monitor": [],
+            "frames": ["-o", str(tmp_path / "f.gv")]}[command]
+    code, _, err = run(command, *args)
+    assert (code, len(opened)) == (130, 1), err
+    reader = parsed[:]
+    sources.publish_bus(None, False, name="static_transform_publisher")
+    assert reader == [sources.DEFAULT_BUS] == parsed[1:] == ["zenoh"]
 
 
 def test_parse_time() -> None:

@@ -31,8 +31,13 @@ if TYPE_CHECKING:
     from tfbus.transports.spec import BusSpec
     from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
-__all__ = ["BagSource", "BusSource", "TfSource", "is_bus_error", "live", "run_live",
-           "source", "source_options"]
+__all__ = ["DEFAULT_BUS", "BagSource", "BusSource", "TfSource", "is_bus_error", "live",
+           "run_live", "source", "source_options"]
+
+DEFAULT_BUS = "zenoh"
+"""The bus every command uses without ``--bus``: publishers publish on it, and readers
+(echo, monitor, frames) listen to it unless given ``--bag`` (as tf2_echo, tf_monitor and
+view_frames listen to the running ROS graph)."""
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -314,7 +319,8 @@ def source_options(f: F) -> F:
 
     f = click.option(
         "--bus", "bus", metavar="SPEC", default=None,
-        help="Attach to a live bus instead: 'zenoh' (this machine, no configuration), "
+        help="The live bus to listen to (default, without --bag: 'zenoh', this machine, "
+             "where the publishing commands publish by default): 'zenoh', "
              "'zenoh:tcp/HOST:7448', 'zenoh?connect=...&namespace=...', 'ros2' "
              "(ROS 2 over DDS, 'ros2:domain=7'), 'ros1' (a ROS 1 master, "
              "'ros1:http://127.0.0.1:11311').",
@@ -323,14 +329,14 @@ def source_options(f: F) -> F:
 
 
 def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli") -> TfSource:
-    """The source the options name (a usage error for none or both)."""
+    """The source the options name: the bag, else the ``--bus`` spec, else the default
+    bus (:data:`DEFAULT_BUS`, where the publishing commands publish); a usage error for
+    both."""
     if bus is not None and bag is not None:
         fail("give --bag PATH or --bus SPEC, not both")
-    if bus is not None:
-        return BusSource(bus, name=name)
-    if bag is None:
-        fail("no transform source: pass --bag PATH or --bus SPEC (e.g. --bus zenoh)")
-    return BagSource(bag)
+    if bag is not None:
+        return BagSource(bag)
+    return BusSource(bus if bus is not None else DEFAULT_BUS, name=name)
 
 
 def live_only(src: TfSource, **options: object) -> None:
@@ -415,8 +421,8 @@ async def live(
         tg.cancel_scope.cancel()
 
 
-BUS_HELP = ("Bus to publish on (default 'zenoh': this machine, no configuration), e.g. "
-            "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
+BUS_HELP = (f"Bus to publish on (default {DEFAULT_BUS!r}: this machine, no configuration), "
+            "e.g. 'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
             "'ros2:domain=7', 'ros1', 'ros1:http://127.0.0.1:11311'.")
 
 
@@ -437,7 +443,7 @@ def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]
         if bus is not None:
             fail("give --bus SPEC or --local, not both")
         return Bus
-    chosen = parse_spec(bus if bus is not None else "zenoh")
+    chosen = parse_spec(bus if bus is not None else DEFAULT_BUS)
 
     def open_bus() -> Bus:
         return Bus(transport=open_spec_transport(chosen, name=name))

@@ -132,9 +132,10 @@ def command(
 
     As tf2_echo, this is the pose of TARGET in SOURCE, i.e. lookup_transform(SOURCE,
     TARGET, t): it maps points in TARGET into SOURCE. With --bag and no --time, it steps
-    through the recording at --rate Hz of bag time. With --bus it listens to a live bus
-    and prints the latest transform (or the one at --time) at --rate Hz of wall time,
-    saying on stderr what it is waiting for until the frames are connected. A failed
+    through the recording at --rate Hz of bag time. Otherwise it listens to a live bus
+    (--bus, default 'zenoh', where 'tfbus static-transform' and the demo publish) and
+    prints the latest transform (or the one at --time) at --rate Hz of wall time, saying
+    on stderr what it is waiting for until the frames are connected. A failed
     lookup prints tf2_echo's "Failure at ... Exception thrown:..." text (exit status 1).
 
     \b
@@ -142,6 +143,7 @@ def command(
       tfbus echo world turtle1 --bag turtle.bag
       tfbus echo world turtle1 --bag turtle.bag --time 1396293900.25 --matrix
       tfbus echo map base_link --bag nav2.mcap --rate 10 -n 5
+      tfbus echo base_link base_laser          # the default bus, until Ctrl-C
       tfbus echo base_link base_laser --bus zenoh -n 1
       tfbus echo base_link base_laser --bus zenoh:tcp/192.168.1.10:7448 --duration 10
     """

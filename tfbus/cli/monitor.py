@@ -134,8 +134,9 @@ def command(
     "Net delay avg/max" lines. On a bag recorded with simulated time (stamps far from
     the recorder's clock) delays are measured against the newest stamp, with a note.
 
-    With --bus it listens to a live bus: the tables (cumulative since it attached) are
-    printed every --interval seconds and on exit, with the broadcasters known through
+    Without --bag it listens to a live bus (--bus, default 'zenoh'): the tables
+    (cumulative since it attached) are printed every --interval seconds and on exit,
+    with the broadcasters known through
     Zenoh liveliness (alive / gone); a line is printed as soon as a broadcaster appears
     ("[alive] ...") or its liveliness is lost because it exited or died ("[dead] ...").
 
