@@ -242,6 +242,47 @@ def test_readers_listen_on_the_default_bus_without_a_source(
     assert reader == [sources.DEFAULT_BUS] == parsed[1:] == ["zenoh"]
 
 
+def test_echo_takes_tf2_echos_positional_rate() -> None:
+    """Issue 20, 2.7: ``tf2_echo source target [rate]``: RATE as the third argument is
+    --rate (steps of 1/rate s of bag time through the turtle bag's 21.5 s of chain)."""
+    base = ["echo", "world", "turtle1", "--bag", str(TURTLE)]
+    counts = {}
+    for extra in ([], ["4"], ["--rate", "4"]):
+        code, out, _ = run(*base[:3], *extra, *base[3:])
+        assert code == 0
+        counts[" ".join(extra)] = out.count("At time")
+    assert counts["4"] == counts["--rate 4"] > 3.5 * counts[""] > 0
+    code, _, err = run(*base[:3], "4", "--rate", "2", *base[3:])
+    assert_usage_error(code, err, "RATE 4", "--rate 2")
+    code, _, err = run(*base[:3], "0", *base[3:])
+    assert_usage_error(code, err, "RATE")
+
+
+@pytest.mark.parametrize(("args", "label", "frame"), [
+    (["/world", "turtle1"], "target_frame", "/world"),
+    (["world", "/turtle1"], "source_frame", "/turtle1"),
+])
+def test_echo_leading_slash_is_tf2s_own_message(
+    args: list[str], label: str, frame: str
+) -> None:
+    """Issue 20, 2.7: tf2's validateFrameId message (as the conformance corpus records it
+    from tf2 0.7.6), one line, exit status 1 as a failed lookup; with --bag and on a
+    live bus alike (nothing is opened for a frame id that can never be found)."""
+    expected = (f'tfbus echo: error: Invalid argument "{frame}" passed to lookupTransform '
+                f"argument {label} in tf2 frame_ids cannot start with a '/' like:")
+    for source in (["--bag", str(TURTLE)], []):
+        code, out, err = run("echo", *args, *source)
+        assert (code, out, err.rstrip("\n").splitlines()) == (1, "", [expected])
+    from tfbus import BufferCore, InvalidArgumentException
+    from tfbus.messages import Header, Transform, TransformStamped
+
+    core = BufferCore()
+    core.set_transform(TransformStamped(Header(Time(1), "world"), "turtle1", Transform()), "t")
+    with pytest.raises(InvalidArgumentException) as info:
+        core.lookup_transform(*args, Time(0))
+    assert expected.endswith(str(info.value).strip())
+
+
 def test_parse_time() -> None:
     assert parse_time("latest") == Time(0)
     assert parse_time("1396293909.544282913") == Time(1396293909, 544282913)
@@ -373,6 +414,57 @@ def test_static_transform_bad_arguments() -> None:
     assert_usage_error(code, err, "expected 8 arguments")
     code, _, err = run("static-transform", "1", "2", "x", "0", "0", "0", "a", "b")
     assert_usage_error(code, err, "'x' is not a number")
+
+
+def test_static_transform_takes_ros2_flags(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 20, 2.7: ROS 2's flag form (tf2_ros static_transform_broadcaster_program.cpp):
+    every flag optional (translation 0, quaternion (0, 0, 0, 1), RPY 0) but the frame
+    ids; quaternion and RPY flags together, flags mixed with positional arguments or a
+    flag without its value are errors."""
+    ts = parse_static_args(["--x", "0.1", "--z", "0.2", "--frame-id", "base_link",
+                            "--child-frame-id", "base_laser"])
+    assert (ts.header.frame_id, ts.child_frame_id) == ("base_link", "base_laser")
+    assert tuple(ts.transform.translation) == (0.1, 0.0, 0.2)
+    assert tuple(ts.transform.rotation) == (0.0, 0.0, 0.0, 1.0)
+    ts = parse_static_args(["--yaw", "1.5707963267948966", "--y", "-1", "--frame-id", "a",
+                            "--child-frame-id", "b"])
+    assert tuple(ts.transform.translation) == (0.0, -1.0, 0.0)
+    assert tuple(ts.transform.rotation) == pytest.approx(
+        (0, 0, math.sqrt(0.5), math.sqrt(0.5)))
+    rpy = parse_static_args(["--roll", "0.3", "--pitch", "-0.2", "--yaw", "1.1",
+                             "--frame-id", "a", "--child-frame-id", "b"])
+    old = parse_static_args(["0", "0", "0", "1.1", "-0.2", "0.3", "a", "b"])  # yaw pitch roll
+    assert rpy == old
+    ts = parse_static_args(["--qz", "1", "--frame-id", "a", "--child-frame-id", "b"])
+    assert tuple(ts.transform.rotation) == pytest.approx((0, 0, math.sqrt(0.5), math.sqrt(0.5)))
+    for bad, needle in [
+        (["--x", "1", "--frame-id", "a"], "--child-frame-id"),
+        (["--child-frame-id", "b"], "--frame-id"),
+        (["--qx", "1", "--roll", "1", "--frame-id", "a", "--child-frame-id", "b"],
+         "both quaternion"),
+        (["0", "0", "0", "0", "0", "0", "a", "b", "--x", "1"], "new-style"),
+        (["--frame-id", "a", "--child-frame-id", "b", "--x"], "--x"),
+        (["--x", "--frame-id", "a", "--child-frame-id", "b"], "--x"),
+        (["--x", "one", "--frame-id", "a", "--child-frame-id", "b"], "--x: 'one'"),
+        (["--frame-id", "a", "--child-frame-id", "a"], "both 'a'"),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(needle)):
+            parse_static_args(bad)
+    import tfbus.cli.static_transform as tcli
+
+    seen = []
+
+    async def fake(open_bus: object, ts: object, once: bool) -> None:
+        seen.append(ts)
+
+    monkeypatch.setattr(tcli, "_publish_static", fake)
+    code, _, err = run("static-transform", "--x", "0.1", "--z", "0.2", "--frame-id",
+                       "base_link", "--child-frame-id", "base_laser", "--local")
+    assert code == 0, err
+    assert seen == [parse_static_args(["0.1", "0", "0.2", "0", "0", "0", "base_link",
+                                       "base_laser"])]
+    code, _, err = run("static-transform", "--x", "0.1", "--frame-id", "a", "--local")
+    assert_usage_error(code, err, "--child-frame-id")
 
 
 # --------------------------------------------------------------------------- replay
