@@ -19,10 +19,19 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from typing import Any
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
+
+
+# setuptools' editable install ends with an "Editable installation. Please be careful with
+# folders in your working directory with the same name as your package" notice
+# (setuptools.warnings.InformationOnly, setuptools/command/editable_wheel.py), which pip
+# >= 25 shows even with -q: a box on every `make` target. tfbus's flat layout is the one
+# it describes and is intended, so that notice (and only it) is not shown.
+warnings.filterwarnings("ignore", message=r"Editable installation\.")
 
 
 def _flag(name: str) -> bool:

@@ -14,6 +14,7 @@ import hashlib
 import importlib.metadata
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -127,3 +128,34 @@ def test_tfbus_no_extensions_gives_a_pure_wheel(sdist: Path, tmp_path: Path) -> 
     members = _members(wheel)
     assert not [m for m in members if m.endswith((".so", ".pyx", ".c"))]
     assert "tfbus/_ccore.pyi" in members and "tfbus/py.typed" in members
+
+
+def _project_copy(dest: Path) -> Path:
+    """The files a build reads, copied (a build writes build/ and *.egg-info next to them)."""
+    for name in ("pyproject.toml", "setup.py", "README.md", "LICENSE", "MANIFEST.in"):
+        shutil.copy2(ROOT / name, dest / name)
+    shutil.copytree(ROOT / "tfbus", dest / "tfbus",
+                    ignore=shutil.ignore_patterns("*.so", "*.c", "__pycache__"))
+    return dest
+
+
+def test_editable_install_is_quiet(tmp_path: Path) -> None:
+    """Issue 20, 2.2: ``pip install -q -e .`` (what every ``make`` target may run) prints
+    nothing: not setuptools' "Editable installation ... Please be careful" box, which pip
+    shows even with -q. Into a new venv, from a copy of the project."""
+    venv = tmp_path / "venv"
+    done = _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], timeout=120)
+    assert done.returncode == 0, done.stderr
+    project = tmp_path / "project"
+    project.mkdir()
+    _project_copy(project)
+    env = dict(os.environ, TFBUS_NO_EXTENSIONS="1")  # the box is the same with or without
+    done = _run([sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"),
+                 "install", "-q", "--no-deps", "-e", str(project)], timeout=900, env=env)
+    log = done.stdout + done.stderr
+    assert done.returncode == 0, log[-4000:]
+    assert "Editable installation" not in log and "Please be careful" not in log, log
+    # pip's own notes about this machine's index configuration are not the build's.
+    noise = [ln for ln in log.splitlines()
+             if ln.strip() and not re.match(r"WARNING: Location .* is ignored", ln)]
+    assert noise == [], log
