@@ -65,9 +65,13 @@ def test_every_command_has_help_with_examples(command: str) -> None:
 def test_version() -> None:
     from importlib.metadata import version
 
+    from tfbus import _backend
+
     code, out, _ = run("--version")
     assert code == 0
-    assert out == f"tfbus {version('tfbus')}\n"
+    core = "compiled core" if _backend.COMPILED else "pure-Python core: "
+    assert out.startswith(f"tfbus {version('tfbus')} ({core}")
+    assert out == f"tfbus {version('tfbus')} ({_backend.core_description()})\n"
 
 
 def test_version_of_a_source_tree_that_is_not_installed(
@@ -87,12 +91,12 @@ def test_version_of_a_source_tree_that_is_not_installed(
     try:
         importlib.reload(tfbus._version)
         code, out, _ = run("--version")
-        assert (code, out) == (0, "tfbus 0+unknown\n")
+        assert (code, out.split(" (")[0]) == (0, "tfbus 0+unknown")
     finally:
         monkeypatch.undo()
         importlib.reload(tfbus._version)
     code, out, _ = run("--version")
-    assert (code, out) == (0, f"tfbus {importlib.metadata.version('tfbus')}\n")
+    assert (code, out.split(" (")[0]) == (0, f"tfbus {importlib.metadata.version('tfbus')}")
 
 
 def test_unknown_command_and_option_are_one_line() -> None:

@@ -115,6 +115,11 @@ def test_without_a_c_compiler_the_sdist_builds_pure_python(
     wheel, log = _wheel(sdist, tmp_path, env)
     assert FALLBACK_MESSAGE in log
     assert "pure-Python core" in log
+    # Issue 20, 2.3: a pure wheel, not one tagged for this Python and platform.
+    assert wheel.name == f"tfbus-{_pyproject_version()}-py3-none-any.whl"
+    with zipfile.ZipFile(wheel) as z:
+        meta = z.read(f"tfbus-{_pyproject_version()}.dist-info/WHEEL").decode()
+    assert "Root-Is-Purelib: true" in meta and "Tag: py3-none-any" in meta, meta
     members = _members(wheel)
     assert {"tfbus/core.py", "tfbus/_pycore.py", "tfbus/_backend.py"} <= set(members)
     assert not [m for m in members if m.endswith(".so")]
@@ -159,3 +164,34 @@ def test_editable_install_is_quiet(tmp_path: Path) -> None:
     noise = [ln for ln in log.splitlines()
              if ln.strip() and not re.match(r"WARNING: Location .* is ignored", ln)]
     assert noise == [], log
+
+
+def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
+    """Issue 20, 2.3: tfbus without its compiled module (a copy of the package, .py files
+    only, first on sys.path) logs one warning line at import and ``tfbus --version``
+    names the core; choosing the pure core with TFBUS_PURE_PYTHON=1 is silent."""
+    shutil.copytree(ROOT / "tfbus", tmp_path / "tfbus",
+                    ignore=shutil.ignore_patterns("*.so", "*.c", "*.pyx", "__pycache__"))
+    env = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"}
+    env["PYTHONPATH"] = str(tmp_path)
+    # An editable install's finder (setuptools' __editable__ module) would still find the
+    # repository's tfbus._ccore: without it, this is a tfbus installed with no compiled core.
+    prelude = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
+               "getattr(f, '__module__', '').startswith('__editable__')]; ")
+    code = prelude + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
+    done = _run([sys.executable, "-c", code], timeout=120, env=env, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == f"{tmp_path / 'tfbus' / '__init__.py'} False\n"
+    from tfbus._backend import PURE_FALLBACK_WARNING
+
+    assert done.stderr == PURE_FALLBACK_WARNING + "\n"
+    assert "\n" not in PURE_FALLBACK_WARNING and "pure-Python core" in PURE_FALLBACK_WARNING
+    version = importlib.metadata.version("tfbus")
+    cli = prelude + "from tfbus.cli import main; sys.exit(main(['--version']))"
+    done = _run([sys.executable, "-c", cli], timeout=120, env=env, cwd=tmp_path)
+    assert (done.returncode, done.stdout) == (
+        0, f"tfbus {version} (pure-Python core: the compiled one is not installed)\n")
+    env["TFBUS_PURE_PYTHON"] = "1"
+    done = _run([sys.executable, "-c", cli], timeout=120, env=env, cwd=tmp_path)
+    assert (done.returncode, done.stdout, done.stderr) == (
+        0, f"tfbus {version} (pure-Python core: TFBUS_PURE_PYTHON is set)\n", "")
