@@ -31,8 +31,8 @@ if TYPE_CHECKING:
     from tfbus.transports.spec import BusSpec
     from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
-__all__ = ["DEFAULT_BUS", "BagSource", "BusSource", "TfSource", "is_bus_error", "live",
-           "run_live", "source", "source_options"]
+__all__ = ["DEFAULT_BUS", "UNKNOWN_PUBLISHER", "BagSource", "BusSource", "TfSource",
+           "is_bus_error", "live", "run_live", "source", "source_options"]
 
 DEFAULT_BUS = "zenoh"
 """The bus every command uses without ``--bus``: publishers publish on it, and readers
@@ -129,6 +129,9 @@ class BagSource(TfSource):
 
 _UNKNOWN_AUTHORITY = "unknown"
 _SHARED_AUTHORITY = "unattributed"
+UNKNOWN_PUBLISHER = "unknown_publisher"
+"""The broadcaster's name on ROS 1, where the message does not carry it: tf_monitor's
+(``ros::MessageEvent::getPublisherName`` without a connection header, Debian's tf 1.13)."""
 
 
 def parse_spec(spec: str) -> BusSpec:
@@ -173,9 +176,11 @@ class BusSource(TfSource):
     over Zenoh, liveliness changes of broadcasters are tracked (:attr:`gone`).
 
     Authority: the wire format does not say which node sent a message, so a message is
-    attributed to the one live broadcaster publishing its topic (``"unknown"`` before
-    any is known or on transports without liveliness, ``"unattributed"`` when several
-    publish it).
+    attributed to the one live broadcaster publishing its topic (``"unattributed"`` when
+    several publish it). Before any is known a message is ``"unknown"``, and accounted to
+    the broadcaster once its liveliness arrives (no row of its own). Transports without
+    liveliness (:attr:`has_liveliness` False) name every sender ``"unknown_publisher"``
+    on ROS 1, as tf_monitor does there, else ``"unknown"``.
 
     Args:
         spec: a ``--bus`` value (:func:`tfbus.transports.spec.parse_bus_spec`).
@@ -223,6 +228,11 @@ class BusSource(TfSource):
         """Record a one-line warning (printed at the end, exit status 1)."""
         self._problem = message
 
+    @property
+    def has_liveliness(self) -> bool:
+        """Whether the transport tells which nodes broadcast (Zenoh's liveliness)."""
+        return self.bus_spec.scheme == "zenoh"
+
     def alive_broadcasters(self) -> dict[str, PeerInfo]:
         """The live broadcasters now (a Zenoh transport's ``broadcasters()``); empty when
         detached or on a transport without liveliness."""
@@ -266,11 +276,20 @@ class BusSource(TfSource):
         self.transport = None
 
     def _authority(self, static: bool) -> str:
+        if not self.has_liveliness:
+            return UNKNOWN_PUBLISHER if self.bus_spec.scheme == "ros1" else _UNKNOWN_AUTHORITY
         topic = "/tf_static" if static else "/tf"
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
         if len(names) == 1:
             return names.pop()
         return _SHARED_AUTHORITY if names else _UNKNOWN_AUTHORITY
+
+    def _attribute_unknown(self) -> None:
+        """What arrived before any broadcaster was known goes to the broadcaster, when
+        exactly one is known now (a single "unknown" row would otherwise stay)."""
+        names = {p.name for p in self.broadcasters_seen.values()}
+        if len(names) == 1 and _UNKNOWN_AUTHORITY in self._statistics.authorities:
+            self._statistics.rename_authority(_UNKNOWN_AUTHORITY, names.pop())
 
     async def _watch(
         self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
@@ -285,6 +304,7 @@ class BusSource(TfSource):
                 info = PeerInfo(ev.node_id, ev.name, topics)
                 self.broadcasters_seen[ev.node_id] = info
                 self.gone.pop(ev.node_id, None)
+                self._attribute_unknown()
                 if known is None and on_peer is not None:
                     on_peer("alive", info)
             elif (
