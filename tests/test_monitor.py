@@ -231,3 +231,34 @@ def test_demo_broadcaster_line_has_no_empty_node() -> None:
     assert result.exit_code == 0, result.stderr
     first = result.stderr.splitlines()[0]
     assert first == "[ INFO] robot_tf_publisher: running the broadcaster node on memory"
+
+
+@pytest.mark.anyio
+async def test_a_second_broadcaster_does_not_make_the_first_unattributed() -> None:
+    """Two live broadcasters on /tf: the wire does not name the sender, but a frame keeps
+    the broadcaster it had while that one was alone (tf_monitor's frame -> authority
+    map): no "unattributed" row for the first one's frames."""
+    from tfbus.cli._sources import BusSource
+    from tfbus.transports.zenoh import PeerEvent, PeerInfo
+
+    src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
+    alive: dict[str, PeerInfo] = {}
+    src.alive_broadcasters = lambda: dict(alive)  # type: ignore[method-assign]
+
+    async def appear(node: str, name: str) -> None:
+        async def events():  # type: ignore[no-untyped-def]
+            yield PeerEvent(True, node, name, "/tf")
+
+        alive[node] = PeerInfo(node, name, frozenset({"/tf"}))
+        await src._watch(events(), None)  # type: ignore[arg-type]
+
+    await appear("a1", "robot_tf_publisher")
+    src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
+    await appear("b2", "odom_publisher")
+    src.sink.set_transforms([tf("base_link", "base_laser", T0 + 10 * MS)], "x", False)
+    src.sink.set_transforms([tf("odom", "base_link", T0 + 10 * MS)], "x", False)
+    stats = src.statistics()
+    assert stats.frames["base_laser"].authorities == {"robot_tf_publisher": 2}
+    assert stats.authorities["robot_tf_publisher"].messages == 2
+    # odom -> base_link appeared while both were alive: nothing says whose it is.
+    assert stats.frames["base_link"].authority == "unattributed"

@@ -418,6 +418,8 @@ class MonitoredSink:
         clock: the receive clock.
         authority: ``authority(is_static) -> str`` names the sender of a message (the
             wire format carries none); by default the listener's authority is used.
+        attribute: ``attribute(is_static, transforms) -> str`` names the sender from
+            the message too (its frames); used instead of ``authority`` when given.
     """
 
     def __init__(
@@ -426,16 +428,21 @@ class MonitoredSink:
         statistics: TfStatistics,
         clock: Clock,
         authority: Callable[[bool], str] | None = None,
+        *,
+        attribute: Callable[[bool, Sequence[TransformStamped]], str] | None = None,
     ) -> None:
         """Wrap ``buffer``."""
         self.buffer = buffer
         self.statistics = statistics
         self._clock = clock
         self._authority = authority
+        self._attribute = attribute
 
     def _account(self, transforms: Sequence[TransformStamped], authority: str,
                  static: bool) -> str:
-        if self._authority is not None:
+        if self._attribute is not None:
+            authority = self._attribute(static, transforms)
+        elif self._authority is not None:
             authority = self._authority(static)
         self.statistics.add(self._clock.now(), transforms, authority, static=static)
         return authority

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import signal
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -176,11 +176,13 @@ class BusSource(TfSource):
     over Zenoh, liveliness changes of broadcasters are tracked (:attr:`gone`).
 
     Authority: the wire format does not say which node sent a message, so a message is
-    attributed to the one live broadcaster publishing its topic (``"unattributed"`` when
-    several publish it). Before any is known a message is ``"unknown"``, and accounted to
-    the broadcaster once its liveliness arrives (no row of its own). Transports without
-    liveliness (:attr:`has_liveliness` False) name every sender ``"unknown_publisher"``
-    on ROS 1, as tf_monitor does there, else ``"unknown"``.
+    attributed to the one live broadcaster publishing its topic; when several publish it,
+    to the one its frames were attributed to while it was alone (tf_monitor's frame ->
+    authority map, kept), and ``"unattributed"`` only when that does not decide. Before
+    any is known a message is ``"unknown"``, and accounted to the broadcaster once its
+    liveliness arrives (no row of its own). Transports without liveliness
+    (:attr:`has_liveliness` False) name every sender ``"unknown_publisher"`` on ROS 1,
+    as tf_monitor does there, else ``"unknown"``.
 
     Args:
         spec: a ``--bus`` value (:func:`tfbus.transports.spec.parse_bus_spec`).
@@ -200,7 +202,8 @@ class BusSource(TfSource):
         self.clock = SystemClock()
         self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
         self._statistics = TfStatistics()
-        self.sink = MonitoredSink(self._buffer, self._statistics, self.clock, self._authority)
+        self.sink = MonitoredSink(self._buffer, self._statistics, self.clock,
+                                  attribute=self._attribute)
         self.transport: Transport | None = None
         self.listener: TransformListener | None = None
         self.broadcasters_seen: dict[str, PeerInfo] = {}
@@ -283,6 +286,21 @@ class BusSource(TfSource):
         if len(names) == 1:
             return names.pop()
         return _SHARED_AUTHORITY if names else _UNKNOWN_AUTHORITY
+
+    def _attribute(self, static: bool, transforms: Sequence[object]) -> str:
+        name = self._authority(static)
+        if name != _SHARED_AUTHORITY:
+            return name
+        topic = "/tf_static" if static else "/tf"
+        names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
+        frames = self._statistics.frames
+        owners = set()
+        for ts in transforms:
+            child = getattr(ts, "child_frame_id", None)
+            fs = frames.get(child) if isinstance(child, str) else None
+            if fs is not None and fs.authority in names:
+                owners.add(fs.authority)
+        return owners.pop() if len(owners) == 1 else _SHARED_AUTHORITY
 
     def _attribute_unknown(self) -> None:
         """What arrived before any broadcaster was known goes to the broadcaster, when
