@@ -44,6 +44,7 @@ test: lint
 
 demo: $(CORE_STAMP)
 	$(BIN)/python demos/robot_setup_tf.py --duration 10
+	@echo 'next: . $(VENV)/bin/activate, then tfbus --help (or $(BIN)/tfbus --help without activating)'
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py

@@ -8,8 +8,9 @@ the same behaviour (``tfbus.core.COMPILED`` says which one is loaded).
   the wheel is pure Python.
 * Without a working C compiler (or without the Python headers) the build of the
   extension fails; this file then prints why and installs the pure-Python core instead
-  of failing the whole install. ``TFBUS_REQUIRE_EXTENSIONS=1`` turns that fallback back
-  into an error (used by ``make dist``: a release wheel must carry the compiled core).
+  of failing the whole install, in a wheel tagged ``py3-none-any`` as any pure wheel.
+  ``TFBUS_REQUIRE_EXTENSIONS=1`` turns that fallback back into an error (used by
+  ``make dist``: a release wheel must carry the compiled core).
 
 The pattern is the one of PyYAML's and msgpack's ``setup.py`` (an optional extension whose
 build failure falls back to pure Python).
@@ -19,10 +20,18 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from typing import Any
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
+
+# setuptools' editable install ends with an "Editable installation. Please be careful with
+# folders in your working directory with the same name as your package" notice
+# (setuptools.warnings.InformationOnly, setuptools/command/editable_wheel.py), which pip
+# >= 25 shows even with -q: a box on every `make` target. tfbus's flat layout is the one
+# it describes and is intended, so that notice (and only it) is not shown.
+warnings.filterwarnings("ignore", message=r"Editable installation\.")
 
 
 def _flag(name: str) -> bool:
@@ -63,7 +72,36 @@ class OptionalBuildExt(build_ext):
     def _fallback(self, exc: Exception) -> None:
         if REQUIRE_EXTENSIONS:
             raise
+        self.distribution.tfbus_pure = True  # type: ignore[attr-defined]
         sys.stderr.write(_FALLBACK.format(error=f"{type(exc).__name__}: {exc}"))
+
+
+def _pure_tagged(base: Any) -> Any:
+    """``bdist_wheel`` whose wheel is tagged ``py3-none-any`` (and ``Root-Is-Purelib``)
+    when the extension could not be built: it then holds no compiled code, and the
+    tag bdist_wheel chose before the build (from ``has_ext_modules()``) would wrongly
+    claim one Python and platform (``cp313-cp313-linux_x86_64``)."""
+
+    class PureFallbackBdistWheel(base):  # type: ignore[misc, valid-type]
+        def get_tag(self) -> tuple[str, str, str]:
+            if getattr(self.distribution, "tfbus_pure", False):
+                self.root_is_pure = True
+            return tuple(super().get_tag())  # type: ignore[return-value]
+
+    return PureFallbackBdistWheel
+
+
+def _cmdclass() -> dict[str, Any]:
+    commands: dict[str, Any] = {"build_ext": OptionalBuildExt}
+    try:  # setuptools >= 70.1 (the build requires >= 77); else the wheel package's
+        from setuptools.command.bdist_wheel import bdist_wheel
+    except ImportError:
+        try:
+            from wheel.bdist_wheel import bdist_wheel  # type: ignore[no-redef]
+        except ImportError:
+            return commands  # no wheel building here (python setup.py build_ext)
+    commands["bdist_wheel"] = _pure_tagged(bdist_wheel)
+    return commands
 
 
 def _extensions() -> list[Extension]:
@@ -84,4 +122,4 @@ def _extensions() -> list[Extension]:
     return list(cythonize([ext], language_level=3))
 
 
-setup(ext_modules=_extensions(), cmdclass={"build_ext": OptionalBuildExt})
+setup(ext_modules=_extensions(), cmdclass=_cmdclass())

@@ -32,6 +32,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any, Final, TypeAlias
 
+import pytest
+
 from tfbus import (
     Duration,
     Header,
@@ -47,6 +49,7 @@ from tfbus import (
 __all__ = [
     "ANGLE_TOL",
     "CORPUS",
+    "DEVIATIONS",
     "NORM_TOL",
     "T_TOL",
     "Case",
@@ -62,6 +65,11 @@ __all__ = [
     "rotation_angle",
     "run_case",
 ]
+
+DEVIATIONS: Final = pytest.StashKey[dict[str, list[str]]]()
+"""Where ``test_level1`` records, per case id, the ops that differ from tf2 by design
+(``config.stash``); ``conftest.pytest_terminal_summary`` sums them up in one line at the
+end of a run and lists them with ``-v``."""
 
 CORPUS: Final = Path(__file__).parent / "data" / "public.jsonl.gz"
 

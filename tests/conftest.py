@@ -20,3 +20,25 @@ def anyio_backend(request: pytest.FixtureRequest) -> str:
     Module scope, so module-scoped async fixtures (as in ``test_bag.py``) may use it.
     """
     return str(request.param)
+
+
+def pytest_terminal_summary(
+    terminalreporter: pytest.TerminalReporter, exitstatus: int, config: pytest.Config
+) -> None:
+    """The intended deviation from tf2 (±Inf translations rejected) in one line at the end
+    of a run that met it, instead of one warning per case; ``-v`` lists every op."""
+    from conformance import DEVIATIONS
+
+    found = config.stash.get(DEVIATIONS, {})
+    if not found:
+        return
+    ops = sum(len(lines) for lines in found.values())
+    verbose = config.get_verbosity() > 0
+    terminalreporter.write_line(
+        f"tfbus conformance: {ops} corpus ops in {len(found)} cases differ from tf2 by design "
+        "(tfbus rejects ±Inf translations)" + (":" if verbose else "; -v lists them")
+    )
+    if verbose:
+        for case_id, lines in sorted(found.items()):
+            for line in lines:
+                terminalreporter.write_line(f"  {case_id} {line}")

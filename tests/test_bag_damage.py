@@ -135,6 +135,37 @@ def test_item8_unreadable_schema_is_a_bag_read_error(tmp_path: Path) -> None:
     assert err.offset is not None and 0 < err.offset < len(mangled) and "schema.mcap" in str(err)
 
 
+@pytest.mark.parametrize("cut", [True, False])
+def test_unparsable_schema_is_one_short_line(tmp_path: Path, cut: bool) -> None:
+    """Issue 20, 2.10: ``tfbus bag-info`` on an MCAP whose stored schema does not parse
+    printed the whole schema twice in one ~1500-character warning; now one short line:
+    the file, the byte offset, the schema's name and its first bad line (line 2 of the
+    stored definition, the mangled separator), whether or not the file has a summary
+    (a complete file is then read record by record: no usable topic hash here)."""
+    from click.testing import CliRunner
+
+    from tfbus.cli import cli
+
+    source = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:40])["mcap"]
+    text = "geometry_msgs/TransformStamped[] transforms\n=====<=====\n" + "=" * 80 + "\n"
+    whole = mcap_with(tmp_path / "bad.mcap", source, [10**18 + i for i in range(5)],
+                      schema_text=text.encode() + b"MSG: geometry_msgs/TransformStamped\n")
+    path = whole
+    if cut:
+        path = tmp_path / "badcut.mcap"
+        data = whole.read_bytes()
+        path.write_bytes(data[: len(data) * 9 // 10])
+    result = CliRunner().invoke(cli, ["bag-info", str(path)], catch_exceptions=False)
+    (line,) = result.stderr.splitlines()
+    assert line.startswith(f"tfbus bag-info: warning: {path}: schema "
+                           "'tf2_msgs/msg/TFMessage' does not parse at line 2: '=====<====='")
+    assert "; reading stopped (byte " in line
+    offset = int(line.split("(byte ")[1].split(",")[0])
+    assert 0 < offset < path.stat().st_size
+    assert len(line) < 100 + len(str(path)) + 60
+    assert "MSG:" not in line and "transforms" not in line  # the schema is not quoted
+
+
 def test_item8_non_utf8_connection_header_is_a_bag_read_error(tmp_path: Path) -> None:
     """Item 8: a ROS 1 bag without index whose connection topic is not UTF-8 raised
     UnicodeDecodeError; now a BagReadError at that record's offset."""

@@ -65,9 +65,13 @@ def test_every_command_has_help_with_examples(command: str) -> None:
 def test_version() -> None:
     from importlib.metadata import version
 
+    from tfbus import _backend
+
     code, out, _ = run("--version")
     assert code == 0
-    assert out == f"tfbus {version('tfbus')}\n"
+    core = "compiled core" if _backend.COMPILED else "pure-Python core: "
+    assert out.startswith(f"tfbus {version('tfbus')} ({core}")
+    assert out == f"tfbus {version('tfbus')} ({_backend.core_description()})\n"
 
 
 def test_version_of_a_source_tree_that_is_not_installed(
@@ -87,12 +91,12 @@ def test_version_of_a_source_tree_that_is_not_installed(
     try:
         importlib.reload(tfbus._version)
         code, out, _ = run("--version")
-        assert (code, out) == (0, "tfbus 0+unknown\n")
+        assert (code, out.split(" (")[0]) == (0, "tfbus 0+unknown")
     finally:
         monkeypatch.undo()
         importlib.reload(tfbus._version)
     code, out, _ = run("--version")
-    assert (code, out) == (0, f"tfbus {importlib.metadata.version('tfbus')}\n")
+    assert (code, out.split(" (")[0]) == (0, f"tfbus {importlib.metadata.version('tfbus')}")
 
 
 def test_unknown_command_and_option_are_one_line() -> None:
@@ -202,8 +206,85 @@ def test_echo_failure_and_bad_arguments() -> None:
     assert_usage_error(code, err, "soon")
     code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--rate", "0")
     assert_usage_error(code, err, "--rate")
-    code, _, err = run("echo", "world", "turtle1")
-    assert_usage_error(code, err, "--bag")
+    code, _, err = run("echo", "world", "turtle1", "--bag", str(TURTLE), "--bus", "zenoh")
+    assert_usage_error(code, err, "--bag", "--bus")
+
+
+@pytest.mark.parametrize("command", ["echo", "monitor", "frames"])
+def test_readers_listen_on_the_default_bus_without_a_source(
+    command: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Issue 20, 2.6: ``tfbus echo base_link base_laser`` with no --bag/--bus listens to
+    the bus the publishers publish on by default, as tf2_echo listens to the running
+    graph (no usage error). The live session is replaced by a Ctrl-C (exit 130)."""
+    import importlib
+
+    import tfbus.cli._sources as sources
+
+    parsed: list[str] = []
+    real_parse = sources.parse_spec
+
+    def parse(spec: str):  # type: ignore[no-untyped-def]
+        parsed.append(spec)
+        return real_parse(spec)
+
+    monkeypatch.setattr(sources, "parse_spec", parse)
+    module = importlib.import_module(f"tfbus.cli.{command}")
+    opened: list[object] = []
+
+    def interrupted(main: object, **_: object) -> int:
+        opened.append(main)
+        return 130
+
+    monkeypatch.setattr(module, "run_live", interrupted)
+    args = {"echo": ["base_link", "base_laser"], "monitor": [],
+            "frames": ["-o", str(tmp_path / "f.gv")]}[command]
+    code, _, err = run(command, *args)
+    assert (code, len(opened)) == (130, 1), err
+    reader = parsed[:]
+    sources.publish_bus(None, False, name="static_transform_publisher")
+    assert reader == [sources.DEFAULT_BUS] == parsed[1:] == ["zenoh"]
+
+
+def test_echo_takes_tf2_echos_positional_rate() -> None:
+    """Issue 20, 2.7: ``tf2_echo source target [rate]``: RATE as the third argument is
+    --rate (steps of 1/rate s of bag time through the turtle bag's 21.5 s of chain)."""
+    base = ["echo", "world", "turtle1", "--bag", str(TURTLE)]
+    counts = {}
+    for extra in ([], ["4"], ["--rate", "4"]):
+        code, out, _ = run(*base[:3], *extra, *base[3:])
+        assert code == 0
+        counts[" ".join(extra)] = out.count("At time")
+    assert counts["4"] == counts["--rate 4"] > 3.5 * counts[""] > 0
+    code, _, err = run(*base[:3], "4", "--rate", "2", *base[3:])
+    assert_usage_error(code, err, "RATE 4", "--rate 2")
+    code, _, err = run(*base[:3], "0", *base[3:])
+    assert_usage_error(code, err, "RATE")
+
+
+@pytest.mark.parametrize(("args", "label", "frame"), [
+    (["/world", "turtle1"], "target_frame", "/world"),
+    (["world", "/turtle1"], "source_frame", "/turtle1"),
+])
+def test_echo_leading_slash_is_tf2s_own_message(
+    args: list[str], label: str, frame: str
+) -> None:
+    """Issue 20, 2.7: tf2's validateFrameId message (as the conformance corpus records it
+    from tf2 0.7.6), one line, exit status 1 as a failed lookup; with --bag and on a
+    live bus alike (nothing is opened for a frame id that can never be found)."""
+    expected = (f'tfbus echo: error: Invalid argument "{frame}" passed to lookupTransform '
+                f"argument {label} in tf2 frame_ids cannot start with a '/' like:")
+    for source in (["--bag", str(TURTLE)], []):
+        code, out, err = run("echo", *args, *source)
+        assert (code, out, err.rstrip("\n").splitlines()) == (1, "", [expected])
+    from tfbus import BufferCore, InvalidArgumentException
+    from tfbus.messages import Header, Transform, TransformStamped
+
+    core = BufferCore()
+    core.set_transform(TransformStamped(Header(Time(1), "world"), "turtle1", Transform()), "t")
+    with pytest.raises(InvalidArgumentException) as info:
+        core.lookup_transform(*args, Time(0))
+    assert expected.endswith(str(info.value).strip())
 
 
 def test_parse_time() -> None:
@@ -337,6 +418,57 @@ def test_static_transform_bad_arguments() -> None:
     assert_usage_error(code, err, "expected 8 arguments")
     code, _, err = run("static-transform", "1", "2", "x", "0", "0", "0", "a", "b")
     assert_usage_error(code, err, "'x' is not a number")
+
+
+def test_static_transform_takes_ros2_flags(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 20, 2.7: ROS 2's flag form (tf2_ros static_transform_broadcaster_program.cpp):
+    every flag optional (translation 0, quaternion (0, 0, 0, 1), RPY 0) but the frame
+    ids; quaternion and RPY flags together, flags mixed with positional arguments or a
+    flag without its value are errors."""
+    ts = parse_static_args(["--x", "0.1", "--z", "0.2", "--frame-id", "base_link",
+                            "--child-frame-id", "base_laser"])
+    assert (ts.header.frame_id, ts.child_frame_id) == ("base_link", "base_laser")
+    assert tuple(ts.transform.translation) == (0.1, 0.0, 0.2)
+    assert tuple(ts.transform.rotation) == (0.0, 0.0, 0.0, 1.0)
+    ts = parse_static_args(["--yaw", "1.5707963267948966", "--y", "-1", "--frame-id", "a",
+                            "--child-frame-id", "b"])
+    assert tuple(ts.transform.translation) == (0.0, -1.0, 0.0)
+    assert tuple(ts.transform.rotation) == pytest.approx(
+        (0, 0, math.sqrt(0.5), math.sqrt(0.5)))
+    rpy = parse_static_args(["--roll", "0.3", "--pitch", "-0.2", "--yaw", "1.1",
+                             "--frame-id", "a", "--child-frame-id", "b"])
+    old = parse_static_args(["0", "0", "0", "1.1", "-0.2", "0.3", "a", "b"])  # yaw pitch roll
+    assert rpy == old
+    ts = parse_static_args(["--qz", "1", "--frame-id", "a", "--child-frame-id", "b"])
+    assert tuple(ts.transform.rotation) == pytest.approx((0, 0, math.sqrt(0.5), math.sqrt(0.5)))
+    for bad, needle in [
+        (["--x", "1", "--frame-id", "a"], "--child-frame-id"),
+        (["--child-frame-id", "b"], "--frame-id"),
+        (["--qx", "1", "--roll", "1", "--frame-id", "a", "--child-frame-id", "b"],
+         "both quaternion"),
+        (["0", "0", "0", "0", "0", "0", "a", "b", "--x", "1"], "new-style"),
+        (["--frame-id", "a", "--child-frame-id", "b", "--x"], "--x"),
+        (["--x", "--frame-id", "a", "--child-frame-id", "b"], "--x"),
+        (["--x", "one", "--frame-id", "a", "--child-frame-id", "b"], "--x: 'one'"),
+        (["--frame-id", "a", "--child-frame-id", "a"], "both 'a'"),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(needle)):
+            parse_static_args(bad)
+    import tfbus.cli.static_transform as tcli
+
+    seen = []
+
+    async def fake(open_bus: object, ts: object, once: bool) -> None:
+        seen.append(ts)
+
+    monkeypatch.setattr(tcli, "_publish_static", fake)
+    code, _, err = run("static-transform", "--x", "0.1", "--z", "0.2", "--frame-id",
+                       "base_link", "--child-frame-id", "base_laser", "--local")
+    assert code == 0, err
+    assert seen == [parse_static_args(["0.1", "0", "0.2", "0", "0", "0", "base_link",
+                                       "base_laser"])]
+    code, _, err = run("static-transform", "--x", "0.1", "--frame-id", "a", "--local")
+    assert_usage_error(code, err, "--child-frame-id")
 
 
 # --------------------------------------------------------------------------- replay

@@ -199,8 +199,7 @@ def site() -> Iterator[Path]:
 
 def test_site_builds_every_page(site: Path) -> None:
     for page in _pages():
-        rel = page.relative_to(DOCS).with_suffix("")
-        built = site / (rel.parent if rel.name == "index" else rel) / "index.html"
+        built = site / page.relative_to(DOCS).with_suffix(".html")  # use_directory_urls off
         assert built.is_file(), f"{page} was not built ({built})"
         text = built.read_text(encoding="utf-8")
         # A mistyped fence leaves its backticks in the page instead of a code block.
@@ -303,7 +302,7 @@ def _fetch(url: str) -> str:
 
 @pytest.mark.parametrize(
     ("path", "title", "heading"),
-    [("", "tfbus", "tfbus"), ("api/core/", "tfbus.core - tfbus", "tfbus.core")],
+    [("index.html", "tfbus", "tfbus"), ("api/core.html", "tfbus.core - tfbus", "tfbus.core")],
 )
 def test_page_renders_in_chromium(
     chromium: str, served: str, path: str, title: str, heading: str
@@ -327,6 +326,97 @@ def test_page_renders_in_chromium(
             assert urllib.parse.unquote(fragment) in ids, f"{url}: no anchor for {href!r}"
         checked += 1
     assert checked >= 10, f"{url}: only {checked} internal links found"
+
+
+def test_site_is_browsable_from_disk(site: Path) -> None:
+    """Issue 20, 2.9: ``make docs`` then site/index.html over file://: every internal link
+    of every page names a file of the site (page.html), never a directory, which a
+    browser shows as a listing without a server's index.html."""
+    pages = sorted(site.rglob("*.html"))
+    assert (site / "index.html") in pages and (site / "api" / "core.html") in pages
+    checked = 0
+    for built in pages:
+        if built.name == "404.html":
+            continue  # a server's error page: its links are absolute on purpose
+        for href in _parse(built.read_text(encoding="utf-8")).links:
+            parts = urllib.parse.urlsplit(href)
+            if parts.scheme or parts.netloc or not parts.path:
+                continue  # external, or an anchor on the same page
+            target = (built.parent / urllib.parse.unquote(parts.path)).resolve()
+            assert target.is_file(), f"{built.relative_to(site)}: {href!r} is not a file"
+            checked += 1
+    assert checked > 500
+
+
+def test_site_carries_no_build_extension(site: Path) -> None:
+    """docs/ext (the mkdocstrings extension the build loads) is not copied into the
+    site, nor any source or compiled file."""
+    assert (DOCS / "ext" / "sphinx_roles.py").is_file()
+    assert not (site / "ext").exists()
+    found = [p for p in site.rglob("*") if p.suffix in (".py", ".pyx", ".c", ".so", ".pyi")]
+    assert found == []
+
+
+def _exported_table() -> dict[str, str]:
+    """Name -> the page its row links to, from the "Exported names" table of
+    docs/api/tfbus.md (``""`` for a row without a link)."""
+    text = (DOCS / "api" / "tfbus.md").read_text(encoding="utf-8")
+    table = text[text.index("## Exported names"):].split("\n\n")[1]
+    rows: dict[str, str] = {}
+    for line in table.splitlines()[2:]:
+        names, where = line.strip("|").split("|")
+        page = re.search(r"\]\(([\w.]+\.md)\)", where)
+        for name in re.findall(r"`(\w+)`", names):
+            rows[name] = page.group(1) if page else ""
+    return rows
+
+
+def test_api_page_lists_every_exported_name() -> None:
+    """The API page's exported-names table lists ``tfbus.__all__`` (and ``__version__``),
+    each linking to the API page that documents the module defining it (a ``:::``
+    directive of that module or of a package above it)."""
+    import tfbus
+
+    rows = _exported_table()
+    assert set(rows) == set(tfbus.__all__) | {"__version__"}
+    for name in tfbus.__all__:
+        defined = getattr(tfbus, name).__module__
+        page = (DOCS / "api" / rows[name]).read_text(encoding="utf-8")
+        documented = re.findall(r"(?m)^::: ([\w.]+)", page)
+        assert any(defined == d or defined.startswith(d + ".") for d in documented), (
+            f"{name} ({defined}) links to api/{rows[name]}, which documents {documented}")
+
+
+def test_pointers_to_documents_resolve() -> None:
+    """No pointer to a document that does not exist (the package docstring pointed at
+    design notes in the README, which has none): every ``docs/*.md`` path named in the
+    code, the tests, the README or CONTRIBUTING.md exists, and no design file is named."""
+    files = [*ROOT.glob("tfbus/**/*.py"), *ROOT.glob("tests/*.py"), ROOT / "README.md",
+             ROOT / "CONTRIBUTING.md"]
+    named = 0
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        assert not re.search("DESIGN[ .]", text), path
+        for ref in re.findall(r"\bdocs/[\w/.-]+\.md\b", text):
+            assert (ROOT / ref).is_file(), f"{path.relative_to(ROOT)} names {ref}"
+            named += 1
+    assert named >= 5
+    assert "docs/architecture.md" in (ROOT / "tfbus" / "__init__.py").read_text()
+
+
+def test_contributing_says_how_to_set_up_test_and_benchmark() -> None:
+    """CONTRIBUTING.md: every ``make`` target it names exists, every repository path it
+    names exists, and it points at the architecture page."""
+    text = (ROOT / "CONTRIBUTING.md").read_text(encoding="utf-8")
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    targets = set(re.findall(r"(?m)^([a-z][\w-]*):", makefile))
+    named = set(re.findall(r"\bmake ([a-z][\w-]*)", text))
+    assert {"install", "test", "lint", "bench", "docs"} <= named <= targets, named - targets
+    paths = set(re.findall(r"`((?:tfbus|tests|benchmarks|docs|scripts|demos)/[\w/.*-]*)`",
+                           text))
+    for ref in paths:
+        assert list(ROOT.glob(ref.rstrip("/"))), f"CONTRIBUTING.md names {ref}, absent"
+    assert "docs/architecture.md" in paths
 
 
 def test_async_examples_cover_both_backends() -> None:

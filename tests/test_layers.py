@@ -1,4 +1,4 @@
-"""The layer order of ``tfbus/`` (DESIGN.md "Layers"): no import runs up a layer, no
+"""The layer order of ``tfbus/`` (docs/architecture.md "Layers"): no import runs up a layer, no
 import cycles, and every module has a place in the table.
 
 Imports are read with :mod:`ast` from every ``.py`` file under ``tfbus/`` (every
@@ -6,8 +6,8 @@ Imports are read with :mod:`ast` from every ``.py`` file under ``tfbus/`` (every
 line scan from the compiled core's ``.pyx`` (Cython's ``cimport`` lines are C, not
 Python modules, and are skipped). Nothing is imported: the test reads source only.
 
-Adding a module? Put it in ``LAYERS`` below (and in ``docs/architecture.md`` /
-DESIGN.md's table): a module missing from the table fails :func:`test_every_module_has_a_layer`.
+Adding a module? Put it in ``LAYERS`` below (and in ``docs/architecture.md``'s table):
+a module missing from the table fails :func:`test_every_module_has_a_layer`.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ ONLY_IMPORTS: dict[str, set[str]] = {
 """Modules allowed a narrower set of tfbus imports than their layer would give."""
 
 SANS_IO_FORBIDDEN = {"anyio", "asyncio", "trio", "sniffio", "time", "datetime", "threading"}
-"""What layers 0-1 must not import: no event loop, no wall clock (DESIGN.md "Sans-I/O
+"""What layers 0-1 must not import: no event loop, no wall clock (docs/architecture.md "Sans-I/O
 core"). ``time`` is the standard library's (tfbus's own is ``tfbus.time``)."""
 
 WALL_CLOCK_PENDING: dict[str, str] = {

@@ -109,3 +109,156 @@ async def test_listener_feeds_buffer_and_statistics() -> None:
     assert base.rate == pytest.approx(10.0) and base.delay_avg == pytest.approx(0.005)
     assert base.authority == "peer" and stats.frames["odom"].authority == "peer-static"
     buffer.close()
+
+
+# --------------------------------------------------------------------------- issue 20, 2.8
+
+
+def _render(stats_src: object, frames: tuple[str, ...] = ()) -> str:
+    import io
+
+    from rich.console import Console
+
+    from tfbus.cli._sources import BusSource
+    from tfbus.cli.monitor import print_monitor
+
+    assert isinstance(stats_src, BusSource)
+    buf = io.StringIO()
+    print_monitor(Console(file=buf, width=200), stats_src.statistics(), frames,
+                  live_src=stats_src)
+    return buf.getvalue()
+
+
+def _row(text: str, first: str) -> list[str]:
+    (line,) = [ln for ln in text.splitlines() if ln.split("│")[0].strip() == first]
+    return [cell.strip() for cell in line.split("│")]
+
+
+def test_a_dead_broadcasters_frames_stop_showing_their_old_rate() -> None:
+    """100 Hz for 5 s from 'robot', then silence: the live tables show the rate over the
+    last RATE_WINDOW (10 s) of receive time, so 100 Hz while it runs and 0.000 once it
+    has been silent for the window (the whole-run rate is kept for bags)."""
+    from tfbus.cli._sources import BusSource
+    from tfbus.monitor import RATE_WINDOW
+
+    src = BusSource("memory")
+    stats = src.statistics()
+    for i in range(501):  # 0 .. 5 s, stamps = receive times - 1 ms
+        t = T0 + i * 10 * MS
+        stats.add(Time.from_ns(t), [tf("base_link", "base_laser", t - MS)], "robot",
+                  static=False)
+    last = Time.from_ns(T0 + 5000 * MS)
+    assert RATE_WINDOW == 10.0
+    frame, robot = stats.frames["base_laser"], stats.authorities["robot"]
+    assert frame.recent_rate(last) == pytest.approx(100.0)
+    assert robot.recent_rate(last) == pytest.approx(100.0)
+    # 8 s later the window holds its last 2 s of samples: still their rate.
+    assert frame.recent_rate(Time.from_ns(last.ns + 8000 * MS)) == pytest.approx(100.0)
+    src.clock = ManualClock(last)  # type: ignore[assignment]
+    assert _row(_render(src), "base_laser")[3] == "100.000"
+    assert _row(_render(src), "robot")[1] == "100.000"
+    src.clock = ManualClock(Time.from_ns(last.ns + 10_001 * MS))  # type: ignore[assignment]
+    assert frame.recent_rate(src.clock.now()) == 0.0 == robot.recent_rate(src.clock.now())
+    assert _row(_render(src), "base_laser")[3] == "0.000"
+    assert _row(_render(src), "robot")[1] == "0.000"
+    assert frame.rate == pytest.approx(100.0)  # the whole-run rate, for bags
+
+
+def test_ros1_names_the_publisher_unknown_publisher_and_has_no_liveliness_table() -> None:
+    """On ROS 1 the message does not name its sender: tf_monitor prints
+    ``unknown_publisher``, and there is no liveliness table to print (it would be empty)."""
+    from tfbus.cli._sources import BusSource
+
+    src = BusSource("ros1:master=http://127.0.0.1:1")
+    src.clock = ManualClock(Time.from_ns(T0 + 20 * MS))  # type: ignore[assignment]
+    src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
+    assert set(src.statistics().authorities) == {"unknown_publisher"}
+    text = _render(src)
+    assert _row(text, "base_laser")[2] == "unknown_publisher"
+    assert "liveliness" not in text.lower()
+    assert "unknown_publisher" in [c for c in _row(text, "unknown_publisher")]
+
+
+@pytest.mark.anyio
+async def test_messages_before_the_liveliness_go_to_the_broadcaster() -> None:
+    """A message that arrives before its broadcaster's liveliness is first "unknown";
+    once the one broadcaster is known it is accounted to it: no spurious row."""
+    from tfbus.cli._sources import BusSource
+    from tfbus.transports.zenoh import PeerEvent
+
+    src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
+    src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
+    assert set(src.statistics().authorities) == {"unknown"}
+
+    async def events():  # type: ignore[no-untyped-def]
+        yield PeerEvent(True, "a1", "robot_tf_publisher", "")
+        yield PeerEvent(True, "a1", "robot_tf_publisher", "/tf")
+
+    await src._watch(events(), None)  # type: ignore[arg-type]
+    stats = src.statistics()
+    assert set(stats.authorities) == {"robot_tf_publisher"}
+    assert stats.authorities["robot_tf_publisher"].messages == 1
+    assert stats.frames["base_laser"].authority == "robot_tf_publisher"
+    text = _render(src)
+    assert "unknown" not in text and "unattributed" not in text
+
+
+@pytest.mark.parametrize("spec", ["zenoh", "ros1", "ros2:domain=7", "memory"])
+def test_the_running_node_line_names_the_node(spec: str) -> None:
+    """``tfbus demo broadcaster``'s "running the broadcaster node" line: a name on every
+    transport (ROS 1 and ROS 2 transports have no ``name``), never an empty ``(node )``."""
+    from tfbus.cli.demo import node_label
+    from tfbus.demo import BROADCASTER_NAME
+    from tfbus.transports.spec import open_transport, parse_bus_spec
+
+    transport = (None if spec == "memory"
+                 else open_transport(parse_bus_spec(spec), default_name=BROADCASTER_NAME))
+    name, ident = node_label(transport, BROADCASTER_NAME)
+    if spec == "ros1":  # the caller id: a ROS graph name made unique by the pid
+        assert name.startswith(f"/{BROADCASTER_NAME}_") and ident == name
+    else:
+        expected_id = {"zenoh": "", "ros2:domain=7": "ROS 2 domain 7", "memory": ""}
+        assert (name, ident) == (BROADCASTER_NAME, expected_id[spec])
+
+
+def test_demo_broadcaster_line_has_no_empty_node() -> None:
+    from click.testing import CliRunner
+
+    from tfbus.cli import cli
+
+    result = CliRunner().invoke(cli, ["demo", "broadcaster", "--bus", "memory", "--duration",
+                                      "0.05"], catch_exceptions=False)
+    assert result.exit_code == 0, result.stderr
+    first = result.stderr.splitlines()[0]
+    assert first == "[ INFO] robot_tf_publisher: running the broadcaster node on memory"
+
+
+@pytest.mark.anyio
+async def test_a_second_broadcaster_does_not_make_the_first_unattributed() -> None:
+    """Two live broadcasters on /tf: the wire does not name the sender, but a frame keeps
+    the broadcaster it had while that one was alone (tf_monitor's frame -> authority
+    map): no "unattributed" row for the first one's frames."""
+    from tfbus.cli._sources import BusSource
+    from tfbus.transports.zenoh import PeerEvent, PeerInfo
+
+    src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
+    alive: dict[str, PeerInfo] = {}
+    src.alive_broadcasters = lambda: dict(alive)  # type: ignore[method-assign]
+
+    async def appear(node: str, name: str) -> None:
+        async def events():  # type: ignore[no-untyped-def]
+            yield PeerEvent(True, node, name, "/tf")
+
+        alive[node] = PeerInfo(node, name, frozenset({"/tf"}))
+        await src._watch(events(), None)  # type: ignore[arg-type]
+
+    await appear("a1", "robot_tf_publisher")
+    src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
+    await appear("b2", "odom_publisher")
+    src.sink.set_transforms([tf("base_link", "base_laser", T0 + 10 * MS)], "x", False)
+    src.sink.set_transforms([tf("odom", "base_link", T0 + 10 * MS)], "x", False)
+    stats = src.statistics()
+    assert stats.frames["base_laser"].authorities == {"robot_tf_publisher": 2}
+    assert stats.authorities["robot_tf_publisher"].messages == 2
+    # odom -> base_link appeared while both were alive: nothing says whose it is.
+    assert stats.frames["base_link"].authority == "unattributed"

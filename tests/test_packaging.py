@@ -14,6 +14,7 @@ import hashlib
 import importlib.metadata
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -114,6 +115,11 @@ def test_without_a_c_compiler_the_sdist_builds_pure_python(
     wheel, log = _wheel(sdist, tmp_path, env)
     assert FALLBACK_MESSAGE in log
     assert "pure-Python core" in log
+    # Issue 20, 2.3: a pure wheel, not one tagged for this Python and platform.
+    assert wheel.name == f"tfbus-{_pyproject_version()}-py3-none-any.whl"
+    with zipfile.ZipFile(wheel) as z:
+        meta = z.read(f"tfbus-{_pyproject_version()}.dist-info/WHEEL").decode()
+    assert "Root-Is-Purelib: true" in meta and "Tag: py3-none-any" in meta, meta
     members = _members(wheel)
     assert {"tfbus/core.py", "tfbus/_pycore.py", "tfbus/_backend.py"} <= set(members)
     assert not [m for m in members if m.endswith(".so")]
@@ -127,3 +133,65 @@ def test_tfbus_no_extensions_gives_a_pure_wheel(sdist: Path, tmp_path: Path) -> 
     members = _members(wheel)
     assert not [m for m in members if m.endswith((".so", ".pyx", ".c"))]
     assert "tfbus/_ccore.pyi" in members and "tfbus/py.typed" in members
+
+
+def _project_copy(dest: Path) -> Path:
+    """The files a build reads, copied (a build writes build/ and *.egg-info next to them)."""
+    for name in ("pyproject.toml", "setup.py", "README.md", "LICENSE", "MANIFEST.in"):
+        shutil.copy2(ROOT / name, dest / name)
+    shutil.copytree(ROOT / "tfbus", dest / "tfbus",
+                    ignore=shutil.ignore_patterns("*.so", "*.c", "__pycache__"))
+    return dest
+
+
+def test_editable_install_is_quiet(tmp_path: Path) -> None:
+    """Issue 20, 2.2: ``pip install -q -e .`` (what every ``make`` target may run) prints
+    nothing: not setuptools' "Editable installation ... Please be careful" box, which pip
+    shows even with -q. Into a new venv, from a copy of the project."""
+    venv = tmp_path / "venv"
+    done = _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], timeout=120)
+    assert done.returncode == 0, done.stderr
+    project = tmp_path / "project"
+    project.mkdir()
+    _project_copy(project)
+    env = dict(os.environ, TFBUS_NO_EXTENSIONS="1")  # the box is the same with or without
+    done = _run([sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"),
+                 "install", "-q", "--no-deps", "-e", str(project)], timeout=900, env=env)
+    log = done.stdout + done.stderr
+    assert done.returncode == 0, log[-4000:]
+    assert "Editable installation" not in log and "Please be careful" not in log, log
+    # pip's own notes about this machine's index configuration are not the build's.
+    noise = [ln for ln in log.splitlines()
+             if ln.strip() and not re.match(r"WARNING: Location .* is ignored", ln)]
+    assert noise == [], log
+
+
+def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
+    """Issue 20, 2.3: tfbus without its compiled module (a copy of the package, .py files
+    only, first on sys.path) logs one warning line at import and ``tfbus --version``
+    names the core; choosing the pure core with TFBUS_PURE_PYTHON=1 is silent."""
+    shutil.copytree(ROOT / "tfbus", tmp_path / "tfbus",
+                    ignore=shutil.ignore_patterns("*.so", "*.c", "*.pyx", "__pycache__"))
+    env = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"}
+    env["PYTHONPATH"] = str(tmp_path)
+    # An editable install's finder (setuptools' __editable__ module) would still find the
+    # repository's tfbus._ccore: without it, this is a tfbus installed with no compiled core.
+    prelude = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
+               "getattr(f, '__module__', '').startswith('__editable__')]; ")
+    code = prelude + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
+    done = _run([sys.executable, "-c", code], timeout=120, env=env, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == f"{tmp_path / 'tfbus' / '__init__.py'} False\n"
+    from tfbus._backend import PURE_FALLBACK_WARNING
+
+    assert done.stderr == PURE_FALLBACK_WARNING + "\n"
+    assert "\n" not in PURE_FALLBACK_WARNING and "pure-Python core" in PURE_FALLBACK_WARNING
+    version = importlib.metadata.version("tfbus")
+    cli = prelude + "from tfbus.cli import main; sys.exit(main(['--version']))"
+    done = _run([sys.executable, "-c", cli], timeout=120, env=env, cwd=tmp_path)
+    assert (done.returncode, done.stdout) == (
+        0, f"tfbus {version} (pure-Python core: the compiled one is not installed)\n")
+    env["TFBUS_PURE_PYTHON"] = "1"
+    done = _run([sys.executable, "-c", cli], timeout=120, env=env, cwd=tmp_path)
+    assert (done.returncode, done.stdout, done.stderr) == (
+        0, f"tfbus {version} (pure-Python core: TFBUS_PURE_PYTHON is set)\n", "")

@@ -1,4 +1,4 @@
-"""The public names are a contract (DESIGN.md): pin them, and check the hierarchy."""
+"""The public names are a contract (docs/architecture.md): pin them, and check the hierarchy."""
 
 import tfbus
 

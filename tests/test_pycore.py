@@ -126,7 +126,8 @@ def test_both_cores_export_the_same_names() -> None:
             assert getattr(_pycore, name) == getattr(_ccore, name), name
         else:
             assert getattr(_pycore, name).__doc__, f"_pycore.{name} has no docstring"
-    assert set(_pycore.__all__) | {"COMPILED", "ENV_PURE_PYTHON"} == set(_backend.__all__)
+    own = {"COMPILED", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING", "core_description"}
+    assert set(_pycore.__all__) | own == set(_backend.__all__)
 
 
 def test_the_loaded_core_is_reported() -> None:

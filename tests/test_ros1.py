@@ -778,6 +778,9 @@ def test_cli_echo_monitor_frames_over_ros1(
         monitor = tfbus_cli(master, "monitor", "--bus", "ros1", "--duration", "6")
         out = _cli_finish(monitor)
         assert any("base_laser" in line for line in out), out
+        # tf_monitor's name for a ROS 1 sender, and no (empty) liveliness table (issue 20).
+        assert any("base_laser" in line and "unknown_publisher" in line for line in out), out
+        assert not any("liveliness" in line for line in out), out
         gv = tmp_path / "frames.gv"
         frames = tfbus_cli(master, "frames", "--bus", "ros1", "--wait", "6", "-o", str(gv))
         out = _cli_finish(frames)

@@ -1,6 +1,6 @@
 """tfbus: ROS tf2's coordinate-frame machinery for plain async Python.
 
-Layers (each imports only those below it; see DESIGN notes in the README):
+Layers (each imports only those below it; see docs/architecture.md):
 
 * values — :class:`Time`, message types (x, y, z, w quaternions), :mod:`tfbus.geometry`;
 * :class:`BufferCore` — tf2's transform buffer, synchronous and sans-I/O;

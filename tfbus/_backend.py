@@ -9,12 +9,17 @@ pure Python (:mod:`tfbus._pycore`), same behaviour bit for bit.
 
 A compiled module that exists but fails to import (an ABI mismatch, a broken build) is
 an error, never a silent fallback. ``COMPILED`` says which core is loaded (re-exported as
-``tfbus.core.COMPILED``). Every other module imports the core's names from here.
+``tfbus.core.COMPILED``), :func:`core_description` says it in words (``tfbus
+--version`` prints it). When the pure core is loaded because the compiled one is absent
+(not asked for with ``TFBUS_PURE_PYTHON``), one warning line is logged at import on the
+``tfbus`` logger (:data:`PURE_FALLBACK_WARNING`). Every other module imports the core's
+names from here.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import logging
 import os
 from types import ModuleType
 from typing import TYPE_CHECKING, Final
@@ -31,6 +36,7 @@ __all__ = [
     "NO_ERROR",
     "OK",
     "OLD_DATA",
+    "PURE_FALLBACK_WARNING",
     "REPEATED_DATA",
     "UNKNOWN_FRAME",
     "CoreBase",
@@ -41,6 +47,7 @@ __all__ = [
     "batch_lookup",
     "compose",
     "compose_full",
+    "core_description",
     "format_sec",
     "inverse",
     "lerp_rows",
@@ -75,6 +82,27 @@ def _load() -> tuple[ModuleType, bool]:
 IMPLEMENTATION, COMPILED = _load()
 """The loaded core module, and whether it is the compiled one."""
 
+PURE_FALLBACK_WARNING: Final = (
+    "tfbus: the compiled core (tfbus._ccore) is not installed, using the pure-Python core "
+    "(same results, slower lookups); reinstall with a C compiler and the Python headers "
+    "for the compiled one, or set TFBUS_PURE_PYTHON=1 to choose the pure one"
+)
+"""The line logged (``tfbus`` logger, WARNING) when the compiled core is missing."""
+
+
+def core_description() -> str:
+    """Which core is loaded, in words: ``compiled core`` or ``pure-Python core`` and why
+    (``TFBUS_PURE_PYTHON`` set, or the compiled module not installed)."""
+    if COMPILED:
+        return "compiled core"
+    if pure_python_requested():
+        return f"pure-Python core: {ENV_PURE_PYTHON} is set"
+    return "pure-Python core: the compiled one is not installed"
+
+
+if not COMPILED and not pure_python_requested():
+    logging.getLogger("tfbus").warning(PURE_FALLBACK_WARNING)
+
 if TYPE_CHECKING:
     # Both cores export the same names; the compiled core's stub is the contract.
     from tfbus._ccore import (
@@ -107,6 +135,7 @@ if TYPE_CHECKING:
     )
 else:
     for _name in __all__:
-        if _name not in ("COMPILED", "ENV_PURE_PYTHON"):
+        if _name not in ("COMPILED", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING",
+                         "core_description"):
             globals()[_name] = getattr(IMPLEMENTATION, _name)
     del _name

@@ -28,6 +28,11 @@ Definitions (one for every tool: ``tfbus frames``, ``monitor`` and ``bag-info``)
 * **net delay** of a chain (tf_monitor ``A B``): receive time minus the latest common
   stamp of the chain's dynamic links (what ``lookupTransform(A, B, Time())`` returns),
   sampled at every message that updates one of them.
+* **recent rate** (live tables): the same rates over the samples received in the last
+  :data:`RATE_WINDOW` seconds before now (:meth:`FrameStatistics.recent_rate`,
+  :meth:`AuthorityStatistics.recent_rate`). tf_monitor keeps only its last 1000 samples
+  per frame and per broadcaster (10 s at 100 Hz); a window in time also ages a
+  broadcaster that stopped: its rate is 0.0 once it has been silent for the window.
 
 Source: ros/geometry ``tf/src/tf_monitor.cpp`` (TFMonitor::callback, outputFrameInfo,
 spin), tf2 ``BufferCore::_chainAsVector`` for the chain's order.
@@ -36,6 +41,7 @@ spin), tf2 ``BufferCore::_chainAsVector`` for the chain's order.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -46,6 +52,8 @@ from tfbus.messages import TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
 
 __all__ = [
+    "RATE_WINDOW",
+    "RECENT_SAMPLES",
     "SIM_TIME_GAP",
     "AuthorityStatistics",
     "ChainDelay",
@@ -59,6 +67,18 @@ __all__ = [
 SIM_TIME_GAP = 86_400.0
 """Seconds between a header stamp and its receive time beyond which the stamps are taken
 to be simulated time (see the module docstring)."""
+
+RATE_WINDOW = 10.0
+"""Seconds of receive time the live tables' rates are measured over (module docstring)."""
+
+RECENT_SAMPLES = 10_000
+"""Receive times kept per frame and per broadcaster for the recent rates (a bound on
+memory: at more than 1 kHz the window is the last 10 000 samples)."""
+
+
+def _recent(samples: deque[tuple[int, int]], now: Time, window: float) -> list[int]:
+    start = now.ns - round(window * NSEC_PER_SEC)
+    return [value for received, value in samples if start <= received <= now.ns]
 
 
 def link_rate(distinct_stamps: int, oldest_ns: int, newest_ns: int) -> float:
@@ -90,6 +110,10 @@ class FrameStatistics:
     delay_sum: float = 0.0
     delay_count: int = 0
     delay_max: float = -math.inf
+    received: deque[tuple[int, int]] = field(
+        default_factory=lambda: deque(maxlen=RECENT_SAMPLES), repr=False
+    )
+    """(receive time, header stamp) in ns of the last :data:`RECENT_SAMPLES` samples."""
 
     @property
     def rate(self) -> float:
@@ -97,6 +121,15 @@ class FrameStatistics:
         if self.static or self.first_stamp is None or self.last_stamp is None:
             return 0.0
         return link_rate(len(self.stamps), self.first_stamp, self.last_stamp)
+
+    def recent_rate(self, now: Time, window: float = RATE_WINDOW) -> float:
+        """The rate in Hz (:func:`link_rate` of the distinct stamps) of the samples
+        received in the ``window`` seconds before ``now``: 0.0 for a frame silent that
+        long (its broadcaster stopped) or static."""
+        if self.static:
+            return 0.0
+        stamps = set(_recent(self.received, now, window))
+        return link_rate(len(stamps), min(stamps), max(stamps)) if stamps else 0.0
 
     @property
     def authority(self) -> str:
@@ -127,6 +160,10 @@ class AuthorityStatistics:
     delay_sum: float = 0.0
     delay_count: int = 0
     delay_max: float = -math.inf
+    received: deque[tuple[int, int]] = field(
+        default_factory=lambda: deque(maxlen=RECENT_SAMPLES), repr=False
+    )
+    """(receive time, receive time) in ns of the last :data:`RECENT_SAMPLES` messages."""
 
     @property
     def rate(self) -> float:
@@ -135,6 +172,13 @@ class AuthorityStatistics:
             return 0.0
         span = (self.last - self.first) / NSEC_PER_SEC
         return (self.messages - 1) / span if span > 0 else 0.0
+
+    def recent_rate(self, now: Time, window: float = RATE_WINDOW) -> float:
+        """Messages per second among those received in the ``window`` seconds before
+        ``now`` (0.0 with fewer than two: a broadcaster silent that long)."""
+        times = _recent(self.received, now, window)
+        span = (max(times) - min(times)) / NSEC_PER_SEC if times else 0.0
+        return (len(times) - 1) / span if len(times) > 1 and span > 0 else 0.0
 
     @property
     def delay_avg(self) -> float:
@@ -248,6 +292,7 @@ class TfStatistics:
         if auth.first is None:
             auth.first = t
         auth.last = t
+        auth.received.append((t, t))
         touched = False
         for ts in transforms:
             if not (
@@ -272,6 +317,7 @@ class TfStatistics:
                 fs.last_stamp = ns
             if static:
                 continue
+            fs.received.append((t, ns))
             touched = True
             if self.sim_time is None:
                 self.sim_time = abs(t - ns) / NSEC_PER_SEC > SIM_TIME_GAP
@@ -305,6 +351,34 @@ class TfStatistics:
         chain.delay_sum += d
         chain.delay_count += 1
         chain.delay_max = max(chain.delay_max, d)
+
+    def rename_authority(self, old: str, new: str) -> None:
+        """Account everything received from ``old`` to ``new`` instead (merged with what
+        ``new`` already has): a live bus names a message's broadcaster only once it is
+        known, so what came first under a placeholder moves to it."""
+        src = self.authorities.pop(old, None)
+        if src is None or old == new:
+            if src is not None:
+                self.authorities[old] = src
+            return
+        dst = self.authorities.get(new)
+        if dst is None:
+            src.authority = new
+            self.authorities[new] = src
+        else:
+            dst.messages += src.messages
+            firsts = [x for x in (dst.first, src.first) if x is not None]
+            lasts = [x for x in (dst.last, src.last) if x is not None]
+            dst.first = min(firsts) if firsts else None
+            dst.last = max(lasts) if lasts else None
+            dst.delay_sum += src.delay_sum
+            dst.delay_count += src.delay_count
+            dst.delay_max = max(dst.delay_max, src.delay_max)
+            dst.received = deque(sorted([*src.received, *dst.received]),
+                                 maxlen=RECENT_SAMPLES)
+        for fs in self.frames.values():
+            if old in fs.authorities:
+                fs.authorities[new] = fs.authorities.get(new, 0) + fs.authorities.pop(old)
 
     @property
     def duration(self) -> float:
@@ -344,6 +418,8 @@ class MonitoredSink:
         clock: the receive clock.
         authority: ``authority(is_static) -> str`` names the sender of a message (the
             wire format carries none); by default the listener's authority is used.
+        attribute: ``attribute(is_static, transforms) -> str`` names the sender from
+            the message too (its frames); used instead of ``authority`` when given.
     """
 
     def __init__(
@@ -352,16 +428,21 @@ class MonitoredSink:
         statistics: TfStatistics,
         clock: Clock,
         authority: Callable[[bool], str] | None = None,
+        *,
+        attribute: Callable[[bool, Sequence[TransformStamped]], str] | None = None,
     ) -> None:
         """Wrap ``buffer``."""
         self.buffer = buffer
         self.statistics = statistics
         self._clock = clock
         self._authority = authority
+        self._attribute = attribute
 
     def _account(self, transforms: Sequence[TransformStamped], authority: str,
                  static: bool) -> str:
-        if self._authority is not None:
+        if self._attribute is not None:
+            authority = self._attribute(static, transforms)
+        elif self._authority is not None:
             authority = self._authority(static)
         self.statistics.add(self._clock.now(), transforms, authority, static=static)
         return authority

@@ -12,6 +12,7 @@ into :class:`~tfbus.errors.BagReadError`.
 
 from __future__ import annotations
 
+import ast
 import struct
 from collections.abc import Callable, Iterable
 from contextlib import suppress
@@ -30,6 +31,7 @@ __all__ = [
     "TF_MSGDEF",
     "Decoder",
     "RawItem",
+    "SchemaParseError",
     "Source",
     "cdr_decoder",
     "decode_cdr",
@@ -295,8 +297,49 @@ def from_rosbags(msg: Any) -> list[TransformStamped]:
     return out
 
 
+class SchemaParseError(ValueError):
+    """A message definition stored in a bag does not parse: the message names the type
+    and the first line that does not (one short line, never the whole definition)."""
+
+
+_SHOWN_LINE = 60  # characters of the bad line quoted in a SchemaParseError
+
+
+def schema_problem(msgtype: str, msgdef: str, err: BaseException) -> str:
+    """What is wrong with ``msgdef``, in one short line: ``schema 'pkg/msg/T' does not
+    parse at line N: '<that line>'``.
+
+    rosbags' parsers (``rosbags.typesys.msg`` / ``idl``) say ``Could not parse:`` then,
+    one per line, the text they parsed (``repr``; for .msg text prefixed with
+    ``MSG: <type>``) and the position where parsing stopped; that position's line is the
+    one quoted, numbered in the stored definition. Another error is quoted shortened."""
+    parts = str(err).split("\n")
+    text: object = None
+    if len(parts) >= 3 and parts[0].startswith("Could not parse") and parts[2].isdigit():
+        with suppress(ValueError, SyntaxError):
+            text = ast.literal_eval(parts[1])
+    if not isinstance(text, str):
+        first = " ".join(str(err).split()) or type(err).__name__
+        short = first if len(first) <= 2 * _SHOWN_LINE else first[: 2 * _SHOWN_LINE] + "..."
+        return f"schema {msgtype!r} does not parse: {short}"
+    pos = min(int(parts[2]), len(text))
+    start = text.rfind("\n", 0, pos) + 1
+    end = text.find("\n", pos)
+    line = text[start : end if end >= 0 else len(text)]
+    number = text.count("\n", 0, start) + 1
+    if text.startswith(f"MSG: {msgtype}\n") and not msgdef.startswith("MSG: "):
+        number -= 1  # the header line rosbags added is not the bag's
+    if len(line) > _SHOWN_LINE:
+        line = line[:_SHOWN_LINE] + "..."
+    return f"schema {msgtype!r} does not parse at line {number}: {line!r}"
+
+
 def _typestore(msgtype: str, msgdef: str, idl: bool, ros1: bool) -> Typestore:
-    """A rosbags typestore that knows ``msgtype`` from the definition stored in the bag."""
+    """A rosbags typestore that knows ``msgtype`` from the definition stored in the bag.
+
+    Raises:
+        SchemaParseError: ``msgdef`` does not parse (:func:`schema_problem` says where).
+    """
     from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
     if not msgdef:
@@ -305,7 +348,11 @@ def _typestore(msgtype: str, msgdef: str, idl: bool, ros1: bool) -> Typestore:
             store.register(get_types_from_msg(TF_MSGDEF, msgtype))
         return store
     store = get_typestore(Stores.EMPTY)
-    store.register(get_types_from_idl(msgdef) if idl else get_types_from_msg(msgdef, msgtype))
+    try:
+        types = get_types_from_idl(msgdef) if idl else get_types_from_msg(msgdef, msgtype)
+        store.register(types)
+    except Exception as err:  # rosbags' TypesysError, or whatever its parser raises
+        raise SchemaParseError(schema_problem(msgtype, msgdef, err)) from None
     return store
 
 
@@ -313,8 +360,8 @@ def ros1_decoder(msgtype: str, md5: str, msgdef: str) -> Decoder:
     """The decoder for a ROS 1 connection of type ``msgtype`` (rosbags' ``pkg/msg/Name``).
 
     Raises:
-        Exception: rosbags' ``TypesysError`` (or another error) when the stored definition
-            cannot be parsed; the reader reports it as a ``BagReadError``.
+        SchemaParseError: the stored definition cannot be parsed (the type and the first
+            bad line); the reader reports it as a ``BagReadError``.
     """
     if md5 == ROS1_TF_MD5:
         return decode_ros1
@@ -333,8 +380,8 @@ def cdr_decoder(msgtype: str, msgdef: str, *, idl: bool, digest: str = "") -> De
     from ``msgdef`` (``.msg`` text, or IDL when ``idl``).
 
     Raises:
-        Exception: rosbags' ``TypesysError`` (or another error) when the definition cannot
-            be parsed; the reader reports it as a ``BagReadError``.
+        SchemaParseError: the definition cannot be parsed (the type and the first bad
+            line); the reader reports it as a ``BagReadError``.
     """
     if digest == ROS2_TF_RIHS01:
         return decode_cdr

@@ -14,7 +14,7 @@
     tfbus demo laser                          a simulated laser projected three ways
     tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
     tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus
-    tfbus --version                           tfbus <version>
+    tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
 group and shared plumbing in ``_common.py``, the transform sources and bus options in

@@ -180,13 +180,16 @@ def version() -> str:
 def _print_version(ctx: click.Context, param: click.Parameter, value: bool) -> None:
     if not value or ctx.resilient_parsing:
         return
-    click.echo(f"tfbus {version()}")
+    from tfbus._backend import core_description
+
+    click.echo(f"tfbus {version()} ({core_description()})")
     ctx.exit()
 
 
 @click.group("tfbus", cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--version", is_flag=True, expose_value=False, is_eager=True,
-              callback=_print_version, help="Print 'tfbus <version>' and exit.")
+              callback=_print_version,
+              help="Print 'tfbus <version> (<core>)', the core in use, and exit.")
 def cli() -> None:
     """tfbus: ROS tf2's tools for plain Python (bags, echo, monitor, view_frames).
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import signal
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -31,8 +31,13 @@ if TYPE_CHECKING:
     from tfbus.transports.spec import BusSpec
     from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
-__all__ = ["BagSource", "BusSource", "TfSource", "is_bus_error", "live", "run_live",
-           "source", "source_options"]
+__all__ = ["DEFAULT_BUS", "UNKNOWN_PUBLISHER", "BagSource", "BusSource", "TfSource",
+           "is_bus_error", "live", "run_live", "source", "source_options"]
+
+DEFAULT_BUS = "zenoh"
+"""The bus every command uses without ``--bus``: publishers publish on it, and readers
+(echo, monitor, frames) listen to it unless given ``--bag`` (as tf2_echo, tf_monitor and
+view_frames listen to the running ROS graph)."""
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -124,6 +129,9 @@ class BagSource(TfSource):
 
 _UNKNOWN_AUTHORITY = "unknown"
 _SHARED_AUTHORITY = "unattributed"
+UNKNOWN_PUBLISHER = "unknown_publisher"
+"""The broadcaster's name on ROS 1, where the message does not carry it: tf_monitor's
+(``ros::MessageEvent::getPublisherName`` without a connection header, Debian's tf 1.13)."""
 
 
 def parse_spec(spec: str, *, name: str = "tfbus-cli") -> BusSpec:
@@ -183,9 +191,13 @@ class BusSource(TfSource):
     over Zenoh, liveliness changes of broadcasters are tracked (:attr:`gone`).
 
     Authority: the wire format does not say which node sent a message, so a message is
-    attributed to the one live broadcaster publishing its topic (``"unknown"`` before
-    any is known or on transports without liveliness, ``"unattributed"`` when several
-    publish it).
+    attributed to the one live broadcaster publishing its topic; when several publish it,
+    to the one its frames were attributed to while it was alone (tf_monitor's frame ->
+    authority map, kept), and ``"unattributed"`` only when that does not decide. Before
+    any is known a message is ``"unknown"``, and accounted to the broadcaster once its
+    liveliness arrives (no row of its own). Transports without liveliness
+    (:attr:`has_liveliness` False) name every sender ``"unknown_publisher"`` on ROS 1,
+    as tf_monitor does there, else ``"unknown"``.
 
     Args:
         spec: a ``--bus`` value (:func:`tfbus.transports.spec.parse_bus_spec`).
@@ -205,7 +217,8 @@ class BusSource(TfSource):
         self.clock = SystemClock()
         self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
         self._statistics = TfStatistics()
-        self.sink = MonitoredSink(self._buffer, self._statistics, self.clock, self._authority)
+        self.sink = MonitoredSink(self._buffer, self._statistics, self.clock,
+                                  attribute=self._attribute)
         self.transport: Transport | None = None
         self.listener: TransformListener | None = None
         self.broadcasters_seen: dict[str, PeerInfo] = {}
@@ -232,6 +245,11 @@ class BusSource(TfSource):
     def report_problem(self, message: str) -> None:
         """Record a one-line warning (printed at the end, exit status 1)."""
         self._problem = message
+
+    @property
+    def has_liveliness(self) -> bool:
+        """Whether the transport tells which nodes broadcast (Zenoh's liveliness)."""
+        return self.bus_spec.scheme == "zenoh"
 
     def alive_broadcasters(self) -> dict[str, PeerInfo]:
         """The live broadcasters now (a Zenoh transport's ``broadcasters()``); empty when
@@ -276,11 +294,35 @@ class BusSource(TfSource):
         self.transport = None
 
     def _authority(self, static: bool) -> str:
+        if not self.has_liveliness:
+            return UNKNOWN_PUBLISHER if self.bus_spec.scheme == "ros1" else _UNKNOWN_AUTHORITY
         topic = "/tf_static" if static else "/tf"
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
         if len(names) == 1:
             return names.pop()
         return _SHARED_AUTHORITY if names else _UNKNOWN_AUTHORITY
+
+    def _attribute(self, static: bool, transforms: Sequence[object]) -> str:
+        name = self._authority(static)
+        if name != _SHARED_AUTHORITY:
+            return name
+        topic = "/tf_static" if static else "/tf"
+        names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
+        frames = self._statistics.frames
+        owners = set()
+        for ts in transforms:
+            child = getattr(ts, "child_frame_id", None)
+            fs = frames.get(child) if isinstance(child, str) else None
+            if fs is not None and fs.authority in names:
+                owners.add(fs.authority)
+        return owners.pop() if len(owners) == 1 else _SHARED_AUTHORITY
+
+    def _attribute_unknown(self) -> None:
+        """What arrived before any broadcaster was known goes to the broadcaster, when
+        exactly one is known now (a single "unknown" row would otherwise stay)."""
+        names = {p.name for p in self.broadcasters_seen.values()}
+        if len(names) == 1 and _UNKNOWN_AUTHORITY in self._statistics.authorities:
+            self._statistics.rename_authority(_UNKNOWN_AUTHORITY, names.pop())
 
     async def _watch(
         self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
@@ -295,6 +337,7 @@ class BusSource(TfSource):
                 info = PeerInfo(ev.node_id, ev.name, topics)
                 self.broadcasters_seen[ev.node_id] = info
                 self.gone.pop(ev.node_id, None)
+                self._attribute_unknown()
                 if known is None and on_peer is not None:
                     on_peer("alive", info)
             elif (
@@ -329,7 +372,8 @@ def source_options(f: F) -> F:
 
     f = click.option(
         "--bus", "bus", metavar="SPEC", default=None,
-        help="Attach to a live bus instead: 'zenoh' (this machine, no configuration), "
+        help="The live bus to listen to (default, without --bag: 'zenoh', this machine, "
+             "where the publishing commands publish by default): 'zenoh', "
              "'zenoh:tcp/HOST:7448', 'zenoh?connect=...&namespace=...', 'ros2' "
              "(ROS 2 over DDS, 'ros2:domain=7'), 'ros1' (a ROS 1 master, "
              "'ros1:http://127.0.0.1:11311').",
@@ -338,14 +382,14 @@ def source_options(f: F) -> F:
 
 
 def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli") -> TfSource:
-    """The source the options name (a usage error for none or both)."""
+    """The source the options name: the bag, else the ``--bus`` spec, else the default
+    bus (:data:`DEFAULT_BUS`, where the publishing commands publish); a usage error for
+    both."""
     if bus is not None and bag is not None:
         fail("give --bag PATH or --bus SPEC, not both")
-    if bus is not None:
-        return BusSource(bus, name=name)
-    if bag is None:
-        fail("no transform source: pass --bag PATH or --bus SPEC (e.g. --bus zenoh)")
-    return BagSource(bag)
+    if bag is not None:
+        return BagSource(bag)
+    return BusSource(bus if bus is not None else DEFAULT_BUS, name=name)
 
 
 def live_only(src: TfSource, **options: object) -> None:
@@ -430,8 +474,8 @@ async def live(
         tg.cancel_scope.cancel()
 
 
-BUS_HELP = ("Bus to publish on (default 'zenoh': this machine, no configuration), e.g. "
-            "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
+BUS_HELP = (f"Bus to publish on (default {DEFAULT_BUS!r}: this machine, no configuration), "
+            "e.g. 'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
             "'ros2:domain=7', 'ros1', 'ros1:http://127.0.0.1:11311'.")
 
 
@@ -452,7 +496,7 @@ def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]
         if bus is not None:
             fail("give --bus SPEC or --local, not both")
         return Bus
-    chosen = parse_spec(bus if bus is not None else "zenoh", name=name)
+    chosen = parse_spec(bus if bus is not None else DEFAULT_BUS, name=name)
 
     def open_bus() -> Bus:
         return Bus(transport=open_spec_transport(chosen, name=name))

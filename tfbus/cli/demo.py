@@ -13,7 +13,7 @@ import click
 from tfbus.cli._common import error, fail, literal
 from tfbus.cli._sources import cancel_on_signal, check_bus_spec, is_bus_error, run_live
 
-__all__ = ["command"]
+__all__ = ["command", "node_label"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -77,6 +77,19 @@ def run_both(*, duration: float | None, rate: float, listen_rate: float, backend
     return 0
 
 
+def node_label(transport: object, default: str) -> tuple[str, str]:
+    """(name, id) of the node a transport makes, for the "running the ... node" line:
+    the name is never empty (the transport's ``name`` or ROS 1 ``node_name``, else
+    ``default``); the id is Zenoh's node id, the ROS 1 caller id or the ROS 2 domain,
+    ``""`` when the transport has none."""
+    name = str(getattr(transport, "name", "") or getattr(transport, "node_name", "")
+               or default)
+    ident = getattr(transport, "node_id", "") or getattr(transport, "node_name", "")
+    if not ident and getattr(transport, "domain_id", None) is not None:
+        ident = f"ROS 2 domain {transport.domain_id}"  # type: ignore[attr-defined]
+    return name, str(ident)
+
+
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,
              listen_rate: float, backend: str) -> int:
     """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh."""
@@ -94,11 +107,9 @@ def run_role(role: str, spec: str, *, duration: float | None, rate: float,
 
     async def main() -> None:
         async with bus:
-            transport = bus.transport
-            node = getattr(transport, "node_id", "")
-            shown = getattr(transport, "name", role)
-            print(f"[ INFO] {literal(shown)}: running the {role} node on {literal(spec)} "
-                  f"(node {literal(node)})", file=sys.stderr, flush=True)
+            shown, node = node_label(bus.transport, name)
+            print(f"[ INFO] {literal(shown)}: running the {role} node on {literal(spec)}"
+                  + (f" (node {literal(node)})" if node else ""), file=sys.stderr, flush=True)
             if role == "broadcaster":
                 await run_broadcaster(bus, duration=duration, rate=rate, out=_print_line,
                                       handle_signals=True)

@@ -12,6 +12,7 @@ import click
 from tfbus.cli._common import (
     TIME,
     console,
+    error,
     fail,
     finish_status,
     fmt_sec,
@@ -112,9 +113,12 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
 @click.command("echo")
 @click.argument("source_frame", metavar="SOURCE")
 @click.argument("target_frame", metavar="TARGET")
+@click.argument("rate_arg", metavar="[RATE]", required=False,
+                type=click.FloatRange(min=0, min_open=True))
 @source_options
-@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=1.0,
-              show_default=True, help="Echo rate, Hz (of bag time with --bag).")
+@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Echo rate, Hz (of bag time with --bag); default 1. Also tf2_echo's "
+                   "third argument, RATE.")
 @click.option("--time", "at", type=TIME, default=None,
               help="Look up once at this time (seconds, or 'latest').")
 @click.option("--matrix", is_flag=True, help="Also print the 4x4 homogeneous matrix.")
@@ -125,28 +129,47 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
               help="With --bus: stop after this many seconds (default: -n, or Ctrl-C).")
 def command(
-    source_frame: str, target_frame: str, bag: Path | None, bus: str | None, rate: float,
-    at: Time | None, matrix: bool, precision: int, limit: int | None, duration: float | None,
+    source_frame: str, target_frame: str, rate_arg: float | None, bag: Path | None,
+    bus: str | None, rate: float | None, at: Time | None, matrix: bool, precision: int,
+    limit: int | None, duration: float | None,
 ) -> int:
     """Print the transform from SOURCE to TARGET, like tf2_echo.
 
     As tf2_echo, this is the pose of TARGET in SOURCE, i.e. lookup_transform(SOURCE,
     TARGET, t): it maps points in TARGET into SOURCE. With --bag and no --time, it steps
-    through the recording at --rate Hz of bag time. With --bus it listens to a live bus
-    and prints the latest transform (or the one at --time) at --rate Hz of wall time,
-    saying on stderr what it is waiting for until the frames are connected. A failed
+    through the recording at --rate Hz of bag time. Otherwise it listens to a live bus
+    (--bus, default 'zenoh', where 'tfbus static-transform' and the demo publish) and
+    prints the latest transform (or the one at --time) at --rate Hz of wall time, saying
+    on stderr what it is waiting for until the frames are connected. A failed
     lookup prints tf2_echo's "Failure at ... Exception thrown:..." text (exit status 1).
+
+    As tf2_echo, the rate may be the third argument (tfbus echo A B 10). A frame id
+    tf2 refuses (empty, or starting with '/') is tf2's own one-line message, exit
+    status 1 (the lookup fails).
 
     \b
     Examples:
       tfbus echo world turtle1 --bag turtle.bag
+      tfbus echo world turtle1 10 --bag turtle.bag        # tf2_echo's rate argument
       tfbus echo world turtle1 --bag turtle.bag --time 1396293900.25 --matrix
       tfbus echo map base_link --bag nav2.mcap --rate 10 -n 5
+      tfbus echo base_link base_laser          # the default bus, until Ctrl-C
       tfbus echo base_link base_laser --bus zenoh -n 1
       tfbus echo base_link base_laser --bus zenoh:tcp/192.168.1.10:7448 --duration 10
     """
+    from tfbus._backend import INVALID_ARGUMENT
+    from tfbus.core_text import bad_frame_exception
     from tfbus.errors import TransformException
 
+    if rate_arg is not None and rate is not None and rate_arg != rate:
+        fail(f"two rates: RATE {rate_arg:g} and --rate {rate:g}; give one")
+    rate = rate_arg if rate_arg is not None else rate if rate is not None else 1.0
+    if source_frame != target_frame:  # tf2 returns the identity before validating
+        for label, frame in (("lookupTransform argument target_frame", source_frame),
+                             ("lookupTransform argument source_frame", target_frame)):
+            if not frame or frame.startswith("/"):  # tf2 validateFrameId: never found
+                error(str(bad_frame_exception(label, frame, INVALID_ARGUMENT)))
+                return 1
     src = source(bag, bus, name="tfbus-echo")
     live_only(src, duration=duration)
     if isinstance(src, BusSource):

@@ -112,8 +112,9 @@ def command(bag: Path | None, bus: str | None, output: Path, duration: float | N
     Each edge is labelled with broadcaster, average rate, buffer length, most recent and
     oldest transform. .gv / .dot output is DOT text and needs nothing else; .pdf / .svg /
     .png need Graphviz's 'dot' program (without it the DOT text is written next to the
-    requested file and the exit status is 1). With --bus it listens to a live bus for
-    --duration seconds first, as view_frames does (exit status 1 if nothing was heard).
+    requested file and the exit status is 1). Without --bag it listens to a live bus
+    (--bus, default 'zenoh') for --duration seconds first, as view_frames does (exit
+    status 1 if nothing was heard).
     Every frame id is drawn literally as one node (very long ids shortened visibly).
 
     \b

@@ -65,7 +65,18 @@ def print_monitor(
 ) -> None:
     """tf_monitor's report: ``RESULTS`` (and for ``A B`` the chain and its net delay),
     the frames table, the broadcasters table and, for a live bus, the broadcasters known
-    through liveliness."""
+    through liveliness (when the transport has it).
+
+    On a live bus the rates are the recent ones (:data:`tfbus.monitor.RATE_WINDOW`
+    seconds before now): the frames of a broadcaster that stopped fall to 0.000 instead
+    of showing their old rate; a bag's are over the whole recording."""
+    from tfbus.monitor import AuthorityStatistics, FrameStatistics
+
+    now = live_src.clock.now() if live_src is not None else None
+
+    def rate(x: FrameStatistics | AuthorityStatistics) -> float:
+        return x.rate if now is None else x.recent_rate(now)
+
     selected = list(s.frames.values())
     title = (f"RESULTS: for {literal(frames[0])} to {literal(frames[1])}" if frames
              else "RESULTS: for all Frames")
@@ -86,7 +97,7 @@ def print_monitor(
         dyn = not f.static
         table.add_row(
             literal(f.child), literal(f.parent), literal(f.authority),
-            f"{f.rate:.3f}" if dyn else "static",
+            f"{rate(f):.3f}" if dyn else "static",
             f"{f.delay_avg:.6f}" if dyn else "-",
             f"{f.delay_max:.6f}" if dyn and f.delay_count else "-",
         )
@@ -94,12 +105,12 @@ def print_monitor(
     btable = _table("All Broadcasters", ("node",), ("rate Hz", "avg delay s", "max delay s"))
     for a in sorted(s.authorities.values(), key=lambda a: a.authority):
         btable.add_row(
-            literal(a.authority), f"{a.rate:.3f}",
+            literal(a.authority), f"{rate(a):.3f}",
             f"{a.delay_avg:.6f}" if a.delay_count else "-",
             f"{a.delay_max:.6f}" if a.delay_count else "-",
         )
     out.print(btable)
-    if live_src is not None:
+    if live_src is not None and live_src.has_liveliness:
         out.print(liveliness_table(live_src))
 
 
@@ -134,8 +145,9 @@ def command(
     "Net delay avg/max" lines. On a bag recorded with simulated time (stamps far from
     the recorder's clock) delays are measured against the newest stamp, with a note.
 
-    With --bus it listens to a live bus: the tables (cumulative since it attached) are
-    printed every --interval seconds and on exit, with the broadcasters known through
+    Without --bag it listens to a live bus (--bus, default 'zenoh'): the tables
+    (cumulative since it attached) are printed every --interval seconds and on exit,
+    with the broadcasters known through
     Zenoh liveliness (alive / gone); a line is printed as soon as a broadcaster appears
     ("[alive] ...") or its liveliness is lost because it exited or died ("[dead] ...").
 
