@@ -224,9 +224,9 @@ def test_readers_listen_on_the_default_bus_without_a_source(
     parsed: list[str] = []
     real_parse = sources.parse_spec
 
-    def parse(spec: str):  # type: ignore[no-untyped-def]
+    def parse(spec: str, **kwargs: str):  # type: ignore[no-untyped-def]
         parsed.append(spec)
-        return real_parse(spec)
+        return real_parse(spec, **kwargs)
 
     monkeypatch.setattr(sources, "parse_spec", parse)
     module = importlib.import_module(f"tfbus.cli.{command}")
