@@ -304,6 +304,7 @@ class Ros1Transport:
         self._next_conn = 0
         self._tg: anyio.abc.TaskGroup | None = None
         self._request_limiter: anyio.CapacityLimiter | None = None
+        self._update_seq: dict[str, int] = {}
         self._tcp_port = 0
         self._api_uri = ""
         self._registered = False
@@ -472,12 +473,10 @@ class Ros1Transport:
                 if not self._registered or not await self._still_known():
                     self._registered = False
                     self._registered_pub.clear()
-                    publishers = await self._register_subscribers()
+                    await self._register_subscribers(bus)
                     self._registered = True
                     self._stats.registrations += 1
                     warned = False
-                    for topic, uris in publishers.items():
-                        self._update_publishers(bus, topic, uris)
                 for topic in sorted(self._published - self._registered_pub):
                     await self._register_publisher(topic)
             except TransportError as exc:
@@ -502,9 +501,14 @@ class Ros1Transport:
             raise
         return bool(uri == self._api_uri)
 
-    async def _register_subscribers(self) -> dict[str, list[str]]:
-        out = {}
+    async def _register_subscribers(self, bus: _BusLike) -> None:
+        """``registerSubscriber`` per topic, following the publishers each answer lists,
+        unless a ``publisherUpdate`` for that topic arrived during the call: the master
+        sent it after its answer, so it is the newer list (as roscpp's
+        ``TopicManager::registerSubscriber`` applies the answer under the subscription's
+        lock, in order with ``pubUpdate``)."""
         for topic in self._topics:
+            seq = self._update_seq.get(topic, 0)
             value = await call(
                 self._master_uri,
                 "registerSubscriber",
@@ -516,8 +520,8 @@ class Ros1Transport:
             )
             if not isinstance(value, list):
                 raise BadReply(f"registerSubscriber at {self._master_uri}: not a list of URIs")
-            out[topic] = [u for u in value if isinstance(u, str)]
-        return out
+            if self._update_seq.get(topic, 0) == seq:
+                self._update_publishers(bus, topic, [u for u in value if isinstance(u, str)])
 
     async def _register_publisher(self, topic: str) -> None:
         await call(
@@ -567,6 +571,7 @@ class Ros1Transport:
         """``publisherUpdate``: connect to new publishers of ``topic``, drop gone ones."""
         bus = self._bus
         if bus is not None and topic in self._topics:
+            self._update_seq[topic] = self._update_seq.get(topic, 0) + 1
             self._update_publishers(bus, topic, publishers)
 
     def on_shutdown(self, caller_id: str, message: str) -> None:

@@ -13,7 +13,6 @@ a thread or the node's shutdown for longer.
 from __future__ import annotations
 
 import contextlib
-import errno
 import logging
 import os
 import time
@@ -223,11 +222,6 @@ async def call(
     return value
 
 
-_ACCEPT_RETRY: Final = frozenset(
-    {errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM, errno.ECONNABORTED, errno.EPROTO}
-)
-
-
 async def serve_listener(
     listener: MultiListener[anyio.abc.SocketStream],
     handler: Callable[[anyio.abc.SocketStream], Coroutine[Any, Any, None]],
@@ -237,11 +231,11 @@ async def serve_listener(
     """Accept connections forever (on each socket of ``listener``, as made by
     :func:`anyio.create_tcp_listener`) and run ``handler`` on each in its own task.
 
-    An ``accept`` that fails for lack of resources (``EMFILE``, ``ENFILE``, ``ENOBUFS``,
-    ``ENOMEM``) or because the peer left first is logged (at most once a second),
-    reported to ``on_accept_error``, and retried after a back-off of 10 ms doubling to
-    0.5 s, as roscpp's ``TransportTCP::accept`` / trio's ``serve_listeners`` do; the
-    listener keeps serving. Any other error propagates.
+    An ``accept`` that fails with an :class:`OSError` (``EMFILE``/``ENFILE``: out of
+    file descriptors, ``ENOBUFS``, ``ENOMEM``, a peer that left first) is logged (at most
+    once a second), reported to ``on_accept_error``, and retried after a back-off of 10
+    ms doubling to 0.5 s, as roscpp's ``TransportTCP::accept`` and trio's
+    ``serve_listeners`` do; the listener keeps serving. Closing the listener ends it.
     """
     async with anyio.create_task_group() as tg:
         for sub in listener.listeners:
@@ -262,8 +256,10 @@ async def _accept_loop(
         while True:
             try:
                 stream = await listener.accept()
-            except OSError as exc:
-                if exc.errno not in _ACCEPT_RETRY:
+            except (OSError, anyio.BrokenResourceError) as raised:
+                # trio's listener wraps the OSError in BrokenResourceError
+                exc = raised if isinstance(raised, OSError) else raised.__cause__
+                if not isinstance(exc, OSError):
                     raise
                 if on_accept_error is not None:
                     on_accept_error(exc)
