@@ -249,7 +249,8 @@ class Ros1Transport:
         queue_size: frames queued per subscriber connection before the oldest is dropped.
         max_message_bytes: largest accepted TCPROS frame; a larger one closes the
             connection (counted as malformed).
-        master_timeout: seconds an XML-RPC call may take.
+        master_timeout: seconds an XML-RPC call (to the master or a publisher) may take
+            in all: connect, send and the whole answer.
         master_check_period: seconds between checks that the master still knows this
             node (re-registration after a master restart).
         allow_remote: contact publishers outside loopback even when ``host`` is loopback.
