@@ -608,3 +608,47 @@ async def test_fuzz_the_master_client() -> None:
             except TransportError as exc:  # only "no answer" kinds
                 pytest.fail(f"not counted as junk: {exc}")
     assert outcomes["value"] > 50 and outcomes["bad"] > 50
+
+
+# ------------------------------------------------------------------ the CLI
+
+
+def test_cli_monitor_survives_hostile_publishers() -> None:
+    """``tfbus monitor --bus ros1`` with publishers answering ports out of range and
+    non-XML: it runs its duration and exits 0, no traceback (before: exit 1, traceback)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    peers = [HostilePeer(send_raw(http_answer(tcpros_answer(p)))) for p in PORTS]
+    peers.append(HostilePeer(send_raw(JUNK["not xml"])))
+    with FakeMaster() as master:
+        for peer in peers:
+            peer.start()
+            master.extra_publishers.append(peer.uri)
+        spec = "ros1:" + master.uri.rstrip("/")
+        try:
+            proc = subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "tfbus.cli",
+                    "monitor",
+                    "--duration",
+                    "3",
+                    "--bus",
+                    "ros1:" + master.uri.rstrip("/"),
+                ],
+                capture_output=True,
+                text=True,
+                timeout=120,
+                cwd=root,
+                check=False,
+            )
+        finally:
+            for peer in peers:
+                peer.close()
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert all(peer.requests >= 1 for peer in peers)
