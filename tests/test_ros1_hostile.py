@@ -638,7 +638,7 @@ def test_cli_monitor_survives_hostile_publishers() -> None:
                     "--duration",
                     "3",
                     "--bus",
-                    "ros1:" + master.uri.rstrip("/"),
+                    spec,
                 ],
                 capture_output=True,
                 text=True,
