@@ -462,11 +462,11 @@ async def test_a_broadcaster_advertises_tf_when_created() -> None:
 async def test_a_huge_publisher_update_is_bounded_and_keeps_the_good_one() -> None:
     """10 000 URIs in one publisherUpdate: at most MAX_PUBLISHERS followed (those already
     connected first), the rest dropped and counted; the good publisher keeps delivering."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        closed = s.getsockname()[1]  # nothing listens there: connection refused
-    junk = [f"http://127.0.0.1:{closed}/n{i}" for i in range(10_000)]
-    with FakeMaster() as master:
+    # a port that never accepts: once its backlog is full, each call waits for its deadline
+    with socket.socket() as stuck, FakeMaster() as master:
+        stuck.bind(("127.0.0.1", 0))
+        stuck.listen(0)
+        junk = [f"http://127.0.0.1:{stuck.getsockname()[1]}/n{i}" for i in range(10_000)]
         async with pair(master) as p:
             await p.delivers()
             await anyio.to_thread.run_sync(
