@@ -49,7 +49,7 @@ from tfbus import (
 from tfbus.errors import TransformException, TransportError
 from tfbus.transports.ros1 import Ros1Transport
 from tfbus.transports.ros1.node import MAX_PUBLISHERS
-from tfbus.transports.ros1.rpc import MAX_XMLRPC_BYTES, BadReply, call, loads
+from tfbus.transports.ros1.rpc import MAX_XMLRPC_BYTES, BadReply, CallFailed, call, loads
 
 pytestmark = pytest.mark.anyio
 
@@ -588,15 +588,15 @@ def _fuzz_answer(rng: random.Random) -> bytes:
 
 
 async def test_fuzz_the_master_client() -> None:
-    """300 seeded answers from a hostile master: each call returns a value or raises
-    TransportError (BadReply for junk), nothing else."""
+    """300 seeded answers from a hostile master: each call returns a value, or raises
+    BadReply (junk) or CallFailed (a code other than 1), nothing else."""
     rng = random.Random(2121)
     answers: list[bytes] = []
 
     def behave(path: str, sock: socket.socket, stop: object) -> None:
         sock.sendall(answers.pop())
 
-    outcomes = {"value": 0, "bad": 0}
+    outcomes = {"value": 0, "bad": 0, "refused": 0}
     with HostilePeer(behave) as peer, anyio.fail_after(120):
         for _ in range(300):
             answers.append(_fuzz_answer(rng))
@@ -605,6 +605,8 @@ async def test_fuzz_the_master_client() -> None:
                 outcomes["value"] += 1
             except BadReply:
                 outcomes["bad"] += 1
+            except CallFailed:  # a well-formed answer with a code other than 1
+                outcomes["refused"] += 1
             except TransportError as exc:  # only "no answer" kinds
                 pytest.fail(f"not counted as junk: {exc}")
     assert outcomes["value"] > 50 and outcomes["bad"] > 50

@@ -26,7 +26,7 @@ from tfbus.clock._base import running_asyncio_loop
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 
-from .rpc import BadReply, SlaveServer, call, serve_listener
+from .rpc import BadReply, CallFailed, SlaveServer, call, serve_listener
 from .tcpros import (
     MAX_HEADER_BYTES,
     TF_MD5SUM,
@@ -496,10 +496,8 @@ class Ros1Transport:
             uri = await call(
                 self._master_uri, "lookupNode", self._name, self._name, timeout=self._timeout
             )
-        except BadReply as exc:
-            if "code" in str(exc):  # the master answered "unknown node": register again
-                return False
-            raise
+        except CallFailed:  # the master does not know this node (restarted): register
+            return False
         return bool(uri == self._api_uri)
 
     async def _register_subscribers(self, bus: _BusLike) -> None:

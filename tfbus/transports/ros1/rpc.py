@@ -34,6 +34,7 @@ __all__ = [
     "MAX_XMLRPC_DEPTH",
     "SLAVE_REQUEST_TIMEOUT",
     "BadReply",
+    "CallFailed",
     "SlaveNode",
     "SlaveServer",
     "call",
@@ -59,6 +60,15 @@ _MAX_HTTP_HEAD: Final = 16 * 1024
 class BadReply(TransportError):
     """A peer answered, but not with ROS XML-RPC: not HTTP 200, not XML, nested too deep,
     too large, an XML-RPC fault, or a value of the wrong shape."""
+
+
+class CallFailed(TransportError):
+    """A well-formed ROS answer whose code is not 1 (``-1`` error, ``0`` failure): the
+    peer refused the call, e.g. ``lookupNode`` of a node the master does not know."""
+
+    def __init__(self, message: str, code: object) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 class _TooDeep(Exception):
@@ -180,7 +190,8 @@ async def call(
 
     Raises:
         BadReply: the peer answered, but not ROS XML-RPC (not HTTP 200, not XML, nested
-            too deep, over ``limit``, a fault, the wrong shape), or returned code != 1.
+            too deep, over ``limit``, a fault, the wrong shape).
+        CallFailed: a ROS answer with a code other than 1.
         TransportError: the peer is unreachable or did not answer within ``timeout``.
     """
     what = f"{method} at {uri:.200}"
@@ -217,8 +228,10 @@ async def call(
     if not (isinstance(reply, list) and len(reply) == 3):
         raise BadReply(f"{what}: malformed reply {params!r:.200}")
     code, status_message, value = reply
-    if code != 1 or isinstance(code, bool):
-        raise BadReply(f"{what}: code {code!r:.40}: {status_message!r:.200}")
+    if not isinstance(code, int) or isinstance(code, bool):
+        raise BadReply(f"{what}: code {code!r:.40} is not an int")
+    if code != 1:
+        raise CallFailed(f"{what}: code {code}: {status_message!r:.200}", code)
     return value
 
 
