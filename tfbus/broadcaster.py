@@ -45,8 +45,17 @@ class TransformBroadcaster:
     topic: ClassVar[str] = TF_TOPIC
 
     def __init__(self, bus: Bus) -> None:
-        """Broadcast on ``bus``."""
+        """Broadcast on ``bus``.
+
+        A transport that can announce a topic before sending on it (an ``advertise``
+        method, as :class:`~tfbus.transports.ros1.Ros1Transport` has) is told now, as
+        tf2_ros's broadcasters advertise their topic when constructed, so peers can
+        connect before the first message.
+        """
         self._bus = bus
+        advertise = getattr(bus.transport, "advertise", None)
+        if callable(advertise):
+            advertise(self.topic)
         self.sent = 0
         """Transforms sent so far."""
 

@@ -10,9 +10,10 @@ What a node needs of ROS 1, and where it comes from (ROS wiki "ROS/Master_API",
 "ROS/Slave_API", "ROS/TCPROS", "ROS/Connection Header"; ros_comm's ``rospy/impl``):
 
 * master API (client): ``registerPublisher``, ``registerSubscriber``,
-  ``unregisterPublisher``, ``unregisterSubscriber``, ``lookupNode``, over XML-RPC with the
-  standard library's :mod:`xmlrpc.client`;
-* slave API (server, :mod:`xmlrpc.server` in a thread): ``requestTopic``,
+  ``unregisterPublisher``, ``unregisterSubscriber``, ``lookupNode``, over XML-RPC on
+  anyio sockets (HTTP/1.0 by hand, bodies by :mod:`xmlrpc.client`), each call with one
+  total deadline (``master_timeout``);
+* slave API (server, on anyio sockets in the node's task group): ``requestTopic``,
   ``publisherUpdate``, ``getPid``, ``getBusInfo``, ``getBusStats``, ``getMasterUri``,
   ``getSubscriptions``, ``getPublications``, ``paramUpdate``, ``shutdown``;
 * TCPROS: connection headers (``callerid``, ``topic``, ``md5sum``, ``type``,
@@ -35,10 +36,25 @@ Behaviour, as tf2_ros and roscpp do it:
   registers again, without restarting tfbus;
 * bad input costs one connection at most: a malformed header, an oversized or
   undecodable TCPROS frame closes that connection only and is counted in
-  :meth:`Ros1Transport.statistics`; every other connection keeps delivering;
+  :meth:`Ros1Transport.statistics`; every other connection keeps delivering. XML-RPC
+  from any peer (master, publisher, slave API client) is bounded: bodies to 1 MiB
+  (:data:`~tfbus.transports.ros1.rpc.MAX_XMLRPC_BYTES`), nesting to 64 elements, each
+  call to ``master_timeout`` in all and each served request to 5 s; an answer that is
+  not ROS XML-RPC (or offers a port outside 1..65535) is counted in ``bad_replies`` and
+  retried with back-off; a request refused is counted in ``bad_requests``. At most 16
+  ``requestTopic`` calls run at once and 1024 publishers per topic are followed, so slow
+  or numerous peers cannot starve a good one; an ``accept`` that fails (``EMFILE``: out
+  of file descriptors) backs off and the listener goes on; a connection must send its
+  header within ``max(master_timeout, 1)`` s. Leaving the bus takes at most ~1 s
+  (unregistering, best effort) whatever peers do;
+* ``/tf`` (or ``/tf_static``) is registered with the master when a broadcaster is made
+  (:meth:`Ros1Transport.advertise`, as tf2_ros advertises at construction), so
+  subscribers connect before the first message;
 * loopback by default: the master defaults to ``http://127.0.0.1:11311`` and the node's
   own servers bind ``127.0.0.1``; while this node's host is a loopback address it
-  connects to no publisher outside 127.0.0.0/8 (``allow_remote=True`` lifts that for a
+  connects to no publisher outside 127.0.0.0/8 (neither its XML-RPC URI, from the master
+  or a ``publisherUpdate``, nor the TCPROS endpoint it offers; counted in
+  ``refused_hosts``) (``allow_remote=True`` lifts that for a
   robot network). ``ROS_MASTER_URI``, ``ROS_IP`` and ``ROS_HOSTNAME`` are honoured as ROS
   does.
 """

@@ -19,14 +19,14 @@ from urllib.parse import urlsplit
 
 import anyio
 import anyio.abc
-from anyio.from_thread import BlockingPortal
 from anyio.streams.buffered import BufferedByteReceiveStream
+from anyio.streams.stapled import MultiListener
 
 from tfbus.clock._base import running_asyncio_loop
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 
-from .rpc import SlaveServer, call
+from .rpc import BadReply, CallFailed, SlaveServer, call, serve_listener
 from .tcpros import (
     MAX_HEADER_BYTES,
     TF_MD5SUM,
@@ -45,6 +45,14 @@ _log = logging.getLogger("tfbus.transports.ros1")
 
 _TOPICS: Final = ("/tf", "/tf_static")
 _LATCHED: Final = frozenset({"/tf_static"})
+MAX_PUBLISHERS: Final = 1024
+"""Publishers of one topic this node follows at most; further URIs in a master answer or a
+``publisherUpdate`` are dropped (counted). Those already connected are kept first."""
+MAX_CONCURRENT_REQUESTS: Final = 16
+"""``requestTopic`` calls in flight at once, whatever the number of publishers; each has
+the node's ``master_timeout`` as its deadline, so slow publishers delay a good one by
+one deadline at most."""
+_UNREGISTER_DEADLINE: Final = 1.0
 
 
 @dataclass
@@ -62,7 +70,19 @@ class Ros1Statistics:
         connections_closed: TCPROS connections closed, both directions.
         registrations: successful registrations with a master (more than one after a
             master restart).
-        refused_hosts: publishers not contacted because they are outside loopback.
+        refused_hosts: publishers not contacted because they are outside loopback (their
+            XML-RPC URI from the master or a ``publisherUpdate``, or the TCPROS endpoint
+            they offer).
+        bad_replies: XML-RPC answers from the master or a publisher that were not ROS
+            XML-RPC (not HTTP 200, not XML, nested too deep, over 1 MiB, a fault, the
+            wrong shape, a TCPROS port outside 1..65535); each call is retried with
+            back-off.
+        bad_requests: requests to this node's slave API that were refused (not XML-RPC,
+            over 1 MiB, too slow, an unknown method or wrong arguments).
+        accept_errors: ``accept`` calls that failed for lack of resources (e.g.
+            ``EMFILE``: out of file descriptors); the listener backs off and goes on.
+        publishers_dropped: publisher URIs not followed because a topic already had
+            :data:`MAX_PUBLISHERS` of them.
     """
 
     received: int = 0
@@ -74,6 +94,10 @@ class Ros1Statistics:
     connections_closed: int = 0
     registrations: int = 0
     refused_hosts: int = 0
+    bad_replies: int = 0
+    bad_requests: int = 0
+    accept_errors: int = 0
+    publishers_dropped: int = 0
 
 
 class _BusLike(Protocol):
@@ -88,6 +112,15 @@ def _resolve_host(host: str | None) -> str:
     if host:
         return host
     return os.environ.get("ROS_IP") or os.environ.get("ROS_HOSTNAME") or "127.0.0.1"
+
+
+def _uri_host(uri: str) -> str | None:
+    """The host of an ``http://host:port/`` URI, or None when there is none to contact
+    (the call then fails as a bad URI, without a connection)."""
+    try:
+        return urlsplit(uri).hostname
+    except ValueError:
+        return None
 
 
 def _is_loopback(host: str) -> bool:
@@ -216,7 +249,8 @@ class Ros1Transport:
         queue_size: frames queued per subscriber connection before the oldest is dropped.
         max_message_bytes: largest accepted TCPROS frame; a larger one closes the
             connection (counted as malformed).
-        master_timeout: seconds an XML-RPC call may take.
+        master_timeout: seconds an XML-RPC call (to the master or a publisher) may take
+            in all: connect, send and the whole answer.
         master_check_period: seconds between checks that the master still knows this
             node (re-registration after a master restart).
         allow_remote: contact publishers outside loopback even when ``host`` is loopback.
@@ -270,7 +304,8 @@ class Ros1Transport:
         self._bus_info: dict[int, list[Any]] = {}
         self._next_conn = 0
         self._tg: anyio.abc.TaskGroup | None = None
-        self._portal: BlockingPortal | None = None
+        self._request_limiter: anyio.CapacityLimiter | None = None
+        self._update_seq: dict[str, int] = {}
         self._tcp_port = 0
         self._api_uri = ""
         self._registered = False
@@ -333,27 +368,41 @@ class Ros1Transport:
         except OSError as exc:
             self._running = False
             raise TransportError(f"cannot listen for TCPROS on {self._host}: {exc}") from exc
-        server: SlaveServer | None = None
+        api_listener: MultiListener[anyio.abc.SocketStream] | None = None
         try:
+            try:
+                api = await anyio.create_tcp_listener(local_host=self._host, local_port=0)
+            except OSError as exc:
+                raise TransportError(f"cannot serve the slave API on {self._host}: {exc}") from exc
+            api_listener = api
             self._tcp_port = listener.extra(anyio.abc.SocketAttribute.local_port)
-            server = SlaveServer(self._host, self)
-            self._api_uri = server.uri
-            async with BlockingPortal() as portal, anyio.create_task_group() as tg:
-                self._portal = portal
+            api_port = api.extra(anyio.abc.SocketAttribute.local_port)
+            self._api_uri = f"http://{self._host}:{api_port}/"
+            server = SlaveServer(self)
+            self._request_limiter = anyio.CapacityLimiter(MAX_CONCURRENT_REQUESTS)
+            async with anyio.create_task_group() as tg:
                 self._tg = tg
-                server.start()
-                tg.start_soon(listener.serve, self._serve_subscriber)
+                tg.start_soon(
+                    serve_listener, api_listener, server.handle, "slave API", self._on_accept_error
+                )
+                tg.start_soon(
+                    serve_listener,
+                    listener,
+                    self._serve_subscriber,
+                    "TCPROS",
+                    self._on_accept_error,
+                )
                 tg.start_soon(self._master_loop, bus)
                 task_status.started()
                 await anyio.sleep_forever()
         finally:
             self._tg = None
-            self._portal = None
             with anyio.CancelScope(shield=True):
                 if self._registered:
-                    await anyio.to_thread.run_sync(self._unregister_all)
-                if server is not None:
-                    await anyio.to_thread.run_sync(server.close)
+                    with anyio.move_on_after(_UNREGISTER_DEADLINE):
+                        await self._unregister_all()
+                if api_listener is not None:
+                    await api_listener.aclose()
                 await listener.aclose()
             self._registered = False
             self._registered_pub.clear()
@@ -364,6 +413,15 @@ class Ros1Transport:
             if self._shutdown_reason is not None:
                 reason, self._shutdown_reason = self._shutdown_reason, None
                 raise TransportError(f"the ROS master asked {self._name} to shut down: {reason}")
+
+    def advertise(self, topic: str) -> None:
+        """Register as a publisher of ``topic`` now, before anything is sent, as a tf2_ros
+        ``TransformBroadcaster`` advertises ``/tf`` when it is constructed
+        (``ros::NodeHandle::advertise``): subscribers connect meanwhile, so the first
+        messages reach them. Topics this transport does not carry are ignored."""
+        if topic in self._topics and topic not in self._published:
+            self._published.add(topic)
+            self._need_register.set()
 
     def send_nowait(self, topic: str, message: object) -> None:
         """Send a locally published ``TFMessage`` to every subscriber; never blocks.
@@ -376,8 +434,7 @@ class Ros1Transport:
         if topic not in self._topics or not isinstance(message, TFMessage):
             return
         if topic not in self._published:
-            self._published.add(topic)
-            self._need_register.set()
+            self.advertise(topic)
         transforms: Iterable[TransformStamped] = message.transforms
         if topic in _LATCHED:
             latched = self._latched.setdefault(topic, {})
@@ -406,45 +463,52 @@ class Ros1Transport:
     # -- master ------------------------------------------------------------------------
 
     async def _master_loop(self, bus: _BusLike) -> None:
-        """Register, keep registered (a restarted master forgets us), follow publishers."""
+        """Register, keep registered (a restarted master forgets us), follow publishers.
+
+        Each master call has ``master_timeout`` as its deadline; a failed or junk answer
+        is retried after ``master_check_period`` (junk is counted in ``bad_replies`` and
+        logged once until the master answers properly again)."""
         warned = False
         while True:
             try:
-                if not self._registered or not await anyio.to_thread.run_sync(self._still_known):
+                if not self._registered or not await self._still_known():
                     self._registered = False
                     self._registered_pub.clear()
-                    publishers = await anyio.to_thread.run_sync(self._register_subscribers)
+                    await self._register_subscribers(bus)
                     self._registered = True
                     self._stats.registrations += 1
                     warned = False
-                    for topic, uris in publishers.items():
-                        self._update_publishers(bus, topic, uris)
                 for topic in sorted(self._published - self._registered_pub):
-                    await anyio.to_thread.run_sync(self._register_publisher, topic)
+                    await self._register_publisher(topic)
             except TransportError as exc:
                 self._registered = False
+                if isinstance(exc, BadReply):
+                    self._stats.bad_replies += 1
                 if not warned:
-                    _log.warning(
-                        "ros1: master %s unreachable (%s); retrying", self._master_uri, exc
-                    )
+                    _log.warning("ros1: master %s unusable (%s); retrying", self._master_uri, exc)
                     warned = True
             self._need_register = anyio.Event()
             with anyio.move_on_after(self._check_period):
                 await self._need_register.wait()
 
-    def _still_known(self) -> bool:
+    async def _still_known(self) -> bool:
         try:
-            uri = call(
+            uri = await call(
                 self._master_uri, "lookupNode", self._name, self._name, timeout=self._timeout
             )
-        except TransportError:
+        except CallFailed:  # the master does not know this node (restarted): register
             return False
         return bool(uri == self._api_uri)
 
-    def _register_subscribers(self) -> dict[str, list[str]]:
-        out = {}
+    async def _register_subscribers(self, bus: _BusLike) -> None:
+        """``registerSubscriber`` per topic, following the publishers each answer lists,
+        unless a ``publisherUpdate`` for that topic arrived during the call: the master
+        sent it after its answer, so it is the newer list (as roscpp's
+        ``TopicManager::registerSubscriber`` applies the answer under the subscription's
+        lock, in order with ``pubUpdate``)."""
         for topic in self._topics:
-            value = call(
+            seq = self._update_seq.get(topic, 0)
+            value = await call(
                 self._master_uri,
                 "registerSubscriber",
                 self._name,
@@ -453,11 +517,13 @@ class Ros1Transport:
                 self._api_uri,
                 timeout=self._timeout,
             )
-            out[topic] = [str(u) for u in value] if isinstance(value, list) else []
-        return out
+            if not isinstance(value, list):
+                raise BadReply(f"registerSubscriber at {self._master_uri}: not a list of URIs")
+            if self._update_seq.get(topic, 0) == seq:
+                self._update_publishers(bus, topic, [u for u in value if isinstance(u, str)])
 
-    def _register_publisher(self, topic: str) -> None:
-        call(
+    async def _register_publisher(self, topic: str) -> None:
+        await call(
             self._master_uri,
             "registerPublisher",
             self._name,
@@ -468,30 +534,20 @@ class Ros1Transport:
         )
         self._registered_pub.add(topic)
 
-    def _unregister_all(self) -> None:
-        timeout = min(self._timeout, 0.5)
-        for topic in self._topics:
-            with contextlib.suppress(TransportError):
-                call(
-                    self._master_uri,
-                    "unregisterSubscriber",
-                    self._name,
-                    topic,
-                    self._api_uri,
-                    timeout=timeout,
-                )
-        for topic in list(self._registered_pub):
-            with contextlib.suppress(TransportError):
-                call(
-                    self._master_uri,
-                    "unregisterPublisher",
-                    self._name,
-                    topic,
-                    self._api_uri,
-                    timeout=timeout,
-                )
+    async def _unregister_all(self) -> None:
+        """Best effort, all at once (the caller bounds the whole in time)."""
 
-    # -- slave API callbacks (rpc.SlaveNode; called from the server's threads) -----------
+        async def one(method: str, *args: object) -> None:
+            with contextlib.suppress(TransportError):
+                await call(self._master_uri, method, *args, timeout=_UNREGISTER_DEADLINE)
+
+        async with anyio.create_task_group() as tg:
+            for topic in self._topics:
+                tg.start_soon(one, "unregisterSubscriber", self._name, topic, self._api_uri)
+            for topic in list(self._registered_pub):
+                tg.start_soon(one, "unregisterPublisher", self._name, topic, self._api_uri)
+
+    # -- slave API callbacks (rpc.SlaveNode; called in the event loop) -------------------
 
     def bus_info(self) -> list[list[Any]]:
         """``getBusInfo``: [id, peer, direction, transport, topic, connected] per link."""
@@ -512,38 +568,64 @@ class Ros1Transport:
 
     def on_publisher_update(self, topic: str, publishers: list[str]) -> None:
         """``publisherUpdate``: connect to new publishers of ``topic``, drop gone ones."""
-        portal = self._portal
-        if portal is not None and topic in self._topics:
-            with contextlib.suppress(RuntimeError):
-                portal.start_task_soon(self._publisher_update, topic, publishers)
+        bus = self._bus
+        if bus is not None and topic in self._topics:
+            self._update_seq[topic] = self._update_seq.get(topic, 0) + 1
+            self._update_publishers(bus, topic, publishers)
 
     def on_shutdown(self, caller_id: str, message: str) -> None:
         """``shutdown``: stop this node; :meth:`run` then raises TransportError."""
-        portal = self._portal
-        if portal is not None:
-            self._shutdown_reason = f"{message} (from {caller_id})"
-            with contextlib.suppress(RuntimeError):
-                portal.start_task_soon(self._stop)
-
-    async def _stop(self) -> None:
         if self._tg is not None:
+            self._shutdown_reason = f"{message} (from {caller_id})"
             self._tg.cancel_scope.cancel()
 
-    async def _publisher_update(self, topic: str, uris: list[str]) -> None:
-        bus = self._bus
-        if bus is not None:
-            self._update_publishers(bus, topic, uris)
+    def on_bad_request(self, reason: str) -> None:
+        """A refused slave API request: counted in ``bad_requests``, logged at debug."""
+        self._stats.bad_requests += 1
+        _log.debug("ros1: slave API: %s", reason)
+
+    def _on_accept_error(self, exc: OSError) -> None:
+        self._stats.accept_errors += 1
 
     # -- subscriber side: connect to publishers -------------------------------------------
 
     def _update_publishers(self, bus: _BusLike, topic: str, uris: list[str]) -> None:
-        wanted = {u for u in uris if u != self._api_uri}
+        """Follow exactly the publishers ``uris`` of ``topic`` (an answer of the master or
+        a ``publisherUpdate``): at most :data:`MAX_PUBLISHERS`, those already followed
+        first; none outside loopback unless allowed (``refused_hosts``)."""
+        wanted: dict[str, None] = {}
+        current = {k[1] for k in self._incoming if k[0] == topic}
+        fresh = []
+        for uri in dict.fromkeys(uris):
+            if uri == self._api_uri:
+                continue
+            if uri in current:
+                wanted[uri] = None
+            else:
+                fresh.append(uri)
+        for uri in fresh:
+            if len(wanted) >= MAX_PUBLISHERS:
+                self._stats.publishers_dropped += len(fresh) - fresh.index(uri)
+                _log.warning(
+                    "ros1: %s: following %d publishers at most; %d more dropped",
+                    topic,
+                    MAX_PUBLISHERS,
+                    len(fresh) - fresh.index(uri),
+                )
+                break
+            if not self._remote_ok:
+                host = _uri_host(uri)
+                if host is not None and not _is_loopback(host):
+                    self._stats.refused_hosts += 1
+                    _log.debug("ros1: not contacting %s (outside loopback)", uri[:200])
+                    continue
+            wanted[uri] = None
         for key in [k for k in self._incoming if k[0] == topic and k[1] not in wanted]:
             self._incoming.pop(key).cancel()
         tg = self._tg
         if tg is None:
             return
-        for uri in sorted(wanted):
+        for uri in wanted:
             if (topic, uri) not in self._incoming:
                 scope = anyio.CancelScope()
                 self._incoming[(topic, uri)] = scope
@@ -559,22 +641,55 @@ class Ros1Transport:
                 try:
                     await self._receive_from(bus, topic, uri)
                     delay = 0.1  # a connection that ended cleanly: reconnect promptly
+                except BadReply as exc:  # its XML-RPC answer: retried with back-off
+                    self._stats.bad_replies += 1
+                    _log.debug("ros1: %s from %s: %s", topic, uri[:200], exc)
                 except (
                     OSError,
+                    TimeoutError,
                     TransportError,
                     anyio.EndOfStream,
                     anyio.IncompleteRead,
                     anyio.BrokenResourceError,
                 ) as exc:
-                    _log.debug("ros1: %s from %s: %s", topic, uri, exc)
-                except (ValueError, TypeError) as exc:  # malformed reply, header or frame:
+                    _log.debug("ros1: %s from %s: %s", topic, uri[:200], exc)
+                except (ValueError, TypeError) as exc:  # malformed header or frame:
                     # this connection only
                     self._stats.malformed += 1
-                    _log.warning("ros1: closing %s from %s: %s", topic, uri, exc)
+                    _log.warning("ros1: closing %s from %s: %s", topic, uri[:200], exc)
                 await anyio.sleep(delay)
                 delay = min(delay * 2, 2.0)
         if self._incoming.get((topic, uri)) is scope:
             del self._incoming[(topic, uri)]
+
+    async def _request_topic(self, topic: str, uri: str) -> tuple[str, int]:
+        """``requestTopic`` at ``uri`` (at most :data:`MAX_CONCURRENT_REQUESTS` at once):
+        the TCPROS (host, port) offered.
+
+        Raises:
+            BadReply: no ``["TCPROS", host, port]`` with a port in 1..65535.
+            TransportError: no answer, or a host outside loopback (``refused_hosts``).
+        """
+        limiter = self._request_limiter
+        if limiter is None:
+            raise TransportError("the node is not running")
+        async with limiter:
+            reply = await call(
+                uri, "requestTopic", self._name, topic, [["TCPROS"]], timeout=self._timeout
+            )
+        if not (isinstance(reply, list) and len(reply) >= 3 and reply[0] == "TCPROS"):
+            raise BadReply(f"requestTopic at {uri:.200}: no TCPROS endpoint in {reply!r:.200}")
+        host, port = reply[1], reply[2]
+        if not isinstance(host, str) or not host or len(host) > 255:
+            raise BadReply(f"requestTopic at {uri:.200}: bad host {host!r:.80}")
+        if not isinstance(port, int) or isinstance(port, bool) or not 0 < port < 65536:
+            raise BadReply(f"requestTopic at {uri:.200}: port {port!r:.40} not in 1..65535")
+        if not self._remote_ok and not _is_loopback(host):
+            self._stats.refused_hosts += 1
+            raise TransportError(
+                f"publisher {uri:.200} offers {host}:{port}, outside loopback (allow_remote=False)"
+            )
+        return host, port
 
     async def _receive_from(self, bus: _BusLike, topic: str, uri: str) -> None:
         """One connection to the publisher at ``uri`` (roscpp's
@@ -584,23 +699,12 @@ class Ros1Transport:
         the publisher's header, then deliver each message until the connection ends.
 
         Raises:
+            BadReply: the publisher's XML-RPC answer is junk (the caller counts it).
             TransportError, OSError, anyio.EndOfStream: the connection could not be
                 made or ended (the caller retries).
             ValueError: a malformed header or frame (the caller counts it).
         """
-        reply = await anyio.to_thread.run_sync(
-            lambda: call(
-                uri, "requestTopic", self._name, topic, [["TCPROS"]], timeout=self._timeout
-            )
-        )
-        if not (isinstance(reply, list) and len(reply) >= 3 and reply[0] == "TCPROS"):
-            raise TransportError(f"requestTopic at {uri}: no TCPROS endpoint in {reply!r:.200}")
-        host, port = str(reply[1]), int(reply[2])
-        if not self._remote_ok and not _is_loopback(host):
-            self._stats.refused_hosts += 1
-            raise TransportError(
-                f"publisher {uri} offers {host}:{port}, outside loopback (allow_remote=False)"
-            )
+        host, port = await self._request_topic(topic, uri)
         link = _Inbound(self, bus, topic, uri)
         hello = encode_header(
             {
