@@ -654,3 +654,34 @@ def test_cli_monitor_survives_hostile_publishers() -> None:
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
     assert all(peer.requests >= 1 for peer in peers)
+
+
+# ------------------------------------------------------------------ refusal logs
+
+
+async def test_a_flood_of_bad_headers_is_counted_but_logged_rarely(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Every malformed connection header is counted; the warnings about them are limited
+    by time (at most one line per 5 s per kind), so a peer sending them as fast as it can
+    cannot flood the log (issue 21: refusal logs limited by time too)."""
+    flood = 40
+    with FakeMaster() as master:
+        async with pair(master) as p:
+            await p.delivers()
+            before = p.pub.statistics().malformed
+            caplog.set_level(logging.WARNING, logger="tfbus.transports.ros1")
+            start = anyio.current_time()
+            for _ in range(flood):
+                with anyio.fail_after(10):
+                    stream = await anyio.connect_tcp("127.0.0.1", p.pub._tcp_port)
+                    async with stream:
+                        await stream.send((12).to_bytes(4, "little") + b"no equals!!!")
+                        with suppress(anyio.EndOfStream, anyio.BrokenResourceError):
+                            await stream.receive()
+            await _until(lambda: p.pub.statistics().malformed - before >= flood, "counted")
+            elapsed = anyio.current_time() - start
+            await p.delivers()
+    lines = [r for r in caplog.records if "bad connection header" in r.getMessage()]
+    assert p.pub.statistics().malformed - before == flood
+    assert len(lines) <= 1 + int(elapsed // 5.0), (len(lines), elapsed)

@@ -11,6 +11,7 @@ import os
 import secrets
 import socket
 import struct
+import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -25,6 +26,7 @@ from anyio.streams.stapled import MultiListener
 from tfbus.clock._base import running_asyncio_loop
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
+from tfbus.ratelimit import CountLimitedLog
 
 from .rpc import BadReply, CallFailed, SlaveServer, call, serve_listener
 from .tcpros import (
@@ -42,6 +44,9 @@ from .tcpros import (
 __all__ = ["Ros1Statistics", "Ros1Transport"]
 
 _log = logging.getLogger("tfbus.transports.ros1")
+_peer_log = CountLimitedLog(_log, 1, period=5.0, clock=time.monotonic)
+"""Warnings about what a peer sent (malformed frames and headers): at most one line per
+5 s per kind, however fast a hostile peer sends; every one is counted in statistics()."""
 
 _TOPICS: Final = ("/tf", "/tf_static")
 _LATCHED: Final = frozenset({"/tf_static"})
@@ -656,7 +661,8 @@ class Ros1Transport:
                 except (ValueError, TypeError) as exc:  # malformed header or frame:
                     # this connection only
                     self._stats.malformed += 1
-                    _log.warning("ros1: closing %s from %s: %s", topic, uri[:200], exc)
+                    _peer_log.log(logging.WARNING, "ros1: closing %s from %s: %s", topic,
+                                  uri[:200], exc)
                 await anyio.sleep(delay)
                 delay = min(delay * 2, 2.0)
         if self._incoming.get((topic, uri)) is scope:
@@ -789,7 +795,8 @@ class Ros1Transport:
                     )
             except (ValueError, struct.error) as exc:
                 self._stats.malformed += 1
-                _log.warning("ros1: bad connection header from a subscriber: %s", exc)
+                _peer_log.log(logging.WARNING, "ros1: bad connection header from a subscriber: %s",
+                              exc)
                 return
             except (
                 TimeoutError,
