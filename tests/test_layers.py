@@ -40,6 +40,7 @@ LAYERS: dict[str, int] = {
     "cache": 1,
     "errors": 1,
     "batch": 1,
+    "velocity": 1,
     # 2: the bus and time sources
     "bus": 2,
     "clock": 2,

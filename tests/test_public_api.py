@@ -12,7 +12,8 @@ def test_public_all_is_pinned() -> None:
         "Quaternion", "SetResult", "StaticTransformBroadcaster", "Subscription", "SystemClock",
         "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform", "TransformArray",
         "TransformBroadcaster", "TransformException", "TransformListener", "TransformStamped",
-        "Transport", "TransportError", "Vector3", "Vector3Stamped", "every",
+        "Transport", "TransportError", "Twist", "Vector3", "Vector3Stamped", "VelocityStamped",
+        "every",
     ]  # fmt: skip
     for name in tfbus.__all__:
         assert getattr(tfbus, name).__doc__, f"{name} has no docstring"

@@ -40,8 +40,10 @@ from tfbus.messages import (
     TFMessage,
     Transform,
     TransformStamped,
+    Twist,
     Vector3,
     Vector3Stamped,
+    VelocityStamped,
 )
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
@@ -90,7 +92,9 @@ __all__ = [
     "TransformStamped",
     "Transport",
     "TransportError",
+    "Twist",
     "Vector3",
     "Vector3Stamped",
+    "VelocityStamped",
     "every",
 ]

@@ -59,9 +59,17 @@ from tfbus.errors import (
     LookupException,
     TransformException,
 )
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Header,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+    VelocityStamped,
+)
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS, Duration, Time
+from tfbus.velocity import lookup_velocity as _lookup_velocity
 
 __all__ = [
     "COMPILED",
@@ -639,6 +647,68 @@ class BufferCore(BatchLookupMixin, CoreBase):
         return (
             f"BufferCore(cache_time={self.cache_time_ns / 1e9:g}, "
             f"frames={len(self._frame_names) - 1})"
+        )
+
+    # ------------------------------------------------------------------ velocity, chain
+
+    def lookup_velocity(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        time: Time,
+        averaging_interval: Duration | float,
+        *,
+        method: str = "tf2",
+    ) -> VelocityStamped:
+        """The velocity of ``tracking_frame`` relative to ``observation_frame``, expressed
+        in ``observation_frame`` about the tracking frame's origin, averaged over
+        ``averaging_interval`` (seconds or a Duration, > 0) around ``time`` (0: the latest
+        common time). tf2 ``BufferCore::lookupVelocity`` (ROS 2) / ``tf::Transformer::
+        lookupTwist`` (ROS 1); see :mod:`tfbus.velocity` for the formula, and for why
+        ``method="tf2"`` (the default, tf2's numbers) is not the physical velocity of a
+        rotating frame and what ``method="origin"`` returns instead.
+
+        Returns:
+            VelocityStamped (m/s, rad/s) with ``header.frame_id == observation_frame``,
+            ``body_frame_id == tracking_frame``.
+
+        Raises:
+            InvalidArgumentException: a bad ``averaging_interval``, ``time`` or
+                ``method`` (the message names the argument and value), or a bad frame id.
+            LookupException, ConnectivityException, ExtrapolationException: as
+                :meth:`lookup_transform`, for the window's ends.
+        """
+        return _lookup_velocity(
+            self, tracking_frame, observation_frame, observation_frame, (0.0, 0.0, 0.0),
+            tracking_frame, time, averaging_interval, method,
+        )
+
+    def lookup_velocity_full(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        reference_frame: str,
+        reference_point: Vector3 | tuple[float, float, float],
+        reference_point_frame: str,
+        time: Time,
+        averaging_interval: Duration | float,
+        *,
+        method: str = "tf2",
+    ) -> VelocityStamped:
+        """:meth:`lookup_velocity` expressed in ``reference_frame`` about
+        ``reference_point`` (x, y, z metres in ``reference_point_frame``), tf2's argument
+        order (ROS 2 ``lookupVelocity`` with seven arguments, ROS 1 ``lookupTwist``).
+
+        Returns:
+            VelocityStamped with ``header.frame_id == reference_frame``.
+
+        Raises:
+            as :meth:`lookup_velocity`; InvalidArgumentException also for a
+            ``reference_point`` that is not 3 finite numbers.
+        """
+        return _lookup_velocity(
+            self, tracking_frame, observation_frame, reference_frame, reference_point,
+            reference_point_frame, time, averaging_interval, method,
         )
 
 

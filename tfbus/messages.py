@@ -41,8 +41,10 @@ __all__ = [
     "TFMessage",
     "Transform",
     "TransformStamped",
+    "Twist",
     "Vector3",
     "Vector3Stamped",
+    "VelocityStamped",
 ]
 
 
@@ -230,6 +232,39 @@ class JointState(NamedTuple):
     position: Sequence[float] = ()
     velocity: Sequence[float] = ()
     effort: Sequence[float] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Twist(NamedTuple):
+    """geometry_msgs/Twist: ``linear`` velocity (m/s) and ``angular`` velocity (rad/s,
+    about the axes of the frame it is expressed in)."""
+
+    linear: Vector3 = _ZERO_VECTOR
+    angular: Vector3 = _ZERO_VECTOR
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class VelocityStamped(NamedTuple):
+    """geometry_msgs/VelocityStamped (ROS 2): the velocity of ``body_frame_id`` relative
+    to ``reference_frame_id``, expressed in ``header.frame_id`` at ``header.stamp``.
+
+    ``velocity.linear`` in m/s, ``velocity.angular`` in rad/s. What
+    :meth:`tfbus.core.BufferCore.lookup_velocity` returns (``header.frame_id`` is its
+    reference frame, ``reference_frame_id`` its observation frame).
+    """
+
+    header: Header = _EMPTY_HEADER
+    body_frame_id: str = ""
+    reference_frame_id: str = ""
+    velocity: Twist = Twist()
 
     def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
