@@ -9,7 +9,8 @@ where an op is ``["new"]`` (a fresh BufferCore from here on), ``["set", parent, 
 stamp_ns, [tx, ty, tz], [qx, qy, qz, qw], static]`` or ``["call", method_name,
 [arg, ...]]`` (an argument ``{"t": ns}`` is a ``rospy.Time``). Prints one JSON line
 per call: ``{"ok": result}`` (a list, tuple, bool, str, number, a Time as
-``{"t": ns}``, a TransformStamped as ``{"tf": [frame_id, child, stamp_ns, [t], [q]]}``) or ``{"err": exception class name, "msg": text}``.
+``{"t": ns}``, a TransformStamped as ``{"tf": [frame_id, child, stamp_ns, [t], [q]]}``)
+or ``{"err": exception class name, "msg": text}``.
 """
 
 from __future__ import annotations
