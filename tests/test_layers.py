@@ -59,6 +59,7 @@ LAYERS: dict[str, int] = {
     "robot_state": 4,
     "urdf": 4,
     "transports": 4,
+    "compat": 4,
     # 5: the command line and examples
     "cli": 5,
     "demo": 5,

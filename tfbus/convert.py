@@ -35,6 +35,7 @@ attribute).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from typing import Any, ClassVar, TypeVar
 
@@ -51,8 +52,10 @@ from tfbus.messages import (
 )
 
 __all__ = [
+    "ConvertRegistration",
     "TransformFunction",
     "TransformRegistration",
+    "convert",
     "do_transform_transform",
     "get_transform_function",
     "register_transform",
@@ -176,3 +179,62 @@ register_transform(PointStamped, do_transform_point)
 register_transform(PoseStamped, do_transform_pose)
 register_transform(Vector3Stamped, do_transform_vector3)
 register_transform(TransformStamped, do_transform_transform)
+
+
+class ConvertRegistration:
+    """tf2_ros's conversion registry (``tf2_ros/buffer_interface.py``), one table per
+    process: ``add_to_msg(type, fn)``, ``add_from_msg(type, fn)``,
+    ``add_convert((from_type, to_type), fn)`` and their ``get_*``; :func:`convert` uses
+    them. ``get_*`` raise TypeError naming the type when nothing is registered."""
+
+    _to_msg: ClassVar[dict[Any, Callable[[Any], Any]]] = {}
+    _from_msg: ClassVar[dict[Any, Callable[[Any], Any]]] = {}
+    _convert: ClassVar[dict[Any, Callable[[Any], Any]]] = {}
+
+    def add_to_msg(self, key: Any, callback: Callable[[Any], Any]) -> None:
+        """Register ``callback(obj) -> message`` for objects of type ``key``."""
+        ConvertRegistration._to_msg[key] = callback
+
+    def add_from_msg(self, key: Any, callback: Callable[[Any], Any]) -> None:
+        """Register ``callback(message) -> obj`` building objects of type ``key``."""
+        ConvertRegistration._from_msg[key] = callback
+
+    def add_convert(self, key: Any, callback: Callable[[Any], Any]) -> None:
+        """Register a direct conversion for ``key = (from_type, to_type)``."""
+        ConvertRegistration._convert[key] = callback
+
+    @staticmethod
+    def _get(table: dict[Any, Callable[[Any], Any]], key: Any) -> Callable[[Any], Any]:
+        fn = table.get(key)
+        if fn is None:
+            raise TypeError(f"Type {key} if not loaded or supported")  # tf2_ros's text
+        return fn
+
+    def get_to_msg(self, key: Any) -> Callable[[Any], Any]:
+        """The ``to_msg`` function of ``key``. Raises TypeError when absent."""
+        return self._get(ConvertRegistration._to_msg, key)
+
+    def get_from_msg(self, key: Any) -> Callable[[Any], Any]:
+        """The ``from_msg`` function of ``key``. Raises TypeError when absent."""
+        return self._get(ConvertRegistration._from_msg, key)
+
+    def get_convert(self, key: Any) -> Callable[[Any], Any]:
+        """The direct conversion for ``(from_type, to_type)``. Raises TypeError when
+        absent."""
+        return self._get(ConvertRegistration._convert, key)
+
+
+def convert(a: Any, b_type: Any) -> Any:
+    """tf2_ros ``convert(a, b_type)``: a direct conversion when registered, else a copy
+    when ``a`` already is a ``b_type``, else ``from_msg[b_type](to_msg[type(a)](a))``.
+
+    Raises:
+        TypeError: no way to convert (the missing type is named).
+    """
+    registry = ConvertRegistration()
+    try:
+        return registry.get_convert((type(a), b_type))(a)
+    except TypeError:
+        if type(a) is b_type:
+            return copy.deepcopy(a)
+        return registry.get_from_msg(b_type)(registry.get_to_msg(type(a))(a))

@@ -48,6 +48,7 @@ from tfbus.core_text import (
     FrameInfo,
     Tf7,
     bad_frame_exception,
+    frames_as_dot,
     frames_as_string,
     frames_as_yaml,
     invalid_transform_exception,
@@ -830,3 +831,11 @@ class BufferCore(BatchLookupMixin, CoreBase):
             f"Could not find a connection between '{names[1]}' and '{names[0]}' because "
             "they are not part of the same tree.Tf has two or more unconnected trees."
         )
+
+    def all_frames_as_dot(self, current_time: Time | None = None) -> str:
+        """The frame tree as a Graphviz ``digraph`` in tf2 0.7.6's text
+        (``BufferCore::_allFramesAsDot``, what view_frames draws): an edge per link with
+        its broadcaster, rate (Hz), newest stamp and buffer length (seconds); with a
+        ``current_time`` > 0, each link's age and a legend pointing at the roots."""
+        seconds = 0.0 if current_time is None else current_time.ns / 1e9
+        return frames_as_dot(self.get_frame_names(), self.frame_info(), seconds)
