@@ -9,11 +9,12 @@ def test_public_all_is_pinned() -> None:
         "ExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
         "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
         "Point", "PointCloud2", "PointField", "PointStamped", "Pose", "PoseStamped",
-        "Quaternion", "SetResult", "StaticTransformBroadcaster", "Subscription", "SystemClock",
+        "Quaternion", "SetResult", "Stamped", "StaticTransformBroadcaster", "Subscription",
+        "SystemClock",
         "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform", "TransformArray",
         "TransformBroadcaster", "TransformException", "TransformListener", "TransformStamped",
         "Transport", "TransportError", "Twist", "Vector3", "Vector3Stamped", "VelocityStamped",
-        "every",
+        "Wrench", "WrenchStamped", "every",
     ]  # fmt: skip
     for name in tfbus.__all__:
         assert getattr(tfbus, name).__doc__, f"{name} has no docstring"
@@ -63,8 +64,10 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
         "every", "timeout_ns",
     }  # fmt: skip
     assert set(tfbus.convert.__all__) == {
-        "TransformFunction", "TransformRegistration", "do_transform_transform",
-        "get_transform_function", "register_transform", "registered_types",
+        "ConvertRegistration", "TransformFunction", "TransformRegistration", "convert",
+        "do_transform_cloud", "do_transform_stamped", "do_transform_transform",
+        "do_transform_wrench", "get_transform_function", "register_transform",
+        "registered_types",
     }  # fmt: skip
     for module in (tfbus.time, tfbus.clock, tfbus.convert):
         for name in module.__all__:

@@ -37,6 +37,7 @@ from tfbus.messages import (
     Pose,
     PoseStamped,
     Quaternion,
+    Stamped,
     TFMessage,
     Transform,
     TransformStamped,
@@ -44,6 +45,8 @@ from tfbus.messages import (
     Vector3,
     Vector3Stamped,
     VelocityStamped,
+    Wrench,
+    WrenchStamped,
 )
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
@@ -77,6 +80,7 @@ __all__ = [
     "PoseStamped",
     "Quaternion",
     "SetResult",
+    "Stamped",
     "StaticTransformBroadcaster",
     "Subscription",
     "SystemClock",
@@ -96,5 +100,7 @@ __all__ = [
     "Vector3",
     "Vector3Stamped",
     "VelocityStamped",
+    "Wrench",
+    "WrenchStamped",
     "every",
 ]

@@ -26,7 +26,7 @@ or kept in a cache without copies.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple, NoReturn
+from typing import Generic, NamedTuple, NoReturn, TypeVar
 
 from tfbus.time import Time
 
@@ -38,6 +38,7 @@ __all__ = [
     "Pose",
     "PoseStamped",
     "Quaternion",
+    "Stamped",
     "TFMessage",
     "Transform",
     "TransformStamped",
@@ -45,6 +46,8 @@ __all__ = [
     "Vector3",
     "Vector3Stamped",
     "VelocityStamped",
+    "Wrench",
+    "WrenchStamped",
 ]
 
 
@@ -265,6 +268,49 @@ class VelocityStamped(NamedTuple):
     body_frame_id: str = ""
     reference_frame_id: str = ""
     velocity: Twist = Twist()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Wrench(NamedTuple):
+    """geometry_msgs/Wrench: ``force`` (N) and ``torque`` (N·m)."""
+
+    force: Vector3 = _ZERO_VECTOR
+    torque: Vector3 = _ZERO_VECTOR
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class WrenchStamped(NamedTuple):
+    """geometry_msgs/WrenchStamped: a wrench in ``header.frame_id`` at ``header.stamp``."""
+
+    header: Header = _EMPTY_HEADER
+    wrench: Wrench = Wrench()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+_T = TypeVar("_T")
+
+
+class Stamped(NamedTuple, Generic[_T]):
+    """Any value with a stamp and a frame: tf2's ``Stamped<T>`` and tf2_ros's
+    ``Stamped``. ``Stamped(header, data)``, e.g. ``Stamped[Point](Header(t, "laser"),
+    Point(1, 0, 0))``. :meth:`tfbus.Buffer.transform` accepts one whose ``data`` is a
+    Point, Vector3 (rotated only), Pose, Quaternion (rotated), Transform or Wrench
+    (:func:`tfbus.convert.do_transform_stamped`)."""
+
+    header: Header
+    data: _T
 
     def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
