@@ -151,13 +151,14 @@ class BufferCore:
         observation_frame: str,
         time: object,
         averaging_interval: object,
-    ) -> VelocityStamped:
-        """ROS 2 tf2_py ``lookupVelocityCore``: :meth:`tfbus.BufferCore.lookup_velocity`
-        (tf2's algorithm; ``averaging_interval`` a duration or seconds)."""
-        return self.core.lookup_velocity(
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """ROS 2 tf2_py ``lookupVelocityCore`` → ``((vx, vy, vz), (wx, wy, wz))`` (m/s,
+        rad/s; tf2_py's shape): :meth:`tfbus.BufferCore.lookup_velocity` (tf2's
+        algorithm; ``averaging_interval`` a duration or seconds)."""
+        return _pair(self.core.lookup_velocity(
             tracking_frame, observation_frame, to_time(time),
             _interval(averaging_interval),
-        )
+        ))
 
     def lookupVelocityFullCore(
         self,
@@ -168,19 +169,24 @@ class BufferCore:
         reference_point_frame: str,
         time: object,
         averaging_interval: object,
-    ) -> VelocityStamped:
-        """ROS 2 tf2_py ``lookupVelocityFullCore``:
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """ROS 2 tf2_py ``lookupVelocityFullCore`` → ``((vx, vy, vz), (wx, wy, wz))``:
         :meth:`tfbus.BufferCore.lookup_velocity_full` (``reference_point``: anything
-        with x, y, z, metres)."""
+        with x, y, z, or an (x, y, z) tuple, metres)."""
         point = (
             reference_point
             if isinstance(reference_point, tuple)
             else tuple(to_point(reference_point, "reference_point"))
         )
-        return self.core.lookup_velocity_full(
+        return _pair(self.core.lookup_velocity_full(
             tracking_frame, observation_frame, reference_frame, point,  # type: ignore[arg-type]
             reference_point_frame, to_time(time), _interval(averaging_interval),
-        )
+        ))
+
+
+def _pair(v: VelocityStamped) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    lin, ang = v.velocity
+    return (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z)
 
 
 def _interval(value: object) -> Duration | float:
