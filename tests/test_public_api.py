@@ -9,6 +9,7 @@ def test_public_all_is_pinned() -> None:
         "ExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
         "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
         "Point", "PointCloud2", "PointField", "PointStamped", "Pose", "PoseStamped",
+        "PoseWithCovariance", "PoseWithCovarianceStamped",
         "Quaternion", "SetResult", "Stamped", "StaticTransformBroadcaster", "Subscription",
         "SystemClock",
         "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform", "TransformArray",
@@ -65,9 +66,9 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
     }  # fmt: skip
     assert set(tfbus.convert.__all__) == {
         "ConvertRegistration", "TransformFunction", "TransformRegistration", "convert",
-        "do_transform_cloud", "do_transform_stamped", "do_transform_transform",
-        "do_transform_wrench", "get_transform_function", "register_transform",
-        "registered_types",
+        "do_transform_cloud", "do_transform_pose_with_covariance", "do_transform_stamped",
+        "do_transform_transform", "do_transform_wrench", "get_transform_function",
+        "register_transform", "registered_types", "transform_covariance",
     }  # fmt: skip
     for module in (tfbus.time, tfbus.clock, tfbus.convert):
         for name in module.__all__:

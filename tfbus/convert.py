@@ -56,6 +56,8 @@ from tfbus.messages import (
     PointStamped,
     Pose,
     PoseStamped,
+    PoseWithCovariance,
+    PoseWithCovarianceStamped,
     Quaternion,
     Stamped,
     Transform,
@@ -73,12 +75,14 @@ __all__ = [
     "TransformRegistration",
     "convert",
     "do_transform_cloud",
+    "do_transform_pose_with_covariance",
     "do_transform_stamped",
     "do_transform_transform",
     "do_transform_wrench",
     "get_transform_function",
     "register_transform",
     "registered_types",
+    "transform_covariance",
 ]
 
 _M = TypeVar("_M")
@@ -280,6 +284,48 @@ def do_transform_cloud(cloud: PointCloud2, transform: TransformStamped) -> Point
     )  # fmt: skip
 
 
+def transform_covariance(covariance: Any, transform: TransformStamped) -> tuple[float, ...]:
+    """Rotate a 6x6 pose covariance (36 numbers, row-major, x y z then rotations) into
+    the transform's parent frame: each 3x3 block ``B`` becomes ``R B Rᵀ`` with ``R`` the
+    transform's rotation (ROS 2 tf2_geometry_msgs ``transform_covariance``,
+    ros2/geometry2 #430); the translation does not enter.
+
+    Raises:
+        InvalidArgumentException: ``covariance`` is not 36 finite numbers.
+    """
+    try:
+        cov = np.asarray(covariance, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidArgumentException(
+            f"covariance must be 36 finite numbers, got {covariance!r}"
+        ) from None
+    if cov.shape != (36,) or not np.isfinite(cov).all():
+        raise InvalidArgumentException(
+            f"covariance must be 36 finite numbers, got shape {cov.shape}: {covariance!r}"
+        )
+    cols = [_rotate(Vector3(*e), transform) for e in ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))]
+    rot = np.array([[c.x, c.y, c.z] for c in cols]).T  # columns: the rotated axes
+    jac = np.kron(np.eye(2), rot)
+    out = jac @ cov.reshape(6, 6) @ jac.T
+    return tuple(float(v) for v in out.ravel())
+
+
+def do_transform_pose_with_covariance(
+    pose: PoseWithCovarianceStamped, transform: TransformStamped
+) -> PoseWithCovarianceStamped:
+    """Transform a pose with covariance: the pose as :func:`tfbus.geometry.do_transform_pose`,
+    the covariance by :func:`transform_covariance` (ROS 2 tf2_geometry_msgs
+    ``do_transform_pose_with_covariance_stamped``). The result header is
+    ``transform.header``.
+
+    Raises:
+        InvalidArgumentException: the covariance is not 36 finite numbers.
+    """
+    cov = transform_covariance(pose.pose.covariance, transform)
+    moved = do_transform_pose(PoseStamped(pose.header, pose.pose.pose), transform)
+    return PoseWithCovarianceStamped(transform.header, PoseWithCovariance(moved.pose, cov))
+
+
 def do_transform_stamped(obj: Stamped[Any], transform: TransformStamped) -> Stamped[Any]:
     """Transform a :class:`~tfbus.messages.Stamped` value by the type of its ``data``:
     Point (moved), Vector3 (rotated), Pose, Quaternion (rotated: ``q ⊗ data``),
@@ -318,6 +364,7 @@ register_transform(PoseStamped, do_transform_pose)
 register_transform(Vector3Stamped, do_transform_vector3)
 register_transform(TransformStamped, do_transform_transform)
 register_transform(WrenchStamped, do_transform_wrench)
+register_transform(PoseWithCovarianceStamped, do_transform_pose_with_covariance)
 register_transform(PointCloud2, do_transform_cloud)
 register_transform(Stamped, do_transform_stamped)
 

@@ -37,6 +37,8 @@ __all__ = [
     "PointStamped",
     "Pose",
     "PoseStamped",
+    "PoseWithCovariance",
+    "PoseWithCovarianceStamped",
     "Quaternion",
     "Stamped",
     "TFMessage",
@@ -311,6 +313,35 @@ class Stamped(NamedTuple, Generic[_T]):
 
     header: Header
     data: _T
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+_ZERO_COVARIANCE: tuple[float, ...] = (0.0,) * 36
+
+
+class PoseWithCovariance(NamedTuple):
+    """geometry_msgs/PoseWithCovariance: a pose and its 6x6 covariance, row-major, 36
+    numbers, in the order (x, y, z, rotation about x, about y, about z): m², rad²."""
+
+    pose: Pose = Pose()
+    covariance: Sequence[float] = _ZERO_COVARIANCE
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class PoseWithCovarianceStamped(NamedTuple):
+    """geometry_msgs/PoseWithCovarianceStamped: a pose with covariance in
+    ``header.frame_id`` at ``header.stamp``."""
+
+    header: Header = _EMPTY_HEADER
+    pose: PoseWithCovariance = PoseWithCovariance()
 
     def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")

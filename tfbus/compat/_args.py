@@ -20,6 +20,8 @@ from tfbus.messages import (
     PointStamped,
     Pose,
     PoseStamped,
+    PoseWithCovariance,
+    PoseWithCovarianceStamped,
     Quaternion,
     Transform,
     TransformStamped,
@@ -148,7 +150,10 @@ def to_stamped(value: Any, name: str = "object_stamped") -> object:
     """A tfbus stamped message for a foreign PointStamped, PoseStamped,
     Vector3Stamped or TransformStamped (by its fields); other objects as they are
     (they are looked up in the transform registry by their own type)."""
-    if isinstance(value, (PointStamped, PoseStamped, Vector3Stamped, TransformStamped)):
+    if isinstance(
+        value,
+        (PointStamped, PoseStamped, Vector3Stamped, TransformStamped, PoseWithCovarianceStamped),
+    ):
         return value
     if hasattr(value, "child_frame_id") and hasattr(value, "transform"):
         return to_transform_stamped(value, name)
@@ -159,6 +164,16 @@ def to_stamped(value: Any, name: str = "object_stamped") -> object:
     if hasattr(value, "vector"):
         return Vector3Stamped(_header(value, name), to_vector3(value.vector, f"{name}.vector"))
     pose = getattr(value, "pose", None)
+    if pose is not None and hasattr(pose, "covariance") and hasattr(pose, "pose"):
+        inner = pose.pose
+        return PoseWithCovarianceStamped(
+            _header(value, name),
+            PoseWithCovariance(
+                Pose(to_point(inner.position, f"{name}.pose.pose.position"),
+                     to_quaternion(inner.orientation, f"{name}.pose.pose.orientation")),
+                tuple(float(c) for c in pose.covariance),
+            ),
+        )
     if pose is not None and hasattr(pose, "position") and hasattr(pose, "orientation"):
         return PoseStamped(
             _header(value, name),

@@ -18,8 +18,10 @@ from tfbus.compat._args import (
     to_transform_stamped,
     to_vector3,
 )
+from tfbus.convert import do_transform_pose_with_covariance as _pose_cov
 from tfbus.convert import do_transform_transform as _transform
 from tfbus.convert import do_transform_wrench as _wrench
+from tfbus.convert import transform_covariance as _covariance
 from tfbus.geometry import do_transform_point as _point
 from tfbus.geometry import do_transform_pose as _pose_stamped
 from tfbus.geometry import do_transform_vector3 as _vector3
@@ -28,6 +30,7 @@ from tfbus.messages import (
     PointStamped,
     Pose,
     PoseStamped,
+    PoseWithCovarianceStamped,
     TransformStamped,
     Vector3Stamped,
     Wrench,
@@ -38,9 +41,11 @@ __all__ = [
     "do_transform_point",
     "do_transform_pose",
     "do_transform_pose_stamped",
+    "do_transform_pose_with_covariance_stamped",
     "do_transform_transform",
     "do_transform_vector3",
     "do_transform_wrench",
+    "transform_covariance",
 ]
 
 
@@ -100,3 +105,18 @@ def do_transform_pose(pose: Any, transform: Any) -> Pose | PoseStamped:
 def do_transform_pose_stamped(pose: Any, transform: Any) -> PoseStamped:
     """ROS 2 ``do_transform_pose_stamped``: :func:`tfbus.geometry.do_transform_pose`."""
     return _pose_stamped(_stamped(pose, PoseStamped, "pose"), to_transform_stamped(transform))
+
+
+def do_transform_pose_with_covariance_stamped(
+    pose: Any, transform: Any
+) -> PoseWithCovarianceStamped:
+    """ROS 2 ``do_transform_pose_with_covariance_stamped``:
+    :func:`tfbus.convert.do_transform_pose_with_covariance`."""
+    return _pose_cov(_stamped(pose, PoseWithCovarianceStamped, "pose"),
+                     to_transform_stamped(transform))
+
+
+def transform_covariance(cov_in: Any, transform: Any) -> tuple[float, ...]:
+    """ROS 2 ``transform_covariance(cov_in, transform)`` (the 36 rotated numbers):
+    :func:`tfbus.convert.transform_covariance`."""
+    return _covariance(cov_in, to_transform_stamped(transform))
