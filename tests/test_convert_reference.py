@@ -207,3 +207,52 @@ async def test_buffer_transform_accepts_stamped() -> None:
     out = await buf.transform(Stamped[Point](Header(Time(1), "laser"), Point(1, 0, 0)), "map",
                               timeout=1.0)
     assert out == Stamped(Header(Time(1), "map"), Point(2.0, 2.0, 3.0))
+
+
+def test_twist_velocity_and_polygon() -> None:
+    from tfbus import Point32, Polygon, PolygonStamped, Twist, TwistStamped, VelocityStamped
+    from tfbus.convert import do_transform_polygon, do_transform_twist, do_transform_velocity
+
+    yaw = [0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)]  # +90° about z
+    tf = _ts([1.0, 0.0, 0.0], yaw)
+    tw = Twist(Vector3(1.0, 0.0, 0.0), Vector3(0.0, 0.0, 1.0))
+    # ω' = R ω = (0, 0, 1); v' = R v + t x ω' = (0, 1, 0) + (0, -1, 0)
+    out = do_transform_twist(TwistStamped(Header(Time(1), "source"), tw), tf)
+    assert out.header == tf.header
+    assert list(out.twist.angular) == pytest.approx([0.0, 0.0, 1.0])
+    assert list(out.twist.linear) == pytest.approx([0.0, 0.0, 0.0], abs=1e-15)
+    vel = VelocityStamped(Header(Time(1), "source"), "body", "world", tw)
+    moved = do_transform_velocity(vel, tf)
+    assert (moved.header, moved.body_frame_id, moved.reference_frame_id) == (
+        tf.header, "body", "world")
+    assert moved.velocity == out.twist
+    poly = PolygonStamped(Header(Time(1), "source"),
+                          Polygon((Point32(1, 0, 0), Point32(0, 1, 0), Point32(0, 0, 2))))
+    moved_poly = do_transform_polygon(poly, tf)
+    assert moved_poly.header == tf.header
+    assert [list(p) for p in moved_poly.polygon.points] == [
+        pytest.approx([1.0, 1.0, 0.0]), pytest.approx([0.0, 0.0, 0.0]),
+        pytest.approx([1.0, 0.0, 2.0])]
+
+
+@pytest.mark.anyio
+async def test_buffer_transform_of_the_new_types() -> None:
+    from tfbus import PoseWithCovariance, PoseWithCovarianceStamped, Twist, TwistStamped
+
+    buf = Buffer()
+    buf.set_transform(TransformStamped(Header(Time(1), "map"), "laser",
+                                       Transform(Vector3(0.0, 0.0, 0.0),
+                                                 Quaternion(1.0, 0.0, 0.0, 0.0))))
+    tw = await buf.transform(TwistStamped(Header(Time(1), "laser"),
+                                          Twist(Vector3(0, 1, 0), Vector3(0, 0, 1))), "map")
+    assert list(tw.twist.linear) == pytest.approx([0, -1, 0]) and tw.header.frame_id == "map"
+    cov = tuple(float(i) for i in range(36))
+    pc = await buf.transform(PoseWithCovarianceStamped(Header(Time(1), "laser"),
+                                                       PoseWithCovariance(Pose(), cov)), "map")
+    signs = np.array([1, -1, -1, 1, -1, -1])
+    assert np.array_equal(np.array(pc.pose.covariance).reshape(6, 6),
+                          np.array(cov).reshape(6, 6) * np.outer(signs, signs))
+    with pytest.raises(InvalidArgumentException, match="36 finite numbers"):
+        await buf.transform(PoseWithCovarianceStamped(Header(Time(1), "laser"),
+                                                      PoseWithCovariance(Pose(), (1.0,) * 35)),
+                            "map")

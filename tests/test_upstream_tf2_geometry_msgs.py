@@ -175,3 +175,27 @@ def test_ros1_and_ros2_pose_forms() -> None:
     stamped = tf2_geometry_msgs.do_transform_pose_stamped(
         PoseStampedMsg(Hd(Time(1), "base")), t)
     assert list(stamped.pose.position) == [1.0, 0.0, 0.0]
+
+
+@dataclass
+class PolygonMsg:
+    points: list[V3] = field(default_factory=list)
+
+
+@dataclass
+class PolygonStampedMsg:
+    header: Hd = field(default_factory=Hd)
+    polygon: PolygonMsg = field(default_factory=PolygonMsg)
+
+
+def test_polygon_stamped_by_fields() -> None:
+    t = TfMsg(Hd(Time(2), "map"), "base")
+    t.transform.translation = V3(1.0, 2.0, 3.0)
+    t.transform.rotation = Q4(w=1.0)
+    poly = PolygonStampedMsg(Hd(Time(2), "base"), PolygonMsg([V3(1.0), V3(0.0, 1.0)]))
+    out = tf2_geometry_msgs.do_transform_polygon_stamped(poly, t)
+    assert out.header == Header(Time(2), "map")
+    assert [list(p) for p in out.polygon.points] == [[2.0, 2.0, 3.0], [1.0, 3.0, 3.0]]
+    b = tf2_ros.Buffer()
+    b.set_transform(t, "test")
+    assert b.transform(poly, "map") == out

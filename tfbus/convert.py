@@ -53,7 +53,10 @@ from tfbus.geometry import (
 )
 from tfbus.messages import (
     Point,
+    Point32,
     PointStamped,
+    Polygon,
+    PolygonStamped,
     Pose,
     PoseStamped,
     PoseWithCovariance,
@@ -62,8 +65,11 @@ from tfbus.messages import (
     Stamped,
     Transform,
     TransformStamped,
+    Twist,
+    TwistStamped,
     Vector3,
     Vector3Stamped,
+    VelocityStamped,
     Wrench,
     WrenchStamped,
 )
@@ -75,9 +81,12 @@ __all__ = [
     "TransformRegistration",
     "convert",
     "do_transform_cloud",
+    "do_transform_polygon",
     "do_transform_pose_with_covariance",
     "do_transform_stamped",
     "do_transform_transform",
+    "do_transform_twist",
+    "do_transform_velocity",
     "do_transform_wrench",
     "get_transform_function",
     "register_transform",
@@ -326,6 +335,54 @@ def do_transform_pose_with_covariance(
     return PoseWithCovarianceStamped(transform.header, PoseWithCovariance(moved.pose, cov))
 
 
+def _twist(twist: Twist, transform: TransformStamped) -> Twist:
+    """tf2's re-expression of a twist (``lookupVelocity`` step 4, ROS 2
+    tf2_geometry_msgs ``doTransform(VelocityStamped)``): ``ω' = R ω``,
+    ``v' = R v + t x ω'`` (x: cross product)."""
+    w = _rotate(twist.angular, transform)
+    v = _rotate(twist.linear, transform)
+    t = transform.transform.translation
+    return Twist(
+        Vector3(v.x + t.y * w.z - t.z * w.y, v.y + t.z * w.x - t.x * w.z,
+                v.z + t.x * w.y - t.y * w.x),
+        w,
+    )  # fmt: skip
+
+
+def do_transform_twist(twist: TwistStamped, transform: TransformStamped) -> TwistStamped:
+    """Re-express a stamped twist (m/s, rad/s) in the transform's parent frame with tf2's
+    formula: angular rotated, linear rotated plus ``t x ω'`` (ROS 2 tf2_geometry_msgs
+    ``doTransform(VelocityStamped)``, whose C++ also adds the input twist to the result
+    and keeps the input header: not reproduced). The result header is
+    ``transform.header``.
+
+    Raises:
+        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
+    """
+    return TwistStamped(transform.header, _twist(twist.twist, transform))
+
+
+def do_transform_velocity(
+    velocity: VelocityStamped, transform: TransformStamped
+) -> VelocityStamped:
+    """:func:`do_transform_twist` for a VelocityStamped: ``velocity`` re-expressed, header
+    ``transform.header``, ``body_frame_id`` and ``reference_frame_id`` kept."""
+    return velocity._replace(
+        header=transform.header, velocity=_twist(velocity.velocity, transform)
+    )
+
+
+def do_transform_polygon(polygon: PolygonStamped, transform: TransformStamped) -> PolygonStamped:
+    """Move every vertex of a stamped polygon (metres) as :func:`do_transform_point`
+    does (ROS 2 tf2_geometry_msgs ``do_transform_polygon_stamped``). The result header is
+    ``transform.header``."""
+    points = tuple(
+        Point32(*do_transform_point(PointStamped(polygon.header, Point(*p)), transform).point)
+        for p in polygon.polygon.points
+    )
+    return PolygonStamped(transform.header, Polygon(points))
+
+
 def do_transform_stamped(obj: Stamped[Any], transform: TransformStamped) -> Stamped[Any]:
     """Transform a :class:`~tfbus.messages.Stamped` value by the type of its ``data``:
     Point (moved), Vector3 (rotated), Pose, Quaternion (rotated: ``q ⊗ data``),
@@ -365,6 +422,9 @@ register_transform(Vector3Stamped, do_transform_vector3)
 register_transform(TransformStamped, do_transform_transform)
 register_transform(WrenchStamped, do_transform_wrench)
 register_transform(PoseWithCovarianceStamped, do_transform_pose_with_covariance)
+register_transform(TwistStamped, do_transform_twist)
+register_transform(VelocityStamped, do_transform_velocity)
+register_transform(PolygonStamped, do_transform_polygon)
 register_transform(PointCloud2, do_transform_cloud)
 register_transform(Stamped, do_transform_stamped)
 

@@ -34,7 +34,10 @@ __all__ = [
     "Header",
     "JointState",
     "Point",
+    "Point32",
     "PointStamped",
+    "Polygon",
+    "PolygonStamped",
     "Pose",
     "PoseStamped",
     "PoseWithCovariance",
@@ -45,6 +48,7 @@ __all__ = [
     "Transform",
     "TransformStamped",
     "Twist",
+    "TwistStamped",
     "Vector3",
     "Vector3Stamped",
     "VelocityStamped",
@@ -342,6 +346,55 @@ class PoseWithCovarianceStamped(NamedTuple):
 
     header: Header = _EMPTY_HEADER
     pose: PoseWithCovariance = PoseWithCovariance()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class TwistStamped(NamedTuple):
+    """geometry_msgs/TwistStamped: a velocity (m/s, rad/s) in ``header.frame_id``."""
+
+    header: Header = _EMPTY_HEADER
+    twist: Twist = Twist()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Point32(NamedTuple):
+    """geometry_msgs/Point32: a position, metres (float32 on the wire; Python floats
+    here)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Polygon(NamedTuple):
+    """geometry_msgs/Polygon: its vertices (``points``, Point32) in order."""
+
+    points: Sequence[Point32] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class PolygonStamped(NamedTuple):
+    """geometry_msgs/PolygonStamped: a polygon in ``header.frame_id``."""
+
+    header: Header = _EMPTY_HEADER
+    polygon: Polygon = Polygon()
 
     def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")

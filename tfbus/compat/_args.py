@@ -17,7 +17,10 @@ from tfbus.errors import InvalidArgumentException
 from tfbus.messages import (
     Header,
     Point,
+    Point32,
     PointStamped,
+    Polygon,
+    PolygonStamped,
     Pose,
     PoseStamped,
     PoseWithCovariance,
@@ -152,13 +155,22 @@ def to_stamped(value: Any, name: str = "object_stamped") -> object:
     (they are looked up in the transform registry by their own type)."""
     if isinstance(
         value,
-        (PointStamped, PoseStamped, Vector3Stamped, TransformStamped, PoseWithCovarianceStamped),
+        (
+            PointStamped, PoseStamped, Vector3Stamped, TransformStamped,
+            PoseWithCovarianceStamped, PolygonStamped,
+        ),
     ):
         return value
     if hasattr(value, "child_frame_id") and hasattr(value, "transform"):
         return to_transform_stamped(value, name)
     if not hasattr(value, "header"):
         return value
+    polygon = getattr(value, "polygon", None)
+    if polygon is not None and hasattr(polygon, "points"):
+        return PolygonStamped(
+            _header(value, name),
+            Polygon(tuple(Point32(*to_point(p, f"{name}.polygon.points")) for p in polygon.points)),
+        )
     if hasattr(value, "point"):
         return PointStamped(_header(value, name), to_point(value.point, f"{name}.point"))
     if hasattr(value, "vector"):

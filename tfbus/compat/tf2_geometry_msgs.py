@@ -18,6 +18,7 @@ from tfbus.compat._args import (
     to_transform_stamped,
     to_vector3,
 )
+from tfbus.convert import do_transform_polygon as _polygon
 from tfbus.convert import do_transform_pose_with_covariance as _pose_cov
 from tfbus.convert import do_transform_transform as _transform
 from tfbus.convert import do_transform_wrench as _wrench
@@ -28,6 +29,7 @@ from tfbus.geometry import do_transform_vector3 as _vector3
 from tfbus.messages import (
     Header,
     PointStamped,
+    PolygonStamped,
     Pose,
     PoseStamped,
     PoseWithCovarianceStamped,
@@ -39,6 +41,7 @@ from tfbus.messages import (
 
 __all__ = [
     "do_transform_point",
+    "do_transform_polygon_stamped",
     "do_transform_pose",
     "do_transform_pose_stamped",
     "do_transform_pose_with_covariance_stamped",
@@ -120,3 +123,8 @@ def transform_covariance(cov_in: Any, transform: Any) -> tuple[float, ...]:
     """ROS 2 ``transform_covariance(cov_in, transform)`` (the 36 rotated numbers):
     :func:`tfbus.convert.transform_covariance`."""
     return _covariance(cov_in, to_transform_stamped(transform))
+
+
+def do_transform_polygon_stamped(polygon: Any, transform: Any) -> PolygonStamped:
+    """ROS 2 ``do_transform_polygon_stamped``: :func:`tfbus.convert.do_transform_polygon`."""
+    return _polygon(_stamped(polygon, PolygonStamped, "polygon"), to_transform_stamped(transform))
