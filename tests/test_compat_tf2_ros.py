@@ -48,9 +48,9 @@ def test_exceptions_are_tfbus_classes_under_tf2_names() -> None:
 
 def test_sync_methods_with_ros2_call_shapes() -> None:
     buf = tf2_ros.Buffer()
-    assert buf.set_transform(_yaw_tf("map", "base", RospyTime(1, 0), 1.0, 0.0), "a")
-    assert buf.set_transform(_yaw_tf("map", "base", RclpyTime(2 * 10**9), 2.0, 0.0), "a")
-    assert buf.set_transform_static(_yaw_tf("base", "laser", MsgTime(0, 0), 0.5, math.pi / 2), "b")
+    assert buf.set_transform(_yaw_tf("map", "base", RospyTime(1, 0), 1.0, 0.0), "a") is None  # type: ignore[func-returns-value]
+    buf.set_transform(_yaw_tf("map", "base", RclpyTime(2 * 10**9), 2.0, 0.0), "a")
+    buf.set_transform_static(_yaw_tf("base", "laser", MsgTime(0, 0), 0.5, math.pi / 2), "b")
     # lookup_transform(target, source, time, timeout): the timeout positional, as ROS 2
     t = buf.lookup_transform("map", "laser", RclpyTime(1_500_000_000), RclpyTime(10**9))
     assert isinstance(t, TransformStamped)

@@ -107,13 +107,15 @@ class Buffer:
 
     # ---------------------------------------------------------------- data
 
-    def set_transform(self, transform: Any, authority: str) -> bool:
-        """tf2 ``set_transform``: :meth:`tfbus.BufferCore.set_transform`."""
-        return self.buffer.set_transform(to_transform_stamped(transform), authority)
+    def set_transform(self, transform: Any, authority: str) -> None:
+        """tf2 ``set_transform`` (returns None, as ROS 2's):
+        :meth:`tfbus.BufferCore.set_transform`."""
+        self.buffer.set_transform(to_transform_stamped(transform), authority)
 
-    def set_transform_static(self, transform: Any, authority: str) -> bool:
-        """tf2 ``set_transform_static``: :meth:`tfbus.BufferCore.set_transform_static`."""
-        return self.buffer.set_transform_static(to_transform_stamped(transform), authority)
+    def set_transform_static(self, transform: Any, authority: str) -> None:
+        """tf2 ``set_transform_static`` (returns None):
+        :meth:`tfbus.BufferCore.set_transform_static`."""
+        self.buffer.set_transform_static(to_transform_stamped(transform), authority)
 
     def clear(self) -> None:
         """tf2 ``clear``: :meth:`tfbus.BufferCore.clear`."""
