@@ -59,6 +59,7 @@ __all__ = [
     "TransformException",
     "TransformListener",
     "TransformRegistration",
+    "TransformStamped",
     "TypeException",
     "convert",
 ]
