@@ -140,3 +140,26 @@ def test_chain_equals_real_tf2_py_on_random_trees() -> None:
             lists += 1 if mine else 0
     assert lists > 300 and errors > 50, (lists, errors)
 
+
+
+def test_monitor_chain_line_is_tf2s() -> None:
+    """``tfbus monitor A B``'s ``Chain is:`` line is tf2's ``_chainAsVector(B, 0, A, 0,
+    B)``, as tf_monitor prints it, quirks included (here the root A, where the branches
+    meet one level below it); the net delay still follows the lookup's path."""
+    from tfbus.cli.monitor import chain_lines, tf2_chain
+    from tfbus.monitor import TfStatistics
+
+    stats = TfStatistics()
+    links = [("A", "B"), ("B", "C"), ("B", "E")]
+    stats.add(Time(1), [TransformStamped(Header(Time(1), p), c, Transform()) for p, c in links],
+              "n", static=False)
+    stats.watch_chain("C", "E")
+    assert tf2_chain(stats.parents(), "C", "E") == ["C", "B", "A", "E"]
+    assert chain_lines(stats, ["C", "E"])[0] == "Chain is: C -> B -> A -> E"
+    assert stats.chains[0].frames == ("C", "B", "E")  # the path the lookup walks
+    assert tf2_chain({"x": "y", "p": "q"}, "x", "p") is None  # two trees
+    if have_tf2_py():
+        ops: list[list[Any]] = [["set", p, c, SEC, [0, 0, 0], [0, 0, 0, 1], False]
+                                for p, c in links]
+        ops.append(["call", "_chain", ["E", {"t": 0}, "C", {"t": 0}, "E"]])
+        assert run_side(ops) == [{"ok": ["C", "B", "A", "E"]}]
