@@ -40,6 +40,7 @@ LAYERS: dict[str, int] = {
     "cache": 1,
     "errors": 1,
     "batch": 1,
+    "velocity": 1,
     # 2: the bus and time sources
     "bus": 2,
     "clock": 2,
@@ -58,6 +59,7 @@ LAYERS: dict[str, int] = {
     "robot_state": 4,
     "urdf": 4,
     "transports": 4,
+    "compat": 4,
     # 5: the command line and examples
     "cli": 5,
     "demo": 5,

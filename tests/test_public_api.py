@@ -8,11 +8,14 @@ def test_public_all_is_pinned() -> None:
         "Buffer", "BufferCore", "Bus", "Clock", "ConnectivityException", "Duration",
         "ExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
         "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
-        "Point", "PointCloud2", "PointField", "PointStamped", "Pose", "PoseStamped",
-        "Quaternion", "SetResult", "StaticTransformBroadcaster", "Subscription", "SystemClock",
-        "TFMessage", "TfbusError", "Time", "TimeoutException", "Transform", "TransformArray",
-        "TransformBroadcaster", "TransformException", "TransformListener", "TransformStamped",
-        "Transport", "TransportError", "Vector3", "Vector3Stamped", "every",
+        "Point", "Point32", "PointCloud2", "PointField", "PointStamped", "Polygon",
+        "PolygonStamped", "Pose", "PoseStamped", "PoseWithCovariance",
+        "PoseWithCovarianceStamped", "Quaternion", "SetResult", "Stamped",
+        "StaticTransformBroadcaster", "Subscription", "SystemClock", "TFMessage", "TfbusError",
+        "Time", "TimeoutException", "Transform", "TransformArray", "TransformBroadcaster",
+        "TransformException", "TransformListener", "TransformStamped", "Transport",
+        "TransportError", "Twist", "TwistStamped", "Vector3", "Vector3Stamped",
+        "VelocityStamped", "Wrench", "WrenchStamped", "every",
     ]  # fmt: skip
     for name in tfbus.__all__:
         assert getattr(tfbus, name).__doc__, f"{name} has no docstring"
@@ -62,8 +65,11 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
         "every", "timeout_ns",
     }  # fmt: skip
     assert set(tfbus.convert.__all__) == {
-        "TransformFunction", "TransformRegistration", "do_transform_transform",
-        "get_transform_function", "register_transform", "registered_types",
+        "ConvertRegistration", "TransformFunction", "TransformRegistration", "convert",
+        "do_transform_cloud", "do_transform_polygon", "do_transform_pose_with_covariance",
+        "do_transform_stamped", "do_transform_twist", "do_transform_velocity",
+        "do_transform_transform", "do_transform_wrench", "get_transform_function",
+        "register_transform", "registered_types", "transform_covariance",
     }  # fmt: skip
     for module in (tfbus.time, tfbus.clock, tfbus.convert):
         for name in module.__all__:

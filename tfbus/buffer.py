@@ -33,8 +33,9 @@ from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import TimeoutException, TransformException
-from tfbus.messages import Header, TransformStamped
+from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
 from tfbus.time import Duration, Time
+from tfbus.velocity import check_velocity_arguments
 
 if TYPE_CHECKING:
     from asyncio import AbstractEventLoop, Future
@@ -448,6 +449,84 @@ class Buffer(AsyncBatchMixin, BufferCore):
         )
         result: _M = do_transform(obj, ts)
         return result
+
+    # ------------------------------------------------------------------ velocity
+
+    async def lookup_velocity_async(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        time: Time,
+        averaging_interval: Duration | float,
+        timeout: float | Duration | None = None,
+        *,
+        method: str = "tf2",
+    ) -> VelocityStamped:
+        """:meth:`~tfbus.core.BufferCore.lookup_velocity`, waiting up to ``timeout``
+        (seconds of the buffer's clock) until ``tracking_frame`` can be looked up in
+        ``observation_frame`` at ``time``; the velocity is then computed from the data
+        at hand (tf2 clamps the averaging window to the latest common time).
+
+        Raises:
+            TimeoutException: no data within ``timeout``.
+            InvalidArgumentException: bad arguments, checked before waiting.
+            ExtrapolationException, LookupException, ConnectivityException: as the
+                synchronous method, once the data is there.
+        """
+        return await self.lookup_velocity_full_async(
+            tracking_frame, observation_frame, observation_frame, (0.0, 0.0, 0.0),
+            tracking_frame, time, averaging_interval, timeout, method=method,
+        )
+
+    async def lookup_velocity_full_async(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        reference_frame: str,
+        reference_point: Vector3 | tuple[float, float, float],
+        reference_point_frame: str,
+        time: Time,
+        averaging_interval: Duration | float,
+        timeout: float | Duration | None = None,
+        *,
+        method: str = "tf2",
+    ) -> VelocityStamped:
+        """:meth:`~tfbus.core.BufferCore.lookup_velocity_full`, waiting up to
+        ``timeout`` for the observation, reference and reference-point frames' data at
+        ``time``.
+
+        Raises: as :meth:`lookup_velocity_async`.
+        """
+        check_velocity_arguments(time, averaging_interval, reference_point, method)
+        pairs = (
+            (observation_frame, tracking_frame),
+            (reference_frame, tracking_frame),
+            (reference_frame, reference_point_frame),
+        )
+
+        def check() -> VelocityStamped | TransformException | None:
+            for target, source in pairs:
+                found = self.check_transform(target, source, time)
+                if found is None or isinstance(found, TransformException):
+                    return found
+            try:
+                return self.lookup_velocity_full(
+                    tracking_frame, observation_frame, reference_frame, reference_point,
+                    reference_point_frame, time, averaging_interval, method=method,
+                )
+            except TransformException as e:
+                return e
+
+        def frames() -> frozenset[str]:
+            out: frozenset[str] = frozenset()
+            for target, source in pairs:
+                out |= self._frames_of(target, source, time)
+            return out
+
+        def describe() -> str:
+            return "velocity: " + "; ".join(self._describe(t, s, time) for t, s in pairs)
+
+        return await self._wait(check, frames, timeout, describe)
 
 
 def _header_of(obj: object) -> Header:

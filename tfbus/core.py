@@ -48,6 +48,7 @@ from tfbus.core_text import (
     FrameInfo,
     Tf7,
     bad_frame_exception,
+    frames_as_dot,
     frames_as_string,
     frames_as_yaml,
     invalid_transform_exception,
@@ -59,9 +60,17 @@ from tfbus.errors import (
     LookupException,
     TransformException,
 )
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Header,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+    VelocityStamped,
+)
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS, Duration, Time
+from tfbus.velocity import lookup_velocity as _lookup_velocity
 
 __all__ = [
     "COMPILED",
@@ -662,4 +671,192 @@ class BufferCore(BatchLookupMixin, CoreBase):
             f"frames={len(self._frame_names) - 1})"
         )
 
+    # ------------------------------------------------------------------ velocity, chain
 
+    def lookup_velocity(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        time: Time,
+        averaging_interval: Duration | float,
+        *,
+        method: str = "tf2",
+    ) -> VelocityStamped:
+        """The velocity of ``tracking_frame`` relative to ``observation_frame``, expressed
+        in ``observation_frame`` about the tracking frame's origin, averaged over
+        ``averaging_interval`` (seconds or a Duration, > 0) around ``time`` (0: the latest
+        common time). tf2 ``BufferCore::lookupVelocity`` (ROS 2) / ``tf::Transformer::
+        lookupTwist`` (ROS 1); see :mod:`tfbus.velocity` for the formula, and for why
+        ``method="tf2"`` (the default, tf2's numbers) is not the physical velocity of a
+        rotating frame and what ``method="origin"`` returns instead.
+
+        Returns:
+            VelocityStamped (m/s, rad/s) with ``header.frame_id == observation_frame``,
+            ``body_frame_id == tracking_frame``.
+
+        Raises:
+            InvalidArgumentException: a bad ``averaging_interval``, ``time`` or
+                ``method`` (the message names the argument and value), or a bad frame id.
+            LookupException, ConnectivityException, ExtrapolationException: as
+                :meth:`lookup_transform`, for the window's ends.
+        """
+        return _lookup_velocity(
+            self, tracking_frame, observation_frame, observation_frame, (0.0, 0.0, 0.0),
+            tracking_frame, time, averaging_interval, method,
+        )
+
+    def lookup_velocity_full(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        reference_frame: str,
+        reference_point: Vector3 | tuple[float, float, float],
+        reference_point_frame: str,
+        time: Time,
+        averaging_interval: Duration | float,
+        *,
+        method: str = "tf2",
+    ) -> VelocityStamped:
+        """:meth:`lookup_velocity` expressed in ``reference_frame`` about
+        ``reference_point`` (x, y, z metres in ``reference_point_frame``), tf2's argument
+        order (ROS 2 ``lookupVelocity`` with seven arguments, ROS 1 ``lookupTwist``).
+
+        Returns:
+            VelocityStamped with ``header.frame_id == reference_frame``.
+
+        Raises:
+            as :meth:`lookup_velocity`; InvalidArgumentException also for a
+            ``reference_point`` that is not 3 finite numbers.
+        """
+        return _lookup_velocity(
+            self, tracking_frame, observation_frame, reference_frame, reference_point,
+            reference_point_frame, time, averaging_interval, method,
+        )
+
+    def chain(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+    ) -> list[str]:
+        """The frames a time-travel lookup walks, in tf2_py 0.7.6 ``_chain`` order
+        (tf2 ``BufferCore::_chainAsVector``): the walk from ``source_frame`` to
+        ``fixed_frame`` at ``source_time``, then from ``fixed_frame`` to ``target_frame``
+        at ``target_time``, the shared frame between them once. E.g. on A→B→C, A→D,
+        ``chain("D", t, "C", t, "A") == ["C", "B", "A", "D"]``; ``[]`` when all three
+        frames are one.
+
+        Each walk is tf2 0.7.6 ``walkToTopParent``'s frame chain, quirks included: the
+        source's ancestors up to the root, then the target's branch, with the pruning
+        of the common part that keeps the root when the two branches meet one level
+        below it (A→B→C, B→E: the walk from C to E is ``[C, B, A, E]``).
+
+        Raises:
+            InvalidArgumentException, LookupException, ConnectivityException,
+            ExtrapolationException: as :meth:`lookup_transform` of either leg
+                (fixed ← source at ``source_time``, then target ← fixed at
+                ``target_time``). tf2_py raises the same classes, with an empty message
+                for an unknown id at time 0 (a ConnectivityException at another time).
+        """
+        first = self._walk_chain(fixed_frame, source_frame, source_time)
+        second = self._walk_chain(target_frame, fixed_frame, target_time)
+        if first and second and first[-1] == second[0]:
+            first.pop()
+        return first + second
+
+    def _walk_chain(self, target: str, source: str, time: Time) -> list[str]:
+        """tf2 0.7.6 ``walkToTopParent``'s ``frame_chain`` from ``source`` to ``target``
+        (after the same walk's errors, raised by :meth:`lookup_transform`)."""
+        if target == source:
+            return []
+        known_target, known_source = self.frame_exists(target), self.frame_exists(source)
+        if not (known_target and known_source):
+            self._unknown_in_chain(target, source, time, known_target, known_source)
+            return []  # both unknown: tf2 sees frame 0 twice, an identity walk
+        at = self.lookup_transform(target, source, time).header.stamp  # raises as tf2
+        linked = {info.child for info in self.frame_info()}
+        chain: list[str] = []
+        frame: str | None = source
+        top = source
+        while frame is not None:
+            chain.append(frame)
+            if frame not in linked:
+                top = frame
+                break
+            parent = self.get_parent(frame, at)
+            if parent is None:  # no data at this time: the target walk must meet it
+                top = frame
+                break
+            if frame == target:
+                return chain
+            top, frame = frame, parent
+            if len(chain) > MAX_GRAPH_DEPTH + 1:
+                break
+        reverse: list[str] = []
+        frame = target
+        while frame is not None and frame != top:
+            reverse.append(frame)
+            if frame not in linked:
+                break
+            parent = self.get_parent(frame, at)
+            if frame == source:  # source is an ancestor of target: this walk, reversed
+                return reverse[::-1]
+            frame = parent
+            if len(reverse) > MAX_GRAPH_DEPTH + 1:
+                break
+        reverse.append(top)  # tf2 appends the top parent to ease the pruning
+        m, n = len(reverse) - 1, len(chain) - 1
+        while m >= 0 and n >= 0 and chain[n] == reverse[m]:
+            m -= 1
+            n -= 1
+        if n > 0:
+            del chain[n + 2 :]
+        chain.extend(reverse[i] for i in range(m, -1, -1))
+        return chain
+
+    def _unknown_in_chain(
+        self, target: str, source: str, time: Time, known_target: bool, known_source: bool
+    ) -> None:
+        """What tf2 0.7.6 ``_chainAsVector`` does with an unknown id (frame number 0, no
+        validation): nothing when both are unknown; at time 0 a LookupException with an
+        empty message; otherwise the walk up from the known id ends in tf2's
+        extrapolation error (a link without data at ``time``) or connectivity error,
+        with ``NO_PARENT`` for the unknown id."""
+        if not known_target and not known_source:
+            return
+        if time.ns == 0:
+            raise LookupException("")
+        known = source if known_source else target
+        names = (source, "NO_PARENT") if known_source else ("NO_PARENT", target)
+        frame = known
+        for _ in range(MAX_GRAPH_DEPTH + 1):
+            newest = self.get_parent(frame)
+            if newest is None:
+                break  # a root (or an emptied link)
+            parent = self.get_parent(frame, time)
+            if parent is None:  # no data at time: tf2 reports the extrapolation
+                # frame as the *target* of a lookup: tf2's walk reports the target's
+                # own link when it has no data (the source side only flags it)
+                failure = self.try_lookup_transform(frame, newest, time)
+                if isinstance(failure, ExtrapolationException):
+                    detail = str(failure).split(", when looking up transform from frame")[0]
+                    raise ExtrapolationException(
+                        f"{detail}, when looking up transform from frame [{names[0]}] to "
+                        f"frame [{names[1]}]"
+                    )
+                break
+            frame = parent
+        raise ConnectivityException(
+            f"Could not find a connection between '{names[1]}' and '{names[0]}' because "
+            "they are not part of the same tree.Tf has two or more unconnected trees."
+        )
+
+    def all_frames_as_dot(self, current_time: Time | None = None) -> str:
+        """The frame tree as a Graphviz ``digraph`` in tf2 0.7.6's text
+        (``BufferCore::_allFramesAsDot``, what view_frames draws): an edge per link with
+        its broadcaster, rate (Hz), newest stamp and buffer length (seconds); with a
+        ``current_time`` > 0, each link's age and a legend pointing at the roots."""
+        seconds = 0.0 if current_time is None else current_time.ns / 1e9
+        return frames_as_dot(self.get_frame_names(), self.frame_info(), seconds)

@@ -19,6 +19,7 @@ __all__ = [
     "FrameInfo",
     "Tf7",
     "bad_frame_exception",
+    "frames_as_dot",
     "frames_as_string",
     "frames_as_yaml",
     "invalid_transform_exception",
@@ -184,3 +185,44 @@ def bad_frame_exception(label: str, frame: object, code: int) -> TransformExcept
             "cannot start with a '/' like: "
         )
     return LookupException(f'"{frame}" passed to {label} does not exist. ')
+
+
+def frames_as_dot(
+    frame_names: Iterable[str], infos: Iterable[FrameInfo], current_time_s: float = 0.0
+) -> str:
+    """tf2 0.7.6 ``BufferCore::_allFramesAsDot`` (view_frames' graph) over every known
+    frame id (registration order) and the links' :class:`FrameInfo`: one edge
+    ``"parent" -> "child"`` per link holding data, labelled with its broadcaster, rate
+    (Hz, samples / span, span at least 0.1 ms), newest stamp (and, when
+    ``current_time_s`` > 0, its age) and buffer length (seconds, 3 decimals); then a
+    legend node pointing at each root (a frame with no link: only when
+    ``current_time_s`` > 0; a link emptied by ``clear()``: always).
+    ``'digraph G {\n"no tf data recieved"}'`` (tf2's spelling) for an empty buffer."""
+    names = list(frame_names)
+    by_child = {info.child: info for info in infos}
+    out = ["digraph G {\n"]
+    if not names:
+        out.append('"no tf data recieved"')
+    for name in names:
+        info = by_child.get(name)
+        if info is None or not info.samples:
+            continue
+        newest, oldest = info.newest_ns / 1e9, info.oldest_ns / 1e9
+        rate = info.samples / max(newest - oldest, 0.0001)
+        age = f"( {current_time_s - newest:.3f} sec old)" if current_time_s > 0 else ""
+        out.append(
+            f'"{info.parent}" -> "{name}"[label="Broadcaster: {info.authority}\\n'
+            f"Average rate: {rate:.3f} Hz\\nMost recent transform: {newest:.3f} {age}\\n"
+            f'Buffer length: {(info.newest_ns - info.oldest_ns) / 1e9:.3f} sec\\n"];\n'
+        )
+    legend = ' subgraph cluster_legend { style=bold; color=black; label ="view_frames Result";\n'
+    recorded = f'"Recorded at time: {current_time_s:.3f}"[ shape=plaintext ] ;\n '
+    for name in names:
+        info = by_child.get(name)
+        if info is None and current_time_s > 0:
+            out.append(f'edge [style=invis];\n{legend}{recorded}}}->"{name}";\n')
+        elif info is not None and info.parent == "NO_PARENT":
+            stamp = recorded if current_time_s > 0 else ""
+            out.append(f'edge [style=invis];\n{legend}{stamp}}}->"{name}";\n')
+    out.append("}")
+    return "".join(out)

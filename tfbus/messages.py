@@ -26,7 +26,7 @@ or kept in a cache without copies.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple, NoReturn
+from typing import Generic, NamedTuple, NoReturn, TypeVar
 
 from tfbus.time import Time
 
@@ -34,15 +34,26 @@ __all__ = [
     "Header",
     "JointState",
     "Point",
+    "Point32",
     "PointStamped",
+    "Polygon",
+    "PolygonStamped",
     "Pose",
     "PoseStamped",
+    "PoseWithCovariance",
+    "PoseWithCovarianceStamped",
     "Quaternion",
+    "Stamped",
     "TFMessage",
     "Transform",
     "TransformStamped",
+    "Twist",
+    "TwistStamped",
     "Vector3",
     "Vector3Stamped",
+    "VelocityStamped",
+    "Wrench",
+    "WrenchStamped",
 ]
 
 
@@ -230,6 +241,160 @@ class JointState(NamedTuple):
     position: Sequence[float] = ()
     velocity: Sequence[float] = ()
     effort: Sequence[float] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Twist(NamedTuple):
+    """geometry_msgs/Twist: ``linear`` velocity (m/s) and ``angular`` velocity (rad/s,
+    about the axes of the frame it is expressed in)."""
+
+    linear: Vector3 = _ZERO_VECTOR
+    angular: Vector3 = _ZERO_VECTOR
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class VelocityStamped(NamedTuple):
+    """geometry_msgs/VelocityStamped (ROS 2): the velocity of ``body_frame_id`` relative
+    to ``reference_frame_id``, expressed in ``header.frame_id`` at ``header.stamp``.
+
+    ``velocity.linear`` in m/s, ``velocity.angular`` in rad/s. What
+    :meth:`tfbus.core.BufferCore.lookup_velocity` returns (``header.frame_id`` is its
+    reference frame, ``reference_frame_id`` its observation frame).
+    """
+
+    header: Header = _EMPTY_HEADER
+    body_frame_id: str = ""
+    reference_frame_id: str = ""
+    velocity: Twist = Twist()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Wrench(NamedTuple):
+    """geometry_msgs/Wrench: ``force`` (N) and ``torque`` (N·m)."""
+
+    force: Vector3 = _ZERO_VECTOR
+    torque: Vector3 = _ZERO_VECTOR
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class WrenchStamped(NamedTuple):
+    """geometry_msgs/WrenchStamped: a wrench in ``header.frame_id`` at ``header.stamp``."""
+
+    header: Header = _EMPTY_HEADER
+    wrench: Wrench = Wrench()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+_T = TypeVar("_T")
+
+
+class Stamped(NamedTuple, Generic[_T]):
+    """Any value with a stamp and a frame: tf2's ``Stamped<T>`` and tf2_ros's
+    ``Stamped``. ``Stamped(header, data)``, e.g. ``Stamped[Point](Header(t, "laser"),
+    Point(1, 0, 0))``. :meth:`tfbus.Buffer.transform` accepts one whose ``data`` is a
+    Point, Vector3 (rotated only), Pose, Quaternion (rotated), Transform or Wrench
+    (:func:`tfbus.convert.do_transform_stamped`)."""
+
+    header: Header
+    data: _T
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+_ZERO_COVARIANCE: tuple[float, ...] = (0.0,) * 36
+
+
+class PoseWithCovariance(NamedTuple):
+    """geometry_msgs/PoseWithCovariance: a pose and its 6x6 covariance, row-major, 36
+    numbers, in the order (x, y, z, rotation about x, about y, about z): m², rad²."""
+
+    pose: Pose = Pose()
+    covariance: Sequence[float] = _ZERO_COVARIANCE
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class PoseWithCovarianceStamped(NamedTuple):
+    """geometry_msgs/PoseWithCovarianceStamped: a pose with covariance in
+    ``header.frame_id`` at ``header.stamp``."""
+
+    header: Header = _EMPTY_HEADER
+    pose: PoseWithCovariance = PoseWithCovariance()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class TwistStamped(NamedTuple):
+    """geometry_msgs/TwistStamped: a velocity (m/s, rad/s) in ``header.frame_id``."""
+
+    header: Header = _EMPTY_HEADER
+    twist: Twist = Twist()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Point32(NamedTuple):
+    """geometry_msgs/Point32: a position, metres (float32 on the wire; Python floats
+    here)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Polygon(NamedTuple):
+    """geometry_msgs/Polygon: its vertices (``points``, Point32) in order."""
+
+    points: Sequence[Point32] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class PolygonStamped(NamedTuple):
+    """geometry_msgs/PolygonStamped: a polygon in ``header.frame_id``."""
+
+    header: Header = _EMPTY_HEADER
+    polygon: Polygon = Polygon()
 
     def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")

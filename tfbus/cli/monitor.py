@@ -19,6 +19,9 @@ from tfbus.cli._sources import (
     source,
     source_options,
 )
+from tfbus.time import Time
+
+_ZERO = Time(0)
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -27,7 +30,24 @@ if TYPE_CHECKING:
     from tfbus.monitor import TfStatistics
     from tfbus.transports.zenoh import PeerInfo
 
-__all__ = ["chain_lines", "command", "liveliness_table", "print_monitor"]
+__all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "tf2_chain"]
+
+
+def tf2_chain(parents: dict[str, str], a: str, b: str) -> list[str] | None:
+    """tf_monitor's ``Chain is:`` list for ``A B``: tf2 ``_chainAsVector(B, 0, A, 0, B)``
+    (:meth:`tfbus.BufferCore.chain`, tf2_py's ``_chain`` exactly) over each frame's latest
+    parent; None when tf2 would raise (unconnected, a loop)."""
+    from tfbus.core import BufferCore
+    from tfbus.errors import TransformException
+    from tfbus.messages import Header, Transform, TransformStamped
+
+    core = BufferCore()
+    for child, parent in parents.items():
+        core.set_transform_static(TransformStamped(Header(frame_id=parent), child, Transform()))
+    try:
+        return core.chain(b, _ZERO, a, _ZERO, b)
+    except TransformException:
+        return None
 
 
 def chain_lines(stats: TfStatistics, frames: Sequence[str]) -> list[str]:
@@ -43,8 +63,9 @@ def chain_lines(stats: TfStatistics, frames: Sequence[str]) -> list[str]:
     if chain is None or chain.frames is None:
         return [f"Waiting for transform chain to become available between {literal(source)} "
                 f"and {literal(target)}"]
+    shown = tf2_chain(stats.parents(), source, target)
     return [
-        "Chain is: " + " -> ".join(literal(f) for f in chain.frames),
+        "Chain is: " + " -> ".join(literal(f) for f in (chain.frames if shown is None else shown)),
         f"Net delay     avg = {chain.delay_avg:g}: max = {chain.delay_max:g}",
     ]
 

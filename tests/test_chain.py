@@ -1,0 +1,165 @@
+"""``BufferCore.chain``: the frame path of a time-travel lookup, exactly as Debian's real
+tf2_py 0.7.6 ``BufferCore._chain`` returns it (run in a side process under
+``/usr/bin/python3``, ``tests/peers/tf2_py_side.py``), on fixed cases and random trees."""
+
+from __future__ import annotations
+
+import json
+import random
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tfbus import (
+    BufferCore,
+    ConnectivityException,
+    ExtrapolationException,
+    Header,
+    LookupException,
+    Quaternion,
+    Time,
+    Transform,
+    TransformException,
+    TransformStamped,
+    Vector3,
+)
+
+HERE = Path(__file__).resolve().parent
+SIDE = HERE / "peers" / "tf2_py_side.py"
+SYSTEM_PYTHON = "/usr/bin/python3"
+SEC = 1_000_000_000
+
+
+def have_tf2_py() -> bool:
+    """Whether Debian's python3-tf2 can be imported by the system interpreter."""
+    try:
+        r = subprocess.run([SYSTEM_PYTHON, "-c", "import tf2_py, rospy"], capture_output=True,
+                           timeout=60, check=False)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return r.returncode == 0
+
+
+def run_side(ops: list[list[Any]], cache_time_s: float = 10.0) -> list[dict[str, Any]]:
+    """Run ``ops`` on the real tf2_py; one decoded JSON answer per call."""
+    r = subprocess.run([SYSTEM_PYTHON, str(SIDE)],
+                       input=json.dumps({"cache_time_s": cache_time_s, "ops": ops}),
+                       capture_output=True, text=True, timeout=300, check=True)
+    return [json.loads(line) for line in r.stdout.splitlines()]
+
+
+needs_tf2_py = pytest.mark.skipif(not have_tf2_py(), reason="Debian python3-tf2 not installed")
+
+
+def _add(core: BufferCore, ops: list[list[Any]], parent: str, child: str, ns: int,
+         static: bool = False) -> None:
+    t, q = (0.1, 0.2, 0.3), (0.0, 0.0, 0.0, 1.0)
+    ts = TransformStamped(Header(Time.from_ns(ns), parent), child,
+                          Transform(Vector3(*t), Quaternion(*q)))
+    (core.set_transform_static if static else core.set_transform)(ts)
+    ops.append(["set", parent, child, ns, list(t), list(q), static])
+
+
+def test_known_chains() -> None:
+    core = BufferCore()
+    for k in (1, 2):
+        for parent, child in (("A", "B"), ("B", "C"), ("A", "D")):
+            core.set_transform(TransformStamped(Header(Time(k), parent), child, Transform()))
+    t0 = Time(0)
+    assert core.chain("D", t0, "C", t0, "A") == ["C", "B", "A", "D"]
+    assert core.chain("C", t0, "D", t0, "A") == ["D", "A", "B", "C"]
+    assert core.chain("C", t0, "C", t0, "C") == []
+    assert core.chain("A", t0, "C", t0, "B") == ["C", "B", "A"]
+    # tf2 0.7.6's pruning keeps the root when the branches meet one level below it
+    assert core.chain("C", t0, "B", t0, "A") == ["B", "A", "B", "C"]
+    with pytest.raises(LookupException):
+        core.chain("C", t0, "nowhere", t0, "A")
+    with pytest.raises(ExtrapolationException):
+        core.chain("C", Time(5), "D", t0, "A")
+    core.set_transform(TransformStamped(Header(Time(1), "Z"), "Y", Transform()))
+    with pytest.raises(ConnectivityException):
+        core.chain("C", t0, "Y", t0, "A")
+
+
+def _random_case(rng: random.Random) -> tuple[BufferCore, list[list[Any]], list[str]]:
+    core = BufferCore(100.0)
+    ops: list[list[Any]] = []
+    n = rng.randrange(3, 9)
+    names = [f"n{i}" for i in range(n)]
+    parents: dict[str, str] = {}
+    for i in range(1, n):
+        parents[names[i]] = names[rng.randrange(i)]
+    # a second tree now and then, and a re-parented frame at later stamps
+    if rng.random() < 0.2:
+        parents[names[-1]] = "other_root"
+    for name, parent in parents.items():
+        if rng.random() < 0.25:
+            _add(core, ops, parent, name, 0, static=True)
+            continue
+        first = rng.randrange(1, 3)
+        for s in range(first, first + rng.randrange(2, 5)):
+            _add(core, ops, parent, name, s * SEC)
+    if rng.random() < 0.3 and n > 3:
+        child = names[-1]
+        new_parent = names[rng.randrange(1, n - 2)]
+        if new_parent != child and parents.get(child) != new_parent:
+            for s in (7, 8):
+                _add(core, ops, new_parent, child, s * SEC)
+    return core, ops, [*names, "other_root"]
+
+
+@needs_tf2_py
+def test_chain_equals_real_tf2_py_on_random_trees() -> None:
+    rng = random.Random(23)
+    ops: list[list[Any]] = []
+    ours: list[list[str] | tuple[str, str]] = []
+    for _ in range(60):
+        core, setup, names = _random_case(rng)
+        ops.append(["new"])
+        ops.extend(setup)
+        for _ in range(25):
+            target, source, fixed = (rng.choice(names) for _ in range(3))
+            tt, st = (rng.choice([0, rng.randrange(0, 9) * SEC, rng.randrange(SEC, 5 * SEC)])
+                      for _ in range(2))
+            ops.append(["call", "_chain", [target, {"t": tt}, source, {"t": st}, fixed]])
+            try:
+                ours.append(core.chain(target, Time.from_ns(tt), source, Time.from_ns(st), fixed))
+            except TransformException as e:
+                ours.append((type(e).__name__, str(e)))
+    answers = run_side(ops, cache_time_s=100.0)
+    assert len(answers) == len(ours)
+    lists = errors = 0
+    for mine, ref in zip(ours, answers, strict=True):
+        if "err" in ref:
+            assert mine == (ref["err"], ref["msg"]), (mine, ref)  # class and tf2's text
+            errors += 1
+        else:
+            assert mine == ref["ok"], (mine, ref)
+            lists += 1 if mine else 0
+    assert lists > 300 and errors > 50, (lists, errors)
+
+
+
+def test_monitor_chain_line_is_tf2s() -> None:
+    """``tfbus monitor A B``'s ``Chain is:`` line is tf2's ``_chainAsVector(B, 0, A, 0,
+    B)``, as tf_monitor prints it, quirks included (here the root A, where the branches
+    meet one level below it); the net delay still follows the lookup's path."""
+    from tfbus.cli.monitor import chain_lines, tf2_chain
+    from tfbus.monitor import TfStatistics
+
+    stats = TfStatistics()
+    links = [("A", "B"), ("B", "C"), ("B", "E")]
+    stats.add(Time(1), [TransformStamped(Header(Time(1), p), c, Transform()) for p, c in links],
+              "n", static=False)
+    stats.watch_chain("C", "E")
+    assert tf2_chain(stats.parents(), "C", "E") == ["C", "B", "A", "E"]
+    assert chain_lines(stats, ["C", "E"])[0] == "Chain is: C -> B -> A -> E"
+    assert stats.chains[0].frames == ("C", "B", "E")  # the path the lookup walks
+    assert tf2_chain({"x": "y", "p": "q"}, "x", "p") is None  # two trees
+    if have_tf2_py():
+        ops: list[list[Any]] = [["set", p, c, SEC, [0, 0, 0], [0, 0, 0, 1], False]
+                                for p, c in links]
+        ops.append(["call", "_chain", ["E", {"t": 0}, "C", {"t": 0}, "E"]])
+        assert run_side(ops) == [{"ok": ["C", "B", "A", "E"]}]

@@ -1,0 +1,83 @@
+"""``tfbus.compat.tf2_ros`` with the real rclpy (ROS 2 wheels in ``.venv-ros2``, built by
+``scripts/install_ros2_env.sh``): ``TransformListener(buffer, node)`` fills the buffer
+from an rclpy node's ``/tf`` and ``/tf_static``, sent by the compat broadcasters on
+another node. Runs in a subprocess (``tests/ros2_peers/compat_rclpy_peer.py``) on a
+random ``ROS_DOMAIN_ID``, Fast DDS restricted to 127.0.0.1 by a profile written here."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
+PEER = ROOT / "tests" / "ros2_peers" / "compat_rclpy_peer.py"
+
+FASTDDS_LOOPBACK = """<?xml version="1.0" encoding="UTF-8" ?>
+<dds xmlns="http://www.eprosima.com">
+  <profiles>
+    <transport_descriptors>
+      <transport_descriptor>
+        <transport_id>udp_lo</transport_id>
+        <type>UDPv4</type>
+        <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
+      </transport_descriptor>
+    </transport_descriptors>
+    <participant profile_name="tfbus_compat_lo" is_default_profile="true">
+      <rtps>
+        <userTransports><transport_id>udp_lo</transport_id></userTransports>
+        <useBuiltinTransports>false</useBuiltinTransports>
+      </rtps>
+    </participant>
+  </profiles>
+</dds>
+"""
+
+
+@pytest.fixture(scope="module", name="ros_python")
+def ros_python_fixture() -> Path:
+    if sys.platform != "linux":
+        pytest.skip("the ROS 2 wheels are manylinux only")
+    out = subprocess.run(["bash", str(ROOT / "scripts" / "install_ros2_env.sh")],
+                         capture_output=True, text=True, timeout=1200, check=False)
+    if "ros2-env: ready" not in out.stdout or not ROS_PYTHON.exists():
+        pytest.skip(f"no ROS 2 venv: {out.stdout[-300:]}")
+    return ROS_PYTHON
+
+
+def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
+    profile = tmp_path / "fastdds_lo.xml"
+    profile.write_text(FASTDDS_LOOPBACK)
+    paths = sysconfig.get_paths()  # the test runner's own environment (anyio, numpy, ...)
+    site = os.pathsep.join(dict.fromkeys([paths["purelib"], paths["platlib"]]))
+    env = dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)),
+        RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        FASTDDS_DEFAULT_PROFILES_FILE=str(profile),
+        # tfbus from this checkout; its dependencies (anyio, ...) from the project venv
+        PYTHONPATH=os.pathsep.join([str(ROOT), site]),
+        PYTHONUNBUFFERED="1",
+    )
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    if sys.version_info[:2] != (3, 11):
+        pytest.skip("the ROS 2 venv is Python 3.11: this environment's packages cannot be shared")
+    r = subprocess.run([str(ros_python), str(PEER)], env=env, capture_output=True, text=True,
+                       timeout=120, check=False)
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    answer = json.loads(r.stdout.strip().splitlines()[-1])
+    assert answer == {
+        "frame_id": "map",
+        "child_frame_id": "laser",
+        "stamp_ns": 2_000_000_000,
+        "translation": [2.5, 0.0, 0.0],
+        "type": "tfbus.messages.TransformStamped",
+    }

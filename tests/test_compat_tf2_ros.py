@@ -1,0 +1,154 @@
+"""``tfbus.compat.tf2_ros``: ROS 2 tf2_ros call shapes on tfbus — the buffer's
+synchronous and awaitable methods (timeouts on a ManualClock), arguments in rospy /
+rclpy / builtin_interfaces forms and duck-typed messages, the registries, ``Stamped``,
+and a listener fed by the broadcasters over a tfbus bus."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import anyio
+import pytest
+from test_compat_tf2_py import (
+    Hdr,
+    MsgTime,
+    Quat,
+    RclpyTime,
+    RospyTime,
+    RosTransformStamped,
+    Tf,
+    Vec,
+)
+
+import tfbus
+from tfbus import ManualClock, PointStamped, Time, TransformStamped
+from tfbus.bus import Bus
+from tfbus.compat import tf2_ros
+
+
+@dataclass
+class RosPointStamped:
+    header: Hdr
+    point: Vec
+
+
+def _yaw_tf(parent: str, child: str, stamp: Any, x: float, yaw: float) -> RosTransformStamped:
+    return RosTransformStamped(Hdr(stamp, parent), child,
+                               Tf(Vec(x, 0, 0), Quat(0, 0, math.sin(yaw / 2), math.cos(yaw / 2))))
+
+
+def test_exceptions_are_tfbus_classes_under_tf2_names() -> None:
+    for name in ("TransformException", "LookupException", "ConnectivityException",
+                 "ExtrapolationException", "InvalidArgumentException", "TimeoutException"):
+        assert getattr(tf2_ros, name) is getattr(tfbus, name)
+    assert issubclass(tf2_ros.LookupException, tf2_ros.TransformException)
+
+
+def test_sync_methods_with_ros2_call_shapes() -> None:
+    buf = tf2_ros.Buffer()
+    assert buf.set_transform(_yaw_tf("map", "base", RospyTime(1, 0), 1.0, 0.0), "a") is None  # type: ignore[func-returns-value]
+    buf.set_transform(_yaw_tf("map", "base", RclpyTime(2 * 10**9), 2.0, 0.0), "a")
+    buf.set_transform_static(_yaw_tf("base", "laser", MsgTime(0, 0), 0.5, math.pi / 2), "b")
+    # lookup_transform(target, source, time, timeout): the timeout positional, as ROS 2
+    t = buf.lookup_transform("map", "laser", RclpyTime(1_500_000_000), RclpyTime(10**9))
+    assert isinstance(t, TransformStamped)
+    assert t.header.stamp == Time.from_ns(1_500_000_000)
+    assert list(t.transform.translation) == pytest.approx([2.0, 0.0, 0.0])
+    assert buf.can_transform("map", "laser", MsgTime(1, 0), RclpyTime(0)) is True
+    assert buf.can_transform("map", "nope", MsgTime(1, 0), return_debug_tuple=True) == (
+        False, "canTransform: source_frame nope does not exist.")
+    assert buf.can_transform_full("laser", MsgTime(2, 0), "laser", MsgTime(1, 0), "map") is True
+    full = buf.lookup_transform_full("laser", RospyTime(2, 0), "laser", RospyTime(1, 0), "map")
+    assert list(full.transform.translation) == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
+    with pytest.raises(tf2_ros.ExtrapolationException):
+        buf.lookup_transform("map", "laser", RospyTime(5, 0), RospyTime(1, 0))
+    # transform(): a foreign PointStamped by its fields, the tfbus type back
+    out = buf.transform(RosPointStamped(Hdr(RospyTime(1, 0), "laser"), Vec(1.0, 0, 0)), "map")
+    assert isinstance(out, PointStamped)
+    assert out.header.frame_id == "map"
+    assert list(out.point) == pytest.approx([1.5, 1.0, 0.0], abs=1e-12)
+    laser_point = PointStamped(tfbus.Header(Time(1), "laser"), tfbus.Point(1, 0, 0))
+    out_full = buf.transform_full(laser_point, "laser", Time(2), "map")
+    assert list(out_full.point) == pytest.approx([1.0, 1.0, 0.0], abs=1e-12)  # laser moved +1 x
+    buf.clear()
+    assert not buf.can_transform("map", "base", Time(0))
+
+
+def test_registries_convert_and_stamped() -> None:
+    class Celsius(float):
+        pass
+
+    reg = tf2_ros.ConvertRegistration()
+    reg.add_to_msg(Celsius, lambda c: {"celsius": float(c)})
+    reg.add_from_msg(str, lambda m: f"{m['celsius']:.1f} C")
+    assert tf2_ros.convert(Celsius(21.5), str) == "21.5 C"
+    assert tf2_ros.convert("same", str) == "same"
+    with pytest.raises(tf2_ros.TypeException, match="not loaded or supported"):
+        reg.get_to_msg(bytes)
+    assert tf2_ros.Buffer.registration.get(PointStamped) is not None
+    p = tf2_ros.Stamped(PointStamped(), RospyTime(3, 5), "odom")
+    assert p.header == tfbus.Header(Time(3, 5), "odom")
+
+    @dataclass
+    class Mutable:
+        header: Any = None
+
+    m = Mutable()
+    assert tf2_ros.Stamped(m, MsgTime(1, 2), "x") is m and m.header.frame_id == "x"
+
+
+@pytest.mark.anyio
+async def test_awaitable_waits_and_timeouts() -> None:
+    clock = ManualClock(Time(0))
+    buf = tf2_ros.Buffer(RospyTime(10, 0), clock=clock)
+    got: list[Any] = []
+    failed: list[BaseException] = []
+
+    async def wait_ok() -> None:
+        got.append(await buf.wait_for_transform_async("map", "base", RclpyTime(10**9),
+                                                      timeout=RclpyTime(5 * 10**9)))
+        got.append(await buf.lookup_transform_async("map", "base", MsgTime(1, 0)))
+        got.append(await buf.lookup_transform_full_async("base", MsgTime(1, 0), "base",
+                                                         MsgTime(1, 0), "map", timeout=1.0))
+        got.append(await buf.wait_for_transform_full_async("base", Time(1), "base", Time(1),
+                                                           "map"))
+
+    async def wait_too_long() -> None:
+        try:
+            await buf.lookup_transform_async("map", "elsewhere", Time(0), timeout=2.0)
+        except tf2_ros.TimeoutException as e:
+            failed.append(e)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(wait_ok)
+        tg.start_soon(wait_too_long)
+        await clock.advance(0)
+        assert not got
+        buf.set_transform(_yaw_tf("map", "base", RospyTime(1, 0), 1.0, 0.0), "a")
+        await clock.advance(2.5)
+    assert got[0] is True and got[3] is True
+    assert got[1].header.stamp == Time(1)
+    assert len(failed) == 1 and "elsewhere" in str(failed[0])
+    assert buf.buffer.pending_waits == 0
+
+
+@pytest.mark.anyio
+async def test_listener_and_broadcasters_on_a_tfbus_bus() -> None:
+    async with Bus() as bus:
+        buf = tf2_ros.Buffer()
+        async with tf2_ros.TransformListener(buf, bus=bus):
+            tf2_ros.StaticTransformBroadcaster(bus).sendTransform(
+                _yaw_tf("base", "laser", MsgTime(0, 0), 0.5, 0.0))
+            caster = tf2_ros.TransformBroadcaster(bus)
+            caster.sendTransform([_yaw_tf("map", "base", RospyTime(1, 0), 1.0, 0.0),
+                                  _yaw_tf("map", "base", RospyTime(2, 0), 2.0, 0.0)])
+            t = await buf.lookup_transform_async("map", "laser", RospyTime(1, 500_000_000),
+                                                 timeout=5.0)
+    assert list(t.transform.translation) == pytest.approx([2.0, 0.0, 0.0])
+
+
+def test_listener_needs_a_node_or_a_bus() -> None:
+    with pytest.raises(tf2_ros.InvalidArgumentException, match="node or bus"):
+        tf2_ros.TransformListener(tf2_ros.Buffer())

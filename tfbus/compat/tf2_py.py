@@ -1,0 +1,195 @@
+"""``tf2_py.BufferCore`` (Debian's tf2_py 0.7.6, ROS 1 geometry2) on tfbus.
+
+``from tfbus.compat import tf2_py`` in place of ``import tf2_py``: the same class and
+method names, argument order and return shapes, plus ROS 2 tf2_py's velocity methods.
+Every method converts its arguments (:mod:`tfbus.compat._args`) and calls the
+:class:`tfbus.BufferCore` method named in its docstring; results are tfbus types
+(``TransformStamped`` with ``header.stamp`` a :class:`tfbus.Time`) with tf2's field
+names. Exceptions are tfbus's, which are the classes exported here under tf2's names.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from tfbus.compat._args import to_duration, to_point, to_time, to_transform_stamped
+from tfbus.core import BufferCore as _Core
+from tfbus.errors import (
+    ConnectivityException,
+    ExtrapolationException,
+    InvalidArgumentException,
+    LookupException,
+    TimeoutException,
+    TransformException,
+)
+from tfbus.messages import TransformStamped, VelocityStamped
+from tfbus.time import Duration, Time
+
+__all__ = [
+    "BufferCore",
+    "ConnectivityException",
+    "ExtrapolationException",
+    "InvalidArgumentException",
+    "LookupException",
+    "TimeoutException",
+    "TransformException",
+]
+
+
+class BufferCore:
+    """tf2_py's ``BufferCore(cache_time=10 s)`` over a :class:`tfbus.BufferCore`
+    (``.core``). ``cache_time``: a rospy / rclpy / tfbus Duration or seconds."""
+
+    def __init__(self, cache_time: object = None) -> None:
+        """Create the buffer; ``cache_time`` defaults to 10 s (tf2's default)."""
+        self.core = _Core(10.0 if cache_time is None else to_duration(cache_time, "cache_time"))
+
+    def set_transform(self, transform: Any, authority: str) -> None:
+        """tf2_py ``set_transform(msg, authority)``: :meth:`tfbus.BufferCore.set_transform`
+        (returns None, as tf2_py)."""
+        self.core.set_transform(to_transform_stamped(transform), authority)
+
+    def set_transform_static(self, transform: Any, authority: str) -> None:
+        """tf2_py ``set_transform_static(msg, authority)``:
+        :meth:`tfbus.BufferCore.set_transform_static` (returns None)."""
+        self.core.set_transform_static(to_transform_stamped(transform), authority)
+
+    def clear(self) -> None:
+        """tf2_py ``clear()``: :meth:`tfbus.BufferCore.clear`."""
+        self.core.clear()
+
+    def can_transform_core(
+        self, target_frame: str, source_frame: str, time: object
+    ) -> tuple[bool, str]:
+        """tf2_py ``can_transform_core`` → ``(ok, error message)``:
+        :meth:`tfbus.BufferCore.can_transform` with ``return_debug_tuple=True``."""
+        out = self.core.can_transform(target_frame, source_frame, to_time(time), True)
+        assert isinstance(out, tuple)
+        return out
+
+    def can_transform_full_core(
+        self,
+        target_frame: str,
+        target_time: object,
+        source_frame: str,
+        source_time: object,
+        fixed_frame: str,
+    ) -> tuple[bool, str]:
+        """tf2_py ``can_transform_full_core`` → ``(ok, error message)``:
+        :meth:`tfbus.BufferCore.can_transform_full`."""
+        out = self.core.can_transform_full(
+            target_frame, to_time(target_time, "target_time"), source_frame,
+            to_time(source_time, "source_time"), fixed_frame, True,
+        )
+        assert isinstance(out, tuple)
+        return out
+
+    def lookup_transform_core(
+        self, target_frame: str, source_frame: str, time: object
+    ) -> TransformStamped:
+        """tf2_py ``lookup_transform_core``: :meth:`tfbus.BufferCore.lookup_transform`."""
+        return self.core.lookup_transform(target_frame, source_frame, to_time(time))
+
+    def lookup_transform_full_core(
+        self,
+        target_frame: str,
+        target_time: object,
+        source_frame: str,
+        source_time: object,
+        fixed_frame: str,
+    ) -> TransformStamped:
+        """tf2_py ``lookup_transform_full_core``:
+        :meth:`tfbus.BufferCore.lookup_transform_full`."""
+        return self.core.lookup_transform_full(
+            target_frame, to_time(target_time, "target_time"), source_frame,
+            to_time(source_time, "source_time"), fixed_frame,
+        )
+
+    def get_latest_common_time(self, target_frame: str, source_frame: str) -> Time:
+        """tf2_py ``get_latest_common_time``:
+        :meth:`tfbus.BufferCore.get_latest_common_time` (a tfbus Time)."""
+        return self.core.get_latest_common_time(target_frame, source_frame)
+
+    def all_frames_as_string(self) -> str:
+        """tf2_py ``all_frames_as_string``: :meth:`tfbus.BufferCore.all_frames_as_string`."""
+        return self.core.all_frames_as_string()
+
+    def all_frames_as_yaml(self, current_time: object = None) -> str:
+        """tf2_py ``all_frames_as_yaml``: :meth:`tfbus.BufferCore.all_frames_as_yaml`."""
+        when = None if current_time is None else to_time(current_time, "current_time")
+        return self.core.all_frames_as_yaml(when)
+
+    def _chain(
+        self,
+        target_frame: str,
+        target_time: object,
+        source_frame: str,
+        source_time: object,
+        fixed_frame: str,
+    ) -> list[str]:
+        """tf2_py ``_chain``: :meth:`tfbus.BufferCore.chain`."""
+        return self.core.chain(
+            target_frame, to_time(target_time, "target_time"), source_frame,
+            to_time(source_time, "source_time"), fixed_frame,
+        )
+
+    def _allFramesAsDot(self, time: object = None) -> str:
+        """tf2_py ``_allFramesAsDot([time])``: :meth:`tfbus.BufferCore.all_frames_as_dot`."""
+        return self.core.all_frames_as_dot(None if time is None else to_time(time))
+
+    def _frameExists(self, frame_id: str) -> bool:
+        """tf2_py ``_frameExists``: :meth:`tfbus.BufferCore.frame_exists`."""
+        return self.core.frame_exists(frame_id)
+
+    def _getFrameStrings(self) -> list[str]:
+        """tf2_py ``_getFrameStrings``: :meth:`tfbus.BufferCore.get_frame_names`."""
+        return self.core.get_frame_names()
+
+    def lookupVelocityCore(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        time: object,
+        averaging_interval: object,
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """ROS 2 tf2_py ``lookupVelocityCore`` → ``((vx, vy, vz), (wx, wy, wz))`` (m/s,
+        rad/s; tf2_py's shape): :meth:`tfbus.BufferCore.lookup_velocity` (tf2's
+        algorithm; ``averaging_interval`` a duration or seconds)."""
+        return _pair(self.core.lookup_velocity(
+            tracking_frame, observation_frame, to_time(time),
+            _interval(averaging_interval),
+        ))
+
+    def lookupVelocityFullCore(
+        self,
+        tracking_frame: str,
+        observation_frame: str,
+        reference_frame: str,
+        reference_point: Any,
+        reference_point_frame: str,
+        time: object,
+        averaging_interval: object,
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """ROS 2 tf2_py ``lookupVelocityFullCore`` → ``((vx, vy, vz), (wx, wy, wz))``:
+        :meth:`tfbus.BufferCore.lookup_velocity_full` (``reference_point``: anything
+        with x, y, z, or an (x, y, z) tuple, metres)."""
+        point = (
+            reference_point
+            if isinstance(reference_point, tuple)
+            else tuple(to_point(reference_point, "reference_point"))
+        )
+        return _pair(self.core.lookup_velocity_full(
+            tracking_frame, observation_frame, reference_frame, point,  # type: ignore[arg-type]
+            reference_point_frame, to_time(time), _interval(averaging_interval),
+        ))
+
+
+def _pair(v: VelocityStamped) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    lin, ang = v.velocity
+    return (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z)
+
+
+def _interval(value: object) -> Duration | float:
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)  # validated (> 0, finite) by the velocity lookup
+    return to_duration(value, "averaging_interval")
