@@ -32,6 +32,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # -- nav2_like.mcap --------------------------------------------------------------------------
@@ -182,8 +184,8 @@ def nav2_records(m: Msgs) -> list[tuple[int, str, Any]]:
         recs.append((recv(now), "/tf", m.tf_message([m.tf("map", "odom", t, xyz,
                                                            quat_rpy(0, 0, yaw))])))  # fmt: skip
     odom_type = m.t["nav_msgs/msg/Odometry"]
-    pwc, twc = m.t["geometry_msgs/msg/PoseWithCovariance"], m.t["geometry_msgs/msg/TwistWithCovariance"]
-    import numpy as np
+    pwc = m.t["geometry_msgs/msg/PoseWithCovariance"]
+    twc = m.t["geometry_msgs/msg/TwistWithCovariance"]
 
     for i in range(N_ODOM_TOPIC):
         t = SIM_START_NS + i * ODOM_TOPIC_PERIOD_NS
