@@ -51,7 +51,7 @@ from tfbus.transports.ros2 import Ros2Transport  # noqa: E402
 
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 ROS_SIDE = ROOT / "benchmarks" / "_ros2_side.py"
-FASTDDS_LO = ROOT.parent / "shared" / "ros2" / "fastdds_lo.xml"
+FASTDDS_LO = ROOT / "tests" / "ros2_peers" / "fastdds_lo.xml"
 WAIT = 60.0
 
 
