@@ -176,6 +176,8 @@ class Proc:
 
 
 def _env(domain: int) -> dict[str, str]:
+    if not FASTDDS_LO.is_file():  # Fast DDS would fall back to every interface
+        sys.exit(f"error: {FASTDDS_LO.relative_to(ROOT)} is missing from the repository")
     env = dict(
         os.environ, ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", FASTDDS_DEFAULT_PROFILES_FILE=str(FASTDDS_LO),

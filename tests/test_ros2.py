@@ -463,6 +463,8 @@ class Peer:
     """An rclpy process: stdout lines queued by a reader thread; SIGTERM to stop."""
 
     def __init__(self, python: Path, script: Path, args: list[str], domain: int) -> None:
+        # Without its profile Fast DDS would fall back to every interface: never run so.
+        assert (PEERS / "fastdds_lo.xml").is_file(), "tests/ros2_peers/fastdds_lo.xml missing"
         env = dict(
             os.environ,
             ROS_DOMAIN_ID=str(domain),
