@@ -458,7 +458,7 @@ def test_nav2_matches_rosbags_and_lookups() -> None:
     assert core.can_transform("base_link", "oakd_rgb_camera_optical_frame", Time(0))
 
 
-def test_evo_sqlite_folder_and_bare_db3() -> None:
+def test_sqlite_folder_and_bare_db3() -> None:
     for path in (EX_DIR, EX_DIR / "tf_example.db3"):
         s = samples(path)
         assert set(s) == {("odom", "base_footprint", False), ("base_footprint", "base_link", True)}
