@@ -12,7 +12,7 @@ plus one /tf_static), then timed:
 A bare ``.mcap`` file is read by tfbus through the ``mcap`` package; its row shows that
 reader against rosbags' own MCAP reader on the same file.
 
-The real recordings in ../shared/data are timed too when present. Prints figures only.
+The recordings in tests/data (tests/data/SOURCES.md) are timed too. Prints figures only.
 
     .venv/bin/python benchmarks/bench_bag.py [--transforms N]
 """
@@ -28,7 +28,7 @@ from pathlib import Path
 from tfbus import Header, Quaternion, TFMessage, Time, Transform, TransformStamped, Vector3
 from tfbus.bag import BagMessage, load_buffer, read_messages, write_bag
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 
 
 def synthetic(n_transforms: int, per_msg: int = 10) -> list[BagMessage]:
@@ -124,10 +124,10 @@ def main() -> None:
             report(label, path, args.repeat)
         # A bare .mcap file is read by the mcap package (a bag folder by rosbags).
         report("ROS 2 .mcap file (mcap pkg)", next((tmp / "s_mcap").glob("*.mcap")), args.repeat)
-        print("real recordings (../shared/data):")
-        for name in ("webviz_turtle_tf_example.bag", "evo_nav2_turtlebot.mcap", "evo_tf_example"):
-            if (DATA / name).exists():
-                report(name, DATA / name, args.repeat)
+        print("recordings (tests/data):")
+        for name in ("webviz_turtle_tf_example.bag", "laser/drl_guardian_3.bag",
+                     "nav2_like.mcap", "tf_example"):
+            report(name, DATA / name, args.repeat)
     finally:
         shutil.rmtree(tmp)
 

@@ -43,7 +43,7 @@ from tfbus.robot_state import RobotStatePublisher
 from tfbus.time import Time
 
 ROOT = Path(__file__).resolve().parents[1]
-PR2 = ROOT.parent / "shared" / "data" / "urdf" / "rsp_pr2.urdf"
+PR2 = ROOT / "tests" / "data" / "urdf" / "rsp_pr2.urdf"
 ROS_PYTHON = "/usr/bin/python3"
 ROS_SIDE = Path(__file__).with_name("_rsp_side.py")
 TARGET = 100_000

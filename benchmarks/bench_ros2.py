@@ -51,7 +51,7 @@ from tfbus.transports.ros2 import Ros2Transport  # noqa: E402
 
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 ROS_SIDE = ROOT / "benchmarks" / "_ros2_side.py"
-FASTDDS_LO = ROOT.parent / "shared" / "ros2" / "fastdds_lo.xml"
+FASTDDS_LO = ROOT / "tests" / "ros2_peers" / "fastdds_lo.xml"
 WAIT = 60.0
 
 
@@ -176,6 +176,8 @@ class Proc:
 
 
 def _env(domain: int) -> dict[str, str]:
+    if not FASTDDS_LO.is_file():  # Fast DDS would fall back to every interface
+        sys.exit(f"error: {FASTDDS_LO.relative_to(ROOT)} is missing from the repository")
     env = dict(
         os.environ, ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", FASTDDS_DEFAULT_PROFILES_FILE=str(FASTDDS_LO),

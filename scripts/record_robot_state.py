@@ -40,7 +40,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "urdf"
+DATA = ROOT / "tests" / "data" / "urdf"
 EXTRA = ROOT / "tests" / "data" / "rsp" / "extra_joints.urdf"
 BASE_SEC = 1_700_000_000
 FREQUENCY = 20.0
@@ -283,7 +283,7 @@ def record(urdfs: list[Path], out_dir: Path, seed: int, wait: float) -> list[Pat
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("urdf", nargs="*", type=Path,
-                        help="URDF files (default: ../shared/data/urdf/*.urdf + the extra one)")
+                        help="URDF files (default: tests/data/urdf/*.urdf + the extra one)")
     parser.add_argument("--out", type=Path, default=ROOT / "tests" / "data" / "rsp")
     parser.add_argument("--seed", type=int, default=15)
     parser.add_argument("--wait", type=float, default=1.5,

@@ -1,5 +1,5 @@
 """Regenerate ``tests/laser_ref/expected.jsonl.gz``: run every differential case (edge
-cases and every scan of ``../shared/data/laser/*.bag``) through the real ROS 1
+cases and every scan of ``tests/data/laser/*.bag``) through the real ROS 1
 laser_geometry (``tests/laser_ref/harness.cpp``, compiled here with g++ and pkg-config)
 and record each cloud's layout and SHA-256, or tf2's error.
 

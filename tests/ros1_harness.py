@@ -1,7 +1,8 @@
 """Real ROS 1 peers for the tests: Debian's roscore and tools, the tutorial's C++ nodes.
 
 Everything runs on 127.0.0.1: each master gets a free port, ``ROS_IP=127.0.0.1`` and a
-private ``ROS_HOME`` (``../shared/ros1/README.md``). Processes are started here, read by
+private ``ROS_HOME``. The tutorial's nodes are this repository's C++ sources in
+``tests/ros1_peers/`` (built by its ``build.sh``). Processes are started here, read by
 threads line by line, waited on with a bound, and ended by their PID (SIGINT, then SIGKILL
 after a bound).
 """
@@ -26,7 +27,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_ROS1 = ROOT.parent / "shared" / "ros1"
+PEERS = ROOT / "tests" / "ros1_peers"
 INSTALL = ROOT / "scripts" / "install_ros1.sh"
 ROS_BIN = Path("/usr/bin")
 
@@ -203,19 +204,17 @@ def ros1_fixture() -> None:
 
 @pytest.fixture(scope="session", name="tutorial_nodes")
 def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener``, built once."""
-    build = SHARED_ROS1 / "build.sh"
-    if not build.exists():
-        pytest.skip(f"{build} not found (../shared/ros1 is absent)")
+    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/ros1_peers/``),
+    built once. ROS 1 is there (the ``ros1`` fixture), so a failed build is a failure."""
     if shutil.which("g++") is None:
         pytest.skip("g++ not found: cannot build the tutorial's C++ nodes")
     out = tmp_path_factory.mktemp("ros1_nodes")
     res = subprocess.run(
-        ["bash", str(build), str(out)],
+        ["bash", str(PEERS / "build.sh"), str(out)],
         env=_path_env(),
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=700,
         check=False,
     )
     assert res.returncode == 0, res.stderr

@@ -1,16 +1,22 @@
 """tfbus.bag: reading real recordings, load_buffer lookups, damage, writing, replay, record.
 
-Real data: ``tests/data/webviz_turtle_tf_example.bag`` (Apache-2.0, see ATTRIBUTION.md) is
-always present; the GPL-3.0 evo recordings are read in place from ``../shared/data`` and
-their tests skip when that folder is absent.
+Data (``tests/data/SOURCES.md``): real ROS 1 recordings (the webviz turtle_tf bag, the
+two bz2 laser bags) and the project's own ROS 2 recordings written by
+``scripts/make_test_bags.py`` with other writers than tfbus's (``nav2_like.mcap`` by the
+mcap package, ``tf_example/`` by rosbags): their counts, rates and spans are the
+script's constants, and the committed files are checked to be what the script writes.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import sqlite3
+import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import anyio
 import numpy as np
@@ -48,14 +54,10 @@ pytestmark = pytest.mark.anyio
 
 DATA = Path(__file__).parent / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
-NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
-EVO_DIR = SHARED / "evo_tf_example"
-
-LASER = SHARED / "laser"
-needs_laser = pytest.mark.skipif(not LASER.exists(), reason="../shared/data/laser absent")
-needs_nav2 = pytest.mark.skipif(not NAV2.exists(), reason="../shared/data (GPL evo data) absent")
-needs_evo = pytest.mark.skipif(not EVO_DIR.exists(), reason="../shared/data (GPL evo data) absent")
+NAV2 = DATA / "nav2_like.mcap"
+EX_DIR = DATA / "tf_example"
+LASER = DATA / "laser"
+MAKE_BAGS = Path(__file__).resolve().parents[1] / "scripts" / "make_test_bags.py"
 
 
 # --------------------------------------------------------------------------- helpers
@@ -162,12 +164,10 @@ def test_bag_format_is_a_str_enum() -> None:
     assert [f.value for f in BagFormat] == ["ros1", "sqlite3", "mcap"]
 
 
-@needs_nav2
-@needs_evo
 def test_detect_format_ros2() -> None:
     assert detect_format(NAV2) is BagFormat.MCAP
-    assert detect_format(EVO_DIR) is BagFormat.SQLITE3
-    assert detect_format(EVO_DIR / "tf_example.db3") is BagFormat.SQLITE3
+    assert detect_format(EX_DIR) is BagFormat.SQLITE3
+    assert detect_format(EX_DIR / "tf_example.db3") is BagFormat.SQLITE3
 
 
 def test_missing_and_unknown_errors_are_one_line(tmp_path: Path) -> None:
@@ -290,16 +290,26 @@ def test_summary_rate_counts_distinct_stamps(tmp_path: Path) -> None:
     assert f.delay_max == pytest.approx(0.051, abs=1e-9)
 
 
-@needs_nav2
 def test_summary_of_a_sim_time_bag_measures_delay_against_bag_stamps() -> None:
-    """The nav2 bag's stamps are simulated time (~929 s) while its bag times are wall
-    time (~1.78e9 s): delays are measured against the newest stamp (tf_monitor's
-    definition in tfbus.monitor), not reported as 1.78e9 s as before."""
+    """The nav2-like bag's stamps are simulated time (928..988 s) while its bag times are
+    wall time (~1.78e9 s): delays are measured against the newest stamp (tf_monitor's
+    definition in tfbus.monitor), not reported as 1.78e9 s as before. map -> odom is
+    stamped 0.1 s behind the sim clock (make_test_bags.MAP_ODOM_LAG_NS), the other
+    links at it."""
     s = summarize(NAV2)
     assert s.sim_time is True
     dynamic = [f for f in s.frames.values() if not f.static]
     assert dynamic and all(0.0 <= f.delay_avg <= f.delay_max < 2.0 for f in dynamic)
-    assert s.frames["odom"].delay_max == pytest.approx(1.679, abs=1e-9)
+    # Recomputed here: newest stamp seen so far (this message included) minus the stamp.
+    newest, worst = 0, 0
+    for rec in read_messages(NAV2, topics=["/tf"]):
+        newest = max([newest, *(x.header.stamp.ns for x in rec.message.transforms)])
+        for x in rec.message.transforms:
+            if x.child_frame_id == "odom":
+                worst = max(worst, newest - x.header.stamp.ns)
+    assert s.frames["odom"].delay_max == pytest.approx(worst / 1e9, abs=1e-9)
+    assert 0.05 < s.frames["odom"].delay_max < 0.1  # the lag, less the newest's own age
+    assert s.frames["base_link"].delay_max < 0.05  # stamped at the sim clock
 
 
 def test_topic_filter_and_empty_filter_quirk() -> None:
@@ -373,29 +383,56 @@ def test_load_buffer_cache_covers_the_whole_span() -> None:
     assert info["turtle1"] < 1344  # a short cache prunes, as asked
 
 
-# --------------------------------------------------------------------------- evo (ROS 2)
+# --------------------------------------------------------------------------- ROS 2 (ours)
 
 
-@needs_nav2
+def _make_test_bags() -> Any:
+    """scripts/make_test_bags.py as a module (its constants are the expected numbers)."""
+    spec = importlib.util.spec_from_file_location("make_test_bags", MAKE_BAGS)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_committed_ros2_recordings_are_what_the_script_writes(tmp_path: Path) -> None:
+    """tests/data/nav2_like.mcap and tests/data/tf_example/ are regenerated by
+    scripts/make_test_bags.py: the same messages, stamps and bag times."""
+    subprocess.run([sys.executable, str(MAKE_BAGS), "--out", str(tmp_path)], check=True,
+                   capture_output=True, timeout=120)  # fmt: skip
+    for name in ("nav2_like.mcap", "tf_example"):
+        assert list(read_messages(tmp_path / name)) == list(read_messages(DATA / name)), name
+
+
 def test_nav2_mcap_frames_counts_span() -> None:
+    g = _make_test_bags()
     s = samples(NAV2)
     frames = {c for (_p, c, _st) in s} | {p for (p, _c, _st) in s}
-    assert len(frames) == 34
+    assert len(frames) == 34  # map, odom, base_link, 2 wheels, 29 statics
     static = [k for k in s if k[2]]
     assert len(static) == 29 and all(len(s[k]) == 1 for k in static)
-    assert sum(len(v) for k, v in s.items() if not k[2]) == 7284
-    assert len(s[("odom", "base_link", False)]) == 2639
-    assert len(s[("map", "odom", False)]) == 921
-    assert len(s[("base_link", "left_wheel", False)]) == 1862
+    assert {(p, c) for p, c, _st in static} == {(p, c) for p, c, _x, _r in g.STATICS}
+    assert sum(len(v) for k, v in s.items() if not k[2]) == 1500 + 2 * 1200 + 480
+    assert len(s[("odom", "base_link", False)]) == g.N_ODOM_BASE == 1500
+    assert len(s[("map", "odom", False)]) == g.N_MAP_ODOM == 480
+    assert len(s[("base_link", "left_wheel", False)]) == g.N_WHEELS == 1200
     recs = list(read_messages(NAV2))
-    assert sum(r.topic == "/tf" for r in recs) == 5422
+    assert sum(r.topic == "/tf" for r in recs) == 1500 + 1200 + 480
+    assert sum(r.topic == "/tf_static" for r in recs) == 1
     stamps = [ts.header.stamp.to_sec() for r in recs if r.topic == "/tf"
               for ts in r.message.transforms]
-    assert 928 <= min(stamps) < max(stamps) <= 1027  # sim time
+    assert min(stamps) == 927.907 and max(stamps) == 987.96  # sim time (map->odom lags)
     assert {r.authority for r in recs} == {tfbag.ROS2_AUTHORITY}
+    # rates from the stamps: 25, 20 and 8 Hz exactly
+    for edge, hz in ((("odom", "base_link"), 25.0), (("base_link", "right_wheel"), 20.0),
+                     (("map", "odom"), 8.0)):  # fmt: skip
+        e = s[(*edge, False)]
+        span = (e[-1].header.stamp - e[0].header.stamp).to_sec()
+        assert (len(e) - 1) / span == pytest.approx(hz, rel=1e-12)
+    # the /odom topic (nav_msgs/Odometry) is not tf: filtered out, even when asked for
+    assert list(read_messages(NAV2, topics=["/odom"])) == []
 
 
-@needs_nav2
 def test_nav2_matches_rosbags_and_lookups() -> None:
     ref = rosbags_reference(NAV2)
     mine = [(r.time.ns, r.topic, list(r.message.transforms)) for r in read_messages(NAV2)]
@@ -405,7 +442,7 @@ def test_nav2_matches_rosbags_and_lookups() -> None:
     for ts in s[("odom", "base_link", False)][::101]:
         got = core.lookup_transform("odom", "base_link", ts.header.stamp)
         assert got.transform == ts.transform
-    # map -> odom at 9.5 Hz: interpolate between two samples independently.
+    # map -> odom at 8 Hz: interpolate between two samples independently.
     mo = s[("map", "odom", False)]
     a, b = mo[400], mo[401]
     ta, tb = a.header.stamp.ns, b.header.stamp.ns
@@ -421,28 +458,27 @@ def test_nav2_matches_rosbags_and_lookups() -> None:
     assert core.can_transform("base_link", "oakd_rgb_camera_optical_frame", Time(0))
 
 
-@needs_evo
-def test_evo_sqlite_folder_and_bare_db3() -> None:
-    for path in (EVO_DIR, EVO_DIR / "tf_example.db3"):
+def test_sqlite_folder_and_bare_db3() -> None:
+    for path in (EX_DIR, EX_DIR / "tf_example.db3"):
         s = samples(path)
         assert set(s) == {("odom", "base_footprint", False), ("base_footprint", "base_link", True)}
-        assert len(s[("odom", "base_footprint", False)]) == 517
-    assert [(r.time.ns, r.topic, list(r.message.transforms)) for r in read_messages(EVO_DIR)] == (
-        rosbags_reference(EVO_DIR)
+        assert len(s[("odom", "base_footprint", False)]) == 517  # make_test_bags.EX_COUNT
+    assert [(r.time.ns, r.topic, list(r.message.transforms)) for r in read_messages(EX_DIR)] == (
+        rosbags_reference(EX_DIR)
     )
-    core = load_buffer(EVO_DIR)
-    recorded = samples(EVO_DIR)[("odom", "base_footprint", False)]
+    core = load_buffer(EX_DIR)
+    recorded = samples(EX_DIR)[("odom", "base_footprint", False)]
     for ts in recorded[::50]:
         assert core.lookup_transform("odom", "base_footprint", ts.header.stamp).transform == (
             ts.transform
         )
     span = (recorded[-1].header.stamp - recorded[0].header.stamp).to_sec()
-    assert span == pytest.approx(51.6, abs=0.2)
+    assert span == pytest.approx(51.6, abs=1e-9)  # 516 periods of 0.1 s
 
 
 # --------------------------------------------------------------------------- laser (ROS 1, bz2)
 
-#: From ../shared/data/SOURCES.md: /tf message counts and (parent, child, Hz) of the
+#: From tests/data/SOURCES.md: /tf message counts and (parent, child, Hz) of the
 #: fastest frame of each recording (2014, no /tf_static, bz2-compressed chunks).
 LASER_BAGS = {
     "drl_guardian_3.bag": (22_998, ("odom", "base_footprint", 120.0), 10),
@@ -455,7 +491,6 @@ def laser_reads() -> dict[str, list[BagMessage]]:
     return {name: list(read_messages(LASER / name)) for name in LASER_BAGS}
 
 
-@needs_laser
 @pytest.mark.parametrize("name", sorted(LASER_BAGS))
 def test_laser_bags_tf_loads(name: str, laser_reads: dict[str, list[BagMessage]]) -> None:
     count, (parent, child, hz), n_frames = LASER_BAGS[name]
@@ -471,7 +506,6 @@ def test_laser_bags_tf_loads(name: str, laser_reads: dict[str, list[BagMessage]]
         assert core.lookup_transform(parent, child, ts.header.stamp).transform == ts.transform
 
 
-@needs_laser
 def test_laser_bag_cut_is_salvaged_through_bz2_chunks(
     tmp_path: Path, laser_reads: dict[str, list[BagMessage]]
 ) -> None:
@@ -538,7 +572,6 @@ def test_truncated_right_after_header(tmp_path: Path) -> None:
     assert e.value.messages_read == 0
 
 
-@needs_nav2
 def test_truncated_mcap(tmp_path: Path) -> None:
     full = list(read_messages(NAV2))
     cut = _truncate(NAV2, tmp_path / "cut.mcap", 0.999)

@@ -25,8 +25,7 @@ from tfbus.cli import cli, frames_dot, main, parse_static_args, parse_time
 
 DATA = Path(__file__).parent / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
-NAV2 = SHARED / "evo_nav2_turtlebot.mcap"
+NAV2 = DATA / "nav2_like.mcap"  # scripts/make_test_bags.py (tests/data/SOURCES.md)
 COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay",
             "robot-state-publisher", "joint-states", "demo"]
 
@@ -123,11 +122,10 @@ def test_bag_info() -> None:
     assert "static" in rows["carrot"] and "turtle1" in rows["carrot"]
 
 
-@pytest.mark.skipif(not NAV2.exists(), reason="../shared/data (GPL evo data) absent")
 def test_bag_info_mcap() -> None:
     code, out, _ = run("bag-info", str(NAV2))
     assert code == 0
-    assert "mcap" in out and "34 (29 static links, 4 dynamic links, 7313 transforms)" in out
+    assert "mcap" in out and "34 (29 static links, 4 dynamic links, 4409 transforms)" in out
 
 
 def test_bag_info_errors(tmp_path: Path) -> None:

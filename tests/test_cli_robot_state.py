@@ -32,7 +32,7 @@ from tfbus.time import Time
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = ROOT / "demos" / "robot.urdf"
-PR2 = ROOT.parent / "shared" / "data" / "urdf" / "rsp_pr2.urdf"
+PR2 = ROOT / "tests" / "data" / "urdf" / "rsp_pr2.urdf"
 RSP_SUMMARY = re.compile(r"^\[ INFO\] summary: (\d+) joint states received, (\d+) published "
                          r"\((\d+) transforms\), (\d+) rate-limited, 0 invalid, "
                          r"0 positions refused$")

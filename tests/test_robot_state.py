@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import gzip
+import hashlib
 import json
 import math
 import os
@@ -46,7 +47,7 @@ pytestmark = pytest.mark.anyio
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "rsp"
-SHARED_URDF = ROOT.parent / "shared" / "data" / "urdf"
+URDF = ROOT / "tests" / "data" / "urdf"
 RECORDINGS = sorted(DATA.glob("*.json.gz"))
 TOL = 1e-9
 
@@ -60,7 +61,7 @@ def anyio_backend(request: pytest.FixtureRequest) -> str:
 
 def urdf_path(name: str) -> Path:
     local = DATA / name
-    return local if local.exists() else SHARED_URDF / name
+    return local if local.exists() else URDF / name
 
 
 def load(path: Path) -> dict[str, Any]:
@@ -97,8 +98,14 @@ def finite(node: list[Row]) -> list[Row]:
 
 def test_recordings_cover_every_urdf_in_the_data() -> None:
     names = {load(p)["urdf"] for p in RECORDINGS}
-    assert {p.name for p in SHARED_URDF.glob("*.urdf")} <= names
+    in_data = {p.name for p in URDF.glob("*.urdf")}
+    assert in_data == {"erd_panda.urdf", "rsp_pr2.urdf", "tb3_burger.urdf",
+                       "urdf_tutorial_07-physics.urdf"}  # tests/data/SOURCES.md
+    assert in_data <= names
     assert "extra_joints.urdf" in names
+    for p in RECORDINGS:  # each recording was made from the file now in tests/data
+        rec = load(p)
+        assert hashlib.sha256(urdf_path(rec["urdf"]).read_bytes()).hexdigest() == rec["sha256"]
 
 
 @pytest.mark.parametrize("recording", RECORDINGS, ids=lambda p: p.name.split(".")[0])
@@ -331,7 +338,7 @@ def test_loop_with_two_links_and_unreadable_files(tmp_path: Path) -> None:
 
 def test_every_urdf_in_the_data_parses(tmp_path: Path) -> None:
     counts = {}
-    for path in sorted(SHARED_URDF.glob("*.urdf")):
+    for path in sorted(URDF.glob("*.urdf")):
         model = load_urdf(path)
         assert load_urdf(path.read_text()) == model == load_urdf(str(path))
         assert load_urdf(model) is model
@@ -414,7 +421,7 @@ async def test_run_refuses_a_bad_frequency() -> None:
 
 async def test_joint_states_move_within_limits_and_feed_the_publisher() -> None:
     clock = ManualClock(Time(1000))
-    model = load_urdf(SHARED_URDF / "rsp_pr2.urdf")
+    model = load_urdf(URDF / "rsp_pr2.urdf")
     rsp = RobotStatePublisher(model)
     async with Bus() as bus, anyio.create_task_group() as tg:
         js = bus.subscribe("/joint_states")
@@ -476,7 +483,7 @@ def ros1_rsp() -> None:
 
 
 def test_live_against_the_real_node(ros1_rsp: None, tmp_path: Path) -> None:
-    urdfs = [SHARED_URDF / "tb3_burger.urdf", DATA / "extra_joints.urdf"]
+    urdfs = [URDF / "tb3_burger.urdf", DATA / "extra_joints.urdf"]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "VIRTUAL_ENV"))}
     done = subprocess.run(
         ["/usr/bin/python3", str(ROOT / "scripts" / "record_robot_state.py"), "--out",
@@ -616,7 +623,7 @@ def test_joint_rotation_is_kdls_matrix_route(rpy: tuple[float, float, float],
 
 @functools.cache
 def _pr2() -> RobotStatePublisher:
-    return RobotStatePublisher(SHARED_URDF / "rsp_pr2.urdf")
+    return RobotStatePublisher(URDF / "rsp_pr2.urdf")
 
 
 @settings(max_examples=50, deadline=None)

@@ -5,8 +5,9 @@ The rclpy peers run as subprocesses of the ROS 2 venv built by
 ``scripts/install_ros2_env.sh`` (session fixture; the tests skip with its reason only
 when the wheels cannot be installed). Network rule: every test uses a fresh random
 ``ROS_DOMAIN_ID``; the rclpy side runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``
-plus the loopback Fast DDS profile, tfbus with its loopback Cyclone configuration (or the
-shared ``cyclone_lo.xml``); peers stop on SIGTERM. Every wait is on data or output, with
+plus the loopback Fast DDS profile ``tests/ros2_peers/fastdds_lo.xml``, tfbus with its
+loopback Cyclone configuration (or ``tests/ros2_peers/cyclone_lo.xml``); peers stop on
+SIGTERM. Every wait is on data or output, with
 a bound; none is a fixed sleep.
 """
 
@@ -69,9 +70,8 @@ from tfbus.transports.ros2_wire import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "ros2"
-PEER = ROOT / "tests" / "ros2_peers" / "tf_peer.py"
-SHARED_PEER = SHARED / "ros_tf_peer.py"
+PEERS = ROOT / "tests" / "ros2_peers"
+PEER = PEERS / "tf_peer.py"
 ROS_VENV_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 INSTALL = ROOT / "scripts" / "install_ros2_env.sh"
 WAIT = 30.0  # bound of every wait on a peer (Fast DDS -> Cyclone takes 3-4 s to match)
@@ -450,12 +450,12 @@ def ros2_python() -> Path:
         )
     except subprocess.TimeoutExpired:
         pytest.skip("no real ROS 2 peer: install_ros2_env.sh did not finish in 1200 s")
-    if not ROS_VENV_PYTHON.exists() or "ros2-env: ready" not in out.stdout:
-        reason = next(
-            (line for line in out.stdout.splitlines() if "unavailable" in line),
-            f"install_ros2_env.sh failed: {out.stdout[-300:]} {out.stderr[-300:]}",
-        )
+    reason = next((line for line in out.stdout.splitlines() if "unavailable" in line), None)
+    if reason is not None:  # the machine cannot provide the peer (no python3.11, no index)
         pytest.skip(f"no real ROS 2 peer: {reason}")
+    # Anything else (a file of ours missing, a venv that does not work) is a failure.
+    assert out.returncode == 0 and "ros2-env: ready" in out.stdout, (out.stdout, out.stderr)
+    assert ROS_VENV_PYTHON.exists()
     return ROS_VENV_PYTHON
 
 
@@ -463,12 +463,14 @@ class Peer:
     """An rclpy process: stdout lines queued by a reader thread; SIGTERM to stop."""
 
     def __init__(self, python: Path, script: Path, args: list[str], domain: int) -> None:
+        # Without its profile Fast DDS would fall back to every interface: never run so.
+        assert (PEERS / "fastdds_lo.xml").is_file(), "tests/ros2_peers/fastdds_lo.xml missing"
         env = dict(
             os.environ,
             ROS_DOMAIN_ID=str(domain),
             RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
             ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-            FASTDDS_DEFAULT_PROFILES_FILE=str(SHARED / "fastdds_lo.xml"),
+            FASTDDS_DEFAULT_PROFILES_FILE=str(PEERS / "fastdds_lo.xml"),
             PYTHONUNBUFFERED="1",
         )
         env.pop("ROS_LOCALHOST_ONLY", None)
@@ -544,7 +546,7 @@ def write_json(path: Path, transforms: list[TransformStamped]) -> Path:
 
 LOOPBACK_PROFILES = {
     "tfbus-default": lambda: None,
-    "shared-cyclone_lo.xml": lambda: str(SHARED / "cyclone_lo.xml"),
+    "cyclone_lo.xml": lambda: str(PEERS / "cyclone_lo.xml"),
 }
 
 
@@ -557,7 +559,7 @@ async def test_tutorial_rclpy_broadcaster_to_tfbus_listener(
     the tutorial's listener on tfbus: the INFO line with the tutorial's numbers."""
     d = new_domain()
     dyn = write_json(tmp_path / "d.json", [ts("base_link", "base_laser", t=(0.1, 0.0, 0.2))])
-    peers(["--dynamic", str(dyn), "--rate", "100"], d, SHARED_PEER)
+    peers(["--tf", str(dyn), "--rate", "100"], d)
     lines: list[str] = []
     got = anyio.Event()
 
@@ -640,9 +642,9 @@ async def test_two_ros2_publishers_at_once(
     one_s, one_d = [ts("base_link", "base_laser", t=(0.1, 0.0, 0.2))], [ts("odom", "base_link")]
     two_s, two_d = [ts("map", "world", t=(0.0, 0.0, 1.0))], [ts("world", "odom", t=(2.0, 0, 0))]
     for name, s, dyn in (("one", one_s, one_d), ("two", two_s, two_d)):
-        peers(["--static", str(write_json(tmp_path / f"{name}s.json", s)),
-               "--dynamic", str(write_json(tmp_path / f"{name}d.json", dyn)),
-               "--rate", "50"], d, SHARED_PEER)  # fmt: skip
+        peers(["--tf-static", str(write_json(tmp_path / f"{name}s.json", s)),
+               "--tf", str(write_json(tmp_path / f"{name}d.json", dyn)),
+               "--rate", "50"], d)  # fmt: skip
     buffer = Buffer()
     async with Bus(transport=Ros2Transport(domain_id=d)) as bus, TransformListener(buffer, bus):
         got = await buffer.lookup_transform_async("map", "base_laser", Time(0), timeout=WAIT)
@@ -734,12 +736,12 @@ async def test_rclpy_peer_killed_and_restarted(
     s2 = write_json(tmp_path / "s2.json", [ts("base_link", "base_laser", t=(0.3, 0.0, 0.2))])
     async with Bus(transport=Ros2Transport(domain_id=d)) as bus:
         statics, tf = bus.subscribe("/tf_static"), bus.subscribe("/tf")
-        first = peers(["--static", str(s1), "--dynamic", str(dyn), "--rate", "50"], d, SHARED_PEER)
+        first = peers(["--tf-static", str(s1), "--tf", str(dyn), "--rate", "50"], d)
         msg = await receive_where(statics, lambda m: True)
         assert msg.transforms[0].transform.translation == Vector3(0.1, 0.0, 0.2)
         await receive_where(tf, lambda m: True)
         assert await anyio.to_thread.run_sync(first.stop) == 0  # SIGTERM: a clean exit
-        peers(["--static", str(s2), "--dynamic", str(dyn), "--rate", "50"], d, SHARED_PEER)
+        peers(["--tf-static", str(s2), "--tf", str(dyn), "--rate", "50"], d)
         msg = await receive_where(
             statics, lambda m: m.transforms[0].transform.translation == Vector3(0.3, 0.0, 0.2)
         )
@@ -819,7 +821,7 @@ def finish(proc: subprocess.Popen[str], stop: bool = False) -> tuple[str, str]:
 
 def tutorial_peer(peers: Callable[..., Peer], tmp_path: Path, d: int) -> Peer:
     dyn = write_json(tmp_path / "d.json", [ts("base_link", "base_laser", t=(0.1, 0.0, 0.2))])
-    return peers(["--dynamic", str(dyn), "--rate", "100"], d, SHARED_PEER)
+    return peers(["--tf", str(dyn), "--rate", "100"], d)
 
 
 def test_cli_demo_listener_over_ros2(peers: Callable[..., Peer], tmp_path: Path) -> None:

@@ -1,7 +1,7 @@
 """The laser_geometry differential test's plumbing, shared by ``tests/test_laser.py`` and
 ``scripts/regen_laser_ref.py``.
 
-* The cases: every LaserScan of the real recordings in ``../shared/data/laser/`` (with all
+* The cases: every LaserScan of the real recordings in ``tests/data/laser/`` (with all
   their ``/tf``), and hand-made edge cases (NaN / inf ranges, empty scans, negative
   increments, cutoffs, channel options, a single beam, the fixed-frame overload).
 * The reference: ``harness.cpp`` (ROS 1 laser_geometry + tf2::BufferCore, compiled with
@@ -41,7 +41,7 @@ from tfbus.sensor_msgs import LaserScan, PointCloud2
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-DATA = ROOT.parent / "shared" / "data" / "laser"
+DATA = ROOT / "tests" / "data" / "laser"
 EXPECTED = HERE / "expected.jsonl.gz"
 SCAN_TOPICS = (
     "/scan",

@@ -4,6 +4,7 @@ Run it with the ROS 2 venv's python (scripts/install_ros2_env.sh), never import 
 
     tf_peer.py --echo                          print every /tf and /tf_static message
     tf_peer.py --publish F.json [--static] [--rate HZ]   publish F's transforms
+    tf_peer.py [--tf-static S.json] [--tf D.json] [--rate HZ]   a robot's broadcasters
 
 --echo prints one JSON line per received TFMessage, at once (flushed):
     {"topic": "/tf", "transforms": [{"parent", "child", "stamp": [sec, nanosec],
@@ -11,6 +12,9 @@ Run it with the ROS 2 venv's python (scripts/install_ros2_env.sh), never import 
 --publish publishes ONE TFMessage holding all of F's entries (same JSON form, "stamp"
 given explicitly, so edge stamps can be sent): on /tf at --rate Hz until stopped, or with
 --static once on /tf_static (tf2_ros' StaticTransformBroadcaster QoS).
+--tf-static / --tf behave as tf2_ros' broadcasters in a node: S's entries once on
+/tf_static in one message, D's on /tf at --rate Hz, each stamped with the node's clock
+at the time it is sent (entries need no "stamp"). Both may be given, with --echo too.
 Prints READY once its endpoints exist; exits cleanly on SIGTERM/SIGINT.
 """
 
@@ -40,9 +44,12 @@ STATIC_SUB_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                             history=HistoryPolicy.KEEP_LAST)
 
 
-def to_msg(d):
+def to_msg(d, now=None):
     t = TransformStamped()
-    t.header.stamp.sec, t.header.stamp.nanosec = int(d["stamp"][0]), int(d["stamp"][1])
+    if now is not None:
+        t.header.stamp = now
+    else:
+        t.header.stamp.sec, t.header.stamp.nanosec = int(d["stamp"][0]), int(d["stamp"][1])
     t.header.frame_id, t.child_frame_id = d["parent"], d["child"]
     # float(): this rclpy build stores a Python int in a float64 field as raw bits
     tr, r = t.transform.translation, t.transform.rotation
@@ -63,6 +70,8 @@ def main():
     ap.add_argument("--echo", action="store_true")
     ap.add_argument("--publish")
     ap.add_argument("--static", action="store_true")
+    ap.add_argument("--tf-static", dest="tf_static")
+    ap.add_argument("--tf", dest="tf_file")
     ap.add_argument("--rate", type=float, default=20.0)
     ap.add_argument("--duration", type=float, default=120.0)
     a = ap.parse_args()
@@ -89,11 +98,26 @@ def main():
                                     STATIC_PUB_QOS if a.static else TF_QOS)
         if a.static:
             pub.publish(msg)
+    if a.tf_static:
+        with open(a.tf_static) as f:
+            statics = json.load(f)
+        static_pub = node.create_publisher(TFMessage, "/tf_static", STATIC_PUB_QOS)
+        now = node.get_clock().now().to_msg()
+        static_pub.publish(TFMessage(transforms=[to_msg(d, now) for d in statics]))
+    dynamic, dynamic_pub = [], None
+    if a.tf_file:
+        with open(a.tf_file) as f:
+            dynamic = json.load(f)
+        dynamic_pub = node.create_publisher(TFMessage, "/tf", TF_QOS)
     print("READY", flush=True)
     end, period, nxt = time.monotonic() + a.duration, 1.0 / a.rate, 0.0
     while not stop and time.monotonic() < end:
-        if pub is not None and not a.static and time.monotonic() >= nxt:
-            pub.publish(msg)
+        if time.monotonic() >= nxt:
+            if pub is not None and not a.static:
+                pub.publish(msg)
+            if dynamic_pub is not None:
+                now = node.get_clock().now().to_msg()
+                dynamic_pub.publish(TFMessage(transforms=[to_msg(d, now) for d in dynamic]))
             nxt = time.monotonic() + period
         rclpy.spin_once(node, timeout_sec=min(period, 0.02))
     node.destroy_node()
