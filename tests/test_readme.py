@@ -164,6 +164,7 @@ INSTALLERS = {
     "install_ros1.sh": "ROS 1",
     "install_ros1_rsp.sh": "ROS 1",
     "install_ros2_env.sh": "ROS 2",
+    "install_tf2_msgs_py.sh": "tf2_geometry_msgs",
 }
 
 
