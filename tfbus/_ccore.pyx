@@ -51,6 +51,7 @@ from cpython.float cimport PyFloat_FromDouble
 from cpython.object cimport PyObject
 from cpython.ref cimport Py_DECREF, Py_INCREF
 from cpython.tuple cimport PyTuple_SET_ITEM
+from cpython.unicode cimport PyUnicode_GET_LENGTH, PyUnicode_READ_CHAR
 
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
@@ -74,6 +75,7 @@ cdef enum:
     C_OK = 0
     C_OLD_DATA = 1
     C_REPEATED_DATA = 2
+    C_INVALID = 3  # CoreBase._insert_one: a tf2 rule is broken (INVALID below)
     # gather outcomes
     G_OK = 0
     G_EMPTY = 1  # no samples: tf2 gives an empty detail
@@ -805,6 +807,11 @@ cdef inline str _as_str(object value):
     return None
 
 
+cdef inline bint _slashed(str frame_id) noexcept:
+    """Whether ``frame_id`` starts with '/' (tf2 ``stripSlash`` strips one)."""
+    return PyUnicode_GET_LENGTH(frame_id) != 0 and PyUnicode_READ_CHAR(frame_id, 0) == 47
+
+
 cdef str _show(object value):
     """``repr`` of a bad value for an error message, bounded in length."""
     cdef str text
@@ -870,6 +877,14 @@ cdef class CoreBase:
     cdef int64_t _cache_ns
     cdef dict _memo
     cdef long long _memo_generation
+    # What the last ``_insert_one`` did, beyond its code (read by ``_store`` and
+    # ``_store_one`` right after it; no list per transform): the stripped ids, the stamp,
+    # the values (for INVALID only) and whether the tree's shape may have changed.
+    cdef str _last_parent
+    cdef str _last_child
+    cdef int64_t _last_stamp
+    cdef object _last_values
+    cdef bint _last_relinked
 
     def __cinit__(self, *args, **kwargs):
         self._frame_ids = {"NO_PARENT": 0}
@@ -902,21 +917,21 @@ cdef class CoreBase:
 
     # ------------------------------------------------------------------ insert
 
-    cdef int _insert_one(self, object ts, str authority, bint is_static, list out) except -1:
+    cdef int _insert_one(self, object ts, str authority, bint is_static) except -1:
         """``BufferCore::setTransformImpl``: check, register frames, store.
 
         Returns the cache's C_OK / C_OLD_DATA / C_REPEATED_DATA, or INVALID (a tf2 rule
-        is broken: ``out`` gets ``[parent, child, values]`` for the message). On C_OK and
-        refusals ``out`` gets ``[parent, child, stamp, relinked]``. A field of the wrong
-        type raises InvalidArgumentException naming it; nothing is stored or registered
-        before every check has passed (no half-stored frame)."""
+        is broken). What it did beyond the code is left in ``_last_parent``,
+        ``_last_child`` (stripped ids), ``_last_stamp`` (ns; not for INVALID),
+        ``_last_values`` (the 7 values, INVALID only) and ``_last_relinked``. A field of
+        the wrong type raises InvalidArgumentException naming it; nothing is stored or
+        registered before every check has passed (no half-stored frame)."""
         cdef object header, tf, tr, rot, stamp_obj, cid, pid, cache
         cdef str child, parent
         cdef double v[7]
         cdef double norm2
         cdef int64_t stamp, old_stamp
         cdef int code, k, old_parent
-        cdef bint relinked
         header = (<tuple>ts)[0]
         tf = (<tuple>ts)[2]
         if not isinstance(header, Header):
@@ -946,10 +961,12 @@ cdef class CoreBase:
             v[k] = _number((<tuple>tr)[k], _FIELDS[k])
         for k in range(4):
             v[3 + k] = _number((<tuple>rot)[k], _FIELDS[3 + k])
-        if len(parent) and parent[0] == "/":
+        if _slashed(parent):
             parent = parent[1:]
-        if len(child) and child[0] == "/":
+        if _slashed(child):
             child = child[1:]
+        self._last_parent = parent
+        self._last_child = child
         # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
         norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
         # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
@@ -962,11 +979,10 @@ cdef class CoreBase:
             or v[2] - v[2] != 0.0
             or not fabs(norm2 - 1.0) < 0.01
         ):
-            out.append(parent)
-            out.append(child)
-            out.append((v[0], v[1], v[2], v[3], v[4], v[5], v[6]))
-            return INVALID
+            self._last_values = (v[0], v[1], v[2], v[3], v[4], v[5], v[6])
+            return C_INVALID
         stamp = stamp_obj._ns
+        self._last_stamp = stamp
         self._generation += 1
         cid = self._frame_ids.get(child)
         if cid is None:
@@ -982,18 +998,13 @@ cdef class CoreBase:
         code = (<Link>cache).c_insert(stamp, pid, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
-        relinked = False
+        self._last_relinked = False
         if code == C_OK:
             if old_parent != <int>pid:
-                relinked = True
+                self._last_relinked = True
             elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
-                relinked = True
-        if code == C_OK:
+                self._last_relinked = True
             self._authority[cid] = authority
-        out.append(parent)
-        out.append(child)
-        out.append(stamp_obj)
-        out.append(relinked)
         return code
 
     def _store(self, transforms, str authority, bint is_static):
@@ -1018,29 +1029,56 @@ cdef class CoreBase:
         cdef list errors = []
         cdef set touched = set()
         cdef bint relinked = False
-        cdef list out = []
         cdef int code
         for ts in transforms:
             try:
                 if not isinstance(ts, TransformStamped):
                     raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
-                code = self._insert_one(ts, authority, is_static, out)
+                code = self._insert_one(ts, authority, is_static)
             except Exception as exc:
                 errors.append((i, exc))
             else:
                 if code == C_OK:
                     stored += 1
-                    touched.add(out[0])
-                    touched.add(out[1])
-                    if out[3]:
+                    touched.add(self._last_child)
+                    touched.add(self._last_parent)
+                    if self._last_relinked:
                         relinked = True
-                elif code == INVALID:
-                    errors.append((i, (out[0], out[1], out[2])))
+                elif code == C_INVALID:
+                    errors.append((i, (self._last_parent, self._last_child, self._last_values)))
                 else:
-                    refusals.append((code, out[1], out[2]._ns))
-            del out[:]
+                    refusals.append((code, self._last_child, self._last_stamp))
             i += 1
         return stored, len(refusals), errors, touched, relinked, refusals
+
+    def _store_one(self, ts, str authority, bint is_static):
+        """One transform, as ``_store`` would store it (``BufferCore.set_transform``'s
+        path: no list, set or tuple on success). Calls nothing back.
+
+        Returns True when stored; else what ``_store`` reports for it: ``(OLD_DATA |
+        REPEATED_DATA, child, stamp ns)`` for a refusal by the cache, ``(INVALID, parent,
+        child, values)`` for a transform that breaks a tf2 rule.
+
+        Raises:
+            TypeError: ``ts`` is not a TransformStamped.
+            InvalidArgumentException: a field of the wrong type (named).
+        """
+        cdef int code
+        if not isinstance(ts, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
+        code = self._insert_one(ts, authority, is_static)
+        if code == C_OK:
+            return True
+        if code == C_INVALID:
+            return (INVALID, self._last_parent, self._last_child, self._last_values)
+        return (code, self._last_child, self._last_stamp)
+
+    def _last_touched(self):
+        """``(child, parent, relinked)`` of the transform ``_store_one`` last stored: the
+        (stripped) ids whose lookups may have changed and whether the tree's shape may
+        have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
+        waits are pending."""
+        return self._last_child, self._last_parent, self._last_relinked
 
     # ------------------------------------------------------------------ queries
 
