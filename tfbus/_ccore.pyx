@@ -717,9 +717,11 @@ def compose_full(leg2, leg1):
 # ---------------------------------------------------------------------- results
 
 cdef extern from "Python.h":
+    ctypedef PyObject* (*allocfunc)(PyTypeObject* tp, Py_ssize_t n) except NULL
     ctypedef struct PyTypeObject:
-        pass
+        allocfunc tp_alloc
     PyObject* PyType_GenericAlloc(PyTypeObject* tp, Py_ssize_t n) except NULL
+    int PyObject_GenericSetAttr(object o, object name, object value) except -1
     void PyObject_GC_UnTrack(void* op)
 
 
@@ -782,9 +784,13 @@ cdef object _stamped(object stamp, str target, str source, const double* v):
 
 
 cdef object _time_of(int64_t ns):
-    """``Time.from_ns(ns)`` for a valid ns, without re-validating it."""
-    cdef object t = Time.__new__(Time)
-    t._ns = ns
+    """``Time.from_ns(ns)`` for a valid ns, without re-validating it: the instance from
+    the type's ``tp_alloc`` (what ``object.__new__`` does, minus looking up and calling
+    it), its ``_ns`` slot set through the generic setattr (the slot's descriptor)."""
+    cdef PyObject* p = (<PyTypeObject*>Time).tp_alloc(<PyTypeObject*>Time, 0)
+    cdef object t = <object>p
+    Py_DECREF(t)  # tp_alloc's reference, now owned by ``t``
+    PyObject_GenericSetAttr(t, "_ns", ns)
     return t
 
 
@@ -854,7 +860,9 @@ cdef tuple _bad_id(str frame_id, int which):
     return (UNKNOWN_FRAME, which)
 
 
-cdef int MEMO_SIZE = 64  # small: a larger memo costs a never-repeated query ~1 µs of churn
+cdef enum:
+    # Slots of the lookup memo (a power of two). Small: a memo holds results alive.
+    MEMO_SIZE = 64
 
 
 cdef class CoreBase:
@@ -875,8 +883,12 @@ cdef class CoreBase:
     cdef public dict _authority
     cdef public long long _generation
     cdef int64_t _cache_ns
-    cdef dict _memo
-    cdef long long _memo_generation
+    # The lookup memo, direct-mapped: slot -> the last result stored there, the time
+    # asked and the generation it is valid for (no key tuple, no dict: a never-repeated
+    # query pays a few compares and one list store).
+    cdef list _memo
+    cdef int64_t _memo_t[MEMO_SIZE]
+    cdef long long _memo_gen[MEMO_SIZE]
     # What the last ``_insert_one`` did, beyond its code (read by ``_store`` and
     # ``_store_one`` right after it; no list per transform): the stripped ids, the stamp,
     # the values (for INVALID only) and whether the tree's shape may have changed.
@@ -887,14 +899,17 @@ cdef class CoreBase:
     cdef bint _last_relinked
 
     def __cinit__(self, *args, **kwargs):
+        cdef int k
         self._frame_ids = {"NO_PARENT": 0}
         self._frame_names = ["NO_PARENT"]
         self._caches = [None]
         self._authority = {}
         self._generation = 0
         self._cache_ns = 0
-        self._memo = {}
-        self._memo_generation = -1
+        self._memo = [None] * MEMO_SIZE
+        for k in range(MEMO_SIZE):
+            self._memo_gen[k] = -1
+            self._memo_t[k] = 0
 
     @property
     def cache_time_ns(self):
@@ -1117,7 +1132,8 @@ cdef class CoreBase:
         cdef int64_t used, lct
         cdef int target_id, source_id, err, where = 0, gcode = 0
         cdef double v[7]
-        cdef object key, hit, out, cache
+        cdef object hit, out, cache
+        cdef size_t slot
         cdef bint expired
         cdef Link link
         cdef double st[7]
@@ -1130,15 +1146,15 @@ cdef class CoreBase:
             source = _as_str(source)
             if source is None:
                 return (INVALID_ARGUMENT, 1)
-        if self._memo_generation == self._generation:
-            key = (target, source, t)
-            hit = self._memo.get(key)
-            if hit is not None:
+        # The memo slot of (target, source, t), by the ids' identity: an equal id in
+        # another string object only misses. A hit is the very query: same objects (the
+        # result holds them), same time, no insert or clear since.
+        slot = (((<size_t><PyObject*>target) >> 4) ^ ((<size_t><PyObject*>source) >> 3)
+                ^ <size_t>t ^ (<size_t>t >> 20)) & (MEMO_SIZE - 1)
+        if self._memo_gen[slot] == self._generation and self._memo_t[slot] == t:
+            hit = self._memo[slot]
+            if (<tuple>hit)[1] is source and (<tuple>(<tuple>hit)[0])[1] is target:
                 return hit
-        else:
-            self._memo.clear()
-            self._memo_generation = self._generation
-            key = (target, source, t)
         if target == source:
             if t == 0:
                 # tf2 stamps the identity with the frame's newest sample; an unknown id
@@ -1167,9 +1183,9 @@ cdef class CoreBase:
                 expired = lct != 0 and used < lct - self._cache_ns
             return (err, where, used, expired)
         out = _stamped(time if used == t and t != 0 else _time_of(used), target, source, v)
-        if len(self._memo) >= MEMO_SIZE:
-            self._memo.clear()
-        self._memo[key] = out
+        self._memo[slot] = out
+        self._memo_t[slot] = t
+        self._memo_gen[slot] = self._generation
         return out
 
     def _chain(self, target_frame, source_frame, time=None):
