@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
-from tfbus.core import BufferCore
+from tfbus.core import COMPILED, BufferCore
 
 NS = 1_000_000_000
 TF2_PYTHON = "/usr/bin/python3"
@@ -387,7 +387,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     sc = scenario(args.quick)
     started = time.perf_counter()
-    print(f"tfbus BufferCore vs tf2_py — Python {sys.version.split()[0]}", flush=True)
+    core = "compiled core" if COMPILED else "pure-Python core (TFBUS_PURE_PYTHON)"
+    print(f"tfbus BufferCore ({core}) vs tf2_py — Python {sys.version.split()[0]}", flush=True)
     ours: dict[str, Any] = {"lookup_s": tfbus_lookups(sc)}
     breakdown = depth2_breakdown(sc)  # in the same state as the lookups above
     ours["set_per_s"] = tfbus_set_rate(sc)
