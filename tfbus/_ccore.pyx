@@ -29,12 +29,16 @@ conformance corpus, ``tests/test_conformance.py``).
 
 * :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``: ``_store``
   (``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
-  the frames it touched), ``_query`` (``lookupTransform`` in one call: checks, memo,
+  the frames it touched) and ``_store_one`` (one transform: True, or what it refused
+  and why), ``_query`` (``lookupTransform`` in one call: checks, memo,
   ``walkToTopParent`` with ``TransformAccum``, the TransformStamped built here; or a
   failure tuple), ``_chain`` (the frames an answer depends on), ``_cwalk`` and
   ``_ccommon_time`` (``getLatestCommonTime``). Nothing here calls into the Python
   subclass: error *messages* and log lines are built by ``tfbus.core`` from the codes
   returned here.
+
+* ``_tf_from_ros1``: a ROS 1 serialised ``TFMessage`` into TransformStamped values, built
+  in C like the lookups' results (``tfbus.bag.decode.decode_ros1`` uses it).
 
 * The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
   ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
