@@ -8,7 +8,7 @@ CORE_STAMP := $(VENV)/.installed-core
 DOCS_STAMP := $(VENV)/.installed-docs
 DIST_STAMP := $(VENV)/.installed-dist
 
-.PHONY: install test lint demo bench docs docs-serve perf-tables dist dist-check test-matrix clean
+.PHONY: install test lint demo bench bench-check docs docs-serve perf-tables dist dist-check test-matrix clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,11 @@ demo: $(CORE_STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
+
+# The speed targets of issue 22 against tf2_py, PASS/FAIL per row (not part of `make test`:
+# no timing is a test). Run it before and after a change to the core (CONTRIBUTING.md).
+bench-check: $(STAMP)
+	$(BIN)/python benchmarks/bench_check.py
 
 # The documentation site into site/, warnings are errors.
 docs: $(DOCS_STAMP)

@@ -7,7 +7,8 @@ Prints, on this machine:
 * lookup latency (µs per call) for chains of depth 1, 2, 8 and 32 (root <- leaf), at
   time 0, at interpolated times that vary from call to call (so no result caching can
   help), and at one fixed interpolated time;
-* ``set_transform`` rate (single calls, 100 Hz samples of many frames, cache pruning on);
+* ``set_transform`` rate (single calls, 100 Hz samples of many frames, cache pruning on),
+  and ns per call on a chain of 10 links stored in order (issue 22: <= 0.35x tf2_py);
 * memory per cached sample (1000 frames x 10 s x 100 Hz = 1M samples): tracemalloc and
   RSS growth for tfbus, RSS growth for tf2 (C++ allocations are invisible to tracemalloc).
 
@@ -34,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
-from tfbus.core import BufferCore
+from tfbus.core import COMPILED, BufferCore
 
 NS = 1_000_000_000
 TF2_PYTHON = "/usr/bin/python3"
@@ -74,6 +75,7 @@ def scenario(quick: bool) -> dict[str, Any]:
         "set_t0_ns": t0,
         "set_frames": 100,
         "set_stamps": 500 if quick else 2_000,  # 20 s at 100 Hz: pruning is active
+        "chain_steps": 500 if quick else 2_000,  # set_transform on a chain of 10 links
         "mem_frames": 100 if quick else 1_000,
         "mem_samples": 1_000,  # 10 s at 100 Hz, all within cache_time
     }
@@ -159,6 +161,24 @@ def tfbus_lookups(sc: dict[str, Any]) -> dict[str, float]:
         )
         out[f"{depth}/zero_fresh"] = _fresh_zero(core, leaf, sc)
     return out
+
+
+def tfbus_set_chain(sc: dict[str, Any]) -> float:
+    """Seconds per ``set_transform`` on a chain of 10 links stored in order, 100 Hz steps
+    (best of the repeats, a fresh buffer each)."""
+    msgs = [
+        _message(f"f{i}", f"f{i + 1}", sc["set_t0_ns"] + k * sc["period_ns"], k + i)
+        for k in range(sc["chain_steps"])
+        for i in range(10)
+    ]
+    best = float("inf")
+    for _ in range(sc["repeats"]):
+        setter = BufferCore(cache_time=sc["cache_time_s"]).set_transform
+        start = time.perf_counter()
+        for m in msgs:
+            setter(m, "bench")
+        best = min(best, (time.perf_counter() - start) / len(msgs))
+    return best
 
 
 def tfbus_set_rate(sc: dict[str, Any]) -> float:
@@ -337,6 +357,13 @@ def report(sc: dict[str, Any], ours: dict[str, Any], ref: dict[str, Any] | str) 
         f"{'set_transform, single calls':36} {a / 1e6:8.3f} M/s "
         f"{'—' if b is None else f'{b / 1e6:8.3f} M/s':>12} {ratio:>10}  >= 0.5x tf2_py  {verdict}"
     )
+    a, b = ours["set_chain_s"], theirs.get("set_chain_s")
+    ratio = f"{a / b:9.2f}x" if b else ""
+    verdict = "" if b is None else ("ok" if a <= 0.35 * b else "SLOWER")
+    print(
+        f"{'set_transform, chain of 10, in order':36} {a * 1e9:8.0f} ns "
+        f"{'—' if b is None else f'{b * 1e9:8.0f} ns':>12} {ratio:>10}  <= 0.35x tf2_py  {verdict}"
+    )
     traced = ours["traced_bytes_per_sample"]
     verdict = "ok" if traced <= MEMORY_TARGET else "TOO BIG"
     samples = sc["mem_frames"] * sc["mem_samples"]
@@ -360,10 +387,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     sc = scenario(args.quick)
     started = time.perf_counter()
-    print(f"tfbus BufferCore vs tf2_py — Python {sys.version.split()[0]}", flush=True)
+    core = "compiled core" if COMPILED else "pure-Python core (TFBUS_PURE_PYTHON)"
+    print(f"tfbus BufferCore ({core}) vs tf2_py — Python {sys.version.split()[0]}", flush=True)
     ours: dict[str, Any] = {"lookup_s": tfbus_lookups(sc)}
     breakdown = depth2_breakdown(sc)  # in the same state as the lookups above
     ours["set_per_s"] = tfbus_set_rate(sc)
+    ours["set_chain_s"] = tfbus_set_chain(sc)
     ours.update(tfbus_memory(sc))
     ref = "skipped (--no-tf2)" if args.no_tf2 else tf2_side(sc)
     # Other work may share the machine: measure tfbus's lookups again after tf2's and

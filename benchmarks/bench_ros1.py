@@ -30,9 +30,9 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(HERE))
 
-from ros1_harness import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+from _ros1_peers import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
 
 
 def build(out: Path) -> None:

@@ -4,6 +4,8 @@
   (each link's samples at its own stamps), vs a loop of ``tf2_py`` lookups
   (``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6). Target ≤ 0.03x,
   aim ≤ 100 ns per time.
+  Then small N (1 to 128 random times): the batch against a loop of single lookups, and
+  the N from which the batch is faster.
 * A 720-beam scan projected and transformed into odom (laser_geometry's interpolation)
   vs the C++ laser_geometry (``benchmarks/laser_geometry_bench.cpp``, built here with g++
   and pkg-config). Target ≤ 2x.
@@ -156,6 +158,35 @@ def bench_lookups(n: int) -> None:
     print(f"  tf2_py lookup loop          {ref * 1e3:8.2f} ms  {ref / n * 1e9:7.0f} ns/time")
     print(f"  ratio tfbus batch / tf2_py loop: {ours / ref:.4f}x (target <= 0.03x)"
           f"  [our median / tf2_py best: {med / ref:.4f}x]")  # fmt: skip
+
+
+def bench_small_batches() -> None:
+    """Where the batch starts paying: ``lookup_transforms`` of N random times vs a loop of
+    ``lookup_transform`` over the same N, depth 8 (medians of 200 draws each)."""
+    print(f"\nlookup_transforms vs a lookup_transform loop, small N, depth {DEPTH}")
+    core = chain_core()
+    rng = np.random.default_rng(5)
+    pool = query_times(4096)
+    leaf = f"f{DEPTH}"
+    even = None
+    for n in (1, 2, 4, 8, 16, 32, 64, 128):
+        batch, loop = [], []
+        for _ in range(200):
+            times = rng.choice(pool, n, replace=False)
+            stamps = [Time.from_ns(int(t)) for t in times]
+            t0 = time.perf_counter()
+            core.lookup_transforms("f0", leaf, times)
+            batch.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            for t in stamps:
+                core.lookup_transform("f0", leaf, t)
+            loop.append(time.perf_counter() - t0)
+        b, lo = statistics.median(batch), statistics.median(loop)
+        if even is None and b < lo:
+            even = n
+        print(f"  N = {n:4d}   batch {b * 1e6:7.2f} us   loop {lo * 1e6:7.2f} us   {b / lo:5.2f}x")
+    verdict = f"the batch is faster from N = {even} on" if even else "the loop is faster at every N"
+    print(f"  {verdict}")
 
 
 def _scan(beams: int) -> LaserScan:
@@ -319,6 +350,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     print(f"tfbus sensor streams — Python {sys.version.split()[0]}")
     bench_lookups(10_000)
+    bench_small_batches()
     bench_laser(720, 200 if args.quick else 1000)
     bench_filter(5_000 if args.quick else 50_000)
 

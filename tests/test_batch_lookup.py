@@ -218,6 +218,41 @@ def test_chain_rows_and_split_in_two_threads(simd: bool, target: str, source: st
     assert got.valid.all()
 
 
+@pytest.mark.parametrize("order", ["random", "reversed", "duplicated", "mixed", "short"])
+def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> None:
+    """Unsorted times are walked sorted and written back to their rows: each row is the
+    single lookup at its own time (bit for bit on the scalar loops), and the same bits
+    as the sorted batch's row for that time; time 0 and failing times keep their rows."""
+    core = _chain(8)
+    rng = np.random.default_rng(2)
+    base = rng.integers(10, 999_000_000, 20_000)  # above the two-thread split
+    times = {
+        "random": base,
+        "reversed": np.sort(base)[::-1].copy(),
+        "duplicated": rng.permutation(np.repeat(base[:5_000], 4)),  # each time 4 times
+        # time 0, times before and after the data (masked), exact stamps
+        "mixed": rng.permutation(
+            np.r_[base[:3_000], [0] * 5, [1, 2, 5, 2_000_000_000] * 3, [10_000_008] * 7]
+        ),
+        "short": base[:63],  # below the rows from which unsorted times are sorted
+    }[order]
+    got = core.lookup_transforms("f0", "f8", times, errors="mask")
+    order_idx = np.argsort(times, kind="stable")
+    ordered = core.lookup_transforms("f0", "f8", times[order_idx], errors="mask")
+    for name in ("translations", "rotations", "stamps", "valid"):
+        a, b = getattr(got, name)[order_idx], getattr(ordered, name)
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), name
+    for i in range(times.shape[0]):
+        single = _single(core, "f0", "f8", int(times[i]))
+        if isinstance(single, Exception):
+            assert not got.valid[i] and np.isnan(got.translations[i]).all()
+            assert got.stamps[i] == times[i]
+        else:
+            assert got.valid[i]
+            _check_row(got, i, single, simd)
+    assert (~got.valid).sum() == (12 if order == "mixed" else 0)  # before and after the data
+
+
 def test_first_failing_time_decides_the_exception() -> None:
     core = _chain(2)
     times = [5_000_000, 2_000_000_000, 1, 3_000_000]

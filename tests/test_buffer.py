@@ -26,7 +26,7 @@ from tfbus import (
 )
 from tfbus.buffer import Buffer
 from tfbus.clock import ManualClock, SystemClock
-from tfbus.core import MAX_GRAPH_DEPTH
+from tfbus.core import MAX_GRAPH_DEPTH, SetResult
 from tfbus.time import Duration
 
 pytestmark = pytest.mark.anyio
@@ -100,6 +100,29 @@ async def test_a_batch_insert_wakes_the_waits_it_completes_once() -> None:
     assert checks == 1  # rechecked once, after the whole batch, not per transform
     assert result[0].transform.translation.x == pytest.approx(3.5)
     assert buf.pending_waits == 0
+
+
+@pytest.mark.parametrize("insert", ["set_transform", "set_transform_static", "insert_transform"])
+async def test_each_single_insert_wakes_the_waits_on_its_frames(insert: str) -> None:
+    """The single inserts store through the core's one-transform path (no batch result);
+    the Buffer still re-checks the waits on the two frames: here a wait whose path the
+    insert completes by linking a new frame (the tree's shape changed)."""
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("map", "odom", T0, x=1.0))
+    result: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        result.append(await buf.lookup_transform_async("map", "base", T0))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        assert buf.pending_waits == 1
+        stored = getattr(buf, insert)(tf("odom", "base", T0, x=2.0), "test")
+        assert stored in (True, SetResult.STORED)
+        await settle()
+        assert buf.pending_waits == 0 and result, "the insert did not wake the wait"
+    assert result[0].transform.translation.x == pytest.approx(3.0)
 
 
 async def test_future_time_resolves_with_interpolation_once_bracketed() -> None:

@@ -541,6 +541,36 @@ def test_store_argument_errors_alike() -> None:
     same(lambda c: bufs[c]._ccommon_time(1, 2))
 
 
+def test_store_one_alike() -> None:
+    """The single-transform store (``set_transform``'s path) reports the same as the
+    batch, in both cores: True, a refusal ``(code, child, stamp)``, a broken rule
+    ``(INVALID, parent, child, values)``, or the same exception; then the frames it
+    touched."""
+    bufs = {name: cls() for name, cls in BUFFERS.items()}
+    unit = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    items = [
+        _stamped("/a", "/b", 10, unit),  # stored: a new link
+        _stamped("a", "b", 10, unit),  # TF_REPEATED_DATA
+        _stamped("a", "b", 20, unit),  # stored, same shape
+        _stamped("c", "b", 30, unit),  # stored, another parent: relinked
+        _stamped("a", "b", 1, unit),  # stored out of order, parent a again: relinked
+        _stamped("a", "a", 40, unit),  # INVALID: self transform
+        _stamped("a", "d", 40, (math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0)),  # INVALID
+        _stamped("a", "d", 40, unit)._replace(header=None),  # a field of the wrong type
+        "not a transform",
+    ]
+    for item in items:
+        first = same(lambda c, i=item: bufs[c]._store_one(i, "au", False))
+        if first == ("ok", canon(True)):
+            same(lambda c: bufs[c]._last_touched())
+    old = _stamped("a", "e", 0, unit)  # TF_OLD_DATA: 20 s older than the newest sample
+    same(lambda c: bufs[c]._store_one(_stamped("a", "e", 20 * 10**9, unit), "au", False))
+    assert same(lambda c: bufs[c]._store_one(old, "au", False)) == ("ok", canon((1, "e", 0)))
+    same(lambda c: bufs[c]._store_one(old, 5, False))  # authority not a str
+    same(lambda c: bufs[c]._store_one(_stamped("s", "t", 3, unit), "au", 1))  # static
+    same(lambda c: list(bufs[c].frame_info()))
+
+
 def test_memo_and_identity_alike() -> None:
     """The memo: a repeated query returns the same object until the next insert; a
     lookup at the stored stamp keeps the caller's Time object."""

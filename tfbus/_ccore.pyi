@@ -1,7 +1,7 @@
 """Type stubs for the compiled core (``tfbus/_ccore.pyx``)."""
 
 from collections.abc import Iterable, Sequence
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -92,6 +92,10 @@ class CoreBase:
         bool,
         list[tuple[int, str, int]],
     ]: ...
+    def _store_one(
+        self, ts: Any, authority: str, is_static: bool
+    ) -> Literal[True] | tuple[int, str, int] | tuple[int, str, str, _Tf7]: ...
+    def _last_touched(self) -> tuple[str, str, bool]: ...
     def _id_status(self, frame_id: object) -> int: ...
     def _query(self, target: str, source: str, time: Time) -> TransformStamped | _Failure: ...
     def _chain(self, target_frame: str, source_frame: str, time: Time | None = None) -> list[

@@ -29,12 +29,16 @@ conformance corpus, ``tests/test_conformance.py``).
 
 * :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``: ``_store``
   (``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
-  the frames it touched), ``_query`` (``lookupTransform`` in one call: checks, memo,
+  the frames it touched) and ``_store_one`` (one transform: True, or what it refused
+  and why), ``_query`` (``lookupTransform`` in one call: checks, memo,
   ``walkToTopParent`` with ``TransformAccum``, the TransformStamped built here; or a
   failure tuple), ``_chain`` (the frames an answer depends on), ``_cwalk`` and
   ``_ccommon_time`` (``getLatestCommonTime``). Nothing here calls into the Python
   subclass: error *messages* and log lines are built by ``tfbus.core`` from the codes
   returned here.
+
+* ``_tf_from_ros1``: a ROS 1 serialised ``TFMessage`` into TransformStamped values, built
+  in C like the lookups' results (``tfbus.bag.decode.decode_ros1`` uses it).
 
 * The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
   ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
@@ -51,6 +55,7 @@ from cpython.float cimport PyFloat_FromDouble
 from cpython.object cimport PyObject
 from cpython.ref cimport Py_DECREF, Py_INCREF
 from cpython.tuple cimport PyTuple_SET_ITEM
+from cpython.unicode cimport PyUnicode_GET_LENGTH, PyUnicode_READ_CHAR
 
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
@@ -74,6 +79,7 @@ cdef enum:
     C_OK = 0
     C_OLD_DATA = 1
     C_REPEATED_DATA = 2
+    C_INVALID = 3  # CoreBase._insert_one: a tf2 rule is broken (INVALID below)
     # gather outcomes
     G_OK = 0
     G_EMPTY = 1  # no samples: tf2 gives an empty detail
@@ -715,9 +721,11 @@ def compose_full(leg2, leg1):
 # ---------------------------------------------------------------------- results
 
 cdef extern from "Python.h":
+    ctypedef PyObject* (*allocfunc)(PyTypeObject* tp, Py_ssize_t n) except NULL
     ctypedef struct PyTypeObject:
-        pass
+        allocfunc tp_alloc
     PyObject* PyType_GenericAlloc(PyTypeObject* tp, Py_ssize_t n) except NULL
+    int PyObject_GenericSetAttr(object o, object name, object value) except -1
     void PyObject_GC_UnTrack(void* op)
 
 
@@ -780,10 +788,101 @@ cdef object _stamped(object stamp, str target, str source, const double* v):
 
 
 cdef object _time_of(int64_t ns):
-    """``Time.from_ns(ns)`` for a valid ns, without re-validating it."""
-    cdef object t = Time.__new__(Time)
-    t._ns = ns
+    """``Time.from_ns(ns)`` for a valid ns, without re-validating it: the instance from
+    the type's ``tp_alloc`` (what ``object.__new__`` does, minus looking up and calling
+    it), its ``_ns`` slot set through the generic setattr (the slot's descriptor)."""
+    cdef PyObject* p = (<PyTypeObject*>Time).tp_alloc(<PyTypeObject*>Time, 0)
+    cdef object t = <object>p
+    Py_DECREF(t)  # tp_alloc's reference, now owned by ``t``
+    PyObject_GenericSetAttr(t, "_ns", ns)
     return t
+
+
+# ---------------------------------------------------------------------- ROS 1 wire
+
+from struct import error as _StructError
+
+from cpython.list cimport PyList_New, PyList_SET_ITEM
+from cpython.unicode cimport PyUnicode_DecodeUTF8
+from libc.stdint cimport uint32_t
+from libc.string cimport memcmp
+
+
+cdef inline uint32_t _u32le(const unsigned char* p) noexcept:
+    return <uint32_t>p[0] | (<uint32_t>p[1] << 8) | (<uint32_t>p[2] << 16) | (<uint32_t>p[3] << 24)
+
+
+cdef enum:
+    _ROS1_TF_MIN = 76  # bytes of a transform with empty ids: 4 u32 + 2 u32 + 7 float64
+
+
+def _tf_from_ros1(const unsigned char[::1] buf):
+    """The transforms of a ROS 1 serialised ``tf2_msgs/TFMessage`` (``u32 count``, then
+    per transform ``u32 seq, u32 sec, u32 nsec, u32 len, frame_id, u32 len,
+    child_frame_id, 7 float64``, little endian), built in C: what
+    ``tfbus.bag.decode.decode_ros1``'s struct decoder returns, equal values (frame ids
+    decoded as strict UTF-8; a transform whose serialised header is byte for byte the
+    previous one's shares its Header; bytes after the last transform are ignored).
+    Little-endian hosts only (the doubles are read in host order).
+
+    Raises:
+        struct.error: the payload is shorter than its contents.
+        UnicodeDecodeError: a frame id is not UTF-8.
+    """
+    cdef Py_ssize_t size = buf.shape[0], off = 4, head, hlen = 0, prev = -1, k
+    cdef const unsigned char* p
+    cdef uint32_t n, flen, clen, sec, nsec
+    cdef double v[7]
+    cdef object header = None, child, vec, rot, tf, ts
+    cdef list out
+    if size < 4:
+        raise _StructError("message shorter than its contents")
+    p = &buf[0]
+    n = _u32le(p)
+    if n > (size - 4) // _ROS1_TF_MIN:
+        raise _StructError("message shorter than its contents")
+    out = PyList_New(n)
+    for k in range(n):
+        # The list owns a reference to None in each slot until it is set (PyList_New
+        # leaves NULLs, which a failure below must not expose).
+        Py_INCREF(None)
+        PyList_SET_ITEM(out, k, None)
+    for k in range(n):
+        head = off
+        if off + 16 > size:
+            raise _StructError("message shorter than its contents")
+        flen = _u32le(p + off + 12)
+        if flen > size - off - 16:
+            raise _StructError("message shorter than its contents")
+        off += 16 + flen
+        if not (prev >= 0 and hlen == off - head and memcmp(p + prev, p + head, hlen) == 0):
+            sec = _u32le(p + head + 4)
+            nsec = _u32le(p + head + 8)
+            header = _named(
+                Header,
+                _time_of(<int64_t>sec * 1000000000 + nsec),
+                PyUnicode_DecodeUTF8(<const char*>(p + head + 16), flen, NULL),
+            )
+            prev = head
+            hlen = off - head
+        if off + 4 > size:
+            raise _StructError("message shorter than its contents")
+        clen = _u32le(p + off)
+        if clen > size - off - 4 or size - off - 4 - clen < 56:
+            raise _StructError("message shorter than its contents")
+        child = PyUnicode_DecodeUTF8(<const char*>(p + off + 4), clen, NULL)
+        off += 4 + clen
+        memcpy(v, p + off, 7 * sizeof(double))
+        off += 56
+        vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
+                      PyFloat_FromDouble(v[2]))
+        PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
+        rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
+        tf = _named(Transform, vec, rot)
+        PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
+        ts = _named3(TransformStamped, header, child, tf)
+        out[k] = ts
+    return out
 
 
 # Validation outcomes of an inserted transform (beyond the cache's OK / OLD / REPEATED).
@@ -803,6 +902,11 @@ cdef inline str _as_str(object value):
     if isinstance(value, str):
         return str.__str__(value)
     return None
+
+
+cdef inline bint _slashed(str frame_id) noexcept:
+    """Whether ``frame_id`` starts with '/' (tf2 ``stripSlash`` strips one)."""
+    return PyUnicode_GET_LENGTH(frame_id) != 0 and PyUnicode_READ_CHAR(frame_id, 0) == 47
 
 
 cdef str _show(object value):
@@ -847,7 +951,9 @@ cdef tuple _bad_id(str frame_id, int which):
     return (UNKNOWN_FRAME, which)
 
 
-cdef int MEMO_SIZE = 64  # small: a larger memo costs a never-repeated query ~1 µs of churn
+cdef enum:
+    # Slots of the lookup memo (a power of two). Small: a memo holds results alive.
+    MEMO_SIZE = 64
 
 
 cdef class CoreBase:
@@ -868,18 +974,33 @@ cdef class CoreBase:
     cdef public dict _authority
     cdef public long long _generation
     cdef int64_t _cache_ns
-    cdef dict _memo
-    cdef long long _memo_generation
+    # The lookup memo, direct-mapped: slot -> the last result stored there, the time
+    # asked and the generation it is valid for (no key tuple, no dict: a never-repeated
+    # query pays a few compares and one list store).
+    cdef list _memo
+    cdef int64_t _memo_t[MEMO_SIZE]
+    cdef long long _memo_gen[MEMO_SIZE]
+    # What the last ``_insert_one`` did, beyond its code (read by ``_store`` and
+    # ``_store_one`` right after it; no list per transform): the stripped ids, the stamp,
+    # the values (for INVALID only) and whether the tree's shape may have changed.
+    cdef str _last_parent
+    cdef str _last_child
+    cdef int64_t _last_stamp
+    cdef object _last_values
+    cdef bint _last_relinked
 
     def __cinit__(self, *args, **kwargs):
+        cdef int k
         self._frame_ids = {"NO_PARENT": 0}
         self._frame_names = ["NO_PARENT"]
         self._caches = [None]
         self._authority = {}
         self._generation = 0
         self._cache_ns = 0
-        self._memo = {}
-        self._memo_generation = -1
+        self._memo = [None] * MEMO_SIZE
+        for k in range(MEMO_SIZE):
+            self._memo_gen[k] = -1
+            self._memo_t[k] = 0
 
     @property
     def cache_time_ns(self):
@@ -902,21 +1023,21 @@ cdef class CoreBase:
 
     # ------------------------------------------------------------------ insert
 
-    cdef int _insert_one(self, object ts, str authority, bint is_static, list out) except -1:
+    cdef int _insert_one(self, object ts, str authority, bint is_static) except -1:
         """``BufferCore::setTransformImpl``: check, register frames, store.
 
         Returns the cache's C_OK / C_OLD_DATA / C_REPEATED_DATA, or INVALID (a tf2 rule
-        is broken: ``out`` gets ``[parent, child, values]`` for the message). On C_OK and
-        refusals ``out`` gets ``[parent, child, stamp, relinked]``. A field of the wrong
-        type raises InvalidArgumentException naming it; nothing is stored or registered
-        before every check has passed (no half-stored frame)."""
+        is broken). What it did beyond the code is left in ``_last_parent``,
+        ``_last_child`` (stripped ids), ``_last_stamp`` (ns; not for INVALID),
+        ``_last_values`` (the 7 values, INVALID only) and ``_last_relinked``. A field of
+        the wrong type raises InvalidArgumentException naming it; nothing is stored or
+        registered before every check has passed (no half-stored frame)."""
         cdef object header, tf, tr, rot, stamp_obj, cid, pid, cache
         cdef str child, parent
         cdef double v[7]
         cdef double norm2
         cdef int64_t stamp, old_stamp
         cdef int code, k, old_parent
-        cdef bint relinked
         header = (<tuple>ts)[0]
         tf = (<tuple>ts)[2]
         if not isinstance(header, Header):
@@ -946,10 +1067,12 @@ cdef class CoreBase:
             v[k] = _number((<tuple>tr)[k], _FIELDS[k])
         for k in range(4):
             v[3 + k] = _number((<tuple>rot)[k], _FIELDS[3 + k])
-        if len(parent) and parent[0] == "/":
+        if _slashed(parent):
             parent = parent[1:]
-        if len(child) and child[0] == "/":
+        if _slashed(child):
             child = child[1:]
+        self._last_parent = parent
+        self._last_child = child
         # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
         norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
         # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
@@ -962,11 +1085,10 @@ cdef class CoreBase:
             or v[2] - v[2] != 0.0
             or not fabs(norm2 - 1.0) < 0.01
         ):
-            out.append(parent)
-            out.append(child)
-            out.append((v[0], v[1], v[2], v[3], v[4], v[5], v[6]))
-            return INVALID
+            self._last_values = (v[0], v[1], v[2], v[3], v[4], v[5], v[6])
+            return C_INVALID
         stamp = stamp_obj._ns
+        self._last_stamp = stamp
         self._generation += 1
         cid = self._frame_ids.get(child)
         if cid is None:
@@ -982,18 +1104,13 @@ cdef class CoreBase:
         code = (<Link>cache).c_insert(stamp, pid, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
-        relinked = False
+        self._last_relinked = False
         if code == C_OK:
             if old_parent != <int>pid:
-                relinked = True
+                self._last_relinked = True
             elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
-                relinked = True
-        if code == C_OK:
+                self._last_relinked = True
             self._authority[cid] = authority
-        out.append(parent)
-        out.append(child)
-        out.append(stamp_obj)
-        out.append(relinked)
         return code
 
     def _store(self, transforms, str authority, bint is_static):
@@ -1018,29 +1135,56 @@ cdef class CoreBase:
         cdef list errors = []
         cdef set touched = set()
         cdef bint relinked = False
-        cdef list out = []
         cdef int code
         for ts in transforms:
             try:
                 if not isinstance(ts, TransformStamped):
                     raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
-                code = self._insert_one(ts, authority, is_static, out)
+                code = self._insert_one(ts, authority, is_static)
             except Exception as exc:
                 errors.append((i, exc))
             else:
                 if code == C_OK:
                     stored += 1
-                    touched.add(out[0])
-                    touched.add(out[1])
-                    if out[3]:
+                    touched.add(self._last_child)
+                    touched.add(self._last_parent)
+                    if self._last_relinked:
                         relinked = True
-                elif code == INVALID:
-                    errors.append((i, (out[0], out[1], out[2])))
+                elif code == C_INVALID:
+                    errors.append((i, (self._last_parent, self._last_child, self._last_values)))
                 else:
-                    refusals.append((code, out[1], out[2]._ns))
-            del out[:]
+                    refusals.append((code, self._last_child, self._last_stamp))
             i += 1
         return stored, len(refusals), errors, touched, relinked, refusals
+
+    def _store_one(self, ts, str authority, bint is_static):
+        """One transform, as ``_store`` would store it (``BufferCore.set_transform``'s
+        path: no list, set or tuple on success). Calls nothing back.
+
+        Returns True when stored; else what ``_store`` reports for it: ``(OLD_DATA |
+        REPEATED_DATA, child, stamp ns)`` for a refusal by the cache, ``(INVALID, parent,
+        child, values)`` for a transform that breaks a tf2 rule.
+
+        Raises:
+            TypeError: ``ts`` is not a TransformStamped.
+            InvalidArgumentException: a field of the wrong type (named).
+        """
+        cdef int code
+        if not isinstance(ts, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
+        code = self._insert_one(ts, authority, is_static)
+        if code == C_OK:
+            return True
+        if code == C_INVALID:
+            return (INVALID, self._last_parent, self._last_child, self._last_values)
+        return (code, self._last_child, self._last_stamp)
+
+    def _last_touched(self):
+        """``(child, parent, relinked)`` of the transform ``_store_one`` last stored: the
+        (stripped) ids whose lookups may have changed and whether the tree's shape may
+        have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
+        waits are pending."""
+        return self._last_child, self._last_parent, self._last_relinked
 
     # ------------------------------------------------------------------ queries
 
@@ -1079,7 +1223,8 @@ cdef class CoreBase:
         cdef int64_t used, lct
         cdef int target_id, source_id, err, where = 0, gcode = 0
         cdef double v[7]
-        cdef object key, hit, out, cache
+        cdef object hit, out, cache
+        cdef size_t slot
         cdef bint expired
         cdef Link link
         cdef double st[7]
@@ -1092,15 +1237,15 @@ cdef class CoreBase:
             source = _as_str(source)
             if source is None:
                 return (INVALID_ARGUMENT, 1)
-        if self._memo_generation == self._generation:
-            key = (target, source, t)
-            hit = self._memo.get(key)
-            if hit is not None:
+        # The memo slot of (target, source, t), by the ids' identity: an equal id in
+        # another string object only misses. A hit is the very query: same objects (the
+        # result holds them), same time, no insert or clear since.
+        slot = (((<size_t><PyObject*>target) >> 4) ^ ((<size_t><PyObject*>source) >> 3)
+                ^ <size_t>t ^ (<size_t>t >> 20)) & (MEMO_SIZE - 1)
+        if self._memo_gen[slot] == self._generation and self._memo_t[slot] == t:
+            hit = self._memo[slot]
+            if (<tuple>hit)[1] is source and (<tuple>(<tuple>hit)[0])[1] is target:
                 return hit
-        else:
-            self._memo.clear()
-            self._memo_generation = self._generation
-            key = (target, source, t)
         if target == source:
             if t == 0:
                 # tf2 stamps the identity with the frame's newest sample; an unknown id
@@ -1129,9 +1274,9 @@ cdef class CoreBase:
                 expired = lct != 0 and used < lct - self._cache_ns
             return (err, where, used, expired)
         out = _stamped(time if used == t and t != 0 else _time_of(used), target, source, v)
-        if len(self._memo) >= MEMO_SIZE:
-            self._memo.clear()
-        self._memo[key] = out
+        self._memo[slot] = out
+        self._memo_t[slot] = t
+        self._memo_gen[slot] = self._generation
         return out
 
     def _chain(self, target_frame, source_frame, time=None):
@@ -1399,6 +1544,16 @@ cdef extern from "pythread.h":
 
 cdef int _NCPU = os.cpu_count() or 1
 cdef Py_ssize_t _SPLIT_ROWS = 8192  # below this a second thread costs more than it saves
+cdef Py_ssize_t _SORT_ROWS = 64  # below this, unsorted times are walked as given
+
+
+cdef bint _nondecreasing(const int64_t* t, Py_ssize_t n) noexcept nogil:
+    """Whether ``t[0] <= t[1] <= ... <= t[n - 1]``."""
+    cdef Py_ssize_t i
+    for i in range(1, n):
+        if t[i] < t[i - 1]:
+            return False
+    return True
 
 
 cdef extern from *:
@@ -1988,6 +2143,7 @@ cdef struct _BJob:
     bint src_early
     bint tgt_early
     const int64_t* times
+    const int64_t* order  # row r of ``times`` is row order[r] of out / ok; NULL: r itself
     Py_ssize_t n_rows
     double* out
     signed char* ok
@@ -2006,16 +2162,19 @@ cdef enum:
 
 cdef inline int _bstore(_BJob* job, Py_ssize_t rb, int m, const signed char* good,
                         double block[7][_BLOCK]) noexcept nogil:
-    """Write the good rows of a block (rows ``rb`` .. ``rb + m - 1``) to ``job.out`` and
-    mark them answered; how many were written."""
+    """Write the good rows of a block (rows ``rb`` .. ``rb + m - 1`` of ``job.times``)
+    to ``job.out`` (at ``job.order``'s rows when the times were sorted) and mark them
+    answered; how many were written."""
     cdef int j, k, n = 0
+    cdef Py_ssize_t row
     cdef double* o
     for j in range(m):
         if good[j]:
-            o = &job.out[(rb + j) * 7]
+            row = rb + j if job.order == NULL else job.order[rb + j]
+            o = &job.out[row * 7]
             for k in range(7):
                 o[k] = block[k][j]
-            job.ok[rb + j] = 1
+            job.ok[row] = 1
             n += 1
     return n
 
@@ -2077,8 +2236,9 @@ cdef void _bworker(void* arg) noexcept nogil:
 
 
 cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink* tgt,
-                        int nt, bint tgt_early, const int64_t* times, Py_ssize_t n_rows,
-                        double* out, signed char* ok, bint vector_sin) except -1:
+                        int nt, bint tgt_early, const int64_t* times, const int64_t* order,
+                        Py_ssize_t n_rows, double* out, signed char* ok,
+                        bint vector_sin) except -1:
     """``_brows`` over all rows; from ``_SPLIT_ROWS`` rows on (several CPUs), a second
     thread claims chunks too. The split is dynamic (chunks of ``_CHUNK`` rows claimed
     from a shared counter), so a core busy with other work slows the call down by at
@@ -2096,6 +2256,7 @@ cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink*
     job.src_early = src_early
     job.tgt_early = tgt_early
     job.times = times
+    job.order = order
     job.n_rows = n_rows
     job.out = out
     job.ok = ok
@@ -2146,7 +2307,10 @@ def batch_lookup(CoreBase core, object target_frame, object source_frame,
     caller's (identity) case and returns -1 too.
 
     The path is resolved once; each time is then gathered and accumulated along it in C
-    (no GIL), in ``_walk``'s arithmetic order. Rows that plan cannot take (time 0,
+    (no GIL), in ``_walk``'s arithmetic order. ``times`` may come in any order: from 64
+    rows on, times that are not non-decreasing are walked sorted (numpy's argsort; the
+    kernel's cursor and per-interval constants pay off on sorted times) and each row is
+    written back to its place (a row's value does not depend on the order). Rows that plan cannot take (time 0,
     a link with several parents, a span >= 2**53 ns, a row missing data) go through
     ``_walk`` itself. From 8192 rows on a machine with several CPUs, a second thread
     claims chunks of rows alongside the caller (the caller keeps the GIL and waits for a
@@ -2180,6 +2344,10 @@ cdef Py_ssize_t _batch_lookup(CoreBase core, object target_frame, object source_
     cdef bint src_early = False, tgt_early = False, planned
     cdef int64_t used
     cdef list caches = core._caches
+    cdef const int64_t* row_times
+    cdef const int64_t* order = NULL
+    cdef const int64_t[::1] sorted_times
+    cdef const int64_t[::1] sort_order
     if (out.shape[0] != n_rows or out.shape[1] != 7 or ok.shape[0] != n_rows
             or stamps.shape[0] != n_rows):
         raise ValueError("batch_lookup: out must be (N, 7), stamps and ok (N,) for N times")
@@ -2196,8 +2364,17 @@ cdef Py_ssize_t _batch_lookup(CoreBase core, object target_frame, object source_
         if planned and not tgt_early and frame != top:
             planned = False  # disconnected: the scalar walk reports it
     if planned and n_rows:
+        row_times = &times[0]
+        if n_rows >= _SORT_ROWS and not _nondecreasing(row_times, n_rows):
+            # The kernel's cursor and per-interval constants pay off on sorted times: walk
+            # them sorted (numpy's argsort) and write each row back to its place.
+            arr = np.asarray(times)
+            sort_order = np.argsort(arr, kind="quicksort").astype(np.int64, copy=False)
+            sorted_times = arr.take(sort_order)
+            row_times = &sorted_times[0]
+            order = &sort_order[0]
         answered = _bsplit(src_links, ns, src_early, tgt_links, nt, tgt_early,
-                           &times[0], n_rows, &out[0, 0], &ok[0], vector_sin)
+                           row_times, order, n_rows, &out[0, 0], &ok[0], vector_sin)
     if answered == n_rows:
         return answered
     for r in range(n_rows):

@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_left
 from collections.abc import Iterable, Sequence
-from typing import Any, Final, TypeVar
+from typing import Any, Final, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -887,6 +887,11 @@ class CoreBase:
         "_frame_ids",
         "_frame_names",
         "_generation",
+        "_last_child",
+        "_last_parent",
+        "_last_relinked",
+        "_last_stamp",
+        "_last_values",
         "_memo",
         "_memo_generation",
     )
@@ -899,6 +904,14 @@ class CoreBase:
     _cache_ns: int
     _memo: dict[tuple[str, str, int], TransformStamped]
     _memo_generation: int
+    # What the last ``_insert_one`` did, beyond its code (read by ``_store`` and
+    # ``_store_one`` right after it): the stripped ids, the stamp, the values (for
+    # INVALID only) and whether the tree's shape may have changed.
+    _last_parent: str
+    _last_child: str
+    _last_stamp: int
+    _last_values: Tf7
+    _last_relinked: bool
 
     def __new__(cls: type[_Core], *args: Any, **kwargs: Any) -> _Core:
         self = super().__new__(cls)
@@ -910,6 +923,10 @@ class CoreBase:
         self._cache_ns = 0
         self._memo = {}
         self._memo_generation = -1
+        self._last_parent = self._last_child = ""
+        self._last_stamp = 0
+        self._last_values = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        self._last_relinked = False
         return self
 
     @property
@@ -937,16 +954,14 @@ class CoreBase:
 
     # ------------------------------------------------------------------ insert
 
-    def _insert_one(
-        self, ts: TransformStamped, authority: str, is_static: bool, out: list[Any]
-    ) -> int:
+    def _insert_one(self, ts: TransformStamped, authority: str, is_static: bool) -> int:
         """``BufferCore::setTransformImpl``: check, register frames, store.
 
-        Returns OK / OLD_DATA / REPEATED_DATA, or INVALID (a tf2 rule is broken: ``out``
-        gets ``[parent, child, values]``). On OK and refusals ``out`` gets ``[parent,
-        child, stamp, relinked]``. A field of the wrong type raises
-        InvalidArgumentException naming it; nothing is stored or registered before every
-        check has passed."""
+        Returns OK / OLD_DATA / REPEATED_DATA, or INVALID (a tf2 rule is broken). What it
+        did beyond the code is left in ``_last_parent``, ``_last_child`` (stripped ids),
+        ``_last_stamp`` (ns; not for INVALID), ``_last_values`` (INVALID only) and
+        ``_last_relinked``. A field of the wrong type raises InvalidArgumentException
+        naming it; nothing is stored or registered before every check has passed."""
         header = ts[0]
         tf = ts[2]
         if not isinstance(header, Header):
@@ -985,6 +1000,8 @@ class CoreBase:
             parent = parent[1:]
         if len(child) and child[0] == "/":
             child = child[1:]
+        self._last_parent = parent
+        self._last_child = child
         # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
         norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
         # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
@@ -997,11 +1014,10 @@ class CoreBase:
             or v[2] - v[2] != 0.0
             or not abs(norm2 - 1.0) < 0.01
         ):
-            out.append(parent)
-            out.append(child)
-            out.append(v)
+            self._last_values = v
             return INVALID
         stamp = stamp_obj._ns
+        self._last_stamp = stamp
         self._generation += 1
         cid = self._frame_ids.get(child)
         if cid is None:
@@ -1017,14 +1033,12 @@ class CoreBase:
         code = cache._c_insert(stamp, pid, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
-        relinked = False
+        self._last_relinked = False
         if code == OK:
-            relinked = old_parent != pid or (isinstance(cache, TimeCache) and cache._pa is not None)
+            self._last_relinked = old_parent != pid or (
+                isinstance(cache, TimeCache) and cache._pa is not None
+            )
             self._authority[cid] = authority
-        out.append(parent)
-        out.append(child)
-        out.append(stamp_obj)
-        out.append(relinked)
         return code
 
     def _store(
@@ -1066,27 +1080,59 @@ class CoreBase:
         errors: list[tuple[int, Exception | tuple[str, str, Tf7]]] = []
         touched: set[str] = set()
         relinked = False
-        out: list[Any] = []
         for i, ts in enumerate(transforms):
             try:
                 if not isinstance(ts, TransformStamped):
                     raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
-                code = self._insert_one(ts, authority, is_static, out)
+                code = self._insert_one(ts, authority, is_static)
             except Exception as exc:
                 errors.append((i, exc))
             else:
                 if code == OK:
                     stored += 1
-                    touched.add(out[0])
-                    touched.add(out[1])
-                    if out[3]:
+                    touched.add(self._last_child)
+                    touched.add(self._last_parent)
+                    if self._last_relinked:
                         relinked = True
                 elif code == INVALID:
-                    errors.append((i, (out[0], out[1], out[2])))
+                    errors.append((i, (self._last_parent, self._last_child, self._last_values)))
                 else:
-                    refusals.append((code, out[1], out[2]._ns))
-            del out[:]
+                    refusals.append((code, self._last_child, self._last_stamp))
         return stored, len(refusals), errors, touched, relinked, refusals
+
+    def _store_one(
+        self, ts: Any, authority: str, is_static: bool
+    ) -> Literal[True] | tuple[int, str, int] | tuple[int, str, str, Tf7]:
+        """One transform, as ``_store`` would store it (``BufferCore.set_transform``'s
+        path). Calls nothing back.
+
+        Returns True when stored; else what ``_store`` reports for it: ``(OLD_DATA |
+        REPEATED_DATA, child, stamp ns)`` for a refusal by the cache, ``(INVALID, parent,
+        child, values)`` for a transform that breaks a tf2 rule.
+
+        Raises:
+            TypeError: ``ts`` is not a TransformStamped, or ``authority`` not a str.
+            InvalidArgumentException: a field of the wrong type (named).
+        """
+        if authority is not None and type(authority) is not str:
+            raise TypeError(
+                f"Argument 'authority' has incorrect type (expected str, got {_tp_name(authority)})"
+            )
+        if not isinstance(ts, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
+        code = self._insert_one(ts, authority, bool(is_static))
+        if code == OK:
+            return True
+        if code == INVALID:
+            return (INVALID, self._last_parent, self._last_child, self._last_values)
+        return (code, self._last_child, self._last_stamp)
+
+    def _last_touched(self) -> tuple[str, str, bool]:
+        """``(child, parent, relinked)`` of the transform ``_store_one`` last stored: the
+        (stripped) ids whose lookups may have changed and whether the tree's shape may
+        have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
+        waits are pending."""
+        return self._last_child, self._last_parent, self._last_relinked
 
     # ------------------------------------------------------------------ queries
 

@@ -9,7 +9,8 @@ slerp, then ``TransformAccum``), so each row is the single lookup's result: bit 
 except that the compiled core's ``lookup_transforms`` entry may take slerp's per-time
 sines from libmvec's vector sin (``tfbus._ccore._batch_lookup_vector``, if
 ``_BATCH_VECTOR_SIN``), a few ulp from libm's (rows within ~1e-14 of the single lookup;
-issue 12 allows 1e-12). Rows the
+issue 12 allows 1e-12). Times may come in any order (the compiled core walks
+unsorted times sorted and writes each row back: as fast as sorted times). Rows the
 compiled plan cannot take (time 0, a link whose parent changed) go through the core's
 scalar walk; for a row that cannot be answered at all, the single public
 ``lookup_transform`` is asked, so the exception and its message are tf2's by

@@ -31,7 +31,7 @@ from tfbus.batch_async import AsyncBatchMixin
 from tfbus.clock import Clock, SystemClock, timeout_ns
 from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
-from tfbus.core import BatchResult, BufferCore
+from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.errors import TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
 from tfbus.time import Duration, Time
@@ -127,12 +127,47 @@ class Buffer(AsyncBatchMixin, BufferCore):
         authority: str = "default",
         is_static: bool = False,
     ) -> BatchResult:
-        """:meth:`BufferCore.set_transforms` (every insert goes through it), then the
-        waits that depend on the frames it touched are re-checked, once per batch."""
+        """:meth:`BufferCore.set_transforms`, then the waits that depend on the frames
+        it touched are re-checked, once per batch."""
         result = super().set_transforms(transforms, authority, is_static)
         if self._index and result.touched:
             self._recheck_frames(result.touched, result.relinked)
         return result
+
+    def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
+        """:meth:`BufferCore.set_transform`, then the waits that depend on the
+        transform's two frames are re-checked (when it was stored)."""
+        stored = super().set_transform(transform, authority)
+        if stored and self._index:
+            self._recheck_last()
+        return stored
+
+    def set_transform_static(
+        self, transform: TransformStamped, authority: str = "default"
+    ) -> bool:
+        """:meth:`BufferCore.set_transform_static`, then the waits re-checked as by
+        :meth:`set_transform`."""
+        stored = super().set_transform_static(transform, authority)
+        if stored and self._index:
+            self._recheck_last()
+        return stored
+
+    def insert_transform(
+        self, transform: TransformStamped, authority: str = "default", is_static: bool = False
+    ) -> SetResult:
+        """:meth:`BufferCore.insert_transform`, then the waits re-checked as by
+        :meth:`set_transform`."""
+        result = super().insert_transform(transform, authority, is_static)
+        if result is SetResult.STORED and self._index:
+            self._recheck_last()
+        return result
+
+    def _recheck_last(self) -> None:
+        """Re-check the waits on the frames of the transform the core stored last (what
+        it reports for one insert: its two ids, and whether the tree's shape may have
+        changed)."""
+        child, parent, relinked = self._last_touched()
+        self._recheck_frames((child, parent), relinked)
 
     def _recheck_frames(self, names: Iterable[str], relinked: bool) -> None:
         index = self._index

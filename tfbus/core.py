@@ -29,12 +29,13 @@ import math
 from collections.abc import Iterable, Iterator
 from collections.abc import Set as AbstractSet
 from numbers import Real
-from typing import Final, NamedTuple
+from typing import Any, Final, NamedTuple
 
 from tfbus._backend import (
     COMPILED,
     CONNECTIVITY_ERROR,
     EXTRAPOLATION_ERROR,
+    INVALID,
     INVALID_ARGUMENT,
     LOOKUP_ERROR,
     MAX_GRAPH_DEPTH,
@@ -188,7 +189,6 @@ class BufferCore(BatchLookupMixin, CoreBase):
     def __init__(self, cache_time: float | Duration = 10.0) -> None:
         self._set_cache_time_ns(_cache_time_ns(cache_time))
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
-        self._last_refusal = SetResult.REPEATED_DATA  # what the last refusal was
 
     # ------------------------------------------------------------------ inserting
 
@@ -219,7 +219,11 @@ class BufferCore(BatchLookupMixin, CoreBase):
                 in tf2's order. Nothing is stored, no frame is registered.
             TypeError: ``transform`` is not a TransformStamped.
         """
-        return self.insert_transform(transform, authority, False) is SetResult.STORED
+        r = self._store_one(transform, authority, False)
+        if r is True:
+            return True
+        self._not_stored(r, authority)
+        return False
 
     def set_transform_static(
         self, transform: TransformStamped, authority: str = "default"
@@ -230,20 +234,31 @@ class BufferCore(BatchLookupMixin, CoreBase):
 
         Returns and raises as :meth:`set_transform`.
         """
-        return self.insert_transform(transform, authority, True) is SetResult.STORED
+        r = self._store_one(transform, authority, True)
+        if r is True:
+            return True
+        self._not_stored(r, authority)
+        return False
 
     def insert_transform(
         self, transform: TransformStamped, authority: str = "default", is_static: bool = False
     ) -> SetResult:
         """Like :meth:`set_transform` / :meth:`set_transform_static`, but tells why a
-        transform was refused. Raises as :meth:`set_transform`. Goes through
-        :meth:`set_transforms` (one place stores)."""
-        result = self.set_transforms((transform,), authority, is_static)
-        if result.errors:
-            raise result.errors[0][1]
-        if result.stored:
-            return SetResult.STORED
-        return self._last_refusal
+        transform was refused. Raises as :meth:`set_transform`.
+
+        The three store one transform through the core's ``_store_one`` (what
+        :meth:`set_transforms` does per item, with nothing built on success)."""
+        r = self._store_one(transform, authority, is_static)
+        return SetResult.STORED if r is True else self._not_stored(r, authority)
+
+    def _not_stored(self, problem: tuple[Any, ...], authority: str) -> SetResult:
+        """What ``_store_one`` reported for a transform it did not store: log a refusal
+        (count-limited) and say which, or raise tf2's InvalidArgumentException."""
+        if problem[0] == INVALID:
+            _, parent, child, values = problem
+            raise invalid_transform_exception(parent, child, values, authority)
+        self._log_refusals([problem], authority)
+        return SetResult.OLD_DATA if problem[0] == OLD_DATA else SetResult.REPEATED_DATA
 
     def set_transforms(
         self,
@@ -252,7 +267,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         is_static: bool = False,
     ) -> BatchResult:
         """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
-        listener uses, several times faster per transform than :meth:`set_transform`.
+        listener uses; per transform at least as fast as :meth:`set_transform`.
 
         Each item is handled exactly as :meth:`set_transform` (or
         :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
@@ -298,9 +313,6 @@ class BufferCore(BatchLookupMixin, CoreBase):
                     stamp / 1e9,
                     authority,
                 )
-        self._last_refusal = (
-            SetResult.OLD_DATA if refusals[-1][0] == OLD_DATA else SetResult.REPEATED_DATA
-        )
 
     def clear(self) -> None:
         """Drop all dynamic data; static transforms and known frame ids stay
@@ -390,8 +402,9 @@ class BufferCore(BatchLookupMixin, CoreBase):
             ExtrapolationException: a link on the path has no data at ``time``.
 
         One compiled call validates, walks and builds the result. Successful results are
-        memoised until the next insert or ``clear()``, so repeating a query (many objects
-        at one stamp, time 0 between updates) costs a dict lookup.
+        memoised until the next insert or ``clear()`` (64 slots, by the ids' identity and
+        the time), so repeating a query (many objects at one stamp, time 0 between
+        updates) costs a few compares.
         """
         try:
             out = self._query(target_frame, source_frame, time)

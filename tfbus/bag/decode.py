@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import ast
 import struct
+import sys
 from collections.abc import Callable, Iterable
 from contextlib import suppress
 from itertools import repeat
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
+from tfbus._backend import IMPLEMENTATION
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import NSEC_PER_SEC, Time
 
@@ -36,6 +38,7 @@ __all__ = [
     "cdr_decoder",
     "decode_cdr",
     "decode_ros1",
+    "decode_ros1_struct",
     "from_rosbags",
     "ros1_decoder",
 ]
@@ -107,8 +110,30 @@ _layouts: dict[tuple[int, int], tuple[Callable[[bytes], tuple[Any, ...]], tuple[
 layout, and the frame id lengths then child id lengths it assumes."""
 
 
+_compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = (
+    getattr(IMPLEMENTATION, "_tf_from_ros1", None) if sys.byteorder == "little" else None
+)
+"""The compiled core's ROS 1 TFMessage decoder (objects built in C), where there is one."""
+
+
 def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
+
+    With the compiled core (on a little-endian host) the transforms are built in C
+    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    :func:`decode_ros1_struct`. Equal values either way (tested).
+
+    Raises:
+        struct.error: the payload is shorter than its contents.
+        UnicodeDecodeError: a frame id is not UTF-8.
+    """
+    if _compiled_ros1 is not None:
+        return _compiled_ros1(raw)
+    return decode_ros1_struct(raw)
+
+
+def decode_ros1_struct(raw: bytes | memoryview) -> list[TransformStamped]:
+    """Decode a ROS 1 serialized TFMessage with :mod:`struct` (the pure-Python path).
 
     A publisher sends the same frames message after message, so the same layout (count,
     size and the length of every frame id): after a message of 12 to 4096 transforms was

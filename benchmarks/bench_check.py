@@ -1,0 +1,345 @@
+"""Speed regression guard (issue 22): the core's targets against tf2_py, PASS or FAIL.
+
+    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1]   # or: make bench-check
+
+Runs the cases of issue 22's table in the same run as the real tf2 (``tf2_py`` under
+``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6; ``_tf2_check_side.py``),
+in interleaved rounds (tfbus's side, then tf2's, ``--rounds`` times), and judges the
+median of the per-round ratios, so that a machine shared with other work slows both
+sides of a ratio alike. Each side's figure in a round is the best of 3 runs.
+
+Rows (target):
+
+* ``set_transform``, a chain of 10 links, in order: <= 0.35x tf2_py;
+  ``set_transforms`` (10 per call) per transform <= a ``set_transform`` loop (1.00x);
+* ``lookup_transform`` never repeated, interpolated: depth 2 <= 0.20x tf2_py, depth 8
+  and 32 <= 0.55x; depth 2 at time 0 right after an insert <= 0.20x;
+* ``lookup_transforms``, N = 10 000 times, depth 8, every link interpolated, times
+  sorted, random, reversed and duplicated: <= 0.03x a tf2_py loop and <= 120 ns/time;
+* wake-up of a waiting lookup: <= 3x a bare anyio Event (median of per-repeat ratios,
+  as ``bench_bus.py``), asyncio and trio;
+* ROS 1 receive latency, 100 Hz x 50 transforms, 10 s: <= 1.5x a roscpp subscriber in
+  the same run (median of 3 runs, ``bench_ros1.py``), nothing lost (``--no-ros1``
+  skips it).
+
+Prints one line per row, its figures, the target and PASS or FAIL; exit status 1 if a
+row fails (2 if tf2_py cannot run). Not part of ``make test`` (a timing is never a
+test); run it before and after a change to the core (CONTRIBUTING.md).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS threads would spin
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import anyio
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import bench_bus  # noqa: E402
+import bench_core  # noqa: E402
+import bench_sensors  # noqa: E402
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3  # noqa: E402
+from tfbus.core import BufferCore  # noqa: E402
+
+TF2_PYTHON = "/usr/bin/python3"
+TF2_SIDE = HERE / "_tf2_check_side.py"
+RUNS = 3  # runs per side per round; the best is the round's figure
+NS = 1_000_000_000
+
+
+def scenario() -> dict[str, Any]:
+    """Everything both sides need to run identical workloads."""
+    n = 10_000
+    sorted_ns = bench_sensors.query_times(n)
+    rng = np.random.default_rng(22)
+    orders = {
+        "sorted": sorted_ns,
+        "random": rng.permutation(sorted_ns),
+        "reversed": sorted_ns[::-1].copy(),
+        "duplicated": rng.permutation(np.repeat(sorted_ns[: n // 4], 4)),
+    }
+    return {
+        "runs": RUNS,
+        "set_chain": {
+            "links": 10,
+            "steps": 1000,
+            "t0_ns": 1_700_000_000 * NS,
+            "period_ns": NS // 100,
+            "cache_time_s": 10.0,
+        },
+        "lookup": {**bench_core.scenario(True), "depths": [2, 8, 32]},
+        "batch": {
+            "depth": bench_sensors.DEPTH,
+            "samples": bench_sensors.SAMPLES,
+            "base": bench_sensors.BASE_NS,
+            "step": bench_sensors.STEP_NS,
+            "orders": {k: v.tolist() for k, v in orders.items()},
+        },
+    }
+
+
+def _message(parent: str, child: str, stamp_ns: int, k: int) -> TransformStamped:
+    s = 0.01 * (k % 11)
+    return TransformStamped(
+        Header(Time.from_ns(stamp_ns), parent),
+        child,
+        Transform(
+            Vector3(1.0 + 0.001 * (k % 7), 0.5, -0.25),
+            Quaternion(s, 0.0, 0.0, (1.0 - s * s) ** 0.5),
+        ),
+    )
+
+
+class Ours:
+    """tfbus's side: buffers built once, measured once per round."""
+
+    def __init__(self, sc: dict[str, Any]) -> None:
+        self.sc = sc
+        c = sc["set_chain"]
+        self.set_msgs = [
+            _message(f"f{i}", f"f{i + 1}", c["t0_ns"] + k * c["period_ns"], k + i)
+            for k in range(c["steps"])
+            for i in range(c["links"])
+        ]
+        lk = sc["lookup"]
+        self.chains = {d: bench_core._chain(lk, d) for d in lk["depths"]}
+        self.varying = [Time.from_ns(ns) for ns in lk["query_ns"]]
+        self.batch_core = bench_sensors.chain_core()
+        self.orders = {k: np.array(v, dtype=np.int64) for k, v in sc["batch"]["orders"].items()}
+
+    def _best(self, fn: Callable[[], float]) -> float:
+        return min(fn() for _ in range(RUNS))
+
+    def round(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        cache_time = self.sc["set_chain"]["cache_time_s"]
+        msgs = self.set_msgs
+        links = self.sc["set_chain"]["links"]
+
+        def singles() -> float:
+            setter = BufferCore(cache_time=cache_time).set_transform
+            start = time.perf_counter()
+            for m in msgs:
+                setter(m, "bench")
+            return (time.perf_counter() - start) / len(msgs)
+
+        batches = [msgs[i : i + links] for i in range(0, len(msgs), links)]
+
+        def batched() -> float:
+            setter = BufferCore(cache_time=cache_time).set_transforms
+            start = time.perf_counter()
+            for b in batches:
+                setter(b, "bench")
+            return (time.perf_counter() - start) / len(msgs)
+
+        out["set_chain"] = self._best(singles)
+        out["set_batch"] = self._best(batched)
+        lk = self.sc["lookup"]
+        calls = lk["calls"]
+        runs = [self.varying[r * calls : (r + 1) * calls] for r in range(RUNS)]
+        for depth, core in self.chains.items():
+            leaf = f"f{depth}"
+            lookup = core.lookup_transform
+            out[f"{depth}/interp"] = bench_core._best_per_call(
+                lambda t, lookup=lookup, leaf=leaf: lookup("f0", leaf, t), runs
+            )
+        # A fresh buffer each round: the inserts' stamps start over (tf2's side too).
+        fresh = bench_core._chain(lk, 2)
+        out["2/zero_fresh"] = bench_core._fresh_zero(fresh, "f2", {**lk, "repeats": RUNS})
+        batch: dict[str, float] = {}
+        leaf = f"f{self.sc['batch']['depth']}"
+        for name, times in self.orders.items():
+
+            def one(times: Any = times) -> float:
+                start = time.perf_counter()
+                self.batch_core.lookup_transforms("f0", leaf, times)
+                return (time.perf_counter() - start) / times.shape[0]
+
+            batch[name] = self._best(one)
+        out["batch"] = batch
+        return out
+
+
+def tf2_round(sc: dict[str, Any]) -> dict[str, Any]:
+    """One round of tf2_py's side.
+
+    Raises:
+        RuntimeError: tf2_py cannot run (why).
+    """
+    run = subprocess.run(
+        [TF2_PYTHON, str(TF2_SIDE)],
+        input=json.dumps(sc),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if run.returncode:
+        raise RuntimeError(f"tf2 side failed: {run.stderr.strip()[-400:]}")
+    result: dict[str, Any] = json.loads(run.stdout)
+    return result
+
+
+class Rows:
+    """The verdict table."""
+
+    def __init__(self) -> None:
+        self.failed = 0
+
+    def row(self, name: str, figures: str, ok: bool, target: str) -> None:
+        self.failed += not ok
+        print(f"  {'PASS' if ok else 'FAIL'}  {name:46} {figures:48} target {target}", flush=True)
+
+
+def _ratio(ours: list[float], theirs: list[float]) -> float:
+    return statistics.median(a / b for a, b in zip(ours, theirs, strict=True))
+
+
+def core_rows(rows: Rows, rounds: int) -> None:
+    sc = scenario()
+    ours_side = Ours(sc)
+    ours: list[dict[str, Any]] = []
+    theirs: list[dict[str, Any]] = []
+    for r in range(rounds):
+        print(f"  (round {r + 1}/{rounds})", flush=True)
+        ours.append(ours_side.round())
+        theirs.append(tf2_round(sc))
+
+    def col(side: list[dict[str, Any]], key: str, sub: str | None = None) -> list[float]:
+        return [float(x[key][sub] if sub else x[key]) for x in side]
+
+    def us(v: float) -> str:
+        return f"{v * 1e9:,.0f} ns" if v < 1e-6 else f"{v * 1e6:,.2f} us"
+
+    a, b = col(ours, "set_chain"), col(theirs, "set_chain")
+    q = _ratio(a, b)
+    rows.row(
+        "set_transform, chain of 10 links, in order",
+        f"{us(statistics.median(a))} vs tf2_py {us(statistics.median(b))} = {q:.2f}x",
+        q <= 0.35,
+        "<= 0.35x tf2_py",
+    )
+    c = col(ours, "set_batch")
+    q = _ratio(c, a)
+    rows.row(
+        "set_transforms (10 a call), per transform",
+        f"{us(statistics.median(c))} vs set_transform {us(statistics.median(a))} = {q:.2f}x",
+        q <= 1.0,
+        "<= 1.00x a set_transform loop",
+    )
+    for key, label, target in (
+        ("2/interp", "lookup_transform depth 2, interpolated", 0.20),
+        ("2/zero_fresh", "insert then Time(0) lookup, depth 2", 0.20),
+        ("8/interp", "lookup_transform depth 8, interpolated", 0.55),
+        ("32/interp", "lookup_transform depth 32, interpolated", 0.55),
+    ):
+        a, b = col(ours, key), col(theirs, key)
+        q = _ratio(a, b)
+        rows.row(
+            label,
+            f"{us(statistics.median(a))} vs tf2_py {us(statistics.median(b))} = {q:.2f}x",
+            q <= target,
+            f"<= {target:.2f}x tf2_py",
+        )
+    for order in sc["batch"]["orders"]:
+        a, b = col(ours, "batch", order), col(theirs, "batch", order)
+        q = _ratio(a, b)
+        per = statistics.median(a)
+        rows.row(
+            f"lookup_transforms N=10000 depth 8, {order}",
+            f"{per * 1e9:.0f} ns/time vs tf2_py loop {us(statistics.median(b))} = {q:.3f}x",
+            q <= 0.03 and per <= 120e-9,
+            "<= 0.03x and <= 120 ns/time",
+        )
+
+
+def wakeup_rows(rows: Rows, repeats: int) -> None:
+    cfg = bench_bus.QUICK
+    for backend in bench_bus.BACKENDS:
+        ratios = []
+        for _ in range(repeats):
+            floor = anyio.run(
+                bench_bus.event_floor_run, cfg.latency_samples, cfg.latency_warmup, backend=backend
+            )
+            wake = anyio.run(
+                bench_bus.latency_run,
+                cfg.latency_samples,
+                cfg.latency_warmup,
+                None,
+                backend=backend,
+            )
+            ratios.append(wake.median_ms / floor.median_ms)
+        q = statistics.median(ratios)
+        rows.row(
+            f"wake-up vs a bare anyio Event, {backend}",
+            f"{q:.2f}x (per repeat: {' '.join(f'{x:.2f}' for x in ratios)})",
+            q <= 3.0,
+            "<= 3x the floor",
+        )
+
+
+def ros1_rows(rows: Rows, runs: int) -> None:
+    import bench_ros1
+    from _ros1_peers import Master, free_port, master_env, ros1_missing
+
+    why = ros1_missing()
+    if why is not None:
+        rows.row("ROS 1 receive latency, 100 Hz x 50 transforms", f"not run: {why}", False, "")
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        bins = Path(tmp)
+        bench_ros1.build(bins)
+        port = free_port()
+        master = Master(port, master_env(port, bins / "ros_home"))
+        master.start()
+        try:
+            results = [bench_ros1.scenario(master, bins, 100.0, 50, 10.0) for _ in range(runs)]
+        finally:
+            master.stop()
+    q = statistics.median(t50 / c50 for c50, _, t50, _, _ in results)
+    whole = sum(r[4] for r in results)
+    rows.row(
+        "ROS 1 receive latency, 100 Hz x 50 transforms",
+        f"{q:.2f}x roscpp (median of {runs}), all received in {whole}/{runs} runs",
+        q <= 1.5 and whole == runs,
+        "<= 1.5x roscpp, none lost",
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--rounds", type=int, default=5, help="interleaved rounds (default 5)")
+    parser.add_argument("--no-ros1", action="store_true", help="skip the ROS 1 row")
+    args = parser.parse_args(argv)
+    load0 = os.getloadavg()[0]
+    print(f"bench-check: tfbus vs tf2_py, {args.rounds} interleaved rounds (load {load0:.2f})")
+    rows = Rows()
+    try:
+        core_rows(rows, args.rounds)
+    except RuntimeError as exc:
+        print(f"  tf2_py unavailable: {exc}")
+        return 2
+    wakeup_rows(rows, args.rounds)
+    if not args.no_ros1:
+        ros1_rows(rows, 3)
+    print(f"{rows.failed} row(s) failed (load {load0:.2f} -> {os.getloadavg()[0]:.2f})")
+    return 1 if rows.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

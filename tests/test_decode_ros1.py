@@ -1,0 +1,96 @@
+"""The ROS 1 TFMessage decoders agree: the compiled one (objects built in C,
+``tfbus._ccore._tf_from_ros1``, what ``decode_ros1`` uses with the compiled core), the
+struct one (``decode_ros1_struct``, the pure-Python path) and rosbags' generic
+deserialiser; a short payload and a bad UTF-8 id fail alike."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.bag import decode as dec
+from tfbus.core import COMPILED
+
+pytest.importorskip("rosbags")
+from tfbus.transports.ros1.tcpros import TFCodec  # needs rosbags (checked above)
+
+pytestmark = pytest.mark.skipif(
+    dec._compiled_ros1 is None, reason="no compiled ROS 1 decoder (pure-Python core)"
+)
+
+_finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+_ids = st.sampled_from(["", "base_link", "odom", "ü", "a" * 40, "bench_7"])
+
+
+def test_decode_ros1_uses_the_compiled_decoder() -> None:
+    assert COMPILED and dec._compiled_ros1 is not None
+    raw = TFCodec().encode([_ts("a", "b", 3, (1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0))])
+    assert dec.decode_ros1(raw) == dec._compiled_ros1(raw)
+
+
+def _ts(parent: str, child: str, ns: int, v: tuple[float, ...]) -> TransformStamped:
+    return TransformStamped(
+        Header(Time.from_ns(ns), parent), child, Transform(Vector3(*v[:3]), Quaternion(*v[3:]))
+    )
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            _ids,
+            _ids,
+            st.sampled_from([0, 1, 10**9 - 1, 1_700_000_000_123_456_789, (2**31 - 1) * 10**9]),
+            st.tuples(*[_finite] * 7),
+        ),
+        max_size=30,
+    ),
+    st.binary(max_size=5),
+)
+def test_compiled_struct_and_rosbags_agree(
+    items: list[tuple[str, str, int, tuple[float, ...]]], trailing: bytes
+) -> None:
+    codec = TFCodec()
+    raw = codec.encode(_ts(p, c, ns, v) for p, c, ns, v in items)
+    assert dec._compiled_ros1 is not None
+    got = dec._compiled_ros1(raw + trailing)
+    assert got == dec.decode_ros1_struct(raw + trailing) == codec.decode_generic(raw)
+    # Bit for bit (== on floats would take -0.0 for 0.0).
+    assert [struct.pack("<7d", *t.transform.translation, *t.transform.rotation) for t in got] == [
+        struct.pack("<7d", *v) for *_, v in items
+    ]
+    assert dec._compiled_ros1(memoryview(raw)) == got
+
+
+def test_consecutive_equal_headers_share_one_header() -> None:
+    raw = TFCodec().encode(
+        [_ts("base_link", f"c{i}", 5, (0, 0, 0, 0, 0, 0, 1)) for i in range(3)]
+        + [_ts("base_link", "d", 6, (0, 0, 0, 0, 0, 0, 1))]
+    )
+    assert dec._compiled_ros1 is not None
+    out = dec._compiled_ros1(raw)
+    assert out[0].header is out[1].header is out[2].header
+    assert out[3].header is not out[2].header and out[3].header.stamp.ns == 6
+
+
+def test_short_or_bad_payloads_fail_alike() -> None:
+    raw = TFCodec().encode([_ts("base_link", "a", 1, (1, 2, 3, 0, 0, 0, 1))] * 2)
+    assert dec._compiled_ros1 is not None
+    for cut in range(len(raw)):
+        with pytest.raises(struct.error):
+            dec.decode_ros1_struct(raw[:cut])
+        with pytest.raises(struct.error):
+            dec._compiled_ros1(raw[:cut])
+    huge = struct.pack("<I", 2**32 - 1) + raw[4:]  # a count no payload of this size holds
+    for decode in (dec._compiled_ros1, dec.decode_ros1_struct):
+        with pytest.raises(struct.error):
+            decode(huge)
+    bad = raw.replace(b"base_link", b"base_lin\xff")
+    for decode in (dec._compiled_ros1, dec.decode_ros1_struct):
+        with pytest.raises(UnicodeDecodeError):
+            decode(bad)
+    assert dec._compiled_ros1(struct.pack("<I", 0)) == []
