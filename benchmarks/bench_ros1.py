@@ -6,14 +6,20 @@ p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and
 their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
 (target: none lost at 100 Hz x 50 frames for 60 s), with the 1-minute load average.
 ``--repeat N`` runs each scenario N times (a fresh pair of subscribers each time) and
-adds the median of the per-run figures: on a shared machine one run is noisy. Figures
-only; nothing is asserted.
+adds the median of the per-run figures: on a shared machine one run is noisy. The
+50-frame scenario runs once per ``--modes`` entry (default all, see :data:`MODES`):
+``queue`` is issue 22's row (a queued ``async for`` subscription against a roscpp
+callback), ``callback`` a tfbus callback subscription against the same roscpp callback,
+``listener`` a tfbus ``TransformListener`` into a ``Buffer`` against a
+``tf2_ros::TransformListener`` into a ``tf2_ros::Buffer``. Figures only; nothing is
+asserted.
 
 Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.0.1.
 
     .venv/bin/python benchmarks/bench_ros1.py           # 10 s at 1 frame, 60 s at 50 frames
     .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
     .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 5
+    .venv/bin/python benchmarks/bench_ros1.py --modes queue  # issue 22's row alone
 """
 
 from __future__ import annotations
