@@ -6,19 +6,26 @@ p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and
 their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
 (target: none lost at 100 Hz x 50 frames for 60 s), with the 1-minute load average.
 ``--repeat N`` runs each scenario N times (a fresh pair of subscribers each time) and
-adds the median of the per-run figures: on a shared machine one run is noisy. Figures
-only; nothing is asserted.
+adds the median of the per-run figures: on a shared machine one run is noisy. The
+50-frame scenario runs once per ``--modes`` entry (default all, see :data:`MODES`):
+``queue`` is issue 22's row (a queued ``async for`` subscription against a roscpp
+callback), ``callback`` a tfbus callback subscription against the same roscpp callback,
+``listener`` a tfbus ``TransformListener`` into a ``Buffer`` against a
+``tf2_ros::TransformListener`` into a ``tf2_ros::Buffer``. Figures only; nothing is
+asserted.
 
 Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.0.1.
 
     .venv/bin/python benchmarks/bench_ros1.py           # 10 s at 1 frame, 60 s at 50 frames
     .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
     .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 5
+    .venv/bin/python benchmarks/bench_ros1.py --modes queue  # issue 22's row alone
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import statistics
@@ -27,6 +34,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -48,38 +56,82 @@ def build(out: Path) -> None:
             ["g++", "-O2", "-o", str(out / name), str(HERE / "ros1" / f"{name}.cpp"), *flags],
             check=True,
         )
+    listener_flags = subprocess.run(
+        ["pkg-config", "--cflags", "--libs", "roscpp", "tf2_msgs", "tf2_ros"],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "PATH": "/usr/bin:" + os.environ.get("PATH", "")},
+    ).stdout.split()
+    subprocess.run(
+        ["g++", "-O2", "-o", str(out / "bench_listener"),
+         str(HERE / "ros1" / "bench_listener.cpp"), *listener_flags],
+        check=True,
+    )
 
 
-def tfbus_subscriber() -> None:
+MODES = ("queue", "callback", "listener")
+"""How each side receives, per ``--modes``:
+
+* ``queue``: C++ ``bench_sub`` (a roscpp subscription callback) vs a tfbus queued
+  subscription read by ``async for`` (the first row of issue 22, kept as it was: tfbus's
+  time includes handing the message from the read callback to the waiting task).
+* ``callback``: the same C++ subscriber vs a tfbus callback subscription
+  (:meth:`tfbus.Bus.subscribe_callback`), the counterpart of a roscpp callback.
+* ``listener``: C++ ``bench_listener`` (``tf2_ros::TransformListener`` into a
+  ``tf2_ros::Buffer``, time taken by the buffer's transforms-changed signal after the
+  message's last transform is stored) vs a tfbus ``TransformListener`` into a ``Buffer``
+  (time taken by a callback subscribed after the listener's, so when the whole message
+  is stored).
+"""
+
+
+def tfbus_subscriber(mode: str) -> None:
     """The tfbus side (a child process): print READY, receive /tf until SIGINT/SIGTERM,
     then the same report as bench_sub."""
     import anyio
 
-    from tfbus import Bus
+    from tfbus import Buffer, Bus, TransformListener
     from tfbus.transports.ros1 import Ros1Transport
 
     lat: list[float] = []
     counts = [0, 0]
 
+    def record(msg: Any) -> None:
+        now = time.time_ns()
+        counts[0] += 1
+        counts[1] += len(msg.transforms)
+        if msg.transforms:
+            lat.append((now - msg.transforms[0].header.stamp.ns) / 1e3)
+
     async def main() -> None:
         async with Bus(transport=Ros1Transport(node_name="/tfbus_bench")) as bus:
-            sub = bus.subscribe("/tf", queue_size=100_000)
-            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
-                async with anyio.create_task_group() as tg:
-
-                    async def stop() -> None:
-                        async for _ in signals:
-                            tg.cancel_scope.cancel()
-                            return
-
-                    tg.start_soon(stop)
+            sub = bus.subscribe("/tf", queue_size=100_000) if mode == "queue" else None
+            async with contextlib.AsyncExitStack() as stack:
+                listener = None
+                if mode == "listener":
+                    listener = TransformListener(Buffer(), bus)
+                    await stack.enter_async_context(listener)
+                if mode in ("callback", "listener"):
+                    stack.enter_context(bus.subscribe_callback("/tf", record))
+                with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
                     print("READY", flush=True)
-                    async for msg in sub:
-                        now = time.time_ns()
-                        counts[0] += 1
-                        counts[1] += len(msg.transforms)
-                        if msg.transforms:
-                            lat.append((now - msg.transforms[0].header.stamp.ns) / 1e3)
+                    if sub is None:  # callbacks record; wait for the signal
+                        async for _ in signals:
+                            break
+                    else:
+                        async with anyio.create_task_group() as tg:
+
+                            async def stop() -> None:
+                                async for _ in signals:
+                                    tg.cancel_scope.cancel()
+                                    return
+
+                            tg.start_soon(stop)
+                            async for msg in sub:
+                                record(msg)
+                if listener is not None:  # transforms received = transforms stored
+                    counts[1] = listener.statistics().stored
 
     anyio.run(main)
     print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
@@ -101,14 +153,17 @@ def pct(values: list[float], q: float) -> float:
 
 
 def scenario(
-    master: Master, bins: Path, rate: float, frames: int, seconds: float
+    master: Master, bins: Path, rate: float, frames: int, seconds: float, mode: str = "queue"
 ) -> tuple[float, float, float, float, bool]:
-    """One run: prints its line; returns C++ and tfbus median and p99, and whether
-    tfbus received every transform sent."""
-    cpp = master.run(str(bins / "bench_sub"))
+    """One run (``mode``: see :data:`MODES`): prints its line; returns C++ and tfbus
+    median and p99, and whether tfbus received every transform sent."""
+    if mode == "listener":
+        cpp = master.run(str(bins / "bench_listener"), str(frames))
+    else:
+        cpp = master.run(str(bins / "bench_sub"))
     env = dict(master.env)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    tfb = Proc([sys.executable, __file__, "--tfbus-sub"], env)
+    tfb = Proc([sys.executable, __file__, "--tfbus-sub", mode], env)
     cpp.wait_for("READY", 30)
     tfb.wait_for("READY", 60)
     pub = master.run(str(bins / "bench_pub"), str(rate), str(frames), str(seconds))
@@ -121,7 +176,8 @@ def scenario(
     t50, t99 = statistics.median(t_lat), pct(t_lat, 0.99)
     load = os.getloadavg()[0]
     print(
-        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | load {load:4.2f} | "
+        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | {mode:8s} | "
+        f"load {load:4.2f} | "
         f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
         f"ratio {t50 / c50:4.2f} / {t99 / c99:4.2f} | "
         f"received C++ {c_msgs}/{sent_msgs} msgs {c_tfs}/{sent_tfs} tfs, "
@@ -133,17 +189,19 @@ def scenario(
 
 
 def repeated(
-    master: Master, bins: Path, rate: float, frames: int, seconds: float, repeat: int
+    master: Master, bins: Path, rate: float, frames: int, seconds: float, repeat: int,
+    mode: str = "queue",
 ) -> None:
     """``repeat`` runs of one scenario, then the medians of their figures."""
-    runs = [scenario(master, bins, rate, frames, seconds) for _ in range(repeat)]
+    runs = [scenario(master, bins, rate, frames, seconds, mode) for _ in range(repeat)]
     if repeat < 2:
         return
     c50, c99, t50, t99 = (statistics.median(r[i] for r in runs) for i in range(4))
     ratio = statistics.median(r[2] / r[0] for r in runs)
     ratio99 = statistics.median(r[3] / r[1] for r in runs)
     print(
-        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | median of {repeat} runs | "
+        f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | {mode:8s} | "
+        f"median of {repeat} runs | "
         f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
         f"ratio {ratio:4.2f} / {ratio99:4.2f} (median of per-run ratios) | "
         f"runs with every transform received: {sum(r[4] for r in runs)}/{repeat}",
@@ -155,11 +213,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="shorter runs")
     parser.add_argument("--repeat", type=int, default=1, help="runs per scenario (default 1)")
-    parser.add_argument("--tfbus-sub", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--modes",
+        default=",".join(MODES),
+        help="how the 50-frame scenario is received, comma separated (default: all; "
+        "queue = issue 22's row; the 1-frame scenario is always queue)",
+    )
+    parser.add_argument("--tfbus-sub", choices=MODES, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.tfbus_sub:
-        tfbus_subscriber()
+        tfbus_subscriber(args.tfbus_sub)
         return
+    modes = [m for m in args.modes.split(",") if m]
+    bad = [m for m in modes if m not in MODES]
+    if bad or not modes:
+        parser.error(f"--modes: {bad or modes!r}: choose from {', '.join(MODES)}")
     why = ros1_missing()
     if why is not None:
         sys.exit(f"ROS 1 unavailable: {why}")
@@ -172,7 +240,10 @@ def main() -> None:
         try:
             print("latency median / p99, one-way, receive time - header.stamp (same run)")
             repeated(master, bins, 100.0, 1, 5.0 if args.quick else 10.0, args.repeat)
-            repeated(master, bins, 100.0, 50, 10.0 if args.quick else 60.0, args.repeat)
+            for mode in modes:
+                repeated(
+                    master, bins, 100.0, 50, 10.0 if args.quick else 60.0, args.repeat, mode
+                )
         finally:
             master.stop()
 

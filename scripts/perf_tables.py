@@ -38,7 +38,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "bag": ([], ["--transforms", "50000", "--repeat", "2"], 1800),
     "zenoh": ([], ["--probes", "500", "--seconds", "2"], 900),
     "ros2": ([], ["--lat-count", "100", "--flood-seconds", "2"], 1800),
-    "ros1": ([], ["--quick"], 1800),
+    "ros1": (["--repeat", "3"], ["--quick", "--repeat", "3"], 1800),
     "sensors": ([], ["--quick"], 1800),
     "check": ([], ["--rounds", "3", "--no-ros1"], 1800),
 }

@@ -94,3 +94,20 @@ def test_short_or_bad_payloads_fail_alike() -> None:
         with pytest.raises(UnicodeDecodeError):
             decode(bad)
     assert dec._compiled_ros1(struct.pack("<I", 0)) == []
+
+
+def test_repeated_frame_ids_are_the_earlier_strs_and_a_changed_id_is_new() -> None:
+    """A publisher repeats its frame ids: the same ASCII id at the same position is the
+    str decoded before (no new object); a different id, also of the same length, or a
+    non-ASCII one, is decoded anew."""
+    codec = TFCodec()
+    v = (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    first = dec._compiled_ros1(codec.encode([_ts("map", "bench_1", 1, v), _ts("map", "ü", 1, v)]))
+    again = dec._compiled_ros1(codec.encode([_ts("map", "bench_1", 2, v), _ts("map", "ü", 2, v)]))
+    assert again[0].child_frame_id is first[0].child_frame_id
+    assert again[0].header.frame_id is first[0].header.frame_id
+    assert again[1].child_frame_id == "ü"
+    changed = dec._compiled_ros1(codec.encode([_ts("odo", "bench_2", 3, v)]))
+    assert [changed[0].header.frame_id, changed[0].child_frame_id] == ["odo", "bench_2"]
+    back = dec._compiled_ros1(codec.encode([_ts("map", "bench_1", 4, v)]))
+    assert back[0].child_frame_id == "bench_1" and back[0].header.frame_id == "map"

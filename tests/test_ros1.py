@@ -276,6 +276,31 @@ def test_frame_splitter_any_chunking(payloads: list[bytes], cuts: list[int]) -> 
     assert out == payloads
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.binary(max_size=70), min_size=1, max_size=20),
+    st.lists(st.integers(1, 90), min_size=1, max_size=40),
+)
+def test_frame_splitter_reused_view(payloads: list[bytes], cuts: list[int]) -> None:
+    """Fed views of one reused read buffer (as the asyncio pump feeds it), the frames
+    are the same however the stream is cut: an incomplete frame's bytes are copied
+    before the buffer is overwritten by the next read."""
+    out: list[bytes] = []
+    splitter = FrameSplitter(lambda raw: out.append(bytes(raw)), 100, 100)
+    data = b"".join(struct.pack("<I", len(p)) + p for p in payloads)
+    read = bytearray(90)
+    view = memoryview(read)
+    i = k = 0
+    while i < len(data):
+        chunk = data[i : i + cuts[k % len(cuts)]]
+        read[:] = b"\xaa" * len(read)  # the previous read's bytes are gone
+        read[: len(chunk)] = chunk
+        splitter.feed(view[: len(chunk)])
+        i += len(chunk)
+        k += 1
+    assert out == payloads
+
+
 def test_frame_splitter_limits() -> None:
     """The first frame (connection header) has its own limit; an oversized length raises
     after the whole frames before it were handed on, without waiting for its bytes."""

@@ -808,6 +808,34 @@ from libc.stdint cimport uint32_t
 from libc.string cimport memcmp
 
 
+cdef extern from "Python.h":
+    int PyUnicode_IS_ASCII(object o)
+    void* PyUnicode_DATA(object o)
+
+
+# Frame ids by their position in a message: a publisher sends the same ids message
+# after message, so an id whose bytes equal the ASCII str decoded last time at the same
+# position is that (immutable) str again, not a new one. Compared byte for byte on
+# every use; a different id replaces it. Positions past _ROS1_ID_SLOTS are decoded.
+DEF _ROS1_ID_SLOTS = 4096
+cdef list _ros1_children = [None] * _ROS1_ID_SLOTS
+cdef list _ros1_frames = [None] * _ROS1_ID_SLOTS
+
+
+cdef inline object _ros1_id(list cache, Py_ssize_t k, const unsigned char* s, uint32_t n):
+    """The str of the UTF-8 bytes ``s[:n]``: the one cached at ``k`` if equal."""
+    cdef object cached
+    if k < _ROS1_ID_SLOTS:
+        cached = cache[k]
+        if (cached is not None and <uint32_t>PyUnicode_GET_LENGTH(cached) == n
+                and memcmp(PyUnicode_DATA(cached), s, n) == 0):
+            return cached
+    cdef object text = PyUnicode_DecodeUTF8(<const char*>s, n, NULL)
+    if k < _ROS1_ID_SLOTS and PyUnicode_IS_ASCII(text):
+        cache[k] = text
+    return text
+
+
 cdef inline uint32_t _u32le(const unsigned char* p) noexcept:
     return <uint32_t>p[0] | (<uint32_t>p[1] << 8) | (<uint32_t>p[2] << 16) | (<uint32_t>p[3] << 24)
 
@@ -822,7 +850,9 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     child_frame_id, 7 float64``, little endian), built in C: what
     ``tfbus.bag.decode.decode_ros1``'s struct decoder returns, equal values (frame ids
     decoded as strict UTF-8; a transform whose serialised header is byte for byte the
-    previous one's shares its Header; bytes after the last transform are ignored).
+    previous one's shares its Header; an ASCII frame id equal to the one at the same
+    position of an earlier message is that message's str, not a new one; bytes after
+    the last transform are ignored).
     Little-endian hosts only (the doubles are read in host order).
 
     Raises:
@@ -861,7 +891,7 @@ def _tf_from_ros1(const unsigned char[::1] buf):
             header = _named(
                 Header,
                 _time_of(<int64_t>sec * 1000000000 + nsec),
-                PyUnicode_DecodeUTF8(<const char*>(p + head + 16), flen, NULL),
+                _ros1_id(_ros1_frames, k, p + head + 16, flen),
             )
             prev = head
             hlen = off - head
@@ -870,7 +900,7 @@ def _tf_from_ros1(const unsigned char[::1] buf):
         clen = _u32le(p + off)
         if clen > size - off - 4 or size - off - 4 - clen < 56:
             raise _StructError("message shorter than its contents")
-        child = PyUnicode_DecodeUTF8(<const char*>(p + off + 4), clen, NULL)
+        child = _ros1_id(_ros1_children, k, p + off + 4, clen)
         off += 4 + clen
         memcpy(v, p + off, 7 * sizeof(double))
         off += 56

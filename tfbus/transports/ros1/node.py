@@ -174,13 +174,14 @@ class _Inbound:
         self._stats = node._stats
         self.splitter = FrameSplitter(self._frame, MAX_HEADER_BYTES, node._max_bytes)
 
-    def _frame(self, raw: bytes) -> None:
+    def _frame(self, raw: bytes | memoryview) -> None:
+        # ``raw`` may be a view of the pump's read buffer: decoded here, never kept.
         if self.conn_id:
             transforms = self._decode(raw)
             self._stats.received += 1
             self._deliver(self.topic, TFMessage(tuple(transforms)))
             return
-        header = decode_header(raw)
+        header = decode_header(bytes(raw))
         if "error" in header:
             raise TransportError(f"publisher {self.uri} refused {self.topic}: {header['error']}")
         if header.get("md5sum") not in (TF_MD5SUM, "*"):
@@ -203,7 +204,7 @@ class _AsyncioPump(asyncio.BufferedProtocol):
     that asyncio allocates at its ``max_size`` of 256 KiB and then shrinks (measured here:
     ~16 us more per read of a 4.6 kB message)."""
 
-    def __init__(self, feed: Callable[[bytes], None], *events: anyio.Event) -> None:
+    def __init__(self, feed: Callable[[memoryview], None], *events: anyio.Event) -> None:
         self._feed = feed
         self._events = events
         self._buffer = memoryview(bytearray(_READ_SIZE))
@@ -220,7 +221,9 @@ class _AsyncioPump(asyncio.BufferedProtocol):
         if self.error is not None:
             return
         try:
-            self._feed(self._buffer[:nbytes].tobytes())
+            # A view, not a copy: the splitter reads it (and copies only an incomplete
+            # frame) before the loop reads into the buffer again.
+            self._feed(self._buffer[:nbytes])
         except Exception as exc:  # malformed input or a refusal: this connection only
             self._end(exc)
             if self._transport is not None:

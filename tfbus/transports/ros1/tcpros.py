@@ -104,7 +104,7 @@ class TFCodec:
         except (struct.error, UnicodeEncodeError, TypeError, AttributeError) as exc:
             raise ValueError(f"cannot serialise a TFMessage for ROS 1: {exc}") from exc
 
-    def decode(self, raw: bytes) -> list[TransformStamped]:
+    def decode(self, raw: bytes | memoryview) -> list[TransformStamped]:
         """Deserialise one ROS 1 ``TFMessage`` with the bag reader's struct decoder
         (:func:`tfbus.bag.decode.decode_ros1`, the same fixed layout: valid because the
         connection's md5sum is checked to be :data:`TF_MD5SUM`). It is 3-5x faster than
@@ -187,18 +187,23 @@ class FrameSplitter:
     (``TransportPublisherLink::onMessageLength`` / ``onMessage``, each a
     ``Connection::read`` filled by ``Connection::readTransport``); here whatever one
     receive returned is split at once, so a read of several frames costs one wake-up
-    and a frame that fits in one read is not copied into a buffer first.
+    and a frame that fits in one read is not copied at all: fed a ``memoryview`` (the
+    asyncio pump's read buffer), the sink gets a view of it.
 
     Args:
-        sink: called with each frame's payload (without its length prefix); what it
-            raises propagates from :meth:`feed`, after the frames before it.
+        sink: called with each frame's payload (without its length prefix): ``bytes``,
+            or a ``memoryview`` valid only during the call when :meth:`feed` was given
+            one (the sink must not keep it); what it raises propagates from
+            :meth:`feed`, after the frames before it.
         first_limit: largest first frame (the connection header).
         limit: largest later frame (a message).
     """
 
     __slots__ = ("_buf", "_first", "_limit", "_need", "_rest", "_sink")
 
-    def __init__(self, sink: Callable[[bytes], object], first_limit: int, limit: int) -> None:
+    def __init__(
+        self, sink: Callable[[bytes | memoryview], object], first_limit: int, limit: int
+    ) -> None:
         self._sink = sink
         self._first = True
         self._limit = first_limit
@@ -206,8 +211,10 @@ class FrameSplitter:
         self._buf = bytearray()
         self._need = 4  # bytes the buffered frame needs before it can be split
 
-    def feed(self, data: bytes) -> None:
-        """Add received bytes; hand every frame they complete to ``sink``.
+    def feed(self, data: bytes | memoryview) -> None:
+        """Add received bytes; hand every frame they complete to ``sink``. A
+        ``memoryview`` is read during the call only (an incomplete frame's bytes are
+        copied), so its buffer may be reused afterwards.
 
         Raises:
             ValueError: a length prefix over the limit (after the frames before it);
