@@ -58,8 +58,8 @@ def test_every_extra_the_readme_names_exists() -> None:
     named |= {x.strip() for x in listed.group(1).split(",")} | {listed.group(2)}
     assert named, "no extra found in the README"
     assert named <= extras, f"README names extras pyproject.toml lacks: {sorted(named - extras)}"
-    # ... and lists every user extra there is (test, docs and cli are not for users).
-    assert extras - {"test", "docs", "cli"} <= named
+    # ... and lists every user extra there is (test, docs, cli and bench are not for users).
+    assert extras - {"test", "docs", "cli", "bench"} <= named
 
 
 def test_readme_says_how_to_reach_the_venv_commands() -> None:
