@@ -1,0 +1,117 @@
+"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display (layer 5).
+
+Needs the ``tfbus[view]`` extra (viser); without it the command says so in one line
+(exit status 2).
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import threading
+from pathlib import Path
+from types import FrameType
+
+import click
+
+from tfbus.cli._common import bag_path, fail
+from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
+
+__all__ = ["command"]
+
+NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
+
+
+@click.command("view")
+@click.option("--bag", type=bag_path(), default=None, help="Show this bag, with a time slider.")
+@click.option("--bus", "bus", metavar="SPEC", default=None,
+              help="Show a live bus (default 'zenoh' without --bag).")
+@click.option("--fixed-frame", default=None,
+              help="Frame at the origin (default: the root of the largest tree).")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to serve on. Anything but 127.0.0.1 exposes the page, which has "
+                   "no authentication, to the network.")
+@click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
+              help="TCP port of the page (0: any free port).")
+@click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
+@click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
+              help="With --bag: playback rate (x0.1-x10).")
+@click.option("--frame-timeout", type=click.FloatRange(min=0.0, min_open=True),
+              default=DEFAULT_FRAME_TIMEOUT, show_default=True,
+              help="Seconds without an update before a frame is hidden (it fades to grey "
+                   "from a third of it, as rviz's TF display).")
+def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
+            port: int, paused: bool, rate: float, frame_timeout: float) -> None:
+    """Serve a live 3D page of the frames (open the printed address in a browser).
+
+    \b
+    Examples:
+      tfbus view --bag tests/data/webviz_turtle_tf_example.bag
+      tfbus view --bus zenoh --fixed-frame odom --port 8081
+    """
+    try:
+        importlib.import_module("viser")
+    except ImportError:
+        fail(NEEDS_EXTRA)
+    if bag is not None and bus is not None:
+        fail("give --bag PATH or --bus SPEC, not both")
+    from tfbus.view.server import PortInUseError, TfPage
+
+    try:
+        page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}")
+    except PortInUseError as err:
+        fail(str(err))
+    except OSError as err:
+        fail(f"cannot serve on {host}:{port}: {err}")
+    click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
+    try:
+        if bag is not None:
+            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate)
+        else:
+            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
+    finally:
+        page.close()
+
+
+def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
+               paused: bool, rate: float) -> None:
+    from tfbus.cli._sources import BagSource
+    from tfbus.view.player import BagPlayer
+    from tfbus.view.server import TfPage
+    from tfbus.view.timeline import BagTimeline
+
+    assert isinstance(page, TfPage)
+    src = BagSource(bag)
+    timeline = BagTimeline.read(bag)
+    player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
+                       paused=paused, rate=rate, statistics=src.statistics())
+    stop = threading.Event()
+
+    def on_signal(_sig: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    player.render()
+    player.run(stop)
+
+
+def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float) -> None:
+    import anyio
+
+    from tfbus.cli._sources import BusSource, live, run_live
+    from tfbus.view.player import MAX_DRAW_HZ, draw_live
+    from tfbus.view.server import TfPage
+
+    assert isinstance(page, TfPage)
+    src = BusSource(spec, name="tfbus-view")
+
+    async def body() -> None:
+        while True:
+            draw_live(page, src.buffer(), src.statistics(), src.clock.now(),
+                      fixed_frame=fixed_frame, frame_timeout=frame_timeout)
+            await anyio.sleep(1.0 / MAX_DRAW_HZ)
+
+    code = run_live(lambda: live(src, None, body))
+    if code:
+        raise SystemExit(code)
