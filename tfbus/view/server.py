@@ -108,6 +108,8 @@ class TfPage:
         self.frames: dict[str, Any] = {}
         """Scene handle of each frame id drawn (``position``, ``wxyz``, ``visible``)."""
         self.labels: dict[str, Any] = {}
+        self.camera_set = False
+        """Whether the camera was aimed at the frames (once, at the first frames drawn)."""
         self.links: Any = None
         self.link_count = 0
         gui = self.server.gui
@@ -158,11 +160,28 @@ class TfPage:
                 c = _mix(f.colour if f.colour is not None else 0.0)
                 colours.append([c, c])
         self._draw_links(segments, colours)
+        if not self.camera_set:
+            self._aim(scene)
         self._draw_panel(scene, stats, rates)
         msg = scene.message
         if msg is None and scene.fixed_frame is not None:
             msg = f"fixed frame: {scene.fixed_frame}"
         self.set_status(msg)
+
+    def _aim(self, scene: Scene) -> None:
+        """Point the browsers' initial camera at the drawn frames (their bounding box seen
+        from the -x -y +z diagonal); nothing before a frame is placed."""
+        placed = [_xyz(f.pose) for f in scene.frames if f.visible and f.pose is not None]
+        if not placed:
+            return
+        pts = np.asarray(placed, dtype=np.float64)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        centre = (lo + hi) / 2.0
+        size = max(float(np.max(hi - lo)), 1.0)
+        cam = self.server.initial_camera
+        cam.look_at = tuple(centre)
+        cam.position = tuple(centre + np.array([-0.9, -0.9, 0.8]) * size)
+        self.camera_set = True
 
     def _draw_links(self, segments: list[list[tuple[float, float, float]]],
                     colours: list[list[tuple[int, int, int]]]) -> None:
@@ -208,8 +227,8 @@ class TfPage:
         errors = [f"<li>{_h(f.frame_id)}: {_h(f.error)}</li>" for f in scene.frames
                   if f.error is not None]
         value = (
-            "<table><tr><th>frame</th><th>parent</th><th>Hz</th><th>age</th>"
-            "<th>broadcaster</th><th>state</th></tr>" + "".join(rows) + "</table>"
+            "<table style='font-size:0.8em'><tr><th>frame</th><th>parent</th><th>Hz</th>"
+            "<th>age</th><th>broadcaster</th><th>state</th></tr>" + "".join(rows) + "</table>"
             + (f"<p>cannot place in [{_h(scene.fixed_frame)}]:</p><ul>{''.join(errors)}</ul>"
                if errors else "")
         )
