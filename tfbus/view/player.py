@@ -55,6 +55,8 @@ class BagPlayer:
 
         self.slider.on_update(self._on_slider)
         self.last_scene: Scene | None = None
+        if timeline.times:  # the camera frames every frame the bag places by its end
+            page.aim(build_scene(timeline.buffer_at(timeline.end), fixed_frame=fixed_frame))
 
     def _on_slider(self, _event: Any) -> None:
         # a user's drag of the time slider (our own writes set the same value)

@@ -161,14 +161,14 @@ class TfPage:
                 colours.append([c, c])
         self._draw_links(segments, colours)
         if not self.camera_set:
-            self._aim(scene)
+            self.aim(scene)
         self._draw_panel(scene, stats, rates)
         msg = scene.message
         if msg is None and scene.fixed_frame is not None:
             msg = f"fixed frame: {scene.fixed_frame}"
         self.set_status(msg)
 
-    def _aim(self, scene: Scene) -> None:
+    def aim(self, scene: Scene) -> None:
         """Point the browsers' initial camera at the drawn frames (their bounding box seen
         from the -x -y +z diagonal); nothing before a frame is placed."""
         placed = [_xyz(f.pose) for f in scene.frames if f.visible and f.pose is not None]
