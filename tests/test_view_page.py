@@ -10,6 +10,7 @@ import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -159,3 +160,52 @@ def test_bag_and_bus_together_is_a_usage_error() -> None:
     result = CliRunner().invoke(cli, ["view", "--bag", str(TURTLE), "--bus", "memory",
                                       "--port", str(port)])
     assert result.exit_code == 2 and "not both" in result.stderr
+
+
+LASER = DATA / "laser" / "drl_guardian_3.bag"
+
+
+def test_scan_points_equal_the_projection(page: TfPage) -> None:
+    from tfbus.laser import LaserProjection
+    from tfbus.sensor_msgs import read_points
+    from tfbus.view.scans import ScanTrack
+
+    track = ScanTrack.read(LASER, "/scan")
+    assert len(track.scans) == 1036
+    timeline = BagTimeline.read(LASER)
+    player = BagPlayer(page, timeline, fixed_frame="odom", paused=True, scans=[track])
+    drawn = 0
+    for k in range(1, 6):
+        player.seek(player.duration * k / 6)
+        player.render()
+        t = player.time()
+        core = timeline.buffer_at(t)
+        cloud = page.clouds["/scan"]
+        assert "/scan" not in player.scan_errors and cloud.visible
+        # the newest scan at or before t that tf can place (a fresh scan waits for its tf)
+        placed = None
+        for scan in reversed(track.scans[: sum(1 for x in track.times if x <= t.ns)]):
+            try:
+                placed = LaserProjection().transform_laser_scan_to_point_cloud(
+                    "odom", scan, core)
+                break
+            except Exception:
+                continue
+        assert placed is not None
+        ref = read_points(placed, ["x", "y", "z"])
+        want = np.stack([ref["x"], ref["y"], ref["z"]], axis=1)
+        assert want.shape[0] > 100
+        np.testing.assert_array_equal(np.asarray(cloud.points), want)
+        drawn += 1
+    assert drawn == 5
+
+
+def test_scan_topic_missing_is_a_usage_error() -> None:
+    result = CliRunner().invoke(cli, ["view", "--bag", str(LASER), "--scan", "/nope",
+                                      "--port", "0"])
+    assert result.exit_code == 2
+    assert result.stderr.strip().endswith(
+        "no LaserScan topic of that name in " + str(LASER) +
+        " (scan topics: /hokuyo_back_scan, /scan)")
+    result = CliRunner().invoke(cli, ["view", "--scan", "/scan", "--port", "0"])
+    assert result.exit_code == 2 and "--scan needs --bag" in result.stderr

@@ -9,13 +9,18 @@ from __future__ import annotations
 import importlib
 import signal
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 import click
 
 from tfbus.cli._common import bag_path, fail
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
+
+if TYPE_CHECKING:
+    from tfbus.view.scans import ScanTrack
 
 __all__ = ["command"]
 
@@ -33,6 +38,9 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
                    "no authentication, to the network.")
 @click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="TCP port of the page (0: any free port).")
+@click.option("--scan", "scan_topics", multiple=True, metavar="TOPIC",
+              help="With --bag: draw this topic's LaserScans, projected into the fixed frame "
+                   "(tfbus.laser.LaserProjection). Repeatable.")
 @click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
 @click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
               help="With --bag: playback rate (x0.1-x10).")
@@ -41,13 +49,15 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
               help="Seconds without an update before a frame is hidden (it fades to grey "
                    "from a third of it, as rviz's TF display).")
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
-            port: int, paused: bool, rate: float, frame_timeout: float) -> None:
+            port: int, paused: bool, rate: float, frame_timeout: float,
+            scan_topics: tuple[str, ...]) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
     Examples:
       tfbus view --bag tests/data/webviz_turtle_tf_example.bag
       tfbus view --bus zenoh --fixed-frame odom --port 8081
+      tfbus view --bag tests/data/laser/drl_guardian_3.bag --scan /scan --fixed-frame odom
     """
     try:
         importlib.import_module("viser")
@@ -55,8 +65,18 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(NEEDS_EXTRA)
     if bag is not None and bus is not None:
         fail("give --bag PATH or --bus SPEC, not both")
+    if scan_topics and bag is None:
+        fail("--scan needs --bag PATH (scans from a live bus are not drawn yet)")
+    from tfbus.view.scans import ScanTrack
     from tfbus.view.server import PortInUseError, TfPage
 
+    tracks = []
+    for topic in scan_topics:
+        assert bag is not None
+        try:
+            tracks.append(ScanTrack.read(bag, topic))
+        except ValueError as err:
+            fail(str(err))
     try:
         page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}")
     except PortInUseError as err:
@@ -66,7 +86,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
     try:
         if bag is not None:
-            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate)
+            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
     finally:
@@ -74,7 +94,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
 
 
 def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
-               paused: bool, rate: float) -> None:
+               paused: bool, rate: float, tracks: Sequence[ScanTrack]) -> None:
     from tfbus.cli._sources import BagSource
     from tfbus.view.player import BagPlayer
     from tfbus.view.server import TfPage
@@ -84,7 +104,7 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     src = BagSource(bag)
     timeline = BagTimeline.read(bag)
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
-                       paused=paused, rate=rate, statistics=src.statistics())
+                       paused=paused, rate=rate, statistics=src.statistics(), scans=tracks)
     stop = threading.Event()
 
     def on_signal(_sig: int, _frame: FrameType | None) -> None:

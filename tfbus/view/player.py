@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import threading
 import time as _wall
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from tfbus.core import BufferCore
+from tfbus.laser import LaserProjection
 from tfbus.monitor import TfStatistics
 from tfbus.time import Time
+from tfbus.view.scans import ScanTrack
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene, build_scene
 from tfbus.view.server import TfPage
 from tfbus.view.timeline import BagTimeline
@@ -33,7 +35,8 @@ class BagPlayer:
 
     def __init__(self, page: TfPage, timeline: BagTimeline, *, fixed_frame: str | None = None,
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT, paused: bool = False,
-                 rate: float = 1.0, statistics: TfStatistics | None = None) -> None:
+                 rate: float = 1.0, statistics: TfStatistics | None = None,
+                 scans: Sequence[ScanTrack] = ()) -> None:
         if not 0.1 <= rate <= 10.0:
             raise ValueError(f"rate must be between 0.1 and 10, got {rate!r}")
         self.page = page
@@ -41,6 +44,10 @@ class BagPlayer:
         self.fixed_frame = fixed_frame
         self.frame_timeout = frame_timeout
         self.statistics = statistics
+        self.scans = tuple(scans)
+        self._projectors = [LaserProjection() for _ in self.scans]
+        self.scan_errors: dict[str, str] = {}
+        """Why a scan topic is not drawn at the bag time shown (tf2's message)."""
         self.position = 0.0
         """Seconds from the bag's start."""
         self.duration = (timeline.end.ns - timeline.start.ns) / 1e9
@@ -90,11 +97,20 @@ class BagPlayer:
                             last_update=self.timeline.last_update(t),
                             frame_timeout=self.frame_timeout)
         self.page.draw(scene, self.statistics)
+        self.scan_errors.clear()
+        for track, projector in zip(self.scans, self._projectors, strict=True):
+            pts = None
+            if scene.fixed_frame is not None:
+                pts, _, why = track.project_at(t, scene.fixed_frame, core, projector)
+                if why is not None:
+                    self.scan_errors[track.topic] = why
+            self.page.draw_points(track.topic, pts)
         if scene.message is None and self.timeline.problem:
             self.page.set_status(self.timeline.problem)
         elif scene.frames:
             self.page.set_status(f"fixed frame: {scene.fixed_frame}   bag time "
-                                 f"{self.position:.2f} / {self.duration:.2f} s")
+                                 f"{self.position:.2f} / {self.duration:.2f} s"
+                                 + "".join(f"   {e}" for e in self.scan_errors.values()))
         self.last_scene = scene
         return scene
 

@@ -21,6 +21,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfStatistics
@@ -110,6 +111,8 @@ class TfPage:
         self.labels: dict[str, Any] = {}
         self.camera_set = False
         """Whether the camera was aimed at the frames (once, at the first frames drawn)."""
+        self.clouds: dict[str, Any] = {}
+        """Point cloud handle per scan topic (``points``: ``(N, 3) float32``)."""
         self.links: Any = None
         self.link_count = 0
         gui = self.server.gui
@@ -235,6 +238,26 @@ class TfPage:
         if value != self.panel_html:
             self.panel_html = value
             self.tree.content = value
+
+    def draw_points(self, key: str, points: npt.NDArray[np.float32] | None,
+                    colour: tuple[int, int, int] = (20, 90, 230)) -> None:
+        """Draw ``points`` (``(N, 3)`` metres in the fixed frame) as the cloud ``key``
+        (one per scan topic); ``None`` hides it."""
+        with self._lock:
+            handle = self.clouds.get(key)
+            if points is None:
+                if handle is not None:
+                    handle.visible = False
+                return
+            pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+            if handle is None:
+                handle = self.server.scene.add_point_cloud(
+                    f"/scans/s{len(self.clouds)}", pts, colour, point_size=0.03,
+                    precision="float32")  # viser would send float16 (mm-level error)
+                self.clouds[key] = handle
+            else:
+                handle.points = pts
+                handle.visible = True
 
     def close(self) -> None:
         """Stop the server (closes its port)."""
