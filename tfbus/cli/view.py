@@ -20,6 +20,7 @@ from tfbus.cli._common import bag_path, fail
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
 
 if TYPE_CHECKING:
+    from tfbus.view.foxglove_bridge import FoxgloveBridge
     from tfbus.view.scans import ScanTrack
 
 __all__ = ["command"]
@@ -41,6 +42,11 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 @click.option("--scan", "scan_topics", multiple=True, metavar="TOPIC",
               help="With --bag: draw this topic's LaserScans, projected into the fixed frame "
                    "(tfbus.laser.LaserProjection). Repeatable.")
+@click.option("--foxglove", "foxglove_port", type=click.IntRange(0, 65535), default=None,
+              metavar="PORT",
+              help="With --bag: also serve the Foxglove WebSocket protocol on this port "
+                   "(/tf as foxglove.FrameTransforms, scans as foxglove.LaserScan, bag "
+                   "time as server time), on --host.")
 @click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
 @click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
               help="With --bag: playback rate (x0.1-x10).")
@@ -50,7 +56,7 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
                    "from a third of it, as rviz's TF display).")
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
-            scan_topics: tuple[str, ...]) -> None:
+            scan_topics: tuple[str, ...], foxglove_port: int | None) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -65,6 +71,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(NEEDS_EXTRA)
     if bag is not None and bus is not None:
         fail("give --bag PATH or --bus SPEC, not both")
+    if foxglove_port is not None and bag is None:
+        fail("--foxglove needs --bag PATH (a live bus is not relayed to Foxglove yet)")
     if scan_topics and bag is None:
         fail("--scan needs --bag PATH (scans from a live bus are not drawn yet)")
     from tfbus.view.scans import ScanTrack
@@ -84,17 +92,33 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     except OSError as err:
         fail(f"cannot serve on {host}:{port}: {err}")
     click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
+    bridge = None
+    if foxglove_port is not None:
+        from tfbus.view.foxglove_bridge import FoxgloveBridge
+
+        try:
+            bridge = FoxgloveBridge(host, foxglove_port)
+        except ImportError:
+            page.close()
+            fail("the 'foxglove-sdk' package is not installed: pip install 'tfbus[view]'")
+        except OSError as err:
+            page.close()
+            fail(str(err))
+        click.echo(f"tfbus view: Foxglove ws://{host}:{bridge.port}", err=True)
     try:
         if bag is not None:
-            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks)
+            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
     finally:
         page.close()
+        if bridge is not None:
+            bridge.close()
 
 
 def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
-               paused: bool, rate: float, tracks: Sequence[ScanTrack]) -> None:
+               paused: bool, rate: float, tracks: Sequence[ScanTrack],
+               bridge: FoxgloveBridge | None) -> None:
     from tfbus.cli._sources import BagSource
     from tfbus.view.player import BagPlayer
     from tfbus.view.server import TfPage
@@ -104,7 +128,8 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     src = BagSource(bag)
     timeline = BagTimeline.read(bag)
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
-                       paused=paused, rate=rate, statistics=src.statistics(), scans=tracks)
+                       paused=paused, rate=rate, statistics=src.statistics(), scans=tracks,
+                       foxglove=bridge)
     stop = threading.Event()
 
     def on_signal(_sig: int, _frame: FrameType | None) -> None:

@@ -3,6 +3,7 @@ x0.1-x10) or a live buffer, redrawn at most :data:`MAX_DRAW_HZ` times a second."
 
 from __future__ import annotations
 
+import bisect
 import threading
 import time as _wall
 from collections.abc import Callable, Sequence
@@ -12,6 +13,7 @@ from tfbus.core import BufferCore
 from tfbus.laser import LaserProjection
 from tfbus.monitor import TfStatistics
 from tfbus.time import Time
+from tfbus.view.foxglove_bridge import FoxgloveBridge
 from tfbus.view.scans import ScanTrack
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene, build_scene
 from tfbus.view.server import TfPage
@@ -36,7 +38,8 @@ class BagPlayer:
     def __init__(self, page: TfPage, timeline: BagTimeline, *, fixed_frame: str | None = None,
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT, paused: bool = False,
                  rate: float = 1.0, statistics: TfStatistics | None = None,
-                 scans: Sequence[ScanTrack] = ()) -> None:
+                 scans: Sequence[ScanTrack] = (),
+                 foxglove: FoxgloveBridge | None = None) -> None:
         if not 0.1 <= rate <= 10.0:
             raise ValueError(f"rate must be between 0.1 and 10, got {rate!r}")
         self.page = page
@@ -45,6 +48,12 @@ class BagPlayer:
         self.frame_timeout = frame_timeout
         self.statistics = statistics
         self.scans = tuple(scans)
+        self.foxglove = foxglove
+        self._fg_upto = 0
+        self._fg_scan_upto = [0 for _ in self.scans]
+        for track in self.scans:  # advertised from the start, before any scan is due
+            if foxglove is not None:
+                foxglove.scan_channel(track.topic)
         self._projectors = [LaserProjection() for _ in self.scans]
         self.scan_errors: dict[str, str] = {}
         """Why a scan topic is not drawn at the bag time shown (tf2's message)."""
@@ -111,8 +120,34 @@ class BagPlayer:
             self.page.set_status(f"fixed frame: {scene.fixed_frame}   bag time "
                                  f"{self.position:.2f} / {self.duration:.2f} s"
                                  + "".join(f"   {e}" for e in self.scan_errors.values()))
+        if self.foxglove is not None:
+            self._feed_foxglove(t, scene)
         self.last_scene = scene
         return scene
+
+    def _feed_foxglove(self, t: Time, scene: Scene) -> None:
+        """Send Foxglove the bag's messages up to ``t`` not sent yet (after a jump back:
+        the statics again, then from ``t`` on), the scans likewise, ``t`` as the server
+        time and tf's errors as statuses."""
+        fg = self.foxglove
+        assert fg is not None
+        tl = self.timeline
+        n = bisect.bisect_right(tl.times, t.ns)
+        if n < self._fg_upto:
+            for i in range(n):
+                if tl.messages[i][2]:
+                    fg.publish_transforms(tl.messages[i][0], tl.times[i])
+            self._fg_upto = n
+        for i in range(self._fg_upto, n):
+            fg.publish_transforms(tl.messages[i][0], tl.times[i])
+        self._fg_upto = n
+        for k, track in enumerate(self.scans):
+            m = bisect.bisect_right(track.times, t.ns)
+            for i in range(self._fg_scan_upto[k], m):  # empty after a jump back
+                fg.publish_scan(track.topic, track.scans[i], track.times[i])
+            self._fg_scan_upto[k] = m
+        fg.broadcast_time(t.ns)
+        fg.publish_errors(scene)
 
     def run(self, stop: threading.Event,
             clock: Callable[[], float] = _wall.monotonic) -> None:
