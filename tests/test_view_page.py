@@ -209,3 +209,8 @@ def test_scan_topic_missing_is_a_usage_error() -> None:
         " (scan topics: /hokuyo_back_scan, /scan)")
     result = CliRunner().invoke(cli, ["view", "--scan", "/scan", "--port", "0"])
     assert result.exit_code == 2 and "--scan needs --bag" in result.stderr
+
+
+def test_foxglove_needs_a_bag() -> None:
+    result = CliRunner().invoke(cli, ["view", "--foxglove", "0", "--port", "0"])
+    assert result.exit_code == 2 and "--foxglove needs --bag" in result.stderr
