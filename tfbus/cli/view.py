@@ -47,6 +47,10 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
               help="With --bag: also serve the Foxglove WebSocket protocol on this port "
                    "(/tf as foxglove.FrameTransforms, scans as foxglove.LaserScan, bag "
                    "time as server time), on --host.")
+@click.option("--urdf", "urdf", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None,
+              help="Draw this URDF's link geometry (boxes, cylinders, spheres) on the link "
+                   "frames, following the transforms robot_state_publisher sends.")
 @click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
 @click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
               help="With --bag: playback rate (x0.1-x10).")
@@ -56,7 +60,8 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
                    "from a third of it, as rviz's TF display).")
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
-            scan_topics: tuple[str, ...], foxglove_port: int | None) -> None:
+            scan_topics: tuple[str, ...], foxglove_port: int | None,
+            urdf: Path | None) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -78,6 +83,17 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     from tfbus.view.scans import ScanTrack
     from tfbus.view.server import PortInUseError, TfPage
 
+    visuals = []
+    if urdf is not None:
+        from tfbus.view.robot import link_visuals
+
+        try:
+            visuals = link_visuals(urdf)
+        except ImportError:
+            fail("the 'urdf_parser_py' package is not installed: pip install 'tfbus[robot]'")
+        except ValueError as err:
+            fail(str(err))
+
     tracks = []
     for topic in scan_topics:
         assert bag is not None
@@ -91,6 +107,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(str(err))
     except OSError as err:
         fail(f"cannot serve on {host}:{port}: {err}")
+    page.set_visuals(visuals)
     click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
     bridge = None
     if foxglove_port is not None:

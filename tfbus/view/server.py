@@ -17,7 +17,7 @@ import html
 import re
 import socket
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfStatistics
+from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
 
 __all__ = ["PortInUseError", "TfPage", "text"]
@@ -111,6 +112,9 @@ class TfPage:
         self.labels: dict[str, Any] = {}
         self.camera_set = False
         """Whether the camera was aimed at the frames (once, at the first frames drawn)."""
+        self.visuals: dict[str, list[Any]] = {}
+        """Geometry handles per link frame id (children of the frame's scene node)."""
+        self._pending_visuals: dict[str, list[LinkVisual]] = {}
         self.clouds: dict[str, Any] = {}
         """Point cloud handle per scan topic (``points``: ``(N, 3) float32``)."""
         self.links: Any = None
@@ -153,6 +157,7 @@ class TfPage:
                                              origin_radius=0.02)
                 self.frames[f.frame_id] = handle
                 self.labels[f.frame_id] = scene_api.add_label(f"/tf/f{n}/label", text(f.frame_id))
+                self._attach(f.frame_id, f"/tf/f{n}")
             if f.pose is not None:
                 handle.position = _xyz(f.pose)
                 handle.wxyz = _wxyz(f.pose)
@@ -170,6 +175,28 @@ class TfPage:
         if msg is None and scene.fixed_frame is not None:
             msg = f"fixed frame: {scene.fixed_frame}"
         self.set_status(msg)
+
+    def set_visuals(self, visuals: Sequence[LinkVisual]) -> None:
+        """Link geometry (``--urdf``) to draw on each link's frame once it is drawn: a
+        child node of the frame, at the visual's origin, so it moves with the frame."""
+        with self._lock:
+            for v in visuals:
+                self._pending_visuals.setdefault(v.link, []).append(v)
+
+    def _attach(self, frame_id: str, node: str) -> None:
+        scene_api = self.server.scene
+        for k, v in enumerate(self._pending_visuals.pop(frame_id, [])):
+            name = f"{node}/v{k}"
+            if v.kind == "box":
+                h = scene_api.add_box(name, color=v.rgb, dimensions=v.size,
+                                      position=v.xyz, wxyz=v.wxyz)
+            elif v.kind == "cylinder":
+                h = scene_api.add_cylinder(name, radius=v.size[0], height=v.size[1],
+                                           color=v.rgb, position=v.xyz, wxyz=v.wxyz)
+            else:
+                h = scene_api.add_icosphere(name, radius=v.size[0], color=v.rgb,
+                                            position=v.xyz, wxyz=v.wxyz)
+            self.visuals.setdefault(frame_id, []).append(h)
 
     def aim(self, scene: Scene) -> None:
         """Point the browsers' initial camera at the drawn frames (their bounding box seen
