@@ -13,13 +13,13 @@ import pytest
 pytest.importorskip("viser")
 pytest.importorskip("urdf_parser_py")
 
-from tfbus import Time  # noqa: E402
-from tfbus.messages import Header, JointState  # noqa: E402
-from tfbus.core import BufferCore  # noqa: E402
-from tfbus.robot_state import RobotStatePublisher  # noqa: E402
-from tfbus.view import build_scene  # noqa: E402
-from tfbus.view.robot import link_visuals  # noqa: E402
-from tfbus.view.server import TfPage  # noqa: E402
+from tfbus import Time
+from tfbus.core import BufferCore
+from tfbus.messages import Header, JointState
+from tfbus.robot_state import RobotStatePublisher
+from tfbus.view import build_scene
+from tfbus.view.robot import link_visuals
+from tfbus.view.server import TfPage
 
 URDF = Path(__file__).parent / "data" / "urdf" / "urdf_tutorial_07-physics.urdf"
 H = math.sin(1.57075 / 2)
@@ -38,7 +38,7 @@ def test_visuals_read_from_the_urdf() -> None:
     vis = link_visuals(URDF)
     base = [v for v in vis if v.link == "base_link"]
     assert [(v.kind, v.size) for v in base] == [("cylinder", (0.2, 0.6))]
-    leg = [v for v in vis if v.link == "right_leg"][0]
+    leg = next(v for v in vis if v.link == "right_leg")
     assert leg.kind == "box" and leg.size == (0.6, 0.1, 0.2)
     assert leg.xyz == (0.0, 0.0, -0.3)
     assert leg.wxyz == pytest.approx((math.cos(1.57075 / 2), 0.0, H, 0.0))
