@@ -55,9 +55,15 @@ def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[by
     return done
 
 
-def dom(exe: str, url: str) -> str:
-    """The page's DOM after the viser client connected and drew what the server sent."""
-    return _chromium(exe, url, "--dump-dom").stdout.decode("utf-8", "replace")
+def dom(exe: str, url: str, until: str) -> str:
+    """The page's DOM after the viser client connected and drew what the server sent:
+    loaded again (at most 4 times) while ``until`` is not in it yet (a loaded machine can
+    end Chromium's virtual-time budget before the websocket delivered the panel)."""
+    for _ in range(4):
+        text = _chromium(exe, url, "--dump-dom").stdout.decode("utf-8", "replace")
+        if until in text:
+            break
+    return text
 
 
 def screenshot(exe: str, url: str, path: Path) -> Path:
@@ -95,7 +101,7 @@ def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> No
     assert hi - lo > 100  # not a blank canvas: grid lines, axes, labels, the panel
     colours = len(shot.convert("RGB").getcolors(maxcolors=1 << 24) or [])
     assert colours > 50
-    text = dom(chromium, url)
+    text = dom(chromium, url, "bag time 10.00 / 21.50 s")
     names = {t.child_frame_id for rec in read_messages(TURTLE) for t in rec.message.transforms}
     names |= {t.header.frame_id for rec in read_messages(TURTLE) for t in rec.message.transforms}
     assert names == {"world", "turtle1", "turtle2", "carrot"}
@@ -121,7 +127,7 @@ def test_live_frame_goes_stale_then_hidden(chromium: str, page: TfPage) -> None:
     send(odd)
     url = f"http://127.0.0.1:{page.port}/"
     draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
-    first = dom(chromium, url)
+    first = dom(chromium, url, "<td>base_link</td>")
     assert row(first, "base_link")[-1] == "ok"
     # the id with markup is text in the page: escaped in the DOM, never an element
     escaped = html.escape(odd)
@@ -132,12 +138,68 @@ def test_live_frame_goes_stale_then_hidden(chromium: str, page: TfPage) -> None:
         clock.advance_nowait(0.5)
         send(odd)
     draw_live(page, core, stats, clock.now(), frame_timeout=3.0)  # base_link silent 2 s
-    second = dom(chromium, url)
+    second = dom(chromium, url, "<td>stale</td>")
     assert row(second, "base_link")[-1] == "stale" and row(second, "base_link")[3] == "2.0 s"
     assert row(second, escaped)[-1] == "ok"
     assert page.frames["base_link"].visible
     clock.advance_nowait(1.5)  # silent 3.5 s > 3 s timeout: hidden
     draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
-    third = dom(chromium, url)
+    third = dom(chromium, url, "hidden (timed out)")
     assert row(third, "base_link")[-1] == "hidden (timed out)"
     assert not page.frames["base_link"].visible
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+@pytest.mark.anyio
+async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
+    """The live path as ``tfbus view --bus`` runs it: broadcasters on a bus ->
+    TransformListener -> MonitoredSink (Buffer + TfStatistics, receive time from a
+    ManualClock) -> draw_live; one broadcaster stops and its frame turns stale."""
+    import anyio
+
+    from tfbus.broadcaster import TransformBroadcaster
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Bus
+    from tfbus.listener import TransformListener
+    from tfbus.monitor import MonitoredSink
+
+    clock = ManualClock(Time.from_sec(50.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfStatistics()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    url = f"http://127.0.0.1:{page.port}/"
+
+    def tf(child: str, x: float) -> TransformStamped:
+        return TransformStamped(Header(clock.now(), "odom"), child,
+                                Transform(Vector3(x, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+
+    async with Bus() as bus, TransformListener(sink, bus, clock=clock):
+        arm, cam = TransformBroadcaster(bus), TransformBroadcaster(bus)
+
+        async def send(*which: tuple[TransformBroadcaster, str, float]) -> None:
+            before = stats.messages.get("/tf", 0)
+            for b, child, x in which:
+                await b.send_transform(tf(child, x))
+            with anyio.fail_after(5):
+                while stats.messages.get("/tf", 0) < before + len(which):
+                    await anyio.sleep(0)
+
+        await send((arm, "arm", 1.0), (cam, "camera", 2.0))
+        draw_live(page, buffer, stats, clock.now(), frame_timeout=6.0)
+        first = await anyio.to_thread.run_sync(dom, chromium, url, "<td>camera</td>")
+        assert row(first, "arm")[1:2] == ["odom"] and row(first, "arm")[-1] == "ok"
+        assert row(first, "camera")[-1] == "ok"
+        assert tuple(page.frames["camera"].position) == (2.0, 0.0, 0.0)
+        for k in range(6):  # the camera's broadcaster stopped; the arm keeps going
+            await clock.advance(0.5)
+            await send((arm, "arm", 1.0 + 0.1 * (k + 1)))
+        draw_live(page, buffer, stats, clock.now(), frame_timeout=6.0)
+        second = await anyio.to_thread.run_sync(dom, chromium, url, "<td>stale</td>")
+        assert row(second, "camera")[-1] == "stale" and row(second, "camera")[3] == "3.0 s"
+        assert row(second, "arm")[-1] == "ok"
+        assert tuple(page.frames["arm"].position) == pytest.approx((1.6, 0.0, 0.0))
+    buffer.close()
