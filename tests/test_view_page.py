@@ -214,3 +214,33 @@ def test_scan_topic_missing_is_a_usage_error() -> None:
 def test_foxglove_needs_a_bag() -> None:
     result = CliRunner().invoke(cli, ["view", "--foxglove", "0", "--port", "0"])
     assert result.exit_code == 2 and "--foxglove needs --bag" in result.stderr
+
+
+def test_command_serves_a_bag_and_stops_on_sigint() -> None:
+    """``tfbus view --bag`` as a process: it prints its address, serves the page on
+    127.0.0.1, and SIGINT ends it with status 0 (waits bounded; killed by PID if not)."""
+    import select
+    import signal
+    import subprocess
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    exe = Path(sys.executable).with_name("tfbus")
+    proc = subprocess.Popen([str(exe), "view", "--bag", str(TURTLE), "--port", str(port),
+                             "--paused"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stderr is not None
+        ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
+        assert ready, "tfbus view printed nothing in 60 s"
+        line = proc.stderr.readline()  # the first line is the address
+        assert line.strip() == f"tfbus view: http://127.0.0.1:{port}/"
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as resp:
+            assert resp.status == 200
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)

@@ -108,6 +108,13 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     except OSError as err:
         fail(f"cannot serve on {host}:{port}: {err}")
     page.set_visuals(visuals)
+    stop = threading.Event()
+    if bag is not None:  # (a live bus: run_live's own handlers)
+        def on_signal(_sig: int, _frame: FrameType | None) -> None:
+            stop.set()
+
+        signal.signal(signal.SIGINT, on_signal)
+        signal.signal(signal.SIGTERM, on_signal)
     click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
     bridge = None
     if foxglove_port is not None:
@@ -124,7 +131,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         click.echo(f"tfbus view: Foxglove ws://{host}:{bridge.port}", err=True)
     try:
         if bag is not None:
-            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge)
+            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
     finally:
@@ -135,7 +142,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
 
 def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
                paused: bool, rate: float, tracks: Sequence[ScanTrack],
-               bridge: FoxgloveBridge | None) -> None:
+               bridge: FoxgloveBridge | None, stop: threading.Event) -> None:
     from tfbus.cli._sources import BagSource
     from tfbus.view.player import BagPlayer
     from tfbus.view.server import TfPage
@@ -147,13 +154,6 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
                        paused=paused, rate=rate, statistics=src.statistics(), scans=tracks,
                        foxglove=bridge)
-    stop = threading.Event()
-
-    def on_signal(_sig: int, _frame: FrameType | None) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
     player.render()
     player.run(stop)
 
