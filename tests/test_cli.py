@@ -27,7 +27,7 @@ DATA = Path(__file__).parent / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 NAV2 = DATA / "nav2_like.mcap"  # scripts/make_test_bags.py (tests/data/SOURCES.md)
 COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay",
-            "robot-state-publisher", "joint-states", "demo"]
+            "robot-state-publisher", "joint-states", "demo", "view"]
 
 
 def run(*args: str) -> tuple[int, str, str]:

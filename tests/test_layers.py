@@ -64,6 +64,7 @@ LAYERS: dict[str, int] = {
     "cli": 5,
     "demo": 5,
     "demo_laser": 5,
+    "view": 5,
     "__main__": 5,
 }
 """Layer of each top-level module or package of ``tfbus`` (a package's submodules share

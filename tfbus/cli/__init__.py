@@ -14,6 +14,7 @@
     tfbus demo laser                          a simulated laser projected three ways
     tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
     tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus
+    tfbus view --bag PATH                     the frames live in a browser (rviz's TF display)
     tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
@@ -52,6 +53,7 @@ COMMANDS: tuple[str, ...] = (
     "robot_state_publisher",
     "joint_states",
     "demo",
+    "view",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 

@@ -1,0 +1,205 @@
+"""``tfbus view`` in a real browser: Debian's headless Chromium opens the page served from
+the turtle bag and from a live buffer; the screenshot is not blank, the frame names are in
+the page's text, a frame whose broadcaster stopped is shown stale then hidden, and an id
+with markup stays text.
+
+Chromium runs as a child process with a fresh profile, killed (by its PID, through
+``subprocess.run``'s timeout) if it outlives the bound; everything is on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import re
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("viser")
+Image = pytest.importorskip("PIL.Image")  # viser's own dependency (through imageio)
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3  # noqa: E402
+from tfbus.bag import read_messages  # noqa: E402
+from tfbus.clock import ManualClock  # noqa: E402
+from tfbus.core import BufferCore  # noqa: E402
+from tfbus.monitor import TfStatistics  # noqa: E402
+from tfbus.view.player import BagPlayer, draw_live  # noqa: E402
+from tfbus.view.server import TfPage  # noqa: E402
+from tfbus.view.timeline import BagTimeline  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--window-size=1280,800", "--virtual-time-budget=6000"]
+
+
+@pytest.fixture(scope="module")
+def chromium() -> str:
+    exe = shutil.which("chromium")
+    if exe is None:
+        pytest.skip("Debian chromium not installed (scripts/install_chromium.sh)")
+    return exe
+
+
+def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[bytes]:
+    with tempfile.TemporaryDirectory(prefix="tfbus-view-chromium-") as profile:
+        done = subprocess.run([exe, *FLAGS, f"--user-data-dir={profile}", *extra, url],
+                              capture_output=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done
+
+
+def dom(exe: str, url: str, until: str) -> str:
+    """The page's DOM after the viser client connected and drew what the server sent:
+    loaded again (at most 4 times) while ``until`` is not in it yet (a loaded machine can
+    end Chromium's virtual-time budget before the websocket delivered the panel)."""
+    for _ in range(4):
+        text = _chromium(exe, url, "--dump-dom").stdout.decode("utf-8", "replace")
+        if until in text:
+            break
+    return text
+
+
+def screenshot(exe: str, url: str, path: Path) -> Path:
+    _chromium(exe, url, f"--screenshot={path}")
+    assert path.stat().st_size > 0
+    return path
+
+
+def row(page_dom: str, frame_text: str) -> list[str]:
+    """The cells of the frame-tree row of ``frame_text`` (as the DOM holds it, escaped)."""
+    m = re.search(r"<tr><td>" + re.escape(frame_text) + r"</td>(.*?)</tr>", page_dom)
+    assert m is not None, f"no row for {frame_text!r}"
+    return [frame_text, *re.findall(r"<td>(.*?)</td>", m.group(1))]
+
+
+@pytest.fixture
+def page() -> Iterator[TfPage]:
+    p = TfPage("127.0.0.1", 0)
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:
+    timeline = BagTimeline.read(TURTLE)
+    player = BagPlayer(page, timeline, paused=True)
+    player.seek(10.0)
+    player.render()
+    url = f"http://127.0.0.1:{page.port}/"
+    shot = Image.open(io.BytesIO(screenshot(chromium, url, tmp_path / "turtle.png").read_bytes()))
+    grey = shot.convert("L")
+    assert grey.size == (1280, 800)
+    lo, hi = grey.getextrema()
+    assert hi - lo > 100  # not a blank canvas: grid lines, axes, labels, the panel
+    colours = len(shot.convert("RGB").getcolors(maxcolors=1 << 24) or [])
+    assert colours > 50
+    text = dom(chromium, url, "bag time 10.00 / 21.50 s")
+    names = {t.child_frame_id for rec in read_messages(TURTLE) for t in rec.message.transforms}
+    names |= {t.header.frame_id for rec in read_messages(TURTLE) for t in rec.message.transforms}
+    assert names == {"world", "turtle1", "turtle2", "carrot"}
+    for name in names:
+        assert f"<td>{name}</td>" in text
+    assert row(text, "turtle1")[1] == "world" and row(text, "turtle1")[-1] == "ok"
+    assert row(text, "carrot")[-1] == "static"
+    assert "bag time 10.00 / 21.50 s" in text
+
+
+def test_live_frame_goes_stale_then_hidden(chromium: str, page: TfPage) -> None:
+    clock = ManualClock(Time.from_sec(100.0))
+    core, stats = BufferCore(), TfStatistics()
+    odd = "<b>bold</b>&amp;"
+
+    def send(child: str, parent: str = "world") -> None:
+        t = TransformStamped(Header(clock.now(), parent), child,
+                             Transform(Vector3(1.0, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+        core.set_transform(t, "bc_" + child)
+        stats.add(clock.now(), [t], "bc_" + child, static=False)
+
+    send("base_link")
+    send(odd)
+    url = f"http://127.0.0.1:{page.port}/"
+    draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
+    first = dom(chromium, url, "<td>base_link</td>")
+    assert row(first, "base_link")[-1] == "ok"
+    # the id with markup is text in the page: escaped in the DOM, never an element
+    escaped = html.escape(odd)
+    assert row(first, escaped)[-1] == "ok"
+    assert "<b>bold</b>" not in first
+    # base_link's broadcaster stops; odd's keeps sending
+    for _ in range(4):
+        clock.advance_nowait(0.5)
+        send(odd)
+    draw_live(page, core, stats, clock.now(), frame_timeout=3.0)  # base_link silent 2 s
+    second = dom(chromium, url, "<td>stale</td>")
+    assert row(second, "base_link")[-1] == "stale" and row(second, "base_link")[3] == "2.0 s"
+    assert row(second, escaped)[-1] == "ok"
+    assert page.frames["base_link"].visible
+    clock.advance_nowait(1.5)  # silent 3.5 s > 3 s timeout: hidden
+    draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
+    third = dom(chromium, url, "hidden (timed out)")
+    assert row(third, "base_link")[-1] == "hidden (timed out)"
+    assert not page.frames["base_link"].visible
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+@pytest.mark.anyio
+async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
+    """The live path as ``tfbus view --bus`` runs it: broadcasters on a bus ->
+    TransformListener -> MonitoredSink (Buffer + TfStatistics, receive time from a
+    ManualClock) -> draw_live; one broadcaster stops and its frame turns stale."""
+    import anyio
+
+    from tfbus.broadcaster import TransformBroadcaster
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Bus
+    from tfbus.listener import TransformListener
+    from tfbus.monitor import MonitoredSink
+
+    clock = ManualClock(Time.from_sec(50.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfStatistics()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    url = f"http://127.0.0.1:{page.port}/"
+
+    def tf(child: str, x: float) -> TransformStamped:
+        return TransformStamped(Header(clock.now(), "odom"), child,
+                                Transform(Vector3(x, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+
+    async with Bus() as bus, TransformListener(sink, bus, clock=clock):
+        arm, cam = TransformBroadcaster(bus), TransformBroadcaster(bus)
+
+        async def send(*which: tuple[TransformBroadcaster, str, float]) -> None:
+            before = stats.messages.get("/tf", 0)
+            for b, child, x in which:
+                await b.send_transform(tf(child, x))
+            with anyio.fail_after(5):
+                while stats.messages.get("/tf", 0) < before + len(which):
+                    await anyio.sleep(0)
+
+        await send((arm, "arm", 1.0), (cam, "camera", 2.0))
+        draw_live(page, buffer, stats, clock.now(), frame_timeout=6.0)
+        first = await anyio.to_thread.run_sync(dom, chromium, url, "<td>camera</td>")
+        assert row(first, "arm")[1:2] == ["odom"] and row(first, "arm")[-1] == "ok"
+        assert row(first, "camera")[-1] == "ok"
+        assert tuple(page.frames["camera"].position) == (2.0, 0.0, 0.0)
+        for k in range(6):  # the camera's broadcaster stopped; the arm keeps going
+            await clock.advance(0.5)
+            await send((arm, "arm", 1.0 + 0.1 * (k + 1)))
+        draw_live(page, buffer, stats, clock.now(), frame_timeout=6.0)
+        second = await anyio.to_thread.run_sync(dom, chromium, url, "<td>stale</td>")
+        assert row(second, "camera")[-1] == "stale" and row(second, "camera")[3] == "3.0 s"
+        assert row(second, "arm")[-1] == "ok"
+        assert tuple(page.frames["arm"].position) == pytest.approx((1.6, 0.0, 0.0))
+    buffer.close()

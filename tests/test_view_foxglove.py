@@ -1,0 +1,233 @@
+"""``tfbus view --foxglove``: a Foxglove WebSocket protocol client (subprotocol
+``foxglove.sdk.v1``, the ``websockets`` package) subscribes to ``/tf`` and a scan topic,
+decodes the protobuf messages it receives (wire format decoded here, field numbers from
+the foxglove schemas) and compares every transform with ``Buffer.lookup_transform``;
+bag time arrives as the server time, tf errors as status messages."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("foxglove")
+pytest.importorskip("viser")
+websockets = pytest.importorskip("websockets")
+
+from tfbus import Time  # noqa: E402
+from tfbus.bag import load_buffer  # noqa: E402
+from tfbus.view.foxglove_bridge import FoxgloveBridge  # noqa: E402
+from tfbus.view.player import BagPlayer  # noqa: E402
+from tfbus.view.scans import ScanTrack  # noqa: E402
+from tfbus.view.server import TfPage  # noqa: E402
+from tfbus.view.timeline import BagTimeline  # noqa: E402
+
+DATA = Path(__file__).parent / "data"
+TURTLE = DATA / "webviz_turtle_tf_example.bag"
+LASER = DATA / "laser" / "drl_guardian_3.bag"
+
+
+def fields(buf: bytes) -> dict[int, list[Any]]:
+    """Protocol buffers wire format: field number -> values (varint: int, fixed64: float
+    (the schemas' doubles), fixed32: float, length-delimited: bytes)."""
+    out: dict[int, list[Any]] = {}
+    i = 0
+    while i < len(buf):
+        key, i = _varint(buf, i)
+        num, wire = key >> 3, key & 7
+        if wire == 0:
+            val, i = _varint(buf, i)
+        elif wire == 1:
+            val, i = struct.unpack_from("<d", buf, i)[0], i + 8
+        elif wire == 5:
+            val, i = struct.unpack_from("<f", buf, i)[0], i + 4
+        elif wire == 2:
+            n, i = _varint(buf, i)
+            val, i = buf[i:i + n], i + n
+        else:
+            raise AssertionError(f"wire type {wire}")
+        out.setdefault(num, []).append(val)
+    return out
+
+
+def _varint(buf: bytes, i: int) -> tuple[int, int]:
+    shift = value = 0
+    while True:
+        b = buf[i]
+        i += 1
+        value |= (b & 0x7F) << shift
+        shift += 7
+        if not b & 0x80:
+            return value, i
+
+
+def _one(f: dict[int, list[Any]], n: int, default: Any) -> Any:
+    return f.get(n, [default])[0]
+
+
+def frame_transform(buf: bytes) -> tuple[int, str, str, tuple[float, ...], tuple[float, ...]]:
+    """foxglove.FrameTransform: timestamp=1 (sec=1, nsec=2), parent=2, child=3,
+    translation=4 (x y z = 1 2 3), rotation=5 (x y z w = 1 2 3 4)."""
+    f = fields(buf)
+    ts = fields(_one(f, 1, b""))
+    stamp = _one(ts, 1, 0) * 1_000_000_000 + _one(ts, 2, 0)
+    tr = fields(_one(f, 4, b""))
+    rot = fields(_one(f, 5, b""))
+    return (stamp, _one(f, 2, b"").decode(), _one(f, 3, b"").decode(),
+            tuple(_one(tr, k, 0.0) for k in (1, 2, 3)),
+            tuple(_one(rot, k, 0.0) for k in (1, 2, 3, 4)))
+
+
+def probe_channel(bridge: FoxgloveBridge) -> Any:
+    """A ``/probe`` channel on the bridge's context: the client knows its subscription is
+    active once a probe message reaches it (no sleep)."""
+    from foxglove.channels import FrameTransformsChannel
+
+    return FrameTransformsChannel("/probe", context=bridge.context)
+
+
+async def collect(port: int, probe_ch: Any, topics: list[str], act: Any, want: int,
+                  need_status: int = 0, want_scans: int = 0) -> dict[str, Any]:
+    """Subscribe to ``topics``, call ``act()``, gather messages until ``want`` tf batches,
+    a time and statuses arrived (bounded: 10 s)."""
+    got: dict[str, Any] = {"tf": [], "scan": [], "time": [], "status": []}
+    from foxglove.messages import FrameTransforms
+
+    probe = "/probe"
+    async with websockets.connect(f"ws://127.0.0.1:{port}",
+                                  subprotocols=["foxglove.sdk.v1"], close_timeout=1) as ws:
+        assert ws.subprotocol == "foxglove.sdk.v1"
+        channels: dict[str, dict[str, Any]] = {}
+        async with asyncio.timeout(10):
+            while not all(t in channels for t in [probe, *topics]):
+                msg = await ws.recv()
+                if isinstance(msg, str):
+                    m = json.loads(msg)
+                    if m["op"] == "serverInfo":
+                        assert "time" in m["capabilities"]
+                    if m["op"] == "advertise":
+                        channels.update({c["topic"]: c for c in m["channels"]})
+        subs = {k + 1: t for k, t in enumerate(topics)}
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": k, "channelId": channels[t]["id"]} for k, t in subs.items()]
+            + [{"id": 0, "channelId": channels[probe]["id"]}]}))
+        # one subscribe op: once a probe arrives, every subscription above is active
+        async with asyncio.timeout(10):
+            while True:
+                probe_ch.log(FrameTransforms(transforms=[]))
+                try:
+                    async with asyncio.timeout(0.05):
+                        msg = await ws.recv()
+                except TimeoutError:
+                    continue
+                if isinstance(msg, bytes) and msg[0] == 1 and \
+                        struct.unpack_from("<I", msg, 1)[0] == 0:
+                    break
+        act()
+        async with asyncio.timeout(10):
+            while len(got["tf"]) < want or not got["time"] or len(got["status"]) < need_status \
+                    or len(got["scan"]) < want_scans:
+                msg = await ws.recv()
+                if isinstance(msg, str):
+                    m = json.loads(msg)
+                    if m["op"] == "status":
+                        got["status"].append(m)
+                    continue
+                if msg[0] == 2:
+                    got["time"].append(struct.unpack_from("<Q", msg, 1)[0])
+                elif msg[0] == 1:
+                    sub, log_time = struct.unpack_from("<IQ", msg, 1)
+                    if sub == 0:
+                        continue  # a probe still in flight
+                    key = "tf" if subs[sub] == "/tf" else "scan"
+                    got[key].append((log_time, msg[13:]))
+    got["channels"] = channels
+    return got
+
+
+@pytest.fixture
+def page() -> Iterator[TfPage]:
+    p = TfPage("127.0.0.1", 0)
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+def test_foxglove_client_receives_the_bags_transforms(page: TfPage) -> None:
+    timeline = BagTimeline.read(TURTLE)
+    full = load_buffer(TURTLE)
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    try:
+        assert bridge.port != 0
+        player = BagPlayer(page, timeline, paused=True, foxglove=bridge)
+        player.seek(3.0)
+        upto = sum(1 for t in timeline.times if t <= player.time().ns)
+        got = asyncio.run(collect(bridge.port, probe_channel(bridge), ["/tf"], player.render, upto))
+    finally:
+        bridge.close()
+    assert got["channels"]["/tf"]["schemaName"] == "foxglove.FrameTransforms"
+    assert got["time"][-1] == player.time().ns
+    assert len(got["tf"]) == upto
+    assert [lt for lt, _ in got["tf"]] == timeline.times[:upto]
+    checked = 0
+    for _, payload in got["tf"]:
+        for item in fields(payload)[1]:
+            stamp, parent, child, xyz, xyzw = frame_transform(item)
+            at = Time(0) if stamp == 0 else Time.from_ns(stamp)
+            ref = full.lookup_transform(parent, child, at)
+            v, q = ref.transform.translation, ref.transform.rotation
+            assert xyz == (v.x, v.y, v.z) and xyzw == (q.x, q.y, q.z, q.w)
+            checked += 1
+    assert checked >= upto
+    assert got["status"] == []  # every frame placed in world: no error
+
+
+def test_tf_errors_arrive_as_status(page: TfPage) -> None:
+    timeline = BagTimeline.read(TURTLE)
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    try:
+        player = BagPlayer(page, timeline, paused=True, foxglove=bridge,
+                           fixed_frame="nowhere")
+        player.seek(1.0)
+        got = asyncio.run(collect(bridge.port, probe_channel(bridge), ["/tf"], player.render,
+                                  1, need_status=4))
+        core = timeline.buffer_at(player.time())
+    finally:
+        bridge.close()
+    messages = {s["message"] for s in got["status"]}
+    assert messages == {f"{name}: {core.try_lookup_transform('nowhere', name, Time(0))}"
+                        for name in ("carrot", "turtle1", "turtle2", "world")}
+    assert all(s["level"] == 1 for s in got["status"])  # warning
+
+
+def test_scans_as_foxglove_laser_scan(page: TfPage) -> None:
+    timeline = BagTimeline.read(LASER)
+    track = ScanTrack.read(LASER, "/scan")
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    try:
+        player = BagPlayer(page, timeline, paused=True, foxglove=bridge,
+                           fixed_frame="odom", scans=[track])
+        player.seek(0.5)
+        n = sum(1 for t in track.times if t <= player.time().ns)
+        got = asyncio.run(collect(bridge.port, probe_channel(bridge), ["/tf", "/scan"],
+                                  player.render, 1,
+                                  want_scans=n))
+    finally:
+        bridge.close()
+    assert got["channels"]["/scan"]["schemaName"] == "foxglove.LaserScan"
+    assert n > 0 and len(got["scan"]) == n
+    # foxglove.LaserScan: timestamp=1, frame_id=2, pose=3, start_angle=4, end_angle=5,
+    # ranges=6 (packed doubles), intensities=7
+    f = fields(got["scan"][0][1])
+    scan = track.scans[0]
+    assert f[2][0].decode() == scan.header.frame_id
+    assert _one(f, 4, 0.0) == pytest.approx(float(scan.angle_min))
+    ranges = struct.unpack(f"<{len(f[6][0]) // 8}d", f[6][0])
+    np.testing.assert_array_equal(np.asarray(ranges), scan.ranges.astype(np.float64))

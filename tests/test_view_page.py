@@ -1,0 +1,246 @@
+"""The page of ``tfbus view`` (tfbus/view/server.py, player.py; viser): the scene's numbers
+read back from the server's scene handles, ids as text, an empty bag, port in use, the
+command's errors."""
+
+from __future__ import annotations
+
+import socket
+import sys
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+pytest.importorskip("viser")
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.bag import load_buffer
+from tfbus.cli import cli
+from tfbus.core import BufferCore
+from tfbus.view import build_scene
+from tfbus.view.player import BagPlayer
+from tfbus.view.server import PortInUseError, TfPage
+from tfbus.view.timeline import BagTimeline
+
+DATA = Path(__file__).parent / "data"
+TURTLE = DATA / "webviz_turtle_tf_example.bag"
+
+
+@pytest.fixture
+def page() -> Iterator[TfPage]:
+    p = TfPage("127.0.0.1", 0)
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+def test_scene_numbers_equal_lookup_transform(page: TfPage) -> None:
+    timeline = BagTimeline.read(TURTLE)
+    full = load_buffer(TURTLE)
+    player = BagPlayer(page, timeline, paused=True)
+    assert player.duration == pytest.approx(21.498641465, abs=1e-6)
+    checked = 0
+    for k in range(1, 11):
+        player.seek(player.duration * k / 10)
+        scene = player.render()
+        t = player.time()
+        shown = timeline.buffer_at(t)
+        assert scene.fixed_frame == "world"
+        for f in scene.frames:
+            handle = page.frames[f.frame_id]
+            ref = shown.lookup_transform("world", f.frame_id, Time(0))
+            tr, q = ref.transform.translation, ref.transform.rotation
+            # viser sends a pose only when not np.allclose to the one sent before (rtol
+            # 1e-5, atol 1e-8): the drawn pose is within that of the lookup, never further
+            assert tuple(handle.position) == pytest.approx((tr.x, tr.y, tr.z),
+                                                           rel=1e-5, abs=1e-8)
+            assert tuple(handle.wxyz) == pytest.approx((q.w, q.x, q.y, q.z), rel=1e-5, abs=1e-8)
+            assert handle.visible
+            # the same pose the whole bag gives at the stamp drawn (replay's view == bag's)
+            if ref.header.stamp.ns:
+                whole = full.lookup_transform("world", f.frame_id, ref.header.stamp)
+                assert whole.transform == ref.transform
+                assert ref.header.stamp.ns <= t.ns
+            checked += 1
+    assert checked == 40
+    assert [page.labels[f].text for f in ("carrot", "turtle1", "turtle2", "world")] == \
+        ["carrot", "turtle1", "turtle2", "world"]
+    assert "/turtle1_tf_broadcaster" in page.panel_html
+    assert "<td>carrot</td><td>turtle1</td>" in page.panel_html and "static" in page.panel_html
+
+
+def test_play_advances_bag_time_at_rate(page: TfPage) -> None:
+    timeline = BagTimeline.read(TURTLE)
+    player = BagPlayer(page, timeline, paused=False, rate=2.0)
+    player.advance(1.5)
+    assert player.position == pytest.approx(3.0)
+    assert float(player.slider.value) == pytest.approx(3.0)
+    player.playing.value = False
+    player.advance(1.0)
+    assert player.position == pytest.approx(3.0)
+    player.playing.value = True
+    player.advance(100.0)
+    assert player.position == player.duration  # stops at the end
+    with pytest.raises(ValueError, match="rate"):
+        BagPlayer(page, timeline, rate=20.0)
+
+
+def test_ids_with_markup_are_text(page: TfPage) -> None:
+    core = BufferCore()
+    odd = "<img src=x onerror=alert(1)>*b*\x1b[31m"
+    core.set_transform(TransformStamped(Header(Time.from_sec(1.0), "world"), odd,
+                                        Transform(Vector3(1.0, 2.0, 3.0),
+                                                  Quaternion(0.0, 0.0, 0.0, 1.0))), "<script>")
+    core.set_transform(TransformStamped(Header(Time.from_sec(1.0), "elsewhere"), "lost",
+                                        Transform(Vector3(0.0, 0.0, 0.0),
+                                                  Quaternion(0.0, 0.0, 0.0, 1.0))), "x")
+    page.draw(build_scene(core, fixed_frame="world"))
+    assert "<img" not in page.panel_html and "<script>" not in page.panel_html
+    assert "&lt;img src=x onerror=alert(1)&gt;*b*\\x1b[31m" in page.panel_html
+    assert "&lt;script&gt;" in page.panel_html
+    assert page.labels[odd].text == "<img src=x onerror=alert(1)>*b*\\x1b[31m"
+    assert tuple(page.frames[odd].position) == (1.0, 2.0, 3.0)
+    # the frame in another tree: hidden, with the core's message in the panel
+    assert not page.frames["lost"].visible
+    err = str(core.try_lookup_transform("world", "lost", Time(0)))
+    assert _html_text(err) in page.panel_html
+
+
+def _html_text(s: str) -> str:
+    import html
+
+    return html.escape(s, quote=True)
+
+
+def test_bag_without_tf_shows_empty_scene_and_message(page: TfPage, tmp_path: Path) -> None:
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    bag = tmp_path / "chatter.bag"
+    with Writer(bag) as w:
+        conn = w.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        msg = store.types["std_msgs/msg/String"](data="hello")
+        w.write(conn, 1_000_000_000, store.serialize_ros1(msg, "std_msgs/msg/String"))
+    timeline = BagTimeline.read(bag)
+    player = BagPlayer(page, timeline, paused=True)
+    scene = player.render()
+    assert scene.frames == () and page.frames == {}
+    assert "no transforms received" in page.status_html
+
+
+def test_served_on_loopback_and_port_in_use(page: TfPage) -> None:
+    assert page.host == "127.0.0.1"
+    with urllib.request.urlopen(f"http://127.0.0.1:{page.port}/", timeout=10) as resp:
+        assert resp.status == 200 and b"<html" in resp.read().lower()
+    with pytest.raises(PortInUseError, match=f"127.0.0.1:{page.port}"):
+        TfPage("127.0.0.1", page.port)
+    result = CliRunner().invoke(cli, ["view", "--bag", str(TURTLE), "--port", str(page.port)])
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tfbus view: error: cannot serve on")
+
+
+def test_without_viser_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "viser", None)  # import viser -> ImportError
+    result = CliRunner().invoke(cli, ["view", "--bag", str(TURTLE)])
+    assert result.exit_code == 2
+    assert result.stderr.strip() == ("tfbus view: error: the 'viser' package is not "
+                                     "installed: pip install 'tfbus[view]'")
+
+
+def test_bag_and_bus_together_is_a_usage_error() -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    result = CliRunner().invoke(cli, ["view", "--bag", str(TURTLE), "--bus", "memory",
+                                      "--port", str(port)])
+    assert result.exit_code == 2 and "not both" in result.stderr
+
+
+LASER = DATA / "laser" / "drl_guardian_3.bag"
+
+
+def test_scan_points_equal_the_projection(page: TfPage) -> None:
+    from tfbus.laser import LaserProjection
+    from tfbus.sensor_msgs import read_points
+    from tfbus.view.scans import ScanTrack
+
+    track = ScanTrack.read(LASER, "/scan")
+    assert len(track.scans) == 1036
+    timeline = BagTimeline.read(LASER)
+    player = BagPlayer(page, timeline, fixed_frame="odom", paused=True, scans=[track])
+    drawn = 0
+    for k in range(1, 6):
+        player.seek(player.duration * k / 6)
+        player.render()
+        t = player.time()
+        core = timeline.buffer_at(t)
+        cloud = page.clouds["/scan"]
+        assert "/scan" not in player.scan_errors and cloud.visible
+        # the newest scan at or before t that tf can place (a fresh scan waits for its tf)
+        placed = None
+        for scan in reversed(track.scans[: sum(1 for x in track.times if x <= t.ns)]):
+            try:
+                placed = LaserProjection().transform_laser_scan_to_point_cloud(
+                    "odom", scan, core)
+                break
+            except Exception:
+                continue
+        assert placed is not None
+        ref = read_points(placed, ["x", "y", "z"])
+        want = np.stack([ref["x"], ref["y"], ref["z"]], axis=1)
+        assert want.shape[0] > 100
+        np.testing.assert_array_equal(np.asarray(cloud.points), want)
+        drawn += 1
+    assert drawn == 5
+
+
+def test_scan_topic_missing_is_a_usage_error() -> None:
+    result = CliRunner().invoke(cli, ["view", "--bag", str(LASER), "--scan", "/nope",
+                                      "--port", "0"])
+    assert result.exit_code == 2
+    assert result.stderr.strip().endswith(
+        "no LaserScan topic of that name in " + str(LASER) +
+        " (scan topics: /hokuyo_back_scan, /scan)")
+    result = CliRunner().invoke(cli, ["view", "--scan", "/scan", "--port", "0"])
+    assert result.exit_code == 2 and "--scan needs --bag" in result.stderr
+
+
+def test_foxglove_needs_a_bag() -> None:
+    result = CliRunner().invoke(cli, ["view", "--foxglove", "0", "--port", "0"])
+    assert result.exit_code == 2 and "--foxglove needs --bag" in result.stderr
+
+
+def test_command_serves_a_bag_and_stops_on_sigint() -> None:
+    """``tfbus view --bag`` as a process: it prints its address, serves the page on
+    127.0.0.1, and SIGINT ends it with status 0 (waits bounded; killed by PID if not)."""
+    import select
+    import signal
+    import subprocess
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    exe = Path(sys.executable).with_name("tfbus")
+    proc = subprocess.Popen([str(exe), "view", "--bag", str(TURTLE), "--port", str(port),
+                             "--paused"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stderr is not None
+        ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
+        assert ready, "tfbus view printed nothing in 60 s"
+        line = proc.stderr.readline()  # the first line is the address
+        assert line.strip() == f"tfbus view: http://127.0.0.1:{port}/"
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as resp:
+            assert resp.status == 200
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)

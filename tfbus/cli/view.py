@@ -1,0 +1,179 @@
+"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display (layer 5).
+
+Needs the ``tfbus[view]`` extra (viser); without it the command says so in one line
+(exit status 2).
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING
+
+import click
+
+from tfbus.cli._common import bag_path, fail
+from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
+
+if TYPE_CHECKING:
+    from tfbus.view.foxglove_bridge import FoxgloveBridge
+    from tfbus.view.scans import ScanTrack
+
+__all__ = ["command"]
+
+NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
+
+
+@click.command("view")
+@click.option("--bag", type=bag_path(), default=None, help="Show this bag, with a time slider.")
+@click.option("--bus", "bus", metavar="SPEC", default=None,
+              help="Show a live bus (default 'zenoh' without --bag).")
+@click.option("--fixed-frame", default=None,
+              help="Frame at the origin (default: the root of the largest tree).")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to serve on. Anything but 127.0.0.1 exposes the page, which has "
+                   "no authentication, to the network.")
+@click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
+              help="TCP port of the page (0: any free port).")
+@click.option("--scan", "scan_topics", multiple=True, metavar="TOPIC",
+              help="With --bag: draw this topic's LaserScans, projected into the fixed frame "
+                   "(tfbus.laser.LaserProjection). Repeatable.")
+@click.option("--foxglove", "foxglove_port", type=click.IntRange(0, 65535), default=None,
+              metavar="PORT",
+              help="With --bag: also serve the Foxglove WebSocket protocol on this port "
+                   "(/tf as foxglove.FrameTransforms, scans as foxglove.LaserScan, bag "
+                   "time as server time), on --host.")
+@click.option("--urdf", "urdf", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None,
+              help="Draw this URDF's link geometry (boxes, cylinders, spheres) on the link "
+                   "frames, following the transforms robot_state_publisher sends.")
+@click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
+@click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
+              help="With --bag: playback rate (x0.1-x10).")
+@click.option("--frame-timeout", type=click.FloatRange(min=0.0, min_open=True),
+              default=DEFAULT_FRAME_TIMEOUT, show_default=True,
+              help="Seconds without an update before a frame is hidden (it fades to grey "
+                   "from a third of it, as rviz's TF display).")
+def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
+            port: int, paused: bool, rate: float, frame_timeout: float,
+            scan_topics: tuple[str, ...], foxglove_port: int | None,
+            urdf: Path | None) -> None:
+    """Serve a live 3D page of the frames (open the printed address in a browser).
+
+    \b
+    Examples:
+      tfbus view --bag tests/data/webviz_turtle_tf_example.bag
+      tfbus view --bus zenoh --fixed-frame odom --port 8081
+      tfbus view --bag tests/data/laser/drl_guardian_3.bag --scan /scan --fixed-frame odom
+    """
+    try:
+        importlib.import_module("viser")
+    except ImportError:
+        fail(NEEDS_EXTRA)
+    if bag is not None and bus is not None:
+        fail("give --bag PATH or --bus SPEC, not both")
+    if foxglove_port is not None and bag is None:
+        fail("--foxglove needs --bag PATH (a live bus is not relayed to Foxglove yet)")
+    if scan_topics and bag is None:
+        fail("--scan needs --bag PATH (scans from a live bus are not drawn yet)")
+    from tfbus.view.scans import ScanTrack
+    from tfbus.view.server import PortInUseError, TfPage
+
+    visuals = []
+    if urdf is not None:
+        from tfbus.view.robot import link_visuals
+
+        try:
+            visuals = link_visuals(urdf)
+        except ImportError:
+            fail("the 'urdf_parser_py' package is not installed: pip install 'tfbus[robot]'")
+        except ValueError as err:
+            fail(str(err))
+
+    tracks = []
+    for topic in scan_topics:
+        assert bag is not None
+        try:
+            tracks.append(ScanTrack.read(bag, topic))
+        except ValueError as err:
+            fail(str(err))
+    try:
+        page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}")
+    except PortInUseError as err:
+        fail(str(err))
+    except OSError as err:
+        fail(f"cannot serve on {host}:{port}: {err}")
+    page.set_visuals(visuals)
+    stop = threading.Event()
+    if bag is not None:  # (a live bus: run_live's own handlers)
+        def on_signal(_sig: int, _frame: FrameType | None) -> None:
+            stop.set()
+
+        signal.signal(signal.SIGINT, on_signal)
+        signal.signal(signal.SIGTERM, on_signal)
+    click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
+    bridge = None
+    if foxglove_port is not None:
+        from tfbus.view.foxglove_bridge import FoxgloveBridge
+
+        try:
+            bridge = FoxgloveBridge(host, foxglove_port)
+        except ImportError:
+            page.close()
+            fail("the 'foxglove-sdk' package is not installed: pip install 'tfbus[view]'")
+        except OSError as err:
+            page.close()
+            fail(str(err))
+        click.echo(f"tfbus view: Foxglove ws://{host}:{bridge.port}", err=True)
+    try:
+        if bag is not None:
+            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop)
+        else:
+            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
+    finally:
+        page.close()
+        if bridge is not None:
+            bridge.close()
+
+
+def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
+               paused: bool, rate: float, tracks: Sequence[ScanTrack],
+               bridge: FoxgloveBridge | None, stop: threading.Event) -> None:
+    from tfbus.cli._sources import BagSource
+    from tfbus.view.player import BagPlayer
+    from tfbus.view.server import TfPage
+    from tfbus.view.timeline import BagTimeline
+
+    assert isinstance(page, TfPage)
+    src = BagSource(bag)
+    timeline = BagTimeline.read(bag)
+    player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
+                       paused=paused, rate=rate, statistics=src.statistics(), scans=tracks,
+                       foxglove=bridge)
+    player.render()
+    player.run(stop)
+
+
+def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float) -> None:
+    import anyio
+
+    from tfbus.cli._sources import BusSource, live, run_live
+    from tfbus.view.player import MAX_DRAW_HZ, draw_live
+    from tfbus.view.server import TfPage
+
+    assert isinstance(page, TfPage)
+    src = BusSource(spec, name="tfbus-view")
+
+    async def body() -> None:
+        while True:
+            draw_live(page, src.buffer(), src.statistics(), src.clock.now(),
+                      fixed_frame=fixed_frame, frame_timeout=frame_timeout)
+            await anyio.sleep(1.0 / MAX_DRAW_HZ)
+
+    code = run_live(lambda: live(src, None, body))
+    if code:
+        raise SystemExit(code)

@@ -1,0 +1,178 @@
+"""What drives the page of ``tfbus view``: a bag's timeline (slider, play/pause at
+x0.1-x10) or a live buffer, redrawn at most :data:`MAX_DRAW_HZ` times a second."""
+
+from __future__ import annotations
+
+import bisect
+import threading
+import time as _wall
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from tfbus.core import BufferCore
+from tfbus.laser import LaserProjection
+from tfbus.monitor import TfStatistics
+from tfbus.time import Time
+from tfbus.view.foxglove_bridge import FoxgloveBridge
+from tfbus.view.scans import ScanTrack
+from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene, build_scene
+from tfbus.view.server import TfPage
+from tfbus.view.timeline import BagTimeline
+
+__all__ = ["MAX_DRAW_HZ", "BagPlayer", "draw_live"]
+
+MAX_DRAW_HZ = 30.0
+"""Drawing is down-sampled to this rate, whatever the rate of the transforms."""
+
+
+class BagPlayer:
+    """A bag on a :class:`TfPage`: a time slider (seconds from the bag's start), a
+    "playing" checkbox and a rate slider (x0.1-x10); bag time advances at ``rate`` x
+    wall time while playing and stops at the end.
+
+    The scene at bag time ``t`` is the buffer ``tfbus replay`` would have filled by
+    then (:meth:`BagTimeline.buffer_at`), looked up at its latest time (``Time(0)``, as
+    rviz does), ages measured from ``t``.
+    """
+
+    def __init__(self, page: TfPage, timeline: BagTimeline, *, fixed_frame: str | None = None,
+                 frame_timeout: float = DEFAULT_FRAME_TIMEOUT, paused: bool = False,
+                 rate: float = 1.0, statistics: TfStatistics | None = None,
+                 scans: Sequence[ScanTrack] = (),
+                 foxglove: FoxgloveBridge | None = None) -> None:
+        if not 0.1 <= rate <= 10.0:
+            raise ValueError(f"rate must be between 0.1 and 10, got {rate!r}")
+        self.page = page
+        self.timeline = timeline
+        self.fixed_frame = fixed_frame
+        self.frame_timeout = frame_timeout
+        self.statistics = statistics
+        self.scans = tuple(scans)
+        self.foxglove = foxglove
+        self._fg_upto = 0
+        self._fg_scan_upto = [0 for _ in self.scans]
+        for track in self.scans:  # advertised from the start, before any scan is due
+            if foxglove is not None:
+                foxglove.scan_channel(track.topic)
+        self._projectors = [LaserProjection() for _ in self.scans]
+        self.scan_errors: dict[str, str] = {}
+        """Why a scan topic is not drawn at the bag time shown (tf2's message)."""
+        self.position = 0.0
+        """Seconds from the bag's start."""
+        self.duration = (timeline.end.ns - timeline.start.ns) / 1e9
+        gui = page.server.gui
+        self._lock = threading.RLock()
+        self.slider: Any = gui.add_slider("bag time (s)", min=0.0, max=max(self.duration, 0.01),
+                                          step=0.01, initial_value=0.0)
+        self.playing: Any = gui.add_checkbox("playing", initial_value=not paused)
+        self.rate: Any = gui.add_slider("rate (x)", min=0.1, max=10.0, step=0.1,
+                                        initial_value=rate)
+        self._shown = -1.0
+
+        self.slider.on_update(self._on_slider)
+        self.last_scene: Scene | None = None
+        if timeline.times:  # the camera frames every frame the bag places by its end
+            page.aim(build_scene(timeline.buffer_at(timeline.end), fixed_frame=fixed_frame))
+
+    def _on_slider(self, _event: Any) -> None:
+        # a user's drag of the time slider (our own writes set the same value)
+        with self._lock:
+            if abs(float(self.slider.value) - self.position) > 1e-9:
+                self.position = float(self.slider.value)
+
+    def time(self) -> Time:
+        """The bag time shown."""
+        return Time.from_ns(self.timeline.start.ns + round(self.position * 1e9))
+
+    def advance(self, wall_seconds: float) -> None:
+        """Move bag time by ``wall_seconds`` x rate when playing (stops at the end)."""
+        with self._lock:
+            if self.playing.value and self.position < self.duration:
+                self.position = min(self.duration,
+                                    self.position + wall_seconds * float(self.rate.value))
+                self.slider.value = self.position
+
+    def seek(self, seconds: float) -> None:
+        """Show bag time ``start + seconds`` (clamped to the bag)."""
+        with self._lock:
+            self.position = min(max(seconds, 0.0), self.duration)
+            self.slider.value = self.position
+
+    def render(self) -> Scene:
+        """Draw the scene at :meth:`time` and return it."""
+        t = self.time()
+        core = self.timeline.buffer_at(t)
+        scene = build_scene(core, fixed_frame=self.fixed_frame, now=t,
+                            last_update=self.timeline.last_update(t),
+                            frame_timeout=self.frame_timeout)
+        self.page.draw(scene, self.statistics)
+        self.scan_errors.clear()
+        for track, projector in zip(self.scans, self._projectors, strict=True):
+            pts = None
+            if scene.fixed_frame is not None:
+                pts, _, why = track.project_at(t, scene.fixed_frame, core, projector)
+                if why is not None:
+                    self.scan_errors[track.topic] = why
+            self.page.draw_points(track.topic, pts)
+        if scene.message is None and self.timeline.problem:
+            self.page.set_status(self.timeline.problem)
+        elif scene.frames:
+            self.page.set_status(f"fixed frame: {scene.fixed_frame}   bag time "
+                                 f"{self.position:.2f} / {self.duration:.2f} s"
+                                 + "".join(f"   {e}" for e in self.scan_errors.values()))
+        if self.foxglove is not None:
+            self._feed_foxglove(t, scene)
+        self.last_scene = scene
+        return scene
+
+    def _feed_foxglove(self, t: Time, scene: Scene) -> None:
+        """Send Foxglove the bag's messages up to ``t`` not sent yet (after a jump back:
+        the statics again, then from ``t`` on), the scans likewise, ``t`` as the server
+        time and tf's errors as statuses."""
+        fg = self.foxglove
+        assert fg is not None
+        tl = self.timeline
+        n = bisect.bisect_right(tl.times, t.ns)
+        if n < self._fg_upto:
+            for i in range(n):
+                if tl.messages[i][2]:
+                    fg.publish_transforms(tl.messages[i][0], tl.times[i])
+            self._fg_upto = n
+        for i in range(self._fg_upto, n):
+            fg.publish_transforms(tl.messages[i][0], tl.times[i])
+        self._fg_upto = n
+        for k, track in enumerate(self.scans):
+            m = bisect.bisect_right(track.times, t.ns)
+            for i in range(self._fg_scan_upto[k], m):  # empty after a jump back
+                fg.publish_scan(track.topic, track.scans[i], track.times[i])
+            self._fg_scan_upto[k] = m
+        fg.broadcast_time(t.ns)
+        fg.publish_errors(scene)
+
+    def run(self, stop: threading.Event,
+            clock: Callable[[], float] = _wall.monotonic) -> None:
+        """Play until ``stop`` is set, drawing at most :data:`MAX_DRAW_HZ` times a second."""
+        period = 1.0 / MAX_DRAW_HZ
+        last = clock()
+        while not stop.is_set():
+            now = clock()
+            self.advance(now - last)
+            last = now
+            if self.position != self._shown or self.playing.value:
+                self.render()
+                self._shown = self.position
+            stop.wait(period)
+
+
+def draw_live(page: TfPage, core: BufferCore, statistics: TfStatistics, now: Time, *,
+              fixed_frame: str | None = None,
+              frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> Scene:
+    """Draw a live buffer at its latest data; ages from each frame's last receive time
+    (``statistics``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``."""
+    last = {name: Time.from_ns(fs.received[-1][0])
+            for name, fs in statistics.frames.items() if fs.received}
+    rates = {name: fs.recent_rate(now) for name, fs in statistics.frames.items()}
+    scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
+                        frame_timeout=frame_timeout)
+    page.draw(scene, statistics, rates)
+    return scene

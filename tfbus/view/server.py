@@ -1,0 +1,291 @@
+"""The page of ``tfbus view``: a viser server drawing a :class:`~tfbus.view.scene.Scene`
+(needs the ``tfbus[view]`` extra).
+
+Per frame an axes triad (``scene.add_frame``) at its pose in the fixed frame with a text
+label of its id, a line from each child to its parent (coloured by :func:`fade`: full
+colour, fading to grey, hidden), a grid, and a side panel with the frame tree (parent,
+rate, age, broadcaster, static) and tf2's message for each frame that cannot be placed.
+Ids reach the page as text only: the panel is HTML built here with every id through
+:func:`html.escape` (control characters also written as ``\\xNN`` escapes), and scene
+labels are viser's text labels. Scene node names are numbered (``/tf/f3``), never made
+from ids, so a ``/`` in an id cannot re-parent a node.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+import socket
+import threading
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from tfbus.messages import TransformStamped
+from tfbus.monitor import TfStatistics
+from tfbus.view.robot import LinkVisual
+from tfbus.view.scene import Scene
+
+__all__ = ["PortInUseError", "TfPage", "text"]
+
+_UNSAFE = re.compile(r"[\x00-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069]")
+
+FULL_COLOUR = (230, 140, 20)
+"""Colour of a fresh link line (RGB 0-255); it fades to :data:`GREY`."""
+GREY = (128, 128, 128)
+
+
+def text(frame_id: object) -> str:
+    """An id as visible text: control and bidirectional characters as ``\\xNN`` /
+    ``\\uNNNN`` escapes (as ``tfbus`` prints them in a terminal)."""
+    return _UNSAFE.sub(lambda m: f"\\x{ord(m.group()):02x}" if ord(m.group()) < 0x100
+                       else f"\\u{ord(m.group()):04x}", str(frame_id))
+
+
+def _h(value: object) -> str:
+    return html.escape(text(value), quote=True)
+
+
+class PortInUseError(OSError):
+    """The port asked for is taken (viser would silently move to the next one)."""
+
+
+def _check_port(host: str, port: int) -> None:
+    if port == 0:
+        return
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        try:
+            s.bind((host, port))
+        except OSError as err:
+            raise PortInUseError(f"cannot serve on {host}:{port}: {err.strerror}") from None
+
+
+def _wxyz(pose: TransformStamped) -> tuple[float, float, float, float]:
+    q = pose.transform.rotation
+    return (q.w, q.x, q.y, q.z)
+
+
+def _xyz(pose: TransformStamped) -> tuple[float, float, float]:
+    v = pose.transform.translation
+    return (v.x, v.y, v.z)
+
+
+def _mix(colour: float) -> tuple[int, int, int]:
+    r, g, b = (round(grey + (full - grey) * colour)
+               for full, grey in zip(FULL_COLOUR, GREY, strict=True))
+    return (r, g, b)
+
+
+class TfPage:
+    """A viser server showing tf frames; :meth:`draw` puts a scene on it.
+
+    Args:
+        host: address to bind (``127.0.0.1`` by default: this machine only; the page has
+            no authentication).
+        port: TCP port; 0 picks a free one (:attr:`port` says which).
+        title: first line of the side panel.
+
+    Raises:
+        PortInUseError: ``port`` is taken.
+        ImportError: viser is not installed (``pip install 'tfbus[view]'``).
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8080, *,
+                 title: str = "tfbus view") -> None:
+        import viser
+
+        _check_port(host, port)
+        self.server: Any = viser.ViserServer(host=host, port=port, verbose=False)
+        self.port: int = int(self.server.get_port())
+        if port and self.port != port:
+            self.server.stop()
+            raise PortInUseError(f"cannot serve on {host}:{port}: address already in use")
+        self.host = host
+        self._lock = threading.Lock()
+        self.server.scene.set_up_direction("+z")
+        self.server.scene.add_grid("/grid", width=20.0, height=20.0, cell_size=1.0,
+                                   section_size=5.0, plane="xy")
+        self.frames: dict[str, Any] = {}
+        """Scene handle of each frame id drawn (``position``, ``wxyz``, ``visible``)."""
+        self.labels: dict[str, Any] = {}
+        self.camera_set = False
+        """Whether the camera was aimed at the frames (once, at the first frames drawn)."""
+        self.visuals: dict[str, list[Any]] = {}
+        """Geometry handles per link frame id (children of the frame's scene node)."""
+        self._pending_visuals: dict[str, list[LinkVisual]] = {}
+        self.clouds: dict[str, Any] = {}
+        """Point cloud handle per scan topic (``points``: ``(N, 3) float32``)."""
+        self.links: Any = None
+        self.link_count = 0
+        gui = self.server.gui
+        self._title = gui.add_html(f"<b>{_h(title)}</b>")
+        self.status = gui.add_html("")
+        self.tree = gui.add_html("")
+        self.panel_html = ""
+        """The frame tree panel's HTML as last sent."""
+        self.status_html = ""
+
+    # ------------------------------------------------------------------ drawing
+
+    def set_status(self, message: str | None) -> None:
+        """One line above the tree (an empty scene's reason, a damaged bag, a time)."""
+        value = "" if not message else f"<p>{_h(message)}</p>"
+        if value != self.status_html:
+            self.status_html = value
+            self.status.content = value
+
+    def draw(self, scene: Scene, stats: TfStatistics | None = None,
+             rates: Mapping[str, float] | None = None) -> None:
+        """Show ``scene``: frames, labels, links, panel. ``stats`` gives broadcasters
+        and rates (Hz) when known; ``rates`` overrides a rate per frame."""
+        with self._lock:
+            self._draw(scene, stats, rates)
+
+    def _draw(self, scene: Scene, stats: TfStatistics | None,
+              rates: Mapping[str, float] | None) -> None:
+        scene_api = self.server.scene
+        poses = {f.frame_id: f.pose for f in scene.frames}
+        segments: list[list[tuple[float, float, float]]] = []
+        colours: list[list[tuple[int, int, int]]] = []
+        for f in scene.frames:
+            handle = self.frames.get(f.frame_id)
+            if handle is None:
+                n = len(self.frames)
+                handle = scene_api.add_frame(f"/tf/f{n}", axes_length=0.25, axes_radius=0.01,
+                                             origin_radius=0.02)
+                self.frames[f.frame_id] = handle
+                self.labels[f.frame_id] = scene_api.add_label(f"/tf/f{n}/label", text(f.frame_id))
+                self._attach(f.frame_id, f"/tf/f{n}")
+            if f.pose is not None:
+                handle.position = _xyz(f.pose)
+                handle.wxyz = _wxyz(f.pose)
+            handle.visible = f.visible
+            parent_pose = poses.get(f.parent) if f.parent is not None else None
+            if f.visible and f.pose is not None and parent_pose is not None:
+                segments.append([_xyz(f.pose), _xyz(parent_pose)])
+                c = _mix(f.colour if f.colour is not None else 0.0)
+                colours.append([c, c])
+        self._draw_links(segments, colours)
+        if not self.camera_set:
+            self.aim(scene)
+        self._draw_panel(scene, stats, rates)
+        msg = scene.message
+        if msg is None and scene.fixed_frame is not None:
+            msg = f"fixed frame: {scene.fixed_frame}"
+        self.set_status(msg)
+
+    def set_visuals(self, visuals: Sequence[LinkVisual]) -> None:
+        """Link geometry (``--urdf``) to draw on each link's frame once it is drawn: a
+        child node of the frame, at the visual's origin, so it moves with the frame."""
+        with self._lock:
+            for v in visuals:
+                self._pending_visuals.setdefault(v.link, []).append(v)
+
+    def _attach(self, frame_id: str, node: str) -> None:
+        scene_api = self.server.scene
+        for k, v in enumerate(self._pending_visuals.pop(frame_id, [])):
+            name = f"{node}/v{k}"
+            if v.kind == "box":
+                h = scene_api.add_box(name, color=v.rgb, dimensions=v.size,
+                                      position=v.xyz, wxyz=v.wxyz)
+            elif v.kind == "cylinder":
+                h = scene_api.add_cylinder(name, radius=v.size[0], height=v.size[1],
+                                           color=v.rgb, position=v.xyz, wxyz=v.wxyz)
+            else:
+                h = scene_api.add_icosphere(name, radius=v.size[0], color=v.rgb,
+                                            position=v.xyz, wxyz=v.wxyz)
+            self.visuals.setdefault(frame_id, []).append(h)
+
+    def aim(self, scene: Scene) -> None:
+        """Point the browsers' initial camera at the drawn frames (their bounding box seen
+        from the -x -y +z diagonal); nothing before a frame is placed."""
+        placed = [_xyz(f.pose) for f in scene.frames if f.visible and f.pose is not None]
+        if not placed:
+            return
+        pts = np.asarray(placed, dtype=np.float64)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        centre = (lo + hi) / 2.0
+        size = max(float(np.max(hi - lo)), 1.0)
+        cam = self.server.initial_camera
+        cam.look_at = tuple(centre)
+        cam.position = tuple(centre + np.array([-0.9, -0.9, 0.8]) * size)
+        self.camera_set = True
+
+    def _draw_links(self, segments: list[list[tuple[float, float, float]]],
+                    colours: list[list[tuple[int, int, int]]]) -> None:
+        if not segments:
+            if self.links is not None:
+                self.links.visible = False
+            return
+        pts = np.asarray(segments, dtype=np.float32)
+        cols = np.asarray(colours, dtype=np.uint8)
+        if self.links is None or len(segments) != self.link_count:
+            if self.links is not None:
+                self.links.remove()
+            self.links = self.server.scene.add_line_segments(
+                "/links", pts, cols, thickness=2.0, thickness_units="screen")
+            self.link_count = len(segments)
+        else:
+            self.links.points = pts
+            self.links.colors = cols
+            self.links.visible = True
+
+    def _draw_panel(self, scene: Scene, stats: TfStatistics | None,
+                    rates: Mapping[str, float] | None) -> None:
+        rows = []
+        for f in scene.frames:
+            fs = stats.frames.get(f.frame_id) if stats is not None else None
+            rate = (rates or {}).get(f.frame_id, fs.rate if fs is not None else 0.0)
+            who = fs.authority if fs is not None else (f.authority or "")
+            if f.static:
+                state = "static"
+            elif f.pose is None:
+                state = "unplaced"
+            elif f.colour is None:
+                state = "hidden (timed out)"
+            elif f.colour < 1.0:
+                state = "stale"
+            else:
+                state = "ok"
+            age = "" if f.age is None else f"{f.age:.1f} s"
+            rows.append(
+                f"<tr><td>{_h(f.frame_id)}</td><td>{_h(f.parent or '')}</td>"
+                f"<td>{rate:.1f}</td><td>{age}</td><td>{_h(who)}</td><td>{state}</td></tr>"
+            )
+        errors = [f"<li>{_h(f.frame_id)}: {_h(f.error)}</li>" for f in scene.frames
+                  if f.error is not None]
+        value = (
+            "<table style='font-size:0.8em'><tr><th>frame</th><th>parent</th><th>Hz</th>"
+            "<th>age</th><th>broadcaster</th><th>state</th></tr>" + "".join(rows) + "</table>"
+            + (f"<p>cannot place in [{_h(scene.fixed_frame)}]:</p><ul>{''.join(errors)}</ul>"
+               if errors else "")
+        )
+        if value != self.panel_html:
+            self.panel_html = value
+            self.tree.content = value
+
+    def draw_points(self, key: str, points: npt.NDArray[np.float32] | None,
+                    colour: tuple[int, int, int] = (20, 90, 230)) -> None:
+        """Draw ``points`` (``(N, 3)`` metres in the fixed frame) as the cloud ``key``
+        (one per scan topic); ``None`` hides it."""
+        with self._lock:
+            handle = self.clouds.get(key)
+            if points is None:
+                if handle is not None:
+                    handle.visible = False
+                return
+            pts = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+            if handle is None:
+                handle = self.server.scene.add_point_cloud(
+                    f"/scans/s{len(self.clouds)}", pts, colour, point_size=0.03,
+                    precision="float32")  # viser would send float16 (mm-level error)
+                self.clouds[key] = handle
+            else:
+                handle.points = pts
+                handle.visible = True
+
+    def close(self) -> None:
+        """Stop the server (closes its port)."""
+        self.server.stop()
