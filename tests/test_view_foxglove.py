@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import anyio
 import numpy as np
 import pytest
 
@@ -104,7 +105,7 @@ async def collect(port: int, probe_ch: Any, topics: list[str], act: Any, want: i
                                   subprotocols=["foxglove.sdk.v1"], close_timeout=1) as ws:
         assert ws.subprotocol == "foxglove.sdk.v1"
         channels: dict[str, dict[str, Any]] = {}
-        async with asyncio.timeout(10):
+        with anyio.fail_after(10):
             while not all(t in channels for t in [probe, *topics]):
                 msg = await ws.recv()
                 if isinstance(msg, str):
@@ -118,19 +119,19 @@ async def collect(port: int, probe_ch: Any, topics: list[str], act: Any, want: i
             {"id": k, "channelId": channels[t]["id"]} for k, t in subs.items()]
             + [{"id": 0, "channelId": channels[probe]["id"]}]}))
         # one subscribe op: once a probe arrives, every subscription above is active
-        async with asyncio.timeout(10):
+        with anyio.fail_after(10):
             while True:
                 probe_ch.log(FrameTransforms(transforms=[]))
-                try:
-                    async with asyncio.timeout(0.05):
-                        msg = await ws.recv()
-                except TimeoutError:
+                msg = None
+                with anyio.move_on_after(0.05):
+                    msg = await ws.recv()
+                if msg is None:
                     continue
                 if isinstance(msg, bytes) and msg[0] == 1 and \
                         struct.unpack_from("<I", msg, 1)[0] == 0:
                     break
         act()
-        async with asyncio.timeout(10):
+        with anyio.fail_after(10):
             while len(got["tf"]) < want or not got["time"] or len(got["status"]) < need_status \
                     or len(got["scan"]) < want_scans:
                 msg = await ws.recv()

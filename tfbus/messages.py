@@ -25,8 +25,10 @@ or kept in a cache without copies.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
-from typing import Generic, NamedTuple, NoReturn, TypeVar
+from types import GenericAlias
+from typing import TYPE_CHECKING, Any, Generic, NamedTuple, NoReturn, TypeVar
 
 from tfbus.time import Time
 
@@ -308,20 +310,38 @@ class WrenchStamped(NamedTuple):
 _T = TypeVar("_T")
 
 
-class Stamped(NamedTuple, Generic[_T]):
-    """Any value with a stamp and a frame: tf2's ``Stamped<T>`` and tf2_ros's
-    ``Stamped``. ``Stamped(header, data)``, e.g. ``Stamped[Point](Header(t, "laser"),
-    Point(1, 0, 0))``. :meth:`tfbus.Buffer.transform` accepts one whose ``data`` is a
-    Point, Vector3 (rotated only), Pose, Quaternion (rotated), Transform or Wrench
-    (:func:`tfbus.convert.do_transform_stamped`)."""
+if TYPE_CHECKING or sys.version_info >= (3, 11):
 
-    header: Header
-    data: _T
+    class Stamped(NamedTuple, Generic[_T]):
+        """Any value with a stamp and a frame: tf2's ``Stamped<T>`` and tf2_ros's
+        ``Stamped``. ``Stamped(header, data)``, e.g. ``Stamped[Point](Header(t, "laser"),
+        Point(1, 0, 0))``. :meth:`tfbus.Buffer.transform` accepts one whose ``data`` is a
+        Point, Vector3 (rotated only), Pose, Quaternion (rotated), Transform or Wrench
+        (:func:`tfbus.convert.do_transform_stamped`)."""
 
-    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
-    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
-    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
-    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+        header: Header
+        data: _T
+
+        def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+        def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+        def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+        def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+else:  # a generic NamedTuple needs Python 3.11: the same fields, Stamped[T] an alias
+
+    class Stamped(NamedTuple):
+        """Any value with a stamp and a frame (tf2's ``Stamped<T>``): ``Stamped(header,
+        data)``; ``Stamped[Point]`` is a ``types.GenericAlias`` of this class."""
+
+        header: Header
+        data: Any
+
+        def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+        def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+        def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+        def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+        __class_getitem__ = classmethod(GenericAlias)
 
 
 _ZERO_COVARIANCE: tuple[float, ...] = (0.0,) * 36
