@@ -6,9 +6,9 @@
 forward and 20 cm up on a fixed joint; two continuous wheels). Three tasks share one
 in-process bus:
 
-* robot_state_publisher (:class:`tfbus.robot_state.RobotStatePublisher`) publishes the
+* robot_state_publisher (:class:`tfbus.robot.RobotStatePublisher`) publishes the
   fixed laser mount once on the latched /tf_static and the wheels on /tf from
-* a joint-state source turning the wheels (:func:`tfbus.robot_state.publish_joint_states`,
+* a joint-state source turning the wheels (:func:`tfbus.robot.publish_joint_states`,
   10 Hz), in place of the tutorial's hand-written 100 Hz broadcaster;
 * the tutorial's listener, unchanged (:func:`tfbus.demo.listener_node`), which keeps
   printing once a second::
@@ -36,7 +36,7 @@ from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock
 from tfbus.demo import listener_node
 from tfbus.listener import TransformListener
-from tfbus.robot_state import RobotStatePublisher, RobotStateStatistics, publish_joint_states
+from tfbus.robot import RobotStatePublisher, RobotStateStatistics, publish_joint_states
 
 ROBOT_URDF = Path(__file__).with_name("robot.urdf")
 
@@ -54,7 +54,7 @@ async def run_robot_state_demo(
     the publisher's summary through ``out``; return the publisher's statistics.
 
     Raises:
-        tfbus.urdf.URDFError: if ``urdf`` is not a usable robot description.
+        tfbus.robot.URDFError: if ``urdf`` is not a usable robot description.
     """
     clock = clock if clock is not None else SystemClock()
     rsp = RobotStatePublisher(urdf)

@@ -56,8 +56,7 @@ LAYERS: dict[str, int] = {
     "monitor": 4,
     "filters": 4,
     "laser": 4,
-    "robot_state": 4,
-    "urdf": 4,
+    "robot": 4,
     "transports": 4,
     "compat": 4,
     # 5: the command line and examples

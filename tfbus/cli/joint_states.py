@@ -1,7 +1,7 @@
 """``tfbus joint-states``: joint_state_publisher without a GUI, animated (layer 5).
 
 Every movable joint swings sinusoidally within its limits
-(:func:`tfbus.robot_state.publish_joint_states`), until Ctrl-C or SIGTERM (or
+(:func:`tfbus.robot.publish_joint_states`), until Ctrl-C or SIGTERM (or
 ``--duration``), then one summary line.
 """
 
@@ -46,7 +46,7 @@ def command(model: Path, bus: str | None, local: bool, rate: float,
       tfbus joint-states demos/robot.urdf
       tfbus joint-states pr2.urdf --rate 50 --bus 'zenoh?connect=tcp/127.0.0.1:7500'
     """
-    from tfbus.robot_state import publish_joint_states
+    from tfbus.robot import publish_joint_states
 
     robot = load_model(model)
     open_bus = publish_bus(bus, local, name="joint_state_publisher")

@@ -1,4 +1,4 @@
-"""URDF robot descriptions read into a validated kinematic tree (layer 0, no I/O but files).
+"""URDF robot descriptions read into a validated kinematic tree (no I/O but reading files).
 
 ::
 
