@@ -10,7 +10,7 @@ in-process bus:
   fixed laser mount once on the latched /tf_static and the wheels on /tf from
 * a joint-state source turning the wheels (:func:`tfbus.robot.publish_joint_states`,
   10 Hz), in place of the tutorial's hand-written 100 Hz broadcaster;
-* the tutorial's listener, unchanged (:func:`tfbus.demo.listener_node`), which keeps
+* the tutorial's listener, unchanged (:func:`tfbus.demos.tutorial.listener_node`), which keeps
   printing once a second::
 
     [ INFO] ...: base_laser: (1.00, 0.20. 0.00) -----> base_link: (1.10, 0.20, 0.20) at time 0.00
@@ -34,7 +34,7 @@ import anyio
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock
-from tfbus.demo import listener_node
+from tfbus.demos.tutorial import listener_node
 from tfbus.listener import TransformListener
 from tfbus.robot import RobotStatePublisher, RobotStateStatistics, publish_joint_states
 

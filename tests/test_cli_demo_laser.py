@@ -1,4 +1,4 @@
-"""``tfbus demo laser``: the laser demo (tfbus.demo_laser) from the command line.
+"""``tfbus demo laser``: the laser demo (tfbus.demos.laser) from the command line.
 
 The demo's own figures are tested in tests/test_demo_laser.py under a ManualClock; here
 the command: its options reach ``run_laser_demo``, it ends with the demo's summary line,
@@ -30,7 +30,7 @@ def run(*args: str) -> tuple[int, str, str]:
 
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
 def test_demo_laser_runs_for_its_duration_and_prints_the_summary(backend: str) -> None:
-    pytest.importorskip("tfbus.demo_laser", reason="tfbus.demo_laser not present")
+    pytest.importorskip("tfbus.demos.laser", reason="tfbus.demos.laser not present")
     if backend == "trio":
         pytest.importorskip("trio")
     # --duration given to the group applies to the role, as for listener/broadcaster
@@ -57,10 +57,10 @@ def test_demo_laser_bad_options_are_one_line(args: list[str], needle: str) -> No
 
 
 def test_demo_laser_without_the_module_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "tfbus.demo_laser", None)  # import fails by name
+    monkeypatch.setitem(sys.modules, "tfbus.demos.laser", None)  # import fails by name
     code, out, err = run("demo", "laser", "--duration", "1")
     assert code == 1 and out == ""
-    assert err == ("tfbus demo laser: error: the laser demo (tfbus.demo_laser) is not "
+    assert err == ("tfbus demo laser: error: the laser demo (tfbus.demos.laser) is not "
                    "part of this installation\n")
 
 

@@ -14,7 +14,7 @@ from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.cli import main
 from tfbus.clock import ManualClock
-from tfbus.demo import BroadcasterStats, broadcaster_node, listener_node, run_demo
+from tfbus.demos.tutorial import BroadcasterStats, broadcaster_node, listener_node, run_demo
 from tfbus.listener import TransformListener
 
 pytestmark = pytest.mark.anyio
@@ -92,7 +92,7 @@ def test_main_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
 
 async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
     from tfbus.bus import MemoryTransport
-    from tfbus.demo import run_broadcaster, run_listener
+    from tfbus.demos.tutorial import run_broadcaster, run_listener
 
     clock = ManualClock(START)
     a, b = MemoryTransport.pair()
@@ -130,7 +130,7 @@ async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
 
 
 def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
-    import tfbus.demo as demo
+    import tfbus.demos.tutorial as demo
 
     opened: list[tuple[str, str | None]] = []
     calls: list[tuple[str, dict[str, object]]] = []
@@ -167,7 +167,7 @@ def test_main_rejects_a_bad_bus(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_open_bus_names_the_node_unless_the_spec_does() -> None:
     pytest.importorskip("zenoh")
-    from tfbus.demo import open_bus
+    from tfbus.demos.tutorial import open_bus
 
     named = open_bus("zenoh", name="robot_tf_listener").transport
     assert getattr(named, "name", None) == "robot_tf_listener"

@@ -61,8 +61,7 @@ LAYERS: dict[str, int] = {
     "compat": 4,
     # 5: the command line and examples
     "cli": 5,
-    "demo": 5,
-    "demo_laser": 5,
+    "demos": 5,
     "view": 5,
     "__main__": 5,
 }

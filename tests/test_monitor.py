@@ -208,7 +208,7 @@ def test_the_running_node_line_names_the_node(spec: str) -> None:
     """``tfbus demo broadcaster``'s "running the broadcaster node" line: a name on every
     transport (ROS 1 and ROS 2 transports have no ``name``), never an empty ``(node )``."""
     from tfbus.cli.demo import node_label
-    from tfbus.demo import BROADCASTER_NAME
+    from tfbus.demos.tutorial import BROADCASTER_NAME
     from tfbus.transports.spec import open_transport, parse_bus_spec
 
     transport = (None if spec == "memory"

@@ -24,14 +24,14 @@ distance of the projected points from the room's walls (the known geometry)::
 
 (one line, wrapped here).
 
-Run with ``tfbus demo laser`` or ``python demos/laser_scan.py --duration 10``.
+Run with ``tfbus demo laser --duration 10`` or ``python demos/laser_scan.py --duration 10``
+(the same click command, :mod:`tfbus.cli.demo`, parses the options).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import anyio
@@ -49,7 +49,7 @@ from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vect
 from tfbus.sensor_msgs import LaserScan, read_points
 from tfbus.time import Duration, Time
 
-__all__ = ["METHODS", "LaserDemoStats", "main", "run_laser_demo", "simulate_scan"]
+__all__ = ["METHODS", "LaserDemoStats", "run_laser_demo", "simulate_scan"]
 
 ROOM_HALF = 5.0  # metres: walls at x = ±5 and y = ±5
 RADIUS = 2.0  # metres
@@ -252,17 +252,3 @@ async def run_laser_demo(
         out(stats.summary())
     return stats
 
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python demos/laser_scan.py [--duration S]``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else "")
-    parser.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
-    args = parser.parse_args(argv)
-    try:
-        anyio.run(lambda: run_laser_demo(args.duration))
-    except KeyboardInterrupt:
-        return 130
-    except ValueError as exc:
-        print(f"error: {exc}")
-        return 2
-    return 0
