@@ -34,13 +34,15 @@ from tfbus.geometry import do_transform_point
 from tfbus.messages import Header, JointState, Point, PointStamped, TransformStamped
 from tfbus.robot import (
     JointStateError,
+    RobotModel,
     RobotStatePublisher,
-    _quaternions,
+    URDFError,
+    load_urdf,
     publish_joint_states,
     sinusoidal_joint_state,
 )
+from tfbus.robot.state_publisher import _quaternions
 from tfbus.time import Time
-from tfbus.robot import RobotModel, URDFError, load_urdf
 
 pytest.importorskip("urdf_parser_py")
 pytestmark = pytest.mark.anyio

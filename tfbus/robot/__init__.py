@@ -11,14 +11,14 @@ The ``tfbus robot-state-publisher`` and ``tfbus joint-states`` commands (:mod:`t
 run these on a bus.
 """
 
+from tfbus.errors import JointStateError, URDFError
 from tfbus.robot.joint_states import publish_joint_states, sinusoidal_joint_state
 from tfbus.robot.state_publisher import (
     JOINT_STATES_TOPIC,
-    JointStateError,
     RobotStatePublisher,
     RobotStateStatistics,
 )
-from tfbus.robot.urdf import JOINT_TYPES, JointInfo, Mimic, RobotModel, URDFError, load_urdf
+from tfbus.robot.urdf import JOINT_TYPES, JointInfo, Mimic, RobotModel, load_urdf
 
 __all__ = [
     "JOINT_STATES_TOPIC",

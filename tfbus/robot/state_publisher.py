@@ -46,7 +46,6 @@ import logging
 import math
 import numbers
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,7 +58,7 @@ from transforms3d.quaternions import quat2mat
 
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import Clock, SystemClock
-from tfbus.errors import TfbusError
+from tfbus.errors import JointStateError
 from tfbus.messages import (
     Header,
     JointState,
@@ -69,12 +68,11 @@ from tfbus.messages import (
     TransformStamped,
     Vector3,
 )
+from tfbus.robot.urdf import JointInfo, Mimic, RobotModel, load_urdf
 from tfbus.time import Time
-from tfbus.robot.urdf import JointInfo, Mimic, RobotModel, URDFError, load_urdf
 
 __all__ = [
     "JOINT_STATES_TOPIC",
-    "JointStateError",
     "RobotStatePublisher",
     "RobotStateStatistics",
 ]
@@ -90,22 +88,6 @@ _MAX_OTHER_NAMES = 1024
 """Joint names not in the model that :meth:`RobotStatePublisher.run` remembers for its rate
 limit; past that they are all forgotten at once (and count as never published, as a name
 the node has not heard yet)."""
-
-
-class JointStateError(TfbusError, ValueError):
-    """A JointState (or some of its positions) that cannot be turned into transforms.
-
-    Attributes:
-        refused: joint name -> the offending position (NaN, ±Inf, not a number).
-        transforms: the transforms of the other joints of the message, computed anyway
-            (empty when the whole message is invalid).
-    """
-
-    def __init__(self, message: str, refused: dict[str, object] | None = None,
-                 transforms: Sequence[TransformStamped] = ()) -> None:
-        super().__init__(message)
-        self.refused = dict(refused or {})
-        self.transforms = list(transforms)
 
 
 @dataclass
