@@ -27,6 +27,7 @@ LAYERS: dict[str, int] = {
     "sensor_msgs": 0,
     "time": 0,
     "ratelimit": 0,
+    "topics": 0,  # the topic names, in one place
     "_version": 0,  # the distribution's version from package metadata
     # 1: the sans-I/O core (geometry and convert call the tf2 scalar math of the core that
     # _backend chose: compiled _ccore or pure-Python _pycore, same behaviour)
@@ -334,6 +335,32 @@ def test_every_exception_is_in_errors() -> None:
     assert not unexpected, "exception classes outside tfbus/errors.py:\n" + "\n".join(unexpected)
     stale = sorted(name for name in ERRORS_ELSEWHERE_PENDING if name not in found)
     assert not stale, f"{stale} moved to errors.py: remove them from ERRORS_ELSEWHERE_PENDING"
+
+
+TOPIC_NAMES = frozenset({"/tf", "/tf_static", "/joint_states", "/scan"})
+"""The names ``tfbus/topics.py`` defines: written nowhere else in code."""
+
+
+def test_topic_names_are_written_once() -> None:
+    """``"/tf"`` and its siblings are string constants only in ``tfbus/topics.py``; every
+    other module imports the name (docstrings, which show examples, are not code)."""
+    problems: list[str] = []
+    for module, path in MODULES.items():
+        if module == "tfbus.topics" or path.suffix != ".py":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        docstrings = {
+            id(node.value)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+        }
+        problems += [
+            f"{_where(module, node.lineno)}: {node.value!r}"
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and node.value in TOPIC_NAMES
+            and id(node) not in docstrings
+        ]
+    assert not problems, "import these names from tfbus.topics:\n" + "\n".join(problems)
 
 
 @pytest.mark.parametrize(

@@ -50,6 +50,7 @@ from tfbus.clock import Clock
 from tfbus.core import BatchResult
 from tfbus.messages import TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
     "RATE_WINDOW",
@@ -283,7 +284,7 @@ class TfStatistics:
         if self.end is None or t > self.end.ns:
             self.end = time
         if topic is None:
-            topic = "/tf_static" if static else "/tf"
+            topic = TF_STATIC_TOPIC if static else TF_TOPIC
         self.messages[topic] = self.messages.get(topic, 0) + 1
         auth = self.authorities.get(authority)
         if auth is None:

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 if TYPE_CHECKING:
     import anyio
@@ -296,7 +297,7 @@ class BusSource(TfSource):
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:
             return UNKNOWN_PUBLISHER if self.bus_spec.scheme == "ros1" else _UNKNOWN_AUTHORITY
-        topic = "/tf_static" if static else "/tf"
+        topic = TF_STATIC_TOPIC if static else TF_TOPIC
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
         if len(names) == 1:
             return names.pop()
@@ -306,7 +307,7 @@ class BusSource(TfSource):
         name = self._authority(static)
         if name != _SHARED_AUTHORITY:
             return name
-        topic = "/tf_static" if static else "/tf"
+        topic = TF_STATIC_TOPIC if static else TF_TOPIC
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
         frames = self._statistics.frames
         owners = set()
@@ -332,7 +333,7 @@ class BusSource(TfSource):
         async for event in sub:
             ev: PeerEvent = event
             known = self.broadcasters_seen.get(ev.node_id)
-            if ev.alive and ev.topic in ("/tf", "/tf_static"):
+            if ev.alive and ev.topic in (TF_TOPIC, TF_STATIC_TOPIC):
                 topics = (known.topics if known else frozenset()) | {ev.topic}
                 info = PeerInfo(ev.node_id, ev.name, topics)
                 self.broadcasters_seen[ev.node_id] = info

@@ -16,6 +16,7 @@ import click
 from tfbus.cli._common import literal
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
 from tfbus.cli._sources import publish_bus, publish_options
+from tfbus.topics import JOINT_STATES_TOPIC
 
 if TYPE_CHECKING:
     import anyio.abc
@@ -58,7 +59,7 @@ def command(model: Path, bus: str | None, local: bool, rate: float,
                    f"{rate:g} Hz on {bus_label(bus, local)}", err=True)
 
     def finish(b: Bus) -> None:
-        published = b.statistics().get("/joint_states")
+        published = b.statistics().get(JOINT_STATES_TOPIC)
         click.echo(f"[ INFO] summary: {published.published if published else 0} "
                    f"joint states published")
 

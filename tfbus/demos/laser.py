@@ -48,6 +48,7 @@ from tfbus.listener import TransformListener
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.sensor_msgs import LaserScan, read_points
 from tfbus.time import Duration, Time
+from tfbus.topics import SCAN_TOPIC
 
 __all__ = ["METHODS", "LaserDemoStats", "run_laser_demo", "simulate_scan"]
 
@@ -141,7 +142,7 @@ async def _laser(bus: Bus, clock: Clock, beams: int, scan_rate: float, epoch_ns:
     async for _ in every(1.0 / scan_rate, clock=clock):
         # The sweep that just ended: its first beam was one sweep ago.
         scan = simulate_scan(clock.now().ns - sweep_ns, beams, scan_rate, epoch_ns)
-        await bus.publish("/scan", scan)
+        await bus.publish(SCAN_TOPIC, scan)
 
 
 async def _mapper(
@@ -154,7 +155,7 @@ async def _mapper(
     beams: int,
 ) -> None:
     projector = LaserProjection()
-    sub = bus.subscribe("/scan", queue_size=10)
+    sub = bus.subscribe(SCAN_TOPIC, queue_size=10)
     sweep = Duration.from_sec(1.0 / scan_rate)
     period = LaserDemoStats()
     start = clock.now().ns

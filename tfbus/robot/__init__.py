@@ -13,12 +13,9 @@ run these on a bus.
 
 from tfbus.errors import JointStateError, URDFError
 from tfbus.robot.joint_states import publish_joint_states, sinusoidal_joint_state
-from tfbus.robot.state_publisher import (
-    JOINT_STATES_TOPIC,
-    RobotStatePublisher,
-    RobotStateStatistics,
-)
+from tfbus.robot.state_publisher import RobotStatePublisher, RobotStateStatistics
 from tfbus.robot.urdf import JOINT_TYPES, JointInfo, Mimic, RobotModel, load_urdf
+from tfbus.topics import JOINT_STATES_TOPIC
 
 __all__ = [
     "JOINT_STATES_TOPIC",

@@ -23,9 +23,9 @@ import anyio.abc
 from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock, every
 from tfbus.messages import Header, JointState
-from tfbus.robot.state_publisher import JOINT_STATES_TOPIC
 from tfbus.robot.urdf import RobotModel
 from tfbus.time import Time
+from tfbus.topics import JOINT_STATES_TOPIC
 
 __all__ = ["publish_joint_states", "sinusoidal_joint_state"]
 

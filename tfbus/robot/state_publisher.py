@@ -56,7 +56,7 @@ import numpy.typing as npt
 from transforms3d.euler import euler2quat
 from transforms3d.quaternions import quat2mat
 
-from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
+from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock
 from tfbus.errors import JointStateError
 from tfbus.messages import (
@@ -70,17 +70,14 @@ from tfbus.messages import (
 )
 from tfbus.robot.urdf import JointInfo, Mimic, RobotModel, load_urdf
 from tfbus.time import Time
+from tfbus.topics import JOINT_STATES_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
-    "JOINT_STATES_TOPIC",
     "RobotStatePublisher",
     "RobotStateStatistics",
 ]
 
 _log = logging.getLogger(__name__)
-
-JOINT_STATES_TOPIC = "/joint_states"
-"""The topic robot_state_publisher reads :class:`~tfbus.messages.JointState` from."""
 
 _F64 = npt.NDArray[np.float64]
 
