@@ -255,16 +255,16 @@ def test_summary_turtle() -> None:
 
 def test_summary_is_the_monitors_statistics() -> None:
     """bag-info, monitor and frames share one accounting: a BagSummary is tf_monitor's
-    TfStatistics with the bag's path, format and error (issue 11 item 22)."""
-    from tfbus.monitor import AuthorityStatistics, FrameStatistics, TfStatistics
+    TfSummary with the bag's path, format and error (issue 11 item 22)."""
+    from tfbus.monitor import AuthoritySummary, FrameSummary, TfSummary
 
-    assert tfbag.FrameSummary is FrameStatistics
-    assert tfbag.AuthoritySummary is AuthorityStatistics
+    assert tfbag.FrameSummary is FrameSummary
+    assert tfbag.AuthoritySummary is AuthoritySummary
     s = summarize(TURTLE)
-    stats = TfStatistics()
+    stats = TfSummary()
     for rec in read_messages(TURTLE):
         stats.add(rec.time, rec.message.transforms, rec.authority, static=rec.is_static)
-    assert isinstance(s, TfStatistics) and s.path == TURTLE
+    assert isinstance(s, TfSummary) and s.path == TURTLE
     assert s.frames == stats.frames and s.authorities == stats.authorities
     assert (s.start, s.end, s.messages) == (stats.start, stats.end, stats.messages)
 

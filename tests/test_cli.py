@@ -657,9 +657,9 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
                     await tf.send_transform(laser(ns))
                     ns += 1
                     await anyio.sleep(0.005)
-                while src.statistics().frames["base_laser"].count < ns - 1 - 5:
+                while src.summary().frames["base_laser"].count < ns - 1 - 5:
                     await anyio.sleep(0.02)
-            s = src.statistics()
+            s = src.summary()
             # Issue 10 §3: the live source is a TransformListener feeding the Buffer and
             # tfbus.monitor's statistics, not a second feed loop.
             from tfbus.listener import TransformListener

@@ -286,7 +286,7 @@ def test_item21_names_never_cut_off_in_80_columns(hostile_bag: Path) -> None:
                      for k in range(3)])
     buf = StringIO()
     out = Console(file=buf, width=80, markup=False, highlight=False, emoji=False)
-    print_monitor(out, BagSource(path).statistics(), ())
+    print_monitor(out, BagSource(path).summary(), ())
     lines = buf.getvalue().splitlines()
     assert max(len(line) for line in lines) <= 80
     first_cells = "".join(line.split("│")[0].strip() for line in lines if "│" in line)

@@ -30,7 +30,7 @@ def command(path: Path) -> int:
     from tfbus.bag import detect_format
 
     src = BagSource(path)
-    s = src.statistics()
+    s = src.summary()
     out = console()
     out.print(f"path:       {literal(path)}")
     out.print(f"format:     {detect_format(path).value}")
