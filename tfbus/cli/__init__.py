@@ -1,4 +1,4 @@
-"""The ``tfbus`` command line: the tf2 tools every tf user knows (layer 5).
+"""The ``tfbus`` command line: the tf2 tools every tf user knows.
 
 ::
 

@@ -1,5 +1,5 @@
 """What ``robot-state-publisher`` and ``joint-states`` share: the URDF argument, the
-``--duration`` option, and running a node on the bus until a signal (layer 5)."""
+``--duration`` option, and running a node on the bus until a signal."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Where echo, monitor and frames get their transforms: a bag or a live bus (layer 5).
+"""Where echo, monitor and frames get their transforms: a bag or a live bus.
 
 :class:`BagSource` reads a recording; :class:`BusSource` is a
 :class:`~tfbus.listener.TransformListener` feeding a :class:`~tfbus.buffer.Buffer` and

@@ -1,4 +1,4 @@
-"""``tfbus bag-info``: frames, parents, broadcasters, rates and span of a bag (layer 5)."""
+"""``tfbus bag-info``: frames, parents, broadcasters, rates and span of a bag."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``tfbus demo``: the seed demo and the tutorial's two nodes (layer 5). The options are
+"""``tfbus demo``: the seed demo and the tutorial's two nodes. The options are
 parsed here, once; :mod:`tfbus.demos.tutorial` holds the nodes and runners."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``tfbus frames``: view_frames, the frame tree drawn by Graphviz (layer 5)."""
+"""``tfbus frames``: view_frames, the frame tree drawn by Graphviz."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``tfbus joint-states``: joint_state_publisher without a GUI, animated (layer 5).
+"""``tfbus joint-states``: joint_state_publisher without a GUI, animated.
 
 Every movable joint swings sinusoidally within its limits
 (:func:`tfbus.robot.publish_joint_states`), until Ctrl-C or SIGTERM (or

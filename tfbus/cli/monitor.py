@@ -1,4 +1,4 @@
-"""``tfbus monitor``: tf_monitor on a bag or a live bus (layer 5); the statistics are
+"""``tfbus monitor``: tf_monitor on a bag or a live bus; the summary tables are
 :mod:`tfbus.monitor`'s."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``tfbus robot-state-publisher``: ROS's robot_state_publisher (layer 5).
+"""``tfbus robot-state-publisher``: ROS's robot_state_publisher.
 
 Fixed joints once on the latched /tf_static, moving joints on /tf from the JointStates on
 /joint_states (:class:`tfbus.robot.RobotStatePublisher`), until Ctrl-C or SIGTERM

@@ -1,4 +1,4 @@
-"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display (layer 5).
+"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display.
 
 Needs the ``tfbus[view]`` extra (viser); without it the command says so in one line
 (exit status 2).
