@@ -52,12 +52,12 @@ from tfbus.bag import (
 
 pytestmark = pytest.mark.anyio
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 NAV2 = DATA / "nav2_like.mcap"
 EX_DIR = DATA / "tf_example"
 LASER = DATA / "laser"
-MAKE_BAGS = Path(__file__).resolve().parents[1] / "scripts" / "make_test_bags.py"
+MAKE_BAGS = Path(__file__).resolve().parents[2] / "scripts" / "make_test_bags.py"
 
 
 # --------------------------------------------------------------------------- helpers

@@ -1,6 +1,6 @@
 """``tfbus demo laser``: the laser demo (tfbus.demos.laser) from the command line.
 
-The demo's own figures are tested in tests/test_demo_laser.py under a ManualClock; here
+The demo's own figures are tested in tests/demos/test_demo_laser.py under a ManualClock; here
 the command: its options reach ``run_laser_demo``, it ends with the demo's summary line,
 bad options are one-line errors, and an installation without the module says so.
 """

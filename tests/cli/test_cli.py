@@ -23,7 +23,7 @@ from tfbus import Time
 from tfbus.bag import load_buffer, read_messages
 from tfbus.cli import cli, frames_dot, main, parse_static_args, parse_time
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 NAV2 = DATA / "nav2_like.mcap"  # scripts/make_test_bags.py (tests/data/SOURCES.md)
 COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay",
@@ -556,7 +556,7 @@ def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_demo_script_runs_the_click_command(tmp_path: Path) -> None:
     """demos/robot_setup_tf.py stays runnable and parses with the same click command."""
-    script = Path(__file__).resolve().parents[1] / "demos" / "robot_setup_tf.py"
+    script = Path(__file__).resolve().parents[2] / "demos" / "robot_setup_tf.py"
     proc = subprocess.run([sys.executable, str(script), "--rate", "-1"], capture_output=True,
                           text=True, timeout=120, check=False)
     assert proc.returncode == 2
@@ -610,7 +610,7 @@ def _free_port() -> int:
 @pytest.mark.anyio
 async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> None:
     """BusSource in process, against a broadcaster on a second Zenoh session (127.0.0.1
-    only, bounded waits); the subprocess versions are in tests/test_three_terminals.py."""
+    only, bounded waits); the subprocess versions are in tests/cli/test_three_terminals.py."""
     pytest.importorskip("zenoh")
     import anyio
     import anyio.abc

@@ -87,7 +87,7 @@ def test_main_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 # -- the tutorial's terminals: one node per bus (two linked in-memory buses stand in for
-#    two processes; tests/test_three_terminals.py runs them over Zenoh for real)
+#    two processes; tests/cli/test_three_terminals.py runs them over Zenoh for real)
 
 
 async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:

@@ -27,7 +27,7 @@ from tfbus.bag import BagMessage, write_bag
 from tfbus.cli import cli
 from tfbus.messages import TFMessage
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 
 LONG_ID = "L" * 16384

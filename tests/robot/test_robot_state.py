@@ -47,7 +47,7 @@ from tfbus.time import Time
 pytest.importorskip("urdf_parser_py")
 pytestmark = pytest.mark.anyio
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data" / "rsp"
 URDF = ROOT / "tests" / "data" / "urdf"
 RECORDINGS = sorted(DATA.glob("*.json.gz"))
