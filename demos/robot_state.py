@@ -22,14 +22,13 @@ Ctrl-C / SIGTERM exit cleanly; the last line is the robot state publisher's summ
 
 from __future__ import annotations
 
-import argparse
 import functools
 import signal
-import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
 import anyio
+import click
 
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
@@ -89,24 +88,24 @@ async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
             return
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the demo from the command line; returns the exit status."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--duration", type=float, default=None,
-                        help="seconds to run (default: until Ctrl-C)")
-    parser.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
-    args = parser.parse_args(argv)
+@click.command(help=__doc__.split("\n")[0] if __doc__ else None)
+@click.option("--duration", type=click.FloatRange(min=0), default=None,
+              help="Seconds to run (default: until Ctrl-C).")
+@click.option("--backend", type=click.Choice(["asyncio", "trio"]), default="asyncio",
+              show_default=True, help="Event loop.")
+def main(duration: float | None, backend: str) -> None:
+    """Run the demo from the command line (exit status 130 after a Ctrl-C that came
+    before the signal handler; bad options are click's one usage error, status 2)."""
 
     def line(text: str) -> None:
         print(text, flush=True)
 
     try:
-        anyio.run(functools.partial(run_robot_state_demo, duration=args.duration, out=line,
-                                    handle_signals=True), backend=args.backend)
+        anyio.run(functools.partial(run_robot_state_demo, duration=duration, out=line,
+                                    handle_signals=True), backend=backend)
     except KeyboardInterrupt:  # before the signal handler was installed
-        return 130
-    return 0
+        click.get_current_context().exit(130)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

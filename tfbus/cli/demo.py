@@ -93,17 +93,12 @@ def node_label(transport: object, default: str) -> tuple[str, str]:
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,
              listen_rate: float, backend: str) -> int:
     """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh."""
-    from tfbus.demos.tutorial import (
-        BROADCASTER_NAME,
-        LISTENER_NAME,
-        open_bus,
-        run_broadcaster,
-        run_listener,
-    )
+    from tfbus.demos.tutorial import BROADCASTER_NAME, LISTENER_NAME, run_broadcaster, run_listener
+    from tfbus.transports.spec import open_bus
 
     name = BROADCASTER_NAME if role == "broadcaster" else LISTENER_NAME
     try:
-        bus = open_bus(spec, name=name)
+        bus = open_bus(spec, default_name=name)
     except ValueError as err:
         fail(str(err))
     except Exception as err:
