@@ -26,7 +26,7 @@ Prints, on this machine, for asyncio and trio (``anyio.run(..., backend=...)``):
    subscription queue). Only transforms the buffer actually stored are counted
    (``listener.statistics().stored``, cross-checked against the buffer's newest stamp
    and sample count per frame); drops are reported. Target: >= 1 M/s batched.
-3. **CPU share of the demo** (``tfbus.demo.run_demo``, 100 Hz broadcaster + 1 Hz
+3. **CPU share of the demo** (``tfbus.demos.tutorial.run_demo``, 100 Hz broadcaster + 1 Hz
    listener, SystemClock, output discarded): process CPU time / wall time, plus the
    demo's own summary (measured broadcast rate, timer jitter p50/p99).
 
@@ -62,7 +62,7 @@ from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import SystemClock
 from tfbus.core import BatchResult
-from tfbus.demo import run_demo
+from tfbus.demos.tutorial import run_demo
 from tfbus.listener import TransformListener
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Time

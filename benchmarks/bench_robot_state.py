@@ -39,7 +39,7 @@ import anyio
 
 from tfbus.bus import Bus
 from tfbus.messages import Header, JointState
-from tfbus.robot_state import RobotStatePublisher
+from tfbus.robot import RobotStatePublisher
 from tfbus.time import Time
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,7 +124,7 @@ def chain_urdf(n: int) -> str:
 
 def bench_load(sizes: Sequence[int]) -> None:
     """Print load_urdf's time on a generated chain of each size (one run each)."""
-    from tfbus.urdf import load_urdf
+    from tfbus.robot import load_urdf
 
     for n in sizes:
         text = chain_urdf(n)

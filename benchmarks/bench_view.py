@@ -1,7 +1,7 @@
 """The CPU ``tfbus view`` costs following a 100 Hz x 50-frame source.
 
 In one process, for ``--seconds`` of wall time: every 10 ms, 50 dynamic transforms (a
-chain of 10 plus 40 leaves, slowly moving) go into a BufferCore and TfStatistics, as the
+chain of 10 plus 40 leaves, slowly moving) go into a BufferCore and TfSummary, as the
 live bus source stores them; every 1/30 s the page redraws (``draw_live``: the scene model
 with 50 lookups, then viser's frame, label, line and panel updates). A browser may be
 connected to the printed address meanwhile. Prints the process CPU per wall second (the
@@ -18,7 +18,7 @@ import time
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.core import BufferCore
-from tfbus.monitor import TfStatistics
+from tfbus.monitor import TfSummary
 from tfbus.view.player import MAX_DRAW_HZ, draw_live
 from tfbus.view.server import TfPage
 
@@ -40,7 +40,7 @@ def transforms(t: float) -> list[TransformStamped]:
 
 
 def run(seconds: float, page: TfPage | None) -> tuple[float, float, int]:
-    core, stats = BufferCore(), TfStatistics()
+    core, stats = BufferCore(), TfSummary()
     start = time.monotonic()
     cpu0 = time.process_time()
     next_tf = next_draw = start

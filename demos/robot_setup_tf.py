@@ -6,9 +6,9 @@
 
 A 100 Hz broadcaster publishes base_link -> base_laser (10 cm forward, 20 cm up); a 1 Hz
 listener transforms the laser point (1.0, 0.2, 0.0) into base_link and prints the
-tutorial's line. The two nodes are `tfbus.demo.broadcaster_node` and
-`tfbus.demo.listener_node`; read `tfbus/demo.py` for their ten lines each. The options
-are `tfbus demo`'s (this script runs that command).
+tutorial's line. The two nodes are `tfbus.demos.tutorial.broadcaster_node` and
+`tfbus.demos.tutorial.listener_node`; read `tfbus/demos/tutorial.py` for their ten lines
+each. The options are `tfbus demo`'s (this script runs that command).
 """
 
 import sys

@@ -6,11 +6,11 @@
 forward and 20 cm up on a fixed joint; two continuous wheels). Three tasks share one
 in-process bus:
 
-* robot_state_publisher (:class:`tfbus.robot_state.RobotStatePublisher`) publishes the
+* robot_state_publisher (:class:`tfbus.robot.RobotStatePublisher`) publishes the
   fixed laser mount once on the latched /tf_static and the wheels on /tf from
-* a joint-state source turning the wheels (:func:`tfbus.robot_state.publish_joint_states`,
+* a joint-state source turning the wheels (:func:`tfbus.robot.publish_joint_states`,
   10 Hz), in place of the tutorial's hand-written 100 Hz broadcaster;
-* the tutorial's listener, unchanged (:func:`tfbus.demo.listener_node`), which keeps
+* the tutorial's listener, unchanged (:func:`tfbus.demos.tutorial.listener_node`), which keeps
   printing once a second::
 
     [ INFO] ...: base_laser: (1.00, 0.20. 0.00) -----> base_link: (1.10, 0.20, 0.20) at time 0.00
@@ -22,21 +22,20 @@ Ctrl-C / SIGTERM exit cleanly; the last line is the robot state publisher's summ
 
 from __future__ import annotations
 
-import argparse
 import functools
 import signal
-import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
 import anyio
+import click
 
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock
-from tfbus.demo import listener_node
+from tfbus.demos.tutorial import listener_node
 from tfbus.listener import TransformListener
-from tfbus.robot_state import RobotStatePublisher, RobotStateStatistics, publish_joint_states
+from tfbus.robot import RobotStatePublisher, RobotStateStatistics, publish_joint_states
 
 ROBOT_URDF = Path(__file__).with_name("robot.urdf")
 
@@ -54,7 +53,7 @@ async def run_robot_state_demo(
     the publisher's summary through ``out``; return the publisher's statistics.
 
     Raises:
-        tfbus.urdf.URDFError: if ``urdf`` is not a usable robot description.
+        tfbus.robot.URDFError: if ``urdf`` is not a usable robot description.
     """
     clock = clock if clock is not None else SystemClock()
     rsp = RobotStatePublisher(urdf)
@@ -89,24 +88,24 @@ async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
             return
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the demo from the command line; returns the exit status."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--duration", type=float, default=None,
-                        help="seconds to run (default: until Ctrl-C)")
-    parser.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
-    args = parser.parse_args(argv)
+@click.command(help=__doc__.split("\n")[0] if __doc__ else None)
+@click.option("--duration", type=click.FloatRange(min=0), default=None,
+              help="Seconds to run (default: until Ctrl-C).")
+@click.option("--backend", type=click.Choice(["asyncio", "trio"]), default="asyncio",
+              show_default=True, help="Event loop.")
+def main(duration: float | None, backend: str) -> None:
+    """Run the demo from the command line (exit status 130 after a Ctrl-C that came
+    before the signal handler; bad options are click's one usage error, status 2)."""
 
     def line(text: str) -> None:
         print(text, flush=True)
 
     try:
-        anyio.run(functools.partial(run_robot_state_demo, duration=args.duration, out=line,
-                                    handle_signals=True), backend=args.backend)
+        anyio.run(functools.partial(run_robot_state_demo, duration=duration, out=line,
+                                    handle_signals=True), backend=backend)
     except KeyboardInterrupt:  # before the signal handler was installed
-        return 130
-    return 0
+        click.get_current_context().exit(130)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

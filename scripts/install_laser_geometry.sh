@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install ROS 1 laser_geometry (C++ headers + library, Python bindings) from Debian, for
-# the differential tests in tests/test_laser.py. Idempotent and time-bounded; exits 0 with
+# the differential tests in tests/sensors/test_laser.py. Idempotent and time-bounded; exits 0 with
 # a reason when the install is impossible (not root, no apt).
 set -u
 if pkg-config --exists laser_geometry 2>/dev/null && command -v g++ >/dev/null; then

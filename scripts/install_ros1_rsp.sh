@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install Debian's ROS 1 robot_state_publisher, roscore and the rospy message packages the
-# recording script and tests/test_robot_state.py's live test use. Idempotent and bounded
+# recording script and tests/robot/test_robot_state.py's live test use. Idempotent and bounded
 # in time; exits 0 with a reason on stdout when it cannot install (not root, no apt-get,
 # apt failed), so the test can skip with that reason.
 set -u

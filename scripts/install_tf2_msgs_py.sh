@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Install Debian's ROS 1 python3-tf2-geometry-msgs and python3-tf2-sensor-msgs (0.7.6),
 # the reference implementations the registered transforms of tfbus.convert are checked
-# against (tests/test_convert_reference.py, run under /usr/bin/python3). Idempotent and
+# against (tests/geometry/test_convert_reference.py, run under /usr/bin/python3). Idempotent and
 # time-bounded; exits 0 with a reason when the install is impossible (not root, no apt).
 set -u
 check() {

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Record what ROS 1's real robot_state_publisher publishes, for tests/test_robot_state.py.
+"""Record what ROS 1's real robot_state_publisher publishes, for tests/robot/test_robot_state.py.
 
 Run with the system interpreter (ROS 1's rospy lives there, not in the venv)::
 
@@ -16,7 +16,7 @@ stamp, empty/mismatched positions, NaN, out-of-limit values) one at a time and r
 the ``/tf`` message each one produced (``null`` when none came within 1.5 s). The node
 keeps one message in its queue, so the next state is sent only after the previous answer.
 
-Output: ``OUT/<urdf stem>.json.gz`` (see ``tests/test_robot_state.py`` for the layout).
+Output: ``OUT/<urdf stem>.json.gz`` (see ``tests/robot/test_robot_state.py`` for the layout).
 Every wait is bounded; roscore and the node are stopped by PID (SIGINT, then wait).
 """
 

@@ -147,9 +147,9 @@ def test_monitor_chain_line_is_tf2s() -> None:
     B)``, as tf_monitor prints it, quirks included (here the root A, where the branches
     meet one level below it); the net delay still follows the lookup's path."""
     from tfbus.cli.monitor import chain_lines, tf2_chain
-    from tfbus.monitor import TfStatistics
+    from tfbus.monitor import TfSummary
 
-    stats = TfStatistics()
+    stats = TfSummary()
     links = [("A", "B"), ("B", "C"), ("B", "E")]
     stats.add(Time(1), [TransformStamped(Header(Time(1), p), c, Transform()) for p, c in links],
               "n", static=False)

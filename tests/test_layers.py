@@ -27,6 +27,7 @@ LAYERS: dict[str, int] = {
     "sensor_msgs": 0,
     "time": 0,
     "ratelimit": 0,
+    "topics": 0,  # the topic names, in one place
     "_version": 0,  # the distribution's version from package metadata
     # 1: the sans-I/O core (geometry and convert call the tf2 scalar math of the core that
     # _backend chose: compiled _ccore or pure-Python _pycore, same behaviour)
@@ -56,14 +57,12 @@ LAYERS: dict[str, int] = {
     "monitor": 4,
     "filters": 4,
     "laser": 4,
-    "robot_state": 4,
-    "urdf": 4,
+    "robot": 4,
     "transports": 4,
     "compat": 4,
     # 5: the command line and examples
     "cli": 5,
-    "demo": 5,
-    "demo_laser": 5,
+    "demos": 5,
     "view": 5,
     "__main__": 5,
 }
@@ -71,7 +70,7 @@ LAYERS: dict[str, int] = {
 its layer). ``tfbus/__init__.py`` is the facade above every layer."""
 
 ONLY_IMPORTS: dict[str, set[str]] = {
-    "errors": {"time"},  # the exception tree may name a Time, nothing else of tfbus
+    "errors": {"time", "messages"},  # the exception tree may name a Time or a message type
 }
 """Modules allowed a narrower set of tfbus imports than their layer would give."""
 
@@ -83,6 +82,19 @@ WALL_CLOCK_PENDING: dict[str, str] = {
 }
 """Known offenders of SANS_IO_FORBIDDEN being fixed elsewhere. An entry that no longer
 offends fails the test, so the list cannot go stale."""
+
+ERRORS_ELSEWHERE_PENDING: dict[str, str] = {
+    "SchemaParseError": "bag/decode.py: the codecs move (helper 'transports', issue 26)",
+    "BadReply": "transports/ros1/rpc.py: the transports move (helper 'transports', issue 26)",
+    "CallFailed": "transports/ros1/rpc.py: the transports move (helper 'transports', issue 26)",
+    "_TooDeep": "transports/ros1/rpc.py: the transports move (helper 'transports', issue 26)",
+    "PortInUseError": "view/server.py (helper 'view', issue 26)",
+}
+"""Exception classes still defined outside ``tfbus/errors.py``, each with where it is and
+who moves it. An entry whose class is no longer found outside errors.py fails the test, so
+the list cannot go stale."""
+
+_EXCEPTION_BASE = re.compile(r"(Error|Exception)$")
 
 _PYX_IMPORT = re.compile(r"^\s*(?:from\s+([\w.]+)\s+import\s|import\s+([\w.]+))", re.MULTILINE)
 _PYX_CIMPORT = re.compile(r"^\s*(?:from\s+[\w.]+\s+cimport\s|cimport\s)")
@@ -295,6 +307,60 @@ def test_layers_0_and_1_are_sans_io() -> None:
     )
     stale = sorted(m for m in WALL_CLOCK_PENDING if m in MODULES and m not in offenders)
     assert not stale, f"{stale} no longer import a clock: remove them from WALL_CLOCK_PENDING"
+
+
+def _exception_classes() -> Iterator[tuple[str, str]]:
+    """``(class name, where)`` of every class outside errors.py with a base named
+    ``...Error`` or ``...Exception`` (what ``git grep "class .*(.*Error\\|Exception)"``
+    finds, read with :mod:`ast`)."""
+    for module, path in MODULES.items():
+        if module == "tfbus.errors" or path.suffix != ".py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            for base in node.bases:
+                name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
+                if _EXCEPTION_BASE.search(name):
+                    yield node.name, _where(module, node.lineno)
+                    break
+
+
+def test_every_exception_is_in_errors() -> None:
+    """One exception tree, one module (httpx's ``_exceptions.py``): a new error class goes
+    into ``tfbus/errors.py`` and is imported where it is raised."""
+    found = dict(_exception_classes())
+    unexpected = sorted(f"{where}: {name}" for name, where in found.items()
+                        if name not in ERRORS_ELSEWHERE_PENDING)
+    assert not unexpected, "exception classes outside tfbus/errors.py:\n" + "\n".join(unexpected)
+    stale = sorted(name for name in ERRORS_ELSEWHERE_PENDING if name not in found)
+    assert not stale, f"{stale} moved to errors.py: remove them from ERRORS_ELSEWHERE_PENDING"
+
+
+TOPIC_NAMES = frozenset({"/tf", "/tf_static", "/joint_states", "/scan"})
+"""The names ``tfbus/topics.py`` defines: written nowhere else in code."""
+
+
+def test_topic_names_are_written_once() -> None:
+    """``"/tf"`` and its siblings are string constants only in ``tfbus/topics.py``; every
+    other module imports the name (docstrings, which show examples, are not code)."""
+    problems: list[str] = []
+    for module, path in MODULES.items():
+        if module == "tfbus.topics" or path.suffix != ".py":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        docstrings = {
+            id(node.value)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+        }
+        problems += [
+            f"{_where(module, node.lineno)}: {node.value!r}"
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and node.value in TOPIC_NAMES
+            and id(node) not in docstrings
+        ]
+    assert not problems, "import these names from tfbus.topics:\n" + "\n".join(problems)
 
 
 @pytest.mark.parametrize(

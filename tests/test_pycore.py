@@ -651,7 +651,7 @@ PURE_SUITE = [
     "tests/test_core_properties.py",
     "tests/test_cache.py",
     "tests/test_batch_lookup.py",
-    "tests/test_geometry.py",
+    "tests/geometry/test_geometry.py",
 ]
 
 

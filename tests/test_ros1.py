@@ -48,7 +48,7 @@ from tfbus import (
     Vector3,
 )
 from tfbus.bag.decode import decode_ros1_struct
-from tfbus.demo import run_broadcaster, run_listener
+from tfbus.demos.tutorial import run_broadcaster, run_listener
 from tfbus.transports.ros1 import (
     TF_MD5SUM,
     Ros1Transport,

@@ -39,7 +39,7 @@ from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import SystemClock
-from tfbus.demo import broadcaster_node, run_listener
+from tfbus.demos.tutorial import broadcaster_node, run_listener
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.listener import TransformListener
 from tfbus.messages import (

@@ -28,7 +28,7 @@ from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.bag import read_messages  # noqa: E402
 from tfbus.clock import ManualClock  # noqa: E402
 from tfbus.core import BufferCore  # noqa: E402
-from tfbus.monitor import TfStatistics  # noqa: E402
+from tfbus.monitor import TfSummary  # noqa: E402
 from tfbus.view.player import BagPlayer, draw_live  # noqa: E402
 from tfbus.view.server import TfPage  # noqa: E402
 from tfbus.view.timeline import BagTimeline  # noqa: E402
@@ -124,7 +124,7 @@ def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> No
 
 def test_live_frame_goes_stale_then_hidden(chromium: str, page: TfPage) -> None:
     clock = ManualClock(Time.from_sec(100.0))
-    core, stats = BufferCore(), TfStatistics()
+    core, stats = BufferCore(), TfSummary()
     odd = "<b>bold</b>&amp;"
 
     def send(child: str, parent: str = "world") -> None:
@@ -167,7 +167,7 @@ def anyio_backend(request: pytest.FixtureRequest) -> str:
 @pytest.mark.anyio
 async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
     """The live path as ``tfbus view --bus`` runs it: broadcasters on a bus ->
-    TransformListener -> MonitoredSink (Buffer + TfStatistics, receive time from a
+    TransformListener -> MonitoredSink (Buffer + TfSummary, receive time from a
     ManualClock) -> draw_live; one broadcaster stops and its frame turns stale."""
     import anyio
 
@@ -179,7 +179,7 @@ async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
 
     clock = ManualClock(Time.from_sec(50.0))
     buffer = Buffer(cache_time=10.0, clock=clock)
-    stats = TfStatistics()
+    stats = TfSummary()
     sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
     url = f"http://127.0.0.1:{page.port}/"
 

@@ -16,7 +16,7 @@ pytest.importorskip("urdf_parser_py")
 from tfbus import Time
 from tfbus.core import BufferCore
 from tfbus.messages import Header, JointState
-from tfbus.robot_state import RobotStatePublisher
+from tfbus.robot import RobotStatePublisher
 from tfbus.view import build_scene
 from tfbus.view.robot import link_visuals
 from tfbus.view.server import TfPage

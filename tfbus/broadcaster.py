@@ -18,8 +18,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import ClassVar
 
-from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
+from tfbus.bus import Bus
 from tfbus.messages import TFMessage, TransformStamped
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = ["StaticTransformBroadcaster", "TransformBroadcaster"]
 

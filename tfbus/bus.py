@@ -57,6 +57,7 @@ from tfbus.subscription import (
     SubscriptionStatistics,
     _TopicCounters,
 )
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
     "TF_STATIC_TOPIC",
@@ -70,10 +71,6 @@ __all__ = [
     "Transport",
 ]
 
-TF_TOPIC: Final = "/tf"
-"""The topic of dynamic transforms (``TFMessage``)."""
-TF_STATIC_TOPIC: Final = "/tf_static"
-"""The topic of static transforms (``TFMessage``), latched per child frame."""
 
 _log = logging.getLogger(__name__)
 

@@ -10,10 +10,13 @@ the wire format and transports add their own branches under one base::
     │   ├── ExtrapolationException     a link on the path has no data at that time
     │   ├── InvalidArgumentException   malformed input: bad frame id, NaN, ±Inf, bad quaternion
     │   └── TimeoutException           an awaited transform did not arrive in time
+    ├── URDFError                      a robot description cannot be used (also ValueError)
+    ├── JointStateError                a JointState cannot become transforms (also ValueError)
     ├── BagError                       a recording cannot be read or written (``path``)
     │   ├── BagNotFoundError           the path does not exist (also FileNotFoundError)
     │   ├── BagFormatError             not a bag format tfbus reads (also ValueError)
     │   └── BagReadError               truncated or corrupt: reading stopped part-way
+    │                                  (ScanError: its internal signal inside tfbus.bag)
     ├── WireError                      a payload cannot be encoded/decoded (also ValueError)
     │   ├── WireDecodeError            not a well-formed tfbus message
     │   ├── WireVersionError           another wire format version
@@ -31,10 +34,14 @@ still an ``Exception`` (and the bag/wire ones keep their ``FileNotFoundError`` /
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .time import Time, format_stamp
+
+if TYPE_CHECKING:
+    from .messages import TransformStamped
 
 __all__ = [
     "BagError",
@@ -44,11 +51,13 @@ __all__ = [
     "ConnectivityException",
     "ExtrapolationException",
     "InvalidArgumentException",
+    "JointStateError",
     "LookupException",
     "TfbusError",
     "TimeoutException",
     "TransformException",
     "TransportError",
+    "URDFError",
     "WireDecodeError",
     "WireEncodeError",
     "WireError",
@@ -100,6 +109,45 @@ class InvalidArgumentException(TransformException):
 class TimeoutException(TransformException):
     """An awaited transform did not become available within the timeout
     (``tf2::TimeoutException``)."""
+
+
+# --------------------------------------------------------------------------- robots
+
+
+class URDFError(TfbusError, ValueError):
+    """A robot description that cannot be used: not XML, not a URDF, or not one tree
+    (:func:`tfbus.robot.load_urdf`; the checks of urdfdom's ``urdf_parser/src/model.cpp``).
+
+    The message names the offending element (``joint 'elbow'``, ``link 'arm'``, the XML
+    line). Also a :class:`ValueError`.
+
+    Attributes:
+        element: the offending element as ``"joint 'NAME'"``, ``"link 'NAME'"``,
+            ``"line N"`` or ``"robot"``.
+    """
+
+    def __init__(self, message: str, element: str = "robot") -> None:
+        super().__init__(message)
+        self.element = element
+
+
+class JointStateError(TfbusError, ValueError):
+    """A JointState (or some of its positions) that cannot be turned into transforms
+    (:meth:`tfbus.robot.RobotStatePublisher.transforms`; robot_state_publisher's
+    ``JointStateListener::callbackJointState`` refuses the same messages). Also a
+    :class:`ValueError`.
+
+    Attributes:
+        refused: joint name -> the offending position (NaN, ±Inf, not a number).
+        transforms: the transforms of the other joints of the message, computed anyway
+            (empty when the whole message is invalid).
+    """
+
+    def __init__(self, message: str, refused: dict[str, object] | None = None,
+                 transforms: Sequence[TransformStamped] = ()) -> None:
+        super().__init__(message)
+        self.refused = dict(refused or {})
+        self.transforms = list(transforms)
 
 
 # --------------------------------------------------------------------------- recordings
@@ -155,6 +203,20 @@ class BagReadError(BagError):
         self.last_time = last_time
         self.messages_read = messages_read
         self.partial: Any = None
+
+
+class ScanError(Exception):
+    """Reading a damaged bag stopped at byte ``offset`` of the file for ``reason``.
+
+    Internal to :mod:`tfbus.bag` (``salvage`` raises it, ``reader`` turns it into a
+    :class:`BagReadError`): it never reaches a caller, so it is no :class:`TfbusError`
+    and not in ``__all__``.
+    """
+
+    def __init__(self, reason: str, offset: int) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.offset = offset
 
 
 # --------------------------------------------------------------------------- wire format

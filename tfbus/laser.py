@@ -3,7 +3,7 @@
 :class:`LaserProjection` reproduces ROS 1 laser_geometry 1.6 (``laser_geometry.cpp``,
 the PointCloud2 overloads of ``projectLaser_`` and ``transformLaserScanToPointCloud_``
 with a ``tf2::BufferCore``), vectorised with numpy over the beams, and is checked point
-for point against the compiled library (``tests/test_laser.py``):
+for point against the compiled library (``tests/sensors/test_laser.py``):
 
 * beam i is kept iff ``ranges[i] < range_cutoff`` (as double; ``range_cutoff < 0`` means
   ``range_max``) and ``ranges[i] >= range_min`` (as float): NaN is always dropped, +inf

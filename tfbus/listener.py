@@ -26,12 +26,13 @@ import anyio
 import anyio.abc
 
 from tfbus.buffer import Buffer
-from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, CallbackSubscription, Subscription
+from tfbus.bus import Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
 from tfbus.core import BatchResult
 from tfbus.errors import TransformException
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import RateLimitedLog
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = ["ListenerStatistics", "TransformListener", "TransformSink"]
 

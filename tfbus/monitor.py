@@ -1,16 +1,21 @@
-"""tf_monitor's statistics: per-frame rate and delay, per-broadcaster rate and delay, and
-the net delay of a chain, for bags and live buses alike (layer 4).
+"""tf_monitor's summaries: per-frame rate and delay, per-broadcaster rate and delay, and
+the net delay of a chain, for bags and live buses alike.
+
+Words: in tfbus *statistics* are counters (``Bus.statistics()``,
+``TransformListener.statistics()``, ``transport.statistics()``); the tables kept here are
+*summaries* (:class:`TfSummary`, :class:`FrameSummary`, :class:`AuthoritySummary`), as
+:func:`tfbus.bag.summarize` returns for a recording.
 
 ::
 
-    stats = TfStatistics()
+    stats = TfSummary()
     for rec in read_messages("turtle.bag"):               # a recording ...
         stats.add(rec.time, rec.message.transforms, rec.authority, static=rec.is_static)
     stats.frames["turtle1"].rate                          # Hz
 
     sink = MonitoredSink(buffer, stats, clock)            # ... or a live bus:
     async with TransformListener(sink, bus):              # the listener feeds the buffer
-        ...                                               # and the statistics at once
+        ...                                               # and the summary at once
 
 Definitions (one for every tool: ``tfbus frames``, ``monitor`` and ``bag-info``):
 
@@ -22,15 +27,15 @@ Definitions (one for every tool: ``tfbus frames``, ``monitor`` and ``bag-info``)
   the receive time of a recorded message. When the stamps are more than
   :data:`SIM_TIME_GAP` seconds away from the receive clock (a bag recorded with
   simulated time, stamps near 0 while the recorder's clock is near 1.7e9), delays are
-  measured against the newest stamp seen so far instead and :attr:`TfStatistics.sim_time`
+  measured against the newest stamp seen so far instead and :attr:`TfSummary.sim_time`
   is set, so that tools can say so.
 * **rate** of a broadcaster: ``(messages - 1) / (last - first receive time)``.
 * **net delay** of a chain (tf_monitor ``A B``): receive time minus the latest common
   stamp of the chain's dynamic links (what ``lookupTransform(A, B, Time())`` returns),
   sampled at every message that updates one of them.
 * **recent rate** (live tables): the same rates over the samples received in the last
-  :data:`RATE_WINDOW` seconds before now (:meth:`FrameStatistics.recent_rate`,
-  :meth:`AuthorityStatistics.recent_rate`). tf_monitor keeps only its last 1000 samples
+  :data:`RATE_WINDOW` seconds before now (:meth:`FrameSummary.recent_rate`,
+  :meth:`AuthoritySummary.recent_rate`). tf_monitor keeps only its last 1000 samples
   per frame and per broadcaster (10 s at 100 Hz); a window in time also ages a
   broadcaster that stopped: its rate is 0.0 once it has been silent for the window.
 
@@ -50,16 +55,17 @@ from tfbus.clock import Clock
 from tfbus.core import BatchResult
 from tfbus.messages import TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
     "RATE_WINDOW",
     "RECENT_SAMPLES",
     "SIM_TIME_GAP",
-    "AuthorityStatistics",
+    "AuthoritySummary",
     "ChainDelay",
-    "FrameStatistics",
+    "FrameSummary",
     "MonitoredSink",
-    "TfStatistics",
+    "TfSummary",
     "frame_chain",
     "link_rate",
 ]
@@ -92,8 +98,8 @@ def link_rate(distinct_stamps: int, oldest_ns: int, newest_ns: int) -> float:
 
 
 @dataclass
-class FrameStatistics:
-    """Statistics of one child frame: its parent, who sends it, its stamps and delays.
+class FrameSummary:
+    """The summary of one child frame: its parent, who sends it, its stamps and delays.
 
     Stamps are header stamps in ns; delays are seconds (see the module docstring).
     ``count`` counts every transform received, ``stamps`` the distinct stamps.
@@ -150,7 +156,7 @@ class FrameStatistics:
 
 
 @dataclass
-class AuthorityStatistics:
+class AuthoritySummary:
     """Per broadcaster (authority): messages received and their transforms' delays."""
 
     authority: str
@@ -229,19 +235,19 @@ class ChainDelay:
 
 
 @dataclass
-class TfStatistics:
+class TfSummary:
     """tf_monitor's tables, fed one message at a time by :meth:`add`.
 
     ``start`` / ``end`` are the first and last receive times, ``messages`` counts
-    messages per topic, ``frames`` maps a child frame id to its statistics and
+    messages per topic, ``frames`` maps a child frame id to its summary and
     ``authorities`` a broadcaster to its own.
     """
 
     start: Time | None = None
     end: Time | None = None
     messages: dict[str, int] = field(default_factory=dict)
-    frames: dict[str, FrameStatistics] = field(default_factory=dict)
-    authorities: dict[str, AuthorityStatistics] = field(default_factory=dict)
+    frames: dict[str, FrameSummary] = field(default_factory=dict)
+    authorities: dict[str, AuthoritySummary] = field(default_factory=dict)
     sim_time: bool | None = None
     """None before the first dynamic transform; True when delays are measured against
     the newest stamp because the stamps are simulated time (module docstring)."""
@@ -283,11 +289,11 @@ class TfStatistics:
         if self.end is None or t > self.end.ns:
             self.end = time
         if topic is None:
-            topic = "/tf_static" if static else "/tf"
+            topic = TF_STATIC_TOPIC if static else TF_TOPIC
         self.messages[topic] = self.messages.get(topic, 0) + 1
         auth = self.authorities.get(authority)
         if auth is None:
-            auth = self.authorities[authority] = AuthorityStatistics(authority)
+            auth = self.authorities[authority] = AuthoritySummary(authority)
         auth.messages += 1
         if auth.first is None:
             auth.first = t
@@ -305,7 +311,7 @@ class TfStatistics:
             child = ts.child_frame_id
             fs = self.frames.get(child)
             if fs is None or fs.static != static:
-                fs = self.frames[child] = FrameStatistics(child, ts.header.frame_id, static)
+                fs = self.frames[child] = FrameSummary(child, ts.header.frame_id, static)
             fs.parent = ts.header.frame_id
             fs.count += 1
             fs.authorities[authority] = fs.authorities.get(authority, 0) + 1
@@ -409,12 +415,12 @@ class _Store(Protocol):
 
 class MonitoredSink:
     """A :class:`~tfbus.listener.TransformSink` that stores into ``buffer`` and accounts
-    every message in ``statistics`` (receive time = ``clock.now()``): a
+    every message in ``summary`` (receive time = ``clock.now()``): a
     ``TransformListener`` on it feeds the buffer and tf_monitor's tables at once.
 
     Args:
         buffer: the ``BufferCore`` or ``Buffer`` to store into.
-        statistics: where to account.
+        summary: where to account (the tables).
         clock: the receive clock.
         authority: ``authority(is_static) -> str`` names the sender of a message (the
             wire format carries none); by default the listener's authority is used.
@@ -425,7 +431,7 @@ class MonitoredSink:
     def __init__(
         self,
         buffer: _Store,
-        statistics: TfStatistics,
+        summary: TfSummary,
         clock: Clock,
         authority: Callable[[bool], str] | None = None,
         *,
@@ -433,7 +439,7 @@ class MonitoredSink:
     ) -> None:
         """Wrap ``buffer``."""
         self.buffer = buffer
-        self.statistics = statistics
+        self.summary = summary
         self._clock = clock
         self._authority = authority
         self._attribute = attribute
@@ -444,7 +450,7 @@ class MonitoredSink:
             authority = self._attribute(static, transforms)
         elif self._authority is not None:
             authority = self._authority(static)
-        self.statistics.add(self._clock.now(), transforms, authority, static=static)
+        self.summary.add(self._clock.now(), transforms, authority, static=static)
         return authority
 
     def set_transforms(
@@ -468,5 +474,5 @@ class MonitoredSink:
 
     def clear(self) -> None:
         """The clock jumped back (the listener asks): clear the buffer's dynamic data,
-        as tf2_ros does; the statistics keep what was seen."""
+        as tf2_ros does; the summary keeps what was seen."""
         self.buffer.clear()

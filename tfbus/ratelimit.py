@@ -1,7 +1,7 @@
 """Rate-limited logging: one helper for every component that may log the same problem
 many times a second (refused transforms, malformed messages from a peer).
 
-Layer 0: pure, synchronous, reads no clock of its own. The caller says what time it is,
+Pure and synchronous, it reads no clock of its own. The caller says what time it is,
 in seconds of *its* clock (so a ``ManualClock`` drives it in tests), or uses the
 count-limited form, which needs no time on each call (what the sans-I/O core uses): it
 logs one line in every ``every`` and, when it is given a clock (a function returning

@@ -1,4 +1,4 @@
-// Reference side of tests/test_laser.py: ROS 1 laser_geometry (Debian liblaser-geometry-dev)
+// Reference side of tests/sensors/test_laser.py: ROS 1 laser_geometry (Debian liblaser-geometry-dev)
 // with a tf2::BufferCore, driven by a line-based text file on stdin.
 //
 // Input lines (whitespace-separated tokens; doubles as C99 hex floats, "inf", "nan"):

@@ -1,4 +1,4 @@
-"""The laser_geometry differential test's plumbing, shared by ``tests/test_laser.py`` and
+"""The laser_geometry differential test's plumbing, shared by ``tests/sensors/test_laser.py`` and
 ``scripts/regen_laser_ref.py``.
 
 * The cases: every LaserScan of the real recordings in ``tests/data/laser/`` (with all

@@ -2,7 +2,7 @@
 ``tf2_sensor_msgs.do_transform_cloud`` (0.7.6) on cases read as JSON from stdin.
 
 Runs under ``/usr/bin/python3`` (``scripts/install_tf2_msgs_py.sh``), never imports tfbus:
-the reference side of ``tests/test_convert_reference.py``. Input::
+the reference side of ``tests/geometry/test_convert_reference.py``. Input::
 
     {"wrenches": [[[tx, ty, tz], [qx, qy, qz, qw], [fx, fy, fz], [tx, ty, tz]], ...],
      "clouds": [{"t": [...], "q": [...], "fields": [[name, offset, datatype, count], ...],

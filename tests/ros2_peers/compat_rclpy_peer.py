@@ -1,6 +1,6 @@
 """An rclpy process using ``tfbus.compat.tf2_ros`` as ROS 2 code uses ``tf2_ros``.
 
-Run by ``tests/test_compat_rclpy.py`` under the ROS 2 venv's python (real rclpy wheels).
+Run by ``tests/compat/test_compat_rclpy.py`` under the ROS 2 venv's python (real rclpy wheels).
 Node ``talker`` sends, with the compat broadcasters, a static ``base -> laser`` and a
 dynamic ``map -> base`` (real ``geometry_msgs`` messages, rclpy stamps); node
 ``listener`` holds a compat ``Buffer`` and ``TransformListener(buffer, node)``. Both are

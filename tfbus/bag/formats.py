@@ -15,6 +15,7 @@ from typing import Final, NamedTuple
 from tfbus.errors import BagFormatError, BagNotFoundError
 from tfbus.messages import TFMessage
 from tfbus.time import Time
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
 
 __all__ = [
     "DEFAULT_TOPICS",
@@ -27,9 +28,7 @@ __all__ = [
     "detect_format",
 ]
 
-TF_TOPIC: Final = "/tf"
-TF_STATIC_TOPIC: Final = "/tf_static"
-DEFAULT_TOPICS: Final = (TF_TOPIC, TF_STATIC_TOPIC)
+DEFAULT_TOPICS: Final = TF_TOPICS
 
 #: Message types carried on /tf and /tf_static (rosbags' normalised names).
 TF_MSGTYPES: Final = frozenset({"tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"})

@@ -39,8 +39,8 @@ from tfbus.bag.formats import (
     detect_format,
     fmt_time,
 )
-from tfbus.bag.salvage import ScanError, mcap_channel_source, scan_mcap, scan_ros1
-from tfbus.errors import BagError, BagFormatError, BagReadError
+from tfbus.bag.salvage import mcap_channel_source, scan_mcap, scan_ros1
+from tfbus.errors import BagError, BagFormatError, BagReadError, ScanError
 from tfbus.messages import TFMessage
 from tfbus.time import Time
 

@@ -30,25 +30,17 @@ from typing import IO, TYPE_CHECKING, cast
 
 from tfbus.bag.decode import RawItem, Source, cdr_decoder, ros1_decoder
 from tfbus.bag.formats import MCAP_MAGIC, ROS1_MAGIC, ROS2_AUTHORITY, TF_MSGTYPES
+from tfbus.errors import ScanError
 from tfbus.time import NSEC_PER_SEC
 
 if TYPE_CHECKING:
     from mcap.records import Channel, Schema
 
-__all__ = ["ScanError", "mcap_channel_source", "scan_mcap", "scan_ros1"]
+__all__ = ["mcap_channel_source", "scan_mcap", "scan_ros1"]
 
 _U32 = struct.Struct("<I")
 # ROS 1 record ops (header field ``op``): message data, bag header, chunk, connection.
 _OP_MSG, _OP_HEADER, _OP_CHUNK, _OP_CONN = b"\x02", b"\x03", b"\x05", b"\x07"
-
-
-class ScanError(Exception):
-    """Reading stopped at byte ``offset`` of the file for ``reason`` (internal)."""
-
-    def __init__(self, reason: str, offset: int) -> None:
-        super().__init__(reason)
-        self.reason = reason
-        self.offset = offset
 
 
 def _in_window(stamp: int, lo: int | None, hi: int | None) -> bool:

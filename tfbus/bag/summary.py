@@ -1,5 +1,5 @@
-"""tf_monitor statistics of a recording: :func:`summarize` a bag with
-:class:`tfbus.monitor.TfStatistics`, the same accounting that serves live buses.
+"""tf_monitor's summary of a recording: :func:`summarize` a bag with
+:class:`tfbus.monitor.TfSummary`, the same accounting that serves live buses.
 
 The definitions (a frame's rate, delays, sim-time stamps) are :mod:`tfbus.monitor`'s, so
 ``summarize``, ``tfbus bag-info``, ``tfbus monitor`` and ``tfbus frames`` agree:
@@ -7,7 +7,7 @@ The definitions (a frame's rate, delays, sim-time stamps) are :mod:`tfbus.monito
 * rate of a frame = ``(distinct header stamps - 1) / (newest - oldest stamp)`` in Hz
   (:func:`tfbus.monitor.link_rate`; issue 11 item 22);
 * delay = bag (receive) time minus header stamp, or against the newest stamp when the
-  bag was recorded with simulated time (:attr:`~tfbus.monitor.TfStatistics.sim_time`).
+  bag was recorded with simulated time (:attr:`~tfbus.monitor.TfSummary.sim_time`).
 """
 
 from __future__ import annotations
@@ -21,22 +21,14 @@ from tfbus.bag.formats import DEFAULT_TOPICS, BagFormat, BagMessage, detect_form
 from tfbus.bag.reader import read_messages
 from tfbus.errors import BagReadError
 from tfbus.messages import TransformStamped
-from tfbus.monitor import AuthorityStatistics, FrameStatistics, TfStatistics
+from tfbus.monitor import AuthoritySummary, FrameSummary, TfSummary
 from tfbus.time import Time
 
 __all__ = ["AuthoritySummary", "BagSummary", "FrameSummary", "summarize"]
 
-FrameSummary = FrameStatistics
-"""The statistics of one child frame (:class:`tfbus.monitor.FrameStatistics`; the name
-:mod:`tfbus.bag` has always exported)."""
-
-AuthoritySummary = AuthorityStatistics
-"""The statistics of one broadcaster (:class:`tfbus.monitor.AuthorityStatistics`)."""
-
-
 @dataclass
-class BagSummary(TfStatistics):
-    """What :func:`summarize` found: tf_monitor's tables (:class:`TfStatistics`: ``start``
+class BagSummary(TfSummary):
+    """What :func:`summarize` found: tf_monitor's tables (:class:`TfSummary`: ``start``
     / ``end`` bag times of the first and last tf message, ``messages`` per topic,
     ``frames``, ``authorities``) plus the bag's ``path`` and ``format``, and ``error``
     when the bag was damaged (everything before the damage was accounted)."""
@@ -49,7 +41,7 @@ class BagSummary(TfStatistics):
             authority: str = "", *, static: bool = False, topic: str | None = None) -> None:
         """Account for one message: ``add(rec)`` with a :class:`BagMessage` (at bag time,
         counted under its own topic, static when it is ``/tf_static``), or the arguments
-        of :meth:`TfStatistics.add`."""
+        of :meth:`TfSummary.add`."""
         if isinstance(time, BagMessage):
             rec = time
             super().add(rec.time, rec.message.transforms, rec.authority,

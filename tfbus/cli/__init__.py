@@ -1,4 +1,4 @@
-"""The ``tfbus`` command line: the tf2 tools every tf user knows (layer 5).
+"""The ``tfbus`` command line: the tf2 tools every tf user knows.
 
 ::
 
@@ -10,7 +10,7 @@
     tfbus replay PATH --rate 2                publish a bag on --bus, with a progress bar
     tfbus robot-state-publisher MODEL.urdf    robot_state_publisher (on --bus, default zenoh)
     tfbus joint-states MODEL.urdf             joint_state_publisher, animated (--bus)
-    tfbus demo --duration 10                  the seed demo (tfbus.demo)
+    tfbus demo --duration 10                  the seed demo (tfbus.demos.tutorial)
     tfbus demo laser                          a simulated laser projected three ways
     tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
     tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus

@@ -1,5 +1,5 @@
 """What every ``tfbus`` command shares: the group, one-line errors, literal printing of
-ids, time arguments, and the exit paths (layer 5)."""
+ids, time arguments, and the exit paths."""
 
 from __future__ import annotations
 

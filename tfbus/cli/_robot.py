@@ -1,5 +1,5 @@
 """What ``robot-state-publisher`` and ``joint-states`` share: the URDF argument, the
-``--duration`` option, and running a node on the bus until a signal (layer 5)."""
+``--duration`` option, and running a node on the bus until a signal."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     import anyio.abc
 
     from tfbus.bus import Bus
-    from tfbus.urdf import RobotModel
+    from tfbus.robot import RobotModel
 
 __all__ = ["bus_label", "duration_option", "load_model", "model_argument", "serve"]
 
@@ -30,10 +30,10 @@ duration_option = click.option("--duration", type=click.FloatRange(min=0), defau
 
 
 def load_model(path: Path) -> RobotModel:
-    """The URDF at ``path`` (:func:`tfbus.urdf.load_urdf`), or a one-line usage error
+    """The URDF at ``path`` (:func:`tfbus.robot.load_urdf`), or a one-line usage error
     naming the file and the element at fault. Without urdfdom-py the ``ImportError``
     propagates: the ``tfbus`` group turns it into one line naming the ``robot`` extra."""
-    from tfbus.urdf import URDFError, load_urdf
+    from tfbus.robot import URDFError, load_urdf
 
     try:
         return load_urdf(path)

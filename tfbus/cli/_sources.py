@@ -1,10 +1,10 @@
-"""Where echo, monitor and frames get their transforms: a bag or a live bus (layer 5).
+"""Where echo, monitor and frames get their transforms: a bag or a live bus.
 
 :class:`BagSource` reads a recording; :class:`BusSource` is a
 :class:`~tfbus.listener.TransformListener` feeding a :class:`~tfbus.buffer.Buffer` and
-:class:`~tfbus.monitor.TfStatistics` at once (:class:`~tfbus.monitor.MonitoredSink`), plus
+:class:`~tfbus.monitor.TfSummary` at once (:class:`~tfbus.monitor.MonitoredSink`), plus
 over Zenoh the liveliness of broadcasters. Both offer :meth:`TfSource.buffer` and
-:meth:`TfSource.statistics`.
+:meth:`TfSource.summary`.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 if TYPE_CHECKING:
     import anyio
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
     from tfbus.bus import Subscription, Transport
     from tfbus.core import BufferCore
     from tfbus.listener import TransformListener
-    from tfbus.monitor import TfStatistics
+    from tfbus.monitor import TfSummary
     from tfbus.transports.spec import BusSpec
     from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
@@ -55,8 +56,8 @@ class TfSource:
         """A BufferCore holding the transforms (for lookups and the frame tree)."""
         raise NotImplementedError
 
-    def statistics(self) -> TfStatistics:
-        """tf_monitor's per-frame and per-broadcaster statistics (:mod:`tfbus.monitor`)."""
+    def summary(self) -> TfSummary:
+        """tf_monitor's per-frame and per-broadcaster tables (:mod:`tfbus.monitor`)."""
         raise NotImplementedError
 
     @property
@@ -82,11 +83,11 @@ class BagSource(TfSource):
         self.path = path
         self.label = str(path)
         self._buffer: BufferCore | None = None
-        self._statistics: TfStatistics | None = None
+        self._summary: TfSummary | None = None
         self._problem: str | None = None
         self.chain: list[str] | None = None
-        """``[source, target]``: the chain whose net delay :meth:`statistics` measures
-        (set it, then :meth:`reset_statistics`)."""
+        """``[source, target]``: the chain whose net delay :meth:`summary` measures
+        (set it, then :meth:`reset_summary`)."""
         check_bag(path)
 
     def buffer(self) -> BufferCore:
@@ -101,12 +102,12 @@ class BagSource(TfSource):
         assert self._buffer is not None
         return self._buffer
 
-    def statistics(self) -> TfStatistics:
+    def summary(self) -> TfSummary:
         from tfbus.bag import BagReadError, read_messages
-        from tfbus.monitor import TfStatistics
+        from tfbus.monitor import TfSummary
 
-        if self._statistics is None:
-            stats = TfStatistics()
+        if self._summary is None:
+            stats = TfSummary()
             if self.chain is not None:
                 stats.watch_chain(self.chain[0], self.chain[1])
             try:
@@ -115,12 +116,12 @@ class BagSource(TfSource):
                               static=rec.is_static)
             except BagReadError as err:
                 self._problem = one_line(str(err))
-            self._statistics = stats
-        return self._statistics
+            self._summary = stats
+        return self._summary
 
-    def reset_statistics(self) -> None:
-        """Forget the statistics: the next :meth:`statistics` reads the bag again."""
-        self._statistics = None
+    def reset_summary(self) -> None:
+        """Forget the summary: the next :meth:`summary` reads the bag again."""
+        self._summary = None
 
     @property
     def problem(self) -> str | None:
@@ -186,7 +187,7 @@ class BusSource(TfSource):
     While :meth:`attach` is open, a :class:`~tfbus.listener.TransformListener` stores every
     ``/tf`` and ``/tf_static`` message other processes broadcast in :meth:`buffer` (a
     :class:`~tfbus.buffer.Buffer`, so lookups can be awaited) through a
-    :class:`~tfbus.monitor.MonitoredSink`, which accounts it in :meth:`statistics`
+    :class:`~tfbus.monitor.MonitoredSink`, which accounts it in :meth:`summary`
     (receive time = wall clock, delay = receive time - header stamp, as tf_monitor), and
     over Zenoh, liveliness changes of broadcasters are tracked (:attr:`gone`).
 
@@ -208,7 +209,7 @@ class BusSource(TfSource):
     def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0) -> None:
         from tfbus.buffer import Buffer
         from tfbus.clock import SystemClock
-        from tfbus.monitor import MonitoredSink, TfStatistics
+        from tfbus.monitor import MonitoredSink, TfSummary
 
         self.spec = spec
         self.bus_spec = parse_spec(spec, name=name)
@@ -216,8 +217,8 @@ class BusSource(TfSource):
         self.label = f"the bus {spec!r}"
         self.clock = SystemClock()
         self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
-        self._statistics = TfStatistics()
-        self.sink = MonitoredSink(self._buffer, self._statistics, self.clock,
+        self._summary = TfSummary()
+        self.sink = MonitoredSink(self._buffer, self._summary, self.clock,
                                   attribute=self._attribute)
         self.transport: Transport | None = None
         self.listener: TransformListener | None = None
@@ -230,8 +231,8 @@ class BusSource(TfSource):
     def buffer(self) -> Buffer:
         return self._buffer
 
-    def statistics(self) -> TfStatistics:
-        return self._statistics
+    def summary(self) -> TfSummary:
+        return self._summary
 
     @property
     def invalid(self) -> int:
@@ -296,7 +297,7 @@ class BusSource(TfSource):
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:
             return UNKNOWN_PUBLISHER if self.bus_spec.scheme == "ros1" else _UNKNOWN_AUTHORITY
-        topic = "/tf_static" if static else "/tf"
+        topic = TF_STATIC_TOPIC if static else TF_TOPIC
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
         if len(names) == 1:
             return names.pop()
@@ -306,9 +307,9 @@ class BusSource(TfSource):
         name = self._authority(static)
         if name != _SHARED_AUTHORITY:
             return name
-        topic = "/tf_static" if static else "/tf"
+        topic = TF_STATIC_TOPIC if static else TF_TOPIC
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
-        frames = self._statistics.frames
+        frames = self._summary.frames
         owners = set()
         for ts in transforms:
             child = getattr(ts, "child_frame_id", None)
@@ -321,8 +322,8 @@ class BusSource(TfSource):
         """What arrived before any broadcaster was known goes to the broadcaster, when
         exactly one is known now (a single "unknown" row would otherwise stay)."""
         names = {p.name for p in self.broadcasters_seen.values()}
-        if len(names) == 1 and _UNKNOWN_AUTHORITY in self._statistics.authorities:
-            self._statistics.rename_authority(_UNKNOWN_AUTHORITY, names.pop())
+        if len(names) == 1 and _UNKNOWN_AUTHORITY in self._summary.authorities:
+            self._summary.rename_authority(_UNKNOWN_AUTHORITY, names.pop())
 
     async def _watch(
         self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
@@ -332,7 +333,7 @@ class BusSource(TfSource):
         async for event in sub:
             ev: PeerEvent = event
             known = self.broadcasters_seen.get(ev.node_id)
-            if ev.alive and ev.topic in ("/tf", "/tf_static"):
+            if ev.alive and ev.topic in (TF_TOPIC, TF_STATIC_TOPIC):
                 topics = (known.topics if known else frozenset()) | {ev.topic}
                 info = PeerInfo(ev.node_id, ev.name, topics)
                 self.broadcasters_seen[ev.node_id] = info

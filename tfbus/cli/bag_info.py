@@ -1,4 +1,4 @@
-"""``tfbus bag-info``: frames, parents, broadcasters, rates and span of a bag (layer 5)."""
+"""``tfbus bag-info``: frames, parents, broadcasters, rates and span of a bag."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def command(path: Path) -> int:
     from tfbus.bag import detect_format
 
     src = BagSource(path)
-    s = src.statistics()
+    s = src.summary()
     out = console()
     out.print(f"path:       {literal(path)}")
     out.print(f"format:     {detect_format(path).value}")

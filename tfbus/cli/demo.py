@@ -1,5 +1,5 @@
-"""``tfbus demo``: the seed demo and the tutorial's two nodes (layer 5). The options are
-parsed here, once; :mod:`tfbus.demo` holds the nodes and runners."""
+"""``tfbus demo``: the seed demo and the tutorial's two nodes. The options are
+parsed here, once; :mod:`tfbus.demos.tutorial` holds the nodes and runners."""
 
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ def run_both(*, duration: float | None, rate: float, listen_rate: float, backend
     """Both nodes in this process on an in-process bus, until ``duration`` or a signal."""
     import anyio
 
-    from tfbus.demo import run_demo
+    from tfbus.demos.tutorial import run_demo
 
     try:
         anyio.run(
@@ -93,11 +93,12 @@ def node_label(transport: object, default: str) -> tuple[str, str]:
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,
              listen_rate: float, backend: str) -> int:
     """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh."""
-    from tfbus.demo import BROADCASTER_NAME, LISTENER_NAME, open_bus, run_broadcaster, run_listener
+    from tfbus.demos.tutorial import BROADCASTER_NAME, LISTENER_NAME, run_broadcaster, run_listener
+    from tfbus.transports.spec import open_bus
 
     name = BROADCASTER_NAME if role == "broadcaster" else LISTENER_NAME
     try:
-        bus = open_bus(spec, name=name)
+        bus = open_bus(spec, default_name=name)
     except ValueError as err:
         fail(str(err))
     except Exception as err:
@@ -198,16 +199,16 @@ def listener(
 
 def run_laser(*, duration: float | None, backend: str, beams: int, scan_rate: float,
               odom_rate: float) -> int:
-    """The laser demo (:func:`tfbus.demo_laser.run_laser_demo`) on an in-process bus,
+    """The laser demo (:func:`tfbus.demos.laser.run_laser_demo`) on an in-process bus,
     until ``duration`` or a signal; its summary line is printed either way."""
     import anyio
 
     try:  # imported by name: the module may be absent from an installation
-        run_laser_demo = importlib.import_module("tfbus.demo_laser").run_laser_demo
+        run_laser_demo = importlib.import_module("tfbus.demos.laser").run_laser_demo
     except ModuleNotFoundError as err:
-        if err.name != "tfbus.demo_laser":
+        if err.name != "tfbus.demos.laser":
             raise
-        error("the laser demo (tfbus.demo_laser) is not part of this installation")
+        error("the laser demo (tfbus.demos.laser) is not part of this installation")
         return 1
 
     async def main() -> None:
@@ -243,7 +244,7 @@ def laser(
     while it moves. Each scan waits for odometry (a MessageFilter), then is projected
     with one transform at its stamp, with laser_geometry's start/end interpolation and
     beam by beam. Each second a line gives the distance of the projected points from
-    the walls per method; a summary line at the end (tfbus.demo_laser).
+    the walls per method; a summary line at the end (tfbus.demos.laser).
 
     \b
     Examples:

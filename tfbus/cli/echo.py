@@ -1,4 +1,4 @@
-"""``tfbus echo``: tf2_echo / tf_echo on a bag or a live bus (layer 5)."""
+"""``tfbus echo``: tf2_echo / tf_echo on a bag or a live bus."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``tfbus frames``: view_frames, the frame tree drawn by Graphviz (layer 5)."""
+"""``tfbus frames``: view_frames, the frame tree drawn by Graphviz."""
 
 from __future__ import annotations
 
@@ -139,7 +139,7 @@ def command(bag: Path | None, bus: str | None, output: Path, duration: float | N
         code = run_live(lambda: live(src, seconds, anyio.sleep_forever))
         if code is not None:
             return code
-        if not src.statistics().messages:
+        if not src.summary().messages:
             src.report_problem(f"no transforms received from {src.label} in {seconds:g} s")
         dot = frames_dot(src.buffer(), recorded_at=src.clock.now())
     else:

@@ -1,7 +1,7 @@
-"""``tfbus joint-states``: joint_state_publisher without a GUI, animated (layer 5).
+"""``tfbus joint-states``: joint_state_publisher without a GUI, animated.
 
 Every movable joint swings sinusoidally within its limits
-(:func:`tfbus.robot_state.publish_joint_states`), until Ctrl-C or SIGTERM (or
+(:func:`tfbus.robot.publish_joint_states`), until Ctrl-C or SIGTERM (or
 ``--duration``), then one summary line.
 """
 
@@ -16,6 +16,7 @@ import click
 from tfbus.cli._common import literal
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
 from tfbus.cli._sources import publish_bus, publish_options
+from tfbus.topics import JOINT_STATES_TOPIC
 
 if TYPE_CHECKING:
     import anyio.abc
@@ -46,7 +47,7 @@ def command(model: Path, bus: str | None, local: bool, rate: float,
       tfbus joint-states demos/robot.urdf
       tfbus joint-states pr2.urdf --rate 50 --bus 'zenoh?connect=tcp/127.0.0.1:7500'
     """
-    from tfbus.robot_state import publish_joint_states
+    from tfbus.robot import publish_joint_states
 
     robot = load_model(model)
     open_bus = publish_bus(bus, local, name="joint_state_publisher")
@@ -58,7 +59,7 @@ def command(model: Path, bus: str | None, local: bool, rate: float,
                    f"{rate:g} Hz on {bus_label(bus, local)}", err=True)
 
     def finish(b: Bus) -> None:
-        published = b.statistics().get("/joint_states")
+        published = b.statistics().get(JOINT_STATES_TOPIC)
         click.echo(f"[ INFO] summary: {published.published if published else 0} "
                    f"joint states published")
 

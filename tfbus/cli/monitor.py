@@ -1,4 +1,4 @@
-"""``tfbus monitor``: tf_monitor on a bag or a live bus (layer 5); the statistics are
+"""``tfbus monitor``: tf_monitor on a bag or a live bus; the summary tables are
 :mod:`tfbus.monitor`'s."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from rich.console import Console
     from rich.table import Table
 
-    from tfbus.monitor import TfStatistics
+    from tfbus.monitor import TfSummary
     from tfbus.transports.zenoh import PeerInfo
 
 __all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "tf2_chain"]
@@ -50,7 +50,7 @@ def tf2_chain(parents: dict[str, str], a: str, b: str) -> list[str] | None:
         return None
 
 
-def chain_lines(stats: TfStatistics, frames: Sequence[str]) -> list[str]:
+def chain_lines(stats: TfSummary, frames: Sequence[str]) -> list[str]:
     """tf_monitor's lines for ``A B`` (ros/geometry ``tf/src/tf_monitor.cpp``, spin)::
 
         Chain is: A -> ... -> B
@@ -82,7 +82,7 @@ def _table(title: str, names: Sequence[str], numbers: Sequence[str]) -> Table:
 
 
 def print_monitor(
-    out: Console, s: TfStatistics, frames: Sequence[str], live_src: BusSource | None = None
+    out: Console, s: TfSummary, frames: Sequence[str], live_src: BusSource | None = None
 ) -> None:
     """tf_monitor's report: ``RESULTS`` (and for ``A B`` the chain and its net delay),
     the frames table, the broadcasters table and, for a live bus, the broadcasters known
@@ -91,11 +91,11 @@ def print_monitor(
     On a live bus the rates are the recent ones (:data:`tfbus.monitor.RATE_WINDOW`
     seconds before now): the frames of a broadcaster that stopped fall to 0.000 instead
     of showing their old rate; a bag's are over the whole recording."""
-    from tfbus.monitor import AuthorityStatistics, FrameStatistics
+    from tfbus.monitor import AuthoritySummary, FrameSummary
 
     now = live_src.clock.now() if live_src is not None else None
 
-    def rate(x: FrameStatistics | AuthorityStatistics) -> float:
+    def rate(x: FrameSummary | AuthoritySummary) -> float:
         return x.rate if now is None else x.recent_rate(now)
 
     selected = list(s.frames.values())
@@ -185,11 +185,11 @@ def command(
     live_only(src, duration=duration, interval=interval)
     if isinstance(src, BusSource):
         if frames:
-            src.statistics().watch_chain(frames[0], frames[1])
+            src.summary().watch_chain(frames[0], frames[1])
         return _monitor_live(src, frames, duration=duration, interval=interval or 1.0)
     assert isinstance(src, BagSource)
     if frames:
-        stats = src.statistics()
+        stats = src.summary()
         for name in frames:
             if name not in stats.frames and all(f.parent != name for f in stats.frames.values()):
                 fail(f"frame {name!r} does not exist in {src.label}")
@@ -198,8 +198,8 @@ def command(
                   "(they are in different trees)")
             return 1
         src.chain = list(frames)
-        src.reset_statistics()
-    print_monitor(console(), src.statistics(), frames)
+        src.reset_summary()
+    print_monitor(console(), src.summary(), frames)
     return finish_status(src.problem)
 
 
@@ -219,7 +219,7 @@ def _monitor_live(
                       "is gone: liveliness lost (it exited, was killed or is unreachable)")
 
     def report() -> None:
-        print_monitor(out, src.statistics(), frames, live_src=src)
+        print_monitor(out, src.summary(), frames, live_src=src)
 
     async def body() -> None:
         async for _ in every(interval, clock=src.clock):

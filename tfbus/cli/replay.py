@@ -1,4 +1,4 @@
-"""``tfbus replay``: rosbag play for /tf and /tf_static, with a progress bar (layer 5)."""
+"""``tfbus replay``: rosbag play for /tf and /tf_static, with a progress bar."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
-"""``tfbus robot-state-publisher``: ROS's robot_state_publisher (layer 5).
+"""``tfbus robot-state-publisher``: ROS's robot_state_publisher.
 
 Fixed joints once on the latched /tf_static, moving joints on /tf from the JointStates on
-/joint_states (:class:`tfbus.robot_state.RobotStatePublisher`), until Ctrl-C or SIGTERM
+/joint_states (:class:`tfbus.robot.RobotStatePublisher`), until Ctrl-C or SIGTERM
 (or ``--duration``), then one summary line.
 """
 
@@ -51,7 +51,7 @@ def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
       tfbus echo base_link left_wheel --bus zenoh           # a third one
       tfbus robot-state-publisher pr2.urdf --frame-prefix pr2/ --bus 'zenoh:tcp/10.0.0.2:7448'
     """
-    from tfbus.robot_state import RobotStatePublisher
+    from tfbus.robot import RobotStatePublisher
 
     rsp = RobotStatePublisher(load_model(model), frame_prefix=frame_prefix)
     open_bus = publish_bus(bus, local, name="robot_state_publisher")

@@ -1,4 +1,4 @@
-"""``tfbus static-transform``: static_transform_publisher (layer 5)."""
+"""``tfbus static-transform``: static_transform_publisher."""
 
 from __future__ import annotations
 

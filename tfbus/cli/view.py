@@ -1,4 +1,4 @@
-"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display (layer 5).
+"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display.
 
 Needs the ``tfbus[view]`` extra (viser); without it the command says so in one line
 (exit status 2).
@@ -152,7 +152,7 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     src = BagSource(bag)
     timeline = BagTimeline.read(bag)
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
-                       paused=paused, rate=rate, statistics=src.statistics(), scans=tracks,
+                       paused=paused, rate=rate, statistics=src.summary(), scans=tracks,
                        foxglove=bridge)
     player.render()
     player.run(stop)
@@ -170,7 +170,7 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
 
     async def body() -> None:
         while True:
-            draw_live(page, src.buffer(), src.statistics(), src.clock.now(),
+            draw_live(page, src.buffer(), src.summary(), src.clock.now(),
                       fixed_frame=fixed_frame, frame_timeout=frame_timeout)
             await anyio.sleep(1.0 / MAX_DRAW_HZ)
 

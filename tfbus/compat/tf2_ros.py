@@ -44,6 +44,7 @@ from tfbus.errors import (
 )
 from tfbus.listener import TransformListener as _Listener
 from tfbus.messages import Header, TFMessage, TransformStamped
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
     "Buffer",
@@ -315,8 +316,8 @@ class TransformListener:
             history=HistoryPolicy.KEEP_LAST,
         )
         self._subscriptions = [
-            node.create_subscription(RosTFMessage, "/tf", self._on_tf, dynamic),
-            node.create_subscription(RosTFMessage, "/tf_static", self._on_static, static),
+            node.create_subscription(RosTFMessage, TF_TOPIC, self._on_tf, dynamic),
+            node.create_subscription(RosTFMessage, TF_STATIC_TOPIC, self._on_static, static),
         ]
 
     def _on_tf(self, message: Any) -> None:
@@ -351,7 +352,7 @@ class TransformBroadcaster:
     transform or a list as one TFMessage on ``/tf`` — on an rclpy node (its own
     publisher; rclpy messages built from the fields) or a tfbus bus."""
 
-    _topic = "/tf"
+    _topic = TF_TOPIC
     _static = False
 
     def __init__(self, node: object, qos: object = None) -> None:
@@ -392,7 +393,7 @@ class StaticTransformBroadcaster(TransformBroadcaster):
     on ``/tf_static`` (transient local); every transform sent so far is re-sent, one
     per child frame, as tf2_ros does."""
 
-    _topic = "/tf_static"
+    _topic = TF_STATIC_TOPIC
     _static = True
 
 

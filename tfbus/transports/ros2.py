@@ -85,6 +85,7 @@ from cyclonedds.util import duration
 
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports.ros2_wire import (
     DOMAIN_ID_MAX,
     TF_STATIC_TOPIC_DDS,
@@ -112,7 +113,7 @@ TF_TYPE_HASH: Final = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d
 """REP-2011 type hash of ``tf2_msgs/msg/TFMessage`` (ROS 2 Jazzy and later), as rmw
 puts it in the endpoints' user data (``typehash=...;``)."""
 
-_TOPICS: Final = {"/tf": TF_TOPIC_DDS, "/tf_static": TF_STATIC_TOPIC_DDS}
+_TOPICS: Final = {TF_TOPIC: TF_TOPIC_DDS, TF_STATIC_TOPIC: TF_STATIC_TOPIC_DDS}
 _ANY_STATE: Final = SampleState.Any | ViewState.Any | InstanceState.Any
 _XCDR1: Final = Policy.DataRepresentation(use_cdrv0_representation=True)
 _USER_DATA: Final = Policy.Userdata(data=f"typehash={TF_TYPE_HASH};".encode())
@@ -265,7 +266,7 @@ class Ros2Transport:
         config: str | os.PathLike[str] | None = None,
         interfaces: Sequence[str] | None = None,
         peers: Sequence[str] | None = None,
-        topics: Iterable[str] = ("/tf", "/tf_static"),
+        topics: Iterable[str] = (TF_TOPIC, TF_STATIC_TOPIC),
         max_batch: int = 256,
         max_transforms: int = 100_000,
     ) -> None:
@@ -317,7 +318,7 @@ class Ros2Transport:
         """True between ``run``'s ``started()`` and its end."""
         return self._running
 
-    def matched_publishers(self, topic: str = "/tf") -> int:
+    def matched_publishers(self, topic: str = TF_TOPIC) -> int:
         """How many DDS writers (ROS 2 publishers, other tfbus transports) on ``topic``
         this transport's reader is matched with now (0 when not running).
 
@@ -376,7 +377,7 @@ class Ros2Transport:
             self._endpoints = endpoints
             self._running = True
             if self._statics:
-                self._write("/tf_static", encode_tf_message(tuple(self._statics.values())))
+                self._write(TF_STATIC_TOPIC, encode_tf_message(tuple(self._statics.values())))
             task_status.started()
             await self._pump(bus, wake_r, endpoints)
         finally:
@@ -411,7 +412,7 @@ class Ros2Transport:
             raise WireEncodeError(f"{topic} carries TFMessage, not {type(message).__name__}")
         try:
             transforms = tuple(message.transforms)
-            if topic == "/tf_static":
+            if topic == TF_STATIC_TOPIC:
                 encode_tf_message(transforms)  # validate before merging
                 merged = dict(self._statics)
                 for ts in transforms:
@@ -426,7 +427,7 @@ class Ros2Transport:
                 raise
             raise WireEncodeError(f"{topic}: not a TFMessage of TransformStamped: {exc}") from None
         if self._endpoints is None:
-            if topic == "/tf":
+            if topic == TF_TOPIC:
                 self._stats.not_connected += 1
             return
         self._write(topic, payload)
@@ -461,7 +462,7 @@ class Ros2Transport:
             writers: dict[str, DataWriter[TFMessage_]] = {}
             for topic, name in _TOPICS.items():
                 dds_topic = Topic(participant, name, TFMessage_)
-                static = topic == "/tf_static"
+                static = topic == TF_STATIC_TOPIC
                 writers[topic] = DataWriter(
                     participant, dds_topic, TF_STATIC_WRITER_QOS if static else TF_WRITER_QOS
                 )

@@ -15,6 +15,7 @@ from typing import Any
 
 from tfbus.messages import TransformStamped
 from tfbus.sensor_msgs import LaserScan
+from tfbus.topics import TF_TOPIC
 from tfbus.view.scene import Scene
 
 __all__ = ["FoxgloveBridge"]
@@ -46,7 +47,7 @@ class FoxgloveBridge:
         except Exception as err:  # the SDK raises its own RuntimeError for a bind failure
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {err}") from None
         self.port: int = int(self.server.port)
-        self.tf: Any = FrameTransformsChannel("/tf", context=self.context)
+        self.tf: Any = FrameTransformsChannel(TF_TOPIC, context=self.context)
         self.scans: dict[str, Any] = {}
         self._status: dict[str, str] = {}
 

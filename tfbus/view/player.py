@@ -11,7 +11,7 @@ from typing import Any
 
 from tfbus.core import BufferCore
 from tfbus.laser import LaserProjection
-from tfbus.monitor import TfStatistics
+from tfbus.monitor import TfSummary
 from tfbus.time import Time
 from tfbus.view.foxglove_bridge import FoxgloveBridge
 from tfbus.view.scans import ScanTrack
@@ -37,7 +37,7 @@ class BagPlayer:
 
     def __init__(self, page: TfPage, timeline: BagTimeline, *, fixed_frame: str | None = None,
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT, paused: bool = False,
-                 rate: float = 1.0, statistics: TfStatistics | None = None,
+                 rate: float = 1.0, statistics: TfSummary | None = None,
                  scans: Sequence[ScanTrack] = (),
                  foxglove: FoxgloveBridge | None = None) -> None:
         if not 0.1 <= rate <= 10.0:
@@ -164,7 +164,7 @@ class BagPlayer:
             stop.wait(period)
 
 
-def draw_live(page: TfPage, core: BufferCore, statistics: TfStatistics, now: Time, *,
+def draw_live(page: TfPage, core: BufferCore, statistics: TfSummary, now: Time, *,
               fixed_frame: str | None = None,
               frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> Scene:
     """Draw a live buffer at its latest data; ages from each frame's last receive time

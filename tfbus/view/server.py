@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tfbus.messages import TransformStamped
-from tfbus.monitor import TfStatistics
+from tfbus.monitor import TfSummary
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
 
@@ -136,14 +136,14 @@ class TfPage:
             self.status_html = value
             self.status.content = value
 
-    def draw(self, scene: Scene, stats: TfStatistics | None = None,
+    def draw(self, scene: Scene, stats: TfSummary | None = None,
              rates: Mapping[str, float] | None = None) -> None:
         """Show ``scene``: frames, labels, links, panel. ``stats`` gives broadcasters
         and rates (Hz) when known; ``rates`` overrides a rate per frame."""
         with self._lock:
             self._draw(scene, stats, rates)
 
-    def _draw(self, scene: Scene, stats: TfStatistics | None,
+    def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
         scene_api = self.server.scene
         poses = {f.frame_id: f.pose for f in scene.frames}
@@ -232,7 +232,7 @@ class TfPage:
             self.links.colors = cols
             self.links.visible = True
 
-    def _draw_panel(self, scene: Scene, stats: TfStatistics | None,
+    def _draw_panel(self, scene: Scene, stats: TfSummary | None,
                     rates: Mapping[str, float] | None) -> None:
         rows = []
         for f in scene.frames:

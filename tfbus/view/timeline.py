@@ -11,6 +11,7 @@ from tfbus.bag import BagReadError, read_messages
 from tfbus.core import BufferCore
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
+from tfbus.topics import TF_STATIC_TOPIC
 
 __all__ = ["BagTimeline"]
 
@@ -40,7 +41,7 @@ class BagTimeline:
         tl = cls(cache_time=cache_time)
         try:
             for rec in read_messages(path):
-                static = rec.topic == "/tf_static"
+                static = rec.topic == TF_STATIC_TOPIC
                 tl.times.append(rec.time.ns)
                 tl.messages.append((tuple(rec.message.transforms), rec.authority, static))
                 if not static:

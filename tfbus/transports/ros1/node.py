@@ -27,6 +27,7 @@ from tfbus.clock._base import running_asyncio_loop
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import CountLimitedLog
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 from .rpc import BadReply, CallFailed, SlaveServer, call, serve_listener
 from .tcpros import (
@@ -48,8 +49,8 @@ _peer_log = CountLimitedLog(_log, 1, period=5.0, clock=time.monotonic)
 """Warnings about what a peer sent (malformed frames and headers): at most one line per
 5 s per kind, however fast a hostile peer sends; every one is counted in statistics()."""
 
-_TOPICS: Final = ("/tf", "/tf_static")
-_LATCHED: Final = frozenset({"/tf_static"})
+_TOPICS: Final = (TF_TOPIC, TF_STATIC_TOPIC)
+_LATCHED: Final = frozenset({TF_STATIC_TOPIC})
 MAX_PUBLISHERS: Final = 1024
 """Publishers of one topic this node follows at most; further URIs in a master answer or a
 ``publisherUpdate`` are dropped (counted). Those already connected are kept first."""

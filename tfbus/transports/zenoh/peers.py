@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, NamedTuple
 
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports.zenoh.keys import KeySpace
 
 __all__ = ["PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
@@ -21,7 +22,7 @@ __all__ = ["PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
 PEERS_TOPIC: Final = "/tfbus/peers"
 """Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
 
-_TF_TOPICS: Final = frozenset({"/tf", "/tf_static"})
+_TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
 
 
 class PeerEvent(NamedTuple):

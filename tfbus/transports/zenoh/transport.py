@@ -41,6 +41,7 @@ from tfbus.errors import TransportError, WireLimitError, WireVersionError
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
 from tfbus.ratelimit import CountLimitedLog
+from tfbus.topics import TF_STATIC_TOPIC
 from tfbus.transports.wire import (
     SequenceTracker,
     WireCodec,
@@ -65,7 +66,7 @@ __all__ = ["ZenohStatistics", "ZenohTransport"]
 
 log = logging.getLogger("tfbus.transports.zenoh")
 
-_LATCHED_DEFAULT: Final = ("/tf_static",)
+_LATCHED_DEFAULT: Final = (TF_STATIC_TOPIC,)
 _SAMPLE: Final = 0
 _REPLY: Final = 1
 _ALIVE_PUT: Final = 2

@@ -52,12 +52,12 @@ from tfbus.bag import (
 
 pytestmark = pytest.mark.anyio
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 NAV2 = DATA / "nav2_like.mcap"
 EX_DIR = DATA / "tf_example"
 LASER = DATA / "laser"
-MAKE_BAGS = Path(__file__).resolve().parents[1] / "scripts" / "make_test_bags.py"
+MAKE_BAGS = Path(__file__).resolve().parents[2] / "scripts" / "make_test_bags.py"
 
 
 # --------------------------------------------------------------------------- helpers
@@ -255,16 +255,16 @@ def test_summary_turtle() -> None:
 
 def test_summary_is_the_monitors_statistics() -> None:
     """bag-info, monitor and frames share one accounting: a BagSummary is tf_monitor's
-    TfStatistics with the bag's path, format and error (issue 11 item 22)."""
-    from tfbus.monitor import AuthorityStatistics, FrameStatistics, TfStatistics
+    TfSummary with the bag's path, format and error (issue 11 item 22)."""
+    from tfbus.monitor import AuthoritySummary, FrameSummary, TfSummary
 
-    assert tfbag.FrameSummary is FrameStatistics
-    assert tfbag.AuthoritySummary is AuthorityStatistics
+    assert tfbag.FrameSummary is FrameSummary
+    assert tfbag.AuthoritySummary is AuthoritySummary
     s = summarize(TURTLE)
-    stats = TfStatistics()
+    stats = TfSummary()
     for rec in read_messages(TURTLE):
         stats.add(rec.time, rec.message.transforms, rec.authority, static=rec.is_static)
-    assert isinstance(s, TfStatistics) and s.path == TURTLE
+    assert isinstance(s, TfSummary) and s.path == TURTLE
     assert s.frames == stats.frames and s.authorities == stats.authorities
     assert (s.start, s.end, s.messages) == (stats.start, stats.end, stats.messages)
 

@@ -13,7 +13,7 @@ Adapted, and why:
   tfbus TransformStamped of the same fields.
 
 ``test_listener_and_broadcaster.py`` (rclpy nodes) is covered by
-``tests/test_compat_rclpy.py`` with the real rclpy, not case for case.
+``tests/compat/test_compat_rclpy.py`` with the real rclpy, not case for case.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from tfbus.bag import (
 )
 from tfbus.time import Time
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 TURTLE_MESSAGES = 2689
 

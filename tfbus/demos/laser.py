@@ -24,14 +24,14 @@ distance of the projected points from the room's walls (the known geometry)::
 
 (one line, wrapped here).
 
-Run with ``tfbus demo laser`` or ``python demos/laser_scan.py --duration 10``.
+Run with ``tfbus demo laser --duration 10`` or ``python demos/laser_scan.py --duration 10``
+(the same click command, :mod:`tfbus.cli.demo`, parses the options).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import anyio
@@ -48,8 +48,9 @@ from tfbus.listener import TransformListener
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.sensor_msgs import LaserScan, read_points
 from tfbus.time import Duration, Time
+from tfbus.topics import SCAN_TOPIC
 
-__all__ = ["METHODS", "LaserDemoStats", "main", "run_laser_demo", "simulate_scan"]
+__all__ = ["METHODS", "LaserDemoStats", "run_laser_demo", "simulate_scan"]
 
 ROOM_HALF = 5.0  # metres: walls at x = ±5 and y = ±5
 RADIUS = 2.0  # metres
@@ -141,7 +142,7 @@ async def _laser(bus: Bus, clock: Clock, beams: int, scan_rate: float, epoch_ns:
     async for _ in every(1.0 / scan_rate, clock=clock):
         # The sweep that just ended: its first beam was one sweep ago.
         scan = simulate_scan(clock.now().ns - sweep_ns, beams, scan_rate, epoch_ns)
-        await bus.publish("/scan", scan)
+        await bus.publish(SCAN_TOPIC, scan)
 
 
 async def _mapper(
@@ -154,7 +155,7 @@ async def _mapper(
     beams: int,
 ) -> None:
     projector = LaserProjection()
-    sub = bus.subscribe("/scan", queue_size=10)
+    sub = bus.subscribe(SCAN_TOPIC, queue_size=10)
     sweep = Duration.from_sec(1.0 / scan_rate)
     period = LaserDemoStats()
     start = clock.now().ns
@@ -252,17 +253,3 @@ async def run_laser_demo(
         out(stats.summary())
     return stats
 
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python demos/laser_scan.py [--duration S]``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else "")
-    parser.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
-    args = parser.parse_args(argv)
-    try:
-        anyio.run(lambda: run_laser_demo(args.duration))
-    except KeyboardInterrupt:
-        return 130
-    except ValueError as exc:
-        print(f"error: {exc}")
-        return 2
-    return 0

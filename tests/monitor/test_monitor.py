@@ -14,7 +14,7 @@ from tfbus.bus import Bus
 from tfbus.clock import ManualClock
 from tfbus.listener import TransformListener
 from tfbus.messages import TFMessage
-from tfbus.monitor import MonitoredSink, TfStatistics, frame_chain, link_rate
+from tfbus.monitor import MonitoredSink, TfSummary, frame_chain, link_rate
 
 T0 = 1_700_000_000 * 10**9
 MS = 1_000_000
@@ -39,7 +39,7 @@ def test_link_rate_is_intervals_over_span() -> None:
 def test_frame_and_broadcaster_statistics_by_hand() -> None:
     """odom -> base at stamps 0, 100, 100 (repeated), 300 ms, each received 20 ms later,
     by 'a'; map -> odom static by 'b'."""
-    s = TfStatistics()
+    s = TfSummary()
     s.add(Time.from_ns(T0), [tf("map", "odom", 0)], "b", static=True)
     for stamp in (0, 100, 100, 300):
         s.add(Time.from_ns(T0 + (stamp + 20) * MS), [tf("odom", "base", T0 + stamp * MS)], "a",
@@ -63,7 +63,7 @@ def test_chain_order_and_net_delay() -> None:
     assert frame_chain(parents, "b", "c") == ["b", "a", "world", "c"]
     assert frame_chain(parents, "world", "b") == ["world", "a", "b"]
     assert frame_chain({"x": "y", "p": "q"}, "x", "p") is None
-    s = TfStatistics()
+    s = TfSummary()
     chain = s.watch_chain("b", "c")
     assert chain.frames is None
     s.add(Time.from_ns(T0 + 10 * MS), [tf("world", "a", T0), tf("a", "b", T0)], "n",
@@ -75,7 +75,7 @@ def test_chain_order_and_net_delay() -> None:
 
 
 def test_simulated_time_delays_use_the_newest_stamp() -> None:
-    s = TfStatistics()
+    s = TfSummary()
     for k in range(3):
         s.add(Time.from_ns(T0 + k * 100 * MS), [tf("map", "odom", 10**10 + k * 100 * MS)], "a",
               static=False)
@@ -87,13 +87,13 @@ def test_simulated_time_delays_use_the_newest_stamp() -> None:
 
 
 @pytest.mark.anyio
-async def test_listener_feeds_buffer_and_statistics() -> None:
-    """The live path: TransformListener -> MonitoredSink -> Buffer and TfStatistics, the
+async def test_listener_feeds_buffer_and_summary() -> None:
+    """The live path: TransformListener -> MonitoredSink -> Buffer and TfSummary, the
     receive time from the clock, the authority from the callback, bad transforms counted
     by the listener and kept out of the buffer."""
     clock = ManualClock(Time.from_ns(T0))
     buffer = Buffer(cache_time=10.0, clock=clock)
-    stats = TfStatistics()
+    stats = TfSummary()
     sink = MonitoredSink(buffer, stats, clock, lambda static: "peer-static" if static else "peer")
     async with Bus() as bus, TransformListener(sink, bus, clock=clock) as listener:
         await bus.publish("/tf_static", TFMessage([tf("map", "odom", 0)]))
@@ -124,7 +124,7 @@ def _render(stats_src: object, frames: tuple[str, ...] = ()) -> str:
 
     assert isinstance(stats_src, BusSource)
     buf = io.StringIO()
-    print_monitor(Console(file=buf, width=200), stats_src.statistics(), frames,
+    print_monitor(Console(file=buf, width=200), stats_src.summary(), frames,
                   live_src=stats_src)
     return buf.getvalue()
 
@@ -142,7 +142,7 @@ def test_a_dead_broadcasters_frames_stop_showing_their_old_rate() -> None:
     from tfbus.monitor import RATE_WINDOW
 
     src = BusSource("memory")
-    stats = src.statistics()
+    stats = src.summary()
     for i in range(501):  # 0 .. 5 s, stamps = receive times - 1 ms
         t = T0 + i * 10 * MS
         stats.add(Time.from_ns(t), [tf("base_link", "base_laser", t - MS)], "robot",
@@ -172,7 +172,7 @@ def test_ros1_names_the_publisher_unknown_publisher_and_has_no_liveliness_table(
     src = BusSource("ros1:master=http://127.0.0.1:1")
     src.clock = ManualClock(Time.from_ns(T0 + 20 * MS))  # type: ignore[assignment]
     src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
-    assert set(src.statistics().authorities) == {"unknown_publisher"}
+    assert set(src.summary().authorities) == {"unknown_publisher"}
     text = _render(src)
     assert _row(text, "base_laser")[2] == "unknown_publisher"
     assert "liveliness" not in text.lower()
@@ -188,14 +188,14 @@ async def test_messages_before_the_liveliness_go_to_the_broadcaster() -> None:
 
     src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
     src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
-    assert set(src.statistics().authorities) == {"unknown"}
+    assert set(src.summary().authorities) == {"unknown"}
 
     async def events():  # type: ignore[no-untyped-def]
         yield PeerEvent(True, "a1", "robot_tf_publisher", "")
         yield PeerEvent(True, "a1", "robot_tf_publisher", "/tf")
 
     await src._watch(events(), None)  # type: ignore[arg-type]
-    stats = src.statistics()
+    stats = src.summary()
     assert set(stats.authorities) == {"robot_tf_publisher"}
     assert stats.authorities["robot_tf_publisher"].messages == 1
     assert stats.frames["base_laser"].authority == "robot_tf_publisher"
@@ -208,7 +208,7 @@ def test_the_running_node_line_names_the_node(spec: str) -> None:
     """``tfbus demo broadcaster``'s "running the broadcaster node" line: a name on every
     transport (ROS 1 and ROS 2 transports have no ``name``), never an empty ``(node )``."""
     from tfbus.cli.demo import node_label
-    from tfbus.demo import BROADCASTER_NAME
+    from tfbus.demos.tutorial import BROADCASTER_NAME
     from tfbus.transports.spec import open_transport, parse_bus_spec
 
     transport = (None if spec == "memory"
@@ -257,7 +257,7 @@ async def test_a_second_broadcaster_does_not_make_the_first_unattributed() -> No
     await appear("b2", "odom_publisher")
     src.sink.set_transforms([tf("base_link", "base_laser", T0 + 10 * MS)], "x", False)
     src.sink.set_transforms([tf("odom", "base_link", T0 + 10 * MS)], "x", False)
-    stats = src.statistics()
+    stats = src.summary()
     assert stats.frames["base_laser"].authorities == {"robot_tf_publisher": 2}
     assert stats.authorities["robot_tf_publisher"].messages == 2
     # odom -> base_link appeared while both were alive: nothing says whose it is.

@@ -38,7 +38,7 @@ from tfbus.sensor_msgs import (
     read_points,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: The recordings in tests/data/laser/ (tests/data/SOURCES.md): a missing one is a failure.
 BAGS = ["drl_guardian_3.bag", "drl_jarvis_complex_path_fast.bag"]
 

@@ -30,7 +30,7 @@ from tfbus.cli import cli, main
 from tfbus.listener import TransformListener
 from tfbus.time import Time
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ROBOT = ROOT / "demos" / "robot.urdf"
 PR2 = ROOT / "tests" / "data" / "urdf" / "rsp_pr2.urdf"
 RSP_SUMMARY = re.compile(r"^\[ INFO\] summary: (\d+) joint states received, (\d+) published "

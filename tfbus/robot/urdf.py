@@ -1,4 +1,4 @@
-"""URDF robot descriptions read into a validated kinematic tree (layer 0, no I/O but files).
+"""URDF robot descriptions read into a validated kinematic tree (no I/O but reading files).
 
 ::
 
@@ -32,28 +32,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tfbus.errors import TfbusError
+from tfbus.errors import URDFError
 
-__all__ = ["JOINT_TYPES", "JointInfo", "Mimic", "RobotModel", "URDFError", "load_urdf"]
+__all__ = ["JOINT_TYPES", "JointInfo", "Mimic", "RobotModel", "load_urdf"]
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 """The joint types of the URDF specification (``urdf::Joint``)."""
-
-
-class URDFError(TfbusError, ValueError):
-    """A robot description that cannot be used: not XML, not a URDF, or not one tree.
-
-    The message names the offending element (``joint 'elbow'``, ``link 'arm'``, the XML
-    line). Also a :class:`ValueError`.
-
-    Attributes:
-        element: the offending element as ``"joint 'NAME'"``, ``"link 'NAME'"``,
-            ``"line N"`` or ``"robot"``.
-    """
-
-    def __init__(self, message: str, element: str = "robot") -> None:
-        super().__init__(message)
-        self.element = element
 
 
 @dataclass(frozen=True, slots=True)

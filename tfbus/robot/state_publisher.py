@@ -1,4 +1,4 @@
-"""robot_state_publisher: a URDF and joint states become ``/tf`` and ``/tf_static`` (layer 3).
+"""robot_state_publisher: a URDF and joint states become ``/tf`` and ``/tf_static``.
 
 ::
 
@@ -46,7 +46,6 @@ import logging
 import math
 import numbers
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -57,9 +56,9 @@ import numpy.typing as npt
 from transforms3d.euler import euler2quat
 from transforms3d.quaternions import quat2mat
 
-from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
-from tfbus.clock import Clock, SystemClock, every
-from tfbus.errors import TfbusError
+from tfbus.bus import Bus
+from tfbus.clock import Clock, SystemClock
+from tfbus.errors import JointStateError
 from tfbus.messages import (
     Header,
     JointState,
@@ -69,24 +68,16 @@ from tfbus.messages import (
     TransformStamped,
     Vector3,
 )
+from tfbus.robot.urdf import JointInfo, Mimic, RobotModel, load_urdf
 from tfbus.time import Time
-from tfbus.urdf import JointInfo, Mimic, RobotModel, URDFError, load_urdf
+from tfbus.topics import JOINT_STATES_TOPIC, TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
-    "JOINT_STATES_TOPIC",
-    "JointStateError",
     "RobotStatePublisher",
     "RobotStateStatistics",
-    "URDFError",
-    "load_urdf",
-    "publish_joint_states",
-    "sinusoidal_joint_state",
 ]
 
 _log = logging.getLogger(__name__)
-
-JOINT_STATES_TOPIC = "/joint_states"
-"""The topic robot_state_publisher reads :class:`~tfbus.messages.JointState` from."""
 
 _F64 = npt.NDArray[np.float64]
 
@@ -94,22 +85,6 @@ _MAX_OTHER_NAMES = 1024
 """Joint names not in the model that :meth:`RobotStatePublisher.run` remembers for its rate
 limit; past that they are all forgotten at once (and count as never published, as a name
 the node has not heard yet)."""
-
-
-class JointStateError(TfbusError, ValueError):
-    """A JointState (or some of its positions) that cannot be turned into transforms.
-
-    Attributes:
-        refused: joint name -> the offending position (NaN, ±Inf, not a number).
-        transforms: the transforms of the other joints of the message, computed anyway
-            (empty when the whole message is invalid).
-    """
-
-    def __init__(self, message: str, refused: dict[str, object] | None = None,
-                 transforms: Sequence[TransformStamped] = ()) -> None:
-        super().__init__(message)
-        self.refused = dict(refused or {})
-        self.transforms = list(transforms)
 
 
 @dataclass
@@ -225,7 +200,7 @@ class RobotStatePublisher:
     """ROS's robot_state_publisher for one robot description.
 
     Args:
-        model: URDF text, a path to a URDF file, a :class:`~tfbus.urdf.RobotModel` or a
+        model: URDF text, a path to a URDF file, a :class:`~tfbus.robot.RobotModel` or a
             ``urdf_parser_py`` Robot.
         frame_prefix: prepended to every link name in frame ids (ROS 2's parameter:
             plain concatenation, e.g. ``"robot1/"``).
@@ -451,50 +426,3 @@ class RobotStatePublisher:
                     bus.publish_nowait(TF_TOPIC, TFMessage(tuple(out)))
                     stats.published += 1
                     stats.transforms += len(out)
-
-
-def sinusoidal_joint_state(model: RobotModel, stamp: Time, seconds: float,
-                           period: float = 4.0) -> JointState:
-    """A JointState moving every movable, non-mimic joint of ``model`` sinusoidally
-    within its limits, like joint_state_publisher without a GUI but animated.
-
-    Joint k (in document order) is at ``mid + half * sin(2 pi seconds / period + k)``
-    with ``mid``/``half`` the centre and half-range of its ``<limit>``; continuous joints
-    (no limits) sweep -pi..pi. Mimic joints are left to robot_state_publisher.
-    """
-    names: list[str] = []
-    positions: list[float] = []
-    for k, joint in enumerate(j for j in model.joints if j.movable and j.mimic is None):
-        lo, hi = joint.lower, joint.upper
-        if joint.type == "continuous" or lo is None or hi is None or lo >= hi:
-            lo, hi = (-math.pi, math.pi) if joint.type != "prismatic" else (0.0, 0.0)
-        # Halved first: with limits of +-1e308, hi - lo would overflow to inf.
-        mid, half = lo / 2.0 + hi / 2.0, hi / 2.0 - lo / 2.0
-        names.append(joint.name)
-        q = mid + half * math.sin(2.0 * math.pi * seconds / period + k)
-        positions.append(min(max(q, lo), hi))
-    return JointState(Header(stamp, ""), tuple(names), tuple(positions))
-
-
-async def publish_joint_states(
-    bus: Bus, model: RobotModel, *, rate: float = 10.0, clock: Clock | None = None,
-    topic: str = JOINT_STATES_TOPIC, period: float = 4.0,
-    task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
-) -> None:
-    """Publish :func:`sinusoidal_joint_state` on ``topic`` at ``rate`` Hz (clock time,
-    drift-free), stamped ``clock.now()``, until cancelled.
-
-    Raises:
-        ValueError: if ``rate`` or ``period`` is not a positive finite number.
-    """
-    for what, value in (("rate", rate), ("period", period)):
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{what} must be a positive number, got {value!r}")
-    clock = clock if clock is not None else SystemClock()
-    start = clock.now()
-    task_status.started()
-    async for _ in every(1.0 / rate, clock=clock, immediate=True):
-        now = clock.now()
-        await bus.publish(topic, sinusoidal_joint_state(model, now, (now - start).to_sec(),
-                                                        period))
-

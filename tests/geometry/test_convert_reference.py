@@ -34,7 +34,7 @@ from tfbus import (
 from tfbus.convert import do_transform_cloud, do_transform_stamped, do_transform_wrench
 from tfbus.sensor_msgs import PointCloud2, PointField, read_points
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SIDE = ROOT / "tests" / "peers" / "tf2_msgs_side.py"
 INSTALL = ROOT / "scripts" / "install_tf2_msgs_py.sh"
 

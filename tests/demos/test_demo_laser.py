@@ -1,4 +1,4 @@
-"""The laser demo (``tfbus.demo_laser``) under ManualClock on asyncio and trio: a line
+"""The laser demo (``tfbus.demos.laser``) under ManualClock on asyncio and trio: a line
 each simulated second, every scan projected, and the three methods' wall errors in the
 expected order (per-beam and laser_geometry's interpolation sub-millimetre, one transform
 at the header stamp off by centimetres at 2 m/s and 1 rad/s)."""
@@ -13,7 +13,7 @@ import pytest
 
 from tfbus import Time
 from tfbus.clock import ManualClock
-from tfbus.demo_laser import base_pose, run_laser_demo, simulate_scan, wall_error
+from tfbus.demos.laser import base_pose, run_laser_demo, simulate_scan, wall_error
 
 pytestmark = pytest.mark.anyio
 

@@ -29,7 +29,7 @@ pytest.importorskip("msgspec")
 pytest.importorskip("click")
 pytest.importorskip("rich")
 
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 INFO = re.compile(
     r"^\[ INFO\] (\d+\.\d{9}): base_laser: \(1\.00, 0\.20\. 0\.00\) -----> "

@@ -1,4 +1,4 @@
-"""Tests for tfbus/robot_state.py and tfbus/urdf.py.
+"""Tests for tfbus/robot/state_publisher.py and tfbus/robot/urdf.py.
 
 The reference is ROS 1's robot_state_publisher 1.15.2 (Debian): ``tests/data/rsp/*.json.gz``
 were recorded from the real node by ``scripts/record_robot_state.py`` (layout: ``urdf``,
@@ -32,20 +32,22 @@ from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import ManualClock
 from tfbus.geometry import do_transform_point
 from tfbus.messages import Header, JointState, Point, PointStamped, TransformStamped
-from tfbus.robot_state import (
+from tfbus.robot import (
     JointStateError,
+    RobotModel,
     RobotStatePublisher,
-    _quaternions,
+    URDFError,
+    load_urdf,
     publish_joint_states,
     sinusoidal_joint_state,
 )
+from tfbus.robot.state_publisher import _quaternions
 from tfbus.time import Time
-from tfbus.urdf import RobotModel, URDFError, load_urdf
 
 pytest.importorskip("urdf_parser_py")
 pytestmark = pytest.mark.anyio
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data" / "rsp"
 URDF = ROOT / "tests" / "data" / "urdf"
 RECORDINGS = sorted(DATA.glob("*.json.gz"))

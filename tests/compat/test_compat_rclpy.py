@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 PEER = ROOT / "tests" / "ros2_peers" / "compat_rclpy_peer.py"
 
