@@ -7,7 +7,6 @@ from __future__ import annotations
 import socket
 import sys
 import urllib.request
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -25,17 +24,8 @@ from tfbus.view.player import BagPlayer
 from tfbus.view.server import PortInUseError, TfPage
 from tfbus.view.timeline import BagTimeline
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_scene_numbers_equal_lookup_transform(page: TfPage) -> None:

@@ -15,7 +15,6 @@ import re
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +32,7 @@ from tfbus.view.player import BagPlayer, draw_live  # noqa: E402
 from tfbus.view.server import TfPage  # noqa: E402
 from tfbus.view.timeline import BagTimeline  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -87,15 +86,6 @@ def row(page_dom: str, frame_text: str) -> list[str]:
     m = re.search(r"<tr><td>" + re.escape(frame_text) + r"</td>(.*?)</tr>", page_dom)
     assert m is not None, f"no row for {frame_text!r}"
     return [frame_text, *re.findall(r"<td>(.*?)</td>", m.group(1))]
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:

@@ -5,7 +5,6 @@ transforms."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -21,17 +20,9 @@ from tfbus.view import build_scene
 from tfbus.view.robot import link_visuals
 from tfbus.view.server import TfPage
 
-URDF = Path(__file__).parent / "data" / "urdf" / "urdf_tutorial_07-physics.urdf"
+URDF = (Path(__file__).resolve().parents[2] / "tests" / "data" / "urdf"
+        / "urdf_tutorial_07-physics.urdf")
 H = math.sin(1.57075 / 2)
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_visuals_read_from_the_urdf() -> None:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import asyncio
 import json
 import struct
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +28,7 @@ from tfbus.view.scans import ScanTrack  # noqa: E402
 from tfbus.view.server import TfPage  # noqa: E402
 from tfbus.view.timeline import BagTimeline  # noqa: E402
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 LASER = DATA / "laser" / "drl_guardian_3.bag"
 
@@ -150,15 +149,6 @@ async def collect(port: int, probe_ch: Any, topics: list[str], act: Any, want: i
                     got[key].append((log_time, msg[13:]))
     got["channels"] = channels
     return got
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_foxglove_client_receives_the_bags_transforms(page: TfPage) -> None:
