@@ -4,6 +4,7 @@ command's errors."""
 
 from __future__ import annotations
 
+import math
 import socket
 import sys
 import urllib.request
@@ -234,3 +235,40 @@ def test_command_serves_a_bag_and_stops_on_sigint() -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=10)
+
+
+def test_axes_fade_to_grey_then_hide_as_rviz(page: TfPage) -> None:
+    """rviz's TF display: full colour for a third of the frame timeout, then fading to
+    grey, then hidden; the axes' colours and ends are read back from the server's node."""
+    from tfbus.clock import ManualClock
+    from tfbus.view.server import AXES_COLOURS
+
+    clock = ManualClock(Time.from_sec(100.0))
+    core = BufferCore()
+    s = math.sqrt(0.5)  # "a" rotated +90 degrees about z: its x axis points along +y
+    core.set_transform(TransformStamped(Header(clock.now(), "world"), "a", Transform(
+        Vector3(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, s, s))), "test")
+    last = {"a": clock.now()}
+
+    def drawn() -> tuple[tuple[int, int, int], ...] | None:
+        page.draw(build_scene(core, fixed_frame="world", now=clock.now(), last_update=last))
+        return page.axes_colours("a")
+
+    assert drawn() == AXES_COLOURS == ((230, 30, 30), (30, 190, 30), (40, 80, 240))
+    row = page.axes_rows["a"]
+    ends = np.asarray(page.axes.points)[row:row + 3]
+    np.testing.assert_allclose(ends, [
+        [[1.0, 2.0, 3.0], [1.0, 2.25, 3.0]],   # x along +y
+        [[1.0, 2.0, 3.0], [0.75, 2.0, 3.0]],   # y along -x
+        [[1.0, 2.0, 3.0], [1.0, 2.0, 3.25]],   # z up
+    ], atol=1e-6)
+    clock.advance_nowait(5.0)   # the first third of 15 s: still full colour
+    assert drawn() == AXES_COLOURS
+    clock.advance_nowait(5.0)   # 10 s: half way to grey (128, 128, 128)
+    assert drawn() == ((179, 79, 79), (79, 159, 79), (84, 104, 184))
+    clock.advance_nowait(5.0)   # 15 s: grey
+    assert drawn() == ((128, 128, 128),) * 3
+    clock.advance_nowait(0.5)   # beyond the timeout: hidden
+    assert drawn() is None and page.frames["a"].visible is False
+    last["a"] = clock.now()     # it comes back in full colour
+    assert drawn() == AXES_COLOURS and page.frames["a"].visible is True
