@@ -198,13 +198,68 @@ def test_scan_topic_missing_is_a_usage_error() -> None:
     assert result.stderr.strip().endswith(
         "no LaserScan topic of that name in " + str(LASER) +
         " (scan topics: /hokuyo_back_scan, /scan)")
-    result = CliRunner().invoke(cli, ["view", "--scan", "/scan", "--port", "0"])
-    assert result.exit_code == 2 and "--scan needs --bag" in result.stderr
 
 
-def test_foxglove_needs_a_bag() -> None:
-    result = CliRunner().invoke(cli, ["view", "--foxglove", "0", "--port", "0"])
-    assert result.exit_code == 2 and "--foxglove needs --bag" in result.stderr
+def test_bad_bus_is_one_usage_line() -> None:
+    result = CliRunner().invoke(cli, ["view", "--bus", "nope", "--scan", "/scan",
+                                      "--port", "0"])
+    assert result.exit_code == 2
+    assert result.stderr.count("\n") == 1 and "nope" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_command_live_bus_with_scan_and_foxglove() -> None:
+    """``tfbus view --bus memory --scan /scan --foxglove PORT`` as a process: both
+    addresses printed, the page served, the Foxglove server advertising /tf, /tf_static and
+    /scan to a client (subprotocol foxglove.sdk.v1); SIGINT ends it with status 0."""
+    import asyncio
+    import json
+    import select
+    import signal
+    import subprocess
+
+    import anyio
+    import websockets
+
+    ports = []
+    for _ in range(2):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            ports.append(s.getsockname()[1])
+    exe = Path(sys.executable).with_name("tfbus")
+    proc = subprocess.Popen([str(exe), "view", "--bus", "memory", "--scan", "/scan",
+                             "--port", str(ports[0]), "--foxglove", str(ports[1])],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+    async def advertised() -> set[str]:
+        topics: set[str] = set()
+        async with websockets.connect(f"ws://127.0.0.1:{ports[1]}",
+                                      subprotocols=["foxglove.sdk.v1"], close_timeout=1) as ws:
+            with anyio.fail_after(10):
+                while not {"/tf", "/tf_static", "/scan"} <= topics:
+                    m = json.loads(await ws.recv())
+                    if m["op"] == "advertise":
+                        topics |= {c["topic"] for c in m["channels"]}
+        return topics
+
+    try:
+        assert proc.stderr is not None
+        lines = []
+        for _ in range(2):
+            ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
+            assert ready, "tfbus view printed nothing in 60 s"
+            lines.append(proc.stderr.readline().strip())
+        assert lines == [f"tfbus view: http://127.0.0.1:{ports[0]}/",
+                         f"tfbus view: Foxglove ws://127.0.0.1:{ports[1]}"]
+        with urllib.request.urlopen(f"http://127.0.0.1:{ports[0]}/", timeout=10) as resp:
+            assert resp.status == 200
+        assert asyncio.run(advertised()) >= {"/tf", "/tf_static", "/scan"}
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
 
 
 def test_command_serves_a_bag_and_stops_on_sigint() -> None:

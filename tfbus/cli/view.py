@@ -40,13 +40,14 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 @click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="TCP port of the page (0: any free port).")
 @click.option("--scan", "scan_topics", multiple=True, metavar="TOPIC",
-              help="With --bag: draw this topic's LaserScans, projected into the fixed frame "
+              help="Draw this topic's LaserScans (from the bag, or from the bus once their "
+                   "transforms arrived), projected into the fixed frame "
                    "(tfbus.laser.LaserProjection). Repeatable.")
 @click.option("--foxglove", "foxglove_port", type=click.IntRange(0, 65535), default=None,
               metavar="PORT",
-              help="With --bag: also serve the Foxglove WebSocket protocol on this port "
-                   "(/tf as foxglove.FrameTransforms, scans as foxglove.LaserScan, bag "
-                   "time as server time), on --host.")
+              help="Also serve the Foxglove WebSocket protocol on this port, on --host "
+                   "(/tf and /tf_static as foxglove.FrameTransforms, scans as "
+                   "foxglove.LaserScan, bag or clock time as server time).")
 @click.option("--urdf", "urdf", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=None,
               help="Draw this URDF's link geometry (boxes, cylinders, spheres) on the link "
@@ -69,6 +70,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
       tfbus view --bag tests/data/webviz_turtle_tf_example.bag
       tfbus view --bus zenoh --fixed-frame odom --port 8081
       tfbus view --bag tests/data/laser/drl_guardian_3.bag --scan /scan --fixed-frame odom
+      tfbus view --bus zenoh --scan /scan --foxglove 8765
     """
     try:
         importlib.import_module("viser")
@@ -76,10 +78,10 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(NEEDS_EXTRA)
     if bag is not None and bus is not None:
         fail("give --bag PATH or --bus SPEC, not both")
-    if foxglove_port is not None and bag is None:
-        fail("--foxglove needs --bag PATH (a live bus is not relayed to Foxglove yet)")
-    if scan_topics and bag is None:
-        fail("--scan needs --bag PATH (scans from a live bus are not drawn yet)")
+    if bus is not None and bag is None:
+        from tfbus.cli._sources import check_bus_spec
+
+        check_bus_spec(bus)
     from tfbus.view.scans import ScanTrack
     from tfbus.view.server import PortInUseError, TfPage
 
@@ -95,12 +97,12 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             fail(str(err))
 
     tracks = []
-    for topic in scan_topics:
-        assert bag is not None
-        try:
-            tracks.append(ScanTrack.read(bag, topic))
-        except ValueError as err:
-            fail(str(err))
+    if bag is not None:  # (a live bus: its scans arrive once it is open)
+        for topic in scan_topics:
+            try:
+                tracks.append(ScanTrack.read(bag, topic))
+            except ValueError as err:
+                fail(str(err))
     try:
         page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}")
     except PortInUseError as err:
@@ -109,12 +111,14 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(f"cannot serve on {host}:{port}: {err}")
     page.set_visuals(visuals)
     stop = threading.Event()
-    if bag is not None:  # (a live bus: run_live's own handlers)
-        def on_signal(_sig: int, _frame: FrameType | None) -> None:
-            stop.set()
 
-        signal.signal(signal.SIGINT, on_signal)
-        signal.signal(signal.SIGTERM, on_signal)
+    def on_signal(_sig: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    # before the address is printed: a Ctrl-C any time after it ends with status 0 (a
+    # live bus replaces them by run_live's own once attached, and checks ``stop`` then)
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
     bridge = None
     if foxglove_port is not None:
@@ -133,7 +137,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         if bag is not None:
             _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop)
         else:
-            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
+            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
+                       stop)
     finally:
         page.close()
         if bridge is not None:
@@ -158,21 +163,22 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     player.run(stop)
 
 
-def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float) -> None:
-    import anyio
-
+def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
+               scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
+               stop: threading.Event) -> None:
     from tfbus.cli._sources import BusSource, live, run_live
-    from tfbus.view.player import MAX_DRAW_HZ, draw_live
+    from tfbus.view.live import LiveView
     from tfbus.view.server import TfPage
 
     assert isinstance(page, TfPage)
     src = BusSource(spec, name="tfbus-view")
+    view = LiveView(page, src.buffer(), src.statistics(), src.clock, fixed_frame=fixed_frame,
+                    frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge)
 
     async def body() -> None:
-        while True:
-            draw_live(page, src.buffer(), src.statistics(), src.clock.now(),
-                      fixed_frame=fixed_frame, frame_timeout=frame_timeout)
-            await anyio.sleep(1.0 / MAX_DRAW_HZ)
+        assert src.bus is not None
+        if not stop.is_set():  # a signal before run_live's handlers: stop now
+            await view.run(src.bus)
 
     code = run_live(lambda: live(src, None, body))
     if code:
