@@ -50,8 +50,13 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
                    "foxglove.LaserScan, bag or clock time as server time).")
 @click.option("--urdf", "urdf", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=None,
-              help="Draw this URDF's link geometry (boxes, cylinders, spheres) on the link "
-                   "frames, following the transforms robot_state_publisher sends.")
+              help="Draw this URDF's link geometry (boxes, cylinders, spheres, STL/OBJ/DAE "
+                   "meshes) on the link frames, following the transforms "
+                   "robot_state_publisher sends.")
+@click.option("--mesh-dir", "mesh_dirs", multiple=True,
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="With --urdf: where package://PKG/... meshes are (DIR/PKG/...), before "
+                   "ROS_PACKAGE_PATH's folders and those above the URDF. Repeatable.")
 @click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
 @click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
               help="With --bag: playback rate (x0.1-x10).")
@@ -62,7 +67,7 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
             scan_topics: tuple[str, ...], foxglove_port: int | None,
-            urdf: Path | None) -> None:
+            urdf: Path | None, mesh_dirs: tuple[Path, ...]) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -82,15 +87,16 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         from tfbus.cli._sources import check_bus_spec
 
         check_bus_spec(bus)
+    from tfbus.view.robot import RobotModel
     from tfbus.view.scans import ScanTrack
     from tfbus.view.server import PortInUseError, TfPage
 
-    visuals = []
+    robot = RobotModel(())
     if urdf is not None:
-        from tfbus.view.robot import link_visuals
+        from tfbus.view.robot import load_robot
 
         try:
-            visuals = link_visuals(urdf)
+            robot = load_robot(urdf, mesh_dirs)
         except ImportError:
             fail("the 'urdf_parser_py' package is not installed: pip install 'tfbus[robot]'")
         except ValueError as err:
@@ -109,7 +115,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(str(err))
     except OSError as err:
         fail(f"cannot serve on {host}:{port}: {err}")
-    page.set_visuals(visuals)
+    page.set_visuals(robot.visuals)
+    page.set_notes(robot.notes)
     stop = threading.Event()
 
     def on_signal(_sig: int, _frame: FrameType | None) -> None:

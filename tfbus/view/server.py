@@ -150,6 +150,9 @@ class TfPage:
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
         self.tree = gui.add_html("")
+        self.notes = gui.add_html("")
+        self.notes_html = ""
+        """The notes' HTML as last sent (:meth:`set_notes`)."""
         self.panel_html = ""
         """The frame tree panel's HTML as last sent."""
         self.status_html = ""
@@ -222,6 +225,14 @@ class TfPage:
             for v in visuals:
                 self._pending_visuals.setdefault(v.link, []).append(v)
 
+    def set_notes(self, notes: Sequence[str]) -> None:
+        """Lines under the frame tree (a URDF mesh not found or unreadable), as text."""
+        with self._lock:
+            value = "".join(f"<p>{_h(n)}</p>" for n in notes)
+            if value != self.notes_html:
+                self.notes_html = value
+                self.notes.content = value
+
     def _attach(self, frame_id: str, node: str) -> None:
         scene_api = self.server.scene
         for k, v in enumerate(self._pending_visuals.pop(frame_id, [])):
@@ -232,6 +243,9 @@ class TfPage:
             elif v.kind == "cylinder":
                 h = scene_api.add_cylinder(name, radius=v.size[0], height=v.size[1],
                                            color=v.rgb, position=v.xyz, wxyz=v.wxyz)
+            elif v.kind == "mesh" and v.vertices is not None and v.faces is not None:
+                h = scene_api.add_mesh_simple(name, v.vertices, v.faces, color=v.rgb,
+                                              position=v.xyz, wxyz=v.wxyz)
             else:
                 h = scene_api.add_icosphere(name, radius=v.size[0], color=v.rgb,
                                             position=v.xyz, wxyz=v.wxyz)
