@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import anyio
 
+from tfbus.clock import every
 from tfbus.filters import FilterFailureReason, MessageFilter
 from tfbus.laser import LaserProjection
 from tfbus.messages import TFMessage, TransformStamped
@@ -159,9 +160,10 @@ class LiveView:
         cancelled."""
         async with anyio.create_task_group() as tg:
             await tg.start(self.follow, bus)
-            while True:
+            self.render()
+            # on the view's clock, a deadline every 1/30 s (an overrun skips ticks)
+            async for _ in every(1.0 / MAX_DRAW_HZ, clock=self.clock):
                 self.render()
-                await anyio.sleep(1.0 / MAX_DRAW_HZ)
 
     async def follow(self, bus: Bus, *, task_status: Any = anyio.TASK_STATUS_IGNORED) -> None:
         """Subscribe to the scan topics (and, with Foxglove, ``/tf`` and ``/tf_static``),
