@@ -203,3 +203,47 @@ async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
         assert row(second, "arm")[-1] == "ok"
         assert tuple(page.frames["arm"].position) == pytest.approx((1.6, 0.0, 0.0))
     buffer.close()
+
+
+def _reds(shot: Any) -> int:
+    """Pixels of the x axes' red (230, 30, 30; viser's thin lines blend it lighter):
+    red well above green and blue, never a grey or the links' orange; in the scene only
+    (viser's orientation gizmo, bottom left, and the panel are left out)."""
+    rgb = shot.convert("RGB").crop((150, 150, 940, 700))
+    return sum(n for n, (r, g, b) in (rgb.getcolors(maxcolors=1 << 24) or [])
+               if r - max(g, b) > 80)
+
+
+def _most_reds(exe: str, url: str, path: Path) -> int:
+    """:func:`_reds` of the most complete of three screenshots: the viser client fades its
+    scene in after loading, and on a loaded machine Chromium's virtual-time budget can end
+    before that is done (paler reds). An upper bound for a shot that must have none."""
+    return max(_reds(screenshot(exe, url, path)) for _ in range(3))
+
+
+def test_axes_fade_to_grey_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:
+    """rviz's fade as the browser draws it: three fresh frames add red x axes to the
+    screen; at the timeout they are grey (they add no red: the same red as when they are
+    hidden, which is the root's own axes, never faded) and the tree says stale."""
+    clock = ManualClock(Time.from_sec(100.0))
+    core, stats = BufferCore(), TfStatistics()
+    for k, child in enumerate(("a", "b", "c")):
+        t = TransformStamped(Header(clock.now(), "world"), child,
+                             Transform(Vector3(0.4 * k, 0.3, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+        core.set_transform(t, "bc")
+        stats.add(clock.now(), [t], "bc", static=False)
+    url = f"http://127.0.0.1:{page.port}/"
+    draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
+    fresh = _most_reds(chromium, url, tmp_path / "fresh.png")
+    clock.advance_nowait(3.0)  # silent for the whole timeout: grey, still drawn
+    draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
+    assert page.axes_colours("a") == ((128, 128, 128),) * 3
+    grey = _most_reds(chromium, url, tmp_path / "grey.png")
+    assert row(dom(chromium, url, "<td>stale</td>"), "a")[-1] == "stale"
+    clock.advance_nowait(0.5)  # beyond it: a, b and c hidden, the root's axes alone
+    draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
+    assert page.axes_colours("a") is None and page.axes_colours("world") is not None
+    root = _most_reds(chromium, url, tmp_path / "hidden.png")
+    assert root > 50                      # the root's red x axis is on screen
+    assert fresh > root + 200             # plus the three fresh red axes
+    assert abs(grey - root) < 40          # grey axes add no red

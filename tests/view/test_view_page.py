@@ -307,9 +307,17 @@ def test_axes_fade_to_grey_then_hide_as_rviz(page: TfPage) -> None:
 
     def drawn() -> tuple[tuple[int, int, int], ...] | None:
         page.draw(build_scene(core, fixed_frame="world", now=clock.now(), last_update=last))
-        return page.axes_colours("a")
+        shown = page.axes_colours("a")
+        if shown is not None:  # what the scene node holds: viser's linear colour values
+            row = page.axes_rows["a"]
+            held = np.asarray(page.axes.colors)[row:row + 3]
+            lin = [[round(255 * ((c / 255 + 0.055) / 1.055) ** 2.4) for c in rgb]
+                   for rgb in shown]
+            assert held.tolist() == [[rgb, rgb] for rgb in lin]
+        return shown
 
     assert drawn() == AXES_COLOURS == ((230, 30, 30), (30, 190, 30), (40, 80, 240))
+    assert np.asarray(page.axes.colors)[page.axes_rows["a"]][0].tolist() == [202, 3, 3]
     row = page.axes_rows["a"]
     ends = np.asarray(page.axes.points)[row:row + 3]
     np.testing.assert_allclose(ends, [

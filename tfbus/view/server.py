@@ -84,6 +84,16 @@ def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, 
     return (r, g, b)
 
 
+def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """sRGB 0-255 as the linear 0-255 values viser's per-vertex line colours are (its
+    client divides by 255 and three.js encodes the output as sRGB): sent so, a colour is
+    shown as given (the IEC 61966-2-1 transfer function)."""
+    c = srgb.astype(np.float64) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    out: npt.NDArray[np.uint8] = np.round(lin * 255.0).astype(np.uint8)
+    return out
+
+
 def _axes(pose: TransformStamped) -> list[list[tuple[float, float, float]]]:
     """The x, y, z axis segments of a frame at ``pose``: origin to origin + R e_k x
     :data:`AXES_LENGTH`."""
@@ -146,6 +156,7 @@ class TfPage:
         self.axes_count = 0
         self.axes_rows: dict[str, int] = {}
         """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
+        self._axes_srgb: list[list[tuple[int, int, int]]] = []
         gui = self.server.gui
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
@@ -210,6 +221,7 @@ class TfPage:
         self.axes, self.axes_count = self._segments(
             "/axes", self.axes, self.axes_count, axes, axes_colours, 4.0)
         self.axes_rows = rows
+        self._axes_srgb = axes_colours
         if not self.camera_set:
             self.aim(scene)
         self._draw_panel(scene, stats, rates)
@@ -277,7 +289,7 @@ class TfPage:
                 handle.visible = False
             return handle, count
         pts = np.asarray(segments, dtype=np.float32)
-        cols = np.asarray(colours, dtype=np.uint8)
+        cols = _to_linear(np.asarray(colours, dtype=np.uint8))
         if handle is None or len(segments) != count:
             if handle is not None:
                 handle.remove()
@@ -290,13 +302,13 @@ class TfPage:
         return handle, len(segments)
 
     def axes_colours(self, frame_id: str) -> tuple[tuple[int, int, int], ...] | None:
-        """The colours of ``frame_id``'s x, y, z axes as the server holds them (read back
-        from the scene node); ``None`` when the frame is not drawn (hidden, unplaced)."""
+        """The colours (sRGB 0-255, as shown) of ``frame_id``'s x, y, z axes as last
+        drawn; ``None`` when the frame is not drawn (hidden, unplaced). The scene node
+        (:attr:`axes` ``.colors``) holds them as viser's linear values."""
         row = self.axes_rows.get(frame_id)
         if row is None or self.axes is None or not self.axes.visible:
             return None
-        cols = np.asarray(self.axes.colors).reshape(-1, 2, 3)
-        return tuple((int(c[0][0]), int(c[0][1]), int(c[0][2])) for c in cols[row:row + 3])
+        return tuple((c[0][0], c[0][1], c[0][2]) for c in self._axes_srgb[row:row + 3])
 
     def _draw_panel(self, scene: Scene, stats: TfStatistics | None,
                     rates: Mapping[str, float] | None) -> None:
