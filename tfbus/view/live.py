@@ -260,7 +260,7 @@ class LiveView:
                 f"{feed.topic}: waiting for the transforms of {feed.received} scan(s)"
             self.page.draw_points(feed.topic, None)
             return
-        key = (id(feed.ready[-1]), fixed)
+        key = (feed.passed, fixed)  # the newest scan that passed, and where it goes
         if key == feed._shown:
             return  # nothing new since the last redraw: nothing projected
         first_error: str | None = None
