@@ -166,8 +166,10 @@ def test_tutorial_meshes_missing_are_notes(monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     robot = load_robot(URDF)
     assert len(robot.notes) == 4
-    assert all(" not found (looked in " in n and "urdf_tutorial/meshes/" in n
+    assert all(" not found (no --mesh-dir" in n and "urdf_tutorial/meshes/" in n
                for n in robot.notes)
-    assert robot.notes[0].startswith("left_gripper: mesh package://urdf_tutorial/meshes/"
-                                     "l_finger.dae not found")
+    assert robot.notes[0] == (
+        "left_gripper: mesh package://urdf_tutorial/meshes/l_finger.dae not found (no "
+        "--mesh-dir, ROS_PACKAGE_PATH folder or folder named urdf_tutorial above the URDF "
+        "to look in)")
     assert len(robot.visuals) == len(link_visuals(URDF)) > 10

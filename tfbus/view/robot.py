@@ -166,8 +166,11 @@ def load_robot(path: Path, mesh_dirs: Sequence[Path] = ()) -> RobotModel:
                 filename = str(getattr(g, "filename", "") or "")
                 found, tried = resolve_mesh(filename, path, mesh_dirs)
                 if found is None:
-                    notes.append(f"{link.name}: mesh {filename} not found (looked in "
-                                 f"{', '.join(map(str, tried)) or 'no place'}; --mesh-dir)")
+                    where = (f"looked in {', '.join(map(str, tried))}" if tried else
+                             "no --mesh-dir, ROS_PACKAGE_PATH folder or folder named "
+                             f"{urlparse(filename).netloc or '?'} above the URDF to look in")
+                    notes.append(f"{link.name}: mesh {filename} not found ({where}"
+                                 f"{'; --mesh-dir' if tried else ''})")
                     continue
                 raw = getattr(g, "scale", None) or (1.0, 1.0, 1.0)
                 scale = tuple(float(c) for c in raw)
