@@ -1,11 +1,22 @@
-"""The CPU ``tfbus view`` costs following a 100 Hz x 50-frame source.
+"""The CPU ``tfbus view --bus`` costs following a live 100 Hz x 50-frame source, with and
+without ``--scan``.
 
-In one process, for ``--seconds`` of wall time: every 10 ms, 50 dynamic transforms (a
-chain of 10 plus 40 leaves, slowly moving) go into a BufferCore and TfSummary, as the
-live bus source stores them; every 1/30 s the page redraws (``draw_live``: the scene model
-with 50 lookups, then viser's frame, label, line and panel updates). A browser may be
-connected to the printed address meanwhile. Prints the process CPU per wall second (the
-ingest alone, then ingest + view) and the mean time of one redraw.
+In one process, on an in-process bus, for ``--seconds`` of wall time per phase: a
+broadcaster sends 50 dynamic transforms (a chain of 10 plus 40 leaves, slowly moving) as
+one ``/tf`` message every 10 ms, a laser sends a 720-beam scan (frame ``f3``, a 25 ms
+sweep, stamped at its first beam) on ``/scan`` at 40 Hz, and a TransformListener stores
+the transforms through a MonitoredSink (Buffer + TfSummary), as ``tfbus view --bus``
+does. Phases:
+
+1. the source and the listener alone;
+2. plus the view (``LiveView.run``: redraws at most 30 times a second; the scene model
+   with 50 lookups, then viser's frame, label, line and panel updates);
+3. plus ``--scan /scan`` (a MessageFilter on the fixed frame, tolerance the sweep; the
+   newest scan projected with LaserProjection per redraw and drawn as a point cloud).
+
+A browser may be connected to the printed address meanwhile. Prints the process CPU per
+wall second of each phase, the redraws a second and the mean time of one redraw, and the
+scans received, passed and drawn.
 
     .venv/bin/python benchmarks/bench_view.py [--seconds 5]
 """
@@ -15,15 +26,26 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from dataclasses import dataclass
+
+import anyio
+import numpy as np
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
-from tfbus.core import BufferCore
-from tfbus.monitor import TfSummary
-from tfbus.view.player import MAX_DRAW_HZ, draw_live
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.clock import SystemClock, every
+from tfbus.listener import TransformListener
+from tfbus.messages import TFMessage
+from tfbus.monitor import MonitoredSink, TfSummary
+from tfbus.sensor_msgs import LaserScan
+from tfbus.view.live import LiveView
 from tfbus.view.server import TfPage
 
 FRAMES = 50
 RATE = 100.0
+SCAN_RATE = 40.0
+BEAMS = 720
 
 
 def transforms(t: float) -> list[TransformStamped]:
@@ -39,49 +61,105 @@ def transforms(t: float) -> list[TransformStamped]:
     return out
 
 
-def run(seconds: float, page: TfPage | None) -> tuple[float, float, int]:
-    core, stats = BufferCore(), TfSummary()
-    start = time.monotonic()
-    cpu0 = time.process_time()
-    next_tf = next_draw = start
-    draws = 0
-    draw_time = 0.0
-    while (now := time.monotonic()) - start < seconds:
-        if now >= next_tf:
-            t = time.time()
-            batch = transforms(t)
-            for tr in batch:
-                core.set_transform(tr, "bench")
-            stats.add(Time.from_sec(t), batch, "bench", static=False)
-            next_tf += 1.0 / RATE
-        if page is not None and now >= next_draw:
-            d0 = time.perf_counter()
-            draw_live(page, core, stats, Time.from_sec(time.time()))
-            draw_time += time.perf_counter() - d0
-            draws += 1
-            next_draw += 1.0 / MAX_DRAW_HZ
-        time.sleep(max(0.0, min(next_tf, next_draw if page else next_tf) - time.monotonic()))
-    cpu = time.process_time() - cpu0
-    return cpu / seconds, draw_time / max(draws, 1), draws
+def scan(first_beam_ns: int) -> LaserScan:
+    inc = 2 * math.pi / BEAMS
+    return LaserScan(
+        header=Header(Time.from_ns(first_beam_ns), "f3"), angle_min=-math.pi,
+        angle_max=-math.pi + (BEAMS - 1) * inc, angle_increment=inc,
+        time_increment=1.0 / SCAN_RATE / BEAMS, scan_time=1.0 / SCAN_RATE, range_min=0.1,
+        range_max=30.0, ranges=np.full(BEAMS, 4.0, dtype=np.float32))
+
+
+@dataclass
+class Phase:
+    cpu: float = 0.0
+    """Process CPU seconds per wall second."""
+    redraws: int = 0
+    redraw_time: float = 0.0
+    received: int = 0
+    passed: int = 0
+    drawn: int = 0
+
+
+async def phase(seconds: float, page: TfPage | None, with_scan: bool) -> Phase:
+    clock = SystemClock()
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "bench")
+    out = Phase()
+    sweep_ns = round(1e9 / SCAN_RATE)
+    async with Bus(queue_size=10_000) as bus, TransformListener(sink, bus, clock=clock), \
+            anyio.create_task_group() as tg:
+
+        async def tf_source() -> None:
+            async for _ in every(1.0 / RATE, clock=clock):
+                await bus.publish("/tf", TFMessage(transforms(time.time())))
+
+        async def laser() -> None:
+            async for _ in every(1.0 / SCAN_RATE, clock=clock):
+                await bus.publish("/scan", scan(time.time_ns() - sweep_ns))
+
+        tg.start_soon(tf_source)
+        tg.start_soon(laser)
+        view = None
+        if page is not None:
+            view = LiveView(page, buffer, stats, clock,
+                            scan_topics=["/scan"] if with_scan else ())
+            render = view.render
+
+            def timed() -> object:
+                t0 = time.perf_counter()
+                try:
+                    return render()
+                finally:
+                    out.redraw_time += time.perf_counter() - t0
+                    out.redraws += 1
+
+            view.render = timed  # type: ignore[method-assign]
+            tg.start_soon(view.run, bus)
+        await anyio.sleep(0.5)  # settle (the first scans wait for the fixed frame)
+        out.redraws = 0
+        out.redraw_time = 0.0
+        cpu0 = time.process_time()
+        await anyio.sleep(seconds)
+        out.cpu = (time.process_time() - cpu0) / seconds
+        if view is not None and with_scan:
+            feed = view.feeds["/scan"]
+            out.received, out.passed, out.drawn = feed.received, feed.passed, feed.drawn
+        tg.cancel_scope.cancel()
+    buffer.close()
+    return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=5.0)
     args = ap.parse_args()
-    base, _, _ = run(args.seconds, None)
+    s = args.seconds
+    base = anyio.run(phase, s, None, False)
     page = TfPage("127.0.0.1", 0)
     try:
         print(f"page: http://127.0.0.1:{page.port}/")
-        full, per_draw, draws = run(args.seconds, page)
+        view = anyio.run(phase, s, page, False)
     finally:
         page.close()
-    print(f"source {RATE:.0f} Hz x {FRAMES} frames, {args.seconds:g} s wall")
-    print(f"  ingest only:        {100 * base:5.1f} % of one core")
-    print(f"  ingest + view:      {100 * full:5.1f} % of one core "
-          f"({draws} redraws, {draws / args.seconds:.1f}/s)")
-    print(f"  view alone:         {100 * (full - base):5.1f} % of one core, "
-          f"{1e3 * per_draw:.2f} ms per redraw")
+    page = TfPage("127.0.0.1", 0)
+    try:
+        scans = anyio.run(phase, s, page, True)
+    finally:
+        page.close()
+    print(f"live source {RATE:.0f} Hz x {FRAMES} frames + {SCAN_RATE:.0f} Hz x {BEAMS}-beam "
+          f"scans on an in-process bus, {s:g} s wall per phase")
+    print(f"  source + listener:        {100 * base.cpu:5.1f} % of one core")
+    print(f"  + view:                   {100 * view.cpu:5.1f} % of one core "
+          f"({view.redraws / s:.1f} redraws/s, "
+          f"{1e3 * view.redraw_time / max(view.redraws, 1):.2f} ms per redraw)")
+    print(f"  + view --scan /scan:      {100 * scans.cpu:5.1f} % of one core "
+          f"({scans.redraws / s:.1f} redraws/s, "
+          f"{1e3 * scans.redraw_time / max(scans.redraws, 1):.2f} ms per redraw; "
+          f"scans received {scans.received}, passed {scans.passed}, drawn {scans.drawn})")
+    print(f"  view alone:               {100 * (view.cpu - base.cpu):5.1f} % of one core; "
+          f"with --scan {100 * (scans.cpu - base.cpu):5.1f} %")
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     import anyio
 
     from tfbus.buffer import Buffer
-    from tfbus.bus import Subscription, Transport
+    from tfbus.bus import Bus, Subscription, Transport
     from tfbus.core import BufferCore
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfSummary
@@ -221,6 +221,8 @@ class BusSource(TfSource):
         self.sink = MonitoredSink(self._buffer, self._summary, self.clock,
                                   attribute=self._attribute)
         self.transport: Transport | None = None
+        self.bus: Bus | None = None
+        """The open bus while attached (other topics can be subscribed on it)."""
         self.listener: TransformListener | None = None
         self.broadcasters_seen: dict[str, PeerInfo] = {}
         """Every broadcaster heard of through liveliness, by node id."""
@@ -281,6 +283,7 @@ class BusSource(TfSource):
         with _literal_logging():
             async with Bus(transport=transport, queue_size=10_000) as bus:
                 self.transport = transport
+                self.bus = bus
                 self.listener = TransformListener(self.sink, bus, clock=self.clock)
                 async with self.listener, anyio.create_task_group() as tg:
                     if self.bus_spec.scheme == "zenoh":
@@ -293,6 +296,7 @@ class BusSource(TfSource):
                     finally:
                         tg.cancel_scope.cancel()
         self.transport = None
+        self.bus = None
 
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:

@@ -1,4 +1,4 @@
-"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display.
+"""``tfbus view``: the frames live in a browser (viser), like rviz's TF display (layer 5).
 
 Needs the ``tfbus[view]`` extra (viser); without it the command says so in one line
 (exit status 2).
@@ -40,17 +40,23 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 @click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="TCP port of the page (0: any free port).")
 @click.option("--scan", "scan_topics", multiple=True, metavar="TOPIC",
-              help="With --bag: draw this topic's LaserScans, projected into the fixed frame "
+              help="Draw this topic's LaserScans (from the bag, or from the bus once their "
+                   "transforms arrived), projected into the fixed frame "
                    "(tfbus.laser.LaserProjection). Repeatable.")
 @click.option("--foxglove", "foxglove_port", type=click.IntRange(0, 65535), default=None,
               metavar="PORT",
-              help="With --bag: also serve the Foxglove WebSocket protocol on this port "
-                   "(/tf as foxglove.FrameTransforms, scans as foxglove.LaserScan, bag "
-                   "time as server time), on --host.")
+              help="Also serve the Foxglove WebSocket protocol on this port, on --host "
+                   "(/tf and /tf_static as foxglove.FrameTransforms, scans as "
+                   "foxglove.LaserScan, bag or clock time as server time).")
 @click.option("--urdf", "urdf", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=None,
-              help="Draw this URDF's link geometry (boxes, cylinders, spheres) on the link "
-                   "frames, following the transforms robot_state_publisher sends.")
+              help="Draw this URDF's link geometry (boxes, cylinders, spheres, STL/OBJ/DAE "
+                   "meshes) on the link frames, following the transforms "
+                   "robot_state_publisher sends.")
+@click.option("--mesh-dir", "mesh_dirs", multiple=True,
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="With --urdf: where package://PKG/... meshes are (DIR/PKG/...), before "
+                   "ROS_PACKAGE_PATH's folders and those above the URDF. Repeatable.")
 @click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
 @click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
               help="With --bag: playback rate (x0.1-x10).")
@@ -61,7 +67,7 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
             scan_topics: tuple[str, ...], foxglove_port: int | None,
-            urdf: Path | None) -> None:
+            urdf: Path | None, mesh_dirs: tuple[Path, ...]) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -69,6 +75,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
       tfbus view --bag tests/data/webviz_turtle_tf_example.bag
       tfbus view --bus zenoh --fixed-frame odom --port 8081
       tfbus view --bag tests/data/laser/drl_guardian_3.bag --scan /scan --fixed-frame odom
+      tfbus view --bus zenoh --scan /scan --foxglove 8765
     """
     try:
         importlib.import_module("viser")
@@ -76,45 +83,49 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(NEEDS_EXTRA)
     if bag is not None and bus is not None:
         fail("give --bag PATH or --bus SPEC, not both")
-    if foxglove_port is not None and bag is None:
-        fail("--foxglove needs --bag PATH (a live bus is not relayed to Foxglove yet)")
-    if scan_topics and bag is None:
-        fail("--scan needs --bag PATH (scans from a live bus are not drawn yet)")
+    if bus is not None and bag is None:
+        from tfbus.cli._sources import check_bus_spec
+
+        check_bus_spec(bus)
+    from tfbus.view.robot import RobotModel
     from tfbus.view.scans import ScanTrack
     from tfbus.view.server import PortInUseError, TfPage
 
-    visuals = []
+    robot = RobotModel(())
     if urdf is not None:
-        from tfbus.view.robot import link_visuals
+        from tfbus.view.robot import load_robot
 
         try:
-            visuals = link_visuals(urdf)
+            robot = load_robot(urdf, mesh_dirs)
         except ImportError:
             fail("the 'urdf_parser_py' package is not installed: pip install 'tfbus[robot]'")
         except ValueError as err:
             fail(str(err))
 
     tracks = []
-    for topic in scan_topics:
-        assert bag is not None
-        try:
-            tracks.append(ScanTrack.read(bag, topic))
-        except ValueError as err:
-            fail(str(err))
+    if bag is not None:  # (a live bus: its scans arrive once it is open)
+        for topic in scan_topics:
+            try:
+                tracks.append(ScanTrack.read(bag, topic))
+            except ValueError as err:
+                fail(str(err))
     try:
         page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}")
     except PortInUseError as err:
         fail(str(err))
     except OSError as err:
         fail(f"cannot serve on {host}:{port}: {err}")
-    page.set_visuals(visuals)
+    page.set_visuals(robot.visuals)
+    page.set_notes(robot.notes)
     stop = threading.Event()
-    if bag is not None:  # (a live bus: run_live's own handlers)
-        def on_signal(_sig: int, _frame: FrameType | None) -> None:
-            stop.set()
 
-        signal.signal(signal.SIGINT, on_signal)
-        signal.signal(signal.SIGTERM, on_signal)
+    def on_signal(_sig: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    # before the address is printed: a Ctrl-C any time after it ends with status 0 (a
+    # live bus replaces them by run_live's own once attached, and checks ``stop`` then)
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
     bridge = None
     if foxglove_port is not None:
@@ -133,7 +144,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         if bag is not None:
             _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop)
         else:
-            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout)
+            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
+                       stop)
     finally:
         page.close()
         if bridge is not None:
@@ -152,27 +164,28 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     src = BagSource(bag)
     timeline = BagTimeline.read(bag)
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
-                       paused=paused, rate=rate, statistics=src.summary(), scans=tracks,
+                       paused=paused, rate=rate, summary=src.summary(), scans=tracks,
                        foxglove=bridge)
     player.render()
     player.run(stop)
 
 
-def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float) -> None:
-    import anyio
-
+def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
+               scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
+               stop: threading.Event) -> None:
     from tfbus.cli._sources import BusSource, live, run_live
-    from tfbus.view.player import MAX_DRAW_HZ, draw_live
+    from tfbus.view.live import LiveView
     from tfbus.view.server import TfPage
 
     assert isinstance(page, TfPage)
     src = BusSource(spec, name="tfbus-view")
+    view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
+                    frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge)
 
     async def body() -> None:
-        while True:
-            draw_live(page, src.buffer(), src.summary(), src.clock.now(),
-                      fixed_frame=fixed_frame, frame_timeout=frame_timeout)
-            await anyio.sleep(1.0 / MAX_DRAW_HZ)
+        assert src.bus is not None
+        if not stop.is_set():  # a signal before run_live's handlers: stop now
+            await view.run(src.bus)
 
     code = run_live(lambda: live(src, None, body))
     if code:

@@ -10,12 +10,13 @@ warning status message (tf2's text), cleared when it can be placed again.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable
 from typing import Any
 
 from tfbus.messages import TransformStamped
 from tfbus.sensor_msgs import LaserScan
-from tfbus.topics import TF_TOPIC
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.view.scene import Scene
 
 __all__ = ["FoxgloveBridge"]
@@ -36,24 +37,36 @@ class FoxgloveBridge:
     def __init__(self, host: str = "127.0.0.1", port: int = 8765) -> None:
         import foxglove
         from foxglove.channels import FrameTransformsChannel
-        from foxglove.websocket import Capability
+        from foxglove.websocket import Capability, ServerListener
 
         self._fg: Any = foxglove
         self.context: Any = foxglove.Context()
+        self._static_wanted = threading.Event()
+        wanted = self._static_wanted
+
+        class _Listener(ServerListener):  # called on the SDK's thread
+            def on_subscribe(self, _client: Any, channel: Any) -> None:
+                if getattr(channel, "topic", None) == TF_STATIC_TOPIC:
+                    wanted.set()
+
         try:
             self.server: Any = foxglove.start_server(
                 name="tfbus view", host=host, port=port, capabilities=[Capability.Time],
-                context=self.context)
+                server_listener=_Listener(), context=self.context)
         except Exception as err:  # the SDK raises its own RuntimeError for a bind failure
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {err}") from None
         self.port: int = int(self.server.port)
         self.tf: Any = FrameTransformsChannel(TF_TOPIC, context=self.context)
+        self.tf_static: Any = None
+        """The ``/tf_static`` channel, made by the first ``publish_transforms(static=True)``
+        (a live bus; a bag's static transforms go out on ``/tf``)."""
         self.scans: dict[str, Any] = {}
         self._status: dict[str, str] = {}
 
-    def publish_transforms(self, transforms: Iterable[TransformStamped], log_time_ns: int) -> None:
-        """Send transforms on ``/tf`` as one ``foxglove.FrameTransforms`` (log time: bag
-        or receive time, nanoseconds)."""
+    def publish_transforms(self, transforms: Iterable[TransformStamped], log_time_ns: int,
+                           *, static: bool = False) -> None:
+        """Send transforms on ``/tf`` (``/tf_static`` with ``static``) as one
+        ``foxglove.FrameTransforms`` (log time: bag or receive time, nanoseconds)."""
         from foxglove.messages import (
             FrameTransform,
             FrameTransforms,
@@ -70,8 +83,30 @@ class FoxgloveBridge:
                 parent_frame_id=t.header.frame_id, child_frame_id=t.child_frame_id,
                 translation=Vector3(x=v.x, y=v.y, z=v.z),
                 rotation=Quaternion(x=q.x, y=q.y, z=q.z, w=q.w)))
-        if out:
-            self.tf.log(FrameTransforms(transforms=out), log_time=log_time_ns)
+        if not out:
+            return
+        channel = self.tf
+        if static:
+            self.advertise_static()
+            channel = self.tf_static
+        channel.log(FrameTransforms(transforms=out), log_time=log_time_ns)
+
+    def advertise_static(self) -> None:
+        """Advertise ``/tf_static`` now (before any static transform arrives), so a client
+        can subscribe to it from the start."""
+        if self.tf_static is None:
+            from foxglove.channels import FrameTransformsChannel
+
+            self.tf_static = FrameTransformsChannel(TF_STATIC_TOPIC, context=self.context)
+
+    def take_static_request(self) -> bool:
+        """Whether a client subscribed to ``/tf_static`` since the last call (the latest
+        static transforms are then sent again: a late joiner gets them, as from a latched
+        topic)."""
+        if self._static_wanted.is_set():
+            self._static_wanted.clear()
+            return True
+        return False
 
     def scan_channel(self, topic: str) -> Any:
         """The ``foxglove.LaserScan`` channel of ``topic``, advertised on first use."""

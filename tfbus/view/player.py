@@ -37,7 +37,7 @@ class BagPlayer:
 
     def __init__(self, page: TfPage, timeline: BagTimeline, *, fixed_frame: str | None = None,
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT, paused: bool = False,
-                 rate: float = 1.0, statistics: TfSummary | None = None,
+                 rate: float = 1.0, summary: TfSummary | None = None,
                  scans: Sequence[ScanTrack] = (),
                  foxglove: FoxgloveBridge | None = None) -> None:
         if not 0.1 <= rate <= 10.0:
@@ -46,7 +46,7 @@ class BagPlayer:
         self.timeline = timeline
         self.fixed_frame = fixed_frame
         self.frame_timeout = frame_timeout
-        self.statistics = statistics
+        self.summary = summary
         self.scans = tuple(scans)
         self.foxglove = foxglove
         self._fg_upto = 0
@@ -105,7 +105,7 @@ class BagPlayer:
         scene = build_scene(core, fixed_frame=self.fixed_frame, now=t,
                             last_update=self.timeline.last_update(t),
                             frame_timeout=self.frame_timeout)
-        self.page.draw(scene, self.statistics)
+        self.page.draw(scene, self.summary)
         self.scan_errors.clear()
         for track, projector in zip(self.scans, self._projectors, strict=True):
             pts = None
@@ -164,15 +164,15 @@ class BagPlayer:
             stop.wait(period)
 
 
-def draw_live(page: TfPage, core: BufferCore, statistics: TfSummary, now: Time, *,
+def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
               fixed_frame: str | None = None,
               frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> Scene:
     """Draw a live buffer at its latest data; ages from each frame's last receive time
-    (``statistics``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``."""
+    (``summary``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``."""
     last = {name: Time.from_ns(fs.received[-1][0])
-            for name, fs in statistics.frames.items() if fs.received}
-    rates = {name: fs.recent_rate(now) for name, fs in statistics.frames.items()}
+            for name, fs in summary.frames.items() if fs.received}
+    rates = {name: fs.recent_rate(now) for name, fs in summary.frames.items()}
     scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
                         frame_timeout=frame_timeout)
-    page.draw(scene, statistics, rates)
+    page.draw(scene, summary, rates)
     return scene

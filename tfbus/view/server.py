@@ -1,9 +1,10 @@
 """The page of ``tfbus view``: a viser server drawing a :class:`~tfbus.view.scene.Scene`
 (needs the ``tfbus[view]`` extra).
 
-Per frame an axes triad (``scene.add_frame``) at its pose in the fixed frame with a text
-label of its id, a line from each child to its parent (coloured by :func:`fade`: full
-colour, fading to grey, hidden), a grid, and a side panel with the frame tree (parent,
+Per frame an axes triad at its pose in the fixed frame (x red, y green, z blue: line
+segments, so their colour can fade) with a text label of its id, a line from each child
+to its parent (axes and line coloured by :func:`~tfbus.view.scene.fade`, as rviz's TF
+display: full colour, fading to grey, hidden), a grid, and a side panel with the frame tree (parent,
 rate, age, broadcaster, static) and tf2's message for each frame that cannot be placed.
 Ids reach the page as text only: the panel is HTML built here with every id through
 :func:`html.escape` (control characters also written as ``\\xNN`` escapes), and scene
@@ -35,6 +36,11 @@ _UNSAFE = re.compile(r"[\x00-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069
 FULL_COLOUR = (230, 140, 20)
 """Colour of a fresh link line (RGB 0-255); it fades to :data:`GREY`."""
 GREY = (128, 128, 128)
+"""What a frame's axes and link line fade to at the frame timeout (rviz's TF display)."""
+AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
+"""Full colour of the x, y and z axis of a frame (RGB 0-255)."""
+AXES_LENGTH = 0.25
+"""Length of each drawn axis, metres."""
 
 
 def text(frame_id: object) -> str:
@@ -72,10 +78,35 @@ def _xyz(pose: TransformStamped) -> tuple[float, float, float]:
     return (v.x, v.y, v.z)
 
 
-def _mix(colour: float) -> tuple[int, int, int]:
-    r, g, b = (round(grey + (full - grey) * colour)
-               for full, grey in zip(FULL_COLOUR, GREY, strict=True))
+def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, int, int]:
+    """``full`` faded towards :data:`GREY`: ``colour`` 1.0 is ``full``, 0.0 grey."""
+    r, g, b = (round(grey + (f - grey) * colour) for f, grey in zip(full, GREY, strict=True))
     return (r, g, b)
+
+
+def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """sRGB 0-255 as the linear 0-255 values viser's per-vertex line colours are (its
+    client divides by 255 and three.js encodes the output as sRGB): sent so, a colour is
+    shown as given (the IEC 61966-2-1 transfer function)."""
+    c = srgb.astype(np.float64) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    out: npt.NDArray[np.uint8] = np.round(lin * 255.0).astype(np.uint8)
+    return out
+
+
+def _axes(pose: TransformStamped) -> list[list[tuple[float, float, float]]]:
+    """The x, y, z axis segments of a frame at ``pose``: origin to origin + R e_k x
+    :data:`AXES_LENGTH`."""
+    o = _xyz(pose)
+    q = pose.transform.rotation
+    x, y, z, w = q.x, q.y, q.z, q.w
+    cols = (  # the columns of the rotation matrix of (x, y, z, w)
+        (1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)),
+        (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
+        (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)),
+    )
+    return [[o, (o[0] + AXES_LENGTH * c[0], o[1] + AXES_LENGTH * c[1],
+                 o[2] + AXES_LENGTH * c[2])] for c in cols]
 
 
 class TfPage:
@@ -119,10 +150,20 @@ class TfPage:
         """Point cloud handle per scan topic (``points``: ``(N, 3) float32``)."""
         self.links: Any = None
         self.link_count = 0
+        self.axes: Any = None
+        """The line segments of every visible frame's axes (``points``, ``colors``:
+        ``(3 N, 2, 3)``), three rows per frame in :attr:`axes_rows`' order."""
+        self.axes_count = 0
+        self.axes_rows: dict[str, int] = {}
+        """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
+        self._axes_srgb: list[list[tuple[int, int, int]]] = []
         gui = self.server.gui
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
         self.tree = gui.add_html("")
+        self.notes = gui.add_html("")
+        self.notes_html = ""
+        """The notes' HTML as last sent (:meth:`set_notes`)."""
         self.panel_html = ""
         """The frame tree panel's HTML as last sent."""
         self.status_html = ""
@@ -149,12 +190,14 @@ class TfPage:
         poses = {f.frame_id: f.pose for f in scene.frames}
         segments: list[list[tuple[float, float, float]]] = []
         colours: list[list[tuple[int, int, int]]] = []
+        axes: list[list[tuple[float, float, float]]] = []
+        axes_colours: list[list[tuple[int, int, int]]] = []
+        rows: dict[str, int] = {}
         for f in scene.frames:
             handle = self.frames.get(f.frame_id)
             if handle is None:
                 n = len(self.frames)
-                handle = scene_api.add_frame(f"/tf/f{n}", axes_length=0.25, axes_radius=0.01,
-                                             origin_radius=0.02)
+                handle = scene_api.add_frame(f"/tf/f{n}", show_axes=False)
                 self.frames[f.frame_id] = handle
                 self.labels[f.frame_id] = scene_api.add_label(f"/tf/f{n}/label", text(f.frame_id))
                 self._attach(f.frame_id, f"/tf/f{n}")
@@ -162,12 +205,23 @@ class TfPage:
                 handle.position = _xyz(f.pose)
                 handle.wxyz = _wxyz(f.pose)
             handle.visible = f.visible
+            if f.visible and f.pose is not None:
+                rows[f.frame_id] = len(axes)
+                axes.extend(_axes(f.pose))
+                for full in AXES_COLOURS:
+                    c = _mix(f.colour if f.colour is not None else 0.0, full)
+                    axes_colours.append([c, c])
             parent_pose = poses.get(f.parent) if f.parent is not None else None
             if f.visible and f.pose is not None and parent_pose is not None:
                 segments.append([_xyz(f.pose), _xyz(parent_pose)])
                 c = _mix(f.colour if f.colour is not None else 0.0)
                 colours.append([c, c])
-        self._draw_links(segments, colours)
+        self.links, self.link_count = self._segments(
+            "/links", self.links, self.link_count, segments, colours, 2.0)
+        self.axes, self.axes_count = self._segments(
+            "/axes", self.axes, self.axes_count, axes, axes_colours, 4.0)
+        self.axes_rows = rows
+        self._axes_srgb = axes_colours
         if not self.camera_set:
             self.aim(scene)
         self._draw_panel(scene, stats, rates)
@@ -183,6 +237,14 @@ class TfPage:
             for v in visuals:
                 self._pending_visuals.setdefault(v.link, []).append(v)
 
+    def set_notes(self, notes: Sequence[str]) -> None:
+        """Lines under the frame tree (a URDF mesh not found or unreadable), as text."""
+        with self._lock:
+            value = "".join(f"<p>{_h(n)}</p>" for n in notes)
+            if value != self.notes_html:
+                self.notes_html = value
+                self.notes.content = value
+
     def _attach(self, frame_id: str, node: str) -> None:
         scene_api = self.server.scene
         for k, v in enumerate(self._pending_visuals.pop(frame_id, [])):
@@ -193,6 +255,9 @@ class TfPage:
             elif v.kind == "cylinder":
                 h = scene_api.add_cylinder(name, radius=v.size[0], height=v.size[1],
                                            color=v.rgb, position=v.xyz, wxyz=v.wxyz)
+            elif v.kind == "mesh" and v.vertices is not None and v.faces is not None:
+                h = scene_api.add_mesh_simple(name, v.vertices, v.faces, color=v.rgb,
+                                              position=v.xyz, wxyz=v.wxyz)
             else:
                 h = scene_api.add_icosphere(name, radius=v.size[0], color=v.rgb,
                                             position=v.xyz, wxyz=v.wxyz)
@@ -213,24 +278,37 @@ class TfPage:
         cam.position = tuple(centre + np.array([-0.9, -0.9, 0.8]) * size)
         self.camera_set = True
 
-    def _draw_links(self, segments: list[list[tuple[float, float, float]]],
-                    colours: list[list[tuple[int, int, int]]]) -> None:
+    def _segments(self, name: str, handle: Any, count: int,
+                  segments: list[list[tuple[float, float, float]]],
+                  colours: list[list[tuple[int, int, int]]],
+                  thickness: float) -> tuple[Any, int]:
+        """Show ``segments`` as the line-segments node ``name`` (re-made when their number
+        changes, else updated in place; hidden when there are none)."""
         if not segments:
-            if self.links is not None:
-                self.links.visible = False
-            return
+            if handle is not None:
+                handle.visible = False
+            return handle, count
         pts = np.asarray(segments, dtype=np.float32)
-        cols = np.asarray(colours, dtype=np.uint8)
-        if self.links is None or len(segments) != self.link_count:
-            if self.links is not None:
-                self.links.remove()
-            self.links = self.server.scene.add_line_segments(
-                "/links", pts, cols, thickness=2.0, thickness_units="screen")
-            self.link_count = len(segments)
+        cols = _to_linear(np.asarray(colours, dtype=np.uint8))
+        if handle is None or len(segments) != count:
+            if handle is not None:
+                handle.remove()
+            handle = self.server.scene.add_line_segments(
+                name, pts, cols, thickness=thickness, thickness_units="screen")
         else:
-            self.links.points = pts
-            self.links.colors = cols
-            self.links.visible = True
+            handle.points = pts
+            handle.colors = cols
+            handle.visible = True
+        return handle, len(segments)
+
+    def axes_colours(self, frame_id: str) -> tuple[tuple[int, int, int], ...] | None:
+        """The colours (sRGB 0-255, as shown) of ``frame_id``'s x, y, z axes as last
+        drawn; ``None`` when the frame is not drawn (hidden, unplaced). The scene node
+        (:attr:`axes` ``.colors``) holds them as viser's linear values."""
+        row = self.axes_rows.get(frame_id)
+        if row is None or self.axes is None or not self.axes.visible:
+            return None
+        return tuple((c[0][0], c[0][1], c[0][2]) for c in self._axes_srgb[row:row + 3])
 
     def _draw_panel(self, scene: Scene, stats: TfSummary | None,
                     rates: Mapping[str, float] | None) -> None:

@@ -4,10 +4,10 @@ command's errors."""
 
 from __future__ import annotations
 
+import math
 import socket
 import sys
 import urllib.request
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -25,17 +25,8 @@ from tfbus.view.player import BagPlayer
 from tfbus.view.server import PortInUseError, TfPage
 from tfbus.view.timeline import BagTimeline
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_scene_numbers_equal_lookup_transform(page: TfPage) -> None:
@@ -207,13 +198,68 @@ def test_scan_topic_missing_is_a_usage_error() -> None:
     assert result.stderr.strip().endswith(
         "no LaserScan topic of that name in " + str(LASER) +
         " (scan topics: /hokuyo_back_scan, /scan)")
-    result = CliRunner().invoke(cli, ["view", "--scan", "/scan", "--port", "0"])
-    assert result.exit_code == 2 and "--scan needs --bag" in result.stderr
 
 
-def test_foxglove_needs_a_bag() -> None:
-    result = CliRunner().invoke(cli, ["view", "--foxglove", "0", "--port", "0"])
-    assert result.exit_code == 2 and "--foxglove needs --bag" in result.stderr
+def test_bad_bus_is_one_usage_line() -> None:
+    result = CliRunner().invoke(cli, ["view", "--bus", "nope", "--scan", "/scan",
+                                      "--port", "0"])
+    assert result.exit_code == 2
+    assert result.stderr.count("\n") == 1 and "nope" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_command_live_bus_with_scan_and_foxglove() -> None:
+    """``tfbus view --bus memory --scan /scan --foxglove PORT`` as a process: both
+    addresses printed, the page served, the Foxglove server advertising /tf, /tf_static and
+    /scan to a client (subprotocol foxglove.sdk.v1); SIGINT ends it with status 0."""
+    import asyncio
+    import json
+    import select
+    import signal
+    import subprocess
+
+    import anyio
+    import websockets
+
+    ports = []
+    for _ in range(2):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            ports.append(s.getsockname()[1])
+    exe = Path(sys.executable).with_name("tfbus")
+    proc = subprocess.Popen([str(exe), "view", "--bus", "memory", "--scan", "/scan",
+                             "--port", str(ports[0]), "--foxglove", str(ports[1])],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+    async def advertised() -> set[str]:
+        topics: set[str] = set()
+        async with websockets.connect(f"ws://127.0.0.1:{ports[1]}",
+                                      subprotocols=["foxglove.sdk.v1"], close_timeout=1) as ws:
+            with anyio.fail_after(10):
+                while not {"/tf", "/tf_static", "/scan"} <= topics:
+                    m = json.loads(await ws.recv())
+                    if m["op"] == "advertise":
+                        topics |= {c["topic"] for c in m["channels"]}
+        return topics
+
+    try:
+        assert proc.stderr is not None
+        lines = []
+        for _ in range(2):
+            ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
+            assert ready, "tfbus view printed nothing in 60 s"
+            lines.append(proc.stderr.readline().strip())
+        assert lines == [f"tfbus view: http://127.0.0.1:{ports[0]}/",
+                         f"tfbus view: Foxglove ws://127.0.0.1:{ports[1]}"]
+        with urllib.request.urlopen(f"http://127.0.0.1:{ports[0]}/", timeout=10) as resp:
+            assert resp.status == 200
+        assert asyncio.run(advertised()) >= {"/tf", "/tf_static", "/scan"}
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
 
 
 def test_command_serves_a_bag_and_stops_on_sigint() -> None:
@@ -244,3 +290,48 @@ def test_command_serves_a_bag_and_stops_on_sigint() -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=10)
+
+
+def test_axes_fade_to_grey_then_hide_as_rviz(page: TfPage) -> None:
+    """rviz's TF display: full colour for a third of the frame timeout, then fading to
+    grey, then hidden; the axes' colours and ends are read back from the server's node."""
+    from tfbus.clock import ManualClock
+    from tfbus.view.server import AXES_COLOURS
+
+    clock = ManualClock(Time.from_sec(100.0))
+    core = BufferCore()
+    s = math.sqrt(0.5)  # "a" rotated +90 degrees about z: its x axis points along +y
+    core.set_transform(TransformStamped(Header(clock.now(), "world"), "a", Transform(
+        Vector3(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, s, s))), "test")
+    last = {"a": clock.now()}
+
+    def drawn() -> tuple[tuple[int, int, int], ...] | None:
+        page.draw(build_scene(core, fixed_frame="world", now=clock.now(), last_update=last))
+        shown = page.axes_colours("a")
+        if shown is not None:  # what the scene node holds: viser's linear colour values
+            row = page.axes_rows["a"]
+            held = np.asarray(page.axes.colors)[row:row + 3]
+            lin = [[round(255 * ((c / 255 + 0.055) / 1.055) ** 2.4) for c in rgb]
+                   for rgb in shown]
+            assert held.tolist() == [[rgb, rgb] for rgb in lin]
+        return shown
+
+    assert drawn() == AXES_COLOURS == ((230, 30, 30), (30, 190, 30), (40, 80, 240))
+    assert np.asarray(page.axes.colors)[page.axes_rows["a"]][0].tolist() == [202, 3, 3]
+    row = page.axes_rows["a"]
+    ends = np.asarray(page.axes.points)[row:row + 3]
+    np.testing.assert_allclose(ends, [
+        [[1.0, 2.0, 3.0], [1.0, 2.25, 3.0]],   # x along +y
+        [[1.0, 2.0, 3.0], [0.75, 2.0, 3.0]],   # y along -x
+        [[1.0, 2.0, 3.0], [1.0, 2.0, 3.25]],   # z up
+    ], atol=1e-6)
+    clock.advance_nowait(5.0)   # the first third of 15 s: still full colour
+    assert drawn() == AXES_COLOURS
+    clock.advance_nowait(5.0)   # 10 s: half way to grey (128, 128, 128)
+    assert drawn() == ((179, 79, 79), (79, 159, 79), (84, 104, 184))
+    clock.advance_nowait(5.0)   # 15 s: grey
+    assert drawn() == ((128, 128, 128),) * 3
+    clock.advance_nowait(0.5)   # beyond the timeout: hidden
+    assert drawn() is None and page.frames["a"].visible is False
+    last["a"] = clock.now()     # it comes back in full colour
+    assert drawn() == AXES_COLOURS and page.frames["a"].visible is True

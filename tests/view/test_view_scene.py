@@ -14,7 +14,7 @@ from tfbus.clock import ManualClock
 from tfbus.core import BufferCore
 from tfbus.view import build_scene, default_fixed_frame, fade
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 BAG = DATA / "webviz_turtle_tf_example.bag"
 S2 = math.sqrt(0.5)
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 import asyncio
 import json
 import struct
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +28,7 @@ from tfbus.view.scans import ScanTrack  # noqa: E402
 from tfbus.view.server import TfPage  # noqa: E402
 from tfbus.view.timeline import BagTimeline  # noqa: E402
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 LASER = DATA / "laser" / "drl_guardian_3.bag"
 
@@ -146,19 +145,11 @@ async def collect(port: int, probe_ch: Any, topics: list[str], act: Any, want: i
                     sub, log_time = struct.unpack_from("<IQ", msg, 1)
                     if sub == 0:
                         continue  # a probe still in flight
-                    key = "tf" if subs[sub] == "/tf" else "scan"
+                    key = "tf" if subs[sub] in ("/tf", "/tf_static") else "scan"
                     got[key].append((log_time, msg[13:]))
+                    got.setdefault(subs[sub], []).append((log_time, msg[13:]))
     got["channels"] = channels
     return got
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_foxglove_client_receives_the_bags_transforms(page: TfPage) -> None:
@@ -232,3 +223,88 @@ def test_scans_as_foxglove_laser_scan(page: TfPage) -> None:
     assert _one(f, 4, 0.0) == pytest.approx(float(scan.angle_min))
     ranges = struct.unpack(f"<{len(f[6][0]) // 8}d", f[6][0])
     np.testing.assert_array_equal(np.asarray(ranges), scan.ranges.astype(np.float64))
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def anyio_backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+@pytest.mark.anyio
+async def test_live_bus_relayed_to_foxglove(page: TfPage) -> None:
+    """``tfbus view --bus --scan --foxglove``: /tf and /tf_static from a live bus reach a
+    Foxglove client as foxglove.FrameTransforms (each equal to lookup_transform), the
+    static one sent again for the client that subscribed after it was published (a latched
+    topic), the scan as foxglove.LaserScan, the clock's time as server time."""
+    from test_view_live import scan
+
+    from tfbus import Header, Quaternion, Transform, TransformStamped, Vector3
+    from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
+    from tfbus.listener import TransformListener
+    from tfbus.monitor import MonitoredSink, TfSummary
+    from tfbus.view.live import LiveView
+
+    clock = ManualClock(Time.from_sec(10.3))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+
+    def tf(parent: str, child: str, sec: float, x: float) -> TransformStamped:
+        return TransformStamped(Header(Time.from_sec(sec), parent), child,
+                                Transform(Vector3(x, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0)))
+
+    try:
+        view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"], foxglove=bridge)
+        async with Bus() as bus, TransformListener(sink, bus, clock=clock), \
+                anyio.create_task_group() as tg:
+            await tg.start(view.follow, bus)
+            await StaticTransformBroadcaster(bus).send_transform(
+                tf("base_link", "base_laser", 0.0, 0.1))  # before any client connects
+            with anyio.fail_after(5):
+                while view.relayed < 1:
+                    await anyio.sleep(0)
+            dyn = TransformBroadcaster(bus)
+
+            async def step() -> None:
+                await dyn.send_transform(tf("odom", "base_link", 10.0, 1.0))
+                await dyn.send_transform(tf("odom", "base_link", 10.2, 3.0))
+                await bus.publish("/scan", scan(10.1))
+                with anyio.fail_after(5):
+                    while view.relayed < 3:
+                        await anyio.sleep(0)
+                    view.render()  # the fixed frame (odom) is known: the scan's filter starts
+                    await view.wait_passed("/scan", 1)
+                view.render()
+
+            got = await anyio.to_thread.run_sync(lambda: asyncio.run(collect(
+                bridge.port, probe_channel(bridge), ["/tf", "/tf_static", "/scan"],
+                lambda: anyio.from_thread.run(step), 3, want_scans=1)))
+            tg.cancel_scope.cancel()
+        assert got["channels"]["/tf_static"]["schemaName"] == "foxglove.FrameTransforms"
+        assert got["channels"]["/scan"]["schemaName"] == "foxglove.LaserScan"
+        assert [lt for lt, _ in got["/tf"]] == [clock.now().ns] * 2
+        assert got["time"][-1] == clock.now().ns
+        seen = []
+        for topic in ("/tf", "/tf_static"):
+            for _, payload in got[topic]:
+                for item in fields(payload)[1]:
+                    stamp, parent, child, xyz, xyzw = frame_transform(item)
+                    ref = buffer.lookup_transform(parent, child, Time.from_ns(stamp))
+                    v, q = ref.transform.translation, ref.transform.rotation
+                    assert xyz == (v.x, v.y, v.z) and xyzw == (q.x, q.y, q.z, q.w)
+                    seen.append((topic, parent, child, stamp, xyz[0]))
+        assert seen == [("/tf", "odom", "base_link", 10_000_000_000, 1.0),
+                        ("/tf", "odom", "base_link", 10_200_000_000, 3.0),
+                        ("/tf_static", "base_link", "base_laser", 0, 0.1)]
+        f = fields(got["scan"][0][1])
+        assert f[2][0].decode() == "base_laser"
+        ranges = struct.unpack(f"<{len(f[6][0]) // 8}d", f[6][0])
+        assert ranges == (1.0, 2.0, 3.0)
+        assert got["status"] == []  # every frame placed in odom
+    finally:
+        bridge.close()
+        buffer.close()

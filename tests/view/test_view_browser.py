@@ -15,7 +15,6 @@ import re
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +32,7 @@ from tfbus.view.player import BagPlayer, draw_live  # noqa: E402
 from tfbus.view.server import TfPage  # noqa: E402
 from tfbus.view.timeline import BagTimeline  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -87,15 +86,6 @@ def row(page_dom: str, frame_text: str) -> list[str]:
     m = re.search(r"<tr><td>" + re.escape(frame_text) + r"</td>(.*?)</tr>", page_dom)
     assert m is not None, f"no row for {frame_text!r}"
     return [frame_text, *re.findall(r"<td>(.*?)</td>", m.group(1))]
-
-
-@pytest.fixture
-def page() -> Iterator[TfPage]:
-    p = TfPage("127.0.0.1", 0)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:
@@ -213,3 +203,44 @@ async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
         assert row(second, "arm")[-1] == "ok"
         assert tuple(page.frames["arm"].position) == pytest.approx((1.6, 0.0, 0.0))
     buffer.close()
+
+
+def _reds(shot: Any) -> int:
+    """Pixels of the x axes' red (230, 30, 30; viser's thin lines blend it lighter):
+    red well above green and blue, never a grey or the links' orange; in the scene only
+    (viser's orientation gizmo, bottom left, and the panel are left out)."""
+    rgb = shot.convert("RGB").crop((150, 150, 940, 700))
+    return sum(n for n, (r, g, b) in (rgb.getcolors(maxcolors=1 << 24) or [])
+               if r - max(g, b) > 80)
+
+
+def _most_reds(exe: str, url: str, path: Path) -> int:
+    """:func:`_reds` of the more complete of two screenshots: the viser client fades its
+    scene in after loading, and on a loaded machine Chromium's virtual-time budget can end
+    before that is done (paler reds). An upper bound for a shot that must have none."""
+    return max(_reds(screenshot(exe, url, path)) for _ in range(2))
+
+
+def test_axes_fade_to_grey_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:
+    """rviz's fade as the browser draws it: fresh frames have red x axes on screen; at the
+    timeout the same frames are grey (no red pixel left in the scene)."""
+    from tfbus.view import build_scene
+
+    clock = ManualClock(Time.from_sec(100.0))
+    core = BufferCore()
+    for k, child in enumerate(("a", "b", "c")):
+        core.set_transform(TransformStamped(
+            Header(clock.now(), "world"), child,
+            Transform(Vector3(0.4 * k, 0.3, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0))), "bc")
+    # every frame updated now (the root too, as when a broadcaster sends it)
+    last = dict.fromkeys(("world", "a", "b", "c"), clock.now())
+    url = f"http://127.0.0.1:{page.port}/"
+    page.draw(build_scene(core, now=clock.now(), last_update=last, frame_timeout=3.0))
+    fresh = _most_reds(chromium, url, tmp_path / "fresh.png")
+    clock.advance_nowait(3.0)  # silent for the whole timeout: grey, still drawn
+    page.draw(build_scene(core, now=clock.now(), last_update=last, frame_timeout=3.0))
+    assert [page.axes_colours(f) for f in ("world", "a", "b", "c")] == \
+        [((128, 128, 128),) * 3] * 4
+    grey = _most_reds(chromium, url, tmp_path / "grey.png")
+    assert fresh > 300    # four red x axes
+    assert grey < 10      # none left

@@ -1,0 +1,108 @@
+"""``tfbus view --bus SPEC --scan TOPIC`` (tfbus/view/live.py): LaserScans from a live bus
+wait for their transforms in a MessageFilter, are projected into the fixed frame and drawn,
+at most one projection per redraw; a bad message on the topic is counted and dropped."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import anyio
+import numpy as np
+import pytest
+
+pytest.importorskip("viser")
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.broadcaster import TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.clock import ManualClock
+from tfbus.laser import LaserProjection
+from tfbus.listener import TransformListener
+from tfbus.monitor import MonitoredSink, TfSummary
+from tfbus.sensor_msgs import LaserScan, read_points
+from tfbus.view.live import LiveView
+from tfbus.view.server import TfPage
+
+pytestmark = pytest.mark.anyio
+
+
+def odom_to_laser(sec: float, x: float) -> TransformStamped:
+    return TransformStamped(Header(Time.from_sec(sec), "odom"), "base_laser",
+                            Transform(Vector3(x, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+
+
+def scan(sec: float) -> LaserScan:
+    """Three beams at 0, 90 and 180 degrees, 10 ms apart (a 20 ms sweep)."""
+    return LaserScan(header=Header(Time.from_sec(sec), "base_laser"), angle_min=0.0,
+                     angle_max=math.pi, angle_increment=math.pi / 2, time_increment=0.01,
+                     scan_time=0.1, range_min=0.1, range_max=10.0,
+                     ranges=np.array([1.0, 2.0, 3.0], dtype=np.float32))
+
+
+def xyz(cloud: Any) -> np.ndarray:
+    pts = read_points(cloud, ["x", "y", "z"])
+    return np.stack([pts["x"], pts["y"], pts["z"]], axis=1)
+
+
+async def until(cond: Any) -> None:
+    """Let the bus deliver until ``cond()`` (bounded: 5 s, then the test fails)."""
+    with anyio.fail_after(5):
+        while not cond():
+            await anyio.sleep(0)
+
+
+async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> None:
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
+    feed = view.feeds["/scan"]
+    async with Bus() as bus, TransformListener(sink, bus, clock=clock), \
+            anyio.create_task_group() as tg:
+        await tg.start(view.follow, bus)
+        tfb = TransformBroadcaster(bus)
+        await tfb.send_transform(odom_to_laser(10.0, 1.0))
+        await until(lambda: stats.messages.get("/tf", 0) == 1)
+        assert view.render().fixed_frame == "odom"
+        assert feed.error == "/scan: no scan yet" and "/scan" not in page.clouds
+
+        await bus.publish("/scan", scan(10.1))  # its transforms (10.1, 10.12) are not there
+        await until(lambda: feed.received == 1)
+        view.render()
+        assert feed.passed == 0 and feed.drawn == 0 and "/scan" not in page.clouds
+        assert feed.error == "/scan: waiting for the transforms of 1 scan(s)"
+        assert "waiting for the transforms" in page.status_html
+
+        await tfb.send_transform(odom_to_laser(10.2, 3.0))  # now they can be interpolated
+        with anyio.fail_after(5):
+            await view.wait_passed("/scan", 1)
+        view.render()
+        assert feed.drawn == 1 and feed.error is None
+        drawn = np.asarray(page.clouds["/scan"].points)
+        # beam k at 10.1 + 0.01 k: the laser at x = 2.0, 2.1, 2.2 (laser_geometry's slerp
+        # between the first and last beam's transforms)
+        np.testing.assert_allclose(drawn, [[3.0, 0.0, 0.0], [2.1, 2.0, 0.0], [-0.8, 0.0, 0.0]],
+                                   atol=1e-5)
+        ref = LaserProjection().transform_laser_scan_to_point_cloud("odom", scan(10.1), buffer)
+        np.testing.assert_array_equal(drawn, xyz(ref).astype(np.float32))
+
+        await bus.publish("/scan", "not a LaserScan")  # a bad message: counted, dropped
+        await until(lambda: feed.bad == 1)
+
+        for k in range(5):  # five more scans between two redraws: one projection drawn
+            await bus.publish("/scan", scan(10.13 + 0.01 * k))
+        with anyio.fail_after(5):
+            await view.wait_passed("/scan", 6)
+        view.render()
+        view.render()
+        assert (feed.received, feed.passed, feed.bad, feed.dropped, feed.drawn) == (6, 6, 1, 0, 2)
+        newest = LaserProjection().transform_laser_scan_to_point_cloud("odom", scan(10.17),
+                                                                       buffer)
+        np.testing.assert_array_equal(np.asarray(page.clouds["/scan"].points),
+                                      xyz(newest).astype(np.float32))
+        assert page.clouds["/scan"].visible
+        tg.cancel_scope.cancel()
+    buffer.close()

@@ -1,0 +1,282 @@
+"""``tfbus view --bus SPEC``: the page (and Foxglove) following a live bus.
+
+:class:`LiveView` draws the buffer a :class:`~tfbus.listener.TransformListener` fills
+(:func:`~tfbus.view.player.draw_live`) at most :data:`~tfbus.view.player.MAX_DRAW_HZ`
+times a second and, from the same bus:
+
+* each ``--scan`` topic's ``sensor_msgs/LaserScan``\\ s, held back by a
+  :class:`~tfbus.filters.MessageFilter` (tf2_ros ``MessageFilter``, target: the fixed
+  frame, tolerance: the scan's sweep, as rviz's LaserScan display sets it) until the
+  transforms at the scan's first and last beam arrived, then projected into the fixed
+  frame with :class:`~tfbus.laser.LaserProjection` (laser_geometry's
+  ``transformLaserScanToPointCloud``) and drawn as a point cloud: only the newest scan that
+  passed is projected per redraw, so drawing is down-sampled to the redraw rate whatever
+  the scan rate;
+* with ``--foxglove``: ``/tf`` and ``/tf_static`` relayed as ``foxglove.FrameTransforms``
+  (log time: the receive time; the latest static transforms sent again whenever a client
+  subscribes to ``/tf_static``, as a latched topic), each scan as ``foxglove.LaserScan``,
+  the clock's time as the server time and tf's errors as statuses.
+
+A message of another type on a scan topic (or on ``/tf``) is counted in
+:attr:`ScanFeed.bad` (:attr:`LiveView.bad_tf`) and dropped.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import anyio
+
+from tfbus.clock import every
+from tfbus.filters import FilterFailureReason, MessageFilter
+from tfbus.laser import LaserProjection
+from tfbus.messages import TFMessage, TransformStamped
+from tfbus.sensor_msgs import LaserScan
+from tfbus.time import Duration
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPICS
+from tfbus.view.player import MAX_DRAW_HZ, draw_live
+from tfbus.view.scans import MAX_SCANS_BACK, project_scan
+from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene
+
+if TYPE_CHECKING:
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Bus
+    from tfbus.clock import Clock
+    from tfbus.monitor import TfSummary
+    from tfbus.subscription import Subscription
+    from tfbus.view.foxglove_bridge import FoxgloveBridge
+    from tfbus.view.server import TfPage
+
+__all__ = ["LiveView", "ScanFeed", "sweep"]
+
+
+def sweep(scan: LaserScan) -> Duration:
+    """Time from a scan's first beam to its last, ``(len(ranges) - 1) * time_increment``
+    (laser_geometry's end time; 0 for a scan without beams or time increment)."""
+    n = len(scan.ranges)
+    return Duration.from_sec(max(0.0, (n - 1) * float(scan.time_increment))) if n else \
+        Duration.from_ns(0)
+
+
+@dataclass
+class ScanFeed:
+    """One ``--scan`` topic of a live bus: counters, the scans that passed the filter
+    (newest last, at most :data:`~tfbus.view.scans.MAX_SCANS_BACK`) and what is drawn."""
+
+    topic: str
+    received: int = 0
+    """LaserScans received."""
+    bad: int = 0
+    """Messages of another type on the topic: counted and dropped."""
+    passed: int = 0
+    """Scans the MessageFilter let through (their transforms arrived)."""
+    dropped: int = 0
+    """Scans the MessageFilter dropped (queue full, too old, malformed)."""
+    drawn: int = 0
+    """Projections drawn (at most one per redraw)."""
+    error: str | None = None
+    """Why nothing is drawn now (tf2's message, no scan yet), else None."""
+    ready: deque[LaserScan] = field(default_factory=lambda: deque(maxlen=MAX_SCANS_BACK))
+    _shown: tuple[int, str] | None = None
+
+
+class _ScanSource:
+    """The LaserScans of a subscription (anything else counted as bad and dropped), one
+    of them put back in front (the first, read to size the filter's tolerance)."""
+
+    def __init__(self, sub: Subscription[Any], feed: ScanFeed, view: LiveView) -> None:
+        self._sub = sub
+        self._feed = feed
+        self._view = view
+        self._front: list[LaserScan] = []
+
+    def push_back(self, scan: LaserScan) -> None:
+        self._front.append(scan)
+
+    def __aiter__(self) -> _ScanSource:
+        return self
+
+    async def __anext__(self) -> LaserScan:
+        if self._front:
+            return self._front.pop()
+        while True:
+            msg = await self._sub.__anext__()
+            if isinstance(msg, LaserScan):
+                self._feed.received += 1
+                self._view._relay_scan(self._feed.topic, msg)
+                return msg
+            self._feed.bad += 1
+
+
+class LiveView:
+    """What ``tfbus view --bus`` draws, from one bus.
+
+    Args:
+        page: the page to draw on.
+        buffer: the transforms (filled by a TransformListener on the same bus).
+        summary: receive times and rates per frame (a MonitoredSink's).
+        clock: ages, log times and the Foxglove server time.
+        fixed_frame: the frame at the origin (None: the root of the largest tree).
+        frame_timeout: seconds, as :func:`~tfbus.view.scene.fade`.
+        scan_topics: LaserScan topics to draw.
+        foxglove: a Foxglove server to relay ``/tf``, ``/tf_static`` and the scans to.
+    """
+
+    def __init__(self, page: TfPage, buffer: Buffer, summary: TfSummary, clock: Clock,
+                 *, fixed_frame: str | None = None,
+                 frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
+                 scan_topics: Sequence[str] = (),
+                 foxglove: FoxgloveBridge | None = None) -> None:
+        self.page = page
+        self.buffer = buffer
+        self.summary = summary
+        self.clock = clock
+        self.fixed_frame = fixed_frame
+        self.frame_timeout = frame_timeout
+        self.foxglove = foxglove
+        self.feeds = {t: ScanFeed(t) for t in dict.fromkeys(scan_topics)}
+        """The scan topics' feeds, by topic."""
+        self.bad_tf = 0
+        """Messages on /tf or /tf_static that are not TFMessages (relay only)."""
+        self.relayed = 0
+        """TFMessages relayed to Foxglove."""
+        self.shown_fixed: str | None = None
+        """The fixed frame of the last redraw (the default one once it is known)."""
+        self._fixed_known = anyio.Event()
+        self._progress = anyio.Event()
+        self._projector = LaserProjection()
+        self._statics: dict[str, TransformStamped] = {}
+        if foxglove is not None:  # advertised before any message arrives
+            foxglove.advertise_static()
+            for topic in self.feeds:
+                foxglove.scan_channel(topic)
+
+    # ---------------------------------------------------------------- bus side
+
+    async def run(self, bus: Bus) -> None:
+        """Follow ``bus`` and redraw at most :data:`MAX_DRAW_HZ` times a second, until
+        cancelled."""
+        async with anyio.create_task_group() as tg:
+            await tg.start(self.follow, bus)
+            self.render()
+            # on the view's clock, a deadline every 1/30 s (an overrun skips ticks)
+            async for _ in every(1.0 / MAX_DRAW_HZ, clock=self.clock):
+                self.render()
+
+    async def follow(self, bus: Bus, *, task_status: Any = anyio.TASK_STATUS_IGNORED) -> None:
+        """Subscribe to the scan topics (and, with Foxglove, ``/tf`` and ``/tf_static``),
+        report started, then feed them until cancelled."""
+        async with anyio.create_task_group() as tg:
+            for feed in self.feeds.values():
+                sub = bus.subscribe(feed.topic, queue_size=10)
+                tg.start_soon(self._follow_scans, feed, _ScanSource(sub, feed, self))
+            if self.foxglove is not None:
+                for topic in TF_TOPICS:
+                    tg.start_soon(self._relay_tf, bus.subscribe(topic, queue_size=1000),
+                                  topic == TF_STATIC_TOPIC)
+            task_status.started()
+
+    def _changed(self) -> None:
+        self._progress.set()
+        self._progress = anyio.Event()
+
+    async def wait_passed(self, topic: str, count: int) -> None:
+        """Return once ``count`` scans of ``topic`` passed the filter (bound it with
+        ``anyio.fail_after``)."""
+        while self.feeds[topic].passed < count:
+            await self._progress.wait()
+
+    async def _follow_scans(self, feed: ScanFeed, source: _ScanSource) -> None:
+        try:
+            first = await source.__anext__()
+        except StopAsyncIteration:
+            return
+        source.push_back(first)
+        await self._fixed_known.wait()
+        target = self.shown_fixed
+        assert target is not None
+
+        def failed(_scan: LaserScan, _why: FilterFailureReason) -> None:
+            feed.dropped += 1
+
+        async with MessageFilter(self.buffer, target, source, queue_size=10,
+                                 tolerance=sweep(first), on_failure=failed) as mf:
+            async for scan in mf:
+                if self.shown_fixed is not None and self.shown_fixed != target:
+                    target = self.shown_fixed
+                    mf.set_target_frames(target)
+                feed.ready.append(scan)
+                feed.passed += 1
+                self._changed()
+
+    async def _relay_tf(self, sub: Subscription[Any], static: bool) -> None:
+        bridge = self.foxglove
+        assert bridge is not None
+        async for msg in sub:
+            if not isinstance(msg, TFMessage):
+                self.bad_tf += 1
+                continue
+            if static:
+                for t in msg.transforms:
+                    self._statics[t.child_frame_id] = t
+            bridge.publish_transforms(msg.transforms, self.clock.now().ns, static=static)
+            self.relayed += 1
+
+    def _relay_scan(self, topic: str, scan: LaserScan) -> None:
+        if self.foxglove is not None:
+            self.foxglove.publish_scan(topic, scan, self.clock.now().ns)
+
+    # ---------------------------------------------------------------- drawing
+
+    def render(self) -> Scene:
+        """One redraw: the frames at the buffer's latest data, the newest placeable scan
+        of each topic (projected only when it changed), and for Foxglove the server time,
+        the statuses and the static transforms a new subscriber asked for."""
+        now = self.clock.now()
+        scene = draw_live(self.page, self.buffer, self.summary, now,
+                          fixed_frame=self.fixed_frame, frame_timeout=self.frame_timeout)
+        if scene.fixed_frame is not None and scene.frames:
+            self.shown_fixed = scene.fixed_frame
+            self._fixed_known.set()
+        for feed in self.feeds.values():
+            self._draw_feed(feed, self.shown_fixed)
+        errors = [f.error for f in self.feeds.values() if f.error is not None]
+        if errors and scene.message is None:
+            self.page.set_status(f"fixed frame: {scene.fixed_frame}"
+                                 + "".join(f"   {e}" for e in errors))
+        bridge = self.foxglove
+        if bridge is not None:
+            if bridge.take_static_request() and self._statics:
+                bridge.publish_transforms(list(self._statics.values()), now.ns, static=True)
+            bridge.broadcast_time(now.ns)
+            bridge.publish_errors(scene)
+        return scene
+
+    def _draw_feed(self, feed: ScanFeed, fixed: str | None) -> None:
+        if fixed is None or not feed.ready:
+            feed.error = f"{feed.topic}: no scan yet" if not feed.received else \
+                f"{feed.topic}: waiting for the transforms of {feed.received} scan(s)"
+            self.page.draw_points(feed.topic, None)
+            return
+        key = (feed.passed, fixed)  # the newest scan that passed, and where it goes
+        if key == feed._shown:
+            return  # nothing new since the last redraw: nothing projected
+        first_error: str | None = None
+        for scan in reversed(feed.ready):
+            try:
+                pts = project_scan(self._projector, scan, fixed, self.buffer)
+            except Exception as err:  # tf2's TransformException, or a malformed scan
+                if first_error is None:
+                    first_error = f"{feed.topic}: {err}"
+                continue
+            self.page.draw_points(feed.topic, pts)
+            feed.drawn += 1
+            feed.error = None
+            feed._shown = key
+            return
+        feed.error = first_error
+        feed._shown = key
+        self.page.draw_points(feed.topic, None)
