@@ -1,4 +1,4 @@
-"""Build the compiled core (``tfbus/_ccore.pyx``, Cython), optionally; everything else is
+"""Build the compiled core (``tfbus/core/_ccore.pyx``, Cython), optionally; everything else is
 in pyproject.toml.
 
 The extension is an accelerator, never a requirement: tfbus has a pure-Python core with
@@ -43,7 +43,7 @@ REQUIRE_EXTENSIONS = _flag("TFBUS_REQUIRE_EXTENSIONS")
 
 _FALLBACK = """
 ========================================================================
-tfbus: the compiled core (tfbus._ccore) could not be built:
+tfbus: the compiled core (tfbus.core._ccore) could not be built:
     {error}
 tfbus is installed with its pure-Python core instead: same behaviour,
 slower lookups (tfbus.core.COMPILED is False). To get the compiled core,
@@ -118,7 +118,7 @@ def _extensions() -> list[Extension]:
     # tf2's numbers are reproduced bit for bit only if the compiler keeps each multiply
     # and add separately rounded: no fused multiply-add contraction.
     extra = [] if sys.platform == "win32" else ["-O2", "-ffp-contract=off"]
-    ext = Extension("tfbus._ccore", ["tfbus/_ccore.pyx"], extra_compile_args=extra)
+    ext = Extension("tfbus.core._ccore", ["tfbus/core/_ccore.pyx"], extra_compile_args=extra)
     return list(cythonize([ext], language_level=3))
 
 

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from tfbus import _pycore
 from tfbus import geometry as g
+from tfbus.core import _pycore
 from tfbus.messages import (
     Header,
     Point,

@@ -29,18 +29,11 @@ LAYERS: dict[str, int] = {
     "ratelimit": 0,
     "_version": 0,  # the distribution's version from package metadata
     # 1: the sans-I/O core (geometry and convert call the tf2 scalar math of the core that
-    # _backend chose: compiled _ccore or pure-Python _pycore, same behaviour)
+    # core/_select chose: compiled or pure-Python, same behaviour)
     "geometry": 1,
     "convert": 1,
-    "core": 1,
-    "core_text": 1,
-    "_backend": 1,
-    "_ccore": 1,
-    "_pycore": 1,
-    "cache": 1,
+    "core": 1,  # BufferCore, its text, batch values, velocity, caches, both twins
     "errors": 1,
-    "batch": 1,
-    "velocity": 1,
     # 2: the bus and time sources
     "bus": 2,
     "clock": 2,
@@ -50,7 +43,6 @@ LAYERS: dict[str, int] = {
     "buffer": 3,
     "listener": 3,
     "broadcaster": 3,
-    "batch_async": 3,
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
     "monitor": 4,
@@ -175,10 +167,10 @@ def _where(module: str, line: int) -> str:
 
 
 def test_the_package_is_found() -> None:
-    assert "tfbus.core" in MODULES and "tfbus._ccore" in MODULES and "tfbus" in MODULES
-    assert "tfbus.messages" in _graph()["tfbus._ccore"]  # the compiled core's import is seen
+    assert "tfbus.core" in MODULES and "tfbus.core._ccore" in MODULES and "tfbus" in MODULES
+    assert "tfbus.messages" in _graph()["tfbus.core._ccore"]  # the compiled core's import is seen
     # the one selection point imports both cores
-    assert {"tfbus._ccore", "tfbus._pycore"} <= set(_graph()["tfbus._backend"])
+    assert {"tfbus.core._ccore", "tfbus.core._pycore"} <= set(_graph()["tfbus.core._select"])
 
 
 def test_every_module_has_a_layer() -> None:

@@ -1,4 +1,4 @@
-"""The pure-Python core (``tfbus/_pycore.py``) against the compiled one (``tfbus/_ccore``),
+"""The pure-Python core (``tfbus/core/_pycore.py``) against the compiled one (``tfbus/_ccore``),
 side by side in one process: same results bit for bit, same exceptions and messages.
 
 * Scalar math (compose, inverse, quat_multiply, quat_rotate, slerp, compose_full) on
@@ -17,7 +17,7 @@ counts as equal to every NaN: IEEE 754 does not specify the sign and payload of 
 produced from NaN operands, and the compiled core's depend on the operand order the C
 compiler picks (it may rewrite ``-a * b + c`` as ``c - a * b``).
 
-Plus: which core is loaded and why (``tfbus._backend``), and the suite's core-level tests
+Plus: which core is loaded and why (``tfbus.core._select``), and the suite's core-level tests
 and the tf2 conformance corpus run again in a subprocess with ``TFBUS_PURE_PYTHON=1``.
 """
 
@@ -40,11 +40,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3, _backend, _pycore
-from tfbus.batch import BatchLookupMixin
-from tfbus.core import BufferCore
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.core import BufferCore, _pycore, _select
 
-_ccore = pytest.importorskip("tfbus._ccore", reason="the compiled core is not built here")
+_ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
 
 ROOT = Path(__file__).resolve().parents[1]
 CORES = {"compiled": _ccore, "pure": _pycore}
@@ -56,7 +55,7 @@ def _buffer_class(base: type) -> type[BufferCore]:
     """``BufferCore``'s own methods over the given core's ``CoreBase``."""
     skip = {"__dict__", "__weakref__"}
     body = {k: v for k, v in vars(BufferCore).items() if k not in skip}
-    return type("BufferCore", (BatchLookupMixin, base), body)
+    return type("BufferCore", (base,), body)
 
 
 BUFFERS = {name: _buffer_class(core.CoreBase) for name, core in CORES.items()}
@@ -115,7 +114,7 @@ def same(fn: Callable[[Any], Any], *cores: str) -> Any:
 
 
 def test_both_cores_export_the_same_names() -> None:
-    stub = (ROOT / "tfbus" / "_ccore.pyi").read_text()
+    stub = (ROOT / "tfbus" / "core" / "_ccore.pyi").read_text()
     declared = set(re.findall(r"^(?:def|class) (\w+)|^(\w+): Final", stub, re.M))
     names = {a or b for a, b in declared} - {""}
     public = {n for n in names if not n.startswith("_")}
@@ -127,15 +126,15 @@ def test_both_cores_export_the_same_names() -> None:
         else:
             assert getattr(_pycore, name).__doc__, f"_pycore.{name} has no docstring"
     own = {"COMPILED", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING", "core_description"}
-    assert set(_pycore.__all__) | own == set(_backend.__all__)
+    assert set(_pycore.__all__) | own == set(_select.__all__)
 
 
 def test_the_loaded_core_is_reported() -> None:
     import tfbus.core
 
-    assert tfbus.core.COMPILED is _backend.COMPILED
-    expected = _pycore if _backend.pure_python_requested() else _ccore
-    assert _backend.IMPLEMENTATION is expected
+    assert tfbus.core.COMPILED is _select.COMPILED
+    expected = _pycore if _select.pure_python_requested() else _ccore
+    assert _select.IMPLEMENTATION is expected
     assert tfbus.core.BufferCore.__mro__[-2] is expected.CoreBase
     assert tfbus.core.COMPILED is (expected is _ccore)
 
@@ -168,7 +167,7 @@ def test_backend_choice(
         # find the extension in the source tree for a submodule the copy lacks)
         "import sys; sys.meta_path[:] = [f for f in sys.meta_path "
         "if not getattr(f, '__module__', '').startswith('__editable__')]; "
-        "import tfbus.core as c, tfbus.cache as k, tfbus.batch as b; "
+        "import tfbus.core as c, tfbus.core.cache as k, tfbus.core._select as b; "
         "print(c.COMPILED, c.BufferCore.__mro__[-2].__module__, "
         "k.TimeCache.__module__, b.batch_lookup.__module__, c.__file__)"
     )
@@ -180,16 +179,16 @@ def test_backend_choice(
         cwd=top,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    module = "tfbus._ccore" if compiled else "tfbus._pycore"
+    module = "tfbus.core._ccore" if compiled else "tfbus.core._pycore"
     assert done.stdout.split() == [
-        str(compiled), module, module, module, str(top / "tfbus" / "core.py")
+        str(compiled), module, module, module, str(top / "tfbus" / "core" / "__init__.py")
     ]  # fmt: skip
 
 
 def test_a_broken_compiled_core_is_an_error_not_a_fallback() -> None:
     """An extension that exists but cannot load (here: a dependency it imports is
     missing) must fail loudly, not silently give the slower core."""
-    code = "import sys; sys.modules['tfbus.messages'] = None; import tfbus._backend"
+    code = "import sys; sys.modules['tfbus.messages'] = None; import tfbus.core._select"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120)  # fmt: skip
     assert done.returncode != 0
@@ -669,7 +668,7 @@ def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path)
     )  # fmt: skip
     tail = "\n".join(done.stdout.splitlines()[-30:])
     assert done.returncode == 0, tail + done.stderr[-3000:]
-    assert "tfbus core: pure-Python (tfbus._pycore), COMPILED=False" in done.stdout, tail
+    assert "tfbus core: pure-Python (tfbus.core._pycore), COMPILED=False" in done.stdout, tail
     cases = ElementTree.parse(report).getroot().iter("testcase")
     passed: dict[str, int] = {}
     for case in cases:

@@ -26,16 +26,18 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import anyio
 import anyio.lowlevel
+import numpy as np
+import numpy.typing as npt
 
-from tfbus.batch_async import AsyncBatchMixin
 from tfbus.clock import Clock, SystemClock, timeout_ns
 from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
+from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
+from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
 from tfbus.time import Duration, Time
-from tfbus.velocity import check_velocity_arguments
 
 if TYPE_CHECKING:
     from asyncio import AbstractEventLoop, Future
@@ -99,7 +101,7 @@ class _Waiter(Generic[_T]):
             future.set_result(None)
 
 
-class Buffer(AsyncBatchMixin, BufferCore):
+class Buffer(BufferCore):
     """A :class:`~tfbus.core.BufferCore` plus awaitable lookups (tf2_ros ``Buffer``).
 
     Args:
@@ -486,6 +488,71 @@ class Buffer(AsyncBatchMixin, BufferCore):
         return result
 
     # ------------------------------------------------------------------ velocity
+
+    # ------------------------------------------------------------------ batched waits
+
+    async def _wait_latest(
+        self,
+        target_frame: str,
+        source_frame: str,
+        times: npt.NDArray[np.int64],
+        timeout: float | Duration | None,
+    ) -> None:
+        """Wait until the latest of ``times`` can be looked up (nothing for no times).
+        Time 0 means "latest available": waiting for it waits for the frames to connect."""
+        if times.size:
+            await self.wait_for_transform(
+                target_frame, source_frame, Time.from_ns(int(times.max())), timeout
+            )
+
+    async def lookup_transforms_async(
+        self,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        timeout: float | Duration | None = None,
+        *,
+        errors: Errors = "raise",
+    ) -> TransformArray:
+        """:meth:`~tfbus.core.BufferCore.lookup_transforms`, first waiting (event-driven,
+        as :meth:`wait_for_transform`) until the latest of ``times`` can be looked up.
+        Data up to the latest time normally covers the earlier ones; a time that has
+        fallen out of the cache, or a gap inside the requested span, is reported by the
+        batched lookup as tf2's exception (or masked with ``errors="mask"``).
+
+        Args:
+            timeout: seconds (or a Duration) of the buffer's clock; None waits forever.
+
+        Raises:
+            TimeoutException: the latest time did not become available within ``timeout``.
+            ExtrapolationException: the latest time is older than the cache window.
+            TransformException subclasses, ValueError: as the synchronous lookup.
+        """
+        t = as_times(times)
+        await self._wait_latest(target_frame, source_frame, t, timeout)
+        return self.lookup_transforms(target_frame, source_frame, t, errors=errors)
+
+    async def transform_points_async(
+        self,
+        points: npt.ArrayLike,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        timeout: float | Duration | None = None,
+        *,
+        errors: Errors = "raise",
+    ) -> npt.NDArray[np.float64]:
+        """:meth:`~tfbus.core.BufferCore.transform_points` (each ``(N, 3)`` point, metres,
+        at its own time), first waiting until the latest of ``times`` can be looked up.
+
+        Raises: as :meth:`lookup_transforms_async`; ValueError for malformed points.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+        t = as_times(times, p.shape[0])
+        await self._wait_latest(target_frame, source_frame, t, timeout)
+        return self.transform_points(p, target_frame, source_frame, t, errors=errors)
 
     async def lookup_velocity_async(
         self,

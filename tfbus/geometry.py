@@ -17,7 +17,7 @@ Formulas:
 * :func:`compose`, :func:`inverse`, :func:`rotate_vectors`, :func:`apply_transform` and
   :func:`quat_multiply` evaluate tf2's expressions (``tf2/LinearMath/Quaternion.h``
   ``operator*`` and ``quatRotate``, ``tf2/src/buffer_core.cpp`` ``TransformAccum``) in the
-  same order as the core's scalar math (:mod:`tfbus._ccore` or :mod:`tfbus._pycore`): row
+  same order as the core's scalar math (:mod:`tfbus.core._ccore` or :mod:`tfbus.core._pycore`): row
   by row, results are bit-for-bit equal to the
   scalar ones that :class:`~tfbus.core.BufferCore` computes. One quaternion against many
   vectors or points uses the equivalent 3x3 matrix instead (KDL's
@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from transforms3d import euler as _t3d_euler
 from transforms3d import quaternions as _t3d_quat
 
-from tfbus import _backend as _core
+from tfbus.core import _select as _core
 from tfbus.messages import (
     Point,
     PointStamped,
@@ -283,7 +283,7 @@ def compose(
         ValueError: wrong shapes, or batches of different N.
 
     Source: ``tf2/src/buffer_core.cpp`` ``TransformAccum::accum``;
-    :func:`tfbus._ccore.compose` gives bit-identical numbers for one transform.
+    :func:`tfbus.core._ccore.compose` gives bit-identical numbers for one transform.
     """
     ta = _as_array(translation_a, 3, "translation_a")
     qa = _as_array(rotation_a, 4, "rotation_a")
@@ -308,7 +308,7 @@ def inverse(translation: npt.ArrayLike, rotation: npt.ArrayLike) -> tuple[Array,
         ValueError: wrong shapes, or batches of different N.
 
     Source: ``tf2/src/buffer_core.cpp`` ``TransformAccum::finalize``;
-    :func:`tfbus._ccore.inverse`.
+    :func:`tfbus.core._ccore.inverse`.
     """
     t = _as_array(translation, 3, "translation")
     q = _as_array(rotation, 4, "rotation")
@@ -335,7 +335,7 @@ def slerp(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: float) -> Quaternion:
         ZeroDivisionError: if either quaternion is zero (tf2 would return NaN).
 
     Source: ``tf2/LinearMath/Quaternion.h`` ``Quaternion::slerp`` via
-    :func:`tfbus._ccore.slerp`.
+    :func:`tfbus.core._ccore.slerp`.
     """
     a = np.asarray(q0, dtype=np.float64)
     b = np.asarray(q1, dtype=np.float64)

@@ -20,7 +20,7 @@ from contextlib import suppress
 from itertools import repeat
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
-from tfbus._backend import IMPLEMENTATION
+from tfbus.core._select import IMPLEMENTATION
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import NSEC_PER_SEC, Time
 
@@ -120,7 +120,7 @@ def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
 
     With the compiled core (on a little-endian host) the transforms are built in C
-    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    (``tfbus.core._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
     :func:`decode_ros1_struct`. Equal values either way (tested).
 
     Raises:

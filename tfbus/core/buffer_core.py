@@ -2,8 +2,8 @@
 
 This is tf2's ``BufferCore`` (ROS 1 geometry2 0.7.6, ``tf2/src/buffer_core.cpp``)
 re-implemented with the same semantics (API and messages here; storage, insert and the
-walk in the core chosen by :mod:`tfbus._backend`: compiled from ``tfbus/_ccore.pyx``, or
-its pure-Python twin ``tfbus/_pycore.py``, bit for bit the same), checked against vectors
+walk in the core chosen by :mod:`tfbus.core._select`: compiled from ``tfbus/core/_ccore.pyx``, or
+its pure-Python twin ``tfbus/core/_pycore.py``, bit for bit the same), checked against vectors
 recorded from the real tf2 (``tests/data/public.jsonl.gz`` and ``tf2_regressions.jsonl``):
 
 * ``lookup_transform(target, source, t)`` returns the pose of ``source`` in ``target``
@@ -31,7 +31,10 @@ from collections.abc import Set as AbstractSet
 from numbers import Real
 from typing import Any, Final, NamedTuple
 
-from tfbus._backend import (
+import numpy as np
+import numpy.typing as npt
+
+from tfbus.core._select import (
     COMPILED,
     CONNECTIVITY_ERROR,
     EXTRAPOLATION_ERROR,
@@ -43,9 +46,17 @@ from tfbus._backend import (
     UNKNOWN_FRAME,
     CoreBase,
     compose_full,
+    lookup_rows,
 )
-from tfbus.batch import BatchLookupMixin
-from tfbus.core_text import (
+from tfbus.core.batch import (
+    Errors,
+    TimesLike,
+    TransformArray,
+    as_times,
+    check_errors,
+    compose_rows,
+)
+from tfbus.core.text import (
     FrameInfo,
     Tf7,
     bad_frame_exception,
@@ -54,6 +65,7 @@ from tfbus.core_text import (
     frames_as_yaml,
     invalid_transform_exception,
 )
+from tfbus.core.velocity import lookup_velocity as _lookup_velocity
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -71,7 +83,6 @@ from tfbus.messages import (
 )
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS, Duration, Time
-from tfbus.velocity import lookup_velocity as _lookup_velocity
 
 __all__ = [
     "COMPILED",
@@ -161,7 +172,7 @@ def _not_a_time(time: object, err: AttributeError) -> Exception:
                      f"{type(time).__name__} {time!r}")
 
 
-class BufferCore(BatchLookupMixin, CoreBase):
+class BufferCore(CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
     Args:
@@ -181,7 +192,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
     use it from one thread (or one event loop), as tfbus does.
 
     Storage, insert, the walk and building results are in the core (compiled from
-    :mod:`tfbus._ccore`, Cython, or the pure-Python :mod:`tfbus._pycore`; ``COMPILED``
+    :mod:`tfbus.core._ccore`, Cython, or the pure-Python :mod:`tfbus.core._pycore`; ``COMPILED``
     says which) and report what they did as return values; this class turns those into
     tf2's messages, exceptions and (count-limited) log lines.
     """
@@ -461,6 +472,161 @@ class BufferCore(BatchLookupMixin, CoreBase):
             )
         return None
 
+    # ------------------------------------------------------------------ batched lookups
+
+    def lookup_transforms(
+        self,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        *,
+        errors: Errors = "raise",
+    ) -> TransformArray:
+        """``lookup_transform(target_frame, source_frame, t)`` for every t of ``times``
+        (issue 12): the path is resolved once, every time is walked along it in the core.
+
+        Args:
+            target_frame: frame to express data in.
+            source_frame: frame the data is in.
+            times: ``(N,) int64`` nanoseconds (or Times); 0 means latest, as in tf2.
+            errors: ``"raise"`` (default) or ``"mask"``: failed rows become NaN with
+                ``valid[i] = False`` and the call does not raise for missing data.
+
+        Returns:
+            A :class:`~tfbus.core.batch.TransformArray` whose row i equals
+            ``lookup_transform`` at ``times[i]`` (stamp = the time used; values to the
+            bit, or within 1e-12 where the compiled core vectorises slerp's sines: see
+            :mod:`tfbus.core.batch`).
+
+        Raises:
+            InvalidArgumentException: a frame id is empty or starts with '/' (always, as
+                the single lookup validates before looking at times).
+            LookupException, ConnectivityException, ExtrapolationException: with
+                ``errors="raise"``, the exception and message the single lookup raises
+                for the first time that cannot be answered. With ``errors="mask"`` an
+                unknown frame id still raises LookupException (no row could ever be
+                answered).
+            ValueError: ``times`` or ``errors`` is malformed.
+
+        Source: tf2 ``BufferCore::lookupTransform`` / ``walkToTopParent`` per time.
+        """
+        check_errors(errors)
+        t = as_times(times)
+        n = t.shape[0]
+        out = np.empty((n, 7))
+        stamps = t.copy()
+        valid = np.ones(n, dtype=bool)
+        if target_frame == source_frame:
+            # The single lookup validates nothing here; time 0 is stamped with the frame's
+            # newest sample: ask it once.
+            out[:] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+            zero = t == 0
+            if zero.any():
+                latest = self.lookup_transform(target_frame, source_frame, _LATEST)
+                stamps[zero] = latest.header.stamp.ns
+            return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame)
+        ok = np.empty(n, dtype=np.int8)
+        answered = lookup_rows(self, target_frame, source_frame, t, out, stamps, ok)
+        if answered < 0:
+            # An invalid or unknown frame id: the single lookup raises tf2's exception.
+            self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[0]) if n else 0))
+            raise AssertionError("lookup_transform accepted an id batch_lookup refused")
+        if answered != n:
+            bad = np.flatnonzero(ok == 0)
+            if errors == "raise":
+                self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[bad[0]])))
+                raise AssertionError("lookup_transform answered a time the walk could not")
+            out[bad] = math.nan
+            valid[bad] = False
+        return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid)
+
+    def lookup_transforms_full(
+        self,
+        target_frame: str,
+        target_times: TimesLike,
+        source_frame: str,
+        source_times: TimesLike,
+        fixed_frame: str,
+        *,
+        errors: Errors = "raise",
+    ) -> TransformArray:
+        """``lookup_transform_full`` (time travel through ``fixed_frame``) row by row.
+
+        ``target_times`` and ``source_times`` are ``(N,)`` int64 ns (or Times); either may
+        be a single time, broadcast to the other's N. Row i is ``lookup(target <- fixed @
+        target_times[i]) o lookup(fixed <- source @ source_times[i])`` through normalised
+        rotations, exactly as :meth:`lookup_transform_full` computes it
+        (:func:`~tfbus.core.batch.compose_rows`); its stamp is the second leg's.
+
+        Raises:
+            InvalidArgumentException, LookupException: a frame id is invalid or unknown
+                (validated in the order target, source, fixed).
+            ConnectivityException, ExtrapolationException: as the single call for the
+                first failing row (source leg first), unless ``errors="mask"``.
+            ValueError: the time arrays have different lengths, or are malformed.
+        """
+        check_errors(errors)
+        frames = (target_frame, source_frame, fixed_frame)
+        if not all(self.invalid_frame_id(f) is None and self.frame_exists(f) for f in frames):
+            # The single call validates the three ids first, in this order: let it raise.
+            self.lookup_transform_full(target_frame, _LATEST, source_frame, _LATEST, fixed_frame)
+        tt = as_times(target_times)
+        st = as_times(source_times)
+        n = max(tt.shape[0], st.shape[0])
+        tt, st = as_times(tt, n), as_times(st, n)
+        leg1 = self.lookup_transforms(fixed_frame, source_frame, st, errors="mask")
+        leg2 = self.lookup_transforms(target_frame, fixed_frame, tt, errors="mask")
+        if errors == "raise":
+            # The single call looks up leg 1 then leg 2 per time: the first failing row
+            # decides, and within it the source leg.
+            bad = np.flatnonzero(~(leg1.valid & leg2.valid))
+            if bad.size:
+                i = int(bad[0])
+                self.lookup_transform_full(
+                    target_frame,
+                    Time.from_ns(int(tt[i])),
+                    source_frame,
+                    Time.from_ns(int(st[i])),
+                    fixed_frame,
+                )
+                raise AssertionError("lookup_transform_full did not raise")  # pragma: no cover
+        return compose_rows(leg2, leg1)
+
+    def transform_points(
+        self,
+        points: npt.ArrayLike,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        *,
+        errors: Errors = "raise",
+    ) -> npt.NDArray[np.float64]:
+        """Map each point of ``points`` from ``source_frame`` into ``target_frame`` at its
+        own time (per-beam projection, lidar de-skewing).
+
+        Args:
+            points: ``(N, 3)`` metres in ``source_frame``.
+            target_frame: frame to express the points in.
+            source_frame: frame the points are in.
+            times: ``(N,) int64`` ns (or one time for all points).
+            errors: ``"mask"`` gives NaN rows for points whose time cannot be answered.
+
+        Returns:
+            ``(N, 3) float64`` metres: row i is ``quatRotate(q_i, p_i) + t_i`` with
+            ``(t_i, q_i) = lookup_transform(target_frame, source_frame, times[i])``.
+
+        Raises:
+            ValueError: ``points`` is not ``(N, 3)`` or ``times`` does not match.
+            TransformException subclasses: as :meth:`lookup_transforms`.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+        tf = self.lookup_transforms(
+            target_frame, source_frame, as_times(times, p.shape[0]), errors=errors
+        )
+        return tf.apply(p)
+
     def chain_frames(
         self, target_frame: str, source_frame: str, time: Time = _LATEST
     ) -> list[str]:
@@ -699,7 +865,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         in ``observation_frame`` about the tracking frame's origin, averaged over
         ``averaging_interval`` (seconds or a Duration, > 0) around ``time`` (0: the latest
         common time). tf2 ``BufferCore::lookupVelocity`` (ROS 2) / ``tf::Transformer::
-        lookupTwist`` (ROS 1); see :mod:`tfbus.velocity` for the formula, and for why
+        lookupTwist`` (ROS 1); see :mod:`tfbus.core.velocity` for the formula, and for why
         ``method="tf2"`` (the default, tf2's numbers) is not the physical velocity of a
         rotating frame and what ``method="origin"`` returns instead.
 

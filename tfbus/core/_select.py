@@ -1,5 +1,5 @@
-"""The one place that chooses tfbus's core: compiled (:mod:`tfbus._ccore`, Cython) or
-pure Python (:mod:`tfbus._pycore`), same behaviour bit for bit.
+"""The one place that chooses tfbus's core: compiled (:mod:`tfbus.core._ccore`, Cython) or
+pure Python (:mod:`tfbus.core._pycore`), same behaviour bit for bit.
 
 * The compiled core is loaded when it was built (wheels and installs with a C compiler).
 * The pure-Python core is loaded when the compiled module is absent (an install without
@@ -51,6 +51,7 @@ __all__ = [
     "format_sec",
     "inverse",
     "lerp_rows",
+    "lookup_rows",
     "quat_multiply",
     "quat_rotate",
     "slerp",
@@ -70,11 +71,11 @@ def _load() -> tuple[ModuleType, bool]:
     """The core module to use and whether it is the compiled one. The compiled module is
     looked for first (``find_spec``): absent, the pure core is loaded; present, it is
     imported and any error importing it propagates."""
-    if not pure_python_requested() and importlib.util.find_spec("tfbus._ccore") is not None:
-        from tfbus import _ccore
+    if not pure_python_requested() and importlib.util.find_spec("tfbus.core._ccore") is not None:
+        from tfbus.core import _ccore
 
         return _ccore, True
-    from tfbus import _pycore
+    from tfbus.core import _pycore
 
     return _pycore, False
 
@@ -83,7 +84,7 @@ IMPLEMENTATION, COMPILED = _load()
 """The loaded core module, and whether it is the compiled one."""
 
 PURE_FALLBACK_WARNING: Final = (
-    "tfbus: the compiled core (tfbus._ccore) is not installed, using the pure-Python core "
+    "tfbus: the compiled core (tfbus.core._ccore) is not installed, using the pure-Python core "
     "(same results, slower lookups); reinstall with a C compiler and the Python headers "
     "for the compiled one, or set TFBUS_PURE_PYTHON=1 to choose the pure one"
 )
@@ -105,7 +106,7 @@ if not COMPILED and not pure_python_requested():
 
 if TYPE_CHECKING:
     # Both cores export the same names; the compiled core's stub is the contract.
-    from tfbus._ccore import (
+    from tfbus.core._ccore import (
         CONNECTIVITY_ERROR,
         EXTRAPOLATION_ERROR,
         INVALID,
@@ -128,6 +129,7 @@ if TYPE_CHECKING:
         format_sec,
         inverse,
         lerp_rows,
+        lookup_rows,
         quat_multiply,
         quat_rotate,
         slerp,

@@ -42,7 +42,7 @@ conformance corpus, ``tests/test_conformance.py``).
 
 * The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
   ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
-  :mod:`tfbus.geometry`; ``tfbus/_pycore.py`` is its pure-Python twin (same numbers).
+  :mod:`tfbus.geometry`; ``tfbus/core/_pycore.py`` is its pure-Python twin (same numbers).
 """
 
 import numpy as np
@@ -1551,7 +1551,7 @@ cdef class CoreBase:
 # used, are the single lookup's bit for bit. Rows the plan cannot answer
 # exactly (time 0, a gather that fails, a link with several parents, a span >= 2**53 ns)
 # go through ``CoreBase._walk``; rows that fail there too are left unanswered, and
-# ``tfbus.batch`` asks the single lookup for tf2's exception: no error is reproduced.
+# ``tfbus.core.batch`` asks the single lookup for tf2's exception: no error is reproduced.
 
 import os
 
@@ -2349,15 +2349,15 @@ def batch_lookup(CoreBase core, object target_frame, object source_frame,
     return _batch_lookup(core, target_frame, source_frame, times, out, stamps, ok, False)
 
 
-def _batch_lookup_vector(CoreBase core, object target_frame, object source_frame,
-                         const int64_t[::1] times, double[:, ::1] out, int64_t[::1] stamps,
-                         signed char[::1] ok):
+def lookup_rows(CoreBase core, object target_frame, object source_frame,
+                const int64_t[::1] times, double[:, ::1] out, int64_t[::1] stamps,
+                signed char[::1] ok):
     """:func:`batch_lookup` with slerp's per-time sines from glibc's libmvec where
     ``_BATCH_VECTOR_SIN`` (AVX2 vector sine, a few ulp from libm's): rows then agree with
     ``lookup_transform`` to within 1e-12 (issue 12's tolerance; ~1e-14 in practice), bit
     for bit where a row has no per-time sine; elsewhere it is :func:`batch_lookup`. The
-    entry :func:`tfbus.batch.lookup_transforms` uses (compiled core only: the pure-Python
-    core has no counterpart, and its ``batch_lookup`` twins the bit-exact one)."""
+    entry :meth:`tfbus.core.BufferCore.lookup_transforms` uses (the pure-Python core's
+    ``lookup_rows`` is its ``batch_lookup``: it has no vector sine)."""
     return _batch_lookup(core, target_frame, source_frame, times, out, stamps, ok, True)
 
 

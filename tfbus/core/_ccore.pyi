@@ -1,4 +1,4 @@
-"""Type stubs for the compiled core (``tfbus/_ccore.pyx``)."""
+"""Type stubs for the compiled core (``tfbus/core/_ccore.pyx``)."""
 
 from collections.abc import Iterable, Sequence
 from typing import Any, Final, Literal
@@ -116,7 +116,7 @@ def batch_lookup(
     stamps: npt.NDArray[np.int64],
     ok: npt.NDArray[np.int8],
 ) -> int: ...
-def _batch_lookup_vector(
+def lookup_rows(
     core: CoreBase,
     target_frame: str,
     source_frame: str,

@@ -1,8 +1,8 @@
-"""The pure-Python core: everything :mod:`tfbus._ccore` (Cython) exports, same behaviour.
+"""The pure-Python core: everything :mod:`tfbus.core._ccore` (Cython) exports, same behaviour.
 
 Loaded instead of the compiled core when it was not built (no C compiler, or
 ``TFBUS_NO_EXTENSIONS=1`` at install) or when ``TFBUS_PURE_PYTHON=1`` is set at import
-(:mod:`tfbus._backend` chooses; ``tfbus.core.COMPILED`` says which one is loaded).
+(:mod:`tfbus.core._select` chooses; ``tfbus.core.COMPILED`` says which one is loaded).
 
 Same behaviour means the same results **bit for bit**, the same return values, the same
 exceptions and messages (checked side by side in ``tests/test_pycore.py`` and by the tf2
@@ -71,6 +71,7 @@ __all__ = [
     "format_sec",
     "inverse",
     "lerp_rows",
+    "lookup_rows",
     "quat_multiply",
     "quat_rotate",
     "slerp",
@@ -1461,7 +1462,7 @@ def batch_lookup(
     ok: npt.NDArray[np.int8],
 ) -> int:
     """``lookupTransform(target_frame, source_frame, t)`` for every t of ``times``, into
-    caller-owned arrays (the entry of :func:`tfbus.batch.lookup_transforms`).
+    caller-owned arrays (the entry of :func:`tfbus.core.batch.lookup_transforms`).
 
     Args:
         core: the buffer (a CoreBase of this module).
@@ -1486,7 +1487,7 @@ def batch_lookup(
     """
     if not isinstance(core, CoreBase):
         raise TypeError(
-            "Argument 'core' has incorrect type (expected tfbus._pycore.CoreBase, got "
+            "Argument 'core' has incorrect type (expected tfbus.core._pycore.CoreBase, got "
             f"{_tp_name(core)})"
         )
     t = _view(times, "i", 8, "const int64_t", 1, False)
@@ -1511,6 +1512,12 @@ def batch_lookup(
             k[r] = 1
             answered += 1
     return answered
+
+
+lookup_rows = batch_lookup
+"""The rows of :meth:`tfbus.core.BufferCore.lookup_transforms`: the compiled core's may
+take slerp's per-time sines from libmvec; the pure-Python core has no vector sine, so its
+``lookup_rows`` is :func:`batch_lookup`, bit for bit the single lookup."""
 
 
 # ----- per-point tf2 math for sensor data (laser projection)

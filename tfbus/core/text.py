@@ -11,7 +11,7 @@ import math
 from collections.abc import Iterable
 from typing import Final, NamedTuple
 
-from tfbus._backend import INVALID_ARGUMENT
+from tfbus.core._select import INVALID_ARGUMENT
 from tfbus.errors import InvalidArgumentException, LookupException, TransformException
 from tfbus.time import Time
 
