@@ -20,7 +20,7 @@ from tfbus import (
     TransformStamped,
     Vector3,
 )
-from tfbus.core import BatchResult, BufferCore, SetResult
+from tfbus.core import COMPILED, BatchResult, BufferCore, SetResult
 
 
 def ts(
@@ -130,3 +130,19 @@ def test_a_parent_id_outside_the_frame_table_is_a_missing_link_not_a_crash() -> 
     core._caches[core._frame_ids["b"]].insert(2 * 10**9, 10**6, (0.0,) * 6 + (1.0,))  # type: ignore[union-attr]
     ok, message = core.can_transform("a", "b", Time(2), return_debug_tuple=True)  # type: ignore[misc]
     assert not ok and "not part of the same tree" in message
+
+
+def test_the_compiled_base_state_is_read_only_from_python() -> None:
+    """BufferCore changes its base's state only through its public methods (issue 26):
+    the internals are readable for white-box tests, never assignable."""
+    core = BufferCore()
+    core.set_transform(ts("b", parent="a", sec=1.0), "x")
+    for name in ("_frame_ids", "_frame_names", "_caches", "_authority", "_generation"):
+        if COMPILED:  # the pure twin's slots are plain attributes
+            with pytest.raises(AttributeError):
+                setattr(core, name, getattr(core, name))
+    assert core.parent_of("b", 0) == "a" and core.parent_of("a", 0) is None
+    assert core.link_info() == [("b", "a", "x", False, 1, 10**9, 10**9)]
+    assert core.common_time("a", "b") == (0, 10**9)
+    core.clear()
+    assert core.link_info() == [("b", "NO_PARENT", "x", False, 0, 0, 0)]

@@ -992,17 +992,20 @@ cdef class CoreBase:
     Nothing here calls into the subclass: inserts and queries return codes and data, and
     ``tfbus.core`` turns them into tf2's messages, exceptions and log lines.
 
-    Attributes (for ``tfbus.core`` only): ``_frame_ids`` (frame id → int id; 0 is tf2's
-    ``NO_PARENT``), ``_frame_names`` (int id → frame id), ``_caches`` (int id → link or
-    None), ``_authority`` (int id → authority of its last stored transform) and
-    ``_generation`` (bumped by every insert attempt and by ``clear``).
+    Read-only internals (for white-box tests and the batch kernel, never written from
+    Python): ``_frame_ids`` (frame id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names``
+    (int id → frame id), ``_caches`` (int id → link or None), ``_authority`` (int id →
+    authority of its last stored transform) and ``_generation`` (bumped by every insert
+    attempt and by ``clear``). Python code uses the public methods: ``clear``,
+    ``get_frame_names``, ``frame_exists``, ``parent_of``, ``link_info``,
+    ``extrapolation_detail``, ``common_time``.
     """
 
-    cdef public dict _frame_ids
-    cdef public list _frame_names
-    cdef public list _caches
-    cdef public dict _authority
-    cdef public long long _generation
+    cdef readonly dict _frame_ids
+    cdef readonly list _frame_names
+    cdef readonly list _caches
+    cdef readonly dict _authority
+    cdef readonly long long _generation
     cdef int64_t _cache_ns
     # The lookup memo, direct-mapped: slot -> the last result stored there, the time
     # asked and the generation it is valid for (no key tuple, no dict: a never-repeated
@@ -1452,6 +1455,79 @@ cdef class CoreBase:
         cdef int64_t t = 0
         cdef int err = self._common(target_id, source_id, &t)
         return err, t
+
+    # ------------------------------------------------------------------ public state
+
+    def clear(self):
+        """Drop every stored sample, keeping the frames and their links (tf2
+        ``BufferCore::clear``). As in tf2, the reserved frame 0 (``NO_PARENT``) is
+        skipped: a link stored with child ``"NO_PARENT"`` keeps its samples."""
+        cdef object cache
+        self._generation += 1
+        for cache in self._caches[1:]:
+            if cache is not None:
+                cache.clear()
+
+    def get_frame_names(self):
+        """Every known frame id (children and parents), in registration order."""
+        return self._frame_names[1:]
+
+    def frame_exists(self, frame_id):
+        """Whether ``frame_id`` is known (tf2 ``_frameExists``)."""
+        return self._frame_ids.get(frame_id, 0) != 0
+
+    def parent_of(self, frame_id, int64_t time_ns):
+        """The parent id of ``frame_id`` at ``time_ns`` (0 = latest), or None for a root,
+        an unknown frame or a time its link has no data for (tf2 ``_getParent``)."""
+        cdef object fid = self._frame_ids.get(frame_id, 0)
+        cdef object cache = self._caches[fid] if fid else None
+        if cache is None:
+            return None
+        r = cache.gather(time_ns)
+        if isinstance(r, str) or r[0] == 0:
+            return None
+        return self._frame_names[r[0]]
+
+    def link_info(self):
+        """Per linked frame, in registration order, ``(child, parent, authority,
+        is_static, samples, oldest_ns, newest_ns)``; the parent of an emptied link is
+        ``NO_PARENT``, a link with no recorded authority says so."""
+        cdef list names = self._frame_names
+        cdef list out = []
+        cdef Py_ssize_t fid
+        cdef object cache, r
+        for fid in range(1, len(self._caches)):
+            cache = self._caches[fid]
+            if cache is None:
+                continue
+            r = cache.gather(0)
+            out.append((
+                names[fid],
+                names[0 if isinstance(r, str) else r[0]],
+                self._authority.get(fid, "no recorded authority"),
+                cache.is_static,
+                len(cache),
+                cache.oldest_stamp(),
+                cache.latest_stamp(),
+            ))
+        return out
+
+    def extrapolation_detail(self, int where, int64_t used):
+        """tf2's extrapolation text of the link of frame ``where`` (the int id a failed
+        query reported) at ``used`` ns: ``"Lookup would require extrapolation ..."``;
+        ``""`` for no link or a link that can answer that time."""
+        cache = self._caches[where] if 0 < where < len(self._caches) else None
+        detail = cache.gather(used) if cache is not None else ""
+        return detail if isinstance(detail, str) else ""
+
+    def common_time(self, target_frame, source_frame):
+        """tf2 ``getLatestCommonTime`` for two known frame ids: ``(NO_ERROR, time ns)``,
+        or ``(LOOKUP_ERROR (a loop) | CONNECTIVITY_ERROR, 0)``.
+
+        Raises:
+            KeyError: an id is unknown (validate first).
+        """
+        return self._ccommon_time(self._frame_ids[target_frame], self._frame_ids[source_frame])
 
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1:

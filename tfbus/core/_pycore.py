@@ -872,10 +872,13 @@ class CoreBase:
     Nothing here calls into the subclass: inserts and queries return codes and data, and
     ``tfbus.core`` turns them into tf2's messages, exceptions and log lines.
 
-    Attributes (for ``tfbus.core`` only): ``_frame_ids`` (frame id → int id; 0 is tf2's
-    ``NO_PARENT``), ``_frame_names`` (int id → frame id), ``_caches`` (int id → link or
-    None), ``_authority`` (int id → authority of its last stored transform) and
-    ``_generation`` (bumped by every insert attempt and by ``clear``).
+    Internals (for white-box tests, never written from outside): ``_frame_ids`` (frame
+    id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names`` (int id → frame id),
+    ``_caches`` (int id → link or None), ``_authority`` (int id → authority of its last
+    stored transform) and ``_generation`` (bumped by every insert attempt and by
+    ``clear``). Python code uses the public methods: ``clear``, ``get_frame_names``,
+    ``frame_exists``, ``parent_of``, ``link_info``, ``extrapolation_detail``,
+    ``common_time``.
 
     The state is set up in ``__new__`` (the compiled core's ``__cinit__``), so a
     subclass's ``__init__`` need not call this one.
@@ -1345,6 +1348,80 @@ class CoreBase:
         (tf2 ``getLatestCommonTime``)."""
         err, t = self._common(_cint(target_id), _cint(source_id))
         return err, (t if err == NO_ERROR else 0)
+
+    # ------------------------------------------------------------------ public state
+
+    def clear(self) -> None:
+        """Drop every stored sample, keeping the frames and their links (tf2
+        ``BufferCore::clear``). As in tf2, the reserved frame 0 (``NO_PARENT``) is
+        skipped: a link stored with child ``"NO_PARENT"`` keeps its samples."""
+        self._generation += 1
+        caches: list[Any] = self._caches  # TimeCache / StaticCache (Link's subclasses)
+        for cache in caches[1:]:
+            if cache is not None:
+                cache.clear()
+
+    def get_frame_names(self) -> list[str]:
+        """Every known frame id (children and parents), in registration order."""
+        return self._frame_names[1:]
+
+    def frame_exists(self, frame_id: str) -> bool:
+        """Whether ``frame_id`` is known (tf2 ``_frameExists``)."""
+        return self._frame_ids.get(frame_id, 0) != 0
+
+    def parent_of(self, frame_id: str, time_ns: int) -> str | None:
+        """The parent id of ``frame_id`` at ``time_ns`` (0 = latest), or None for a root,
+        an unknown frame or a time its link has no data for (tf2 ``_getParent``)."""
+        time_ns = _int64(time_ns)
+        fid = self._frame_ids.get(frame_id, 0)
+        cache = self._caches[fid] if fid else None
+        if cache is None:
+            return None
+        r = cache.gather(time_ns)
+        if isinstance(r, str) or r[0] == 0:
+            return None
+        return self._frame_names[r[0]]
+
+    def link_info(self) -> list[tuple[str, str, str, bool, int, int, int]]:
+        """Per linked frame, in registration order, ``(child, parent, authority,
+        is_static, samples, oldest_ns, newest_ns)``; the parent of an emptied link is
+        ``NO_PARENT``, a link with no recorded authority says so."""
+        names = self._frame_names
+        caches: list[Any] = self._caches  # TimeCache / StaticCache (Link's subclasses)
+        out = []
+        for fid in range(1, len(caches)):
+            cache = caches[fid]
+            if cache is None:
+                continue
+            r = cache.gather(0)
+            out.append((
+                names[fid],
+                names[0 if isinstance(r, str) else r[0]],
+                self._authority.get(fid, "no recorded authority"),
+                cache.is_static,
+                len(cache),
+                cache.oldest_stamp(),
+                cache.latest_stamp(),
+            ))  # fmt: skip
+        return out
+
+    def extrapolation_detail(self, where: int, used: int) -> str:
+        """tf2's extrapolation text of the link of frame ``where`` (the int id a failed
+        query reported) at ``used`` ns: ``"Lookup would require extrapolation ..."``;
+        ``""`` for no link or a link that can answer that time."""
+        where, used = _cint(where), _int64(used)
+        cache = self._caches[where] if 0 < where < len(self._caches) else None
+        detail = cache.gather(used) if cache is not None else ""
+        return detail if isinstance(detail, str) else ""
+
+    def common_time(self, target_frame: str, source_frame: str) -> tuple[int, int]:
+        """tf2 ``getLatestCommonTime`` for two known frame ids: ``(NO_ERROR, time ns)``,
+        or ``(LOOKUP_ERROR (a loop) | CONNECTIVITY_ERROR, 0)``.
+
+        Raises:
+            KeyError: an id is unknown (validate first).
+        """
+        return self._ccommon_time(self._frame_ids[target_frame], self._frame_ids[source_frame])
 
     def _walk(self, target_id: int, source_id: int, time: int) -> tuple[int, Tf7, int, int]:
         """tf2 ``walkToTopParent`` with ``TransformAccum``: ``(code, v, where, time

@@ -325,17 +325,6 @@ class BufferCore(CoreBase):
                     authority,
                 )
 
-    def clear(self) -> None:
-        """Drop all dynamic data; static transforms and known frame ids stay
-        (tf2 ``BufferCore::clear``).
-
-        As in tf2, the reserved frame 0 (``NO_PARENT``) is skipped: a link stored with
-        child ``"NO_PARENT"`` keeps its samples."""
-        self._generation += 1
-        for cache in self._caches[1:]:
-            if cache is not None:
-                cache.clear()
-
     # ------------------------------------------------------------------ failures
 
     def _failure(
@@ -344,10 +333,7 @@ class BufferCore(CoreBase):
         """tf2's exception for a failure tuple of the compiled query (``CoreBase._query``)."""
         code = failure[0]
         if code == EXTRAPOLATION_ERROR:
-            where, used = failure[1], failure[2]
-            cache = self._caches[where]
-            detail = cache.gather(used) if cache is not None else ""
-            detail = detail if isinstance(detail, str) else ""  # a link to NO_PARENT
+            detail = self.extrapolation_detail(failure[1], failure[2])
             return ExtrapolationException(
                 _cap(
                     f"{detail}, when looking up transform from frame [{source}] "
@@ -774,7 +760,7 @@ class BufferCore(CoreBase):
         """
         self._validate("get_latest_common_time", target_frame)
         self._validate("get_latest_common_time", source_frame)
-        err, t = self._ccommon_time(self._frame_ids[target_frame], self._frame_ids[source_frame])
+        err, t = self.common_time(target_frame, source_frame)
         if err == LOOKUP_ERROR:
             raise TransformException(str(self._failure("", target_frame, source_frame, (err,))))
         if err:
@@ -785,25 +771,10 @@ class BufferCore(CoreBase):
 
     # ------------------------------------------------------------------ introspection
 
-    def get_frame_names(self) -> list[str]:
-        """Every known frame id (children and parents), in registration order."""
-        return self._frame_names[1:]
-
-    def frame_exists(self, frame_id: str) -> bool:
-        """Whether ``frame_id`` is known (tf2 ``_frameExists``)."""
-        return self._frame_ids.get(frame_id, 0) != 0
-
     def get_parent(self, frame_id: str, time: Time = _LATEST) -> str | None:
         """The parent of ``frame_id`` at ``time`` (0 = latest), or None for a root, an
         unknown frame or a time the link has no data for (tf2 ``_getParent``)."""
-        fid = self._frame_ids.get(frame_id, 0)
-        cache = self._caches[fid] if fid else None
-        if cache is None:
-            return None
-        r = cache.gather(time.ns)
-        if isinstance(r, str) or r[0] == 0:
-            return None
-        return self._frame_names[r[0]]
+        return self.parent_of(frame_id, time.ns)
 
     def all_frames_as_string(self) -> str:
         """One line ``Frame X exists with parent Y.`` per frame that has a link, in
@@ -827,27 +798,12 @@ class BufferCore(CoreBase):
         parent, authority, is_static, samples, oldest_ns, newest_ns)`` — the data behind
         ``all_frames_as_string`` and ``all_frames_as_yaml``, for tools. The parent of an
         emptied link is ``NO_PARENT``."""
-        names = self._frame_names
-        for fid in range(1, len(self._caches)):
-            cache = self._caches[fid]
-            if cache is None:
-                continue
-            r = cache.gather(0)
-            parent = 0 if isinstance(r, str) else r[0]
-            yield FrameInfo(
-                names[fid],
-                names[parent],
-                self._authority.get(fid, "no recorded authority"),
-                cache.is_static,
-                len(cache),
-                cache.oldest_stamp(),
-                cache.latest_stamp(),
-            )
+        return map(FrameInfo._make, self.link_info())
 
     def __repr__(self) -> str:
         return (
             f"BufferCore(cache_time={self.cache_time_ns / 1e9:g}, "
-            f"frames={len(self._frame_names) - 1})"
+            f"frames={len(self.get_frame_names())})"
         )
 
     # ------------------------------------------------------------------ velocity, chain
