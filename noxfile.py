@@ -8,7 +8,7 @@ interpreter found" (``scripts/pythons.py`` looks on ``PATH`` and in pyenv's vers
 
     nox                      # every version found
     nox -s tests-3.10        # one
-    nox -s tests-3.13 -- tests/test_core.py -x     # arguments after -- go to pytest
+    nox -s tests-3.13 -- tests/core/test_core.py -x     # arguments after -- go to pytest
 """
 
 from __future__ import annotations

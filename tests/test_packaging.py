@@ -85,7 +85,7 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
         "pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "MANIFEST.in",
         "tfbus/__init__.py", "tfbus/core/_ccore.pyx", "tfbus/core/_ccore.pyi", "tfbus/py.typed",
         "tfbus/core/_pycore.py", "tfbus/core/_select.py",
-        "tests/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
+        "tests/core/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
         "docs/index.md", "mkdocs.yml",
     }
     assert required <= names, sorted(required - names)

@@ -5,7 +5,7 @@
 Semantics are tf2's (geometry2 0.7.6); every rule here is a transcription of the tf2 C++
 named next to it, and the arithmetic is done in the same order as tf2, in IEEE doubles
 with no fused multiply-add, so results are bit-for-bit tf2's (checked by the
-conformance corpus, ``tests/test_conformance.py``).
+conformance corpus, ``tests/core/test_conformance.py``).
 
 * :class:`TimeCache` — a dynamic link (``tf2/src/cache.cpp``):
 

@@ -5,7 +5,7 @@ Loaded instead of the compiled core when it was not built (no C compiler, or
 (:mod:`tfbus.core._select` chooses; ``tfbus.core.COMPILED`` says which one is loaded).
 
 Same behaviour means the same results **bit for bit**, the same return values, the same
-exceptions and messages (checked side by side in ``tests/test_pycore.py`` and by the tf2
+exceptions and messages (checked side by side in ``tests/core/test_pycore.py`` and by the tf2
 conformance corpus run against this core). That holds because:
 
 * every formula is the compiled core's, term for term and in the same order: Python

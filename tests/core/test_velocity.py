@@ -32,7 +32,7 @@ from tfbus import (
     VelocityStamped,
 )
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # tests/
 SEC = 1_000_000_000
 
 

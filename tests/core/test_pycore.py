@@ -45,7 +45,7 @@ from tfbus.core import BufferCore, _pycore, _select
 
 _ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CORES = {"compiled": _ccore, "pure": _pycore}
 
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -647,12 +647,11 @@ def test_row_function_errors_alike() -> None:
 # --------------------------------------------------------------------------- the suite
 
 PURE_SUITE = [
-    "tests/test_conformance.py",
-    "tests/test_core.py",
-    "tests/test_core_hardening.py",
-    "tests/test_core_properties.py",
-    "tests/test_cache.py",
-    "tests/test_batch_lookup.py",
+    "tests/core/test_conformance.py",
+    "tests/core/test_core.py",
+    "tests/core/test_core_properties.py",
+    "tests/core/test_cache.py",
+    "tests/core/test_batch_lookup.py",
     "tests/test_geometry.py",
 ]
 
