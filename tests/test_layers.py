@@ -35,6 +35,7 @@ LAYERS: dict[str, int] = {
     "core": 1,  # BufferCore, its text, batch values, velocity, caches, both twins
     "errors": 1,
     # 2: the bus and time sources
+    "_aio": 2,  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)
     "bus": 2,
     "clock": 2,
     "latch": 2,

@@ -20,17 +20,15 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Callable, Iterable
 from functools import partial
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
-import anyio
-import anyio.lowlevel
 import numpy as np
 import numpy.typing as npt
 
+from tfbus._aio import Wakeup, running_asyncio_loop
 from tfbus.clock import Clock, SystemClock, timeout_ns
-from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
@@ -40,7 +38,7 @@ from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
 from tfbus.time import Duration, Time
 
 if TYPE_CHECKING:
-    from asyncio import AbstractEventLoop, Future
+    from asyncio import AbstractEventLoop
 
 __all__ = ["Buffer"]
 
@@ -51,18 +49,14 @@ _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
 
 
-class _Waiter(Generic[_T]):
+class _Waiter(Wakeup, Generic[_T]):
     """One pending wait: ``check()`` returns the answer, or None while unavailable, or
     returns or raises the TransformException that fails the wait. Indexed under
-    ``frames`` (from ``frames_fn()``) while pending. :meth:`wake` ends the wait (the
-    answer came, or the deadline).
-
-    On asyncio the waiting task awaits a bare future of ``loop`` (what anyio's Event
-    wraps twice: ``anyio.Event`` -> ``asyncio.Event`` -> a future per waiter); elsewhere an
-    ``anyio.Event``. Either is cancelled like any anyio checkpoint.
+    ``frames`` (from ``frames_fn()``) while pending. :meth:`~tfbus._aio.Wakeup.wake` ends
+    the wait (the answer came, or the deadline).
     """
 
-    __slots__ = ("check", "error", "event", "frames", "frames_fn", "future", "result")
+    __slots__ = ("check", "error", "frames", "frames_fn", "result")
 
     def __init__(
         self,
@@ -70,35 +64,12 @@ class _Waiter(Generic[_T]):
         frames_fn: Callable[[], frozenset[str]],
         loop: AbstractEventLoop | None,
     ) -> None:
+        super().__init__(loop)
         self.check = check
         self.frames_fn = frames_fn
-        self.future: Future[None] | None = None
-        self.event: anyio.Event | None = None
-        if loop is not None:
-            self.future = loop.create_future()
-        else:
-            self.event = anyio.Event()
         self.frames: frozenset[str] = frozenset()
         self.result: _T | None = None
         self.error: BaseException | None = None
-
-    def wait(self) -> Awaitable[object]:
-        """What the waiting task awaits (once): a checkpoint even if already woken (a
-        ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does)."""
-        future = self.future
-        if future is not None:
-            return anyio.lowlevel.checkpoint() if future.done() else future
-        assert self.event is not None
-        return self.event.wait()
-
-    def wake(self) -> None:
-        """End the wait (idempotent; harmless after the task was cancelled)."""
-        future = self.future
-        if future is None:
-            assert self.event is not None
-            self.event.set()
-        elif not future.done():
-            future.set_result(None)
 
 
 class Buffer(BufferCore):
@@ -282,10 +253,8 @@ class Buffer(BufferCore):
             else:
                 # The clock's deadline callback wakes the wait as the data would (no
                 # cancel scope to enter and leave); a clock that cannot schedule one in
-                # this loop (Clock.call_later returns None), or that predates call_later,
-                # gives its cancel scope instead.
-                call_later = getattr(self.clock, "call_later", None)
-                cancel = None if call_later is None else call_later(timeout, waiter.wake)
+                # this loop (Clock.call_later returns None) gives its cancel scope instead.
+                cancel = self.clock.call_later(timeout, waiter.wake)
                 if cancel is None:
                     with self.clock.move_on_after(timeout):
                         await waiter.wait()

@@ -137,12 +137,8 @@ class TransformListener:
         if clock is None:
             clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
         self._clock = clock
-        # The clock read on every message: its now_ns() when it has one (both tfbus
-        # clocks do; it builds no Time), else now().ns.
-        now_ns = getattr(clock, "now_ns", None)
-        self._now_ns: Callable[[], int] = (
-            now_ns if callable(now_ns) else lambda: self._clock.now().ns
-        )
+        # The clock read on every message: now_ns() builds no Time.
+        self._now_ns: Callable[[], int] = clock.now_ns
         # A Buffer reading its own clock clears itself on a jump back (Clock.on_jump);
         # any other sink is cleared by the listener, as tf2_ros's listener does.
         self._clears_sink = not (isinstance(buffer, Buffer) and buffer.clock is clock)
