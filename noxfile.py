@@ -2,7 +2,7 @@
 
 Each session makes a fresh venv with that interpreter's own ``venv`` module (nox's default
 backend), installs tfbus editable with its extras — which builds the compiled core for
-that interpreter beside the others (``tfbus/core/_ccore.cpython-3XY-*.so``) — and runs pytest.
+that interpreter beside the others (``tfbus/core/_c*.cpython-3XY-*.so``) — and runs pytest.
 An interpreter that is not installed is skipped, not failed: the matrix runs "on each
 interpreter found" (``scripts/pythons.py`` looks on ``PATH`` and in pyenv's versions).
 

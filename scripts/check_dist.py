@@ -83,7 +83,7 @@ def check_sdist(python: Path, dist: Path, tmp: Path, *, compiler: bool) -> None:
         env["PATH"] = str(bin_)  # the configured compiler (gcc) is not found
     log = step("pip install sdist", [str(bin_ / "pip"), "install", "-v", "--no-cache-dir",
                str(sdist)], timeout=1200, env=env)
-    fallback = "tfbus: the compiled core (tfbus.core._ccore) could not be built"
+    fallback = "tfbus: the compiled core (tfbus/core/_c*.pyx) could not be built"
     if not compiler and fallback not in log:
         FAILURES.append("sdist without compiler: no fallback message in the build log")
         print("  [FAIL] the build log does not explain the fallback")

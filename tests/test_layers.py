@@ -170,8 +170,10 @@ def _where(module: str, line: int) -> str:
 def test_the_package_is_found() -> None:
     assert "tfbus.core" in MODULES and "tfbus.core._ccore" in MODULES and "tfbus" in MODULES
     assert "tfbus.messages" in _graph()["tfbus.core._ccore"]  # the compiled core's import is seen
-    # the one selection point imports both cores
-    assert {"tfbus.core._ccore", "tfbus.core._pycore"} <= set(_graph()["tfbus.core._select"])
+    # the one selection point imports both cores, every module of each
+    cores = {f"tfbus.core._{c}{job}" for c in ("c", "py") for job in ("math", "cache", "batch")}
+    cores |= {"tfbus.core._ccore", "tfbus.core._pycore"}
+    assert cores <= set(_graph()["tfbus.core._select"])
 
 
 def test_every_module_has_a_layer() -> None:

@@ -27,7 +27,7 @@ import pytest
 import tfbus
 
 ROOT = Path(__file__).resolve().parents[1]
-FALLBACK_MESSAGE = "tfbus: the compiled core (tfbus.core._ccore) could not be built"
+FALLBACK_MESSAGE = "tfbus: the compiled core (tfbus/core/_c*.pyx) could not be built"
 
 
 def _pyproject_version() -> str:
@@ -83,14 +83,17 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     required = {
         "pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "MANIFEST.in",
-        "tfbus/__init__.py", "tfbus/core/_ccore.pyx", "tfbus/core/_ccore.pyi", "tfbus/py.typed",
-        "tfbus/core/_pycore.py", "tfbus/core/_select.py",
+        "tfbus/__init__.py", "tfbus/py.typed", "tfbus/core/_select.py",
+        *(f"tfbus/core/_c{job}.{ext}" for job in ("math", "cache", "core", "wire", "batch")
+          for ext in ("pyx", "pyi")),
+        *(f"tfbus/core/_c{job}.pxd" for job in ("math", "cache", "core", "results")),
+        *(f"tfbus/core/_py{job}.py" for job in ("math", "cache", "core", "batch")),
         "tests/core/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
         "docs/index.md", "mkdocs.yml",
     }
     assert required <= names, sorted(required - names)
     # Never generated or built files: the C is regenerated from the .pyx by Cython.
-    assert not [n for n in names if n.endswith((".so", ".pyc", "_ccore.c"))]
+    assert not [n for n in names if n.endswith((".so", ".pyc", ".c"))]
 
 
 def _wheel(sdist: Path, out: Path, env: dict[str, str]) -> tuple[Path, str]:
@@ -132,7 +135,7 @@ def test_tfbus_no_extensions_gives_a_pure_wheel(sdist: Path, tmp_path: Path) -> 
     assert wheel.name.endswith("-py3-none-any.whl")
     assert "TFBUS_NO_EXTENSIONS is set" in log
     members = _members(wheel)
-    assert not [m for m in members if m.endswith((".so", ".pyx", ".c"))]
+    assert not [m for m in members if m.endswith((".so", ".pyx", ".pxd", ".c"))]
     assert "tfbus/core/_ccore.pyi" in members and "tfbus/py.typed" in members
 
 

@@ -1,4 +1,4 @@
-"""``tfbus.core.cache`` (compiled in ``tfbus/core/_ccore.pyx``): TimeCache and StaticCache storage.
+"""``tfbus.core.cache`` (compiled in ``tfbus/core/_ccache.pyx``): TimeCache and StaticCache storage.
 
 The semantics are checked op by op against tf2 by the conformance corpus; these tests
 drive the storage mechanics (out-of-order inserts, pruning, growth, compaction, the

@@ -1,4 +1,4 @@
-"""The pure-Python core (``tfbus/core/_pycore.py``) against the compiled one (``tfbus/_ccore``),
+"""The pure-Python core (``tfbus/core/_py*.py``) against the compiled one (``tfbus/core/_c*.pyx``),
 side by side in one process: same results bit for bit, same exceptions and messages.
 
 * Scalar math (compose, inverse, quat_multiply, quat_rotate, slerp, compose_full) on
@@ -32,6 +32,7 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 from xml.etree import ElementTree
 
@@ -41,12 +42,25 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
-from tfbus.core import BufferCore, _pycore, _select
+from tfbus.core import BufferCore, _pybatch, _pycache, _pycore, _pymath, _select
 
 _ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
+from tfbus.core import _cbatch, _ccache, _cmath  # noqa: E402  (built with _ccore)
 
 ROOT = Path(__file__).resolve().parents[2]
-CORES = {"compiled": _ccore, "pure": _pycore}
+TWINS = [(_cmath, _pymath), (_ccache, _pycache), (_ccore, _pycore), (_cbatch, _pybatch)]
+"""The core split by job: (compiled module, its pure-Python twin)."""
+
+
+def _namespace(*modules: Any) -> SimpleNamespace:
+    """Every public name of a core's modules in one namespace."""
+    return SimpleNamespace(**{n: getattr(m, n) for m in modules for n in m.__all__})
+
+
+CORES = {
+    "compiled": _namespace(*(c for c, _ in TWINS)),
+    "pure": _namespace(*(p for _, p in TWINS)),
+}
 
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -113,20 +127,28 @@ def same(fn: Callable[[Any], Any], *cores: str) -> Any:
 # --------------------------------------------------------------------------- the API
 
 
-def test_both_cores_export_the_same_names() -> None:
-    stub = (ROOT / "tfbus" / "core" / "_ccore.pyi").read_text()
+@pytest.mark.parametrize(("compiled", "pure"), TWINS, ids=[c.__name__ for c, _ in TWINS])
+def test_both_cores_export_the_same_names(compiled: Any, pure: Any) -> None:
+    """Each compiled module and its pure twin: the same public names (the stub's, the
+    module's ``__all__``), equal constants, documented functions and classes."""
+    stub = (ROOT / "tfbus" / "core" / f"{compiled.__name__.rsplit('.', 1)[1]}.pyi").read_text()
     declared = set(re.findall(r"^(?:def|class) (\w+)|^(\w+): Final", stub, re.M))
     names = {a or b for a, b in declared} - {""}
     public = {n for n in names if not n.startswith("_")}
-    assert public <= set(_pycore.__all__)
-    assert set(_pycore.__all__) <= {n for n in dir(_ccore) if not n.startswith("_")}
-    for name in _pycore.__all__:
+    assert public == set(pure.__all__) == set(compiled.__all__)
+    for name in pure.__all__:
         if name.isupper():
-            assert getattr(_pycore, name) == getattr(_ccore, name), name
+            assert getattr(pure, name) == getattr(compiled, name), name
         else:
-            assert getattr(_pycore, name).__doc__, f"_pycore.{name} has no docstring"
-    own = {"COMPILED", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING", "core_description"}
-    assert set(_pycore.__all__) | own == set(_select.__all__)
+            assert getattr(pure, name).__doc__, f"{pure.__name__}.{name} has no docstring"
+            assert getattr(compiled, name).__doc__, f"{compiled.__name__}.{name} has no docstring"
+
+
+def test_the_selection_exports_every_core_name() -> None:
+    own = {"COMPILED", "COMPILED_MODULES", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING",
+           "TF_FROM_ROS1", "core_description"}  # fmt: skip
+    every = {n for _, pure in TWINS for n in pure.__all__}
+    assert every | own == set(_select.__all__)
 
 
 def test_the_loaded_core_is_reported() -> None:
@@ -135,6 +157,8 @@ def test_the_loaded_core_is_reported() -> None:
     assert tfbus.core.COMPILED is _select.COMPILED
     expected = _pycore if _select.pure_python_requested() else _ccore
     assert _select.IMPLEMENTATION is expected
+    pure = _select.pure_python_requested()
+    assert tuple(p if pure else c for c, p in TWINS) == _select.IMPLEMENTATIONS
     assert tfbus.core.BufferCore.__mro__[-2] is expected.CoreBase
     assert tfbus.core.COMPILED is (expected is _ccore)
 
@@ -179,9 +203,10 @@ def test_backend_choice(
         cwd=top,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    module = "tfbus.core._ccore" if compiled else "tfbus.core._pycore"
+    prefix = "tfbus.core._c" if compiled else "tfbus.core._py"
     assert done.stdout.split() == [
-        str(compiled), module, module, module, str(top / "tfbus" / "core" / "__init__.py")
+        str(compiled), prefix + "core", prefix + "cache", prefix + "batch",
+        str(top / "tfbus" / "core" / "__init__.py"),
     ]  # fmt: skip
 
 
@@ -624,7 +649,7 @@ def test_row_functions_bit_for_bit(
 
     same(rows)
     for k in range(n):
-        assert canon(tuple(rows("pure")[0][k].tolist())) == canon(_pycore.slerp(*a, *b, ratios[k]))
+        assert canon(tuple(rows("pure")[0][k].tolist())) == canon(_pymath.slerp(*a, *b, ratios[k]))
 
 
 def test_row_function_errors_alike() -> None:

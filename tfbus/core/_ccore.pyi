@@ -1,17 +1,12 @@
-"""Type stubs for the compiled core (``tfbus/core/_ccore.pyx``)."""
+"""Type stubs for the compiled frame table and walk (``tfbus/core/_ccore.pyx``)."""
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from typing import Any, Final, Literal
 
-import numpy as np
-import numpy.typing as npt
-
+from tfbus.core._ccache import Link
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
 
-OK: Final[int]
-OLD_DATA: Final[int]
-REPEATED_DATA: Final[int]
 NO_ERROR: Final[int]
 LOOKUP_ERROR: Final[int]
 CONNECTIVITY_ERROR: Final[int]
@@ -20,54 +15,8 @@ MAX_GRAPH_DEPTH: Final[int]
 INVALID: Final[int]
 INVALID_ARGUMENT: Final[int]
 UNKNOWN_FRAME: Final[int]
-_BATCH_VECTOR_SIN: Final[bool]
 
 _Tf7 = tuple[float, float, float, float, float, float, float]
-
-def format_sec(ns: int) -> str: ...
-def quat_multiply(
-    ax: float, ay: float, az: float, aw: float, bx: float, by: float, bz: float, bw: float
-) -> tuple[float, float, float, float]: ...
-def quat_rotate(
-    qx: float, qy: float, qz: float, qw: float, vx: float, vy: float, vz: float
-) -> tuple[float, float, float]: ...
-def compose(a: Sequence[float], b: Sequence[float]) -> _Tf7: ...
-def inverse(a: Sequence[float]) -> _Tf7: ...
-def slerp(
-    ax: float,
-    ay: float,
-    az: float,
-    aw: float,
-    bx: float,
-    by: float,
-    bz: float,
-    bw: float,
-    ratio: float,
-) -> tuple[float, float, float, float]: ...
-def compose_full(leg2: Sequence[float], leg1: Sequence[float]) -> _Tf7: ...
-
-class Link:
-    @property
-    def is_static(self) -> bool: ...
-    @property
-    def cache_time_ns(self) -> int: ...
-    def gather(self, time: int) -> tuple[int, _Tf7] | str: ...
-    def latest(self) -> tuple[int, int]: ...
-    def insert(self, stamp: int, parent: int, values: _Tf7) -> int: ...
-    def latest_stamp(self) -> int: ...
-    def oldest_stamp(self) -> int: ...
-    def nbytes(self) -> int: ...
-    def clear(self) -> None: ...
-    def __len__(self) -> int: ...
-
-class TimeCache(Link):
-    def __init__(self, cache_time_ns: int) -> None: ...
-    def stamps(self) -> npt.NDArray[np.int64]: ...
-    def values(self) -> npt.NDArray[np.float64]: ...
-
-class StaticCache(Link):
-    def __init__(self) -> None: ...
-    def stamp_sent(self) -> int: ...
 
 # A failed query: (code, ...) as documented on CoreBase._query.
 _Failure = tuple[int, ...]
@@ -117,42 +66,3 @@ class CoreBase:
     def _cwalk(
         self, target_id: int, source_id: int, time: int
     ) -> tuple[int, _Tf7 | int | None, int]: ...
-
-# batched lookups (issue 12)
-def batch_lookup(
-    core: CoreBase,
-    target_frame: str,
-    source_frame: str,
-    times: npt.NDArray[np.int64],
-    out: npt.NDArray[np.float64],
-    stamps: npt.NDArray[np.int64],
-    ok: npt.NDArray[np.int8],
-) -> int: ...
-def lookup_rows(
-    core: CoreBase,
-    target_frame: str,
-    source_frame: str,
-    times: npt.NDArray[np.int64],
-    out: npt.NDArray[np.float64],
-    stamps: npt.NDArray[np.int64],
-    ok: npt.NDArray[np.int8],
-) -> int: ...
-def slerp_rows(
-    a: Sequence[float],
-    b: Sequence[float],
-    ratios: npt.NDArray[np.float64],
-    out: npt.NDArray[np.float64],
-) -> None: ...
-def apply_transforms(
-    q: npt.NDArray[np.float64],
-    v: npt.NDArray[np.float64],
-    p: npt.NDArray[np.float64],
-    out: npt.NDArray[np.float64],
-) -> None: ...
-def lerp_rows(
-    a: Sequence[float],
-    b: Sequence[float],
-    ratios: npt.NDArray[np.float64],
-    out: npt.NDArray[np.float64],
-) -> None: ...
-def _batch_simd(enable: bool) -> bool: ...
