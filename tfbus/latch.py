@@ -17,7 +17,7 @@ Two rules (issue 11, item 4):
   ``laser`` and ``/laser`` are one entry; the latest valid one sent wins, in the
   position the child first took.
 
-Synchronous and without I/O (layer 2: it uses the core, nothing above it).
+Synchronous and without I/O: it uses the core, nothing above it.
 """
 
 from __future__ import annotations

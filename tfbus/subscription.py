@@ -1,4 +1,4 @@
-"""Subscriptions of a :class:`~tfbus.bus.Bus` (layer 2): :class:`Subscription`, a
+"""Subscriptions of a :class:`~tfbus.bus.Bus`: :class:`Subscription`, a
 bounded drop-oldest queue read by a task, and :class:`CallbackSubscription`, a function
 called inside each publish or delivery. Made by :meth:`~tfbus.bus.Bus.subscribe` and
 :meth:`~tfbus.bus.Bus.subscribe_callback`; re-exported by :mod:`tfbus.bus`.

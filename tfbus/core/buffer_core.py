@@ -23,13 +23,10 @@ Messages of exceptions are tf2's, character for character.
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from collections.abc import Set as AbstractSet
-from numbers import Real
-from typing import Any, Final, NamedTuple
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -55,6 +52,13 @@ from tfbus.core.batch import (
     as_times,
     check_errors,
     compose_rows,
+)
+from tfbus.core.results import (
+    BatchResult,
+    SetResult,
+    cache_time_ns,
+    cap_message,
+    not_a_time,
 )
 from tfbus.core.text import (
     FrameInfo,
@@ -82,7 +86,7 @@ from tfbus.messages import (
     VelocityStamped,
 )
 from tfbus.ratelimit import CountLimitedLog
-from tfbus.time import TIME_MAX_NS, Duration, Time
+from tfbus.time import Duration, Time
 
 __all__ = [
     "COMPILED",
@@ -96,80 +100,10 @@ __all__ = [
 
 logger = logging.getLogger("tfbus.core")
 
-_MAX_MESSAGE: Final = 999  # extrapolation messages only (tf2 0.7.6, measured with tf2_py)
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
 _LATEST: Final = Time(0)
 _new: Final = tuple.__new__  # builds a NamedTuple without its Python-level __new__
-
-
-
-
-
-class SetResult(enum.Enum):
-    """What ``BufferCore.insert_transform`` did with a transform."""
-
-    STORED = "stored"
-    OLD_DATA = "TF_OLD_DATA"
-    """Refused: older than the link's newest stamp minus ``cache_time``."""
-    REPEATED_DATA = "TF_REPEATED_DATA"
-    """Refused: the link already has a sample with this stamp (the first one wins)."""
-
-
-class BatchResult(NamedTuple):
-    """What :meth:`BufferCore.set_transforms` did with a batch of transforms."""
-
-    stored: int
-    """How many were stored."""
-    refused: int
-    """How many the caches refused (TF_OLD_DATA, TF_REPEATED_DATA; logged)."""
-    errors: list[tuple[int, Exception]]
-    """``(index in the batch, exception)`` for each item that was not stored because it
-    is invalid (:class:`~tfbus.errors.InvalidArgumentException`: a tf2 rule broken, or a
-    field of the wrong type) or is not a :class:`~tfbus.messages.TransformStamped`
-    (TypeError)."""
-    touched: AbstractSet[str] = frozenset()
-    """The (stripped) child and parent frame ids of every stored transform: the frames
-    whose lookups may have changed. ``tfbus.buffer.Buffer`` rechecks its waits from it."""
-    relinked: bool = False
-    """Whether a stored transform may have changed the tree's shape (a new link, a link
-    emptied by ``clear()`` refilled, or a link given another parent): which frames a
-    lookup depends on (:meth:`BufferCore.chain_frames`) may have changed."""
-
-
-def _cap(message: str) -> str:
-    """tf2 0.7.6 truncates extrapolation messages (only those) to 999 characters."""
-    return message[:_MAX_MESSAGE]
-
-
-def _cache_time_ns(value: object) -> int:
-    """``cache_time`` (seconds or a Duration) as int nanoseconds, checked before use."""
-    if isinstance(value, Duration):
-        ns = value.ns
-    elif isinstance(value, Real) and not isinstance(value, bool):
-        seconds = float(value)
-        if not math.isfinite(seconds) or not 0.0 <= seconds <= TIME_MAX_NS / 1e9:
-            raise ValueError(
-                "cache_time must be finite seconds in [0, 9.2e9] (int64 nanoseconds), "
-                f"got {value!r}"
-            )
-        ns = Duration.from_sec(seconds).ns  # exact: the one seconds -> ns conversion
-    else:
-        raise TypeError(
-            f"cache_time must be seconds (a real number) or a Duration, got {value!r}"
-        )
-    if not 0 <= ns <= TIME_MAX_NS:
-        raise ValueError(f"cache_time must be in [0, 2**63 - 1] ns, got {ns} ns")
-    return ns
-
-
-def _not_a_time(time: object, err: AttributeError) -> Exception:
-    """The error for a lookup whose ``time`` is not a :class:`~tfbus.time.Time` (the
-    compiled query reads ``time._ns``): a TypeError naming the argument."""
-    if isinstance(time, Time):
-        return err
-    return TypeError(f"time must be a tfbus.Time (Time(0) for the latest data), not "
-                     f"{type(time).__name__} {time!r}")
 
 
 class BufferCore(CoreBase):
@@ -198,7 +132,7 @@ class BufferCore(CoreBase):
     """
 
     def __init__(self, cache_time: float | Duration = 10.0) -> None:
-        self._set_cache_time_ns(_cache_time_ns(cache_time))
+        self._set_cache_time_ns(cache_time_ns(cache_time))
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
 
     # ------------------------------------------------------------------ inserting
@@ -335,7 +269,7 @@ class BufferCore(CoreBase):
         if code == EXTRAPOLATION_ERROR:
             detail = self.extrapolation_detail(failure[1], failure[2])
             return ExtrapolationException(
-                _cap(
+                cap_message(
                     f"{detail}, when looking up transform from frame [{source}] "
                     f"to frame [{target}]"
                 )
@@ -406,7 +340,7 @@ class BufferCore(CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         raise self._failure("lookupTransform", target_frame, source_frame, out)
@@ -419,7 +353,7 @@ class BufferCore(CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         return self._failure("lookupTransform", target_frame, source_frame, out)
@@ -440,7 +374,7 @@ class BufferCore(CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         code = out[0]
@@ -686,7 +620,7 @@ class BufferCore(CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return True, ""
         code = out[0]

@@ -1,5 +1,5 @@
 """tf2's texts for :mod:`tfbus.core`: the messages of rejected transforms and invalid
-query arguments, and the ``allFramesAsString`` / ``allFramesAsYAML`` dumps (layer 1).
+query arguments, and the ``allFramesAsString`` / ``allFramesAsYAML`` dumps.
 
 Each text is tf2 0.7.6's (``tf2/src/buffer_core.cpp``) character for character where tf2
 defines it; YAML quoting is added only for ids YAML would misread (issue 11 item 7).

@@ -33,8 +33,8 @@ frame) relative to the observation frame, ``v = (E.origin - S.origin) / dt + ω 
 with ``ω`` as in step 3 and ``r`` the point minus the origin (observation frame, at
 ``time``), then both vectors rotated into the reference frame's axes at ``time``.
 
-Layer 1: pure functions over any object with ``lookup_transform`` and
-``get_latest_common_time`` (a :class:`~tfbus.core.BufferCore`); no clock, no I/O.
+Pure functions over any object with ``lookup_transform`` and ``get_latest_common_time``
+(a :class:`~tfbus.core.BufferCore`, which calls them); no clock, no I/O.
 """
 
 from __future__ import annotations
