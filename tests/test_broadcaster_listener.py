@@ -389,3 +389,39 @@ async def test_listener_on_a_buffer_reads_the_buffers_clock() -> None:
         await settle(clock)
         assert not buf.can_transform("base_link", "laser", T0)
     buf.close()
+
+
+async def test_a_jump_back_clears_a_sink_once_whoever_follows_the_clock(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue 26: "clear on a jump back" has one owner (``clear_on_jump_back``): two
+    listeners feeding one BufferCore, and a Buffer with its own listener, on one clock,
+    clear each sink once per jump (one warning line), and stop following on exit."""
+    from tfbus.buffer import clear_on_jump_back
+
+    clock = ManualClock(T0)
+    core = BufferCore()
+    buf = Buffer(clock=clock)
+    caplog.set_level(logging.WARNING)
+    async with Bus() as bus:
+        async with (
+            TransformListener(core, bus, clock=clock),
+            TransformListener(core, bus, clock=clock),
+            TransformListener(buf, bus),
+        ):
+            TransformBroadcaster(bus).send_transform_nowait([ts("laser")])
+            await settle(clock)
+            assert core.can_transform("base_link", "laser", T0)
+            assert buf.can_transform("base_link", "laser", T0)
+            clock.set_nowait(Time(T0.sec - 60))
+            jumps = [r for r in caplog.records if "jump back in time" in r.getMessage()]
+            assert len(jumps) == 2  # one per sink
+            assert not core.can_transform("base_link", "laser", T0)
+            assert not buf.can_transform("base_link", "laser", T0)
+        stop = clear_on_jump_back(core, clock)
+        stop()
+        stop()  # idempotent
+        core.set_transform(ts("laser", stamp=Time(T0.sec - 60)), "x")
+        clock.set_nowait(Time(T0.sec - 120))  # no listener follows core any more
+        assert core.can_transform("base_link", "laser", Time(T0.sec - 60))
+        assert not buf.can_transform("base_link", "laser", Time(T0.sec - 60))

@@ -22,7 +22,7 @@ import logging
 import math
 from collections.abc import Callable, Iterable
 from functools import partial
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -40,13 +40,79 @@ from tfbus.time import Duration, Time
 if TYPE_CHECKING:
     from asyncio import AbstractEventLoop
 
-__all__ = ["Buffer"]
+__all__ = ["Buffer", "clear_on_jump_back"]
 
 _log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
 _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
+
+
+class _Clearable(Protocol):
+    """What a jump back clears: a ``BufferCore``, a ``Buffer``, any transform sink."""
+
+    def clear(self) -> None: ...
+
+
+_jump_followers: dict[tuple[int, int], tuple[list[Callable[[], None]], Callable[[], None]]] = {}
+"""(id(sink), id(clock)) -> (the ``then`` callbacks, the clock's unregister): one clock
+callback per sink and clock, however many owners asked for it."""
+
+
+def clear_on_jump_back(
+    sink: _Clearable, clock: Clock, then: Callable[[], None] | None = None
+) -> Callable[[], None]:
+    """The one owner of tf2_ros's "a clock jump back clears the buffer" (tf2_ros
+    ``Buffer`` / ``TransformListener``): when ``clock`` jumps back (:meth:`Clock.on_jump
+    <tfbus.clock.Clock.on_jump>`; a :class:`~tfbus.clock.SystemClock` notices it when read,
+    as a listener does on every message), log one warning line, ``sink.clear()``, then
+    call ``then`` (a :class:`Buffer` re-evaluates its pending waits).
+
+    A :class:`Buffer` follows its own clock; a :class:`~tfbus.listener.TransformListener`
+    asks for its sink and clock while it listens: for a Buffer on the same clock both
+    share one clock callback, so the buffer is cleared once.
+
+    Returns:
+        A function that stops this follow (idempotent); the clock callback goes with the
+        last one.
+    """
+    key = (id(sink), id(clock))
+    entry = _jump_followers.get(key)
+    if entry is None:
+        thens: list[Callable[[], None]] = []
+
+        def on_jump(old: Time, new: Time) -> None:
+            _log.warning(
+                "Detected jump back in time of %.3f s. Clearing TF buffer.",
+                (old.ns - new.ns) / 1e9,
+            )
+            sink.clear()
+            for callback in list(thens):
+                callback()
+
+        entry = (thens, clock.on_jump(on_jump))
+        _jump_followers[key] = entry
+    callbacks, unregister_clock = entry
+    token: Callable[[], None] = then if then is not None else _no_then
+    callbacks.append(token)
+    done = False
+
+    def stop() -> None:
+        nonlocal done
+        if done:
+            return
+        done = True
+        callbacks.remove(token)
+        if not callbacks:
+            unregister_clock()
+            _jump_followers.pop(key, None)
+
+    return stop
+
+
+def _no_then() -> None:
+    """The ``then`` of an owner that only needs the clear."""
 
 
 class _Waiter(Wakeup, Generic[_T]):
@@ -90,7 +156,7 @@ class Buffer(BufferCore):
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
-        self._unregister_jump = self.clock.on_jump(self._on_jump)
+        self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
 
     # ------------------------------------------------------------------ notification
 
@@ -177,11 +243,8 @@ class Buffer(BufferCore):
         waiter.frames = _NO_FRAMES
         waiter.wake()
 
-    def _on_jump(self, old: Time, new: Time) -> None:
-        _log.warning(
-            "Detected jump back in time of %.3f s. Clearing TF buffer.", (old.ns - new.ns) / 1e9
-        )
-        self.clear()
+    def _recheck_pending(self) -> None:
+        """Re-evaluate every pending wait (after the buffer was cleared on a jump back)."""
         for waiter in self._pending():
             self._recheck(waiter)
 
