@@ -1,48 +1,27 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
 # cython: initializedcheck=False, embedsignature=True
-"""Compiled heart of :class:`tfbus.core.BufferCore`: link storage, insert and the walk.
+"""Compiled heart of :class:`tfbus.core.BufferCore`: the frame table, insert and the walk
+(the twin of :mod:`tfbus.core._pycore`).
 
 Semantics are tf2's (geometry2 0.7.6); every rule here is a transcription of the tf2 C++
 named next to it, and the arithmetic is done in the same order as tf2, in IEEE doubles
 with no fused multiply-add, so results are bit-for-bit tf2's (checked by the
 conformance corpus, ``tests/core/test_conformance.py``).
 
-* :class:`TimeCache` — a dynamic link (``tf2/src/cache.cpp``):
+:class:`CoreBase` is the frame table and the hot paths of ``BufferCore``: ``_store``
+(``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
+the frames it touched) and ``_store_one`` (one transform: True, or what it refused and
+why), ``_query`` (``lookupTransform`` in one call: checks, memo, ``walkToTopParent`` with
+``TransformAccum``, the TransformStamped built here; or a failure tuple), ``_chain`` (the
+frames an answer depends on), ``_cwalk`` and ``common_time`` (``getLatestCommonTime``),
+and the public ``clear``, ``get_frame_names``, ``frame_exists``, ``parent_of``,
+``link_info``, ``extrapolation_detail`` through which ``BufferCore`` reads its state.
+Nothing here calls into the Python subclass: error *messages* and log lines are built by
+:mod:`tfbus.core.buffer_core` from the codes returned here.
 
-  - ``insert``: refused as TF_OLD_DATA iff ``newest > stamp + cache_time``; refused as
-    TF_REPEATED_DATA if a sample with the same stamp exists (the first one wins, whatever
-    its values or parent); otherwise stored, then every sample older than
-    ``newest - cache_time`` is dropped (``TimeCache::insertData`` / ``pruneList``).
-  - ``gather(t)``: t = 0 gives the newest sample; a single sample answers only at its
-    exact stamp; otherwise t must lie in [oldest, newest] (no extrapolation, not even
-    1 ns); between two samples with the same parent the result is interpolated (linear
-    translation, tf2 slerp rotation, ratio from integer ns), between samples with
-    different parents the older one is used (``findClosest`` / ``getData`` /
-    ``interpolate``).
-  - Storage: numpy arrays ``(cap,) int64`` stamps (ns) and ``(cap, 7) float64`` rows
-    (tx, ty, tz, qx, qy, qz, qw), live samples sorted by stamp in ``[head, tail)``, plus
-    a ``(cap,) int32`` parent id per sample only once the link has had two different
-    parents: 64 bytes per sample, ~68 with the growth slack.
-
-* :class:`StaticCache` — a static link (``tf2/src/static_cache.cpp``): one value, valid
-  at every time; each insert overwrites it; its latest stamp is 0.
-
-* :class:`CoreBase` — the frame table and the hot paths of ``BufferCore``: ``_store``
-  (``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
-  the frames it touched) and ``_store_one`` (one transform: True, or what it refused
-  and why), ``_query`` (``lookupTransform`` in one call: checks, memo,
-  ``walkToTopParent`` with ``TransformAccum``, the TransformStamped built here; or a
-  failure tuple), ``_chain`` (the frames an answer depends on), ``_cwalk`` and
-  ``_ccommon_time`` (``getLatestCommonTime``). Nothing here calls into the Python
-  subclass: error *messages* and log lines are built by ``tfbus.core`` from the codes
-  returned here.
-
-* ``_tf_from_ros1``: a ROS 1 serialised ``TFMessage`` into TransformStamped values, built
-  in C like the lookups' results (``tfbus.bag.decode.decode_ros1`` uses it).
-
-* The scalar transform math of tf2 (``quat_multiply``, ``quat_rotate``, ``compose``,
-  ``inverse``, ``slerp``, ``compose_full``): one home, used by the caches, the walk and
-  :mod:`tfbus.geometry`; ``tfbus/core/_pycore.py`` is its pure-Python twin (same numbers).
+The links are :mod:`tfbus.core._ccache`'s, the scalar math ``_cmath.pxd``'s inline
+functions; ``_ccore.pxd`` declares the table and the walk for the batch kernel
+(:mod:`tfbus.core._cbatch`).
 """
 
 __all__ = [

@@ -121,7 +121,7 @@ def _sin(x: float) -> float:
 # ---------------------------------------------------------------------- scalar math
 #
 # The scalar transform arithmetic of tf2 (``tf2/LinearMath/Quaternion.h``, ``Vector3.h``;
-# ``buffer_core.cpp`` ``TransformAccum``) in tf2's evaluation order, as in _ccore.pyx.
+# ``buffer_core.cpp`` ``TransformAccum``) in tf2's evaluation order, as in _cmath.pxd.
 
 
 def _qrot(

@@ -2,8 +2,8 @@
 
 This is tf2's ``BufferCore`` (ROS 1 geometry2 0.7.6, ``tf2/src/buffer_core.cpp``)
 re-implemented with the same semantics (API and messages here; storage, insert and the
-walk in the core chosen by :mod:`tfbus.core._select`: compiled from ``tfbus/core/_ccore.pyx``, or
-its pure-Python twin ``tfbus/core/_pycore.py``, bit for bit the same), checked against vectors
+walk in the core chosen by :mod:`tfbus.core._select`: compiled from ``tfbus/core/_c*.pyx``, or
+its pure-Python twins ``tfbus/core/_py*.py``, bit for bit the same), checked against vectors
 recorded from the real tf2 (``tests/data/public.jsonl.gz`` and ``tf2_regressions.jsonl``):
 
 * ``lookup_transform(target, source, t)`` returns the pose of ``source`` in ``target``
