@@ -4,6 +4,8 @@ One package, one job per module:
 
 * :mod:`tfbus.core.buffer_core` -- :class:`BufferCore` (tf2 ``tf2/src/buffer_core.cpp``):
   the frame graph, per-link time caches, single and batched lookups, tf2's messages;
+* :mod:`tfbus.core.results` -- what the inserts return (:class:`SetResult`,
+  :class:`BatchResult`) and the argument checks;
 * :mod:`tfbus.core.batch` -- :class:`~tfbus.core.batch.TransformArray` and the time-array
   helper of the batched lookups;
 * :mod:`tfbus.core.velocity` -- tf2 ``lookupVelocity`` from two lookups;
@@ -11,7 +13,9 @@ One package, one job per module:
   exception messages;
 * :mod:`tfbus.core.cache` -- the per-link storage (``TimeCache``, ``StaticCache``);
 * :mod:`tfbus.core._select` -- the one place that chooses the implementation: compiled
-  (Cython) or its pure-Python twin, same results bit for bit (:data:`COMPILED`).
+  (Cython: ``_cmath``, ``_ccache``, ``_ccore``, ``_cwire``, ``_cbatch``) or its pure-Python
+  twins (``_pymath``, ``_pycache``, ``_pycore``, ``_pybatch``), same results bit for bit
+  (:data:`COMPILED`).
 
 ``from tfbus.core import BufferCore`` is the supported import; the names below are this
 package's public surface.

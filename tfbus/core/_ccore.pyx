@@ -60,7 +60,6 @@ from tfbus.core._cresults cimport (
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Time
-from tfbus.core._ccache import StaticCache, TimeCache
 
 # outcomes of BufferCore._cwalk / _ccommon_time (tf2_msgs::TF2Error)
 NO_ERROR = 0
