@@ -16,16 +16,16 @@ $(BIN)/python:
 
 # Everything: every extra, the test tools and the docs tools (tests/test_docs.py builds
 # the site and runs every example of it).
-$(STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
+$(STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd) | $(BIN)/python
 	$(BIN)/python -m pip install -q -e '.[all,test,docs]'
 	touch $(STAMP) $(CORE_STAMP) $(DOCS_STAMP)
 
 # tfbus alone (its core dependencies), for the demo.
-$(CORE_STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
+$(CORE_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd) | $(BIN)/python
 	$(BIN)/python -m pip install -q -e .
 	touch $(CORE_STAMP)
 
-$(DOCS_STAMP): pyproject.toml setup.py tfbus/_ccore.pyx | $(BIN)/python
+$(DOCS_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd) | $(BIN)/python
 	$(BIN)/python -m pip install -q -e '.[all,docs]'
 	touch $(DOCS_STAMP) $(CORE_STAMP)
 
@@ -84,4 +84,4 @@ test-matrix: $(DIST_STAMP)
 
 clean:
 	rm -rf $(VENV) .nox .pytest_cache .mypy_cache .ruff_cache build dist site *.egg-info \
-	    tfbus/_ccore.c tfbus/*.so
+	    tfbus/core/_c*.c tfbus/core/*.so

@@ -2,13 +2,13 @@
 
 Each session makes a fresh venv with that interpreter's own ``venv`` module (nox's default
 backend), installs tfbus editable with its extras — which builds the compiled core for
-that interpreter beside the others (``tfbus/_ccore.cpython-3XY-*.so``) — and runs pytest.
+that interpreter beside the others (``tfbus/core/_c*.cpython-3XY-*.so``) — and runs pytest.
 An interpreter that is not installed is skipped, not failed: the matrix runs "on each
 interpreter found" (``scripts/pythons.py`` looks on ``PATH`` and in pyenv's versions).
 
     nox                      # every version found
     nox -s tests-3.10        # one
-    nox -s tests-3.13 -- tests/test_core.py -x     # arguments after -- go to pytest
+    nox -s tests-3.13 -- tests/core/test_core.py -x     # arguments after -- go to pytest
 """
 
 from __future__ import annotations

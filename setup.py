@@ -1,7 +1,7 @@
-"""Build the compiled core (``tfbus/_ccore.pyx``, Cython), optionally; everything else is
+"""Build the compiled core (``tfbus/core/_c*.pyx``, Cython), optionally; everything else is
 in pyproject.toml.
 
-The extension is an accelerator, never a requirement: tfbus has a pure-Python core with
+The extensions are an accelerator, never a requirement: tfbus has a pure-Python core with
 the same behaviour (``tfbus.core.COMPILED`` says which one is loaded).
 
 * ``TFBUS_NO_EXTENSIONS=1`` (any value but ``""``/``0``) skips the extension altogether:
@@ -39,11 +39,17 @@ def _flag(name: str) -> bool:
 
 
 NO_EXTENSIONS = _flag("TFBUS_NO_EXTENSIONS")
+
+COMPILED_MODULES = ("_cmath", "_ccache", "_ccore", "_cwire", "_cbatch")
+"""The compiled core, one extension per job (``tfbus/core/<name>.pyx``; the ``.pxd`` files
+beside them share declarations and inline math): scalar math, link storage, frame table
+and walk, ROS 1 wire decoding, the batch kernel. All or none: ``tfbus.core._select``
+loads the compiled core only when every one of them is importable."""
 REQUIRE_EXTENSIONS = _flag("TFBUS_REQUIRE_EXTENSIONS")
 
 _FALLBACK = """
 ========================================================================
-tfbus: the compiled core (tfbus._ccore) could not be built:
+tfbus: the compiled core (tfbus/core/_c*.pyx) could not be built:
     {error}
 tfbus is installed with its pure-Python core instead: same behaviour,
 slower lookups (tfbus.core.COMPILED is False). To get the compiled core,
@@ -118,8 +124,11 @@ def _extensions() -> list[Extension]:
     # tf2's numbers are reproduced bit for bit only if the compiler keeps each multiply
     # and add separately rounded: no fused multiply-add contraction.
     extra = [] if sys.platform == "win32" else ["-O2", "-ffp-contract=off"]
-    ext = Extension("tfbus._ccore", ["tfbus/_ccore.pyx"], extra_compile_args=extra)
-    return list(cythonize([ext], language_level=3))
+    exts = [
+        Extension(f"tfbus.core.{name}", [f"tfbus/core/{name}.pyx"], extra_compile_args=extra)
+        for name in COMPILED_MODULES
+    ]
+    return list(cythonize(exts, language_level=3))
 
 
 setup(ext_modules=_extensions(), cmdclass=_cmdclass())

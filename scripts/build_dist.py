@@ -1,7 +1,7 @@
 """``make dist``: the sdist, one manylinux wheel per Python found, and ``twine check``.
 
 1. ``python -m build --sdist`` — the sdist carries the compiled core's source
-   (``tfbus/_ccore.pyx``), its stub, the tests and docs (``MANIFEST.in``).
+   (``tfbus/core/_c*.pyx``), their stubs, the tests and docs (``MANIFEST.in``).
 2. For each supported interpreter found (``scripts/pythons.py``): ``pip wheel`` *from that
    sdist* (so a file missing from the sdist breaks the release build, not a user's
    install), with ``TFBUS_REQUIRE_EXTENSIONS=1``: a release wheel must carry the compiled

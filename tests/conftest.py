@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from tfbus import _backend
+from tfbus.core import _select
 
 
 def pytest_report_header() -> str:
     """Which core the run uses (``TFBUS_PURE_PYTHON=1`` selects the pure-Python one)."""
-    kind = "compiled" if _backend.COMPILED else "pure-Python"
-    return f"tfbus core: {kind} ({_backend.IMPLEMENTATION.__name__}), COMPILED={_backend.COMPILED}"
+    kind = "compiled" if _select.COMPILED else "pure-Python"
+    return f"tfbus core: {kind} ({_select.IMPLEMENTATION.__name__}), COMPILED={_select.COMPILED}"
 
 
 @pytest.fixture(params=["asyncio", "trio"], scope="module")

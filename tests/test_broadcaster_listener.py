@@ -331,11 +331,12 @@ async def test_end_to_end_across_a_memory_transport() -> None:
 
 
 class _ProtocolOnlyClock:
-    """A Clock with nothing beyond the protocol (no ``now_ns``), over a ManualClock."""
+    """A Clock with nothing beyond the protocol, over a ManualClock (a third-party Clock)."""
 
     def __init__(self, inner: ManualClock) -> None:
         self.inner = inner
         self.now = inner.now
+        self.now_ns = inner.now_ns
         self.sleep_until = inner.sleep_until
         self.sleep = inner.sleep
         self.on_jump = inner.on_jump
@@ -350,11 +351,11 @@ async def test_listener_clears_the_buffer_when_its_clock_jumps_back(
 ) -> None:
     """Issue 11 item 17: the listener reads the clock on each message, as tf2_ros's
     TransformListener does, so a clock stepped back clears the buffer (here a BufferCore,
-    which has no clock of its own: only the listener can notice). The listener reads a
-    clock's ``now_ns()`` (no Time built) and any other Clock's ``now()``."""
+    which has no clock of its own: only the listener can notice). The listener reads the
+    Clock protocol's ``now_ns()`` (no Time built), of a tfbus clock or any other."""
     clock = ManualClock(T0)
     listened: Clock = _ProtocolOnlyClock(clock) if protocol_only else clock
-    assert isinstance(listened, Clock) and hasattr(listened, "now_ns") != protocol_only
+    assert isinstance(listened, Clock)
     core = BufferCore()
     caplog.set_level(logging.WARNING, logger="tfbus.listener")
     async with Bus() as bus, TransformListener(core, bus, clock=listened):
@@ -388,3 +389,39 @@ async def test_listener_on_a_buffer_reads_the_buffers_clock() -> None:
         await settle(clock)
         assert not buf.can_transform("base_link", "laser", T0)
     buf.close()
+
+
+async def test_a_jump_back_clears_a_sink_once_whoever_follows_the_clock(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue 26: "clear on a jump back" has one owner (``clear_on_jump_back``): two
+    listeners feeding one BufferCore, and a Buffer with its own listener, on one clock,
+    clear each sink once per jump (one warning line), and stop following on exit."""
+    from tfbus.buffer import clear_on_jump_back
+
+    clock = ManualClock(T0)
+    core = BufferCore()
+    buf = Buffer(clock=clock)
+    caplog.set_level(logging.WARNING)
+    async with Bus() as bus:
+        async with (
+            TransformListener(core, bus, clock=clock),
+            TransformListener(core, bus, clock=clock),
+            TransformListener(buf, bus),
+        ):
+            TransformBroadcaster(bus).send_transform_nowait([ts("laser")])
+            await settle(clock)
+            assert core.can_transform("base_link", "laser", T0)
+            assert buf.can_transform("base_link", "laser", T0)
+            clock.set_nowait(Time(T0.sec - 60))
+            jumps = [r for r in caplog.records if "jump back in time" in r.getMessage()]
+            assert len(jumps) == 2  # one per sink
+            assert not core.can_transform("base_link", "laser", T0)
+            assert not buf.can_transform("base_link", "laser", T0)
+        stop = clear_on_jump_back(core, clock)
+        stop()
+        stop()  # idempotent
+        core.set_transform(ts("laser", stamp=Time(T0.sec - 60)), "x")
+        clock.set_nowait(Time(T0.sec - 120))  # no listener follows core any more
+        assert core.can_transform("base_link", "laser", Time(T0.sec - 60))
+        assert not buf.can_transform("base_link", "laser", Time(T0.sec - 60))

@@ -1,5 +1,5 @@
 """The ROS 1 TFMessage decoders agree: the compiled one (objects built in C,
-``tfbus._ccore._tf_from_ros1``, what ``decode_ros1`` uses with the compiled core), the
+``tfbus.core._cwire._tf_from_ros1``, what ``decode_ros1`` uses with the compiled core), the
 struct one (``decode_ros1_struct``, the pure-Python path) and rosbags' generic
 deserialiser; a short payload and a bad UTF-8 id fail alike."""
 

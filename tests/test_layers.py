@@ -30,19 +30,13 @@ LAYERS: dict[str, int] = {
     "topics": 0,  # the topic names, in one place
     "_version": 0,  # the distribution's version from package metadata
     # 1: the sans-I/O core (geometry and convert call the tf2 scalar math of the core that
-    # _backend chose: compiled _ccore or pure-Python _pycore, same behaviour)
+    # core/_select chose: compiled or pure-Python, same behaviour)
     "geometry": 1,
     "convert": 1,
-    "core": 1,
-    "core_text": 1,
-    "_backend": 1,
-    "_ccore": 1,
-    "_pycore": 1,
-    "cache": 1,
+    "core": 1,  # BufferCore, its text, batch values, velocity, caches, both twins
     "errors": 1,
-    "batch": 1,
-    "velocity": 1,
     # 2: the bus and time sources
+    "_aio": 2,  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)
     "bus": 2,
     "clock": 2,
     "latch": 2,
@@ -51,7 +45,6 @@ LAYERS: dict[str, int] = {
     "buffer": 3,
     "listener": 3,
     "broadcaster": 3,
-    "batch_async": 3,
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
     "monitor": 4,
@@ -187,10 +180,12 @@ def _where(module: str, line: int) -> str:
 
 
 def test_the_package_is_found() -> None:
-    assert "tfbus.core" in MODULES and "tfbus._ccore" in MODULES and "tfbus" in MODULES
-    assert "tfbus.messages" in _graph()["tfbus._ccore"]  # the compiled core's import is seen
-    # the one selection point imports both cores
-    assert {"tfbus._ccore", "tfbus._pycore"} <= set(_graph()["tfbus._backend"])
+    assert "tfbus.core" in MODULES and "tfbus.core._ccore" in MODULES and "tfbus" in MODULES
+    assert "tfbus.messages" in _graph()["tfbus.core._ccore"]  # the compiled core's import is seen
+    # the one selection point imports both cores, every module of each
+    cores = {f"tfbus.core._{c}{job}" for c in ("c", "py") for job in ("math", "cache", "batch")}
+    cores |= {"tfbus.core._ccore", "tfbus.core._pycore"}
+    assert cores <= set(_graph()["tfbus.core._select"])
 
 
 def test_every_module_has_a_layer() -> None:

@@ -27,7 +27,7 @@ import pytest
 import tfbus
 
 ROOT = Path(__file__).resolve().parents[1]
-FALLBACK_MESSAGE = "tfbus: the compiled core (tfbus._ccore) could not be built"
+FALLBACK_MESSAGE = "tfbus: the compiled core (tfbus/core/_c*.pyx) could not be built"
 
 
 def _pyproject_version() -> str:
@@ -83,14 +83,17 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     required = {
         "pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "MANIFEST.in",
-        "tfbus/__init__.py", "tfbus/_ccore.pyx", "tfbus/_ccore.pyi", "tfbus/py.typed",
-        "tfbus/_pycore.py", "tfbus/_backend.py",
-        "tests/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
+        "tfbus/__init__.py", "tfbus/py.typed", "tfbus/core/_select.py",
+        *(f"tfbus/core/_c{job}.{ext}" for job in ("math", "cache", "core", "wire", "batch")
+          for ext in ("pyx", "pyi")),
+        *(f"tfbus/core/_c{job}.pxd" for job in ("math", "cache", "core", "results")),
+        *(f"tfbus/core/_py{job}.py" for job in ("math", "cache", "core", "batch")),
+        "tests/core/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
         "docs/index.md", "mkdocs.yml",
     }
     assert required <= names, sorted(required - names)
     # Never generated or built files: the C is regenerated from the .pyx by Cython.
-    assert not [n for n in names if n.endswith((".so", ".pyc", "_ccore.c"))]
+    assert not [n for n in names if n.endswith((".so", ".pyc", ".c"))]
 
 
 def _wheel(sdist: Path, out: Path, env: dict[str, str]) -> tuple[Path, str]:
@@ -121,7 +124,8 @@ def test_without_a_c_compiler_the_sdist_builds_pure_python(
         meta = z.read(f"tfbus-{_pyproject_version()}.dist-info/WHEEL").decode()
     assert "Root-Is-Purelib: true" in meta and "Tag: py3-none-any" in meta, meta
     members = _members(wheel)
-    assert {"tfbus/core.py", "tfbus/_pycore.py", "tfbus/_backend.py"} <= set(members)
+    pure = {"tfbus/core/buffer_core.py", "tfbus/core/_pycore.py", "tfbus/core/_select.py"}
+    assert pure <= set(members)
     assert not [m for m in members if m.endswith(".so")]
 
 
@@ -131,8 +135,8 @@ def test_tfbus_no_extensions_gives_a_pure_wheel(sdist: Path, tmp_path: Path) -> 
     assert wheel.name.endswith("-py3-none-any.whl")
     assert "TFBUS_NO_EXTENSIONS is set" in log
     members = _members(wheel)
-    assert not [m for m in members if m.endswith((".so", ".pyx", ".c"))]
-    assert "tfbus/_ccore.pyi" in members and "tfbus/py.typed" in members
+    assert not [m for m in members if m.endswith((".so", ".pyx", ".pxd", ".c"))]
+    assert "tfbus/core/_ccore.pyi" in members and "tfbus/py.typed" in members
 
 
 def _project_copy(dest: Path) -> Path:
@@ -175,14 +179,14 @@ def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"}
     env["PYTHONPATH"] = str(tmp_path)
     # An editable install's finder (setuptools' __editable__ module) would still find the
-    # repository's tfbus._ccore: without it, this is a tfbus installed with no compiled core.
+    # repository's tfbus.core._ccore: without it, this is a tfbus installed with no compiled core.
     prelude = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
                "getattr(f, '__module__', '').startswith('__editable__')]; ")
     code = prelude + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
     done = _run([sys.executable, "-c", code], timeout=120, env=env, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout == f"{tmp_path / 'tfbus' / '__init__.py'} False\n"
-    from tfbus._backend import PURE_FALLBACK_WARNING
+    from tfbus.core._select import PURE_FALLBACK_WARNING
 
     assert done.stderr == PURE_FALLBACK_WARNING + "\n"
     assert "\n" not in PURE_FALLBACK_WARNING and "pure-Python core" in PURE_FALLBACK_WARNING

@@ -11,12 +11,12 @@ Layers (each imports only those below it; see docs/architecture.md):
 
 from tfbus import bus as _bus
 from tfbus._version import __version__ as __version__
-from tfbus.batch import TransformArray
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus, Subscription, Transport
 from tfbus.clock import Clock, ManualClock, SystemClock, every
 from tfbus.core import BufferCore, SetResult
+from tfbus.core.batch import TransformArray
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,

@@ -20,27 +20,27 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Callable, Iterable
 from functools import partial
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
-import anyio
-import anyio.lowlevel
+import numpy as np
+import numpy.typing as npt
 
-from tfbus.batch_async import AsyncBatchMixin
+from tfbus._aio import Wakeup, running_asyncio_loop
 from tfbus.clock import Clock, SystemClock, timeout_ns
-from tfbus.clock._base import running_asyncio_loop
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
+from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
+from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
 from tfbus.time import Duration, Time
-from tfbus.velocity import check_velocity_arguments
 
 if TYPE_CHECKING:
-    from asyncio import AbstractEventLoop, Future
+    from asyncio import AbstractEventLoop
 
-__all__ = ["Buffer"]
+__all__ = ["Buffer", "clear_on_jump_back"]
 
 _log = logging.getLogger(__name__)
 
@@ -49,18 +49,80 @@ _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
 
 
-class _Waiter(Generic[_T]):
+class _Clearable(Protocol):
+    """What a jump back clears: a ``BufferCore``, a ``Buffer``, any transform sink."""
+
+    def clear(self) -> None: ...
+
+
+_jump_followers: dict[tuple[int, int], tuple[list[Callable[[], None]], Callable[[], None]]] = {}
+"""(id(sink), id(clock)) -> (the ``then`` callbacks, the clock's unregister): one clock
+callback per sink and clock, however many owners asked for it."""
+
+
+def clear_on_jump_back(
+    sink: _Clearable, clock: Clock, then: Callable[[], None] | None = None
+) -> Callable[[], None]:
+    """The one owner of tf2_ros's "a clock jump back clears the buffer" (tf2_ros
+    ``Buffer`` / ``TransformListener``): when ``clock`` jumps back (:meth:`Clock.on_jump
+    <tfbus.clock.Clock.on_jump>`; a :class:`~tfbus.clock.SystemClock` notices it when read,
+    as a listener does on every message), log one warning line, ``sink.clear()``, then
+    call ``then`` (a :class:`Buffer` re-evaluates its pending waits).
+
+    A :class:`Buffer` follows its own clock; a :class:`~tfbus.listener.TransformListener`
+    asks for its sink and clock while it listens: for a Buffer on the same clock both
+    share one clock callback, so the buffer is cleared once.
+
+    Returns:
+        A function that stops this follow (idempotent); the clock callback goes with the
+        last one.
+    """
+    key = (id(sink), id(clock))
+    entry = _jump_followers.get(key)
+    if entry is None:
+        thens: list[Callable[[], None]] = []
+
+        def on_jump(old: Time, new: Time) -> None:
+            _log.warning(
+                "Detected jump back in time of %.3f s. Clearing TF buffer.",
+                (old.ns - new.ns) / 1e9,
+            )
+            sink.clear()
+            for callback in list(thens):
+                callback()
+
+        entry = (thens, clock.on_jump(on_jump))
+        _jump_followers[key] = entry
+    callbacks, unregister_clock = entry
+    token: Callable[[], None] = then if then is not None else _no_then
+    callbacks.append(token)
+    done = False
+
+    def stop() -> None:
+        nonlocal done
+        if done:
+            return
+        done = True
+        callbacks.remove(token)
+        if not callbacks:
+            unregister_clock()
+            _jump_followers.pop(key, None)
+
+    return stop
+
+
+def _no_then() -> None:
+    """The ``then`` of an owner that only needs the clear."""
+
+
+class _Waiter(Wakeup, Generic[_T]):
     """One pending wait: ``check()`` returns the answer, or None while unavailable, or
     returns or raises the TransformException that fails the wait. Indexed under
-    ``frames`` (from ``frames_fn()``) while pending. :meth:`wake` ends the wait (the
-    answer came, or the deadline).
-
-    On asyncio the waiting task awaits a bare future of ``loop`` (what anyio's Event
-    wraps twice: ``anyio.Event`` -> ``asyncio.Event`` -> a future per waiter); elsewhere an
-    ``anyio.Event``. Either is cancelled like any anyio checkpoint.
+    ``frames`` (from ``frames_fn()``) while pending. :meth:`~tfbus._aio.Wakeup.wake` ends
+    the wait (the answer came, or the deadline).
     """
 
-    __slots__ = ("check", "error", "event", "frames", "frames_fn", "future", "result")
+    __slots__ = ("check", "error", "frames", "frames_fn", "result")
 
     def __init__(
         self,
@@ -68,38 +130,15 @@ class _Waiter(Generic[_T]):
         frames_fn: Callable[[], frozenset[str]],
         loop: AbstractEventLoop | None,
     ) -> None:
+        super().__init__(loop)
         self.check = check
         self.frames_fn = frames_fn
-        self.future: Future[None] | None = None
-        self.event: anyio.Event | None = None
-        if loop is not None:
-            self.future = loop.create_future()
-        else:
-            self.event = anyio.Event()
         self.frames: frozenset[str] = frozenset()
         self.result: _T | None = None
         self.error: BaseException | None = None
 
-    def wait(self) -> Awaitable[object]:
-        """What the waiting task awaits (once): a checkpoint even if already woken (a
-        ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does)."""
-        future = self.future
-        if future is not None:
-            return anyio.lowlevel.checkpoint() if future.done() else future
-        assert self.event is not None
-        return self.event.wait()
 
-    def wake(self) -> None:
-        """End the wait (idempotent; harmless after the task was cancelled)."""
-        future = self.future
-        if future is None:
-            assert self.event is not None
-            self.event.set()
-        elif not future.done():
-            future.set_result(None)
-
-
-class Buffer(AsyncBatchMixin, BufferCore):
+class Buffer(BufferCore):
     """A :class:`~tfbus.core.BufferCore` plus awaitable lookups (tf2_ros ``Buffer``).
 
     Args:
@@ -117,7 +156,7 @@ class Buffer(AsyncBatchMixin, BufferCore):
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
-        self._unregister_jump = self.clock.on_jump(self._on_jump)
+        self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
 
     # ------------------------------------------------------------------ notification
 
@@ -204,11 +243,8 @@ class Buffer(AsyncBatchMixin, BufferCore):
         waiter.frames = _NO_FRAMES
         waiter.wake()
 
-    def _on_jump(self, old: Time, new: Time) -> None:
-        _log.warning(
-            "Detected jump back in time of %.3f s. Clearing TF buffer.", (old.ns - new.ns) / 1e9
-        )
-        self.clear()
+    def _recheck_pending(self) -> None:
+        """Re-evaluate every pending wait (after the buffer was cleared on a jump back)."""
         for waiter in self._pending():
             self._recheck(waiter)
 
@@ -280,10 +316,8 @@ class Buffer(AsyncBatchMixin, BufferCore):
             else:
                 # The clock's deadline callback wakes the wait as the data would (no
                 # cancel scope to enter and leave); a clock that cannot schedule one in
-                # this loop (Clock.call_later returns None), or that predates call_later,
-                # gives its cancel scope instead.
-                call_later = getattr(self.clock, "call_later", None)
-                cancel = None if call_later is None else call_later(timeout, waiter.wake)
+                # this loop (Clock.call_later returns None) gives its cancel scope instead.
+                cancel = self.clock.call_later(timeout, waiter.wake)
                 if cancel is None:
                     with self.clock.move_on_after(timeout):
                         await waiter.wait()
@@ -486,6 +520,71 @@ class Buffer(AsyncBatchMixin, BufferCore):
         return result
 
     # ------------------------------------------------------------------ velocity
+
+    # ------------------------------------------------------------------ batched waits
+
+    async def _wait_latest(
+        self,
+        target_frame: str,
+        source_frame: str,
+        times: npt.NDArray[np.int64],
+        timeout: float | Duration | None,
+    ) -> None:
+        """Wait until the latest of ``times`` can be looked up (nothing for no times).
+        Time 0 means "latest available": waiting for it waits for the frames to connect."""
+        if times.size:
+            await self.wait_for_transform(
+                target_frame, source_frame, Time.from_ns(int(times.max())), timeout
+            )
+
+    async def lookup_transforms_async(
+        self,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        timeout: float | Duration | None = None,
+        *,
+        errors: Errors = "raise",
+    ) -> TransformArray:
+        """:meth:`~tfbus.core.BufferCore.lookup_transforms`, first waiting (event-driven,
+        as :meth:`wait_for_transform`) until the latest of ``times`` can be looked up.
+        Data up to the latest time normally covers the earlier ones; a time that has
+        fallen out of the cache, or a gap inside the requested span, is reported by the
+        batched lookup as tf2's exception (or masked with ``errors="mask"``).
+
+        Args:
+            timeout: seconds (or a Duration) of the buffer's clock; None waits forever.
+
+        Raises:
+            TimeoutException: the latest time did not become available within ``timeout``.
+            ExtrapolationException: the latest time is older than the cache window.
+            TransformException subclasses, ValueError: as the synchronous lookup.
+        """
+        t = as_times(times)
+        await self._wait_latest(target_frame, source_frame, t, timeout)
+        return self.lookup_transforms(target_frame, source_frame, t, errors=errors)
+
+    async def transform_points_async(
+        self,
+        points: npt.ArrayLike,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        timeout: float | Duration | None = None,
+        *,
+        errors: Errors = "raise",
+    ) -> npt.NDArray[np.float64]:
+        """:meth:`~tfbus.core.BufferCore.transform_points` (each ``(N, 3)`` point, metres,
+        at its own time), first waiting until the latest of ``times`` can be looked up.
+
+        Raises: as :meth:`lookup_transforms_async`; ValueError for malformed points.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+        t = as_times(times, p.shape[0])
+        await self._wait_latest(target_frame, source_frame, t, timeout)
+        return self.transform_points(p, target_frame, source_frame, t, errors=errors)
 
     async def lookup_velocity_async(
         self,

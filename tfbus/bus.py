@@ -38,7 +38,7 @@ logged, never passed to the publisher.
 from __future__ import annotations
 
 import logging
-from collections.abc import Awaitable, Callable, Generator, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar, runtime_checkable
@@ -47,7 +47,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
-from tfbus.clock._base import running_asyncio_loop
+from tfbus._aio import ShieldedYield, running_asyncio_loop
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
 from tfbus.subscription import (
@@ -79,38 +79,7 @@ _TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
 T = TypeVar("T")
 
 if TYPE_CHECKING:
-    from asyncio import AbstractEventLoop
-
-
-class _ShieldedYield:
-    """``await bus._after_publish()`` on asyncio: what anyio's
-    ``cancel_shielded_checkpoint`` does (let every other ready task run once, then
-    resume; never raise anyio's cancellation), without entering and leaving a
-    ``CancelScope(shield=True)``, which cost about as much as the rest of a publish.
-
-    The task waits on a future that is already done (one per bus, done for good, so it
-    serves every publish). asyncio resumes the task exactly as after
-    ``sleep(0)`` (one ``call_soon``, behind every callback already ready), and anyio never
-    cancels a task whose awaited future is done: a cancel scope cancelled meanwhile
-    delivers its cancellation at the task's next checkpoint instead, as it does for a
-    shielded one. (A native ``Task.cancel()`` still lands, as it does through anyio's
-    shield.) ``tests/test_bus.py`` holds anyio to this.
-    """
-
-    __slots__ = ("_future",)
-
-    def __init__(self, loop: AbstractEventLoop) -> None:
-        future = loop.create_future()
-        future.set_result(None)
-        self._future = future
-
-    def __call__(self) -> _ShieldedYield:
-        return self
-
-    def __await__(self) -> Generator[Any, None, None]:
-        future = self._future
-        future._asyncio_future_blocking = True  # what Future.__await__ sets: "wait on me"
-        yield future
+    pass
 
 
 def _backend_checkpoint_if_cancelled() -> Callable[[], Awaitable[None]]:
@@ -222,7 +191,7 @@ class Bus:
             raise RuntimeError("a Bus can be opened only once")
         loop = running_asyncio_loop()
         if loop is not None:
-            self._after_publish = _ShieldedYield(loop)
+            self._after_publish = ShieldedYield(loop)
         self._before_publish = _backend_checkpoint_if_cancelled()
         tg = anyio.create_task_group()
         await tg.__aenter__()

@@ -17,7 +17,7 @@ Formulas:
 * :func:`compose`, :func:`inverse`, :func:`rotate_vectors`, :func:`apply_transform` and
   :func:`quat_multiply` evaluate tf2's expressions (``tf2/LinearMath/Quaternion.h``
   ``operator*`` and ``quatRotate``, ``tf2/src/buffer_core.cpp`` ``TransformAccum``) in the
-  same order as the core's scalar math (:mod:`tfbus._ccore` or :mod:`tfbus._pycore`): row
+  same order as the core's scalar math (:mod:`tfbus.core._cmath` or :mod:`tfbus.core._pymath`): row
   by row, results are bit-for-bit equal to the
   scalar ones that :class:`~tfbus.core.BufferCore` computes. One quaternion against many
   vectors or points uses the equivalent 3x3 matrix instead (KDL's
@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from transforms3d import euler as _t3d_euler
 from transforms3d import quaternions as _t3d_quat
 
-from tfbus import _backend as _core
+from tfbus.core import _select as _core
 from tfbus.messages import (
     Point,
     PointStamped,
@@ -129,7 +129,7 @@ def _fit(arr: Array, n: int | None) -> Array:
 
 
 def _quat_multiply(a: Array, b: Array) -> Array:
-    # Quaternion.h operator* / _ccore.quat_multiply, same evaluation order.
+    # Quaternion.h operator* / _cmath.quat_multiply, same evaluation order.
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return np.stack(
@@ -144,7 +144,7 @@ def _quat_multiply(a: Array, b: Array) -> Array:
 
 
 def _quat_rotate(q: Array, v: Array) -> Array:
-    # tf2 quatRotate: q ⊗ (v, 0) ⊗ conj(q), as _ccore.quat_rotate, same evaluation order.
+    # tf2 quatRotate: q ⊗ (v, 0) ⊗ conj(q), as _cmath.quat_rotate, same evaluation order.
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
     tx = qw * vx + qy * vz - qz * vy
@@ -283,7 +283,7 @@ def compose(
         ValueError: wrong shapes, or batches of different N.
 
     Source: ``tf2/src/buffer_core.cpp`` ``TransformAccum::accum``;
-    :func:`tfbus._ccore.compose` gives bit-identical numbers for one transform.
+    :func:`tfbus.core._cmath.compose` gives bit-identical numbers for one transform.
     """
     ta = _as_array(translation_a, 3, "translation_a")
     qa = _as_array(rotation_a, 4, "rotation_a")
@@ -308,7 +308,7 @@ def inverse(translation: npt.ArrayLike, rotation: npt.ArrayLike) -> tuple[Array,
         ValueError: wrong shapes, or batches of different N.
 
     Source: ``tf2/src/buffer_core.cpp`` ``TransformAccum::finalize``;
-    :func:`tfbus._ccore.inverse`.
+    :func:`tfbus.core._cmath.inverse`.
     """
     t = _as_array(translation, 3, "translation")
     q = _as_array(rotation, 4, "rotation")
@@ -335,7 +335,7 @@ def slerp(q0: npt.ArrayLike, q1: npt.ArrayLike, ratio: float) -> Quaternion:
         ZeroDivisionError: if either quaternion is zero (tf2 would return NaN).
 
     Source: ``tf2/LinearMath/Quaternion.h`` ``Quaternion::slerp`` via
-    :func:`tfbus._ccore.slerp`.
+    :func:`tfbus.core._cmath.slerp`.
     """
     a = np.asarray(q0, dtype=np.float64)
     b = np.asarray(q1, dtype=np.float64)

@@ -37,9 +37,9 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._backend import apply_transforms, lerp_rows, slerp_rows
 from tfbus.buffer import Buffer
 from tfbus.core import BufferCore
+from tfbus.core._select import apply_transforms, lerp_rows, slerp_rows
 from tfbus.messages import Header
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time

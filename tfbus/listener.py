@@ -25,7 +25,7 @@ from typing import Any, Protocol
 import anyio
 import anyio.abc
 
-from tfbus.buffer import Buffer
+from tfbus.buffer import Buffer, clear_on_jump_back
 from tfbus.bus import Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
 from tfbus.core import BatchResult
@@ -138,16 +138,9 @@ class TransformListener:
         if clock is None:
             clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
         self._clock = clock
-        # The clock read on every message: its now_ns() when it has one (both tfbus
-        # clocks do; it builds no Time), else now().ns.
-        now_ns = getattr(clock, "now_ns", None)
-        self._now_ns: Callable[[], int] = (
-            now_ns if callable(now_ns) else lambda: self._clock.now().ns
-        )
-        # A Buffer reading its own clock clears itself on a jump back (Clock.on_jump);
-        # any other sink is cleared by the listener, as tf2_ros's listener does.
-        self._clears_sink = not (isinstance(buffer, Buffer) and buffer.clock is clock)
-        self._last_update = -1
+        # The clock read on every message: now_ns() builds no Time.
+        self._now_ns: Callable[[], int] = clock.now_ns
+        self._unfollow_jumps: Callable[[], None] | None = None
         self._log = RateLimitedLog(_log, log_period)
         self._task_group: anyio.abc.TaskGroup | None = None
         self._subs: list[Subscription[Any]] = []
@@ -174,6 +167,9 @@ class TransformListener:
         if self._entered:
             raise RuntimeError("a TransformListener can be entered only once")
         self._entered = True
+        # A jump back of the clock read on each message clears the sink (one owner; a
+        # Buffer on this clock already follows it, and is cleared once).
+        self._unfollow_jumps = clear_on_jump_back(self._buffer, self._clock)
         if self._inline:
             self._callbacks = [
                 self._bus.subscribe_callback(TF_STATIC_TOPIC, partial(self._handle, True))
@@ -208,6 +204,8 @@ class TransformListener:
         tb: TracebackType | None,
     ) -> bool | None:
         """Stop listening: unregister both subscriptions (and cancel the tasks)."""
+        if self._unfollow_jumps is not None:
+            self._unfollow_jumps()
         for cb in self._callbacks:
             cb.close()
         tg = self._task_group
@@ -238,25 +236,12 @@ class TransformListener:
     def _warn(self, msg: str, *args: object) -> None:
         self._log.log(self._clock.now().ns / 1e9, logging.WARNING, msg, *args)
 
-    def _jumped_back(self, now: int) -> None:
-        """The clock read ``now`` (ns), earlier than the last reading: clear the sink, as
-        tf2_ros's listener does (unless it is a Buffer on this clock, which clears itself
-        through ``on_jump``; reading a ``SystemClock`` fires those callbacks)."""
-        if self._clears_sink:
-            _log.warning(
-                "Detected jump back in time of %.3f s. Clearing TF buffer.",
-                (self._last_update - now) / 1e9,
-            )
-            self._buffer.clear()
-
     def _handle(self, static: bool, message: object) -> None:
         self._messages += 1
         # tf2_ros TransformListener::subscription_callback_impl: read the clock on each
-        # message; a time earlier than the last one read is a jump back.
-        now = self._now_ns()
-        if now < self._last_update:
-            self._jumped_back(now)
-        self._last_update = now
+        # message; a clock that reads earlier than before reports the jump back to its
+        # on_jump callbacks (clear_on_jump_back clears the sink).
+        self._now_ns()
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         if not isinstance(message, TFMessage):
             self._malformed += 1

@@ -58,13 +58,13 @@ def test_every_command_has_help_with_examples(command: str) -> None:
 def test_version() -> None:
     from importlib.metadata import version
 
-    from tfbus import _backend
+    from tfbus.core import _select
 
     code, out, _ = run("--version")
     assert code == 0
-    core = "compiled core" if _backend.COMPILED else "pure-Python core: "
+    core = "compiled core" if _select.COMPILED else "pure-Python core: "
     assert out.startswith(f"tfbus {version('tfbus')} ({core}")
-    assert out == f"tfbus {version('tfbus')} ({_backend.core_description()})\n"
+    assert out == f"tfbus {version('tfbus')} ({_select.core_description()})\n"
 
 
 def test_version_of_a_source_tree_that_is_not_installed(

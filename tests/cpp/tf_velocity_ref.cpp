@@ -1,5 +1,5 @@
 // Reference answers from Debian's C++ libtf (ROS 1 tf 1.13): tf::Transformer::lookupTwist.
-// Built and run by tests/geometry/test_velocity.py. Reads lines from stdin:
+// Built and run by tests/core/test_velocity.py. Reads lines from stdin:
 //   T parent child stamp_ns tx ty tz qx qy qz qw      store a transform
 //   P parent child stamp_ns tx ty tz qx qy qz qw      store a static transform (tf2 buffer)
 //   S tracking observation time_ns interval_ns        lookupTwist (4 arguments)

@@ -1,7 +1,7 @@
 """Run a script of calls on Debian's real ``tf2_py.BufferCore`` (ROS 1 geometry2 0.7.6).
 
 Runs under ``/usr/bin/python3`` (``python3-tf2``), never imports tfbus: the test side of
-``tests/test_chain.py``. Reads JSON on stdin::
+``tests/core/test_chain.py``. Reads JSON on stdin::
 
     {"cache_time_s": 10.0, "ops": [op, ...]}
 

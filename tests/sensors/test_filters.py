@@ -27,9 +27,10 @@ from tfbus import (
     TransformStamped,
     Vector3,
 )
-from tfbus.batch_async import lookup_transforms_async, transform_points_async
 from tfbus.buffer import Buffer
 from tfbus.clock import ManualClock
+from tfbus.core import BufferCore
+from tfbus.core._select import CoreBase
 from tfbus.filters import FilterFailureReason, MessageFilter
 
 pytestmark = pytest.mark.anyio
@@ -255,7 +256,7 @@ async def test_lookup_transforms_async_waits_for_the_latest_time() -> None:
     got = []
 
     async def look() -> None:
-        got.append(await lookup_transforms_async(buf, "odom", "laser", times))
+        got.append(await buf.lookup_transforms_async("odom", "laser", times))
 
     async with anyio.create_task_group() as tg:
         tg.start_soon(look)
@@ -268,12 +269,12 @@ async def test_lookup_transforms_async_waits_for_the_latest_time() -> None:
         assert len(got) == 1
     ref = buf.lookup_transforms("odom", "laser", times)
     assert got[0].translations.tolist() == ref.translations.tolist()
-    pts = await transform_points_async(buf, np.ones((3, 3)), "odom", "laser", times)
+    pts = await buf.transform_points_async(np.ones((3, 3)), "odom", "laser", times)
     np.testing.assert_allclose(pts, buf.transform_points(np.ones((3, 3)), "odom", "laser", times))
 
     async def late() -> None:
         with pytest.raises(TimeoutException):
-            await lookup_transforms_async(buf, "odom", "laser", [at(9.0).ns], timeout=1.0)
+            await buf.lookup_transforms_async("odom", "laser", [at(9.0).ns], timeout=1.0)
 
     async with anyio.create_task_group() as tg:
         tg.start_soon(late)
@@ -281,13 +282,11 @@ async def test_lookup_transforms_async_waits_for_the_latest_time() -> None:
         await clock.advance(2.0)
     buf.set_transform(odom(30.0))
     with pytest.raises(ExtrapolationException):
-        await lookup_transforms_async(buf, "odom", "laser", [at(1.0).ns, at(3.0).ns])
+        await buf.lookup_transforms_async("odom", "laser", [at(1.0).ns, at(3.0).ns])
 
 
 async def test_buffer_has_the_awaitable_batched_lookups() -> None:
-    from tfbus.batch_async import AsyncBatchMixin
-
-    assert issubclass(Buffer, AsyncBatchMixin)
+    assert Buffer.__mro__[1:3] == (BufferCore, CoreBase)  # one class, no mixins
     clock = ManualClock(Time(100))
     buf = Buffer(clock=clock)
     buf.set_transform(odom(1.0))

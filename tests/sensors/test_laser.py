@@ -325,7 +325,7 @@ def test_per_beam_kernels_match_the_scalar_tf2_math() -> None:
     """The per-beam kernels of the loaded core: slerp rows are tf2's scalar slerp bit for bit
     (angle hoisted, not changed), lerp rows the textbook formula, and a quarter turn
     about z with an origin maps points as hand-computed."""
-    from tfbus._backend import apply_transforms, lerp_rows, slerp, slerp_rows
+    from tfbus.core._select import apply_transforms, lerp_rows, slerp, slerp_rows
 
     a = (0.0, 0.0, math.sin(0.2), math.cos(0.2))
     b = (0.1, -0.2, -0.9, -0.3)  # negative dot: the shortest path flips b

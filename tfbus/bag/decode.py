@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import ast
 import struct
-import sys
 from collections.abc import Callable, Iterable
 from contextlib import suppress
 from itertools import repeat
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
-from tfbus._backend import IMPLEMENTATION
+from tfbus.core._select import TF_FROM_ROS1
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import NSEC_PER_SEC, Time
 
@@ -110,9 +109,7 @@ _layouts: dict[tuple[int, int], tuple[Callable[[bytes], tuple[Any, ...]], tuple[
 layout, and the frame id lengths then child id lengths it assumes."""
 
 
-_compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = (
-    getattr(IMPLEMENTATION, "_tf_from_ros1", None) if sys.byteorder == "little" else None
-)
+_compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = TF_FROM_ROS1
 """The compiled core's ROS 1 TFMessage decoder (objects built in C), where there is one."""
 
 
@@ -120,7 +117,7 @@ def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
 
     With the compiled core (on a little-endian host) the transforms are built in C
-    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    (``tfbus.core._cwire._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
     :func:`decode_ros1_struct`. Equal values either way (tested).
 
     Raises:

@@ -157,8 +157,8 @@ def command(
       tfbus echo base_link base_laser --bus zenoh -n 1
       tfbus echo base_link base_laser --bus zenoh:tcp/192.168.1.10:7448 --duration 10
     """
-    from tfbus._backend import INVALID_ARGUMENT
-    from tfbus.core_text import bad_frame_exception
+    from tfbus.core._select import INVALID_ARGUMENT
+    from tfbus.core.text import bad_frame_exception
     from tfbus.errors import TransformException
 
     if rate_arg is not None and rate is not None and rate_arg != rate:

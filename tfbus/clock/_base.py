@@ -8,7 +8,6 @@ from __future__ import annotations
 import logging
 import math
 import numbers
-import sys
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from itertools import count
@@ -19,7 +18,7 @@ import anyio
 from tfbus.time import Duration, Time, seconds_to_ns
 
 if TYPE_CHECKING:
-    from asyncio import AbstractEventLoop
+    pass
 
 _log = logging.getLogger("tfbus.clock")
 
@@ -33,6 +32,10 @@ class Clock(Protocol):
 
     def now(self) -> Time:
         """The current time of this clock."""
+        ...
+
+    def now_ns(self) -> int:
+        """:meth:`now` as int nanoseconds, building no Time (read on every message)."""
         ...
 
     async def sleep_until(self, t: Time) -> None:
@@ -134,26 +137,6 @@ def timeout_ns(seconds: float | Duration | None, *, name: str = "timeout") -> in
 
 def _noop() -> None:
     """The canceller of a call that will never happen (or already did)."""
-
-
-def running_asyncio_loop() -> AbstractEventLoop | None:
-    """The running asyncio event loop when the caller runs in one of its tasks (anyio on
-    asyncio), else None (trio, including trio in guest mode on an asyncio host, whose
-    tasks are not asyncio tasks; no loop at all).
-
-    ``asyncio`` is looked up in ``sys.modules`` (it is necessarily loaded when an asyncio
-    loop is running), never imported by tfbus.
-    """
-    asyncio = sys.modules.get("asyncio")
-    if asyncio is None:
-        return None
-    try:
-        loop: AbstractEventLoop = asyncio.get_running_loop()
-    except RuntimeError:  # no asyncio loop running in this thread
-        return None
-    if asyncio.current_task(loop) is None:
-        return None  # a callback of the loop, not a task: e.g. trio in guest mode
-    return loop
 
 
 class _JumpCallbacks:

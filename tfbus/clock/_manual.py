@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from heapq import heapify, heappop, heappush
@@ -13,45 +12,16 @@ from typing import Final
 import anyio
 import anyio.lowlevel
 
+from tfbus._aio import wait_all_tasks_blocked
 from tfbus.clock._base import (
     JumpCallback,
     _JumpCallbacks,
     _noop,
-    running_asyncio_loop,
     timeout_ns,
 )
 from tfbus.time import TIME_MAX_NS, Duration, Time, seconds_to_ns
 
 _TIME_ZERO = Time(0)
-
-
-async def _wait_all_tasks_blocked() -> None:
-    """Let every other task run until it is blocked, without touching the wall clock.
-
-    On trio this is ``trio.testing.wait_all_tasks_blocked`` via anyio, which is exact
-    and instant. anyio's asyncio version sleeps 0.1 s of *wall time* each time it finds a
-    runnable task, which would make every woken chain of tasks (timer -> bus ->
-    subscriber) cost 100 ms; so on asyncio we do the same check with zero-length
-    checkpoints instead (:func:`~tfbus.clock._base.running_asyncio_loop`: asyncio is
-    never imported by tfbus).
-    """
-    loop = running_asyncio_loop()
-    if loop is None:
-        await anyio.wait_all_tasks_blocked()
-        return
-    asyncio = sys.modules["asyncio"]
-    this_task = asyncio.current_task()
-    await anyio.lowlevel.checkpoint()
-    while True:
-        for task in asyncio.all_tasks(loop):
-            if task is this_task:
-                continue
-            waiter = getattr(task, "_fut_waiter", None)
-            if waiter is None or waiter.done():
-                break
-        else:
-            return
-        await anyio.lowlevel.checkpoint()
 
 
 _NEVER: Final = TIME_MAX_NS + 1
@@ -325,7 +295,7 @@ class ManualClock:
                 await self._run_to(t.ns)
             else:
                 self._jump_to(t.ns)
-                await _wait_all_tasks_blocked()
+                await wait_all_tasks_blocked()
 
     def advance_nowait(self, d: float | Duration) -> None:
         """Move time forward by ``d`` at once, waking every sleeper due by then.
@@ -374,7 +344,7 @@ class ManualClock:
         return self._lock
 
     async def _run_to(self, target_ns: int) -> None:
-        await _wait_all_tasks_blocked()
+        await wait_all_tasks_blocked()
         sleepers = self._sleepers
         self._prune()
         while sleepers and sleepers[0][0] <= target_ns:
@@ -382,7 +352,7 @@ class ManualClock:
             # backend (trio shuffles tasks woken in the same batch).
             self._now_ns = max(self._now_ns, sleepers[0][0])
             heappop(sleepers)[2]()
-            await _wait_all_tasks_blocked()
+            await wait_all_tasks_blocked()
             self._prune()
         self._now_ns = target_ns
         # Deadlines at exactly the target have already been woken above.

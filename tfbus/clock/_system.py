@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING, Any
 import anyio
 import anyio.lowlevel
 
+from tfbus._aio import running_asyncio_loop
 from tfbus.clock._base import (
     JumpCallback,
     _JumpCallbacks,
     _noop,
-    running_asyncio_loop,
     timeout_ns,
 )
 from tfbus.time import NSEC_PER_SEC, Duration, Time

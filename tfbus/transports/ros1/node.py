@@ -23,7 +23,7 @@ import anyio.abc
 from anyio.streams.buffered import BufferedByteReceiveStream
 from anyio.streams.stapled import MultiListener
 
-from tfbus.clock._base import running_asyncio_loop
+from tfbus._aio import running_asyncio_loop
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import CountLimitedLog

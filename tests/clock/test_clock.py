@@ -889,7 +889,7 @@ def test_system_call_later_outside_an_event_loop_is_none() -> None:
 
 
 async def test_running_asyncio_loop_only_in_asyncio_tasks(anyio_backend: str) -> None:
-    from tfbus.clock._base import running_asyncio_loop
+    from tfbus._aio import running_asyncio_loop
 
     loop = running_asyncio_loop()
     if anyio_backend == "asyncio":

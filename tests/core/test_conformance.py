@@ -86,7 +86,7 @@ def test_a_green_run_ends_quietly() -> None:
         done = subprocess.run(
             [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", *flags, str(here),
              "-k", "level1 and set_validation"],
-            cwd=here.parents[1], capture_output=True, text=True, timeout=300, check=False,
+            cwd=here.parents[2], capture_output=True, text=True, timeout=300, check=False,
         )
         assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
         return done.stdout.splitlines()

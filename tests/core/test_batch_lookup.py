@@ -1,11 +1,11 @@
-"""Batched lookups (``tfbus.batch``) against N single ``lookup_transform`` calls.
+"""Batched lookups (``tfbus.core.batch``) against N single ``lookup_transform`` calls.
 
 The oracle is the single lookup itself (checked bit for bit against tf2 by the
 conformance corpus): every row must equal it to 1e-12, every failure must raise the same
 exception with the same message as the single lookup for the first failing time.
 
 Each row comparison runs twice (fixture ``simd``): as shipped, where slerp's per-time
-sines may come from libmvec's vector sin (``tfbus._ccore._BATCH_VECTOR_SIN``; rows within the
+sines may come from libmvec's vector sin (``tfbus.core._cbatch._BATCH_VECTOR_SIN``; rows within the
 issue's 1e-12, a few ulp in practice), and with the batch forced onto its scalar loops
 (libm's sin), where every row must be the single lookup's bit for bit. Rows whose math
 has no per-time sine (exact stamps, statics, constant rotations) are bit-identical either
@@ -36,20 +36,20 @@ from tfbus import (
     TransformStamped,
     Vector3,
 )
-from tfbus._backend import IMPLEMENTATION, batch_lookup
-from tfbus.batch import TransformArray, as_times
 from tfbus.core import COMPILED
+from tfbus.core._select import IMPLEMENTATIONS, batch_lookup
+from tfbus.core.batch import TransformArray, as_times
 
 
 def _batch_simd(on: bool) -> bool:
     """Turn the compiled batch's SIMD paths and vector sine on or off; whether the vector
     sine is now in use. The pure-Python core (this file also runs against it, see
     ``tests/test_pycore.py``) has neither: its rows are always the single walk's."""
-    return bool(IMPLEMENTATION._batch_simd(on)) if COMPILED else False
+    return bool(IMPLEMENTATIONS[3]._batch_simd(on)) if COMPILED else False
 
 
 def _vector_sin_available() -> bool:
-    return bool(IMPLEMENTATION._BATCH_VECTOR_SIN) if COMPILED else False
+    return bool(IMPLEMENTATIONS[3]._BATCH_VECTOR_SIN) if COMPILED else False
 
 FRAMES = ["a", "b", "c", "d", "e", "f"]
 

@@ -1,7 +1,7 @@
 """Per-link transform storage: ``TimeCache`` (dynamic) and ``StaticCache`` (static).
 
-Both come from the core (:mod:`tfbus._backend`: compiled :mod:`tfbus._ccore`, or the
-pure-Python :mod:`tfbus._pycore`) and are re-exported here. Semantics are tf2's
+Both come from the core (:mod:`tfbus.core._select`: compiled :mod:`tfbus.core._ccache`, or
+the pure-Python :mod:`tfbus.core._pycache`) and are re-exported here. Semantics are tf2's
 (geometry2 0.7.6, ``tf2/src/cache.cpp`` and ``static_cache.cpp``):
 
 * ``insert``: refused as TF_OLD_DATA iff ``newest > stamp + cache_time``; refused as
@@ -24,6 +24,6 @@ parents (64 bytes per sample otherwise), searched by binary search.
 
 from __future__ import annotations
 
-from tfbus._backend import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache, format_sec
+from tfbus.core._select import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache, format_sec
 
 __all__ = ["OK", "OLD_DATA", "REPEATED_DATA", "StaticCache", "TimeCache", "format_sec"]

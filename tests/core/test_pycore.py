@@ -1,4 +1,4 @@
-"""The pure-Python core (``tfbus/_pycore.py``) against the compiled one (``tfbus/_ccore``),
+"""The pure-Python core (``tfbus/core/_py*.py``) against the compiled one (``tfbus/core/_c*.pyx``),
 side by side in one process: same results bit for bit, same exceptions and messages.
 
 * Scalar math (compose, inverse, quat_multiply, quat_rotate, slerp, compose_full) on
@@ -17,7 +17,7 @@ counts as equal to every NaN: IEEE 754 does not specify the sign and payload of 
 produced from NaN operands, and the compiled core's depend on the operand order the C
 compiler picks (it may rewrite ``-a * b + c`` as ``c - a * b``).
 
-Plus: which core is loaded and why (``tfbus._backend``), and the suite's core-level tests
+Plus: which core is loaded and why (``tfbus.core._select``), and the suite's core-level tests
 and the tf2 conformance corpus run again in a subprocess with ``TFBUS_PURE_PYTHON=1``.
 """
 
@@ -32,6 +32,7 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 from xml.etree import ElementTree
 
@@ -40,14 +41,26 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3, _backend, _pycore
-from tfbus.batch import BatchLookupMixin
-from tfbus.core import BufferCore
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.core import BufferCore, _pybatch, _pycache, _pycore, _pymath, _select
 
-_ccore = pytest.importorskip("tfbus._ccore", reason="the compiled core is not built here")
+_ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
+from tfbus.core import _cbatch, _ccache, _cmath  # noqa: E402  (built with _ccore)
 
-ROOT = Path(__file__).resolve().parents[1]
-CORES = {"compiled": _ccore, "pure": _pycore}
+ROOT = Path(__file__).resolve().parents[2]
+TWINS = [(_cmath, _pymath), (_ccache, _pycache), (_ccore, _pycore), (_cbatch, _pybatch)]
+"""The core split by job: (compiled module, its pure-Python twin)."""
+
+
+def _namespace(*modules: Any) -> SimpleNamespace:
+    """Every public name of a core's modules in one namespace."""
+    return SimpleNamespace(**{n: getattr(m, n) for m in modules for n in m.__all__})
+
+
+CORES = {
+    "compiled": _namespace(*(c for c, _ in TWINS)),
+    "pure": _namespace(*(p for _, p in TWINS)),
+}
 
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -56,7 +69,7 @@ def _buffer_class(base: type) -> type[BufferCore]:
     """``BufferCore``'s own methods over the given core's ``CoreBase``."""
     skip = {"__dict__", "__weakref__"}
     body = {k: v for k, v in vars(BufferCore).items() if k not in skip}
-    return type("BufferCore", (BatchLookupMixin, base), body)
+    return type("BufferCore", (base,), body)
 
 
 BUFFERS = {name: _buffer_class(core.CoreBase) for name, core in CORES.items()}
@@ -114,28 +127,38 @@ def same(fn: Callable[[Any], Any], *cores: str) -> Any:
 # --------------------------------------------------------------------------- the API
 
 
-def test_both_cores_export_the_same_names() -> None:
-    stub = (ROOT / "tfbus" / "_ccore.pyi").read_text()
+@pytest.mark.parametrize(("compiled", "pure"), TWINS, ids=[c.__name__ for c, _ in TWINS])
+def test_both_cores_export_the_same_names(compiled: Any, pure: Any) -> None:
+    """Each compiled module and its pure twin: the same public names (the stub's, the
+    module's ``__all__``), equal constants, documented functions and classes."""
+    stub = (ROOT / "tfbus" / "core" / f"{compiled.__name__.rsplit('.', 1)[1]}.pyi").read_text()
     declared = set(re.findall(r"^(?:def|class) (\w+)|^(\w+): Final", stub, re.M))
     names = {a or b for a, b in declared} - {""}
     public = {n for n in names if not n.startswith("_")}
-    assert public <= set(_pycore.__all__)
-    assert set(_pycore.__all__) <= {n for n in dir(_ccore) if not n.startswith("_")}
-    for name in _pycore.__all__:
+    assert public == set(pure.__all__) == set(compiled.__all__)
+    for name in pure.__all__:
         if name.isupper():
-            assert getattr(_pycore, name) == getattr(_ccore, name), name
+            assert getattr(pure, name) == getattr(compiled, name), name
         else:
-            assert getattr(_pycore, name).__doc__, f"_pycore.{name} has no docstring"
-    own = {"COMPILED", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING", "core_description"}
-    assert set(_pycore.__all__) | own == set(_backend.__all__)
+            assert getattr(pure, name).__doc__, f"{pure.__name__}.{name} has no docstring"
+            assert getattr(compiled, name).__doc__, f"{compiled.__name__}.{name} has no docstring"
+
+
+def test_the_selection_exports_every_core_name() -> None:
+    own = {"COMPILED", "COMPILED_MODULES", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING",
+           "TF_FROM_ROS1", "core_description"}  # fmt: skip
+    every = {n for _, pure in TWINS for n in pure.__all__}
+    assert every | own == set(_select.__all__)
 
 
 def test_the_loaded_core_is_reported() -> None:
     import tfbus.core
 
-    assert tfbus.core.COMPILED is _backend.COMPILED
-    expected = _pycore if _backend.pure_python_requested() else _ccore
-    assert _backend.IMPLEMENTATION is expected
+    assert tfbus.core.COMPILED is _select.COMPILED
+    expected = _pycore if _select.pure_python_requested() else _ccore
+    assert _select.IMPLEMENTATION is expected
+    pure = _select.pure_python_requested()
+    assert tuple(p if pure else c for c, p in TWINS) == _select.IMPLEMENTATIONS
     assert tfbus.core.BufferCore.__mro__[-2] is expected.CoreBase
     assert tfbus.core.COMPILED is (expected is _ccore)
 
@@ -168,7 +191,7 @@ def test_backend_choice(
         # find the extension in the source tree for a submodule the copy lacks)
         "import sys; sys.meta_path[:] = [f for f in sys.meta_path "
         "if not getattr(f, '__module__', '').startswith('__editable__')]; "
-        "import tfbus.core as c, tfbus.cache as k, tfbus.batch as b; "
+        "import tfbus.core as c, tfbus.core.cache as k, tfbus.core._select as b; "
         "print(c.COMPILED, c.BufferCore.__mro__[-2].__module__, "
         "k.TimeCache.__module__, b.batch_lookup.__module__, c.__file__)"
     )
@@ -180,16 +203,17 @@ def test_backend_choice(
         cwd=top,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    module = "tfbus._ccore" if compiled else "tfbus._pycore"
+    prefix = "tfbus.core._c" if compiled else "tfbus.core._py"
     assert done.stdout.split() == [
-        str(compiled), module, module, module, str(top / "tfbus" / "core.py")
+        str(compiled), prefix + "core", prefix + "cache", prefix + "batch",
+        str(top / "tfbus" / "core" / "__init__.py"),
     ]  # fmt: skip
 
 
 def test_a_broken_compiled_core_is_an_error_not_a_fallback() -> None:
     """An extension that exists but cannot load (here: a dependency it imports is
     missing) must fail loudly, not silently give the slower core."""
-    code = "import sys; sys.modules['tfbus.messages'] = None; import tfbus._backend"
+    code = "import sys; sys.modules['tfbus.messages'] = None; import tfbus.core._select"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120)  # fmt: skip
     assert done.returncode != 0
@@ -448,6 +472,9 @@ def test_buffers_bit_for_bit(ops: list[tuple[Any, ...]], cache_time: float) -> N
     same(lambda c: bufs[c].all_frames_as_yaml(Time(5)))
     same(lambda c: list(bufs[c].frame_info()))
     same(lambda c: (bufs[c]._frame_ids, bufs[c]._frame_names, bufs[c]._authority))
+    same(lambda c: (bufs[c].get_frame_names(), bufs[c].link_info()))
+    for frame in FRAMES:
+        same(lambda c, f=frame: (bufs[c].parent_of(f, 0), bufs[c].parent_of(f, 3 * NS)))
     for target in FRAMES[:5]:
         for source in FRAMES[:5]:
             times = _times(sorted(stamps), len(stamps) // 2, NS // 2)
@@ -622,7 +649,7 @@ def test_row_functions_bit_for_bit(
 
     same(rows)
     for k in range(n):
-        assert canon(tuple(rows("pure")[0][k].tolist())) == canon(_pycore.slerp(*a, *b, ratios[k]))
+        assert canon(tuple(rows("pure")[0][k].tolist())) == canon(_pymath.slerp(*a, *b, ratios[k]))
 
 
 def test_row_function_errors_alike() -> None:
@@ -645,12 +672,11 @@ def test_row_function_errors_alike() -> None:
 # --------------------------------------------------------------------------- the suite
 
 PURE_SUITE = [
-    "tests/test_conformance.py",
-    "tests/test_core.py",
-    "tests/test_core_hardening.py",
-    "tests/test_core_properties.py",
-    "tests/test_cache.py",
-    "tests/test_batch_lookup.py",
+    "tests/core/test_conformance.py",
+    "tests/core/test_core.py",
+    "tests/core/test_core_properties.py",
+    "tests/core/test_cache.py",
+    "tests/core/test_batch_lookup.py",
     "tests/geometry/test_geometry.py",
 ]
 
@@ -669,7 +695,7 @@ def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path)
     )  # fmt: skip
     tail = "\n".join(done.stdout.splitlines()[-30:])
     assert done.returncode == 0, tail + done.stderr[-3000:]
-    assert "tfbus core: pure-Python (tfbus._pycore), COMPILED=False" in done.stdout, tail
+    assert "tfbus core: pure-Python (tfbus.core._pycore), COMPILED=False" in done.stdout, tail
     cases = ElementTree.parse(report).getroot().iter("testcase")
     passed: dict[str, int] = {}
     for case in cases:

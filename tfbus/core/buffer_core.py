@@ -2,8 +2,8 @@
 
 This is tf2's ``BufferCore`` (ROS 1 geometry2 0.7.6, ``tf2/src/buffer_core.cpp``)
 re-implemented with the same semantics (API and messages here; storage, insert and the
-walk in the core chosen by :mod:`tfbus._backend`: compiled from ``tfbus/_ccore.pyx``, or
-its pure-Python twin ``tfbus/_pycore.py``, bit for bit the same), checked against vectors
+walk in the core chosen by :mod:`tfbus.core._select`: compiled from ``tfbus/core/_c*.pyx``, or
+its pure-Python twins ``tfbus/core/_py*.py``, bit for bit the same), checked against vectors
 recorded from the real tf2 (``tests/data/public.jsonl.gz`` and ``tf2_regressions.jsonl``):
 
 * ``lookup_transform(target, source, t)`` returns the pose of ``source`` in ``target``
@@ -23,15 +23,15 @@ Messages of exceptions are tf2's, character for character.
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from collections.abc import Set as AbstractSet
-from numbers import Real
-from typing import Any, Final, NamedTuple
+from typing import Any, Final
 
-from tfbus._backend import (
+import numpy as np
+import numpy.typing as npt
+
+from tfbus.core._select import (
     COMPILED,
     CONNECTIVITY_ERROR,
     EXTRAPOLATION_ERROR,
@@ -43,9 +43,24 @@ from tfbus._backend import (
     UNKNOWN_FRAME,
     CoreBase,
     compose_full,
+    lookup_rows,
 )
-from tfbus.batch import BatchLookupMixin
-from tfbus.core_text import (
+from tfbus.core.batch import (
+    Errors,
+    TimesLike,
+    TransformArray,
+    as_times,
+    check_errors,
+    compose_rows,
+)
+from tfbus.core.results import (
+    BatchResult,
+    SetResult,
+    cache_time_ns,
+    cap_message,
+    not_a_time,
+)
+from tfbus.core.text import (
     FrameInfo,
     Tf7,
     bad_frame_exception,
@@ -54,6 +69,7 @@ from tfbus.core_text import (
     frames_as_yaml,
     invalid_transform_exception,
 )
+from tfbus.core.velocity import lookup_velocity as _lookup_velocity
 from tfbus.errors import (
     ConnectivityException,
     ExtrapolationException,
@@ -70,8 +86,7 @@ from tfbus.messages import (
     VelocityStamped,
 )
 from tfbus.ratelimit import CountLimitedLog
-from tfbus.time import TIME_MAX_NS, Duration, Time
-from tfbus.velocity import lookup_velocity as _lookup_velocity
+from tfbus.time import Duration, Time
 
 __all__ = [
     "COMPILED",
@@ -85,83 +100,13 @@ __all__ = [
 
 logger = logging.getLogger("tfbus.core")
 
-_MAX_MESSAGE: Final = 999  # extrapolation messages only (tf2 0.7.6, measured with tf2_py)
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
 _LATEST: Final = Time(0)
 _new: Final = tuple.__new__  # builds a NamedTuple without its Python-level __new__
 
 
-
-
-
-class SetResult(enum.Enum):
-    """What ``BufferCore.insert_transform`` did with a transform."""
-
-    STORED = "stored"
-    OLD_DATA = "TF_OLD_DATA"
-    """Refused: older than the link's newest stamp minus ``cache_time``."""
-    REPEATED_DATA = "TF_REPEATED_DATA"
-    """Refused: the link already has a sample with this stamp (the first one wins)."""
-
-
-class BatchResult(NamedTuple):
-    """What :meth:`BufferCore.set_transforms` did with a batch of transforms."""
-
-    stored: int
-    """How many were stored."""
-    refused: int
-    """How many the caches refused (TF_OLD_DATA, TF_REPEATED_DATA; logged)."""
-    errors: list[tuple[int, Exception]]
-    """``(index in the batch, exception)`` for each item that was not stored because it
-    is invalid (:class:`~tfbus.errors.InvalidArgumentException`: a tf2 rule broken, or a
-    field of the wrong type) or is not a :class:`~tfbus.messages.TransformStamped`
-    (TypeError)."""
-    touched: AbstractSet[str] = frozenset()
-    """The (stripped) child and parent frame ids of every stored transform: the frames
-    whose lookups may have changed. ``tfbus.buffer.Buffer`` rechecks its waits from it."""
-    relinked: bool = False
-    """Whether a stored transform may have changed the tree's shape (a new link, a link
-    emptied by ``clear()`` refilled, or a link given another parent): which frames a
-    lookup depends on (:meth:`BufferCore.chain_frames`) may have changed."""
-
-
-def _cap(message: str) -> str:
-    """tf2 0.7.6 truncates extrapolation messages (only those) to 999 characters."""
-    return message[:_MAX_MESSAGE]
-
-
-def _cache_time_ns(value: object) -> int:
-    """``cache_time`` (seconds or a Duration) as int nanoseconds, checked before use."""
-    if isinstance(value, Duration):
-        ns = value.ns
-    elif isinstance(value, Real) and not isinstance(value, bool):
-        seconds = float(value)
-        if not math.isfinite(seconds) or not 0.0 <= seconds <= TIME_MAX_NS / 1e9:
-            raise ValueError(
-                "cache_time must be finite seconds in [0, 9.2e9] (int64 nanoseconds), "
-                f"got {value!r}"
-            )
-        ns = Duration.from_sec(seconds).ns  # exact: the one seconds -> ns conversion
-    else:
-        raise TypeError(
-            f"cache_time must be seconds (a real number) or a Duration, got {value!r}"
-        )
-    if not 0 <= ns <= TIME_MAX_NS:
-        raise ValueError(f"cache_time must be in [0, 2**63 - 1] ns, got {ns} ns")
-    return ns
-
-
-def _not_a_time(time: object, err: AttributeError) -> Exception:
-    """The error for a lookup whose ``time`` is not a :class:`~tfbus.time.Time` (the
-    compiled query reads ``time._ns``): a TypeError naming the argument."""
-    if isinstance(time, Time):
-        return err
-    return TypeError(f"time must be a tfbus.Time (Time(0) for the latest data), not "
-                     f"{type(time).__name__} {time!r}")
-
-
-class BufferCore(BatchLookupMixin, CoreBase):
+class BufferCore(CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
     Args:
@@ -181,13 +126,13 @@ class BufferCore(BatchLookupMixin, CoreBase):
     use it from one thread (or one event loop), as tfbus does.
 
     Storage, insert, the walk and building results are in the core (compiled from
-    :mod:`tfbus._ccore`, Cython, or the pure-Python :mod:`tfbus._pycore`; ``COMPILED``
+    :mod:`tfbus.core._ccore`, Cython, or the pure-Python :mod:`tfbus.core._pycore`; ``COMPILED``
     says which) and report what they did as return values; this class turns those into
     tf2's messages, exceptions and (count-limited) log lines.
     """
 
     def __init__(self, cache_time: float | Duration = 10.0) -> None:
-        self._set_cache_time_ns(_cache_time_ns(cache_time))
+        self._set_cache_time_ns(cache_time_ns(cache_time))
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
 
     # ------------------------------------------------------------------ inserting
@@ -314,17 +259,6 @@ class BufferCore(BatchLookupMixin, CoreBase):
                     authority,
                 )
 
-    def clear(self) -> None:
-        """Drop all dynamic data; static transforms and known frame ids stay
-        (tf2 ``BufferCore::clear``).
-
-        As in tf2, the reserved frame 0 (``NO_PARENT``) is skipped: a link stored with
-        child ``"NO_PARENT"`` keeps its samples."""
-        self._generation += 1
-        for cache in self._caches[1:]:
-            if cache is not None:
-                cache.clear()
-
     # ------------------------------------------------------------------ failures
 
     def _failure(
@@ -333,12 +267,9 @@ class BufferCore(BatchLookupMixin, CoreBase):
         """tf2's exception for a failure tuple of the compiled query (``CoreBase._query``)."""
         code = failure[0]
         if code == EXTRAPOLATION_ERROR:
-            where, used = failure[1], failure[2]
-            cache = self._caches[where]
-            detail = cache.gather(used) if cache is not None else ""
-            detail = detail if isinstance(detail, str) else ""  # a link to NO_PARENT
+            detail = self.extrapolation_detail(failure[1], failure[2])
             return ExtrapolationException(
-                _cap(
+                cap_message(
                     f"{detail}, when looking up transform from frame [{source}] "
                     f"to frame [{target}]"
                 )
@@ -409,7 +340,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         raise self._failure("lookupTransform", target_frame, source_frame, out)
@@ -422,7 +353,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         return self._failure("lookupTransform", target_frame, source_frame, out)
@@ -443,7 +374,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
         code = out[0]
@@ -460,6 +391,161 @@ class BufferCore(BatchLookupMixin, CoreBase):
                 "lookupTransform", target_frame, source_frame, (INVALID_ARGUMENT, 1)
             )
         return None
+
+    # ------------------------------------------------------------------ batched lookups
+
+    def lookup_transforms(
+        self,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        *,
+        errors: Errors = "raise",
+    ) -> TransformArray:
+        """``lookup_transform(target_frame, source_frame, t)`` for every t of ``times``
+        (issue 12): the path is resolved once, every time is walked along it in the core.
+
+        Args:
+            target_frame: frame to express data in.
+            source_frame: frame the data is in.
+            times: ``(N,) int64`` nanoseconds (or Times); 0 means latest, as in tf2.
+            errors: ``"raise"`` (default) or ``"mask"``: failed rows become NaN with
+                ``valid[i] = False`` and the call does not raise for missing data.
+
+        Returns:
+            A :class:`~tfbus.core.batch.TransformArray` whose row i equals
+            ``lookup_transform`` at ``times[i]`` (stamp = the time used; values to the
+            bit, or within 1e-12 where the compiled core vectorises slerp's sines: see
+            :mod:`tfbus.core.batch`).
+
+        Raises:
+            InvalidArgumentException: a frame id is empty or starts with '/' (always, as
+                the single lookup validates before looking at times).
+            LookupException, ConnectivityException, ExtrapolationException: with
+                ``errors="raise"``, the exception and message the single lookup raises
+                for the first time that cannot be answered. With ``errors="mask"`` an
+                unknown frame id still raises LookupException (no row could ever be
+                answered).
+            ValueError: ``times`` or ``errors`` is malformed.
+
+        Source: tf2 ``BufferCore::lookupTransform`` / ``walkToTopParent`` per time.
+        """
+        check_errors(errors)
+        t = as_times(times)
+        n = t.shape[0]
+        out = np.empty((n, 7))
+        stamps = t.copy()
+        valid = np.ones(n, dtype=bool)
+        if target_frame == source_frame:
+            # The single lookup validates nothing here; time 0 is stamped with the frame's
+            # newest sample: ask it once.
+            out[:] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+            zero = t == 0
+            if zero.any():
+                latest = self.lookup_transform(target_frame, source_frame, _LATEST)
+                stamps[zero] = latest.header.stamp.ns
+            return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame)
+        ok = np.empty(n, dtype=np.int8)
+        answered = lookup_rows(self, target_frame, source_frame, t, out, stamps, ok)
+        if answered < 0:
+            # An invalid or unknown frame id: the single lookup raises tf2's exception.
+            self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[0]) if n else 0))
+            raise AssertionError("lookup_transform accepted an id batch_lookup refused")
+        if answered != n:
+            bad = np.flatnonzero(ok == 0)
+            if errors == "raise":
+                self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[bad[0]])))
+                raise AssertionError("lookup_transform answered a time the walk could not")
+            out[bad] = math.nan
+            valid[bad] = False
+        return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid)
+
+    def lookup_transforms_full(
+        self,
+        target_frame: str,
+        target_times: TimesLike,
+        source_frame: str,
+        source_times: TimesLike,
+        fixed_frame: str,
+        *,
+        errors: Errors = "raise",
+    ) -> TransformArray:
+        """``lookup_transform_full`` (time travel through ``fixed_frame``) row by row.
+
+        ``target_times`` and ``source_times`` are ``(N,)`` int64 ns (or Times); either may
+        be a single time, broadcast to the other's N. Row i is ``lookup(target <- fixed @
+        target_times[i]) o lookup(fixed <- source @ source_times[i])`` through normalised
+        rotations, exactly as :meth:`lookup_transform_full` computes it
+        (:func:`~tfbus.core.batch.compose_rows`); its stamp is the second leg's.
+
+        Raises:
+            InvalidArgumentException, LookupException: a frame id is invalid or unknown
+                (validated in the order target, source, fixed).
+            ConnectivityException, ExtrapolationException: as the single call for the
+                first failing row (source leg first), unless ``errors="mask"``.
+            ValueError: the time arrays have different lengths, or are malformed.
+        """
+        check_errors(errors)
+        frames = (target_frame, source_frame, fixed_frame)
+        if not all(self.invalid_frame_id(f) is None and self.frame_exists(f) for f in frames):
+            # The single call validates the three ids first, in this order: let it raise.
+            self.lookup_transform_full(target_frame, _LATEST, source_frame, _LATEST, fixed_frame)
+        tt = as_times(target_times)
+        st = as_times(source_times)
+        n = max(tt.shape[0], st.shape[0])
+        tt, st = as_times(tt, n), as_times(st, n)
+        leg1 = self.lookup_transforms(fixed_frame, source_frame, st, errors="mask")
+        leg2 = self.lookup_transforms(target_frame, fixed_frame, tt, errors="mask")
+        if errors == "raise":
+            # The single call looks up leg 1 then leg 2 per time: the first failing row
+            # decides, and within it the source leg.
+            bad = np.flatnonzero(~(leg1.valid & leg2.valid))
+            if bad.size:
+                i = int(bad[0])
+                self.lookup_transform_full(
+                    target_frame,
+                    Time.from_ns(int(tt[i])),
+                    source_frame,
+                    Time.from_ns(int(st[i])),
+                    fixed_frame,
+                )
+                raise AssertionError("lookup_transform_full did not raise")  # pragma: no cover
+        return compose_rows(leg2, leg1)
+
+    def transform_points(
+        self,
+        points: npt.ArrayLike,
+        target_frame: str,
+        source_frame: str,
+        times: TimesLike,
+        *,
+        errors: Errors = "raise",
+    ) -> npt.NDArray[np.float64]:
+        """Map each point of ``points`` from ``source_frame`` into ``target_frame`` at its
+        own time (per-beam projection, lidar de-skewing).
+
+        Args:
+            points: ``(N, 3)`` metres in ``source_frame``.
+            target_frame: frame to express the points in.
+            source_frame: frame the points are in.
+            times: ``(N,) int64`` ns (or one time for all points).
+            errors: ``"mask"`` gives NaN rows for points whose time cannot be answered.
+
+        Returns:
+            ``(N, 3) float64`` metres: row i is ``quatRotate(q_i, p_i) + t_i`` with
+            ``(t_i, q_i) = lookup_transform(target_frame, source_frame, times[i])``.
+
+        Raises:
+            ValueError: ``points`` is not ``(N, 3)`` or ``times`` does not match.
+            TransformException subclasses: as :meth:`lookup_transforms`.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+        tf = self.lookup_transforms(
+            target_frame, source_frame, as_times(times, p.shape[0]), errors=errors
+        )
+        return tf.apply(p)
 
     def chain_frames(
         self, target_frame: str, source_frame: str, time: Time = _LATEST
@@ -534,7 +620,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
-            raise _not_a_time(time, err) from None
+            raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return True, ""
         code = out[0]
@@ -608,7 +694,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         """
         self._validate("get_latest_common_time", target_frame)
         self._validate("get_latest_common_time", source_frame)
-        err, t = self._ccommon_time(self._frame_ids[target_frame], self._frame_ids[source_frame])
+        err, t = self.common_time(target_frame, source_frame)
         if err == LOOKUP_ERROR:
             raise TransformException(str(self._failure("", target_frame, source_frame, (err,))))
         if err:
@@ -619,25 +705,10 @@ class BufferCore(BatchLookupMixin, CoreBase):
 
     # ------------------------------------------------------------------ introspection
 
-    def get_frame_names(self) -> list[str]:
-        """Every known frame id (children and parents), in registration order."""
-        return self._frame_names[1:]
-
-    def frame_exists(self, frame_id: str) -> bool:
-        """Whether ``frame_id`` is known (tf2 ``_frameExists``)."""
-        return self._frame_ids.get(frame_id, 0) != 0
-
     def get_parent(self, frame_id: str, time: Time = _LATEST) -> str | None:
         """The parent of ``frame_id`` at ``time`` (0 = latest), or None for a root, an
         unknown frame or a time the link has no data for (tf2 ``_getParent``)."""
-        fid = self._frame_ids.get(frame_id, 0)
-        cache = self._caches[fid] if fid else None
-        if cache is None:
-            return None
-        r = cache.gather(time.ns)
-        if isinstance(r, str) or r[0] == 0:
-            return None
-        return self._frame_names[r[0]]
+        return self.parent_of(frame_id, time.ns)
 
     def all_frames_as_string(self) -> str:
         """One line ``Frame X exists with parent Y.`` per frame that has a link, in
@@ -661,27 +732,12 @@ class BufferCore(BatchLookupMixin, CoreBase):
         parent, authority, is_static, samples, oldest_ns, newest_ns)`` — the data behind
         ``all_frames_as_string`` and ``all_frames_as_yaml``, for tools. The parent of an
         emptied link is ``NO_PARENT``."""
-        names = self._frame_names
-        for fid in range(1, len(self._caches)):
-            cache = self._caches[fid]
-            if cache is None:
-                continue
-            r = cache.gather(0)
-            parent = 0 if isinstance(r, str) else r[0]
-            yield FrameInfo(
-                names[fid],
-                names[parent],
-                self._authority.get(fid, "no recorded authority"),
-                cache.is_static,
-                len(cache),
-                cache.oldest_stamp(),
-                cache.latest_stamp(),
-            )
+        return map(FrameInfo._make, self.link_info())
 
     def __repr__(self) -> str:
         return (
             f"BufferCore(cache_time={self.cache_time_ns / 1e9:g}, "
-            f"frames={len(self._frame_names) - 1})"
+            f"frames={len(self.get_frame_names())})"
         )
 
     # ------------------------------------------------------------------ velocity, chain
@@ -699,7 +755,7 @@ class BufferCore(BatchLookupMixin, CoreBase):
         in ``observation_frame`` about the tracking frame's origin, averaged over
         ``averaging_interval`` (seconds or a Duration, > 0) around ``time`` (0: the latest
         common time). tf2 ``BufferCore::lookupVelocity`` (ROS 2) / ``tf::Transformer::
-        lookupTwist`` (ROS 1); see :mod:`tfbus.velocity` for the formula, and for why
+        lookupTwist`` (ROS 1); see :mod:`tfbus.core.velocity` for the formula, and for why
         ``method="tf2"`` (the default, tf2's numbers) is not the physical velocity of a
         rotating frame and what ``method="origin"`` returns instead.
 

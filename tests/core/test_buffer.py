@@ -456,22 +456,9 @@ class _NoCallbackClock(ManualClock):
         return None
 
 
-class _OldClock:
-    """A clock written before ``Clock.call_later`` existed (over a ManualClock)."""
-
-    def __init__(self, inner: ManualClock) -> None:
-        self.now = inner.now
-        self.sleep_until = inner.sleep_until
-        self.sleep = inner.sleep
-        self.on_jump = inner.on_jump
-        self.move_on_after = inner.move_on_after
-        self.fail_after = inner.fail_after
-
-
-@pytest.mark.parametrize("old", [False, True], ids=["call_later-None", "no-call_later"])
-async def test_a_clock_without_callbacks_times_out_through_its_cancel_scope(old: bool) -> None:
+async def test_a_clock_without_callbacks_times_out_through_its_cancel_scope() -> None:
     clock = _NoCallbackClock(T0)
-    buf = Buffer(clock=_OldClock(clock) if old else clock)  # type: ignore[arg-type]
+    buf = Buffer(clock=clock)
     outcome: list[object] = []
 
     async def waiter(child: str) -> None:

@@ -1,4 +1,4 @@
-"""``tfbus.cache`` (compiled in ``tfbus/_ccore.pyx``): TimeCache and StaticCache storage.
+"""``tfbus.core.cache`` (compiled in ``tfbus/core/_ccache.pyx``): TimeCache and StaticCache storage.
 
 The semantics are checked op by op against tf2 by the conformance corpus; these tests
 drive the storage mechanics (out-of-order inserts, pruning, growth, compaction, the
@@ -11,7 +11,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tfbus.cache import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache
+from tfbus.core.cache import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache
 
 Row = tuple[float, float, float, float, float, float, float]
 

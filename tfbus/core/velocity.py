@@ -6,7 +6,7 @@ Two methods, chosen by ``method=`` of :meth:`tfbus.core.BufferCore.lookup_veloci
 ``tf2/src/buffer_core.cpp`` ``BufferCore::lookupVelocity``, a copy of ROS 1
 ``tf/src/tf.cpp`` ``tf::Transformer::lookupTwist`` (whose integer-nanosecond time
 arithmetic is the one used here; checked against Debian's C++ libtf 1.13.2 within 1e-9
-by ``tests/geometry/test_velocity.py``):
+by ``tests/core/test_velocity.py``):
 
 1. ``latest`` = latest common time of observation and tracking frame; ``time`` 0 means
    ``latest`` (ROS 1; ROS 2 takes 0 literally).
@@ -33,8 +33,8 @@ frame) relative to the observation frame, ``v = (E.origin - S.origin) / dt + ω 
 with ``ω`` as in step 3 and ``r`` the point minus the origin (observation frame, at
 ``time``), then both vectors rotated into the reference frame's axes at ``time``.
 
-Pure functions over any object with ``lookup_transform`` and
-``get_latest_common_time`` (a :class:`~tfbus.core.BufferCore`); no clock, no I/O.
+Pure functions over any object with ``lookup_transform`` and ``get_latest_common_time``
+(a :class:`~tfbus.core.BufferCore`, which calls them); no clock, no I/O.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """tf2's texts for :mod:`tfbus.core`: the messages of rejected transforms and invalid
-query arguments, and the ``allFramesAsString`` / ``allFramesAsYAML`` dumps (layer 1).
+query arguments, and the ``allFramesAsString`` / ``allFramesAsYAML`` dumps.
 
 Each text is tf2 0.7.6's (``tf2/src/buffer_core.cpp``) character for character where tf2
 defines it; YAML quoting is added only for ids YAML would misread (issue 11 item 7).
@@ -11,7 +11,7 @@ import math
 from collections.abc import Iterable
 from typing import Final, NamedTuple
 
-from tfbus._backend import INVALID_ARGUMENT
+from tfbus.core._select import INVALID_ARGUMENT
 from tfbus.errors import InvalidArgumentException, LookupException, TransformException
 from tfbus.time import Time
 

@@ -26,7 +26,7 @@ from tfbus import (
     Vector3,
 )
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # tests/
 SIDE = HERE / "peers" / "tf2_py_side.py"
 SYSTEM_PYTHON = "/usr/bin/python3"
 SEC = 1_000_000_000

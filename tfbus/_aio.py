@@ -1,0 +1,155 @@
+"""Every CPython-asyncio shortcut of tfbus, in one file to review per Python release.
+
+anyio keeps its own in ``anyio/_backends/_asyncio.py``; tfbus's hot paths take a few more,
+each measured to matter (``benchmarks/bench_bus.py``, ``bench_check.py``'s wake-up rows)
+and each with its portable anyio fallback next to it in the caller:
+
+* :func:`running_asyncio_loop` -- is the caller an asyncio task? (``sys.modules``, never
+  an import of asyncio);
+* :class:`ShieldedYield` -- ``cancel_shielded_checkpoint`` as one yield on a done future
+  (``Future._asyncio_future_blocking``);
+* :class:`Wakeup` -- a one-shot wake-up: a bare future of the loop on asyncio, an
+  ``anyio.Event`` elsewhere;
+* :func:`wait_all_tasks_blocked` -- anyio's ``wait_all_tasks_blocked`` without its 0.1 s
+  wall-clock sleeps on asyncio (``Task._fut_waiter``).
+
+Nothing here imports tfbus: the bus, the clocks and the buffer import it.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Awaitable, Generator
+from typing import TYPE_CHECKING, Any
+
+import anyio
+import anyio.lowlevel
+
+if TYPE_CHECKING:
+    from asyncio import AbstractEventLoop, Future
+
+__all__ = ["ShieldedYield", "Wakeup", "running_asyncio_loop", "wait_all_tasks_blocked"]
+
+
+def running_asyncio_loop() -> AbstractEventLoop | None:
+    """The running asyncio event loop when the caller runs in one of its tasks (anyio on
+    asyncio), else None (trio, including trio in guest mode on an asyncio host, whose
+    tasks are not asyncio tasks; no loop at all).
+
+    ``asyncio`` is looked up in ``sys.modules`` (it is necessarily loaded when an asyncio
+    loop is running), never imported by tfbus.
+    """
+    asyncio = sys.modules.get("asyncio")
+    if asyncio is None:
+        return None
+    try:
+        loop: AbstractEventLoop = asyncio.get_running_loop()
+    except RuntimeError:  # no asyncio loop running in this thread
+        return None
+    if asyncio.current_task(loop) is None:
+        return None  # a callback of the loop, not a task: e.g. trio in guest mode
+    return loop
+
+
+class ShieldedYield:
+    """``await shielded_yield()`` on asyncio: what anyio's ``cancel_shielded_checkpoint``
+    does (let every other ready task run once, then resume; never raise anyio's
+    cancellation), without entering and leaving a ``CancelScope(shield=True)``, which cost
+    about as much as the rest of a bus publish.
+
+    The task waits on a future that is already done (one per bus, done for good, so it
+    serves every publish). asyncio resumes the task exactly as after ``sleep(0)`` (one
+    ``call_soon``, behind every callback already ready), and anyio never cancels a task
+    whose awaited future is done: a cancel scope cancelled meanwhile delivers its
+    cancellation at the task's next checkpoint instead, as it does for a shielded one. (A
+    native ``Task.cancel()`` still lands, as it does through anyio's shield.)
+    ``tests/test_bus.py`` holds anyio to this.
+
+    Args:
+        loop: the asyncio loop whose tasks await it (:func:`running_asyncio_loop`).
+    """
+
+    __slots__ = ("_future",)
+
+    def __init__(self, loop: AbstractEventLoop) -> None:
+        future = loop.create_future()
+        future.set_result(None)
+        self._future = future
+
+    def __call__(self) -> ShieldedYield:
+        return self
+
+    def __await__(self) -> Generator[Any, None, None]:
+        future = self._future
+        future._asyncio_future_blocking = True  # what Future.__await__ sets: "wait on me"
+        yield future
+
+
+class Wakeup:
+    """A one-shot wake-up for one waiting task: :meth:`wait` gives what it awaits (once),
+    :meth:`wake` ends the wait (idempotent; harmless after the task was cancelled).
+
+    On asyncio (``loop`` given) the task awaits a bare future of ``loop`` (what
+    ``anyio.Event`` wraps twice: ``anyio.Event`` -> ``asyncio.Event`` -> a future per
+    waiter); elsewhere an ``anyio.Event``. Either is cancelled like any anyio checkpoint.
+
+    Args:
+        loop: the running asyncio loop (:func:`running_asyncio_loop`), or None.
+    """
+
+    __slots__ = ("event", "future")
+
+    def __init__(self, loop: AbstractEventLoop | None) -> None:
+        self.future: Future[None] | None = None
+        self.event: anyio.Event | None = None
+        if loop is not None:
+            self.future = loop.create_future()
+        else:
+            self.event = anyio.Event()
+
+    def wait(self) -> Awaitable[object]:
+        """What the waiting task awaits (once): a checkpoint even if already woken (a
+        ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does)."""
+        future = self.future
+        if future is not None:
+            return anyio.lowlevel.checkpoint() if future.done() else future
+        assert self.event is not None
+        return self.event.wait()
+
+    def wake(self) -> None:
+        """End the wait (idempotent; harmless after the task was cancelled)."""
+        future = self.future
+        if future is None:
+            assert self.event is not None
+            self.event.set()
+        elif not future.done():
+            future.set_result(None)
+
+
+async def wait_all_tasks_blocked() -> None:
+    """Let every other task run until it is blocked, without touching the wall clock.
+
+    On trio this is ``trio.testing.wait_all_tasks_blocked`` via anyio, which is exact and
+    instant. anyio's asyncio version sleeps 0.1 s of *wall time* each time it finds a
+    runnable task, which would make every woken chain of tasks (timer -> bus ->
+    subscriber) cost 100 ms; so on asyncio the same check is done with zero-length
+    checkpoints: a task is blocked when it waits on a future that is not done
+    (``Task._fut_waiter``).
+    """
+    loop = running_asyncio_loop()
+    if loop is None:
+        await anyio.wait_all_tasks_blocked()
+        return
+    asyncio = sys.modules["asyncio"]
+    this_task = asyncio.current_task()
+    await anyio.lowlevel.checkpoint()
+    while True:
+        for task in asyncio.all_tasks(loop):
+            if task is this_task:
+                continue
+            waiter = getattr(task, "_fut_waiter", None)
+            if waiter is None or waiter.done():
+                break
+        else:
+            return
+        await anyio.lowlevel.checkpoint()

@@ -1,0 +1,416 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False, embedsignature=True
+"""Compiled link storage of the core: :class:`TimeCache` (a dynamic link) and
+:class:`StaticCache` (a static one), twins of :mod:`tfbus.core._pycache`.
+
+* :class:`TimeCache` — a dynamic link (``tf2/src/cache.cpp``):
+
+  - ``insert``: refused as TF_OLD_DATA iff ``newest > stamp + cache_time``; refused as
+    TF_REPEATED_DATA if a sample with the same stamp exists (the first one wins, whatever
+    its values or parent); otherwise stored, then every sample older than
+    ``newest - cache_time`` is dropped (``TimeCache::insertData`` / ``pruneList``).
+  - ``gather(t)``: t = 0 gives the newest sample; a single sample answers only at its
+    exact stamp; otherwise t must lie in [oldest, newest] (no extrapolation, not even
+    1 ns); between two samples with the same parent the result is interpolated (linear
+    translation, tf2 slerp rotation, ratio from integer ns), between samples with
+    different parents the older one is used (``findClosest`` / ``getData`` /
+    ``interpolate``).
+  - Storage: numpy arrays ``(cap,) int64`` stamps (ns) and ``(cap, 7) float64`` rows
+    (tx, ty, tz, qx, qy, qz, qw), live samples sorted by stamp in ``[head, tail)``, plus
+    a ``(cap,) int32`` parent id per sample only once the link has had two different
+    parents: 64 bytes per sample, ~68 with the growth slack.
+
+* :class:`StaticCache` — a static link (``tf2/src/static_cache.cpp``): one value, valid
+  at every time; each insert overwrites it; its latest stamp is 0.
+
+* ``format_sec`` and tf2's extrapolation details (``cache.cpp``
+  ``createExtrapolationException1/2/3``).
+"""
+
+__all__ = [
+    "OK",
+    "OLD_DATA",
+    "REPEATED_DATA",
+    "Link",
+    "StaticCache",
+    "TimeCache",
+    "format_sec",
+]
+
+import numpy as np
+
+from libc.stdint cimport INT64_MAX, int32_t, int64_t
+from libc.string cimport memcpy, memmove
+
+from tfbus.core._cmath cimport EXACT_SPAN, _bisect_left, _slerp
+
+# insert outcomes (tf2 cache insertData)
+OK = 0
+OLD_DATA = 1
+REPEATED_DATA = 2
+
+
+# ---------------------------------------------------------------------- messages
+
+
+def format_sec(ns):
+    """A stamp as tf2 prints it in error messages: ``%.09f`` of ``(double)sec + 1e-9*nsec``
+    (``ros::Time::toSec``)."""
+    sec, nsec = divmod(ns, 1_000_000_000)
+    return "%.09f" % (float(sec) + 1e-9 * float(nsec))
+
+
+cdef str _detail(int code, int64_t requested, int64_t known):
+    """tf2's extrapolation detail for a failed gather (cache.cpp
+    createExtrapolationException1/2/3, with their snprintf buffer sizes)."""
+    if code == G_AT:
+        return (
+            f"Lookup would require extrapolation at time {format_sec(requested)}, "
+            f"but only time {format_sec(known)} is in the buffer"
+        )[:115]
+    if code == G_FUTURE:
+        return (
+            f"Lookup would require extrapolation {format_sec(requested - known)}s into the "
+            f"future.  Requested time {format_sec(requested)} but the latest data is at "
+            f"time {format_sec(known)}"
+        )[:162]
+    if code == G_PAST:
+        return (
+            f"Lookup would require extrapolation {format_sec(known - requested)}s into the "
+            f"past.  Requested time {format_sec(requested)} but the earliest data is at "
+            f"time {format_sec(known)}"
+        )[:162]
+    return ""
+
+
+# ---------------------------------------------------------------------- links
+
+
+cdef class Link:
+    """Common base of :class:`TimeCache` and :class:`StaticCache` (tf2 ``TimeCacheInterface``)."""
+
+    cdef int c_gather(self, int64_t time, double* out, int* parent) except -1:
+        return G_EMPTY
+
+    cdef int c_latest(self, int64_t* stamp) noexcept:
+        stamp[0] = 0
+        return 0
+
+    cdef int c_insert(self, int64_t stamp, int parent, const double* v) except -1:
+        return C_OK
+
+    cdef int64_t c_known(self, int code) noexcept:
+        return 0
+
+    def gather(self, time):
+        """The link's transform at ``time`` (ns; 0 = newest) as ``(parent id, values)``,
+        ``values`` a 7-tuple (tx, ty, tz, qx, qy, qz, qw), or tf2's extrapolation detail
+        string (possibly empty) when there is no data. A parent id of 0 (tf2's
+        ``NO_PARENT``) is returned as is; callers treat it as a failure with an empty
+        detail, like tf2's ``gather``."""
+        cdef double v[7]
+        cdef int parent = 0
+        cdef int64_t t = time
+        cdef int code = self.c_gather(t, v, &parent)
+        if code != G_OK:
+            return _detail(code, t, self.c_known(code))
+        return parent, (v[0], v[1], v[2], v[3], v[4], v[5], v[6])
+
+    def latest(self):
+        """``(newest stamp ns, its parent id)``; ``(0, 0)`` when empty
+        (``getLatestTimeAndParent``)."""
+        cdef int64_t stamp = 0
+        cdef int parent = self.c_latest(&stamp)
+        return stamp, parent
+
+    def insert(self, stamp, parent, values):
+        """Store one sample (stamp ns, parent id, 7 floats); returns ``OK``, ``OLD_DATA``
+        or ``REPEATED_DATA`` (tf2 ``insertData``)."""
+        cdef double v[7]
+        cdef int k
+        if len(values) != 7:
+            raise ValueError(f"expected 7 values, got {len(values)}")
+        for k in range(7):
+            v[k] = values[k]
+        return self.c_insert(stamp, parent, v)
+
+
+cdef class TimeCache(Link):
+    """The time-indexed samples of one dynamic link (child frame → parent frame).
+
+    Args:
+        cache_time_ns: how far back from the newest sample data is kept, nanoseconds
+            (values beyond int64 keep everything).
+    """
+
+
+    def __cinit__(self, cache_time_ns):
+        self.cache_time_ns = min(cache_time_ns, INT64_MAX)
+        self._alloc(MIN_CAPACITY)
+        self._head = 0
+        self._tail = 0
+        self._parent = 0
+        self._parents_arr = None
+        self._pa = NULL
+
+    @property
+    def is_static(self):
+        """False: a dynamic link."""
+        return False
+
+    cdef int _alloc(self, Py_ssize_t cap) except -1:
+        cdef int64_t[::1] s
+        cdef double[:, ::1] v
+        self._stamps_arr = np.empty(cap, dtype=np.int64)
+        self._values_arr = np.empty((cap, 7), dtype=np.float64)
+        s = self._stamps_arr
+        v = self._values_arr
+        self._st = &s[0]
+        self._va = &v[0, 0]
+        self._cap = cap
+        return 0
+
+    cdef int _alloc_parents(self, Py_ssize_t cap) except -1:
+        cdef int32_t[::1] p
+        self._parents_arr = np.full(cap, self._parent, dtype=np.int32)
+        p = self._parents_arr
+        self._pa = &p[0]
+        return 0
+
+    def __len__(self):
+        return self._tail - self._head
+
+    def nbytes(self):
+        """Bytes held by this link's sample arrays (capacity, not just live samples)."""
+        n = self._stamps_arr.nbytes + self._values_arr.nbytes
+        return n + (self._parents_arr.nbytes if self._parents_arr is not None else 0)
+
+    def stamps(self):
+        """Stored stamps, oldest first, ``(N,) int64`` nanoseconds (a copy)."""
+        return self._stamps_arr[self._head:self._tail].copy()
+
+    def values(self):
+        """Stored samples, oldest first, ``(N, 7) float64`` rows (tx, ty, tz, qx, qy, qz,
+        qw) (a copy)."""
+        return self._values_arr[self._head:self._tail].copy()
+
+    def latest_stamp(self):
+        """Newest stamp in ns, 0 when empty (``getLatestTimestamp``)."""
+        return self._st[self._tail - 1] if self._tail != self._head else 0
+
+    def oldest_stamp(self):
+        """Oldest stamp in ns, 0 when empty (``getOldestTimestamp``)."""
+        return self._st[self._head] if self._tail != self._head else 0
+
+    def clear(self):
+        """Drop every sample (``clearList``); capacity is released."""
+        self._alloc(MIN_CAPACITY)
+        self._head = 0
+        self._tail = 0
+        self._parents_arr = None
+        self._pa = NULL
+
+    cdef int c_latest(self, int64_t* stamp) noexcept:
+        cdef Py_ssize_t tail = self._tail
+        if tail == self._head:
+            stamp[0] = 0
+            return 0
+        stamp[0] = self._st[tail - 1]
+        return self._parent if self._pa == NULL else self._pa[tail - 1]
+
+    cdef int64_t c_known(self, int code) noexcept:
+        # The stamp named by a gather failure: the newest one, or the oldest for G_PAST.
+        if self._tail == self._head:
+            return 0
+        return self._st[self._head] if code == G_PAST else self._st[self._tail - 1]
+
+    cdef int c_insert(self, int64_t stamp, int parent, const double* v) except -1:
+        cdef Py_ssize_t head = self._head
+        cdef Py_ssize_t tail = self._tail
+        cdef Py_ssize_t pos, n
+        cdef int64_t newest, horizon
+        cdef int64_t* st = self._st
+        if tail != head:
+            newest = st[tail - 1]
+            # newest > stamp + cache_time, without overflow (stamps are >= 0).
+            if newest - self.cache_time_ns > stamp:
+                return C_OLD_DATA
+            if stamp > newest:
+                pos = tail
+            else:
+                pos = _bisect_left(st, stamp, head, tail)
+                if st[pos] == stamp:
+                    return C_REPEATED_DATA
+        else:
+            pos = tail
+        if parent != self._parent and self._pa == NULL:
+            if tail == head:
+                self._parent = parent
+            else:
+                self._alloc_parents(self._cap)
+        if tail == self._cap:
+            self._make_room()
+            pos += self._head - head
+            head = self._head
+            tail = self._tail
+        st = self._st
+        if pos != tail:  # out-of-order insert: shift the newer samples up by one
+            n = tail - pos
+            memmove(&st[pos + 1], &st[pos], n * sizeof(int64_t))
+            memmove(&self._va[(pos + 1) * 7], &self._va[pos * 7], n * 7 * sizeof(double))
+            if self._pa != NULL:
+                memmove(&self._pa[pos + 1], &self._pa[pos], n * sizeof(int32_t))
+        st[pos] = stamp
+        memcpy(&self._va[pos * 7], v, 7 * sizeof(double))
+        if self._pa != NULL:
+            self._pa[pos] = parent
+        tail += 1
+        self._tail = tail
+        # pruneList: drop samples older than newest - cache_time (strict comparison).
+        horizon = st[tail - 1] - self.cache_time_ns
+        if st[head] < horizon:
+            self._head = _bisect_left(st, horizon, head, tail)
+        return C_OK
+
+    cdef int _make_room(self) except -1:
+        """Storage is full at the top: slide the live samples down if at least 1/16 of the
+        capacity is free below them, else grow by 1/16 (amortised O(1) inserts; a steady
+        stream settles at ~7 % slack, i.e. ~68 bytes per sample)."""
+        cdef Py_ssize_t head = self._head, tail = self._tail, cap = self._cap
+        cdef Py_ssize_t n = tail - head, new_cap
+        cdef int64_t* old_st
+        cdef double* old_va
+        cdef int32_t* old_pa
+        cdef object keep_s, keep_v, keep_p
+        if head >= cap // 16 and head > 0:
+            memmove(self._st, &self._st[head], n * sizeof(int64_t))
+            memmove(self._va, &self._va[head * 7], n * 7 * sizeof(double))
+            if self._pa != NULL:
+                memmove(self._pa, &self._pa[head], n * sizeof(int32_t))
+        else:
+            new_cap = max(MIN_CAPACITY, n + max(n // 16, 4))
+            keep_s, keep_v, keep_p = self._stamps_arr, self._values_arr, self._parents_arr
+            old_st, old_va, old_pa = self._st, self._va, self._pa
+            self._alloc(new_cap)
+            memcpy(self._st, &old_st[head], n * sizeof(int64_t))
+            memcpy(self._va, &old_va[head * 7], n * 7 * sizeof(double))
+            if old_pa != NULL:
+                self._alloc_parents(new_cap)
+                memcpy(self._pa, &old_pa[head], n * sizeof(int32_t))
+            del keep_s, keep_v, keep_p
+        self._head = 0
+        self._tail = n
+        return 0
+
+    cdef int c_gather(self, int64_t time, double* out, int* parent) except -1:
+        cdef Py_ssize_t head = self._head, tail = self._tail, i, i0
+        cdef const int64_t* st = self._st
+        cdef const double* a
+        cdef const double* b
+        cdef int64_t newest, t0, span
+        cdef int p0
+        cdef double r, s
+        if tail == head:
+            return G_EMPTY
+        if time == 0:
+            i = tail - 1
+        else:
+            newest = st[tail - 1]
+            if time == newest:
+                i = tail - 1
+            elif tail - head == 1:
+                return G_AT
+            elif time > newest:
+                return G_FUTURE
+            else:
+                i = _bisect_left(st, time, head, tail)
+                if st[i] != time:
+                    if i == head:
+                        return G_PAST
+                    # Between samples i-1 (older) and i (newer).
+                    i0 = i - 1
+                    p0 = self._parent if self._pa == NULL else self._pa[i0]
+                    parent[0] = p0
+                    a = &self._va[i0 * 7]
+                    if self._pa != NULL and self._pa[i] != p0:
+                        memcpy(out, a, 7 * sizeof(double))
+                        return G_OK
+                    b = &self._va[i * 7]
+                    # TimeCache::interpolate; the ratio is correctly rounded from integer
+                    # ns (tf2 divides double seconds; the two differ by < 1e-15 relative).
+                    t0 = st[i0]
+                    span = st[i] - t0
+                    if span < EXACT_SPAN:
+                        r = <double>(time - t0) / <double>span
+                    else:  # Python's int true division is correctly rounded at any size
+                        r = (<object>(time - t0)) / (<object>span)
+                    s = 1.0 - r
+                    out[0] = s * a[0] + r * b[0]
+                    out[1] = s * a[1] + r * b[1]
+                    out[2] = s * a[2] + r * b[2]
+                    _slerp(&a[3], b[3], b[4], b[5], b[6], r, &out[3])
+                    return G_OK
+        parent[0] = self._parent if self._pa == NULL else self._pa[i]
+        memcpy(out, &self._va[i * 7], 7 * sizeof(double))
+        return G_OK
+
+
+cdef class StaticCache(Link):
+    """The single value of a static link, valid at every time (``tf2::StaticCache``).
+
+    ``insert`` always overwrites (last wins, stamp ignored); ``latest()`` reports stamp 0,
+    so static links never limit tf2's latest common time; ``clear()`` keeps the value.
+    """
+
+
+    def __cinit__(self):
+        self._v[:] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+        self._parent = 0
+        self._stamp = 0
+
+    @property
+    def is_static(self):
+        """True: a static link."""
+        return True
+
+    @property
+    def cache_time_ns(self):
+        """0: a static link keeps no history."""
+        return 0
+
+    def __len__(self):
+        return 1
+
+    def nbytes(self):
+        """Bytes of sample storage (one row of 7 doubles)."""
+        return 7 * 8
+
+    def latest_stamp(self):
+        """Always 0 (``StaticCache::getLatestTimestamp``)."""
+        return 0
+
+    def oldest_stamp(self):
+        """Always 0 (``StaticCache::getOldestTimestamp``)."""
+        return 0
+
+    def stamp_sent(self):
+        """Stamp (ns) of the last message that set this static value (informational)."""
+        return self._stamp
+
+    def clear(self):
+        """No-op: ``BufferCore.clear()`` keeps static transforms, as in tf2."""
+
+    cdef int c_latest(self, int64_t* stamp) noexcept:
+        stamp[0] = 0
+        return self._parent
+
+    cdef int c_insert(self, int64_t stamp, int parent, const double* v) except -1:
+        self._parent = parent
+        memcpy(self._v, v, 7 * sizeof(double))
+        self._stamp = stamp
+        return C_OK
+
+    cdef int c_gather(self, int64_t time, double* out, int* parent) except -1:
+        parent[0] = self._parent
+        memcpy(out, self._v, 7 * sizeof(double))
+        return G_OK

@@ -1,0 +1,804 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False, embedsignature=True
+"""Compiled heart of :class:`tfbus.core.BufferCore`: the frame table, insert and the walk
+(the twin of :mod:`tfbus.core._pycore`).
+
+Semantics are tf2's (geometry2 0.7.6); every rule here is a transcription of the tf2 C++
+named next to it, and the arithmetic is done in the same order as tf2, in IEEE doubles
+with no fused multiply-add, so results are bit-for-bit tf2's (checked by the
+conformance corpus, ``tests/core/test_conformance.py``).
+
+:class:`CoreBase` is the frame table and the hot paths of ``BufferCore``: ``_store``
+(``BufferCore::setTransformImpl`` over a batch: returns counts, refusals, problems and
+the frames it touched) and ``_store_one`` (one transform: True, or what it refused and
+why), ``_query`` (``lookupTransform`` in one call: checks, memo, ``walkToTopParent`` with
+``TransformAccum``, the TransformStamped built here; or a failure tuple), ``_chain`` (the
+frames an answer depends on), ``_cwalk`` and ``common_time`` (``getLatestCommonTime``),
+and the public ``clear``, ``get_frame_names``, ``frame_exists``, ``parent_of``,
+``link_info``, ``extrapolation_detail`` through which ``BufferCore`` reads its state.
+Nothing here calls into the Python subclass: error *messages* and log lines are built by
+:mod:`tfbus.core.buffer_core` from the codes returned here.
+
+The links are :mod:`tfbus.core._ccache`'s, the scalar math ``_cmath.pxd``'s inline
+functions; ``_ccore.pxd`` declares the table and the walk for the batch kernel
+(:mod:`tfbus.core._cbatch`).
+"""
+
+__all__ = [
+    "CONNECTIVITY_ERROR",
+    "EXTRAPOLATION_ERROR",
+    "INVALID",
+    "INVALID_ARGUMENT",
+    "LOOKUP_ERROR",
+    "MAX_GRAPH_DEPTH",
+    "NO_ERROR",
+    "UNKNOWN_FRAME",
+    "CoreBase",
+]
+
+
+import numpy as np
+
+from libc.stdint cimport INT64_MAX, int64_t
+from libc.string cimport memcpy
+from cpython.object cimport PyObject
+from cpython.unicode cimport PyUnicode_GET_LENGTH, PyUnicode_READ_CHAR
+
+from libc.math cimport fabs, sqrt
+from tfbus.core._ccache cimport (
+    C_INVALID, C_MAX_DEPTH, C_OK, C_OLD_DATA, C_REPEATED_DATA, CLIMB_EARLY, CLIMB_FAILED,
+    CLIMB_LOOP, CLIMB_STOPPED, G_AT, G_EMPTY, G_FUTURE, G_OK, G_PAST, Link, StaticCache,
+    TimeCache, _detail, _link,
+)
+from tfbus.core._cmath cimport _accumulate, _compose, _identity, _qrot, _qmul
+from cpython.float cimport PyFloat_FromDouble
+from cpython.ref cimport Py_DECREF
+
+from tfbus.core._cresults cimport (
+    PyObject_GC_UnTrack, PyObject_GenericSetAttr, PyTypeObject, _named, _named3, _named4,
+)
+from tfbus.errors import InvalidArgumentException
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import Time
+
+# outcomes of BufferCore._cwalk / _ccommon_time (tf2_msgs::TF2Error)
+NO_ERROR = 0
+LOOKUP_ERROR = 1
+CONNECTIVITY_ERROR = 2
+EXTRAPOLATION_ERROR = 3
+
+MAX_GRAPH_DEPTH = 1000
+"""Walks longer than this are taken to be loops (tf2 ``MAX_GRAPH_DEPTH``)."""
+
+
+# ---------------------------------------------------------------------- results
+
+cdef object _stamped(object stamp, str target, str source, const double* v):
+    """The lookup result: ``TransformStamped(Header(stamp, target), source,
+    Transform(Vector3(v[0:3]), Quaternion(v[3:7])))``, built in C."""
+    cdef object vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
+                              PyFloat_FromDouble(v[2]))
+    PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a reference cycle
+    cdef object rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
+    return _named3(
+        TransformStamped, _named(Header, stamp, target), source, _named(Transform, vec, rot)
+    )
+
+
+cdef object _time_of(int64_t ns):
+    """``Time.from_ns(ns)`` for a valid ns, without re-validating it: the instance from
+    the type's ``tp_alloc`` (what ``object.__new__`` does, minus looking up and calling
+    it), its ``_ns`` slot set through the generic setattr (the slot's descriptor)."""
+    cdef PyObject* p = (<PyTypeObject*>Time).tp_alloc(<PyTypeObject*>Time, 0)
+    cdef object t = <object>p
+    Py_DECREF(t)  # tp_alloc's reference, now owned by ``t``
+    PyObject_GenericSetAttr(t, "_ns", ns)
+    return t
+
+
+# Validation outcomes of an inserted transform (beyond the cache's OK / OLD / REPEATED).
+INVALID = 3
+"""``CoreBase._store``: the transform breaks one of tf2's rules (setTransformImpl)."""
+
+# Query failures beyond tf2's codes: a bad argument (empty or '/'-prefixed id).
+INVALID_ARGUMENT = 4
+UNKNOWN_FRAME = 5
+
+
+cdef inline str _as_str(object value):
+    """A frame id as the exact ``str`` it is (``numpy.str_`` or any ``str`` subclass is
+    accepted as its string value); None for anything that is not a string."""
+    if type(value) is str:
+        return <str>value
+    if isinstance(value, str):
+        return str.__str__(value)
+    return None
+
+
+cdef inline bint _slashed(str frame_id) noexcept:
+    """Whether ``frame_id`` starts with '/' (tf2 ``stripSlash`` strips one)."""
+    return PyUnicode_GET_LENGTH(frame_id) != 0 and PyUnicode_READ_CHAR(frame_id, 0) == 47
+
+
+cdef str _show(object value):
+    """``repr`` of a bad value for an error message, bounded in length."""
+    cdef str text
+    try:
+        text = repr(value)
+    except Exception:
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+cdef inline double _number(object value, str field) except? -1.0:
+    """A transform component as a double; anything but a real number (bool, None, str,
+    an int beyond double range, ...) is an InvalidArgumentException naming the field."""
+    if type(value) is float:
+        return <double>value
+    if not isinstance(value, (bool, np.bool_, str, bytes, complex)) and value is not None:
+        try:
+            return float(value)
+        except (OverflowError, TypeError, ValueError):
+            pass
+    raise InvalidArgumentException(f"{field} must be a real number, got {_show(value)}")
+
+
+cdef tuple _FIELDS = (
+    "transform.translation.x",
+    "transform.translation.y",
+    "transform.translation.z",
+    "transform.rotation.x",
+    "transform.rotation.y",
+    "transform.rotation.z",
+    "transform.rotation.w",
+)
+
+
+cdef tuple _bad_id(str frame_id, int which):
+    """The failure tuple of a query argument that is not a known frame (tf2
+    ``validateFrameId``): empty or '/'-prefixed ids are invalid, others unknown."""
+    if not frame_id or frame_id[0] == "/":
+        return (INVALID_ARGUMENT, which)
+    return (UNKNOWN_FRAME, which)
+
+
+cdef int _climb(list caches, int frame, int stop, int early, int64_t time, double* acc,
+                int* reached) except -1:
+    """One half of tf2's ``walkToTopParent``: walk up from ``frame`` gathering each link
+    at ``time`` and accumulating ``frame -> current`` into ``acc``.
+
+    Stops at ``stop`` (not gathered), at a frame without a link, at a link with no data
+    (CLIMB_FAILED, ``reached`` = the failing frame), or at ``early`` once its link
+    gathered (CLIMB_EARLY; that link is not accumulated). ``reached`` is the frame where
+    the climb ended.
+    """
+    cdef double st[7]
+    cdef int parent = 0
+    cdef int depth = 0
+    cdef bint first = True
+    cdef object obj
+    _identity(acc)
+    while frame != stop:
+        obj = _link(caches, frame)
+        if obj is None:
+            break
+        if (<Link>obj).c_gather(time, st, &parent) != G_OK or parent == 0:
+            reached[0] = frame
+            return CLIMB_FAILED
+        if frame == early:
+            reached[0] = frame
+            return CLIMB_EARLY
+        if first:
+            memcpy(acc, st, 7 * sizeof(double))
+            first = False
+        else:
+            _accumulate(acc, st)
+        frame = parent
+        depth += 1
+        if depth > C_MAX_DEPTH:
+            reached[0] = frame
+            return CLIMB_LOOP
+    reached[0] = frame
+    return CLIMB_STOPPED
+
+
+cdef class CoreBase:
+    """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
+
+    Nothing here calls into the subclass: inserts and queries return codes and data, and
+    ``tfbus.core`` turns them into tf2's messages, exceptions and log lines.
+
+    Read-only internals (for white-box tests and the batch kernel, never written from
+    Python): ``_frame_ids`` (frame id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names``
+    (int id → frame id), ``_caches`` (int id → link or None), ``_authority`` (int id →
+    authority of its last stored transform) and ``_generation`` (bumped by every insert
+    attempt and by ``clear``). Python code uses the public methods: ``clear``,
+    ``get_frame_names``, ``frame_exists``, ``parent_of``, ``link_info``,
+    ``extrapolation_detail``, ``common_time``.
+    """
+
+    # The lookup memo, direct-mapped: slot -> the last result stored there, the time
+    # asked and the generation it is valid for (no key tuple, no dict: a never-repeated
+    # query pays a few compares and one list store).
+    # What the last ``_insert_one`` did, beyond its code (read by ``_store`` and
+    # ``_store_one`` right after it; no list per transform): the stripped ids, the stamp,
+    # the values (for INVALID only) and whether the tree's shape may have changed.
+
+    def __cinit__(self, *args, **kwargs):
+        cdef int k
+        self._frame_ids = {"NO_PARENT": 0}
+        self._frame_names = ["NO_PARENT"]
+        self._caches = [None]
+        self._authority = {}
+        self._generation = 0
+        self._cache_ns = 0
+        self._memo = [None] * MEMO_SIZE
+        for k in range(MEMO_SIZE):
+            self._memo_gen[k] = -1
+            self._memo_t[k] = 0
+
+    @property
+    def cache_time_ns(self):
+        """The history kept per dynamic link, nanoseconds (the one copy: every link is
+        created with it; read-only)."""
+        return self._cache_ns
+
+    def _set_cache_time_ns(self, ns):
+        """Set the cache time (ns); only before the first insert (``BufferCore.__init__``)."""
+        if len(self._frame_names) > 1:
+            raise RuntimeError("cache_time is fixed once transforms are stored")
+        self._cache_ns = min(ns, INT64_MAX)
+
+    cdef object _register(self, str frame_id):
+        cdef object fid = len(self._frame_names)
+        self._frame_ids[frame_id] = fid
+        self._frame_names.append(frame_id)
+        self._caches.append(None)
+        return fid
+
+    # ------------------------------------------------------------------ insert
+
+    cdef int _insert_one(self, object ts, str authority, bint is_static) except -1:
+        """``BufferCore::setTransformImpl``: check, register frames, store.
+
+        Returns the cache's C_OK / C_OLD_DATA / C_REPEATED_DATA, or INVALID (a tf2 rule
+        is broken). What it did beyond the code is left in ``_last_parent``,
+        ``_last_child`` (stripped ids), ``_last_stamp`` (ns; not for INVALID),
+        ``_last_values`` (the 7 values, INVALID only) and ``_last_relinked``. A field of
+        the wrong type raises InvalidArgumentException naming it; nothing is stored or
+        registered before every check has passed (no half-stored frame)."""
+        cdef object header, tf, tr, rot, stamp_obj, cid, pid, cache
+        cdef str child, parent
+        cdef double v[7]
+        cdef double norm2
+        cdef int64_t stamp, old_stamp
+        cdef int code, k, old_parent
+        header = (<tuple>ts)[0]
+        tf = (<tuple>ts)[2]
+        if not isinstance(header, Header):
+            raise InvalidArgumentException(f"header must be a Header, got {_show(header)}")
+        if not isinstance(tf, Transform):
+            raise InvalidArgumentException(f"transform must be a Transform, got {_show(tf)}")
+        tr = (<tuple>tf)[0]
+        rot = (<tuple>tf)[1]
+        if not (isinstance(tr, tuple) and len(<tuple>tr) == 3):
+            raise InvalidArgumentException(
+                f"transform.translation must be a Vector3, got {_show(tr)}")
+        if not (isinstance(rot, tuple) and len(<tuple>rot) == 4):
+            raise InvalidArgumentException(
+                f"transform.rotation must be a Quaternion, got {_show(rot)}")
+        parent = _as_str((<tuple>header)[1])
+        if parent is None:
+            raise InvalidArgumentException(
+                f"header.frame_id must be a str, got {_show((<tuple>header)[1])}")
+        child = _as_str((<tuple>ts)[1])
+        if child is None:
+            raise InvalidArgumentException(
+                f"child_frame_id must be a str, got {_show((<tuple>ts)[1])}")
+        stamp_obj = (<tuple>header)[0]
+        if not isinstance(stamp_obj, Time):
+            raise InvalidArgumentException(f"header.stamp must be a Time, got {_show(stamp_obj)}")
+        for k in range(3):
+            v[k] = _number((<tuple>tr)[k], _FIELDS[k])
+        for k in range(4):
+            v[3 + k] = _number((<tuple>rot)[k], _FIELDS[3 + k])
+        if _slashed(parent):
+            parent = parent[1:]
+        if _slashed(child):
+            child = child[1:]
+        self._last_parent = parent
+        self._last_child = child
+        # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
+        norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
+        # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
+        if (
+            child == parent
+            or not child
+            or not parent
+            or v[0] - v[0] != 0.0
+            or v[1] - v[1] != 0.0
+            or v[2] - v[2] != 0.0
+            or not fabs(norm2 - 1.0) < 0.01
+        ):
+            self._last_values = (v[0], v[1], v[2], v[3], v[4], v[5], v[6])
+            return C_INVALID
+        stamp = stamp_obj._ns
+        self._last_stamp = stamp
+        self._generation += 1
+        cid = self._frame_ids.get(child)
+        if cid is None:
+            cid = self._register(child)
+        cache = self._caches[cid]
+        if cache is None:
+            cache = StaticCache() if is_static else TimeCache(self._cache_ns)
+            self._caches[cid] = cache
+        pid = self._frame_ids.get(parent)
+        if pid is None:
+            pid = self._register(parent)
+        old_parent = (<Link>cache).c_latest(&old_stamp)
+        code = (<Link>cache).c_insert(stamp, pid, v)
+        # The tree's shape may have changed: a new or emptied link, another parent, or a
+        # link that keeps one parent per sample.
+        self._last_relinked = False
+        if code == C_OK:
+            if old_parent != <int>pid:
+                self._last_relinked = True
+            elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
+                self._last_relinked = True
+            self._authority[cid] = authority
+        return code
+
+    def _store(self, transforms, str authority, bint is_static):
+        """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
+        order; one bad item never stops the others. Calls nothing back.
+
+        Returns ``(stored, refused, errors, touched, relinked, refusals)`` (the first
+        five are ``BatchResult``'s fields):
+
+        * ``stored``: how many were stored; ``refused``: how many were refused;
+        * ``refusals``: ``[(code, child, stamp ns)]`` for each refused by its cache
+          (``OLD_DATA`` / ``REPEATED_DATA``);
+        * ``errors``: ``[(index, problem)]``, ``problem`` either an exception
+          (InvalidArgumentException for a field of the wrong type, TypeError for an item
+          that is not a TransformStamped) or ``(parent, child, values)`` for a transform
+          that breaks a tf2 rule (the caller builds tf2's message);
+        * ``touched``: set of the (stripped) child and parent ids of every stored transform;
+        * ``relinked``: whether a stored transform may have changed the tree's shape.
+        """
+        cdef Py_ssize_t stored = 0, i = 0
+        cdef list refusals = []
+        cdef list errors = []
+        cdef set touched = set()
+        cdef bint relinked = False
+        cdef int code
+        for ts in transforms:
+            try:
+                if not isinstance(ts, TransformStamped):
+                    raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
+                code = self._insert_one(ts, authority, is_static)
+            except Exception as exc:
+                errors.append((i, exc))
+            else:
+                if code == C_OK:
+                    stored += 1
+                    touched.add(self._last_child)
+                    touched.add(self._last_parent)
+                    if self._last_relinked:
+                        relinked = True
+                elif code == C_INVALID:
+                    errors.append((i, (self._last_parent, self._last_child, self._last_values)))
+                else:
+                    refusals.append((code, self._last_child, self._last_stamp))
+            i += 1
+        return stored, len(refusals), errors, touched, relinked, refusals
+
+    def _store_one(self, ts, str authority, bint is_static):
+        """One transform, as ``_store`` would store it (``BufferCore.set_transform``'s
+        path: no list, set or tuple on success). Calls nothing back.
+
+        Returns True when stored; else what ``_store`` reports for it: ``(OLD_DATA |
+        REPEATED_DATA, child, stamp ns)`` for a refusal by the cache, ``(INVALID, parent,
+        child, values)`` for a transform that breaks a tf2 rule.
+
+        Raises:
+            TypeError: ``ts`` is not a TransformStamped.
+            InvalidArgumentException: a field of the wrong type (named).
+        """
+        cdef int code
+        if not isinstance(ts, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
+        code = self._insert_one(ts, authority, is_static)
+        if code == C_OK:
+            return True
+        if code == C_INVALID:
+            return (INVALID, self._last_parent, self._last_child, self._last_values)
+        return (code, self._last_child, self._last_stamp)
+
+    def _last_touched(self):
+        """``(child, parent, relinked)`` of the transform ``_store_one`` last stored: the
+        (stripped) ids whose lookups may have changed and whether the tree's shape may
+        have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
+        waits are pending."""
+        return self._last_child, self._last_parent, self._last_relinked
+
+    # ------------------------------------------------------------------ queries
+
+    def _id_status(self, frame_id):
+        """0 for a known, queryable frame id; else INVALID_ARGUMENT (not a string, empty,
+        '/'-prefixed) or UNKNOWN_FRAME (tf2 ``validateFrameId``)."""
+        cdef str name = _as_str(frame_id)
+        if name is None:
+            return INVALID_ARGUMENT
+        if self._frame(name) >= 0:
+            return 0
+        return _bad_id(name, 0)[0]
+
+
+    def _query(self, object target, object source, time):
+        """``lookupTransform(target, source, time)`` in one call: the TransformStamped
+        (built here, memoised until the next insert or clear), or a failure tuple:
+
+        * ``(INVALID_ARGUMENT, 0 | 1)`` / ``(UNKNOWN_FRAME, 0 | 1)``: the target (0) or
+          source (1) id is empty / '/'-prefixed, or unknown;
+        * ``(LOOKUP_ERROR, 0)``: a loop; ``(CONNECTIVITY_ERROR, 0)``: two trees;
+        * ``(EXTRAPOLATION_ERROR, frame id, time ns, expired)``: the link of that frame has
+          no data at the time; ``expired`` when the time is older than the path's latest
+          common time minus cache_time (tf2's transformable-request test), i.e. waiting
+          cannot help.
+        """
+        cdef int64_t t = (<object>time)._ns
+        cdef int64_t used, lct
+        cdef int target_id, source_id, err, where = 0, gcode = 0
+        cdef double v[7]
+        cdef object hit, out, cache
+        cdef size_t slot
+        cdef bint expired
+        cdef Link link
+        cdef double st[7]
+        cdef int p = 0
+        if type(target) is not str:
+            target = _as_str(target)
+            if target is None:
+                return (INVALID_ARGUMENT, 0)
+        if type(source) is not str:
+            source = _as_str(source)
+            if source is None:
+                return (INVALID_ARGUMENT, 1)
+        # The memo slot of (target, source, t), by the ids' identity: an equal id in
+        # another string object only misses. A hit is the very query: same objects (the
+        # result holds them), same time, no insert or clear since.
+        slot = (((<size_t><PyObject*>target) >> 4) ^ ((<size_t><PyObject*>source) >> 3)
+                ^ <size_t>t ^ (<size_t>t >> 20)) & (MEMO_SIZE - 1)
+        if self._memo_gen[slot] == self._generation and self._memo_t[slot] == t:
+            hit = self._memo[slot]
+            if (<tuple>hit)[1] is source and (<tuple>(<tuple>hit)[0])[1] is target:
+                return hit
+        if target == source:
+            if t == 0:
+                # tf2 stamps the identity with the frame's newest sample; an unknown id
+                # maps to frame 0 (NO_PARENT), whose link exists only if "NO_PARENT" was
+                # stored as a child (lookupFrameNumber / getFrame).
+                cache = self._caches[self._frame_ids.get(target, 0)]
+                if cache is not None:
+                    (<Link>cache).c_latest(&t)
+            _identity(v)
+            return _stamped(_time_of(t) if t != (<object>time)._ns else time, target, source, v)
+        target_id = self._frame(target)
+        if target_id < 0:
+            return _bad_id(<str>target, 0)
+        source_id = self._frame(source)
+        if source_id < 0:
+            return _bad_id(<str>source, 1)
+        used = t
+        err = self._walk(target_id, source_id, &used, v, &where)
+        if err != NO_ERROR:
+            if err != EXTRAPOLATION_ERROR:
+                return (err, 0)
+            expired = False
+            link = <Link>self._caches[where]
+            gcode = link.c_gather(used, st, &p)
+            if gcode != G_FUTURE and self._common(target_id, source_id, &lct) == NO_ERROR:
+                expired = lct != 0 and used < lct - self._cache_ns
+            return (err, where, used, expired)
+        out = _stamped(time if used == t and t != 0 else _time_of(used), target, source, v)
+        self._memo[slot] = out
+        self._memo_t[slot] = t
+        self._memo_gen[slot] = self._generation
+        return out
+
+    def _chain(self, target_frame, source_frame, time=None):
+        """The frames an answer for ``lookup_transform(target_frame, source_frame, time)``
+        depends on, now and as data arrives: both ids, and the ancestors of each by its
+        link's newest parent and, for a time other than 0, by its parent at ``time`` (a
+        link re-parented over time), at most ``MAX_GRAPH_DEPTH + 1`` per chain (a longer
+        walk is tf2's loop error). Unknown ids are included as given (they may arrive).
+        Like tf2's ``_chainAsVector``, but as a set and for both parentage rules.
+
+        Returns:
+            A list of frame ids (no duplicates, in discovery order).
+        """
+        cdef int64_t t = 0 if time is None else (<object>time)._ns
+        cdef list names = self._frame_names
+        cdef list caches = self._caches
+        cdef set seen = set()
+        cdef list out = []
+        cdef list todo = [target_frame, source_frame]
+        cdef object name, fid, obj
+        cdef int frame, parent, depth, p2
+        cdef int64_t stamp
+        cdef double st[7]
+        while todo:
+            name = todo.pop()
+            if name in seen:
+                continue
+            seen.add(name)
+            out.append(name)
+            fid = self._frame_ids.get(name)
+            if fid is None:
+                continue
+            frame = <int>fid
+            depth = 0
+            while frame != 0 and depth <= C_MAX_DEPTH:
+                obj = _link(caches, frame)
+                if obj is None:
+                    break
+                if t != 0:
+                    p2 = 0
+                    if (<Link>obj).c_gather(t, st, &p2) == G_OK and p2 != 0:
+                        if names[p2] not in seen:
+                            todo.append(names[p2])
+                parent = (<Link>obj).c_latest(&stamp)
+                if parent == 0 or parent >= len(names):
+                    break
+                name = names[parent]
+                if name in seen:
+                    break
+                seen.add(name)
+                out.append(name)
+                frame = parent
+                depth += 1
+        return out
+
+    # ------------------------------------------------------------------ the walk
+
+    cdef int _common(self, int target, int source, int64_t* out) except -1:
+        """tf2 ``getLatestCommonTime``; NO_ERROR with ``out`` set, or an error code."""
+        cdef list caches = self._caches
+        cdef object obj
+        cdef int64_t lct_stamp[C_MAX_DEPTH + 2]
+        cdef int lct_parent[C_MAX_DEPTH + 2]
+        cdef Py_ssize_t n = 0, k
+        cdef int frame, parent, depth, common_parent
+        cdef int64_t stamp, common
+        cdef bint have = False, found
+        out[0] = 0
+        if source == target:
+            obj = _link(caches, source)
+            if obj is not None:
+                (<Link>obj).c_latest(out)
+            return NO_ERROR
+        # Walk up from the source, remembering (stamp, parent) of each link.
+        frame = source
+        common = INT64_MAX
+        depth = 0
+        while frame != 0:
+            obj = _link(caches, frame)
+            if obj is None:
+                break
+            parent = (<Link>obj).c_latest(&stamp)
+            if parent == 0:
+                break
+            if stamp and (not have or stamp < common):
+                common = stamp
+                have = True
+            lct_stamp[n] = stamp
+            lct_parent[n] = parent
+            n += 1
+            frame = parent
+            if frame == target:
+                out[0] = common if have else 0
+                return NO_ERROR
+            depth += 1
+            if depth > C_MAX_DEPTH:
+                return LOOKUP_ERROR
+        # Walk up from the target until a parent seen on the source side.
+        frame = target
+        depth = 0
+        have = False
+        common = INT64_MAX
+        common_parent = 0
+        while True:
+            obj = _link(caches, frame)
+            if obj is None:
+                break
+            parent = (<Link>obj).c_latest(&stamp)
+            if parent == 0:
+                break
+            if stamp and (not have or stamp < common):
+                common = stamp
+                have = True
+            found = False
+            for k in range(n):
+                if lct_parent[k] == parent:
+                    found = True
+                    break
+            if found:
+                common_parent = parent
+                break
+            frame = parent
+            if frame == source:
+                out[0] = common if have else 0
+                return NO_ERROR
+            depth += 1
+            if depth > C_MAX_DEPTH:
+                return LOOKUP_ERROR
+        if common_parent == 0:
+            return CONNECTIVITY_ERROR
+        for k in range(n):
+            stamp = lct_stamp[k]
+            if stamp and (not have or stamp < common):
+                common = stamp
+                have = True
+            if lct_parent[k] == common_parent:
+                break
+        out[0] = common if have else 0
+        return NO_ERROR
+
+    def _ccommon_time(self, int target_id, int source_id):
+        """``(NO_ERROR, time ns)``, or ``(LOOKUP_ERROR (loop) | CONNECTIVITY_ERROR, 0)``."""
+        cdef int64_t t = 0
+        cdef int err = self._common(target_id, source_id, &t)
+        return err, t
+
+    # ------------------------------------------------------------------ public state
+
+    def clear(self):
+        """Drop every stored sample, keeping the frames and their links (tf2
+        ``BufferCore::clear``). As in tf2, the reserved frame 0 (``NO_PARENT``) is
+        skipped: a link stored with child ``"NO_PARENT"`` keeps its samples."""
+        cdef object cache
+        self._generation += 1
+        for cache in self._caches[1:]:
+            if cache is not None:
+                cache.clear()
+
+    def get_frame_names(self):
+        """Every known frame id (children and parents), in registration order."""
+        return self._frame_names[1:]
+
+    def frame_exists(self, frame_id):
+        """Whether ``frame_id`` is known (tf2 ``_frameExists``)."""
+        return self._frame_ids.get(frame_id, 0) != 0
+
+    def parent_of(self, frame_id, int64_t time_ns):
+        """The parent id of ``frame_id`` at ``time_ns`` (0 = latest), or None for a root,
+        an unknown frame or a time its link has no data for (tf2 ``_getParent``)."""
+        cdef object fid = self._frame_ids.get(frame_id, 0)
+        cdef object cache = self._caches[fid] if fid else None
+        if cache is None:
+            return None
+        r = cache.gather(time_ns)
+        if isinstance(r, str) or r[0] == 0:
+            return None
+        return self._frame_names[r[0]]
+
+    def link_info(self):
+        """Per linked frame, in registration order, ``(child, parent, authority,
+        is_static, samples, oldest_ns, newest_ns)``; the parent of an emptied link is
+        ``NO_PARENT``, a link with no recorded authority says so."""
+        cdef list names = self._frame_names
+        cdef list out = []
+        cdef Py_ssize_t fid
+        cdef object cache, r
+        for fid in range(1, len(self._caches)):
+            cache = self._caches[fid]
+            if cache is None:
+                continue
+            r = cache.gather(0)
+            out.append((
+                names[fid],
+                names[0 if isinstance(r, str) else r[0]],
+                self._authority.get(fid, "no recorded authority"),
+                cache.is_static,
+                len(cache),
+                cache.oldest_stamp(),
+                cache.latest_stamp(),
+            ))
+        return out
+
+    def extrapolation_detail(self, int where, int64_t used):
+        """tf2's extrapolation text of the link of frame ``where`` (the int id a failed
+        query reported) at ``used`` ns: ``"Lookup would require extrapolation ..."``;
+        ``""`` for no link or a link that can answer that time."""
+        cache = self._caches[where] if 0 < where < len(self._caches) else None
+        detail = cache.gather(used) if cache is not None else ""
+        return detail if isinstance(detail, str) else ""
+
+    def common_time(self, target_frame, source_frame):
+        """tf2 ``getLatestCommonTime`` for two known frame ids: ``(NO_ERROR, time ns)``,
+        or ``(LOOKUP_ERROR (a loop) | CONNECTIVITY_ERROR, 0)``.
+
+        Raises:
+            KeyError: an id is unknown (validate first).
+        """
+        return self._ccommon_time(self._frame_ids[target_frame], self._frame_ids[source_frame])
+
+    cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
+                   int* where) except -1:
+        """tf2 ``walkToTopParent`` with ``TransformAccum``: ``out`` = the transform mapping
+        source coordinates into target coordinates at ``time[0]`` (0 = latest common time,
+        replaced by the time used). Returns NO_ERROR, LOOKUP_ERROR (a loop),
+        CONNECTIVITY_ERROR, or EXTRAPOLATION_ERROR with ``where`` = the frame whose link had
+        no data."""
+        cdef list caches = self._caches
+        cdef double src[7]
+        cdef double tgt[7]
+        cdef double r[3]
+        cdef double q[4]
+        cdef int top = 0, frame = 0, src_failed_at = 0
+        cdef int outcome, err
+        cdef bint failed
+        if source_id == target_id:
+            _identity(out)
+            return NO_ERROR
+        if time[0] == 0:
+            err = self._common(target_id, source_id, time)
+            if err:
+                return err
+
+        # Source side: source -> top. A failure here is only remembered: the path may
+        # still close below it (only links between the two frames must be valid).
+        outcome = _climb(caches, source_id, 0, target_id, time[0], src, &top)
+        if outcome == CLIMB_EARLY:  # TargetParentOfSource
+            memcpy(out, src, 7 * sizeof(double))
+            return NO_ERROR
+        if outcome == CLIMB_LOOP:
+            return LOOKUP_ERROR
+        failed = outcome == CLIMB_FAILED
+        if failed:
+            src_failed_at = top
+
+        # Target side: target -> top. A failure here is reported at once.
+        outcome = _climb(caches, target_id, top, source_id, time[0], tgt, &frame)
+        if outcome == CLIMB_FAILED:
+            where[0] = frame
+            return EXTRAPOLATION_ERROR
+        if outcome == CLIMB_LOOP:
+            return LOOKUP_ERROR
+        if outcome == CLIMB_EARLY:  # SourceParentOfTarget: the source side is unused
+            _identity(src)
+        elif frame != top:
+            if failed:
+                where[0] = src_failed_at
+                return EXTRAPOLATION_ERROR
+            return CONNECTIVITY_ERROR
+
+        # FullPath: inv(target -> top) ∘ (source -> top), inv = (conj q, conj q * (-t)):
+        # conj(q) applied to (s - g), then conj(q) ⊗ q_s.
+        _qrot(-tgt[3], -tgt[4], -tgt[5], tgt[6], src[0] - tgt[0], src[1] - tgt[1],
+              src[2] - tgt[2], r)
+        _qmul(-tgt[3], -tgt[4], -tgt[5], tgt[6], src[3], src[4], src[5], src[6], q)
+        out[0] = r[0]
+        out[1] = r[1]
+        out[2] = r[2]
+        out[3] = q[0]
+        out[4] = q[1]
+        out[5] = q[2]
+        out[6] = q[3]
+        return NO_ERROR
+
+    def _cwalk(self, int target_id, int source_id, int64_t time):
+        """tf2 ``walkToTopParent`` with ``TransformAccum`` (see ``_walk``).
+
+        Returns ``(NO_ERROR, 7-tuple, time used)``, ``(EXTRAPOLATION_ERROR, id of the
+        frame whose link had no data, time)``, ``(CONNECTIVITY_ERROR, None, 0)`` or
+        ``(LOOKUP_ERROR, None, 0)`` (a loop).
+        """
+        cdef double v[7]
+        cdef int where = 0
+        cdef int err = self._walk(target_id, source_id, &time, v, &where)
+        if err == NO_ERROR:
+            return NO_ERROR, (v[0], v[1], v[2], v[3], v[4], v[5], v[6]), time
+        if err == EXTRAPOLATION_ERROR:
+            return err, where, time
+        return err, None, 0

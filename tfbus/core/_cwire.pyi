@@ -1,0 +1,5 @@
+"""Type stubs for the compiled ROS 1 wire decoder (``tfbus/core/_cwire.pyx``)."""
+
+from tfbus.messages import TransformStamped
+
+def _tf_from_ros1(buf: memoryview | bytes) -> list[TransformStamped]: ...

@@ -1,0 +1,218 @@
+"""The batched lookups' values: one path, many times (issue 12).
+
+:meth:`BufferCore.lookup_transforms <tfbus.core.BufferCore.lookup_transforms>` answers
+``lookup_transform`` for every time of an ``(N,)`` int64 nanosecond array in one call and
+returns a :class:`TransformArray`; ``lookup_transforms_full`` composes two such arrays
+with :func:`compose_rows`. The core's ``batch_lookup`` (compiled: resolves the path
+between the two frames once and gathers and accumulates every link for every time in C;
+pure Python: the single walk per time) works in the same arithmetic order as the single
+lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then ``TransformAccum``),
+so each row is the single lookup's result: bit for bit, except that the compiled core's
+``lookup_rows`` may take slerp's per-time sines from libmvec's vector sin (rows within
+~1e-14 of the single lookup; issue 12 allows 1e-12). Times may come in any order. For a
+row that cannot be answered at all, the single public ``lookup_transform`` is asked, so
+the exception and its message are tf2's by construction.
+
+No threads, no event loop; the awaitable twins are methods of :class:`tfbus.buffer.Buffer`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal, TypeAlias, cast
+
+import numpy as np
+import numpy.typing as npt
+
+from tfbus.time import Time
+
+__all__ = [
+    "Errors",
+    "TimesLike",
+    "TransformArray",
+    "as_times",
+    "check_errors",
+    "compose_rows",
+]
+
+Errors: TypeAlias = Literal["raise", "mask"]
+"""What a batched lookup does with a row it cannot answer: raise tf2's exception or
+mask the row (NaN, ``valid[i] = False``)."""
+
+TimesLike: TypeAlias = npt.ArrayLike | Sequence[Time] | Time | int
+"""What the batched lookups take as times: ``(N,)`` int64 ns, Times, or one of either."""
+
+_F64 = npt.NDArray[np.float64]
+_I64 = npt.NDArray[np.int64]
+
+
+class TransformArray:
+    """N transforms between one pair of frames, one per time (the batched
+    ``TransformStamped``).
+
+    Attributes:
+        stamps: ``(N,) int64`` nanoseconds, the time each row was taken at (a requested
+            time 0 becomes the latest common time, as in ``lookup_transform``).
+        translations: ``(N, 3) float64`` metres.
+        rotations: ``(N, 4) float64`` quaternions in (x, y, z, w) order.
+        frame_id: the target frame (the rows map ``child_frame_id`` data into it).
+        child_frame_id: the source frame.
+        valid: ``(N,) bool``; False only for rows that failed under ``errors="mask"``
+            (their translation and rotation are NaN, their stamp the requested time).
+    """
+
+    __slots__ = ("child_frame_id", "frame_id", "rotations", "stamps", "translations", "valid")
+
+    def __init__(
+        self,
+        stamps: _I64,
+        translations: _F64,
+        rotations: _F64,
+        frame_id: str,
+        child_frame_id: str,
+        valid: npt.NDArray[np.bool_] | None = None,
+    ) -> None:
+        n = stamps.shape[0]
+        if translations.shape != (n, 3) or rotations.shape != (n, 4):
+            raise ValueError(
+                f"translations must be ({n}, 3) and rotations ({n}, 4), "
+                f"got {translations.shape} and {rotations.shape}"
+            )
+        self.stamps = stamps
+        self.translations = translations
+        self.rotations = rotations
+        self.frame_id = frame_id
+        self.child_frame_id = child_frame_id
+        self.valid = np.ones(n, dtype=bool) if valid is None else valid
+
+    def __len__(self) -> int:
+        return int(self.stamps.shape[0])
+
+    def __repr__(self) -> str:
+        return (
+            f"TransformArray(frame_id={self.frame_id!r}, "
+            f"child_frame_id={self.child_frame_id!r}, n={len(self)}, "
+            f"invalid={int(np.count_nonzero(~self.valid))})"
+        )
+
+    def as_matrices(self) -> _F64:
+        """``(N, 4, 4) float64`` homogeneous matrices ``[[R, t], [0, 0, 0, 1]]`` acting on
+        column vectors; R is the matrix of ``v -> q v q*`` (tf2 ``quatRotate``, exact for
+        unit quaternions; for a non-unit q it scales by ``|q|²`` as tf2 does). NaN rows
+        stay NaN."""
+        x, y, z, w = (self.rotations[:, k] for k in range(4))
+        n = len(self)
+        m = np.zeros((n, 4, 4))
+        m[:, 0, 0] = w * w + x * x - y * y - z * z
+        m[:, 0, 1] = 2 * (x * y - w * z)
+        m[:, 0, 2] = 2 * (x * z + w * y)
+        m[:, 1, 0] = 2 * (x * y + w * z)
+        m[:, 1, 1] = w * w - x * x + y * y - z * z
+        m[:, 1, 2] = 2 * (y * z - w * x)
+        m[:, 2, 0] = 2 * (x * z - w * y)
+        m[:, 2, 1] = 2 * (y * z + w * x)
+        m[:, 2, 2] = w * w - x * x - y * y + z * z
+        m[:, :3, 3] = self.translations
+        m[:, 3, 3] = 1.0
+        return m
+
+    def apply(self, points: npt.ArrayLike) -> _F64:
+        """Map ``(N, 3)`` points, row i through transform i (``quatRotate(q, p) + t``,
+        tf2's order), into ``frame_id``. Returns ``(N, 3) float64``.
+
+        Raises:
+            ValueError: ``points`` is not ``(N, 3)`` for this array's N.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        if p.shape != (len(self), 3):
+            raise ValueError(f"points must have shape ({len(self)}, 3), got {p.shape}")
+        from tfbus.geometry import apply_transform  # geometry imports the core: not at load
+
+        return apply_transform(self.translations, self.rotations, p)
+
+
+def as_times(times: TimesLike, n: int | None = None) -> _I64:
+    """``times`` as a contiguous ``(N,) int64`` array of nanoseconds.
+
+    Accepts an integer array, a sequence of :class:`~tfbus.time.Time` or ints, or one
+    Time / int (broadcast to ``n`` rows when ``n`` is given).
+
+    Raises:
+        ValueError: not one-dimensional, not integers (floats are refused: seconds near
+            1.7e9 cannot hold nanoseconds), negative, or of the wrong length.
+    """
+    if isinstance(times, Time):
+        arr = np.array([times.ns], dtype=np.int64)
+    elif isinstance(times, (list, tuple)) and times and isinstance(times[0], Time):
+        if not all(isinstance(t, Time) for t in times):
+            raise ValueError("times mixes Time and other values")
+        arr = np.fromiter((t.ns for t in cast("Sequence[Time]", times)), np.int64, len(times))
+    else:
+        raw = np.asarray(times)
+        if raw.ndim == 0:
+            raw = raw.reshape(1)
+        if raw.size and raw.dtype.kind not in "iu":
+            raise ValueError(
+                f"times must be integer nanoseconds (or Time objects), got dtype {raw.dtype}"
+            )
+        if raw.dtype.kind == "u" and raw.size and int(raw.max()) > np.iinfo(np.int64).max:
+            raise ValueError("times exceed the int64 nanosecond range")
+        arr = raw.astype(np.int64, copy=False)
+    if arr.ndim != 1:
+        raise ValueError(f"times must be one-dimensional (N,), got shape {arr.shape}")
+    if arr.size and int(arr.min()) < 0:
+        raise ValueError(f"times must be >= 0 ns, got {int(arr.min())}")
+    if n is not None and arr.shape[0] != n:
+        if arr.shape[0] == 1:
+            arr = np.full(n, arr[0], dtype=np.int64)
+        else:
+            raise ValueError(f"times has {arr.shape[0]} entries, expected {n}")
+    return np.ascontiguousarray(arr)
+
+
+def check_errors(errors: str) -> None:
+    """Raise ValueError unless ``errors`` is ``"raise"`` or ``"mask"``."""
+    if errors not in ("raise", "mask"):
+        raise ValueError(f"errors must be 'raise' or 'mask', got {errors!r}")
+
+
+def compose_rows(leg2: TransformArray, leg1: TransformArray) -> TransformArray:
+    """Row by row ``leg2 ∘ leg1`` through normalised rotations, in the arithmetic order of
+    :meth:`~tfbus.core.BufferCore.lookup_transform_full` (tf2::Transform's multiply):
+    the rows of ``lookup_transforms_full``. The stamps are ``leg2``'s, a row is valid
+    where both legs are; the frames are ``leg2.frame_id`` and ``leg1.child_frame_id``.
+    """
+    x1, y1, z1 = (leg1.translations[:, k] for k in range(3))
+    x2, y2, z2 = (leg2.translations[:, k] for k in range(3))
+    a = leg2.rotations / np.sqrt(np.sum(leg2.rotations * leg2.rotations, axis=1))[:, None]
+    b = leg1.rotations / np.sqrt(np.sum(leg1.rotations * leg1.rotations, axis=1))[:, None]
+    ax, ay, az, aw = (a[:, k] for k in range(4))
+    bx, by, bz, bw = (b[:, k] for k in range(4))
+    # The order of BufferCore.lookup_transform_full (tf2::Transform's multiply).
+    tx = aw * x1 + ay * z1 - az * y1
+    ty = aw * y1 + az * x1 - ax * z1
+    tz = aw * z1 + ax * y1 - ay * x1
+    tw = -ax * x1 - ay * y1 - az * z1
+    q = np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by + ay * bw + az * bx - ax * bz,
+            aw * bz + az * bw + ax * by - ay * bx,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=1,
+    )
+    q /= np.sqrt(q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2] + q[:, 3] * q[:, 3])[
+        :, None
+    ]
+    trans = np.stack(
+        [
+            -tw * ax + tx * aw - ty * az + tz * ay + x2,
+            -tw * ay + ty * aw - tz * ax + tx * az + y2,
+            -tw * az + tz * aw - tx * ay + ty * ax + z2,
+        ],
+        axis=1,
+    )
+    valid = leg1.valid & leg2.valid
+    stamps = leg2.stamps.copy()
+    return TransformArray(stamps, trans, q, leg2.frame_id, leg1.child_frame_id, valid)
