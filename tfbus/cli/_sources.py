@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from tfbus.buffer import Buffer
     from tfbus.bus import Subscription, Transport
     from tfbus.core import BufferCore
+    from tfbus.fleet import FleetBuffer
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfStatistics
     from tfbus.transports.spec import BusSpec
@@ -226,6 +227,8 @@ class BusSource(TfSource):
         self.gone: dict[str, PeerInfo] = {}
         """Broadcasters whose liveliness went away (exited, killed or unreachable)."""
         self._problem: str | None = None
+        self.fleet: FleetBuffer | None = None
+        """The robots of a fleet bus (``namespace=*``) while attached."""
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -245,6 +248,12 @@ class BusSource(TfSource):
     def report_problem(self, message: str) -> None:
         """Record a one-line warning (printed at the end, exit status 1)."""
         self._problem = message
+
+    @property
+    def is_fleet(self) -> bool:
+        """Whether the bus is a Zenoh fleet bus (``namespace=*``): every robot's frames,
+        prefixed ``robot/`` (:class:`~tfbus.fleet.FleetBuffer`)."""
+        return self.bus_spec.scheme == "zenoh" and self.bus_spec.value("namespace") == "*"
 
     @property
     def has_liveliness(self) -> bool:
@@ -280,8 +289,18 @@ class BusSource(TfSource):
         with _literal_logging():
             async with Bus(transport=transport, queue_size=10_000) as bus:
                 self.transport = transport
-                self.listener = TransformListener(self.sink, bus, clock=self.clock)
-                async with self.listener, anyio.create_task_group() as tg:
+                if self.is_fleet:
+                    from tfbus.fleet import FleetBuffer
+                    from tfbus.monitor import MonitoredSink
+
+                    # every robot's frames, robot/-prefixed, accounted to its broadcaster
+                    sink = MonitoredSink(self._buffer, self._statistics, self.clock)
+                    self.fleet = FleetBuffer(bus, merged=True, sink=sink)
+                    self.listener = None
+                    receiver: Any = self.fleet
+                else:
+                    receiver = self.listener = TransformListener(self.sink, bus, clock=self.clock)
+                async with receiver, anyio.create_task_group() as tg:
                     if self.bus_spec.scheme == "zenoh":
                         from tfbus.transports.zenoh import PEERS_TOPIC
 
@@ -332,7 +351,7 @@ class BusSource(TfSource):
         async for event in sub:
             ev: PeerEvent = event
             known = self.broadcasters_seen.get(ev.node_id)
-            if ev.alive and ev.topic in ("/tf", "/tf_static"):
+            if ev.alive and ev.topic.endswith(("/tf", "/tf_static")):
                 topics = (known.topics if known else frozenset()) | {ev.topic}
                 info = PeerInfo(ev.node_id, ev.name, topics)
                 self.broadcasters_seen[ev.node_id] = info

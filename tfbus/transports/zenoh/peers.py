@@ -22,6 +22,7 @@ PEERS_TOPIC: Final = "/tfbus/peers"
 """Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
 
 _TF_TOPICS: Final = frozenset({"/tf", "/tf_static"})
+_TF_SUFFIXES: Final = ("/tf", "/tf_static")
 
 
 class PeerEvent(NamedTuple):
@@ -57,8 +58,9 @@ class PeerInfo:
 
     @property
     def is_broadcaster(self) -> bool:
-        """True if it has published ``/tf`` or ``/tf_static``."""
-        return bool(self.topics & _TF_TOPICS)
+        """True if it has published ``/tf`` or ``/tf_static`` (on a fleet bus,
+        ``namespace=*``: ``/robot7/tf`` or ``/robot7/tf_static``)."""
+        return any(t in _TF_TOPICS or t.endswith(_TF_SUFFIXES) for t in self.topics)
 
 
 class PeerTable:
