@@ -10,96 +10,26 @@ every child is killed by its PID in ``finally``.
 
 from __future__ import annotations
 
-import os
-import queue
 import signal
 import socket
-import subprocess
-import sys
-import threading
-import time
-from collections.abc import Callable
-from pathlib import Path
 
 import anyio
 import pytest
 
 pytest.importorskip("zenoh")
 
+from fleet_procs import Proc
+
 from tfbus.bus import Bus
 from tfbus.remote import BufferClient
 from tfbus.time import Time
 from tfbus.transports.zenoh import ZenohTransport
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
-
-
-class Proc:
-    """A ``tfbus`` child; its merged stdout/stderr lines are collected by a thread."""
-
-    def __init__(self, *args: str) -> None:
-        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONIOENCODING="utf-8")
-        env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-        env.pop("COLUMNS", None)
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "tfbus.cli", *args], stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, encoding="utf-8", env=env, cwd=ROOT,
-        )
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.seen: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def expect(self, predicate: Callable[[str], bool], timeout: float = 30.0,
-               start: int = 0) -> int:
-        """Index of the first line from ``start`` on that matches (bounded wait)."""
-        deadline = time.monotonic() + timeout
-        i = start
-        while True:
-            while i < len(self.seen):
-                if predicate(self.seen[i]):
-                    return i
-                i += 1
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise AssertionError("no matching line in:\n" + "\n".join(self.seen))
-            try:
-                self.seen.append(self.lines.get(timeout=min(remaining, 0.2)))
-            except queue.Empty:
-                if self.proc.poll() is not None and self.lines.empty():
-                    raise AssertionError(
-                        f"exited {self.proc.returncode}:\n" + "\n".join(self.seen)
-                    ) from None
-
-    def stop(self, sig: int = signal.SIGTERM, timeout: float = 20.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-        try:
-            return self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            return self.proc.wait(timeout)
-
-    def rest(self, timeout: float = 10.0) -> list[str]:
-        """Every line, once the process has ended (bounded)."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                self.seen.append(self.lines.get(timeout=0.2))
-            except queue.Empty:
-                if self.proc.poll() is not None:
-                    break
-        return self.seen
 
 
 def test_router_robots_monitor_and_served_lookups() -> None:
@@ -153,9 +83,7 @@ def test_router_robots_monitor_and_served_lookups() -> None:
         assert "answered" in server.rest()[-1]
     finally:
         for p in procs:
-            if p.proc.poll() is None:
-                p.proc.kill()
-                p.proc.wait(10)
+            p.kill()
 
 
 @pytest.mark.parametrize(
