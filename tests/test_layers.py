@@ -51,6 +51,7 @@ LAYERS: dict[str, int] = {
     "listener": 3,
     "broadcaster": 3,
     "batch_async": 3,
+    "fleet": 3,
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
     "monitor": 4,
@@ -60,6 +61,7 @@ LAYERS: dict[str, int] = {
     "urdf": 4,
     "transports": 4,
     "compat": 4,
+    "remote": 4,
     # 5: the command line and examples
     "cli": 5,
     "demo": 5,
