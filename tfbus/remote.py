@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Final, TypeVar
@@ -182,6 +183,7 @@ class BufferServer:
         self._sender = new_sender_id()
         self._max_pending = max_pending
         self._pending = 0
+        self._pending_lock = threading.Lock()  # Zenoh threads add, the event loop removes
         self._stats = ServerStatistics()
         self._portal: anyio.from_thread.BlockingPortal | None = None
         self._queryable: zenoh.Queryable[None] | None = None
@@ -235,16 +237,20 @@ class BufferServer:
         portal = self._portal
         payload = query.payload
         data = b"" if payload is None else payload.to_bytes()
-        if portal is None or self._pending >= self._max_pending:
+        with self._pending_lock:
+            accepted = portal is not None and self._pending < self._max_pending
+            if accepted:
+                self._pending += 1
+        if portal is None or not accepted:
             self._stats.busy += 1
             with query:
                 self._reply_error(query, TransformException("buffer server busy or stopping"))
             return
-        self._pending += 1
         try:
             portal.start_task_soon(self._answer, query, data)
         except RuntimeError:  # the portal stopped meanwhile
-            self._pending -= 1
+            with self._pending_lock:
+                self._pending -= 1
             with query:
                 self._reply_error(query, TransformException("buffer server stopping"))
 
@@ -274,7 +280,8 @@ class BufferServer:
         except zenoh.ZError as exc:
             log.debug("cannot answer a lookup: %s", exc)
         finally:
-            self._pending -= 1
+            with self._pending_lock:
+                self._pending -= 1
 
     async def _run(self, request: Mapping[str, Any]) -> object:
         op = request.get("op")

@@ -27,6 +27,7 @@ from tfbus.errors import (  # noqa: E402
     InvalidArgumentException,
     LookupException,
     TimeoutException,
+    TransformException,
 )
 from tfbus.messages import (  # noqa: E402
     Header,
@@ -209,3 +210,39 @@ async def test_client_needs_a_zenoh_bus_and_a_server() -> None:
         client = BufferClient(bus, timeout_padding=0.2)
         with pytest.raises(TimeoutException, match="no answer from buffer server"):
             await client.lookup_transform("world", "base", Time(0), timeout=0.0)
+
+
+async def test_requests_over_max_pending_are_refused_and_counted() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    clock = ManualClock(Time(100))
+    buffer = Buffer(clock=clock)
+    buffer.set_transform_static(ts("world", "base", 0, 1.0), "test")
+    async with (
+        ZenohRouter(listen=endpoint),
+        client_bus(endpoint, name="server") as sbus,
+        client_bus(endpoint, name="thin", topics=()) as cbus,
+        BufferServer(buffer, sbus, max_pending=1) as server,
+    ):
+        client = BufferClient(cbus, timeout_padding=5.0)
+        with anyio.fail_after(10):
+            while not await client.can_transform("world", "base", Time(0), 0.0):
+                await anyio.sleep(0.05)
+        outcome: list[BaseException] = []
+
+        async def ask() -> None:
+            try:
+                await client.lookup_transform("world", "ghost", Time(0), timeout=5.0)
+            except TransformException as exc:
+                outcome.append(exc)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(ask)
+            await wait_until(lambda: buffer.pending_waits == 1)
+            with pytest.raises(TransformException, match=r"^buffer server busy or stopping$"):
+                await client.lookup_transform("world", "base", Time(0), timeout=0.0)
+            assert server.statistics().busy == 1
+            await clock.advance(5.0)
+        assert type(outcome[0]) is LookupException
+        # the slot is free again
+        t = await client.lookup_transform("world", "base", Time(0), timeout=0.0)
+        assert t.transform.translation.x == 1.0
