@@ -62,6 +62,7 @@ LAYERS: dict[str, int] = {
     "transports": 4,
     "compat": 4,
     "remote": 4,
+    "remote_ros1": 4,
     # 5: the command line and examples
     "cli": 5,
     "demo": 5,
