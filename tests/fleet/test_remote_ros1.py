@@ -1,9 +1,10 @@
-"""Ros1BufferClient against Debian's real tf2_ros ``buffer_server`` (ROS 1, 127.0.0.1).
+"""tf2_ros's LookupTransform action on ROS 1 (127.0.0.1), both directions.
 
-A roscore on a free loopback port, Debian's ``static_transform_publisher`` (tf2_ros) and
-``buffer_server`` nodes; the tfbus client sends ``tf2_msgs/LookupTransform`` goals and
-gets the transform, or the server's TF2Error as the tf2 exception of the same kind.
-Every wait is bounded; the nodes are stopped by PID.
+A roscore on a free loopback port. (1) tfbus's Ros1BufferClient against Debian's real
+``buffer_server`` fed by Debian's ``static_transform_publisher``: the transform, or the
+server's TF2Error as the tf2 exception of the same kind. (2) Debian's real
+``tf2_ros.BufferClient`` (python3-tf2-ros, rospy + actionlib) against tfbus's
+Ros1BufferServer. Every wait is bounded; the nodes are stopped by PID.
 """
 
 from __future__ import annotations
@@ -19,13 +20,17 @@ from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures
     ros1_fixture,
 )
 
+from tfbus.buffer import Buffer
 from tfbus.errors import LookupException
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.remote_ros1 import (
     GOAL_MD5,
     GOAL_TYPE,
     RESULT_MD5,
     RESULT_TYPE,
     Ros1BufferClient,
+    Ros1BufferServer,
+    decode_goal,
     decode_result,
     encode_goal,
 )
@@ -64,6 +69,11 @@ def test_goal_round_trips_through_debians_genpy() -> None:
         "3", "g-1", "map", "laser", "5000000007", "1500000000", "6000000000", "odom", "True"]
     with pytest.raises(ValueError, match="malformed tf2_msgs/LookupTransformActionResult"):
         decode_result(b"\x01\x02")
+    goal = decode_goal(raw)
+    assert (goal.goal_id, goal.target_frame, goal.source_time, goal.timeout, goal.advanced) \
+        == ("g-1", "map", Time(5, 7), 1.5, True)
+    with pytest.raises(ValueError, match="malformed tf2_msgs/LookupTransformActionGoal"):
+        decode_goal(raw[:-3])
 
 
 def test_client_gets_answers_from_debians_buffer_server(master: Master) -> None:
@@ -94,3 +104,56 @@ def test_client_gets_answers_from_debians_buffer_server(master: Master) -> None:
     finally:
         for p in (server, static):
             p.stop()
+
+
+DEBIAN_CLIENT = """
+import rospy, tf2_ros
+rospy.init_node("debian_buffer_client", anonymous=True)
+client = tf2_ros.BufferClient("/tf2_buffer_server")
+print("server", client.wait_for_server(rospy.Duration(30)), flush=True)
+t = client.lookup_transform("base", "laser", rospy.Time(0), rospy.Duration(1))
+v = t.transform.translation
+print("result", t.header.frame_id, t.child_frame_id, v.x, v.y, v.z, flush=True)
+try:
+    client.lookup_transform("base", "ghost", rospy.Time(0), rospy.Duration(0))
+except tf2_ros.LookupException as e:
+    print("lookup_error", str(e), flush=True)
+t = client.lookup_transform_full("laser", rospy.Time(0), "laser", rospy.Time(0), "base",
+                                 rospy.Duration(1))
+print("full", t.transform.translation.x, flush=True)
+"""
+
+
+def test_debians_buffer_client_gets_answers_from_tfbus(master: Master) -> None:
+    done = subprocess.run(["/usr/bin/python3", "-c", "import tf2_ros, actionlib"],
+                          capture_output=True, timeout=60, check=False)
+    if done.returncode != 0:
+        pytest.skip("python3-tf2-ros / python3-actionlib not installed")
+    buffer = Buffer()
+    buffer.set_transform_static(TransformStamped(
+        Header(Time(0), "base"), "laser",
+        Transform(Vector3(1.0, 2.0, 3.0), Quaternion())), "test")
+    expected_error = ""
+    try:
+        buffer.lookup_transform("base", "ghost", Time(0))
+    except LookupException as exc:
+        expected_error = str(exc)
+
+    async def main() -> None:
+        async with Ros1BufferServer(buffer, master.uri) as server:
+            client = master.run("/usr/bin/python3", "-c", DEBIAN_CLIENT)
+            try:
+                def wait(pattern: str) -> str:
+                    return client.wait_for(pattern, timeout=60.0).group(0)
+
+                assert await anyio.to_thread.run_sync(wait, r"server \S+") == "server True"
+                assert await anyio.to_thread.run_sync(wait, r"result .*") == \
+                    "result base laser 1.0 2.0 3.0"
+                assert await anyio.to_thread.run_sync(wait, r"lookup_error .*") == \
+                    f"lookup_error {expected_error}"
+                assert await anyio.to_thread.run_sync(wait, r"full .*") == "full 0.0"
+                assert server.answered == 3 and server.malformed == 0
+            finally:
+                client.stop()
+
+    anyio.run(main)
