@@ -92,9 +92,9 @@ def test_router_robots_monitor_and_served_lookups() -> None:
         (("serve-buffer", "--bus", "zenoh:namespace=*"), 2,
          "tfbus serve-buffer: error: --bus 'zenoh:namespace=*': serve one robot's namespace, "
          "not namespace=*"),
-        (("serve-buffer", "--bus", "ros1"), 2,
-         "tfbus serve-buffer: error: --bus 'ros1': serve-buffer answers over Zenoh only "
-         "(a 'zenoh' bus)"),
+        (("serve-buffer", "--bus", "memory"), 2,
+         "tfbus serve-buffer: error: --bus 'memory': serve-buffer answers over Zenoh or ROS 1 "
+         "only (a 'zenoh' or 'ros1' bus)"),
         (("monitor", "--bus", "zenoh:mode=router"), 2,
          "tfbus monitor: error: --bus 'zenoh:mode=router': mode must be one of peer, client, "
          "got 'router'"),

@@ -18,6 +18,7 @@ from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures
     Master,
     master_fixture,
     ros1_fixture,
+    tfbus_cli,
 )
 
 from tfbus.buffer import Buffer
@@ -157,3 +158,30 @@ def test_debians_buffer_client_gets_answers_from_tfbus(master: Master) -> None:
                 client.stop()
 
     anyio.run(main)
+
+
+def test_serve_buffer_command_answers_debians_buffer_client(master: Master) -> None:
+    """``tfbus serve-buffer --bus ros1:master=...`` fed by Debian's
+    static_transform_publisher, asked by Debian's tf2_ros.BufferClient."""
+    done = subprocess.run(["/usr/bin/python3", "-c", "import tf2_ros, actionlib"],
+                          capture_output=True, timeout=60, check=False)
+    if done.returncode != 0:
+        pytest.skip("python3-tf2-ros / python3-actionlib not installed")
+    static = master.run(str(STATIC_PUBLISHER), "1", "2", "3", "0", "0", "0", "base", "laser")
+    server = tfbus_cli(master, "serve-buffer", "--bus", f"ros1:master={master.uri}")
+    client = None
+    try:
+        server.wait_for(r"buffer server on the ROS 1 action /tf2_buffer_server", timeout=60)
+        script = DEBIAN_CLIENT.split("try:")[0].replace(
+            'rospy.Duration(1))', 'rospy.Duration(20))')
+        client = master.run("/usr/bin/python3", "-c", script)
+        assert client.wait_for(r"server \S+", timeout=60).group(0) == "server True"
+        assert client.wait_for(r"result .*", timeout=60).group(0) == \
+            "result base laser 1.0 2.0 3.0"
+        assert server.stop() == 0
+        assert server.wait_for(r"summary: \d+ goals answered", timeout=20).group(0) == \
+            "summary: 1 goals answered"
+    finally:
+        for p in (client, server, static):
+            if p is not None:
+                p.stop()
