@@ -41,6 +41,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "ros1": (["--repeat", "3"], ["--quick", "--repeat", "3"], 1800),
     "sensors": ([], ["--quick"], 1800),
     "check": ([], ["--rounds", "3", "--no-ros1"], 1800),
+    "fleet": ([], ["--quick"], 1800),
 }
 
 

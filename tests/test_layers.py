@@ -45,6 +45,7 @@ LAYERS: dict[str, int] = {
     "buffer": 3,
     "listener": 3,
     "broadcaster": 3,
+    "fleet": 3,
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
     "monitor": 4,
@@ -53,6 +54,8 @@ LAYERS: dict[str, int] = {
     "robot": 4,
     "transports": 4,
     "compat": 4,
+    "remote": 4,
+    "remote_ros1": 4,
     # 5: the command line and examples
     "cli": 5,
     "demos": 5,

@@ -71,7 +71,7 @@ def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
         code, _, err = run("demo", "listener", "--bus", "zenoh?bogus=1")
         assert code == 2 and err.strip() == (
             "tfbus demo listener: error: unknown bus option 'bogus' (known: config, connect, "
-            "express, listen, name, namespace, port, prefix)"
+            "express, listen, mode, name, namespace, port, prefix)"
         )
     assert len(calls) == 2
 

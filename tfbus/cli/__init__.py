@@ -15,6 +15,8 @@
     tfbus demo listener / demo broadcaster    the tutorial's nodes as two processes (Zenoh)
     tfbus echo SOURCE TARGET --bus zenoh      ... echo, monitor, frames on a live bus
     tfbus view --bag PATH                     the frames live in a browser (rviz's TF display)
+    tfbus router                              Zenoh's router for fleets (tcp/127.0.0.1:7447)
+    tfbus serve-buffer --bus SPEC             answer lookups for thin clients (tfbus.remote)
     tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
@@ -54,6 +56,8 @@ COMMANDS: tuple[str, ...] = (
     "joint_states",
     "demo",
     "view",
+    "router",
+    "serve_buffer",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
-from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
 
 if TYPE_CHECKING:
     import anyio
@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from tfbus.buffer import Buffer
     from tfbus.bus import Bus, Subscription, Transport
     from tfbus.core import BufferCore
+    from tfbus.fleet import FleetBuffer
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfSummary
     from tfbus.transports.spec import BusSpec
@@ -229,6 +230,8 @@ class BusSource(TfSource):
         self.gone: dict[str, PeerInfo] = {}
         """Broadcasters whose liveliness went away (exited, killed or unreachable)."""
         self._problem: str | None = None
+        self.fleet: FleetBuffer | None = None
+        """The robots of a fleet bus (``namespace=*``) while attached."""
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -248,6 +251,12 @@ class BusSource(TfSource):
     def report_problem(self, message: str) -> None:
         """Record a one-line warning (printed at the end, exit status 1)."""
         self._problem = message
+
+    @property
+    def is_fleet(self) -> bool:
+        """Whether the bus is a Zenoh fleet bus (``namespace=*``): every robot's frames,
+        prefixed ``robot/`` (:class:`~tfbus.fleet.FleetBuffer`)."""
+        return self.bus_spec.scheme == "zenoh" and self.bus_spec.value("namespace") == "*"
 
     @property
     def has_liveliness(self) -> bool:
@@ -284,8 +293,18 @@ class BusSource(TfSource):
             async with Bus(transport=transport, queue_size=10_000) as bus:
                 self.transport = transport
                 self.bus = bus
-                self.listener = TransformListener(self.sink, bus, clock=self.clock)
-                async with self.listener, anyio.create_task_group() as tg:
+                if self.is_fleet:
+                    from tfbus.fleet import FleetBuffer
+                    from tfbus.monitor import MonitoredSink
+
+                    # every robot's frames, robot/-prefixed, accounted to its broadcaster
+                    sink = MonitoredSink(self._buffer, self._summary, self.clock)
+                    self.fleet = FleetBuffer(bus, merged=True, sink=sink)
+                    self.listener = None
+                    receiver: Any = self.fleet
+                else:
+                    receiver = self.listener = TransformListener(self.sink, bus, clock=self.clock)
+                async with receiver, anyio.create_task_group() as tg:
                     if self.bus_spec.scheme == "zenoh":
                         from tfbus.transports.zenoh import PEERS_TOPIC
 
@@ -337,7 +356,7 @@ class BusSource(TfSource):
         async for event in sub:
             ev: PeerEvent = event
             known = self.broadcasters_seen.get(ev.node_id)
-            if ev.alive and ev.topic in (TF_TOPIC, TF_STATIC_TOPIC):
+            if ev.alive and ev.topic.endswith(TF_TOPICS):
                 topics = (known.topics if known else frozenset()) | {ev.topic}
                 info = PeerInfo(ev.node_id, ev.name, topics)
                 self.broadcasters_seen[ev.node_id] = info

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,10 +27,12 @@ if TYPE_CHECKING:
     from rich.console import Console
     from rich.table import Table
 
-    from tfbus.monitor import TfSummary
+    from tfbus.fleet import FleetBuffer
+    from tfbus.monitor import AuthoritySummary, TfSummary
     from tfbus.transports.zenoh import PeerInfo
 
-__all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "tf2_chain"]
+__all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "robots_table",
+           "tf2_chain"]
 
 
 def tf2_chain(parents: dict[str, str], a: str, b: str) -> list[str] | None:
@@ -91,7 +93,7 @@ def print_monitor(
     On a live bus the rates are the recent ones (:data:`tfbus.monitor.RATE_WINDOW`
     seconds before now): the frames of a broadcaster that stopped fall to 0.000 instead
     of showing their old rate; a bag's are over the whole recording."""
-    from tfbus.monitor import AuthoritySummary, FrameSummary
+    from tfbus.monitor import FrameSummary
 
     now = live_src.clock.now() if live_src is not None else None
 
@@ -131,8 +133,24 @@ def print_monitor(
             f"{a.delay_max:.6f}" if a.delay_count else "-",
         )
     out.print(btable)
+    if live_src is not None and live_src.fleet is not None:
+        out.print(robots_table(live_src.fleet, s, rate))
     if live_src is not None and live_src.has_liveliness:
         out.print(liveliness_table(live_src))
+
+
+def robots_table(fleet: FleetBuffer, s: TfSummary,
+                 rate: Callable[[AuthoritySummary], float]) -> Table:
+    """The robots of a fleet bus (``--bus "zenoh:namespace=*"``): alive or gone (Zenoh
+    liveliness), their broadcasters, messages received and their rate (the sum of their
+    broadcasters' rates, Hz)."""
+    table = _table("Robots", ("robot", "status", "broadcasters"), ("messages", "rate Hz"))
+    for name, info in sorted(fleet.robots().items()):
+        hz = sum(rate(a) for a in s.authorities.values() if a.authority.startswith(name + "/"))
+        table.add_row(literal(name), "alive" if info.alive else "gone",
+                      ", ".join(literal(b) for b in sorted(info.broadcasters)),
+                      str(info.messages), f"{hz:.3f}")
+    return table
 
 
 def liveliness_table(src: BusSource) -> Table:
@@ -178,6 +196,11 @@ def command(
       tfbus monitor world turtle1 --bag turtle.bag
       tfbus monitor --bus zenoh
       tfbus monitor base_link base_laser --bus zenoh --duration 10 --interval 5
+      tfbus monitor --bus 'zenoh:mode=client&connect=tcp/127.0.0.1:7447&namespace=*'
+
+    With --bus 'zenoh:...&namespace=*' it listens to every robot (each robot's bus has
+    its own namespace=NAME): frames are listed as NAME/frame and a Robots table says
+    which robots are alive or gone, their broadcasters and rates.
     """
     if len(frames) not in (0, 2):
         fail("give no frames, or exactly two: SOURCE TARGET")

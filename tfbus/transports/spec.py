@@ -278,7 +278,8 @@ register_scheme(
         "zenoh",
         "tfbus.transports.zenoh.options",
         keys=frozenset(
-            {"connect", "listen", "config", "prefix", "namespace", "name", "port", "express"}
+            {"connect", "listen", "config", "prefix", "namespace", "name", "port", "express",
+             "mode"}
         ),
         default_key="connect",
         extra="zenoh",

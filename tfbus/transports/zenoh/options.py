@@ -9,7 +9,9 @@ Forms (the grammar is :mod:`tfbus.transports.spec`'s, shared by every transport)
     zenoh?config=/etc/tfbus/zenoh.json5&name=planner
 
 Keys: ``connect``, ``listen`` (endpoint lists), ``config`` (JSON5 file), ``prefix``,
-``namespace``, ``name``, ``port`` (rendezvous port), ``express`` (``1``/``true``).
+``namespace`` (``*``: every robot, a fleet listener), ``name``, ``port`` (rendezvous
+port), ``express`` (``1``/``true``), ``mode`` (``peer`` or ``client``: ``client`` goes
+through a Zenoh router, ``tfbus router``; with ``config`` the file's mode rules).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ class ZenohOptions:
     name: str | None = None
     port: int = DEFAULT_PORT
     express: bool = False
+    mode: str | None = None
 
     @classmethod
     def from_spec(cls, spec: BusSpec) -> ZenohOptions:
@@ -66,6 +69,7 @@ class ZenohOptions:
             name=spec.value("name"),
             port=spec.integer("port", DEFAULT_PORT, minimum=1, maximum=65535),
             express=spec.boolean("express"),
+            mode=_mode(spec.value("mode")),
         )
 
     def transport(self, **overrides: Any) -> ZenohTransport:
@@ -85,8 +89,19 @@ class ZenohOptions:
             "port": self.port,
             "express": self.express,
         }
+        if self.mode is not None and self.config is None:
+            kwargs["config"] = {"mode": self.mode}
         kwargs.update(overrides)
         return ZenohTransport(**kwargs)
+
+
+def _mode(value: str | None) -> str | None:
+    if value is not None and value not in _MODES:
+        raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {value!r}")
+    return value
+
+
+_MODES = ("peer", "client")
 
 
 def parse_bus_spec(spec: str) -> ZenohOptions:

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, NamedTuple
 
-from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
+from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
 from tfbus.transports.zenoh.keys import KeySpace
 
 __all__ = ["PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
@@ -23,6 +23,7 @@ PEERS_TOPIC: Final = "/tfbus/peers"
 """Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
 
 _TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
+_TF_SUFFIXES: Final = TF_TOPICS
 
 
 class PeerEvent(NamedTuple):
@@ -58,8 +59,9 @@ class PeerInfo:
 
     @property
     def is_broadcaster(self) -> bool:
-        """True if it has published ``/tf`` or ``/tf_static``."""
-        return bool(self.topics & _TF_TOPICS)
+        """True if it has published ``/tf`` or ``/tf_static`` (on a fleet bus,
+        ``namespace=*``: ``/robot7/tf`` or ``/robot7/tf_static``)."""
+        return any(t in _TF_TOPICS or t.endswith(_TF_SUFFIXES) for t in self.topics)
 
 
 class PeerTable:

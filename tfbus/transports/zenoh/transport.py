@@ -56,7 +56,8 @@ from tfbus.transports.zenoh.config import (
     zenoh_config,
 )
 from tfbus.transports.zenoh.counters import ZenohStatistics
-from tfbus.transports.zenoh.keys import DEFAULT_PREFIX, KeySpace
+from tfbus.transports.zenoh.fleet_keys import key_space
+from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
 
 if TYPE_CHECKING:
@@ -102,7 +103,8 @@ class ZenohTransport:
             paths to values (see :func:`~tfbus.transports.zenoh.zenoh_config`).
         prefix: first key-expression chunk(s) (default ``"tfbus"``).
         namespace: optional chunk(s) after the prefix (``"robot1"``): buses only see
-            buses with the same prefix and namespace.
+            buses with the same prefix and namespace; ``"*"`` is a fleet listener that
+            sees every robot's topics as ``/robot1/tf`` (:mod:`.fleet_keys`).
         name: this node's name as others see it (default ``"<program>-<pid>"``).
         topics: the remote topics to receive (default: all under the namespace).
         latched_topics: topics whose last message (``TFMessage``: last valid transform
@@ -137,7 +139,7 @@ class ZenohTransport:
         port: int = DEFAULT_PORT,
         express: bool = False,
     ) -> None:
-        self._keys = KeySpace(prefix, namespace)
+        self._keys = key_space(prefix, namespace)
         if max_pending < 1 or max_batch < 1:
             raise ValueError("max_pending and max_batch must be at least 1")
         self._name = name if name is not None else default_name()
@@ -184,6 +186,12 @@ class ZenohTransport:
     def node_id(self) -> str:
         """This node's Zenoh session id (hex) while running, else ``""``."""
         return self._node_id
+
+    @property
+    def session(self) -> zenoh.Session | None:
+        """The open Zenoh session while running (for :mod:`tfbus.remote`'s queryables),
+        else None."""
+        return self._session
 
     @property
     def running(self) -> bool:

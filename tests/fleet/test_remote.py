@@ -1,0 +1,248 @@
+"""tfbus.remote: BufferServer / BufferClient through a Zenoh router on 127.0.0.1.
+
+The router is Zenoh's own (a session in router mode, tfbus.transports.zenoh.router); the
+server and the client are Zenoh clients of it. Timeouts are on the server's clock: the
+server's buffer runs on a ManualClock, so a timeout happens when the test advances it.
+Every wait is bounded (anyio.fail_after).
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+
+import anyio
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+
+from tfbus.buffer import Buffer  # noqa: E402
+from tfbus.bus import Bus  # noqa: E402
+from tfbus.clock import ManualClock  # noqa: E402
+from tfbus.errors import (  # noqa: E402
+    ConnectivityException,
+    ExtrapolationException,
+    InvalidArgumentException,
+    LookupException,
+    TimeoutException,
+    TransformException,
+)
+from tfbus.messages import (  # noqa: E402
+    Header,
+    Point,
+    PointStamped,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
+from tfbus.remote import BufferClient, BufferServer  # noqa: E402
+from tfbus.time import Time  # noqa: E402
+from tfbus.transports.wire import WireCodec  # noqa: E402
+from tfbus.transports.zenoh import ZenohTransport  # noqa: E402
+from tfbus.transports.zenoh.router import ZenohRouter  # noqa: E402
+
+pytestmark = pytest.mark.anyio
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def ts(parent: str, child: str, sec: float, x: float) -> TransformStamped:
+    return TransformStamped(
+        Header(Time(sec), parent), child, Transform(Vector3(x, 0.0, 0.0), Quaternion())
+    )
+
+
+def client_bus(endpoint: str, **kw: object) -> Bus:
+    return Bus(transport=ZenohTransport(connect=endpoint, config={"mode": "client"}, **kw))
+
+
+async def wait_until(predicate: Callable[[], bool], timeout: float = 5.0) -> None:
+    with anyio.fail_after(timeout):
+        while not predicate():
+            await anyio.sleep(0.01)
+
+
+@dataclass
+class Setup:
+    buffer: Buffer
+    clock: ManualClock
+    server: BufferServer
+    client: BufferClient
+    client_bus: Bus
+
+
+@asynccontextmanager
+async def served() -> AsyncIterator[Setup]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    clock = ManualClock(Time(100))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    buffer.set_transform(ts("world", "base", 10, 1.0), "test")
+    buffer.set_transform(ts("world", "base", 12, 3.0), "test")
+    buffer.set_transform_static(ts("base", "laser", 0, 0.5), "test")
+    async with (
+        ZenohRouter(listen=endpoint),
+        client_bus(endpoint, name="server") as sbus,
+        client_bus(endpoint, name="thin", topics=()) as cbus,
+        BufferServer(buffer, sbus) as server,
+    ):
+        client = BufferClient(cbus, timeout_padding=5.0)
+        # the queryable reaches the client through the router: wait for one answer
+        with anyio.fail_after(10):
+            while not await client.can_transform("world", "base", Time(0), 0.0):
+                await anyio.sleep(0.05)
+        yield Setup(buffer, clock, server, client, cbus)
+
+
+async def test_lookups_answer_as_the_server_buffer() -> None:
+    async with served() as s:
+        t = await s.client.lookup_transform("world", "laser", Time(11), timeout=1.0)
+        assert t.header.frame_id == "world" and t.child_frame_id == "laser"
+        assert t.header.stamp == Time(11)
+        assert t.transform.translation.x == pytest.approx(2.5)  # 2.0 interpolated + 0.5
+        local = s.buffer.lookup_transform("world", "laser", Time(11))
+        assert t == local
+        full = await s.client.lookup_transform_full(
+            "laser", Time(12), "laser", Time(10), "world", timeout=0.0
+        )
+        assert full.transform.translation.x == pytest.approx(-2.0)  # base moved +2 m
+        assert await s.client.can_transform("world", "laser", Time(0), 0.0) is True
+        assert await s.client.can_transform("world", "nowhere", Time(0), 0.0) is False
+        p = await s.client.transform(
+            PointStamped(Header(Time(12), "laser"), Point(1.0, 2.0, 3.0)), "world", 0.0
+        )
+        assert p.header.frame_id == "world" and p.point == Point(4.5, 2.0, 3.0)
+        assert s.server.statistics().answered >= 5
+
+
+async def test_errors_come_back_as_the_same_tf2_classes_and_messages() -> None:
+    async with served() as s:
+        s.buffer.set_transform_static(ts("island", "palm", 0, 1.0), "test")
+        cases = [
+            (("world", "ghost", Time(0)), LookupException),
+            (("world", "palm", Time(0)), ConnectivityException),
+            (("world", "base", Time(50)), ExtrapolationException),
+            (("", "base", Time(0)), InvalidArgumentException),
+        ]
+        for args, cls in cases:
+            with pytest.raises(cls) as local:
+                s.buffer.lookup_transform(*args)
+            with pytest.raises(cls) as remote:
+                await s.client.lookup_transform(*args, timeout=0.0)
+            assert type(remote.value) is cls
+            assert str(remote.value) == str(local.value)
+
+
+async def test_timeouts_run_on_the_servers_clock() -> None:
+    async with served() as s:
+        outcome: list[BaseException] = []
+
+        async def ask() -> None:
+            try:
+                await s.client.lookup_transform("world", "ghost", Time(0), timeout=3.0)
+            except LookupException as exc:
+                outcome.append(exc)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(ask)
+            await wait_until(lambda: s.buffer.pending_waits == 1)
+            await s.clock.advance(2.9)
+            await anyio.sleep(0.05)
+            assert not outcome and s.buffer.pending_waits == 1
+            await s.clock.advance(0.2)
+        # tf2_ros buffer_server: the expired goal is answered with lookupTransform's error
+        assert len(outcome) == 1 and type(outcome[0]) is LookupException
+        assert str(outcome[0]) == (
+            '"ghost" passed to lookupTransform argument source_frame does not exist. '
+        )
+
+
+async def test_a_waiting_lookup_resumes_when_the_data_arrives() -> None:
+    async with served() as s:
+        result: list[TransformStamped] = []
+
+        async def ask() -> None:
+            result.append(await s.client.lookup_transform("world", "arm", Time(0), timeout=60))
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(ask)
+            await wait_until(lambda: s.buffer.pending_waits == 1)
+            s.buffer.set_transform(ts("base", "arm", 12, 0.25), "test")
+        assert result[0].transform.translation.x == pytest.approx(3.25)
+
+
+async def test_bad_requests_are_counted_and_named() -> None:
+    async with served() as s:
+        session = s.client_bus.transport.session  # type: ignore[union-attr]
+        key = s.server.key
+        # not a tfbus payload: counted, left unanswered
+        replies = await anyio.to_thread.run_sync(
+            lambda: list(session.get(key, payload=b"\x00garbage", timeout=3.0))
+        )
+        assert [r for r in replies if r.ok is not None] == []
+        await wait_until(lambda: s.server.statistics().malformed == 1)
+        # a tfbus map with a bad field: an InvalidArgumentException naming it
+        codec = WireCodec()
+        bad = codec.encode({"op": "lookup", "target": "world", "source": 7, "time": 0,
+                            "timeout": 0.0}, sender=1, seq=1)
+        replies = await anyio.to_thread.run_sync(
+            lambda: list(session.get(key, payload=bad, timeout=3.0))
+        )
+        answer = codec.decode(replies[0].ok.payload.to_bytes()).message
+        assert answer == {"error": "InvalidArgumentException",
+                          "message": "request field 'source' has an invalid value 7"}
+        # the server goes on answering
+        t = await s.client.lookup_transform("world", "base", Time(0), timeout=0.0)
+        assert t.transform.translation.x == pytest.approx(3.0)
+
+
+async def test_client_needs_a_zenoh_bus_and_a_server() -> None:
+    with pytest.raises(TypeError, match="needs a bus over Zenoh"):
+        BufferClient(Bus())
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    async with ZenohRouter(listen=endpoint), client_bus(endpoint, topics=()) as bus:
+        client = BufferClient(bus, timeout_padding=0.2)
+        with pytest.raises(TimeoutException, match="no answer from buffer server"):
+            await client.lookup_transform("world", "base", Time(0), timeout=0.0)
+
+
+async def test_requests_over_max_pending_are_refused_and_counted() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    clock = ManualClock(Time(100))
+    buffer = Buffer(clock=clock)
+    buffer.set_transform_static(ts("world", "base", 0, 1.0), "test")
+    async with (
+        ZenohRouter(listen=endpoint),
+        client_bus(endpoint, name="server") as sbus,
+        client_bus(endpoint, name="thin", topics=()) as cbus,
+        BufferServer(buffer, sbus, max_pending=1) as server,
+    ):
+        client = BufferClient(cbus, timeout_padding=5.0)
+        with anyio.fail_after(10):
+            while not await client.can_transform("world", "base", Time(0), 0.0):
+                await anyio.sleep(0.05)
+        outcome: list[BaseException] = []
+
+        async def ask() -> None:
+            try:
+                await client.lookup_transform("world", "ghost", Time(0), timeout=5.0)
+            except TransformException as exc:
+                outcome.append(exc)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(ask)
+            await wait_until(lambda: buffer.pending_waits == 1)
+            with pytest.raises(TransformException, match=r"^buffer server busy or stopping$"):
+                await client.lookup_transform("world", "base", Time(0), timeout=0.0)
+            assert server.statistics().busy == 1
+            await clock.advance(5.0)
+        assert type(outcome[0]) is LookupException
+        # the slot is free again
+        t = await client.lookup_transform("world", "base", Time(0), timeout=0.0)
+        assert t.transform.translation.x == 1.0

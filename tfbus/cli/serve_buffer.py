@@ -1,0 +1,111 @@
+"""``tfbus serve-buffer``: tf2_ros's buffer_server on a bus (layer 5).
+
+Listens to ``/tf`` and ``/tf_static`` on ``--bus`` into one
+:class:`~tfbus.buffer.Buffer` and answers :class:`~tfbus.remote.BufferClient` lookups
+from it (:class:`~tfbus.remote.BufferServer`) on Zenoh, or tf2_ros's LookupTransform
+action (:class:`~tfbus.remote_ros1.Ros1BufferServer`) on ROS 1, until Ctrl-C or
+SIGTERM (or ``--duration``); then one summary line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Any
+
+import click
+
+from tfbus.cli._common import fail, literal
+from tfbus.cli._sources import (
+    DEFAULT_BUS,
+    cancel_on_signal,
+    open_spec_transport,
+    parse_spec,
+    run_live,
+)
+
+__all__ = ["command"]
+
+
+@click.command("serve-buffer")
+@click.option("--bus", "bus", metavar="SPEC", default=DEFAULT_BUS, show_default=True,
+              help="The bus to listen and answer on: Zenoh (e.g. "
+                   "'zenoh:mode=client&connect=tcp/127.0.0.1:7447&namespace=robot7') or ROS 1 "
+                   "('ros1', 'ros1:master=http://127.0.0.1:11311': the LookupTransform "
+                   "action of tf2_ros, as /NAME).")
+@click.option("--name", "name", default="tf2_buffer_server", show_default=True,
+              help="The server's name (clients use the same: BufferClient(bus, name=...)).")
+@click.option("--cache-time", type=click.FloatRange(min=0, min_open=True), default=10.0,
+              show_default=True, help="Seconds of history the buffer keeps.")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Stop after this many seconds (default: until Ctrl-C or SIGTERM).")
+def command(bus: str, name: str, cache_time: float, duration: float | None) -> int | None:
+    """Answer transform lookups for thin clients (tf2_ros buffer_server): keep one
+    buffer of /tf and /tf_static from --bus and serve lookup_transform,
+    lookup_transform_full and can_transform to tfbus.remote.BufferClient (Zenoh), or
+    tf2_ros's LookupTransform action as /tf2_buffer_server to tf2_ros.BufferClient
+    (ROS 1).
+
+    \b
+    Examples:
+      tfbus serve-buffer
+      tfbus serve-buffer --bus 'zenoh:mode=client&connect=tcp/127.0.0.1:7447'
+      tfbus serve-buffer --bus ros1
+    """
+    import anyio
+
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Bus
+    from tfbus.listener import TransformListener
+    from tfbus.remote import BufferServer
+
+    ros1 = bus.split(":", 1)[0].split("?", 1)[0] == "ros1"
+    # on ROS 1 the action node takes tf2_ros's name; the /tf listener is another node
+    spec = parse_spec(bus, name="tfbus_buffer_server_tf" if ros1 else "tf2_buffer_server")
+    if spec.scheme not in ("zenoh", "ros1"):
+        fail(f"--bus {bus!r}: serve-buffer answers over Zenoh or ROS 1 only "
+             "(a 'zenoh' or 'ros1' bus)")
+    if spec.value("namespace") == "*":
+        fail(f"--bus {bus!r}: serve one robot's namespace, not namespace=*")
+    if not name:
+        fail("--name must not be empty")
+    served: list[BufferServer] = []
+    served_ros1: list[Any] = []
+
+    async def main() -> None:
+        buffer = Buffer(cache_time=cache_time)
+        transport = open_spec_transport(spec, name="tfbus_buffer_server_tf" if ros1
+                                        else "tf2_buffer_server")
+        async with contextlib.AsyncExitStack() as stack:
+            b = await stack.enter_async_context(Bus(transport=transport))
+            await stack.enter_async_context(TransformListener(buffer, b))
+            if ros1:
+                from tfbus.remote_ros1 import Ros1BufferServer
+
+                action = "/" + name.lstrip("/")
+                server_ros1 = Ros1BufferServer(buffer, getattr(transport, "master_uri", ""),
+                                               server=action, name=action)
+                await stack.enter_async_context(server_ros1)
+                served_ros1.append(server_ros1)
+                where = f"the ROS 1 action {action} (tf2_msgs/LookupTransform)"
+            else:
+                server = await stack.enter_async_context(BufferServer(buffer, b, name=name))
+                served.append(server)
+                where = server.key
+            tg = await stack.enter_async_context(anyio.create_task_group())
+            with anyio.CancelScope() as scope:
+                if duration is not None:
+                    scope.deadline = anyio.current_time() + duration
+                await tg.start(cancel_on_signal, scope)
+                click.echo(f"[ INFO] buffer server on {literal(where)}", err=True)
+                await anyio.sleep_forever()
+            tg.cancel_scope.cancel()
+
+    status = run_live(main)
+    if served:
+        s = served[0].statistics()
+        click.echo(f"[ INFO] summary: {s.requests} requests, {s.answered} answered, "
+                   f"{s.errors} errors, {s.malformed} malformed")
+    if served_ros1:
+        r = served_ros1[0]
+        click.echo(f"[ INFO] summary: {r.answered} goals answered, {r.malformed} malformed")
+    return status
