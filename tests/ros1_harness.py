@@ -2,7 +2,7 @@
 
 Everything runs on 127.0.0.1: each master gets a free port, ``ROS_IP=127.0.0.1`` and a
 private ``ROS_HOME``. The tutorial's nodes are this repository's C++ sources in
-``tests/ros1_peers/`` (built by its ``build.sh``). Processes are started here, read by
+``tests/peers/ros1/`` (built by its ``build.sh``). Processes are started here, read by
 threads line by line, waited on with a bound, and ended by their PID (SIGINT, then SIGKILL
 after a bound).
 """
@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PEERS = ROOT / "tests" / "ros1_peers"
+PEERS = ROOT / "tests" / "peers" / "ros1"
 INSTALL = ROOT / "scripts" / "install_ros1.sh"
 ROS_BIN = Path("/usr/bin")
 
@@ -204,7 +204,7 @@ def ros1_fixture() -> None:
 
 @pytest.fixture(scope="session", name="tutorial_nodes")
 def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/ros1_peers/``),
+    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/peers/ros1/``),
     built once. ROS 1 is there (the ``ros1`` fixture), so a failed build is a failure."""
     if shutil.which("g++") is None:
         pytest.skip("g++ not found: cannot build the tutorial's C++ nodes")

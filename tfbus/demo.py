@@ -69,7 +69,6 @@ __all__ = [
     "format_error",
     "format_info",
     "listener_node",
-    "open_bus",
     "run_broadcaster",
     "run_demo",
     "run_listener",
@@ -321,18 +320,3 @@ async def _cancel_on_signal(scope: anyio.CancelScope) -> None:
 async def _borrowed(bus: Bus) -> AsyncIterator[Bus]:
     """An already open bus, used as ``async with`` without closing it."""
     yield bus
-
-
-def open_bus(spec: str = "zenoh", *, name: str | None = None) -> Bus:
-    """A new (not yet opened) bus from a ``--bus`` value (:mod:`tfbus.transports.spec`:
-    ``zenoh``, ``ros2``, ``ros1``, ``memory``, ...).
-
-    ``name`` is the node name used unless ``spec`` gives one (``zenoh?name=...``).
-
-    Raises:
-        TransportError: if the scheme's extra is not installed (the message names it).
-        ValueError: if ``spec`` is not a valid bus spec.
-    """
-    from tfbus.transports.spec import open_bus as open_spec_bus
-
-    return open_spec_bus(spec, default_name=name)

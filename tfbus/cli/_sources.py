@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import click
 
 from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
+from tfbus.transports._base import PeerAware
+from tfbus.transports.spec import BUS_HELP, DEFAULT_BUS  # every command's bus without --bus
 
 if TYPE_CHECKING:
     import anyio
@@ -28,16 +30,11 @@ if TYPE_CHECKING:
     from tfbus.core import BufferCore
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfStatistics
+    from tfbus.transports._base import PeerEvent, PeerInfo
     from tfbus.transports.spec import BusSpec
-    from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
 __all__ = ["DEFAULT_BUS", "UNKNOWN_PUBLISHER", "BagSource", "BusSource", "TfSource",
            "is_bus_error", "live", "run_live", "source", "source_options"]
-
-DEFAULT_BUS = "zenoh"
-"""The bus every command uses without ``--bus``: publishers publish on it, and readers
-(echo, monitor, frames) listen to it unless given ``--bag`` (as tf2_echo, tf_monitor and
-view_frames listen to the running ROS graph)."""
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -226,6 +223,7 @@ class BusSource(TfSource):
         self.gone: dict[str, PeerInfo] = {}
         """Broadcasters whose liveliness went away (exited, killed or unreachable)."""
         self._problem: str | None = None
+        self._peer_aware = False
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -248,14 +246,17 @@ class BusSource(TfSource):
 
     @property
     def has_liveliness(self) -> bool:
-        """Whether the transport tells which nodes broadcast (Zenoh's liveliness)."""
-        return self.bus_spec.scheme == "zenoh"
+        """Whether the transport tells which nodes broadcast (it is
+        :class:`~tfbus.transports._base.PeerAware`: Zenoh's liveliness); known once
+        attached, kept after."""
+        return self._peer_aware
 
     def alive_broadcasters(self) -> dict[str, PeerInfo]:
-        """The live broadcasters now (a Zenoh transport's ``broadcasters()``); empty when
-        detached or on a transport without liveliness."""
-        broadcasters = getattr(self.transport, "broadcasters", None)
-        return dict(broadcasters()) if callable(broadcasters) else {}
+        """The live broadcasters now (a :class:`~tfbus.transports._base.PeerAware`
+        transport's ``broadcasters()``); empty when detached or on a transport without
+        liveliness."""
+        transport = self.transport
+        return dict(transport.broadcasters()) if isinstance(transport, PeerAware) else {}
 
     @contextlib.asynccontextmanager
     async def attach(
@@ -277,15 +278,15 @@ class BusSource(TfSource):
         from tfbus.listener import TransformListener
 
         transport = open_spec_transport(self.bus_spec, name=self.name)
+        peer_aware = transport if isinstance(transport, PeerAware) else None
+        self._peer_aware = peer_aware is not None
         with _literal_logging():
             async with Bus(transport=transport, queue_size=10_000) as bus:
                 self.transport = transport
                 self.listener = TransformListener(self.sink, bus, clock=self.clock)
                 async with self.listener, anyio.create_task_group() as tg:
-                    if self.bus_spec.scheme == "zenoh":
-                        from tfbus.transports.zenoh import PEERS_TOPIC
-
-                        peers = bus.subscribe(PEERS_TOPIC, queue_size=1000)
+                    if peer_aware is not None:
+                        peers = bus.subscribe(peer_aware.peers_topic, queue_size=1000)
                         tg.start_soon(self._watch, peers, on_peer)
                     try:
                         yield self
@@ -327,7 +328,7 @@ class BusSource(TfSource):
     async def _watch(
         self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
     ) -> None:
-        from tfbus.transports.zenoh import PeerInfo
+        from tfbus.transports._base import PeerInfo
 
         async for event in sub:
             ev: PeerEvent = event
@@ -472,11 +473,6 @@ async def live(
         if finish is not None:
             finish()
         tg.cancel_scope.cancel()
-
-
-BUS_HELP = (f"Bus to publish on (default {DEFAULT_BUS!r}: this machine, no configuration), "
-            "e.g. 'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
-            "'ros2:domain=7', 'ros1', 'ros1:http://127.0.0.1:11311'.")
 
 
 def publish_options(f: F) -> F:

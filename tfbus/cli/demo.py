@@ -12,14 +12,12 @@ import click
 
 from tfbus.cli._common import error, fail, literal
 from tfbus.cli._sources import cancel_on_signal, check_bus_spec, is_bus_error, run_live
+from tfbus.transports.spec import BUS_HELP
 
 __all__ = ["command", "node_label"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-_BUS_HELP = ("Bus to run on (default 'zenoh': this machine, no configuration), e.g. "
-             "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', "
-             "'ros2' (ROS 2 over DDS), 'ros1' (a ROS 1 master: ROS_MASTER_URI).")
 
 
 def _demo_options(*, rate: bool, listen_rate: bool) -> Callable[[F], F]:
@@ -93,11 +91,12 @@ def node_label(transport: object, default: str) -> tuple[str, str]:
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,
              listen_rate: float, backend: str) -> int:
     """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh."""
-    from tfbus.demo import BROADCASTER_NAME, LISTENER_NAME, open_bus, run_broadcaster, run_listener
+    from tfbus.demo import BROADCASTER_NAME, LISTENER_NAME, run_broadcaster, run_listener
+    from tfbus.transports import spec as bus_spec
 
     name = BROADCASTER_NAME if role == "broadcaster" else LISTENER_NAME
     try:
-        bus = open_bus(spec, name=name)
+        bus = bus_spec.open_bus(spec, default_name=name)
     except ValueError as err:
         fail(str(err))
     except Exception as err:
@@ -151,7 +150,7 @@ def command(
 
 
 @command.command("broadcaster")
-@click.option("--bus", metavar="SPEC", default=None, help=_BUS_HELP)
+@click.option("--bus", metavar="SPEC", default=None, help=BUS_HELP)
 @_demo_options(rate=True, listen_rate=False)
 @click.pass_context
 def broadcaster(
@@ -175,7 +174,7 @@ def broadcaster(
 
 
 @command.command("listener")
-@click.option("--bus", metavar="SPEC", default=None, help=_BUS_HELP)
+@click.option("--bus", metavar="SPEC", default=None, help=BUS_HELP)
 @_demo_options(rate=False, listen_rate=True)
 @click.pass_context
 def listener(

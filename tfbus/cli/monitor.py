@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from rich.table import Table
 
     from tfbus.monitor import TfStatistics
-    from tfbus.transports.zenoh import PeerInfo
+    from tfbus.transports._base import PeerInfo
 
 __all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "tf2_chain"]
 

@@ -47,7 +47,7 @@ from tfbus import (
     TransformStamped,
     Vector3,
 )
-from tfbus.bag.decode import decode_ros1_struct
+from tfbus.codecs.ros1 import decode_ros1_struct
 from tfbus.demo import run_broadcaster, run_listener
 from tfbus.transports.ros1 import (
     TF_MD5SUM,
@@ -55,9 +55,9 @@ from tfbus.transports.ros1 import (
     TFCodec,
     decode_header,
     encode_header,
-    ros1_transport_from_options,
 )
 from tfbus.transports.ros1.tcpros import FrameSplitter
+from tfbus.transports.spec import open_transport
 
 pytestmark = pytest.mark.anyio
 
@@ -337,10 +337,13 @@ def test_options_and_defaults(monkeypatch: pytest.MonkeyPatch) -> None:
     assert t.node_name.startswith("/tfbus_")
     monkeypatch.setenv("ROS_MASTER_URI", "http://127.0.0.1:11999")
     assert Ros1Transport().master_uri == "http://127.0.0.1:11999"
-    t = ros1_transport_from_options({"master": "http://127.0.0.1:1234", "name": "x"})
+    t = open_transport("ros1:master=http://127.0.0.1:1234&name=x")
+    assert isinstance(t, Ros1Transport)
     assert (t.master_uri, t.node_name) == ("http://127.0.0.1:1234", "/x")
-    with pytest.raises(ValueError, match="unknown ros1 option"):
-        ros1_transport_from_options({"colour": "red"})
+    with pytest.raises(ValueError, match="unknown bus option 'colour'"):
+        open_transport("ros1:colour=red")
+    with pytest.raises(ValueError, match="remote must be 0 or 1"):
+        open_transport("ros1:remote=yes")
     with pytest.raises(ValueError, match="master_uri must be"):
         Ros1Transport(master_uri="127.0.0.1:11311")
     with pytest.raises(ValueError, match="node_name"):

@@ -31,6 +31,7 @@ msgspec = pytest.importorskip("msgspec")
 
 from tfbus.buffer import Buffer  # noqa: E402
 from tfbus.bus import Bus  # noqa: E402
+from tfbus.codecs import native as wire  # noqa: E402
 from tfbus.errors import TransportError  # noqa: E402
 from tfbus.listener import TransformListener  # noqa: E402
 from tfbus.messages import (  # noqa: E402
@@ -44,14 +45,13 @@ from tfbus.messages import (  # noqa: E402
     Vector3,
 )
 from tfbus.time import Time  # noqa: E402
-from tfbus.transports import wire  # noqa: E402
+from tfbus.transports.spec import open_bus  # noqa: E402
+from tfbus.transports.spec import parse_bus_spec as parse_any_spec  # noqa: E402
 from tfbus.transports.zenoh import (  # noqa: E402
     PEERS_TOPIC,
     PeerEvent,
     ZenohOptions,
     ZenohTransport,
-    parse_bus_spec,
-    zenoh_bus_from_options,
     zenoh_config,
 )
 from tfbus.transports.zenoh.keys import key_topic as _key_topic  # noqa: E402
@@ -59,8 +59,8 @@ from tfbus.transports.zenoh.keys import topic_key as _topic_key  # noqa: E402
 
 HEAD = bytes([wire.MAGIC, wire.WIRE_VERSION])
 BLOCK = zenoh.CongestionControl.BLOCK
-PEERS_DIR = Path(__file__).parent / "zenoh_peers"
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).resolve().parents[2]
+PEERS_DIR = ROOT / "tests" / "peers" / "zenoh"
 
 
 def free_port() -> int:
@@ -141,6 +141,11 @@ def test_topic_keys_round_trip() -> None:
     assert _topic_key("/tf") == "tf"
 
 
+def parse_bus_spec(text: str) -> ZenohOptions:
+    """A ``zenoh`` spec's options: the one parser (spec.parse_bus_spec), then ZenohOptions."""
+    return ZenohOptions.from_spec(parse_any_spec(text))
+
+
 def test_parse_bus_spec() -> None:
     assert parse_bus_spec("zenoh") == ZenohOptions()
     opts = parse_bus_spec(
@@ -156,7 +161,7 @@ def test_parse_bus_spec() -> None:
             parse_bus_spec(bad)
     with pytest.raises(ValueError):
         ZenohTransport(prefix="tf*bus")
-    bus = zenoh_bus_from_options("zenoh?namespace=r2&name=x")
+    bus = open_bus("zenoh?namespace=r2&name=x")
     assert isinstance(bus.transport, ZenohTransport)
     assert bus.transport.key_prefix == "tfbus/r2"
 
@@ -602,7 +607,7 @@ def test_fuzz_wire_decoder_raises_only_wire_errors(data: bytes) -> None:
 @given(_msgpack_values)
 def test_depth_walk_agrees_with_msgpack(value: Any) -> None:
     """The pre-decode walk (issue 11, item 1) ends exactly where the value ends."""
-    from tfbus.transports._msgpack import check_depth
+    from tfbus.codecs.native import check_depth
 
     data = _packb(value)
     assert check_depth(data + b"\x01", 0, 1000) == len(data)
