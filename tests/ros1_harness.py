@@ -4,7 +4,8 @@ Everything runs on 127.0.0.1: each master gets a free port, ``ROS_IP=127.0.0.1``
 private ``ROS_HOME``. The tutorial's nodes are this repository's C++ sources in
 ``tests/peers/ros1/`` (built by its ``build.sh``). Processes are started here, read by
 threads line by line, waited on with a bound, and ended by their PID (SIGINT, then SIGKILL
-after a bound).
+after a bound). Also the benchmarks' ROS 1 harness (``benchmarks/bench_ros1.py``,
+``bench_check.py``, ``soak_ros1.py`` put ``tests/`` on ``sys.path``): one home.
 """
 
 from __future__ import annotations
@@ -33,15 +34,23 @@ ROS_BIN = Path("/usr/bin")
 
 
 def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
 
-def ros1_missing() -> str | None:
-    """Why ROS 1 cannot be used here (after trying to install it), or None."""
+def ros1_missing(packages: tuple[str, ...] = ("tf",)) -> str | None:
+    """Why ROS 1 cannot be used here (after trying to install it with
+    ``scripts/install_ros1.sh``), or None: roscore, rosrun and the pkg-config
+    ``packages`` (the tests' C++ nodes need ``tf``; the benchmarks' ``roscpp`` and
+    ``tf2_msgs``)."""
     need = [ROS_BIN / "roscore", ROS_BIN / "rosrun"]
-    if all(p.exists() for p in need) and _has_pkg("tf"):
+
+    def ready() -> bool:
+        return all(p.exists() for p in need) and all(_has_pkg(p) for p in packages)
+
+    if ready():
         return None
     if not INSTALL.exists():
         return f"{INSTALL} missing"
@@ -51,7 +60,7 @@ def ros1_missing() -> str | None:
         ).stdout.strip()
     except subprocess.TimeoutExpired:
         return "installing ROS 1 timed out"
-    if all(p.exists() for p in need) and _has_pkg("tf"):
+    if ready():
         return None
     return out or "ROS 1 not installed"
 

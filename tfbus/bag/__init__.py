@@ -1,4 +1,4 @@
-"""Read, replay and record ``/tf`` and ``/tf_static`` in ROS bags (layer 4).
+"""Read, replay and record ``/tf`` and ``/tf_static`` in ROS bags.
 
 Formats:
 
