@@ -20,7 +20,7 @@ import click
 
 from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
 from tfbus.transports._base import PeerAware
-from tfbus.transports.spec import BUS_HELP, DEFAULT_BUS  # every command's bus without --bus
+from tfbus.transports.spec import BUS_HELP, DEFAULT_BUS, schemes  # DEFAULT_BUS: no --bus
 
 if TYPE_CHECKING:
     import anyio
@@ -223,7 +223,8 @@ class BusSource(TfSource):
         self.gone: dict[str, PeerInfo] = {}
         """Broadcasters whose liveliness went away (exited, killed or unreachable)."""
         self._problem: str | None = None
-        self._peer_aware = False
+        scheme = schemes().get(self.bus_spec.scheme)
+        self._peer_aware = scheme is not None and scheme.peer_aware
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -247,8 +248,8 @@ class BusSource(TfSource):
     @property
     def has_liveliness(self) -> bool:
         """Whether the transport tells which nodes broadcast (it is
-        :class:`~tfbus.transports._base.PeerAware`: Zenoh's liveliness); known once
-        attached, kept after."""
+        :class:`~tfbus.transports._base.PeerAware`: Zenoh's liveliness): the scheme
+        table's word until attached, then the transport's own."""
         return self._peer_aware
 
     def alive_broadcasters(self) -> dict[str, PeerInfo]:

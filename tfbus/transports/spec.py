@@ -147,6 +147,8 @@ class TransportScheme:
         factory: the name of ``transport_from_spec(spec, **overrides) -> Transport``
             in ``module``.
         summary: one line for help texts.
+        peer_aware: its transports are :class:`~tfbus.transports._base.PeerAware` (they
+            know their peers: Zenoh's liveliness), so a command can say so before opening.
     """
 
     scheme: str
@@ -157,6 +159,7 @@ class TransportScheme:
     requires: tuple[str, ...] = ()
     factory: str = "transport_from_spec"
     summary: str = ""
+    peer_aware: bool = False
 
 
 _SCHEMES: dict[str, TransportScheme] = {}
@@ -293,6 +296,7 @@ register_scheme(
         extra="zenoh",
         requires=("zenoh", "msgspec"),
         summary="Zenoh: this machine by default, or connect/listen endpoints",
+        peer_aware=True,
     )
 )
 register_scheme(
