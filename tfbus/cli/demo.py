@@ -80,12 +80,10 @@ def node_label(transport: object, default: str) -> tuple[str, str]:
     the name is never empty (the transport's ``name`` or ROS 1 ``node_name``, else
     ``default``); the id is Zenoh's node id, the ROS 1 caller id or the ROS 2 domain,
     ``""`` when the transport has none."""
-    name = str(getattr(transport, "name", "") or getattr(transport, "node_name", "")
-               or default)
-    ident = getattr(transport, "node_id", "") or getattr(transport, "node_name", "")
-    if not ident and getattr(transport, "domain_id", None) is not None:
-        ident = f"ROS 2 domain {transport.domain_id}"  # type: ignore[attr-defined]
-    return name, str(ident)
+    from tfbus.transports._base import NodeLabelled
+
+    name, ident = transport.node_label() if isinstance(transport, NodeLabelled) else ("", "")
+    return name or default, ident
 
 
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,

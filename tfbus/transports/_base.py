@@ -29,6 +29,7 @@ import anyio
 __all__ = [
     "PEERS_TOPIC",
     "BusLike",
+    "NodeLabelled",
     "PeerAware",
     "PeerEvent",
     "PeerInfo",
@@ -88,6 +89,15 @@ class PeerInfo:
     def is_broadcaster(self) -> bool:
         """True if it has published ``/tf`` or ``/tf_static``."""
         return bool(self.topics & _TF_TOPICS)
+
+
+@runtime_checkable
+class NodeLabelled(Protocol):
+    """A transport that makes a named node (Zenoh, ROS 1, ROS 2; not ``memory``)."""
+
+    def node_label(self) -> tuple[str, str]:
+        """(the node's name or ``""``, its id on the network or ``""``), for log lines."""
+        ...
 
 
 @runtime_checkable

@@ -268,6 +268,11 @@ class Ros1Transport:
 
     # -- public ------------------------------------------------------------------------
 
+    def node_label(self) -> tuple[str, str]:
+        """(the caller id, the caller id): a ROS 1 node is known by its name
+        (:class:`~tfbus.transports._base.NodeLabelled`)."""
+        return self.node_name, self.node_name
+
     @property
     def node_name(self) -> str:
         """This node's caller id, e.g. ``/tfbus_1234_a1b2c3``."""

@@ -68,7 +68,7 @@ import contextlib
 import os
 import threading
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -288,6 +288,11 @@ class Ros2Transport:
 
     # -- public information -----------------------------------------------------------------
 
+    def node_label(self) -> tuple[str, str]:
+        """(no name: DDS has none for tfbus, ``"ROS 2 domain N"``)
+        (:class:`~tfbus.transports._base.NodeLabelled`)."""
+        return "", f"ROS 2 domain {self._domain_id}"
+
     @property
     def domain_id(self) -> int:
         """The DDS domain id (ROS_DOMAIN_ID)."""
@@ -324,8 +329,7 @@ class Ros2Transport:
 
     def statistics(self) -> Ros2Statistics:
         """A copy of the counters (see :class:`Ros2Statistics`)."""
-        s = self._stats
-        return Ros2Statistics(**{f.name: getattr(s, f.name) for f in fields(Ros2Statistics)})
+        return replace(self._stats)
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"

@@ -29,7 +29,7 @@ import logging
 import time
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 import anyio
@@ -169,6 +169,11 @@ class ZenohTransport:
         """The key-expression base: ``prefix`` or ``prefix/namespace``."""
         return self._keys.base
 
+    def node_label(self) -> tuple[str, str]:
+        """(this node's name, its Zenoh session id; ``""`` while not running)
+        (:class:`~tfbus.transports._base.NodeLabelled`)."""
+        return self._name, self._node_id
+
     @property
     def name(self) -> str:
         """This node's name."""
@@ -230,8 +235,7 @@ class ZenohTransport:
 
     def statistics(self) -> ZenohStatistics:
         """A copy of the counters (see :class:`ZenohStatistics`)."""
-        s = self._stats
-        return ZenohStatistics(**{f.name: getattr(s, f.name) for f in fields(s)})
+        return replace(self._stats)
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"
