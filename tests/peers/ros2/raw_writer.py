@@ -21,8 +21,8 @@ from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 
-from tfbus.transports.ros2 import TF_WRITER_QOS, cyclone_config
-from tfbus.transports.ros2.dds import TFMessage_
+from tfbus.transports.ros2.dds import TFMessage_, cyclone_config
+from tfbus.transports.ros2.transport import TF_WRITER_QOS
 
 
 def main() -> None:
