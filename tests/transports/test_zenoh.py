@@ -1,4 +1,5 @@
-"""Tests of tfbus.transports (wire format, Zenoh transport) -- real processes on 127.0.0.1.
+"""Tests of the Zenoh transport (tfbus.transports.zenoh) -- real processes on 127.0.0.1; its wire
+format is tested in tests/codecs/test_codec_native.py.
 
 Every Zenoh session here uses explicit 127.0.0.1 endpoints with multicast scouting off
 (the transport's defaults); every wait is bounded; child processes are killed in
