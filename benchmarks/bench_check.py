@@ -295,9 +295,9 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
 
 def ros1_rows(rows: Rows, runs: int) -> None:
     import bench_ros1
-    from _ros1_peers import Master, free_port, master_env, ros1_missing
+    from ros1_harness import Master, free_port, master_env, ros1_missing  # via bench_ros1
 
-    why = ros1_missing()
+    why = ros1_missing(bench_ros1.BENCH_PACKAGES)
     if why is not None:
         rows.row("ROS 1 receive latency, 100 Hz x 50 transforms", f"not run: {why}", False, "")
         return

@@ -39,8 +39,12 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT / "tests"))  # the ROS 1 harness: one home, shared with the tests
 
-from _ros1_peers import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+from ros1_harness import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+
+BENCH_PACKAGES = ("roscpp", "tf2_msgs")
+"""What the C++ publisher and subscriber of ``benchmarks/ros1/`` build against."""
 
 
 def build(out: Path) -> None:
@@ -228,7 +232,7 @@ def main() -> None:
     bad = [m for m in modes if m not in MODES]
     if bad or not modes:
         parser.error(f"--modes: {bad or modes!r}: choose from {', '.join(MODES)}")
-    why = ros1_missing()
+    why = ros1_missing(BENCH_PACKAGES)
     if why is not None:
         sys.exit(f"ROS 1 unavailable: {why}")
     with tempfile.TemporaryDirectory() as tmp:

@@ -51,7 +51,7 @@ from tfbus.transports.ros2 import Ros2Transport  # noqa: E402
 
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 ROS_SIDE = ROOT / "benchmarks" / "_ros2_side.py"
-FASTDDS_LO = ROOT / "tests" / "ros2_peers" / "fastdds_lo.xml"
+FASTDDS_LO = ROOT / "tests" / "peers" / "ros2" / "fastdds_lo.xml"
 WAIT = 60.0
 
 
@@ -236,7 +236,8 @@ def _summary(r: dict[str, Any]) -> tuple[float, float, float]:
 
 def codec_figures(batch: int = 100, rounds: int = 200) -> None:
     """Per-transform encode/decode time: this codec vs cyclonedds-python's serializer."""
-    from tfbus.transports.ros2_wire import TFMessage_, decode_tf_message, encode_tf_message
+    from tfbus.codecs.cdr import decode_tf_message, encode_tf_message
+    from tfbus.transports.ros2.dds import TFMessage_
 
     msg = _message("codec", batch)
     data = encode_tf_message(msg.transforms)

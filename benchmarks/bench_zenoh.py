@@ -40,10 +40,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
+from tfbus.codecs.native import WireCodec, WireError
 from tfbus.listener import TransformListener
 from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
-from tfbus.transports.wire import WireCodec, WireError
 from tfbus.transports.zenoh import ZenohTransport
 
 

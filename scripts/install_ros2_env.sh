@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Build (once) the real ROS 2 peers' venvs used by tests/test_ros2.py and
+# Build (once) the real ROS 2 peers' venvs used by tests/transports/test_ros2.py and
 # benchmarks/bench_ros2.py, in the repository root, from PyPI's ROS 2 wheels alone:
 #   .venv-ros2/     rclpy + rmw_fastrtps_cpp (ROS 2 Kilted wheels) + tf2_msgs, which PyPI
 #                   does not carry: generated with rosidl from scripts/ros2/tf2_msgs/

@@ -2,9 +2,10 @@
 
 Everything runs on 127.0.0.1: each master gets a free port, ``ROS_IP=127.0.0.1`` and a
 private ``ROS_HOME``. The tutorial's nodes are this repository's C++ sources in
-``tests/ros1_peers/`` (built by its ``build.sh``). Processes are started here, read by
+``tests/peers/ros1/`` (built by its ``build.sh``). Processes are started here, read by
 threads line by line, waited on with a bound, and ended by their PID (SIGINT, then SIGKILL
-after a bound).
+after a bound). Also the benchmarks' ROS 1 harness (``benchmarks/bench_ros1.py``,
+``bench_check.py``, ``soak_ros1.py`` put ``tests/`` on ``sys.path``): one home.
 """
 
 from __future__ import annotations
@@ -27,21 +28,29 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PEERS = ROOT / "tests" / "ros1_peers"
+PEERS = ROOT / "tests" / "peers" / "ros1"
 INSTALL = ROOT / "scripts" / "install_ros1.sh"
 ROS_BIN = Path("/usr/bin")
 
 
 def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
 
-def ros1_missing() -> str | None:
-    """Why ROS 1 cannot be used here (after trying to install it), or None."""
+def ros1_missing(packages: tuple[str, ...] = ("tf",)) -> str | None:
+    """Why ROS 1 cannot be used here (after trying to install it with
+    ``scripts/install_ros1.sh``), or None: roscore, rosrun and the pkg-config
+    ``packages`` (the tests' C++ nodes need ``tf``; the benchmarks' ``roscpp`` and
+    ``tf2_msgs``)."""
     need = [ROS_BIN / "roscore", ROS_BIN / "rosrun"]
-    if all(p.exists() for p in need) and _has_pkg("tf"):
+
+    def ready() -> bool:
+        return all(p.exists() for p in need) and all(_has_pkg(p) for p in packages)
+
+    if ready():
         return None
     if not INSTALL.exists():
         return f"{INSTALL} missing"
@@ -51,7 +60,7 @@ def ros1_missing() -> str | None:
         ).stdout.strip()
     except subprocess.TimeoutExpired:
         return "installing ROS 1 timed out"
-    if all(p.exists() for p in need) and _has_pkg("tf"):
+    if ready():
         return None
     return out or "ROS 1 not installed"
 
@@ -204,7 +213,7 @@ def ros1_fixture() -> None:
 
 @pytest.fixture(scope="session", name="tutorial_nodes")
 def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/ros1_peers/``),
+    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/peers/ros1/``),
     built once. ROS 1 is there (the ``ros1`` fixture), so a failed build is a failure."""
     if shutil.which("g++") is None:
         pytest.skip("g++ not found: cannot build the tutorial's C++ nodes")

@@ -9,9 +9,10 @@ from collections.abc import Iterable
 import anyio
 import pytest
 
+from tfbus import MemoryTransport
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
-from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus, MemoryTransport
+from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import Clock, ManualClock, every
 from tfbus.core import BatchResult, BufferCore
 from tfbus.errors import ExtrapolationException, LookupException

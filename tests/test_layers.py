@@ -1,5 +1,6 @@
 """The layer order of ``tfbus/`` (docs/architecture.md "Layers"): no import runs up a layer, no
-import cycles, and every module has a place in the table.
+import cycles, no import sideways between the layer-4 packages, and every module has a place
+in the table.
 
 Imports are read with :mod:`ast` from every ``.py`` file under ``tfbus/`` (every
 ``import`` node: module level, inside functions, under ``if TYPE_CHECKING``) and with a
@@ -35,6 +36,7 @@ LAYERS: dict[str, int] = {
     "convert": 1,
     "core": 1,  # BufferCore, its text, batch values, velocity, caches, both twins
     "errors": 1,
+    "codecs": 1,  # message codecs (ROS 1, CDR, tfbus's msgpack wire): sans-I/O
     # 2: the bus and time sources
     "_aio": 2,  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)
     "bus": 2,
@@ -54,10 +56,9 @@ LAYERS: dict[str, int] = {
     "robot": 4,
     "transports": 4,
     "compat": 4,
-    "remote": 4,
-    "remote_ros1": 4,
     # 5: the command line and examples
     "cli": 5,
+    "remote": 5,  # lookups served over a transport (Zenoh queryable, ROS 1 action)
     "demos": 5,
     "view": 5,
     "__main__": 5,
@@ -69,6 +70,19 @@ ONLY_IMPORTS: dict[str, set[str]] = {
     "errors": {"time", "messages"},  # the exception tree may name a Time or a message type
 }
 """Modules allowed a narrower set of tfbus imports than their layer would give."""
+
+SIDEWAYS_LAYER: int = 4
+"""The layer whose packages are siblings: each may import only lower layers, never another
+package of its own layer (bag, transports, compat, monitor, filters, laser, robot...)."""
+
+SIDEWAYS_PENDING: dict[tuple[str, str], str] = {
+    ("bag", "monitor"): "bag/summary.py builds its tf_monitor table with monitor's "
+    "statistics; to be resolved by the tree helper's statistics vocabulary (issue 26)",
+    ("robot_state", "urdf"): "robot_state_publisher reads URDF: one tfbus/robot/ package "
+    "(issue 26, tree helper)",
+}
+"""Known sideways imports between layer-4 packages being removed elsewhere, with why. An
+entry whose packages both still exist but no longer import sideways fails the test."""
 
 SANS_IO_FORBIDDEN = {"anyio", "asyncio", "trio", "sniffio", "time", "datetime", "threading"}
 """What layers 0-1 must not import: no event loop, no wall clock (docs/architecture.md "Sans-I/O
@@ -230,6 +244,63 @@ def test_no_import_runs_up_a_layer() -> None:
                     f"of tfbus, not {target}"
                 )
     assert not problems, "imports against the layer order:\n" + "\n".join(problems)
+
+
+def _sideways(
+    graph: dict[str, dict[str, int]], layers: dict[str, int]
+) -> dict[tuple[str, str], list[tuple[str, str, int]]]:
+    """Imports between two different entries of :data:`SIDEWAYS_LAYER`:
+    ``(importer entry, imported entry) -> [(importer, imported, line), ...]``."""
+    found: dict[tuple[str, str], list[tuple[str, str, int]]] = {}
+    for importer, edges in graph.items():
+        entry = _entry(importer)
+        if entry is None or layers.get(entry) != SIDEWAYS_LAYER:
+            continue
+        for target, line in edges.items():
+            target_entry = _entry(target)
+            if (target_entry is not None and target_entry != entry
+                    and layers.get(target_entry) == SIDEWAYS_LAYER):
+                found.setdefault((entry, target_entry), []).append((importer, target, line))
+    return found
+
+
+def test_no_import_sideways_between_layer_4_packages() -> None:
+    """bag, transports, compat, monitor, ... each import only lower layers (issue 26: the
+    one sideways arrow was transports/ros1/tcpros.py importing tfbus.bag.decode; the
+    shared code now lives a layer down, in tfbus.codecs)."""
+    found = _sideways(_graph(), LAYERS)
+    unexpected = [
+        f"{_where(importer, line)}: {importer} imports {target} (both layer {SIDEWAYS_LAYER}: "
+        f"move what they share down a layer)"
+        for pair, edges in sorted(found.items())
+        if pair not in SIDEWAYS_PENDING
+        for importer, target, line in edges
+    ]
+    assert not unexpected, "imports sideways on layer 4:\n" + "\n".join(unexpected)
+    stale = sorted(
+        pair for pair in SIDEWAYS_PENDING
+        if all(p in LAYERS and any(_entry(m) == p for m in MODULES) for p in pair)
+        and pair not in found
+    )
+    assert not stale, f"{stale} no longer import sideways: remove them from SIDEWAYS_PENDING"
+
+
+def test_the_sideways_rule_sees_a_sideways_import() -> None:
+    """The rule itself: a layer-4 package importing another is reported, one importing a
+    lower layer or itself is not (a synthetic graph, so the rule cannot pass vacuously)."""
+    layers = {"bag": 4, "transports": 4, "codecs": 1}
+    graph = {
+        "tfbus.transports.ros1.tcpros": {
+            "tfbus.bag.decode": 13,
+            "tfbus.codecs.ros1": 14,
+            "tfbus.transports.ros1.rpc": 15,
+        },
+        "tfbus.bag.decode": {"tfbus.codecs.cdr": 3},
+    }
+    assert _sideways(graph, layers) == {
+        ("transports", "bag"): [("tfbus.transports.ros1.tcpros", "tfbus.bag.decode", 13)]
+    }
+    assert ("transports", "bag") not in _sideways(_graph(), LAYERS)
 
 
 def _cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:

@@ -36,7 +36,7 @@ def test_exceptions_derive_from_transform_exception() -> None:
 
 def test_one_tree_for_bag_and_wire_errors() -> None:
     from tfbus.bag import BagError, BagFormatError, BagNotFoundError
-    from tfbus.transports.wire import WireDecodeError
+    from tfbus.codecs.native import WireDecodeError
 
     assert issubclass(BagError, tfbus.TfbusError)
     assert issubclass(BagNotFoundError, FileNotFoundError)

@@ -9,7 +9,6 @@ Layers (each imports only those below it; see docs/architecture.md):
 * :mod:`tfbus.bag`, :mod:`tfbus.transports`, the ``tfbus`` command line.
 """
 
-from tfbus import bus as _bus
 from tfbus._version import __version__ as __version__
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
@@ -57,10 +56,6 @@ from tfbus.messages import (
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
 from tfbus.transports.memory import MemoryTransport
-
-# MemoryTransport moved from tfbus.bus (layer 2) to tfbus.transports.memory (layer 4);
-# ``from tfbus.bus import MemoryTransport`` keeps working without bus.py importing up.
-setattr(_bus, "MemoryTransport", MemoryTransport)  # noqa: B010
 
 __all__ = [
     "Buffer",

@@ -235,7 +235,7 @@ class WireVersionError(WireError):
 
 
 class WireLimitError(WireError):
-    """The payload exceeds a :class:`~tfbus.transports.wire.WireLimits` bound."""
+    """The payload exceeds a :class:`~tfbus.codecs.native.WireLimits` bound."""
 
 
 class WireEncodeError(WireError):

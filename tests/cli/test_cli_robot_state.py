@@ -134,7 +134,7 @@ class Child:
 
 def test_joint_states_drive_the_publisher_across_processes() -> None:
     pytest.importorskip("zenoh")
-    from tfbus.transports.zenoh import zenoh_bus_from_options
+    from tfbus.transports.spec import open_bus
 
     port = free_port()
     listen, connect = (f"zenoh?{k}=tcp/127.0.0.1:{port}" for k in ("listen", "connect"))
@@ -149,7 +149,7 @@ def test_joint_states_drive_the_publisher_across_processes() -> None:
 
         async def watch() -> tuple[Time, float]:
             buffer = Buffer(cache_time=10.0)
-            async with zenoh_bus_from_options(connect, name="test") as bus, \
+            async with open_bus(connect, default_name="test") as bus, \
                     TransformListener(buffer, bus):
                 with anyio.fail_after(30):
                     laser = await buffer.wait_for_transform("base_link", "base_laser", Time(0))

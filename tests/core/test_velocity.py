@@ -1,6 +1,6 @@
 """Velocity lookups (``BufferCore.lookup_velocity``, ``lookup_velocity_full``,
 ``Buffer.lookup_velocity_async``): tf2's numbers, checked against Debian's C++ libtf
-``tf::Transformer::lookupTwist`` (``tests/cpp/tf_velocity_ref.cpp``, built here with g++
+``tf::Transformer::lookupTwist`` (``tests/peers/cpp/tf_velocity_ref.cpp``, built here with g++
 against libtf-dev) on random moving 3-D trees; the documented non-physical example;
 ``method="origin"`` against finite differences of lookups; bad input."""
 
@@ -219,7 +219,8 @@ def _build_reference(tmp: Path) -> Path:
     if flags.returncode:
         pytest.skip("libtf-dev not installed (pkg-config tf)")
     exe = tmp / "tf_velocity_ref"
-    subprocess.run(["g++", "-O1", "-o", str(exe), str(HERE / "cpp" / "tf_velocity_ref.cpp"),
+    source = HERE / "peers" / "cpp" / "tf_velocity_ref.cpp"
+    subprocess.run(["g++", "-O1", "-o", str(exe), str(source),
                     *flags.stdout.split()], check=True, timeout=300)
     return exe
 

@@ -91,7 +91,7 @@ def test_main_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
-    from tfbus.bus import MemoryTransport
+    from tfbus import MemoryTransport
     from tfbus.demos.tutorial import run_broadcaster, run_listener
 
     clock = ManualClock(START)
@@ -131,13 +131,13 @@ async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
 
 def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
     import tfbus.demos.tutorial as demo
-    import tfbus.transports.spec as spec
+    from tfbus.transports import spec as bus_spec
 
     opened: list[tuple[str, str | None]] = []
     calls: list[tuple[str, dict[str, object]]] = []
 
-    def fake_open_bus(value: str, *, default_name: str | None = None) -> Bus:
-        opened.append((value, default_name))
+    def fake_open_bus(spec: str, *, default_name: str | None = None) -> Bus:
+        opened.append((spec, default_name))
         return Bus()
 
     async def fake_broadcaster(bus: Bus, **kwargs: object) -> BroadcasterStats:
@@ -148,7 +148,7 @@ def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
         calls.append(("listener", kwargs))
         return None
 
-    monkeypatch.setattr(spec, "open_bus", fake_open_bus)
+    monkeypatch.setattr(bus_spec, "open_bus", fake_open_bus)
     monkeypatch.setattr(demo, "run_broadcaster", fake_broadcaster)
     monkeypatch.setattr(demo, "run_listener", fake_listener)
     assert main(["demo", "broadcaster", "--rate", "50", "--duration", "3"]) == 0
@@ -168,9 +168,9 @@ def test_main_rejects_a_bad_bus(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_open_bus_names_the_node_unless_the_spec_does() -> None:
     pytest.importorskip("zenoh")
+    from tfbus.demos.tutorial import LISTENER_NAME
     from tfbus.transports.spec import open_bus
 
-    named = open_bus("zenoh", default_name="robot_tf_listener").transport
+    named = open_bus("zenoh", default_name=LISTENER_NAME).transport
     assert getattr(named, "name", None) == "robot_tf_listener"
-    assert getattr(open_bus("zenoh?name=mine", default_name="x").transport, "name",
-                   None) == "mine"
+    assert getattr(open_bus("zenoh?name=mine", default_name="x").transport, "name", None) == "mine"

@@ -21,6 +21,7 @@ zenoh = pytest.importorskip("zenoh")
 from tfbus.buffer import Buffer  # noqa: E402
 from tfbus.bus import Bus  # noqa: E402
 from tfbus.clock import ManualClock  # noqa: E402
+from tfbus.codecs.native import WireCodec  # noqa: E402
 from tfbus.errors import (  # noqa: E402
     ConnectivityException,
     ExtrapolationException,
@@ -40,7 +41,6 @@ from tfbus.messages import (  # noqa: E402
 )
 from tfbus.remote import BufferClient, BufferServer  # noqa: E402
 from tfbus.time import Time  # noqa: E402
-from tfbus.transports.wire import WireCodec  # noqa: E402
 from tfbus.transports.zenoh import ZenohTransport  # noqa: E402
 from tfbus.transports.zenoh.router import ZenohRouter  # noqa: E402
 

@@ -24,7 +24,7 @@ from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures
 from tfbus.buffer import Buffer
 from tfbus.errors import LookupException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
-from tfbus.remote_ros1 import (
+from tfbus.remote.ros1 import (
     GOAL_MD5,
     GOAL_TYPE,
     RESULT_MD5,

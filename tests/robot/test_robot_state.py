@@ -679,11 +679,11 @@ def test_pr2_chain_equals_direct_forward_kinematics(q: list[float]) -> None:
 
 def test_joint_state_message_and_its_wire_form() -> None:
     pytest.importorskip("msgspec")
-    from tfbus.transports.wire import WireCodec
+    from tfbus.codecs.native import WireCodec
 
     assert JointState()._fields == ("header", "name", "position", "velocity", "effort")
     assert JointState() == JointState(Header(), (), (), (), ())
-    # registered with the wire format by default (tfbus.transports.wire), nothing to call
+    # registered with the wire format by default (tfbus.codecs.native), nothing to call
     msg = JointState(Header(Time(3, 4), "base"), ["a", "b"], [0.5, -1.0], [], [2.0, 3.0])
     codec = WireCodec()
     back = codec.decode(codec.encode(msg, sender=1, seq=1)).message

@@ -29,7 +29,8 @@ The package, one job per module:
 
 * :mod:`~tfbus.bag.formats`: topics, :class:`BagMessage`, :class:`BagFormat`,
   :func:`detect_format`;
-* :mod:`~tfbus.bag.decode`: serialized ``TFMessage`` → tfbus values;
+* :mod:`~tfbus.bag.decode`: which codec (:mod:`tfbus.codecs`) decodes a connection's
+  serialized ``TFMessage``;
 * :mod:`~tfbus.bag.reader`: :func:`read_messages`;
 * :mod:`~tfbus.bag.salvage`: reading damaged files up to the damage;
 * :mod:`~tfbus.bag.loader`: :func:`load_buffer`;

@@ -12,9 +12,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
-from tfbus.bag.decode import TF_MSGDEF
 from tfbus.bag.formats import DEFAULT_TOPICS, TF_STATIC_TOPIC, BagFormat, BagMessage
 from tfbus.bag.reader import describe
+from tfbus.codecs.ros1 import ROSBAGS_TF_TYPE, tf_typestore, to_rosbags
 from tfbus.errors import BagError, BagFormatError
 from tfbus.messages import TFMessage
 from tfbus.time import Time
@@ -62,16 +62,10 @@ class _Writer:
         fmt: BagFormat,
         callerid: str,
     ) -> None:
-        from rosbags.typesys import Stores, get_typestore
-
         self.path = path
         self.fmt = fmt
         self.ros1 = fmt is BagFormat.ROS1
-        self.store = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.ROS2_HUMBLE)
-        if "tf2_msgs/msg/TFMessage" not in self.store.types:  # ROS1_NOETIC lacks tf2_msgs
-            from rosbags.typesys import get_types_from_msg
-
-            self.store.register(get_types_from_msg(TF_MSGDEF, "tf2_msgs/msg/TFMessage"))
+        self.store = tf_typestore(ros1=self.ros1)
         self.callerid = callerid
         self.conns: dict[str, Any] = {}
         self.writer: Any = None
@@ -98,7 +92,7 @@ class _Writer:
     def _conn(self, topic: str) -> Any:
         conn = self.conns.get(topic)
         if conn is None:
-            typ = "tf2_msgs/msg/TFMessage"
+            typ = ROSBAGS_TF_TYPE
             static = topic == TF_STATIC_TOPIC
             if self.ros1:
                 conn = self.writer.add_connection(
@@ -114,35 +108,8 @@ class _Writer:
 
     def write(self, time: Time, topic: str, message: TFMessage) -> None:
         s = self.store
-        T = s.types
-        Time_ = T["builtin_interfaces/msg/Time"]
-        Header_ = T["std_msgs/msg/Header"]
-        TS_ = T["geometry_msgs/msg/TransformStamped"]
-        Tr_ = T["geometry_msgs/msg/Transform"]
-        V_ = T["geometry_msgs/msg/Vector3"]
-        Q_ = T["geometry_msgs/msg/Quaternion"]
-        items = []
-        for ts in message.transforms:
-            st = ts.header.stamp
-            stamp = Time_(sec=st.sec, nanosec=st.nanosec)
-            head = (
-                Header_(seq=0, stamp=stamp, frame_id=ts.header.frame_id)
-                if self.ros1
-                else Header_(stamp=stamp, frame_id=ts.header.frame_id)
-            )
-            tr, q = ts.transform.translation, ts.transform.rotation
-            items.append(
-                TS_(
-                    header=head,
-                    child_frame_id=ts.child_frame_id,
-                    transform=Tr_(
-                        translation=V_(x=float(tr.x), y=float(tr.y), z=float(tr.z)),
-                        rotation=Q_(x=float(q.x), y=float(q.y), z=float(q.z), w=float(q.w)),
-                    ),
-                )
-            )
-        msg = T["tf2_msgs/msg/TFMessage"](transforms=items)
-        typ = "tf2_msgs/msg/TFMessage"
+        msg = to_rosbags(s, message.transforms, ros1=self.ros1)
+        typ = ROSBAGS_TF_TYPE
         raw = s.serialize_ros1(msg, typ) if self.ros1 else s.serialize_cdr(msg, typ)
         self.writer.write(self._conn(topic), time.ns, raw)
         self.count += 1

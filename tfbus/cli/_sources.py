@@ -20,6 +20,8 @@ import click
 
 from tfbus.cli._common import SafeLogFormatter, error, fail, one_line
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
+from tfbus.transports._base import PeerAware
+from tfbus.transports.spec import BUS_HELP, DEFAULT_BUS, schemes  # DEFAULT_BUS: no --bus
 
 if TYPE_CHECKING:
     import anyio
@@ -30,16 +32,11 @@ if TYPE_CHECKING:
     from tfbus.fleet import FleetBuffer
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfSummary
+    from tfbus.transports._base import PeerEvent, PeerInfo
     from tfbus.transports.spec import BusSpec
-    from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
 __all__ = ["DEFAULT_BUS", "UNKNOWN_PUBLISHER", "BagSource", "BusSource", "TfSource",
            "is_bus_error", "live", "run_live", "source", "source_options"]
-
-DEFAULT_BUS = "zenoh"
-"""The bus every command uses without ``--bus``: publishers publish on it, and readers
-(echo, monitor, frames) listen to it unless given ``--bag`` (as tf2_echo, tf_monitor and
-view_frames listen to the running ROS graph)."""
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -232,6 +229,8 @@ class BusSource(TfSource):
         self._problem: str | None = None
         self.fleet: FleetBuffer | None = None
         """The robots of a fleet bus (``namespace=*``) while attached."""
+        scheme = schemes().get(self.bus_spec.scheme)
+        self._peer_aware = scheme is not None and scheme.peer_aware
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -260,14 +259,17 @@ class BusSource(TfSource):
 
     @property
     def has_liveliness(self) -> bool:
-        """Whether the transport tells which nodes broadcast (Zenoh's liveliness)."""
-        return self.bus_spec.scheme == "zenoh"
+        """Whether the transport tells which nodes broadcast (it is
+        :class:`~tfbus.transports._base.PeerAware`: Zenoh's liveliness): the scheme
+        table's word until attached, then the transport's own."""
+        return self._peer_aware
 
     def alive_broadcasters(self) -> dict[str, PeerInfo]:
-        """The live broadcasters now (a Zenoh transport's ``broadcasters()``); empty when
-        detached or on a transport without liveliness."""
-        broadcasters = getattr(self.transport, "broadcasters", None)
-        return dict(broadcasters()) if callable(broadcasters) else {}
+        """The live broadcasters now (a :class:`~tfbus.transports._base.PeerAware`
+        transport's ``broadcasters()``); empty when detached or on a transport without
+        liveliness."""
+        transport = self.transport
+        return dict(transport.broadcasters()) if isinstance(transport, PeerAware) else {}
 
     @contextlib.asynccontextmanager
     async def attach(
@@ -289,6 +291,8 @@ class BusSource(TfSource):
         from tfbus.listener import TransformListener
 
         transport = open_spec_transport(self.bus_spec, name=self.name)
+        peer_aware = transport if isinstance(transport, PeerAware) else None
+        self._peer_aware = peer_aware is not None
         with _literal_logging():
             async with Bus(transport=transport, queue_size=10_000) as bus:
                 self.transport = transport
@@ -305,10 +309,8 @@ class BusSource(TfSource):
                 else:
                     receiver = self.listener = TransformListener(self.sink, bus, clock=self.clock)
                 async with receiver, anyio.create_task_group() as tg:
-                    if self.bus_spec.scheme == "zenoh":
-                        from tfbus.transports.zenoh import PEERS_TOPIC
-
-                        peers = bus.subscribe(PEERS_TOPIC, queue_size=1000)
+                    if peer_aware is not None:
+                        peers = bus.subscribe(peer_aware.peers_topic, queue_size=1000)
                         tg.start_soon(self._watch, peers, on_peer)
                     try:
                         yield self
@@ -351,7 +353,7 @@ class BusSource(TfSource):
     async def _watch(
         self, sub: Subscription[Any], on_peer: Callable[[str, PeerInfo], None] | None
     ) -> None:
-        from tfbus.transports.zenoh import PeerInfo
+        from tfbus.transports._base import PeerInfo
 
         async for event in sub:
             ev: PeerEvent = event
@@ -496,11 +498,6 @@ async def live(
         if finish is not None:
             finish()
         tg.cancel_scope.cancel()
-
-
-BUS_HELP = (f"Bus to publish on (default {DEFAULT_BUS!r}: this machine, no configuration), "
-            "e.g. 'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
-            "'ros2:domain=7', 'ros1', 'ros1:http://127.0.0.1:11311'.")
 
 
 def publish_options(f: F) -> F:

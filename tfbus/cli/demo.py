@@ -12,14 +12,12 @@ import click
 
 from tfbus.cli._common import error, fail, literal
 from tfbus.cli._sources import cancel_on_signal, check_bus_spec, is_bus_error, run_live
+from tfbus.transports.spec import BUS_HELP
 
 __all__ = ["command", "node_label"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-_BUS_HELP = ("Bus to run on (default 'zenoh': this machine, no configuration), e.g. "
-             "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', "
-             "'ros2' (ROS 2 over DDS), 'ros1' (a ROS 1 master: ROS_MASTER_URI).")
 
 
 def _demo_options(*, rate: bool, listen_rate: bool) -> Callable[[F], F]:
@@ -82,23 +80,21 @@ def node_label(transport: object, default: str) -> tuple[str, str]:
     the name is never empty (the transport's ``name`` or ROS 1 ``node_name``, else
     ``default``); the id is Zenoh's node id, the ROS 1 caller id or the ROS 2 domain,
     ``""`` when the transport has none."""
-    name = str(getattr(transport, "name", "") or getattr(transport, "node_name", "")
-               or default)
-    ident = getattr(transport, "node_id", "") or getattr(transport, "node_name", "")
-    if not ident and getattr(transport, "domain_id", None) is not None:
-        ident = f"ROS 2 domain {transport.domain_id}"  # type: ignore[attr-defined]
-    return name, str(ident)
+    from tfbus.transports._base import NodeLabelled
+
+    name, ident = transport.node_label() if isinstance(transport, NodeLabelled) else ("", "")
+    return name or default, ident
 
 
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,
              listen_rate: float, backend: str) -> int:
     """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh."""
     from tfbus.demos.tutorial import BROADCASTER_NAME, LISTENER_NAME, run_broadcaster, run_listener
-    from tfbus.transports.spec import open_bus
+    from tfbus.transports import spec as bus_spec
 
     name = BROADCASTER_NAME if role == "broadcaster" else LISTENER_NAME
     try:
-        bus = open_bus(spec, default_name=name)
+        bus = bus_spec.open_bus(spec, default_name=name)
     except ValueError as err:
         fail(str(err))
     except Exception as err:
@@ -152,7 +148,7 @@ def command(
 
 
 @command.command("broadcaster")
-@click.option("--bus", metavar="SPEC", default=None, help=_BUS_HELP)
+@click.option("--bus", metavar="SPEC", default=None, help=BUS_HELP)
 @_demo_options(rate=True, listen_rate=False)
 @click.pass_context
 def broadcaster(
@@ -176,7 +172,7 @@ def broadcaster(
 
 
 @command.command("listener")
-@click.option("--bus", metavar="SPEC", default=None, help=_BUS_HELP)
+@click.option("--bus", metavar="SPEC", default=None, help=BUS_HELP)
 @_demo_options(rate=False, listen_rate=True)
 @click.pass_context
 def listener(

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
     from tfbus.fleet import FleetBuffer
     from tfbus.monitor import AuthoritySummary, TfSummary
-    from tfbus.transports.zenoh import PeerInfo
+    from tfbus.transports._base import PeerInfo
 
 __all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "robots_table",
            "tf2_chain"]

@@ -3,7 +3,7 @@
 Listens to ``/tf`` and ``/tf_static`` on ``--bus`` into one
 :class:`~tfbus.buffer.Buffer` and answers :class:`~tfbus.remote.BufferClient` lookups
 from it (:class:`~tfbus.remote.BufferServer`) on Zenoh, or tf2_ros's LookupTransform
-action (:class:`~tfbus.remote_ros1.Ros1BufferServer`) on ROS 1, until Ctrl-C or
+action (:class:`~tfbus.remote.ros1.Ros1BufferServer`) on ROS 1, until Ctrl-C or
 SIGTERM (or ``--duration``); then one summary line.
 """
 
@@ -79,7 +79,7 @@ def command(bus: str, name: str, cache_time: float, duration: float | None) -> i
             b = await stack.enter_async_context(Bus(transport=transport))
             await stack.enter_async_context(TransformListener(buffer, b))
             if ros1:
-                from tfbus.remote_ros1 import Ros1BufferServer
+                from tfbus.remote.ros1 import Ros1BufferServer
 
                 action = "/" + name.lstrip("/")
                 server_ros1 = Ros1BufferServer(buffer, getattr(transport, "master_uri", ""),

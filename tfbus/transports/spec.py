@@ -45,6 +45,15 @@ __all__ = [
     "schemes",
 ]
 
+DEFAULT_BUS: Final = "zenoh"
+"""The bus of the command line when ``--bus`` is not given."""
+BUS_HELP: Final = (
+    f"Bus to use (default {DEFAULT_BUS!r}: this machine, no configuration), e.g. "
+    "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
+    "'ros2:domain=7' (ROS 2 over DDS), 'ros1', 'ros1:http://127.0.0.1:11311' (a ROS 1 "
+    "master; default ROS_MASTER_URI), 'memory' (this process only)."
+)
+"""The one help text of every command's ``--bus`` option."""
 _KEY_VALUE: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_]*=")
 _TRUE: Final = frozenset({"1", "true", "yes", "on"})
 _FALSE: Final = frozenset({"0", "false", "no", "off", ""})
@@ -138,6 +147,8 @@ class TransportScheme:
         factory: the name of ``transport_from_spec(spec, **overrides) -> Transport``
             in ``module``.
         summary: one line for help texts.
+        peer_aware: its transports are :class:`~tfbus.transports._base.PeerAware` (they
+            know their peers: Zenoh's liveliness), so a command can say so before opening.
     """
 
     scheme: str
@@ -148,6 +159,7 @@ class TransportScheme:
     requires: tuple[str, ...] = ()
     factory: str = "transport_from_spec"
     summary: str = ""
+    peer_aware: bool = False
 
 
 _SCHEMES: dict[str, TransportScheme] = {}
@@ -269,7 +281,7 @@ def open_bus(
 register_scheme(
     TransportScheme(
         "memory",
-        "tfbus.transports.memory",
+        "tfbus.transports.memory.options",
         summary="in-process only: nothing leaves this process",
     )
 )
@@ -285,12 +297,13 @@ register_scheme(
         extra="zenoh",
         requires=("zenoh", "msgspec"),
         summary="Zenoh: this machine by default, or connect/listen endpoints",
+        peer_aware=True,
     )
 )
 register_scheme(
     TransportScheme(
         "ros2",
-        "tfbus.transports.ros2",
+        "tfbus.transports.ros2.options",
         keys=frozenset({"domain", "config", "interfaces", "peers"}),
         default_key="domain",
         extra="ros2",
@@ -301,7 +314,7 @@ register_scheme(
 register_scheme(
     TransportScheme(
         "ros1",
-        "tfbus.transports.ros1",
+        "tfbus.transports.ros1.options",
         keys=frozenset({"master", "name", "host", "remote"}),
         default_key="master",
         extra="ros1",

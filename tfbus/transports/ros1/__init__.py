@@ -19,8 +19,8 @@ What a node needs of ROS 1, and where it comes from (ROS wiki "ROS/Master_API",
 * TCPROS: connection headers (``callerid``, ``topic``, ``md5sum``, ``type``,
   ``message_definition``, ``latching``, ``tcp_nodelay``), then length-prefixed messages.
   Messages are serialised by rosbags' ROS 1 serialiser (``Typestore.serialize_ros1``),
-  which also yields the message definition and its md5; received ones are decoded by the
-  bag reader's struct decoder (:func:`tfbus.bag.decode.decode_ros1`, tested equal to
+  which also yields the message definition and its md5; received ones are decoded by
+  tfbus's struct decoder (:func:`tfbus.codecs.ros1.decode_ros1`, tested equal to
   rosbags' ``deserialize_ros1``). On asyncio, frames are split, decoded and delivered in
   the event loop's read callback (an :class:`asyncio.BufferedProtocol`), as roscpp reads
   in its poll thread; on trio, in the connection's task.
@@ -57,19 +57,19 @@ Behaviour, as tf2_ros and roscpp do it:
   ``refused_hosts``) (``allow_remote=True`` lifts that for a
   robot network). ``ROS_MASTER_URI``, ``ROS_IP`` and ``ROS_HOSTNAME`` are honoured as ROS
   does.
+
+One module per concern, as every transport package (``docs/architecture.md``, "Adding a
+transport"): :mod:`~tfbus.transports.ros1.transport` (:class:`Ros1Transport`, the node),
+:mod:`~tfbus.transports.ros1.options` (the ``ros1`` bus spec),
+:mod:`~tfbus.transports.ros1.rpc` (XML-RPC client and slave API server),
+:mod:`~tfbus.transports.ros1.tcpros` (connection headers and frames); the message codec
+is :mod:`tfbus.codecs.ros1`.
 """
 
-from __future__ import annotations
+from tfbus.codecs.ros1 import TF_MD5SUM, TF_TYPE, TFCodec
 
-import os
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
-
-from .node import Ros1Statistics, Ros1Transport
-from .tcpros import TF_MD5SUM, TF_TYPE, TFCodec, decode_header, encode_header
-
-if TYPE_CHECKING:
-    from tfbus.transports.spec import BusSpec
+from .tcpros import decode_header, encode_header
+from .transport import Ros1Statistics, Ros1Transport
 
 __all__ = [
     "TF_MD5SUM",
@@ -79,54 +79,4 @@ __all__ = [
     "TFCodec",
     "decode_header",
     "encode_header",
-    "ros1_transport_from_options",
-    "transport_from_spec",
 ]
-
-
-def ros1_transport_from_options(options: Mapping[str, str]) -> Ros1Transport:
-    """Build a transport from a CLI bus spec's options (``ros1:master=http://...,name=/x``).
-
-    Keys: ``master`` (master URI), ``name`` (node name), ``host`` (address to bind and
-    advertise), ``remote`` (``1`` to contact publishers outside loopback).
-
-    Raises:
-        ValueError: an unknown key or a bad value, naming it.
-    """
-    known = {"master", "name", "host", "remote"}
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise ValueError(
-            f"unknown ros1 option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
-        )
-    remote = options.get("remote", "0")
-    if remote not in ("0", "1"):
-        raise ValueError(f"ros1 option remote must be 0 or 1, got {remote!r}")
-    return Ros1Transport(
-        master_uri=options.get("master"),
-        node_name=options.get("name"),
-        host=options.get("host"),
-        allow_remote=remote == "1",
-    )
-
-
-def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
-    """The ``ros1`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`):
-    ``ros1``, ``ros1:http://127.0.0.1:11311`` (master),
-    ``ros1:master=http://127.0.0.1:11311&name=/planner&host=127.0.0.1``.
-
-    ``overrides`` may carry ``name`` (a CLI's default node name; ``-`` becomes ``_``),
-    used when the spec gives none.
-
-    Raises:
-        ValueError: a value that is not understood (named).
-        TypeError: an override other than ``name``.
-    """
-    unknown = set(overrides) - {"name"}
-    if unknown:
-        raise TypeError(f"unexpected ros1 transport override(s): {', '.join(sorted(unknown))}")
-    options = {key: value for key in spec.options if (value := spec.value(key)) is not None}
-    default_name = overrides.get("name")
-    if "name" not in options and isinstance(default_name, str) and default_name:
-        options["name"] = f"{default_name.replace('-', '_')}_{os.getpid()}"
-    return ros1_transport_from_options(options)

@@ -25,9 +25,8 @@ import anyio
 import anyio.abc
 from anyio.streams.stapled import MultiListener
 
+from tfbus.codecs.ros1 import TF_TYPE
 from tfbus.errors import TransportError
-
-from .tcpros import TF_TYPE
 
 __all__ = [
     "MAX_XMLRPC_BYTES",

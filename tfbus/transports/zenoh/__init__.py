@@ -24,7 +24,8 @@ One module per concern (anyio's ``_core`` style; the public names are re-exporte
   path, late joiners, matching status);
 * :mod:`~tfbus.transports.zenoh.counters` -- :class:`ZenohStatistics`;
 * :mod:`~tfbus.transports.zenoh.options` -- the ``zenoh`` bus spec of the command line
-  (:class:`ZenohOptions`, :func:`parse_bus_spec`, :func:`zenoh_bus_from_options`).
+  (:class:`ZenohOptions`; parsing and opening are :mod:`tfbus.transports.spec`'s:
+  ``open_bus("zenoh?name=planner")``).
 
 Zenoh's own errors are raised as :class:`~tfbus.errors.TransportError`. See
 ``docs/zenoh.md`` for multi-host set-ups, TLS and access control.
@@ -33,12 +34,7 @@ Zenoh's own errors are raised as :class:`~tfbus.errors.TransportError`. See
 from tfbus.transports.zenoh.config import DEFAULT_PORT, zenoh_config
 from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
-from tfbus.transports.zenoh.options import (
-    ZenohOptions,
-    parse_bus_spec,
-    transport_from_spec,
-    zenoh_bus_from_options,
-)
+from tfbus.transports.zenoh.options import ZenohOptions, transport_from_spec
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerEvent, PeerInfo
 from tfbus.transports.zenoh.transport import ZenohTransport
 
@@ -51,8 +47,6 @@ __all__ = [
     "ZenohOptions",
     "ZenohStatistics",
     "ZenohTransport",
-    "parse_bus_spec",
     "transport_from_spec",
-    "zenoh_bus_from_options",
     "zenoh_config",
 ]

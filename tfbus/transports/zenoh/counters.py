@@ -9,12 +9,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from tfbus.transports._base import TransportStatistics
+
 __all__ = ["ZenohStatistics"]
 
 
 @dataclass(slots=True)
-class ZenohStatistics:
-    """Counters of one :class:`ZenohTransport` (:meth:`ZenohTransport.statistics`).
+class ZenohStatistics(TransportStatistics):
+    """Counters of one :class:`ZenohTransport` (:meth:`ZenohTransport.statistics`); the
+    first five are :class:`~tfbus.transports._base.TransportStatistics`'s.
 
     Attributes:
         sent: messages put on the network.
@@ -27,22 +30,17 @@ class ZenohStatistics:
             (any decode failure: bad bytes, shape, nesting, stamps, ids).
         wrong_version: payloads dropped because of another wire format version.
         over_limit: payloads dropped because they broke a bound of
-            :class:`~tfbus.transports.wire.WireLimits` (sizes, counts, nesting).
+            :class:`~tfbus.codecs.native.WireLimits` (sizes, counts, nesting).
         overflow: entries dropped (oldest first) because the inbound queue was full.
         lost: gaps in publishers' sequence numbers (messages the network dropped);
-            only plausible gaps count (:class:`~tfbus.transports.wire.SequenceTracker`).
+            only plausible gaps count (:class:`~tfbus.codecs.native.SequenceTracker`).
         resets: implausible jumps of a publisher's sequence numbers (forged, corrupted
             or a restarted stream): reported here, never counted in ``lost``.
         batches: event-loop wake-ups that delivered queued entries.
     """
 
-    sent: int = 0
-    send_errors: int = 0
     not_connected: int = 0
-    received: int = 0
-    delivered: int = 0
     latched_replies: int = 0
-    malformed: int = 0
     wrong_version: int = 0
     over_limit: int = 0
     overflow: int = 0

@@ -1,6 +1,7 @@
 """The ``zenoh`` bus spec: :class:`ZenohOptions` for command lines and scripts.
 
-Forms (the grammar is :mod:`tfbus.transports.spec`'s, shared by every transport)::
+Forms (parsed by :func:`tfbus.transports.spec.parse_bus_spec`, the one ``--bus`` parser;
+this module only turns a parsed :class:`~tfbus.transports.spec.BusSpec` into a transport)::
 
     zenoh                                   one machine, no configuration
     zenoh:tcp/10.0.0.2:7448                 shorthand for connect=...
@@ -17,23 +18,19 @@ through a Zenoh router, ``tfbus router``; with ``config`` the file's mode rules)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from tfbus.transports.spec import BusSpec
-from tfbus.transports.spec import parse_bus_spec as _parse_any
 from tfbus.transports.zenoh.config import DEFAULT_PORT
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.transport import ZenohTransport
 
-if TYPE_CHECKING:
-    from tfbus.bus import Bus
-
-__all__ = ["ZenohOptions", "parse_bus_spec", "transport_from_spec", "zenoh_bus_from_options"]
+__all__ = ["ZenohOptions", "transport_from_spec"]
 
 
 @dataclass(frozen=True, slots=True)
 class ZenohOptions:
-    """Everything a command line needs to build a Zenoh-backed bus (see :func:`parse_bus_spec`).
+    """Everything a command line needs to build a Zenoh-backed bus (from a ``--bus`` spec).
 
     Attributes mirror :class:`ZenohTransport`'s arguments of the same names.
     """
@@ -104,17 +101,6 @@ def _mode(value: str | None) -> str | None:
 _MODES = ("peer", "client")
 
 
-def parse_bus_spec(spec: str) -> ZenohOptions:
-    """Parse a ``zenoh`` ``--bus`` value into :class:`ZenohOptions`.
-
-    (For any scheme, use :func:`tfbus.transports.spec.parse_bus_spec`.)
-
-    Raises:
-        ValueError: if the scheme is not ``zenoh`` or a key/value is not understood.
-    """
-    return ZenohOptions.from_spec(_parse_any(spec))
-
-
 def transport_from_spec(spec: BusSpec, **overrides: Any) -> ZenohTransport:
     """The ``zenoh`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`).
 
@@ -123,27 +109,3 @@ def transport_from_spec(spec: BusSpec, **overrides: Any) -> ZenohTransport:
         TransportError: an unreadable or invalid config file.
     """
     return ZenohOptions.from_spec(spec).transport(**overrides)
-
-
-def zenoh_bus_from_options(
-    options: ZenohOptions | str | None = None, *, queue_size: int = 100, **overrides: Any
-) -> Bus:
-    """A new (not yet opened) :class:`~tfbus.bus.Bus` carried over Zenoh.
-
-    ``options`` is a :class:`ZenohOptions`, a ``--bus`` string (:func:`parse_bus_spec`)
-    or None for the one-machine defaults; ``overrides`` are passed to
-    :class:`ZenohTransport` (e.g. ``name="tfbus-monitor"``). Use it with
-    ``async with zenoh_bus_from_options(spec) as bus:``; the transport is
-    ``bus.transport``.
-
-    Raises:
-        ValueError: for an invalid spec, prefix, namespace, name or ``queue_size``.
-        TransportError: for an unreadable or invalid config file.
-    """
-    from tfbus.bus import Bus
-
-    if options is None:
-        options = ZenohOptions()
-    elif isinstance(options, str):
-        options = parse_bus_spec(options)
-    return Bus(transport=options.transport(**overrides), queue_size=queue_size)

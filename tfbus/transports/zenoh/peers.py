@@ -6,62 +6,17 @@ liveliness token for itself and one per topic it has published
 that closes, crashes or is killed (its TCP link closes; a silent partition is noticed
 after the lease, ``transport/link/tx/lease``, 10 s by default). :class:`PeerTable` turns
 those token events into :class:`PeerInfo` entries and :class:`PeerEvent` messages, which
-the transport delivers on the local bus topic :data:`PEERS_TOPIC`.
+the transport delivers on the local bus topic :data:`PEERS_TOPIC` (those three are
+defined in :mod:`tfbus.transports._base`, shared with the command line's
+:class:`~tfbus.transports._base.PeerAware` check).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Final, NamedTuple
-
-from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
+from tfbus.transports._base import PEERS_TOPIC, PeerEvent, PeerInfo
 from tfbus.transports.zenoh.keys import KeySpace
 
 __all__ = ["PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
-
-PEERS_TOPIC: Final = "/tfbus/peers"
-"""Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
-
-_TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
-_TF_SUFFIXES: Final = TF_TOPICS
-
-
-class PeerEvent(NamedTuple):
-    """A remote node or one of its published topics appeared or disappeared.
-
-    Attributes:
-        alive: True when it appeared, False when it went away (closed or died).
-        node_id: the remote Zenoh session id (hex), unique per process run.
-        name: the node's name (``ZenohTransport(name=...)``, default ``prog-pid``).
-        topic: the topic the remote started/stopped publishing, or ``""`` for the node.
-    """
-
-    alive: bool
-    node_id: str
-    name: str
-    topic: str = ""
-
-
-@dataclass(frozen=True, slots=True)
-class PeerInfo:
-    """A live remote node (:meth:`ZenohTransport.alive`).
-
-    Attributes:
-        node_id: the remote Zenoh session id (hex).
-        name: its name.
-        topics: the topics it has published so far (a broadcaster has ``/tf`` and/or
-            ``/tf_static``).
-    """
-
-    node_id: str
-    name: str
-    topics: frozenset[str] = frozenset()
-
-    @property
-    def is_broadcaster(self) -> bool:
-        """True if it has published ``/tf`` or ``/tf_static`` (on a fleet bus,
-        ``namespace=*``: ``/robot7/tf`` or ``/robot7/tf_static``)."""
-        return any(t in _TF_TOPICS or t.endswith(_TF_SUFFIXES) for t in self.topics)
 
 
 class PeerTable:

@@ -1,11 +1,12 @@
 """ZenohTransport: a :class:`~tfbus.bus.Transport` carrying a bus over Zenoh.
 
-Threads: Zenoh calls back on its own threads. The callbacks only append
-``(kind, key, bytes)`` to a bounded deque and, if no wake-up is pending, write one byte to
-a socket pair; the event loop waits on that socket (``anyio.wait_readable``, which works
-on asyncio and trio), then decodes and delivers everything queued -- one wake-up per
-batch, never a blocked Zenoh thread, and per-publisher order kept (one FIFO). When the
-deque is full (``max_pending``), the oldest entries are dropped and counted.
+Threads: Zenoh calls back on its own threads. The callbacks only append ``(kind, key,
+bytes)`` to a bounded deque and, if no wake-up is pending, write one byte to a socket pair
+(:class:`~tfbus.transports._base.ThreadWakeup`); the event loop waits on that socket
+(``anyio.wait_readable``, which works on asyncio and trio), then decodes and delivers
+everything queued -- one wake-up per batch, never a blocked Zenoh thread, and
+per-publisher order kept (one FIFO). When the deque is full (``max_pending``), the oldest
+entries are dropped and counted.
 
 Received bytes never end the bus: every payload that does not decode, of any kind, is a
 counted, dropped message (:class:`ZenohStatistics`), and sequence numbers that jump
@@ -25,30 +26,30 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import socket
 import time
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, fields
-from typing import TYPE_CHECKING, Any, Final, Protocol
+from dataclasses import dataclass, field, replace
+from typing import Any, Final
 
 import anyio
 import anyio.abc
 import anyio.lowlevel
 import zenoh
 
-from tfbus.errors import TransportError, WireLimitError, WireVersionError
-from tfbus.latch import StaticLatch
-from tfbus.messages import TFMessage
-from tfbus.ratelimit import CountLimitedLog
-from tfbus.topics import TF_STATIC_TOPIC
-from tfbus.transports.wire import (
+from tfbus.codecs.native import (
     SequenceTracker,
     WireCodec,
     WireEncodeError,
     WireLimits,
     new_sender_id,
 )
+from tfbus.errors import TransportError, WireLimitError, WireVersionError
+from tfbus.latch import StaticLatch
+from tfbus.messages import TFMessage
+from tfbus.ratelimit import CountLimitedLog
+from tfbus.topics import TF_STATIC_TOPIC
+from tfbus.transports._base import BusLike, ThreadWakeup
 from tfbus.transports.zenoh.config import (
     DEFAULT_PORT,
     ZenohConfigSource,
@@ -60,9 +61,6 @@ from tfbus.transports.zenoh.fleet_keys import key_space
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
 
-if TYPE_CHECKING:
-    from tfbus.bus import Bus
-
 __all__ = ["ZenohStatistics", "ZenohTransport"]
 
 log = logging.getLogger("tfbus.transports.zenoh")
@@ -73,11 +71,6 @@ _REPLY: Final = 1
 _ALIVE_PUT: Final = 2
 _ALIVE_DEL: Final = 3
 _MATCHING: Final = 4
-
-
-class _BusLike(Protocol):
-    def deliver_nowait(self, topic: str, message: object) -> None: ...
-    def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None: ...
 
 
 @dataclass(slots=True)
@@ -122,6 +115,10 @@ class ZenohTransport:
         TransportError: if Zenoh rejects the configuration (e.g. an unreadable file).
     """
 
+    peers_topic: str = PEERS_TOPIC
+    """The local bus topic of :class:`~tfbus.transports._base.PeerEvent` messages (this
+    transport is :class:`~tfbus.transports._base.PeerAware`)."""
+
     def __init__(
         self,
         *,
@@ -160,9 +157,7 @@ class ZenohTransport:
         self._seqs = SequenceTracker()
         self._peers = PeerTable(self._keys, self._latched)
         self._inbox: deque[tuple[int, str, bytes]] = deque(maxlen=max_pending)
-        self._wake_pending = False
-        self._wake_w: socket.socket | None = None
-        self._wake_r: socket.socket | None = None
+        self._wakeup: ThreadWakeup | None = None
         self._session: zenoh.Session | None = None
         self._node_id = ""
         self._running = False
@@ -176,6 +171,11 @@ class ZenohTransport:
     def key_prefix(self) -> str:
         """The key-expression base: ``prefix`` or ``prefix/namespace``."""
         return self._keys.base
+
+    def node_label(self) -> tuple[str, str]:
+        """(this node's name, its Zenoh session id; ``""`` while not running)
+        (:class:`~tfbus.transports._base.NodeLabelled`)."""
+        return self._name, self._node_id
 
     @property
     def name(self) -> str:
@@ -244,8 +244,7 @@ class ZenohTransport:
 
     def statistics(self) -> ZenohStatistics:
         """A copy of the counters (see :class:`ZenohStatistics`)."""
-        s = self._stats
-        return ZenohStatistics(**{f.name: getattr(s, f.name) for f in fields(s)})
+        return replace(self._stats)
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"
@@ -258,7 +257,7 @@ class ZenohTransport:
 
     async def run(
         self,
-        bus: Bus | _BusLike,
+        bus: BusLike,
         *,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
@@ -274,13 +273,11 @@ class ZenohTransport:
         if self._running or self._session is not None:
             raise RuntimeError("this ZenohTransport is already running")
         session = await anyio.to_thread.run_sync(self._open_session)
-        wake_r, wake_w = socket.socketpair()
-        wake_r.setblocking(False)
-        wake_w.setblocking(False)
+        wakeup = ThreadWakeup()
         declared: list[Any] = []
         try:
             try:
-                self._declare(session, declared, wake_r, wake_w)
+                self._declare(session, declared, wakeup)
             except zenoh.ZError as err:
                 raise TransportError(f"cannot declare on the Zenoh session: {err}") from err
             self._running = True
@@ -289,8 +286,7 @@ class ZenohTransport:
         finally:
             self._running = False
             self._session = None
-            self._wake_w = None
-            self._wake_r = None
+            self._wakeup = None
             for outlet in self._outlets.values():
                 outlet.publisher = None
                 outlet.token = None
@@ -300,10 +296,8 @@ class ZenohTransport:
             self._matching_changed = None  # bound to this event loop
             with anyio.CancelScope(shield=True):
                 await anyio.to_thread.run_sync(_close_session, session, declared)
-            wake_r.close()
-            wake_w.close()
+            wakeup.close()
             self._inbox.clear()
-            self._wake_pending = False
 
     def send_nowait(self, topic: str, message: object) -> None:
         """Put a locally published message on the network; never blocks, never raises.
@@ -356,15 +350,13 @@ class ZenohTransport:
         self,
         session: zenoh.Session,
         declared: list[Any],
-        wake_r: socket.socket,
-        wake_w: socket.socket,
+        wakeup: ThreadWakeup,
     ) -> None:
         keys = self._keys
         self._node_id = str(session.zid())
         self._peers.own_id = self._node_id
         self._session = session
-        self._wake_w = wake_w
-        self._wake_r = wake_r
+        self._wakeup = wakeup
         data_keys = (
             [keys.all_data()] if self._topics is None else [keys.data(t) for t in self._topics]
         )
@@ -431,12 +423,9 @@ class ZenohTransport:
         if len(inbox) >= self._max_pending:
             self._stats.overflow += 1  # deque(maxlen) drops the oldest entry
         inbox.append(item)
-        if not self._wake_pending:
-            self._wake_pending = True
-            wake = self._wake_w
-            if wake is not None:
-                with contextlib.suppress(OSError):  # full buffer: a wake-up is queued
-                    wake.send(b"\0")
+        wakeup = self._wakeup
+        if wakeup is not None:
+            wakeup.wake()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
@@ -462,19 +451,17 @@ class ZenohTransport:
 
     # -- internals: event loop ------------------------------------------------------------
 
-    async def _pump(self, bus: Bus | _BusLike) -> None:
-        reader = self._wake_r
-        assert reader is not None
+    async def _pump(self, bus: BusLike) -> None:
+        wakeup = self._wakeup
+        assert wakeup is not None
         while True:
-            await anyio.wait_readable(reader)
-            with contextlib.suppress(BlockingIOError):
-                reader.recv(4096)
-            self._wake_pending = False
+            await wakeup.wait()
+            wakeup.rearm()
             self._stats.batches += 1
             while self._drain(bus):
                 await anyio.lowlevel.checkpoint()
 
-    def _drain(self, bus: Bus | _BusLike) -> bool:
+    def _drain(self, bus: BusLike) -> bool:
         """Decode and deliver up to ``max_batch`` queued entries; True if more remain."""
         inbox = self._inbox
         run_topic: str | None = None
@@ -536,7 +523,7 @@ class ZenohTransport:
             stats.latched_replies += 1
         return decoded.message
 
-    def _deliver(self, bus: Bus | _BusLike, topic: str | None, run: list[object]) -> None:
+    def _deliver(self, bus: BusLike, topic: str | None, run: list[object]) -> None:
         assert topic is not None
         if len(run) == 1:
             bus.deliver_nowait(topic, run[0])

@@ -14,7 +14,7 @@ tf2_ros's ``buffer_server`` / ``BufferClient`` (tf2_ros ``buffer_server.cpp``,
 
 Protocol: a Zenoh queryable on ``{prefix[/namespace]}/@buffer/{name}`` (a verbatim
 ``@`` chunk, never matched by ``/**`` data subscriptions). A request is a tfbus wire
-payload (:mod:`tfbus.transports.wire`, plain msgpack map) ``{"op": "lookup" | "full" |
+payload (:mod:`tfbus.codecs.native`, plain msgpack map) ``{"op": "lookup" | "full" |
 "can", "target", "source", "time" (ns), "target_time", "source_time", "fixed",
 "timeout" (seconds of the **server's** clock, or None: forever)}``; the reply is a
 ``TransformStamped``, ``{"can": bool}`` or ``{"error": <tf2 class name>, "message":
@@ -41,6 +41,7 @@ import anyio.from_thread
 import zenoh
 
 from tfbus import errors
+from tfbus.codecs.native import WireCodec, new_sender_id
 from tfbus.errors import (
     InvalidArgumentException,
     TimeoutException,
@@ -50,7 +51,6 @@ from tfbus.errors import (
 )
 from tfbus.messages import TransformStamped
 from tfbus.time import Duration, Time
-from tfbus.transports.wire import WireCodec, new_sender_id
 
 if TYPE_CHECKING:
     from tfbus.buffer import Buffer

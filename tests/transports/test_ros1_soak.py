@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ros1_harness import ros1_fixture  # noqa: F401  (registers the fixture)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_soak_under_attack_loses_nothing(ros1: None) -> None:

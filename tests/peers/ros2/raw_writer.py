@@ -1,4 +1,4 @@
-"""A raw DDS writer on rt/tf in its own process, for tests/test_ros2.py.
+"""A raw DDS writer on rt/tf in its own process, for tests/transports/test_ros2.py.
 
 Run with the tfbus venv's python: ``raw_writer.py DOMAIN``. Commands on stdin, one per
 line; one answer line each on stdout:
@@ -21,8 +21,8 @@ from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 
-from tfbus.transports.ros2 import TF_WRITER_QOS, cyclone_config
-from tfbus.transports.ros2_wire import TFMessage_
+from tfbus.transports.ros2.dds import TFMessage_, cyclone_config
+from tfbus.transports.ros2.transport import TF_WRITER_QOS
 
 
 def main() -> None:

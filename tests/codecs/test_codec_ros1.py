@@ -1,7 +1,8 @@
 """The ROS 1 TFMessage decoders agree: the compiled one (objects built in C,
 ``tfbus.core._cwire._tf_from_ros1``, what ``decode_ros1`` uses with the compiled core), the
 struct one (``decode_ros1_struct``, the pure-Python path) and rosbags' generic
-deserialiser; a short payload and a bad UTF-8 id fail alike."""
+deserialiser; a short payload and a bad UTF-8 id fail alike (the codec's one error:
+``WireDecodeError``)."""
 
 from __future__ import annotations
 
@@ -12,11 +13,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
-from tfbus.bag import decode as dec
+from tfbus.codecs import ros1 as dec
 from tfbus.core import COMPILED
+from tfbus.errors import WireDecodeError
 
 pytest.importorskip("rosbags")
-from tfbus.transports.ros1.tcpros import TFCodec  # needs rosbags (checked above)
+from tfbus.codecs.ros1 import TFCodec  # needs rosbags (checked above)
 
 pytestmark = pytest.mark.skipif(
     dec._compiled_ros1 is None, reason="no compiled ROS 1 decoder (pure-Python core)"
@@ -82,16 +84,21 @@ def test_short_or_bad_payloads_fail_alike() -> None:
     assert dec._compiled_ros1 is not None
     for cut in range(len(raw)):
         with pytest.raises(struct.error):
-            dec.decode_ros1_struct(raw[:cut])
-        with pytest.raises(struct.error):
             dec._compiled_ros1(raw[:cut])
+        for decode in (dec.decode_ros1_struct, dec.decode_ros1):
+            with pytest.raises(WireDecodeError):
+                decode(raw[:cut])
     huge = struct.pack("<I", 2**32 - 1) + raw[4:]  # a count no payload of this size holds
-    for decode in (dec._compiled_ros1, dec.decode_ros1_struct):
-        with pytest.raises(struct.error):
+    with pytest.raises(struct.error):
+        dec._compiled_ros1(huge)
+    for decode in (dec.decode_ros1_struct, dec.decode_ros1):
+        with pytest.raises(WireDecodeError):
             decode(huge)
     bad = raw.replace(b"base_link", b"base_lin\xff")
-    for decode in (dec._compiled_ros1, dec.decode_ros1_struct):
-        with pytest.raises(UnicodeDecodeError):
+    with pytest.raises(UnicodeDecodeError):
+        dec._compiled_ros1(bad)
+    for decode in (dec.decode_ros1_struct, dec.decode_ros1):
+        with pytest.raises(WireDecodeError, match="utf-8"):
             decode(bad)
     assert dec._compiled_ros1(struct.pack("<I", 0)) == []
 

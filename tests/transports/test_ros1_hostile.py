@@ -48,8 +48,8 @@ from tfbus import (
 )
 from tfbus.errors import TransformException, TransportError
 from tfbus.transports.ros1 import Ros1Transport
-from tfbus.transports.ros1.node import MAX_PUBLISHERS
 from tfbus.transports.ros1.rpc import MAX_XMLRPC_BYTES, BadReply, CallFailed, call, loads
+from tfbus.transports.ros1.transport import MAX_PUBLISHERS
 
 pytestmark = pytest.mark.anyio
 
@@ -622,7 +622,7 @@ def test_cli_monitor_survives_hostile_publishers() -> None:
     import sys
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     peers = [HostilePeer(send_raw(http_answer(tcpros_answer(p)))) for p in PORTS]
     peers.append(HostilePeer(send_raw(JUNK["not xml"])))
     with FakeMaster() as master:

@@ -1,4 +1,4 @@
-"""Test peer: a broadcaster process over Zenoh (for tests/test_zenoh.py).
+"""Test peer: a broadcaster process over Zenoh (for tests/transports/test_zenoh.py).
 
 Publishes the static transforms ``world -> <name>_static`` once at start, then
 ``world -> <name>_moving`` on /tf at ``--rate`` Hz with stamps 1 ns, 2 ns, ... (the

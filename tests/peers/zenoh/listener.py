@@ -1,4 +1,4 @@
-"""Test peer: a listener process over Zenoh (for tests/test_zenoh.py).
+"""Test peer: a listener process over Zenoh (for tests/transports/test_zenoh.py).
 
 Feeds a Buffer through a TransformListener and prints one line per event, flushed:
 ``READY <node_id>``, ``TF <child> <stamp_ns>`` (/tf), ``STATIC <child>`` (/tf_static),

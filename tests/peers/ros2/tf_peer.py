@@ -1,4 +1,4 @@
-"""A real ROS 2 tf peer for tests/test_ros2.py (rclpy + rmw_fastrtps_cpp).
+"""A real ROS 2 tf peer for tests/transports/test_ros2.py (rclpy + rmw_fastrtps_cpp).
 
 Run it with the ROS 2 venv's python (scripts/install_ros2_env.sh), never import it:
 

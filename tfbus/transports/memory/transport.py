@@ -9,16 +9,15 @@ optional dependency (anyio only). Also re-exported as ``tfbus.MemoryTransport``.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import anyio
 import anyio.abc
 
 if TYPE_CHECKING:
-    from tfbus.bus import Bus
-    from tfbus.transports.spec import BusSpec
+    from tfbus.transports._base import BusLike
 
-__all__ = ["MemoryTransport", "transport_from_spec"]
+__all__ = ["MemoryTransport"]
 
 
 class MemoryTransport:
@@ -59,7 +58,7 @@ class MemoryTransport:
 
     async def run(
         self,
-        bus: Bus,
+        bus: BusLike,
         *,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
@@ -98,10 +97,3 @@ class MemoryTransport:
         return (
             f"<MemoryTransport sent={self.sent} delivered={self.delivered} dropped={self.dropped}>"
         )
-
-
-def transport_from_spec(spec: BusSpec, **overrides: Any) -> MemoryTransport:
-    """The ``memory`` bus spec (:mod:`tfbus.transports.spec`): an unlinked end, so the
-    bus is private to this process (what it sends is counted in ``dropped``).
-    ``overrides`` may give ``max_buffer_size``."""
-    return MemoryTransport(**overrides)

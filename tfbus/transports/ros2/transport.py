@@ -14,10 +14,11 @@ published here, and tfbus broadcasters are heard by ROS 2's ``tf2_ros.TransformL
 No ROS installation is needed: DDS comes from the ``cyclonedds`` wheel
 (``pip install 'tfbus[ros2]'``, which bundles Cyclone DDS' C library).
 
-**Wire.** ROS 2's names and layout exactly (see :mod:`tfbus.transports.ros2_wire`): DDS
-topics ``rt/tf`` and ``rt/tf_static``, type ``tf2_msgs::msg::dds_::TFMessage_``, XCDR1
-little-endian, and the type hash ``RIHS01_e369d0f0...`` in the endpoints' user data as
-rmw announces it. Other bus topics are not sent to ROS 2 (counted in ``not_mapped``).
+**Wire.** ROS 2's names and layout exactly (names and types in
+:mod:`tfbus.transports.ros2.dds`, samples coded by :mod:`tfbus.codecs.cdr`): DDS topics
+``rt/tf`` and ``rt/tf_static``, type ``tf2_msgs::msg::dds_::TFMessage_``, XCDR1
+little-endian, and the type hash ``RIHS01_e369d0f0...`` in the endpoints' user data as rmw
+announces it. Other bus topics are not sent to ROS 2 (counted in ``not_mapped``).
 
 **QoS** (``tf2_ros/qos.hpp``: ``DynamicBroadcasterQoS``, ``StaticBroadcasterQoS``,
 ``DynamicListenerQoS``, ``StaticListenerQoS``):
@@ -35,14 +36,14 @@ naming the transform and value; nothing of that message is sent. Received sample
 not decode are counted in ``malformed`` and dropped; the valid ones are delivered.
 (Structurally invalid CDR -- truncated, wrong lengths -- is meant never to get this far:
 cyclonedds-python's sertype normalizes serialized samples against the type with
-``dds_stream_normalize``; ``tests/test_ros2.py`` shows it refusing them on write. What
+``dds_stream_normalize``; ``tests/transports/test_ros2.py`` shows it refusing them on write. What
 valid CDR can carry and tfbus still refuses, and counts: frame ids that are not UTF-8,
 stamps before 1970, messages over ``max_transforms``. The decoder itself is hardened
 against every structural fault too.)
 
 **Network.** By default the transport binds the loopback interface only, with multicast
 off and unicast discovery to 127.0.0.1
-(:func:`~tfbus.transports.ros2_wire.cyclone_config`): it reaches ROS 2 nodes on this
+(:func:`~tfbus.transports.ros2.dds.cyclone_config`): it reaches ROS 2 nodes on this
 machine that run with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (and, with Fast DDS, a
 loopback profile), and sends nothing to any other address. For a robot network pass
 ``interfaces=["eth0"]`` (multicast discovery on those interfaces, optional unicast
@@ -53,7 +54,8 @@ Cyclone >= 11 never matches Fast DDS 3.x endpoints (ROS 2 Kilted's default rmw);
 in your own file.
 
 **Threads.** Cyclone calls ``on_data_available`` on its receive thread; the callback only
-writes one byte to a socket pair (if no wake-up is pending). The event loop waits on that
+writes one byte to a socket pair (if no wake-up is pending:
+:class:`~tfbus.transports._base.ThreadWakeup`). The event loop waits on that
 socket (``anyio.wait_readable``: asyncio and trio), then takes the raw samples from the
 DDS readers (whose keep-last histories are the bounded queue, as in rclpy) and decodes and
 delivers them with ``bus.deliver_many_nowait`` -- one wake-up per burst, at most
@@ -64,12 +66,11 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import threading
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, Protocol
+from typing import Any, Final
 
 import anyio
 import anyio.abc
@@ -83,30 +84,24 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+from tfbus.codecs.cdr import decode_tf_message, encode_tf_message
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
-from tfbus.transports.ros2_wire import (
+from tfbus.transports._base import BusLike, ThreadWakeup, TransportStatistics
+from tfbus.transports.ros2.dds import (
     DOMAIN_ID_MAX,
     TF_STATIC_TOPIC_DDS,
     TF_TOPIC_DDS,
     TFMessage_,
     cyclone_config,
-    decode_tf_message,
-    encode_tf_message,
 )
-
-if TYPE_CHECKING:
-    from tfbus.bus import Bus
-    from tfbus.transports.spec import BusSpec
 
 __all__ = [
     "TF_TYPE_HASH",
     "Ros2Statistics",
     "Ros2Transport",
     "cyclone_config",
-    "ros2_transport_from_options",
-    "transport_from_spec",
 ]
 
 TF_TYPE_HASH: Final = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
@@ -139,35 +134,27 @@ TF_STATIC_READER_QOS: Final = Qos(
 )  # fmt: skip
 
 
-class _BusLike(Protocol):
-    def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None: ...
-
-
 @dataclass(slots=True)
-class Ros2Statistics:
-    """Counters of one :class:`Ros2Transport` (:meth:`Ros2Transport.statistics`).
+class Ros2Statistics(TransportStatistics):
+    """Counters of one :class:`Ros2Transport` (:meth:`Ros2Transport.statistics`); the
+    first five are :class:`~tfbus.transports._base.TransportStatistics`'s.
 
     Attributes:
         sent: TFMessages written to DDS.
         send_errors: local messages refused (not a TFMessage, stamp outside int32, ...).
+        received: samples taken from DDS (valid data only: a writer leaving is no sample).
+        delivered: TFMessages delivered into the bus.
+        malformed: received samples dropped because they did not decode.
         send_dropped: writes DDS refused (e.g. a reliable reader's window was full).
         not_connected: ``/tf`` messages published while the transport was not running
             (``/tf_static`` ones are kept and written once it runs).
         not_mapped: messages on topics other than ``/tf`` and ``/tf_static`` (not sent).
-        received: samples taken from DDS (valid data only).
-        delivered: TFMessages delivered into the bus.
-        malformed: received samples dropped because they did not decode.
         batches: event-loop wake-ups that took samples.
     """
 
-    sent: int = 0
-    send_errors: int = 0
     send_dropped: int = 0
     not_connected: int = 0
     not_mapped: int = 0
-    received: int = 0
-    delivered: int = 0
-    malformed: int = 0
     batches: int = 0
 
 
@@ -297,11 +284,15 @@ class Ros2Transport:
         self._stats = Ros2Statistics()
         self._statics: dict[str, TransformStamped] = {}
         self._endpoints: _Endpoints | None = None
-        self._wake_w: socket.socket | None = None
-        self._wake_pending = False
+        self._wakeup: ThreadWakeup | None = None
         self._running = False
 
     # -- public information -----------------------------------------------------------------
+
+    def node_label(self) -> tuple[str, str]:
+        """(no name: DDS has none for tfbus, ``"ROS 2 domain N"``)
+        (:class:`~tfbus.transports._base.NodeLabelled`)."""
+        return "", f"ROS 2 domain {self._domain_id}"
 
     @property
     def domain_id(self) -> int:
@@ -339,8 +330,7 @@ class Ros2Transport:
 
     def statistics(self) -> Ros2Statistics:
         """A copy of the counters (see :class:`Ros2Statistics`)."""
-        s = self._stats
-        return Ros2Statistics(**{f.name: getattr(s, f.name) for f in fields(Ros2Statistics)})
+        return replace(self._stats)
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"
@@ -350,7 +340,7 @@ class Ros2Transport:
 
     async def run(
         self,
-        bus: Bus | _BusLike,
+        bus: BusLike,
         *,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
@@ -365,10 +355,8 @@ class Ros2Transport:
         """
         if self._running or self._endpoints is not None:
             raise RuntimeError("this Ros2Transport is already running")
-        wake_r, wake_w = socket.socketpair()
-        wake_r.setblocking(False)
-        wake_w.setblocking(False)
-        self._wake_w = wake_w
+        wakeup = ThreadWakeup()
+        self._wakeup = wakeup
         endpoints: _Endpoints | None = None
         try:
             with anyio.CancelScope(shield=True):  # a cancelled open must still be closed
@@ -379,17 +367,15 @@ class Ros2Transport:
             if self._statics:
                 self._write(TF_STATIC_TOPIC, encode_tf_message(tuple(self._statics.values())))
             task_status.started()
-            await self._pump(bus, wake_r, endpoints)
+            await self._pump(bus, wakeup, endpoints)
         finally:
             self._running = False
             self._endpoints = None
-            self._wake_w = None
+            self._wakeup = None
             if endpoints is not None:
                 with anyio.CancelScope(shield=True):
                     await anyio.to_thread.run_sync(self._close, endpoints)
-            wake_r.close()
-            wake_w.close()
-            self._wake_pending = False
+            wakeup.close()
 
     def send_nowait(self, topic: str, message: object) -> None:
         """Write a locally published ``/tf`` or ``/tf_static`` message to DDS; never blocks.
@@ -445,12 +431,9 @@ class Ros2Transport:
 
     def _on_data(self, _reader: object) -> None:
         # Cyclone's receive thread: keep it short, never block.
-        if not self._wake_pending:
-            self._wake_pending = True
-            wake = self._wake_w
-            if wake is not None:
-                with contextlib.suppress(OSError):  # full buffer: a wake-up is queued
-                    wake.send(b"\0")
+        wakeup = self._wakeup
+        if wakeup is not None:
+            wakeup.wake()
 
     def _open(self) -> _Endpoints:
         _acquire_domain(self._domain_id, self._config)
@@ -484,10 +467,10 @@ class Ros2Transport:
         _delete(endpoints.participant)
         _release_domain(self._domain_id)
 
-    async def _pump(self, bus: Bus | _BusLike, wake_r: socket.socket, ep: _Endpoints) -> None:
+    async def _pump(self, bus: BusLike, wakeup: ThreadWakeup, ep: _Endpoints) -> None:
         readers = list(ep.readers.items())
         while True:
-            self._wake_pending = False
+            wakeup.rearm()
             self._stats.batches += 1
             more = True
             while more:
@@ -497,11 +480,9 @@ class Ros2Transport:
                         more = True
                 if more:
                     await anyio.lowlevel.checkpoint()
-            await anyio.wait_readable(wake_r)
-            with contextlib.suppress(BlockingIOError):
-                wake_r.recv(4096)
+            await wakeup.wait()
 
-    def _take(self, bus: Bus | _BusLike, topic: str, reader: DataReader[TFMessage_]) -> bool:
+    def _take(self, bus: BusLike, topic: str, reader: DataReader[TFMessage_]) -> bool:
         """Take, decode and deliver up to ``max_batch`` samples; True if it took that many."""
         samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, self._max_batch)
         if isinstance(samples, int) or not samples:
@@ -520,66 +501,3 @@ class Ros2Transport:
             bus.deliver_many_nowait(topic, out)
             stats.delivered += len(out)
         return len(samples) >= self._max_batch
-
-
-# -- process-side helper (for the CLI bus spec) ---------------------------------------------
-
-_SPEC_KEYS: Final = frozenset({"domain", "config", "interfaces", "peers"})
-
-
-def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros2Transport:
-    """The ``ros2`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`):
-    ``ros2``, ``ros2:7`` (domain), ``ros2:domain=7&interfaces=eth0,wlan0&peers=10.0.0.2``.
-
-    ``overrides`` may carry ``name`` (a CLI's node name), which DDS has no use for.
-
-    Raises:
-        ValueError: a value that is not understood (named).
-        TypeError: an override other than ``name``.
-    """
-    unknown = set(overrides) - {"name"}
-    if unknown:
-        raise TypeError(f"unexpected ros2 transport override(s): {', '.join(sorted(unknown))}")
-    options: dict[str, str] = {}
-    for key, values in spec.options.items():
-        if values:
-            options[key] = "+".join(v for value in values for v in value.split(","))
-    return ros2_transport_from_options(options)
-
-
-def ros2_transport_from_options(options: dict[str, str]) -> Ros2Transport:
-    """A :class:`Ros2Transport` from a bus spec's options (``ros2[:key=value,...]``).
-
-    Keys: ``domain`` (0..232; default ``ROS_DOMAIN_ID`` or 0), ``config`` (a Cyclone XML
-    file), ``interfaces`` and ``peers`` (``+``-separated lists, e.g.
-    ``interfaces=eth0+wlan0``: a robot network instead of loopback).
-
-    Raises:
-        ValueError: for an unknown key or a value that is not understood.
-    """
-    unknown = set(options) - _SPEC_KEYS
-    if unknown:
-        raise ValueError(
-            f"unknown ros2 bus option {sorted(unknown)[0]!r} "
-            f"(known: {', '.join(sorted(_SPEC_KEYS))})"
-        )
-    domain_text = options.get("domain")
-    domain_id: int | None = None
-    if domain_text is not None:
-        try:
-            domain_id = int(domain_text)
-        except ValueError:
-            raise ValueError(
-                f"ros2 bus option 'domain' must be an integer, got {domain_text!r}"
-            ) from None
-
-    def split(key: str) -> list[str] | None:
-        text = options.get(key)
-        return None if text is None else [v for v in text.split("+") if v]
-
-    return Ros2Transport(
-        domain_id=domain_id,
-        config=options.get("config"),
-        interfaces=split("interfaces"),
-        peers=split("peers"),
-    )

@@ -5,8 +5,8 @@ The rclpy peers run as subprocesses of the ROS 2 venv built by
 ``scripts/install_ros2_env.sh`` (session fixture; the tests skip with its reason only
 when the wheels cannot be installed). Network rule: every test uses a fresh random
 ``ROS_DOMAIN_ID``; the rclpy side runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``
-plus the loopback Fast DDS profile ``tests/ros2_peers/fastdds_lo.xml``, tfbus with its
-loopback Cyclone configuration (or ``tests/ros2_peers/cyclone_lo.xml``); peers stop on
+plus the loopback Fast DDS profile ``tests/peers/ros2/fastdds_lo.xml``, tfbus with its
+loopback Cyclone configuration (or ``tests/peers/ros2/cyclone_lo.xml``); peers stop on
 SIGTERM. Every wait is on data or output, with
 a bound; none is a fixed sleep.
 """
@@ -39,6 +39,7 @@ from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import SystemClock
+from tfbus.codecs.cdr import SEC_MAX, decode_tf_message, encode_tf_message
 from tfbus.demos.tutorial import broadcaster_node, run_listener
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.listener import TransformListener
@@ -51,12 +52,8 @@ from tfbus.messages import (
     Vector3,
 )
 from tfbus.time import Time
-from tfbus.transports.ros2 import (
-    Ros2Transport,
-    ros2_transport_from_options,
-)
-from tfbus.transports.ros2_wire import (
-    SEC_MAX,
+from tfbus.transports.ros2 import Ros2Transport
+from tfbus.transports.ros2.dds import (
     Header_,
     Quaternion_,
     TFMessage_,
@@ -65,12 +62,11 @@ from tfbus.transports.ros2_wire import (
     TransformStamped_,
     Vector3_,
     cyclone_config,
-    decode_tf_message,
-    encode_tf_message,
 )
+from tfbus.transports.spec import open_transport
 
-ROOT = Path(__file__).resolve().parents[1]
-PEERS = ROOT / "tests" / "ros2_peers"
+ROOT = Path(__file__).resolve().parents[2]
+PEERS = ROOT / "tests" / "peers" / "ros2"
 PEER = PEERS / "tf_peer.py"
 ROS_VENV_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 INSTALL = ROOT / "scripts" / "install_ros2_env.sh"
@@ -260,18 +256,21 @@ def test_robot_network_config() -> None:
 
 
 def test_options_and_arguments(tmp_path: Path) -> None:
-    t = ros2_transport_from_options({"domain": "7"})
+    t = open_transport("ros2:domain=7")
+    assert isinstance(t, Ros2Transport)
     assert t.domain_id == 7 and "127.0.0.1" in t.config
-    t = ros2_transport_from_options({"domain": "8", "interfaces": "eth0+wlan0"})
+    t = open_transport("ros2:domain=8&interfaces=eth0,wlan0")
+    assert isinstance(t, Ros2Transport)
     assert 'name="wlan0"' in t.config and 'name="eth0"' in t.config
     xml = tmp_path / "c.xml"
     xml.write_text(cyclone_config(interfaces=["eth1"]))
-    assert 'name="eth1"' in ros2_transport_from_options({"config": str(xml)}).config
+    t = open_transport(f"ros2:config={xml}")
+    assert isinstance(t, Ros2Transport) and 'name="eth1"' in t.config
     assert 'name="eth1"' in Ros2Transport(config=f"file://{xml}").config
-    with pytest.raises(ValueError, match="unknown ros2 bus option 'domian'"):
-        ros2_transport_from_options({"domian": "7"})
+    with pytest.raises(ValueError, match="unknown bus option 'domian'"):
+        open_transport("ros2:domian=7")
     with pytest.raises(ValueError, match="'domain' must be an integer, got 'x'"):
-        ros2_transport_from_options({"domain": "x"})
+        open_transport("ros2:domain=x")
     with pytest.raises(ValueError, match=r"domain_id must be in 0\.\.232, got 233"):
         Ros2Transport(domain_id=233)
     with pytest.raises(ValueError, match="not both"):
@@ -348,11 +347,11 @@ async def test_one_cyclone_configuration_per_domain_in_a_process(anyio_backend: 
         assert other.running
 
 
-RAW_WRITER = ROOT / "tests" / "ros2_peers" / "raw_writer.py"
+RAW_WRITER = PEERS / "raw_writer.py"
 
 
 class RawWriter:
-    """A raw DDS writer on rt/tf in its own process (tests/ros2_peers/raw_writer.py): a
+    """A raw DDS writer on rt/tf in its own process (tests/peers/ros2/raw_writer.py): a
     writer and a listening reader in one process can deadlock inside Cyclone."""
 
     def __init__(self, domain_id: int) -> None:
@@ -464,7 +463,7 @@ class Peer:
 
     def __init__(self, python: Path, script: Path, args: list[str], domain: int) -> None:
         # Without its profile Fast DDS would fall back to every interface: never run so.
-        assert (PEERS / "fastdds_lo.xml").is_file(), "tests/ros2_peers/fastdds_lo.xml missing"
+        assert (PEERS / "fastdds_lo.xml").is_file(), "tests/peers/ros2/fastdds_lo.xml missing"
         env = dict(
             os.environ,
             ROS_DOMAIN_ID=str(domain),

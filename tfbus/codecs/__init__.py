@@ -1,0 +1,18 @@
+"""Message codecs: tfbus values to and from bytes, synchronous and free of I/O (as
+rosbags' ``serde``). The transports and the bag reader and writer use them; nothing here
+imports an event loop, a socket or a clock.
+
+* :mod:`tfbus.codecs.ros1` -- ROS 1 ``tf2_msgs/TFMessage`` (struct decoder, rosbags'
+  serialiser, the one rosbags message builder);
+* :mod:`tfbus.codecs.cdr` -- ROS 2 ``tf2_msgs/msg/TFMessage`` in XCDR1/XCDR2 (DDS samples
+  and ROS 2 bags);
+* :mod:`tfbus.codecs.native` -- tfbus's own versioned msgpack wire (the Zenoh transport).
+
+One error contract: a payload that does not decode raises
+:class:`~tfbus.errors.WireDecodeError` (a ``ValueError``), never anything else; a value
+that cannot be encoded raises :class:`~tfbus.errors.WireEncodeError`. Importing this
+package imports none of the codecs (``native`` needs ``msgspec``, ``ros1``'s rosbags
+parts need ``rosbags``).
+"""
+
+__all__: list[str] = []

@@ -1,0 +1,447 @@
+"""ROS 1's ``tf2_msgs/TFMessage``: the struct decoder, rosbags' serialiser and the one
+rosbags message builder.
+
+* :func:`decode_ros1` -- a ROS 1 serialized TFMessage (little endian, ``std_msgs/Header``
+  with ``seq``) into tfbus values, by a dedicated :mod:`struct` decoder (or the compiled
+  core's, built in C), several times faster than a generic deserializer and tested equal
+  to rosbags' ``deserialize_ros1``. Used by the ROS 1 transport (TCPROS) and by the bag
+  reader for ``.bag`` connections whose md5 is :data:`TF_MD5SUM`.
+* :class:`TFCodec` -- ROS 1 serialisation by rosbags' typestore (``serialize_ros1``, which
+  also gives the message definition and its md5 for the TCPROS connection header).
+* :func:`tf_typestore`, :func:`to_rosbags`, :func:`from_rosbags` -- the rosbags typestore
+  that knows ``tf2_msgs/msg/TFMessage`` and the conversion of tfbus values to and from
+  rosbags message objects (the bag writer and :class:`TFCodec` build messages here only).
+
+**Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` (a ``ValueError``) and
+nothing else; encoding raises :class:`~tfbus.errors.WireEncodeError`.
+Wire layout: ROS wiki "ROS/TCPROS" and ``roscpp_serialization``; the message is
+``geometry_msgs/TransformStamped[] transforms``.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Iterable
+from itertools import repeat
+from typing import TYPE_CHECKING, Any, Final
+
+from tfbus.core._select import TF_FROM_ROS1
+from tfbus.errors import WireDecodeError, WireEncodeError
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import NSEC_PER_SEC, Time
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
+
+__all__ = [
+    "ROSBAGS_TF_TYPE",
+    "TF_MD5SUM",
+    "TF_MSGDEF",
+    "TF_TYPE",
+    "TFCodec",
+    "decode_ros1",
+    "decode_ros1_struct",
+    "from_rosbags",
+    "tf_typestore",
+    "to_rosbags",
+]
+
+TF_TYPE: Final = "tf2_msgs/TFMessage"
+"""The ROS 1 type of ``/tf`` and ``/tf_static``."""
+TF_MD5SUM: Final = "94810edda583a504dfda3829e70d7eec"
+"""ROS 1 md5 of ``tf2_msgs/TFMessage``'s full definition (identical for ``tf/tfMessage``;
+checked against rosbags' by :class:`TFCodec`)."""
+TF_MSGDEF: Final = "geometry_msgs/TransformStamped[] transforms\n"
+"""The body of tf2_msgs/TFMessage (and tf/tfMessage); its field types come from the store."""
+ROSBAGS_TF_TYPE: Final = "tf2_msgs/msg/TFMessage"
+"""rosbags' name of the type (``pkg/msg/Name``, ROS 1 and ROS 2 alike)."""
+
+_SEC_MAX: Final = 2**31 - 1  # rosbags serialises ROS 1 time.sec as int32 (2038-01-19)
+_DECODE_ERRORS: Final = (struct.error, UnicodeDecodeError, ValueError, IndexError, OverflowError)
+
+
+_U32 = struct.Struct("<I")
+_ROS1_HEAD = struct.Struct("<IIII")  # seq, sec, nsec, len(frame_id)
+
+
+def _ts(ns: int, frame: str, child: str, v: tuple[float, ...]) -> TransformStamped:
+    return TransformStamped(
+        Header(Time.from_ns(ns), frame),
+        child,
+        Transform(Vector3(v[0], v[1], v[2]), Quaternion(v[3], v[4], v[5], v[6])),
+    )
+
+
+_new: Callable[..., Any] = tuple.__new__  # a NamedTuple without its generated __new__
+_STR_CACHE_MAX: Final = 4096
+_STR_CACHE_KEY_MAX: Final = 256
+_strings: dict[bytes, str] = {}
+"""Frame ids seen, as UTF-8 bytes -> ``str`` (a tf stream repeats the same few names)."""
+_tails: dict[int, Callable[[bytes, int], tuple[Any, ...]]] = {}
+"""Per child-id length: ``u32 len, child bytes, 7 doubles`` in one struct call."""
+
+
+def _text(raw: bytes) -> str:
+    """``raw`` decoded as UTF-8, remembered (bounded) so a repeated frame id costs one
+    dict lookup and every message shares one ``str`` per name."""
+    text = _strings.get(raw)
+    if text is None:
+        text = raw.decode()
+        if len(raw) <= _STR_CACHE_KEY_MAX and len(_strings) < _STR_CACHE_MAX:
+            _strings[raw] = text
+    return text
+
+
+def _tail(clen: int) -> Callable[[bytes, int], tuple[Any, ...]]:
+    unpack = _tails.get(clen)
+    if unpack is None:
+        unpack = struct.Struct(f"<4x{clen}s7d").unpack_from
+        if len(_tails) < _STR_CACHE_MAX:
+            _tails[clen] = unpack
+    return unpack
+
+
+_LAYOUT_MIN: Final = 12  # below, the walk is as fast (measured)
+_LAYOUT_MAX: Final = 4096
+_LAYOUT_BUDGET: Final = 16384
+"""Transforms over all cached layouts (a struct costs ~0.3 kB per transform: ~5 MB at
+most, whatever a peer sends)."""
+_layout_room = _LAYOUT_BUDGET
+_GROUP: Final = 14  # values per transform: seq sec nsec flen frame clen child x y z qx qy qz qw
+_layouts: dict[tuple[int, int], tuple[Callable[[bytes], tuple[Any, ...]], tuple[int, ...]]] = {}
+"""(transform count, message size) -> one struct unpacking a whole message of that
+layout, and the frame id lengths then child id lengths it assumes."""
+
+
+_compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = TF_FROM_ROS1
+"""The compiled core's ROS 1 TFMessage decoder (objects built in C), where there is one."""
+
+
+def _decode_ros1_compiled_or_struct(raw: bytes | memoryview) -> list[TransformStamped]:
+    """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
+
+    With the compiled core (on a little-endian host) the transforms are built in C
+    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    :func:`decode_ros1_struct`. Equal values either way (tested).
+
+    Raises:
+        struct.error: the payload is shorter than its contents.
+        UnicodeDecodeError: a frame id is not UTF-8.
+    """
+    if _compiled_ros1 is not None:
+        return _compiled_ros1(raw)
+    return _decode_struct(raw)
+
+
+def _decode_struct(raw: bytes | memoryview) -> list[TransformStamped]:
+    """Decode a ROS 1 serialized TFMessage with :mod:`struct` (the pure-Python path).
+
+    A publisher sends the same frames message after message, so the same layout (count,
+    size and the length of every frame id): after a message of 12 to 4096 transforms was
+    decoded one transform at a time, its layout is kept as a single :class:`struct.Struct`
+    (16384 transforms over all layouts at most); a later message of the same count and
+    size is unpacked by it in one call, used only if every length field it read equals
+    the layout's (otherwise the transform-at-a-time decoder runs), and its values are
+    built column by column (:func:`_columns`). Both paths give equal values.
+
+    Raises:
+        struct.error: the payload is shorter than its contents.
+        UnicodeDecodeError: a frame id is not UTF-8.
+    """
+    buf = bytes(raw)
+    (n,) = _U32.unpack_from(buf, 0)
+    if n < _LAYOUT_MIN or n > _LAYOUT_MAX:
+        return _walk_ros1(buf, n)
+    key = (n, len(buf))
+    layout = _layouts.get(key)
+    if layout is not None:
+        unpack, lengths = layout
+        values = unpack(buf)
+        if values[3::_GROUP] + values[5::_GROUP] == lengths:
+            return _columns(values, n)
+    out = _walk_ros1(buf, n)
+    global _layout_room
+    if layout is None and n <= _layout_room:
+        _layout_room -= n
+        _layouts[key] = _layout(buf, n)
+    return out
+
+
+def _layout(buf: bytes, n: int) -> tuple[Callable[[bytes], tuple[Any, ...]], tuple[int, ...]]:
+    """The struct of a whole message shaped like ``buf`` (already decoded, so whole)."""
+    frames, children, parts = [], [], ["<4x"]
+    off = 4
+    for _ in range(n):
+        (flen,) = _U32.unpack_from(buf, off + 12)
+        off += 16 + flen
+        (clen,) = _U32.unpack_from(buf, off)
+        off += 4 + clen + 56
+        frames.append(flen)
+        children.append(clen)
+        parts.append(f"IIII{flen}sI{clen}s7d")
+    return struct.Struct("".join(parts)).unpack_from, (*frames, *children)
+
+
+def _columns(values: tuple[Any, ...], n: int) -> list[TransformStamped]:
+    """Build the transforms from one flat unpack of ``n`` groups of :data:`_GROUP`
+    values, a column at a time (``map`` over ``tuple.__new__``: no Python frame per
+    value). Transforms of one stamp and frame id (the usual message) share a Header."""
+    new = _new
+    g = _GROUP
+    secs, nsecs, frames = values[1::g], values[2::g], values[4::g]
+    strings = _strings
+    children = [strings.get(c) or _text(c) for c in values[6::g]]
+    headers: Iterable[Header]
+    if secs.count(secs[0]) == n and nsecs.count(nsecs[0]) == n and frames.count(frames[0]) == n:
+        stamp = Time.from_ns(secs[0] * NSEC_PER_SEC + nsecs[0])
+        headers = repeat(new(Header, (stamp, _text(frames[0]))), n)
+    else:
+        headers = [
+            new(Header, (Time.from_ns(sec * NSEC_PER_SEC + nsec), _text(frame)))
+            for sec, nsec, frame in zip(secs, nsecs, frames, strict=True)
+        ]
+    vectors = map(
+        new, repeat(Vector3, n), zip(values[7::g], values[8::g], values[9::g], strict=True)
+    )
+    rotations = map(
+        new,
+        repeat(Quaternion, n),
+        zip(values[10::g], values[11::g], values[12::g], values[13::g], strict=True),
+    )
+    transforms = map(new, repeat(Transform, n), zip(vectors, rotations, strict=True))
+    return list(
+        map(new, repeat(TransformStamped, n), zip(headers, children, transforms, strict=True))
+    )
+
+
+def _walk_ros1(buf: bytes, n: int) -> list[TransformStamped]:
+    """Decode the ``n`` transforms of a ROS 1 TFMessage, one after the other.
+
+    Transforms whose serialized header (seq, stamp, frame id) is byte-for-byte the one
+    before share one :class:`~tfbus.messages.Header` value (a broadcaster stamps a whole
+    message at once, as tf2_ros's ``TransformBroadcaster`` does); frame ids are decoded
+    once per name (a bounded cache). Values are immutable, so sharing is invisible.
+
+    Raises:
+        struct.error: the payload is shorter than its contents.
+        UnicodeDecodeError: a frame id is not UTF-8.
+    """
+    off = 4
+    out: list[TransformStamped] = []
+    append = out.append
+    head = _ROS1_HEAD.unpack_from
+    u32 = _U32.unpack_from
+    tails = _tails
+    starts = buf.startswith
+    new = _new
+    prev = b""  # the previous transform's serialized header
+    header = None
+    for _ in range(n):
+        if prev and starts(prev, off):
+            off += len(prev)
+        else:
+            _seq, sec, nsec, flen = head(buf, off)
+            end = off + 16 + flen
+            header = new(
+                Header, (Time.from_ns(sec * NSEC_PER_SEC + nsec), _text(buf[off + 16 : end]))
+            )
+            prev = buf[off:end]
+            off = end
+        (clen,) = u32(buf, off)
+        child, x, y, z, qx, qy, qz, qw = (tails.get(clen) or _tail(clen))(buf, off)
+        off += clen + 60
+        append(
+            new(
+                TransformStamped,
+                (
+                    header,
+                    _strings.get(child) or _text(child),
+                    new(Transform, (new(Vector3, (x, y, z)), new(Quaternion, (qx, qy, qz, qw)))),
+                ),
+            )
+        )
+    if off > len(buf):
+        raise struct.error("message shorter than its contents")
+    return out
+
+
+def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
+    """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
+
+    With the compiled core (on a little-endian host) the transforms are built in C
+    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    :func:`decode_ros1_struct`. Equal values either way (tested). Bytes after the message
+    are ignored (a TCPROS frame or bag record holds exactly one message).
+
+    Raises:
+        WireDecodeError: the payload is shorter than its contents or a frame id is not
+            UTF-8 (the message says which).
+    """
+    try:
+        return _decode_ros1_compiled_or_struct(raw)
+    except _DECODE_ERRORS as exc:
+        raise WireDecodeError(str(exc) or type(exc).__name__) from None
+
+
+def decode_ros1_struct(raw: bytes | memoryview) -> list[TransformStamped]:
+    """Decode a ROS 1 serialized TFMessage with :mod:`struct` (the pure-Python path).
+
+    A publisher sends the same frames message after message, so the same layout (count,
+    size and the length of every frame id): after a message of 12 to 4096 transforms was
+    decoded one transform at a time, its layout is kept as a single :class:`struct.Struct`
+    (16384 transforms over all layouts at most); a later message of the same count and
+    size is unpacked by it in one call, used only if every length field it read equals
+    the layout's (otherwise the transform-at-a-time decoder runs), and its values are
+    built column by column. Both paths give equal values.
+
+    Raises:
+        WireDecodeError: the payload is shorter than its contents or a frame id is not
+            UTF-8.
+    """
+    try:
+        return _decode_struct(raw)
+    except _DECODE_ERRORS as exc:
+        raise WireDecodeError(str(exc) or type(exc).__name__) from None
+
+
+def tf_typestore(*, ros1: bool, msgtype: str = ROSBAGS_TF_TYPE) -> Typestore:
+    """A rosbags typestore (``ROS1_NOETIC`` or ``ROS2_HUMBLE``) that knows ``msgtype``
+    (default ``tf2_msgs/msg/TFMessage``; ROS1_NOETIC lacks tf2_msgs, and a bag may name
+    the type ``tf/msg/tfMessage``: registered from :data:`TF_MSGDEF` when missing).
+
+    Raises:
+        ImportError: rosbags is not installed (``pip install 'tfbus[ros1]'``).
+    """
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if msgtype not in store.types:
+        store.register(get_types_from_msg(TF_MSGDEF, msgtype))
+    return store
+
+
+def to_rosbags(store: Typestore, transforms: Iterable[TransformStamped], *, ros1: bool) -> Any:
+    """The rosbags ``tf2_msgs/msg/TFMessage`` object of ``transforms`` in ``store``
+    (:func:`tf_typestore`), ready for ``serialize_ros1`` (``ros1``: the header has a
+    ``seq``, written 0 as tf2_ros does) or ``serialize_cdr``.
+
+    Raises:
+        AttributeError, TypeError, ValueError: an element is not a ``TransformStamped``
+            of float-convertible values.
+    """
+    t = store.types
+    time_ = t["builtin_interfaces/msg/Time"]
+    header_ = t["std_msgs/msg/Header"]
+    stamped_ = t["geometry_msgs/msg/TransformStamped"]
+    transform_ = t["geometry_msgs/msg/Transform"]
+    vector_ = t["geometry_msgs/msg/Vector3"]
+    quat_ = t["geometry_msgs/msg/Quaternion"]
+    items = []
+    for ts in transforms:
+        sec, nsec = divmod(ts.header.stamp.ns, NSEC_PER_SEC)
+        stamp = time_(sec=sec, nanosec=nsec)
+        frame_id = ts.header.frame_id
+        head = (
+            header_(seq=0, stamp=stamp, frame_id=frame_id)
+            if ros1
+            else header_(stamp=stamp, frame_id=frame_id)
+        )
+        tr, q = ts.transform.translation, ts.transform.rotation
+        items.append(
+            stamped_(
+                header=head,
+                child_frame_id=ts.child_frame_id,
+                transform=transform_(
+                    translation=vector_(x=float(tr.x), y=float(tr.y), z=float(tr.z)),
+                    rotation=quat_(x=float(q.x), y=float(q.y), z=float(q.z), w=float(q.w)),
+                ),
+            )
+        )
+    return t[ROSBAGS_TF_TYPE](transforms=items)
+
+
+def from_rosbags(msg: Any) -> list[TransformStamped]:
+    """Convert a rosbags-deserialized TFMessage object (ROS 1 or ROS 2) to tfbus values."""
+    out = []
+    for t in msg.transforms:
+        st = t.header.stamp
+        tr = t.transform.translation
+        q = t.transform.rotation
+        out.append(
+            _ts(
+                int(st.sec) * NSEC_PER_SEC + int(st.nanosec),
+                str(t.header.frame_id),
+                str(t.child_frame_id),
+                (tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w),
+            )
+        )
+    return out
+
+
+class TFCodec:
+    """ROS 1 (de)serialisation of ``tf2_msgs/TFMessage``: rosbags' typestore writes,
+    :func:`decode_ros1` reads (valid because a TCPROS connection's md5sum is checked to be
+    :data:`TF_MD5SUM`); :meth:`decode_generic` is rosbags' reader, the reference.
+
+    Raises:
+        ImportError: rosbags is not installed (``pip install 'tfbus[ros1]'``).
+    """
+
+    def __init__(self) -> None:
+        try:
+            store = tf_typestore(ros1=True)
+        except ImportError as exc:
+            raise ImportError(
+                "the ROS 1 transport needs rosbags: pip install 'tfbus[ros1]'"
+            ) from exc
+        self._store = store
+        definition, md5 = store.generate_msgdef(ROSBAGS_TF_TYPE, ros_version=1)
+        if md5 != TF_MD5SUM:  # pragma: no cover - a rosbags regression, not an input error
+            raise RuntimeError(f"rosbags gives md5 {md5} for {TF_TYPE}, expected {TF_MD5SUM}")
+        self.definition: str = definition
+        """The full message definition for the TCPROS ``message_definition`` field."""
+
+    def encode(self, transforms: Iterable[TransformStamped]) -> bytes:
+        """Serialise transforms as one ROS 1 ``TFMessage``.
+
+        Raises:
+            WireEncodeError: a stamp before 1970 or from 2038-01-19 on (rosbags writes
+                ROS 1's ``time.sec`` as int32; ROS 1 itself reads uint32), or a field of
+                the wrong type, naming the frame (a ``ValueError``).
+        """
+        items = list(transforms)
+        for ts in items:
+            ns = ts.header.stamp.ns
+            if not 0 <= ns // NSEC_PER_SEC <= _SEC_MAX:
+                raise WireEncodeError(
+                    f"header.stamp {ns} ns of {ts.child_frame_id!r} is outside ROS 1's time "
+                    "as sent (0 .. 2**31-1 s)"
+                )
+        try:
+            msg = to_rosbags(self._store, items, ros1=True)
+            return bytes(self._store.serialize_ros1(msg, ROSBAGS_TF_TYPE))
+        except (struct.error, UnicodeEncodeError, TypeError, AttributeError, ValueError) as exc:
+            raise WireEncodeError(f"cannot serialise a TFMessage for ROS 1: {exc}") from exc
+
+    def decode(self, raw: bytes | memoryview) -> list[TransformStamped]:
+        """Deserialise one ROS 1 ``TFMessage`` (:func:`decode_ros1`): 3-5x faster than
+        rosbags' generic deserialiser (:meth:`decode_generic`, the reference it is tested
+        against), which keeps a 50-transform message's latency near roscpp's.
+
+        Raises:
+            WireDecodeError: the bytes are not a whole ``TFMessage`` (short, bad UTF-8).
+        """
+        return decode_ros1(raw)
+
+    def decode_generic(self, raw: bytes) -> list[TransformStamped]:
+        """Deserialise one ROS 1 ``TFMessage`` with rosbags' generic deserialiser.
+
+        Raises:
+            WireDecodeError: the bytes are not a whole ``TFMessage``.
+        """
+        try:
+            return from_rosbags(self._store.deserialize_ros1(raw, ROSBAGS_TF_TYPE))
+        except Exception as exc:  # rosbags raises struct.error, UnicodeDecodeError, ...
+            raise WireDecodeError(
+                f"malformed {TF_TYPE}: {type(exc).__name__}: {exc}"
+            ) from None

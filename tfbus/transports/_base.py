@@ -1,0 +1,193 @@
+"""What every transport shares: the bus it feeds, the thread-to-loop wake-up, the common
+statistics counters and the :class:`PeerAware` protocol.
+
+* :class:`BusLike` -- the part of :class:`~tfbus.bus.Bus` a transport calls
+  (``deliver_nowait`` / ``deliver_many_nowait``), so a transport's ``run`` can be
+  driven by a test double as well as by a bus.
+* :class:`ThreadWakeup` -- a middleware thread (Zenoh's callbacks, Cyclone's listener)
+  signals the event loop through a socket pair: the thread writes one byte when no
+  wake-up is pending, the loop waits with ``anyio.wait_readable`` (asyncio and trio
+  alike) and then drains whatever the middleware queued -- one wake-up per burst.
+* :class:`TransportStatistics` -- the counters every transport has, with one meaning
+  each (each transport's statistics class adds its own).
+* :class:`PeerAware` -- what a transport that knows its peers (Zenoh's liveliness)
+  offers; the command line asks ``isinstance(transport, PeerAware)``, never a scheme name.
+
+A new transport copies the template of ``docs/architecture.md`` ("Adding a transport").
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Final, NamedTuple, Protocol, runtime_checkable
+
+import anyio
+
+from tfbus.topics import TF_TOPICS
+
+__all__ = [
+    "PEERS_TOPIC",
+    "BusLike",
+    "NodeLabelled",
+    "PeerAware",
+    "PeerEvent",
+    "PeerInfo",
+    "ThreadWakeup",
+    "TransportStatistics",
+]
+
+
+class BusLike(Protocol):
+    """The bus as a transport sees it (:class:`~tfbus.bus.Bus` implements it)."""
+
+    def deliver_nowait(self, topic: str, message: object) -> None:
+        """Deliver one remote message to the local subscribers."""
+
+    def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None:
+        """Deliver several remote messages of one topic, in order."""
+
+
+PEERS_TOPIC: Final = "/tfbus/peers"
+"""Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
+
+_TF_TOPICS: Final = frozenset(TF_TOPICS)
+
+
+class PeerEvent(NamedTuple):
+    """A remote node or one of its published topics appeared or disappeared.
+
+    Attributes:
+        alive: True when it appeared, False when it went away (closed or died).
+        node_id: the remote node's id (Zenoh: its session id, hex), unique per process run.
+        name: the node's name (Zenoh: ``ZenohTransport(name=...)``, default ``prog-pid``).
+        topic: the topic the remote started/stopped publishing, or ``""`` for the node.
+    """
+
+    alive: bool
+    node_id: str
+    name: str
+    topic: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class PeerInfo:
+    """A live remote node (a :class:`PeerAware` transport's ``broadcasters()``).
+
+    Attributes:
+        node_id: the remote node's id (Zenoh: its session id, hex).
+        name: its name.
+        topics: the topics it has published so far (a broadcaster has ``/tf`` and/or
+            ``/tf_static``).
+    """
+
+    node_id: str
+    name: str
+    topics: frozenset[str] = frozenset()
+
+    @property
+    def is_broadcaster(self) -> bool:
+        """True if it has published ``/tf`` or ``/tf_static`` (on a fleet bus,
+        ``namespace=*``: ``/robot7/tf`` or ``/robot7/tf_static``)."""
+        return any(t in _TF_TOPICS or t.endswith(TF_TOPICS) for t in self.topics)
+
+
+@runtime_checkable
+class NodeLabelled(Protocol):
+    """A transport that makes a named node (Zenoh, ROS 1, ROS 2; not ``memory``)."""
+
+    def node_label(self) -> tuple[str, str]:
+        """(the node's name or ``""``, its id on the network or ``""``), for log lines."""
+        ...
+
+
+@runtime_checkable
+class PeerAware(Protocol):
+    """A transport that knows the other processes on its network (Zenoh's liveliness).
+
+    It delivers a :class:`PeerEvent` on the local bus topic :attr:`peers_topic` whenever a
+    peer appears, disappears or starts/stops publishing a topic. The command line asks
+    ``isinstance(transport, PeerAware)`` (a runtime-checkable Protocol) instead of
+    testing a scheme name.
+    """
+
+    peers_topic: str
+    """The local bus topic of the :class:`PeerEvent` messages (:data:`PEERS_TOPIC`)."""
+
+    @property
+    def node_id(self) -> str:
+        """This transport's id as its peers see it (``""`` while not running)."""
+        ...
+
+    def broadcasters(self) -> Mapping[str, PeerInfo]:
+        """The live peers that have published ``/tf`` or ``/tf_static``, by node id."""
+        ...
+
+
+@dataclass(slots=True)
+class TransportStatistics:
+    """The counters shared by every transport's statistics (monotonic since it was made).
+
+    One meaning each, whatever the middleware: every payload taken from the network counts
+    in ``received`` and then ends in ``delivered`` or in a drop counter (``malformed``, or
+    a transport's own: ``wrong_version``, ``overflow``, ...).
+
+    Attributes:
+        sent: messages put on the network (ROS 1: one per subscriber connection).
+        send_errors: local messages refused before sending (not encodable: a stamp out of
+            the middleware's range, a message of the wrong type, ...).
+        received: payloads taken from the network (valid or not).
+        delivered: valid messages delivered into the bus.
+        malformed: received payloads dropped because they did not decode (ROS 1: each
+            also closed its connection).
+    """
+
+    sent: int = 0
+    send_errors: int = 0
+    received: int = 0
+    delivered: int = 0
+    malformed: int = 0
+
+
+class ThreadWakeup:
+    """Wake the event loop from a middleware thread, once per burst.
+
+    The loop side (:meth:`wait`) runs on asyncio and trio (``anyio.wait_readable`` on a
+    socket); :meth:`wake` may be called from any thread and never blocks. Create it in
+    the transport's ``run`` and :meth:`close` it on the way out.
+    """
+
+    def __init__(self) -> None:
+        """Open the socket pair (non-blocking both ways)."""
+        self._r, self._w = socket.socketpair()
+        self._r.setblocking(False)
+        self._w.setblocking(False)
+        self._pending = False
+        self._closed = False
+
+    def wake(self) -> None:
+        """Signal the loop, unless a wake-up is already pending (any thread, non-blocking)."""
+        if not self._pending and not self._closed:
+            self._pending = True
+            with contextlib.suppress(OSError):  # full buffer: a wake-up is queued anyway
+                self._w.send(b"\0")
+
+    def rearm(self) -> None:
+        """Let the next :meth:`wake` signal again: call it *before* draining the queue,
+        so nothing queued after the drain goes unnoticed."""
+        self._pending = False
+
+    async def wait(self) -> None:
+        """Wait until :meth:`wake` was called, then consume the signal."""
+        await anyio.wait_readable(self._r)
+        with contextlib.suppress(BlockingIOError):
+            self._r.recv(4096)
+
+    def close(self) -> None:
+        """Close both sockets (later :meth:`wake` calls do nothing)."""
+        self._closed = True
+        self._pending = False
+        self._r.close()
+        self._w.close()

@@ -1,0 +1,33 @@
+"""Carry a :class:`~tfbus.bus.Bus`'s ``/tf`` and ``/tf_static`` to and from ROS 2 over DDS.
+
+::
+
+    from tfbus.bus import Bus
+    from tfbus.transports.ros2 import Ros2Transport
+
+    async with Bus(transport=Ros2Transport(domain_id=0)) as bus:   # this machine only
+        ...
+
+Needs the ``tfbus[ros2]`` extra (``cyclonedds``). One module per concern, as every
+transport package (``docs/architecture.md``, "Adding a transport"):
+
+* :mod:`~tfbus.transports.ros2.transport` -- :class:`Ros2Transport` and
+  :class:`Ros2Statistics` (QoS, threads, receive path);
+* :mod:`~tfbus.transports.ros2.options` -- the ``ros2`` bus spec
+  (:func:`~tfbus.transports.ros2.options.transport_from_spec`);
+* :mod:`~tfbus.transports.ros2.dds` -- DDS topic and type names, the ``IdlStruct`` types,
+  :func:`cyclone_config`.
+
+The samples are (de)serialised by :mod:`tfbus.codecs.cdr`.
+"""
+
+from tfbus.transports.ros2.dds import DOMAIN_ID_MAX, cyclone_config
+from tfbus.transports.ros2.transport import TF_TYPE_HASH, Ros2Statistics, Ros2Transport
+
+__all__ = [
+    "DOMAIN_ID_MAX",
+    "TF_TYPE_HASH",
+    "Ros2Statistics",
+    "Ros2Transport",
+    "cyclone_config",
+]
