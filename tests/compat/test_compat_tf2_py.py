@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from test_chain import SYSTEM_PYTHON, have_tf2_py, run_side
+from tf2_py_harness import SYSTEM_PYTHON, have_tf2_py, run_side
 
 from tfbus import Time, TransformException, TransformStamped
 from tfbus.compat import tf2_py

@@ -4,13 +4,11 @@ tf2_py 0.7.6 ``BufferCore._chain`` returns it (run in a side process under
 
 from __future__ import annotations
 
-import json
 import random
-import subprocess
-from pathlib import Path
 from typing import Any
 
 import pytest
+from tf2_py_harness import have_tf2_py, run_side
 
 from tfbus import (
     BufferCore,
@@ -26,29 +24,7 @@ from tfbus import (
     Vector3,
 )
 
-HERE = Path(__file__).resolve().parents[1]  # tests/
-SIDE = HERE / "peers" / "tf2_py_side.py"
-SYSTEM_PYTHON = "/usr/bin/python3"
 SEC = 1_000_000_000
-
-
-def have_tf2_py() -> bool:
-    """Whether Debian's python3-tf2 can be imported by the system interpreter."""
-    try:
-        r = subprocess.run([SYSTEM_PYTHON, "-c", "import tf2_py, rospy"], capture_output=True,
-                           timeout=60, check=False)
-    except (OSError, subprocess.TimeoutExpired):
-        return False
-    return r.returncode == 0
-
-
-def run_side(ops: list[list[Any]], cache_time_s: float = 10.0) -> list[dict[str, Any]]:
-    """Run ``ops`` on the real tf2_py; one decoded JSON answer per call."""
-    r = subprocess.run([SYSTEM_PYTHON, str(SIDE)],
-                       input=json.dumps({"cache_time_s": cache_time_s, "ops": ops}),
-                       capture_output=True, text=True, timeout=300, check=True)
-    return [json.loads(line) for line in r.stdout.splitlines()]
-
 
 needs_tf2_py = pytest.mark.skipif(not have_tf2_py(), reason="Debian python3-tf2 not installed")
 
