@@ -48,9 +48,9 @@ LAYERS: dict[str, int] = {
     "listener": 3,
     "broadcaster": 3,
     "fleet": 3,
+    "monitor": 3,  # tf_monitor's summaries over a sink (bag/ and cli/ use them)
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
-    "monitor": 4,
     "filters": 4,
     "laser": 4,
     "robot": 4,
@@ -73,13 +73,9 @@ ONLY_IMPORTS: dict[str, set[str]] = {
 
 SIDEWAYS_LAYER: int = 4
 """The layer whose packages are siblings: each may import only lower layers, never another
-package of its own layer (bag, transports, compat, monitor, filters, laser, robot...)."""
+package of its own layer (bag, transports, compat, filters, laser, robot)."""
 
 SIDEWAYS_PENDING: dict[tuple[str, str], str] = {
-    ("bag", "monitor"): "bag/summary.py builds its tf_monitor table with monitor's "
-    "statistics; to be resolved by the tree helper's statistics vocabulary (issue 26)",
-    ("robot_state", "urdf"): "robot_state_publisher reads URDF: one tfbus/robot/ package "
-    "(issue 26, tree helper)",
 }
 """Known sideways imports between layer-4 packages being removed elsewhere, with why. An
 entry whose packages both still exist but no longer import sideways fails the test."""
@@ -94,11 +90,6 @@ WALL_CLOCK_PENDING: dict[str, str] = {
 offends fails the test, so the list cannot go stale."""
 
 ERRORS_ELSEWHERE_PENDING: dict[str, str] = {
-    "SchemaParseError": "bag/decode.py: the codecs move (helper 'transports', issue 26)",
-    "BadReply": "transports/ros1/rpc.py: the transports move (helper 'transports', issue 26)",
-    "CallFailed": "transports/ros1/rpc.py: the transports move (helper 'transports', issue 26)",
-    "_TooDeep": "transports/ros1/rpc.py: the transports move (helper 'transports', issue 26)",
-    "PortInUseError": "view/server.py (helper 'view', issue 26)",
 }
 """Exception classes still defined outside ``tfbus/errors.py``, each with where it is and
 who moves it. An entry whose class is no longer found outside errors.py fails the test, so

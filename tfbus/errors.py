@@ -169,6 +169,12 @@ class BagFormatError(BagError, ValueError):
     """The path exists but is not a bag format tfbus reads (also a :class:`ValueError`)."""
 
 
+class SchemaParseError(ValueError):
+    """A message definition stored in a bag does not parse: the message names the type
+    and the first line that does not (one short line, never the whole definition;
+    :mod:`tfbus.bag.decode`)."""
+
+
 class BagReadError(BagError):
     """A truncated or corrupt bag: reading stopped part-way.
 
@@ -250,3 +256,28 @@ class TransportError(TfbusError):
     failed (Zenoh's ``ZError``, a DDS or ROS 1 master error, ...), mapped to this class so
     callers never match on another library's exception types. The original error is the
     ``__cause__``."""
+
+
+class BadReply(TransportError):
+    """A ROS 1 peer answered, but not with ROS XML-RPC: not HTTP 200, not XML, nested too
+    deep, too large, an XML-RPC fault, or a value of the wrong shape
+    (:mod:`tfbus.transports.ros1.rpc`)."""
+
+
+class CallFailed(TransportError):
+    """A well-formed ROS 1 XML-RPC answer whose code is not 1 (``-1`` error, ``0``
+    failure): the peer refused the call, e.g. ``lookupNode`` of a node the master does not
+    know (:mod:`tfbus.transports.ros1.rpc`).
+
+    Attributes:
+        code: the answer's status code, as received.
+    """
+
+    def __init__(self, message: str, code: object) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class PortInUseError(OSError):
+    """The port asked of ``tfbus view`` is taken (viser would silently move to the next
+    one): :mod:`tfbus.view.server`."""

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Final, NamedTuple
 from tfbus.codecs.cdr import decode_tf_message
 from tfbus.codecs.ros1 import TF_MD5SUM as ROS1_TF_MD5
 from tfbus.codecs.ros1 import decode_ros1, from_rosbags, tf_typestore
+from tfbus.errors import SchemaParseError
 from tfbus.messages import TransformStamped
 
 if TYPE_CHECKING:
@@ -53,11 +54,6 @@ def _decode_cdr(raw: bytes | memoryview) -> Sequence[TransformStamped]:
         WireDecodeError: the payload is not a whole TFMessage.
     """
     return decode_tf_message(raw).transforms
-
-
-class SchemaParseError(ValueError):
-    """A message definition stored in a bag does not parse: the message names the type
-    and the first line that does not (one short line, never the whole definition)."""
 
 
 _SHOWN_LINE = 60  # characters of the bad line quoted in a SchemaParseError

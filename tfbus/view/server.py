@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
 from tfbus.view.robot import LinkVisual
@@ -52,10 +53,6 @@ def text(frame_id: object) -> str:
 
 def _h(value: object) -> str:
     return html.escape(text(value), quote=True)
-
-
-class PortInUseError(OSError):
-    """The port asked for is taken (viser would silently move to the next one)."""
 
 
 def _check_port(host: str, port: int) -> None:

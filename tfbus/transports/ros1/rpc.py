@@ -26,7 +26,7 @@ import anyio.abc
 from anyio.streams.stapled import MultiListener
 
 from tfbus.codecs.ros1 import TF_TYPE
-from tfbus.errors import TransportError
+from tfbus.errors import BadReply, CallFailed, TransportError
 
 __all__ = [
     "MAX_XMLRPC_BYTES",
@@ -56,24 +56,6 @@ SLAVE_REQUEST_TIMEOUT: Final = 5.0
 _MAX_HTTP_HEAD: Final = 16 * 1024
 
 
-class BadReply(TransportError):
-    """A peer answered, but not with ROS XML-RPC: not HTTP 200, not XML, nested too deep,
-    too large, an XML-RPC fault, or a value of the wrong shape."""
-
-
-class CallFailed(TransportError):
-    """A well-formed ROS answer whose code is not 1 (``-1`` error, ``0`` failure): the
-    peer refused the call, e.g. ``lookupNode`` of a node the master does not know."""
-
-    def __init__(self, message: str, code: object) -> None:
-        super().__init__(message)
-        self.code = code
-
-
-class _TooDeep(Exception):
-    pass
-
-
 class _BoundedUnmarshaller(xmlrpc.client.Unmarshaller):
     """The standard unmarshaller, refusing nesting deeper than ``max_depth`` elements
     (it keeps its own stack, but a deep value breaks ``repr`` and comparisons later)."""
@@ -86,7 +68,7 @@ class _BoundedUnmarshaller(xmlrpc.client.Unmarshaller):
     def start(self, tag: str, attrs: dict[str, str]) -> None:
         self._depth += 1
         if self._depth > self._max_depth:
-            raise _TooDeep(f"elements nested deeper than {self._max_depth}")
+            raise ValueError(f"elements nested deeper than {self._max_depth}")
         super().start(tag, attrs)
 
     def end(self, tag: str) -> None:
