@@ -106,3 +106,48 @@ async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> Non
         assert page.clouds["/scan"].visible
         tg.cancel_scope.cancel()
     buffer.close()
+
+
+async def test_live_view_draws_scans_from_another_zenoh_bus(page: TfPage) -> None:
+    """``tfbus view --bus zenoh --scan /scan`` across processes (issue 24): a LaserScan
+    published on one Zenoh bus is drawn by a LiveView following another, on 127.0.0.1
+    (no scouting), exactly as the same scan projected in-process."""
+    pytest.importorskip("zenoh")
+    import socket
+
+    from tfbus.transports.zenoh import ZenohTransport
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
+    feed = view.feeds["/scan"]
+    robot = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot")
+    viewer = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="viewer")
+    async with Bus(transport=robot) as a, Bus(transport=viewer) as b, \
+            TransformListener(sink, b, clock=clock), anyio.create_task_group() as tg:
+        await tg.start(view.follow, b)
+        with anyio.fail_after(5):
+            await robot.wait_matching("/scan")
+            await robot.wait_matching("/tf")
+        tfb = TransformBroadcaster(a)
+        await tfb.send_transform(odom_to_laser(10.0, 1.0))
+        await tfb.send_transform(odom_to_laser(10.2, 3.0))
+        await until(lambda: stats.messages.get("/tf", 0) == 2)
+        assert view.render().fixed_frame == "odom"
+        await a.publish("/scan", scan(10.1))
+        with anyio.fail_after(5):
+            await view.wait_passed("/scan", 1)
+        view.render()
+        assert (feed.received, feed.passed, feed.bad, feed.drawn) == (1, 1, 0, 1)
+        drawn = np.asarray(page.clouds["/scan"].points)
+        np.testing.assert_allclose(drawn, [[3.0, 0.0, 0.0], [2.1, 2.0, 0.0], [-0.8, 0.0, 0.0]],
+                                   atol=1e-5)
+        ref = LaserProjection().transform_laser_scan_to_point_cloud("odom", scan(10.1), buffer)
+        np.testing.assert_array_equal(drawn, xyz(ref).astype(np.float32))
+        tg.cancel_scope.cancel()
+    buffer.close()
