@@ -841,3 +841,70 @@ def test_cli_static_transform_over_ros1_reaches_tf_echo(master: Master) -> None:
     finally:
         echo.stop()
         assert proc.stop(signal.SIGTERM) == 0
+
+
+# --------------------------------------------------- sensor_msgs/LaserScan (issue 24)
+
+SCAN_YAML = (
+    "{header: {seq: 0, stamp: {secs: 10, nsecs: 100000000}, frame_id: base_laser}, "
+    "angle_min: 0.0, angle_max: 3.14159265, angle_increment: 1.57079633, "
+    "time_increment: 0.01, scan_time: 0.1, range_min: 0.1, range_max: 10.0, "
+    "ranges: [1.0, 2.0, 3.0, .nan, .inf], intensities: [5.0, 6.5, 7.0, 0.0, 1.0]}"
+)
+"""One LaserScan as ``rostopic pub`` takes it (YAML): five beams, a NaN and an inf."""
+
+
+def rostopic_scan_publisher(master: Master, topic: str = "/scan") -> Proc:
+    """Debian's ``rostopic pub`` (rospy, genpy's serialiser) publishing SCAN_YAML at 5 Hz."""
+    return master.run("rostopic", "pub", "-r", "5", topic, "sensor_msgs/LaserScan", "--",
+                      SCAN_YAML)
+
+
+def assert_is_the_yaml_scan(got: object) -> None:
+    import numpy as np
+
+    from tfbus.sensor_msgs import LaserScan
+
+    assert type(got) is LaserScan
+    assert got.header == Header(Time.from_ns(10_100_000_000), "base_laser")
+    f32 = np.float32
+    assert (got.angle_min, got.angle_max, got.angle_increment, got.time_increment,
+            got.scan_time, got.range_min, got.range_max) == tuple(
+        float(f32(v)) for v in (0.0, 3.14159265, 1.57079633, 0.01, 0.1, 0.1, 10.0))
+    # PyYAML's .nan is -inf/inf: x86's default NaN, sign bit set; compared as a NaN
+    assert np.isnan(got.ranges[3]) and got.ranges.dtype == f32 and len(got.ranges) == 5
+    want = np.array([1.0, 2.0, 3.0, np.inf], dtype=f32)
+    assert got.ranges[[0, 1, 2, 4]].tobytes() == want.tobytes()
+    assert got.intensities.tobytes() == np.array([5.0, 6.5, 7.0, 0.0, 1.0], f32).tobytes()
+
+
+async def test_rostopic_laser_scans_reach_the_bus(master: Master) -> None:
+    """A real ROS 1 publisher (``rostopic pub sensor_msgs/LaserScan``) → a tfbus bus with
+    ``scan_topics=["/scan"]``: delivered as tfbus LaserScans, equal value for value;
+    the master knows this node subscribes with the LaserScan type."""
+    transport = Ros1Transport(master_uri=master.uri, scan_topics=["/scan"])
+    assert transport.subscriptions() == ("/tf", "/tf_static", "/scan")
+    publisher = rostopic_scan_publisher(master)
+    try:
+        async with Bus(transport=transport) as bus:
+            sub = bus.subscribe("/scan")
+            with anyio.fail_after(40):
+                got = await sub.receive()
+            assert_is_the_yaml_scan(got)
+            state = master.call("getSystemState", "/tfbus_test")
+            assert [transport.node_name] in [s[1] for s in state[1] if s[0] == "/scan"]  # type: ignore[index]
+            types = dict(master.call("getTopicTypes", "/tfbus_test"))  # type: ignore[arg-type]
+            assert types["/scan"] == "sensor_msgs/LaserScan"
+    finally:
+        publisher.stop()
+    stats = transport.statistics()
+    assert stats.malformed == 0 and stats.delivered >= 1
+
+
+def test_scan_topics_are_checked() -> None:
+    with pytest.raises(ValueError, match="'/tf' is already carried"):
+        Ros1Transport(scan_topics=["/tf"])
+    with pytest.raises(ValueError, match="'scan' is not a global ROS graph name"):
+        Ros1Transport(scan_topics=["scan"])
+    assert Ros1Transport(scan_topics=["/scan", "/scan"]).subscriptions() == (
+        "/tf", "/tf_static", "/scan")
