@@ -28,8 +28,10 @@ from hypothesis import strategies as st
 from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures)
     Master,
     Proc,
+    assert_is_the_yaml_scan,
     master_fixture,
     ros1_fixture,
+    rostopic_scan_publisher,
     tfbus_cli,
     tutorial_nodes_fixture,
 )
@@ -845,39 +847,6 @@ def test_cli_static_transform_over_ros1_reaches_tf_echo(master: Master) -> None:
 
 # --------------------------------------------------- sensor_msgs/LaserScan (issue 24)
 
-SCAN_YAML = (
-    "{header: {seq: 0, stamp: {secs: 10, nsecs: 100000000}, frame_id: base_laser}, "
-    "angle_min: 0.0, angle_max: 3.14159265, angle_increment: 1.57079633, "
-    "time_increment: 0.01, scan_time: 0.1, range_min: 0.1, range_max: 10.0, "
-    "ranges: [1.0, 2.0, 3.0, .nan, .inf], intensities: [5.0, 6.5, 7.0, 0.0, 1.0]}"
-)
-"""One LaserScan as ``rostopic pub`` takes it (YAML): five beams, a NaN and an inf."""
-
-
-def rostopic_scan_publisher(master: Master, topic: str = "/scan") -> Proc:
-    """Debian's ``rostopic pub`` (rospy, genpy's serialiser) publishing SCAN_YAML at 5 Hz."""
-    return master.run("rostopic", "pub", "-r", "5", topic, "sensor_msgs/LaserScan", "--",
-                      SCAN_YAML)
-
-
-def assert_is_the_yaml_scan(got: object) -> None:
-    import numpy as np
-
-    from tfbus.sensor_msgs import LaserScan
-
-    assert type(got) is LaserScan
-    assert got.header == Header(Time.from_ns(10_100_000_000), "base_laser")
-    f32 = np.float32
-    assert (got.angle_min, got.angle_max, got.angle_increment, got.time_increment,
-            got.scan_time, got.range_min, got.range_max) == tuple(
-        float(f32(v)) for v in (0.0, 3.14159265, 1.57079633, 0.01, 0.1, 0.1, 10.0))
-    # PyYAML's .nan is -inf/inf: x86's default NaN, sign bit set; compared as a NaN
-    assert np.isnan(got.ranges[3]) and got.ranges.dtype == f32 and len(got.ranges) == 5
-    want = np.array([1.0, 2.0, 3.0, np.inf], dtype=f32)
-    assert got.ranges[[0, 1, 2, 4]].tobytes() == want.tobytes()
-    assert got.intensities.tobytes() == np.array([5.0, 6.5, 7.0, 0.0, 1.0], f32).tobytes()
-
-
 async def test_rostopic_laser_scans_reach_the_bus(master: Master) -> None:
     """A real ROS 1 publisher (``rostopic pub sensor_msgs/LaserScan``) → a tfbus bus with
     ``scan_topics=["/scan"]``: delivered as tfbus LaserScans, equal value for value;
@@ -908,3 +877,21 @@ def test_scan_topics_are_checked() -> None:
         Ros1Transport(scan_topics=["scan"])
     assert Ros1Transport(scan_topics=["/scan", "/scan"]).subscriptions() == (
         "/tf", "/tf_static", "/scan")
+
+
+def test_bus_specs_pass_scan_topics_to_ros1_only() -> None:
+    """``tfbus view --bus ros1 --scan /scan`` opens a ROS 1 node subscribed to /scan
+    (the CLI's open_spec_transport -> spec.open_transport -> the ros1 factory); Zenoh and
+    memory carry every topic and take no such option."""
+    from tfbus.cli._sources import BusSource, open_spec_transport
+    from tfbus.transports.spec import parse_bus_spec
+
+    ros1 = open_spec_transport(parse_bus_spec("ros1"), name="tfbus-view", scan_topics=["/scan"])
+    assert isinstance(ros1, Ros1Transport)
+    assert ros1.subscriptions() == ("/tf", "/tf_static", "/scan")
+    assert ros1.topic_type("/scan") == "sensor_msgs/LaserScan"
+    assert ros1.topic_type("/tf") == "tf2_msgs/TFMessage"
+    plain = open_transport("ros1")
+    assert isinstance(plain, Ros1Transport) and plain.subscriptions() == ("/tf", "/tf_static")
+    assert open_transport("memory", scan_topics=["/scan"]) is not None
+    assert BusSource("ros1", scan_topics=["/scan"]).scan_topics == ("/scan",)

@@ -13,6 +13,8 @@ import pytest
 
 pytest.importorskip("viser")
 
+from ros1_harness import master_fixture, ros1_fixture  # noqa: F401  (registers fixtures)
+
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
@@ -151,3 +153,50 @@ async def test_live_view_draws_scans_from_another_zenoh_bus(page: TfPage) -> Non
         np.testing.assert_array_equal(drawn, xyz(ref).astype(np.float32))
         tg.cancel_scope.cancel()
     buffer.close()
+
+
+async def test_live_view_draws_a_real_ros1_laser(master: Any) -> None:
+    """``tfbus view --bus ros1 --scan /scan`` (issue 24): Debian's ``rostopic pub``
+    publishes a sensor_msgs/LaserScan and tf2_ros's static_transform_publisher the laser's
+    pose on a loopback roscore; the bus opened from the spec with the scan topic receives
+    both and the LiveView draws the scan where laser_geometry puts it."""
+    pytest.importorskip("rosbags")
+    from ros1_harness import assert_is_the_yaml_scan, rostopic_scan_publisher
+
+    from tfbus.transports.spec import open_bus
+
+    page = TfPage("127.0.0.1", 0)
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
+    feed = view.feeds["/scan"]
+    static = master.run("rosrun", "tf2_ros", "static_transform_publisher", "1", "0", "0",
+                        "0", "0", "0", "1", "odom", "base_laser")
+    laser = rostopic_scan_publisher(master)
+    try:
+        async with open_bus("ros1", default_name="tfbus-view", scan_topics=["/scan"]) as bus, \
+                TransformListener(sink, bus, clock=clock), anyio.create_task_group() as tg:
+            raw = bus.subscribe("/scan")
+            await tg.start(view.follow, bus)
+            await buffer.wait_for_transform("odom", "base_laser", Time(0), timeout=40.0)
+            assert view.render().fixed_frame == "odom"
+            with anyio.fail_after(40):
+                got = await raw.receive()
+                await view.wait_passed("/scan", 1)
+            assert_is_the_yaml_scan(got)
+            view.render()
+            assert feed.drawn == 1 and feed.error is None and feed.bad == 0
+            drawn = np.asarray(page.clouds["/scan"].points)
+            # beams at 0, 90, 180 degrees (float32 angles); NaN and inf are not drawn
+            np.testing.assert_allclose(drawn, [[2.0, 0.0, 0.0], [1.0, 2.0, 0.0],
+                                               [-2.0, 0.0, 0.0]], atol=1e-5)
+            ref = LaserProjection().transform_laser_scan_to_point_cloud("odom", got, buffer)
+            np.testing.assert_array_equal(drawn, xyz(ref).astype(np.float32))
+            tg.cancel_scope.cancel()
+    finally:
+        laser.stop()
+        static.stop()
+        buffer.close()
+        page.close()
