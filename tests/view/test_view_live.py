@@ -200,3 +200,50 @@ async def test_live_view_draws_a_real_ros1_laser(master: Any) -> None:
         static.stop()
         buffer.close()
         page.close()
+
+
+def test_command_view_bus_ros1_subscribes_to_the_scan(master: Any) -> None:
+    """``tfbus view --bus ros1 --scan /scan`` as a process on a loopback roscore: its node
+    registers as a subscriber of /scan, and its slave API lists /scan as a
+    sensor_msgs/LaserScan subscription (the type rostopic's publisher must match);
+    SIGINT ends it with status 0."""
+    import select
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+    import xmlrpc.client
+    from pathlib import Path
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    exe = Path(sys.executable).with_name("tfbus")
+    proc = subprocess.Popen([str(exe), "view", "--bus", "ros1", "--scan", "/scan",
+                             "--port", str(port)], env=master.env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
+        assert ready, "tfbus view printed nothing in 60 s"
+        assert proc.stderr.readline().strip() == f"tfbus view: http://127.0.0.1:{port}/"
+        nodes: list[str] = []
+        deadline = time.monotonic() + 40
+        while not nodes and time.monotonic() < deadline:  # bounded: registration
+            subs = master.call("getSystemState", "/tfbus_test")[1]
+            nodes = [n for t, ns in subs if t == "/scan" for n in ns]
+            if not nodes:
+                time.sleep(0.1)
+        assert len(nodes) == 1 and nodes[0].startswith("/tfbus_view_")
+        api = master.call("lookupNode", "/tfbus_test", nodes[0])
+        code, _, subscribed = xmlrpc.client.ServerProxy(api).getSubscriptions("/tfbus_test")
+        assert code == 1
+        assert ["/scan", "sensor_msgs/LaserScan"] in subscribed
+        assert ["/tf", "tf2_msgs/TFMessage"] in subscribed
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
