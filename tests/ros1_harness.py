@@ -258,3 +258,41 @@ def tfbus_cli(master: Master, *args: str) -> Proc:
     env["PYTHONIOENCODING"] = "utf-8"
     env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env["PATH"]
     return Proc([sys.executable, "-m", "tfbus.cli", *args], env, cwd=ROOT)
+
+
+# -- sensor_msgs/LaserScan from Debian's rostopic (issue 24) -------------------------
+
+SCAN_YAML = (
+    "{header: {seq: 0, stamp: {secs: 10, nsecs: 100000000}, frame_id: base_laser}, "
+    "angle_min: 0.0, angle_max: 3.14159265, angle_increment: 1.57079633, "
+    "time_increment: 0.01, scan_time: 0.1, range_min: 0.1, range_max: 10.0, "
+    "ranges: [1.0, 2.0, 3.0, .nan, .inf], intensities: [5.0, 6.5, 7.0, 0.0, 1.0]}"
+)
+"""One LaserScan as ``rostopic pub`` takes it (YAML): five beams, a NaN and an inf."""
+
+
+def rostopic_scan_publisher(master: Master, topic: str = "/scan") -> Proc:
+    """Debian's ``rostopic pub`` (rospy, genpy's serialiser) publishing SCAN_YAML at 5 Hz."""
+    return master.run("rostopic", "pub", "-r", "5", topic, "sensor_msgs/LaserScan", "--",
+                      SCAN_YAML)
+
+
+def assert_is_the_yaml_scan(got: object) -> None:
+    """``got`` is SCAN_YAML's scan as a tfbus LaserScan, value for value (float32)."""
+    import numpy as np
+
+    from tfbus.messages import Header
+    from tfbus.sensor_msgs import LaserScan
+    from tfbus.time import Time
+
+    assert type(got) is LaserScan
+    assert got.header == Header(Time.from_ns(10_100_000_000), "base_laser")
+    f32 = np.float32
+    assert (got.angle_min, got.angle_max, got.angle_increment, got.time_increment,
+            got.scan_time, got.range_min, got.range_max) == tuple(
+        float(f32(v)) for v in (0.0, 3.14159265, 1.57079633, 0.01, 0.1, 0.1, 10.0))
+    # PyYAML's .nan is -inf/inf: x86's default NaN, sign bit set; compared as a NaN
+    assert np.isnan(got.ranges[3]) and got.ranges.dtype == f32 and len(got.ranges) == 5
+    want = np.array([1.0, 2.0, 3.0, np.inf], dtype=f32)
+    assert got.ranges[[0, 1, 2, 4]].tobytes() == want.tobytes()
+    assert got.intensities.tobytes() == np.array([5.0, 6.5, 7.0, 0.0, 1.0], f32).tobytes()

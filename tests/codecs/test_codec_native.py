@@ -259,3 +259,69 @@ def test_depth_walk_agrees_with_msgpack(value: Any) -> None:
 
     data = _packb(value)
     assert check_depth(data + b"\x01", 0, 1000) == len(data)
+
+
+# -- sensor_msgs/LaserScan (issue 24: scans between processes) ---------------------------
+
+
+def _scan(n: int = 5) -> Any:
+    import numpy as np
+
+    from tfbus.sensor_msgs import LaserScan
+
+    ranges = np.array([0.5, float("nan"), float("inf"), 1e-3, 7.25][:n], dtype=np.float32)
+    # a NaN with a payload: only a bit-for-bit copy keeps it
+    ranges = np.concatenate([ranges, np.array([0x7FC01234], dtype=np.uint32).view(np.float32)])
+    return LaserScan(header=Header(Time.from_ns(1_700_000_000_123_456_789), "base_laser"),
+                     angle_min=-1.5, angle_max=1.5, angle_increment=0.1, time_increment=1e-4,
+                     scan_time=0.1, range_min=0.05, range_max=30.0, ranges=ranges,
+                     intensities=np.arange(len(ranges), dtype=np.float32) * 0.5)
+
+
+def test_wire_laser_scan_round_trip_bit_for_bit() -> None:
+    import numpy as np
+
+    from tfbus.sensor_msgs import LaserScan
+
+    codec = wire.WireCodec()
+    scan = _scan()
+    out = codec.decode(codec.encode(scan, sender=9, seq=4))
+    assert (out.sender, out.seq) == (9, 4)
+    got = out.message
+    assert type(got) is LaserScan
+    assert got.header == scan.header and type(got.header.stamp) is Time
+    for name in ("angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+                 "range_min", "range_max"):
+        assert getattr(got, name) == getattr(scan, name), name
+    for name in ("ranges", "intensities"):
+        a, b = getattr(got, name), getattr(scan, name)
+        assert a.dtype == np.float32 and a.shape == b.shape
+        assert a.tobytes() == b.tobytes(), name
+        a[0] = 1.0  # a writable copy of its own, not a view of the payload
+    empty = codec.decode(codec.encode(LaserScan(), sender=1, seq=1)).message
+    assert type(empty) is LaserScan and len(empty.ranges) == 0 and len(empty.intensities) == 0
+
+
+def test_wire_laser_scan_limits_and_damage() -> None:
+    codec = wire.WireCodec(wire.WireLimits(max_scan_beams=6, max_frame_id_length=10))
+    ok = codec.encode(_scan(), sender=1, seq=1)  # 6 beams: at the bound
+    assert len(codec.decode(ok).message.ranges) == 6  # type: ignore[attr-defined]
+    with pytest.raises(wire.WireLimitError, match="length <= 24"):
+        codec.decode(wire.WireCodec().encode(
+            type(_scan())(ranges=[1.0] * 7), sender=1, seq=1))
+    with pytest.raises(wire.WireLimitError):
+        codec.decode(wire.WireCodec().encode(
+            type(_scan())(header=Header(Time(1), "x" * 11)), sender=1, seq=1))
+    # ranges of 23 bytes: not a whole number of float32s
+    odd = ok.replace(b"\xc4\x18", b"\xc4\x17", 1)
+    odd = odd[: odd.index(b"\xc4\x17") + 2 + 23] + odd[odd.index(b"\xc4\x17") + 2 + 24:]
+    with pytest.raises(wire.WireDecodeError, match="ranges"):
+        codec.decode(odd)
+    for cut in (3, 10, len(ok) // 2, len(ok) - 1):
+        with pytest.raises(wire.WireDecodeError):
+            codec.decode(ok[:cut])
+    wrong_type = ok.replace(b"\xaabase_laser", b"\x2a" + b"\xc0" * 10, 1)  # frame_id an int
+    with pytest.raises(wire.WireDecodeError):
+        codec.decode(wrong_type)
+    with pytest.raises(ValueError, match="reserved"):
+        wire.register_message_type(dict, "LaserScan")

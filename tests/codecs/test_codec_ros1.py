@@ -118,3 +118,75 @@ def test_repeated_frame_ids_are_the_earlier_strs_and_a_changed_id_is_new() -> No
     assert [changed[0].header.frame_id, changed[0].child_frame_id] == ["odo", "bench_2"]
     back = dec._compiled_ros1(codec.encode([_ts("map", "bench_1", 4, v)]))
     assert back[0].child_frame_id == "bench_1" and back[0].header.frame_id == "map"
+
+
+# -- sensor_msgs/LaserScan (issue 24: a real ROS 1 laser in tfbus view) ------------------
+
+
+def _rosbags_scan(n: int, m: int) -> tuple[bytes, object]:
+    """A ROS 1 LaserScan serialised by rosbags (the reference), and the message."""
+    import numpy as np
+
+    store = dec.tf_typestore(ros1=True)
+    t = store.types
+    ranges = np.linspace(0.25, 9.75, n, dtype=np.float32)
+    if n > 2:
+        ranges[1] = np.nan
+        ranges[2] = np.inf
+    msg = t["sensor_msgs/msg/LaserScan"](
+        header=t["std_msgs/msg/Header"](seq=7, stamp=t["builtin_interfaces/msg/Time"](
+            sec=1_700_000_000, nanosec=123_456_789), frame_id="base_laser"),
+        angle_min=np.float32(-2.0), angle_max=np.float32(2.0),
+        angle_increment=np.float32(4.0 / max(n - 1, 1)), time_increment=np.float32(1e-4),
+        scan_time=np.float32(0.1), range_min=np.float32(0.05), range_max=np.float32(30.0),
+        ranges=ranges, intensities=np.arange(m, dtype=np.float32) * 0.5)
+    return bytes(store.serialize_ros1(msg, "sensor_msgs/msg/LaserScan")), msg
+
+
+def test_laser_scan_md5_and_definition_are_rosbags_and_debians() -> None:
+    # ``rosmsg md5 sensor_msgs/LaserScan`` on Debian's ros-sensor-msgs: 90c7ef2d...
+    assert dec.SCAN_MD5SUM == "90c7ef2dc6895d81024acba2ac42f369"
+    assert dec.SCAN_TYPE == "sensor_msgs/LaserScan"
+    definition = dec.scan_definition()
+    assert definition.startswith("std_msgs/Header header\nfloat32 angle_min\n")
+    assert "MSG: std_msgs/Header\nuint32 seq\ntime stamp\nstring frame_id" in definition
+
+
+@pytest.mark.parametrize(("n", "m"), [(0, 0), (1, 0), (5, 5), (720, 0), (360, 360)])
+def test_laser_scan_decoder_equals_rosbags(n: int, m: int) -> None:
+    import numpy as np
+
+    from tfbus.sensor_msgs import LaserScan
+
+    raw, msg = _rosbags_scan(n, m)
+    got = dec.decode_laser_scan(raw)
+    assert type(got) is LaserScan
+    assert got.header == Header(Time.from_ns(1_700_000_000_123_456_789), "base_laser")
+    for name in ("angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+                 "range_min", "range_max"):
+        assert getattr(got, name) == float(getattr(msg, name)), name
+    assert got.ranges.dtype == np.float32 and got.intensities.dtype == np.float32
+    assert got.ranges.tobytes() == msg.ranges.tobytes()  # type: ignore[attr-defined]
+    assert got.intensities.tobytes() == msg.intensities.tobytes()  # type: ignore[attr-defined]
+    got.ranges[:] = 0.0  # its own writable copy
+    assert dec.decode_laser_scan(memoryview(raw)).ranges.tobytes() == \
+        msg.ranges.tobytes()  # type: ignore[attr-defined]
+
+
+def test_laser_scan_decoder_refuses_damage_and_bounds() -> None:
+    raw, _ = _rosbags_scan(5, 5)
+    for cut in range(len(raw)):  # every truncation, one clear error
+        with pytest.raises(WireDecodeError):
+            dec.decode_laser_scan(raw[:cut])
+    with pytest.raises(WireDecodeError, match="trailing"):
+        dec.decode_laser_scan(raw + b"\x00")
+    with pytest.raises(WireDecodeError, match="ranges: 5 beams exceed 4"):
+        dec.decode_laser_scan(raw, max_beams=4)
+    # ranges count claiming 2**32-1 beams: refused before any allocation
+    at = 16 + len("base_laser") + 28
+    huge = raw[:at] + struct.pack("<I", 2**32 - 1) + raw[at + 4:]
+    with pytest.raises(WireDecodeError, match="ranges"):
+        dec.decode_laser_scan(huge)
+    bad_utf8 = raw.replace(b"base_laser", b"base_lase\xff", 1)
+    with pytest.raises(WireDecodeError, match="frame_id"):
+        dec.decode_laser_scan(bad_utf8)

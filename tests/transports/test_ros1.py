@@ -10,6 +10,7 @@ each with a bound.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import signal
 import socket
@@ -28,8 +29,10 @@ from hypothesis import strategies as st
 from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures)
     Master,
     Proc,
+    assert_is_the_yaml_scan,
     master_fixture,
     ros1_fixture,
+    rostopic_scan_publisher,
     tfbus_cli,
     tutorial_nodes_fixture,
 )
@@ -841,3 +844,118 @@ def test_cli_static_transform_over_ros1_reaches_tf_echo(master: Master) -> None:
     finally:
         echo.stop()
         assert proc.stop(signal.SIGTERM) == 0
+
+
+# --------------------------------------------------- sensor_msgs/LaserScan (issue 24)
+
+async def test_rostopic_laser_scans_reach_the_bus(master: Master) -> None:
+    """A real ROS 1 publisher (``rostopic pub sensor_msgs/LaserScan``) → a tfbus bus with
+    ``scan_topics=["/scan"]``: delivered as tfbus LaserScans, equal value for value;
+    the master knows this node subscribes with the LaserScan type."""
+    transport = Ros1Transport(master_uri=master.uri, scan_topics=["/scan"])
+    assert transport.subscriptions() == ("/tf", "/tf_static", "/scan")
+    publisher = rostopic_scan_publisher(master)
+    try:
+        async with Bus(transport=transport) as bus:
+            sub = bus.subscribe("/scan")
+            with anyio.fail_after(40):
+                got = await sub.receive()
+            assert_is_the_yaml_scan(got)
+            state = master.call("getSystemState", "/tfbus_test")
+            assert [transport.node_name] in [s[1] for s in state[1] if s[0] == "/scan"]  # type: ignore[index]
+            types = dict(master.call("getTopicTypes", "/tfbus_test"))  # type: ignore[arg-type]
+            assert types["/scan"] == "sensor_msgs/LaserScan"
+    finally:
+        publisher.stop()
+    stats = transport.statistics()
+    assert stats.malformed == 0 and stats.delivered >= 1
+
+
+def test_scan_topics_are_checked() -> None:
+    with pytest.raises(ValueError, match="'/tf' is already carried"):
+        Ros1Transport(scan_topics=["/tf"])
+    with pytest.raises(ValueError, match="'scan' is not a global ROS graph name"):
+        Ros1Transport(scan_topics=["scan"])
+    assert Ros1Transport(scan_topics=["/scan", "/scan"]).subscriptions() == (
+        "/tf", "/tf_static", "/scan")
+
+
+def test_bus_specs_pass_scan_topics_to_ros1_only() -> None:
+    """``tfbus view --bus ros1 --scan /scan`` opens a ROS 1 node subscribed to /scan
+    (the CLI's open_spec_transport -> spec.open_transport -> the ros1 factory); Zenoh and
+    memory carry every topic and take no such option."""
+    from tfbus.cli._sources import BusSource, open_spec_transport
+    from tfbus.transports.spec import parse_bus_spec
+
+    ros1 = open_spec_transport(parse_bus_spec("ros1"), name="tfbus-view", scan_topics=["/scan"])
+    assert isinstance(ros1, Ros1Transport)
+    assert ros1.subscriptions() == ("/tf", "/tf_static", "/scan")
+    assert ros1.topic_type("/scan") == "sensor_msgs/LaserScan"
+    assert ros1.topic_type("/tf") == "tf2_msgs/TFMessage"
+    plain = open_transport("ros1")
+    assert isinstance(plain, Ros1Transport) and plain.subscriptions() == ("/tf", "/tf_static")
+    assert open_transport("memory", scan_topics=["/scan"]) is not None
+    assert BusSource("ros1", scan_topics=["/scan"]).scan_topics == ("/scan",)
+
+
+class _EvilScanPublisher(_EvilPublisher):
+    """A fake ROS 1 publisher of /scan: its header, one valid LaserScan (serialised by
+    rosbags), then a LaserScan claiming 2**32-1 beams in a 64-byte frame."""
+
+    def _serve(self) -> None:
+        import numpy as np
+
+        from tfbus.codecs.ros1 import SCAN_MD5SUM, tf_typestore
+
+        store = tf_typestore(ros1=True)
+        t = store.types
+        good = bytes(store.serialize_ros1(t["sensor_msgs/msg/LaserScan"](
+            header=t["std_msgs/msg/Header"](seq=1, stamp=t["builtin_interfaces/msg/Time"](
+                sec=3, nanosec=0), frame_id="evil_ok"),
+            angle_min=np.float32(0), angle_max=np.float32(1), angle_increment=np.float32(1),
+            time_increment=np.float32(0), scan_time=np.float32(0), range_min=np.float32(0),
+            range_max=np.float32(5), ranges=np.array([4.5, 2.25], np.float32),
+            intensities=np.zeros(0, np.float32)), "sensor_msgs/msg/LaserScan"))
+        bad = good[: 16 + 7 + 28] + struct.pack("<I", 2**32 - 1) + b"\x00" * 9
+        conn, _ = self.tcp.accept()
+        with conn:
+            conn.recv(65536)
+            conn.sendall(encode_header({"callerid": "/evil", "md5sum": SCAN_MD5SUM,
+                                        "type": "sensor_msgs/LaserScan", "topic": "/scan"}))
+            for msg in (good, bad):
+                conn.sendall(struct.pack("<I", len(msg)) + msg)
+            self.served.set()
+            conn.settimeout(5.0)
+            with contextlib.suppress(OSError):
+                while conn.recv(4096):
+                    pass
+
+    def __enter__(self) -> _EvilScanPublisher:
+        for t in self.threads:
+            t.start()
+        self.master.call("registerPublisher", "/evil", "/scan", "sensor_msgs/LaserScan",
+                         self.api_uri)
+        return self
+
+
+async def test_malformed_scan_closes_only_its_connection(master: Master) -> None:
+    """A damaged LaserScan from one publisher is counted and its connection closed; the
+    scan before it and the real rostopic publisher's scans are delivered."""
+    transport = Ros1Transport(master_uri=master.uri, scan_topics=["/scan"])
+    publisher = rostopic_scan_publisher(master)
+    try:
+        async with Bus(transport=transport) as bus:
+            sub = bus.subscribe("/scan", queue_size=1000)
+            with anyio.fail_after(40):
+                assert_is_the_yaml_scan(await sub.receive())
+            with _EvilScanPublisher(master, b"") as evil:
+                await anyio.to_thread.run_sync(evil.served.wait, 40.0)
+                frames: set[str] = set()
+                with anyio.fail_after(40):
+                    while "evil_ok" not in frames or transport.statistics().malformed < 1:
+                        frames.add((await sub.receive()).header.frame_id)
+                with anyio.fail_after(40):  # rostopic's connection keeps delivering
+                    assert_is_the_yaml_scan(await sub.receive())
+    finally:
+        publisher.stop()
+    assert transport.statistics().malformed == 1

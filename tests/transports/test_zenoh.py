@@ -245,6 +245,73 @@ async def test_malformed_payloads_are_dropped_and_counted() -> None:
             await anyio.to_thread.run_sync(session.close)
 
 
+def laser_scan(sec: float, n: int = 720) -> Any:
+    import numpy as np
+
+    from tfbus.sensor_msgs import LaserScan
+
+    ranges = np.linspace(0.2, 12.0, n, dtype=np.float32)
+    ranges[::7] = np.nan
+    ranges[3] = np.inf
+    return LaserScan(header=Header(Time.from_sec(sec), "base_laser"), angle_min=-3.14159,
+                     angle_max=3.14159, angle_increment=6.28318 / n, time_increment=1e-4,
+                     scan_time=0.1, range_min=0.1, range_max=30.0, ranges=ranges,
+                     intensities=np.arange(n, dtype=np.float32))
+
+
+@pytest.mark.anyio
+async def test_laser_scans_cross_bit_for_bit_and_bad_ones_are_dropped() -> None:
+    """A sensor_msgs/LaserScan published on one Zenoh bus arrives equal, bit for bit, on
+    another (issue 24); a damaged or oversized scan is counted and dropped, the next kept."""
+    from tfbus.sensor_msgs import LaserScan
+
+    port = free_port()
+    ta = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="laser")
+    tb = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="viewer",
+                        limits=wire.WireLimits(max_scan_beams=1000))
+    cfg, _ = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
+    async with Bus(transport=ta) as a, Bus(transport=tb) as b:
+        sub = b.subscribe("/scan", queue_size=10)
+        with anyio.fail_after(5):
+            await ta.wait_matching("/scan")
+        sent = laser_scan(12.5)
+        a.publish_nowait("/scan", sent)
+        with anyio.fail_after(5):
+            got = await sub.receive()
+        assert type(got) is LaserScan and got is not sent
+        assert got.header == sent.header
+        for name in ("angle_min", "angle_max", "angle_increment", "time_increment",
+                     "scan_time", "range_min", "range_max"):
+            assert getattr(got, name) == getattr(sent, name), name
+        assert got.ranges.tobytes() == sent.ranges.tobytes()
+        assert got.intensities.tobytes() == sent.intensities.tobytes()
+        assert len(got.ranges) == 720
+
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            raw = session.declare_publisher("tfbus/scan", congestion_control=BLOCK)
+            await wait_until(lambda: raw.matching_status.matching)
+            codec = wire.WireCodec()
+            good = codec.encode(laser_scan(13.0, 10), sender=77, seq=1)
+            at = good.index(b"\xc4\x28")  # ranges: bin 8 of 40 bytes
+            damaged = good[:at] + b"\xc4\x27" + good[at + 2 : at + 41] + good[at + 42 :]
+            too_long = codec.encode(laser_scan(13.0, 1001), sender=77, seq=2)
+            last = codec.encode(laser_scan(14.0, 10), sender=77, seq=3)
+            before = tb.statistics()
+            for payload in (damaged, too_long, good[:-5], last):
+                raw.put(payload)
+            with anyio.fail_after(5):
+                kept = await sub.receive()
+            assert kept.header.stamp == Time.from_sec(14.0)
+            assert kept.ranges.tobytes() == laser_scan(14.0, 10).ranges.tobytes()
+            stats = tb.statistics()
+            assert stats.malformed - before.malformed == 2
+            assert stats.over_limit - before.over_limit == 1
+            assert sub.statistics().queued == 0
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+
+
 @pytest.mark.anyio
 async def test_default_rendezvous_port_and_namespaces() -> None:
     port = free_port()  # stands in for DEFAULT_PORT: defaults, on a port of our own

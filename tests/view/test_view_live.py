@@ -13,6 +13,8 @@ import pytest
 
 pytest.importorskip("viser")
 
+from ros1_harness import master_fixture, ros1_fixture  # noqa: F401  (registers fixtures)
+
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
@@ -106,3 +108,142 @@ async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> Non
         assert page.clouds["/scan"].visible
         tg.cancel_scope.cancel()
     buffer.close()
+
+
+async def test_live_view_draws_scans_from_another_zenoh_bus(page: TfPage) -> None:
+    """``tfbus view --bus zenoh --scan /scan`` across processes (issue 24): a LaserScan
+    published on one Zenoh bus is drawn by a LiveView following another, on 127.0.0.1
+    (no scouting), exactly as the same scan projected in-process."""
+    pytest.importorskip("zenoh")
+    import socket
+
+    from tfbus.transports.zenoh import ZenohTransport
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
+    feed = view.feeds["/scan"]
+    robot = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot")
+    viewer = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="viewer")
+    async with Bus(transport=robot) as a, Bus(transport=viewer) as b, \
+            TransformListener(sink, b, clock=clock), anyio.create_task_group() as tg:
+        await tg.start(view.follow, b)
+        with anyio.fail_after(5):
+            await robot.wait_matching("/scan")
+            await robot.wait_matching("/tf")
+        tfb = TransformBroadcaster(a)
+        await tfb.send_transform(odom_to_laser(10.0, 1.0))
+        await tfb.send_transform(odom_to_laser(10.2, 3.0))
+        await until(lambda: stats.messages.get("/tf", 0) == 2)
+        assert view.render().fixed_frame == "odom"
+        await a.publish("/scan", scan(10.1))
+        with anyio.fail_after(5):
+            await view.wait_passed("/scan", 1)
+        view.render()
+        assert (feed.received, feed.passed, feed.bad, feed.drawn) == (1, 1, 0, 1)
+        drawn = np.asarray(page.clouds["/scan"].points)
+        np.testing.assert_allclose(drawn, [[3.0, 0.0, 0.0], [2.1, 2.0, 0.0], [-0.8, 0.0, 0.0]],
+                                   atol=1e-5)
+        ref = LaserProjection().transform_laser_scan_to_point_cloud("odom", scan(10.1), buffer)
+        np.testing.assert_array_equal(drawn, xyz(ref).astype(np.float32))
+        tg.cancel_scope.cancel()
+    buffer.close()
+
+
+async def test_live_view_draws_a_real_ros1_laser(master: Any) -> None:
+    """``tfbus view --bus ros1 --scan /scan`` (issue 24): Debian's ``rostopic pub``
+    publishes a sensor_msgs/LaserScan and tf2_ros's static_transform_publisher the laser's
+    pose on a loopback roscore; the bus opened from the spec with the scan topic receives
+    both and the LiveView draws the scan where laser_geometry puts it."""
+    pytest.importorskip("rosbags")
+    from ros1_harness import assert_is_the_yaml_scan, rostopic_scan_publisher
+
+    from tfbus.transports.spec import open_bus
+
+    page = TfPage("127.0.0.1", 0)
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
+    feed = view.feeds["/scan"]
+    static = master.run("rosrun", "tf2_ros", "static_transform_publisher", "1", "0", "0",
+                        "0", "0", "0", "1", "odom", "base_laser")
+    laser = rostopic_scan_publisher(master)
+    try:
+        async with open_bus("ros1", default_name="tfbus-view", scan_topics=["/scan"]) as bus, \
+                TransformListener(sink, bus, clock=clock), anyio.create_task_group() as tg:
+            raw = bus.subscribe("/scan")
+            await tg.start(view.follow, bus)
+            await buffer.wait_for_transform("odom", "base_laser", Time(0), timeout=40.0)
+            assert view.render().fixed_frame == "odom"
+            with anyio.fail_after(40):
+                got = await raw.receive()
+                await view.wait_passed("/scan", 1)
+            assert_is_the_yaml_scan(got)
+            view.render()
+            assert feed.drawn == 1 and feed.error is None and feed.bad == 0
+            drawn = np.asarray(page.clouds["/scan"].points)
+            # beams at 0, 90, 180 degrees (float32 angles); NaN and inf are not drawn
+            np.testing.assert_allclose(drawn, [[2.0, 0.0, 0.0], [1.0, 2.0, 0.0],
+                                               [-2.0, 0.0, 0.0]], atol=1e-5)
+            ref = LaserProjection().transform_laser_scan_to_point_cloud("odom", got, buffer)
+            np.testing.assert_array_equal(drawn, xyz(ref).astype(np.float32))
+            tg.cancel_scope.cancel()
+    finally:
+        laser.stop()
+        static.stop()
+        buffer.close()
+        page.close()
+
+
+def test_command_view_bus_ros1_subscribes_to_the_scan(master: Any) -> None:
+    """``tfbus view --bus ros1 --scan /scan`` as a process on a loopback roscore: its node
+    registers as a subscriber of /scan, and its slave API lists /scan as a
+    sensor_msgs/LaserScan subscription (the type rostopic's publisher must match);
+    SIGINT ends it with status 0."""
+    import select
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+    import xmlrpc.client
+    from pathlib import Path
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    exe = Path(sys.executable).with_name("tfbus")
+    proc = subprocess.Popen([str(exe), "view", "--bus", "ros1", "--scan", "/scan",
+                             "--port", str(port)], env=master.env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
+        assert ready, "tfbus view printed nothing in 60 s"
+        assert proc.stderr.readline().strip() == f"tfbus view: http://127.0.0.1:{port}/"
+        nodes: list[str] = []
+        deadline = time.monotonic() + 40
+        while not nodes and time.monotonic() < deadline:  # bounded: registration
+            subs = master.call("getSystemState", "/tfbus_test")[1]
+            nodes = [n for t, ns in subs if t == "/scan" for n in ns]
+            if not nodes:
+                time.sleep(0.1)
+        assert len(nodes) == 1 and nodes[0].startswith("/tfbus_view_")
+        api = master.call("lookupNode", "/tfbus_test", nodes[0])
+        code, _, subscribed = xmlrpc.client.ServerProxy(api).getSubscriptions("/tfbus_test")
+        assert code == 1
+        assert ["/scan", "sensor_msgs/LaserScan"] in subscribed
+        assert ["/tf", "tf2_msgs/TFMessage"] in subscribed
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)

@@ -159,9 +159,12 @@ def parse_spec(spec: str, *, name: str = "tfbus-cli") -> BusSpec:
     return parsed
 
 
-def open_spec_transport(spec: BusSpec, *, name: str) -> Transport:
+def open_spec_transport(
+    spec: BusSpec, *, name: str, scan_topics: Sequence[str] = ()
+) -> Transport:
     """A new transport for ``spec``; ``name`` is this node's name unless the spec gives
-    one (:func:`tfbus.transports.spec.open_transport`'s ``default_name``).
+    one (:func:`tfbus.transports.spec.open_transport`'s ``default_name``); ``scan_topics``
+    are the LaserScan topics it must carry (``tfbus view --scan``).
 
     Raises:
         TransportError: the scheme's extra is not installed (named), or the transport
@@ -170,7 +173,7 @@ def open_spec_transport(spec: BusSpec, *, name: str) -> Transport:
     """
     from tfbus.transports.spec import open_transport
 
-    return open_transport(spec, default_name=name)
+    return open_transport(spec, default_name=name, scan_topics=scan_topics)
 
 
 def check_bus_spec(bus: str | None) -> None:
@@ -202,9 +205,12 @@ class BusSource(TfSource):
         spec: a ``--bus`` value (:func:`tfbus.transports.spec.parse_bus_spec`).
         name: this node's name unless ``spec`` gives one (``zenoh?name=...``).
         cache_time: seconds of history the buffer keeps.
+        scan_topics: ``sensor_msgs/LaserScan`` topics the transport must also carry
+            (``tfbus view --scan``; :func:`tfbus.transports.spec.open_transport`).
     """
 
-    def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0) -> None:
+    def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0,
+                 scan_topics: Sequence[str] = ()) -> None:
         from tfbus.buffer import Buffer
         from tfbus.clock import SystemClock
         from tfbus.monitor import MonitoredSink, TfSummary
@@ -212,6 +218,7 @@ class BusSource(TfSource):
         self.spec = spec
         self.bus_spec = parse_spec(spec, name=name)
         self.name = name
+        self.scan_topics = tuple(scan_topics)
         self.label = f"the bus {spec!r}"
         self.clock = SystemClock()
         self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
@@ -290,7 +297,8 @@ class BusSource(TfSource):
         from tfbus.bus import Bus
         from tfbus.listener import TransformListener
 
-        transport = open_spec_transport(self.bus_spec, name=self.name)
+        transport = open_spec_transport(self.bus_spec, name=self.name,
+                                        scan_topics=self.scan_topics)
         peer_aware = transport if isinstance(transport, PeerAware) else None
         self._peer_aware = peer_aware is not None
         with _literal_logging():

@@ -178,7 +178,7 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
     from tfbus.view.server import TfPage
 
     assert isinstance(page, TfPage)
-    src = BusSource(spec, name="tfbus-view")
+    src = BusSource(spec, name="tfbus-view", scan_topics=scan_topics)
     view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
                     frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge)
 

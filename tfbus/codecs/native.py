@@ -16,6 +16,12 @@ receiver can detect gaps and keep per-publisher order. ``tag`` names the message
   (the NamedTuples' field order; stamps are integer nanoseconds, lengths metres).
 * a registered name (``"TransformStamped"``, ``"PointStamped"``, ``"JointState"``, ... or
   anything added with :func:`register_message_type`) -- that type, encoded field by field.
+* ``"LaserScan"`` -- a :class:`~tfbus.sensor_msgs.LaserScan`; ``body`` is
+  ``[stamp_ns, frame_id, angle_min, angle_max, angle_increment, time_increment, scan_time,
+  range_min, range_max, ranges, intensities]`` (the fields of sensor_msgs' ``LaserScan.msg``
+  in order; angles radians, times seconds, ranges metres; ``ranges`` and ``intensities``
+  msgpack ``bin`` of little-endian float32s, copied bit for bit, at most
+  ``WireLimits.max_scan_beams`` each).
 * ``""`` -- a plain msgpack value (None, bool, int, float, str, bytes, list, dict).
 
 Decoding is defensive: a payload that is too large, not msgpack, of the wrong shape or
@@ -43,6 +49,7 @@ from dataclasses import dataclass
 from typing import Annotated, Any, Final, Literal, NamedTuple
 
 import msgspec
+import numpy as np
 
 from tfbus import messages as _m
 from tfbus.errors import (
@@ -52,6 +59,7 @@ from tfbus.errors import (
     WireLimitError,
     WireVersionError,
 )
+from tfbus.sensor_msgs import LaserScan
 from tfbus.time import TIME_MAX_NS, Time
 
 __all__ = [
@@ -79,6 +87,8 @@ _INT64_MAX: Final = 2**63 - 1
 _ID: Final[Any] = Annotated[int, msgspec.Meta(ge=1, le=_INT64_MAX)]  # sender ids, seqs
 _TF_TAG: Final = "tf"
 _RAW_TAG: Final = ""
+_SCAN_TAG: Final = "LaserScan"
+_F32_LE: Final = np.dtype("<f4")
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,12 +103,16 @@ class WireLimits:
         max_depth: deepest nesting of msgpack arrays/maps in the body of a payload that
             is not a TFMessage (default 64), checked before decoding it (a TFMessage has
             a fixed shape and is decoded by a schema that refuses anything deeper).
+        max_scan_beams: most beams (float32 values) in a LaserScan's ``ranges`` and in
+            its ``intensities`` each (default 1 000 000; a 0.1 degree 360 degree laser
+            has 3 600).
     """
 
     max_payload_bytes: int = 16 * 1024 * 1024
     max_transforms: int = 100_000
     max_frame_id_length: int = 256
     max_depth: int = 64
+    max_scan_beams: int = 1_000_000
 
 
 class Decoded(NamedTuple):
@@ -155,7 +169,7 @@ def register_message_type(cls: type, tag: str | None = None) -> None:
         ValueError: if ``tag`` is empty, ``"tf"`` or already registered for another type.
     """
     name = cls.__qualname__ if tag is None else tag
-    if name in (_TF_TAG, _RAW_TAG):
+    if name in (_TF_TAG, _RAW_TAG, _SCAN_TAG):
         raise ValueError(f"tag {name!r} is reserved")
     if _REGISTRY.get(name, cls) is not cls:
         raise ValueError(f"tag {name!r} is already registered for {_REGISTRY[name]!r}")
@@ -205,6 +219,9 @@ class WireCodec:
             )
         )
         self._raw_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder()
+        self._scan_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(
+            _scan_schema(self.limits)
+        )
         self._typed: dict[str, Callable[[bytes | memoryview], object]] = {}
 
     # -- encoding -------------------------------------------------------------------
@@ -219,6 +236,9 @@ class WireCodec:
         if type(message) is _m.TFMessage:
             tag = _TF_TAG
             body: object = message.transforms
+        elif type(message) is LaserScan:
+            tag = _SCAN_TAG
+            body = _scan_to_wire(message)
         else:
             tag = _TAG_OF.get(type(message), _RAW_TAG)
             body = message
@@ -244,7 +264,8 @@ class WireCodec:
                 [1, 2**63), or any other failure of the decoder (issue 11, item 1).
             WireVersionError: a tfbus payload of another format version.
             WireLimitError: payload too large, too many transforms, frame id too long,
-                nesting too deep.
+                nesting too deep, a LaserScan with more than ``limits.max_scan_beams``
+                beams.
         """
         n = len(payload)
         if n > self.limits.max_payload_bytes:
@@ -272,6 +293,8 @@ class WireCodec:
             body = view[pos:]
             if tag == _TF_TAG:
                 message: object = _m.TFMessage(_from_wire(self._tf_decoder.decode(body)))
+            elif tag == _SCAN_TAG:
+                message = _scan_from_wire(self._scan_decoder.decode(body))
             else:
                 check_depth(data, pos, self.limits.max_depth)
                 if tag == _RAW_TAG:
@@ -317,6 +340,68 @@ def _tf_schema(limits: WireLimits) -> Any:
         gc=False,
     )
     return Annotated[tuple[item, ...], msgspec.Meta(max_length=limits.max_transforms)]
+
+
+_SCAN_FLOATS: Final = (
+    "angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+    "range_min", "range_max",
+)  # fmt: skip
+
+
+def _scan_schema(limits: WireLimits) -> Any:
+    """The msgspec type of a LaserScan body under ``limits`` (every field typed, arrays
+    as ``bin`` of at most ``4 * limits.max_scan_beams`` bytes)."""
+    beams = Annotated[bytes, msgspec.Meta(max_length=4 * limits.max_scan_beams)]
+    return msgspec.defstruct(
+        "_WireLaserScan",
+        [
+            ("stamp", Annotated[int, msgspec.Meta(ge=0, le=TIME_MAX_NS)]),
+            ("frame_id", Annotated[str, msgspec.Meta(max_length=limits.max_frame_id_length)]),
+            *((name, float) for name in _SCAN_FLOATS),
+            ("ranges", beams),
+            ("intensities", beams),
+        ],
+        array_like=True,
+        gc=False,
+    )
+
+
+def _scan_to_wire(scan: LaserScan) -> tuple[object, ...]:
+    """A LaserScan as its wire body (see the module's docstring)."""
+    return (
+        scan.header.stamp.ns,
+        scan.header.frame_id,
+        *(float(getattr(scan, name)) for name in _SCAN_FLOATS),
+        np.ascontiguousarray(scan.ranges, dtype=_F32_LE).tobytes(),
+        np.ascontiguousarray(scan.intensities, dtype=_F32_LE).tobytes(),
+    )
+
+
+def _beams(data: bytes, name: str) -> Any:
+    if len(data) % 4:
+        raise WireDecodeError(
+            f"LaserScan.{name} of {len(data)} bytes is not a whole number of float32s"
+        )
+    return np.frombuffer(data, dtype=_F32_LE).astype(np.float32)  # a writable copy
+
+
+def _scan_from_wire(body: Any) -> LaserScan:
+    """The wire schema's LaserScan body as a :class:`~tfbus.sensor_msgs.LaserScan` (bounds
+    and types already checked by the schema)."""
+    stamp = Time.__new__(Time)
+    stamp._ns = body.stamp
+    return LaserScan(
+        _m.Header(stamp, body.frame_id),
+        body.angle_min,
+        body.angle_max,
+        body.angle_increment,
+        body.time_increment,
+        body.scan_time,
+        body.range_min,
+        body.range_max,
+        _beams(body.ranges, "ranges"),
+        _beams(body.intensities, "intensities"),
+    )
 
 
 _new = tuple.__new__

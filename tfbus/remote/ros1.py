@@ -283,6 +283,10 @@ class _Node:
     def subscriptions(self) -> Sequence[str]:
         return list(self._subs)
 
+    def topic_type(self, topic: str) -> str:
+        """The ROS 1 type this node subscribes to ``topic`` with (``getSubscriptions``)."""
+        return self._subs[topic][0] if topic in self._subs else ""
+
     def publications(self) -> Sequence[str]:
         return list(self._pubs)
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, cast
 from urllib.parse import parse_qsl
@@ -149,6 +149,9 @@ class TransportScheme:
         summary: one line for help texts.
         peer_aware: its transports are :class:`~tfbus.transports._base.PeerAware` (they
             know their peers: Zenoh's liveliness), so a command can say so before opening.
+        scan_topics: its factory takes a ``scan_topics=`` override, the
+            ``sensor_msgs/LaserScan`` topics to subscribe to (ROS 1: a subscription has a
+            type); a scheme that carries every topic (memory, Zenoh) needs none.
     """
 
     scheme: str
@@ -160,6 +163,7 @@ class TransportScheme:
     factory: str = "transport_from_spec"
     summary: str = ""
     peer_aware: bool = False
+    scan_topics: bool = False
 
 
 _SCHEMES: dict[str, TransportScheme] = {}
@@ -225,13 +229,20 @@ def parse_bus_spec(spec: str) -> BusSpec:
 
 
 def open_transport(
-    spec: BusSpec | str, *, default_name: str | None = None, **overrides: Any
+    spec: BusSpec | str,
+    *,
+    default_name: str | None = None,
+    scan_topics: Sequence[str] = (),
+    **overrides: Any,
 ) -> Transport:
     """A new transport for ``spec`` (its scheme's module is imported now).
 
     ``overrides`` go to the scheme's factory (e.g. ``name="tfbus-monitor"`` for zenoh).
     ``default_name`` is the node's name for the schemes whose nodes have one (a ``name``
     key: zenoh, ros1) when neither the spec nor ``overrides`` gives one.
+    ``scan_topics`` are ``sensor_msgs/LaserScan`` topics the transport must carry: given
+    to the factory of a scheme that subscribes by type (:attr:`TransportScheme.scan_topics`,
+    ROS 1), carried anyway by the others (memory, Zenoh: every topic).
 
     Raises:
         ValueError: an invalid spec or option value.
@@ -259,6 +270,8 @@ def open_transport(
         and parsed.value("name") is None
     ):
         overrides["name"] = default_name
+    if info.scan_topics and scan_topics:
+        overrides["scan_topics"] = tuple(scan_topics)
     return factory(parsed, **overrides)
 
 
@@ -320,5 +333,6 @@ register_scheme(
         extra="ros1",
         requires=("rosbags",),
         summary="ROS 1 node (TCPROS): ROS_MASTER_URI, else http://127.0.0.1:11311",
+        scan_topics=True,
     )
 )

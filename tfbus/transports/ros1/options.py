@@ -22,14 +22,15 @@ def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
     """The ``ros1`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`).
 
     ``overrides`` may carry ``name`` (a CLI's default node name; ``-`` becomes ``_`` and
-    the process id is appended), used when the spec gives none.
+    the process id is appended), used when the spec gives none, and ``scan_topics``
+    (:class:`Ros1Transport`'s: ``sensor_msgs/LaserScan`` topics to subscribe to).
 
     Raises:
         ValueError: a value that is not understood (named: ``remote`` not a boolean, a bad
             node name or master URI).
-        TypeError: an override other than ``name``.
+        TypeError: an override other than ``name`` and ``scan_topics``.
     """
-    unknown = set(overrides) - {"name"}
+    unknown = set(overrides) - {"name", "scan_topics"}
     if unknown:
         raise TypeError(f"unexpected ros1 transport override(s): {', '.join(sorted(unknown))}")
     name = spec.value("name")
@@ -44,4 +45,5 @@ def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
         node_name=name,
         host=spec.value("host"),
         allow_remote=remote == "1",
+        scan_topics=tuple(overrides.get("scan_topics", ())),
     )

@@ -278,6 +278,8 @@ class SlaveNode(Protocol):
 
     def subscriptions(self) -> Sequence[str]: ...
 
+    def topic_type(self, topic: str) -> str: ...
+
     def publications(self) -> Sequence[str]: ...
 
     def tcpros_endpoint(self, topic: str) -> tuple[str, int] | None: ...
@@ -400,7 +402,7 @@ class SlaveServer:
 
     def getSubscriptions(self, caller_id: str) -> list[object]:
         """[[topic, type], ...] subscribed."""
-        return [1, "", [[t, TF_TYPE] for t in self._node.subscriptions()]]
+        return [1, "", [[t, self._node.topic_type(t)] for t in self._node.subscriptions()]]
 
     def getPublications(self, caller_id: str) -> list[object]:
         """[[topic, type], ...] published."""

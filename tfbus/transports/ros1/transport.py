@@ -24,7 +24,15 @@ from anyio.streams.buffered import BufferedByteReceiveStream
 from anyio.streams.stapled import MultiListener
 
 from tfbus._aio import open_pumped_connection, running_asyncio_loop
-from tfbus.codecs.ros1 import TF_MD5SUM, TF_TYPE, TFCodec
+from tfbus.codecs.ros1 import (
+    SCAN_MD5SUM,
+    SCAN_TYPE,
+    TF_MD5SUM,
+    TF_TYPE,
+    TFCodec,
+    decode_laser_scan,
+    scan_definition,
+)
 from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import CountLimitedLog
@@ -164,6 +172,8 @@ class _Inbound:
         self.conn_id = 0
         self.header_or_end = anyio.Event()
         self._deliver = bus.deliver_nowait
+        self._scan = topic in node._scan_topics
+        self._md5 = SCAN_MD5SUM if self._scan else TF_MD5SUM
         self._decode = node._codec.decode
         self._stats = node._stats
         self.splitter = FrameSplitter(self._frame, MAX_HEADER_BYTES, node._max_bytes)
@@ -172,14 +182,17 @@ class _Inbound:
         # ``raw`` may be a view of the pump's read buffer: decoded here, never kept.
         if self.conn_id:
             self._stats.received += 1
-            transforms = self._decode(raw)  # WireDecodeError: counted in malformed
-            self._deliver(self.topic, TFMessage(tuple(transforms)))
+            if self._scan:  # WireDecodeError: counted in malformed
+                self._deliver(self.topic, decode_laser_scan(raw))
+            else:
+                transforms = self._decode(raw)  # WireDecodeError: counted in malformed
+                self._deliver(self.topic, TFMessage(tuple(transforms)))
             self._stats.delivered += 1
             return
         header = decode_header(bytes(raw))
         if "error" in header:
             raise TransportError(f"publisher {self.uri} refused {self.topic}: {header['error']}")
-        if header.get("md5sum") not in (TF_MD5SUM, "*"):
+        if header.get("md5sum") not in (self._md5, "*"):
             raise ValueError(
                 f"publisher {self.uri} sends md5sum {header.get('md5sum')!r} on {self.topic}"
             )
@@ -198,6 +211,11 @@ class Ros1Transport:
         host: the address this node's servers bind and advertise; default ``ROS_IP``,
             else ``ROS_HOSTNAME``, else ``127.0.0.1``.
         topics: the topics carried (default ``/tf`` and ``/tf_static``).
+        scan_topics: ``sensor_msgs/LaserScan`` topics to subscribe to (e.g. ``/scan``):
+            each message is delivered to the bus as a
+            :class:`~tfbus.sensor_msgs.LaserScan` (:func:`~tfbus.codecs.ros1.decode_laser_scan`;
+            a malformed one closes its connection and is counted in ``malformed``).
+            Receive only: a LaserScan published on the bus is not sent to ROS 1.
         queue_size: frames queued per subscriber connection before the oldest is dropped.
         max_message_bytes: largest accepted TCPROS frame; a larger one closes the
             connection (counted as malformed).
@@ -208,8 +226,9 @@ class Ros1Transport:
         allow_remote: contact publishers outside loopback even when ``host`` is loopback.
 
     Raises:
-        ValueError: a ``master_uri`` that is not ``http://host:port``, or a node name that
-            is not a ROS graph name.
+        ValueError: a ``master_uri`` that is not ``http://host:port``, a node name that
+            is not a ROS graph name, or a scan topic that is also in ``topics`` or is not
+            a ROS graph name.
     """
 
     def __init__(
@@ -219,6 +238,7 @@ class Ros1Transport:
         host: str | None = None,
         *,
         topics: Sequence[str] = _TOPICS,
+        scan_topics: Sequence[str] = (),
         queue_size: int = 100,
         max_message_bytes: int = 16 * 1024 * 1024,
         master_timeout: float = 2.0,
@@ -240,6 +260,15 @@ class Ros1Transport:
         self._name = name
         self._host = _resolve_host(host)
         self._topics = tuple(topics)
+        self._scan_topics = tuple(dict.fromkeys(scan_topics))
+        for topic in self._scan_topics:
+            if topic in self._topics:
+                raise ValueError(f"scan topic {topic!r} is already carried as a tf topic")
+            if not topic.startswith("/") or not all(c.isalnum() or c in "/_" for c in topic) \
+                    or "//" in topic or topic.endswith("/"):
+                raise ValueError(f"scan topic {topic!r} is not a global ROS graph name")
+        self._subscribed = self._topics + self._scan_topics
+        self._scan_definition = scan_definition() if self._scan_topics else ""
         self._queue_size = queue_size
         self._max_bytes = max_message_bytes
         self._timeout = master_timeout
@@ -463,14 +492,14 @@ class Ros1Transport:
         sent it after its answer, so it is the newer list (as roscpp's
         ``TopicManager::registerSubscriber`` applies the answer under the subscription's
         lock, in order with ``pubUpdate``)."""
-        for topic in self._topics:
+        for topic in self._subscribed:
             seq = self._update_seq.get(topic, 0)
             value = await call(
                 self._master_uri,
                 "registerSubscriber",
                 self._name,
                 topic,
-                TF_TYPE,
+                SCAN_TYPE if topic in self._scan_topics else TF_TYPE,
                 self._api_uri,
                 timeout=self._timeout,
             )
@@ -499,7 +528,7 @@ class Ros1Transport:
                 await call(self._master_uri, method, *args, timeout=_UNREGISTER_DEADLINE)
 
         async with anyio.create_task_group() as tg:
-            for topic in self._topics:
+            for topic in self._subscribed:
                 tg.start_soon(one, "unregisterSubscriber", self._name, topic, self._api_uri)
             for topic in list(self._registered_pub):
                 tg.start_soon(one, "unregisterPublisher", self._name, topic, self._api_uri)
@@ -512,7 +541,12 @@ class Ros1Transport:
 
     def subscriptions(self) -> Sequence[str]:
         """``getSubscriptions``: the topics this node subscribes to."""
-        return self._topics
+        return self._subscribed
+
+    def topic_type(self, topic: str) -> str:
+        """The ROS 1 message type of ``topic`` (``sensor_msgs/LaserScan`` for a scan
+        topic, else ``tf2_msgs/TFMessage``), as ``getSubscriptions`` reports it."""
+        return SCAN_TYPE if topic in self._scan_topics else TF_TYPE
 
     def publications(self) -> Sequence[str]:
         """``getPublications``: the topics this node has published on so far."""
@@ -526,7 +560,7 @@ class Ros1Transport:
     def on_publisher_update(self, topic: str, publishers: list[str]) -> None:
         """``publisherUpdate``: connect to new publishers of ``topic``, drop gone ones."""
         bus = self._bus
-        if bus is not None and topic in self._topics:
+        if bus is not None and topic in self._subscribed:
             self._update_seq[topic] = self._update_seq.get(topic, 0) + 1
             self._update_publishers(bus, topic, publishers)
 
@@ -664,13 +698,14 @@ class Ros1Transport:
         """
         host, port = await self._request_topic(topic, uri)
         link = _Inbound(self, bus, topic, uri)
+        scan = topic in self._scan_topics
         hello = encode_header(
             {
                 "callerid": self._name,
                 "topic": topic,
-                "md5sum": TF_MD5SUM,
-                "type": TF_TYPE,
-                "message_definition": self._codec.definition,
+                "md5sum": SCAN_MD5SUM if scan else TF_MD5SUM,
+                "type": SCAN_TYPE if scan else TF_TYPE,
+                "message_definition": self._scan_definition if scan else self._codec.definition,
                 "tcp_nodelay": "1",
             }
         )
