@@ -20,7 +20,7 @@ import subprocess
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from xmlrpc.server import SimpleXMLRPCServer
+from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 import anyio
 import pytest
@@ -551,6 +551,15 @@ async def test_master_restart_is_noticed_and_new_publishers_reach_tfbus(
         assert transport.node_name in subscribers["/tf"]
 
 
+class _BoundedHandler(SimpleXMLRPCRequestHandler):
+    """A request of the fake slave API may take 2 s at most: the test leaves the publisher
+    (``api.shutdown()``, which waits for the request being served) from the event loop's
+    thread, so a tfbus node's ``requestTopic`` connected but not yet written (its bytes
+    wait for that loop) must not hold the server, and the test, forever (CI saw it)."""
+
+    timeout = 2.0
+
+
 class _EvilPublisher:
     """A fake ROS 1 publisher of /tf: a slave API answering ``requestTopic`` and a TCPROS
     server that sends a valid header, one valid message, then a malformed frame."""
@@ -560,7 +569,8 @@ class _EvilPublisher:
         self.tcp.bind(("127.0.0.1", 0))
         self.tcp.listen(4)
         self.frame = frame
-        self.api = SimpleXMLRPCServer(("127.0.0.1", 0), logRequests=False, allow_none=True)
+        self.api = SimpleXMLRPCServer(("127.0.0.1", 0), requestHandler=_BoundedHandler,
+                                      logRequests=False, allow_none=True)
         port = self.tcp.getsockname()[1]
         self.api.register_function(
             lambda *a: [1, "", ["TCPROS", "127.0.0.1", port]], "requestTopic"
