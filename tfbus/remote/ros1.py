@@ -323,6 +323,29 @@ class _Node:
             self.on_publisher_update(topic, [u for u in uris if isinstance(u, str)]
                                      if isinstance(uris, list) else [])
 
+    async def open(self) -> anyio.abc.TaskGroup:
+        """A task group entered here, with the node started in it (:meth:`start`); the
+        group is left again if starting fails.
+
+        Raises:
+            TransportError: the master cannot be reached or refuses.
+        """
+        tg = anyio.create_task_group()
+        await tg.__aenter__()
+        try:
+            await self.start(tg)
+        except BaseException:
+            tg.cancel_scope.cancel()
+            await tg.__aexit__(None, None, None)
+            raise
+        return tg
+
+    async def close(self, tg: anyio.abc.TaskGroup) -> None:
+        """Unregister (:meth:`stop`), then end the task group :meth:`open` gave."""
+        await self.stop()
+        tg.cancel_scope.cancel()
+        await tg.__aexit__(None, None, None)
+
     async def stop(self) -> None:
         with anyio.move_on_after(2.0, shield=True), contextlib.suppress(TransportError):
             for topic in self._pubs:
@@ -438,25 +461,14 @@ class Ros1BufferClient:
         Raises:
             TransportError: the master cannot be reached or refuses.
         """
-        tg = anyio.create_task_group()
-        await tg.__aenter__()
-        self._tg = tg
-        try:
-            await self._node.start(tg)
-        except BaseException:
-            tg.cancel_scope.cancel()
-            await tg.__aexit__(None, None, None)
-            self._tg = None
-            raise
+        self._tg = await self._node.open()
         return self
 
     async def __aexit__(self, *exc: object) -> None:
         """Unregister and stop."""
         tg, self._tg = self._tg, None
         if tg is not None:
-            await self._node.stop()
-            tg.cancel_scope.cancel()
-            await tg.__aexit__(None, None, None)
+            await self._node.close(tg)
 
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
                                timeout: float | Duration = 0.0) -> TransformStamped:
@@ -566,26 +578,15 @@ class Ros1BufferServer:
         Raises:
             TransportError: the master cannot be reached or refuses.
         """
-        tg = anyio.create_task_group()
-        await tg.__aenter__()
-        self._tg = tg
-        try:
-            await self._node.start(tg)
-        except BaseException:
-            tg.cancel_scope.cancel()
-            await tg.__aexit__(None, None, None)
-            self._tg = None
-            raise
-        tg.start_soon(self._status)
+        self._tg = await self._node.open()
+        self._tg.start_soon(self._status)
         return self
 
     async def __aexit__(self, *exc: object) -> None:
         """Unregister and stop (goals still waiting are dropped)."""
         tg, self._tg = self._tg, None
         if tg is not None:
-            await self._node.stop()
-            tg.cancel_scope.cancel()
-            await tg.__aexit__(None, None, None)
+            await self._node.close(tg)
 
     async def _status(self) -> None:
         seq = 0
