@@ -12,6 +12,8 @@ Rows (target):
 
 * ``set_transform``, a chain of 10 links, in order: <= 0.35x tf2_py;
   ``set_transforms`` (10 per call) per transform <= a ``set_transform`` loop (1.00x);
+  for information, the same ratio for messages of 1, 2, 5, 10 and 50 transforms, chain
+  and star shaped (a message of one pays the batch's fixed cost alone);
 * ``lookup_transform`` never repeated, interpolated: depth 2 <= 0.20x tf2_py, depth 8
   and 32 <= 0.55x; depth 2 at time 0 right after an insert <= 0.20x;
 * ``lookup_transforms``, N = 10 000 times, depth 8, every link interpolated, times
@@ -106,6 +108,43 @@ def _message(parent: str, child: str, stamp_ns: int, k: int) -> TransformStamped
     )
 
 
+SIZES = [(shape, n) for shape in ("chain", "star") for n in (1, 2, 5, 10, 50)]
+"""Batch shapes and sizes of the informational ``set_transforms`` table."""
+
+
+def _stream(shape: str, n: int, t0_ns: int, period_ns: int) -> list[TransformStamped]:
+    """~10 000 transforms in messages of ``n`` links, in stamp order."""
+    steps = max(200, 10_000 // n)
+    return [
+        _message(
+            *((f"f{i}", f"f{i + 1}") if shape == "chain" else ("base", f"c{i}")),
+            t0_ns + k * period_ns,
+            k + i,
+        )
+        for k in range(steps)
+        for i in range(n)
+    ]
+
+
+def _loop(stream: list[TransformStamped], cache_time: float) -> float:
+    """Seconds per transform of a ``set_transform`` loop over ``stream``."""
+    setter = BufferCore(cache_time=cache_time).set_transform
+    start = time.perf_counter()
+    for m in stream:
+        setter(m, "bench")
+    return (time.perf_counter() - start) / len(stream)
+
+
+def _batch(stream: list[TransformStamped], n: int, cache_time: float) -> float:
+    """Seconds per transform of ``set_transforms`` over ``stream`` in messages of ``n``."""
+    batches = [stream[i : i + n] for i in range(0, len(stream), n)]
+    setter = BufferCore(cache_time=cache_time).set_transforms
+    start = time.perf_counter()
+    for b in batches:
+        setter(b, "bench")
+    return (time.perf_counter() - start) / len(stream)
+
+
 class Ours:
     """tfbus's side: buffers built once, measured once per round."""
 
@@ -121,6 +160,12 @@ class Ours:
         self.chains = {d: bench_core._chain(lk, d) for d in lk["depths"]}
         self.varying = [Time.from_ns(ns) for ns in lk["query_ns"]]
         self.batch_core = bench_sensors.chain_core()
+        # The messages users send: one transform per message (tf2_ros's broadcaster), a
+        # few, or a robot's whole tree; a chain (each parent the child before) or a star
+        # (one parent), ~10 000 transforms per stream.
+        self.size_streams = {
+            (shape, n): _stream(shape, n, c["t0_ns"], c["period_ns"]) for shape, n in SIZES
+        }
         self.orders = {k: np.array(v, dtype=np.int64) for k, v in sc["batch"]["orders"].items()}
 
     def _best(self, fn: Callable[[], float]) -> float:
@@ -150,6 +195,11 @@ class Ours:
 
         out["set_chain"] = self._best(singles)
         out["set_batch"] = self._best(batched)
+        sizes: dict[str, float] = {}
+        for (shape, n), stream in self.size_streams.items():
+            sizes[f"{shape}/{n}/loop"] = self._best(lambda s=stream: _loop(s, cache_time))
+            sizes[f"{shape}/{n}/batch"] = self._best(lambda s=stream, n=n: _batch(s, n, cache_time))
+        out["set_sizes"] = sizes
         lk = self.sc["lookup"]
         calls = lk["calls"]
         runs = [self.varying[r * calls : (r + 1) * calls] for r in range(RUNS)]
@@ -242,6 +292,15 @@ def core_rows(rows: Rows, rounds: int) -> None:
         q <= 1.0,
         "<= 1.00x a set_transform loop",
     )
+    sizes = [x["set_sizes"] for x in ours]
+    line = []
+    for shape, n in SIZES:
+        q = statistics.median(r[f"{shape}/{n}/batch"] / r[f"{shape}/{n}/loop"] for r in sizes)
+        loop = statistics.median(r[f"{shape}/{n}/loop"] for r in sizes)
+        line.append(f"{shape} n={n}: {q:.2f}x of {us(loop)}")
+    print("  info  set_transforms / set_transform loop, per transform, by message size:")
+    for shape in ("chain", "star"):
+        print("          " + ";  ".join(x for x in line if x.startswith(shape)), flush=True)
     for key, label, target in (
         ("2/interp", "lookup_transform depth 2, interpolated", 0.20),
         ("2/zero_fresh", "insert then Time(0) lookup, depth 2", 0.20),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Set as AbstractSet
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,15 @@ from tfbus import (
     TransformStamped,
     Vector3,
 )
-from tfbus.core import COMPILED, MAX_GRAPH_DEPTH, BatchResult, BufferCore, FrameInfo, SetResult
+from tfbus.core import (
+    COMPILED,
+    MAX_GRAPH_DEPTH,
+    BatchResult,
+    BufferCore,
+    FrameInfo,
+    SetResult,
+    TouchedFrames,
+)
 from tfbus.ratelimit import CountLimitedLog, RateLimitedLog
 
 
@@ -396,6 +405,54 @@ def test_set_transforms_reports_the_frames_it_touched() -> None:
     assert r.relinked
     r = core.set_transforms([ts_any("a", stamp=Time(101))])  # refused (repeated)
     assert r.stored == 0 and r.refused == 1 and not r.touched
+
+
+def test_touched_frames_is_a_set_built_only_when_asked() -> None:
+    """Issue 22 §1: the batch only records the ids it stored (so a batch nobody inspects
+    hashes none); ``touched`` is a read-only set all the same, equal to and combinable
+    with any set."""
+    core = BufferCore()
+    r = core.set_transforms(
+        [
+            ts_any("a"),
+            ts_any("b", parent="a"),
+            ts_any("/a", stamp=Time(11)),
+            ts_any("c", x=math.nan),
+        ]
+    )
+    t = r.touched
+    assert isinstance(t, TouchedFrames) and isinstance(t, AbstractSet)
+    assert t and type(t._ids) is list  # truth needs no set
+    assert (len(t), sorted(t)) == (3, ["a", "b", "base"])
+    assert type(t._ids) is frozenset  # built once, on first use
+    assert "a" in t and "c" not in t and 1 not in t
+    assert t == {"a", "b", "base"} == t and t != {"a", "b"} and t != ["a", "b", "base"]
+    assert (t & {"a", "x"}, t | {"x"}, t - {"a"}, t ^ {"a", "x"}) == (
+        {"a"},
+        {"a", "b", "base", "x"},
+        {"b", "base"},
+        {"b", "base", "x"},
+    )
+    assert {"a"} <= t and t < {"a", "b", "base", "x"} and t.isdisjoint({"x"})
+    assert hash(t) == hash(frozenset({"a", "b", "base"}))
+    assert repr(t) == "TouchedFrames(['a', 'b', 'base'])"
+    empty = core.set_transforms([]).touched
+    assert not empty and empty == frozenset() and len(empty) == 0 and list(empty) == []
+    assert TouchedFrames(["x", "x"]) == {"x"}
+
+
+@pytest.mark.parametrize("child, parent", [("a", "a"), ("/a", "a"), ("base", "/base"), ("n", "n")])
+def test_self_transform_is_refused_for_known_and_new_frames(child: str, parent: str) -> None:
+    """tf2 ``setTransformImpl``: a transform whose two (stripped) ids are one frame is
+    refused, whether that frame is known (the check compares ids) or new (it compares
+    strings); nothing is registered."""
+    core = BufferCore()
+    core.set_transform(ts_any("a"))
+    with pytest.raises(InvalidArgumentException, match="are the same"):
+        core.set_transform(ts_any(child, parent=parent, stamp=Time(20)))
+    r = core.set_transforms([ts_any(child, parent=parent, stamp=Time(20)), ts_any("b")])
+    assert (r.stored, [i for i, _ in r.errors], set(r.touched)) == (1, [0], {"b", "base"})
+    assert sorted(core.get_frame_names()) == ["a", "b", "base"]
 
 
 def test_the_compiled_base_calls_nothing_back(caplog: pytest.LogCaptureFixture) -> None:

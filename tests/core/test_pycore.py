@@ -42,7 +42,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
-from tfbus.core import BufferCore, _pybatch, _pycache, _pycore, _pymath, _select
+from tfbus.core import BufferCore, TouchedFrames, _pybatch, _pycache, _pycore, _pymath, _select
 
 _ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
 from tfbus.core import _cbatch, _ccache, _cmath  # noqa: E402  (built with _ccore)
@@ -97,7 +97,7 @@ def canon(value: Any) -> Any:
         return ("E", type(value).__name__, str(value))
     if isinstance(value, dict):
         return ("d", sorted((canon(k), canon(v)) for k, v in value.items()))
-    if isinstance(value, (set, frozenset)):
+    if isinstance(value, (set, frozenset, TouchedFrames)):
         return ("s", sorted(repr(canon(v)) for v in value))
     if isinstance(value, (tuple, list)):
         return (type(value).__name__, [canon(v) for v in value])

@@ -5,7 +5,7 @@ One package, one job per module:
 * :mod:`tfbus.core.buffer_core` -- :class:`BufferCore` (tf2 ``tf2/src/buffer_core.cpp``):
   the frame graph, per-link time caches, single and batched lookups, tf2's messages;
 * :mod:`tfbus.core.results` -- what the inserts return (:class:`SetResult`,
-  :class:`BatchResult`) and the argument checks;
+  :class:`BatchResult`, :class:`TouchedFrames`) and the argument checks;
 * :mod:`tfbus.core.batch` -- :class:`~tfbus.core.batch.TransformArray` and the time-array
   helper of the batched lookups;
 * :mod:`tfbus.core.velocity` -- tf2 ``lookupVelocity`` from two lookups;
@@ -33,6 +33,7 @@ from tfbus.core.buffer_core import (
     SetResult,
     Tf7,
 )
+from tfbus.core.results import TouchedFrames
 
 __all__ = [
     "COMPILED",
@@ -42,5 +43,6 @@ __all__ = [
     "FrameInfo",
     "SetResult",
     "Tf7",
+    "TouchedFrames",
     "TransformArray",
 ]

@@ -4,6 +4,7 @@ from collections.abc import Iterable
 from typing import Any, Final, Literal
 
 from tfbus.core._ccache import Link
+from tfbus.core.results import BatchResult, TouchedFrames
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
 
@@ -38,14 +39,16 @@ class CoreBase:
     def _set_cache_time_ns(self, ns: int) -> None: ...
     def _store(
         self, transforms: Iterable[Any], authority: str, is_static: bool
-    ) -> tuple[
-        int,
-        int,
-        list[tuple[int, Exception | tuple[str, str, _Tf7]]],
-        set[str],
-        bool,
-        list[tuple[int, str, int]],
-    ]: ...
+    ) -> (
+        BatchResult
+        | tuple[
+            int,
+            list[tuple[int, Exception | tuple[str, str, _Tf7]]],
+            TouchedFrames,
+            bool,
+            list[tuple[int, str, int]],
+        ]
+    ): ...
     def _store_one(
         self, ts: Any, authority: str, is_static: bool
     ) -> Literal[True] | tuple[int, str, int] | tuple[int, str, str, _Tf7]: ...

@@ -55,11 +55,13 @@ from cpython.float cimport PyFloat_FromDouble
 from cpython.ref cimport Py_DECREF
 
 from tfbus.core._cresults cimport (
-    PyObject_GC_UnTrack, PyObject_GenericSetAttr, PyTypeObject, _named, _named3, _named4,
+    PyObject_GC_UnTrack, PyObject_GenericSetAttr, PyType_GenericAlloc, PyTypeObject, _named,
+    _named3, _named4, _named5,
 )
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Time
+from tfbus.core.results import BatchResult, TouchedFrames
 
 # outcomes of BufferCore._cwalk / _ccommon_time (tf2_msgs::TF2Error)
 NO_ERROR = 0
@@ -273,6 +275,7 @@ cdef class CoreBase:
         cdef double norm2
         cdef int64_t stamp, old_stamp
         cdef int code, k, old_parent
+        cdef bint same
         header = (<tuple>ts)[0]
         tf = (<tuple>ts)[2]
         if not isinstance(header, Header):
@@ -310,9 +313,17 @@ cdef class CoreBase:
         self._last_child = child
         # tf2's order (setTransformImpl: w² + x² + y² + z²): it decides cases at the limit.
         norm2 = v[6] * v[6] + v[3] * v[3] + v[4] * v[4] + v[5] * v[5]
+        # Self transform: two known ids are the same frame exactly when they map to the
+        # same id object (no string comparison); a known and an unknown id never are.
+        cid = self._frame_ids.get(child)
+        pid = self._frame_ids.get(parent)
+        if cid is not None:
+            same = cid is pid
+        else:
+            same = pid is None and child == parent
         # `v - v == 0` fails for NaN and ±Inf alike; the norm test fails for NaN too.
         if (
-            child == parent
+            same
             or not child
             or not parent
             or v[0] - v[0] != 0.0
@@ -325,14 +336,12 @@ cdef class CoreBase:
         stamp = stamp_obj._ns
         self._last_stamp = stamp
         self._generation += 1
-        cid = self._frame_ids.get(child)
         if cid is None:
             cid = self._register(child)
         cache = self._caches[cid]
         if cache is None:
             cache = StaticCache() if is_static else TimeCache(self._cache_ns)
             self._caches[cid] = cache
-        pid = self._frame_ids.get(parent)
         if pid is None:
             pid = self._register(parent)
         old_parent = (<Link>cache).c_latest(&old_stamp)
@@ -352,45 +361,63 @@ cdef class CoreBase:
         """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
         order; one bad item never stops the others. Calls nothing back.
 
-        Returns ``(stored, refused, errors, touched, relinked, refusals)`` (the first
-        five are ``BatchResult``'s fields):
+        Returns the :class:`~tfbus.core.results.BatchResult` itself when nothing was
+        refused and nothing was invalid (the common case: no Python code runs after this
+        one call). Else the plain tuple ``(stored, errors, touched, relinked, refusals)``
+        for ``BufferCore`` to turn into tf2's messages and log lines:
 
-        * ``stored``: how many were stored; ``refused``: how many were refused;
+        * ``stored``: how many were stored;
         * ``refusals``: ``[(code, child, stamp ns)]`` for each refused by its cache
           (``OLD_DATA`` / ``REPEATED_DATA``);
         * ``errors``: ``[(index, problem)]``, ``problem`` either an exception
           (InvalidArgumentException for a field of the wrong type, TypeError for an item
           that is not a TransformStamped) or ``(parent, child, values)`` for a transform
           that breaks a tf2 rule (the caller builds tf2's message);
-        * ``touched``: set of the (stripped) child and parent ids of every stored transform;
+        * ``touched``: a :class:`~tfbus.core.results.TouchedFrames` of the (stripped)
+          child and parent ids of every stored transform (recorded in a list here, made a
+          set only when asked);
         * ``relinked``: whether a stored transform may have changed the tree's shape.
         """
         cdef Py_ssize_t stored = 0, i = 0
-        cdef list refusals = []
-        cdef list errors = []
-        cdef set touched = set()
+        cdef list refusals = None
+        cdef list errors = None
+        cdef list ids = []
         cdef bint relinked = False
         cdef int code
+        cdef object touched
         for ts in transforms:
             try:
                 if not isinstance(ts, TransformStamped):
                     raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
                 code = self._insert_one(ts, authority, is_static)
             except Exception as exc:
+                if errors is None:
+                    errors = []
                 errors.append((i, exc))
             else:
                 if code == C_OK:
                     stored += 1
-                    touched.add(self._last_child)
-                    touched.add(self._last_parent)
+                    ids.append(self._last_child)
+                    ids.append(self._last_parent)
                     if self._last_relinked:
                         relinked = True
                 elif code == C_INVALID:
+                    if errors is None:
+                        errors = []
                     errors.append((i, (self._last_parent, self._last_child, self._last_values)))
                 else:
+                    if refusals is None:
+                        refusals = []
                     refusals.append((code, self._last_child, self._last_stamp))
             i += 1
-        return stored, len(refusals), errors, touched, relinked, refusals
+        # TouchedFrames(ids) without its Python-level __init__ (one slot, set here).
+        touched = <object>PyType_GenericAlloc(<PyTypeObject*>TouchedFrames, 0)
+        Py_DECREF(touched)
+        PyObject_GenericSetAttr(touched, "_ids", ids)
+        if errors is None and refusals is None:
+            return _named5(BatchResult, stored, 0, [], touched, relinked)
+        return (stored, [] if errors is None else errors, touched, relinked,
+                [] if refusals is None else refusals)
 
     def _store_one(self, ts, str authority, bint is_static):
         """One transform, as ``_store`` would store it (``BufferCore.set_transform``'s

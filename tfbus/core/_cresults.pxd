@@ -44,6 +44,23 @@ cdef inline object _named3(object cls, object a, object b, object c):
     return obj
 
 
+cdef inline object _named5(object cls, object a, object b, object c, object d, object e):
+    cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 5)
+    cdef object obj = <object>p
+    Py_DECREF(obj)
+    Py_INCREF(a)
+    Py_INCREF(b)
+    Py_INCREF(c)
+    Py_INCREF(d)
+    Py_INCREF(e)
+    PyTuple_SET_ITEM(obj, 0, a)
+    PyTuple_SET_ITEM(obj, 1, b)
+    PyTuple_SET_ITEM(obj, 2, c)
+    PyTuple_SET_ITEM(obj, 3, d)
+    PyTuple_SET_ITEM(obj, 4, e)
+    return obj
+
+
 cdef inline object _named4(object cls, double a, double b, double c, double d):
     cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 4)
     PyObject_GC_UnTrack(p)  # four floats: it can never be part of a reference cycle

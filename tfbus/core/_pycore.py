@@ -43,6 +43,7 @@ from tfbus.core._pymath import (
     _qrot,
     _tp_name,
 )
+from tfbus.core.results import BatchResult, TouchedFrames
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Time
@@ -389,28 +390,33 @@ class CoreBase:
 
     def _store(
         self, transforms: Iterable[Any], authority: str, is_static: bool
-    ) -> tuple[
-        int,
-        int,
-        list[tuple[int, Exception | tuple[str, str, Tf7]]],
-        set[str],
-        bool,
-        list[tuple[int, str, int]],
-    ]:
+    ) -> (
+        BatchResult
+        | tuple[
+            int,
+            list[tuple[int, Exception | tuple[str, str, Tf7]]],
+            TouchedFrames,
+            bool,
+            list[tuple[int, str, int]],
+        ]
+    ):
         """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
         order; one bad item never stops the others. Calls nothing back.
 
-        Returns ``(stored, refused, errors, touched, relinked, refusals)`` (the first
-        five are ``BatchResult``'s fields):
+        Returns the :class:`~tfbus.core.results.BatchResult` itself when nothing was
+        refused and nothing was invalid (the common case). Else the plain tuple
+        ``(stored, errors, touched, relinked, refusals)`` for ``BufferCore`` to turn into
+        tf2's messages and log lines:
 
-        * ``stored``: how many were stored; ``refused``: how many were refused;
+        * ``stored``: how many were stored;
         * ``refusals``: ``[(code, child, stamp ns)]`` for each refused by its cache
           (``OLD_DATA`` / ``REPEATED_DATA``);
         * ``errors``: ``[(index, problem)]``, ``problem`` either an exception
           (InvalidArgumentException for a field of the wrong type, TypeError for an item
           that is not a TransformStamped) or ``(parent, child, values)`` for a transform
           that breaks a tf2 rule (the caller builds tf2's message);
-        * ``touched``: set of the (stripped) child and parent ids of every stored transform;
+        * ``touched``: a :class:`~tfbus.core.results.TouchedFrames` of the (stripped)
+          child and parent ids of every stored transform;
         * ``relinked``: whether a stored transform may have changed the tree's shape.
 
         Raises:
@@ -424,7 +430,7 @@ class CoreBase:
         stored = 0
         refusals: list[tuple[int, str, int]] = []
         errors: list[tuple[int, Exception | tuple[str, str, Tf7]]] = []
-        touched: set[str] = set()
+        ids: list[str] = []
         relinked = False
         for i, ts in enumerate(transforms):
             try:
@@ -436,15 +442,18 @@ class CoreBase:
             else:
                 if code == OK:
                     stored += 1
-                    touched.add(self._last_child)
-                    touched.add(self._last_parent)
+                    ids.append(self._last_child)
+                    ids.append(self._last_parent)
                     if self._last_relinked:
                         relinked = True
                 elif code == INVALID:
                     errors.append((i, (self._last_parent, self._last_child, self._last_values)))
                 else:
                     refusals.append((code, self._last_child, self._last_stamp))
-        return stored, len(refusals), errors, touched, relinked, refusals
+        touched = TouchedFrames(ids)
+        if not (errors or refusals):
+            return BatchResult(stored, 0, [], touched, relinked)
+        return stored, errors, touched, relinked, refusals
 
     def _store_one(
         self, ts: Any, authority: str, is_static: bool

@@ -103,7 +103,6 @@ logger = logging.getLogger("tfbus.core")
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
 _LATEST: Final = Time(0)
-_new: Final = tuple.__new__  # builds a NamedTuple without its Python-level __new__
 
 
 class BufferCore(CoreBase):
@@ -225,9 +224,9 @@ class BufferCore(CoreBase):
             subclass needs to react to the insert, e.g. ``Buffer``'s waits).
         """
         r = self._store(transforms, authority, is_static)
-        if not (r[2] or r[5]):  # the common case: nothing refused, nothing invalid
-            return _new(BatchResult, r[:5])
-        stored, _, problems, touched, relinked, refusals = r
+        if isinstance(r, BatchResult):  # the common case: nothing refused, nothing invalid
+            return r
+        stored, problems, touched, relinked, refusals = r
         if refusals:
             self._log_refusals(refusals, authority)
         errors: list[tuple[int, Exception]] = [

@@ -6,13 +6,22 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Iterable, Iterator
 from collections.abc import Set as AbstractSet
 from numbers import Real
 from typing import Final, NamedTuple
 
 from tfbus.time import TIME_MAX_NS, Duration, Time
 
-__all__ = ["MAX_MESSAGE", "BatchResult", "SetResult", "cache_time_ns", "cap_message", "not_a_time"]
+__all__ = [
+    "MAX_MESSAGE",
+    "BatchResult",
+    "SetResult",
+    "TouchedFrames",
+    "cache_time_ns",
+    "cap_message",
+    "not_a_time",
+]
 
 MAX_MESSAGE: Final = 999
 """tf2 0.7.6 caps extrapolation messages (only those) at this many characters (measured
@@ -29,6 +38,53 @@ class SetResult(enum.Enum):
     """Refused: the link already has a sample with this stamp (the first one wins)."""
 
 
+class TouchedFrames(AbstractSet[str]):
+    """The (stripped) frame ids of the transforms a batch stored: a read-only set
+    (``collections.abc.Set``: ``in``, ``len``, iteration, comparisons and set operators
+    with any set).
+
+    The insert only records each stored transform's child and parent id (repeats
+    included); the set is built from them the first time it is asked for. A listener
+    whose batches nobody inspects (no pending waits) therefore never hashes a frame id for
+    it: ``set_transforms`` does less work than a loop of ``set_transform``.
+
+    Args:
+        ids: frame ids, repeats allowed.
+    """
+
+    __slots__ = ("_ids",)
+
+    _ids: list[str] | frozenset[str]  # the recorded ids, then the set once built
+
+    def __init__(self, ids: Iterable[str] = ()) -> None:
+        self._ids = list(ids)
+
+    def _frozen(self) -> frozenset[str]:
+        ids = self._ids
+        if type(ids) is frozenset:
+            return ids
+        built = self._ids = frozenset(ids)
+        return built
+
+    def __contains__(self, frame_id: object) -> bool:
+        return frame_id in self._frozen()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._frozen())
+
+    def __len__(self) -> int:
+        return len(self._frozen())
+
+    def __bool__(self) -> bool:
+        return bool(self._ids)  # no set needed: empty exactly when nothing was recorded
+
+    def __hash__(self) -> int:
+        return hash(self._frozen())
+
+    def __repr__(self) -> str:
+        return f"TouchedFrames({sorted(self._frozen())!r})"
+
+
 class BatchResult(NamedTuple):
     """What :meth:`BufferCore.set_transforms` did with a batch of transforms."""
 
@@ -43,7 +99,8 @@ class BatchResult(NamedTuple):
     (TypeError)."""
     touched: AbstractSet[str] = frozenset()
     """The (stripped) child and parent frame ids of every stored transform: the frames
-    whose lookups may have changed. ``tfbus.buffer.Buffer`` rechecks its waits from it."""
+    whose lookups may have changed (a :class:`TouchedFrames`, built on first use).
+    ``tfbus.buffer.Buffer`` rechecks its waits from it."""
     relinked: bool = False
     """Whether a stored transform may have changed the tree's shape (a new link, a link
     emptied by ``clear()`` refilled, or a link given another parent): which frames a
