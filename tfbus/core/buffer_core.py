@@ -211,7 +211,10 @@ class BufferCore(CoreBase):
         is_static: bool = False,
     ) -> BatchResult:
         """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
-        listener uses; per transform at least as fast as :meth:`set_transform`.
+        listener uses. Per transform it is faster than a loop of :meth:`set_transform`
+        from about 5 transforms a call on (``make bench-check`` prints the ratio by
+        message size); a call with one transform pays the result's fixed cost, about
+        0.1 µs, on top.
 
         Each item is handled exactly as :meth:`set_transform` (or
         :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
