@@ -210,8 +210,9 @@ def main() -> int:
     try:
         for page in QUOTING:
             text = page.read_text(encoding="utf-8")
-            if fill_quotes(text) != text:
-                page.write_text(fill_quotes(text), encoding="utf-8")
+            filled = fill_quotes(text)
+            if filled != text:
+                page.write_text(filled, encoding="utf-8")
                 print(f"rewrote the quoted figures of {page.relative_to(ROOT)}")
     except QuoteError as exc:
         print(exc)
