@@ -13,6 +13,7 @@ import logging
 import random
 import resource
 import socket
+import struct
 import xmlrpc.client
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager, suppress
@@ -39,6 +40,7 @@ from tfbus import (
     Bus,
     Header,
     Quaternion,
+    TFMessage,
     Time,
     Transform,
     TransformBroadcaster,
@@ -49,6 +51,7 @@ from tfbus import (
 from tfbus.errors import TransformException, TransportError
 from tfbus.transports.ros1 import Ros1Transport
 from tfbus.transports.ros1.rpc import MAX_XMLRPC_BYTES, BadReply, CallFailed, call, loads
+from tfbus.transports.ros1.tcpros import encode_header
 from tfbus.transports.ros1.transport import MAX_PUBLISHERS
 
 pytestmark = pytest.mark.anyio
@@ -457,6 +460,92 @@ async def test_a_broadcaster_advertises_tf_when_created() -> None:
             assert "registerPublisher" in master.calls
             bc.send_transform_nowait(_ts("first", 1))
             await buffer.wait_for_transform("map", "first", Time(0), timeout=30.0)
+
+
+class _ResetOnSend(anyio.abc.SocketStream):
+    """A subscriber's socket that sends a valid connection header, then neither reads
+    nor closes, and whose every send after the header reply fails as a socket the peer
+    reset does (``EPIPE`` wrapped in :class:`anyio.BrokenResourceError`).
+
+    With a real socket the node may see the reset first on its read side or on its
+    write side, whichever of its two tasks wakes first; this stream makes the write
+    side see it, every time."""
+
+    def __init__(self) -> None:
+        header = encode_header(
+            {"topic": "/tf", "md5sum": "*", "callerid": "/leaver", "type": "tf2_msgs/TFMessage"}
+        )
+        self._incoming = [header]
+        self.sent: list[bytes] = []
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        if self._incoming:
+            return self._incoming.pop(0)
+        await anyio.sleep_forever()
+        raise AssertionError("unreachable")
+
+    async def send(self, item: bytes) -> None:
+        if self.sent:
+            raise anyio.BrokenResourceError from BrokenPipeError(32, "Broken pipe")
+        self.sent.append(bytes(item))
+
+    async def send_eof(self) -> None:
+        pass
+
+    async def aclose(self) -> None:
+        pass
+
+    @property
+    def _raw_socket(self) -> socket.socket:
+        raise NotImplementedError
+
+
+async def test_a_subscriber_that_resets_mid_send_ends_only_its_connection() -> None:
+    """A subscriber leaving while the node sends it a frame closes that connection and
+    nothing else: the error does not escape the connection's task group wrapped in an
+    ExceptionGroup (which once stopped the node, in CI, when the write side saw the reset
+    before the read side)."""
+    node = Ros1Transport(master_uri="http://127.0.0.1:1/", node_name="/pub")
+    node.advertise("/tf")
+    stream = _ResetOnSend()
+    with anyio.fail_after(30):
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(node._serve_subscriber, stream)
+            await _until(lambda: node.statistics().connections_opened == 1, "the subscriber")
+            node.send_nowait("/tf", TFMessage((_ts("a", 1),)))
+    assert b"callerid=/pub" in stream.sent[0]  # the header reply went out
+    stats = node.statistics()
+    assert stats.connections_closed == 1
+    assert stats.sent == 0
+
+
+async def test_subscribers_resetting_mid_stream_leave_the_node_publishing() -> None:
+    """Real sockets: subscribers that connect, read a few frames and reset (``SO_LINGER``
+    0) while the node publishes every 10 ms; the node keeps delivering to a good one."""
+    with FakeMaster() as master:
+        async with pair(master) as p:
+            await p.delivers()
+            port = p.pub.tcpros_endpoint("/tf")
+            assert port is not None
+            for _ in range(20):
+                with socket.create_connection(port, timeout=10) as sock:
+                    sock.sendall(
+                        encode_header(
+                            {"topic": "/tf", "md5sum": "*", "callerid": "/leaver",
+                             "tcp_nodelay": "1"}
+                        )
+                    )
+                    got = b""
+                    with anyio.fail_after(10):
+                        while len(got) < 256:
+                            chunk = await anyio.to_thread.run_sync(sock.recv, 65536)
+                            assert chunk, "the node closed the subscriber's connection"
+                            got += chunk
+                    sock.setsockopt(
+                        socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0)
+                    )
+            await p.delivers()
+            assert p.pub.statistics().connections_closed >= 20
 
 
 async def test_a_huge_publisher_update_is_bounded_and_keeps_the_good_one() -> None:

@@ -832,19 +832,32 @@ class Ros1Transport:
             try:
                 async with anyio.create_task_group() as conn_tg:
                     conn_tg.start_soon(self._watch_closed, stream, conn_tg.cancel_scope)
-                    while True:
-                        while out.queue:
-                            await stream.send(out.queue.popleft())
-                            self._stats.sent += 1
-                        out.wake = anyio.Event()
-                        if not out.queue:
-                            await out.wake.wait()
-            except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
-                pass
+                    await self._send_queued(stream, out)
+                    conn_tg.cancel_scope.cancel()
             finally:
                 with contextlib.suppress(ValueError):
                     self._outgoing.get(topic, []).remove(out)
                 self._close_conn(out.conn_id)
+
+    async def _send_queued(self, stream: anyio.abc.SocketStream, out: _Outgoing) -> None:
+        """Send ``out``'s queued frames as they come, until the subscriber's socket fails.
+
+        A subscriber that leaves while a frame is being sent (``EPIPE``/``ECONNRESET``,
+        seen as :class:`anyio.BrokenResourceError` or :class:`OSError`) ends this
+        connection only. The errors are caught here, not around the connection's task
+        group, which would raise them wrapped in an :class:`ExceptionGroup` and stop the
+        node.
+        """
+        try:
+            while True:
+                while out.queue:
+                    await stream.send(out.queue.popleft())
+                    self._stats.sent += 1
+                out.wake = anyio.Event()
+                if not out.queue:
+                    await out.wake.wait()
+        except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
+            return
 
     @staticmethod
     async def _watch_closed(stream: anyio.abc.SocketStream, scope: anyio.CancelScope) -> None:
