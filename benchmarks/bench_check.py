@@ -338,7 +338,7 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
 
 def ros1_rows(rows: Rows, runs: int) -> None:
     import bench_ros1
-    from ros1_harness import Master, free_port, master_env, ros1_missing  # via bench_ros1
+    from ros1_peers import Master, free_port, master_env, ros1_missing  # via bench_ros1
 
     why = ros1_missing(bench_ros1.BENCH_PACKAGES)
     if why is not None:

@@ -39,9 +39,9 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(ROOT / "tests"))  # the ROS 1 harness: one home, shared with the tests
+sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers: one home, shared with the tests
 
-from ros1_harness import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+from ros1_peers import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
 
 BENCH_PACKAGES = ("roscpp", "tf2_msgs")
 """What the C++ publisher and subscriber of ``benchmarks/ros1/`` build against."""

@@ -31,10 +31,10 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers (no pytest)
 
-from ros1_harness import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
 from ros1_hostile import HostilePeer, http_answer, send_raw, tcpros_answer  # noqa: E402
+from ros1_peers import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
 
 _T0 = 1_000_000_000
 

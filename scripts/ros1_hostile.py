@@ -1,9 +1,11 @@
-"""Hostile ROS 1 peers for the tests, all on 127.0.0.1 (a free port each): a minimal but
-real ROS master (:class:`FakeMaster`, whose answers can be replaced by raw bytes) and
-XML-RPC servers that answer junk, trickle or never answer (:class:`HostilePeer`).
+"""Hostile ROS 1 peers for the tests and ``benchmarks/soak_ros1.py``, all on 127.0.0.1 (a
+free port each): a minimal but real ROS master (:class:`FakeMaster`, whose answers can be
+replaced by raw bytes) and XML-RPC servers that answer junk, trickle or never answer
+(:class:`HostilePeer`).
 
 Each serves from daemon threads; every wait in them is bounded (``stop`` ends them).
-Addresses outside loopback appear only as data a node must refuse.
+Addresses outside loopback appear only as data a node must refuse. Standard library only
+(no pytest), like ``ros1_peers``.
 """
 
 from __future__ import annotations
