@@ -804,3 +804,55 @@ async def test_recorder_drains_queued_messages_on_exit(tmp_path: Path) -> None:
     assert sorted((r.time, r.message) for r in back) == sorted(
         (m.message.transforms[0].header.stamp, m.message) for m in msgs
     )
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "sqlite3", "mcap"])
+async def test_recorder_drops_a_stamp_the_format_cannot_hold(tmp_path: Path, fmt: str) -> None:
+    """A transform stamped 2**31 s (message stamps are int32 seconds in the bag formats
+    rosbags writes) between two good ones: that message is counted and dropped, the
+    recorder keeps recording and the bag closes whole (before: the serialization error
+    escaped the recorder's pump)."""
+    from tfbus.bus import Bus
+
+    out = tmp_path / ("far.bag" if fmt == "ros1" else "far")
+
+    def msg(stamp: Time, x: float) -> TFMessage:
+        return TFMessage((TransformStamped(Header(stamp, "odom"), "base_link",
+                                           Transform(Vector3(x, 0.0, 0.0))),))
+
+    good = [msg(Time(1_700_000_000), 1.0), msg(Time(1_700_000_001), 2.0)]
+    async with Bus() as bus:
+        async with BagRecorder(bus, out, format=fmt) as rec:
+            bus.publish_nowait("/tf", good[0])
+            await anyio.wait_all_tasks_blocked()
+            bus.publish_nowait("/tf", msg(Time(2**31), 9.0))
+            await anyio.wait_all_tasks_blocked()
+            assert rec.dropped == 1
+            bus.publish_nowait("/tf", good[1])
+            await anyio.wait_all_tasks_blocked()
+            bus.publish_nowait("/tf", msg(Time(2**32 + 7), 9.0))  # drained on exit
+        assert (rec.count, rec.dropped) == (2, 2)
+    assert [list(r.message.transforms) for r in read_messages(out)] == \
+        [list(m.transforms) for m in good]
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "sqlite3", "mcap"])
+async def test_recorder_drops_a_bag_time_ros1_cannot_hold(tmp_path: Path, fmt: str) -> None:
+    """A receive time past 2**32 s: a ROS 1 bag (uint32 seconds) drops and counts each
+    such message and still closes readable (before: rosbags had indexed the time before
+    failing, and closing the bag failed too); ROS 2 bags (int64 ns) write it."""
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
+
+    clock = ManualClock(start=Time(2**32 + 5))
+    out = tmp_path / ("late.bag" if fmt == "ros1" else "late")
+    m = TFMessage((TransformStamped(Header(Time(1_700_000_000), "odom"), "base_link",
+                                    Transform()),))
+    async with Bus() as bus:
+        async with BagRecorder(bus, out, clock=clock, format=fmt) as rec:
+            for _ in range(3):
+                bus.publish_nowait("/tf", m)
+                await anyio.wait_all_tasks_blocked()
+        assert (rec.count, rec.dropped) == ((0, 3) if fmt == "ros1" else (3, 0))
+    back = [(r.time, list(r.message.transforms)) for r in read_messages(out)]
+    assert back == ([] if fmt == "ros1" else [(clock.now(), list(m.transforms))] * 3)

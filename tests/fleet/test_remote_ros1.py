@@ -9,21 +9,30 @@ Ros1BufferServer. Every wait is bounded; the nodes are stopped by PID.
 
 from __future__ import annotations
 
+import contextlib
+import socket
+import struct
 import subprocess
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 import anyio
+import anyio.abc
 import pytest
+from anyio.streams.buffered import BufferedByteReceiveStream
 from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures)
     Master,
     master_fixture,
     ros1_fixture,
     tfbus_cli,
 )
+from ros1_hostile import FakeMaster, HostilePeer, http_answer, send_raw, tcpros_answer, xmlrpc_call
 
 from tfbus.buffer import Buffer
 from tfbus.errors import LookupException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.remote import ros1 as remote_ros1
 from tfbus.remote.ros1 import (
     GOAL_MD5,
     GOAL_TYPE,
@@ -36,6 +45,7 @@ from tfbus.remote.ros1 import (
     encode_goal,
 )
 from tfbus.time import Time
+from tfbus.transports.ros1.tcpros import encode_header, frame, read_frame
 
 BUFFER_SERVER = Path("/usr/lib/tf2_ros/buffer_server")
 STATIC_PUBLISHER = Path("/usr/lib/tf2_ros/static_transform_publisher")
@@ -185,3 +195,196 @@ def test_serve_buffer_command_answers_debians_buffer_client(master: Master) -> N
         for p in (client, server, static):
             if p is not None:
                 p.stop()
+
+
+# ------------------------------------------------------------------ hostile local peers
+# A FakeMaster (scripts/ros1_hostile.py) on 127.0.0.1 instead of a roscore: each test runs
+# without ROS installed, on asyncio and on trio. In each, the node under attack keeps
+# answering a good client and leaves its context cleanly (an error escaping into the
+# node's task group would be raised there).
+
+
+def _static_buffer() -> Buffer:
+    buffer = Buffer()
+    buffer.set_transform_static(TransformStamped(
+        Header(Time(0), "base"), "laser",
+        Transform(Vector3(1.0, 2.0, 3.0), Quaternion())), "test")
+    return buffer
+
+
+async def _answered(client: Ros1BufferClient) -> None:
+    """The server answers a lookup (bounded: the connections may still be opening)."""
+    t = await client.lookup_transform("base", "laser", Time(0), 20.0)
+    assert tuple(t.transform.translation) == (1.0, 2.0, 3.0)
+
+
+async def _until(predicate: Callable[[], bool], timeout: float = 30.0) -> None:
+    with anyio.fail_after(timeout):
+        while not predicate():
+            await anyio.sleep(0.02)
+
+
+@asynccontextmanager
+async def _goal_publisher(goals: list[bytes], topic: str = "/tf2_buffer_server/goal"
+                          ) -> AsyncIterator[tuple[str, anyio.Event]]:
+    """A publisher of raw ``goals`` on ``topic``: its slave API URI (a HostilePeer whose
+    every requestTopic answer names a TCPROS port of this task group, which sends each
+    subscriber the header and then the goals) and an event set once they are sent."""
+    sent = anyio.Event()
+
+    async def serve(stream: anyio.abc.SocketStream) -> None:
+        async with stream:
+            with contextlib.suppress(anyio.EndOfStream, anyio.BrokenResourceError, OSError):
+                await read_frame(BufferedByteReceiveStream(stream), 65536, "header")
+                await stream.send(encode_header({
+                    "callerid": "/hostile", "md5sum": GOAL_MD5, "type": GOAL_TYPE,
+                    "topic": topic}))
+                for raw in goals:
+                    await stream.send(frame(raw))
+                sent.set()
+                while await stream.receive():
+                    pass
+
+    listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+    port = listener.listeners[0].extra(anyio.abc.SocketAttribute.local_port)
+    async with listener, anyio.create_task_group() as tg:
+        tg.start_soon(listener.serve, serve)
+        with HostilePeer(send_raw(http_answer(tcpros_answer(f"<int>{port}</int>")))) as peer:
+            yield peer.uri, sent
+        tg.cancel_scope.cancel()
+
+
+@pytest.mark.anyio
+async def test_a_subscriber_resetting_before_its_header_leaves_the_node_serving() -> None:
+    """Connections to the server's TCPROS port reset (``SO_LINGER`` 0) before sending a
+    header: each ends only its own connection (before: the BrokenResourceError anyio
+    raises for ECONNRESET escaped the header read and stopped the node)."""
+    with FakeMaster() as master:
+        async with Ros1BufferServer(_static_buffer(), master.uri) as server:
+            endpoint = server._node.tcpros_endpoint("/tf2_buffer_server/result")
+            assert endpoint is not None
+            for _ in range(20):
+                with socket.create_connection(endpoint, timeout=10) as sock:
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            async with Ros1BufferClient(master.uri) as client:
+                await _answered(client)
+                await _answered(client)
+
+
+@pytest.mark.anyio
+async def test_a_publisher_uri_that_does_not_parse_is_refused_and_the_others_kept() -> None:
+    """publisherUpdate naming ``http://[::1`` (urlsplit raises ValueError) besides the
+    good client: that URI is refused and counted, the client keeps its answers (before:
+    the ValueError stopped the node)."""
+    with FakeMaster() as master:
+        async with Ros1BufferServer(_static_buffer(), master.uri) as server, \
+                Ros1BufferClient(master.uri) as client:
+            await _answered(client)
+            slave, good = server._node._slave_uri, client._node._slave_uri
+            answer = await anyio.to_thread.run_sync(lambda: xmlrpc_call(
+                slave, "publisherUpdate", "/master", "/tf2_buffer_server/goal",
+                ["http://[::1", "http://[::1]x:1/", good]))
+            assert answer[0] == 1
+            await _answered(client)
+            await _until(lambda: server.refused >= 2)
+        assert server.refused == 2
+
+
+@pytest.mark.anyio
+async def test_a_requested_port_out_of_range_is_refused() -> None:
+    """A publisher whose requestTopic answer names port 70000 (or -1, or a bool): refused
+    and counted, never connected to (before: OverflowError from connect stopped the
+    node)."""
+    peers = [HostilePeer(send_raw(http_answer(tcpros_answer(p))))
+             for p in ("<int>70000</int>", "<int>-1</int>", "<boolean>1</boolean>")]
+    with FakeMaster() as master:
+        for peer in peers:
+            peer.start()
+        try:
+            async with Ros1BufferServer(_static_buffer(), master.uri) as server, \
+                    Ros1BufferClient(master.uri) as client:
+                await _answered(client)
+                await anyio.to_thread.run_sync(lambda: xmlrpc_call(
+                    server._node._slave_uri, "publisherUpdate", "/master",
+                    "/tf2_buffer_server/goal", [p.uri for p in peers]))
+                await _until(lambda: server.refused >= len(peers))
+                await _answered(client)
+        finally:
+            for peer in peers:
+                peer.close()
+
+
+@pytest.mark.anyio
+async def test_a_subscriber_that_never_reads_does_not_stop_the_answers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A subscriber of ``result`` that connects first and never reads (a tiny receive
+    buffer), while 60 goals of 100 kB frame names (6 MB of answers, past what the
+    sockets hold) are answered at once: the good client gets every answer. Before: the
+    answers sent concurrently on the stalled stream raised BusyResourceError and stopped
+    the node, and those queued behind it never reached the client. With the per-
+    subscriber queue bounded lower, the stalled one then loses its oldest frames
+    (counted), and the client's next answer still arrives."""
+    with FakeMaster() as master:
+        async with Ros1BufferServer(_static_buffer(), master.uri) as server:
+            endpoint = server._node.tcpros_endpoint("/tf2_buffer_server/result")
+            assert endpoint is not None
+            stalled = socket.socket()
+            stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            with stalled:
+                stalled.settimeout(10)
+                stalled.connect(endpoint)
+                stalled.sendall(encode_header({
+                    "callerid": "/stalled", "topic": "/tf2_buffer_server/result",
+                    "md5sum": RESULT_MD5, "type": RESULT_TYPE}))
+                await _until(lambda: server._node.subscribers("/tf2_buffer_server/result") == 1)
+                async with Ros1BufferClient(master.uri) as client:
+                    await _answered(client)
+                    errors: list[str] = []
+
+                    async def ask(k: int) -> None:
+                        with pytest.raises(LookupException) as err:
+                            await client.lookup_transform("base", f"{k}" + "g" * 100_000,
+                                                          Time(0), 0.0)
+                        errors.append(str(err.value))
+
+                    with anyio.fail_after(60):
+                        async with anyio.create_task_group() as tg:
+                            for k in range(60):
+                                tg.start_soon(ask, k)
+                    assert len(errors) == 60
+                    assert (server.dropped, client.dropped) == (0, 0)
+                    monkeypatch.setattr(remote_ros1, "_QUEUE_BYTES", 1 << 20)
+                    await _answered(client)
+                    assert server.dropped > 0 and client.dropped == 0
+
+
+@pytest.mark.anyio
+async def test_an_answer_whose_stamp_ros1_cannot_carry_is_refused() -> None:
+    """A goal stamped 0xFFFFFFFF s + 0xFFFFFFFF ns (past 2**32 s), and one asking a time
+    past 2**32 s: neither answer fits ROS 1's uint32 seconds; each is refused and counted
+    (before: struct.error from encode_result stopped the node); the good client keeps
+    its answers."""
+    stamped = bytearray(encode_goal("bad-1", 1, "base", "laser", Time(0), 0.0, Time(0),
+                                    "", False))
+    stamped[16:24] = b"\xff" * 8  # goal_id.stamp (after the 16-byte header)
+    late = encode_goal("bad-2", 2, "base", "laser", Time(2**32 - 1), 0.0, Time(0), "",
+                       False)
+    late = late.replace(struct.pack("<II", 2**32 - 1, 0), struct.pack("<II", 2**32 - 1,
+                                                                     2**32 - 1))
+    assert decode_goal(late).source_time.ns >= 2**32 * 10**9
+    with FakeMaster() as master:
+        async with Ros1BufferServer(_static_buffer(), master.uri) as server, \
+                Ros1BufferClient(master.uri) as client:
+            await _answered(client)
+            async with _goal_publisher([bytes(stamped), late]) as (uri, sent):
+                await anyio.to_thread.run_sync(lambda: xmlrpc_call(
+                    server._node._slave_uri, "publisherUpdate", "/master",
+                    "/tf2_buffer_server/goal", [uri, client._node._slave_uri]))
+                with anyio.fail_after(30):
+                    await sent.wait()
+                await _answered(client)
+                await _until(lambda: server.refused_answers >= 2)
+        assert server.refused_answers == 2 and server.malformed == 0
+    with pytest.raises(ValueError, match="ROS 1 time"):
+        encode_goal("g", 1, "base", "laser", Time(2**32), 0.0, Time(0), "", False)

@@ -428,6 +428,35 @@ async def test_an_oversized_request_is_refused_unread() -> None:
             await p.delivers()
 
 
+async def test_a_content_length_of_non_ascii_digits_is_refused() -> None:
+    """``Content-Length: \\xb2`` ('²' in latin-1, for which str.isdigit is true but int()
+    raises): answered 400 and counted; the node goes on (before: the ValueError escaped
+    the slave API's accept loop and stopped the node)."""
+    with FakeMaster() as master:
+        async with pair(master) as p:
+            await p.delivers()
+            host, port = p.sub.uri[7:-1].split(":")
+            before = p.sub.statistics().bad_requests
+            for length in (b"\xb2", b"1\xb3", b"\xb9" * 3):
+                with anyio.fail_after(30):
+                    stream = await anyio.connect_tcp(host, int(port))
+                    async with stream:
+                        await stream.send(b"POST / HTTP/1.0\r\nContent-Length: " + length
+                                          + b"\r\n\r\n<?xml version='1.0'?>")
+                        answer = await stream.receive()
+                assert answer.startswith(b"HTTP/1.0 400 ")
+            assert p.sub.statistics().bad_requests >= before + 3
+            assert await call(p.sub.uri, "getPid", "/x", timeout=5.0) > 0
+            await p.delivers()
+
+
+async def test_an_answer_with_a_non_ascii_content_length_is_a_bad_reply() -> None:
+    """The same header in an answer to a call: BadReply (junk), not a transport error."""
+    answer = b"HTTP/1.0 200 OK\r\nContent-Length: \xb2\r\n\r\n"
+    with HostilePeer(send_raw(answer)) as peer, pytest.raises(BadReply, match="bad Content"):
+        await call(peer.uri, "lookupNode", "/a", "/b", timeout=5.0)
+
+
 @pytest.mark.parametrize("length", [True, False])
 async def test_an_oversized_master_answer_is_cut(length: bool) -> None:
     """A 20 MB string in the master's answer: refused after 1 MiB (counted), retried."""

@@ -308,3 +308,87 @@ async def test_live_bus_relayed_to_foxglove(page: TfPage) -> None:
     finally:
         bridge.close()
         buffer.close()
+
+
+@pytest.mark.anyio
+async def test_stamps_foxglove_cannot_carry_are_dropped_and_the_rest_relayed(
+    page: TfPage,
+) -> None:
+    """Stamps at 2**32 s (a Zenoh peer may send up to 2**63 ns; foxglove's Timestamp has
+    uint32 seconds) on /tf, /tf_static and a scan: each such transform or scan is
+    counted in ``dropped`` and not sent, the transforms beside it are, the static one is
+    not sent again to a late /tf_static subscriber, later scans are relayed (before:
+    OverflowError ended the relay and ``tfbus view``)."""
+    from test_view_live import scan
+
+    from tfbus import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
+    from tfbus.buffer import Buffer
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
+    from tfbus.listener import TransformListener
+    from tfbus.monitor import MonitoredSink, TfSummary
+    from tfbus.view.live import LiveView
+
+    clock = ManualClock(Time.from_sec(10.3))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    far = Time(2**32)
+
+    def tf(parent: str, child: str, stamp: Time, x: float) -> TransformStamped:
+        return TransformStamped(Header(stamp, parent), child,
+                                Transform(Vector3(x, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0)))
+
+    far_scan = scan(10.1)
+    far_scan.header = Header(far, "base_laser")
+    try:
+        view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"], foxglove=bridge)
+        feed = view.feeds["/scan"]
+        async with Bus() as bus, TransformListener(sink, bus, clock=clock), \
+                anyio.create_task_group() as tg:
+            await tg.start(view.follow, bus)
+            await bus.publish("/tf_static", TFMessage((
+                tf("base_link", "far_static", far, 0.5),
+                tf("base_link", "base_laser", Time(0), 0.1))))
+            await bus.publish("/scan", far_scan)  # the first scan: relayed on receipt
+            with anyio.fail_after(5):
+                while view.relayed < 1 or feed.received < 1:
+                    await anyio.sleep(0)
+            assert bridge.dropped == 2
+
+            async def step() -> None:
+                await bus.publish("/tf", TFMessage((tf("odom", "far", far, 7.0),
+                                                    tf("odom", "base_link", Time.from_sec(10.0),
+                                                       1.0))))
+                await bus.publish("/tf", TFMessage((tf("odom", "base_link", Time.from_sec(10.2),
+                                                       3.0),)))
+                await bus.publish("/scan", scan(10.1))
+                with anyio.fail_after(5):
+                    while view.relayed < 3:
+                        await anyio.sleep(0)
+                    view.render()  # sends the statics again; the fixed frame is known
+                    while feed.received < 2:
+                        await anyio.sleep(0)
+                view.render()
+
+            got = await anyio.to_thread.run_sync(lambda: asyncio.run(collect(
+                bridge.port, probe_channel(bridge), ["/tf", "/tf_static", "/scan"],
+                lambda: anyio.from_thread.run(step), 3, want_scans=1)))
+            tg.cancel_scope.cancel()
+        seen = []
+        for topic in ("/tf", "/tf_static"):
+            for _, payload in got[topic]:
+                for item in fields(payload)[1]:
+                    stamp, parent, child, _xyz, _xyzw = frame_transform(item)
+                    seen.append((topic, parent, child, stamp))
+        assert seen == [("/tf", "odom", "base_link", 10_000_000_000),
+                        ("/tf", "odom", "base_link", 10_200_000_000),
+                        ("/tf_static", "base_link", "base_laser", 0)]
+        assert len(got["scan"]) == 1
+        ts = fields(fields(got["scan"][0][1])[1][0])
+        assert _one(ts, 1, 0) * 1_000_000_000 + _one(ts, 2, 0) == 10_100_000_000
+        assert bridge.dropped == 3
+    finally:
+        bridge.close()
+        buffer.close()

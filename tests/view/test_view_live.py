@@ -4,6 +4,7 @@ at most one projection per redraw; a bad message on the topic is counted and dro
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -106,6 +107,37 @@ async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> Non
         np.testing.assert_array_equal(np.asarray(page.clouds["/scan"].points),
                                       xyz(newest).astype(np.float32))
         assert page.clouds["/scan"].visible
+        tg.cancel_scope.cancel()
+    buffer.close()
+
+
+async def test_a_first_scan_without_a_finite_sweep_is_dropped(page: TfPage) -> None:
+    """The first scan of a topic sizes the filter's tolerance (its sweep); one with
+    ``time_increment = inf`` and three beams has none: it is counted in ``dropped`` and
+    the next scan sizes it, passes and is drawn (before: Duration.from_sec(inf) raised
+    ValueError out of the view, and ``tfbus view`` exited)."""
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
+    feed = view.feeds["/scan"]
+    async with Bus() as bus, TransformListener(sink, bus, clock=clock), \
+            anyio.create_task_group() as tg:
+        await tg.start(view.follow, bus)
+        tfb = TransformBroadcaster(bus)
+        await tfb.send_transform(odom_to_laser(10.0, 1.0))
+        await until(lambda: stats.messages.get("/tf", 0) == 1)
+        assert view.render().fixed_frame == "odom"
+        await bus.publish("/scan", dataclasses.replace(scan(10.1), time_increment=math.inf))
+        await until(lambda: feed.dropped == 1)
+        await bus.publish("/scan", scan(10.1))
+        await tfb.send_transform(odom_to_laser(10.2, 3.0))
+        with anyio.fail_after(5):
+            await view.wait_passed("/scan", 1)
+        view.render()
+        assert (feed.received, feed.passed, feed.dropped, feed.drawn) == (2, 1, 1, 1)
+        assert feed.error is None
         tg.cancel_scope.cancel()
     buffer.close()
 

@@ -6,6 +6,9 @@ folders with sqlite3 or MCAP storage (``rosbags.rosbag2.Writer``, bag version 8)
 
 from __future__ import annotations
 
+import logging
+import struct
+import time as _wallclock
 from collections.abc import Collection, Iterator, Sequence
 from os import PathLike
 from pathlib import Path
@@ -17,7 +20,8 @@ from tfbus.bag.reader import describe
 from tfbus.codecs.ros1 import ROSBAGS_TF_TYPE, tf_typestore, to_rosbags
 from tfbus.errors import BagError, BagFormatError
 from tfbus.messages import TFMessage
-from tfbus.time import Time
+from tfbus.ratelimit import CountLimitedLog
+from tfbus.time import NSEC_PER_SEC, Time
 
 if TYPE_CHECKING:
     from tfbus.bus import Bus, Subscription
@@ -25,6 +29,8 @@ if TYPE_CHECKING:
 
 __all__ = ["BagRecorder", "write_bag"]
 
+_ROS1_MAX_SEC = 0xFFFF_FFFF  # a ROS 1 bag's record times are uint32 seconds
+_log = CountLimitedLog(logging.getLogger(__name__), 1, period=5.0, clock=_wallclock.monotonic)
 
 
 def _qos(static: bool) -> list[Any]:
@@ -107,10 +113,25 @@ class _Writer:
         return conn
 
     def write(self, time: Time, topic: str, message: TFMessage) -> None:
+        """Write one message at bag time ``time``.
+
+        Raises:
+            ValueError: a header stamp or ``time`` the format cannot hold (message
+                stamps: int32 seconds as rosbags serializes them; a ROS 1 bag's times:
+                uint32 seconds); nothing was written.
+        """
         s = self.store
         msg = to_rosbags(s, message.transforms, ros1=self.ros1)
         typ = ROSBAGS_TF_TYPE
-        raw = s.serialize_ros1(msg, typ) if self.ros1 else s.serialize_cdr(msg, typ)
+        try:
+            raw = s.serialize_ros1(msg, typ) if self.ros1 else s.serialize_cdr(msg, typ)
+        except (struct.error, OverflowError) as exc:
+            raise ValueError(f"a stamp does not fit a {self.fmt.value} message: {exc}") from None
+        # checked before rosbags' ROS 1 writer indexes the time (it would fail only later,
+        # then again when closing the bag)
+        if self.ros1 and time.ns // NSEC_PER_SEC > _ROS1_MAX_SEC:
+            raise ValueError(f"bag time {time.ns // NSEC_PER_SEC} s is past a ROS 1 bag's "
+                             "(uint32 seconds)")
         self.writer.write(self._conn(topic), time.ns, raw)
         self.count += 1
 
@@ -159,6 +180,9 @@ def write_bag(
     Raises:
         BagError: the path exists already or cannot be created.
         BagFormatError: unknown ``format``.
+        ValueError: a header stamp or bag time the format cannot hold (message stamps
+            are int32 seconds; a ROS 1 bag's times uint32 seconds); the messages before
+            it are written and the bag closed.
     """
     p = Path(path)
     w = _Writer(p, _format_for(p, format), callerid)
@@ -175,8 +199,10 @@ class BagRecorder:
     """Record a bus's ``/tf`` and ``/tf_static`` to a bag while the ``async with`` lasts.
 
     Each message is written with the receive time read from ``clock`` (or the header
-    stamp of its first transform when no clock is given). On exit the messages already
-    delivered to the recorder are written and the bag is closed::
+    stamp of its first transform when no clock is given). A message with a stamp or
+    receive time the format cannot hold (message stamps are int32 seconds; a ROS 1 bag's
+    times uint32 seconds) is counted in :attr:`dropped`, logged and not written. On exit
+    the messages already delivered to the recorder are written and the bag is closed::
 
         async with Bus() as bus, BagRecorder(bus, "session.bag", clock=clock) as rec:
             ...
@@ -212,6 +238,8 @@ class BagRecorder:
         self.topics = tuple(topics)
         self._writer = _Writer(self.path, _format_for(self.path, format), callerid)
         self._subs: list[Subscription[Any]] = []
+        self.dropped = 0
+        """Messages not written: a stamp or receive time the bag format cannot hold."""
 
     @property
     def count(self) -> int:
@@ -242,7 +270,12 @@ class BagRecorder:
             t = msg.transforms[0].header.stamp
         else:
             return
-        self._writer.write(t, topic, msg)
+        try:
+            self._writer.write(t, topic, msg)
+        except ValueError as exc:  # only this message cannot be written
+            self.dropped += 1
+            _log.log(logging.WARNING, "%s: not recording a message on %s: %s", self.path,
+                     topic, exc)
 
     async def __aexit__(
         self,

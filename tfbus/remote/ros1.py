@@ -14,17 +14,23 @@
   Debian's ``tf2_ros.BufferClient`` gets its answers.
 
 Loopback only: the node listens on 127.0.0.1 and contacts only 127.0.0.1 / localhost
-peers. A goal that does not decode is counted and dropped.
+peers. A goal that does not decode is counted and dropped; so is a publisher URI that is
+not a loopback ``http://host:port`` (or whose ``requestTopic`` answer is not), and an
+answer ROS 1 cannot carry (a stamp at or after 2**32 s). Each subscriber has its own
+bounded queue of frames (the oldest dropped when full), so one that does not read holds up
+no other.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import secrets
 import struct
 import time as _wallclock
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 from urllib.parse import urlsplit
@@ -36,6 +42,7 @@ from anyio.streams.buffered import BufferedByteReceiveStream
 from tfbus import errors
 from tfbus.errors import TransformException, TransportError
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
 from tfbus.transports.ros1.rpc import SlaveServer, call, serve_listener
 from tfbus.transports.ros1.tcpros import decode_header, encode_header, frame, read_frame
@@ -80,6 +87,11 @@ _ERRORS: Final[dict[int, type[TransformException]]] = {
     6: errors.TransformException,
 }
 _MAX_FRAME: Final = 1 << 20
+# Frames queued per subscriber, at most: beyond either bound its oldest are dropped.
+_QUEUE_FRAMES = 1000
+_QUEUE_BYTES = 8 << 20
+_log = logging.getLogger("tfbus.remote")
+_peer_log = CountLimitedLog(_log, 1, period=5.0, clock=_wallclock.monotonic)
 _U8 = struct.Struct("<B")
 _U32 = struct.Struct("<I")
 _TIME = struct.Struct("<II")
@@ -93,7 +105,10 @@ def _string(text: str) -> bytes:
 
 
 def _time(t: Time) -> bytes:
-    return _TIME.pack(t.ns // 1_000_000_000, t.ns % 1_000_000_000)
+    sec, nsec = divmod(t.ns, 1_000_000_000)
+    if sec > 0xFFFF_FFFF:
+        raise ValueError(f"stamp {sec}.{nsec:09d} s is past ROS 1 time (uint32 seconds)")
+    return _TIME.pack(sec, nsec)
 
 
 class _Reader:
@@ -125,7 +140,11 @@ class _Reader:
 
 def encode_goal(goal_id: str, seq: int, target: str, source: str, source_time: Time,
                 timeout: float, target_time: Time, fixed: str, advanced: bool) -> bytes:
-    """A ``tf2_msgs/LookupTransformActionGoal`` in ROS 1 serialisation."""
+    """A ``tf2_msgs/LookupTransformActionGoal`` in ROS 1 serialisation.
+
+    Raises:
+        ValueError: a time at or after 2**32 s, past ROS 1 time (uint32 seconds).
+    """
     now = Time.from_ns(_wallclock.time_ns())
     seconds = math.floor(timeout)
     return b"".join((
@@ -206,7 +225,12 @@ def _goal_status(goal_id: str, stamp: Time, status: int) -> bytes:
 def encode_result(seq: int, goal_id: str, goal_stamp: Time, ts: TransformStamped, code: int,
                   message: str) -> bytes:
     """A ``tf2_msgs/LookupTransformActionResult`` with status SUCCEEDED (as tf2_ros's
-    buffer_server sends every answer, the error in ``TF2Error``)."""
+    buffer_server sends every answer, the error in ``TF2Error``).
+
+    Raises:
+        ValueError: ``goal_stamp`` or the transform's stamp is at or after 2**32 s, past
+            ROS 1 time (uint32 seconds).
+    """
     now = Time.from_ns(_wallclock.time_ns())
     t = ts.transform
     return b"".join((
@@ -223,7 +247,26 @@ def _loopback(host: str | None) -> bool:
     return host in ("127.0.0.1", "localhost")
 
 
+def _loopback_uri(uri: str) -> bool:
+    """Whether ``uri`` parses and names 127.0.0.1 or localhost (``urlsplit`` raises
+    ValueError for e.g. ``http://[::1``)."""
+    try:
+        return _loopback(urlsplit(uri).hostname)
+    except ValueError:
+        return False
+
+
 _Handler = Callable[[bytes], None]
+
+
+class _Subscriber:
+    """One subscriber of a topic of ours: the frames still to send it (``size`` bytes),
+    sent by that connection's own task only."""
+
+    def __init__(self) -> None:
+        self.queue: deque[bytes] = deque()
+        self.size = 0
+        self.wake = anyio.Event()
 
 
 class _Node:
@@ -236,13 +279,15 @@ class _Node:
         self.name = name
         self._pubs: dict[str, tuple[str, str]] = {}
         self._subs: dict[str, tuple[str, str, _Handler]] = {}
-        self._out: dict[str, list[anyio.abc.SocketStream]] = {}
+        self._out: dict[str, list[_Subscriber]] = {}
         self._in: dict[str, set[str]] = {}
         self._changed = anyio.Event()
         self._slave_uri = ""
         self._tcpros: tuple[str, int] | None = None
         self._tg: anyio.abc.TaskGroup | None = None
         self.malformed = 0
+        self.refused = 0  # publisher URIs / requestTopic answers refused
+        self.dropped = 0  # frames dropped from a full subscriber queue
 
     def publish(self, topic: str, msg_type: str, md5: str) -> None:
         self._pubs[topic] = (msg_type, md5)
@@ -266,11 +311,26 @@ class _Node:
         event, self._changed = self._changed, anyio.Event()
         event.set()
 
-    async def send(self, topic: str, payload: bytes) -> None:
+    def send_nowait(self, topic: str, payload: bytes) -> None:
+        """Queue ``payload`` for every subscriber of ``topic``. Each connection sends its
+        own queue, so a subscriber that does not read holds up no other; its queue keeps
+        at most ``_QUEUE_FRAMES`` frames and ``_QUEUE_BYTES`` bytes (but always the
+        newest frame), the oldest dropped and counted in ``dropped``."""
         data = frame(payload)
-        for stream in list(self._out.get(topic, ())):
-            with contextlib.suppress(OSError, anyio.BrokenResourceError):
-                await stream.send(data)
+        for sub in self._out.get(topic, ()):
+            sub.queue.append(data)
+            sub.size += len(data)
+            while len(sub.queue) > _QUEUE_FRAMES or (
+                    sub.size > _QUEUE_BYTES and len(sub.queue) > 1):
+                sub.size -= len(sub.queue.popleft())
+                self.dropped += 1
+            sub.wake.set()
+
+    def refuse(self, what: str, uri: str) -> None:
+        """Count and log (limited in time) a publisher that is not followed."""
+        self.refused += 1
+        _peer_log.log(logging.WARNING, "ros1: %s: not following publisher %r: %s",
+                      self.name, uri[:200], what)
 
     # SlaveNode
     @property
@@ -362,7 +422,8 @@ class _Node:
                 with anyio.fail_after(10):
                     header = decode_header(await read_frame(
                         BufferedByteReceiveStream(stream), 65536, "connection header"))
-            except (TimeoutError, ValueError, OSError, anyio.EndOfStream, anyio.IncompleteRead):
+            except (TimeoutError, ValueError, OSError, anyio.EndOfStream, anyio.IncompleteRead,
+                    anyio.BrokenResourceError):  # anyio's error for ECONNRESET
                 return
             topic = header.get("topic", "")
             kind = self._pubs.get(topic)
@@ -371,33 +432,67 @@ class _Node:
                     await stream.send(encode_header({"error": f"{topic!r}: wrong md5sum"
                                                      if kind else f"no topic {topic!r}"}))
                 return
-            with contextlib.suppress(OSError, anyio.BrokenResourceError):
+            try:
                 await stream.send(encode_header({
                     "callerid": self.name, "md5sum": kind[1], "type": kind[0], "topic": topic,
                     "latching": "0", "message_definition": ""}))
+            except (OSError, anyio.BrokenResourceError):
+                return
             if header.get("probe") == "1":
                 return
-            self._out[topic].append(stream)
+            sub = _Subscriber()
+            self._out[topic].append(sub)
             self._wake()
             try:
-                with contextlib.suppress(anyio.EndOfStream, OSError, anyio.BrokenResourceError):
-                    while await stream.receive():  # a subscriber sends nothing more
-                        pass
+                async with anyio.create_task_group() as tg:
+                    tg.start_soon(self._watch_closed, stream, tg.cancel_scope)
+                    await self._send_queued(stream, sub)
+                    tg.cancel_scope.cancel()
             finally:
-                self._out[topic].remove(stream)
+                self._out[topic].remove(sub)
                 self._wake()
+
+    @staticmethod
+    async def _send_queued(stream: anyio.abc.SocketStream, sub: _Subscriber) -> None:
+        """Send ``sub``'s frames as they are queued, until its socket fails (the only
+        task sending on ``stream``; its errors end this connection only)."""
+        try:
+            while True:
+                while sub.queue:
+                    data = sub.queue.popleft()
+                    sub.size -= len(data)
+                    await stream.send(data)
+                sub.wake = anyio.Event()
+                if not sub.queue:
+                    await sub.wake.wait()
+        except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
+            return
+
+    @staticmethod
+    async def _watch_closed(stream: anyio.abc.SocketStream, scope: anyio.CancelScope) -> None:
+        """A subscriber sends nothing after its header: any end of reading means it left."""
+        with contextlib.suppress(anyio.EndOfStream, OSError, anyio.BrokenResourceError,
+                                 anyio.ClosedResourceError):
+            while await stream.receive():
+                pass
+        scope.cancel()
 
     async def _receive(self, topic: str, uri: str) -> None:
         """Receive ``topic`` from one publisher."""
         connected = self._in[topic]
-        if uri in connected or not _loopback(urlsplit(uri).hostname):
+        if uri in connected:
+            return
+        if not _loopback_uri(uri):
+            self.refuse("not an http URI on 127.0.0.1 or localhost", uri)
             return
         msg_type, md5, handler = self._subs[topic]
         try:
             answer = await call(uri, "requestTopic", self.name, topic, [["TCPROS"]],
                                 timeout=10.0)
             if not (isinstance(answer, list) and len(answer) == 3 and answer[0] == "TCPROS"
-                    and _loopback(str(answer[1])) and isinstance(answer[2], int)):
+                    and _loopback(str(answer[1])) and type(answer[2]) is int
+                    and 0 < answer[2] < 65536):
+                self.refuse(f"requestTopic answered {answer!r:.200}", uri)
                 return
             stream = await anyio.connect_tcp(str(answer[1]), answer[2])
         except (TransportError, OSError):
@@ -455,6 +550,19 @@ class Ros1BufferClient:
         """Result messages that did not decode (counted, dropped)."""
         return self._node.malformed
 
+    @property
+    def refused(self) -> int:
+        """Publishers of the results not followed: a URI that is not a loopback
+        ``http://host:port``, or a ``requestTopic`` answer that is not a loopback TCPROS
+        endpoint (counted, logged)."""
+        return self._node.refused
+
+    @property
+    def dropped(self) -> int:
+        """Goals dropped for a server that does not read them fast enough (the oldest,
+        beyond 1000 goals or 8 MiB queued)."""
+        return self._node.dropped
+
     async def __aenter__(self) -> Ros1BufferClient:
         """Start the node and register with the master.
 
@@ -478,7 +586,8 @@ class Ros1BufferClient:
         Raises:
             The server's tf2 error as the same tfbus class (its message kept);
             TimeoutException if no result came within ``timeout + timeout_padding``
-            wall seconds (tf2_ros's message).
+            wall seconds (tf2_ros's message); ValueError for a time at or after 2**32 s
+            (past ROS 1 time).
         """
         return await self._goal(target_frame, source_frame, time, timeout, Time(0), "", False)
 
@@ -520,7 +629,7 @@ class Ros1BufferClient:
                 while not (node.subscribers(self._goal_topic)
                            and node.publishers(self._result_topic)):
                     await node.changed()
-                await node.send(self._goal_topic, encode_goal(
+                node.send_nowait(self._goal_topic, encode_goal(
                     goal_id, self._seq, target, source, source_time, seconds, target_time,
                     fixed, advanced))
                 await done.wait()
@@ -566,11 +675,27 @@ class Ros1BufferServer:
         self._seq = 0
         self.answered = 0
         """Goals answered (with a transform or a TF2Error)."""
+        self.refused_answers = 0
+        """Goals not answered because ROS 1 cannot carry the answer: the goal's stamp or
+        the transform's is at or after 2**32 s (uint32 seconds); counted, logged."""
 
     @property
     def malformed(self) -> int:
         """Goals that did not decode (counted, dropped)."""
         return self._node.malformed
+
+    @property
+    def refused(self) -> int:
+        """Publishers of goals not followed: a URI that is not a loopback
+        ``http://host:port``, or a ``requestTopic`` answer that is not a loopback TCPROS
+        endpoint (counted, logged)."""
+        return self._node.refused
+
+    @property
+    def dropped(self) -> int:
+        """Frames (results, feedback, status) dropped for subscribers that do not read
+        them fast enough (the oldest, beyond 1000 frames or 8 MiB queued for one)."""
+        return self._node.dropped
 
     async def __aenter__(self) -> Ros1BufferServer:
         """Start the node, register with the master, publish status at 5 Hz.
@@ -593,8 +718,8 @@ class Ros1BufferServer:
         while True:
             seq += 1
             now = Time.from_ns(_wallclock.time_ns())
-            await self._node.send(self._topics["status"],
-                                  _U32.pack(seq) + _time(now) + _string("") + _U32.pack(0))
+            self._node.send_nowait(self._topics["status"],
+                                   _U32.pack(seq) + _time(now) + _string("") + _U32.pack(0))
             await anyio.sleep(0.2)
 
     def _on_goal(self, raw: bytes) -> None:
@@ -632,7 +757,14 @@ class Ros1BufferServer:
             ts = empty
             code = next((c for c, cls in _ERRORS.items() if type(exc) is cls), 6)
             message = str(exc)
+        try:
+            result = encode_result(self._seq + 1, goal.goal_id, goal.goal_stamp, ts, code,
+                                   message)
+        except ValueError as exc:  # a stamp past ROS 1 time
+            self.refused_answers += 1
+            _peer_log.log(logging.WARNING, "ros1: %s: not answering goal %r: %s",
+                          self._node.name, goal.goal_id[:200], exc)
+            return
         self._seq += 1
         self.answered += 1
-        await self._node.send(self._topics["result"], encode_result(
-            self._seq, goal.goal_id, goal.goal_stamp, ts, code, message))
+        self._node.send_nowait(self._topics["result"], result)

@@ -6,20 +6,31 @@ translation, rotation x y z w, the header stamp as timestamp), scans as
 ``foxglove.LaserScan`` in their own frame, bag time as the server time (the ``time``
 capability: Foxglove's timeline follows the bag), and each frame tf cannot place as a
 warning status message (tf2's text), cleared when it can be placed again.
+
+Foxglove's ``Timestamp`` has uint32 seconds: a transform or scan stamped at or after
+2**32 s (a Zenoh peer may send stamps up to 2**63 ns) is not sent, counted in
+:attr:`FoxgloveBridge.dropped` and logged; the others are sent.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
+import time
 from collections.abc import Iterable
-from typing import Any
+from typing import Any, Final
 
 from tfbus.messages import TransformStamped
+from tfbus.ratelimit import CountLimitedLog
 from tfbus.sensor_msgs import LaserScan
+from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.view.scene import Scene
 
 __all__ = ["FoxgloveBridge"]
+
+_MAX_SEC: Final = 0xFFFF_FFFF  # foxglove.Timestamp.sec is a uint32
+_log = CountLimitedLog(logging.getLogger("tfbus.view"), 1, period=5.0, clock=time.monotonic)
 
 
 class FoxgloveBridge:
@@ -62,11 +73,25 @@ class FoxgloveBridge:
         (a live bus; a bag's static transforms go out on ``/tf``)."""
         self.scans: dict[str, Any] = {}
         self._status: dict[str, str] = {}
+        self.dropped = 0
+        """Transforms and scans not sent: stamped at or after 2**32 s, which Foxglove's
+        ``Timestamp`` (uint32 seconds) cannot carry."""
+
+    @staticmethod
+    def fits(stamp: Time) -> bool:
+        """Whether Foxglove's ``Timestamp`` (uint32 seconds) can carry ``stamp``."""
+        return stamp.sec <= _MAX_SEC
+
+    def _drop(self, what: str, stamp: Time) -> None:
+        self.dropped += 1
+        _log.log(logging.WARNING, "foxglove: not sending %s stamped %d s (past uint32 "
+                 "seconds)", what, stamp.sec)
 
     def publish_transforms(self, transforms: Iterable[TransformStamped], log_time_ns: int,
                            *, static: bool = False) -> None:
         """Send transforms on ``/tf`` (``/tf_static`` with ``static``) as one
-        ``foxglove.FrameTransforms`` (log time: bag or receive time, nanoseconds)."""
+        ``foxglove.FrameTransforms`` (log time: bag or receive time, nanoseconds); those
+        that do not :meth:`fit <fits>` are left out and counted in :attr:`dropped`."""
         from foxglove.messages import (
             FrameTransform,
             FrameTransforms,
@@ -77,6 +102,10 @@ class FoxgloveBridge:
 
         out = []
         for t in transforms:
+            if not self.fits(t.header.stamp):
+                self._drop(f"the transform {t.header.frame_id!r:.80} -> "
+                           f"{t.child_frame_id!r:.80}", t.header.stamp)
+                continue
             v, q = t.transform.translation, t.transform.rotation
             out.append(FrameTransform(
                 timestamp=Timestamp(sec=t.header.stamp.sec, nsec=t.header.stamp.nanosec),
@@ -119,12 +148,16 @@ class FoxgloveBridge:
 
     def publish_scan(self, topic: str, scan: LaserScan, log_time_ns: int) -> None:
         """Send a scan as ``foxglove.LaserScan`` in its own frame (identity pose, ranges
-        and intensities as recorded, start/end angle = angle_min/angle_max)."""
+        and intensities as recorded, start/end angle = angle_min/angle_max); one that does
+        not :meth:`fit <fits>` is not sent, counted in :attr:`dropped`."""
         from foxglove.messages import LaserScan as FgScan
         from foxglove.messages import Pose, Quaternion, Timestamp, Vector3
 
         ch = self.scan_channel(topic)
         s = scan.header.stamp
+        if not self.fits(s):
+            self._drop(f"a scan on {topic}", s)
+            return
         ch.log(FgScan(
             timestamp=Timestamp(sec=s.sec, nsec=s.nanosec), frame_id=scan.header.frame_id,
             pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0),

@@ -18,7 +18,8 @@ times a second and, from the same bus:
   the clock's time as the server time and tf's errors as statuses.
 
 A message of another type on a scan topic (or on ``/tf``) is counted in
-:attr:`ScanFeed.bad` (:attr:`LiveView.bad_tf`) and dropped.
+:attr:`ScanFeed.bad` (:attr:`LiveView.bad_tf`) and dropped; a first scan whose sweep is
+not finite (it would size the filter's tolerance) in :attr:`ScanFeed.dropped`.
 """
 
 from __future__ import annotations
@@ -55,7 +56,11 @@ __all__ = ["LiveView", "ScanFeed", "sweep"]
 
 def sweep(scan: LaserScan) -> Duration:
     """Time from a scan's first beam to its last, ``(len(ranges) - 1) * time_increment``
-    (laser_geometry's end time; 0 for a scan without beams or time increment)."""
+    (laser_geometry's end time; 0 for a scan without beams or time increment).
+
+    Raises:
+        ValueError: the sweep is infinite (``time_increment`` +inf and two beams or more).
+    """
     n = len(scan.ranges)
     return Duration.from_sec(max(0.0, (n - 1) * float(scan.time_increment))) if n else \
         Duration.from_ns(0)
@@ -74,7 +79,8 @@ class ScanFeed:
     passed: int = 0
     """Scans the MessageFilter let through (their transforms arrived)."""
     dropped: int = 0
-    """Scans the MessageFilter dropped (queue full, too old, malformed)."""
+    """Scans the MessageFilter dropped (queue full, too old, malformed), and first scans
+    without a finite sweep (:func:`sweep`), which cannot size the filter's tolerance."""
     drawn: int = 0
     """Projections drawn (at most one per redraw)."""
     error: str | None = None
@@ -194,8 +200,18 @@ class LiveView:
             first = await source.__anext__()
         except StopAsyncIteration:
             return
-        source.push_back(first)
         await self._fixed_known.wait()
+        while True:  # the first scan with a finite sweep sizes the tolerance
+            try:
+                tolerance = sweep(first)
+                break
+            except ValueError:  # time_increment +inf: dropped, counted
+                feed.dropped += 1
+            try:
+                first = await source.__anext__()
+            except StopAsyncIteration:
+                return
+        source.push_back(first)
         target = self.shown_fixed
         assert target is not None
 
@@ -203,7 +219,7 @@ class LiveView:
             feed.dropped += 1
 
         async with MessageFilter(self.buffer, target, source, queue_size=10,
-                                 tolerance=sweep(first), on_failure=failed) as mf:
+                                 tolerance=tolerance, on_failure=failed) as mf:
             async for scan in mf:
                 if self.shown_fixed is not None and self.shown_fixed != target:
                     target = self.shown_fixed
@@ -219,9 +235,10 @@ class LiveView:
             if not isinstance(msg, TFMessage):
                 self.bad_tf += 1
                 continue
-            if static:
+            if static:  # kept to send again; one Foxglove cannot carry is dropped once
                 for t in msg.transforms:
-                    self._statics[t.child_frame_id] = t
+                    if bridge.fits(t.header.stamp):
+                        self._statics[t.child_frame_id] = t
             bridge.publish_transforms(msg.transforms, self.clock.now().ns, static=static)
             self.relayed += 1
 

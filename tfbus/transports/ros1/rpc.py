@@ -135,7 +135,9 @@ def _content_length(headers: dict[str, str], what: str) -> int | None:
     raw = headers.get("content-length")
     if raw is None:
         return None
-    if not raw.isdigit() or len(raw) > 18:
+    # ASCII digits only: str.isdigit is also true for '²', '³', '¹' (latin-1), which
+    # int() refuses
+    if not (raw.isascii() and raw.isdigit()) or len(raw) > 18:
         raise BadReply(f"{what}: bad Content-Length {raw[:40]!r}")
     return int(raw)
 
@@ -336,7 +338,7 @@ class SlaveServer:
                 with anyio.fail_after(self._timeout):
                     answer = await self._answer(stream)
                     await stream.send(answer)
-            except BadReply as exc:
+            except (BadReply, ValueError) as exc:  # ValueError: a request parse we missed
                 self._node.on_bad_request(str(exc))
                 with contextlib.suppress(Exception), anyio.move_on_after(0.2):
                     await stream.send(_http(400, b"bad request\n", "text/plain"))
