@@ -120,6 +120,57 @@ def test_repeated_frame_ids_are_the_earlier_strs_and_a_changed_id_is_new() -> No
     assert back[0].child_frame_id == "bench_1" and back[0].header.frame_id == "map"
 
 
+def _raw_tf(*values: tuple[float, ...] | bytes, stamp: int = 1) -> bytes:
+    """A ROS 1 TFMessage of ``map -> c<k>`` transforms; each entry is 7 doubles or their
+    56 bytes (to set NaN payloads exactly)."""
+    out = [struct.pack("<I", len(values))]
+    for k, v in enumerate(values):
+        child = f"c{k}".encode()
+        out.append(struct.pack("<IIII", 0, stamp, 0, 3) + b"map")
+        out.append(struct.pack("<I", len(child)) + child)
+        out.append(v if isinstance(v, bytes) else struct.pack("<7d", *v))
+    return b"".join(out)
+
+
+def test_repeated_values_are_the_earlier_transforms_and_changed_bytes_are_new() -> None:
+    """A publisher repeats most values (joint origins, identity rotations): a transform
+    whose 56 bytes equal those at the same position of the last message is that message's
+    Transform; one with only the translation (or the rotation) equal shares that part;
+    any other bytes give a new value, equal to what the struct decoder reads, so 0.0 and
+    -0.0 or two NaN payloads are told apart."""
+    one = (1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0)
+    two = (4.0, 5.0, 6.0, 0.0, 0.0, 0.6, 0.8)
+    first = dec._compiled_ros1(_raw_tf(one, two, one))
+    again = dec._compiled_ros1(_raw_tf(one, two, one, stamp=2))
+    assert [a.transform is f.transform for a, f in zip(again, first, strict=True)] == [True] * 3
+    assert again[0].header.stamp.ns == 2_000_000_000  # the stamps are read anew
+    # position 0: rotation changed; position 1: translation changed; 2: both
+    moved = dec._compiled_ros1(_raw_tf((1.0, 2.0, 3.0, 0.0, 0.0, 0.6, 0.8),
+                                       (7.0, 5.0, 6.0, 0.0, 0.0, 0.6, 0.8), two))
+    assert moved[0].transform.translation is again[0].transform.translation
+    assert moved[0].transform.rotation == Quaternion(0.0, 0.0, 0.6, 0.8)
+    assert moved[1].transform.rotation is again[1].transform.rotation
+    assert moved[1].transform.translation == Vector3(7.0, 5.0, 6.0)
+    assert moved[2].transform == Transform(Vector3(4.0, 5.0, 6.0),
+                                           Quaternion(0.0, 0.0, 0.6, 0.8))
+    # byte for byte: -0.0 after 0.0 and another NaN payload are new values
+    nan_a = struct.pack("<d", float("nan"))
+    nan_b = struct.pack("<Q", 0x7FF8_0000_0000_0001)
+    raw = [struct.pack("<6d", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) + nan_a,
+           struct.pack("<7d", *one)]
+    base = dec._compiled_ros1(_raw_tf(*raw))
+    signed = dec._compiled_ros1(_raw_tf(struct.pack("<6d", -0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                                        + nan_b, raw[1]))
+    assert struct.pack("<d", signed[0].transform.translation.x) == struct.pack("<d", -0.0)
+    assert struct.pack("<d", signed[0].transform.rotation.w) == nan_b
+    assert signed[1].transform is base[1].transform
+    twin = dec.decode_ros1_struct(_raw_tf(struct.pack("<6d", -0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                                          + nan_b, raw[1]))
+    assert [struct.pack("<7d", *t.transform.translation, *t.transform.rotation)
+            for t in signed] == [struct.pack("<7d", *t.transform.translation,
+                                             *t.transform.rotation) for t in twin]
+
+
 # -- sensor_msgs/LaserScan (issue 24: a real ROS 1 laser in tfbus view) ------------------
 
 

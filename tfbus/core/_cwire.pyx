@@ -52,6 +52,45 @@ cdef inline object _ros1_id(list cache, Py_ssize_t k, const unsigned char* s, ui
     return text
 
 
+# Transform values by their position in a message, alike: a publisher sends many of the
+# same values message after message (robot_state_publisher's joint origins, identity
+# rotations, a robot standing still), so a Transform, Vector3 or Quaternion whose 56, 24
+# or 32 bytes equal those decoded last time at the same position is that (immutable)
+# value again, not new floats and tuples. Compared byte for byte (so 0.0 and -0.0, or two
+# NaN payloads, are told apart) on every use; different bytes replace it.
+cdef list _ros1_transforms = [None] * _ROS1_ID_SLOTS
+cdef double _ros1_values[_ROS1_ID_SLOTS][7]
+
+
+cdef inline object _ros1_transform(Py_ssize_t k, const double* v):
+    """The Transform of the 7 doubles ``v`` (translation x y z, rotation x y z w): the
+    one cached at ``k``, or one sharing its Vector3 or Quaternion, when the bytes match."""
+    cdef object cached = None, vec = None, rot = None, tf
+    cdef double* old
+    if k < _ROS1_ID_SLOTS:
+        cached = _ros1_transforms[k]
+        if cached is not None:
+            old = _ros1_values[k]
+            if memcmp(old, v, 7 * sizeof(double)) == 0:
+                return cached
+            if memcmp(old, v, 3 * sizeof(double)) == 0:
+                vec = (<tuple>cached)[0]
+            elif memcmp(old + 3, v + 3, 4 * sizeof(double)) == 0:
+                rot = (<tuple>cached)[1]
+    if vec is None:
+        vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
+                      PyFloat_FromDouble(v[2]))
+        PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
+    if rot is None:
+        rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
+    tf = _named(Transform, vec, rot)
+    PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
+    if k < _ROS1_ID_SLOTS:
+        _ros1_transforms[k] = tf
+        memcpy(_ros1_values[k], v, 7 * sizeof(double))
+    return tf
+
+
 cdef inline uint32_t _u32le(const unsigned char* p) noexcept:
     return <uint32_t>p[0] | (<uint32_t>p[1] << 8) | (<uint32_t>p[2] << 16) | (<uint32_t>p[3] << 24)
 
@@ -67,8 +106,10 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     ``tfbus.bag.decode.decode_ros1``'s struct decoder returns, equal values (frame ids
     decoded as strict UTF-8; a transform whose serialised header is byte for byte the
     previous one's shares its Header; an ASCII frame id equal to the one at the same
-    position of an earlier message is that message's str, not a new one; bytes after
-    the last transform are ignored).
+    position of an earlier message is that message's str, not a new one, and a transform
+    whose 7 doubles (or translation, or rotation) are byte for byte those at the same
+    position of the last message is that message's Transform (Vector3, Quaternion);
+    bytes after the last transform are ignored).
     Little-endian hosts only (the doubles are read in host order).
 
     Raises:
@@ -79,7 +120,7 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     cdef const unsigned char* p
     cdef uint32_t n, flen, clen, sec, nsec
     cdef double v[7]
-    cdef object header = None, child, vec, rot, tf, ts
+    cdef object header = None, child, ts
     cdef list out
     if size < 4:
         raise _StructError("message shorter than its contents")
@@ -120,12 +161,6 @@ def _tf_from_ros1(const unsigned char[::1] buf):
         off += 4 + clen
         memcpy(v, p + off, 7 * sizeof(double))
         off += 56
-        vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
-                      PyFloat_FromDouble(v[2]))
-        PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
-        rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
-        tf = _named(Transform, vec, rot)
-        PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
-        ts = _named3(TransformStamped, header, child, tf)
+        ts = _named3(TransformStamped, header, child, _ros1_transform(k, v))
         out[k] = ts
     return out
