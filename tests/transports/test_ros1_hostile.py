@@ -51,7 +51,7 @@ from tfbus import (
 from tfbus.errors import TransformException, TransportError
 from tfbus.transports.ros1 import Ros1Transport
 from tfbus.transports.ros1.rpc import MAX_XMLRPC_BYTES, BadReply, CallFailed, call, loads
-from tfbus.transports.ros1.tcpros import encode_header
+from tfbus.transports.ros1.tcpros import FrameQueue, encode_header
 from tfbus.transports.ros1.transport import MAX_PUBLISHERS
 
 pytestmark = pytest.mark.anyio
@@ -546,6 +546,18 @@ async def test_a_subscriber_that_resets_mid_send_ends_only_its_connection() -> N
     stats = node.statistics()
     assert stats.connections_closed == 1
     assert stats.sent == 0
+
+
+def test_a_frame_queue_drops_its_oldest_beyond_its_bounds_and_keeps_the_newest() -> None:
+    """``FrameQueue``: beyond ``max_frames`` frames or ``max_bytes`` bytes the oldest go
+    (counted by ``put``); one frame larger than ``max_bytes`` is still kept; new bounds
+    apply from the next ``put``."""
+    q = FrameQueue(3, max_bytes=10)
+    assert [q.put(b"aaaa"), q.put(b"bbbb"), len(q)] == [0, 0, 2]
+    assert (q.put(b"cccc"), len(q)) == (1, 2)  # 12 bytes > 10: "aaaa" dropped
+    assert (q.put(b"x" * 50), len(q)) == (2, 1)  # alone over the bound, but the newest
+    q.max_bytes = None
+    assert [q.put(b"1"), q.put(b"2"), q.put(b"3"), len(q)] == [0, 0, 1, 3]  # 3 frames
 
 
 async def test_subscribers_resetting_mid_stream_leave_the_node_publishing() -> None:

@@ -30,7 +30,6 @@ import os
 import secrets
 import struct
 import time as _wallclock
-from collections import deque
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 from urllib.parse import urlsplit
@@ -45,7 +44,14 @@ from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vect
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
 from tfbus.transports.ros1.rpc import SlaveServer, call, serve_listener
-from tfbus.transports.ros1.tcpros import decode_header, encode_header, frame, read_frame
+from tfbus.transports.ros1.tcpros import (
+    FrameQueue,
+    decode_header,
+    encode_header,
+    frame,
+    read_frame,
+    serve_subscriber,
+)
 
 if TYPE_CHECKING:
     from tfbus.buffer import Buffer
@@ -259,16 +265,6 @@ def _loopback_uri(uri: str) -> bool:
 _Handler = Callable[[bytes], None]
 
 
-class _Subscriber:
-    """One subscriber of a topic of ours: the frames still to send it (``size`` bytes),
-    sent by that connection's own task only."""
-
-    def __init__(self) -> None:
-        self.queue: deque[bytes] = deque()
-        self.size = 0
-        self.wake = anyio.Event()
-
-
 class _Node:
     """A minimal ROS 1 node (slave API + TCPROS) for a few topics of fixed types."""
 
@@ -279,7 +275,7 @@ class _Node:
         self.name = name
         self._pubs: dict[str, tuple[str, str]] = {}
         self._subs: dict[str, tuple[str, str, _Handler]] = {}
-        self._out: dict[str, list[_Subscriber]] = {}
+        self._out: dict[str, list[FrameQueue]] = {}
         self._in: dict[str, set[str]] = {}
         self._changed = anyio.Event()
         self._slave_uri = ""
@@ -318,13 +314,7 @@ class _Node:
         newest frame), the oldest dropped and counted in ``dropped``."""
         data = frame(payload)
         for sub in self._out.get(topic, ()):
-            sub.queue.append(data)
-            sub.size += len(data)
-            while len(sub.queue) > _QUEUE_FRAMES or (
-                    sub.size > _QUEUE_BYTES and len(sub.queue) > 1):
-                sub.size -= len(sub.queue.popleft())
-                self.dropped += 1
-            sub.wake.set()
+            self.dropped += sub.put(data)
 
     def refuse(self, what: str, uri: str) -> None:
         """Count and log (limited in time) a publisher that is not followed."""
@@ -440,42 +430,14 @@ class _Node:
                 return
             if header.get("probe") == "1":
                 return
-            sub = _Subscriber()
+            sub = FrameQueue(_QUEUE_FRAMES, _QUEUE_BYTES)
             self._out[topic].append(sub)
             self._wake()
             try:
-                async with anyio.create_task_group() as tg:
-                    tg.start_soon(self._watch_closed, stream, tg.cancel_scope)
-                    await self._send_queued(stream, sub)
-                    tg.cancel_scope.cancel()
+                await serve_subscriber(stream, sub)
             finally:
                 self._out[topic].remove(sub)
                 self._wake()
-
-    @staticmethod
-    async def _send_queued(stream: anyio.abc.SocketStream, sub: _Subscriber) -> None:
-        """Send ``sub``'s frames as they are queued, until its socket fails (the only
-        task sending on ``stream``; its errors end this connection only)."""
-        try:
-            while True:
-                while sub.queue:
-                    data = sub.queue.popleft()
-                    sub.size -= len(data)
-                    await stream.send(data)
-                sub.wake = anyio.Event()
-                if not sub.queue:
-                    await sub.wake.wait()
-        except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
-            return
-
-    @staticmethod
-    async def _watch_closed(stream: anyio.abc.SocketStream, scope: anyio.CancelScope) -> None:
-        """A subscriber sends nothing after its header: any end of reading means it left."""
-        with contextlib.suppress(anyio.EndOfStream, OSError, anyio.BrokenResourceError,
-                                 anyio.ClosedResourceError):
-            while await stream.receive():
-                pass
-        scope.cancel()
 
     async def _receive(self, topic: str, uri: str) -> None:
         """Receive ``topic`` from one publisher."""

@@ -4,19 +4,25 @@ wiki "ROS/TCPROS", "ROS/Connection Header"). The message itself is (de)serialise
 
 from __future__ import annotations
 
+import contextlib
 import struct
+from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Final
 
+import anyio
+import anyio.abc
 from anyio.streams.buffered import BufferedByteReceiveStream
 
 __all__ = [
     "MAX_HEADER_BYTES",
+    "FrameQueue",
     "FrameSplitter",
     "decode_header",
     "encode_header",
     "frame",
     "read_frame",
+    "serve_subscriber",
 ]
 
 MAX_HEADER_BYTES: Final = 64 * 1024
@@ -146,3 +152,86 @@ class FrameSplitter:
 def frame(payload: bytes) -> bytes:
     """``payload`` with its TCPROS length prefix (u32, little endian)."""
     return _U32.pack(len(payload)) + payload
+
+
+class FrameQueue:
+    """The frames still to send to one subscriber, oldest first, bounded: beyond
+    ``max_frames`` frames, or ``max_bytes`` bytes when given (the newest frame is always
+    kept), the oldest are dropped, as roscpp's per-subscriber queue drops them.
+
+    Filled without blocking by the publishing side (:meth:`put`) and emptied by that
+    connection's own task only (:func:`serve_subscriber`): a subscriber that does not read
+    holds up no other, and no two tasks ever send on one stream.
+
+    ``max_frames`` and ``max_bytes`` may be changed at any time; the next :meth:`put`
+    applies them.
+    """
+
+    def __init__(self, max_frames: int, max_bytes: int | None = None) -> None:
+        self._frames: deque[bytes] = deque()
+        self._size = 0
+        self.max_frames = max_frames
+        self.max_bytes = max_bytes
+        self._wake = anyio.Event()
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def put(self, data: bytes) -> int:
+        """Queue one frame (with its length prefix); returns how many old frames were
+        dropped to keep within the bounds."""
+        frames = self._frames
+        frames.append(data)
+        self._size += len(data)
+        dropped = 0
+        while len(frames) > self.max_frames or (
+            self.max_bytes is not None and self._size > self.max_bytes and len(frames) > 1
+        ):
+            self._size -= len(frames.popleft())
+            dropped += 1
+        self._wake.set()
+        return dropped
+
+    async def send_to(
+        self, stream: anyio.abc.ByteSendStream, on_sent: Callable[[], None] | None = None
+    ) -> None:
+        """Send the frames as they are queued (``on_sent`` after each), until the
+        subscriber's socket fails: ``OSError``, :class:`anyio.BrokenResourceError` (a reset
+        or a broken pipe) or :class:`anyio.ClosedResourceError` end this connection only
+        and are not raised. Caught here, inside the connection's task group, and not
+        around it, where they would come out wrapped in an ``ExceptionGroup``."""
+        frames = self._frames
+        try:
+            while True:
+                while frames:
+                    data = frames.popleft()
+                    self._size -= len(data)
+                    await stream.send(data)
+                    if on_sent is not None:
+                        on_sent()
+                self._wake = anyio.Event()
+                if not frames:
+                    await self._wake.wait()
+        except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
+            return
+
+
+async def serve_subscriber(
+    stream: anyio.abc.SocketStream, frames: FrameQueue, on_sent: Callable[[], None] | None = None
+) -> None:
+    """Send ``frames`` to a connected subscriber (its header already answered) until it
+    leaves: a subscriber sends nothing after its header, so any end of reading (EOF, a
+    reset, junk) means it left; a failed send ends the connection too. Returns, never
+    raises for the peer's doing (``TransportPublisherLink``'s counterpart, roscpp's
+    ``SubscriberLink``)."""
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(_watch_closed, stream, tg.cancel_scope)
+        await frames.send_to(stream, on_sent)
+        tg.cancel_scope.cancel()
+
+
+async def _watch_closed(stream: anyio.abc.SocketStream, scope: anyio.CancelScope) -> None:
+    with contextlib.suppress(Exception):  # any end of reading: the subscriber left
+        while await stream.receive(4096):
+            pass
+    scope.cancel()

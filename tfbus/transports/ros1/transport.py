@@ -12,7 +12,6 @@ import secrets
 import socket
 import struct
 import time
-from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Final
@@ -42,11 +41,13 @@ from tfbus.transports._base import BusLike, TransportStatistics
 from .rpc import BadReply, CallFailed, SlaveServer, call, serve_listener
 from .tcpros import (
     MAX_HEADER_BYTES,
+    FrameQueue,
     FrameSplitter,
     decode_header,
     encode_header,
     frame,
     read_frame,
+    serve_subscriber,
 )
 
 __all__ = ["Ros1Statistics", "Ros1Transport"]
@@ -140,13 +141,12 @@ def _is_loopback(host: str) -> bool:
 
 
 class _Outgoing:
-    """One subscriber connected to us: a bounded queue of frames (drop oldest)."""
+    """One subscriber connected to us: its bounded queue of frames (drop oldest)."""
 
     def __init__(self, topic: str, peer: str, queue_size: int) -> None:
         self.topic = topic
         self.peer = peer
-        self.queue: deque[bytes] = deque(maxlen=queue_size)
-        self.wake = anyio.Event()
+        self.frames = FrameQueue(queue_size)
         self.conn_id = 0
 
 
@@ -441,10 +441,7 @@ class Ros1Transport:
         if topic in _LATCHED:
             self._latched_frame[topic] = framed
         for out in self._outgoing.get(topic, ()):
-            if len(out.queue) == out.queue.maxlen:
-                self._stats.send_dropped += 1
-            out.queue.append(framed)
-            out.wake.set()
+            self._stats.send_dropped += out.frames.put(framed)
 
     # -- master ------------------------------------------------------------------------
 
@@ -826,43 +823,15 @@ class Ros1Transport:
                 return
             out = _Outgoing(topic, header.get("callerid", "?"), self._queue_size)
             if latching and topic in self._latched_frame:
-                out.queue.append(self._latched_frame[topic])
+                out.frames.put(self._latched_frame[topic])
             out.conn_id = self._open_conn(out.peer, "o", topic)
             self._outgoing.setdefault(topic, []).append(out)
             try:
-                async with anyio.create_task_group() as conn_tg:
-                    conn_tg.start_soon(self._watch_closed, stream, conn_tg.cancel_scope)
-                    await self._send_queued(stream, out)
-                    conn_tg.cancel_scope.cancel()
+                await serve_subscriber(stream, out.frames, self._count_sent)
             finally:
                 with contextlib.suppress(ValueError):
                     self._outgoing.get(topic, []).remove(out)
                 self._close_conn(out.conn_id)
 
-    async def _send_queued(self, stream: anyio.abc.SocketStream, out: _Outgoing) -> None:
-        """Send ``out``'s queued frames as they come, until the subscriber's socket fails.
-
-        A subscriber that leaves while a frame is being sent (``EPIPE``/``ECONNRESET``,
-        seen as :class:`anyio.BrokenResourceError` or :class:`OSError`) ends this
-        connection only. The errors are caught here, not around the connection's task
-        group, which would raise them wrapped in an :class:`ExceptionGroup` and stop the
-        node.
-        """
-        try:
-            while True:
-                while out.queue:
-                    await stream.send(out.queue.popleft())
-                    self._stats.sent += 1
-                out.wake = anyio.Event()
-                if not out.queue:
-                    await out.wake.wait()
-        except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
-            return
-
-    @staticmethod
-    async def _watch_closed(stream: anyio.abc.SocketStream, scope: anyio.CancelScope) -> None:
-        """A subscriber sends nothing after its header: any read end means it left."""
-        with contextlib.suppress(Exception):
-            while True:
-                await stream.receive(4096)
-        scope.cancel()
+    def _count_sent(self) -> None:
+        self._stats.sent += 1
