@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
 import anyio
@@ -25,7 +27,7 @@ from tfbus.laser import LaserProjection
 from tfbus.listener import TransformListener
 from tfbus.monitor import MonitoredSink, TfSummary
 from tfbus.sensor_msgs import LaserScan, read_points
-from tfbus.view.live import LiveView
+from tfbus.view.live import LiveView, ScanFeed
 from tfbus.view.server import TfPage
 
 pytestmark = pytest.mark.anyio
@@ -56,13 +58,28 @@ async def until(cond: Any) -> None:
             await anyio.sleep(0)
 
 
-async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> None:
+@dataclasses.dataclass
+class Live:
+    """A LiveView following ``/scan`` on an in-process bus, ``odom -> base_laser`` sent
+    at 10 s (the fixed frame is ``odom``)."""
+
+    view: LiveView
+    buffer: Buffer
+    bus: Bus
+    tfb: TransformBroadcaster
+
+    @property
+    def feed(self) -> ScanFeed:
+        return self.view.feeds["/scan"]
+
+
+@asynccontextmanager
+async def live_view(page: TfPage) -> AsyncIterator[Live]:
     clock = ManualClock(Time.from_sec(10.0))
     buffer = Buffer(cache_time=10.0, clock=clock)
     stats = TfSummary()
     sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
     view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
-    feed = view.feeds["/scan"]
     async with Bus() as bus, TransformListener(sink, bus, clock=clock), \
             anyio.create_task_group() as tg:
         await tg.start(view.follow, bus)
@@ -70,6 +87,14 @@ async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> Non
         await tfb.send_transform(odom_to_laser(10.0, 1.0))
         await until(lambda: stats.messages.get("/tf", 0) == 1)
         assert view.render().fixed_frame == "odom"
+        yield Live(view, buffer, bus, tfb)
+        tg.cancel_scope.cancel()
+    buffer.close()
+
+
+async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> None:
+    async with live_view(page) as live:
+        view, buffer, bus, tfb, feed = live.view, live.buffer, live.bus, live.tfb, live.feed
         assert feed.error == "/scan: no scan yet" and "/scan" not in page.clouds
 
         await bus.publish("/scan", scan(10.1))  # its transforms (10.1, 10.12) are not there
@@ -107,8 +132,6 @@ async def test_live_scans_wait_for_transforms_and_are_drawn(page: TfPage) -> Non
         np.testing.assert_array_equal(np.asarray(page.clouds["/scan"].points),
                                       xyz(newest).astype(np.float32))
         assert page.clouds["/scan"].visible
-        tg.cancel_scope.cancel()
-    buffer.close()
 
 
 async def test_a_first_scan_without_a_finite_sweep_is_dropped(page: TfPage) -> None:
@@ -116,19 +139,8 @@ async def test_a_first_scan_without_a_finite_sweep_is_dropped(page: TfPage) -> N
     ``time_increment = inf`` and three beams has none: it is counted in ``dropped`` and
     the next scan sizes it, passes and is drawn (before: Duration.from_sec(inf) raised
     ValueError out of the view, and ``tfbus view`` exited)."""
-    clock = ManualClock(Time.from_sec(10.0))
-    buffer = Buffer(cache_time=10.0, clock=clock)
-    stats = TfSummary()
-    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
-    view = LiveView(page, buffer, stats, clock, scan_topics=["/scan"])
-    feed = view.feeds["/scan"]
-    async with Bus() as bus, TransformListener(sink, bus, clock=clock), \
-            anyio.create_task_group() as tg:
-        await tg.start(view.follow, bus)
-        tfb = TransformBroadcaster(bus)
-        await tfb.send_transform(odom_to_laser(10.0, 1.0))
-        await until(lambda: stats.messages.get("/tf", 0) == 1)
-        assert view.render().fixed_frame == "odom"
+    async with live_view(page) as live:
+        view, bus, tfb, feed = live.view, live.bus, live.tfb, live.feed
         await bus.publish("/scan", dataclasses.replace(scan(10.1), time_increment=math.inf))
         await until(lambda: feed.dropped == 1)
         await bus.publish("/scan", scan(10.1))
@@ -138,8 +150,6 @@ async def test_a_first_scan_without_a_finite_sweep_is_dropped(page: TfPage) -> N
         view.render()
         assert (feed.received, feed.passed, feed.dropped, feed.drawn) == (2, 1, 1, 1)
         assert feed.error is None
-        tg.cancel_scope.cancel()
-    buffer.close()
 
 
 async def test_live_view_draws_scans_from_another_zenoh_bus(page: TfPage) -> None:
