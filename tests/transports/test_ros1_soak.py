@@ -16,13 +16,15 @@ from ros1_harness import ros1_fixture  # noqa: F401  (registers the fixture)
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_soak_under_attack_loses_nothing(ros1: None) -> None:
+def test_soak_under_attack_loses_nothing(ros1: None, tmp_path: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
+    # stderr (the nodes' logs, a traceback) kept in a file: its end is in any failure
+    errs = {backend: (tmp_path / f"{backend}.err").open("w") for backend in ("asyncio", "trio")}
     procs = {
         backend: subprocess.Popen(
             [sys.executable, str(ROOT / "benchmarks" / "soak_ros1.py"), "--backend", backend],
             stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
+            stderr=errs[backend],
             text=True,
             env=env,
             cwd=ROOT,
@@ -37,7 +39,10 @@ def test_soak_under_attack_loses_nothing(ros1: None) -> None:
             for p in procs.values():
                 p.kill()
             raise
+    for f in errs.values():
+        f.close()
     for backend, out in outputs.items():
+        out += "\n--- stderr (end) ---\n" + (tmp_path / f"{backend}.err").read_text()[-4000:]
         m = re.search(r"sent (\d+) transforms \((\d+) messages\), received (\d+), lost (\d+)", out)
         assert m, f"{backend}: {out}"
         assert (int(m[1]), int(m[2])) == (300_000, 6000), out
