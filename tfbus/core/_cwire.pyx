@@ -61,12 +61,90 @@ cdef inline object _ros1_id(list cache, Py_ssize_t k, const unsigned char* s, ui
 cdef list _ros1_transforms = [None] * _ROS1_ID_SLOTS
 cdef double _ros1_values[_ROS1_ID_SLOTS][7]
 
+# Values that change (a robot moving every joint) cannot be shared; but the objects of a
+# message nobody holds any more can be used again, as CPython's ``zip`` reuses its result
+# tuple when only it holds it (``zip_next``, Objects/bltinmodule.c). Each position keeps
+# the TransformStamped it gave two decodes ago (the last one is usually still held: an
+# ``async for`` loop keeps its message until the next arrives); when that object, its
+# Transform, Vector3, Quaternion or floats are referenced by nothing but their holder
+# here, nobody can see them any more, and they are filled with the new values in place
+# instead of being freed by the user and allocated here again (about 11 objects a
+# transform). Anything a user still holds (the message, a transform, a rotation, a float)
+# has other references, is never changed, and a new object is made in its place.
+# CPython 3.14 caches tuple hashes and free-threaded builds cannot trust a reference
+# count of 1: there, nothing is reused.
+cdef extern from *:
+    """
+    #if PY_VERSION_HEX >= 0x030E0000 || defined(Py_GIL_DISABLED)
+    #define TFBUS_REUSE 0
+    #else
+    #define TFBUS_REUSE 1
+    #endif
+    """
+    const bint TFBUS_REUSE
 
-cdef inline object _ros1_transform(Py_ssize_t k, const double* v):
+
+cdef extern from "Python.h":
+    ctypedef struct PyFloatObject:
+        double ob_fval
+    Py_ssize_t _refcnt "Py_REFCNT"(PyObject* o)
+    PyObject* _item "PyTuple_GET_ITEM"(PyObject* t, Py_ssize_t i)
+    PyObject* _list_item "PyList_GET_ITEM"(PyObject* t, Py_ssize_t i)
+    void _set_item "PyTuple_SET_ITEM"(PyObject* t, Py_ssize_t i, PyObject* o)
+    bint _is_float "PyFloat_CheckExact"(PyObject* o)
+    void _incref "Py_INCREF"(PyObject* o)
+    void _decref "Py_DECREF"(PyObject* o)
+
+
+_REUSES = bool(TFBUS_REUSE)
+"""Whether this build refills the objects nobody holds any more (False on CPython 3.14+
+and free-threaded builds)."""
+
+cdef list _ros1_spares = [None] * (2 * _ROS1_ID_SLOTS)
+cdef unsigned char _ros1_turn[_ROS1_ID_SLOTS]
+
+
+cdef inline PyObject* _sole_item(PyObject* t, Py_ssize_t i) noexcept:
+    """Item ``i`` of tuple ``t`` (which only this module references) when ``t`` is its
+    only holder, else NULL."""
+    cdef PyObject* o
+    if t == NULL:
+        return NULL
+    o = _item(t, i)
+    return o if _refcnt(o) == 1 else NULL
+
+
+cdef inline void _replace(PyObject* t, Py_ssize_t i, object new) noexcept:
+    """Item ``i`` of tuple ``t`` (only this module references it) becomes ``new``."""
+    cdef PyObject* old = _item(t, i)
+    if old == <PyObject*>new:
+        return
+    _incref(<PyObject*>new)
+    _set_item(t, i, <PyObject*>new)
+    _decref(old)
+
+
+cdef inline void _fill(PyObject* t, const double* v, Py_ssize_t n):
+    """The floats of tuple ``t`` (only this module references it) become ``v[:n]``: a
+    float only ``t`` holds is changed in place, any other replaced by a new one."""
+    cdef PyObject* f
+    cdef Py_ssize_t i
+    for i in range(n):
+        f = _item(t, i)
+        if _refcnt(f) == 1 and _is_float(f):
+            (<PyFloatObject*>f).ob_fval = v[i]
+        else:
+            _replace(t, i, PyFloat_FromDouble(v[i]))
+
+
+cdef inline object _ros1_transform(Py_ssize_t k, const double* v, PyObject* spare):
     """The Transform of the 7 doubles ``v`` (translation x y z, rotation x y z w): the
-    one cached at ``k``, or one sharing its Vector3 or Quaternion, when the bytes match."""
+    one cached at ``k``, or one sharing its Vector3 or Quaternion, when the bytes match;
+    else ``spare`` (a Transform only this module references, or NULL) refilled, or a new
+    one."""
     cdef object cached = None, vec = None, rot = None, tf
     cdef double* old
+    cdef PyObject* part
     if k < _ROS1_ID_SLOTS:
         cached = _ros1_transforms[k]
         if cached is not None:
@@ -78,13 +156,28 @@ cdef inline object _ros1_transform(Py_ssize_t k, const double* v):
             elif memcmp(old + 3, v + 3, 4 * sizeof(double)) == 0:
                 rot = (<tuple>cached)[1]
     if vec is None:
-        vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
-                      PyFloat_FromDouble(v[2]))
-        PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
+        part = _sole_item(spare, 0)
+        if part != NULL:
+            _fill(part, v, 3)
+            vec = <object>part
+        else:
+            vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
+                          PyFloat_FromDouble(v[2]))
+            PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
     if rot is None:
-        rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
-    tf = _named(Transform, vec, rot)
-    PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
+        part = _sole_item(spare, 1)
+        if part != NULL:
+            _fill(part, v + 3, 4)
+            rot = <object>part
+        else:
+            rot = _named4(Quaternion, v[3], v[4], v[5], v[6])
+    if spare != NULL:
+        _replace(spare, 0, vec)
+        _replace(spare, 1, rot)
+        tf = <object>spare
+    else:
+        tf = _named(Transform, vec, rot)
+        PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
     if k < _ROS1_ID_SLOTS:
         _ros1_transforms[k] = tf
         memcpy(_ros1_values[k], v, 7 * sizeof(double))
@@ -109,7 +202,9 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     position of an earlier message is that message's str, not a new one, and a transform
     whose 7 doubles (or translation, or rotation) are byte for byte those at the same
     position of the last message is that message's Transform (Vector3, Quaternion);
-    bytes after the last transform are ignored).
+    the objects of the transform decoded two messages earlier at the same position
+    that nothing else references any more are refilled rather than made anew, see
+    ``_REUSES``; bytes after the last transform are ignored).
     Little-endian hosts only (the doubles are read in host order).
 
     Raises:
@@ -120,7 +215,9 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     cdef const unsigned char* p
     cdef uint32_t n, flen, clen, sec, nsec
     cdef double v[7]
-    cdef object header = None, child, ts
+    cdef object header = None, child, ts, tf, spare = None
+    cdef Py_ssize_t slot
+    cdef PyObject* held
     cdef list out
     if size < 4:
         raise _StructError("message shorter than its contents")
@@ -161,6 +258,26 @@ def _tf_from_ros1(const unsigned char[::1] buf):
         off += 4 + clen
         memcpy(v, p + off, 7 * sizeof(double))
         off += 56
-        ts = _named3(TransformStamped, header, child, _ros1_transform(k, v))
+        if TFBUS_REUSE and k < _ROS1_ID_SLOTS:
+            # Take this position's TransformStamped of two decodes ago out of its slot:
+            # held by ``spare`` alone when nobody else holds it (then it, and whatever of
+            # it only it holds, is refilled; nothing else can reach it meanwhile).
+            slot = 2 * k + _ros1_turn[k]
+            _ros1_turn[k] ^= 1
+            held = _list_item(<PyObject*>_ros1_spares, slot)
+            if held != <PyObject*>None and _refcnt(held) == 1:
+                spare = <object>held
+                _ros1_spares[slot] = None
+                tf = _ros1_transform(k, v, _sole_item(held, 2))
+                _replace(held, 0, header)
+                _replace(held, 1, child)
+                _replace(held, 2, tf)
+                ts = spare
+                spare = None
+            else:
+                ts = _named3(TransformStamped, header, child, _ros1_transform(k, v, NULL))
+            _ros1_spares[slot] = ts
+        else:
+            ts = _named3(TransformStamped, header, child, _ros1_transform(k, v, NULL))
         out[k] = ts
     return out
