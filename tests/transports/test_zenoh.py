@@ -526,6 +526,37 @@ async def test_late_joiner_gets_the_valid_static_after_a_nan_resend() -> None:
             assert b.latched_statics() == TFMessage((good,))
 
 
+def test_a_latched_message_is_delivered_once_when_the_reply_races_the_live_one() -> None:
+    """A node that starts publishing ``/tf_static`` is queried by its peers (its new
+    topic token) while its first message is on the way: the live payload and the reply
+    (the latched payload, numbered as the last one sent) both arrive, in either order.
+    Each message reaches the bus once; the other is counted in ``duplicates``. A reply
+    to a receiver that joined late still delivers what it missed."""
+    from tfbus.transports.zenoh import transport as zt
+
+    tr = ZenohTransport(name="dedupe")
+    one = TFMessage((ts("laser", 1, 1.5),))
+    two = TFMessage((ts("laser", 1, 1.5), ts("camera", 1, 0.5)))
+
+    def payload(message: TFMessage, sender: int, seq: int) -> bytes:
+        return tr._codec.encode(message, sender=sender, seq=seq)
+
+    topic = "/tf_static"
+    # live first, then the reply to the query its token caused
+    assert tr._receive(zt._SAMPLE, topic, payload(one, 11, 1)) == one
+    assert tr._receive(zt._REPLY, topic, payload(one, 11, 1)) is None
+    # reply first (the sender's second message), then that message live
+    assert tr._receive(zt._REPLY, topic, payload(two, 11, 2)) == two
+    assert tr._receive(zt._SAMPLE, topic, payload(two, 11, 2)) is None
+    stats = tr.statistics()
+    assert (stats.received, stats.duplicates, stats.latched_replies) == (4, 2, 1)
+    # joined late: seen live from message 3 on, so a reply numbered 3 holds what 1-2 sent
+    three = TFMessage((ts("wheel", 1, 0.1),))
+    assert tr._receive(zt._SAMPLE, topic, payload(three, 12, 3)) == three
+    assert tr._receive(zt._REPLY, topic, payload(two, 12, 3)) == two
+    assert tr.statistics().duplicates == 2
+
+
 # -- bus specs and errors ----------------------------------------------------------------
 
 

@@ -1,8 +1,8 @@
 """ZenohStatistics: the counters of one :class:`~tfbus.transports.zenoh.ZenohTransport`.
 
-Every received payload ends in exactly one of ``delivered`` or a drop counter
-(``malformed``, ``wrong_version``, ``over_limit``, ``overflow``); sequence numbers feed
-``lost`` (plausible gaps) and ``resets`` (implausible jumps), never both.
+Every received payload ends in exactly one of ``delivered``, ``duplicates`` or a drop
+counter (``malformed``, ``wrong_version``, ``over_limit``, ``overflow``); sequence numbers
+feed ``lost`` (plausible gaps) and ``resets`` (implausible jumps), never both.
 """
 
 from __future__ import annotations
@@ -26,6 +26,11 @@ class ZenohStatistics(TransportStatistics):
         received: payloads received (samples and latched replies).
         delivered: messages delivered into the bus.
         latched_replies: of ``received``, those that answered a late-joiner query.
+        duplicates: payloads not delivered because the bus already had them: a
+            late-joiner reply holding nothing the live stream had not delivered, or a
+            live payload that a delivered reply already held (a node that starts
+            publishing a latched topic is queried while its first message is on the
+            way; :meth:`~tfbus.codecs.native.SequenceTracker.reply_is_news`).
         malformed: payloads dropped because they were not well-formed tfbus messages
             (any decode failure: bad bytes, shape, nesting, stamps, ids).
         wrong_version: payloads dropped because of another wire format version.
@@ -47,6 +52,7 @@ class ZenohStatistics(TransportStatistics):
     lost: int = 0
     resets: int = 0
     batches: int = 0
+    duplicates: int = 0
 
     @property
     def dropped(self) -> int:

@@ -515,12 +515,19 @@ class ZenohTransport:
         except Exception:  # WireDecodeError -- or anything else: bytes never end the bus
             stats.malformed += 1
             return None
+        seqs = self._seqs
         if kind == _SAMPLE:
-            lost, reset = self._seqs.observe(decoded.sender, topic, decoded.seq)
+            lost, reset = seqs.observe(decoded.sender, topic, decoded.seq)
             stats.lost += lost
             stats.resets += reset
-        else:
+            if not seqs.live_is_news(decoded.sender, topic, decoded.seq):
+                stats.duplicates += 1
+                return None
+        elif seqs.reply_is_news(decoded.sender, topic, decoded.seq):
             stats.latched_replies += 1
+        else:
+            stats.duplicates += 1
+            return None
         return decoded.message
 
     def _deliver(self, bus: BusLike, topic: str | None, run: list[object]) -> None:
