@@ -340,7 +340,7 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
 
 def ros1_rows(rows: Rows, runs: int) -> None:
     import bench_ros1
-    from ros1_peers import Master, free_port, master_env, ros1_missing  # via bench_ros1
+    from ros1_peers import ros1_missing, start_master  # via bench_ros1
 
     names = {False: "ROS 1 receive latency, 100 Hz x 50 transforms",
              True: "ROS 1 receive latency, the same, values moving"}
@@ -353,9 +353,7 @@ def ros1_rows(rows: Rows, runs: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         bins = Path(tmp)
         bench_ros1.build(bins)
-        port = free_port()
-        master = Master(port, master_env(port, bins / "ros_home"))
-        master.start()
+        master = start_master(bins / "ros_home")
         try:
             for moving in names:
                 results[moving] = [

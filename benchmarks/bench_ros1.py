@@ -44,7 +44,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers: one home, shared with the tests
 
-from ros1_peers import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
 BENCH_PACKAGES = ("roscpp", "tf2_msgs")
 """What the C++ publisher and subscriber of ``benchmarks/ros1/`` build against."""
@@ -246,9 +246,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         bins = Path(tmp)
         build(bins)
-        port = free_port()
-        master = Master(port, master_env(port, bins / "ros_home"))
-        master.start()
+        master = start_master(bins / "ros_home")
         try:
             print("latency median / p99, one-way, receive time - header.stamp (same run)")
             repeated(master, bins, 100.0, 1, 5.0 if args.quick else 10.0, args.repeat)

@@ -34,7 +34,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers (no pytest)
 
 from ros1_hostile import HostilePeer, http_answer, send_raw, tcpros_answer  # noqa: E402
-from ros1_peers import Master, Proc, free_port, master_env, ros1_missing  # noqa: E402
+from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
 _T0 = 1_000_000_000
 
@@ -260,9 +260,7 @@ def main() -> None:
     if why is not None:
         sys.exit(f"ROS 1 is needed: {why}")
     with tempfile.TemporaryDirectory() as tmp:
-        port = free_port()
-        master = Master(port, master_env(port, Path(tmp) / "ros_home"))
-        master.start()
+        master = start_master(Path(tmp) / "ros_home")
         try:
             code = subscriber(args, master)
         finally:

@@ -164,9 +164,21 @@ class Master:
         return f"http://127.0.0.1:{self.port}"
 
     def start(self) -> None:
+        """Start roscore and wait (bounded) until the master and /rosout are up.
+
+        Raises:
+            PortTaken: another process bound the port first (roscore is stopped).
+            AssertionError: roscore did not come up within 60 s.
+        """
         self.proc = Proc([str(ROS_BIN / "roscore"), "-p", str(self.port)], self.env)
         # roscore prints this once the master and /rosout are up: wait on it, bounded.
-        self.proc.wait_for(r"started core service \[/rosout\]", timeout=60.0)
+        # If the port was taken meanwhile it says so and never comes up: stop waiting.
+        m = self.proc.wait_for(
+            r"started core service \[/rosout\]|(port \d+ is already in use)", timeout=60.0
+        )
+        if m.group(1):
+            self.stop()
+            raise PortTaken(f"roscore on 127.0.0.1:{self.port}: {m.group(1)}")
         xmlrpc.client.ServerProxy(self.uri).getPid("/tfbus_test")
 
     def stop(self) -> None:
@@ -182,6 +194,34 @@ class Master:
         code, status, value = getattr(xmlrpc.client.ServerProxy(self.uri), method)(*args)
         assert code == 1, status
         return value
+
+
+class PortTaken(RuntimeError):
+    """The port chosen for roscore was bound by another process before roscore bound it."""
+
+
+def start_master(home: Path, attempts: int = 3) -> Master:
+    """A roscore started on a free 127.0.0.1 port, its ROS_HOME ``home``.
+
+    A free port is only free when it is chosen: another process (any outgoing
+    connection takes an ephemeral port) may bind it before roscore does. Then another
+    port is chosen, up to ``attempts`` times.
+
+    Raises:
+        PortTaken: every port chosen was taken first.
+        AssertionError: roscore did not come up within 60 s.
+    """
+    while True:
+        port = free_port()
+        master = Master(port, master_env(port, home))
+        try:
+            master.start()
+        except PortTaken:
+            attempts -= 1
+            if attempts <= 0:
+                raise
+            continue
+        return master
 
 
 def master_env(port: int, home: Path) -> dict[str, str]:

@@ -22,6 +22,7 @@ from ros1_peers import (
     free_port,
     master_env,
     ros1_missing,
+    start_master,
 )
 
 __all__ = [
@@ -71,9 +72,7 @@ def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory)
 @pytest.fixture(name="master")
 def master_fixture(ros1: None, tmp_path: Path) -> Iterator[Master]:
     """A fresh roscore on a free loopback port; the test's environment points at it."""
-    port = free_port()
-    m = Master(port, master_env(port, tmp_path / "ros_home"))
-    m.start()
+    m = start_master(tmp_path / "ros_home")
     saved = {k: os.environ.get(k) for k in ("ROS_MASTER_URI", "ROS_IP", "ROS_HOSTNAME")}
     os.environ["ROS_MASTER_URI"] = m.uri
     os.environ["ROS_IP"] = "127.0.0.1"
