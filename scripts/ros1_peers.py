@@ -171,15 +171,18 @@ class Master:
             AssertionError: roscore did not come up within 60 s.
         """
         self.proc = Proc([str(ROS_BIN / "roscore"), "-p", str(self.port)], self.env)
-        # roscore prints this once the master and /rosout are up: wait on it, bounded.
-        # If the port was taken meanwhile it says so and never comes up: stop waiting.
-        m = self.proc.wait_for(
-            r"started core service \[/rosout\]|(port \d+ is already in use)", timeout=60.0
-        )
-        if m.group(1):
-            self.stop()
-            raise PortTaken(f"roscore on 127.0.0.1:{self.port}: {m.group(1)}")
-        xmlrpc.client.ServerProxy(self.uri).getPid("/tfbus_test")
+        try:
+            # roscore prints this once the master and /rosout are up: wait on it, bounded.
+            # If the port was taken meanwhile it says so and never comes up: stop waiting.
+            m = self.proc.wait_for(
+                r"started core service \[/rosout\]|(port \d+ is already in use)", timeout=60.0
+            )
+            if m.group(1):
+                raise PortTaken(f"roscore on 127.0.0.1:{self.port}: {m.group(1)}")
+            xmlrpc.client.ServerProxy(self.uri).getPid("/tfbus_test")
+        except BaseException:
+            self.stop()  # never leave a roscore that did not come up running
+            raise
 
     def stop(self) -> None:
         if self.proc is not None:

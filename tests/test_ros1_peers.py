@@ -13,7 +13,6 @@ import pytest
 import ros1_peers
 from ros1_harness import ros1_fixture  # noqa: F401  (registers the fixture)
 
-
 _free_port = ros1_peers.free_port
 
 
@@ -45,3 +44,17 @@ def test_a_taken_port_is_chosen_again(
         with pytest.raises(ros1_peers.PortTaken, match=f"port {taken} is already in use"):
             ros1_peers.start_master(tmp_path / "ros_home", attempts=1)
         assert time.monotonic() - start < 50.0
+        assert not _roscores_on(taken)  # the one that could not bind was stopped
+
+
+def _roscores_on(port: int) -> list[int]:
+    """PIDs of roscore processes started with ``-p port``."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        try:
+            args = (proc / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if any(a.endswith(b"roscore") for a in args) and str(port).encode() in args:
+            found.append(int(proc.name))
+    return found
