@@ -101,6 +101,15 @@ class Proc:
         for line in self.proc.stdout:
             self.lines.put(line.rstrip("\n"))
 
+    def discard(self) -> None:
+        """Forget every line printed so far: later waits see only what comes next."""
+        self.seen.clear()
+        while True:
+            try:
+                self.lines.get_nowait()
+            except queue.Empty:
+                return
+
     def wait_for(self, pattern: str, timeout: float = 20.0) -> re.Match[str]:
         """The first line (from now on, or already seen) matching ``pattern``.
 
@@ -235,6 +244,9 @@ def master_env(port: int, home: Path) -> dict[str, str]:
         ROS_HOME=str(home),
         ROS_LOG_DIR=str(home / "log"),
         PYTHONUNBUFFERED="1",
+        # rosconsole writes ROS_INFO lines to a pipe fully buffered (4 KiB) unless told:
+        # a 1 Hz C++ node's first line would arrive some 30 s late.
+        ROSCONSOLE_STDOUT_LINE_BUFFERED="1",
     )
     env.pop("ROS_HOSTNAME", None)
     (home / "log").mkdir(parents=True, exist_ok=True)

@@ -398,27 +398,34 @@ async def test_tfbus_broadcaster_feeds_cpp_listener_at_100_hz(
     master: Master, tutorial_nodes: Path
 ) -> None:
     """tfbus's broadcaster → the tutorial's C++ tf_listener prints its line, and
-    ``rostopic hz /tf`` measures 100 Hz ± 1 %."""
+    ``rostopic hz /tf`` measures 100 Hz ± 1 % once every node is up."""
     transport = Ros1Transport(master_uri=master.uri, node_name="/robot_tf_publisher")
+    summary: list[str] = []
     async with Bus(transport=transport) as bus, anyio.create_task_group() as tg:
-        tg.start_soon(lambda: run_broadcaster(bus, out=lambda _: None))
+        tg.start_soon(lambda: run_broadcaster(bus, out=summary.append))
         listener = master.run(str(tutorial_nodes / "tf_listener"))
         hz = master.run("rostopic", "hz", "/tf", "-w", "300")
         try:
             await anyio.to_thread.run_sync(listener.wait_for, CPP_INFO, 40.0)
+            # The reports so far, and the next 3 (300 arrivals: 3 s each), time arrivals
+            # from while rostopic, tf_listener and the broadcaster were starting on the
+            # same cores: a 20 ms hold-up there is 2 % of a 1 s window (a clean-clone run
+            # measured 97.9, 99.0, 99.3 Hz over its first three). The steady rate is in
+            # the 3 after those.
+            hz.discard()
             rates: list[float] = []
-            for _ in range(3):
-                m = await anyio.to_thread.run_sync(hz.wait_for, r"average rate: ([\d.]+)", 40.0)
+            for _ in range(6):
+                m = await anyio.to_thread.run_sync(hz.wait_for, r"average rate: ([\d.]+)", 20.0)
                 rates.append(float(m.group(1)))
         finally:
             listener.stop()
             hz.stop()
         tg.cancel_scope.cancel()
     # rostopic hz times arrivals in its own (rospy) process: the median of its three
-    # reports, so that one late arrival there on a loaded machine does not decide it
-    assert 99.0 <= statistics.median(rates) <= 101.0, rates
+    # steady reports, so that one late arrival there on a loaded machine does not decide it
+    assert 99.0 <= statistics.median(rates[3:]) <= 101.0, (rates, summary)
     stats = transport.statistics()
-    assert stats.sent > 0 and stats.send_errors == 0
+    assert stats.sent > 0 and stats.send_errors == 0 and stats.send_dropped == 0, stats
 
 
 @pytest.mark.parametrize("tfbus_first", [False, True], ids=["ros-first", "tfbus-first"])
