@@ -103,12 +103,8 @@ class Proc:
 
     def discard(self) -> None:
         """Forget every line printed so far: later waits see only what comes next."""
+        self.drain()
         self.seen.clear()
-        while True:
-            try:
-                self.lines.get_nowait()
-            except queue.Empty:
-                return
 
     def wait_for(self, pattern: str, timeout: float = 20.0) -> re.Match[str]:
         """The first line (from now on, or already seen) matching ``pattern``.
