@@ -398,6 +398,17 @@ class Bus:
             for cb in callbacks:
                 cb._call(message)
 
+    def reaches(self, topic: str) -> bool:
+        """Whether a message delivered on ``topic`` now reaches anyone: a subscription
+        or a callback on it, or the ``/tf_static`` latch, which hands it to subscribers
+        still to come. A transport asks before it counts a payload as delivered (e.g. to
+        drop a later copy of it as a duplicate)."""
+        return (
+            topic == TF_STATIC_TOPIC
+            or bool(self._subscriptions.get(topic))
+            or bool(self._callbacks.get(topic))
+        )
+
     def latched_statics(self) -> TFMessage:
         """One ``TFMessage`` of the latest static transform of every child frame.
 

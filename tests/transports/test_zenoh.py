@@ -557,6 +557,44 @@ def test_a_latched_message_is_delivered_once_when_the_reply_races_the_live_one()
     assert tr.statistics().duplicates == 2
 
 
+@pytest.mark.anyio
+async def test_a_latched_message_that_reached_no_one_is_delivered_by_the_reply() -> None:
+    """A fleet follows a robot's topics once its liveliness says it is there. A robot's
+    first ``/robot2/tf_static`` can arrive live before that token: it reaches no one, so
+    the reply to the query the token causes is news, not a duplicate, and the fleet gets
+    the static. A clean-clone run lost robot2's static this way (its lookup timed out).
+    A token and a live payload drained together are delivered in order: the fleet
+    follows first, and the reply after that is the duplicate."""
+    from tfbus.fleet import FleetBuffer
+    from tfbus.transports.zenoh import transport as zt
+
+    tr = ZenohTransport(namespace="*", name="viewer")
+    static = TFMessage((ts("laser", 1, 0.5, parent="base"),))
+
+    def payload(sender: int) -> bytes:
+        return tr._codec.encode(static, sender=sender, seq=1)
+
+    def drain(*items: tuple[int, str, bytes]) -> None:
+        tr._inbox.extend(items)
+        assert not tr._drain(bus)
+
+    async with Bus() as bus, FleetBuffer(bus) as fleet:
+        drain((zt._SAMPLE, "tfbus/robot2/tf_static", payload(21)))  # nobody follows robot2
+        assert "robot2" not in fleet.robots()
+        drain((zt._ALIVE_PUT, "tfbus/robot2/@alive/a1/static", b""),
+              (zt._REPLY, "tfbus/robot2/@latch/a1/tf_static", payload(21)))
+        got = fleet["robot2"].lookup_transform("base", "laser", Time(0))
+        assert got.transform.translation.x == 0.5
+        assert tr.statistics().duplicates == 0
+
+        drain((zt._ALIVE_PUT, "tfbus/robot3/@alive/b2/static", b""),
+              (zt._SAMPLE, "tfbus/robot3/tf_static", payload(22)))
+        drain((zt._REPLY, "tfbus/robot3/@latch/b2/tf_static", payload(22)))
+        assert fleet["robot3"].can_transform("base", "laser", Time(0))
+        assert tr.statistics().duplicates == 1
+        assert fleet.statistics().messages == 2
+
+
 # -- bus specs and errors ----------------------------------------------------------------
 
 

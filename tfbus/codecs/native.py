@@ -446,7 +446,8 @@ class SequenceTracker:
     travel different routes, so a receiver that joins while a latched topic is
     published gets both; ROS 1 latching (sent on connect, then the stream) and DDS
     transient-local durability (deduplicated by writer sequence numbers) deliver such a
-    message once.
+    message once. A payload that reached no subscriber does not count as delivered
+    (:meth:`unseen`): a subscriber that came after it still gets the reply.
     """
 
     def __init__(self, max_gap: int = 100_000, max_senders: int = 4096) -> None:
@@ -504,6 +505,14 @@ class SequenceTracker:
         """Whether a live payload numbered ``seq`` (already :meth:`observe` d) is not
         one that a delivered reply already held (numbered ``seq`` or later)."""
         return seq > self._replied.get((sender, topic), 0)
+
+    def unseen(self, sender: int, topic: str) -> None:
+        """A payload of the stream ``(sender, topic)`` reached no one (nothing was
+        subscribed to ``topic`` yet): what the stream delivered no longer makes a later
+        copy a duplicate, so a reply or live payload carrying it is news again."""
+        key = (sender, topic)
+        self._whole.discard(key)
+        self._replied.pop(key, None)
 
     def forget(self, sender: int) -> None:
         """Drop every stream of ``sender`` (e.g. when that node went away)."""

@@ -49,6 +49,10 @@ class BusLike(Protocol):
     def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None:
         """Deliver several remote messages of one topic, in order."""
 
+    def reaches(self, topic: str) -> bool:
+        """Whether a message delivered on ``topic`` now reaches anyone (a subscriber,
+        or a latch keeping it for subscribers to come)."""
+
 
 PEERS_TOPIC: Final = "/tfbus/peers"
 """Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""

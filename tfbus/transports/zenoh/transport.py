@@ -470,7 +470,12 @@ class ZenohTransport:
             kind, key, payload = inbox.popleft()
             if kind in (_SAMPLE, _REPLY):
                 topic = self._keys.topic_of(key, reply=kind == _REPLY)
-                message = self._receive(kind, topic, payload)
+                if topic != run_topic and run:
+                    # delivered first: a subscriber an event of the run makes (a fleet
+                    # following a robot on its liveliness) is there for what follows
+                    self._deliver(bus, run_topic, run)
+                    run = []
+                message = self._receive(kind, topic, payload, bus)
                 if message is None or topic is None:
                     continue
             elif kind == _MATCHING:
@@ -497,8 +502,12 @@ class ZenohTransport:
             self._deliver(bus, run_topic, run)
         return bool(inbox)
 
-    def _receive(self, kind: int, topic: str | None, payload: bytes) -> object | None:
-        """Decode one received payload; None (counted) when it is dropped."""
+    def _receive(
+        self, kind: int, topic: str | None, payload: bytes, bus: BusLike | None = None
+    ) -> object | None:
+        """Decode one received payload; None (counted) when it is dropped. A payload
+        that will reach no one on ``bus`` is not remembered as delivered, so that a
+        later copy of it (the reply to a late joiner) is not dropped as a duplicate."""
         stats = self._stats
         stats.received += 1
         if topic is None:
@@ -528,6 +537,8 @@ class ZenohTransport:
         else:
             stats.duplicates += 1
             return None
+        if bus is not None and not bus.reaches(topic):
+            seqs.unseen(decoded.sender, topic)
         return decoded.message
 
     def _deliver(self, bus: BusLike, topic: str | None, run: list[object]) -> None:
