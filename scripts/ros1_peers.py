@@ -247,3 +247,46 @@ def master_env(port: int, home: Path) -> dict[str, str]:
     env.pop("ROS_HOSTNAME", None)
     (home / "log").mkdir(parents=True, exist_ok=True)
     return env
+
+
+def check_master() -> str | None:
+    """Why a roscore started here does not work, or None: one is started on a free
+    127.0.0.1 port with a private ``ROS_HOME``, must answer the master API's ``getPid``
+    and ``lookupNode`` for ``/rosout``, and is stopped by its PID.
+    ``scripts/install_ros1.sh`` runs it (``ros1_peers.py --check-master``) after its install."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="tfbus-roscore-check-") as home:
+        try:
+            master = start_master(Path(home))
+        except (AssertionError, OSError, PortTaken) as exc:
+            return f"roscore did not come up on 127.0.0.1: {exc or type(exc).__name__}"
+        try:
+            master.call("getPid", "/tfbus_check")
+            # roscore says /rosout started before the node has registered: wait, bounded.
+            deadline = time.monotonic() + 30.0
+            while True:
+                code, status, _ = xmlrpc.client.ServerProxy(master.uri).lookupNode(
+                    "/tfbus_check", "/rosout"
+                )
+                if code == 1:
+                    break
+                if time.monotonic() > deadline:
+                    return f"roscore answers but /rosout did not register in 30 s: {status}"
+                time.sleep(0.1)
+        except (AssertionError, OSError, xmlrpc.client.Error) as exc:
+            return f"roscore does not answer its master API: {exc}"
+        finally:
+            master.stop()
+    return None
+
+
+if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:] != ["--check-master"]:
+        sys.exit("usage: ros1_peers.py --check-master")
+    why = check_master()
+    if why is not None:
+        print(why)
+        sys.exit(1)

@@ -29,6 +29,17 @@ def anyio_backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
 
+@pytest.fixture(scope="session")
+def tf2_py_installed() -> None:
+    """Debian's tf2_py (python3-tf2, installed with ROS 1 by ``scripts/install_ros1.sh``):
+    the reference of the tests that run the same operations on tf2_py and tfbus."""
+    from peer_install import require
+    from tf2_py_harness import have_tf2_py
+
+    require("ros1", "install_ros1.sh")
+    assert have_tf2_py(), "install_ros1.sh said ready, but /usr/bin/python3 cannot import tf2_py"
+
+
 def pytest_terminal_summary(
     terminalreporter: pytest.TerminalReporter, exitstatus: int, config: pytest.Config
 ) -> None:
@@ -36,6 +47,7 @@ def pytest_terminal_summary(
     of a run that met it, instead of one warning per case; ``-v`` lists every op."""
     from conformance import DEVIATIONS
 
+    _skip_summary(terminalreporter, config)
     found = config.stash.get(DEVIATIONS, {})
     if not found:
         return
@@ -49,3 +61,55 @@ def pytest_terminal_summary(
         for case_id, lines in sorted(found.items()):
             for line in lines:
                 terminalreporter.write_line(f"  {case_id} {line}")
+
+
+# Every skip of the run (not expected failures): (node id, reason), in order.
+_SKIPS: list[tuple[str, str]] = []
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Keep every skip with its reason, for the summary and the CI check below."""
+    if report.skipped and not hasattr(report, "wasxfail"):
+        longrepr = report.longrepr
+        reason = longrepr[2] if isinstance(longrepr, tuple) else str(longrepr)
+        _SKIPS.append((report.nodeid, reason.removeprefix("Skipped: ")))
+
+
+def _unexpected_skips() -> list[tuple[str, str]]:
+    from peer_install import legitimate
+
+    return [(nodeid, why) for nodeid, why in _SKIPS if not legitimate(nodeid, why)]
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """Under CI, a run that skipped a test not listed in ``peer_install.LEGITIMATE_SKIPS``
+    fails: a skip there hides a peer or an extra that did not install."""
+    from peer_install import in_ci
+
+    if in_ci() and exitstatus == pytest.ExitCode.OK and _unexpected_skips():
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def _skip_summary(reporter: pytest.TerminalReporter, config: pytest.Config) -> None:
+    """The skips of the run counted by reason, the unexpected ones marked."""
+    from collections import Counter
+
+    from peer_install import in_ci, legitimate
+
+    skips = _SKIPS
+    if not skips:
+        return
+    by_reason = Counter(
+        ("listed" if legitimate(nodeid, why) else "NOT LISTED", why) for nodeid, why in skips
+    )
+    reporter.write_sep("-", f"skips by reason ({len(skips)})")
+    for (kind, why), n in sorted(by_reason.items(), key=lambda kv: (-kv[1], kv[0])):
+        reporter.write_line(f"{n:4d}  [{kind}] {why}")
+    unexpected = _unexpected_skips()
+    if unexpected and in_ci():
+        reporter.write_line(
+            f"CI: {len(unexpected)} skip(s) not listed in tests/peer_install.py "
+            "LEGITIMATE_SKIPS: the run fails", red=True
+        )
+        for nodeid, why in unexpected:
+            reporter.write_line(f"  {nodeid}: {why}", red=True)

@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from peer_install import peer_unavailable
 from ros1_peers import (
     ROOT,
     Master,
@@ -47,7 +48,7 @@ def ros1_fixture() -> None:
     """ROS 1 is installed (installing it if possible), else the test is skipped."""
     why = ros1_missing()
     if why is not None:
-        pytest.skip(why)
+        peer_unavailable("ros1", why)
 
 
 @pytest.fixture(scope="session", name="tutorial_nodes")
@@ -55,7 +56,7 @@ def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory)
     """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/peers/ros1/``),
     built once. ROS 1 is there (the ``ros1`` fixture), so a failed build is a failure."""
     if shutil.which("g++") is None:
-        pytest.skip("g++ not found: cannot build the tutorial's C++ nodes")
+        peer_unavailable("ros1", "g++ not found: cannot build the tutorial's C++ nodes")
     out = tmp_path_factory.mktemp("ros1_nodes")
     res = subprocess.run(
         ["bash", str(PEERS / "build.sh"), str(out)],

@@ -37,6 +37,7 @@ from typing import Any
 
 import anyio
 import pytest
+from peer_install import require
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -245,18 +246,9 @@ def _parse(text: str) -> _PageParser:
 
 @pytest.fixture(scope="session")
 def chromium() -> str:
+    require("chromium", "install_chromium.sh", timeout=2400)
     exe = shutil.which("chromium")
-    if exe is None:
-        script = ROOT / "scripts" / "install_chromium.sh"
-        try:
-            done = subprocess.run(["bash", str(script)], capture_output=True, text=True,
-                                  timeout=2400, check=False)
-            reason = (done.stdout + done.stderr).strip()
-        except subprocess.TimeoutExpired:
-            reason = f"{script} timed out"
-        exe = shutil.which("chromium")
-        if exe is None:
-            pytest.skip(f"Debian chromium unavailable: {reason}")
+    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
     return exe
 
 

@@ -8,6 +8,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from peer_install import require
 
 from tfbus import (
     Duration,
@@ -24,16 +25,10 @@ from tfbus.bag import BagMessage, write_bag
 SYSTEM_PYTHON = Path("/usr/bin/python3")
 
 
-def _has_rosbag() -> bool:
-    if not SYSTEM_PYTHON.exists():
-        return False
-    probe = subprocess.run(
-        [str(SYSTEM_PYTHON), "-c", "import rosbag"], capture_output=True, timeout=60
-    )
-    return probe.returncode == 0
-
-
-pytestmark = pytest.mark.skipif(not _has_rosbag(), reason="ROS 1 rosbag (python3-rosbag) absent")
+@pytest.fixture(autouse=True, scope="module")
+def _rosbag() -> None:
+    """Debian's ROS 1 rosbag (python3-rosbag, installed with ROS 1 by install_ros1.sh)."""
+    require("ros1", "install_ros1.sh")
 
 READER = """
 import json, sys, rosbag

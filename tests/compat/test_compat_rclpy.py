@@ -15,6 +15,7 @@ import sysconfig
 from pathlib import Path
 
 import pytest
+from peer_install import peer_unavailable, require
 
 ROOT = Path(__file__).resolve().parents[2]
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
@@ -44,11 +45,9 @@ FASTDDS_LOOPBACK = """<?xml version="1.0" encoding="UTF-8" ?>
 @pytest.fixture(scope="module", name="ros_python")
 def ros_python_fixture() -> Path:
     if sys.platform != "linux":
-        pytest.skip("the ROS 2 wheels are manylinux only")
-    out = subprocess.run(["bash", str(ROOT / "scripts" / "install_ros2_env.sh")],
-                         capture_output=True, text=True, timeout=1200, check=False)
-    if "ros2-env: ready" not in out.stdout or not ROS_PYTHON.exists():
-        pytest.skip(f"no ROS 2 venv: {out.stdout[-300:]}")
+        peer_unavailable("ros2-env", "the ROS 2 wheels are manylinux only")
+    require("ros2-env", "install_ros2_env.sh", timeout=1200)
+    assert ROS_PYTHON.exists()
     return ROS_PYTHON
 
 

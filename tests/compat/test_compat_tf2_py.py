@@ -12,13 +12,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from tf2_py_harness import SYSTEM_PYTHON, have_tf2_py, run_side
+from tf2_py_harness import SYSTEM_PYTHON, run_side
 
 from tfbus import Time, TransformException, TransformStamped
 from tfbus.compat import tf2_py
 
 SEC = 1_000_000_000
-needs_tf2_py = pytest.mark.skipif(not have_tf2_py(), reason="Debian python3-tf2 not installed")
+needs_tf2_py = pytest.mark.usefixtures("tf2_py_installed")  # tests/conftest.py
 
 
 @dataclass

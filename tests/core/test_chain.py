@@ -26,7 +26,7 @@ from tfbus import (
 
 SEC = 1_000_000_000
 
-needs_tf2_py = pytest.mark.skipif(not have_tf2_py(), reason="Debian python3-tf2 not installed")
+needs_tf2_py = pytest.mark.usefixtures("tf2_py_installed")  # tests/conftest.py
 
 
 def _add(core: BufferCore, ops: list[list[Any]], parent: str, child: str, ns: int,

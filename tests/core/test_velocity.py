@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import math
 import random
-import shutil
 import subprocess
 from functools import partial
 from pathlib import Path
 
 import pytest
+from peer_install import require
 
 from tfbus import (
     Buffer,
@@ -212,12 +212,9 @@ def test_origin_method_matches_finite_differences_of_lookups() -> None:
 
 
 def _build_reference(tmp: Path) -> Path:
-    if shutil.which("g++") is None:
-        pytest.skip("g++ not found")
+    require("ros1", "install_ros1.sh")  # libtf-dev, g++ and pkg-config with it
     flags = subprocess.run(["pkg-config", "--cflags", "--libs", "tf"], capture_output=True,
-                           text=True, check=False)
-    if flags.returncode:
-        pytest.skip("libtf-dev not installed (pkg-config tf)")
+                           text=True, check=True)
     exe = tmp / "tf_velocity_ref"
     source = HERE / "peers" / "cpp" / "tf_velocity_ref.cpp"
     subprocess.run(["g++", "-O1", "-o", str(exe), str(source),

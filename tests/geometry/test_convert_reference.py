@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from peer_install import require
 
 from tfbus import (
     Buffer,
@@ -41,10 +42,7 @@ INSTALL = ROOT / "scripts" / "install_tf2_msgs_py.sh"
 
 @pytest.fixture(scope="module", name="reference")
 def reference_fixture() -> None:
-    out = subprocess.run(["bash", str(INSTALL)], capture_output=True, text=True, timeout=2000,
-                         check=False)
-    if "tf2-msgs-py: ready" not in out.stdout:
-        pytest.skip(out.stdout.strip() or "python3-tf2-geometry-msgs not installable")
+    require("tf2-msgs-py", INSTALL.name, timeout=2000)
 
 
 def _side(cases: dict[str, Any]) -> dict[str, Any]:

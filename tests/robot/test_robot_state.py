@@ -16,7 +16,6 @@ import hashlib
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from peer_install import require
 
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import ManualClock
@@ -468,20 +468,7 @@ def test_sinusoidal_joint_state_values() -> None:
 @pytest.fixture(scope="session")
 def ros1_rsp() -> None:
     """ROS 1's robot_state_publisher, installed by scripts/install_ros1_rsp.sh if missing."""
-    def present() -> bool:
-        return (Path("/usr/lib/robot_state_publisher/robot_state_publisher").exists()
-                and shutil.which("roscore") is not None and subprocess.run(
-                    ["/usr/bin/python3", "-c", "import rospy, sensor_msgs.msg, tf2_msgs.msg"],
-                    capture_output=True).returncode == 0)
-
-    if present():
-        return
-    if sys.platform != "linux" or not Path("/usr/bin/python3").exists():
-        pytest.skip("ROS 1 (Debian) needs Linux with /usr/bin/python3")
-    done = subprocess.run(["bash", str(ROOT / "scripts" / "install_ros1_rsp.sh")],
-                          capture_output=True, text=True, timeout=2400)
-    if not present():
-        pytest.skip(done.stdout.strip() or "ROS 1 robot_state_publisher could not be installed")
+    require("ros1-robot-state-publisher", "install_ros1_rsp.sh", timeout=2400)
 
 
 def test_live_against_the_real_node(ros1_rsp: None, tmp_path: Path) -> None:

@@ -31,6 +31,7 @@ from typing import Any
 
 import anyio
 import pytest
+from peer_install import peer_unavailable, require
 
 pytest.importorskip("cyclonedds", reason="needs the ros2 extra: pip install 'tfbus[ros2]'")
 
@@ -442,18 +443,8 @@ async def test_malformed_samples_are_counted_and_dropped(anyio_backend: str) -> 
 def ros2_python() -> Path:
     """The ROS 2 venv's python, installed by scripts/install_ros2_env.sh when missing."""
     if sys.platform != "linux":
-        pytest.skip("the ROS 2 wheels of the recipe are manylinux only")
-    try:
-        out = subprocess.run(
-            ["bash", str(INSTALL)], capture_output=True, text=True, timeout=1200, check=False
-        )
-    except subprocess.TimeoutExpired:
-        pytest.skip("no real ROS 2 peer: install_ros2_env.sh did not finish in 1200 s")
-    reason = next((line for line in out.stdout.splitlines() if "unavailable" in line), None)
-    if reason is not None:  # the machine cannot provide the peer (no python3.11, no index)
-        pytest.skip(f"no real ROS 2 peer: {reason}")
-    # Anything else (a file of ours missing, a venv that does not work) is a failure.
-    assert out.returncode == 0 and "ros2-env: ready" in out.stdout, (out.stdout, out.stderr)
+        peer_unavailable("ros2-env", "the ROS 2 wheels of the recipe are manylinux only")
+    require("ros2-env", INSTALL.name, timeout=1200)
     assert ROS_VENV_PYTHON.exists()
     return ROS_VENV_PYTHON
 

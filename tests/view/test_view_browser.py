@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from peer_install import require
 
 pytest.importorskip("viser")
 Image = pytest.importorskip("PIL.Image")  # viser's own dependency (through imageio)
@@ -41,9 +42,9 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 @pytest.fixture(scope="module")
 def chromium() -> str:
+    require("chromium", "install_chromium.sh", timeout=2400)
     exe = shutil.which("chromium")
-    if exe is None:
-        pytest.skip("Debian chromium not installed (scripts/install_chromium.sh)")
+    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
     return exe
 
 
