@@ -75,7 +75,8 @@ dist-check: $(DIST_STAMP)
 	$(BIN)/python scripts/check_dist.py
 
 # The suite on each of Python 3.10-3.13 found on this machine (nox, venv backend);
-# `make test-matrix PYTHONS="3.10 3.13"` for some of them. NOX_ARGS go to nox first
+# `make test-matrix PYTHONS="3.10 3.13"` for some of them; each runs the core subset of
+# noxfile.py (the whole suite runs on the default Python). NOX_ARGS go to nox first
 # (CI: --error-on-missing-interpreters).
 PYTHONS ?=
 NOX_ARGS ?=
