@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -207,3 +208,70 @@ def test_ros2_env_builds_with_every_system_ros_hidden(tmp_path: Path) -> None:
     assert done.stdout.strip().splitlines()[-1].startswith("ros2-env: ready (")
     found = (root / ".venv-ros2" / ".tfbus-cmake-packages").read_text().split()
     assert found and all(f":PATH={root}/.venv-ros2/" in line for line in found)
+
+
+# ------------------------------------------------------------------ a missing peer under CI
+
+
+def test_a_missing_peer_fails_under_ci_and_skips_elsewhere(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from peer_install import peer_unavailable
+
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception) as failed:
+        peer_unavailable("ros1", "apt-get install failed")
+    assert str(failed.value) == (
+        "CI needs every real peer: ros1 unavailable: apt-get install failed "
+        "(install it with: sudo bash scripts/install_ros1.sh)"
+    )
+    monkeypatch.delenv("CI")
+    with pytest.raises(pytest.skip.Exception) as skipped:
+        peer_unavailable("ros2-env", "python3.11 not found")
+    assert str(skipped.value) == (
+        "ros2-env unavailable: python3.11 not found "
+        "(install it with: bash scripts/install_ros2_env.sh)"
+    )
+
+
+SKIPPING = '''
+import pytest
+
+def test_netem_delay_and_loss():
+    pytest.skip("tc qdisc netem is not available in this kernel: no such qdisc")
+
+def test_other():
+    pytest.skip("a peer that did not install")
+
+def test_passes():
+    pass
+'''
+
+
+@pytest.mark.parametrize("ci", ["true", ""])
+def test_the_run_counts_skips_by_reason_and_ci_fails_on_an_unlisted_one(
+    ci: str, tmp_path: Path
+) -> None:
+    """A run with this conftest: a listed skip (netem) and an unlisted one."""
+    tests = tmp_path / "tests"
+    (tests / "fleet").mkdir(parents=True)
+    for name in ("conftest.py", "peer_install.py", "conformance.py"):
+        shutil.copy(ROOT / "tests" / name, tests / name)
+    (tests / "fleet" / "test_fleet_netns.py").write_text(SKIPPING)
+    env = {**os.environ, "CI": ci}
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+         "-p", "no:randomly", "tests/fleet/test_fleet_netns.py"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120, check=False,
+    )
+    out = done.stdout
+    assert "1 passed, 2 skipped" in out, out
+    assert "skips by reason (2)" in out
+    assert "   1  [listed] tc qdisc netem is not available in this kernel: no such qdisc" in out
+    assert "   1  [NOT LISTED] a peer that did not install" in out
+    if ci:
+        assert done.returncode == 1, out
+        assert "CI: 1 skip(s) not listed in tests/peer_install.py LEGITIMATE_SKIPS" in out
+        assert "tests/fleet/test_fleet_netns.py::test_other: a peer that did not install" in out
+    else:
+        assert done.returncode == 0, out
