@@ -11,17 +11,20 @@ DIST_STAMP := $(VENV)/.installed-dist
 .PHONY: install test lint demo bench bench-check docs docs-serve perf-tables dist dist-check test-matrix clean
 
 $(BIN)/python:
+	@echo "make: creating $(VENV) (a Python virtual environment for tfbus)"
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 
 # Everything: every extra, the test tools and the docs tools (tests/test_docs.py builds
 # the site and runs every example of it).
 $(STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd) | $(BIN)/python
+	@echo "make: installing tfbus with every extra and the test and docs tools into $(VENV) (compiles the core with Cython; a few minutes the first time)"
 	$(BIN)/python -m pip install -q -e '.[all,test,docs]'
 	touch $(STAMP) $(CORE_STAMP) $(DOCS_STAMP)
 
 # tfbus alone (its core dependencies), for the demo.
 $(CORE_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd) | $(BIN)/python
+	@echo "make: installing tfbus into $(VENV) (numpy, transforms3d, anyio; compiles the core with Cython, about 2 minutes the first time)"
 	$(BIN)/python -m pip install -q -e .
 	touch $(CORE_STAMP)
 
@@ -43,6 +46,7 @@ test: lint
 	$(BIN)/python -m pytest -q
 
 demo: $(CORE_STAMP)
+	@echo "make: running the tutorial demo for 10 s (a 100 Hz broadcaster and a 1 Hz listener on one bus)"
 	$(BIN)/python demos/robot_setup_tf.py --duration 10
 	@echo 'next: . $(VENV)/bin/activate, then tfbus --help (or $(BIN)/tfbus --help without activating)'
 

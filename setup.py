@@ -68,12 +68,24 @@ class OptionalBuildExt(build_ext):
             super().run()
         except Exception as exc:  # distutils' CompileError, PlatformError, ExecError...
             self._fallback(exc)
+        if getattr(self.distribution, "tfbus_pure", False):
+            self._remove_compiled()
 
     def build_extension(self, ext: Any) -> None:
         try:
             super().build_extension(ext)
         except Exception as exc:
             self._fallback(exc)
+
+    def _remove_compiled(self) -> None:
+        """A pure build carries no compiled module: all or none (``tfbus.core._select``).
+        Those built before the failure, and an earlier build's in ``build/lib.*`` (which
+        pip's in-tree build of a clone reuses), would otherwise go into the
+        ``py3-none-any`` wheel."""
+        for ext in self.extensions:
+            path = self.get_ext_fullpath(ext.name)
+            if os.path.exists(path):
+                os.remove(path)
 
     def _fallback(self, exc: Exception) -> None:
         if REQUIRE_EXTENSIONS:

@@ -199,3 +199,26 @@ def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
     done = _run([sys.executable, "-c", cli], timeout=120, env=env, cwd=tmp_path)
     assert (done.returncode, done.stdout, done.stderr) == (
         0, f"tfbus {version} (pure-Python core: TFBUS_PURE_PYTHON is set)\n", "")
+
+
+def test_a_pure_rebuild_of_a_clone_carries_no_stale_compiled_core(tmp_path: Path) -> None:
+    """A clone built once with a compiler (its ``build/lib.*`` holds the compiled core),
+    then again without one: the second wheel is pure, with no compiled module from the
+    first build in it (pip builds a directory in place and reuses ``build/``)."""
+    import sysconfig
+
+    (tmp_path / "clone").mkdir()
+    project = _project_copy(tmp_path / "clone")
+    lib = project / "build" / f"lib.{sysconfig.get_platform()}-{sys.implementation.cache_tag}"
+    (lib / "tfbus" / "core").mkdir(parents=True)
+    compiled = sorted((ROOT / "tfbus" / "core").glob("_c*.so"))
+    if not compiled:
+        pytest.skip("this checkout has no compiled core to leave behind")
+    for so in compiled:  # what the first, compiled build left in build/
+        shutil.copy2(so, lib / "tfbus" / "core" / so.name)
+    env = {k: v for k, v in os.environ.items() if k not in ("CC", "TFBUS_NO_EXTENSIONS")}
+    env["PATH"] = str(Path(sys.executable).parent)  # the configured compiler is not found
+    wheel, log = _wheel(project, tmp_path / "out", env)
+    assert FALLBACK_MESSAGE in log
+    assert wheel.name == f"tfbus-{_pyproject_version()}-py3-none-any.whl"
+    assert not [m for m in _members(wheel) if m.endswith(".so")]
