@@ -49,10 +49,6 @@ LEGITIMATE_SKIPS: dict[tuple[str, str], str] = {
         "the delay-and-loss part of the multi-host test needs the kernel's netem qdisc "
         "(sch_netem), which some kernels lack"
     ),
-    ("tests/compat/test_compat_rclpy.py::*", r"the ROS 2 venv is Python 3\.11"): (
-        "the ROS 2 wheels are cp311: on another interpreter the test runner's own packages "
-        "cannot be shared with the ROS 2 venv"
-    ),
 }
 
 

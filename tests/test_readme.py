@@ -181,3 +181,27 @@ def test_readme_names_everything_make_test_installs() -> None:
     block = text[text.index("make test "):text.index("```", text.index("make test "))]
     missing = sorted(INSTALLERS[s] for s in used if INSTALLERS[s] not in block)
     assert not missing, f"README: `make test` does not say it installs {missing}"
+
+
+def test_readme_counts_the_skips_a_machine_with_every_peer_prints() -> None:
+    """The README's number of skipped documentation examples is the number of examples the
+    pages mark 'Not run: ...' (each backend of an async one counts), and the legitimate
+    skips it names are the ones of ``tests/peer_install.py``."""
+    from peer_install import LEGITIMATE_SKIPS
+    from test_docs import NOT_RUN, _pages, extract
+
+    not_run = sum(
+        len(list(ex.backends()))
+        for page in _pages()
+        for ex in extract(page)
+        if ex.title is not None and ex.title.startswith(NOT_RUN)
+    )
+    text = " ".join(_readme().split())
+    match = re.search(r"the (\d+) documentation examples that need other hosts", text)
+    assert match is not None, "README: no count of the skipped documentation examples"
+    assert int(match.group(1)) == not_run
+    assert "listed in `tests/peer_install.py`" in text
+    assert {pattern for pattern, _ in LEGITIMATE_SKIPS} == {
+        "tests/test_docs.py::test_example",
+        "tests/fleet/test_fleet_netns.py::test_netem_delay_and_loss",
+    }
