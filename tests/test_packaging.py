@@ -222,3 +222,42 @@ def test_a_pure_rebuild_of_a_clone_carries_no_stale_compiled_core(tmp_path: Path
     assert FALLBACK_MESSAGE in log
     assert wheel.name == f"tfbus-{_pyproject_version()}-py3-none-any.whl"
     assert not [m for m in _members(wheel) if m.endswith(".so")]
+
+
+def test_a_source_tree_shadowing_a_compiled_install_says_so(tmp_path: Path) -> None:
+    """Python run from a clone imports the clone's tfbus (no compiled core there) before
+    the installed one (compiled): the warning names both places and what to do, instead
+    of telling the user to reinstall with a C compiler."""
+    compiled = sorted((ROOT / "tfbus" / "core").glob("_c*.so"))
+    if not compiled:
+        pytest.skip("this checkout has no compiled core to install")
+    clone = tmp_path / "clone"
+    shutil.copytree(ROOT / "tfbus", clone / "tfbus",
+                    ignore=shutil.ignore_patterns("*.so", "*.c", "*.pyx", "__pycache__"))
+    # An installed tfbus (as pip lays one out): the package with its compiled core and a
+    # dist-info whose RECORD lists the files.
+    site = tmp_path / "site"
+    shutil.copytree(ROOT / "tfbus", site / "tfbus",
+                    ignore=shutil.ignore_patterns("*.c", "*.pyx", "__pycache__"))
+    info = site / f"tfbus-{_pyproject_version()}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: tfbus\nVersion: {_pyproject_version()}\n"
+    )
+    record = [f"{p.relative_to(site).as_posix()},," for p in sorted((site / "tfbus").rglob("*"))
+              if p.is_file()]
+    (info / "RECORD").write_text("\n".join(record) + "\n")
+    env = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"}
+    env["PYTHONPATH"] = os.pathsep.join([str(clone), str(site)])
+    prelude = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
+               "getattr(f, '__module__', '').startswith('__editable__')]; ")
+    code = prelude + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
+    done = _run([sys.executable, "-c", code], timeout=120, env=env, cwd=clone)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == f"{clone / 'tfbus' / '__init__.py'} False\n"
+    assert done.stderr == (
+        f"tfbus: the tfbus imported from {clone / 'tfbus'} has no compiled core and shadows "
+        f"the one installed in {site / 'tfbus'}, which has it (Python puts the current "
+        "directory first on sys.path): run from another directory, or build the tree's compiled core in place "
+        "with `python setup.py build_ext --inplace`\n"
+    )

@@ -62,12 +62,14 @@ __all__ = [
     "compose",
     "compose_full",
     "core_description",
+    "fallback_warning",
     "format_sec",
     "inverse",
     "lerp_rows",
     "lookup_rows",
     "quat_multiply",
     "quat_rotate",
+    "shadowed_install",
     "slerp",
     "slerp_rows",
 ]
@@ -116,6 +118,46 @@ PURE_FALLBACK_WARNING: Final = (
 """The line logged (``tfbus`` logger, WARNING) when the compiled core is missing."""
 
 
+def shadowed_install() -> str | None:
+    """The directory of an installed tfbus that has the compiled core, when the tfbus
+    imported is another copy without it (a source tree first on ``sys.path``: Python puts
+    the current directory first, so running from a clone imports the clone), else None.
+
+    The installed distribution is the one ``importlib.metadata`` finds (its ``RECORD``
+    lists the compiled modules); an editable install lists none and is never reported.
+    """
+    from importlib.metadata import PackageNotFoundError, distribution
+    from pathlib import Path
+
+    try:
+        files = distribution("tfbus").files or []
+    except PackageNotFoundError:
+        return None
+    here = Path(__file__).resolve().parent
+    for file in files:
+        if file.parts[:2] == ("tfbus", "core") and file.name.startswith(COMPILED_MODULES):
+            located = Path(str(file.locate())).resolve()
+            if located.suffix in (".so", ".pyd") and located.parent != here and located.exists():
+                return str(located.parent.parent)
+    return None
+
+
+def fallback_warning() -> str:
+    """The warning logged at import when the compiled core is not loaded though not asked
+    for: :data:`PURE_FALLBACK_WARNING`, or, when a source tree without it shadows an
+    installed tfbus that has it, a line that says so and what to do."""
+    installed = shadowed_install()
+    if installed is None:
+        return PURE_FALLBACK_WARNING
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    return (
+        f"tfbus: the tfbus imported from {here} has no compiled core and shadows the one "
+        f"installed in {installed}, which has it (Python puts the current directory first "
+        "on sys.path): run from another directory, or build the tree's compiled core in "
+        "place with `python setup.py build_ext --inplace`"
+    )
+
+
 def core_description() -> str:
     """Which core is loaded, in words: ``compiled core`` or ``pure-Python core`` and why
     (``TFBUS_PURE_PYTHON`` set, or the compiled module not installed)."""
@@ -127,7 +169,7 @@ def core_description() -> str:
 
 
 if not COMPILED and not pure_python_requested():
-    logging.getLogger("tfbus").warning(PURE_FALLBACK_WARNING)
+    logging.getLogger("tfbus").warning(fallback_warning())
 
 if TYPE_CHECKING:
     # Both cores export the same names; the compiled modules' stubs are the contract.
