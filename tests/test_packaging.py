@@ -258,6 +258,6 @@ def test_a_source_tree_shadowing_a_compiled_install_says_so(tmp_path: Path) -> N
     assert done.stderr == (
         f"tfbus: the tfbus imported from {clone / 'tfbus'} has no compiled core and shadows "
         f"the one installed in {site / 'tfbus'}, which has it (Python puts the current "
-        "directory first on sys.path): run from another directory, or build the tree's compiled core in place "
-        "with `python setup.py build_ext --inplace`\n"
+        "directory first on sys.path): run from another directory, or build the tree's "
+        "compiled core in place with `python setup.py build_ext --inplace`\n"
     )
