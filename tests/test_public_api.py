@@ -5,10 +5,12 @@ import tfbus
 
 def test_public_all_is_pinned() -> None:
     assert sorted(tfbus.__all__) == [
-        "Buffer", "BufferCore", "Bus", "Clock", "ConnectivityException", "Duration",
-        "ExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
+        "BackwardExtrapolationException", "Buffer", "BufferCore", "Bus", "Clock",
+        "ConnectivityException", "Duration", "ExtrapolationException",
+        "ForwardExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
         "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
-        "Point", "Point32", "PointCloud2", "PointField", "PointStamped", "Polygon",
+        "NoDataForExtrapolationException", "Point", "Point32", "PointCloud2", "PointField",
+        "PointStamped", "Polygon",
         "PolygonStamped", "Pose", "PoseStamped", "PoseWithCovariance",
         "PoseWithCovarianceStamped", "Quaternion", "SetResult", "Stamped",
         "StaticTransformBroadcaster", "Subscription", "SystemClock", "TFMessage", "TfbusError",
@@ -30,6 +32,12 @@ def test_exceptions_derive_from_transform_exception() -> None:
         "TimeoutException",
     ):
         assert issubclass(getattr(tfbus, name), tfbus.TransformException)
+    for name in (
+        "BackwardExtrapolationException",
+        "ForwardExtrapolationException",
+        "NoDataForExtrapolationException",
+    ):
+        assert issubclass(getattr(tfbus, name), tfbus.ExtrapolationException)
     assert issubclass(tfbus.TransformException, tfbus.TfbusError)
     assert issubclass(tfbus.TransportError, tfbus.TfbusError)
 

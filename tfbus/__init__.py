@@ -17,10 +17,13 @@ from tfbus.clock import Clock, ManualClock, SystemClock, every
 from tfbus.core import BufferCore, SetResult
 from tfbus.core.batch import TransformArray
 from tfbus.errors import (
+    BackwardExtrapolationException,
     ConnectivityException,
     ExtrapolationException,
+    ForwardExtrapolationException,
     InvalidArgumentException,
     LookupException,
+    NoDataForExtrapolationException,
     TfbusError,
     TimeoutException,
     TransformException,
@@ -58,6 +61,7 @@ from tfbus.time import Duration, Time
 from tfbus.transports.memory import MemoryTransport
 
 __all__ = [
+    "BackwardExtrapolationException",
     "Buffer",
     "BufferCore",
     "Bus",
@@ -65,6 +69,7 @@ __all__ = [
     "ConnectivityException",
     "Duration",
     "ExtrapolationException",
+    "ForwardExtrapolationException",
     "Header",
     "InvalidArgumentException",
     "LaserProjection",
@@ -73,6 +78,7 @@ __all__ = [
     "ManualClock",
     "MemoryTransport",
     "MessageFilter",
+    "NoDataForExtrapolationException",
     "Point",
     "Point32",
     "PointCloud2",

@@ -44,15 +44,18 @@ if TYPE_CHECKING:
     from .messages import TransformStamped
 
 __all__ = [
+    "BackwardExtrapolationException",
     "BagError",
     "BagFormatError",
     "BagNotFoundError",
     "BagReadError",
     "ConnectivityException",
     "ExtrapolationException",
+    "ForwardExtrapolationException",
     "InvalidArgumentException",
     "JointStateError",
     "LookupException",
+    "NoDataForExtrapolationException",
     "TfbusError",
     "TimeoutException",
     "TransformException",
@@ -87,6 +90,39 @@ class ExtrapolationException(TransformException):
 
     tf2 never extrapolates, not even by 1 ns.
     """
+
+
+class BackwardExtrapolationException(ExtrapolationException):
+    """The requested time is before the oldest sample of a link with two or more samples
+    (ROS 2 tf2's ``BackwardExtrapolationException``: rolling ``tf2/src/cache.cpp``
+    ``createExtrapolationException3``, ``TF2_BACKWARD_EXTRAPOLATION_ERROR``)."""
+
+
+class ForwardExtrapolationException(ExtrapolationException):
+    """The requested time is after the newest sample of a link with two or more samples
+    (ROS 2 tf2's ``ForwardExtrapolationException``: rolling ``tf2/src/cache.cpp``
+    ``createExtrapolationException2``, ``TF2_FORWARD_EXTRAPOLATION_ERROR``)."""
+
+
+class NoDataForExtrapolationException(ExtrapolationException):
+    """A link has no sample to interpolate from: it is empty, or holds one sample at
+    another time (ROS 2 tf2's ``NoDataForExtrapolationException``: rolling
+    ``tf2/src/cache.cpp`` ``findClosest`` and ``createExtrapolationException1``,
+    ``TF2_NO_DATA_FOR_EXTRAPOLATION_ERROR``)."""
+
+
+def extrapolation_exception(message: str) -> ExtrapolationException:
+    """The ROS 2 class of an extrapolation failure whose ``message`` starts with tf2's
+    detail for the failing link (``"Lookup would require extrapolation ..."``, tf2 0.7.6's
+    wording, kept): ``... into the future`` is forward, ``... into the past`` backward,
+    ``... at time T, but only time T1 is in the buffer`` or no detail (an empty link) no
+    data, as rolling's ``TimeCache::findClosest`` chooses them. The message is kept."""
+    detail = message.split(", when looking up transform", 1)[0]
+    if "s into the future." in detail:
+        return ForwardExtrapolationException(message)
+    if "s into the past." in detail:
+        return BackwardExtrapolationException(message)
+    return NoDataForExtrapolationException(message)
 
 
 class InvalidArgumentException(TransformException):

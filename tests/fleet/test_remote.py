@@ -24,7 +24,7 @@ from tfbus.clock import ManualClock  # noqa: E402
 from tfbus.codecs.native import WireCodec  # noqa: E402
 from tfbus.errors import (  # noqa: E402
     ConnectivityException,
-    ExtrapolationException,
+    ForwardExtrapolationException,
     InvalidArgumentException,
     LookupException,
     TimeoutException,
@@ -127,7 +127,7 @@ async def test_errors_come_back_as_the_same_tf2_classes_and_messages() -> None:
         cases = [
             (("world", "ghost", Time(0)), LookupException),
             (("world", "palm", Time(0)), ConnectivityException),
-            (("world", "base", Time(50)), ExtrapolationException),
+            (("world", "base", Time(50)), ForwardExtrapolationException),
             (("", "base", Time(0)), InvalidArgumentException),
         ]
         for args, cls in cases:

@@ -76,6 +76,7 @@ from tfbus.errors import (
     InvalidArgumentException,
     LookupException,
     TransformException,
+    extrapolation_exception,
 )
 from tfbus.messages import (
     Header,
@@ -271,7 +272,7 @@ class BufferCore(CoreBase):
         code = failure[0]
         if code == EXTRAPOLATION_ERROR:
             detail = self.extrapolation_detail(failure[1], failure[2])
-            return ExtrapolationException(
+            return extrapolation_exception(
                 cap_message(
                     f"{detail}, when looking up transform from frame [{source}] "
                     f"to frame [{target}]"
@@ -333,7 +334,11 @@ class BufferCore(CoreBase):
             InvalidArgumentException: a frame id is empty or starts with '/'.
             LookupException: a frame id is unknown, or the path contains a loop.
             ConnectivityException: the frames are in different trees.
-            ExtrapolationException: a link on the path has no data at ``time``.
+            ExtrapolationException: a link on the path has no data at ``time``: its ROS 2
+                subclass ``ForwardExtrapolationException`` (after the link's newest
+                sample), ``BackwardExtrapolationException`` (before its oldest) or
+                ``NoDataForExtrapolationException`` (one sample at another time, or none),
+                as rolling tf2's ``TimeCache::findClosest`` chooses; tf2 0.7.6's message.
 
         One compiled call validates, walks and builds the result. Successful results are
         memoised until the next insert or ``clear()`` (64 slots, by the ids' identity and
@@ -914,7 +919,7 @@ class BufferCore(CoreBase):
                 failure = self.try_lookup_transform(frame, newest, time)
                 if isinstance(failure, ExtrapolationException):
                     detail = str(failure).split(", when looking up transform from frame")[0]
-                    raise ExtrapolationException(
+                    raise extrapolation_exception(
                         f"{detail}, when looking up transform from frame [{names[0]}] to "
                         f"frame [{names[1]}]"
                     )

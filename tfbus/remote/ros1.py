@@ -602,6 +602,8 @@ class Ros1BufferClient:
                 "The LookupTransform goal sent to the BufferServer did not come back in the "
                 "specified time. Something is likely wrong with the server.")
         ts, code, message = box[0]
+        if code == 3:  # tf2_msgs/TF2Error has one extrapolation code: the text tells which
+            raise errors.extrapolation_exception(message)
         if code:
             raise _ERRORS.get(code, TransformException)(message)
         return ts
@@ -717,7 +719,7 @@ class Ros1BufferServer:
             code, message = 0, ""
         except TransformException as exc:
             ts = empty
-            code = next((c for c, cls in _ERRORS.items() if type(exc) is cls), 6)
+            code = next((c for c, cls in _ERRORS.items() if isinstance(exc, cls)), 6)
             message = str(exc)
         try:
             result = encode_result(self._seq + 1, goal.goal_id, goal.goal_stamp, ts, code,

@@ -71,6 +71,9 @@ _EXCEPTIONS: Final[Mapping[str, type[TransformException]]] = {
         errors.LookupException,
         errors.ConnectivityException,
         errors.ExtrapolationException,
+        errors.BackwardExtrapolationException,
+        errors.ForwardExtrapolationException,
+        errors.NoDataForExtrapolationException,
         errors.InvalidArgumentException,
         errors.TimeoutException,
     )
