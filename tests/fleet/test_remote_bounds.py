@@ -232,3 +232,36 @@ async def test_frame_ids_longer_than_the_bound_are_refused() -> None:
         with pytest.raises(LookupException):
             await s.client.lookup_transform("world", "g" * MAX_FRAME_ID_BYTES, Time(0), 0.0)
         assert s.server.statistics().pending == 0
+
+
+async def test_serve_buffer_bounds_every_wait() -> None:
+    """``tfbus serve-buffer --max-wait 2`` (a child process, Zenoh client of the router):
+    a lookup of a frame that never comes with timeout None is answered with the lookup's
+    error after 2 s of the server's clock (before: the option did not exist, and the
+    lookup waited for ever); the summary counts the busy and cancelled lookups."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    async with ZenohRouter(listen=endpoint), \
+            client_bus(endpoint, name="thin", topics=()) as cbus:
+        server = Proc("serve-buffer", "--bus", f"zenoh:mode=client&connect={endpoint}",
+                      "--max-wait", "2", "--max-pending", "4")
+        try:
+            await anyio.to_thread.run_sync(lambda: server.expect(
+                lambda line: "buffer server on" in line))
+            client = BufferClient(cbus, timeout_padding=5.0)
+            with anyio.fail_after(60):
+                while True:  # the queryable reaches this client through the router
+                    try:
+                        await client.lookup_transform("world", "ghost", Time(0), timeout=None)
+                    except LookupException as exc:
+                        assert str(exc) == ('"world" passed to lookupTransform argument '
+                                            'target_frame does not exist. ')
+                        break
+                    except TransformException as exc:
+                        assert str(exc).startswith("no answer from buffer server")
+                        await anyio.sleep(0.1)
+            assert server.stop() == 0
+            lines = await anyio.to_thread.run_sync(server.rest)
+            assert any(line.startswith("[ INFO] summary: ") and
+                       line.endswith(" 0 malformed, 0 busy, 0 cancelled") for line in lines)
+        finally:
+            server.kill()
