@@ -36,14 +36,27 @@ __all__ = ["command"]
               help="The server's name (clients use the same: BufferClient(bus, name=...)).")
 @click.option("--cache-time", type=click.FloatRange(min=0, min_open=True), default=10.0,
               show_default=True, help="Seconds of history the buffer keeps.")
+@click.option("--max-wait", type=click.FloatRange(min=0, min_open=True, max=1e9), default=60.0,
+              show_default=True,
+              help="Longest wait of one lookup, seconds (a timeout of none or longer waits "
+                   "this long; tf2_ros's buffer_server has no bound).")
+@click.option("--max-pending", type=click.IntRange(min=1, max=1_000_000), default=1000,
+              show_default=True,
+              help="Most lookups (ROS 1: goals) waiting at once; more are refused as busy.")
+@click.option("--max-per-peer", type=click.IntRange(min=1, max=1_000_000), default=None,
+              help="Zenoh: most lookups of one querier waiting at once (default: "
+                   "max-pending / 4).")
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Stop after this many seconds (default: until Ctrl-C or SIGTERM).")
-def command(bus: str, name: str, cache_time: float, duration: float | None) -> int | None:
+def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending: int,
+            max_per_peer: int | None, duration: float | None) -> int | None:
     """Answer transform lookups for thin clients (tf2_ros buffer_server): keep one
     buffer of /tf and /tf_static from --bus and serve lookup_transform,
     lookup_transform_full and can_transform to tfbus.remote.BufferClient (Zenoh), or
     tf2_ros's LookupTransform action as /tf2_buffer_server to tf2_ros.BufferClient
-    (ROS 1).
+    (ROS 1). Every lookup waits at most --max-wait seconds; at most --max-pending wait at
+    once (Zenoh: --max-per-peer of one querier); a lookup whose client cancelled it or
+    left (ROS 1: an actionlib cancel request) ends at once.
 
     \b
     Examples:
@@ -83,12 +96,15 @@ def command(bus: str, name: str, cache_time: float, duration: float | None) -> i
 
                 action = "/" + name.lstrip("/")
                 server_ros1 = Ros1BufferServer(buffer, getattr(transport, "master_uri", ""),
-                                               server=action, name=action)
+                                               server=action, name=action,
+                                               max_goals=max_pending, max_wait=max_wait)
                 await stack.enter_async_context(server_ros1)
                 served_ros1.append(server_ros1)
                 where = f"the ROS 1 action {action} (tf2_msgs/LookupTransform)"
             else:
-                server = await stack.enter_async_context(BufferServer(buffer, b, name=name))
+                server = await stack.enter_async_context(BufferServer(
+                    buffer, b, name=name, max_pending=max_pending, max_per_peer=max_per_peer,
+                    max_wait=max_wait))
                 served.append(server)
                 where = server.key
             tg = await stack.enter_async_context(anyio.create_task_group())
@@ -104,8 +120,10 @@ def command(bus: str, name: str, cache_time: float, duration: float | None) -> i
     if served:
         s = served[0].statistics()
         click.echo(f"[ INFO] summary: {s.requests} requests, {s.answered} answered, "
-                   f"{s.errors} errors, {s.malformed} malformed")
+                   f"{s.errors} errors, {s.malformed} malformed, {s.busy} busy, "
+                   f"{s.cancelled} cancelled")
     if served_ros1:
         r = served_ros1[0]
-        click.echo(f"[ INFO] summary: {r.answered} goals answered, {r.malformed} malformed")
+        click.echo(f"[ INFO] summary: {r.answered} goals answered, {r.malformed} malformed, "
+                   f"{r.rejected} rejected, {r.cancelled} cancelled")
     return status

@@ -20,13 +20,22 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from tfbus.remote.zenoh import (
+        DEFAULT_MAX_WAIT,
         DEFAULT_SERVER_NAME,
+        MAX_FRAME_ID_BYTES,
         BufferClient,
         BufferServer,
         ServerStatistics,
     )
 
-__all__ = ["DEFAULT_SERVER_NAME", "BufferClient", "BufferServer", "ServerStatistics"]
+__all__ = [
+    "DEFAULT_MAX_WAIT",
+    "DEFAULT_SERVER_NAME",
+    "MAX_FRAME_ID_BYTES",
+    "BufferClient",
+    "BufferServer",
+    "ServerStatistics",
+]
 
 
 def __getattr__(name: str) -> Any:

@@ -11,7 +11,16 @@
   ``cancel``, publishes ``result``, ``feedback`` and ``status`` (``GoalStatusArray`` at
   5 Hz, actionlib's default, so that actionlib clients' ``wait_for_server`` sees it);
   every result has status SUCCEEDED with the lookup's ``TF2Error``, as the real server.
-  Debian's ``tf2_ros.BufferClient`` gets its answers.
+  Debian's ``tf2_ros.BufferClient`` gets its answers. It honours cancel requests as
+  tf2_ros's ``BufferServer::cancelCB`` (``buffer_server.cpp``: the goal is removed and
+  ``setCanceled``, a PREEMPTED result) with actionlib's ``GoalID`` semantics
+  (``ActionServerBase::cancelCallback``, ``action_server_base.h``; rospy
+  ``ActionServer.internal_cancel_callback``): an empty id and a zero stamp cancel every
+  goal, an id cancels that goal (or, not yet received, recalls it when it comes), a
+  non-zero stamp cancels every goal stamped at or before it and recalls those that come
+  later so stamped. It holds at most ``max_goals`` goals (more are REJECTED at once with
+  the status text "buffer server busy: ...") and waits at most ``max_wait`` seconds for
+  one (tf2_ros's server waits for as long as the goal asks, up to 2**31 s).
 
 Loopback only: the node listens on 127.0.0.1 and contacts only 127.0.0.1 / localhost
 peers. A goal that does not decode is counted and dropped; so is a publisher URI that is
@@ -57,15 +66,21 @@ if TYPE_CHECKING:
     from tfbus.buffer import Buffer
 
 __all__ = [
+    "CANCEL_MD5",
+    "CANCEL_TYPE",
     "GOAL_MD5",
     "GOAL_TYPE",
+    "MAX_GOAL_ID_BYTES",
+    "MAX_HELD_GOAL_BYTES",
     "RESULT_MD5",
     "RESULT_TYPE",
     "Ros1BufferClient",
     "Ros1BufferServer",
     "decode_goal",
+    "decode_goal_id",
     "decode_result",
     "encode_goal",
+    "encode_goal_id",
     "encode_result",
 ]
 
@@ -82,7 +97,24 @@ STATUS_TYPE: Final = "actionlib_msgs/GoalStatusArray"
 STATUS_MD5: Final = "8b2b82f13216d0a8ea88bd3af735e619"
 CANCEL_TYPE: Final = "actionlib_msgs/GoalID"
 CANCEL_MD5: Final = "302881f31927c1df708a2dbab0e80ee8"
-_SUCCEEDED: Final = 3  # actionlib_msgs/GoalStatus SUCCEEDED
+# actionlib_msgs/GoalStatus
+_ACTIVE: Final = 1
+_PREEMPTED: Final = 2
+_SUCCEEDED: Final = 3
+_REJECTED: Final = 5
+_RECALLED: Final = 8
+_STATUS_NAMES: Final = {0: "PENDING", 1: "ACTIVE", 2: "PREEMPTED", 3: "SUCCEEDED",
+                        4: "ABORTED", 5: "REJECTED", 6: "PREEMPTING", 7: "RECALLING",
+                        8: "RECALLED", 9: "LOST"}
+_RECALLED_BY_STAMP: Final = (
+    "This goal handle was canceled by the action server because its timestamp is before "
+    "the timestamp of the last cancel request")  # actionlib ActionServerBase::goalCallback
+MAX_GOAL_ID_BYTES: Final = 1024
+"""Longest goal id (bytes) :class:`Ros1BufferServer` holds; a longer one is counted as
+malformed (actionlib's ids, ``/node-count-secs.nsecs``, are tens of bytes)."""
+MAX_HELD_GOAL_BYTES: Final = 32 << 20
+"""Most bytes of goals :class:`Ros1BufferServer` holds at once (with ``max_goals``)."""
+_STATUS_KEPT: Final = 5.0  # actionlib's status_list_timeout: a finished goal stays listed
 
 _ERRORS: Final[dict[int, type[TransformException]]] = {
     1: errors.LookupException,  # tf2_msgs/TF2Error LOOKUP_ERROR
@@ -169,22 +201,7 @@ def decode_result(raw: bytes) -> tuple[str, TransformStamped, int, str]:
     Raises:
         ValueError: the bytes are not such a message.
     """
-    try:
-        r = _Reader(raw)
-        r.header()
-        r.time()
-        goal_id = r.string()
-        r.take(_U8)  # status
-        r.string()  # text
-        header = r.header()
-        child = r.string()
-        x, y, z, qx, qy, qz, qw = r.take(_POSE)
-        (code,) = r.take(_U8)
-        message = r.string()
-    except (struct.error, UnicodeDecodeError, ValueError) as exc:
-        raise ValueError(f"malformed {RESULT_TYPE}: {exc}") from exc
-    ts = TransformStamped(header, child, Transform(Vector3(x, y, z), Quaternion(qx, qy, qz, qw)))
-    return goal_id, ts, code, message
+    return _decode_result_status(raw)[:4]
 
 
 class Goal(NamedTuple):
@@ -224,14 +241,60 @@ def decode_goal(raw: bytes) -> Goal:
                 target_time, fixed, bool(advanced))
 
 
-def _goal_status(goal_id: str, stamp: Time, status: int) -> bytes:
-    return _time(stamp) + _string(goal_id) + _U8.pack(status) + _string("")
+def _goal_status(goal_id: str, stamp: Time, status: int, text: str = "") -> bytes:
+    return _time(stamp) + _string(goal_id) + _U8.pack(status) + _string(text)
+
+
+def decode_goal_id(raw: bytes) -> tuple[Time, str]:
+    """``(stamp, id)`` of an ``actionlib_msgs/GoalID`` (a cancel request).
+
+    Raises:
+        ValueError: the bytes are not such a message.
+    """
+    try:
+        r = _Reader(raw)
+        stamp = r.time()
+        goal_id = r.string()
+    except (struct.error, UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"malformed {CANCEL_TYPE}: {exc}") from exc
+    return stamp, goal_id
+
+
+def encode_goal_id(stamp: Time, goal_id: str) -> bytes:
+    """An ``actionlib_msgs/GoalID`` (a cancel request: actionlib's client cancels its goal
+    with ``GoalID(stamp=0, id=goal_id)``).
+
+    Raises:
+        ValueError: a stamp at or after 2**32 s.
+    """
+    return _time(stamp) + _string(goal_id)
+
+
+def _decode_result_status(raw: bytes) -> tuple[str, TransformStamped, int, str, int, str]:
+    try:
+        r = _Reader(raw)
+        r.header()
+        r.time()
+        goal_id = r.string()
+        (status,) = r.take(_U8)
+        text = r.string()
+        header = r.header()
+        child = r.string()
+        x, y, z, qx, qy, qz, qw = r.take(_POSE)
+        (code,) = r.take(_U8)
+        message = r.string()
+    except (struct.error, UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"malformed {RESULT_TYPE}: {exc}") from exc
+    ts = TransformStamped(header, child, Transform(Vector3(x, y, z), Quaternion(qx, qy, qz, qw)))
+    return goal_id, ts, code, message, status, text
 
 
 def encode_result(seq: int, goal_id: str, goal_stamp: Time, ts: TransformStamped, code: int,
-                  message: str) -> bytes:
-    """A ``tf2_msgs/LookupTransformActionResult`` with status SUCCEEDED (as tf2_ros's
-    buffer_server sends every answer, the error in ``TF2Error``).
+                  message: str, status: int = _SUCCEEDED, text: str = "") -> bytes:
+    """A ``tf2_msgs/LookupTransformActionResult``; by default with status SUCCEEDED (as
+    tf2_ros's buffer_server sends every answer, the error in ``TF2Error``); ``status`` and
+    ``text`` are the ``actionlib_msgs/GoalStatus`` of a goal ended otherwise (PREEMPTED 2,
+    REJECTED 5, RECALLED 8).
 
     Raises:
         ValueError: ``goal_stamp`` or the transform's stamp is at or after 2**32 s, past
@@ -241,7 +304,7 @@ def encode_result(seq: int, goal_id: str, goal_stamp: Time, ts: TransformStamped
     t = ts.transform
     return b"".join((
         _U32.pack(seq), _time(now), _string(""),
-        _goal_status(goal_id, goal_stamp, _SUCCEEDED),
+        _goal_status(goal_id, goal_stamp, status, text),
         _U32.pack(0), _time(ts.header.stamp), _string(ts.header.frame_id),
         _string(ts.child_frame_id),
         _POSE.pack(*t.translation, *t.rotation),
@@ -263,6 +326,7 @@ def _loopback_uri(uri: str) -> bool:
 
 
 _Handler = Callable[[bytes], None]
+_Answer = tuple[TransformStamped, int, str, int, str]  # transform, code, message, status, text
 
 
 class _Node:
@@ -499,11 +563,13 @@ class Ros1BufferClient:
                  name: str | None = None, timeout_padding: float = 2.0) -> None:
         self._node = _Node(master_uri, name or f"/tfbus_buffer_client_{os.getpid()}")
         self._goal_topic = f"{server}/goal"
+        self._cancel_topic = f"{server}/cancel"
         self._result_topic = f"{server}/result"
         self._node.publish(self._goal_topic, GOAL_TYPE, GOAL_MD5)
+        self._node.publish(self._cancel_topic, CANCEL_TYPE, CANCEL_MD5)
         self._node.subscribe(self._result_topic, RESULT_TYPE, RESULT_MD5, self._on_result)
         self._padding = timeout_padding
-        self._waiting: dict[str, tuple[anyio.Event, list[tuple[TransformStamped, int, str]]]] = {}
+        self._waiting: dict[str, tuple[anyio.Event, list[_Answer]]] = {}
         self._seq = 0
         self._tg: anyio.abc.TaskGroup | None = None
 
@@ -545,11 +611,15 @@ class Ros1BufferClient:
         """tf2_ros ``BufferClient.lookup_transform``: the server waits up to ``timeout``
         seconds of its clock.
 
+        A lookup cancelled here (or not answered in time) is cancelled on the server too
+        (``actionlib_msgs/GoalID`` with its goal id on ``{server}/cancel``).
+
         Raises:
             The server's tf2 error as the same tfbus class (its message kept);
             TimeoutException if no result came within ``timeout + timeout_padding``
-            wall seconds (tf2_ros's message); ValueError for a time at or after 2**32 s
-            (past ROS 1 time).
+            wall seconds, or the result's status is not SUCCEEDED (the goal was
+            REJECTED, PREEMPTED or RECALLED; tf2_ros's messages, the status and its text
+            appended); ValueError for a time at or after 2**32 s (past ROS 1 time).
         """
         return await self._goal(target_frame, source_frame, time, timeout, Time(0), "", False)
 
@@ -565,13 +635,13 @@ class Ros1BufferClient:
 
     def _on_result(self, raw: bytes) -> None:
         try:
-            goal_id, ts, code, message = decode_result(raw)
+            goal_id, ts, code, message, status, text = _decode_result_status(raw)
         except ValueError:
             self._node.malformed += 1
             return
         waiting = self._waiting.get(goal_id)
         if waiting is not None:
-            waiting[1].append((ts, code, message))
+            waiting[1].append((ts, code, message, status, text))
             waiting[0].set()
 
     async def _goal(self, target: str, source: str, source_time: Time,
@@ -583,25 +653,38 @@ class Ros1BufferClient:
         self._seq += 1
         goal_id = f"{self._node.name}-{self._seq}-{secrets.token_hex(4)}"
         done = anyio.Event()
-        box: list[tuple[TransformStamped, int, str]] = []
+        box: list[_Answer] = []
         self._waiting[goal_id] = (done, box)
         node = self._node
+        sent = False
         try:
             with anyio.move_on_after(seconds + self._padding):
                 while not (node.subscribers(self._goal_topic)
+                           and node.subscribers(self._cancel_topic)
                            and node.publishers(self._result_topic)):
                     await node.changed()
                 node.send_nowait(self._goal_topic, encode_goal(
                     goal_id, self._seq, target, source, source_time, seconds, target_time,
                     fixed, advanced))
+                sent = True
                 await done.wait()
         finally:
             self._waiting.pop(goal_id, None)
+            if sent and not box:
+                # cancelled, or no answer in time: cancel the goal, as actionlib's
+                # ClientGoalHandle.cancel (GoalID stamp 0, this id), so that the server
+                # does not hold it for nobody
+                node.send_nowait(self._cancel_topic, encode_goal_id(Time(0), goal_id))
         if not box:
             raise errors.TimeoutException(
                 "The LookupTransform goal sent to the BufferServer did not come back in the "
                 "specified time. Something is likely wrong with the server.")
-        ts, code, message = box[0]
+        ts, code, message, status, text = box[0]
+        if status != _SUCCEEDED:  # tf2_ros buffer_client.py __process_goal
+            raise errors.TimeoutException(
+                "The LookupTransform goal sent to the BufferServer did not come back with "
+                "SUCCEEDED status. Something is likely wrong with the server. Status was "
+                f"{_STATUS_NAMES.get(status, status)}: {text[:200]}")
         if code == 3:  # tf2_msgs/TF2Error has one extrapolation code: the text tells which
             raise errors.extrapolation_exception(message)
         if code:
@@ -609,9 +692,36 @@ class Ros1BufferClient:
         return ts
 
 
+class _Held:
+    """A goal the server holds: its task's cancel scope, once it runs."""
+
+    __slots__ = ("cancel_requested", "goal", "scope", "size")
+
+    def __init__(self, goal: Goal, size: int) -> None:
+        self.goal = goal
+        self.size = size
+        self.scope: anyio.CancelScope | None = None
+        self.cancel_requested = False
+
+    def cancel(self) -> None:
+        self.cancel_requested = True
+        if self.scope is not None:
+            self.scope.cancel()
+
+
 class Ros1BufferServer:
     """tf2_ros ``buffer_server`` on ROS 1 answering from ``buffer`` (module doc):
     ``async with Ros1BufferServer(buffer, master_uri):``.
+
+    Goals wait on ``buffer`` for at most their timeout and at most ``max_wait`` seconds
+    (of the buffer's clock, and of wall time), then are answered with the lookup's own
+    result or error (``buffer_server.cpp`` ``checkTransforms``). A cancel request
+    (``actionlib_msgs/GoalID`` on ``{server}/cancel``) ends the goals it names at once
+    with a PREEMPTED result (module doc). At most ``max_goals`` goals, and at most
+    :data:`MAX_HELD_GOAL_BYTES` of them, are held; more are answered at once with a
+    REJECTED result whose status text says "buffer server busy: ...". The status array
+    (5 Hz) lists the goals held (ACTIVE) and those ended in the last 5 s (actionlib's
+    ``status_list_timeout``), so that actionlib clients follow them.
 
     Args:
         buffer: the :class:`~tfbus.buffer.Buffer` to answer from (its clock bounds the
@@ -619,22 +729,39 @@ class Ros1BufferServer:
         master_uri: the ROS 1 master (loopback only).
         server: the action's namespace (default ``/tf2_buffer_server``, the real node's).
         name: this node's name (default ``/tf2_buffer_server``, the real node's).
+        max_goals: most goals held at once.
+        max_wait: longest wait of one goal, seconds (default 60).
 
     Raises:
-        ValueError: a master that is not on 127.0.0.1 / localhost.
+        ValueError: a master that is not on 127.0.0.1 / localhost, ``max_goals`` < 1, or
+            ``max_wait`` not a positive finite number.
     """
 
     def __init__(self, buffer: Buffer, master_uri: str, *,
-                 server: str = "/tf2_buffer_server", name: str = "/tf2_buffer_server") -> None:
+                 server: str = "/tf2_buffer_server", name: str = "/tf2_buffer_server",
+                 max_goals: int = 1000, max_wait: float = 60.0) -> None:
+        if max_goals < 1:
+            raise ValueError(f"max_goals must be at least 1, got {max_goals!r}")
+        if isinstance(max_wait, bool) or not isinstance(max_wait, (int, float)) \
+                or not 0 < max_wait < math.inf:
+            raise ValueError(f"max_wait must be positive finite seconds, got {max_wait!r}")
         self._buffer = buffer
         self._node = _Node(master_uri, name)
         self._topics = {k: f"{server}/{k}" for k in ("goal", "cancel", "result", "feedback",
                                                       "status")}
         self._node.subscribe(self._topics["goal"], GOAL_TYPE, GOAL_MD5, self._on_goal)
-        self._node.subscribe(self._topics["cancel"], CANCEL_TYPE, CANCEL_MD5, lambda raw: None)
+        self._node.subscribe(self._topics["cancel"], CANCEL_TYPE, CANCEL_MD5, self._on_cancel)
         self._node.publish(self._topics["result"], RESULT_TYPE, RESULT_MD5)
         self._node.publish(self._topics["feedback"], FEEDBACK_TYPE, FEEDBACK_MD5)
         self._node.publish(self._topics["status"], STATUS_TYPE, STATUS_MD5)
+        self._max_goals = max_goals
+        self._max_wait = float(max_wait)
+        self._held: dict[str, _Held] = {}
+        self._held_bytes = 0
+        # goals ended lately, for the status array: id -> (stamp, status, text, when)
+        self._ended: dict[str, tuple[Time, int, str, float]] = {}
+        self._recall: dict[str, None] = {}  # cancelled by id before they came (bounded)
+        self._last_cancel = Time(0)
         self._tg: anyio.abc.TaskGroup | None = None
         self._seq = 0
         self.answered = 0
@@ -642,11 +769,22 @@ class Ros1BufferServer:
         self.refused_answers = 0
         """Goals not answered because ROS 1 cannot carry the answer: the goal's stamp or
         the transform's is at or after 2**32 s (uint32 seconds); counted, logged."""
+        self.cancelled = 0
+        """Goals ended by a cancel request (PREEMPTED, or RECALLED when it came first)."""
+        self.rejected = 0
+        """Goals REJECTED because ``max_goals`` goals (or :data:`MAX_HELD_GOAL_BYTES`)
+        were held."""
 
     @property
     def malformed(self) -> int:
-        """Goals that did not decode (counted, dropped)."""
+        """Goals and cancel requests that did not decode, or whose goal id is longer than
+        :data:`MAX_GOAL_ID_BYTES` (counted, dropped)."""
         return self._node.malformed
+
+    @property
+    def pending(self) -> int:
+        """Goals held now (waiting for their transform)."""
+        return len(self._held)
 
     @property
     def refused(self) -> int:
@@ -682,9 +820,25 @@ class Ros1BufferServer:
         while True:
             seq += 1
             now = Time.from_ns(_wallclock.time_ns())
-            self._node.send_nowait(self._topics["status"],
-                                   _U32.pack(seq) + _time(now) + _string("") + _U32.pack(0))
+            self._node.send_nowait(self._topics["status"], _U32.pack(seq) + _time(now)
+                                   + _string("") + self._status_list())
             await anyio.sleep(0.2)
+
+    def _status_list(self) -> bytes:
+        """The ``status_list`` of a ``GoalStatusArray``: the goals held (ACTIVE), then
+        those ended within the last 5 s (the older ones forgotten)."""
+        horizon = _wallclock.monotonic() - _STATUS_KEPT
+        ended = self._ended
+        while ended:
+            oldest = next(iter(ended))
+            if ended[oldest][3] >= horizon:
+                break
+            del ended[oldest]
+        parts = [_goal_status(h.goal.goal_id, h.goal.goal_stamp, _ACTIVE)
+                 for h in self._held.values()]
+        parts += [_goal_status(goal_id, stamp, status, text)
+                  for goal_id, (stamp, status, text, _when) in ended.items()]
+        return _U32.pack(len(parts)) + b"".join(parts)
 
     def _on_goal(self, raw: bytes) -> None:
         try:
@@ -692,19 +846,119 @@ class Ros1BufferServer:
         except ValueError:
             self._node.malformed += 1
             return
-        if self._tg is not None:
-            self._tg.start_soon(self._answer, goal)
+        if len(goal.goal_id) > MAX_GOAL_ID_BYTES // 4 \
+                and len(goal.goal_id.encode()) > MAX_GOAL_ID_BYTES:
+            self._node.malformed += 1
+            return
+        if self._tg is None or goal.goal_id in self._held or goal.goal_id in self._ended:
+            return  # actionlib ActionServerBase::goalCallback: a known goal is ignored
+        by_id = goal.goal_id in self._recall
+        if by_id or (goal.goal_stamp != Time(0) and goal.goal_stamp <= self._last_cancel):
+            # actionlib goalCallback: a goal cancelled before it came is RECALLED
+            self._recall.pop(goal.goal_id, None)
+            text = "" if by_id else _RECALLED_BY_STAMP
+            self.cancelled += 1
+            self._end(goal, _RECALLED, text)
+            return
+        if len(self._held) >= self._max_goals \
+                or self._held_bytes + len(raw) > MAX_HELD_GOAL_BYTES:
+            self.rejected += 1
+            self._end(goal, _REJECTED, f"buffer server busy: {len(self._held)} goals waiting "
+                                       f"({self._held_bytes} bytes; max_goals "
+                                       f"{self._max_goals})")
+            return
+        held = _Held(goal, len(raw))
+        self._held[goal.goal_id] = held
+        self._held_bytes += held.size
+        self._tg.start_soon(self._answer, held)
 
-    async def _answer(self, goal: Goal) -> None:
-        buffer = self._buffer
-        empty = TransformStamped(Header(), "", Transform())
+    def _on_cancel(self, raw: bytes) -> None:
+        """actionlib ``ActionServerBase::cancelCallback`` (``action_server_base.h``) with
+        tf2_ros ``BufferServer::cancelCB`` (``buffer_server.cpp``) as the cancel callback:
+        an empty id and a zero stamp cancel every goal held; an id, that goal; a non-zero
+        stamp, every goal stamped at or before it. An id not held is kept (bounded) so
+        that its goal is RECALLED when it comes; the latest stamp is kept so that goals
+        stamped at or before it are RECALLED when they come."""
         try:
-            if goal.advanced:
-                g = goal
+            stamp, goal_id = decode_goal_id(raw)
+        except ValueError:
+            self._node.malformed += 1
+            return
+        if len(goal_id) > MAX_GOAL_ID_BYTES // 4 and len(goal_id.encode()) > MAX_GOAL_ID_BYTES:
+            self._node.malformed += 1
+            return
+        everything = goal_id == "" and stamp == Time(0)
+        found = goal_id in self._ended
+        for held in list(self._held.values()):
+            g = held.goal
+            if everything or g.goal_id == goal_id or (stamp != Time(0)
+                                                        and g.goal_stamp <= stamp):
+                found = found or g.goal_id == goal_id
+                held.cancel()
+        if goal_id and not found:
+            self._recall[goal_id] = None
+            while len(self._recall) > self._max_goals:
+                del self._recall[next(iter(self._recall))]
+        if stamp > self._last_cancel:
+            self._last_cancel = stamp
+
+    def _end(self, goal: Goal, status: int, text: str) -> None:
+        """Send a goal's result with ``status`` (no transform) and list it as ended."""
+        self._send_result(goal, TransformStamped(Header(), "", Transform()), 0, "",
+                          status, text)
+
+    def _send_result(self, goal: Goal, ts: TransformStamped, code: int, message: str,
+                     status: int = _SUCCEEDED, text: str = "") -> bool:
+        try:
+            result = encode_result(self._seq + 1, goal.goal_id, goal.goal_stamp, ts, code,
+                                   message, status, text)
+        except ValueError as exc:  # a stamp past ROS 1 time
+            self.refused_answers += 1
+            _peer_log.log(logging.WARNING, "ros1: %s: not answering goal %r: %s",
+                          self._node.name, goal.goal_id[:200], exc)
+            return False
+        self._seq += 1
+        self._ended[goal.goal_id] = (goal.goal_stamp, status, text, _wallclock.monotonic())
+        while len(self._ended) > self._max_goals:
+            del self._ended[next(iter(self._ended))]
+        self._node.send_nowait(self._topics["result"], result)
+        return True
+
+    async def _answer(self, held: _Held) -> None:
+        goal = held.goal
+        try:
+            with anyio.CancelScope() as scope:
+                held.scope = scope
+                if held.cancel_requested:
+                    scope.cancel()
+                with anyio.move_on_after(self._max_wait):
+                    ts, code, message = await self._lookup(goal, min(goal.timeout,
+                                                                     self._max_wait))
+                    if self._send_result(goal, ts, code, message):
+                        self.answered += 1
+                    return
+                # past max_wait of wall time: answered as an expired timeout
+                ts, code, message = await self._lookup(goal, 0.0)
+                if self._send_result(goal, ts, code, message):
+                    self.answered += 1
+                return
+            # tf2_ros BufferServer::cancelCB: setCanceled() on the active goal: PREEMPTED
+            self.cancelled += 1
+            self._end(goal, _PREEMPTED, "")
+        finally:
+            del self._held[goal.goal_id]
+            self._held_bytes -= held.size
+
+    async def _lookup(self, goal: Goal, timeout: float) -> tuple[TransformStamped, int, str]:
+        """The goal's transform, or its ``TF2Error`` code and message."""
+        buffer = self._buffer
+        g = goal
+        try:
+            if g.advanced:
                 try:
                     ts = await buffer.lookup_transform_full_async(
                         g.target_frame, g.target_time, g.source_frame, g.source_time,
-                        g.fixed_frame, g.timeout)
+                        g.fixed_frame, timeout)
                 except errors.TimeoutException:  # buffer_server.cpp: lookup's own error
                     ts = buffer.lookup_transform_full(
                         g.target_frame, g.target_time, g.source_frame, g.source_time,
@@ -712,23 +966,11 @@ class Ros1BufferServer:
             else:
                 try:
                     ts = await buffer.lookup_transform_async(
-                        goal.target_frame, goal.source_frame, goal.source_time, goal.timeout)
+                        g.target_frame, g.source_frame, g.source_time, timeout)
                 except errors.TimeoutException:
-                    ts = buffer.lookup_transform(goal.target_frame, goal.source_frame,
-                                                 goal.source_time)
-            code, message = 0, ""
+                    ts = buffer.lookup_transform(g.target_frame, g.source_frame,
+                                                 g.source_time)
         except TransformException as exc:
-            ts = empty
             code = next((c for c, cls in _ERRORS.items() if isinstance(exc, cls)), 6)
-            message = str(exc)
-        try:
-            result = encode_result(self._seq + 1, goal.goal_id, goal.goal_stamp, ts, code,
-                                   message)
-        except ValueError as exc:  # a stamp past ROS 1 time
-            self.refused_answers += 1
-            _peer_log.log(logging.WARNING, "ros1: %s: not answering goal %r: %s",
-                          self._node.name, goal.goal_id[:200], exc)
-            return
-        self._seq += 1
-        self.answered += 1
-        self._node.send_nowait(self._topics["result"], result)
+            return TransformStamped(Header(), "", Transform()), code, str(exc)
+        return ts, 0, ""

@@ -24,6 +24,22 @@ expires is answered with ``lookupTransform``'s own error then (``LookupException
 ``ExtrapolationException``, ...). A request that does not decode is counted and left
 unanswered; one with a bad field is answered with an ``InvalidArgumentException`` naming
 the field and value.
+
+The server holds against any querier: every wait is bounded (``max_wait``, 60 s by
+default: a ``timeout`` of None or longer waits that long; tf2_ros's ``buffer_server``
+has no such bound), at most ``max_pending`` lookups wait at once and at most
+``max_per_peer`` of them from one Zenoh session, frame ids are at most
+:data:`MAX_FRAME_ID_BYTES` long, and a lookup whose querier is gone stops waiting. For
+that a request also carries ``"query_timeout"`` (wall seconds the querier waits for the
+answer) and, when its timeout is None or over 1 s, ``"id"`` (a random hex token of the
+lookup): while such a lookup is asked, the client holds a Zenoh liveliness token
+``{key}/@lookup/{id}``. The server
+stops a lookup, unanswered, when that token goes (the client's lookup was cancelled, or
+its session closed: Zenoh deletes a session's tokens when it leaves), and answers it as
+an expired timeout after ``query_timeout`` wall seconds (or ``max_wait``, whichever is
+less). The querier is the Zenoh session id of the query's source info (``SourceInfo``,
+set by :class:`BufferClient`); queries without one share a single per-peer share. Zenoh
+does not authenticate that id: on an untrusted network use Zenoh's access control.
 """
 
 from __future__ import annotations
@@ -31,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import secrets
 import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -57,7 +74,14 @@ if TYPE_CHECKING:
     from tfbus.bus import Bus
     from tfbus.transports.zenoh import ZenohTransport
 
-__all__ = ["DEFAULT_SERVER_NAME", "BufferClient", "BufferServer", "ServerStatistics"]
+__all__ = [
+    "DEFAULT_MAX_WAIT",
+    "DEFAULT_SERVER_NAME",
+    "MAX_FRAME_ID_BYTES",
+    "BufferClient",
+    "BufferServer",
+    "ServerStatistics",
+]
 
 log = logging.getLogger("tfbus.remote")
 
@@ -79,6 +103,19 @@ _EXCEPTIONS: Final[Mapping[str, type[TransformException]]] = {
     )
 }
 _OPS: Final = ("lookup", "full", "can")
+DEFAULT_MAX_WAIT: Final = 60.0
+"""Seconds a :class:`BufferServer` waits for one lookup at most, by default (tf2_ros's
+``buffer_server`` waits for as long as the goal's timeout asks)."""
+MAX_FRAME_ID_BYTES: Final = 1024
+"""Longest frame id (UTF-8 bytes) a :class:`BufferServer` looks up. tf2 accepts any
+length (``BufferCore::validateFrameId`` refuses only empty ids and a leading ``/``); real
+frame ids (``base_link``, ``robot7/arm/wrist_3_link``) are tens of bytes."""
+_MAX_REQUEST_BYTES: Final = 16 << 10  # a request with 4 frame ids of 1 KiB is smaller
+_MAX_ID_CHARS: Final = 64
+# A lookup that may wait longer than this (server seconds) holds a liveliness token so
+# that the server ends it once its querier is gone; a shorter one ends there within its
+# timeout anyway, and spares the token's two messages (about 0.4 ms a lookup).
+_TRACKED_AFTER: Final = 1.0
 _M = TypeVar("_M")
 
 
@@ -115,9 +152,13 @@ class ServerStatistics:
     Attributes:
         requests: queries received.
         answered: transforms (or can_transform answers) sent back.
-        errors: tf2 errors sent back (lookup, timeout, bad argument...).
+        errors: tf2 errors sent back (lookup, timeout, bad argument, busy...).
         malformed: queries dropped unanswered (not a tfbus request).
-        busy: queries refused because ``max_pending`` were already being answered.
+        busy: queries refused because ``max_pending`` lookups, or ``max_per_peer`` of the
+            same querier, were already waiting.
+        cancelled: lookups ended unanswered because their querier went (its lookup was
+            cancelled, or its Zenoh session closed).
+        pending: lookups waiting now.
     """
 
     requests: int = 0
@@ -125,6 +166,8 @@ class ServerStatistics:
     errors: int = 0
     malformed: int = 0
     busy: int = 0
+    cancelled: int = 0
+    pending: int = 0
 
 
 def _field(request: Mapping[str, Any], name: str, kind: str) -> Any:
@@ -144,8 +187,45 @@ def _field(request: Mapping[str, Any], name: str, kind: str) -> Any:
         except ValueError:
             ok = False
     if not ok:
-        raise InvalidArgumentException(f"request field {name!r} has an invalid value {value!r}")
+        raise InvalidArgumentException(
+            f"request field {name!r} has an invalid value {value!r:.200}")
+    if isinstance(value, str) and len(value) > MAX_FRAME_ID_BYTES // 4:
+        size = len(value.encode())
+        if size > MAX_FRAME_ID_BYTES:
+            raise InvalidArgumentException(
+                f"request field {name!r} is a frame id of {size} bytes, longer than "
+                f"{MAX_FRAME_ID_BYTES}")
     return value
+
+
+def _lookup_id(request: Mapping[str, Any]) -> str | None:
+    """The request's ``id`` if it is a usable key chunk (hex digits, at most 64)."""
+    value = request.get("id")
+    if isinstance(value, str) and 0 < len(value) <= _MAX_ID_CHARS \
+            and all(c in "0123456789abcdef" for c in value):
+        return value
+    return None
+
+
+def _querier(query: zenoh.Query) -> str:
+    """The Zenoh session id of the query's source info ("" when the querier set none)."""
+    try:
+        info = query.source_info
+        return "" if info is None else str(info.source_id.zid)
+    except Exception:  # source info is unstable API: a querier without it is anonymous
+        return ""
+
+
+class _Lookup:
+    """A lookup the server holds: its querier, and how to end it from a Zenoh thread."""
+
+    __slots__ = ("cancelled", "lookup_id", "peer", "scope")
+
+    def __init__(self, peer: str, lookup_id: str | None) -> None:
+        self.peer = peer
+        self.lookup_id = lookup_id
+        self.scope: anyio.CancelScope | None = None
+        self.cancelled = False
 
 
 class BufferServer:
@@ -154,18 +234,34 @@ class BufferServer:
 
     Use ``async with BufferServer(buffer, bus):`` inside ``async with bus:``. Lookups
     wait on ``buffer`` (its clock bounds the requested timeouts); each one runs as a task
-    of the server, at most ``max_pending`` at a time (more are answered with a
-    ``TransformException`` "server busy").
+    of the server. Every wait is bounded and no querier can hold the server for others
+    (module doc):
+
+    * a ``timeout`` of None, or longer than ``max_wait``, waits ``max_wait`` seconds of
+      the buffer's clock; any lookup is answered as an expired timeout (the lookup's own
+      result or error, as tf2_ros ``buffer_server.cpp`` ``checkTransforms``) after
+      ``max_wait`` wall seconds or its querier's ``query_timeout``, whichever is less;
+    * a lookup whose querier cancelled it or whose Zenoh session left is ended unanswered
+      (its liveliness token ``{key}/@lookup/{id}`` was deleted), its slot freed;
+    * at most ``max_pending`` lookups wait at once and at most ``max_per_peer`` of one
+      querier (the Zenoh session id of the query's source info); more are answered at once
+      with a ``TransformException`` "buffer server busy: ...";
+    * a frame id longer than :data:`MAX_FRAME_ID_BYTES` is answered with an
+      ``InvalidArgumentException`` naming the field, and so is a request over 16 KiB.
 
     Args:
         buffer: the :class:`~tfbus.buffer.Buffer` to answer from.
         bus: an open bus over Zenoh (``ZenohTransport``, one namespace).
         name: the server's name in its key (default ``tf2_buffer_server``).
-        max_pending: most requests answered at once.
+        max_pending: most lookups waiting at once.
+        max_per_peer: most lookups of one querier waiting at once (default
+            ``max_pending // 4``, at least 1).
+        max_wait: longest wait of one lookup, seconds (default :data:`DEFAULT_MAX_WAIT`).
 
     Raises:
         TypeError: the bus is not carried over Zenoh.
-        ValueError: an empty name, a fleet bus, or ``max_pending`` < 1.
+        ValueError: an empty name, a fleet bus, ``max_pending`` or ``max_per_peer`` < 1,
+            or ``max_wait`` not a positive finite number.
     """
 
     def __init__(
@@ -175,9 +271,18 @@ class BufferServer:
         *,
         name: str = DEFAULT_SERVER_NAME,
         max_pending: int = 1000,
+        max_per_peer: int | None = None,
+        max_wait: float = DEFAULT_MAX_WAIT,
     ) -> None:
         if max_pending < 1:
             raise ValueError(f"max_pending must be at least 1, got {max_pending!r}")
+        if max_per_peer is None:
+            max_per_peer = max(1, max_pending // 4)
+        if max_per_peer < 1:
+            raise ValueError(f"max_per_peer must be at least 1, got {max_per_peer!r}")
+        if isinstance(max_wait, bool) or not isinstance(max_wait, (int, float)) \
+                or not 0 < max_wait < math.inf:
+            raise ValueError(f"max_wait must be positive finite seconds, got {max_wait!r}")
         self._buffer = buffer
         self._transport = _zenoh_transport(bus)
         self._name = name
@@ -185,11 +290,16 @@ class BufferServer:
         self._codec = WireCodec()
         self._sender = new_sender_id()
         self._max_pending = max_pending
+        self._max_per_peer = max_per_peer
+        self._max_wait = float(max_wait)
         self._pending = 0
+        self._per_peer: dict[str, int] = {}
+        self._lookups: dict[str, _Lookup] = {}  # by lookup id
         self._pending_lock = threading.Lock()  # Zenoh threads add, the event loop removes
         self._stats = ServerStatistics()
         self._portal: anyio.from_thread.BlockingPortal | None = None
         self._queryable: zenoh.Queryable[None] | None = None
+        self._tokens: zenoh.Subscriber[None] | None = None
 
     @property
     def key(self) -> str:
@@ -197,12 +307,14 @@ class BufferServer:
         return self._key
 
     def statistics(self) -> ServerStatistics:
-        """A copy of the counters."""
+        """A copy of the counters (``pending``: the lookups waiting now)."""
         s = self._stats
-        return ServerStatistics(**{f.name: getattr(s, f.name) for f in fields(s)})
+        copy = ServerStatistics(**{f.name: getattr(s, f.name) for f in fields(s)})
+        copy.pending = self._pending
+        return copy
 
     async def __aenter__(self) -> BufferServer:
-        """Declare the queryable.
+        """Declare the queryable (and the liveliness subscriber of the lookups' tokens).
 
         Raises:
             RuntimeError: the bus is not open, or the server is already running.
@@ -215,82 +327,161 @@ class BufferServer:
         await portal.__aenter__()
         self._portal = portal
         try:
+            self._tokens = session.liveliness().declare_subscriber(
+                f"{self._key}/@lookup/*", self._on_token)
             self._queryable = session.declare_queryable(self._key, self._on_query)
         except zenoh.ZError as err:
-            self._portal = None
-            await portal.__aexit__(None, None, None)
+            await self.__aexit__(None, None, None)
             raise TransportError(f"cannot declare the buffer server {self._key}: {err}") from err
         return self
 
     async def __aexit__(self, *exc: object) -> None:
         """Undeclare the queryable and cancel the lookups still waiting."""
         queryable, self._queryable = self._queryable, None
+        tokens, self._tokens = self._tokens, None
         portal, self._portal = self._portal, None
-        if queryable is not None:
-            with contextlib.suppress(Exception):
-                queryable.undeclare()  # type: ignore[no-untyped-call]
+        for declared in (queryable, tokens):
+            if declared is not None:
+                with contextlib.suppress(Exception):
+                    declared.undeclare()  # type: ignore[no-untyped-call]
         if portal is not None:
             await portal.stop(cancel_remaining=True)
             await portal.__aexit__(None, None, None)
 
-    # -- Zenoh thread ------------------------------------------------------------------
+    # -- Zenoh threads -----------------------------------------------------------------
 
     def _on_query(self, query: zenoh.Query) -> None:
         self._stats.requests += 1
-        portal = self._portal
         payload = query.payload
         data = b"" if payload is None else payload.to_bytes()
-        with self._pending_lock:
-            accepted = portal is not None and self._pending < self._max_pending
-            if accepted:
-                self._pending += 1
-        if portal is None or not accepted:
-            self._stats.busy += 1
+        if len(data) > _MAX_REQUEST_BYTES:
             with query:
-                self._reply_error(query, TransformException("buffer server busy or stopping"))
+                self._reply_error(query, InvalidArgumentException(
+                    f"request of {len(data)} bytes, longer than {_MAX_REQUEST_BYTES}"))
             return
         try:
-            portal.start_task_soon(self._answer, query, data)
-        except RuntimeError:  # the portal stopped meanwhile
-            with self._pending_lock:
-                self._pending -= 1
-            with query:
-                self._reply_error(query, TransformException("buffer server stopping"))
+            request = self._codec.decode(data).message
+        except WireError:
+            request = None
+        if not isinstance(request, dict):
+            self._stats.malformed += 1
+            query.drop()  # type: ignore[no-untyped-call]
+            return
+        lookup = _Lookup(_querier(query), _lookup_id(request))
+        refusal = self._admit(lookup)
+        portal = self._portal
+        if refusal is None and portal is not None:
+            try:
+                portal.start_task_soon(self._answer, query, request, lookup)
+                return
+            except RuntimeError:  # the portal stopped meanwhile
+                self._release(lookup)
+                refusal = TransformException("buffer server stopping")
+        elif refusal is None:
+            self._release(lookup)
+            refusal = TransformException("buffer server stopping")
+        with query:
+            self._reply_error(query, refusal)
+
+    def _admit(self, lookup: _Lookup) -> TransformException | None:
+        """Take a slot for ``lookup``, or the error that refuses it."""
+        with self._pending_lock:
+            if self._portal is None:
+                return TransformException("buffer server stopping")
+            if lookup.lookup_id is not None and lookup.lookup_id in self._lookups:
+                return InvalidArgumentException(
+                    f"request field 'id' has a value {lookup.lookup_id!r} already waiting")
+            if self._pending >= self._max_pending:
+                self._stats.busy += 1
+                return TransformException(
+                    f"buffer server busy: {self._pending} lookups waiting (max_pending)")
+            held = self._per_peer.get(lookup.peer, 0)
+            if held >= self._max_per_peer:
+                self._stats.busy += 1
+                return TransformException(
+                    f"buffer server busy: {held} lookups of this querier waiting "
+                    "(max_per_peer)")
+            self._pending += 1
+            self._per_peer[lookup.peer] = held + 1
+            if lookup.lookup_id is not None:
+                self._lookups[lookup.lookup_id] = lookup
+        return None
+
+    def _release(self, lookup: _Lookup) -> None:
+        with self._pending_lock:
+            self._pending -= 1
+            held = self._per_peer[lookup.peer] - 1
+            if held:
+                self._per_peer[lookup.peer] = held
+            else:
+                del self._per_peer[lookup.peer]
+            if lookup.lookup_id is not None and self._lookups.get(lookup.lookup_id) is lookup:
+                del self._lookups[lookup.lookup_id]
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        """A lookup's liveliness token went: its querier cancelled it or left."""
+        if sample.kind != zenoh.SampleKind.DELETE:
+            return
+        lookup_id = str(sample.key_expr).rsplit("/", 1)[-1]
+        with self._pending_lock:
+            lookup = self._lookups.get(lookup_id)
+            if lookup is None:
+                return
+            lookup.cancelled = True
+            scope = lookup.scope
+        portal = self._portal
+        if scope is not None and portal is not None:
+            with contextlib.suppress(RuntimeError):  # the portal stopped meanwhile
+                portal.start_task_soon(_cancel, scope)
 
     # -- event loop ----------------------------------------------------------------------
 
-    async def _answer(self, query: zenoh.Query, data: bytes) -> None:
+    async def _answer(self, query: zenoh.Query, request: dict[str, Any],
+                      lookup: _Lookup) -> None:
         try:
             with query:
-                try:
-                    request = self._codec.decode(data).message
-                except WireError:
-                    request = None
-                if not isinstance(request, dict):
-                    self._stats.malformed += 1
-                    return
-                try:
-                    result = await self._run(request)
-                except TransformException as exc:
-                    self._reply_error(query, exc)
-                    return
-                except Exception as exc:  # never end the server on one request
-                    log.warning("lookup request %r failed: %r", request, exc)
-                    self._reply_error(query, TransformException(f"server error: {exc}"))
-                    return
-                self._stats.answered += 1
-                query.reply(self._key, self._codec.encode(result, sender=self._sender, seq=1))
+                wall = self._max_wait
+                sent = request.get("query_timeout")
+                if isinstance(sent, (int, float)) and not isinstance(sent, bool) \
+                        and sent >= 0:
+                    wall = min(wall, float(sent))
+                with anyio.CancelScope() as gone:
+                    with self._pending_lock:
+                        lookup.scope = gone
+                        if lookup.cancelled:
+                            gone.cancel()
+                    try:
+                        with anyio.move_on_after(wall):
+                            result = await self._run(request, self._max_wait)
+                            self._reply(query, result)
+                            return
+                        # past the wall bound: answered as an expired timeout
+                        self._reply(query, await self._run(request, 0.0))
+                    except TransformException as exc:
+                        self._reply_error(query, exc)
+                    except Exception as exc:  # never end the server on one request
+                        log.warning("lookup request %r failed: %r", request, exc)
+                        self._reply_error(query, TransformException(f"server error: {exc}"))
+                if gone.cancelled_caught:
+                    self._stats.cancelled += 1
         except zenoh.ZError as exc:
             log.debug("cannot answer a lookup: %s", exc)
         finally:
-            with self._pending_lock:
-                self._pending -= 1
+            self._release(lookup)
 
-    async def _run(self, request: Mapping[str, Any]) -> object:
+    def _reply(self, query: zenoh.Query, result: object) -> None:
+        self._stats.answered += 1
+        query.reply(self._key, self._codec.encode(result, sender=self._sender, seq=1))
+
+    async def _run(self, request: Mapping[str, Any], max_wait: float) -> object:
         op = request.get("op")
         if op not in _OPS:
             raise InvalidArgumentException(f"request field 'op' has an invalid value {op!r}")
+        if "id" in request and _lookup_id(request) is None:
+            raise InvalidArgumentException(
+                f"request field 'id' has an invalid value {request['id']!r:.200}")
         timeout = _field(request, "timeout", "timeout")
+        timeout = max_wait if timeout is None else min(timeout, max_wait)
         buffer = self._buffer
         if op == "full":
             target = _field(request, "target", "frame")
@@ -326,6 +517,10 @@ class BufferServer:
             query.reply(self._key, self._codec.encode(body, sender=self._sender, seq=1))
 
 
+async def _cancel(scope: anyio.CancelScope) -> None:
+    scope.cancel()
+
+
 class BufferClient:
     """:class:`~tfbus.buffer.Buffer`'s awaitable lookups, answered by a remote
     :class:`BufferServer` (tf2_ros ``BufferClient``): no ``/tf`` subscription here.
@@ -333,8 +528,12 @@ class BufferClient:
     Timeouts are seconds of the **server's** clock (the server waits); the Zenoh query
     itself is bounded by ``timeout + timeout_padding`` seconds of wall time (tf2_ros
     ``BufferClient``'s ``timeout_padding``, 2 s), after which
-    :class:`~tfbus.errors.TimeoutException` is raised. With ``timeout`` None (wait
-    forever on the server) the query is bounded by ``max_wait`` seconds.
+    :class:`~tfbus.errors.TimeoutException` is raised. With ``timeout`` None the query is
+    bounded by ``max_wait`` seconds (and the server waits at most its own ``max_wait``,
+    60 s by default, then answers with the lookup's own result or error). A lookup
+    cancelled here (a cancelled task, ``anyio.move_on_after``) ends its Zenoh query at
+    once, and, if its timeout is None or over 1 s, its wait on the server too (module
+    doc).
 
     Args:
         bus: an open bus over Zenoh (a client can open it with ``topics=()`` to receive
@@ -460,11 +659,23 @@ class BufferClient:
             timeout = None
         request["timeout"] = timeout
         wall = self._max_wait if timeout is None else timeout + self._padding
+        lookup_id: str | None = None
+        if timeout is None or timeout > _TRACKED_AFTER:
+            lookup_id = secrets.token_hex(16)
+            request["id"] = lookup_id
+        request["query_timeout"] = wall
         payload = self._codec.encode(request, sender=self._sender, seq=1)
         session = _session(self._transport)
-        replies = await anyio.to_thread.run_sync(
-            _query, session, self._key, payload, wall, abandon_on_cancel=True
-        )
+        cancel = zenoh.CancellationToken()
+        try:
+            replies = await anyio.to_thread.run_sync(
+                _query, session, self._key, payload, wall, lookup_id, cancel,
+                abandon_on_cancel=True,
+            )
+        finally:
+            # a cancelled lookup ends its Zenoh get at once; the get's thread then
+            # undeclares the lookup's liveliness token, which ends the server's wait
+            cancel.cancel()
         for data in replies:
             try:
                 answer = self._codec.decode(data).message
@@ -479,14 +690,33 @@ class BufferClient:
         )
 
 
-def _query(session: zenoh.Session, key: str, payload: bytes, wall: float) -> list[bytes]:
-    """A Zenoh get (worker thread): the payloads of the ok replies."""
+def _query(session: zenoh.Session, key: str, payload: bytes, wall: float,
+           lookup_id: str | None, cancel: zenoh.CancellationToken) -> list[bytes]:
+    """A Zenoh get (worker thread): the payloads of the ok replies. While it waits, the
+    lookup's liveliness token ``{key}/@lookup/{lookup_id}`` is declared if it has an id
+    (the server ends the lookup when it goes); the query carries this session's id as
+    source info."""
+    token = None
+    if lookup_id is not None:
+        try:
+            token = session.liveliness().declare_token(f"{key}/@lookup/{lookup_id}")
+        except zenoh.ZError as err:
+            raise TransportError(f"buffer query on {key} failed: {err}") from err
     try:
+        try:
+            source: zenoh.SourceInfo | None = zenoh.SourceInfo(session.id, 0)
+        except Exception:  # source info is unstable API: ask without it
+            source = None
         replies = session.get(key, payload=payload, timeout=wall,
-                              target=zenoh.QueryTarget.BEST_MATCHING)
+                              target=zenoh.QueryTarget.BEST_MATCHING, source_info=source,
+                              cancellation_token=cancel)
         return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
     except zenoh.ZError as err:
         raise TransportError(f"buffer query on {key} failed: {err}") from err
+    finally:
+        if token is not None:
+            with contextlib.suppress(Exception):  # the session may have closed meanwhile
+                token.undeclare()  # type: ignore[no-untyped-call]
 
 
 def _typed(answer: object, cls: type[_M]) -> _M:
