@@ -346,6 +346,8 @@ class ZenohTransport:
             self._send_ready = None
             with anyio.CancelScope(shield=True):
                 await self._flush_sends()
+            # published while the flush ran: the session is closing
+            self._stats.not_connected += len(self._take_sends())
             self._session = None
             self._wakeup = None
             for outlet in self._outlets.values():
