@@ -54,7 +54,12 @@ def _ts(child: str, ns: int, x: float) -> TransformStamped:
 
 
 async def sender(args: argparse.Namespace) -> None:
-    transport = ZenohTransport(connect=args.endpoint, name="bench-sender", express=args.express)
+    transport = ZenohTransport(
+        connect=args.endpoint,
+        name="bench-sender",
+        express=args.express,
+        congestion_control=args.congestion_control,
+    )
     async with Bus(transport=transport) as bus:
         with anyio.fail_after(10):
             while not transport.alive():
@@ -101,7 +106,8 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> None:
                     "--seconds",
                     str(args.seconds),
                 ]
-                + (["--express"] if args.express else []),
+                + (["--express"] if args.express else [])
+                + ["--congestion-control", args.congestion_control],
                 env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)},
             )
             try:
@@ -203,6 +209,7 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=100)
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--express", action="store_true")
+    parser.add_argument("--congestion-control", default="drop", choices=["drop", "block"])
     parser.add_argument("--backend", default="asyncio")
     parser.add_argument("--wire-only", action="store_true")
     args = parser.parse_args()
@@ -216,7 +223,8 @@ def main() -> None:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     print(
-        f"bench_zenoh: backend={args.backend} express={args.express} (2 processes, "
+        f"bench_zenoh: backend={args.backend} express={args.express} "
+        f"congestion_control={args.congestion_control} (2 processes, "
         f"127.0.0.1:{port})"
     )
     anyio.run(receiver, args, f"tcp/127.0.0.1:{port}", backend=args.backend)

@@ -18,6 +18,13 @@ Robots are found through Zenoh liveliness (a node named ``robot7/<name>`` appear
 when it comes back, its nodes' latched ``/tf_static`` arrive again (the transport asks
 every node that appears for them).
 
+What peers announce is bounded: at most ``max_robots`` robots are kept (a buffer and two
+subscriptions each); a namespace announced beyond that is not followed, counted in
+:attr:`FleetStatistics.robots_refused`. A robot gone for ``forget_after`` seconds of the
+fleet's clock is released (buffer, subscriptions and entry; counted in
+:attr:`FleetStatistics.released`), making room for others; if it comes back it is
+followed anew.
+
 With ``merged=True`` there is one buffer (:attr:`FleetBuffer.merged`) holding every
 robot's frames with the robot's name as a prefix (``robot7/base_link``, tf_prefix style),
 so lookups can cross robots once something links their trees.
@@ -26,14 +33,14 @@ so lookups can cross robots once something links their trees.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import anyio
 
 from tfbus.buffer import Buffer
-from tfbus.clock import Clock
+from tfbus.clock import Clock, SystemClock, timeout_ns
 from tfbus.messages import Header, TFMessage, TransformStamped
 from tfbus.time import Duration
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
@@ -79,6 +86,9 @@ class FleetStatistics:
         refused: transforms the buffers did not store (invalid, old or repeated data).
         dropped: messages on a robot's tf topics that were not a ``TFMessage``.
         gone: times a robot was reported gone.
+        robots_refused: namespaces announced by a peer (liveliness) that were not
+            followed because ``max_robots`` robots were kept already.
+        released: robots released after being gone for ``forget_after`` seconds.
     """
 
     messages: int = 0
@@ -86,6 +96,8 @@ class FleetStatistics:
     refused: int = 0
     dropped: int = 0
     gone: int = 0
+    robots_refused: int = 0
+    released: int = 0
 
 
 @dataclass(slots=True)
@@ -95,6 +107,7 @@ class _Robot:
     nodes: dict[str, str] = field(default_factory=dict)  # node id -> name
     broadcasters: set[str] = field(default_factory=set)  # node ids
     pinned: bool = False
+    gone_ns: int | None = None  # the fleet clock's time when its last node went away
     messages: int = 0
     transforms: int = 0
     callbacks: list[CallbackSubscription] = field(default_factory=list)
@@ -129,9 +142,15 @@ class FleetBuffer:
         sink: (merged only) where the prefixed transforms go instead of the merged
             buffer's ``set_transforms`` (e.g. a :class:`~tfbus.monitor.MonitoredSink`
             around it); the authority given is the robot's broadcaster name.
+        max_robots: most robots kept at once (alive, gone or added); a namespace a peer
+            announces beyond that is refused and counted (``robots_refused``).
+        forget_after: seconds of ``clock`` time after which a gone robot is released
+            (``math.inf``: never). With ``merged=True`` the merged buffer keeps the
+            frames it already stored (dynamic ones leave it after ``cache_time``).
 
     Raises:
-        ValueError: ``cache_time`` not positive, or ``sink`` without ``merged``.
+        ValueError: ``cache_time`` or ``forget_after`` not positive, ``max_robots``
+            below 1, or ``sink`` without ``merged``.
     """
 
     def __init__(
@@ -142,10 +161,21 @@ class FleetBuffer:
         cache_time: float | Duration = 10.0,
         clock: Clock | None = None,
         sink: TransformSink | None = None,
+        max_robots: int = 1000,
+        forget_after: float = 300.0,
     ) -> None:
         seconds = cache_time.to_sec() if isinstance(cache_time, Duration) else float(cache_time)
         if not seconds > 0:
             raise ValueError(f"cache_time must be positive seconds, got {cache_time!r}")
+        if not max_robots >= 1:
+            raise ValueError(f"max_robots must be at least 1, got {max_robots!r}")
+        if not float(forget_after) > 0:
+            raise ValueError(f"forget_after must be positive seconds, got {forget_after!r}")
+        self._max_robots = max_robots
+        self._forget_after = float(forget_after)
+        self._forget_ns = timeout_ns(self._forget_after, name="forget_after")
+        self._time: Clock = clock if clock is not None else SystemClock()
+        self._release_scheduled = False
         if sink is not None and not merged:
             raise ValueError("sink= is for merged=True only")
         self._bus = bus
@@ -191,13 +221,14 @@ class FleetBuffer:
         return len(self._robots)
 
     def robots(self) -> dict[str, RobotInfo]:
-        """Every robot seen, alive or gone, by name (a snapshot)."""
+        """Every robot kept, alive or gone, by name (a snapshot; robots gone for
+        ``forget_after`` are released first)."""
+        self._release_due()
         return {name: self._info(r) for name, r in self._robots.items()}
 
     def statistics(self) -> FleetStatistics:
         """A copy of the counters."""
-        s = self._stats
-        return FleetStatistics(s.messages, s.transforms, s.refused, s.dropped, s.gone)
+        return replace(self._stats)
 
     def on_change(self, callback: Callable[[str, RobotInfo], None]) -> None:
         """Call ``callback(what, info)`` with ``what`` ``"alive"`` when a robot appears
@@ -254,8 +285,13 @@ class FleetBuffer:
 
         Raises:
             ValueError: an empty name or one containing ``/``.
+            RuntimeError: ``max_robots`` robots are kept already.
         """
         entry = self._robot(robot)
+        if entry is None:
+            raise RuntimeError(
+                f"cannot add robot {robot!r}: max_robots={self._max_robots} robots are kept"
+            )
         entry.pinned = True
         self._notify("alive", entry)
         return self[robot]
@@ -272,12 +308,17 @@ class FleetBuffer:
             r.transforms,
         )
 
-    def _robot(self, robot: str) -> _Robot:
+    def _robot(self, robot: str) -> _Robot | None:
+        """The robot's entry, made if there is room (None if ``max_robots`` are kept)."""
         entry = self._robots.get(robot)
         if entry is not None:
             return entry
         if not robot or "/" in robot:
             raise ValueError(f"robot name must be one non-empty chunk, got {robot!r}")
+        if len(self._robots) >= self._max_robots:
+            self._release_due()
+            if len(self._robots) >= self._max_robots:
+                return None
         buffer = None if self._merged is not None else Buffer(self._cache_time, clock=self._clock)
         entry = self._robots[robot] = _Robot(robot, buffer)
         for static in (True, False):
@@ -302,7 +343,11 @@ class FleetBuffer:
             entry = self._robot(robot)
         except ValueError:
             return
+        if entry is None:
+            self._stats.robots_refused += 1
+            return
         was_alive = self._info(entry).alive
+        entry.gone_ns = None
         entry.nodes[node_id] = name
         self._node_robot[node_id] = robot
         if any(t.endswith(TF_TOPICS) for t in topics):
@@ -326,7 +371,40 @@ class FleetBuffer:
         self._node_robot.pop(node_id, None)
         if not self._info(entry).alive:
             self._stats.gone += 1
+            entry.gone_ns = self._time.now_ns()
+            self._schedule_release()
             self._notify("gone", entry)
+
+    def _schedule_release(self) -> None:
+        """Wake :meth:`_release_due` when the earliest gone robot is due (a clock that
+        cannot schedule, the system clock under trio, leaves it to the next event)."""
+        if self._release_scheduled or self._forget_ns is None:
+            return
+        gone = [r.gone_ns for r in self._robots.values() if r.gone_ns is not None]
+        if not gone:
+            return
+        wait_ns = min(gone) + self._forget_ns - self._time.now_ns()
+        self._release_scheduled = True
+        if self._time.call_later(max(wait_ns, 0) / 1e9, self._on_release_timer) is None:
+            self._release_scheduled = False
+
+    def _on_release_timer(self) -> None:
+        self._release_scheduled = False
+        if self._peer_callback is not None:  # the fleet is running
+            self._release_due()
+
+    def _release_due(self) -> None:
+        """Release every robot gone for ``forget_after`` (its buffer and subscriptions)."""
+        if self._forget_ns is None:
+            return
+        now = self._time.now_ns()
+        for name, entry in list(self._robots.items()):
+            if entry.gone_ns is not None and now - entry.gone_ns >= self._forget_ns:
+                for cb in entry.callbacks:
+                    cb.close()
+                del self._robots[name]
+                self._stats.released += 1
+        self._schedule_release()
 
     def _authority(self, entry: _Robot) -> str:
         names = sorted(entry.nodes[n] for n in entry.broadcasters if n in entry.nodes)

@@ -650,3 +650,108 @@ async def test_zenoh_errors_are_transport_errors(tmp_path: Path) -> None:
             async with Bus(transport=ZenohTransport(listen=ep, name="second")):
                 pass
     assert isinstance(info.value.__cause__, zenoh.ZError)
+
+
+# -- congestion: /tf_static is never dropped; congestion_control="block" counts its drops --
+
+
+def big(child: str, ns: int, n: int = 40) -> TFMessage:
+    """A /tf message of ``n`` transforms (about 4 kB): a few thousand fill Zenoh's queue."""
+    return TFMessage(tuple(ts(f"{child}_{k}", ns, float(k)) for k in range(n)))
+
+
+@pytest.mark.anyio
+async def test_tf_static_is_not_dropped_while_tf_floods_the_link() -> None:
+    port = free_port()
+    ta = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="A")
+    cfg, _ = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
+    gate = threading.Event()  # a subscriber that stalls: Zenoh's queue to it fills up
+    got: list[tuple[str, bytes]] = []
+
+    def slow(sample: Any) -> None:
+        gate.wait(10)
+        got.append((str(sample.key_expr), sample.payload.to_bytes()))
+
+    async with Bus(transport=ta) as a:
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            session.declare_subscriber("tfbus/**", slow)
+            with anyio.fail_after(10):
+                await ta.wait_matching("/tf")
+            a.publish_nowait("/tf_static", TFMessage((ts("s0", 1),)))
+            for i in range(1, 3001):  # no await: faster than the stalled link drains
+                a.publish_nowait("/tf", big("m", i))
+                if i % 300 == 0:
+                    a.publish_nowait("/tf_static", TFMessage((ts(f"s{i // 300}", 1),)))
+            gate.set()
+            codec = wire.WireCodec()
+
+            def statics() -> set[str]:
+                return {t.child_frame_id for key, payload in list(got)
+                        if key == "tfbus/tf_static"
+                        for t in codec.decode(payload).message.transforms}
+
+            # every static arrives (BLOCK; the ones published while one waited are
+            # merged into it); /tf loses what Zenoh dropped (DROP)
+            await wait_until(lambda: len(statics()) == 11, timeout=30)
+            assert statics() == {f"s{k}" for k in range(11)}
+            sa = ta.statistics()
+            assert sa.sent + sa.send_merged == 3011 and sa.send_dropped == 0
+            assert ta.congestion_control == "drop"
+            # what Zenoh was told (its drops cannot be seen from Python): /tf_static
+            # blocks and is reliable, /tf drops
+            outlets = ta._outlets
+            static_pub, tf_pub = outlets["/tf_static"].publisher, outlets["/tf"].publisher
+            assert static_pub is not None and tf_pub is not None
+            assert static_pub.congestion_control == BLOCK
+            assert static_pub.reliability == zenoh.Reliability.RELIABLE
+            assert tf_pub.congestion_control == zenoh.CongestionControl.DROP
+        finally:
+            gate.set()
+            await anyio.to_thread.run_sync(session.close)
+
+
+@pytest.mark.anyio
+async def test_congestion_control_block_counts_its_drops_at_the_sender() -> None:
+    port = free_port()
+    ta = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="A",
+                        congestion_control="block", max_send_pending=50)
+    tb = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="B")
+    async with Bus(transport=ta) as a, Bus(transport=tb) as b:
+        sub = b.subscribe("/tf", queue_size=5000)
+        with anyio.fail_after(10):
+            await ta.wait_matching("/tf")
+        a.publish_nowait("/tf", big("m", 1))
+        with anyio.fail_after(10):
+            await sub.receive()
+        # 500 at once: the send queue holds the newest 50, the 450 before are dropped
+        for i in range(2, 502):
+            a.publish_nowait("/tf", big("m", i))
+        assert ta.statistics().send_dropped == 450
+        await wait_until(lambda: ta.statistics().sent == 51, timeout=20)
+        await wait_until(lambda: sub.statistics().queued == 50, timeout=20)
+        got = [sub.receive_nowait().transforms[0].header.stamp.ns for _ in range(50)]
+        assert got == list(range(452, 502))
+        assert tb.statistics().lost == 450  # the receiver sees the same gap
+        # paced by what was handed to Zenoh: BLOCK never drops, nothing is lost
+        for chunk in range(40):  # 50 at a time: the send queue never overflows
+            for i in range(50):
+                a.publish_nowait("/tf", big("m", 1000 + chunk * 50 + i, n=10))
+            await wait_until(lambda c=chunk: ta.statistics().sent == 101 + c * 50, 20)
+        await wait_until(lambda: tb.statistics().received >= 2051, timeout=20)
+        sa, sb = ta.statistics(), tb.statistics()
+        assert (sa.sent, sa.send_dropped, sa.send_queued) == (2051, 450, 0)
+        assert sb.lost == 450 and sub.statistics().queued == 2000
+        tf_pub = ta._outlets["/tf"].publisher
+        assert tf_pub is not None and tf_pub.congestion_control == BLOCK
+
+
+def test_congestion_control_option() -> None:
+    assert parse_bus_spec("zenoh?congestion_control=block").congestion_control == "block"
+    assert parse_bus_spec("zenoh").transport().congestion_control == "drop"
+    with pytest.raises(ValueError, match="congestion_control must be drop or block, got 'x'"):
+        parse_bus_spec("zenoh?congestion_control=x")
+    with pytest.raises(ValueError, match="congestion_control must be 'drop' or 'block'"):
+        ZenohTransport(congestion_control="fast")
+    with pytest.raises(ValueError, match="max_send_pending must be at least 1, got 0"):
+        ZenohTransport(max_send_pending=0)

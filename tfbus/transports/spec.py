@@ -304,7 +304,7 @@ register_scheme(
         "tfbus.transports.zenoh.options",
         keys=frozenset(
             {"connect", "listen", "config", "prefix", "namespace", "name", "port", "express",
-             "mode"}
+             "mode", "congestion_control"}
         ),
         default_key="connect",
         extra="zenoh",

@@ -1,8 +1,9 @@
 """ZenohStatistics: the counters of one :class:`~tfbus.transports.zenoh.ZenohTransport`.
 
 Every received payload ends in exactly one of ``delivered``, ``duplicates`` or a drop
-counter (``malformed``, ``wrong_version``, ``over_limit``, ``overflow``); sequence numbers
-feed ``lost`` (plausible gaps) and ``resets`` (implausible jumps), never both.
+counter (``malformed``, ``wrong_version``, ``over_limit``, ``overflow``,
+``refused_keys``); sequence numbers feed ``lost`` (plausible gaps) and ``resets``
+(implausible jumps), never both.
 """
 
 from __future__ import annotations
@@ -42,6 +43,18 @@ class ZenohStatistics(TransportStatistics):
         resets: implausible jumps of a publisher's sequence numbers (forged, corrupted
             or a restarted stream): reported here, never counted in ``lost``.
         batches: event-loop wake-ups that delivered queued entries.
+        refused_keys: payloads dropped because their key is not the one spelling of a
+            topic of the bus (a percent-encoded alias such as ``tfbus/r%31/tf`` of
+            ``tfbus/r1/tf``; :func:`~tfbus.transports.zenoh.keys.parse_chunk`).
+        refused_tokens: liveliness tokens ignored for the same reason.
+        send_dropped: local messages tfbus dropped from its send queue because
+            ``max_send_pending`` messages were already waiting (only with
+            ``congestion_control="block"``). With ``"drop"`` (the default) Zenoh may
+            drop ``/tf`` under congestion without telling the sender: those are not
+            counted here, only by receivers, as ``lost``.
+        send_merged: latched messages (``/tf_static``) merged into the latched
+            snapshot still waiting to be sent (none of their transforms is lost).
+        send_queued: messages waiting in the send queue when the copy was made.
     """
 
     not_connected: int = 0
@@ -53,8 +66,17 @@ class ZenohStatistics(TransportStatistics):
     resets: int = 0
     batches: int = 0
     duplicates: int = 0
+    refused_keys: int = 0
+    refused_tokens: int = 0
+    send_dropped: int = 0
+    send_merged: int = 0
+    send_queued: int = 0
 
     @property
     def dropped(self) -> int:
-        """All inbound payloads dropped: malformed + wrong_version + over_limit + overflow."""
-        return self.malformed + self.wrong_version + self.over_limit + self.overflow
+        """All inbound payloads dropped: malformed + wrong_version + over_limit + overflow
+        + refused_keys."""
+        return (
+            self.malformed + self.wrong_version + self.over_limit + self.overflow
+            + self.refused_keys
+        )

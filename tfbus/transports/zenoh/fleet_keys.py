@@ -14,6 +14,13 @@ A fleet bus publishing on ``/robot7/tf`` puts on ``tfbus/robot7/tf`` (robot7's b
 receives it as ``/tf``); a topic of one chunk (``/tf``) goes to the root namespace
 (``tfbus/tf``). The fleet listener's own liveliness token is in the root namespace, so
 robots do not list it. Namespaces of a fleet are one key chunk (``*`` matches one chunk).
+
+A namespace has one spelling: the chunk a robot's bus puts on, which
+:func:`~tfbus.transports.zenoh.keys.check_base_chunk` allows (no ``%``, ``*``, ``$``,
+``#``, ``?``, ``@`` or space). A key whose namespace chunk is anything else -- the
+percent-encoded alias ``tfbus/r%31/tf`` of ``tfbus/r1/tf`` -- is refused (None), so a
+Zenoh access rule for ``tfbus/r1/**`` covers everything the fleet stores as robot
+``r1``'s; topic chunks after it are held to :func:`~tfbus.transports.zenoh.keys.parse_chunk`.
 """
 
 from __future__ import annotations
@@ -25,13 +32,13 @@ from tfbus.transports.zenoh.keys import (
     AliveKey,
     KeySpace,
     check_base_chunk,
-    decode_chunk,
     encode_chunk,
-    key_topic,
+    parse_chunk,
+    parse_topic_key,
     topic_key,
 )
 
-__all__ = ["FLEET_NAMESPACE", "FleetKeySpace", "key_space", "namespace_of"]
+__all__ = ["FLEET_NAMESPACE", "FleetKeySpace", "key_space", "namespace_chunk", "namespace_of"]
 
 FLEET_NAMESPACE: Final = "*"
 """The namespace that makes a transport a fleet listener (every robot's namespace)."""
@@ -47,6 +54,14 @@ def key_space(prefix: str = DEFAULT_PREFIX, namespace: str = "") -> KeySpace:
     if namespace == FLEET_NAMESPACE:
         return FleetKeySpace(prefix)
     return KeySpace(prefix, namespace)
+
+
+def namespace_chunk(chunk: str) -> str | None:
+    """``chunk`` if it is a namespace a robot's bus can have (one chunk that
+    :func:`~tfbus.transports.zenoh.keys.check_base_chunk` accepts), else None."""
+    if not chunk or "/" in chunk or any(c in chunk for c in "*$#?@% "):
+        return None
+    return chunk
 
 
 class FleetKeySpace(KeySpace):
@@ -72,7 +87,10 @@ class FleetKeySpace(KeySpace):
         return parts[0], "/" + parts[1]
 
     def _ns_base(self, namespace: str) -> str:
-        return f"{self._prefix}/{encode_chunk(namespace)}" if namespace else self._prefix
+        if not namespace:
+            return self._prefix
+        # a robot's own spelling; a name no robot can have is escaped (reaches no robot)
+        return f"{self._prefix}/{namespace_chunk(namespace) or encode_chunk(namespace)}"
 
     def data(self, topic: str) -> str:
         """The key of a namespaced topic (``/robot7/tf`` -> ``tfbus/robot7/tf``)."""
@@ -106,14 +124,19 @@ class FleetKeySpace(KeySpace):
 
     def topic_of(self, key: str, reply: bool = False) -> str | None:
         """``tfbus/robot7/tf`` -> ``/robot7/tf`` (with ``reply``: a latch key's topic,
-        namespaced); None for a key that is not one of the fleet's."""
+        namespaced); None for a key that is not one of the fleet's or not its one
+        spelling (module doc: ``tfbus/r%31/tf`` is refused)."""
         head = self._prefix + "/"
         if not key.startswith(head):
             return None
         parts = key[len(head) :].split("/", 1)
         if len(parts) != 2 or not parts[0] or parts[0].startswith("@"):
             return None
+        namespace: str | None
         namespace, rest = parts
+        namespace = namespace_chunk(namespace)
+        if namespace is None:
+            return None
         if reply:
             latch = rest.split("/", 2)
             if len(latch) != 3 or latch[0] != "@latch" or not latch[2]:
@@ -121,21 +144,25 @@ class FleetKeySpace(KeySpace):
             rest = latch[2]
         elif rest.startswith("@"):
             return None
-        return "/" + decode_chunk(namespace) + key_topic(rest)
+        topic = parse_topic_key(rest)
+        return None if topic is None else "/" + namespace + topic
 
     def parse_alive(self, key: str) -> AliveKey | None:
         """A robot's liveliness key: the node, ``"robot7/<name>"`` and the namespaced
-        topic (``""`` for the node itself); None if it is not a fleet key."""
+        topic (``""`` for the node itself); None if it is not a fleet key or not its one
+        spelling (module doc)."""
         head = self._prefix + "/"
         if not key.startswith(head):
             return None
         parts = key[len(head) :].split("/", 4)
         if len(parts) < 4 or parts[1] != "@alive" or parts[0].startswith("@"):
             return None
-        namespace = decode_chunk(parts[0])
-        name = f"{namespace}/{decode_chunk(parts[3])}"
-        topic = f"/{namespace}{key_topic(parts[4])}" if len(parts) == 5 else ""
-        return AliveKey(parts[2], name, topic)
+        namespace = namespace_chunk(parts[0])
+        name = parse_chunk(parts[3])
+        topic = parse_topic_key(parts[4]) if len(parts) == 5 else ""
+        if namespace is None or name is None or topic is None:
+            return None
+        return AliveKey(parts[2], f"{namespace}/{name}", f"/{namespace}{topic}" if topic else "")
 
 
 def namespace_of(name_or_topic: str) -> str:

@@ -10,6 +10,11 @@ Key expressions (``base`` is ``prefix`` or ``prefix/namespace``)::
 Topic chunks are percent-encoded where Zenoh would not accept them (``*$#?@%``, spaces,
 non-ASCII, empty chunks), so any topic name maps to a valid key and back. The ``@``
 chunks are Zenoh "verbatim" chunks: ``{base}/**`` never matches them.
+
+Every topic has **one** key: a received key is read back only if it is the spelling
+:func:`encode_chunk` gives (upper-case hex, nothing escaped that need not be), so an
+alias such as ``tfbus/t%66`` is not taken for ``tfbus/tf`` -- a Zenoh access rule written
+for ``tfbus/tf`` covers everything delivered as ``/tf`` (:func:`parse_chunk`).
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ __all__ = [
     "decode_chunk",
     "encode_chunk",
     "key_topic",
+    "parse_chunk",
+    "parse_topic_key",
     "topic_key",
 ]
 
@@ -42,6 +49,27 @@ def encode_chunk(chunk: str) -> str:
 def decode_chunk(chunk: str) -> str:
     """The text of a chunk made by :func:`encode_chunk`."""
     return "" if chunk == "%" else unquote(chunk)
+
+
+def parse_chunk(chunk: str) -> str | None:
+    """The text of a received key chunk, or None if the chunk is not the one spelling
+    :func:`encode_chunk` gives that text (``"t%66"`` for ``"tf"``, ``"%c3%a9"`` for
+    ``"%C3%A9"``, ``"%zz"``): one key per topic, so access rules on keys cannot be bypassed by a
+    percent-encoded alias (RFC 3986 section 6.2.2 normalisation, made a requirement)."""
+    text = decode_chunk(chunk)
+    return text if encode_chunk(text) == chunk else None
+
+
+def parse_topic_key(key: str) -> str | None:
+    """The topic of a received key (the inverse of :func:`topic_key`), or None if any
+    chunk is not canonical (:func:`parse_chunk`)."""
+    chunks = []
+    for chunk in key.split("/"):
+        text = parse_chunk(chunk)
+        if text is None:
+            return None
+        chunks.append(text)
+    return "/" + "/".join(chunks)
 
 
 def topic_key(topic: str) -> str:
@@ -118,7 +146,8 @@ class KeySpace:
 
     def topic_of(self, key: str, reply: bool = False) -> str | None:
         """The topic of a data key (or, with ``reply``, of a latch key); None if the key
-        is not one of this bus's. Results are cached (at most 10 000 keys)."""
+        is not one of this bus's or not its canonical spelling (:func:`parse_topic_key`).
+        Results are cached (at most 10 000 keys)."""
         cache_key = "@" + key if reply else key
         topic = self._cache.get(cache_key, "")
         if topic != "":
@@ -130,17 +159,21 @@ class KeySpace:
             if reply:
                 parts = rest.split("/", 2)
                 rest = parts[2] if len(parts) == 3 and parts[0] == "@latch" else None
-        topic = None if not rest else key_topic(rest)
+        topic = None if not rest else parse_topic_key(rest)
         if len(self._cache) < 10_000:
             self._cache[cache_key] = topic
         return topic
 
     def parse_alive(self, key: str) -> AliveKey | None:
-        """The node, name and topic of a liveliness key; None if it is not one of ours."""
+        """The node, name and topic of a liveliness key; None if it is not one of ours
+        or not its canonical spelling (:func:`parse_chunk`)."""
         if not key.startswith(self._alive):
             return None
         parts = key[len(self._alive) :].split("/", 2)
         if len(parts) < 2:
             return None
-        topic = key_topic(parts[2]) if len(parts) == 3 else ""
-        return AliveKey(parts[0], decode_chunk(parts[1]), topic)
+        name = parse_chunk(parts[1])
+        topic = parse_topic_key(parts[2]) if len(parts) == 3 else ""
+        if name is None or topic is None:
+            return None
+        return AliveKey(parts[0], name, topic)

@@ -11,7 +11,8 @@ this module only turns a parsed :class:`~tfbus.transports.spec.BusSpec` into a t
 
 Keys: ``connect``, ``listen`` (endpoint lists), ``config`` (JSON5 file), ``prefix``,
 ``namespace`` (``*``: every robot, a fleet listener), ``name``, ``port`` (rendezvous
-port), ``express`` (``1``/``true``), ``mode`` (``peer`` or ``client``: ``client`` goes
+port), ``express`` (``1``/``true``), ``congestion_control`` (``drop``, the default, or
+``block``: :class:`ZenohTransport`), ``mode`` (``peer`` or ``client``: ``client`` goes
 through a Zenoh router, ``tfbus router``; with ``config`` the file's mode rules).
 """
 
@@ -43,6 +44,7 @@ class ZenohOptions:
     name: str | None = None
     port: int = DEFAULT_PORT
     express: bool = False
+    congestion_control: str = "drop"
     mode: str | None = None
 
     @classmethod
@@ -66,6 +68,7 @@ class ZenohOptions:
             name=spec.value("name"),
             port=spec.integer("port", DEFAULT_PORT, minimum=1, maximum=65535),
             express=spec.boolean("express"),
+            congestion_control=_congestion(spec.value("congestion_control")),
             mode=_mode(spec.value("mode")),
         )
 
@@ -85,6 +88,7 @@ class ZenohOptions:
             "name": self.name,
             "port": self.port,
             "express": self.express,
+            "congestion_control": self.congestion_control,
         }
         if self.mode is not None and self.config is None:
             kwargs["config"] = {"mode": self.mode}
@@ -99,6 +103,14 @@ def _mode(value: str | None) -> str | None:
 
 
 _MODES = ("peer", "client")
+
+
+def _congestion(value: str | None) -> str:
+    if value is None:
+        return "drop"
+    if value not in ("drop", "block"):
+        raise ValueError(f"congestion_control must be drop or block, got {value!r}")
+    return value
 
 
 def transport_from_spec(spec: BusSpec, **overrides: Any) -> ZenohTransport:

@@ -34,6 +34,9 @@ class PeerTable:
         self._peers: dict[str, PeerInfo] = {}
         self.own_id = ""
         """This node's id (its own tokens are ignored)."""
+        self.refused = 0
+        """Liveliness events ignored because their key is not one of the bus's keys in
+        its one spelling (:meth:`~tfbus.transports.zenoh.keys.KeySpace.parse_alive`)."""
 
     def update(self, alive: bool, key: str) -> tuple[PeerEvent, bool] | None:
         """Apply one liveliness event: ``(event, query_latched)`` or None to ignore it.
@@ -42,7 +45,10 @@ class PeerTable:
         topics (it just appeared, or just started publishing a latched topic).
         """
         parsed = self._keys.parse_alive(key)
-        if parsed is None or parsed.node_id == self.own_id:
+        if parsed is None:
+            self.refused += 1
+            return None
+        if parsed.node_id == self.own_id:
             return None
         node_id, name, topic = parsed
         info = self._peers.get(node_id)
@@ -69,7 +75,7 @@ class PeerTable:
         return {k: v for k, v in self._peers.items() if v.is_broadcaster}
 
     def clear(self) -> None:
-        """Forget every node (the transport stopped)."""
+        """Forget every node (the transport stopped; ``refused`` is kept)."""
         self._peers.clear()
         self.own_id = ""
 

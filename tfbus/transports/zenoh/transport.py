@@ -18,6 +18,16 @@ queryable; when a node appears (liveliness), the others query it, so a listener 
 after a static broadcaster -- or a broadcaster whose first publish raced the connection --
 still gets its static transforms.
 
+Sending: latched topics (``/tf_static``) are put with ``CongestionControl.BLOCK`` and
+``Reliability.RELIABLE`` from a worker thread (``anyio.to_thread``), never from the event
+loop; at most one of their messages waits per topic (a newer one is merged into it, as
+tf2_ros' StaticTransformBroadcaster republishes the merged set), so they are never
+dropped by tfbus nor by Zenoh. Other topics are put with ``CongestionControl.DROP`` from
+the event loop (Zenoh drops under congestion and does not tell the sender: receivers count
+the gap in ``lost``), or, with ``congestion_control="block"``, through the same worker
+with ``BLOCK``: then the only drops are tfbus' own, from a bounded send queue
+(``max_send_pending``), counted in ``send_dropped``.
+
 Errors of Zenoh itself (``zenoh.ZError``) are raised as
 :class:`~tfbus.errors.TransportError` with the ``ZError`` as ``__cause__``.
 """
@@ -71,6 +81,16 @@ _REPLY: Final = 1
 _ALIVE_PUT: Final = 2
 _ALIVE_DEL: Final = 3
 _MATCHING: Final = 4
+_CONGESTION: Final = ("drop", "block")
+
+
+@dataclass(slots=True)
+class _Pending:
+    """One message waiting in the send queue for the worker thread."""
+
+    outlet: _Outlet
+    publisher: zenoh.Publisher
+    payload: bytes
 
 
 @dataclass(slots=True)
@@ -84,6 +104,8 @@ class _Outlet:
     matching_listener: Any = None
     latch: StaticLatch = field(default_factory=StaticLatch)
     latched_payload: bytes | None = None
+    queued: bool = False  # put by the worker thread (BLOCK), not by the event loop
+    pending: _Pending | None = None  # a latched message not yet handed to the worker
 
 
 class ZenohTransport:
@@ -109,9 +131,20 @@ class ZenohTransport:
         port: the rendezvous port of the no-configuration default.
         express: send each message at once instead of letting Zenoh batch small
             messages (lower latency under load, lower peak throughput).
+        congestion_control: ``"drop"`` (default): topics other than the latched ones
+            are put with Zenoh's ``CongestionControl.DROP`` -- a congested link drops
+            them, unseen by the sender (receivers count ``lost``); ``"block"``: every
+            topic is put with ``CongestionControl.BLOCK`` from a worker thread, and the
+            only drops are from the send queue, counted in ``send_dropped``. Latched
+            topics are always ``BLOCK`` and reliable.
+        max_send_pending: capacity of the send queue (``congestion_control="block"``),
+            messages of non-latched topics; when full, the oldest is dropped and
+            counted in ``send_dropped``.
 
     Raises:
-        ValueError: if ``prefix`` / ``namespace`` / ``name`` are not valid.
+        ValueError: if ``prefix`` / ``namespace`` / ``name`` / ``congestion_control``
+            are not valid, or ``max_pending`` / ``max_batch`` / ``max_send_pending``
+            is below 1.
         TransportError: if Zenoh rejects the configuration (e.g. an unreadable file).
     """
 
@@ -135,10 +168,23 @@ class ZenohTransport:
         max_batch: int = 64,
         port: int = DEFAULT_PORT,
         express: bool = False,
+        congestion_control: str = "drop",
+        max_send_pending: int = 10_000,
     ) -> None:
         self._keys = key_space(prefix, namespace)
         if max_pending < 1 or max_batch < 1:
             raise ValueError("max_pending and max_batch must be at least 1")
+        if congestion_control not in _CONGESTION:
+            raise ValueError(
+                f"congestion_control must be 'drop' or 'block', got {congestion_control!r}"
+            )
+        if max_send_pending < 1:
+            raise ValueError(f"max_send_pending must be at least 1, got {max_send_pending!r}")
+        self._block = congestion_control == "block"
+        self._max_send_pending = max_send_pending
+        self._send_queue: deque[_Pending] = deque()
+        self._send_unlatched = 0  # entries of non-latched topics in the send queue
+        self._send_ready: anyio.Event | None = None
         self._name = name if name is not None else default_name()
         if not self._name:
             raise ValueError("name must not be empty")
@@ -242,9 +288,18 @@ class ZenohTransport:
                 return
             await changed.wait()
 
+    @property
+    def congestion_control(self) -> str:
+        """``"drop"`` or ``"block"``: how topics other than the latched ones are put."""
+        return "block" if self._block else "drop"
+
     def statistics(self) -> ZenohStatistics:
         """A copy of the counters (see :class:`ZenohStatistics`)."""
-        return replace(self._stats)
+        return replace(
+            self._stats,
+            refused_tokens=self._peers.refused,
+            send_queued=len(self._send_queue),
+        )
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"
@@ -281,10 +336,18 @@ class ZenohTransport:
             except zenoh.ZError as err:
                 raise TransportError(f"cannot declare on the Zenoh session: {err}") from err
             self._running = True
+            self._send_ready = anyio.Event()
             task_status.started()
-            await self._pump(bus)
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(self._send_loop)
+                await self._pump(bus)
         finally:
             self._running = False
+            self._send_ready = None
+            with anyio.CancelScope(shield=True):
+                await self._flush_sends()
+            # published while the flush ran: the session is closing
+            self._stats.not_connected += len(self._take_sends())
             self._session = None
             self._wakeup = None
             for outlet in self._outlets.values():
@@ -305,24 +368,37 @@ class ZenohTransport:
         A message that cannot be encoded is dropped and counted in ``send_errors``
         (logged once per type); a message published while not running is counted in
         ``not_connected`` (latched topics still remember it for later late joiners).
+        A latched message published while the previous one of its topic still waits for
+        the worker thread replaces it by the latched snapshot (every valid transform
+        per child frame; same sequence number), counted in ``send_merged``; a message
+        of another topic that finds the send queue full (``congestion_control="block"``)
+        pushes out the oldest one, counted in ``send_dropped``.
         """
         outlet = self._outlet(topic)
-        outlet.seq += 1
+        pending = outlet.pending
+        seq = outlet.seq if pending is not None else outlet.seq + 1
         try:
-            payload = self._codec.encode(message, sender=self._sender, seq=outlet.seq)
+            payload = self._codec.encode(message, sender=self._sender, seq=seq)
         except WireEncodeError as exc:
-            outlet.seq -= 1
             self._stats.send_errors += 1
             self._log.log(logging.WARNING, "dropping a message on %s: %s", topic, exc)
             return
+        outlet.seq = seq
         if outlet.latched:
             self._latch(outlet, message, payload)
+        if pending is not None and outlet.latched_payload is not None:
+            pending.payload = outlet.latched_payload  # not yet handed to Zenoh
+            self._stats.send_merged += 1
+            return
         publisher = outlet.publisher
         if publisher is None:
             if self._running:
                 self._stats.send_errors += 1
             else:
                 self._stats.not_connected += 1
+            return
+        if outlet.queued:
+            self._enqueue(_Pending(outlet, publisher, payload))
             return
         try:
             publisher.put(payload)
@@ -331,6 +407,56 @@ class ZenohTransport:
             self._log.log(logging.WARNING, "zenoh put on %s failed: %s", outlet.key, exc)
             return
         self._stats.sent += 1
+
+    # -- internals: the send queue (event loop) and its worker thread -----------------
+
+    def _enqueue(self, item: _Pending) -> None:
+        queue = self._send_queue
+        if item.outlet.latched:
+            item.outlet.pending = item
+        else:
+            if self._send_unlatched >= self._max_send_pending:
+                for i, old in enumerate(queue):  # the oldest message of a non-latched topic
+                    if not old.outlet.latched:
+                        del queue[i]
+                        self._send_unlatched -= 1
+                        self._stats.send_dropped += 1
+                        break
+            self._send_unlatched += 1
+        queue.append(item)
+        ready = self._send_ready
+        if ready is not None:
+            ready.set()
+
+    def _take_sends(self) -> list[_Pending]:
+        batch = list(self._send_queue)
+        self._send_queue.clear()
+        self._send_unlatched = 0
+        for item in batch:
+            item.outlet.pending = None  # handed over: a newer latched message is queued anew
+        return batch
+
+    async def _send_loop(self) -> None:
+        while True:
+            ready = self._send_ready
+            assert ready is not None
+            await ready.wait()
+            self._send_ready = anyio.Event()
+            while self._send_queue:
+                await self._send(self._take_sends())
+
+    async def _send(self, batch: list[_Pending]) -> None:
+        sent, failed = await anyio.to_thread.run_sync(_put_all, batch)
+        self._stats.sent += sent
+        self._stats.send_errors += len(failed)
+        for key, exc in failed[:1]:
+            self._log.log(logging.WARNING, "zenoh put on %s failed: %s", key, exc)
+
+    async def _flush_sends(self) -> None:
+        """Hand what is still queued to Zenoh before the session closes (each put is
+        bounded by Zenoh's ``congestion_control/block/wait_before_close``)."""
+        if self._send_queue:
+            await self._send(self._take_sends())
 
     # -- internals: session -----------------------------------------------------------
 
@@ -393,9 +519,13 @@ class ZenohTransport:
     def _declare_outlet(self, outlet: _Outlet) -> None:
         session = self._session
         assert session is not None
+        outlet.queued = outlet.latched or self._block
         publisher = session.declare_publisher(
             outlet.key,
-            congestion_control=zenoh.CongestionControl.DROP,
+            congestion_control=(
+                zenoh.CongestionControl.BLOCK if outlet.queued else zenoh.CongestionControl.DROP
+            ),
+            reliability=zenoh.Reliability.RELIABLE,
             allowed_destination=zenoh.Locality.REMOTE,
             express=self._express,
         )
@@ -511,7 +641,7 @@ class ZenohTransport:
         stats = self._stats
         stats.received += 1
         if topic is None:
-            stats.malformed += 1
+            stats.refused_keys += 1
             return None
         try:
             decoded = self._codec.decode(payload)
@@ -562,6 +692,20 @@ class ZenohTransport:
             )
         except zenoh.ZError as exc:
             self._log.log(logging.WARNING, "late-joiner query to %s failed: %s", node_id, exc)
+
+
+def _put_all(batch: list[_Pending]) -> tuple[int, list[tuple[str, Exception]]]:
+    """Put every queued message in order (a worker thread; BLOCK puts may wait)."""
+    sent = 0
+    failed: list[tuple[str, Exception]] = []
+    for item in batch:
+        try:
+            item.publisher.put(item.payload)
+        except zenoh.ZError as exc:
+            failed.append((item.outlet.key, exc))
+        else:
+            sent += 1
+    return sent, failed
 
 
 def _close_session(session: zenoh.Session, declared: list[Any]) -> None:

@@ -1,0 +1,135 @@
+"""A fleet listener (namespace ``*``) against peers that announce what they like (127.0.0.1).
+
+In-process: Zenoh's router, a fleet bus with a :class:`~tfbus.fleet.FleetBuffer`, and a
+raw Zenoh session standing for the peers: it declares liveliness tokens and puts payloads
+on keys of its choosing. Every wait is bounded; time is advanced on a ManualClock.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Callable
+
+import anyio
+import pytest
+
+zenoh = pytest.importorskip("zenoh")
+pytest.importorskip("msgspec")
+
+from tfbus.bus import Bus  # noqa: E402
+from tfbus.clock import ManualClock  # noqa: E402
+from tfbus.codecs import native as wire  # noqa: E402
+from tfbus.fleet import FleetBuffer  # noqa: E402
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3  # noqa: E402
+from tfbus.time import Time  # noqa: E402
+from tfbus.transports.zenoh import ZenohTransport, zenoh_config  # noqa: E402
+from tfbus.transports.zenoh.fleet_keys import FleetKeySpace  # noqa: E402
+from tfbus.transports.zenoh.router import ZenohRouter  # noqa: E402
+
+pytestmark = pytest.mark.anyio
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def tf_payload(child: str, x: float, seq: int) -> bytes:
+    t = TransformStamped(Header(Time(1), "map"), child, Transform(Vector3(x, 0, 0), Quaternion()))
+    return wire.WireCodec().encode(TFMessage([t]), sender=77, seq=seq)
+
+
+async def wait_until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
+    with anyio.fail_after(timeout):
+        while not predicate():
+            await anyio.sleep(0.02)
+
+
+def test_a_namespace_has_one_spelling() -> None:
+    keys = FleetKeySpace("tfbus")
+    assert keys.topic_of("tfbus/r1/tf") == "/r1/tf"
+    assert keys.topic_of("tfbus/r%31/tf") is None  # alias of r1
+    assert keys.topic_of("tfbus/r1/t%66") is None  # alias of /r1/tf
+    assert keys.topic_of("tfbus/r1/a%20b") == "/r1/a b"  # the one spelling of "a b"
+    assert keys.topic_of("tfbus/r1/a%2fb") is None  # lower-case hex: an alias
+    assert keys.topic_of("tfbus/r%31/@latch/abc/tf_static", reply=True) is None
+    assert keys.parse_alive("tfbus/r%31/@alive/abc/talker") is None
+    assert keys.parse_alive("tfbus/r1/@alive/abc/t%61lker") is None
+    assert keys.parse_alive("tfbus/r1/@alive/abc/talker") == ("abc", "r1/talker", "")
+
+
+async def test_a_percent_encoded_alias_of_a_namespace_is_refused_and_counted() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, namespace="*",
+                               name="fleet")
+    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
+    async with ZenohRouter(listen=endpoint), Bus(transport=transport) as fbus, \
+            FleetBuffer(fbus) as fleet:
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            liveliness = session.liveliness()
+            alias = liveliness.declare_token("tfbus/r%31/@alive/aa11/intruder")
+            real = liveliness.declare_token("tfbus/r2/@alive/bb22/robot")
+            await fleet.wait_for_robot("r2", timeout=10)
+            await wait_until(lambda: transport.statistics().refused_tokens == 1)
+            session.put("tfbus/r%31/tf", tf_payload("base", 9.0, 1))
+            session.put("tfbus/r2/tf", tf_payload("base", 2.0, 1))
+            await wait_until(lambda: fleet.statistics().messages == 1
+                             and transport.statistics().refused_keys == 1)
+            assert "r1" not in fleet and list(fleet) == ["r2"]
+            assert fleet["r2"].lookup_transform("map", "base", Time(0)).transform \
+                .translation.x == 2.0
+            stats = transport.statistics()  # delivered: r2 appearing, its /tf
+            assert (stats.refused_keys, stats.refused_tokens, stats.delivered) == (1, 1, 2)
+            assert stats.dropped == 1
+            alias.undeclare()
+            real.undeclare()
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+
+
+async def test_announced_namespaces_are_bounded_and_gone_ones_released() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    clock = ManualClock(Time(1000))
+    transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, namespace="*",
+                               name="fleet")
+    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
+    async with ZenohRouter(listen=endpoint), Bus(transport=transport) as fbus, \
+            FleetBuffer(fbus, max_robots=3, forget_after=60, clock=clock) as fleet:
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            liveliness = session.liveliness()
+            tokens = {f"ns{i}": liveliness.declare_token(f"tfbus/ns{i}/@alive/{i:04x}/n")
+                      for i in range(5)}
+            await wait_until(lambda: fleet.statistics().robots_refused == 2)
+            kept = sorted(fleet)
+            assert len(kept) == 3 and len(fbus.transport.alive()) == 5  # type: ignore[attr-defined]
+            # a kept robot goes away: shown as gone until forget_after has passed
+            tokens.pop(kept[0]).undeclare()
+            await wait_until(lambda: fleet.statistics().gone == 1)
+            clock.advance_nowait(59.0)
+            assert fleet.robots()[kept[0]].alive is False and len(fleet) == 3
+            clock.advance_nowait(1.0)  # 60 s gone: released by the fleet's clock
+            await wait_until(lambda: fleet.statistics().released == 1)
+            assert kept[0] not in fleet and len(fleet) == 2
+            # room again: a new namespace is followed, the next one refused
+            tokens["ns5"] = liveliness.declare_token("tfbus/ns5/@alive/0005/n")
+            await fleet.wait_for_robot("ns5", timeout=10)
+            tokens["ns6"] = liveliness.declare_token("tfbus/ns6/@alive/0006/n")
+            await wait_until(lambda: fleet.statistics().robots_refused == 3)
+            assert len(fleet) == 3 and "ns6" not in fleet
+            with pytest.raises(RuntimeError, match="max_robots=3"):
+                fleet.add_robot("manual")
+            for token in tokens.values():
+                token.undeclare()
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+
+
+def test_bounds_are_checked() -> None:
+    bus = Bus()
+    with pytest.raises(ValueError, match="max_robots must be at least 1, got 0"):
+        FleetBuffer(bus, max_robots=0)
+    with pytest.raises(ValueError, match="forget_after must be positive seconds, got -1"):
+        FleetBuffer(bus, forget_after=-1)
