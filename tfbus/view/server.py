@@ -28,6 +28,7 @@ import numpy.typing as npt
 from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
+from tfbus.view.guard import PageGuard
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
 
@@ -115,26 +116,40 @@ class TfPage:
     """A viser server showing tf frames; :meth:`draw` puts a scene on it.
 
     Args:
-        host: address to bind (``127.0.0.1`` by default: this machine only; the page has
-            no authentication).
+        host: address to bind (``127.0.0.1`` by default: this machine only).
         port: TCP port; 0 picks a free one (:attr:`port` says which).
         title: first line of the side panel.
+        token: a secret a browser must carry (``?token=``) to be let in from a name other
+            than this machine's (:mod:`tfbus.view.guard`); None: loopback names only.
+
+    Every request's ``Host`` and ``Origin`` are checked (:attr:`guard`): another site
+    the user visits cannot read the frames nor drive playback; refused requests, failed
+    handshakes and unreadable messages are counted there and logged as one line.
 
     Raises:
         PortInUseError: ``port`` is taken.
+        ValueError: ``token`` is not a valid token (:class:`~tfbus.view.guard.PageGuard`).
         ImportError: viser is not installed (``pip install 'tfbus[view]'``).
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8080, *,
-                 title: str = "tfbus view") -> None:
+                 title: str = "tfbus view", token: str | None = None) -> None:
         import viser
 
+        from tfbus.view import guard
+
+        PageGuard(host, port, token)  # a bad token is refused before anything is bound
+        guard.install()
         _check_port(host, port)
         self.server: Any = viser.ViserServer(host=host, port=port, verbose=False)
         self.port: int = int(self.server.get_port())
         if port and self.port != port:
             self.server.stop()
             raise PortInUseError(f"cannot serve on {host}:{port}: address already in use")
+        self.guard = PageGuard(host, self.port, token)
+        """The ``Host`` / ``Origin`` / token check and its counters (``refused``,
+        ``failed_handshakes``, ``bad_messages``)."""
+        guard.register(self.guard)
         self.host = host
         self._lock = threading.Lock()
         self.server.scene.set_up_direction("+z")
@@ -371,4 +386,7 @@ class TfPage:
 
     def close(self) -> None:
         """Stop the server (closes its port)."""
+        from tfbus.view import guard
+
         self.server.stop()
+        guard.unregister(self.guard)
