@@ -209,3 +209,15 @@ def test_another_origins_page_in_chromium_cannot_open_the_views_websocket(
     assert '<p id="out">refused</p>' in text, text[-500:]
     assert page.guard.refused >= 1
     assert not any(r.startswith("open") for r in results)
+
+
+def test_view_token_option_is_checked_before_anything_is_served() -> None:
+    """``tfbus view --token`` with a space or empty: one usage line, exit status 2."""
+    from click.testing import CliRunner
+
+    from tfbus.cli.view import command
+
+    for bad in ("has space", "", "x" * 257):
+        result = CliRunner().invoke(command, ["--bus", "memory", "--port", "0", "--token", bad])
+        assert result.exit_code == 2, result.output
+        assert "--token" in result.output and "Traceback" not in result.output
