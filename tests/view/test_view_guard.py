@@ -221,3 +221,37 @@ def test_view_token_option_is_checked_before_anything_is_served() -> None:
         result = CliRunner().invoke(command, ["--bus", "memory", "--port", "0", "--token", bad])
         assert result.exit_code == 2, result.output
         assert "--token" in result.output and "Traceback" not in result.output
+
+
+def test_foxglove_server_refuses_foreign_host_and_origin() -> None:
+    """The Foxglove WebSocket (``--foxglove``) is checked as the page is: a foreign
+    ``Host`` or ``Origin`` gets 403 and is counted; this machine's names and Foxglove's
+    web app (another origin by design) are relayed to the SDK's server (101)."""
+    pytest.importorskip("foxglove")
+    from tfbus.view.foxglove_bridge import FoxgloveBridge
+
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    try:
+        p = bridge.port
+
+        def status(host: str, origin: str | None) -> int:
+            s = socket.create_connection(("127.0.0.1", p), timeout=10)
+            key = base64.b64encode(os.urandom(16)).decode()
+            head = (f"GET / HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
+                    f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                    "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n")
+            if origin is not None:
+                head += f"Origin: {origin}\r\n"
+            s.sendall((head + "\r\n").encode())
+            line = s.recv(200).split(b"\r\n")[0]
+            s.close()
+            return int(line.split(b" ")[1])
+
+        assert status(f"evil.example:{p}", None) == 403  # DNS rebinding
+        assert status(f"127.0.0.1:{p}", "http://evil.example") == 403  # another site
+        assert bridge.guard.refused == 2
+        assert status(f"127.0.0.1:{p}", None) == 101
+        assert status(f"localhost:{p}", "https://app.foxglove.dev") == 101
+        assert bridge.guard.refused == 2
+    finally:
+        bridge.close()

@@ -145,7 +145,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         from tfbus.view.foxglove_bridge import FoxgloveBridge
 
         try:
-            bridge = FoxgloveBridge(host, foxglove_port)
+            bridge = FoxgloveBridge(host, foxglove_port, token=token)
         except ImportError:
             page.close()
             fail("the 'foxglove-sdk' package is not installed: pip install 'tfbus[view]'")

@@ -69,13 +69,16 @@ class PageGuard:
             name: from another machine the page is reached with the token only.
         port: the TCP port served.
         token: the secret a remote browser must carry (None: no token, loopback only).
+        origins: other origins let in (``https://app.foxglove.dev`` for the Foxglove
+            server: Foxglove's web app is another origin by design).
 
     Raises:
         ValueError: ``token`` is empty, longer than 256 characters or not printable
             ASCII without spaces, ``;``, ``,`` or ``"`` (it goes in a cookie and a URL).
     """
 
-    def __init__(self, host: str, port: int, token: str | None = None) -> None:
+    def __init__(self, host: str, port: int, token: str | None = None,
+                 origins: Iterable[str] = ()) -> None:
         if token is not None and not (
             0 < len(token) <= 256
             and all(0x21 <= ord(c) < 0x7F and c not in ';,"\\' for c in token)
@@ -88,6 +91,7 @@ class PageGuard:
         if _name(host) not in _WILDCARDS and _name(host) not in names:
             names.append(_name(host))
         self.hosts: frozenset[str] = frozenset(f"{n}:{port}" for n in names)
+        self.origins = frozenset(o.lower() for o in origins)
         """The ``Host`` values accepted without the token (name:port)."""
         self.refused = 0
         """Requests refused: a foreign ``Host`` or ``Origin``, no or a wrong token."""
@@ -110,6 +114,8 @@ class PageGuard:
               cookie: str = "") -> str | None:
         """Why a request with these headers is refused, None when it may go on."""
         h = (host or "").strip().lower()
+        if origin is not None and origin.lower() in self.origins:
+            origin = None  # an origin let in: as a client that sends none
         if self._has_token(path, cookie):
             if origin is not None and origin != f"http://{h}" and origin != f"https://{h}":
                 return f"Origin {origin!r:.80} is not the page's own"
