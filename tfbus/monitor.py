@@ -34,10 +34,17 @@ Definitions (one for every tool: ``tfbus frames``, ``monitor`` and ``bag-info``)
   stamp of the chain's dynamic links (what ``lookupTransform(A, B, Time())`` returns),
   sampled at every message that updates one of them.
 * **recent rate** (live tables): the same rates over the samples received in the last
-  :data:`RATE_WINDOW` seconds before now (:meth:`FrameSummary.recent_rate`,
-  :meth:`AuthoritySummary.recent_rate`). tf_monitor keeps only its last 1000 samples
-  per frame and per broadcaster (10 s at 100 Hz); a window in time also ages a
-  broadcaster that stopped: its rate is 0.0 once it has been silent for the window.
+  :data:`RATE_WINDOW` seconds before now, and at most the last :data:`RECENT_SAMPLES`
+  of them (:meth:`FrameSummary.recent_rate`, :meth:`AuthoritySummary.recent_rate`), as
+  tf_monitor keeps only its last 1000 samples per frame and per broadcaster. The window
+  is a :class:`RateWindow`: memory is bounded whatever the run time, and a rate costs
+  O(1) amortized per call (samples leave the window once).
+* **stale**: a frame or broadcaster silent for more than :data:`STALE_PERIODS` of its
+  own periods (and at least :data:`STALE_AFTER` seconds) has stopped: its recent rate is
+  0.0 and :meth:`RateWindow.stale` says so.
+* **distinct stamps** (the whole-run rate): a stamp counts once when it repeats one of
+  the last :data:`RECENT_SAMPLES` distinct stamps of the frame (tf2 likewise only finds a
+  repeated stamp among the data its cache still holds).
 
 Source: ros/geometry ``tf/src/tf_monitor.cpp`` (TFMonitor::callback, outputFrameInfo,
 spin), tf2 ``BufferCore::_chainAsVector`` for the chain's order.
@@ -61,10 +68,13 @@ __all__ = [
     "RATE_WINDOW",
     "RECENT_SAMPLES",
     "SIM_TIME_GAP",
+    "STALE_AFTER",
+    "STALE_PERIODS",
     "AuthoritySummary",
     "ChainDelay",
     "FrameSummary",
     "MonitoredSink",
+    "RateWindow",
     "TfSummary",
     "frame_chain",
     "link_rate",
@@ -77,14 +87,140 @@ to be simulated time (see the module docstring)."""
 RATE_WINDOW = 10.0
 """Seconds of receive time the live tables' rates are measured over (module docstring)."""
 
-RECENT_SAMPLES = 10_000
-"""Receive times kept per frame and per broadcaster for the recent rates (a bound on
-memory: at more than 1 kHz the window is the last 10 000 samples)."""
+RECENT_SAMPLES = 1000
+"""Samples kept per frame and per broadcaster for the recent rates: the bound on memory
+(tf_monitor keeps its last 1000; above 100 Hz the window is the last 1000 samples)."""
+
+STALE_PERIODS = 5.0
+"""A frame or broadcaster silent for this many of its own periods has stopped."""
+STALE_AFTER = 1.0
+"""... and silent for at least this many seconds (a stale verdict is never quicker)."""
 
 
-def _recent(samples: deque[tuple[int, int]], now: Time, window: float) -> list[int]:
-    start = now.ns - round(window * NSEC_PER_SEC)
-    return [value for received, value in samples if start <= received <= now.ns]
+class RateWindow:
+    """The samples of one frame (or broadcaster) received in the last ``window`` seconds,
+    at most ``maxlen`` of them: ``(receive time, value)`` in ns, value the header stamp
+    (``distinct``: a repeated stamp is kept once, as tf2 keeps it) or the receive time.
+
+    Memory is ``O(maxlen)``; :meth:`add` and :meth:`rate` are O(1) amortized (each
+    sample enters and leaves once; the oldest and newest values are kept by sliding
+    minimum and maximum queues).
+
+    Args:
+        window: seconds of receive time (> 0).
+        maxlen: samples kept at most (>= 2).
+        distinct: keep one sample per value (header stamps), else every sample.
+
+    Raises:
+        ValueError: ``window`` not finite and > 0, or ``maxlen`` < 2.
+    """
+
+    __slots__ = ("_hi", "_lo", "_samples", "_seq", "_values", "distinct", "last_received",
+                 "maxlen", "window_ns")
+
+    def __init__(self, window: float = RATE_WINDOW, maxlen: int = RECENT_SAMPLES, *,
+                 distinct: bool = True) -> None:
+        if not (0.0 < window < math.inf):
+            raise ValueError(f"window must be finite and > 0 seconds, got {window!r}")
+        if maxlen < 2:
+            raise ValueError(f"maxlen must be >= 2, got {maxlen!r}")
+        self.window_ns = round(window * NSEC_PER_SEC)
+        self.maxlen = maxlen
+        self.distinct = distinct
+        self.last_received: int | None = None
+        """Receive time (ns) of the newest sample added, repeated ones included."""
+        self._samples: deque[tuple[int, int, int]] = deque()  # (seq, received, value)
+        self._values: set[int] = set()
+        self._lo: deque[tuple[int, int]] = deque()  # (seq, value), values increasing
+        self._hi: deque[tuple[int, int]] = deque()  # (seq, value), values decreasing
+        self._seq = 0
+
+    def __len__(self) -> int:
+        """Samples held now (at most :attr:`maxlen`)."""
+        return len(self._samples)
+
+    def __eq__(self, other: object) -> bool:
+        """Same settings and the same samples held (receive time, value)."""
+        if not isinstance(other, RateWindow):
+            return NotImplemented
+        return ((self.window_ns, self.maxlen, self.distinct, self.last_received)
+                == (other.window_ns, other.maxlen, other.distinct, other.last_received)
+                and [s[1:] for s in self._samples] == [s[1:] for s in other._samples])
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def values(self) -> set[int]:
+        """The values held now (distinct header stamps for a frame)."""
+        return {v for _, _, v in self._samples}
+
+    def values_by_time(self) -> list[int]:
+        """The receive times (ns) of the samples held now, oldest first."""
+        return [r for _, r, _ in self._samples]
+
+    def add(self, received: int, value: int) -> bool:
+        """Account one sample (ns); False when ``distinct`` and ``value`` is held already
+        (a repeated stamp: not kept again)."""
+        self.last_received = received
+        if self.distinct and value in self._values:
+            return False
+        seq = self._seq
+        self._seq += 1
+        self._samples.append((seq, received, value))
+        if self.distinct:
+            self._values.add(value)
+        while self._lo and self._lo[-1][1] >= value:
+            self._lo.pop()
+        self._lo.append((seq, value))
+        while self._hi and self._hi[-1][1] <= value:
+            self._hi.pop()
+        self._hi.append((seq, value))
+        if len(self._samples) > self.maxlen:
+            self._pop()
+        return True
+
+    def _pop(self) -> None:
+        seq, _, value = self._samples.popleft()
+        if self.distinct:
+            self._values.discard(value)
+        if self._lo and self._lo[0][0] <= seq:
+            self._lo.popleft()
+        if self._hi and self._hi[0][0] <= seq:
+            self._hi.popleft()
+
+    def age(self, now: Time) -> None:
+        """Let go of the samples received more than ``window`` seconds before ``now``."""
+        start = now.ns - self.window_ns
+        while self._samples and self._samples[0][1] < start:
+            self._pop()
+
+    def stale(self, now: Time) -> bool:
+        """Whether the source stopped: nothing received for :data:`STALE_PERIODS` of
+        its periods in the window and at least :data:`STALE_AFTER` seconds (or ever)."""
+        if self.last_received is None:
+            return True
+        silent = (now.ns - self.last_received) / NSEC_PER_SEC
+        rate = self._span_rate()
+        period = 1.0 / rate if rate > 0 else 0.0
+        return silent > max(STALE_AFTER, STALE_PERIODS * period)
+
+    def _span_rate(self) -> float:
+        if len(self._samples) < 2:
+            return 0.0
+        return link_rate(len(self._samples), self._lo[0][1], self._hi[0][1])
+
+    def rate(self, now: Time) -> float:
+        """``(samples - 1) / (newest - oldest value)`` in Hz over the window ending at
+        ``now`` (:func:`link_rate`); 0.0 with fewer than two samples or when
+        :meth:`stale`. Samples received after ``now`` (a clock that went back) are
+        not counted."""
+        self.age(now)
+        if self._samples and self._samples[-1][1] > now.ns:
+            kept = [(r, v) for _, r, v in self._samples if r <= now.ns]
+            if len(kept) < 2:
+                return 0.0
+            vals = [v for _, v in kept]
+            return link_rate(len(vals), min(vals), max(vals))
+        return 0.0 if self.stale(now) else self._span_rate()
 
 
 def link_rate(distinct_stamps: int, oldest_ns: int, newest_ns: int) -> float:
@@ -102,7 +238,8 @@ class FrameSummary:
     """The summary of one child frame: its parent, who sends it, its stamps and delays.
 
     Stamps are header stamps in ns; delays are seconds (see the module docstring).
-    ``count`` counts every transform received, ``stamps`` the distinct stamps.
+    ``count`` counts every transform received, ``distinct_stamps`` the distinct stamps
+    (module docstring); memory is bounded (:class:`RateWindow`).
     """
 
     child: str
@@ -110,32 +247,44 @@ class FrameSummary:
     static: bool
     authorities: dict[str, int] = field(default_factory=dict)
     count: int = 0
-    stamps: set[int] = field(default_factory=set, repr=False)
+    distinct_stamps: int = 0
     first_stamp: int | None = None
     last_stamp: int | None = None
     delay_sum: float = 0.0
     delay_count: int = 0
     delay_max: float = -math.inf
-    received: deque[tuple[int, int]] = field(
-        default_factory=lambda: deque(maxlen=RECENT_SAMPLES), repr=False
-    )
-    """(receive time, header stamp) in ns of the last :data:`RECENT_SAMPLES` samples."""
+    received: RateWindow = field(default_factory=RateWindow, repr=False)
+    """(receive time, header stamp) in ns of the distinct stamps received in the last
+    :data:`RATE_WINDOW` seconds, at most :data:`RECENT_SAMPLES` of them."""
+
+    @property
+    def stamps(self) -> set[int]:
+        """The distinct header stamps (ns) held in :attr:`received` (the recent ones)."""
+        return self.received.values()
+
+    @property
+    def last_received(self) -> int | None:
+        """Receive time (ns) of the newest transform of this frame."""
+        return self.received.last_received
 
     @property
     def rate(self) -> float:
-        """Average rate in Hz (:func:`link_rate`; 0.0 for a static frame)."""
+        """Average rate in Hz (:func:`link_rate` of :attr:`distinct_stamps`; 0.0 for a
+        static frame)."""
         if self.static or self.first_stamp is None or self.last_stamp is None:
             return 0.0
-        return link_rate(len(self.stamps), self.first_stamp, self.last_stamp)
+        return link_rate(self.distinct_stamps, self.first_stamp, self.last_stamp)
 
-    def recent_rate(self, now: Time, window: float = RATE_WINDOW) -> float:
+    def recent_rate(self, now: Time) -> float:
         """The rate in Hz (:func:`link_rate` of the distinct stamps) of the samples
-        received in the ``window`` seconds before ``now``: 0.0 for a frame silent that
-        long (its broadcaster stopped) or static."""
-        if self.static:
-            return 0.0
-        stamps = set(_recent(self.received, now, window))
-        return link_rate(len(stamps), min(stamps), max(stamps)) if stamps else 0.0
+        received in the :data:`RATE_WINDOW` seconds before ``now``
+        (:meth:`RateWindow.rate`): 0.0 for a static frame, or one that is stale (its
+        broadcaster stopped)."""
+        return 0.0 if self.static else self.received.rate(now)
+
+    def stale(self, now: Time) -> bool:
+        """Whether this dynamic frame stopped arriving (:meth:`RateWindow.stale`)."""
+        return not self.static and self.received.stale(now)
 
     @property
     def authority(self) -> str:
@@ -166,10 +315,10 @@ class AuthoritySummary:
     delay_sum: float = 0.0
     delay_count: int = 0
     delay_max: float = -math.inf
-    received: deque[tuple[int, int]] = field(
-        default_factory=lambda: deque(maxlen=RECENT_SAMPLES), repr=False
-    )
-    """(receive time, receive time) in ns of the last :data:`RECENT_SAMPLES` messages."""
+    received: RateWindow = field(default_factory=lambda: RateWindow(distinct=False),
+                                 repr=False)
+    """Receive times (ns) of the messages of the last :data:`RATE_WINDOW` seconds, at
+    most :data:`RECENT_SAMPLES` of them."""
 
     @property
     def rate(self) -> float:
@@ -179,12 +328,14 @@ class AuthoritySummary:
         span = (self.last - self.first) / NSEC_PER_SEC
         return (self.messages - 1) / span if span > 0 else 0.0
 
-    def recent_rate(self, now: Time, window: float = RATE_WINDOW) -> float:
-        """Messages per second among those received in the ``window`` seconds before
-        ``now`` (0.0 with fewer than two: a broadcaster silent that long)."""
-        times = _recent(self.received, now, window)
-        span = (max(times) - min(times)) / NSEC_PER_SEC if times else 0.0
-        return (len(times) - 1) / span if len(times) > 1 and span > 0 else 0.0
+    def recent_rate(self, now: Time) -> float:
+        """Messages per second among those received in the :data:`RATE_WINDOW` seconds
+        before ``now`` (:meth:`RateWindow.rate`; 0.0 for a stale broadcaster)."""
+        return self.received.rate(now)
+
+    def stale(self, now: Time) -> bool:
+        """Whether this broadcaster stopped sending (:meth:`RateWindow.stale`)."""
+        return self.received.stale(now)
 
     @property
     def delay_avg(self) -> float:
@@ -298,7 +449,7 @@ class TfSummary:
         if auth.first is None:
             auth.first = t
         auth.last = t
-        auth.received.append((t, t))
+        auth.received.add(t, t)
         touched = False
         for ts in transforms:
             if not (
@@ -316,14 +467,16 @@ class TfSummary:
             fs.count += 1
             fs.authorities[authority] = fs.authorities.get(authority, 0) + 1
             ns = ts.header.stamp.ns
-            fs.stamps.add(ns)
+            if static:  # no rate: a stamp other than the last one counts as new
+                fs.distinct_stamps += ns != fs.last_stamp
+            elif fs.received.add(t, ns):
+                fs.distinct_stamps += 1
             if fs.first_stamp is None or ns < fs.first_stamp:
                 fs.first_stamp = ns
             if fs.last_stamp is None or ns > fs.last_stamp:
                 fs.last_stamp = ns
             if static:
                 continue
-            fs.received.append((t, ns))
             touched = True
             if self.sim_time is None:
                 self.sim_time = abs(t - ns) / NSEC_PER_SEC > SIM_TIME_GAP
@@ -380,8 +533,10 @@ class TfSummary:
             dst.delay_sum += src.delay_sum
             dst.delay_count += src.delay_count
             dst.delay_max = max(dst.delay_max, src.delay_max)
-            dst.received = deque(sorted([*src.received, *dst.received]),
-                                 maxlen=RECENT_SAMPLES)
+            merged = RateWindow(distinct=False)
+            for t in sorted([*src.received.values_by_time(), *dst.received.values_by_time()]):
+                merged.add(t, t)
+            dst.received = merged
         for fs in self.frames.values():
             if old in fs.authorities:
                 fs.authorities[new] = fs.authorities.get(new, 0) + fs.authorities.pop(old)

@@ -136,10 +136,11 @@ def _row(text: str, first: str) -> list[str]:
 
 def test_a_dead_broadcasters_frames_stop_showing_their_old_rate() -> None:
     """100 Hz for 5 s from 'robot', then silence: the live tables show the rate over the
-    last RATE_WINDOW (10 s) of receive time, so 100 Hz while it runs and 0.000 once it
-    has been silent for the window (the whole-run rate is kept for bags)."""
+    last RATE_WINDOW (10 s) of receive time, so 100 Hz while it runs; once it has been
+    silent for STALE_PERIODS (5) of its periods and at least STALE_AFTER (1 s), it is
+    stale: 0.000 and marked so (the whole-run rate is kept for bags)."""
     from tfbus.cli._sources import BusSource
-    from tfbus.monitor import RATE_WINDOW
+    from tfbus.monitor import RATE_WINDOW, STALE_AFTER, STALE_PERIODS
 
     src = BusSource("memory")
     stats = src.summary()
@@ -148,20 +149,81 @@ def test_a_dead_broadcasters_frames_stop_showing_their_old_rate() -> None:
         stats.add(Time.from_ns(t), [tf("base_link", "base_laser", t - MS)], "robot",
                   static=False)
     last = Time.from_ns(T0 + 5000 * MS)
-    assert RATE_WINDOW == 10.0
+    assert (RATE_WINDOW, STALE_PERIODS, STALE_AFTER) == (10.0, 5.0, 1.0)
     frame, robot = stats.frames["base_laser"], stats.authorities["robot"]
     assert frame.recent_rate(last) == pytest.approx(100.0)
     assert robot.recent_rate(last) == pytest.approx(100.0)
-    # 8 s later the window holds its last 2 s of samples: still their rate.
-    assert frame.recent_rate(Time.from_ns(last.ns + 8000 * MS)) == pytest.approx(100.0)
+    # 0.9 s of silence: less than max(1 s, 5 periods of 10 ms): still running
+    assert frame.recent_rate(Time.from_ns(last.ns + 900 * MS)) == pytest.approx(100.0)
+    assert not frame.stale(Time.from_ns(last.ns + 900 * MS))
+    # 1.1 s of silence: stale, its rate falls to 0 (it used to stay 100 Hz for 10 s)
+    later = Time.from_ns(last.ns + 1100 * MS)
+    assert frame.stale(later) and robot.stale(later)
+    assert frame.recent_rate(later) == 0.0 == robot.recent_rate(later)
     src.clock = ManualClock(last)  # type: ignore[assignment]
     assert _row(_render(src), "base_laser")[3] == "100.000"
     assert _row(_render(src), "robot")[1] == "100.000"
+    src.clock = ManualClock(later)  # type: ignore[assignment]
+    assert _row(_render(src), "base_laser")[3] == "0.000 stale"
+    assert _row(_render(src), "robot")[1] == "0.000 stale"
     src.clock = ManualClock(Time.from_ns(last.ns + 10_001 * MS))  # type: ignore[assignment]
     assert frame.recent_rate(src.clock.now()) == 0.0 == robot.recent_rate(src.clock.now())
-    assert _row(_render(src), "base_laser")[3] == "0.000"
-    assert _row(_render(src), "robot")[1] == "0.000"
+    assert len(frame.received) == 0 == len(robot.received)  # the window let go of all
     assert frame.rate == pytest.approx(100.0)  # the whole-run rate, for bags
+
+
+def test_memory_per_frame_is_bounded_whatever_the_run_time() -> None:
+    """5 000 transforms/s on one frame for 60 s of receive time (300 000 distinct
+    stamps): the frame keeps at most RECENT_SAMPLES (1000) samples and stamps (the
+    summary used to keep a set of every stamp ever received), the broadcaster as many;
+    the whole-run rate still counts every distinct stamp: 299 999 / 59.9998 s."""
+    from tfbus.monitor import RECENT_SAMPLES
+
+    s = TfSummary()
+    us = 1000
+    for i in range(300_000):  # every 200 us
+        t = T0 + i * 200 * us
+        s.add(Time.from_ns(t), [tf("odom", "base", t - MS)], "a", static=False)
+    f, a = s.frames["base"], s.authorities["a"]
+    assert RECENT_SAMPLES == 1000
+    assert len(f.received) == 1000 and len(f.stamps) == 1000 and len(a.received) == 1000
+    assert f.distinct_stamps == 300_000
+    assert f.rate == pytest.approx(299_999 / 59.9998)
+    now = Time.from_ns(T0 + 299_999 * 200 * us)
+    # the last 1000 samples span 999 x 200 us: 5000 Hz
+    assert f.recent_rate(now) == pytest.approx(5000.0) == a.recent_rate(now)
+
+
+def test_recent_rate_by_hand_with_repeats_and_window() -> None:
+    """Stamps (ms) 0, 100, 100 (repeated: kept once), 200, 400, 700, received 10 ms
+    later. At 710 ms every sample is in the 10 s window: 5 distinct stamps over 0.7 s
+    = 4 / 0.7 Hz. At 10 150 ms the window starts at 150 ms: stamps 200, 400, 700 = 2 /
+    0.5 Hz... but 9.44 s of silence is stale (> 5 periods of 0.25 s, > 1 s): 0.0."""
+    from tfbus.monitor import RateWindow
+
+    s = TfSummary()
+    for stamp in (0, 100, 100, 200, 400, 700):
+        s.add(Time.from_ns(T0 + (stamp + 10) * MS), [tf("o", "b", T0 + stamp * MS)], "a",
+              static=False)
+    f = s.frames["b"]
+    assert f.recent_rate(Time.from_ns(T0 + 710 * MS)) == pytest.approx(4 / 0.7)
+    assert f.distinct_stamps == 5 and f.count == 6
+    w = RateWindow(10.0, 1000)
+    for stamp in (0, 100, 200, 400, 700):
+        w.add((stamp + 10) * MS, stamp * MS)
+    w.age(Time.from_ns(10_150 * MS))
+    assert sorted(w.values()) == [200 * MS, 400 * MS, 700 * MS]
+    assert w.stale(Time.from_ns(10_150 * MS))
+    assert w.rate(Time.from_ns(10_150 * MS)) == 0.0
+    w2 = RateWindow(1.0, 3)  # a short window, capped at 3 samples: 1.0 / 2 s ... by hand
+    for k in range(5):
+        w2.add(k * 100 * MS, k * 100 * MS)
+    assert sorted(w2.values()) == [200 * MS, 300 * MS, 400 * MS]
+    assert w2.rate(Time.from_ns(450 * MS)) == pytest.approx(2 / 0.2)
+    with pytest.raises(ValueError, match="window"):
+        RateWindow(float("nan"))
+    with pytest.raises(ValueError, match="maxlen"):
+        RateWindow(1.0, 1)
 
 
 def test_ros1_names_the_publisher_unknown_publisher_and_has_no_liveliness_table() -> None:

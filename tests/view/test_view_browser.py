@@ -120,8 +120,12 @@ def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> No
     assert names == {"world", "turtle1", "turtle2", "carrot"}
     for name in names:
         assert f"<td>{name}</td>" in text
-    assert row(text, "turtle1")[1] == "world" and row(text, "turtle1")[-1] == "ok"
-    assert row(text, "carrot")[-1] == "static"
+    assert row(text, "turtle1")[1] == "world" and row(text, "turtle1")[4] == "ok"
+    assert row(text, "carrot")[4] == "static"
+    # a static link reads "static" in the Hz column (was "0.0"), a root frame nothing
+    assert row(text, "carrot")[2] == "static" and row(text, "turtle1")[2] == "0.0"
+    assert row(text, "world")[2] == ""
+    assert "white-space:nowrap" in text  # one line per frame: columns never wrap
     assert "bag time 10.00 / 21.50 s" in text
 
 
@@ -141,10 +145,10 @@ def test_live_frame_goes_stale_then_hidden(chromium: str, page: TfPage) -> None:
     url = f"http://127.0.0.1:{page.port}/"
     draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
     first = dom(chromium, url, "<td>base_link</td>")
-    assert row(first, "base_link")[-1] == "ok"
+    assert row(first, "base_link")[4] == "ok"
     # the id with markup is text in the page: escaped in the DOM, never an element
     escaped = html.escape(odd)
-    assert row(first, escaped)[-1] == "ok"
+    assert row(first, escaped)[4] == "ok"
     assert "<b>bold</b>" not in first
     # base_link's broadcaster stops; odd's keeps sending
     for _ in range(4):
@@ -152,13 +156,13 @@ def test_live_frame_goes_stale_then_hidden(chromium: str, page: TfPage) -> None:
         send(odd)
     draw_live(page, core, stats, clock.now(), frame_timeout=3.0)  # base_link silent 2 s
     second = dom(chromium, url, "<td>stale</td>")
-    assert row(second, "base_link")[-1] == "stale" and row(second, "base_link")[3] == "2.0 s"
-    assert row(second, escaped)[-1] == "ok"
+    assert row(second, "base_link")[4] == "stale" and row(second, "base_link")[3] == "2.0 s"
+    assert row(second, escaped)[4] == "ok"
     assert page.frames["base_link"].visible
     clock.advance_nowait(1.5)  # silent 3.5 s > 3 s timeout: hidden
     draw_live(page, core, stats, clock.now(), frame_timeout=3.0)
     third = dom(chromium, url, "hidden (timed out)")
-    assert row(third, "base_link")[-1] == "hidden (timed out)"
+    assert row(third, "base_link")[4] == "hidden (timed out)"
     assert not page.frames["base_link"].visible
 
 
@@ -204,16 +208,16 @@ async def test_live_bus_page_in_chromium(chromium: str, page: TfPage) -> None:
         await send((arm, "arm", 1.0), (cam, "camera", 2.0))
         draw_live(page, buffer, stats, clock.now(), frame_timeout=6.0)
         first = await anyio.to_thread.run_sync(dom, chromium, url, "<td>camera</td>")
-        assert row(first, "arm")[1:2] == ["odom"] and row(first, "arm")[-1] == "ok"
-        assert row(first, "camera")[-1] == "ok"
+        assert row(first, "arm")[1:2] == ["odom"] and row(first, "arm")[4] == "ok"
+        assert row(first, "camera")[4] == "ok"
         assert tuple(page.frames["camera"].position) == (2.0, 0.0, 0.0)
         for k in range(6):  # the camera's broadcaster stopped; the arm keeps going
             await clock.advance(0.5)
             await send((arm, "arm", 1.0 + 0.1 * (k + 1)))
         draw_live(page, buffer, stats, clock.now(), frame_timeout=6.0)
         second = await anyio.to_thread.run_sync(dom, chromium, url, "<td>stale</td>")
-        assert row(second, "camera")[-1] == "stale" and row(second, "camera")[3] == "3.0 s"
-        assert row(second, "arm")[-1] == "ok"
+        assert row(second, "camera")[4] == "stale" and row(second, "camera")[3] == "3.0 s"
+        assert row(second, "arm")[4] == "ok"
         assert tuple(page.frames["arm"].position) == pytest.approx((1.6, 0.0, 0.0))
     buffer.close()
 

@@ -91,14 +91,19 @@ def print_monitor(
     through liveliness (when the transport has it).
 
     On a live bus the rates are the recent ones (:data:`tfbus.monitor.RATE_WINDOW`
-    seconds before now): the frames of a broadcaster that stopped fall to 0.000 instead
-    of showing their old rate; a bag's are over the whole recording."""
+    seconds before now): the frames of a broadcaster that stopped fall to 0.000 and read
+    ``stale`` (silent for :data:`tfbus.monitor.STALE_PERIODS` of their periods, at least
+    :data:`tfbus.monitor.STALE_AFTER` s); a bag's are over the whole recording."""
     from tfbus.monitor import FrameSummary
 
     now = live_src.clock.now() if live_src is not None else None
 
     def rate(x: FrameSummary | AuthoritySummary) -> float:
         return x.rate if now is None else x.recent_rate(now)
+
+    def shown(x: FrameSummary | AuthoritySummary) -> str:
+        stale = now is not None and x.stale(now)
+        return f"{rate(x):.3f}" + (" stale" if stale else "")
 
     selected = list(s.frames.values())
     title = (f"RESULTS: for {literal(frames[0])} to {literal(frames[1])}" if frames
@@ -120,7 +125,7 @@ def print_monitor(
         dyn = not f.static
         table.add_row(
             literal(f.child), literal(f.parent), literal(f.authority),
-            f"{rate(f):.3f}" if dyn else "static",
+            shown(f) if dyn else "static",
             f"{f.delay_avg:.6f}" if dyn else "-",
             f"{f.delay_max:.6f}" if dyn and f.delay_count else "-",
         )
@@ -128,7 +133,7 @@ def print_monitor(
     btable = _table("All Broadcasters", ("node",), ("rate Hz", "avg delay s", "max delay s"))
     for a in sorted(s.authorities.values(), key=lambda a: a.authority):
         btable.add_row(
-            literal(a.authority), f"{rate(a):.3f}",
+            literal(a.authority), shown(a),
             f"{a.delay_avg:.6f}" if a.delay_count else "-",
             f"{a.delay_max:.6f}" if a.delay_count else "-",
         )

@@ -35,8 +35,12 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 @click.option("--fixed-frame", default=None,
               help="Frame at the origin (default: the root of the largest tree).")
 @click.option("--host", default="127.0.0.1", show_default=True,
-              help="Address to serve on. Anything but 127.0.0.1 exposes the page, which has "
-                   "no authentication, to the network.")
+              help="Address to serve on. The page answers only requests addressed to this "
+                   "machine's names (localhost, 127.0.0.1, [::1]) or to --host, from its own "
+                   "origin; from another machine give --token too.")
+@click.option("--token", default=None, metavar="SECRET",
+              help="Let a browser in from any name when it carries this secret "
+                   "(http://HOST:PORT/?token=SECRET; 1-256 printable ASCII characters).")
 @click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="TCP port of the page (0: any free port).")
 @click.option("--scan", "scan_topics", multiple=True, metavar="TOPIC",
@@ -67,7 +71,7 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
             scan_topics: tuple[str, ...], foxglove_port: int | None,
-            urdf: Path | None, mesh_dirs: tuple[Path, ...]) -> None:
+            urdf: Path | None, mesh_dirs: tuple[Path, ...], token: str | None) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -83,6 +87,13 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(NEEDS_EXTRA)
     if bag is not None and bus is not None:
         fail("give --bag PATH or --bus SPEC, not both")
+    if token is not None:
+        from tfbus.view.guard import PageGuard
+
+        try:
+            PageGuard(host, port, token)
+        except ValueError as err:
+            fail(f"--token: {err}")
     if bus is not None and bag is None:
         from tfbus.cli._sources import check_bus_spec
 
@@ -110,7 +121,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             except ValueError as err:
                 fail(str(err))
     try:
-        page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}")
+        page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}",
+                      token=token)
     except PortInUseError as err:
         fail(str(err))
     except OSError as err:
@@ -126,13 +138,14 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     # live bus replaces them by run_live's own once attached, and checks ``stop`` then)
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    click.echo(f"tfbus view: http://{host}:{page.port}/", err=True)
+    query = "" if token is None else "?token=" + token
+    click.echo(f"tfbus view: http://{host}:{page.port}/{query}", err=True)
     bridge = None
     if foxglove_port is not None:
         from tfbus.view.foxglove_bridge import FoxgloveBridge
 
         try:
-            bridge = FoxgloveBridge(host, foxglove_port)
+            bridge = FoxgloveBridge(host, foxglove_port, token=token)
         except ImportError:
             page.close()
             fail("the 'foxglove-sdk' package is not installed: pip install 'tfbus[view]'")

@@ -7,6 +7,14 @@ translation, rotation x y z w, the header stamp as timestamp), scans as
 capability: Foxglove's timeline follows the bag), and each frame tf cannot place as a
 warning status message (tf2's text), cleared when it can be placed again.
 
+Who may connect: foxglove-sdk's server checks neither ``Origin`` nor ``Host``, so it
+listens on a free port of 127.0.0.1 only, behind a front (:class:`_Front`) on ``host``:
+``port`` that reads each connection's request head (at most :data:`MAX_HEAD` bytes in
+:data:`HEAD_TIMEOUT` seconds, :data:`MAX_CONNECTIONS` at once) and checks it as the page
+does (:class:`~tfbus.view.guard.PageGuard`, Foxglove's web app
+``https://app.foxglove.dev`` let in too); a refused one gets ``403`` and is counted in
+:attr:`FoxgloveBridge.guard`, the others are relayed byte for byte.
+
 Foxglove's ``Timestamp`` has uint32 seconds: a transform or scan stamped at or after
 2**32 s (a Zenoh peer may send stamps up to 2**63 ns) is not sent, counted in
 :attr:`FoxgloveBridge.dropped` and logged; the others are sent.
@@ -14,7 +22,9 @@ Foxglove's ``Timestamp`` has uint32 seconds: a transform or scan stamped at or a
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import socket
 import threading
 import time
 from collections.abc import Iterable
@@ -25,27 +35,140 @@ from tfbus.ratelimit import CountLimitedLog
 from tfbus.sensor_msgs import LaserScan
 from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
+from tfbus.view.guard import PageGuard
 from tfbus.view.scene import Scene
 
-__all__ = ["FoxgloveBridge"]
+__all__ = ["FOXGLOVE_APP", "HEAD_TIMEOUT", "MAX_CONNECTIONS", "MAX_HEAD", "FoxgloveBridge"]
+
+FOXGLOVE_APP: Final = "https://app.foxglove.dev"
+"""The origin of Foxglove's web app, let in by default."""
+MAX_HEAD: Final = 16_384
+"""Bytes of request head read at most before a connection is refused."""
+HEAD_TIMEOUT: Final = 10.0
+"""Seconds a connection has to send its request head."""
+MAX_CONNECTIONS: Final = 64
+"""Connections relayed at once; more are closed at once."""
 
 _MAX_SEC: Final = 0xFFFF_FFFF  # foxglove.Timestamp.sec is a uint32
 _log = CountLimitedLog(logging.getLogger("tfbus.view"), 1, period=5.0, clock=time.monotonic)
+
+
+def _pump(src: socket.socket, dst: socket.socket) -> None:
+    try:
+        while data := src.recv(65536):
+            dst.sendall(data)
+    except OSError:
+        pass
+    finally:
+        with contextlib.suppress(OSError):
+            dst.shutdown(socket.SHUT_WR)
+
+
+class _Front:
+    """The listening socket on ``host:port`` in front of the SDK's loopback server."""
+
+    def __init__(self, host: str, port: int, inner: int, guard_of: Any) -> None:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self.sock = socket.socket(family, socket.SOCK_STREAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self.sock.bind((host, port))
+        except OSError:
+            self.sock.close()
+            raise
+        self.sock.listen(64)
+        self.sock.settimeout(0.2)
+        self.port: int = int(self.sock.getsockname()[1])
+        self.inner = inner
+        self._guard_of = guard_of
+        self._stop = threading.Event()
+        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
+        self._thread = threading.Thread(target=self._accept, name="tfbus-foxglove-front",
+                                        daemon=True)
+        self._thread.start()
+
+    def _accept(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self.sock.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not self._slots.acquire(blocking=False):
+                conn.close()
+                continue
+            threading.Thread(target=self._serve, args=(conn,), daemon=True).start()
+
+    def _serve(self, conn: socket.socket) -> None:
+        guard: PageGuard = self._guard_of()
+        try:
+            conn.settimeout(HEAD_TIMEOUT)
+            head = b""
+            while b"\r\n\r\n" not in head:
+                chunk = conn.recv(4096)
+                if not chunk or len(head) + len(chunk) > MAX_HEAD:
+                    guard.note("failed_handshakes", "no HTTP request head")
+                    return
+                head += chunk
+            lines = head.split(b"\r\n\r\n", 1)[0].decode("latin-1").split("\r\n")
+            fields: dict[str, list[str]] = {}
+            for line in lines[1:]:
+                name, _, value = line.partition(":")
+                fields.setdefault(name.strip().lower(), []).append(value.strip())
+            parts = lines[0].split(" ")
+            path = parts[1] if len(parts) == 3 else "/"
+
+            def one(name: str) -> str | None:
+                got = fields.get(name)
+                return got[0] if got else None
+
+            why = guard.check(one("host"), one("origin"), path,
+                              ", ".join(fields.get("cookie", [])))
+            if why is not None:
+                guard.note("refused", why)
+                conn.sendall(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 10\r\n"
+                             b"Connection: close\r\n\r\nForbidden\n")
+                return
+            conn.settimeout(None)
+            with socket.create_connection(("127.0.0.1", self.inner), timeout=5) as up:
+                up.settimeout(None)
+                up.sendall(head)
+                back = threading.Thread(target=_pump, args=(up, conn), daemon=True)
+                back.start()
+                _pump(conn, up)
+                back.join()
+        except OSError as err:
+            guard.note("failed_handshakes", type(err).__name__)
+        finally:
+            conn.close()
+            self._slots.release()
+
+    def close(self) -> None:
+        self._stop.set()
+        self.sock.close()
+        self._thread.join(timeout=5)
 
 
 class FoxgloveBridge:
     """A Foxglove WebSocket server with a ``/tf`` channel (and one per scan topic).
 
     Args:
-        host: address to bind (``127.0.0.1``: this machine only; no authentication).
+        host: address to bind (``127.0.0.1``: this machine only).
         port: TCP port (0: a free one; :attr:`port` says which).
+        token: as the page's (:class:`~tfbus.view.guard.PageGuard`): lets a client in
+            from any name when it carries ``?token=``.
+        origins: browser origins let in besides this machine's (Foxglove's web app).
 
     Raises:
         ImportError: ``foxglove-sdk`` is not installed (``pip install 'tfbus[view]'``).
         OSError: the port cannot be bound.
+        ValueError: a bad ``token``.
     """
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765) -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *,
+                 token: str | None = None,
+                 origins: Iterable[str] = (FOXGLOVE_APP,)) -> None:
         import foxglove
         from foxglove.channels import FrameTransformsChannel
         from foxglove.websocket import Capability, ServerListener
@@ -60,13 +183,22 @@ class FoxgloveBridge:
                 if getattr(channel, "topic", None) == TF_STATIC_TOPIC:
                     wanted.set()
 
+        origins = tuple(origins)
+        self.guard: PageGuard = PageGuard(host, port, token, origins)  # bad token: no bind
         try:
             self.server: Any = foxglove.start_server(
-                name="tfbus view", host=host, port=port, capabilities=[Capability.Time],
+                name="tfbus view", host="127.0.0.1", port=0, capabilities=[Capability.Time],
                 server_listener=_Listener(), context=self.context)
         except Exception as err:  # the SDK raises its own RuntimeError for a bind failure
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {err}") from None
-        self.port: int = int(self.server.port)
+        try:
+            self._front = _Front(host, port, int(self.server.port), lambda: self.guard)
+        except OSError as err:
+            self.server.stop()
+            raise OSError(f"cannot serve Foxglove on {host}:{port}: {err.strerror}") from None
+        self.port: int = self._front.port
+        self.guard = PageGuard(host, self.port, token, origins)  # port 0: the one bound
+        """The ``Host`` / ``Origin`` / token check of the front and its counters."""
         self.tf: Any = FrameTransformsChannel(TF_TOPIC, context=self.context)
         self.tf_static: Any = None
         """The ``/tf_static`` channel, made by the first ``publish_transforms(static=True)``
@@ -186,5 +318,6 @@ class FoxgloveBridge:
         self._status = now
 
     def close(self) -> None:
-        """Stop the server."""
+        """Stop the server and its front."""
+        self._front.close()
         self.server.stop()

@@ -169,8 +169,8 @@ def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
               frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> Scene:
     """Draw a live buffer at its latest data; ages from each frame's last receive time
     (``summary``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``."""
-    last = {name: Time.from_ns(fs.received[-1][0])
-            for name, fs in summary.frames.items() if fs.received}
+    last = {name: Time.from_ns(fs.last_received)
+            for name, fs in summary.frames.items() if fs.last_received is not None}
     rates = {name: fs.recent_rate(now) for name, fs in summary.frames.items()}
     scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
                         frame_timeout=frame_timeout)

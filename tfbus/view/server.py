@@ -4,8 +4,9 @@
 Per frame an axes triad at its pose in the fixed frame (x red, y green, z blue: line
 segments, so their colour can fade) with a text label of its id, a line from each child
 to its parent (axes and line coloured by :func:`~tfbus.view.scene.fade`, as rviz's TF
-display: full colour, fading to grey, hidden), a grid, and a side panel with the frame tree (parent,
-rate, age, broadcaster, static) and tf2's message for each frame that cannot be placed.
+display: full colour, fading to grey, hidden), a grid, and a side panel with the frame
+tree (parent, rate, age, state, broadcaster: one line per frame, "static" for a static
+link's rate) and tf2's message for each frame that cannot be placed.
 Ids reach the page as text only: the panel is HTML built here with every id through
 :func:`html.escape` (control characters also written as ``\\xNN`` escapes), and scene
 labels are viser's text labels. Scene node names are numbered (``/tf/f3``), never made
@@ -27,6 +28,7 @@ import numpy.typing as npt
 from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
+from tfbus.view.guard import PageGuard
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
 
@@ -40,6 +42,10 @@ GREY = (128, 128, 128)
 """What a frame's axes and link line fade to at the frame timeout (rviz's TF display)."""
 AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
 """Full colour of the x, y and z axis of a frame (RGB 0-255)."""
+_PANEL_BOX = "overflow-x:auto;max-width:100%"
+_PANEL_TABLE = "font-size:0.75em;white-space:nowrap;border-spacing:0.6em 0"
+# cells never wrap (an id is one line); a table wider than the panel scrolls sideways
+
 AXES_LENGTH = 0.25
 """Length of each drawn axis, metres."""
 
@@ -110,26 +116,40 @@ class TfPage:
     """A viser server showing tf frames; :meth:`draw` puts a scene on it.
 
     Args:
-        host: address to bind (``127.0.0.1`` by default: this machine only; the page has
-            no authentication).
+        host: address to bind (``127.0.0.1`` by default: this machine only).
         port: TCP port; 0 picks a free one (:attr:`port` says which).
         title: first line of the side panel.
+        token: a secret a browser must carry (``?token=``) to be let in from a name other
+            than this machine's (:mod:`tfbus.view.guard`); None: loopback names only.
+
+    Every request's ``Host`` and ``Origin`` are checked (:attr:`guard`): another site
+    the user visits cannot read the frames nor drive playback; refused requests, failed
+    handshakes and unreadable messages are counted there and logged as one line.
 
     Raises:
         PortInUseError: ``port`` is taken.
+        ValueError: ``token`` is not a valid token (:class:`~tfbus.view.guard.PageGuard`).
         ImportError: viser is not installed (``pip install 'tfbus[view]'``).
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8080, *,
-                 title: str = "tfbus view") -> None:
+                 title: str = "tfbus view", token: str | None = None) -> None:
         import viser
 
+        from tfbus.view import guard
+
+        PageGuard(host, port, token)  # a bad token is refused before anything is bound
+        guard.install()
         _check_port(host, port)
         self.server: Any = viser.ViserServer(host=host, port=port, verbose=False)
         self.port: int = int(self.server.get_port())
         if port and self.port != port:
             self.server.stop()
             raise PortInUseError(f"cannot serve on {host}:{port}: address already in use")
+        self.guard = PageGuard(host, self.port, token)
+        """The ``Host`` / ``Origin`` / token check and its counters (``refused``,
+        ``failed_handshakes``, ``bad_messages``)."""
+        guard.register(self.guard)
         self.host = host
         self._lock = threading.Lock()
         self.server.scene.set_up_direction("+z")
@@ -325,15 +345,18 @@ class TfPage:
             else:
                 state = "ok"
             age = "" if f.age is None else f"{f.age:.1f} s"
+            # a static link has no rate; a root frame is no link at all
+            hz = "static" if f.static else "" if f.parent is None else f"{rate:.1f}"
             rows.append(
                 f"<tr><td>{_h(f.frame_id)}</td><td>{_h(f.parent or '')}</td>"
-                f"<td>{rate:.1f}</td><td>{age}</td><td>{_h(who)}</td><td>{state}</td></tr>"
+                f"<td>{hz}</td><td>{age}</td><td>{state}</td><td>{_h(who)}</td></tr>"
             )
         errors = [f"<li>{_h(f.frame_id)}: {_h(f.error)}</li>" for f in scene.frames
                   if f.error is not None]
         value = (
-            "<table style='font-size:0.8em'><tr><th>frame</th><th>parent</th><th>Hz</th>"
-            "<th>age</th><th>broadcaster</th><th>state</th></tr>" + "".join(rows) + "</table>"
+            f"<div style='{_PANEL_BOX}'><table style='{_PANEL_TABLE}'><tr><th>frame</th>"
+            "<th>parent</th><th>Hz</th><th>age</th><th>state</th><th>broadcaster</th></tr>"
+            + "".join(rows) + "</table></div>"
             + (f"<p>cannot place in [{_h(scene.fixed_frame)}]:</p><ul>{''.join(errors)}</ul>"
                if errors else "")
         )
@@ -363,4 +386,7 @@ class TfPage:
 
     def close(self) -> None:
         """Stop the server (closes its port)."""
+        from tfbus.view import guard
+
         self.server.stop()
+        guard.unregister(self.guard)
