@@ -2,7 +2,9 @@
 s with ``tfbus monitor``, ``tfbus view --bus`` and ``tfbus serve-buffer`` attached, and
 lookup clients coming and going, some of them badly behaved.
 
-Everything runs on 127.0.0.1 through one ``tfbus router`` (multicast scouting off):
+Everything runs on 127.0.0.1 through one ``tfbus router`` (multicast scouting off), with
+``congestion_control=block`` (Zenoh never drops ``/tf``; a drop would be tfbus's own,
+counted):
 
 * a broadcaster process (this file, ``--role pub``) sends ``--frames`` dynamic transforms
   at ``--rate`` Hz on an absolute schedule, plus one static, and prints how many it sent;
@@ -50,7 +52,8 @@ def _free_port() -> int:
 
 
 def _client_spec(port: int) -> str:
-    return f"zenoh:mode=client&connect=tcp/127.0.0.1:{port}"
+    # congestion_control=block: Zenoh never drops /tf (tfbus's send queue would count it).
+    return f"zenoh:mode=client&connect=tcp/127.0.0.1:{port}&congestion_control=block"
 
 
 async def _until_signal() -> None:
