@@ -20,17 +20,23 @@ if TYPE_CHECKING:
     from rich.console import Console
 
 __all__ = [
+    "HOST",
+    "MAX_HZ",
+    "MAX_SECONDS",
     "TIME",
+    "FiniteFloat",
     "bag_path",
     "cli",
     "console",
     "fail",
     "finish_status",
     "fmt_sec",
+    "hertz",
     "literal",
     "missing_extra",
     "one_line",
     "parse_time",
+    "seconds",
     "warn",
 ]
 
@@ -273,6 +279,80 @@ class _TimeParam(click.ParamType):  # type: ignore[type-arg,unused-ignore]
 
 
 TIME = _TimeParam()
+
+
+MAX_SECONDS = 1e9
+"""The longest duration, interval, timeout or cache time an option takes, seconds
+(about 31.7 years; leave a ``--duration`` out to run until Ctrl-C). Beyond it a value
+is a usage error: ``1e300`` seconds is no longer a time anyone waits, and it overflows
+the int64 nanoseconds tf2 keeps times in (ROS 2 ``rcl_duration_value_t``)."""
+
+MAX_HZ = 1e6
+"""The highest rate an option takes, Hz (a period of 1 microsecond). The lowest is
+``1 / MAX_SECONDS``: the period of every rate is a duration an option could take."""
+
+
+class FiniteFloat(click.FloatRange):
+    """A float option that must be a finite number within ``[min, max]``
+    (:class:`click.FloatRange`, which lets ``nan`` through every bound and ``inf``
+    through a missing one). A bad value is click's usage error naming the option and
+    the value (exit status 2)."""
+
+    name = "float"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        """``value`` as a float, or a usage error: not a number, not finite, out of range."""
+        if isinstance(value, str) and not value.strip():
+            self.fail("an empty value is not a number", param, ctx)
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number (range {self._describe_range()})",
+                      param, ctx)
+        return rv
+
+    def _describe_range(self) -> str:
+        return super()._describe_range().replace("1000000000.0", "1e9").replace(
+            "1000000.0", "1e6").replace("1e-09", "1e-9")
+
+
+def seconds(*, zero: bool = False) -> FiniteFloat:
+    """A ``--duration`` / ``--interval`` / ``--cache-time`` type: finite seconds in
+    ``(0, MAX_SECONDS]`` (``[0, MAX_SECONDS]`` with ``zero``)."""
+    return FiniteFloat(min=0.0, max=MAX_SECONDS, min_open=not zero)
+
+
+def hertz() -> FiniteFloat:
+    """A rate option type: finite Hz in ``[1 / MAX_SECONDS, MAX_HZ]``."""
+    return FiniteFloat(min=1.0 / MAX_SECONDS, max=MAX_HZ)
+
+
+class _HostParam(click.ParamType):  # type: ignore[type-arg,unused-ignore]
+    """An address to serve on: a host name or IP address this machine can resolve
+    (``getaddrinfo``), never empty. A server given one it cannot bind would otherwise
+    fail in its own thread, after the command said it serves."""
+
+    name = "HOST"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> str:
+        """``value`` unchanged, or a usage error: empty, or not resolvable."""
+        import socket
+
+        text = str(value)
+        if not text.strip():
+            self.fail("give an address, e.g. 127.0.0.1 (this machine) or 0.0.0.0 (every "
+                      "interface)", param, ctx)
+        try:
+            socket.getaddrinfo(text, None, type=socket.SOCK_STREAM)
+        except (OSError, UnicodeError, ValueError) as err:
+            self.fail(f"{text!r} is not an address of this machine's resolver: {err}",
+                      param, ctx)
+        return text
+
+
+HOST = _HostParam()
+"""The type of a ``--host`` option (an address to serve on)."""
 
 
 def bag_path() -> click.Path:

@@ -14,7 +14,7 @@ from typing import Any
 
 import click
 
-from tfbus.cli._common import fail, literal
+from tfbus.cli._common import fail, literal, seconds
 from tfbus.cli._sources import (
     DEFAULT_BUS,
     cancel_on_signal,
@@ -34,9 +34,9 @@ __all__ = ["command"]
                    "action of tf2_ros, as /NAME).")
 @click.option("--name", "name", default="tf2_buffer_server", show_default=True,
               help="The server's name (clients use the same: BufferClient(bus, name=...)).")
-@click.option("--cache-time", type=click.FloatRange(min=0, min_open=True), default=10.0,
+@click.option("--cache-time", type=seconds(), default=10.0,
               show_default=True, help="Seconds of history the buffer keeps.")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", type=seconds(), default=None,
               help="Stop after this many seconds (default: until Ctrl-C or SIGTERM).")
 def command(bus: str, name: str, cache_time: float, duration: float | None) -> int | None:
     """Answer transform lookups for thin clients (tf2_ros buffer_server): keep one
