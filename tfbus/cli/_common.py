@@ -23,6 +23,7 @@ __all__ = [
     "HOST",
     "MAX_HZ",
     "MAX_SECONDS",
+    "MISSING_EXTRA_STATUS",
     "TIME",
     "FiniteFloat",
     "bag_path",
@@ -113,28 +114,33 @@ def error(message: str) -> None:
     click.echo(f"{command_path()}: error: {one_line(message)}", err=True)
 
 
-# Which extra brings which importable module (pyproject.toml [project.optional-dependencies]).
-_EXTRAS = {
-    "click": "cli", "rich": "cli", "graphviz": "cli", "rosbags": "bag", "mcap": "bag",
-    "zenoh": "zenoh", "msgspec": "zenoh", "urdf_parser_py": "robot", "lxml": "robot",
-}
+MISSING_EXTRA_STATUS = 2
+"""The exit status of a command whose optional dependency is not installed: 2, the
+status of a usage error (click's), after one line naming the extra to install."""
+
+# Which extra brings which importable module, beyond tfbus._extras.EXTRAS.
+_CLI_EXTRAS = {"click": "cli", "rich": "cli", "graphviz": "cli"}
 
 
 def missing_extra(err: ImportError) -> str | None:
-    """The one-line advice for an optional dependency that is not installed, or None
-    when ``err`` is not about one."""
+    """The one-line advice for an optional dependency that is not installed (a
+    :class:`~tfbus.errors.MissingExtraError`, or an ImportError of a package an extra
+    brings), or None when ``err`` is not about one."""
+    from tfbus._extras import EXTRAS, MissingExtraError, extra_advice
+
+    if isinstance(err, MissingExtraError):
+        return str(err)
     name = (getattr(err, "name", None) or "").partition(".")[0]
-    if name == "trio":
-        return "the trio backend needs the 'trio' package: pip install trio"
-    extra = _EXTRAS.get(name)
+    extra = _CLI_EXTRAS.get(name) or EXTRAS.get(name)
     if extra is None:
         return None
-    return f"the '{name}' package is not installed: pip install 'tfbus[{extra}]'"
+    return f"the '{name}' package is not installed: {extra_advice(name, extra)}"
 
 
 class _Group(click.Group):
     """A click group whose usage errors are one line (``tfbus CMD: error: MESSAGE``),
-    which turns a missing optional dependency into one line naming the extra, and which
+    which turns a missing optional dependency into one line naming the extra (exit status
+    :data:`MISSING_EXTRA_STATUS`), and which
     exits with 130 on Ctrl-C and SIGTERM (see :func:`tfbus.cli.main`) with no traceback."""
 
     def main(
@@ -168,8 +174,8 @@ class _Group(click.Group):
             advice = missing_extra(err)
             if advice is None:
                 raise
-            click.echo(f"tfbus: error: {advice}", err=True)
-            rv = 1
+            click.echo(f"tfbus: error: {one_line(advice)}", err=True)
+            rv = MISSING_EXTRA_STATUS
         if standalone_mode:
             sys.exit(rv if isinstance(rv, int) else 0)
         return rv
