@@ -36,6 +36,7 @@ LAYERS: dict[str, int] = {
     "convert": 1,
     "core": 1,  # BufferCore, its text, batch values, velocity, caches, both twins
     "errors": 1,
+    "_extras": 1,  # which extra brings which package; raises errors.MissingExtraError
     "codecs": 1,  # message codecs (ROS 1, CDR, tfbus's msgpack wire): sans-I/O
     # 2: the bus and time sources
     "_aio": 2,  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)

@@ -55,6 +55,7 @@ __all__ = [
     "InvalidArgumentException",
     "JointStateError",
     "LookupException",
+    "MissingExtraError",
     "NoDataForExtrapolationException",
     "TfbusError",
     "TimeoutException",
@@ -317,3 +318,24 @@ class CallFailed(TransportError):
 class PortInUseError(OSError):
     """The port asked of ``tfbus view`` is taken (viser would silently move to the next
     one): :mod:`tfbus.view.server`."""
+
+
+class MissingExtraError(ModuleNotFoundError, TfbusError):
+    """A subpackage of tfbus needs an optional dependency that is not installed.
+
+    A :class:`ModuleNotFoundError` (so ``except ImportError`` still catches it) whose
+    message names the package, the extra and the two ``pip install`` forms
+    (raised by :func:`tfbus._extras.require` at import of the subpackage).
+
+    Attributes:
+        name: the missing top-level package (as :class:`ModuleNotFoundError`'s).
+        extra: the tfbus extra that installs it.
+        needed_by: the tfbus module that needs it.
+    """
+
+    def __init__(self, needed_by: str, package: str, extra: str) -> None:
+        super().__init__(f"{needed_by} needs the '{package}' package: pip install "
+                         f"'tfbus[{extra}]' (from a clone of tfbus: pip install '.[{extra}]')",
+                         name=package)
+        self.extra = extra
+        self.needed_by = needed_by

@@ -152,3 +152,33 @@ async def test_listener_and_broadcasters_on_a_tfbus_bus() -> None:
 def test_listener_needs_a_node_or_a_bus() -> None:
     with pytest.raises(tf2_ros.InvalidArgumentException, match="node or bus"):
         tf2_ros.TransformListener(tf2_ros.Buffer())
+
+
+@pytest.mark.parametrize("cls", [tf2_ros.TransformBroadcaster,
+                                 tf2_ros.StaticTransformBroadcaster])
+@pytest.mark.parametrize(("node", "shown"), [("x", "str 'x'"), (42, "int 42"),
+                                             (None, "NoneType None")])
+def test_broadcaster_on_a_non_node_names_the_argument(
+    cls: type[tf2_ros.TransformBroadcaster], node: object, shown: str
+) -> None:
+    """A broadcaster given neither an rclpy node nor a bus says so, with the type and
+    value given (it said "No module named 'rclpy'")."""
+    with pytest.raises(TypeError) as info:
+        cls(node)
+    assert str(info.value) == (
+        f"{cls.__name__}: node must be an rclpy Node or a tfbus.Bus, got {shown}")
+
+
+def test_listener_on_a_non_bus_or_non_node_names_the_argument() -> None:
+    """``TransformListener(buffer, bus="x")`` raised an empty AssertionError; a non-node
+    ``node`` said "No module named 'rclpy'". Each names the argument and its type."""
+    with pytest.raises(TypeError) as info:
+        tf2_ros.TransformListener(tf2_ros.Buffer(), bus="x")  # type: ignore[arg-type]
+    assert str(info.value) == "TransformListener: bus must be a tfbus.Bus, got str 'x'"
+    with pytest.raises(TypeError) as info:
+        tf2_ros.TransformListener(tf2_ros.Buffer(), {})
+    assert str(info.value) == (
+        "TransformListener: node must be an rclpy Node or a tfbus.Bus, got dict {}")
+    long = "n" * 100
+    with pytest.raises(TypeError, match=f"got str '{'n' * 59}\\.\\.\\.$"):
+        tf2_ros.TransformListener(tf2_ros.Buffer(), long)

@@ -902,3 +902,40 @@ def test_issue21_loading_does_not_pop_from_a_list_of_every_element(
                                      '</joint><link name="l4"/>',
                                      '<limit lower="x" upper="1" effort="1" velocity="1"/>'
                                      '</joint><link name="l4"/>'))
+
+
+async def test_run_a_joint_state_stamped_ahead_holds_back_the_next_ones() -> None:
+    """ROS 1 parity: one JointState stamped an hour ahead of the clock rate-limits every
+    later one stamped now (``min(now, last publish stamps)``); ``max_stamp_ahead`` drops
+    it instead (counted in ``statistics.ahead``) and the later ones go out."""
+    hour = 3600 * 10**9
+    now = 1000 * 10**9
+
+    async def published(**kw: Any) -> tuple[list[int], RobotStatePublisher]:
+        clock = ManualClock(Time.from_ns(now))
+        rsp = RobotStatePublisher(ARM)
+        stamps = []
+        async with Bus() as bus, anyio.create_task_group() as tg:
+            tf = bus.subscribe(TF_TOPIC)
+            await tg.start(start_rsp(rsp, bus, clock, publish_frequency=10.0, **kw))
+            for k, stamp in enumerate([now, now + hour] + [now + j * 10**8 for j in (1, 2, 3)]):
+                if k >= 2:
+                    await clock.set(Time.from_ns(stamp))
+                await bus.publish("/joint_states", JointState(
+                    Header(Time.from_ns(stamp)), ["shoulder"], [0.1]))
+                await clock.advance(0)
+                while tf.statistics().queued:
+                    stamps.append(tf.receive_nowait().transforms[0].header.stamp.ns)
+            tg.cancel_scope.cancel()
+        return stamps, rsp
+
+    stamps, rsp = await published()
+    assert stamps == [now, now + hour]  # every later one held back
+    assert (rsp.statistics.rate_limited, rsp.statistics.ahead) == (3, 0)
+    stamps, rsp = await published(max_stamp_ahead=60.0)
+    assert stamps == [now, now + 10**8, now + 2 * 10**8, now + 3 * 10**8]
+    assert (rsp.statistics.rate_limited, rsp.statistics.ahead) == (0, 1)
+    async with Bus() as bus:
+        for bad in (-1.0, math.nan, math.inf, 1e300, "5"):
+            with pytest.raises(ValueError, match="max_stamp_ahead"):
+                await RobotStatePublisher(ARM).run(bus, max_stamp_ahead=bad)  # type: ignore[arg-type]

@@ -815,3 +815,37 @@ async def test_a_flood_of_bad_headers_is_counted_but_logged_rarely(
     lines = [r for r in caplog.records if "bad connection header" in r.getMessage()]
     assert p.pub.statistics().malformed - before == flood
     assert len(lines) <= 1 + int(elapsed // 5.0), (len(lines), elapsed)
+
+
+async def test_a_huge_publisher_update_does_not_queue_the_delivering_publisher() -> None:
+    """10 000 URIs that never answer in one publisherUpdate fill the node's
+    MAX_CONCURRENT_REQUESTS requestTopic slots, each for its whole deadline; the publisher
+    that already delivered is listed first among those followed and asks requestTopic
+    again at once (it queued behind the new ones: minutes of silence after a reconnect)."""
+    with socket.socket() as stuck, FakeMaster() as master:
+        stuck.bind(("127.0.0.1", 0))
+        stuck.listen(0)
+        junk = [f"http://127.0.0.1:{stuck.getsockname()[1]}/n{i}" for i in range(10_000)]
+        async with pair(master, master_timeout=30.0) as p:
+            await p.delivers()
+            await anyio.to_thread.run_sync(
+                lambda: xmlrpc_call(
+                    p.sub.uri, "publisherUpdate", "/x", "/tf", [*junk, p.pub.uri], timeout=20
+                )
+            )
+            followed = [k[1] for k in p.sub._incoming if k[0] == "/tf"]
+            assert len(followed) == MAX_PUBLISHERS and p.pub.uri in followed
+            assert p.sub.statistics().publishers_dropped == 10_001 - MAX_PUBLISHERS
+            limiter = p.sub._request_limiter
+            assert limiter is not None
+
+            async def slots_taken() -> bool:
+                return limiter.borrowed_tokens == limiter.total_tokens
+
+            with anyio.fail_after(30):
+                while not await slots_taken():
+                    await anyio.sleep(0.02)
+            with anyio.fail_after(10):  # the junk holds every slot for 30 s
+                host, port = await p.sub._request_topic("/tf", p.pub.uri)
+            assert (host, port) == p.pub.tcpros_endpoint("/tf")
+            await p.delivers()

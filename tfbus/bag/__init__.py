@@ -41,6 +41,10 @@ The package, one job per module:
 
 from __future__ import annotations
 
+from tfbus._extras import require
+
+require(__name__, "rosbags", "mcap")
+
 from tfbus.bag.formats import (
     DEFAULT_TOPICS,
     ROS2_AUTHORITY,

@@ -27,7 +27,9 @@ A command is registered by one line in :data:`COMMANDS`.
 Every command has ``--help`` with examples. A bad argument prints one line,
 ``tfbus <command>: error: ...``, and exits with status 2; a damaged bag prints what was
 readable, a one-line warning, and exits with status 1; a missing optional dependency is
-one line naming the extra to install. Ids from bags and peers are printed literally
+one line naming the extra to install (``pip install 'tfbus[bag]'``, and the form for a
+clone of the repository, ``pip install '.[bag]'``), exit status 2 as a usage error
+(``tfbus.cli._common.MISSING_EXTRA_STATUS``). Ids from bags and peers are printed literally
 (control characters escaped, never rich markup). Ctrl-C and SIGTERM end every command
 cleanly.
 
@@ -99,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``tfbus`` command (``pyproject.toml``); returns the exit status.
 
     Without click or rich installed it prints one line naming the extra (``tfbus[cli]``)
-    and returns 1."""
+    and returns 2, as for every missing optional dependency."""
     try:
         _load()
     except ImportError as err:
@@ -107,8 +109,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if missing not in ("click", "rich"):
             raise
         print(f"tfbus: error: the command line needs the '{missing}' package: "
-              "pip install 'tfbus[cli]'", file=sys.stderr)
-        return 1
+              "pip install 'tfbus[cli]' (from a clone of tfbus: pip install '.[cli]')",
+              file=sys.stderr)
+        return 2  # MISSING_EXTRA_STATUS (tfbus.cli._common needs click)
     common = importlib.import_module("tfbus.cli._common")
     code: int = common.run_main(argv)
     return code

@@ -20,17 +20,24 @@ if TYPE_CHECKING:
     from rich.console import Console
 
 __all__ = [
+    "HOST",
+    "MAX_HZ",
+    "MAX_SECONDS",
+    "MISSING_EXTRA_STATUS",
     "TIME",
+    "FiniteFloat",
     "bag_path",
     "cli",
     "console",
     "fail",
     "finish_status",
     "fmt_sec",
+    "hertz",
     "literal",
     "missing_extra",
     "one_line",
     "parse_time",
+    "seconds",
     "warn",
 ]
 
@@ -107,28 +114,33 @@ def error(message: str) -> None:
     click.echo(f"{command_path()}: error: {one_line(message)}", err=True)
 
 
-# Which extra brings which importable module (pyproject.toml [project.optional-dependencies]).
-_EXTRAS = {
-    "click": "cli", "rich": "cli", "graphviz": "cli", "rosbags": "bag", "mcap": "bag",
-    "zenoh": "zenoh", "msgspec": "zenoh", "urdf_parser_py": "robot", "lxml": "robot",
-}
+MISSING_EXTRA_STATUS = 2
+"""The exit status of a command whose optional dependency is not installed: 2, the
+status of a usage error (click's), after one line naming the extra to install."""
+
+# Which extra brings which importable module, beyond tfbus._extras.EXTRAS.
+_CLI_EXTRAS = {"click": "cli", "rich": "cli", "graphviz": "cli"}
 
 
 def missing_extra(err: ImportError) -> str | None:
-    """The one-line advice for an optional dependency that is not installed, or None
-    when ``err`` is not about one."""
+    """The one-line advice for an optional dependency that is not installed (a
+    :class:`~tfbus.errors.MissingExtraError`, or an ImportError of a package an extra
+    brings), or None when ``err`` is not about one."""
+    from tfbus._extras import EXTRAS, MissingExtraError, extra_advice
+
+    if isinstance(err, MissingExtraError):
+        return str(err)
     name = (getattr(err, "name", None) or "").partition(".")[0]
-    if name == "trio":
-        return "the trio backend needs the 'trio' package: pip install trio"
-    extra = _EXTRAS.get(name)
+    extra = _CLI_EXTRAS.get(name) or EXTRAS.get(name)
     if extra is None:
         return None
-    return f"the '{name}' package is not installed: pip install 'tfbus[{extra}]'"
+    return f"the '{name}' package is not installed: {extra_advice(name, extra)}"
 
 
 class _Group(click.Group):
     """A click group whose usage errors are one line (``tfbus CMD: error: MESSAGE``),
-    which turns a missing optional dependency into one line naming the extra, and which
+    which turns a missing optional dependency into one line naming the extra (exit status
+    :data:`MISSING_EXTRA_STATUS`), and which
     exits with 130 on Ctrl-C and SIGTERM (see :func:`tfbus.cli.main`) with no traceback."""
 
     def main(
@@ -162,8 +174,8 @@ class _Group(click.Group):
             advice = missing_extra(err)
             if advice is None:
                 raise
-            click.echo(f"tfbus: error: {advice}", err=True)
-            rv = 1
+            click.echo(f"tfbus: error: {one_line(advice)}", err=True)
+            rv = MISSING_EXTRA_STATUS
         if standalone_mode:
             sys.exit(rv if isinstance(rv, int) else 0)
         return rv
@@ -273,6 +285,80 @@ class _TimeParam(click.ParamType):  # type: ignore[type-arg,unused-ignore]
 
 
 TIME = _TimeParam()
+
+
+MAX_SECONDS = 1e9
+"""The longest duration, interval, timeout or cache time an option takes, seconds
+(about 31.7 years; leave a ``--duration`` out to run until Ctrl-C). Beyond it a value
+is a usage error: ``1e300`` seconds is no longer a time anyone waits, and it overflows
+the int64 nanoseconds tf2 keeps times in (ROS 2 ``rcl_duration_value_t``)."""
+
+MAX_HZ = 1e6
+"""The highest rate an option takes, Hz (a period of 1 microsecond). The lowest is
+``1 / MAX_SECONDS``: the period of every rate is a duration an option could take."""
+
+
+class FiniteFloat(click.FloatRange):
+    """A float option that must be a finite number within ``[min, max]``
+    (:class:`click.FloatRange`, which lets ``nan`` through every bound and ``inf``
+    through a missing one). A bad value is click's usage error naming the option and
+    the value (exit status 2)."""
+
+    name = "float"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        """``value`` as a float, or a usage error: not a number, not finite, out of range."""
+        if isinstance(value, str) and not value.strip():
+            self.fail("an empty value is not a number", param, ctx)
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number (range {self._describe_range()})",
+                      param, ctx)
+        return rv
+
+    def _describe_range(self) -> str:
+        return super()._describe_range().replace("1000000000.0", "1e9").replace(
+            "1000000.0", "1e6").replace("1e-09", "1e-9")
+
+
+def seconds(*, zero: bool = False) -> FiniteFloat:
+    """A ``--duration`` / ``--interval`` / ``--cache-time`` type: finite seconds in
+    ``(0, MAX_SECONDS]`` (``[0, MAX_SECONDS]`` with ``zero``)."""
+    return FiniteFloat(min=0.0, max=MAX_SECONDS, min_open=not zero)
+
+
+def hertz() -> FiniteFloat:
+    """A rate option type: finite Hz in ``[1 / MAX_SECONDS, MAX_HZ]``."""
+    return FiniteFloat(min=1.0 / MAX_SECONDS, max=MAX_HZ)
+
+
+class _HostParam(click.ParamType):  # type: ignore[type-arg,unused-ignore]
+    """An address to serve on: a host name or IP address this machine can resolve
+    (``getaddrinfo``), never empty. A server given one it cannot bind would otherwise
+    fail in its own thread, after the command said it serves."""
+
+    name = "HOST"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> str:
+        """``value`` unchanged, or a usage error: empty, or not resolvable."""
+        import socket
+
+        text = str(value)
+        if not text.strip():
+            self.fail("give an address, e.g. 127.0.0.1 (this machine) or 0.0.0.0 (every "
+                      "interface)", param, ctx)
+        try:
+            socket.getaddrinfo(text, None, type=socket.SOCK_STREAM)
+        except (OSError, UnicodeError, ValueError) as err:
+            self.fail(f"{text!r} is not an address of this machine's resolver: {err}",
+                      param, ctx)
+        return text
+
+
+HOST = _HostParam()
+"""The type of a ``--host`` option (an address to serve on)."""
 
 
 def bag_path() -> click.Path:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from tfbus.cli._common import fail, literal
+from tfbus.cli._common import fail, literal, seconds
 from tfbus.cli._sources import cancel_on_signal, run_live
 
 if TYPE_CHECKING:
@@ -24,7 +24,7 @@ model_argument = click.argument("model", metavar="MODEL.urdf",
                                 type=click.Path(dir_okay=False, path_type=Path))
 """``MODEL.urdf``: the robot description (read by :func:`load_model`)."""
 
-duration_option = click.option("--duration", type=click.FloatRange(min=0), default=None,
+duration_option = click.option("--duration", type=seconds(zero=True), default=None,
                                help="Seconds to run (default: until Ctrl-C / SIGTERM).")
 """``--duration S``: stop after ``S`` seconds of wall-clock time."""
 

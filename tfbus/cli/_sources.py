@@ -141,21 +141,27 @@ def parse_spec(spec: str, *, name: str = "tfbus-cli") -> BusSpec:
     the spec (not opened: no socket, no thread) and dropped, so a value its factory or
     constructor refuses (``zenoh?port=abc``, ``ros2:domain=999``, ``ros1:name=bad name``,
     an unreadable ``ros2:config`` file, ...) is the same one-line usage error. A missing
-    extra is left to the opening of the bus, which names it.
+    extra raises :class:`~tfbus.errors.MissingExtraError` naming it (the ``tfbus`` group
+    prints it on one line, exit status 2).
     """
     from tfbus.errors import TransportError
-    from tfbus.transports.spec import parse_bus_spec
+    from tfbus.transports.spec import parse_bus_spec, schemes
 
     try:
         parsed = parse_bus_spec(spec)
     except ValueError as err:
         fail(str(err))
+    scheme = schemes().get(parsed.scheme)
+    if scheme is not None:  # a missing extra: named now, as every one (exit status 2)
+        from tfbus._extras import require
+
+        require(f"the {parsed.scheme!r} bus", *scheme.requires, extra=scheme.extra or None)
     try:
         open_spec_transport(parsed, name=name)
     except ValueError as err:
         fail(f"--bus {spec!r}: {err}")
     except TransportError:
-        pass  # an extra not installed: said when the bus is opened (exit status 1)
+        pass  # the transport refused its configuration: said when the bus is opened
     return parsed
 
 

@@ -10,7 +10,7 @@ from typing import Any, TypeVar
 
 import click
 
-from tfbus.cli._common import error, fail, literal
+from tfbus.cli._common import error, fail, hertz, literal, seconds
 from tfbus.cli._sources import cancel_on_signal, check_bus_spec, is_bus_error, run_live
 from tfbus.transports.spec import BUS_HELP
 
@@ -27,12 +27,12 @@ def _demo_options(*, rate: bool, listen_rate: bool) -> Callable[[F], F]:
         f = click.option("--backend", type=click.Choice(["asyncio", "trio"]), default=None,
                          help="Event loop (default asyncio).")(f)
         if listen_rate:
-            f = click.option("--listen-rate", type=click.FloatRange(min=0, min_open=True),
+            f = click.option("--listen-rate", type=hertz(),
                              default=None, help="Listener rate, Hz (default 1).")(f)
         if rate:
-            f = click.option("--rate", type=click.FloatRange(min=0, min_open=True),
+            f = click.option("--rate", type=hertz(),
                              default=None, help="Broadcast rate, Hz (default 100).")(f)
-        return click.option("--duration", type=click.FloatRange(min=0), default=None,
+        return click.option("--duration", type=seconds(zero=True), default=None,
                             help="Seconds to run (default: until Ctrl-C).")(f)
 
     return decorate
@@ -223,11 +223,11 @@ def run_laser(*, duration: float | None, backend: str, beams: int, scan_rate: fl
 
 @command.command("laser")
 @_demo_options(rate=False, listen_rate=False)
-@click.option("--beams", type=click.IntRange(min=2), default=720, show_default=True,
+@click.option("--beams", type=click.IntRange(2, 100_000), default=720, show_default=True,
               help="Beams per sweep (one full turn).")
-@click.option("--scan-rate", type=click.FloatRange(min=0, min_open=True), default=40.0,
+@click.option("--scan-rate", type=hertz(), default=40.0,
               show_default=True, help="Laser sweeps per second, Hz.")
-@click.option("--odom-rate", type=click.FloatRange(min=0, min_open=True), default=50.0,
+@click.option("--odom-rate", type=hertz(), default=50.0,
               show_default=True, help="odom -> base_link transforms per second, Hz.")
 @click.pass_context
 def laser(

@@ -16,9 +16,11 @@ from tfbus.cli._common import (
     fail,
     finish_status,
     fmt_sec,
+    hertz,
     literal,
     literal_lines,
     one_line,
+    seconds,
     warn,
 )
 from tfbus.cli._sources import BusSource, live, live_only, run_live, source, source_options
@@ -114,9 +116,9 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
 @click.argument("source_frame", metavar="SOURCE")
 @click.argument("target_frame", metavar="TARGET")
 @click.argument("rate_arg", metavar="[RATE]", required=False,
-                type=click.FloatRange(min=0, min_open=True))
+                type=hertz())
 @source_options
-@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--rate", type=hertz(), default=None,
               help="Echo rate, Hz (of bag time with --bag); default 1. Also tf2_echo's "
                    "third argument, RATE.")
 @click.option("--time", "at", type=TIME, default=None,
@@ -126,7 +128,7 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
               help="Digits after the decimal point.")
 @click.option("-n", "--limit", type=click.IntRange(min=1), default=None,
               help="Stop after this many lookups (with --bus: transforms printed).")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", type=seconds(), default=None,
               help="With --bus: stop after this many seconds (default: -n, or Ctrl-C).")
 def command(
     source_frame: str, target_frame: str, rate_arg: float | None, bag: Path | None,

@@ -10,7 +10,15 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import RATE_HELP, console, error, fail, finish_status, literal
+from tfbus.cli._common import (
+    RATE_HELP,
+    console,
+    error,
+    fail,
+    finish_status,
+    literal,
+    seconds,
+)
 from tfbus.cli._sources import BusSource, live, live_only, run_live, source, source_options
 from tfbus.time import NSEC_PER_SEC, Time
 
@@ -104,7 +112,7 @@ def _write(path: Path, data: str | bytes) -> bool:
               default=Path("frames.pdf"), show_default=True,
               help="Output file: .pdf, .svg, .png (rendered by Graphviz 'dot') or .gv/.dot.")
 @click.option("--duration", "--wait", "duration", default=None,
-              type=click.FloatRange(min=0, min_open=True),
+              type=seconds(),
               help="With --bus: seconds to listen before drawing (default 5).")
 def command(bag: Path | None, bus: str | None, output: Path, duration: float | None) -> int:
     """Draw the frame tree with Graphviz, like view_frames.

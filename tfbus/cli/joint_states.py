@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import literal
+from tfbus.cli._common import hertz, literal
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
 from tfbus.cli._sources import publish_bus, publish_options
 from tfbus.topics import JOINT_STATES_TOPIC
@@ -29,7 +29,7 @@ __all__ = ["command"]
 @click.command("joint-states")
 @model_argument
 @publish_options
-@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=10.0,
+@click.option("--rate", type=hertz(), default=10.0,
               show_default=True, help="JointState messages per second.")
 @duration_option
 def command(model: Path, bus: str | None, local: bool, rate: float,

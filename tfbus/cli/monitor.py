@@ -9,7 +9,15 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import RATE_HELP, console, error, fail, finish_status, literal
+from tfbus.cli._common import (
+    RATE_HELP,
+    console,
+    error,
+    fail,
+    finish_status,
+    literal,
+    seconds,
+)
 from tfbus.cli._sources import (
     BagSource,
     BusSource,
@@ -174,9 +182,9 @@ def liveliness_table(src: BusSource) -> Table:
 @click.command("monitor", epilog=RATE_HELP)
 @click.argument("frames", nargs=-1)
 @source_options
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", type=seconds(), default=None,
               help="With --bus: stop after this many seconds (default: Ctrl-C).")
-@click.option("--interval", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--interval", type=seconds(), default=None,
               help="With --bus: print the tables every this many seconds (default 1).")
 def command(
     frames: tuple[str, ...], bag: Path | None, bus: str | None, duration: float | None,

@@ -8,7 +8,19 @@ from typing import Any
 
 import click
 
-from tfbus.cli._common import TIME, bag_path, console, fmt_sec, literal, one_line, warn
+from tfbus.cli._common import (
+    MAX_HZ,
+    MAX_SECONDS,
+    TIME,
+    FiniteFloat,
+    bag_path,
+    console,
+    fail,
+    fmt_sec,
+    literal,
+    one_line,
+    warn,
+)
 from tfbus.cli._sources import (
     cancel_on_signal,
     check_bag,
@@ -16,14 +28,14 @@ from tfbus.cli._sources import (
     publish_options,
     run_live,
 )
-from tfbus.time import Time
+from tfbus.time import NSEC_PER_SEC, Time
 
 __all__ = ["command"]
 
 
 @click.command("replay")
 @click.argument("path", type=bag_path())
-@click.option("--rate", "-r", type=click.FloatRange(min=0), default=1.0, show_default=True,
+@click.option("--rate", "-r", type=FiniteFloat(min=0, max=MAX_HZ), default=1.0, show_default=True,
               help="Speed factor (2 = twice as fast); 0 = as fast as possible.")
 @click.option("--start", type=TIME, default=None, help="Start at this bag time (seconds).")
 @click.option("--stop", type=TIME, default=None, help="Stop before this bag time.")
@@ -50,11 +62,19 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
     check_bag(path)
     open_bus = publish_bus(bus, local, name="tfbus-replay")
     n_total = 0
+    first = last = None
     try:
-        for _ in read_messages(path):
+        for rec in read_messages(path):
             n_total += 1
+            first = rec.time.ns if first is None else min(first, rec.time.ns)
+            last = rec.time.ns if last is None else max(last, rec.time.ns)
     except BagReadError:
         pass
+    if rate and first is not None and last is not None:
+        span = (last - first) / NSEC_PER_SEC
+        if span / rate > MAX_SECONDS:
+            fail(f"--rate {rate:g}: replaying {span:.3f} s of bag time would take "
+                 f"{span / rate:.3g} s, more than {MAX_SECONDS:g} s")
     result: list[int] = []
     problem: list[BagReadError] = []
     code = run_live(lambda: _replay(open_bus, path, rate, start, stop, quiet, n_total,

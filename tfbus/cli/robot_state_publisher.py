@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import literal
+from tfbus.cli._common import hertz, literal, seconds
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
 from tfbus.cli._sources import publish_bus, publish_options
 
@@ -28,15 +28,19 @@ __all__ = ["command"]
 @click.command("robot-state-publisher")
 @model_argument
 @publish_options
-@click.option("--publish-frequency", type=click.FloatRange(min=0, min_open=True),
+@click.option("--publish-frequency", type=hertz(),
               default=20.0, show_default=True,
               help="Most /tf updates per joint per second of joint-state stamps (ROS's "
                    "publish_frequency; below 1 Hz counts as 1).")
+@click.option("--max-stamp-ahead", type=seconds(zero=True), default=None, metavar="S",
+              help="Drop a JointState stamped more than S seconds ahead of the clock "
+                   "(default: none, as ROS, where one such message holds back every later "
+                   "one until the clock reaches its stamp).")
 @click.option("--frame-prefix", default="", metavar="P",
               help="Prepended to every link name in frame ids (ROS 2's frame_prefix).")
 @duration_option
 def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
-            frame_prefix: str, duration: float | None) -> int:
+            max_stamp_ahead: float | None, frame_prefix: str, duration: float | None) -> int:
     """Publish a robot's links on /tf and /tf_static from its URDF and /joint_states,
     like ROS's robot_state_publisher.
 
@@ -58,7 +62,8 @@ def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
     moving = sum(j.movable for j in rsp.model.joints)
 
     async def start(b: Bus, tg: anyio.abc.TaskGroup) -> None:
-        await tg.start(functools.partial(rsp.run, b, publish_frequency=publish_frequency))
+        await tg.start(functools.partial(rsp.run, b, publish_frequency=publish_frequency,
+                                         max_stamp_ahead=max_stamp_ahead))
         click.echo(f"[ INFO] robot_state_publisher: {literal(rsp.model.name)}: "
                    f"{len(rsp.model.joints)} joints ({moving} moving), root "
                    f"{literal(rsp.model.root)}, on {bus_label(bus, local)}", err=True)
@@ -67,6 +72,8 @@ def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
         s = rsp.statistics
         click.echo(f"[ INFO] summary: {s.received} joint states received, {s.published} "
                    f"published ({s.transforms} transforms), {s.rate_limited} rate-limited, "
-                   f"{s.invalid} invalid, {s.refused_positions} positions refused")
+                   f"{s.invalid} invalid, {s.refused_positions} positions refused"
+                   + (f", {s.ahead} stamped too far ahead" if max_stamp_ahead is not None
+                      else ""))
 
     return serve(open_bus, duration, start, finish)

@@ -7,14 +7,20 @@ until Ctrl-C or SIGTERM (or ``--duration``).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import click
 
-from tfbus.cli._common import literal
+from tfbus.cli._common import fail, literal, seconds
 from tfbus.cli._sources import cancel_on_signal, run_live
 
 __all__ = ["command"]
+
+_ENDPOINT = re.compile(r"^[a-z][a-z0-9+-]*/[^\s/][^\s]*$")
+"""A Zenoh endpoint's shape, ``<protocol>/<address>[?<metadata>][#<config>]``
+(zenoh-protocol ``core/endpoint.rs``); Zenoh checks the rest."""
+_RUST_LOCATION = re.compile(r" at /\S+?:\d+(?::\d+)?\.?")
 
 
 @click.command("router")
@@ -27,7 +33,7 @@ __all__ = ["command"]
               type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A Zenoh JSON5 configuration file (its settings rule; mode is "
                    "router). See docs/zenoh.md for TLS and access control.")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", type=seconds(), default=None,
               help="Stop after this many seconds (default: until Ctrl-C or SIGTERM).")
 def command(listen: tuple[str, ...], connect: tuple[str, ...], config: Path | None,
             duration: float | None) -> int | None:
@@ -43,9 +49,19 @@ def command(listen: tuple[str, ...], connect: tuple[str, ...], config: Path | No
     """
     import anyio
 
+    from tfbus.errors import TransportError
     from tfbus.transports.zenoh.router import ZenohRouter
 
-    router = ZenohRouter(listen=listen or None, connect=connect or None, config=config)
+    for option, endpoints in (("--listen", listen), ("--connect", connect)):
+        for endpoint in endpoints:
+            if not _ENDPOINT.match(endpoint):
+                fail(f"{option} {endpoint!r}: a Zenoh endpoint is PROTOCOL/ADDRESS, e.g. "
+                     "tcp/127.0.0.1:7447")
+    try:
+        router = ZenohRouter(listen=listen or None, connect=connect or None, config=config)
+    except TransportError as err:
+        # (Zenoh's messages end with the Rust source location: not the user's concern)
+        fail(_RUST_LOCATION.sub("", str(err)))
 
     async def main() -> None:
         async with router, anyio.create_task_group() as tg:

@@ -14,7 +14,7 @@ from typing import Any
 
 import click
 
-from tfbus.cli._common import fail, literal
+from tfbus.cli._common import fail, literal, seconds
 from tfbus.cli._sources import (
     DEFAULT_BUS,
     cancel_on_signal,
@@ -34,10 +34,9 @@ __all__ = ["command"]
                    "action of tf2_ros, as /NAME).")
 @click.option("--name", "name", default="tf2_buffer_server", show_default=True,
               help="The server's name (clients use the same: BufferClient(bus, name=...)).")
-@click.option("--cache-time", type=click.FloatRange(min=0, min_open=True), default=10.0,
+@click.option("--cache-time", type=seconds(), default=10.0,
               show_default=True, help="Seconds of history the buffer keeps.")
-@click.option("--max-wait", type=click.FloatRange(min=0, min_open=True, max=1e9), default=60.0,
-              show_default=True,
+@click.option("--max-wait", type=seconds(), default=60.0, show_default=True,
               help="Longest wait of one lookup, seconds (a timeout of none or longer waits "
                    "this long; tf2_ros's buffer_server has no bound).")
 @click.option("--max-pending", type=click.IntRange(min=1, max=1_000_000), default=1000,
@@ -46,7 +45,7 @@ __all__ = ["command"]
 @click.option("--max-per-peer", type=click.IntRange(min=1, max=1_000_000), default=None,
               help="Zenoh: most lookups of one querier waiting at once (default: "
                    "max-pending / 4).")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", type=seconds(), default=None,
               help="Stop after this many seconds (default: until Ctrl-C or SIGTERM).")
 def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending: int,
             max_per_peer: int | None, duration: float | None) -> int | None:

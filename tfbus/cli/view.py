@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import bag_path, fail
+from tfbus.cli._common import HOST, FiniteFloat, bag_path, fail, seconds
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
 
 if TYPE_CHECKING:
@@ -34,7 +34,7 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
               help="Show a live bus (default 'zenoh' without --bag).")
 @click.option("--fixed-frame", default=None,
               help="Frame at the origin (default: the root of the largest tree).")
-@click.option("--host", default="127.0.0.1", show_default=True,
+@click.option("--host", type=HOST, default="127.0.0.1", show_default=True,
               help="Address to serve on. The page answers only requests addressed to this "
                    "machine's names (localhost, 127.0.0.1, [::1]) or to --host, from its own "
                    "origin; from another machine give --token too.")
@@ -62,9 +62,9 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
               help="With --urdf: where package://PKG/... meshes are (DIR/PKG/...), before "
                    "ROS_PACKAGE_PATH's folders and those above the URDF. Repeatable.")
 @click.option("--paused", is_flag=True, help="With --bag: start paused at the bag's start.")
-@click.option("--rate", type=click.FloatRange(0.1, 10.0), default=1.0, show_default=True,
+@click.option("--rate", type=FiniteFloat(0.1, 10.0), default=1.0, show_default=True,
               help="With --bag: playback rate (x0.1-x10).")
-@click.option("--frame-timeout", type=click.FloatRange(min=0.0, min_open=True),
+@click.option("--frame-timeout", type=seconds(),
               default=DEFAULT_FRAME_TIMEOUT, show_default=True,
               help="Seconds without an update before a frame is hidden (it fades to grey "
                    "from a third of it, as rviz's TF display).")

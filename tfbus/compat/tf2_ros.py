@@ -277,6 +277,20 @@ def _is_bus(value: object) -> bool:
     return isinstance(value, Bus)
 
 
+def _describe(value: object) -> str:
+    """``value``'s type and a short repr, for an error message."""
+    text = repr(value)
+    return f"{type(value).__name__} {text[:60] + '...' if len(text) > 60 else text}"
+
+
+def _check_node(who: str, node: object, method: str) -> None:
+    """A TypeError naming ``node`` and its type unless it is a tfbus Bus or has an rclpy
+    node's ``method`` (so a wrong argument is not reported as a missing rclpy)."""
+    if not callable(getattr(node, method, None)):
+        raise TypeError(f"{who}: node must be an rclpy Node or a tfbus.Bus, got "
+                        f"{_describe(node)}")
+
+
 class TransformListener:
     """tf2_ros ``TransformListener(buffer, node)``: fills ``buffer`` (a compat
     :class:`Buffer` or a :class:`tfbus.Buffer`) from an rclpy node's ``/tf`` and
@@ -295,9 +309,12 @@ class TransformListener:
         self._subscriptions: list[Any] = []
         if bus is not None or _is_bus(node):
             chosen = bus if bus is not None else node
-            assert isinstance(chosen, Bus)
+            if not isinstance(chosen, Bus):
+                raise TypeError("TransformListener: bus must be a tfbus.Bus, got "
+                                f"{_describe(chosen)}")
             self._inner = _Listener(self.buffer, chosen)
         elif node is not None:
+            _check_node("TransformListener", node, "create_subscription")
             self._attach_rclpy(node)
         else:
             raise InvalidArgumentException("TransformListener needs an rclpy node or bus=")
@@ -362,6 +379,7 @@ class TransformBroadcaster:
         if isinstance(node, Bus):
             self._bus_side = _StaticBroadcaster(node) if self._static else _Broadcaster(node)
         else:
+            _check_node(type(self).__name__, node, "create_publisher")
             from rclpy.qos import DurabilityPolicy, QoSProfile
             from tf2_msgs.msg import TFMessage as RosTFMessage
 

@@ -11,6 +11,10 @@ The ``tfbus robot-state-publisher`` and ``tfbus joint-states`` commands (:mod:`t
 run these on a bus.
 """
 
+from tfbus._extras import require
+
+require(__name__, "urdf_parser_py", "lxml")
+
 from tfbus.errors import JointStateError, URDFError
 from tfbus.robot.joint_states import publish_joint_states, sinusoidal_joint_state
 from tfbus.robot.state_publisher import RobotStatePublisher, RobotStateStatistics

@@ -81,6 +81,9 @@ _log = logging.getLogger(__name__)
 
 _F64 = npt.NDArray[np.float64]
 
+_MAX_AHEAD_S = 1e9
+"""The largest ``max_stamp_ahead`` (seconds): beyond it the bound would overflow the
+int64 nanoseconds of a stamp (and bounds nothing)."""
 _MAX_OTHER_NAMES = 1024
 """Joint names not in the model that :meth:`RobotStatePublisher.run` remembers for its rate
 limit; past that they are all forgotten at once (and count as never published, as a name
@@ -92,7 +95,8 @@ class RobotStateStatistics:
     """Counters of :meth:`RobotStatePublisher.run`: JointState messages ``received``,
     ``published`` on /tf, skipped by the ``rate_limited`` check, ``invalid`` (not a
     JointState, or refused whole), ``refused_positions`` (NaN/Inf positions dropped),
-    and ``transforms`` published on /tf."""
+    ``ahead`` (stamped further ahead of the clock than ``max_stamp_ahead`` allows) and
+    ``transforms`` published on /tf."""
 
     received: int = 0
     published: int = 0
@@ -100,6 +104,7 @@ class RobotStateStatistics:
     invalid: int = 0
     refused_positions: int = 0
     transforms: int = 0
+    ahead: int = 0
 
 
 def _quaternions(r: _F64) -> _F64:
@@ -342,6 +347,7 @@ class RobotStatePublisher:
         *,
         joint_states_topic: str = JOINT_STATES_TOPIC,
         publish_frequency: float = 20.0,
+        max_stamp_ahead: float | None = None,
         clock: Clock | None = None,
         task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
     ) -> None:
@@ -353,19 +359,33 @@ class RobotStatePublisher:
         TFMessage on ``/tf``, rate-limited as ROS 1's node does: published only when
         ``stamp >= least recent publish stamp of its joints + 1 / max(publish_frequency,
         1)`` seconds (unless ``ignore_timestamp``); a clock jump backwards resets that
-        memory. Invalid messages are counted in :attr:`statistics` and logged, and
+        memory. As there, one JointState stamped ahead of the clock holds every later
+        one back until the clock reaches its stamp (ROS 1 ``joint_state_listener.cpp``
+        takes ``min(now, last publish stamps)``): an hour ahead, an hour of silence.
+        ``max_stamp_ahead`` (seconds) is the way out: a JointState stamped more than
+        that ahead of ``clock.now()`` is counted in ``statistics.ahead``, logged and
+        dropped, remembered by nobody (None, the default: ROS's behaviour). Invalid
+        messages are counted in :attr:`statistics` and logged, and
         never stop the node; with NaN/Inf positions the other joints are still published.
         Publish times are kept for the model's joints and for at most 1 024 other names
         (then those are forgotten at once), not for every name ever heard.
 
         Raises:
-            ValueError: if ``publish_frequency`` is not a positive finite number.
+            ValueError: if ``publish_frequency`` is not a positive finite number, or
+                ``max_stamp_ahead`` not a finite number >= 0.
             RuntimeError / anyio.ClosedResourceError: if the bus is not open / closed.
         """
         if not (isinstance(publish_frequency, (int, float)) and math.isfinite(publish_frequency)
                 and publish_frequency > 0):
             raise ValueError(f"publish_frequency must be a positive number of Hz, "
                              f"got {publish_frequency!r}")
+        ahead_ns: int | None = None
+        if max_stamp_ahead is not None:
+            if not (isinstance(max_stamp_ahead, (int, float))
+                    and 0 <= max_stamp_ahead <= _MAX_AHEAD_S):
+                raise ValueError(f"max_stamp_ahead must be seconds in [0, {_MAX_AHEAD_S:g}], "
+                                 f"got {max_stamp_ahead!r}")
+            ahead_ns = round(max_stamp_ahead * 1e9)
         clock = clock if clock is not None else SystemClock()
         interval = round(1e9 / max(float(publish_frequency), 1.0))
         last_publish: dict[str, int] = {}
@@ -401,6 +421,12 @@ class RobotStatePublisher:
                 if last_callback > now:  # moved backwards in time: re-publish
                     last_publish.clear()
                 last_callback = now
+                if ahead_ns is not None and stamp > now + ahead_ns:
+                    stats.ahead += 1
+                    _warn(stats.ahead, "ignored a JointState on %s stamped %.3f s ahead of "
+                          "the clock (max_stamp_ahead %g s)", joint_states_topic,
+                          (stamp - now) / 1e9, max_stamp_ahead)
+                    continue
                 keys = [n for n in names if isinstance(n, str)]
                 least = min([now, *(last_publish.get(n, 0) for n in keys)])
                 if not (self.ignore_timestamp or stamp >= least + interval):

@@ -66,6 +66,10 @@ transport"): :mod:`~tfbus.transports.ros1.transport` (:class:`Ros1Transport`, th
 is :mod:`tfbus.codecs.ros1`.
 """
 
+from tfbus._extras import require
+
+require(__name__, "rosbags", extra="ros1")
+
 from tfbus.codecs.ros1 import TF_MD5SUM, TF_TYPE, TFCodec
 
 from .tcpros import decode_header, encode_header

@@ -197,6 +197,7 @@ class _Inbound:
                 f"publisher {self.uri} sends md5sum {header.get('md5sum')!r} on {self.topic}"
             )
         self.conn_id = self.node._open_conn(header.get("callerid", self.uri), "i", self.topic)
+        self.node._delivering.add((self.topic, self.uri))
         self.header_or_end.set()
 
 
@@ -282,6 +283,9 @@ class Ros1Transport:
         self._latched_frame: dict[str, bytes] = {}
         self._outgoing: dict[str, list[_Outgoing]] = {}
         self._incoming: dict[tuple[str, str], anyio.CancelScope] = {}
+        # (topic, publisher URI) whose TCPROS header was accepted: kept first and asked
+        # again without queueing behind new, unproven publishers
+        self._delivering: set[tuple[str, str]] = set()
         self._bus_info: dict[int, list[Any]] = {}
         self._next_conn = 0
         self._tg: anyio.abc.TaskGroup | None = None
@@ -579,16 +583,24 @@ class Ros1Transport:
 
     def _update_publishers(self, bus: BusLike, topic: str, uris: list[str]) -> None:
         """Follow exactly the publishers ``uris`` of ``topic`` (an answer of the master or
-        a ``publisherUpdate``): at most :data:`MAX_PUBLISHERS`, those already followed
-        first; none outside loopback unless allowed (``refused_hosts``)."""
+        a ``publisherUpdate``): at most :data:`MAX_PUBLISHERS`, those that delivered
+        first, then those already followed, then new ones; none outside loopback unless
+        allowed (``refused_hosts``). A publisher that delivered asks ``requestTopic``
+        again outside the :data:`MAX_CONCURRENT_REQUESTS` queue, so thousands of new
+        URIs that never answer cannot starve it."""
         wanted: dict[str, None] = {}
         current = {k[1] for k in self._incoming if k[0] == topic}
-        fresh = []
-        for uri in dict.fromkeys(uris):
-            if uri == self._api_uri:
-                continue
-            if uri in current:
+        listed = [uri for uri in dict.fromkeys(uris) if uri != self._api_uri]
+        for uri in listed:
+            if (topic, uri) in self._delivering and uri in current:
                 wanted[uri] = None
+        fresh = []
+        for uri in listed:
+            if uri in current:
+                if len(wanted) < MAX_PUBLISHERS:
+                    wanted[uri] = None
+                elif uri not in wanted:
+                    fresh.append(uri)  # (over the bound: dropped and counted below)
             else:
                 fresh.append(uri)
         for uri in fresh:
@@ -610,6 +622,7 @@ class Ros1Transport:
             wanted[uri] = None
         for key in [k for k in self._incoming if k[0] == topic and k[1] not in wanted]:
             self._incoming.pop(key).cancel()
+        self._delivering = {k for k in self._delivering if k[0] != topic or k[1] in wanted}
         tg = self._tg
         if tg is None:
             return
@@ -662,7 +675,8 @@ class Ros1Transport:
         limiter = self._request_limiter
         if limiter is None:
             raise TransportError("the node is not running")
-        async with limiter:
+        proven = (topic, uri) in self._delivering
+        async with contextlib.nullcontext() if proven else limiter:
             reply = await call(
                 uri, "requestTopic", self._name, topic, [["TCPROS"]], timeout=self._timeout
             )

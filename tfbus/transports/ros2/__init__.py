@@ -21,6 +21,10 @@ transport package (``docs/architecture.md``, "Adding a transport"):
 The samples are (de)serialised by :mod:`tfbus.codecs.cdr`.
 """
 
+from tfbus._extras import require
+
+require(__name__, "cyclonedds")
+
 from tfbus.transports.ros2.dds import DOMAIN_ID_MAX, cyclone_config
 from tfbus.transports.ros2.transport import TF_TYPE_HASH, Ros2Statistics, Ros2Transport
 

@@ -31,6 +31,10 @@ Zenoh's own errors are raised as :class:`~tfbus.errors.TransportError`. See
 ``docs/zenoh.md`` for multi-host set-ups, TLS and access control.
 """
 
+from tfbus._extras import require
+
+require(__name__, "zenoh", "msgspec")
+
 from tfbus.transports.zenoh.config import DEFAULT_PORT, zenoh_config
 from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
