@@ -47,3 +47,32 @@ async def test_lookups_map_their_timeout_to_http_errors(anyio_backend: str) -> N
             buffer = app.state.buffer
         # Shutdown: the lifespan left the bus and the listener; nothing waits.
         assert buffer.pending_waits == 0
+
+
+def test_served_by_uvicorn_and_shut_down_by_sigterm() -> None:
+    """The same app behind a real uvicorn on 127.0.0.1: start-up, a lookup, and SIGTERM
+    (uvicorn's graceful shutdown runs the lifespan's exit: the bus closes)."""
+    pytest.importorskip("uvicorn")
+    import signal
+    import socket
+
+    from .proc import Child
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = Child("-m", "uvicorn", "examples.fastapi_app:app", "--host", "127.0.0.1",
+                   "--port", str(port))
+    try:
+        server.expect("INFO:     Application startup complete.")
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+            ok = client.get("/transform/odom/base_link", params={"ahead": 0.2})
+            assert ok.status_code == 200, ok.text
+            late = client.get("/transform/odom/base_link", params={"ahead": 100, "timeout": 0.3})
+            assert late.status_code == 504
+        # uvicorn re-raises the signal once its graceful shutdown is done (0.29+).
+        assert server.terminate() in (0, -signal.SIGTERM)
+        server.expect("INFO:     Application shutdown complete.")
+        assert not any("Traceback" in line for line in server.seen), server.seen
+    finally:
+        server.kill()
