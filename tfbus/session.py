@@ -18,8 +18,8 @@ Where the owning task runs:
 * either, with ``task_group=``: a task of that anyio task group, which then cannot end
   before the session is closed (the structured choice for servers).
 
-See docs/recipes/jupyter.md for the notebook recipe and docs/application.md for error
-handling, cancellation and shutdown in applications.
+See docs/recipes/jupyter.md for the notebook recipe, and the page "Using tfbus in your
+application" for error handling, cancellation and shutdown.
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ class TransformSession:
         Works from any task of the loop the session was opened in; idempotent (a second
         call returns at once). Shielded from cancellation, so an interrupted caller
         still leaves nothing half-closed. Waits that were pending on the buffer end as
-        :mod:`tfbus.buffer` documents for a closed bus (see docs/application.md).
+        :mod:`tfbus.buffer` documents for a closed bus.
 
         Raises:
             Exception: the error the owning task ended with (a transport failure, as
