@@ -49,6 +49,7 @@ LAYERS: dict[str, int] = {
     "listener": 3,
     "broadcaster": 3,
     "fleet": 3,
+    "session": 3,  # a bus, buffer, listener and broadcasters held by a background task
     "monitor": 3,  # tf_monitor's summaries over a sink (bag/ and cli/ use them)
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,

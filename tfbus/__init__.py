@@ -57,6 +57,8 @@ from tfbus.messages import (
     WrenchStamped,
 )
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
+from tfbus.session import TransformSession as TransformSession
+from tfbus.session import open_session as open_session
 from tfbus.time import Duration, Time
 from tfbus.transports.memory import MemoryTransport
 

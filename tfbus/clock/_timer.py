@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import anyio
 
 from tfbus.clock._base import Clock
+from tfbus.clock._system import SystemClock
 from tfbus.time import Duration, Time, seconds_to_ns
 
 
@@ -48,8 +49,10 @@ class PeriodicTimer:
     reading) re-anchors the schedule: the next deadline becomes ``new_now + period``.
     """
 
-    def __init__(self, period: float | Duration, *, clock: Clock, immediate: bool = False) -> None:
-        """See :func:`every`.
+    def __init__(
+        self, period: float | Duration, *, clock: Clock | None = None, immediate: bool = False
+    ) -> None:
+        """See :func:`every` (``clock=None``: a :class:`~tfbus.clock.SystemClock`).
 
         Raises:
             ValueError: if ``period`` is not positive, or not finite.
@@ -59,6 +62,8 @@ class PeriodicTimer:
         if period_ns <= 0:
             raise ValueError(f"period must be positive, got {period!r}")
         self._period_ns = period_ns
+        if clock is None:
+            clock = SystemClock()
         self._clock = clock
         self._immediate = immediate
         self._anchor_ns: int | None = None  # deadline of index _anchor_index
@@ -139,12 +144,16 @@ class PeriodicTimer:
         )
 
 
-def every(period: float | Duration, *, clock: Clock, immediate: bool = False) -> PeriodicTimer:
+def every(
+    period: float | Duration, *, clock: Clock | None = None, immediate: bool = False
+) -> PeriodicTimer:
     """A periodic timer: ``async for tick in every(0.01, clock=clock): ...`` (100 Hz).
 
     Args:
         period: seconds (float) or a :class:`~tfbus.time.Duration` between deadlines.
-        clock: the time source to read and sleep on.
+        clock: the time source to read and sleep on; default a
+            :class:`~tfbus.clock.SystemClock` (wall time), as every other component's
+            (``Buffer``, ``TransformListener``) default.
         immediate: fire the first tick at once (deadline ``start``) rather than one
             period after the first iteration starts (``ros::Timer`` behaviour, default).
 

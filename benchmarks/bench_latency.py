@@ -1,0 +1,292 @@
+"""Cross-process latency at robot rates: tfbus over Zenoh beside raw zenoh-python.
+
+Two processes on 127.0.0.1 (Zenoh peers, explicit tcp/127.0.0.1 endpoints, multicast
+scouting off: :func:`tfbus.transports.zenoh.config.zenoh_config`, the configuration
+``ZenohTransport`` itself uses). This process receives; a child it starts sends probes at
+each rate in turn (10, 50, 100 and 1 000 Hz by default), paced on absolute deadlines.
+Each probe carries the sender's ``time.monotonic_ns()`` (CLOCK_MONOTONIC is system-wide
+on Linux), so one-way latency is the receiver's clock minus it.
+
+Paths measured, each with Zenoh's default batching and with ``express`` publishers:
+
+* ``raw``: zenoh-python ``Publisher.put`` of 8 bytes -> subscriber callback (on Zenoh's
+  thread): the floor any Python program on Zenoh pays;
+* ``raw+loop``: the same callback handing the sample to an asyncio loop
+  (``loop.call_soon_threadsafe`` into an ``asyncio.Queue``) and the latency taken when the
+  task awaiting ``queue.get()`` resumes: the thread hop and task wake-up any awaiting
+  Python program on Zenoh pays;
+* ``bus``: ``TransformBroadcaster.send_transform`` on a ``Bus(ZenohTransport)`` ->
+  a lookup awaiting that stamp (``Buffer.wait_for_transform``) on the receiver's bus.
+
+Usage: ``python benchmarks/bench_latency.py [--seconds 2] [--rates 10,50,100,1000]
+[--paths raw,raw+loop,bus] [--backend asyncio]``. Prints a table of medians and p90 per
+rate and path (microseconds) and the ratio of ``bus`` to ``raw+loop`` and to ``raw``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import socket
+import statistics
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import anyio
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import zenoh
+
+from tfbus.broadcaster import TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.listener import TransformListener
+from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.time import Time
+from tfbus.transports.zenoh import ZenohTransport
+from tfbus.transports.zenoh.config import zenoh_config
+
+RAW_KEY = "bench/latency"
+PROBE = struct.Struct("<qq")  # (rate, sent monotonic ns)
+START_DELAY = 1.0  # seconds the sender waits after it sees the receiver, before probing
+
+
+def _schedule(rates: list[float], seconds: float) -> list[tuple[float, int]]:
+    """(rate, probes) per rate: ``seconds`` worth, at least 20, at most 2000."""
+    return [(rate, max(20, min(2000, int(rate * seconds)))) for rate in rates]
+
+
+def _pace(rates: list[float], seconds: float) -> list[tuple[int, float]]:
+    """(rate, offset from the start in seconds) of every probe, in order."""
+    out: list[tuple[int, float]] = []
+    t = 0.0
+    for rate, count in _schedule(rates, seconds):
+        for _ in range(count):
+            out.append((int(rate), t))
+            t += 1.0 / rate
+        t += 0.2  # a gap between rates
+    return out
+
+
+# -- sender (child process) -------------------------------------------------------------
+
+
+def raw_sender(args: argparse.Namespace) -> None:
+    cfg, _ = zenoh_config(connect=args.endpoint)
+    with zenoh.open(cfg) as session:
+        publisher = session.declare_publisher(RAW_KEY, express=args.express)
+        deadline = time.monotonic() + 30
+        while not publisher.matching_status.matching:
+            if time.monotonic() > deadline:
+                raise SystemExit("raw sender: no subscriber within 30 s")
+            time.sleep(0.01)
+        time.sleep(START_DELAY)
+        start = time.monotonic()
+        for rate, offset in _pace(args.rate_list, args.seconds):
+            delay = start + offset - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            publisher.put(PROBE.pack(rate, time.monotonic_ns()))
+        time.sleep(0.5)
+
+
+async def bus_sender(args: argparse.Namespace) -> None:
+    transport = ZenohTransport(connect=args.endpoint, name="latency-sender", express=args.express)
+    async with Bus(transport=transport) as bus:
+        with anyio.fail_after(30):
+            while not transport.alive():
+                await anyio.sleep(0.01)
+        await anyio.sleep(START_DELAY)
+        tf = TransformBroadcaster(bus)
+        start = time.monotonic()
+        for i, (rate, offset) in enumerate(_pace(args.rate_list, args.seconds), 1):
+            delay = start + offset - time.monotonic()
+            if delay > 0:
+                await anyio.sleep(delay)
+            await tf.send_transform(
+                TransformStamped(
+                    Header(Time.from_ns(i), "world"),
+                    "probe",
+                    Transform(Vector3(float(time.monotonic_ns()), float(rate), 0.0), Quaternion()),
+                )
+            )
+        await anyio.sleep(0.5)
+
+
+# -- receiver (this process) ------------------------------------------------------------
+
+
+def _child(args: argparse.Namespace, path: str, endpoint: str) -> subprocess.Popen[bytes]:
+    cmd = [sys.executable, __file__, "--role", "sender", "--path", path, "--endpoint", endpoint,
+           "--seconds", str(args.seconds), "--rates", args.rates, "--backend", args.backend]
+    if args.express:
+        cmd.append("--express")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    return subprocess.Popen(cmd, env=env)
+
+
+def _total(args: argparse.Namespace) -> int:
+    return len(_pace(args.rate_list, args.seconds))
+
+
+def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dict[int, list[float]]:
+    lat: dict[int, list[float]] = {}
+    total = _total(args)
+    done = threading.Event()
+    count = [0]
+
+    def record(rate: int, sent: int, now: int) -> None:
+        lat.setdefault(rate, []).append((now - sent) / 1e3)
+        count[0] += 1
+        if count[0] >= total:
+            done.set()
+
+    async def run_loop() -> None:
+        loop = asyncio.get_running_loop()
+        queue: asyncio.Queue[tuple[int, int]] = asyncio.Queue()
+
+        def callback(sample: zenoh.Sample) -> None:
+            loop.call_soon_threadsafe(queue.put_nowait, PROBE.unpack(sample.payload.to_bytes()))
+
+        cfg, _ = zenoh_config(listen=endpoint)
+        with zenoh.open(cfg) as session:
+            session.declare_subscriber(RAW_KEY, callback)
+            child = _child(args, "raw", endpoint)
+            try:
+                limit = 60 + 2 * args.seconds * len(args.rate_list)
+                with anyio.move_on_after(limit):
+                    while count[0] < total:
+                        if child.poll() is not None and queue.empty():
+                            await asyncio.sleep(0.5)  # the last samples in flight
+                            if queue.empty():
+                                break
+                        try:
+                            rate, sent = await asyncio.wait_for(queue.get(), 1.0)
+                        except TimeoutError:
+                            continue
+                        record(rate, sent, time.monotonic_ns())  # the awaiting task resumed
+            finally:
+                child.kill()
+                child.wait(timeout=10)
+
+    if loop_hop:
+        asyncio.run(run_loop())
+        return lat
+
+    def callback(sample: zenoh.Sample) -> None:
+        rate, sent = PROBE.unpack(sample.payload.to_bytes())
+        record(rate, sent, time.monotonic_ns())
+
+    cfg, _ = zenoh_config(listen=endpoint)
+    with zenoh.open(cfg) as session:
+        session.declare_subscriber(RAW_KEY, callback)
+        child = _child(args, "raw", endpoint)
+        try:
+            deadline = time.monotonic() + 60 + 2 * args.seconds * len(args.rate_list)
+            while not done.wait(0.05) and time.monotonic() < deadline:
+                if child.poll() is not None:
+                    done.wait(0.5)
+                    break
+        finally:
+            child.kill()
+            child.wait(timeout=10)
+    return lat
+
+
+async def bus_receiver(args: argparse.Namespace, endpoint: str) -> dict[int, list[float]]:
+    lat: dict[int, list[float]] = {}
+    transport = ZenohTransport(listen=endpoint, name="latency-receiver", express=args.express)
+    buffer = Buffer(cache_time=3600.0)
+    async with Bus(transport=transport) as bus, TransformListener(buffer, bus):
+        child = _child(args, "bus", endpoint)
+        try:
+            with anyio.fail_after(60):
+                await buffer.wait_for_transform("world", "probe", Time.from_ns(1))
+            for i in range(1, _total(args) + 1):
+                try:
+                    ts = await buffer.wait_for_transform(
+                        "world", "probe", Time.from_ns(i), timeout=2.0
+                    )
+                except Exception:
+                    continue
+                now = time.monotonic_ns()
+                if ts.header.stamp.ns == i:
+                    v = ts.transform.translation
+                    lat.setdefault(int(v.y), []).append((now - v.x) / 1e3)
+        finally:
+            child.kill()
+            child.wait(timeout=10)
+    return lat
+
+
+def _free_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--role", default="receiver", choices=["receiver", "sender"])
+    parser.add_argument("--path", default="", help="sender: raw or bus")
+    parser.add_argument("--endpoint", default="")
+    parser.add_argument("--seconds", type=float, default=2.0, help="seconds per rate")
+    parser.add_argument("--rates", default="10,50,100,1000")
+    parser.add_argument("--paths", default="raw,raw+loop,bus")
+    parser.add_argument("--express", action="store_true", help="sender: express publisher")
+    parser.add_argument("--modes", default="batched,express", help="receiver: which to run")
+    parser.add_argument("--backend", default="asyncio")
+    args = parser.parse_args()
+    args.rate_list = [float(r) for r in args.rates.split(",")]
+    if args.role == "sender":
+        if args.path == "raw":
+            raw_sender(args)
+        else:
+            anyio.run(bus_sender, args, backend=args.backend)
+        return
+    paths = args.paths.split(",")
+    modes = args.modes.split(",")
+    print(f"bench_latency: one-way latency, 2 processes on 127.0.0.1, backend={args.backend}, "
+          f"{args.seconds:g} s per rate (20..2000 probes), microseconds")
+    results: dict[tuple[str, str], dict[int, list[float]]] = {}
+    for mode in modes:
+        args.express = mode == "express"
+        for path in paths:
+            endpoint = _free_endpoint()
+            if path == "bus":
+                got = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
+            else:
+                got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
+            results[(mode, path)] = got
+    header = f"{'publisher':9} {'rate':>6} " + " ".join(
+        f"{p + ' med':>13} {'p90':>7}" for p in paths
+    )
+    print(header)
+    for mode in modes:
+        for rate in (int(r) for r in args.rate_list):
+            cells = []
+            meds: dict[str, float] = {}
+            for path in paths:
+                lat = sorted(results[(mode, path)].get(rate, []))
+                if not lat:
+                    cells.append(f"{'-':>13} {'-':>7}")
+                    continue
+                meds[path] = statistics.median(lat)
+                p90 = lat[min(len(lat) - 1, int(len(lat) * 0.9))]
+                cells.append(f"{meds[path]:13.0f} {p90:7.0f}")
+            ratio = ""
+            if "bus" in meds:
+                ratio = "  bus/" + " bus/".join(
+                    f"{p}={meds['bus'] / meds[p]:.2f}" for p in paths if p != "bus" and p in meds
+                )
+            print(f"{mode:9} {rate:6d} " + " ".join(cells) + ratio)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,78 @@
+"""The FastAPI recipe (examples/fastapi_app.py) run by its real lifespan and served to an
+httpx client through the ASGI transport, on asyncio and on trio."""
+
+from __future__ import annotations
+
+import anyio
+import pytest
+
+pytest.importorskip("fastapi")
+httpx = pytest.importorskip("httpx")
+
+from examples.fastapi_app import app  # noqa: E402
+
+
+@pytest.mark.anyio
+async def test_lookups_map_their_timeout_to_http_errors(anyio_backend: str) -> None:
+    with anyio.fail_after(60):
+        async with app.router.lifespan_context(app):
+            transport = httpx.ASGITransport(app=app)
+            async with httpx.AsyncClient(transport=transport, base_url="http://tfbus") as client:
+                # 0.2 s ahead: answered once the broadcast covering that time arrives.
+                ok = await client.get("/transform/odom/base_link", params={"ahead": 0.2})
+                assert ok.status_code == 200, ok.text
+                body = ok.json()
+                x = body["translation"][0]
+                assert 0.15 <= x <= 60.0  # 1 m/s since start-up, at least the 0.2 s ahead
+                assert body["translation"][1:] == [0.0, 0.0]
+
+                # 100 s ahead cannot arrive within 0.3 s: 504 with tf2's reason.
+                late = await client.get(
+                    "/transform/odom/base_link", params={"ahead": 100, "timeout": 0.3}
+                )
+                assert late.status_code == 504
+                assert late.json()["detail"].startswith("no transform within 0.3 s:")
+
+                unknown = await client.get("/transform/odom/gripper", params={"timeout": 0.3})
+                assert unknown.status_code == 404
+                assert unknown.json()["detail"] == "unknown frame 'gripper'"
+
+                # A request whose client gives up: its wait is removed with its task.
+                with anyio.move_on_after(0.3):
+                    await client.get(
+                        "/transform/odom/base_link", params={"ahead": 100, "timeout": 100}
+                    )
+                waits = await client.get("/waits")
+                assert waits.json() == {"pending": 0}
+            buffer = app.state.buffer
+        # Shutdown: the lifespan left the bus and the listener; nothing waits.
+        assert buffer.pending_waits == 0
+
+
+def test_served_by_uvicorn_and_shut_down_by_sigterm() -> None:
+    """The same app behind a real uvicorn on 127.0.0.1: start-up, a lookup, and SIGTERM
+    (uvicorn's graceful shutdown runs the lifespan's exit: the bus closes)."""
+    pytest.importorskip("uvicorn")
+    import signal
+    import socket
+
+    from .proc import Child
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = Child("-m", "uvicorn", "examples.fastapi_app:app", "--host", "127.0.0.1",
+                   "--port", str(port))
+    try:
+        server.expect("INFO:     Application startup complete.")
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+            ok = client.get("/transform/odom/base_link", params={"ahead": 0.2})
+            assert ok.status_code == 200, ok.text
+            late = client.get("/transform/odom/base_link", params={"ahead": 100, "timeout": 0.3})
+            assert late.status_code == 504
+        # uvicorn re-raises the signal once its graceful shutdown is done (0.29+).
+        assert server.terminate() in (0, -signal.SIGTERM)
+        server.expect("INFO:     Application shutdown complete.")
+        assert not any("Traceback" in line for line in server.seen), server.seen
+    finally:
+        server.kill()
