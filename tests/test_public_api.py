@@ -15,9 +15,10 @@ def test_public_all_is_pinned() -> None:
         "PoseWithCovarianceStamped", "Quaternion", "SetResult", "Stamped",
         "StaticTransformBroadcaster", "Subscription", "SystemClock", "TFMessage", "TfbusError",
         "Time", "TimeoutException", "Transform", "TransformArray", "TransformBroadcaster",
-        "TransformException", "TransformListener", "TransformStamped", "Transport",
+        "TransformException", "TransformListener", "TransformSession", "TransformStamped",
+        "Transport",
         "TransportError", "Twist", "TwistStamped", "Vector3", "Vector3Stamped",
-        "VelocityStamped", "Wrench", "WrenchStamped", "every",
+        "VelocityStamped", "Wrench", "WrenchStamped", "every", "open_session",
     ]  # fmt: skip
     for name in tfbus.__all__:
         assert getattr(tfbus, name).__doc__, f"{name} has no docstring"

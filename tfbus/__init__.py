@@ -107,6 +107,7 @@ __all__ = [
     "TransformBroadcaster",
     "TransformException",
     "TransformListener",
+    "TransformSession",
     "TransformStamped",
     "Transport",
     "TransportError",
@@ -118,4 +119,5 @@ __all__ = [
     "Wrench",
     "WrenchStamped",
     "every",
+    "open_session",
 ]
