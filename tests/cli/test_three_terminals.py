@@ -251,6 +251,11 @@ def test_monitor_lists_the_broadcaster_alive_then_reports_it_dead() -> None:
         k = monitor.expect(lambda line: alive_row.search(line) is not None)
         f = monitor.expect(lambda line: frame_row.search(line) is not None)
         assert float(frame_row.search(monitor.seen[f]).group(1)) > 10  # type: ignore[union-attr]
+        t = monitor.expect(lambda line: line.startswith("transport: "), start=f)
+        counts = re.fullmatch(r"transport: (\d+) received, (\d+) lost \(gaps in the "
+                              r"publishers' sequence numbers\), (\d+) dropped on receipt",
+                              monitor.seen[t].strip())
+        assert counts is not None and int(counts.group(1)) > 0, monitor.seen[t]
         broadcaster.kill()  # SIGKILL: no goodbye, Zenoh notices the link drop
         d = monitor.expect(
             lambda line: line.startswith("[dead] broadcaster robot_tf_publisher"), start=k

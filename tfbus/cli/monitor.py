@@ -146,10 +146,28 @@ def print_monitor(
             f"{a.delay_max:.6f}" if a.delay_count else "-",
         )
     out.print(btable)
+    if live_src is not None:
+        line = transport_line(live_src)
+        if line:
+            out.print(line)
     if live_src is not None and live_src.fleet is not None:
         out.print(robots_table(live_src.fleet, s, rate))
     if live_src is not None and live_src.has_liveliness:
         out.print(liveliness_table(live_src))
+
+
+def transport_line(src: BusSource) -> str:
+    """What the transport lost or dropped on the way in, for a transport that counts it
+    (Zenoh's :class:`~tfbus.transports.zenoh.counters.ZenohStatistics`): ``lost`` is the
+    gaps in the publishers' sequence numbers (messages a congested network or a sender's
+    ``congestion_control="drop"`` publisher dropped: the sender cannot count those),
+    ``dropped`` the payloads refused on receipt. Empty for a transport without them."""
+    statistics = getattr(src.transport, "statistics", None)
+    stats = statistics() if callable(statistics) else None
+    if stats is None or not hasattr(stats, "lost"):
+        return ""
+    return (f"transport: {stats.received} received, {stats.lost} lost (gaps in the "
+            f"publishers' sequence numbers), {stats.dropped} dropped on receipt")
 
 
 def robots_table(fleet: FleetBuffer, s: TfSummary,
