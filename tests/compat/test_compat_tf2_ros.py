@@ -149,6 +149,3 @@ async def test_listener_and_broadcasters_on_a_tfbus_bus() -> None:
     assert list(t.transform.translation) == pytest.approx([2.0, 0.0, 0.0])
 
 
-def test_listener_needs_a_node_or_a_bus() -> None:
-    with pytest.raises(tf2_ros.InvalidArgumentException, match="node or bus"):
-        tf2_ros.TransformListener(tf2_ros.Buffer())
