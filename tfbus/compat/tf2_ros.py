@@ -48,7 +48,13 @@ from tfbus.bus import Bus
 from tfbus.clock import Clock
 from tfbus.compat import tf2_geometry_msgs as _geometry
 from tfbus.compat._args import to_duration, to_stamped, to_time, to_transform_stamped
-from tfbus.compat._loop import LoopThreadError, background, in_event_loop, ros1_bus
+from tfbus.compat._loop import (
+    LoopThreadError,
+    background,
+    in_event_loop,
+    ros1_bus,
+    rospy_node_name,
+)
 from tfbus.compat._types import flavour_of, ros_message, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
 from tfbus.errors import (
@@ -151,12 +157,32 @@ class Buffer:
         self, cache_time: object = None, node: object = None, *, clock: Clock | None = None,
         debug: bool = True,
     ) -> None:
-        """Create the buffer (see the class docs; ``debug`` is ROS 1's, unused)."""
+        """Create the buffer (see the class docs). ``debug`` (ROS 1's): in an initialised
+        rospy node, offer the ``~tf2_frames`` service as ROS 1's Buffer does."""
         seconds = 10.0 if cache_time is None else to_duration(cache_time, "cache_time")
         self.buffer = _Buffer(seconds, clock=clock)
         self.node = node
         self._owned = False
         self._flavour: str | None = None
+        self.frame_server: Any = None
+        if debug and rospy_node_name() is not None:
+            self._serve_frames()
+
+    def _serve_frames(self) -> None:
+        """ROS 1 tf2_ros ``Buffer(debug=True)``: the rospy service ``~tf2_frames``
+        (``tf2_msgs/FrameGraph``, answered with :meth:`all_frames_as_yaml`) unless the
+        node advertises one already (Debian's ``tf2_ros/buffer.py``); view_frames asks it."""
+        import rosgraph.masterapi  # type: ignore[import-not-found]
+        import rospy  # type: ignore[import-not-found]
+        from tf2_msgs.srv import FrameGraph, FrameGraphResponse  # type: ignore[import-not-found]
+
+        try:
+            rosgraph.masterapi.Master(rospy.get_name()).lookupService("~tf2_frames")
+        except (rosgraph.masterapi.Error, rosgraph.masterapi.Failure):
+            self.frame_server = rospy.Service(
+                "~tf2_frames", FrameGraph,
+                lambda _request: FrameGraphResponse(self.all_frames_as_yaml()),
+            )
 
     # ---------------------------------------------------------------- threads
 
