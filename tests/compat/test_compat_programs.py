@@ -87,9 +87,8 @@ def test_echo_matches_debian(master: Master, feed: object, tmp_path: Path) -> No
         want, got = _echo_block(debian), _echo_block(ours)
         # map → laser (static, 45° about z) then laser → tool: the same 14 numbers
         assert got == want
-        assert want[:3] == pytest.approx([1.0 + 0.5 * 0.7071067811865476 + 0.25 * 0.7071067811865476,
-                                          2.0 + 0.5 * 0.7071067811865476 - 0.25 * 0.7071067811865476,
-                                          3.125], abs=1e-9)
+        r = 0.7071067811865476  # (0.5, -0.25, 0.125) turned 45° about z, plus (1, 2, 3)
+        assert want[:3] == pytest.approx([1.0 + 0.75 * r, 2.0 + 0.25 * r, 3.125], abs=1e-9)
         start = time.monotonic()
         ours.proc.send_signal(signal.SIGINT)
         code = ours.proc.wait(timeout=20.0)
