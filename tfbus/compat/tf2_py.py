@@ -46,21 +46,16 @@ class BufferCore:
         self.core = _Core(10.0 if cache_time is None else to_duration(cache_time, "cache_time"))
         self._flavour: str | None = None
 
-    def _note(self, transform: Any) -> None:
-        found = flavour_of(getattr(getattr(transform, "header", None), "stamp", None))
-        if found is not None:
-            self._flavour = found
-
     def set_transform(self, transform: Any, authority: str) -> None:
         """tf2_py ``set_transform(msg, authority)``: :meth:`tfbus.BufferCore.set_transform`
         (returns None, as tf2_py)."""
-        self._note(transform)
+        _note(self, transform)
         self.core.set_transform(to_transform_stamped(transform), authority)
 
     def set_transform_static(self, transform: Any, authority: str) -> None:
         """tf2_py ``set_transform_static(msg, authority)``:
         :meth:`tfbus.BufferCore.set_transform_static` (returns None)."""
-        self._note(transform)
+        _note(self, transform)
         self.core.set_transform_static(to_transform_stamped(transform), authority)
 
     def clear(self) -> None:
@@ -195,6 +190,13 @@ class BufferCore:
             tracking_frame, observation_frame, reference_frame, point,  # type: ignore[arg-type]
             reference_point_frame, to_time(time), _interval(averaging_interval),
         ))
+
+
+def _note(buffer: BufferCore, transform: Any) -> None:
+    """Remember the caller's flavour (rospy / rclpy / tfbus) from a transform's stamp."""
+    found = flavour_of(getattr(getattr(transform, "header", None), "stamp", None))
+    if found is not None:
+        buffer._flavour = found
 
 
 def _pair(v: VelocityStamped) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
