@@ -406,22 +406,58 @@ class Buffer:
 
     # ---------------------------------------------------------------- awaitable
 
-    async def wait_for_transform_async(
-        self, target_frame: str, source_frame: str, time: object, *, timeout: object = None
-    ) -> bool:
-        """ROS 2 ``wait_for_transform_async``, awaitable: True once the transform is
-        available (:meth:`tfbus.Buffer.wait_for_transform`).
+    def _awaitable(self, coro: Any, flavour: str | None) -> Any:
+        """``coro`` for an async caller (asyncio / trio: awaited in its own loop); for an
+        rclpy caller (rclpy imported, no async library running in this thread) an
+        ``rclpy.task.Future`` completed by the background loop, as ROS 2's tf2_ros
+        returns — awaitable in rclpy coroutine callbacks; with ``Buffer(node=...)`` the
+        node's executor is woken when it completes."""
+        rclpy = sys.modules.get("rclpy")
+        if rclpy is None or in_event_loop():
+            return coro
+        from rclpy.task import Future as RclpyFuture  # type: ignore[import-not-found]
 
-        Raises:
+        executor = getattr(self.node, "executor", None)
+        future: Any = RclpyFuture(executor=executor)
+        future.add_done_callback(lambda _f: None)  # a done callback wakes the executor
+        self._own()
+
+        async def run() -> None:
+            try:
+                value = await coro
+            except BaseException as exc:  # handed to the future, as rclpy's tasks do
+                future.set_exception(exc)
+                if not isinstance(exc, Exception):
+                    raise
+            else:
+                future.set_result(value if flavour is None else ros_message(
+                    value, flavour, "TransformStamped") if isinstance(
+                        value, TransformStamped) else value)
+
+        background.portal().start_task_soon(run)
+        return future
+
+    def wait_for_transform_async(
+        self, target_frame: str, source_frame: str, time: object, *, timeout: object = None
+    ) -> Any:
+        """ROS 2 ``wait_for_transform_async``: True once the transform is available
+        (:meth:`tfbus.Buffer.wait_for_transform`) — an awaitable under asyncio / trio,
+        an ``rclpy.task.Future`` under rclpy (see :meth:`_awaitable`).
+
+        Raises (or sets on the future):
             TimeoutException: not within ``timeout`` (a duration or seconds; None:
                 no limit).
         """
-        await self.buffer.wait_for_transform(
-            target_frame, source_frame, to_time(time), _timeout(timeout)
-        )
-        return True
+        t = to_time(time)
 
-    async def wait_for_transform_full_async(
+        async def wait() -> bool:
+            await self.buffer.wait_for_transform(target_frame, source_frame, t,
+                                                 _timeout(timeout))
+            return True
+
+        return self._awaitable(wait(), None)
+
+    def wait_for_transform_full_async(
         self,
         target_frame: str,
         target_time: object,
@@ -430,24 +466,30 @@ class Buffer:
         fixed_frame: str,
         *,
         timeout: object = None,
-    ) -> bool:
-        """ROS 2 ``wait_for_transform_full_async``, awaitable: True once both legs are
-        available (:meth:`tfbus.Buffer.lookup_transform_full_async`)."""
-        await self.lookup_transform_full_async(
-            target_frame, target_time, source_frame, source_time, fixed_frame,
-            timeout=timeout,
-        )
-        return True
+    ) -> Any:
+        """ROS 2 ``wait_for_transform_full_async``: True once both legs are available
+        (:meth:`tfbus.Buffer.lookup_transform_full_async`); an awaitable or an rclpy
+        Future as :meth:`wait_for_transform_async`."""
+        tt, st = to_time(target_time, "target_time"), to_time(source_time, "source_time")
 
-    async def lookup_transform_async(
+        async def wait() -> bool:
+            await self.buffer.lookup_transform_full_async(
+                target_frame, tt, source_frame, st, fixed_frame, _timeout(timeout))
+            return True
+
+        return self._awaitable(wait(), None)
+
+    def lookup_transform_async(
         self, target_frame: str, source_frame: str, time: object, *, timeout: object = None
-    ) -> TransformStamped:
-        """ROS 2 ``lookup_transform_async``: :meth:`tfbus.Buffer.lookup_transform_async`."""
-        return await self.buffer.lookup_transform_async(
-            target_frame, source_frame, to_time(time), _timeout(timeout)
-        )
+    ) -> Any:
+        """ROS 2 ``lookup_transform_async``: :meth:`tfbus.Buffer.lookup_transform_async`
+        — an awaitable under asyncio / trio (a tfbus TransformStamped), an rclpy Future
+        under rclpy (an rclpy TransformStamped), with a ``timeout`` that works."""
+        coro = self.buffer.lookup_transform_async(
+            target_frame, source_frame, to_time(time), _timeout(timeout))
+        return self._awaitable(coro, flavour_of(time))
 
-    async def lookup_transform_full_async(
+    def lookup_transform_full_async(
         self,
         target_frame: str,
         target_time: object,
@@ -456,13 +498,15 @@ class Buffer:
         fixed_frame: str,
         *,
         timeout: object = None,
-    ) -> TransformStamped:
+    ) -> Any:
         """ROS 2 ``lookup_transform_full_async``:
-        :meth:`tfbus.Buffer.lookup_transform_full_async`."""
-        return await self.buffer.lookup_transform_full_async(
+        :meth:`tfbus.Buffer.lookup_transform_full_async`; an awaitable or an rclpy
+        Future as :meth:`lookup_transform_async`."""
+        coro = self.buffer.lookup_transform_full_async(
             target_frame, to_time(target_time, "target_time"), source_frame,
             to_time(source_time, "source_time"), fixed_frame, _timeout(timeout),
         )
+        return self._awaitable(coro, flavour_of(target_time, source_time))
 
 
 def _is_bus(value: object) -> bool:
