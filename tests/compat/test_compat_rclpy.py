@@ -78,5 +78,12 @@ def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
         "child_frame_id": "laser",
         "stamp_ns": 2_000_000_000,
         "translation": [2.5, 0.0, 0.0],
-        "type": "tfbus.messages.TransformStamped",
+        # an rclpy Time given: an rclpy message returned (the caller's type)
+        "type": "geometry_msgs.msg._transform_stamped.TransformStamped",
+        # ROS 2's non-blocking forms under rclpy's executor: rclpy Futures
+        "future_type": "rclpy.task.Future",
+        "done_before": False,
+        "wait_result": True,
+        "awaited_x": 8.5,
+        "timeout_error": "TimeoutException",
     }

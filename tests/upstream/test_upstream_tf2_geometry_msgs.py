@@ -5,9 +5,8 @@ covariance rotation against its definition (ROS 2 ``transform_covariance``: ever
 block ``B`` becomes ``R B Rᵀ``) on random inputs, and its bad input.
 
 Upstream passes ``new_type=PointStamped`` (rclpy's class); here it is tfbus's
-``PointStamped``, the type the compat layer returns. One upstream assertion cannot pass:
-the transformed orientation's sign (w = +1 upstream, through KDL's matrix; tfbus keeps
-the quaternion product, w = -1, the same rotation): a strict xfail below.
+``PointStamped``, the type the compat layer returns. The transformed orientation's
+sign is upstream's (w = +1, through KDL's matrix), exactly.
 """
 
 from __future__ import annotations
@@ -115,13 +114,10 @@ def test_transform() -> None:
     ])  # fmt: skip
     position, orientation = out_c.pose.pose
     assert (position.x, position.y, position.z) == (2, 0, 0)
-    # the same rotation; upstream's sign (w = +1) is the strict xfail below
-    assert (orientation.x, orientation.y, orientation.z, abs(orientation.w)) == (0, 0, 0, 1)
+    assert (orientation.x, orientation.y, orientation.z, orientation.w) == (0, 0, 0, 1)
     assert np.array_equal(out_c.pose.covariance, expected)
 
 
-@pytest.mark.xfail(strict=True, reason="tfbus keeps the quaternion product's sign (q_t * q = "
-                   "-1 here); ROS 2's KDL matrix path returns +1 for the same rotation")
 def test_transform_pose_with_covariance_orientation_sign() -> None:
     t = TfMsg()
     t.transform.translation = V3(1.0, 2.0, 3.0)
@@ -129,7 +125,7 @@ def test_transform_pose_with_covariance_orientation_sign() -> None:
     cov = PoseCovStampedMsg(Hd(RclTime(seconds=2.0).to_msg(), "a"),
                             PoseCovMsg(PoseMsg(V3(1.0, 2.0, 3.0), Q4(w=0.0, x=1.0)), COV))
     out = tf2_geometry_msgs.do_transform_pose_with_covariance_stamped(cov, t)
-    assert out.pose.pose.orientation.w == 1
+    assert tuple(out.pose.pose.orientation) == (0.0, 0.0, 0.0, 1.0)
 
 
 def test_covariance_blocks_rotate_as_defined() -> None:
@@ -168,13 +164,15 @@ def test_ros1_and_ros2_pose_forms() -> None:
     t.transform.translation = V3(1.0, 0.0, 0.0)
     t.transform.rotation = Q4(w=1.0)
     ros2 = tf2_geometry_msgs.do_transform_pose(PoseMsg(V3(0.0, 1.0, 0.0)), t)
-    assert not hasattr(ros2, "header") and list(ros2.position) == [1.0, 1.0, 0.0]
+    # a message given, the same class returned (mutable, as ROS's)
+    assert type(ros2) is PoseMsg and ros2.position == V3(1.0, 1.0, 0.0)
     ros1 = tf2_geometry_msgs.do_transform_pose(PoseStampedMsg(Hd(Time(1), "base"),
                                                               PoseMsg(V3(0.0, 1.0, 0.0))), t)
-    assert ros1.header == Header(Time(1), "map") and list(ros1.pose.position) == [1.0, 1.0, 0.0]
+    assert type(ros1) is PoseStampedMsg and ros1.pose.position == V3(1.0, 1.0, 0.0)
+    assert (ros1.header.stamp.sec, ros1.header.stamp.nanosec, ros1.header.frame_id) == (1, 0, "map")
     stamped = tf2_geometry_msgs.do_transform_pose_stamped(
         PoseStampedMsg(Hd(Time(1), "base")), t)
-    assert list(stamped.pose.position) == [1.0, 0.0, 0.0]
+    assert stamped.pose.position == V3(1.0, 0.0, 0.0)
 
 
 @dataclass

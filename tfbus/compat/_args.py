@@ -30,6 +30,8 @@ from tfbus.messages import (
     TransformStamped,
     Vector3,
     Vector3Stamped,
+    Wrench,
+    WrenchStamped,
 )
 from tfbus.time import Duration, Time
 
@@ -151,13 +153,14 @@ def to_transform_stamped(value: Any, name: str = "transform") -> TransformStampe
 
 def to_stamped(value: Any, name: str = "object_stamped") -> object:
     """A tfbus stamped message for a foreign PointStamped, PoseStamped,
-    Vector3Stamped or TransformStamped (by its fields); other objects as they are
+    Vector3Stamped, WrenchStamped, PoseWithCovarianceStamped, PolygonStamped or
+    TransformStamped (by its fields); other objects as they are
     (they are looked up in the transform registry by their own type)."""
     if isinstance(
         value,
         (
             PointStamped, PoseStamped, Vector3Stamped, TransformStamped,
-            PoseWithCovarianceStamped, PolygonStamped,
+            PoseWithCovarianceStamped, PolygonStamped, WrenchStamped,
         ),
     ):
         return value
@@ -175,6 +178,11 @@ def to_stamped(value: Any, name: str = "object_stamped") -> object:
         return PointStamped(_header(value, name), to_point(value.point, f"{name}.point"))
     if hasattr(value, "vector"):
         return Vector3Stamped(_header(value, name), to_vector3(value.vector, f"{name}.vector"))
+    wrench = getattr(value, "wrench", None)
+    if wrench is not None and hasattr(wrench, "force") and hasattr(wrench, "torque"):
+        return WrenchStamped(_header(value, name), Wrench(
+            to_vector3(wrench.force, f"{name}.wrench.force"),
+            to_vector3(wrench.torque, f"{name}.wrench.torque")))
     pose = getattr(value, "pose", None)
     if pose is not None and hasattr(pose, "covariance") and hasattr(pose, "pose"):
         inner = pose.pose

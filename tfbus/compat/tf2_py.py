@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 from tfbus.compat._args import to_duration, to_point, to_time, to_transform_stamped
+from tfbus.compat._types import flavour_of, time_out
 from tfbus.core import BufferCore as _Core
 from tfbus.errors import (
     ConnectivityException,
@@ -23,7 +24,7 @@ from tfbus.errors import (
     TransformException,
 )
 from tfbus.messages import TransformStamped, VelocityStamped
-from tfbus.time import Duration, Time
+from tfbus.time import Duration
 
 __all__ = [
     "BufferCore",
@@ -43,15 +44,18 @@ class BufferCore:
     def __init__(self, cache_time: object = None) -> None:
         """Create the buffer; ``cache_time`` defaults to 10 s (tf2's default)."""
         self.core = _Core(10.0 if cache_time is None else to_duration(cache_time, "cache_time"))
+        self._flavour: str | None = None
 
     def set_transform(self, transform: Any, authority: str) -> None:
         """tf2_py ``set_transform(msg, authority)``: :meth:`tfbus.BufferCore.set_transform`
         (returns None, as tf2_py)."""
+        _note(self, transform)
         self.core.set_transform(to_transform_stamped(transform), authority)
 
     def set_transform_static(self, transform: Any, authority: str) -> None:
         """tf2_py ``set_transform_static(msg, authority)``:
         :meth:`tfbus.BufferCore.set_transform_static` (returns None)."""
+        _note(self, transform)
         self.core.set_transform_static(to_transform_stamped(transform), authority)
 
     def clear(self) -> None:
@@ -105,10 +109,14 @@ class BufferCore:
             to_time(source_time, "source_time"), fixed_frame,
         )
 
-    def get_latest_common_time(self, target_frame: str, source_frame: str) -> Time:
+    def get_latest_common_time(self, target_frame: str, source_frame: str) -> Any:
         """tf2_py ``get_latest_common_time``:
-        :meth:`tfbus.BufferCore.get_latest_common_time` (a tfbus Time)."""
-        return self.core.get_latest_common_time(target_frame, source_frame)
+        :meth:`tfbus.BufferCore.get_latest_common_time`, in the caller's time type: a
+        rospy ``Time`` (``secs``, ``nsecs``) when the buffer was fed rospy messages, an
+        rclpy ``Time`` for rclpy messages, else a tfbus Time
+        (:mod:`tfbus.compat._types`)."""
+        return time_out(self.core.get_latest_common_time(target_frame, source_frame),
+                        self._flavour)
 
     def all_frames_as_string(self) -> str:
         """tf2_py ``all_frames_as_string``: :meth:`tfbus.BufferCore.all_frames_as_string`."""
@@ -182,6 +190,13 @@ class BufferCore:
             tracking_frame, observation_frame, reference_frame, point,  # type: ignore[arg-type]
             reference_point_frame, to_time(time), _interval(averaging_interval),
         ))
+
+
+def _note(buffer: BufferCore, transform: Any) -> None:
+    """Remember the caller's flavour (rospy / rclpy / tfbus) from a transform's stamp."""
+    found = flavour_of(getattr(getattr(transform, "header", None), "stamp", None))
+    if found is not None:
+        buffer._flavour = found
 
 
 def _pair(v: VelocityStamped) -> tuple[tuple[float, float, float], tuple[float, float, float]]:

@@ -4,27 +4,41 @@
 
 * :class:`Buffer`: ``lookup_transform(target, source, time, timeout=...)``,
   ``lookup_transform_full``, ``can_transform(..., return_debug_tuple=)``,
-  ``can_transform_full``, ``transform``, ``transform_full``, ``set_transform(_static)``,
-  ``clear`` answer at once from the data at hand (they never block the event loop: a
-  ``timeout`` is accepted and not waited on, see below); the awaitable
+  ``can_transform_full``, ``transform``, ``transform_full`` wait up to ``timeout`` in the
+  calling thread (tf2's semantics), woken by the arrival that answers them in the
+  process's background loop (:mod:`tfbus.compat._loop`); from an event loop's thread a
+  wait that would be needed raises :class:`~tfbus.compat._loop.LoopThreadError` (use the
+  awaitable methods there). ``set_transform(_static)``, ``clear``,
+  ``get_latest_common_time``, ``all_frames_as_yaml`` / ``all_frames_as_string``; the awaitable
   ``wait_for_transform_async``, ``wait_for_transform_full_async``,
   ``lookup_transform_async``, ``lookup_transform_full_async`` wait, with a ``timeout=``
   that works (ros2/geometry2 #327, PR #797), on :class:`tfbus.Buffer`'s event-driven
   waits.
 * :class:`TransformListener` ``(buffer, node=None, *, bus=None)``: an rclpy node's
-  ``/tf`` and ``/tf_static`` subscriptions, or a tfbus bus (``async with``).
+  ``/tf`` and ``/tf_static`` subscriptions, or a tfbus bus (``async with``), or — no node
+  and no bus, ROS 1's idiom — the ROS 1 graph at ``ROS_MASTER_URI`` through tfbus's own
+  ROS 1 transport, carried by the background loop.
 * :class:`TransformBroadcaster`, :class:`StaticTransformBroadcaster` (``sendTransform``)
-  on an rclpy node or a tfbus bus.
+  on an rclpy node, a tfbus bus, or (no argument) the ROS 1 graph as the listener.
+* Results in the caller's types (:mod:`tfbus.compat._types`): a rospy ``Time`` given,
+  rospy messages and times returned; an rclpy one, rclpy's; a tfbus one, tfbus's.
 * tf2's exceptions, :class:`TransformRegistration`, :class:`ConvertRegistration`,
   :func:`convert`, :func:`Stamped`.
 
-A synchronous call that would have to wait (ROS 2 spins or sleeps up to ``timeout``)
-raises the lookup's exception at once instead: use the ``*_async`` methods to wait.
+tf2_ros's submodule paths (``tf2_ros.buffer``, ``tf2_ros.buffer_interface``,
+``tf2_ros.transform_listener``, ``tf2_ros.transform_broadcaster``,
+``tf2_ros.static_transform_broadcaster``, ``tf2_ros.buffer_client``) are registered as
+modules holding the same names, so ``from tfbus.compat.tf2_ros.buffer import Buffer``
+works as ``from tf2_ros.buffer import Buffer`` does.
 """
 
 from __future__ import annotations
 
+import contextlib
+import sys
+import types
 from collections.abc import Iterable
+from functools import partial
 from typing import Any
 
 from tfbus.broadcaster import StaticTransformBroadcaster as _StaticBroadcaster
@@ -32,7 +46,16 @@ from tfbus.broadcaster import TransformBroadcaster as _Broadcaster
 from tfbus.buffer import Buffer as _Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock
+from tfbus.compat import tf2_geometry_msgs as _geometry
 from tfbus.compat._args import to_duration, to_stamped, to_time, to_transform_stamped
+from tfbus.compat._loop import (
+    LoopThreadError,
+    background,
+    in_event_loop,
+    ros1_bus,
+    rospy_node_name,
+)
+from tfbus.compat._types import flavour_of, ros_message, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
 from tfbus.errors import (
     ConnectivityException,
@@ -43,16 +66,30 @@ from tfbus.errors import (
     TransformException,
 )
 from tfbus.listener import TransformListener as _Listener
-from tfbus.messages import Header, TFMessage, TransformStamped
+from tfbus.messages import (
+    Header,
+    PointStamped,
+    PoseStamped,
+    TFMessage,
+    TransformStamped,
+    Vector3Stamped,
+    WrenchStamped,
+)
+from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
+    "DEFAULT_STATIC_TF_TOPIC",
+    "DEFAULT_TF_TOPIC",
     "Buffer",
+    "BufferClient",
+    "BufferInterface",
     "ConnectivityException",
     "ConvertRegistration",
     "ExtrapolationException",
     "InvalidArgumentException",
     "LookupException",
+    "LoopThreadError",
     "Stamped",
     "StaticTransformBroadcaster",
     "TimeoutException",
@@ -64,6 +101,19 @@ __all__ = [
     "TypeException",
     "convert",
 ]
+
+_DEBIAN: dict[type, Any] = {
+    PointStamped: _geometry.do_transform_point,
+    Vector3Stamped: _geometry.do_transform_vector3,
+    PoseStamped: _geometry.do_transform_pose,
+    WrenchStamped: _geometry.do_transform_wrench,
+}
+"""The types Debian's tf2_geometry_msgs registers, transformed by its arithmetic."""
+
+DEFAULT_TF_TOPIC = TF_TOPIC
+"""tf2_ros ``DEFAULT_TF_TOPIC`` (``"/tf"``)."""
+DEFAULT_STATIC_TF_TOPIC = TF_STATIC_TOPIC
+"""tf2_ros ``DEFAULT_STATIC_TF_TOPIC`` (``"/tf_static"``)."""
 
 TypeException = TypeError
 """tf2_ros's ``TypeException`` (no registered function for a type): tfbus raises
@@ -94,43 +144,152 @@ class Buffer:
     """tf2_ros ``Buffer(cache_time=None, node=None)`` over a :class:`tfbus.Buffer`
     (``.buffer``; ``cache_time`` 10 s by default, a duration in any form). ``node`` is
     accepted for ROS 2's signature and not used (time comes from ``clock``, a tfbus
-    clock, default the system clock)."""
+    clock, default the system clock).
+
+    Thread use: once a background listener feeds it (or a blocking call had to wait),
+    the buffer belongs to the process's background loop and every call from another
+    thread runs there (``portal.call``), as tf2_ros's buffer takes its mutex."""
 
     registration = TransformRegistration()
     """The transform functions by type (tf2_ros ``BufferInterface.registration``)."""
 
     def __init__(
-        self, cache_time: object = None, node: object = None, *, clock: Clock | None = None
+        self, cache_time: object = None, node: object = None, *, clock: Clock | None = None,
+        debug: bool = True,
     ) -> None:
-        """Create the buffer (see the class docs)."""
+        """Create the buffer (see the class docs). ``debug`` (ROS 1's): in an initialised
+        rospy node, offer the ``~tf2_frames`` service as ROS 1's Buffer does."""
         seconds = 10.0 if cache_time is None else to_duration(cache_time, "cache_time")
         self.buffer = _Buffer(seconds, clock=clock)
         self.node = node
+        self._owned = False
+        self._flavour: str | None = None
+        self.frame_server: Any = None
+        if debug and rospy_node_name() is not None:
+            self._serve_frames()
+
+    def _serve_frames(self) -> None:
+        """ROS 1 tf2_ros ``Buffer(debug=True)``: the rospy service ``~tf2_frames``
+        (``tf2_msgs/FrameGraph``, answered with :meth:`all_frames_as_yaml`) unless the
+        node advertises one already (Debian's ``tf2_ros/buffer.py``); view_frames asks it."""
+        import rosgraph.masterapi  # type: ignore[import-not-found]
+        import rospy  # type: ignore[import-not-found]
+        from tf2_msgs.srv import FrameGraph, FrameGraphResponse  # type: ignore[import-not-found]
+
+        try:
+            rosgraph.masterapi.Master(rospy.get_name()).lookupService("~tf2_frames")
+        except (rosgraph.masterapi.Error, rosgraph.masterapi.Failure):
+            self.frame_server = rospy.Service(
+                "~tf2_frames", FrameGraph,
+                lambda _request: FrameGraphResponse(self.all_frames_as_yaml()),
+            )
+
+    # ---------------------------------------------------------------- threads
+
+    def _own(self) -> None:
+        """From now on the background loop runs this buffer's calls."""
+        self._owned = True
+
+    def _run(self, fn: Any, *args: object) -> Any:
+        if self._owned and not background.in_loop_thread():
+            return background.call(fn, *args)
+        return fn(*args)
+
+    def _blocking(self, now: Any, wait: Any, timeout: object) -> Any:
+        """``now()``; when it raises a TransformException and ``timeout`` is positive,
+        ``wait(seconds)`` (a coroutine function) run in the background loop, this thread
+        blocked until it ends (woken by the arrival that answers it)."""
+        try:
+            return self._run(now)
+        except TransformException:
+            seconds = _timeout(timeout)
+            if seconds is not None and seconds <= 0.0:
+                raise
+            if seconds is None and timeout is None:
+                raise  # tf2's default timeout: Duration(0), do not wait
+            if background.in_loop_thread() or in_event_loop():
+                raise LoopThreadError(
+                    "a blocking tf2 call with a timeout cannot wait in an event loop's "
+                    "own thread (it would block the loop that delivers the data): await "
+                    "lookup_transform_async / wait_for_transform_async there"
+                ) from None
+            self._own()
+            return background.call(wait, seconds)
+
+    def _flavoured(self, *values: object) -> str | None:
+        found = flavour_of(*values)
+        if found is not None:
+            self._flavour = found
+        return found
 
     # ---------------------------------------------------------------- data
 
     def set_transform(self, transform: Any, authority: str) -> None:
         """tf2 ``set_transform`` (returns None, as ROS 2's):
         :meth:`tfbus.BufferCore.set_transform`."""
-        self.buffer.set_transform(to_transform_stamped(transform), authority)
+        ts = to_transform_stamped(transform)
+        self._flavoured(getattr(getattr(transform, "header", None), "stamp", None))
+        self._run(self.buffer.set_transform, ts, authority)
 
     def set_transform_static(self, transform: Any, authority: str) -> None:
         """tf2 ``set_transform_static`` (returns None):
         :meth:`tfbus.BufferCore.set_transform_static`."""
-        self.buffer.set_transform_static(to_transform_stamped(transform), authority)
+        ts = to_transform_stamped(transform)
+        self._flavoured(getattr(getattr(transform, "header", None), "stamp", None))
+        self._run(self.buffer.set_transform_static, ts, authority)
 
     def clear(self) -> None:
         """tf2 ``clear``: :meth:`tfbus.BufferCore.clear`."""
-        self.buffer.clear()
+        self._run(self.buffer.clear)
 
-    # ---------------------------------------------------------------- at once
+    def get_latest_common_time(self, target_frame: str, source_frame: str) -> Any:
+        """tf2 ``get_latest_common_time``: :meth:`tfbus.BufferCore.get_latest_common_time`,
+        in the caller's time type (rospy / rclpy ``Time`` when the buffer was fed or
+        queried with those, else a tfbus Time)."""
+        t = self._run(self.buffer.get_latest_common_time, target_frame, source_frame)
+        return time_out(t, self._flavour)
+
+    def all_frames_as_yaml(self, current_time: object = None) -> str:
+        """tf2 ``all_frames_as_yaml``: :meth:`tfbus.BufferCore.all_frames_as_yaml`."""
+        when = None if current_time is None else to_time(current_time, "current_time")
+        return str(self._run(self.buffer.all_frames_as_yaml, when))
+
+    def all_frames_as_string(self) -> str:
+        """tf2 ``all_frames_as_string``: :meth:`tfbus.BufferCore.all_frames_as_string`."""
+        return str(self._run(self.buffer.all_frames_as_string))
+
+    # ---------------------------------------------------------------- blocking
 
     def lookup_transform(
         self, target_frame: str, source_frame: str, time: object, timeout: object = None
+    ) -> Any:
+        """tf2_ros ``lookup_transform``, waiting up to ``timeout`` (a duration of any
+        flavour or seconds; None or zero: answer now) in the calling thread.
+
+        Returns:
+            the TransformStamped, a rospy / rclpy message when ``time`` is one of theirs.
+
+        Raises:
+            LookupException, ConnectivityException, ExtrapolationException: now, or
+                when ``timeout`` passed without the data (tf2 raises the lookup's
+                exception after its wait too).
+            LoopThreadError: a wait needed from an event loop's thread.
+        """
+        t = to_time(time)
+        flavour = self._flavoured(time)
+        out = self._blocking(
+            partial(self.buffer.lookup_transform, target_frame, source_frame, t),
+            partial(self._wait_lookup, target_frame, source_frame, t), timeout,
+        )
+        return ros_message(out, flavour, "TransformStamped")
+
+    async def _wait_lookup(
+        self, target: str, source: str, t: Time, seconds: float | None
     ) -> TransformStamped:
-        """tf2_ros ``lookup_transform``: :meth:`tfbus.BufferCore.lookup_transform` now
-        (``timeout`` not waited on: see the module docs)."""
-        return self.buffer.lookup_transform(target_frame, source_frame, to_time(time))
+        try:
+            return await self.buffer.lookup_transform_async(target, source, t, seconds)
+        except TimeoutException:
+            return self.buffer.lookup_transform(target, source, t)  # tf2's own exception
 
     def lookup_transform_full(
         self,
@@ -140,12 +299,24 @@ class Buffer:
         source_time: object,
         fixed_frame: str,
         timeout: object = None,
+    ) -> Any:
+        """tf2_ros ``lookup_transform_full``, waiting up to ``timeout`` as
+        :meth:`lookup_transform`."""
+        tt, st = to_time(target_time, "target_time"), to_time(source_time, "source_time")
+        flavour = self._flavoured(target_time, source_time)
+        args: tuple[str, Time, str, Time, str] = (
+            target_frame, tt, source_frame, st, fixed_frame)
+        out = self._blocking(partial(self.buffer.lookup_transform_full, *args),
+                             partial(self._wait_full, args), timeout)
+        return ros_message(out, flavour, "TransformStamped")
+
+    async def _wait_full(
+        self, args: tuple[str, Time, str, Time, str], seconds: float | None
     ) -> TransformStamped:
-        """tf2_ros ``lookup_transform_full``: :meth:`tfbus.BufferCore.lookup_transform_full`."""
-        return self.buffer.lookup_transform_full(
-            target_frame, to_time(target_time, "target_time"), source_frame,
-            to_time(source_time, "source_time"), fixed_frame,
-        )
+        try:
+            return await self.buffer.lookup_transform_full_async(*args, seconds)
+        except TimeoutException:
+            return self.buffer.lookup_transform_full(*args)
 
     def can_transform(
         self,
@@ -155,10 +326,17 @@ class Buffer:
         timeout: object = None,
         return_debug_tuple: bool = False,
     ) -> bool | tuple[bool, str]:
-        """tf2_ros ``can_transform``: :meth:`tfbus.BufferCore.can_transform` now."""
-        return self.buffer.can_transform(
-            target_frame, source_frame, to_time(time), return_debug_tuple
-        )
+        """tf2_ros ``can_transform``, waiting up to ``timeout`` for the data as
+        :meth:`lookup_transform` (False, or ``(False, reason)``, when it passes)."""
+        t = to_time(time)
+        self._flavoured(time)
+        with contextlib.suppress(TransformException):
+            self._blocking(
+                partial(self.buffer.lookup_transform, target_frame, source_frame, t),
+                partial(self._wait_lookup, target_frame, source_frame, t), timeout,
+            )
+        return self._run(self.buffer.can_transform, target_frame, source_frame, t,  # type: ignore[no-any-return]
+                         return_debug_tuple)
 
     def can_transform_full(
         self,
@@ -170,11 +348,22 @@ class Buffer:
         timeout: object = None,
         return_debug_tuple: bool = False,
     ) -> bool | tuple[bool, str]:
-        """tf2_ros ``can_transform_full``: :meth:`tfbus.BufferCore.can_transform_full`."""
-        return self.buffer.can_transform_full(
-            target_frame, to_time(target_time, "target_time"), source_frame,
-            to_time(source_time, "source_time"), fixed_frame, return_debug_tuple,
-        )
+        """tf2_ros ``can_transform_full``, waiting up to ``timeout`` as
+        :meth:`can_transform`."""
+        tt, st = to_time(target_time, "target_time"), to_time(source_time, "source_time")
+        self._flavoured(target_time, source_time)
+        args = (target_frame, tt, source_frame, st, fixed_frame)
+        with contextlib.suppress(TransformException):
+            self._blocking(partial(self.buffer.lookup_transform_full, *args),
+                           partial(self._wait_full, args), timeout)
+        return self._run(self.buffer.can_transform_full, *args,  # type: ignore[no-any-return]
+                         return_debug_tuple)
+
+    def _apply(self, obj: Any, given: Any, ts: Any) -> Any:
+        fn = _DEBIAN.get(type(obj))
+        if fn is not None:
+            return fn(given, ts)
+        return self.registration.get(type(obj))(obj, to_transform_stamped(ts))
 
     def transform(
         self,
@@ -183,15 +372,18 @@ class Buffer:
         timeout: object = None,
         new_type: Any = None,
     ) -> Any:
-        """tf2_ros ``transform``: the registered function of the object's type applied
-        to :meth:`lookup_transform` ``(target_frame, header.frame_id, header.stamp)``;
-        converted to ``new_type`` by :func:`convert` when given. A foreign geometry
-        message is taken by its fields and returned as the tfbus type."""
+        """tf2_ros ``transform``: :meth:`lookup_transform` ``(target_frame,
+        header.frame_id, header.stamp, timeout)`` applied to the object — points,
+        vectors, poses and wrenches by Debian's arithmetic
+        (:mod:`tfbus.compat.tf2_geometry_msgs`, the result in the object's own type),
+        other types by the registered function; converted to ``new_type`` by
+        :func:`convert` when given."""
         obj = to_stamped(object_stamped)
-        fn = self.registration.get(type(obj))
         header = obj.header  # type: ignore[attr-defined]
-        out = fn(obj, self.lookup_transform(target_frame, header.frame_id, header.stamp))
-        return out if new_type is None else convert(out, new_type)
+        ts = self.lookup_transform(target_frame, header.frame_id, header.stamp, timeout)
+        if new_type is not None:  # converted from the tfbus result, by the registries
+            return convert(self._apply(obj, obj, ts), new_type)
+        return self._apply(obj, object_stamped, ts)
 
     def transform_full(
         self,
@@ -204,32 +396,68 @@ class Buffer:
     ) -> Any:
         """tf2_ros ``transform_full``: as :meth:`transform`, through ``fixed_frame``."""
         obj = to_stamped(object_stamped)
-        fn = self.registration.get(type(obj))
         header = obj.header  # type: ignore[attr-defined]
         ts = self.lookup_transform_full(
-            target_frame, target_time, header.frame_id, header.stamp, fixed_frame
+            target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout
         )
-        out = fn(obj, ts)
-        return out if new_type is None else convert(out, new_type)
+        if new_type is not None:  # converted from the tfbus result, by the registries
+            return convert(self._apply(obj, obj, ts), new_type)
+        return self._apply(obj, object_stamped, ts)
 
     # ---------------------------------------------------------------- awaitable
 
-    async def wait_for_transform_async(
-        self, target_frame: str, source_frame: str, time: object, *, timeout: object = None
-    ) -> bool:
-        """ROS 2 ``wait_for_transform_async``, awaitable: True once the transform is
-        available (:meth:`tfbus.Buffer.wait_for_transform`).
+    def _awaitable(self, coro: Any, flavour: str | None) -> Any:
+        """``coro`` for an async caller (asyncio / trio: awaited in its own loop); for an
+        rclpy caller (rclpy imported, no async library running in this thread) an
+        ``rclpy.task.Future`` completed by the background loop, as ROS 2's tf2_ros
+        returns — awaitable in rclpy coroutine callbacks; with ``Buffer(node=...)`` the
+        node's executor is woken when it completes."""
+        rclpy = sys.modules.get("rclpy")
+        if rclpy is None or in_event_loop():
+            return coro
+        from rclpy.task import Future as RclpyFuture  # type: ignore[import-not-found]
 
-        Raises:
+        executor = getattr(self.node, "executor", None)
+        future: Any = RclpyFuture(executor=executor)
+        future.add_done_callback(lambda _f: None)  # a done callback wakes the executor
+        self._own()
+
+        async def run() -> None:
+            try:
+                value = await coro
+            except BaseException as exc:  # handed to the future, as rclpy's tasks do
+                future.set_exception(exc)
+                if not isinstance(exc, Exception):
+                    raise
+            else:
+                future.set_result(value if flavour is None else ros_message(
+                    value, flavour, "TransformStamped") if isinstance(
+                        value, TransformStamped) else value)
+
+        background.portal().start_task_soon(run)
+        return future
+
+    def wait_for_transform_async(
+        self, target_frame: str, source_frame: str, time: object, *, timeout: object = None
+    ) -> Any:
+        """ROS 2 ``wait_for_transform_async``: True once the transform is available
+        (:meth:`tfbus.Buffer.wait_for_transform`) — an awaitable under asyncio / trio,
+        an ``rclpy.task.Future`` under rclpy (see :meth:`_awaitable`).
+
+        Raises (or sets on the future):
             TimeoutException: not within ``timeout`` (a duration or seconds; None:
                 no limit).
         """
-        await self.buffer.wait_for_transform(
-            target_frame, source_frame, to_time(time), _timeout(timeout)
-        )
-        return True
+        t = to_time(time)
 
-    async def wait_for_transform_full_async(
+        async def wait() -> bool:
+            await self.buffer.wait_for_transform(target_frame, source_frame, t,
+                                                 _timeout(timeout))
+            return True
+
+        return self._awaitable(wait(), None)
+
+    def wait_for_transform_full_async(
         self,
         target_frame: str,
         target_time: object,
@@ -238,24 +466,30 @@ class Buffer:
         fixed_frame: str,
         *,
         timeout: object = None,
-    ) -> bool:
-        """ROS 2 ``wait_for_transform_full_async``, awaitable: True once both legs are
-        available (:meth:`tfbus.Buffer.lookup_transform_full_async`)."""
-        await self.lookup_transform_full_async(
-            target_frame, target_time, source_frame, source_time, fixed_frame,
-            timeout=timeout,
-        )
-        return True
+    ) -> Any:
+        """ROS 2 ``wait_for_transform_full_async``: True once both legs are available
+        (:meth:`tfbus.Buffer.lookup_transform_full_async`); an awaitable or an rclpy
+        Future as :meth:`wait_for_transform_async`."""
+        tt, st = to_time(target_time, "target_time"), to_time(source_time, "source_time")
 
-    async def lookup_transform_async(
+        async def wait() -> bool:
+            await self.buffer.lookup_transform_full_async(
+                target_frame, tt, source_frame, st, fixed_frame, _timeout(timeout))
+            return True
+
+        return self._awaitable(wait(), None)
+
+    def lookup_transform_async(
         self, target_frame: str, source_frame: str, time: object, *, timeout: object = None
-    ) -> TransformStamped:
-        """ROS 2 ``lookup_transform_async``: :meth:`tfbus.Buffer.lookup_transform_async`."""
-        return await self.buffer.lookup_transform_async(
-            target_frame, source_frame, to_time(time), _timeout(timeout)
-        )
+    ) -> Any:
+        """ROS 2 ``lookup_transform_async``: :meth:`tfbus.Buffer.lookup_transform_async`
+        — an awaitable under asyncio / trio (a tfbus TransformStamped), an rclpy Future
+        under rclpy (an rclpy TransformStamped), with a ``timeout`` that works."""
+        coro = self.buffer.lookup_transform_async(
+            target_frame, source_frame, to_time(time), _timeout(timeout))
+        return self._awaitable(coro, flavour_of(time))
 
-    async def lookup_transform_full_async(
+    def lookup_transform_full_async(
         self,
         target_frame: str,
         target_time: object,
@@ -264,13 +498,15 @@ class Buffer:
         fixed_frame: str,
         *,
         timeout: object = None,
-    ) -> TransformStamped:
+    ) -> Any:
         """ROS 2 ``lookup_transform_full_async``:
-        :meth:`tfbus.Buffer.lookup_transform_full_async`."""
-        return await self.buffer.lookup_transform_full_async(
+        :meth:`tfbus.Buffer.lookup_transform_full_async`; an awaitable or an rclpy
+        Future as :meth:`lookup_transform_async`."""
+        coro = self.buffer.lookup_transform_full_async(
             target_frame, to_time(target_time, "target_time"), source_frame,
             to_time(source_time, "source_time"), fixed_frame, _timeout(timeout),
         )
+        return self._awaitable(coro, flavour_of(target_time, source_time))
 
 
 def _is_bus(value: object) -> bool:
@@ -296,15 +532,26 @@ class TransformListener:
     :class:`Buffer` or a :class:`tfbus.Buffer`) from an rclpy node's ``/tf`` and
     ``/tf_static`` (subscribed here, as ROS 2 does; messages taken by their fields), or,
     with ``bus=``, from a tfbus bus through :class:`tfbus.TransformListener` (enter it
-    with ``async with``)."""
+    with ``async with``), or — ROS 1's ``TransformListener(buffer)``, no node — from the
+    ROS 1 graph at ``ROS_MASTER_URI``: tfbus's own ROS 1 transport
+    (:func:`tfbus.compat._loop.ros1_bus`, one node per process, named after the rospy
+    node plus ``_tf2``) in the process's background loop, listening at once and until
+    the program ends."""
 
     def __init__(
         self, buffer: Buffer | _Buffer, node: object = None, *, bus: Bus | None = None,
         **_ros_options: object,
     ) -> None:
-        """Attach to ``node`` (rclpy) or ``bus``; ``qos``, ``spin_thread`` and other
-        ROS 2 options are accepted and unused."""
+        """Attach to ``node`` (rclpy), ``bus``, or the ROS 1 graph; ``qos``,
+        ``spin_thread``, ``queue_size``, ``buff_size``, ``tcp_nodelay`` and other ROS
+        options are accepted and unused.
+
+        Raises:
+            RuntimeError: no node and no bus, and the ROS 1 graph could not be joined
+                (the reason chained).
+        """
         self.buffer = buffer.buffer if isinstance(buffer, Buffer) else buffer
+        self._compat = buffer if isinstance(buffer, Buffer) else None
         self._inner: _Listener | None = None
         self._subscriptions: list[Any] = []
         if bus is not None or _is_bus(node):
@@ -316,8 +563,11 @@ class TransformListener:
         elif node is not None:
             _check_node("TransformListener", node, "create_subscription")
             self._attach_rclpy(node)
-        else:
-            raise InvalidArgumentException("TransformListener needs an rclpy node or bus=")
+        else:  # ROS 1's TransformListener(buffer): the ROS 1 graph, in the background loop
+            if isinstance(buffer, Buffer):
+                buffer._own()
+            self._inner = _Listener(self.buffer, ros1_bus())
+            background.enter(self._inner)
 
     def _attach_rclpy(self, node: Any) -> None:
         from rclpy.qos import (  # type: ignore[import-not-found]
@@ -337,13 +587,18 @@ class TransformListener:
             node.create_subscription(RosTFMessage, TF_STATIC_TOPIC, self._on_static, static),
         ]
 
+    def _set(self, message: Any, static: bool) -> None:
+        ours = [to_transform_stamped(t) for t in message.transforms]
+        if self._compat is not None and self._compat._owned:  # the background loop's
+            background.call(self.buffer.set_transforms, ours, "default_authority", static)
+        else:
+            self.buffer.set_transforms(ours, "default_authority", is_static=static)
+
     def _on_tf(self, message: Any) -> None:
-        self.buffer.set_transforms([to_transform_stamped(t) for t in message.transforms],
-                                   "default_authority")
+        self._set(message, False)
 
     def _on_static(self, message: Any) -> None:
-        self.buffer.set_transforms([to_transform_stamped(t) for t in message.transforms],
-                                   "default_authority", is_static=True)
+        self._set(message, True)
 
     async def __aenter__(self) -> TransformListener:
         """Start the bus listener (a node's subscriptions are live already)."""
@@ -372,11 +627,20 @@ class TransformBroadcaster:
     _topic = TF_TOPIC
     _static = False
 
-    def __init__(self, node: object, qos: object = None) -> None:
-        """Publish on ``node`` (rclpy) or on a tfbus :class:`~tfbus.Bus`."""
+    def __init__(self, node: object = None, qos: object = None, **_ros_options: object) -> None:
+        """Publish on ``node`` (rclpy), on a tfbus :class:`~tfbus.Bus`, or — no node,
+        ROS 1's ``TransformBroadcaster()`` — on the ROS 1 graph at ``ROS_MASTER_URI``
+        (tfbus's ROS 1 transport in the background loop, advertised now as tf2_ros
+        does; ``queue_size`` and other rospy options accepted and unused)."""
         self._bus_side: _Broadcaster | None = None
         self._publisher: Any = None
-        if isinstance(node, Bus):
+        self._background = False
+        if node is None:
+            bus = ros1_bus()
+            self._bus_side = background.call(
+                _StaticBroadcaster if self._static else _Broadcaster, bus)
+            self._background = True
+        elif isinstance(node, Bus):
             self._bus_side = _StaticBroadcaster(node) if self._static else _Broadcaster(node)
         else:
             _check_node(type(self).__name__, node, "create_publisher")
@@ -392,7 +656,11 @@ class TransformBroadcaster:
         self._latched: dict[str, TransformStamped] = {}
 
     def sendTransform(self, transform: Any) -> None:
-        """Publish ``transform`` (one, or an iterable of them, any flavour)."""
+        """Publish ``transform`` (one, or an iterable of them, any flavour).
+
+        Raises:
+            InvalidArgumentException: a transform without ROS's fields (named).
+        """
         items = [transform] if not isinstance(transform, Iterable) or hasattr(
             transform, "child_frame_id"
         ) else list(transform)
@@ -400,7 +668,9 @@ class TransformBroadcaster:
         if self._static:  # tf2_ros keeps every static transform sent, by child frame
             self._latched.update((t.child_frame_id, t) for t in ours)
             ours = list(self._latched.values())
-        if self._bus_side is not None:
+        if self._bus_side is not None and self._background:
+            background.call(self._bus_side.send_transform_nowait, ours)
+        elif self._bus_side is not None:
             self._bus_side.send_transform_nowait(ours)
         else:
             self._publisher.publish(_to_rclpy(TFMessage(ours)))
@@ -435,3 +705,52 @@ def _to_rclpy(message: TFMessage) -> Any:
          m.transform.rotation.w) = q
         out.append(m)
     return RosTFMessage(transforms=out)
+
+
+BufferInterface = Buffer
+"""ROS 1 tf2_ros ``BufferInterface`` (the base of ``Buffer`` and ``BufferClient``):
+here :class:`Buffer`, which has its whole interface (``transform``, ``lookup_transform``,
+``can_transform`` and their ``_full`` forms, ``registration``)."""
+
+
+class BufferClient(Buffer):
+    """ROS 1 tf2_ros ``BufferClient(ns, check_frequency=None, timeout_padding=...)``: a
+    buffer whose lookups ROS 1 asks a ``tf2_server`` for over the ``LookupTransform``
+    action. tfbus has no actionlib: this buffer listens to the ROS 1 graph itself
+    (:class:`TransformListener`) and answers the same calls locally, with the same
+    waits; ``wait_for_server`` returns True once the listener has joined the graph."""
+
+    def __init__(self, ns: str = "tf2_buffer_server", check_frequency: object = None,
+                 timeout_padding: object = None) -> None:
+        """Create the buffer and its ROS 1 listener (``ns`` kept as ``self.ns``)."""
+        super().__init__()
+        self.ns = ns
+        self._listener = TransformListener(self)
+
+    def wait_for_server(self, timeout: object = None) -> bool:
+        """True: the listener is on the graph (it joined when the buffer was made)."""
+        return True
+
+
+def _submodule(name: str, names: list[str], doc: str) -> None:
+    """Register ``tfbus.compat.tf2_ros.<name>`` holding ``names`` (tf2_ros's path)."""
+    module = types.ModuleType(f"{__name__}.{name}", doc)
+    here = sys.modules[__name__]
+    for n in names:
+        setattr(module, n, getattr(here, n))
+    module.__all__ = names  # type: ignore[attr-defined]
+    sys.modules[module.__name__] = module
+    setattr(here, name, module)
+
+
+_submodule("buffer", ["Buffer"], "tf2_ros.buffer: :class:`Buffer`.")
+_submodule("buffer_interface", ["BufferInterface", "Stamped", "TransformRegistration",
+                                "ConvertRegistration", "convert", "TypeException"],
+           "tf2_ros.buffer_interface: the interface, registries and :func:`convert`.")
+_submodule("buffer_client", ["BufferClient"], "tf2_ros.buffer_client: :class:`BufferClient`.")
+_submodule("transform_listener", ["TransformListener"],
+           "tf2_ros.transform_listener: :class:`TransformListener`.")
+_submodule("transform_broadcaster", ["TransformBroadcaster"],
+           "tf2_ros.transform_broadcaster: :class:`TransformBroadcaster`.")
+_submodule("static_transform_broadcaster", ["StaticTransformBroadcaster"],
+           "tf2_ros.static_transform_broadcaster: :class:`StaticTransformBroadcaster`.")

@@ -1,0 +1,77 @@
+"""``tfbus.compat.tf2_ros`` in a real rospy program (Debian's ROS 1, a roscore on
+127.0.0.1 and a free port): ``TransformListener(buffer)`` and
+``StaticTransformBroadcaster()`` with no node join the ROS 1 graph through tfbus's ROS 1
+transport (``rosnode info`` shows the node on ``/tf`` and ``/tf_static``); a blocking
+``lookup_transform(..., rospy.Duration(30))`` called right after start-up waits for
+Debian's ``static_transform_publisher`` and returns a rospy message with a rospy time;
+Debian's own tf2_ros (rospy) receives the program's static transform; SIGINT ends the
+program promptly."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
+
+ROOT = Path(__file__).resolve().parents[2]
+PROBE = ROOT / "tests" / "compat" / "rospy_probe.py"
+
+DEBIAN_LISTENER = """
+import rospy, tf2_ros
+rospy.init_node("debian_listener")
+b = tf2_ros.Buffer()
+tf2_ros.TransformListener(b)
+t = b.lookup_transform("map", "probe", rospy.Time(0), rospy.Duration(30))
+print("GOT", t.header.stamp.secs, t.header.stamp.nsecs, t.transform.translation.x, flush=True)
+"""
+
+
+def _env(master: Master) -> dict[str, str]:
+    env = dict(master.env)
+    env["PYTHONPATH"] = str(ROOT)
+    return env
+
+
+def test_rospy_program_on_the_ros1_graph(master: Master) -> None:
+    publisher = master.run("rosrun", "tf2_ros", "static_transform_publisher",
+                           "1", "2", "3", "0", "0", "0.3826834323650898", "0.9238795325112867",
+                           "map", "laser")
+    probe = Proc([sys.executable, str(PROBE)], _env(master), cwd=ROOT)
+    try:
+        line = probe.wait_for(r"^\{.*\}$", timeout=60.0).group(0)
+        got = json.loads(line)
+        assert got["type"] == "geometry_msgs.msg._TransformStamped.TransformStamped"
+        assert got["stamp_type"] == "Time" and got["stamp"] == [0, 0]  # a static: stamp 0
+        assert got["latest"] == [0, 0]
+        assert got["translation"] == [1.0, 2.0, 3.0]
+        assert got["rotation"] == [0.0, 0.0, 0.3826834323650898, 0.9238795325112867]
+        assert got["can"] is True
+        probe.wait_for("READY", timeout=10.0)
+        info = subprocess.run(["rosnode", "info", "/compat_probe_tf2"], env=master.env,
+                              capture_output=True, text=True, timeout=60, check=False).stdout
+        publications = info.split("Publications:")[1].split("Subscriptions:")[0]
+        subscriptions = info.split("Subscriptions:")[1].split("Services:")[0]
+        assert "/tf_static" in publications, info
+        assert "/tf " in subscriptions and "/tf_static" in subscriptions, info
+        debian = Proc(["/usr/bin/python3", "-c", DEBIAN_LISTENER], master.env)
+        m = debian.wait_for(r"^GOT (\d+) (\d+) (\S+)$", timeout=60.0)
+        # a static looked up at time 0: stamp 0, as tf2 answers for statics
+        assert (m.group(1), m.group(2), float(m.group(3))) == ("0", "0", 4.0)
+        debian.stop()
+        start = time.monotonic()
+        probe.proc.send_signal(signal.SIGINT)
+        code = probe.proc.wait(timeout=20.0)
+        elapsed = time.monotonic() - start
+        assert code == 0, probe.drain()
+        print(f"SIGINT to exit: {elapsed:.3f} s")
+        assert elapsed < 5.0, elapsed  # a bound for a loaded machine (1 s is the aim)
+    finally:
+        probe.stop()
+        publisher.stop()
+    assert os.environ.get("ROS_IP") == "127.0.0.1"
