@@ -47,7 +47,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
-from tfbus._aio import ShieldedYield, running_asyncio_loop
+from tfbus._aio import ShieldedYield, exit_task_group, running_asyncio_loop
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
 from tfbus.subscription import (
@@ -215,14 +215,19 @@ class Bus:
     ) -> bool | None:
         """Close the bus: end all subscriptions and cancel the transport task.
 
+        What the ``async with`` body raised leaves as itself, never inside an
+        ``ExceptionGroup`` (:func:`tfbus._aio.exit_task_group`): ``except
+        TimeoutException:`` around the block catches a timeout raised in it.
+
         Raises:
-            BaseExceptionGroup: if the transport task failed.
+            BaseException: the body's exception, as itself (a transport failure at the
+                same time is its ``__context__``).
+            BaseExceptionGroup: if the transport task failed while the body did not raise.
         """
         self._shutdown()
         tg = self._task_group
         assert tg is not None
-        tg.cancel_scope.cancel()
-        return await tg.__aexit__(exc_type, exc, tb)
+        return await exit_task_group(tg, exc_type, exc, tb)
 
     def _shutdown(self) -> None:
         self._state = "closed"

@@ -25,6 +25,7 @@ from typing import Any, Protocol
 import anyio
 import anyio.abc
 
+from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer, clear_on_jump_back
 from tfbus.bus import Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
@@ -203,7 +204,8 @@ class TransformListener:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
-        """Stop listening: unregister both subscriptions (and cancel the tasks)."""
+        """Stop listening: unregister both subscriptions (and cancel the tasks). What the
+        ``async with`` body raised leaves as itself (:func:`tfbus._aio.exit_task_group`)."""
         if self._unfollow_jumps is not None:
             self._unfollow_jumps()
         for cb in self._callbacks:
@@ -212,8 +214,7 @@ class TransformListener:
         if tg is None:
             return None
         try:
-            tg.cancel_scope.cancel()
-            return await tg.__aexit__(exc_type, exc, tb)
+            return await exit_task_group(tg, exc_type, exc, tb)
         finally:
             for sub in self._subs:
                 sub.close()
