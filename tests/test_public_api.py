@@ -5,7 +5,8 @@ import tfbus
 
 def test_public_all_is_pinned() -> None:
     assert sorted(tfbus.__all__) == [
-        "Buffer", "BufferCore", "Bus", "Clock", "ConnectivityException", "Duration",
+        "Buffer", "BufferClosedException", "BufferCore", "Bus", "Clock",
+        "ConnectivityException", "Duration",
         "ExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
         "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
         "Point", "Point32", "PointCloud2", "PointField", "PointStamped", "Polygon",

@@ -17,6 +17,7 @@ from tfbus.clock import Clock, ManualClock, SystemClock, every
 from tfbus.core import BufferCore, SetResult
 from tfbus.core.batch import TransformArray
 from tfbus.errors import (
+    BufferClosedException,
     ConnectivityException,
     ExtrapolationException,
     InvalidArgumentException,
@@ -59,6 +60,7 @@ from tfbus.transports.memory import MemoryTransport
 
 __all__ = [
     "Buffer",
+    "BufferClosedException",
     "BufferCore",
     "Bus",
     "Clock",

@@ -165,6 +165,8 @@ class Bus:
         self._latch = StaticLatch()
         self._task_group: anyio.abc.TaskGroup | None = None
         self._state = "new"  # "new" -> "open" -> "closed"
+        # Called once when the bus closes (a TransformListener on it: its buffer's waits).
+        self._on_close: list[Callable[[], None]] = []
         # The checkpoints around a publish: set for the event loop the bus is opened in.
         self._before_publish: Callable[[], Awaitable[None]] = (
             anyio.lowlevel.checkpoint_if_cancelled
@@ -213,7 +215,10 @@ class Bus:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
-        """Close the bus: end all subscriptions and cancel the transport task.
+        """Close the bus: end all subscriptions, leave every TransformListener still
+        on it (the waits pending on their buffers fail with
+        :class:`~tfbus.errors.BufferClosedException`, as when a listener is left) and
+        cancel the transport task.
 
         What the ``async with`` body raised leaves as itself, never inside an
         ``ExceptionGroup`` (:func:`tfbus._aio.exit_task_group`): ``except
@@ -238,6 +243,9 @@ class Bus:
             for cb in callbacks:
                 cb._closed = True
         self._callbacks.clear()
+        hooks, self._on_close = self._on_close, []
+        for hook in hooks:
+            hook()
 
     def _check_open(self) -> None:
         if self._state == "open":
