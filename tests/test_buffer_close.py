@@ -150,3 +150,16 @@ async def test_timeout_exception_is_a_timeout_error_and_a_transform_exception() 
     assert isinstance(caught[0], TransformException)
     assert str(caught[0]).startswith("Timed out after 0 s waiting for transform from")
     assert issubclass(TimeoutException, TimeoutError)
+
+
+async def test_lookup_transform_with_a_tf2_ros_timeout_points_to_the_async_lookup() -> None:
+    buffer = make_buffer()
+    buffer.set_transform(
+        TransformStamped(Header(Time(5), "map"), "odom", Transform(Vector3(1.0, 2.0, 3.0)))
+    )
+    with pytest.raises(TypeError, match=r"await buffer\.lookup_transform_async\('map', 'odom'"):
+        buffer.lookup_transform("map", "odom", Time(0), timeout=1.0)
+    # tf2_ros's default (no wait) is accepted and is the plain lookup
+    got = buffer.lookup_transform("map", "odom", Time(0), timeout=0.0)
+    assert tuple(got.transform.translation) == (1.0, 2.0, 3.0)
+    assert buffer.lookup_transform("map", "odom", Time(5)).header.stamp == Time(5)

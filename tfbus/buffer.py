@@ -48,6 +48,7 @@ _log = logging.getLogger(__name__)
 _T = TypeVar("_T")
 _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
+_core_lookup_transform = BufferCore.lookup_transform
 
 
 class _Clearable(Protocol):
@@ -160,6 +161,31 @@ class Buffer(BufferCore):
         self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
         self._closed = False
         self._listeners = 0  # TransformListeners feeding this buffer now
+
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+    ) -> TransformStamped:
+        """:meth:`BufferCore.lookup_transform` (never waits). ``timeout`` exists for
+        tf2_ros habits: ``None`` or 0 is tf2_ros's default (no wait); any other value is
+        a TypeError pointing to :meth:`lookup_transform_async`, since a call that blocks
+        would stop the event loop that delivers the data.
+
+        Raises:
+            TypeError: a non-zero ``timeout``.
+            InvalidArgumentException, LookupException, ConnectivityException,
+            ExtrapolationException: as :meth:`BufferCore.lookup_transform`.
+        """
+        if timeout is not None and timeout_ns(timeout) != 0:
+            raise TypeError(
+                "Buffer.lookup_transform does not wait (it would block the event loop "
+                "that delivers the data): use 'await buffer.lookup_transform_async("
+                f"{target_frame!r}, {source_frame!r}, time, timeout={timeout!r})'"
+            )
+        return _core_lookup_transform(self, target_frame, source_frame, time)
 
     # ------------------------------------------------------------------ notification
 
