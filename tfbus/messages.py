@@ -188,7 +188,7 @@ def _transform_new(
         translation = _components(translation, Vector3, "Transform.translation", "x, y, z")
     if rotation.__class__ is not Quaternion:
         rotation = _components(rotation, Quaternion, "Transform.rotation", "x, y, z, w")
-    return _tuple_new(cls, (translation, rotation))  # type: ignore[type-var]
+    return _tuple_new(cls, (translation, rotation))
 
 
 def _transform_replace(self: Transform, **fields: object) -> Transform:
