@@ -15,7 +15,7 @@ from tfbus.buffer import Buffer
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import Clock, ManualClock, every
 from tfbus.core import BatchResult, BufferCore
-from tfbus.errors import ExtrapolationException, LookupException
+from tfbus.errors import ExtrapolationException, InvalidArgumentException, LookupException
 from tfbus.listener import ListenerStatistics, TransformListener
 from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Duration, Time
@@ -119,13 +119,13 @@ async def test_listener_stores_valid_transforms_beside_invalid_ones(
     core = BufferCore()
     caplog.set_level(logging.WARNING, logger="tfbus.listener")
     async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
-        br = TransformBroadcaster(bus)
         bad = [
             ts("nan_frame", math.nan),
             ts("bad_quat", rotation=Quaternion(0.0, 0.0, 0.0, 2.0)),
             ts("base_link"),  # self transform
         ]
-        await br.send_transform([ts("a"), bad[0], ts("b"), bad[1], bad[2], ts("c")])
+        # Published as a peer that does not check would (a broadcaster refuses them).
+        await bus.publish(TF_TOPIC, TFMessage([ts("a"), bad[0], ts("b"), bad[1], bad[2], ts("c")]))
         await settle(clock)
         for child in ("a", "b", "c"):
             assert core.can_transform("base_link", child, T0)
@@ -142,7 +142,7 @@ async def test_listener_stores_valid_transforms_beside_invalid_ones(
 
         # after the log period, the next one is logged and mentions the suppressed ones
         await clock.advance(10.0)
-        await br.send_transform(ts("nan2", math.inf))
+        await bus.publish(TF_TOPIC, TFMessage([ts("nan2", math.inf)]))
         await settle(clock)
         warnings = [r for r in caplog.records if r.name == "tfbus.listener"]
         assert len(warnings) == 2
@@ -426,3 +426,61 @@ async def test_a_jump_back_clears_a_sink_once_whoever_follows_the_clock(
         clock.set_nowait(Time(T0.sec - 120))  # no listener follows core any more
         assert core.can_transform("base_link", "laser", Time(T0.sec - 60))
         assert not buf.can_transform("base_link", "laser", Time(T0.sec - 60))
+
+
+@pytest.mark.parametrize(
+    ("bad", "codes"),
+    [
+        (ts("nan_frame", math.nan), ("TF_NAN_INPUT",)),
+        (ts("inf_frame", math.inf), ("TF_INF_INPUT",)),
+        (ts("q", rotation=Quaternion(0.0, 0.0, 0.0, 2.0)), ("TF_DENORMALIZED_QUATERNION",)),
+        (ts("base_link"), ("TF_SELF_TRANSFORM",)),
+        (ts(""), ("TF_NO_CHILD_FRAME_ID",)),
+    ],
+)
+@pytest.mark.parametrize("static", [False, True])
+async def test_the_broadcaster_refuses_what_set_transform_refuses(
+    bad: TransformStamped, codes: tuple[str, ...], static: bool
+) -> None:
+    """The sender raises the InvalidArgumentException BufferCore.set_transform raises (same
+    codes, same wording), publishes nothing of the call, and the next valid send works."""
+    with pytest.raises(InvalidArgumentException) as expected:
+        BufferCore().set_transform(bad)
+    async with Bus() as bus:
+        sub = bus.subscribe(TF_STATIC_TOPIC if static else TF_TOPIC)
+        br = (StaticTransformBroadcaster if static else TransformBroadcaster)(bus)
+        with pytest.raises(InvalidArgumentException) as info:
+            await br.send_transform([ts("a"), bad])
+        with pytest.raises(InvalidArgumentException):
+            br.send_transform_nowait(bad)
+        assert info.value.codes == codes == expected.value.codes
+        assert str(info.value).split(": ", 1)[1] == str(expected.value).split(": ", 1)[1]
+        assert br.sent == 0
+        assert sub.statistics().queued == 0
+        await br.send_transform(ts("a", 1.5))
+        assert (await sub.receive()).transforms[0].transform.translation.x == 1.5
+
+
+async def test_the_broadcaster_sends_what_set_transform_accepts() -> None:
+    """ints, a quaternion within tf2's 0.01 of unit norm, numpy-built transforms pass."""
+    from tfbus.geometry import quaternion_from_euler
+
+    async with Bus() as bus:
+        core = BufferCore()
+        async with TransformListener(core, bus):
+            br = TransformBroadcaster(bus)
+            await br.send_transform(
+                [
+                    ts("ints")._replace(
+                        transform=Transform(Vector3(1, 2, 3), Quaternion(0, 0, 0, 1))
+                    ),
+                    ts("near", rotation=Quaternion(0.0, 0.0, 0.0, 1.004)),
+                    ts("np", 2.0)._replace(
+                        transform=Transform([2.0, 0.0, 0.0], quaternion_from_euler(0.0, 0.0, 1.0))
+                    ),
+                ]
+            )
+            assert br.sent == 3
+            got = core.lookup_transform("base_link", "np", Time(0))
+            assert got.transform.rotation.z == pytest.approx(math.sin(0.5), abs=1e-12)
+            assert core.lookup_transform("base_link", "ints", Time(0)).transform.translation.z == 3

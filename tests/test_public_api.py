@@ -5,8 +5,8 @@ import tfbus
 
 def test_public_all_is_pinned() -> None:
     assert sorted(tfbus.__all__) == [
-        "BackwardExtrapolationException", "Buffer", "BufferCore", "Bus", "Clock",
-        "ConnectivityException", "Duration", "ExtrapolationException",
+        "BackwardExtrapolationException", "Buffer", "BufferClosedException", "BufferCore",
+        "Bus", "Clock", "ConnectivityException", "Duration", "ExtrapolationException",
         "ForwardExtrapolationException", "Header", "InvalidArgumentException", "LaserProjection",
         "LaserScan", "LookupException", "ManualClock", "MemoryTransport", "MessageFilter",
         "NoDataForExtrapolationException", "Point", "Point32", "PointCloud2", "PointField",

@@ -18,6 +18,7 @@ from tfbus.core import BufferCore, SetResult
 from tfbus.core.batch import TransformArray
 from tfbus.errors import (
     BackwardExtrapolationException,
+    BufferClosedException,
     ConnectivityException,
     ExtrapolationException,
     ForwardExtrapolationException,
@@ -65,6 +66,7 @@ from tfbus.transports.memory import MemoryTransport
 __all__ = [
     "BackwardExtrapolationException",
     "Buffer",
+    "BufferClosedException",
     "BufferCore",
     "Bus",
     "Clock",

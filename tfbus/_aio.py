@@ -16,6 +16,10 @@ and each with its portable anyio fallback next to it in the caller:
   one kept buffer (``asyncio.BufferedProtocol``), for the ROS 1 transport's TCPROS
   subscriber connections.
 
+and, portable on every backend, :func:`exit_task_group`: how every tfbus context manager
+that owns a task group leaves it, so that the exception its body raised leaves it as
+itself (not inside an ``ExceptionGroup``).
+
 Nothing here imports tfbus: the bus, the clocks, the buffer and the ROS 1 transport import
 it. ``asyncio`` itself is imported only inside the asyncio-only functions, so a trio
 program never loads it through tfbus.
@@ -28,15 +32,18 @@ from collections.abc import Awaitable, Callable, Generator
 from typing import TYPE_CHECKING, Any, cast
 
 import anyio
+import anyio.abc
 import anyio.lowlevel
 
 if TYPE_CHECKING:
     import asyncio
     from asyncio import AbstractEventLoop, Future
+    from types import TracebackType
 
 __all__ = [
     "ShieldedYield",
     "Wakeup",
+    "exit_task_group",
     "open_pumped_connection",
     "running_asyncio_loop",
     "wait_all_tasks_blocked",
@@ -259,3 +266,69 @@ async def open_pumped_connection(
         lambda: _pump_class()(feed, *events), host, port
     )
     return transport, pump
+
+
+# -- context managers: the body's exception leaves as itself -------------------------------
+
+
+if sys.version_info < (3, 11):  # pragma: no cover - anyio depends on the backport there
+    from exceptiongroup import BaseExceptionGroup  # type: ignore[import-not-found,unused-ignore]
+
+
+async def exit_task_group(
+    tg: anyio.abc.TaskGroup,
+    exc_type: type[BaseException] | None,
+    exc: BaseException | None,
+    tb: TracebackType | None,
+) -> bool | None:
+    """Leave ``tg`` (cancelling what still runs in it) from a context manager's
+    ``__aexit__`` so that what the ``async with`` body raised leaves as itself.
+
+    anyio's and trio's task groups put the body's exception into a ``BaseExceptionGroup``
+    with the failures of the group's tasks (PEP 654 "strict" groups), so ``except
+    TimeoutException:`` around ``async with Bus():`` would miss a timeout raised inside.
+    Here:
+
+    * the body raised ``exc`` and no background task failed (the group holds only ``exc``
+      and cancellations): ``exc`` is raised as itself, its traceback kept. A cancellation
+      of the backend (``anyio.get_cancelled_exc_class()``), ``KeyboardInterrupt`` and
+      ``SystemExit`` are re-raised the same way, so an enclosing cancel scope still sees
+      its own cancellation;
+    * the body raised ``exc`` and a background task failed too: ``exc`` is raised as
+      itself, and the background failures are attached as its ``__context__`` (shown in
+      its traceback as "During handling of the above exception ...");
+    * the body ended normally, or was cancelled because a background task failed (the
+      task group cancels its body then): the task group's ``BaseExceptionGroup`` of
+      those failures propagates as anyio raises it.
+
+    Returns:
+        What the task group's ``__aexit__`` returned (never swallows ``exc``).
+
+    Raises:
+        BaseException: ``exc`` itself, or the group of background failures.
+    """
+    tg.cancel_scope.cancel()
+    try:
+        return await tg.__aexit__(exc_type, exc, tb)
+    except BaseExceptionGroup as group:
+        if exc is None:
+            raise
+        background = _background_failures(group, exc)
+        if background is not None and isinstance(exc, anyio.get_cancelled_exc_class()):
+            raise  # the body was cancelled because a task failed: the failure is the news
+    # Raised outside the ``except`` block, so Python does not chain the group itself.
+    if background is not None:
+        exc.__context__ = background
+    raise exc
+
+
+def _background_failures(
+    group: BaseExceptionGroup[BaseException], exc: BaseException
+) -> BaseExceptionGroup[BaseException] | None:
+    """The failures of ``group`` other than ``exc`` and the backend's cancellations, or
+    None when there are none."""
+    cancelled = anyio.get_cancelled_exc_class()
+    rest = group.split(lambda e: e is exc)[1]
+    if rest is None:
+        return None
+    return rest.split(cancelled)[1]

@@ -16,17 +16,56 @@ sending just the new ones is enough.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from math import isfinite
 from typing import ClassVar
 
 from tfbus.bus import Bus
+from tfbus.core import BufferCore
 from tfbus.messages import TFMessage, TransformStamped
+from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = ["StaticTransformBroadcaster", "TransformBroadcaster"]
 
 
+def _check(ts: TransformStamped) -> None:
+    """Refuse what a receiving buffer would refuse, with the InvalidArgumentException
+    ``BufferCore.set_transform`` raises (tf2 ``BufferCore::setTransformImpl``'s checks:
+    self transform, empty frame id, NaN, infinite translation, quaternion norm).
+
+    The common case (plain floats, finite, a unit quaternion, two different ids without
+    a leading '/') passes a few comparisons; anything else is given to a scratch
+    BufferCore, the one authority on validity, which raises the very exception a
+    listener would have logged (and accepts what it accepts).
+    """
+    try:
+        header = ts.header
+        parent = header.frame_id
+        child = ts.child_frame_id
+        x, y, z = ts.transform.translation
+        qx, qy, qz, qw = ts.transform.rotation
+        plain = (
+            type(header.stamp) is Time
+            and type(parent) is str
+            and type(child) is str
+            and parent != child
+            and parent[:1] not in ("", "/")
+            and child[:1] not in ("", "/")
+            and type(x) is float and type(y) is float and type(z) is float
+            and type(qx) is float and type(qy) is float
+            and type(qz) is float and type(qw) is float
+            and isfinite(x + y + z)  # NaN or ±Inf anywhere makes the sum non-finite
+            and abs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+        )  # fmt: skip
+    except (TypeError, ValueError, AttributeError):
+        plain = False
+    if not plain:
+        BufferCore().set_transform(ts, "TransformBroadcaster")  # raises when invalid
+
+
 def _as_message(transform: TransformStamped | Iterable[TransformStamped]) -> TFMessage:
     if isinstance(transform, TransformStamped):
+        _check(transform)
         return TFMessage((transform,))
     try:
         transforms = tuple(transform)
@@ -37,6 +76,7 @@ def _as_message(transform: TransformStamped | Iterable[TransformStamped]) -> TFM
     for ts in transforms:
         if not isinstance(ts, TransformStamped):
             raise TypeError(f"expected TransformStamped, not {type(ts).__name__}")
+        _check(ts)
     return TFMessage(transforms)
 
 
@@ -70,10 +110,16 @@ class TransformBroadcaster:
     ) -> None:
         """Publish ``transform`` (one or a sequence) as one TFMessage; never blocks.
 
-        An empty sequence publishes nothing. Transforms are not validated here: the
-        receiving buffers do that (and a listener counts the bad ones).
+        An empty sequence publishes nothing. Every transform is checked as a receiving
+        buffer would check it, before anything is published: one invalid transform
+        refuses the whole call, so a bad value is refused here, at the sender, and
+        never reaches the listeners (which would only drop it and log).
 
         Raises:
+            InvalidArgumentException: a transform ``BufferCore.set_transform`` refuses
+                (NaN, an infinite translation, a quaternion whose squared norm is not
+                within 0.01 of 1, an empty id, a self transform, a field of the wrong
+                type), with the same message and ``codes``.
             TypeError: if ``transform`` is not a TransformStamped or an iterable of them.
             RuntimeError: if the bus is not open yet.
             anyio.ClosedResourceError: if the bus is closed.
@@ -90,6 +136,7 @@ class TransformBroadcaster:
         """:meth:`send_transform_nowait` plus a checkpoint; never waits for subscribers.
 
         Raises:
+            InvalidArgumentException: as :meth:`send_transform_nowait` (nothing sent).
             TypeError: if ``transform`` is not a TransformStamped or an iterable of them.
             RuntimeError: if the bus is not open yet.
             anyio.ClosedResourceError: if the bus is closed.

@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable
 from functools import partial
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
+import anyio.lowlevel
 import numpy as np
 import numpy.typing as npt
 
@@ -33,7 +34,7 @@ from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
 from tfbus.core.velocity import check_velocity_arguments
-from tfbus.errors import TimeoutException, TransformException
+from tfbus.errors import BufferClosedException, TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
 from tfbus.time import Duration, Time
 
@@ -47,6 +48,7 @@ _log = logging.getLogger(__name__)
 _T = TypeVar("_T")
 _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
+_core_lookup_transform = BufferCore.lookup_transform
 
 
 class _Clearable(Protocol):
@@ -157,6 +159,33 @@ class Buffer(BufferCore):
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
         self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
+        self._closed = False
+        self._listeners = 0  # TransformListeners feeding this buffer now
+
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+    ) -> TransformStamped:
+        """:meth:`BufferCore.lookup_transform` (never waits). ``timeout`` exists for
+        tf2_ros habits: ``None`` or 0 is tf2_ros's default (no wait); any other value is
+        a TypeError pointing to :meth:`lookup_transform_async`, since a call that blocks
+        would stop the event loop that delivers the data.
+
+        Raises:
+            TypeError: a non-zero ``timeout``.
+            InvalidArgumentException, LookupException, ConnectivityException,
+            ExtrapolationException: as :meth:`BufferCore.lookup_transform`.
+        """
+        if timeout is not None and timeout_ns(timeout) != 0:
+            raise TypeError(
+                "Buffer.lookup_transform does not wait (it would block the event loop "
+                "that delivers the data): use 'await buffer.lookup_transform_async("
+                f"{target_frame!r}, {source_frame!r}, time, timeout={timeout!r})'"
+            )
+        return _core_lookup_transform(self, target_frame, source_frame, time)
 
     # ------------------------------------------------------------------ notification
 
@@ -256,9 +285,52 @@ class Buffer(BufferCore):
         """How many waits are currently registered (0 once every wait has ended)."""
         return len(self._pending())
 
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` (or :meth:`aclose`) was called."""
+        return self._closed
+
     def close(self) -> None:
-        """Stop following the clock's jumps. Pending waits are unaffected."""
-        self._unregister_jump()
+        """Close the buffer: every pending wait fails at once with
+        :class:`~tfbus.errors.BufferClosedException`, and so does every later wait that
+        would have to wait (a lookup the stored data answers still succeeds, as do the
+        synchronous methods); stop following the clock's jumps. Idempotent.
+
+        A server shutting down (uvicorn's graceful shutdown, a worker's cancel scope)
+        closes its buffers so the requests still waiting on them end now, not at their
+        own timeouts.
+        """
+        if not self._closed:
+            self._closed = True
+            self._unregister_jump()
+        self._fail_pending("the buffer was closed")
+
+    async def aclose(self) -> None:
+        """:meth:`close`, then a checkpoint (anyio's ``aclose`` convention), so the
+        failed waits run before the caller goes on."""
+        self.close()
+        await anyio.lowlevel.checkpoint()
+
+    def _fail_pending(self, why: str) -> int:
+        """Fail every pending wait with a BufferClosedException saying ``why`` (one
+        instance each: each task raises its own); returns how many."""
+        waiters = self._pending()
+        for waiter in waiters:
+            self._unindex(waiter)
+            waiter.error = BufferClosedException(f"{why} while waiting")
+            waiter.wake()
+        return len(waiters)
+
+    def _listener_entered(self) -> None:
+        """A :class:`~tfbus.listener.TransformListener` starts feeding this buffer."""
+        self._listeners += 1
+
+    def _listener_left(self) -> None:
+        """A TransformListener stops feeding this buffer; when it was the last one, the
+        waits pending now fail: nothing will store the data they wait for."""
+        self._listeners -= 1
+        if self._listeners == 0:
+            self._fail_pending("the last TransformListener feeding the buffer was left")
 
     # ------------------------------------------------------------------ indexing
 
@@ -308,6 +380,8 @@ class Buffer(BufferCore):
             if isinstance(result, TransformException):
                 raise result
             return result
+        if self._closed:
+            raise BufferClosedException(f"the buffer is closed: not waiting for {describe()}")
         waiter: _Waiter[_T] = _Waiter(check, frames, running_asyncio_loop())
         self._reindex(waiter, frames())
         try:

@@ -47,7 +47,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
-from tfbus._aio import ShieldedYield, running_asyncio_loop
+from tfbus._aio import ShieldedYield, exit_task_group, running_asyncio_loop
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
 from tfbus.subscription import (
@@ -165,6 +165,8 @@ class Bus:
         self._latch = StaticLatch()
         self._task_group: anyio.abc.TaskGroup | None = None
         self._state = "new"  # "new" -> "open" -> "closed"
+        # Called once when the bus closes (a TransformListener on it: its buffer's waits).
+        self._on_close: list[Callable[[], None]] = []
         # The checkpoints around a publish: set for the event loop the bus is opened in.
         self._before_publish: Callable[[], Awaitable[None]] = (
             anyio.lowlevel.checkpoint_if_cancelled
@@ -213,16 +215,24 @@ class Bus:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
-        """Close the bus: end all subscriptions and cancel the transport task.
+        """Close the bus: end all subscriptions, leave every TransformListener still
+        on it (the waits pending on their buffers fail with
+        :class:`~tfbus.errors.BufferClosedException`, as when a listener is left) and
+        cancel the transport task.
+
+        What the ``async with`` body raised leaves as itself, never inside an
+        ``ExceptionGroup`` (:func:`tfbus._aio.exit_task_group`): ``except
+        TimeoutException:`` around the block catches a timeout raised in it.
 
         Raises:
-            BaseExceptionGroup: if the transport task failed.
+            BaseException: the body's exception, as itself (a transport failure at the
+                same time is its ``__context__``).
+            BaseExceptionGroup: if the transport task failed while the body did not raise.
         """
         self._shutdown()
         tg = self._task_group
         assert tg is not None
-        tg.cancel_scope.cancel()
-        return await tg.__aexit__(exc_type, exc, tb)
+        return await exit_task_group(tg, exc_type, exc, tb)
 
     def _shutdown(self) -> None:
         self._state = "closed"
@@ -233,6 +243,9 @@ class Bus:
             for cb in callbacks:
                 cb._closed = True
         self._callbacks.clear()
+        hooks, self._on_close = self._on_close, []
+        for hook in hooks:
+            hook()
 
     def _check_open(self) -> None:
         if self._state == "open":

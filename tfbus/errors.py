@@ -9,7 +9,9 @@ the wire format and transports add their own branches under one base::
     │   ├── ConnectivityException      both frames known, but in different trees
     │   ├── ExtrapolationException     a link on the path has no data at that time
     │   ├── InvalidArgumentException   malformed input: bad frame id, NaN, ±Inf, bad quaternion
-    │   └── TimeoutException           an awaited transform did not arrive in time
+    │   ├── TimeoutException           an awaited transform did not arrive in time (also
+    │   │                              TimeoutError)
+    │   └── BufferClosedException      a wait ended because its Buffer closed or lost its feed
     ├── URDFError                      a robot description cannot be used (also ValueError)
     ├── JointStateError                a JointState cannot become transforms (also ValueError)
     ├── BagError                       a recording cannot be read or written (``path``)
@@ -49,6 +51,7 @@ __all__ = [
     "BagFormatError",
     "BagNotFoundError",
     "BagReadError",
+    "BufferClosedException",
     "ConnectivityException",
     "ExtrapolationException",
     "ForwardExtrapolationException",
@@ -143,9 +146,26 @@ class InvalidArgumentException(TransformException):
         self.codes = codes
 
 
-class TimeoutException(TransformException):
+class TimeoutException(TransformException, TimeoutError):
     """An awaited transform did not become available within the timeout
-    (``tf2::TimeoutException``)."""
+    (``tf2::TimeoutException``).
+
+    Also a built-in :class:`TimeoutError` (what ``asyncio.timeout``, ``anyio.fail_after``
+    and ``trio.fail_after`` raise on Python >= 3.11), so one ``except TimeoutError``
+    covers tfbus's ``timeout=`` and the event loop's deadlines; ``except
+    TransformException`` still catches it as tf2 code expects.
+    """
+
+
+class BufferClosedException(TransformException):
+    """A wait on a :class:`~tfbus.buffer.Buffer` ended because nothing will feed it any
+    more: the buffer was closed (``Buffer.close()`` / ``aclose()``), or the last
+    :class:`~tfbus.listener.TransformListener` feeding it was left (leaving its
+    ``async with`` block or the ``Bus`` under it). Every pending wait fails at once with
+    it, so a server shutting down does not wait for each wait's own timeout.
+
+    tfbus's own: tf2_ros has no such case (its waits poll until their timeout).
+    """
 
 
 # --------------------------------------------------------------------------- robots

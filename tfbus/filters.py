@@ -41,6 +41,7 @@ from typing import Generic, Protocol, TypeVar
 import anyio
 import anyio.abc
 
+from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer
 from tfbus.errors import TransformException
 from tfbus.messages import Header
@@ -205,10 +206,11 @@ class MessageFilter(Generic[M]):
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
+        """Stop reading the source. What the ``async with`` body raised leaves as itself
+        (:func:`tfbus._aio.exit_task_group`)."""
         assert self._tg is not None
-        self._tg.cancel_scope.cancel()
         try:
-            return await self._tg.__aexit__(exc_type, exc, tb)
+            return await exit_task_group(self._tg, exc_type, exc, tb)
         finally:
             self._tg = None
 

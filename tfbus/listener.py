@@ -25,6 +25,7 @@ from typing import Any, Protocol
 import anyio
 import anyio.abc
 
+from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer, clear_on_jump_back
 from tfbus.bus import Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
@@ -181,6 +182,7 @@ class TransformListener:
             except BaseException:
                 self._callbacks[0].close()
                 raise
+            self._feed_started()
             return self
         static = self._bus.subscribe(TF_STATIC_TOPIC, self._queue_size)
         try:
@@ -195,6 +197,7 @@ class TransformListener:
         self._task_group = tg
         tg.start_soon(self._run, static, True, name="TransformListener /tf_static")
         tg.start_soon(self._run, dynamic, False, name="TransformListener /tf")
+        self._feed_started()
         return self
 
     async def __aexit__(
@@ -203,20 +206,37 @@ class TransformListener:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> bool | None:
-        """Stop listening: unregister both subscriptions (and cancel the tasks)."""
+        """Stop listening: unregister both subscriptions (and cancel the tasks). When this
+        was the last listener feeding its :class:`~tfbus.buffer.Buffer`, the waits
+        pending on it fail at once with :class:`~tfbus.errors.BufferClosedException`
+        (nothing will store the data they wait for); the buffer stays usable. What the
+        ``async with`` body raised leaves as itself (:func:`tfbus._aio.exit_task_group`)."""
         if self._unfollow_jumps is not None:
             self._unfollow_jumps()
+        if self._feed_ended in self._bus._on_close:
+            self._bus._on_close.remove(self._feed_ended)
+            self._feed_ended()
         for cb in self._callbacks:
             cb.close()
         tg = self._task_group
         if tg is None:
             return None
         try:
-            tg.cancel_scope.cancel()
-            return await tg.__aexit__(exc_type, exc, tb)
+            return await exit_task_group(tg, exc_type, exc, tb)
         finally:
             for sub in self._subs:
                 sub.close()
+
+    def _feed_started(self) -> None:
+        if isinstance(self._buffer, Buffer):
+            self._buffer._listener_entered()
+            self._bus._on_close.append(self._feed_ended)
+
+    def _feed_ended(self) -> None:
+        """This listener no longer feeds its Buffer (left, or its bus closed): the
+        buffer's pending waits fail if no other listener feeds it."""
+        assert isinstance(self._buffer, Buffer)
+        self._buffer._listener_left()
 
     async def _run(self, sub: Subscription[Any], static: bool) -> None:
         async for message in sub:

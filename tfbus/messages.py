@@ -25,6 +25,7 @@ or kept in a cache without copies.
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Sequence
 from types import GenericAlias
@@ -120,6 +121,16 @@ class Transform(NamedTuple):
     """geometry_msgs/Transform: ``translation`` (metres) then ``rotation`` (x, y, z, w).
 
     Maps a point p in the child frame to the parent frame: ``R(rotation) p + translation``.
+
+    Besides a :class:`Vector3` and a :class:`Quaternion`, ``translation`` and ``rotation``
+    accept any finite sequence or array of 3 and 4 numbers (a list, a tuple, a numpy
+    array such as :func:`tfbus.geometry.quaternion_from_euler` returns), converted once
+    here, in ``Transform(...)`` and ``_replace(...)`` (``_make`` does not convert).
+
+    Raises:
+        ValueError: ``translation`` or ``rotation`` is neither its type nor such a
+            sequence (wrong length, not numbers, NaN or infinite); the message names the
+            field and the value.
     """
 
     translation: Vector3 = _ZERO_VECTOR
@@ -129,6 +140,67 @@ class Transform(NamedTuple):
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
     def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+def _components(value: object, kind: type[Any], where: str, names: str) -> Any:
+    """``value`` as a ``kind`` (Vector3, Point or Quaternion): itself if it is one, else
+    a finite sequence or array of ``len(names)`` numbers converted once (what
+    :func:`tfbus.geometry.quaternion_from_euler` and numpy return, a list, a tuple).
+
+    Raises:
+        ValueError: anything else (wrong length, not numbers, NaN or infinite, not a
+            sequence), naming the field and the value.
+    """
+    if isinstance(value, kind):
+        return value
+    items: object = None
+    if not isinstance(value, (str, bytes)):
+        tolist = getattr(value, "tolist", None)  # numpy: Python floats, one call
+        try:
+            items = tolist() if callable(tolist) else list(value)  # type: ignore[call-overload]
+        except TypeError:
+            items = None
+    if (
+        isinstance(items, list)
+        and len(items) == len(kind._fields)
+        and all(
+            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+            for c in items
+        )
+    ):
+        return kind(*(float(c) for c in items))
+    raise ValueError(
+        f"{where} must be a {kind.__name__} or a sequence of {len(kind._fields)} finite "
+        f"numbers ({names}), got {value!r}"
+    )
+
+
+_tuple_new = tuple.__new__
+
+
+def _transform_new(
+    cls: type[Transform],
+    translation: Vector3 = _ZERO_VECTOR,
+    rotation: Quaternion = _IDENTITY_QUATERNION,
+) -> Transform:
+    # The messages' own types go straight through (two type checks: the hot path).
+    if translation.__class__ is not Vector3:
+        translation = _components(translation, Vector3, "Transform.translation", "x, y, z")
+    if rotation.__class__ is not Quaternion:
+        rotation = _components(rotation, Quaternion, "Transform.rotation", "x, y, z, w")
+    return _tuple_new(cls, (translation, rotation))
+
+
+def _transform_replace(self: Transform, **fields: object) -> Transform:
+    translation = fields.pop("translation", self[0])
+    rotation = fields.pop("rotation", self[1])
+    if fields:
+        raise ValueError(f"Got unexpected field names: {list(fields)!r}")
+    return _transform_new(type(self), translation, rotation)  # type: ignore[arg-type]
+
+
+setattr(Transform, "__new__", _transform_new)  # noqa: B010  (NamedTuple forbids it in the body)
+setattr(Transform, "_replace", _transform_replace)  # noqa: B010
 
 
 class Pose(NamedTuple):

@@ -549,7 +549,7 @@ def test_store_argument_errors_alike() -> None:
         ts._replace(transform=Transform(Vector3(2**1100, 0, 0), Quaternion())),
         ts._replace(transform=Transform(Vector3("1", 0, 0), Quaternion())),
         ts._replace(transform=Transform(Vector3(True, 0, 0), Quaternion())),
-        ts._replace(transform=Transform((1, 2), Quaternion())),
+        ts._replace(transform=Transform._make(((1, 2), Quaternion()))),
         ts._replace(child_frame_id=np.str_("c")),
         ts._replace(child_frame_id=5),
         ts._replace(header=Header(5, "a")),

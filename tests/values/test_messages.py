@@ -177,3 +177,38 @@ def test_replace_builds_a_modified_message_and_leaves_the_original() -> None:
     assert t3.child_frame_id == t.child_frame_id
     assert t.header.frame_id != "map" and t == sample()  # the original is unchanged
     assert "_replace" in (tfbus.messages.__doc__ or "")
+
+
+def test_transform_accepts_what_the_geometry_helpers_return() -> None:
+    """quaternion_from_euler's array, lists, tuples and arrays become Vector3/Quaternion once,
+    at construction (and in _replace); BufferCore.set_transform then stores them."""
+    import numpy as np
+
+    from tfbus.core import BufferCore
+    from tfbus.geometry import quaternion_from_euler
+    from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+    from tfbus.time import Time
+
+    t = Transform(np.array([1.0, 2.0, 3.0]), quaternion_from_euler(0.0, 0.0, 1.0))
+    assert type(t.translation) is Vector3 and type(t.rotation) is Quaternion
+    assert t.translation == Vector3(1.0, 2.0, 3.0)
+    assert t.rotation.z == pytest.approx(0.479425538604203, abs=1e-15)
+    assert Transform([1, 2, 3], (0, 0, 0, 1)) == Transform(Vector3(1.0, 2.0, 3.0), Quaternion())
+    assert type(Transform()._replace(rotation=[0.0, 0.0, 0.0, 1.0]).rotation) is Quaternion
+    core = BufferCore()
+    assert core.set_transform(TransformStamped(Header(Time(1), "map"), "base", t))
+    got = core.lookup_transform("map", "base", Time(1)).transform
+    assert got.translation == Vector3(1.0, 2.0, 3.0)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [(1.0, 2.0), "abc", 5, None, [1.0, 2.0, float("nan")], [True, 1.0, 2.0], [[1.0, 2.0, 3.0]]],
+)
+def test_transform_refuses_anything_else_naming_the_field(bad: object) -> None:
+    from tfbus.messages import Transform
+
+    with pytest.raises(ValueError, match=r"Transform\.translation must be a Vector3 or a sequence"):
+        Transform(bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"Transform\.rotation must be a Quaternion or a sequence"):
+        Transform(rotation=bad)  # type: ignore[arg-type]
