@@ -57,8 +57,9 @@ LAYERS: dict[str, int] = {
     "laser": 4,
     "robot": 4,
     "transports": 4,
-    "compat": 4,
-    # 5: the command line and examples
+    # 5: the command line, examples and the tf2 adapters (compat joins a ROS 1 graph
+    # through tfbus's ROS 1 transport, as the command line opens buses)
+    "compat": 5,
     "cli": 5,
     "remote": 5,  # lookups served over a transport (Zenoh queryable, ROS 1 action)
     "demos": 5,

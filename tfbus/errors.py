@@ -58,6 +58,7 @@ __all__ = [
     "InvalidArgumentException",
     "JointStateError",
     "LookupException",
+    "LoopThreadError",
     "MissingExtraError",
     "NoDataForExtrapolationException",
     "TfbusError",
@@ -127,6 +128,12 @@ def extrapolation_exception(message: str) -> ExtrapolationException:
     if "s into the past." in detail:
         return BackwardExtrapolationException(message)
     return NoDataForExtrapolationException(message)
+
+
+class LoopThreadError(TfbusError, RuntimeError):
+    """A blocking ``tfbus.compat`` call that would have to wait was made from an event
+    loop's own thread (it would wait on the loop it blocks): await the ``*_async`` method
+    there instead."""
 
 
 class InvalidArgumentException(TransformException):

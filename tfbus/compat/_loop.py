@@ -31,17 +31,14 @@ import anyio
 import anyio.abc
 from anyio.from_thread import BlockingPortal
 
+from tfbus.errors import LoopThreadError
+
 __all__ = ["STOP_TIMEOUT", "BackgroundLoop", "LoopThreadError", "background", "shutdown"]
 
 _T = TypeVar("_T")
 
 STOP_TIMEOUT = 0.8
 """Seconds :meth:`BackgroundLoop.stop` waits for the loop to close its bus and end."""
-
-
-class LoopThreadError(RuntimeError):
-    """A blocking call was made from an event loop's own thread (it would wait on the
-    loop it blocks): call the ``*_async`` method there instead."""
 
 
 class BackgroundLoop:
