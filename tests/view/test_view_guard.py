@@ -86,7 +86,7 @@ def test_foreign_host_and_origin_are_refused_this_machines_pass(page: TfPage) ->
 
 
 def test_the_token_lets_a_remote_browser_in_and_only_with_it() -> None:
-    page = TfPage("0.0.0.0", 0, token="s3cret-Token")
+    page = TfPage("127.0.0.1", 0, token="s3cret-Token")  # the Host header says remote
     try:
         p = page.port
         remote = f"robot.lan:{p}"
