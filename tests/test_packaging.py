@@ -170,6 +170,12 @@ def test_editable_install_is_quiet(tmp_path: Path) -> None:
     assert noise == [], log
 
 
+# An editable install's finder (setuptools' __editable__ module) would still find the
+# repository's tfbus.core._ccore: without it, the tfbus on PYTHONPATH is the one imported.
+NO_EDITABLE_FINDER = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
+                      "getattr(f, '__module__', '').startswith('__editable__')]; ")
+
+
 def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
     """Issue 20, 2.3: tfbus without its compiled module (a copy of the package, .py files
     only, first on sys.path) logs one warning line at import and ``tfbus --version``
@@ -178,11 +184,7 @@ def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
                     ignore=shutil.ignore_patterns("*.so", "*.c", "*.pyx", "__pycache__"))
     env = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"}
     env["PYTHONPATH"] = str(tmp_path)
-    # An editable install's finder (setuptools' __editable__ module) would still find the
-    # repository's tfbus.core._ccore: without it, this is a tfbus installed with no compiled core.
-    prelude = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
-               "getattr(f, '__module__', '').startswith('__editable__')]; ")
-    code = prelude + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
+    code = NO_EDITABLE_FINDER + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
     done = _run([sys.executable, "-c", code], timeout=120, env=env, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout == f"{tmp_path / 'tfbus' / '__init__.py'} False\n"
@@ -191,7 +193,7 @@ def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
     assert done.stderr == PURE_FALLBACK_WARNING + "\n"
     assert "\n" not in PURE_FALLBACK_WARNING and "pure-Python core" in PURE_FALLBACK_WARNING
     version = importlib.metadata.version("tfbus")
-    cli = prelude + "from tfbus.cli import main; sys.exit(main(['--version']))"
+    cli = NO_EDITABLE_FINDER + "from tfbus.cli import main; sys.exit(main(['--version']))"
     done = _run([sys.executable, "-c", cli], timeout=120, env=env, cwd=tmp_path)
     assert (done.returncode, done.stdout) == (
         0, f"tfbus {version} (pure-Python core: the compiled one is not installed)\n")
@@ -249,9 +251,7 @@ def test_a_source_tree_shadowing_a_compiled_install_says_so(tmp_path: Path) -> N
     (info / "RECORD").write_text("\n".join(record) + "\n")
     env = {k: v for k, v in os.environ.items() if k != "TFBUS_PURE_PYTHON"}
     env["PYTHONPATH"] = os.pathsep.join([str(clone), str(site)])
-    prelude = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path if not "
-               "getattr(f, '__module__', '').startswith('__editable__')]; ")
-    code = prelude + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
+    code = NO_EDITABLE_FINDER + "import tfbus, tfbus.core as c; print(tfbus.__file__, c.COMPILED)"
     done = _run([sys.executable, "-c", code], timeout=120, env=env, cwd=clone)
     assert done.returncode == 0, done.stderr
     assert done.stdout == f"{clone / 'tfbus' / '__init__.py'} False\n"
