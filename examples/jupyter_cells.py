@@ -6,6 +6,8 @@
 # %% setup: open the bus, buffer, listener and broadcasters (re-running it replaces them)
 import asyncio
 
+import anyio
+
 from tfbus import (
     Duration,
     Header,
@@ -13,6 +15,7 @@ from tfbus import (
     SystemClock,
     TimeoutException,
     Transform,
+    TransformSession,
     TransformStamped,
     Vector3,
     every,
@@ -25,17 +28,21 @@ tf = await open_session(name="robot")  # noqa: F704 (top-level await: a notebook
 clock = SystemClock()
 
 
-async def odometry() -> None:
-    """A simulated robot driving along x at 1 m/s, broadcasting odom -> base_link at 50 Hz."""
+async def odometry(session: TransformSession) -> None:
+    """A simulated robot driving along x at 1 m/s, broadcasting odom -> base_link at 50 Hz
+    on ``session`` (its own, not the global ``tf`` a re-run rebinds) until it is closed."""
     start = clock.now()
-    async for _ in every(0.02, immediate=True):
-        now = clock.now()
-        x = (now - start).to_sec()
-        await tf.broadcaster.send_transform(TransformStamped(
-            Header(now, "odom"), "base_link", Transform(Vector3(x, 0.0, 0.0), Quaternion())))
+    try:
+        async for _ in every(0.02, immediate=True):
+            now = clock.now()
+            x = (now - start).to_sec()
+            await session.broadcaster.send_transform(TransformStamped(
+                Header(now, "odom"), "base_link", Transform(Vector3(x, 0.0, 0.0), Quaternion())))
+    except anyio.ClosedResourceError:
+        pass  # its session was closed (the set-up cell re-run, or the close cell)
 
 
-robot = asyncio.get_running_loop().create_task(odometry())
+robot = asyncio.get_running_loop().create_task(odometry(tf))
 print("session open:", tf)
 
 # %% lookup: a time 0.2 s ahead: awaited until the broadcast covering it arrives
