@@ -133,3 +133,57 @@ def test_bounds_are_checked() -> None:
         FleetBuffer(bus, max_robots=0)
     with pytest.raises(ValueError, match="forget_after must be positive seconds, got -1"):
         FleetBuffer(bus, forget_after=-1)
+
+
+async def test_live_nodes_are_bounded_whatever_a_peer_declares() -> None:
+    """A peer declaring liveliness tokens for made-up node ids (and topics) fills at most
+    ``max_peers`` places; the rest are ignored and counted, and a node that goes frees
+    its place for the next."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, name="me",
+                               max_peers=3)
+    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
+    async with ZenohRouter(listen=endpoint), Bus(transport=transport):
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            liveliness = session.liveliness()
+            tokens = [liveliness.declare_token(f"tfbus/@alive/{i:04x}/fake") for i in range(6)]
+            tokens.append(liveliness.declare_token(f"tfbus/@alive/{'f' * 65}/long"))
+            await wait_until(lambda: transport.statistics().peers_over_limit == 4)
+            assert len(transport.alive()) == 3
+            # topics of a tracked node are bounded too (256 by default): one more is fine
+            first = sorted(transport.alive())[0]
+            topic = liveliness.declare_token(f"tfbus/@alive/{first}/fake/tf")
+            await wait_until(lambda: "/tf" in transport.alive()[first].topics)
+            # a tracked node goes: its place is free for a new one
+            gone = tokens.pop(int(first, 16))
+            topic.undeclare()
+            gone.undeclare()
+            await wait_until(lambda: first not in transport.alive())
+            tokens.append(liveliness.declare_token("tfbus/@alive/abcd/late"))
+            await wait_until(lambda: "abcd" in transport.alive())
+            assert len(transport.alive()) == 3
+            assert transport.statistics().peers_over_limit == 4
+            for token in tokens:
+                token.undeclare()
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+
+
+def test_peer_table_bounds_topics_per_node_and_checks_its_arguments() -> None:
+    from tfbus.transports.zenoh.keys import KeySpace
+    from tfbus.transports.zenoh.peers import PeerTable
+
+    keys = KeySpace()
+    table = PeerTable(keys, frozenset({"/tf_static"}), max_peers=2, max_topics=2)
+    assert table.update(True, keys.alive("n1", "a")) is not None
+    for topic in ("/tf", "/tf_static"):
+        assert table.update(True, keys.alive("n1", "a", topic)) is not None
+    assert table.update(True, keys.alive("n1", "a", "/extra")) is None
+    assert table.update(True, keys.alive("n1", "a", "/tf")) is not None  # already tracked
+    assert table.alive()["n1"].topics == frozenset({"/tf", "/tf_static"})
+    assert table.over_limit == 1
+    with pytest.raises(ValueError, match="max_peers must be at least 1, got 0"):
+        PeerTable(keys, frozenset(), max_peers=0)
+    with pytest.raises(ValueError, match="max_topics must be at least 1, got 0"):
+        PeerTable(keys, frozenset(), max_topics=0)

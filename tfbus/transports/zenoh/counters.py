@@ -47,6 +47,9 @@ class ZenohStatistics(TransportStatistics):
             topic of the bus (a percent-encoded alias such as ``tfbus/r%31/tf`` of
             ``tfbus/r1/tf``; :func:`~tfbus.transports.zenoh.keys.parse_chunk`).
         refused_tokens: liveliness tokens ignored for the same reason.
+        peers_over_limit: liveliness tokens ignored because the table of live nodes was
+            full (``max_peers``), a node had ``max_topics`` topics already, or the node
+            id was longer than :data:`~tfbus.transports.zenoh.peers.MAX_NODE_ID_LENGTH`.
         send_dropped: local messages tfbus dropped from its send queue because
             ``max_send_pending`` messages were already waiting (only with
             ``congestion_control="block"``). With ``"drop"`` (the default) Zenoh may
@@ -68,6 +71,7 @@ class ZenohStatistics(TransportStatistics):
     duplicates: int = 0
     refused_keys: int = 0
     refused_tokens: int = 0
+    peers_over_limit: int = 0
     send_dropped: int = 0
     send_merged: int = 0
     send_queued: int = 0

@@ -16,27 +16,58 @@ from __future__ import annotations
 from tfbus.transports._base import PEERS_TOPIC, PeerEvent, PeerInfo
 from tfbus.transports.zenoh.keys import KeySpace
 
-__all__ = ["PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
+__all__ = ["MAX_NODE_ID_LENGTH", "PEERS_TOPIC", "PeerEvent", "PeerInfo", "PeerTable"]
+
+MAX_NODE_ID_LENGTH = 64
+"""Longest node id accepted in a liveliness key, in characters (a Zenoh session id is
+at most 32 hexadecimal digits)."""
 
 
 class PeerTable:
     """The live remote nodes of one transport, updated from liveliness key events.
 
+    The table is bounded whatever remote peers declare: at most ``max_peers`` nodes and
+    ``max_topics`` topics per node are tracked; a token beyond either bound, or with a
+    node id longer than :data:`MAX_NODE_ID_LENGTH`, is ignored and counted in
+    :attr:`over_limit` (it is never queried for latched messages). A node's entry goes
+    when its node token goes, freeing its place.
+
     Args:
         keys: the bus's key space (liveliness keys of other buses are ignored).
         latched: the latched topics: a node that appears, or starts publishing one of
             them, should be asked for its latched messages.
+        max_peers: most remote nodes tracked at once.
+        max_topics: most topics tracked per node.
+
+    Raises:
+        ValueError: if ``max_peers`` or ``max_topics`` is less than 1.
     """
 
-    def __init__(self, keys: KeySpace, latched: frozenset[str]) -> None:
+    def __init__(
+        self,
+        keys: KeySpace,
+        latched: frozenset[str],
+        *,
+        max_peers: int = 4096,
+        max_topics: int = 256,
+    ) -> None:
+        if max_peers < 1:
+            raise ValueError(f"max_peers must be at least 1, got {max_peers!r}")
+        if max_topics < 1:
+            raise ValueError(f"max_topics must be at least 1, got {max_topics!r}")
         self._keys = keys
         self._latched = latched
+        self._max_peers = max_peers
+        self._max_topics = max_topics
         self._peers: dict[str, PeerInfo] = {}
         self.own_id = ""
         """This node's id (its own tokens are ignored)."""
         self.refused = 0
         """Liveliness events ignored because their key is not one of the bus's keys in
         its one spelling (:meth:`~tfbus.transports.zenoh.keys.KeySpace.parse_alive`)."""
+        self.over_limit = 0
+        """Liveliness tokens ignored because they would pass ``max_peers`` or
+        ``max_topics``, or name a node id longer than :data:`MAX_NODE_ID_LENGTH`."""
 
     def update(self, alive: bool, key: str) -> tuple[PeerEvent, bool] | None:
         """Apply one liveliness event: ``(event, query_latched)`` or None to ignore it.
@@ -55,7 +86,13 @@ class PeerTable:
         query = False
         if alive:
             if info is None:
+                if len(node_id) > MAX_NODE_ID_LENGTH or len(self._peers) >= self._max_peers:
+                    self.over_limit += 1
+                    return None
                 info = PeerInfo(node_id, name)
+            if topic and topic not in info.topics and len(info.topics) >= self._max_topics:
+                self.over_limit += 1
+                return None
             if topic:
                 info = PeerInfo(node_id, name, info.topics | {topic})
             self._peers[node_id] = info

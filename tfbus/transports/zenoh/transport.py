@@ -140,11 +140,15 @@ class ZenohTransport:
         max_send_pending: capacity of the send queue (``congestion_control="block"``),
             messages of non-latched topics; when full, the oldest is dropped and
             counted in ``send_dropped``.
+        max_peers: most other live nodes tracked (:attr:`alive`); liveliness tokens of
+            further nodes are ignored and counted in ``peers_over_limit``, so a peer
+            declaring tokens for made-up node ids cannot grow this node's memory or
+            make it query them (:class:`~tfbus.transports.zenoh.peers.PeerTable`).
 
     Raises:
         ValueError: if ``prefix`` / ``namespace`` / ``name`` / ``congestion_control``
-            are not valid, or ``max_pending`` / ``max_batch`` / ``max_send_pending``
-            is below 1.
+            are not valid, or ``max_pending`` / ``max_batch`` / ``max_send_pending`` /
+            ``max_peers`` is below 1.
         TransportError: if Zenoh rejects the configuration (e.g. an unreadable file).
     """
 
@@ -170,6 +174,7 @@ class ZenohTransport:
         express: bool = False,
         congestion_control: str = "drop",
         max_send_pending: int = 10_000,
+        max_peers: int = 4096,
     ) -> None:
         self._keys = key_space(prefix, namespace)
         if max_pending < 1 or max_batch < 1:
@@ -201,7 +206,7 @@ class ZenohTransport:
         self._stats = ZenohStatistics()
         self._outlets: dict[str, _Outlet] = {}
         self._seqs = SequenceTracker()
-        self._peers = PeerTable(self._keys, self._latched)
+        self._peers = PeerTable(self._keys, self._latched, max_peers=max_peers)
         self._inbox: deque[tuple[int, str, bytes]] = deque(maxlen=max_pending)
         self._wakeup: ThreadWakeup | None = None
         self._session: zenoh.Session | None = None
@@ -298,6 +303,7 @@ class ZenohTransport:
         return replace(
             self._stats,
             refused_tokens=self._peers.refused,
+            peers_over_limit=self._peers.over_limit,
             send_queued=len(self._send_queue),
         )
 
