@@ -304,7 +304,7 @@ register_scheme(
         "tfbus.transports.zenoh.options",
         keys=frozenset(
             {"connect", "listen", "config", "prefix", "namespace", "name", "port", "express",
-             "mode", "congestion_control"}
+             "mode", "congestion_control", "connect_timeout"}
         ),
         default_key="connect",
         extra="zenoh",

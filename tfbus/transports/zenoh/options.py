@@ -13,11 +13,14 @@ Keys: ``connect``, ``listen`` (endpoint lists), ``config`` (JSON5 file), ``prefi
 ``namespace`` (``*``: every robot, a fleet listener), ``name``, ``port`` (rendezvous
 port), ``express`` (``1``/``true``), ``congestion_control`` (``drop``, the default, or
 ``block``: :class:`ZenohTransport`), ``mode`` (``peer`` or ``client``: ``client`` goes
-through a Zenoh router, ``tfbus router``; with ``config`` the file's mode rules).
+through a Zenoh router, ``tfbus router``; with ``config`` the file's mode rules),
+``connect_timeout`` (seconds to wait for the ``connect`` endpoints, e.g. a router not up
+yet; default: wait as long as it takes).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,6 +49,7 @@ class ZenohOptions:
     express: bool = False
     congestion_control: str = "drop"
     mode: str | None = None
+    connect_timeout: float | None = None
 
     @classmethod
     def from_spec(cls, spec: BusSpec) -> ZenohOptions:
@@ -70,6 +74,7 @@ class ZenohOptions:
             express=spec.boolean("express"),
             congestion_control=_congestion(spec.value("congestion_control")),
             mode=_mode(spec.value("mode")),
+            connect_timeout=_seconds(spec.value("connect_timeout")),
         )
 
     def transport(self, **overrides: Any) -> ZenohTransport:
@@ -89,6 +94,7 @@ class ZenohOptions:
             "port": self.port,
             "express": self.express,
             "congestion_control": self.congestion_control,
+            "connect_timeout": self.connect_timeout,
         }
         if self.mode is not None and self.config is None:
             kwargs["config"] = {"mode": self.mode}
@@ -103,6 +109,18 @@ def _mode(value: str | None) -> str | None:
 
 
 _MODES = ("peer", "client")
+
+
+def _seconds(value: str | None) -> float | None:
+    if value is None:
+        return None
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = math.nan
+    if not 0 <= seconds < math.inf:
+        raise ValueError(f"connect_timeout must be finite seconds >= 0, got {value!r}")
+    return seconds
 
 
 def _congestion(value: str | None) -> str:

@@ -35,7 +35,9 @@ Errors of Zenoh itself (``zenoh.ZError``) are raised as
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
+import math
 import time
 from collections import deque
 from collections.abc import Iterable, Sequence
@@ -74,6 +76,16 @@ from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
 __all__ = ["ZenohStatistics", "ZenohTransport"]
 
 log = logging.getLogger("tfbus.transports.zenoh")
+
+UNREACHABLE: Final = "Unable to connect to any of"
+"""Zenoh's error text when none of the ``connect`` endpoints answers (a client whose
+router is not up): the one error :class:`ZenohTransport` waits out."""
+CONNECT_RETRY_FIRST: Final = 0.25
+"""Seconds before the first retry to open a session whose endpoints did not answer."""
+CONNECT_RETRY_MAX: Final = 2.0
+"""Longest wait between two retries, seconds."""
+CONNECT_LOG_PERIOD: Final = 5.0
+"""Seconds between two "waiting for a Zenoh router" log lines."""
 
 _LATCHED_DEFAULT: Final = (TF_STATIC_TOPIC,)
 _SAMPLE: Final = 0
@@ -144,11 +156,17 @@ class ZenohTransport:
             further nodes are ignored and counted in ``peers_over_limit``, so a peer
             declaring tokens for made-up node ids cannot grow this node's memory or
             make it query them (:class:`~tfbus.transports.zenoh.peers.PeerTable`).
+        connect_timeout: seconds to keep trying while none of the ``connect`` endpoints
+            answers (a ``mode=client`` session whose router is not up yet: Zenoh refuses
+            to open it, "Unable to connect to any of ..."). ``None`` (default) waits as
+            long as it takes, as rmw_zenoh waits for its router, logging which endpoints
+            it tries once every :data:`CONNECT_LOG_PERIOD` seconds; retries back off
+            from 0.25 s to 2 s. Then :class:`~tfbus.errors.TransportError`.
 
     Raises:
         ValueError: if ``prefix`` / ``namespace`` / ``name`` / ``congestion_control``
             are not valid, or ``max_pending`` / ``max_batch`` / ``max_send_pending`` /
-            ``max_peers`` is below 1.
+            ``max_peers`` is below 1, or ``connect_timeout`` is negative or not finite.
         TransportError: if Zenoh rejects the configuration (e.g. an unreadable file).
     """
 
@@ -175,6 +193,7 @@ class ZenohTransport:
         congestion_control: str = "drop",
         max_send_pending: int = 10_000,
         max_peers: int = 4096,
+        connect_timeout: float | None = None,
     ) -> None:
         self._keys = key_space(prefix, namespace)
         if max_pending < 1 or max_batch < 1:
@@ -185,6 +204,11 @@ class ZenohTransport:
             )
         if max_send_pending < 1:
             raise ValueError(f"max_send_pending must be at least 1, got {max_send_pending!r}")
+        if connect_timeout is not None and not 0 <= connect_timeout < math.inf:
+            raise ValueError(
+                f"connect_timeout must be None or finite seconds >= 0, got {connect_timeout!r}"
+            )
+        self._connect_timeout = connect_timeout
         self._block = congestion_control == "block"
         self._max_send_pending = max_send_pending
         self._send_queue: deque[_Pending] = deque()
@@ -333,7 +357,7 @@ class ZenohTransport:
         """
         if self._running or self._session is not None:
             raise RuntimeError("this ZenohTransport is already running")
-        session = await anyio.to_thread.run_sync(self._open_session)
+        session = await self._open_waiting()
         wakeup = ThreadWakeup()
         declared: list[Any] = []
         try:
@@ -465,6 +489,45 @@ class ZenohTransport:
             await self._send(self._take_sends())
 
     # -- internals: session -----------------------------------------------------------
+
+    def _connect_endpoints(self) -> str:
+        """The ``connect`` endpoints of the configuration, for a log line."""
+        try:
+            endpoints = json.loads(self._config.get_json("connect/endpoints"))
+            return ", ".join(str(e) for e in endpoints) or "no endpoint"
+        except (zenoh.ZError, ValueError, TypeError):
+            return "the configured endpoints"
+
+    async def _open_waiting(self) -> zenoh.Session:
+        """Open the session, retrying while no ``connect`` endpoint answers (bounded by
+        ``connect_timeout``); each attempt fails within milliseconds, and the waits
+        between them are cancellable (Ctrl-C ends a waiting command at once)."""
+        deadline = (
+            None if self._connect_timeout is None
+            else anyio.current_time() + self._connect_timeout
+        )
+        delay = CONNECT_RETRY_FIRST
+        next_log = anyio.current_time() + CONNECT_RETRY_FIRST  # not for a router racing us
+        while True:
+            try:
+                return await anyio.to_thread.run_sync(self._open_session)
+            except TransportError as err:
+                if UNREACHABLE not in str(err):
+                    raise
+                now = anyio.current_time()
+                if deadline is not None and now >= deadline:
+                    raise TransportError(
+                        f"no Zenoh router or peer answered within {self._connect_timeout:g} s"
+                        f" (connect_timeout): {err}"
+                    ) from err.__cause__
+                if now >= next_log:
+                    next_log = now + CONNECT_LOG_PERIOD
+                    log.warning(
+                        "waiting for a Zenoh router or peer at %s (is `tfbus router` running?);"
+                        " still trying", self._connect_endpoints()
+                    )
+                await anyio.sleep(delay if deadline is None else min(delay, deadline - now))
+                delay = min(delay * 2, CONNECT_RETRY_MAX)
 
     def _open_session(self) -> zenoh.Session:
         try:
