@@ -199,6 +199,33 @@ def test_the_package_is_found() -> None:
     assert cores <= set(_graph()["tfbus.core._select"])
 
 
+def test_only_the_core_imports_its_selection() -> None:
+    """The implementation choice (compiled or pure-Python) stays inside ``tfbus.core``:
+    modules above it use the public face ``tfbus.core.kernels``."""
+    outside = sorted(
+        _where(importer, edges["tfbus.core._select"])
+        for importer, edges in _graph().items()
+        if "tfbus.core._select" in edges and not importer.startswith("tfbus.core")
+    )
+    assert not outside, "import tfbus.core.kernels, not tfbus.core._select:\n" + "\n".join(
+        outside
+    )
+
+
+def test_each_topic_name_has_one_home() -> None:
+    """Topic names are defined in ``tfbus/topics.py`` only; elsewhere they are imported."""
+    names = ("/tf", "/tf_static", "/tfbus/peers", "/joint_states", "/scan")
+    pattern = re.compile(r'^[A-Z_]+(?::[^=]*)?\s*=\s*"(' + "|".join(map(re.escape, names)) + ')"',
+                         re.MULTILINE)
+    homes = sorted(
+        f"{path.relative_to(PACKAGE.parent)}: {m.group(0)}"
+        for module, path in MODULES.items()
+        if path.suffix == ".py" and module != "tfbus.topics"
+        for m in pattern.finditer(path.read_text(encoding="utf-8"))
+    )
+    assert not homes, "define topic names in tfbus/topics.py only:\n" + "\n".join(homes)
+
+
 def test_every_module_has_a_layer() -> None:
     missing = sorted(
         {entry for m in MODULES if (entry := _entry(m)) is not None and entry not in LAYERS}

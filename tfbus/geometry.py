@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from transforms3d import euler as _t3d_euler
 from transforms3d import quaternions as _t3d_quat
 
-from tfbus.core import _select as _core
+from tfbus.core import kernels as _core
 from tfbus.messages import (
     Point,
     PointStamped,

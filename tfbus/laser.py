@@ -39,7 +39,7 @@ import numpy.typing as npt
 
 from tfbus.buffer import Buffer
 from tfbus.core import BufferCore
-from tfbus.core._select import apply_transforms, lerp_rows, slerp_rows
+from tfbus.core.kernels import apply_transforms, lerp_rows, slerp_rows
 from tfbus.messages import Header
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time

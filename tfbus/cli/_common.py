@@ -192,7 +192,7 @@ def version() -> str:
 def _print_version(ctx: click.Context, param: click.Parameter, value: bool) -> None:
     if not value or ctx.resilient_parsing:
         return
-    from tfbus.core._select import core_description
+    from tfbus.core.kernels import core_description
 
     click.echo(f"tfbus {version()} ({core_description()})")
     ctx.exit()

@@ -159,7 +159,7 @@ def command(
       tfbus echo base_link base_laser --bus zenoh -n 1
       tfbus echo base_link base_laser --bus zenoh:tcp/192.168.1.10:7448 --duration 10
     """
-    from tfbus.core._select import INVALID_ARGUMENT
+    from tfbus.core.kernels import INVALID_ARGUMENT
     from tfbus.core.text import bad_frame_exception
     from tfbus.errors import TransformException
 

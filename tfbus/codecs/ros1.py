@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from tfbus.core._select import TF_FROM_ROS1
+from tfbus.core.kernels import TF_FROM_ROS1
 from tfbus.errors import WireDecodeError, WireEncodeError
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.sensor_msgs import LaserScan
