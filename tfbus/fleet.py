@@ -43,7 +43,7 @@ from tfbus.buffer import Buffer
 from tfbus.clock import Clock, SystemClock, timeout_ns
 from tfbus.messages import Header, TFMessage, TransformStamped
 from tfbus.time import Duration
-from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
+from tfbus.topics import PEERS_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, TF_TOPICS
 
 if TYPE_CHECKING:
     from tfbus.bus import Bus
@@ -52,7 +52,6 @@ if TYPE_CHECKING:
 
 __all__ = ["FleetBuffer", "FleetStatistics", "RobotInfo", "prefix_frames"]
 
-PEERS_TOPIC = "/tfbus/peers"  # tfbus.transports.zenoh.PEERS_TOPIC, without importing zenoh
 
 
 @dataclass(frozen=True, slots=True)

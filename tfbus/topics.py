@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from typing import Final
 
-__all__ = ["JOINT_STATES_TOPIC", "SCAN_TOPIC", "TF_STATIC_TOPIC", "TF_TOPIC", "TF_TOPICS"]
+__all__ = [
+    "JOINT_STATES_TOPIC",
+    "PEERS_TOPIC",
+    "SCAN_TOPIC",
+    "TF_STATIC_TOPIC",
+    "TF_TOPIC",
+    "TF_TOPICS",
+]
 
 TF_TOPIC: Final = "/tf"
 """Dynamic transforms (``tf2_msgs/TFMessage``): tf2_ros ``TransformBroadcaster``'s topic."""
@@ -27,3 +34,8 @@ sends."""
 
 SCAN_TOPIC: Final = "/scan"
 """``sensor_msgs/LaserScan``: the laser demo's scans (the conventional ROS name)."""
+
+PEERS_TOPIC: Final = "/tfbus/peers"
+"""Local bus topic on which a peer-aware transport delivers
+:class:`~tfbus.transports._base.PeerEvent` messages (nodes appearing and leaving); never
+sent to other processes."""

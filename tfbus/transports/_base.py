@@ -26,7 +26,7 @@ from typing import Final, NamedTuple, Protocol, runtime_checkable
 
 import anyio
 
-from tfbus.topics import TF_TOPICS
+from tfbus.topics import PEERS_TOPIC, TF_TOPICS
 
 __all__ = [
     "PEERS_TOPIC",
@@ -54,8 +54,6 @@ class BusLike(Protocol):
         or a latch keeping it for subscribers to come)."""
 
 
-PEERS_TOPIC: Final = "/tfbus/peers"
-"""Local bus topic on which the transport delivers :class:`PeerEvent` (never sent out)."""
 
 _TF_TOPICS: Final = frozenset(TF_TOPICS)
 
