@@ -53,7 +53,7 @@ demo: $(CORE_STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
 
-# The speed targets of issue 22 against tf2_py, PASS/FAIL per row (not part of `make test`:
+# The speed targets against tf2_py, PASS/FAIL per row (not part of `make test`:
 # no timing is a test). Run it before and after a change to the core (CONTRIBUTING.md).
 bench-check: $(STAMP)
 	$(BIN)/python benchmarks/bench_check.py

@@ -5,7 +5,7 @@ tfbus's own writer (a robot-like mix: several dynamic frames per /tf message at 
 plus one /tf_static), then timed:
 
 * ``rosbags``: rosbags' AnyReader + typestore ``deserialize`` of every /tf message (the
-  "bare read" the issue's target is stated against);
+  "bare read" the read-speed target is stated against);
 * ``read_messages``: tfbus.bag.read_messages (decoded to tfbus values);
 * ``load_buffer``: tfbus.bag.load_buffer (read + BufferCore.set_transform).
 

@@ -12,10 +12,10 @@ Prints, on this machine, for asyncio and trio (``anyio.run(..., backend=...)``):
    Buffer. The latency is ``time.perf_counter_ns()`` taken right before
    ``send_transform`` to ``perf_counter_ns()`` taken right after the awaiting task's
    ``await`` returns. Shown for ``timeout=None``, 1 s and 10 s, with a ``SystemClock``
-   (real time). Targets (issue 3): median <= 0.1 ms, p99 <= 1 ms, whatever the
+   (real time). Targets: median <= 0.1 ms, p99 <= 1 ms, whatever the
    timeout. For reference, tf2_ros polls: 0.5-23 ms. The floor is measured in the same
    way right before each repeat: a bare ``anyio.Event`` set -> the awaiting task
-   resuming, same hand-off; target (issue 10 §5): wake-up median <= 3x that floor, on
+   resuming, same hand-off; target: wake-up median <= 3x that floor, on
    both backends (the median of the per-repeat ratios: each repeat's wake-ups over the
    floor measured just before them, so that the machine's speed drift cancels).
 2. **Bus throughput**, transforms/s through broadcaster -> bus -> listener -> buffer:
@@ -73,7 +73,7 @@ BACKENDS = ("asyncio", "trio")
 LATENCY_TIMEOUTS: tuple[float | None, ...] = (None, 1.0, 10.0)
 LATENCY_MEDIAN_TARGET_MS = 0.1
 LATENCY_P99_TARGET_MS = 1.0
-LATENCY_FLOOR_RATIO_TARGET = 3.0  # issue 10: median <= 3x a bare Event set -> resume
+LATENCY_FLOOR_RATIO_TARGET = 3.0  # target: median <= 3x a bare Event set -> resume
 THROUGHPUT_TARGET = 1_000_000  # transforms/s, batched
 N_CHILDREN = 100  # frames per batched message
 STAMP_PERIOD = 10 * MS  # 100 Hz
@@ -301,7 +301,7 @@ def bench_latency(backend: str, cfg: Config) -> None:
     floor_ms = statistics.median(r.median_ms for r in floors)
     print(
         f"  bare anyio.Event set -> resume (the floor): median {floor_ms * 1e3:.1f} us; "
-        f"target (issue 10): wake-up median <= {LATENCY_FLOOR_RATIO_TARGET:g}x the floor"
+        f"target: wake-up median <= {LATENCY_FLOOR_RATIO_TARGET:g}x the floor"
     )
     if len(floors) > 1:
         each_floor = " ".join(f"{r.median_ms * 1e3:.1f}" for r in floors)
@@ -344,12 +344,12 @@ def bench_latency(backend: str, cfg: Config) -> None:
 
 # --------------------------------------------------------------------------- deep waiters
 
-DEEP_DEPTH = 10_000  # issue 11 item 16
+DEEP_DEPTH = 10_000  # links in the chain the waits sit below
 DEEP_WAITERS = 100
 
 
 async def deep_insert_run(inserts: int, link: str) -> list[int]:
-    """Issue 11 item 16: ``DEEP_WAITERS`` pending waits below a ``DEEP_DEPTH``-deep chain
+    """``DEEP_WAITERS`` pending waits below a ``DEEP_DEPTH``-deep chain
     (each waits for the leaf in a frame that does not exist yet), then ``inserts`` new
     samples of one chain link (``link``: "top", the root's link, or "leaf", the link of
     the frame every wait starts from), each stored through ``Buffer.set_transforms``
@@ -397,7 +397,7 @@ def bench_deep(cfg: Config) -> None:
     inserts = 5 if cfg is QUICK else 20
     print(
         f"\n[asyncio] insert cost with {DEEP_WAITERS} waiters below a {DEEP_DEPTH}-deep chain "
-        f"(issue 11 item 16), {inserts} inserts of one link:"
+        f"{inserts} inserts of one link:"
     )
     for link in ("top", "leaf"):
         samples = anyio.run(deep_insert_run, inserts, link, backend="asyncio")

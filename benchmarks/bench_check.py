@@ -1,8 +1,8 @@
-"""Speed regression guard (issue 22): the core's targets against tf2_py, PASS or FAIL.
+"""Speed regression guard: the core's targets against tf2_py, PASS or FAIL.
 
     .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1]   # or: make bench-check
 
-Runs the cases of issue 22's table in the same run as the real tf2 (``tf2_py`` under
+Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6; ``_tf2_check_side.py``),
 in interleaved rounds (tfbus's side, then tf2's, ``--rounds`` times), and judges the
 median of the per-round ratios, so that a machine shared with other work slows both

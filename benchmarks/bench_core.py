@@ -8,15 +8,15 @@ Prints, on this machine:
   time 0, at interpolated times that vary from call to call (so no result caching can
   help), and at one fixed interpolated time;
 * ``set_transform`` rate (single calls, 100 Hz samples of many frames, cache pruning on),
-  and ns per call on a chain of 10 links stored in order (issue 22: <= 0.35x tf2_py);
+  and ns per call on a chain of 10 links stored in order (target: <= 0.35x tf2_py);
 * memory per cached sample (1000 frames x 10 s x 100 Hz = 1M samples): tracemalloc and
   RSS growth for tfbus, RSS growth for tf2 (C++ allocations are invisible to tracemalloc).
 
 The tf2 half runs ``benchmarks/_tf2_side.py`` under ``/usr/bin/python3`` (Debian
 ``python3-tf2``); the scenario (stamps, query times, sizes) is handed over as JSON so both
-sides do exactly the same work. Targets (issue 2): lookups no slower than tf2_py,
+sides do exactly the same work. Targets: lookups no slower than tf2_py,
 set_transform at least half of tf2_py's rate, at most 72 bytes per cached sample;
-(issue 10 §5) a never-repeated depth-2 lookup at most 0.20x tf2_py, with a breakdown of
+and a never-repeated depth-2 lookup at most 0.20x tf2_py, with a breakdown of
 where its time goes and the floor (building the same TransformStamped, no lookup).
 Figures only: nothing here asserts a timing.
 """
@@ -41,7 +41,7 @@ NS = 1_000_000_000
 TF2_PYTHON = "/usr/bin/python3"
 TF2_SIDE = Path(__file__).with_name("_tf2_side.py")
 MEMORY_TARGET = 72  # bytes per cached sample
-LOOKUP_DEPTH2_TARGET = 0.20  # issue 10 §5: never-repeated depth-2 lookup vs tf2_py
+LOOKUP_DEPTH2_TARGET = 0.20  # target: never-repeated depth-2 lookup vs tf2_py
 
 
 def scenario(quick: bool) -> dict[str, Any]:
@@ -258,7 +258,7 @@ def _us(seconds: float | None) -> str:
 
 
 def depth2_breakdown(sc: dict[str, Any]) -> dict[str, float]:
-    """Where a never-repeated depth-2 lookup spends its time (issue 10 §5), seconds per
+    """Where a never-repeated depth-2 lookup spends its time, seconds per
     call, best of the repeats, on the same query times as the main table:
 
     * ``full``: ``BufferCore.lookup_transform`` (what users call);
@@ -322,7 +322,7 @@ def report_breakdown(b: dict[str, float], ref: dict[str, Any] | str) -> None:
         ratio = b["full"] / theirs
         verdict = "ok" if ratio <= LOOKUP_DEPTH2_TARGET else "MISS"
         print(
-            f"  target (issue 10): <= {LOOKUP_DEPTH2_TARGET:.2f}x tf2_py "
+            f"  target: <= {LOOKUP_DEPTH2_TARGET:.2f}x tf2_py "
             f"({_us(theirs).strip()}): {ratio:.2f}x  {verdict}"
         )
 

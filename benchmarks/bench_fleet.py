@@ -1,4 +1,4 @@
-"""Fleet benchmark (issue 25): figures, no assertions.
+"""Fleet benchmark: figures, no assertions.
 
 1. Scale through one router: ``--robots`` robot processes (each a Zenoh client in its
    own namespace ``robotK``) publish ``--frames`` transforms per message at ``--rate`` Hz
@@ -17,7 +17,7 @@
 
 Usage: ``python benchmarks/bench_fleet.py [--robots 20 --frames 30 --rate 50 --seconds 10]
 [--sim-robots 100] [--queries 2000]``; ``--quick`` for a short run.
-Targets (issue 25): 0 lost, p99 <= 20 ms for 20 x 30 x 50 Hz.
+Targets: 0 lost, p99 <= 20 ms for 20 x 30 x 50 Hz.
 """
 
 from __future__ import annotations

@@ -16,9 +16,9 @@ Prints, on this machine:
   rate; and tfbus's CPU per transform for the same work, with the ratio.
 
 * ``load_urdf`` on generated chains of 10^4 and 5x10^4 revolute joints: seconds and
-  links/s (issue 21: 1.4 s and 18.7 s before, quadratic in the number of elements).
+  links/s (1.4 s and 18.7 s when loading was quadratic in the number of elements).
 
-Target (issue 15): at least 100 000 joint transforms/s. Figures only: nothing here
+Target: at least 100 000 joint transforms/s. Figures only: nothing here
 asserts a timing.
 """
 

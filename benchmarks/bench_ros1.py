@@ -8,7 +8,7 @@ their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of th
 ``--repeat N`` runs each scenario N times (a fresh pair of subscribers each time) and
 adds the median of the per-run figures: on a shared machine one run is noisy. The
 50-frame scenario runs once per ``--modes`` entry (default all, see :data:`MODES`):
-``queue`` is issue 22's row (a queued ``async for`` subscription against a roscpp
+``queue`` is the receive-latency target's row (a queued ``async for`` subscription against a roscpp
 callback), ``callback`` a tfbus callback subscription against the same roscpp callback,
 ``listener`` a tfbus ``TransformListener`` into a ``Buffer`` against a
 ``tf2_ros::TransformListener`` into a ``tf2_ros::Buffer``. The publisher's values are
@@ -22,7 +22,7 @@ Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.
     .venv/bin/python benchmarks/bench_ros1.py           # 10 s at 1 frame, 60 s at 50 frames
     .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
     .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 5
-    .venv/bin/python benchmarks/bench_ros1.py --modes queue  # issue 22's row alone
+    .venv/bin/python benchmarks/bench_ros1.py --modes queue  # the receive-latency row alone
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ MODES = ("queue", "callback", "listener")
 """How each side receives, per ``--modes``:
 
 * ``queue``: C++ ``bench_sub`` (a roscpp subscription callback) vs a tfbus queued
-  subscription read by ``async for`` (the first row of issue 22, kept as it was: tfbus's
+  subscription read by ``async for`` (the receive-latency target's row, kept as it was: tfbus's
   time includes handing the message from the read callback to the waiting task).
 * ``callback``: the same C++ subscriber vs a tfbus callback subscription
   (:meth:`tfbus.Bus.subscribe_callback`), the counterpart of a roscpp callback.
@@ -229,7 +229,7 @@ def main() -> None:
         "--modes",
         default=",".join(MODES),
         help="how the 50-frame scenario is received, comma separated (default: all; "
-        "queue = issue 22's row; the 1-frame scenario is always queue)",
+        "queue = the receive-latency target's row; the 1-frame scenario is always queue)",
     )
     parser.add_argument("--tfbus-sub", choices=MODES, help=argparse.SUPPRESS)
     args = parser.parse_args()

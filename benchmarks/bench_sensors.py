@@ -1,4 +1,4 @@
-"""Sensor-stream benchmarks (issue 12), each against the real peer in the same run.
+"""Sensor-stream benchmarks, each against the real peer in the same run.
 
 * ``lookup_transforms``: N = 10 000 times, a chain of depth 8, every link interpolated
   (each link's samples at its own stamps), vs a loop of ``tf2_py`` lookups

@@ -10,7 +10,7 @@ and a child it starts (the sender: Bus + TransformBroadcaster).
 2. Throughput: the sender publishes TFMessages of ``--batch`` transforms as fast as it
    can for ``--seconds``; the receiver counts transforms stored in its Buffer.
 3. Wire decoding in this process (first, no network): microseconds per payload for
-   valid TFMessages and for hostile payloads refused (issue 11: 1 000-deep nesting,
+   valid TFMessages and for hostile payloads refused (1 000-deep nesting,
    stamps beyond int64, a flat 16 KB list walked by the nesting bound).
 
 Usage: ``python benchmarks/bench_zenoh.py [--probes 2000] [--batch 100] [--seconds 3]

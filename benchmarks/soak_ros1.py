@@ -1,4 +1,4 @@
-"""ROS 1 soak under attack (issue 21): a tfbus publisher process sends ``--rate`` Hz x
+"""ROS 1 soak under attack: a tfbus publisher process sends ``--rate`` Hz x
 ``--frames`` transforms for ``--seconds`` s through a real roscore to a tfbus subscriber
 node that is attacked meanwhile, and every transform must arrive.
 

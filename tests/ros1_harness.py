@@ -98,7 +98,7 @@ def tfbus_cli(master: Master, *args: str) -> Proc:
     return Proc([sys.executable, "-m", "tfbus.cli", *args], env, cwd=ROOT)
 
 
-# -- sensor_msgs/LaserScan from Debian's rostopic (issue 24) -------------------------
+# -- sensor_msgs/LaserScan from Debian's rostopic ------------------------------------
 
 SCAN_YAML = (
     "{header: {seq: 0, stamp: {secs: 10, nsecs: 100000000}, frame_id: base_laser}, "

@@ -1,4 +1,4 @@
-"""``benchmarks/`` stands alone (issue 22, point 5): every benchmark imports with the
+"""``benchmarks/`` stands alone: every benchmark imports with the
 ``bench`` extra alone, nothing from ``tests/`` and none of the ``test`` extra's packages.
 
 Each benchmark module is loaded (its ``__main__`` block not run) in a fresh interpreter

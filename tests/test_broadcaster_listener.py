@@ -186,7 +186,7 @@ async def test_listener_survives_junk_on_the_topics(caplog: pytest.LogCaptureFix
         assert core.can_transform("base_link", "later", T0 + Duration(1))
         stats = listener.statistics()
         # "junk" and four non-TFMessages are malformed; a TransformStamped whose transform
-        # field has the wrong type is an invalid transform (issue 11 item 13).
+        # field has the wrong type is an invalid transform.
         assert stats.malformed == 4
         assert stats.invalid == 1
         assert stats.stored == 2
@@ -350,7 +350,7 @@ class _ProtocolOnlyClock:
 async def test_listener_clears_the_buffer_when_its_clock_jumps_back(
     caplog: pytest.LogCaptureFixture, protocol_only: bool
 ) -> None:
-    """Issue 11 item 17: the listener reads the clock on each message, as tf2_ros's
+    """The listener reads the clock on each message, as tf2_ros's
     TransformListener does, so a clock stepped back clears the buffer (here a BufferCore,
     which has no clock of its own: only the listener can notice). The listener reads the
     Clock protocol's ``now_ns()`` (no Time built), of a tfbus clock or any other."""
@@ -375,7 +375,7 @@ async def test_listener_clears_the_buffer_when_its_clock_jumps_back(
 
 
 async def test_listener_on_a_buffer_reads_the_buffers_clock() -> None:
-    """Issue 11 item 17: with ``Buffer()`` + ``TransformListener`` (the README set-up) the
+    """With ``Buffer()`` + ``TransformListener`` (the README set-up) the
     listener reads the buffer's own clock on each message; a jump back seen there clears
     the buffer once (the Buffer's own jump handler)."""
     clock = ManualClock(T0)
@@ -395,7 +395,7 @@ async def test_listener_on_a_buffer_reads_the_buffers_clock() -> None:
 async def test_a_jump_back_clears_a_sink_once_whoever_follows_the_clock(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    """Issue 26: "clear on a jump back" has one owner (``clear_on_jump_back``): two
+    """The rule "clear on a jump back" has one owner (``clear_on_jump_back``): two
     listeners feeding one BufferCore, and a Buffer with its own listener, on one clock,
     clear each sink once per jump (one warning line), and stop following on exit."""
     from tfbus.buffer import clear_on_jump_back

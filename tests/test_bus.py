@@ -381,7 +381,7 @@ def _with(t: TransformStamped, **fields: Any) -> TransformStamped:
 
 
 async def test_latch_keeps_the_valid_static_when_an_invalid_one_is_resent() -> None:
-    """Issue 11 item 4: a NaN static re-sent by any publisher replaced the valid latched
+    """A NaN static re-sent by any publisher replaced the valid latched
     /tf_static entry, so late joiners never got the valid one. The latch stores only
     transforms the core would store (same validation)."""
     good = ts("laser", 1.5)
@@ -405,7 +405,7 @@ async def test_latch_keeps_the_valid_static_when_an_invalid_one_is_resent() -> N
 
 
 async def test_latch_key_is_the_normalised_child_id() -> None:
-    """Issue 11 item 4: ``laser`` and ``/laser`` are one latched entry (tf2 strips the
+    """``laser`` and ``/laser`` are one latched entry (tf2 strips the
     leading slash), the latest sent wins."""
     async with Bus() as bus:
         bus.publish_nowait(TF_STATIC_TOPIC, TFMessage((ts("laser", 1.0), ts("cam", 2.0))))
@@ -416,8 +416,8 @@ async def test_latch_key_is_the_normalised_child_id() -> None:
 
 
 def test_memory_transport_keeps_its_old_import_paths() -> None:
-    """MemoryTransport lives in tfbus.transports.memory (issue 10 section 3) and is
-    exported as tfbus.MemoryTransport; bus.py itself neither imports nor gets (issue 26:
+    """MemoryTransport lives in tfbus.transports.memory and is
+    exported as tfbus.MemoryTransport; bus.py itself neither imports nor gets (there is
     no ``setattr`` into another module) anything of the transports layer."""
     import ast
     from pathlib import Path
@@ -463,7 +463,7 @@ async def test_publish_checks_cancellation_before_publishing() -> None:
 
 
 async def test_publish_never_raises_cancellation_after_publishing() -> None:
-    """The checkpoint after a publish is cancel-shielded (issue 10: on asyncio a yield on
+    """The checkpoint after a publish is cancel-shielded (on asyncio a yield on
     a done future, which anyio's cancel scopes do not interrupt; this holds anyio to it):
     a scope cancelled while the publisher yields cancels it at its next checkpoint, not
     inside the publish that already delivered the message."""

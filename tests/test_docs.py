@@ -321,7 +321,7 @@ def test_page_renders_in_chromium(
 
 
 def test_site_is_browsable_from_disk(site: Path) -> None:
-    """Issue 20, 2.9: ``make docs`` then site/index.html over file://: every internal link
+    """``make docs`` then site/index.html over file://: every internal link
     of every page names a file of the site (page.html), never a directory, which a
     browser shows as a listing without a server's index.html."""
     pages = sorted(site.rglob("*.html"))
@@ -437,7 +437,7 @@ def _perf_tables() -> Any:
 
 
 def test_quoted_figures_are_the_saved_output_lines() -> None:
-    """Issue 22 §5: a figure quoted in the README or a page is filled in from the saved
+    """A figure quoted in the README or a page is filled in from the saved
     benchmark output (the lines its expression picks, and when they were measured), so
     it cannot outlive a new run; an expression that picks nothing is an error."""
     pt = _perf_tables()

@@ -286,7 +286,7 @@ def _sideways(
 
 
 def test_no_import_sideways_between_layer_4_packages() -> None:
-    """bag, transports, compat, monitor, ... each import only lower layers (issue 26: the
+    """bag, transports, compat, monitor, ... each import only lower layers (the
     one sideways arrow was transports/ros1/tcpros.py importing tfbus.bag.decode; the
     shared code now lives a layer down, in tfbus.codecs)."""
     found = _sideways(_graph(), LAYERS)

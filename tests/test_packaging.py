@@ -118,7 +118,7 @@ def test_without_a_c_compiler_the_sdist_builds_pure_python(
     wheel, log = _wheel(sdist, tmp_path, env)
     assert FALLBACK_MESSAGE in log
     assert "pure-Python core" in log
-    # Issue 20, 2.3: a pure wheel, not one tagged for this Python and platform.
+    # A pure wheel, not one tagged for this Python and platform.
     assert wheel.name == f"tfbus-{_pyproject_version()}-py3-none-any.whl"
     with zipfile.ZipFile(wheel) as z:
         meta = z.read(f"tfbus-{_pyproject_version()}.dist-info/WHEEL").decode()
@@ -149,7 +149,7 @@ def _project_copy(dest: Path) -> Path:
 
 
 def test_editable_install_is_quiet(tmp_path: Path) -> None:
-    """Issue 20, 2.2: ``pip install -q -e .`` (what every ``make`` target may run) prints
+    """``pip install -q -e .`` (what every ``make`` target may run) prints
     nothing: not setuptools' "Editable installation ... Please be careful" box, which pip
     shows even with -q. Into a new venv, from a copy of the project."""
     venv = tmp_path / "venv"
@@ -177,7 +177,7 @@ NO_EDITABLE_FINDER = ("import sys; sys.meta_path[:] = [f for f in sys.meta_path 
 
 
 def test_the_pure_fallback_says_so(tmp_path: Path) -> None:
-    """Issue 20, 2.3: tfbus without its compiled module (a copy of the package, .py files
+    """tfbus without its compiled module (a copy of the package, .py files
     only, first on sys.path) logs one warning line at import and ``tfbus --version``
     names the core; choosing the pure core with TFBUS_PURE_PYTHON=1 is silent."""
     shutil.copytree(ROOT / "tfbus", tmp_path / "tfbus",

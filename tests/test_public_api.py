@@ -61,7 +61,7 @@ def test_buffer_is_a_buffer_core() -> None:
 def test_time_clock_and_convert_modules_pin_their_names() -> None:
     """The time layer's helpers beside the package's names: one exact seconds ->
     nanoseconds conversion, one stamp formatter, the clocks' deadline primitive and the
-    transform registry (issue 10 §2-3)."""
+    transform registry."""
     import tfbus.clock
     import tfbus.convert
     import tfbus.time

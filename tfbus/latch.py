@@ -6,7 +6,7 @@ transient-local publisher (ROS 2 ``StaticTransformBroadcaster``) or a latched on
 per child). The :class:`~tfbus.bus.Bus` keeps one for its late subscribers and every
 transport keeps one for its late-joining peers; this class is that one piece of logic.
 
-Two rules (issue 11, item 4):
+Two rules:
 
 * only a transform the core would store is latched -- the check *is*
   :meth:`BufferCore.set_transform_static <tfbus.core.BufferCore.set_transform_static>`

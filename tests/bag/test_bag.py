@@ -255,7 +255,7 @@ def test_summary_turtle() -> None:
 
 def test_summary_is_the_monitors_statistics() -> None:
     """bag-info, monitor and frames share one accounting: a BagSummary is tf_monitor's
-    TfSummary with the bag's path, format and error (issue 11 item 22)."""
+    TfSummary with the bag's path, format and error."""
     from tfbus.monitor import AuthoritySummary, FrameSummary, TfSummary
 
     assert tfbag.FrameSummary is FrameSummary

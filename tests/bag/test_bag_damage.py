@@ -1,4 +1,4 @@
-"""Damaged bags (issue 11, items 8 and 9, and the bag-reading fuzz test).
+"""Damaged bags (records that do not parse, bags cut short, and the bag-reading fuzz test).
 
 Whatever the damage, a read returns every readable message first, then raises one
 ``BagReadError`` naming the file and the byte offset where reading stopped; no other
@@ -103,11 +103,11 @@ def mcap_with(path: Path, source: Path, log_times: list[int], schema_text: bytes
     return path
 
 
-# --------------------------------------------------------------------------- item 8
+# ------------------------------------------------------------ records that do not parse
 
 
-def test_item8_log_time_beyond_int64_is_a_bag_read_error(tmp_path: Path) -> None:
-    """Item 8: an MCAP log time >= 2**63 ns raised ValueError (Time range) out of the
+def test_log_time_beyond_int64_is_a_bag_read_error(tmp_path: Path) -> None:
+    """An MCAP log time >= 2**63 ns raised ValueError (Time range) out of the
     read; now the three messages before it are returned, then a BagReadError."""
     bags = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:10])
     bad = mcap_with(tmp_path / "huge.mcap", bags["mcap"], [10**18, 10**18 + 1, 10**18 + 2,
@@ -119,8 +119,8 @@ def test_item8_log_time_beyond_int64_is_a_bag_read_error(tmp_path: Path) -> None
     assert "\n" not in str(err)
 
 
-def test_item8_unreadable_schema_is_a_bag_read_error(tmp_path: Path) -> None:
-    """Item 8: a cut MCAP whose stored definition is mangled raised rosbags'
+def test_unreadable_schema_is_a_bag_read_error(tmp_path: Path) -> None:
+    """A cut MCAP whose stored definition is mangled raised rosbags'
     TypesysError; now a BagReadError naming the file and the offset."""
     bags = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:40])
     data = bags["mcap"].read_bytes()
@@ -137,7 +137,7 @@ def test_item8_unreadable_schema_is_a_bag_read_error(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("cut", [True, False])
 def test_unparsable_schema_is_one_short_line(tmp_path: Path, cut: bool) -> None:
-    """Issue 20, 2.10: ``tfbus bag-info`` on an MCAP whose stored schema does not parse
+    """``tfbus bag-info`` on an MCAP whose stored schema does not parse
     printed the whole schema twice in one ~1500-character warning; now one short line:
     the file, the byte offset, the schema's name and its first bad line (line 2 of the
     stored definition, the mangled separator), whether or not the file has a summary
@@ -166,8 +166,8 @@ def test_unparsable_schema_is_one_short_line(tmp_path: Path, cut: bool) -> None:
     assert "MSG:" not in line and "transforms" not in line  # the schema is not quoted
 
 
-def test_item8_non_utf8_connection_header_is_a_bag_read_error(tmp_path: Path) -> None:
-    """Item 8: a ROS 1 bag without index whose connection topic is not UTF-8 raised
+def test_non_utf8_connection_header_is_a_bag_read_error(tmp_path: Path) -> None:
+    """A ROS 1 bag without index whose connection topic is not UTF-8 raised
     UnicodeDecodeError; now a BagReadError at that record's offset."""
     path = tmp_path / "w.bag"
     write_bag(path, list(read_messages(TURTLE))[:40])
@@ -184,7 +184,7 @@ def test_item8_non_utf8_connection_header_is_a_bag_read_error(tmp_path: Path) ->
     assert "utf8.bag" in str(err)
 
 
-def test_item8_every_bag_error_leaves_the_cli_helpers_one_line(tmp_path: Path) -> None:
+def test_every_bag_error_leaves_the_cli_helpers_one_line(tmp_path: Path) -> None:
     """load_buffer and summarize on a damaged file: a BagReadError / a summary with its
     error, never another exception."""
     bags = tfbus_bags(tmp_path, list(read_messages(TURTLE))[:10])
@@ -196,11 +196,11 @@ def test_item8_every_bag_error_leaves_the_cli_helpers_one_line(tmp_path: Path) -
     assert s.error is not None and s.messages == {"/tf": 1}
 
 
-# --------------------------------------------------------------------------- item 9
+# --------------------------------------------------------------------------- bags cut short
 
 
-def test_item9_ros1_cut_exactly_after_a_chunk_is_truncated(tmp_path: Path) -> None:
-    """Item 9: a 20 000-message bag cut right after a chunk (and its index records)
+def test_ros1_cut_exactly_after_a_chunk_is_truncated(tmp_path: Path) -> None:
+    """A 20 000-message bag cut right after a chunk (and its index records)
     returned the first chunks' messages with no error; the missing index now says the
     bag is truncated, after those messages."""
     base = list(read_messages(TURTLE))
@@ -228,8 +228,8 @@ def test_item9_ros1_cut_exactly_after_a_chunk_is_truncated(tmp_path: Path) -> No
     assert err.offset == cut_at and "truncated" in err.reason
 
 
-def test_item9_version_line_alone_is_not_an_empty_bag(tmp_path: Path) -> None:
-    """Item 9: the 13-byte file ``#ROSBAG V2.0\\n`` read as an empty bag; it is an error."""
+def test_version_line_alone_is_not_an_empty_bag(tmp_path: Path) -> None:
+    """The 13-byte file ``#ROSBAG V2.0\\n`` read as an empty bag; it is an error."""
     path = tmp_path / "v.bag"
     path.write_bytes(b"#ROSBAG V2.0\n")
     got, err = read_all(path)
@@ -333,7 +333,7 @@ def test_compressed_ros1_bag_cut_is_salvaged(tmp_path: Path, compression: str) -
     assert err.offset is not None and err.offset < len(data) // 2
 
 
-# --------------------------------------------------------------------------- issue 21
+# --------------------------------------- flipped .db3 bits, salvage memory, chunk sizes
 
 
 def _index_entry_flipped(tmp_path: Path, row: int, bit: int) -> tuple[Path, list[BagMessage]]:
@@ -359,8 +359,8 @@ def _index_entry_flipped(tmp_path: Path, row: int, bit: int) -> tuple[Path, list
     return bad, messages
 
 
-def test_issue21_item8_db3_timestamp_read_as_a_blob_is_a_bag_read_error(tmp_path: Path) -> None:
-    """Issue 21, item 8: one flipped bit makes a timestamp a 1-byte BLOB (serial type 14):
+def test_db3_timestamp_read_as_a_blob_is_a_bag_read_error(tmp_path: Path) -> None:
+    """One flipped bit makes a timestamp a 1-byte BLOB (serial type 14):
     read_messages leaked TypeError ('<=' between int and bytes); now the 9 messages
     before it in time order, then a BagReadError naming the file and the row."""
     bad, messages = _index_entry_flipped(tmp_path, 10, 3)
@@ -371,8 +371,8 @@ def test_issue21_item8_db3_timestamp_read_as_a_blob_is_a_bag_read_error(tmp_path
     assert "BLOB" in err.reason and "\n" not in str(err)
 
 
-def test_issue21_item8_db3_timestamp_out_of_order_is_a_bag_read_error(tmp_path: Path) -> None:
-    """Issue 21, item 8: a flip making the timestamp a 32-bit integer (serial type 4) read
+def test_db3_timestamp_out_of_order_is_a_bag_read_error(tmp_path: Path) -> None:
+    """A flip making the timestamp a 32-bit integer (serial type 4) read
     the message "cleanly" at bag time 325100004 ns, out of order; a time-ordered read
     going backwards is now damage."""
     bad, messages = _index_entry_flipped(tmp_path, 10, 1)
@@ -382,7 +382,7 @@ def test_issue21_item8_db3_timestamp_out_of_order_is_a_bag_read_error(tmp_path: 
 
 
 @pytest.mark.parametrize("command", [["bag-info"], ["echo", "world", "turtle1"], ["monitor"]])
-def test_issue21_item8_cli_on_a_flipped_db3_is_one_line(tmp_path: Path,
+def test_cli_on_a_flipped_db3_is_one_line(tmp_path: Path,
                                                          command: list[str]) -> None:
     """bag-info, echo and monitor on the flipped file printed a traceback; now one line
     naming the file (exit status 1), after what was readable."""
@@ -400,7 +400,7 @@ def test_issue21_item8_cli_on_a_flipped_db3_is_one_line(tmp_path: Path,
     assert result.exit_code == 1
 
 
-def test_issue21_ros1_salvage_does_not_read_the_file_into_memory(tmp_path: Path) -> None:
+def test_ros1_salvage_does_not_read_the_file_into_memory(tmp_path: Path) -> None:
     """Salvaging a ROS 1 bag read the whole file (Path.read_bytes, then a copy without
     its first line): Python memory grew by twice the file. It is now mapped and read a
     record at a time: the traced peak while reading a 9 MB bag cut at 90 % stays
@@ -434,7 +434,7 @@ def test_issue21_ros1_salvage_does_not_read_the_file_into_memory(tmp_path: Path)
     assert got == sum(e <= size * 9 // 10 for e in ends) and "truncated" in err.value.reason
 
 
-def test_issue21_compressed_chunk_without_its_size_is_refused(tmp_path: Path) -> None:
+def test_compressed_chunk_without_its_size_is_refused(tmp_path: Path) -> None:
     """A bz2 chunk whose header lacks "size" (the uncompressed size, a required field)
     was decompressed without any bound; it is now a BagReadError at that chunk, after
     the messages before it."""
@@ -467,8 +467,8 @@ def test_issue21_compressed_chunk_without_its_size_is_refused(tmp_path: Path) ->
 
 
 @pytest.mark.parametrize("short", [1, 37, 100])
-def test_issue21_item9_db3_cut_short_is_truncated(tmp_path: Path, short: int) -> None:
-    """Issue 21, item 9: a .db3 cut short by 1-100 bytes read "cleanly", its last page
+def test_db3_cut_short_is_truncated(tmp_path: Path, short: int) -> None:
+    """A .db3 cut short by 1-100 bytes read "cleanly", its last page
     zero-filled by sqlite (message 476 of 500 came back with garbage values). The short
     file is now detected from its header (page count x page size) and reported as
     truncated, after the messages stored on the intact pages: here the 476 on the leaf

@@ -1,8 +1,8 @@
 """The ``tfbus`` group, through click's CliRunner: help, version, unknown commands, the
 ``--bus`` option every live command shares, log lines, signals, missing optional
 dependencies, one rate definition across tools, the fuzz run of every command on damaged,
-empty, missing and hostile inputs, and one run of the installed entry point (issue 11's
-CLI items 5, 22, 23; issue 21 item 12). Each command's own tests are in
+empty, missing and hostile inputs, and one run of the installed entry point (escaped
+log lines, one rate, one-line errors, bad --bus values). Each command's own tests are in
 ``tests/cli/test_cli_<command>.py``. Bag data: tests/data/webviz_turtle_tf_example.bag
 (Apache-2.0)."""
 
@@ -183,7 +183,7 @@ async def test_bus_source_collects_attributes_and_sees_a_broadcaster_go() -> Non
                 while src.summary().frames["base_laser"].count < ns - 1 - 5:
                     await anyio.sleep(0.02)
             s = src.summary()
-            # Issue 10 §3: the live source is a TransformListener feeding the Buffer and
+            # The live source is a TransformListener feeding the Buffer and
             # tfbus.monitor's statistics, not a second feed loop.
             from tfbus.listener import TransformListener
 
@@ -226,8 +226,8 @@ def test_installed_entry_point() -> None:
     assert proc.stderr.strip() == "tfbus echo: error: Missing argument 'TARGET'."
 
 
-def test_item5_log_lines_from_peers_are_literal() -> None:
-    """Issue 11 item 5: the live source's log lines (a peer's bad transform) are escaped."""
+def test_log_lines_from_peers_are_literal() -> None:
+    """The live source's log lines (a peer's bad transform) are escaped."""
     import logging
 
     from tfbus.cli._common import SafeLogFormatter
@@ -239,8 +239,8 @@ def test_item5_log_lines_from_peers_are_literal() -> None:
     )
 
 
-def test_item22_one_rate_definition_across_tools(tmp_path: Path) -> None:
-    """Issue 11 item 22: frames, monitor and bag-info give the same rate on a bag with
+def test_one_rate_definition_across_tools(tmp_path: Path) -> None:
+    """frames, monitor and bag-info give the same rate on a bag with
     repeated stamps. Hand-computed: stamps 0, 0.1, 0.1, 0.2, 0.4 s -> 4 distinct stamps
     over 0.4 s -> (4 - 1) / 0.4 = 7.5 Hz."""
     path = tmp_path / "rep.bag"
@@ -271,8 +271,8 @@ def _without(module: str, argv: Sequence[str]) -> subprocess.CompletedProcess[st
                    "from tfbus.cli import main\nsys.exit(main(sys.argv[1:]))", *argv)
 
 
-def test_item23_missing_click_names_the_extra() -> None:
-    """Issue 11 item 23: ``tfbus`` without click: one line naming tfbus[cli]."""
+def test_missing_click_names_the_extra() -> None:
+    """``tfbus`` without click: one line naming tfbus[cli]."""
     proc = _without("click", ["--help"])
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip() == (
@@ -281,8 +281,8 @@ def test_item23_missing_click_names_the_extra() -> None:
     )
 
 
-def test_item23_missing_rosbags_names_the_extra(tmp_path: Path) -> None:
-    """Issue 11 item 23: reading an .mcap without rosbags: one line naming tfbus[bag]."""
+def test_missing_rosbags_names_the_extra(tmp_path: Path) -> None:
+    """Reading an .mcap without rosbags: one line naming tfbus[bag]."""
     folder = tmp_path / "b"
     write_bag(folder, [BagMessage(Time.from_ns(T0), "/tf", TFMessage([tf("a", "b", T0)]), "")],
               format="mcap")
@@ -293,8 +293,8 @@ def test_item23_missing_rosbags_names_the_extra(tmp_path: Path) -> None:
     assert len(lines) == 1 and "pip install 'tfbus[bag]'" in lines[0]
 
 
-def test_item23_missing_trio_is_one_line() -> None:
-    """Issue 11 item 23: --backend trio without trio: one line saying what to install."""
+def test_missing_trio_is_one_line() -> None:
+    """--backend trio without trio: one line saying what to install."""
     proc = _without("trio", ["demo", "--backend", "trio", "--duration", "0"])
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip() == (
@@ -317,8 +317,8 @@ def _sigterm_after_first_line(*args: str) -> tuple[int, str, str]:
     return proc.returncode, first + out, err
 
 
-def test_item23_sigterm_ends_commands_cleanly() -> None:
-    """Issue 11 item 23: SIGTERM ends a long-running command as Ctrl-C does: no
+def test_sigterm_ends_commands_cleanly() -> None:
+    """SIGTERM ends a long-running command as Ctrl-C does: no
     traceback, a clean exit status."""
     code, out, err = _sigterm_after_first_line(
         "static-transform", "0", "0", "1", "0", "0", "0", "world", "cam", "--local")
@@ -379,14 +379,14 @@ def _check(args: list[str], code: int, out: str, err: str) -> None:
 def test_fuzz_every_command_on_damaged_empty_and_missing_inputs(
     damaged_inputs: dict[str, Path], tmp_path: Path
 ) -> None:
-    """Issue 11 fuzzing: every command on damaged, empty and missing bags: a one-line
+    """Fuzzing: every command on damaged, empty and missing bags: a one-line
     error (or warning after what was readable), a non-zero exit, never a traceback."""
     failures = 0
     for name, path in damaged_inputs.items():
         for args in _commands(str(path), "world", "turtle1", tmp_path):
             code, out, err = run(*args)
             _check(args, code, out, err)
-            # (version-only.bag: an error once tfbus.bag reports it, issue 11 item 9)
+            # (version-only.bag: an error once tfbus.bag reports it as one)
             if name in ("missing.bag", "empty.bag", "text.bag", "junk.mcap"):
                 assert code != 0, (args, out)
             failures += code != 0
@@ -394,7 +394,7 @@ def test_fuzz_every_command_on_damaged_empty_and_missing_inputs(
 
 
 def test_fuzz_every_command_on_hostile_ids(hostile_bag: Path, tmp_path: Path) -> None:
-    """Issue 11 fuzzing: every command with every hostile id (as argument and in the
+    """Fuzzing: every command with every hostile id (as argument and in the
     bag): no raw control character on stdout, one-line errors, no traceback."""
     for a in HOSTILE:
         for args in _commands(str(hostile_bag), a, "world", tmp_path):
@@ -430,10 +430,10 @@ BAD_BUS_SPECS = [
 @pytest.mark.parametrize(("spec", "said"), BAD_BUS_SPECS)
 @pytest.mark.parametrize("command", [["monitor", "--duration", "0.1"],
                                      ["echo", "a", "b", "--duration", "0.1"]])
-def test_issue21_item12_bad_bus_values_are_one_line_usage_errors(
+def test_bad_bus_values_are_one_line_usage_errors(
     spec: str, said: str, command: list[str]
 ) -> None:
-    """Issue 21, item 12: a --bus value the transport refuses printed a traceback (exit
+    """A --bus value the transport refuses printed a traceback (exit
     status 1) when the bus was opened, and port=99999 was accepted; each is now one
     line naming the spec and the value, exit status 2, before anything runs."""
     pytest.importorskip("zenoh" if spec.startswith("zenoh") else
@@ -444,7 +444,7 @@ def test_issue21_item12_bad_bus_values_are_one_line_usage_errors(
     assert f"--bus {spec!r}: " in err and said in err, err
 
 
-def test_issue21_item12_zenoh_port_out_of_range_is_refused_by_the_library() -> None:
+def test_zenoh_port_out_of_range_is_refused_by_the_library() -> None:
     """The same check where the spec becomes options, for scripts: open_transport and
     ZenohTransport refuse a port outside 1..65535 with a ValueError naming it."""
     pytest.importorskip("zenoh")

@@ -1,5 +1,5 @@
 """``tfbus bag-info``: frames, parents, broadcasters, rates and span of a bag; damaged
-bags; hostile ids printed literally (issue 11 item 5)."""
+bags; hostile ids printed literally."""
 
 from __future__ import annotations
 
@@ -61,8 +61,8 @@ def test_bag_info_truncated_shows_prefix_and_warns(tmp_path: Path) -> None:
     assert len(lines) == 1 and "warning" in lines[0] and "reading stopped" in lines[0]
 
 
-def test_item5_ids_print_literally_in_bag_info_and_monitor(hostile_bag: Path) -> None:
-    """Issue 11 item 5: ids and broadcaster names are never rich markup and control
+def test_ids_print_literally_in_bag_info_and_monitor(hostile_bag: Path) -> None:
+    """Ids and broadcaster names are never rich markup and control
     characters are escaped (bag-info, monitor, monitor A B)."""
     for args in (("bag-info", str(hostile_bag)), ("monitor", "--bag", str(hostile_bag)),
                  ("monitor", "[/]", "\x1b[2J", "--bag", str(hostile_bag))):

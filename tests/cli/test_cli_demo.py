@@ -42,7 +42,7 @@ def _fake_runners(monkeypatch: pytest.MonkeyPatch) -> list[tuple[object, ...]]:
 
 
 def test_demo_options_are_parsed_once_by_click(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Issue 10 §3: the options reach the runners as values (no argv rebuilt for a second
+    """The options reach the runners as values (no argv rebuilt for a second
     parser)."""
     calls = _fake_runners(monkeypatch)
     code, _, _ = run("demo", "--duration", "3", "--rate", "50", "--listen-rate", "2")

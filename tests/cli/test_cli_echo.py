@@ -1,5 +1,5 @@
 """``tfbus echo`` (tf2_echo / tf_echo) on a bag or a live bus, its time arguments, and
-tf2_echo's failure text with hostile ids (issue 11 items 5 and 20)."""
+tf2_echo's failure text with hostile ids and on two trees."""
 
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ def test_echo_failure_and_bad_arguments() -> None:
 def test_readers_listen_on_the_default_bus_without_a_source(
     command: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    """Issue 20, 2.6: ``tfbus echo base_link base_laser`` with no --bag/--bus listens to
+    """``tfbus echo base_link base_laser`` with no --bag/--bus listens to
     the bus the publishers publish on by default, as tf2_echo listens to the running
     graph (no usage error). The live session is replaced by a Ctrl-C (exit 130)."""
     import importlib
@@ -116,7 +116,7 @@ def test_readers_listen_on_the_default_bus_without_a_source(
 
 
 def test_echo_takes_tf2_echos_positional_rate() -> None:
-    """Issue 20, 2.7: ``tf2_echo source target [rate]``: RATE as the third argument is
+    """``tf2_echo source target [rate]``: RATE as the third argument is
     --rate (steps of 1/rate s of bag time through the turtle bag's 21.5 s of chain)."""
     base = ["echo", "world", "turtle1", "--bag", str(TURTLE)]
     counts = {}
@@ -138,7 +138,7 @@ def test_echo_takes_tf2_echos_positional_rate() -> None:
 def test_echo_leading_slash_is_tf2s_own_message(
     args: list[str], label: str, frame: str
 ) -> None:
-    """Issue 20, 2.7: tf2's validateFrameId message (as the conformance corpus records it
+    """tf2's validateFrameId message (as the conformance corpus records it
     from tf2 0.7.6), one line, exit status 1 as a failed lookup; with --bag and on a
     live bus alike (nothing is opened for a frame id that can never be found)."""
     expected = (f'tfbus echo: error: Invalid argument "{frame}" passed to lookupTransform '
@@ -167,8 +167,8 @@ def test_parse_time() -> None:
             parse_time(bad)
 
 
-def test_item5_echo_failure_path_is_literal(hostile_bag: Path) -> None:
-    """Issue 11 item 5 and 20: the echo failure text keeps bracketed names and escapes
+def test_echo_failure_path_is_literal(hostile_bag: Path) -> None:
+    """The echo failure text keeps bracketed names and escapes
     control characters, including in the list of frames."""
     code, out, _ = run("echo", "[bold red]x[/]", "\x1b[2J", "--bag", str(hostile_bag),
                        "--time", "1")
@@ -179,8 +179,8 @@ def test_item5_echo_failure_path_is_literal(hostile_bag: Path) -> None:
     assert "Frame \\x1b[2J exists with parent world." in out
 
 
-def test_item20_echo_on_two_trees_prints_tf2_echo_failure(two_trees_bag: Path) -> None:
-    """Issue 11 item 20: no KeyError; tf_echo's failure text with the frame names."""
+def test_echo_on_two_trees_prints_tf2_echo_failure(two_trees_bag: Path) -> None:
+    """No KeyError; tf_echo's failure text with the frame names."""
     code, out, err = run("echo", "b", "d", "--bag", str(two_trees_bag))
     assert code == 1 and "Traceback" not in err
     assert out.startswith("Failure at 0.000000000\nException thrown:Could not find a "

@@ -1,5 +1,5 @@
 """``tfbus frames`` (view_frames): the DOT text, rendering, output errors, and hostile or
-escaped ids as one quoted node each (issue 11 items 6 and 10, issue 21 item 11)."""
+escaped ids as one quoted node each."""
 
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def test_frames_pdf_renders_or_explains(tmp_path: Path) -> None:
     code, _, err = run("frames", "--bag", str(TURTLE), "-o", str(out))
     assert (tmp_path / "frames.gv").exists()
     if shutil.which("dot"):
-        assert code == 0, f"Graphviz failed: {err}"  # issue 10 §4: its error text shown
+        assert code == 0, f"Graphviz failed: {err}"  # Graphviz's error text shown
         assert out.read_bytes().startswith(b"%PDF")
     else:
         assert code == 1 and "'dot' not found" in err and len(err.strip().splitlines()) == 1
@@ -70,10 +70,10 @@ def _svg_nodes(svg: Path) -> list[str]:
 
 
 @pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is not installed")
-def test_item6_every_hostile_tree_renders_one_node_per_frame(
+def test_every_hostile_tree_renders_one_node_per_frame(
     hostile_bag: Path, tmp_path: Path
 ) -> None:
-    """Issue 11 item 6: one node per frame, nothing injected, every tree renders (also a
+    """One node per frame, nothing injected, every tree renders (also a
     trailing backslash, <script> and a 16 KB id, which is shortened visibly)."""
     out = tmp_path / "tree.svg"
     code, _, err = run("frames", "--bag", str(hostile_bag), "-o", str(out))
@@ -93,23 +93,23 @@ def test_item6_every_hostile_tree_renders_one_node_per_frame(
         assert len(_svg_nodes(out)) == 3
 
 
-def test_item6_dot_text_quotes_every_id(hostile_bag: Path) -> None:
-    """Issue 11 item 6: in the DOT text every id is one quoted identifier."""
+def test_dot_text_quotes_every_id(hostile_bag: Path) -> None:
+    """In the DOT text every id is one quoted identifier."""
     from tfbus.bag import load_buffer
     from tfbus.cli import frames_dot
 
     dot = frames_dot(load_buffer(hostile_bag))
     assert '\tworld -> "cam:left" [label=' in dot
-    assert '\tworld -> "back\\\\\\\\" [label=' in dot  # drawn back\\ (issue 21)
+    assert '\tworld -> "back\\\\\\\\" [label=' in dot  # drawn back\\, not an escape
     assert '\tworld -> "<script>" [label=' in dot
     assert "\x1b" not in dot
 
 
 @pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is not installed")
-def test_item6_dot_errors_are_one_line(
+def test_dot_errors_are_one_line(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Issue 11 item 6: Graphviz's own error (several lines) and an empty one are
+    """Graphviz's own error (several lines) and an empty one are
     reported in one line."""
     import tfbus.cli.frames as frames
 
@@ -129,8 +129,8 @@ def test_item6_dot_errors_are_one_line(
     assert "no message from dot" in err
 
 
-def test_item10_unwritable_output_is_one_line(tmp_path: Path) -> None:
-    """Issue 11 item 10: a missing directory or an unwritable path: a one-line error."""
+def test_unwritable_output_is_one_line(tmp_path: Path) -> None:
+    """A missing directory or an unwritable path: a one-line error."""
     code, _, err = run("frames", "--bag", str(TURTLE), "-o", str(tmp_path / "nodir" / "f.svg"))
     assert_one_line_error(code, err)
     assert "does not exist" in err
@@ -141,8 +141,8 @@ def test_item10_unwritable_output_is_one_line(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is not installed")
-def test_issue21_item11_escaped_and_raw_ids_stay_two_nodes(tmp_path: Path) -> None:
-    """Issue 21, item 11: 'a\\nb' (a newline) and the text 'a\\x0ab' were both drawn
+def test_escaped_and_raw_ids_stay_two_nodes(tmp_path: Path) -> None:
+    """'a\\nb' (a newline) and the text 'a\\x0ab' were both drawn
     a\\x0ab, one DOT node for two frames (3 nodes for 4 frames); each frame is one node,
     drawn as Python writes it, and the tree renders."""
     ids = ["a\nb", "a\\x0ab", "c\\", "c\\\\"]

@@ -1,5 +1,5 @@
 """``tfbus monitor`` (tf_monitor) on a bag: the tables, a chain's net delay, two trees,
-names never cut off, sim-time delays (issue 11 item 21)."""
+names never cut off, sim-time delays."""
 
 from __future__ import annotations
 
@@ -41,8 +41,8 @@ def test_monitor() -> None:
     assert_usage_error(code, err, "two")
 
 
-def test_item21_monitor_chain_and_net_delay_lines(tmp_path: Path) -> None:
-    """Issue 11 item 21: tf_monitor's ``Chain is:`` and ``Net delay`` lines, exactly.
+def test_monitor_chain_and_net_delay_lines(tmp_path: Path) -> None:
+    """tf_monitor's ``Chain is:`` and ``Net delay`` lines, exactly.
 
     Hand-computed: world -> base at 10 Hz (stamps k*0.1 s, received 0.01 s later) and
     base -> cam static. Net delay at each /tf message = 0.01 s."""
@@ -61,15 +61,15 @@ def test_item21_monitor_chain_and_net_delay_lines(tmp_path: Path) -> None:
     assert code == 2 and "'b'" in err
 
 
-def test_item21_monitor_two_trees_is_one_line(two_trees_bag: Path) -> None:
-    """Issue 11 item 21: frames in different trees: a one-line error, not a crash."""
+def test_monitor_two_trees_is_one_line(two_trees_bag: Path) -> None:
+    """Frames in different trees: a one-line error, not a crash."""
     code, _, err = run("monitor", "b", "d", "--bag", str(two_trees_bag))
     assert_one_line_error(code, err)
     assert "not connected" in err
 
 
-def test_item21_names_never_cut_off_in_80_columns(hostile_bag: Path) -> None:
-    """Issue 11 item 21: in an 80-column terminal, long names wrap inside their cell."""
+def test_names_never_cut_off_in_80_columns(hostile_bag: Path) -> None:
+    """In an 80-column terminal, long names wrap inside their cell."""
     from io import StringIO
 
     from rich.console import Console
@@ -92,8 +92,8 @@ def test_item21_names_never_cut_off_in_80_columns(hostile_bag: Path) -> None:
     assert name in first_cells
 
 
-def test_item21_sim_time_delays_are_relative_to_the_bag_clock(tmp_path: Path) -> None:
-    """Issue 11 item 21: stamps in simulated time (10 s) recorded at 1.7e9 s: delays
+def test_sim_time_delays_are_relative_to_the_bag_clock(tmp_path: Path) -> None:
+    """Stamps in simulated time (10 s) recorded at 1.7e9 s: delays
     against the newest stamp, with a note, not 1.7e9 s. Hand-computed: every message
     stamps the newest time, so every delay is 0."""
     path = tmp_path / "sim.bag"

@@ -1,5 +1,5 @@
 """``tfbus replay`` (rosbag play for /tf and /tf_static): fast replay, the progress bar,
-damaged bags, and SIGTERM mid-replay (issue 11 item 23)."""
+damaged bags, and SIGTERM mid-replay."""
 
 from __future__ import annotations
 
@@ -53,8 +53,8 @@ def test_replay_truncated_and_bad_args(tmp_path: Path) -> None:
     assert_usage_error(code, err, "--rate")
 
 
-def test_item23_sigterm_during_replay() -> None:
-    """Issue 11 item 23: replay stops on SIGTERM with its count line and status 130."""
+def test_sigterm_during_replay() -> None:
+    """Replay stops on SIGTERM with its count line and status 130."""
     proc = subprocess.Popen([sys.executable, "-m", "tfbus.cli", "replay", str(TURTLE),
                              "--local"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=ROOT, env={**os.environ, "COLUMNS": "80"})

@@ -179,10 +179,10 @@ def test_joint_states_drive_the_publisher_across_processes() -> None:
 
 
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e309"])
-def test_issue21_item10_a_limit_that_is_not_finite_is_one_line(
+def test_a_limit_that_is_not_finite_is_one_line(
     tmp_path: Path, value: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Issue 21, item 10: joint-states and robot-state-publisher took a URDF whose
+    """joint-states and robot-state-publisher took a URDF whose
     <limit> is nan / inf and published NaN / inf positions; now one line naming the
     joint and the attribute, exit status 2, as urdfdom refuses it."""
     bad = tmp_path / "bad.urdf"

@@ -87,7 +87,7 @@ def test_static_transform_bad_arguments() -> None:
 
 
 def test_static_transform_takes_ros2_flags(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Issue 20, 2.7: ROS 2's flag form (tf2_ros static_transform_broadcaster_program.cpp):
+    """ROS 2's flag form (tf2_ros static_transform_broadcaster_program.cpp):
     every flag optional (translation 0, quaternion (0, 0, 0, 1), RPY 0) but the frame
     ids; quaternion and RPY flags together, flags mixed with positional arguments or a
     flag without its value are errors."""

@@ -265,10 +265,10 @@ def test_monitor_lists_the_broadcaster_alive_then_reports_it_dead() -> None:
         assert any(gone_row.search(line) for line in monitor.seen[-12:])  # final report
 
 
-def test_item19_static_transform_and_replay_reach_echo_over_the_bus() -> None:
-    """Issue 11 item 19: ``tfbus static-transform --bus`` and ``tfbus replay --bus``
+def test_static_transform_and_replay_reach_echo_over_the_bus() -> None:
+    """``tfbus static-transform --bus`` and ``tfbus replay --bus``
     publish where ``tfbus echo --bus`` (another process) sees them; SIGTERM ends both
-    cleanly (issue 11 item 23)."""
+    cleanly (status 130, no traceback)."""
     turtle = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
     port = free_port()
     with processes() as ps:

@@ -552,7 +552,7 @@ async def test_system_clock_deadlines_are_anyios(monkeypatch: pytest.MonkeyPatch
 
 
 def test_timeout_meaning_is_the_same_on_every_clock() -> None:
-    """Issue 11 item 14: inf is no timeout, NaN a ValueError, on both clocks."""
+    """Inf is no timeout, NaN a ValueError, on both clocks."""
     assert timeout_ns(None) is None
     assert timeout_ns(math.inf) is None
     assert timeout_ns(np.float32("inf")) is None  # type: ignore[arg-type]
@@ -573,7 +573,7 @@ def test_timeout_meaning_is_the_same_on_every_clock() -> None:
 
 
 async def test_manual_clock_huge_and_infinite_timeouts_never_fire() -> None:
-    """Issue 11 item 14: a ManualClock wait with timeout inf or 1e10 s (past the end of
+    """A ManualClock wait with timeout inf or 1e10 s (past the end of
     Time) is a wait with no deadline, not an error; NaN is a ValueError."""
     clock = ManualClock(Time(1_700_000_000))
     ev = anyio.Event()
@@ -615,7 +615,7 @@ class _NoMultiply(str):
 
 
 async def test_str_durations_are_type_errors_before_any_arithmetic() -> None:
-    """Issue 11 item 12: ``every('0.01')`` and ``advance('1')`` allocated 1-4 GB (the
+    """``every('0.01')`` and ``advance('1')`` allocated 1-4 GB (the
     string repeated 10^9 times) before the TypeError: types are checked first."""
     clock = ManualClock(T0)
     for text in ("0.01", "1"):
@@ -709,7 +709,7 @@ async def _until_waiting(buf: Buffer, n: int) -> None:
 async def test_buffer_wait_with_infinite_or_huge_timeout_waits_for_the_data(
     clock_kind: str,
 ) -> None:
-    """Issue 11 item 14: ``timeout=inf`` or ``1e10`` on a ManualClock raised an
+    """``timeout=inf`` or ``1e10`` on a ManualClock raised an
     ExceptionGroup (OverflowError / ValueError from the timer task); on both clocks it is
     now a wait with no deadline that ends when the data arrives."""
     clock: ManualClock | SystemClock = ManualClock(T0) if clock_kind == "manual" else SystemClock()
@@ -734,7 +734,7 @@ async def test_buffer_wait_with_infinite_or_huge_timeout_waits_for_the_data(
 
 @pytest.mark.parametrize("clock_kind", ["manual", "system"])
 async def test_buffer_wait_with_nan_timeout_is_a_value_error(clock_kind: str) -> None:
-    """Issue 11 item 14: NaN is a ValueError, up front, on both clocks (also when the
+    """NaN is a ValueError, up front, on both clocks (also when the
     data is already there), and nothing stays registered."""
     clock: ManualClock | SystemClock = ManualClock(T0) if clock_kind == "manual" else SystemClock()
     buf = Buffer(clock=clock)
@@ -773,7 +773,7 @@ async def test_buffer_timeout_on_a_manual_clock_is_a_clock_deadline() -> None:
     assert clock.pending == 0 and buf.pending_waits == 0
 
 
-# -- Clock.call_later (issue 10: the deadline of a Buffer wait, with no cancel scope) -----
+# -- Clock.call_later (the deadline of a Buffer wait, with no cancel scope) ---------------
 
 
 async def test_manual_call_later_runs_in_deadline_order_among_sleepers() -> None:

@@ -1,5 +1,5 @@
 """tfbus's own wire (:mod:`tfbus.codecs.native`, the msgpack payload the Zenoh transport
-carries): round trips, limits, malformed and hostile payloads (issue 11), fuzzing. Only
+carries): round trips, limits, malformed and hostile payloads, fuzzing. Only
 ``WireError`` subclasses ever come out of the decoder. No I/O."""
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def test_wire_limits_and_negative_stamp() -> None:
         codec.decode(bad_stamp)
 
 
-# -- issue 11: hostile payloads ------------------------------------------------------------
+# -- hostile payloads: deep nesting, huge stamps, forged sequence numbers ------------------
 
 
 def _envelope(tag: bytes, body: bytes, sender: bytes = b"\x05", seq: bytes = b"\x01") -> bytes:
@@ -102,7 +102,7 @@ def _envelope(tag: bytes, body: bytes, sender: bytes = b"\x05", seq: bytes = b"\
     ],
 )
 def test_deep_nesting_is_a_decode_error_not_recursion(tag: bytes, error: type) -> None:
-    """Issue 11 item 1: a ~1 KB msgpack payload nested 1 000 deep raised RecursionError
+    """A ~1 KB msgpack payload nested 1 000 deep raised RecursionError
     out of the decoder; nesting is bounded before decoding."""
     payload = _envelope(tag, b"\x91" * 1000 + b"\xc0")
     assert len(payload) < 1100
@@ -115,7 +115,7 @@ def test_deep_nesting_is_a_decode_error_not_recursion(tag: bytes, error: type) -
 
 
 def test_nesting_below_the_bound_still_decodes() -> None:
-    """Issue 11 item 1: the bound leaves ordinary nested values alone."""
+    """The bound leaves ordinary nested values alone."""
     codec = wire.WireCodec()
     value: Any = 1
     for _ in range(wire.WireLimits().max_depth - 1):
@@ -124,7 +124,7 @@ def test_nesting_below_the_bound_still_decodes() -> None:
 
 
 def test_stamps_beyond_int64_are_rejected_at_decode() -> None:
-    """Issue 11 item 2: stamps >= 2**63 ns passed the decoder (and crashed --bus CLI
+    """Stamps >= 2**63 ns passed the decoder (and crashed --bus CLI
     commands later with OverflowError); they are malformed at decode time."""
     codec = wire.WireCodec()
     ok = codec.encode(TFMessage((ts("a", 7),)), sender=1, seq=1)
@@ -153,7 +153,7 @@ def test_stamps_beyond_int64_are_rejected_at_decode() -> None:
     ],
 )
 def test_negative_or_oversized_sequence_numbers_are_malformed(sender: bytes, seq: bytes) -> None:
-    """Issue 11 item 3: sender ids and sequence numbers are 1..2**63-1 (negative ones fed
+    """Sender ids and sequence numbers are 1..2**63-1 (negative ones fed
     the `lost` counter); anything else is a decode error."""
     codec = wire.WireCodec()
     body = codec.encode(TFMessage((ts("a", 1),)), sender=5, seq=1)[8:]
@@ -163,7 +163,7 @@ def test_negative_or_oversized_sequence_numbers_are_malformed(sender: bytes, seq
 
 
 def test_sequence_tracker_counts_only_plausible_gaps() -> None:
-    """Issue 11 item 3: a forged sequence number pushed `lost` to 9e18; a gap counts as
+    """A forged sequence number pushed `lost` to 9e18; a gap counts as
     lost only when plausible, anything else is a reported reset."""
     tracker = wire.SequenceTracker(max_gap=1000)
     assert tracker.observe(7, "/tf", 1) == (0, False)
@@ -219,7 +219,7 @@ def test_sequence_tracker_tells_a_late_joiner_reply_from_news() -> None:
     assert len(small._replied) <= 2
 
 
-# -- issue 11: fuzzing the wire decoder --------------------------------------------------
+# -- fuzzing the wire decoder ------------------------------------------------------------
 
 _msgpack_values = st.recursive(
     st.none()
@@ -284,7 +284,7 @@ _GOOD = wire.WireCodec().encode(
     )
 )
 def test_fuzz_wire_decoder_raises_only_wire_errors(data: bytes) -> None:
-    """Issue 11, fuzzing: random and structured bytes give a decoded message or a
+    """Fuzzing: random and structured bytes give a decoded message or a
     WireError (the counted decode error), never anything else."""
     _decode_or_wire_error(wire.WireCodec(), data)
 
@@ -292,14 +292,14 @@ def test_fuzz_wire_decoder_raises_only_wire_errors(data: bytes) -> None:
 @settings(max_examples=200, deadline=None)
 @given(_msgpack_values)
 def test_depth_walk_agrees_with_msgpack(value: Any) -> None:
-    """The pre-decode walk (issue 11, item 1) ends exactly where the value ends."""
+    """The pre-decode walk (the nesting bound) ends exactly where the value ends."""
     from tfbus.codecs.native import check_depth
 
     data = _packb(value)
     assert check_depth(data + b"\x01", 0, 1000) == len(data)
 
 
-# -- sensor_msgs/LaserScan (issue 24: scans between processes) ---------------------------
+# -- sensor_msgs/LaserScan (scans between processes) -------------------------------------
 
 
 def _scan(n: int = 5) -> Any:

@@ -277,7 +277,7 @@ def test_refilling_never_changes_what_is_held_and_decodes_as_the_twin(
         assert all(bits(obj) == snap for obj, snap in kept)
 
 
-# -- sensor_msgs/LaserScan (issue 24: a real ROS 1 laser in tfbus view) ------------------
+# -- sensor_msgs/LaserScan (a real ROS 1 laser in tfbus view) ----------------------------
 
 
 def _rosbags_scan(n: int, m: int) -> tuple[bytes, object]:

@@ -6,7 +6,7 @@ exception with the same message as the single lookup for the first failing time.
 
 Each row comparison runs twice (fixture ``simd``): as shipped, where slerp's per-time
 sines may come from libmvec's vector sin (``tfbus.core._cbatch._BATCH_VECTOR_SIN``; rows within the
-issue's 1e-12, a few ulp in practice), and with the batch forced onto its scalar loops
+tolerance 1e-12, a few ulp in practice), and with the batch forced onto its scalar loops
 (libm's sin), where every row must be the single lookup's bit for bit. Rows whose math
 has no per-time sine (exact stamps, statics, constant rotations) are bit-identical either
 way (``test_rows_without_sines_are_bit_exact_with_the_vector_sine``).
@@ -126,7 +126,7 @@ def simd(request: pytest.FixtureRequest) -> Iterator[bool]:
 
 def _check_row(got: TransformArray, i: int, ts: TransformStamped, vector_sin: bool) -> None:
     row = [*got.translations[i], *got.rotations[i]]
-    if vector_sin:  # the tolerance
+    if vector_sin:  # the batch's tolerance
         np.testing.assert_allclose(row, _row(ts), rtol=0, atol=1e-12)
     else:  # the scalar walk's arithmetic, bit for bit
         assert row == _row(ts)

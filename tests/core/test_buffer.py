@@ -306,7 +306,7 @@ async def test_timeout_with_the_system_clock_uses_real_time() -> None:
 
 
 async def test_wait_across_a_loop_raises_lookup_exception_at_once() -> None:
-    """Issue 11 item 15: wait_for_transform across a loop (a -> b -> a) raises
+    """wait_for_transform across a loop (a -> b -> a) raises
     LookupException at once, as its docstring says, instead of waiting."""
     buf = Buffer(clock=ManualClock(T0))
     buf.set_transform(tf("a", "b", T0))
@@ -332,7 +332,7 @@ async def test_wait_across_a_loop_raises_lookup_exception_at_once() -> None:
 
 
 async def test_a_wait_loop_appearing_later_fails_the_wait() -> None:
-    """Issue 11 item 15: a loop that forms while waiting fails the wait."""
+    """A loop that forms while waiting fails the wait."""
     buf = Buffer(clock=ManualClock(T0))
     buf.set_transform(tf("a", "b", T0))
     outcomes: list[BaseException] = []
@@ -355,7 +355,7 @@ async def test_a_wait_loop_appearing_later_fails_the_wait() -> None:
 
 
 async def test_waits_below_a_deep_chain_are_rechecked_without_rewalking_it() -> None:
-    """Issue 11 item 16: with waits below a 10 000-deep chain, an insert that does not
+    """With waits below a 10 000-deep chain, an insert that does not
     change the tree's shape rechecks each wait it touches with one query and does not
     recompute the frames they depend on (O(waiters touched), not O(depth x waiters));
     the frames a wait is indexed under are bounded by tf2's MAX_GRAPH_DEPTH."""
@@ -410,7 +410,7 @@ class _CountingClock(SystemClock):
 
 
 async def test_a_timed_wait_is_woken_by_a_clock_callback_and_cancels_it() -> None:
-    """Issue 10: a ``timeout=`` is the clock's ``call_later`` deadline (no cancel scope
+    """A ``timeout=`` is the clock's ``call_later`` deadline (no cancel scope
     per wait); a wait answered by the data cancels it, whatever ended the wait."""
     clock = _CountingClock()
     buf = Buffer(clock=clock)

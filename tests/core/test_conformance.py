@@ -74,7 +74,7 @@ def test_intended_deviation_inventory() -> None:
 
 
 def test_a_green_run_ends_quietly() -> None:
-    """Issue 20, 2.2: the intended deviation is one summary line at the end of a green
+    """The intended deviation is one summary line at the end of a green
     run (it was one DeviationReport warning per case, ~70 lines); ``-v`` lists its ops."""
     import subprocess
     import sys

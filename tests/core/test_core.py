@@ -1,6 +1,6 @@
 """``tfbus.core.BufferCore``: the batch insert and edges of the compiled core that the
 tf2 corpus (``test_conformance.py``) and the property tests do not reach; and its
-hardening (issue 11): wrong values never crash, never half-store, and are named."""
+checks of what it is given: wrong values never crash, never half-store, and are named."""
 
 from __future__ import annotations
 
@@ -148,7 +148,7 @@ def test_a_parent_id_outside_the_frame_table_is_a_missing_link_not_a_crash() -> 
 
 
 def test_the_compiled_base_state_is_read_only_from_python() -> None:
-    """BufferCore changes its base's state only through its public methods (issue 26):
+    """BufferCore changes its base's state only through its public methods:
     the internals are readable for white-box tests, never assignable."""
     core = BufferCore()
     core.set_transform(ts("b", parent="a", sec=1.0), "x")
@@ -162,11 +162,11 @@ def test_the_compiled_base_state_is_read_only_from_python() -> None:
     core.clear()
     assert core.link_info() == [("b", "NO_PARENT", "x", False, 0, 0, 0)]
 
-# ============================================================================ hardening
-# Issue 11, the core's part: wrong values given to the API never crash, never half-store,
-# and are named in the error (items 7, 11, 13); plus the core's reporting contract of
-# issue 10 §1 (the batch result names what it touched; the core's base calls nothing
-# back). The scalar math's single home (§3) is checked in ``test_pycore.py``.
+# ============================================================================ wrong values
+# Wrong values given to the API never crash, never half-store,
+# and are named in the error (YAML ids, str subclasses, field types); plus the core's
+# reporting contract (the batch result names what it touched; the core's base calls nothing
+# back). The scalar math's single home is checked in ``test_pycore.py``.
 
 T = Time(100)
 
@@ -177,7 +177,7 @@ def ts_any(child: Any, parent: Any = "base", stamp: Any = T, x: Any = 1.0, w: An
     )
 
 
-# ----------------------------------------------------------------------------- item 7
+# ----------------------------------------------------------------------------- YAML ids
 
 
 HOSTILE_IDS = [
@@ -217,7 +217,7 @@ HOSTILE_IDS = [
 
 
 def test_all_frames_as_yaml_quotes_hostile_ids_and_reads_back_every_id() -> None:
-    """Issue 11 item 7: ids YAML would misread are quoted; the text is valid YAML that
+    """Ids YAML would misread are quoted; the text is valid YAML that
     reads back every child, parent and broadcaster id unchanged."""
     core = BufferCore()
     for k, frame in enumerate(HOSTILE_IDS):
@@ -234,7 +234,7 @@ def test_all_frames_as_yaml_quotes_hostile_ids_and_reads_back_every_id() -> None
 
 
 def test_all_frames_as_yaml_keeps_tf2_text_for_ordinary_ids() -> None:
-    """Issue 11 item 7: ordinary ids are written exactly as tf2's allFramesAsYAML does."""
+    """Ordinary ids are written exactly as tf2's allFramesAsYAML does."""
     core = BufferCore()
     core.set_transform(ts_any("base_laser", parent="base_link", stamp=Time(1)), "auth")
     core.set_transform(ts_any("base_laser", parent="base_link", stamp=Time(3)), "auth")
@@ -257,11 +257,11 @@ def test_all_frames_as_yaml_keeps_tf2_text_for_ordinary_ids() -> None:
     )
 
 
-# ----------------------------------------------------------------------------- item 11
+# -------------------------------------------------- str subclasses, nothing half-stored
 
 
 def test_a_numpy_str_frame_id_is_the_string_it_is() -> None:
-    """Issue 11 item 11: numpy.str_ (any str subclass) ids are accepted as their string,
+    """numpy.str_ (any str subclass) ids are accepted as their string,
     stored as plain ``str`` and found by plain strings (and the other way round)."""
     core = BufferCore()
     assert core.set_transform(ts_any(np.str_("laser"), parent=np.str_("/base")))
@@ -289,7 +289,7 @@ def test_a_numpy_str_frame_id_is_the_string_it_is() -> None:
     ],
 )
 def test_a_rejected_transform_leaves_no_ghost_frame(bad: TransformStamped) -> None:
-    """Issue 11 item 11: nothing is ever half-stored: a transform that raises registers
+    """Nothing is ever half-stored: a transform that raises registers
     no frame and changes nothing."""
     core = BufferCore()
     core.set_transform(ts_any("a"))
@@ -302,7 +302,7 @@ def test_a_rejected_transform_leaves_no_ghost_frame(bad: TransformStamped) -> No
     assert not core.frame_exists("ghost") and not core.frame_exists("ghost_parent")
 
 
-# ----------------------------------------------------------------------------- item 13
+# ----------------------------------------------------------------------------- field types
 
 
 @pytest.mark.parametrize(
@@ -340,7 +340,7 @@ def test_a_rejected_transform_leaves_no_ghost_frame(bad: TransformStamped) -> No
 def test_wrong_types_in_a_transform_are_named(
     transform: TransformStamped, field: str, shown: str
 ) -> None:
-    """Issue 11 item 13: a wrong type anywhere in a TransformStamped (None, str, bool,
+    """A wrong type anywhere in a TransformStamped (None, str, bool,
     huge int, dict) is an InvalidArgumentException naming the field and the value; bool
     is not a number; nothing is stored."""
     core = BufferCore()
@@ -353,7 +353,7 @@ def test_wrong_types_in_a_transform_are_named(
 
 
 def test_numbers_of_other_real_types_are_accepted() -> None:
-    """Issue 11 item 13 (the other side): ints and numpy floats are numbers."""
+    """The other side of the type checks: ints and numpy floats are numbers."""
     core = BufferCore()
     assert core.set_transform(ts_any("c", x=np.float32(0.5), w=1))
     assert core.set_transform(ts_any("d", x=3, w=np.float64(1.0)))
@@ -362,7 +362,7 @@ def test_numbers_of_other_real_types_are_accepted() -> None:
 
 @pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan, 1e300, -1.0])
 def test_cache_time_out_of_range_is_an_error_naming_it(value: float) -> None:
-    """Issue 11 item 13: cache_time inf / nan / 1e300 (and negative) raise an error that
+    """cache_time inf / nan / 1e300 (and negative) raise an error that
     names cache_time."""
     with pytest.raises(ValueError, match="cache_time"):
         BufferCore(cache_time=value)
@@ -370,17 +370,17 @@ def test_cache_time_out_of_range_is_an_error_naming_it(value: float) -> None:
 
 @pytest.mark.parametrize("value", ["10", True, None, [10.0]])
 def test_cache_time_of_the_wrong_type_is_a_type_error_naming_it(value: Any) -> None:
-    """Issue 11 items 12/13: a cache_time that is not a number is refused before anything
+    """A cache_time that is not a number is refused before anything
     is allocated (and bool is not a number)."""
     with pytest.raises(TypeError, match="cache_time"):
         BufferCore(cache_time=value)
 
 
-# --------------------------------------------------------------------- issue 10 §1
+# -------------------------------------------------------- the core's reporting contract
 
 
 def test_cache_time_lives_in_one_place() -> None:
-    """Issue 10 §1: cache_time has one home; it cannot be changed behind the links'
+    """cache_time has one home; it cannot be changed behind the links'
     backs (what is reported is what is kept)."""
     core = BufferCore(cache_time=2.0)
     assert core.cache_time_ns == 2_000_000_000
@@ -395,7 +395,7 @@ def test_cache_time_lives_in_one_place() -> None:
 
 
 def test_set_transforms_reports_the_frames_it_touched() -> None:
-    """Issue 10 §1: the batch result names the (stripped) frames of what was stored and
+    """The batch result names the (stripped) frames of what was stored and
     whether the tree's shape may have changed."""
     core = BufferCore()
     r = core.set_transforms([ts_any("/a", parent="/base"), ts_any("b", x=math.nan)])
@@ -409,7 +409,7 @@ def test_set_transforms_reports_the_frames_it_touched() -> None:
 
 
 def test_touched_frames_is_a_set_built_only_when_asked() -> None:
-    """Issue 22 §1: the batch only records the ids it stored (so a batch nobody inspects
+    """The batch only records the ids it stored (so a batch nobody inspects
     hashes none); ``touched`` is a read-only set all the same, equal to and combinable
     with any set."""
     core = BufferCore()
@@ -457,7 +457,7 @@ def test_self_transform_is_refused_for_known_and_new_frames(child: str, parent: 
 
 
 def test_the_compiled_base_calls_nothing_back(caplog: pytest.LogCaptureFixture) -> None:
-    """Issue 10 §1: the compiled base reports codes; a subclass overriding the names the
+    """The compiled base reports codes; a subclass overriding the names the
     old base called (``_reject``, ``_refused``) is never called."""
     calls: list[str] = []
 
@@ -479,7 +479,7 @@ def test_the_compiled_base_calls_nothing_back(caplog: pytest.LogCaptureFixture) 
 
 
 def test_chain_frames_is_bounded_by_the_graph_depth() -> None:
-    """Issue 11 item 16 (core part): the frames a wait depends on are at most
+    """The frames a wait depends on are at most
     MAX_GRAPH_DEPTH + 1 per chain, whatever the depth of the tree."""
     core = BufferCore()
     depth = 3 * MAX_GRAPH_DEPTH
@@ -494,7 +494,7 @@ def test_chain_frames_is_bounded_by_the_graph_depth() -> None:
 
 
 def test_rate_limited_log_takes_time_from_the_caller(caplog: pytest.LogCaptureFixture) -> None:
-    """Issue 10 §2: the helper reads no clock: ``now`` comes from the caller."""
+    """The helper reads no clock: ``now`` comes from the caller."""
     log = RateLimitedLog(logging.getLogger("tfbus.test"), period=5.0)
     caplog.set_level(logging.WARNING, logger="tfbus.test")
     assert log.log(100.0, logging.WARNING, "x %s", 1)
@@ -546,11 +546,11 @@ def test_invalid_frame_id_checks_form_only() -> None:
     assert isinstance(core.invalid_frame_id(3), InvalidArgumentException)  # type: ignore[arg-type]
 
 
-# --------------------------------------------------------------------------- issue 21
+# ----------------------------------------------------------- lookup times, limited logs
 
 
 @pytest.mark.parametrize("time", [None, 5, 1.5, "0", 10**9])
-def test_issue21_lookup_time_of_the_wrong_type_is_a_type_error(time: Any) -> None:
+def test_lookup_time_of_the_wrong_type_is_a_type_error(time: Any) -> None:
     """lookup_transform(..., time=None) (or an int) raised AttributeError: '_ns' from
     the compiled query; every lookup now raises a TypeError naming the argument, and
     the core goes on answering (run under both cores: TFBUS_PURE_PYTHON=1)."""
@@ -566,7 +566,7 @@ def test_issue21_lookup_time_of_the_wrong_type_is_a_type_error(time: Any) -> Non
     assert core.lookup_transform("base", "child", Time(0)).transform.translation.x == 1.0
 
 
-def test_issue21_count_limited_log_is_limited_by_time_too(
+def test_count_limited_log_is_limited_by_time_too(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     """Refusal logs were limited by count only (1 per 1000): a flood printed ~180 lines
@@ -600,7 +600,7 @@ def test_issue21_count_limited_log_is_limited_by_time_too(
         CountLimitedLog(logging.getLogger("tfbus.test"), period=-1.0)
 
 
-def test_issue21_a_flood_of_refused_transforms_logs_a_few_lines(
+def test_a_flood_of_refused_transforms_logs_a_few_lines(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     """A Buffer's TF_REPEATED_DATA log under a flood: 50 000 repeated stamps over 10 s

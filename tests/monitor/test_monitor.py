@@ -111,7 +111,7 @@ async def test_listener_feeds_buffer_and_summary() -> None:
     buffer.close()
 
 
-# --------------------------------------------------------------------------- issue 20, 2.8
+# --------------------------------------------------------------------------- rendering the table
 
 
 def _render(stats_src: object, frames: tuple[str, ...] = ()) -> str:

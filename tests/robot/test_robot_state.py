@@ -701,7 +701,7 @@ def test_live_the_real_node_refuses_the_same_malformed_urdfs(ros1_rsp: None) -> 
     assert len(verdicts) == len(MALFORMED)
 
 
-# --------------------------------------------------------------------------- issue 21
+# ------------------------------------ URDF limits and joint states that are not numbers
 
 
 def _arm_with_limit(lower: str, upper: str, effort: str = "1", velocity: str = "1") -> str:
@@ -715,9 +715,9 @@ def _arm_with_limit(lower: str, upper: str, effort: str = "1", velocity: str = "
     (("-1", "1e309"), "upper"), (("-1", "1", "nan", "1"), "effort"),
     (("-1", "1", "1", "-inf"), "velocity"),
 ])
-def test_issue21_item10_limits_that_are_not_finite_are_refused(limit: tuple[str, ...],
+def test_limits_that_are_not_finite_are_refused(limit: tuple[str, ...],
                                                                what: str) -> None:
-    """Issue 21, item 10: <limit> values urdfdom's strToDouble cannot read (nan, inf,
+    """<limit> values urdfdom's strToDouble cannot read (nan, inf,
     1e309, which overflows) were accepted; now a URDFError naming the joint and the
     attribute, as urdfdom's parseJointLimits refuses them."""
     with pytest.raises(URDFError, match=rf"joint 'shoulder': <limit {what}=") as err:
@@ -725,7 +725,7 @@ def test_issue21_item10_limits_that_are_not_finite_are_refused(limit: tuple[str,
     assert err.value.element == "joint 'shoulder'"
 
 
-def test_issue21_item10_huge_finite_limits_give_finite_joint_states() -> None:
+def test_huge_finite_limits_give_finite_joint_states() -> None:
     """±1e308 is a double urdfdom reads; joint-states computed (upper - lower) / 2 = inf
     and published inf / NaN positions. Every position is now finite and within limits,
     and robot_state_publisher computes finite transforms from them (a prismatic joint
@@ -753,7 +753,7 @@ def test_issue21_item10_huge_finite_limits_give_finite_joint_states() -> None:
     assert seen >= 200
 
 
-def test_issue21_prismatic_translation_overflow_is_refused() -> None:
+def test_prismatic_translation_overflow_is_refused() -> None:
     """A finite position whose translation overflows (rail moved 1.7e308 m along x from
     an origin already 1.7e308 m along x) is refused by name, not published as inf."""
     rsp = RobotStatePublisher(ARM.replace('<origin xyz="0 0 1" rpy="0 0 1.5707963267948966"/>',
@@ -771,7 +771,7 @@ def test_issue21_prismatic_translation_overflow_is_refused() -> None:
     JointState(Header(5), ["shoulder"], [0.1]),  # type: ignore[arg-type]
     None,
 ])
-def test_issue21_malformed_joint_states_are_joint_state_errors(bad: Any) -> None:
+def test_malformed_joint_states_are_joint_state_errors(bad: Any) -> None:
     """header=None / name=None raised AttributeError / TypeError out of transforms();
     now JointStateError (nothing computed)."""
     rsp = RobotStatePublisher(ARM)
@@ -781,7 +781,7 @@ def test_issue21_malformed_joint_states_are_joint_state_errors(bad: Any) -> None
 
 
 @pytest.mark.parametrize("value", ["0.1", True, b"0.1", None, [0.1]])
-def test_issue21_positions_that_are_not_numbers_are_refused(value: Any) -> None:
+def test_positions_that_are_not_numbers_are_refused(value: Any) -> None:
     """A position given as "0.1" or True was turned into 0.1 / 1.0 by float(); a
     position is a float64: anything but a real number is refused by name, the other
     joints are computed, and a mimic of the refused joint is refused too."""
@@ -795,7 +795,7 @@ def test_issue21_positions_that_are_not_numbers_are_refused(value: Any) -> None:
     assert len(ok) == 3
 
 
-async def test_issue21_run_counts_bad_joint_states_and_goes_on() -> None:
+async def test_run_counts_bad_joint_states_and_goes_on() -> None:
     """Through run(): a None header, None names, a str and a bool position are counted
     (invalid / refused_positions) and the next good message is published."""
     clock = ManualClock(Time(1000))
@@ -818,7 +818,7 @@ async def test_issue21_run_counts_bad_joint_states_and_goes_on() -> None:
     assert (st.received, st.invalid, st.refused_positions, st.published) == (5, 2, 2, 1)
 
 
-async def test_issue21_rate_limit_memory_is_bounded() -> None:
+async def test_rate_limit_memory_is_bounded() -> None:
     """Every unknown joint name heard was kept for the rate limit (300 x 5 000 names:
     +175 MB). 400 messages of 500 new names each (200 000 names) now leave the memory
     traced while they are handled within 8 MB; the model's joints keep their limit."""
@@ -855,7 +855,7 @@ async def test_issue21_rate_limit_memory_is_bounded() -> None:
 
 
 @pytest.mark.parametrize("model", [b"", b"   \n", "", "  ", b"robot"])
-def test_issue21_empty_description_is_a_urdf_error(model: Any) -> None:
+def test_empty_description_is_a_urdf_error(model: Any) -> None:
     """load_urdf(b"") raised TypeError ("expected URDF text, a path ..."); empty or
     non-XML bytes and blank text are now URDFError saying so."""
     with pytest.raises(URDFError, match=r"empty|not XML"):
@@ -871,7 +871,7 @@ def _chain(n: int) -> str:
     return "".join(parts) + "</robot>"
 
 
-def test_issue21_loading_does_not_pop_from_a_list_of_every_element(
+def test_loading_does_not_pop_from_a_list_of_every_element(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """A 5x10^4-link URDF took 18.7 s (10^4: 1.4 s): urdfdom-py's Reflection.set_from_xml

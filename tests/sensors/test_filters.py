@@ -300,10 +300,10 @@ async def test_buffer_has_the_awaitable_batched_lookups() -> None:
     assert pts[:, 0].tolist() == got.translations[:, 0].tolist()
 
 
-# --------------------------------------------------------------------------- issue 21
+# --------------------------------------------------------------------------- malformed messages
 
 
-async def test_issue21_malformed_messages_are_dropped_and_counted() -> None:
+async def test_malformed_messages_are_dropped_and_counted() -> None:
     """One bad message (frame id None, an int stamp, no header, stamp + tolerance past
     int64) ended the whole filter with its exception; each is now dropped and counted
     as MALFORMED, reported to on_failure, and the good messages around it pass."""

@@ -357,7 +357,7 @@ def test_per_beam_kernels_match_the_scalar_tf2_math() -> None:
         apply_transforms(np.zeros((2, 4)), np.zeros((1, 3)), pts[:1], out[:1])
 
 
-# --------------------------------------------------------------------------- issue 21
+# ---------------------------------------------------------- ranges that are not numbers
 
 
 @pytest.mark.parametrize(("ranges", "said"), [
@@ -368,7 +368,7 @@ def test_per_beam_kernels_match_the_scalar_tf2_math() -> None:
     ([1.0, None], "must hold numbers, got object values"),
     ([True, False], "must hold numbers, got bool values"),
 ])
-def test_issue21_ranges_that_are_not_numbers_are_refused(ranges: object, said: str) -> None:
+def test_ranges_that_are_not_numbers_are_refused(ranges: object, said: str) -> None:
     """LaserScan(ranges=None) became one NaN beam (np.ascontiguousarray makes any
     scalar a 1-element array) and a scalar one beam; both, and strings, are now a
     ValueError naming the field. Sequences and arrays of numbers are kept as float32."""

@@ -1,6 +1,6 @@
 """tfbus as a ROS 1 node, against the real ROS 1 (Debian's roscore, roscpp, tf, tf2_ros).
 
-Scenarios of issue 14, each a test: the tutorial's C++ broadcaster feeding a tfbus
+The ROS 1 scenarios, each a test: the tutorial's C++ broadcaster feeding a tfbus
 listener and a tfbus broadcaster feeding the tutorial's C++ listener (and
 ``rostopic hz``), statics both ways with either side late, ``tf_monitor`` listing the
 tfbus node, a master restarted under a running stream, a malformed TCPROS frame on one
@@ -828,7 +828,7 @@ def test_cli_echo_monitor_frames_over_ros1(
         monitor = tfbus_cli(master, "monitor", "--bus", "ros1", "--duration", "6")
         out = _cli_finish(monitor)
         assert any("base_laser" in line for line in out), out
-        # tf_monitor's name for a ROS 1 sender, and no (empty) liveliness table (issue 20).
+        # tf_monitor's name for a ROS 1 sender, and no (empty) liveliness table.
         assert any("base_laser" in line and "unknown_publisher" in line for line in out), out
         assert not any("liveliness" in line for line in out), out
         gv = tmp_path / "frames.gv"
@@ -863,7 +863,7 @@ def test_cli_static_transform_over_ros1_reaches_tf_echo(master: Master) -> None:
         assert proc.stop(signal.SIGTERM) == 0
 
 
-# --------------------------------------------------- sensor_msgs/LaserScan (issue 24)
+# ------------------------------------------------------------ sensor_msgs/LaserScan
 
 async def test_rostopic_laser_scans_reach_the_bus(master: Master) -> None:
     """A real ROS 1 publisher (``rostopic pub sensor_msgs/LaserScan``) → a tfbus bus with

@@ -1,4 +1,4 @@
-"""A ROS 1 node under attack from local processes (issue 21): hostile masters, publishers
+"""A ROS 1 node under attack from local processes: hostile masters, publishers
 and clients of the slave API or the TCPROS port, all on 127.0.0.1 (private ports), and
 fuzzing of the slave API and the master client. In each, the node goes on: its counters
 show what was refused, and a good publisher keeps delivering to it.
@@ -794,7 +794,7 @@ async def test_a_flood_of_bad_headers_is_counted_but_logged_rarely(
 ) -> None:
     """Every malformed connection header is counted; the warnings about them are limited
     by time (at most one line per 5 s per kind), so a peer sending them as fast as it can
-    cannot flood the log (issue 21: refusal logs limited by time too)."""
+    cannot flood the log (refusal logs limited by time too)."""
     flood = 40
     with FakeMaster() as master:
         async with pair(master) as p:

@@ -1,4 +1,4 @@
-"""The ROS 1 soak of issue 21 in the suite: ``benchmarks/soak_ros1.py`` at 100 Hz x 50
+"""The ROS 1 soak under attack in the suite: ``benchmarks/soak_ros1.py`` at 100 Hz x 50
 transforms for 60 s, with three hostile publishers and 50 idle connections attached to
 the subscriber, on asyncio and on trio at once (one real roscore each, all on
 127.0.0.1). Nothing may be lost."""

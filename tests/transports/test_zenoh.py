@@ -262,7 +262,7 @@ def laser_scan(sec: float, n: int = 720) -> Any:
 @pytest.mark.anyio
 async def test_laser_scans_cross_bit_for_bit_and_bad_ones_are_dropped() -> None:
     """A sensor_msgs/LaserScan published on one Zenoh bus arrives equal, bit for bit, on
-    another (issue 24); a damaged or oversized scan is counted and dropped, the next kept."""
+    another; a damaged or oversized scan is counted and dropped, the next kept."""
     from tfbus.sensor_msgs import LaserScan
 
     port = free_port()
@@ -454,12 +454,12 @@ def _envelope(tag: bytes, body: bytes, sender: bytes = b"\x05", seq: bytes = b"\
     return HEAD + b"\x94" + sender + seq + tag + body
 
 
-# -- issue 11 through a real Bus --------------------------------------------------------
+# -- hostile payloads through a real Bus ---------------------------------------------------
 
 
 @pytest.mark.anyio
 async def test_bus_survives_hostile_payloads() -> None:
-    """Issue 11 items 1-3 through a real Bus with ZenohTransport (loopback, explicit
+    """Hostile payloads through a real Bus with ZenohTransport (loopback, explicit
     endpoints): a 1 000-deep payload (RecursionError ended the Bus), stamps >= 2**63 ns
     (crashed --bus commands later) and forged/negative sequence numbers (`lost` went to
     9e18) are counted and dropped or reported; valid messages beside them arrive, and the
@@ -474,11 +474,11 @@ async def test_bus_survives_hostile_payloads() -> None:
 
     huge_stamp = tf(7, 2).replace(b"\x07\xa5world", b"\xcf" + b"\xff" * 8 + b"\xa5world", 1)
     hostile = [
-        _envelope(b"\xa2tf", b"\x91" * 1000 + b"\xc0"),  # item 1, TFMessage tag
-        _envelope(b"\xa0", b"\x91" * 1000 + b"\xc0"),  # item 1, plain value
-        _envelope(b"\xa7Vector3", b"\x81\x00" * 1000 + b"\xc0"),  # item 1, maps
-        huge_stamp,  # item 2
-        _envelope(b"\xa2tf", tf(1, 1)[8:], seq=b"\xff"),  # item 3: negative seq
+        _envelope(b"\xa2tf", b"\x91" * 1000 + b"\xc0"),  # deep nesting, TFMessage tag
+        _envelope(b"\xa0", b"\x91" * 1000 + b"\xc0"),  # deep nesting, plain value
+        _envelope(b"\xa7Vector3", b"\x81\x00" * 1000 + b"\xc0"),  # deep nesting, maps
+        huge_stamp,  # stamp >= 2**63 ns
+        _envelope(b"\xa2tf", tf(1, 1)[8:], seq=b"\xff"),  # negative seq
     ]
     async with Bus(transport=transport) as bus:
         sub = bus.subscribe("/tf")
@@ -509,7 +509,7 @@ async def test_bus_survives_hostile_payloads() -> None:
 
 @pytest.mark.anyio
 async def test_late_joiner_gets_the_valid_static_after_a_nan_resend() -> None:
-    """Issue 11 item 4 across processes' worth of transports: a NaN static re-sent by the
+    """The latched static across processes' worth of transports: a NaN static re-sent by the
     publisher no longer replaces the valid latched one that late joiners are served."""
     port = free_port()
     ta = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="A")
@@ -636,8 +636,8 @@ def test_bus_spec_grammar_and_scheme_table() -> None:
 
 @pytest.mark.anyio
 async def test_zenoh_errors_are_transport_errors(tmp_path: Path) -> None:
-    """Zenoh's own errors reach callers as tfbus.errors.TransportError (issue 10 section
-    3), with the ZError as the cause."""
+    """Zenoh's own errors reach callers as tfbus.errors.TransportError (one
+    error type for every transport), with the ZError as the cause."""
     bad = tmp_path / "bad.json5"
     bad.write_text("{ this is not json5")
     with pytest.raises(TransportError) as info:

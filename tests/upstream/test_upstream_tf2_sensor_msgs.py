@@ -6,7 +6,7 @@ structured array: its rows are compared as tuples, as upstream compares its list
 
 Not rewritten: ROS 1 ``test_tf2/test/test_convert.py`` (converts through PyKDL with
 ``tf2_kdl``, which tfbus does not provide) and ``test_buffer_client.py`` (a remote
-buffer over actionlib, its own issue).
+buffer over actionlib, a separate feature).
 """
 
 from __future__ import annotations

@@ -139,7 +139,7 @@ def test_exported_from_package() -> None:
 
 
 def test_arithmetic_that_means_nothing_raises_type_error() -> None:
-    """Issue 11 item 18: ``Vector3(1, 2, 3) + Vector3(1, 1, 1)`` silently gave a 6-tuple
+    """``Vector3(1, 2, 3) + Vector3(1, 1, 1)`` silently gave a 6-tuple
     (tuple concatenation), ``Quaternion() * 2`` an 8-tuple. Every message type refuses
     ``+`` and ``*`` on either side, and the error says how to build a changed copy."""
     v = Vector3(1.0, 2.0, 3.0)

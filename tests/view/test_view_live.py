@@ -153,7 +153,7 @@ async def test_a_first_scan_without_a_finite_sweep_is_dropped(page: TfPage) -> N
 
 
 async def test_live_view_draws_scans_from_another_zenoh_bus(page: TfPage) -> None:
-    """``tfbus view --bus zenoh --scan /scan`` across processes (issue 24): a LaserScan
+    """``tfbus view --bus zenoh --scan /scan`` across processes: a LaserScan
     published on one Zenoh bus is drawn by a LiveView following another, on 127.0.0.1
     (no scouting), exactly as the same scan projected in-process."""
     pytest.importorskip("zenoh")
@@ -198,7 +198,7 @@ async def test_live_view_draws_scans_from_another_zenoh_bus(page: TfPage) -> Non
 
 
 async def test_live_view_draws_a_real_ros1_laser(master: Any) -> None:
-    """``tfbus view --bus ros1 --scan /scan`` (issue 24): Debian's ``rostopic pub``
+    """``tfbus view --bus ros1 --scan /scan``: Debian's ``rostopic pub``
     publishes a sensor_msgs/LaserScan and tf2_ros's static_transform_publisher the laser's
     pose on a loopback roscore; the bus opened from the spec with the scan topic receives
     both and the LiveView draws the scan where laser_geometry puts it."""

@@ -497,7 +497,7 @@ def _read(
         if item is None:
             return
         stamp, src, raw, offset = item
-        if type(stamp) is not int:  # sqlite3: a damaged record or index (issue 21, item 8)
+        if type(stamp) is not int:  # sqlite3: a damaged record or index (a flipped bit)
             raise fail(f"corrupt {src.topic} message: its bag time is {_kind(stamp)}, not an "
                        f"integer{_sqlite_record(p, fmt, stamp, raw)}", offset) from None
         if ordered and last is not None and stamp < last:

@@ -5,7 +5,7 @@ The definitions (a frame's rate, delays, sim-time stamps) are :mod:`tfbus.monito
 ``summarize``, ``tfbus bag-info``, ``tfbus monitor`` and ``tfbus frames`` agree:
 
 * rate of a frame = ``(distinct header stamps - 1) / (newest - oldest stamp)`` in Hz
-  (:func:`tfbus.monitor.link_rate`; issue 11 item 22);
+  (:func:`tfbus.monitor.link_rate`; one definition for every tool);
 * delay = bag (receive) time minus header stamp, or against the newest stamp when the
   bag was recorded with simulated time (:attr:`~tfbus.monitor.TfSummary.sim_time`).
 """

@@ -387,4 +387,4 @@ RATE_HELP = (
     "monitor and bag-info."
 )
 """The ``--help`` epilogue of frames, monitor and bag-info: the rate definition
-(:func:`tfbus.monitor.link_rate`), issue 11 item 22."""
+(:func:`tfbus.monitor.link_rate`), the same in every tool."""

@@ -261,7 +261,7 @@ class WireCodec:
         Raises:
             WireDecodeError: bad magic byte, bad msgpack, wrong shape or field type, a
                 stamp outside [0, 2**63) ns, a sender id or sequence number outside
-                [1, 2**63), or any other failure of the decoder (issue 11, item 1).
+                [1, 2**63), or any other failure of the decoder (nesting too deep included).
             WireVersionError: a tfbus payload of another format version.
             WireLimitError: payload too large, too many transforms, frame id too long,
                 nesting too deep, a LaserScan with more than ``limits.max_scan_beams``
@@ -432,7 +432,7 @@ class SequenceTracker:
 
     Every ``(sender, topic)`` stream numbers its payloads 1, 2, ...; a receiver learns
     from the gaps how many the network dropped. A forged or corrupted number must not
-    turn into billions of "lost" messages (issue 11, item 3): a forward jump of at most
+    turn into billions of "lost" messages: a forward jump of at most
     ``max_gap`` counts as that many lost; anything else (a larger jump, a step back, a
     repeat) is a *reset* -- reported, not counted as loss -- and the stream resumes from
     the new number. The table keeps at most ``max_senders`` streams (it is cleared when

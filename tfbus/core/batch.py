@@ -1,4 +1,4 @@
-"""The batched lookups' values: one path, many times (issue 12).
+"""The batched lookups' values: one path, many times.
 
 :meth:`BufferCore.lookup_transforms <tfbus.core.BufferCore.lookup_transforms>` answers
 ``lookup_transform`` for every time of an ``(N,)`` int64 nanosecond array in one call and
@@ -9,7 +9,7 @@ pure Python: the single walk per time) works in the same arithmetic order as the
 lookup (tf2 ``TimeCache::interpolate`` with tf2's clamped slerp, then ``TransformAccum``),
 so each row is the single lookup's result: bit for bit, except that the compiled core's
 ``lookup_rows`` may take slerp's per-time sines from libmvec's vector sin (rows within
-~1e-14 of the single lookup; issue 12 allows 1e-12). Times may come in any order. For a
+~1e-14 of the single lookup; the tolerance is 1e-12). Times may come in any order. For a
 row that cannot be answered at all, the single public ``lookup_transform`` is asked, so
 the exception and its message are tf2's by construction.
 

@@ -411,7 +411,7 @@ class BufferCore(CoreBase):
         errors: Errors = "raise",
     ) -> TransformArray:
         """``lookup_transform(target_frame, source_frame, t)`` for every t of ``times``
-        (issue 12): the path is resolved once, every time is walked along it in the core.
+        (one batch): the path is resolved once, every time is walked along it in the core.
 
         Args:
             target_frame: frame to express data in.

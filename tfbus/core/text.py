@@ -2,7 +2,7 @@
 query arguments, and the ``allFramesAsString`` / ``allFramesAsYAML`` dumps.
 
 Each text is tf2 0.7.6's (``tf2/src/buffer_core.cpp``) character for character where tf2
-defines it; YAML quoting is added only for ids YAML would misread (issue 11 item 7).
+defines it; YAML quoting is added only for ids YAML would misread.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def _yaml_quoted(text: str) -> str:
 
 def _yaml_key(frame_id: str) -> str:
     """A frame id as a YAML mapping key: plain as tf2 writes it when YAML reads it back
-    unchanged, else quoted (issue 11 item 7)."""
+    unchanged, else quoted."""
     return frame_id if _yaml_plain(frame_id) else _yaml_quoted(frame_id)
 
 

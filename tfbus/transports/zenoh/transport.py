@@ -10,7 +10,7 @@ entries are dropped and counted.
 
 Received bytes never end the bus: every payload that does not decode, of any kind, is a
 counted, dropped message (:class:`ZenohStatistics`), and sequence numbers that jump
-implausibly are reported as resets, not as billions of lost messages (issue 11).
+implausibly are reported as resets, not as billions of lost messages.
 
 Late joiners: each transport serves the latched topics it has *itself* published
 (``/tf_static`` merged per child frame by a :class:`~tfbus.latch.StaticLatch`) on a
