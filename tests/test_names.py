@@ -26,16 +26,8 @@ NUMBERED = re.compile(r"(?<![A-Za-z])issue[\s_#]*\d+", re.IGNORECASE)
 REPOSITORY = re.compile(r"[\w.-]+/[\w.-]+(?:'s)?[\s,:]*$")
 URL = re.compile(r"\w+://\S*$")
 
-# Comments and docstrings of the compiled core's sources, changed only together with a
-# rebuild of the core (tfbus/core/_c*.pyx): exactly these lines, no others.
-KEPT = {
-    ("tfbus/core/_cbatch.pyx", "# ===== batched lookups (issue 12) ====="),
-    ("tfbus/core/_cbatch.pyx",
-     "``lookup_transform`` to within 1e-12 (issue 12's tolerance; ~1e-14 in practice), bit"),
-    ("tfbus/core/_cmath.pyx", "numpy arrays (laser projection, issue 12)."),
-    ("tfbus/core/_cmath.pyx",
-     "# ----- per-point tf2 math for sensor data (issue 12: laser projection)"),
-}
+# Lines let through, as (path, text): none today.
+KEPT: set[tuple[str, str]] = set()
 
 # Folders of a checkout that are not the project's text (tools, builds, caches).
 NOT_SOURCE = {".git", ".venv", "build", "dist", "site", "__pycache__", ".mypy_cache",

@@ -24,7 +24,7 @@ from tfbus.core._cmath cimport EXACT_SPAN, _bisect_left, _compose, _identity, _s
 
 from tfbus.core._ccore import NO_ERROR
 
-# ===== batched lookups (issue 12) =====
+# ===== batched lookups =====
 #
 # ``batch_lookup`` answers ``lookup_transform`` for many times at once. The path between
 # the two frames is resolved once (the same climbs as ``_cwalk``, by each link's parent);
@@ -36,7 +36,7 @@ from tfbus.core._ccore import NO_ERROR
 # per-time sines come from libmvec's vector sin where it is available
 # (``_batch_lookup_vector``, if ``_BATCH_VECTOR_SIN``), a few ulp from libm's, so such
 # rows agree with the single
-# lookup to ~1e-15 (the issue allows 1e-12), not bit for bit; rows without a per-time
+# lookup to ~1e-15 (the batch tolerance is 1e-12), not bit for bit; rows without a per-time
 # sine (exact stamps, statics, zero slerp angles), and every row where libmvec is not
 # used, are the single lookup's bit for bit. Rows the plan cannot answer
 # exactly (time 0, a gather that fails, a link with several parents, a span >= 2**53 ns)
@@ -290,7 +290,7 @@ tfb_vsin_set(<size_t>_libmvec_sin_address())
 _BATCH_VECTOR_SIN = bool(tfb_simd_init())
 """True when :func:`_batch_lookup_vector` takes slerp's per-time sines from glibc's libmvec
 (``_ZGVdN4v_sin``, AVX2): its rows then agree with ``lookup_transform`` to within a few
-ulp of the sines (well inside the issue's 1e-12), not bit for bit. False (no libmvec, no
+ulp of the sines (well inside the batch tolerance 1e-12), not bit for bit. False (no libmvec, no
 AVX2): libm's ``sin``, rows bit-identical to the scalar lookup."""
 
 
@@ -844,7 +844,7 @@ def lookup_rows(CoreBase core, object target_frame, object source_frame,
                 signed char[::1] ok):
     """:func:`batch_lookup` with slerp's per-time sines from glibc's libmvec where
     ``_BATCH_VECTOR_SIN`` (AVX2 vector sine, a few ulp from libm's): rows then agree with
-    ``lookup_transform`` to within 1e-12 (issue 12's tolerance; ~1e-14 in practice), bit
+    ``lookup_transform`` to within 1e-12 (the batch tolerance; ~1e-14 in practice), bit
     for bit where a row has no per-time sine; elsewhere it is :func:`batch_lookup`. The
     entry :meth:`tfbus.core.BufferCore.lookup_transforms` uses (the pure-Python core's
     ``lookup_rows`` is its ``batch_lookup``: it has no vector sine)."""

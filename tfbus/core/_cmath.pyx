@@ -8,7 +8,7 @@
   expressions in tf2's evaluation order (the C bodies are in ``_cmath.pxd``, shared with
   the caches, the walk and the batch kernel); :mod:`tfbus.geometry` calls these.
 * ``slerp_rows``, ``lerp_rows``, ``apply_transforms``: the same expressions over rows of
-  numpy arrays (laser projection, issue 12).
+  numpy arrays (laser projection).
 """
 
 __all__ = [
@@ -121,7 +121,7 @@ def compose_full(leg2, leg1):
     return (b[0], b[1], b[2], b[3] / n, b[4] / n, b[5] / n, b[6] / n)
 
 
-# ----- per-point tf2 math for sensor data (issue 12: laser projection)
+# ----- per-point tf2 math for sensor data (laser projection)
 
 
 def slerp_rows(a, b, const double[::1] ratios, double[:, ::1] out):
