@@ -8,6 +8,8 @@ each must end cleanly on SIGINT."""
 
 from __future__ import annotations
 
+import json
+import math
 import re
 import shutil
 import signal
@@ -15,6 +17,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
@@ -126,3 +129,92 @@ def test_view_frames_matches_debian(master: Master, feed: object, tmp_path: Path
     assert all(b.startswith(("/static_transform_publisher", "/rostopic")) for _, _, b in want)
     assert {b for _, _, b in got} == {"default_authority"}
     assert (tmp_path / "tfbus" / "frames.pdf").stat().st_size > 0
+
+
+# -- public rospy programs copied into tests/compat/programs (see its README) ----------
+
+RECORDER = ROOT / "tests" / "compat" / "ros1_tf_recorder.py"
+
+
+def _upstream(name: str, into: Path) -> Path:
+    """The upstream program, unmodified: the copy with its import diff undone."""
+    into.mkdir(parents=True, exist_ok=True)
+    shutil.copy(PROGRAMS / f"{name}.py", into / f"{name}.py")
+    r = subprocess.run(["patch", "-R", "-s", "--no-backup-if-mismatch", str(into / f"{name}.py"),
+                        str(PROGRAMS / f"{name}.imports.diff")],
+                       capture_output=True, text=True, timeout=30, check=False)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return into / f"{name}.py"
+
+
+def _side_by_side(master: Master, name: str, tmp_path: Path,
+                  count: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The upstream rospy program on Debian's python3 + tf2_ros and the copy on tfbus,
+    both on ``master`` under their own node names; a rospy subscriber of /tf records
+    ``count`` transforms of each (by caller id). Both must end on SIGINT with status 0
+    and no traceback. Returns (Debian's, ours)."""
+    recorder = master.run("/usr/bin/python3", str(RECORDER))
+    recorder.wait_for(r"^READY$", timeout=60.0)
+    debian = Proc(["/usr/bin/python3", str(_upstream(name, tmp_path / "debian")),
+                   f"__name:={name}_debian"], master.env, cwd=tmp_path)
+    ours = Proc([sys.executable, "-c", RUN_ON_TFBUS, str(PROGRAMS / f"{name}.py"),
+                 f"__name:={name}_tfbus"], _tfbus_env(master), cwd=tmp_path)
+    got: dict[str, list[dict[str, Any]]] = {"debian": [], "tfbus": []}
+    deadline = time.monotonic() + 60.0
+    try:
+        while min(len(v) for v in got.values()) < count:
+            assert time.monotonic() < deadline, {k: len(v) for k, v in got.items()}
+            line = recorder.wait_for(r"^\{.*\}$", timeout=max(0.1, deadline - time.monotonic()))
+            message = json.loads(line.group(0))
+            who = message["callerid"]
+            for side in got:  # tfbus's ROS 1 node is the rospy node's name plus "_tf2"
+                if who.startswith(f"/{name}_{side}"):
+                    got[side].append(message)
+        for proc in (ours, debian):
+            start = time.monotonic()
+            proc.proc.send_signal(signal.SIGINT)
+            code = proc.proc.wait(timeout=20.0)
+            print(f"{name} ({proc.args[0]}), SIGINT to exit: {time.monotonic() - start:.3f} s")
+            lines = proc.seen + proc.drain()
+            assert code == 0, lines[-20:]
+            assert not [line for line in lines if "Traceback" in line], lines[-20:]
+            assert time.monotonic() - start < 5.0  # a bound for a loaded machine
+    finally:
+        ours.stop()
+        debian.stop()
+        recorder.stop()
+    return got["debian"][:count], got["tfbus"][:count]
+
+
+def _period(sent: list[dict[str, Any]]) -> float:
+    ns = [s * 1_000_000_000 + n for s, n in (t["stamp"] for t in sent)]
+    assert ns == sorted(ns) and len(set(ns)) == len(ns)
+    return (ns[-1] - ns[1]) / (len(ns) - 2) / 1e9
+
+
+def test_fixed_tf2_broadcaster_matches_debian(master: Master, tmp_path: Path) -> None:
+    """turtle_tf2's fixed_tf2_broadcaster (ROS 1's ``TransformBroadcaster()``, no node):
+    the same transform at the same rate as the unmodified program on Debian's tf2_ros."""
+    debian, ours = _side_by_side(master, "fixed_tf2_broadcaster", tmp_path, 12)
+    for sent in (debian, ours):
+        assert {(t["parent"], t["child"], tuple(t["t"]), tuple(t["r"])) for t in sent} == {
+            ("turtle1", "carrot1", (0.0, 2.0, 0.0), (0.0, 0.0, 0.0, 1.0))}
+        assert 0.05 < _period(sent) < 0.5  # rospy.Rate(10.0) on a loaded machine
+
+
+def test_dynamic_tf2_broadcaster_matches_debian(master: Master, tmp_path: Path) -> None:
+    """turtle_tf2's dynamic_tf2_broadcaster: carrot1 on a 10 m circle, angle π·t of the
+    time t read just before the stamp; the same for the unmodified program on Debian."""
+    debian, ours = _side_by_side(master, "dynamic_tf2_broadcaster", tmp_path, 12)
+    for sent in (debian, ours):
+        assert {(t["parent"], t["child"]) for t in sent} == {("turtle1", "carrot1")}
+        for t in sent:
+            x, y, z = t["t"]
+            assert x * x + y * y == pytest.approx(100.0, abs=1e-9)
+            assert (z, t["r"]) == (0.0, [0.0, 0.0, 0.0, 1.0])
+            stamp = t["stamp"][0] + t["stamp"][1] * 1e-9
+            # sin(x)/cos(x) of x = π·t: the angle atan2(x, y) is π·t (mod 2π), read a
+            # moment before the stamp (0.2 rad: 64 ms, a bound for a loaded machine)
+            lag = (math.pi * stamp - math.atan2(x, y)) % (2 * math.pi)
+            assert lag < 0.2, (t, lag)
+        assert 0.05 < _period(sent) < 0.5
