@@ -46,6 +46,8 @@ UPSTREAM: dict[str, tuple[str, str, str, str]] = {
                               "da5ac42dc5d52d1bc0811229a6448efd1cef9e4f"),
     "dynamic_tf2_broadcaster": (*TUTORIALS_ROS1, "turtle_tf2/nodes/dynamic_tf2_broadcaster.py",
                                 "1776ff71fe0fe0ab1c5c2f2759b047620037403f"),
+    "turtle_tf2_listener": (*TUTORIALS_ROS1, "turtle_tf2/nodes/turtle_tf2_listener.py",
+                            "b82c6ca669ed083471c7c15721f43f6d9a0cde7c"),
 }
 
 IMPORT_LINE = re.compile(r"^[+-](import [\w.]+( as \w+)?|from [\w.]+ import [\w, ]+)$")
