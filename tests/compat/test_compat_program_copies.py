@@ -48,6 +48,8 @@ UPSTREAM: dict[str, tuple[str, str, str, str]] = {
                                 "1776ff71fe0fe0ab1c5c2f2759b047620037403f"),
     "turtle_tf2_listener": (*TUTORIALS_ROS1, "turtle_tf2/nodes/turtle_tf2_listener.py",
                             "b82c6ca669ed083471c7c15721f43f6d9a0cde7c"),
+    "turtle_tf2_broadcaster": (*TUTORIALS_ROS1, "turtle_tf2/nodes/turtle_tf2_broadcaster.py",
+                               "13a28565f2a68899e91245e6b98d15a05acab3ee"),
 }
 
 IMPORT_LINE = re.compile(r"^[+-](import [\w.]+( as \w+)?|from [\w.]+ import [\w, ]+)$")
