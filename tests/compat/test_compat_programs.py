@@ -181,7 +181,7 @@ def _side_by_side(master: Master, name: str, tmp_path: Path,
             lines = proc.seen + proc.drain()
             assert code == 0, lines[-20:]
             assert not [line for line in lines if "Traceback" in line], lines[-20:]
-            assert time.monotonic() - start < 5.0  # a bound for a loaded machine
+            assert time.monotonic() - start < 10.0  # a bound for a loaded machine (a hang)
     finally:
         ours.stop()
         debian.stop()
@@ -299,7 +299,7 @@ def test_turtle_tf2_listener_matches_debian(master: Master, tmp_path: Path) -> N
             lines = proc.seen + proc.drain()
             assert code == 0, lines[-20:]
             assert not [line for line in lines if "Traceback" in line], lines[-20:]
-            assert time.monotonic() - start < 5.0
+            assert time.monotonic() - start < 10.0  # a bound (a hang)
     finally:
         for proc in (ours, debian):
             if proc is not None:
@@ -357,7 +357,7 @@ def test_turtle_tf2_broadcaster_matches_debian(master: Master, tmp_path: Path) -
             lines = proc.seen + proc.drain()
             assert code == 0, lines[-20:]
             assert not [line for line in lines if "Traceback" in line], lines[-20:]
-            assert time.monotonic() - start < 5.0
+            assert time.monotonic() - start < 10.0  # a bound (a hang)
     finally:
         for proc in (ours, debian):
             if proc is not None:
