@@ -554,6 +554,7 @@ class TransformListener:
         self._compat = buffer if isinstance(buffer, Buffer) else None
         self._inner: _Listener | None = None
         self._subscriptions: list[Any] = []
+        self.group: Any = None  # rclpy: the subscriptions' ReentrantCallbackGroup
         if bus is not None or _is_bus(node):
             chosen = bus if bus is not None else node
             if not isinstance(chosen, Bus):
@@ -570,6 +571,13 @@ class TransformListener:
             background.enter(self._inner)
 
     def _attach_rclpy(self, node: Any) -> None:
+        """The two subscriptions of ROS 2's ``tf2_ros/transform_listener.py``: same QoS,
+        and their own ``ReentrantCallbackGroup``, so that a callback of the node's
+        default (mutually exclusive) group may block in ``lookup_transform(...,
+        timeout)`` under a ``MultiThreadedExecutor`` while ``/tf`` is still delivered."""
+        from rclpy.callback_groups import (  # type: ignore[import-not-found]
+            ReentrantCallbackGroup,
+        )
         from rclpy.qos import (  # type: ignore[import-not-found]
             DurabilityPolicy,
             HistoryPolicy,
@@ -582,9 +590,12 @@ class TransformListener:
             depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL,
             history=HistoryPolicy.KEEP_LAST,
         )
+        self.group = ReentrantCallbackGroup()
         self._subscriptions = [
-            node.create_subscription(RosTFMessage, TF_TOPIC, self._on_tf, dynamic),
-            node.create_subscription(RosTFMessage, TF_STATIC_TOPIC, self._on_static, static),
+            node.create_subscription(RosTFMessage, TF_TOPIC, self._on_tf, dynamic,
+                                     callback_group=self.group),
+            node.create_subscription(RosTFMessage, TF_STATIC_TOPIC, self._on_static, static,
+                                     callback_group=self.group),
         ]
 
     def _set(self, message: Any, static: bool) -> None:

@@ -92,8 +92,8 @@ def main() -> int:
         else:
             got[0] = t.transform.translation.x
 
-    # on the talker node: the listener's default (mutually exclusive) callback group must
-    # stay free to deliver /tf while the coroutine waits, as in ROS 2 with tf2_ros
+    # on the talker node (the listener's node works too: its subscriptions have their own
+    # ReentrantCallbackGroup, as tf2_ros's; examples_tf2_py's async waiter does that)
     timer = talker.create_timer(0.05, in_callback)
     deadline = time.monotonic() + WAIT
     while not got and time.monotonic() < deadline:
