@@ -757,7 +757,7 @@ class BufferCore(CoreBase):
 
     # ------------------------------------------------------------------ introspection
 
-    parent_of = _PARENT_OF  # type: ignore[assignment]
+    parent_of = _PARENT_OF
     """Not public: the core's ``parent_of(frame_id, time_ns)`` goes by tf2's name,
     :meth:`get_parent`; reading this attribute raises AttributeError saying so."""
 
