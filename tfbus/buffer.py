@@ -155,7 +155,7 @@ class Buffer(BufferCore):
     every ``*_async``) are coroutines: ``await`` them (tf2_ros's calls block instead).
     A call left without ``await`` names that mistake: using its result (``p2.point``,
     ``if buffer.can_transform_async(...)``) raises AttributeError or TypeError saying
-    ``Buffer.transform(...) is a coroutine: write `await buffer.transform(...)```, and
+    "Buffer.transform(...) is a coroutine: write ``await buffer.transform(...)``", and
     dropping it warns with that text (RuntimeWarning), not Python's bare "coroutine
     ... was never awaited".
     """
