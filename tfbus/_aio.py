@@ -358,8 +358,11 @@ class Awaiting(Coroutine[Any, Any, _R]):
     working) saying ``await`` is missing; collected without ever being awaited, it warns
     with that text (RuntimeWarning) in place of Python's "coroutine ... was never awaited".
 
-    The cost: one object around the coroutine and one call per ``await``
-    (``benchmarks``: within the noise of a cached lookup's await).
+    The cost: one object around the coroutine, a Python-level ``__await__`` and
+    ``__del__``, about 0.5 µs of CPU per call and await; the waiting lookups
+    (:class:`~tfbus.buffer.Buffer`) answer data already there without setting up a wait,
+    so an awaited cached ``lookup_transform_async`` costs what it did before (about
+    1.3 µs of CPU on the reference machine, asyncio and trio alike).
     """
 
     __slots__ = ("_awaited", "_call", "_coro")
