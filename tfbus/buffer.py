@@ -28,7 +28,7 @@ import anyio.lowlevel
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._aio import Wakeup, running_asyncio_loop
+from tfbus._aio import Wakeup, coroutine_method, running_asyncio_loop
 from tfbus.clock import Clock, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
@@ -150,6 +150,14 @@ class Buffer(BufferCore):
 
     Every synchronous method of BufferCore is available unchanged. Use from one event
     loop (the one that runs its waits); not thread-safe.
+
+    The waiting methods (``wait_for_transform``, ``transform``, ``transform_full`` and
+    every ``*_async``) are coroutines: ``await`` them (tf2_ros's calls block instead).
+    A call left without ``await`` names that mistake: using its result (``p2.point``,
+    ``if buffer.can_transform_async(...)``) raises AttributeError or TypeError saying
+    "Buffer.transform(...) is a coroutine: write ``await buffer.transform(...)``", and
+    dropping it warns with that text (RuntimeWarning), not Python's bare "coroutine
+    ... was never awaited".
     """
 
     def __init__(self, cache_time: float | Duration = 10.0, *, clock: Clock | None = None) -> None:
@@ -417,6 +425,7 @@ class Buffer(BufferCore):
         what = f"transform from [{source}] to [{target}] at time {time.ns / 1e9:.9f}"
         return f"{what}: {reason}" if reason else what
 
+    @coroutine_method
     async def wait_for_transform(
         self,
         target_frame: str,
@@ -441,6 +450,12 @@ class Buffer(BufferCore):
             InvalidArgumentException: a frame id is empty or starts with '/'.
             LookupException: the path between the frames contains a loop.
         """
+        if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
+            found = self.check_transform(target_frame, source_frame, time)
+            if found is not None:  # the data is there (or can never be): no wait set up
+                if isinstance(found, TransformException):
+                    raise found
+                return found
         return await self._wait(
             partial(self.check_transform, target_frame, source_frame, time),
             partial(self._frames_of, target_frame, source_frame, time),
@@ -448,6 +463,7 @@ class Buffer(BufferCore):
             partial(self._describe, target_frame, source_frame, time),
         )
 
+    @coroutine_method
     async def lookup_transform_async(
         self,
         target_frame: str,
@@ -459,13 +475,20 @@ class Buffer(BufferCore):
 
         Raises: as :meth:`wait_for_transform`.
         """
-        return await self._wait(  # wait_for_transform's body: one coroutine fewer
+        if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
+            found = self.check_transform(target_frame, source_frame, time)
+            if found is not None:  # wait_for_transform's body: one coroutine fewer
+                if isinstance(found, TransformException):
+                    raise found
+                return found
+        return await self._wait(
             partial(self.check_transform, target_frame, source_frame, time),
             partial(self._frames_of, target_frame, source_frame, time),
             timeout,
             partial(self._describe, target_frame, source_frame, time),
         )
 
+    @coroutine_method
     async def lookup_transform_full_async(
         self,
         target_frame: str,
@@ -514,6 +537,7 @@ class Buffer(BufferCore):
 
         return await self._wait(check, frames, timeout, describe)
 
+    @coroutine_method
     async def can_transform_async(
         self,
         target_frame: str,
@@ -533,6 +557,7 @@ class Buffer(BufferCore):
     """The transform functions by type (tf2_ros ``BufferInterface.registration``), shared
     process-wide: see :mod:`tfbus.convert` to register your own stamped types."""
 
+    @coroutine_method
     async def transform(
         self, obj: _M, target_frame: str, timeout: float | Duration | None = None
     ) -> _M:
@@ -558,10 +583,24 @@ class Buffer(BufferCore):
         """
         do_transform = self.registration.get(type(obj))
         header = _header_of(obj)
-        ts = await self.wait_for_transform(target_frame, header.frame_id, header.stamp, timeout)
+        source, stamp = header.frame_id, header.stamp
+        ts: TransformStamped | None = None
+        if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
+            found = self.check_transform(target_frame, source, stamp)
+            if isinstance(found, TransformException):
+                raise found
+            ts = found
+        if ts is None:
+            ts = await self._wait(  # wait_for_transform's body: one coroutine fewer
+                partial(self.check_transform, target_frame, source, stamp),
+                partial(self._frames_of, target_frame, source, stamp),
+                timeout,
+                partial(self._describe, target_frame, source, stamp),
+            )
         result: _M = do_transform(obj, ts)
         return result
 
+    @coroutine_method
     async def transform_full(
         self,
         obj: _M,
@@ -611,6 +650,7 @@ class Buffer(BufferCore):
                 target_frame, source_frame, Time.from_ns(int(times.max())), timeout
             )
 
+    @coroutine_method
     async def lookup_transforms_async(
         self,
         target_frame: str,
@@ -638,6 +678,7 @@ class Buffer(BufferCore):
         await self._wait_latest(target_frame, source_frame, t, timeout)
         return self.lookup_transforms(target_frame, source_frame, t, errors=errors)
 
+    @coroutine_method
     async def transform_points_async(
         self,
         points: npt.ArrayLike,
@@ -660,6 +701,7 @@ class Buffer(BufferCore):
         await self._wait_latest(target_frame, source_frame, t, timeout)
         return self.transform_points(p, target_frame, source_frame, t, errors=errors)
 
+    @coroutine_method
     async def lookup_velocity_async(
         self,
         tracking_frame: str,
@@ -686,6 +728,7 @@ class Buffer(BufferCore):
             tracking_frame, time, averaging_interval, timeout, method=method,
         )
 
+    @coroutine_method
     async def lookup_velocity_full_async(
         self,
         tracking_frame: str,

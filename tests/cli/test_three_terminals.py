@@ -89,6 +89,7 @@ class Tfbus:
         self.lines: queue.Queue[str] = queue.Queue()
         self.seen: list[str] = []
         self.err: list[str] = []
+        self.err_seen = threading.Condition()  # notified at each stderr line
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
         threading.Thread(target=self._read_err, daemon=True).start()
@@ -101,7 +102,21 @@ class Tfbus:
     def _read_err(self) -> None:
         assert self.proc.stderr is not None
         for line in self.proc.stderr:
-            self.err.append(line.rstrip("\n"))
+            with self.err_seen:
+                self.err.append(line.rstrip("\n"))
+                self.err_seen.notify_all()
+
+    def expect_err(self, predicate: Callable[[str], bool], timeout: float = 15.0) -> str:
+        """The first stderr line that matches, waiting up to ``timeout`` s for it."""
+        with self.err_seen:
+            found = self.err_seen.wait_for(
+                lambda: any(predicate(line) for line in self.err) or self.proc.poll() is not None,
+                timeout=timeout,
+            )
+            line = next((line for line in self.err if predicate(line)), None)
+        if not found or line is None:
+            raise AssertionError(self.describe("no matching stderr line"))
+        return line
 
     def _more(self, deadline: float) -> bool:
         """Move one line into ``seen``; False when the deadline passed or stdout ended."""
@@ -206,6 +221,64 @@ def test_listener_first_prints_error_then_info_lines() -> None:
         bsummary = BROADCASTER_SUMMARY.match(broadcaster.seen[-1])
         assert bsummary, broadcaster.seen
         assert int(bsummary.group(1)) > 50
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_ctrl_c_at_any_moment_ends_the_listener_without_a_traceback(backend: str) -> None:
+    """Ctrl-C (SIGINT) on ``tfbus demo listener`` at six moments of its run: as soon as it
+    says it is running (bus open, signal handler not yet installed), at its first line,
+    and after its 2nd, 3rd, 5th and 8th lines (lookups at 20 Hz in between). Each ends
+    with status 0 (its summary line printed) or 130 (before the handler), never a
+    traceback."""
+    port = free_port()
+    with processes() as ps:
+        broadcaster = Tfbus("demo", "broadcaster", "--bus", listen_spec(port), "--duration", "120")
+        ps.append(broadcaster)
+        for moment in (0, 1, 2, 3, 5, 8):
+            listener = Tfbus("demo", "listener", "--backend", backend, "--listen-rate", "20",
+                             "--bus", connect_spec(port), "--duration", "60")
+            ps.append(listener)
+            if moment == 0:
+                listener.expect_err(lambda line: "running the listener node" in line)
+            else:
+                listener.expect(lambda line: line.startswith("["), start=moment - 1)
+            code = listener.finish(signal.SIGINT)
+            what = listener.describe(f"SIGINT at moment {moment}")
+            assert code in (0, 130), what
+            assert not any("Traceback" in line for line in listener.err), what
+            if code == 0:
+                assert LISTENER_SUMMARY.match(listener.seen[-1]), what
+        assert broadcaster.finish(signal.SIGINT) == 0
+
+
+_INTERRUPT_WHILE_LOADING = """
+import importlib.abc, os, signal, sys
+
+class InterruptAtImport(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name == "tfbus.cli.demo":  # one of the command modules tfbus.cli.main loads
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C, delivered inside the import
+        return None
+
+from tfbus.cli import main
+sys.meta_path.insert(0, InterruptAtImport())
+sys.exit(main(["demo", "listener", "--help"]))
+"""
+
+
+def test_ctrl_c_while_the_commands_load_exits_130_without_a_traceback() -> None:
+    """Ctrl-C while ``tfbus`` loads click, rich and its command modules (the second of
+    start-up before any command runs): exit status 130, nothing on stdout, no
+    traceback. The SIGINT is sent by an import hook at the import of a command module,
+    so the moment is exact."""
+    done = subprocess.run(
+        [sys.executable, "-c", _INTERRUPT_WHILE_LOADING], capture_output=True, text=True,
+        env=_env(), cwd=ROOT, timeout=60,
+    )
+    assert done.returncode == 130, done.stderr
+    assert "Traceback" not in done.stderr and "KeyboardInterrupt" not in done.stderr
+    assert done.stdout == ""
 
 
 def test_echo_and_frames_attach_to_a_running_broadcaster(tmp_path: Path) -> None:

@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tfbus import (
+    Buffer,
     ExtrapolationException,
     Header,
     InvalidArgumentException,
@@ -156,11 +157,33 @@ def test_the_compiled_base_state_is_read_only_from_python() -> None:
         if COMPILED:  # the pure twin's slots are plain attributes
             with pytest.raises(AttributeError):
                 setattr(core, name, getattr(core, name))
-    assert core.parent_of("b", 0) == "a" and core.parent_of("a", 0) is None
+    assert core.get_parent("b") == "a" and core.get_parent("a") is None
     assert core.link_info() == [("b", "a", "x", False, 1, 10**9, 10**9)]
     assert core.common_time("a", "b") == (0, 10**9)
     core.clear()
     assert core.link_info() == [("b", "NO_PARENT", "x", False, 0, 0, 0)]
+
+
+@pytest.mark.parametrize("kind", [BufferCore, Buffer])
+def test_the_parent_of_a_frame_is_reached_by_one_public_name_get_parent(kind: type) -> None:
+    """tf2's ``_getParent`` is ``get_parent(frame_id, time=Time(0))``; the core's
+    ``parent_of(frame_id, time_ns)`` is not reachable from a buffer, and a guess of it
+    names the public method."""
+    buf = kind()
+    buf.set_transform(ts("b", parent="a", sec=1.0), "x")
+    buf.set_transform(ts("b", parent="c", sec=3.0), "x")  # b re-parented at 3 s
+    assert buf.get_parent("b") == "c"
+    assert buf.get_parent("b", Time.from_sec(1.0)) == "a"
+    assert buf.get_parent("b", Time.from_sec(3.0)) == "c"
+    assert buf.get_parent("a") is None and buf.get_parent("unknown") is None
+    with pytest.raises(AttributeError, match=r"has no attribute 'parent_of'.*get_parent\(") as e:
+        buf.parent_of("b", 0)  # type: ignore[attr-defined]
+    assert e.value.name == "parent_of"
+    assert not hasattr(buf, "parent_of") and not hasattr(kind, "parent_of")
+    assert "parent_of" not in dir(buf) and "get_parent" in dir(buf)
+    with pytest.raises(TypeError, match=r"time must be a tfbus Time.*got int 0"):
+        buf.get_parent("b", 0)
+
 
 # ============================================================================ wrong values
 # Wrong values given to the API never crash, never half-store,

@@ -475,7 +475,8 @@ def test_buffers_bit_for_bit(ops: list[tuple[Any, ...]], cache_time: float) -> N
     same(lambda c: (bufs[c]._frame_ids, bufs[c]._frame_names, bufs[c]._authority))
     same(lambda c: (bufs[c].get_frame_names(), bufs[c].link_info()))
     for frame in FRAMES:
-        same(lambda c, f=frame: (bufs[c].parent_of(f, 0), bufs[c].parent_of(f, 3 * NS)))
+        at = Time.from_ns(3 * NS)
+        same(lambda c, f=frame, t=at: (bufs[c].get_parent(f), bufs[c].get_parent(f, t)))
     for target in FRAMES[:5]:
         for source in FRAMES[:5]:
             times = _times(sorted(stamps), len(stamps) // 2, NS // 2)

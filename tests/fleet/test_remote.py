@@ -121,6 +121,24 @@ async def test_lookups_answer_as_the_server_buffer() -> None:
         assert s.server.statistics().answered >= 5
 
 
+async def test_a_lookup_without_await_names_the_missing_await() -> None:
+    """tf2_ros's ``BufferClient.lookup_transform`` blocks; here the call without ``await``
+    says so at the result's first use, and awaiting the same call answers."""
+    async with served() as s:
+        pending = s.client.lookup_transform("world", "laser", Time(11), timeout=1.0)
+        with pytest.raises(
+            AttributeError,
+            match=r"BufferClient\.lookup_transform\(\.\.\.\) is a coroutine: write "
+            r"`await buffer_client\.lookup_transform\(\.\.\.\)`.*'transform'",
+        ):
+            pending.transform  # noqa: B018
+        asked = s.client.can_transform("world", "laser", Time(0), 0.0)
+        with pytest.raises(TypeError, match=r"BufferClient\.can_transform\(\.\.\.\) is a coro"):
+            bool(asked)
+        asked.close()  # dropped on purpose: no warning
+        assert (await pending).transform.translation.x == pytest.approx(2.5)
+
+
 async def test_errors_come_back_as_the_same_tf2_classes_and_messages() -> None:
     async with served() as s:
         s.buffer.set_transform_static(ts("island", "palm", 0, 1.0), "test")

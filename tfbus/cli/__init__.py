@@ -101,9 +101,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``tfbus`` command (``pyproject.toml``); returns the exit status.
 
     Without click or rich installed it prints one line naming the extra (``tfbus[cli]``)
-    and returns 2, as for every missing optional dependency."""
+    and returns 2, as for every missing optional dependency. Ctrl-C while the commands
+    load (click, rich and the command modules: about a second on a loaded machine) ends
+    it with status 130 and no traceback, as Ctrl-C during a command does."""
     try:
         _load()
+    except KeyboardInterrupt:
+        return 130
     except ImportError as err:
         missing = (getattr(err, "name", None) or "").partition(".")[0]
         if missing not in ("click", "rich"):

@@ -106,6 +106,50 @@ _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 
 _LATEST: Final = Time(0)
 
 
+class _CoreOnly:
+    """A method of the core (``CoreBase``) kept off ``BufferCore``'s public surface: its
+    public name is another (tf2's), so reading it from a buffer raises AttributeError
+    naming that one, and ``dir()`` leaves it out. :meth:`call` still reaches the core's
+    method (the next one along the instance type's MRO).
+    """
+
+    __slots__ = ("_found", "name", "public")
+
+    def __init__(self, public: str) -> None:
+        self.public = public
+        self.name = ""
+        self._found: dict[type, Any] = {}
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: object, owner: type | None = None) -> Any:
+        kind = owner.__name__ if owner is not None else type(obj).__name__
+        raise AttributeError(
+            f"{kind!r} object has no attribute {self.name!r}. Did you mean: {self.public}?",
+            name=self.name,
+            obj=obj,
+        )
+
+    def call(self, obj: object, *args: Any) -> Any:
+        """The core's method of this name, called on ``obj``."""
+        kind = type(obj)
+        method = self._found.get(kind)
+        if method is None:
+            method = next(
+                found
+                for klass in kind.__mro__
+                if (found := vars(klass).get(self.name)) is not None and found is not self
+            )
+            self._found[kind] = method
+        return method(obj, *args)
+
+
+_PARENT_OF: Final = _CoreOnly(
+    "'get_parent(frame_id, time=Time(0))' (tf2's BufferCore::_getParent; time a Time, not ns)"
+)
+
+
 class BufferCore(CoreBase):
     """tf2's transform buffer: stores stamped transforms per link and answers lookups.
 
@@ -713,10 +757,33 @@ class BufferCore(CoreBase):
 
     # ------------------------------------------------------------------ introspection
 
+    parent_of = _PARENT_OF
+    """Not public: the core's ``parent_of(frame_id, time_ns)`` goes by tf2's name,
+    :meth:`get_parent`; reading this attribute raises AttributeError saying so."""
+
+    def __dir__(self) -> list[str]:
+        """``dir()`` without the core's names that go by another public name here."""
+        return [name for name in super().__dir__() if name != "parent_of"]
+
     def get_parent(self, frame_id: str, time: Time = _LATEST) -> str | None:
         """The parent of ``frame_id`` at ``time`` (0 = latest), or None for a root, an
-        unknown frame or a time the link has no data for (tf2 ``_getParent``)."""
-        return self.parent_of(frame_id, time.ns)
+        unknown frame or a time the link has no data for (tf2 ``BufferCore::_getParent``).
+
+        Args:
+            frame_id: the child frame.
+            time: a :class:`~tfbus.time.Time`; ``Time(0)`` is the link's newest data.
+
+        Raises:
+            TypeError: ``time`` is not a Time (an int of nanoseconds is refused, not
+                taken as seconds or ns).
+        """
+        if not isinstance(time, Time):
+            raise TypeError(
+                f"get_parent: time must be a tfbus Time (Time(0) = latest), got "
+                f"{type(time).__name__} {time!r}"
+            )
+        parent: str | None = _PARENT_OF.call(self, frame_id, time.ns)
+        return parent
 
     def all_frames_as_string(self) -> str:
         """One line ``Frame X exists with parent Y.`` per frame that has a link, in

@@ -48,6 +48,7 @@ import anyio.abc
 from anyio.streams.buffered import BufferedByteReceiveStream
 
 from tfbus import errors
+from tfbus._aio import coroutine_method
 from tfbus.errors import TransformException, TransportError
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.ratelimit import CountLimitedLog
@@ -606,6 +607,7 @@ class Ros1BufferClient:
         if tg is not None:
             await self._node.close(tg)
 
+    @coroutine_method
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
                                timeout: float | Duration = 0.0) -> TransformStamped:
         """tf2_ros ``BufferClient.lookup_transform``: the server waits up to ``timeout``
@@ -623,6 +625,7 @@ class Ros1BufferClient:
         """
         return await self._goal(target_frame, source_frame, time, timeout, Time(0), "", False)
 
+    @coroutine_method
     async def lookup_transform_full(self, target_frame: str, target_time: Time,
                                     source_frame: str, source_time: Time, fixed_frame: str,
                                     timeout: float | Duration = 0.0) -> TransformStamped:

@@ -58,6 +58,7 @@ import anyio.from_thread
 import zenoh
 
 from tfbus import errors
+from tfbus._aio import coroutine_method
 from tfbus.codecs.native import WireCodec, new_sender_id
 from tfbus.errors import (
     InvalidArgumentException,
@@ -567,6 +568,7 @@ class BufferClient:
         self._padding = timeout_padding
         self._max_wait = max_wait
 
+    @coroutine_method
     async def lookup_transform(
         self,
         target_frame: str,
@@ -585,6 +587,7 @@ class BufferClient:
                    "time": time.ns}
         return _typed(await self._ask(request, timeout), TransformStamped)
 
+    @coroutine_method
     async def lookup_transform_full(
         self,
         target_frame: str,
@@ -604,6 +607,7 @@ class BufferClient:
                    "fixed": fixed_frame}
         return _typed(await self._ask(request, timeout), TransformStamped)
 
+    @coroutine_method
     async def can_transform(
         self,
         target_frame: str,
@@ -626,6 +630,7 @@ class BufferClient:
             return False
         return isinstance(answer, dict) and answer.get("can") is True
 
+    @coroutine_method
     async def transform(
         self, obj: _M, target_frame: str, timeout: float | Duration | None = None
     ) -> _M:
