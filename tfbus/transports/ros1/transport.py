@@ -50,7 +50,7 @@ from .tcpros import (
     serve_subscriber,
 )
 
-__all__ = ["Ros1Statistics", "Ros1Transport"]
+__all__ = ["Ros1Statistics", "Ros1Transport", "tf_message_from"]
 
 _log = logging.getLogger("tfbus.transports.ros1")
 _peer_log = CountLimitedLog(_log, 1, period=5.0, clock=time.monotonic)
@@ -156,6 +156,17 @@ def _set_nodelay(sock: socket.socket | None) -> None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
+def tf_message_from(authority: str) -> type[TFMessage]:
+    """A ``TFMessage`` subclass whose class attribute ``authority`` is ``authority``: the
+    messages of one TCPROS connection are built with it, so that a
+    :class:`~tfbus.listener.TransformListener` records each publisher's caller id
+    (the connection header's ``callerid``) as the authority of its transforms, as
+    tf2_ros's ROS 1 listener does (``TransformListener::subscription_callback_impl``:
+    ``msg_evt.getPublisherName()``). One class per connection, made when its header
+    arrives: a message costs nothing more than a plain ``TFMessage``."""
+    return type("TFMessage", (TFMessage,), {"__slots__": (), "authority": authority})
+
+
 class _Inbound:
     """What one connection to a publisher receives, frame by frame: the publisher's
     connection header, then messages, each decoded and delivered to the bus at once
@@ -176,6 +187,7 @@ class _Inbound:
         self._md5 = SCAN_MD5SUM if self._scan else TF_MD5SUM
         self._decode = node._codec.decode
         self._stats = node._stats
+        self._message: type[TFMessage] = TFMessage  # per publisher: tf_message_from
         self.splitter = FrameSplitter(self._frame, MAX_HEADER_BYTES, node._max_bytes)
 
     def _frame(self, raw: bytes | memoryview) -> None:
@@ -186,7 +198,7 @@ class _Inbound:
                 self._deliver(self.topic, decode_laser_scan(raw))
             else:
                 transforms = self._decode(raw)  # WireDecodeError: counted in malformed
-                self._deliver(self.topic, TFMessage(tuple(transforms)))
+                self._deliver(self.topic, self._message(tuple(transforms)))
             self._stats.delivered += 1
             return
         header = decode_header(bytes(raw))
@@ -196,7 +208,9 @@ class _Inbound:
             raise ValueError(
                 f"publisher {self.uri} sends md5sum {header.get('md5sum')!r} on {self.topic}"
             )
-        self.conn_id = self.node._open_conn(header.get("callerid", self.uri), "i", self.topic)
+        callerid = header.get("callerid") or self.uri
+        self._message = tf_message_from(callerid)
+        self.conn_id = self.node._open_conn(callerid, "i", self.topic)
         self.node._delivering.add((self.topic, self.uri))
         self.header_or_end.set()
 
