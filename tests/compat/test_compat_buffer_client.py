@@ -214,3 +214,65 @@ def test_buffer_client_on_tfbus_server_and_cancel_on_timeout(
 
     background.call(cancelled_there)
     assert held.cancelled == 1 and held.pending == 0 and held.answered == 0
+
+
+@pytest.mark.anyio
+async def test_raw_topics_between_two_nodes_and_a_malformed_result_dropped(
+        master: Master) -> None:
+    """The action's topics between two tfbus ROS 1 nodes (raw topics both ways): a server
+    node that answers each goal first with bytes that are no LookupTransformActionResult
+    (counted in ``malformed``, dropped), then with the real result, which the client
+    returns."""
+    import struct
+
+    import anyio
+
+    from tfbus import Bus
+    from tfbus.compat._action import ActionClient
+    from tfbus.remote import ros1 as action
+    from tfbus.transports.ros1 import Ros1Transport
+
+    status = struct.pack("<III", 1, 0, 0) + struct.pack("<I", 0) + struct.pack("<I", 0)
+    goals: list[action.Goal] = []
+    callers: list[str] = []
+    answer = TransformStamped(Header(Time.from_sec(5.0), "map"), "laser",
+                              Transform(Vector3(1.0, 2.0, 3.0), Quaternion(*Q)))
+    server = Ros1Transport(master_uri=master.uri, node_name="/raw_server")
+    client_side = Ros1Transport(master_uri=master.uri, node_name="/raw_client")
+
+    def on_goal(payload: bytes, callerid: str) -> None:
+        goal = action.decode_goal(payload)
+        goals.append(goal)
+        callers.append(callerid)
+        server.send_raw_nowait("/raw_ns/result", b"\x01\x02 not a result")
+        server.send_raw_nowait("/raw_ns/result", action.encode_result(
+            1, goal.goal_id, goal.goal_stamp, answer, 0, ""))
+
+    async with Bus(transport=server), Bus(transport=client_side), \
+            anyio.create_task_group() as tg:
+        server.subscribe_raw("/raw_ns/goal", action.GOAL_TYPE, action.GOAL_MD5, on_goal)
+        server.subscribe_raw("/raw_ns/cancel", action.CANCEL_TYPE, action.CANCEL_MD5,
+                             lambda _p, _c: None)
+        server.advertise_raw("/raw_ns/result", action.RESULT_TYPE, action.RESULT_MD5)
+        server.advertise_raw("/raw_ns/status", action.STATUS_TYPE, action.STATUS_MD5)
+        client = ActionClient(client_side, "raw_ns")
+
+        async def statuses() -> None:  # actionlib's status array, 5 Hz
+            while True:
+                server.send_raw_nowait("/raw_ns/status", status)
+                await anyio.sleep(0.2)
+
+        tg.start_soon(statuses)
+        with anyio.fail_after(60):
+            await client.wait_ready()
+        got = await client.lookup("map", "laser", Time(0), 1.0, Time(0), "", False, 10.0)
+        # the client's goal publisher is connected to the server, the server to its result
+        assert server.connections("/raw_ns/goal") == (1, 0)
+        assert client_side.connections("/raw_ns/result") == (1, 0)
+        assert client_side.connections("/raw_ns/goal") == (0, 1)
+        tg.cancel_scope.cancel()
+    assert got == answer
+    assert client.malformed == 1 and client.cancelled == 0
+    assert [(g.target_frame, g.source_frame, g.timeout, g.advanced) for g in goals] == [
+        ("map", "laser", 1.0, False)]
+    assert callers == ["/raw_client"]  # the TCPROS header's callerid, per connection
