@@ -91,7 +91,7 @@ class ListenerStatistics:
 class TransformListener:
     """Subscribes to ``/tf`` and ``/tf_static`` and stores every transform in a buffer.
 
-    ``TransformListener(buffer, bus, *, authority="default_authority", clock=None,
+    ``TransformListener(buffer, bus, *, authority=None, clock=None,
     queue_size=None, log_period=5.0, inline=True)``. Use ``async with``: entering
     subscribes to both topics and stores the latched static transforms before it returns
     (so a lookup right after sees them); leaving unregisters both subscriptions.
@@ -107,8 +107,13 @@ class TransformListener:
         buffer: a ``BufferCore``, a ``Buffer``, or anything with their
             ``set_transforms`` and ``clear`` (see :class:`TransformSink`).
         bus: the bus to listen on (must be open).
-        authority: the authority recorded with each transform (tf2_ros's Python
-            listener uses ``"default_authority"``).
+        authority: the authority recorded with each transform. None (the default):
+            the publisher's name where the transport gives one — ROS 1's caller id
+            (the TCPROS ``callerid``, as tf2_ros's ROS 1 listener records
+            ``msg_evt.getPublisherName()``), carried by the message's class
+            (:func:`tfbus.transports.ros1.transport.tf_message_from`) — else
+            ``"default_authority"`` (tf2_ros's ROS 2 listener's). A string: that
+            authority for every transform.
         clock: read on each message, as tf2_ros does: a time earlier than the last one
             read is a jump back, which clears the buffer; also paces log messages.
             Default: the buffer's clock for a ``Buffer``, else ``SystemClock()``.
@@ -123,7 +128,7 @@ class TransformListener:
         buffer: TransformSink,
         bus: Bus,
         *,
-        authority: str = "default_authority",
+        authority: str | None = None,
         clock: Clock | None = None,
         queue_size: int | None = None,
         log_period: float = 5.0,
@@ -132,7 +137,8 @@ class TransformListener:
         """Create a listener (not yet listening; use ``async with``)."""
         self._buffer = buffer
         self._bus = bus
-        self._authority = authority
+        self._authority = "default_authority" if authority is None else authority
+        self._publisher_authority = authority is None
         self._queue_size = queue_size
         self._inline = inline
         self._callbacks: list[CallbackSubscription] = []
@@ -277,8 +283,13 @@ class TransformListener:
             self._malformed += 1
             self._warn("ignoring a TFMessage on %s: not iterable", topic)
             return
+        authority = self._authority
+        if self._publisher_authority and type(message) is not TFMessage:
+            named = getattr(type(message), "authority", None)
+            if isinstance(named, str) and named:
+                authority = named
         try:
-            result = self._buffer.set_transforms(transforms, self._authority, static)
+            result = self._buffer.set_transforms(transforms, authority, static)
         except Exception as bug:  # a sink that breaks its contract: count, never die
             self._malformed += 1
             self._warn("ignoring a TFMessage on %s: %s: %s", topic, type(bug).__name__, bug)

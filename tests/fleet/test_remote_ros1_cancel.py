@@ -39,8 +39,8 @@ from tfbus.remote.ros1 import (
     RESULT_TYPE,
     Ros1BufferClient,
     Ros1BufferServer,
-    _decode_result_status,
     _Node,
+    decode_result_status,
     encode_goal,
     encode_goal_id,
 )
@@ -83,7 +83,7 @@ class ActionPeer:
         self.results: dict[str, tuple[int, str, int]] = {}
 
     def on_result(self, raw: bytes) -> None:
-        goal_id, _ts, code, _message, status, text = _decode_result_status(raw)
+        goal_id, _ts, code, _message, status, text = decode_result_status(raw)
         self.results[goal_id] = (status, text, code)
 
     def send_goal(self, raw: bytes) -> None:

@@ -233,7 +233,7 @@ class WireCodec:
             WireEncodeError: if the message type is neither a TFMessage, a registered
                 type nor a plain msgpack value, or a field cannot be encoded.
         """
-        if type(message) is _m.TFMessage:
+        if isinstance(message, _m.TFMessage):  # also a ROS 1 connection's subclass
             tag = _TF_TAG
             body: object = message.transforms
         elif type(message) is LaserScan:

@@ -20,6 +20,8 @@
   ROS 1 transport, carried by the background loop.
 * :class:`TransformBroadcaster`, :class:`StaticTransformBroadcaster` (``sendTransform``)
   on an rclpy node, a tfbus bus, or (no argument) the ROS 1 graph as the listener.
+* :class:`BufferClient` (ROS 1): tf2_ros's ``LookupTransform`` action client on the
+  same ROS 1 node, answered by a ``buffer_server``.
 * Results in the caller's types (:mod:`tfbus.compat._types`): a rospy ``Time`` given,
   rospy messages and times returned; an rclpy one, rclpy's; a tfbus one, tfbus's.
 * tf2's exceptions, :class:`TransformRegistration`, :class:`ConvertRegistration`,
@@ -35,11 +37,15 @@ works as ``from tf2_ros.buffer import Buffer`` does.
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 import types
+import weakref
 from collections.abc import Iterable
 from functools import partial
-from typing import Any
+from typing import Any, cast
+
+import anyio
 
 from tfbus.broadcaster import StaticTransformBroadcaster as _StaticBroadcaster
 from tfbus.broadcaster import TransformBroadcaster as _Broadcaster
@@ -47,6 +53,7 @@ from tfbus.buffer import Buffer as _Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock
 from tfbus.compat import tf2_geometry_msgs as _geometry
+from tfbus.compat._action import ActionClient
 from tfbus.compat._args import to_duration, to_stamped, to_time, to_transform_stamped
 from tfbus.compat._loop import (
     LoopThreadError,
@@ -724,23 +731,185 @@ here :class:`Buffer`, which has its whole interface (``transform``, ``lookup_tra
 ``can_transform`` and their ``_full`` forms, ``registration``)."""
 
 
+_action_clients: weakref.WeakKeyDictionary[Any, dict[str, ActionClient]] = \
+    weakref.WeakKeyDictionary()
+"""The action clients of each ROS 1 transport, by namespace (one per process and ns)."""
+
+
+def _action_client(transport: Any, ns: str) -> ActionClient:
+    """The process's :class:`~tfbus.compat._action.ActionClient` for ``ns`` on
+    ``transport`` (made on first use; in the background loop)."""
+    clients = _action_clients.setdefault(transport, {})
+    key = "/" + ns.strip("/")
+    if key not in clients:
+        clients[key] = ActionClient(transport, ns)
+    return clients[key]
+
+
 class BufferClient(Buffer):
-    """ROS 1 tf2_ros ``BufferClient(ns, check_frequency=None, timeout_padding=...)``: a
-    buffer whose lookups ROS 1 asks a ``tf2_server`` for over the ``LookupTransform``
-    action. tfbus has no actionlib: this buffer listens to the ROS 1 graph itself
-    (:class:`TransformListener`) and answers the same calls locally, with the same
-    waits; ``wait_for_server`` returns True once the listener has joined the graph."""
+    """ROS 1 tf2_ros ``BufferClient(ns, check_frequency=None, timeout_padding=2 s)``
+    (Debian's ``tf2_ros/buffer_client.py``): every lookup is a goal of tf2_ros's
+    ``LookupTransform`` action (``tf2_msgs/LookupTransformAction``) sent to the buffer
+    server at ``ns`` (a ``tf2_ros buffer_server`` node, or tfbus's
+    :class:`tfbus.remote.ros1.Ros1BufferServer`), which waits up to the call's
+    ``timeout`` for the transform and answers with it or with a ``TF2Error``.
+
+    The action's topics (``{ns}/goal``, ``cancel``, ``result``, ``status``) are carried
+    by the process's one ROS 1 node (:func:`tfbus.compat._loop.ros1_bus`, the node of
+    the ROS 1 :class:`TransformListener` and broadcasters), no second node; the calls
+    block their thread until the result comes (woken by it, through the background
+    loop), as actionlib's ``wait_for_result`` does.
+
+    Differences from tf2_ros's: a goal whose wait ends here unanswered is cancelled on
+    the server (``{ns}/cancel``; tf2_ros's client leaves it there); a lookup sent
+    before the server is connected waits for it within the same bound (actionlib drops
+    a goal sent before the server's node subscribed). ``check_frequency`` is accepted
+    and unused (deprecated in tf2_ros too). The local-buffer methods inherited from
+    :class:`Buffer` (``set_transform``, ``all_frames_as_yaml``...) are not the server's:
+    tf2_ros's BufferClient has none.
+    """
 
     def __init__(self, ns: str = "tf2_buffer_server", check_frequency: object = None,
                  timeout_padding: object = None) -> None:
-        """Create the buffer and its ROS 1 listener (``ns`` kept as ``self.ns``)."""
-        super().__init__()
+        """Join the ROS 1 graph (the process's node, in the background loop) and
+        advertise the action's goal and cancel topics under ``ns``;
+        ``timeout_padding`` (a duration of any flavour or seconds; default 2 s) is added
+        to each call's ``timeout`` to bound its wait for the result.
+
+        Raises:
+            ValueError: ``ns`` is not a ROS graph name, or ``timeout_padding`` is
+                negative or not finite (named).
+            RuntimeError: the ROS 1 graph could not be joined (the reason chained).
+        """
+        super().__init__(debug=False)
         self.ns = ns
-        self._listener = TransformListener(self)
+        padding = 2.0 if timeout_padding is None else _timeout(timeout_padding)
+        if padding is None or not 0.0 <= padding < math.inf:
+            raise ValueError(f"timeout_padding must be finite seconds >= 0, got "
+                             f"{timeout_padding!r}")
+        self.timeout_padding = padding
+        bus = ros1_bus()
+        self.client: ActionClient = background.call(_action_client, bus.transport, ns)
+
+    def _not_in_loop(self) -> None:
+        if background.in_loop_thread() or in_event_loop():
+            raise LoopThreadError(
+                "BufferClient's calls block until the server answers: they cannot run in "
+                "an event loop's own thread (use tfbus.remote.ros1.Ros1BufferClient there)")
 
     def wait_for_server(self, timeout: object = None) -> bool:
-        """True: the listener is on the graph (it joined when the buffer was made)."""
-        return True
+        """tf2_ros ``wait_for_server``: block until the action server is connected
+        (actionlib's condition, :meth:`ActionClient.ready`), at most ``timeout`` (a
+        duration of any flavour or seconds; None or zero, actionlib's default
+        ``Duration()``: no limit).
+
+        Returns:
+            True once the server is there; False when ``timeout`` passed first.
+
+        Raises:
+            LoopThreadError: called from an event loop's thread.
+        """
+        self._not_in_loop()
+        seconds = _timeout(timeout)
+        limit = math.inf if seconds is None or seconds <= 0.0 else seconds
+        client = self.client
+
+        async def wait() -> bool:
+            with anyio.move_on_after(limit):
+                await client.wait_ready()
+                return True
+            return False
+
+        return bool(background.call(cast(Any, wait)))
+
+    def _goal(self, target: str, source: str, source_time: Time, timeout: object,
+              target_time: Time, fixed: str, advanced: bool) -> TransformStamped:
+        seconds = _timeout(timeout)
+        seconds = 0.0 if seconds is None else seconds
+        if not 0.0 <= seconds < math.inf:
+            raise ValueError(f"timeout must be finite seconds >= 0, got {timeout!r}")
+        self._not_in_loop()
+        lookup: Any = self.client.lookup
+        out: TransformStamped = background.call(lookup, target, source, source_time, seconds,
+                                                target_time, fixed, advanced,
+                                                self.timeout_padding)
+        return out
+
+    def lookup_transform(
+        self, target_frame: str, source_frame: str, time: object, timeout: object = None
+    ) -> Any:
+        """tf2_ros ``BufferClient.lookup_transform``: the server's transform from
+        ``source_frame`` to ``target_frame`` at ``time`` (0: the latest), the server
+        waiting up to ``timeout`` (None or zero: not at all) for it.
+
+        Returns:
+            the TransformStamped, a rospy message when ``time`` is a rospy Time.
+
+        Raises:
+            LookupException, ConnectivityException, ExtrapolationException,
+                InvalidArgumentException, TimeoutException, TransformException: the
+                server's ``TF2Error`` (its message kept).
+            TimeoutException: no result within ``timeout + timeout_padding`` (the goal is
+                then cancelled on the server), or a result whose status is not
+                SUCCEEDED.
+            LoopThreadError: called from an event loop's thread.
+        """
+        flavour = self._flavoured(time)
+        out = self._goal(target_frame, source_frame, to_time(time), timeout, Time(0), "",
+                         False)
+        return ros_message(out, flavour, "TransformStamped")
+
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: object,
+        source_frame: str,
+        source_time: object,
+        fixed_frame: str,
+        timeout: object = None,
+    ) -> Any:
+        """tf2_ros ``BufferClient.lookup_transform_full`` (the goal's advanced form,
+        through ``fixed_frame``). Returns and raises as :meth:`lookup_transform`."""
+        flavour = self._flavoured(target_time, source_time)
+        out = self._goal(target_frame, source_frame, to_time(source_time, "source_time"),
+                         timeout, to_time(target_time, "target_time"), fixed_frame, True)
+        return ros_message(out, flavour, "TransformStamped")
+
+    def can_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: object,
+        timeout: object = None,
+        return_debug_tuple: bool = False,
+    ) -> bool | tuple[bool, str]:
+        """tf2_ros ``BufferClient.can_transform``: whether :meth:`lookup_transform`
+        succeeds (any TransformException: False; with ``return_debug_tuple``,
+        ``(False, its message)``)."""
+        try:
+            self.lookup_transform(target_frame, source_frame, time, timeout)
+        except TransformException as exc:
+            return (False, str(exc)) if return_debug_tuple else False
+        return (True, "") if return_debug_tuple else True
+
+    def can_transform_full(
+        self,
+        target_frame: str,
+        target_time: object,
+        source_frame: str,
+        source_time: object,
+        fixed_frame: str,
+        timeout: object = None,
+        return_debug_tuple: bool = False,
+    ) -> bool | tuple[bool, str]:
+        """tf2_ros ``BufferClient.can_transform_full``: whether
+        :meth:`lookup_transform_full` succeeds, as :meth:`can_transform`."""
+        try:
+            self.lookup_transform_full(target_frame, target_time, source_frame, source_time,
+                                       fixed_frame, timeout)
+        except TransformException as exc:
+            return (False, str(exc)) if return_debug_tuple else False
+        return (True, "") if return_debug_tuple else True
 
 
 def _submodule(name: str, names: list[str], doc: str) -> None:

@@ -80,9 +80,11 @@ __all__ = [
     "decode_goal",
     "decode_goal_id",
     "decode_result",
+    "decode_result_status",
     "encode_goal",
     "encode_goal_id",
     "encode_result",
+    "result_transform",
 ]
 
 GOAL_TYPE: Final = "tf2_msgs/LookupTransformActionGoal"
@@ -202,7 +204,7 @@ def decode_result(raw: bytes) -> tuple[str, TransformStamped, int, str]:
     Raises:
         ValueError: the bytes are not such a message.
     """
-    return _decode_result_status(raw)[:4]
+    return decode_result_status(raw)[:4]
 
 
 class Goal(NamedTuple):
@@ -271,7 +273,13 @@ def encode_goal_id(stamp: Time, goal_id: str) -> bytes:
     return _time(stamp) + _string(goal_id)
 
 
-def _decode_result_status(raw: bytes) -> tuple[str, TransformStamped, int, str, int, str]:
+def decode_result_status(raw: bytes) -> tuple[str, TransformStamped, int, str, int, str]:
+    """``(goal id, transform, TF2Error code, error string, GoalStatus status, status
+    text)`` of a ``tf2_msgs/LookupTransformActionResult``.
+
+    Raises:
+        ValueError: the bytes are not such a message.
+    """
     try:
         r = _Reader(raw)
         r.header()
@@ -638,7 +646,7 @@ class Ros1BufferClient:
 
     def _on_result(self, raw: bytes) -> None:
         try:
-            goal_id, ts, code, message, status, text = _decode_result_status(raw)
+            goal_id, ts, code, message, status, text = decode_result_status(raw)
         except ValueError:
             self._node.malformed += 1
             return
@@ -682,17 +690,32 @@ class Ros1BufferClient:
             raise errors.TimeoutException(
                 "The LookupTransform goal sent to the BufferServer did not come back in the "
                 "specified time. Something is likely wrong with the server.")
-        ts, code, message, status, text = box[0]
-        if status != _SUCCEEDED:  # tf2_ros buffer_client.py __process_goal
-            raise errors.TimeoutException(
-                "The LookupTransform goal sent to the BufferServer did not come back with "
-                "SUCCEEDED status. Something is likely wrong with the server. Status was "
-                f"{_STATUS_NAMES.get(status, status)}: {text[:200]}")
-        if code == 3:  # tf2_msgs/TF2Error has one extrapolation code: the text tells which
-            raise errors.extrapolation_exception(message)
-        if code:
-            raise _ERRORS.get(code, TransformException)(message)
-        return ts
+        return result_transform(*box[0])
+
+
+def result_transform(ts: TransformStamped, code: int, message: str, status: int,
+                     text: str) -> TransformStamped:
+    """The transform of a decoded ``LookupTransformActionResult``
+    (:func:`decode_result_status`), or its error raised as tf2_ros's ``BufferClient``
+    does (``buffer_client.py`` ``__process_goal`` / ``__process_result``).
+
+    Raises:
+        TimeoutException: the goal's status is not SUCCEEDED (REJECTED, PREEMPTED,
+            RECALLED...; tf2_ros's message, the status and its text appended).
+        LookupException, ConnectivityException, ExtrapolationException,
+            InvalidArgumentException, TimeoutException, TransformException: the
+            ``TF2Error`` code 1..6, with the server's message.
+    """
+    if status != _SUCCEEDED:  # tf2_ros buffer_client.py __process_goal
+        raise errors.TimeoutException(
+            "The LookupTransform goal sent to the BufferServer did not come back with "
+            "SUCCEEDED status. Something is likely wrong with the server. Status was "
+            f"{_STATUS_NAMES.get(status, status)}: {text[:200]}")
+    if code == 3:  # tf2_msgs/TF2Error has one extrapolation code: the text tells which
+        raise errors.extrapolation_exception(message)
+    if code:
+        raise _ERRORS.get(code, TransformException)(message)
+    return ts
 
 
 class _Held:

@@ -47,6 +47,10 @@ Behaviour, as tf2_ros and roscpp do it:
   of file descriptors) backs off and the listener goes on; a connection must send its
   header within ``max(master_timeout, 1)`` s. Leaving the bus takes at most ~1 s
   (unregistering, best effort) whatever peers do;
+* other topics, of any ROS 1 type, carried as serialised bytes on the same node
+  (:meth:`Ros1Transport.subscribe_raw`, :meth:`Ros1Transport.advertise_raw`,
+  :meth:`Ros1Transport.send_raw_nowait`): the ``LookupTransform`` action's topics of
+  :class:`tfbus.compat.tf2_ros.BufferClient`;
 * ``/tf`` (or ``/tf_static``) is registered with the master when a broadcaster is made
   (:meth:`Ros1Transport.advertise`, as tf2_ros advertises at construction), so
   subscribers connect before the first message;

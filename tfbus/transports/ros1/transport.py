@@ -12,7 +12,7 @@ import secrets
 import socket
 import struct
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Final
 from urllib.parse import urlsplit
@@ -50,7 +50,7 @@ from .tcpros import (
     serve_subscriber,
 )
 
-__all__ = ["Ros1Statistics", "Ros1Transport"]
+__all__ = ["RawHandler", "Ros1Statistics", "Ros1Transport", "tf_message_from"]
 
 _log = logging.getLogger("tfbus.transports.ros1")
 _peer_log = CountLimitedLog(_log, 1, period=5.0, clock=time.monotonic)
@@ -156,6 +156,21 @@ def _set_nodelay(sock: socket.socket | None) -> None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
+RawHandler = Callable[[bytes, str], None]
+"""A raw topic's handler: ``handler(payload, callerid)`` (:meth:`Ros1Transport.subscribe_raw`)."""
+
+
+def tf_message_from(authority: str) -> type[TFMessage]:
+    """A ``TFMessage`` subclass whose class attribute ``authority`` is ``authority``: the
+    messages of one TCPROS connection are built with it, so that a
+    :class:`~tfbus.listener.TransformListener` records each publisher's caller id
+    (the connection header's ``callerid``) as the authority of its transforms, as
+    tf2_ros's ROS 1 listener does (``TransformListener::subscription_callback_impl``:
+    ``msg_evt.getPublisherName()``). One class per connection, made when its header
+    arrives: a message costs nothing more than a plain ``TFMessage``."""
+    return type("TFMessage", (TFMessage,), {"__slots__": (), "authority": authority})
+
+
 class _Inbound:
     """What one connection to a publisher receives, frame by frame: the publisher's
     connection header, then messages, each decoded and delivered to the bus at once
@@ -173,20 +188,25 @@ class _Inbound:
         self.header_or_end = anyio.Event()
         self._deliver = bus.deliver_nowait
         self._scan = topic in node._scan_topics
-        self._md5 = SCAN_MD5SUM if self._scan else TF_MD5SUM
+        self._raw = node._raw_handlers.get(topic)
+        self._md5 = node._md5_of(topic)
+        self.callerid = ""
         self._decode = node._codec.decode
         self._stats = node._stats
+        self._message: type[TFMessage] = TFMessage  # per publisher: tf_message_from
         self.splitter = FrameSplitter(self._frame, MAX_HEADER_BYTES, node._max_bytes)
 
     def _frame(self, raw: bytes | memoryview) -> None:
         # ``raw`` may be a view of the pump's read buffer: decoded here, never kept.
         if self.conn_id:
             self._stats.received += 1
-            if self._scan:  # WireDecodeError: counted in malformed
+            if self._raw is not None:  # a raw topic: its handler decodes (and counts)
+                self._raw(bytes(raw), self.callerid)
+            elif self._scan:  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, decode_laser_scan(raw))
             else:
                 transforms = self._decode(raw)  # WireDecodeError: counted in malformed
-                self._deliver(self.topic, TFMessage(tuple(transforms)))
+                self._deliver(self.topic, self._message(tuple(transforms)))
             self._stats.delivered += 1
             return
         header = decode_header(bytes(raw))
@@ -196,7 +216,10 @@ class _Inbound:
             raise ValueError(
                 f"publisher {self.uri} sends md5sum {header.get('md5sum')!r} on {self.topic}"
             )
-        self.conn_id = self.node._open_conn(header.get("callerid", self.uri), "i", self.topic)
+        callerid = header.get("callerid") or self.uri
+        self.callerid = callerid
+        self._message = tf_message_from(callerid)
+        self.conn_id = self.node._open_conn(callerid, "i", self.topic)
         self.node._delivering.add((self.topic, self.uri))
         self.header_or_end.set()
 
@@ -269,6 +292,11 @@ class Ros1Transport:
                     or "//" in topic or topic.endswith("/"):
                 raise ValueError(f"scan topic {topic!r} is not a global ROS graph name")
         self._subscribed = self._topics + self._scan_topics
+        # topics of other ROS 1 types, carried as serialised bytes (subscribe_raw /
+        # advertise_raw): topic -> (type, md5sum); the subscribed ones' handlers
+        self._raw_types: dict[str, tuple[str, str]] = {}
+        self._raw_handlers: dict[str, RawHandler] = {}
+        self._registered_sub: set[str] = set()
         self._scan_definition = scan_definition() if self._scan_topics else ""
         self._queue_size = queue_size
         self._max_bytes = max_message_bytes
@@ -447,6 +475,83 @@ class Ros1Transport:
         for out in self._outgoing.get(topic, ()):
             self._stats.send_dropped += out.frames.put(framed)
 
+    # -- topics of other types, as serialised bytes ---------------------------------------
+
+    def _check_raw(self, topic: str, msg_type: str, md5: str) -> None:
+        if not topic.startswith("/") or not all(c.isalnum() or c in "/_" for c in topic) \
+                or "//" in topic or topic.endswith("/"):
+            raise ValueError(f"topic {topic!r} is not a global ROS graph name")
+        if topic in self._topics or topic in self._scan_topics:
+            raise ValueError(f"topic {topic!r} is already carried as a tf or scan topic")
+        if self._raw_types.get(topic, (msg_type, md5)) != (msg_type, md5):
+            raise ValueError(f"topic {topic!r} is carried as {self._raw_types[topic][0]} "
+                             f"already, not {msg_type}")
+        if not msg_type or "/" not in msg_type or len(md5) != 32:
+            raise ValueError(f"msg_type {msg_type!r} / md5sum {md5!r} is not a ROS 1 "
+                             "message type (package/Name) with its 32-digit md5sum")
+
+    def subscribe_raw(self, topic: str, msg_type: str, md5: str, handler: RawHandler) -> None:
+        """Subscribe to ``topic`` of ROS 1 type ``msg_type`` (md5sum ``md5``) on this
+        node: each message's serialised bytes go to ``handler(payload, callerid)`` in
+        the event loop, as they arrive (e.g. an actionlib client's ``result`` and
+        ``status``: :class:`tfbus.compat.tf2_ros.BufferClient`). Registered with the
+        master now if the node runs, else when it registers. One handler per topic;
+        the handler decodes, and counts and drops what does not decode (an exception
+        from it closes that connection, counted in ``malformed``).
+
+        Raises:
+            ValueError: ``topic`` is not a global graph name, is ``/tf``, ``/tf_static``
+                or a scan topic, is subscribed already, or the type is not
+                ``package/Name`` with a 32-digit md5sum.
+        """
+        self._check_raw(topic, msg_type, md5)
+        if topic in self._raw_handlers:
+            raise ValueError(f"topic {topic!r} is subscribed already")
+        self._raw_types[topic] = (msg_type, md5)
+        self._raw_handlers[topic] = handler
+        self._subscribed = (*self._subscribed, topic)
+        self._need_register.set()
+
+    def advertise_raw(self, topic: str, msg_type: str, md5: str) -> None:
+        """Register as a publisher of ``topic`` of ROS 1 type ``msg_type`` (md5sum
+        ``md5``), sent with :meth:`send_raw_nowait` (e.g. an actionlib client's ``goal``
+        and ``cancel``).
+
+        Raises:
+            ValueError: as :meth:`subscribe_raw`.
+        """
+        self._check_raw(topic, msg_type, md5)
+        self._raw_types[topic] = (msg_type, md5)
+        if topic not in self._published:
+            self._published.add(topic)
+            self._need_register.set()
+
+    def send_raw_nowait(self, topic: str, payload: bytes) -> None:
+        """Queue ``payload`` (one serialised message of the type :meth:`advertise_raw`
+        gave) for every subscriber of ``topic`` connected now; never blocks (a full
+        queue drops its oldest frame, counted in ``send_dropped``).
+
+        Raises:
+            ValueError: ``topic`` was not advertised with :meth:`advertise_raw`.
+        """
+        if topic not in self._raw_types or topic not in self._published:
+            raise ValueError(f"topic {topic!r} is not advertised with advertise_raw")
+        framed = frame(payload)
+        for out in self._outgoing.get(topic, ()):
+            self._stats.send_dropped += out.frames.put(framed)
+
+    def connections(self, topic: str) -> tuple[int, int]:
+        """``(publishers, subscribers)`` of ``topic`` connected to this node now: the
+        publishers whose connection header was accepted and the subscribers connected
+        to ours (actionlib's ``wait_for_server`` asks as much)."""
+        publishers = sum(1 for t, _ in self._delivering if t == topic)
+        return publishers, len(self._outgoing.get(topic, ()))
+
+    def _md5_of(self, topic: str) -> str:
+        if topic in self._raw_types:
+            return self._raw_types[topic][1]
+        return SCAN_MD5SUM if topic in self._scan_topics else TF_MD5SUM
+
     # -- master ------------------------------------------------------------------------
 
     async def _master_loop(self, bus: BusLike) -> None:
@@ -461,10 +566,13 @@ class Ros1Transport:
                 if not self._registered or not await self._still_known():
                     self._registered = False
                     self._registered_pub.clear()
+                    self._registered_sub.clear()
                     await self._register_subscribers(bus)
                     self._registered = True
                     self._stats.registrations += 1
                     warned = False
+                for topic in [t for t in self._subscribed if t not in self._registered_sub]:
+                    await self._register_subscriber(bus, topic)
                 for topic in sorted(self._published - self._registered_pub):
                     await self._register_publisher(topic)
             except TransportError as exc:
@@ -494,20 +602,24 @@ class Ros1Transport:
         ``TopicManager::registerSubscriber`` applies the answer under the subscription's
         lock, in order with ``pubUpdate``)."""
         for topic in self._subscribed:
-            seq = self._update_seq.get(topic, 0)
-            value = await call(
-                self._master_uri,
-                "registerSubscriber",
-                self._name,
-                topic,
-                SCAN_TYPE if topic in self._scan_topics else TF_TYPE,
-                self._api_uri,
-                timeout=self._timeout,
-            )
-            if not isinstance(value, list):
-                raise BadReply(f"registerSubscriber at {self._master_uri}: not a list of URIs")
-            if self._update_seq.get(topic, 0) == seq:
-                self._update_publishers(bus, topic, [u for u in value if isinstance(u, str)])
+            await self._register_subscriber(bus, topic)
+
+    async def _register_subscriber(self, bus: BusLike, topic: str) -> None:
+        seq = self._update_seq.get(topic, 0)
+        value = await call(
+            self._master_uri,
+            "registerSubscriber",
+            self._name,
+            topic,
+            self.topic_type(topic),
+            self._api_uri,
+            timeout=self._timeout,
+        )
+        if not isinstance(value, list):
+            raise BadReply(f"registerSubscriber at {self._master_uri}: not a list of URIs")
+        self._registered_sub.add(topic)
+        if self._update_seq.get(topic, 0) == seq:
+            self._update_publishers(bus, topic, [u for u in value if isinstance(u, str)])
 
     async def _register_publisher(self, topic: str) -> None:
         await call(
@@ -515,7 +627,7 @@ class Ros1Transport:
             "registerPublisher",
             self._name,
             topic,
-            TF_TYPE,
+            self._raw_types[topic][0] if topic in self._raw_types else TF_TYPE,
             self._api_uri,
             timeout=self._timeout,
         )
@@ -546,7 +658,10 @@ class Ros1Transport:
 
     def topic_type(self, topic: str) -> str:
         """The ROS 1 message type of ``topic`` (``sensor_msgs/LaserScan`` for a scan
-        topic, else ``tf2_msgs/TFMessage``), as ``getSubscriptions`` reports it."""
+        topic, a raw topic's own type, else ``tf2_msgs/TFMessage``), as
+        ``getSubscriptions`` reports it."""
+        if topic in self._raw_types:
+            return self._raw_types[topic][0]
         return SCAN_TYPE if topic in self._scan_topics else TF_TYPE
 
     def publications(self) -> Sequence[str]:
@@ -710,13 +825,15 @@ class Ros1Transport:
         host, port = await self._request_topic(topic, uri)
         link = _Inbound(self, bus, topic, uri)
         scan = topic in self._scan_topics
+        raw = topic in self._raw_types
         hello = encode_header(
             {
                 "callerid": self._name,
                 "topic": topic,
-                "md5sum": SCAN_MD5SUM if scan else TF_MD5SUM,
-                "type": SCAN_TYPE if scan else TF_TYPE,
-                "message_definition": self._scan_definition if scan else self._codec.definition,
+                "md5sum": self._md5_of(topic),
+                "type": self.topic_type(topic),
+                "message_definition": "" if raw else self._scan_definition if scan
+                else self._codec.definition,
                 "tcp_nodelay": "1",
             }
         )
@@ -806,11 +923,12 @@ class Ros1Transport:
                 return
             topic = header.get("topic", "")
             md5 = header.get("md5sum", "")
-            if topic not in self._published or md5 not in (TF_MD5SUM, "*"):
+            ours = self._md5_of(topic)
+            if topic not in self._published or md5 not in (ours, "*"):
                 why = (
                     f"{self._name} does not publish {topic!r}"
                     if topic not in self._published
-                    else f"md5sum mismatch: {md5!r} != {TF_MD5SUM}"
+                    else f"md5sum mismatch: {md5!r} != {ours}"
                 )
                 with contextlib.suppress(OSError, anyio.BrokenResourceError):
                     await stream.send(encode_header({"error": why}))
@@ -821,11 +939,12 @@ class Ros1Transport:
                         socket.IPPROTO_TCP, socket.TCP_NODELAY, 1
                     )
             latching = topic in _LATCHED
+            raw = topic in self._raw_types
             reply = {
                 "callerid": self._name,
-                "md5sum": TF_MD5SUM,
-                "type": TF_TYPE,
-                "message_definition": self._codec.definition,
+                "md5sum": ours,
+                "type": self.topic_type(topic),
+                "message_definition": "" if raw else self._codec.definition,
                 "latching": "1" if latching else "0",
                 "topic": topic,
             }
