@@ -11,9 +11,10 @@ arrival that answers it, never polled.
 
 The thread starts with the first object that needs it and stops (its bus leaves the
 ROS 1 graph, bounded) at interpreter exit (:func:`atexit.register`), at
-``rospy.on_shutdown`` when rospy is initialised, or on :func:`shutdown`. It is a daemon
-thread: a program that ends (or is interrupted by SIGINT) never waits for it more than
-:data:`STOP_TIMEOUT` seconds.
+``rospy.on_shutdown`` when rospy is initialised (asked there, so that it leaves the graph
+while rospy's own node does; the exit waits for it), or on :func:`shutdown`. It is a
+daemon thread: a program that ends (or is interrupted by SIGINT) never waits for it more
+than :data:`STOP_TIMEOUT` seconds.
 """
 
 from __future__ import annotations
@@ -157,9 +158,10 @@ class BackgroundLoop:
                 self._shared[key] = self.enter(make())
             return self._shared[key]  # type: ignore[no-any-return]
 
-    def stop(self, timeout: float = STOP_TIMEOUT) -> None:
-        """Exit everything entered (buses leave their graph), end the loop and wait for
-        its thread up to ``timeout`` s (it is a daemon: the process never waits more)."""
+    def request_stop(self) -> None:
+        """Ask the loop to exit everything entered and end, without waiting for it
+        (rospy's shutdown hook: rospy's own shutdown runs meanwhile, and the
+        interpreter's exit, :func:`shutdown`, waits for the rest)."""
         thread, portal, stop = self._thread, self._portal, self._stop
         if thread is None or portal is None or stop is None or not thread.is_alive():
             return
@@ -168,6 +170,16 @@ class BackgroundLoop:
             return
         with contextlib.suppress(RuntimeError):  # the loop ended meanwhile
             portal.start_task_soon(_set, stop)
+
+    def stop(self, timeout: float = STOP_TIMEOUT) -> None:
+        """Exit everything entered (buses leave their graph), end the loop and wait for
+        its thread up to ``timeout`` s (it is a daemon: the process never waits more)."""
+        thread = self._thread
+        if thread is None or not thread.is_alive():
+            return
+        self.request_stop()
+        if threading.current_thread() is thread:
+            return
         thread.join(timeout)
         with self._lock:
             self._thread = None
@@ -201,7 +213,7 @@ def _register_rospy_shutdown() -> None:
         return
     with contextlib.suppress(Exception):
         if rospy.core.is_initialized():
-            rospy.on_shutdown(shutdown)
+            rospy.on_shutdown(background.request_stop)
             _rospy_hooked = True
 
 
