@@ -26,10 +26,12 @@ and p90 per rate and path (microseconds) and the ratio of ``bus`` to ``raw+loop`
 ``--breakdown`` also times the stages of the ``bus`` path, per probe (medians per rate,
 microseconds): on the sender, the stamp to ``send_nowait`` and the encode + ``put``; on
 the receiver, the stamp to Zenoh's callback, the callback to the transport's reader
-waking, the decode, the decode to the bus delivery, the delivery to the buffer insert,
-and the insert to the awaiting lookup's resumption. The stages are timed by wrapping
-the transport's and buffer's methods on their instances (a few hundred nanoseconds
-each), so the ``bus`` figures of a ``--breakdown`` run are slightly higher.
+waking, the decode (with the transport's counters and sequence numbers), the decode to
+the bus delivery, the delivery to the buffer insert (the listener's callback, which also
+re-checks and wakes the pending lookup), and the insert to the lookup's resumption. The
+stages are timed by wrapping the transport's and buffer's methods on their instances (a
+few hundred nanoseconds each), so the ``bus`` figures of a ``--breakdown`` run are
+slightly higher.
 """
 
 from __future__ import annotations
@@ -125,7 +127,10 @@ async def bus_sender(args: argparse.Namespace) -> None:
                 send_nowait(topic, message)
                 v = message.transforms[0].transform.translation  # type: ignore[attr-defined]
                 done = time.monotonic_ns()
-                stages.setdefault(int(v.y), []).append([(entry - v.x) / 1e3, (done - entry) / 1e3])
+                rate = int(v.y)
+                if stages and rate not in stages:  # the previous rate is over: its line
+                    _print_sender_stages(stages)
+                stages.setdefault(rate, []).append([(entry - v.x) / 1e3, (done - entry) / 1e3])
 
             transport.send_nowait = timed_send  # type: ignore[method-assign]
         start = time.monotonic()
@@ -140,11 +145,16 @@ async def bus_sender(args: argparse.Namespace) -> None:
                     Transform(Vector3(float(time.monotonic_ns()), float(rate), 0.0), Quaternion()),
                 )
             )
-        for rate, rows in stages.items():  # before the receiver, done, ends this process
-            meds = [statistics.median(col) for col in zip(*rows, strict=True)]
-            print(f"breakdown sender {rate:5d} Hz: stamp->send_nowait {meds[0]:6.1f} us, "
-                  f"encode+put {meds[1]:6.1f} us (median of {len(rows)})", flush=True)
+        _print_sender_stages(stages)  # before the receiver, done, ends this process
         await anyio.sleep(0.5)
+
+
+def _print_sender_stages(stages: dict[int, list[list[float]]]) -> None:
+    """Print the sender's stage medians of the last rate in ``stages``."""
+    rate, rows = list(stages.items())[-1]
+    meds = [statistics.median(col) for col in zip(*rows, strict=True)]
+    print(f"breakdown sender   {rate:5d} Hz (median of {len(rows)}): stamp->send_nowait "
+          f"{meds[0]:.1f}, encode+put {meds[1]:.1f} us", flush=True)
 
 
 # -- receiver (this process) ------------------------------------------------------------
