@@ -338,6 +338,11 @@ async def bus_receiver(args: argparse.Namespace, endpoint: str) -> dict[int, lis
     return lat
 
 
+def _loadavg() -> str:
+    """The system's load averages: the figures are only comparable at similar loads."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
 def _free_endpoint() -> str:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -368,6 +373,7 @@ def main() -> None:
     modes = args.modes.split(",")
     print(f"bench_latency: one-way latency, 2 processes on 127.0.0.1, backend={args.backend}, "
           f"{args.seconds:g} s per rate (20..2000 probes), microseconds")
+    print("load average (1, 5, 15 min) at the start: " + _loadavg())
     results: dict[tuple[str, str], dict[int, list[float]]] = {}
     for mode in modes:
         args.express = mode == "express"
@@ -378,6 +384,7 @@ def main() -> None:
             else:
                 got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
             results[(mode, path)] = got
+    print("load average (1, 5, 15 min) at the end: " + _loadavg())
     header = f"{'publisher':9} {'rate':>6} " + " ".join(
         f"{p + ' med':>13} {'p90':>7}" for p in paths
     )
