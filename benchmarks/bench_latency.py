@@ -19,9 +19,11 @@ Paths measured, each with Zenoh's default batching and with ``express`` publishe
   a lookup awaiting that stamp (``Buffer.wait_for_transform``) on the receiver's bus.
 
 Usage: ``python benchmarks/bench_latency.py [--seconds 2] [--rates 10,50,100,1000]
-[--paths raw,raw+loop,bus] [--backend asyncio] [--breakdown]``. Prints a table of medians
-and p90 per rate and path (microseconds) and the ratio of ``bus`` to ``raw+loop`` and to
-``raw``.
+[--paths raw,raw+loop,bus] [--backend asyncio] [--rounds 1] [--breakdown]``. Prints a table
+of medians and p90 per rate and path (microseconds) and the ratio of ``bus`` to
+``raw+loop`` and to ``raw``, and the load average at the start and the end. On a shared,
+loaded machine the paths, measured one after the other, see different spells of load:
+``--rounds N`` runs the whole sequence N times and pools each path's probes.
 
 ``--breakdown`` also times the stages of the ``bus`` path, per probe (medians per rate,
 microseconds): on the sender, the stamp to ``send_nowait``, the encode and the ``put``; on
@@ -359,6 +361,8 @@ def main() -> None:
     parser.add_argument("--paths", default="raw,raw+loop,bus")
     parser.add_argument("--express", action="store_true", help="sender: express publisher")
     parser.add_argument("--modes", default="batched,express", help="receiver: which to run")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="run every path this many times, alternately; pool the probes")
     parser.add_argument("--backend", default="asyncio")
     parser.add_argument("--breakdown", action="store_true", help="time the bus path's stages")
     args = parser.parse_args()
@@ -372,18 +376,21 @@ def main() -> None:
     paths = args.paths.split(",")
     modes = args.modes.split(",")
     print(f"bench_latency: one-way latency, 2 processes on 127.0.0.1, backend={args.backend}, "
-          f"{args.seconds:g} s per rate (20..2000 probes), microseconds")
+          f"{args.seconds:g} s per rate (20..2000 probes) x {args.rounds} round(s), microseconds")
     print("load average (1, 5, 15 min) at the start: " + _loadavg())
     results: dict[tuple[str, str], dict[int, list[float]]] = {}
-    for mode in modes:
-        args.express = mode == "express"
-        for path in paths:
-            endpoint = _free_endpoint()
-            if path == "bus":
-                got = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
-            else:
-                got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
-            results[(mode, path)] = got
+    for _ in range(args.rounds):  # paths alternate: each sees the same spells of load
+        for mode in modes:
+            args.express = mode == "express"
+            for path in paths:
+                endpoint = _free_endpoint()
+                if path == "bus":
+                    got = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
+                else:
+                    got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
+                pooled = results.setdefault((mode, path), {})
+                for rate, lat in got.items():
+                    pooled.setdefault(rate, []).extend(lat)
     print("load average (1, 5, 15 min) at the end: " + _loadavg())
     header = f"{'publisher':9} {'rate':>6} " + " ".join(
         f"{p + ' med':>13} {'p90':>7}" for p in paths
