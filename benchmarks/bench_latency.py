@@ -19,14 +19,28 @@ Paths measured, each with Zenoh's default batching and with ``express`` publishe
   a lookup awaiting that stamp (``Buffer.wait_for_transform``) on the receiver's bus.
 
 Usage: ``python benchmarks/bench_latency.py [--seconds 2] [--rates 10,50,100,1000]
-[--paths raw,raw+loop,bus] [--backend asyncio]``. Prints a table of medians and p90 per
-rate and path (microseconds) and the ratio of ``bus`` to ``raw+loop`` and to ``raw``.
+[--paths raw,raw+loop,bus] [--backend asyncio] [--rounds 1] [--breakdown]``. Prints a table
+of medians and p90 per rate and path (microseconds) and the ratio of ``bus`` to
+``raw+loop`` and to ``raw``, and the load average at the start and the end. On a shared,
+loaded machine the paths, measured one after the other, see different spells of load:
+``--rounds N`` runs the whole sequence N times and pools each path's probes.
+
+``--breakdown`` also times the stages of the ``bus`` path, per probe (medians per rate,
+microseconds): on the sender, the stamp to ``send_nowait``, the encode and the ``put``; on
+the receiver, the stamp to Zenoh's callback, the callback to the transport's reader
+waking, the decode (with the transport's counters and sequence numbers), the decode to
+the bus delivery, the delivery to the buffer insert (the listener's callback, which also
+re-checks and wakes the pending lookup), and the insert to the lookup's resumption. The
+stages are timed by wrapping the transport's and buffer's methods on their instances (a
+few hundred nanoseconds each), so the ``bus`` figures of a ``--breakdown`` run are
+slightly higher.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import itertools
 import os
 import socket
 import statistics
@@ -35,7 +49,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from pathlib import Path
+from typing import Any
 
 import anyio
 
@@ -47,7 +63,7 @@ from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.listener import TransformListener
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
 from tfbus.transports.zenoh import ZenohTransport
 from tfbus.transports.zenoh.config import zenoh_config
@@ -104,6 +120,30 @@ async def bus_sender(args: argparse.Namespace) -> None:
                 await anyio.sleep(0.01)
         await anyio.sleep(START_DELAY)
         tf = TransformBroadcaster(bus)
+        stages: dict[int, list[list[float]]] = {}
+        if args.breakdown:
+            send_nowait, encode = transport.send_nowait, transport._codec.encode
+            encoded = [0]
+
+            def timed_encode(message: object, *, sender: int, seq: int) -> bytes:
+                payload = encode(message, sender=sender, seq=seq)
+                encoded[0] = time.monotonic_ns()
+                return payload
+
+            def timed_send(topic: str, message: object) -> None:
+                entry = time.monotonic_ns()
+                send_nowait(topic, message)
+                v = message.transforms[0].transform.translation  # type: ignore[attr-defined]
+                done = time.monotonic_ns()
+                rate = int(v.y)
+                if stages and rate not in stages:  # the previous rate is over: its line
+                    _print_sender_stages(stages)
+                stages.setdefault(rate, []).append(
+                    [(entry - v.x) / 1e3, (encoded[0] - entry) / 1e3, (done - encoded[0]) / 1e3]
+                )
+
+            transport._codec.encode = timed_encode  # type: ignore[method-assign]
+            transport.send_nowait = timed_send  # type: ignore[method-assign]
         start = time.monotonic()
         for i, (rate, offset) in enumerate(_pace(args.rate_list, args.seconds), 1):
             delay = start + offset - time.monotonic()
@@ -116,7 +156,16 @@ async def bus_sender(args: argparse.Namespace) -> None:
                     Transform(Vector3(float(time.monotonic_ns()), float(rate), 0.0), Quaternion()),
                 )
             )
+        _print_sender_stages(stages)  # before the receiver, done, ends this process
         await anyio.sleep(0.5)
+
+
+def _print_sender_stages(stages: dict[int, list[list[float]]]) -> None:
+    """Print the sender's stage medians of the last rate in ``stages``."""
+    rate, rows = list(stages.items())[-1]
+    meds = [statistics.median(col) for col in zip(*rows, strict=True)]
+    print(f"breakdown sender   {rate:5d} Hz (median of {len(rows)}): stamp->send_nowait "
+          f"{meds[0]:.1f}, encode {meds[1]:.1f}, put {meds[2]:.1f} us", flush=True)
 
 
 # -- receiver (this process) ------------------------------------------------------------
@@ -127,6 +176,8 @@ def _child(args: argparse.Namespace, path: str, endpoint: str) -> subprocess.Pop
            "--seconds", str(args.seconds), "--rates", args.rates, "--backend", args.backend]
     if args.express:
         cmd.append("--express")
+    if args.breakdown and path == "bus":
+        cmd.append("--breakdown")
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
     return subprocess.Popen(cmd, env=env)
 
@@ -199,10 +250,63 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
     return lat
 
 
+BREAKDOWN_STAGES = ("stamp->callback", "callback->reader", "decode", "decode->deliver",
+                    "deliver->insert", "insert->resume")
+
+
+def _instrument(transport: ZenohTransport, buffer: Buffer) -> dict[int, list[int]]:
+    """Wrap the receiver's methods to time each probe's stages: {probe: [callback entry,
+    reader woke, decoded, delivery entry, inserted]} (monotonic ns)."""
+    stamps: dict[int, list[int]] = {}
+    callbacks: deque[int] = deque()
+    woke = [0]
+    on_sample, drain, receive = transport._on_sample, transport._drain, transport._receive
+    deliver, set_transforms = transport._deliver, buffer.set_transforms
+
+    def timed_on_sample(sample: zenoh.Sample) -> None:
+        callbacks.append(time.monotonic_ns())
+        on_sample(sample)
+
+    def timed_drain(bus: object) -> bool:
+        woke[0] = time.monotonic_ns()
+        return drain(bus)  # type: ignore[arg-type]
+
+    def timed_receive(kind: int, topic: str | None, payload: bytes, bus: object = None) -> object:
+        entry = callbacks.popleft() if kind == 0 and callbacks else 0
+        message = receive(kind, topic, payload, bus)  # type: ignore[arg-type]
+        if isinstance(message, TFMessage) and message.transforms:
+            stamps[message.transforms[0].header.stamp.ns] = [entry, woke[0], time.monotonic_ns()]
+        return message
+
+    def timed_deliver(bus: object, topic: str | None, run: list[object]) -> None:
+        now = time.monotonic_ns()
+        for message in run:
+            if isinstance(message, TFMessage) and message.transforms:
+                stamps.get(message.transforms[0].header.stamp.ns, []).append(now)
+        deliver(bus, topic, run)  # type: ignore[arg-type]
+
+    def timed_set_transforms(transforms: Any, authority: str = "default",
+                             is_static: bool = False) -> Any:
+        items = list(transforms)
+        result = set_transforms(items, authority, is_static)
+        if items:
+            stamps.get(items[0].header.stamp.ns, []).append(time.monotonic_ns())
+        return result
+
+    transport._on_sample = timed_on_sample  # type: ignore[method-assign]
+    transport._drain = timed_drain  # type: ignore[method-assign]
+    transport._receive = timed_receive  # type: ignore[method-assign]
+    transport._deliver = timed_deliver  # type: ignore[method-assign]
+    buffer.set_transforms = timed_set_transforms  # type: ignore[method-assign]
+    return stamps
+
+
 async def bus_receiver(args: argparse.Namespace, endpoint: str) -> dict[int, list[float]]:
     lat: dict[int, list[float]] = {}
     transport = ZenohTransport(listen=endpoint, name="latency-receiver", express=args.express)
     buffer = Buffer(cache_time=3600.0)
+    stamps = _instrument(transport, buffer) if args.breakdown else {}
+    stages: dict[int, list[list[float]]] = {}
     async with Bus(transport=transport) as bus, TransformListener(buffer, bus):
         child = _child(args, "bus", endpoint)
         try:
@@ -219,10 +323,26 @@ async def bus_receiver(args: argparse.Namespace, endpoint: str) -> dict[int, lis
                 if ts.header.stamp.ns == i:
                     v = ts.transform.translation
                     lat.setdefault(int(v.y), []).append((now - v.x) / 1e3)
+                    times = stamps.pop(i, [])
+                    if len(times) == 5 and times[0]:
+                        marks = [v.x, *times, now]
+                        stages.setdefault(int(v.y), []).append(
+                            [(b - a) / 1e3 for a, b in itertools.pairwise(marks)]
+                        )
         finally:
             child.kill()
             child.wait(timeout=10)
+    for rate, rows in sorted(stages.items()):
+        meds = [statistics.median(col) for col in zip(*rows, strict=True)]
+        print(f"breakdown receiver {rate:5d} Hz (median of {len(rows)}): " + ", ".join(
+            f"{name} {med:.1f}" for name, med in zip(BREAKDOWN_STAGES, meds, strict=True)
+        ) + " us")
     return lat
+
+
+def _loadavg() -> str:
+    """The system's load averages: the figures are only comparable at similar loads."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
 def _free_endpoint() -> str:
@@ -241,7 +361,10 @@ def main() -> None:
     parser.add_argument("--paths", default="raw,raw+loop,bus")
     parser.add_argument("--express", action="store_true", help="sender: express publisher")
     parser.add_argument("--modes", default="batched,express", help="receiver: which to run")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="run every path this many times, alternately; pool the probes")
     parser.add_argument("--backend", default="asyncio")
+    parser.add_argument("--breakdown", action="store_true", help="time the bus path's stages")
     args = parser.parse_args()
     args.rate_list = [float(r) for r in args.rates.split(",")]
     if args.role == "sender":
@@ -253,17 +376,22 @@ def main() -> None:
     paths = args.paths.split(",")
     modes = args.modes.split(",")
     print(f"bench_latency: one-way latency, 2 processes on 127.0.0.1, backend={args.backend}, "
-          f"{args.seconds:g} s per rate (20..2000 probes), microseconds")
+          f"{args.seconds:g} s per rate (20..2000 probes) x {args.rounds} round(s), microseconds")
+    print("load average (1, 5, 15 min) at the start: " + _loadavg())
     results: dict[tuple[str, str], dict[int, list[float]]] = {}
-    for mode in modes:
-        args.express = mode == "express"
-        for path in paths:
-            endpoint = _free_endpoint()
-            if path == "bus":
-                got = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
-            else:
-                got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
-            results[(mode, path)] = got
+    for _ in range(args.rounds):  # paths alternate: each sees the same spells of load
+        for mode in modes:
+            args.express = mode == "express"
+            for path in paths:
+                endpoint = _free_endpoint()
+                if path == "bus":
+                    got = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
+                else:
+                    got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
+                pooled = results.setdefault((mode, path), {})
+                for rate, lat in got.items():
+                    pooled.setdefault(rate, []).extend(lat)
+    print("load average (1, 5, 15 min) at the end: " + _loadavg())
     header = f"{'publisher':9} {'rate':>6} " + " ".join(
         f"{p + ' med':>13} {'p90':>7}" for p in paths
     )

@@ -51,7 +51,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "bus": ([], ["--quick"], 1800),
     "bag": ([], ["--transforms", "50000", "--repeat", "2"], 1800),
     "zenoh": ([], ["--probes", "500", "--seconds", "2"], 900),
-    "latency": ([], ["--seconds", "1"], 900),
+    "latency": (["--rounds", "3"], ["--seconds", "0.5", "--rounds", "2"], 900),
     "ros2": ([], ["--lat-count", "100", "--flood-seconds", "2"], 1800),
     "ros1": (["--repeat", "3"], ["--quick", "--repeat", "3"], 1800),
     "sensors": ([], ["--quick"], 1800),

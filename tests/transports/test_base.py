@@ -43,6 +43,99 @@ async def test_a_thread_wakes_the_loop_once_per_burst() -> None:
     wakeup.wake()  # after close: ignored, no error
 
 
+@pytest.mark.anyio
+async def test_serve_drains_each_wake_up_then_in_batches_until_cancelled() -> None:
+    """``ThreadWakeup.serve``: ``drain(True)`` once per wake-up from another thread, then
+    ``drain(False)`` while it reports more; nothing after the watch is cancelled."""
+    wakeup = ThreadWakeup()
+    calls: list[bool] = []
+    backlog = [0]  # batches still to drain after the current one
+    drained = anyio.Event()
+
+    def drain(woken: bool) -> bool:
+        calls.append(woken)
+        more = backlog[0] > 0
+        if more:
+            backlog[0] -= 1
+        else:
+            drained.set()
+        return more
+
+    try:
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(wakeup.serve, drain)
+            for backlog[0] in (0, 2):
+                drained = anyio.Event()
+                waker = threading.Thread(target=wakeup.wake)
+                waker.start()
+                with anyio.fail_after(10):  # a bound, not a timing
+                    await drained.wait()
+                waker.join(10)
+            tg.cancel_scope.cancel()
+        assert calls == [True, True, False, False]
+        wakeup.wake()  # the watch is over: nothing drains it
+        await anyio.lowlevel.checkpoint()
+        assert calls == [True, True, False, False]
+    finally:
+        wakeup.close()
+
+
+@pytest.mark.anyio
+async def test_serve_raises_what_drain_raises() -> None:
+    wakeup = ThreadWakeup()
+
+    def drain(woken: bool) -> bool:
+        raise LookupError("from drain")
+
+    try:
+        wakeup.wake()
+        with anyio.fail_after(10), pytest.raises(LookupError, match="from drain"):
+            await wakeup.serve(drain)
+    finally:
+        wakeup.close()
+
+
+def test_serve_drains_in_the_asyncio_iteration_that_sees_the_wake_up() -> None:
+    """On asyncio, ``drain`` runs in the loop's read callback of the socket: in the loop
+    iteration whose poll reports it readable (the one after ``wake``), not one later in a
+    task resumed by that callback, and outside any task."""
+    import asyncio
+
+    async def main() -> list[tuple[int, int, object]]:
+        loop = asyncio.get_running_loop()
+        wakeup = ThreadWakeup()
+        tick = [0]  # event-loop iterations, counted by a callback that re-schedules itself
+        woke_at = [0]
+        seen: list[tuple[int, int, object]] = []
+        drained = asyncio.Event()
+
+        def ticker() -> None:
+            tick[0] += 1
+            if tick[0] == 5:  # the watch is registered by then
+                woke_at[0] = tick[0]
+                wakeup.wake()
+            handle[0] = loop.call_soon(ticker)
+
+        def drain(woken: bool) -> bool:
+            seen.append((woke_at[0], tick[0], asyncio.current_task()))
+            drained.set()
+            return False
+
+        server = asyncio.ensure_future(wakeup.serve(drain))
+        handle = [loop.call_soon(ticker)]
+        try:
+            await asyncio.wait_for(drained.wait(), 10)
+        finally:
+            handle[0].cancel()
+            server.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await server
+            wakeup.close()
+        return seen
+
+    assert asyncio.run(main()) == [(5, 6, None)]
+
+
 def _stats_classes() -> dict[str, type]:
     out: dict[str, type] = {}
     for module, name in (

@@ -2,9 +2,10 @@
 
 Threads: Zenoh calls back on its own threads. The callbacks only append ``(kind, key,
 bytes)`` to a bounded deque and, if no wake-up is pending, write one byte to a socket pair
-(:class:`~tfbus.transports._base.ThreadWakeup`); the event loop waits on that socket
-(``anyio.wait_readable``, which works on asyncio and trio), then decodes and delivers
-everything queued -- one wake-up per batch, never a blocked Zenoh thread, and
+(:class:`~tfbus.transports._base.ThreadWakeup`); the event loop, woken by that socket
+(:meth:`~tfbus.transports._base.ThreadWakeup.serve`: asyncio's read callback, or
+``anyio.wait_readable`` on trio), decodes and delivers everything queued, in batches of
+``max_batch`` -- one wake-up per burst, never a blocked Zenoh thread, and
 per-publisher order kept (one FIFO). When the deque is full (``max_pending``), the oldest
 entries are dropped and counted.
 
@@ -46,7 +47,6 @@ from typing import Any, Final
 
 import anyio
 import anyio.abc
-import anyio.lowlevel
 import zenoh
 
 from tfbus.codecs.native import (
@@ -653,12 +653,13 @@ class ZenohTransport:
     async def _pump(self, bus: BusLike) -> None:
         wakeup = self._wakeup
         assert wakeup is not None
-        while True:
-            await wakeup.wait()
-            wakeup.rearm()
-            self._stats.batches += 1
-            while self._drain(bus):
-                await anyio.lowlevel.checkpoint()
+
+        def drain(woken: bool) -> bool:
+            if woken:
+                self._stats.batches += 1
+            return self._drain(bus)
+
+        await wakeup.serve(drain)
 
     def _drain(self, bus: BusLike) -> bool:
         """Decode and deliver up to ``max_batch`` queued entries; True if more remain."""
