@@ -469,18 +469,23 @@ class Ros2Transport:
 
     async def _pump(self, bus: BusLike, wakeup: ThreadWakeup, ep: _Endpoints) -> None:
         readers = list(ep.readers.items())
-        while True:
-            wakeup.rearm()
-            self._stats.batches += 1
-            more = True
-            while more:
-                more = False
-                for topic, reader in readers:
-                    if self._take(bus, topic, reader):
-                        more = True
-                if more:
-                    await anyio.lowlevel.checkpoint()
-            await wakeup.wait()
+
+        def drain(woken: bool) -> bool:
+            """Take up to ``max_batch`` samples of each reader; True if one had more."""
+            if woken:
+                self._stats.batches += 1
+            more = False
+            for topic, reader in readers:
+                if self._take(bus, topic, reader):
+                    more = True
+            return more
+
+        wakeup.rearm()  # what arrived before the first wake-up, then after each one
+        more = drain(True)
+        while more:
+            await anyio.lowlevel.checkpoint()
+            more = drain(False)
+        await wakeup.serve(drain)
 
     def _take(self, bus: BusLike, topic: str, reader: DataReader[TFMessage_]) -> bool:
         """Take, decode and deliver up to ``max_batch`` samples; True if it took that many."""
