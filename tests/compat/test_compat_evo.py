@@ -84,7 +84,7 @@ def test_evo_traj_matches_debian_tf2_py(evo_dir: Path, tmp_path: Path) -> None:
 
     # A pose every 0.1 s from the first stamp. Debian's tf2_py (ROS 1) carries stamps as
     # double seconds (tf2_py.cpp rostime_converter: ros::Time().fromSec(to_sec())), so it
-    # keeps the last stamp as ...051.849999905 s and evo's 0.1 s steps stop one short of
+    # keeps the last stamp as ...051.849999905 s and evo's 0.1 s steps end one before
     # it; tfbus keeps stamps in integer nanoseconds, as rclpy's tf2 does, and evo's last
     # step lands on the last message.
     assert len(debian) == 516 and len(tfbus) == 517
