@@ -35,6 +35,7 @@ INSTALL: dict[str, str] = {
     "tf2-msgs-py": "sudo bash scripts/install_tf2_msgs_py.sh",
     "chromium": "sudo bash scripts/install_chromium.sh",
     "ros2-env": "bash scripts/install_ros2_env.sh",
+    "evo": "bash scripts/install_evo.sh",
 }
 
 # Skips that remain legitimate with every peer installed, by name: (test id pattern, fnmatch

@@ -275,3 +275,26 @@ def test_the_run_counts_skips_by_reason_and_ci_fails_on_an_unlisted_one(
         assert "tests/fleet/test_fleet_netns.py::test_other: a peer that did not install" in out
     else:
         assert done.returncode == 0, out
+
+
+# -------------------------------------------------------------------------- evo (PyPI)
+
+
+def test_an_evo_that_pip_cannot_install_is_not_ready(tmp_path: Path) -> None:
+    """``scripts/install_evo.sh`` with a pip that fails: status 1 and the reason, no ready
+    line (the test peer is evo from PyPI, installed with ``pip install --target``)."""
+    if not Path("/usr/bin/python3").exists():
+        pytest.skip("the script checks Debian's python3 first; there is none here")
+    failing = tmp_path / "python"
+    failing.write_text("#!/bin/bash\necho 'no index here' >&2\nexit 1\n")
+    failing.chmod(0o755)
+    env = dict(os.environ, PIP_PYTHON=str(failing), TFBUS_EVO_DIR=str(tmp_path / "evo"))
+    done = _run("install_evo.sh", env)
+    lines = done.stdout.strip().splitlines()
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    if "tf2_py or rospy does not import" in done.stdout:
+        pytest.skip("Debian's ROS 1 is not installed: the script stops before pip")
+    assert lines[-1].startswith(
+        f"evo: unavailable: pip install --target {tmp_path / 'evo'} evo==1.38.1 failed"), lines
+    assert lines[-1].endswith("no index here"), lines
+    assert not (tmp_path / "evo" / ".tfbus-evo-ok").exists()
