@@ -212,6 +212,10 @@ class _Front:
             await self._serve(reader, writer)
         except (OSError, asyncio.IncompleteReadError) as err:
             self._guard_of().note("failed_handshakes", type(err).__name__)
+        except asyncio.CancelledError:
+            # the front closing: the connection's task ends, not cancelled (asyncio's
+            # streams would print the cancellation of a connection task as a traceback)
+            pass
         finally:
             self._active.discard(task)
             writer.close()
