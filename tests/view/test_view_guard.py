@@ -255,3 +255,134 @@ def test_foxglove_server_refuses_foreign_host_and_origin() -> None:
         assert bridge.guard.refused == 2
     finally:
         bridge.close()
+
+
+def _foxglove_upgrade(port: int) -> bytes:
+    """A Foxglove client's WebSocket upgrade, plain ``ws://``, to ``port``; what the
+    server answered before it closed (bounded: 10 s)."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    key = base64.b64encode(os.urandom(16)).decode()
+    s.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+               f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+               "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n"
+               "\r\n").encode())
+    data = b""
+    try:
+        while b"\r\n\r\n" not in data and len(data) < 65536:
+            chunk = s.recv(4096)
+            if not chunk:
+                break
+            data += chunk
+    except OSError:
+        pass
+    s.close()
+    return data
+
+
+def test_the_foxglove_sdks_own_port_refuses_clients_that_go_around_the_front(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """foxglove-sdk's server checks no ``Host`` or ``Origin``; it listens on 127.0.0.1
+    behind the front. A client that finds its port and connects straight to it is
+    refused: a plain ``ws://`` upgrade gets no WebSocket (the SDK serves TLS only) and
+    TLS with a browser's certificate checks fails (the run's certificate is trusted by
+    the front alone); through the front the same upgrade is let in. The SDK's line per
+    dropped connection becomes at most one line per 5 s, no traceback."""
+    pytest.importorskip("foxglove")
+    import ssl
+
+    from tfbus.view import foxglove_bridge
+    from tfbus.view.foxglove_bridge import FoxgloveBridge
+
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    try:
+        inner = bridge.server.port  # the SDK's own server
+        assert inner != bridge.port
+        for _ in range(4):
+            answer = _foxglove_upgrade(inner)
+            assert not answer.startswith(b"HTTP/1.1 101"), answer
+            assert b"sec-websocket-accept" not in answer.lower()
+        browser_checks = ssl.create_default_context()  # the system's authorities
+        with pytest.raises(ssl.SSLCertVerificationError), \
+                socket.create_connection(("127.0.0.1", inner), timeout=10) as raw, \
+                browser_checks.wrap_socket(raw, server_hostname="127.0.0.1"):
+            pass
+        # counted (by this process: at least these five), not printed one by one
+        _until(lambda: sum(n for k, n in foxglove_bridge.sdk_lines.items()
+                           if "not made through its front" in k) >= 5)
+        # the front relays the same upgrade to the SDK (over TLS) and it is let in
+        assert _foxglove_upgrade(bridge.port).startswith(b"HTTP/1.1 101")
+        assert bridge.guard.refused == 0
+    finally:
+        bridge.close()
+    lines = [r.getMessage() for r in caplog.records]
+    assert not any("Traceback" in x or x.startswith("Dropping client") for x in lines), lines
+    assert sum("not made through its front" in x for x in lines) <= 2, lines
+
+
+def test_another_origins_page_in_chromium_cannot_open_the_foxglove_sdks_port() -> None:
+    """A site the user visits finds the SDK's port (a port scan from its script) and
+    opens ``ws://`` and ``wss://127.0.0.1:PORT/`` with Foxglove's subprotocol: both fail
+    (no TLS, then a certificate no authority vouches for), the script never sees a
+    message."""
+    pytest.importorskip("foxglove")
+    exe = shutil.which("chromium")
+    if exe is None:
+        pytest.skip("Debian chromium not installed (scripts/install_chromium.sh)")
+    from tfbus.view.foxglove_bridge import FoxgloveBridge
+
+    bridge = FoxgloveBridge("127.0.0.1", 0)
+    results: list[str] = []
+    inner = bridge.server.port
+    body = f"""<html><body><p id=out>pending</p><script>
+const said = {{}};
+function report() {{
+  if (Object.keys(said).length < 2) return;
+  const what = said.ws + "-" + said.wss;
+  document.getElementById("out").textContent = what;
+  fetch("/result?r=" + what);
+}}
+for (const scheme of ["ws", "wss"]) {{
+  const ws = new WebSocket(scheme + "://127.0.0.1:{inner}/", "foxglove.sdk.v1");
+  ws.onopen = () => {{ said[scheme] = "open"; report(); }};
+  ws.onerror = () => {{ said[scheme] = "refused"; report(); }};
+}}
+</script></body></html>""".encode()
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            out = body
+            if self.path.startswith("/result"):
+                results.append(self.path.split("=", 1)[1])
+                out = b"ok"
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(out)))
+            self.end_headers()
+            self.wfile.write(out)
+
+        def log_message(self, *_args: object) -> None:
+            pass
+
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    thread = threading.Thread(target=srv.serve_forever, daemon=True)
+    thread.start()
+    try:
+        text = ""
+        for _ in range(3):  # a loaded machine can end the virtual-time budget too early
+            with tempfile.TemporaryDirectory(prefix="tfbus-view-guard-") as profile:
+                done = subprocess.run(
+                    [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                     "--disable-background-networking", "--disable-component-update",
+                     "--virtual-time-budget=5000", f"--user-data-dir={profile}",
+                     "--dump-dom", f"http://127.0.0.1:{srv.server_address[1]}/"],
+                    capture_output=True, timeout=90, check=False)
+            text = done.stdout.decode("utf-8", "replace")
+            if "pending" not in text:
+                break
+        assert '<p id="out">refused-refused</p>' in text, text[-500:]
+        assert not any("open" in r for r in results)
+    finally:
+        srv.shutdown()
+        srv.server_close()
+        thread.join(timeout=10)
+        bridge.close()

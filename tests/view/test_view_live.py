@@ -25,6 +25,7 @@ from tfbus.bus import Bus
 from tfbus.clock import ManualClock
 from tfbus.laser import LaserProjection
 from tfbus.listener import TransformListener
+from tfbus.messages import TFMessage
 from tfbus.monitor import MonitoredSink, TfSummary
 from tfbus.sensor_msgs import LaserScan, read_points
 from tfbus.view.live import LiveView, ScanFeed
@@ -289,3 +290,70 @@ def test_command_view_bus_ros1_subscribes_to_the_scan(master: Any) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=10)
+
+
+async def test_redraws_wait_until_the_zenoh_intake_caught_up(page: TfPage) -> None:
+    """A redraw costs milliseconds per frame; drawing at 30 Hz whatever the intake let a
+    busy ``tfbus view --bus`` fall behind, and Zenoh's inbound queue grew by every
+    message that arrived meanwhile (the soak: +52 MB in 28 min). Now a redraw is put off
+    (counted in ``deferred``) while the transport holds received messages not delivered,
+    for at most MAX_DRAW_STALL s on the view's clock; once delivered, the redraw shows
+    the newest pose."""
+    pytest.importorskip("zenoh")
+    import socket
+    import time
+
+    from tfbus.transports.zenoh import ZenohTransport
+    from tfbus.view.live import MAX_DRAW_STALL
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock)
+    robot = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot")
+    viewer = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="viewer")
+
+    def queued(n: int) -> None:
+        """Block the event loop (nothing is delivered) until Zenoh's threads queued
+        ``n`` messages for it (bounded: 20 s)."""
+        deadline = time.monotonic() + 20.0
+        while viewer.pending < n:
+            assert time.monotonic() < deadline, f"{viewer.pending} of {n} queued"
+            time.sleep(0.001)
+
+    async with Bus(transport=robot) as a, Bus(transport=viewer) as b, \
+            TransformListener(sink, b, clock=clock):
+        with anyio.fail_after(10):
+            await robot.wait_matching("/tf")
+        tfb = TransformBroadcaster(a)
+        await tfb.send_transform(odom_to_laser(10.0, 1.0))
+        await until(lambda: stats.messages.get("/tf", 0) == 1)
+        assert viewer.pending == 0
+        assert view.redraw(b) is not None and view.deferred == 0
+        assert page.frames["base_laser"].position == pytest.approx((1.0, 0.0, 0.0))
+
+        for k in range(1, 21):  # a burst the event loop has not delivered yet
+            a.publish_nowait("/tf", TFMessage([odom_to_laser(10.0 + 0.01 * k, 1.0 + k)]))
+        queued(20)
+        assert view.redraw(b) is None and view.deferred == 1  # the intake goes first
+        assert view.redraw(b) is None and view.deferred == 2
+        assert page.frames["base_laser"].position == pytest.approx((1.0, 0.0, 0.0))
+        await until(lambda: viewer.pending == 0 and stats.messages.get("/tf", 0) == 21)
+        assert view.redraw(b) is not None and view.deferred == 2
+        assert page.frames["base_laser"].position == pytest.approx((21.0, 0.0, 0.0))
+
+        # behind for MAX_DRAW_STALL s of the view's clock: drawn all the same
+        for k in range(21, 31):
+            a.publish_nowait("/tf", TFMessage([odom_to_laser(10.0 + 0.01 * k, 1.0 + k)]))
+        queued(10)
+        clock.advance_nowait(MAX_DRAW_STALL * 0.5)
+        assert view.redraw(b) is None and view.deferred == 3
+        clock.advance_nowait(MAX_DRAW_STALL * 0.5)
+        assert view.redraw(b) is not None and view.deferred == 3
+        assert viewer.pending == 10  # drawn before the backlog: the older pose
+        assert page.frames["base_laser"].position == pytest.approx((21.0, 0.0, 0.0))
+    buffer.close()

@@ -13,6 +13,9 @@ statistics counters and the :class:`PeerAware` protocol.
   each (each transport's statistics class adds its own).
 * :class:`PeerAware` -- what a transport that knows its peers (Zenoh's liveliness)
   offers; the command line asks ``isinstance(transport, PeerAware)``, never a scheme name.
+* :class:`Backlogged` -- a transport whose middleware threads queue received messages
+  for the event loop says how many still wait (``tfbus view`` draws only when the
+  intake is caught up).
 
 A new transport copies the template of ``docs/architecture.md`` ("Adding a transport").
 """
@@ -36,6 +39,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PEERS_TOPIC",
+    "Backlogged",
     "BusLike",
     "NodeLabelled",
     "PeerAware",
@@ -131,6 +135,21 @@ class PeerAware(Protocol):
 
     def broadcasters(self) -> Mapping[str, PeerInfo]:
         """The live peers that have published ``/tf`` or ``/tf_static``, by node id."""
+        ...
+
+
+@runtime_checkable
+class Backlogged(Protocol):
+    """A transport that queues what its middleware threads receive for the event loop
+    (Zenoh's inbound queue): :attr:`pending` says how much is not delivered yet. A
+    consumer with optional work (``tfbus view``'s redraws) asks
+    ``isinstance(transport, Backlogged)`` and puts that work off while the queue is not
+    empty, so the queue does not grow while the work runs.
+    """
+
+    @property
+    def pending(self) -> int:
+        """Entries received and not yet delivered into the bus (0 when caught up)."""
         ...
 
 

@@ -17,6 +17,13 @@ times a second and, from the same bus:
   subscribes to ``/tf_static``, as a latched topic), each scan as ``foxglove.LaserScan``,
   the clock's time as the server time and tf's errors as statuses.
 
+Drawing never lets the intake fall behind: a redraw is put off (counted in
+:attr:`LiveView.deferred`) while the bus's transport still holds received messages it
+has not delivered (:class:`~tfbus.transports._base.Backlogged`, Zenoh's inbound queue),
+for at most :data:`MAX_DRAW_STALL` seconds. A redraw costs milliseconds per frame; on a
+busy machine, redrawing at :data:`~tfbus.view.player.MAX_DRAW_HZ` regardless let the
+inbound queue grow by the transforms that arrived meanwhile.
+
 A message of another type on a scan topic (or on ``/tf``) is counted in
 :attr:`ScanFeed.bad` (:attr:`LiveView.bad_tf`) and dropped; a first scan whose sweep is
 not finite (it would size the filter's tolerance) in :attr:`ScanFeed.dropped`.
@@ -36,8 +43,9 @@ from tfbus.filters import FilterFailureReason, MessageFilter
 from tfbus.laser import LaserProjection
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.sensor_msgs import LaserScan
-from tfbus.time import Duration
+from tfbus.time import Duration, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPICS
+from tfbus.transports._base import Backlogged
 from tfbus.view.player import MAX_DRAW_HZ, draw_live
 from tfbus.view.scans import MAX_SCANS_BACK, project_scan
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene
@@ -51,7 +59,11 @@ if TYPE_CHECKING:
     from tfbus.view.foxglove_bridge import FoxgloveBridge
     from tfbus.view.server import TfPage
 
-__all__ = ["LiveView", "ScanFeed", "sweep"]
+__all__ = ["MAX_DRAW_STALL", "LiveView", "ScanFeed", "sweep"]
+
+MAX_DRAW_STALL = 1.0
+"""Seconds (the view's clock) a redraw may be put off while the transport's inbound
+queue is not empty: the page still moves at least once a second under any load."""
 
 
 def sweep(scan: LaserScan) -> Duration:
@@ -151,6 +163,10 @@ class LiveView:
         """TFMessages relayed to Foxglove."""
         self.shown_fixed: str | None = None
         """The fixed frame of the last redraw (the default one once it is known)."""
+        self.deferred = 0
+        """Redraws put off because the transport had not delivered all it received
+        (:meth:`redraw`)."""
+        self._drawn_at: Time | None = None
         self._fixed_known = anyio.Event()
         self._progress = anyio.Event()
         self._projector = LaserProjection()
@@ -163,14 +179,30 @@ class LiveView:
     # ---------------------------------------------------------------- bus side
 
     async def run(self, bus: Bus) -> None:
-        """Follow ``bus`` and redraw at most :data:`MAX_DRAW_HZ` times a second, until
-        cancelled."""
+        """Follow ``bus`` and redraw at most :data:`MAX_DRAW_HZ` times a second
+        (:meth:`redraw`: not while the intake is behind), until cancelled."""
         async with anyio.create_task_group() as tg:
             await tg.start(self.follow, bus)
             self.render()
             # on the view's clock, a deadline every 1/30 s (an overrun skips ticks)
             async for _ in every(1.0 / MAX_DRAW_HZ, clock=self.clock):
-                self.render()
+                self.redraw(bus)
+
+    def redraw(self, bus: Bus) -> Scene | None:
+        """One tick of the draw loop: :meth:`render` and return its scene, unless
+        ``bus``'s transport still holds received messages it has not delivered
+        (:class:`~tfbus.transports._base.Backlogged` ``.pending > 0``) and the last
+        redraw is less than :data:`MAX_DRAW_STALL` seconds old on the view's clock: then
+        nothing is drawn, :attr:`deferred` counts it and None is returned (the event
+        loop delivers the backlog first; a later tick draws the newer data)."""
+        transport = bus.transport
+        if isinstance(transport, Backlogged) and transport.pending > 0 \
+                and self._drawn_at is not None:
+            elapsed = self.clock.now().ns - self._drawn_at.ns
+            if 0 <= elapsed < MAX_DRAW_STALL * 1e9:  # (a clock that went back: draw)
+                self.deferred += 1
+                return None
+        return self.render()
 
     async def follow(self, bus: Bus, *, task_status: Any = anyio.TASK_STATUS_IGNORED) -> None:
         """Subscribe to the scan topics (and, with Foxglove, ``/tf`` and ``/tf_static``),
@@ -253,6 +285,7 @@ class LiveView:
         of each topic (projected only when it changed), and for Foxglove the server time,
         the statuses and the static transforms a new subscriber asked for."""
         now = self.clock.now()
+        self._drawn_at = now
         scene = draw_live(self.page, self.buffer, self.summary, now,
                           fixed_frame=self.fixed_frame, frame_timeout=self.frame_timeout)
         if scene.fixed_frame is not None and scene.frames:

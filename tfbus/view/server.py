@@ -198,7 +198,9 @@ class TfPage:
              rates: Mapping[str, float] | None = None) -> None:
         """Show ``scene``: frames, labels, links, panel. ``stats`` gives broadcasters
         and rates (Hz) when known; ``rates`` overrides a rate per frame."""
-        with self._lock:
+        # one batch: viser's loop is woken once per redraw, not once per changed value,
+        # and a browser applies the redraw's poses together
+        with self._lock, self.server.atomic():
             self._draw(scene, stats, rates)
 
     def _draw(self, scene: Scene, stats: TfSummary | None,

@@ -322,6 +322,12 @@ class ZenohTransport:
         """``"drop"`` or ``"block"``: how topics other than the latched ones are put."""
         return "block" if self._block else "drop"
 
+    @property
+    def pending(self) -> int:
+        """Entries received by Zenoh's threads and not yet delivered into the bus (the
+        inbound queue, at most ``max_pending``; :class:`~tfbus.transports._base.Backlogged`)."""
+        return len(self._inbox)
+
     def statistics(self) -> ZenohStatistics:
         """A copy of the counters (see :class:`ZenohStatistics`)."""
         return replace(
