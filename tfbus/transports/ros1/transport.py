@@ -24,11 +24,15 @@ from anyio.streams.stapled import MultiListener
 
 from tfbus._aio import open_pumped_connection, running_asyncio_loop
 from tfbus.codecs.ros1 import (
+    CLOCK_MD5SUM,
+    CLOCK_MSGDEF,
+    CLOCK_TYPE,
     SCAN_MD5SUM,
     SCAN_TYPE,
     TF_MD5SUM,
     TF_TYPE,
     TFCodec,
+    decode_clock,
     decode_laser_scan,
     scan_definition,
 )
@@ -173,7 +177,8 @@ class _Inbound:
         self.header_or_end = anyio.Event()
         self._deliver = bus.deliver_nowait
         self._scan = topic in node._scan_topics
-        self._md5 = SCAN_MD5SUM if self._scan else TF_MD5SUM
+        self._clock = topic == node._clock_topic
+        self._md5 = node._topic_md5(topic)
         self._decode = node._codec.decode
         self._stats = node._stats
         self.splitter = FrameSplitter(self._frame, MAX_HEADER_BYTES, node._max_bytes)
@@ -184,6 +189,8 @@ class _Inbound:
             self._stats.received += 1
             if self._scan:  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, decode_laser_scan(raw))
+            elif self._clock:  # WireDecodeError: counted in malformed
+                self._deliver(self.topic, decode_clock(raw))
             else:
                 transforms = self._decode(raw)  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, TFMessage(tuple(transforms)))
@@ -199,6 +206,16 @@ class _Inbound:
         self.conn_id = self.node._open_conn(header.get("callerid", self.uri), "i", self.topic)
         self.node._delivering.add((self.topic, self.uri))
         self.header_or_end.set()
+
+
+def _is_global_name(topic: str) -> bool:
+    """Whether ``topic`` is a global ROS graph name (``/a/b_c``)."""
+    return (
+        topic.startswith("/")
+        and all(c.isalnum() or c in "/_" for c in topic)
+        and "//" not in topic
+        and not topic.endswith("/")
+    )
 
 
 class Ros1Transport:
@@ -217,6 +234,12 @@ class Ros1Transport:
             :class:`~tfbus.sensor_msgs.LaserScan` (:func:`~tfbus.codecs.ros1.decode_laser_scan`;
             a malformed one closes its connection and is counted in ``malformed``).
             Receive only: a LaserScan published on the bus is not sent to ROS 1.
+        clock_topic: a ``rosgraph_msgs/Clock`` topic to subscribe to (``"/clock"`` for
+            simulated time, :data:`~tfbus.topics.CLOCK_TOPIC`): each message is delivered
+            to the bus as a :class:`~tfbus.messages.Clock`
+            (:func:`~tfbus.codecs.ros1.decode_clock`), what a
+            :class:`~tfbus.clock.SimClock` on the bus follows; default ``None``: not
+            subscribed. Receive only.
         queue_size: frames queued per subscriber connection before the oldest is dropped.
         max_message_bytes: largest accepted TCPROS frame; a larger one closes the
             connection (counted as malformed).
@@ -228,8 +251,8 @@ class Ros1Transport:
 
     Raises:
         ValueError: a ``master_uri`` that is not ``http://host:port``, a node name that
-            is not a ROS graph name, or a scan topic that is also in ``topics`` or is not
-            a ROS graph name.
+            is not a ROS graph name, or a scan topic or the clock topic that is also
+            carried otherwise or is not a global ROS graph name.
     """
 
     def __init__(
@@ -240,6 +263,7 @@ class Ros1Transport:
         *,
         topics: Sequence[str] = _TOPICS,
         scan_topics: Sequence[str] = (),
+        clock_topic: str | None = None,
         queue_size: int = 100,
         max_message_bytes: int = 16 * 1024 * 1024,
         master_timeout: float = 2.0,
@@ -265,10 +289,17 @@ class Ros1Transport:
         for topic in self._scan_topics:
             if topic in self._topics:
                 raise ValueError(f"scan topic {topic!r} is already carried as a tf topic")
-            if not topic.startswith("/") or not all(c.isalnum() or c in "/_" for c in topic) \
-                    or "//" in topic or topic.endswith("/"):
+            if not _is_global_name(topic):
                 raise ValueError(f"scan topic {topic!r} is not a global ROS graph name")
-        self._subscribed = self._topics + self._scan_topics
+        if clock_topic is not None:
+            if clock_topic in self._topics or clock_topic in self._scan_topics:
+                raise ValueError(f"clock topic {clock_topic!r} is already carried")
+            if not _is_global_name(clock_topic):
+                raise ValueError(f"clock topic {clock_topic!r} is not a global ROS graph name")
+        self._clock_topic = clock_topic
+        self._subscribed = self._topics + self._scan_topics + (
+            () if clock_topic is None else (clock_topic,)
+        )
         self._scan_definition = scan_definition() if self._scan_topics else ""
         self._queue_size = queue_size
         self._max_bytes = max_message_bytes
@@ -500,7 +531,7 @@ class Ros1Transport:
                 "registerSubscriber",
                 self._name,
                 topic,
-                SCAN_TYPE if topic in self._scan_topics else TF_TYPE,
+                self.topic_type(topic),
                 self._api_uri,
                 timeout=self._timeout,
             )
@@ -546,8 +577,23 @@ class Ros1Transport:
 
     def topic_type(self, topic: str) -> str:
         """The ROS 1 message type of ``topic`` (``sensor_msgs/LaserScan`` for a scan
-        topic, else ``tf2_msgs/TFMessage``), as ``getSubscriptions`` reports it."""
-        return SCAN_TYPE if topic in self._scan_topics else TF_TYPE
+        topic, ``rosgraph_msgs/Clock`` for the clock topic, else ``tf2_msgs/TFMessage``),
+        as ``getSubscriptions`` reports it."""
+        if topic in self._scan_topics:
+            return SCAN_TYPE
+        return CLOCK_TYPE if topic == self._clock_topic else TF_TYPE
+
+    def _topic_md5(self, topic: str) -> str:
+        """The md5sum of :meth:`topic_type` (TCPROS connection header)."""
+        if topic in self._scan_topics:
+            return SCAN_MD5SUM
+        return CLOCK_MD5SUM if topic == self._clock_topic else TF_MD5SUM
+
+    def _topic_definition(self, topic: str) -> str:
+        """The message definition of :meth:`topic_type` (TCPROS connection header)."""
+        if topic in self._scan_topics:
+            return self._scan_definition
+        return CLOCK_MSGDEF if topic == self._clock_topic else self._codec.definition
 
     def publications(self) -> Sequence[str]:
         """``getPublications``: the topics this node has published on so far."""
@@ -709,14 +755,13 @@ class Ros1Transport:
         """
         host, port = await self._request_topic(topic, uri)
         link = _Inbound(self, bus, topic, uri)
-        scan = topic in self._scan_topics
         hello = encode_header(
             {
                 "callerid": self._name,
                 "topic": topic,
-                "md5sum": SCAN_MD5SUM if scan else TF_MD5SUM,
-                "type": SCAN_TYPE if scan else TF_TYPE,
-                "message_definition": self._scan_definition if scan else self._codec.definition,
+                "md5sum": self._topic_md5(topic),
+                "type": self.topic_type(topic),
+                "message_definition": self._topic_definition(topic),
                 "tcp_nodelay": "1",
             }
         )
