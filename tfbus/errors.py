@@ -184,7 +184,7 @@ class BufferClosedException(TransformException):
 class SimTimeStalled(TfbusError, TimeoutError):
     """A wait on a :class:`~tfbus.clock.SimClock` saw no valid ``/clock`` message for the
     clock's ``wall_timeout`` seconds of wall time: the simulation (or bag player) that
-    drives simulated time stopped publishing it, so the wait could otherwise last
+    drives simulated time no longer publishes it, so the wait could otherwise last
     forever.
 
     Also a built-in :class:`TimeoutError`. Raised by the clock's ``sleep``,
