@@ -12,7 +12,7 @@ def test_public_all_is_pinned() -> None:
         "NoDataForExtrapolationException", "Point", "Point32", "PointCloud2", "PointField",
         "PointStamped", "Polygon",
         "PolygonStamped", "Pose", "PoseStamped", "PoseWithCovariance",
-        "PoseWithCovarianceStamped", "Quaternion", "SetResult", "Stamped",
+        "PoseWithCovarianceStamped", "Quaternion", "SetResult", "SimClock", "Stamped",
         "StaticTransformBroadcaster", "Subscription", "SystemClock", "TFMessage", "TfbusError",
         "Time", "TimeoutException", "Transform", "TransformArray", "TransformBroadcaster",
         "TransformException", "TransformListener", "TransformSession", "TransformStamped",
@@ -70,8 +70,8 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
         "NSEC_PER_SEC", "TIME_MAX_NS", "Duration", "Time", "format_stamp", "seconds_to_ns",
     }  # fmt: skip
     assert set(tfbus.clock.__all__) == {
-        "Clock", "JumpCallback", "ManualClock", "PeriodicTimer", "SystemClock", "Tick",
-        "every", "timeout_ns",
+        "Clock", "JumpCallback", "ManualClock", "PeriodicTimer", "SimClock", "SystemClock",
+        "Tick", "every", "timeout_ns",
     }  # fmt: skip
     assert set(tfbus.convert.__all__) == {
         "ConvertRegistration", "TransformFunction", "TransformRegistration", "convert",
@@ -86,7 +86,7 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
             if callable(obj) and not name.startswith(("TransformFunction", "JumpCallback")):
                 assert obj.__doc__, f"{module.__name__}.{name} has no docstring"
     for method in ("now", "sleep", "sleep_until", "on_jump", "move_on_after", "fail_after"):
-        for cls in (tfbus.Clock, tfbus.SystemClock, tfbus.ManualClock):
+        for cls in (tfbus.Clock, tfbus.SystemClock, tfbus.ManualClock, tfbus.SimClock):
             assert getattr(cls, method).__doc__, f"{cls.__name__}.{method} has no docstring"
     assert isinstance(tfbus.ManualClock(), tfbus.Clock)
     assert isinstance(tfbus.SystemClock(), tfbus.Clock)

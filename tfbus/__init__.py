@@ -13,7 +13,7 @@ from tfbus._version import __version__ as __version__
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus, Subscription, Transport
-from tfbus.clock import Clock, ManualClock, SystemClock, every
+from tfbus.clock import Clock, ManualClock, SimClock, SystemClock, every
 from tfbus.core import BufferCore, SetResult
 from tfbus.core.batch import TransformArray
 from tfbus.errors import (
@@ -96,6 +96,7 @@ __all__ = [
     "PoseWithCovarianceStamped",
     "Quaternion",
     "SetResult",
+    "SimClock",
     "Stamped",
     "StaticTransformBroadcaster",
     "Subscription",

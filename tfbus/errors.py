@@ -12,6 +12,8 @@ the wire format and transports add their own branches under one base::
     │   ├── TimeoutException           an awaited transform did not arrive in time (also
     │   │                              TimeoutError)
     │   └── BufferClosedException      a wait ended because its Buffer closed or lost its feed
+    ├── SimTimeStalled                 no /clock came for a SimClock's wall_timeout while
+    │                                  waiting on simulated time (also TimeoutError)
     ├── URDFError                      a robot description cannot be used (also ValueError)
     ├── JointStateError                a JointState cannot become transforms (also ValueError)
     ├── BagError                       a recording cannot be read or written (``path``)
@@ -61,6 +63,7 @@ __all__ = [
     "LoopThreadError",
     "MissingExtraError",
     "NoDataForExtrapolationException",
+    "SimTimeStalled",
     "TfbusError",
     "TimeoutException",
     "TransformException",
@@ -176,6 +179,18 @@ class BufferClosedException(TransformException):
 
 
 # --------------------------------------------------------------------------- robots
+
+
+class SimTimeStalled(TfbusError, TimeoutError):
+    """A wait on a :class:`~tfbus.clock.SimClock` saw no valid ``/clock`` message for the
+    clock's ``wall_timeout`` seconds of wall time: the simulation (or bag player) that
+    drives simulated time no longer publishes it, so the wait could otherwise last
+    forever.
+
+    Also a built-in :class:`TimeoutError`. Raised by the clock's ``sleep``,
+    ``sleep_until``, ``move_on_after`` / ``fail_after`` blocks, and so by a
+    :class:`~tfbus.buffer.Buffer`'s ``timeout=`` waits and ``every()`` timers on it.
+    """
 
 
 class URDFError(TfbusError, ValueError):

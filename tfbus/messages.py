@@ -1,4 +1,5 @@
-"""Message value types with ROS field names (geometry_msgs, std_msgs, tf2_msgs).
+"""Message value types with ROS field names (geometry_msgs, std_msgs, tf2_msgs,
+rosgraph_msgs).
 
 All are immutable ``NamedTuple``s: cheap to create (a lookup returns one per call),
 hashable, unpackable (``x, y, z = v``) and with readable ``repr``s. Units are metres for
@@ -34,6 +35,7 @@ from typing import TYPE_CHECKING, Any, Generic, NamedTuple, NoReturn, TypeVar
 from tfbus.time import Time
 
 __all__ = [
+    "Clock",
     "Header",
     "JointState",
     "Point",
@@ -293,6 +295,21 @@ class TFMessage(NamedTuple):
     """tf2_msgs/TFMessage: the message carried on ``/tf`` and ``/tf_static``."""
 
     transforms: Sequence[TransformStamped] = ()
+
+    def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
+    def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+    def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class Clock(NamedTuple):
+    """rosgraph_msgs/Clock: the simulated time a simulator or a bag player publishes on
+    ``/clock`` (:data:`tfbus.topics.CLOCK_TOPIC`); what nodes with ``use_sim_time``
+    read as "now" (:class:`tfbus.clock.SimClock`). ``clock`` is a
+    :class:`~tfbus.time.Time` (``time clock`` in ``Clock.msg``).
+    """
+
+    clock: Time = Time(0)
 
     def __add__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Final
 
 __all__ = [
+    "CLOCK_TOPIC",
     "JOINT_STATES_TOPIC",
     "PEERS_TOPIC",
     "SCAN_TOPIC",
@@ -39,3 +40,7 @@ PEERS_TOPIC: Final = "/tfbus/peers"
 """Local bus topic on which a peer-aware transport delivers
 :class:`~tfbus.transports._base.PeerEvent` messages (nodes appearing and leaving); never
 sent to other processes."""
+
+CLOCK_TOPIC: Final = "/clock"
+"""``rosgraph_msgs/Clock``: simulated time, published by a simulator or ``rosbag play
+--clock`` and followed by nodes with ``use_sim_time`` (:class:`tfbus.clock.SimClock`)."""

@@ -1,4 +1,5 @@
-"""Time sources and periodic timers: ``SystemClock``, ``ManualClock``, ``every()``.
+"""Time sources and periodic timers: ``SystemClock``, ``ManualClock``, ``SimClock``,
+``every()``.
 
 Every async component of tfbus takes a :class:`Clock`; nothing else in tfbus reads the
 wall clock. :class:`SystemClock` follows wall time (``time.time_ns``), as ROS time does
@@ -7,6 +8,12 @@ drive by hand: ``await clock.advance(1.0)`` steps through every pending deadline
 order, letting woken tasks run until they block again before taking the next step, so a
 100 Hz timer ticks exactly 100 times per simulated second, instantly and
 deterministically (the role trio's ``MockClock(autojump_threshold=0)`` plays for trio).
+
+:class:`SimClock` is ROS's ``use_sim_time``: its time is the newest ``/clock``
+(``rosgraph_msgs/Clock``) heard on a bus, and its deadlines move only as ``/clock`` does::
+
+    async with SimClock(bus) as clock:             # Time(0) until the first /clock
+        await clock.sleep(1.0)                     # one simulated second
 
 :func:`every` is the periodic timer (``ros::Rate`` / ``ros::Timer``)::
 
@@ -21,7 +28,8 @@ and skips older missed ones, counting them as overruns (as ``rcl_timer`` does; s
 
 The package is small private modules re-exported here (anyio's layout): ``_base``
 (the :class:`Clock` protocol, :func:`timeout_ns`, jump callbacks), ``_system``
-(:class:`SystemClock`), ``_manual`` (:class:`ManualClock` and its deadline scopes) and
+(:class:`SystemClock`), ``_manual`` (:class:`ManualClock` and its deadline scopes),
+``_sim`` (:class:`SimClock`, which sets a ManualClock from each ``/clock``) and
 ``_timer`` (:func:`every`, :class:`PeriodicTimer`, :class:`Tick`). Import from
 ``tfbus.clock``.
 
@@ -52,6 +60,7 @@ at the first checkpoint; a deadline beyond the end of :class:`~tfbus.time.Time`
 
 from tfbus.clock._base import Clock, JumpCallback, timeout_ns
 from tfbus.clock._manual import ManualClock
+from tfbus.clock._sim import SimClock
 from tfbus.clock._system import SystemClock
 from tfbus.clock._timer import PeriodicTimer, Tick, every
 
@@ -60,6 +69,7 @@ __all__ = [
     "JumpCallback",
     "ManualClock",
     "PeriodicTimer",
+    "SimClock",
     "SystemClock",
     "Tick",
     "every",

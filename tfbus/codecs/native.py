@@ -189,6 +189,7 @@ for _cls in (
     _m.PoseStamped,
     _m.Vector3Stamped,
     _m.JointState,
+    _m.Clock,
 ):
     register_message_type(_cls)
 

@@ -16,6 +16,8 @@ rosbags message builder.
   :data:`SCAN_MD5SUM`) into a :class:`~tfbus.sensor_msgs.LaserScan`, by :mod:`struct` and
   ``numpy.frombuffer``, bounded (:data:`MAX_SCAN_BEAMS`); tested equal to rosbags'
   ``serialize_ros1``. Used by the ROS 1 transport's scan topics.
+* :func:`encode_clock`, :func:`decode_clock` -- ``rosgraph_msgs/Clock`` (md5
+  :data:`CLOCK_MD5SUM`): one ``time``, two little-endian ``uint32`` (secs, nsecs).
 
 **Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` (a ``ValueError``) and
 nothing else; encoding raises :class:`~tfbus.errors.WireEncodeError`.
@@ -34,7 +36,7 @@ import numpy as np
 
 from tfbus.core.kernels import TF_FROM_ROS1
 from tfbus.errors import WireDecodeError, WireEncodeError
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import Clock, Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.sensor_msgs import LaserScan
 from tfbus.time import NSEC_PER_SEC, Time
 
@@ -42,6 +44,9 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 __all__ = [
+    "CLOCK_MD5SUM",
+    "CLOCK_MSGDEF",
+    "CLOCK_TYPE",
     "MAX_SCAN_BEAMS",
     "ROSBAGS_TF_TYPE",
     "SCAN_MD5SUM",
@@ -50,9 +55,11 @@ __all__ = [
     "TF_MSGDEF",
     "TF_TYPE",
     "TFCodec",
+    "decode_clock",
     "decode_laser_scan",
     "decode_ros1",
     "decode_ros1_struct",
+    "encode_clock",
     "from_rosbags",
     "scan_definition",
     "tf_typestore",
@@ -75,6 +82,13 @@ SCAN_MD5SUM: Final = "90c7ef2dc6895d81024acba2ac42f369"
 """ROS 1 md5 of ``sensor_msgs/LaserScan`` (``rosmsg md5 sensor_msgs/LaserScan``; checked
 against rosbags' by :func:`scan_definition`)."""
 ROSBAGS_SCAN_TYPE: Final = "sensor_msgs/msg/LaserScan"
+CLOCK_TYPE: Final = "rosgraph_msgs/Clock"
+"""The ROS 1 type of ``/clock`` (simulated time)."""
+CLOCK_MSGDEF: Final = "time clock\n"
+"""The full definition of ``rosgraph_msgs/Clock`` (``Clock.msg``, comments removed)."""
+CLOCK_MD5SUM: Final = "a9c97c1d230cfc112e270351a944ee47"
+"""ROS 1 md5 of ``rosgraph_msgs/Clock`` (``rosmsg md5 rosgraph_msgs/Clock`` on Debian's
+ROS 1; the md5 of ``"time clock"``, genmsg's rule for a message of builtin fields)."""
 MAX_SCAN_BEAMS: Final = 1_000_000
 """Most beams :func:`decode_laser_scan` accepts in ``ranges`` and in ``intensities`` each
 by default (a 0.1 degree, 360 degree laser has 3 600)."""
@@ -544,3 +558,42 @@ def scan_definition() -> str:
     if md5 != SCAN_MD5SUM:  # pragma: no cover - a rosbags regression, not an input error
         raise RuntimeError(f"rosbags gives md5 {md5} for {SCAN_TYPE}, expected {SCAN_MD5SUM}")
     return str(definition)
+
+
+# -- rosgraph_msgs/Clock ------------------------------------------------------------------
+
+_TIME = struct.Struct("<II")  # ROS 1 time: uint32 secs, uint32 nsecs
+
+
+def encode_clock(message: Clock) -> bytes:
+    """A :class:`~tfbus.messages.Clock` as ROS 1 serializes ``rosgraph_msgs/Clock``: 8
+    bytes, ``uint32`` seconds then ``uint32`` nanoseconds, little endian (ROS wiki "msg",
+    "Serialization"; ROS 1 ``time`` is unsigned, seconds below 2**32).
+
+    Raises:
+        WireEncodeError: ``message`` is not a Clock holding a :class:`~tfbus.time.Time`,
+            or its seconds do not fit a ``uint32`` (after year 2106).
+    """
+    stamp = message.clock if isinstance(message, Clock) else None
+    if not isinstance(stamp, Time):
+        raise WireEncodeError(f"{CLOCK_TYPE}.clock must be a Time, got {stamp!r}")
+    sec, nsec = divmod(stamp.ns, NSEC_PER_SEC)
+    if sec >= 2**32:
+        raise WireEncodeError(f"{CLOCK_TYPE}.clock {sec} s does not fit a ROS 1 uint32 time")
+    return _TIME.pack(sec, nsec)
+
+
+def decode_clock(raw: bytes | memoryview) -> Clock:
+    """A ROS 1 serialized ``rosgraph_msgs/Clock`` (see :func:`encode_clock`) as a
+    :class:`~tfbus.messages.Clock`.
+
+    Raises:
+        WireDecodeError: not exactly 8 bytes, or ``nsecs`` of a billion or more (the
+            ROS 1 time normal form).
+    """
+    if len(raw) != _TIME.size:
+        raise WireDecodeError(f"malformed {CLOCK_TYPE}: {len(raw)} bytes, expected 8")
+    sec, nsec = _TIME.unpack(raw)
+    if nsec >= NSEC_PER_SEC:
+        raise WireDecodeError(f"malformed {CLOCK_TYPE}: clock.nsecs {nsec} >= 1e9")
+    return Clock(Time.from_ns(sec * NSEC_PER_SEC + nsec))

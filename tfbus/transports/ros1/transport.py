@@ -24,11 +24,15 @@ from anyio.streams.stapled import MultiListener
 
 from tfbus._aio import open_pumped_connection, running_asyncio_loop
 from tfbus.codecs.ros1 import (
+    CLOCK_MD5SUM,
+    CLOCK_MSGDEF,
+    CLOCK_TYPE,
     SCAN_MD5SUM,
     SCAN_TYPE,
     TF_MD5SUM,
     TF_TYPE,
     TFCodec,
+    decode_clock,
     decode_laser_scan,
     scan_definition,
 )
@@ -189,7 +193,8 @@ class _Inbound:
         self._deliver = bus.deliver_nowait
         self._scan = topic in node._scan_topics
         self._raw = node._raw_handlers.get(topic)
-        self._md5 = node._md5_of(topic)
+        self._clock = topic == node._clock_topic
+        self._md5 = node._topic_md5(topic)
         self.callerid = ""
         self._decode = node._codec.decode
         self._stats = node._stats
@@ -204,6 +209,8 @@ class _Inbound:
                 self._raw(bytes(raw), self.callerid)
             elif self._scan:  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, decode_laser_scan(raw))
+            elif self._clock:  # WireDecodeError: counted in malformed
+                self._deliver(self.topic, decode_clock(raw))
             else:
                 transforms = self._decode(raw)  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, self._message(tuple(transforms)))
@@ -224,6 +231,16 @@ class _Inbound:
         self.header_or_end.set()
 
 
+def _is_global_name(topic: str) -> bool:
+    """Whether ``topic`` is a global ROS graph name (``/a/b_c``)."""
+    return (
+        topic.startswith("/")
+        and all(c.isalnum() or c in "/_" for c in topic)
+        and "//" not in topic
+        and not topic.endswith("/")
+    )
+
+
 class Ros1Transport:
     """A :class:`~tfbus.bus.Transport` that is a ROS 1 node.
 
@@ -240,6 +257,12 @@ class Ros1Transport:
             :class:`~tfbus.sensor_msgs.LaserScan` (:func:`~tfbus.codecs.ros1.decode_laser_scan`;
             a malformed one closes its connection and is counted in ``malformed``).
             Receive only: a LaserScan published on the bus is not sent to ROS 1.
+        clock_topic: a ``rosgraph_msgs/Clock`` topic to subscribe to (``"/clock"`` for
+            simulated time, :data:`~tfbus.topics.CLOCK_TOPIC`): each message is delivered
+            to the bus as a :class:`~tfbus.messages.Clock`
+            (:func:`~tfbus.codecs.ros1.decode_clock`), what a
+            :class:`~tfbus.clock.SimClock` on the bus follows; default ``None``: not
+            subscribed. Receive only.
         queue_size: frames queued per subscriber connection before the oldest is dropped.
         max_message_bytes: largest accepted TCPROS frame; a larger one closes the
             connection (counted as malformed).
@@ -251,8 +274,8 @@ class Ros1Transport:
 
     Raises:
         ValueError: a ``master_uri`` that is not ``http://host:port``, a node name that
-            is not a ROS graph name, or a scan topic that is also in ``topics`` or is not
-            a ROS graph name.
+            is not a ROS graph name, or a scan topic or the clock topic that is also
+            carried otherwise or is not a global ROS graph name.
     """
 
     def __init__(
@@ -263,6 +286,7 @@ class Ros1Transport:
         *,
         topics: Sequence[str] = _TOPICS,
         scan_topics: Sequence[str] = (),
+        clock_topic: str | None = None,
         queue_size: int = 100,
         max_message_bytes: int = 16 * 1024 * 1024,
         master_timeout: float = 2.0,
@@ -288,10 +312,17 @@ class Ros1Transport:
         for topic in self._scan_topics:
             if topic in self._topics:
                 raise ValueError(f"scan topic {topic!r} is already carried as a tf topic")
-            if not topic.startswith("/") or not all(c.isalnum() or c in "/_" for c in topic) \
-                    or "//" in topic or topic.endswith("/"):
+            if not _is_global_name(topic):
                 raise ValueError(f"scan topic {topic!r} is not a global ROS graph name")
-        self._subscribed = self._topics + self._scan_topics
+        if clock_topic is not None:
+            if clock_topic in self._topics or clock_topic in self._scan_topics:
+                raise ValueError(f"clock topic {clock_topic!r} is already carried")
+            if not _is_global_name(clock_topic):
+                raise ValueError(f"clock topic {clock_topic!r} is not a global ROS graph name")
+        self._clock_topic = clock_topic
+        self._subscribed = self._topics + self._scan_topics + (
+            () if clock_topic is None else (clock_topic,)
+        )
         # topics of other ROS 1 types, carried as serialised bytes (subscribe_raw /
         # advertise_raw): topic -> (type, md5sum); the subscribed ones' handlers
         self._raw_types: dict[str, tuple[str, str]] = {}
@@ -547,11 +578,6 @@ class Ros1Transport:
         publishers = sum(1 for t, _ in self._delivering if t == topic)
         return publishers, len(self._outgoing.get(topic, ()))
 
-    def _md5_of(self, topic: str) -> str:
-        if topic in self._raw_types:
-            return self._raw_types[topic][1]
-        return SCAN_MD5SUM if topic in self._scan_topics else TF_MD5SUM
-
     # -- master ------------------------------------------------------------------------
 
     async def _master_loop(self, bus: BusLike) -> None:
@@ -658,11 +684,30 @@ class Ros1Transport:
 
     def topic_type(self, topic: str) -> str:
         """The ROS 1 message type of ``topic`` (``sensor_msgs/LaserScan`` for a scan
-        topic, a raw topic's own type, else ``tf2_msgs/TFMessage``), as
-        ``getSubscriptions`` reports it."""
+        topic, ``rosgraph_msgs/Clock`` for the clock topic, a raw topic's own type, else
+        ``tf2_msgs/TFMessage``), as ``getSubscriptions`` reports it."""
         if topic in self._raw_types:
             return self._raw_types[topic][0]
-        return SCAN_TYPE if topic in self._scan_topics else TF_TYPE
+        if topic in self._scan_topics:
+            return SCAN_TYPE
+        return CLOCK_TYPE if topic == self._clock_topic else TF_TYPE
+
+    def _topic_md5(self, topic: str) -> str:
+        """The md5sum of :meth:`topic_type` (TCPROS connection header)."""
+        if topic in self._raw_types:
+            return self._raw_types[topic][1]
+        if topic in self._scan_topics:
+            return SCAN_MD5SUM
+        return CLOCK_MD5SUM if topic == self._clock_topic else TF_MD5SUM
+
+    def _topic_definition(self, topic: str) -> str:
+        """The message definition of :meth:`topic_type` (TCPROS connection header; empty
+        for a raw topic, whose definition tfbus does not know)."""
+        if topic in self._raw_types:
+            return ""
+        if topic in self._scan_topics:
+            return self._scan_definition
+        return CLOCK_MSGDEF if topic == self._clock_topic else self._codec.definition
 
     def publications(self) -> Sequence[str]:
         """``getPublications``: the topics this node has published on so far."""
@@ -824,16 +869,13 @@ class Ros1Transport:
         """
         host, port = await self._request_topic(topic, uri)
         link = _Inbound(self, bus, topic, uri)
-        scan = topic in self._scan_topics
-        raw = topic in self._raw_types
         hello = encode_header(
             {
                 "callerid": self._name,
                 "topic": topic,
-                "md5sum": self._md5_of(topic),
+                "md5sum": self._topic_md5(topic),
                 "type": self.topic_type(topic),
-                "message_definition": "" if raw else self._scan_definition if scan
-                else self._codec.definition,
+                "message_definition": self._topic_definition(topic),
                 "tcp_nodelay": "1",
             }
         )
@@ -923,7 +965,7 @@ class Ros1Transport:
                 return
             topic = header.get("topic", "")
             md5 = header.get("md5sum", "")
-            ours = self._md5_of(topic)
+            ours = self._topic_md5(topic)
             if topic not in self._published or md5 not in (ours, "*"):
                 why = (
                     f"{self._name} does not publish {topic!r}"

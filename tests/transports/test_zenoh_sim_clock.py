@@ -1,0 +1,99 @@
+"""SimClock over Zenoh: /clock published on one bus drives simulated time on another.
+
+Two buses in one process joined by Zenoh sessions on explicit 127.0.0.1 endpoints
+(multicast scouting off, the transport's defaults). Zenoh may drop a message under load
+(``CongestionControl.DROP``), so the publishing side repeats each ``/clock`` until the
+other side has read it; every wait is bounded.
+"""
+
+from __future__ import annotations
+
+import socket
+
+import anyio
+import pytest
+
+pytest.importorskip("zenoh")
+
+from tfbus import Buffer, Bus, SimClock, TransformListener
+from tfbus.errors import TimeoutException
+from tfbus.messages import (
+    Clock,
+    Header,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
+from tfbus.time import Time
+from tfbus.topics import CLOCK_TOPIC
+from tfbus.transports.zenoh import ZenohTransport
+
+pytestmark = pytest.mark.anyio
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+async def test_clock_from_another_bus_drives_sleeps_and_lookups() -> None:
+    port = free_port()
+    sim = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="simulator")
+    app = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="app")
+    async with Bus(transport=sim) as a, Bus(transport=app) as b, SimClock(b) as clock:
+        buffer = Buffer(clock=clock)
+        async with TransformListener(buffer, b), anyio.create_task_group() as tg:
+            with anyio.fail_after(10):
+                await sim.wait_matching(CLOCK_TOPIC)
+
+            async def publish_clock(sec: int) -> None:
+                """Publish /clock at ``sec`` until the app's clock reads it (bounded)."""
+                with anyio.fail_after(10):
+                    while clock.now() < Time(sec):
+                        a.publish_nowait(CLOCK_TOPIC, Clock(Time(sec)))
+                        await anyio.sleep(0.02)
+
+            assert clock.now() == Time(0)  # nothing heard yet
+            results: dict[str, object] = {}
+
+            async def sleeper() -> None:
+                await clock.sleep_until(Time(3))
+                results["sleep"] = clock.now()
+
+            async def lookup(child: str, timeout: float) -> None:
+                try:
+                    t = await buffer.lookup_transform_async("map", child, Time(5), timeout)
+                    results[child] = (t.transform.translation.x, clock.now())
+                except TimeoutException:
+                    results[child] = ("timeout", clock.now())
+
+            tg.start_soon(sleeper)
+            for sec in (1, 2):
+                await publish_clock(sec)
+            assert results == {}
+            await publish_clock(3)
+            with anyio.fail_after(10):
+                while "sleep" not in results:
+                    await anyio.sleep(0.01)
+            assert results == {"sleep": Time(3)}
+
+            tg.start_soon(lookup, "base", 3.0)  # from 3 s: deadline at 6 s of sim time
+            tg.start_soon(lookup, "nowhere", 1.0)  # deadline at 4 s
+            await publish_clock(4)
+            with anyio.fail_after(10):
+                while "nowhere" not in results:
+                    await anyio.sleep(0.01)
+            assert results["nowhere"] == ("timeout", Time(4))
+            assert "base" not in results
+            await publish_clock(5)
+            stamped = TFMessage(
+                (TransformStamped(Header(Time(5), "map"), "base", Transform(Vector3(2.5, 0, 0))),)
+            )
+            with anyio.fail_after(10):
+                while "base" not in results:
+                    a.publish_nowait("/tf", stamped)
+                    await anyio.sleep(0.02)
+            assert results["base"] == (2.5, Time(5))
+            assert clock.jumps == 0 and clock.dropped == 0

@@ -1,0 +1,405 @@
+"""``SimClock``: simulated time read from ``/clock`` on a bus (ROS ``use_sim_time``)."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from contextlib import AbstractContextManager, ExitStack
+from types import TracebackType
+from typing import TYPE_CHECKING
+
+import anyio
+
+from tfbus.clock._base import JumpCallback
+from tfbus.clock._manual import ManualClock
+from tfbus.errors import SimTimeStalled
+from tfbus.messages import Clock as ClockMessage
+from tfbus.ratelimit import CountLimitedLog
+from tfbus.time import NSEC_PER_SEC, Duration, Time
+from tfbus.topics import CLOCK_TOPIC
+
+if TYPE_CHECKING:
+    from tfbus.bus import Bus
+    from tfbus.subscription import CallbackSubscription
+
+_log = logging.getLogger("tfbus.clock")
+
+MAX_FORWARD_STEP: float = 1e9
+"""Default bound, in seconds, of how far one ``/clock`` may move a :class:`SimClock`
+ahead of the time it reads (about 31.7 years); a message further ahead is dropped."""
+
+
+class _WallGuard:
+    """An ``anyio.CancelScope`` on wall time around one wait of a :class:`SimClock`:
+    its deadline is ``wall_timeout`` after the wait began or after the last valid
+    ``/clock``, whichever is later; leaving the scope after it fired raises
+    :class:`~tfbus.errors.SimTimeStalled`."""
+
+    __slots__ = ("_clock", "_scope")
+
+    def __init__(self, clock: SimClock) -> None:
+        self._clock = clock
+        self._scope = anyio.CancelScope()
+
+    def refresh(self, deadline: float) -> None:
+        self._scope.deadline = deadline
+
+    def __enter__(self) -> _WallGuard:
+        clock = self._clock
+        assert clock._wall_timeout is not None
+        self._scope.deadline = anyio.current_time() + clock._wall_timeout
+        self._scope.__enter__()
+        clock._guards.add(self)
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool:
+        self._clock._guards.discard(self)
+        suppressed = bool(self._scope.__exit__(exc_type, exc, tb))
+        if self._scope.cancelled_caught:
+            clock = self._clock
+            raise SimTimeStalled(
+                f"no {clock.topic} message for {clock._wall_timeout:g} s of wall time "
+                f"while waiting on simulated time (now {clock.now().to_sec():.9f} s)"
+            )
+        return suppressed
+
+
+class SimClock:
+    """Simulated time: the newest ``rosgraph_msgs/Clock`` heard on ``/clock`` of a bus,
+    as a ROS node with ``use_sim_time`` reads it (rospy ``rospy.Time.now()``, rclpy
+    ``Clock(clock_type=ROS_TIME)`` with ``use_sim_time``; ``rclpy/time_source.py``).
+
+    ``async with SimClock(bus) as clock:`` subscribes to ``/clock`` on the open ``bus``
+    (a :class:`~tfbus.messages.Clock` per message, from another process through any
+    transport that carries the topic, or published in this one); leaving the block
+    unsubscribes. It is a :class:`~tfbus.clock.Clock`, so a
+    :class:`~tfbus.buffer.Buffer`, a :class:`~tfbus.listener.TransformListener`,
+    :func:`~tfbus.clock.every` and every ``timeout=`` of tfbus can run on it.
+
+    Semantics (as rospy and rclpy with ``use_sim_time``):
+
+    * ``now()`` is ``Time(0)`` until the first ``/clock`` arrives, then the newest one.
+    * ``sleep``, ``sleep_until``, ``move_on_after`` / ``fail_after`` deadlines,
+      ``call_later`` and ``every()`` ticks are deadlines on simulated time: they advance
+      only as ``/clock`` advances (a paused simulation pauses them) and are woken by the
+      ``/clock`` message that reaches them, inside its delivery (nothing polls). The
+      deadline machinery is a :class:`~tfbus.clock.ManualClock` that each message sets.
+    * A ``/clock`` earlier than ``now()`` (a looping bag, a reset world) is a jump back:
+      ``now()`` follows it, the :meth:`on_jump` callbacks get ``(old, new)`` (a
+      :class:`~tfbus.listener.TransformListener` or :class:`~tfbus.buffer.Buffer` on this
+      clock clears its buffer, as tf2_ros does), it is counted in :attr:`jumps` and
+      logged (the first, then one in a thousand). Pending deadlines keep their absolute
+      times. Two publishers of ``/clock`` whose stamps interleave make one jump back per
+      backward step: :attr:`jumps` growing steadily is the sign of them.
+    * A message that is not a ``Clock`` holding a :class:`~tfbus.time.Time` (a negative
+      or non-integer stamp cannot be one), or one more than ``max_forward_step`` seconds
+      ahead of ``now()`` once a first ``/clock`` was accepted, is dropped, counted in
+      :attr:`dropped` and logged (the first of each kind, then one in a thousand); the
+      valid messages around it are kept. The first ``/clock`` is accepted at any valid
+      time (a bag recorded on wall time starts near 1.7e9 s).
+
+    ``wall_timeout`` (seconds of wall time, ``None`` = no bound) guards every wait on
+    simulated time against a simulation that died: a ``sleep``, ``sleep_until`` or
+    ``move_on_after`` / ``fail_after`` block during which no valid ``/clock`` arrives for
+    ``wall_timeout`` wall seconds raises :class:`~tfbus.errors.SimTimeStalled` (a
+    ``TimeoutError``). A paused simulation that still publishes ``/clock`` is alive:
+    its waits go on. With a ``wall_timeout``, :meth:`call_later` returns ``None``, so a
+    :class:`~tfbus.buffer.Buffer`'s ``timeout=`` waits use the guarded
+    :meth:`move_on_after` instead. Without a bound, a wait on a clock whose ``/clock``
+    never advances lasts until cancelled, as in ROS.
+
+    Use from the event loop of the bus.
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        *,
+        topic: str = CLOCK_TOPIC,
+        wall_timeout: float | None = None,
+        max_forward_step: float = MAX_FORWARD_STEP,
+    ) -> None:
+        """Create a clock following ``topic`` (default ``/clock``) on ``bus`` (subscribed
+        on entering ``async with``).
+
+        Args:
+            bus: the bus carrying ``/clock`` (open when the clock is entered).
+            topic: the topic of ``rosgraph_msgs/Clock`` messages.
+            wall_timeout: seconds of wall time without a valid ``/clock`` after which a
+                wait on this clock raises :class:`~tfbus.errors.SimTimeStalled`;
+                ``None`` (default): no bound.
+            max_forward_step: seconds; a ``/clock`` further ahead of ``now()`` is dropped
+                (default :data:`MAX_FORWARD_STEP`, 1e9 s).
+
+        Raises:
+            ValueError: ``wall_timeout`` is not a positive finite number, or
+                ``max_forward_step`` is not a positive number (``inf`` allowed).
+            TypeError: ``wall_timeout`` or ``max_forward_step`` is not a number.
+        """
+        if wall_timeout is not None:
+            if isinstance(wall_timeout, bool) or not isinstance(wall_timeout, (int, float)):
+                raise TypeError(f"wall_timeout must be a number of seconds, got {wall_timeout!r}")
+            if not (0 < wall_timeout < math.inf):
+                raise ValueError(
+                    f"wall_timeout must be positive and finite seconds, got {wall_timeout!r}"
+                )
+        if isinstance(max_forward_step, bool) or not isinstance(max_forward_step, (int, float)):
+            raise TypeError(
+                f"max_forward_step must be a number of seconds, got {max_forward_step!r}"
+            )
+        if not max_forward_step > 0:
+            raise ValueError(
+                f"max_forward_step must be a positive number of seconds, got {max_forward_step!r}"
+            )
+        self._bus = bus
+        self._topic = topic
+        self._wall_timeout = None if wall_timeout is None else float(wall_timeout)
+        self._max_step_ns = (
+            None if math.isinf(max_forward_step) else int(max_forward_step * NSEC_PER_SEC)
+        )
+        self._core = ManualClock()
+        self._guards: set[_WallGuard] = set()
+        self._subscription: CallbackSubscription | None = None
+        self._entered = False
+        self._received = 0
+        self._accepted = 0
+        self._dropped = 0
+        self._jumps = 0
+        self._logs = CountLimitedLog(_log, 1000)
+
+    # -- lifecycle --------------------------------------------------------------------
+
+    async def __aenter__(self) -> SimClock:
+        """Subscribe to the topic on the bus.
+
+        Raises:
+            RuntimeError: the clock was already entered, or the bus is not open.
+            anyio.ClosedResourceError: the bus is closed.
+        """
+        if self._entered:
+            raise RuntimeError("a SimClock can be entered only once")
+        self._entered = True
+        self._subscription = self._bus.subscribe_callback(self._topic, self._on_clock)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        """Unsubscribe; the body's exception, if any, leaves as itself. ``now()`` keeps
+        the last time read."""
+        if self._subscription is not None:
+            self._subscription.close()
+            self._subscription = None
+
+    # -- statistics -------------------------------------------------------------------
+
+    @property
+    def topic(self) -> str:
+        """The topic followed (``/clock`` by default)."""
+        return self._topic
+
+    @property
+    def received(self) -> int:
+        """Messages delivered on the topic, valid or not."""
+        return self._received
+
+    @property
+    def accepted(self) -> int:
+        """Valid ``/clock`` messages that set the time (equal stamps included)."""
+        return self._accepted
+
+    @property
+    def dropped(self) -> int:
+        """Messages dropped: not a ``Clock`` of a ``Time``, or too far ahead."""
+        return self._dropped
+
+    @property
+    def jumps(self) -> int:
+        """Backward jumps of simulated time (each ``/clock`` earlier than ``now()``)."""
+        return self._jumps
+
+    # -- the topic --------------------------------------------------------------------
+
+    def _on_clock(self, message: object) -> None:
+        self._received += 1
+        stamp = message.clock if isinstance(message, ClockMessage) else None
+        if not isinstance(stamp, Time):
+            self._dropped += 1
+            self._logs.log(
+                logging.WARNING,
+                "dropping a %s on %s: expected a rosgraph_msgs/Clock of a Time",
+                type(message).__name__,
+                self._topic,
+            )
+            return
+        now_ns = self._core.now_ns()
+        new_ns = stamp.ns
+        if self._accepted and self._max_step_ns is not None and new_ns - now_ns > self._max_step_ns:
+            self._dropped += 1
+            self._logs.log(
+                logging.WARNING,
+                "dropping a %s of %.9f s: more than %g s ahead of the simulated time %.9f s",
+                self._topic,
+                new_ns / 1e9,
+                self._max_step_ns / 1e9,
+                now_ns / 1e9,
+            )
+            return
+        self._accepted += 1
+        if self._guards:
+            deadline = anyio.current_time() + (self._wall_timeout or 0.0)
+            for guard in list(self._guards):
+                guard.refresh(deadline)
+        if new_ns < now_ns:
+            self._jumps += 1
+            self._logs.log(
+                logging.WARNING,
+                "simulated time on %s jumped back from %.9f s to %.9f s",
+                self._topic,
+                now_ns / 1e9,
+                new_ns / 1e9,
+            )
+        self._core.set_nowait(stamp)
+
+    # -- Clock protocol ---------------------------------------------------------------
+
+    def now(self) -> Time:
+        """The simulated time: the newest accepted ``/clock``, ``Time(0)`` before any."""
+        return self._core.now()
+
+    def now_ns(self) -> int:
+        """:meth:`now` as int nanoseconds."""
+        return self._core.now_ns()
+
+    async def sleep_until(self, t: Time) -> None:
+        """Return once a ``/clock`` at ``t`` or later has arrived (after a checkpoint if
+        ``now() >= t`` already).
+
+        Raises:
+            SimTimeStalled: ``wall_timeout`` passed with no valid ``/clock``.
+            anyio.get_cancelled_exc_class(): the calling task was cancelled meanwhile.
+        """
+        if self._wall_timeout is None:
+            await self._core.sleep_until(t)
+            return
+        with _WallGuard(self):
+            await self._core.sleep_until(t)
+
+    async def sleep(self, seconds: float | Duration) -> None:
+        """Sleep ``seconds`` (or a :class:`~tfbus.time.Duration`) of simulated time:
+        until a ``/clock`` at ``now() + seconds`` or later arrives. ``<= 0``: a
+        checkpoint; ``math.inf``: until cancelled (or ``wall_timeout``).
+
+        Raises:
+            SimTimeStalled: ``wall_timeout`` passed with no valid ``/clock``.
+            anyio.get_cancelled_exc_class(): the calling task was cancelled meanwhile.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
+        """
+        if self._wall_timeout is None:
+            await self._core.sleep(seconds)
+            return
+        with _WallGuard(self):
+            await self._core.sleep(seconds)
+
+    def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
+        """Register ``callback(old, new)``, called when a ``/clock`` earlier than
+        ``now()`` arrives (inside its delivery). Returns the function that unregisters
+        it. Exceptions from callbacks are logged, never raised into the delivery."""
+        return self._core.on_jump(callback)
+
+    def move_on_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """A cancel scope cancelled when ``/clock`` reaches ``now() + seconds`` (see
+        :meth:`ManualClock.move_on_after <tfbus.clock.ManualClock.move_on_after>`).
+
+        Raises:
+            SimTimeStalled: on leaving the block, if ``wall_timeout`` passed in it with
+                no valid ``/clock``.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        return self._guarded(self._core.move_on_after(seconds, shield=shield))
+
+    def fail_after(
+        self, seconds: float | Duration | None, *, shield: bool = False
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        """As :meth:`move_on_after`, raising ``TimeoutError`` when the simulated-time
+        deadline ends the block.
+
+        Raises:
+            TimeoutError: on leaving the block, if the deadline cancelled it.
+            SimTimeStalled: on leaving the block, if ``wall_timeout`` passed in it with
+                no valid ``/clock``.
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number, a Duration or None.
+        """
+        return self._guarded(self._core.fail_after(seconds, shield=shield))
+
+    def call_later(
+        self, seconds: float | Duration, callback: Callable[[], object]
+    ) -> Callable[[], None] | None:
+        """Call ``callback()`` in the delivery of the ``/clock`` that reaches ``now() +
+        seconds`` (at once if ``seconds <= 0``; never for ``inf``). Returns the
+        function that cancels it; ``None`` with a ``wall_timeout`` (the caller then uses
+        the guarded :meth:`move_on_after`, as :meth:`Clock.call_later
+        <tfbus.clock.Clock.call_later>` provides).
+
+        Raises:
+            ValueError: ``seconds`` is NaN.
+            TypeError: ``seconds`` is not a number nor a Duration.
+        """
+        if self._wall_timeout is not None:
+            return None
+        return self._core.call_later(seconds, callback)
+
+    def _guarded(
+        self, deadline: AbstractContextManager[anyio.CancelScope]
+    ) -> AbstractContextManager[anyio.CancelScope]:
+        if self._wall_timeout is None:
+            return deadline
+        return _GuardedDeadline(self, deadline)
+
+    def __repr__(self) -> str:
+        return (
+            f"SimClock(topic={self._topic!r}, now={self.now()!r}, received={self._received}, "
+            f"dropped={self._dropped}, jumps={self._jumps})"
+        )
+
+
+class _GuardedDeadline:
+    """A simulated-time deadline scope inside a :class:`_WallGuard`."""
+
+    __slots__ = ("_clock", "_deadline", "_stack")
+
+    def __init__(
+        self, clock: SimClock, deadline: AbstractContextManager[anyio.CancelScope]
+    ) -> None:
+        self._clock = clock
+        self._deadline = deadline
+        self._stack = ExitStack()
+
+    def __enter__(self) -> anyio.CancelScope:
+        with ExitStack() as stack:
+            stack.enter_context(_WallGuard(self._clock))
+            scope = stack.enter_context(self._deadline)
+            self._stack = stack.pop_all()
+        return scope
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> bool:
+        return bool(self._stack.__exit__(exc_type, exc, tb))
