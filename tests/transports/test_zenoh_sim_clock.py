@@ -81,6 +81,9 @@ async def test_clock_from_another_bus_drives_sleeps_and_lookups() -> None:
 
             tg.start_soon(lookup, "base", 3.0)  # from 3 s: deadline at 6 s of sim time
             tg.start_soon(lookup, "nowhere", 1.0)  # deadline at 4 s
+            with anyio.fail_after(10):  # both waiting before the clock moves on
+                while buffer.pending_waits < 2:
+                    await anyio.sleep(0.01)
             await publish_clock(4)
             with anyio.fail_after(10):
                 while "nowhere" not in results:
