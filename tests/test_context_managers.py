@@ -173,8 +173,8 @@ async def test_compat_tf2_ros_listener() -> None:
 
 async def test_zenoh_buffer_server_and_router() -> None:
     pytest.importorskip("zenoh")
-    from tfbus.remote.zenoh import BufferServer
     from tfbus.transports.zenoh import ZenohTransport
+    from tfbus.transports.zenoh.lookups import BufferServer
     from tfbus.transports.zenoh.router import ZenohRouter
 
     def zenoh_bus() -> Bus:
@@ -188,11 +188,13 @@ async def test_zenoh_buffer_server_and_router() -> None:
     )
 
 
-async def test_ros1_buffer_server_and_client(master: Master) -> None:
-    from tfbus.remote.ros1 import Ros1BufferClient, Ros1BufferServer
+async def test_ros1_buffer_server(master: Master) -> None:
+    from tfbus.bus import Bus
+    from tfbus.remote import BufferServer
+    from tfbus.transports.ros1 import Ros1Transport
 
-    await _assert_leaves_as_itself(lambda: Ros1BufferServer(Buffer(), master.uri))
-    await _assert_leaves_as_itself(lambda: Ros1BufferClient(master.uri))
+    async with Bus(transport=Ros1Transport(master.uri, None, "127.0.0.1")) as bus:
+        await _assert_leaves_as_itself(lambda: BufferServer(Buffer(), bus))
 
 
 # -- what the README's "Use" snippet does -------------------------------------------------------

@@ -468,3 +468,22 @@ def test_relative_imports_resolve(
     importer: str, is_package: bool, level: int, target: str | None, expected: str
 ) -> None:
     assert _resolve(importer, is_package, level, target) == expected
+
+
+def test_the_remote_facade_asks_the_transports_capability() -> None:
+    """docs/architecture.md "a new capability goes on its transport": ``tfbus.remote``
+    reaches transports only through ``transports._base`` (the ``LookupServing``
+    Protocol), never a transport package: the middleware's lookups live in the
+    transport's own package (on its own session or node)."""
+    graph = _graph()
+    remote = [m for m in graph if m == "tfbus.remote" or m.startswith("tfbus.remote.")]
+    assert remote
+    problems = [
+        f"{_where(m, line)}: imports {target}"
+        for m in remote
+        for target, line in graph[m].items()
+        if target.startswith("tfbus.transports") and target != "tfbus.transports._base"
+    ]
+    assert not problems, "remote/ imports a transport package:\n" + "\n".join(problems)
+    assert "tfbus.transports.ros1.action" in MODULES
+    assert "tfbus.transports.zenoh.lookups" in MODULES

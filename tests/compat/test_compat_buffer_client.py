@@ -5,7 +5,7 @@ on ``/tf``) exactly as Debian's own ``tf2_ros.BufferClient`` (rospy, Debian's py
 answered on the same server: the transform, and the ``TF2Error`` codes as tf2's
 exceptions (an unknown frame, an extrapolation, a server that never answers). The
 action's topics are on the process's one tfbus ROS 1 node, beside ``/tf``. Against
-tfbus's own :class:`~tfbus.remote.ros1.Ros1BufferServer` too, whose held goal is
+tfbus's own :class:`~tfbus.remote.BufferServer` on a ROS 1 bus too, whose held goal is
 cancelled when the client's wait ends first."""
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from __future__ import annotations
 import json
 import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
@@ -21,11 +22,11 @@ import pytest
 from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
 
 from tfbus import Buffer as TfbusBuffer
-from tfbus import ManualClock, Time
+from tfbus import Bus, ManualClock, Time
 from tfbus.compat import tf2_ros
 from tfbus.compat._loop import background, ros1_bus, shutdown
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
-from tfbus.remote.ros1 import Ros1BufferServer
+from tfbus.remote import BufferServer
 
 ROOT = Path(__file__).resolve().parents[2]
 Q = (0.0, 0.0, 0.3826834323650898, 0.9238795325112867)
@@ -178,17 +179,28 @@ def test_no_server_times_out_as_debians(master: Master, loop: None) -> None:
     assert 0.9 <= took < 30.0  # timeout + timeout_padding, then the error
 
 
+@asynccontextmanager
+async def _served(buffer: TfbusBuffer, master_uri: str, node_name: str,
+                  **options: Any) -> AsyncIterator[BufferServer]:
+    """``BufferServer(buffer, bus, **options)`` on a ROS 1 node of its own."""
+    from tfbus.transports.ros1 import Ros1Transport
+
+    async with Bus(transport=Ros1Transport(master_uri, node_name, "127.0.0.1")) as bus, \
+            BufferServer(buffer, bus, **options) as server:
+        yield server
+
+
 def test_buffer_client_on_tfbus_server_and_cancel_on_timeout(
         master: Master, loop: None) -> None:
     served = TfbusBuffer(10.0)
     served.set_transform_static(TransformStamped(
         Header(Time(0), "map"), "laser", Transform(Vector3(1.0, 2.0, 3.0), Quaternion(*Q))),
         "test")
-    server = background.enter(Ros1BufferServer(served, master.uri))
+    server = background.enter(_served(served, master.uri, "/tf2_buffer_server"))
     # a server whose clock never moves holds a waiting goal (up to max_wait wall seconds)
     frozen = TfbusBuffer(10.0, clock=ManualClock(Time.from_sec(100.0)))
-    held = background.enter(Ros1BufferServer(frozen, master.uri, server="/frozen_server",
-                                              name="/frozen_server", max_wait=60.0))
+    held = background.enter(_served(frozen, master.uri, "/frozen_server",
+                                    name="/frozen_server", max_wait=60.0))
     client = tf2_ros.BufferClient("tf2_buffer_server")
     assert client.wait_for_server(60.0) is True
     t = client.lookup_transform("map", "laser", Time(0), 1.0)
@@ -197,7 +209,8 @@ def test_buffer_client_on_tfbus_server_and_cancel_on_timeout(
     assert tuple(t.transform.rotation) == Q
     with pytest.raises(tf2_ros.LookupException, match="nowhere"):
         client.lookup_transform("map", "nowhere", Time(0))
-    assert server.answered == 2
+    s = server.statistics()
+    assert (s.answered, s.errors) == (1, 1)
 
     slow = tf2_ros.BufferClient("frozen_server", timeout_padding=0.3)
     assert slow.wait_for_server(60.0) is True
@@ -209,11 +222,12 @@ def test_buffer_client_on_tfbus_server_and_cancel_on_timeout(
         import anyio
 
         with anyio.fail_after(30):
-            while held.cancelled == 0:  # the cancel arrives through TCPROS
+            while held.statistics().cancelled == 0:  # the cancel arrives through TCPROS
                 await anyio.sleep(0.01)
 
     background.call(cancelled_there)
-    assert held.cancelled == 1 and held.pending == 0 and held.answered == 0
+    h = held.statistics()
+    assert (h.cancelled, h.pending, h.answered, h.errors) == (1, 0, 0, 0)
 
 
 @pytest.mark.anyio
@@ -228,9 +242,8 @@ async def test_raw_topics_between_two_nodes_and_a_malformed_result_dropped(
     import anyio
 
     from tfbus import Bus
-    from tfbus.compat._action import ActionClient
-    from tfbus.remote import ros1 as action
-    from tfbus.transports.ros1 import Ros1Transport
+    from tfbus.transports.ros1 import Ros1Transport, action
+    from tfbus.transports.ros1.action import ActionClient
 
     status = struct.pack("<III", 1, 0, 0) + struct.pack("<I", 0) + struct.pack("<I", 0)
     goals: list[action.Goal] = []

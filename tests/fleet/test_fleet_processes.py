@@ -90,11 +90,11 @@ def test_router_robots_monitor_and_served_lookups() -> None:
     ("args", "status", "message"),
     [
         (("serve-buffer", "--bus", "zenoh:namespace=*"), 2,
-         "tfbus serve-buffer: error: --bus 'zenoh:namespace=*': serve one robot's namespace, "
-         "not namespace=*"),
+         "tfbus serve-buffer: error: --bus 'zenoh:namespace=*': a remote buffer needs one "
+         "namespace, not a fleet bus (namespace=*)"),
         (("serve-buffer", "--bus", "memory"), 2,
-         "tfbus serve-buffer: error: --bus 'memory': serve-buffer answers over Zenoh or ROS 1 "
-         "only (a 'zenoh' or 'ros1' bus)"),
+         "tfbus serve-buffer: error: --bus 'memory': the 'memory' transport does not serve "
+         "lookups (Zenoh and ROS 1 do)"),
         (("monitor", "--bus", "zenoh:mode=router"), 2,
          "tfbus monitor: error: --bus 'zenoh:mode=router': mode must be one of peer, client, "
          "got 'router'"),

@@ -123,7 +123,7 @@ async def test_a_querier_whose_query_expires_frees_its_slot() -> None:
                            "timeout": None, **extra}
                 payload = codec.encode(request, sender=1, seq=1)
                 await anyio.to_thread.run_sync(
-                    lambda p=payload: list(raw.get(s.server.key, payload=p, timeout=0.5)))
+                    lambda p=payload: list(raw.get(s.server.where, payload=p, timeout=0.5)))
                 await wait_until(lambda: s.server.statistics().pending == 0, timeout=20)
                 await _answered(s.client)
             assert s.server.statistics().busy == 0

@@ -1,10 +1,11 @@
 """tf2_ros's LookupTransform action on ROS 1 (127.0.0.1), both directions.
 
-A roscore on a free loopback port. (1) tfbus's Ros1BufferClient against Debian's real
-``buffer_server`` fed by Debian's ``static_transform_publisher``: the transform, or the
-server's TF2Error as the tf2 exception of the same kind. (2) Debian's real
-``tf2_ros.BufferClient`` (python3-tf2-ros, rospy + actionlib) against tfbus's
-Ros1BufferServer. Every wait is bounded; the nodes are stopped by PID.
+A roscore on a free loopback port. (1) ``tfbus.remote.BufferClient(bus)`` on a ROS 1 bus
+against Debian's real ``buffer_server`` fed by Debian's ``static_transform_publisher``: the
+transform, or the server's TF2Error as the tf2 exception of the same kind. (2) Debian's
+real ``tf2_ros.BufferClient`` (python3-tf2-ros, rospy + actionlib) against
+``tfbus.remote.BufferServer(buffer, bus)`` on a ROS 1 bus, whose action topics are
+carried by the same node as ``/tf``. Every wait is bounded; the nodes are stopped by PID.
 """
 
 from __future__ import annotations
@@ -30,23 +31,32 @@ from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures
 from ros1_hostile import FakeMaster, HostilePeer, http_answer, send_raw, tcpros_answer, xmlrpc_call
 
 from tfbus.buffer import Buffer
+from tfbus.bus import Bus
 from tfbus.errors import LookupException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
-from tfbus.remote.ros1 import (
+from tfbus.remote import BufferClient, BufferServer
+from tfbus.time import Time
+from tfbus.transports.ros1 import Ros1Transport
+from tfbus.transports.ros1.action import (
     GOAL_MD5,
     GOAL_TYPE,
     RESULT_MD5,
     RESULT_TYPE,
-    Ros1BufferClient,
-    Ros1BufferServer,
     decode_goal,
     decode_result,
     encode_goal,
 )
-from tfbus.time import Time
 from tfbus.transports.ros1.tcpros import encode_header, frame, read_frame
 
 BUFFER_SERVER = Path("/usr/lib/tf2_ros/buffer_server")
+
+
+@asynccontextmanager
+async def ros1_bus(master_uri: str, node_name: str | None = None) -> AsyncIterator[Bus]:
+    """An open bus over a ROS 1 node of ``master_uri`` (loopback)."""
+    async with Bus(transport=Ros1Transport(master_uri, node_name, "127.0.0.1")) as bus:
+        yield bus
+
 STATIC_PUBLISHER = Path("/usr/lib/tf2_ros/static_transform_publisher")
 
 
@@ -86,14 +96,16 @@ def test_goal_round_trips_through_debians_genpy() -> None:
         decode_goal(raw[:-3])
 
 
-def test_client_gets_answers_from_debians_buffer_server(master: Master) -> None:
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_client_gets_answers_from_debians_buffer_server(master: Master, backend: str) -> None:
     if not BUFFER_SERVER.exists():
         pytest.skip(f"{BUFFER_SERVER} missing (Debian's libtf2-ros1d)")
     static = master.run(str(STATIC_PUBLISHER), "1", "2", "3", "0", "0", "0", "base", "laser")
     server = master.run(str(BUFFER_SERVER))
     try:
         async def main() -> None:
-            async with Ros1BufferClient(master.uri) as client:
+            async with ros1_bus(master.uri) as bus:
+                client = BufferClient(bus)
                 with anyio.fail_after(60):
                     while True:
                         try:
@@ -110,7 +122,7 @@ def test_client_gets_answers_from_debians_buffer_server(master: Master) -> None:
                                                           "base", 1.0)
                 assert tuple(full.transform.translation) == (0.0, 0.0, 0.0)
 
-        anyio.run(main)
+        anyio.run(main, backend=backend)
     finally:
         for p in (server, static):
             p.stop()
@@ -134,7 +146,8 @@ print("full", t.transform.translation.x, flush=True)
 """
 
 
-def test_debians_buffer_client_gets_answers_from_tfbus(master: Master) -> None:
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_debians_buffer_client_gets_answers_from_tfbus(master: Master, backend: str) -> None:
     done = subprocess.run(["/usr/bin/python3", "-c", "import tf2_ros, actionlib"],
                           capture_output=True, timeout=60, check=False)
     if done.returncode != 0:
@@ -150,7 +163,8 @@ def test_debians_buffer_client_gets_answers_from_tfbus(master: Master) -> None:
         expected_error = str(exc)
 
     async def main() -> None:
-        async with Ros1BufferServer(buffer, master.uri) as server:
+        async with ros1_bus(master.uri, "/tfbus_served") as bus, \
+                BufferServer(buffer, bus) as server:
             client = master.run("/usr/bin/python3", "-c", DEBIAN_CLIENT)
             try:
                 def wait(pattern: str) -> str:
@@ -162,16 +176,18 @@ def test_debians_buffer_client_gets_answers_from_tfbus(master: Master) -> None:
                 assert await anyio.to_thread.run_sync(wait, r"lookup_error .*") == \
                     f"lookup_error {expected_error}"
                 assert await anyio.to_thread.run_sync(wait, r"full .*") == "full 0.0"
-                assert server.answered == 3 and server.malformed == 0
+                s = server.statistics()
+                assert (s.requests, s.answered, s.errors, s.malformed) == (3, 2, 1, 0)
             finally:
                 client.stop()
 
-    anyio.run(main)
+    anyio.run(main, backend=backend)
 
 
 def test_serve_buffer_command_answers_debians_buffer_client(master: Master) -> None:
     """``tfbus serve-buffer --bus ros1:master=...`` fed by Debian's
-    static_transform_publisher, asked by Debian's tf2_ros.BufferClient."""
+    static_transform_publisher, asked by Debian's tf2_ros.BufferClient; ``rosnode info``
+    shows the action's topics on the node that subscribes to ``/tf`` (one node)."""
     done = subprocess.run(["/usr/bin/python3", "-c", "import tf2_ros, actionlib"],
                           capture_output=True, timeout=60, check=False)
     if done.returncode != 0:
@@ -180,16 +196,28 @@ def test_serve_buffer_command_answers_debians_buffer_client(master: Master) -> N
     server = tfbus_cli(master, "serve-buffer", "--bus", f"ros1:master={master.uri}")
     client = None
     try:
-        server.wait_for(r"buffer server on the ROS 1 action /tf2_buffer_server", timeout=60)
+        node = server.wait_for(r"buffer server on the ROS 1 action /tf2_buffer_server "
+                               r"\(tf2_msgs/LookupTransform\) of node (/\w+)", timeout=60).group(1)
+        assert node.startswith("/tf2_buffer_server")
         script = DEBIAN_CLIENT.split("try:")[0].replace(
             'rospy.Duration(1))', 'rospy.Duration(20))')
         client = master.run("/usr/bin/python3", "-c", script)
         assert client.wait_for(r"server \S+", timeout=60).group(0) == "server True"
         assert client.wait_for(r"result .*", timeout=60).group(0) == \
             "result base laser 1.0 2.0 3.0"
+        # one node: /tf, /tf_static and the action's five topics
+        info = subprocess.run(["rosnode", "info", node], env=master.env,
+                              capture_output=True, text=True, timeout=60, check=False).stdout
+        pubs = info.split("Publications:")[1].split("Subscriptions:")[0]
+        subs = info.split("Subscriptions:")[1].split("Services:")[0]
+        for topic in ("result", "feedback", "status"):
+            assert f" * /tf2_buffer_server/{topic} [" in pubs, info
+        for topic in ("/tf ", "/tf_static ", "/tf2_buffer_server/goal ",
+                      "/tf2_buffer_server/cancel "):
+            assert f" * {topic}[" in subs, info
         assert server.stop() == 0
-        assert server.wait_for(r"summary: \d+ goals answered", timeout=20).group(0) == \
-            "summary: 1 goals answered"
+        assert server.wait_for(r"summary: \d+ requests, \d+ answered", timeout=20).group(0) \
+            == "summary: 1 requests, 1 answered"
     finally:
         for p in (client, server, static):
             if p is not None:
@@ -211,7 +239,7 @@ def _static_buffer() -> Buffer:
     return buffer
 
 
-async def _answered(client: Ros1BufferClient) -> None:
+async def _answered(client: BufferClient) -> None:
     """The server answers a lookup (bounded: the connections may still be opening)."""
     t = await client.lookup_transform("base", "laser", Time(0), 20.0)
     assert tuple(t.transform.translation) == (1.0, 2.0, 3.0)
@@ -254,107 +282,67 @@ async def _goal_publisher(goals: list[bytes], topic: str = "/tf2_buffer_server/g
 
 
 @pytest.mark.anyio
-async def test_a_subscriber_resetting_before_its_header_leaves_the_node_serving() -> None:
-    """Connections to the server's TCPROS port reset (``SO_LINGER`` 0) before sending a
-    header: each ends only its own connection (before: the BrokenResourceError anyio
-    raises for ECONNRESET escaped the header read and stopped the node)."""
+async def test_buffer_client_and_server_on_ros1_buses_answer_as_a_buffer() -> None:
+    """``BufferClient(bus)`` on one ROS 1 node asks ``BufferServer(buffer, bus)`` on
+    another (the LookupTransform action through the master): the transform (1, 2, 3),
+    the full lookup's (0, 0, 0), can_transform True / False, the server's LookupException
+    with its own message, and the counters in the one ``ServerStatistics`` shape."""
+    buffer = _static_buffer()
+    expected = ""
+    try:
+        buffer.lookup_transform("base", "ghost", Time(0))
+    except LookupException as exc:
+        expected = str(exc)
     with FakeMaster() as master:
-        async with Ros1BufferServer(_static_buffer(), master.uri) as server:
-            endpoint = server._node.tcpros_endpoint("/tf2_buffer_server/result")
+        async with ros1_bus(master.uri, "/served") as served, \
+                BufferServer(buffer, served) as server, ros1_bus(master.uri, "/asking") as bus:
+            client = BufferClient(bus)
+            await _answered(client)
+            full = await client.lookup_transform_full("laser", Time(0), "laser", Time(0),
+                                                      "base", 5.0)
+            assert tuple(full.transform.translation) == (0.0, 0.0, 0.0)
+            assert await client.can_transform("base", "laser", Time(0), 5.0) is True
+            assert await client.can_transform("base", "ghost", Time(0), 0.0) is False
+            with pytest.raises(LookupException) as err:
+                await client.lookup_transform("base", "ghost", Time(0), 0.0)
+            assert str(err.value) == expected
+            s = server.statistics()
+            assert (s.requests, s.answered, s.errors, s.malformed, s.busy, s.pending) == \
+                (5, 3, 2, 0, 0, 0)
+            assert server.where == ("the ROS 1 action /tf2_buffer_server "
+                                    "(tf2_msgs/LookupTransform) of node /served")
+
+
+@pytest.mark.anyio
+async def test_a_transport_without_lookups_is_refused_by_name() -> None:
+    """A bus whose transport does not serve lookups (``memory``): TypeError naming it,
+    from BufferServer and BufferClient alike."""
+    from tfbus.transports.memory import MemoryTransport
+
+    async with Bus(transport=MemoryTransport()) as bus:
+        for make in (lambda: BufferServer(Buffer(), bus), lambda: BufferClient(bus)):
+            with pytest.raises(TypeError, match="MemoryTransport does not"):
+                make()
+
+
+@pytest.mark.anyio
+async def test_a_subscriber_resetting_before_its_header_leaves_the_node_serving() -> None:
+    """Connections to the server node's TCPROS port reset (``SO_LINGER`` 0) before
+    sending a header: each ends only its own connection, the client keeps its answers."""
+    with FakeMaster() as master:
+        async with ros1_bus(master.uri, "/served") as served, \
+                BufferServer(_static_buffer(), served):
+            transport = served.transport
+            assert isinstance(transport, Ros1Transport)
+            endpoint = transport.tcpros_endpoint("/tf2_buffer_server/result")
             assert endpoint is not None
             for _ in range(20):
                 with socket.create_connection(endpoint, timeout=10) as sock:
                     sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
-            async with Ros1BufferClient(master.uri) as client:
+            async with ros1_bus(master.uri, "/asking") as bus:
+                client = BufferClient(bus)
                 await _answered(client)
                 await _answered(client)
-
-
-@pytest.mark.anyio
-async def test_a_publisher_uri_that_does_not_parse_is_refused_and_the_others_kept() -> None:
-    """publisherUpdate naming ``http://[::1`` (urlsplit raises ValueError) besides the
-    good client: that URI is refused and counted, the client keeps its answers (before:
-    the ValueError stopped the node)."""
-    with FakeMaster() as master:
-        async with Ros1BufferServer(_static_buffer(), master.uri) as server, \
-                Ros1BufferClient(master.uri) as client:
-            await _answered(client)
-            slave, good = server._node._slave_uri, client._node._slave_uri
-            answer = await anyio.to_thread.run_sync(lambda: xmlrpc_call(
-                slave, "publisherUpdate", "/master", "/tf2_buffer_server/goal",
-                ["http://[::1", "http://[::1]x:1/", good]))
-            assert answer[0] == 1
-            await _answered(client)
-            await _until(lambda: server.refused >= 2)
-        assert server.refused == 2
-
-
-@pytest.mark.anyio
-async def test_a_requested_port_out_of_range_is_refused() -> None:
-    """A publisher whose requestTopic answer names port 70000 (or -1, or a bool): refused
-    and counted, never connected to (before: OverflowError from connect stopped the
-    node)."""
-    peers = [HostilePeer(send_raw(http_answer(tcpros_answer(p))))
-             for p in ("<int>70000</int>", "<int>-1</int>", "<boolean>1</boolean>")]
-    with FakeMaster() as master:
-        for peer in peers:
-            peer.start()
-        try:
-            async with Ros1BufferServer(_static_buffer(), master.uri) as server, \
-                    Ros1BufferClient(master.uri) as client:
-                await _answered(client)
-                await anyio.to_thread.run_sync(lambda: xmlrpc_call(
-                    server._node._slave_uri, "publisherUpdate", "/master",
-                    "/tf2_buffer_server/goal", [p.uri for p in peers]))
-                await _until(lambda: server.refused >= len(peers))
-                await _answered(client)
-        finally:
-            for peer in peers:
-                peer.close()
-
-
-@pytest.mark.anyio
-async def test_a_subscriber_that_never_reads_does_not_stop_the_answers() -> None:
-    """A subscriber of ``result`` that connects first and never reads (a tiny receive
-    buffer), while 60 goals of 100 kB frame names (6 MB of answers, past what the
-    sockets hold) are answered at once: the good client gets every answer. Before: the
-    answers sent concurrently on the stalled stream raised BusyResourceError and stopped
-    the node, and those queued behind it never reached the client. With the per-
-    subscriber queue bounded lower, the stalled one then loses its oldest frames
-    (counted), and the client's next answer still arrives."""
-    with FakeMaster() as master:
-        async with Ros1BufferServer(_static_buffer(), master.uri) as server:
-            endpoint = server._node.tcpros_endpoint("/tf2_buffer_server/result")
-            assert endpoint is not None
-            stalled = socket.socket()
-            stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-            with stalled:
-                stalled.settimeout(10)
-                stalled.connect(endpoint)
-                stalled.sendall(encode_header({
-                    "callerid": "/stalled", "topic": "/tf2_buffer_server/result",
-                    "md5sum": RESULT_MD5, "type": RESULT_TYPE}))
-                await _until(lambda: server._node.subscribers("/tf2_buffer_server/result") == 1)
-                async with Ros1BufferClient(master.uri) as client:
-                    await _answered(client)
-                    errors: list[str] = []
-
-                    async def ask(k: int) -> None:
-                        with pytest.raises(LookupException) as err:
-                            await client.lookup_transform("base", f"{k}" + "g" * 100_000,
-                                                          Time(0), 0.0)
-                        errors.append(str(err.value))
-
-                    with anyio.fail_after(60):
-                        async with anyio.create_task_group() as tg:
-                            for k in range(60):
-                                tg.start_soon(ask, k)
-                    assert len(errors) == 60
-                    assert (server.dropped, client.dropped) == (0, 0)
-                    for queue in server._node._out["/tf2_buffer_server/result"]:
-                        queue.max_bytes = 1 << 20  # bounded lower from now on
-                    await _answered(client)
-                    assert server.dropped > 0 and client.dropped == 0
 
 
 @pytest.mark.anyio
@@ -372,17 +360,23 @@ async def test_an_answer_whose_stamp_ros1_cannot_carry_is_refused() -> None:
                                                                      2**32 - 1))
     assert decode_goal(late).source_time.ns >= 2**32 * 10**9
     with FakeMaster() as master:
-        async with Ros1BufferServer(_static_buffer(), master.uri) as server, \
-                Ros1BufferClient(master.uri) as client:
+        async with ros1_bus(master.uri, "/served") as served, \
+                BufferServer(_static_buffer(), served) as server, \
+                ros1_bus(master.uri, "/asking") as bus:
+            client = BufferClient(bus)
             await _answered(client)
             async with _goal_publisher([bytes(stamped), late]) as (uri, sent):
+                transport, asking = served.transport, bus.transport
+                assert isinstance(transport, Ros1Transport)
+                assert isinstance(asking, Ros1Transport)
                 await anyio.to_thread.run_sync(lambda: xmlrpc_call(
-                    server._node._slave_uri, "publisherUpdate", "/master",
-                    "/tf2_buffer_server/goal", [uri, client._node._slave_uri]))
+                    transport.uri, "publisherUpdate", "/master",
+                    "/tf2_buffer_server/goal", [uri, asking.uri]))
                 with anyio.fail_after(30):
                     await sent.wait()
                 await _answered(client)
-                await _until(lambda: server.refused_answers >= 2)
-        assert server.refused_answers == 2 and server.malformed == 0
+                await _until(lambda: server.statistics().unsendable >= 2)
+        s = server.statistics()
+        assert (s.unsendable, s.malformed) == (2, 0)
     with pytest.raises(ValueError, match="ROS 1 time"):
         encode_goal("g", 1, "base", "laser", Time(2**32), 0.0, Time(0), "", False)

@@ -1,9 +1,10 @@
 """``tfbus serve-buffer``: tf2_ros's buffer_server on a bus (layer 5).
 
 Listens to ``/tf`` and ``/tf_static`` on ``--bus`` into one
-:class:`~tfbus.buffer.Buffer` and answers :class:`~tfbus.remote.BufferClient` lookups
-from it (:class:`~tfbus.remote.BufferServer`) on Zenoh, or tf2_ros's LookupTransform
-action (:class:`~tfbus.remote.ros1.Ros1BufferServer`) on ROS 1, until Ctrl-C or
+:class:`~tfbus.buffer.Buffer` and answers lookups from it
+(:class:`~tfbus.remote.BufferServer`: on every bus whose transport serves lookups, the
+:class:`~tfbus.transports._base.LookupServing` capability; Zenoh: a queryable, ROS 1:
+tf2_ros's LookupTransform action on the node that also carries ``/tf``), until Ctrl-C or
 SIGTERM (or ``--duration``); then one summary line.
 """
 
@@ -69,60 +70,43 @@ def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending
     from tfbus.bus import Bus
     from tfbus.listener import TransformListener
     from tfbus.remote import BufferServer
+    from tfbus.transports._base import LookupServing
 
-    ros1 = bus.split(":", 1)[0].split("?", 1)[0] == "ros1"
-    # on ROS 1 the action node takes tf2_ros's name; the /tf listener is another node
-    spec = parse_spec(bus, name="tfbus_buffer_server_tf" if ros1 else "tf2_buffer_server")
-    if spec.scheme not in ("zenoh", "ros1"):
-        fail(f"--bus {bus!r}: serve-buffer answers over Zenoh or ROS 1 only "
-             "(a 'zenoh' or 'ros1' bus)")
-    if spec.value("namespace") == "*":
-        fail(f"--bus {bus!r}: serve one robot's namespace, not namespace=*")
+    # the node (ROS 1) or Zenoh session takes tf2_ros's name: the action and /tf share it
+    spec = parse_spec(bus, name="tf2_buffer_server")
     if not name:
         fail("--name must not be empty")
-    served: list[BufferServer] = []
-    served_ros1: list[Any] = []
+    transport = open_spec_transport(spec, name="tf2_buffer_server")
+    if not isinstance(transport, LookupServing):
+        fail(f"--bus {bus!r}: the {spec.scheme!r} transport does not serve lookups "
+             "(Zenoh and ROS 1 do)")
+    options: dict[str, Any] = {"name": name, "max_pending": max_pending, "max_wait": max_wait}
+    if max_per_peer is not None:
+        options["max_per_peer"] = max_per_peer
+    buffer = Buffer(cache_time=cache_time)
+    the_bus = Bus(transport=transport)
+    try:
+        server = BufferServer(buffer, the_bus, **options)
+    except (TypeError, ValueError) as err:
+        fail(f"--bus {bus!r}: {err}")
 
     async def main() -> None:
-        buffer = Buffer(cache_time=cache_time)
-        transport = open_spec_transport(spec, name="tfbus_buffer_server_tf" if ros1
-                                        else "tf2_buffer_server")
         async with contextlib.AsyncExitStack() as stack:
-            b = await stack.enter_async_context(Bus(transport=transport))
+            b = await stack.enter_async_context(the_bus)
             await stack.enter_async_context(TransformListener(buffer, b))
-            if ros1:
-                from tfbus.remote.ros1 import Ros1BufferServer
-
-                action = "/" + name.lstrip("/")
-                server_ros1 = Ros1BufferServer(buffer, getattr(transport, "master_uri", ""),
-                                               server=action, name=action,
-                                               max_goals=max_pending, max_wait=max_wait)
-                await stack.enter_async_context(server_ros1)
-                served_ros1.append(server_ros1)
-                where = f"the ROS 1 action {action} (tf2_msgs/LookupTransform)"
-            else:
-                server = await stack.enter_async_context(BufferServer(
-                    buffer, b, name=name, max_pending=max_pending, max_per_peer=max_per_peer,
-                    max_wait=max_wait))
-                served.append(server)
-                where = server.key
+            await stack.enter_async_context(server)
             tg = await stack.enter_async_context(anyio.create_task_group())
             with anyio.CancelScope() as scope:
                 if duration is not None:
                     scope.deadline = anyio.current_time() + duration
                 await tg.start(cancel_on_signal, scope)
-                click.echo(f"[ INFO] buffer server on {literal(where)}", err=True)
+                click.echo(f"[ INFO] buffer server on {literal(server.where)}", err=True)
                 await anyio.sleep_forever()
             tg.cancel_scope.cancel()
 
     status = run_live(main)
-    if served:
-        s = served[0].statistics()
-        click.echo(f"[ INFO] summary: {s.requests} requests, {s.answered} answered, "
-                   f"{s.errors} errors, {s.malformed} malformed, {s.busy} busy, "
-                   f"{s.cancelled} cancelled")
-    if served_ros1:
-        r = served_ros1[0]
-        click.echo(f"[ INFO] summary: {r.answered} goals answered, {r.malformed} malformed, "
-                   f"{r.rejected} rejected, {r.cancelled} cancelled")
+    s = server.statistics()
+    click.echo(f"[ INFO] summary: {s.requests} requests, {s.answered} answered, "
+               f"{s.errors} errors, {s.malformed} malformed, {s.busy} busy, "
+               f"{s.cancelled} cancelled")
     return status

@@ -40,7 +40,6 @@ import contextlib
 import math
 import sys
 import types
-import weakref
 from collections.abc import Iterable
 from functools import partial
 from typing import Any, cast
@@ -53,7 +52,6 @@ from tfbus.buffer import Buffer as _Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock
 from tfbus.compat import tf2_geometry_msgs as _geometry
-from tfbus.compat._action import ActionClient
 from tfbus.compat._args import to_duration, to_stamped, to_time, to_transform_stamped
 from tfbus.compat._loop import (
     LoopThreadError,
@@ -84,6 +82,7 @@ from tfbus.messages import (
 )
 from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
+from tfbus.transports.ros1.action import ActionClient, action_client
 
 __all__ = [
     "DEFAULT_STATIC_TF_TOPIC",
@@ -731,27 +730,12 @@ here :class:`Buffer`, which has its whole interface (``transform``, ``lookup_tra
 ``can_transform`` and their ``_full`` forms, ``registration``)."""
 
 
-_action_clients: weakref.WeakKeyDictionary[Any, dict[str, ActionClient]] = \
-    weakref.WeakKeyDictionary()
-"""The action clients of each ROS 1 transport, by namespace (one per process and ns)."""
-
-
-def _action_client(transport: Any, ns: str) -> ActionClient:
-    """The process's :class:`~tfbus.compat._action.ActionClient` for ``ns`` on
-    ``transport`` (made on first use; in the background loop)."""
-    clients = _action_clients.setdefault(transport, {})
-    key = "/" + ns.strip("/")
-    if key not in clients:
-        clients[key] = ActionClient(transport, ns)
-    return clients[key]
-
-
 class BufferClient(Buffer):
     """ROS 1 tf2_ros ``BufferClient(ns, check_frequency=None, timeout_padding=2 s)``
     (Debian's ``tf2_ros/buffer_client.py``): every lookup is a goal of tf2_ros's
     ``LookupTransform`` action (``tf2_msgs/LookupTransformAction``) sent to the buffer
     server at ``ns`` (a ``tf2_ros buffer_server`` node, or tfbus's
-    :class:`tfbus.remote.ros1.Ros1BufferServer`), which waits up to the call's
+    :class:`tfbus.remote.BufferServer` on a ROS 1 bus), which waits up to the call's
     ``timeout`` for the transform and answers with it or with a ``TF2Error``.
 
     The action's topics (``{ns}/goal``, ``cancel``, ``result``, ``status``) are carried
@@ -789,13 +773,13 @@ class BufferClient(Buffer):
                              f"{timeout_padding!r}")
         self.timeout_padding = padding
         bus = ros1_bus()
-        self.client: ActionClient = background.call(_action_client, bus.transport, ns)
+        self.client: ActionClient = background.call(action_client, bus.transport, ns)
 
     def _not_in_loop(self) -> None:
         if background.in_loop_thread() or in_event_loop():
             raise LoopThreadError(
                 "BufferClient's calls block until the server answers: they cannot run in "
-                "an event loop's own thread (use tfbus.remote.ros1.Ros1BufferClient there)")
+                "an event loop's own thread (use tfbus.remote.BufferClient(bus) there)")
 
     def wait_for_server(self, timeout: object = None) -> bool:
         """tf2_ros ``wait_for_server``: block until the action server is connected

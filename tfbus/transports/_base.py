@@ -13,6 +13,11 @@ statistics counters and the :class:`PeerAware` protocol.
   each (each transport's statistics class adds its own).
 * :class:`PeerAware` -- what a transport that knows its peers (Zenoh's liveliness)
   offers; the command line asks ``isinstance(transport, PeerAware)``, never a scheme name.
+* :class:`LookupServing` -- a transport that serves and asks transform lookups
+  (tf2_ros's ``buffer_server`` / ``BufferClient``) over its own middleware: Zenoh (a
+  queryable), ROS 1 (the ``LookupTransform`` action on the transport's node);
+  :class:`tfbus.remote.BufferServer` and :class:`tfbus.remote.BufferClient` ask
+  ``isinstance(transport, LookupServing)``. Counted in :class:`ServerStatistics`.
 * :class:`Backlogged` -- a transport whose middleware threads queue received messages
   for the event loop says how many still wait (``tfbus view`` draws only when the
   intake is caught up).
@@ -26,7 +31,16 @@ import contextlib
 import socket
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final, NamedTuple, NoReturn, Protocol, runtime_checkable
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    Final,
+    NamedTuple,
+    NoReturn,
+    Protocol,
+    TypeVar,
+    runtime_checkable,
+)
 
 import anyio
 import anyio.lowlevel
@@ -37,14 +51,25 @@ from tfbus.topics import PEERS_TOPIC, TF_TOPICS
 if TYPE_CHECKING:
     from asyncio import AbstractEventLoop, Handle
 
+    from tfbus.buffer import Buffer
+    from tfbus.messages import TransformStamped
+    from tfbus.time import Duration, Time
+
 __all__ = [
+    "DEFAULT_MAX_WAIT",
+    "DEFAULT_SERVER_NAME",
+    "MAX_FRAME_ID_BYTES",
     "PEERS_TOPIC",
     "Backlogged",
     "BusLike",
+    "LookupClient",
+    "LookupServer",
+    "LookupServing",
     "NodeLabelled",
     "PeerAware",
     "PeerEvent",
     "PeerInfo",
+    "ServerStatistics",
     "ThreadWakeup",
     "TransportStatistics",
 ]
@@ -150,6 +175,133 @@ class Backlogged(Protocol):
     @property
     def pending(self) -> int:
         """Entries received and not yet delivered into the bus (0 when caught up)."""
+        ...
+
+
+DEFAULT_SERVER_NAME: Final = "tf2_buffer_server"
+"""The default lookup server name: tf2_ros's ``buffer_server`` node name (ROS 1: the
+action ``/tf2_buffer_server``)."""
+DEFAULT_MAX_WAIT: Final = 60.0
+"""Seconds a lookup server waits for one lookup at most, by default (tf2_ros's
+``buffer_server`` waits for as long as the goal's timeout asks)."""
+
+MAX_FRAME_ID_BYTES: Final = 1024
+"""Longest frame id (UTF-8 bytes) a lookup server over Zenoh looks up. tf2 accepts any
+length (``BufferCore::validateFrameId`` refuses only empty ids and a leading ``/``); real
+frame ids (``base_link``, ``robot7/arm/wrist_3_link``) are tens of bytes."""
+
+
+@dataclass(slots=True)
+class ServerStatistics:
+    """Counters of a lookup server (:class:`LookupServer`; monotonic since it was made,
+    ``pending`` now), one shape on every transport.
+
+    Attributes:
+        requests: lookups received (Zenoh: queries; ROS 1: goals), valid or not.
+        answered: transforms (or can_transform answers) sent back.
+        errors: tf2 errors sent back (lookup, timeout, bad argument, busy on Zenoh...).
+        malformed: requests dropped unanswered because they did not decode.
+        busy: requests refused because the server held its most lookups (Zenoh:
+            ``max_pending`` or ``max_per_peer``; ROS 1: ``max_pending``, REJECTED).
+        cancelled: lookups ended because their client cancelled them or left (ROS 1:
+            PREEMPTED or RECALLED by an actionlib cancel request).
+        pending: lookups waiting now.
+        unsendable: answers the middleware cannot carry, not sent (ROS 1: a stamp at or
+            after 2**32 s).
+    """
+
+    requests: int = 0
+    answered: int = 0
+    errors: int = 0
+    malformed: int = 0
+    busy: int = 0
+    cancelled: int = 0
+    pending: int = 0
+    unsendable: int = 0
+
+
+@runtime_checkable
+class LookupServer(Protocol):
+    """A running lookup server (what :meth:`LookupServing.serve_lookups` gives): an async
+    context manager answering while entered."""
+
+    @property
+    def where(self) -> str:
+        """Where it answers, for log lines (a Zenoh key, a ROS 1 action namespace)."""
+        ...
+
+    def statistics(self) -> ServerStatistics:
+        """A copy of its counters."""
+        ...
+
+    async def __aenter__(self) -> Any:
+        """Start answering."""
+        ...
+
+    async def __aexit__(self, *exc: object) -> None:
+        """End answering; lookups still waiting are dropped."""
+        ...
+
+
+_M = TypeVar("_M")
+
+
+@runtime_checkable
+class LookupClient(Protocol):
+    """:class:`~tfbus.buffer.Buffer`'s awaitable lookups answered by a remote server
+    (what :meth:`LookupServing.lookup_client` gives): timeouts are seconds of the
+    server's clock (None: the server's longest wait); the server's tf2 error is raised
+    as the same :mod:`tfbus.errors` class."""
+
+    async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
+                               timeout: float | Duration | None = None
+                               ) -> TransformStamped:
+        """tf2_ros ``BufferClient.lookup_transform``."""
+        ...
+
+    async def lookup_transform_full(self, target_frame: str, target_time: Time,
+                                    source_frame: str, source_time: Time, fixed_frame: str,
+                                    timeout: float | Duration | None = None
+                                    ) -> TransformStamped:
+        """tf2_ros ``BufferClient.lookup_transform_full``."""
+        ...
+
+    async def can_transform(self, target_frame: str, source_frame: str, time: Time,
+                            timeout: float | Duration | None = None) -> bool:
+        """tf2_ros ``BufferClient.can_transform``."""
+        ...
+
+    async def transform(self, obj: _M, target_frame: str,
+                        timeout: float | Duration | None = None) -> _M:
+        """tf2_ros ``BufferClient.transform``."""
+        ...
+
+
+@runtime_checkable
+class LookupServing(Protocol):
+    """A transport that serves transform lookups to thin clients and asks them
+    (tf2_ros ``buffer_server`` / ``BufferClient``) over its own middleware. The facade
+    :mod:`tfbus.remote` asks ``isinstance(transport, LookupServing)``, never a scheme
+    name; a new transport gets remote lookups by implementing these two methods."""
+
+    def serve_lookups(self, buffer: Buffer, bus: Any, **options: Any) -> LookupServer:
+        """A :class:`LookupServer` answering from ``buffer`` on this transport's
+        ``bus`` (open), with the transport's options (``name``, ``max_pending``,
+        ``max_wait``...).
+
+        Raises:
+            TypeError: an option this transport does not have.
+            ValueError: a bad option value (named).
+        """
+        ...
+
+    def lookup_client(self, bus: Any, **options: Any) -> LookupClient:
+        """A :class:`LookupClient` asking the server ``name`` over ``bus`` (open).
+
+        Raises:
+            TypeError: an option this transport does not have.
+            ValueError: a bad option value (named).
+        """
         ...
 
 

@@ -49,8 +49,11 @@ Behaviour, as tf2_ros and roscpp do it:
   (unregistering, best effort) whatever peers do;
 * other topics, of any ROS 1 type, carried as serialised bytes on the same node
   (:meth:`Ros1Transport.subscribe_raw`, :meth:`Ros1Transport.advertise_raw`,
-  :meth:`Ros1Transport.send_raw_nowait`): the ``LookupTransform`` action's topics of
-  :class:`tfbus.compat.tf2_ros.BufferClient`;
+  :meth:`Ros1Transport.send_raw_nowait`): tf2_ros's ``LookupTransform`` action, both
+  ends (:mod:`~tfbus.transports.ros1.action`: :meth:`Ros1Transport.serve_lookups`,
+  :meth:`Ros1Transport.lookup_client`, the ``LookupServing`` capability behind
+  :class:`tfbus.remote.BufferServer` / :class:`tfbus.remote.BufferClient`, and
+  :class:`tfbus.compat.tf2_ros.BufferClient`);
 * ``/tf`` (or ``/tf_static``) is registered with the master when a broadcaster is made
   (:meth:`Ros1Transport.advertise`, as tf2_ros advertises at construction), so
   subscribers connect before the first message;
@@ -66,7 +69,9 @@ One module per concern, as every transport package (``docs/architecture.md``, "A
 transport"): :mod:`~tfbus.transports.ros1.transport` (:class:`Ros1Transport`, the node),
 :mod:`~tfbus.transports.ros1.options` (the ``ros1`` bus spec),
 :mod:`~tfbus.transports.ros1.rpc` (XML-RPC client and slave API server),
-:mod:`~tfbus.transports.ros1.tcpros` (connection headers and frames); the message codec
+:mod:`~tfbus.transports.ros1.tcpros` (connection headers and frames),
+:mod:`~tfbus.transports.ros1.action` (tf2_ros's ``LookupTransform`` action on the node's
+raw topics: server and client); the message codec
 is :mod:`tfbus.codecs.ros1`.
 """
 

@@ -14,7 +14,7 @@ import struct
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 from urllib.parse import urlsplit
 
 import anyio
@@ -41,6 +41,10 @@ from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports._base import BusLike, TransportStatistics
+
+if TYPE_CHECKING:
+    from tfbus.buffer import Buffer
+    from tfbus.transports.ros1.action import LookupActionClient, LookupActionServer
 
 from .rpc import BadReply, CallFailed, SlaveServer, call, serve_listener
 from .tcpros import (
@@ -388,6 +392,36 @@ class Ros1Transport:
     def statistics(self) -> Ros1Statistics:
         """A copy of the counters (see :class:`Ros1Statistics`)."""
         return replace(self._stats)
+
+    def serve_lookups(self, buffer: Buffer, bus: object, *, name: str = "/tf2_buffer_server",
+                      max_pending: int = 1000, max_wait: float = 60.0) -> LookupActionServer:
+        """tf2_ros ``buffer_server`` on this node: the ``tf2_msgs/LookupTransform``
+        action ``name`` answering from ``buffer``
+        (:class:`~tfbus.transports.ros1.action.LookupActionServer`; ``bus`` is the open
+        bus this transport runs under); :class:`~tfbus.transports._base.LookupServing`.
+
+        Raises:
+            ValueError: as :class:`~tfbus.transports.ros1.action.LookupActionServer`.
+        """
+        from tfbus.transports.ros1.action import LookupActionServer
+
+        return LookupActionServer(self, buffer, name=name, max_pending=max_pending,
+                                  max_wait=max_wait)
+
+    def lookup_client(self, bus: object, *, name: str = "/tf2_buffer_server",
+                      timeout_padding: float = 2.0,
+                      max_wait: float = 3600.0) -> LookupActionClient:
+        """tf2_ros ``BufferClient`` on this node: goals of the ``LookupTransform`` action
+        ``name`` (:class:`~tfbus.transports.ros1.action.LookupActionClient`);
+        :class:`~tfbus.transports._base.LookupServing`.
+
+        Raises:
+            ValueError: as :class:`~tfbus.transports.ros1.action.LookupActionClient`.
+        """
+        from tfbus.transports.ros1.action import LookupActionClient
+
+        return LookupActionClient(self, name=name, timeout_padding=timeout_padding,
+                                  max_wait=max_wait)
 
     def __repr__(self) -> str:
         return f"Ros1Transport(master_uri={self._master_uri!r}, node_name={self._name!r})"

@@ -23,6 +23,10 @@ One module per concern (anyio's ``_core`` style; the public names are re-exporte
 * :mod:`~tfbus.transports.zenoh.transport` -- :class:`ZenohTransport` (threads, receive
   path, late joiners, matching status);
 * :mod:`~tfbus.transports.zenoh.counters` -- :class:`ZenohStatistics`;
+* :mod:`~tfbus.transports.zenoh.lookups` -- lookups served to thin clients on a
+  queryable (its ``BufferServer`` / ``BufferClient``; :meth:`ZenohTransport.serve_lookups`
+  and :meth:`ZenohTransport.lookup_client`, the ``LookupServing`` capability behind
+  :class:`tfbus.remote.BufferServer` / :class:`tfbus.remote.BufferClient`);
 * :mod:`~tfbus.transports.zenoh.options` -- the ``zenoh`` bus spec of the command line
   (:class:`ZenohOptions`; parsing and opening are :mod:`tfbus.transports.spec`'s:
   ``open_bus("zenoh?name=planner")``).

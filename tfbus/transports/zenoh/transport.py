@@ -43,7 +43,7 @@ import time
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import anyio
 import anyio.abc
@@ -72,6 +72,9 @@ from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.fleet_keys import key_space
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
+
+if TYPE_CHECKING:
+    from tfbus.transports.zenoh.lookups import BufferClient, BufferServer
 
 __all__ = ["ZenohStatistics", "ZenohTransport"]
 
@@ -336,6 +339,31 @@ class ZenohTransport:
             peers_over_limit=self._peers.over_limit,
             send_queued=len(self._send_queue),
         )
+
+    def serve_lookups(self, buffer: Any, bus: Any, **options: Any) -> BufferServer:
+        """tf2_ros ``buffer_server`` over Zenoh: a queryable answering lookups from
+        ``buffer`` (:class:`tfbus.transports.zenoh.lookups.BufferServer`, its options:
+        ``name``, ``max_pending``, ``max_per_peer``, ``max_wait``);
+        :class:`~tfbus.transports._base.LookupServing`.
+
+        Raises:
+            TypeError: an unknown option. ValueError: as the server's constructor.
+        """
+        from tfbus.transports.zenoh.lookups import BufferServer
+
+        return BufferServer(buffer, bus, **options)
+
+    def lookup_client(self, bus: Any, **options: Any) -> BufferClient:
+        """tf2_ros ``BufferClient`` over Zenoh
+        (:class:`tfbus.transports.zenoh.lookups.BufferClient`, its options: ``name``,
+        ``timeout_padding``, ``max_wait``); :class:`~tfbus.transports._base.LookupServing`.
+
+        Raises:
+            TypeError: an unknown option. ValueError: as the client's constructor.
+        """
+        from tfbus.transports.zenoh.lookups import BufferClient
+
+        return BufferClient(bus, **options)
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"

@@ -50,7 +50,7 @@ import math
 import secrets
 import threading
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 import anyio
@@ -69,6 +69,12 @@ from tfbus.errors import (
 )
 from tfbus.messages import TransformStamped
 from tfbus.time import Duration, Time
+from tfbus.transports._base import (
+    DEFAULT_MAX_WAIT,
+    DEFAULT_SERVER_NAME,
+    MAX_FRAME_ID_BYTES,
+    ServerStatistics,
+)
 
 if TYPE_CHECKING:
     from tfbus.buffer import Buffer
@@ -86,9 +92,6 @@ __all__ = [
 
 log = logging.getLogger("tfbus.remote")
 
-DEFAULT_SERVER_NAME: Final = "tf2_buffer_server"
-"""The default server name: tf2_ros's ``buffer_server`` node name."""
-
 _EXCEPTIONS: Final[Mapping[str, type[TransformException]]] = {
     cls.__name__: cls
     for cls in (
@@ -104,13 +107,6 @@ _EXCEPTIONS: Final[Mapping[str, type[TransformException]]] = {
     )
 }
 _OPS: Final = ("lookup", "full", "can")
-DEFAULT_MAX_WAIT: Final = 60.0
-"""Seconds a :class:`BufferServer` waits for one lookup at most, by default (tf2_ros's
-``buffer_server`` waits for as long as the goal's timeout asks)."""
-MAX_FRAME_ID_BYTES: Final = 1024
-"""Longest frame id (UTF-8 bytes) a :class:`BufferServer` looks up. tf2 accepts any
-length (``BufferCore::validateFrameId`` refuses only empty ids and a leading ``/``); real
-frame ids (``base_link``, ``robot7/arm/wrist_3_link``) are tens of bytes."""
 _MAX_REQUEST_BYTES: Final = 16 << 10  # a request with 4 frame ids of 1 KiB is smaller
 _MAX_ID_CHARS: Final = 64
 # A lookup that may wait longer than this (server seconds) holds a liveliness token so
@@ -144,31 +140,6 @@ def _key(transport: ZenohTransport, name: str) -> str:
     if not name:
         raise ValueError("the server name must not be empty")
     return f"{transport.key_prefix}/@buffer/{encode_chunk(name)}"
-
-
-@dataclass(slots=True)
-class ServerStatistics:
-    """Counters of a :class:`BufferServer`.
-
-    Attributes:
-        requests: queries received.
-        answered: transforms (or can_transform answers) sent back.
-        errors: tf2 errors sent back (lookup, timeout, bad argument, busy...).
-        malformed: queries dropped unanswered (not a tfbus request).
-        busy: queries refused because ``max_pending`` lookups, or ``max_per_peer`` of the
-            same querier, were already waiting.
-        cancelled: lookups ended unanswered because their querier went (its lookup was
-            cancelled, or its Zenoh session closed).
-        pending: lookups waiting now.
-    """
-
-    requests: int = 0
-    answered: int = 0
-    errors: int = 0
-    malformed: int = 0
-    busy: int = 0
-    cancelled: int = 0
-    pending: int = 0
 
 
 def _field(request: Mapping[str, Any], name: str, kind: str) -> Any:
@@ -305,6 +276,11 @@ class BufferServer:
     @property
     def key(self) -> str:
         """The Zenoh key the server answers on."""
+        return self._key
+
+    @property
+    def where(self) -> str:
+        """Where the server answers, for log lines: its Zenoh key."""
         return self._key
 
     def statistics(self) -> ServerStatistics:
