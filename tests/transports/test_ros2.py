@@ -71,6 +71,7 @@ from tfbus.transports.ros2.dds import (
     TransformStamped_,
     Vector3_,
     cyclone_config,
+    dds_topic_name,
 )
 from tfbus.transports.spec import open_transport
 
@@ -922,6 +923,8 @@ def test_clock_codec_against_cyclonedds() -> None:
 
 def test_clock_topic_option() -> None:
     assert Ros2Transport(domain_id=1).clock_topic is None  # off by default
+    assert dds_topic_name("/clock") == "rt/clock"  # rmw's "rt" prefix
+    assert dds_topic_name("/sim_1/clock") == "rt/sim_1/clock"
     t = open_transport("ros2:domain=3", clock_topic="/clock")
     assert isinstance(t, Ros2Transport) and t.clock_topic == "/clock"
     with pytest.raises(ValueError, match="clock_topic '/tf' is already carried"):

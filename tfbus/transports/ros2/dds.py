@@ -39,6 +39,7 @@ __all__ = [
     "TFMessage_",
     "TransformStamped_",
     "cyclone_config",
+    "dds_topic_name",
 ]
 
 TF_TOPIC_DDS: Final = "rt/tf"

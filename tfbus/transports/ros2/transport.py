@@ -172,15 +172,15 @@ class Ros2Statistics(TransportStatistics):
     first five are :class:`~tfbus.transports._base.TransportStatistics`'s.
 
     Attributes:
-        sent: TFMessages written to DDS.
+        sent: TFMessages (and Clocks, with ``clock_topic``) written to DDS.
         send_errors: local messages refused (not a TFMessage or Clock, stamp outside
             int32, ...).
         received: samples taken from DDS (valid data only: a writer leaving is no sample).
         delivered: TFMessages (and Clocks, with ``clock_topic``) delivered into the bus.
         malformed: received samples dropped because they did not decode.
         send_dropped: writes DDS refused (e.g. a reliable reader's window was full).
-        not_connected: ``/tf`` messages published while the transport was not running
-            (``/tf_static`` ones are kept and written once it runs).
+        not_connected: ``/tf`` (and clock topic) messages published while the transport
+            was not running (``/tf_static`` ones are kept and written once it runs).
         not_mapped: messages on topics other than ``/tf``, ``/tf_static`` and the clock
             topic (not sent).
         batches: event-loop wake-ups that took samples.
