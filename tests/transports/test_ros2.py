@@ -39,12 +39,19 @@ pytest.importorskip("cyclonedds", reason="needs the ros2 extra: pip install 'tfb
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
-from tfbus.clock import SystemClock
-from tfbus.codecs.cdr import SEC_MAX, decode_tf_message, encode_tf_message
+from tfbus.clock import SimClock, SystemClock
+from tfbus.codecs.cdr import (
+    SEC_MAX,
+    decode_clock,
+    decode_tf_message,
+    encode_clock,
+    encode_tf_message,
+)
 from tfbus.demos.tutorial import broadcaster_node, run_listener
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.listener import TransformListener
 from tfbus.messages import (
+    Clock,
     Header,
     Quaternion,
     TFMessage,
@@ -52,9 +59,10 @@ from tfbus.messages import (
     TransformStamped,
     Vector3,
 )
-from tfbus.time import Time
+from tfbus.time import Duration, Time
 from tfbus.transports.ros2 import Ros2Transport
 from tfbus.transports.ros2.dds import (
+    Clock_,
     Header_,
     Quaternion_,
     TFMessage_,
@@ -63,6 +71,7 @@ from tfbus.transports.ros2.dds import (
     TransformStamped_,
     Vector3_,
     cyclone_config,
+    dds_topic_name,
 )
 from tfbus.transports.spec import open_transport
 
@@ -355,11 +364,11 @@ class RawWriter:
     """A raw DDS writer on rt/tf in its own process (tests/peers/ros2/raw_writer.py): a
     writer and a listening reader in one process can deadlock inside Cyclone."""
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(self, domain_id: int, *topic: str) -> None:
         env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
         env.pop("CYCLONEDDS_URI", None)
         self.proc = subprocess.Popen(
-            [sys.executable, str(RAW_WRITER), str(domain_id)],
+            [sys.executable, str(RAW_WRITER), str(domain_id), *topic],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
         )  # fmt: skip
         self.lines: queue.Queue[str] = queue.Queue()
@@ -877,3 +886,167 @@ def test_cli_static_transform_over_ros2(peers: Callable[..., Peer]) -> None:
     assert (x["parent"], x["child"], x["t"], x["r"]) == (
         "base_link", "base_laser", [0.1, 0.0, 0.2], [0.0, 0.0, 0.0, 1.0]
     )  # fmt: skip
+
+
+# -- simulated time: rosgraph_msgs/msg/Clock on rt/clock ------------------------------------------
+
+CLOCK_PEER = PEERS / "clock_peer.py"
+
+
+def test_clock_codec_against_cyclonedds() -> None:
+    from cyclonedds.idl._support import Endianness
+
+    clock = Clock(Time(123, 456_789))
+    data = encode_clock(clock)
+    # encapsulation CDR_LE, int32 sec, uint32 nanosec: 12 bytes, as rmw sends them
+    assert data == b"\x00\x01\x00\x00" + _u32(123) + _u32(456_789)
+    assert data == Clock_(Time_(123, 456_789)).serialize(endianness=Endianness.Little)
+    big = Clock_(Time_(123, 456_789)).serialize(endianness=Endianness.Big)
+    assert decode_clock(data) == decode_clock(big) == clock
+    edge = Clock(Time(SEC_MAX, 999_999_999))
+    assert decode_clock(encode_clock(edge)) == edge
+    with pytest.raises(WireEncodeError, match=r"Clock\.clock: sec=2147483648"):
+        encode_clock(Clock(Time(SEC_MAX + 1)))
+    with pytest.raises(WireEncodeError, match="must be a Time"):
+        encode_clock("junk")  # type: ignore[arg-type]
+    bad = {
+        "short": data[:11],
+        "xcdr2 delimited": b"\x00\x09\x00\x00" + data[4:],
+        "negative sec": data[:4] + (-1).to_bytes(4, "little", signed=True) + data[8:],
+        "nanosec 1e9": data[:8] + _u32(1_000_000_000),
+    }
+    for name, junk in bad.items():
+        with pytest.raises(WireDecodeError):
+            decode_clock(junk)
+        assert name  # every case raised WireDecodeError only
+
+
+def test_clock_topic_option() -> None:
+    assert Ros2Transport(domain_id=1).clock_topic is None  # off by default
+    assert dds_topic_name("/clock") == "rt/clock"  # rmw's "rt" prefix
+    assert dds_topic_name("/sim_1/clock") == "rt/sim_1/clock"
+    t = open_transport("ros2:domain=3", clock_topic="/clock")
+    assert isinstance(t, Ros2Transport) and t.clock_topic == "/clock"
+    with pytest.raises(ValueError, match="clock_topic '/tf' is already carried"):
+        Ros2Transport(clock_topic="/tf")
+    with pytest.raises(ValueError, match="clock_topic: topic 'clock' is not a global ROS"):
+        Ros2Transport(clock_topic="clock")
+    with pytest.raises(ValueError, match="clock_topic: topic '/sim//clock' is not a global"):
+        Ros2Transport(clock_topic="/sim//clock")
+    with pytest.raises(TypeError, match="unexpected ros2 transport override"):
+        open_transport("ros2", clock="/clock")
+    t = Ros2Transport(domain_id=1, clock_topic="/clock")
+    t.send_nowait("/clock", Clock(Time(5)))  # not running: counted, not sent
+    with pytest.raises(WireEncodeError, match="must be a Time"):
+        t.send_nowait("/clock", TFMessage(()))
+    plain = Ros2Transport(domain_id=1)
+    plain.send_nowait("/clock", Clock(Time(5)))  # not carried without clock_topic
+    assert t.statistics().not_connected == 1 and t.statistics().send_errors == 1
+    assert plain.statistics().not_mapped == 1
+    with pytest.raises(ValueError, match="'/clock' is not received"):
+        plain.matched_publishers("/clock")
+
+
+@pytest.mark.anyio
+async def test_tfbus_clock_to_a_tfbus_sim_clock_with_malformed_samples(anyio_backend: str) -> None:
+    """tfbus publishes Clock on one transport, a SimClock on another follows it over DDS;
+    a raw writer's samples that are valid CDR but no tfbus Clock (a negative sec, a
+    nanosec of 1e9) are counted in ``malformed`` and dropped, the valid ones kept."""
+    d = new_domain()
+    a_t = Ros2Transport(domain_id=d, clock_topic="/clock")
+    b_t = Ros2Transport(domain_id=d, clock_topic="/clock")
+    async with Bus(transport=a_t) as a, Bus(transport=b_t) as b, SimClock(b) as clock:
+        assert clock.now() == Time(0)
+        with anyio.fail_after(WAIT):
+            while clock.now() != Time(42, 5):  # best effort, volatile: until matched
+                a.publish_nowait("/clock", Clock(Time(42, 5)))
+                with anyio.move_on_after(0.1):
+                    await clock.sleep_until(Time(42, 5))
+        writer = await anyio.to_thread.run_sync(RawWriter, d, "clock")
+        try:
+            with anyio.fail_after(WAIT):
+                while b_t.matched_publishers("/clock") < 2:
+                    await anyio.sleep(0.01)  # polling a bounded condition, not a fixed wait
+            good = encode_clock(Clock(Time(50)))
+            for junk in (good[:4] + (-1).to_bytes(4, "little", signed=True) + good[8:],
+                         good[:8] + _u32(1_000_000_000)):  # fmt: skip
+                before = b_t.statistics().malformed
+                with anyio.fail_after(WAIT):
+                    while b_t.statistics().malformed == before:  # best effort: resend
+                        assert await writer.write(junk) == 0
+                        await anyio.sleep(0.01)
+            with anyio.fail_after(WAIT):
+                while clock.now() != Time(50):
+                    assert await writer.write(good) == 0
+                    with anyio.move_on_after(0.1):
+                        await clock.sleep_until(Time(50))
+        finally:
+            writer.close()
+    assert clock.dropped == 0 and clock.jumps == 0  # the junk never reached the bus
+    stats = b_t.statistics()
+    assert stats.malformed >= 2 and stats.delivered == stats.received - stats.malformed
+    assert a_t.statistics().sent >= 1 and a_t.statistics().send_errors == 0
+
+
+@pytest.mark.anyio
+async def test_rclpy_simulator_drives_a_tfbus_sim_clock(
+    anyio_backend: str, peers: Callable[..., Peer], tmp_path: Path
+) -> None:
+    """An rclpy "simulator" publishes /clock at 10x real time from 100 s (a step of 0.1
+    simulated seconds every 10 ms) and /tf stamped with it: a SimClock on the ROS 2
+    transport follows it, a lookup at clock.now() answers the broadcast values, and a
+    sleep of one simulated second ends after about 0.1 s of wall time."""
+    d = new_domain()
+    dyn = write_json(tmp_path / "d.json", [ts("base_link", "base_laser", t=(0.1, 0.0, 0.2))])
+    peers(["--simulate", "100", "--factor", "10", "--tf", str(dyn)], d, script=CLOCK_PEER)
+    transport = Ros2Transport(domain_id=d, clock_topic="/clock")
+    async with Bus(transport=transport) as bus, SimClock(bus) as clock:
+        buffer = Buffer(clock=clock)
+        async with TransformListener(buffer, bus, clock=clock):
+            with anyio.fail_after(WAIT):  # wall-time bound: DDS discovery, then /clock
+                await clock.sleep_until(Time(100))
+            start = clock.now()
+            assert start >= Time(100) and start.ns % 100_000_000 == 0  # a simulator step
+            wall = time.monotonic()
+            with anyio.fail_after(WAIT):
+                await clock.sleep(1.0)  # one simulated second
+            wall = time.monotonic() - wall
+            now = clock.now()
+            assert Duration(1) <= now - start < Duration(30) and now.ns % 100_000_000 == 0
+            with anyio.fail_after(WAIT):  # 300 simulated seconds: ~30 s of wall time
+                got = await buffer.lookup_transform_async("base_link", "base_laser", now,
+                                                          timeout=300.0)  # fmt: skip
+    assert got.header == Header(now, "base_link") and got.child_frame_id == "base_laser"
+    assert got.transform == Transform(Vector3(0.1, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0))
+    assert wall < WAIT  # ~0.1 s at 10x; bounded only (no timing assertion)
+    assert clock.dropped == 0 and clock.jumps == 0
+    assert transport.statistics().malformed == 0 and clock.accepted >= 10
+
+
+@pytest.mark.anyio
+async def test_tfbus_clock_drives_an_rclpy_node_with_use_sim_time(
+    anyio_backend: str, peers: Callable[..., Peer]
+) -> None:
+    """tfbus publishes Clock on /clock: an rclpy node with use_sim_time follows it (its
+    get_clock().now() takes each value, a step back included, as rclpy's TimeSource)."""
+    d = new_domain()
+    follower = peers(["--follow"], d, script=CLOCK_PEER)
+    transport = Ros2Transport(domain_id=d, clock_topic="/clock")
+    current = [Clock(Time(42, 5))]
+
+    async def publish_until_stopped(bus: Bus) -> None:
+        while True:  # best effort, volatile: a late subscriber needs repeated messages
+            bus.publish_nowait("/clock", current[0])
+            await anyio.sleep(0.05)
+
+    seen: list[list[int]] = []
+    async with Bus(transport=transport) as bus, anyio.create_task_group() as tg:
+        tg.start_soon(publish_until_stopped, bus)
+        for clock, expected in ((Time(42, 5), [42, 5]), (Time(43, 500_000_000), [43, 500_000_000]),
+                                (Time(7), [7, 0])):  # fmt: skip
+            current[0] = Clock(clock)
+            msg = await follower.await_message(lambda m, e=expected: m["now"] == e)
+            seen.append(msg["now"])
+        tg.cancel_scope.cancel()
+    assert seen == [[42, 5], [43, 500_000_000], [7, 0]]
+    assert transport.statistics().send_errors == 0

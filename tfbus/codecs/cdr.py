@@ -1,4 +1,5 @@
-"""ROS 2's ``tf2_msgs/msg/TFMessage`` in CDR: the one XCDR1/XCDR2 codec of tfbus.
+"""ROS 2's ``tf2_msgs/msg/TFMessage`` and ``rosgraph_msgs/msg/Clock`` in CDR: the one
+XCDR1/XCDR2 codec of tfbus.
 
 Used by the ROS 2 transport (:mod:`tfbus.transports.ros2`) and by the bag reader for ROS 2
 bags (``.db3``, ``.mcap``: :mod:`tfbus.bag.decode`). Synchronous, free of I/O and of
@@ -22,6 +23,10 @@ deserializer in ``tests/codecs/test_cdr.py``.
 :class:`~tfbus.errors.WireEncodeError`; a received negative ``sec`` (a time before 1970,
 which tfbus' :class:`~tfbus.time.Time` cannot hold) makes the sample malformed.
 
+**Clock.** ``rosgraph_msgs/msg/Clock`` is one ``builtin_interfaces/Time clock``: after the
+encapsulation header, ``int32 sec`` and ``uint32 nanosec`` (12 bytes in all, XCDR1 and
+XCDR2 alike): :func:`encode_clock`, :func:`decode_clock`.
+
 **Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` and nothing else.
 """
 
@@ -32,13 +37,23 @@ from collections.abc import Sequence
 from typing import Final
 
 from tfbus.errors import WireDecodeError, WireEncodeError
-from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Clock,
+    Header,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
 from tfbus.time import NSEC_PER_SEC, Time
 
 __all__ = [
     "SEC_MAX",
     "SEC_MIN",
+    "decode_clock",
     "decode_tf_message",
+    "encode_clock",
     "encode_tf_message",
 ]
 
@@ -224,3 +239,58 @@ def decode_tf_message(data: bytes | memoryview, *, max_transforms: int = 100_000
     except UnicodeDecodeError as exc:
         raise WireDecodeError(f"TFMessage: a frame id is not UTF-8: {exc}") from None
     return TFMessage(tuple(out))
+
+
+# -- rosgraph_msgs/msg/Clock -------------------------------------------------------------------
+
+_CLOCK_LE: Final = struct.Struct("<iI")  # builtin_interfaces/Time: int32 sec, uint32 nanosec
+_CLOCK_BE: Final = struct.Struct(">iI")
+
+
+def encode_clock(message: Clock) -> bytes:
+    """Serialize a :class:`~tfbus.messages.Clock` as ``rosgraph_msgs/msg/Clock`` in XCDR1
+    little-endian: the encapsulation header ``00 01 00 00``, ``int32 sec``, ``uint32
+    nanosec`` (12 bytes, as rmw sends it).
+
+    Raises:
+        WireEncodeError: if ``message`` is not a ``Clock`` holding a
+            :class:`~tfbus.time.Time`, or its seconds fall outside int32 (from
+            2038-01-19T03:14:08Z: ``builtin_interfaces/Time`` cannot carry them).
+    """
+    stamp = message.clock if isinstance(message, Clock) else None
+    if not isinstance(stamp, Time):
+        raise WireEncodeError(f"rosgraph_msgs/msg/Clock.clock must be a Time, got {stamp!r:.100}")
+    sec, nanosec = divmod(stamp.ns, NSEC_PER_SEC)
+    if not SEC_MIN <= sec <= SEC_MAX:
+        raise WireEncodeError(
+            f"rosgraph_msgs/msg/Clock.clock: sec={sec} is outside ROS 2's int32 range "
+            f"[{SEC_MIN}, {SEC_MAX}] (builtin_interfaces/Time); ROS 2 cannot carry it"
+        )
+    return _HEADER_LE + _CLOCK_LE.pack(sec, nanosec)
+
+
+def decode_clock(data: bytes | memoryview) -> Clock:
+    """Parse a serialized ``rosgraph_msgs/msg/Clock`` (with its encapsulation header;
+    XCDR1 or ``PLAIN_CDR2``, either byte order) into a :class:`~tfbus.messages.Clock`
+    (integer nanoseconds ``sec * 10**9 + nanosec``).
+
+    Raises:
+        WireDecodeError: if the sample is shorter than 12 bytes, has another
+            encapsulation, a negative ``sec`` (before 1970: tfbus' :class:`~tfbus.time.Time`
+            cannot hold it) or a ``nanosec`` of 10**9 or more (not a normalized
+            ``builtin_interfaces/Time``). Never anything else.
+    """
+    if len(data) < 12:
+        raise WireDecodeError(f"rosgraph_msgs/msg/Clock sample too short: {len(data)} bytes")
+    kind = (data[0] << 8) | data[1]
+    if kind in (_CDR_LE, _CDR2_LE):
+        sec, nanosec = _CLOCK_LE.unpack_from(data, 4)
+    elif kind in (_CDR_BE, _CDR2_BE):
+        sec, nanosec = _CLOCK_BE.unpack_from(data, 4)
+    else:
+        raise WireDecodeError(f"unsupported CDR encapsulation 0x{kind:04x}")
+    if sec < 0:
+        raise WireDecodeError(f"rosgraph_msgs/msg/Clock: clock.sec={sec} is before 1970")
+    if nanosec >= NSEC_PER_SEC:
+        raise WireDecodeError(f"rosgraph_msgs/msg/Clock: clock.nanosec={nanosec} >= 10**9")
+    return Clock(Time.from_ns(sec * NSEC_PER_SEC + nanosec))

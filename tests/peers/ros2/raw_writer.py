@@ -1,7 +1,8 @@
 """A raw DDS writer on rt/tf in its own process, for tests/transports/test_ros2.py.
 
-Run with the tfbus venv's python: ``raw_writer.py DOMAIN``. Commands on stdin, one per
-line; one answer line each on stdout:
+Run with the tfbus venv's python: ``raw_writer.py DOMAIN [clock]`` (``clock``: write
+``rosgraph_msgs/msg/Clock`` samples on rt/clock with the ``/clock`` writer QoS instead).
+Commands on stdin, one per line; one answer line each on stdout:
 
 * ``W <hex>`` -- write these bytes as one serialized sample; answers ``RC <return code>``
   (0: written; negative: refused by Cyclone, which validates every sample).
@@ -21,15 +22,19 @@ from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 
-from tfbus.transports.ros2.dds import TFMessage_, cyclone_config
-from tfbus.transports.ros2.transport import TF_WRITER_QOS
+from tfbus.transports.ros2.dds import Clock_, TFMessage_, cyclone_config
+from tfbus.transports.ros2.transport import CLOCK_WRITER_QOS, TF_WRITER_QOS
 
 
 def main() -> None:
     domain_id = int(sys.argv[1])
     domain = Domain(domain_id, cyclone_config())
     participant = DomainParticipant(domain_id)
-    writer = DataWriter(participant, Topic(participant, "rt/tf", TFMessage_), TF_WRITER_QOS)
+    if sys.argv[2:] == ["clock"]:
+        topic = Topic(participant, "rt/clock", Clock_)
+        writer = DataWriter(participant, topic, CLOCK_WRITER_QOS)
+    else:
+        writer = DataWriter(participant, Topic(participant, "rt/tf", TFMessage_), TF_WRITER_QOS)
     print("READY", flush=True)
     for line in sys.stdin:
         cmd, _, arg = line.strip().partition(" ")

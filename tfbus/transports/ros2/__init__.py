@@ -1,4 +1,5 @@
-"""Carry a :class:`~tfbus.bus.Bus`'s ``/tf`` and ``/tf_static`` to and from ROS 2 over DDS.
+"""Carry a :class:`~tfbus.bus.Bus`'s ``/tf`` and ``/tf_static`` (and, with ``clock_topic``,
+``/clock``) to and from ROS 2 over DDS.
 
 ::
 
@@ -26,9 +27,15 @@ from tfbus._extras import require
 require(__name__, "cyclonedds")
 
 from tfbus.transports.ros2.dds import DOMAIN_ID_MAX, cyclone_config
-from tfbus.transports.ros2.transport import TF_TYPE_HASH, Ros2Statistics, Ros2Transport
+from tfbus.transports.ros2.transport import (
+    CLOCK_TYPE_HASH,
+    TF_TYPE_HASH,
+    Ros2Statistics,
+    Ros2Transport,
+)
 
 __all__ = [
+    "CLOCK_TYPE_HASH",
     "DOMAIN_ID_MAX",
     "TF_TYPE_HASH",
     "Ros2Statistics",

@@ -1,5 +1,6 @@
-"""ROS 2's ``tf2_msgs/msg/TFMessage`` as DDS sees it: topic and type names, the
-``IdlStruct`` types Cyclone announces, and the Cyclone DDS configuration.
+"""ROS 2's ``tf2_msgs/msg/TFMessage`` and ``rosgraph_msgs/msg/Clock`` as DDS sees them:
+topic and type names, the ``IdlStruct`` types Cyclone announces, and the Cyclone DDS
+configuration.
 
 Synchronous and free of I/O, so it is unit-testable alone; the transport that uses it is
 :class:`tfbus.transports.ros2.Ros2Transport`.
@@ -11,8 +12,10 @@ type plus a trailing underscore). The nested types are
 ``geometry_msgs::msg::dds_::TransformStamped_``, ``std_msgs::msg::dds_::Header_``,
 ``builtin_interfaces::msg::dds_::Time_`` (``int32 sec``, ``uint32 nanosec``),
 ``geometry_msgs::msg::dds_::Transform_``, ``Vector3_`` (x, y, z metres) and
-``Quaternion_`` (x, y, z, w). They are declared below as cyclonedds ``IdlStruct``s so that
-Cyclone announces the right type name and type information during discovery.
+``Quaternion_`` (x, y, z, w). ``/clock`` is the DDS topic ``rt/clock`` of type
+``rosgraph_msgs::msg::dds_::Clock_`` (one ``Time_ clock``). They are declared below as
+cyclonedds ``IdlStruct``s so that Cyclone announces the right type name and type
+information during discovery.
 
 The samples themselves are (de)serialised by :mod:`tfbus.codecs.cdr` (XCDR1, as rmw
 sends them), about 9x faster than cyclonedds-python's own serializer.
@@ -28,18 +31,23 @@ from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import float64, int32, sequence, uint32
 
 __all__ = [
+    "CLOCK_TOPIC_DDS",
     "DOMAIN_ID_MAX",
     "TF_STATIC_TOPIC_DDS",
     "TF_TOPIC_DDS",
+    "Clock_",
     "TFMessage_",
     "TransformStamped_",
     "cyclone_config",
+    "dds_topic_name",
 ]
 
 TF_TOPIC_DDS: Final = "rt/tf"
 """The DDS topic ROS 2 uses for ``/tf`` (``rt/`` is rmw's prefix for ROS topics)."""
 TF_STATIC_TOPIC_DDS: Final = "rt/tf_static"
 """The DDS topic ROS 2 uses for ``/tf_static``."""
+CLOCK_TOPIC_DDS: Final = "rt/clock"
+"""The DDS topic ROS 2 uses for ``/clock`` (simulated time)."""
 DOMAIN_ID_MAX: Final = 232
 """Largest DDS domain id whose RTPS ports fit in 16 bits (RTPS 2.x, 9.6.1.1; ROS 2's
 "domain ID" concept page gives the same bound)."""
@@ -106,6 +114,30 @@ class TFMessage_(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
 
     # cyclonedds' ``sequence[T]`` is typed through its mypy plugin, which tfbus does not load
     transforms: sequence[TransformStamped_] = field(default_factory=list)  # type: ignore[type-arg,assignment]
+
+
+@dataclass
+class Clock_(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    """``rosgraph_msgs/msg/Clock``: the simulated time on ``/clock``."""
+
+    clock: Time_ = field(default_factory=Time_)
+
+
+def dds_topic_name(topic: str) -> str:
+    """The DDS topic of a ROS 2 topic: rmw's ``rt`` prefix before the fully qualified
+    name (``/clock`` -> ``rt/clock``; ``rmw_dds_common``'s ``ros_topic_prefix``).
+
+    Raises:
+        ValueError: if ``topic`` is not a global ROS graph name (``/a/b_c``: starts with
+            ``/``, alphanumerics and ``_``, no empty token, no trailing ``/``).
+    """
+    tokens = topic[1:].split("/") if topic.startswith("/") else []
+    if not tokens or not all(
+        t and t.replace("_", "a").isascii() and t.replace("_", "a").isalnum() and not t[0].isdigit()
+        for t in tokens
+    ):
+        raise ValueError(f"topic {topic!r} is not a global ROS graph name such as '/clock'")
+    return "rt" + topic
 
 
 # -- Cyclone DDS configuration -------------------------------------------------------------

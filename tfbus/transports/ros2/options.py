@@ -20,14 +20,16 @@ __all__ = ["transport_from_spec"]
 def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros2Transport:
     """The ``ros2`` row of the scheme table (:func:`tfbus.transports.spec.open_transport`).
 
-    ``overrides`` may carry ``name`` (a CLI's node name), which DDS has no use for.
+    ``overrides`` may carry ``name`` (a CLI's node name), which DDS has no use for, and
+    ``clock_topic`` (``"/clock"``: carry ``rosgraph_msgs/msg/Clock`` for a
+    :class:`~tfbus.clock.SimClock`, as :class:`Ros2Transport`'s argument).
 
     Raises:
         ValueError: a value that is not understood (named: ``domain`` not an integer or
             outside 0..232, an empty list, an unreadable ``config``).
-        TypeError: an override other than ``name``.
+        TypeError: an override other than ``name`` and ``clock_topic``.
     """
-    unknown = set(overrides) - {"name"}
+    unknown = set(overrides) - {"name", "clock_topic"}
     if unknown:
         raise TypeError(f"unexpected ros2 transport override(s): {', '.join(sorted(unknown))}")
     domain_text = spec.value("domain")
@@ -46,4 +48,5 @@ def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros2Transport:
         config=spec.value("config"),
         interfaces=list(interfaces) if interfaces else None,
         peers=list(peers) if peers else None,
+        clock_topic=overrides.get("clock_topic"),
     )

@@ -1,4 +1,5 @@
-"""Carry a :class:`~tfbus.bus.Bus`'s ``/tf`` and ``/tf_static`` to and from ROS 2 over DDS.
+"""Carry a :class:`~tfbus.bus.Bus`'s ``/tf`` and ``/tf_static`` (and, on request, ``/clock``)
+to and from ROS 2 over DDS.
 
 ::
 
@@ -20,10 +21,24 @@ No ROS installation is needed: DDS comes from the ``cyclonedds`` wheel
 little-endian, and the type hash ``RIHS01_e369d0f0...`` in the endpoints' user data as rmw
 announces it. Other bus topics are not sent to ROS 2 (counted in ``not_mapped``).
 
+**Simulated time.** With ``clock_topic="/clock"`` the transport also carries
+``rosgraph_msgs/msg/Clock`` on the DDS topic ``rt/clock`` (type
+``rosgraph_msgs::msg::dds_::Clock_``, type hash :data:`CLOCK_TYPE_HASH`): each sample
+heard is delivered to the bus as a :class:`~tfbus.messages.Clock`, what a
+:class:`~tfbus.clock.SimClock` on the bus follows (a simulator, ``ros2 bag play --clock``),
+and a ``Clock`` published on the bus is written to ROS 2, where nodes with
+``use_sim_time`` follow it. QoS as ROS 2's own: the reader is rclpy's ``TimeSource``
+subscription (``rclpy/time_source.py``: best effort, keep-last 1, volatile), which also
+matches reliable publishers; the writer is ``rclcpp::ClockQoS`` (``rclcpp/qos.cpp``: the
+sensor-data profile, best effort, volatile, keep-last 1), what ``ros2 bag play --clock``
+and simulators' ``/clock`` publishers use.
+
 **QoS** (``tf2_ros/qos.hpp``: ``DynamicBroadcasterQoS``, ``StaticBroadcasterQoS``,
 ``DynamicListenerQoS``, ``StaticListenerQoS``):
 
 * ``/tf``: reliable, volatile, keep-last 100 (writer and reader);
+* ``/clock`` (with ``clock_topic``): best effort, volatile, keep-last 1 (writer and
+  reader), as above;
 * ``/tf_static``: reliable, **transient-local**, keep-last **1** on the writer and 100 on
   the reader. A listener that joins late still receives every static broadcaster's last
   message. Because the writer keeps only its *last* message, this transport, like
@@ -84,7 +99,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from tfbus.codecs.cdr import decode_tf_message, encode_tf_message
+from tfbus.codecs.cdr import decode_clock, decode_tf_message, encode_clock, encode_tf_message
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -93,11 +108,14 @@ from tfbus.transports.ros2.dds import (
     DOMAIN_ID_MAX,
     TF_STATIC_TOPIC_DDS,
     TF_TOPIC_DDS,
+    Clock_,
     TFMessage_,
     cyclone_config,
+    dds_topic_name,
 )
 
 __all__ = [
+    "CLOCK_TYPE_HASH",
     "TF_TYPE_HASH",
     "Ros2Statistics",
     "Ros2Transport",
@@ -107,6 +125,9 @@ __all__ = [
 TF_TYPE_HASH: Final = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
 """REP-2011 type hash of ``tf2_msgs/msg/TFMessage`` (ROS 2 Jazzy and later), as rmw
 puts it in the endpoints' user data (``typehash=...;``)."""
+CLOCK_TYPE_HASH: Final = "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564"
+"""REP-2011 type hash of ``rosgraph_msgs/msg/Clock`` (``type_hashes`` of
+``share/rosgraph_msgs/msg/Clock.json`` in ROS 2 Kilted's ``ros-kilted-rosgraph-msgs``)."""
 
 _TOPICS: Final = {TF_TOPIC: TF_TOPIC_DDS, TF_STATIC_TOPIC: TF_STATIC_TOPIC_DDS}
 _ANY_STATE: Final = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -132,6 +153,17 @@ TF_STATIC_READER_QOS: Final = Qos(
     _RELIABLE_READ, Policy.Durability.TransientLocal, Policy.History.KeepLast(100), _XCDR1,
     _USER_DATA, Policy.IgnoreLocal.Participant,
 )  # fmt: skip
+_CLOCK_USER_DATA: Final = Policy.Userdata(data=f"typehash={CLOCK_TYPE_HASH};".encode())
+CLOCK_WRITER_QOS: Final = Qos(
+    Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(1),
+    _XCDR1, _CLOCK_USER_DATA,
+)  # fmt: skip
+"""``/clock`` writer: ``rclcpp::ClockQoS`` (best effort, volatile, keep-last 1)."""
+CLOCK_READER_QOS: Final = Qos(
+    Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(1),
+    _XCDR1, _CLOCK_USER_DATA, Policy.IgnoreLocal.Participant,
+)  # fmt: skip
+"""``/clock`` reader: rclpy ``TimeSource``'s ``QoSProfile(depth=1, reliability=BEST_EFFORT)``."""
 
 
 @dataclass(slots=True)
@@ -140,15 +172,17 @@ class Ros2Statistics(TransportStatistics):
     first five are :class:`~tfbus.transports._base.TransportStatistics`'s.
 
     Attributes:
-        sent: TFMessages written to DDS.
-        send_errors: local messages refused (not a TFMessage, stamp outside int32, ...).
+        sent: TFMessages (and Clocks, with ``clock_topic``) written to DDS.
+        send_errors: local messages refused (not a TFMessage or Clock, stamp outside
+            int32, ...).
         received: samples taken from DDS (valid data only: a writer leaving is no sample).
-        delivered: TFMessages delivered into the bus.
+        delivered: TFMessages (and Clocks, with ``clock_topic``) delivered into the bus.
         malformed: received samples dropped because they did not decode.
         send_dropped: writes DDS refused (e.g. a reliable reader's window was full).
-        not_connected: ``/tf`` messages published while the transport was not running
-            (``/tf_static`` ones are kept and written once it runs).
-        not_mapped: messages on topics other than ``/tf`` and ``/tf_static`` (not sent).
+        not_connected: ``/tf`` (and clock topic) messages published while the transport
+            was not running (``/tf_static`` ones are kept and written once it runs).
+        not_mapped: messages on topics other than ``/tf``, ``/tf_static`` and the clock
+            topic (not sent).
         batches: event-loop wake-ups that took samples.
     """
 
@@ -219,8 +253,8 @@ def _resolve_config(config: str | os.PathLike[str]) -> str:
 @dataclass(slots=True)
 class _Endpoints:
     participant: DomainParticipant
-    readers: dict[str, DataReader[TFMessage_]]
-    writers: dict[str, DataWriter[TFMessage_]]
+    readers: dict[str, DataReader[Any]]
+    writers: dict[str, DataWriter[Any]]
 
 
 class Ros2Transport:
@@ -239,11 +273,19 @@ class Ros2Transport:
         topics: which of ``/tf`` and ``/tf_static`` to receive (both by default).
         max_batch: most samples delivered per event-loop turn before yielding.
         max_transforms: received messages with more transforms are malformed.
+        clock_topic: a ``rosgraph_msgs/msg/Clock`` topic to carry (``"/clock"`` for
+            simulated time, :data:`~tfbus.topics.CLOCK_TOPIC`; DDS topic ``rt`` + name):
+            each sample heard is delivered to the bus as a
+            :class:`~tfbus.messages.Clock` (:func:`~tfbus.codecs.cdr.decode_clock`; one
+            that does not decode is counted in ``malformed`` and dropped), what a
+            :class:`~tfbus.clock.SimClock` follows, and each ``Clock`` published on the
+            bus topic of that name is written to ROS 2. Default ``None``: not carried.
 
     Raises:
         ValueError: if ``domain_id`` is not in 0..232, ``config`` is combined with
             ``interfaces``/``peers`` or cannot be read, a topic is not ``/tf`` or
-            ``/tf_static``, or a bound is less than 1.
+            ``/tf_static``, ``clock_topic`` is ``/tf``, ``/tf_static`` or not a global
+            ROS graph name, or a bound is less than 1.
     """
 
     def __init__(
@@ -256,6 +298,7 @@ class Ros2Transport:
         topics: Iterable[str] = (TF_TOPIC, TF_STATIC_TOPIC),
         max_batch: int = 256,
         max_transforms: int = 100_000,
+        clock_topic: str | None = None,
     ) -> None:
         if domain_id is None:
             env = os.environ.get("ROS_DOMAIN_ID", "").strip()
@@ -273,6 +316,15 @@ class Ros2Transport:
         for topic in self._topics:
             if topic not in _TOPICS:
                 raise ValueError(f"topics: {topic!r} is not '/tf' or '/tf_static'")
+        self._clock_dds = ""
+        if clock_topic is not None:
+            if clock_topic in _TOPICS:
+                raise ValueError(f"clock_topic {clock_topic!r} is already carried as a tf topic")
+            try:
+                self._clock_dds = dds_topic_name(clock_topic)
+            except ValueError as exc:
+                raise ValueError(f"clock_topic: {exc}") from None
+        self._clock_topic = clock_topic
         self._domain_id = domain_id
         self._config = (
             _resolve_config(config)
@@ -305,18 +357,24 @@ class Ros2Transport:
         return self._config
 
     @property
+    def clock_topic(self) -> str | None:
+        """The ``rosgraph_msgs/msg/Clock`` topic carried (``None``: none)."""
+        return self._clock_topic
+
+    @property
     def running(self) -> bool:
         """True between ``run``'s ``started()`` and its end."""
         return self._running
 
     def matched_publishers(self, topic: str = TF_TOPIC) -> int:
         """How many DDS writers (ROS 2 publishers, other tfbus transports) on ``topic``
-        this transport's reader is matched with now (0 when not running).
+        (a tf topic received, or the clock topic) this transport's reader is matched
+        with now (0 when not running).
 
         Raises:
             ValueError: if ``topic`` is not one this transport receives.
         """
-        if topic not in self._topics:
+        if topic not in self._topics and topic != self._clock_topic:
             raise ValueError(f"{topic!r} is not received by this transport")
         endpoints = self._endpoints
         if endpoints is None:
@@ -378,18 +436,33 @@ class Ros2Transport:
             wakeup.close()
 
     def send_nowait(self, topic: str, message: object) -> None:
-        """Write a locally published ``/tf`` or ``/tf_static`` message to DDS; never blocks.
+        """Write a locally published ``/tf`` or ``/tf_static`` message (or a ``Clock`` on
+        the clock topic) to DDS; never blocks.
 
         ``/tf_static``: the message's transforms are merged into the set this transport
         has sent (latest per child frame) and the whole set is written (tf2_ros'
         StaticTransformBroadcaster behaviour, needed with a keep-last-1 transient-local
         writer). Other topics are not carried to ROS 2 (counted in ``not_mapped``).
+        The clock topic's messages are written when the transport runs (best effort, as
+        ``rclcpp::ClockQoS``; counted in ``not_connected`` when it does not).
 
         Raises:
             WireEncodeError: if the message is not a ``TFMessage`` of ``TransformStamped``
-                or a stamp's ``sec`` is outside int32 (ROS 2's ``builtin_interfaces/Time``);
-                nothing of the message is sent or remembered.
+                (on the clock topic: not a :class:`~tfbus.messages.Clock`) or a stamp's
+                ``sec`` is outside int32 (ROS 2's ``builtin_interfaces/Time``); nothing of
+                the message is sent or remembered.
         """
+        if topic == self._clock_topic:
+            try:
+                payload = encode_clock(message)  # type: ignore[arg-type]
+            except WireEncodeError:
+                self._stats.send_errors += 1
+                raise
+            if self._endpoints is None:
+                self._stats.not_connected += 1
+                return
+            self._write(topic, payload)
+            return
         if topic not in _TOPICS:
             self._stats.not_mapped += 1
             return
@@ -441,8 +514,8 @@ class Ros2Transport:
         try:
             participant = DomainParticipant(self._domain_id)
             listener = Listener(on_data_available=self._on_data)  # type: ignore[no-untyped-call]
-            readers: dict[str, DataReader[TFMessage_]] = {}
-            writers: dict[str, DataWriter[TFMessage_]] = {}
+            readers: dict[str, DataReader[Any]] = {}
+            writers: dict[str, DataWriter[Any]] = {}
             for topic, name in _TOPICS.items():
                 dds_topic = Topic(participant, name, TFMessage_)
                 static = topic == TF_STATIC_TOPIC
@@ -456,6 +529,12 @@ class Ros2Transport:
                         TF_STATIC_READER_QOS if static else TF_READER_QOS,
                         listener=listener,
                     )
+            if self._clock_topic is not None:
+                clock = Topic(participant, self._clock_dds, Clock_)
+                writers[self._clock_topic] = DataWriter(participant, clock, CLOCK_WRITER_QOS)
+                readers[self._clock_topic] = DataReader(
+                    participant, clock, CLOCK_READER_QOS, listener=listener
+                )
             return _Endpoints(participant, readers, writers)
         except DDSException as exc:
             if participant is not None:
@@ -487,19 +566,23 @@ class Ros2Transport:
             more = drain(False)
         await wakeup.serve(drain)
 
-    def _take(self, bus: BusLike, topic: str, reader: DataReader[TFMessage_]) -> bool:
+    def _take(self, bus: BusLike, topic: str, reader: DataReader[Any]) -> bool:
         """Take, decode and deliver up to ``max_batch`` samples; True if it took that many."""
         samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, self._max_batch)
         if isinstance(samples, int) or not samples:
             return False
         stats = self._stats
         out: list[object] = []
+        clock = topic == self._clock_topic
         for data, info in samples:
             if not info.valid_data:
                 continue  # a writer left (unregister/dispose): no data
             stats.received += 1
             try:
-                out.append(decode_tf_message(data, max_transforms=self._max_transforms))
+                if clock:
+                    out.append(decode_clock(data))
+                else:
+                    out.append(decode_tf_message(data, max_transforms=self._max_transforms))
             except WireDecodeError:
                 stats.malformed += 1
         if out:
