@@ -468,3 +468,39 @@ def test_relative_imports_resolve(
     importer: str, is_package: bool, level: int, target: str | None, expected: str
 ) -> None:
     assert _resolve(importer, is_package, level, target) == expected
+
+
+FRAME_WALK_HOMES: dict[str, set[str]] = {
+    "tfbus.core.buffer_core": {"up"},  # frame_path: tfbus's one frame path
+    "tfbus.compat.tf2_py": {"_walk_chain"},  # tf2_py 0.7.6 ``_chain``
+    "tfbus.view.scene": {"default_fixed_frame"},  # each frame's root (a walk, not a chain)
+}
+"""The functions that walk a frame's ancestors by name (a loop over ``get_parent`` or a
+``parents`` mapping), by module: the frame path has one home in the core and tf2_py's
+ordered chain (quirks included) one in ``compat/tf2_py.py``; everyone else calls them."""
+
+
+def _walks_parents(loop: ast.While) -> bool:
+    for node in ast.walk(loop):
+        if isinstance(node, ast.Attribute) and node.attr == "get_parent":
+            return True
+        if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name)
+                and node.value.id == "parents"):
+            return True
+    return False
+
+
+def test_the_frame_chain_has_one_home() -> None:
+    found: dict[str, set[str]] = {}
+    for module, path in MODULES.items():
+        if path.suffix != ".py":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for fn in ast.walk(tree):
+            if not isinstance(fn, ast.FunctionDef):
+                continue
+            own = [n for n in ast.iter_child_nodes(fn) if not isinstance(n, ast.FunctionDef)]
+            loops = [n for top in own for n in ast.walk(top) if isinstance(n, ast.While)]
+            if any(_walks_parents(loop) for loop in loops):
+                found.setdefault(module, set()).add(fn.name)
+    assert found == FRAME_WALK_HOMES
