@@ -504,3 +504,24 @@ def test_the_frame_chain_has_one_home() -> None:
             if any(_walks_parents(loop) for loop in loops):
                 found.setdefault(module, set()).add(fn.name)
     assert found == FRAME_WALK_HOMES
+
+
+def test_do_transform_lives_in_convert_and_geometry_below_it() -> None:
+    """tfbus's ``do_transform_*`` (messages) are defined in ``convert.py`` only (the tf2
+    adapters under ``compat/`` keep their own, tf2's KDL arithmetic); ``geometry.py`` is
+    array math, and the core imports neither (no lazy ``core`` -> ``geometry`` import)."""
+    homes: dict[str, set[str]] = {}
+    for module, path in MODULES.items():
+        if path.suffix != ".py" or module.startswith("tfbus.compat."):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        names = {n.name for n in ast.walk(tree)
+                 if isinstance(n, ast.FunctionDef) and n.name.startswith("do_transform")}
+        if names:
+            homes[module] = names
+    assert set(homes) == {"tfbus.convert"}
+    assert {"do_transform_point", "do_transform_vector3", "do_transform_pose"} <= homes[
+        "tfbus.convert"]
+    graph = _graph()
+    assert [m for m, edges in graph.items() if m.startswith("tfbus.core")
+            and {"tfbus.geometry", "tfbus.convert"} & set(edges)] == []

@@ -30,7 +30,7 @@ from peer_install import require
 
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import ManualClock
-from tfbus.geometry import do_transform_point
+from tfbus.convert import do_transform_point
 from tfbus.messages import Header, JointState, Point, PointStamped, TransformStamped
 from tfbus.robot import (
     JointStateError,

@@ -46,8 +46,8 @@ from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock, every
+from tfbus.convert import do_transform_point
 from tfbus.errors import TransformException
-from tfbus.geometry import do_transform_point
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
