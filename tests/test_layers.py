@@ -556,3 +556,21 @@ def test_the_command_line_asks_schemes_for_capabilities() -> None:
     offenders = {module for module, _ in problems}
     assert offenders == set(SCHEME_NAMES_PENDING), "scheme names tested in the command line:\n" + (
         "\n".join(where for module, where in problems if module not in SCHEME_NAMES_PENDING))
+
+
+def test_statistics_classes_are_named_statistics() -> None:
+    """One shape for counters: classes named ``<Name>Statistics`` (no ``*Stats``), read
+    through a ``statistics()`` method, never a ``statistics`` attribute."""
+    problems = []
+    for module, path in MODULES.items():
+        if path.suffix != ".py":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef) and node.name.endswith("Stats"):
+                problems.append(f"{_where(module, node.lineno)}: class {node.name}")
+            if (isinstance(node, ast.Assign) and any(
+                    isinstance(t, ast.Attribute) and t.attr == "statistics"
+                    for t in node.targets)):
+                problems.append(f"{_where(module, node.lineno)}: a statistics attribute")
+    assert not problems, "\n".join(problems)
