@@ -574,3 +574,27 @@ def test_statistics_classes_are_named_statistics() -> None:
                     for t in node.targets)):
                 problems.append(f"{_where(module, node.lineno)}: a statistics attribute")
     assert not problems, "\n".join(problems)
+
+
+def test_the_clock_owns_jump_callbacks() -> None:
+    """Backward jumps are the clock's: callbacks live in the clock (``Clock.on_jump``,
+    one shared callback per ``key``); outside ``tfbus/clock`` only ``buffer.py``'s
+    ``clear_on_jump_back`` registers them, and no module keeps a registry of its own
+    (a module-level dict)."""
+    callers = set()
+    registries = []
+    for module, path in MODULES.items():
+        if path.suffix != ".py" or module.startswith("tfbus.clock"):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        if any(isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
+               and n.func.attr == "on_jump" for n in ast.walk(tree)):
+            callers.add(module)
+            registries += [  # a module-level dict: built literally or annotated as one
+                _where(module, node.lineno) for node in tree.body
+                if (isinstance(node, ast.Assign)
+                    and isinstance(node.value, (ast.Dict, ast.DictComp)))
+                or (isinstance(node, ast.AnnAssign) and "dict" in ast.unparse(node.annotation))
+            ]
+    assert callers == {"tfbus.buffer"}
+    assert registries == []
