@@ -75,10 +75,10 @@ async def run_robot_state_demo(
                 tg.cancel_scope.cancel()
     finally:
         buffer.close()
-        s = rsp.statistics
+        s = rsp.statistics()
         out(f"[ INFO] summary: robot_state_publisher published {s.transforms} wheel "
             f"transforms from {s.received} joint states")
-    return rsp.statistics
+    return rsp.statistics()
 
 
 async def _cancel_on_signal(scope: anyio.CancelScope) -> None:

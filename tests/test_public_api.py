@@ -75,8 +75,9 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
     }  # fmt: skip
     assert set(tfbus.convert.__all__) == {
         "ConvertRegistration", "TransformFunction", "TransformRegistration", "convert",
-        "do_transform_cloud", "do_transform_polygon", "do_transform_pose_with_covariance",
-        "do_transform_stamped", "do_transform_twist", "do_transform_velocity",
+        "do_transform_cloud", "do_transform_point", "do_transform_polygon",
+        "do_transform_pose", "do_transform_pose_with_covariance", "do_transform_stamped",
+        "do_transform_twist", "do_transform_vector3", "do_transform_velocity",
         "do_transform_transform", "do_transform_wrench", "get_transform_function",
         "register_transform", "registered_types", "transform_covariance",
     }  # fmt: skip

@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tfbus._aio import Wakeup, coroutine_method, running_asyncio_loop
-from tfbus.clock import Clock, SystemClock, timeout_ns
+from tfbus.clock import Clock, JumpCallback, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
@@ -57,64 +57,63 @@ class _Clearable(Protocol):
     def clear(self) -> None: ...
 
 
-_jump_followers: dict[tuple[int, int], tuple[list[Callable[[], None]], Callable[[], None]]] = {}
-"""(id(sink), id(clock)) -> (the ``then`` callbacks, the clock's unregister): one clock
-callback per sink and clock, however many owners asked for it."""
-
-
 def clear_on_jump_back(
     sink: _Clearable, clock: Clock, then: Callable[[], None] | None = None
 ) -> Callable[[], None]:
-    """The one owner of tf2_ros's "a clock jump back clears the buffer" (tf2_ros
-    ``Buffer`` / ``TransformListener``): when ``clock`` jumps back (:meth:`Clock.on_jump
+    """tf2_ros's "a clock jump back clears the buffer" (tf2_ros ``Buffer`` /
+    ``TransformListener``): when ``clock`` jumps back (:meth:`Clock.on_jump
     <tfbus.clock.Clock.on_jump>`; a :class:`~tfbus.clock.SystemClock` notices it when read,
-    as a listener does on every message), log one warning line, ``sink.clear()``, then
+    as a listener does on every message), log one warning line and ``sink.clear()``, then
     call ``then`` (a :class:`Buffer` re-evaluates its pending waits).
 
-    A :class:`Buffer` follows its own clock; a :class:`~tfbus.listener.TransformListener`
-    asks for its sink and clock while it listens: for a Buffer on the same clock both
-    share one clock callback, so the buffer is cleared once.
+    The clear is registered on the clock under one key per sink object:
+    a :class:`Buffer` follows its own clock and a
+    :class:`~tfbus.listener.TransformListener` asks for its sink and clock while it
+    listens; on the same clock they share that one callback, so the buffer is cleared
+    (and the jump logged) once per jump. ``then`` is a callback of its own, after it.
 
     Returns:
-        A function that stops this follow (idempotent); the clock callback goes with the
-        last one.
+        A function that stops this follow (idempotent); the clock drops the clear with
+        the last owner.
     """
-    key = (id(sink), id(clock))
-    entry = _jump_followers.get(key)
-    if entry is None:
-        thens: list[Callable[[], None]] = []
-
-        def on_jump(old: Time, new: Time) -> None:
-            _log.warning(
-                "Detected jump back in time of %.3f s. Clearing TF buffer.",
-                (old.ns - new.ns) / 1e9,
-            )
-            sink.clear()
-            for callback in list(thens):
-                callback()
-
-        entry = (thens, clock.on_jump(on_jump))
-        _jump_followers[key] = entry
-    callbacks, unregister_clock = entry
-    token: Callable[[], None] = then if then is not None else _no_then
-    callbacks.append(token)
-    done = False
+    stops = [clock.on_jump(_clear(sink), key=_ClearKey(sink))]
+    if then is not None:
+        stops.append(clock.on_jump(lambda _old, _new: then()))
 
     def stop() -> None:
-        nonlocal done
-        if done:
-            return
-        done = True
-        callbacks.remove(token)
-        if not callbacks:
-            unregister_clock()
-            _jump_followers.pop(key, None)
+        for unregister in stops:
+            unregister()
 
     return stop
 
 
-def _no_then() -> None:
-    """The ``then`` of an owner that only needs the clear."""
+class _ClearKey:
+    """The clock key of "clear ``sink`` on a jump back": equal for the same sink object
+    (identity, whatever the sink's own ``==``), holding it while registered."""
+
+    __slots__ = ("sink",)
+
+    def __init__(self, sink: _Clearable) -> None:
+        self.sink = sink
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _ClearKey) and other.sink is self.sink
+
+    def __hash__(self) -> int:
+        return hash((_ClearKey, id(self.sink)))
+
+
+def _clear(sink: _Clearable) -> JumpCallback:
+    """The clock callback that logs a jump back and clears ``sink``."""
+
+    def on_jump(old: Time, new: Time) -> None:
+        _log.warning(
+            "Detected jump back in time of %.3f s. Clearing TF buffer.",
+            (old.ns - new.ns) / 1e9,
+        )
+        sink.clear()
+
+    return on_jump
 
 
 class _Waiter(Wakeup, Generic[_T]):

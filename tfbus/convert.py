@@ -44,13 +44,9 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
+from tfbus.core import kernels as _core
 from tfbus.errors import InvalidArgumentException
-from tfbus.geometry import (
-    do_transform_point,
-    do_transform_pose,
-    do_transform_vector3,
-    transform_points,
-)
+from tfbus.geometry import transform_points
 from tfbus.messages import (
     Point,
     Point32,
@@ -81,11 +77,14 @@ __all__ = [
     "TransformRegistration",
     "convert",
     "do_transform_cloud",
+    "do_transform_point",
     "do_transform_polygon",
+    "do_transform_pose",
     "do_transform_pose_with_covariance",
     "do_transform_stamped",
     "do_transform_transform",
     "do_transform_twist",
+    "do_transform_vector3",
     "do_transform_velocity",
     "do_transform_wrench",
     "get_transform_function",
@@ -177,6 +176,75 @@ def registered_types() -> tuple[type, ...]:
     return TransformRegistration().types()
 
 
+def _point_through(
+    ts: TransformStamped, x: float, y: float, z: float
+) -> tuple[float, float, float]:
+    tr = ts.transform.translation
+    q = ts.transform.rotation
+    rx, ry, rz = _core.quat_rotate(q.x, q.y, q.z, q.w, x, y, z)
+    return rx + tr.x, ry + tr.y, rz + tr.z
+
+
+def do_transform_point(point: PointStamped, transform: TransformStamped) -> PointStamped:
+    """Transform a stamped point, as tf2_geometry_msgs' ``do_transform_point``.
+
+    Args:
+        point: a point (metres) in ``transform.child_frame_id``.
+        transform: e.g. ``lookup_transform(target, point.header.frame_id, t)``.
+
+    Returns:
+        The point in the transform's parent frame. Its header is ``transform.header``
+        (stamp and ``frame_id`` of the transform), as in tf2_geometry_msgs; the point's
+        own header is not checked nor kept. Numbers are bit-for-bit those of
+        :func:`tfbus.geometry.apply_transform` on one point.
+
+    Raises:
+        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
+
+    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(PointStamped)``.
+    """
+    x, y, z = _point_through(transform, *point.point)
+    return PointStamped(transform.header, Point(x, y, z))
+
+
+def do_transform_vector3(vector: Vector3Stamped, transform: TransformStamped) -> Vector3Stamped:
+    """Rotate a stamped vector, as tf2_geometry_msgs' ``do_transform_vector3``.
+
+    Only the rotation applies (a direction has no position). The result header is
+    ``transform.header``. A non-unit quaternion scales the vector by ``|q|²``, as tf2's
+    KDL ``Rotation::Quaternion`` does.
+
+    Raises:
+        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
+
+    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(Vector3Stamped)``.
+    """
+    q = transform.transform.rotation
+    x, y, z = _core.quat_rotate(q.x, q.y, q.z, q.w, *vector.vector)
+    return Vector3Stamped(transform.header, Vector3(x, y, z))
+
+
+def do_transform_pose(pose: PoseStamped, transform: TransformStamped) -> PoseStamped:
+    """Transform a stamped pose, as tf2_geometry_msgs' ``do_transform_pose``.
+
+    Position: ``q p q* + t``; orientation: ``q ⊗ q_pose`` (tf2's compose). The result
+    header is ``transform.header``. tf2_geometry_msgs goes through a KDL rotation matrix
+    and may return the negated, equivalent quaternion; tfbus keeps the product's sign and
+    does not normalise it.
+
+    Raises:
+        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
+
+    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(PoseStamped)``.
+    """
+    p = pose.pose
+    x, y, z = _point_through(transform, *p.position)
+    q = transform.transform.rotation
+    o = p.orientation
+    qx, qy, qz, qw = _core.quat_multiply(q.x, q.y, q.z, q.w, o.x, o.y, o.z, o.w)
+    return PoseStamped(transform.header, Pose(Point(x, y, z), Quaternion(qx, qy, qz, qw)))
+
+
 def do_transform_transform(
     transform_in: TransformStamped, transform: TransformStamped
 ) -> TransformStamped:
@@ -195,7 +263,7 @@ def do_transform_transform(
 
     Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h``
     ``doTransform(TransformStamped, TransformStamped, TransformStamped)``; the
-    arithmetic is :func:`tfbus.geometry.do_transform_pose`'s.
+    arithmetic is :func:`do_transform_pose`'s.
     """
     tr, rot = transform_in.transform
     moved = do_transform_pose(PoseStamped(transform_in.header, Pose(Point(*tr), rot)), transform)

@@ -1,4 +1,5 @@
-"""Rigid-transform geometry on numpy arrays, and tf2_geometry_msgs' ``do_transform_*``.
+"""Rigid-transform geometry on numpy arrays (tf2_geometry_msgs' ``do_transform_*`` on
+messages are in :mod:`tfbus.convert`).
 
 Conventions (the same everywhere in tfbus):
 
@@ -49,24 +50,17 @@ from transforms3d import euler as _t3d_euler
 from transforms3d import quaternions as _t3d_quat
 
 from tfbus.core import kernels as _core
+from tfbus.core.batch import quat_rotate_rows
 from tfbus.messages import (
-    Point,
-    PointStamped,
-    Pose,
-    PoseStamped,
     Quaternion,
     Transform,
     TransformStamped,
     Vector3,
-    Vector3Stamped,
 )
 
 __all__ = [
     "apply_transform",
     "compose",
-    "do_transform_point",
-    "do_transform_pose",
-    "do_transform_vector3",
     "euler_from_quaternion",
     "from_matrix",
     "inverse",
@@ -143,24 +137,6 @@ def _quat_multiply(a: Array, b: Array) -> Array:
     )
 
 
-def _quat_rotate(q: Array, v: Array) -> Array:
-    # tf2 quatRotate: q ⊗ (v, 0) ⊗ conj(q), as _cmath.quat_rotate, same evaluation order.
-    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
-    tx = qw * vx + qy * vz - qz * vy
-    ty = qw * vy + qz * vx - qx * vz
-    tz = qw * vz + qx * vy - qy * vx
-    tw = -qx * vx - qy * vy - qz * vz
-    return np.stack(
-        [
-            -tw * qx + tx * qw - ty * qz + tz * qy,
-            -tw * qy + ty * qw - tz * qx + tx * qz,
-            -tw * qz + tz * qw - tx * qy + ty * qx,
-        ],
-        axis=-1,
-    )
-
-
 def _rotation_matrix(q: Array) -> Array:
     # The 3x3 matrix of v -> q v q* for one, possibly non-unit, quaternion (|q|² R(q/|q|)):
     # KDL ``Rotation::Quaternion``, which tf2_geometry_msgs' doTransform uses.
@@ -181,7 +157,7 @@ def _rotate(q: Array, v: Array) -> Array:
     if q.ndim == 1 and v.ndim == 2:
         rotated: Array = v @ _rotation_matrix(q).T
         return rotated
-    return _quat_rotate(q, v)
+    return quat_rotate_rows(q, v)
 
 
 def _conjugate(q: Array) -> Array:
@@ -551,72 +527,3 @@ def transform_points(transform: Transform | TransformStamped, points: npt.ArrayL
     """
     t, q = transform_to_arrays(transform)
     return apply_transform(t, q, points)
-
-
-def _point_through(
-    ts: TransformStamped, x: float, y: float, z: float
-) -> tuple[float, float, float]:
-    tr = ts.transform.translation
-    q = ts.transform.rotation
-    rx, ry, rz = _core.quat_rotate(q.x, q.y, q.z, q.w, x, y, z)
-    return rx + tr.x, ry + tr.y, rz + tr.z
-
-
-def do_transform_point(point: PointStamped, transform: TransformStamped) -> PointStamped:
-    """Transform a stamped point, as tf2_geometry_msgs' ``do_transform_point``.
-
-    Args:
-        point: a point (metres) in ``transform.child_frame_id``.
-        transform: e.g. ``lookup_transform(target, point.header.frame_id, t)``.
-
-    Returns:
-        The point in the transform's parent frame. Its header is ``transform.header``
-        (stamp and ``frame_id`` of the transform), as in tf2_geometry_msgs; the point's
-        own header is not checked nor kept. Numbers are bit-for-bit those of
-        :func:`apply_transform` on one point.
-
-    Raises:
-        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
-
-    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(PointStamped)``.
-    """
-    x, y, z = _point_through(transform, *point.point)
-    return PointStamped(transform.header, Point(x, y, z))
-
-
-def do_transform_vector3(vector: Vector3Stamped, transform: TransformStamped) -> Vector3Stamped:
-    """Rotate a stamped vector, as tf2_geometry_msgs' ``do_transform_vector3``.
-
-    Only the rotation applies (a direction has no position). The result header is
-    ``transform.header``. A non-unit quaternion scales the vector by ``|q|²``, as tf2's
-    KDL ``Rotation::Quaternion`` does.
-
-    Raises:
-        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
-
-    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(Vector3Stamped)``.
-    """
-    q = transform.transform.rotation
-    x, y, z = _core.quat_rotate(q.x, q.y, q.z, q.w, *vector.vector)
-    return Vector3Stamped(transform.header, Vector3(x, y, z))
-
-
-def do_transform_pose(pose: PoseStamped, transform: TransformStamped) -> PoseStamped:
-    """Transform a stamped pose, as tf2_geometry_msgs' ``do_transform_pose``.
-
-    Position: ``q p q* + t``; orientation: ``q ⊗ q_pose`` (tf2's compose). The result
-    header is ``transform.header``. tf2_geometry_msgs goes through a KDL rotation matrix
-    and may return the negated, equivalent quaternion; tfbus keeps the product's sign and
-    does not normalise it.
-
-    Raises:
-        Nothing of its own (no frame or stamp check, like tf2_geometry_msgs).
-
-    Source: ``tf2_geometry_msgs/tf2_geometry_msgs.h`` ``doTransform(PoseStamped)``.
-    """
-    p = pose.pose
-    x, y, z = _point_through(transform, *p.position)
-    q = transform.transform.rotation
-    o = p.orientation
-    qx, qy, qz, qw = _core.quat_multiply(q.x, q.y, q.z, q.w, o.x, o.y, o.z, o.w)
-    return PoseStamped(transform.header, Pose(Point(x, y, z), Quaternion(qx, qy, qz, qw)))

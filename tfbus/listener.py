@@ -259,19 +259,22 @@ class TransformListener:
                 return
             self._handle(static, message)
 
-    def _warn(self, msg: str, *args: object) -> None:
-        self._log.log(self._clock.now().ns / 1e9, logging.WARNING, msg, *args)
+    def _warn(self, now_ns: int, msg: str, *args: object) -> None:
+        """One rate-limited warning, timed by the clock read of the message it is about."""
+        self._log.log(now_ns / 1e9, logging.WARNING, msg, *args)
 
     def _handle(self, static: bool, message: object) -> None:
         self._messages += 1
-        # tf2_ros TransformListener::subscription_callback_impl: read the clock on each
-        # message; a clock that reads earlier than before reports the jump back to its
-        # on_jump callbacks (clear_on_jump_back clears the sink).
-        self._now_ns()
+        # tf2_ros TransformListener::subscription_callback_impl reads the clock on each
+        # message: the time of this message's warnings; a SystemClock that reads earlier
+        # than before fires its on_jump callbacks then (the clock owns the detection;
+        # clear_on_jump_back's callback clears the sink).
+        now_ns = self._now_ns()
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         if not isinstance(message, TFMessage):
             self._malformed += 1
             self._warn(
+                now_ns,
                 "ignoring a %s on %s: expected TFMessage",
                 type(message).__name__,
                 topic,
@@ -281,7 +284,7 @@ class TransformListener:
             transforms = iter(message.transforms)
         except TypeError:
             self._malformed += 1
-            self._warn("ignoring a TFMessage on %s: not iterable", topic)
+            self._warn(now_ns, "ignoring a TFMessage on %s: not iterable", topic)
             return
         authority = self._authority
         if self._publisher_authority and type(message) is not TFMessage:
@@ -292,17 +295,19 @@ class TransformListener:
             result = self._buffer.set_transforms(transforms, authority, static)
         except Exception as bug:  # a sink that breaks its contract: count, never die
             self._malformed += 1
-            self._warn("ignoring a TFMessage on %s: %s: %s", topic, type(bug).__name__, bug)
+            self._warn(now_ns, "ignoring a TFMessage on %s: %s: %s", topic,
+                       type(bug).__name__, bug)
             return
         self._stored += result.stored
         self._refused += result.refused
         for _, exc in result.errors:
             if isinstance(exc, TransformException):
                 self._invalid += 1
-                self._warn("ignoring a transform on %s: %s", topic, exc)
+                self._warn(now_ns, "ignoring a transform on %s: %s", topic, exc)
             else:
                 self._malformed += 1
                 self._warn(
+                    now_ns,
                     "ignoring a malformed transform on %s: %s: %s",
                     topic,
                     type(exc).__name__,

@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from tfbus.clock import Clock
-from tfbus.core import BatchResult
+from tfbus.core import BatchResult, frame_path
 from tfbus.messages import TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -343,26 +343,9 @@ class AuthoritySummary:
         return self.delay_sum / self.delay_count if self.delay_count else 0.0
 
 
-def frame_chain(parents: dict[str, str], source: str, target: str) -> list[str] | None:
-    """The frames from ``source`` up to the lowest common ancestor and down to
-    ``target`` (tf2 ``_chainAsVector`` order, as tf_monitor prints it), given each child
-    frame's parent; None when the two frames are in different trees (or in a loop)."""
-
-    def up(frame: str) -> list[str]:
-        chain = [frame]
-        while chain[-1] in parents and parents[chain[-1]] not in chain:
-            chain.append(parents[chain[-1]])
-        return chain
-
-    if source == target:
-        return [source]
-    a, b = up(source), up(target)
-    in_b = set(b)
-    for i, frame in enumerate(a):
-        if frame in in_b:
-            j = b.index(frame)
-            return a[: i + 1] + b[:j][::-1]
-    return None
+frame_chain = frame_path
+"""The frames from a source up to the lowest common ancestor and down to a target, given
+each child frame's parent: :func:`tfbus.core.frame_path` (this module's name for it)."""
 
 
 @dataclass
@@ -374,7 +357,7 @@ class ChainDelay:
     source: str
     target: str
     frames: tuple[str, ...] | None = None
-    """The chain at the last sample (:func:`frame_chain`), None while not connected."""
+    """The chain at the last sample (:func:`tfbus.core.frame_path`), None while not connected."""
     delay_sum: float = 0.0
     delay_count: int = 0
     delay_max: float = 0.0
@@ -413,7 +396,7 @@ class TfSummary:
         return chain
 
     def chain(self, source: str, target: str) -> tuple[str, ...] | None:
-        """The chain between two frames now (:func:`frame_chain`), None if unconnected."""
+        """The chain between two frames now (:func:`tfbus.core.frame_path`), None if unconnected."""
         found = frame_chain(self.parents(), source, target)
         return tuple(found) if found is not None else None
 

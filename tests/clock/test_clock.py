@@ -202,6 +202,49 @@ async def test_backward_set_fires_jump_callbacks() -> None:
     assert len(jumps) == 2
 
 
+async def test_jump_callbacks_under_one_key_run_once_until_the_last_owner_leaves(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``on_jump(callback, key=k)``: owners registering under one key share the first
+    callback (it runs once per jump); it goes with the last owner's unregister. Unkeyed
+    callbacks are each their own; all run in registration order. The same on a
+    SystemClock, whose jumps are seen when it is read."""
+    clock = ManualClock(T0)
+    calls: list[str] = []
+    first = clock.on_jump(lambda old, new: calls.append("a"), key="clear")
+    second = clock.on_jump(lambda old, new: calls.append("b"), key="clear")
+    plain = clock.on_jump(lambda old, new: calls.append("p"))
+    plain_too = clock.on_jump(lambda old, new: calls.append("p"))
+    clock.set_nowait(Time(1))
+    assert calls == ["a", "p", "p"]
+    first()
+    first()  # idempotent: the second owner still holds the key
+    plain()
+    clock.set_nowait(Time(0))
+    assert calls == ["a", "p", "p", "a", "p"]
+    second()
+    plain_too()
+    clock.set_nowait(T0)
+    clock.set_nowait(Time(0))
+    assert calls == ["a", "p", "p", "a", "p"]
+    again = clock.on_jump(lambda old, new: calls.append("c"), key="clear")
+    clock.set_nowait(Time(T0.sec))
+    clock.set_nowait(Time(0))
+    assert calls[-1] == "c"
+    again()
+
+    wall = iter([5_000, 6_000, 2_000, 1_000])
+    monkeypatch.setattr(time, "time_ns", lambda: next(wall))
+    system = SystemClock()
+    seen: list[tuple[int, int]] = []
+    stops = [system.on_jump(lambda old, new: seen.append((old.ns, new.ns)), key=("k", 1))
+             for _ in range(3)]
+    assert [system.now_ns() for _ in range(4)] == [5_000, 6_000, 2_000, 1_000]
+    assert seen == [(6_000, 2_000), (2_000, 1_000)]
+    for stop in stops:
+        stop()
+
+
 async def test_advance_nowait_wakes_all_due_at_once() -> None:
     clock = ManualClock(T0)
     woke: list[Time] = []

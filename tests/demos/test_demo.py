@@ -14,7 +14,7 @@ from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.cli import main
 from tfbus.clock import ManualClock
-from tfbus.demos.tutorial import BroadcasterStats, broadcaster_node, listener_node, run_demo
+from tfbus.demos.tutorial import BroadcasterStatistics, broadcaster_node, listener_node, run_demo
 from tfbus.listener import TransformListener
 
 pytestmark = pytest.mark.anyio
@@ -72,7 +72,7 @@ async def test_listener_without_broadcaster_prints_the_error_line() -> None:
             'point from "base_laser" to "base_link": "base_link" passed to '
             "lookupTransform argument target_frame does not exist. "
         ]
-        stats = BroadcasterStats()
+        stats = BroadcasterStatistics()
         tg.start_soon(broadcaster_node, bus, clock, 100.0, stats)
         await clock.advance(1.0)
         assert INFO.match(lines[-1]), lines[-1]
@@ -140,9 +140,9 @@ def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
         opened.append((spec, default_name))
         return Bus()
 
-    async def fake_broadcaster(bus: Bus, **kwargs: object) -> BroadcasterStats:
+    async def fake_broadcaster(bus: Bus, **kwargs: object) -> BroadcasterStatistics:
         calls.append(("broadcaster", kwargs))
-        return BroadcasterStats()
+        return BroadcasterStatistics()
 
     async def fake_listener(bus: Bus, **kwargs: object) -> object:
         calls.append(("listener", kwargs))

@@ -28,12 +28,14 @@ from tfbus.buffer import Buffer
 from tfbus.clock import ManualClock
 from tfbus.convert import (
     TransformRegistration,
+    do_transform_point,
+    do_transform_pose,
     do_transform_transform,
+    do_transform_vector3,
     get_transform_function,
     register_transform,
     registered_types,
 )
-from tfbus.geometry import do_transform_point, do_transform_pose, do_transform_vector3
 
 pytestmark = pytest.mark.anyio
 

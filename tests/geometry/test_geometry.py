@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
+from tfbus import convert
 from tfbus import geometry as g
 from tfbus.core import _pymath
 from tfbus.messages import (
@@ -260,7 +261,7 @@ def test_transform_points_messages() -> None:
 def test_do_transform_point_tutorial() -> None:
     ts = stamped("base_link", "base_laser", (0.1, 0.0, 0.2), IDENTITY_Q, ns=5_000_000_000)
     p = PointStamped(Header(Time(4), "base_laser"), Point(1.0, 0.2, 0.0))
-    out = g.do_transform_point(p, ts)
+    out = convert.do_transform_point(p, ts)
     assert isinstance(out, PointStamped)
     assert out.header == Header(Time(5), "base_link")  # the transform's header
     assert out.point == pytest.approx(Point(1.1, 0.2, 0.2), abs=1e-15)
@@ -269,7 +270,7 @@ def test_do_transform_point_tutorial() -> None:
 def test_do_transform_vector3_rotation_only() -> None:
     ts = stamped("map", "robot", (10.0, 20.0, 30.0), YAW90, ns=7)
     v = Vector3Stamped(Header(Time.from_ns(7), "robot"), Vector3(1.0, 0.0, 0.0))
-    out = g.do_transform_vector3(v, ts)
+    out = convert.do_transform_vector3(v, ts)
     assert isinstance(out, Vector3Stamped)
     assert out.header == ts.header
     assert out.vector == pytest.approx(Vector3(0.0, 1.0, 0.0), abs=1e-15)
@@ -278,14 +279,14 @@ def test_do_transform_vector3_rotation_only() -> None:
 def test_do_transform_pose() -> None:
     ts = stamped("map", "robot", (1.0, 0.0, 0.0), YAW90, ns=3)
     pose = PoseStamped(Header(Time.from_ns(3), "robot"), Pose(Point(1.0, 0.0, 0.0), Quaternion()))
-    out = g.do_transform_pose(pose, ts)
+    out = convert.do_transform_pose(pose, ts)
     assert isinstance(out, PoseStamped)
     assert out.header == ts.header
     assert out.pose.position == pytest.approx(Point(1.0, 1.0, 0.0), abs=1e-15)
     assert out.pose.orientation == pytest.approx(Quaternion(*YAW90), abs=1e-15)
     # A pose already yawed by 90° ends up yawed by 180°.
     pose = pose._replace(pose=pose.pose._replace(orientation=Quaternion(*YAW90)))
-    assert_same_rotation(g.do_transform_pose(pose, ts).pose.orientation, (0, 0, 1, 0))
+    assert_same_rotation(convert.do_transform_pose(pose, ts).pose.orientation, (0, 0, 1, 0))
 
 
 def test_swap_is_done_in_one_place() -> None:
@@ -473,13 +474,13 @@ def test_do_transform_point_matches_arrays(
     t: tuple[float, float, float], q: tuple[float, ...], p: tuple[float, ...], ns: int
 ) -> None:
     ts = stamped("target", "source", t, q, ns=ns)
-    out = g.do_transform_point(PointStamped(Header(Time(1), "source"), Point(*p)), ts)
+    out = convert.do_transform_point(PointStamped(Header(Time(1), "source"), Point(*p)), ts)
     assert out.header is ts.header
     assert out.point == tuple(g.apply_transform(t, q, p).tolist())
-    vec = g.do_transform_vector3(Vector3Stamped(Header(), Vector3(*p)), ts)
+    vec = convert.do_transform_vector3(Vector3Stamped(Header(), Vector3(*p)), ts)
     assert vec.header is ts.header
     assert vec.vector == tuple(g.rotate_vectors(q, p).tolist())
-    pose = g.do_transform_pose(PoseStamped(Header(), Pose(Point(*p), Quaternion(*q))), ts)
+    pose = convert.do_transform_pose(PoseStamped(Header(), Pose(Point(*p), Quaternion(*q))), ts)
     assert pose.header is ts.header
     assert pose.pose.position == out.point
     assert pose.pose.orientation == tuple(g.quat_multiply(q, q).tolist())

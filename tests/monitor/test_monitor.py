@@ -324,3 +324,35 @@ async def test_a_second_broadcaster_does_not_make_the_first_unattributed() -> No
     assert stats.authorities["robot_tf_publisher"].messages == 2
     # odom -> base_link appeared while both were alive: nothing says whose it is.
     assert stats.frames["base_link"].authority == "unattributed"
+
+
+def test_the_command_line_asks_the_scheme_for_fleet_and_unknown_authority(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Whether a bus is a fleet bus and what an unnamed broadcaster is called are facts of
+    the scheme table (``TransportScheme.fleet_option``, ``unknown_authority``), not of
+    the scheme's name: a scheme registered with them gets both from the command line."""
+    from tfbus.cli._sources import BusSource
+    from tfbus.transports import spec
+
+    monkeypatch.setattr(spec, "_SCHEMES", spec.schemes())  # this test's rows only
+    spec.register_scheme(spec.TransportScheme(
+        "yard", "tfbus.transports.memory.options", keys=frozenset({"robots"}),
+        fleet_option="robots", unknown_authority="nobody",
+    ))
+    assert BusSource("yard?robots=*").is_fleet
+    assert not BusSource("yard?robots=r1").is_fleet
+    assert not BusSource("yard").is_fleet
+    src = BusSource("yard")
+    src.clock = ManualClock(Time.from_ns(T0 + 20 * MS))  # type: ignore[assignment]
+    src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
+    assert set(src.summary().authorities) == {"nobody"}
+    rows = spec.schemes()
+    assert rows["zenoh"].is_fleet(spec.parse_bus_spec("zenoh?namespace=*"))
+    assert not rows["zenoh"].is_fleet(spec.parse_bus_spec("zenoh?namespace=robot1"))
+    assert not rows["ros1"].is_fleet(spec.parse_bus_spec("ros1"))
+    assert (rows["ros1"].unknown_authority, rows["zenoh"].unknown_authority) == (
+        "unknown_publisher", None)
+    src = BusSource("memory")
+    src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
+    assert set(src.summary().authorities) == {"unknown"}

@@ -30,7 +30,7 @@ from peer_install import require
 
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
 from tfbus.clock import ManualClock
-from tfbus.geometry import do_transform_point
+from tfbus.convert import do_transform_point
 from tfbus.messages import Header, JointState, Point, PointStamped, TransformStamped
 from tfbus.robot import (
     JointStateError,
@@ -165,9 +165,9 @@ async def test_run_publishes_what_the_real_node_published(recording: Path) -> No
             assert_same(rows(got), node), case["label"]
         tg.cancel_scope.cancel()
     published = sum(1 for c in data["cases"] if finite(c["tf"] or []))
-    assert rsp.statistics.published == published
-    assert rsp.statistics.rate_limited == 2
-    assert rsp.statistics.received == len(data["cases"])
+    assert rsp.statistics().published == published
+    assert rsp.statistics().rate_limited == 2
+    assert rsp.statistics().received == len(data["cases"])
 
 
 # --------------------------------------------------------------------------- hand-computed
@@ -392,9 +392,11 @@ async def test_run_rate_limits_per_joint_and_resets_on_a_clock_jump() -> None:
         await bus.publish("/joint_states", JointState(Header(Time(600)), ["rail"], [0.1, 0.2]))
         assert await send(601 * 10**9, ["shoulder", "rail"]) == ["slide", "upper", "twin"]
         tg.cancel_scope.cancel()
-    st = rsp.statistics
+    st = rsp.statistics()
     assert (st.received, st.published, st.rate_limited, st.invalid) == (9, 5, 2, 2)
     assert st.transforms == 2 + 2 + 1 + 2 + 3
+    st.received = 0  # a snapshot: the caller's copy, not the publisher's counters
+    assert rsp.statistics().received == 9
 
 
 async def test_run_ignore_timestamp_and_nan(caplog: pytest.LogCaptureFixture) -> None:
@@ -410,7 +412,7 @@ async def test_run_ignore_timestamp_and_nan(caplog: pytest.LogCaptureFixture) ->
         msgs = [tf.receive_nowait() for _ in range(3)]
         assert all([t.child_frame_id for t in m.transforms] == ["slide"] for m in msgs)
         tg.cancel_scope.cancel()
-    assert rsp.statistics.refused_positions == 6
+    assert rsp.statistics().refused_positions == 6
     assert "shoulder=inf" in caplog.text
 
 
@@ -814,7 +816,7 @@ async def test_run_counts_bad_joint_states_and_goes_on() -> None:
                                 None)]
         tg.cancel_scope.cancel()
     assert [[t.child_frame_id for t in m.transforms] for m in got] == [["slide"]]
-    st = rsp.statistics
+    st = rsp.statistics()
     assert (st.received, st.invalid, st.refused_positions, st.published) == (5, 2, 2, 1)
 
 
@@ -851,7 +853,7 @@ async def test_rate_limit_memory_is_bounded() -> None:
         assert sub.statistics().queued == 1  # the second is within 100 ms: rate-limited
         tg.cancel_scope.cancel()
     assert grown < 8_000_000, grown
-    assert rsp.statistics.received == 402 and rsp.statistics.rate_limited == 1
+    assert rsp.statistics().received == 402 and rsp.statistics().rate_limited == 1
 
 
 @pytest.mark.parametrize("model", [b"", b"   \n", "", "  ", b"robot"])
@@ -907,7 +909,7 @@ def test_loading_does_not_pop_from_a_list_of_every_element(
 async def test_run_a_joint_state_stamped_ahead_holds_back_the_next_ones() -> None:
     """ROS 1 parity: one JointState stamped an hour ahead of the clock rate-limits every
     later one stamped now (``min(now, last publish stamps)``); ``max_stamp_ahead`` drops
-    it instead (counted in ``statistics.ahead``) and the later ones go out."""
+    it instead (counted in ``statistics().ahead``) and the later ones go out."""
     hour = 3600 * 10**9
     now = 1000 * 10**9
 
@@ -931,10 +933,10 @@ async def test_run_a_joint_state_stamped_ahead_holds_back_the_next_ones() -> Non
 
     stamps, rsp = await published()
     assert stamps == [now, now + hour]  # every later one held back
-    assert (rsp.statistics.rate_limited, rsp.statistics.ahead) == (3, 0)
+    assert (rsp.statistics().rate_limited, rsp.statistics().ahead) == (3, 0)
     stamps, rsp = await published(max_stamp_ahead=60.0)
     assert stamps == [now, now + 10**8, now + 2 * 10**8, now + 3 * 10**8]
-    assert (rsp.statistics.rate_limited, rsp.statistics.ahead) == (0, 1)
+    assert (rsp.statistics().rate_limited, rsp.statistics().ahead) == (0, 1)
     async with Bus() as bus:
         for bad in (-1.0, math.nan, math.inf, 1e300, "5"):
             with pytest.raises(ValueError, match="max_stamp_ahead"):

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from tfbus.transports._base import PeerEvent, PeerInfo
     from tfbus.transports.spec import BusSpec
 
-__all__ = ["DEFAULT_BUS", "UNKNOWN_PUBLISHER", "BagSource", "BusSource", "TfSource",
+__all__ = ["DEFAULT_BUS", "BagSource", "BusSource", "TfSource",
            "is_bus_error", "live", "run_live", "source", "source_options"]
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -128,9 +128,6 @@ class BagSource(TfSource):
 
 _UNKNOWN_AUTHORITY = "unknown"
 _SHARED_AUTHORITY = "unattributed"
-UNKNOWN_PUBLISHER = "unknown_publisher"
-"""The broadcaster's name on ROS 1, where the message does not carry it: tf_monitor's
-(``ros::MessageEvent::getPublisherName`` without a connection header, Debian's tf 1.13)."""
 
 
 def parse_spec(spec: str, *, name: str = "tfbus-cli") -> BusSpec:
@@ -242,8 +239,8 @@ class BusSource(TfSource):
         self._problem: str | None = None
         self.fleet: FleetBuffer | None = None
         """The robots of a fleet bus (``namespace=*``) while attached."""
-        scheme = schemes().get(self.bus_spec.scheme)
-        self._peer_aware = scheme is not None and scheme.peer_aware
+        self._scheme = schemes().get(self.bus_spec.scheme)
+        self._peer_aware = self._scheme is not None and self._scheme.peer_aware
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -266,9 +263,10 @@ class BusSource(TfSource):
 
     @property
     def is_fleet(self) -> bool:
-        """Whether the bus is a Zenoh fleet bus (``namespace=*``): every robot's frames,
-        prefixed ``robot/`` (:class:`~tfbus.fleet.FleetBuffer`)."""
-        return self.bus_spec.scheme == "zenoh" and self.bus_spec.value("namespace") == "*"
+        """Whether the bus is a fleet bus (its scheme's
+        :meth:`~tfbus.transports.spec.TransportScheme.is_fleet`: Zenoh's ``namespace=*``):
+        every robot's frames, prefixed ``robot/`` (:class:`~tfbus.fleet.FleetBuffer`)."""
+        return self._scheme is not None and self._scheme.is_fleet(self.bus_spec)
 
     @property
     def has_liveliness(self) -> bool:
@@ -335,7 +333,8 @@ class BusSource(TfSource):
 
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:
-            return UNKNOWN_PUBLISHER if self.bus_spec.scheme == "ros1" else _UNKNOWN_AUTHORITY
+            named = self._scheme.unknown_authority if self._scheme is not None else None
+            return named or _UNKNOWN_AUTHORITY
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
         if len(names) == 1:

@@ -76,10 +76,8 @@ def _chain_span(core: BufferCore, frames: Sequence[str]) -> tuple[int, int] | No
     """[oldest, newest] stamp range covered by every dynamic link on the chain between
     the two ``frames``; None when the chain is all static or the frames are not
     connected (two trees: the lookup then reports why)."""
-    from tfbus.monitor import frame_chain
-
     info = {c: (p, st, o, n) for c, p, _a, st, _s, o, n in core.frame_info()}
-    chain = frame_chain({c: v[0] for c, v in info.items()}, frames[0], frames[1])
+    chain = core.frame_path(frames[0], frames[1])
     if chain is None:
         return None
     lo, hi = 0, None

@@ -45,8 +45,9 @@ __all__ = ["chain_lines", "command", "liveliness_table", "print_monitor", "robot
 
 def tf2_chain(parents: dict[str, str], a: str, b: str) -> list[str] | None:
     """tf_monitor's ``Chain is:`` list for ``A B``: tf2 ``_chainAsVector(B, 0, A, 0, B)``
-    (:meth:`tfbus.BufferCore.chain`, tf2_py's ``_chain`` exactly) over each frame's latest
+    (:func:`tfbus.compat.tf2_py.chain`, tf2_py's ``_chain`` exactly) over each frame's latest
     parent; None when tf2 would raise (unconnected, a loop)."""
+    from tfbus.compat.tf2_py import chain
     from tfbus.core import BufferCore
     from tfbus.errors import TransformException
     from tfbus.messages import Header, Transform, TransformStamped
@@ -55,7 +56,7 @@ def tf2_chain(parents: dict[str, str], a: str, b: str) -> list[str] | None:
     for child, parent in parents.items():
         core.set_transform_static(TransformStamped(Header(frame_id=parent), child, Transform()))
     try:
-        return core.chain(b, _ZERO, a, _ZERO, b)
+        return chain(core, b, _ZERO, a, _ZERO, b)
     except TransformException:
         return None
 

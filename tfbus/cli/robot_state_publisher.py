@@ -69,7 +69,7 @@ def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
                    f"{literal(rsp.model.root)}, on {bus_label(bus, local)}", err=True)
 
     def finish(b: Bus) -> None:
-        s = rsp.statistics
+        s = rsp.statistics()
         click.echo(f"[ INFO] summary: {s.received} joint states received, {s.published} "
                    f"published ({s.transforms} transforms), {s.rate_limited} rate-limited, "
                    f"{s.invalid} invalid, {s.refused_positions} positions refused"

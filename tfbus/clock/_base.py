@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from contextlib import AbstractContextManager
 from itertools import count
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
@@ -57,8 +57,17 @@ class Clock(Protocol):
         """
         ...
 
-    def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
-        """Register ``callback(old, new)`` for backward jumps; returns an unregister function."""
+    def on_jump(
+        self, callback: JumpCallback, *, key: Hashable | None = None
+    ) -> Callable[[], None]:
+        """Register ``callback(old, new)`` for backward jumps; returns an unregister function.
+
+        With a ``key``, registrations share one callback: the first one registered under
+        ``key`` runs once per jump however many owners asked for it, until the last of
+        them unregisters (tf2_ros clears a buffer once per jump back, though its Buffer and
+        its TransformListener both watch the clock). Without one, every registration is
+        its own callback. Callbacks run in registration order.
+        """
         ...
 
     def move_on_after(
@@ -140,20 +149,36 @@ def _noop() -> None:
 
 
 class _JumpCallbacks:
-    """A registry of backward-jump callbacks shared by both clocks."""
+    """The backward-jump callbacks of one clock (:meth:`Clock.on_jump`), shared by the
+    clocks: each callback once, keyed ones counted by how many owners hold them."""
 
-    __slots__ = ("_callbacks", "_ids")
+    __slots__ = ("_callbacks", "_holders", "_ids")
 
     def __init__(self) -> None:
-        self._callbacks: dict[int, JumpCallback] = {}
+        self._callbacks: dict[Hashable, JumpCallback] = {}
+        self._holders: dict[Hashable, int] = {}
         self._ids = count()
 
-    def add(self, callback: JumpCallback) -> Callable[[], None]:
-        key = next(self._ids)
-        self._callbacks[key] = callback
+    def add(self, callback: JumpCallback, key: Hashable | None = None) -> Callable[[], None]:
+        """Register ``callback`` (under ``key``: joined to the one held there, if any);
+        returns its idempotent unregister."""
+        slot: Hashable = ("key", key) if key is not None else ("id", next(self._ids))
+        if slot not in self._callbacks:
+            self._callbacks[slot] = callback
+        self._holders[slot] = self._holders.get(slot, 0) + 1
+        done = False
 
         def unregister() -> None:
-            self._callbacks.pop(key, None)
+            nonlocal done
+            if done:
+                return
+            done = True
+            left = self._holders.get(slot, 1) - 1
+            if left > 0:
+                self._holders[slot] = left
+            else:
+                self._holders.pop(slot, None)
+                self._callbacks.pop(slot, None)
 
         return unregister
 

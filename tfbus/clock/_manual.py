@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from contextlib import AbstractContextManager
 from heapq import heapify, heappop, heappush
 from itertools import count
@@ -174,13 +174,16 @@ class ManualClock:
         """
         await self._sleep_until_ns(self._deadline_ns(timeout_ns(seconds, name="seconds")))
 
-    def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
+    def on_jump(
+        self, callback: JumpCallback, *, key: Hashable | None = None
+    ) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when :meth:`set` moves time backwards.
 
+        ``key``: one shared callback per key (:meth:`tfbus.clock.Clock.on_jump`).
         Returns a function that unregisters it (calling it twice is harmless). Exceptions
         from callbacks are logged, never raised into ``set``.
         """
-        return self._jump.add(callback)
+        return self._jump.add(callback, key)
 
     def move_on_after(
         self, seconds: float | Duration | None, *, shield: bool = False

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from contextlib import AbstractContextManager, ExitStack
 from types import TracebackType
 from typing import TYPE_CHECKING
@@ -311,11 +311,14 @@ class SimClock:
         with _WallGuard(self):
             await self._core.sleep(seconds)
 
-    def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
+    def on_jump(
+        self, callback: JumpCallback, *, key: Hashable | None = None
+    ) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when a ``/clock`` earlier than
-        ``now()`` arrives (inside its delivery). Returns the function that unregisters
+        ``now()`` arrives (inside its delivery); ``key``: one shared callback per key
+        (:meth:`tfbus.clock.Clock.on_jump`). Returns the function that unregisters
         it. Exceptions from callbacks are logged, never raised into the delivery."""
-        return self._core.on_jump(callback)
+        return self._core.on_jump(callback, key=key)
 
     def move_on_after(
         self, seconds: float | Duration | None, *, shield: bool = False

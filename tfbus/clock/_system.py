@@ -7,7 +7,7 @@ import math
 import sys
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from contextlib import AbstractContextManager
 from functools import partial
 from heapq import heapify, heappop, heappush
@@ -307,13 +307,16 @@ class SystemClock:
             var.set(timers)
         return timers.add(trio.current_time() + delay, callback)
 
-    def on_jump(self, callback: JumpCallback) -> Callable[[], None]:
+    def on_jump(
+        self, callback: JumpCallback, *, key: Hashable | None = None
+    ) -> Callable[[], None]:
         """Register ``callback(old, new)``, called when the wall clock is seen going back.
 
+        ``key``: one shared callback per key (:meth:`tfbus.clock.Clock.on_jump`).
         Returns a function that unregisters it (calling it twice is harmless). Exceptions
         from callbacks are logged, never raised into the task that observed the jump.
         """
-        return self._jump.add(callback)
+        return self._jump.add(callback, key)
 
     def __repr__(self) -> str:
         return "SystemClock()"

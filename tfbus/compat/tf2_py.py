@@ -14,6 +14,7 @@ from typing import Any
 
 from tfbus.compat._args import to_duration, to_point, to_time, to_transform_stamped
 from tfbus.compat._types import flavour_of, time_out
+from tfbus.core import MAX_GRAPH_DEPTH
 from tfbus.core import BufferCore as _Core
 from tfbus.errors import (
     ConnectivityException,
@@ -22,9 +23,10 @@ from tfbus.errors import (
     LookupException,
     TimeoutException,
     TransformException,
+    extrapolation_exception,
 )
 from tfbus.messages import TransformStamped, VelocityStamped
-from tfbus.time import Duration
+from tfbus.time import Duration, Time
 
 __all__ = [
     "BufferCore",
@@ -34,6 +36,7 @@ __all__ = [
     "LookupException",
     "TimeoutException",
     "TransformException",
+    "chain",
 ]
 
 
@@ -135,9 +138,9 @@ class BufferCore:
         source_time: object,
         fixed_frame: str,
     ) -> list[str]:
-        """tf2_py ``_chain``: :meth:`tfbus.BufferCore.chain`."""
-        return self.core.chain(
-            target_frame, to_time(target_time, "target_time"), source_frame,
+        """tf2_py ``_chain``: :func:`chain` on ``.core``."""
+        return chain(
+            self.core, target_frame, to_time(target_time, "target_time"), source_frame,
             to_time(source_time, "source_time"), fixed_frame,
         )
 
@@ -208,3 +211,128 @@ def _interval(value: object) -> Duration | float:
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return float(value)  # validated (> 0, finite) by the velocity lookup
     return to_duration(value, "averaging_interval")
+
+
+def chain(
+    core: _Core,
+    target_frame: str,
+    target_time: Time,
+    source_frame: str,
+    source_time: Time,
+    fixed_frame: str,
+) -> list[str]:
+    """The frames a time-travel lookup on ``core`` walks, in tf2_py 0.7.6 ``_chain``
+    order (tf2 ``BufferCore::_chainAsVector``): the walk from ``source_frame`` to
+    ``fixed_frame`` at ``source_time``, then from ``fixed_frame`` to ``target_frame``
+    at ``target_time``, the shared frame between them once. E.g. on A→B→C, A→D,
+    ``chain(core, "D", t, "C", t, "A") == ["C", "B", "A", "D"]``; ``[]`` when all three
+    frames are one.
+
+    Each walk is tf2 0.7.6 ``walkToTopParent``'s frame chain, quirks included: the
+    source's ancestors up to the root, then the target's branch, with the pruning
+    of the common part that keeps the root when the two branches meet one level
+    below it (A→B→C, B→E: the walk from C to E is ``[C, B, A, E]``). tfbus's own code
+    asks the core for a frame path (:func:`tfbus.core.frame_path`); this ordering is
+    tf2_py's and lives here only.
+
+    Raises:
+        InvalidArgumentException, LookupException, ConnectivityException,
+        ExtrapolationException: as :meth:`tfbus.BufferCore.lookup_transform` of either
+            leg (fixed ← source at ``source_time``, then target ← fixed at
+            ``target_time``). tf2_py raises the same classes, with an empty message
+            for an unknown id at time 0 (a ConnectivityException at another time).
+    """
+    first = _walk_chain(core, fixed_frame, source_frame, source_time)
+    second = _walk_chain(core, target_frame, fixed_frame, target_time)
+    if first and second and first[-1] == second[0]:
+        first.pop()
+    return first + second
+
+
+def _walk_chain(core: _Core, target: str, source: str, time: Time) -> list[str]:
+    """tf2 0.7.6 ``walkToTopParent``'s ``frame_chain`` from ``source`` to ``target``
+    (after the same walk's errors, raised by :meth:`tfbus.BufferCore.lookup_transform`)."""
+    if target == source:
+        return []
+    known_target, known_source = core.frame_exists(target), core.frame_exists(source)
+    if not (known_target and known_source):
+        _unknown_in_chain(core, target, source, time, known_target, known_source)
+        return []  # both unknown: tf2 sees frame 0 twice, an identity walk
+    at = core.lookup_transform(target, source, time).header.stamp  # raises as tf2
+    linked = {info.child for info in core.frame_info()}
+    walk: list[str] = []
+    frame: str | None = source
+    top = source
+    while frame is not None:
+        walk.append(frame)
+        if frame not in linked:
+            top = frame
+            break
+        parent = core.get_parent(frame, at)
+        if parent is None:  # no data at this time: the target walk must meet it
+            top = frame
+            break
+        if frame == target:
+            return walk
+        top, frame = frame, parent
+        if len(walk) > MAX_GRAPH_DEPTH + 1:
+            break
+    reverse: list[str] = []
+    frame = target
+    while frame is not None and frame != top:
+        reverse.append(frame)
+        if frame not in linked:
+            break
+        parent = core.get_parent(frame, at)
+        if frame == source:  # source is an ancestor of target: this walk, reversed
+            return reverse[::-1]
+        frame = parent
+        if len(reverse) > MAX_GRAPH_DEPTH + 1:
+            break
+    reverse.append(top)  # tf2 appends the top parent to ease the pruning
+    m, n = len(reverse) - 1, len(walk) - 1
+    while m >= 0 and n >= 0 and walk[n] == reverse[m]:
+        m -= 1
+        n -= 1
+    if n > 0:
+        del walk[n + 2 :]
+    walk.extend(reverse[i] for i in range(m, -1, -1))
+    return walk
+
+
+def _unknown_in_chain(
+    core: _Core, target: str, source: str, time: Time, known_target: bool, known_source: bool
+) -> None:
+    """What tf2 0.7.6 ``_chainAsVector`` does with an unknown id (frame number 0, no
+    validation): nothing when both are unknown; at time 0 a LookupException with an
+    empty message; otherwise the walk up from the known id ends in tf2's
+    extrapolation error (a link without data at ``time``) or connectivity error,
+    with ``NO_PARENT`` for the unknown id."""
+    if not known_target and not known_source:
+        return
+    if time.ns == 0:
+        raise LookupException("")
+    known = source if known_source else target
+    names = (source, "NO_PARENT") if known_source else ("NO_PARENT", target)
+    frame = known
+    for _ in range(MAX_GRAPH_DEPTH + 1):
+        newest = core.get_parent(frame)
+        if newest is None:
+            break  # a root (or an emptied link)
+        parent = core.get_parent(frame, time)
+        if parent is None:  # no data at time: tf2 reports the extrapolation
+            # frame as the *target* of a lookup: tf2's walk reports the target's
+            # own link when it has no data (the source side only flags it)
+            failure = core.try_lookup_transform(frame, newest, time)
+            if isinstance(failure, ExtrapolationException):
+                detail = str(failure).split(", when looking up transform from frame")[0]
+                raise extrapolation_exception(
+                    f"{detail}, when looking up transform from frame [{names[0]}] to "
+                    f"frame [{names[1]}]"
+                )
+            break
+        frame = parent
+    raise ConnectivityException(
+        f"Could not find a connection between '{names[1]}' and '{names[0]}' because "
+        "they are not part of the same tree.Tf has two or more unconnected trees."
+    )

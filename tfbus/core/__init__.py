@@ -32,6 +32,7 @@ from tfbus.core.buffer_core import (
     FrameInfo,
     SetResult,
     Tf7,
+    frame_path,
 )
 from tfbus.core.results import TouchedFrames
 
@@ -45,4 +46,5 @@ __all__ = [
     "Tf7",
     "TouchedFrames",
     "TransformArray",
+    "frame_path",
 ]

@@ -33,6 +33,7 @@ __all__ = [
     "as_times",
     "check_errors",
     "compose_rows",
+    "quat_rotate_rows",
 ]
 
 Errors: TypeAlias = Literal["raise", "mask"]
@@ -126,9 +127,31 @@ class TransformArray:
         p = np.asarray(points, dtype=np.float64)
         if p.shape != (len(self), 3):
             raise ValueError(f"points must have shape ({len(self)}, 3), got {p.shape}")
-        from tfbus.geometry import apply_transform  # geometry imports the core: not at load
+        rotated: _F64 = quat_rotate_rows(self.rotations, p) + self.translations
+        return rotated
 
-        return apply_transform(self.translations, self.rotations, p)
+
+def quat_rotate_rows(q: _F64, v: _F64) -> _F64:
+    """tf2's ``quatRotate(q, v)`` = ``q ⊗ (v, 0) ⊗ q*`` element-wise over rows, in
+    ``_cmath.quat_rotate``'s evaluation order (bit for bit the scalar kernel's numbers;
+    a non-unit ``q`` scales ``v`` by ``|q|²``, as tf2's does). ``q``: ``(..., 4)``
+    (x, y, z, w); ``v``: ``(..., 3)`` metres, broadcast against ``q``. Returns
+    ``(..., 3) float64``. Source: ``tf2/LinearMath/Quaternion.h`` ``quatRotate``."""
+    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    tx = qw * vx + qy * vz - qz * vy
+    ty = qw * vy + qz * vx - qx * vz
+    tz = qw * vz + qx * vy - qy * vx
+    tw = -qx * vx - qy * vy - qz * vz
+    out: _F64 = np.stack(
+        [
+            -tw * qx + tx * qw - ty * qz + tz * qy,
+            -tw * qy + ty * qw - tz * qx + tx * qz,
+            -tw * qz + tz * qw - tx * qy + ty * qx,
+        ],
+        axis=-1,
+    )
+    return out
 
 
 def as_times(times: TimesLike, n: int | None = None) -> _I64:

@@ -72,7 +72,6 @@ from tfbus.core.text import (
 from tfbus.core.velocity import lookup_velocity as _lookup_velocity
 from tfbus.errors import (
     ConnectivityException,
-    ExtrapolationException,
     InvalidArgumentException,
     LookupException,
     TransformException,
@@ -97,6 +96,7 @@ __all__ = [
     "FrameInfo",
     "SetResult",
     "Tf7",
+    "frame_path",
 ]
 
 logger = logging.getLogger("tfbus.core")
@@ -104,6 +104,31 @@ logger = logging.getLogger("tfbus.core")
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
 _LATEST: Final = Time(0)
+
+
+def frame_path(parents: dict[str, str], source: str, target: str) -> list[str] | None:
+    """The frames from ``source`` up to the lowest common ancestor and down to
+    ``target`` (tf2 ``_chainAsVector``'s order without tf2 0.7.6's pruning quirk, as
+    tf_monitor measures a chain), given each child frame's parent; ``[source]`` when
+    the two are one; None when the two frames are in different trees (or in a loop).
+    tfbus's one frame path: :meth:`BufferCore.frame_path`, the monitor and tf_echo use
+    it (the tf2_py 0.7.6 ordering with its quirks is :func:`tfbus.compat.tf2_py.chain`)."""
+
+    def up(frame: str) -> list[str]:
+        walk = [frame]
+        while walk[-1] in parents and parents[walk[-1]] not in walk:
+            walk.append(parents[walk[-1]])
+        return walk
+
+    if source == target:
+        return [source]
+    a, b = up(source), up(target)
+    in_b = {frame: j for j, frame in enumerate(b)}
+    for i, frame in enumerate(a):
+        j = in_b.get(frame)
+        if j is not None:
+            return a[: i + 1] + b[:j][::-1]
+    return None
 
 
 class _CoreOnly:
@@ -877,125 +902,16 @@ class BufferCore(CoreBase):
             reference_point_frame, time, averaging_interval, method,
         )
 
-    def chain(
-        self,
-        target_frame: str,
-        target_time: Time,
-        source_frame: str,
-        source_time: Time,
-        fixed_frame: str,
-    ) -> list[str]:
-        """The frames a time-travel lookup walks, in tf2_py 0.7.6 ``_chain`` order
-        (tf2 ``BufferCore::_chainAsVector``): the walk from ``source_frame`` to
-        ``fixed_frame`` at ``source_time``, then from ``fixed_frame`` to ``target_frame``
-        at ``target_time``, the shared frame between them once. E.g. on A→B→C, A→D,
-        ``chain("D", t, "C", t, "A") == ["C", "B", "A", "D"]``; ``[]`` when all three
-        frames are one.
+    def frame_path(self, source_frame: str, target_frame: str) -> list[str] | None:
+        """The frames from ``source_frame`` up to the lowest common ancestor and down to
+        ``target_frame`` by each link's newest parent (:func:`frame_path`); None when
+        they are not connected (two trees, a loop or an unknown id).
 
-        Each walk is tf2 0.7.6 ``walkToTopParent``'s frame chain, quirks included: the
-        source's ancestors up to the root, then the target's branch, with the pruning
-        of the common part that keeps the root when the two branches meet one level
-        below it (A→B→C, B→E: the walk from C to E is ``[C, B, A, E]``).
-
-        Raises:
-            InvalidArgumentException, LookupException, ConnectivityException,
-            ExtrapolationException: as :meth:`lookup_transform` of either leg
-                (fixed ← source at ``source_time``, then target ← fixed at
-                ``target_time``). tf2_py raises the same classes, with an empty message
-                for an unknown id at time 0 (a ConnectivityException at another time).
+        Returns:
+            Frame ids, ``[source_frame]`` when the two ids are one.
         """
-        first = self._walk_chain(fixed_frame, source_frame, source_time)
-        second = self._walk_chain(target_frame, fixed_frame, target_time)
-        if first and second and first[-1] == second[0]:
-            first.pop()
-        return first + second
-
-    def _walk_chain(self, target: str, source: str, time: Time) -> list[str]:
-        """tf2 0.7.6 ``walkToTopParent``'s ``frame_chain`` from ``source`` to ``target``
-        (after the same walk's errors, raised by :meth:`lookup_transform`)."""
-        if target == source:
-            return []
-        known_target, known_source = self.frame_exists(target), self.frame_exists(source)
-        if not (known_target and known_source):
-            self._unknown_in_chain(target, source, time, known_target, known_source)
-            return []  # both unknown: tf2 sees frame 0 twice, an identity walk
-        at = self.lookup_transform(target, source, time).header.stamp  # raises as tf2
-        linked = {info.child for info in self.frame_info()}
-        chain: list[str] = []
-        frame: str | None = source
-        top = source
-        while frame is not None:
-            chain.append(frame)
-            if frame not in linked:
-                top = frame
-                break
-            parent = self.get_parent(frame, at)
-            if parent is None:  # no data at this time: the target walk must meet it
-                top = frame
-                break
-            if frame == target:
-                return chain
-            top, frame = frame, parent
-            if len(chain) > MAX_GRAPH_DEPTH + 1:
-                break
-        reverse: list[str] = []
-        frame = target
-        while frame is not None and frame != top:
-            reverse.append(frame)
-            if frame not in linked:
-                break
-            parent = self.get_parent(frame, at)
-            if frame == source:  # source is an ancestor of target: this walk, reversed
-                return reverse[::-1]
-            frame = parent
-            if len(reverse) > MAX_GRAPH_DEPTH + 1:
-                break
-        reverse.append(top)  # tf2 appends the top parent to ease the pruning
-        m, n = len(reverse) - 1, len(chain) - 1
-        while m >= 0 and n >= 0 and chain[n] == reverse[m]:
-            m -= 1
-            n -= 1
-        if n > 0:
-            del chain[n + 2 :]
-        chain.extend(reverse[i] for i in range(m, -1, -1))
-        return chain
-
-    def _unknown_in_chain(
-        self, target: str, source: str, time: Time, known_target: bool, known_source: bool
-    ) -> None:
-        """What tf2 0.7.6 ``_chainAsVector`` does with an unknown id (frame number 0, no
-        validation): nothing when both are unknown; at time 0 a LookupException with an
-        empty message; otherwise the walk up from the known id ends in tf2's
-        extrapolation error (a link without data at ``time``) or connectivity error,
-        with ``NO_PARENT`` for the unknown id."""
-        if not known_target and not known_source:
-            return
-        if time.ns == 0:
-            raise LookupException("")
-        known = source if known_source else target
-        names = (source, "NO_PARENT") if known_source else ("NO_PARENT", target)
-        frame = known
-        for _ in range(MAX_GRAPH_DEPTH + 1):
-            newest = self.get_parent(frame)
-            if newest is None:
-                break  # a root (or an emptied link)
-            parent = self.get_parent(frame, time)
-            if parent is None:  # no data at time: tf2 reports the extrapolation
-                # frame as the *target* of a lookup: tf2's walk reports the target's
-                # own link when it has no data (the source side only flags it)
-                failure = self.try_lookup_transform(frame, newest, time)
-                if isinstance(failure, ExtrapolationException):
-                    detail = str(failure).split(", when looking up transform from frame")[0]
-                    raise extrapolation_exception(
-                        f"{detail}, when looking up transform from frame [{names[0]}] to "
-                        f"frame [{names[1]}]"
-                    )
-                break
-            frame = parent
-        raise ConnectivityException(
-            f"Could not find a connection between '{names[1]}' and '{names[0]}' because "
-            "they are not part of the same tree.Tf has two or more unconnected trees."
-        )
+        return frame_path({info.child: info.parent for info in self.frame_info()},
+                          source_frame, target_frame)
 
     def all_frames_as_dot(self, current_time: Time | None = None) -> str:
         """The frame tree as a Graphviz ``digraph`` in tf2 0.7.6's text

@@ -50,7 +50,7 @@ from tfbus.sensor_msgs import LaserScan, read_points
 from tfbus.time import Duration, Time
 from tfbus.topics import SCAN_TOPIC
 
-__all__ = ["METHODS", "LaserDemoStats", "run_laser_demo", "simulate_scan"]
+__all__ = ["METHODS", "LaserDemoStatistics", "run_laser_demo", "simulate_scan"]
 
 ROOM_HALF = 5.0  # metres: walls at x = ±5 and y = ±5
 RADIUS = 2.0  # metres
@@ -109,7 +109,7 @@ def wall_error(x: npt.NDArray[np.float32], y: npt.NDArray[np.float32]) -> npt.ND
 
 
 @dataclass
-class LaserDemoStats:
+class LaserDemoStatistics:
     """What the demo measured: scans projected, and per method every point's wall
     error (m) of the last reporting period and overall mean / max."""
 
@@ -149,7 +149,7 @@ async def _mapper(
     buffer: Buffer,
     bus: Bus,
     clock: Clock,
-    stats: LaserDemoStats,
+    stats: LaserDemoStatistics,
     out: Callable[[str], None],
     scan_rate: float,
     beams: int,
@@ -157,7 +157,7 @@ async def _mapper(
     projector = LaserProjection()
     sub = bus.subscribe(SCAN_TOPIC, queue_size=10)
     sweep = Duration.from_sec(1.0 / scan_rate)
-    period = LaserDemoStats()
+    period = LaserDemoStatistics()
     start = clock.now().ns
     next_report = start + 1_000_000_000
 
@@ -189,7 +189,7 @@ async def _mapper(
                 )
                 out(f"t={(now - start) / 1e9:5.1f} s  scans {period.scans}  "
                     f"wall error mean/max mm: {per}")  # fmt: skip
-                period = LaserDemoStats()
+                period = LaserDemoStatistics()
                 next_report += 1_000_000_000
 
 
@@ -202,7 +202,7 @@ async def run_laser_demo(
     beams: int = 720,
     scan_rate: float = 40.0,
     odom_rate: float = 50.0,
-) -> LaserDemoStats:
+) -> LaserDemoStatistics:
     """Run the laser demo for ``duration`` seconds of ``clock`` time (default: the
     system clock; None: until cancelled), print a line each second and a summary line
     through ``out``, and return the statistics.
@@ -221,7 +221,7 @@ async def run_laser_demo(
             f"{scan_rate}, {odom_rate}, {beams}"
         )
     clock = clock if clock is not None else SystemClock()
-    stats = LaserDemoStats()
+    stats = LaserDemoStatistics()
     buffer = Buffer(cache_time=10.0, clock=clock)
     own = bus is None
     the_bus = Bus() if bus is None else bus

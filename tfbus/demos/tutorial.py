@@ -46,8 +46,8 @@ from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock, SystemClock, every
+from tfbus.convert import do_transform_point
 from tfbus.errors import TransformException
-from tfbus.geometry import do_transform_point
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
@@ -63,8 +63,8 @@ from tfbus.time import Time
 __all__ = [
     "BROADCASTER_NAME",
     "LISTENER_NAME",
-    "BroadcasterStats",
-    "ListenerStats",
+    "BroadcasterStatistics",
+    "LookupStatistics",
     "broadcaster_node",
     "format_error",
     "format_info",
@@ -109,7 +109,7 @@ def format_error(now: Time, error: TransformException) -> str:
 
 
 @dataclass
-class BroadcasterStats:
+class BroadcasterStatistics:
     """What the broadcaster did: transforms ``sent``, clock times of the first and last
     send (ns), and each tick's lateness (ns) — the timer's jitter."""
 
@@ -141,7 +141,7 @@ class BroadcasterStats:
 
 
 @dataclass
-class ListenerStats:
+class LookupStatistics:
     """What the listener did: ``lookups`` attempted, of which ``transformed`` succeeded
     and ``failed`` raised a TransformException."""
 
@@ -158,12 +158,12 @@ class ListenerStats:
 
 
 async def broadcaster_node(
-    bus: Bus, clock: Clock, rate: float = 100.0, stats: BroadcasterStats | None = None
+    bus: Bus, clock: Clock, rate: float = 100.0, stats: BroadcasterStatistics | None = None
 ) -> None:
     """The tutorial's ``robot_tf_publisher``: base_link → base_laser at ``rate`` Hz,
     stamped with ``clock.now()``, on absolute deadlines. Runs until cancelled."""
     broadcaster = TransformBroadcaster(bus)
-    stats = stats if stats is not None else BroadcasterStats()
+    stats = stats if stats is not None else BroadcasterStatistics()
     async for tick in every(1.0 / rate, clock=clock, immediate=True):
         now = clock.now()
         await broadcaster.send_transform(
@@ -181,12 +181,12 @@ async def listener_node(
     clock: Clock,
     listen_rate: float = 1.0,
     out: Callable[[str], None] = print,
-    stats: ListenerStats | None = None,
+    stats: LookupStatistics | None = None,
 ) -> None:
     """The tutorial's ``robot_tf_listener``: every ``1/listen_rate`` s, transform
     (1.0, 0.2, 0.0) in base_laser at Time(0) (latest) into base_link and print the
     tutorial's line through ``out``. Runs until cancelled."""
-    stats = stats if stats is not None else ListenerStats()
+    stats = stats if stats is not None else LookupStatistics()
     laser_point = PointStamped(Header(Time(0), "base_laser"), LASER_POINT)
     async for _ in every(1.0 / listen_rate, clock=clock):
         now = clock.now()
@@ -210,7 +210,7 @@ async def run_demo(
     out: Callable[[str], None] = print,
     handle_signals: bool = False,
     bus: Bus | None = None,
-) -> BroadcasterStats:
+) -> BroadcasterStatistics:
     """Run both nodes on one bus for ``duration`` seconds of ``clock`` time (None:
     until cancelled, or until SIGINT/SIGTERM when ``handle_signals``), print the summary
     line through ``out`` and return the broadcaster's statistics.
@@ -219,7 +219,7 @@ async def run_demo(
     in-process :class:`~tfbus.bus.Bus`.
     """
     clock = clock if clock is not None else SystemClock()
-    stats = BroadcasterStats()
+    stats = BroadcasterStatistics()
     buffer = Buffer(cache_time=10.0, clock=clock)
     try:
         async with (
@@ -244,7 +244,7 @@ async def run_broadcaster(
     rate: float = 100.0,
     out: Callable[[str], None] = print,
     handle_signals: bool = False,
-) -> BroadcasterStats:
+) -> BroadcasterStatistics:
     """Run the broadcaster node alone on the open ``bus`` (one of the tutorial's
     terminals) for ``duration`` seconds of ``clock`` time (None: until cancelled, or
     until SIGINT/SIGTERM when ``handle_signals``); print its summary line through ``out``
@@ -254,7 +254,7 @@ async def run_broadcaster(
         Exception: whatever publishing on ``bus`` raises (e.g. the bus was closed).
     """
     clock = clock if clock is not None else SystemClock()
-    stats = BroadcasterStats()
+    stats = BroadcasterStatistics()
     try:
         async with anyio.create_task_group() as tg:
             tg.start_soon(broadcaster_node, bus, clock, rate, stats)
@@ -272,7 +272,7 @@ async def run_listener(
     listen_rate: float = 1.0,
     out: Callable[[str], None] = print,
     handle_signals: bool = False,
-) -> ListenerStats:
+) -> LookupStatistics:
     """Run the listener node alone on the open ``bus``: a Buffer fed by a
     TransformListener, and the tutorial's line (ERROR until a broadcaster is heard, then
     INFO) every ``1/listen_rate`` s through ``out``. Stops after ``duration`` seconds of
@@ -283,7 +283,7 @@ async def run_listener(
         Exception: whatever subscribing on ``bus`` raises (e.g. the bus is not open).
     """
     clock = clock if clock is not None else SystemClock()
-    stats = ListenerStats()
+    stats = LookupStatistics()
     buffer = Buffer(cache_time=10.0, clock=clock)
     try:
         async with (

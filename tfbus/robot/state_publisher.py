@@ -46,7 +46,7 @@ import logging
 import math
 import numbers
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import anyio
@@ -225,8 +225,7 @@ class RobotStatePublisher:
             raise TypeError(f"frame_prefix must be a str, not {type(frame_prefix).__name__}")
         self.frame_prefix = frame_prefix
         self.ignore_timestamp = bool(ignore_timestamp)
-        self.statistics = RobotStateStatistics()
-        """What :meth:`run` did so far."""
+        self._statistics = RobotStateStatistics()
         moving = sorted((j for j in self.model.joints if j.movable), key=lambda j: j.name)
         self._moving = {j.name: _moving_joint(j, frame_prefix) for j in moving}
         self._mimic: list[tuple[str, Mimic]] = sorted(
@@ -241,6 +240,10 @@ class RobotStatePublisher:
         ]
 
     # -- sans-I/O ---------------------------------------------------------------------
+
+    def statistics(self) -> RobotStateStatistics:
+        """A copy of the counters: what :meth:`run` did so far."""
+        return replace(self._statistics)
 
     def static_transforms(self, stamp: Time) -> list[TransformStamped]:
         """The transform of every fixed (and planar) joint, parent link -> child link,
@@ -363,9 +366,9 @@ class RobotStatePublisher:
         one back until the clock reaches its stamp (ROS 1 ``joint_state_listener.cpp``
         takes ``min(now, last publish stamps)``): an hour ahead, an hour of silence.
         ``max_stamp_ahead`` (seconds) is the way out: a JointState stamped more than
-        that ahead of ``clock.now()`` is counted in ``statistics.ahead``, logged and
+        that ahead of ``clock.now()`` is counted in ``statistics().ahead``, logged and
         dropped, remembered by nobody (None, the default: ROS's behaviour). Invalid
-        messages are counted in :attr:`statistics` and logged, and
+        messages are counted in :meth:`statistics` and logged, and
         never stop the node; with NaN/Inf positions the other joints are still published.
         Publish times are kept for the model's joints and for at most 1 024 other names
         (then those are forgotten at once), not for every name ever heard.
@@ -392,7 +395,7 @@ class RobotStatePublisher:
         joints = frozenset(j.name for j in self.model.joints)
         bound = len(joints) + _MAX_OTHER_NAMES
         last_callback = refusals = 0
-        stats = self.statistics
+        stats = self._statistics
         with bus.subscribe(joint_states_topic) as sub:
             statics = self.static_transforms(clock.now())
             if statics:

@@ -152,6 +152,14 @@ class TransportScheme:
         scan_topics: its factory takes a ``scan_topics=`` override, the
             ``sensor_msgs/LaserScan`` topics to subscribe to (ROS 1: a subscription has a
             type); a scheme that carries every topic (memory, Zenoh) needs none.
+        fleet_option: the option key that, set to ``*``, makes a bus carry every robot's
+            frames under its namespace (Zenoh's ``namespace=*``; read by
+            :class:`~tfbus.fleet.FleetBuffer`); None when the scheme has no fleet form.
+            :meth:`is_fleet` asks it of a parsed spec.
+        unknown_authority: the broadcaster name the middleware's own tools show for a
+            transform whose sender it cannot name (ROS 1: ``unknown_publisher``,
+            roscpp's ``MessageEvent`` default that tf_monitor prints); None: the
+            command line's own word.
     """
 
     scheme: str
@@ -164,6 +172,17 @@ class TransportScheme:
     summary: str = ""
     peer_aware: bool = False
     scan_topics: bool = False
+    fleet_option: str | None = None
+    unknown_authority: str | None = None
+
+    def is_fleet(self, spec: BusSpec) -> bool:
+        """Whether ``spec`` (a parsed bus of this scheme) is a fleet bus: its
+        :attr:`fleet_option` is ``*``.
+
+        Raises:
+            ValueError: the option was given more than one value (:meth:`BusSpec.value`).
+        """
+        return self.fleet_option is not None and spec.value(self.fleet_option) == "*"
 
 
 _SCHEMES: dict[str, TransportScheme] = {}
@@ -311,6 +330,7 @@ register_scheme(
         requires=("zenoh", "msgspec"),
         summary="Zenoh: this machine by default, or connect/listen endpoints",
         peer_aware=True,
+        fleet_option="namespace",
     )
 )
 register_scheme(
@@ -334,5 +354,6 @@ register_scheme(
         requires=("rosbags",),
         summary="ROS 1 node (TCPROS): ROS_MASTER_URI, else http://127.0.0.1:11311",
         scan_topics=True,
+        unknown_authority="unknown_publisher",
     )
 )
