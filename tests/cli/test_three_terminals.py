@@ -382,6 +382,7 @@ class Simulator:
         self.port = port
         self.done = threading.Event()
         self.sim_ns = 0
+        self.joint_stamps: list[int] = []  # /joint_states header stamps heard (ns)
         self.failure: BaseException | None = None
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -407,11 +408,15 @@ class Simulator:
             Vector3,
         )
         from tfbus.time import Time
-        from tfbus.topics import CLOCK_TOPIC, TF_TOPIC
+        from tfbus.topics import CLOCK_TOPIC, JOINT_STATES_TOPIC, TF_TOPIC
         from tfbus.transports.zenoh import ZenohTransport
+
+        def on_joint_state(message: object) -> None:
+            self.joint_stamps.append(message.header.stamp.ns)  # type: ignore[attr-defined]
 
         transport = ZenohTransport(listen=f"tcp/127.0.0.1:{self.port}", name="simulator")
         async with Bus(transport=transport) as bus:
+            bus.subscribe_callback(JOINT_STATES_TOPIC, on_joint_state)
             with anyio.move_on_after(120):
                 k = 0
                 while not self.done.is_set():
@@ -469,5 +474,30 @@ def test_listener_with_use_sim_time_prints_one_line_per_simulated_second() -> No
             at = next(line for line in echo.seen if line.startswith("At time "))
             assert 100.0 <= float(at.split()[2]) <= sim.sim_ns / 1e9, echo.seen
             assert "- Translation: [0.100, 0.000, 0.200]" in echo.seen
+    finally:
+        sim.close()
+
+
+def test_joint_states_with_use_sim_time_stamps_with_clock() -> None:
+    port = free_port()
+    sim = Simulator(port)
+    try:
+        with processes() as ps:
+            joints = Tfbus("joint-states", "demos/robot.urdf", "--use-sim-time", "--rate", "10",
+                           "--bus", connect_spec(port), "--duration", "60")
+            ps.append(joints)
+            deadline = time.monotonic() + 30
+            while len([t for t in sim.joint_stamps if t > 0]) < 5:
+                assert time.monotonic() < deadline, joints.describe("no stamped joint states")
+                time.sleep(0.05)
+            stamps = [t / 1e9 for t in sim.joint_stamps if t > 0]
+            # Simulated time (100 s on), not the wall clock's, each a /clock step (0.1 s);
+            # at 10 Hz of simulated time: 0.1 s apart (10 ms of wall time at 10x), or a
+            # step or two more where Zenoh dropped a /clock or a JointState under load.
+            assert all(100.0 <= t <= sim.sim_ns / 1e9 for t in stamps), stamps
+            assert all(abs(t * 10 - round(t * 10)) < 1e-6 for t in stamps), stamps
+            gaps = [round((b - a) * 10) for a, b in pairwise(stamps[1:])]
+            assert all(1 <= g <= 3 for g in gaps) and gaps.count(1) >= len(gaps) // 2, stamps
+            assert joints.finish(signal.SIGTERM) == 0
     finally:
         sim.close()
