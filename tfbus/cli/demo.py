@@ -3,8 +3,8 @@ parsed here, once; :mod:`tfbus.demos.tutorial` holds the nodes and runners."""
 
 from __future__ import annotations
 
-import contextlib
 import importlib
+import math
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -113,26 +113,28 @@ def run_role(role: str, spec: str, *, duration: float | None, rate: float,
             raise
         raise click.ClickException(f"cannot configure the bus {spec!r}: {err}") from None
 
+    async def run_node(clock: Clock | None, node_duration: float | None) -> None:
+        if role == "broadcaster":
+            await run_broadcaster(bus, clock=clock, duration=node_duration, rate=rate,
+                                  out=_print_line, handle_signals=True)
+        else:
+            await run_listener(bus, clock=clock, duration=node_duration,
+                               listen_rate=listen_rate, out=_print_line, handle_signals=True)
+
     async def main() -> None:
-        async with bus, contextlib.AsyncExitStack() as stack:
-            clock: Clock | None = None
-            if use_sim_time:
-                clock = await stack.enter_async_context(SimClock(bus))
+        async with bus:
             shown, node = node_label(bus.transport, name)
             print(f"[ INFO] {literal(shown)}: running the {role} node on {literal(spec)}"
                   + (f" (node {literal(node)})" if node else "")
                   + (" on simulated time (/clock)" if use_sim_time else ""),
                   file=sys.stderr, flush=True)
-            node_duration = None if use_sim_time else duration  # else: wall seconds here
-            with anyio.move_on_after(duration if use_sim_time and duration is not None
-                                     else float("inf")):
-                if role == "broadcaster":
-                    await run_broadcaster(bus, clock=clock, duration=node_duration, rate=rate,
-                                          out=_print_line, handle_signals=True)
-                else:
-                    await run_listener(bus, clock=clock, duration=node_duration,
-                                       listen_rate=listen_rate, out=_print_line,
-                                       handle_signals=True)
+            if not use_sim_time:
+                await run_node(None, duration)
+                return
+            # simulated time: the node's clock follows /clock; --duration stays wall time
+            async with SimClock(bus) as clock:
+                with anyio.move_on_after(math.inf if duration is None else duration):
+                    await run_node(clock, None)
 
     code = run_live(main, backend=backend)
     return code if code is not None else 0
