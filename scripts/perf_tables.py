@@ -60,6 +60,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "compat": ([], [], 600),
     "robot_state": ([], ["--quick"], 900),
     "view": (["--seconds", "10"], ["--seconds", "3"], 900),
+    "sim_clock": ([], ["--quick"], 600),
 }
 
 #: Pages whose ``perf-quote`` blocks are filled (performance.md has its own block).

@@ -11,7 +11,9 @@ from typing import Final
 
 __all__ = [
     "CLOCK_TOPIC",
+    "DEFAULT_CLOCK_HZ",
     "JOINT_STATES_TOPIC",
+    "MAX_CLOCK_HZ",
     "PEERS_TOPIC",
     "SCAN_TOPIC",
     "TF_STATIC_TOPIC",
@@ -44,3 +46,12 @@ sent to other processes."""
 CLOCK_TOPIC: Final = "/clock"
 """``rosgraph_msgs/Clock``: simulated time, published by a simulator or ``rosbag play
 --clock`` and followed by nodes with ``use_sim_time`` (:class:`tfbus.clock.SimClock`)."""
+
+DEFAULT_CLOCK_HZ: Final = 100.0
+"""``/clock`` messages per second a replay publishes by default (:func:`tfbus.bag.replay`'s
+``publish_clock``, ``tfbus replay --clock``): ROS 1 ``rosbag play --clock``'s
+``--hz`` default (``rosbag/src/rosbag/rosbag_main.py``: ``default=100``); ``ros2 bag play
+--clock`` defaults to 40 Hz instead (``ros2bag/verb/play.py``)."""
+
+MAX_CLOCK_HZ: Final = 10_000.0
+"""The highest ``publish_clock`` rate accepted, Hz."""

@@ -24,6 +24,8 @@ import pytest
 
 pytest.importorskip("rosbags")
 
+import itertools
+
 from tfbus import (
     Duration,
     Header,
@@ -732,6 +734,68 @@ async def test_replay_paces_at_rate_on_its_pace_clock() -> None:
     for p, t in published:
         assert p.ns == 5000 * 10**9 + max(round((t.ns - start.ns) / 4.0), 0)
     assert published[-1][0] - published[1][0] > Duration(0, 490_000_000)  # ~2 s / 4
+
+
+async def test_replay_publishes_bag_time_on_clock_as_rosbag_play_clock() -> None:
+    """``publish_clock=HZ``: /clock carries bag time at HZ per second of pace time,
+    following pace time times the rate, reaching each message's bag time before that
+    message and never going back (rosbag's TimePublisher)."""
+    from tfbus.bag import DEFAULT_CLOCK_HZ
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock, SimClock
+    from tfbus.messages import Clock
+    from tfbus.topics import CLOCK_TOPIC, TF_TOPIC
+
+    assert DEFAULT_CLOCK_HZ == 100.0  # rosbag play --clock's --hz default
+    pace = ManualClock(start=Time(5000))
+    start, stop = Time(1396293900), Time(1396293901)
+    seen: list[tuple[str, Time, Time]] = []  # (topic, pace time, bag or clock time)
+    done = anyio.Event()
+    async with Bus() as bus, SimClock(bus) as sim:
+
+        def on_clock(msg: object) -> None:
+            assert isinstance(msg, Clock)
+            seen.append((CLOCK_TOPIC, pace.now(), msg.clock))
+
+        def on_tf(msg: object) -> None:
+            seen.append((TF_TOPIC, pace.now(), max(ts.header.stamp for ts in msg.transforms)))
+
+        bus.subscribe_callback(CLOCK_TOPIC, on_clock)
+        bus.subscribe_callback(TF_TOPIC, on_tf)
+
+        async def run() -> None:
+            await replay(TURTLE, bus, rate=2.0, start=start, stop=stop, pace_clock=pace,
+                         publish_clock=10.0)
+            done.set()
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(run)
+            for _ in range(60):  # 0.6 s of pace time, 1 s of bag time at rate 2 (+ spare)
+                await pace.advance(0.01)
+            await done.wait()
+        with pytest.raises(ValueError, match="publish_clock"):
+            await replay(TURTLE, bus, rate=None, publish_clock=0)
+        with pytest.raises(ValueError, match="publish_clock"):
+            await replay(TURTLE, bus, rate=None, publish_clock=math.inf)
+        clocks = [(p, t) for topic, p, t in seen if topic == CLOCK_TOPIC]
+        # The first /clock is ``start`` itself, at once; never backwards; a SimClock on
+        # the bus reads the last one.
+        assert clocks[0] == (Time(5000), start)
+        assert all(a[1] < b[1] for a, b in itertools.pairwise(clocks))
+        assert sim.now() == clocks[-1][1]
+        # At each 10 Hz tick (every 0.1 s of pace time) /clock reads start + 2 x the
+        # elapsed pace time (rate 2): 0.2 s of bag time apart, between the messages.
+        at_ticks = [max(t for p, t in clocks if p == Time(5000, k * 100_000_000))
+                    for k in (1, 2, 3, 4)]
+        assert [round((t.ns - start.ns) / 1e6) for t in at_ticks] == [200, 400, 600, 800]
+        assert len(clocks) > len([x for x in seen if x[0] == TF_TOPIC])  # ticks between
+        # Each /tf goes out after a /clock at its own bag time.
+        last_clock = Time(0)
+        for topic, _p, t in seen:
+            if topic == CLOCK_TOPIC:
+                last_clock = t
+            else:
+                assert last_clock >= t
 
 
 async def test_replay_without_rate_never_sleeps() -> None:

@@ -59,11 +59,15 @@ def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
     assert code == 0
     code, _, _ = run("demo", "--duration", "3", "broadcaster", "--rate", "50")  # inherited
     assert code == 0
+    code, _, _ = run("demo", "listener", "--use-sim-time")
+    assert code == 0
     assert calls == [
         ("listener", "zenoh?port=9000", {"duration": 2.0, "rate": 100.0, "listen_rate": 1.0,
-                                         "backend": "asyncio"}),
+                                         "backend": "asyncio", "use_sim_time": False}),
         ("broadcaster", "zenoh", {"duration": 3.0, "rate": 50.0, "listen_rate": 1.0,
-                                  "backend": "asyncio"}),
+                                  "backend": "asyncio", "use_sim_time": False}),
+        ("listener", "zenoh", {"duration": None, "rate": 100.0, "listen_rate": 1.0,
+                               "backend": "asyncio", "use_sim_time": True}),
     ]
     code, _, err = run("demo", "broadcaster", "--listen-rate", "2")  # not a broadcaster's
     assert code == 2 and "--listen-rate" in err
@@ -73,7 +77,7 @@ def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
             "tfbus demo listener: error: unknown bus option 'bogus' (known: config, "
             "congestion_control, connect, express, listen, mode, name, namespace, port, prefix)"
         )
-    assert len(calls) == 2
+    assert len(calls) == 3
 
 
 def test_demo_script_runs_the_click_command(tmp_path: Path) -> None:

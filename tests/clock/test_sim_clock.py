@@ -56,6 +56,24 @@ async def test_time_is_zero_until_the_first_clock_then_follows_it() -> None:
     assert clock.now() == tick_after  # left: keeps the last time read
 
 
+async def test_clock_made_before_its_bus_drives_a_buffer_once_attached() -> None:
+    clock = SimClock()
+    buffer = Buffer(clock=clock)  # built before the bus exists, as a CLI's source is
+    with pytest.raises(RuntimeError, match="no bus"):
+        await clock.__aenter__()
+    async with Bus() as bus, clock.attach(bus), TransformListener(buffer, bus):
+        assert clock.now() == Time(0)
+        bus.publish_nowait("/tf", tf("base", 120.0, 1.5))
+        tick(bus, 120.0)
+        assert clock.now() == Time(120)
+        t = await buffer.lookup_transform_async("map", "base", clock.now(), timeout=1.0)
+        assert t.transform.translation.x == 1.5
+        with pytest.raises(RuntimeError, match="already follows a bus"):
+            SimClock(bus).attach(bus)
+        with pytest.raises(RuntimeError, match="entered"):
+            clock.attach(bus)
+
+
 async def test_sleep_advances_only_with_clock_and_a_pause_pauses_it() -> None:
     woke: list[Time] = []
     async with Bus() as bus, SimClock(bus) as clock, anyio.create_task_group() as tg:

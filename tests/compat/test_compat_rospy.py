@@ -75,3 +75,46 @@ def test_rospy_program_on_the_ros1_graph(master: Master) -> None:
         probe.stop()
         publisher.stop()
     assert os.environ.get("ROS_IP") == "127.0.0.1"
+
+
+SIM_TIME_PROGRAM = """
+import sys, time
+sys.path.append("/usr/lib/python3/dist-packages")
+import rospy
+from tfbus.compat import tf2_ros
+rospy.init_node("compat_sim_time")
+buffer = tf2_ros.Buffer()
+tf2_ros.TransformListener(buffer)
+clock = buffer.buffer.clock
+print("CLOCK", type(clock).__name__, clock.now().ns, flush=True)
+deadline = time.monotonic() + 60
+while time.monotonic() < deadline and (rospy.Time.now().to_nsec() == 0 or clock.now().ns == 0):
+    time.sleep(0.05)
+print("NOW", rospy.Time.now().to_nsec(), clock.now().ns, flush=True)
+t = buffer.lookup_transform("map", "laser", rospy.Time(0), rospy.Duration(30))
+print("GOT", t.transform.translation.x, flush=True)
+"""
+"""A rospy program on /use_sim_time: its compat Buffer's clock, before and after /clock."""
+
+
+def test_rospy_use_sim_time_makes_the_compat_buffer_follow_clock(master: Master) -> None:
+    master.call("setParam", "/tfbus_test", "/use_sim_time", True)
+    program = Proc([sys.executable, "-c", SIM_TIME_PROGRAM], _env(master), cwd=ROOT)
+    clock = publisher = None
+    try:
+        # time is zero until the first /clock, as rospy's with /use_sim_time
+        m = program.wait_for(r"^CLOCK (\w+) (\d+)$", timeout=60.0)
+        assert (m.group(1), m.group(2)) == ("SimClock", "0")
+        clock = master.run("rostopic", "pub", "-r", "5", "/clock", "rosgraph_msgs/Clock", "--",
+                           "{clock: {secs: 42, nsecs: 500000000}}")
+        m = program.wait_for(r"^NOW (\d+) (\d+)$", timeout=60.0)
+        assert (m.group(1), m.group(2)) == ("42500000000", "42500000000")
+        publisher = master.run("rosrun", "tf2_ros", "static_transform_publisher",
+                               "1.5", "0", "0", "0", "0", "0", "1", "map", "laser")
+        m = program.wait_for(r"^GOT (\S+)$", timeout=60.0)
+        assert float(m.group(1)) == 1.5
+    finally:
+        program.stop()
+        for proc in (clock, publisher):
+            if proc is not None:
+                proc.stop()

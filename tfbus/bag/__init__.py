@@ -56,13 +56,14 @@ from tfbus.bag.formats import (
     detect_format,
 )
 from tfbus.bag.loader import load_buffer
-from tfbus.bag.playback import replay
+from tfbus.bag.playback import DEFAULT_CLOCK_HZ, replay
 from tfbus.bag.reader import read_messages
 from tfbus.bag.summary import AuthoritySummary, BagSummary, FrameSummary, summarize
 from tfbus.bag.writer import BagRecorder, write_bag
 from tfbus.errors import BagError, BagFormatError, BagNotFoundError, BagReadError
 
 __all__ = [
+    "DEFAULT_CLOCK_HZ",
     "DEFAULT_TOPICS",
     "ROS2_AUTHORITY",
     "TF_MSGTYPES",

@@ -4,24 +4,63 @@ Two clocks take part, as in ``rosbag play --clock``: the *pace* clock replay sle
 keep the recorded spacing (wall time, :class:`~tfbus.clock.SystemClock`, by default;
 tests pass a :class:`~tfbus.clock.ManualClock` and advance it), and an optional *bag-time*
 ``clock`` that replay moves to each message's bag time (the ``/clock`` topic's role), so
-code awaiting on it sees the recording's time.
+code awaiting on it sees the recording's time. With ``publish_clock=HZ`` replay also
+publishes that time as ``rosgraph_msgs/Clock`` on ``/clock`` at ``HZ`` per second of
+pace time, so other processes' :class:`~tfbus.clock.SimClock` (or ROS nodes with
+``use_sim_time``) follow the recording, as ``rosbag play --clock`` drives a ROS graph.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Collection
 from os import PathLike
 from typing import TYPE_CHECKING
 
 from tfbus.bag.formats import DEFAULT_TOPICS, BagMessage
 from tfbus.bag.reader import read_messages
+from tfbus.messages import Clock as ClockMessage
 from tfbus.time import Time
+from tfbus.topics import CLOCK_TOPIC, DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 
 if TYPE_CHECKING:
     from tfbus.bus import Bus
     from tfbus.clock import Clock, ManualClock
 
-__all__ = ["replay"]
+__all__ = ["DEFAULT_CLOCK_HZ", "MAX_CLOCK_HZ", "replay"]
+
+class _ClockSender:
+    """Publishes bag time on ``/clock``, never backwards: through the bus (memory, Zenoh),
+    or on a ROS 1 node as raw ``rosgraph_msgs/Clock`` bytes
+    (:meth:`~tfbus.transports.ros1.Ros1Transport.advertise_raw`), since that transport
+    carries only tf topics as messages."""
+
+    def __init__(self, bus: Bus) -> None:
+        self._bus = bus
+        self._raw: Callable[[bytes], None] | None = None
+        self.last_ns = -1
+        self.sent = 0
+        module = sys.modules.get("tfbus.transports.ros1.transport")
+        transport = bus.transport
+        if module is not None and isinstance(transport, module.Ros1Transport):
+            from tfbus.codecs.ros1 import CLOCK_MD5SUM, CLOCK_TYPE
+
+            transport.advertise_raw(CLOCK_TOPIC, CLOCK_TYPE, CLOCK_MD5SUM)
+            self._raw = lambda payload: transport.send_raw_nowait(CLOCK_TOPIC, payload)
+
+    def send(self, ns: int) -> None:
+        """Publish ``Clock(Time.from_ns(ns))`` unless it is not after the last one sent."""
+        if ns <= self.last_ns or ns < 0:
+            return
+        self.last_ns = ns
+        message = ClockMessage(Time.from_ns(ns))
+        if self._raw is not None:
+            from tfbus.codecs.ros1 import encode_clock
+
+            self._raw(encode_clock(message))
+        else:
+            self._bus.publish_nowait(CLOCK_TOPIC, message)
+        self.sent += 1
 
 
 async def replay(
@@ -35,6 +74,7 @@ async def replay(
     topics: Collection[str] = DEFAULT_TOPICS,
     on_message: Callable[[BagMessage], object] | None = None,
     pace_clock: Clock | None = None,
+    publish_clock: float | None = None,
 ) -> int:
     """Publish a bag's tf messages on ``bus``, in order, at recorded timing times ``rate``.
 
@@ -62,6 +102,15 @@ async def replay(
         pace_clock: the clock that paces the replay; default a new
             :class:`~tfbus.clock.SystemClock` (wall time). Unused when ``rate`` is
             ``None`` / ``0``.
+        publish_clock: Hz; publish bag time on ``/clock`` (:class:`~tfbus.messages.Clock`)
+            this many times per second of pace time (:data:`DEFAULT_CLOCK_HZ`, 100, is
+            ``rosbag play --clock``'s), as rosbag's ``TimePublisher`` does: the time
+            advances with pace time times ``rate`` but never past the next message's bag
+            time, which is published before that message, and never goes back (statics
+            latched from before ``start`` do not move it). With ``rate`` ``None`` / ``0``
+            only the message times are published, one before each message. ``None``
+            (default): no ``/clock``. On a ROS 1 bus it is published as raw
+            ``rosgraph_msgs/Clock``.
 
     Returns:
         The number of messages published.
@@ -69,12 +118,22 @@ async def replay(
     Raises:
         BagNotFoundError, BagFormatError: see :func:`~tfbus.bag.read_messages`.
         BagReadError: damaged bag, raised after everything readable was published.
-        ValueError: a negative or non-finite ``rate``.
+        ValueError: a negative or non-finite ``rate``; a ``publish_clock`` that is not a
+            number in (0, :data:`MAX_CLOCK_HZ`].
     """
+    import anyio
     import anyio.lowlevel
 
     if rate is not None and not 0 <= rate < float("inf"):
         raise ValueError(f"rate must be a finite number >= 0, got {rate!r}")
+    if publish_clock is not None and (
+        isinstance(publish_clock, bool)
+        or not isinstance(publish_clock, (int, float))
+        or not 0 < publish_clock <= MAX_CLOCK_HZ
+    ):
+        raise ValueError(
+            f"publish_clock must be a rate in Hz in (0, {MAX_CLOCK_HZ:g}], got {publish_clock!r}"
+        )
     speed = rate or None
     pacer: Clock | None = None
     if speed is not None:
@@ -83,22 +142,49 @@ async def replay(
 
             pace_clock = SystemClock()
         pacer = pace_clock
-    t0_bag = t0_pace = 0
+    sender = _ClockSender(bus) if publish_clock is not None else None
+    # bag time (ns) of the pace schedule's origin, pace time of it, next message's bag time
+    state = {"t0_bag": 0, "t0_pace": 0, "horizon": -1}
+
+    async def tick_clock(hz: float, pace: Clock, speed: float, out: _ClockSender) -> None:
+        """rosbag's TimePublisher: bag time following pace time, capped at the horizon."""
+        from tfbus.clock import every
+
+        async for _ in every(1.0 / hz, clock=pace):
+            if state["horizon"] >= 0:
+                elapsed = pace.now().ns - state["t0_pace"]
+                out.send(min(state["t0_bag"] + round(elapsed * speed), state["horizon"]))
+
     n = 0
-    for rec in read_messages(path, topics=topics, start=start, stop=stop):
-        if pacer is not None and speed is not None:
-            if n == 0:
-                # Anchored at ``start``: statics latched from before it go out at once.
-                t0_bag = rec.time.ns if start is None else max(rec.time.ns, start.ns)
-                t0_pace = pacer.now().ns
-            due = t0_pace + round((rec.time.ns - t0_bag) / speed)
-            await pacer.sleep_until(Time.from_ns(max(due, 0)))
-        if clock is not None and clock.now() < rec.time:
-            await clock.set(rec.time)
-        await bus.publish(rec.topic, rec.message)
-        n += 1
-        if on_message is not None:
-            on_message(rec)
-        if pacer is None:
-            await anyio.lowlevel.checkpoint()
+    failure: Exception | None = None
+    async with anyio.create_task_group() as tg:  # the /clock ticker's
+        try:
+            for rec in read_messages(path, topics=topics, start=start, stop=stop):
+                if pacer is not None and speed is not None:
+                    if n == 0:
+                        # Anchored at ``start``: statics latched from before it go out at once.
+                        state["t0_bag"] = rec.time.ns if start is None else max(rec.time.ns,
+                                                                                 start.ns)
+                        state["t0_pace"] = pacer.now().ns
+                        if sender is not None and publish_clock is not None:
+                            sender.send(state["t0_bag"])
+                            tg.start_soon(tick_clock, publish_clock, pacer, speed, sender)
+                    state["horizon"] = max(rec.time.ns, state["horizon"])
+                    due = state["t0_pace"] + round((rec.time.ns - state["t0_bag"]) / speed)
+                    await pacer.sleep_until(Time.from_ns(max(due, 0)))
+                if sender is not None:
+                    sender.send(rec.time.ns)
+                if clock is not None and clock.now() < rec.time:
+                    await clock.set(rec.time)
+                await bus.publish(rec.topic, rec.message)
+                n += 1
+                if on_message is not None:
+                    on_message(rec)
+                if pacer is None:
+                    await anyio.lowlevel.checkpoint()
+        except Exception as err:  # raised below, as itself, once the ticker has stopped
+            failure = err
+        tg.cancel_scope.cancel()
+    if failure is not None:
+        raise failure
     return n

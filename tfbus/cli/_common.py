@@ -388,3 +388,17 @@ RATE_HELP = (
 )
 """The ``--help`` epilogue of frames, monitor and bag-info: the rate definition
 (:func:`tfbus.monitor.link_rate`), the same in every tool."""
+
+
+USE_SIM_TIME_HELP = (
+    "Run on simulated time: the newest /clock (rosgraph_msgs/Clock) heard on the bus, "
+    "zero until the first (ROS 2's use_sim_time parameter, ROS 1's /use_sim_time; "
+    "tfbus.SimClock). Rates, lookups and delays follow it; --duration stays wall time."
+)
+
+
+def use_sim_time_option(f: F) -> F:
+    """``--use-sim-time``: the command's clock is a :class:`~tfbus.clock.SimClock` on
+    its bus (the ROS 2 parameter's name, ``rclpy/time_source.py``)."""
+    return click.option("--use-sim-time", "use_sim_time", is_flag=True,
+                        help=USE_SIM_TIME_HELP)(f)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -16,6 +17,7 @@ if TYPE_CHECKING:
     import anyio.abc
 
     from tfbus.bus import Bus
+    from tfbus.clock import Clock
     from tfbus.robot import RobotModel
 
 __all__ = ["bus_label", "duration_option", "load_model", "model_argument", "serve"]
@@ -49,23 +51,32 @@ def bus_label(bus: str | None, local: bool) -> str:
 def serve(
     open_bus: Callable[[], Any],
     duration: float | None,
-    start: Callable[[Bus, anyio.abc.TaskGroup], Awaitable[None]],
+    start: Callable[[Bus, anyio.abc.TaskGroup, Clock | None], Awaitable[None]],
     finish: Callable[[Bus], None],
+    *,
+    use_sim_time: bool = False,
 ) -> int:
-    """Open the bus ``open_bus()`` makes, ``await start(bus, task_group)`` (which starts
-    the node's tasks), and run until SIGINT/SIGTERM or ``duration`` seconds; then call
-    ``finish(bus)`` (the summary line) and return 0. A bus that cannot be opened is a
-    one-line error and status 1 (:func:`~tfbus.cli._sources.run_live`)."""
+    """Open the bus ``open_bus()`` makes, ``await start(bus, task_group, clock)`` (which
+    starts the node's tasks on ``clock``: a :class:`~tfbus.clock.SimClock` on the bus
+    with ``use_sim_time``, else None, the wall clock), and run until SIGINT/SIGTERM or
+    ``duration`` seconds of wall time; then call ``finish(bus)`` (the summary line) and
+    return 0. A bus that cannot be opened is a one-line error and status 1
+    (:func:`~tfbus.cli._sources.run_live`)."""
     opened: list[Bus] = []
 
     async def main() -> None:
         import anyio
 
+        from tfbus.clock import SimClock
+
         bus = open_bus()
         opened.append(bus)
-        async with bus, anyio.create_task_group() as tg:
+
+        async with bus, contextlib.AsyncExitStack() as stack:
+            clock = await stack.enter_async_context(SimClock(bus)) if use_sim_time else None
+            tg = await stack.enter_async_context(anyio.create_task_group())
             await tg.start(cancel_on_signal, tg.cancel_scope)
-            await start(bus, tg)
+            await start(bus, tg, clock)
             if duration is not None:
                 await anyio.sleep(duration)
                 tg.cancel_scope.cancel()

@@ -163,11 +163,14 @@ def parse_spec(spec: str, *, name: str = "tfbus-cli") -> BusSpec:
 
 
 def open_spec_transport(
-    spec: BusSpec, *, name: str, scan_topics: Sequence[str] = ()
+    spec: BusSpec, *, name: str, scan_topics: Sequence[str] = (), use_sim_time: bool = False
 ) -> Transport:
     """A new transport for ``spec``; ``name`` is this node's name unless the spec gives
     one (:func:`tfbus.transports.spec.open_transport`'s ``default_name``); ``scan_topics``
-    are the LaserScan topics it must carry (``tfbus view --scan``).
+    are the LaserScan topics it must carry (``tfbus view --scan``); ``use_sim_time``: it
+    must carry ``/clock`` too (a ROS 1 node subscribes to it by type:
+    :class:`~tfbus.transports.ros1.Ros1Transport`'s ``clock_topic``; Zenoh and memory
+    carry every topic).
 
     Raises:
         TransportError: the scheme's extra is not installed (named), or the transport
@@ -176,6 +179,11 @@ def open_spec_transport(
     """
     from tfbus.transports.spec import open_transport
 
+    if use_sim_time and spec.scheme == "ros1":
+        from tfbus.topics import CLOCK_TOPIC
+
+        return open_transport(spec, default_name=name, scan_topics=scan_topics,
+                              clock_topic=CLOCK_TOPIC)
     return open_transport(spec, default_name=name, scan_topics=scan_topics)
 
 
@@ -210,12 +218,15 @@ class BusSource(TfSource):
         cache_time: seconds of history the buffer keeps.
         scan_topics: ``sensor_msgs/LaserScan`` topics the transport must also carry
             (``tfbus view --scan``; :func:`tfbus.transports.spec.open_transport`).
+        use_sim_time: the clock (:attr:`clock`: receive times, timers, lookups) is a
+            :class:`~tfbus.clock.SimClock` following ``/clock`` on the bus once attached
+            (ROS's ``use_sim_time``), instead of the wall clock.
     """
 
     def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0,
-                 scan_topics: Sequence[str] = ()) -> None:
+                 scan_topics: Sequence[str] = (), use_sim_time: bool = False) -> None:
         from tfbus.buffer import Buffer
-        from tfbus.clock import SystemClock
+        from tfbus.clock import Clock, SimClock, SystemClock
         from tfbus.monitor import MonitoredSink, TfSummary
 
         self.spec = spec
@@ -223,7 +234,10 @@ class BusSource(TfSource):
         self.name = name
         self.scan_topics = tuple(scan_topics)
         self.label = f"the bus {spec!r}"
-        self.clock = SystemClock()
+        self.use_sim_time = use_sim_time
+        self.sim_clock: SimClock | None = SimClock() if use_sim_time else None
+        """The simulated clock with ``use_sim_time`` (entered while attached), else None."""
+        self.clock: Clock = self.sim_clock if self.sim_clock is not None else SystemClock()
         self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
         self._summary = TfSummary()
         self.sink = MonitoredSink(self._buffer, self._summary, self.clock,
@@ -302,11 +316,13 @@ class BusSource(TfSource):
         from tfbus.listener import TransformListener
 
         transport = open_spec_transport(self.bus_spec, name=self.name,
-                                        scan_topics=self.scan_topics)
+                                        scan_topics=self.scan_topics,
+                                        use_sim_time=self.use_sim_time)
         peer_aware = transport if isinstance(transport, PeerAware) else None
         self._peer_aware = peer_aware is not None
         with _literal_logging():
-            async with Bus(transport=transport, queue_size=10_000) as bus:
+            async with Bus(transport=transport, queue_size=10_000) as bus, \
+                    self._following_clock(bus):
                 self.transport = transport
                 self.bus = bus
                 if self.is_fleet:
@@ -330,6 +346,13 @@ class BusSource(TfSource):
                         tg.cancel_scope.cancel()
         self.transport = None
         self.bus = None
+
+    def _following_clock(self, bus: Bus) -> contextlib.AbstractAsyncContextManager[object]:
+        """The simulated clock attached to ``bus`` and entered (``use_sim_time``), else
+        nothing to enter."""
+        if self.sim_clock is None:
+            return contextlib.nullcontext()
+        return self.sim_clock.attach(bus)
 
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:
@@ -420,15 +443,19 @@ def source_options(f: F) -> F:
     return click.option("--bag", type=bag_path(), help="Read transforms from this bag.")(f)
 
 
-def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli") -> TfSource:
+def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli",
+           use_sim_time: bool = False) -> TfSource:
     """The source the options name: the bag, else the ``--bus`` spec, else the default
     bus (:data:`DEFAULT_BUS`, where the publishing commands publish); a usage error for
-    both."""
+    both, and for ``--use-sim-time`` with a bag (a bag has its own times)."""
     if bus is not None and bag is not None:
         fail("give --bag PATH or --bus SPEC, not both")
     if bag is not None:
+        if use_sim_time:
+            fail("--use-sim-time applies to --bus sources only")
         return BagSource(bag)
-    return BusSource(bus if bus is not None else DEFAULT_BUS, name=name)
+    return BusSource(bus if bus is not None else DEFAULT_BUS, name=name,
+                     use_sim_time=use_sim_time)
 
 
 def live_only(src: TfSource, **options: object) -> None:
@@ -521,9 +548,11 @@ def publish_options(f: F) -> F:
     return click.option("--bus", "bus", metavar="SPEC", default=None, help=BUS_HELP)(f)
 
 
-def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]:
+def publish_bus(bus: str | None, local: bool, *, name: str,
+                use_sim_time: bool = False) -> Callable[[], Any]:
     """A factory of the (unopened) bus the options name: in-process with ``--local``, else
-    the ``--bus`` spec (default ``zenoh``). Bad options are a one-line usage error now."""
+    the ``--bus`` spec (default ``zenoh``). Bad options are a one-line usage error now.
+    ``use_sim_time``: the transport carries ``/clock`` too (:func:`open_spec_transport`)."""
     from tfbus.bus import Bus
 
     if local:
@@ -533,6 +562,6 @@ def publish_bus(bus: str | None, local: bool, *, name: str) -> Callable[[], Any]
     chosen = parse_spec(bus if bus is not None else DEFAULT_BUS, name=name)
 
     def open_bus() -> Bus:
-        return Bus(transport=open_spec_transport(chosen, name=name))
+        return Bus(transport=open_spec_transport(chosen, name=name, use_sim_time=use_sim_time))
 
     return open_bus

@@ -4,13 +4,14 @@ parsed here, once; :mod:`tfbus.demos.tutorial` holds the nodes and runners."""
 from __future__ import annotations
 
 import importlib
+import math
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
 import click
 
-from tfbus.cli._common import error, fail, hertz, literal, seconds
+from tfbus.cli._common import error, fail, hertz, literal, seconds, use_sim_time_option
 from tfbus.cli._sources import cancel_on_signal, check_bus_spec, is_bus_error, run_live
 from tfbus.transports.spec import BUS_HELP
 
@@ -87,14 +88,24 @@ def node_label(transport: object, default: str) -> tuple[str, str]:
 
 
 def run_role(role: str, spec: str, *, duration: float | None, rate: float,
-             listen_rate: float, backend: str) -> int:
-    """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh."""
+             listen_rate: float, backend: str, use_sim_time: bool = False) -> int:
+    """One node (``broadcaster`` or ``listener``) on the bus ``spec`` over Zenoh.
+
+    ``use_sim_time``: the node's clock is a :class:`~tfbus.clock.SimClock` on the bus
+    (stamps, the listener's period and lookups follow ``/clock``; ``duration`` stays
+    seconds of wall time)."""
+    import anyio
+
+    from tfbus.bus import Bus
+    from tfbus.cli._sources import open_spec_transport
+    from tfbus.clock import Clock, SimClock
     from tfbus.demos.tutorial import BROADCASTER_NAME, LISTENER_NAME, run_broadcaster, run_listener
     from tfbus.transports import spec as bus_spec
 
     name = BROADCASTER_NAME if role == "broadcaster" else LISTENER_NAME
     try:
-        bus = bus_spec.open_bus(spec, default_name=name)
+        bus = Bus(transport=open_spec_transport(bus_spec.parse_bus_spec(spec), name=name,
+                                                use_sim_time=use_sim_time))
     except ValueError as err:
         fail(str(err))
     except Exception as err:
@@ -102,17 +113,28 @@ def run_role(role: str, spec: str, *, duration: float | None, rate: float,
             raise
         raise click.ClickException(f"cannot configure the bus {spec!r}: {err}") from None
 
+    async def run_node(clock: Clock | None, node_duration: float | None) -> None:
+        if role == "broadcaster":
+            await run_broadcaster(bus, clock=clock, duration=node_duration, rate=rate,
+                                  out=_print_line, handle_signals=True)
+        else:
+            await run_listener(bus, clock=clock, duration=node_duration,
+                               listen_rate=listen_rate, out=_print_line, handle_signals=True)
+
     async def main() -> None:
         async with bus:
             shown, node = node_label(bus.transport, name)
             print(f"[ INFO] {literal(shown)}: running the {role} node on {literal(spec)}"
-                  + (f" (node {literal(node)})" if node else ""), file=sys.stderr, flush=True)
-            if role == "broadcaster":
-                await run_broadcaster(bus, duration=duration, rate=rate, out=_print_line,
-                                      handle_signals=True)
-            else:
-                await run_listener(bus, duration=duration, listen_rate=listen_rate,
-                                   out=_print_line, handle_signals=True)
+                  + (f" (node {literal(node)})" if node else "")
+                  + (" on simulated time (/clock)" if use_sim_time else ""),
+                  file=sys.stderr, flush=True)
+            if not use_sim_time:
+                await run_node(None, duration)
+                return
+            # simulated time: the node's clock follows /clock; --duration stays wall time
+            async with SimClock(bus) as clock:
+                with anyio.move_on_after(math.inf if duration is None else duration):
+                    await run_node(clock, None)
 
     code = run_live(main, backend=backend)
     return code if code is not None else 0
@@ -150,10 +172,11 @@ def command(
 @command.command("broadcaster")
 @click.option("--bus", metavar="SPEC", default=None, help=BUS_HELP)
 @_demo_options(rate=True, listen_rate=False)
+@use_sim_time_option
 @click.pass_context
 def broadcaster(
     ctx: click.Context, bus: str | None, duration: float | None, rate: float | None,
-    backend: str | None,
+    backend: str | None, use_sim_time: bool,
 ) -> int:
     """The tutorial's robot_tf_publisher alone: base_link -> base_laser over Zenoh.
 
@@ -168,16 +191,18 @@ def broadcaster(
     check_bus_spec(bus)
     o = _inherit(ctx, duration=duration, rate=rate, backend=backend)
     return run_role("broadcaster", bus or "zenoh", duration=o["duration"],
-                    rate=o["rate"] or 100.0, listen_rate=1.0, backend=_backend(o["backend"]))
+                    rate=o["rate"] or 100.0, listen_rate=1.0, backend=_backend(o["backend"]),
+                    use_sim_time=use_sim_time)
 
 
 @command.command("listener")
 @click.option("--bus", metavar="SPEC", default=None, help=BUS_HELP)
 @_demo_options(rate=False, listen_rate=True)
+@use_sim_time_option
 @click.pass_context
 def listener(
     ctx: click.Context, bus: str | None, duration: float | None, listen_rate: float | None,
-    backend: str | None,
+    backend: str | None, use_sim_time: bool,
 ) -> int:
     """The tutorial's robot_tf_listener alone, over Zenoh: the tutorial's line each second.
 
@@ -186,11 +211,13 @@ def listener(
       tfbus demo listener
       tfbus demo listener --listen-rate 2 --duration 10
       tfbus demo listener --bus 'zenoh?connect=tcp/127.0.0.1:7500'
+      tfbus demo listener --use-sim-time     # one line per second of /clock time
     """
     check_bus_spec(bus)
     o = _inherit(ctx, duration=duration, listen_rate=listen_rate, backend=backend)
     return run_role("listener", bus or "zenoh", duration=o["duration"], rate=100.0,
-                    listen_rate=o["listen_rate"] or 1.0, backend=_backend(o["backend"]))
+                    listen_rate=o["listen_rate"] or 1.0, backend=_backend(o["backend"]),
+                    use_sim_time=use_sim_time)
 
 
 def run_laser(*, duration: float | None, backend: str, beams: int, scan_rate: float,

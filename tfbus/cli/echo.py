@@ -21,6 +21,7 @@ from tfbus.cli._common import (
     literal_lines,
     one_line,
     seconds,
+    use_sim_time_option,
     warn,
 )
 from tfbus.cli._sources import BusSource, live, live_only, run_live, source, source_options
@@ -116,6 +117,7 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
 @click.argument("rate_arg", metavar="[RATE]", required=False,
                 type=hertz())
 @source_options
+@use_sim_time_option
 @click.option("--rate", type=hertz(), default=None,
               help="Echo rate, Hz (of bag time with --bag); default 1. Also tf2_echo's "
                    "third argument, RATE.")
@@ -130,8 +132,8 @@ def _echo_times(core: BufferCore, source: str, target: str, rate: float) -> Iter
               help="With --bus: stop after this many seconds (default: -n, or Ctrl-C).")
 def command(
     source_frame: str, target_frame: str, rate_arg: float | None, bag: Path | None,
-    bus: str | None, rate: float | None, at: Time | None, matrix: bool, precision: int,
-    limit: int | None, duration: float | None,
+    bus: str | None, use_sim_time: bool, rate: float | None, at: Time | None, matrix: bool,
+    precision: int, limit: int | None, duration: float | None,
 ) -> int:
     """Print the transform from SOURCE to TARGET, like tf2_echo.
 
@@ -170,7 +172,7 @@ def command(
             if not frame or frame.startswith("/"):  # tf2 validateFrameId: never found
                 error(str(bad_frame_exception(label, frame, INVALID_ARGUMENT)))
                 return 1
-    src = source(bag, bus, name="tfbus-echo")
+    src = source(bag, bus, name="tfbus-echo", use_sim_time=use_sim_time)
     live_only(src, duration=duration)
     if isinstance(src, BusSource):
         return _echo_live(src, source_frame, target_frame, rate=rate, at=at, matrix=matrix,

@@ -18,6 +18,7 @@ from tfbus.cli._common import (
     finish_status,
     literal,
     seconds,
+    use_sim_time_option,
 )
 from tfbus.cli._sources import BusSource, live, live_only, run_live, source, source_options
 from tfbus.time import NSEC_PER_SEC, Time
@@ -108,13 +109,15 @@ def _write(path: Path, data: str | bytes) -> bool:
 
 @click.command("frames", epilog=RATE_HELP)
 @source_options
+@use_sim_time_option
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("frames.pdf"), show_default=True,
               help="Output file: .pdf, .svg, .png (rendered by Graphviz 'dot') or .gv/.dot.")
 @click.option("--duration", "--wait", "duration", default=None,
               type=seconds(),
               help="With --bus: seconds to listen before drawing (default 5).")
-def command(bag: Path | None, bus: str | None, output: Path, duration: float | None) -> int:
+def command(bag: Path | None, bus: str | None, use_sim_time: bool, output: Path,
+            duration: float | None) -> int:
     """Draw the frame tree with Graphviz, like view_frames.
 
     Each edge is labelled with broadcaster, average rate, buffer length, most recent and
@@ -137,7 +140,7 @@ def command(bag: Path | None, bus: str | None, output: Path, duration: float | N
         fail(f"unsupported output {output.name!r}: use .pdf, .svg, .png, .gv or .dot")
     if not output.parent.is_dir():
         fail(f"cannot write {str(output)!r}: directory {str(output.parent)!r} does not exist")
-    src = source(bag, bus, name="tfbus-frames")
+    src = source(bag, bus, name="tfbus-frames", use_sim_time=use_sim_time)
     live_only(src, duration=duration)
     if isinstance(src, BusSource):
         import anyio

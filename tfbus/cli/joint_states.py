@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import hertz, literal
+from tfbus.cli._common import hertz, literal, use_sim_time_option
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
 from tfbus.cli._sources import publish_bus, publish_options
 from tfbus.topics import JOINT_STATES_TOPIC
@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     import anyio.abc
 
     from tfbus.bus import Bus
+    from tfbus.clock import Clock
 
 __all__ = ["command"]
 
@@ -32,8 +33,9 @@ __all__ = ["command"]
 @click.option("--rate", type=hertz(), default=10.0,
               show_default=True, help="JointState messages per second.")
 @duration_option
+@use_sim_time_option
 def command(model: Path, bus: str | None, local: bool, rate: float,
-            duration: float | None) -> int:
+            duration: float | None, use_sim_time: bool) -> int:
     """Publish JointStates on /joint_states moving every movable joint sinusoidally within
     its limits (joint_state_publisher without a GUI, animated; mimic joints are left to
     robot_state_publisher).
@@ -50,10 +52,11 @@ def command(model: Path, bus: str | None, local: bool, rate: float,
     from tfbus.robot import publish_joint_states
 
     robot = load_model(model)
-    open_bus = publish_bus(bus, local, name="joint_state_publisher")
+    open_bus = publish_bus(bus, local, name="joint_state_publisher", use_sim_time=use_sim_time)
 
-    async def start(b: Bus, tg: anyio.abc.TaskGroup) -> None:
-        await tg.start(functools.partial(publish_joint_states, b, robot, rate=rate))
+    async def start(b: Bus, tg: anyio.abc.TaskGroup, clock: Clock | None) -> None:
+        await tg.start(functools.partial(publish_joint_states, b, robot, rate=rate,
+                                         clock=clock))
         click.echo(f"[ INFO] joint_state_publisher: {literal(robot.name)}: "
                    f"{sum(j.movable and j.mimic is None for j in robot.joints)} joints at "
                    f"{rate:g} Hz on {bus_label(bus, local)}", err=True)
@@ -63,4 +66,4 @@ def command(model: Path, bus: str | None, local: bool, rate: float,
         click.echo(f"[ INFO] summary: {published.published if published else 0} "
                    f"joint states published")
 
-    return serve(open_bus, duration, start, finish)
+    return serve(open_bus, duration, start, finish, use_sim_time=use_sim_time)

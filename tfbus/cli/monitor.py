@@ -17,6 +17,7 @@ from tfbus.cli._common import (
     finish_status,
     literal,
     seconds,
+    use_sim_time_option,
 )
 from tfbus.cli._sources import (
     BagSource,
@@ -201,13 +202,14 @@ def liveliness_table(src: BusSource) -> Table:
 @click.command("monitor", epilog=RATE_HELP)
 @click.argument("frames", nargs=-1)
 @source_options
+@use_sim_time_option
 @click.option("--duration", type=seconds(), default=None,
               help="With --bus: stop after this many seconds (default: Ctrl-C).")
 @click.option("--interval", type=seconds(), default=None,
               help="With --bus: print the tables every this many seconds (default 1).")
 def command(
-    frames: tuple[str, ...], bag: Path | None, bus: str | None, duration: float | None,
-    interval: float | None,
+    frames: tuple[str, ...], bag: Path | None, bus: str | None, use_sim_time: bool,
+    duration: float | None, interval: float | None,
 ) -> int:
     """Per-frame rates, delays and broadcasters, like tf_monitor.
 
@@ -236,7 +238,7 @@ def command(
     """
     if len(frames) not in (0, 2):
         fail("give no frames, or exactly two: SOURCE TARGET")
-    src = source(bag, bus, name="tfbus-monitor")
+    src = source(bag, bus, name="tfbus-monitor", use_sim_time=use_sim_time)
     live_only(src, duration=duration, interval=interval)
     if isinstance(src, BusSource):
         if frames:

@@ -29,6 +29,7 @@ from tfbus.cli._sources import (
     run_live,
 )
 from tfbus.time import NSEC_PER_SEC, Time
+from tfbus.topics import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 
 __all__ = ["command"]
 
@@ -40,15 +41,23 @@ __all__ = ["command"]
 @click.option("--start", type=TIME, default=None, help="Start at this bag time (seconds).")
 @click.option("--stop", type=TIME, default=None, help="Stop before this bag time.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+@click.option("--clock", "clock_hz", type=FiniteFloat(min=0, min_open=True, max=MAX_CLOCK_HZ),
+              is_flag=False, flag_value=DEFAULT_CLOCK_HZ, default=None, metavar="[HZ]",
+              help="Publish bag time on /clock (rosgraph_msgs/Clock) at HZ per second "
+                   f"(default {DEFAULT_CLOCK_HZ:g}, rosbag play --clock's --hz), for nodes "
+                   "with use_sim_time ('--use-sim-time' of the other commands).")
 @publish_options
 def command(path: Path, rate: float, start: Time | None, stop: Time | None, quiet: bool,
-            bus: str | None, local: bool) -> int:
+            clock_hz: float | None, bus: str | None, local: bool) -> int:
     """Publish a bag's /tf and /tf_static on the bus at recorded timing.
 
     It publishes on --bus (default 'zenoh', where 'tfbus echo --bus zenoh' and every
     other process see it). A ManualClock follows bag time, so anything awaiting on the
     bus sees the recording's time. Statics recorded before --start are published first
-    (latched). Ctrl-C or SIGTERM stop it (exit status 130).
+    (latched). Ctrl-C or SIGTERM stop it (exit status 130). With --clock it also
+    publishes bag time on /clock, as 'rosbag play --clock' does (never past the next
+    message's time; a ROS 1 bus gets rosgraph_msgs/Clock from this node), so 'tfbus
+    demo listener --use-sim-time' and ROS nodes with use_sim_time follow the recording.
 
     \b
     Examples:
@@ -56,6 +65,8 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
       tfbus replay nav2.mcap --rate 4
       tfbus replay turtle.bag --rate 0 --start 1396293900
       tfbus replay turtle.bag --bus 'zenoh?listen=tcp/127.0.0.1:7500'
+      tfbus replay turtle.bag --clock --bus ros1     # drives /use_sim_time nodes
+      tfbus replay turtle.bag --clock 40             # ros2 bag play --clock's rate
     """
     from tfbus.bag import BagReadError, read_messages
 
@@ -78,7 +89,7 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
     result: list[int] = []
     problem: list[BagReadError] = []
     code = run_live(lambda: _replay(open_bus, path, rate, start, stop, quiet, n_total,
-                                    result, problem))
+                                    result, problem, clock_hz))
     n = result[0] if result else 0
     if problem:
         click.echo(f"replayed {problem[0].messages_read} messages from {literal(path)}")
@@ -96,7 +107,7 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
 async def _replay(
     open_bus: Callable[[], object], path: Path, rate: float, start: Time | None,
     stop: Time | None, quiet: bool, total: int, result: list[int],
-    problem: list[Any],
+    problem: list[Any], clock_hz: float | None = None,
 ) -> None:
     import anyio
     from rich.progress import (
@@ -133,7 +144,7 @@ async def _replay(
             try:
                 result[0] = await replay(
                     path, bus, clock=clock, rate=rate or None, start=start, stop=stop,
-                    on_message=advance,
+                    on_message=advance, publish_clock=clock_hz,
                 )
                 result.append(1)  # finished
             except BagReadError as err:

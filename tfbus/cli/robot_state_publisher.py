@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import hertz, literal, seconds
+from tfbus.cli._common import hertz, literal, seconds, use_sim_time_option
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
 from tfbus.cli._sources import publish_bus, publish_options
 
@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     import anyio.abc
 
     from tfbus.bus import Bus
+    from tfbus.clock import Clock
 
 __all__ = ["command"]
 
@@ -39,8 +40,10 @@ __all__ = ["command"]
 @click.option("--frame-prefix", default="", metavar="P",
               help="Prepended to every link name in frame ids (ROS 2's frame_prefix).")
 @duration_option
+@use_sim_time_option
 def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
-            max_stamp_ahead: float | None, frame_prefix: str, duration: float | None) -> int:
+            max_stamp_ahead: float | None, frame_prefix: str, duration: float | None,
+            use_sim_time: bool) -> int:
     """Publish a robot's links on /tf and /tf_static from its URDF and /joint_states,
     like ROS's robot_state_publisher.
 
@@ -58,12 +61,12 @@ def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
     from tfbus.robot import RobotStatePublisher
 
     rsp = RobotStatePublisher(load_model(model), frame_prefix=frame_prefix)
-    open_bus = publish_bus(bus, local, name="robot_state_publisher")
+    open_bus = publish_bus(bus, local, name="robot_state_publisher", use_sim_time=use_sim_time)
     moving = sum(j.movable for j in rsp.model.joints)
 
-    async def start(b: Bus, tg: anyio.abc.TaskGroup) -> None:
+    async def start(b: Bus, tg: anyio.abc.TaskGroup, clock: Clock | None) -> None:
         await tg.start(functools.partial(rsp.run, b, publish_frequency=publish_frequency,
-                                         max_stamp_ahead=max_stamp_ahead))
+                                         max_stamp_ahead=max_stamp_ahead, clock=clock))
         click.echo(f"[ INFO] robot_state_publisher: {literal(rsp.model.name)}: "
                    f"{len(rsp.model.joints)} joints ({moving} moving), root "
                    f"{literal(rsp.model.root)}, on {bus_label(bus, local)}", err=True)
@@ -76,4 +79,4 @@ def command(model: Path, bus: str | None, local: bool, publish_frequency: float,
                    + (f", {s.ahead} stamped too far ahead" if max_stamp_ahead is not None
                       else ""))
 
-    return serve(open_bus, duration, start, finish)
+    return serve(open_bus, duration, start, finish, use_sim_time=use_sim_time)

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tfbus.cli._common import HOST, FiniteFloat, bag_path, fail, seconds
+from tfbus.cli._common import HOST, FiniteFloat, bag_path, fail, seconds, use_sim_time_option
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
 
 if TYPE_CHECKING:
@@ -68,10 +68,12 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
               default=DEFAULT_FRAME_TIMEOUT, show_default=True,
               help="Seconds without an update before a frame is hidden (it fades to grey "
                    "from a third of it, as rviz's TF display).")
+@use_sim_time_option
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
             scan_topics: tuple[str, ...], foxglove_port: int | None,
-            urdf: Path | None, mesh_dirs: tuple[Path, ...], token: str | None) -> None:
+            urdf: Path | None, mesh_dirs: tuple[Path, ...], token: str | None,
+            use_sim_time: bool) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -87,6 +89,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(NEEDS_EXTRA)
     if bag is not None and bus is not None:
         fail("give --bag PATH or --bus SPEC, not both")
+    if bag is not None and use_sim_time:
+        fail("--use-sim-time applies to --bus sources only")
     if token is not None:
         from tfbus.view.guard import PageGuard
 
@@ -158,7 +162,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
-                       stop)
+                       stop, use_sim_time=use_sim_time)
     finally:
         page.close()
         if bridge is not None:
@@ -185,13 +189,14 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
 
 def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
                scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
-               stop: threading.Event) -> None:
+               stop: threading.Event, *, use_sim_time: bool = False) -> None:
     from tfbus.cli._sources import BusSource, live, run_live
     from tfbus.view.live import LiveView
     from tfbus.view.server import TfPage
 
     assert isinstance(page, TfPage)
-    src = BusSource(spec, name="tfbus-view", scan_topics=scan_topics)
+    src = BusSource(spec, name="tfbus-view", scan_topics=scan_topics,
+                    use_sim_time=use_sim_time)
     view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
                     frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge)
 

@@ -119,7 +119,7 @@ class SimClock:
 
     def __init__(
         self,
-        bus: Bus,
+        bus: Bus | None = None,
         *,
         topic: str = CLOCK_TOPIC,
         wall_timeout: float | None = None,
@@ -129,7 +129,9 @@ class SimClock:
         on entering ``async with``).
 
         Args:
-            bus: the bus carrying ``/clock`` (open when the clock is entered).
+            bus: the bus carrying ``/clock`` (open when the clock is entered); ``None``:
+                given later with :meth:`attach`, before entering (for a
+                :class:`~tfbus.buffer.Buffer` built on this clock before its bus exists).
             topic: the topic of ``rosgraph_msgs/Clock`` messages.
             wall_timeout: seconds of wall time without a valid ``/clock`` after which a
                 wait on this clock raises :class:`~tfbus.errors.SimTimeStalled`;
@@ -157,7 +159,7 @@ class SimClock:
             raise ValueError(
                 f"max_forward_step must be a positive number of seconds, got {max_forward_step!r}"
             )
-        self._bus = bus
+        self._bus: Bus | None = bus
         self._topic = topic
         self._wall_timeout = None if wall_timeout is None else float(wall_timeout)
         self._max_step_ns = (
@@ -175,15 +177,36 @@ class SimClock:
 
     # -- lifecycle --------------------------------------------------------------------
 
+    def attach(self, bus: Bus) -> SimClock:
+        """Set the bus whose ``/clock`` this clock follows, for a clock created without
+        one (``SimClock()``); then enter it (``async with clock.attach(bus):``). Until
+        it is entered ``now()`` is ``Time(0)`` and waits block, as before any ``/clock``.
+
+        Returns:
+            this clock.
+
+        Raises:
+            RuntimeError: the clock was already entered, or already has a bus.
+        """
+        if self._entered:
+            raise RuntimeError("a SimClock that was entered cannot be attached to a bus")
+        if self._bus is not None:
+            raise RuntimeError("this SimClock already follows a bus")
+        self._bus = bus
+        return self
+
     async def __aenter__(self) -> SimClock:
         """Subscribe to the topic on the bus.
 
         Raises:
-            RuntimeError: the clock was already entered, or the bus is not open.
+            RuntimeError: the clock was already entered, has no bus (created without one
+                and not given one by :meth:`attach`), or the bus is not open.
             anyio.ClosedResourceError: the bus is closed.
         """
         if self._entered:
             raise RuntimeError("a SimClock can be entered only once")
+        if self._bus is None:
+            raise RuntimeError("this SimClock has no bus: SimClock(bus) or clock.attach(bus)")
         self._entered = True
         self._subscription = self._bus.subscribe_callback(self._topic, self._on_clock)
         return self

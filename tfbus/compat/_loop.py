@@ -230,22 +230,51 @@ def rospy_node_name() -> str | None:
     return None
 
 
+def rospy_use_sim_time() -> bool:
+    """Whether rospy is initialised and the ``/use_sim_time`` parameter is true: what
+    makes ``rospy.Time.now()`` simulated time (``rospy/impl/simtime.py``,
+    ``rospy.get_param('/use_sim_time')``); False without rospy or when it cannot say."""
+    rospy = sys.modules.get("rospy")
+    if rospy is None:
+        return False
+    try:
+        if rospy.core.is_initialized():
+            return bool(rospy.get_param("/use_sim_time", False))
+    except Exception:
+        return False
+    return False
+
+
 def ros1_bus() -> Any:
     """The process's bus on the ROS 1 graph at ``ROS_MASTER_URI`` (tfbus's own ROS 1
     transport, :class:`tfbus.transports.ros1.Ros1Transport`), entered in the background
     loop on first use. Its node name is the rospy node's name plus ``_tf2`` when rospy
     is initialised (a second node: the master would shut down a node that took the
-    same name), else ``/tfbus_<pid>_<random>``."""
+    same name), else ``/tfbus_<pid>_<random>``. With rospy's ``/use_sim_time`` true
+    (:func:`rospy_use_sim_time`) the node also subscribes to ``/clock``."""
     from tfbus.bus import Bus
+    from tfbus.topics import CLOCK_TOPIC
     from tfbus.transports.ros1 import Ros1Transport
 
     def make() -> Bus:
         name = rospy_node_name()
         node = f"{name}_tf2" if name else None
-        return Bus(transport=Ros1Transport(node_name=node))
+        clock_topic = CLOCK_TOPIC if rospy_use_sim_time() else None
+        return Bus(transport=Ros1Transport(node_name=node, clock_topic=clock_topic))
 
     _register_rospy_shutdown()
     return background.shared(f"ros1:{os.environ.get('ROS_MASTER_URI', '')}", make)
+
+
+def ros1_sim_clock() -> Any:
+    """The process's :class:`~tfbus.clock.SimClock` following ``/clock`` on
+    :func:`ros1_bus` (entered in the background loop on first use): the time of a rospy
+    node with ``/use_sim_time``, as ``rospy.Time.now()`` reads it."""
+    from tfbus.clock import SimClock
+
+    bus = ros1_bus()
+    return background.shared(f"ros1-clock:{os.environ.get('ROS_MASTER_URI', '')}",
+                             lambda: SimClock(bus))
 
 
 def in_event_loop() -> bool:

@@ -58,7 +58,9 @@ from tfbus.compat._loop import (
     background,
     in_event_loop,
     ros1_bus,
+    ros1_sim_clock,
     rospy_node_name,
+    rospy_use_sim_time,
 )
 from tfbus.compat._types import flavour_of, ros_message, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
@@ -150,7 +152,9 @@ class Buffer:
     """tf2_ros ``Buffer(cache_time=None, node=None)`` over a :class:`tfbus.Buffer`
     (``.buffer``; ``cache_time`` 10 s by default, a duration in any form). ``node`` is
     accepted for ROS 2's signature and not used (time comes from ``clock``, a tfbus
-    clock, default the system clock).
+    clock, default the system clock; in an initialised rospy node whose
+    ``/use_sim_time`` parameter is true, a :class:`~tfbus.clock.SimClock` following
+    ``/clock`` on the ROS 1 graph, as ``rospy.Time.now()``).
 
     Thread use: once a background listener feeds it (or a blocking call had to wait),
     the buffer belongs to the process's background loop and every call from another
@@ -166,6 +170,8 @@ class Buffer:
         """Create the buffer (see the class docs). ``debug`` (ROS 1's): in an initialised
         rospy node, offer the ``~tf2_frames`` service as ROS 1's Buffer does."""
         seconds = 10.0 if cache_time is None else to_duration(cache_time, "cache_time")
+        if clock is None and rospy_use_sim_time():  # rospy's simulated time: /clock
+            clock = ros1_sim_clock()
         self.buffer = _Buffer(seconds, clock=clock)
         self.node = node
         self._owned = False

@@ -23,14 +23,15 @@ def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
 
     ``overrides`` may carry ``name`` (a CLI's default node name; ``-`` becomes ``_`` and
     the process id is appended), used when the spec gives none, and ``scan_topics``
-    (:class:`Ros1Transport`'s: ``sensor_msgs/LaserScan`` topics to subscribe to).
+    (:class:`Ros1Transport`'s: ``sensor_msgs/LaserScan`` topics to subscribe to) and
+    ``clock_topic`` (:class:`Ros1Transport`'s: ``"/clock"`` for ``--use-sim-time``).
 
     Raises:
         ValueError: a value that is not understood (named: ``remote`` not a boolean, a bad
             node name or master URI).
-        TypeError: an override other than ``name`` and ``scan_topics``.
+        TypeError: an override other than ``name``, ``scan_topics`` and ``clock_topic``.
     """
-    unknown = set(overrides) - {"name", "scan_topics"}
+    unknown = set(overrides) - {"name", "scan_topics", "clock_topic"}
     if unknown:
         raise TypeError(f"unexpected ros1 transport override(s): {', '.join(sorted(unknown))}")
     name = spec.value("name")
@@ -46,4 +47,5 @@ def transport_from_spec(spec: BusSpec, **overrides: Any) -> Ros1Transport:
         host=spec.value("host"),
         allow_remote=remote == "1",
         scan_topics=tuple(overrides.get("scan_topics", ())),
+        clock_topic=overrides.get("clock_topic"),
     )

@@ -1,0 +1,208 @@
+"""Benchmark simulated time: what following ``/clock`` costs, and how late a sim-time
+wake-up is.
+
+    .venv/bin/python benchmarks/bench_sim_clock.py [--hz 1000] [--seconds 5] [--quick]
+
+A publisher process (this script, ``--role publisher``) sends ``rosgraph_msgs/Clock`` on
+``/clock`` over Zenoh (127.0.0.1, explicit endpoints, multicast scouting off) at ``--hz``,
+one simulated step of ``1/hz`` s per message (real time), on absolute deadlines. This
+process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
+
+1. **CPU cost of /clock at HZ**: this process's CPU time (``time.process_time``: every
+   thread, Zenoh's included) per second of wall time over ``--seconds``, with the
+   publisher sending, minus the same with a publisher that sends nothing (the idle bus):
+   the share of one core that following ``/clock`` costs. Target: under 2 % at 1 kHz.
+2. **Sim-time wake-up lateness**: ``clock.sleep_until(d)`` for deadlines ``d`` falling
+   between two ``/clock`` steps (10.5 steps ahead, then 10.25, 10.75, ...); each wake-up
+   is measured as ``clock.now() - d`` in ``/clock`` steps: woken by the first message at
+   or after ``d`` it is below 1 (within one ``/clock`` message of its deadline).
+   Target: max below 1 step.
+
+Figures only: nothing here asserts a timing (a loaded machine shows it in the figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import anyio
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tfbus import Bus, SimClock, Time
+from tfbus.messages import Clock
+from tfbus.topics import CLOCK_TOPIC
+from tfbus.transports.zenoh import ZenohTransport
+
+START = Time(100)
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+async def publisher(port: int, hz: float, seconds: float) -> None:
+    """Publish /clock at ``hz`` (0: nothing) for ``seconds`` once a subscriber matches."""
+    transport = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="sim_clock_publisher")
+    async with Bus(transport=transport) as bus:
+        print("LISTENING", flush=True)
+        with anyio.fail_after(60):
+            await transport.wait_matching(CLOCK_TOPIC)
+        if hz <= 0:
+            await anyio.sleep(seconds)
+            return
+        step_ns = round(1e9 / hz)
+        t0 = anyio.current_time()
+        for k in range(int(seconds * hz)):
+            bus.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(START.ns + k * step_ns)))
+            await anyio.sleep(max(0.0, t0 + (k + 1) / hz - anyio.current_time()))
+
+
+def start_publisher(port: int, hz: float, seconds: float) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, __file__, "--role", "publisher", "--port", str(port), "--hz", str(hz),
+         "--seconds", str(seconds)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    if line.strip() != "LISTENING":
+        proc.kill()
+        raise RuntimeError(f"the publisher did not start: {line!r}")
+    return proc
+
+
+async def follow(port: int, hz: float, seconds: float, wakeups: int,
+                 sim_clock: bool = True) -> dict[str, float]:
+    """Follow a publisher at ``hz``: CPU share over ``seconds``, then wake-up lateness
+    (``sim_clock`` False: a no-op subscriber on /clock instead of the SimClock, which
+    is the cost of receiving the topic alone)."""
+    settle = 1.5
+    extra = (wakeups * 12 / hz + 5.0) if hz > 0 else 0.0
+    proc = start_publisher(port, hz, settle + seconds + extra + 2.0)
+    result: dict[str, float] = {}
+    try:
+        transport = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="sim_clock_follower")
+        async with Bus(transport=transport) as bus, SimClock(bus) as clock:
+            counted = [0]
+            if not sim_clock:
+                await clock.__aexit__(None, None, None)  # unsubscribed: a no-op one instead
+
+                def count(message: object) -> None:
+                    counted[0] += 1
+
+                bus.subscribe_callback(CLOCK_TOPIC, count)
+
+            def received() -> int:
+                return clock.received if sim_clock else counted[0]
+
+            await anyio.sleep(settle)
+            received0 = received()
+            wall0, cpu0 = time.perf_counter(), time.process_time()
+            await anyio.sleep(seconds)
+            wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+            result["cpu_share"] = cpu / wall
+            result["rate"] = (received() - received0) / wall
+            if hz > 0 and wakeups:
+                step_ns = round(1e9 / hz)
+                late: list[float] = []  # at the wake-up, inside the /clock delivery
+                resumed: list[float] = []  # when the sleeping task ran again
+                fractions = (0.5, 0.25, 0.75, 0.1, 0.9)
+                with anyio.fail_after(extra + 30):
+                    for i in range(wakeups):
+                        ahead = (10 + fractions[i % 5]) * step_ns / 1e9
+                        deadline = clock.now_ns() + round(ahead * 1e9)
+                        woke = anyio.Event()
+
+                        def wake(deadline: int = deadline, woke: anyio.Event = woke) -> None:
+                            late.append((clock.now_ns() - deadline) / step_ns)
+                            woke.set()
+
+                        clock.call_later(ahead, wake)
+                        await clock.sleep_until(Time.from_ns(deadline))
+                        resumed.append((clock.now_ns() - deadline) / step_ns)
+                        await woke.wait()
+                for name, values in (("late", late), ("resumed", resumed)):
+                    result[f"{name}_median"] = statistics.median(values)
+                    result[f"{name}_max"] = max(values)
+                    result[f"{name}_min"] = min(values)
+            result["dropped"] = clock.dropped
+            result["jumps"] = clock.jumps
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+    return result
+
+
+def _sim_clock_cost_per_message(n: int = 100_000) -> float:
+    """Seconds of CPU per /clock a SimClock spends on its own (``_on_clock``, called as
+    the bus delivers it; no transport), median of 5 runs of ``n``."""
+    clock = SimClock(Bus())
+    messages = [Clock(Time.from_ns(START.ns + k * 1_000_000)) for k in range(n)]
+    runs = []
+    for _ in range(5):
+        clock = SimClock(Bus())
+        t0 = time.process_time()
+        for m in messages:
+            clock._on_clock(m)
+        runs.append((time.process_time() - t0) / n)
+    return statistics.median(runs)
+
+
+async def main(args: argparse.Namespace) -> None:
+    print(f"tfbus sim-clock benchmark; Python {sys.version.split()[0]}; Zenoh on 127.0.0.1; "
+          f"/clock at {args.hz:g} Hz, {args.seconds:g} s windows")
+    idle = await follow(free_port(), 0.0, args.seconds, 0)
+    plain = await follow(free_port(), args.hz, args.seconds, 0, sim_clock=False)
+    busy = await follow(free_port(), args.hz, args.seconds, args.wakeups)
+    cost = busy["cpu_share"] - idle["cpu_share"]
+    own = _sim_clock_cost_per_message()
+    print()
+    print("CPU share of one core (process time / wall time, every thread)")
+    print(f"  idle bus, no /clock                      {idle['cpu_share'] * 100:6.2f} %")
+    print(f"  /clock at {args.hz:g} Hz, a no-op subscriber  "
+          f"{plain['cpu_share'] * 100:6.2f} %   ({plain['rate']:.0f}/s received)")
+    print(f"  /clock at {args.hz:g} Hz, a SimClock          "
+          f"{busy['cpu_share'] * 100:6.2f} %   ({busy['rate']:.0f}/s received)")
+    print(f"  cost of following /clock (SimClock - idle) {cost * 100:6.2f} %   "
+          f"target < 2 %   [{'ok' if cost < 0.02 else 'over'}]")
+    print(f"    of which the SimClock itself             "
+          f"{(busy['cpu_share'] - plain['cpu_share']) * 100:6.2f} %   "
+          f"(in process, no transport: {own * 1e6:.2f} us per /clock = "
+          f"{own * args.hz * 100:.2f} % at {args.hz:g} Hz)")
+    print()
+    print(f"sim-time wake-ups: clock.sleep_until(d), d between two /clock steps "
+          f"({args.wakeups} wake-ups; lateness clock.now() - d, in /clock steps of "
+          f"{1e3 / args.hz:g} ms)")
+    print(f"  woken (in the /clock's delivery)  min {busy['late_min']:.3f}  median "
+          f"{busy['late_median']:.3f}  max {busy['late_max']:.3f} steps   "
+          f"target: max < 1 step   [{'ok' if busy['late_max'] < 1 else 'over'}]")
+    print(f"  task resumed (+ event-loop turn)  min {busy['resumed_min']:.3f}  median "
+          f"{busy['resumed_median']:.3f}  max {busy['resumed_max']:.3f} steps")
+    print(f"  dropped /clock {busy['dropped']:.0f}, jumps back {busy['jumps']:.0f}")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--role", default="follower", choices=["follower", "publisher"])
+    parser.add_argument("--port", type=int, default=0)
+    parser.add_argument("--hz", type=float, default=1000.0)
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--wakeups", type=int, default=200)
+    parser.add_argument("--quick", action="store_true", help="2 s windows, 50 wake-ups")
+    ns = parser.parse_args()
+    if ns.quick:
+        ns.seconds, ns.wakeups = 2.0, 50
+    if ns.role == "publisher":
+        anyio.run(publisher, ns.port, ns.hz, ns.seconds)
+    else:
+        anyio.run(main, ns)
