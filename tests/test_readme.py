@@ -160,6 +160,7 @@ def test_use_block_prints_what_its_comment_says(tmp_path: Path) -> None:
 # What each installer the tests may run puts on the machine, as the README must name it.
 INSTALLERS = {
     "install_chromium.sh": "Chromium",
+    "install_evo.sh": "evo",
     "install_laser_geometry.sh": "laser_geometry",
     "install_ros1.sh": "ROS 1",
     "install_ros1_rsp.sh": "ROS 1",

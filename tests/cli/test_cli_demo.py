@@ -75,7 +75,8 @@ def test_demo_roles_forward_options(monkeypatch: pytest.MonkeyPatch) -> None:
         code, _, err = run("demo", "listener", "--bus", "zenoh?bogus=1")
         assert code == 2 and err.strip() == (
             "tfbus demo listener: error: unknown bus option 'bogus' (known: config, "
-            "congestion_control, connect, express, listen, mode, name, namespace, port, prefix)"
+            "congestion_control, connect, connect_timeout, express, listen, mode, name, namespace, "
+            "port, prefix)"
         )
     assert len(calls) == 3
 

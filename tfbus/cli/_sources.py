@@ -168,18 +168,19 @@ def open_spec_transport(
     """A new transport for ``spec``; ``name`` is this node's name unless the spec gives
     one (:func:`tfbus.transports.spec.open_transport`'s ``default_name``); ``scan_topics``
     are the LaserScan topics it must carry (``tfbus view --scan``); ``use_sim_time``: it
-    must carry ``/clock`` too (a ROS 1 node subscribes to it by type:
-    :class:`~tfbus.transports.ros1.Ros1Transport`'s ``clock_topic``; Zenoh and memory
-    carry every topic).
+    must carry ``/clock`` too (a ROS 1 node or a ROS 2 participant subscribes to it by
+    type: the transport's ``clock_topic``, where the scheme table says it takes one;
+    Zenoh and memory carry every topic).
 
     Raises:
         TransportError: the scheme's extra is not installed (named), or the transport
             rejects its configuration.
         ValueError: an option value the transport does not understand.
     """
-    from tfbus.transports.spec import open_transport
+    from tfbus.transports.spec import open_transport, schemes
 
-    if use_sim_time and spec.scheme == "ros1":
+    scheme = schemes().get(spec.scheme)
+    if use_sim_time and scheme is not None and scheme.clock_topic:
         from tfbus.topics import CLOCK_TOPIC
 
         return open_transport(spec, default_name=name, scan_topics=scan_topics,

@@ -160,6 +160,10 @@ class TransportScheme:
             transform whose sender it cannot name (ROS 1: ``unknown_publisher``,
             roscpp's ``MessageEvent`` default that tf_monitor prints); None: the
             command line's own word.
+        clock_topic: its factory takes a ``clock_topic=`` override, the topic of
+            ``rosgraph_msgs/Clock`` to carry for a :class:`~tfbus.clock.SimClock` (ROS 1
+            and ROS 2: a subscription has a type); a scheme that carries every topic
+            (memory, Zenoh) needs none.
     """
 
     scheme: str
@@ -174,6 +178,7 @@ class TransportScheme:
     scan_topics: bool = False
     fleet_option: str | None = None
     unknown_authority: str | None = None
+    clock_topic: bool = False
 
     def is_fleet(self, spec: BusSpec) -> bool:
         """Whether ``spec`` (a parsed bus of this scheme) is a fleet bus: its
@@ -342,6 +347,7 @@ register_scheme(
         extra="ros2",
         requires=("cyclonedds",),
         summary="ROS 2 over DDS (Cyclone): /tf and /tf_static with ROS 2 nodes, loopback",
+        clock_topic=True,
     )
 )
 register_scheme(
@@ -355,5 +361,6 @@ register_scheme(
         summary="ROS 1 node (TCPROS): ROS_MASTER_URI, else http://127.0.0.1:11311",
         scan_topics=True,
         unknown_authority="unknown_publisher",
+        clock_topic=True,
     )
 )
