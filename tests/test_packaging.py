@@ -213,7 +213,10 @@ def test_a_pure_rebuild_of_a_clone_carries_no_stale_compiled_core(tmp_path: Path
     project = _project_copy(tmp_path / "clone")
     lib = project / "build" / f"lib.{sysconfig.get_platform()}-{sys.implementation.cache_tag}"
     (lib / "tfbus" / "core").mkdir(parents=True)
-    compiled = sorted((ROOT / "tfbus" / "core").glob("_c*.so"))
+    # what a compiled build for this interpreter leaves in its build/lib.* (the checkout
+    # may also hold other Pythons' builds, which no build of this one would copy there)
+    suffix = sysconfig.get_config_var("EXT_SUFFIX")
+    compiled = sorted((ROOT / "tfbus" / "core").glob(f"_c*{suffix}"))
     if not compiled:
         pytest.skip("this checkout has no compiled core to leave behind")
     for so in compiled:  # what the first, compiled build left in build/
