@@ -390,7 +390,7 @@ def transform_covariance(covariance: Any, transform: TransformStamped) -> tuple[
 def do_transform_pose_with_covariance(
     pose: PoseWithCovarianceStamped, transform: TransformStamped
 ) -> PoseWithCovarianceStamped:
-    """Transform a pose with covariance: the pose as :func:`tfbus.geometry.do_transform_pose`,
+    """Transform a pose with covariance: the pose as :func:`do_transform_pose`,
     the covariance by :func:`transform_covariance` (ROS 2 tf2_geometry_msgs
     ``do_transform_pose_with_covariance_stamped``). The result header is
     ``transform.header``.
