@@ -130,15 +130,16 @@ async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
 
 
 def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
+    import tfbus.cli._sources as sources
     import tfbus.demos.tutorial as demo
-    from tfbus.transports import spec as bus_spec
+    from tfbus.transports.spec import BusSpec
 
     opened: list[tuple[str, str | None]] = []
     calls: list[tuple[str, dict[str, object]]] = []
 
-    def fake_open_bus(spec: str, *, default_name: str | None = None) -> Bus:
-        opened.append((spec, default_name))
-        return Bus()
+    def fake_open_spec_transport(spec: BusSpec, *, name: str, use_sim_time: bool = False) -> None:
+        opened.append((spec.text, name))
+        return None  # an in-process bus
 
     async def fake_broadcaster(bus: Bus, **kwargs: object) -> BroadcasterStatistics:
         calls.append(("broadcaster", kwargs))
@@ -148,12 +149,14 @@ def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
         calls.append(("listener", kwargs))
         return None
 
-    monkeypatch.setattr(bus_spec, "open_bus", fake_open_bus)
+    monkeypatch.setattr(sources, "open_spec_transport", fake_open_spec_transport)
     monkeypatch.setattr(demo, "run_broadcaster", fake_broadcaster)
     monkeypatch.setattr(demo, "run_listener", fake_listener)
     assert main(["demo", "broadcaster", "--rate", "50", "--duration", "3"]) == 0
     assert main(["demo", "listener", "--bus", "zenoh?port=9000", "--backend", "trio"]) == 0
-    assert opened == [("zenoh", "robot_tf_publisher"), ("zenoh?port=9000", "robot_tf_listener")]
+    # (a --bus given is also opened once as "tfbus-cli" when parsed, to check its config)
+    nodes = [o for o in opened if o[1] != "tfbus-cli"]
+    assert nodes == [("zenoh", "robot_tf_publisher"), ("zenoh?port=9000", "robot_tf_listener")]
     assert [c[0] for c in calls] == ["broadcaster", "listener"]
     assert calls[0][1]["rate"] == 50.0 and calls[0][1]["duration"] == 3.0
     assert calls[0][1]["handle_signals"] is True
