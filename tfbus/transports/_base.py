@@ -277,6 +277,26 @@ class LookupClient(Protocol):
         ...
 
 
+async def transform_remotely(client: LookupClient, obj: _M, target_frame: str,
+                             timeout: float | Duration | None) -> _M:
+    """tf2_ros ``BufferClient.transform`` for any :class:`LookupClient`: ``obj``'s
+    transform is looked up remotely (``client.lookup_transform`` at its header's frame
+    and stamp), then the function registered for ``type(obj)`` (:mod:`tfbus.convert`,
+    ``Buffer.registration``) is applied here.
+
+    Raises:
+        TypeError: no transform function for ``type(obj)`` (before any lookup).
+        The lookup's errors, as ``client.lookup_transform``.
+    """
+    from tfbus.buffer import Buffer, _header_of
+
+    do_transform = Buffer.registration.get(type(obj))
+    header = _header_of(obj)
+    ts = await client.lookup_transform(target_frame, header.frame_id, header.stamp, timeout)
+    result: _M = do_transform(obj, ts)
+    return result
+
+
 @runtime_checkable
 class LookupServing(Protocol):
     """A transport that serves transform lookups to thin clients and asks them

@@ -50,7 +50,7 @@ from tfbus.errors import TransformException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
-from tfbus.transports._base import ServerStatistics
+from tfbus.transports._base import ServerStatistics, transform_remotely
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -962,10 +962,4 @@ class LookupActionClient:
             TypeError: no transform function for ``type(obj)`` (before any goal).
             The lookup's errors, as :meth:`lookup_transform`.
         """
-        from tfbus.buffer import Buffer, _header_of
-
-        do_transform = Buffer.registration.get(type(obj))
-        header = _header_of(obj)
-        ts = await self.lookup_transform(target_frame, header.frame_id, header.stamp, timeout)
-        result: _M = do_transform(obj, ts)
-        return result
+        return await transform_remotely(self, obj, target_frame, timeout)

@@ -74,6 +74,7 @@ from tfbus.transports._base import (
     DEFAULT_SERVER_NAME,
     MAX_FRAME_ID_BYTES,
     ServerStatistics,
+    transform_remotely,
 )
 
 if TYPE_CHECKING:
@@ -618,13 +619,7 @@ class BufferClient:
             TypeError: no transform function for ``type(obj)`` (before any query).
             The lookup's errors, as :meth:`lookup_transform`.
         """
-        from tfbus.buffer import Buffer, _header_of
-
-        do_transform = Buffer.registration.get(type(obj))
-        header = _header_of(obj)
-        ts = await self.lookup_transform(target_frame, header.frame_id, header.stamp, timeout)
-        result: _M = do_transform(obj, ts)
-        return result
+        return await transform_remotely(self, obj, target_frame, timeout)
 
     async def _ask(self, request: dict[str, Any], timeout: float | Duration | None) -> object:
         if isinstance(timeout, Duration):
