@@ -11,7 +11,10 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VERSION="${TFBUS_EVO_VERSION:-1.38.1}"
 DIR="${TFBUS_EVO_DIR:-$ROOT/.peer-evo/evo-$VERSION}"
 LIMIT="${TFBUS_EVO_INSTALL_TIMEOUT:-600}"
-PIP_PYTHON="${PIP_PYTHON:-$ROOT/.venv/bin/python}"
+# pip runs from any Python with pip (the project's venv if it is there; else a small venv
+# of its own, so the script works before `make test` has made .venv) and installs wheels
+# for Debian's python3, which is the interpreter that runs evo.
+PIP_PYTHON="${PIP_PYTHON:-}"
 
 unavailable() { echo "evo: unavailable: $*"; exit 1; }
 
@@ -39,10 +42,21 @@ if [ -f "$DIR/.tfbus-evo-ok" ]; then
     why="$(works 2>&1)" || unavailable "installed in $DIR, but it does not work: $why"
     echo "evo: ready ($DIR, already installed)"; exit 0
 fi
+if [ -z "$PIP_PYTHON" ]; then
+  if [ -x "$ROOT/.venv/bin/python" ]; then
+    PIP_PYTHON="$ROOT/.venv/bin/python"
+  else
+    PIP_VENV="$ROOT/.peer-evo/pip-venv"
+    [ -x "$PIP_VENV/bin/python" ] || timeout 300 "${PYTHON:-python3}" -m venv "$PIP_VENV" \
+        || unavailable "could not make a venv to run pip with (${PYTHON:-python3} -m venv $PIP_VENV)"
+    PIP_PYTHON="$PIP_VENV/bin/python"
+  fi
+fi
 [ -x "$PIP_PYTHON" ] || unavailable "no $PIP_PYTHON to run pip with"
+DEBIAN_PY="$(/usr/bin/python3 -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
 rm -rf "$DIR"; mkdir -p "$DIR"
 out="$(timeout "$LIMIT" "$PIP_PYTHON" -m pip install -q --disable-pip-version-check \
-    --target "$DIR" "evo==$VERSION" 2>&1)" \
+    --target "$DIR" --python-version "$DEBIAN_PY" --only-binary=:all: "evo==$VERSION" 2>&1)" \
     || unavailable "pip install --target $DIR evo==$VERSION failed or took over $LIMIT s: $(printf "%s" "$out" | tail -c 400)"
 why="$(works 2>&1)" || unavailable "installed in $DIR, but it does not work: $why"
 touch "$DIR/.tfbus-evo-ok"
