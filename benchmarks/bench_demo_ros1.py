@@ -1,0 +1,111 @@
+"""The seed demo over ROS 1, CPU against the tutorial's own C++ pair, same run.
+
+The ROS tutorial "Setting up your robot using tf" has two C++ nodes: a 100 Hz
+``robot_tf_publisher`` (base_link -> base_laser) and a 1 Hz ``robot_tf_listener``
+(``tests/peers/ros1/tf_broadcaster.cpp`` and ``tf_listener.cpp``, built here against
+Debian's roscpp and tf). tfbus runs the same two nodes as ``tfbus demo broadcaster`` and
+``tfbus demo listener`` on ``--bus ros1:`` (one process each, as the tutorial's two
+terminals). Both pairs run on one roscore on 127.0.0.1, in alternating rounds; each round
+measures the CPU time (user + system, from ``/proc/PID/stat``) the two processes of a
+pair use over a window that starts once the listener prints its first tutorial line
+(start-up, imports and registration are not counted) and lasts ``--seconds``.
+
+Prints each round, then per side the min/median/max CPU as a percentage of one core, the
+ratio tfbus / C++ (target <= 1.5x) and the 1-minute load average. Figures only; nothing
+is asserted. Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++.
+
+    .venv/bin/python benchmarks/bench_demo_ros1.py            # 3 rounds of 20 s
+    .venv/bin/python benchmarks/bench_demo_ros1.py --quick    # 3 rounds of 8 s
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers: one home, shared with the tests
+
+from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
+
+TICK = os.sysconf("SC_CLK_TCK")
+TFBUS = [sys.executable, "-m", "tfbus.cli"]
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of a process so far (``/proc/PID/stat`` fields 14-15)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def run_pair(master: Master, commands: list[list[str]], seconds: float) -> list[float]:
+    """Start a broadcaster and a listener, wait (bounded) for the listener's first tutorial
+    line, then measure both processes' CPU over ``seconds``: each one's share of a core."""
+    procs: list[Proc] = []
+    try:
+        for cmd in commands:
+            procs.append(master.run(*cmd))
+        procs[1].wait_for(r"base_laser: \(1\.00, 0\.20\. 0\.00\) -----> base_link", timeout=60.0)
+        before = [cpu_seconds(p.proc.pid) for p in procs]
+        t0 = time.monotonic()
+        time.sleep(seconds)  # the measurement window itself (a benchmark, not a test)
+        after = [cpu_seconds(p.proc.pid) for p in procs]
+        wall = time.monotonic() - t0
+        return [(a - b) / wall for a, b in zip(after, before, strict=True)]
+    finally:
+        for p in reversed(procs):
+            p.stop(signal.SIGINT, timeout=10.0)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0] if __doc__ else "")
+    parser.add_argument("--quick", action="store_true", help="rounds of 8 s instead of 20 s")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
+    args = parser.parse_args(argv)
+    seconds = 8.0 if args.quick else 20.0
+    why = ros1_missing(("roscpp", "tf"))
+    if why:
+        print(f"seed demo over ROS 1: unavailable ({why})")
+        return
+    with tempfile.TemporaryDirectory(prefix="tfbus-bench-demo-") as tmp:
+        out = Path(tmp) / "bin"
+        subprocess.run(["bash", str(ROOT / "tests" / "peers" / "ros1" / "build.sh"), str(out)],
+                       check=True, capture_output=True, timeout=600)  # fmt: skip
+        master = start_master(Path(tmp) / "home")
+        try:
+            uri = f"ros1:{master.uri}"
+            sides = {
+                "C++ tutorial pair": [[str(out / "tf_broadcaster")], [str(out / "tf_listener")]],
+                "tfbus demo pair": [[*TFBUS, "demo", "broadcaster", "--bus", uri],
+                                    [*TFBUS, "demo", "listener", "--bus", uri]],
+            }  # fmt: skip
+            shares: dict[str, list[float]] = {name: [] for name in sides}
+            print(f"seed demo over ROS 1: {args.rounds} rounds of {seconds:.0f} s, "
+                  "broadcaster 100 Hz + listener 1 Hz, CPU of both processes")  # fmt: skip
+            for k in range(args.rounds):
+                for name, commands in sides.items():
+                    broadcaster, listener = run_pair(master, commands, seconds)
+                    shares[name].append(broadcaster + listener)
+                    print(f"  round {k + 1}  {name:18s} {(broadcaster + listener) * 100:6.2f} % "
+                          f"of a core (broadcaster {broadcaster * 100:.2f}, listener "
+                          f"{listener * 100:.2f})")  # fmt: skip
+        finally:
+            master.stop()
+    for name, values in shares.items():
+        low, mid, high = (100 * f(values) for f in (min, statistics.median, max))
+        print(f"  {name:18s} min {low:6.2f} %  median {mid:6.2f} %  max {high:6.2f} %")
+    cpp, ours = (statistics.median(v) for v in shares.values())
+    print(f"  ratio tfbus / C++ (medians) {ours / cpp:.2f}x (target <= 1.5x); "
+          f"load {os.getloadavg()[0]:.1f}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
