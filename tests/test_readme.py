@@ -170,7 +170,7 @@ INSTALLERS = {
 
 
 def test_readme_names_everything_make_test_installs() -> None:
-    """Each ``scripts/install_*.sh`` the tests run (as root they apt-get install) is named
+    """Each ``scripts/install/install_*.sh`` the tests run (as root they apt-get install) is named
     in the README's comment on ``make test``."""
     used = set()
     for path in (ROOT / "tests").rglob("*.py"):
