@@ -37,7 +37,7 @@ from typing import Any
 
 import anyio
 import pytest
-from peer_install import require
+from peer_install import LEGITIMATE_SKIPS, require
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -411,6 +411,27 @@ def test_contributing_says_how_to_set_up_test_and_benchmark() -> None:
     assert "docs/architecture.md" in paths
 
 
+def test_contributing_counts_the_skips_a_machine_with_every_peer_prints() -> None:
+    """CONTRIBUTING.md's number of skipped documentation examples is the number of examples the
+    pages mark 'Not run: ...' (each backend of an async one counts), and the legitimate
+    skips it names are the ones of ``tests/peer_install.py``."""
+    not_run = sum(
+        len(list(ex.backends()))
+        for page in _pages()
+        for ex in extract(page)
+        if ex.title is not None and ex.title.startswith(NOT_RUN)
+    )
+    text = " ".join((ROOT / "CONTRIBUTING.md").read_text(encoding="utf-8").split())
+    match = re.search(r"the (\d+) documentation examples that need other hosts", text)
+    assert match is not None, "CONTRIBUTING.md: no count of the skipped documentation examples"
+    assert int(match.group(1)) == not_run
+    assert "listed in `tests/peer_install.py`" in text
+    assert {pattern for pattern, _ in LEGITIMATE_SKIPS} == {
+        "tests/test_docs.py::test_example",
+        "tests/fleet/test_fleet_netns.py::test_netem_delay_and_loss",
+    }
+
+
 def test_async_examples_cover_both_backends() -> None:
     """At least one example runs on each backend (the forcing of anyio.run is in use)."""
     backends = {b for page in _pages() for ex in extract(page) for b in ex.backends()}
@@ -438,7 +459,7 @@ def _perf_tables() -> Any:
 
 
 def test_quoted_figures_are_the_saved_output_lines() -> None:
-    """A figure quoted in the README or a page is filled in from the saved
+    """A figure quoted in a page is filled in from the saved
     benchmark output (the lines its expression picks, and when they were measured), so
     it cannot outlive a new run; an expression that picks nothing is an error."""
     pt = _perf_tables()
@@ -458,4 +479,5 @@ def test_quoted_figures_are_the_saved_output_lines() -> None:
         with pytest.raises(pt.QuoteError):
             pt.fill_quotes(marker.replace("core /chain of 10/", bad) + "\n<!-- perf-quote end -->")
     quoting = [p for p in pt.QUOTING if pt.QUOTE.search(p.read_text(encoding="utf-8"))]
-    assert {p.name for p in quoting} >= {"README.md", "zenoh.md", "view.md"}
+    assert {p.name for p in quoting} >= {"performance.md", "sensors.md", "robot.md",
+                                         "transports.md", "zenoh.md", "view.md"}

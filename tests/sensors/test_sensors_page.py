@@ -1,4 +1,5 @@
-"""The README's "Sensor streams" example runs and prints what its comments say."""
+"""The "Sensor streams" page's example (docs/sensors.md) runs and prints what its comments
+say."""
 
 from __future__ import annotations
 
@@ -7,21 +8,20 @@ import io
 import re
 from pathlib import Path
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "sensors.md"
 
 
 def _example() -> str:
-    text = README.read_text(encoding="utf-8")
-    section = text[text.index("## Sensor streams") :]
-    match = re.search(r"```python\n(.*?)```", section, re.DOTALL)
-    assert match is not None, "no python block in the Sensor streams section"
+    text = PAGE.read_text(encoding="utf-8")
+    match = re.search(r"```python\n(.*?)```", text, re.DOTALL)
+    assert match is not None, "no python block on the Sensor streams page"
     return match.group(1)
 
 
 def test_sensor_streams_example_runs() -> None:
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        exec(compile(_example(), str(README), "exec"), {"__name__": "__readme__"})
+        exec(compile(_example(), str(PAGE), "exec"), {"__name__": "__docs_example__"})
     lines = out.getvalue().splitlines()
     # beam 1 (straight ahead, 2 m) at t = 1.01 s: robot at x = 1.01, laser 0.1 ahead
     first = [float(x) for x in re.findall(r"-?\d+\.\d*", lines[0])]
