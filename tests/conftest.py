@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-# The ROS 1 peers (ros1_peers, ros1_hostile) live in scripts/, shared with the benchmarks,
+# The ROS 1 peers (ros1_peers, ros1_hostile) live in peers/ros1/, shared with the benchmarks,
 # which import nothing from tests/.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "peers" / "ros1"))
 

@@ -5,7 +5,7 @@ private ``ROS_HOME``. Processes are started here, read by threads line by line, 
 with a bound, and ended by their PID (SIGINT, then SIGKILL after a bound).
 
 Needs nothing but the standard library (no pytest): ``benchmarks/bench_ros1.py``,
-``bench_check.py`` and ``soak_ros1.py`` put ``scripts/`` on ``sys.path`` and import it
+``bench_check.py`` and ``soak_ros1.py`` put ``peers/ros1/`` on ``sys.path`` and import it
 with the ``bench`` extra alone; the tests' fixtures (``tests/ros1_harness.py``) build on it.
 """
 
