@@ -72,7 +72,7 @@ def peer_unavailable(peer: str, reason: str) -> NoReturn:
 
 
 def install(peer: str, script: str, timeout: float = 1900.0) -> str:
-    """Run ``scripts/<script>`` (idempotent) and return its ``ready`` line; when it exits
+    """Run ``scripts/install/<script>`` (idempotent) and return its ``ready`` line; when it exits
     non-zero or does not finish in ``timeout`` seconds, :func:`peer_unavailable`."""
     try:
         out = subprocess.run(
@@ -83,12 +83,12 @@ def install(peer: str, script: str, timeout: float = 1900.0) -> str:
             check=False,
         )
     except subprocess.TimeoutExpired:
-        peer_unavailable(peer, f"scripts/{script} did not finish in {timeout:.0f} s")
+        peer_unavailable(peer, f"scripts/install/{script} did not finish in {timeout:.0f} s")
     lines = out.stdout.strip().splitlines()
     if out.returncode != 0:
         why = next((ln for ln in lines if "unavailable" in ln), None)
         peer_unavailable(
-            peer, why or f"scripts/{script} exited {out.returncode}: {out.stderr[-500:]}"
+            peer, why or f"scripts/install/{script} exited {out.returncode}: {out.stderr[-500:]}"
         )
     return lines[-1] if lines else ""
 

@@ -136,6 +136,23 @@ def test_every_peer_has_an_install_command() -> None:
     assert named == scripts
 
 
+def test_an_installer_that_exits_without_a_reason_is_named_by_its_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An installer exiting non-zero without an ``unavailable`` line: the skip's reason
+    names it by its path from the repository root (where a reader runs it again), with its
+    status and the end of its stderr."""
+    import peer_install
+
+    (tmp_path / "install_evo.sh").write_text("echo working\necho broken >&2\nexit 3\n")
+    monkeypatch.setattr(peer_install, "SCRIPTS", tmp_path)
+    monkeypatch.setenv("CI", "")
+    with pytest.raises(pytest.skip.Exception) as info:
+        peer_install.install("evo", "install_evo.sh", timeout=60)
+    assert "evo unavailable: scripts/install/install_evo.sh exited 3: broken" in str(info.value)
+    assert (ROOT / "scripts" / "install" / "install_evo.sh").is_file()
+
+
 # -------------------------------------------------------------------------- ROS 2 venv
 
 
