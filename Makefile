@@ -67,16 +67,16 @@ docs-serve: $(DOCS_STAMP)
 
 # Re-run the benchmarks and rewrite the tables of docs/performance.md from their output.
 perf-tables: $(STAMP)
-	$(BIN)/python scripts/perf_tables.py --run
+	$(BIN)/python scripts/docs/perf_tables.py --run
 
 # sdist + one manylinux wheel per Python found, twine-checked, into dist/.
 dist: $(DIST_STAMP)
-	$(BIN)/python scripts/build_dist.py
+	$(BIN)/python scripts/release/build_dist.py
 
 # What a user does with dist/: clean venvs (3.10 and 3.13) install the wheel and run the
 # demo; the sdist installs without a C compiler and passes the conformance corpus.
 dist-check: $(DIST_STAMP)
-	$(BIN)/python scripts/check_dist.py
+	$(BIN)/python scripts/release/check_dist.py
 
 # The suite on each of Python 3.10-3.13 found on this machine (nox, venv backend);
 # `make test-matrix PYTHONS="3.10 3.13"` for some of them; each runs the core subset of

@@ -4,7 +4,7 @@ Each session makes a fresh venv with that interpreter's own ``venv`` module (nox
 backend), installs tfbus editable with its extras — which builds the compiled core for
 that interpreter beside the others (``tfbus/core/_c*.cpython-3XY-*.so``) — and runs pytest.
 An interpreter that is not installed is skipped, not failed: the matrix runs "on each
-interpreter found" (``scripts/pythons.py`` looks on ``PATH`` and in pyenv's versions).
+interpreter found" (``scripts/release/pythons.py`` looks on ``PATH`` and in pyenv's versions).
 
     nox                      # every version found
     nox -s tests-3.10        # one
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import nox
 
-sys.path.insert(0, str(Path(__file__).resolve().parent / "scripts"))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "scripts" / "release"))
 from pythons import VERSIONS, find_pythons
 
 nox.options.sessions = ["tests"]

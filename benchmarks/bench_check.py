@@ -3,10 +3,11 @@
     .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1]   # or: make bench-check
 
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
-``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6; ``_tf2_check_side.py``),
-in interleaved rounds (tfbus's side, then tf2's, ``--rounds`` times), and judges the
-median of the per-round ratios, so that a machine shared with other work slows both
-sides of a ratio alike. Each side's figure in a round is the best of 3 runs.
+``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
+``peers/debian/tf2_check_side.py``), in interleaved rounds (tfbus's side, then tf2's,
+``--rounds`` times), and judges the median of the per-round ratios, so that a machine
+shared with other work slows both sides of a ratio alike. Each side's figure in a round is
+the best of 3 runs.
 
 Rows (target):
 
@@ -62,7 +63,7 @@ from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.core import BufferCore  # noqa: E402
 
 TF2_PYTHON = "/usr/bin/python3"
-TF2_SIDE = HERE / "_tf2_check_side.py"
+TF2_SIDE = HERE.parent / "peers" / "debian" / "tf2_check_side.py"
 RUNS = 3  # runs per side per round; the best is the round's figure
 NS = 1_000_000_000
 

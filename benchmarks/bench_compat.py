@@ -11,7 +11,7 @@ time over 3 s of wall time with the loop started and nothing to do, per cent of 
 
 Then the same two figures on a ROS 1 graph (a roscore on 127.0.0.1, Debian's ROS 1),
 tfbus.compat beside Debian's tf2_ros (rospy) running the same program
-(``_compat_blocking_side.py``): a thread blocked in ``Buffer.lookup_transform(..., t,
+(``peers/ros1/compat_blocking_side.py``): a thread blocked in ``Buffer.lookup_transform(..., t,
 timeout=5 s)`` for a stamp ``t`` not yet received, answered by one ``/tf`` message from
 the same rospy publisher process; the delay from the message's arrival in the waiting
 process (a ``/tf`` callback there registered before the listener's) to the call's
@@ -36,18 +36,18 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers, shared with the tests
+sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers, shared with the tests
 
 from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
 WAITS = 200
 IDLE_SECONDS = 10.0
-SIDE = str(HERE / "_compat_blocking_side.py")
+SIDE = str(ROOT / "peers" / "ros1" / "compat_blocking_side.py")
 
 
 def side(python: str, which: str) -> dict[str, float]:
-    r = subprocess.run([python, str(HERE / "_compat_side.py"), which], capture_output=True,
-                       text=True, check=True, timeout=600)
+    r = subprocess.run([python, str(ROOT / "peers" / "debian" / "compat_side.py"), which],
+                       capture_output=True, text=True, check=True, timeout=600)
     result: dict[str, float] = json.loads(r.stdout)
     return result
 

@@ -12,7 +12,7 @@ Prints, on this machine:
 * memory per cached sample (1000 frames x 10 s x 100 Hz = 1M samples): tracemalloc and
   RSS growth for tfbus, RSS growth for tf2 (C++ allocations are invisible to tracemalloc).
 
-The tf2 half runs ``benchmarks/_tf2_side.py`` under ``/usr/bin/python3`` (Debian
+The tf2 half runs ``peers/debian/tf2_side.py`` under ``/usr/bin/python3`` (Debian
 ``python3-tf2``); the scenario (stamps, query times, sizes) is handed over as JSON so both
 sides do exactly the same work. Targets: lookups no slower than tf2_py,
 set_transform at least half of tf2_py's rate, at most 72 bytes per cached sample;
@@ -39,7 +39,7 @@ from tfbus.core import COMPILED, BufferCore
 
 NS = 1_000_000_000
 TF2_PYTHON = "/usr/bin/python3"
-TF2_SIDE = Path(__file__).with_name("_tf2_side.py")
+TF2_SIDE = Path(__file__).resolve().parents[1] / "peers" / "debian" / "tf2_side.py"
 MEMORY_TARGET = 72  # bytes per cached sample
 LOOKUP_DEPTH2_TARGET = 0.20  # target: never-repeated depth-2 lookup vs tf2_py
 

@@ -10,7 +10,7 @@ Prints, on this machine:
 * ``RobotStatePublisher.static_transforms``: fixed joints per second;
 * ``run()`` on an in-process bus: JointState messages in, TFMessages out on /tf, per
   second (subscription, rate-limit bookkeeping and publishing included);
-* the real ROS 1 node's cost in the same run (``benchmarks/_rsp_side.py`` under
+* the real ROS 1 node's cost in the same run (``peers/ros1/rsp_side.py`` under
   ``/usr/bin/python3``): the node's CPU time (user + system) per joint transform it
   published, serialisation and TCP included, from identical joint states sent at a steady
   rate; and tfbus's CPU per transform for the same work, with the ratio.
@@ -45,7 +45,7 @@ from tfbus.time import Time
 ROOT = Path(__file__).resolve().parents[1]
 PR2 = ROOT / "tests" / "data" / "urdf" / "rsp_pr2.urdf"
 ROS_PYTHON = "/usr/bin/python3"
-ROS_SIDE = Path(__file__).with_name("_rsp_side.py")
+ROS_SIDE = ROOT / "peers" / "ros1" / "rsp_side.py"
 TARGET = 100_000
 
 
@@ -97,7 +97,7 @@ def bench_run(rsp: RobotStatePublisher, msgs: list[JointState]) -> float:
 def ros_side(msgs: list[JointState], rate: float) -> dict[str, Any] | str:
     if not Path(ROS_PYTHON).exists() or not Path(
             "/usr/lib/robot_state_publisher/robot_state_publisher").exists():
-        return "ROS 1 robot_state_publisher not installed (scripts/install_ros1_rsp.sh)"
+        return "ROS 1 robot_state_publisher not installed (scripts/install/install_ros1_rsp.sh)"
     scenario = {"urdf": str(PR2), "rate": rate,
                 "states": [[m.header.stamp.ns, list(m.name), list(m.position)] for m in msgs]}
     try:

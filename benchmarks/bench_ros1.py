@@ -17,7 +17,7 @@ constant (a robot's fixed joints, or one standing still); with ``queue`` in the 
 moving every joint; ``ros1/bench_pub.cpp``), so a decoder that reuses repeated values is
 also timed where it cannot. Figures only; nothing is asserted.
 
-Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++. Everything on 127.0.0.1.
+Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++. Everything on 127.0.0.1.
 
     .venv/bin/python benchmarks/bench_ros1.py           # 10 s at 1 frame, 60 s at 50 frames
     .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
@@ -42,12 +42,12 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers: one home, shared with the tests
+sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers: one home, shared with the tests
 
 from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
 BENCH_PACKAGES = ("roscpp", "tf2_msgs")
-"""What the C++ publisher and subscriber of ``benchmarks/ros1/`` build against."""
+"""What the C++ publisher and subscriber of ``peers/ros1/`` build against."""
 
 
 def build(out: Path) -> None:
@@ -60,7 +60,8 @@ def build(out: Path) -> None:
     ).stdout.split()
     for name in ("bench_pub", "bench_sub"):
         subprocess.run(
-            ["g++", "-O2", "-o", str(out / name), str(HERE / "ros1" / f"{name}.cpp"), *flags],
+            ["g++", "-O2", "-o", str(out / name), str(ROOT / "peers" / "ros1" / f"{name}.cpp"),
+             *flags],
             check=True,
         )
     listener_flags = subprocess.run(
@@ -72,7 +73,7 @@ def build(out: Path) -> None:
     ).stdout.split()
     subprocess.run(
         ["g++", "-O2", "-o", str(out / "bench_listener"),
-         str(HERE / "ros1" / "bench_listener.cpp"), *listener_flags],
+         str(ROOT / "peers" / "ros1" / "bench_listener.cpp"), *listener_flags],
         check=True,
     )
 

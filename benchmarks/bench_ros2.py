@@ -1,8 +1,8 @@
 """ROS 2 transport benchmark: rclpy -> rclpy, rclpy -> tfbus, tfbus -> tfbus (prints figures).
 
 Every sender and receiver is its own process on 127.0.0.1, on a fresh random
-ROS_DOMAIN_ID; the rclpy ones (benchmarks/_ros2_side.py) run in the ROS 2 venv built by
-scripts/install_ros2_env.sh (rclpy + rmw_fastrtps_cpp, Fast DDS loopback profile), the
+ROS_DOMAIN_ID; the rclpy ones (peers/ros2/ros2_side.py) run in the ROS 2 venv built by
+scripts/install/install_ros2_env.sh (rclpy + rmw_fastrtps_cpp, Fast DDS loopback profile), the
 tfbus ones (this file, ``--role``) use Ros2Transport with its loopback default.
 
 1. One-way latency: the sender publishes ``--lat-count`` TFMessages of ``--batch``
@@ -50,8 +50,8 @@ from tfbus.time import Time  # noqa: E402
 from tfbus.transports.ros2 import Ros2Transport  # noqa: E402
 
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
-ROS_SIDE = ROOT / "benchmarks" / "_ros2_side.py"
-FASTDDS_LO = ROOT / "tests" / "peers" / "ros2" / "fastdds_lo.xml"
+ROS_SIDE = ROOT / "peers" / "ros2" / "ros2_side.py"
+FASTDDS_LO = ROOT / "peers" / "ros2" / "fastdds_lo.xml"
 WAIT = 60.0
 
 
@@ -273,7 +273,7 @@ def main() -> int:
         anyio.run(tfbus_recv, args)
         return 0
     if not ROS_PYTHON.exists():
-        print("the ROS 2 venv is missing: run scripts/install_ros2_env.sh", file=sys.stderr)
+        print("the ROS 2 venv is missing: run scripts/install/install_ros2_env.sh", file=sys.stderr)
         return 2
     codec_figures()
     print(f"{'path':<16}{'batch':>6}{'lat median ms':>15}{'lat p99 ms':>12}"

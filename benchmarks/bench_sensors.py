@@ -7,7 +7,7 @@
   Then small N (1 to 128 random times): the batch against a loop of single lookups, and
   the N from which the batch is faster.
 * A 720-beam scan projected and transformed into odom (laser_geometry's interpolation)
-  vs the C++ laser_geometry (``benchmarks/laser_geometry_bench.cpp``, built here with g++
+  vs the C++ laser_geometry (``peers/debian/laser_geometry_bench.cpp``, built here with g++
   and pkg-config). Target ≤ 2x.
 * A point cloud of N float32 points (10**4 and 10**6) through ``do_transform_cloud``, and
   ``(N, 3)`` float64 points through ``transform_points``, each vs bare numpy
@@ -248,7 +248,8 @@ def bench_laser(beams: int, reps: int) -> None:
                 check=True,
             ).stdout.split()
             subprocess.run(
-                ["g++", "-O2", "-o", str(exe), str(HERE / "laser_geometry_bench.cpp"), *flags],
+                ["g++", "-O2", "-o", str(exe),
+                 str(HERE.parent / "peers" / "debian" / "laser_geometry_bench.cpp"), *flags],
                 check=True,
             )
         for _ in range(ROUNDS):  # alternate the sides; keep each one's best round
@@ -288,7 +289,7 @@ def bench_laser(beams: int, reps: int) -> None:
     print(f"  tfbus transform (laser_geometry interp.) {t * 1e6:8.1f} µs")
     print(f"  tfbus transform (per_beam lookups)       {pb * 1e6:8.1f} µs")
     if not have_cpp:
-        print("  C++ laser_geometry: unavailable (bash scripts/install_laser_geometry.sh)")
+        print("  C++ laser_geometry: unavailable (bash scripts/install/install_laser_geometry.sh)")
         return
     print(f"  C++ laser_geometry projectLaser           {cp * 1e6:8.1f} µs   ratio {p / cp:.2f}x")
     print(f"  C++ laser_geometry transformLaserScan...  {ct * 1e6:8.1f} µs   ratio {t / ct:.2f}x"

@@ -10,7 +10,7 @@ non-XML, one offers a TCPROS server that sends a valid header then a garbage fra
 
 Prints sent / received / lost transforms, the subscriber's counters and the reconnects
 of the idle connections; exits 1 if anything was lost or the node died. Needs Debian's
-ROS 1 (``scripts/install_ros1.sh``).
+ROS 1 (``scripts/install/install_ros1.sh``).
 
     .venv/bin/python benchmarks/soak_ros1.py                       # 60 s, asyncio
     .venv/bin/python benchmarks/soak_ros1.py --backend trio --seconds 10
@@ -31,7 +31,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers (no pytest)
+sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers (no pytest)
 
 from ros1_hostile import HostilePeer, http_answer, send_raw, tcpros_answer  # noqa: E402
 from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402

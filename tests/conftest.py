@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-# The ROS 1 peers (ros1_peers, ros1_hostile) live in scripts/, shared with the benchmarks,
+# The ROS 1 peers (ros1_peers, ros1_hostile) live in peers/ros1/, shared with the benchmarks,
 # which import nothing from tests/.
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "peers" / "ros1"))
 
 from tfbus.core import _select
 
@@ -31,7 +31,7 @@ def anyio_backend(request: pytest.FixtureRequest) -> str:
 
 @pytest.fixture(scope="session")
 def tf2_py_installed() -> None:
-    """Debian's tf2_py (python3-tf2, installed with ROS 1 by ``scripts/install_ros1.sh``):
+    """Debian's tf2_py (python3-tf2, installed with ROS 1 by ``scripts/install/install_ros1.sh``):
     the reference of the tests that run the same operations on tf2_py and tfbus."""
     from peer_install import require
     from tf2_py_harness import have_tf2_py

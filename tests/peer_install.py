@@ -1,6 +1,6 @@
 """The real peers the interop tests run against, and what a test does when one is missing.
 
-Each peer is installed by its ``scripts/install_*.sh``, whose exit status tells the truth
+Each peer is installed by its ``scripts/install/install_*.sh``, whose exit status tells the truth
 (0 and a ``ready`` line only when the peer works, else 1 and an ``unavailable: REASON``
 line). A test whose peer could not be installed calls :func:`peer_unavailable`:
 
@@ -25,17 +25,17 @@ from typing import NoReturn
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "scripts"
+SCRIPTS = ROOT / "scripts" / "install"
 
 # The command that installs each peer (what a skip outside CI tells the user to run).
 INSTALL: dict[str, str] = {
-    "ros1": "sudo bash scripts/install_ros1.sh",
-    "ros1-robot-state-publisher": "sudo bash scripts/install_ros1_rsp.sh",
-    "laser_geometry": "sudo bash scripts/install_laser_geometry.sh",
-    "tf2-msgs-py": "sudo bash scripts/install_tf2_msgs_py.sh",
-    "chromium": "sudo bash scripts/install_chromium.sh",
-    "ros2-env": "bash scripts/install_ros2_env.sh",
-    "evo": "bash scripts/install_evo.sh",
+    "ros1": "sudo bash scripts/install/install_ros1.sh",
+    "ros1-robot-state-publisher": "sudo bash scripts/install/install_ros1_rsp.sh",
+    "laser_geometry": "sudo bash scripts/install/install_laser_geometry.sh",
+    "tf2-msgs-py": "sudo bash scripts/install/install_tf2_msgs_py.sh",
+    "chromium": "sudo bash scripts/install/install_chromium.sh",
+    "ros2-env": "bash scripts/install/install_ros2_env.sh",
+    "evo": "bash scripts/install/install_evo.sh",
 }
 
 # Skips that remain legitimate with every peer installed, by name: (test id pattern, fnmatch
@@ -72,7 +72,7 @@ def peer_unavailable(peer: str, reason: str) -> NoReturn:
 
 
 def install(peer: str, script: str, timeout: float = 1900.0) -> str:
-    """Run ``scripts/<script>`` (idempotent) and return its ``ready`` line; when it exits
+    """Run ``scripts/install/<script>`` (idempotent) and return its ``ready`` line; when it exits
     non-zero or does not finish in ``timeout`` seconds, :func:`peer_unavailable`."""
     try:
         out = subprocess.run(
@@ -83,12 +83,12 @@ def install(peer: str, script: str, timeout: float = 1900.0) -> str:
             check=False,
         )
     except subprocess.TimeoutExpired:
-        peer_unavailable(peer, f"scripts/{script} did not finish in {timeout:.0f} s")
+        peer_unavailable(peer, f"scripts/install/{script} did not finish in {timeout:.0f} s")
     lines = out.stdout.strip().splitlines()
     if out.returncode != 0:
         why = next((ln for ln in lines if "unavailable" in ln), None)
         peer_unavailable(
-            peer, why or f"scripts/{script} exited {out.returncode}: {out.stderr[-500:]}"
+            peer, why or f"scripts/install/{script} exited {out.returncode}: {out.stderr[-500:]}"
         )
     return lines[-1] if lines else ""
 

@@ -1,7 +1,7 @@
 """Real ROS 1 peers for the tests: pytest fixtures (a roscore per test, the tutorial's C++
-nodes) on top of ``scripts/ros1_peers.py`` (Debian's roscore and tools, started and ended
+nodes) on top of ``peers/ros1/ros1_peers.py`` (Debian's roscore and tools, started and ended
 by PID on 127.0.0.1), which the benchmarks use too. The tutorial's nodes are this
-repository's C++ sources in ``tests/peers/ros1/`` (built by its ``build.sh``).
+repository's C++ sources in ``peers/ros1/`` (built by its ``build.sh``).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ __all__ = [
     "tutorial_nodes_fixture",
 ]
 
-PEERS = ROOT / "tests" / "peers" / "ros1"
+PEERS = ROOT / "peers" / "ros1"
 
 
 @pytest.fixture(scope="session", name="ros1")
@@ -53,7 +53,7 @@ def ros1_fixture() -> None:
 
 @pytest.fixture(scope="session", name="tutorial_nodes")
 def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``tests/peers/ros1/``),
+    """The tutorial's C++ ``tf_broadcaster`` and ``tf_listener`` (``peers/ros1/``),
     built once. ROS 1 is there (the ``ros1`` fixture), so a failed build is a failure."""
     if shutil.which("g++") is None:
         peer_unavailable("ros1", "g++ not found: cannot build the tutorial's C++ nodes")

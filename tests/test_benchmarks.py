@@ -3,8 +3,8 @@
 
 Each benchmark module is loaded (its ``__main__`` block not run) in a fresh interpreter
 where the ``test`` extra's top-level packages cannot be imported and ``tests/`` is not on
-``sys.path``. The ``_*_side.py`` scripts run in other interpreters (Debian's ROS 1
-Python, the ROS 2 venv) and are not loaded here.
+``sys.path``. The peer programs the benchmarks run beside tfbus live in ``peers/`` (they
+run in other interpreters: Debian's ROS 1 Python, the ROS 2 venv) and are not loaded here.
 """
 
 from __future__ import annotations

@@ -197,7 +197,7 @@ async def test_ros1_buffer_server(master: Master) -> None:
         await _assert_leaves_as_itself(lambda: BufferServer(Buffer(), bus))
 
 
-# -- what the README's "Use" snippet does -------------------------------------------------------
+# -- what the README's example does -------------------------------------------------------------
 
 
 async def test_a_lookup_timeout_inside_bus_and_listener_is_caught_as_itself() -> None:

@@ -90,6 +90,9 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
         *(f"tfbus/core/_py{job}.py" for job in ("math", "cache", "core", "batch")),
         "tests/core/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
         "docs/index.md", "mkdocs.yml",
+        # the peer programs the interop tests run beside tfbus, and the peers' installers
+        "peers/ros1/ros1_peers.py", "peers/debian/tf2_py_side.py", "peers/ros2/tf_peer.py",
+        "scripts/install/install_ros1.sh", "scripts/install/_peer.sh",
     }
     assert required <= names, sorted(required - names)
     # Never generated or built files: the C is regenerated from the .pyx by Cython.

@@ -1,8 +1,8 @@
 """The install scripts of the real peers tell the truth with their exit status.
 
-Each ``scripts/install_*.sh`` exits 0 with a ``ready`` line only when its peer works, and
-non-zero with an ``unavailable: REASON`` line otherwise (``scripts/_peer.sh`` for the
-Debian ones, ``scripts/install_ros2_env.sh`` for the ROS 2 venv). The failure paths run
+Each ``scripts/install/install_*.sh`` exits 0 with a ``ready`` line only when its peer works, and
+non-zero with an ``unavailable: REASON`` line otherwise (``scripts/install/_peer.sh`` for the
+Debian ones, ``scripts/install/install_ros2_env.sh`` for the ROS 2 venv). The failure paths run
 the real scripts with stand-ins for the system's commands (``id``, ``dpkg-query``,
 ``apt-get``, ``chromium``) first on ``PATH``; the success paths run them as they are.
 The ROS 2 venv is also built in a mount namespace where every ROS of ``/usr`` and ``/opt``
@@ -21,7 +21,7 @@ import pytest
 from peer_install import INSTALL, require
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "scripts"
+SCRIPTS = ROOT / "scripts" / "install"
 APT_SCRIPTS = {
     "install_ros1.sh": "ros1",
     "install_ros1_rsp.sh": "ros1-robot-state-publisher",
@@ -136,15 +136,32 @@ def test_every_peer_has_an_install_command() -> None:
     assert named == scripts
 
 
+def test_an_installer_that_exits_without_a_reason_is_named_by_its_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An installer exiting non-zero without an ``unavailable`` line: the skip's reason
+    names it by its path from the repository root (where a reader runs it again), with its
+    status and the end of its stderr."""
+    import peer_install
+
+    (tmp_path / "install_evo.sh").write_text("echo working\necho broken >&2\nexit 3\n")
+    monkeypatch.setattr(peer_install, "SCRIPTS", tmp_path)
+    monkeypatch.setenv("CI", "")
+    with pytest.raises(pytest.skip.Exception) as info:
+        peer_install.install("evo", "install_evo.sh", timeout=60)
+    assert "evo unavailable: scripts/install/install_evo.sh exited 3: broken" in str(info.value)
+    assert (ROOT / "scripts" / "install" / "install_evo.sh").is_file()
+
+
 # -------------------------------------------------------------------------- ROS 2 venv
 
 
 def _copy_recipe(tmp_path: Path) -> Path:
     """The ROS 2 recipe in a fresh root (no venv there yet)."""
     root = tmp_path / "root"
-    (root / "scripts").mkdir(parents=True)
-    shutil.copy(SCRIPTS / "install_ros2_env.sh", root / "scripts")
-    shutil.copytree(SCRIPTS / "ros2", root / "scripts" / "ros2")
+    (root / "scripts" / "install").mkdir(parents=True)
+    shutil.copy(SCRIPTS / "install_ros2_env.sh", root / "scripts" / "install")
+    shutil.copytree(SCRIPTS / "ros2", root / "scripts" / "install" / "ros2")
     return root
 
 
@@ -160,7 +177,7 @@ def test_ros2_env_that_cannot_be_built_exits_non_zero(
     env: dict[str, str], reason: str, tmp_path: Path
 ) -> None:
     root = _copy_recipe(tmp_path)
-    done = subprocess.run(["bash", str(root / "scripts" / "install_ros2_env.sh")],
+    done = subprocess.run(["bash", str(root / "scripts" / "install" / "install_ros2_env.sh")],
                           env={**os.environ, **env}, capture_output=True, text=True,
                           timeout=60, check=False)
     assert done.returncode == 1, (done.stdout, done.stderr)
@@ -198,7 +215,7 @@ def test_ros2_env_builds_with_every_system_ros_hidden(tmp_path: Path) -> None:
     mounts = "".join(f"mount --bind {empty} {p} && " for p in hidden)
     check = ('test -z "$(ls /opt)" && '
              "! ls -d /usr/share/ament_cmake*/cmake 2>/dev/null | grep -q . && ")
-    script = root / "scripts" / "install_ros2_env.sh"
+    script = root / "scripts" / "install" / "install_ros2_env.sh"
     done = subprocess.run(
         ["unshare", "-m", "--propagation", "private", "bash", "-c",
          f"{mounts}{check}bash {script}"],
@@ -223,14 +240,14 @@ def test_a_missing_peer_fails_under_ci_and_skips_elsewhere(
         peer_unavailable("ros1", "apt-get install failed")
     assert str(failed.value) == (
         "CI needs every real peer: ros1 unavailable: apt-get install failed "
-        "(install it with: sudo bash scripts/install_ros1.sh)"
+        "(install it with: sudo bash scripts/install/install_ros1.sh)"
     )
     monkeypatch.delenv("CI")
     with pytest.raises(pytest.skip.Exception) as skipped:
         peer_unavailable("ros2-env", "python3.11 not found")
     assert str(skipped.value) == (
         "ros2-env unavailable: python3.11 not found "
-        "(install it with: bash scripts/install_ros2_env.sh)"
+        "(install it with: bash scripts/install/install_ros2_env.sh)"
     )
 
 
@@ -281,7 +298,7 @@ def test_the_run_counts_skips_by_reason_and_ci_fails_on_an_unlisted_one(
 
 
 def test_an_evo_that_pip_cannot_install_is_not_ready(tmp_path: Path) -> None:
-    """``scripts/install_evo.sh`` with a pip that fails: status 1 and the reason, no ready
+    """``scripts/install/install_evo.sh`` with a pip that fails: status 1 and the reason, no ready
     line (the test peer is evo from PyPI, installed with ``pip install --target``)."""
     if not Path("/usr/bin/python3").exists():
         pytest.skip("the script checks Debian's python3 first; there is none here")

@@ -1,4 +1,4 @@
-"""The ROS 1 peers' harness (``scripts/ros1_peers.py``): a roscore whose port another
+"""The ROS 1 peers' harness (``peers/ros1/ros1_peers.py``): a roscore whose port another
 process bound between choosing it and roscore binding it is started on another port
 (seen once in a clean-clone run: ``port 45591 is already in use``, then a 60 s wait)."""
 

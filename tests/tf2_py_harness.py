@@ -1,5 +1,5 @@
 """Debian's real tf2_py 0.7.6 in a side process (``/usr/bin/python3``
-``tests/peers/tf2_py_side.py``): the reference that ``tests/core/test_chain.py`` and
+``peers/debian/tf2_py_side.py``): the reference that ``tests/core/test_chain.py`` and
 ``tests/compat/`` compare tfbus with. Shared helpers, not tests."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-SIDE = Path(__file__).resolve().parent / "peers" / "tf2_py_side.py"
+SIDE = Path(__file__).resolve().parents[1] / "peers" / "debian" / "tf2_py_side.py"
 SYSTEM_PYTHON = "/usr/bin/python3"
 
 

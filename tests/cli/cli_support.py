@@ -20,7 +20,7 @@ DATA = ROOT / "tests" / "data"
 TURTLE = DATA / "webviz_turtle_tf_example.bag"
 """A ROS 1 bag of turtlesim's tf (Apache-2.0, tests/data/SOURCES.md)."""
 NAV2 = DATA / "nav2_like.mcap"
-"""An MCAP of a Nav2-like tree (scripts/make_test_bags.py, tests/data/SOURCES.md)."""
+"""An MCAP of a Nav2-like tree (scripts/data/make_test_bags.py, tests/data/SOURCES.md)."""
 
 LONG_ID = "L" * 16384
 HOSTILE = [

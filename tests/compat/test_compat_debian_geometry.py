@@ -4,7 +4,7 @@ half-turn quaternions whose sign a quaternion product and KDL's matrix disagree 
 ``do_transform_point``, ``do_transform_vector3``, ``do_transform_pose``,
 ``do_transform_wrench`` and ``Buffer.transform`` of each; the results are rospy messages of
 the classes given. Both run on the same rospy messages in one process
-(``tests/compat/debian_geometry_side.py``)."""
+(``peers/debian/debian_geometry_side.py``)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from pathlib import Path
 from peer_install import require
 
 ROOT = Path(__file__).resolve().parents[2]
-SIDE = ROOT / "tests" / "compat" / "debian_geometry_side.py"
+SIDE = ROOT / "peers" / "debian" / "debian_geometry_side.py"
 
 
 def test_every_path_equals_debian_bit_for_bit() -> None:

@@ -1,5 +1,5 @@
 """A bag-analysis program on tfbus.compat: evo's ``evo_traj`` (github.com/MichaelGrupp/evo,
-GPL-3.0: installed from PyPI as a test peer by ``scripts/install_evo.sh``, never copied).
+GPL-3.0: installed from PyPI as a test peer by ``scripts/install/install_evo.sh``, never copied).
 
 evo's ``evo/tools/tf_cache.py`` reads a bag's ``/tf`` and ``/tf_static`` into tf2_py's
 ``BufferCore`` (``set_transform`` / ``set_transform_static``), asks
@@ -12,7 +12,7 @@ base_link):
   ``BufferCore``), evo's ROS 1 branch (``rospy.Time``);
 * on tfbus: the ROS 2 venv's python (real ``geometry_msgs``, ``rclpy.time``: evo's ROS 2
   branch, as under rclpy's tf2) with ``sys.modules["tf2_py"] = tfbus.compat.tf2_py`` set
-  before evo is imported (``tests/compat/evo_runner.py``): its imports changed only.
+  before evo is imported (``peers/evo_runner.py``): its imports changed only.
 
 The trajectories evo saves (``--save_as_tum``) are compared pose for pose.
 """
@@ -30,7 +30,7 @@ import pytest
 from peer_install import peer_unavailable, require
 
 ROOT = Path(__file__).resolve().parents[2]
-RUNNER = ROOT / "tests" / "compat" / "evo_runner.py"
+RUNNER = ROOT / "peers" / "evo_runner.py"
 BAG = ROOT / "tests" / "data" / "tf_example"
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 DEBIAN_PYTHON = Path("/usr/bin/python3")
@@ -43,8 +43,8 @@ STATIC_Z = 0.01  # base_footprint -> base_link, the recording's static transform
 
 @pytest.fixture(scope="module", name="evo_dir")
 def evo_dir_fixture() -> Path:
-    """Where evo is installed (``scripts/install_evo.sh``); Debian's ROS 1 and the ROS 2 venv
-    are there too."""
+    """Where evo is installed (``scripts/install/install_evo.sh``); Debian's ROS 1 and the ROS 2
+    venv are there too."""
     if sys.platform != "linux":
         peer_unavailable("ros2-env", "the ROS 2 wheels are manylinux only")
     require("ros1", "install_ros1.sh")

@@ -63,7 +63,7 @@ def feed_fixture(master: Master) -> object:
     """Debian's static_transform_publisher (map → laser) and rostopic pub (/tf,
     laser → tool, stamped now, 20 Hz)."""
     if not (INSTALLED / "echo.py").exists():
-        pytest.skip("tf2-tools is not installed (scripts/install_ros1.sh installs it)")
+        pytest.skip("tf2-tools is not installed (scripts/install/install_ros1.sh installs it)")
     static = master.run("rosrun", "tf2_ros", "static_transform_publisher", "1", "2", "3",
                         "0", "0", "0.3826834323650898", "0.9238795325112867", "map", "laser")
     dynamic = master.run("rostopic", "pub", "-s", "-r", "20", "/tf", "tf2_msgs/TFMessage",
@@ -135,7 +135,7 @@ def test_view_frames_matches_debian(master: Master, feed: object, tmp_path: Path
 
 # -- public rospy programs copied into tests/compat/programs (see its README) ----------
 
-RECORDER = ROOT / "tests" / "compat" / "ros1_tf_recorder.py"
+RECORDER = ROOT / "peers" / "ros1" / "ros1_tf_recorder.py"
 
 
 def _upstream(name: str, into: Path) -> Path:
@@ -222,7 +222,7 @@ def test_dynamic_tf2_broadcaster_matches_debian(master: Master, tmp_path: Path) 
         assert 0.05 < _period(sent) < 0.5
 
 
-TURTLE_PEER = ROOT / "tests" / "compat" / "ros1_turtle_peer.py"
+TURTLE_PEER = ROOT / "peers" / "ros1" / "ros1_turtle_peer.py"
 GENSRV = Path("/usr/lib/genpy/gensrv_py.py")
 GENMSG = Path("/usr/lib/genpy/genmsg_py.py")
 

@@ -1,15 +1,15 @@
 """Public ROS 2 tf2 programs (ros2/geometry2 ``examples_tf2_py``, ros/geometry_tutorials
 ``turtle_tf2_py``; copies in ``tests/compat/programs/``, see its README) run on
 ``tfbus.compat`` with only their import lines changed, under the real rclpy (the ROS 2
-venv, ``scripts/install_ros2_env.sh``), as ``ros2 run`` runs them (their ``main()``).
+venv, ``scripts/install/install_ros2_env.sh``), as ``ros2 run`` runs them (their ``main()``).
 
 Their output is compared numerically with Debian's ``tf2_py`` (tf2's C++ ``BufferCore``,
-``tests/compat/debian_tf2_py_side.py``) fed the same stream: what a real rclpy subscriber
-(``tests/peers/ros2/tf_peer.py --echo``) received from them, or what they received. There
+``peers/debian/debian_tf2_py_side.py``) fed the same stream: what a real rclpy subscriber
+(``peers/ros2/tf_peer.py --echo``) received from them, or what they received. There
 is no ROS 2 ``tf2_ros`` wheel to run them unmodified. The waiters wait on transforms a
-real rclpy publisher (``tests/peers/ros2/gated_tf_feeder.py``) starts sending only after
+real rclpy publisher (``peers/ros2/gated_tf_feeder.py``) starts sending only after
 they logged that they wait. Each program must end on SIGINT with status 0, no traceback.
-Fast DDS is kept on 127.0.0.1 (``tests/peers/ros2/fastdds_lo.xml``), on a random domain."""
+Fast DDS is kept on 127.0.0.1 (``peers/ros2/fastdds_lo.xml``), on a random domain."""
 
 from __future__ import annotations
 
@@ -34,9 +34,9 @@ from ros1_harness import Proc, ros1_fixture  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
 PROGRAMS = ROOT / "tests" / "compat" / "programs"
-PEERS = ROOT / "tests" / "peers" / "ros2"
+PEERS = ROOT / "peers" / "ros2"
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
-DEBIAN_SIDE = ROOT / "tests" / "compat" / "debian_tf2_py_side.py"
+DEBIAN_SIDE = ROOT / "peers" / "debian" / "debian_tf2_py_side.py"
 WAIT = 60.0  # bound on any one wait, for a loaded machine
 
 # as ``ros2 run`` runs a console script: the module's main()

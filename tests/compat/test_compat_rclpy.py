@@ -1,7 +1,7 @@
 """``tfbus.compat.tf2_ros`` with the real rclpy (ROS 2 wheels in ``.venv-ros2``, built by
-``scripts/install_ros2_env.sh``): ``TransformListener(buffer, node)`` fills the buffer
+``scripts/install/install_ros2_env.sh``): ``TransformListener(buffer, node)`` fills the buffer
 from an rclpy node's ``/tf`` and ``/tf_static``, sent by the compat broadcasters on
-another node. Runs in a subprocess (``tests/peers/ros2/compat_rclpy_peer.py``) on a
+another node. Runs in a subprocess (``peers/ros2/compat_rclpy_peer.py``) on a
 random ``ROS_DOMAIN_ID``, Fast DDS restricted to 127.0.0.1 by a profile written here."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from peer_install import peer_unavailable, require
 
 ROOT = Path(__file__).resolve().parents[2]
 ROS_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
-PEER = ROOT / "tests" / "peers" / "ros2" / "compat_rclpy_peer.py"
+PEER = ROOT / "peers" / "ros2" / "compat_rclpy_peer.py"
 
 FASTDDS_LOOPBACK = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com">

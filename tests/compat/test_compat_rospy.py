@@ -20,7 +20,7 @@ from pathlib import Path
 from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
-PROBE = ROOT / "tests" / "compat" / "rospy_probe.py"
+PROBE = ROOT / "peers" / "ros1" / "rospy_probe.py"
 
 DEBIAN_LISTENER = """
 import rospy, tf2_ros

@@ -1,5 +1,5 @@
 """``tfbus.compat.tf2_py.BufferCore`` against Debian's real ``tf2_py.BufferCore`` 0.7.6
-(side process under ``/usr/bin/python3``, ``tests/peers/tf2_py_side.py``): the same
+(side process under ``/usr/bin/python3``, ``peers/debian/tf2_py_side.py``): the same
 method names, and on random trees the same answers for every query method, called with
 rospy-, rclpy- and builtin_interfaces-shaped times."""
 

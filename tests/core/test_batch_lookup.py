@@ -44,7 +44,7 @@ from tfbus.core.batch import TransformArray, as_times
 def _batch_simd(on: bool) -> bool:
     """Turn the compiled batch's SIMD paths and vector sine on or off; whether the vector
     sine is now in use. The pure-Python core (this file also runs against it, see
-    ``tests/test_pycore.py``) has neither: its rows are always the single walk's."""
+    ``tests/core/test_pycore.py``) has neither: its rows are always the single walk's."""
     return bool(IMPLEMENTATIONS[3]._batch_simd(on)) if COMPILED else False
 
 

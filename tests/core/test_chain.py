@@ -1,6 +1,6 @@
 """``tfbus.compat.tf2_py.chain``: the frame path of a time-travel lookup, exactly as Debian's real
 tf2_py 0.7.6 ``BufferCore._chain`` returns it (run in a side process under
-``/usr/bin/python3``, ``tests/peers/tf2_py_side.py``), on fixed cases and random trees."""
+``/usr/bin/python3``, ``peers/debian/tf2_py_side.py``), on fixed cases and random trees."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Velocity lookups (``BufferCore.lookup_velocity``, ``lookup_velocity_full``,
 ``Buffer.lookup_velocity_async``): tf2's numbers, checked against Debian's C++ libtf
-``tf::Transformer::lookupTwist`` (``tests/peers/cpp/tf_velocity_ref.cpp``, built here with g++
+``tf::Transformer::lookupTwist`` (``peers/debian/tf_velocity_ref.cpp``, built here with g++
 against libtf-dev) on random moving 3-D trees; the documented non-physical example;
 ``method="origin"`` against finite differences of lookups; bad input."""
 
@@ -216,7 +216,7 @@ def _build_reference(tmp: Path) -> Path:
     flags = subprocess.run(["pkg-config", "--cflags", "--libs", "tf"], capture_output=True,
                            text=True, check=True)
     exe = tmp / "tf_velocity_ref"
-    source = HERE / "peers" / "cpp" / "tf_velocity_ref.cpp"
+    source = HERE.parent / "peers" / "debian" / "tf_velocity_ref.cpp"
     subprocess.run(["g++", "-O1", "-o", str(exe), str(source),
                     *flags.stdout.split()], check=True, timeout=300)
     return exe

@@ -33,7 +33,7 @@ from fleet_procs import Proc
 
 SUBNET = "10.77.0"
 HOSTS = {"router": 1, "robot1": 2, "robot2": 3, "viewer": 4}
-VIEWER_SIDE = Path(__file__).resolve().parent / "fleet_viewer_side.py"
+VIEWER_SIDE = Path(__file__).resolve().parents[2] / "peers" / "zenoh" / "fleet_viewer_side.py"
 
 
 def ip(*args: str) -> subprocess.CompletedProcess[str]:

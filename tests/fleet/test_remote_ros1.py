@@ -225,7 +225,7 @@ def test_serve_buffer_command_answers_debians_buffer_client(master: Master) -> N
 
 
 # ------------------------------------------------------------------ hostile local peers
-# A FakeMaster (scripts/ros1_hostile.py) on 127.0.0.1 instead of a roscore: each test runs
+# A FakeMaster (peers/ros1/ros1_hostile.py) on 127.0.0.1 instead of a roscore: each test runs
 # without ROS installed, on asyncio and on trio. In each, the node under attack keeps
 # answering a good client and leaves its context cleanly (an error escaping into the
 # node's task group would be raised there).

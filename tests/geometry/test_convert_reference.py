@@ -1,6 +1,6 @@
 """Registered transforms against Debian's ROS 1 Python references (run under
-``/usr/bin/python3`` in a side process, ``tests/peers/tf2_msgs_side.py``; installed by
-``scripts/install_tf2_msgs_py.sh``): ``do_transform_wrench`` (tf2_geometry_msgs) and
+``/usr/bin/python3`` in a side process, ``peers/debian/tf2_msgs_side.py``; installed by
+``scripts/install/install_tf2_msgs_py.sh``): ``do_transform_wrench`` (tf2_geometry_msgs) and
 ``do_transform_cloud`` (tf2_sensor_msgs) on random inputs; the lever-arm wrench form,
 ``Stamped`` values and bad clouds on known numbers."""
 
@@ -36,8 +36,8 @@ from tfbus.convert import do_transform_cloud, do_transform_stamped, do_transform
 from tfbus.sensor_msgs import PointCloud2, PointField, read_points
 
 ROOT = Path(__file__).resolve().parents[2]
-SIDE = ROOT / "tests" / "peers" / "tf2_msgs_side.py"
-INSTALL = ROOT / "scripts" / "install_tf2_msgs_py.sh"
+SIDE = ROOT / "peers" / "debian" / "tf2_msgs_side.py"
+INSTALL = ROOT / "scripts" / "install" / "install_tf2_msgs_py.sh"
 
 
 @pytest.fixture(scope="module", name="reference")

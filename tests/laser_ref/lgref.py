@@ -1,11 +1,12 @@
 """The laser_geometry differential test's plumbing, shared by ``tests/sensors/test_laser.py`` and
-``scripts/regen_laser_ref.py``.
+``scripts/data/regen_laser_ref.py``.
 
 * The cases: every LaserScan of the real recordings in ``tests/data/laser/`` (with all
   their ``/tf``), and hand-made edge cases (NaN / inf ranges, empty scans, negative
   increments, cutoffs, channel options, a single beam, the fixed-frame overload).
-* The reference: ``harness.cpp`` (ROS 1 laser_geometry + tf2::BufferCore, compiled with
-  g++ and pkg-config) reading the cases as text and printing each cloud's bytes.
+* The reference: ``peers/debian/laser_geometry_ref.cpp`` (ROS 1 laser_geometry +
+  tf2::BufferCore, compiled with g++ and pkg-config) reading the cases as text and printing
+  each cloud's bytes.
 * The record: per case the cloud's layout and a SHA-256 of its bytes (or tf2's error),
   gzip-compressed JSON lines in ``expected.jsonl.gz``. The float32 clouds must be equal
   to the byte for the test to pass, which is stricter than the 1e-9 m asked for.
@@ -288,7 +289,8 @@ def harness_input(suite: Suite) -> str:
 
 
 def build_harness(out: Path) -> str | None:
-    """Compile harness.cpp into ``out``; returns None, or why it cannot be built."""
+    """Compile ``peers/debian/laser_geometry_ref.cpp`` into ``out``; returns None, or why it
+    cannot be built."""
     if shutil.which("g++") is None or shutil.which("pkg-config") is None:
         return "g++ or pkg-config is missing"
     flags = subprocess.run(
@@ -300,7 +302,8 @@ def build_harness(out: Path) -> str | None:
     if flags.returncode != 0:
         return "pkg-config does not know laser_geometry (liblaser-geometry-dev missing)"
     res = subprocess.run(
-        ["g++", "-O2", "-o", str(out), str(HERE / "harness.cpp"), *flags.stdout.split()],
+        ["g++", "-O2", "-o", str(out), str(ROOT / "peers" / "debian" / "laser_geometry_ref.cpp"),
+         *flags.stdout.split()],
         capture_output=True,
         text=True,
         check=False,

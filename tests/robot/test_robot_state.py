@@ -1,11 +1,11 @@
 """Tests for tfbus/robot/state_publisher.py and tfbus/robot/urdf.py.
 
 The reference is ROS 1's robot_state_publisher 1.15.2 (Debian): ``tests/data/rsp/*.json.gz``
-were recorded from the real node by ``scripts/record_robot_state.py`` (layout: ``urdf``,
+were recorded from the real node by ``scripts/data/record_robot_state.py`` (layout: ``urdf``,
 ``static`` {stamp_ns, transforms}, ``cases`` [{label, stamp_ns, name, position, tf}],
 each transform ``[stamp_ns, parent, child, [x, y, z], [qx, qy, qz, qw]]``, ``tf`` null when
 the node published nothing). ``test_live_against_the_real_node`` records afresh when ROS 1
-is installed (installing it with scripts/install_ros1_rsp.sh if needed).
+is installed (installing it with scripts/install/install_ros1_rsp.sh if needed).
 """
 
 from __future__ import annotations
@@ -469,7 +469,8 @@ def test_sinusoidal_joint_state_values() -> None:
 
 @pytest.fixture(scope="session")
 def ros1_rsp() -> None:
-    """ROS 1's robot_state_publisher, installed by scripts/install_ros1_rsp.sh if missing."""
+    """ROS 1's robot_state_publisher, installed by scripts/install/install_ros1_rsp.sh if
+    missing."""
     require("ros1-robot-state-publisher", "install_ros1_rsp.sh", timeout=2400)
 
 
@@ -477,7 +478,7 @@ def test_live_against_the_real_node(ros1_rsp: None, tmp_path: Path) -> None:
     urdfs = [URDF / "tb3_burger.urdf", DATA / "extra_joints.urdf"]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "VIRTUAL_ENV"))}
     done = subprocess.run(
-        ["/usr/bin/python3", str(ROOT / "scripts" / "record_robot_state.py"), "--out",
+        ["/usr/bin/python3", str(ROOT / "scripts" / "data" / "record_robot_state.py"), "--out",
          str(tmp_path), "--seed", str(os.getpid()), *map(str, urdfs)],
         capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -691,7 +692,8 @@ def test_live_the_real_node_refuses_the_same_malformed_urdfs(ros1_rsp: None) -> 
     texts = {f"{k}: {message}": text for k, (text, _, message) in enumerate(MALFORMED)}
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "VIRTUAL_ENV"))}
     done = subprocess.run(
-        ["/usr/bin/python3", str(ROOT / "scripts" / "record_robot_state.py"), "--refusals"],
+        ["/usr/bin/python3", str(ROOT / "scripts" / "data" / "record_robot_state.py"),
+         "--refusals"],
         input=json.dumps(texts), capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
     verdicts = json.loads(done.stdout)

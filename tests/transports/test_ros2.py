@@ -2,11 +2,11 @@
 against real ROS 2 nodes (rclpy + rmw_fastrtps_cpp from the ros-kilted-* wheels).
 
 The rclpy peers run as subprocesses of the ROS 2 venv built by
-``scripts/install_ros2_env.sh`` (session fixture; the tests skip with its reason only
+``scripts/install/install_ros2_env.sh`` (session fixture; the tests skip with its reason only
 when the wheels cannot be installed). Network rule: every test uses a fresh random
 ``ROS_DOMAIN_ID``; the rclpy side runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``
-plus the loopback Fast DDS profile ``tests/peers/ros2/fastdds_lo.xml``, tfbus with its
-loopback Cyclone configuration (or ``tests/peers/ros2/cyclone_lo.xml``); peers stop on
+plus the loopback Fast DDS profile ``peers/ros2/fastdds_lo.xml``, tfbus with its
+loopback Cyclone configuration (or ``peers/ros2/cyclone_lo.xml``); peers stop on
 SIGTERM. Every wait is on data or output, with
 a bound; none is a fixed sleep.
 """
@@ -76,10 +76,10 @@ from tfbus.transports.ros2.dds import (
 from tfbus.transports.spec import open_transport
 
 ROOT = Path(__file__).resolve().parents[2]
-PEERS = ROOT / "tests" / "peers" / "ros2"
+PEERS = ROOT / "peers" / "ros2"
 PEER = PEERS / "tf_peer.py"
 ROS_VENV_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
-INSTALL = ROOT / "scripts" / "install_ros2_env.sh"
+INSTALL = ROOT / "scripts" / "install" / "install_ros2_env.sh"
 WAIT = 30.0  # bound of every wait on a peer (Fast DDS -> Cyclone takes 3-4 s to match)
 
 _rng = random.SystemRandom()
@@ -361,7 +361,7 @@ RAW_WRITER = PEERS / "raw_writer.py"
 
 
 class RawWriter:
-    """A raw DDS writer on rt/tf in its own process (tests/peers/ros2/raw_writer.py): a
+    """A raw DDS writer on rt/tf in its own process (peers/ros2/raw_writer.py): a
     writer and a listening reader in one process can deadlock inside Cyclone."""
 
     def __init__(self, domain_id: int, *topic: str) -> None:
@@ -450,7 +450,7 @@ async def test_malformed_samples_are_counted_and_dropped(anyio_backend: str) -> 
 
 @pytest.fixture(scope="session")
 def ros2_python() -> Path:
-    """The ROS 2 venv's python, installed by scripts/install_ros2_env.sh when missing."""
+    """The ROS 2 venv's python, installed by scripts/install/install_ros2_env.sh when missing."""
     if sys.platform != "linux":
         peer_unavailable("ros2-env", "the ROS 2 wheels of the recipe are manylinux only")
     require("ros2-env", INSTALL.name, timeout=1200)
@@ -463,7 +463,7 @@ class Peer:
 
     def __init__(self, python: Path, script: Path, args: list[str], domain: int) -> None:
         # Without its profile Fast DDS would fall back to every interface: never run so.
-        assert (PEERS / "fastdds_lo.xml").is_file(), "tests/peers/ros2/fastdds_lo.xml missing"
+        assert (PEERS / "fastdds_lo.xml").is_file(), "peers/ros2/fastdds_lo.xml missing"
         env = dict(
             os.environ,
             ROS_DOMAIN_ID=str(domain),

@@ -57,7 +57,7 @@ from tfbus.transports.zenoh.keys import topic_key as _topic_key  # noqa: E402
 HEAD = bytes([wire.MAGIC, wire.WIRE_VERSION])
 BLOCK = zenoh.CongestionControl.BLOCK
 ROOT = Path(__file__).resolve().parents[2]
-PEERS_DIR = ROOT / "tests" / "peers" / "zenoh"
+PEERS_DIR = ROOT / "peers" / "zenoh"
 
 
 def free_port() -> int:

@@ -193,7 +193,7 @@ def test_another_origins_page_in_chromium_cannot_open_the_views_websocket(
     error, never a message), and counts it."""
     exe = shutil.which("chromium")
     if exe is None:
-        pytest.skip("Debian chromium not installed (scripts/install_chromium.sh)")
+        pytest.skip("Debian chromium not installed (scripts/install/install_chromium.sh)")
     url, results = attacker
     text = ""
     for _ in range(3):  # a loaded machine can end the virtual-time budget too early
@@ -327,7 +327,7 @@ def test_another_origins_page_in_chromium_cannot_open_the_foxglove_sdks_port() -
     pytest.importorskip("foxglove")
     exe = shutil.which("chromium")
     if exe is None:
-        pytest.skip("Debian chromium not installed (scripts/install_chromium.sh)")
+        pytest.skip("Debian chromium not installed (scripts/install/install_chromium.sh)")
     from tfbus.view.foxglove_bridge import FoxgloveBridge
 
     bridge = FoxgloveBridge("127.0.0.1", 0)

@@ -16,7 +16,7 @@ peer may legally send them. cyclonedds-python's own (de)serializer walks the typ
 Python; this codec is about 9x faster (decode ~2 µs vs ~17 µs per transform,
 ``benchmarks/bench_ros2.py`` prints both). It is checked byte for byte against
 cyclonedds' serializer in ``tests/transports/test_ros2.py`` and against rosbags' generic
-deserializer in ``tests/codecs/test_cdr.py``.
+deserializer in ``tests/codecs/test_codec_cdr.py``.
 
 **Stamps.** ``builtin_interfaces/Time.sec`` is an int32: a stamp at or after
 2038-01-19T03:14:08Z (``sec`` = 2**31) cannot be sent to ROS 2 and is refused with

@@ -11,7 +11,7 @@
 Semantics are ROS 1's ``robot_state_publisher`` 1.15 (``src/robot_state_publisher.cpp``,
 ``src/joint_state_listener.cpp``) with the link tree built as ``kdl_parser`` builds it,
 checked transform for transform against recordings of the real node
-(``tests/data/rsp/``, ``scripts/record_robot_state.py``):
+(``tests/data/rsp/``, ``scripts/data/record_robot_state.py``):
 
 * a **fixed** joint is a static transform: its origin (``xyz``, then ``rpy`` = rotations
   about the fixed x, y, z axes, REP 103 / URDF); a **planar** joint too (kdl_parser makes
