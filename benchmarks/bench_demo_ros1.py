@@ -2,7 +2,7 @@
 
 The ROS tutorial "Setting up your robot using tf" has two C++ nodes: a 100 Hz
 ``robot_tf_publisher`` (base_link -> base_laser) and a 1 Hz ``robot_tf_listener``
-(``tests/peers/ros1/tf_broadcaster.cpp`` and ``tf_listener.cpp``, built here against
+(``peers/ros1/tf_broadcaster.cpp`` and ``tf_listener.cpp``, built here against
 Debian's roscpp and tf). tfbus runs the same two nodes as ``tfbus demo broadcaster`` and
 ``tfbus demo listener`` on ``--bus ros1:`` (one process each, as the tutorial's two
 terminals). Both pairs run on one roscore on 127.0.0.1, in alternating rounds; each round
@@ -12,7 +12,7 @@ pair use over a window that starts once the listener prints its first tutorial l
 
 Prints each round, then per side the min/median/max CPU as a percentage of one core, the
 ratio tfbus / C++ (target <= 1.5x) and the 1-minute load average. Figures only; nothing
-is asserted. Needs Debian's ROS 1 (``scripts/install_ros1.sh``) and g++.
+is asserted. Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++.
 
     .venv/bin/python benchmarks/bench_demo_ros1.py            # 3 rounds of 20 s
     .venv/bin/python benchmarks/bench_demo_ros1.py --quick    # 3 rounds of 8 s
@@ -32,7 +32,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "scripts"))  # the ROS 1 peers: one home, shared with the tests
+sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers: one home, shared with the tests
 
 from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> None:
         return
     with tempfile.TemporaryDirectory(prefix="tfbus-bench-demo-") as tmp:
         out = Path(tmp) / "bin"
-        subprocess.run(["bash", str(ROOT / "tests" / "peers" / "ros1" / "build.sh"), str(out)],
+        subprocess.run(["bash", str(ROOT / "peers" / "ros1" / "build.sh"), str(out)],
                        check=True, capture_output=True, timeout=600)  # fmt: skip
         master = start_master(Path(tmp) / "home")
         try:
