@@ -11,10 +11,11 @@ Paths measured, each with Zenoh's default batching and with ``express`` publishe
 
 * ``raw``: zenoh-python ``Publisher.put`` of 8 bytes -> subscriber callback (on Zenoh's
   thread): the floor any Python program on Zenoh pays;
-* ``raw+loop``: the same callback handing the sample to an asyncio loop
-  (``loop.call_soon_threadsafe`` into an ``asyncio.Queue``) and the latency taken when the
-  task awaiting ``queue.get()`` resumes: the thread hop and task wake-up any awaiting
-  Python program on Zenoh pays;
+* ``raw+loop``: the same callback handing the sample to the event loop of ``--backend``
+  (asyncio: ``loop.call_soon_threadsafe`` into an ``asyncio.Queue``; trio:
+  ``TrioToken.run_sync_soon`` into a memory channel) and the latency taken when the task
+  awaiting it resumes: the thread hop and task wake-up any awaiting Python program on
+  Zenoh pays;
 * ``bus``: ``TransformBroadcaster.send_transform`` on a ``Bus(ZenohTransport)`` ->
   a lookup awaiting that stamp (``Buffer.wait_for_transform``) on the receiver's bus.
 
@@ -46,8 +47,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import itertools
 import json
+import math
 import os
 import socket
 import statistics
@@ -250,8 +253,45 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
                 child.kill()
                 child.wait(timeout=10)
 
+    async def run_trio() -> None:
+        import trio
+
+        token = trio.lowlevel.current_trio_token()
+        send, receive = trio.open_memory_channel[tuple[int, int]](math.inf)
+
+        def callback(sample: zenoh.Sample) -> None:
+            item = PROBE.unpack(sample.payload.to_bytes())
+            with contextlib.suppress(trio.RunFinishedError):
+                token.run_sync_soon(send.send_nowait, item)
+
+        def empty() -> bool:
+            return receive.statistics().current_buffer_used == 0
+
+        cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
+        with zenoh.open(cfg) as session:
+            session.declare_subscriber(RAW_KEY, callback)
+            child = _child(args, "raw", endpoint)
+            try:
+                with trio.move_on_after(60 + 2 * args.seconds * len(args.rate_list)):
+                    while count[0] < total:
+                        if child.poll() is not None and empty():
+                            await trio.sleep(0.5)  # the last samples in flight
+                            if empty():
+                                break
+                        with trio.move_on_after(1.0):
+                            rate, sent = await receive.receive()
+                            record(rate, sent, time.monotonic_ns())  # the task resumed
+            finally:
+                child.kill()
+                child.wait(timeout=10)
+
     if loop_hop:
-        asyncio.run(run_loop())
+        if args.backend == "trio":
+            import trio
+
+            trio.run(run_trio)
+        else:
+            asyncio.run(run_loop())
         return lat
 
     def callback(sample: zenoh.Sample) -> None:
