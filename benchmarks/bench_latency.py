@@ -434,6 +434,7 @@ def main() -> None:
                         help="a Zenoh config value for every path's both processes (repeatable)")
     args = parser.parse_args()
     args.rate_list = [float(r) for r in args.rates.split(",")]
+    _overrides(args)  # a malformed --zenoh-config ends the run before anything starts
     if args.role == "sender":
         if args.path == "raw":
             raw_sender(args)
