@@ -11,19 +11,26 @@ Paths measured, each with Zenoh's default batching and with ``express`` publishe
 
 * ``raw``: zenoh-python ``Publisher.put`` of 8 bytes -> subscriber callback (on Zenoh's
   thread): the floor any Python program on Zenoh pays;
-* ``raw+loop``: the same callback handing the sample to an asyncio loop
-  (``loop.call_soon_threadsafe`` into an ``asyncio.Queue``) and the latency taken when the
-  task awaiting ``queue.get()`` resumes: the thread hop and task wake-up any awaiting
-  Python program on Zenoh pays;
+* ``raw+loop``: the same callback handing the sample to the event loop of ``--backend``
+  (asyncio: ``loop.call_soon_threadsafe`` into an ``asyncio.Queue``; trio:
+  ``TrioToken.run_sync_soon`` into a memory channel) and the latency taken when the task
+  awaiting it resumes: the thread hop and task wake-up any awaiting Python program on
+  Zenoh pays;
 * ``bus``: ``TransformBroadcaster.send_transform`` on a ``Bus(ZenohTransport)`` ->
   a lookup awaiting that stamp (``Buffer.wait_for_transform``) on the receiver's bus.
 
 Usage: ``python benchmarks/bench_latency.py [--seconds 2] [--rates 10,50,100,1000]
-[--paths raw,raw+loop,bus] [--backend asyncio] [--rounds 1] [--breakdown]``. Prints a table
+[--paths raw,raw+loop,bus] [--backend asyncio] [--rounds 1] [--breakdown]
+[--zenoh-config PATH=JSON ...]``. Prints a table
 of medians and p90 per rate and path (microseconds) and the ratio of ``bus`` to
 ``raw+loop`` and to ``raw``, and the load average at the start and the end. On a shared,
 loaded machine the paths, measured one after the other, see different spells of load:
 ``--rounds N`` runs the whole sequence N times and pools each path's probes.
+
+``--zenoh-config PATH=JSON`` (repeatable) sets a Zenoh configuration value in both
+processes of every path, raw and bus alike (the same configuration), e.g.
+``--zenoh-config transport/link/tx/queue/batching/enabled=false``; the values are
+printed in the header.
 
 ``--breakdown`` also times the stages of the ``bus`` path, per probe (medians per rate,
 microseconds): on the sender, the stamp to ``send_nowait``, the encode and the ``put``; on
@@ -40,7 +47,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import itertools
+import json
+import math
 import os
 import socket
 import statistics
@@ -93,8 +103,22 @@ def _pace(rates: list[float], seconds: float) -> list[tuple[int, float]]:
 # -- sender (child process) -------------------------------------------------------------
 
 
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``--zenoh-config PATH=JSON`` values, as a mapping for ``zenoh_config``."""
+    out: dict[str, Any] = {}
+    for item in args.zenoh_config:
+        path, sep, value = item.partition("=")
+        if not sep or not path:
+            raise SystemExit(f"--zenoh-config wants PATH=JSON, got {item!r}")
+        try:
+            out[path] = json.loads(value)
+        except ValueError:
+            raise SystemExit(f"--zenoh-config {path}: not a JSON value: {value!r}") from None
+    return out
+
+
 def raw_sender(args: argparse.Namespace) -> None:
-    cfg, _ = zenoh_config(connect=args.endpoint)
+    cfg, _ = zenoh_config(connect=args.endpoint, config=_overrides(args))
     with zenoh.open(cfg) as session:
         publisher = session.declare_publisher(RAW_KEY, express=args.express)
         deadline = time.monotonic() + 30
@@ -113,7 +137,8 @@ def raw_sender(args: argparse.Namespace) -> None:
 
 
 async def bus_sender(args: argparse.Namespace) -> None:
-    transport = ZenohTransport(connect=args.endpoint, name="latency-sender", express=args.express)
+    transport = ZenohTransport(connect=args.endpoint, name="latency-sender", express=args.express,
+                               config=_overrides(args))
     async with Bus(transport=transport) as bus:
         with anyio.fail_after(30):
             while not transport.alive():
@@ -176,6 +201,8 @@ def _child(args: argparse.Namespace, path: str, endpoint: str) -> subprocess.Pop
            "--seconds", str(args.seconds), "--rates", args.rates, "--backend", args.backend]
     if args.express:
         cmd.append("--express")
+    for item in args.zenoh_config:
+        cmd += ["--zenoh-config", item]
     if args.breakdown and path == "bus":
         cmd.append("--breakdown")
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
@@ -205,7 +232,7 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
         def callback(sample: zenoh.Sample) -> None:
             loop.call_soon_threadsafe(queue.put_nowait, PROBE.unpack(sample.payload.to_bytes()))
 
-        cfg, _ = zenoh_config(listen=endpoint)
+        cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
         with zenoh.open(cfg) as session:
             session.declare_subscriber(RAW_KEY, callback)
             child = _child(args, "raw", endpoint)
@@ -226,15 +253,52 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
                 child.kill()
                 child.wait(timeout=10)
 
+    async def run_trio() -> None:
+        import trio
+
+        token = trio.lowlevel.current_trio_token()
+        send, receive = trio.open_memory_channel[tuple[int, int]](math.inf)
+
+        def callback(sample: zenoh.Sample) -> None:
+            item = PROBE.unpack(sample.payload.to_bytes())
+            with contextlib.suppress(trio.RunFinishedError):
+                token.run_sync_soon(send.send_nowait, item)
+
+        def empty() -> bool:
+            return receive.statistics().current_buffer_used == 0
+
+        cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
+        with zenoh.open(cfg) as session:
+            session.declare_subscriber(RAW_KEY, callback)
+            child = _child(args, "raw", endpoint)
+            try:
+                with trio.move_on_after(60 + 2 * args.seconds * len(args.rate_list)):
+                    while count[0] < total:
+                        if child.poll() is not None and empty():
+                            await trio.sleep(0.5)  # the last samples in flight
+                            if empty():
+                                break
+                        with trio.move_on_after(1.0):
+                            rate, sent = await receive.receive()
+                            record(rate, sent, time.monotonic_ns())  # the task resumed
+            finally:
+                child.kill()
+                child.wait(timeout=10)
+
     if loop_hop:
-        asyncio.run(run_loop())
+        if args.backend == "trio":
+            import trio
+
+            trio.run(run_trio)
+        else:
+            asyncio.run(run_loop())
         return lat
 
     def callback(sample: zenoh.Sample) -> None:
         rate, sent = PROBE.unpack(sample.payload.to_bytes())
         record(rate, sent, time.monotonic_ns())
 
-    cfg, _ = zenoh_config(listen=endpoint)
+    cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
     with zenoh.open(cfg) as session:
         session.declare_subscriber(RAW_KEY, callback)
         child = _child(args, "raw", endpoint)
@@ -303,7 +367,8 @@ def _instrument(transport: ZenohTransport, buffer: Buffer) -> dict[int, list[int
 
 async def bus_receiver(args: argparse.Namespace, endpoint: str) -> dict[int, list[float]]:
     lat: dict[int, list[float]] = {}
-    transport = ZenohTransport(listen=endpoint, name="latency-receiver", express=args.express)
+    transport = ZenohTransport(listen=endpoint, name="latency-receiver", express=args.express,
+                               config=_overrides(args))
     buffer = Buffer(cache_time=3600.0)
     stamps = _instrument(transport, buffer) if args.breakdown else {}
     stages: dict[int, list[list[float]]] = {}
@@ -365,8 +430,11 @@ def main() -> None:
                         help="run every path this many times, alternately; pool the probes")
     parser.add_argument("--backend", default="asyncio")
     parser.add_argument("--breakdown", action="store_true", help="time the bus path's stages")
+    parser.add_argument("--zenoh-config", action="append", default=[], metavar="PATH=JSON",
+                        help="a Zenoh config value for every path's both processes (repeatable)")
     args = parser.parse_args()
     args.rate_list = [float(r) for r in args.rates.split(",")]
+    _overrides(args)  # a malformed --zenoh-config ends the run before anything starts
     if args.role == "sender":
         if args.path == "raw":
             raw_sender(args)
@@ -377,6 +445,8 @@ def main() -> None:
     modes = args.modes.split(",")
     print(f"bench_latency: one-way latency, 2 processes on 127.0.0.1, backend={args.backend}, "
           f"{args.seconds:g} s per rate (20..2000 probes) x {args.rounds} round(s), microseconds")
+    if args.zenoh_config:
+        print("zenoh config, every path: " + " ".join(args.zenoh_config))
     print("load average (1, 5, 15 min) at the start: " + _loadavg())
     results: dict[tuple[str, str], dict[int, list[float]]] = {}
     for _ in range(args.rounds):  # paths alternate: each sees the same spells of load

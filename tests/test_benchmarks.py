@@ -62,3 +62,46 @@ def test_a_benchmark_imports_without_tests_or_the_test_extra(
     )
     assert res.returncode == 0, res.stderr[-3000:]
     assert json.loads(res.stdout.strip().splitlines()[-1]) == []
+
+
+def _bench_latency(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_latency.py"), *args],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+
+
+def test_bench_latency_runs_every_path_with_the_zenoh_config_values_given() -> None:
+    res = _bench_latency(
+        "--paths", "raw,raw+loop", "--modes", "batched", "--rates", "50", "--seconds", "0.4",
+        "--zenoh-config", "transport/link/tx/queue/batching/enabled=false",
+        "--zenoh-config", "transport/link/tx/lease=4000",
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    lines = res.stdout.splitlines()
+    assert (
+        "zenoh config, every path: transport/link/tx/queue/batching/enabled=false"
+        " transport/link/tx/lease=4000"
+    ) in lines
+    rows = [line.split() for line in lines if line.startswith("batched")]
+    assert len(rows) == 1 and rows[0][:2] == ["batched", "50"]
+    assert "-" not in rows[0]  # both paths received probes
+
+
+@pytest.mark.parametrize(
+    ("item", "error"),
+    [
+        ("a/lease", "--zenoh-config wants PATH=JSON, got 'a/lease'"),
+        ("a/lease=4s", "--zenoh-config a/lease: not a JSON value: '4s'"),
+    ],
+)
+def test_bench_latency_refuses_a_zenoh_config_value_that_is_not_path_equals_json(
+    item: str, error: str
+) -> None:
+    res = _bench_latency("--paths", "raw", "--rates", "50", "--seconds", "0.4",
+                         "--zenoh-config", item)
+    assert res.returncode == 1 and error in res.stderr
