@@ -89,4 +89,4 @@ test-matrix: $(DIST_STAMP)
 
 clean:
 	rm -rf $(VENV) .nox .pytest_cache .mypy_cache .ruff_cache build dist site *.egg-info \
-	    tfbus/core/_c*.c tfbus/core/*.so
+	    tfbus/core/_c*.c tfbus/core/*.so tfbus/_c*.c tfbus/*.so

@@ -45,6 +45,10 @@ COMPILED_MODULES = ("_cmath", "_ccache", "_ccore", "_cwire", "_cbatch")
 beside them share declarations and inline math): scalar math, link storage, frame table
 and walk, ROS 1 wire decoding, the batch kernel. All or none: ``tfbus.core._select``
 loads the compiled core only when every one of them is importable."""
+COMPILED_SENSORS = ("_claser",)
+"""Compiled sensor kernels (``tfbus/<name>.pyx``): ``_claser``, laser_geometry's
+projection for :meth:`tfbus.laser.LaserProjection.project_laser`; used with the compiled
+core, the numpy path otherwise."""
 REQUIRE_EXTENSIONS = _flag("TFBUS_REQUIRE_EXTENSIONS")
 
 _FALLBACK = """
@@ -139,6 +143,10 @@ def _extensions() -> list[Extension]:
     exts = [
         Extension(f"tfbus.core.{name}", [f"tfbus/core/{name}.pyx"], extra_compile_args=extra)
         for name in COMPILED_MODULES
+    ]
+    exts += [
+        Extension(f"tfbus.{name}", [f"tfbus/{name}.pyx"], extra_compile_args=extra)
+        for name in COMPILED_SENSORS
     ]
     return list(cythonize(exts, language_level=3))
 

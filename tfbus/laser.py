@@ -32,17 +32,21 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import Literal
+import sys
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from tfbus.buffer import Buffer
-from tfbus.core import BufferCore
+from tfbus.core import COMPILED, BufferCore
 from tfbus.core.kernels import apply_transforms, lerp_rows, slerp_rows
 from tfbus.messages import Header
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
+
+if TYPE_CHECKING:
+    from tfbus._claser import Projector
 
 __all__ = [
     "ChannelOption",
@@ -126,6 +130,38 @@ _INTENSITY, _INDEX, _DISTANCE, _TIMESTAMP, _VIEWPOINT = 0x01, 0x02, 0x04, 0x08, 
 _FIELDS: dict[tuple[str, ...], list[PointField]] = {}  # PointField lists by layout
 
 
+def _compiled_projector() -> type[Projector] | None:
+    """The compiled projection (:mod:`tfbus._claser`) when the compiled core is in use
+    (``tfbus.core.COMPILED``: not under ``TFBUS_PURE_PYTHON``) on a little-endian machine
+    (it writes the cloud's bytes in native order), else None: the numpy path."""
+    if not COMPILED or sys.byteorder != "little":
+        return None
+    try:
+        from tfbus._claser import Projector as compiled
+    except ImportError:  # a build without extensions
+        return None
+    return compiled
+
+
+_PROJECTOR = _compiled_projector()
+
+
+def _layout(opts: int) -> tuple[str, ...]:
+    """The cloud's field names for the channel flags ``opts`` (laser_geometry's order)."""
+    names = ["x", "y", "z"]
+    if opts & _INTENSITY:
+        names.append("intensity")
+    if opts & _INDEX:
+        names.append("index")
+    if opts & _DISTANCE:
+        names.append("distances")
+    if opts & _TIMESTAMP:
+        names.append("stamps")
+    if opts & _VIEWPOINT:
+        names += ["vp_x", "vp_y", "vp_z"]
+    return tuple(names)
+
+
 class LaserProjection:
     """Projects LaserScans to PointCloud2s (laser_geometry ``LaserProjection``).
 
@@ -137,6 +173,7 @@ class LaserProjection:
         self._key: tuple[int, float, float] | None = None  # beams, angle_min, increment
         self._cos = np.zeros(0)
         self._sin = np.zeros(0)
+        self._projector = _PROJECTOR() if _PROJECTOR is not None else None
 
     # ------------------------------------------------------------------ projection
 
@@ -162,17 +199,7 @@ class LaserProjection:
             raise ValueError(
                 f"LaserScan.intensities has {len(scan.intensities)} values for {n} ranges"
             )
-        names = ["x", "y", "z"]
-        if has_intensity:
-            names.append("intensity")
-        if opts & _INDEX:
-            names.append("index")
-        if opts & _DISTANCE:
-            names.append("distances")
-        if opts & _TIMESTAMP:
-            names.append("stamps")
-        if opts & _VIEWPOINT:
-            names += ["vp_x", "vp_y", "vp_z"]
+        names = list(_layout(opts if has_intensity else opts & ~_INTENSITY))
         cos, sin = self._table(scan)
         r64 = ranges.astype(np.float64)
         cutoff = float(scan.range_max) if range_cutoff < 0 else float(range_cutoff)
@@ -202,18 +229,23 @@ class LaserProjection:
 
     @staticmethod
     def _cloud(header: Header, names: list[str], cols: npt.NDArray[np.float32]) -> PointCloud2:
-        key = tuple(names)
-        fields = _FIELDS.get(key)
+        data = cols.astype("<f4", copy=False).tobytes()
+        return LaserProjection._cloud_bytes(header, tuple(names), cols.shape[0], data)
+
+    @staticmethod
+    def _cloud_bytes(
+        header: Header, names: tuple[str, ...], width: int, data: bytes
+    ) -> PointCloud2:
+        fields = _FIELDS.get(names)
         if fields is None:
-            fields = _FIELDS[key] = [
+            fields = _FIELDS[names] = [
                 PointField(name, 4 * k, PointField.INT32 if name == "index" else PointField.FLOAT32)
                 for k, name in enumerate(names)
             ]
         step = 4 * len(names)
-        data = cols.astype("<f4", copy=False).tobytes()
         return PointCloud2(
-            header=header, height=1, width=cols.shape[0], is_bigendian=False,
-            fields=list(fields), point_step=step, row_step=step * cols.shape[0], data=data,
+            header=header, height=1, width=width, is_bigendian=False,
+            fields=list(fields), point_step=step, row_step=step * width, data=data,
             is_dense=False,
         )  # fmt: skip
 
@@ -239,8 +271,26 @@ class LaserProjection:
             ValueError: the scan has intensities, fewer than its ranges (laser_geometry
                 would read out of bounds).
         """
+        opts = int(channel_options)
+        projector = self._projector
+        if projector is not None:  # the same bytes, in one compiled pass
+            cos, sin = self._table(scan)
+            if projector.key is not self._key:
+                projector.set_table(self._key, cos, sin)
+            ranges, intensities = scan.ranges, scan.intensities
+            n = len(ranges)
+            if not (opts & _INTENSITY and len(intensities) > 0):
+                opts &= ~_INTENSITY
+            elif len(intensities) < n:
+                raise ValueError(
+                    f"LaserScan.intensities has {len(intensities)} values for {n} ranges"
+                )
+            cutoff = float(scan.range_max) if range_cutoff < 0 else float(range_cutoff)
+            data, kept = projector.project(ranges, intensities, opts, cutoff,
+                                           scan.range_min, scan.time_increment)  # fmt: skip
+            return self._cloud_bytes(scan.header, _layout(opts), kept, data)
         with np.errstate(all="ignore"):
-            names, _, cols = self._project(scan, range_cutoff, int(channel_options))
+            names, _, cols = self._project(scan, range_cutoff, opts)
         return self._cloud(scan.header, names, cols)
 
     # ------------------------------------------------------------------ transforming
