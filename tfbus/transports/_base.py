@@ -15,7 +15,8 @@ statistics counters and the :class:`PeerAware` protocol.
   offers; the command line asks ``isinstance(transport, PeerAware)``, never a scheme name.
 * :class:`LookupServing` -- a transport that serves and asks transform lookups
   (tf2_ros's ``buffer_server`` / ``BufferClient``) over its own middleware: Zenoh (a
-  queryable), ROS 1 (the ``LookupTransform`` action on the transport's node);
+  queryable), ROS 1 (the ``LookupTransform`` action on the transport's node), ROS 2 (the
+  ``LookupTransform`` action over DDS on the transport's participant);
   :class:`tfbus.remote.BufferServer` and :class:`tfbus.remote.BufferClient` ask
   ``isinstance(transport, LookupServing)``. Counted in :class:`ServerStatistics`.
 * :class:`Backlogged` -- a transport whose middleware threads queue received messages
