@@ -56,9 +56,9 @@ def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending
     buffer of /tf and /tf_static from --bus and serve lookup_transform,
     lookup_transform_full and can_transform to tfbus.remote.BufferClient (Zenoh), or
     tf2_ros's LookupTransform action as /tf2_buffer_server to tf2_ros.BufferClient
-    (ROS 1; ROS 2 over DDS). Every lookup waits at most --max-wait seconds; at most --max-pending wait at
-    once (Zenoh: --max-per-peer of one querier); a lookup whose client cancelled it or
-    left (ROS 1: an actionlib cancel request) ends at once.
+    (ROS 1; ROS 2 over DDS). Every lookup waits at most --max-wait seconds; at most
+    --max-pending wait at once (Zenoh, ROS 2: --max-per-peer of one client); a lookup
+    whose client cancelled it or left (ROS 1: an actionlib cancel request) ends at once.
 
     \b
     Examples:
