@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import random
 import subprocess
 import sys
@@ -357,7 +358,7 @@ async def test_a_client_gone_frees_its_slot(anyio_backend: str) -> None:
     async with Bus(transport=Ros2Transport(domain_id=d)) as a, \
             BufferServer(buf, a) as server:
         proc = subprocess.Popen([sys.executable, "-c", CLIENT, str(d)], stdout=subprocess.PIPE,
-                                text=True, cwd=ROOT)
+                                text=True, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
         try:
             await wait_until(lambda: server.statistics().pending == 1)
             proc.kill()  # gone without a word: its request writer stops being matched
@@ -394,3 +395,35 @@ async def test_bad_goals_are_counted_and_dropped(anyio_backend: str) -> None:
         assert t == buf.lookup_transform("map", "odom", Time(0))
         s = server.statistics()
         assert (s.malformed, s.answered) == (1, 2)
+
+
+@pytest.mark.anyio
+async def test_serve_buffer_command_on_ros2(anyio_backend: str) -> None:
+    """``tfbus serve-buffer --bus ros2:domain=D`` keeps /tf_static from the bus and answers a
+    BufferClient on another ROS 2 participant; one summary line at the end."""
+    d = new_domain()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tfbus.cli", "serve-buffer", "--bus", f"ros2:domain={d}",
+         "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    try:
+        async with Bus(transport=Ros2Transport(domain_id=d)) as bus:
+            from tfbus.broadcaster import StaticTransformBroadcaster
+
+            await StaticTransformBroadcaster(bus).send_transform([ts("map", "odom", 3, 2.5)])
+            client = BufferClient(bus)
+            with anyio.fail_after(WAIT):
+                while True:
+                    try:
+                        t = await client.lookup_transform("map", "odom", Time(0), 1.0)
+                        break
+                    except errors.LookupException:  # /tf_static not heard yet
+                        await anyio.sleep(0.1)
+            assert (t.header.frame_id, t.child_frame_id, t.transform.translation.x) \
+                == ("map", "odom", 2.5)
+    finally:
+        proc.terminate()
+        out, err = await anyio.to_thread.run_sync(lambda: proc.communicate(timeout=WAIT))
+    assert "buffer server on the ROS 2 action /tf2_buffer_server" in err
+    assert "summary:" in out and "1 answered" in out, (out, err)
+    assert proc.returncode == 0
