@@ -427,3 +427,36 @@ async def test_serve_buffer_command_on_ros2(anyio_backend: str) -> None:
     assert "buffer server on the ROS 2 action /tf2_buffer_server" in err
     assert "summary:" in out and "1 answered" in out, (out, err)
     assert proc.returncode == 0
+
+
+@pytest.mark.anyio
+async def test_rclpy_action_client_sees_the_server(anyio_backend: str) -> None:
+    """rclpy's ``ActionClient`` (Fast DDS) finds tfbus's server as the action
+    ``/tf2_buffer_server`` of type ``tf2_msgs/action/LookupTransform``, and
+    ``server_is_ready()``: the names, types and QoS of every endpoint match rcl_action's.
+    Its goal gets no reply (services do not cross DDS vendors: the module doc) and is
+    not misread as a goal."""
+    if sys.platform != "linux":
+        peer_unavailable("ros2-env", "the ROS 2 wheels of the recipe are manylinux only")
+    require("ros2-env", "install_ros2_env.sh", timeout=1200)
+    d = new_domain()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(d), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1",
+               FASTDDS_DEFAULT_PROFILES_FILE=str(ROOT / "tests/peers/ros2/fastdds_lo.xml"))
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    env.pop("CYCLONEDDS_URI", None)
+    async with Bus(transport=Ros2Transport(domain_id=d)) as bus, \
+            BufferServer(filled_buffer(), bus) as server:
+        out = await anyio.to_thread.run_sync(lambda: subprocess.run(
+            [str(ROS_VENV_PYTHON), str(ROOT / "tests/peers/ros2/lookup_action_graph_peer.py"),
+             "/tf2_buffer_server", str(WAIT), "send"], env=env, capture_output=True,
+            text=True, timeout=WAIT + 30, check=True))
+        lines = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+        assert lines[0] == {
+            "ready": True,
+            "actions": [["/tf2_buffer_server", ["tf2_msgs/action/LookupTransform"]]]}
+        assert lines[1:] == [{"sent": True}, {"replied": False}]
+        # its goal has no in-band request header: Cyclone's deserialisation of the
+        # request type refuses it, so it never reaches the server to be misread
+        s = server.statistics()
+        assert (s.requests, s.pending, s.answered, s.errors) == (0, 0, 0, 0)

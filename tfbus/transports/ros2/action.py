@@ -39,7 +39,10 @@ Cyclone server (and the other way round): services do not interoperate across DD
 * :class:`LookupActionClient` is tf2_ros ``BufferClient`` (``buffer_client.py``) with
   :class:`~tfbus.buffer.Buffer`'s awaitable lookups.
 
-A request that does not decode is counted (``malformed``) and dropped; so is a reply.
+A request that does not decode is counted (``malformed``) and dropped; so is a reply. A
+Fast DDS client's request (no request header) does not fit the request type: Cyclone's
+deserialisation drops it before the server sees it (Cyclone logs "deserialization ...
+failed"), so it is never misread as a goal.
 """
 
 from __future__ import annotations
