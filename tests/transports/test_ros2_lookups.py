@@ -440,11 +440,7 @@ async def test_rclpy_action_client_sees_the_server(anyio_backend: str) -> None:
         peer_unavailable("ros2-env", "the ROS 2 wheels of the recipe are manylinux only")
     require("ros2-env", "install_ros2_env.sh", timeout=1200)
     d = new_domain()
-    env = dict(os.environ, ROS_DOMAIN_ID=str(d), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1",
-               FASTDDS_DEFAULT_PROFILES_FILE=str(ROOT / "tests/peers/ros2/fastdds_lo.xml"))
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    env.pop("CYCLONEDDS_URI", None)
+    env = fast_dds_env(d)
     async with Bus(transport=Ros2Transport(domain_id=d)) as bus, \
             BufferServer(filled_buffer(), bus) as server:
         out = await anyio.to_thread.run_sync(lambda: subprocess.run(
@@ -460,3 +456,41 @@ async def test_rclpy_action_client_sees_the_server(anyio_backend: str) -> None:
         # request type refuses it, so it never reaches the server to be misread
         s = server.statistics()
         assert (s.requests, s.pending, s.answered, s.errors) == (0, 0, 0, 0)
+
+
+def fast_dds_env(domain: int) -> dict[str, str]:
+    """An rclpy peer's environment: Fast DDS on loopback only, the test's domain."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1",
+               FASTDDS_DEFAULT_PROFILES_FILE=str(ROOT / "tests/peers/ros2/fastdds_lo.xml"))
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    env.pop("CYCLONEDDS_URI", None)
+    return env
+
+
+@pytest.mark.anyio
+async def test_client_sends_no_goal_to_a_fast_dds_server(anyio_backend: str) -> None:
+    """rclpy's ``ActionServer`` of ``LookupTransform`` on Fast DDS (what a ROS 2
+    ``buffer_server`` on the default rmw is): tfbus's BufferClient finds it, sends it no
+    goal (Fast DDS would misread rmw_cyclonedds' request header) and says why."""
+    if sys.platform != "linux":
+        peer_unavailable("ros2-env", "the ROS 2 wheels of the recipe are manylinux only")
+    require("ros2-env", "install_ros2_env.sh", timeout=1200)
+    d = new_domain()
+    proc = subprocess.Popen(
+        [str(ROS_VENV_PYTHON), str(ROOT / "tests/peers/ros2/lookup_action_server_peer.py"),
+         "/tf2_buffer_server"], env=fast_dds_env(d), stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        first = await anyio.to_thread.run_sync(proc.stdout.readline)
+        assert first.strip() == "READY"
+        async with Bus(transport=Ros2Transport(domain_id=d)) as bus:
+            client = BufferClient(bus)
+            with anyio.fail_after(WAIT), pytest.raises(
+                    errors.TransportError, match=r"served by a Fast DDS node .*no goal was sent"):
+                await client.lookup_transform("map", "odom", Time(0), WAIT - 5.0)
+    finally:
+        proc.terminate()
+        out, _ = await anyio.to_thread.run_sync(lambda: proc.communicate(timeout=WAIT))
+    assert json.loads(out.splitlines()[-1]) == {"goals": 0}

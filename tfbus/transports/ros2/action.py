@@ -26,7 +26,8 @@ That is rmw_cyclonedds_cpp's mapping: ROS 2 nodes on Cyclone DDS are peers. rmw_
 matches the endpoints (its graph sees the server) but carries the request identity out
 of band, which Cyclone DDS cannot write, so its clients never accept a reply from a
 Cyclone server (and the other way round): services do not interoperate across DDS vendors
-(rmw_cyclonedds issue 184).
+(rmw_cyclonedds issue 184). :class:`LookupActionClient` therefore sends no goal to a Fast
+DDS server and says so (TransportError).
 
 * :class:`LookupActionServer` is tf2_ros ``buffer_server`` (``buffer_server.cpp``): every
   goal is accepted (up to ``max_pending``, ``max_per_peer`` per client; more are answered
@@ -157,6 +158,7 @@ _CANCEL_REJECTED: Final = 1
 _CANCEL_UNKNOWN_GOAL: Final = 2
 _CANCEL_TERMINATED: Final = 3
 _ZERO_ID: Final = bytes(16)
+_FAST_DDS_VENDOR: Final = b"\x01\x0f"  # eProsima's RTPS vendor id
 
 _ERRORS: Final[dict[int, type[TransformException]]] = {
     1: errors.LookupException,  # tf2_msgs/TF2Error LOOKUP_ERROR
@@ -707,6 +709,28 @@ class _ClientEndpoints:
         except Exception:
             return False
 
+    def fast_dds_servers(self) -> int:
+        """How many of the ``send_goal`` request readers matched now are Fast DDS's (GUID
+        prefix starting with eProsima's vendor id 01.0f, as Fast DDS makes every GUID
+        prefix): servers whose rmw (rmw_fastrtps_cpp) takes the request identity out of
+        band and so cannot read this client's requests."""
+        writer = self.writers.get("send_goal")
+        if writer is None:
+            return 0
+        try:
+            handles = writer.get_matched_subscriptions()
+        except Exception:  # cyclonedds' list may change under it: none known now
+            return 0
+        count = 0
+        for handle in handles:
+            try:
+                endpoint = writer.get_matched_subscription_data(handle)
+            except Exception:
+                continue
+            if endpoint is not None and endpoint.key.bytes[:2] == _FAST_DDS_VENDOR:
+                count += 1
+        return count
+
     def close(self) -> None:
         self.closed = True
         for entity in (*self.writers.values(), *self.readers.values()):
@@ -879,6 +903,12 @@ class LookupActionClient:
             with anyio.move_on_after(goal.timeout + self._padding):
                 while not endpoints.ready():  # rcl_action's wait_for_server
                     await anyio.sleep(0.05)
+                if endpoints.fast_dds_servers():
+                    raise TransportError(
+                        f"the ROS 2 action {self.name} is served by a Fast DDS node "
+                        "(rmw_fastrtps_cpp): ROS 2 services do not interoperate across DDS "
+                        "vendors, and tfbus speaks rmw_cyclonedds_cpp's; run that node with "
+                        "RMW_IMPLEMENTATION=rmw_cyclonedds_cpp (no goal was sent)")
                 reply = await endpoints.call(
                     "send_goal", lambda rid: encode_send_goal_request(rid, goal))
                 accepted = bool(reply[1])
@@ -914,7 +944,8 @@ class LookupActionClient:
             TimeoutException if no result came within ``timeout + timeout_padding`` wall
             seconds or the goal was refused or cancelled; ValueError for a negative or
             non-finite timeout; WireEncodeError for a time ROS 2 cannot carry;
-            RuntimeError if the transport is not running.
+            RuntimeError if the transport is not running; TransportError (before any
+            goal is sent) if the server matched is a Fast DDS node's.
         """
         return await self._lookup(LookupGoal(
             secrets.token_bytes(16), target_frame, source_frame, time, self._seconds(timeout),
