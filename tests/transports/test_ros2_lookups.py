@@ -51,11 +51,18 @@ ROS_VENV_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 WAIT = 30.0  # bound of every wait on DDS discovery and answers
 
 _rng = random.SystemRandom()
+_used_domains: set[int] = set()
 
 
 def new_domain() -> int:
-    """A random ROS_DOMAIN_ID in 101..232 (tests/transports/test_ros2.py takes 1..100)."""
-    return _rng.randint(101, 232)
+    """A random ROS_DOMAIN_ID in 101..232 not used before in this run
+    (tests/transports/test_ros2.py takes 1..100)."""
+    free = sorted(set(range(101, 233)) - _used_domains)
+    if not free:
+        raise RuntimeError("no free domain id left")
+    d = _rng.choice(free)
+    _used_domains.add(d)
+    return d
 
 
 @pytest.fixture(params=["asyncio", "trio"])
@@ -424,9 +431,9 @@ async def test_serve_buffer_command_on_ros2(anyio_backend: str) -> None:
     finally:
         proc.terminate()
         out, err = await anyio.to_thread.run_sync(lambda: proc.communicate(timeout=WAIT))
-    assert "buffer server on the ROS 2 action /tf2_buffer_server" in err
+    assert "buffer server on the ROS 2 action /tf2_buffer_server" in err, (out, err)
     assert "summary:" in out and "1 answered" in out, (out, err)
-    assert proc.returncode == 0
+    assert proc.returncode == 0, (out, err)
 
 
 @pytest.mark.anyio
@@ -494,3 +501,80 @@ async def test_client_sends_no_goal_to_a_fast_dds_server(anyio_backend: str) -> 
         proc.terminate()
         out, _ = await anyio.to_thread.run_sync(lambda: proc.communicate(timeout=WAIT))
     assert json.loads(out.splitlines()[-1]) == {"goals": 0}
+
+
+@pytest.mark.anyio
+async def test_one_clients_share_is_bounded(anyio_backend: str) -> None:
+    """``max_per_peer``: one client holds at most that many goals; another client's goal
+    is still accepted."""
+    buf = filled_buffer()
+    d = new_domain()
+    async with Bus(transport=Ros2Transport(domain_id=d)) as a, \
+            BufferServer(buf, a, max_per_peer=1) as server, \
+            Bus(transport=Ros2Transport(domain_id=d)) as b, \
+            Bus(transport=Ros2Transport(domain_id=d)) as c:
+        one, other = BufferClient(b), BufferClient(c)
+        with anyio.fail_after(WAIT):
+            await one.lookup_transform("map", "odom", Time(0), 5.0)
+            await other.lookup_transform("map", "odom", Time(0), 5.0)
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(one.can_transform, "map", "late", Time(0), 20.0)
+            await wait_until(lambda: server.statistics().pending == 1)
+            with pytest.raises(errors.TimeoutException, match="accepted status"):
+                await one.lookup_transform("map", "odom", Time(0), 5.0)
+            tg.start_soon(other.can_transform, "map", "late", Time(0), 20.0)
+            await wait_until(lambda: server.statistics().pending == 2)
+            buf.set_transform(ts("map", "late", 12, 1.0), "test")
+        s = server.statistics()
+        assert (s.busy, s.pending, s.answered) == (1, 0, 4)
+
+
+@pytest.mark.anyio
+async def test_cancel_requests_and_status_follow_rcl_action(anyio_backend: str) -> None:
+    """A cancel request with a zero goal id and stamp cancels every goal (return code 0,
+    the goals listed), then an unknown id gets UNKNOWN_GOAL_ID; the status topic lists the
+    goals EXECUTING, then CANCELED; ``get_result`` of a cancelled goal says CANCELED."""
+    from cyclonedds import _clayer
+    from cyclonedds.core import InstanceState, SampleState, ViewState
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    ANY_STATE = SampleState.Any | ViewState.Any | InstanceState.Any
+
+    from tfbus.transports.ros2.action import _client_endpoints
+    from tfbus.transports.ros2.dds import GoalStatusArray_
+
+    buf = filled_buffer()
+    async with server_and_client(buf) as (server, client, b):
+        await client.lookup_transform("map", "odom", Time(0), 5.0)
+        ep = _client_endpoints(b.transport, "/tf2_buffer_server")  # type: ignore[arg-type]
+        participant = b.transport.participant()  # type: ignore[union-attr]
+        status_reader: DataReader[Any] = DataReader(participant, Topic(
+            participant, "rt/tf2_buffer_server/_action/status", GoalStatusArray_))
+        ids = [bytes([k]) * 16 for k in (7, 8)]
+        for goal_id in ids:
+            await ep.call("send_goal", lambda rid, g=goal_id: cdr.encode_send_goal_request(
+                rid, GOAL._replace(goal_id=g, advanced=False, timeout=20.0)))
+        await wait_until(lambda: server.statistics().pending == 2)
+
+        def statuses() -> dict[bytes, int]:
+            out: dict[bytes, int] = {}
+            for data, info in _clayer.ddspy_read(status_reader._ref, ANY_STATE, 16) or []:
+                if info.valid_data:
+                    out = {i.goal_id: st for i, st in cdr.decode_goal_status_array(data)
+                           if i.goal_id in ids}  # not the first lookup's, SUCCEEDED
+            return out
+
+        await wait_until(lambda: statuses() == {ids[0]: 2, ids[1]: 2})
+        reply = await ep.call("cancel_goal", lambda rid: cdr.encode_cancel_goal_request(
+            rid, cdr.GoalInfo(bytes(16), Time(0))))
+        await wait_until(lambda: server.statistics().pending == 0)
+        unknown = await ep.call("cancel_goal", lambda rid: cdr.encode_cancel_goal_request(
+            rid, cdr.GoalInfo(bytes([9]) * 16, Time(0))))
+        result = await ep.call("get_result", lambda rid: cdr.encode_get_result_request(
+            rid, ids[0]))
+        await wait_until(lambda: statuses() == {ids[0]: 5, ids[1]: 5})
+    assert reply[1] == 0 and [g.goal_id for g in reply[2]] == ids  # ERROR_NONE, both
+    assert unknown[1:] == (2, ())  # ERROR_UNKNOWN_GOAL_ID
+    assert result[1].status == 5  # CANCELED
+    assert server.statistics().cancelled == 2

@@ -75,6 +75,7 @@ from tfbus.codecs.lookup_action_cdr import (
     LookupResult,
     RequestId,
     decode_cancel_goal_request,
+    decode_cancel_goal_response,
     decode_get_result_request,
     decode_get_result_response,
     decode_send_goal_request,
@@ -744,11 +745,10 @@ class _ClientEndpoints:
         decoders: dict[str, Callable[[bytes], tuple[Any, ...]]] = {
             "send_goal": decode_send_goal_response,
             "get_result": decode_get_result_response,
+            "cancel_goal": decode_cancel_goal_response,
         }
         for service, reader in list(self.readers.items()):
             for data, _info in _take(reader):
-                if service == "cancel_goal":
-                    continue  # the answer to a cancel is not awaited
                 try:
                     reply = decoders[service](data)
                 except WireDecodeError:
