@@ -367,7 +367,8 @@ async def test_a_client_gone_frees_its_slot(anyio_backend: str) -> None:
         proc = subprocess.Popen([sys.executable, "-c", CLIENT, str(d)], stdout=subprocess.PIPE,
                                 text=True, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
         try:
-            await wait_until(lambda: server.statistics().pending == 1)
+            await wait_until(lambda: server.statistics().answered == 1  # the first lookup,
+                             and server.statistics().pending == 1)  # then the waiting one
             proc.kill()  # gone without a word: its request writer stops being matched
             await anyio.to_thread.run_sync(proc.wait, WAIT)
             await wait_until(lambda: server.statistics().pending == 0)
@@ -378,7 +379,7 @@ async def test_a_client_gone_frees_its_slot(anyio_backend: str) -> None:
             assert proc.stdout is not None
             proc.stdout.close()
         s = server.statistics()
-        assert (s.cancelled, s.answered, s.pending) == (1, 1, 0)
+        assert (s.cancelled, s.answered, s.pending) == (1, 1, 0), s
 
 
 @pytest.mark.anyio
@@ -419,13 +420,8 @@ async def test_serve_buffer_command_on_ros2(anyio_backend: str) -> None:
 
             await StaticTransformBroadcaster(bus).send_transform([ts("map", "odom", 3, 2.5)])
             client = BufferClient(bus)
-            with anyio.fail_after(WAIT):
-                while True:
-                    try:
-                        t = await client.lookup_transform("map", "odom", Time(0), 1.0)
-                        break
-                    except errors.LookupException:  # /tf_static not heard yet
-                        await anyio.sleep(0.1)
+            with anyio.fail_after(WAIT):  # discovery, then the server waits for /tf_static
+                t = await client.lookup_transform("map", "odom", Time(0), WAIT - 5.0)
             assert (t.header.frame_id, t.child_frame_id, t.transform.translation.x) \
                 == ("map", "odom", 2.5)
     finally:
@@ -578,3 +574,19 @@ async def test_cancel_requests_and_status_follow_rcl_action(anyio_backend: str) 
     assert unknown[1:] == (2, ())  # ERROR_UNKNOWN_GOAL_ID
     assert result[1].status == 5  # CANCELED
     assert server.statistics().cancelled == 2
+
+
+@pytest.mark.anyio
+async def test_a_result_ros2_cannot_carry_is_aborted(anyio_backend: str) -> None:
+    """A transform stamped at or after 2**31 s (past ``builtin_interfaces/Time``): the goal
+    ends ABORTED, counted in ``unsendable``; the client raises TimeoutException naming the
+    status (tf2_ros ``BufferClient``: not SUCCEEDED)."""
+    buf = filled_buffer()
+    buf.set_transform(ts("map", "far", 2**31 + 5, 1.0), "test")
+    async with server_and_client(buf) as (server, client, _):
+        await client.lookup_transform("map", "odom", Time(0), 5.0)
+        with anyio.fail_after(WAIT), pytest.raises(errors.TimeoutException,
+                                                   match="SUCCEEDED status: ABORTED"):
+            await client.lookup_transform("map", "far", Time(0), 5.0)
+        s = server.statistics()
+        assert (s.unsendable, s.answered, s.errors, s.pending) == (1, 1, 0, 0)

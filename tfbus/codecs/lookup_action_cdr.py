@@ -37,8 +37,9 @@ copies both into its reply, and a client keeps the replies carrying its own guid
 (``rmw_node.cpp`` ``rmw_send_request`` / ``rmw_take_response_request``). Every service
 sample here is :class:`RequestId` plus the message. (rmw_fastrtps_cpp carries the same
 identity out of band, in the RTPS ``related_sample_identity`` inline QoS; Cyclone DDS
-cannot write that, so services between the two do not interoperate: rmw_cyclonedds
-issue 184.)
+cannot write that, so services between the two do not interoperate:
+rmw_fastrtps_shared_cpp ``__rmw_take_response`` keeps only the replies whose
+``related_sample_identity`` names its client.)
 
 **Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` and nothing else;
 encoding raises :class:`~tfbus.errors.WireEncodeError` for a value the wire cannot carry

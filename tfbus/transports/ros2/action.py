@@ -26,8 +26,9 @@ That is rmw_cyclonedds_cpp's mapping: ROS 2 nodes on Cyclone DDS are peers. rmw_
 matches the endpoints (its graph sees the server) but carries the request identity out
 of band, which Cyclone DDS cannot write, so its clients never accept a reply from a
 Cyclone server (and the other way round): services do not interoperate across DDS vendors
-(rmw_cyclonedds issue 184). :class:`LookupActionClient` therefore sends no goal to a Fast
-DDS server and says so (TransportError).
+(rmw_fastrtps_shared_cpp ``__rmw_take_response`` keeps only the replies whose
+``related_sample_identity`` names its own writer or reader). :class:`LookupActionClient`
+therefore sends no goal to a Fast DDS server and says so (TransportError).
 
 * :class:`LookupActionServer` is tf2_ros ``buffer_server`` (``buffer_server.cpp``): every
   goal is accepted (up to ``max_pending``, ``max_per_peer`` per client; more are answered
@@ -557,10 +558,6 @@ class LookupActionServer:
                     return  # the server ends: dropped unanswered
                 self._stats.cancelled += 1  # tf2_ros BufferServer::cancelCB: canceled
                 result = LookupResult(_CANCELED, _EMPTY, 0, "")
-            elif result.error:
-                self._stats.errors += 1
-            else:
-                self._stats.answered += 1
             self._finish(held, result)
         finally:
             self._held.pop(goal.goal_id, None)
@@ -578,6 +575,12 @@ class LookupActionServer:
             self._stats.unsendable += 1
             _peer_log.log(logging.WARNING, "ros2: %s: result not sendable: %s", self.name, exc)
             result = LookupResult(_ABORTED, _EMPTY, 6, f"result not sendable: {exc}"[:500])
+        else:
+            if result.status == _SUCCEEDED:
+                if result.error:
+                    self._stats.errors += 1
+                else:
+                    self._stats.answered += 1
         held.result = result
         self._done[held.info.goal_id] = (held, _wallclock.monotonic())
         while len(self._done) > self._max_pending:
