@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Build (once) the real ROS 2 peers' venvs used by tests/transports/test_ros2.py and
 # benchmarks/bench_ros2.py, in the repository root, from PyPI's ROS 2 wheels alone:
-#   .venv-ros2/     rclpy + rmw_fastrtps_cpp (ROS 2 Kilted wheels) + tf2_msgs, which PyPI
-#                   does not carry: generated with rosidl from scripts/install/ros2/tf2_msgs/
+#   .venv-ros2/     rclpy + rmw_fastrtps_cpp (ROS 2 Kilted wheels) + tf2_msgs (TFMessage,
+#                   TF2Error, the LookupTransform action), which PyPI does not carry:
+#                   generated with rosidl from scripts/install/ros2/tf2_msgs/
 #   .venv-cyclone/  cyclonedds-python alone (a non-ROS DDS; its wheel bundles libddsc)
 # Idempotent: a venv that already passes the check below is kept (~1 s). Time-bounded
 # (TFBUS_ROS2_INSTALL_TIMEOUT, default 900 s, for the whole build). Its exit status tells the
 # truth: 0 and a last line "ros2-env: ready (PATH)" only when the built venv imports rclpy and
-# serialises a tf2_msgs/TFMessage through its compiled type support; otherwise non-zero and a
+# serialises a tf2_msgs/TFMessage and a LookupTransform goal through its compiled type support; otherwise non-zero and a
 # line "ros2-env: unavailable: REASON" (no python3.11, cmake or g++, no package index, a failed
 # or timed-out build, a package found outside the venv).
 #   usage: scripts/install/install_ros2_env.sh
@@ -36,10 +37,12 @@ PY311="${PY311:-python3.11}"
 
 unavailable() { echo "ros2-env: unavailable: $*"; exit 1; }
 
-check() {  # rclpy imports and a TFMessage goes through the generated, compiled type support
+check() {  # rclpy imports; a TFMessage and a LookupTransform goal go through the generated,
+           # compiled type support
   "$V/bin/python" - >/dev/null 2>&1 <<'PY'
 from geometry_msgs.msg import TransformStamped
 from rclpy.serialization import deserialize_message, serialize_message
+from tf2_msgs.action import LookupTransform
 from tf2_msgs.msg import TFMessage
 
 t = TransformStamped()
@@ -47,6 +50,9 @@ t.header.frame_id, t.child_frame_id = "base_link", "base_laser"
 t.transform.translation.x, t.transform.rotation.w = 0.1, 1.0
 back = deserialize_message(serialize_message(TFMessage(transforms=[t])), TFMessage)
 assert back.transforms[0].child_frame_id == "base_laser" and back.transforms[0].transform.translation.x == 0.1
+goal = LookupTransform.Goal(target_frame="map", source_frame="base_link", advanced=True)
+back = deserialize_message(serialize_message(goal), LookupTransform.Goal)
+assert back.target_frame == "map" and back.advanced
 PY
   [ $? -eq 0 ] && "$CV/bin/python" -c "import cyclonedds.domain" >/dev/null 2>&1
 }
@@ -70,7 +76,8 @@ case "$DISTRO" in
   *) unavailable "ROS_DISTRO must be kilted or jazzy, not '$DISTRO'" ;;
 esac
 for f in "$HERE/tf2_msgs/CMakeLists.txt" "$HERE/tf2_msgs/package.xml" \
-         "$HERE/tf2_msgs/msg/TFMessage.msg" "$HERE/ros2-$DISTRO.lock.txt"; do
+         "$HERE/tf2_msgs/msg/TFMessage.msg" "$HERE/tf2_msgs/msg/TF2Error.msg" \
+         "$HERE/tf2_msgs/action/LookupTransform.action" "$HERE/ros2-$DISTRO.lock.txt"; do
   # A file of the repository: its absence is a broken checkout, not a machine limit.
   [ -f "$f" ] || { echo "ros2-env: error: $f is missing from the repository" >&2; exit 1; }
 done
@@ -116,7 +123,7 @@ grep -l "/opt/python/cp311-cp311" "$V"/share/*/cmake/*.cmake 2>/dev/null | xargs
   -e "s#/opt/python/cp311-cp311/include/python3.11#$PYINC#g" \
   -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NPINC#g"
 
-# 3. Generate and compile tf2_msgs (TFMessage) with rosidl, installed into the venv prefix.
+# 3. Generate and compile tf2_msgs (TFMessage, TF2Error, LookupTransform) with rosidl, installed into the venv prefix.
 # Nothing of a ROS in /usr or /opt may be used (Debian's ament-cmake for ROS 1 sits in
 # /usr/share and would hide an undeclared wheel): those prefixes are ignored, the
 # environment's prefix paths are dropped, and whatever CMake still found outside the venv

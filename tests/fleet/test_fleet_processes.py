@@ -94,7 +94,7 @@ def test_router_robots_monitor_and_served_lookups() -> None:
          "namespace, not a fleet bus (namespace=*)"),
         (("serve-buffer", "--bus", "memory"), 2,
          "tfbus serve-buffer: error: --bus 'memory': the 'memory' transport does not serve "
-         "lookups (Zenoh and ROS 1 do)"),
+         "lookups (Zenoh, ROS 1 and ROS 2 do)"),
         (("monitor", "--bus", "zenoh:mode=router"), 2,
          "tfbus monitor: error: --bus 'zenoh:mode=router': mode must be one of peer, client, "
          "got 'router'"),

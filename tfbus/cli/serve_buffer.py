@@ -4,7 +4,8 @@ Listens to ``/tf`` and ``/tf_static`` on ``--bus`` into one
 :class:`~tfbus.buffer.Buffer` and answers lookups from it
 (:class:`~tfbus.remote.BufferServer`: on every bus whose transport serves lookups, the
 :class:`~tfbus.transports._base.LookupServing` capability; Zenoh: a queryable, ROS 1:
-tf2_ros's LookupTransform action on the node that also carries ``/tf``), until Ctrl-C or
+tf2_ros's LookupTransform action on the node that also carries ``/tf``, ROS 2: that action
+over DDS on the transport's participant), until Ctrl-C or
 SIGTERM (or ``--duration``); then one summary line.
 """
 
@@ -32,7 +33,8 @@ __all__ = ["command"]
               help="The bus to listen and answer on: Zenoh (e.g. "
                    "'zenoh:mode=client&connect=tcp/127.0.0.1:7447&namespace=robot7') or ROS 1 "
                    "('ros1', 'ros1:master=http://127.0.0.1:11311': the LookupTransform "
-                   "action of tf2_ros, as /NAME).")
+                   "action of tf2_ros, as /NAME) or ROS 2 ('ros2', 'ros2:domain=7': the same "
+                   "action over DDS).")
 @click.option("--name", "name", default="tf2_buffer_server", show_default=True,
               help="The server's name (clients use the same: BufferClient(bus, name=...)).")
 @click.option("--cache-time", type=seconds(), default=10.0,
@@ -45,7 +47,7 @@ __all__ = ["command"]
               help="Most lookups (ROS 1: goals) waiting at once; more are refused as busy.")
 @click.option("--max-per-peer", type=click.IntRange(min=1, max=1_000_000), default=None,
               help="Zenoh: most lookups of one querier waiting at once (default: "
-                   "max-pending / 4).")
+                   "max-pending / 4); ROS 2: most goals of one client (default 100).")
 @click.option("--duration", type=seconds(), default=None,
               help="Stop after this many seconds (default: until Ctrl-C or SIGTERM).")
 def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending: int,
@@ -54,15 +56,16 @@ def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending
     buffer of /tf and /tf_static from --bus and serve lookup_transform,
     lookup_transform_full and can_transform to tfbus.remote.BufferClient (Zenoh), or
     tf2_ros's LookupTransform action as /tf2_buffer_server to tf2_ros.BufferClient
-    (ROS 1). Every lookup waits at most --max-wait seconds; at most --max-pending wait at
-    once (Zenoh: --max-per-peer of one querier); a lookup whose client cancelled it or
-    left (ROS 1: an actionlib cancel request) ends at once.
+    (ROS 1; ROS 2 over DDS). Every lookup waits at most --max-wait seconds; at most
+    --max-pending wait at once (Zenoh, ROS 2: --max-per-peer of one client); a lookup
+    whose client cancelled it or left (ROS 1: an actionlib cancel request) ends at once.
 
     \b
     Examples:
       tfbus serve-buffer
       tfbus serve-buffer --bus 'zenoh:mode=client&connect=tcp/127.0.0.1:7447'
       tfbus serve-buffer --bus ros1
+      tfbus serve-buffer --bus ros2:domain=7
     """
     import anyio
 
@@ -79,7 +82,7 @@ def command(bus: str, name: str, cache_time: float, max_wait: float, max_pending
     transport = open_spec_transport(spec, name="tf2_buffer_server")
     if not isinstance(transport, LookupServing):
         fail(f"--bus {bus!r}: the {spec.scheme!r} transport does not serve lookups "
-             "(Zenoh and ROS 1 do)")
+             "(Zenoh, ROS 1 and ROS 2 do)")
     options: dict[str, Any] = {"name": name, "max_pending": max_pending, "max_wait": max_wait}
     if max_per_peer is not None:
         options["max_per_peer"] = max_per_peer

@@ -6,6 +6,8 @@ imports an event loop, a socket or a clock.
   serialiser, the one rosbags message builder);
 * :mod:`tfbus.codecs.cdr` -- ROS 2 ``tf2_msgs/msg/TFMessage`` in XCDR1/XCDR2 (DDS samples
   and ROS 2 bags);
+* :mod:`tfbus.codecs.lookup_action_cdr` -- ROS 2's ``tf2_msgs/action/LookupTransform``
+  action samples (goal, result, cancel, status) in CDR;
 * :mod:`tfbus.codecs.native` -- tfbus's own versioned msgpack wire (the Zenoh transport).
 
 One error contract: a payload that does not decode raises

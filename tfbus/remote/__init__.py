@@ -17,7 +17,10 @@ Each transport serves lookups over its own middleware (the
   (:mod:`tfbus.transports.zenoh.lookups`);
 * ROS 1: tf2_ros's own ``tf2_msgs/LookupTransform`` action ``/{name}`` on the
   transport's node (:mod:`tfbus.transports.ros1.action`), interoperating with Debian's
-  ``buffer_server`` and ``tf2_ros.BufferClient``.
+  ``buffer_server`` and ``tf2_ros.BufferClient``;
+* ROS 2: tf2_ros's ``tf2_msgs/action/LookupTransform`` action ``/{name}`` over DDS on the
+  transport's participant (:mod:`tfbus.transports.ros2.action`; rmw_cyclonedds_cpp's
+  request/reply mapping).
 
 A bus whose transport has no such capability is refused with a TypeError naming it.
 """
@@ -60,9 +63,9 @@ def _serving(bus: Bus) -> LookupServing:
     transport = bus.transport
     if transport is None:
         raise TypeError("remote lookups need a bus over a transport that serves them "
-                        "(Zenoh, ROS 1); this bus has no transport")
+                        "(Zenoh, ROS 1, ROS 2); this bus has no transport")
     if not isinstance(transport, LookupServing):
-        raise TypeError(f"remote lookups need a transport that serves them (Zenoh, ROS 1); "
+        raise TypeError(f"remote lookups need a transport that serves them (Zenoh, ROS 1, ROS 2); "
                         f"{type(transport).__name__} does not: {transport!r}")
     return transport
 
@@ -76,7 +79,8 @@ class BufferServer:
     at most ``max_pending`` lookups wait at once; a lookup whose client cancelled it ends
     at once. The options are the transport's (``Zenoh``:
     :class:`tfbus.transports.zenoh.lookups.BufferServer`, with ``max_per_peer``; ROS 1:
-    :class:`tfbus.transports.ros1.action.LookupActionServer`).
+    :class:`tfbus.transports.ros1.action.LookupActionServer`; ROS 2:
+    :class:`tfbus.transports.ros2.action.LookupActionServer`, with ``max_per_peer``).
 
     Args:
         buffer: the :class:`~tfbus.buffer.Buffer` to answer from.

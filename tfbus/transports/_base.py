@@ -15,7 +15,8 @@ statistics counters and the :class:`PeerAware` protocol.
   offers; the command line asks ``isinstance(transport, PeerAware)``, never a scheme name.
 * :class:`LookupServing` -- a transport that serves and asks transform lookups
   (tf2_ros's ``buffer_server`` / ``BufferClient``) over its own middleware: Zenoh (a
-  queryable), ROS 1 (the ``LookupTransform`` action on the transport's node);
+  queryable), ROS 1 (the ``LookupTransform`` action on the transport's node), ROS 2 (the
+  ``LookupTransform`` action over DDS on the transport's participant);
   :class:`tfbus.remote.BufferServer` and :class:`tfbus.remote.BufferClient` ask
   ``isinstance(transport, LookupServing)``. Counted in :class:`ServerStatistics`.
 * :class:`Backlogged` -- a transport whose middleware threads queue received messages
@@ -202,12 +203,14 @@ class ServerStatistics:
         errors: tf2 errors sent back (lookup, timeout, bad argument, busy on Zenoh...).
         malformed: requests dropped unanswered because they did not decode.
         busy: requests refused because the server held its most lookups (Zenoh:
-            ``max_pending`` or ``max_per_peer``; ROS 1: ``max_pending``, REJECTED).
+            ``max_pending`` or ``max_per_peer``; ROS 1: ``max_pending``, REJECTED; ROS 2:
+            ``max_pending`` or ``max_per_peer``, ``accepted=False``).
         cancelled: lookups ended because their client cancelled them or left (ROS 1:
-            PREEMPTED or RECALLED by an actionlib cancel request).
+            PREEMPTED or RECALLED by an actionlib cancel request; ROS 2: CANCELED by a
+            ``cancel_goal`` request or because the client's request writer left).
         pending: lookups waiting now.
         unsendable: answers the middleware cannot carry, not sent (ROS 1: a stamp at or
-            after 2**32 s).
+            after 2**32 s; ROS 2: at or after 2**31 s, the goal ABORTED).
     """
 
     requests: int = 0

@@ -17,9 +17,13 @@ transport package (``docs/architecture.md``, "Adding a transport"):
 * :mod:`~tfbus.transports.ros2.options` -- the ``ros2`` bus spec
   (:func:`~tfbus.transports.ros2.options.transport_from_spec`);
 * :mod:`~tfbus.transports.ros2.dds` -- DDS topic and type names, the ``IdlStruct`` types,
-  :func:`cyclone_config`.
+  :func:`cyclone_config`;
+* :mod:`~tfbus.transports.ros2.action` -- tf2_ros's ``LookupTransform`` action over DDS
+  (``buffer_server`` and ``BufferClient``) on the transport's participant: the
+  :class:`~tfbus.transports._base.LookupServing` capability.
 
-The samples are (de)serialised by :mod:`tfbus.codecs.cdr`.
+The samples are (de)serialised by :mod:`tfbus.codecs.cdr` and
+:mod:`tfbus.codecs.lookup_action_cdr`.
 """
 
 from tfbus._extras import require

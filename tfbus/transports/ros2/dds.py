@@ -13,7 +13,9 @@ type plus a trailing underscore). The nested types are
 ``builtin_interfaces::msg::dds_::Time_`` (``int32 sec``, ``uint32 nanosec``),
 ``geometry_msgs::msg::dds_::Transform_``, ``Vector3_`` (x, y, z metres) and
 ``Quaternion_`` (x, y, z, w). ``/clock`` is the DDS topic ``rt/clock`` of type
-``rosgraph_msgs::msg::dds_::Clock_`` (one ``Time_ clock``). They are declared below as
+``rosgraph_msgs::msg::dds_::Clock_`` (one ``Time_ clock``). The ``LookupTransform``
+action's request, reply and topic types (:mod:`tfbus.transports.ros2.action`) follow. They
+are declared below as
 cyclonedds ``IdlStruct``s so that Cyclone announces the right type name and type
 information during discovery.
 
@@ -28,14 +30,32 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, sequence, uint32
+from cyclonedds.idl.types import (
+    array,
+    float64,
+    int8,
+    int32,
+    int64,
+    sequence,
+    uint8,
+    uint32,
+    uint64,
+)
 
 __all__ = [
     "CLOCK_TOPIC_DDS",
     "DOMAIN_ID_MAX",
     "TF_STATIC_TOPIC_DDS",
     "TF_TOPIC_DDS",
+    "CancelGoalRequest_",
+    "CancelGoalResponse_",
     "Clock_",
+    "FeedbackMessage_",
+    "GetResultRequest_",
+    "GetResultResponse_",
+    "GoalStatusArray_",
+    "SendGoalRequest_",
+    "SendGoalResponse_",
     "TFMessage_",
     "TransformStamped_",
     "cyclone_config",
@@ -121,6 +141,149 @@ class Clock_(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
     """``rosgraph_msgs/msg/Clock``: the simulated time on ``/clock``."""
 
     clock: Time_ = field(default_factory=Time_)
+
+
+# -- tf2_msgs/action/LookupTransform (tfbus.transports.ros2.action): names as
+# rosidl_generator_dds_idl makes them; the service request and reply types begin with
+# rmw_cyclonedds_cpp's request header (uint64 guid, int64 seq), as their samples do -------
+
+
+@dataclass
+class UUID_(IdlStruct, typename="unique_identifier_msgs::msg::dds_::UUID_"):
+    """``unique_identifier_msgs/msg/UUID``: 16 octets."""
+
+    uuid: array[uint8, 16] = field(default_factory=lambda: [0] * 16)  # type: ignore[valid-type,type-arg,assignment]
+
+
+@dataclass
+class Duration_(IdlStruct, typename="builtin_interfaces::msg::dds_::Duration_"):
+    """``builtin_interfaces/msg/Duration``: seconds (int32) and nanoseconds (uint32)."""
+
+    sec: int32 = 0
+    nanosec: uint32 = 0
+
+
+@dataclass
+class GoalInfo_(IdlStruct, typename="action_msgs::msg::dds_::GoalInfo_"):
+    """``action_msgs/msg/GoalInfo``."""
+
+    goal_id: UUID_ = field(default_factory=UUID_)
+    stamp: Time_ = field(default_factory=Time_)
+
+
+@dataclass
+class GoalStatus_(IdlStruct, typename="action_msgs::msg::dds_::GoalStatus_"):
+    """``action_msgs/msg/GoalStatus``."""
+
+    goal_info: GoalInfo_ = field(default_factory=GoalInfo_)
+    status: int8 = 0
+
+
+@dataclass
+class GoalStatusArray_(IdlStruct, typename="action_msgs::msg::dds_::GoalStatusArray_"):
+    """``action_msgs/msg/GoalStatusArray`` (the action's ``status`` topic)."""
+
+    status_list: sequence[GoalStatus_] = field(default_factory=list)  # type: ignore[type-arg,assignment]
+
+
+@dataclass
+class LookupTransform_Goal_(IdlStruct, typename="tf2_msgs::action::dds_::LookupTransform_Goal_"):
+    """``tf2_msgs/action/LookupTransform`` goal."""
+
+    target_frame: str = ""
+    source_frame: str = ""
+    source_time: Time_ = field(default_factory=Time_)
+    timeout: Duration_ = field(default_factory=Duration_)
+    target_time: Time_ = field(default_factory=Time_)
+    fixed_frame: str = ""
+    advanced: bool = False
+
+
+@dataclass
+class SendGoalRequest_(
+    IdlStruct, typename="tf2_msgs::action::dds_::LookupTransform_SendGoal_Request_"
+):
+    """The ``send_goal`` request, after rmw_cyclonedds_cpp's request header."""
+
+    request_guid: uint64 = 0
+    request_seq: int64 = 0
+    goal_id: UUID_ = field(default_factory=UUID_)
+    goal: LookupTransform_Goal_ = field(default_factory=LookupTransform_Goal_)
+
+
+@dataclass
+class SendGoalResponse_(
+    IdlStruct, typename="tf2_msgs::action::dds_::LookupTransform_SendGoal_Response_"
+):
+    """The ``send_goal`` reply, after the request header."""
+
+    request_guid: uint64 = 0
+    request_seq: int64 = 0
+    accepted: bool = False
+    stamp: Time_ = field(default_factory=Time_)
+
+
+@dataclass
+class GetResultRequest_(
+    IdlStruct, typename="tf2_msgs::action::dds_::LookupTransform_GetResult_Request_"
+):
+    """The ``get_result`` request, after the request header."""
+
+    request_guid: uint64 = 0
+    request_seq: int64 = 0
+    goal_id: UUID_ = field(default_factory=UUID_)
+
+
+@dataclass
+class TF2Error_(IdlStruct, typename="tf2_msgs::msg::dds_::TF2Error_"):
+    """``tf2_msgs/msg/TF2Error``."""
+
+    error: uint8 = 0
+    error_string: str = ""
+
+
+@dataclass
+class GetResultResponse_(
+    IdlStruct, typename="tf2_msgs::action::dds_::LookupTransform_GetResult_Response_"
+):
+    """The ``get_result`` reply, after the request header."""
+
+    request_guid: uint64 = 0
+    request_seq: int64 = 0
+    status: int8 = 0
+    transform: TransformStamped_ = field(default_factory=TransformStamped_)
+    error: TF2Error_ = field(default_factory=TF2Error_)
+
+
+@dataclass
+class CancelGoalRequest_(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Request_"):
+    """The ``cancel_goal`` request, after the request header."""
+
+    request_guid: uint64 = 0
+    request_seq: int64 = 0
+    goal_info: GoalInfo_ = field(default_factory=GoalInfo_)
+
+
+@dataclass
+class CancelGoalResponse_(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Response_"):
+    """The ``cancel_goal`` reply, after the request header."""
+
+    request_guid: uint64 = 0
+    request_seq: int64 = 0
+    return_code: int8 = 0
+    goals_canceling: sequence[GoalInfo_] = field(default_factory=list)  # type: ignore[type-arg,assignment]
+
+
+@dataclass
+class FeedbackMessage_(
+    IdlStruct, typename="tf2_msgs::action::dds_::LookupTransform_FeedbackMessage_"
+):
+    """The ``feedback`` topic's type (the empty feedback has rosidl's placeholder
+    member)."""
+
+    goal_id: UUID_ = field(default_factory=UUID_)
+    structure_needs_at_least_one_member: uint8 = 0
+
 
 
 def dds_topic_name(topic: str) -> str:

@@ -82,10 +82,10 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import anyio
 import anyio.abc
@@ -103,7 +103,12 @@ from tfbus.codecs.cdr import decode_clock, decode_tf_message, encode_clock, enco
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
-from tfbus.transports._base import BusLike, ThreadWakeup, TransportStatistics
+from tfbus.transports._base import (
+    DEFAULT_MAX_WAIT,
+    BusLike,
+    ThreadWakeup,
+    TransportStatistics,
+)
 from tfbus.transports.ros2.dds import (
     DOMAIN_ID_MAX,
     TF_STATIC_TOPIC_DDS,
@@ -113,6 +118,10 @@ from tfbus.transports.ros2.dds import (
     cyclone_config,
     dds_topic_name,
 )
+
+if TYPE_CHECKING:
+    from tfbus.buffer import Buffer
+    from tfbus.transports.ros2.action import LookupActionClient, LookupActionServer
 
 __all__ = [
     "CLOCK_TYPE_HASH",
@@ -338,6 +347,7 @@ class Ros2Transport:
         self._endpoints: _Endpoints | None = None
         self._wakeup: ThreadWakeup | None = None
         self._running = False
+        self._closers: list[Callable[[], None]] = []
 
     # -- public information -----------------------------------------------------------------
 
@@ -390,6 +400,59 @@ class Ros2Transport:
         """A copy of the counters (see :class:`Ros2Statistics`)."""
         return replace(self._stats)
 
+    def participant(self) -> DomainParticipant:
+        """The DomainParticipant of the running transport, on which other endpoints of
+        this process (the ``LookupTransform`` action) are made: one participant per
+        transport.
+
+        Raises:
+            RuntimeError: the transport is not running.
+        """
+        endpoints = self._endpoints
+        if endpoints is None:
+            raise RuntimeError("the Ros2Transport is not running (open its bus first)")
+        return endpoints.participant
+
+    def on_close(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` (once) when the transport leaves the domain, before its
+        participant and every endpoint made on it are deleted."""
+        self._closers.append(callback)
+
+    def serve_lookups(self, buffer: Buffer, bus: object, *, name: str = "/tf2_buffer_server",
+                      max_pending: int = 1000, max_per_peer: int = 100,
+                      max_wait: float = DEFAULT_MAX_WAIT,
+                      result_timeout: float = 60.0) -> LookupActionServer:
+        """tf2_ros ``buffer_server`` on this transport's participant: the
+        ``tf2_msgs/action/LookupTransform`` action ``name`` over DDS answering from
+        ``buffer`` (:class:`~tfbus.transports.ros2.action.LookupActionServer`; ``bus`` is
+        the open bus this transport runs under);
+        :class:`~tfbus.transports._base.LookupServing`.
+
+        Raises:
+            ValueError: as :class:`~tfbus.transports.ros2.action.LookupActionServer`.
+        """
+        from tfbus.transports.ros2.action import LookupActionServer
+
+        return LookupActionServer(self, buffer, name=name, max_pending=max_pending,
+                                  max_per_peer=max_per_peer, max_wait=max_wait,
+                                  result_timeout=result_timeout)
+
+    def lookup_client(self, bus: object, *, name: str = "/tf2_buffer_server",
+                      timeout_padding: float = 2.0,
+                      max_wait: float = 3600.0) -> LookupActionClient:
+        """tf2_ros ``BufferClient`` on this transport's participant: goals of the
+        ``LookupTransform`` action ``name``
+        (:class:`~tfbus.transports.ros2.action.LookupActionClient`);
+        :class:`~tfbus.transports._base.LookupServing`.
+
+        Raises:
+            ValueError: as :class:`~tfbus.transports.ros2.action.LookupActionClient`.
+        """
+        from tfbus.transports.ros2.action import LookupActionClient
+
+        return LookupActionClient(self, name=name, timeout_padding=timeout_padding,
+                                  max_wait=max_wait)
+
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"
         return f"<Ros2Transport {state} domain_id={self._domain_id}>"
@@ -430,6 +493,9 @@ class Ros2Transport:
             self._running = False
             self._endpoints = None
             self._wakeup = None
+            closers, self._closers = self._closers, []
+            for close in closers:
+                close()
             if endpoints is not None:
                 with anyio.CancelScope(shield=True):
                     await anyio.to_thread.run_sync(self._close, endpoints)
