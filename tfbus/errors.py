@@ -48,6 +48,7 @@ if TYPE_CHECKING:
     from .messages import TransformStamped
 
 __all__ = [
+    "TF2_ERROR_CLASSES",
     "BackwardExtrapolationException",
     "BagError",
     "BagFormatError",
@@ -74,6 +75,8 @@ __all__ = [
     "WireError",
     "WireLimitError",
     "WireVersionError",
+    "tf2_error",
+    "tf2_error_code",
 ]
 
 
@@ -180,6 +183,35 @@ class BufferClosedException(TransformException):
 
 # --------------------------------------------------------------------------- robots
 
+
+
+TF2_ERROR_CLASSES: dict[int, type[TransformException]] = {
+    1: LookupException,
+    2: ConnectivityException,
+    3: ExtrapolationException,
+    4: InvalidArgumentException,
+    5: TimeoutException,
+    6: TransformException,
+}
+"""The exception class of each ``tf2_msgs/TF2Error`` error code (1 LOOKUP_ERROR,
+2 CONNECTIVITY_ERROR, 3 EXTRAPOLATION_ERROR, 4 INVALID_ARGUMENT_ERROR, 5 TIMEOUT_ERROR,
+6 TRANSFORM_ERROR; 0 NO_ERROR has none), as tf2_ros's ``buffer_client.py``
+``processResult`` maps them; the LookupTransform action's server and client on ROS 1 and
+ROS 2 use this one table."""
+
+
+def tf2_error_code(exc: TransformException) -> int:
+    """The ``tf2_msgs/TF2Error`` code of ``exc`` (tf2_ros ``buffer_server.cpp``'s catch
+    order): its class's or its nearest base's in :data:`TF2_ERROR_CLASSES`, 6
+    (TRANSFORM_ERROR) for any other transform error. ROS 2's extrapolation subclasses are
+    3 (the message has no finer code)."""
+    return next((c for c, cls in TF2_ERROR_CLASSES.items() if isinstance(exc, cls)), 6)
+
+
+def tf2_error(code: int, message: str) -> TransformException:
+    """The exception a ``tf2_msgs/TF2Error`` with ``code`` and ``message`` stands for
+    (:data:`TF2_ERROR_CLASSES`; an unknown code is a plain :class:`TransformException`)."""
+    return TF2_ERROR_CLASSES.get(code, TransformException)(message)
 
 class SimTimeStalled(TfbusError, TimeoutError):
     """A wait on a :class:`~tfbus.clock.SimClock` saw no valid ``/clock`` message for the

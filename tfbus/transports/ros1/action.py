@@ -146,14 +146,6 @@ MAX_HELD_GOAL_BYTES: Final = 32 << 20
 """Most bytes of goals :class:`LookupActionServer` holds at once (with ``max_pending``)."""
 _STATUS_KEPT: Final = 5.0  # actionlib's status_list_timeout: a finished goal stays listed
 
-_ERRORS: Final[dict[int, type[TransformException]]] = {
-    1: errors.LookupException,  # tf2_msgs/TF2Error LOOKUP_ERROR
-    2: errors.ConnectivityException,
-    3: errors.ExtrapolationException,
-    4: errors.InvalidArgumentException,
-    5: errors.TimeoutException,
-    6: errors.TransformException,
-}
 _log = logging.getLogger("tfbus.remote")
 _peer_log = CountLimitedLog(_log, 1, period=5.0, clock=_wallclock.monotonic)
 _Answer = tuple[TransformStamped, int, str, int, str]  # transform, code, message, status, text
@@ -367,7 +359,7 @@ def result_transform(ts: TransformStamped, code: int, message: str, status: int,
     if code == 3:  # tf2_msgs/TF2Error has one extrapolation code: the text tells which
         raise errors.extrapolation_exception(message)
     if code:
-        raise _ERRORS.get(code, TransformException)(message)
+        raise errors.tf2_error(code, message)
     return ts
 
 
@@ -720,7 +712,7 @@ class LookupActionServer:
                     ts = buffer.lookup_transform(g.target_frame, g.source_frame,
                                                  g.source_time)
         except TransformException as exc:
-            code = next((c for c, cls in _ERRORS.items() if isinstance(exc, cls)), 6)
+            code = errors.tf2_error_code(exc)
             return TransformStamped(Header(), "", Transform()), code, str(exc)
         return ts, 0, ""
 

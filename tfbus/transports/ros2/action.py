@@ -162,14 +162,6 @@ _CANCEL_TERMINATED: Final = 3
 _ZERO_ID: Final = bytes(16)
 _FAST_DDS_VENDOR: Final = b"\x01\x0f"  # eProsima's RTPS vendor id
 
-_ERRORS: Final[dict[int, type[TransformException]]] = {
-    1: errors.LookupException,  # tf2_msgs/TF2Error LOOKUP_ERROR
-    2: errors.ConnectivityException,
-    3: errors.ExtrapolationException,
-    4: errors.InvalidArgumentException,
-    5: errors.TimeoutException,
-    6: errors.TransformException,
-}
 _EMPTY: Final = TransformStamped(Header(), "", Transform())
 _ANY_STATE: Final = SampleState.Any | ViewState.Any | InstanceState.Any
 _MAX_TAKE: Final = 256
@@ -616,7 +608,7 @@ class LookupActionServer:
                     ts = buffer.lookup_transform(g.target_frame, g.source_frame,
                                                  g.source_time)
         except TransformException as exc:
-            code = next((c for c, cls in _ERRORS.items() if isinstance(exc, cls)), 6)
+            code = errors.tf2_error_code(exc)
             return LookupResult(_SUCCEEDED, _EMPTY, code, str(exc))
         return LookupResult(_SUCCEEDED, ts, 0, "")
 
@@ -843,7 +835,7 @@ def result_transform(result: LookupResult) -> TransformStamped:
     if result.error == 3:  # one extrapolation code: the text tells which
         raise errors.extrapolation_exception(result.error_string)
     if result.error:
-        raise _ERRORS.get(result.error, TransformException)(result.error_string)
+        raise errors.tf2_error(result.error, result.error_string)
     return result.transform
 
 
