@@ -71,6 +71,7 @@ from tfbus.core.text import (
 )
 from tfbus.core.velocity import lookup_velocity as _lookup_velocity
 from tfbus.errors import (
+    BackwardExtrapolationException,
     ConnectivityException,
     InvalidArgumentException,
     LookupException,
@@ -436,17 +437,27 @@ class BufferCore(CoreBase):
         return self._failure("lookupTransform", target_frame, source_frame, out)
 
     def check_transform(
-        self, target_frame: str, source_frame: str, time: Time
+        self, target_frame: str, source_frame: str, time: Time, fail_fast: bool = False
     ) -> TransformStamped | TransformException | None:
         """What a wait for ``lookup_transform(target_frame, source_frame, time)`` should do
         now, in one walk (tf2's transformable requests, ``testTransformableRequests``):
+
+        Args:
+            fail_fast: also give up when the data can never come (see Returns); False is
+                tf2_ros's behaviour, which waits for its whole timeout then.
 
         Returns:
             The transform when available; the exception when waiting cannot help — an
             invalid id (InvalidArgumentException), a loop in the path (LookupException),
             or ``time`` older than the path's latest common time minus ``cache_time``
             (ExtrapolationException); None while it may still become available (unknown
-            frames, unconnected trees, no data yet at ``time``).
+            frames, unconnected trees, no data yet at ``time``). With ``fail_fast``, also
+            the exception when the two frames are known and in different trees
+            (ConnectivityException), and when a dynamic link of the path between them
+            (by each link's newest parent) can never answer ``time``: ``time`` is older
+            than that link's newest stamp minus ``cache_time``, the oldest stamp its cache
+            still accepts (tf2 ``TimeCache::insertData`` refuses older data as
+            TF_OLD_DATA) (BackwardExtrapolationException, tf2's message for that link).
         """
         try:
             out = self._query(target_frame, source_frame, time)
@@ -457,6 +468,8 @@ class BufferCore(CoreBase):
         code = out[0]
         if code in (INVALID_ARGUMENT, LOOKUP_ERROR) or (code == EXTRAPOLATION_ERROR and out[3]):
             return self._failure("lookupTransform", target_frame, source_frame, out)
+        if fail_fast and code in (CONNECTIVITY_ERROR, EXTRAPOLATION_ERROR):
+            return self._hopeless(target_frame, source_frame, time, out)
         # An unknown target is reported first (tf2's order), but an invalid source makes
         # the wait hopeless all the same.
         if (
@@ -468,6 +481,83 @@ class BufferCore(CoreBase):
                 "lookupTransform", target_frame, source_frame, (INVALID_ARGUMENT, 1)
             )
         return None
+
+    def _hopeless(
+        self, target: str, source: str, time: Time, failure: tuple[int, ...]
+    ) -> TransformException | None:
+        """For a wait with ``fail_fast``: the exception of a failed query (connectivity or
+        extrapolation ``failure`` of ``_query`` for ``time``) that no later insert can
+        cure, else None.
+
+        * Two known frames in different trees (the walk at the time, or the frames'
+          newest parents for an extrapolation failure): ConnectivityException.
+        * A dynamic link the lookup needs — on the path between the two frames by each
+          link's newest parent, source side first (the link tf2's walk failed on may be
+          one it would not need once others have data: the target's own link when the
+          target is an ancestor of the source) — whose newest stamp minus
+          ``cache_time`` is after ``time``: its cache refuses an
+          insert that old (TF_OLD_DATA, tf2 ``TimeCache::insertData``) and pruning kept
+          nothing older, so it can never answer ``time``. BackwardExtrapolationException
+          with tf2's message for that link.
+
+        ``Time(0)`` (the latest common time) is never hopeless for lack of data: newer
+        data moves it.
+        """
+        if failure[0] == CONNECTIVITY_ERROR:
+            return self._failure("lookupTransform", target, source, failure)
+        ids = self._frame_ids
+        target_id, source_id = ids[target], ids[source]
+        err = self._ccommon_time(target_id, source_id)[0]
+        if err == CONNECTIVITY_ERROR:
+            return self._failure("lookupTransform", target, source, (CONNECTIVITY_ERROR, 0))
+        if time.ns == 0 or err != 0:
+            return None
+        used = failure[2]
+        horizon = used + self.cache_time_ns
+        caches = self._caches
+        for fid in self._links_between(source_id, target_id):
+            link = caches[fid] if 0 < fid < len(caches) else None
+            if link is None or link.is_static:
+                continue
+            newest = link.latest_stamp()
+            if newest > horizon:  # used < newest - cache_time, without overflow
+                error = self._failure(
+                    "lookupTransform", target, source, (EXTRAPOLATION_ERROR, fid, used)
+                )
+                if isinstance(error, BackwardExtrapolationException):
+                    return error
+                # One sample, at a later time: rolling names that NoDataForExtrapolation,
+                # but the time asked is before anything the link can still hold.
+                return BackwardExtrapolationException(str(error))
+        return None
+
+    def _links_between(self, source_id: int, target_id: int) -> list[int]:
+        """The child frame ids of the links between two frames by each link's newest
+        parent (source side, then target side; the lowest common ancestor's own link
+        excluded); empty when they share no ancestor (at most ``MAX_GRAPH_DEPTH`` + 1
+        frames a side)."""
+        caches = self._caches
+
+        def up(frame: int) -> list[int]:
+            walk, seen = [frame], {frame}
+            while len(walk) <= MAX_GRAPH_DEPTH:
+                link = caches[frame] if 0 < frame < len(caches) else None
+                if link is None:
+                    break
+                frame = link.latest()[1]
+                if frame == 0 or frame in seen:
+                    break
+                walk.append(frame)
+                seen.add(frame)
+            return walk
+
+        a, b = up(source_id), up(target_id)
+        in_b = {frame: j for j, frame in enumerate(b)}
+        for i, frame in enumerate(a):
+            j = in_b.get(frame)
+            if j is not None:
+                return a[:i] + b[:j]
+        return []
 
     # ------------------------------------------------------------------ batched lookups
 
