@@ -33,6 +33,7 @@ from tfbus.clock import Clock, JumpCallback, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
+from tfbus.core.buffer_core import OnRepeat
 from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import BufferClosedException, TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
@@ -146,6 +147,8 @@ class Buffer(BufferCore):
         cache_time: history kept per dynamic link, seconds or a Duration.
         clock: time source for timeouts and for detecting backward jumps; defaults to
             :class:`~tfbus.clock.SystemClock`.
+        on_repeat: ``"reject"`` (tf2) or ``"replace"``: see
+            :class:`~tfbus.core.BufferCore`.
 
     Every synchronous method of BufferCore is available unchanged. Use from one event
     loop (the one that runs its waits); not thread-safe.
@@ -159,8 +162,14 @@ class Buffer(BufferCore):
     ... was never awaited".
     """
 
-    def __init__(self, cache_time: float | Duration = 10.0, *, clock: Clock | None = None) -> None:
-        super().__init__(cache_time)
+    def __init__(
+        self,
+        cache_time: float | Duration = 10.0,
+        *,
+        clock: Clock | None = None,
+        on_repeat: OnRepeat = "reject",
+    ) -> None:
+        super().__init__(cache_time, on_repeat=on_repeat)
         self.clock: Clock = clock if clock is not None else SystemClock()
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9

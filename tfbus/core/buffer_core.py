@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from typing import Any, Final
+from typing import Any, Final, Literal, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -95,12 +95,16 @@ __all__ = [
     "BatchResult",
     "BufferCore",
     "FrameInfo",
+    "OnRepeat",
     "SetResult",
     "Tf7",
     "frame_path",
 ]
 
 logger = logging.getLogger("tfbus.core")
+
+OnRepeat: TypeAlias = Literal["reject", "replace"]
+"""``BufferCore(on_repeat=...)``: refuse (tf2) or replace a sample at the newest stamp."""
 
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
@@ -184,11 +188,19 @@ class BufferCore(CoreBase):
             not a bool) or a :class:`~tfbus.time.Duration`, in [0, 2**63 - 1] ns. Expiry
             happens per link on insert, relative to that link's newest stamp, exactly as
             in tf2 (no wall clock is involved).
+        on_repeat: what a dynamic transform whose stamp equals a stored sample of its
+            link does. ``"reject"`` (default, tf2's ``TimeCache::insertData`` in geometry2
+            0.7.6): refused and logged as TF_REPEATED_DATA, the first sample wins.
+            ``"replace"``: when that sample is the link's newest, the new values and
+            parent replace it (a stored transform; a publisher re-sending a corrected
+            pose at the same stamp); an equal stamp older than the newest is still
+            refused as TF_REPEATED_DATA. Static transforms always replace (tf2).
 
     Raises:
         TypeError: ``cache_time`` is not a number or Duration (checked before anything is
             allocated).
-        ValueError: ``cache_time`` is negative, infinite, NaN or beyond int64 ns.
+        ValueError: ``cache_time`` is negative, infinite, NaN or beyond int64 ns;
+            ``on_repeat`` is neither ``"reject"`` nor ``"replace"``.
 
     Frame ids are arbitrary strings compared exactly (a ``str`` subclass such as
     ``numpy.str_`` is taken as the string it is). ``set_transform`` strips one leading
@@ -201,9 +213,20 @@ class BufferCore(CoreBase):
     tf2's messages, exceptions and (count-limited) log lines.
     """
 
-    def __init__(self, cache_time: float | Duration = 10.0) -> None:
+    def __init__(
+        self, cache_time: float | Duration = 10.0, *, on_repeat: OnRepeat = "reject"
+    ) -> None:
         self._set_cache_time_ns(cache_time_ns(cache_time))
+        if on_repeat not in ("reject", "replace"):
+            raise ValueError(f"on_repeat must be 'reject' or 'replace', got {on_repeat!r}")
+        self._set_replace_repeated(on_repeat == "replace")
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
+
+    @property
+    def on_repeat(self) -> OnRepeat:
+        """``"reject"`` or ``"replace"``: what a transform at the stamp of a stored sample
+        of its link does (see the class docstring; fixed at construction)."""
+        return "replace" if self.replace_repeated else "reject"
 
     # ------------------------------------------------------------------ inserting
 
@@ -221,9 +244,11 @@ class BufferCore(CoreBase):
             authority: who sent it (shown by ``all_frames_as_yaml``).
 
         Returns:
-            True when stored; False when the link's cache refused it — TF_OLD_DATA (older
-            than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a sample
-            with this stamp exists) — which is logged (the first, then one per 1000).
+            True when stored (or, with ``on_repeat="replace"``, when it replaced the
+            link's newest sample); False when the link's cache refused it — TF_OLD_DATA
+            (older than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a
+            sample with this stamp exists) — which is logged (the first, then one per
+            1000).
 
         Raises:
             InvalidArgumentException: malformed transform — self transform, empty
