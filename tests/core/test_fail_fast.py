@@ -85,6 +85,9 @@ async def test_without_fail_fast_the_same_wait_takes_its_whole_timeout() -> None
     buf = stale_parent_buffer()
     clock = buf.clock
     assert isinstance(clock, ManualClock)
+    hopeless = buf.check_transform("map", "base", Time.from_sec(105), fail_fast=True)
+    assert isinstance(hopeless, BackwardExtrapolationException)
+    assert buf.check_transform("map", "base", Time.from_sec(105)) is None  # tf2_ros: wait
     outcome: list[BaseException] = []
 
     async def waiter() -> None:
