@@ -217,9 +217,12 @@ class BufferCore(CoreBase):
         self, cache_time: float | Duration = 10.0, *, on_repeat: OnRepeat = "reject"
     ) -> None:
         self._set_cache_time_ns(cache_time_ns(cache_time))
-        if on_repeat not in ("reject", "replace"):
-            raise ValueError(f"on_repeat must be 'reject' or 'replace', got {on_repeat!r}")
-        self._set_replace_repeated(on_repeat == "replace")
+        if on_repeat != "reject":  # (the core's default: nothing to set)
+            if on_repeat != "replace":
+                raise ValueError(
+                    f"on_repeat must be 'reject' or 'replace', got {on_repeat!r}"
+                )
+            self._set_replace_repeated(True)
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
 
     @property
