@@ -33,6 +33,7 @@ from tfbus.clock import Clock, JumpCallback, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
+from tfbus.core.buffer_core import OnRepeat
 from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import BufferClosedException, TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
@@ -146,6 +147,8 @@ class Buffer(BufferCore):
         cache_time: history kept per dynamic link, seconds or a Duration.
         clock: time source for timeouts and for detecting backward jumps; defaults to
             :class:`~tfbus.clock.SystemClock`.
+        on_repeat: ``"reject"`` (tf2) or ``"replace"``: see
+            :class:`~tfbus.core.BufferCore`.
 
     Every synchronous method of BufferCore is available unchanged. Use from one event
     loop (the one that runs its waits); not thread-safe.
@@ -159,8 +162,14 @@ class Buffer(BufferCore):
     ... was never awaited".
     """
 
-    def __init__(self, cache_time: float | Duration = 10.0, *, clock: Clock | None = None) -> None:
-        super().__init__(cache_time)
+    def __init__(
+        self,
+        cache_time: float | Duration = 10.0,
+        *,
+        clock: Clock | None = None,
+        on_repeat: OnRepeat = "reject",
+    ) -> None:
+        super().__init__(cache_time, on_repeat=on_repeat)
         self.clock: Clock = clock if clock is not None else SystemClock()
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
@@ -358,10 +367,12 @@ class Buffer(BufferCore):
 
     # ------------------------------------------------------------------ waiting
 
-    def _try_lookup(self, target: str, source: str, time: Time) -> TransformStamped | None:
+    def _try_lookup(
+        self, target: str, source: str, time: Time, fail_fast: bool = False
+    ) -> TransformStamped | None:
         """The transform, None while it may still arrive; raises when waiting cannot
         help (:meth:`BufferCore.check_transform`: one walk)."""
-        result = self.check_transform(target, source, time)
+        result = self.check_transform(target, source, time, fail_fast)
         if isinstance(result, TransformException):
             raise result
         return result
@@ -431,6 +442,8 @@ class Buffer(BufferCore):
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> TransformStamped:
         """Wait until ``lookup_transform(target_frame, source_frame, time)`` can succeed,
         and return its result. ``time`` may lie in the future; ``Time(0)`` waits until
@@ -440,23 +453,31 @@ class Buffer(BufferCore):
             timeout: seconds (or a Duration) of the buffer's clock (``clock.call_later``,
                 or ``clock.move_on_after`` for a clock that cannot schedule callbacks);
                 None or ``inf`` waits forever; NaN is a ValueError, a str a TypeError.
+            fail_fast: give up at once, not at the timeout, when the answer can never
+                come: the two frames are known and in different trees, or ``time`` is
+                older than the oldest stamp a link of the path can still accept (its
+                newest stamp minus ``cache_time``). Checked on the call and on every
+                insert that touches the path. False (default) is tf2_ros's behaviour.
 
         Raises:
             TimeoutException: not available within ``timeout``; the message says what
                 was missing (tf2's reason).
             ExtrapolationException: ``time`` is older than the cache window of the path
-                (it can never become available).
+                (it can never become available); with ``fail_fast``, its subclass
+                BackwardExtrapolationException also when ``time`` is older than a
+                link's newest stamp minus ``cache_time``.
+            ConnectivityException: with ``fail_fast``, the frames are in different trees.
             InvalidArgumentException: a frame id is empty or starts with '/'.
             LookupException: the path between the frames contains a loop.
         """
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
-            found = self.check_transform(target_frame, source_frame, time)
+            found = self.check_transform(target_frame, source_frame, time, fail_fast)
             if found is not None:  # the data is there (or can never be): no wait set up
                 if isinstance(found, TransformException):
                     raise found
                 return found
         return await self._wait(
-            partial(self.check_transform, target_frame, source_frame, time),
+            partial(self.check_transform, target_frame, source_frame, time, fail_fast),
             partial(self._frames_of, target_frame, source_frame, time),
             timeout,
             partial(self._describe, target_frame, source_frame, time),
@@ -469,19 +490,21 @@ class Buffer(BufferCore):
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> TransformStamped:
         """:meth:`lookup_transform`, waiting up to ``timeout`` for the data.
 
-        Raises: as :meth:`wait_for_transform`.
+        ``fail_fast``, and what is raised: as :meth:`wait_for_transform`.
         """
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
-            found = self.check_transform(target_frame, source_frame, time)
+            found = self.check_transform(target_frame, source_frame, time, fail_fast)
             if found is not None:  # wait_for_transform's body: one coroutine fewer
                 if isinstance(found, TransformException):
                     raise found
                 return found
         return await self._wait(
-            partial(self.check_transform, target_frame, source_frame, time),
+            partial(self.check_transform, target_frame, source_frame, time, fail_fast),
             partial(self._frames_of, target_frame, source_frame, time),
             timeout,
             partial(self._describe, target_frame, source_frame, time),
@@ -496,13 +519,23 @@ class Buffer(BufferCore):
         source_time: Time,
         fixed_frame: str,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> TransformStamped:
         """:meth:`lookup_transform_full` (time travel through ``fixed_frame``), waiting up
         to ``timeout`` for both legs' data.
 
+        Args:
+            fail_fast: give up at once when a leg can never be answered, as
+                :meth:`wait_for_transform` does for its one lookup.
+
         Raises:
             TimeoutException: not available within ``timeout``.
-            ExtrapolationException: a leg's time fell out of the cache window.
+            ExtrapolationException: a leg's time fell out of the cache window (with
+                ``fail_fast``: BackwardExtrapolationException as in
+                :meth:`wait_for_transform`).
+            ConnectivityException: with ``fail_fast``, a leg's frames are in different
+                trees.
             InvalidArgumentException: a frame id is empty or starts with '/'.
         """
         for arg, frame in (
@@ -515,9 +548,9 @@ class Buffer(BufferCore):
                 raise invalid
 
         def check() -> TransformStamped | None:
-            if self._try_lookup(fixed_frame, source_frame, source_time) is None:
+            if self._try_lookup(fixed_frame, source_frame, source_time, fail_fast) is None:
                 return None
-            if self._try_lookup(target_frame, fixed_frame, target_time) is None:
+            if self._try_lookup(target_frame, fixed_frame, target_time, fail_fast) is None:
                 return None
             return self.lookup_transform_full(
                 target_frame, target_time, source_frame, source_time, fixed_frame
@@ -543,11 +576,17 @@ class Buffer(BufferCore):
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> bool:
         """Whether the transform becomes available within ``timeout`` (tf2_ros
-        ``can_transform`` with a timeout). Never raises a TransformException."""
+        ``can_transform`` with a timeout). Never raises a TransformException. With
+        ``fail_fast``, False at once when it can never become available (as
+        :meth:`wait_for_transform`)."""
         try:
-            await self.wait_for_transform(target_frame, source_frame, time, timeout)
+            await self.wait_for_transform(
+                target_frame, source_frame, time, timeout, fail_fast=fail_fast
+            )
         except TransformException:
             return False
         return True
@@ -558,7 +597,12 @@ class Buffer(BufferCore):
 
     @coroutine_method
     async def transform(
-        self, obj: _M, target_frame: str, timeout: float | Duration | None = None
+        self,
+        obj: _M,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> _M:
         """Express a stamped object in ``target_frame`` (tf2_ros ``Buffer.transform``):
         looks up ``target_frame <- obj.header.frame_id`` at ``obj.header.stamp``
@@ -578,20 +622,21 @@ class Buffer(BufferCore):
             TypeError: no transform function is registered for ``type(obj)`` (checked
                 before any wait).
             TimeoutException, ExtrapolationException, InvalidArgumentException,
-            LookupException: as :meth:`wait_for_transform`.
+            LookupException, ConnectivityException: as :meth:`wait_for_transform`,
+                ``fail_fast`` too.
         """
         do_transform = self.registration.get(type(obj))
         header = _header_of(obj)
         source, stamp = header.frame_id, header.stamp
         ts: TransformStamped | None = None
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
-            found = self.check_transform(target_frame, source, stamp)
+            found = self.check_transform(target_frame, source, stamp, fail_fast)
             if isinstance(found, TransformException):
                 raise found
             ts = found
         if ts is None:
             ts = await self._wait(  # wait_for_transform's body: one coroutine fewer
-                partial(self.check_transform, target_frame, source, stamp),
+                partial(self.check_transform, target_frame, source, stamp, fail_fast),
                 partial(self._frames_of, target_frame, source, stamp),
                 timeout,
                 partial(self._describe, target_frame, source, stamp),
@@ -607,6 +652,8 @@ class Buffer(BufferCore):
         target_time: Time,
         fixed_frame: str,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> _M:
         """Express a stamped object in ``target_frame`` at ``target_time``, through
         ``fixed_frame`` (tf2_ros ``Buffer.transform_full``): the transform is
@@ -620,13 +667,15 @@ class Buffer(BufferCore):
 
         Raises:
             TypeError: no transform function is registered for ``type(obj)``.
-            TimeoutException, ExtrapolationException, InvalidArgumentException: as
-                :meth:`lookup_transform_full_async`.
+            TimeoutException, ExtrapolationException, InvalidArgumentException,
+                ConnectivityException: as :meth:`lookup_transform_full_async`,
+                ``fail_fast`` too.
         """
         do_transform = self.registration.get(type(obj))
         header = _header_of(obj)
         ts = await self.lookup_transform_full_async(
-            target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout
+            target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout,
+            fail_fast=fail_fast,
         )
         result: _M = do_transform(obj, ts)
         return result
@@ -641,12 +690,14 @@ class Buffer(BufferCore):
         source_frame: str,
         times: npt.NDArray[np.int64],
         timeout: float | Duration | None,
+        fail_fast: bool = False,
     ) -> None:
         """Wait until the latest of ``times`` can be looked up (nothing for no times).
         Time 0 means "latest available": waiting for it waits for the frames to connect."""
         if times.size:
             await self.wait_for_transform(
-                target_frame, source_frame, Time.from_ns(int(times.max())), timeout
+                target_frame, source_frame, Time.from_ns(int(times.max())), timeout,
+                fail_fast=fail_fast,
             )
 
     @coroutine_method
@@ -658,6 +709,7 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         errors: Errors = "raise",
+        fail_fast: bool = False,
     ) -> TransformArray:
         """:meth:`~tfbus.core.BufferCore.lookup_transforms`, first waiting (event-driven,
         as :meth:`wait_for_transform`) until the latest of ``times`` can be looked up.
@@ -667,6 +719,8 @@ class Buffer(BufferCore):
 
         Args:
             timeout: seconds (or a Duration) of the buffer's clock; None waits forever.
+            fail_fast: give up at once when the latest time can never be looked up (as
+                :meth:`wait_for_transform`).
 
         Raises:
             TimeoutException: the latest time did not become available within ``timeout``.
@@ -674,7 +728,7 @@ class Buffer(BufferCore):
             TransformException subclasses, ValueError: as the synchronous lookup.
         """
         t = as_times(times)
-        await self._wait_latest(target_frame, source_frame, t, timeout)
+        await self._wait_latest(target_frame, source_frame, t, timeout, fail_fast)
         return self.lookup_transforms(target_frame, source_frame, t, errors=errors)
 
     @coroutine_method
@@ -687,17 +741,19 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         errors: Errors = "raise",
+        fail_fast: bool = False,
     ) -> npt.NDArray[np.float64]:
         """:meth:`~tfbus.core.BufferCore.transform_points` (each ``(N, 3)`` point, metres,
         at its own time), first waiting until the latest of ``times`` can be looked up.
 
-        Raises: as :meth:`lookup_transforms_async`; ValueError for malformed points.
+        ``fail_fast`` and what is raised: as :meth:`lookup_transforms_async`; ValueError
+        for malformed points.
         """
         p = np.asarray(points, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != 3:
             raise ValueError(f"points must have shape (N, 3), got {p.shape}")
         t = as_times(times, p.shape[0])
-        await self._wait_latest(target_frame, source_frame, t, timeout)
+        await self._wait_latest(target_frame, source_frame, t, timeout, fail_fast)
         return self.transform_points(p, target_frame, source_frame, t, errors=errors)
 
     @coroutine_method

@@ -43,7 +43,7 @@ import anyio.abc
 
 from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer
-from tfbus.errors import TransformException
+from tfbus.errors import BackwardExtrapolationException, TransformException
 from tfbus.messages import Header
 from tfbus.time import Duration, Time
 
@@ -141,6 +141,14 @@ class MessageFilter(Generic[M]):
         tolerance: also require the transforms at ``stamp + tolerance`` (e.g. a scan's
             sweep time, so every beam can be transformed). Default 0.
         on_failure: called as ``on_failure(message, reason)`` for every dropped message.
+        fail_fast: drop a message at once, not keep it queued, when a transform it needs
+            can never come (:meth:`Buffer.wait_for_transform
+            <tfbus.buffer.Buffer.wait_for_transform>`'s ``fail_fast``): its stamp is
+            older than the oldest stamp a link of the path can still accept (its newest
+            stamp minus ``cache_time``) — OUT_THE_BACK on arrival — or its frame and a
+            target frame are known and in different trees — TRANSFORM_FAILURE; a queued
+            message that becomes so is dropped as TRANSFORM_FAILURE by the insert that
+            shows it. False (default) is tf2_ros's behaviour.
 
     Use as ``async with MessageFilter(...) as mf: async for msg in mf: ...``; leaving
     the ``async with`` stops reading the source and cancels every wait. Iteration ends
@@ -159,6 +167,7 @@ class MessageFilter(Generic[M]):
         queue_size: int = 10,
         tolerance: Duration = _NO_TOLERANCE,
         on_failure: Callable[[M, FilterFailureReason], None] | None = None,
+        fail_fast: bool = False,
     ) -> None:
         if queue_size < 0:
             raise ValueError(f"queue_size must be >= 0, got {queue_size}")
@@ -170,6 +179,7 @@ class MessageFilter(Generic[M]):
         self._queue_size = queue_size
         self._tolerance = tolerance
         self._on_failure = on_failure
+        self._fail_fast = fail_fast
         self._pending: deque[_Entry[M]] = deque()  # arrival order, waiting or ready
         self._n_waiting = 0
         self._n_ready = 0
@@ -295,6 +305,16 @@ class MessageFilter(Generic[M]):
                 if self._out_the_back(target, entry.frame, t):
                     self._drop(entry.msg, FilterFailureReason.OUT_THE_BACK)
                     return
+                if self._fail_fast:
+                    found = buf.check_transform(target, entry.frame, t, fail_fast=True)
+                    if isinstance(found, TransformException):
+                        self._drop(
+                            entry.msg,
+                            FilterFailureReason.OUT_THE_BACK
+                            if isinstance(found, BackwardExtrapolationException)
+                            else FilterFailureReason.TRANSFORM_FAILURE,
+                        )
+                        return
                 ready = False
         entry.ready = ready
         if ready:
@@ -332,7 +352,9 @@ class MessageFilter(Generic[M]):
             try:
                 for target in self._targets:
                     for t in self._times(entry.stamp):
-                        await self._buffer.wait_for_transform(target, entry.frame, t)
+                        await self._buffer.wait_for_transform(
+                            target, entry.frame, t, fail_fast=self._fail_fast
+                        )
             except TransformException:
                 if entry.scope is scope and entry in self._pending:
                     self._pending.remove(entry)

@@ -23,10 +23,12 @@ from tfbus.bus import Bus  # noqa: E402
 from tfbus.clock import ManualClock  # noqa: E402
 from tfbus.codecs.native import WireCodec  # noqa: E402
 from tfbus.errors import (  # noqa: E402
+    BackwardExtrapolationException,
     ConnectivityException,
     ForwardExtrapolationException,
     InvalidArgumentException,
     LookupException,
+    NoDataForExtrapolationException,
     TimeoutException,
     TransformException,
 )
@@ -41,6 +43,7 @@ from tfbus.messages import (  # noqa: E402
 )
 from tfbus.remote import BufferClient, BufferServer  # noqa: E402
 from tfbus.time import Time  # noqa: E402
+from tfbus.transports.ros1.action import LookupActionClient  # noqa: E402
 from tfbus.transports.zenoh import ZenohTransport  # noqa: E402
 from tfbus.transports.zenoh.router import ZenohRouter  # noqa: E402
 
@@ -265,3 +268,76 @@ async def test_requests_over_max_pending_are_refused_and_counted() -> None:
         # the slot is free again
         t = await client.lookup_transform("world", "base", Time(0), timeout=0.0)
         assert t.transform.translation.x == 1.0
+
+
+# ---------------------------------------------------------------------- fail_fast
+# The request carries "fail_fast": true; the server answers with the exception its
+# Buffer raises (same class and message). ROS 1's tf2_msgs/LookupTransform goal has no
+# such field: its client refuses fail_fast=True.
+
+
+async def test_fail_fast_travels_to_the_server_and_its_error_comes_back() -> None:
+    async with served() as s:
+        # world -> base: 10, 12 s, then 23 s (cache 10 s: only 23 s is kept, nothing
+        # before 13 s is accepted any more); base -> arm: 12 s. At 11 s the path's latest
+        # common time (12 s) keeps a plain wait waiting, but base's link never answers.
+        s.buffer.set_transform(ts("base", "arm", 12, 0.5), "test")
+        s.buffer.set_transform(ts("world", "base", 23, 5.0), "test")
+        s.buffer.set_transform_static(ts("island", "palm", 0, 1.0), "test")
+        with pytest.raises(BackwardExtrapolationException) as local:
+            await s.buffer.lookup_transform_async("world", "arm", Time(11), 30.0,
+                                                  fail_fast=True)
+        with pytest.raises(BackwardExtrapolationException) as remote:
+            await s.client.lookup_transform("world", "arm", Time(11), timeout=30.0,
+                                            fail_fast=True)
+        assert str(remote.value) == str(local.value) == (
+            "Lookup would require extrapolation at time 11.000000000, but only time "
+            "23.000000000 is in the buffer, when looking up transform from frame [arm] to "
+            "frame [world]"
+        )
+        with pytest.raises(ConnectivityException):
+            await s.client.lookup_transform_full("world", Time(11), "palm", Time(11),
+                                                 "world", timeout=30.0, fail_fast=True)
+        assert await s.client.can_transform("world", "palm", Time(11), 30.0,
+                                            fail_fast=True) is False
+        with pytest.raises(BackwardExtrapolationException):
+            await s.client.transform(PointStamped(Header(Time(11), "arm"), Point()), "world",
+                                     30.0, fail_fast=True)
+        assert s.clock.now() == Time(100) and s.buffer.pending_waits == 0
+        # Without fail_fast the server waits on its clock, then answers with the
+        # lookup's own error (tf2_ros buffer_server).
+        outcome: list[BaseException] = []
+
+        async def ask() -> None:
+            try:
+                await s.client.lookup_transform("world", "arm", Time(11), timeout=30.0)
+            except TransformException as exc:
+                outcome.append(exc)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(ask)
+            await wait_until(lambda: s.buffer.pending_waits == 1)
+            await anyio.sleep(0.05)
+            assert not outcome
+            await s.clock.advance(30.0)
+        assert type(outcome[0]) is NoDataForExtrapolationException
+
+
+async def test_a_fail_fast_field_that_is_not_a_bool_is_named() -> None:
+    async with served() as s:
+        session = s.client_bus.transport.session  # type: ignore[union-attr]
+        codec = WireCodec()
+        bad = codec.encode({"op": "lookup", "target": "world", "source": "base", "time": 0,
+                            "timeout": 0.0, "fail_fast": "yes"}, sender=1, seq=1)
+        replies = await anyio.to_thread.run_sync(
+            lambda: list(session.get(s.server.where, payload=bad, timeout=3.0))
+        )
+        answer = codec.decode(replies[0].ok.payload.to_bytes()).message
+        assert answer == {"error": "InvalidArgumentException",
+                          "message": "request field 'fail_fast' has an invalid value 'yes'"}
+
+
+async def test_the_ros1_action_client_refuses_fail_fast() -> None:
+    client = LookupActionClient.__new__(LookupActionClient)  # no ROS 1 node: refused first
+    with pytest.raises(ValueError, match="tf2_msgs/LookupTransform action's goal has no"):
+        await client.lookup_transform("world", "base", Time(13), 1.0, fail_fast=True)

@@ -34,6 +34,7 @@ cdef class Link:
 
 cdef class TimeCache(Link):
     cdef readonly int64_t cache_time_ns
+    cdef readonly bint replace_repeated
     cdef object _stamps_arr
     cdef object _values_arr
     cdef object _parents_arr
@@ -47,6 +48,7 @@ cdef class TimeCache(Link):
     cdef int _alloc(self, Py_ssize_t cap) except -1
     cdef int _alloc_parents(self, Py_ssize_t cap) except -1
     cdef int _make_room(self) except -1
+    cdef int _replace_newest(self, int parent, const double* v) except -1
 
 
 cdef class StaticCache(Link):

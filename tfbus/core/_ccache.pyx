@@ -7,7 +7,8 @@
 
   - ``insert``: refused as TF_OLD_DATA iff ``newest > stamp + cache_time``; refused as
     TF_REPEATED_DATA if a sample with the same stamp exists (the first one wins, whatever
-    its values or parent); otherwise stored, then every sample older than
+    its values or parent) — except, with ``replace_repeated``, a sample at the newest
+    stamp, whose values and parent it replaces; otherwise stored, then every sample older than
     ``newest - cache_time`` is dropped (``TimeCache::insertData`` / ``pruneList``).
   - ``gather(t)``: t = 0 gives the newest sample; a single sample answers only at its
     exact stamp; otherwise t must lie in [oldest, newest] (no extrapolation, not even
@@ -141,11 +142,14 @@ cdef class TimeCache(Link):
     Args:
         cache_time_ns: how far back from the newest sample data is kept, nanoseconds
             (values beyond int64 keep everything).
+        replace_repeated: a sample whose stamp equals the newest one replaces it (values
+            and parent) instead of being refused as TF_REPEATED_DATA.
     """
 
 
-    def __cinit__(self, cache_time_ns):
+    def __cinit__(self, cache_time_ns, replace_repeated=False):
         self.cache_time_ns = min(cache_time_ns, INT64_MAX)
+        self.replace_repeated = replace_repeated
         self._alloc(MIN_CAPACITY)
         self._head = 0
         self._tail = 0
@@ -240,6 +244,8 @@ cdef class TimeCache(Link):
             else:
                 pos = _bisect_left(st, stamp, head, tail)
                 if st[pos] == stamp:
+                    if self.replace_repeated and pos == tail - 1:
+                        return self._replace_newest(parent, v)
                     return C_REPEATED_DATA
         else:
             pos = tail
@@ -270,6 +276,21 @@ cdef class TimeCache(Link):
         horizon = st[tail - 1] - self.cache_time_ns
         if st[head] < horizon:
             self._head = _bisect_left(st, horizon, head, tail)
+        return C_OK
+
+    cdef int _replace_newest(self, int parent, const double* v) except -1:
+        """The newest sample takes ``v`` and ``parent`` (its stamp kept; nothing to prune:
+        the newest stamp is unchanged)."""
+        cdef Py_ssize_t pos = self._tail - 1
+        memcpy(&self._va[pos * 7], v, 7 * sizeof(double))
+        if self._pa != NULL:
+            self._pa[pos] = parent
+        elif parent != self._parent:
+            if pos == self._head:  # the only sample: the link's one parent changes
+                self._parent = parent
+            else:
+                self._alloc_parents(self._cap)
+                self._pa[pos] = parent
         return C_OK
 
     cdef int _make_room(self) except -1:

@@ -17,6 +17,7 @@ cdef class CoreBase:
     cdef readonly dict _authority
     cdef readonly long long _generation
     cdef int64_t _cache_ns
+    cdef bint _replace_repeated
     cdef list _memo
     cdef int64_t _memo_t[MEMO_SIZE]
     cdef long long _memo_gen[MEMO_SIZE]

@@ -234,6 +234,7 @@ cdef class CoreBase:
         self._authority = {}
         self._generation = 0
         self._cache_ns = 0
+        self._replace_repeated = False
         self._memo = [None] * MEMO_SIZE
         for k in range(MEMO_SIZE):
             self._memo_gen[k] = -1
@@ -250,6 +251,20 @@ cdef class CoreBase:
         if len(self._frame_names) > 1:
             raise RuntimeError("cache_time is fixed once transforms are stored")
         self._cache_ns = min(ns, INT64_MAX)
+
+    @property
+    def replace_repeated(self):
+        """Whether a transform whose stamp equals the newest sample of its link replaces
+        that sample (``on_repeat="replace"``) instead of being refused as
+        TF_REPEATED_DATA (tf2's rule; read-only)."""
+        return self._replace_repeated
+
+    def _set_replace_repeated(self, replace):
+        """Set :attr:`replace_repeated`; only before the first insert
+        (``BufferCore.__init__``)."""
+        if len(self._frame_names) > 1:
+            raise RuntimeError("on_repeat is fixed once transforms are stored")
+        self._replace_repeated = replace
 
     cdef object _register(self, str frame_id):
         cdef object fid = len(self._frame_names)
@@ -340,7 +355,10 @@ cdef class CoreBase:
             cid = self._register(child)
         cache = self._caches[cid]
         if cache is None:
-            cache = StaticCache() if is_static else TimeCache(self._cache_ns)
+            cache = (
+                StaticCache() if is_static
+                else TimeCache(self._cache_ns, self._replace_repeated)
+            )
             self._caches[cid] = cache
         if pid is None:
             pid = self._register(parent)

@@ -143,20 +143,23 @@ class TimeCache(Link):
     Args:
         cache_time_ns: how far back from the newest sample data is kept, nanoseconds
             (values beyond int64 keep everything).
+        replace_repeated: a sample whose stamp equals the newest one replaces it (values
+            and parent) instead of being refused as TF_REPEATED_DATA.
 
     Storage: ``(cap,) int64`` stamps and ``(cap, 7) float64`` rows, live samples sorted
     by stamp in ``[head, tail)``, plus ``(cap,) int32`` parent ids only once the link has
     had two different parents.
     """
 
-    __slots__ = ("_cap", "_ct", "_head", "_pa", "_parent", "_st", "_tail", "_va")
+    __slots__ = ("_cap", "_ct", "_head", "_pa", "_parent", "_replace", "_st", "_tail", "_va")
 
     _st: _I64
     _va: _F64
     _pa: _I32 | None
 
-    def __init__(self, cache_time_ns: int) -> None:
+    def __init__(self, cache_time_ns: int, replace_repeated: bool = False) -> None:
         self._ct = _int64(min(cache_time_ns, _INT64_MAX))
+        self._replace = bool(replace_repeated)
         self._alloc(_MIN_CAPACITY)
         self._head = 0
         self._tail = 0
@@ -167,6 +170,11 @@ class TimeCache(Link):
     def cache_time_ns(self) -> int:
         """How far back from the newest sample data is kept, ns (read-only)."""
         return self._ct
+
+    @property
+    def replace_repeated(self) -> bool:
+        """Whether a sample at the newest stamp replaces it (read-only)."""
+        return self._replace
 
     @property
     def is_static(self) -> bool:
@@ -241,6 +249,8 @@ class TimeCache(Link):
             else:
                 pos = bisect_left(st, stamp, head, tail)
                 if st.item(pos) == stamp:
+                    if self._replace and pos == tail - 1:
+                        return self._replace_newest(parent, v)
                     return REPEATED_DATA
         else:
             pos = tail
@@ -272,6 +282,23 @@ class TimeCache(Link):
         horizon = int(st.item(tail - 1)) - self._ct
         if st.item(head) < horizon:
             self._head = bisect_left(st, horizon, head, tail)
+        return OK
+
+    def _replace_newest(self, parent: int, v: Tf7) -> int:
+        """The newest sample takes ``v`` and ``parent`` (its stamp kept; nothing to prune:
+        the newest stamp is unchanged)."""
+        pos = self._tail - 1
+        self._va[pos] = v
+        pa = self._pa
+        if pa is not None:
+            pa[pos] = parent
+        elif parent != self._parent:
+            if pos == self._head:  # the only sample: the link's one parent changes
+                self._parent = parent
+            else:
+                self._alloc_parents(self._cap)
+                assert self._pa is not None
+                self._pa[pos] = parent
         return OK
 
     def _make_room(self) -> None:

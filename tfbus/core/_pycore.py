@@ -241,6 +241,7 @@ class CoreBase:
         "_last_values",
         "_memo",
         "_memo_generation",
+        "_replace_repeated",
     )
 
     _frame_ids: dict[str, int]
@@ -249,6 +250,7 @@ class CoreBase:
     _authority: dict[int, str]
     _generation: int
     _cache_ns: int
+    _replace_repeated: bool
     _memo: dict[tuple[str, str, int], TransformStamped]
     _memo_generation: int
     # What the last ``_insert_one`` did, beyond its code (read by ``_store`` and
@@ -268,6 +270,7 @@ class CoreBase:
         self._authority = {}
         self._generation = 0
         self._cache_ns = 0
+        self._replace_repeated = False
         self._memo = {}
         self._memo_generation = -1
         self._last_parent = self._last_child = ""
@@ -291,6 +294,24 @@ class CoreBase:
         if len(self._frame_names) > 1:
             raise RuntimeError("cache_time is fixed once transforms are stored")
         self._cache_ns = _int64(min(ns, _INT64_MAX))
+
+    @property
+    def replace_repeated(self) -> bool:
+        """Whether a transform whose stamp equals the newest sample of its link replaces
+        that sample (``on_repeat="replace"``) instead of being refused as
+        TF_REPEATED_DATA (tf2's rule; read-only)."""
+        return self._replace_repeated
+
+    def _set_replace_repeated(self, replace: bool) -> None:
+        """Set :attr:`replace_repeated`; only before the first insert
+        (``BufferCore.__init__``).
+
+        Raises:
+            RuntimeError: frames are already registered.
+        """
+        if len(self._frame_names) > 1:
+            raise RuntimeError("on_repeat is fixed once transforms are stored")
+        self._replace_repeated = bool(replace)
 
     def _register(self, frame_id: str) -> int:
         fid = len(self._frame_names)
@@ -371,7 +392,10 @@ class CoreBase:
             cid = self._register(child)
         cache = self._caches[cid]
         if cache is None:
-            cache = StaticCache() if is_static else TimeCache(self._cache_ns)
+            cache = (
+                StaticCache() if is_static
+                else TimeCache(self._cache_ns, self._replace_repeated)
+            )
             self._caches[cid] = cache
         pid = self._frame_ids.get(parent)
         if pid is None:

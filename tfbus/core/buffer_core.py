@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from typing import Any, Final
+from typing import Any, Final, Literal, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -71,6 +71,7 @@ from tfbus.core.text import (
 )
 from tfbus.core.velocity import lookup_velocity as _lookup_velocity
 from tfbus.errors import (
+    BackwardExtrapolationException,
     ConnectivityException,
     InvalidArgumentException,
     LookupException,
@@ -94,12 +95,16 @@ __all__ = [
     "BatchResult",
     "BufferCore",
     "FrameInfo",
+    "OnRepeat",
     "SetResult",
     "Tf7",
     "frame_path",
 ]
 
 logger = logging.getLogger("tfbus.core")
+
+OnRepeat: TypeAlias = Literal["reject", "replace"]
+"""``BufferCore(on_repeat=...)``: refuse (tf2) or replace a sample at the newest stamp."""
 
 _REFUSAL_LOG_EVERY: Final = 1000  # one TF_OLD_DATA / TF_REPEATED_DATA line per 1000
 
@@ -183,11 +188,19 @@ class BufferCore(CoreBase):
             not a bool) or a :class:`~tfbus.time.Duration`, in [0, 2**63 - 1] ns. Expiry
             happens per link on insert, relative to that link's newest stamp, exactly as
             in tf2 (no wall clock is involved).
+        on_repeat: what a dynamic transform whose stamp equals a stored sample of its
+            link does. ``"reject"`` (default, tf2's ``TimeCache::insertData`` in geometry2
+            0.7.6): refused and logged as TF_REPEATED_DATA, the first sample wins.
+            ``"replace"``: when that sample is the link's newest, the new values and
+            parent replace it (a stored transform; a publisher re-sending a corrected
+            pose at the same stamp); an equal stamp older than the newest is still
+            refused as TF_REPEATED_DATA. Static transforms always replace (tf2).
 
     Raises:
         TypeError: ``cache_time`` is not a number or Duration (checked before anything is
             allocated).
-        ValueError: ``cache_time`` is negative, infinite, NaN or beyond int64 ns.
+        ValueError: ``cache_time`` is negative, infinite, NaN or beyond int64 ns;
+            ``on_repeat`` is neither ``"reject"`` nor ``"replace"``.
 
     Frame ids are arbitrary strings compared exactly (a ``str`` subclass such as
     ``numpy.str_`` is taken as the string it is). ``set_transform`` strips one leading
@@ -200,9 +213,23 @@ class BufferCore(CoreBase):
     tf2's messages, exceptions and (count-limited) log lines.
     """
 
-    def __init__(self, cache_time: float | Duration = 10.0) -> None:
+    def __init__(
+        self, cache_time: float | Duration = 10.0, *, on_repeat: OnRepeat = "reject"
+    ) -> None:
         self._set_cache_time_ns(cache_time_ns(cache_time))
+        if on_repeat != "reject":  # (the core's default: nothing to set)
+            if on_repeat != "replace":
+                raise ValueError(
+                    f"on_repeat must be 'reject' or 'replace', got {on_repeat!r}"
+                )
+            self._set_replace_repeated(True)
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
+
+    @property
+    def on_repeat(self) -> OnRepeat:
+        """``"reject"`` or ``"replace"``: what a transform at the stamp of a stored sample
+        of its link does (see the class docstring; fixed at construction)."""
+        return "replace" if self.replace_repeated else "reject"
 
     # ------------------------------------------------------------------ inserting
 
@@ -220,9 +247,11 @@ class BufferCore(CoreBase):
             authority: who sent it (shown by ``all_frames_as_yaml``).
 
         Returns:
-            True when stored; False when the link's cache refused it — TF_OLD_DATA (older
-            than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a sample
-            with this stamp exists) — which is logged (the first, then one per 1000).
+            True when stored (or, with ``on_repeat="replace"``, when it replaced the
+            link's newest sample); False when the link's cache refused it — TF_OLD_DATA
+            (older than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a
+            sample with this stamp exists) — which is logged (the first, then one per
+            1000).
 
         Raises:
             InvalidArgumentException: malformed transform — self transform, empty
@@ -436,17 +465,27 @@ class BufferCore(CoreBase):
         return self._failure("lookupTransform", target_frame, source_frame, out)
 
     def check_transform(
-        self, target_frame: str, source_frame: str, time: Time
+        self, target_frame: str, source_frame: str, time: Time, fail_fast: bool = False
     ) -> TransformStamped | TransformException | None:
         """What a wait for ``lookup_transform(target_frame, source_frame, time)`` should do
         now, in one walk (tf2's transformable requests, ``testTransformableRequests``):
+
+        Args:
+            fail_fast: also give up when the data can never come (see Returns); False is
+                tf2_ros's behaviour, which waits for its whole timeout then.
 
         Returns:
             The transform when available; the exception when waiting cannot help — an
             invalid id (InvalidArgumentException), a loop in the path (LookupException),
             or ``time`` older than the path's latest common time minus ``cache_time``
             (ExtrapolationException); None while it may still become available (unknown
-            frames, unconnected trees, no data yet at ``time``).
+            frames, unconnected trees, no data yet at ``time``). With ``fail_fast``, also
+            the exception when the two frames are known and in different trees
+            (ConnectivityException), and when a dynamic link of the path between them
+            (by each link's newest parent) can never answer ``time``: ``time`` is older
+            than that link's newest stamp minus ``cache_time``, the oldest stamp its cache
+            still accepts (tf2 ``TimeCache::insertData`` refuses older data as
+            TF_OLD_DATA) (BackwardExtrapolationException, tf2's message for that link).
         """
         try:
             out = self._query(target_frame, source_frame, time)
@@ -457,6 +496,8 @@ class BufferCore(CoreBase):
         code = out[0]
         if code in (INVALID_ARGUMENT, LOOKUP_ERROR) or (code == EXTRAPOLATION_ERROR and out[3]):
             return self._failure("lookupTransform", target_frame, source_frame, out)
+        if fail_fast and code in (CONNECTIVITY_ERROR, EXTRAPOLATION_ERROR):
+            return self._hopeless(target_frame, source_frame, time, out)
         # An unknown target is reported first (tf2's order), but an invalid source makes
         # the wait hopeless all the same.
         if (
@@ -468,6 +509,83 @@ class BufferCore(CoreBase):
                 "lookupTransform", target_frame, source_frame, (INVALID_ARGUMENT, 1)
             )
         return None
+
+    def _hopeless(
+        self, target: str, source: str, time: Time, failure: tuple[int, ...]
+    ) -> TransformException | None:
+        """For a wait with ``fail_fast``: the exception of a failed query (connectivity or
+        extrapolation ``failure`` of ``_query`` for ``time``) that no later insert can
+        cure, else None.
+
+        * Two known frames in different trees (the walk at the time, or the frames'
+          newest parents for an extrapolation failure): ConnectivityException.
+        * A dynamic link the lookup needs — on the path between the two frames by each
+          link's newest parent, source side first (the link tf2's walk failed on may be
+          one it would not need once others have data: the target's own link when the
+          target is an ancestor of the source) — whose newest stamp minus
+          ``cache_time`` is after ``time``: its cache refuses an
+          insert that old (TF_OLD_DATA, tf2 ``TimeCache::insertData``) and pruning kept
+          nothing older, so it can never answer ``time``. BackwardExtrapolationException
+          with tf2's message for that link.
+
+        ``Time(0)`` (the latest common time) is never hopeless for lack of data: newer
+        data moves it.
+        """
+        if failure[0] == CONNECTIVITY_ERROR:
+            return self._failure("lookupTransform", target, source, failure)
+        ids = self._frame_ids
+        target_id, source_id = ids[target], ids[source]
+        err = self._ccommon_time(target_id, source_id)[0]
+        if err == CONNECTIVITY_ERROR:
+            return self._failure("lookupTransform", target, source, (CONNECTIVITY_ERROR, 0))
+        if time.ns == 0 or err != 0:
+            return None
+        used = failure[2]
+        horizon = used + self.cache_time_ns
+        caches = self._caches
+        for fid in self._links_between(source_id, target_id):
+            link = caches[fid] if 0 < fid < len(caches) else None
+            if link is None or link.is_static:
+                continue
+            newest = link.latest_stamp()
+            if newest > horizon:  # used < newest - cache_time, without overflow
+                error = self._failure(
+                    "lookupTransform", target, source, (EXTRAPOLATION_ERROR, fid, used)
+                )
+                if isinstance(error, BackwardExtrapolationException):
+                    return error
+                # One sample, at a later time: rolling names that NoDataForExtrapolation,
+                # but the time asked is before anything the link can still hold.
+                return BackwardExtrapolationException(str(error))
+        return None
+
+    def _links_between(self, source_id: int, target_id: int) -> list[int]:
+        """The child frame ids of the links between two frames by each link's newest
+        parent (source side, then target side; the lowest common ancestor's own link
+        excluded); empty when they share no ancestor (at most ``MAX_GRAPH_DEPTH`` + 1
+        frames a side)."""
+        caches = self._caches
+
+        def up(frame: int) -> list[int]:
+            walk, seen = [frame], {frame}
+            while len(walk) <= MAX_GRAPH_DEPTH:
+                link = caches[frame] if 0 < frame < len(caches) else None
+                if link is None:
+                    break
+                frame = link.latest()[1]
+                if frame == 0 or frame in seen:
+                    break
+                walk.append(frame)
+                seen.add(frame)
+            return walk
+
+        a, b = up(source_id), up(target_id)
+        in_b = {frame: j for j, frame in enumerate(b)}
+        for i, frame in enumerate(a):
+            j = in_b.get(frame)
+            if j is not None:
+                return a[:i] + b[:j]
+        return []
 
     # ------------------------------------------------------------------ batched lookups
 

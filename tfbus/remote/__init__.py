@@ -158,50 +158,59 @@ class BufferClient:
 
     @coroutine_method
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
-                               timeout: float | Duration | None = None) -> TransformStamped:
+                               timeout: float | Duration | None = None, *,
+                               fail_fast: bool = False) -> TransformStamped:
         """The server's ``lookup_transform_async(target_frame, source_frame, time,
-        timeout)`` (:meth:`tfbus.buffer.Buffer.lookup_transform_async`).
+        timeout)`` (:meth:`tfbus.buffer.Buffer.lookup_transform_async`). ``fail_fast``
+        is the server's (Zenoh's wire carries it; ROS 1's tf2_msgs/LookupTransform
+        action cannot: a ValueError there).
 
         Raises:
             The server's tf2 exception (same class, same message); TimeoutException if
             no answer came within the padded timeout; ValueError for a bad timeout;
             TransportError if the bus closed.
         """
-        return await self._client.lookup_transform(target_frame, source_frame, time, timeout)
+        return await self._client.lookup_transform(target_frame, source_frame, time, timeout,
+                                                   fail_fast=fail_fast)
 
     @coroutine_method
     async def lookup_transform_full(self, target_frame: str, target_time: Time,
                                     source_frame: str, source_time: Time, fixed_frame: str,
-                                    timeout: float | Duration | None = None
-                                    ) -> TransformStamped:
+                                    timeout: float | Duration | None = None, *,
+                                    fail_fast: bool = False) -> TransformStamped:
         """The server's ``lookup_transform_full_async`` (time travel through
-        ``fixed_frame``).
+        ``fixed_frame``); ``fail_fast`` as :meth:`lookup_transform`.
 
         Raises: as :meth:`lookup_transform`.
         """
         return await self._client.lookup_transform_full(
-            target_frame, target_time, source_frame, source_time, fixed_frame, timeout)
+            target_frame, target_time, source_frame, source_time, fixed_frame, timeout,
+            fail_fast=fail_fast)
 
     @coroutine_method
     async def can_transform(self, target_frame: str, source_frame: str, time: Time,
-                            timeout: float | Duration | None = None) -> bool:
+                            timeout: float | Duration | None = None, *,
+                            fail_fast: bool = False) -> bool:
         """Whether the server's buffer has the transform within ``timeout``; False also
-        when the server does not answer in time.
+        when the server does not answer in time. ``fail_fast`` as
+        :meth:`lookup_transform`.
 
         Raises:
             ValueError: a bad timeout. TransportError: the bus closed.
         """
-        return await self._client.can_transform(target_frame, source_frame, time, timeout)
+        return await self._client.can_transform(target_frame, source_frame, time, timeout,
+                                                fail_fast=fail_fast)
 
     @coroutine_method
     async def transform(self, obj: _M, target_frame: str,
-                        timeout: float | Duration | None = None) -> _M:
+                        timeout: float | Duration | None = None, *,
+                        fail_fast: bool = False) -> _M:
         """Express a stamped object in ``target_frame`` (tf2_ros ``BufferClient.transform``):
-        the lookup is remote, the function registered for ``type(obj)``
-        (:mod:`tfbus.convert`) is applied here.
+        the lookup is remote (``fail_fast`` as :meth:`lookup_transform`), the function
+        registered for ``type(obj)`` (:mod:`tfbus.convert`) is applied here.
 
         Raises:
             TypeError: no transform function for ``type(obj)`` (before any lookup).
             The lookup's errors, as :meth:`lookup_transform`.
         """
-        return await self._client.transform(obj, target_frame, timeout)
+        return await self._client.transform(obj, target_frame, timeout, fail_fast=fail_fast)

@@ -257,31 +257,34 @@ class LookupClient(Protocol):
     as the same :mod:`tfbus.errors` class."""
 
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
-                               timeout: float | Duration | None = None
-                               ) -> TransformStamped:
-        """tf2_ros ``BufferClient.lookup_transform``."""
+                               timeout: float | Duration | None = None, *,
+                               fail_fast: bool = False) -> TransformStamped:
+        """tf2_ros ``BufferClient.lookup_transform``; ``fail_fast`` as
+        :meth:`tfbus.buffer.Buffer.wait_for_transform`'s, where the wire carries it."""
         ...
 
     async def lookup_transform_full(self, target_frame: str, target_time: Time,
                                     source_frame: str, source_time: Time, fixed_frame: str,
-                                    timeout: float | Duration | None = None
-                                    ) -> TransformStamped:
+                                    timeout: float | Duration | None = None, *,
+                                    fail_fast: bool = False) -> TransformStamped:
         """tf2_ros ``BufferClient.lookup_transform_full``."""
         ...
 
     async def can_transform(self, target_frame: str, source_frame: str, time: Time,
-                            timeout: float | Duration | None = None) -> bool:
+                            timeout: float | Duration | None = None, *,
+                            fail_fast: bool = False) -> bool:
         """tf2_ros ``BufferClient.can_transform``."""
         ...
 
     async def transform(self, obj: _M, target_frame: str,
-                        timeout: float | Duration | None = None) -> _M:
+                        timeout: float | Duration | None = None, *,
+                        fail_fast: bool = False) -> _M:
         """tf2_ros ``BufferClient.transform``."""
         ...
 
 
 async def transform_remotely(client: LookupClient, obj: _M, target_frame: str,
-                             timeout: float | Duration | None) -> _M:
+                             timeout: float | Duration | None, fail_fast: bool = False) -> _M:
     """tf2_ros ``BufferClient.transform`` for any :class:`LookupClient`: ``obj``'s
     transform is looked up remotely (``client.lookup_transform`` at its header's frame
     and stamp), then the function registered for ``type(obj)`` (:mod:`tfbus.convert`,
@@ -295,7 +298,8 @@ async def transform_remotely(client: LookupClient, obj: _M, target_frame: str,
 
     do_transform = Buffer.registration.get(type(obj))
     header = _header_of(obj)
-    ts = await client.lookup_transform(target_frame, header.frame_id, header.stamp, timeout)
+    ts = await client.lookup_transform(target_frame, header.frame_id, header.stamp, timeout,
+                                       fail_fast=fail_fast)
     result: _M = do_transform(obj, ts)
     return result
 

@@ -886,6 +886,15 @@ class LookupActionClient:
         """The transport's :class:`ActionClient` of this namespace (made on first use)."""
         return action_client(self._transport, self.name)
 
+    @staticmethod
+    def _no_fail_fast(fail_fast: bool) -> None:
+        """tf2_msgs/LookupTransform's goal has no field for it: refuse, never drop it."""
+        if fail_fast:
+            raise ValueError(
+                "fail_fast=True cannot be sent to a ROS 1 buffer_server: the "
+                "tf2_msgs/LookupTransform action's goal has no such field (use a Zenoh "
+                "BufferServer, or a local Buffer)")
+
     def _seconds(self, timeout: float | Duration | None) -> float:
         if timeout is None:
             return self._max_wait
@@ -897,7 +906,8 @@ class LookupActionClient:
 
     @coroutine_method
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
-                               timeout: float | Duration | None = None) -> TransformStamped:
+                               timeout: float | Duration | None = None, *,
+                               fail_fast: bool = False) -> TransformStamped:
         """tf2_ros ``BufferClient.lookup_transform``: the server waits up to ``timeout``
         seconds of its clock (:meth:`tfbus.buffer.Buffer.lookup_transform_async`).
 
@@ -906,9 +916,11 @@ class LookupActionClient:
             TimeoutException if no result came within ``timeout + timeout_padding``
             wall seconds, or the result's status is not SUCCEEDED (the goal was
             REJECTED, PREEMPTED or RECALLED; tf2_ros's messages, the status and its text
-            appended); ValueError for a negative or non-finite timeout, or a time at or
-            after 2**32 s (past ROS 1 time).
+            appended); ValueError for a negative or non-finite timeout, a time at or
+            after 2**32 s (past ROS 1 time), or ``fail_fast=True`` (the action's goal
+            cannot carry it).
         """
+        self._no_fail_fast(fail_fast)
         seconds = self._seconds(timeout)
         return await self.client.lookup(target_frame, source_frame, time, seconds, Time(0),
                                         "", False, self._padding)
@@ -916,20 +928,22 @@ class LookupActionClient:
     @coroutine_method
     async def lookup_transform_full(self, target_frame: str, target_time: Time,
                                     source_frame: str, source_time: Time, fixed_frame: str,
-                                    timeout: float | Duration | None = None
-                                    ) -> TransformStamped:
+                                    timeout: float | Duration | None = None, *,
+                                    fail_fast: bool = False) -> TransformStamped:
         """tf2_ros ``BufferClient.lookup_transform_full`` (the advanced goal: time travel
         through ``fixed_frame``).
 
         Raises: as :meth:`lookup_transform`.
         """
+        self._no_fail_fast(fail_fast)
         seconds = self._seconds(timeout)
         return await self.client.lookup(target_frame, source_frame, source_time, seconds,
                                         target_time, fixed_frame, True, self._padding)
 
     @coroutine_method
     async def can_transform(self, target_frame: str, source_frame: str, time: Time,
-                            timeout: float | Duration | None = None) -> bool:
+                            timeout: float | Duration | None = None, *,
+                            fail_fast: bool = False) -> bool:
         """Whether the server answers the lookup with a transform within ``timeout``
         (tf2_ros ``BufferClient.can_transform``: a lookup whose TransformException
         means False).
@@ -937,6 +951,7 @@ class LookupActionClient:
         Raises:
             ValueError: as :meth:`lookup_transform`.
         """
+        self._no_fail_fast(fail_fast)
         try:
             await self.lookup_transform(target_frame, source_frame, time, timeout)
         except TransformException:
@@ -945,13 +960,15 @@ class LookupActionClient:
 
     @coroutine_method
     async def transform(self, obj: _M, target_frame: str,
-                        timeout: float | Duration | None = None) -> _M:
+                        timeout: float | Duration | None = None, *,
+                        fail_fast: bool = False) -> _M:
         """Express a stamped object in ``target_frame`` (tf2_ros
         ``BufferClient.transform``): the lookup is remote, the function registered for
-        ``type(obj)`` (:mod:`tfbus.convert`) is applied here.
+        ``type(obj)`` (:mod:`tfbus.convert`) is applied here. ``fail_fast=True`` is a
+        ValueError, as in :meth:`lookup_transform`.
 
         Raises:
             TypeError: no transform function for ``type(obj)`` (before any goal).
             The lookup's errors, as :meth:`lookup_transform`.
         """
-        return await transform_remotely(self, obj, target_frame, timeout)
+        return await transform_remotely(self, obj, target_frame, timeout, fail_fast)

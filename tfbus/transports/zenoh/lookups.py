@@ -16,7 +16,10 @@ Protocol: a Zenoh queryable on ``{prefix[/namespace]}/@buffer/{name}`` (a verbat
 ``@`` chunk, never matched by ``/**`` data subscriptions). A request is a tfbus wire
 payload (:mod:`tfbus.codecs.native`, plain msgpack map) ``{"op": "lookup" | "full" |
 "can", "target", "source", "time" (ns), "target_time", "source_time", "fixed",
-"timeout" (seconds of the **server's** clock, or None: forever)}``; the reply is a
+"timeout" (seconds of the **server's** clock, or None: forever)}``, plus ``"fail_fast":
+true`` when the client asks for it (:meth:`tfbus.buffer.Buffer.wait_for_transform`'s
+``fail_fast``; absent means false, so older servers and clients interoperate: an older
+server ignores the field and waits); the reply is a
 ``TransformStamped``, ``{"can": bool}`` or ``{"error": <tf2 class name>, "message":
 ...}``, raised on the client as the same :mod:`tfbus.errors` class with the same
 message. As tf2_ros's ``buffer_server`` (``checkTransforms``), a lookup whose timeout
@@ -460,6 +463,10 @@ class BufferServer:
                 f"request field 'id' has an invalid value {request['id']!r:.200}")
         timeout = _field(request, "timeout", "timeout")
         timeout = max_wait if timeout is None else min(timeout, max_wait)
+        fail_fast = request.get("fail_fast", False)
+        if not isinstance(fail_fast, bool):
+            raise InvalidArgumentException(
+                f"request field 'fail_fast' has an invalid value {fail_fast!r:.200}")
         buffer = self._buffer
         if op == "full":
             target = _field(request, "target", "frame")
@@ -469,7 +476,8 @@ class BufferServer:
             fixed = _field(request, "fixed", "frame")
             try:
                 return await buffer.lookup_transform_full_async(
-                    target, target_time, source, source_time, fixed, timeout
+                    target, target_time, source, source_time, fixed, timeout,
+                    fail_fast=fail_fast,
                 )
             except TimeoutException:
                 return buffer.lookup_transform_full(
@@ -479,9 +487,11 @@ class BufferServer:
         source = _field(request, "source", "frame")
         time = _field(request, "time", "time")
         if op == "can":
-            return {"can": await buffer.can_transform_async(target, source, time, timeout)}
+            return {"can": await buffer.can_transform_async(target, source, time, timeout,
+                                                            fail_fast=fail_fast)}
         try:
-            return await buffer.lookup_transform_async(target, source, time, timeout)
+            return await buffer.lookup_transform_async(target, source, time, timeout,
+                                                       fail_fast=fail_fast)
         except TimeoutException:
             # tf2_ros buffer_server.cpp checkTransforms: once the goal times out, the
             # answer is lookupTransform's own result or error (LookupException, ...).
@@ -552,17 +562,20 @@ class BufferClient:
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> TransformStamped:
         """The server's ``lookup_transform_async(target_frame, source_frame, time,
-        timeout)`` (:meth:`tfbus.buffer.Buffer.lookup_transform_async`).
+        timeout, fail_fast=fail_fast)`` (:meth:`tfbus.buffer.Buffer.lookup_transform_async`;
+        ``fail_fast`` travels as the request's ``"fail_fast"`` field).
 
         Raises:
             The server's tf2 exception (same class, same message); TimeoutException if
             no answer came within the padded timeout; TransportError if the bus closed.
         """
-        request = {"op": "lookup", "target": target_frame, "source": source_frame,
-                   "time": time.ns}
-        return _typed(await self._ask(request, timeout), TransformStamped)
+        request: dict[str, Any] = {"op": "lookup", "target": target_frame,
+                                   "source": source_frame, "time": time.ns}
+        return _typed(await self._ask(request, timeout, fail_fast), TransformStamped)
 
     @coroutine_method
     async def lookup_transform_full(
@@ -573,16 +586,18 @@ class BufferClient:
         source_time: Time,
         fixed_frame: str,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> TransformStamped:
         """The server's ``lookup_transform_full_async`` (time travel through
         ``fixed_frame``).
 
         Raises: as :meth:`lookup_transform`.
         """
-        request = {"op": "full", "target": target_frame, "target_time": target_time.ns,
-                   "source": source_frame, "source_time": source_time.ns,
-                   "fixed": fixed_frame}
-        return _typed(await self._ask(request, timeout), TransformStamped)
+        request: dict[str, Any] = {
+            "op": "full", "target": target_frame, "target_time": target_time.ns,
+            "source": source_frame, "source_time": source_time.ns, "fixed": fixed_frame}
+        return _typed(await self._ask(request, timeout, fail_fast), TransformStamped)
 
     @coroutine_method
     async def can_transform(
@@ -591,25 +606,32 @@ class BufferClient:
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> bool:
         """Whether the server's buffer has the transform within ``timeout``
-        (:meth:`tfbus.buffer.Buffer.can_transform_async`); False also when the server
-        does not answer in time.
+        (:meth:`tfbus.buffer.Buffer.can_transform_async`, ``fail_fast`` too); False also
+        when the server does not answer in time.
 
         Raises:
             TransportError: the bus closed.
         """
-        request = {"op": "can", "target": target_frame, "source": source_frame,
-                   "time": time.ns}
+        request: dict[str, Any] = {"op": "can", "target": target_frame,
+                                   "source": source_frame, "time": time.ns}
         try:
-            answer = await self._ask(request, timeout)
+            answer = await self._ask(request, timeout, fail_fast)
         except TransformException:
             return False
         return isinstance(answer, dict) and answer.get("can") is True
 
     @coroutine_method
     async def transform(
-        self, obj: _M, target_frame: str, timeout: float | Duration | None = None
+        self,
+        obj: _M,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
     ) -> _M:
         """Express a stamped object in ``target_frame`` (tf2_ros ``BufferClient.transform``):
         the lookup is remote, the function registered for ``type(obj)``
@@ -619,9 +641,12 @@ class BufferClient:
             TypeError: no transform function for ``type(obj)`` (before any query).
             The lookup's errors, as :meth:`lookup_transform`.
         """
-        return await transform_remotely(self, obj, target_frame, timeout)
+        return await transform_remotely(self, obj, target_frame, timeout, fail_fast)
 
-    async def _ask(self, request: dict[str, Any], timeout: float | Duration | None) -> object:
+    async def _ask(self, request: dict[str, Any], timeout: float | Duration | None,
+                   fail_fast: bool = False) -> object:
+        if fail_fast:
+            request["fail_fast"] = True
         if isinstance(timeout, Duration):
             timeout = timeout.to_sec()
         if timeout is not None and (
