@@ -18,7 +18,9 @@ Rows (target):
 * ``lookup_transform`` never repeated, interpolated: depth 2 <= 0.20x tf2_py, depth 8
   and 32 <= 0.55x; depth 2 at time 0 right after an insert <= 0.20x;
 * ``lookup_transforms``, N = 10 000 times, depth 8, every link interpolated, times
-  sorted, random, reversed and duplicated: <= 0.03x a tf2_py loop and <= 120 ns/time;
+  sorted, random, reversed and duplicated: <= 0.03x a tf2_py loop and <= 120 ns/time
+  (wall time; the CPU time of both threads printed beside it); and at N = 8192 (the
+  two-thread split) never slower per time than at N = 8191 (one thread);
 * against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``,
   built here with g++ and pkg-config; ``bench_core.cpp_scenario``), alternated rounds,
   each row the median of the per-round ratios with their min..max: ``lookup_transform``
@@ -181,6 +183,7 @@ class Ours:
             (shape, n): _stream(shape, n, c["t0_ns"], c["period_ns"]) for shape, n in SIZES
         }
         self.orders = {k: np.array(v, dtype=np.int64) for k, v in sc["batch"]["orders"].items()}
+        self.split_times = {n: bench_sensors.query_times(n) for n in (8191, 8192)}
 
     def _best(self, fn: Callable[[], float]) -> float:
         return min(fn() for _ in range(RUNS))
@@ -211,16 +214,32 @@ class Ours:
         fresh = bench_core._chain(lk, 2)
         out["2/zero_fresh"] = bench_core._fresh_zero(fresh, "f2", {**lk, "repeats": RUNS})
         batch: dict[str, float] = {}
+        batch_cpu: dict[str, float] = {}
         leaf = f"f{self.sc['batch']['depth']}"
         for name, times in self.orders.items():
+            cpu: list[float] = []
 
-            def one(times: Any = times) -> float:
-                start = time.perf_counter()
+            def one(times: Any = times, cpu: list[float] = cpu) -> float:
+                start, start_cpu = time.perf_counter(), time.process_time()
                 self.batch_core.lookup_transforms("f0", leaf, times)
+                cpu.append((time.process_time() - start_cpu) / times.shape[0])
                 return (time.perf_counter() - start) / times.shape[0]
 
             batch[name] = self._best(one)
+            batch_cpu[name] = min(cpu)  # both threads' CPU time (process time)
         out["batch"] = batch
+        out["batch_cpu"] = batch_cpu
+        # Either side of the two-thread split (from 8192 rows on), alternated.
+        split: dict[str, list[float]] = {}
+        for _ in range(RUNS):
+            for n, times in self.split_times.items():
+                start, start_cpu = time.perf_counter(), time.process_time()
+                self.batch_core.lookup_transforms("f0", leaf, times)
+                wall = (time.perf_counter() - start) / n
+                cpu_t = (time.process_time() - start_cpu) / n
+                split.setdefault(f"{n}", []).append(wall)
+                split.setdefault(f"{n}/cpu", []).append(cpu_t)
+        out["split"] = {k: min(v) for k, v in split.items()}
         return out
 
 
@@ -317,12 +336,15 @@ def core_rows(rows: Rows, rounds: int) -> None:
         a, b = col(ours, "batch", order), col(theirs, "batch", order)
         q = _ratio(a, b)
         per = statistics.median(a)
+        cpu = statistics.median(col(ours, "batch_cpu", order))
         rows.row(
             f"lookup_transforms N=10000 depth 8, {order}",
-            f"{per * 1e9:.0f} ns/time vs tf2_py loop {us(statistics.median(b))} = {q:.3f}x",
+            f"{per * 1e9:.0f} ns/time wall, {cpu * 1e9:.0f} CPU vs tf2_py loop "
+            f"{us(statistics.median(b))} = {q:.3f}x",
             q <= 0.03 and per <= 120e-9,
             "<= 0.03x and <= 120 ns/time",
         )
+    split_row(rows, ours)
 
 
 def _spread(ratios: list[float]) -> str:
@@ -407,6 +429,23 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
 WAKE_TARGETS = {"direct": 1.5, "bus": 2.0}
 """Wake-up of an awaiting lookup over the plain Event floor: by a direct
 ``Buffer.set_transform``, and through ``send_transform`` -> bus -> listener -> buffer."""
+
+
+def split_row(rows: Rows, ours: list[dict[str, Any]]) -> None:
+    """``lookup_transforms`` at N = 8192 (two threads, unless a recent split lost) against
+    N = 8191 (one thread), wall time per time, CPU time beside: never slower."""
+    ratios = [x["split"]["8192"] / x["split"]["8191"] for x in ours]
+    one = statistics.median(x["split"]["8191"] for x in ours)
+    two = statistics.median(x["split"]["8192"] for x in ours)
+    cpu1 = statistics.median(x["split"]["8191/cpu"] for x in ours)
+    cpu2 = statistics.median(x["split"]["8192/cpu"] for x in ours)
+    rows.row(
+        "lookup_transforms N=8192 (split) vs N=8191",
+        f"{two * 1e9:.0f} vs {one * 1e9:.0f} ns/time wall (CPU {cpu2 * 1e9:.0f} vs "
+        f"{cpu1 * 1e9:.0f}) = {_spread(ratios)}",
+        statistics.median(ratios) <= 1.0,
+        "<= 1.0x: never slower",
+    )
 
 
 def wakeup_rows(rows: Rows, repeats: int) -> None:
