@@ -23,6 +23,7 @@ Rows (target):
   two-thread split) never slower per time than at N = 8191 (one thread);
 * against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``,
   built here with g++ and pkg-config; ``bench_core.cpp_scenario``), alternated rounds,
+  each side's thread CPU time per call (best run; preemption by other work stays out),
   each row the median of the per-round ratios with their min..max: ``lookup_transform``
   on chains of depth 1, 2, 8 and 64 at never-repeated interpolated times spread over
   10 s of history (<= 1.3x, 1.1x, 1.0x, 1.0x; the same with times in the newest 100 ms
@@ -380,7 +381,7 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
     mem = bench_core.tfbus_memory_fresh(sc["mem_frames"], sc["mem_samples"])
 
     def ns(v: float) -> str:
-        return f"{v * 1e9:,.0f} ns"
+        return f"{v * 1e9:,.0f} ns CPU"
 
     for depth, target in CPP_TARGETS.items():
         for label in ("interp", "recent"):

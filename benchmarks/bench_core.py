@@ -327,8 +327,8 @@ def build_cpp(out_dir: Path) -> Path | str:
 
 def cpp_round(exe: Path, sc: dict[str, Any]) -> dict[str, Any]:
     """One run of the C++ side: ``{"lookup_s": {"<depth>/interp" | "<depth>/recent": s},
-    "fill_s": s, "steady_s": s, "rss_bytes_per_sample": bytes}`` (seconds per call, best
-    of ``repeats`` runs).
+    "fill_s": s, "steady_s": s, "rss_bytes_per_sample": bytes}`` (CPU seconds per call,
+    best of ``repeats`` runs).
 
     Raises:
         RuntimeError: the program failed (its stderr).
@@ -372,32 +372,40 @@ class CppSideOurs:
         self.steady = _star(sc, sc["steady_warm"], sc["steady_samples"])
 
     def round(self) -> dict[str, Any]:
+        """This thread's CPU seconds per call, best run (``time.thread_time``, as the C++
+        side's ``CLOCK_THREAD_CPUTIME_ID``: other work preempting either side on a
+        shared machine stays out of the ratios)."""
         sc = self.sc
+        clock = time.thread_time
         lookups: dict[str, float] = {}
         for depth, core in self.chains.items():
             leaf = f"f{depth}"
+            lookup = core.lookup_transform
             for label, runs in self.times.items():
-                lookups[f"{depth}/{label}"] = _best_per_call(
-                    lambda t, lookup=core.lookup_transform, leaf=leaf: lookup("f0", leaf, t),
-                    runs,
-                )
+                best = float("inf")
+                for run in runs:
+                    start = clock()
+                    for t in run:
+                        lookup("f0", leaf, t)
+                    best = min(best, (clock() - start) / len(run))
+                lookups[f"{depth}/{label}"] = best
         cache_time = sc["cache_time_s"]
         fill = float("inf")
         for _ in range(sc["fill_buffers"]):
             setter = BufferCore(cache_time=cache_time).set_transform
-            start = time.perf_counter()
+            start = clock()
             for m in self.fill:
                 setter(m, "bench")
-            fill = min(fill, (time.perf_counter() - start) / len(self.fill))
+            fill = min(fill, (clock() - start) / len(self.fill))
         steady = float("inf")
         for _ in range(sc["repeats"]):
             setter = BufferCore(cache_time=cache_time).set_transform
             for m in self.warm:
                 setter(m, "bench")
-            start = time.perf_counter()
+            start = clock()
             for m in self.steady:
                 setter(m, "bench")
-            steady = min(steady, (time.perf_counter() - start) / len(self.steady))
+            steady = min(steady, (clock() - start) / len(self.steady))
         return {"lookup_s": lookups, "fill_s": fill, "steady_s": steady}
 
 
