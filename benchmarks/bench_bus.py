@@ -275,6 +275,104 @@ async def event_floor_run(samples: int, warmup: int) -> LatencyResult:
     return LatencyResult([woke_at[i] - sent_at[i] for i in kept])
 
 
+def _native_yield(backend: str) -> Callable[[], Awaitable[None]]:
+    """The ``backend`` loop's own cheapest yield to other tasks (``asyncio.sleep(0)``,
+    ``trio.lowlevel.cancel_shielded_checkpoint()``), looked up once: the plain floor's
+    setter pays only this to let the waiter run, not anyio's per-call backend lookup."""
+    if backend == "trio":
+        import trio
+
+        return trio.lowlevel.cancel_shielded_checkpoint
+    import asyncio
+
+    return partial(asyncio.sleep, 0)
+
+
+async def plain_floor_run(samples: int, warmup: int, backend: str) -> LatencyResult:
+    """The plain floor of a wake-up: ``event.set()`` on a bare ``anyio.Event``, then the
+    setter yields with the loop's own cheapest yield and the awaiting task resumes.
+    ``perf_counter_ns()`` right before ``set()`` to right after the waiter's ``await``
+    returns (the hand-off protocol of :func:`event_floor_run`)."""
+    total = warmup + samples
+    events = [anyio.Event() for _ in range(total + 1)]
+    sent_at = [0] * (total + 1)
+    woke_at = [0] * (total + 1)
+    done = 0
+    waiting = False
+    yield_now = _native_yield(backend)
+    async with anyio.create_task_group() as tg:
+
+        async def waiter() -> None:
+            nonlocal done, waiting
+            for i in range(1, total + 1):
+                waiting = True
+                await events[i].wait()
+                woke_at[i] = time.perf_counter_ns()
+                waiting = False
+                done = i
+
+        tg.start_soon(waiter)
+        gc.collect()
+        for i in range(1, total + 1):
+            while done != i - 1 or not waiting:
+                await anyio.lowlevel.checkpoint()
+            for _ in range(3):
+                await anyio.lowlevel.checkpoint()
+            sent_at[i] = time.perf_counter_ns()
+            events[i].set()
+            await yield_now()
+        while done != total:
+            await anyio.lowlevel.checkpoint()
+    kept = range(warmup + 1, total + 1)
+    return LatencyResult([woke_at[i] - sent_at[i] for i in kept])
+
+
+async def direct_run(samples: int, warmup: int, backend: str) -> LatencyResult:
+    """A wake-up by a direct insert: one task awaits ``buffer.lookup_transform_async``
+    for a stamp not held yet, another calls ``buffer.set_transform`` with it and yields
+    as :func:`plain_floor_run`'s setter does (no bus, no listener).
+    ``perf_counter_ns()`` right before ``set_transform`` to right after the waiter's
+    ``await`` returns."""
+    total = warmup + samples
+    clock = SystemClock()
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    t0 = clock.now().ns + 3600 * NS  # an hour ahead: a future time in every sense
+    messages = [_probe(t0 + i * MS) for i in range(total + 1)]
+    sent_at = [0] * (total + 1)
+    woke_at = [0] * (total + 1)
+    done = 0
+    yield_now = _native_yield(backend)
+    try:
+        buffer.set_transform(messages[0])
+        async with anyio.create_task_group() as tg:
+
+            async def waiter() -> None:
+                nonlocal done
+                for i in range(1, total + 1):
+                    await buffer.lookup_transform_async(
+                        "world", "probe", Time.from_ns(t0 + i * MS), timeout=None
+                    )
+                    woke_at[i] = time.perf_counter_ns()
+                    done = i
+
+            tg.start_soon(waiter)
+            gc.collect()
+            for i in range(1, total + 1):
+                while done != i - 1 or buffer.pending_waits != 1:
+                    await anyio.lowlevel.checkpoint()
+                for _ in range(3):
+                    await anyio.lowlevel.checkpoint()
+                sent_at[i] = time.perf_counter_ns()
+                buffer.set_transform(messages[i])
+                await yield_now()
+            while done != total:
+                await anyio.lowlevel.checkpoint()
+    finally:
+        buffer.close()
+    kept = range(warmup + 1, total + 1)
+    return LatencyResult([woke_at[i] - sent_at[i] for i in kept])
+
+
 def bench_latency(backend: str, cfg: Config) -> None:
     print(f"\n[{backend}] wake-up latency, send_transform -> awaiting lookup_transform_async")
     print(

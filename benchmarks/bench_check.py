@@ -1,6 +1,7 @@
-"""Speed regression guard: the core's targets against tf2_py, PASS or FAIL.
+"""Speed regression guard: the core's targets against tf2_py and C++ tf2, PASS or FAIL.
 
-    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1]   # or: make bench-check
+    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP]
+    # or: make bench-check; GROUP is core, cpp, wakeup or ros1 (repeatable)
 
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
@@ -18,17 +19,31 @@ Rows (target):
 * ``lookup_transform`` never repeated, interpolated: depth 2 <= 0.20x tf2_py, depth 8
   and 32 <= 0.55x; depth 2 at time 0 right after an insert <= 0.20x;
 * ``lookup_transforms``, N = 10 000 times, depth 8, every link interpolated, times
-  sorted, random, reversed and duplicated: <= 0.03x a tf2_py loop and <= 120 ns/time;
-* wake-up of a waiting lookup: <= 3x a bare anyio Event (median of per-repeat ratios,
-  as ``bench_bus.py``), asyncio and trio;
+  sorted, random, reversed and duplicated: <= 0.03x a tf2_py loop and <= 120 ns/time
+  (wall time; the CPU time of both threads printed beside it); and at N = 8192 (the
+  two-thread split) never slower per time than at N = 8191 (one thread);
+* against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``,
+  built here with g++ and pkg-config; ``bench_core.cpp_scenario``), alternated rounds,
+  each side's thread CPU time per call (best run; preemption by other work stays out),
+  each row the median of the per-round ratios with their min..max: ``lookup_transform``
+  on chains of depth 1, 2, 8 and 64 at never-repeated interpolated times spread over
+  10 s of history (<= 1.3x, 1.1x, 1.0x, 1.0x; the same with times in the newest 100 ms
+  for information); ``set_transform`` on a star of 10 links, a fresh buffer's first 200
+  samples per link (<= 1.3x: no fill phase) and the steady state, a full 10 s cache
+  (<= 1.0x); memory per sample, RSS growth of 200 000 samples (<= 1.0x);
+* wake-up of a waiting lookup against the plain floor (``bench_bus.plain_floor_run``:
+  a bare ``anyio.Event`` set, the loop's own yield, the waiter resumes), by a direct
+  ``Buffer.set_transform`` (<= 1.5x) and through ``send_transform`` -> bus -> listener ->
+  buffer (<= 2.0x), asyncio and trio (median of per-repeat ratios, min..max beside it);
 * ROS 1 receive latency, 100 Hz x 50 transforms, 10 s: <= 1.5x a roscpp subscriber in
   the same run (median of 3 runs, ``bench_ros1.py``), nothing lost; once with constant
   values (a robot's fixed joints) and once with every value changing in every message
   (a robot moving every joint: nothing the decoder can share) (``--no-ros1`` skips
   both).
 
-Prints one line per row, its figures, the target and PASS or FAIL; exit status 1 if a
-row fails (2 if tf2_py cannot run). Not part of ``make test`` (a timing is never a
+Prints one line per row, its figures, the target and PASS or FAIL, and the load average
+(2 cores are shared: only same-run ratios mean anything); exit status 1 if a row fails
+(2 if tf2 cannot run). Not part of ``make test`` (a timing is never a
 test); run it before and after a change to the core (CONTRIBUTING.md).
 """
 
@@ -170,6 +185,7 @@ class Ours:
             (shape, n): _stream(shape, n, c["t0_ns"], c["period_ns"]) for shape, n in SIZES
         }
         self.orders = {k: np.array(v, dtype=np.int64) for k, v in sc["batch"]["orders"].items()}
+        self.split_times = {n: bench_sensors.query_times(n) for n in (8191, 8192)}
 
     def _best(self, fn: Callable[[], float]) -> float:
         return min(fn() for _ in range(RUNS))
@@ -200,16 +216,32 @@ class Ours:
         fresh = bench_core._chain(lk, 2)
         out["2/zero_fresh"] = bench_core._fresh_zero(fresh, "f2", {**lk, "repeats": RUNS})
         batch: dict[str, float] = {}
+        batch_cpu: dict[str, float] = {}
         leaf = f"f{self.sc['batch']['depth']}"
         for name, times in self.orders.items():
+            cpu: list[float] = []
 
-            def one(times: Any = times) -> float:
-                start = time.perf_counter()
+            def one(times: Any = times, cpu: list[float] = cpu) -> float:
+                start, start_cpu = time.perf_counter(), time.process_time()
                 self.batch_core.lookup_transforms("f0", leaf, times)
+                cpu.append((time.process_time() - start_cpu) / times.shape[0])
                 return (time.perf_counter() - start) / times.shape[0]
 
             batch[name] = self._best(one)
+            batch_cpu[name] = min(cpu)  # both threads' CPU time (process time)
         out["batch"] = batch
+        out["batch_cpu"] = batch_cpu
+        # Either side of the two-thread split (from 8192 rows on), alternated.
+        split: dict[str, list[float]] = {}
+        for _ in range(RUNS):
+            for n, times in self.split_times.items():
+                start, start_cpu = time.perf_counter(), time.process_time()
+                self.batch_core.lookup_transforms("f0", leaf, times)
+                wall = (time.perf_counter() - start) / n
+                cpu_t = (time.process_time() - start_cpu) / n
+                split.setdefault(f"{n}", []).append(wall)
+                split.setdefault(f"{n}/cpu", []).append(cpu_t)
+        out["split"] = {k: min(v) for k, v in split.items()}
         return out
 
 
@@ -306,36 +338,147 @@ def core_rows(rows: Rows, rounds: int) -> None:
         a, b = col(ours, "batch", order), col(theirs, "batch", order)
         q = _ratio(a, b)
         per = statistics.median(a)
+        cpu = statistics.median(col(ours, "batch_cpu", order))
         rows.row(
             f"lookup_transforms N=10000 depth 8, {order}",
-            f"{per * 1e9:.0f} ns/time vs tf2_py loop {us(statistics.median(b))} = {q:.3f}x",
+            f"{per * 1e9:.0f} ns/time wall, {cpu * 1e9:.0f} CPU vs tf2_py loop "
+            f"{us(statistics.median(b))} = {q:.3f}x",
             q <= 0.03 and per <= 120e-9,
             "<= 0.03x and <= 120 ns/time",
         )
+    split_row(rows, ours)
+
+
+def _spread(ratios: list[float]) -> str:
+    """``median x (min..max)`` of per-round ratios."""
+    return f"{statistics.median(ratios):.2f}x ({min(ratios):.2f}..{max(ratios):.2f})"
+
+
+CPP_TARGETS = {1: 1.3, 2: 1.1, 8: 1.0, 64: 1.0}
+"""lookup_transform at depth d, never-repeated interpolated times: <= this x C++ tf2."""
+
+
+def cpp_rows(rows: Rows, rounds: int) -> None:
+    """The core rows against Debian's ``tf2::BufferCore`` called from C++
+    (``tf2_buffer_core_bench.cpp``): tfbus's round, then C++'s, ``rounds`` times; each
+    row judges the median of the per-round ratios and prints min..max beside it."""
+    names = [f"lookup_transform depth {d} vs C++ tf2" for d in CPP_TARGETS]
+    names += ["set_transform, first 200 samples vs C++", "set_transform, steady vs C++",
+              "memory per sample (RSS) vs C++"]  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        exe = bench_core.build_cpp(Path(tmp))
+        if isinstance(exe, str):
+            for name in names:
+                rows.row(name, f"not run: {exe}", False, "")
+            return
+        sc = bench_core.cpp_scenario(repeats=RUNS)
+        ours_side = bench_core.CppSideOurs(sc)
+        ours: list[dict[str, Any]] = []
+        theirs: list[dict[str, Any]] = []
+        for r in range(rounds):
+            print(f"  (C++ round {r + 1}/{rounds}, load {os.getloadavg()[0]:.2f})", flush=True)
+            ours.append(ours_side.round())
+            theirs.append(bench_core.cpp_round(exe, sc))
+    mem = bench_core.tfbus_memory_fresh(sc["mem_frames"], sc["mem_samples"])
+
+    def ns(v: float) -> str:
+        return f"{v * 1e9:,.0f} ns CPU"
+
+    for depth, target in CPP_TARGETS.items():
+        for label in ("interp", "recent"):
+            key = f"{depth}/{label}"
+            a = [x["lookup_s"][key] for x in ours]
+            b = [x["lookup_s"][key] for x in theirs]
+            ratios = [p / q for p, q in zip(a, b, strict=True)]
+            figures = (
+                f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}"
+            )
+            if label == "interp":
+                rows.row(
+                    f"lookup_transform depth {depth} vs C++ tf2",
+                    figures,
+                    statistics.median(ratios) <= target,
+                    f"<= {target:.1f}x C++",
+                )
+            else:
+                print(f"  info  {'  the same, times in the newest 100 ms':46} {figures}")
+    for key, label, target in (
+        ("fill_s", "set_transform, first 200 samples vs C++", 1.3),
+        ("steady_s", "set_transform, steady vs C++", 1.0),
+    ):
+        a = [x[key] for x in ours]
+        b = [x[key] for x in theirs]
+        ratios = [p / q for p, q in zip(a, b, strict=True)]
+        rows.row(
+            label,
+            f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}",
+            statistics.median(ratios) <= target,
+            f"<= {target:.1f}x C++",
+        )
+    fills = [x["fill_s"] / x["steady_s"] for x in ours]
+    print(f"  info  {'  tfbus first 200 / tfbus steady':46} {_spread(fills)}")
+    theirs_rss = statistics.median(x["rss_bytes_per_sample"] for x in theirs)
+    q = mem["rss_bytes_per_sample"] / theirs_rss
+    rows.row(
+        "memory per sample (RSS) vs C++",
+        f"{mem['rss_bytes_per_sample']:.1f} B (traced {mem['traced_bytes_per_sample']:.1f} B) "
+        f"vs {theirs_rss:.1f} B = {q:.2f}x",
+        q <= 1.0,
+        "<= 1.0x C++",
+    )
+
+
+WAKE_TARGETS = {"direct": 1.5, "bus": 2.0}
+"""Wake-up of an awaiting lookup over the plain Event floor: by a direct
+``Buffer.set_transform``, and through ``send_transform`` -> bus -> listener -> buffer."""
+
+
+def split_row(rows: Rows, ours: list[dict[str, Any]]) -> None:
+    """``lookup_transforms`` at N = 8192 (two threads, unless a recent split lost) against
+    N = 8191 (one thread), wall time per time, CPU time beside: never slower."""
+    ratios = [x["split"]["8192"] / x["split"]["8191"] for x in ours]
+    one = statistics.median(x["split"]["8191"] for x in ours)
+    two = statistics.median(x["split"]["8192"] for x in ours)
+    cpu1 = statistics.median(x["split"]["8191/cpu"] for x in ours)
+    cpu2 = statistics.median(x["split"]["8192/cpu"] for x in ours)
+    rows.row(
+        "lookup_transforms N=8192 (split) vs N=8191",
+        f"{two * 1e9:.0f} vs {one * 1e9:.0f} ns/time wall (CPU {cpu2 * 1e9:.0f} vs "
+        f"{cpu1 * 1e9:.0f}) = {_spread(ratios)}",
+        statistics.median(ratios) <= 1.0,
+        "<= 1.0x: never slower",
+    )
 
 
 def wakeup_rows(rows: Rows, repeats: int) -> None:
+    """Each repeat measures the plain floor (``bench_bus.plain_floor_run``: ``set()``,
+    the loop's own yield, the waiter resumes), then the direct insert and the bus path;
+    each row judges the median of the per-repeat ratios (min..max beside it)."""
     cfg = bench_bus.QUICK
+    n, warm = cfg.latency_samples, cfg.latency_warmup
     for backend in bench_bus.BACKENDS:
-        ratios = []
+        ratios: dict[str, list[float]] = {"direct": [], "bus": [], "anyio_floor": []}
+        floors: list[float] = []
         for _ in range(repeats):
-            floor = anyio.run(
-                bench_bus.event_floor_run, cfg.latency_samples, cfg.latency_warmup, backend=backend
+            floor = anyio.run(bench_bus.plain_floor_run, n, warm, backend, backend=backend)
+            old_floor = anyio.run(bench_bus.event_floor_run, n, warm, backend=backend)
+            direct = anyio.run(bench_bus.direct_run, n, warm, backend, backend=backend)
+            bus = anyio.run(bench_bus.latency_run, n, warm, None, backend=backend)
+            floors.append(floor.median_ms * 1e3)
+            ratios["direct"].append(direct.median_ms / floor.median_ms)
+            ratios["bus"].append(bus.median_ms / floor.median_ms)
+            ratios["anyio_floor"].append(old_floor.median_ms / floor.median_ms)
+        for key, label in (("direct", "direct insert"), ("bus", "through the bus")):
+            target = WAKE_TARGETS[key]
+            rows.row(
+                f"wake-up, {label}, {backend}",
+                f"{_spread(ratios[key])} of the plain floor {statistics.median(floors):.2f} us",
+                statistics.median(ratios[key]) <= target,
+                f"<= {target:.1f}x the floor",
             )
-            wake = anyio.run(
-                bench_bus.latency_run,
-                cfg.latency_samples,
-                cfg.latency_warmup,
-                None,
-                backend=backend,
-            )
-            ratios.append(wake.median_ms / floor.median_ms)
-        q = statistics.median(ratios)
-        rows.row(
-            f"wake-up vs a bare anyio Event, {backend}",
-            f"{q:.2f}x (per repeat: {' '.join(f'{x:.2f}' for x in ratios)})",
-            q <= 3.0,
-            "<= 3x the floor",
+        print(
+            f"  info  {'  floor with an anyio checkpoint (old floor)':46} "
+            f"{_spread(ratios['anyio_floor'])} of the plain floor"
         )
 
 
@@ -378,17 +521,31 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=5, help="interleaved rounds (default 5)")
     parser.add_argument("--no-ros1", action="store_true", help="skip the ROS 1 row")
+    parser.add_argument("--only", choices=("core", "cpp", "wakeup", "ros1"), action="append",
+                        help="run only these groups of rows (repeatable; default all)")
     args = parser.parse_args(argv)
+    if args.rounds < 3:
+        parser.error("--rounds must be at least 3 (a median of per-round ratios)")
+    groups = set(args.only or ("core", "cpp", "wakeup", "ros1"))
+    if args.no_ros1:
+        groups.discard("ros1")
     load0 = os.getloadavg()[0]
-    print(f"bench-check: tfbus vs tf2_py, {args.rounds} interleaved rounds (load {load0:.2f})")
+    print(
+        f"bench-check: tfbus vs tf2_py and C++ tf2, {args.rounds} interleaved rounds "
+        f"(load {load0:.2f}, {os.cpu_count()} cores)"
+    )
     rows = Rows()
     try:
-        core_rows(rows, args.rounds)
+        if "core" in groups:
+            core_rows(rows, args.rounds)
+        if "cpp" in groups:
+            cpp_rows(rows, args.rounds)
     except RuntimeError as exc:
-        print(f"  tf2_py unavailable: {exc}")
+        print(f"  tf2 unavailable: {exc}")
         return 2
-    wakeup_rows(rows, args.rounds)
-    if not args.no_ros1:
+    if "wakeup" in groups:
+        wakeup_rows(rows, args.rounds)
+    if "ros1" in groups:
         ros1_rows(rows, 3)
     print(f"{rows.failed} row(s) failed (load {load0:.2f} -> {os.getloadavg()[0]:.2f})")
     return 1 if rows.failed else 0

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -40,6 +41,7 @@ from tfbus.core import COMPILED, BufferCore
 NS = 1_000_000_000
 TF2_PYTHON = "/usr/bin/python3"
 TF2_SIDE = Path(__file__).resolve().parents[1] / "peers" / "debian" / "tf2_side.py"
+TF2_CPP = Path(__file__).resolve().parents[1] / "peers" / "debian" / "tf2_buffer_core_bench.cpp"
 MEMORY_TARGET = 72  # bytes per cached sample
 LOOKUP_DEPTH2_TARGET = 0.20  # target: never-repeated depth-2 lookup vs tf2_py
 
@@ -228,6 +230,213 @@ def tfbus_memory(sc: dict[str, Any]) -> dict[str, float]:
     current, _ = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return {"traced_bytes_per_sample": (current - base) / samples, "rss_bytes_per_sample": rss}
+
+
+# ---------------------------------------------------------------------- C++ tf2 reference
+#
+# The core rows against Debian's tf2::BufferCore called from C++ (``tf2_buffer_core_bench.cpp``,
+# built with g++ and pkg-config): the same workloads on both sides, handed over on stdin.
+
+CPP_DEPTHS = (1, 2, 8, 64)
+FILL_SAMPLES = 200  # a link's first samples: the phase in which its storage grows
+
+
+def cpp_scenario(calls: int = 5_000, repeats: int = 3, mem_frames: int = 200) -> dict[str, Any]:
+    """The workloads of the C++ reference rows (both sides run exactly these):
+
+    * lookups on chains f0 <- ... <- f<depth> of 1001 samples per link (10 s at 100 Hz),
+      at ``calls * repeats`` interpolated times never repeated, spread over the whole
+      history (``interp``) and within its newest 100 ms (``recent``: what a robot asks);
+    * ``set_transform`` on a star of 10 links, every link at each 100 Hz stamp in turn: a
+      fresh buffer's first 200 samples per link (``fill``), and 500 more after 1100 (the
+      steady state: a full 10 s cache, pruning on every insert);
+    * memory per sample: RSS growth of ``mem_frames`` x 1000 samples, frame by frame.
+    """
+    base = scenario(True)
+    t0, period = base["set_t0_ns"], base["period_ns"]
+    span = (len(base["chain_stamps"]) - 1) * period
+    spread: list[int] = []
+    recent: list[int] = []
+    window = 10 * period
+    k = 0
+    while len(spread) < calls * repeats:
+        q = t0 + 1 + (k * 2_654_435_761) % (span - 2)
+        k += 1
+        if (q - t0) % period:
+            spread.append(q)
+    k = 0
+    while len(recent) < calls * repeats:
+        q = t0 + span - window + 1 + (k * 7_919) % (window - 2)
+        k += 1
+        if (q - t0) % period:
+            recent.append(q)
+    return {
+        "cache_time_s": base["cache_time_s"],
+        "period_ns": period,
+        "t0_ns": t0,
+        "chain_stamps": base["chain_stamps"],
+        "depths": list(CPP_DEPTHS),
+        "calls": calls,
+        "repeats": repeats,
+        "spread_ns": spread,
+        "recent_ns": recent,
+        "fill_links": 10,
+        "fill_samples": FILL_SAMPLES,
+        "fill_buffers": 20,
+        "steady_links": 10,
+        "steady_warm": 1_100,
+        "steady_samples": 500,
+        "mem_frames": mem_frames,
+        "mem_samples": 1_000,
+    }
+
+
+def _cpp_input(sc: dict[str, Any]) -> str:
+    head = [
+        round(sc["cache_time_s"] * NS), sc["period_ns"], sc["t0_ns"], len(sc["chain_stamps"]),
+        len(sc["depths"]), *sc["depths"], sc["calls"], sc["repeats"],
+    ]  # fmt: skip
+    tail = [
+        sc["fill_links"], sc["fill_samples"], sc["fill_buffers"],
+        sc["steady_links"], sc["steady_warm"], sc["steady_samples"],
+        sc["mem_frames"], sc["mem_samples"],
+    ]  # fmt: skip
+    return " ".join(map(str, [*head, *sc["spread_ns"], *sc["recent_ns"], *tail])) + "\n"
+
+
+def build_cpp(out_dir: Path) -> Path | str:
+    """Build the C++ reference into ``out_dir``: its path, or why it cannot be built."""
+    if shutil.which("g++") is None or shutil.which("pkg-config") is None:
+        return "no g++ / pkg-config"
+    flags = subprocess.run(
+        ["pkg-config", "--cflags", "--libs", "tf2"], capture_output=True, text=True, check=False
+    )
+    if flags.returncode:
+        return "no tf2 for pkg-config (scripts/install_ros1.sh installs libtf2-dev)"
+    exe = out_dir / "tf2_buffer_core_bench"
+    built = subprocess.run(
+        ["g++", "-O2", "-o", str(exe), str(TF2_CPP), *flags.stdout.split()],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if built.returncode:
+        return f"g++ failed: {built.stderr.strip()[-300:]}"
+    return exe
+
+
+def cpp_round(exe: Path, sc: dict[str, Any]) -> dict[str, Any]:
+    """One run of the C++ side: ``{"lookup_s": {"<depth>/interp" | "<depth>/recent": s},
+    "fill_s": s, "steady_s": s, "rss_bytes_per_sample": bytes}`` (CPU seconds per call,
+    best of ``repeats`` runs).
+
+    Raises:
+        RuntimeError: the program failed (its stderr).
+    """
+    run = subprocess.run(
+        [str(exe)], input=_cpp_input(sc), capture_output=True, text=True, check=False, timeout=600
+    )
+    if run.returncode:
+        raise RuntimeError(f"C++ tf2 side failed: {run.stderr.strip()[-300:]}")
+    result: dict[str, Any] = json.loads(run.stdout)
+    return result
+
+
+def _star(sc: dict[str, Any], first: int, count: int) -> list[TransformStamped]:
+    t0, period, links = sc["t0_ns"], sc["period_ns"], sc["fill_links"]
+    return [
+        _message("root", f"c{i}", t0 + k * period, k + i)
+        for k in range(first, first + count)
+        for i in range(links)
+    ]
+
+
+class CppSideOurs:
+    """tfbus's half of the C++ reference rows: the buffers and messages built once, each
+    :meth:`round` measuring what one run of ``tf2_buffer_core_bench`` measures."""
+
+    def __init__(self, sc: dict[str, Any]) -> None:
+        self.sc = sc
+        chain = {"cache_time_s": sc["cache_time_s"], "chain_stamps": sc["chain_stamps"]}
+        self.chains = {d: _chain(chain, d) for d in sc["depths"]}
+        calls = sc["calls"]
+        self.times = {
+            label: [
+                [Time.from_ns(ns) for ns in sc[key][r * calls : (r + 1) * calls]]
+                for r in range(sc["repeats"])
+            ]
+            for label, key in (("interp", "spread_ns"), ("recent", "recent_ns"))
+        }
+        self.fill = _star(sc, 0, sc["fill_samples"])
+        self.warm = _star(sc, 0, sc["steady_warm"])
+        self.steady = _star(sc, sc["steady_warm"], sc["steady_samples"])
+
+    def round(self) -> dict[str, Any]:
+        """This thread's CPU seconds per call, best run (``time.thread_time``, as the C++
+        side's ``CLOCK_THREAD_CPUTIME_ID``: other work preempting either side on a
+        shared machine stays out of the ratios)."""
+        sc = self.sc
+        clock = time.thread_time
+        lookups: dict[str, float] = {}
+        for depth, core in self.chains.items():
+            leaf = f"f{depth}"
+            lookup = core.lookup_transform
+            for label, runs in self.times.items():
+                best = float("inf")
+                for run in runs:
+                    start = clock()
+                    for t in run:
+                        lookup("f0", leaf, t)
+                    best = min(best, (clock() - start) / len(run))
+                lookups[f"{depth}/{label}"] = best
+        cache_time = sc["cache_time_s"]
+        fill = float("inf")
+        for _ in range(sc["fill_buffers"]):
+            setter = BufferCore(cache_time=cache_time).set_transform
+            start = clock()
+            for m in self.fill:
+                setter(m, "bench")
+            fill = min(fill, (clock() - start) / len(self.fill))
+        steady = float("inf")
+        for _ in range(sc["repeats"]):
+            setter = BufferCore(cache_time=cache_time).set_transform
+            for m in self.warm:
+                setter(m, "bench")
+            start = clock()
+            for m in self.steady:
+                setter(m, "bench")
+            steady = min(steady, (clock() - start) / len(self.steady))
+        return {"lookup_s": lookups, "fill_s": fill, "steady_s": steady}
+
+
+_MEMORY_CHILD = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+import bench_core
+sc = {**bench_core.scenario(True), "mem_frames": int(sys.argv[2]), "mem_samples": int(sys.argv[3])}
+print(json.dumps(bench_core.tfbus_memory(sc)))
+"""
+
+
+def tfbus_memory_fresh(frames: int, samples: int) -> dict[str, float]:
+    """:func:`tfbus_memory` in a fresh interpreter (RSS growth not hidden by memory this
+    process freed before): ``traced_bytes_per_sample`` and ``rss_bytes_per_sample``.
+
+    Raises:
+        RuntimeError: the interpreter failed (its stderr).
+    """
+    run = subprocess.run(
+        [sys.executable, "-c", _MEMORY_CHILD, str(Path(__file__).parent), str(frames),
+         str(samples)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=600,
+    )  # fmt: skip
+    if run.returncode:
+        raise RuntimeError(f"memory run failed: {run.stderr.strip()[-300:]}")
+    result: dict[str, float] = json.loads(run.stdout.strip().splitlines()[-1])
+    return result
 
 
 def tf2_side(sc: dict[str, Any]) -> dict[str, Any] | str:

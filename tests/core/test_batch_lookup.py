@@ -208,6 +208,10 @@ def _chain(depth: int, n: int = 101) -> BufferCore:
 )
 def test_chain_rows_and_split_in_two_threads(simd: bool, target: str, source: str) -> None:
     core = _chain(8)
+    if COMPILED:  # a split that lost earlier (a busy machine) must not skip this one
+        from tfbus.core import _cbatch
+
+        _cbatch._split_reset()
     rng = np.random.default_rng(1)
     times = np.sort(rng.integers(10, 999_000_000, 20_000))  # above the two-thread split
     got = core.lookup_transforms(target, source, times)
@@ -216,6 +220,28 @@ def test_chain_rows_and_split_in_two_threads(simd: bool, target: str, source: st
         _check_row(got, i, ts, simd and target != source)
     assert got.frame_id == target and got.child_frame_id == source
     assert got.valid.all()
+
+
+@pytest.mark.skipif(not COMPILED, reason="the compiled kernel's two-thread split")
+def test_a_split_that_loses_to_one_thread_backs_off_to_one_thread() -> None:
+    """Each two-thread call is judged against the caller's own pace: one thread would
+    have taken own_ns * n_rows / own_rows. A loss (or a worker that never started: no
+    core free) runs the next 1, 2, 4, ... 64 calls on one thread; a win resets."""
+    from tfbus.core import _cbatch
+
+    _cbatch._split_reset()
+    try:
+        # caller: 4 096 of 8 192 rows in 400 us -> one thread ~800 us
+        assert _cbatch._split_after(500_000, 400_000, 4_096, 8_192, True) == 0  # won
+        assert _cbatch._split_after(900_000, 400_000, 4_096, 8_192, True) == 1  # lost
+        assert _cbatch._split_after(2_000_000, 700_000, 7_680, 8_192, True) == 2
+        assert _cbatch._split_after(800_000, 800_000, 8_192, 8_192, False) == 4
+        for want in (8, 16, 32, 64, 64):
+            assert _cbatch._split_after(3_000_000, 400_000, 4_096, 8_192, True) == want
+        assert _cbatch._split_after(600_000, 400_000, 4_096, 8_192, True) == 0  # won
+        assert _cbatch._split_after(900_000, 400_000, 4_096, 8_192, True) == 1
+    finally:
+        _cbatch._split_reset()
 
 
 @pytest.mark.parametrize("order", ["random", "reversed", "duplicated", "mixed", "short"])

@@ -8,9 +8,12 @@ possible: a dict of stamps, pruned by tf2's rule after every insert.
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tfbus.core import _pycache
+from tfbus.core._select import COMPILED
 from tfbus.core.cache import OK, OLD_DATA, REPEATED_DATA, StaticCache, TimeCache
 
 Row = tuple[float, float, float, float, float, float, float]
@@ -64,11 +67,42 @@ def test_time_cache_matches_the_model(ops: list[tuple[int, int]], cache_time: in
         assert cache.latest() == (stamps[-1], model.samples[stamps[-1]][0])
         assert cache.gather(0) == model.samples[stamps[-1]]
         assert (cache.oldest_stamp(), cache.latest_stamp()) == (stamps[0], stamps[-1])
-        # Capacity follows the most samples ever live, plus the 1/16 growth slack.
-        assert cache.nbytes() <= (64 + 4) * (peak + max(peak // 16, 4) + 8)
+        # Capacity follows the most samples ever live, plus the growth slack: doubling
+        # below 256 samples, 1/16 beyond.
+        assert cache.nbytes() <= (64 + 4) * (peak + max(min(peak, 255), peak // 16, 4) + 8)
     else:
         assert cache.latest() == (0, 0)
         assert cache.gather(5) == ""
+
+
+TWINS = [_pycache.TimeCache]
+if COMPILED:
+    from tfbus.core import _ccache
+
+    TWINS.append(_ccache.TimeCache)
+
+
+@pytest.mark.parametrize("twin", TWINS, ids=lambda t: t.__module__.rpartition(".")[2])
+def test_capacity_doubles_up_to_256_samples_then_grows_by_a_sixteenth(twin: type) -> None:
+    # 64 bytes a sample: 8 stamp + 7 x 8 values.
+    cache = twin(10**12)
+    caps = []
+    for k in range(1, 600):
+        assert cache.insert(k, 1, row(k)) == OK
+        caps.append(cache.nbytes() // 64)
+    # A new link's first 200 samples: 5 reallocations (8 -> 256), not one every 4-12.
+    assert sorted(set(caps[:200])) == [8, 16, 32, 64, 128, 256]
+    assert sorted(set(caps[200:])) == [256, 272, 289, 307, 326, 346, 367, 389, 413, 438,
+                                       465, 494, 524, 556, 590, 626]  # fmt: skip
+    # Once pruning frees 1/16 of the capacity below the live samples, they slide down:
+    # the capacity stays put.
+    pruned = twin(100)
+    for k in range(1, 2000):
+        pruned.insert(k, 1, row(k))
+    assert len(pruned) == 101
+    assert pruned.nbytes() == 128 * 64
+    assert pruned.stamps().tolist() == list(range(1899, 2000))
+    assert pruned.values()[0].tolist() == list(row(1899))
 
 
 def test_interpolation_between_parents_uses_the_older_sample() -> None:

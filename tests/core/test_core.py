@@ -164,6 +164,48 @@ def test_the_compiled_base_state_is_read_only_from_python() -> None:
     assert core.link_info() == [("b", "NO_PARENT", "x", False, 0, 0, 0)]
 
 
+@pytest.mark.skipif(not COMPILED, reason="the compiled core's result recycling")
+def test_a_dropped_lookup_result_is_recycled_and_a_kept_one_never_changes() -> None:
+    """A never-repeated lookup whose result nobody kept reuses the objects of the result
+    its memo slot drops (no allocation: tracemalloc's peak stays put); a result the
+    caller keeps, or any part of it, is never touched."""
+    import tracemalloc
+
+    core = BufferCore(cache_time=100.0)
+    for k in range(11):  # x = k metres at k s, a quarter turn about z over 10 s
+        yaw = math.pi / 2 * k / 10
+        core.set_transform(TransformStamped(
+            Header(Time.from_sec(k), "a"), "b",
+            Transform(Vector3(float(k), 0.0, 0.0),
+                      Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))))  # fmt: skip
+    times = [Time.from_ns(10**9 + 7_919 * i) for i in range(1, 3001)]  # never repeated
+    kept = core.lookup_transform("a", "b", Time.from_sec(2.5))
+    x = kept.transform.translation
+    qz = kept.transform.rotation.z
+    lookup = core.lookup_transform
+    warm, measured = times[:1000], times[1000:]
+    for t in warm:  # every memo slot now holds a result nobody else holds
+        lookup("a", "b", t)
+    tracemalloc.start()
+    try:
+        before, _ = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        for t in measured:
+            lookup("a", "b", t)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak - before < 200  # a new result of 5 NamedTuples would take ~450 bytes
+    assert kept.header.stamp == Time.from_sec(2.5)
+    assert kept.header.frame_id == "a" and kept.child_frame_id == "b"
+    assert x == (2.5, 0.0, 0.0)
+    assert qz is kept.transform.rotation.z
+    assert qz == pytest.approx(math.sin(math.pi / 2 * 0.25 / 2), rel=1e-12)
+    last = lookup("a", "b", times[-1])
+    assert last.header.stamp is times[-1]
+    assert last.transform.translation.x == pytest.approx(1.0 + 3000 * 7_919e-9, rel=1e-12)
+
+
 @pytest.mark.parametrize("kind", [BufferCore, Buffer])
 def test_the_parent_of_a_frame_is_reached_by_one_public_name_get_parent(kind: type) -> None:
     """tf2's ``_getParent`` is ``get_parent(frame_id, time=Time(0))``; the core's

@@ -44,6 +44,7 @@ from tfbus.core._ccore import NO_ERROR
 # ``tfbus.core.batch`` asks the single lookup for tf2's exception: no error is reproduced.
 
 import os
+from time import perf_counter_ns
 
 from libc.string cimport memset
 from libc.stdlib cimport free, malloc
@@ -64,6 +65,41 @@ cdef extern from "pythread.h":
 
 cdef int _NCPU = os.cpu_count() or 1
 cdef Py_ssize_t _SPLIT_ROWS = 8192  # below this a second thread costs more than it saves
+cdef int _SPLIT_BACKOFF_MAX = 64  # calls on one thread after repeated losing splits
+cdef int _split_skip = 0  # calls left to run on one thread (GIL held when read or set)
+cdef int _split_backoff = 0  # the last skip given; doubles while splits keep losing
+
+
+cdef int _split_verdict(int64_t wall_ns, int64_t own_ns, Py_ssize_t own_rows,
+                        Py_ssize_t n_rows, bint worker_ran) noexcept:
+    """After a two-thread call: whether it lost to one thread, and if so, how many calls
+    to run on one thread before trying two again (1, 2, 4, ... up to 64 while the splits
+    keep losing; 0 after a winning one). One thread's wall time is estimated from the
+    caller's own pace (``own_ns`` for ``own_rows`` rows, the second thread's start
+    included); a worker that never started (no core free) counts as a loss. GIL held."""
+    global _split_skip, _split_backoff
+    cdef bint lost = not worker_ran or own_rows <= 0 or (
+        <double>wall_ns > <double>own_ns * <double>n_rows / <double>own_rows)
+    if lost:
+        _split_backoff = 1 if _split_backoff == 0 else min(2 * _split_backoff,
+                                                            _SPLIT_BACKOFF_MAX)
+        _split_skip = _split_backoff
+    else:
+        _split_backoff = 0
+        _split_skip = 0
+    return _split_skip
+
+
+def _split_after(wall_ns, own_ns, own_rows, n_rows, worker_ran):
+    """:func:`_split_verdict` for white-box tests: the one-thread calls it sets."""
+    return _split_verdict(wall_ns, own_ns, own_rows, n_rows, worker_ran)
+
+
+def _split_reset():
+    """Forget past verdicts (white-box tests): the next large call splits again."""
+    global _split_skip, _split_backoff
+    _split_skip = 0
+    _split_backoff = 0
 cdef Py_ssize_t _SORT_ROWS = 64  # below this, unsorted times are walked as given
 
 
@@ -671,6 +707,7 @@ cdef struct _BJob:
     long state  # atomic: _W_IDLE, then _W_RUNNING (worker) or _W_ABANDONED (caller)
     bint vector_sin  # slerp's per-time sines from libmvec (if found), else libm
     Py_ssize_t answered_worker
+    Py_ssize_t rows_worker
     PyThread_type_lock done
 
 
@@ -699,7 +736,7 @@ cdef inline int _bstore(_BJob* job, Py_ssize_t rb, int m, const signed char* goo
     return n
 
 
-cdef Py_ssize_t _brows(_BJob* job) noexcept nogil:
+cdef Py_ssize_t _brows(_BJob* job, Py_ssize_t* rows) noexcept nogil:
     """The per-time loop of :func:`batch_lookup`: claims chunks of ``_CHUNK`` rows until
     none is left and walks each in blocks of ``_BLOCK`` (no GIL). Every chunk starts from
     the plan's links (fresh cursor and interval cache: the result does not depend on
@@ -722,6 +759,7 @@ cdef Py_ssize_t _brows(_BJob* job) noexcept nogil:
         if r0 >= n_rows:
             break
         r1 = r0 + _CHUNK if n_rows - r0 > _CHUNK else n_rows
+        rows[0] += r1 - r0
         memcpy(src_links, job.src, ns * sizeof(_BLink))
         memcpy(tgt_links, job.tgt, nt * sizeof(_BLink))
         rb = r0
@@ -751,7 +789,7 @@ cdef void _bworker(void* arg) noexcept nogil:
         _free_lock_nogil(job.done)
         free(job)
         return
-    job.answered_worker = _brows(job)
+    job.answered_worker = _brows(job, &job.rows_worker)
     PyThread_release_lock(job.done)  # last touch: the caller frees the job
 
 
@@ -761,14 +799,22 @@ cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink*
                         bint vector_sin) except -1:
     """``_brows`` over all rows; from ``_SPLIT_ROWS`` rows on (several CPUs), a second
     thread claims chunks too. The split is dynamic (chunks of ``_CHUNK`` rows claimed
-    from a shared counter), so a core busy with other work slows the call down by at
-    most one chunk, and a worker that has not started when the rows are done is not
-    waited for."""
+    from a shared counter), and a worker that has not started when the rows are done is
+    not waited for. A machine busy with other work can still make the split lose (the
+    caller waits for a preempted worker's chunk): each split call is judged against the
+    caller's own pace (:func:`_split_verdict`), and after a losing one the next calls run
+    on one thread (1, 2, 4, ... up to 64 calls) before two are tried again."""
+    global _split_skip
     cdef _BJob* job = <_BJob*>malloc(sizeof(_BJob))
-    cdef Py_ssize_t answered
+    cdef Py_ssize_t answered, own_rows = 0
     cdef bint threaded = n_rows >= _SPLIT_ROWS and _NCPU >= 2
+    cdef bint worker_ran = False
+    cdef int64_t t0 = 0, t1 = 0
     if job == NULL:
         raise MemoryError()
+    if threaded and _split_skip > 0:  # a recent split lost to one thread
+        _split_skip -= 1
+        threaded = False
     memcpy(job.src, src, ns * sizeof(_BLink))
     memcpy(job.tgt, tgt, nt * sizeof(_BLink))
     job.ns = ns
@@ -784,8 +830,10 @@ cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink*
     job.state = _W_IDLE
     job.vector_sin = vector_sin
     job.answered_worker = 0
+    job.rows_worker = 0
     job.done = NULL
     if threaded:
+        t0 = perf_counter_ns()
         job.done = PyThread_allocate_lock()
         if job.done == NULL:
             free(job)
@@ -797,15 +845,20 @@ cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink*
             job.done = NULL
             threaded = False
     with nogil:
-        answered = _brows(job)
-        if threaded and not tfb_cas(&job.state, _W_IDLE, _W_ABANDONED):
-            PyThread_acquire_lock(job.done, WAIT_LOCK)  # the worker is running: wait
-            answered += job.answered_worker
-            _free_lock_nogil(job.done)
-            free(job)
-        elif not threaded:
-            free(job)
-        # else: the worker never started; it frees the job when it does
+        answered = _brows(job, &own_rows)
+    if threaded:
+        t1 = perf_counter_ns()
+        with nogil:
+            if not tfb_cas(&job.state, _W_IDLE, _W_ABANDONED):
+                PyThread_acquire_lock(job.done, WAIT_LOCK)  # the worker is running: wait
+                answered += job.answered_worker
+                worker_ran = True
+                _free_lock_nogil(job.done)
+                free(job)
+            # else: the worker never started; it frees the job when it does
+        _split_verdict(perf_counter_ns() - t0, t1 - t0, own_rows, n_rows, worker_ran)
+    else:
+        free(job)
     return answered
 
 

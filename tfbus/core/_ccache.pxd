@@ -23,6 +23,7 @@ cdef enum:
     CLIMB_LOOP = 3  # longer than MAX_GRAPH_DEPTH
     C_MAX_DEPTH = 1000
     MIN_CAPACITY = 8
+    GEOMETRIC_UP_TO = 256  # a link's capacity doubles below this many samples
 
 
 cdef class Link:
@@ -35,9 +36,6 @@ cdef class Link:
 cdef class TimeCache(Link):
     cdef readonly int64_t cache_time_ns
     cdef readonly bint replace_repeated
-    cdef object _stamps_arr
-    cdef object _values_arr
-    cdef object _parents_arr
     cdef int64_t* _st
     cdef double* _va
     cdef int32_t* _pa
@@ -45,7 +43,7 @@ cdef class TimeCache(Link):
     cdef Py_ssize_t _head
     cdef Py_ssize_t _tail
     cdef int _parent
-    cdef int _alloc(self, Py_ssize_t cap) except -1
+    cdef int _resize(self, Py_ssize_t cap) except -1
     cdef int _alloc_parents(self, Py_ssize_t cap) except -1
     cdef int _make_room(self) except -1
     cdef int _replace_newest(self, int parent, const double* v) except -1

@@ -2,7 +2,8 @@
 ``tf2/src/cache.cpp``) and :class:`StaticCache` (``static_cache.cpp``), the twins of the
 compiled :mod:`tfbus.core._ccache`, with the same storage (numpy arrays ``(cap,) int64``
 stamps, ``(cap, 7) float64`` rows and, once a link has had two parents, ``(cap,) int32``
-parent ids, the same growth policy: ``nbytes()`` agrees) and the same results bit for bit.
+parent ids, the same growth policy: ``nbytes()`` agrees) and the same results bit for bit
+(the compiled twin keeps the same arrays in C buffers).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ _G_PAST: Final = 4
 # climb outcomes
 
 _MIN_CAPACITY: Final = 8
+_GEOMETRIC_UP_TO: Final = 256  # a link's capacity doubles below this many samples
 
 # ---------------------------------------------------------------------- messages
 
@@ -303,7 +305,8 @@ class TimeCache(Link):
 
     def _make_room(self) -> None:
         """Storage is full at the top: slide the live samples down if at least 1/16 of the
-        capacity is free below them, else grow by 1/16 (as the compiled core)."""
+        capacity is free below them, else grow: double up to 256 samples, then by 1/16
+        (as the compiled core: the same capacities, ``nbytes()`` agrees)."""
         head, tail, cap = self._head, self._tail, self._cap
         n = tail - head
         if head >= cap // 16 and head > 0:
@@ -312,7 +315,8 @@ class TimeCache(Link):
             if self._pa is not None:
                 self._pa[:n] = self._pa[head:tail]
         else:
-            new_cap = max(_MIN_CAPACITY, n + max(n // 16, 4))
+            grow = n if n < _GEOMETRIC_UP_TO else n // 16
+            new_cap = max(_MIN_CAPACITY, n + max(grow, 4))
             old_st, old_va, old_pa = self._st, self._va, self._pa
             self._alloc(new_cap)
             self._st[:n] = old_st[head:tail]

@@ -16,10 +16,13 @@ the pure-Python :mod:`tfbus.core._pycache`) and are re-exported here. Semantics 
   ``interpolate``).
 * A static link holds one value, valid at every time; each insert overwrites it.
 
-Storage of a dynamic link: contiguous numpy arrays — stamps ``(cap,) int64`` (ns) and
-values ``(cap, 7) float64`` (tx, ty, tz, qx, qy, qz, qw) — holding the live samples
-sorted by stamp, plus a parent id per sample only once the link has had two different
-parents (64 bytes per sample otherwise), searched by binary search.
+Storage of a dynamic link: contiguous arrays (C buffers in the compiled core, numpy
+arrays in the pure one) — ``cap`` int64 stamps (ns) and ``cap`` rows of 7 float64 (tx,
+ty, tz, qx, qy, qz, qw) — holding the live samples sorted by stamp, plus a parent id per
+sample only once the link has had two different parents (64 bytes per sample otherwise),
+searched by binary search. The capacity doubles from 8 up to 256 samples (a new link's
+first 200 samples take 5 reallocations) and grows by 1/16 beyond, when sliding the live
+samples down cannot free 1/16 of it (``nbytes()`` is the capacity in bytes).
 """
 
 from __future__ import annotations
