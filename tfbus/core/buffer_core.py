@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from typing import Any, Final
+from typing import Any, Final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -52,6 +52,18 @@ from tfbus.core.batch import (
     as_times,
     check_errors,
     compose_rows,
+)
+from tfbus.core.policy import (
+    Clamp,
+    Exact,
+    LookupPolicy,
+    Nearest,
+    PolicyReport,
+    PolicyResult,
+    Previous,
+    Window,
+    policy_args,
+    policy_error,
 )
 from tfbus.core.results import (
     BatchResult,
@@ -383,9 +395,29 @@ class BufferCore(CoreBase):
 
     # ------------------------------------------------------------------ lookups
 
+    @overload
     def lookup_transform(
-        self, target_frame: str, source_frame: str, time: Time
-    ) -> TransformStamped:
+        self, target_frame: str, source_frame: str, time: Time, *, policy: Exact | None = None
+    ) -> TransformStamped: ...
+
+    @overload
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> PolicyResult: ...
+
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        *,
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """The pose of ``source_frame`` in ``target_frame`` at ``time`` (tf2
         ``lookupTransform``): it maps points from source into target coordinates.
 
@@ -408,12 +440,31 @@ class BufferCore(CoreBase):
                 sample), ``BackwardExtrapolationException`` (before its oldest) or
                 ``NoDataForExtrapolationException`` (one sample at another time, or none),
                 as rolling tf2's ``TimeCache::findClosest`` chooses; tf2 0.7.6's message.
+                Under a policy: for the first link the policy found no sample for, the
+                exception and message of the exact lookup for that link.
+            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
+
+        ``policy`` (:mod:`tfbus.core.policy`): how each link's sample is picked;
+        ``None`` or :class:`~tfbus.core.policy.Exact` is tf2's rule and returns the
+        TransformStamped. Any other policy (``Nearest(max_delta)``, ``Clamp(max_delta)``,
+        ``Previous()``, ``Window(past, future_wait)``) returns a
+        :class:`~tfbus.core.policy.PolicyResult` ``(transform, report)``: the report names
+        each link's sample stamp and the largest ``|stamp - time|``, so no approximation
+        is silent. Policy lookups are not memoised.
 
         One compiled call validates, walks and builds the result. Successful results are
         memoised until the next insert or ``clear()`` (64 slots, by the ids' identity and
         the time), so repeating a query (many objects at one stamp, time 0 between
         updates) costs a few compares.
         """
+        if policy is not None and type(policy) is not Exact:
+            try:
+                found = self._query_policy(target_frame, source_frame, time, policy._args)
+            except AttributeError as err:
+                raise policy_error(policy, time, err) from None
+            if isinstance(found, PolicyResult):
+                return found
+            raise self._failure("lookupTransform", target_frame, source_frame, found)
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
@@ -421,6 +472,27 @@ class BufferCore(CoreBase):
         if isinstance(out, TransformStamped):
             return out
         raise self._failure("lookupTransform", target_frame, source_frame, out)
+
+    def _policy_query(
+        self, target_frame: str, source_frame: str, time: Time, policy: object
+    ) -> PolicyResult | tuple[int, ...]:
+        """The core's policy lookup: the PolicyResult or a failure tuple (``_query``'s)."""
+        try:
+            out: PolicyResult | tuple[int, ...] = self._query_policy(
+                target_frame, source_frame, time, policy_args(policy)
+            )
+        except AttributeError as err:
+            raise not_a_time(time, err) from None
+        return out
+
+    def _lookup_policy(
+        self, target_frame: str, source_frame: str, time: Time, policy: object
+    ) -> PolicyResult:
+        """:meth:`lookup_transform` under a policy, always its PolicyResult (or raises)."""
+        found = self._policy_query(target_frame, source_frame, time, policy)
+        if isinstance(found, PolicyResult):
+            return found
+        raise self._failure("lookupTransform", target_frame, source_frame, found)
 
     def try_lookup_transform(
         self, target_frame: str, source_frame: str, time: Time
@@ -454,6 +526,29 @@ class BufferCore(CoreBase):
             raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
+        return self._hopeless(target_frame, source_frame, out)
+
+    def check_transform_policy(
+        self, target_frame: str, source_frame: str, time: Time, policy: LookupPolicy
+    ) -> PolicyResult | TransformException | None:
+        """:meth:`check_transform` under a lookup policy (:mod:`tfbus.core.policy`): the
+        :class:`~tfbus.core.policy.PolicyResult` when the policy can answer, the
+        exception when waiting cannot help, None while it may (what an awaited policy
+        lookup rechecks on every insert of its frames). ``Exact()`` answers with a
+        report whose every stamp is the time used (tf2's answer, bit for bit).
+
+        Raises:
+            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
+        """
+        out = self._policy_query(target_frame, source_frame, time, policy)
+        if isinstance(out, PolicyResult):
+            return out
+        return self._hopeless(target_frame, source_frame, out)
+
+    def _hopeless(
+        self, target_frame: str, source_frame: str, out: tuple[int, ...]
+    ) -> TransformException | None:
+        """The exception of a failure tuple when waiting cannot help, else None."""
         code = out[0]
         if code in (INVALID_ARGUMENT, LOOKUP_ERROR) or (code == EXTRAPOLATION_ERROR and out[3]):
             return self._failure("lookupTransform", target_frame, source_frame, out)
@@ -645,7 +740,9 @@ class BufferCore(CoreBase):
         source_frame: str,
         source_time: Time,
         fixed_frame: str,
-    ) -> TransformStamped:
+        *,
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """Time travel (tf2 ``lookupTransform`` with a fixed frame): where data in
         ``source_frame`` at ``source_time`` is, in ``target_frame`` at ``target_time``,
         assuming ``fixed_frame`` does not move.
@@ -659,12 +756,36 @@ class BufferCore(CoreBase):
             InvalidArgumentException, LookupException, ConnectivityException,
             ExtrapolationException: as :meth:`lookup_transform`; ids are validated in the
                 order target, source, fixed, before anything else.
+
+        ``policy`` as in :meth:`lookup_transform`, applied to both legs; a non-exact
+        policy returns a :class:`~tfbus.core.policy.PolicyResult` whose report lists the
+        first leg's links (source up to fixed, against ``source_time``) then the second's
+        (fixed to target, against ``target_time``), its largest delta over both.
         """
         self._validate("lookupTransform argument target_frame", target_frame)
         self._validate("lookupTransform argument source_frame", source_frame)
         self._validate("lookupTransform argument fixed_frame", fixed_frame)
+        if policy is not None and type(policy) is not Exact:
+            r1 = self._lookup_policy(fixed_frame, source_frame, source_time, policy)
+            r2 = self._lookup_policy(target_frame, fixed_frame, target_time, policy)
+            ts = self._compose_legs(r1.transform, r2.transform, target_frame, source_frame)
+            a, b = r1.report, r2.report
+            report = PolicyReport(
+                a.frames + b.frames,
+                a.stamps_ns + b.stamps_ns,
+                max(a.max_abs_delta_ns, b.max_abs_delta_ns),
+            )
+            return PolicyResult(ts, report)
         leg1 = self.lookup_transform(fixed_frame, source_frame, source_time)
         leg2 = self.lookup_transform(target_frame, fixed_frame, target_time)
+        return self._compose_legs(leg1, leg2, target_frame, source_frame)
+
+    @staticmethod
+    def _compose_legs(
+        leg1: TransformStamped, leg2: TransformStamped, target_frame: str, source_frame: str
+    ) -> TransformStamped:
+        """``leg2 ∘ leg1`` through normalised rotations (``compose_full``), stamped
+        with leg2's time, as tf2's fixed-frame lookup builds it."""
         (t1, q1), (t2, q2) = leg1.transform, leg2.transform
         v = compose_full((*t2, *q2), (*t1, *q1))
         return TransformStamped(
