@@ -733,6 +733,30 @@ class BufferCore(CoreBase):
         """
         return self._chain(target_frame, source_frame, time)
 
+    @overload
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        *,
+        policy: Exact | None = None,
+    ) -> TransformStamped: ...
+
+    @overload
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> PolicyResult: ...
+
     def lookup_transform_full(
         self,
         target_frame: str,
