@@ -42,7 +42,11 @@ from tfbus.core.policy import (
     Previous,
     Window,
 )
-from tfbus.errors import BackwardExtrapolationException, ForwardExtrapolationException
+from tfbus.errors import (
+    BackwardExtrapolationException,
+    ForwardExtrapolationException,
+    LookupException,
+)
 from tfbus.time import Duration
 
 NS = 1_000_000_000
@@ -501,3 +505,36 @@ def test_both_cores_and_exact_agree_bit_for_bit(
                 assert checked.report.exact
             else:
                 assert _bits(checked) == _bits(exact)
+
+
+# --------------------------------------------------------------------------- batches
+
+
+def test_batched_rows_are_the_single_policy_lookups(tree: BufferCore) -> None:
+    times = [int(s * NS) for s in (0.5, 1.25, 2.0, 3.1, 4.0, 9.0)]
+    arr = tree.lookup_transforms("map", "laser", times, errors="mask", policy=Clamp(1.0))
+    assert arr.reports is not None and arr.max_abs_delta_ns is not None
+    assert arr.valid.tolist() == [True, True, True, True, True, False]
+    assert arr.max_abs_delta_ns.tolist() == [NS, 250_000_000, 0, 100_000_000, NS, -1]
+    for i, ns in enumerate(times[:5]):
+        ts, report = tree.lookup_transform("map", "laser", Time.from_ns(ns), policy=Clamp(1.0))
+        assert arr.reports[i] == report
+        assert arr.translations[i].tolist() == list(ts.transform.translation)
+        assert arr.rotations[i].tolist() == list(ts.transform.rotation)
+        assert arr.stamps[i] == ns
+    assert arr.reports[5] is None
+    assert np.isnan(arr.translations[5]).all()
+
+
+def test_batched_policy_raises_the_first_rows_error(tree: BufferCore) -> None:
+    with pytest.raises(ForwardExtrapolationException) as caught:
+        tree.lookup_transforms("map", "laser", [2 * NS, 9 * NS], policy=Nearest(0.1))
+    single = tree.try_lookup_transform("map", "laser", Time.from_ns(9 * NS))
+    assert str(caught.value) == str(single)
+    with pytest.raises(LookupException):
+        tree.lookup_transforms("map", "nowhere", [2 * NS], errors="mask", policy=Previous())
+
+
+def test_exact_batches_carry_no_reports(tree: BufferCore) -> None:
+    arr = tree.lookup_transforms("map", "laser", [2 * NS], policy=Exact())
+    assert arr.reports is None and arr.max_abs_delta_ns is None

@@ -573,6 +573,7 @@ class BufferCore(CoreBase):
         times: TimesLike,
         *,
         errors: Errors = "raise",
+        policy: LookupPolicy | None = None,
     ) -> TransformArray:
         """``lookup_transform(target_frame, source_frame, t)`` for every t of ``times``
         (one batch): the path is resolved once, every time is walked along it in the core.
@@ -599,11 +600,18 @@ class BufferCore(CoreBase):
                 unknown frame id still raises LookupException (no row could ever be
                 answered).
             ValueError: ``times`` or ``errors`` is malformed.
+            TypeError: ``policy`` is not a lookup policy.
+
+        ``policy`` (:mod:`tfbus.core.policy`): a non-exact policy answers each row as
+        ``lookup_transform(..., policy=policy)`` does (the core's policy walk per row,
+        not vectorised) and fills the result's ``reports`` and ``max_abs_delta_ns``.
 
         Source: tf2 ``BufferCore::lookupTransform`` / ``walkToTopParent`` per time.
         """
         check_errors(errors)
         t = as_times(times)
+        if policy is not None and type(policy) is not Exact:
+            return self._policy_rows(target_frame, source_frame, t, errors, policy)
         n = t.shape[0]
         out = np.empty((n, 7))
         stamps = t.copy()
@@ -631,6 +639,37 @@ class BufferCore(CoreBase):
             out[bad] = math.nan
             valid[bad] = False
         return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid)
+
+    def _policy_rows(
+        self,
+        target_frame: str,
+        source_frame: str,
+        t: npt.NDArray[np.int64],
+        errors: Errors,
+        policy: LookupPolicy,
+    ) -> TransformArray:
+        """``lookup_transforms`` under a non-exact policy: the core's policy walk per row."""
+        args = policy_args(policy)
+        n = t.shape[0]
+        out = np.full((n, 7), math.nan)
+        stamps = t.copy()
+        valid = np.ones(n, dtype=bool)
+        reports: list[PolicyReport | None] = [None] * n
+        query = self._query_policy
+        for i, ns in enumerate(t.tolist()):
+            found = query(target_frame, source_frame, Time.from_ns(ns), args)
+            if isinstance(found, PolicyResult):
+                ts, reports[i] = found
+                (x, y, z), (qx, qy, qz, qw) = ts.transform
+                out[i] = (x, y, z, qx, qy, qz, qw)
+                stamps[i] = ts.header.stamp.ns
+                continue
+            if errors == "raise" or found[0] in (INVALID_ARGUMENT, UNKNOWN_FRAME):
+                raise self._failure("lookupTransform", target_frame, source_frame, found)
+            valid[i] = False
+        return TransformArray(
+            stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid, reports=reports
+        )
 
     def lookup_transforms_full(
         self,
