@@ -207,7 +207,6 @@ class Buffer(BufferCore):
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
-        *,
         policy: LookupPolicy | None = None,
     ) -> TransformStamped | PolicyResult:
         """:meth:`BufferCore.lookup_transform` (never waits). ``timeout`` exists for
