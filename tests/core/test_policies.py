@@ -538,3 +538,23 @@ def test_batched_policy_raises_the_first_rows_error(tree: BufferCore) -> None:
 def test_exact_batches_carry_no_reports(tree: BufferCore) -> None:
     arr = tree.lookup_transforms("map", "laser", [2 * NS], policy=Exact())
     assert arr.reports is None and arr.max_abs_delta_ns is None
+
+
+def test_batched_full_rows_are_the_single_full_policy_lookups(tree: BufferCore) -> None:
+    src = [4 * NS, int(1.25 * NS), 9 * NS]
+    tgt = [int(1.25 * NS), 4 * NS, 2 * NS]
+    arr = tree.lookup_transforms_full(
+        "laser", tgt, "laser", src, "map", errors="mask", policy=Clamp(1.0)
+    )
+    assert arr.valid.tolist() == [True, True, False]
+    assert arr.reports is not None and arr.max_abs_delta_ns is not None
+    assert arr.max_abs_delta_ns.tolist() == [NS, NS, -1]
+    for i in range(2):
+        ts, report = tree.lookup_transform_full(
+            "laser", Time.from_ns(tgt[i]), "laser", Time.from_ns(src[i]), "map", policy=Clamp(1.0)
+        )
+        assert arr.reports[i] == report
+        assert np.allclose(arr.translations[i], list(ts.transform.translation), atol=1e-12)
+        assert np.allclose(arr.rotations[i], list(ts.transform.rotation), atol=1e-12)
+    with pytest.raises(ForwardExtrapolationException):
+        tree.lookup_transforms_full("laser", tgt, "laser", src, "map", policy=Clamp(1.0))

@@ -682,6 +682,7 @@ class BufferCore(CoreBase):
         fixed_frame: str,
         *,
         errors: Errors = "raise",
+        policy: LookupPolicy | None = None,
     ) -> TransformArray:
         """``lookup_transform_full`` (time travel through ``fixed_frame``) row by row.
 
@@ -697,6 +698,10 @@ class BufferCore(CoreBase):
             ConnectivityException, ExtrapolationException: as the single call for the
                 first failing row (source leg first), unless ``errors="mask"``.
             ValueError: the time arrays have different lengths, or are malformed.
+
+        ``policy`` as in :meth:`lookup_transforms`, applied to both legs: a row's report
+        lists the first leg's links then the second's (``lookup_transform_full``'s), its
+        largest delta over both.
         """
         check_errors(errors)
         frames = (target_frame, source_frame, fixed_frame)
@@ -707,8 +712,8 @@ class BufferCore(CoreBase):
         st = as_times(source_times)
         n = max(tt.shape[0], st.shape[0])
         tt, st = as_times(tt, n), as_times(st, n)
-        leg1 = self.lookup_transforms(fixed_frame, source_frame, st, errors="mask")
-        leg2 = self.lookup_transforms(target_frame, fixed_frame, tt, errors="mask")
+        leg1 = self.lookup_transforms(fixed_frame, source_frame, st, errors="mask", policy=policy)
+        leg2 = self.lookup_transforms(target_frame, fixed_frame, tt, errors="mask", policy=policy)
         if errors == "raise":
             # The single call looks up leg 1 then leg 2 per time: the first failing row
             # decides, and within it the source leg.
@@ -721,9 +726,31 @@ class BufferCore(CoreBase):
                     source_frame,
                     Time.from_ns(int(st[i])),
                     fixed_frame,
+                    policy=policy,
                 )
                 raise AssertionError("lookup_transform_full did not raise")  # pragma: no cover
-        return compose_rows(leg2, leg1)
+        rows = compose_rows(leg2, leg1)
+        if leg1.reports is None or leg2.reports is None:
+            return rows
+        reports = [
+            None
+            if a is None or b is None
+            else PolicyReport(
+                a.frames + b.frames,
+                a.stamps_ns + b.stamps_ns,
+                max(a.max_abs_delta_ns, b.max_abs_delta_ns),
+            )
+            for a, b in zip(leg1.reports, leg2.reports, strict=True)
+        ]
+        return TransformArray(
+            rows.stamps,
+            rows.translations,
+            rows.rotations,
+            rows.frame_id,
+            rows.child_frame_id,
+            rows.valid,
+            reports=reports,
+        )
 
     def transform_points(
         self,
