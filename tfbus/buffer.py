@@ -491,14 +491,38 @@ class Buffer(BufferCore):
         what = f"transform from [{source}] to [{target}] at time {time.ns / 1e9:.9f}"
         return f"{what}: {reason}" if reason else what
 
-    @coroutine_method
+    @overload
+    def wait_for_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        policy: Exact | None = None,
+    ) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def wait_for_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def wait_for_transform(
         self,
         target_frame: str,
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
-    ) -> TransformStamped:
+        *,
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """Wait until ``lookup_transform(target_frame, source_frame, time)`` can succeed,
         and return its result. ``time`` may lie in the future; ``Time(0)`` waits until
         the two frames are connected with data.
@@ -515,7 +539,11 @@ class Buffer(BufferCore):
                 (it can never become available).
             InvalidArgumentException: a frame id is empty or starts with '/'.
             LookupException: the path between the frames contains a loop.
+
+        ``policy``: as in :meth:`lookup_transform_async`.
         """
+        if policy is not None and type(policy) is not Exact:
+            return await self._wait_policy(target_frame, source_frame, time, timeout, policy)
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
             found = self.check_transform(target_frame, source_frame, time)
             if found is not None:  # the data is there (or can never be): no wait set up

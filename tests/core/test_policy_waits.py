@@ -20,7 +20,7 @@ from tfbus import (
     Vector3,
 )
 from tfbus.clock import ManualClock
-from tfbus.core.policy import Clamp, Nearest, PolicyResult, Window
+from tfbus.core.policy import Clamp, Nearest, PolicyResult, Previous, Window
 
 pytestmark = pytest.mark.anyio
 
@@ -159,3 +159,12 @@ async def test_sync_buffer_lookup_takes_the_policy() -> None:
     ts, report = buf.lookup_transform("odom", "base", at(0.5), policy=Clamp(1.0))
     assert ts.transform.translation.x == 2.0
     assert report.max_abs_delta_ns == NS // 2
+
+
+async def test_wait_for_transform_takes_the_policy() -> None:
+    """wait_for_transform(..., policy=Previous()) at T0 + 1 s: answered at once by the
+    T0 sample (x 2), 1 s old."""
+    _, buf = _buffer()
+    ts, report = await buf.wait_for_transform("odom", "base", at(1.0), 1.0, policy=Previous())
+    assert ts.transform.translation.x == 2.0
+    assert report.max_abs_delta_ns == NS
