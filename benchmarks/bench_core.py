@@ -9,6 +9,9 @@ Prints, on this machine:
   help), and at one fixed interpolated time;
 * ``set_transform`` rate (single calls, 100 Hz samples of many frames, cache pruning on),
   and ns per call on a chain of 10 links stored in order (target: <= 0.35x tf2_py);
+* lookup policies (``tfbus.core.policy``): ``lookup_transform(..., policy=P)`` per call
+  against the exact lookup on the same never-repeated times, measured interleaved
+  (target: <= 1.5x the exact lookup);
 * memory per cached sample (1000 frames x 10 s x 100 Hz = 1M samples): tracemalloc and
   RSS growth for tfbus, RSS growth for tf2 (C++ allocations are invisible to tracemalloc).
 
@@ -37,12 +40,14 @@ from typing import Any
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.core import COMPILED, BufferCore
+from tfbus.core.policy import Clamp, Nearest, Previous, Window
 
 NS = 1_000_000_000
 TF2_PYTHON = "/usr/bin/python3"
 TF2_SIDE = Path(__file__).resolve().parents[1] / "peers" / "debian" / "tf2_side.py"
 TF2_CPP = Path(__file__).resolve().parents[1] / "peers" / "debian" / "tf2_buffer_core_bench.cpp"
 MEMORY_TARGET = 72  # bytes per cached sample
+POLICY_TARGET = 1.5  # a policy lookup vs the exact one, same times
 LOOKUP_DEPTH2_TARGET = 0.20  # target: never-repeated depth-2 lookup vs tf2_py
 
 
@@ -163,6 +168,68 @@ def tfbus_lookups(sc: dict[str, Any]) -> dict[str, float]:
         )
         out[f"{depth}/zero_fresh"] = _fresh_zero(core, leaf, sc)
     return out
+
+
+def policy_lookups(sc: dict[str, Any]) -> dict[str, float]:
+    """CPU seconds per ``lookup_transform(root, leaf, t, policy=P)`` on never-repeated
+    interpolated times, keyed ``"depth/policy"`` (``"depth/exact"`` for no policy). The
+    policies and the exact lookup take turns on every chunk of 250 times, and the time
+    is this process's CPU time (``time.process_time``), not the wall clock: other work
+    on the machine neither lands on one side only nor counts at all. The best of the
+    rounds counts."""
+    period_s = sc["period_ns"] / NS
+    policies: dict[str, Any] = {
+        "exact": None,
+        "Nearest(period/2)": Nearest(period_s / 2),
+        "Clamp(10 periods)": Clamp(10 * period_s),
+        "Previous()": Previous(),
+        "Window(10 periods)": Window(10 * period_s),
+    }
+    calls = sc["calls"]
+    times = [Time.from_ns(ns) for ns in sc["query_ns"][:calls]]
+    chunks = [times[k : k + 250] for k in range(0, calls, 250)]
+    clock = time.process_time
+    out: dict[str, float] = {}
+    for depth in sc["depths"]:
+        core = _chain(sc, depth)
+        leaf = f"f{depth}"
+        lookup = core.lookup_transform
+        best = dict.fromkeys(policies, float("inf"))
+        for _ in range(2 * sc["repeats"] + 1):
+            spent = dict.fromkeys(policies, 0.0)
+            for chunk in chunks:
+                for name, policy in policies.items():
+                    start = clock()
+                    if policy is None:
+                        for t in chunk:
+                            lookup("f0", leaf, t)
+                    else:
+                        for t in chunk:
+                            lookup("f0", leaf, t, policy=policy)
+                    spent[name] += clock() - start
+            for name in policies:
+                best[name] = min(best[name], spent[name] / calls)
+        for name, seconds in best.items():
+            out[f"{depth}/{name}"] = seconds
+    return out
+
+
+def report_policies(sc: dict[str, Any], figures: dict[str, float]) -> None:
+    head = "lookup_transform(..., policy=P)"
+    print(f"\n{head:36} {'tfbus':>12} {'exact':>12} {'P/exact':>10}  target")
+    print("-" * 90)
+    for depth in sc["depths"]:
+        exact = figures[f"{depth}/exact"]
+        for key, seconds in figures.items():
+            d, name = key.split("/", 1)
+            if int(d) != depth or name == "exact":
+                continue
+            ratio = seconds / exact
+            verdict = "ok" if ratio <= POLICY_TARGET else "SLOWER"
+            print(
+                f"depth {depth:>2}, {name:<27} {_us(seconds):>12} {_us(exact):>12} "
+                f"{ratio:9.2f}x  <= {POLICY_TARGET}x exact  {verdict}"
+            )
 
 
 def tfbus_set_chain(sc: dict[str, Any]) -> float:
@@ -599,6 +666,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     core = "compiled core" if COMPILED else "pure-Python core (TFBUS_PURE_PYTHON)"
     print(f"tfbus BufferCore ({core}) vs tf2_py — Python {sys.version.split()[0]}", flush=True)
     ours: dict[str, Any] = {"lookup_s": tfbus_lookups(sc)}
+    policies = policy_lookups(sc)
     breakdown = depth2_breakdown(sc)  # in the same state as the lookups above
     ours["set_per_s"] = tfbus_set_rate(sc)
     ours["set_chain_s"] = tfbus_set_chain(sc)
@@ -613,6 +681,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     breakdown = {k: min(v, again_b[k]) for k, v in breakdown.items()}
     report(sc, ours, ref)
     report_breakdown(breakdown, ref)
+    report_policies(sc, policies)
     print(f"\n({time.perf_counter() - started:.1f} s)")
 
 

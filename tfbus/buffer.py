@@ -22,18 +22,28 @@ import logging
 import math
 from collections.abc import Callable, Iterable
 from functools import partial
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar, overload
 
 import anyio.lowlevel
 import numpy as np
 import numpy.typing as npt
 
-from tfbus._aio import Wakeup, coroutine_method, running_asyncio_loop
+from tfbus._aio import Awaiting, Wakeup, coroutine_method, running_asyncio_loop
 from tfbus.clock import Clock, JumpCallback, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
 from tfbus.core import BatchResult, BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
 from tfbus.core.buffer_core import OnRepeat
+from tfbus.core.policy import (
+    Clamp,
+    Exact,
+    LookupPolicy,
+    Nearest,
+    PolicyResult,
+    Previous,
+    Window,
+    policy_args,
+)
 from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import BufferClosedException, TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
@@ -178,17 +188,42 @@ class Buffer(BufferCore):
         self._closed = False
         self._listeners = 0  # TransformListeners feeding this buffer now
 
+    @overload
     def lookup_transform(
         self,
         target_frame: str,
         source_frame: str,
         time: Time,
         timeout: float | Duration | None = None,
-    ) -> TransformStamped:
+        *,
+        policy: Exact | None = None,
+    ) -> TransformStamped: ...
+
+    @overload
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> PolicyResult: ...
+
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """:meth:`BufferCore.lookup_transform` (never waits). ``timeout`` exists for
         tf2_ros habits: ``None`` or 0 is tf2_ros's default (no wait); any other value is
         a TypeError pointing to :meth:`lookup_transform_async`, since a call that blocks
-        would stop the event loop that delivers the data.
+        would stop the event loop that delivers the data. ``policy`` as in
+        :meth:`BufferCore.lookup_transform` (a non-exact one returns a
+        :class:`~tfbus.core.policy.PolicyResult`).
 
         Raises:
             TypeError: a non-zero ``timeout``.
@@ -201,6 +236,8 @@ class Buffer(BufferCore):
                 "that delivers the data): use 'await buffer.lookup_transform_async("
                 f"{target_frame!r}, {source_frame!r}, time, timeout={timeout!r})'"
             )
+        if policy is not None and type(policy) is not Exact:
+            return self._lookup_policy(target_frame, source_frame, time, policy)
         return _core_lookup_transform(self, target_frame, source_frame, time)
 
     # ------------------------------------------------------------------ notification
@@ -429,13 +466,67 @@ class Buffer(BufferCore):
             raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
         return waiter.result
 
+    async def _wait_policy(
+        self,
+        target: str,
+        source: str,
+        time: Time,
+        timeout: float | Duration | None,
+        policy: LookupPolicy,
+    ) -> PolicyResult:
+        """An awaited lookup under a non-exact policy (``lookup_transform_async``)."""
+        policy_args(policy)  # a TypeError for anything else, before any wait
+        if isinstance(policy, Window):
+            wait_ns = policy.future_wait.ns
+            if wait_ns == 0:
+                return self._lookup_policy(target, source, time, policy)
+            limit = timeout_ns(timeout)
+            if limit is None or wait_ns < limit:
+                timeout = policy.future_wait
+        check = partial(self.check_transform_policy, target, source, time, policy)
+        found = check()
+        if found is not None:
+            if isinstance(found, TransformException):
+                raise found
+            return found
+        return await self._wait(
+            check,
+            partial(self._frames_of, target, source, time),
+            timeout,
+            partial(self._describe, target, source, time),
+        )
+
     def _describe(self, target: str, source: str, time: Time) -> str:
         answer = self.can_transform(target, source, time, return_debug_tuple=True)
         reason = answer[1] if isinstance(answer, tuple) else ""
         what = f"transform from [{source}] to [{target}] at time {time.ns / 1e9:.9f}"
         return f"{what}: {reason}" if reason else what
 
-    @coroutine_method
+    @overload
+    def wait_for_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def wait_for_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def wait_for_transform(
         self,
         target_frame: str,
@@ -444,7 +535,8 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> TransformStamped:
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """Wait until ``lookup_transform(target_frame, source_frame, time)`` can succeed,
         and return its result. ``time`` may lie in the future; ``Time(0)`` waits until
         the two frames are connected with data.
@@ -469,7 +561,11 @@ class Buffer(BufferCore):
             ConnectivityException: with ``fail_fast``, the frames are in different trees.
             InvalidArgumentException: a frame id is empty or starts with '/'.
             LookupException: the path between the frames contains a loop.
+
+        ``policy``: as in :meth:`lookup_transform_async`.
         """
+        if policy is not None and type(policy) is not Exact:
+            return await self._wait_policy(target_frame, source_frame, time, timeout, policy)
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
             found = self.check_transform(target_frame, source_frame, time, fail_fast)
             if found is not None:  # the data is there (or can never be): no wait set up
@@ -483,7 +579,31 @@ class Buffer(BufferCore):
             partial(self._describe, target_frame, source_frame, time),
         )
 
-    @coroutine_method
+    @overload
+    def lookup_transform_async(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def lookup_transform_async(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def lookup_transform_async(
         self,
         target_frame: str,
@@ -492,11 +612,24 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> TransformStamped:
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """:meth:`lookup_transform`, waiting up to ``timeout`` for the data.
 
-        ``fail_fast``, and what is raised: as :meth:`wait_for_transform`.
+        ``fail_fast``: as :meth:`wait_for_transform` (exact lookups; a policy's wait ends
+        on its own terms).
+
+        ``policy`` (:mod:`tfbus.core.policy`): a non-exact policy waits until the policy
+        can answer (rechecked on every insert of the path's frames, as an exact wait) and
+        returns its :class:`~tfbus.core.policy.PolicyResult`. ``Window(past,
+        future_wait)``: an answer from the past within ``past`` at once, else a wait of up
+        to ``future_wait`` (and ``timeout``, the shorter) for data at ``time``; with
+        ``future_wait`` 0, tf2's error at once.
+
+        Raises: as :meth:`wait_for_transform`.
         """
+        if policy is not None and type(policy) is not Exact:
+            return await self._wait_policy(target_frame, source_frame, time, timeout, policy)
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
             found = self.check_transform(target_frame, source_frame, time, fail_fast)
             if found is not None:  # wait_for_transform's body: one coroutine fewer

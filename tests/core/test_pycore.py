@@ -43,6 +43,7 @@ from hypothesis import strategies as st
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.core import BufferCore, TouchedFrames, _pybatch, _pycache, _pycore, _pymath, _select
+from tfbus.core.policy import Clamp, Exact, Nearest, Previous, Window
 
 _ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
 from tfbus.core import _cbatch, _ccache, _cmath  # noqa: E402  (built with _ccore)
@@ -424,6 +425,9 @@ def _times(stamps: list[int], k: int, delta: int) -> list[int]:
     return sorted({0, max(0, base + delta), max(0, base), max(0, base - 1), base + 1})
 
 
+_POLICIES = (Exact(), Nearest(0.4), Clamp(0.5), Previous(), Window(1.0))
+
+
 def _queries(buf: BufferCore, target: str, source: str, times: list[int]) -> list[Any]:
     out: list[Any] = []
     for ns in times:
@@ -434,6 +438,10 @@ def _queries(buf: BufferCore, target: str, source: str, times: list[int]) -> lis
         out.append(outcome(lambda t=t: buf.chain_frames(target, source, t)))
         out.append(outcome(lambda t=t: buf.lookup_transform_full(target, t, source, Time(0), "a")))
         out.append(outcome(lambda t=t: buf.get_parent(source, t)))
+        for policy in _POLICIES:  # each link's pick, the report, the failures
+            out.append(
+                outcome(lambda t=t, p=policy: buf.check_transform_policy(target, source, t, p))
+            )
     out.append(outcome(lambda: buf.get_latest_common_time(target, source)))
     out.append(outcome(lambda: buf._id_status(target)))
     return out

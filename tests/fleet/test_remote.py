@@ -22,6 +22,14 @@ from tfbus.buffer import Buffer  # noqa: E402
 from tfbus.bus import Bus  # noqa: E402
 from tfbus.clock import ManualClock  # noqa: E402
 from tfbus.codecs.native import WireCodec  # noqa: E402
+from tfbus.core.policy import (  # noqa: E402
+    Clamp,
+    Nearest,
+    PolicyReport,
+    PolicyResult,
+    Previous,
+    Window,
+)
 from tfbus.errors import (  # noqa: E402
     BackwardExtrapolationException,
     ConnectivityException,
@@ -48,6 +56,8 @@ from tfbus.transports.zenoh import ZenohTransport  # noqa: E402
 from tfbus.transports.zenoh.router import ZenohRouter  # noqa: E402
 
 pytestmark = pytest.mark.anyio
+
+NS = 1_000_000_000
 
 
 def free_port() -> int:
@@ -341,3 +351,67 @@ async def test_the_ros1_action_client_refuses_fail_fast() -> None:
     client = LookupActionClient.__new__(LookupActionClient)  # no ROS 1 node: refused first
     with pytest.raises(ValueError, match="tf2_msgs/LookupTransform action's goal has no"):
         await client.lookup_transform("world", "base", Time(13), 1.0, fail_fast=True)
+
+
+async def test_a_lookup_policy_crosses_the_wire() -> None:
+    """Clamp, Previous and Nearest asked remotely: the server's PolicyResult (transform
+    and report), equal to its local answer; a failure is the same tf2 class and message."""
+    async with served() as s:
+        cases = [
+            (Time(13), Clamp(2.0), 3.5, (13 * NS, 12 * NS)),  # base's 12 s sample held
+            (Time(11), Previous(), 1.5, (11 * NS, 10 * NS)),  # base's 10 s sample
+            (Time(11.2), Nearest(0.5), 2.7, (11_200_000_000, 11_200_000_000)),  # tf2's
+        ]
+        for at, policy, x, stamps in cases:
+            remote = await s.client.lookup_transform("world", "laser", at, 1.0, policy=policy)
+            local = s.buffer.lookup_transform("world", "laser", at, policy=policy)
+            assert type(remote) is PolicyResult and type(remote.report) is PolicyReport
+            assert remote == local
+            assert remote.transform.transform.translation.x == pytest.approx(x)
+            assert remote.report.frames == ("laser", "base")
+            assert remote.report.stamps_ns == stamps
+        with pytest.raises(ForwardExtrapolationException) as local_error:
+            s.buffer.lookup_transform("world", "laser", Time(50), policy=Nearest(0.5))
+        with pytest.raises(ForwardExtrapolationException) as remote_error:
+            await s.client.lookup_transform("world", "laser", Time(50), 0.0, policy=Nearest(0.5))
+        assert str(remote_error.value) == str(local_error.value)
+
+
+async def test_a_remote_window_waits_on_the_servers_clock() -> None:
+    """Window(0.5, 2.0) at 13 s (1 s after base's newest sample): the server waits for
+    data at 13 s; a sample at 14 s (x 5) answers it, interpolated (x 4 + 0.5)."""
+    async with served() as s:
+        got: list[PolicyResult] = []
+
+        async def ask() -> None:
+            got.append(
+                await s.client.lookup_transform(
+                    "world", "laser", Time(13), 5.0, policy=Window(0.5, 2.0)
+                )
+            )
+
+        with anyio.fail_after(10):
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(ask)
+                await wait_until(lambda: s.buffer.pending_waits == 1)
+                s.buffer.set_transform(ts("world", "base", 14, 5.0), "test")
+        assert got[0].transform.transform.translation.x == pytest.approx(4.5)
+        assert got[0].report.exact
+
+
+async def test_a_bad_policy_field_is_named() -> None:
+    async with served() as s:
+        session = s.client_bus.transport.session  # type: ignore[union-attr]
+        codec = WireCodec()
+        for policy in (["sideways", 0, 0], ["nearest", -1, 0], ["clamp", 1], "nearest"):
+            bad = codec.encode({"op": "lookup", "target": "world", "source": "base",
+                                "time": 0, "timeout": 0.0, "policy": policy},
+                               sender=1, seq=1)
+            replies = await anyio.to_thread.run_sync(
+                lambda bad=bad: list(session.get(s.server.where, payload=bad, timeout=3.0))
+            )
+            answer = codec.decode(replies[0].ok.payload.to_bytes()).message
+            assert answer == {"error": "InvalidArgumentException",
+                              "message": f"request field 'policy' has an invalid value {policy!r}"}
+        t = await s.client.lookup_transform("world", "base", Time(0), timeout=0.0)
+        assert t.transform.translation.x == pytest.approx(3.0)

@@ -32,6 +32,7 @@ from ros1_hostile import FakeMaster, HostilePeer, http_answer, send_raw, tcpros_
 
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
+from tfbus.core.policy import Clamp, Exact, Nearest, Previous, Window
 from tfbus.errors import LookupException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.remote import BufferClient, BufferServer
@@ -311,6 +312,23 @@ async def test_buffer_client_and_server_on_ros1_buses_answer_as_a_buffer() -> No
                 (5, 3, 2, 0, 0, 0)
             assert server.where == ("the ROS 1 action /tf2_buffer_server "
                                     "(tf2_msgs/LookupTransform) of node /served")
+
+
+@pytest.mark.anyio
+async def test_a_lookup_policy_is_refused_on_the_ros1_action() -> None:
+    """The LookupTransform action (tf2_msgs) has no field for a lookup policy: a
+    non-exact one is a TypeError naming the client, before anything is sent; an exact
+    lookup through the same client is answered."""
+    with FakeMaster() as master:
+        async with ros1_bus(master.uri, "/served") as served, \
+                BufferServer(_static_buffer(), served), ros1_bus(master.uri, "/asking") as bus:
+            client = BufferClient(bus)
+            await _answered(client)
+            for policy in (Nearest(0.1), Clamp(0.1), Previous(), Window(0.1, 1.0)):
+                with pytest.raises(TypeError, match="cannot carry a lookup policy"):
+                    await client.lookup_transform("base", "laser", Time(0), 1.0, policy=policy)
+            done = await client.lookup_transform("base", "laser", Time(0), 1.0, policy=Exact())
+            assert tuple(done.transform.translation) == (1.0, 2.0, 3.0)
 
 
 @pytest.mark.anyio

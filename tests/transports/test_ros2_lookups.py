@@ -256,6 +256,13 @@ async def test_lookups_equal_the_server_buffers_answers(anyio_backend: str) -> N
         with pytest.raises(type(info.value)) as own:
             buf.lookup_transform("map", "base_link", Time(50))
         assert str(info.value) == str(own.value)  # tf2's message, the same subclass
+        for ask in (lambda: client.lookup_transform("map", "odom", Time(0), 1.0, fail_fast=True),
+                    lambda: client.can_transform("map", "odom", Time(0), 1.0, fail_fast=True),
+                    lambda: client.lookup_transform_full("map", Time(0), "odom", Time(0), "map",
+                                                         1.0, fail_fast=True)):
+            # the LookupTransform goal has no field for it: refused, never dropped
+            with pytest.raises(ValueError, match="fail_fast=True cannot be sent to a ROS 2"):
+                await ask()
         s = server.statistics()
         assert (s.requests, s.answered, s.errors, s.malformed, s.busy, s.pending) \
             == (6, 4, 2, 0, 0, 0)

@@ -28,6 +28,8 @@ cdef enum:
 
 cdef class Link:
     cdef int c_gather(self, int64_t time, double* out, int* parent) except -1
+    cdef int c_pick(self, int64_t time, int mode, int64_t before, int64_t after, double* out,
+                    int* parent, int64_t* used) except -1
     cdef int c_latest(self, int64_t* stamp) noexcept
     cdef int c_insert(self, int64_t stamp, int parent, const double* v) except -1
     cdef int64_t c_known(self, int code) noexcept

@@ -96,6 +96,14 @@ cdef class Link:
     cdef int c_gather(self, int64_t time, double* out, int* parent) except -1:
         return G_EMPTY
 
+    cdef int c_pick(self, int64_t time, int mode, int64_t before, int64_t after, double* out,
+                    int* parent, int64_t* used) except -1:
+        """``c_gather`` under a lookup policy (:mod:`tfbus.core.policy`); ``used`` = the
+        stamp of the sample used (the time itself for an interpolation or a static
+        link)."""
+        used[0] = time
+        return self.c_gather(time, out, parent)
+
     cdef int c_latest(self, int64_t* stamp) noexcept:
         stamp[0] = 0
         return 0
@@ -393,6 +401,50 @@ cdef class TimeCache(Link):
         parent[0] = self._parent if self._pa == NULL else self._pa[i]
         memcpy(out, &self._va[i * 7], 7 * sizeof(double))
         return G_OK
+
+
+    cdef int c_pick(self, int64_t time, int mode, int64_t before, int64_t after, double* out,
+                    int* parent, int64_t* used) except -1:
+        # A lookup policy's sample (tfbus.core.policy): mode 1 nearest within before (=
+        # after), 2 the edge sample within before / after beyond the data, 3 the last at
+        # or before the time. Where it picks none: tf2's gather at the time.
+        cdef Py_ssize_t head = self._head, tail = self._tail, k = -1
+        cdef const int64_t* st = self._st
+        cdef int64_t newest, oldest, d
+        if tail != head and time != 0:
+            newest = st[tail - 1]
+            oldest = st[head]
+            if mode == 3:
+                if time >= newest:
+                    k = tail - 1
+                elif time >= oldest:
+                    k = _bisect_left(st, time, head, tail)
+                    if st[k] != time:
+                        k -= 1
+            elif mode == 1:
+                if time >= newest:
+                    k = tail - 1
+                elif time <= oldest:
+                    k = head
+                else:
+                    k = _bisect_left(st, time, head, tail)
+                    if st[k] != time and time - st[k - 1] <= st[k] - time:
+                        k -= 1
+                d = st[k] - time
+                if d > before or -d > before:
+                    k = -1
+            elif time > newest:
+                if time - newest <= after:
+                    k = tail - 1
+            elif time < oldest and oldest - time <= before:
+                k = head
+            if k >= 0:
+                parent[0] = self._parent if self._pa == NULL else self._pa[k]
+                memcpy(out, &self._va[k * 7], 7 * sizeof(double))
+                used[0] = st[k]
+                return G_OK
+        used[0] = time
+        return self.c_gather(time, out, parent)
 
 
 cdef class StaticCache(Link):

@@ -31,6 +31,9 @@ cdef class CoreBase:
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1
+    cdef int _walk_policy(self, int target_id, int source_id, int64_t* time, int mode,
+                          int64_t before, int64_t after, double* out, int* where,
+                          int* sf, int64_t* ss, Py_ssize_t* n) except -1
 
     cdef inline int _frame(self, object frame_id) except -2:
         """Id of a known, queryable frame, or -1 (empty, '/'-prefixed, unknown)."""

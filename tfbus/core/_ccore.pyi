@@ -4,6 +4,7 @@ from collections.abc import Iterable
 from typing import Any, Final, Literal
 
 from tfbus.core._ccache import Link
+from tfbus.core.policy import PolicyResult
 from tfbus.core.results import BatchResult, TouchedFrames
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
@@ -58,6 +59,9 @@ class CoreBase:
     def _last_touched(self) -> tuple[str, str, bool]: ...
     def _id_status(self, frame_id: object) -> int: ...
     def _query(self, target: str, source: str, time: Time) -> TransformStamped | _Failure: ...
+    def _query_policy(
+        self, target: str, source: str, time: Time, policy: tuple[int, int, int]
+    ) -> PolicyResult | _Failure: ...
     def _chain(self, target_frame: str, source_frame: str, time: Time | None = None) -> list[
         str
     ]: ...

@@ -52,7 +52,8 @@ from tfbus.core._ccache cimport (
 )
 from tfbus.core._cmath cimport _accumulate, _compose, _identity, _qrot, _qmul
 from cpython.float cimport PyFloat_FromDouble
-from cpython.ref cimport Py_DECREF
+from cpython.ref cimport Py_DECREF, Py_INCREF
+from cpython.tuple cimport PyTuple_New, PyTuple_SET_ITEM
 
 from tfbus.core._cresults cimport (
     PyObject_GC_UnTrack, PyObject_GenericSetAttr, PyType_GenericAlloc, PyTypeObject, _named,
@@ -61,7 +62,9 @@ from tfbus.core._cresults cimport (
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Time
+from tfbus.core.policy import PolicyReport, PolicyResult
 from tfbus.core.results import BatchResult, TouchedFrames
+
 
 # outcomes of BufferCore._cwalk / _ccommon_time (tf2_msgs::TF2Error)
 NO_ERROR = 0
@@ -281,6 +284,47 @@ cdef int _climb(list caches, int frame, int stop, int early, int64_t time, doubl
     reached[0] = frame
     return CLIMB_STOPPED
 
+
+cdef int _climb_policy(list caches, int frame, int stop, int early, int64_t time, int mode,
+                       int64_t before, int64_t after, double* acc, int* reached,
+                       int* frames, int64_t* stamps, Py_ssize_t* count) except -1:
+    """``_climb`` with each link's sample picked by a lookup policy (``Link.c_pick``);
+    records the child frame and sample stamp of every accumulated link in ``frames`` /
+    ``stamps`` (room for ``C_MAX_DEPTH + 2``), their number in ``count``."""
+    cdef double st[7]
+    cdef int parent = 0
+    cdef int depth = 0
+    cdef int64_t used = 0
+    cdef bint first = True
+    cdef object obj
+    _identity(acc)
+    count[0] = 0
+    while frame != stop:
+        obj = _link(caches, frame)
+        if obj is None:
+            break
+        if (<Link>obj).c_pick(time, mode, before, after, st, &parent, &used) != G_OK \
+                or parent == 0:
+            reached[0] = frame
+            return CLIMB_FAILED
+        if frame == early:
+            reached[0] = frame
+            return CLIMB_EARLY
+        frames[count[0]] = frame
+        stamps[count[0]] = used
+        count[0] += 1
+        if first:
+            memcpy(acc, st, 7 * sizeof(double))
+            first = False
+        else:
+            _accumulate(acc, st)
+        frame = parent
+        depth += 1
+        if depth > C_MAX_DEPTH:
+            reached[0] = frame
+            return CLIMB_LOOP
+    reached[0] = frame
+    return CLIMB_STOPPED
 
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
@@ -910,6 +954,146 @@ cdef class CoreBase:
         out[5] = q[2]
         out[6] = q[3]
         return NO_ERROR
+
+    cdef int _walk_policy(self, int target_id, int source_id, int64_t* time, int mode,
+                          int64_t before, int64_t after, double* out, int* where,
+                          int* sf, int64_t* ss, Py_ssize_t* n) except -1:
+        """``_walk`` with each link's sample picked by a lookup policy; on success ``sf``
+        / ``ss`` (room for ``2 * C_MAX_DEPTH + 4``) hold the child frame and sample stamp
+        of each of the ``n`` links on the path (source side upwards, then target side
+        downwards; links above the common ancestor, gathered by both sides, are left
+        out)."""
+        cdef list caches = self._caches
+        cdef double src[7]
+        cdef double tgt[7]
+        cdef double r[3]
+        cdef double q[4]
+        cdef int top = 0, frame = 0, src_failed_at = 0
+        cdef int outcome, err
+        cdef Py_ssize_t m = 0, k
+        cdef bint failed
+        cdef int* tf = &sf[C_MAX_DEPTH + 2]
+        cdef int64_t* ts = &ss[C_MAX_DEPTH + 2]
+        n[0] = 0
+        if source_id == target_id:
+            _identity(out)
+            return NO_ERROR
+        if time[0] == 0:
+            err = self._common(target_id, source_id, time)
+            if err:
+                return err
+        outcome = _climb_policy(caches, source_id, 0, target_id, time[0], mode, before,
+                                after, src, &top, sf, ss, n)
+        if outcome == CLIMB_EARLY:
+            memcpy(out, src, 7 * sizeof(double))
+            return NO_ERROR
+        if outcome == CLIMB_LOOP:
+            return LOOKUP_ERROR
+        failed = outcome == CLIMB_FAILED
+        if failed:
+            src_failed_at = top
+        outcome = _climb_policy(caches, target_id, top, source_id, time[0], mode, before,
+                                after, tgt, &frame, tf, ts, &m)
+        if outcome == CLIMB_FAILED:
+            where[0] = frame
+            return EXTRAPOLATION_ERROR
+        if outcome == CLIMB_LOOP:
+            return LOOKUP_ERROR
+        if outcome == CLIMB_EARLY:
+            _identity(src)
+            n[0] = 0
+        elif frame != top:
+            if failed:
+                where[0] = src_failed_at
+                return EXTRAPOLATION_ERROR
+            return CONNECTIVITY_ERROR
+        # The links above the common ancestor were gathered by both sides: drop them.
+        while n[0] and m and sf[n[0] - 1] == tf[m - 1]:
+            n[0] -= 1
+            m -= 1
+        while m:
+            m -= 1
+            sf[n[0]] = tf[m]
+            ss[n[0]] = ts[m]
+            n[0] += 1
+        _qrot(-tgt[3], -tgt[4], -tgt[5], tgt[6], src[0] - tgt[0], src[1] - tgt[1],
+              src[2] - tgt[2], r)
+        _qmul(-tgt[3], -tgt[4], -tgt[5], tgt[6], src[3], src[4], src[5], src[6], q)
+        out[0] = r[0]
+        out[1] = r[1]
+        out[2] = r[2]
+        out[3] = q[0]
+        out[4] = q[1]
+        out[5] = q[2]
+        out[6] = q[3]
+        return NO_ERROR
+
+    def _query_policy(self, object target, object source, time, tuple policy):
+        """``_query`` under a lookup policy (:mod:`tfbus.core.policy`; ``policy`` its
+        ``(mode, before ns, after ns)``, mode 1 nearest, 2 clamp, 3 previous): the
+        :class:`~tfbus.core.policy.PolicyResult` (transform and report, not memoised), or
+        ``_query``'s failure tuple (the failing link's tf2 failure at the time)."""
+        cdef int64_t t = (<object>time)._ns
+        cdef int mode = policy[0]
+        cdef int64_t before = policy[1], after = policy[2]
+        cdef int64_t used, lct, s, d, worst = 0
+        cdef int target_id, source_id, err, where = 0, gcode = 0
+        cdef double v[7]
+        cdef double st[7]
+        cdef int p = 0
+        cdef bint expired
+        cdef Link link
+        cdef list names
+        cdef object out, o
+        cdef Py_ssize_t k, n = 0
+        cdef tuple frames, stamps
+        cdef int fr[2 * C_MAX_DEPTH + 4]
+        cdef int64_t ss[2 * C_MAX_DEPTH + 4]
+        if type(target) is not str:
+            target = _as_str(target)
+            if target is None:
+                return (INVALID_ARGUMENT, 0)
+        if type(source) is not str:
+            source = _as_str(source)
+            if source is None:
+                return (INVALID_ARGUMENT, 1)
+        if target == source:
+            out = self._query(target, source, time)
+            return _named(PolicyResult, out, _named3(PolicyReport, (), (), 0))
+        target_id = self._frame(target)
+        if target_id < 0:
+            return _bad_id(<str>target, 0)
+        source_id = self._frame(source)
+        if source_id < 0:
+            return _bad_id(<str>source, 1)
+        used = t
+        err = self._walk_policy(target_id, source_id, &used, mode, before, after, v, &where,
+                                fr, ss, &n)
+        if err != NO_ERROR:
+            if err != EXTRAPOLATION_ERROR:
+                return (err, 0)
+            expired = False
+            link = <Link>self._caches[where]
+            gcode = link.c_gather(used, st, &p)
+            if gcode != G_FUTURE and self._common(target_id, source_id, &lct) == NO_ERROR:
+                expired = lct != 0 and used < lct - self._cache_ns
+            return (err, where, used, expired)
+        names = self._frame_names
+        frames = PyTuple_New(n)
+        stamps = PyTuple_New(n)
+        for k in range(n):
+            o = names[fr[k]]
+            Py_INCREF(o)
+            PyTuple_SET_ITEM(frames, k, o)
+            s = ss[k]
+            o = s
+            Py_INCREF(o)
+            PyTuple_SET_ITEM(stamps, k, o)
+            d = s - used if s >= used else used - s
+            if d > worst:
+                worst = d
+        out = _stamped(time if used == t and t != 0 else _time_of(used), target, source, v)
+        return _named(PolicyResult, out, _named3(PolicyReport, frames, stamps, worst))
 
     def _cwalk(self, int target_id, int source_id, int64_t time):
         """tf2 ``walkToTopParent`` with ``TransformAccum`` (see ``_walk``).

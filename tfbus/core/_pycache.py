@@ -101,6 +101,12 @@ class Link:
         """``(newest stamp, its parent id)``; ``(0, 0)`` when empty."""
         return 0, 0
 
+    def _c_pick(self, time: int, mode: int, before: int, after: int) -> tuple[int, int, Tf7, int]:
+        """``_c_gather`` under a lookup policy (:mod:`tfbus.core.policy`):
+        ``(gather code, parent id, values, stamp of the sample used)``."""
+        code, parent, v = self._c_gather(time)
+        return code, parent, v, time
+
     def _c_insert(self, stamp: int, parent: int, v: Tf7) -> int:
         return OK
 
@@ -372,6 +378,48 @@ class TimeCache(Link):
                     )  # fmt: skip
         parent = self._parent if pa is None else int(pa.item(i))
         return _G_OK, parent, tuple(self._va[i].tolist())
+
+
+    def _c_pick(self, time: int, mode: int, before: int, after: int) -> tuple[int, int, Tf7, int]:
+        # A lookup policy's sample (tfbus.core.policy): mode 1 nearest within before (=
+        # after), 2 the edge sample within before / after beyond the data, 3 the last at
+        # or before the time. Where it picks none: tf2's gather at the time.
+        head, tail = self._head, self._tail
+        if tail != head and time != 0:
+            st = self._st
+            newest = int(st.item(tail - 1))
+            oldest = int(st.item(head))
+            k = -1
+            if mode == 3:
+                if time >= newest:
+                    k = tail - 1
+                elif time >= oldest:
+                    k = bisect_left(st, time, head, tail)
+                    if st.item(k) != time:
+                        k -= 1
+            elif mode == 1:
+                if time >= newest:
+                    k = tail - 1
+                elif time <= oldest:
+                    k = head
+                else:
+                    k = bisect_left(st, time, head, tail)
+                    if st.item(k) != time and time - int(st.item(k - 1)) <= int(st.item(k)) - time:
+                        k -= 1
+                d = int(st.item(k)) - time
+                if d > before or -d > before:
+                    k = -1
+            elif time > newest:
+                if time - newest <= after:
+                    k = tail - 1
+            elif time < oldest and oldest - time <= before:
+                k = head
+            if k >= 0:
+                pa = self._pa
+                parent = self._parent if pa is None else int(pa.item(k))
+                return _G_OK, parent, tuple(self._va[k].tolist()), int(st.item(k))
+        code, parent, v = self._c_gather(time)
+        return code, parent, v, time
 
 
 class StaticCache(Link):

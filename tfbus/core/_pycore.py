@@ -43,6 +43,7 @@ from tfbus.core._pymath import (
     _qrot,
     _tp_name,
 )
+from tfbus.core.policy import PolicyReport, PolicyResult
 from tfbus.core.results import BatchResult, TouchedFrames
 from tfbus.errors import InvalidArgumentException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
@@ -125,6 +126,47 @@ def _climb(
             first = False
         else:
             acc = _compose(st, acc)  # TransformAccum::accum: acc = link ∘ acc
+        frame = parent
+        depth += 1
+        if depth > MAX_GRAPH_DEPTH:
+            return _CLIMB_LOOP, frame, acc
+    return _CLIMB_STOPPED, frame, acc
+
+
+def _climb_policy(
+    caches: list[Link | None],
+    frame: int,
+    stop: int,
+    early: int,
+    time: int,
+    mode: int,
+    before: int,
+    after: int,
+    frames: list[int],
+    stamps: list[int],
+) -> tuple[int, int, Tf7]:
+    """``_climb`` with each link's sample picked by a lookup policy (``Link._c_pick``);
+    appends the child frame and sample stamp of every accumulated link to ``frames`` and
+    ``stamps``."""
+    acc = _IDENTITY
+    depth = 0
+    first = True
+    while frame != stop:
+        obj = _link(caches, frame)
+        if obj is None:
+            break
+        code, parent, st, used = obj._c_pick(time, mode, before, after)
+        if code != _G_OK or parent == 0:
+            return _CLIMB_FAILED, frame, acc
+        if frame == early:
+            return _CLIMB_EARLY, frame, acc
+        frames.append(frame)
+        stamps.append(used)
+        if first:
+            acc = st
+            first = False
+        else:
+            acc = _compose(st, acc)
         frame = parent
         depth += 1
         if depth > MAX_GRAPH_DEPTH:
@@ -841,6 +883,116 @@ class CoreBase:
         rx, ry, rz = _qrot(iqx, iqy, iqz, iqw, src[0] - tgt[0], src[1] - tgt[1], src[2] - tgt[2])
         qx, qy, qz, qw = _qmul(iqx, iqy, iqz, iqw, src[3], src[4], src[5], src[6])
         return NO_ERROR, (rx, ry, rz, qx, qy, qz, qw), 0, time
+
+    def _walk_policy(
+        self, target_id: int, source_id: int, time: int, mode: int, before: int, after: int
+    ) -> tuple[int, Tf7, int, int, list[int], list[int]]:
+        """``_walk`` with each link's sample picked by a lookup policy: ``(code, v, where,
+        time used, frames, stamps)``, ``frames`` / ``stamps`` the child frame and sample
+        stamp of each link on the path (source side upwards, then target side downwards;
+        links above the common ancestor, gathered by both sides, are left out)."""
+        caches = self._caches
+        sf: list[int] = []
+        ss: list[int] = []
+        tf_: list[int] = []
+        ts_: list[int] = []
+        if source_id == target_id:
+            return NO_ERROR, _IDENTITY, 0, time, sf, ss
+        if time == 0:
+            err, time = self._common(target_id, source_id)
+            if err:
+                return err, _IDENTITY, 0, time, sf, ss
+        outcome, top, src = _climb_policy(
+            caches, source_id, 0, target_id, time, mode, before, after, sf, ss
+        )
+        if outcome == _CLIMB_EARLY:
+            return NO_ERROR, src, 0, time, sf, ss
+        if outcome == _CLIMB_LOOP:
+            return LOOKUP_ERROR, _IDENTITY, 0, time, sf, ss
+        failed = outcome == _CLIMB_FAILED
+        src_failed_at = top if failed else 0
+        outcome, frame, tgt = _climb_policy(
+            caches, target_id, top, source_id, time, mode, before, after, tf_, ts_
+        )
+        if outcome == _CLIMB_FAILED:
+            return EXTRAPOLATION_ERROR, _IDENTITY, frame, time, sf, ss
+        if outcome == _CLIMB_LOOP:
+            return LOOKUP_ERROR, _IDENTITY, 0, time, sf, ss
+        if outcome == _CLIMB_EARLY:
+            src = _IDENTITY
+            sf = []
+            ss = []
+        elif frame != top:
+            if failed:
+                return EXTRAPOLATION_ERROR, _IDENTITY, src_failed_at, time, sf, ss
+            return CONNECTIVITY_ERROR, _IDENTITY, 0, time, sf, ss
+        # The links above the common ancestor were gathered by both sides: drop them.
+        n, m = len(sf), len(tf_)
+        while n and m and sf[n - 1] == tf_[m - 1]:
+            n -= 1
+            m -= 1
+        iqx, iqy, iqz, iqw = -tgt[3], -tgt[4], -tgt[5], tgt[6]
+        rx, ry, rz = _qrot(iqx, iqy, iqz, iqw, src[0] - tgt[0], src[1] - tgt[1], src[2] - tgt[2])
+        qx, qy, qz, qw = _qmul(iqx, iqy, iqz, iqw, src[3], src[4], src[5], src[6])
+        sf = sf[:n] + tf_[:m][::-1]
+        ss = ss[:n] + ts_[:m][::-1]
+        return NO_ERROR, (rx, ry, rz, qx, qy, qz, qw), 0, time, sf, ss
+
+    def _query_policy(
+        self, target: str, source: str, time: Time, policy: tuple[int, int, int]
+    ) -> PolicyResult | tuple[int, ...]:
+        """``_query`` under a lookup policy (:mod:`tfbus.core.policy`; ``policy`` its
+        ``(mode, before ns, after ns)``, mode 1 nearest, 2 clamp, 3 previous): the
+        :class:`~tfbus.core.policy.PolicyResult` (transform and report, not memoised), or
+        ``_query``'s failure tuple (the failing link's tf2 failure at the time)."""
+        t = _int64(time._ns)
+        if type(policy) is not tuple:
+            raise TypeError(f"policy must be a tuple, not {type(policy).__name__}")
+        mode, before, after = _cint(policy[0]), _int64(policy[1]), _int64(policy[2])
+        if type(target) is not str:
+            name = _as_str(target)
+            if name is None:
+                return (INVALID_ARGUMENT, 0)
+            target = name
+        if type(source) is not str:
+            name = _as_str(source)
+            if name is None:
+                return (INVALID_ARGUMENT, 1)
+            source = name
+        if target == source:
+            out = self._query(target, source, time)
+            assert isinstance(out, TransformStamped)
+            return _new(PolicyResult, (out, _new(PolicyReport, ((), (), 0))))
+        target_id = self._frame(target)
+        if target_id < 0:
+            return _bad_id(target, 0)
+        source_id = self._frame(source)
+        if source_id < 0:
+            return _bad_id(source, 1)
+        err, v, where, used, fr, stamps = self._walk_policy(
+            target_id, source_id, t, mode, before, after
+        )
+        if err != NO_ERROR:
+            if err != EXTRAPOLATION_ERROR:
+                return (err, 0)
+            expired = False
+            link = self._caches[where]
+            assert link is not None
+            gcode = link._c_gather(used)[0]
+            if gcode != _G_FUTURE:
+                cerr, lct = self._common(target_id, source_id)
+                if cerr == NO_ERROR:
+                    expired = lct != 0 and used < lct - self._cache_ns
+            return (err, where, used, expired)
+        names = self._frame_names
+        worst = 0
+        for s in stamps:
+            d = s - used if s >= used else used - s
+            if d > worst:
+                worst = d
+        out = _stamped(time if used == t and t != 0 else _time_of(used), target, source, v)
+        report = _new(PolicyReport, (tuple([names[f] for f in fr]), tuple(stamps), worst))
+        return _new(PolicyResult, (out, report))
 
     def _cwalk(
         self, target_id: int, source_id: int, time: int

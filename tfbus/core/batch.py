@@ -24,6 +24,7 @@ from typing import Literal, TypeAlias, cast
 import numpy as np
 import numpy.typing as npt
 
+from tfbus.core.policy import PolicyReport
 from tfbus.time import Time
 
 __all__ = [
@@ -60,9 +61,23 @@ class TransformArray:
         child_frame_id: the source frame.
         valid: ``(N,) bool``; False only for rows that failed under ``errors="mask"``
             (their translation and rotation are NaN, their stamp the requested time).
+        reports: for a lookup under a non-exact policy (:mod:`tfbus.core.policy`), each
+            row's :class:`~tfbus.core.policy.PolicyReport` (None for a masked row);
+            None for an exact lookup.
+        max_abs_delta_ns: with ``reports``, ``(N,) int64``: each row's largest
+            ``|sample stamp - time|`` in ns (-1 for a masked row); else None.
     """
 
-    __slots__ = ("child_frame_id", "frame_id", "rotations", "stamps", "translations", "valid")
+    __slots__ = (
+        "child_frame_id",
+        "frame_id",
+        "max_abs_delta_ns",
+        "reports",
+        "rotations",
+        "stamps",
+        "translations",
+        "valid",
+    )
 
     def __init__(
         self,
@@ -72,6 +87,8 @@ class TransformArray:
         frame_id: str,
         child_frame_id: str,
         valid: npt.NDArray[np.bool_] | None = None,
+        *,
+        reports: Sequence[PolicyReport | None] | None = None,
     ) -> None:
         n = stamps.shape[0]
         if translations.shape != (n, 3) or rotations.shape != (n, 4):
@@ -85,6 +102,15 @@ class TransformArray:
         self.frame_id = frame_id
         self.child_frame_id = child_frame_id
         self.valid = np.ones(n, dtype=bool) if valid is None else valid
+        self.reports: tuple[PolicyReport | None, ...] | None = None
+        self.max_abs_delta_ns: _I64 | None = None
+        if reports is not None:
+            if len(reports) != n:
+                raise ValueError(f"reports must have {n} entries, got {len(reports)}")
+            self.reports = tuple(reports)
+            self.max_abs_delta_ns = np.array(
+                [-1 if r is None else r.max_abs_delta_ns for r in self.reports], dtype=np.int64
+            )
 
     def __len__(self) -> int:
         return int(self.stamps.shape[0])

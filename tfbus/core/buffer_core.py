@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from typing import Any, Final, Literal, TypeAlias
+from typing import Any, Final, Literal, TypeAlias, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -52,6 +52,18 @@ from tfbus.core.batch import (
     as_times,
     check_errors,
     compose_rows,
+)
+from tfbus.core.policy import (
+    Clamp,
+    Exact,
+    LookupPolicy,
+    Nearest,
+    PolicyReport,
+    PolicyResult,
+    Previous,
+    Window,
+    policy_args,
+    policy_error,
 )
 from tfbus.core.results import (
     BatchResult,
@@ -412,9 +424,31 @@ class BufferCore(CoreBase):
 
     # ------------------------------------------------------------------ lookups
 
+    @overload
     def lookup_transform(
-        self, target_frame: str, source_frame: str, time: Time
-    ) -> TransformStamped:
+        self, target_frame: str, source_frame: str, time: Time, *, policy: Exact | None = None
+    ) -> TransformStamped: ...
+
+    @overload
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> PolicyResult: ...
+
+    # ``policy`` is keyword-only in the signatures above (what type checkers hold callers
+    # to), not in the function: a keyword-only default costs every exact lookup a dict
+    # lookup (CPython's __kwdefaults__), ~10% of a memoised answer.
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """The pose of ``source_frame`` in ``target_frame`` at ``time`` (tf2
         ``lookupTransform``): it maps points from source into target coordinates.
 
@@ -437,12 +471,31 @@ class BufferCore(CoreBase):
                 sample), ``BackwardExtrapolationException`` (before its oldest) or
                 ``NoDataForExtrapolationException`` (one sample at another time, or none),
                 as rolling tf2's ``TimeCache::findClosest`` chooses; tf2 0.7.6's message.
+                Under a policy: for the first link the policy found no sample for, the
+                exception and message of the exact lookup for that link.
+            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
+
+        ``policy`` (:mod:`tfbus.core.policy`): how each link's sample is picked;
+        ``None`` or :class:`~tfbus.core.policy.Exact` is tf2's rule and returns the
+        TransformStamped. Any other policy (``Nearest(max_delta)``, ``Clamp(max_delta)``,
+        ``Previous()``, ``Window(past, future_wait)``) returns a
+        :class:`~tfbus.core.policy.PolicyResult` ``(transform, report)``: the report names
+        each link's sample stamp and the largest ``|stamp - time|``, so no approximation
+        is silent. Policy lookups are not memoised.
 
         One compiled call validates, walks and builds the result. Successful results are
         memoised until the next insert or ``clear()`` (64 slots, by the ids' identity and
         the time), so repeating a query (many objects at one stamp, time 0 between
         updates) costs a few compares.
         """
+        if policy is not None and type(policy) is not Exact:
+            try:
+                found = self._query_policy(target_frame, source_frame, time, policy._args)
+            except AttributeError as err:
+                raise policy_error(policy, time, err) from None
+            if isinstance(found, PolicyResult):
+                return found
+            raise self._failure("lookupTransform", target_frame, source_frame, found)
         try:
             out = self._query(target_frame, source_frame, time)
         except AttributeError as err:  # (no cost on the way through)
@@ -450,6 +503,27 @@ class BufferCore(CoreBase):
         if isinstance(out, TransformStamped):
             return out
         raise self._failure("lookupTransform", target_frame, source_frame, out)
+
+    def _policy_query(
+        self, target_frame: str, source_frame: str, time: Time, policy: object
+    ) -> PolicyResult | tuple[int, ...]:
+        """The core's policy lookup: the PolicyResult or a failure tuple (``_query``'s)."""
+        try:
+            out: PolicyResult | tuple[int, ...] = self._query_policy(
+                target_frame, source_frame, time, policy_args(policy)
+            )
+        except AttributeError as err:
+            raise not_a_time(time, err) from None
+        return out
+
+    def _lookup_policy(
+        self, target_frame: str, source_frame: str, time: Time, policy: object
+    ) -> PolicyResult:
+        """:meth:`lookup_transform` under a policy, always its PolicyResult (or raises)."""
+        found = self._policy_query(target_frame, source_frame, time, policy)
+        if isinstance(found, PolicyResult):
+            return found
+        raise self._failure("lookupTransform", target_frame, source_frame, found)
 
     def try_lookup_transform(
         self, target_frame: str, source_frame: str, time: Time
@@ -493,11 +567,40 @@ class BufferCore(CoreBase):
             raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return out
+        return self._hopeless(target_frame, source_frame, out, time, fail_fast)
+
+    def check_transform_policy(
+        self, target_frame: str, source_frame: str, time: Time, policy: LookupPolicy
+    ) -> PolicyResult | TransformException | None:
+        """:meth:`check_transform` under a lookup policy (:mod:`tfbus.core.policy`): the
+        :class:`~tfbus.core.policy.PolicyResult` when the policy can answer, the
+        exception when waiting cannot help, None while it may (what an awaited policy
+        lookup rechecks on every insert of its frames). ``Exact()`` answers with a
+        report whose every stamp is the time used (tf2's answer, bit for bit).
+
+        Raises:
+            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
+        """
+        out = self._policy_query(target_frame, source_frame, time, policy)
+        if isinstance(out, PolicyResult):
+            return out
+        return self._hopeless(target_frame, source_frame, out, time, False)
+
+    def _hopeless(
+        self,
+        target_frame: str,
+        source_frame: str,
+        out: tuple[int, ...],
+        time: Time,
+        fail_fast: bool,
+    ) -> TransformException | None:
+        """The exception of a failure tuple when waiting cannot help (with ``fail_fast``,
+        also when the data can never come: :meth:`_fail_fast_error`), else None."""
         code = out[0]
         if code in (INVALID_ARGUMENT, LOOKUP_ERROR) or (code == EXTRAPOLATION_ERROR and out[3]):
             return self._failure("lookupTransform", target_frame, source_frame, out)
         if fail_fast and code in (CONNECTIVITY_ERROR, EXTRAPOLATION_ERROR):
-            return self._hopeless(target_frame, source_frame, time, out)
+            return self._fail_fast_error(target_frame, source_frame, time, out)
         # An unknown target is reported first (tf2's order), but an invalid source makes
         # the wait hopeless all the same.
         if (
@@ -510,7 +613,7 @@ class BufferCore(CoreBase):
             )
         return None
 
-    def _hopeless(
+    def _fail_fast_error(
         self, target: str, source: str, time: Time, failure: tuple[int, ...]
     ) -> TransformException | None:
         """For a wait with ``fail_fast``: the exception of a failed query (connectivity or
@@ -596,6 +699,7 @@ class BufferCore(CoreBase):
         times: TimesLike,
         *,
         errors: Errors = "raise",
+        policy: LookupPolicy | None = None,
     ) -> TransformArray:
         """``lookup_transform(target_frame, source_frame, t)`` for every t of ``times``
         (one batch): the path is resolved once, every time is walked along it in the core.
@@ -622,11 +726,18 @@ class BufferCore(CoreBase):
                 unknown frame id still raises LookupException (no row could ever be
                 answered).
             ValueError: ``times`` or ``errors`` is malformed.
+            TypeError: ``policy`` is not a lookup policy.
+
+        ``policy`` (:mod:`tfbus.core.policy`): a non-exact policy answers each row as
+        ``lookup_transform(..., policy=policy)`` does (the core's policy walk per row,
+        not vectorised) and fills the result's ``reports`` and ``max_abs_delta_ns``.
 
         Source: tf2 ``BufferCore::lookupTransform`` / ``walkToTopParent`` per time.
         """
         check_errors(errors)
         t = as_times(times)
+        if policy is not None and type(policy) is not Exact:
+            return self._policy_rows(target_frame, source_frame, t, errors, policy)
         n = t.shape[0]
         out = np.empty((n, 7))
         stamps = t.copy()
@@ -655,6 +766,37 @@ class BufferCore(CoreBase):
             valid[bad] = False
         return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid)
 
+    def _policy_rows(
+        self,
+        target_frame: str,
+        source_frame: str,
+        t: npt.NDArray[np.int64],
+        errors: Errors,
+        policy: LookupPolicy,
+    ) -> TransformArray:
+        """``lookup_transforms`` under a non-exact policy: the core's policy walk per row."""
+        args = policy_args(policy)
+        n = t.shape[0]
+        out = np.full((n, 7), math.nan)
+        stamps = t.copy()
+        valid = np.ones(n, dtype=bool)
+        reports: list[PolicyReport | None] = [None] * n
+        query = self._query_policy
+        for i, ns in enumerate(t.tolist()):
+            found = query(target_frame, source_frame, Time.from_ns(ns), args)
+            if isinstance(found, PolicyResult):
+                ts, reports[i] = found
+                (x, y, z), (qx, qy, qz, qw) = ts.transform
+                out[i] = (x, y, z, qx, qy, qz, qw)
+                stamps[i] = ts.header.stamp.ns
+                continue
+            if errors == "raise" or found[0] in (INVALID_ARGUMENT, UNKNOWN_FRAME):
+                raise self._failure("lookupTransform", target_frame, source_frame, found)
+            valid[i] = False
+        return TransformArray(
+            stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid, reports=reports
+        )
+
     def lookup_transforms_full(
         self,
         target_frame: str,
@@ -664,6 +806,7 @@ class BufferCore(CoreBase):
         fixed_frame: str,
         *,
         errors: Errors = "raise",
+        policy: LookupPolicy | None = None,
     ) -> TransformArray:
         """``lookup_transform_full`` (time travel through ``fixed_frame``) row by row.
 
@@ -679,6 +822,10 @@ class BufferCore(CoreBase):
             ConnectivityException, ExtrapolationException: as the single call for the
                 first failing row (source leg first), unless ``errors="mask"``.
             ValueError: the time arrays have different lengths, or are malformed.
+
+        ``policy`` as in :meth:`lookup_transforms`, applied to both legs: a row's report
+        lists the first leg's links then the second's (``lookup_transform_full``'s), its
+        largest delta over both.
         """
         check_errors(errors)
         frames = (target_frame, source_frame, fixed_frame)
@@ -689,8 +836,8 @@ class BufferCore(CoreBase):
         st = as_times(source_times)
         n = max(tt.shape[0], st.shape[0])
         tt, st = as_times(tt, n), as_times(st, n)
-        leg1 = self.lookup_transforms(fixed_frame, source_frame, st, errors="mask")
-        leg2 = self.lookup_transforms(target_frame, fixed_frame, tt, errors="mask")
+        leg1 = self.lookup_transforms(fixed_frame, source_frame, st, errors="mask", policy=policy)
+        leg2 = self.lookup_transforms(target_frame, fixed_frame, tt, errors="mask", policy=policy)
         if errors == "raise":
             # The single call looks up leg 1 then leg 2 per time: the first failing row
             # decides, and within it the source leg.
@@ -703,9 +850,31 @@ class BufferCore(CoreBase):
                     source_frame,
                     Time.from_ns(int(st[i])),
                     fixed_frame,
+                    policy=policy,
                 )
                 raise AssertionError("lookup_transform_full did not raise")  # pragma: no cover
-        return compose_rows(leg2, leg1)
+        rows = compose_rows(leg2, leg1)
+        if leg1.reports is None or leg2.reports is None:
+            return rows
+        reports = [
+            None
+            if a is None or b is None
+            else PolicyReport(
+                a.frames + b.frames,
+                a.stamps_ns + b.stamps_ns,
+                max(a.max_abs_delta_ns, b.max_abs_delta_ns),
+            )
+            for a, b in zip(leg1.reports, leg2.reports, strict=True)
+        ]
+        return TransformArray(
+            rows.stamps,
+            rows.translations,
+            rows.rotations,
+            rows.frame_id,
+            rows.child_frame_id,
+            rows.valid,
+            reports=reports,
+        )
 
     def transform_points(
         self,
@@ -756,6 +925,7 @@ class BufferCore(CoreBase):
         """
         return self._chain(target_frame, source_frame, time)
 
+    @overload
     def lookup_transform_full(
         self,
         target_frame: str,
@@ -763,7 +933,32 @@ class BufferCore(CoreBase):
         source_frame: str,
         source_time: Time,
         fixed_frame: str,
-    ) -> TransformStamped:
+        *,
+        policy: Exact | None = None,
+    ) -> TransformStamped: ...
+
+    @overload
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> PolicyResult: ...
+
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        *,
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """Time travel (tf2 ``lookupTransform`` with a fixed frame): where data in
         ``source_frame`` at ``source_time`` is, in ``target_frame`` at ``target_time``,
         assuming ``fixed_frame`` does not move.
@@ -777,12 +972,36 @@ class BufferCore(CoreBase):
             InvalidArgumentException, LookupException, ConnectivityException,
             ExtrapolationException: as :meth:`lookup_transform`; ids are validated in the
                 order target, source, fixed, before anything else.
+
+        ``policy`` as in :meth:`lookup_transform`, applied to both legs; a non-exact
+        policy returns a :class:`~tfbus.core.policy.PolicyResult` whose report lists the
+        first leg's links (source up to fixed, against ``source_time``) then the second's
+        (fixed to target, against ``target_time``), its largest delta over both.
         """
         self._validate("lookupTransform argument target_frame", target_frame)
         self._validate("lookupTransform argument source_frame", source_frame)
         self._validate("lookupTransform argument fixed_frame", fixed_frame)
+        if policy is not None and type(policy) is not Exact:
+            r1 = self._lookup_policy(fixed_frame, source_frame, source_time, policy)
+            r2 = self._lookup_policy(target_frame, fixed_frame, target_time, policy)
+            ts = self._compose_legs(r1.transform, r2.transform, target_frame, source_frame)
+            a, b = r1.report, r2.report
+            report = PolicyReport(
+                a.frames + b.frames,
+                a.stamps_ns + b.stamps_ns,
+                max(a.max_abs_delta_ns, b.max_abs_delta_ns),
+            )
+            return PolicyResult(ts, report)
         leg1 = self.lookup_transform(fixed_frame, source_frame, source_time)
         leg2 = self.lookup_transform(target_frame, fixed_frame, target_time)
+        return self._compose_legs(leg1, leg2, target_frame, source_frame)
+
+    @staticmethod
+    def _compose_legs(
+        leg1: TransformStamped, leg2: TransformStamped, target_frame: str, source_frame: str
+    ) -> TransformStamped:
+        """``leg2 ∘ leg1`` through normalised rotations (``compose_full``), stamped
+        with leg2's time, as tf2's fixed-frame lookup builds it."""
         (t1, q1), (t2, q2) = leg1.transform, leg2.transform
         v = compose_full((*t2, *q2), (*t1, *q1))
         return TransformStamped(

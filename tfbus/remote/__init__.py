@@ -27,9 +27,19 @@ A bus whose transport has no such capability is refused with a TypeError naming 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, overload
 
-from tfbus._aio import coroutine_method
+from tfbus._aio import Awaiting, coroutine_method
+from tfbus.core.policy import (
+    Clamp,
+    Exact,
+    LookupPolicy,
+    Nearest,
+    PolicyResult,
+    Previous,
+    Window,
+    policy_args,
+)
 from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
     DEFAULT_SERVER_NAME,
@@ -156,20 +166,53 @@ class BufferClient:
         """The transport's own client."""
         return self._client
 
-    @coroutine_method
+    @overload
+    def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
+                         timeout: float | Duration | None = None, *,
+                         fail_fast: bool = False,
+                         policy: Exact | None = None) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
+                         timeout: float | Duration | None = None, *,
+                         fail_fast: bool = False,
+                         policy: Nearest | Clamp | Previous | Window
+                         ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
                                timeout: float | Duration | None = None, *,
-                               fail_fast: bool = False) -> TransformStamped:
+                               fail_fast: bool = False, policy: LookupPolicy | None = None
+                               ) -> TransformStamped | PolicyResult:
         """The server's ``lookup_transform_async(target_frame, source_frame, time,
-        timeout)`` (:meth:`tfbus.buffer.Buffer.lookup_transform_async`). ``fail_fast``
-        is the server's (Zenoh's wire carries it; ROS 1's tf2_msgs/LookupTransform
-        action cannot: a ValueError there).
+        timeout, fail_fast=fail_fast, policy=policy)``
+        (:meth:`tfbus.buffer.Buffer.lookup_transform_async`). ``fail_fast`` is the
+        server's (Zenoh's wire carries it; ROS 1's tf2_msgs/LookupTransform action
+        cannot: a ValueError there).
+
+        ``policy`` (:mod:`tfbus.core.policy`): a non-exact one crosses the wire on Zenoh
+        (the answer is the server's :class:`~tfbus.core.policy.PolicyResult`); the ROS
+        ``LookupTransform`` action (tf2_msgs) has no field for one.
 
         Raises:
             The server's tf2 exception (same class, same message); TimeoutException if
             no answer came within the padded timeout; ValueError for a bad timeout;
-            TransportError if the bus closed.
+            TransportError if the bus closed; TypeError: a non-exact ``policy`` on a
+            transport whose lookups cannot carry one (ROS 1), or not a policy.
         """
+        if policy is not None and type(policy) is not Exact:
+            policy_args(policy)  # a TypeError for anything else
+            if not getattr(self._client, "carries_policy", False):
+                raise TypeError(
+                    f"{type(self._client).__qualname__} cannot carry a lookup policy (the "
+                    "ROS LookupTransform action has no field for one): look up with "
+                    "policy= on a Buffer fed by a TransformListener instead"
+                )
+            client: Any = self._client  # the Zenoh client: policy= beyond LookupClient
+            answer: PolicyResult = await client.lookup_transform(
+                target_frame, source_frame, time, timeout, fail_fast=fail_fast, policy=policy
+            )
+            return answer
         return await self._client.lookup_transform(target_frame, source_frame, time, timeout,
                                                    fail_fast=fail_fast)
 

@@ -283,6 +283,20 @@ class LookupClient(Protocol):
         ...
 
 
+def refuse_fail_fast(fail_fast: bool, middleware: str) -> None:
+    """A ``tf2_msgs/LookupTransform`` goal (ROS 1 and ROS 2's buffer_server action) has no
+    field for ``fail_fast``: refuse it, never drop it.
+
+    Raises:
+        ValueError: ``fail_fast`` is true, naming ``middleware``.
+    """
+    if fail_fast:
+        raise ValueError(
+            f"fail_fast=True cannot be sent to a {middleware} buffer_server: the "
+            "tf2_msgs/LookupTransform action's goal has no such field (use a Zenoh "
+            "BufferServer, or a local Buffer)")
+
+
 async def transform_remotely(client: LookupClient, obj: _M, target_frame: str,
                              timeout: float | Duration | None, fail_fast: bool = False) -> _M:
     """tf2_ros ``BufferClient.transform`` for any :class:`LookupClient`: ``obj``'s

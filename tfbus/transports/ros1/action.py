@@ -50,7 +50,7 @@ from tfbus.errors import TransformException
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
-from tfbus.transports._base import ServerStatistics, transform_remotely
+from tfbus.transports._base import ServerStatistics, refuse_fail_fast, transform_remotely
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -886,15 +886,6 @@ class LookupActionClient:
         """The transport's :class:`ActionClient` of this namespace (made on first use)."""
         return action_client(self._transport, self.name)
 
-    @staticmethod
-    def _no_fail_fast(fail_fast: bool) -> None:
-        """tf2_msgs/LookupTransform's goal has no field for it: refuse, never drop it."""
-        if fail_fast:
-            raise ValueError(
-                "fail_fast=True cannot be sent to a ROS 1 buffer_server: the "
-                "tf2_msgs/LookupTransform action's goal has no such field (use a Zenoh "
-                "BufferServer, or a local Buffer)")
-
     def _seconds(self, timeout: float | Duration | None) -> float:
         if timeout is None:
             return self._max_wait
@@ -920,7 +911,7 @@ class LookupActionClient:
             after 2**32 s (past ROS 1 time), or ``fail_fast=True`` (the action's goal
             cannot carry it).
         """
-        self._no_fail_fast(fail_fast)
+        refuse_fail_fast(fail_fast, "ROS 1")
         seconds = self._seconds(timeout)
         return await self.client.lookup(target_frame, source_frame, time, seconds, Time(0),
                                         "", False, self._padding)
@@ -935,7 +926,7 @@ class LookupActionClient:
 
         Raises: as :meth:`lookup_transform`.
         """
-        self._no_fail_fast(fail_fast)
+        refuse_fail_fast(fail_fast, "ROS 1")
         seconds = self._seconds(timeout)
         return await self.client.lookup(target_frame, source_frame, source_time, seconds,
                                         target_time, fixed_frame, True, self._padding)
@@ -951,7 +942,7 @@ class LookupActionClient:
         Raises:
             ValueError: as :meth:`lookup_transform`.
         """
-        self._no_fail_fast(fail_fast)
+        refuse_fail_fast(fail_fast, "ROS 1")
         try:
             await self.lookup_transform(target_frame, source_frame, time, timeout)
         except TransformException:

@@ -97,6 +97,7 @@ from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
     ServerStatistics,
     ThreadWakeup,
+    refuse_fail_fast,
     transform_remotely,
 )
 from tfbus.transports.ros2.dds import (
@@ -930,7 +931,8 @@ class LookupActionClient:
 
     @coroutine_method
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,
-                               timeout: float | Duration | None = None) -> TransformStamped:
+                               timeout: float | Duration | None = None, *,
+                               fail_fast: bool = False) -> TransformStamped:
         """tf2_ros ``BufferClient.lookup_transform``: the server waits up to ``timeout``
         seconds of its clock.
 
@@ -940,8 +942,10 @@ class LookupActionClient:
             seconds or the goal was refused or cancelled; ValueError for a negative or
             non-finite timeout; WireEncodeError for a time ROS 2 cannot carry;
             RuntimeError if the transport is not running; TransportError (before any
-            goal is sent) if the server matched is a Fast DDS node's.
+            goal is sent) if the server matched is a Fast DDS node's; ValueError for
+            ``fail_fast=True`` (the action's goal cannot carry it).
         """
+        refuse_fail_fast(fail_fast, "ROS 2")
         return await self._lookup(LookupGoal(
             secrets.token_bytes(16), target_frame, source_frame, time, self._seconds(timeout),
             Time(0), "", False))
@@ -949,25 +953,28 @@ class LookupActionClient:
     @coroutine_method
     async def lookup_transform_full(self, target_frame: str, target_time: Time,
                                     source_frame: str, source_time: Time, fixed_frame: str,
-                                    timeout: float | Duration | None = None
-                                    ) -> TransformStamped:
+                                    timeout: float | Duration | None = None, *,
+                                    fail_fast: bool = False) -> TransformStamped:
         """tf2_ros ``BufferClient.lookup_transform_full`` (the advanced goal).
 
         Raises: as :meth:`lookup_transform`.
         """
+        refuse_fail_fast(fail_fast, "ROS 2")
         return await self._lookup(LookupGoal(
             secrets.token_bytes(16), target_frame, source_frame, source_time,
             self._seconds(timeout), target_time, fixed_frame, True))
 
     @coroutine_method
     async def can_transform(self, target_frame: str, source_frame: str, time: Time,
-                            timeout: float | Duration | None = None) -> bool:
+                            timeout: float | Duration | None = None, *,
+                            fail_fast: bool = False) -> bool:
         """Whether the server answers the lookup with a transform within ``timeout``
         (tf2_ros ``BufferClient.can_transform``).
 
         Raises:
             ValueError: as :meth:`lookup_transform`.
         """
+        refuse_fail_fast(fail_fast, "ROS 2")
         try:
             await self.lookup_transform(target_frame, source_frame, time, timeout)
         except TransformException:
@@ -976,7 +983,8 @@ class LookupActionClient:
 
     @coroutine_method
     async def transform(self, obj: _M, target_frame: str,
-                        timeout: float | Duration | None = None) -> _M:
+                        timeout: float | Duration | None = None, *,
+                        fail_fast: bool = False) -> _M:
         """Express a stamped object in ``target_frame`` (tf2_ros
         ``BufferClient.transform``): the lookup is remote, the function registered for
         ``type(obj)`` (:mod:`tfbus.convert`) is applied here.
@@ -985,4 +993,4 @@ class LookupActionClient:
             TypeError: no transform function for ``type(obj)`` (before any goal).
             The lookup's errors, as :meth:`lookup_transform`.
         """
-        return await transform_remotely(self, obj, target_frame, timeout)
+        return await transform_remotely(self, obj, target_frame, timeout, fail_fast)

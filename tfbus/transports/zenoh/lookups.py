@@ -19,12 +19,16 @@ payload (:mod:`tfbus.codecs.native`, plain msgpack map) ``{"op": "lookup" | "ful
 "timeout" (seconds of the **server's** clock, or None: forever)}``, plus ``"fail_fast":
 true`` when the client asks for it (:meth:`tfbus.buffer.Buffer.wait_for_transform`'s
 ``fail_fast``; absent means false, so older servers and clients interoperate: an older
-server ignores the field and waits); the reply is a
-``TransformStamped``, ``{"can": bool}`` or ``{"error": <tf2 class name>, "message":
-...}``, raised on the client as the same :mod:`tfbus.errors` class with the same
-message. As tf2_ros's ``buffer_server`` (``checkTransforms``), a lookup whose timeout
-expires is answered with ``lookupTransform``'s own error then (``LookupException``,
-``ExtrapolationException``, ...). A request that does not decode is counted and left
+server ignores the field and waits), and for a lookup
+under a non-exact policy (:mod:`tfbus.core.policy`) ``"policy": [kind, a, b]`` (kind
+``"nearest"`` / ``"clamp"`` with ``a`` = max_delta ns, ``"previous"``, ``"window"`` with
+``a`` = past ns and ``b`` = future_wait ns; unused numbers 0); the reply is a
+``TransformStamped`` (a ``PolicyResult`` under a policy), ``{"can": bool}`` or
+``{"error": <tf2 class name>, "message": ...}``, raised on the client as the same
+:mod:`tfbus.errors` class with the same message. As tf2_ros's ``buffer_server``
+(``checkTransforms``), a lookup whose timeout expires is answered with
+``lookupTransform``'s own error then (``LookupException``, ``ExtrapolationException``,
+...). A request that does not decode is counted and left
 unanswered; one with a bad field is answered with an ``InvalidArgumentException`` naming
 the field and value.
 
@@ -54,15 +58,25 @@ import secrets
 import threading
 from collections.abc import Mapping
 from dataclasses import fields
-from typing import TYPE_CHECKING, Any, Final, TypeVar
+from typing import TYPE_CHECKING, Any, Final, TypeVar, overload
 
 import anyio
 import anyio.from_thread
 import zenoh
 
 from tfbus import errors
-from tfbus._aio import coroutine_method
-from tfbus.codecs.native import WireCodec, new_sender_id
+from tfbus._aio import Awaiting, coroutine_method
+from tfbus.codecs.native import WireCodec, new_sender_id, register_message_type
+from tfbus.core.policy import (
+    Clamp,
+    Exact,
+    LookupPolicy,
+    Nearest,
+    PolicyReport,
+    PolicyResult,
+    Previous,
+    Window,
+)
 from tfbus.errors import (
     InvalidArgumentException,
     TimeoutException,
@@ -118,6 +132,55 @@ _MAX_ID_CHARS: Final = 64
 # timeout anyway, and spares the token's two messages (about 0.4 ms a lookup).
 _TRACKED_AFTER: Final = 1.0
 _M = TypeVar("_M")
+
+for _cls in (PolicyReport, PolicyResult):  # a policy lookup's answer crosses the wire typed
+    register_message_type(_cls)
+
+_INT64_MAX: Final = (1 << 63) - 1
+
+
+def _policy_to_wire(policy: LookupPolicy) -> list[Any]:
+    """``[kind, a ns, b ns]`` of a non-exact policy (the request's ``"policy"``)."""
+    if isinstance(policy, Nearest):
+        return ["nearest", policy.max_delta.ns, 0]
+    if isinstance(policy, Clamp):
+        return ["clamp", policy.max_delta.ns, 0]
+    if isinstance(policy, Previous):
+        return ["previous", 0, 0]
+    if isinstance(policy, Window):
+        return ["window", policy.past.ns, policy.future_wait.ns]
+    raise TypeError(
+        "policy must be Exact(), Nearest(max_delta), Clamp(max_delta), Previous() or "
+        f"Window(past, future_wait), got {policy!r}"
+    )
+
+
+def _policy_field(request: Mapping[str, Any]) -> LookupPolicy | None:
+    """The request's ``"policy"``, or None when absent.
+
+    Raises:
+        InvalidArgumentException: not ``[kind, a, b]`` with a known kind and two ints in
+            [0, 2**63 - 1], naming the field and value.
+    """
+    value = request.get("policy")
+    if value is None:
+        return None
+    ok = (
+        isinstance(value, list) and len(value) == 3
+        and value[0] in ("nearest", "clamp", "previous", "window")
+        and all(type(v) is int and 0 <= v <= _INT64_MAX for v in value[1:])
+    )
+    if not ok:
+        raise InvalidArgumentException(
+            f"request field 'policy' has an invalid value {value!r:.200}")
+    kind, a, b = value
+    if kind == "nearest":
+        return Nearest(Duration.from_ns(a))
+    if kind == "clamp":
+        return Clamp(Duration.from_ns(a))
+    if kind == "previous":
+        return Previous()
+    return Window(Duration.from_ns(a), Duration.from_ns(b))
 
 
 def _zenoh_transport(bus: Bus) -> ZenohTransport:
@@ -486,6 +549,14 @@ class BufferServer:
         target = _field(request, "target", "frame")
         source = _field(request, "source", "frame")
         time = _field(request, "time", "time")
+        policy = _policy_field(request) if op == "lookup" else None
+        if policy is not None:
+            try:
+                return await buffer.lookup_transform_async(
+                    target, source, time, timeout, policy=policy
+                )
+            except TimeoutException:
+                return buffer.lookup_transform(target, source, time, policy=policy)
         if op == "can":
             return {"can": await buffer.can_transform_async(target, source, time, timeout,
                                                             fail_fast=fail_fast)}
@@ -555,7 +626,34 @@ class BufferClient:
         self._padding = timeout_padding
         self._max_wait = max_wait
 
-    @coroutine_method
+    carries_policy: Final = True
+    """Lookups may carry a :mod:`tfbus.core.policy` (``tfbus.remote`` asks)."""
+
+    @overload
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def lookup_transform(
         self,
         target_frame: str,
@@ -564,17 +662,24 @@ class BufferClient:
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> TransformStamped:
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """The server's ``lookup_transform_async(target_frame, source_frame, time,
-        timeout, fail_fast=fail_fast)`` (:meth:`tfbus.buffer.Buffer.lookup_transform_async`;
-        ``fail_fast`` travels as the request's ``"fail_fast"`` field).
+        timeout, fail_fast=fail_fast, policy=policy)``
+        (:meth:`tfbus.buffer.Buffer.lookup_transform_async`; ``fail_fast`` travels as the
+        request's ``"fail_fast"`` field): under a non-exact policy, the server's
+        :class:`~tfbus.core.policy.PolicyResult`.
 
         Raises:
             The server's tf2 exception (same class, same message); TimeoutException if
-            no answer came within the padded timeout; TransportError if the bus closed.
+            no answer came within the padded timeout; TransportError if the bus closed;
+            TypeError: ``policy`` is not a lookup policy.
         """
         request: dict[str, Any] = {"op": "lookup", "target": target_frame,
                                    "source": source_frame, "time": time.ns}
+        if policy is not None and type(policy) is not Exact:
+            request["policy"] = _policy_to_wire(policy)
+            return _typed(await self._ask(request, timeout, fail_fast), PolicyResult)
         return _typed(await self._ask(request, timeout, fail_fast), TransformStamped)
 
     @coroutine_method
