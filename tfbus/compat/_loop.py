@@ -277,6 +277,66 @@ def ros1_sim_clock() -> Any:
                              lambda: SimClock(bus))
 
 
+def rclpy_use_sim_time(node: object) -> bool:
+    """Whether ``node`` is an rclpy node whose ``use_sim_time`` parameter is true: what
+    makes its clock (``node.get_clock()``) simulated time, following ``/clock``
+    (``rclpy/time_source.py``); False for anything else or when it cannot say."""
+    get = getattr(node, "get_parameter", None)
+    if get is None:
+        return False
+    try:
+        return getattr(get("use_sim_time"), "value", False) is True
+    except Exception:  # no such parameter (undeclared), or not an rclpy node
+        return False
+
+
+_RCLPY_CLOCKS: dict[int, Any] = {}  # id(node) -> its SimClock (the node holds its subscription)
+_RCLPY_CLOCKS_LOCK = threading.Lock()
+
+
+def rclpy_sim_clock(node: Any) -> Any:
+    """A :class:`~tfbus.clock.SimClock` following ``/clock`` as the rclpy ``node`` with
+    ``use_sim_time`` hears it, one per node: the node subscribes to ``/clock``
+    (``rosgraph_msgs/Clock``, best-effort depth 1, as rclpy's ``TimeSource`` does) and
+    each message is published on an in-process bus of the background loop, where the
+    clock follows it. A stamp that is not a valid time (negative seconds, nanoseconds out
+    of range) is counted and dropped by the clock (``statistics().dropped``)."""
+    from rclpy.qos import (  # type: ignore[import-not-found]
+        QoSProfile,
+        ReliabilityPolicy,
+    )
+    from rosgraph_msgs.msg import Clock as RosClock  # type: ignore[import-not-found]
+
+    from tfbus.bus import Bus
+    from tfbus.clock import SimClock
+    from tfbus.messages import Clock as ClockMessage
+    from tfbus.time import Time
+    from tfbus.topics import CLOCK_TOPIC
+
+    with _RCLPY_CLOCKS_LOCK:
+        clock = _RCLPY_CLOCKS.get(id(node))
+        if clock is not None:
+            return clock
+        key = f"rclpy-clock:{id(node)}"
+        bus: Bus = background.shared(f"{key}:bus", Bus)
+        clock = background.shared(key, lambda: SimClock(bus))
+
+        def on_clock(message: Any) -> None:
+            stamp = getattr(message, "clock", None)
+            try:
+                value: object = Time(int(stamp.sec), int(stamp.nanosec))  # type: ignore[union-attr]
+            except (AttributeError, TypeError, ValueError):
+                value = stamp  # not a Time: the clock counts and drops it
+            background.call(bus.publish_nowait, CLOCK_TOPIC, ClockMessage(value))  # type: ignore[arg-type]
+
+        node.create_subscription(
+            RosClock, CLOCK_TOPIC, on_clock,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
+        _RCLPY_CLOCKS[id(node)] = clock
+        return clock
+
+
 def in_event_loop() -> bool:
     """True when the calling thread runs an async event loop (asyncio or trio)."""
     try:
