@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import itertools
 import os
 import sys
 import threading
+import weakref
 from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
 from typing import Any, TypeVar
@@ -290,8 +292,11 @@ def rclpy_use_sim_time(node: object) -> bool:
         return False
 
 
-_RCLPY_CLOCKS: dict[int, Any] = {}  # id(node) -> its SimClock (the node holds its subscription)
+# node -> its SimClock (the node holds the /clock subscription); a node that is gone
+# takes its entry with it, so a new node never inherits a clock fed by a dead one
+_RCLPY_CLOCKS: weakref.WeakKeyDictionary[Any, Any] = weakref.WeakKeyDictionary()
 _RCLPY_CLOCKS_LOCK = threading.Lock()
+_RCLPY_CLOCK_KEYS = itertools.count()
 
 
 def rclpy_sim_clock(node: Any) -> Any:
@@ -299,8 +304,9 @@ def rclpy_sim_clock(node: Any) -> Any:
     ``use_sim_time`` hears it, one per node: the node subscribes to ``/clock``
     (``rosgraph_msgs/Clock``, best-effort depth 1, as rclpy's ``TimeSource`` does) and
     each message is published on an in-process bus of the background loop, where the
-    clock follows it. A stamp that is not a valid time (negative seconds, nanoseconds out
-    of range) is counted and dropped by the clock (``statistics().dropped``)."""
+    clock follows it (until the program ends, as the node's own time source). A stamp
+    that is not a valid time (negative seconds), or one more than ``max_forward_step``
+    ahead, is counted and dropped by the clock (``statistics().dropped``)."""
     from rclpy.qos import (  # type: ignore[import-not-found]
         QoSProfile,
         ReliabilityPolicy,
@@ -314,10 +320,10 @@ def rclpy_sim_clock(node: Any) -> Any:
     from tfbus.topics import CLOCK_TOPIC
 
     with _RCLPY_CLOCKS_LOCK:
-        clock = _RCLPY_CLOCKS.get(id(node))
+        clock = _RCLPY_CLOCKS.get(node)
         if clock is not None:
             return clock
-        key = f"rclpy-clock:{id(node)}"
+        key = f"rclpy-clock:{next(_RCLPY_CLOCK_KEYS)}"
         bus: Bus = background.shared(f"{key}:bus", Bus)
         clock = background.shared(key, lambda: SimClock(bus))
 
@@ -333,7 +339,7 @@ def rclpy_sim_clock(node: Any) -> Any:
             RosClock, CLOCK_TOPIC, on_clock,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
         )
-        _RCLPY_CLOCKS[id(node)] = clock
+        _RCLPY_CLOCKS[node] = clock
         return clock
 
 
