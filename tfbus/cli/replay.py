@@ -88,8 +88,8 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
 
     check_bag(path)
     if start_paused and _keys_fd() is None:
-        raise click.BadParameter("needs a terminal on standard input (the space key "
-                                 "resumes)", param_hint="'--pause'")
+        raise click.BadParameter("needs a terminal on standard input, in the foreground "
+                                 "(the space key resumes)", param_hint="'--pause'")
     open_bus = publish_bus(bus, local, name="tfbus-replay")
     n_total = 0
     first = last = None
@@ -182,7 +182,8 @@ async def _replay(
 
 def _keys_fd() -> int | None:
     """Standard input's descriptor when it is a terminal this platform can put in
-    cbreak mode, else None (no pause key: a pipe, a file, Windows)."""
+    cbreak mode and this process is not a background job of it, else None (no pause
+    key: a pipe, a file, ``tfbus replay ... &``, Windows)."""
     try:
         import termios  # noqa: F401
     except ImportError:
@@ -191,7 +192,14 @@ def _keys_fd() -> int | None:
         fd = sys.stdin.fileno()
     except (AttributeError, OSError, ValueError):
         return None
-    return fd if os.isatty(fd) else None
+    if not os.isatty(fd):
+        return None
+    try:
+        if os.tcgetpgrp(fd) != os.getpgrp():  # a background job ('&'): setting the
+            return None  # terminal would stop it (SIGTTOU)
+    except OSError:  # not this process's controlling terminal: no job control on it
+        pass
+    return fd
 
 
 @contextlib.contextmanager
