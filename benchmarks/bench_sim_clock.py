@@ -18,12 +18,23 @@ process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
    or after ``d`` it is below 1 (within one ``/clock`` message of its deadline).
    Target: max below 1 step.
 
+3. **Raw zenoh-python at HZ, in the same run** (no tfbus): a publisher process putting
+   8-byte payloads at ``--hz`` and a subscriber process measuring its own CPU share the
+   same way, with (a) an idle session (nothing sent), (b) a no-op Python callback per
+   sample (what tfbus's transport declares), (c) a ``RingChannel`` handler polled 100
+   times a second (no Python per sample at all: the cost of Zenoh's own receive
+   threads), (d) (b) with ``ZENOH_RUNTIME`` giving every Zenoh runtime one worker
+   thread, (e) (b) with Zenoh's ``transport/unicast/lowlatency`` (QoS off) on both sides.
+   These are the floor any zenoh-python subscriber pays; ``--no-raw`` leaves them out.
+
 Figures only: nothing here asserts a timing (a loaded machine shows it in the figures).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import socket
 import statistics
 import subprocess
@@ -32,6 +43,7 @@ import time
 from pathlib import Path
 
 import anyio
+import anyio.to_thread
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -142,6 +154,110 @@ async def follow(port: int, hz: float, seconds: float, wakeups: int,
     return result
 
 
+ONE_THREAD_RUNTIME = ", ".join(
+    f"{name}: (worker_threads: 1, max_blocking_threads: 1)"
+    for name in ("app", "acc", "tx", "rx", "net")
+)
+RAW_VARIANTS: tuple[tuple[str, str, dict[str, str], str], ...] = (
+    # (label, subscriber mode, environment, extra zenoh config "key=json5;...")
+    ("idle session, nothing sent", "idle", {}, ""),
+    ("a no-op Python callback per sample", "callback", {}, ""),
+    ("RingChannel polled at 100 Hz (no Python per sample)", "ring", {}, ""),
+    ("callback, ZENOH_RUNTIME one worker thread each", "callback",
+     {"ZENOH_RUNTIME": f"({ONE_THREAD_RUNTIME})"}, ""),
+    ("callback, transport/unicast/lowlatency", "callback", {},
+     "transport/unicast/lowlatency=true;transport/unicast/qos/enabled=false"),
+)
+
+
+def _raw_config(port: int, listen: bool, extra: str) -> object:
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    side = "listen" if listen else "connect"
+    config.insert_json5(f"{side}/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    for item in filter(None, extra.split(";")):
+        key, value = item.split("=", 1)
+        config.insert_json5(key, value)
+    return config
+
+
+def raw_publisher(port: int, hz: float, seconds: float, extra: str) -> None:
+    """zenoh-python alone: put 8 bytes on ``bench/clock`` at ``hz`` for ``seconds``."""
+    import zenoh
+
+    session = zenoh.open(_raw_config(port, True, extra))  # type: ignore[arg-type]
+    publisher = session.declare_publisher("bench/clock")
+    print("LISTENING", flush=True)
+    time.sleep(1.0)
+    if hz <= 0:
+        time.sleep(seconds)
+    t0 = time.monotonic()
+    for k in range(int(seconds * hz) if hz > 0 else 0):
+        publisher.put(k.to_bytes(8, "little"))
+        time.sleep(max(0.0, t0 + (k + 1) / hz - time.monotonic()))
+    session.close()  # type: ignore[no-untyped-call]
+
+
+def raw_subscriber(port: int, mode: str, seconds: float, extra: str) -> None:
+    """zenoh-python alone: receive ``bench/clock`` (``mode``: callback / ring / idle)
+    and print this process's CPU share over ``seconds`` as one JSON line."""
+    import threading
+
+    import zenoh
+
+    session = zenoh.open(_raw_config(port, False, extra))  # type: ignore[arg-type]
+    count = [0]
+    stop = threading.Event()
+    if mode == "ring":
+        subscriber: object = session.declare_subscriber(
+            "bench/clock", zenoh.handlers.RingChannel(64))
+
+        def poll() -> None:
+            while not stop.wait(0.01):
+                while subscriber.try_recv() is not None:  # type: ignore[attr-defined]
+                    count[0] += 1
+
+        threading.Thread(target=poll, daemon=True).start()
+    else:
+        def on_sample(_sample: object) -> None:
+            count[0] += 1
+
+        subscriber = session.declare_subscriber("bench/clock", on_sample)
+    time.sleep(1.5)
+    n0, wall0, cpu0 = count[0], time.perf_counter(), time.process_time()
+    time.sleep(seconds)
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    stop.set()
+    print(json.dumps({"cpu_share": cpu / wall, "rate": (count[0] - n0) / wall}), flush=True)
+    os._exit(0)  # no teardown: the figure is printed
+
+
+def raw(hz: float, seconds: float, mode: str, env: dict[str, str], extra: str) -> dict[str, float]:
+    """One raw zenoh-python measurement: publisher and subscriber processes."""
+    port = free_port()
+    pub = subprocess.Popen(
+        [sys.executable, __file__, "--role", "raw-publisher", "--port", str(port), "--hz",
+         str(0.0 if mode == "idle" else hz), "--seconds", str(seconds + 6), "--zenoh", extra],
+        stdout=subprocess.PIPE, text=True, env={**os.environ, **env},
+    )  # fmt: skip
+    try:
+        assert pub.stdout is not None
+        if pub.stdout.readline().strip() != "LISTENING":
+            raise RuntimeError("the raw publisher did not start")
+        sub = subprocess.run(
+            [sys.executable, __file__, "--role", "raw-subscriber", "--port", str(port),
+             "--mode", mode, "--seconds", str(seconds), "--zenoh", extra],
+            capture_output=True, text=True, env={**os.environ, **env}, timeout=seconds + 60,
+        )  # fmt: skip
+        return dict(json.loads(sub.stdout.strip().splitlines()[-1]))
+    finally:
+        pub.kill()
+        pub.wait(timeout=10)
+
+
 def _sim_clock_cost_per_message(n: int = 100_000) -> float:
     """Seconds of CPU per /clock a SimClock spends on its own (``_on_clock``, called as
     the bus delivers it; no transport), median of 5 runs of ``n``."""
@@ -188,12 +304,26 @@ async def main(args: argparse.Namespace) -> None:
     print(f"  task resumed (+ event-loop turn)  min {busy['resumed_min']:.3f}  median "
           f"{busy['resumed_median']:.3f}  max {busy['resumed_max']:.3f} steps")
     print(f"  dropped /clock {busy['dropped']:.0f}, jumps back {busy['jumps']:.0f}")
+    if args.raw:
+        print()
+        print(f"raw zenoh-python (no tfbus), 8-byte samples at {args.hz:g} Hz: the subscriber "
+              "process's CPU share of one core")
+        for label, mode, env, extra in RAW_VARIANTS:
+            figures = await anyio.to_thread.run_sync(raw, args.hz, args.seconds, mode, env,
+                                                     extra)
+            print(f"  {label:<52} {figures['cpu_share'] * 100:6.2f} %   "
+                  f"({figures['rate']:.0f}/s received)")
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--role", default="follower", choices=["follower", "publisher"])
+    parser.add_argument("--role", default="follower",
+                        choices=["follower", "publisher", "raw-publisher", "raw-subscriber"])
+    parser.add_argument("--mode", default="callback", help=argparse.SUPPRESS)
+    parser.add_argument("--zenoh", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--no-raw", dest="raw", action="store_false",
+                        help="leave out the raw zenoh-python figures")
     parser.add_argument("--port", type=int, default=0)
     parser.add_argument("--hz", type=float, default=1000.0)
     parser.add_argument("--seconds", type=float, default=5.0)
@@ -204,5 +334,9 @@ if __name__ == "__main__":
         ns.seconds, ns.wakeups = 2.0, 50
     if ns.role == "publisher":
         anyio.run(publisher, ns.port, ns.hz, ns.seconds)
+    elif ns.role == "raw-publisher":
+        raw_publisher(ns.port, ns.hz, ns.seconds, ns.zenoh)
+    elif ns.role == "raw-subscriber":
+        raw_subscriber(ns.port, ns.mode, ns.seconds, ns.zenoh)
     else:
         anyio.run(main, ns)

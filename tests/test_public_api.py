@@ -70,8 +70,8 @@ def test_time_clock_and_convert_modules_pin_their_names() -> None:
         "NSEC_PER_SEC", "TIME_MAX_NS", "Duration", "Time", "format_stamp", "seconds_to_ns",
     }  # fmt: skip
     assert set(tfbus.clock.__all__) == {
-        "Clock", "JumpCallback", "ManualClock", "PeriodicTimer", "SimClock", "SystemClock",
-        "Tick", "every", "timeout_ns",
+        "Clock", "JumpCallback", "ManualClock", "PeriodicTimer", "SimClock",
+        "SimClockStatistics", "SystemClock", "Tick", "every", "timeout_ns",
     }  # fmt: skip
     assert set(tfbus.convert.__all__) == {
         "ConvertRegistration", "TransformFunction", "TransformRegistration", "convert",

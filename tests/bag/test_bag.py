@@ -920,3 +920,85 @@ async def test_recorder_drops_a_bag_time_ros1_cannot_hold(tmp_path: Path, fmt: s
         assert (rec.count, rec.dropped) == ((0, 3) if fmt == "ros1" else (3, 0))
     back = [(r.time, list(r.message.transforms)) for r in read_messages(out)]
     assert back == ([] if fmt == "ros1" else [(clock.now(), list(m.transforms))] * 3)
+
+
+async def test_replay_pauses_and_resumes_with_its_control_and_clock_stands_still() -> None:
+    """``ReplayControl``: while paused no message goes out and /clock repeats the paused
+    time at its rate (rosbag's ``runStalledClock``); on resume the schedule shifts by
+    the paused pace time, exactly (ManualClock deadlines: no wall time)."""
+    from tfbus.bag import ReplayControl
+    from tfbus.bus import Bus
+    from tfbus.clock import ManualClock
+    from tfbus.messages import Clock
+    from tfbus.topics import CLOCK_TOPIC, TF_TOPIC
+
+    pace = ManualClock(start=Time(5000))
+    start, stop = Time(1396293900), Time(1396293901)
+    control = ReplayControl()
+    assert not control.paused
+    clocks: list[tuple[int, int]] = []  # (pace ns, /clock ns)
+    sent: list[tuple[int, int]] = []  # (pace ns, bag ns) of /tf messages
+    done = anyio.Event()
+    async with Bus() as bus:
+
+        def on_clock(msg: object) -> None:
+            assert isinstance(msg, Clock)
+            clocks.append((pace.now_ns(), msg.clock.ns))
+
+        bus.subscribe_callback(CLOCK_TOPIC, on_clock)
+
+        def on_message(rec: BagMessage) -> None:
+            if rec.topic == TF_TOPIC:
+                sent.append((pace.now_ns(), rec.time.ns))
+
+        async def run() -> None:
+            await replay(TURTLE, bus, rate=1.0, start=start, stop=stop, pace_clock=pace,
+                         publish_clock=10.0, control=control, on_message=on_message)
+            done.set()
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(run)
+            await pace.advance(0.3)
+            assert control.toggle() is True and control.paused  # paused at 5000.3 s
+            control.pause()  # already paused: nothing changes
+            n_before = len(sent)
+            await pace.advance(0.5)
+            assert len(sent) == n_before  # nothing went out while paused
+            assert control.toggle() is False  # resumed at 5000.8 s
+            control.resume()
+            await pace.advance(2.0)
+            with anyio.fail_after(10):
+                await done.wait()
+    p0, s0, ms = 5000 * 10**9, start.ns, 10**6
+    # the paused 10 Hz ticks (5000.4 ... 5000.8 s) repeat the paused time, start + 0.3 s
+    assert [c for p, c in clocks if p0 + 300 * ms < p <= p0 + 800 * ms] == [s0 + 300 * ms] * 5
+    # after the resume /clock runs on from there: start + 0.4 s at 5000.9 s
+    assert max(c for p, c in clocks if p == p0 + 900 * ms) == s0 + 400 * ms
+    assert all(a[1] <= b[1] for a, b in itertools.pairwise(clocks))
+    recs = [r.time.ns for r in read_messages(TURTLE, start=start, stop=stop)
+            if r.topic == TF_TOPIC]
+    assert [t for _, t in sent] == recs and 0 < n_before < len(recs)
+    for p, t in sent:  # before the pause on schedule; after it, 0.5 s later
+        assert p == p0 + (t - s0) + (0 if t - s0 <= 300 * ms else 500 * ms)
+
+
+async def test_replay_started_paused_publishes_nothing_until_resumed() -> None:
+    """``ReplayControl(paused=True)`` (``rosbag play --pause``), as fast as possible."""
+    from tfbus.bag import ReplayControl
+    from tfbus.bus import Bus
+
+    control = ReplayControl(paused=True)
+    published: list[BagMessage] = []
+    result: list[int] = []
+    async with Bus() as bus:
+
+        async def run() -> None:
+            result.append(await replay(TURTLE, bus, rate=None, control=control,
+                                       on_message=published.append))
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(run)
+            await anyio.wait_all_tasks_blocked()
+            assert published == [] and control.paused
+            control.resume()
+    assert result == [2689] and len(published) == 2689

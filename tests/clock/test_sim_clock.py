@@ -14,7 +14,7 @@ import pytest
 
 from tfbus import Buffer, Bus, SimClock, TransformListener
 from tfbus._aio import wait_all_tasks_blocked
-from tfbus.clock import Clock, every
+from tfbus.clock import Clock, SimClockStatistics, every
 from tfbus.codecs import native, ros1
 from tfbus.errors import SimTimeStalled, TimeoutException, WireDecodeError, WireEncodeError
 from tfbus.messages import (
@@ -167,6 +167,46 @@ async def test_jump_back_calls_callbacks_and_clears_a_listeners_buffer(
             for sec in (6.0, 5.5, 6.5, 6.0):
                 tick(bus, sec)
             assert clock.jumps == 3 and clock.now() == Time.from_sec(6.0)
+
+
+async def test_two_clock_publishers_are_counted_and_logged_a_looping_bag_is_not(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    async with Bus() as bus, SimClock(bus) as clock:
+        with caplog.at_level(logging.WARNING, logger="tfbus.clock"):
+            # a bag of 100..102 s played in a loop (rosbag play -l): jumps back, runs on
+            for _ in range(3):
+                for k in range(21):
+                    tick(bus, 100.0 + k * 0.1)
+            assert clock.statistics() == SimClockStatistics(
+                received=63, accepted=63, dropped=0, jumps=2, interleaved=0
+            )
+            assert not any("several publishers" in r.getMessage() for r in caplog.records)
+            # a simulator at 200 s (100 Hz) beside the looping bag at 100 s (10 Hz):
+            # each bag message jumps back, the simulator's next one leaps forward again
+            for k in range(40):
+                tick(bus, 200.0 + k * 0.01)
+                if k % 10 == 9:
+                    tick(bus, 100.0 + k * 0.01)
+            # a simulator at 50 s (100 Hz) beside a bag at 300 s (10 Hz): each simulator
+            # message after a bag's jumps back, the bag's next one leaps forward
+            for k in range(40):
+                tick(bus, 50.0 + k * 0.01)
+                if k % 10 == 9:
+                    tick(bus, 300.0 + k * 0.01)
+        stats = clock.statistics()
+        # jumps back: 2 loops, 4 bag messages at 100 s, the simulator's first at 50 s and
+        # its 3 after a bag message at 300 s; each bag message at 300 s undoes a jump,
+        # and so does the simulator's next one after a bag message at 100 s (3)
+        assert (stats.received, stats.accepted, stats.jumps) == (151, 151, 10)
+        assert stats.interleaved == 7 and clock.now() == Time.from_sec(300.39)
+        lines = [r.getMessage() for r in caplog.records if "several publishers" in r.getMessage()]
+        assert lines == [
+            "several publishers on /clock? simulated time jumped back from 200.090000000 s "
+            "and returned to 200.100000000 s in one step from 100.090000000 s"
+        ]
+        with pytest.raises(AttributeError):
+            stats.jumps = 0  # type: ignore[misc]
 
 
 async def test_bad_clock_messages_are_counted_dropped_and_logged_once(

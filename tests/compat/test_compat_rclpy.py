@@ -87,3 +87,49 @@ def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
         "awaited_x": 8.5,
         "timeout_error": "TimeoutException",
     }
+
+
+SIM_TIME_PEER = ROOT / "peers" / "ros2" / "compat_sim_time_peer.py"
+
+
+def test_buffer_under_an_rclpy_node_with_use_sim_time_follows_clock(
+    ros_python: Path, tmp_path: Path
+) -> None:
+    """``Buffer()`` + ``TransformListener(buffer, node)`` (and ``Buffer(node=node)``)
+    under a node whose ``use_sim_time`` is true run on a SimClock following ``/clock``
+    as the node hears it: the same time as the node's own rclpy clock; a ``/clock``
+    2e9 s ahead is counted and dropped. A node without it stays on the system clock."""
+    profile = tmp_path / "fastdds_lo.xml"
+    profile.write_text(FASTDDS_LOOPBACK)
+    paths = sysconfig.get_paths()
+    site = os.pathsep.join(dict.fromkeys([paths["purelib"], paths["platlib"]]))
+    env = dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)),
+        RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        FASTDDS_DEFAULT_PROFILES_FILE=str(profile),
+        PYTHONPATH=os.pathsep.join([str(ROOT), site]),
+        PYTHONUNBUFFERED="1",
+    )
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    if sys.version_info[:2] != (3, 11):
+        pytest.skip("the ROS 2 venv is Python 3.11: this environment's packages cannot be shared")
+    r = subprocess.run([str(ros_python), str(SIM_TIME_PEER)], env=env, capture_output=True,
+                       text=True, timeout=120, check=False)
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    answer = json.loads(r.stdout.strip().splitlines()[-1])
+    published = answer.pop("published_ns")
+    assert published > 101_000_000_000 and published % 100_000_000 == 0
+    assert answer == {
+        "clock": "SimClock",
+        "same_clock_for_node_buffer": True,
+        "now_ns": published,
+        "rclpy_now_ns": published,  # rclpy's own TimeSource reads the same /clock
+        "x": answer["expected_x"],
+        "expected_x": (published - 100_000_000_000) / 1e9,
+        "dropped": 1,  # the /clock 2e9 s ahead
+        "jumps": 0,
+        "wall_clock": "SystemClock",
+        "wall_now_after_2020": True,
+    }

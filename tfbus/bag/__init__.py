@@ -34,7 +34,7 @@ The package, one job per module:
 * :mod:`~tfbus.bag.reader`: :func:`read_messages`;
 * :mod:`~tfbus.bag.salvage`: reading damaged files up to the damage;
 * :mod:`~tfbus.bag.loader`: :func:`load_buffer`;
-* :mod:`~tfbus.bag.playback`: :func:`replay`;
+* :mod:`~tfbus.bag.playback`: :func:`replay`, :class:`ReplayControl` (pause, resume);
 * :mod:`~tfbus.bag.writer`: :func:`write_bag`, :class:`BagRecorder`;
 * :mod:`~tfbus.bag.summary`: :func:`summarize` (tf_monitor statistics, :mod:`tfbus.monitor`).
 """
@@ -56,7 +56,7 @@ from tfbus.bag.formats import (
     detect_format,
 )
 from tfbus.bag.loader import load_buffer
-from tfbus.bag.playback import DEFAULT_CLOCK_HZ, replay
+from tfbus.bag.playback import DEFAULT_CLOCK_HZ, ReplayControl, replay
 from tfbus.bag.reader import read_messages
 from tfbus.bag.summary import AuthoritySummary, BagSummary, FrameSummary, summarize
 from tfbus.bag.writer import BagRecorder, write_bag
@@ -79,6 +79,7 @@ __all__ = [
     "BagRecorder",
     "BagSummary",
     "FrameSummary",
+    "ReplayControl",
     "detect_format",
     "load_buffer",
     "read_messages",

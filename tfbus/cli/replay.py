@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import os
+import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -31,7 +34,14 @@ from tfbus.cli._sources import (
 from tfbus.time import NSEC_PER_SEC, Time
 from tfbus.topics import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 
+if TYPE_CHECKING:
+    from tfbus.bag import ReplayControl
+
 __all__ = ["command"]
+
+PAUSE_KEY = b" "
+"""The key that pauses and resumes a replay whose standard input is a terminal (rosbag
+play's and ros2 bag play's space)."""
 
 
 @click.command("replay")
@@ -46,9 +56,11 @@ __all__ = ["command"]
               help="Publish bag time on /clock (rosgraph_msgs/Clock) at HZ per second "
                    f"(default {DEFAULT_CLOCK_HZ:g}, rosbag play --clock's --hz), for nodes "
                    "with use_sim_time ('--use-sim-time' of the other commands).")
+@click.option("--pause", "start_paused", is_flag=True,
+              help="Start paused (rosbag play --pause); the space key resumes.")
 @publish_options
 def command(path: Path, rate: float, start: Time | None, stop: Time | None, quiet: bool,
-            clock_hz: float | None, bus: str | None, local: bool) -> int:
+            clock_hz: float | None, start_paused: bool, bus: str | None, local: bool) -> int:
     """Publish a bag's /tf and /tf_static on the bus at recorded timing.
 
     It publishes on --bus (default 'zenoh', where 'tfbus echo --bus zenoh' and every
@@ -58,6 +70,9 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
     publishes bag time on /clock, as 'rosbag play --clock' does (never past the next
     message's time; a ROS 1 bus gets rosgraph_msgs/Clock from this node), so 'tfbus
     demo listener --use-sim-time' and ROS nodes with use_sim_time follow the recording.
+    When standard input is a terminal, the space key pauses and resumes the replay, as
+    in 'rosbag play': while paused nothing is published and /clock repeats the paused
+    time (rosbag's behaviour); --pause starts paused.
 
     \b
     Examples:
@@ -67,10 +82,14 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
       tfbus replay turtle.bag --bus 'zenoh?listen=tcp/127.0.0.1:7500'
       tfbus replay turtle.bag --clock --bus ros1     # drives /use_sim_time nodes
       tfbus replay turtle.bag --clock 40             # ros2 bag play --clock's rate
+      tfbus replay turtle.bag --clock --pause        # space starts it
     """
     from tfbus.bag import BagReadError, read_messages
 
     check_bag(path)
+    if start_paused and _keys_fd() is None:
+        raise click.BadParameter("needs a terminal on standard input, in the foreground "
+                                 "(the space key resumes)", param_hint="'--pause'")
     open_bus = publish_bus(bus, local, name="tfbus-replay")
     n_total = 0
     first = last = None
@@ -89,7 +108,7 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
     result: list[int] = []
     problem: list[BagReadError] = []
     code = run_live(lambda: _replay(open_bus, path, rate, start, stop, quiet, n_total,
-                                    result, problem, clock_hz))
+                                    result, problem, clock_hz, start_paused))
     n = result[0] if result else 0
     if problem:
         click.echo(f"replayed {problem[0].messages_read} messages from {literal(path)}")
@@ -107,7 +126,7 @@ def command(path: Path, rate: float, start: Time | None, stop: Time | None, quie
 async def _replay(
     open_bus: Callable[[], object], path: Path, rate: float, start: Time | None,
     stop: Time | None, quiet: bool, total: int, result: list[int],
-    problem: list[Any], clock_hz: float | None = None,
+    problem: list[Any], clock_hz: float | None = None, start_paused: bool = False,
 ) -> None:
     import anyio
     from rich.progress import (
@@ -118,11 +137,12 @@ async def _replay(
         TimeElapsedColumn,
     )
 
-    from tfbus.bag import BagMessage, BagReadError, replay
+    from tfbus.bag import BagMessage, BagReadError, ReplayControl, replay
     from tfbus.bus import Bus
     from tfbus.clock import ManualClock
 
     clock = ManualClock()
+    control = ReplayControl(paused=start_paused)
     progress = Progress(
         TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
         TimeElapsedColumn(), console=console(err=True), disable=quiet, transient=False,
@@ -137,16 +157,86 @@ async def _replay(
             result[0] += 1
             progress.update(task, advance=1, description=f"bag time {fmt_sec(rec.time.ns)}")
 
+        def say(line: str) -> None:
+            progress.console.print(line, markup=False, highlight=False)
+
         async with bus, anyio.create_task_group() as tg:
             await tg.start(cancel_on_signal, tg.cancel_scope)
             if not quiet:
-                progress.console.print(f"replaying {literal(path)} ...")
+                say(f"replaying {literal(path)} ...")
+            keys = _keys_fd()
+            if keys is not None:
+                tg.start_soon(_pause_on_key, keys, control, clock, say)
+            if control.paused:
+                say("[PAUSED]  press space to resume")
             try:
                 result[0] = await replay(
                     path, bus, clock=clock, rate=rate or None, start=start, stop=stop,
-                    on_message=advance, publish_clock=clock_hz,
+                    on_message=advance, publish_clock=clock_hz, control=control,
                 )
                 result.append(1)  # finished
             except BagReadError as err:
                 problem.append(err)  # reported outside the bus's task group
             tg.cancel_scope.cancel()
+
+
+def _keys_fd() -> int | None:
+    """Standard input's descriptor when it is a terminal this platform can put in
+    cbreak mode and this process is not a background job of it, else None (no pause
+    key: a pipe, a file, ``tfbus replay ... &``, Windows)."""
+    try:
+        import termios  # noqa: F401
+    except ImportError:
+        return None
+    try:
+        fd = sys.stdin.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+    if not os.isatty(fd):
+        return None
+    try:
+        if os.tcgetpgrp(fd) != os.getpgrp():  # a background job ('&'): setting the
+            return None  # terminal would stop it (SIGTTOU)
+    except OSError:  # not this process's controlling terminal: no job control on it
+        pass
+    return fd
+
+
+@contextlib.contextmanager
+def _cbreak(fd: int) -> Iterator[None]:
+    """The terminal ``fd`` without line buffering and echo (a key arrives as it is
+    pressed, as rosbag's ``Player::setupTerminal`` sets it), restored on the way out."""
+    import termios
+    import tty
+
+    saved = termios.tcgetattr(fd)
+    try:
+        tty.setcbreak(fd, termios.TCSANOW)
+        yield
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+async def _pause_on_key(
+    fd: int, control: ReplayControl, clock: Any, say: Callable[[str], None]
+) -> None:
+    """Toggle ``control`` at each space key read from the terminal ``fd`` (other keys
+    are ignored), saying the bag time it paused or resumed at; until cancelled or the
+    terminal closes."""
+    import anyio
+
+    with _cbreak(fd):
+        while True:
+            await anyio.wait_readable(fd)
+            try:
+                keys = os.read(fd, 64)
+            except BlockingIOError:
+                continue
+            except OSError:  # the terminal went away
+                return
+            if not keys:
+                return
+            for _ in range(keys.count(PAUSE_KEY)):
+                paused = control.toggle()
+                state = "[PAUSED] " if paused else "[RUNNING]"
+                say(f"{state} bag time {fmt_sec(clock.now().ns)}")

@@ -60,7 +60,7 @@ at the first checkpoint; a deadline beyond the end of :class:`~tfbus.time.Time`
 
 from tfbus.clock._base import Clock, JumpCallback, timeout_ns
 from tfbus.clock._manual import ManualClock
-from tfbus.clock._sim import SimClock
+from tfbus.clock._sim import SimClock, SimClockStatistics
 from tfbus.clock._system import SystemClock
 from tfbus.clock._timer import PeriodicTimer, Tick, every
 
@@ -70,6 +70,7 @@ __all__ = [
     "ManualClock",
     "PeriodicTimer",
     "SimClock",
+    "SimClockStatistics",
     "SystemClock",
     "Tick",
     "every",

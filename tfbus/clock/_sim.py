@@ -6,6 +6,7 @@ import logging
 import math
 from collections.abc import Callable, Hashable
 from contextlib import AbstractContextManager, ExitStack
+from dataclasses import dataclass
 from types import TracebackType
 from typing import TYPE_CHECKING
 
@@ -28,6 +29,33 @@ _log = logging.getLogger("tfbus.clock")
 MAX_FORWARD_STEP: float = 1e9
 """Default bound, in seconds, of how far one ``/clock`` may move a :class:`SimClock`
 ahead of the time it reads (about 31.7 years); a message further ahead is dropped."""
+
+
+@dataclass(frozen=True, slots=True)
+class SimClockStatistics:
+    """Counters of a :class:`SimClock` (:meth:`SimClock.statistics`), monotonic since
+    the clock was made.
+
+    Attributes:
+        received: messages delivered on the clock's topic, valid or not.
+        accepted: valid ``/clock`` messages that set the time (equal stamps included).
+        dropped: messages dropped: not a ``Clock`` of a :class:`~tfbus.time.Time`, or
+            more than ``max_forward_step`` seconds ahead of ``now()``.
+        jumps: backward jumps of simulated time (each ``/clock`` earlier than ``now()``).
+        interleaved: backward jumps undone by a later ``/clock`` that leaps forward
+            again, in one step of more than half the jump, to or past the time before
+            it: the mark of two publishers of ``/clock`` whose stamps interleave (a
+            simulator and a ``rosbag play --clock``, two bag players), or of a
+            reordered message. A looping bag or a reset world jumps back and runs on
+            from there in small steps, and is not counted. Logged (the first, then one
+            in a thousand) as "several publishers on /clock".
+    """
+
+    received: int
+    accepted: int
+    dropped: int
+    jumps: int
+    interleaved: int
 
 
 class _WallGuard:
@@ -95,8 +123,13 @@ class SimClock:
       :class:`~tfbus.listener.TransformListener` or :class:`~tfbus.buffer.Buffer` on this
       clock clears its buffer, as tf2_ros does), it is counted in :attr:`jumps` and
       logged (the first, then one in a thousand). Pending deadlines keep their absolute
-      times. Two publishers of ``/clock`` whose stamps interleave make one jump back per
-      backward step: :attr:`jumps` growing steadily is the sign of them.
+      times.
+    * Two publishers of ``/clock`` whose stamps interleave make one jump back per
+      backward step, as in ROS (each clears a listener's buffer). A jump back that a
+      later ``/clock`` undoes by leaping forward again to where time was is counted in
+      :attr:`SimClockStatistics.interleaved` and logged as several publishers on the
+      topic (the first, then one in a thousand); a looping bag, which runs on from its
+      start, is not.
     * A message that is not a ``Clock`` holding a :class:`~tfbus.time.Time` (a negative
       or non-integer stamp cannot be one), or one more than ``max_forward_step`` seconds
       ahead of ``now()`` once a first ``/clock`` was accepted, is dropped, counted in
@@ -173,6 +206,9 @@ class SimClock:
         self._accepted = 0
         self._dropped = 0
         self._jumps = 0
+        self._interleaved = 0
+        # (now() before the last jump back, its size), until time is back there: ns
+        self._jumped: tuple[int, int] | None = None
         self._logs = CountLimitedLog(_log, 1000)
 
     # -- lifecycle --------------------------------------------------------------------
@@ -224,6 +260,16 @@ class SimClock:
             self._subscription = None
 
     # -- statistics -------------------------------------------------------------------
+
+    def statistics(self) -> SimClockStatistics:
+        """A snapshot of the counters (see :class:`SimClockStatistics`)."""
+        return SimClockStatistics(
+            received=self._received,
+            accepted=self._accepted,
+            dropped=self._dropped,
+            jumps=self._jumps,
+            interleaved=self._interleaved,
+        )
 
     @property
     def topic(self) -> str:
@@ -284,6 +330,7 @@ class SimClock:
                 guard.refresh(deadline)
         if new_ns < now_ns:
             self._jumps += 1
+            self._jumped = (now_ns, now_ns - new_ns)
             self._logs.log(
                 logging.WARNING,
                 "simulated time on %s jumped back from %.9f s to %.9f s",
@@ -291,6 +338,21 @@ class SimClock:
                 now_ns / 1e9,
                 new_ns / 1e9,
             )
+        elif self._jumped is not None:
+            jumped_from, size = self._jumped
+            if new_ns >= jumped_from:
+                self._jumped = None
+                if 2 * (new_ns - now_ns) > size:  # a leap back, not time running on
+                    self._interleaved += 1
+                    self._logs.log(
+                        logging.WARNING,
+                        "several publishers on %s? simulated time jumped back from "
+                        "%.9f s and returned to %.9f s in one step from %.9f s",
+                        self._topic,
+                        jumped_from / 1e9,
+                        new_ns / 1e9,
+                        now_ns / 1e9,
+                    )
         self._core.set_nowait(stamp)
 
     # -- Clock protocol ---------------------------------------------------------------
@@ -399,7 +461,7 @@ class SimClock:
     def __repr__(self) -> str:
         return (
             f"SimClock(topic={self._topic!r}, now={self.now()!r}, received={self._received}, "
-            f"dropped={self._dropped}, jumps={self._jumps})"
+            f"dropped={self._dropped}, jumps={self._jumps}, interleaved={self._interleaved})"
         )
 
 

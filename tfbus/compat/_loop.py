@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import itertools
 import os
 import sys
 import threading
+import weakref
 from collections.abc import Awaitable, Callable
 from contextlib import AbstractAsyncContextManager
 from typing import Any, TypeVar
@@ -275,6 +277,70 @@ def ros1_sim_clock() -> Any:
     bus = ros1_bus()
     return background.shared(f"ros1-clock:{os.environ.get('ROS_MASTER_URI', '')}",
                              lambda: SimClock(bus))
+
+
+def rclpy_use_sim_time(node: object) -> bool:
+    """Whether ``node`` is an rclpy node whose ``use_sim_time`` parameter is true: what
+    makes its clock (``node.get_clock()``) simulated time, following ``/clock``
+    (``rclpy/time_source.py``); False for anything else or when it cannot say."""
+    get = getattr(node, "get_parameter", None)
+    if get is None:
+        return False
+    try:
+        return getattr(get("use_sim_time"), "value", False) is True
+    except Exception:  # no such parameter (undeclared), or not an rclpy node
+        return False
+
+
+# node -> its SimClock (the node holds the /clock subscription); a node that is gone
+# takes its entry with it, so a new node never inherits a clock fed by a dead one
+_RCLPY_CLOCKS: weakref.WeakKeyDictionary[Any, Any] = weakref.WeakKeyDictionary()
+_RCLPY_CLOCKS_LOCK = threading.Lock()
+_RCLPY_CLOCK_KEYS = itertools.count()
+
+
+def rclpy_sim_clock(node: Any) -> Any:
+    """A :class:`~tfbus.clock.SimClock` following ``/clock`` as the rclpy ``node`` with
+    ``use_sim_time`` hears it, one per node: the node subscribes to ``/clock``
+    (``rosgraph_msgs/Clock``, best-effort depth 1, as rclpy's ``TimeSource`` does) and
+    each message is published on an in-process bus of the background loop, where the
+    clock follows it (until the program ends, as the node's own time source). A stamp
+    that is not a valid time (negative seconds), or one more than ``max_forward_step``
+    ahead, is counted and dropped by the clock (``statistics().dropped``)."""
+    from rclpy.qos import (  # type: ignore[import-not-found]
+        QoSProfile,
+        ReliabilityPolicy,
+    )
+    from rosgraph_msgs.msg import Clock as RosClock  # type: ignore[import-not-found]
+
+    from tfbus.bus import Bus
+    from tfbus.clock import SimClock
+    from tfbus.messages import Clock as ClockMessage
+    from tfbus.time import Time
+    from tfbus.topics import CLOCK_TOPIC
+
+    with _RCLPY_CLOCKS_LOCK:
+        clock = _RCLPY_CLOCKS.get(node)
+        if clock is not None:
+            return clock
+        key = f"rclpy-clock:{next(_RCLPY_CLOCK_KEYS)}"
+        bus: Bus = background.shared(f"{key}:bus", Bus)
+        clock = background.shared(key, lambda: SimClock(bus))
+
+        def on_clock(message: Any) -> None:
+            stamp = getattr(message, "clock", None)
+            try:
+                value: object = Time(int(stamp.sec), int(stamp.nanosec))  # type: ignore[union-attr]
+            except (AttributeError, TypeError, ValueError):
+                value = stamp  # not a Time: the clock counts and drops it
+            background.call(bus.publish_nowait, CLOCK_TOPIC, ClockMessage(value))  # type: ignore[arg-type]
+
+        node.create_subscription(
+            RosClock, CLOCK_TOPIC, on_clock,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
+        _RCLPY_CLOCKS[node] = clock
+        return clock
 
 
 def in_event_loop() -> bool:

@@ -37,6 +37,7 @@ works as ``from tf2_ros.buffer import Buffer`` does.
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import sys
 import types
@@ -57,6 +58,8 @@ from tfbus.compat._loop import (
     LoopThreadError,
     background,
     in_event_loop,
+    rclpy_sim_clock,
+    rclpy_use_sim_time,
     ros1_bus,
     ros1_sim_clock,
     rospy_node_name,
@@ -85,6 +88,8 @@ from tfbus.messages import (
 from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports.ros1.action import ActionClient, action_client
+
+_log = logging.getLogger("tfbus.compat")
 
 __all__ = [
     "DEFAULT_STATIC_TF_TOPIC",
@@ -150,11 +155,16 @@ def Stamped(obj: Any, stamp: object, frame_id: str) -> Any:
 
 class Buffer:
     """tf2_ros ``Buffer(cache_time=None, node=None)`` over a :class:`tfbus.Buffer`
-    (``.buffer``; ``cache_time`` 10 s by default, a duration in any form). ``node`` is
-    accepted for ROS 2's signature and not used (time comes from ``clock``, a tfbus
-    clock, default the system clock; in an initialised rospy node whose
-    ``/use_sim_time`` parameter is true, a :class:`~tfbus.clock.SimClock` following
-    ``/clock`` on the ROS 1 graph, as ``rospy.Time.now()``).
+    (``.buffer``; ``cache_time`` 10 s by default, a duration in any form). Time comes
+    from ``clock``, a tfbus clock, by default the system clock; but simulated time, a
+    :class:`~tfbus.clock.SimClock` following ``/clock``, as a node with ``use_sim_time``
+    reads it: under an rclpy ``node`` (given here, or the first node of a
+    :class:`TransformListener` on this buffer while it is still empty) whose
+    ``use_sim_time`` parameter is true, ``/clock`` as that node hears it
+    (``node.get_clock()``, rclpy's ``TimeSource``); in an initialised rospy node whose
+    ``/use_sim_time`` parameter is true, ``/clock`` on the ROS 1 graph, as
+    ``rospy.Time.now()``. On simulated time the buffer belongs to the background loop
+    (the loop the clock's ``/clock`` arrives in).
 
     Thread use: once a background listener feeds it (or a blocking call had to wait),
     the buffer belongs to the process's background loop and every call from another
@@ -170,11 +180,17 @@ class Buffer:
         """Create the buffer (see the class docs). ``debug`` (ROS 1's): in an initialised
         rospy node, offer the ``~tf2_frames`` service as ROS 1's Buffer does."""
         seconds = 10.0 if cache_time is None else to_duration(cache_time, "cache_time")
-        if clock is None and rospy_use_sim_time():  # rospy's simulated time: /clock
-            clock = ros1_sim_clock()
+        self._seconds = seconds
+        self._clock_chosen = clock is not None
+        sim = False
+        if clock is None and rclpy_use_sim_time(node):  # rclpy's simulated time: /clock
+            clock, sim = rclpy_sim_clock(node), True
+        elif clock is None and rospy_use_sim_time():  # rospy's simulated time: /clock
+            clock, sim = ros1_sim_clock(), True
+        self._clock_chosen = self._clock_chosen or sim
         self.buffer = _Buffer(seconds, clock=clock)
         self.node = node
-        self._owned = False
+        self._owned = sim  # the SimClock's loop runs this buffer's calls
         self._flavour: str | None = None
         self.frame_server: Any = None
         if debug and rospy_node_name() is not None:
@@ -201,6 +217,22 @@ class Buffer:
     def _own(self) -> None:
         """From now on the background loop runs this buffer's calls."""
         self._owned = True
+
+    def _follow_node_time(self, node: Any) -> bool:
+        """Put this buffer on ``node``'s simulated time (rclpy ``use_sim_time``) when no
+        clock was chosen for it and it holds nothing yet; True when it did."""
+        if self._clock_chosen or not rclpy_use_sim_time(node):
+            return False
+        self._clock_chosen = True
+        if self.buffer.get_frame_names():
+            _log.warning("tf2_ros.Buffer: node %s has use_sim_time, but this buffer already "
+                         "holds transforms on the system clock: it stays on it",
+                         getattr(node, "get_name", lambda: "?")())
+            return False
+        self.buffer.close()
+        self.buffer = _Buffer(self._seconds, clock=rclpy_sim_clock(node))
+        self._owned = True
+        return True
 
     def _run(self, fn: Any, *args: object) -> Any:
         if self._owned and not background.in_loop_thread():
@@ -562,6 +594,8 @@ class TransformListener:
             RuntimeError: no node and no bus, and the ROS 1 graph could not be joined
                 (the reason chained).
         """
+        if isinstance(buffer, Buffer) and node is not None and not _is_bus(node):
+            buffer._follow_node_time(node)  # an rclpy node with use_sim_time
         self.buffer = buffer.buffer if isinstance(buffer, Buffer) else buffer
         self._compat = buffer if isinstance(buffer, Buffer) else None
         self._inner: _Listener | None = None
