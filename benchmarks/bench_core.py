@@ -379,7 +379,7 @@ def build_cpp(out_dir: Path) -> Path | str:
         ["pkg-config", "--cflags", "--libs", "tf2"], capture_output=True, text=True, check=False
     )
     if flags.returncode:
-        return "no tf2 for pkg-config (scripts/install_ros1.sh installs libtf2-dev)"
+        return "no tf2 for pkg-config (scripts/install/install_ros1.sh installs libtf2-dev)"
     exe = out_dir / "tf2_buffer_core_bench"
     built = subprocess.run(
         ["g++", "-O2", "-o", str(exe), str(TF2_CPP), *flags.stdout.split()],
