@@ -212,6 +212,30 @@ def test_only_the_core_imports_its_selection() -> None:
     )
 
 
+def test_the_compiled_ros1_decoder_is_a_codec() -> None:
+    """The compiled ROS 1 ``TFMessage`` decoder lives under ``codecs/`` (``_cwire.pyx``,
+    chosen by ``codecs/ros1.py``), not in the core: no codec imports the core's selection
+    or its kernels, and nothing in ``core/`` imports a codec."""
+    graph = _graph()
+    assert "tfbus.codecs._cwire" in MODULES and "tfbus.core._cwire" not in MODULES
+    assert "tfbus.codecs._cwire" in graph["tfbus.codecs.ros1"]
+    codecs_into_core = sorted(
+        _where(importer, line)
+        for importer, edges in graph.items() if importer.startswith("tfbus.codecs")
+        for target, line in edges.items()
+        if target in ("tfbus.core._select", "tfbus.core.kernels")
+    )
+    assert not codecs_into_core, "a codec imports the core's selection:\n" + "\n".join(
+        codecs_into_core
+    )
+    core_into_codecs = sorted(
+        _where(importer, line)
+        for importer, edges in graph.items() if importer.startswith("tfbus.core")
+        for target, line in edges.items() if target.startswith("tfbus.codecs")
+    )
+    assert not core_into_codecs, "the core imports a codec:\n" + "\n".join(core_into_codecs)
+
+
 def test_each_topic_name_has_one_home() -> None:
     """Topic names are defined in ``tfbus/topics.py`` only; elsewhere they are imported."""
     names = ("/tf", "/tf_static", "/tfbus/peers", "/joint_states", "/scan")
