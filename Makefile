@@ -17,18 +17,18 @@ $(BIN)/python:
 
 # Everything: every extra, the test tools and the docs tools (tests/test_docs.py builds
 # the site and runs every example of it).
-$(STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/_c*.pyx) | $(BIN)/python
+$(STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/codecs/_c*.pyx tfbus/_c*.pyx) | $(BIN)/python
 	@echo "make: installing tfbus with every extra and the test and docs tools into $(VENV) (compiles the core with Cython; a few minutes the first time)"
 	$(BIN)/python -m pip install -q -e '.[all,test,docs]'
 	touch $(STAMP) $(CORE_STAMP) $(DOCS_STAMP)
 
 # tfbus alone (its core dependencies), for the demo.
-$(CORE_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/_c*.pyx) | $(BIN)/python
+$(CORE_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/codecs/_c*.pyx tfbus/_c*.pyx) | $(BIN)/python
 	@echo "make: installing tfbus into $(VENV) (numpy, transforms3d, anyio; compiles the core with Cython, about 2 minutes the first time)"
 	$(BIN)/python -m pip install -q -e .
 	touch $(CORE_STAMP)
 
-$(DOCS_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/_c*.pyx) | $(BIN)/python
+$(DOCS_STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/codecs/_c*.pyx tfbus/_c*.pyx) | $(BIN)/python
 	$(BIN)/python -m pip install -q -e '.[all,docs]'
 	touch $(DOCS_STAMP) $(CORE_STAMP)
 
@@ -89,4 +89,4 @@ test-matrix: $(DIST_STAMP)
 
 clean:
 	rm -rf $(VENV) .nox .pytest_cache .mypy_cache .ruff_cache build dist site *.egg-info \
-	    tfbus/core/_c*.c tfbus/core/*.so tfbus/_c*.c tfbus/*.so
+	    tfbus/core/_c*.c tfbus/core/*.so tfbus/codecs/_c*.c tfbus/codecs/*.so tfbus/_c*.c tfbus/*.so

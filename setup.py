@@ -1,4 +1,5 @@
-"""Build the compiled core (``tfbus/core/_c*.pyx``, Cython), optionally; everything else is
+"""Build the compiled core (``tfbus/core/_c*.pyx``, and the ROS 1 decoder
+``tfbus/codecs/_cwire.pyx``; Cython), optionally; everything else is
 in pyproject.toml.
 
 The extensions are an accelerator, never a requirement: tfbus has a pure-Python core with
@@ -40,11 +41,15 @@ def _flag(name: str) -> bool:
 
 NO_EXTENSIONS = _flag("TFBUS_NO_EXTENSIONS")
 
-COMPILED_MODULES = ("_cmath", "_ccache", "_ccore", "_cwire", "_cbatch")
+COMPILED_MODULES = ("_cmath", "_ccache", "_ccore", "_cbatch")
 """The compiled core, one extension per job (``tfbus/core/<name>.pyx``; the ``.pxd`` files
 beside them share declarations and inline math): scalar math, link storage, frame table
-and walk, ROS 1 wire decoding, the batch kernel. All or none: ``tfbus.core._select``
-loads the compiled core only when every one of them is importable."""
+and walk, the batch kernel. All or none: ``tfbus.core._select`` loads the compiled core
+only when every one of them is importable."""
+COMPILED_CODECS = ("_cwire",)
+"""The compiled codecs (``tfbus/codecs/<name>.pyx``), built with the core whose C helpers
+they ``cimport``: ``_cwire``, the ROS 1 ``TFMessage`` decoder that
+:mod:`tfbus.codecs.ros1` uses with the compiled core."""
 COMPILED_SENSORS = ("_claser",)
 """Compiled sensor kernels (``tfbus/<name>.pyx``): ``_claser``, laser_geometry's
 projection for :meth:`tfbus.laser.LaserProjection.project_laser`; used with the compiled
@@ -141,8 +146,10 @@ def _extensions() -> list[Extension]:
     # and add separately rounded: no fused multiply-add contraction.
     extra = [] if sys.platform == "win32" else ["-O2", "-ffp-contract=off"]
     exts = [
-        Extension(f"tfbus.core.{name}", [f"tfbus/core/{name}.pyx"], extra_compile_args=extra)
-        for name in COMPILED_MODULES
+        Extension(f"tfbus.{package}.{name}", [f"tfbus/{package}/{name}.pyx"],
+                  extra_compile_args=extra)
+        for package, names in (("core", COMPILED_MODULES), ("codecs", COMPILED_CODECS))
+        for name in names
     ]
     exts += [
         Extension(f"tfbus.{name}", [f"tfbus/{name}.pyx"], extra_compile_args=extra)

@@ -236,11 +236,11 @@ def _summary(r: dict[str, Any]) -> tuple[float, float, float]:
 
 def codec_figures(batch: int = 100, rounds: int = 200) -> None:
     """Per-transform encode/decode time: this codec vs cyclonedds-python's serializer."""
-    from tfbus.codecs.cdr import decode_tf_message, encode_tf_message
+    from tfbus.codecs.cdr import decode_tf, encode_tf
     from tfbus.transports.ros2.dds import TFMessage_
 
     msg = _message("codec", batch)
-    data = encode_tf_message(msg.transforms)
+    data = encode_tf(msg.transforms)
     ref = TFMessage_.deserialize(data)
 
     def per_transform_us(fn: Callable[[], object]) -> float:
@@ -250,8 +250,8 @@ def codec_figures(batch: int = 100, rounds: int = 200) -> None:
         return (time.perf_counter() - t0) / rounds / batch * 1e6
 
     print(f"codec, us per transform (batch {batch}): "
-          f"tfbus encode {per_transform_us(lambda: encode_tf_message(msg.transforms)):.2f}, "
-          f"decode {per_transform_us(lambda: decode_tf_message(data)):.2f}; "
+          f"tfbus encode {per_transform_us(lambda: encode_tf(msg.transforms)):.2f}, "
+          f"decode {per_transform_us(lambda: decode_tf(data)):.2f}; "
           f"cyclonedds serialize {per_transform_us(ref.serialize):.2f}, "
           f"deserialize {per_transform_us(lambda: TFMessage_.deserialize(data)):.2f}")  # fmt: skip
 

@@ -30,6 +30,7 @@ LAYERS: dict[str, int] = {
     "ratelimit": 0,
     "topics": 0,  # the topic names, in one place
     "_version": 0,  # the distribution's version from package metadata
+    "_claser": 0,  # compiled laser projection (laser.py's kernel): imports nothing of tfbus
     # 1: the sans-I/O core (geometry and convert call the tf2 scalar math of the core that
     # core/_select chose: compiled or pure-Python, same behaviour)
     "geometry": 1,
@@ -39,8 +40,7 @@ LAYERS: dict[str, int] = {
     "_extras": 1,  # which extra brings which package; raises errors.MissingExtraError
     "codecs": 1,  # message codecs (ROS 1, CDR, tfbus's msgpack wire): sans-I/O
     # 2: the bus and time sources
-    "_aio": 2,
-    "_claser": 0,  # compiled laser projection (laser.py's kernel): C, imports nothing of tfbus  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)
+    "_aio": 2,  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)
     "bus": 2,
     "clock": 2,
     "latch": 2,
@@ -217,6 +217,30 @@ def test_only_the_core_imports_its_selection() -> None:
     assert not outside, "import tfbus.core.kernels, not tfbus.core._select:\n" + "\n".join(
         outside
     )
+
+
+def test_the_compiled_ros1_decoder_is_a_codec() -> None:
+    """The compiled ROS 1 ``TFMessage`` decoder lives under ``codecs/`` (``_cwire.pyx``,
+    chosen by ``codecs/ros1.py``), not in the core: no codec imports the core's selection
+    or its kernels, and nothing in ``core/`` imports a codec."""
+    graph = _graph()
+    assert "tfbus.codecs._cwire" in MODULES and "tfbus.core._cwire" not in MODULES
+    assert "tfbus.codecs._cwire" in graph["tfbus.codecs.ros1"]
+    codecs_into_core = sorted(
+        _where(importer, line)
+        for importer, edges in graph.items() if importer.startswith("tfbus.codecs")
+        for target, line in edges.items()
+        if target in ("tfbus.core._select", "tfbus.core.kernels")
+    )
+    assert not codecs_into_core, "a codec imports the core's selection:\n" + "\n".join(
+        codecs_into_core
+    )
+    core_into_codecs = sorted(
+        _where(importer, line)
+        for importer, edges in graph.items() if importer.startswith("tfbus.core")
+        for target, line in edges.items() if target.startswith("tfbus.codecs")
+    )
+    assert not core_into_codecs, "the core imports a codec:\n" + "\n".join(core_into_codecs)
 
 
 def test_each_topic_name_has_one_home() -> None:

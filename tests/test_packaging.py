@@ -84,8 +84,9 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
     required = {
         "pyproject.toml", "setup.py", "README.md", "LICENSE", "CHANGELOG.md", "MANIFEST.in",
         "tfbus/__init__.py", "tfbus/py.typed", "tfbus/core/_select.py",
-        *(f"tfbus/core/_c{job}.{ext}" for job in ("math", "cache", "core", "wire", "batch")
+        *(f"tfbus/core/_c{job}.{ext}" for job in ("math", "cache", "core", "batch")
           for ext in ("pyx", "pyi")),
+        "tfbus/codecs/_cwire.pyx", "tfbus/codecs/_cwire.pyi",
         *(f"tfbus/core/_c{job}.pxd" for job in ("math", "cache", "core", "results")),
         "tfbus/_claser.pyx", "tfbus/_claser.pyi",
         *(f"tfbus/core/_py{job}.py" for job in ("math", "cache", "core", "batch")),

@@ -38,6 +38,8 @@ __all__ = [
     "Clock",
     "Header",
     "JointState",
+    "LookupTransformGoal",
+    "LookupTransformResult",
     "Point",
     "Point32",
     "PointStamped",
@@ -315,6 +317,50 @@ class Clock(NamedTuple):
     def __radd__(self, other: object) -> NoReturn: raise _refused(self, "+")
     def __mul__(self, other: object) -> NoReturn: raise _refused(self, "*")
     def __rmul__(self, other: object) -> NoReturn: raise _refused(self, "*")
+
+
+class LookupTransformGoal(NamedTuple):
+    """A goal of tf2_ros's ``tf2_msgs/LookupTransform`` action (``LookupTransform.action``,
+    the request of ``buffer_server``), with the action's goal id.
+
+    ``target_frame``, ``source_frame``, ``source_time``, ``timeout`` (seconds, a float;
+    ``duration timeout`` on the wire), ``target_time``, ``fixed_frame`` and ``advanced``
+    (the six-argument lookup when True) are the goal's fields; ``goal_id`` and
+    ``goal_stamp`` are the action's ``GoalID`` (actionlib: ``id``, ``stamp``), the time the
+    client sent it (also the ROS 1 ``ActionGoal`` header's stamp).
+    """
+
+    target_frame: str
+    source_frame: str
+    source_time: Time = Time(0)
+    timeout: float = 0.0
+    target_time: Time = Time(0)
+    fixed_frame: str = ""
+    advanced: bool = False
+    goal_id: str = ""
+    goal_stamp: Time = Time(0)
+
+
+class LookupTransformResult(NamedTuple):
+    """A result of tf2_ros's ``tf2_msgs/LookupTransform`` action, with the action's status.
+
+    ``transform`` and the ``tf2_msgs/TF2Error`` (``error``: 0 NO_ERROR, 1 LOOKUP_ERROR,
+    2 CONNECTIVITY_ERROR, 3 EXTRAPOLATION_ERROR, 4 INVALID_ARGUMENT_ERROR, 5 TIMEOUT_ERROR,
+    6 TRANSFORM_ERROR; ``error_string``) are the result's fields; ``goal_id`` and
+    ``goal_stamp`` name the goal answered, ``status`` and ``status_text`` are its
+    ``actionlib_msgs/GoalStatus`` (3 SUCCEEDED, as ``buffer_server`` ends every lookup,
+    the error in ``error``; 2 PREEMPTED, 5 REJECTED, 8 RECALLED otherwise) and ``stamp``
+    the time the server sent it (the ROS 1 ``ActionResult`` header's stamp).
+    """
+
+    transform: TransformStamped
+    error: int = 0
+    error_string: str = ""
+    goal_id: str = ""
+    goal_stamp: Time = Time(0)
+    status: int = 3
+    status_text: str = ""
+    stamp: Time = Time(0)
 
 
 class JointState(NamedTuple):

@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 
 from tfbus import Time
-from tfbus.cli._sources import BagSource
+from tfbus.cli._bag_source import BagSource
 from tfbus.core import BufferCore
 from tfbus.messages import Header, JointState
 from tfbus.robot import RobotStatePublisher

@@ -88,7 +88,7 @@ def test_readers_listen_on_the_default_bus_without_a_source(
     graph (no usage error). The live session is replaced by a Ctrl-C (exit 130)."""
     import importlib
 
-    import tfbus.cli._sources as sources
+    import tfbus.cli._bus_spec as sources
 
     parsed: list[str] = []
     real_parse = sources.parse_spec

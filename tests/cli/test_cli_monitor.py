@@ -74,7 +74,7 @@ def test_names_never_cut_off_in_80_columns(hostile_bag: Path) -> None:
 
     from rich.console import Console
 
-    from tfbus.cli._sources import BagSource
+    from tfbus.cli._bag_source import BagSource
     from tfbus.cli.monitor import print_monitor
 
     name = "a_very_long_frame_name_" * 6

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tfbus.codecs.cdr import decode_tf_message, encode_tf_message
+from tfbus.codecs.cdr import decode_tf, encode_tf
 from tfbus.errors import WireDecodeError
 from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
@@ -46,11 +46,11 @@ def test_equal_to_rosbags_both_ways() -> None:
     writes the same bytes (up to the final padding rosbags omits)."""
     raw = _rosbags_cdr(MSG)
     store = tf_typestore(ros1=False)
-    assert decode_tf_message(raw) == TFMessage(MSG)
+    assert decode_tf(raw) == TFMessage(MSG)
     assert tuple(from_rosbags(store.deserialize_cdr(raw, ROSBAGS_TF_TYPE))) == MSG
-    ours = encode_tf_message(MSG)
+    ours = encode_tf(MSG)
     assert ours[: len(raw)] == raw and set(ours[len(raw):]) <= {0}
-    assert decode_tf_message(memoryview(raw)) == TFMessage(MSG)  # a bag's view
+    assert decode_tf(memoryview(raw)) == TFMessage(MSG)  # a bag's view
 
 
 def _plain_cdr2(transforms: tuple[TransformStamped, ...], *, big: bool) -> bytes:
@@ -78,11 +78,11 @@ def _plain_cdr2(transforms: tuple[TransformStamped, ...], *, big: bool) -> bytes
 
 @pytest.mark.parametrize("big", [False, True])
 def test_reads_plain_cdr2(big: bool) -> None:
-    assert decode_tf_message(_plain_cdr2(MSG, big=big)) == TFMessage(MSG)
+    assert decode_tf(_plain_cdr2(MSG, big=big)) == TFMessage(MSG)
 
 
 def test_reads_big_endian_cdr() -> None:
-    raw = bytearray(encode_tf_message(MSG[:1]))
+    raw = bytearray(encode_tf(MSG[:1]))
     # re-encode the same values big-endian: XCDR1 layout, every field byte-swapped
     be = bytearray(b"\x00\x00\x00\x00") + struct.pack(">I", 1)
     t = MSG[0]
@@ -93,7 +93,7 @@ def test_reads_big_endian_cdr() -> None:
     be += b"\0" * (-(len(be) - 4) % 8)
     tr, q = t.transform.translation, t.transform.rotation
     be += struct.pack(">7d", tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w)
-    assert decode_tf_message(bytes(be)) == decode_tf_message(bytes(raw)) == TFMessage(MSG[:1])
+    assert decode_tf(bytes(be)) == decode_tf(bytes(raw)) == TFMessage(MSG[:1])
 
 
 def test_every_truncation_is_a_wire_decode_error() -> None:
@@ -102,7 +102,7 @@ def test_every_truncation_is_a_wire_decode_error() -> None:
     raw = _rosbags_cdr(MSG)
     for cut in range(len(raw)):
         with pytest.raises(WireDecodeError):
-            decode_tf_message(raw[:cut])
+            decode_tf(raw[:cut])
 
 
 @pytest.mark.parametrize(
@@ -119,7 +119,7 @@ def test_damaged_samples_say_what_is_wrong(patch: object, match: str) -> None:
     raw = _rosbags_cdr(MSG)
     assert callable(patch)
     with pytest.raises(WireDecodeError, match=match):
-        decode_tf_message(patch(raw))
+        decode_tf(patch(raw))
 
 
 @settings(max_examples=300, deadline=None)
@@ -129,7 +129,7 @@ def test_fuzz_only_wire_decode_errors(noise: bytes, where: int, byte: int) -> No
     raw[where % len(raw)] = byte
     for data in (bytes(raw), noise, b"\x00\x01\x00\x00" + noise):
         try:
-            out = decode_tf_message(data)
+            out = decode_tf(data)
         except WireDecodeError:
             continue
         assert all(type(t) is TransformStamped for t in out.transforms)

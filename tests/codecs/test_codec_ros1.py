@@ -1,5 +1,5 @@
 """The ROS 1 TFMessage decoders agree: the compiled one (objects built in C,
-``tfbus.core._cwire._tf_from_ros1``, what ``decode_ros1`` uses with the compiled core), the
+``tfbus.codecs._cwire._tf_from_ros1``, what ``decode_tf`` uses with the compiled core), the
 struct one (``decode_ros1_struct``, the pure-Python path) and rosbags' generic
 deserialiser; a short payload and a bad UTF-8 id fail alike (the codec's one error:
 ``WireDecodeError``)."""
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus import Header, Quaternion, TFMessage, Time, Transform, TransformStamped, Vector3
 from tfbus.codecs import ros1 as dec
 from tfbus.core import COMPILED
 from tfbus.errors import WireDecodeError
@@ -31,7 +31,7 @@ _ids = st.sampled_from(["", "base_link", "odom", "ü", "a" * 40, "bench_7"])
 def test_decode_ros1_uses_the_compiled_decoder() -> None:
     assert COMPILED and dec._compiled_ros1 is not None
     raw = TFCodec().encode([_ts("a", "b", 3, (1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0))])
-    assert dec.decode_ros1(raw) == dec._compiled_ros1(raw)
+    assert dec.decode_tf(raw) == TFMessage(tuple(dec._compiled_ros1(raw)))
 
 
 def _ts(parent: str, child: str, ns: int, v: tuple[float, ...]) -> TransformStamped:
@@ -85,19 +85,19 @@ def test_short_or_bad_payloads_fail_alike() -> None:
     for cut in range(len(raw)):
         with pytest.raises(struct.error):
             dec._compiled_ros1(raw[:cut])
-        for decode in (dec.decode_ros1_struct, dec.decode_ros1):
+        for decode in (dec.decode_ros1_struct, dec.decode_tf):
             with pytest.raises(WireDecodeError):
                 decode(raw[:cut])
     huge = struct.pack("<I", 2**32 - 1) + raw[4:]  # a count no payload of this size holds
     with pytest.raises(struct.error):
         dec._compiled_ros1(huge)
-    for decode in (dec.decode_ros1_struct, dec.decode_ros1):
+    for decode in (dec.decode_ros1_struct, dec.decode_tf):
         with pytest.raises(WireDecodeError):
             decode(huge)
     bad = raw.replace(b"base_link", b"base_lin\xff")
     with pytest.raises(UnicodeDecodeError):
         dec._compiled_ros1(bad)
-    for decode in (dec.decode_ros1_struct, dec.decode_ros1):
+    for decode in (dec.decode_ros1_struct, dec.decode_tf):
         with pytest.raises(WireDecodeError, match="utf-8"):
             decode(bad)
     assert dec._compiled_ros1(struct.pack("<I", 0)) == []
@@ -176,7 +176,7 @@ def _bits(ts: TransformStamped) -> bytes:
 
 
 def _reuses() -> bool:
-    from tfbus.core import _cwire
+    from tfbus.codecs import _cwire
 
     return bool(_cwire._REUSES)
 
@@ -316,7 +316,7 @@ def test_laser_scan_decoder_equals_rosbags(n: int, m: int) -> None:
     from tfbus.sensor_msgs import LaserScan
 
     raw, msg = _rosbags_scan(n, m)
-    got = dec.decode_laser_scan(raw)
+    got = dec.decode_scan(raw)
     assert type(got) is LaserScan
     assert got.header == Header(Time.from_ns(1_700_000_000_123_456_789), "base_laser")
     for name in ("angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
@@ -326,7 +326,7 @@ def test_laser_scan_decoder_equals_rosbags(n: int, m: int) -> None:
     assert got.ranges.tobytes() == msg.ranges.tobytes()  # type: ignore[attr-defined]
     assert got.intensities.tobytes() == msg.intensities.tobytes()  # type: ignore[attr-defined]
     got.ranges[:] = 0.0  # its own writable copy
-    assert dec.decode_laser_scan(memoryview(raw)).ranges.tobytes() == \
+    assert dec.decode_scan(memoryview(raw)).ranges.tobytes() == \
         msg.ranges.tobytes()  # type: ignore[attr-defined]
 
 
@@ -334,16 +334,16 @@ def test_laser_scan_decoder_refuses_damage_and_bounds() -> None:
     raw, _ = _rosbags_scan(5, 5)
     for cut in range(len(raw)):  # every truncation, one clear error
         with pytest.raises(WireDecodeError):
-            dec.decode_laser_scan(raw[:cut])
+            dec.decode_scan(raw[:cut])
     with pytest.raises(WireDecodeError, match="trailing"):
-        dec.decode_laser_scan(raw + b"\x00")
+        dec.decode_scan(raw + b"\x00")
     with pytest.raises(WireDecodeError, match="ranges: 5 beams exceed 4"):
-        dec.decode_laser_scan(raw, max_beams=4)
+        dec.decode_scan(raw, max_beams=4)
     # ranges count claiming 2**32-1 beams: refused before any allocation
     at = 16 + len("base_laser") + 28
     huge = raw[:at] + struct.pack("<I", 2**32 - 1) + raw[at + 4:]
     with pytest.raises(WireDecodeError, match="ranges"):
-        dec.decode_laser_scan(huge)
+        dec.decode_scan(huge)
     bad_utf8 = raw.replace(b"base_laser", b"base_lase\xff", 1)
     with pytest.raises(WireDecodeError, match="frame_id"):
-        dec.decode_laser_scan(bad_utf8)
+        dec.decode_scan(bad_utf8)

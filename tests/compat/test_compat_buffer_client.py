@@ -242,11 +242,13 @@ async def test_raw_topics_between_two_nodes_and_a_malformed_result_dropped(
     import anyio
 
     from tfbus import Bus
-    from tfbus.transports.ros1 import Ros1Transport, action
+    from tfbus.codecs import ros1 as codec
+    from tfbus.messages import LookupTransformGoal, LookupTransformResult
+    from tfbus.transports.ros1 import Ros1Transport
     from tfbus.transports.ros1.action import ActionClient
 
     status = struct.pack("<III", 1, 0, 0) + struct.pack("<I", 0) + struct.pack("<I", 0)
-    goals: list[action.Goal] = []
+    goals: list[LookupTransformGoal] = []
     callers: list[str] = []
     answer = TransformStamped(Header(Time.from_sec(5.0), "map"), "laser",
                               Transform(Vector3(1.0, 2.0, 3.0), Quaternion(*Q)))
@@ -254,20 +256,21 @@ async def test_raw_topics_between_two_nodes_and_a_malformed_result_dropped(
     client_side = Ros1Transport(master_uri=master.uri, node_name="/raw_client")
 
     def on_goal(payload: bytes, callerid: str) -> None:
-        goal = action.decode_goal(payload)
+        goal = codec.decode_lookup_goal(payload)
         goals.append(goal)
         callers.append(callerid)
         server.send_raw_nowait("/raw_ns/result", b"\x01\x02 not a result")
-        server.send_raw_nowait("/raw_ns/result", action.encode_result(
-            1, goal.goal_id, goal.goal_stamp, answer, 0, ""))
+        server.send_raw_nowait("/raw_ns/result", codec.encode_lookup_result(
+            LookupTransformResult(answer, 0, "", goal.goal_id, goal.goal_stamp)))
 
     async with Bus(transport=server), Bus(transport=client_side), \
             anyio.create_task_group() as tg:
-        server.subscribe_raw("/raw_ns/goal", action.GOAL_TYPE, action.GOAL_MD5, on_goal)
-        server.subscribe_raw("/raw_ns/cancel", action.CANCEL_TYPE, action.CANCEL_MD5,
+        server.subscribe_raw("/raw_ns/goal", codec.LOOKUP_GOAL_TYPE, codec.LOOKUP_GOAL_MD5, on_goal)
+        server.subscribe_raw("/raw_ns/cancel", codec.GOAL_ID_TYPE, codec.GOAL_ID_MD5,
                              lambda _p, _c: None)
-        server.advertise_raw("/raw_ns/result", action.RESULT_TYPE, action.RESULT_MD5)
-        server.advertise_raw("/raw_ns/status", action.STATUS_TYPE, action.STATUS_MD5)
+        server.advertise_raw("/raw_ns/result", codec.LOOKUP_RESULT_TYPE, codec.LOOKUP_RESULT_MD5)
+        server.advertise_raw("/raw_ns/status", codec.GOAL_STATUS_ARRAY_TYPE,
+                             codec.GOAL_STATUS_ARRAY_MD5)
         client = ActionClient(client_side, "raw_ns")
 
         async def statuses() -> None:  # actionlib's status array, 5 Hz

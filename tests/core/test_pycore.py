@@ -147,7 +147,7 @@ def test_both_cores_export_the_same_names(compiled: Any, pure: Any) -> None:
 
 def test_the_selection_exports_every_core_name() -> None:
     own = {"COMPILED", "COMPILED_MODULES", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING",
-           "TF_FROM_ROS1", "core_description", "fallback_warning",
+           "core_description", "fallback_warning",
            "shadowed_install"}  # fmt: skip
     every = {n for _, pure in TWINS for n in pure.__all__}
     assert every | own == set(_select.__all__)

@@ -130,7 +130,7 @@ async def test_run_listener_and_run_broadcaster_on_two_linked_buses() -> None:
 
 
 def test_main_roles_wire_the_runners(monkeypatch: pytest.MonkeyPatch) -> None:
-    import tfbus.cli._sources as sources
+    import tfbus.cli._bus_spec as sources
     import tfbus.demos.tutorial as demo
     from tfbus.transports.spec import BusSpec
 

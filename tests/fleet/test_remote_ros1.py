@@ -32,21 +32,28 @@ from ros1_hostile import FakeMaster, HostilePeer, http_answer, send_raw, tcpros_
 
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
+from tfbus.codecs.ros1 import (
+    LOOKUP_GOAL_MD5,
+    LOOKUP_GOAL_TYPE,
+    LOOKUP_RESULT_MD5,
+    LOOKUP_RESULT_TYPE,
+    decode_lookup_goal,
+    decode_lookup_result,
+    encode_lookup_goal,
+)
 from tfbus.core.policy import Clamp, Exact, Nearest, Previous, Window
 from tfbus.errors import LookupException
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Header,
+    LookupTransformGoal,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
 from tfbus.remote import BufferClient, BufferServer
 from tfbus.time import Time
 from tfbus.transports.ros1 import Ros1Transport
-from tfbus.transports.ros1.action import (
-    GOAL_MD5,
-    GOAL_TYPE,
-    RESULT_MD5,
-    RESULT_TYPE,
-    decode_goal,
-    decode_result,
-    encode_goal,
-)
 from tfbus.transports.ros1.tcpros import encode_header, frame, read_frame
 
 BUFFER_SERVER = Path("/usr/lib/tf2_ros/buffer_server")
@@ -72,14 +79,17 @@ def test_md5sums_are_debians() -> None:
         pytest.skip(f"no Debian python3: {err}")
     if done.returncode != 0:
         pytest.skip(f"python3-tf2-msgs is not installed: {done.stderr.strip()[-200:]}")
-    assert done.stdout.split() == [GOAL_TYPE, GOAL_MD5, RESULT_TYPE, RESULT_MD5]
+    assert done.stdout.split() == [LOOKUP_GOAL_TYPE, LOOKUP_GOAL_MD5, LOOKUP_RESULT_TYPE,
+                                   LOOKUP_RESULT_MD5]
 
 
 def test_goal_round_trips_through_debians_genpy() -> None:
-    raw = encode_goal("g-1", 3, "map", "laser", Time(5, 7), 1.5, Time(6), "odom", True)
+    raw = encode_lookup_goal(LookupTransformGoal("map", "laser", Time(5, 7), 1.5, Time(6),
+                                                 "odom", True, "g-1", Time(9, 4)))
     script = ("import sys\nfrom tf2_msgs.msg import LookupTransformActionGoal as G\n"
               "m = G(); m.deserialize(sys.stdin.buffer.read()); g = m.goal\n"
-              "print(m.header.seq, m.goal_id.id, g.target_frame, g.source_frame, "
+              "print(m.header.seq, m.header.stamp.to_nsec(), m.goal_id.stamp.to_nsec(), "
+              "m.goal_id.id, g.target_frame, g.source_frame, "
               "g.source_time.to_nsec(), g.timeout.to_nsec(), g.target_time.to_nsec(), "
               "g.fixed_frame, g.advanced)")
     done = subprocess.run(["/usr/bin/python3", "-c", script], input=raw, capture_output=True,
@@ -87,14 +97,17 @@ def test_goal_round_trips_through_debians_genpy() -> None:
     if done.returncode != 0:
         pytest.skip(f"python3-tf2-msgs is not installed: {done.stderr.decode()[-200:]}")
     assert done.stdout.decode().split() == [
-        "3", "g-1", "map", "laser", "5000000007", "1500000000", "6000000000", "odom", "True"]
+        "0", "9000000004", "9000000004", "g-1", "map", "laser", "5000000007", "1500000000",
+        "6000000000", "odom", "True"]
     with pytest.raises(ValueError, match="malformed tf2_msgs/LookupTransformActionResult"):
-        decode_result(b"\x01\x02")
-    goal = decode_goal(raw)
+        decode_lookup_result(b"\x01\x02")
+    goal = decode_lookup_goal(raw)
     assert (goal.goal_id, goal.target_frame, goal.source_time, goal.timeout, goal.advanced) \
         == ("g-1", "map", Time(5, 7), 1.5, True)
+    assert goal == LookupTransformGoal("map", "laser", Time(5, 7), 1.5, Time(6), "odom", True,
+                                       "g-1", Time(9, 4))
     with pytest.raises(ValueError, match="malformed tf2_msgs/LookupTransformActionGoal"):
-        decode_goal(raw[:-3])
+        decode_lookup_goal(raw[:-3])
 
 
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
@@ -265,7 +278,7 @@ async def _goal_publisher(goals: list[bytes], topic: str = "/tf2_buffer_server/g
             with contextlib.suppress(anyio.EndOfStream, anyio.BrokenResourceError, OSError):
                 await read_frame(BufferedByteReceiveStream(stream), 65536, "header")
                 await stream.send(encode_header({
-                    "callerid": "/hostile", "md5sum": GOAL_MD5, "type": GOAL_TYPE,
+                    "callerid": "/hostile", "md5sum": LOOKUP_GOAL_MD5, "type": LOOKUP_GOAL_TYPE,
                     "topic": topic}))
                 for raw in goals:
                     await stream.send(frame(raw))
@@ -367,16 +380,16 @@ async def test_a_subscriber_resetting_before_its_header_leaves_the_node_serving(
 async def test_an_answer_whose_stamp_ros1_cannot_carry_is_refused() -> None:
     """A goal stamped 0xFFFFFFFF s + 0xFFFFFFFF ns (past 2**32 s), and one asking a time
     past 2**32 s: neither answer fits ROS 1's uint32 seconds; each is refused and counted
-    (before: struct.error from encode_result stopped the node); the good client keeps
+    (a struct.error from the result's encoder stopped the node); the good client keeps
     its answers."""
-    stamped = bytearray(encode_goal("bad-1", 1, "base", "laser", Time(0), 0.0, Time(0),
-                                    "", False))
+    stamped = bytearray(encode_lookup_goal(LookupTransformGoal(
+        "base", "laser", Time(0), 0.0, Time(0), "", False, "bad-1")))
     stamped[16:24] = b"\xff" * 8  # goal_id.stamp (after the 16-byte header)
-    late = encode_goal("bad-2", 2, "base", "laser", Time(2**32 - 1), 0.0, Time(0), "",
-                       False)
+    late = encode_lookup_goal(LookupTransformGoal(
+        "base", "laser", Time(2**32 - 1), 0.0, Time(0), "", False, "bad-2"))
     late = late.replace(struct.pack("<II", 2**32 - 1, 0), struct.pack("<II", 2**32 - 1,
                                                                      2**32 - 1))
-    assert decode_goal(late).source_time.ns >= 2**32 * 10**9
+    assert decode_lookup_goal(late).source_time.ns >= 2**32 * 10**9
     with FakeMaster() as master:
         async with ros1_bus(master.uri, "/served") as served, \
                 BufferServer(_static_buffer(), served) as server, \
@@ -397,4 +410,5 @@ async def test_an_answer_whose_stamp_ros1_cannot_carry_is_refused() -> None:
         s = server.statistics()
         assert (s.unsendable, s.malformed) == (2, 0)
     with pytest.raises(ValueError, match="ROS 1 time"):
-        encode_goal("g", 1, "base", "laser", Time(2**32), 0.0, Time(0), "", False)
+        encode_lookup_goal(LookupTransformGoal("base", "laser", Time(2**32), 0.0, Time(0), "",
+                                               False, "g"))

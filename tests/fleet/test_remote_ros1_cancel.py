@@ -30,23 +30,30 @@ from ros1_hostile import FakeMaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import ManualClock
+from tfbus.codecs.ros1 import (
+    GOAL_ID_MD5,
+    GOAL_ID_TYPE,
+    LOOKUP_GOAL_MD5,
+    LOOKUP_GOAL_TYPE,
+    LOOKUP_RESULT_MD5,
+    LOOKUP_RESULT_TYPE,
+    decode_lookup_result,
+    encode_goal_id,
+    encode_lookup_goal,
+)
 from tfbus.errors import LookupException, TimeoutException
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Header,
+    LookupTransformGoal,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
 from tfbus.remote import BufferClient, BufferServer, ServerStatistics
 from tfbus.time import Time
 from tfbus.transports.ros1 import Ros1Transport
-from tfbus.transports.ros1.action import (
-    CANCEL_MD5,
-    CANCEL_TYPE,
-    GOAL_MD5,
-    GOAL_TYPE,
-    RESULT_MD5,
-    RESULT_TYPE,
-    LookupActionServer,
-    decode_result_status,
-    encode_goal,
-    encode_goal_id,
-)
+from tfbus.transports.ros1.action import LookupActionServer
 
 PREEMPTED, SUCCEEDED, REJECTED, RECALLED = 2, 3, 5, 8
 GOAL, CANCEL, RESULT = ("/tf2_buffer_server/goal", "/tf2_buffer_server/cancel",
@@ -70,8 +77,8 @@ async def _until(predicate: Callable[[], bool], timeout: float = 30.0) -> None:
 def goal(goal_id: str, stamp_sec: int, source: str = "ghost", timeout: float = 1000.0) -> bytes:
     """A LookupTransform goal for base <- ``source`` whose GoalID is stamped
     ``stamp_sec`` s (bytes 16..24: after the 16-byte header)."""
-    raw = bytearray(encode_goal(goal_id, 1, "base", source, Time(0), timeout, Time(0), "",
-                                False))
+    raw = bytearray(encode_lookup_goal(LookupTransformGoal(
+        "base", source, Time(0), timeout, Time(0), "", False, goal_id)))
     raw[16:24] = struct.pack("<II", stamp_sec, 0)
     return bytes(raw)
 
@@ -92,8 +99,8 @@ class ActionPeer:
         self.results: dict[str, tuple[int, str, int]] = {}
 
     def on_result(self, raw: bytes, _callerid: str) -> None:
-        goal_id, _ts, code, _message, status, text = decode_result_status(raw)
-        self.results[goal_id] = (status, text, code)
+        result = decode_lookup_result(raw)
+        self.results[result.goal_id] = (result.status, result.status_text, result.error)
 
     def send_goal(self, raw: bytes) -> None:
         self.transport.send_raw_nowait(GOAL, raw)
@@ -108,9 +115,9 @@ async def action_peer(master_uri: str) -> AsyncIterator[ActionPeer]:
         transport = bus.transport
         assert isinstance(transport, Ros1Transport)
         peer = ActionPeer(transport)
-        transport.advertise_raw(GOAL, GOAL_TYPE, GOAL_MD5)
-        transport.advertise_raw(CANCEL, CANCEL_TYPE, CANCEL_MD5)
-        transport.subscribe_raw(RESULT, RESULT_TYPE, RESULT_MD5, peer.on_result)
+        transport.advertise_raw(GOAL, LOOKUP_GOAL_TYPE, LOOKUP_GOAL_MD5)
+        transport.advertise_raw(CANCEL, GOAL_ID_TYPE, GOAL_ID_MD5)
+        transport.subscribe_raw(RESULT, LOOKUP_RESULT_TYPE, LOOKUP_RESULT_MD5, peer.on_result)
         c = transport.connections
         await _until(lambda: bool(c(GOAL)[1] and c(CANCEL)[1] and c(RESULT)[0]))
         yield peer

@@ -119,7 +119,7 @@ def _render(stats_src: object, frames: tuple[str, ...] = ()) -> str:
 
     from rich.console import Console
 
-    from tfbus.cli._sources import BusSource
+    from tfbus.cli._bus_source import BusSource
     from tfbus.cli.monitor import print_monitor
 
     assert isinstance(stats_src, BusSource)
@@ -139,7 +139,7 @@ def test_a_dead_broadcasters_frames_stop_showing_their_old_rate() -> None:
     last RATE_WINDOW (10 s) of receive time, so 100 Hz while it runs; once it has been
     silent for STALE_PERIODS (5) of its periods and at least STALE_AFTER (1 s), it is
     stale: 0.000 and marked so (the whole-run rate is kept for bags)."""
-    from tfbus.cli._sources import BusSource
+    from tfbus.cli._bus_source import BusSource
     from tfbus.monitor import RATE_WINDOW, STALE_AFTER, STALE_PERIODS
 
     src = BusSource("memory")
@@ -229,7 +229,7 @@ def test_recent_rate_by_hand_with_repeats_and_window() -> None:
 def test_ros1_names_the_publisher_unknown_publisher_and_has_no_liveliness_table() -> None:
     """On ROS 1 the message does not name its sender: tf_monitor prints
     ``unknown_publisher``, and there is no liveliness table to print (it would be empty)."""
-    from tfbus.cli._sources import BusSource
+    from tfbus.cli._bus_source import BusSource
 
     src = BusSource("ros1:master=http://127.0.0.1:1")
     src.clock = ManualClock(Time.from_ns(T0 + 20 * MS))  # type: ignore[assignment]
@@ -245,7 +245,7 @@ def test_ros1_names_the_publisher_unknown_publisher_and_has_no_liveliness_table(
 async def test_messages_before_the_liveliness_go_to_the_broadcaster() -> None:
     """A message that arrives before its broadcaster's liveliness is first "unknown";
     once the one broadcaster is known it is accounted to it: no spurious row."""
-    from tfbus.cli._sources import BusSource
+    from tfbus.cli._bus_source import BusSource
     from tfbus.transports.zenoh import PeerEvent
 
     src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
@@ -300,7 +300,7 @@ async def test_a_second_broadcaster_does_not_make_the_first_unattributed() -> No
     """Two live broadcasters on /tf: the wire does not name the sender, but a frame keeps
     the broadcaster it had while that one was alone (tf_monitor's frame -> authority
     map): no "unattributed" row for the first one's frames."""
-    from tfbus.cli._sources import BusSource
+    from tfbus.cli._bus_source import BusSource
     from tfbus.transports.zenoh import PeerEvent, PeerInfo
 
     src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
@@ -332,7 +332,7 @@ def test_the_command_line_asks_the_scheme_for_fleet_and_unknown_authority(
     """Whether a bus is a fleet bus and what an unnamed broadcaster is called are facts of
     the scheme table (``TransportScheme.fleet_option``, ``unknown_authority``), not of
     the scheme's name: a scheme registered with them gets both from the command line."""
-    from tfbus.cli._sources import BusSource
+    from tfbus.cli._bus_source import BusSource
     from tfbus.transports import spec
 
     monkeypatch.setattr(spec, "_SCHEMES", spec.schemes())  # this test's rows only

@@ -901,7 +901,8 @@ def test_bus_specs_pass_scan_topics_to_ros1_only() -> None:
     """``tfbus view --bus ros1 --scan /scan`` opens a ROS 1 node subscribed to /scan
     (the CLI's open_spec_transport -> spec.open_transport -> the ros1 factory); Zenoh and
     memory carry every topic and take no such option."""
-    from tfbus.cli._sources import BusSource, open_spec_transport
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.cli._bus_spec import open_spec_transport
     from tfbus.transports.spec import parse_bus_spec
 
     ros1 = open_spec_transport(parse_bus_spec("ros1"), name="tfbus-view", scan_topics=["/scan"])

@@ -26,7 +26,7 @@ from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures
 
 from tfbus import Bus, SimClock, Time
 from tfbus.bag import load_buffer, read_messages
-from tfbus.cli._sources import BusSource
+from tfbus.cli._bus_source import BusSource
 from tfbus.transports.ros1 import Ros1Transport
 
 TURTLE = Path(__file__).resolve().parents[1] / "data" / "webviz_turtle_tf_example.bag"

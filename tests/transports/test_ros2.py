@@ -43,9 +43,9 @@ from tfbus.clock import SimClock, SystemClock
 from tfbus.codecs.cdr import (
     SEC_MAX,
     decode_clock,
-    decode_tf_message,
+    decode_tf,
     encode_clock,
-    encode_tf_message,
+    encode_tf,
 )
 from tfbus.demos.tutorial import broadcaster_node, run_listener
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
@@ -163,7 +163,7 @@ CODEC_CASES = [
 
 @pytest.mark.parametrize("transforms", CODEC_CASES, ids=["empty", "one", "paddings", "edges"])
 def test_encode_is_byte_identical_to_cyclonedds(transforms: list[TransformStamped]) -> None:
-    data = encode_tf_message(transforms)
+    data = encode_tf(transforms)
     assert data[:4] == b"\x00\x01\x00\x00"  # CDR_LE: XCDR1 little-endian, as rmw sends
     assert data == reference_bytes(transforms)
 
@@ -171,13 +171,13 @@ def test_encode_is_byte_identical_to_cyclonedds(transforms: list[TransformStampe
 @pytest.mark.parametrize("transforms", CODEC_CASES, ids=["empty", "one", "paddings", "edges"])
 @pytest.mark.parametrize("big_endian", [False, True], ids=["le", "be"])
 def test_decode_inverts_cyclonedds(transforms: list[TransformStamped], big_endian: bool) -> None:
-    decoded = decode_tf_message(reference_bytes(transforms, big_endian))
+    decoded = decode_tf(reference_bytes(transforms, big_endian))
     assert list(decoded.transforms) == transforms
 
 
 def test_tf2_msgs_layout_by_hand() -> None:
     # TFMessage[1]: count, sec, nanosec, "a\0" (len 2), pad 2, "b\0", pad to 8, 7 doubles
-    data = encode_tf_message([ts("a", "b", 3, 4, (1.0, 2.0, 3.0))])
+    data = encode_tf([ts("a", "b", 3, 4, (1.0, 2.0, 3.0))])
     body = data[4:]
     assert body[:4] == (1).to_bytes(4, "little")
     assert body[4:8] == (3).to_bytes(4, "little") and body[8:12] == (4).to_bytes(4, "little")
@@ -188,13 +188,13 @@ def test_tf2_msgs_layout_by_hand() -> None:
 
 def test_encode_refuses_stamps_ros2_cannot_carry() -> None:
     ok = ts("a", "b", SEC_MAX, 999_999_999)
-    assert decode_tf_message(encode_tf_message([ok])).transforms == (ok,)
+    assert decode_tf(encode_tf([ok])).transforms == (ok,)
     with pytest.raises(WireEncodeError, match=r"transforms\[1\]\.header\.stamp: sec=2147483648"):
-        encode_tf_message([ok, ts("a", "c", SEC_MAX + 1)])
+        encode_tf([ok, ts("a", "c", SEC_MAX + 1)])
     with pytest.raises(WireEncodeError, match=r"transforms\[0\]: a frame id holds a NUL"):
-        encode_tf_message([ts("a\0", "b")])
+        encode_tf([ts("a\0", "b")])
     with pytest.raises(WireEncodeError, match=r"transforms\[0\]: not a TransformStamped"):
-        encode_tf_message(["junk"])  # type: ignore[list-item]
+        encode_tf(["junk"])  # type: ignore[list-item]
 
 
 def _body(*chunks: bytes) -> bytes:
@@ -205,7 +205,7 @@ def _u32(n: int) -> bytes:
     return n.to_bytes(4, "little")
 
 
-GOOD = encode_tf_message([ts("a", "b", 3, 4, (1.0, 2.0, 3.0))])
+GOOD = encode_tf([ts("a", "b", 3, 4, (1.0, 2.0, 3.0))])
 MALFORMED = {
     "empty": b"",
     "header only": b"\x00\x01\x00\x00",
@@ -225,14 +225,14 @@ MALFORMED = {
 @pytest.mark.parametrize("data", MALFORMED.values(), ids=MALFORMED.keys())
 def test_decode_raises_only_wire_decode_error(data: bytes) -> None:
     with pytest.raises(WireDecodeError):
-        decode_tf_message(data)
+        decode_tf(data)
 
 
 def test_decode_limits_the_transform_count() -> None:
-    data = encode_tf_message([ts("a", f"c{i}") for i in range(5)])
-    assert len(decode_tf_message(data, max_transforms=5).transforms) == 5
+    data = encode_tf([ts("a", f"c{i}") for i in range(5)])
+    assert len(decode_tf(data, max_transforms=5).transforms) == 5
     with pytest.raises(WireDecodeError, match="limit 4"):
-        decode_tf_message(data, max_transforms=4)
+        decode_tf(data, max_transforms=4)
 
 
 # -- configuration and options ---------------------------------------------------------------
@@ -415,7 +415,7 @@ STRUCTURAL = {k: v for k, v in MALFORMED.items() if k not in ("invalid utf-8", "
 SEMANTIC = [
     MALFORMED["invalid utf-8"],
     MALFORMED["negative sec"],
-    encode_tf_message([ts("a", f"c{i}") for i in range(5)]),  # over max_transforms=4
+    encode_tf([ts("a", f"c{i}") for i in range(5)]),  # over max_transforms=4
 ]
 
 
@@ -430,7 +430,7 @@ async def test_malformed_samples_are_counted_and_dropped(anyio_backend: str) -> 
         try:
             for name, junk in STRUCTURAL.items():
                 assert await writer.write(junk) < 0, name  # refused by Cyclone itself
-            valid = encode_tf_message([ts("odom", "base_link", 1, 0, (1.0, 0.0, 0.0))])
+            valid = encode_tf([ts("odom", "base_link", 1, 0, (1.0, 0.0, 0.0))])
             with anyio.fail_after(WAIT):
                 while transport.matched_publishers("/tf") == 0:
                     await anyio.sleep(0.01)  # polling a bounded condition, not a fixed wait
@@ -779,7 +779,7 @@ async def test_malformed_samples_beside_a_real_ros2_publisher(
             before = transport.statistics().malformed
             for junk in SEMANTIC[:2]:
                 assert await writer.write(junk) == 0
-            assert await writer.write(encode_tf_message([ts("odom", "marker")])) == 0
+            assert await writer.write(encode_tf([ts("odom", "marker")])) == 0
             await receive_where(tf, lambda m: m.transforms[0].child_frame_id == "marker")
             assert transport.statistics().malformed >= before + 2
             # the rclpy stream still flows after the junk

@@ -2,8 +2,8 @@
 
 A ``TFMessage`` has had the same wire layout since ROS 1 Hydro, so when a connection's
 type hash is the standard one (ROS 1 MD5 ``94810edd...``, ROS 2 RIHS01 ``e369d0f0...``)
-its payloads are decoded by tfbus's codecs (:func:`tfbus.codecs.ros1.decode_ros1`,
-:func:`tfbus.codecs.cdr.decode_tf_message`), several times faster than a generic
+its payloads are decoded by tfbus's codecs (:func:`tfbus.codecs.ros1.decode_tf`,
+:func:`tfbus.codecs.cdr.decode_tf`), several times faster than a generic
 deserializer; any other definition goes through a rosbags typestore built from the
 definition stored in the bag (ROS 1 message text, ROS 2 ``.msg`` or IDL text).
 
@@ -19,9 +19,9 @@ from collections.abc import Callable, Sequence
 from contextlib import suppress
 from typing import TYPE_CHECKING, Final, NamedTuple
 
-from tfbus.codecs.cdr import decode_tf_message
+from tfbus.codecs import cdr, ros1
 from tfbus.codecs.ros1 import TF_MD5SUM as ROS1_TF_MD5
-from tfbus.codecs.ros1 import decode_ros1, from_rosbags, tf_typestore
+from tfbus.codecs.ros1 import from_rosbags, tf_typestore
 from tfbus.errors import SchemaParseError
 from tfbus.messages import TransformStamped
 
@@ -48,12 +48,21 @@ Decoder = Callable[[bytes | memoryview], Sequence[TransformStamped]]
 
 
 def _decode_cdr(raw: bytes | memoryview) -> Sequence[TransformStamped]:
-    """A ROS 2 (CDR) TFMessage's transforms (:func:`tfbus.codecs.cdr.decode_tf_message`).
+    """A ROS 2 (CDR) TFMessage's transforms (:func:`tfbus.codecs.cdr.decode_tf`).
 
     Raises:
         WireDecodeError: the payload is not a whole TFMessage.
     """
-    return decode_tf_message(raw).transforms
+    return cdr.decode_tf(raw).transforms
+
+
+def _decode_ros1(raw: bytes | memoryview) -> Sequence[TransformStamped]:
+    """A ROS 1 TFMessage's transforms (:func:`tfbus.codecs.ros1.decode_tf`).
+
+    Raises:
+        WireDecodeError: the payload is not a whole TFMessage.
+    """
+    return ros1.decode_tf(raw).transforms
 
 
 _SHOWN_LINE = 60  # characters of the bad line quoted in a SchemaParseError
@@ -115,7 +124,7 @@ def ros1_decoder(msgtype: str, md5: str, msgdef: str) -> Decoder:
             bad line); the reader reports it as a ``BagReadError``.
     """
     if md5 == ROS1_TF_MD5:
-        return decode_ros1
+        return _decode_ros1
     store = _typestore(msgtype, msgdef, False, True)
 
     def ros1_generic(raw: bytes | memoryview) -> list[TransformStamped]:

@@ -20,8 +20,10 @@
     tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
-group and shared plumbing in ``_common.py``, the transform sources and bus options in
-``_sources.py``, what the two robot commands share in ``_robot.py``.
+group and shared plumbing in ``_common.py``, the ``--bus`` option in ``_bus_spec.py``,
+the transform sources in ``_tf_source.py`` (their face), ``_bag_source.py`` and
+``_bus_source.py``, chosen from the options by ``_source_options.py``, running on a live
+bus in ``_live_session.py``, what the two robot commands share in ``_robot.py``.
 A command is registered by one line in :data:`COMMANDS`.
 
 Every command has ``--help`` with examples. A bad argument prints one line,
@@ -69,9 +71,9 @@ _LAZY = {
     "parse_time": "tfbus.cli._common",
     "frames_dot": "tfbus.cli.frames",
     "parse_static_args": "tfbus.cli.static_transform",
-    "BagSource": "tfbus.cli._sources",
-    "BusSource": "tfbus.cli._sources",
-    "TfSource": "tfbus.cli._sources",
+    "BagSource": "tfbus.cli._bag_source",
+    "BusSource": "tfbus.cli._bus_source",
+    "TfSource": "tfbus.cli._tf_source",
 }
 
 _loaded = False

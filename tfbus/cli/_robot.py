@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from tfbus.cli._common import fail, literal, seconds
-from tfbus.cli._sources import cancel_on_signal, run_live
+from tfbus.cli._live_session import cancel_on_signal, run_live
 
 if TYPE_CHECKING:
     import anyio.abc
@@ -61,7 +61,7 @@ def serve(
     with ``use_sim_time``, else None, the wall clock), and run until SIGINT/SIGTERM or
     ``duration`` seconds of wall time; then call ``finish(bus)`` (the summary line) and
     return 0. A bus that cannot be opened is a one-line error and status 1
-    (:func:`~tfbus.cli._sources.run_live`)."""
+    (:func:`~tfbus.cli._live_session.run_live`)."""
     opened: list[Bus] = []
 
     async def main() -> None:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
+from tfbus.cli._bag_source import BagSource
 from tfbus.cli._common import RATE_HELP, bag_path, console, finish_status, fmt_sec, literal
-from tfbus.cli._sources import BagSource
 
 __all__ = ["command"]
 

@@ -11,8 +11,9 @@ from typing import Any, TypeVar
 
 import click
 
+from tfbus.cli._bus_spec import check_bus_spec
 from tfbus.cli._common import error, fail, hertz, literal, seconds, use_sim_time_option
-from tfbus.cli._sources import cancel_on_signal, check_bus_spec, is_bus_error, run_live
+from tfbus.cli._live_session import cancel_on_signal, is_bus_error, run_live
 from tfbus.transports.spec import BUS_HELP
 
 __all__ = ["command", "node_label"]
@@ -97,7 +98,7 @@ def run_role(role: str, spec: str, *, duration: float | None, rate: float,
     import anyio
 
     from tfbus.bus import Bus
-    from tfbus.cli._sources import open_spec_transport
+    from tfbus.cli._bus_spec import open_spec_transport
     from tfbus.clock import Clock, SimClock
     from tfbus.demos.tutorial import BROADCASTER_NAME, LISTENER_NAME, run_broadcaster, run_listener
     from tfbus.transports import spec as bus_spec

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 
 import click
 
+from tfbus.cli._bus_spec import publish_bus, publish_options
 from tfbus.cli._common import hertz, literal, use_sim_time_option
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
-from tfbus.cli._sources import publish_bus, publish_options
 from tfbus.topics import JOINT_STATES_TOPIC
 
 if TYPE_CHECKING:

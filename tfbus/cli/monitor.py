@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING
 
 import click
 
+from tfbus.cli._bag_source import BagSource
+from tfbus.cli._bus_source import BusSource
 from tfbus.cli._common import (
     RATE_HELP,
     console,
@@ -19,15 +21,8 @@ from tfbus.cli._common import (
     seconds,
     use_sim_time_option,
 )
-from tfbus.cli._sources import (
-    BagSource,
-    BusSource,
-    live,
-    live_only,
-    run_live,
-    source,
-    source_options,
-)
+from tfbus.cli._live_session import live, run_live
+from tfbus.cli._source_options import live_only, source, source_options
 from tfbus.time import Time
 
 _ZERO = Time(0)

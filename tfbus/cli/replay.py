@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from tfbus.cli._bag_source import check_bag
+from tfbus.cli._bus_spec import publish_bus, publish_options
 from tfbus.cli._common import (
     MAX_HZ,
     MAX_SECONDS,
@@ -24,13 +26,7 @@ from tfbus.cli._common import (
     one_line,
     warn,
 )
-from tfbus.cli._sources import (
-    cancel_on_signal,
-    check_bag,
-    publish_bus,
-    publish_options,
-    run_live,
-)
+from tfbus.cli._live_session import cancel_on_signal, run_live
 from tfbus.time import NSEC_PER_SEC, Time
 from tfbus.topics import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING
 
 import click
 
+from tfbus.cli._bus_spec import publish_bus, publish_options
 from tfbus.cli._common import hertz, literal, seconds, use_sim_time_option
 from tfbus.cli._robot import bus_label, duration_option, load_model, model_argument, serve
-from tfbus.cli._sources import publish_bus, publish_options
 
 if TYPE_CHECKING:
     import anyio.abc

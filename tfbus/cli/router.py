@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 
 from tfbus.cli._common import fail, literal, seconds
-from tfbus.cli._sources import cancel_on_signal, run_live
+from tfbus.cli._live_session import cancel_on_signal, run_live
 
 __all__ = ["command"]
 

@@ -16,14 +16,9 @@ from typing import Any
 
 import click
 
+from tfbus.cli._bus_spec import DEFAULT_BUS, open_spec_transport, parse_spec
 from tfbus.cli._common import fail, literal, seconds
-from tfbus.cli._sources import (
-    DEFAULT_BUS,
-    cancel_on_signal,
-    open_spec_transport,
-    parse_spec,
-    run_live,
-)
+from tfbus.cli._live_session import cancel_on_signal, run_live
 
 __all__ = ["command"]
 

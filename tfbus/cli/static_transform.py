@@ -8,8 +8,9 @@ from collections.abc import Callable, Sequence
 
 import click
 
+from tfbus.cli._bus_spec import publish_bus, publish_options
 from tfbus.cli._common import console, fail, literal
-from tfbus.cli._sources import cancel_on_signal, publish_bus, publish_options, run_live
+from tfbus.cli._live_session import cancel_on_signal, run_live
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
 from tfbus.time import Time
 

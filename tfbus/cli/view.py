@@ -99,7 +99,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         except ValueError as err:
             fail(f"--token: {err}")
     if bus is not None and bag is None:
-        from tfbus.cli._sources import check_bus_spec
+        from tfbus.cli._bus_spec import check_bus_spec
 
         check_bus_spec(bus)
     from tfbus.view.robot import RobotModel
@@ -172,7 +172,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
 def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
                paused: bool, rate: float, tracks: Sequence[ScanTrack],
                bridge: FoxgloveBridge | None, stop: threading.Event) -> None:
-    from tfbus.cli._sources import BagSource
+    from tfbus.cli._bag_source import BagSource
     from tfbus.view.player import BagPlayer
     from tfbus.view.server import TfPage
     from tfbus.view.timeline import BagTimeline
@@ -190,7 +190,8 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
 def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
                scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
                stop: threading.Event, *, use_sim_time: bool = False) -> None:
-    from tfbus.cli._sources import BusSource, live, run_live
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.cli._live_session import live, run_live
     from tfbus.view.live import LiveView
     from tfbus.view.server import TfPage
 

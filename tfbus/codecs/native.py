@@ -29,6 +29,15 @@ type, has more transforms than allowed or a frame id that is too long raises a
 :class:`WireError` subclass, never anything else, so a receiver can count it and go on.
 This module is synchronous and has no I/O: it is unit-testable alone.
 
+**Shape.** Besides :class:`WireCodec` (what the Zenoh transport uses: a payload of a
+stream, with its sender id and sequence number), the module has the functions of every
+codec module of :mod:`tfbus.codecs`, with the same parameters: :func:`encode_tf` /
+:func:`decode_tf`, :func:`encode_scan` / :func:`decode_scan`, :func:`encode_clock` /
+:func:`decode_clock`. They write a payload outside any stream (sender
+:data:`ONE_SHOT_SENDER`, sequence number 1, as a one-shot query reply is) and read any
+payload, dropping its sender and number. tfbus's wire has no ``LookupTransform`` action:
+its remote lookups are Zenoh queries (:mod:`tfbus.transports.zenoh.lookups`).
+
 Two small msgpack readers run *before* msgspec (the last section of this module, byte
 layout from the msgpack specification, https://github.com/msgpack/msgpack/blob/master/spec.md,
 "Formats"): :func:`read_head` reads the envelope's first three fields (``sender``, ``seq``,
@@ -44,7 +53,7 @@ from __future__ import annotations
 
 import re
 import secrets
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, Final, Literal, NamedTuple
 
@@ -59,14 +68,17 @@ from tfbus.errors import (
     WireLimitError,
     WireVersionError,
 )
+from tfbus.messages import Clock, TFMessage, TransformStamped
 from tfbus.sensor_msgs import LaserScan
 from tfbus.time import TIME_MAX_NS, Time
 
 __all__ = [
     "MAGIC",
+    "MAX_SCAN_BEAMS",
+    "MAX_TRANSFORMS",
+    "ONE_SHOT_SENDER",
     "WIRE_VERSION",
     "Decoded",
-    "SequenceTracker",
     "WireCodec",
     "WireDecodeError",
     "WireEncodeError",
@@ -75,6 +87,12 @@ __all__ = [
     "WireLimits",
     "WireVersionError",
     "check_depth",
+    "decode_clock",
+    "decode_scan",
+    "decode_tf",
+    "encode_clock",
+    "encode_scan",
+    "encode_tf",
     "new_sender_id",
     "read_head",
     "register_message_type",
@@ -234,21 +252,7 @@ class WireCodec:
             WireEncodeError: if the message type is neither a TFMessage, a registered
                 type nor a plain msgpack value, or a field cannot be encoded.
         """
-        if isinstance(message, _m.TFMessage):  # also a ROS 1 connection's subclass
-            tag = _TF_TAG
-            body: object = message.transforms
-        elif type(message) is LaserScan:
-            tag = _SCAN_TAG
-            body = _scan_to_wire(message)
-        else:
-            tag = _TAG_OF.get(type(message), _RAW_TAG)
-            body = message
-        try:
-            return _HEADER + self._encoder.encode(_OutEnvelope(sender, seq, tag, body))
-        except (TypeError, ValueError, OverflowError, NotImplementedError) as exc:
-            raise WireEncodeError(
-                f"cannot encode {type(message).__qualname__} for the wire: {exc}"
-            ) from exc
+        return _payload(self._encoder.encode, message, sender, seq)
 
     # -- decoding -------------------------------------------------------------------
 
@@ -321,6 +325,30 @@ class WireCodec:
             dec = msgspec.msgpack.Decoder(cls, dec_hook=_dec_hook).decode
             self._typed[tag] = dec
         return dec
+
+
+def _payload(encode: Callable[[object], bytes], message: object, sender: int,
+             seq: int) -> bytes:
+    """The payload of ``message`` (see :meth:`WireCodec.encode`), msgpack by ``encode``.
+
+    Raises:
+        WireEncodeError: the message cannot be encoded.
+    """
+    if isinstance(message, _m.TFMessage):  # also a ROS 1 connection's subclass
+        tag = _TF_TAG
+        body: object = message.transforms
+    elif type(message) is LaserScan:
+        tag = _SCAN_TAG
+        body = _scan_to_wire(message)
+    else:
+        tag = _TAG_OF.get(type(message), _RAW_TAG)
+        body = message
+    try:
+        return _HEADER + encode(_OutEnvelope(sender, seq, tag, body))
+    except (TypeError, ValueError, OverflowError, NotImplementedError) as exc:
+        raise WireEncodeError(
+            f"cannot encode {type(message).__qualname__} for the wire: {exc}"
+        ) from exc
 
 
 def _tf_schema(limits: WireLimits) -> Any:
@@ -428,109 +456,120 @@ def _from_wire(items: Any) -> tuple[_m.TransformStamped, ...]:
     return tuple(out)
 
 
-class SequenceTracker:
-    """Per-publisher sequence numbers of received payloads: messages lost, and resets.
+# -- the functions of every codec module ------------------------------------------------
 
-    Every ``(sender, topic)`` stream numbers its payloads 1, 2, ...; a receiver learns
-    from the gaps how many the network dropped. A forged or corrupted number must not
-    turn into billions of "lost" messages: a forward jump of at most
-    ``max_gap`` counts as that many lost; anything else (a larger jump, a step back, a
-    repeat) is a *reset* -- reported, not counted as loss -- and the stream resumes from
-    the new number. The table keeps at most ``max_senders`` streams (it is cleared when
-    full, which only means the next payload of each stream starts it again).
+MAX_TRANSFORMS: Final = WireLimits().max_transforms
+"""Most transforms :func:`decode_tf` accepts by default (:class:`WireLimits`)."""
+MAX_SCAN_BEAMS: Final = WireLimits().max_scan_beams
+"""Most beams :func:`decode_scan` accepts in each array by default (:class:`WireLimits`)."""
+ONE_SHOT_SENDER: Final = 1
+"""The sender id of the payloads :func:`encode_tf`, :func:`encode_scan` and
+:func:`encode_clock` write (a message outside any stream; its sequence number is 1)."""
 
-    It also tells a late-joiner reply (the sender's latched payload, which carries the
-    number of the last payload it sent on that topic) from news: a reply numbered ``n``
-    repeats what a stream already delivered when every payload 1..n of it arrived live
-    (:meth:`reply_is_news`), and a live payload numbered ``n`` or less repeats what a
-    reply numbered ``n`` delivered (:meth:`live_is_news`). A reply and a live payload
-    travel different routes, so a receiver that joins while a latched topic is
-    published gets both; ROS 1 latching (sent on connect, then the stream) and DDS
-    transient-local durability (deduplicated by writer sequence numbers) deliver such a
-    message once. A payload that reached no subscriber does not count as delivered
-    (:meth:`unseen`): a subscriber that came after it still gets the reply.
+_DECODERS_KEPT: Final = 8
+_decoders: dict[WireLimits, WireCodec] = {}
+"""Decoding codecs by limits (a few kept, built once each; msgspec's decoders keep no
+state between calls, its encoders do: :func:`_one_shot` encodes with msgspec's stateless
+``encode`` instead)."""
+
+
+def _decoded(data: bytes | memoryview, limits: WireLimits, kind: type, name: str) -> Any:
+    codec = _decoders.get(limits)
+    if codec is None:
+        if len(_decoders) >= _DECODERS_KEPT:
+            _decoders.clear()
+        codec = _decoders[limits] = WireCodec(limits)
+    message = codec.decode(data).message
+    if not isinstance(message, kind):
+        raise WireDecodeError(f"a tfbus payload of {type(message).__name__}, expected {name}")
+    return message
+
+
+def _one_shot(message: object) -> bytes:
+    """The payload of ``message`` from :data:`ONE_SHOT_SENDER`, sequence number 1."""
+    return _payload(_encode, message, ONE_SHOT_SENDER, 1)
+
+
+def _encode(value: object) -> bytes:
+    return msgspec.msgpack.encode(value, enc_hook=_enc_hook)
+
+
+def encode_tf(message: TFMessage | Sequence[TransformStamped]) -> bytes:
+    """A TFMessage (or its transforms) as a tfbus wire payload (tag ``"tf"``, sender
+    :data:`ONE_SHOT_SENDER`, sequence number 1).
+
+    Raises:
+        WireEncodeError: an element is not a TransformStamped of encodable fields.
     """
+    if not isinstance(message, TFMessage):
+        message = TFMessage(tuple(message))
+    return _one_shot(message)
 
-    def __init__(self, max_gap: int = 100_000, max_senders: int = 4096) -> None:
-        """Raises: ValueError: if ``max_gap`` or ``max_senders`` is less than 1."""
-        if max_gap < 1 or max_senders < 1:
-            raise ValueError("max_gap and max_senders must be at least 1")
-        self.max_gap = max_gap
-        self.max_senders = max_senders
-        self._last: dict[tuple[int, str], int] = {}
-        self._whole: set[tuple[int, str]] = set()  # streams received 1, 2, ... without a gap
-        self._replied: dict[tuple[int, str], int] = {}  # number of the last reply delivered
 
-    def observe(self, sender: int, topic: str, seq: int) -> tuple[int, bool]:
-        """Record ``seq`` of the stream ``(sender, topic)``: ``(lost, reset)``.
+def decode_tf(data: bytes | memoryview, *, max_transforms: int = MAX_TRANSFORMS) -> TFMessage:
+    """The TFMessage of a tfbus wire payload (its sender and number dropped).
 
-        ``lost`` is how many numbers were skipped since the previous one (0 when in
-        order or at the stream's start); ``reset`` is True when the step is implausible.
-        """
-        key = (sender, topic)
-        table = self._last
-        last = table.get(key)
-        if last is None:
-            if len(table) >= self.max_senders:
-                self._clear()
-            table[key] = seq
-            if seq == 1:
-                self._whole.add(key)
-            return 0, False
-        table[key] = seq
-        step = seq - last
-        if step == 1:
-            return 0, False
-        self._whole.discard(key)
-        if 1 < step <= self.max_gap + 1:
-            return step - 1, False
-        self._replied.pop(key, None)  # a restarted stream numbers from 1 again
-        if seq == 1:
-            self._whole.add(key)
-        return 0, True
+    Raises:
+        WireDecodeError: not a tfbus payload of a TFMessage (the message says why).
+        WireVersionError: a payload of another format version.
+        WireLimitError: more than ``max_transforms`` transforms, or another
+            :class:`WireLimits` bound exceeded.
+    """
+    message: TFMessage = _decoded(
+        data, WireLimits(max_transforms=max_transforms), TFMessage, "a TFMessage"
+    )
+    return message
 
-    def reply_is_news(self, sender: int, topic: str, seq: int) -> bool:
-        """Whether a late-joiner reply numbered ``seq`` may hold something the stream
-        did not deliver live (False when payloads 1..seq all arrived live); a reply that
-        is news is remembered for :meth:`live_is_news`."""
-        key = (sender, topic)
-        if key in self._whole and self._last[key] >= seq:
-            return False
-        if len(self._replied) >= self.max_senders:
-            self._replied.clear()
-        if seq > self._replied.get(key, 0):
-            self._replied[key] = seq
-        return True
 
-    def live_is_news(self, sender: int, topic: str, seq: int) -> bool:
-        """Whether a live payload numbered ``seq`` (already :meth:`observe` d) is not
-        one that a delivered reply already held (numbered ``seq`` or later)."""
-        return seq > self._replied.get((sender, topic), 0)
+def encode_scan(message: LaserScan) -> bytes:
+    """A :class:`~tfbus.sensor_msgs.LaserScan` as a tfbus wire payload (tag
+    ``"LaserScan"``, the arrays as float32s bit for bit).
 
-    def unseen(self, sender: int, topic: str) -> None:
-        """A payload of the stream ``(sender, topic)`` reached no one (nothing was
-        subscribed to ``topic`` yet): what the stream delivered no longer makes a later
-        copy a duplicate, so a reply or live payload carrying it is news again."""
-        key = (sender, topic)
-        self._whole.discard(key)
-        self._replied.pop(key, None)
+    Raises:
+        WireEncodeError: ``message`` is not a LaserScan, or a field cannot be encoded.
+    """
+    if type(message) is not LaserScan:
+        raise WireEncodeError(f"expected a LaserScan, got {message!r:.100}")
+    return _one_shot(message)
 
-    def forget(self, sender: int) -> None:
-        """Drop every stream of ``sender`` (e.g. when that node went away)."""
-        for key in [k for k in self._last if k[0] == sender]:
-            del self._last[key]
-            self._whole.discard(key)
-        for key in [k for k in self._replied if k[0] == sender]:
-            del self._replied[key]
 
-    def _clear(self) -> None:
-        self._last.clear()
-        self._whole.clear()
-        self._replied.clear()
+def decode_scan(data: bytes | memoryview, *, max_beams: int = MAX_SCAN_BEAMS) -> LaserScan:
+    """The :class:`~tfbus.sensor_msgs.LaserScan` of a tfbus wire payload.
 
-    def __len__(self) -> int:
-        """The number of streams tracked now."""
-        return len(self._last)
+    Raises:
+        WireDecodeError: not a tfbus payload of a LaserScan.
+        WireVersionError: a payload of another format version.
+        WireLimitError: an array of more than ``max_beams`` beams, or another
+            :class:`WireLimits` bound exceeded.
+    """
+    scan: LaserScan = _decoded(
+        data, WireLimits(max_scan_beams=max_beams), LaserScan, "a LaserScan"
+    )
+    return scan
+
+
+def encode_clock(message: Clock) -> bytes:
+    """A :class:`~tfbus.messages.Clock` as a tfbus wire payload (tag ``"Clock"``, the
+    stamp in integer nanoseconds).
+
+    Raises:
+        WireEncodeError: ``message`` is not a Clock holding a :class:`~tfbus.time.Time`.
+    """
+    if not isinstance(message, Clock) or not isinstance(message.clock, Time):
+        raise WireEncodeError(f"expected a Clock holding a Time, got {message!r:.100}")
+    return _one_shot(message)
+
+
+def decode_clock(data: bytes | memoryview) -> Clock:
+    """The :class:`~tfbus.messages.Clock` of a tfbus wire payload.
+
+    Raises:
+        WireDecodeError: not a tfbus payload of a Clock.
+        WireVersionError: a payload of another format version.
+        WireLimitError: the payload exceeds a :class:`WireLimits` bound.
+    """
+    clock: Clock = _decoded(data, WireLimits(), Clock, "a Clock")
+    return clock
 
 
 # -- msgpack readers run before msgspec (the msgpack specification, "Formats") ----------

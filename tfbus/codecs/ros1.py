@@ -1,23 +1,37 @@
 """ROS 1's ``tf2_msgs/TFMessage``: the struct decoder, rosbags' serialiser and the one
 rosbags message builder.
 
-* :func:`decode_ros1` -- a ROS 1 serialized TFMessage (little endian, ``std_msgs/Header``
-  with ``seq``) into tfbus values, by a dedicated :mod:`struct` decoder (or the compiled
-  core's, built in C), several times faster than a generic deserializer and tested equal
-  to rosbags' ``deserialize_ros1``. Used by the ROS 1 transport (TCPROS) and by the bag
-  reader for ``.bag`` connections whose md5 is :data:`TF_MD5SUM`.
+Every codec module of :mod:`tfbus.codecs` offers the same functions, with the same
+parameters: :func:`encode_tf` / :func:`decode_tf`, :func:`encode_scan` /
+:func:`decode_scan`, :func:`encode_clock` / :func:`decode_clock` and, where the wire has
+the ``tf2_msgs/LookupTransform`` action, :func:`encode_lookup_goal` /
+:func:`decode_lookup_goal` / :func:`encode_lookup_result` / :func:`decode_lookup_result`.
+
+* :func:`decode_tf` -- a ROS 1 serialized TFMessage (little endian, ``std_msgs/Header``
+  with ``seq``) into tfbus values, by a dedicated :mod:`struct` decoder
+  (:func:`decode_ros1_struct`) or its compiled twin (:mod:`tfbus.codecs._cwire`, built
+  in C with the compiled core), several times faster than a generic deserializer and
+  tested equal to rosbags' ``deserialize_ros1``. Used by the ROS 1 transport (TCPROS,
+  through :meth:`TFCodec.decode`) and by the bag reader for ``.bag`` connections whose
+  md5 is :data:`TF_MD5SUM`.
 * :class:`TFCodec` -- ROS 1 serialisation by rosbags' typestore (``serialize_ros1``, which
   also gives the message definition and its md5 for the TCPROS connection header).
 * :func:`tf_typestore`, :func:`to_rosbags`, :func:`from_rosbags` -- the rosbags typestore
   that knows ``tf2_msgs/msg/TFMessage`` and the conversion of tfbus values to and from
   rosbags message objects (the bag writer and :class:`TFCodec` build messages here only).
 
-* :func:`decode_laser_scan` -- a ROS 1 serialized ``sensor_msgs/LaserScan`` (md5
-  :data:`SCAN_MD5SUM`) into a :class:`~tfbus.sensor_msgs.LaserScan`, by :mod:`struct` and
-  ``numpy.frombuffer``, bounded (:data:`MAX_SCAN_BEAMS`); tested equal to rosbags'
+* :func:`encode_scan`, :func:`decode_scan` -- ``sensor_msgs/LaserScan`` (md5
+  :data:`SCAN_MD5SUM`) and a :class:`~tfbus.sensor_msgs.LaserScan`, by :mod:`struct` and
+  ``numpy``, bounded (:data:`MAX_SCAN_BEAMS`); tested equal to rosbags'
   ``serialize_ros1``. Used by the ROS 1 transport's scan topics.
 * :func:`encode_clock`, :func:`decode_clock` -- ``rosgraph_msgs/Clock`` (md5
   :data:`CLOCK_MD5SUM`): one ``time``, two little-endian ``uint32`` (secs, nsecs).
+* :func:`encode_lookup_goal`, :func:`decode_lookup_goal`, :func:`encode_lookup_result`,
+  :func:`decode_lookup_result`, :func:`encode_goal_id`, :func:`decode_goal_id`,
+  :func:`encode_goal_status_array` -- tf2_ros's ``tf2_msgs/LookupTransform`` action over
+  actionlib (``LookupTransformActionGoal``, ``LookupTransformActionResult``, the cancel
+  request ``actionlib_msgs/GoalID`` and the ``GoalStatusArray``), used by
+  :mod:`tfbus.transports.ros1.action`.
 
 **Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` (a ``ValueError``) and
 nothing else; encoding raises :class:`~tfbus.errors.WireEncodeError`.
@@ -27,16 +41,30 @@ Wire layout: ROS wiki "ROS/TCPROS" and ``roscpp_serialization``; the message is
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import math
 import struct
-from collections.abc import Callable, Iterable
+import sys
+from collections.abc import Callable, Iterable, Sequence
 from itertools import repeat
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from tfbus.core.kernels import TF_FROM_ROS1
+from tfbus.core import COMPILED
 from tfbus.errors import WireDecodeError, WireEncodeError
-from tfbus.messages import Clock, Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Clock,
+    Header,
+    LookupTransformGoal,
+    LookupTransformResult,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
 from tfbus.sensor_msgs import LaserScan
 from tfbus.time import NSEC_PER_SEC, Time
 
@@ -47,7 +75,18 @@ __all__ = [
     "CLOCK_MD5SUM",
     "CLOCK_MSGDEF",
     "CLOCK_TYPE",
+    "GOAL_ID_MD5",
+    "GOAL_ID_TYPE",
+    "GOAL_STATUS_ARRAY_MD5",
+    "GOAL_STATUS_ARRAY_TYPE",
+    "LOOKUP_FEEDBACK_MD5",
+    "LOOKUP_FEEDBACK_TYPE",
+    "LOOKUP_GOAL_MD5",
+    "LOOKUP_GOAL_TYPE",
+    "LOOKUP_RESULT_MD5",
+    "LOOKUP_RESULT_TYPE",
     "MAX_SCAN_BEAMS",
+    "MAX_TRANSFORMS",
     "ROSBAGS_TF_TYPE",
     "SCAN_MD5SUM",
     "SCAN_TYPE",
@@ -56,10 +95,19 @@ __all__ = [
     "TF_TYPE",
     "TFCodec",
     "decode_clock",
-    "decode_laser_scan",
-    "decode_ros1",
+    "decode_goal_id",
+    "decode_lookup_goal",
+    "decode_lookup_result",
     "decode_ros1_struct",
+    "decode_scan",
+    "decode_tf",
     "encode_clock",
+    "encode_goal_id",
+    "encode_goal_status_array",
+    "encode_lookup_goal",
+    "encode_lookup_result",
+    "encode_scan",
+    "encode_tf",
     "from_rosbags",
     "scan_definition",
     "tf_typestore",
@@ -90,8 +138,28 @@ CLOCK_MD5SUM: Final = "a9c97c1d230cfc112e270351a944ee47"
 """ROS 1 md5 of ``rosgraph_msgs/Clock`` (``rosmsg md5 rosgraph_msgs/Clock`` on Debian's
 ROS 1; the md5 of ``"time clock"``, genmsg's rule for a message of builtin fields)."""
 MAX_SCAN_BEAMS: Final = 1_000_000
-"""Most beams :func:`decode_laser_scan` accepts in ``ranges`` and in ``intensities`` each
-by default (a 0.1 degree, 360 degree laser has 3 600)."""
+"""Most beams :func:`decode_scan` accepts in ``ranges`` and in ``intensities`` each by
+default (a 0.1 degree, 360 degree laser has 3 600)."""
+MAX_TRANSFORMS: Final = 100_000
+"""Most transforms :func:`decode_tf` accepts in one message by default (as
+:func:`tfbus.codecs.cdr.decode_tf` and :class:`tfbus.codecs.native.WireLimits`)."""
+
+LOOKUP_GOAL_TYPE: Final = "tf2_msgs/LookupTransformActionGoal"
+LOOKUP_GOAL_MD5: Final = "f2e7bcdb75c847978d0351a13e699da5"
+"""md5sum of ``tf2_msgs/LookupTransformActionGoal`` (tf2_msgs 0.7.6; checked against
+Debian's python3-tf2-msgs by the tests)."""
+LOOKUP_RESULT_TYPE: Final = "tf2_msgs/LookupTransformActionResult"
+LOOKUP_RESULT_MD5: Final = "ac26ce75a41384fa8bb4dc10f491ab90"
+"""md5sum of ``tf2_msgs/LookupTransformActionResult`` (tf2_msgs 0.7.6)."""
+LOOKUP_FEEDBACK_TYPE: Final = "tf2_msgs/LookupTransformActionFeedback"
+LOOKUP_FEEDBACK_MD5: Final = "aae20e09065c3809e8a8e87c4c8953fd"
+"""md5sum of ``tf2_msgs/LookupTransformActionFeedback`` (tf2_msgs 0.7.6)."""
+GOAL_STATUS_ARRAY_TYPE: Final = "actionlib_msgs/GoalStatusArray"
+GOAL_STATUS_ARRAY_MD5: Final = "8b2b82f13216d0a8ea88bd3af735e619"
+"""md5sum of ``actionlib_msgs/GoalStatusArray`` (an action's ``status`` topic)."""
+GOAL_ID_TYPE: Final = "actionlib_msgs/GoalID"
+GOAL_ID_MD5: Final = "302881f31927c1df708a2dbab0e80ee8"
+"""md5sum of ``actionlib_msgs/GoalID`` (an action's ``cancel`` topic)."""
 
 _SEC_MAX: Final = 2**31 - 1  # rosbags serialises ROS 1 time.sec as int32 (2038-01-19)
 _DECODE_ERRORS: Final = (struct.error, UnicodeDecodeError, ValueError, IndexError, OverflowError)
@@ -150,15 +218,33 @@ _layouts: dict[tuple[int, int], tuple[Callable[[bytes], tuple[Any, ...]], tuple[
 layout, and the frame id lengths then child id lengths it assumes."""
 
 
-_compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = TF_FROM_ROS1
-"""The compiled core's ROS 1 TFMessage decoder (objects built in C), where there is one."""
+def _compiled_decoder() -> Callable[[bytes | memoryview], list[TransformStamped]] | None:
+    """The compiled ROS 1 TFMessage decoder (:mod:`tfbus.codecs._cwire`, objects built in C
+    with the compiled core's helpers) when the compiled core is loaded
+    (:data:`tfbus.core.COMPILED`: not with ``TFBUS_PURE_PYTHON``), the host is little
+    endian and the extension is installed; else None (:func:`decode_ros1_struct` decodes).
+    An extension that is installed but fails to import raises, as the core's do."""
+    if not COMPILED or sys.byteorder != "little":
+        return None
+    if importlib.util.find_spec("tfbus.codecs._cwire") is None:
+        return None
+    from tfbus.codecs import _cwire
+
+    decode: Callable[[bytes | memoryview], list[TransformStamped]] = _cwire._tf_from_ros1
+    return decode
+
+
+_compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = (
+    _compiled_decoder()
+)
+"""The compiled ROS 1 TFMessage decoder (objects built in C), where there is one."""
 
 
 def _decode_ros1_compiled_or_struct(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
 
     With the compiled core (on a little-endian host) the transforms are built in C
-    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    (``tfbus.codecs._cwire._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
     :func:`decode_ros1_struct`. Equal values either way (tested).
 
     Raises:
@@ -302,17 +388,35 @@ def _walk_ros1(buf: bytes, n: int) -> list[TransformStamped]:
     return out
 
 
-def decode_ros1(raw: bytes | memoryview) -> list[TransformStamped]:
+def decode_tf(data: bytes | memoryview, *, max_transforms: int = MAX_TRANSFORMS) -> TFMessage:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
 
     With the compiled core (on a little-endian host) the transforms are built in C
-    (``tfbus._ccore._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
+    (``tfbus.codecs._cwire._tf_from_ros1``, ~3x faster at 50 transforms); otherwise by
     :func:`decode_ros1_struct`. Equal values either way (tested). Bytes after the message
     are ignored (a TCPROS frame or bag record holds exactly one message).
 
     Raises:
+        WireDecodeError: the payload is shorter than its contents, a frame id is not
+            UTF-8, or it announces more than ``max_transforms`` transforms (the message
+            says which).
+    """
+    if len(data) >= 4:
+        (count,) = _U32.unpack_from(data, 0)
+        if count > max_transforms:
+            raise WireDecodeError(
+                f"{TF_TYPE} holds {count} transforms (limit {max_transforms})"
+            )
+    return TFMessage(tuple(_decode_transforms(data)))
+
+
+def _decode_transforms(raw: bytes | memoryview) -> list[TransformStamped]:
+    """The transforms of a ROS 1 TFMessage, as a list (what :func:`decode_tf` wraps and
+    the ROS 1 transport delivers in a per-publisher ``TFMessage``).
+
+    Raises:
         WireDecodeError: the payload is shorter than its contents or a frame id is not
-            UTF-8 (the message says which).
+            UTF-8.
     """
     try:
         return _decode_ros1_compiled_or_struct(raw)
@@ -417,7 +521,7 @@ def from_rosbags(msg: Any) -> list[TransformStamped]:
 
 class TFCodec:
     """ROS 1 (de)serialisation of ``tf2_msgs/TFMessage``: rosbags' typestore writes,
-    :func:`decode_ros1` reads (valid because a TCPROS connection's md5sum is checked to be
+    :func:`decode_tf`'s decoder reads (valid because a TCPROS connection's md5sum is checked to be
     :data:`TF_MD5SUM`); :meth:`decode_generic` is rosbags' reader, the reference.
 
     Raises:
@@ -461,14 +565,15 @@ class TFCodec:
             raise WireEncodeError(f"cannot serialise a TFMessage for ROS 1: {exc}") from exc
 
     def decode(self, raw: bytes | memoryview) -> list[TransformStamped]:
-        """Deserialise one ROS 1 ``TFMessage`` (:func:`decode_ros1`): 3-5x faster than
+        """Deserialise one ROS 1 ``TFMessage`` (:func:`decode_tf`'s decoder, the
+        transforms as a list): 3-5x faster than
         rosbags' generic deserialiser (:meth:`decode_generic`, the reference it is tested
         against), which keeps a 50-transform message's latency near roscpp's.
 
         Raises:
             WireDecodeError: the bytes are not a whole ``TFMessage`` (short, bad UTF-8).
         """
-        return decode_ros1(raw)
+        return _decode_transforms(raw)
 
     def decode_generic(self, raw: bytes) -> list[TransformStamped]:
         """Deserialise one ROS 1 ``TFMessage`` with rosbags' generic deserialiser.
@@ -484,15 +589,72 @@ class TFCodec:
             ) from None
 
 
+@functools.cache
+def _tf_codec() -> TFCodec:
+    """The one :class:`TFCodec` of :func:`encode_tf` (rosbags' typestore, built once)."""
+    return TFCodec()
+
+
+def encode_tf(message: TFMessage | Sequence[TransformStamped]) -> bytes:
+    """Serialise a TFMessage (or its transforms) as ROS 1 ``tf2_msgs/TFMessage`` (each
+    header's ``seq`` 0, as tf2_ros writes it), by rosbags' typestore
+    (:meth:`TFCodec.encode`).
+
+    Raises:
+        WireEncodeError: a stamp before 1970 or from 2038-01-19 on, or a field of the
+            wrong type, naming the frame.
+        ImportError: rosbags is not installed (``pip install 'tfbus[ros1]'``).
+    """
+    transforms = message.transforms if isinstance(message, TFMessage) else message
+    return _tf_codec().encode(transforms)
+
+
 # -- sensor_msgs/LaserScan ----------------------------------------------------------------
 
 _SCAN_FLOATS = struct.Struct("<7fI")  # angle_min ... range_max, then len(ranges)
 _F32_LE: Final = "<f4"
 
 
-def decode_laser_scan(
-    raw: bytes | memoryview, *, max_beams: int = MAX_SCAN_BEAMS
-) -> LaserScan:
+def encode_scan(message: LaserScan) -> bytes:
+    """A :class:`~tfbus.sensor_msgs.LaserScan` as ROS 1 serializes ``sensor_msgs/LaserScan``
+    (the layout :func:`decode_scan` reads; ``header.seq`` 0): the arrays as little-endian
+    float32s, bit for bit. Tested equal to rosbags' ``serialize_ros1``.
+
+    Raises:
+        WireEncodeError: ``message`` is not a LaserScan, its stamp is outside ROS 1's time
+            (0 .. 2**32-1 s), its ``frame_id`` is not a ``str``, or a field does not
+            convert to float32 (the message names the field).
+    """
+    if not isinstance(message, LaserScan):
+        raise WireEncodeError(f"{SCAN_TYPE}: expected a LaserScan, got {message!r:.100}")
+    header = message.header
+    sec, nsec = divmod(header.stamp.ns, NSEC_PER_SEC)
+    if not 0 <= sec < 2**32:
+        raise WireEncodeError(f"{SCAN_TYPE}.header.stamp {sec} s is outside ROS 1 time")
+    if not isinstance(header.frame_id, str):
+        raise WireEncodeError(f"{SCAN_TYPE}.header.frame_id must be a str, "
+                              f"got {header.frame_id!r:.100}")
+    frame = header.frame_id.encode()
+    try:
+        arrays = [np.ascontiguousarray(getattr(message, name), dtype=_F32_LE).reshape(-1)
+                  for name in ("ranges", "intensities")]
+        floats = struct.pack("<7f", *(float(getattr(message, name)) for name in _SCAN_FIELDS))
+    except (TypeError, ValueError, OverflowError, struct.error) as exc:
+        raise WireEncodeError(f"{SCAN_TYPE}: a field does not convert to float32: {exc}") from None
+    return b"".join((
+        _ROS1_HEAD.pack(0, sec, nsec, len(frame)), frame, floats,
+        _U32.pack(arrays[0].size), arrays[0].tobytes(),
+        _U32.pack(arrays[1].size), arrays[1].tobytes(),
+    ))
+
+
+_SCAN_FIELDS: Final = (
+    "angle_min", "angle_max", "angle_increment", "time_increment", "scan_time",
+    "range_min", "range_max",
+)  # fmt: skip
+
+
+def decode_scan(data: bytes | memoryview, *, max_beams: int = MAX_SCAN_BEAMS) -> LaserScan:
     """A ROS 1 serialized ``sensor_msgs/LaserScan`` (``LaserScan.msg``: ``Header header``,
     seven ``float32`` -- angles in radians, times in seconds, ranges in metres -- then
     ``float32[] ranges`` and ``float32[] intensities``, each a ``uint32`` count and that
@@ -505,7 +667,7 @@ def decode_laser_scan(
             a stamp out of range, or an array of more than ``max_beams`` beams (checked
             before anything is allocated).
     """
-    buf = bytes(raw)
+    buf = bytes(data)
     try:
         _seq, sec, nsec, flen = _ROS1_HEAD.unpack_from(buf, 0)
         pos = 16 + flen
@@ -583,7 +745,7 @@ def encode_clock(message: Clock) -> bytes:
     return _TIME.pack(sec, nsec)
 
 
-def decode_clock(raw: bytes | memoryview) -> Clock:
+def decode_clock(data: bytes | memoryview) -> Clock:
     """A ROS 1 serialized ``rosgraph_msgs/Clock`` (see :func:`encode_clock`) as a
     :class:`~tfbus.messages.Clock`.
 
@@ -591,9 +753,229 @@ def decode_clock(raw: bytes | memoryview) -> Clock:
         WireDecodeError: not exactly 8 bytes, or ``nsecs`` of a billion or more (the
             ROS 1 time normal form).
     """
-    if len(raw) != _TIME.size:
-        raise WireDecodeError(f"malformed {CLOCK_TYPE}: {len(raw)} bytes, expected 8")
-    sec, nsec = _TIME.unpack(raw)
+    if len(data) != _TIME.size:
+        raise WireDecodeError(f"malformed {CLOCK_TYPE}: {len(data)} bytes, expected 8")
+    sec, nsec = _TIME.unpack(data)
     if nsec >= NSEC_PER_SEC:
         raise WireDecodeError(f"malformed {CLOCK_TYPE}: clock.nsecs {nsec} >= 1e9")
     return Clock(Time.from_ns(sec * NSEC_PER_SEC + nsec))
+
+
+# -- tf2_msgs/LookupTransform over actionlib ----------------------------------------------
+# LookupTransformActionGoal: Header header, actionlib_msgs/GoalID goal_id (time stamp,
+# string id), LookupTransformGoal goal (string target_frame, string source_frame, time
+# source_time, duration timeout, time target_time, string fixed_frame, bool advanced).
+# LookupTransformActionResult: Header header, actionlib_msgs/GoalStatus status (GoalID
+# goal_id, uint8 status, string text), LookupTransformResult result
+# (geometry_msgs/TransformStamped transform, tf2_msgs/TF2Error error: uint8 error,
+# string error_string). tf2_msgs 0.7.6 ``LookupTransform.action``, actionlib_msgs 1.12.
+
+_U8 = struct.Struct("<B")
+_DURATION = struct.Struct("<ii")  # ROS 1 duration: int32 secs, int32 nsecs
+_POSE = struct.Struct("<7d")
+_ACTION_ERRORS: Final = (struct.error, UnicodeDecodeError, ValueError, OverflowError)
+
+
+def _string(text: str) -> bytes:
+    raw = text.encode()
+    return _U32.pack(len(raw)) + raw
+
+
+def _time(t: Time, field: str) -> bytes:
+    sec, nsec = divmod(t.ns, NSEC_PER_SEC)
+    if sec > 0xFFFF_FFFF:
+        raise WireEncodeError(
+            f"{field} {sec}.{nsec:09d} s is past ROS 1 time (uint32 seconds)"
+        )
+    return _TIME.pack(sec, nsec)
+
+
+def _header(stamp: Time, field: str) -> bytes:
+    """A ``std_msgs/Header`` with ``seq`` 0 and no frame id (actionlib's messages)."""
+    return _U32.pack(0) + _time(stamp, field) + _string("")
+
+
+class _Reader:
+    """Reads ROS 1 fields one after the other (struct, strings bounded by the data)."""
+
+    def __init__(self, raw: bytes) -> None:
+        self.raw, self.off = raw, 0
+
+    def take(self, st: struct.Struct) -> tuple[Any, ...]:
+        out = st.unpack_from(self.raw, self.off)
+        self.off += st.size
+        return out
+
+    def string(self) -> str:
+        (n,) = self.take(_U32)
+        if n > len(self.raw) - self.off:
+            raise ValueError(f"a string of {n} bytes runs past the end of the message")
+        text = self.raw[self.off : self.off + n].decode()
+        self.off += n
+        return text
+
+    def time(self) -> Time:
+        sec, nsec = self.take(_TIME)
+        return Time.from_ns(sec * NSEC_PER_SEC + nsec)
+
+    def header(self) -> Header:
+        self.take(_U32)  # seq
+        stamp = self.time()
+        return Header(stamp, self.string())
+
+
+def encode_lookup_goal(message: LookupTransformGoal) -> bytes:
+    """A :class:`~tfbus.messages.LookupTransformGoal` as ROS 1
+    ``tf2_msgs/LookupTransformActionGoal`` (:data:`LOOKUP_GOAL_MD5`): the header (``seq``
+    0) and the ``GoalID`` stamped ``goal_stamp``, ``timeout`` as a ROS 1 duration (whole
+    seconds and nanoseconds).
+
+    Raises:
+        WireEncodeError: a time at or after 2**32 s (past ROS 1 time, uint32 seconds),
+            naming the field, or a timeout that is not a finite number.
+    """
+    g = message
+    if not isinstance(g.timeout, (int, float)) or not math.isfinite(g.timeout):
+        raise WireEncodeError(f"{LOOKUP_GOAL_TYPE}: goal.timeout must be a finite number "
+                              f"of seconds, got {g.timeout!r:.100}")
+    seconds = math.floor(g.timeout)
+    try:
+        duration = _DURATION.pack(seconds, round((g.timeout - seconds) * 1e9))
+    except struct.error:
+        raise WireEncodeError(f"{LOOKUP_GOAL_TYPE}: goal.timeout {g.timeout} s does not "
+                              "fit a ROS 1 duration (int32 seconds)") from None
+    return b"".join((
+        _header(g.goal_stamp, "goal_stamp"),
+        _time(g.goal_stamp, "goal_stamp"), _string(g.goal_id),
+        _string(g.target_frame), _string(g.source_frame),
+        _time(g.source_time, "source_time"), duration,
+        _time(g.target_time, "target_time"), _string(g.fixed_frame),
+        _U8.pack(1 if g.advanced else 0),
+    ))
+
+
+def decode_lookup_goal(data: bytes | memoryview) -> LookupTransformGoal:
+    """A ROS 1 ``tf2_msgs/LookupTransformActionGoal`` as a
+    :class:`~tfbus.messages.LookupTransformGoal` (``goal_stamp`` from the ``GoalID``; a
+    negative timeout read as 0, as tf2_ros's server waits no time then).
+
+    Raises:
+        WireDecodeError: the bytes are not such a message (short, a string past the end,
+            not UTF-8).
+    """
+    try:
+        r = _Reader(bytes(data))
+        r.header()
+        stamp = r.time()
+        goal_id = r.string()
+        target, source = r.string(), r.string()
+        source_time = r.time()
+        sec, nsec = r.take(_DURATION)
+        target_time = r.time()
+        fixed = r.string()
+        (advanced,) = r.take(_U8)
+    except _ACTION_ERRORS as exc:
+        raise WireDecodeError(f"malformed {LOOKUP_GOAL_TYPE}: {exc}") from None
+    return LookupTransformGoal(target, source, source_time, max(0.0, sec + nsec / 1e9),
+                               target_time, fixed, bool(advanced), goal_id, stamp)
+
+
+def _goal_status(goal_id: str, stamp: Time, status: int, text: str) -> bytes:
+    """An ``actionlib_msgs/GoalStatus``."""
+    return _time(stamp, "goal_stamp") + _string(goal_id) + _U8.pack(status) + _string(text)
+
+
+def encode_lookup_result(message: LookupTransformResult) -> bytes:
+    """A :class:`~tfbus.messages.LookupTransformResult` as ROS 1
+    ``tf2_msgs/LookupTransformActionResult`` (:data:`LOOKUP_RESULT_MD5`): the header
+    (``seq`` 0, stamped ``stamp``), the ``GoalStatus`` of the goal answered, the transform
+    (its header's ``seq`` 0) and the ``TF2Error``.
+
+    Raises:
+        WireEncodeError: a stamp at or after 2**32 s (past ROS 1 time), naming the field,
+            or a status or error code outside uint8.
+    """
+    m = message
+    t = m.transform.transform
+    try:
+        codes = _U8.pack(m.status), _U8.pack(m.error)
+    except struct.error:
+        raise WireEncodeError(f"{LOOKUP_RESULT_TYPE}: status {m.status!r} or error "
+                              f"{m.error!r} is not a uint8") from None
+    return b"".join((
+        _header(m.stamp, "stamp"),
+        _time(m.goal_stamp, "goal_stamp"), _string(m.goal_id), codes[0],
+        _string(m.status_text),
+        _U32.pack(0), _time(m.transform.header.stamp, "transform.header.stamp"),
+        _string(m.transform.header.frame_id), _string(m.transform.child_frame_id),
+        _POSE.pack(*t.translation, *t.rotation),
+        codes[1], _string(m.error_string),
+    ))
+
+
+def decode_lookup_result(data: bytes | memoryview) -> LookupTransformResult:
+    """A ROS 1 ``tf2_msgs/LookupTransformActionResult`` as a
+    :class:`~tfbus.messages.LookupTransformResult`.
+
+    Raises:
+        WireDecodeError: the bytes are not such a message.
+    """
+    try:
+        r = _Reader(bytes(data))
+        sent = r.header().stamp
+        goal_stamp = r.time()
+        goal_id = r.string()
+        (status,) = r.take(_U8)
+        text = r.string()
+        header = r.header()
+        child = r.string()
+        x, y, z, qx, qy, qz, qw = r.take(_POSE)
+        (code,) = r.take(_U8)
+        error_string = r.string()
+    except _ACTION_ERRORS as exc:
+        raise WireDecodeError(f"malformed {LOOKUP_RESULT_TYPE}: {exc}") from None
+    ts = TransformStamped(header, child, Transform(Vector3(x, y, z), Quaternion(qx, qy, qz, qw)))
+    return LookupTransformResult(ts, code, error_string, goal_id, goal_stamp, status, text,
+                                 sent)
+
+
+def encode_goal_id(stamp: Time, goal_id: str) -> bytes:
+    """An ``actionlib_msgs/GoalID`` (:data:`GOAL_ID_MD5`; a cancel request: actionlib's
+    client cancels its goal with ``GoalID(stamp=0, id=goal_id)``).
+
+    Raises:
+        WireEncodeError: a stamp at or after 2**32 s.
+    """
+    return _time(stamp, "stamp") + _string(goal_id)
+
+
+def decode_goal_id(data: bytes | memoryview) -> tuple[Time, str]:
+    """``(stamp, id)`` of an ``actionlib_msgs/GoalID`` (a cancel request).
+
+    Raises:
+        WireDecodeError: the bytes are not such a message.
+    """
+    try:
+        r = _Reader(bytes(data))
+        stamp = r.time()
+        goal_id = r.string()
+    except _ACTION_ERRORS as exc:
+        raise WireDecodeError(f"malformed {GOAL_ID_TYPE}: {exc}") from None
+    return stamp, goal_id
+
+
+def encode_goal_status_array(stamp: Time,
+                             statuses: Iterable[tuple[str, Time, int, str]]) -> bytes:
+    """An ``actionlib_msgs/GoalStatusArray`` (:data:`GOAL_STATUS_ARRAY_MD5`) stamped
+    ``stamp``, of ``(goal id, goal stamp, status, text)`` entries (actionlib's
+    ``GoalStatus`` codes: 1 ACTIVE, 3 SUCCEEDED, ...).
+
+    Raises:
+        WireEncodeError: a stamp at or after 2**32 s, or a status outside uint8.
+    """
+    try:
+        parts = [_goal_status(goal_id, goal_stamp, status, text)
+                 for goal_id, goal_stamp, status, text in statuses]
+    except struct.error:
+        raise WireEncodeError(f"{GOAL_STATUS_ARRAY_TYPE}: a status is not a uint8") from None
+    return _header(stamp, "stamp") + _U32.pack(len(parts)) + b"".join(parts)

@@ -13,7 +13,7 @@ One package, one job per module:
   exception messages;
 * :mod:`tfbus.core.cache` -- the per-link storage (``TimeCache``, ``StaticCache``);
 * :mod:`tfbus.core._select` -- the one place that chooses the implementation: compiled
-  (Cython: ``_cmath``, ``_ccache``, ``_ccore``, ``_cwire``, ``_cbatch``) or its pure-Python
+  (Cython: ``_cmath``, ``_ccache``, ``_ccore``, ``_cbatch``) or its pure-Python
   twins (``_pymath``, ``_pycache``, ``_pycore``, ``_pybatch``), same results bit for bit
   (:data:`COMPILED`).
 

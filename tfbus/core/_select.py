@@ -8,7 +8,6 @@ scalar math, rows   :mod:`tfbus.core._cmath`   :mod:`tfbus.core._pymath`
 link storage        :mod:`tfbus.core._ccache`  :mod:`tfbus.core._pycache`
 frame table, walk   :mod:`tfbus.core._ccore`   :mod:`tfbus.core._pycore`
 batch kernel        :mod:`tfbus.core._cbatch`  :mod:`tfbus.core._pybatch`
-ROS 1 wire decoder  :mod:`tfbus.core._cwire`   (``tfbus.bag.decode``'s struct decoder)
 ==================  =========================  =========================
 
 * The compiled core is loaded when it was built (wheels and installs with a C compiler).
@@ -31,10 +30,8 @@ from __future__ import annotations
 import importlib.util
 import logging
 import os
-import sys
-from collections.abc import Callable
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Final
 
 __all__ = [
     "COMPILED",
@@ -51,7 +48,6 @@ __all__ = [
     "OLD_DATA",
     "PURE_FALLBACK_WARNING",
     "REPEATED_DATA",
-    "TF_FROM_ROS1",
     "UNKNOWN_FRAME",
     "CoreBase",
     "Link",
@@ -83,7 +79,7 @@ def pure_python_requested() -> bool:
     return os.environ.get(ENV_PURE_PYTHON, "").strip() not in ("", "0")
 
 
-COMPILED_MODULES: Final = ("_cmath", "_ccache", "_ccore", "_cwire", "_cbatch")
+COMPILED_MODULES: Final = ("_cmath", "_ccache", "_ccore", "_cbatch")
 """The compiled core's extensions (``setup.py`` builds them all or none)."""
 
 
@@ -211,17 +207,3 @@ else:
             globals()[_name] = getattr(_module, _name)
     del _module, _name
 
-
-def _ros1_decoder() -> Callable[[memoryview | bytes], list[Any]] | None:
-    """The compiled ROS 1 ``TFMessage`` decoder (``_cwire._tf_from_ros1``) with the
-    compiled core on a little-endian host, else None (the caller decodes with struct)."""
-    if not COMPILED or sys.byteorder != "little":
-        return None
-    from tfbus.core import _cwire
-
-    decode: Callable[[memoryview | bytes], list[Any]] = _cwire._tf_from_ros1
-    return decode
-
-
-TF_FROM_ROS1: Final = _ros1_decoder()
-"""The compiled ROS 1 ``TFMessage`` decoder, or None (pure core, big-endian host)."""

@@ -1,5 +1,5 @@
-"""The core's kernels for the modules above it: what ``geometry``, ``laser``, the ROS 1
-codec and the command line use of the implementation :mod:`tfbus.core._select` chose
+"""The core's kernels for the modules above it: what ``geometry``, ``laser`` and the command
+line use of the implementation :mod:`tfbus.core._select` chose
 (compiled or pure-Python, the same results bit for bit).
 
 Nothing outside :mod:`tfbus.core` imports ``_select``; it imports these names from here:
@@ -12,8 +12,6 @@ Nothing outside :mod:`tfbus.core` imports ``_select``; it imports these names fr
 * ``apply_transforms``, ``lerp_rows``, ``slerp_rows``: the row kernels of the batched
   paths on ``(N, 7)`` float64 rows (x, y, z, qx, qy, qz, qw; metres) and ``(N, 3)`` points;
 * ``INVALID_ARGUMENT``: the core's error code of tf2's ``InvalidArgumentException``;
-* ``TF_FROM_ROS1``: the compiled ROS 1 ``tf2_msgs/TFMessage`` decoder, or None (the
-  pure-Python core, or a big-endian host: the caller decodes with ``struct``);
 * ``core_description()``: which core runs, for ``--version`` and diagnostics.
 """
 
@@ -21,7 +19,6 @@ from __future__ import annotations
 
 from tfbus.core._select import (
     INVALID_ARGUMENT,
-    TF_FROM_ROS1,
     apply_transforms,
     core_description,
     lerp_rows,
@@ -33,7 +30,6 @@ from tfbus.core._select import (
 
 __all__ = [
     "INVALID_ARGUMENT",
-    "TF_FROM_ROS1",
     "apply_transforms",
     "core_description",
     "lerp_rows",

@@ -20,7 +20,7 @@ What a node needs of ROS 1, and where it comes from (ROS wiki "ROS/Master_API",
   ``message_definition``, ``latching``, ``tcp_nodelay``), then length-prefixed messages.
   Messages are serialised by rosbags' ROS 1 serialiser (``Typestore.serialize_ros1``),
   which also yields the message definition and its md5; received ones are decoded by
-  tfbus's struct decoder (:func:`tfbus.codecs.ros1.decode_ros1`, tested equal to
+  tfbus's struct decoder (:func:`tfbus.codecs.ros1.decode_tf`, tested equal to
   rosbags' ``deserialize_ros1``). On asyncio, frames are split, decoded and delivered in
   the event loop's read callback (an :class:`asyncio.BufferedProtocol`), as roscpp reads
   in its poll thread; on trio, in the connection's task.

@@ -36,18 +36,42 @@ from __future__ import annotations
 
 import logging
 import math
-import struct
 import time as _wallclock
 import weakref
-from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar
 
 import anyio
 import anyio.abc
 
 from tfbus import errors
 from tfbus._aio import coroutine_method
+from tfbus.codecs.ros1 import (
+    GOAL_ID_MD5,
+    GOAL_ID_TYPE,
+    GOAL_STATUS_ARRAY_MD5,
+    GOAL_STATUS_ARRAY_TYPE,
+    LOOKUP_FEEDBACK_MD5,
+    LOOKUP_FEEDBACK_TYPE,
+    LOOKUP_GOAL_MD5,
+    LOOKUP_GOAL_TYPE,
+    LOOKUP_RESULT_MD5,
+    LOOKUP_RESULT_TYPE,
+    decode_goal_id,
+    decode_lookup_goal,
+    decode_lookup_result,
+    encode_goal_id,
+    encode_goal_status_array,
+    encode_lookup_goal,
+    encode_lookup_result,
+)
 from tfbus.errors import TransformException
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Header,
+    LookupTransformGoal,
+    LookupTransformResult,
+    Transform,
+    TransformStamped,
+)
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
 from tfbus.transports._base import ServerStatistics, refuse_fail_fast, transform_remotely
@@ -85,48 +109,19 @@ class RawTopicNode(Protocol):
         ...
 
 __all__ = [
-    "CANCEL_MD5",
-    "CANCEL_TYPE",
     "DEFAULT_ACTION",
-    "GOAL_MD5",
-    "GOAL_TYPE",
     "MAX_GOAL_ID_BYTES",
     "MAX_HELD_GOAL_BYTES",
-    "RESULT_MD5",
-    "RESULT_TYPE",
-    "STATUS_MD5",
-    "STATUS_TYPE",
     "ActionClient",
-    "Goal",
     "LookupActionClient",
     "LookupActionServer",
     "RawTopicNode",
     "action_client",
-    "decode_goal",
-    "decode_goal_id",
-    "decode_result",
-    "decode_result_status",
-    "encode_goal",
-    "encode_goal_id",
-    "encode_result",
     "result_transform",
 ]
 
 DEFAULT_ACTION: Final = "/tf2_buffer_server"
 """tf2_ros's action namespace (the ``buffer_server`` node's name)."""
-GOAL_TYPE: Final = "tf2_msgs/LookupTransformActionGoal"
-GOAL_MD5: Final = "f2e7bcdb75c847978d0351a13e699da5"
-"""md5sum of ``tf2_msgs/LookupTransformActionGoal`` (tf2_msgs 0.7.6; checked against
-Debian's python3-tf2-msgs by the tests)."""
-RESULT_TYPE: Final = "tf2_msgs/LookupTransformActionResult"
-RESULT_MD5: Final = "ac26ce75a41384fa8bb4dc10f491ab90"
-"""md5sum of ``tf2_msgs/LookupTransformActionResult`` (tf2_msgs 0.7.6)."""
-FEEDBACK_TYPE: Final = "tf2_msgs/LookupTransformActionFeedback"
-FEEDBACK_MD5: Final = "aae20e09065c3809e8a8e87c4c8953fd"
-STATUS_TYPE: Final = "actionlib_msgs/GoalStatusArray"
-STATUS_MD5: Final = "8b2b82f13216d0a8ea88bd3af735e619"
-CANCEL_TYPE: Final = "actionlib_msgs/GoalID"
-CANCEL_MD5: Final = "302881f31927c1df708a2dbab0e80ee8"
 # actionlib_msgs/GoalStatus
 _ACTIVE: Final = 1
 _PREEMPTED: Final = 2
@@ -150,199 +145,13 @@ _log = logging.getLogger("tfbus.remote")
 _peer_log = CountLimitedLog(_log, 1, period=5.0, clock=_wallclock.monotonic)
 _Answer = tuple[TransformStamped, int, str, int, str]  # transform, code, message, status, text
 _M = TypeVar("_M")
-_U8 = struct.Struct("<B")
-_U32 = struct.Struct("<I")
-_TIME = struct.Struct("<II")
-_DURATION = struct.Struct("<ii")
-_POSE = struct.Struct("<7d")
-
-
-def _string(text: str) -> bytes:
-    raw = text.encode()
-    return _U32.pack(len(raw)) + raw
-
-
-def _time(t: Time) -> bytes:
-    sec, nsec = divmod(t.ns, 1_000_000_000)
-    if sec > 0xFFFF_FFFF:
-        raise ValueError(f"stamp {sec}.{nsec:09d} s is past ROS 1 time (uint32 seconds)")
-    return _TIME.pack(sec, nsec)
-
-
-class _Reader:
-    def __init__(self, raw: bytes) -> None:
-        self.raw, self.off = raw, 0
-
-    def take(self, st: struct.Struct) -> tuple[Any, ...]:
-        out = st.unpack_from(self.raw, self.off)
-        self.off += st.size
-        return out
-
-    def string(self) -> str:
-        (n,) = self.take(_U32)
-        if n > len(self.raw) - self.off:
-            raise ValueError(f"a string of {n} bytes runs past the end of the message")
-        text = self.raw[self.off : self.off + n].decode()
-        self.off += n
-        return text
-
-    def time(self) -> Time:
-        sec, nsec = self.take(_TIME)
-        return Time.from_ns(sec * 1_000_000_000 + nsec)
-
-    def header(self) -> Header:
-        self.take(_U32)  # seq
-        stamp = self.time()
-        return Header(stamp, self.string())
-
-
-def encode_goal(goal_id: str, seq: int, target: str, source: str, source_time: Time,
-                timeout: float, target_time: Time, fixed: str, advanced: bool) -> bytes:
-    """A ``tf2_msgs/LookupTransformActionGoal`` in ROS 1 serialisation.
-
-    Raises:
-        ValueError: a time at or after 2**32 s, past ROS 1 time (uint32 seconds).
-    """
-    now = Time.from_ns(_wallclock.time_ns())
-    seconds = math.floor(timeout)
-    return b"".join((
-        _U32.pack(seq), _time(now), _string(""),                       # header
-        _time(now), _string(goal_id),                                  # goal_id
-        _string(target), _string(source), _time(source_time),
-        _DURATION.pack(seconds, round((timeout - seconds) * 1e9)),
-        _time(target_time), _string(fixed), _U8.pack(1 if advanced else 0),
-    ))
-
-
-def decode_result(raw: bytes) -> tuple[str, TransformStamped, int, str]:
-    """``(goal id, transform, TF2Error code, error string)`` of a
-    ``tf2_msgs/LookupTransformActionResult``.
-
-    Raises:
-        ValueError: the bytes are not such a message.
-    """
-    return decode_result_status(raw)[:4]
-
-
-class Goal(NamedTuple):
-    """A decoded ``tf2_msgs/LookupTransformActionGoal``."""
-
-    goal_id: str
-    goal_stamp: Time
-    target_frame: str
-    source_frame: str
-    source_time: Time
-    timeout: float
-    target_time: Time
-    fixed_frame: str
-    advanced: bool
-
-
-def decode_goal(raw: bytes) -> Goal:
-    """The fields of a ``tf2_msgs/LookupTransformActionGoal``.
-
-    Raises:
-        ValueError: the bytes are not such a message.
-    """
-    try:
-        r = _Reader(raw)
-        r.header()
-        stamp = r.time()
-        goal_id = r.string()
-        target, source = r.string(), r.string()
-        source_time = r.time()
-        sec, nsec = r.take(_DURATION)
-        target_time = r.time()
-        fixed = r.string()
-        (advanced,) = r.take(_U8)
-    except (struct.error, UnicodeDecodeError, ValueError) as exc:
-        raise ValueError(f"malformed {GOAL_TYPE}: {exc}") from exc
-    return Goal(goal_id, stamp, target, source, source_time, max(0.0, sec + nsec / 1e9),
-                target_time, fixed, bool(advanced))
-
-
-def _goal_status(goal_id: str, stamp: Time, status: int, text: str = "") -> bytes:
-    return _time(stamp) + _string(goal_id) + _U8.pack(status) + _string(text)
-
-
-def decode_goal_id(raw: bytes) -> tuple[Time, str]:
-    """``(stamp, id)`` of an ``actionlib_msgs/GoalID`` (a cancel request).
-
-    Raises:
-        ValueError: the bytes are not such a message.
-    """
-    try:
-        r = _Reader(raw)
-        stamp = r.time()
-        goal_id = r.string()
-    except (struct.error, UnicodeDecodeError, ValueError) as exc:
-        raise ValueError(f"malformed {CANCEL_TYPE}: {exc}") from exc
-    return stamp, goal_id
-
-
-def encode_goal_id(stamp: Time, goal_id: str) -> bytes:
-    """An ``actionlib_msgs/GoalID`` (a cancel request: actionlib's client cancels its goal
-    with ``GoalID(stamp=0, id=goal_id)``).
-
-    Raises:
-        ValueError: a stamp at or after 2**32 s.
-    """
-    return _time(stamp) + _string(goal_id)
-
-
-def decode_result_status(raw: bytes) -> tuple[str, TransformStamped, int, str, int, str]:
-    """``(goal id, transform, TF2Error code, error string, GoalStatus status, status
-    text)`` of a ``tf2_msgs/LookupTransformActionResult``.
-
-    Raises:
-        ValueError: the bytes are not such a message.
-    """
-    try:
-        r = _Reader(raw)
-        r.header()
-        r.time()
-        goal_id = r.string()
-        (status,) = r.take(_U8)
-        text = r.string()
-        header = r.header()
-        child = r.string()
-        x, y, z, qx, qy, qz, qw = r.take(_POSE)
-        (code,) = r.take(_U8)
-        message = r.string()
-    except (struct.error, UnicodeDecodeError, ValueError) as exc:
-        raise ValueError(f"malformed {RESULT_TYPE}: {exc}") from exc
-    ts = TransformStamped(header, child, Transform(Vector3(x, y, z), Quaternion(qx, qy, qz, qw)))
-    return goal_id, ts, code, message, status, text
-
-
-def encode_result(seq: int, goal_id: str, goal_stamp: Time, ts: TransformStamped, code: int,
-                  message: str, status: int = _SUCCEEDED, text: str = "") -> bytes:
-    """A ``tf2_msgs/LookupTransformActionResult``; by default with status SUCCEEDED (as
-    tf2_ros's buffer_server sends every answer, the error in ``TF2Error``); ``status`` and
-    ``text`` are the ``actionlib_msgs/GoalStatus`` of a goal ended otherwise (PREEMPTED 2,
-    REJECTED 5, RECALLED 8).
-
-    Raises:
-        ValueError: ``goal_stamp`` or the transform's stamp is at or after 2**32 s, past
-            ROS 1 time (uint32 seconds).
-    """
-    now = Time.from_ns(_wallclock.time_ns())
-    t = ts.transform
-    return b"".join((
-        _U32.pack(seq), _time(now), _string(""),
-        _goal_status(goal_id, goal_stamp, status, text),
-        _U32.pack(0), _time(ts.header.stamp), _string(ts.header.frame_id),
-        _string(ts.child_frame_id),
-        _POSE.pack(*t.translation, *t.rotation),
-        _U8.pack(code), _string(message),
-    ))
 
 
 def result_transform(ts: TransformStamped, code: int, message: str, status: int,
                      text: str) -> TransformStamped:
     """The transform of a decoded ``LookupTransformActionResult``
-    (:func:`decode_result_status`), or its error raised as tf2_ros's ``BufferClient``
-    does (``buffer_client.py`` ``__process_goal`` / ``__process_result``).
+    (:func:`~tfbus.codecs.ros1.decode_lookup_result`), or its error raised as tf2_ros's
+    ``BufferClient`` does (``buffer_client.py`` ``__process_goal`` / ``__process_result``).
 
     Raises:
         TimeoutException: the goal's status is not SUCCEEDED (REJECTED, PREEMPTED,
@@ -368,7 +177,7 @@ class _Held:
 
     __slots__ = ("cancel_requested", "goal", "scope", "size")
 
-    def __init__(self, goal: Goal, size: int) -> None:
+    def __init__(self, goal: LookupTransformGoal, size: int) -> None:
         self.goal = goal
         self.size = size
         self.scope: anyio.CancelScope | None = None
@@ -426,11 +235,11 @@ def _server_slot(transport: RawTopicNode, topics: dict[str, str]) -> _ServerSlot
     slot = slots.get(topics["goal"])
     if slot is None:
         slot = _ServerSlot()
-        transport.subscribe_raw(topics["goal"], GOAL_TYPE, GOAL_MD5, slot.on_goal)
-        transport.subscribe_raw(topics["cancel"], CANCEL_TYPE, CANCEL_MD5, slot.on_cancel)
-        transport.advertise_raw(topics["result"], RESULT_TYPE, RESULT_MD5)
-        transport.advertise_raw(topics["feedback"], FEEDBACK_TYPE, FEEDBACK_MD5)
-        transport.advertise_raw(topics["status"], STATUS_TYPE, STATUS_MD5)
+        transport.subscribe_raw(topics["goal"], LOOKUP_GOAL_TYPE, LOOKUP_GOAL_MD5, slot.on_goal)
+        transport.subscribe_raw(topics["cancel"], GOAL_ID_TYPE, GOAL_ID_MD5, slot.on_cancel)
+        transport.advertise_raw(topics["result"], LOOKUP_RESULT_TYPE, LOOKUP_RESULT_MD5)
+        transport.advertise_raw(topics["feedback"], LOOKUP_FEEDBACK_TYPE, LOOKUP_FEEDBACK_MD5)
+        transport.advertise_raw(topics["status"], GOAL_STATUS_ARRAY_TYPE, GOAL_STATUS_ARRAY_MD5)
         slots[topics["goal"]] = slot
     return slot
 
@@ -493,7 +302,6 @@ class LookupActionServer:
         self._recall: dict[str, None] = {}  # cancelled by id before they came (bounded)
         self._last_cancel = Time(0)
         self._tg: anyio.abc.TaskGroup | None = None
-        self._seq = 0
         self._stats = ServerStatistics()
 
     def statistics(self) -> ServerStatistics:
@@ -547,15 +355,13 @@ class LookupActionServer:
             await tg.__aexit__(None, None, None)
 
     async def _status(self) -> None:
-        seq = 0
         while True:
-            seq += 1
             now = Time.from_ns(_wallclock.time_ns())
-            self._transport.send_raw_nowait(self._topics["status"], _U32.pack(seq)
-                                            + _time(now) + _string("") + self._status_list())
+            self._transport.send_raw_nowait(self._topics["status"],
+                                            encode_goal_status_array(now, self._status_list()))
             await anyio.sleep(0.2)
 
-    def _status_list(self) -> bytes:
+    def _status_list(self) -> list[tuple[str, Time, int, str]]:
         """The ``status_list`` of a ``GoalStatusArray``: the goals held (ACTIVE), then
         those ended within the last 5 s (the older ones forgotten)."""
         horizon = _wallclock.monotonic() - _STATUS_KEPT
@@ -565,18 +371,18 @@ class LookupActionServer:
             if ended[oldest][3] >= horizon:
                 break
             del ended[oldest]
-        parts = [_goal_status(h.goal.goal_id, h.goal.goal_stamp, _ACTIVE)
+        parts = [(h.goal.goal_id, h.goal.goal_stamp, _ACTIVE, "")
                  for h in self._held.values()]
-        parts += [_goal_status(goal_id, stamp, status, text)
+        parts += [(goal_id, stamp, status, text)
                   for goal_id, (stamp, status, text, _when) in ended.items()]
-        return _U32.pack(len(parts)) + b"".join(parts)
+        return parts
 
     def _on_goal(self, raw: bytes, _callerid: str = "") -> None:
         if self._tg is None:
             return
         self._stats.requests += 1
         try:
-            goal = decode_goal(bytes(raw))
+            goal = decode_lookup_goal(raw)
         except ValueError:
             self._stats.malformed += 1
             return
@@ -616,7 +422,7 @@ class LookupActionServer:
         if self._tg is None:
             return
         try:
-            stamp, goal_id = decode_goal_id(bytes(raw))
+            stamp, goal_id = decode_goal_id(raw)
         except ValueError:
             self._stats.malformed += 1
             return
@@ -638,29 +444,30 @@ class LookupActionServer:
         if stamp > self._last_cancel:
             self._last_cancel = stamp
 
-    def _end(self, goal: Goal, status: int, text: str) -> None:
+    def _end(self, goal: LookupTransformGoal, status: int, text: str) -> None:
         """Send a goal's result with ``status`` (no transform) and list it as ended."""
         self._send_result(goal, TransformStamped(Header(), "", Transform()), 0, "",
                           status, text)
 
-    def _send_result(self, goal: Goal, ts: TransformStamped, code: int, message: str,
-                     status: int = _SUCCEEDED, text: str = "") -> bool:
+    def _send_result(self, goal: LookupTransformGoal, ts: TransformStamped, code: int,
+                     message: str, status: int = _SUCCEEDED, text: str = "") -> bool:
         try:
-            result = encode_result(self._seq + 1, goal.goal_id, goal.goal_stamp, ts, code,
-                                   message, status, text)
+            result = encode_lookup_result(LookupTransformResult(
+                ts, code, message, goal.goal_id, goal.goal_stamp, status, text,
+                Time.from_ns(_wallclock.time_ns())))
         except ValueError as exc:  # a stamp past ROS 1 time
             self._stats.unsendable += 1
             _peer_log.log(logging.WARNING, "ros1: %s: not answering goal %r: %s",
                           self.name, goal.goal_id[:200], exc)
             return False
-        self._seq += 1
         self._ended[goal.goal_id] = (goal.goal_stamp, status, text, _wallclock.monotonic())
         while len(self._ended) > self._max_pending:
             del self._ended[next(iter(self._ended))]
         self._transport.send_raw_nowait(self._topics["result"], result)
         return True
 
-    def _answered(self, goal: Goal, answer: tuple[TransformStamped, int, str]) -> None:
+    def _answered(self, goal: LookupTransformGoal,
+                  answer: tuple[TransformStamped, int, str]) -> None:
         if self._send_result(goal, *answer):
             if answer[1]:
                 self._stats.errors += 1
@@ -690,7 +497,8 @@ class LookupActionServer:
             del self._held[goal.goal_id]
             self._held_bytes -= held.size
 
-    async def _lookup(self, goal: Goal, timeout: float) -> tuple[TransformStamped, int, str]:
+    async def _lookup(self, goal: LookupTransformGoal,
+                      timeout: float) -> tuple[TransformStamped, int, str]:
         """The goal's transform, or its ``TF2Error`` code and message."""
         buffer = self._buffer
         g = goal
@@ -739,10 +547,12 @@ class ActionClient:
         self._transport = transport
         self.goal_topic, self.cancel_topic = f"{base}/goal", f"{base}/cancel"
         self.result_topic, self.status_topic = f"{base}/result", f"{base}/status"
-        transport.advertise_raw(self.goal_topic, GOAL_TYPE, GOAL_MD5)
-        transport.advertise_raw(self.cancel_topic, CANCEL_TYPE, CANCEL_MD5)
-        transport.subscribe_raw(self.result_topic, RESULT_TYPE, RESULT_MD5, self._on_result)
-        transport.subscribe_raw(self.status_topic, STATUS_TYPE, STATUS_MD5, self._on_status)
+        transport.advertise_raw(self.goal_topic, LOOKUP_GOAL_TYPE, LOOKUP_GOAL_MD5)
+        transport.advertise_raw(self.cancel_topic, GOAL_ID_TYPE, GOAL_ID_MD5)
+        transport.subscribe_raw(self.result_topic, LOOKUP_RESULT_TYPE, LOOKUP_RESULT_MD5,
+                                self._on_result)
+        transport.subscribe_raw(self.status_topic, GOAL_STATUS_ARRAY_TYPE,
+                                GOAL_STATUS_ARRAY_MD5, self._on_status)
         self._waiting: dict[str, tuple[anyio.Event, list[_Answer]]] = {}
         self._status = anyio.Event()
         self._seq = 0
@@ -768,13 +578,14 @@ class ActionClient:
 
     def _on_result(self, payload: bytes, _callerid: str) -> None:
         try:
-            goal_id, ts, code, message, status, text = decode_result_status(bytes(payload))
+            result = decode_lookup_result(payload)
         except ValueError:
             self.malformed += 1
             return
-        waiting = self._waiting.get(goal_id)
+        waiting = self._waiting.get(result.goal_id)
         if waiting is not None and not waiting[1]:
-            waiting[1].append((ts, code, message, status, text))
+            waiting[1].append((result.transform, result.error, result.error_string,
+                               result.status, result.status_text))
             waiting[0].set()
 
     async def lookup(self, target: str, source: str, source_time: Time, timeout: float,
@@ -793,9 +604,9 @@ class ActionClient:
             ValueError: a time at or after 2**32 s (past ROS 1 time).
             the server's tf2 error, as :func:`result_transform`.
         """
-        goal = encode_goal("", 0, target, source, source_time, timeout, target_time,
-                           fixed, advanced)  # checks the times before anything is sent
-        del goal
+        goal = LookupTransformGoal(target, source, source_time, timeout, target_time, fixed,
+                                   advanced)
+        encode_lookup_goal(goal)  # checks the times before anything is sent
         self._seq += 1
         now = _wallclock.time_ns()
         # actionlib's GoalIDGenerator: "<caller id>-<count>-<secs>.<nsecs>"
@@ -808,9 +619,9 @@ class ActionClient:
         try:
             with anyio.move_on_after(timeout + padding):
                 await self.wait_ready()
-                self._transport.send_raw_nowait(self.goal_topic, encode_goal(
-                    goal_id, self._seq, target, source, source_time, timeout, target_time,
-                    fixed, advanced))
+                self._transport.send_raw_nowait(self.goal_topic, encode_lookup_goal(
+                    goal._replace(goal_id=goal_id,
+                                  goal_stamp=Time.from_ns(_wallclock.time_ns()))))
                 sent = True
                 await done.wait()
         finally:

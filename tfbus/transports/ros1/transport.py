@@ -33,7 +33,7 @@ from tfbus.codecs.ros1 import (
     TF_TYPE,
     TFCodec,
     decode_clock,
-    decode_laser_scan,
+    decode_scan,
     scan_definition,
 )
 from tfbus.errors import TransportError
@@ -212,7 +212,7 @@ class _Inbound:
             if self._raw is not None:  # a raw topic: its handler decodes (and counts)
                 self._raw(bytes(raw), self.callerid)
             elif self._scan:  # WireDecodeError: counted in malformed
-                self._deliver(self.topic, decode_laser_scan(raw))
+                self._deliver(self.topic, decode_scan(raw))
             elif self._clock:  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, decode_clock(raw))
             else:
@@ -258,7 +258,7 @@ class Ros1Transport:
         topics: the topics carried (default ``/tf`` and ``/tf_static``).
         scan_topics: ``sensor_msgs/LaserScan`` topics to subscribe to (e.g. ``/scan``):
             each message is delivered to the bus as a
-            :class:`~tfbus.sensor_msgs.LaserScan` (:func:`~tfbus.codecs.ros1.decode_laser_scan`;
+            :class:`~tfbus.sensor_msgs.LaserScan` (:func:`~tfbus.codecs.ros1.decode_scan`;
             a malformed one closes its connection and is counted in ``malformed``).
             Receive only: a LaserScan published on the bus is not sent to ROS 1.
         clock_topic: a ``rosgraph_msgs/Clock`` topic to subscribe to (``"/clock"`` for

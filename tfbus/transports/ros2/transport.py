@@ -99,7 +99,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from tfbus.codecs.cdr import decode_clock, decode_tf_message, encode_clock, encode_tf_message
+from tfbus.codecs.cdr import decode_clock, decode_tf, encode_clock, encode_tf
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -486,7 +486,7 @@ class Ros2Transport:
             self._endpoints = endpoints
             self._running = True
             if self._statics:
-                self._write(TF_STATIC_TOPIC, encode_tf_message(tuple(self._statics.values())))
+                self._write(TF_STATIC_TOPIC, encode_tf(tuple(self._statics.values())))
             task_status.started()
             await self._pump(bus, wakeup, endpoints)
         finally:
@@ -538,14 +538,14 @@ class Ros2Transport:
         try:
             transforms = tuple(message.transforms)
             if topic == TF_STATIC_TOPIC:
-                encode_tf_message(transforms)  # validate before merging
+                encode_tf(transforms)  # validate before merging
                 merged = dict(self._statics)
                 for ts in transforms:
                     merged[ts.child_frame_id] = ts
-                payload = encode_tf_message(tuple(merged.values()))
+                payload = encode_tf(tuple(merged.values()))
                 self._statics = merged
             else:
-                payload = encode_tf_message(transforms)
+                payload = encode_tf(transforms)
         except (WireEncodeError, TypeError, AttributeError) as exc:
             self._stats.send_errors += 1
             if isinstance(exc, WireEncodeError):
@@ -648,7 +648,7 @@ class Ros2Transport:
                 if clock:
                     out.append(decode_clock(data))
                 else:
-                    out.append(decode_tf_message(data, max_transforms=self._max_transforms))
+                    out.append(decode_tf(data, max_transforms=self._max_transforms))
             except WireDecodeError:
                 stats.malformed += 1
         if out:

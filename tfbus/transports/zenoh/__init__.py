@@ -23,6 +23,8 @@ One module per concern (anyio's ``_core`` style; the public names are re-exporte
 * :mod:`~tfbus.transports.zenoh.transport` -- :class:`ZenohTransport` (threads, receive
   path, late joiners, matching status);
 * :mod:`~tfbus.transports.zenoh.counters` -- :class:`ZenohStatistics`;
+* :mod:`~tfbus.transports.zenoh.sequence` -- the per-publisher sequence numbers a session
+  received (``SequenceTracker``: messages lost, resets, late-joiner replies);
 * :mod:`~tfbus.transports.zenoh.lookups` -- lookups served to thin clients on a
   queryable (its ``BufferServer`` / ``BufferClient``; :meth:`ZenohTransport.serve_lookups`
   and :meth:`ZenohTransport.lookup_client`, the ``LookupServing`` capability behind

@@ -31,7 +31,7 @@ class ZenohStatistics(TransportStatistics):
             late-joiner reply holding nothing the live stream had not delivered, or a
             live payload that a delivered reply already held (a node that starts
             publishing a latched topic is queried while its first message is on the
-            way; :meth:`~tfbus.codecs.native.SequenceTracker.reply_is_news`).
+            way; :meth:`~tfbus.transports.zenoh.sequence.SequenceTracker.reply_is_news`).
         malformed: payloads dropped because they were not well-formed tfbus messages
             (any decode failure: bad bytes, shape, nesting, stamps, ids).
         wrong_version: payloads dropped because of another wire format version.
@@ -39,7 +39,7 @@ class ZenohStatistics(TransportStatistics):
             :class:`~tfbus.codecs.native.WireLimits` (sizes, counts, nesting).
         overflow: entries dropped (oldest first) because the inbound queue was full.
         lost: gaps in publishers' sequence numbers (messages the network dropped);
-            only plausible gaps count (:class:`~tfbus.codecs.native.SequenceTracker`).
+            only plausible gaps count (:class:`~tfbus.transports.zenoh.sequence.SequenceTracker`).
         resets: implausible jumps of a publisher's sequence numbers (forged, corrupted
             or a restarted stream): reported here, never counted in ``lost``.
         batches: event-loop wake-ups that delivered queued entries.

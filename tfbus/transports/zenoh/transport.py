@@ -50,7 +50,6 @@ import anyio.abc
 import zenoh
 
 from tfbus.codecs.native import (
-    SequenceTracker,
     WireCodec,
     WireEncodeError,
     WireLimits,
@@ -72,6 +71,7 @@ from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.fleet_keys import key_space
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
+from tfbus.transports.zenoh.sequence import SequenceTracker
 
 if TYPE_CHECKING:
     from tfbus.transports.zenoh.lookups import BufferClient, BufferServer

@@ -2,7 +2,10 @@
 # cython: initializedcheck=False, embedsignature=True
 """ROS 1 wire, compiled: ``_tf_from_ros1`` turns a ROS 1 serialised ``TFMessage`` into
 TransformStamped values, built in C like the lookups' results (the fast path of
-``tfbus.bag.decode.decode_ros1``; the pure-Python decoder there is its twin)."""
+:func:`tfbus.codecs.ros1.decode_tf`; the pure-Python twin is
+:func:`tfbus.codecs.ros1.decode_ros1_struct`). It uses the compiled core's C helpers
+(``tfbus/core/_ccore.pxd``, ``_cresults.pxd``), so it is built with the compiled core and
+loaded only with it (:mod:`tfbus.codecs.ros1` chooses)."""
 
 from cpython.float cimport PyFloat_FromDouble
 from cpython.object cimport PyObject
@@ -196,7 +199,7 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     """The transforms of a ROS 1 serialised ``tf2_msgs/TFMessage`` (``u32 count``, then
     per transform ``u32 seq, u32 sec, u32 nsec, u32 len, frame_id, u32 len,
     child_frame_id, 7 float64``, little endian), built in C: what
-    ``tfbus.bag.decode.decode_ros1``'s struct decoder returns, equal values (frame ids
+    ``tfbus.codecs.ros1.decode_ros1_struct`` returns, equal values (frame ids
     decoded as strict UTF-8; a transform whose serialised header is byte for byte the
     previous one's shares its Header; an ASCII frame id equal to the one at the same
     position of an earlier message is that message's str, not a new one, and a transform

@@ -1,4 +1,4 @@
-"""Type stubs for the compiled ROS 1 wire decoder (``tfbus/core/_cwire.pyx``)."""
+"""Type stubs for the compiled ROS 1 wire decoder (``tfbus/codecs/_cwire.pyx``)."""
 
 from tfbus.messages import TransformStamped
 
