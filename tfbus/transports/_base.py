@@ -29,6 +29,7 @@ A new transport copies the template of ``docs/architecture.md`` ("Adding a trans
 from __future__ import annotations
 
 import contextlib
+import math
 import socket
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -47,6 +48,7 @@ import anyio
 import anyio.lowlevel
 
 from tfbus._aio import running_asyncio_loop
+from tfbus.time import Duration
 from tfbus.topics import PEERS_TOPIC, TF_TOPICS
 
 if TYPE_CHECKING:
@@ -54,7 +56,7 @@ if TYPE_CHECKING:
 
     from tfbus.buffer import Buffer
     from tfbus.messages import TransformStamped
-    from tfbus.time import Duration, Time
+    from tfbus.time import Time
 
 __all__ = [
     "DEFAULT_MAX_WAIT",
@@ -281,6 +283,37 @@ class LookupClient(Protocol):
                         fail_fast: bool = False) -> _M:
         """tf2_ros ``BufferClient.transform``."""
         ...
+
+
+def action_client_limits(timeout_padding: float, max_wait: float) -> tuple[float, float]:
+    """``(timeout_padding, max_wait)`` of a LookupTransform action client (ROS 1 and
+    ROS 2) as floats: wall seconds added to each goal's timeout for the round trip, and
+    the goal timeout sent for a timeout of None.
+
+    Raises:
+        ValueError: ``timeout_padding`` is negative or not finite, or ``max_wait`` is not
+            positive finite.
+    """
+    if not 0.0 <= timeout_padding < math.inf or not 0.0 < max_wait < math.inf:
+        raise ValueError(f"timeout_padding must be finite seconds >= 0 and max_wait "
+                         f"positive finite seconds, got {timeout_padding!r}, {max_wait!r}")
+    return float(timeout_padding), float(max_wait)
+
+
+def goal_timeout(timeout: float | Duration | None, max_wait: float) -> float:
+    """The seconds a LookupTransform goal carries for a client's ``timeout`` (``None``:
+    ``max_wait``; tf2_msgs' ``timeout`` is a finite duration).
+
+    Raises:
+        ValueError: ``timeout`` is negative, not finite, or not seconds nor a Duration.
+    """
+    if timeout is None:
+        return max_wait
+    seconds = timeout.to_sec() if isinstance(timeout, Duration) else timeout
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) \
+            or not 0 <= seconds < math.inf:
+        raise ValueError(f"timeout must be finite seconds >= 0 or None, got {timeout!r}")
+    return float(seconds)
 
 
 def refuse_fail_fast(fail_fast: bool, middleware: str) -> None:

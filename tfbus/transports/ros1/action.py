@@ -74,7 +74,13 @@ from tfbus.messages import (
 )
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
-from tfbus.transports._base import ServerStatistics, refuse_fail_fast, transform_remotely
+from tfbus.transports._base import (
+    ServerStatistics,
+    action_client_limits,
+    goal_timeout,
+    refuse_fail_fast,
+    transform_remotely,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -683,14 +689,10 @@ class LookupActionClient:
 
     def __init__(self, transport: RawTopicNode, *, name: str = DEFAULT_ACTION,
                  timeout_padding: float = 2.0, max_wait: float = 3600.0) -> None:
-        if not 0.0 <= timeout_padding < math.inf or not 0.0 < max_wait < math.inf:
-            raise ValueError(f"timeout_padding must be finite seconds >= 0 and max_wait "
-                             f"positive finite seconds, got {timeout_padding!r}, {max_wait!r}")
+        self._padding, self._max_wait = action_client_limits(timeout_padding, max_wait)
         self._transport = transport
         self.name = _action_ns(name)
         """The action's namespace."""
-        self._padding = float(timeout_padding)
-        self._max_wait = float(max_wait)
 
     @property
     def client(self) -> ActionClient:
@@ -698,13 +700,7 @@ class LookupActionClient:
         return action_client(self._transport, self.name)
 
     def _seconds(self, timeout: float | Duration | None) -> float:
-        if timeout is None:
-            return self._max_wait
-        seconds = timeout.to_sec() if isinstance(timeout, Duration) else timeout
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) \
-                or not 0 <= seconds < math.inf:
-            raise ValueError(f"timeout must be finite seconds >= 0 or None, got {timeout!r}")
-        return float(seconds)
+        return goal_timeout(timeout, self._max_wait)
 
     @coroutine_method
     async def lookup_transform(self, target_frame: str, source_frame: str, time: Time,

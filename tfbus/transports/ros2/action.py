@@ -97,6 +97,8 @@ from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
     ServerStatistics,
     ThreadWakeup,
+    action_client_limits,
+    goal_timeout,
     refuse_fail_fast,
     transform_remotely,
 )
@@ -866,14 +868,10 @@ class LookupActionClient:
 
     def __init__(self, transport: ActionParticipant, *, name: str = DEFAULT_ACTION,
                  timeout_padding: float = 2.0, max_wait: float = 3600.0) -> None:
-        if not 0.0 <= timeout_padding < math.inf or not 0.0 < max_wait < math.inf:
-            raise ValueError(f"timeout_padding must be finite seconds >= 0 and max_wait "
-                             f"positive finite seconds, got {timeout_padding!r}, {max_wait!r}")
+        self._padding, self._max_wait = action_client_limits(timeout_padding, max_wait)
         self._transport = transport
         self.name = _action_name(name)
         """The action's name."""
-        self._padding = float(timeout_padding)
-        self._max_wait = float(max_wait)
 
     @property
     def malformed(self) -> int:
@@ -882,13 +880,7 @@ class LookupActionClient:
         return endpoints.malformed if endpoints is not None else 0
 
     def _seconds(self, timeout: float | Duration | None) -> float:
-        if timeout is None:
-            return self._max_wait
-        seconds = timeout.to_sec() if isinstance(timeout, Duration) else timeout
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) \
-                or not 0 <= seconds < math.inf:
-            raise ValueError(f"timeout must be finite seconds >= 0 or None, got {timeout!r}")
-        return float(seconds)
+        return goal_timeout(timeout, self._max_wait)
 
     async def _lookup(self, goal: LookupGoal) -> TransformStamped:
         encode_send_goal_request(RequestId(0, 0), goal)  # checks the goal before anything
