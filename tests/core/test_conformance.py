@@ -76,6 +76,7 @@ def test_intended_deviation_inventory() -> None:
 def test_a_green_run_ends_quietly() -> None:
     """The intended deviation is one summary line at the end of a green
     run (it was one DeviationReport warning per case, ~70 lines); ``-v`` lists its ops."""
+    import os
     import subprocess
     import sys
     from pathlib import Path
@@ -87,6 +88,8 @@ def test_a_green_run_ends_quietly() -> None:
             [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", *flags, str(here),
              "-k", "level1 and set_validation"],
             cwd=here.parents[2], capture_output=True, text=True, timeout=300, check=False,
+            # the run's own options only: PYTEST_ADDOPTS (e.g. --durations) would add lines
+            env={k: v for k, v in os.environ.items() if k != "PYTEST_ADDOPTS"},
         )
         assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
         return done.stdout.splitlines()

@@ -698,6 +698,7 @@ def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path)
     cases of each level must be among them."""
     report = tmp_path / "pure.xml"
     env = dict(os.environ, TFBUS_PURE_PYTHON="1")
+    env.pop("PYTEST_ADDOPTS", None)  # the run's own options only (its output is read)
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
          f"--junitxml={report}", *PURE_SUITE],
