@@ -689,6 +689,12 @@ PURE_SUITE = [
     "tests/core/test_batch_lookup.py",
     "tests/geometry/test_geometry.py",
 ]
+COMPILED_ONLY = [
+    "tests/core/test_core.py::test_a_dropped_lookup_result_is_recycled_and_a_kept_one_never_changes",
+    "tests/core/test_batch_lookup.py::test_a_split_that_loses_to_one_thread_backs_off_to_one_thread",
+]
+"""Tests of what only the compiled core has (result recycling, the two-thread split): left
+out of the pure run rather than skipped there (under CI a skip not listed fails the run)."""
 
 
 def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path) -> None:
@@ -701,7 +707,8 @@ def test_core_suite_and_conformance_corpus_pass_on_the_pure_core(tmp_path: Path)
     env.pop("PYTEST_ADDOPTS", None)  # the run's own options only (its output is read)
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
-         f"--junitxml={report}", *PURE_SUITE],
+         f"--junitxml={report}", *PURE_SUITE,
+         *(arg for test in COMPILED_ONLY for arg in ("--deselect", test))],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=1800,
     )  # fmt: skip
     tail = "\n".join(done.stdout.splitlines()[-30:])
