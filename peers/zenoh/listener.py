@@ -31,7 +31,11 @@ async def _print_tf(sub: Any, tag: str) -> None:
                 print("STATIC", ts.child_frame_id, flush=True)
 
 
-async def _print_peers(sub: Any) -> None:
+async def _print_peers(sub: Any, transport: ZenohTransport) -> None:
+    # The nodes already alive first: their liveliness may have been delivered before this
+    # subscription existed (the transport's history query runs as the bus starts).
+    for info in transport.alive().values():
+        print("PEER", 1, info.name, "-", flush=True)
     async for ev in sub:
         assert isinstance(ev, PeerEvent)
         print("PEER", int(ev.alive), ev.name, ev.topic or "-", flush=True)
@@ -52,7 +56,7 @@ async def main(args: argparse.Namespace) -> None:
             async with anyio.create_task_group() as tg:
                 tg.start_soon(_print_tf, bus.subscribe("/tf", queue_size=10_000), "TF")
                 tg.start_soon(_print_tf, bus.subscribe("/tf_static"), "STATIC")
-                tg.start_soon(_print_peers, bus.subscribe(PEERS_TOPIC))
+                tg.start_soon(_print_peers, bus.subscribe(PEERS_TOPIC), transport)
                 if args.lookup:
                     tg.start_soon(_lookup, buffer, args.lookup)
                 print("READY", transport.node_id, flush=True)

@@ -522,7 +522,8 @@ async def test_late_joiner_gets_the_valid_static_after_a_nan_resend() -> None:
         a.publish_nowait("/tf_static", TFMessage((nan,)))
         tb = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="B")
         async with Bus(transport=tb) as b:
-            await wait_until(lambda: tb.statistics().latched_replies >= 1)
+            # a late joiner's session start and its query to A take seconds at load 8
+            await wait_until(lambda: tb.statistics().latched_replies >= 1, timeout=15.0)
             assert b.latched_statics() == TFMessage((good,))
 
 

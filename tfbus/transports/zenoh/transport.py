@@ -39,6 +39,7 @@ import contextlib
 import json
 import logging
 import math
+import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Sequence
@@ -96,6 +97,11 @@ _REPLY: Final = 1
 _ALIVE_PUT: Final = 2
 _ALIVE_DEL: Final = 3
 _MATCHING: Final = 4
+_REQUERY: Final = 5
+LATCH_QUERY_RETRIES: Final = 3
+"""Times a late-joiner query that got no reply at all is asked again (after 0.1, 0.2 and
+0.4 s): a node's liveliness token can reach a peer before the route to its latch
+queryable does, and such a query ends with nothing."""
 _CONGESTION: Final = ("drop", "block")
 
 
@@ -712,6 +718,10 @@ class ZenohTransport:
                 message = self._receive(kind, topic, payload, bus)
                 if message is None or topic is None:
                     continue
+            elif kind == _REQUERY:
+                if self._running and key in self._peers.alive():
+                    self._query_latched(key, payload[0])
+                continue
             elif kind == _MATCHING:
                 changed = self._matching_changed
                 self._matching_changed = None
@@ -783,14 +793,31 @@ class ZenohTransport:
             bus.deliver_many_nowait(topic, run)
         self._stats.delivered += len(run)
 
-    def _query_latched(self, node_id: str) -> None:
+    def _query_latched(self, node_id: str, attempt: int = 0) -> None:
+        """Ask ``node_id``'s latch queryable for its latched messages (a late joiner's
+        query); a query that ends with no reply at all is asked again, at most
+        :data:`LATCH_QUERY_RETRIES` times, while the node is alive."""
         session = self._session
         if session is None:
             return
+        replies = [0]
+
+        def on_reply(reply: zenoh.Reply) -> None:  # a Zenoh thread
+            replies[0] += 1
+            self._on_reply(reply)
+
+        def on_done() -> None:  # a Zenoh thread, once the query has ended
+            if replies[0] == 0 and attempt < LATCH_QUERY_RETRIES:
+                timer = threading.Timer(
+                    0.1 * 2**attempt, self._push, ((_REQUERY, node_id, bytes((attempt + 1,))),)
+                )
+                timer.daemon = True
+                timer.start()
+
         try:
             session.get(
                 self._keys.latch(node_id),
-                self._on_reply,
+                zenoh.handlers.Callback(on_reply, on_done),
                 target=zenoh.QueryTarget.ALL,
                 timeout=5.0,
             )
