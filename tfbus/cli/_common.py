@@ -176,6 +176,10 @@ class _Group(click.Group):
                 raise
             click.echo(f"tfbus: error: {one_line(advice)}", err=True)
             rv = MISSING_EXTRA_STATUS
+        except BaseException as err:
+            if not interrupted(err):
+                raise
+            rv = 130  # Ctrl-C raised inside a task group: grouped
         if standalone_mode:
             sys.exit(rv if isinstance(rv, int) else 0)
         return rv
@@ -230,9 +234,22 @@ def run_main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except BaseException as err:
+        if not interrupted(err):
+            raise
+        return 130  # Ctrl-C raised inside a task group: grouped
     finally:
         signal.signal(signal.SIGTERM, previous)
     return rv if isinstance(rv, int) else 0
+
+
+def interrupted(err: BaseException) -> bool:
+    """Whether ``err`` is Ctrl-C: a ``KeyboardInterrupt``, or an exception group (trio
+    and anyio task groups wrap what a task raised) holding nothing else."""
+    if isinstance(err, KeyboardInterrupt):
+        return True
+    inner = getattr(err, "exceptions", None)
+    return isinstance(inner, tuple) and bool(inner) and all(interrupted(e) for e in inner)
 
 
 class SafeLogFormatter(logging.Formatter):

@@ -9,7 +9,7 @@ import signal
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
-from tfbus.cli._common import error
+from tfbus.cli._common import error, interrupted
 
 if TYPE_CHECKING:
     import anyio
@@ -54,6 +54,10 @@ def run_live(main: Callable[[], Awaitable[None]], *, backend: str = "asyncio") -
             raise
         error(f"cannot open the bus: {found}")
         return 1
+    except BaseException as err:  # Ctrl-C raised inside a task group comes grouped
+        if not interrupted(err):
+            raise
+        return 130
     return None
 
 

@@ -12,7 +12,15 @@ from typing import Any, TypeVar
 import click
 
 from tfbus.cli._bus_spec import check_bus_spec
-from tfbus.cli._common import error, fail, hertz, literal, seconds, use_sim_time_option
+from tfbus.cli._common import (
+    error,
+    fail,
+    hertz,
+    interrupted,
+    literal,
+    seconds,
+    use_sim_time_option,
+)
 from tfbus.cli._live_session import cancel_on_signal, is_bus_error, run_live
 from tfbus.transports.spec import BUS_HELP
 
@@ -72,8 +80,10 @@ def run_both(*, duration: float | None, rate: float, listen_rate: float, backend
                              handle_signals=True, out=_print_line),
             backend=backend,
         )
-    except KeyboardInterrupt:
-        return 130
+    except BaseException as err:
+        if not interrupted(err):
+            raise
+        return 130  # Ctrl-C, maybe grouped by a task group
     return 0
 
 
@@ -244,8 +254,10 @@ def run_laser(*, duration: float | None, backend: str, beams: int, scan_rate: fl
 
     try:
         anyio.run(main, backend=backend)
-    except KeyboardInterrupt:
-        return 130
+    except BaseException as err:
+        if not interrupted(err):
+            raise
+        return 130  # Ctrl-C, maybe grouped by a task group
     return 0
 
 
