@@ -234,10 +234,6 @@ def run_main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
-    except BaseException as err:
-        if not interrupted(err):
-            raise
-        return 130  # Ctrl-C raised inside a task group: grouped
     finally:
         signal.signal(signal.SIGTERM, previous)
     return rv if isinstance(rv, int) else 0
