@@ -364,3 +364,17 @@ register_scheme(
         clock_topic=True,
     )
 )
+register_scheme(
+    TransportScheme(
+        "rmw_zenoh",
+        "tfbus.transports.rmw_zenoh.options",
+        keys=frozenset({"connect", "listen", "mode", "domain", "namespace", "name",
+                        "attachment", "connect_timeout"}),
+        default_key="connect",
+        extra="zenoh",
+        requires=("zenoh",),
+        summary="ROS 2 on rmw_zenoh: /tf and /tf_static through a Zenoh router (spec-tested)",
+        peer_aware=True,
+        fleet_option="namespace",
+    )
+)
