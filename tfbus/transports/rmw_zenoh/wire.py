@@ -2,8 +2,9 @@
 attachment, liveliness tokens and their QoS strings.
 
 Every rule here is taken from ros2/rmw_zenoh's source (``rmw_zenoh_cpp/src/detail/``) and
-``docs/design.md``; ``tests/transports/test_rmw_zenoh_wire.py`` holds the golden vectors
-worked out from it, each with the file and line it comes from.
+its design notes (``design.md`` in its docs folder);
+``tests/transports/test_rmw_zenoh_wire.py`` holds the golden vectors worked out from it,
+each with the file and line it comes from.
 
 * **Data key** (``liveliness_utils.cpp``, ``TopicInfo::TopicInfo``):
   ``<domain_id>/<topic name without its leading and trailing slash>/<DDS type
