@@ -14,7 +14,10 @@ off everywhere. Every wait is bounded.
 from __future__ import annotations
 
 import json
+import os
 import socket
+import subprocess
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -341,3 +344,34 @@ async def test_messages_off_the_wire_are_counted() -> None:
     assert (stats.not_connected, stats.not_mapped, stats.send_errors, stats.sent) == (1, 1, 2, 0)
     async with ZenohRouter(listen=endpoint), Bus(transport=t):
         assert t.statistics().sent == 1
+
+
+async def test_cli_static_transform_over_rmw_zenoh() -> None:
+    """``tfbus static-transform --bus rmw_zenoh:...`` (a child process) is heard by a
+    listener that starts after it; the child is ended by its PID."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    async with ZenohRouter(listen=endpoint):
+        child = subprocess.Popen(
+            [sys.executable, "-m", "tfbus.cli", "static-transform", "1.5", "-2", "0.25",
+             "0", "0", "0", "base_link", "laser", "--bus", f"rmw_zenoh:{endpoint}"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        try:
+            assert child.stdout is not None
+            line = await anyio.to_thread.run_sync(child.stdout.readline)
+            assert line.startswith("publishing static transform base_link -> laser"), line
+            t = transport(endpoint, "cli_listener")
+            async with Bus(transport=t) as bus, bus.subscribe("/tf_static") as sub:
+                with anyio.fail_after(20):
+                    got = await sub.receive()
+            (only,) = got.transforms
+            assert (only.header.frame_id, only.child_frame_id) == ("base_link", "laser")
+            assert only.transform.translation == Vector3(1.5, -2.0, 0.25)
+        finally:
+            child.terminate()
+            try:
+                await anyio.to_thread.run_sync(lambda: child.wait(20))
+            except subprocess.TimeoutExpired:
+                child.kill()
+                await anyio.to_thread.run_sync(child.wait)

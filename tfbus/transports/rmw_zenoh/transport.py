@@ -550,6 +550,7 @@ class RmwZenohTransport:
         deadline = (None if self._connect_timeout is None
                     else anyio.current_time() + self._connect_timeout)
         delay = _RETRY_FIRST
+        quiet_until = anyio.current_time() + _RETRY_FIRST  # a router racing us: no line
         while True:
             try:
                 return await anyio.to_thread.run_sync(self._open_session)
@@ -561,7 +562,8 @@ class RmwZenohTransport:
                     raise TransportError(
                         f"no Zenoh router answered within {self._connect_timeout:g} s "
                         f"(connect_timeout): {err}") from err.__cause__
-                self._log.log(logging.WARNING, "waiting for a Zenoh router (%s)", err)
+                if now >= quiet_until:
+                    self._log.log(logging.WARNING, "waiting for a Zenoh router (%s)", err)
                 await anyio.sleep(delay if deadline is None else min(delay, deadline - now))
                 delay = min(delay * 2, _RETRY_MAX)
 
