@@ -209,6 +209,8 @@ def test_tokens_parse_back() -> None:
     f"@ros2_lv/0/aa/0/1/MP/%/%/n/%tf/{TYPE}/{HASH}/::,:,:,:,,/x",
     "@ros2_lv/0/a*/0/0/NN/%/%/n",                               # wild chunk
     "@ros2_lv/99999999999/aa/0/0/NN/%/%/n",                     # absurd domain
+    "@ros2_lv/\u00b2/aa/0/0/NN/%/%/n",                          # a digit int() refuses
+    "@ros2_lv/0/aa/\u0663/0/NN/%/%/n",                          # an Arabic-Indic digit
 ])
 def test_hostile_tokens_are_refused(key: str) -> None:
     with pytest.raises(WireDecodeError):

@@ -34,6 +34,7 @@ each with the file and line it comes from.
 
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import dataclass
 from typing import Final
@@ -93,6 +94,7 @@ _LABELS: Final = (b"sequence_number", b"source_timestamp", b"source_gid")
 _INT64_MIN: Final = -(2**63)
 _INT64_MAX: Final = 2**63 - 1
 _TOKEN_FORBIDDEN: Final = frozenset("*$?#")
+_DECIMAL: Final = re.compile(r"[0-9]+")  # ASCII digits only (str.isdigit takes "²")
 
 
 # -- QoS --------------------------------------------------------------------------------
@@ -324,9 +326,9 @@ def parse_token(key: str) -> EndpointToken:
     kind = parts[5]
     if kind not in ("NN", "MP", "MS", "SS", "SC"):
         raise WireDecodeError(f"liveliness token of unknown entity kind {kind[:20]!r}")
-    if not parts[1].isdigit() or len(parts[1]) > 10:
+    if not _DECIMAL.fullmatch(parts[1]) or len(parts[1]) > 10:
         raise WireDecodeError(f"liveliness token with a bad domain id {parts[1][:20]!r}")
-    if not parts[3].isdigit() or not parts[4].isdigit():
+    if not _DECIMAL.fullmatch(parts[3]) or not _DECIMAL.fullmatch(parts[4]):
         raise WireDecodeError("liveliness token with a non-numeric node or entity id")
     base = EndpointToken(int(parts[1]), parts[2], parts[3], parts[4], kind,
                          demangle_name(parts[7]), demangle_name(parts[8]))
