@@ -303,6 +303,26 @@ async def test_fleet_listener_hears_each_robots_namespace() -> None:
                 for p in fleet_t.broadcasters().values()))
 
 
+async def test_fleet_buffer_over_rmw_zenoh() -> None:
+    """:class:`tfbus.fleet.FleetBuffer` on a fleet listener: robot1's static transform,
+    sent before the fleet starts, in robot1's own buffer."""
+    from tfbus.fleet import FleetBuffer
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    laser = ts("base_link", "base_laser", 1, 0.1)
+    async with ZenohRouter(listen=endpoint):
+        r1 = Bus(transport=transport(endpoint, "driver", namespace="robot1"))
+        async with r1:
+            r1.publish_nowait("/tf_static", TFMessage((laser,)))
+            fleet_bus = Bus(transport=transport(endpoint, "fleet", namespace="*"))
+            async with fleet_bus, FleetBuffer(fleet_bus) as fleet:
+                buffer = await fleet.wait_for_robot("robot1", timeout=20)
+                got = await buffer.lookup_transform_async("base_link", "base_laser",
+                                                          Time(0), 20.0)
+                assert got.transform == laser.transform
+                assert fleet.robots()["robot1"].alive
+
+
 def test_bus_spec_options() -> None:
     t = open_transport("rmw_zenoh:domain=7&connect=tcp/127.0.0.1:7447&namespace=robot1"
                        "&attachment=labelled", default_name="tfbus-view")
@@ -375,3 +395,28 @@ async def test_cli_static_transform_over_rmw_zenoh() -> None:
             except subprocess.TimeoutExpired:
                 child.kill()
                 await anyio.to_thread.run_sync(child.wait)
+
+
+async def test_fleet_statics_that_came_before_the_robots_node_reach_its_buffer() -> None:
+    """The order a fleet listener can see on start: a robot's /tf_static history (from the
+    AdvancedSubscriber) before the robot's liveliness tokens. The statics are kept until
+    the FleetBuffer subscribes to ``/robot1/tf_static`` (on the robot's node appearing),
+    then delivered. Driven through the transport's own queue and drain, in that order."""
+    from tfbus.fleet import FleetBuffer
+    from tfbus.transports.rmw_zenoh import transport as module
+    from tfbus.transports.rmw_zenoh.wire import TF_QOS, endpoint_token, node_token
+
+    t = RmwZenohTransport(namespace="*", name="fleet")
+    laser = ts("base_link", "base_laser", 1, 0.1)
+    att = encode_attachment(Attachment(1, 5, bytes(16)))
+    t._push((module._SAMPLE, f"0/robot1/tf_static/{TYPE}/{HASH}",
+             encode_tf(TFMessage((laser,))), att))
+    t._push((module._ALIVE_PUT, node_token(0, "ab12", 3, "/robot1", "driver"), None, None))
+    t._push((module._ALIVE_PUT, endpoint_token(0, "ab12", 3, 4, "MP", "/robot1", "driver",
+                                               "/robot1/tf_static", TF_QOS), None, None))
+    async with Bus() as bus, FleetBuffer(bus) as fleet:
+        assert t._drain(bus, True) is False
+        buffer = fleet["robot1"]
+        got = await buffer.lookup_transform_async("base_link", "base_laser", Time(0), 0.0)
+    assert got.transform == laser.transform
+    assert t.statistics().delivered == 1

@@ -53,6 +53,9 @@ topics ``/tf`` and ``/tf_static`` to the ROS 2 topics ``/robot1/tf`` and
 tf topics are remapped to relative names. ``namespace="*"`` is the fleet listener: it
 receives every ``/<robot>/tf`` and ``/<robot>/tf_static`` (one namespace chunk) as those
 bus topics, and its peers' names are ``<robot>/<node name>`` (:class:`tfbus.fleet.FleetBuffer`).
+A robot's statics that arrive before anyone subscribed to its ``/<robot>/tf_static`` (the
+AdvancedSubscriber's history comes at once; a fleet subscribes when the robot's node
+appears) are kept (:data:`MAX_UNHEARD_TOPICS`) and delivered once a subscriber is there.
 
 Spec-tested: no real rmw_zenoh installs from the package registries here; the wire is
 checked against golden vectors from rmw_zenoh's source and against ROBOTIS'
@@ -124,6 +127,10 @@ FLEET_NAMESPACE: Final = "*"
 HEARTBEAT_PERIOD: Final = 0.5
 """Seconds between the sporadic heartbeats of the ``/tf_static`` AdvancedPublisher
 (rmw_zenoh ``SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD``, 500 ms)."""
+MAX_UNHEARD_TOPICS: Final = 256
+"""A fleet listener keeps the statics of at most this many ``/<robot>/tf_static`` topics
+that nobody subscribed to yet (each at most ``max_transforms`` transforms), for the
+:class:`~tfbus.fleet.FleetBuffer` that subscribes once the robot's node appears."""
 _UNREACHABLE: Final = "Unable to connect to any of"
 _RETRY_FIRST: Final = 0.25
 _RETRY_MAX: Final = 2.0
@@ -337,6 +344,8 @@ class RmwZenohTransport:
         self._running = False
         self._graph: dict[str, _Node] = {}  # node key -> node
         self._token_node: dict[str, tuple[str, str]] = {}  # token -> (node key, bus topic)
+        # fleet: statics of /<robot>/tf_static received before anyone subscribed to it
+        self._unheard: dict[str, StaticLatch] = {}
         self._log = CountLimitedLog(log, 1000, clock=time.monotonic)
 
     # -- public information ---------------------------------------------------------------
@@ -496,6 +505,7 @@ class RmwZenohTransport:
             self._zid = ""
             self._graph.clear()
             self._token_node.clear()
+            self._unheard.clear()
             with anyio.CancelScope(shield=True):
                 await anyio.to_thread.run_sync(_close_session, session, declared)
             wakeup.close()
@@ -668,9 +678,19 @@ class RmwZenohTransport:
             if kind == _SAMPLE:
                 self._receive(bus, key, payload or b"", attachment)
             else:
-                for event in self._graph_update(kind == _ALIVE_PUT, key):
+                events = self._graph_update(kind == _ALIVE_PUT, key)
+                for event in events:
                     bus.deliver_nowait(PEERS_TOPIC, event)
+                if events and self._unheard:
+                    self._deliver_unheard(bus)
         return bool(inbox)
+
+    def _deliver_unheard(self, bus: BusLike) -> None:
+        """Deliver the statics of fleet topics that had no subscriber when they came to
+        the topics that have one now (a fleet subscribes to a robot's topics when its
+        node appears, which may be after the AdvancedSubscriber's history came)."""
+        for topic in [t for t in self._unheard if bus.reaches(t)]:
+            bus.deliver_nowait(topic, self._unheard.pop(topic).message())
 
     def _receive(self, bus: BusLike, key: str, payload: bytes, attachment: bytes | None) -> None:
         stats = self._stats
@@ -692,6 +712,12 @@ class RmwZenohTransport:
         except WireDecodeError:
             stats.malformed += 1
             return
+        if self._fleet and topic.endswith(TF_STATIC_TOPIC) and not bus.reaches(topic):
+            latch = self._unheard.get(topic)
+            if latch is None and len(self._unheard) < MAX_UNHEARD_TOPICS:
+                latch = self._unheard[topic] = StaticLatch()
+            if latch is not None and len(latch) < self._max_transforms:
+                latch.add(message)
         bus.deliver_nowait(topic, message)
         stats.delivered += 1
 
