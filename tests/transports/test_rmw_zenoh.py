@@ -144,9 +144,10 @@ async def test_tf_both_ways_and_static_late_join_between_two_tfbus_nodes() -> No
                 # routes come up: put until one arrives)
                 await exchange(a, b_tf, TFMessage((ts("map", "odom_a", 7, 1.25),)))
                 await exchange(b, a_tf, TFMessage((ts("map", "odom_b", 8, -1.25),)))
-                peers = b_t.broadcasters()
-                assert [p.name for p in peers.values()] == ["robot_a"]
-                assert next(iter(peers.values())).topics == {"/tf", "/tf_static"}
+                # robot_a's publisher tokens (the /tf one declared with its first put)
+                await wait_until(lambda: [
+                    (p.name, p.topics) for p in b_t.broadcasters().values()
+                ] == [("robot_a", {"/tf", "/tf_static"})])
                 assert isinstance(b_t, PeerAware)
             stats = b_t.statistics()
             assert stats.delivered >= 2 and stats.malformed == stats.no_attachment == 0
