@@ -36,6 +36,7 @@ INSTALL: dict[str, str] = {
     "chromium": "sudo bash scripts/install/install_chromium.sh",
     "ros2-env": "bash scripts/install/install_ros2_env.sh",
     "evo": "bash scripts/install/install_evo.sh",
+    "zenoh-ros2-sdk": "bash scripts/install/install_zenoh_ros2_sdk.sh",
 }
 
 # Skips that remain legitimate with every peer installed, by name: (test id pattern, fnmatch

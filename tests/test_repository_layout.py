@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT_JOBS = {"install", "release", "data", "docs"}
 
 #: The middlewares of ``peers/`` (docs/architecture.md's "peer program" row).
-PEER_FOLDERS = {"ros1", "ros2", "zenoh", "debian"}
+PEER_FOLDERS = {"ros1", "ros2", "zenoh", "debian", "rmw_zenoh"}
 
 
 def _files(folder: str) -> list[Path]:

@@ -142,6 +142,7 @@ def _stats_classes() -> dict[str, type]:
         ("tfbus.transports.zenoh", "ZenohStatistics"),
         ("tfbus.transports.ros2", "Ros2Statistics"),
         ("tfbus.transports.ros1", "Ros1Statistics"),
+        ("tfbus.transports.rmw_zenoh", "RmwZenohStatistics"),
     ):
         try:
             out[name] = getattr(importlib.import_module(module), name)

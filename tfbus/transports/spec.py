@@ -50,7 +50,8 @@ DEFAULT_BUS: Final = "zenoh"
 BUS_HELP: Final = (
     f"Bus to use (default {DEFAULT_BUS!r}: this machine, no configuration), e.g. "
     "'zenoh?listen=tcp/127.0.0.1:7500', 'zenoh:tcp/192.168.1.10:7448', 'ros2', "
-    "'ros2:domain=7' (ROS 2 over DDS), 'ros1', 'ros1:http://127.0.0.1:11311' (a ROS 1 "
+    "'ros2:domain=7' (ROS 2 over DDS), 'rmw_zenoh:tcp/127.0.0.1:7447' (ROS 2 over "
+    "rmw_zenoh, through its router), 'ros1', 'ros1:http://127.0.0.1:11311' (a ROS 1 "
     "master; default ROS_MASTER_URI), 'memory' (this process only)."
 )
 """The one help text of every command's ``--bus`` option."""
@@ -362,5 +363,19 @@ register_scheme(
         scan_topics=True,
         unknown_authority="unknown_publisher",
         clock_topic=True,
+    )
+)
+register_scheme(
+    TransportScheme(
+        "rmw_zenoh",
+        "tfbus.transports.rmw_zenoh.options",
+        keys=frozenset({"connect", "listen", "mode", "domain", "namespace", "name",
+                        "attachment", "connect_timeout"}),
+        default_key="connect",
+        extra="zenoh",
+        requires=("zenoh",),
+        summary="ROS 2 on rmw_zenoh: /tf and /tf_static through a Zenoh router (spec-tested)",
+        peer_aware=True,
+        fleet_option="namespace",
     )
 )
