@@ -62,6 +62,7 @@ COMMANDS: tuple[str, ...] = (
     "view",
     "router",
     "serve_buffer",
+    "doctor",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 

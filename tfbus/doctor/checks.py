@@ -15,6 +15,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, fields
 from typing import Final
 
+from tfbus.core import frame_path
 from tfbus.doctor.report import BroadcasterDelay, Finding, Level, Report
 from tfbus.messages import TransformStamped
 from tfbus.monitor import SIM_TIME_GAP
@@ -399,21 +400,19 @@ class Doctor:
             found[1].add(sender)
 
     def _relink(self, child: str, parent: str, sender: str, t: int) -> None:
-        """A new latest parent for ``child``: look for a loop through it."""
-        self._latest[child] = parent
-        path = [child]
-        frame = parent
-        for _ in range(len(self._latest) + 1):
-            if frame == child:
-                key = frozenset(path)
-                found = self._loops.get(key)
-                self._loops[key] = (tuple(path), sender, found[2] if found else t, t)
-                return
-            path.append(frame)
-            nxt = self._latest.get(frame)
-            if nxt is None:
-                return
-            frame = nxt
+        """A new latest parent for ``child``: a loop when ``child`` is an ancestor of
+        ``parent`` (:func:`tfbus.core.frame_path` from ``parent`` to ``child`` while
+        ``child`` has no parent is the way up between them, None when there is none)."""
+        latest = self._latest
+        latest.pop(child, None)
+        up = [child] if parent == child else frame_path(latest, parent, child)
+        latest[child] = parent
+        if up is None:
+            return
+        path = (child, *up[:-1]) if parent != child else (child,)
+        key = frozenset(path)
+        found = self._loops.get(key)
+        self._loops[key] = (path, sender, found[2] if found else t, t)
 
     def _delay(self, link: _Link, t: int, stamp: int, sender: str) -> None:
         if self.sim_time is None:
@@ -745,31 +744,34 @@ class Doctor:
     def _tree_findings(self) -> list[Finding]:
         parents = dict(self._latest)
         frames = set(parents) | set(parents.values())
-
-        def root(f: str) -> str:
-            seen = set()
-            while f in parents and f not in seen:
-                seen.add(f)
-                f = parents[f]
-            return f
-
+        children: dict[str, list[str]] = {}
+        for c, p in parents.items():
+            children.setdefault(p, []).append(c)
+        # each tree from its root down (frames in a loop have no root: none reaches them)
+        tree_of: dict[str, str] = {}
         roots: dict[str, list[str]] = {}
-        for f in frames:
-            roots.setdefault(root(f), []).append(f)
+        for top in sorted(frames - set(parents)):
+            members, todo = [], [top]
+            while todo:
+                f = todo.pop()
+                tree_of[f] = top
+                members.append(f)
+                todo += children.get(f, ())
+            roots[top] = members
         out: list[Finding] = []
 
+        def root(f: str) -> str | None:
+            return tree_of.get(f)
+
         def ancestors(f: str) -> list[str]:
-            chain, seen = [], {f}
-            while f in parents and parents[f] not in seen:
-                f = parents[f]
-                seen.add(f)
-                chain.append(f)
-            return chain
+            top = tree_of.get(f)
+            path = None if top is None else frame_path(parents, f, top)
+            return [] if path is None else path[1:]
 
         present = [f for f in REP105_ORDER if f in frames]
         for i, a in enumerate(present):
             for b in present[i + 1:]:
-                if root(a) != root(b) or a in ancestors(b):
+                if root(a) is None or root(a) != root(b) or a in ancestors(b):
                     continue
                 inverted = b in ancestors(a)
                 out.append(self._finding(
@@ -778,6 +780,7 @@ class Doctor:
                     + (f"{b} is an ancestor of {a}" if inverted else
                        f"{b} is not below {a} ({b} <- {' <- '.join(ancestors(b)) or '-'})"),
                     frames=(a, b), senders=self._senders_of((a, b)),
+                    start=self._span((a, b))[0], end=self._span((a, b))[1],
                     advice=f"publish {' -> '.join(present)} as one chain, "
                     f"each frame the parent of the next"))
         for w in ("earth", "map", "odom"):
@@ -788,8 +791,10 @@ class Doctor:
                 out.append(self._finding(
                     "rep105", Level.ERROR, f"{w} is below the robot frame {robot}",
                     frames=(w, robot), senders=self._senders_of((w,)),
+                    start=self._span((w,))[0], end=self._span((w,))[1],
                     advice=f"{w} is a world frame (REP 105): publish {w} -> ... -> {robot}"))
         if ("base_footprint" in frames and "base_link" in frames
+                and root("base_footprint") is not None
                 and root("base_footprint") == root("base_link")
                 and parents.get("base_footprint") != "base_link"
                 and parents.get("base_link") != "base_footprint"):
@@ -800,11 +805,12 @@ class Doctor:
                 + (" <- ".join(ancestors("base_link")) or "-"),
                 frames=("base_footprint", "base_link"),
                 senders=self._senders_of(("base_footprint", "base_link")),
+                start=self._span(("base_footprint", "base_link"))[0],
+                end=self._span(("base_footprint", "base_link"))[1],
                 advice="publish base_link -> base_footprint (REP 120) or base_footprint -> "
                 "base_link, one directly below the other"))
         # a component whose walk ends on a loop has no root: the loop check reports it
-        trees = sorted(((r, fs) for r, fs in roots.items() if r not in parents),
-                       key=lambda kv: (-len(kv[1]), kv[0]))
+        trees = sorted(roots.items(), key=lambda kv: (-len(kv[1]), kv[0]))
         if len(trees) > 1:
             tops = [r for r, _ in trees]
             lookups = [(a, b) for i, a in enumerate(tops) for b in tops[i + 1:]][:10]
@@ -824,6 +830,20 @@ class Doctor:
                 lookups=lookups))
         return out
 
+    def _span(self, frames: Iterable[str], sender: str | None = None
+              ) -> tuple[int | None, int | None]:
+        """The receive-time span of ``frames``' messages (of ``sender``'s only, when given)."""
+        spans = []
+        for f in frames:
+            link = self._links.get(f)
+            if link is None:
+                continue
+            for table in (link.static, link.dynamic):
+                spans += [s for name, s in table.items() if sender is None or name == sender]
+        if not spans:
+            return None, None
+        return min(s.first for s in spans), max(s.last for s in spans)
+
     def _senders_of(self, frames: Iterable[str]) -> list[str]:
         out: set[str] = set()
         for f in frames:
@@ -842,6 +862,7 @@ class Doctor:
         lowest = min(on_time) if on_time else 0.0
         for b in judged:
             frames = self._frames_of(b.sender)
+            start, end = self._span(frames, b.sender)
             means = {c: m for c in frames
                      if (d := self._links[c].delay.get(b.sender)) and d[1] >= th.min_samples
                      for m in (d[0] / d[1],)}
@@ -851,7 +872,7 @@ class Doctor:
                     "clock_offset", Level.ERROR,
                     f"{b.sender}'s stamps are {_fmt(-b.median)} s ahead of the receiver's "
                     f"clock (median of {b.samples}, spread {_fmt(b.spread)} s)",
-                    frames=frames, senders=(b.sender,),
+                    frames=frames, senders=(b.sender,), start=start, end=end,
                     advice="synchronise its clock (chrony/NTP): lookups at now() with its "
                     "frames raise ExtrapolationException into the future",
                     counts={"median_delay_s": b.median, "spread_s": b.spread}))
@@ -861,7 +882,7 @@ class Doctor:
                     f"{b.sender} stamps {len(ahead)} of its {len(means)} frames ahead of "
                     "the receiver's clock (its other frames are not: its clock is right): "
                     + ", ".join(f"{c} {_fmt(-m)} s" for c, m in sorted(ahead.items())[:10]),
-                    frames=tuple(sorted(ahead)), senders=(b.sender,),
+                    frames=tuple(sorted(ahead)), senders=(b.sender,), start=start, end=end,
                     advice="deliberate future-dating (ROS 1 robot_state_publisher's fixed "
                     "joints: +0.5 s; amcl's transform_tolerance): fine unless those frames "
                     "are meant to be measured; fixed joints belong on /tf_static",
@@ -871,7 +892,7 @@ class Doctor:
                     "latency", Level.WARNING,
                     f"{b.sender} lags the others by {_fmt(b.median - lowest)} s (median "
                     f"delay {_fmt(b.median)} s against {_fmt(lowest)} s)",
-                    frames=frames, senders=(b.sender,),
+                    frames=frames, senders=(b.sender,), start=start, end=end,
                     advice="its clock is behind or it stamps late data: lookups joining its "
                     "frames with others wait or extrapolate into the past",
                     counts={"median_delay_s": b.median, "lowest_median_s": lowest,

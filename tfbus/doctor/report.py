@@ -193,7 +193,7 @@ _COUNTS = {
 
 REPORT_SCHEMA: Final[dict[str, Any]] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "$id": "https://github.com/tfbus/tfbus/docs/doctor.md#json-schema",
+    "$id": "urn:tfbus:doctor-report:1",
     "title": "tfbus doctor report",
     "type": "object",
     "required": ["schema_version", "source", "messages", "transforms", "frames", "start_ns",
