@@ -282,6 +282,20 @@ def test_identical_statics_from_two_senders_are_fine_different_ones_are_not() ->
                                                          ("/a", "/b"))
 
 
+def test_renaming_the_unknown_sender_topic_by_topic() -> None:
+    """Live, messages come as "unknown" until liveliness names their broadcaster: the
+    /tf_static ones go to the static publisher, the /tf ones to the dynamic one."""
+    d = Doctor()
+    _feed(d, T0, tf("base", "cam", T0), sender="unknown", static=True)
+    for k in range(12):
+        _feed(d, T0 + k * 10 * MS, tf("base", "cam", T0 + k * 10 * MS), sender="unknown")
+    d.rename_authority("unknown", "/static_pub", static=True)
+    d.rename_authority("unknown", "/driver", static=False)
+    found = _only(d.report())
+    assert (found.check, found.senders) == ("static_and_dynamic", ("/driver", "/static_pub"))
+    assert [b.sender for b in d.report().broadcasters] == ["/driver"]
+
+
 def test_memory_is_bounded_by_frames_and_senders_not_messages() -> None:
     """100 000 messages on 3 frames keep a bounded sample; frames past max_frames are
     counted, not tracked."""

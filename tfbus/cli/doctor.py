@@ -137,7 +137,7 @@ def _doctor_live(src: BusSource, duration: float) -> Report | None:
     bus could not be opened (after a one-line error)."""
     import anyio
 
-    from tfbus.doctor import PLACEHOLDER_AUTHORITIES, Doctor, DoctorSink
+    from tfbus.doctor import Doctor, DoctorSink
 
     if src.is_fleet:
         fail("doctor reads one robot's bus: give the robot's namespace, not namespace=*")
@@ -153,7 +153,7 @@ def _doctor_live(src: BusSource, duration: float) -> Report | None:
     result: list[Report] = []
 
     def finish() -> None:
-        _name_unknown(src, doctor, PLACEHOLDER_AUTHORITIES)
+        _name_unknown(src, doctor)
         result.append(doctor.report(now=src.clock.now()))
 
     code = run_live(lambda: live(src, duration, anyio.sleep_forever, finish=finish))
@@ -162,9 +162,13 @@ def _doctor_live(src: BusSource, duration: float) -> Report | None:
     return result[0]
 
 
-def _name_unknown(src: BusSource, doctor: Doctor, placeholders: frozenset[str]) -> None:
-    """What arrived before the one broadcaster's liveliness goes to it, as the monitor's
+def _name_unknown(src: BusSource, doctor: Doctor) -> None:
+    """What arrived before its broadcaster's liveliness (sender ``"unknown"``) goes, topic
+    by topic, to the one broadcaster liveliness names on that topic, as the monitor's
     summary does (:meth:`tfbus.monitor.TfSummary.rename_authority`)."""
-    names = {p.name for p in src.broadcasters_seen.values()}
-    if len(names) == 1 and "unknown" in placeholders:
-        doctor.rename_authority("unknown", names.pop())
+    from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
+
+    for topic, static in ((TF_TOPIC, False), (TF_STATIC_TOPIC, True)):
+        names = {p.name for p in src.broadcasters_seen.values() if topic in p.topics}
+        if len(names) == 1:
+            doctor.rename_authority("unknown", names.pop(), static=static)

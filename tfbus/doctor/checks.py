@@ -493,25 +493,31 @@ class Doctor:
         one-line reason): the report gets a ``damaged_recording`` finding."""
         self.damage = " ".join(reason.split())
 
-    def rename_authority(self, old: str, new: str) -> None:
-        """Account everything received from ``old`` to ``new`` instead (a live bus names a
+    def rename_authority(self, old: str, new: str, *, static: bool | None = None) -> None:
+        """Account what was received from ``old`` to ``new`` instead (a live bus names a
         sender only once its liveliness arrives, as
-        :meth:`tfbus.monitor.TfSummary.rename_authority`)."""
+        :meth:`tfbus.monitor.TfSummary.rename_authority`): with ``static`` True only its
+        ``/tf_static`` messages, False only its ``/tf`` ones, None both."""
         if old == new:
             return
+        dynamic = static is not True
         for link in self._links.values():
-            for table in (link.static, link.dynamic):
+            tables = [t for t, kind in ((link.static, True), (link.dynamic, False))
+                      if static is None or kind is static]
+            for table in tables:
                 span = table.pop(old, None)
                 if span is not None:
                     if new in table:
                         table[new].merge(span)
                     else:
                         table[new] = span
+            if old in link.static_values and static is not False:
+                link.static_values[new] = link.static_values.pop(old)
+            if not dynamic:
+                continue
             for counter in (link.repeated, link.out_of_order):
                 if old in counter:
                     counter[new] = counter.get(new, 0) + counter.pop(old)
-            if old in link.static_values:
-                link.static_values[new] = link.static_values.pop(old)
             if old in link.sender_stamp:
                 stamp = link.sender_stamp.pop(old)
                 link.sender_stamp[new] = max(stamp, link.sender_stamp.get(new, stamp))
@@ -523,14 +529,13 @@ class Doctor:
             if old in link.gap_senders:
                 link.gap_senders.discard(old)
                 link.gap_senders.add(new)
-        sample = self._delays.pop(old, None)
+        sample = self._delays.pop(old, None) if dynamic else None
         if sample is not None:
             into = self._delays.setdefault(new, _Sample(self.thresholds.delay_samples))
             for v in sample.values:
                 into.add(v)
             self._delay_counts[new] = (self._delay_counts.get(new, 0)
                                        + self._delay_counts.pop(old, 0))
-        self._senders.discard(old)
         self._senders.add(new)
 
     # ------------------------------------------------------------------ reporting
