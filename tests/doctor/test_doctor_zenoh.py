@@ -10,80 +10,25 @@ deadline; the children are ended by PID in ``finally``.
 from __future__ import annotations
 
 import json
-import os
-import queue
-import socket
 import subprocess
 import sys
-import threading
-import time
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("zenoh")
 pytest.importorskip("msgspec")
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
-
-
-class _Child:
-    """A ``tfbus`` child process whose output lines a thread collects."""
-
-    def __init__(self, *args: str) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "tfbus.cli", *args], cwd=ROOT, env=_env(),
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.seen: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def expect(self, needle: str, timeout: float = 60.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not any(needle in line for line in self.seen):
-            left = deadline - time.monotonic()
-            assert left > 0, f"no line with {needle!r} in {timeout} s: {self.seen}"
-            try:
-                self.seen.append(self.lines.get(timeout=min(left, 1.0)))
-            except queue.Empty:
-                assert self.proc.poll() is None, f"exited {self.proc.returncode}: {self.seen}"
-
-    def end(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=20)
+from doctor_procs import ROOT, Child, child_env, free_port
 
 
 def test_static_and_dynamic_over_zenoh_names_both_senders() -> None:
-    a, b = _free_port(), _free_port()
-    children: list[_Child] = []
+    a, b = free_port(), free_port()
+    children: list[Child] = []
     try:
-        dynamic = _Child("demo", "broadcaster", "--bus", f"zenoh?listen=tcp/127.0.0.1:{a}",
+        dynamic = Child("demo", "broadcaster", "--bus", f"zenoh?listen=tcp/127.0.0.1:{a}",
                          "--duration", "120")
         children.append(dynamic)
-        static = _Child("static-transform", "0.1", "0", "0.2", "0", "0", "0", "base_link",
+        static = Child("static-transform", "0.1", "0", "0.2", "0", "0", "0", "base_link",
                         "base_laser", "--bus", f"zenoh?listen=tcp/127.0.0.1:{b}")
         children.append(static)
         dynamic.expect("running the broadcaster node")
@@ -92,7 +37,7 @@ def test_static_and_dynamic_over_zenoh_names_both_senders() -> None:
             [sys.executable, "-m", "tfbus.cli", "doctor", "--bus",
              f"zenoh:connect=tcp/127.0.0.1:{a},tcp/127.0.0.1:{b}", "--duration", "5",
              "--json"],
-            cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=90)
+            cwd=ROOT, env=child_env(), capture_output=True, text=True, timeout=90)
     finally:
         for child in children:
             child.end()

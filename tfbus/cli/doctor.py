@@ -149,7 +149,17 @@ def _doctor_live(src: BusSource, duration: float) -> Report | None:
 
         src.sink.observers.append(observe)
     else:  # the sender is the transport's (ROS 1: the caller id of the connection)
-        src.sink = DoctorSink(doctor, src.clock, src.sink)  # type: ignore[assignment]
+        from tfbus.transports.spec import schemes
+
+        scheme = schemes().get(src.bus_spec.scheme)
+        unnamed = (scheme.unknown_authority if scheme is not None else None) or "unknown"
+
+        def sender(static: bool, authority: str) -> str:
+            # the listener's own default: the transport did not name the publisher
+            return unnamed if authority == "default_authority" else authority
+
+        src.sink = DoctorSink(doctor, src.clock, src.sink,  # type: ignore[assignment]
+                              authority=sender)
     result: list[Report] = []
 
     def finish() -> None:
