@@ -299,10 +299,23 @@ def test_renaming_the_unknown_sender_topic_by_topic() -> None:
 def test_memory_is_bounded_by_frames_and_senders_not_messages() -> None:
     """100 000 messages on 3 frames keep a bounded sample; frames past max_frames are
     counted, not tracked."""
+    import tracemalloc
+
     th = Thresholds(max_frames=3, delay_samples=64)
     d = Doctor(th)
-    for k in range(100_000):
-        _feed(d, T0 + k * MS, tf("map", f"f{k % 5}", T0 + k * MS))
+    items = [tf("map", f"f{k}", T0) for k in range(5)]
+    tracemalloc.start()
+    try:
+        for k in range(100_000):
+            ts = items[k % 5]
+            _feed(d, T0 + k * MS, ts._replace(header=ts.header._replace(
+                stamp=Time.from_ns(T0 + k * MS))))
+        snapshot = tracemalloc.take_snapshot().filter_traces(
+            [tracemalloc.Filter(True, "*/tfbus/doctor/*")])
+    finally:
+        tracemalloc.stop()
+    held = sum(stat.size for stat in snapshot.statistics("filename"))
+    assert 0 < held < 50_000  # bytes the doctor allocated and holds: per frame, not message
     report = d.report()
     assert report.frames == 3
     assert all(b.samples <= 64 for b in report.broadcasters)

@@ -178,8 +178,10 @@ class _Span:
 
     def add(self, t: int) -> None:
         self.count += 1
-        self.first = min(self.first, t)
-        self.last = max(self.last, t)
+        if t > self.last:
+            self.last = t
+        elif t < self.first:
+            self.first = t
 
     def merge(self, other: _Span) -> None:
         self.count += other.count
@@ -225,8 +227,9 @@ class _Link:
     """Everything the checks keep about one child frame."""
 
     __slots__ = (
-        "baseline", "child", "consecutive_gaps", "delay", "drop_first", "drop_last", "drop_worst",
-        "dynamic", "first_gap", "gap_count", "gap_largest", "gap_senders", "intervals",
+        "baseline", "child", "consecutive_gaps", "delay", "drop_first", "drop_last",
+        "drop_worst", "dynamic", "first_gap", "gap_count", "gap_largest", "gap_senders", "hot",
+        "intervals",
         "last_gap", "last_received", "newest", "old_data", "order_span", "out_of_order",
         "parent", "parents", "period", "recent", "recent_set", "repeat_span", "repeated",
         "sender_stamp", "static", "static_values",
@@ -241,6 +244,9 @@ class _Link:
         self.static_values: dict[str, tuple[object, ...]] = {}
         self.sender_stamp: dict[str, int] = {}
         self.delay: dict[str, list[float]] = {}  # sender -> [sum of delays s, count]
+        # the last message's (parent, sender, static) and its spans and delay tables
+        self.hot: tuple[str, str, bool, _Span, _Span, list[float] | None,
+                        _Sample | None] | None = None
         self.newest: int | None = None
         self.recent: deque[int] = deque()
         self.recent_set: set[int] = set()
@@ -304,7 +310,6 @@ class Doctor:
         self._latest: dict[str, str] = {}  # child -> its latest parent
         self._loops: dict[frozenset[str], tuple[tuple[str, ...], str, int, int]] = {}
         self._delays: dict[str, _Sample] = {}
-        self._delay_counts: dict[str, int] = {}
         self._newest_stamp = 0
         t = self.thresholds
         self._alpha = 2.0 / (t.rate_window + 1)
@@ -361,10 +366,50 @@ class Doctor:
         if parent.startswith("/"):
             self._slash(parent, "frame_id", sender, t)
             parent = parent[1:]
-        link = self._link(child)
+        link = self._links.get(child) or self._link(child)
         if link is None:
             return
         link.last_received = t
+        hot = link.hot
+        if hot is not None and hot[0] == parent and hot[1] == sender and hot[2] is static:
+            # the same parent, sender and topic as the link's last message: no lookups
+            hot[3].add(t)
+            hot[4].add(t)
+            mean, sample = hot[5], hot[6]
+        else:
+            mean, sample = self._relook(link, t, parent, sender, static)
+        if static:
+            tr, rot = ts.transform.translation, ts.transform.rotation
+            link.static_values[sender] = (parent, tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w)
+            return
+        assert mean is not None and sample is not None
+        stamp = ts.header.stamp.ns
+        # delay: receive time - stamp (against the newest stamp in simulated time)
+        if self.sim_time is None:
+            self.sim_time = abs(t - stamp) / NSEC_PER_SEC > SIM_TIME_GAP
+        if stamp > self._newest_stamp:
+            self._newest_stamp = stamp
+        d = ((self._newest_stamp if self.sim_time else t) - stamp) / NSEC_PER_SEC
+        mean[0] += d
+        mean[1] += 1
+        sample.add(d)
+        newest = link.newest
+        if newest is not None and stamp > newest:
+            # in order (the common case): newer than every stamp held, so not repeated
+            recent = link.recent
+            recent.append(stamp)
+            link.recent_set.add(stamp)
+            if len(recent) > _RECENT_STAMPS:
+                link.recent_set.discard(recent.popleft())
+            link.sender_stamp[sender] = stamp
+            self._interval(link, t, stamp, newest, sender)
+        else:
+            self._stamps(link, t, stamp, sender)
+
+    def _relook(self, link: _Link, t: int, parent: str, sender: str, static: bool
+                ) -> tuple[list[float] | None, _Sample | None]:
+        """Account a message whose parent, sender or topic differs from the link's last:
+        the span tables looked up (and bounded), a new parent checked for a loop."""
         span = link.parents.get(parent)
         if span is None:
             if len(link.parents) >= self.thresholds.max_senders:
@@ -373,7 +418,7 @@ class Doctor:
         span.add(t)
         if parent != link.parent:
             link.parent = parent
-            self._relink(child, parent, sender, t)
+            self._relink(link.child, parent, sender, t)
         senders = link.static if static else link.dynamic
         sspan = senders.get(sender)
         if sspan is None:
@@ -381,13 +426,15 @@ class Doctor:
                 sender = OVERFLOW
             sspan = senders.setdefault(sender, _Span(t))
         sspan.add(t)
-        stamp = ts.header.stamp.ns
-        if static:
-            tr, rot = ts.transform.translation, ts.transform.rotation
-            link.static_values[sender] = (parent, tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w)
-            return
-        self._delay(link, t, stamp, sender)
-        self._stamps(link, t, stamp, sender)
+        mean: list[float] | None = None
+        sample: _Sample | None = None
+        if not static:
+            mean = link.delay.setdefault(sender, [0.0, 0])
+            sample = self._delays.get(sender)
+            if sample is None:
+                sample = self._delays[sender] = _Sample(self.thresholds.delay_samples)
+        link.hot = (parent, sender, static, span, sspan, mean, sample)
+        return mean, sample
 
     def _slash(self, frame_id: str, role: str, sender: str, t: int) -> None:
         found = self._slashed.get(frame_id)
@@ -414,25 +461,7 @@ class Doctor:
         found = self._loops.get(key)
         self._loops[key] = (path, sender, found[2] if found else t, t)
 
-    def _delay(self, link: _Link, t: int, stamp: int, sender: str) -> None:
-        if self.sim_time is None:
-            self.sim_time = abs(t - stamp) / NSEC_PER_SEC > SIM_TIME_GAP
-        self._newest_stamp = max(self._newest_stamp, stamp)
-        d = _sec((self._newest_stamp if self.sim_time else t) - stamp)
-        mean = link.delay.get(sender)
-        if mean is None:
-            link.delay[sender] = [d, 1]
-        else:
-            mean[0] += d
-            mean[1] += 1
-        sample = self._delays.get(sender)
-        if sample is None:
-            sample = self._delays[sender] = _Sample(self.thresholds.delay_samples)
-        sample.add(d)
-        self._delay_counts[sender] = self._delay_counts.get(sender, 0) + 1
-
     def _stamps(self, link: _Link, t: int, stamp: int, sender: str) -> None:
-        th = self.thresholds
         # repeated stamps (TF_REPEATED_DATA) and out-of-order ones, by sender
         if stamp in link.recent_set:
             link.repeated[sender] = link.repeated.get(sender, 0) + 1
@@ -454,10 +483,16 @@ class Doctor:
         newest = link.newest
         if newest is not None and stamp <= newest:
             return
-        link.newest = stamp
         if newest is None:
+            link.newest = stamp
             return
-        # rates and gaps over the increasing stamps
+        self._interval(link, t, stamp, newest, sender)
+
+    def _interval(self, link: _Link, t: int, stamp: int, newest: int, sender: str) -> None:
+        """A stamp newer than the frame's newest: rates and gaps over the increasing
+        stamps."""
+        th = self.thresholds
+        link.newest = stamp
         d = float(stamp - newest)
         link.intervals += 1
         p = link.period
@@ -502,6 +537,7 @@ class Doctor:
             return
         dynamic = static is not True
         for link in self._links.values():
+            link.hot = None
             tables = [t for t, kind in ((link.static, True), (link.dynamic, False))
                       if static is None or kind is static]
             for table in tables:
@@ -534,8 +570,7 @@ class Doctor:
             into = self._delays.setdefault(new, _Sample(self.thresholds.delay_samples))
             for v in sample.values:
                 into.add(v)
-            self._delay_counts[new] = (self._delay_counts.get(new, 0)
-                                       + self._delay_counts.pop(old, 0))
+            into.n += sample.n - len(sample.values)
         self._senders.add(new)
 
     # ------------------------------------------------------------------ reporting
@@ -545,7 +580,7 @@ class Doctor:
         out = []
         for sender, sample in sorted(self._delays.items()):
             out.append(BroadcasterDelay(
-                sender, self._delay_counts.get(sender, 0), sample.quantile(0.5),
+                sender, sample.n, sample.quantile(0.5),
                 max(0.0, sample.quantile(0.9) - sample.quantile(0.1)), len(sample.values)))
         return tuple(out)
 
