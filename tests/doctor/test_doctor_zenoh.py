@@ -1,6 +1,7 @@
 """``tfbus doctor --bus`` over Zenoh, as real processes: ``tfbus demo broadcaster`` sends
 ``base_link -> base_laser`` on /tf while ``tfbus static-transform`` sends the same link on
-/tf_static; the doctor names the fault and both senders (Zenoh liveliness).
+/tf_static; the doctor names the fault and both senders (Zenoh liveliness), and ``tfbus
+monitor --bus`` prints the same finding below its tables.
 
 Every process runs on 127.0.0.1 with explicit endpoints on free ports (the transport's
 defaults keep multicast scouting off); every wait is on an output line against a
@@ -38,6 +39,11 @@ def test_static_and_dynamic_over_zenoh_names_both_senders() -> None:
              f"zenoh:connect=tcp/127.0.0.1:{a},tcp/127.0.0.1:{b}", "--duration", "5",
              "--json"],
             cwd=ROOT, env=child_env(), capture_output=True, text=True, timeout=90)
+        monitor = subprocess.run(
+            [sys.executable, "-m", "tfbus.cli", "monitor", "--bus",
+             f"zenoh:connect=tcp/127.0.0.1:{a},tcp/127.0.0.1:{b}", "--duration", "4",
+             "--interval", "60"],
+            cwd=ROOT, env=child_env(), capture_output=True, text=True, timeout=90)
     finally:
         for child in children:
             child.end()
@@ -48,3 +54,9 @@ def test_static_and_dynamic_over_zenoh_names_both_senders() -> None:
     assert found == [("static_and_dynamic", ["base_laser", "base_link"],
                       ["robot_tf_publisher", "static_transform_publisher"])]
     assert report["messages"] > 50
+    # tfbus monitor prints the live findings below its tables, with the same senders
+    assert monitor.returncode == 0, monitor.stderr
+    table = monitor.stdout.split("Findings (tfbus doctor)", 1)[1]
+    row = next(line for line in table.splitlines() if "static_and_dynamic" in line)
+    assert [c.strip() for c in row.split("│")[:4]] == [
+        "error", "static_and_dynamic", "base_laser", "robot_tf_publisher"]

@@ -25,12 +25,14 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from rich.console import Console
+    from rich.table import Table
 
     from tfbus.doctor import Doctor, Report
     from tfbus.messages import TransformStamped
     from tfbus.time import Time
 
-__all__ = ["DEFAULT_DURATION", "FAIL_ON", "command", "exit_status", "print_report"]
+__all__ = ["DEFAULT_DURATION", "FAIL_ON", "command", "exit_status", "findings_table",
+           "live_report", "print_report", "watch"]
 
 DEFAULT_DURATION = 10.0
 """Seconds ``tfbus doctor --bus`` listens when no ``--duration`` is given."""
@@ -49,8 +51,6 @@ def print_report(out: Console, report: Report) -> None:
     """The report as a heading, the findings table (most severe first) and the
     broadcasters' delays; every id printed literally (no markup, control characters
     escaped)."""
-    from rich.table import Table
-
     span = (report.end_ns - report.start_ns) / 1e9 if report.start_ns is not None \
         and report.end_ns is not None else 0.0
     out.print(f"tfbus doctor: {literal(report.source)}: {report.messages} messages, "
@@ -61,19 +61,10 @@ def print_report(out: Console, report: Report) -> None:
         out.print("no problems found")
     else:
         out.print(", ".join(f"{n} {lv}{'s' if n != 1 else ''}" for lv, n in counts.items()))
-        table = Table(show_edge=False, header_style="bold", show_lines=True)
-        for col in ("level", "check", "frames", "senders", "span (receive time)",
-                    "finding", "advice"):
-            table.add_column(col, overflow="fold")
-        for f in report.findings:
-            when = "-" if f.start_ns is None else (
-                f"{fmt_sec(f.start_ns)} .. {fmt_sec(f.end_ns)}")
-            table.add_row(
-                f.level.value, f.check, "\n".join(literal(x) for x in f.frames[:10]),
-                "\n".join(literal(x) for x in f.senders[:10]), when, literal(f.message),
-                literal(f.advice))
-        out.print(table)
+        out.print(findings_table(report))
     if report.broadcasters:
+        from rich.table import Table
+
         table = Table(title="Broadcasters: receive time - header stamp", show_edge=False,
                       header_style="bold")
         table.add_column("sender", overflow="fold")
@@ -83,6 +74,24 @@ def print_report(out: Console, report: Report) -> None:
             table.add_row(literal(b.sender), str(b.transforms), f"{b.median:.6f}",
                           f"{b.spread:.6f}")
         out.print(table)
+
+
+def findings_table(report: Report, *, title: str | None = None) -> Table:
+    """The findings, most severe first: level, check, frames, senders, receive-time span,
+    what was found and the advice (ids literal: no markup, control characters escaped)."""
+    from rich.table import Table
+
+    table = Table(title=title, show_edge=False, header_style="bold", show_lines=True)
+    for col in ("level", "check", "frames", "senders", "span (receive time)", "finding",
+                "advice"):
+        table.add_column(col, overflow="fold")
+    for f in report.findings:
+        when = "-" if f.start_ns is None else f"{fmt_sec(f.start_ns)} .. {fmt_sec(f.end_ns)}"
+        table.add_row(
+            f.level.value, f.check, "\n".join(literal(x) for x in f.frames[:10]),
+            "\n".join(literal(x) for x in f.senders[:10]), when, literal(f.message),
+            literal(f.advice))
+    return table
 
 
 @click.command("doctor")
@@ -132,15 +141,14 @@ def command(bag: Path | None, bus: str | None, use_sim_time: bool, duration: flo
     return exit_status(report, fail_on)
 
 
-def _doctor_live(src: BusSource, duration: float) -> Report | None:
-    """Listen for ``duration`` seconds (or until Ctrl-C), then the report; None when the
-    bus could not be opened (after a one-line error)."""
-    import anyio
-
+def watch(src: BusSource) -> Doctor:
+    """A :class:`~tfbus.doctor.Doctor` fed by ``src`` once attached: through the monitor
+    sink's observers where liveliness names the sender (Zenoh), else a
+    :class:`~tfbus.doctor.DoctorSink` in front of the sink (the transport's sender: ROS
+    1's caller id; ``unknown`` where the transport names none, as ``tfbus monitor``).
+    Call before :meth:`BusSource.attach`."""
     from tfbus.doctor import Doctor, DoctorSink
 
-    if src.is_fleet:
-        fail("doctor reads one robot's bus: give the robot's namespace, not namespace=*")
     doctor = Doctor(source=src.spec)
     if src.has_liveliness:  # the sender is the broadcaster liveliness names
         def observe(now: Time, items: Sequence[TransformStamped], authority: str,
@@ -160,11 +168,28 @@ def _doctor_live(src: BusSource, duration: float) -> Report | None:
 
         src.sink = DoctorSink(doctor, src.clock, src.sink,  # type: ignore[assignment]
                               authority=sender)
+    return doctor
+
+
+def live_report(src: BusSource, doctor: Doctor) -> Report:
+    """The doctor's report now (silence measured up to ``src``'s clock), the messages that
+    came before their broadcaster's liveliness accounted to it."""
+    _name_unknown(src, doctor)
+    return doctor.report(now=src.clock.now())
+
+
+def _doctor_live(src: BusSource, duration: float) -> Report | None:
+    """Listen for ``duration`` seconds (or until Ctrl-C), then the report; None when the
+    bus could not be opened (after a one-line error)."""
+    import anyio
+
+    if src.is_fleet:
+        fail("doctor reads one robot's bus: give the robot's namespace, not namespace=*")
+    doctor = watch(src)
     result: list[Report] = []
 
     def finish() -> None:
-        _name_unknown(src, doctor)
-        result.append(doctor.report(now=src.clock.now()))
+        result.append(live_report(src, doctor))
 
     code = run_live(lambda: live(src, duration, anyio.sleep_forever, finish=finish))
     if code == 1 or not result:
