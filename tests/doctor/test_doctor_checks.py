@@ -324,6 +324,19 @@ def test_memory_is_bounded_by_frames_and_senders_not_messages() -> None:
     assert found.counts["untracked_transforms"] == 40_000
 
 
+def test_a_peer_making_loops_at_random_cannot_grow_memory() -> None:
+    """Frames re-parented into ever new loops: MAX_LOOPS are remembered, the rest counted."""
+    from tfbus.doctor.checks import MAX_LOOPS
+
+    d = Doctor()
+    for k in range(MAX_LOOPS + 50):
+        _feed(d, T0 + k, tf(f"a{k}", f"b{k}", T0), tf(f"b{k}", f"a{k}", T0), static=True)
+    report = d.report()
+    assert len(report.by_check("loop")) == MAX_LOOPS
+    (found,) = report.by_check("too_many_frames")
+    assert found.counts["untracked_loops"] == 50
+
+
 @pytest.mark.parametrize(("field", "value"), [("stale_periods", 0), ("gap_min", float("nan")),
                                               ("rate_drop", 1.5), ("max_frames", 2.5),
                                               ("lag", True)])

@@ -136,3 +136,25 @@ def test_not_a_bag_and_live_only_options_are_usage_errors(bags: dict[str, Path],
         lines = err.strip().splitlines()
         assert needle in lines[-1], err
         assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("sim", [(), ("--use-sim-time",)])
+def test_a_quiet_live_bus_is_a_clean_report(sim: tuple[str, ...]) -> None:
+    """The in-process bus, nothing published: --duration bounds the wait, the report
+    says 0 messages and the exit status is 0 (with --use-sim-time too)."""
+    code, out, err = run("--bus", "memory", "--duration", "0.2", "--json", *sim)
+    assert code == 0, err
+    doc = json.loads(out)
+    assert (doc["source"], doc["messages"], doc["findings"]) == ("memory", 0, [])
+
+
+def test_the_documented_checks_are_the_module_s() -> None:
+    """docs/doctor.md's table has one row per check, with its rule and reference."""
+    from tfbus.doctor import CHECKS
+
+    text = DOCS.read_text(encoding="utf-8")
+    rows = [line for line in text.splitlines() if re.match(r"^\| `\w+` \| ", line)]
+    documented = {line.split("`")[1]: line for line in rows if line.split("`")[1] in CHECKS}
+    assert set(documented) == set(CHECKS)
+    for name, check in CHECKS.items():
+        assert documented[name] == f"| `{name}` | {check.rule} | {check.reference} |"

@@ -101,8 +101,8 @@ CHECKS: Final[dict[str, Check]] = {c.name: c for c in (
           "is left to the loop check): a lookup between frames of two trees raises "
           "ConnectivityException", "tf2 BufferCore::lookupTransform "
           "(ConnectivityException), tf2 FAQ"),
-    Check("too_many_frames", "more child frames than max_frames: the rest are counted, not "
-          "checked", "tfbus doctor's memory bound"),
+    Check("too_many_frames", "more child frames than max_frames (or more than MAX_LOOPS "
+          "distinct loops): the rest are counted, not checked", "tfbus doctor's memory bound"),
 )}
 """Every check by name: its rule and reference (``docs/doctor.md`` lists the same)."""
 
@@ -221,6 +221,9 @@ class _Sample:
 
 
 _RECENT_STAMPS = 32  # stamps per frame kept to tell a repeated one (tf2's cache holds more)
+MAX_LOOPS: Final = 100
+"""Distinct loops remembered (a peer re-parenting frames at random cannot grow memory);
+further ones are counted in the report's ``too_many_frames``-style ``loops_untracked``."""
 
 
 class _Link:
@@ -306,6 +309,7 @@ class Doctor:
         self.sim_time: bool | None = None
         self.damage: str | None = None
         self.untracked = 0
+        self.loops_untracked = 0
         self._links: dict[str, _Link] = {}
         self._latest: dict[str, str] = {}  # child -> its latest parent
         self._loops: dict[frozenset[str], tuple[tuple[str, ...], str, int, int]] = {}
@@ -459,6 +463,9 @@ class Doctor:
         path = (child, *up[:-1]) if parent != child else (child,)
         key = frozenset(path)
         found = self._loops.get(key)
+        if found is None and len(self._loops) >= MAX_LOOPS:
+            self.loops_untracked += 1
+            return
         self._loops[key] = (path, sender, found[2] if found else t, t)
 
     def _stamps(self, link: _Link, t: int, stamp: int, sender: str) -> None:
@@ -608,13 +615,15 @@ class Doctor:
         findings += self._loop_findings()
         findings += self._tree_findings()
         findings += self._clock_findings()
-        if self.untracked:
+        if self.untracked or self.loops_untracked:
             findings.append(self._finding(
                 "too_many_frames", Level.INFO,
-                f"more than {self.thresholds.max_frames} child frames: {self.untracked} "
-                "transforms of further frames were counted, not checked",
+                f"more than {self.thresholds.max_frames} child frames or {MAX_LOOPS} loops: "
+                f"{self.untracked} transforms of further frames and {self.loops_untracked} "
+                "further loops were counted, not checked",
                 advice="raise Thresholds.max_frames (memory grows with it)",
-                counts={"untracked_transforms": self.untracked}))
+                counts={"untracked_transforms": self.untracked,
+                        "untracked_loops": self.loops_untracked}))
         findings.sort(key=lambda f: (-f.level.rank, f.check, f.frames, f.senders))
         return Report(
             source=self.source, findings=tuple(findings), messages=self.messages,
