@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.doctor import Level
 
 T0 = 1_700_000_000 * 10**9
 """Receive time (ns) of the first message."""
@@ -200,6 +201,29 @@ FAULTS: dict[str, Callable[[], list[Record]]] = {
     "disconnected": disconnected,
 }
 """Each check's recording, by the check's name."""
+
+
+EXPECTED: dict[str, tuple[Level, tuple[str, ...], tuple[str, ...]]] = {
+    # check: (level, frames, senders)
+    "several_authorities": (Level.ERROR, ("base_link", "odom"), ("/odometry", "/rogue")),
+    "static_and_dynamic": (Level.ERROR, ("laser", "base_link"),
+                           ("/laser_driver", "/robot_state_publisher")),
+    "parent_change": (Level.WARNING, ("camera", "base_link", "laser"), ("/camera_node",)),
+    "loop": (Level.ERROR, ("arm_base", "tool"), ("/bad_node",)),
+    "rep105": (Level.ERROR, ("odom", "base_link"), ("/amcl", "/odometry")),
+    "base_footprint": (Level.WARNING, ("base_footprint", "base_link"),
+                       ("/odometry", "/robot_state_publisher")),
+    "leading_slash": (Level.ERROR, ("/base_link",), ("/odometry",)),
+    "stopped": (Level.WARNING, ("base_link", "odom"), ("/odometry",)),
+    "gap": (Level.WARNING, ("base_link", "odom"), ("/odometry",)),
+    "rate_drop": (Level.WARNING, ("base_link", "odom"), ("/odometry",)),
+    "repeated_stamps": (Level.WARNING, ("base_link", "odom"), ("/odometry",)),
+    "out_of_order": (Level.WARNING, ("base_link", "odom"), ("/odometry",)),
+    "clock_offset": (Level.ERROR, ("base_link",), ("/odometry",)),
+    "latency": (Level.WARNING, ("odom",), ("/amcl",)),
+    "disconnected": (Level.WARNING, ("map", "laser_mount"), ("/robot_state_publisher",)),
+}
+"""What the doctor finds on each fault's recording, alone: (level, frames, senders)."""
 
 
 def write_ros1(path: Path, records: list[Record]) -> Path:

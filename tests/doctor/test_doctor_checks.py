@@ -17,6 +17,7 @@ pytest.importorskip("mcap")
 from doctor_faults import (
     AMCL_DELAY_NS,
     CLOCK_AHEAD_NS,
+    EXPECTED,
     FAULTS,
     LAG_NS,
     MS,
@@ -47,27 +48,6 @@ from tfbus.messages import TFMessage
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 E, W, INFO = Level.ERROR, Level.WARNING, Level.INFO
-
-EXPECTED: dict[str, tuple[Level, tuple[str, ...], tuple[str, ...]]] = {
-    # check: (level, frames, senders)
-    "several_authorities": (E, ("base_link", "odom"), ("/odometry", "/rogue")),
-    "static_and_dynamic": (E, ("laser", "base_link"),
-                           ("/laser_driver", "/robot_state_publisher")),
-    "parent_change": (W, ("camera", "base_link", "laser"), ("/camera_node",)),
-    "loop": (E, ("arm_base", "tool"), ("/bad_node",)),
-    "rep105": (E, ("odom", "base_link"), ("/amcl", "/odometry")),
-    "base_footprint": (W, ("base_footprint", "base_link"),
-                       ("/odometry", "/robot_state_publisher")),
-    "leading_slash": (E, ("/base_link",), ("/odometry",)),
-    "stopped": (W, ("base_link", "odom"), ("/odometry",)),
-    "gap": (W, ("base_link", "odom"), ("/odometry",)),
-    "rate_drop": (W, ("base_link", "odom"), ("/odometry",)),
-    "repeated_stamps": (W, ("base_link", "odom"), ("/odometry",)),
-    "out_of_order": (W, ("base_link", "odom"), ("/odometry",)),
-    "clock_offset": (E, ("base_link",), ("/odometry",)),
-    "latency": (W, ("odom",), ("/amcl",)),
-    "disconnected": (W, ("map", "laser_mount"), ("/robot_state_publisher",)),
-}
 
 
 def _only(report: Report) -> Finding:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import anyio
 import pytest
+from doctor_faults import EXPECTED, FAULTS
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.buffer import Buffer
@@ -101,3 +102,24 @@ async def test_a_clean_live_tree_has_no_finding_until_it_stops() -> None:
     assert doctor.report(now=Time.from_ns(T0 + 2900 * MS + 600 * MS)).findings == ()
     (stopped,) = doctor.report(now=Time.from_ns(T0 + 2900 * MS + 1200 * MS)).findings
     assert (stopped.check, stopped.senders) == ("stopped", ("/odometry",))
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("check", sorted(FAULTS))
+async def test_every_fault_live_as_in_its_recording(check: str) -> None:
+    """Each fault's records published on the in-process bus, the clock set to each
+    record's receive time first, each sender named on its messages: the same single
+    finding as from the recording (doctor_faults.EXPECTED)."""
+    clock = ManualClock(Time.from_ns(T0 - MS))
+    doctor = Doctor()
+    kinds: dict[str, type[TFMessage]] = {}
+    records = sorted(FAULTS[check](), key=lambda r: r[0])
+    async with Bus() as bus, TransformListener(DoctorSink(doctor, clock), bus, clock=clock):
+        for n, (t, topic, sender, tfs) in enumerate(records, 1):
+            kind = kinds.get(sender) or kinds.setdefault(sender, from_sender(sender))
+            await clock.set(Time.from_ns(t))
+            await bus.publish(topic, kind(tfs))
+            await _until(doctor, n)
+        report = doctor.report()
+    assert [(f.check, f.level, f.frames, f.senders) for f in report.findings] == [
+        (check, *EXPECTED[check])]
