@@ -148,6 +148,19 @@ def test_a_damaged_recording_is_a_finding(tmp_path: Path) -> None:
     _validate(report)
 
 
+@pytest.mark.parametrize("fmt", ["sqlite3", "mcap"])
+def test_a_damaged_ros2_recording_is_a_finding(tmp_path: Path, fmt: str) -> None:
+    msgs = [BagMessage(Time.from_ns(t), topic, TFMessage(tfs))
+            for t, topic, _, tfs in sorted(clean(), key=lambda r: r[0])]
+    path = tmp_path / f"bag_{fmt}"
+    write_bag(path, msgs, format=fmt)
+    (data,) = [f for f in path.iterdir() if f.suffix in (".db3", ".mcap")]
+    data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    found = _only(diagnose(path))
+    assert (found.check, found.level) == ("damaged_recording", E)
+    assert str(path) in found.message
+
+
 # --------------------------------------------------------------------------- real recordings
 
 
