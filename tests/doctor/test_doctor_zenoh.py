@@ -41,7 +41,7 @@ def test_static_and_dynamic_over_zenoh_names_both_senders() -> None:
             cwd=ROOT, env=child_env(), capture_output=True, text=True, timeout=90)
         monitor = subprocess.run(
             [sys.executable, "-m", "tfbus.cli", "monitor", "--bus",
-             f"zenoh:connect=tcp/127.0.0.1:{a},tcp/127.0.0.1:{b}", "--duration", "4",
+             f"zenoh:connect=tcp/127.0.0.1:{a},tcp/127.0.0.1:{b}", "--duration", "6",
              "--interval", "60"],
             cwd=ROOT, env=child_env(), capture_output=True, text=True, timeout=90)
     finally:
