@@ -564,6 +564,10 @@ class MonitoredSink:
             wire format carries none); by default the listener's authority is used.
         attribute: ``attribute(is_static, transforms) -> str`` names the sender from
             the message too (its frames); used instead of ``authority`` when given.
+
+    :attr:`observers` are called with every message accounted, ``(receive time,
+    transforms, authority as attributed, is_static)`` (``tfbus doctor`` watches a live bus
+    through them).
     """
 
     def __init__(
@@ -581,6 +585,9 @@ class MonitoredSink:
         self._clock = clock
         self._authority = authority
         self._attribute = attribute
+        self.observers: list[Callable[[Time, Sequence[TransformStamped], str, bool], None]] = []
+        """Called with each message accounted: (receive time, transforms, authority,
+        is_static)."""
 
     def _account(self, transforms: Sequence[TransformStamped], authority: str,
                  static: bool) -> str:
@@ -588,7 +595,10 @@ class MonitoredSink:
             authority = self._attribute(static, transforms)
         elif self._authority is not None:
             authority = self._authority(static)
-        self.summary.add(self._clock.now(), transforms, authority, static=static)
+        now = self._clock.now()
+        self.summary.add(now, transforms, authority, static=static)
+        for observe in self.observers:
+            observe(now, transforms, authority, static)
         return authority
 
     def set_transforms(

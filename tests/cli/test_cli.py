@@ -38,7 +38,7 @@ from tfbus.cli import main, parse_static_args
 from tfbus.messages import TFMessage
 
 COMMANDS = ["bag-info", "echo", "monitor", "frames", "static-transform", "replay",
-            "robot-state-publisher", "joint-states", "demo", "view"]
+            "robot-state-publisher", "joint-states", "demo", "view", "doctor"]
 
 
 def test_group_help_lists_commands() -> None:

@@ -67,6 +67,7 @@ def bases(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
         "view": ["--bag", bag, "--port", "0"],
         "router": ["--listen", f"tcp/127.0.0.1:{_free_port()}", "--duration", "0.05"],
         "serve-buffer": ["--bus", zenoh, "--duration", "0.05"],
+        "doctor": ["--bag", bag],
     }
 
 

@@ -5,6 +5,7 @@
     tfbus bag-info PATH                       frames, parents, rates, span, static/dynamic
     tfbus echo SOURCE TARGET --bag PATH       like tf2_echo
     tfbus monitor --bag PATH                  like tf_monitor
+    tfbus doctor --bag PATH                   what is wrong with the tree (--bus: live)
     tfbus frames --bag PATH -o frames.pdf     like view_frames (Graphviz)
     tfbus static-transform x y z yaw pitch roll parent child     (on --bus, default zenoh)
     tfbus replay PATH --rate 2                publish a bag on --bus, with a progress bar
@@ -62,6 +63,7 @@ COMMANDS: tuple[str, ...] = (
     "view",
     "router",
     "serve_buffer",
+    "doctor",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from rich.console import Console
     from rich.table import Table
 
+    from tfbus.doctor import Doctor
     from tfbus.fleet import FleetBuffer
     from tfbus.monitor import AuthoritySummary, TfSummary
     from tfbus.transports._base import PeerInfo
@@ -89,7 +90,8 @@ def _table(title: str, names: Sequence[str], numbers: Sequence[str]) -> Table:
 
 
 def print_monitor(
-    out: Console, s: TfSummary, frames: Sequence[str], live_src: BusSource | None = None
+    out: Console, s: TfSummary, frames: Sequence[str], live_src: BusSource | None = None,
+    doctor: Doctor | None = None,
 ) -> None:
     """tf_monitor's report: ``RESULTS`` (and for ``A B`` the chain and its net delay),
     the frames table, the broadcasters table and, for a live bus, the broadcasters known
@@ -98,7 +100,10 @@ def print_monitor(
     On a live bus the rates are the recent ones (:data:`tfbus.monitor.RATE_WINDOW`
     seconds before now): the frames of a broadcaster that stopped fall to 0.000 and read
     ``stale`` (silent for :data:`tfbus.monitor.STALE_PERIODS` of their periods, at least
-    :data:`tfbus.monitor.STALE_AFTER` s); a bag's are over the whole recording."""
+    :data:`tfbus.monitor.STALE_AFTER` s); a bag's are over the whole recording.
+
+    With a ``doctor`` watching the live bus (:func:`tfbus.cli.doctor.watch`), its findings
+    so far follow (``tfbus doctor``'s table), or one line saying there are none."""
     from tfbus.monitor import FrameSummary
 
     now = live_src.clock.now() if live_src is not None else None
@@ -147,6 +152,14 @@ def print_monitor(
         line = transport_line(live_src)
         if line:
             out.print(line)
+    if live_src is not None and doctor is not None:
+        from tfbus.cli.doctor import findings_table, live_report
+
+        found = live_report(live_src, doctor)
+        if found.findings:
+            out.print(findings_table(found, title="Findings (tfbus doctor)"))
+        else:
+            out.print("doctor: no problems found")
     if live_src is not None and live_src.fleet is not None:
         out.print(robots_table(live_src.fleet, s, rate))
     if live_src is not None and live_src.has_liveliness:
@@ -258,9 +271,11 @@ def command(
 def _monitor_live(
     src: BusSource, frames: Sequence[str], *, duration: float | None, interval: float
 ) -> int:
+    from tfbus.cli.doctor import watch
     from tfbus.clock import every
 
     out = console()
+    doctor = None if src.is_fleet else watch(src)
 
     def on_peer(what: str, info: PeerInfo) -> None:
         if what == "alive":
@@ -271,7 +286,7 @@ def _monitor_live(
                       "is gone: liveliness lost (it exited, was killed or is unreachable)")
 
     def report() -> None:
-        print_monitor(out, src.summary(), frames, live_src=src)
+        print_monitor(out, src.summary(), frames, live_src=src, doctor=doctor)
 
     async def body() -> None:
         async for _ in every(interval, clock=src.clock):
