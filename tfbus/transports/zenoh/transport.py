@@ -15,8 +15,10 @@ implausibly are reported as resets, not as billions of lost messages.
 
 Late joiners: each transport serves the latched topics it has *itself* published
 (``/tf_static`` merged per child frame by a :class:`~tfbus.latch.StaticLatch`) on a
-queryable; when a node appears (liveliness), the others query it, so a listener started
-after a static broadcaster -- or a broadcaster whose first publish raced the connection --
+queryable answered in Zenoh's thread from the bytes last latched
+(:mod:`tfbus.transports.zenoh.queryable`, the home of tfbus's Zenoh queryables); when
+a node appears (liveliness), the others query it, so a listener started after a static
+broadcaster -- or a broadcaster whose first publish raced the connection --
 still gets its static transforms.
 
 Sending: latched topics (``/tf_static``) are put with ``CongestionControl.BLOCK`` and
@@ -72,6 +74,7 @@ from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.fleet_keys import key_space
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
+from tfbus.transports.zenoh.queryable import declare_answering_queryable
 from tfbus.transports.zenoh.sequence import SequenceTracker
 
 if TYPE_CHECKING:
@@ -602,8 +605,9 @@ class ZenohTransport:
                 )
             )
         declared.append(
-            session.declare_queryable(
-                keys.latch(self._node_id), self._on_query, allowed_origin=zenoh.Locality.REMOTE
+            declare_answering_queryable(
+                session, keys.latch(self._node_id), self._on_query,
+                allowed_origin=zenoh.Locality.REMOTE,
             )
         )
         liveliness = session.liveliness()
@@ -680,13 +684,15 @@ class ZenohTransport:
         self._push((kind, str(sample.key_expr), b""))
 
     def _on_query(self, query: zenoh.Query) -> None:
-        with query:
-            for outlet in list(self._outlets.values()):
-                payload = outlet.latched_payload
-                if payload is not None:
-                    key = self._keys.latch(self._node_id, outlet.topic)
-                    if query.key_expr.intersects(key):
-                        query.reply(key, payload)
+        """A late joiner's query of the latch: the latched payloads (a Zenoh thread;
+        :func:`~tfbus.transports.zenoh.queryable.declare_answering_queryable` finalizes
+        the query)."""
+        for outlet in list(self._outlets.values()):
+            payload = outlet.latched_payload
+            if payload is not None:
+                key = self._keys.latch(self._node_id, outlet.topic)
+                if query.key_expr.intersects(key):
+                    query.reply(key, payload)
 
     # -- internals: event loop ------------------------------------------------------------
 
