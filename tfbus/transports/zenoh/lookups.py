@@ -47,6 +47,14 @@ an expired timeout after ``query_timeout`` wall seconds (or ``max_wait``, whiche
 less). The querier is the Zenoh session id of the query's source info (``SourceInfo``,
 set by :class:`BufferClient`); queries without one share a single per-peer share. Zenoh
 does not authenticate that id: on an untrusted network use Zenoh's access control.
+
+Threads: the queryable is a :class:`~tfbus.transports.zenoh.queryable.LoopQueryable`:
+Zenoh's thread only queues each query (at most ``max_pending``; beyond, it answers "buffer
+server busy" at once, counted in ``busy``) and wakes the event loop through
+:class:`~tfbus.transports._base.ThreadWakeup`, where the query is decoded, admitted and
+answered by a task; a Zenoh thread never waits for the loop. A client's lookup is a Zenoh
+``get`` whose reply wakes the waiting task through a socket
+(:func:`~tfbus.transports.zenoh.queryable.get_replies`): no thread per pending lookup.
 """
 
 from __future__ import annotations
@@ -285,7 +293,8 @@ class BufferServer:
       (its liveliness token ``{key}/@lookup/{id}`` was deleted), its slot freed;
     * at most ``max_pending`` lookups wait at once and at most ``max_per_peer`` of one
       querier (the Zenoh session id of the query's source info); more are answered at once
-      with a ``TransformException`` "buffer server busy: ...";
+      with a ``TransformException`` "buffer server busy: ..."; so are queries beyond
+      ``max_pending`` still queued for a busy event loop, in Zenoh's thread (module doc);
     * a frame id longer than :data:`MAX_FRAME_ID_BYTES` is answered with an
       ``InvalidArgumentException`` naming the field, and so is a request over 16 KiB.
 
