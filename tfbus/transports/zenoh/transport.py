@@ -173,21 +173,26 @@ class NewestOnly:
         self.poke()
 
     def offer(self, payload: bytes) -> None:
-        """A sample of the topic (Zenoh's thread): kept, or queued with the one kept
-        before it and the loop woken."""
+        """A sample of the topic (Zenoh's thread): kept, or queued and the loop woken --
+        after the one kept before it when it steps back or does not decode (the jump is
+        seen from the newest time; a bad sample does not replace a good one)."""
         transport = self._transport
         with self._lock:
             pending, self.payload = self.payload, payload  # stored before ``due`` reads
             ns = clock_stamp(payload)
             now = time.monotonic()
-            if ns is None or ns < self._last_ns or now - self._waked >= NEWEST_MAX_DELAY \
+            ordered = ns is None or ns < self._last_ns
+            if ordered or now - self._waked >= NEWEST_MAX_DELAY \
                     or any(due(ns) for due in self._dues):
                 self.payload = None
                 self._waked = now
                 if ns is not None:
                     self._last_ns = ns
                 if pending is not None:
-                    transport._push((_NEWEST, self._key, pending))
+                    if ordered:
+                        transport._push((_NEWEST, self._key, pending))
+                    else:
+                        transport._stats.coalesced += 1
                 transport._push((_NEWEST, self._key, payload))
                 return
             self._last_ns = ns
