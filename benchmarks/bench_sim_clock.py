@@ -166,7 +166,7 @@ RAW_VARIANTS: tuple[tuple[str, str, dict[str, str], str], ...] = (
     ("idle session, nothing sent", "idle", {}, ""),
     ("a no-op Python callback per sample", "callback", {}, ""),
     ("RingChannel polled at 100 Hz (no Python per sample)", "ring", {}, ""),
-    ("a no-op callback run in Zenoh's thread (indirect=False)", "direct", {}, ""),
+    ("no-op callback in Zenoh's thread (indirect=False)", "direct", {}, ""),
     ("callback, ZENOH_RUNTIME one worker thread each", "callback",
      {"ZENOH_RUNTIME": f"({ONE_THREAD_RUNTIME})"}, ""),
     ("callback, transport/unicast/lowlatency", "callback", {},
