@@ -26,8 +26,10 @@ process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
    same way, with (a) an idle session (nothing sent), (b) a no-op Python callback per
    sample (what tfbus's transport declares), (c) a ``RingChannel`` handler polled 100
    times a second (no Python per sample at all: the cost of Zenoh's own receive
-   threads), (d) (b) with ``ZENOH_RUNTIME`` giving every Zenoh runtime one worker
-   thread, (e) (b) with Zenoh's ``transport/unicast/lowlatency`` (QoS off) on both sides.
+   threads), (d) (b) run in Zenoh's own thread (``Callback(..., indirect=False)``: no
+   Python thread of zenoh-python's in between), (e) (b) with ``ZENOH_RUNTIME`` giving
+   every Zenoh runtime one worker thread, (f) (b) with Zenoh's
+   ``transport/unicast/lowlatency`` (QoS off) on both sides.
    These are the floor any zenoh-python subscriber pays; ``--no-raw`` leaves them out.
 
 Figures only: nothing here asserts a timing (a loaded machine shows it in the figures).
