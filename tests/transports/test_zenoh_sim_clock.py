@@ -110,8 +110,9 @@ async def test_clock_is_followed_newest_only_between_deadlines() -> None:
     fast as the bus takes them, Zenoh's thread keeps the newest and the event loop sees
     a few (the rest counted in the transport's ``coalesced``), yet a deadline filed
     between two stamps fires at the first /clock that reaches it, a jump back is seen
-    in order (from the last stamp before it, once), and ``now()`` ends at the last
-    stamp. Before: every /clock woke the event loop and was delivered."""
+    in order (from the last stamp before it, once), bad /clock are counted and dropped,
+    and ``now()`` ends at the last stamp. Before: every /clock woke the event loop and
+    was delivered."""
     port = free_port()
     sim = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="simulator")
     app = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="app")
@@ -145,3 +146,9 @@ async def test_clock_is_followed_newest_only_between_deadlines() -> None:
         await publish_until_read(502 * MS)
         assert jumps == [(Time.from_ns(3000 * MS), Time.from_ns(500 * MS))]
         assert (clock.jumps, clock.dropped, clock.statistics().interleaved) == (1, 0, 0)
+        # a /clock far ahead (2e9 s > max_forward_step) and a TFMessage on /clock reach
+        # the loop at once and are counted and dropped; the valid ones around them stay
+        a.publish_nowait(CLOCK_TOPIC, Clock(Time(2_000_000_000)))
+        a.publish_nowait(CLOCK_TOPIC, TFMessage(()))
+        await publish_until_read(503 * MS)
+        assert (clock.dropped, clock.jumps) == (2, 1)
