@@ -182,7 +182,7 @@ class NewestOnly:
             ns = clock_stamp(payload)
             now = time.monotonic()
             ordered = ns is None or ns < self._last_ns
-            if ordered or now - self._waked >= NEWEST_MAX_DELAY \
+            if ns is None or ordered or now - self._waked >= NEWEST_MAX_DELAY \
                     or any(due(ns) for due in self._dues):
                 self.payload = None
                 self._waked = now
