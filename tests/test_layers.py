@@ -523,6 +523,31 @@ def test_the_remote_facade_asks_the_transports_capability() -> None:
     assert "tfbus.transports.zenoh.lookups" in MODULES
 
 
+def test_middleware_threads_reach_the_loop_only_through_thread_wakeup() -> None:
+    """docs/architecture.md "a new capability goes on its transport": no transport
+    imports ``anyio.from_thread`` (a second thread-to-loop bridge beside
+    ``ThreadWakeup``), and only ``transports/zenoh/queryable.py`` declares Zenoh
+    queryables (one module owns them)."""
+    portals: list[str] = []
+    queryables: list[str] = []
+    for module, path in MODULES.items():
+        if not module.startswith("tfbus.transports") or path.suffix != ".py":
+            continue
+        portals += [f"{_where(module, line)}: imports {name}"
+                    for name, line in _imports(module, path)
+                    if name.startswith("anyio.from_thread")]
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        queryables += [
+            _where(module, node.lineno) for node in ast.walk(tree)
+            if isinstance(node, ast.Attribute) and node.attr == "declare_queryable"
+            and module != "tfbus.transports.zenoh.queryable"
+        ]
+    assert not portals, "a second thread-to-loop bridge:\n" + "\n".join(portals)
+    assert not queryables, "a Zenoh queryable outside zenoh/queryable.py:\n" + \
+        "\n".join(queryables)
+    assert "tfbus.transports.zenoh.queryable" in MODULES
+
+
 FRAME_WALK_HOMES: dict[str, set[str]] = {
     "tfbus.core.buffer_core": {"up"},  # frame_path: tfbus's one frame path
     "tfbus.compat.tf2_py": {"_walk_chain"},  # tf2_py 0.7.6 ``_chain``

@@ -16,7 +16,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from tfbus.codecs import cdr, native, ros1
+from tfbus.codecs import cdr, lookup_action_cdr, native, ros1
 from tfbus.errors import WireDecodeError, WireEncodeError, WireLimitError
 from tfbus.messages import (
     Clock,
@@ -63,9 +63,13 @@ def test_every_codec_module_has_the_same_functions_and_parameters() -> None:
         present = [name for name in LOOKUP_SHAPE if hasattr(module, name)]
         assert present in ([], list(LOOKUP_SHAPE)), f"{module.__name__}: {present}"
         for name in present:
+            assert name in module.__all__, f"{module.__name__} lacks {name}"
             assert _parameters(getattr(module, name)) == reference[name], \
                 f"{module.__name__}.{name}"
-    assert all(hasattr(ros1, name) for name in LOOKUP_SHAPE)
+            assert getattr(module, name).__doc__, f"{module.__name__}.{name} has no docstring"
+    # the wires with the action: ROS 1 (actionlib) and ROS 2 (CDR, re-exported by cdr)
+    assert all(hasattr(m, name) for m in (ros1, cdr) for name in LOOKUP_SHAPE)
+    assert cdr.encode_lookup_goal is lookup_action_cdr.encode_lookup_goal
 
 
 TS = (
@@ -263,3 +267,117 @@ def test_ros1_action_messages_are_read_by_debians_genpy() -> None:
         "'extrapolation into the future'",
         "12000000000 [('g-1', 9000000004, 1, ''), ('g-2', 8000000000, 8, 'recalled')]",
     ]
+
+
+# -- the LookupTransform action on ROS 2 (CDR) ----------------------------------------------
+
+UUID_TEXT = "6ba7b810-9dad-11d1-80b4-00c04fd430c8"  # RFC 4122 appendix C's DNS namespace
+CDR_GOAL = LookupTransformGoal("map", "laser", Time(5, 7), 1.5, Time(6), "odom", True,
+                               UUID_TEXT)
+CDR_RESULT = LookupTransformResult(TS[0], 3, "extrapolation into the future", status=4)
+
+
+def test_cdr_lookup_goal_and_result_round_trip_and_refuse_damage() -> None:
+    raw_goal, raw_result = cdr.encode_lookup_goal(CDR_GOAL), cdr.encode_lookup_result(CDR_RESULT)
+    assert cdr.decode_lookup_goal(raw_goal) == CDR_GOAL
+    assert cdr.decode_lookup_result(raw_result) == CDR_RESULT
+    # the goal id as 32 hex digits is the same UUID; fields the message lacks are dropped
+    undashed = CDR_GOAL._replace(goal_id=UUID_TEXT.replace("-", ""), goal_stamp=Time(9))
+    assert cdr.encode_lookup_goal(undashed) == raw_goal
+    assert cdr.encode_lookup_result(CDR_RESULT._replace(goal_id="g", stamp=Time(3))) \
+        == raw_result
+    assert raw_goal[:4] == b"\x00\x01\x00\x00" and raw_goal[4:20] == bytes.fromhex(
+        UUID_TEXT.replace("-", ""))
+    for raw, decode in ((raw_goal, cdr.decode_lookup_goal),
+                        (raw_result, cdr.decode_lookup_result)):
+        for cut in range(len(raw) - 3):  # the last bytes may be padding
+            with pytest.raises(WireDecodeError):
+                decode(raw[:cut])
+    with pytest.raises(WireEncodeError, match="goal_id must be a UUID"):
+        cdr.encode_lookup_goal(CDR_GOAL._replace(goal_id="g-1"))
+    with pytest.raises(WireEncodeError, match="source_time"):
+        cdr.encode_lookup_goal(CDR_GOAL._replace(source_time=Time(2**31)))
+    with pytest.raises(WireEncodeError, match="timeout"):
+        cdr.encode_lookup_goal(CDR_GOAL._replace(timeout=float("nan")))
+    with pytest.raises(WireEncodeError, match="NUL"):
+        cdr.encode_lookup_result(CDR_RESULT._replace(error_string="a\0b"))
+
+
+def test_cdr_lookup_messages_are_the_action_samples_without_the_request_identity() -> None:
+    """rmw_cyclonedds_cpp's samples (:mod:`tfbus.codecs.lookup_action_cdr`) are the same
+    bytes with the 16-byte request identity after the encapsulation header."""
+    rid = lookup_action_cdr.RequestId(0x0102030405060708, 42)
+    identity = struct.pack("<Qq", rid.guid, rid.seq)
+    goal = lookup_action_cdr.LookupGoal(bytes.fromhex(UUID_TEXT.replace("-", "")), "map",
+                                        "laser", Time(5, 7), 1.5, Time(6), "odom", True)
+    sample = lookup_action_cdr.encode_send_goal_request(rid, goal)
+    raw = cdr.encode_lookup_goal(CDR_GOAL)
+    assert sample == raw[:4] + identity + raw[4:]
+    result = lookup_action_cdr.LookupResult(4, TS[0], 3, "extrapolation into the future")
+    sample = lookup_action_cdr.encode_get_result_response(rid, result)
+    raw = cdr.encode_lookup_result(CDR_RESULT)
+    assert sample == raw[:4] + identity + raw[4:]
+
+
+_ACTION_MSGS = {
+    "tf2_msgs/msg/LookupTransformGoal": """string target_frame
+string source_frame
+builtin_interfaces/Time source_time
+builtin_interfaces/Duration timeout
+builtin_interfaces/Time target_time
+string fixed_frame
+bool advanced""",
+    "tf2_msgs/msg/LookupTransformSendGoalRequest": """unique_identifier_msgs/UUID goal_id
+tf2_msgs/LookupTransformGoal goal""",
+    "tf2_msgs/msg/LookupTransformResult": """geometry_msgs/TransformStamped transform
+tf2_msgs/TF2Error error""",
+    "tf2_msgs/msg/LookupTransformGetResultResponse": """int8 status
+tf2_msgs/LookupTransformResult result""",
+}
+
+
+def test_cdr_lookup_messages_equal_rosbags_serialize_cdr() -> None:
+    """rosbags' generic CDR serialiser, given ``LookupTransform.action``'s fields
+    (tf2_msgs, rosidl's ``SendGoal_Request`` / ``GetResult_Response`` layout), writes the
+    same bytes, and its bytes decode to the same values."""
+    pytest.importorskip("rosbags")
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    for name, text in _ACTION_MSGS.items():
+        store.register(get_types_from_msg(text, name))
+    t = store.types
+    stamp = t["builtin_interfaces/msg/Time"]
+    goal = t["tf2_msgs/msg/LookupTransformGoal"](
+        target_frame="map", source_frame="laser", source_time=stamp(sec=5, nanosec=7),
+        timeout=t["builtin_interfaces/msg/Duration"](sec=1, nanosec=500_000_000),
+        target_time=stamp(sec=6, nanosec=0), fixed_frame="odom", advanced=True)
+    uuid = t["unique_identifier_msgs/msg/UUID"](
+        uuid=np.frombuffer(bytes.fromhex(UUID_TEXT.replace("-", "")), dtype=np.uint8))
+    request = t["tf2_msgs/msg/LookupTransformSendGoalRequest"](goal_id=uuid, goal=goal)
+    expected = bytes(store.serialize_cdr(  # type: ignore[attr-defined]
+        request, "tf2_msgs/msg/LookupTransformSendGoalRequest"))
+    ours = cdr.encode_lookup_goal(CDR_GOAL)
+    assert ours[:len(expected)] == expected and set(ours[len(expected):]) <= {0}
+    assert cdr.decode_lookup_goal(expected) == CDR_GOAL
+
+    ts = TS[0]
+    tr = ts.transform
+    msg_ts = t["geometry_msgs/msg/TransformStamped"](
+        header=t["std_msgs/msg/Header"](stamp=stamp(sec=1_700_000_000, nanosec=123_456_789),
+                                        frame_id="odom"),
+        child_frame_id="base_link",
+        transform=t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=tr.translation.x, y=tr.translation.y,
+                                                       z=tr.translation.z),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=tr.rotation.x, y=tr.rotation.y,
+                                                       z=tr.rotation.z, w=tr.rotation.w)))
+    result = t["tf2_msgs/msg/LookupTransformResult"](
+        transform=msg_ts,
+        error=t["tf2_msgs/msg/TF2Error"](error=3, error_string="extrapolation into the future"))
+    response = t["tf2_msgs/msg/LookupTransformGetResultResponse"](status=4, result=result)
+    expected = bytes(store.serialize_cdr(  # type: ignore[attr-defined]
+        response, "tf2_msgs/msg/LookupTransformGetResultResponse"))
+    ours = cdr.encode_lookup_result(CDR_RESULT)
+    assert ours[:len(expected)] == expected and set(ours[len(expected):]) <= {0}
+    assert cdr.decode_lookup_result(expected) == CDR_RESULT

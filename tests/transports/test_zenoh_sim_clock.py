@@ -100,3 +100,55 @@ async def test_clock_from_another_bus_drives_sleeps_and_lookups() -> None:
                     await anyio.sleep(0.02)
             assert results["base"] == (2.5, Time(5))
             assert clock.jumps == 0 and clock.dropped == 0
+
+
+MS = 1_000_000
+
+
+async def test_clock_is_followed_newest_only_between_deadlines() -> None:
+    """A SimClock on a Zenoh bus takes /clock newest-only: of 2000 /clock published as
+    fast as the bus takes them, Zenoh's thread keeps the newest and the event loop sees
+    a few (the rest counted in the transport's ``coalesced``), yet a deadline filed
+    between two stamps fires at the first /clock that reaches it, a jump back is seen
+    in order (from the last stamp before it, once), bad /clock are counted and dropped,
+    and ``now()`` ends at the last stamp. Before: every /clock woke the event loop and
+    was delivered."""
+    port = free_port()
+    sim = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="simulator")
+    app = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="app")
+    async with Bus(transport=sim) as a, Bus(transport=app) as b, SimClock(b) as clock:
+        with anyio.fail_after(10):
+            await sim.wait_matching(CLOCK_TOPIC)
+
+        async def publish_until_read(ns: int) -> None:
+            with anyio.fail_after(10):
+                while clock.now_ns() != ns:
+                    a.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(ns)))
+                    await anyio.sleep(0.02)
+
+        await publish_until_read(1000 * MS)
+        fired: list[Time] = []
+        jumps: list[tuple[Time, Time]] = []
+        clock.on_jump(lambda old, new: jumps.append((old, new)))
+        clock.call_later(0.5005, lambda: fired.append(clock.now()))  # at 1500.5 ms
+        received = clock.received
+        for k in range(1, 2001):  # 1001 .. 3000 ms
+            a.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns((1000 + k) * MS)))
+            await anyio.sleep(0)
+        await publish_until_read(3000 * MS)
+        assert fired and fired[0].ns in (1501 * MS, 1502 * MS)  # within one /clock
+        delivered = clock.received - received
+        assert delivered < 1000, delivered
+        assert app.statistics().coalesced >= 1000
+        for ns in (500 * MS, 501 * MS, 502 * MS):  # a loop of the bag: back to 500 ms
+            a.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(ns)))
+            await anyio.sleep(0)
+        await publish_until_read(502 * MS)
+        assert jumps == [(Time.from_ns(3000 * MS), Time.from_ns(500 * MS))]
+        assert (clock.jumps, clock.dropped, clock.statistics().interleaved) == (1, 0, 0)
+        # a /clock far ahead (2e9 s > max_forward_step) and a TFMessage on /clock reach
+        # the loop at once and are counted and dropped; the valid ones around them stay
+        a.publish_nowait(CLOCK_TOPIC, Clock(Time(2_000_000_000)))
+        a.publish_nowait(CLOCK_TOPIC, TFMessage(()))
+        await publish_until_read(503 * MS)
+        assert (clock.dropped, clock.jumps) == (2, 1)

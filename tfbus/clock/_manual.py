@@ -253,6 +253,14 @@ class ManualClock:
             return None
         return Time.from_ns(self._sleepers[0][0])
 
+    def _next_deadline_ns(self) -> int:
+        """The earliest deadline filed (a cancelled one may still count), or a time no
+        clock reaches; safe to call from another thread (one read of the heap's top)."""
+        try:
+            return self._sleepers[0][0]
+        except IndexError:
+            return _NEVER
+
     def _advance_ns(self, d: float | Duration) -> int:
         ns = seconds_to_ns(d, name="d")
         if ns < 0:

@@ -8,7 +8,7 @@ from collections.abc import Callable, Hashable
 from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import anyio
 
@@ -31,13 +31,38 @@ MAX_FORWARD_STEP: float = 1e9
 ahead of the time it reads (about 31.7 years); a message further ahead is dropped."""
 
 
+class NewestFollow(Protocol):
+    """What :meth:`KeepsNewest.keep_newest` returns."""
+
+    def poke(self) -> None:
+        """Deliver the sample kept, if any, at the event loop's next turn."""
+
+    def close(self) -> None:
+        """End newest-only delivery for this follower."""
+
+
+@runtime_checkable
+class KeepsNewest(Protocol):
+    """A transport that can deliver a topic newest-only, deciding in its receiving thread
+    when the event loop must see a sample (the Zenoh transport:
+    :meth:`tfbus.transports.zenoh.ZenohTransport.keep_newest`). A :class:`SimClock` asks
+    ``isinstance(bus.transport, KeepsNewest)``."""
+
+    def keep_newest(self, topic: str, due: Callable[[int], bool]) -> NewestFollow:
+        """Deliver ``topic`` (``rosgraph_msgs/Clock``) newest-only; ``due(stamp_ns)``
+        (the transport's thread) says when a sample must reach the event loop now."""
+        ...
+
+
 @dataclass(frozen=True, slots=True)
 class SimClockStatistics:
     """Counters of a :class:`SimClock` (:meth:`SimClock.statistics`), monotonic since
     the clock was made.
 
     Attributes:
-        received: messages delivered on the clock's topic, valid or not.
+        received: messages delivered on the clock's topic, valid or not (over Zenoh,
+            where ``/clock`` is followed newest-only, the ones the event loop saw; the
+            transport counts the skipped ones as ``coalesced``).
         accepted: valid ``/clock`` messages that set the time (equal stamps included).
         dropped: messages dropped: not a ``Clock`` of a :class:`~tfbus.time.Time`, or
             more than ``max_forward_step`` seconds ahead of ``now()``.
@@ -130,6 +155,17 @@ class SimClock:
       :attr:`SimClockStatistics.interleaved` and logged as several publishers on the
       topic (the first, then one in a thousand); a looping bag, which runs on from its
       start, is not.
+    * On a bus whose transport delivers a topic newest-only (:class:`KeepsNewest`: the
+      Zenoh transport), the clock asks for ``/clock`` newest-only: Zenoh's thread decodes
+      each ``/clock`` and wakes the event loop only when it reaches the earliest deadline
+      filed on this clock, steps back, is the first, is more than ``max_forward_step``
+      ahead, or a ``wall_timeout`` wait is running (then at every ``/clock``), and at
+      least every 10 ms of wall time while ``/clock`` flows
+      (:data:`~tfbus.transports.zenoh.transport.NEWEST_MAX_DELAY`): the samples in
+      between are skipped (counted by the transport as ``coalesced``, not here), as a
+      keep-last-1 ``/clock`` subscription of rclpy skips them, and ``now()`` may lag the
+      newest ``/clock`` by that much. A ``/clock`` at 1 kHz then costs one event-loop
+      wake-up per deadline or per 10 ms, not per message.
     * A message that is not a ``Clock`` holding a :class:`~tfbus.time.Time` (a negative
       or non-integer stamp cannot be one), or one more than ``max_forward_step`` seconds
       ahead of ``now()`` once a first ``/clock`` was accepted, is dropped, counted in
@@ -201,6 +237,7 @@ class SimClock:
         self._core = ManualClock()
         self._guards: set[_WallGuard] = set()
         self._subscription: CallbackSubscription | None = None
+        self._newest: NewestFollow | None = None
         self._entered = False
         self._received = 0
         self._accepted = 0
@@ -245,6 +282,9 @@ class SimClock:
             raise RuntimeError("this SimClock has no bus: SimClock(bus) or clock.attach(bus)")
         self._entered = True
         self._subscription = self._bus.subscribe_callback(self._topic, self._on_clock)
+        transport = self._bus.transport
+        if isinstance(transport, KeepsNewest):
+            self._newest = transport.keep_newest(self._topic, self._due)
         return self
 
     async def __aexit__(
@@ -255,6 +295,9 @@ class SimClock:
     ) -> None:
         """Unsubscribe; the body's exception, if any, leaves as itself. ``now()`` keeps
         the last time read."""
+        if self._newest is not None:
+            self._newest.close()
+            self._newest = None
         if self._subscription is not None:
             self._subscription.close()
             self._subscription = None
@@ -355,6 +398,25 @@ class SimClock:
                     )
         self._core.set_nowait(stamp)
 
+    def _due(self, stamp_ns: int) -> bool:
+        """Whether a ``/clock`` of ``stamp_ns`` the transport's thread holds must reach
+        the event loop now (:class:`KeepsNewest`): it reaches the earliest deadline
+        filed, or the clock needs every message (the first, a jump back being checked for
+        interleaving, a wall-guarded wait), or it is to be dropped (logged at once).
+        Called in the transport's thread: reads only."""
+        if self._guards or self._jumped is not None or not self._accepted:
+            return True
+        core = self._core
+        if self._max_step_ns is not None and stamp_ns - core.now_ns() > self._max_step_ns:
+            return True
+        return stamp_ns >= core._next_deadline_ns()
+
+    def _poke(self) -> None:
+        """A deadline is being filed: a ``/clock`` the transport holds may reach it."""
+        newest = self._newest
+        if newest is not None:
+            newest.poke()
+
     # -- Clock protocol ---------------------------------------------------------------
 
     def now(self) -> Time:
@@ -373,6 +435,7 @@ class SimClock:
             SimTimeStalled: ``wall_timeout`` passed with no valid ``/clock``.
             anyio.get_cancelled_exc_class(): the calling task was cancelled meanwhile.
         """
+        self._poke()
         if self._wall_timeout is None:
             await self._core.sleep_until(t)
             return
@@ -390,6 +453,7 @@ class SimClock:
             ValueError: ``seconds`` is NaN.
             TypeError: ``seconds`` is not a number nor a Duration.
         """
+        self._poke()
         if self._wall_timeout is None:
             await self._core.sleep(seconds)
             return
@@ -417,6 +481,7 @@ class SimClock:
             ValueError: ``seconds`` is NaN.
             TypeError: ``seconds`` is not a number, a Duration or None.
         """
+        self._poke()
         return self._guarded(self._core.move_on_after(seconds, shield=shield))
 
     def fail_after(
@@ -432,6 +497,7 @@ class SimClock:
             ValueError: ``seconds`` is NaN.
             TypeError: ``seconds`` is not a number, a Duration or None.
         """
+        self._poke()
         return self._guarded(self._core.fail_after(seconds, shield=shield))
 
     def call_later(
@@ -449,6 +515,7 @@ class SimClock:
         """
         if self._wall_timeout is not None:
             return None
+        self._poke()
         return self._core.call_later(seconds, callback)
 
     def _guarded(

@@ -36,8 +36,13 @@ out alike: :func:`encode_scan`, :func:`decode_scan` (tested equal to rosbags'
 
 **Shape.** The functions have the names and parameters of every codec module of
 :mod:`tfbus.codecs` (``encode_tf``/``decode_tf``, ``encode_scan``/``decode_scan``,
-``encode_clock``/``decode_clock``); the ``tf2_msgs/LookupTransform`` action over DDS has
-its own module.
+``encode_clock``/``decode_clock``) and the ``tf2_msgs/LookupTransform`` action's goal
+and result (``encode_lookup_goal``/``decode_lookup_goal``,
+``encode_lookup_result``/``decode_lookup_result``: ROS 2's ``SendGoal_Request`` and
+``GetResult_Response`` messages), as :mod:`tfbus.codecs.ros1` has them for ROS 1's
+actionlib. The action's functions, and the samples of its services as
+rmw_cyclonedds_cpp puts them on DDS, live in :mod:`tfbus.codecs.lookup_action_cdr`
+(re-exported here).
 
 **Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` and nothing else.
 """
@@ -50,6 +55,12 @@ from typing import Final
 
 import numpy as np
 
+from tfbus.codecs.lookup_action_cdr import (
+    decode_lookup_goal,
+    decode_lookup_result,
+    encode_lookup_goal,
+    encode_lookup_result,
+)
 from tfbus.errors import WireDecodeError, WireEncodeError
 from tfbus.messages import (
     Clock,
@@ -69,9 +80,13 @@ __all__ = [
     "SEC_MAX",
     "SEC_MIN",
     "decode_clock",
+    "decode_lookup_goal",
+    "decode_lookup_result",
     "decode_scan",
     "decode_tf",
     "encode_clock",
+    "encode_lookup_goal",
+    "encode_lookup_result",
     "encode_scan",
     "encode_tf",
 ]

@@ -50,11 +50,20 @@ from __future__ import annotations
 
 import math
 import struct
+import uuid
 from collections.abc import Callable, Sequence
 from typing import Any, Final, NamedTuple, TypeVar
 
 from tfbus.errors import WireDecodeError, WireEncodeError
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import (
+    Header,
+    LookupTransformGoal,
+    LookupTransformResult,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
 from tfbus.time import NSEC_PER_SEC, Time
 
 __all__ = [
@@ -68,6 +77,8 @@ __all__ = [
     "decode_get_result_request",
     "decode_get_result_response",
     "decode_goal_status_array",
+    "decode_lookup_goal",
+    "decode_lookup_result",
     "decode_send_goal_request",
     "decode_send_goal_response",
     "encode_cancel_goal_request",
@@ -75,6 +86,8 @@ __all__ = [
     "encode_get_result_request",
     "encode_get_result_response",
     "encode_goal_status_array",
+    "encode_lookup_goal",
+    "encode_lookup_result",
     "encode_send_goal_request",
     "encode_send_goal_response",
 ]
@@ -295,6 +308,12 @@ def encode_send_goal_request(request_id: RequestId, goal: LookupGoal) -> bytes:
             or more is sent as the longest ``Duration``.
     """
     w = _Writer(request_id)
+    _write_goal(w, goal)
+    return w.done()
+
+
+def _write_goal(w: _Writer, goal: LookupGoal) -> None:
+    """``UUID goal_id`` and ``LookupTransform_Goal goal`` of a ``SendGoal_Request``."""
     w.uuid(goal.goal_id)
     w.string(goal.target_frame, "target_frame")
     w.string(goal.source_frame, "source_frame")
@@ -303,7 +322,6 @@ def encode_send_goal_request(request_id: RequestId, goal: LookupGoal) -> bytes:
     w.time(goal.target_time, "target_time")
     w.string(goal.fixed_frame, "fixed_frame")
     w.put("<B", 1, 1 if goal.advanced else 0)
-    return w.done()
 
 
 @_decoding("LookupTransform_SendGoal_Request")
@@ -315,6 +333,11 @@ def decode_send_goal_request(r: _Reader) -> tuple[RequestId, LookupGoal]:
             NUL-terminated UTF-8, a time before 1970, a negative timeout).
     """
     rid = r.request_id()
+    return rid, _read_goal(r)
+
+
+def _read_goal(r: _Reader) -> LookupGoal:
+    """``UUID goal_id`` and ``LookupTransform_Goal goal`` of a ``SendGoal_Request``."""
     goal_id = r.uuid()
     target = r.string("target_frame")
     source = r.string("source_frame")
@@ -326,8 +349,8 @@ def decode_send_goal_request(r: _Reader) -> tuple[RequestId, LookupGoal]:
     target_time = r.time("target_time")
     fixed = r.string("fixed_frame")
     advanced = r.u8()
-    return rid, LookupGoal(goal_id, target, source, source_time, sec + nanosec / NSEC_PER_SEC,
-                           target_time, fixed, advanced != 0)
+    return LookupGoal(goal_id, target, source, source_time, sec + nanosec / NSEC_PER_SEC,
+                      target_time, fixed, advanced != 0)
 
 
 def encode_send_goal_response(request_id: RequestId, accepted: bool, stamp: Time) -> bytes:
@@ -386,8 +409,15 @@ def encode_get_result_response(request_id: RequestId, result: LookupResult) -> b
         WireEncodeError: a stamp outside int32 seconds, a frame id or error string with a
             NUL, a status outside int8 or an error code outside uint8.
     """
-    ts = result.transform
     w = _Writer(request_id)
+    _write_result(w, result)
+    return w.done()
+
+
+def _write_result(w: _Writer, result: LookupResult) -> None:
+    """``int8 status`` and ``LookupTransform_Result result`` of a
+    ``GetResult_Response``."""
+    ts = result.transform
     try:
         w.put("<b", 1, result.status)
         w.time(ts.header.stamp, "transform.header.stamp")
@@ -399,7 +429,6 @@ def encode_get_result_response(request_id: RequestId, result: LookupResult) -> b
     except struct.error as exc:
         raise WireEncodeError(f"LookupTransform result: {exc}") from None
     w.string(result.error_string, "error.error_string")
-    return w.done()
 
 
 @_decoding("LookupTransform_GetResult_Response")
@@ -410,6 +439,12 @@ def decode_get_result_response(r: _Reader) -> tuple[RequestId, LookupResult]:
         WireDecodeError: the sample is not such a message.
     """
     rid = r.request_id()
+    return rid, _read_result(r)
+
+
+def _read_result(r: _Reader) -> LookupResult:
+    """``int8 status`` and ``LookupTransform_Result result`` of a
+    ``GetResult_Response``."""
     status = r.i8()
     stamp = r.time("transform.header.stamp")
     frame = r.string("transform.header.frame_id")
@@ -419,7 +454,7 @@ def decode_get_result_response(r: _Reader) -> tuple[RequestId, LookupResult]:
     message = r.string("error.error_string")
     ts = TransformStamped(Header(stamp, frame), child,
                           Transform(Vector3(x, y, z), Quaternion(qx, qy, qz, qw)))
-    return rid, LookupResult(status, ts, code, message)
+    return LookupResult(status, ts, code, message)
 
 
 # -- cancel_goal and status ------------------------------------------------------------------
@@ -515,3 +550,92 @@ def decode_goal_status_array(r: _Reader) -> tuple[tuple[GoalInfo, int], ...]:
         stamp = r.time("status_list[].goal_info.stamp")
         out.append((GoalInfo(goal_id, stamp), r.i8()))
     return tuple(out)
+
+
+# -- the action's goal and result in every codec's shape ------------------------------------
+
+
+def _goal_id_bytes(goal_id: str) -> bytes:
+    try:
+        return uuid.UUID(goal_id).bytes
+    except (ValueError, TypeError, AttributeError):
+        raise WireEncodeError(
+            f"goal_id must be a UUID (32 hex digits, RFC 4122), got {goal_id!r:.60}") from None
+
+
+def encode_lookup_goal(message: LookupTransformGoal) -> bytes:
+    """A :class:`~tfbus.messages.LookupTransformGoal` as a ROS 2
+    ``tf2_msgs/action/LookupTransform_SendGoal_Request`` (the goal id, a
+    ``unique_identifier_msgs/UUID``, then ``LookupTransform_Goal``), XCDR1 little-endian,
+    as :func:`encode_send_goal_request` writes it after the rmw request identity
+    (:mod:`tfbus.codecs.ros1`'s function of the same name writes ROS 1's
+    ``LookupTransformActionGoal``).
+
+    ``goal_id`` is the UUID's text (32 hex digits, with or without RFC 4122's dashes);
+    ``goal_stamp`` is not carried (ROS 2's server stamps the goal when it accepts it, in
+    ``send_goal``'s response). A ``timeout`` of 2**31 s or more is sent as the longest
+    ``Duration``.
+
+    Raises:
+        WireEncodeError: a goal id that is not a UUID, a frame id with a NUL, a time
+            outside int32 seconds, a negative or NaN timeout (named).
+    """
+    g = message
+    w = _Writer(None)
+    _write_goal(w, LookupGoal(_goal_id_bytes(g.goal_id), g.target_frame, g.source_frame,
+                              g.source_time, g.timeout, g.target_time, g.fixed_frame,
+                              g.advanced))
+    return w.done()
+
+
+@_decoding("LookupTransform_SendGoal_Request")
+def decode_lookup_goal(r: _Reader) -> LookupTransformGoal:
+    """A ROS 2 ``tf2_msgs/action/LookupTransform_SendGoal_Request`` (CDR, no rmw request
+    identity) as a :class:`~tfbus.messages.LookupTransformGoal`: ``goal_id`` the UUID's
+    RFC 4122 text (``"6ba7b810-9dad-11d1-80b4-00c04fd430c8"``), ``goal_stamp``
+    ``Time(0)`` (not on this message).
+
+    Raises:
+        WireDecodeError: the bytes are not such a message (truncated, a string not
+            NUL-terminated UTF-8, a time before 1970, a negative timeout).
+    """
+    g = _read_goal(r)
+    return LookupTransformGoal(g.target_frame, g.source_frame, g.source_time, g.timeout,
+                               g.target_time, g.fixed_frame, g.advanced,
+                               str(uuid.UUID(bytes=g.goal_id)))
+
+
+def encode_lookup_result(message: LookupTransformResult) -> bytes:
+    """A :class:`~tfbus.messages.LookupTransformResult` as a ROS 2
+    ``tf2_msgs/action/LookupTransform_GetResult_Response`` (``int8 status``, then
+    ``LookupTransform_Result``: the transform and the ``TF2Error``), XCDR1 little-endian,
+    as :func:`encode_get_result_response` writes it after the rmw request identity.
+
+    ``status`` is written as it is: on ROS 2 it is an ``action_msgs/GoalStatus`` code (4
+    SUCCEEDED, 5 CANCELED, 6 ABORTED), not actionlib's (ROS 1: 3 SUCCEEDED). ``goal_id``,
+    ``goal_stamp``, ``status_text`` and ``stamp`` are not carried (ROS 2's
+    ``get_result`` response names its goal by the request it answers).
+
+    Raises:
+        WireEncodeError: a stamp outside int32 seconds, a frame id or error string with a
+            NUL, a status outside int8 or an error code outside uint8.
+    """
+    m = message
+    w = _Writer(None)
+    _write_result(w, LookupResult(m.status, m.transform, m.error, m.error_string))
+    return w.done()
+
+
+@_decoding("LookupTransform_GetResult_Response")
+def decode_lookup_result(r: _Reader) -> LookupTransformResult:
+    """A ROS 2 ``tf2_msgs/action/LookupTransform_GetResult_Response`` (CDR, no rmw
+    request identity) as a :class:`~tfbus.messages.LookupTransformResult` (``status``
+    the ``action_msgs/GoalStatus`` code; the fields the message does not carry at their
+    defaults).
+
+    Raises:
+        WireDecodeError: the bytes are not such a message.
+    """
+    res = _read_result(r)
+    return LookupTransformResult(res.transform, res.error, res.error_string,
+                                 status=res.status)

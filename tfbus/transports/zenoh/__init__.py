@@ -21,7 +21,12 @@ One module per concern (anyio's ``_core`` style; the public names are re-exporte
 * :mod:`~tfbus.transports.zenoh.peers` -- liveliness: :class:`PeerInfo`,
   :class:`PeerEvent` on :data:`PEERS_TOPIC`;
 * :mod:`~tfbus.transports.zenoh.transport` -- :class:`ZenohTransport` (threads, receive
-  path, late joiners, matching status);
+  path, late joiners, matching status, ``/clock`` kept newest-only for a
+  :class:`~tfbus.clock.SimClock`);
+* :mod:`~tfbus.transports.zenoh.queryable` -- every Zenoh queryable and query of tfbus:
+  queries handed to the event loop through ``ThreadWakeup`` and a bounded queue
+  (``LoopQueryable``), queryables answered in Zenoh's thread (the late-joiner latch), and
+  ``get`` replies waited for on a socket, no thread per query (``get_replies``);
 * :mod:`~tfbus.transports.zenoh.counters` -- :class:`ZenohStatistics`;
 * :mod:`~tfbus.transports.zenoh.sequence` -- the per-publisher sequence numbers a session
   received (``SequenceTracker``: messages lost, resets, late-joiner replies);

@@ -58,6 +58,10 @@ class ZenohStatistics(TransportStatistics):
         send_merged: latched messages (``/tf_static``) merged into the latched
             snapshot still waiting to be sent (none of their transforms is lost).
         send_queued: messages waiting in the send queue when the copy was made.
+        coalesced: samples of a newest-only topic (``/clock`` followed by a
+            :class:`~tfbus.clock.SimClock`: :meth:`ZenohTransport.keep_newest`) replaced
+            in Zenoh's thread by a newer one before the event loop saw them (never in
+            ``received``).
     """
 
     not_connected: int = 0
@@ -75,6 +79,7 @@ class ZenohStatistics(TransportStatistics):
     send_dropped: int = 0
     send_merged: int = 0
     send_queued: int = 0
+    coalesced: int = 0
 
     @property
     def dropped(self) -> int:

@@ -47,6 +47,14 @@ an expired timeout after ``query_timeout`` wall seconds (or ``max_wait``, whiche
 less). The querier is the Zenoh session id of the query's source info (``SourceInfo``,
 set by :class:`BufferClient`); queries without one share a single per-peer share. Zenoh
 does not authenticate that id: on an untrusted network use Zenoh's access control.
+
+Threads: the queryable is a :class:`~tfbus.transports.zenoh.queryable.LoopQueryable`:
+Zenoh's thread only queues each query (at most ``max_pending``; beyond, it answers "buffer
+server busy" at once, counted in ``busy``) and wakes the event loop through
+:class:`~tfbus.transports._base.ThreadWakeup`, where the query is decoded, admitted and
+answered by a task; a Zenoh thread never waits for the loop. A client's lookup is a Zenoh
+``get`` whose reply wakes the waiting task through a socket
+(:func:`~tfbus.transports.zenoh.queryable.get_replies`): no thread per pending lookup.
 """
 
 from __future__ import annotations
@@ -55,13 +63,12 @@ import contextlib
 import logging
 import math
 import secrets
-import threading
 from collections.abc import Mapping
 from dataclasses import fields
 from typing import TYPE_CHECKING, Any, Final, TypeVar, overload
 
 import anyio
-import anyio.from_thread
+import anyio.abc
 import zenoh
 
 from tfbus import errors
@@ -93,6 +100,7 @@ from tfbus.transports._base import (
     ServerStatistics,
     transform_remotely,
 )
+from tfbus.transports.zenoh.queryable import LoopQueryable, get_replies
 
 if TYPE_CHECKING:
     from tfbus.buffer import Buffer
@@ -256,7 +264,8 @@ def _querier(query: zenoh.Query) -> str:
 
 
 class _Lookup:
-    """A lookup the server holds: its querier, and how to end it from a Zenoh thread."""
+    """A lookup the server holds: its querier, and how to end it when its querier goes
+    (all on the event loop)."""
 
     __slots__ = ("cancelled", "lookup_id", "peer", "scope")
 
@@ -284,7 +293,8 @@ class BufferServer:
       (its liveliness token ``{key}/@lookup/{id}`` was deleted), its slot freed;
     * at most ``max_pending`` lookups wait at once and at most ``max_per_peer`` of one
       querier (the Zenoh session id of the query's source info); more are answered at once
-      with a ``TransformException`` "buffer server busy: ...";
+      with a ``TransformException`` "buffer server busy: ..."; so are queries beyond
+      ``max_pending`` still queued for a busy event loop, in Zenoh's thread (module doc);
     * a frame id longer than :data:`MAX_FRAME_ID_BYTES` is answered with an
       ``InvalidArgumentException`` naming the field, and so is a request over 16 KiB.
 
@@ -334,10 +344,9 @@ class BufferServer:
         self._pending = 0
         self._per_peer: dict[str, int] = {}
         self._lookups: dict[str, _Lookup] = {}  # by lookup id
-        self._pending_lock = threading.Lock()  # Zenoh threads add, the event loop removes
         self._stats = ServerStatistics()
-        self._portal: anyio.from_thread.BlockingPortal | None = None
-        self._queryable: zenoh.Queryable[None] | None = None
+        self._queryable: LoopQueryable | None = None
+        self._tasks: anyio.abc.TaskGroup | None = None
         self._tokens: zenoh.Subscriber[None] | None = None
 
     @property
@@ -355,6 +364,11 @@ class BufferServer:
         s = self._stats
         copy = ServerStatistics(**{f.name: getattr(s, f.name) for f in fields(s)})
         copy.pending = self._pending
+        queryable = self._queryable
+        if queryable is not None:  # queries counted and refused in Zenoh's threads
+            copy.requests += queryable.received
+            copy.busy += queryable.refused
+            copy.errors += queryable.refused
         return copy
 
     async def __aenter__(self) -> BufferServer:
@@ -364,38 +378,71 @@ class BufferServer:
             RuntimeError: the bus is not open, or the server is already running.
             TransportError: Zenoh refused the declaration.
         """
-        if self._portal is not None:
+        if self._tasks is not None:
             raise RuntimeError("this BufferServer is already running")
         session = _session(self._transport)
-        portal = anyio.from_thread.BlockingPortal()
-        await portal.__aenter__()
-        self._portal = portal
+        self._fold_counts()
+        queryable = self._queryable = LoopQueryable(
+            self._key, self._on_query, self._refuse, max_queued=self._max_pending,
+            noted=self._on_gone,
+        )
+        tasks = anyio.create_task_group()
+        await tasks.__aenter__()
+        self._tasks = tasks
         try:
             self._tokens = session.liveliness().declare_subscriber(
                 f"{self._key}/@lookup/*", self._on_token)
-            self._queryable = session.declare_queryable(self._key, self._on_query)
-        except zenoh.ZError as err:
+            await tasks.start(queryable.serve, session)
+        except (zenoh.ZError, TransportError) as err:
             await self.__aexit__(None, None, None)
+            if isinstance(err, TransportError):
+                raise
             raise TransportError(f"cannot declare the buffer server {self._key}: {err}") from err
         return self
 
     async def __aexit__(self, *exc: object) -> None:
-        """Undeclare the queryable and cancel the lookups still waiting."""
-        queryable, self._queryable = self._queryable, None
+        """Undeclare the queryable, refuse the queries not yet taken ("buffer server
+        stopping") and end the lookups still waiting, unanswered (their clients' queries
+        end at once)."""
         tokens, self._tokens = self._tokens, None
-        portal, self._portal = self._portal, None
-        for declared in (queryable, tokens):
-            if declared is not None:
-                with contextlib.suppress(Exception):
-                    declared.undeclare()  # type: ignore[no-untyped-call]
-        if portal is not None:
-            await portal.stop(cancel_remaining=True)
-            await portal.__aexit__(None, None, None)
+        tasks, self._tasks = self._tasks, None
+        if tokens is not None:
+            with contextlib.suppress(Exception):
+                tokens.undeclare()  # type: ignore[no-untyped-call]
+        if tasks is not None:
+            tasks.cancel_scope.cancel()
+            await tasks.__aexit__(None, None, None)
+        self._fold_counts()
+
+    def _fold_counts(self) -> None:
+        """Add the ended queryable's counts to the server's own."""
+        queryable, self._queryable = self._queryable, None
+        if queryable is not None:
+            self._stats.requests += queryable.received
+            self._stats.busy += queryable.refused
+            self._stats.errors += queryable.refused
 
     # -- Zenoh threads -----------------------------------------------------------------
 
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        """A lookup's liveliness token went: its querier cancelled it or left."""
+        if sample.kind != zenoh.SampleKind.DELETE:
+            return
+        queryable = self._queryable
+        if queryable is not None:
+            queryable.notify(str(sample.key_expr).rsplit("/", 1)[-1])
+
+    def _refuse(self, query: zenoh.Query, message: str) -> None:
+        """The error reply to a query the server will not take (queue full, stopping)."""
+        text = "buffer server stopping" if message == "stopping" else \
+            f"buffer server busy: {message}"
+        body = {"error": "TransformException", "message": text}
+        # a codec of this call: Zenoh threads refuse while the loop encodes answers
+        query.reply(self._key, WireCodec().encode(body, sender=self._sender, seq=1))
+
+    # -- event loop: taking queries ----------------------------------------------------
+
     def _on_query(self, query: zenoh.Query) -> None:
-        self._stats.requests += 1
         payload = query.payload
         data = b"" if payload is None else payload.to_bytes()
         if len(data) > _MAX_REQUEST_BYTES:
@@ -413,15 +460,11 @@ class BufferServer:
             return
         lookup = _Lookup(_querier(query), _lookup_id(request))
         refusal = self._admit(lookup)
-        portal = self._portal
-        if refusal is None and portal is not None:
-            try:
-                portal.start_task_soon(self._answer, query, request, lookup)
-                return
-            except RuntimeError:  # the portal stopped meanwhile
-                self._release(lookup)
-                refusal = TransformException("buffer server stopping")
-        elif refusal is None:
+        tasks = self._tasks
+        if refusal is None and tasks is not None:
+            tasks.start_soon(self._answer, query, request, lookup)
+            return
+        if refusal is None:
             self._release(lookup)
             refusal = TransformException("buffer server stopping")
         with query:
@@ -429,54 +472,43 @@ class BufferServer:
 
     def _admit(self, lookup: _Lookup) -> TransformException | None:
         """Take a slot for ``lookup``, or the error that refuses it."""
-        with self._pending_lock:
-            if self._portal is None:
-                return TransformException("buffer server stopping")
-            if lookup.lookup_id is not None and lookup.lookup_id in self._lookups:
-                return InvalidArgumentException(
-                    f"request field 'id' has a value {lookup.lookup_id!r} already waiting")
-            if self._pending >= self._max_pending:
-                self._stats.busy += 1
-                return TransformException(
-                    f"buffer server busy: {self._pending} lookups waiting (max_pending)")
-            held = self._per_peer.get(lookup.peer, 0)
-            if held >= self._max_per_peer:
-                self._stats.busy += 1
-                return TransformException(
-                    f"buffer server busy: {held} lookups of this querier waiting "
-                    "(max_per_peer)")
-            self._pending += 1
-            self._per_peer[lookup.peer] = held + 1
-            if lookup.lookup_id is not None:
-                self._lookups[lookup.lookup_id] = lookup
+        if lookup.lookup_id is not None and lookup.lookup_id in self._lookups:
+            return InvalidArgumentException(
+                f"request field 'id' has a value {lookup.lookup_id!r} already waiting")
+        if self._pending >= self._max_pending:
+            self._stats.busy += 1
+            return TransformException(
+                f"buffer server busy: {self._pending} lookups waiting (max_pending)")
+        held = self._per_peer.get(lookup.peer, 0)
+        if held >= self._max_per_peer:
+            self._stats.busy += 1
+            return TransformException(
+                f"buffer server busy: {held} lookups of this querier waiting "
+                "(max_per_peer)")
+        self._pending += 1
+        self._per_peer[lookup.peer] = held + 1
+        if lookup.lookup_id is not None:
+            self._lookups[lookup.lookup_id] = lookup
         return None
 
     def _release(self, lookup: _Lookup) -> None:
-        with self._pending_lock:
-            self._pending -= 1
-            held = self._per_peer[lookup.peer] - 1
-            if held:
-                self._per_peer[lookup.peer] = held
-            else:
-                del self._per_peer[lookup.peer]
-            if lookup.lookup_id is not None and self._lookups.get(lookup.lookup_id) is lookup:
-                del self._lookups[lookup.lookup_id]
+        self._pending -= 1
+        held = self._per_peer[lookup.peer] - 1
+        if held:
+            self._per_peer[lookup.peer] = held
+        else:
+            del self._per_peer[lookup.peer]
+        if lookup.lookup_id is not None and self._lookups.get(lookup.lookup_id) is lookup:
+            del self._lookups[lookup.lookup_id]
 
-    def _on_token(self, sample: zenoh.Sample) -> None:
-        """A lookup's liveliness token went: its querier cancelled it or left."""
-        if sample.kind != zenoh.SampleKind.DELETE:
+    def _on_gone(self, lookup_id: str) -> None:
+        """The lookup ``lookup_id``'s querier cancelled it or left: end its wait."""
+        lookup = self._lookups.get(lookup_id)
+        if lookup is None:
             return
-        lookup_id = str(sample.key_expr).rsplit("/", 1)[-1]
-        with self._pending_lock:
-            lookup = self._lookups.get(lookup_id)
-            if lookup is None:
-                return
-            lookup.cancelled = True
-            scope = lookup.scope
-        portal = self._portal
-        if scope is not None and portal is not None:
-            with contextlib.suppress(RuntimeError):  # the portal stopped meanwhile
-                portal.start_task_soon(_cancel, scope)
+        lookup.cancelled = True
+        if lookup.scope is not None:
+            lookup.scope.cancel()
 
     # -- event loop ----------------------------------------------------------------------
 
@@ -490,10 +522,9 @@ class BufferServer:
                         and sent >= 0:
                     wall = min(wall, float(sent))
                 with anyio.CancelScope() as gone:
-                    with self._pending_lock:
-                        lookup.scope = gone
-                        if lookup.cancelled:
-                            gone.cancel()
+                    lookup.scope = gone
+                    if lookup.cancelled:
+                        gone.cancel()
                     try:
                         with anyio.move_on_after(wall):
                             result = await self._run(request, self._max_wait)
@@ -574,10 +605,6 @@ class BufferServer:
         body = {"error": name, "message": str(exc)}
         with contextlib.suppress(zenoh.ZError):
             query.reply(self._key, self._codec.encode(body, sender=self._sender, seq=1))
-
-
-async def _cancel(scope: anyio.CancelScope) -> None:
-    scope.cancel()
 
 
 class BufferClient:
@@ -772,16 +799,7 @@ class BufferClient:
         request["query_timeout"] = wall
         payload = self._codec.encode(request, sender=self._sender, seq=1)
         session = _session(self._transport)
-        cancel = zenoh.CancellationToken()
-        try:
-            replies = await anyio.to_thread.run_sync(
-                _query, session, self._key, payload, wall, lookup_id, cancel,
-                abandon_on_cancel=True,
-            )
-        finally:
-            # a cancelled lookup ends its Zenoh get at once; the get's thread then
-            # undeclares the lookup's liveliness token, which ends the server's wait
-            cancel.cancel()
+        replies = await _query(session, self._key, payload, wall, lookup_id)
         for data in replies:
             try:
                 answer = self._codec.decode(data).message
@@ -796,11 +814,13 @@ class BufferClient:
         )
 
 
-def _query(session: zenoh.Session, key: str, payload: bytes, wall: float,
-           lookup_id: str | None, cancel: zenoh.CancellationToken) -> list[bytes]:
-    """A Zenoh get (worker thread): the payloads of the ok replies. While it waits, the
-    lookup's liveliness token ``{key}/@lookup/{lookup_id}`` is declared if it has an id
-    (the server ends the lookup when it goes); the query carries this session's id as
+async def _query(session: zenoh.Session, key: str, payload: bytes, wall: float,
+                 lookup_id: str | None) -> list[bytes]:
+    """A Zenoh get, waited for on the event loop (no worker thread:
+    :func:`~tfbus.transports.zenoh.queryable.get_replies`): the payloads of the ok
+    replies. While it waits, the lookup's liveliness token ``{key}/@lookup/{lookup_id}``
+    is declared if it has an id (the server ends the lookup when it goes: the lookup was
+    cancelled here, or this session left); the query carries this session's id as
     source info."""
     token = None
     if lookup_id is not None:
@@ -813,12 +833,9 @@ def _query(session: zenoh.Session, key: str, payload: bytes, wall: float,
             source: zenoh.SourceInfo | None = zenoh.SourceInfo(session.id, 0)
         except Exception:  # source info is unstable API: ask without it
             source = None
-        replies = session.get(key, payload=payload, timeout=wall,
-                              target=zenoh.QueryTarget.BEST_MATCHING, source_info=source,
-                              cancellation_token=cancel)
-        return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
-    except zenoh.ZError as err:
-        raise TransportError(f"buffer query on {key} failed: {err}") from err
+        return await get_replies(session, key, payload, max(wall, 1e-3), source_info=source)
+    except TransportError as err:
+        raise TransportError(f"buffer query on {key} failed: {err.__cause__}") from err.__cause__
     finally:
         if token is not None:
             with contextlib.suppress(Exception):  # the session may have closed meanwhile

@@ -9,14 +9,21 @@ bytes)`` to a bounded deque and, if no wake-up is pending, write one byte to a s
 per-publisher order kept (one FIFO). When the deque is full (``max_pending``), the oldest
 entries are dropped and counted.
 
+A topic a :class:`~tfbus.clock.SimClock` follows (``/clock``) is kept newest-only
+(:meth:`ZenohTransport.keep_newest`): Zenoh's thread reads each stamp and keeps the newest
+sample, waking the loop only when it reaches the clock's earliest deadline, steps back, or
+:data:`NEWEST_MAX_DELAY` has passed -- a ``/clock`` at 1 kHz is not a wake-up per message.
+
 Received bytes never end the bus: every payload that does not decode, of any kind, is a
 counted, dropped message (:class:`ZenohStatistics`), and sequence numbers that jump
 implausibly are reported as resets, not as billions of lost messages.
 
 Late joiners: each transport serves the latched topics it has *itself* published
 (``/tf_static`` merged per child frame by a :class:`~tfbus.latch.StaticLatch`) on a
-queryable; when a node appears (liveliness), the others query it, so a listener started
-after a static broadcaster -- or a broadcaster whose first publish raced the connection --
+queryable answered in Zenoh's thread from the bytes last latched
+(:mod:`tfbus.transports.zenoh.queryable`, the home of tfbus's Zenoh queryables); when
+a node appears (liveliness), the others query it, so a listener started after a static
+broadcaster -- or a broadcaster whose first publish raced the connection --
 still gets its static transforms.
 
 Sending: latched topics (``/tf_static``) are put with ``CongestionControl.BLOCK`` and
@@ -42,15 +49,18 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Final
 
 import anyio
 import anyio.abc
+import msgspec
 import zenoh
 
 from tfbus.codecs.native import (
+    MAGIC,
+    WIRE_VERSION,
     WireCodec,
     WireEncodeError,
     WireLimits,
@@ -60,6 +70,7 @@ from tfbus.errors import TransportError, WireLimitError, WireVersionError
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
 from tfbus.ratelimit import CountLimitedLog
+from tfbus.time import TIME_MAX_NS
 from tfbus.topics import TF_STATIC_TOPIC
 from tfbus.transports._base import BusLike, ThreadWakeup
 from tfbus.transports.zenoh.config import (
@@ -72,6 +83,7 @@ from tfbus.transports.zenoh.counters import ZenohStatistics
 from tfbus.transports.zenoh.fleet_keys import key_space
 from tfbus.transports.zenoh.keys import DEFAULT_PREFIX
 from tfbus.transports.zenoh.peers import PEERS_TOPIC, PeerInfo, PeerTable
+from tfbus.transports.zenoh.queryable import declare_answering_queryable
 from tfbus.transports.zenoh.sequence import SequenceTracker
 
 if TYPE_CHECKING:
@@ -98,11 +110,141 @@ _ALIVE_PUT: Final = 2
 _ALIVE_DEL: Final = 3
 _MATCHING: Final = 4
 _REQUERY: Final = 5
+_NEWEST: Final = 6  # a sample of a newest-only topic: no gap counted in ``lost``
+NEWEST_MAX_DELAY: Final = 0.01
+"""Longest wall time, seconds, a sample of a newest-only topic
+(:meth:`ZenohTransport.keep_newest`) waits in Zenoh's thread while newer ones arrive:
+the bus receives the newest at least this often while the topic flows."""
 LATCH_QUERY_RETRIES: Final = 3
 """Times a late-joiner query that got no reply at all is asked again (after 0.1, 0.2 and
 0.4 s): a node's liveliness token can reach a peer before the route to its latch
 queryable does, and such a query ends with nothing."""
 _CONGESTION: Final = ("drop", "block")
+
+
+class NewestOnly:
+    """A newest-only topic of a :class:`ZenohTransport` (:meth:`ZenohTransport.keep_newest`):
+    Zenoh's thread keeps only the newest sample and wakes the event loop when a follower
+    says a sample is due, on a step back, or :data:`NEWEST_MAX_DELAY` after the last
+    wake-up. :meth:`poke` (event loop) delivers the sample kept, if any; :meth:`close`
+    ends one follower's interest (with none left, every sample is delivered again)."""
+
+    __slots__ = ("_dues", "_key", "_last_ns", "_lock", "_topic", "_transport", "_waked",
+                 "payload")
+
+    def __init__(self, transport: ZenohTransport, topic: str, key: str) -> None:
+        self._transport = transport
+        self._topic = topic
+        self._key = key
+        self._dues: tuple[Callable[[int], bool], ...] = ()
+        self._lock = threading.Lock()
+        self._last_ns = -1  # the stamp of the last sample, -1 before one
+        self._waked = 0.0  # time.monotonic() of the last wake-up
+        self.payload: bytes | None = None  # the newest sample not delivered yet
+
+    @property
+    def topic(self) -> str:
+        """The topic kept newest-only."""
+        return self._topic
+
+    def poke(self) -> None:
+        """Deliver the sample kept, if any, at the event loop's next turn (call it after
+        filing a new deadline: a sample kept before the deadline existed may reach it)."""
+        if self.payload is not None:
+            wakeup = self._transport._wakeup
+            if wakeup is not None:
+                wakeup.wake()
+
+    def follow(self, due: Callable[[int], bool]) -> NewestFollower:
+        """Add a follower whose ``due`` is asked at each sample."""
+        self._dues = (*self._dues, due)
+        return NewestFollower(self, due)
+
+    def unfollow(self, due: Callable[[int], bool]) -> None:
+        """Remove a follower; with none left the topic is delivered sample by sample
+        again (the sample kept is delivered)."""
+        dues = list(self._dues)
+        if due in dues:
+            dues.remove(due)
+        self._dues = tuple(dues)
+        transport = self._transport
+        if not dues and transport._newest.get(self._key) is self:
+            del transport._newest[self._key]
+        self.poke()
+
+    def offer(self, payload: bytes) -> None:
+        """A sample of the topic (Zenoh's thread): kept, or queued and the loop woken --
+        after the one kept before it when it steps back or does not decode (the jump is
+        seen from the newest time; a bad sample does not replace a good one)."""
+        transport = self._transport
+        with self._lock:
+            pending, self.payload = self.payload, payload  # stored before ``due`` reads
+            ns = clock_stamp(payload)
+            now = time.monotonic()
+            ordered = ns is None or ns < self._last_ns
+            if ns is None or ordered or now - self._waked >= NEWEST_MAX_DELAY \
+                    or any(due(ns) for due in self._dues):
+                self.payload = None
+                self._waked = now
+                if ns is not None:
+                    self._last_ns = ns
+                if pending is not None:
+                    if ordered:
+                        transport._push((_NEWEST, self._key, pending))
+                    else:
+                        transport._stats.coalesced += 1
+                transport._push((_NEWEST, self._key, payload))
+                return
+            self._last_ns = ns
+            if pending is not None:
+                transport._stats.coalesced += 1
+
+    def take(self) -> bytes | None:
+        """The sample kept, removed (event loop)."""
+        if self.payload is None:
+            return None
+        with self._lock:
+            payload, self.payload = self.payload, None
+            return payload
+
+
+class NewestFollower:
+    """One follower of a newest-only topic (what :meth:`ZenohTransport.keep_newest`
+    returns)."""
+
+    __slots__ = ("_due", "_newest")
+
+    def __init__(self, newest: NewestOnly, due: Callable[[int], bool]) -> None:
+        self._newest: NewestOnly | None = newest
+        self._due = due
+
+    def poke(self) -> None:
+        """Deliver the sample kept, if any, at the event loop's next turn (call it when
+        filing a deadline: a sample kept before the deadline existed may reach it)."""
+        if self._newest is not None:
+            self._newest.poke()
+
+    def close(self) -> None:
+        """End this follower (idempotent)."""
+        newest, self._newest = self._newest, None
+        if newest is not None:
+            newest.unfollow(self._due)
+
+
+_CLOCK_PAYLOAD: Final = msgspec.msgpack.Decoder(tuple[int, int, str, tuple[int]])
+
+
+def clock_stamp(payload: bytes) -> int | None:
+    """The stamp (int ns) of a tfbus wire payload of a ``Clock`` (:mod:`tfbus.codecs.native`:
+    magic byte, version, then ``[sender, seq, "Clock", [ns]]``), read by one typed msgspec
+    decoder (about 1 us, a ninth of the full decode); None for anything else."""
+    if len(payload) < 2 or payload[0] != MAGIC or payload[1] != WIRE_VERSION:
+        return None
+    try:
+        _sender, _seq, tag, (ns,) = _CLOCK_PAYLOAD.decode(memoryview(payload)[2:])
+    except (msgspec.DecodeError, ValueError):
+        return None
+    return ns if tag == "Clock" and 0 <= ns <= TIME_MAX_NS else None
 
 
 @dataclass(slots=True)
@@ -248,6 +390,7 @@ class ZenohTransport:
         # first line of each kind, then 1 in 1000 and at most one per 5 s
         self._log = CountLimitedLog(log, 1000, clock=time.monotonic)
         self._matching_changed: anyio.Event | None = None
+        self._newest: dict[str, NewestOnly] = {}  # by key: topics kept newest-only
 
     # -- public information -----------------------------------------------------------
 
@@ -345,6 +488,32 @@ class ZenohTransport:
             peers_over_limit=self._peers.over_limit,
             send_queued=len(self._send_queue),
         )
+
+    def keep_newest(self, topic: str, due: Callable[[int], bool]) -> NewestFollower:
+        """Deliver ``topic``, a topic of ``rosgraph_msgs/Clock`` (``/clock``), newest-only
+        (ROS 2 subscribes to it keep-last 1, rclpy ``time_source.py``): Zenoh's thread
+        reads each sample's stamp (:func:`clock_stamp`) and keeps only the newest sample,
+        waking the event loop when ``due(stamp_ns)`` (called in Zenoh's thread, must not
+        block) is true, when a stamp is earlier than the previous one (a jump back: the
+        kept sample and it are delivered in order), when a sample is not a tfbus ``Clock``
+        payload (delivered at once: the loop decodes, counts and drops it), or
+        :data:`NEWEST_MAX_DELAY` after the last wake-up; every wake-up also delivers
+        whatever is kept. Samples replaced before the loop saw them are counted in
+        ``coalesced``. A
+        :class:`~tfbus.clock.SimClock` on a Zenoh bus asks for this: the loop runs
+        only when a sleeper's deadline is reached, not at every ``/clock``.
+
+        Several followers may keep one topic: a sample is due when one says so.
+
+        Returns:
+            the follower: :meth:`NewestFollower.poke` after filing a deadline,
+            :meth:`NewestFollower.close` to end it.
+        """
+        key = self._keys.data(topic)
+        newest = self._newest.get(key)
+        if newest is None:
+            newest = self._newest[key] = NewestOnly(self, topic, key)
+        return newest.follow(due)
 
     def serve_lookups(self, buffer: Any, bus: Any, **options: Any) -> BufferServer:
         """tf2_ros ``buffer_server`` over Zenoh: a queryable answering lookups from
@@ -602,8 +771,9 @@ class ZenohTransport:
                 )
             )
         declared.append(
-            session.declare_queryable(
-                keys.latch(self._node_id), self._on_query, allowed_origin=zenoh.Locality.REMOTE
+            declare_answering_queryable(
+                session, keys.latch(self._node_id), self._on_query,
+                allowed_origin=zenoh.Locality.REMOTE,
             )
         )
         liveliness = session.liveliness()
@@ -668,7 +838,12 @@ class ZenohTransport:
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
-            self._push((_SAMPLE, str(sample.key_expr), sample.payload.to_bytes()))
+            key = str(sample.key_expr)
+            newest = self._newest.get(key) if self._newest else None
+            if newest is not None:
+                newest.offer(sample.payload.to_bytes())
+                return
+            self._push((_SAMPLE, key, sample.payload.to_bytes()))
 
     def _on_reply(self, reply: zenoh.Reply) -> None:
         sample = reply.ok
@@ -680,13 +855,15 @@ class ZenohTransport:
         self._push((kind, str(sample.key_expr), b""))
 
     def _on_query(self, query: zenoh.Query) -> None:
-        with query:
-            for outlet in list(self._outlets.values()):
-                payload = outlet.latched_payload
-                if payload is not None:
-                    key = self._keys.latch(self._node_id, outlet.topic)
-                    if query.key_expr.intersects(key):
-                        query.reply(key, payload)
+        """A late joiner's query of the latch: the latched payloads (a Zenoh thread;
+        :func:`~tfbus.transports.zenoh.queryable.declare_answering_queryable` finalizes
+        the query)."""
+        for outlet in list(self._outlets.values()):
+            payload = outlet.latched_payload
+            if payload is not None:
+                key = self._keys.latch(self._node_id, outlet.topic)
+                if query.key_expr.intersects(key):
+                    query.reply(key, payload)
 
     # -- internals: event loop ------------------------------------------------------------
 
@@ -708,7 +885,7 @@ class ZenohTransport:
         run: list[object] = []
         for _ in range(min(len(inbox), self._max_batch)):
             kind, key, payload = inbox.popleft()
-            if kind in (_SAMPLE, _REPLY):
+            if kind in (_SAMPLE, _REPLY, _NEWEST):
                 topic = self._keys.topic_of(key, reply=kind == _REPLY)
                 if topic != run_topic and run:
                     # delivered first: a subscriber an event of the run makes (a fleet
@@ -744,6 +921,15 @@ class ZenohTransport:
             run.append(message)
         if run:
             self._deliver(bus, run_topic, run)
+        if self._newest and not inbox:
+            # what Zenoh's thread kept is newer than everything it queued before: taken
+            # once the queue is empty (a sample it queues meanwhile comes next time)
+            for newest in list(self._newest.values()):
+                kept = newest.take()
+                if kept is not None:
+                    message = self._receive(_NEWEST, newest.topic, kept, bus)
+                    if message is not None:
+                        self._deliver(bus, newest.topic, [message])
         return bool(inbox)
 
     def _receive(
@@ -769,9 +955,10 @@ class ZenohTransport:
             stats.malformed += 1
             return None
         seqs = self._seqs
-        if kind == _SAMPLE:
+        if kind in (_SAMPLE, _NEWEST):
             lost, reset = seqs.observe(decoded.sender, topic, decoded.seq)
-            stats.lost += lost
+            if kind == _SAMPLE:  # a newest-only topic skips samples on purpose
+                stats.lost += lost
             stats.resets += reset
             if not seqs.live_is_news(decoded.sender, topic, decoded.seq):
                 stats.duplicates += 1
