@@ -37,6 +37,7 @@ from tfbus.core.buffer_core import OnRepeat
 from tfbus.core.policy import (
     Clamp,
     Exact,
+    ExpireAfter,
     LookupPolicy,
     Nearest,
     PolicyResult,
@@ -159,6 +160,9 @@ class Buffer(BufferCore):
             :class:`~tfbus.clock.SystemClock`.
         on_repeat: ``"reject"`` (tf2) or ``"replace"``: see
             :class:`~tfbus.core.BufferCore`.
+        cache_policy: None (tf2: frames are kept) or ``expire_after(seconds)``: see
+            :class:`~tfbus.core.BufferCore`. A wait on a frame that expires keeps
+            waiting: new data for it may still come.
 
     Every synchronous method of BufferCore is available unchanged. Use from one event
     loop (the one that runs its waits); not thread-safe.
@@ -178,8 +182,9 @@ class Buffer(BufferCore):
         *,
         clock: Clock | None = None,
         on_repeat: OnRepeat = "reject",
+        cache_policy: ExpireAfter | None = None,
     ) -> None:
-        super().__init__(cache_time, on_repeat=on_repeat)
+        super().__init__(cache_time, on_repeat=on_repeat, cache_policy=cache_policy)
         self.clock: Clock = clock if clock is not None else SystemClock()
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
