@@ -283,6 +283,21 @@ def test_expire_after_removes_frames_as_data_arrives_once_per_every(twin: str) -
 
 
 @pytest.mark.parametrize("twin", sorted(CORES))
+def test_expire_after_starts_over_after_clear(twin: str) -> None:
+    """A clock that jumped back clears the buffer (tf2_ros); the stamps that follow are
+    older than before: expiry goes by them, not by the newest stamp before the clear."""
+    core = buffer_core(twin, cache_policy=expire_after(3.0, every=1.0))
+    for k in range(100, 110):
+        core.set_transform(ts("map", "base", k * S))
+    core.clear()
+    core.set_transform(ts("map", "cup", 0))
+    for k in range(0, 5):
+        core.set_transform(ts("map", "base", k * S))
+    assert not core.frame_exists("cup")  # its 0 s is older than 4 s - 3 s
+    assert core.statistics().frames_expired == 1
+
+
+@pytest.mark.parametrize("twin", sorted(CORES))
 def test_without_a_cache_policy_nothing_expires(twin: str) -> None:
     core = buffer_core(twin)
     assert core.cache_policy is None

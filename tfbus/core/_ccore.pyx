@@ -953,7 +953,11 @@ cdef class CoreBase:
         for cache in self._caches[1:]:
             if cache is not None:
                 cache.clear()
-        # Every dynamic link's newest stamp is 0 now: ``forget`` finds them first.
+        # Every dynamic link's newest stamp is 0 now: ``forget`` finds them first; the
+        # newest stamp stored starts over (a clock that jumped back: older stamps follow).
+        self._newest = 0
+        if self._expiring:
+            self._expire_due = self._expire_every
         self._heap = [
             (0, fid) for fid in range(1, len(self._caches))
             if isinstance(self._caches[fid], TimeCache)
