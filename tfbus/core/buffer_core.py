@@ -1107,16 +1107,31 @@ class BufferCore(CoreBase):
         source_frame: str,
         time: Time,
         return_debug_tuple: bool = False,
+        *,
+        policy: LookupPolicy | None = None,
     ) -> bool | tuple[bool, str]:
         """Whether :meth:`lookup_transform` would succeed (tf2 ``canTransform``). Never
         raises for missing data or bad ids.
 
+        ``policy`` (:mod:`tfbus.core.policy`): whether :meth:`lookup_transform` with that
+        policy would succeed (``None`` or ``Exact()``: tf2's rule).
+
         Returns:
             A bool, or ``(bool, tf2's error message)`` when ``return_debug_tuple`` is
             true (tf2_ros convention). The message is empty on success and for empty or
-            '/'-prefixed ids.
+            '/'-prefixed ids; under a policy it is the error that lookup would raise.
+
+        Raises:
+            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
         """
-        ok, msg = self._can_transform(target_frame, source_frame, time)
+        if policy is not None and type(policy) is not Exact:
+            found = self._policy_query(target_frame, source_frame, time, policy)
+            if isinstance(found, PolicyResult):
+                ok, msg = True, ""
+            else:
+                ok, msg = self._cannot(target_frame, source_frame, found)
+        else:
+            ok, msg = self._can_transform(target_frame, source_frame, time)
         return (ok, msg) if return_debug_tuple else ok
 
     def _can_transform(self, target_frame: str, source_frame: str, time: Time) -> tuple[
@@ -1128,6 +1143,12 @@ class BufferCore(CoreBase):
             raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return True, ""
+        return self._cannot(target_frame, source_frame, out)
+
+    def _cannot(
+        self, target_frame: str, source_frame: str, out: tuple[int, ...]
+    ) -> tuple[bool, str]:
+        """``can_transform``'s ``(False, message)`` for a failed query."""
         code = out[0]
         if code in (INVALID_ARGUMENT, UNKNOWN_FRAME):
             # tf2 canTransform: empty / '/'-prefixed ids first (no message), then both
