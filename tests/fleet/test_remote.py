@@ -438,3 +438,30 @@ async def test_a_bad_policy_field_is_named() -> None:
                               "message": f"request field 'policy' has an invalid value {policy!r}"}
         t = await s.client.lookup_transform("world", "base", Time(0), timeout=0.0)
         assert t.transform.translation.x == pytest.approx(3.0)
+
+
+async def test_can_full_and_transform_carry_the_policy() -> None:
+    """can_transform, lookup_transform_full and transform with a policy answer as the
+    server's buffer does under it (base: x 1 at 10 s, x 3 at 12 s; laser static x 0.5)."""
+    async with served() as s:
+        assert await s.client.can_transform("world", "laser", Time(13), 0.0) is False
+        assert await s.client.can_transform(
+            "world", "laser", Time(13), 0.0, policy=Clamp(1.5)) is True
+        assert await s.client.can_transform(
+            "world", "laser", Time(13), 0.0, policy=Nearest(0.5)) is False
+        found = await s.client.lookup_transform_full(
+            "laser", Time(13), "laser", Time(10), "world", 0.0, policy=Previous())
+        local = s.buffer.lookup_transform_full(
+            "laser", Time(13), "laser", Time(10), "world", policy=Previous())
+        assert isinstance(found, PolicyResult) and found == local
+        assert found.transform.transform.translation.x == pytest.approx(-2.0)
+        assert found.report.max_abs_delta_ns == NS
+        p = PointStamped(Header(Time(13), "laser"), Point(1.0, 0.0, 0.0))
+        moved, report = await s.client.transform(p, "world", 0.0, policy=Clamp(1.5))
+        assert moved.point == Point(4.5, 0.0, 0.0) and moved.header.stamp == Time(13)
+        assert report == s.buffer.lookup_transform(
+            "world", "laser", Time(13), policy=Clamp(1.5)).report
+        with pytest.raises(ForwardExtrapolationException) as remote:
+            await s.client.lookup_transform_full(
+                "laser", Time(20), "laser", Time(10), "world", 0.0, policy=Nearest(0.5))
+        assert "into the future" in str(remote.value)
