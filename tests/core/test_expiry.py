@@ -233,6 +233,25 @@ def test_forget_matches_a_fresh_buffer_fed_only_the_surviving_links(
                 )
 
 
+@settings(max_examples=100, deadline=None)
+@given(ops=ops_strategy)
+def test_both_twins_number_frames_alike_through_forgets(ops: list[tuple[Any, ...]]) -> None:
+    """The frame table (ids, names, freed numbers reused) is the same on both twins."""
+    cores = [buffer_core(twin) for twin in sorted(CORES)]
+    for k, op in enumerate(ops):
+        for core in cores:
+            if op[0] == "insert":
+                parent, child, ns, static = _sample(op)
+                sample = ts(parent, child, ns, x=float(k))
+                (core.set_transform_static if static else core.set_transform)(sample)
+            else:
+                core.forget(op[1] * S)
+        a, b = cores
+        assert a._frame_names == b._frame_names
+        assert a._frame_ids == b._frame_ids
+        assert a.link_info() == b.link_info()
+
+
 # ---------------------------------------------------------------------- expire_after
 
 
