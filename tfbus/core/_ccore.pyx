@@ -525,7 +525,7 @@ cdef class CoreBase:
         cdef double v[7]
         cdef double norm2
         cdef int64_t stamp, old_stamp
-        cdef int code, k, old_parent
+        cdef int code, k, old_parent, ipid
         cdef bint same
         header = (<tuple>ts)[0]
         tf = (<tuple>ts)[2]
@@ -601,15 +601,16 @@ cdef class CoreBase:
             pid = self._register(parent)
         if not is_static and stamp > self._newest:
             self._newest = stamp
+        ipid = pid
         old_parent = (<Link>cache).c_latest(&old_stamp)
-        if old_parent != <int>pid:
+        if old_parent != ipid:
             self._name_parent(cid, pid)
-        code = (<Link>cache).c_insert(stamp, pid, v)
+        code = (<Link>cache).c_insert(stamp, ipid, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
         self._last_relinked = False
         if code == C_OK:
-            if old_parent != <int>pid:
+            if old_parent != ipid:
                 self._last_relinked = True
             elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
                 self._last_relinked = True
