@@ -389,3 +389,6 @@ def test_monitor_refuses_expire_after_with_a_bag() -> None:
     )
     assert result.exit_code == 2, result.output
     assert "--expire-after applies to --bus sources only" in result.stderr
+    result = CliRunner().invoke(cli, ["monitor", "--bus", "memory", "--expire-after", "1e-300"])
+    assert result.exit_code == 2, result.output
+    assert "--expire-after: expire_after seconds must be > 0, got 1e-300" in result.stderr

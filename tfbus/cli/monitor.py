@@ -248,7 +248,12 @@ def command(
         fail("give no frames, or exactly two: SOURCE TARGET")
     from tfbus.core.policy import expire_after
 
-    policy = expire_after(expire_seconds) if expire_seconds is not None else None
+    policy = None
+    if expire_seconds is not None:
+        try:
+            policy = expire_after(expire_seconds)
+        except ValueError as exc:  # a positive value below 1 ns
+            fail(f"--expire-after: {exc}")
     src = source(bag, bus, name="tfbus-monitor", use_sim_time=use_sim_time,
                  cache_policy=policy)
     live_only(src, duration=duration, interval=interval, expire_after=expire_seconds)
