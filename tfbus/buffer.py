@@ -37,8 +37,10 @@ from tfbus.core.buffer_core import OnRepeat
 from tfbus.core.policy import (
     Clamp,
     Exact,
+    ExpireAfter,
     LookupPolicy,
     Nearest,
+    PolicyReport,
     PolicyResult,
     Previous,
     Window,
@@ -150,6 +152,24 @@ class _Waiter(Wakeup, Generic[_T]):
         self.error: BaseException | None = None
 
 
+def _waits_no_more(policy: LookupPolicy) -> bool:
+    """Whether an awaited lookup under ``policy`` answers at once, never waiting
+    (``Window`` with ``future_wait`` 0: tf2's error at once)."""
+    return isinstance(policy, Window) and policy.future_wait.ns == 0
+
+
+def _policy_timeout(
+    policy: LookupPolicy, timeout: float | Duration | None
+) -> float | Duration | None:
+    """The wait of an awaited lookup under ``policy``: ``timeout``, or ``Window``'s
+    ``future_wait`` when that is shorter."""
+    if isinstance(policy, Window):
+        limit = timeout_ns(timeout)
+        if limit is None or policy.future_wait.ns < limit:
+            return policy.future_wait
+    return timeout
+
+
 class Buffer(BufferCore):
     """A :class:`~tfbus.core.BufferCore` plus awaitable lookups (tf2_ros ``Buffer``).
 
@@ -159,6 +179,9 @@ class Buffer(BufferCore):
             :class:`~tfbus.clock.SystemClock`.
         on_repeat: ``"reject"`` (tf2) or ``"replace"``: see
             :class:`~tfbus.core.BufferCore`.
+        cache_policy: None (tf2: frames are kept) or ``expire_after(seconds)``: see
+            :class:`~tfbus.core.BufferCore`. A wait on a frame that expires keeps
+            waiting: new data for it may still come.
 
     Every synchronous method of BufferCore is available unchanged. Use from one event
     loop (the one that runs its waits); not thread-safe.
@@ -178,8 +201,9 @@ class Buffer(BufferCore):
         *,
         clock: Clock | None = None,
         on_repeat: OnRepeat = "reject",
+        cache_policy: ExpireAfter | None = None,
     ) -> None:
-        super().__init__(cache_time, on_repeat=on_repeat)
+        super().__init__(cache_time, on_repeat=on_repeat, cache_policy=cache_policy)
         self.clock: Clock = clock if clock is not None else SystemClock()
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
@@ -476,13 +500,9 @@ class Buffer(BufferCore):
     ) -> PolicyResult:
         """An awaited lookup under a non-exact policy (``lookup_transform_async``)."""
         policy_args(policy)  # a TypeError for anything else, before any wait
-        if isinstance(policy, Window):
-            wait_ns = policy.future_wait.ns
-            if wait_ns == 0:
-                return self._lookup_policy(target, source, time, policy)
-            limit = timeout_ns(timeout)
-            if limit is None or wait_ns < limit:
-                timeout = policy.future_wait
+        if _waits_no_more(policy):
+            return self._lookup_policy(target, source, time, policy)
+        timeout = _policy_timeout(policy, timeout)
         check = partial(self.check_transform_policy, target, source, time, policy)
         found = check()
         if found is not None:
@@ -643,7 +663,35 @@ class Buffer(BufferCore):
             partial(self._describe, target_frame, source_frame, time),
         )
 
-    @coroutine_method
+    @overload
+    def lookup_transform_full_async(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def lookup_transform_full_async(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def lookup_transform_full_async(
         self,
         target_frame: str,
@@ -654,13 +702,20 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> TransformStamped:
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """:meth:`lookup_transform_full` (time travel through ``fixed_frame``), waiting up
         to ``timeout`` for both legs' data.
 
         Args:
             fail_fast: give up at once when a leg can never be answered, as
-                :meth:`wait_for_transform` does for its one lookup.
+                :meth:`wait_for_transform` does for its one lookup (exact lookups).
+            policy: a lookup policy (:mod:`tfbus.core.policy`) for both legs, as
+                :meth:`lookup_transform_async`: a non-exact one waits until both legs
+                can answer under it and returns the
+                :class:`~tfbus.core.policy.PolicyResult` of
+                :meth:`~tfbus.core.BufferCore.lookup_transform_full`; ``Window``'s
+                ``future_wait`` bounds the wait as there.
 
         Raises:
             TimeoutException: not available within ``timeout``.
@@ -679,6 +734,11 @@ class Buffer(BufferCore):
             invalid = self.invalid_frame_id(frame, f"lookupTransform argument {arg}")
             if invalid is not None:
                 raise invalid
+        if policy is not None and type(policy) is not Exact:
+            return await self._wait_full_policy(
+                target_frame, target_time, source_frame, source_time, fixed_frame, timeout,
+                policy,
+            )
 
         def check() -> TransformStamped | None:
             if self._try_lookup(fixed_frame, source_frame, source_time, fail_fast) is None:
@@ -702,6 +762,57 @@ class Buffer(BufferCore):
 
         return await self._wait(check, frames, timeout, describe)
 
+    async def _wait_full_policy(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None,
+        policy: LookupPolicy,
+    ) -> PolicyResult:
+        """``lookup_transform_full_async`` under a non-exact policy."""
+        policy_args(policy)  # a TypeError for anything else, before any wait
+        def answer() -> PolicyResult:
+            found = self.lookup_transform_full(
+                target_frame, target_time, source_frame, source_time, fixed_frame,
+                policy=policy,
+            )
+            assert isinstance(found, PolicyResult)
+            return found
+
+        if _waits_no_more(policy):
+            return answer()
+
+        def check() -> PolicyResult | TransformException | None:
+            for target, source, at in (
+                (fixed_frame, source_frame, source_time),
+                (target_frame, fixed_frame, target_time),
+            ):
+                leg = self.check_transform_policy(target, source, at, policy)
+                if not isinstance(leg, PolicyResult):
+                    return leg
+            return answer()
+
+        def frames() -> frozenset[str]:
+            return self._frames_of(fixed_frame, source_frame, source_time) | self._frames_of(
+                target_frame, fixed_frame, target_time
+            )
+
+        def describe() -> str:
+            return (
+                f"{self._describe(fixed_frame, source_frame, source_time)}; "
+                f"{self._describe(target_frame, fixed_frame, target_time)}"
+            )
+
+        found = check()
+        if found is not None:
+            if isinstance(found, TransformException):
+                raise found
+            return found
+        return await self._wait(check, frames, _policy_timeout(policy, timeout), describe)
+
     @coroutine_method
     async def can_transform_async(
         self,
@@ -711,14 +822,21 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
+        policy: LookupPolicy | None = None,
     ) -> bool:
         """Whether the transform becomes available within ``timeout`` (tf2_ros
         ``can_transform`` with a timeout). Never raises a TransformException. With
         ``fail_fast``, False at once when it can never become available (as
-        :meth:`wait_for_transform`)."""
+        :meth:`wait_for_transform`); with a ``policy``, whether a lookup under it
+        answers within ``timeout`` (as :meth:`lookup_transform_async`).
+
+        Raises:
+            TypeError: ``policy`` is not a lookup policy.
+        """
         try:
             await self.wait_for_transform(
-                target_frame, source_frame, time, timeout, fail_fast=fail_fast
+                target_frame, source_frame, time, timeout, fail_fast=fail_fast,
+                policy=policy,
             )
         except TransformException:
             return False
@@ -728,7 +846,29 @@ class Buffer(BufferCore):
     """The transform functions by type (tf2_ros ``BufferInterface.registration``), shared
     process-wide: see :mod:`tfbus.convert` to register your own stamped types."""
 
-    @coroutine_method
+    @overload
+    def transform(
+        self,
+        obj: _M,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[_M]: ...
+
+    @overload
+    def transform(
+        self,
+        obj: _M,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[tuple[_M, PolicyReport]]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def transform(
         self,
         obj: _M,
@@ -736,7 +876,8 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> _M:
+        policy: LookupPolicy | None = None,
+    ) -> _M | tuple[_M, PolicyReport]:
         """Express a stamped object in ``target_frame`` (tf2_ros ``Buffer.transform``):
         looks up ``target_frame <- obj.header.frame_id`` at ``obj.header.stamp``
         (``Time(0)``: latest), waiting up to ``timeout``, and applies the function
@@ -757,10 +898,17 @@ class Buffer(BufferCore):
             TimeoutException, ExtrapolationException, InvalidArgumentException,
             LookupException, ConnectivityException: as :meth:`wait_for_transform`,
                 ``fail_fast`` too.
+
+        ``policy`` (:mod:`tfbus.core.policy`): the lookup under that policy, as
+        :meth:`lookup_transform_async`; a non-exact one returns ``(transformed object,
+        PolicyReport)``, the report naming the samples the transform was built from.
         """
         do_transform = self.registration.get(type(obj))
         header = _header_of(obj)
         source, stamp = header.frame_id, header.stamp
+        if policy is not None and type(policy) is not Exact:
+            answer = await self._wait_policy(target_frame, source, stamp, timeout, policy)
+            return do_transform(obj, answer.transform), answer.report
         ts: TransformStamped | None = None
         if timeout is None or (type(timeout) is float and math.isfinite(timeout)):
             found = self.check_transform(target_frame, source, stamp, fail_fast)
@@ -777,7 +925,33 @@ class Buffer(BufferCore):
         result: _M = do_transform(obj, ts)
         return result
 
-    @coroutine_method
+    @overload
+    def transform_full(
+        self,
+        obj: _M,
+        target_frame: str,
+        target_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[_M]: ...
+
+    @overload
+    def transform_full(
+        self,
+        obj: _M,
+        target_frame: str,
+        target_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[tuple[_M, PolicyReport]]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def transform_full(
         self,
         obj: _M,
@@ -787,7 +961,8 @@ class Buffer(BufferCore):
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> _M:
+        policy: LookupPolicy | None = None,
+    ) -> _M | tuple[_M, PolicyReport]:
         """Express a stamped object in ``target_frame`` at ``target_time``, through
         ``fixed_frame`` (tf2_ros ``Buffer.transform_full``): the transform is
         :meth:`lookup_transform_full_async` ``(target_frame, target_time,
@@ -803,13 +978,24 @@ class Buffer(BufferCore):
             TimeoutException, ExtrapolationException, InvalidArgumentException,
                 ConnectivityException: as :meth:`lookup_transform_full_async`,
                 ``fail_fast`` too.
+
+        ``policy``: as :meth:`transform` (both legs; a non-exact one returns
+        ``(transformed object, PolicyReport)``).
         """
         do_transform = self.registration.get(type(obj))
         header = _header_of(obj)
+        if policy is not None and type(policy) is not Exact:
+            found = await self.lookup_transform_full_async(
+                target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout,
+                policy=policy,
+            )
+            assert isinstance(found, PolicyResult)
+            return do_transform(obj, found.transform), found.report
         ts = await self.lookup_transform_full_async(
             target_frame, target_time, header.frame_id, header.stamp, fixed_frame, timeout,
             fail_fast=fail_fast,
         )
+        assert isinstance(ts, TransformStamped)
         result: _M = do_transform(obj, ts)
         return result
 

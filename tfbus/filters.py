@@ -43,6 +43,7 @@ import anyio.abc
 
 from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer
+from tfbus.core.policy import Exact, LookupPolicy, policy_args
 from tfbus.errors import BackwardExtrapolationException, TransformException
 from tfbus.messages import Header
 from tfbus.time import Duration, Time
@@ -149,6 +150,12 @@ class MessageFilter(Generic[M]):
             target frame are known and in different trees — TRANSFORM_FAILURE; a queued
             message that becomes so is dropped as TRANSFORM_FAILURE by the insert that
             shows it. False (default) is tf2_ros's behaviour.
+        policy: a lookup policy (:mod:`tfbus.core.policy`): a message passes once every
+            transform it needs can be looked up under it (``Buffer.can_transform(...,
+            policy=policy)``; its waits are ``wait_for_transform(..., policy=policy)``,
+            a ``Window``'s bounded by ``future_wait``: a message whose wait ends without
+            an answer is dropped as TRANSFORM_FAILURE). Look the transforms up with the
+            same policy. None or ``Exact()`` (default): tf2's rule.
 
     Use as ``async with MessageFilter(...) as mf: async for msg in mf: ...``; leaving
     the ``async with`` stops reading the source and cancels every wait. Iteration ends
@@ -156,6 +163,7 @@ class MessageFilter(Generic[M]):
 
     Raises:
         ValueError: ``queue_size`` < 0, a negative tolerance, or no target frame.
+        TypeError: ``policy`` is not a lookup policy.
     """
 
     def __init__(
@@ -168,7 +176,10 @@ class MessageFilter(Generic[M]):
         tolerance: Duration = _NO_TOLERANCE,
         on_failure: Callable[[M, FilterFailureReason], None] | None = None,
         fail_fast: bool = False,
+        policy: LookupPolicy | None = None,
     ) -> None:
+        if policy is not None:
+            policy_args(policy)  # a TypeError for anything else
         if queue_size < 0:
             raise ValueError(f"queue_size must be >= 0, got {queue_size}")
         if tolerance.ns < 0:
@@ -180,6 +191,7 @@ class MessageFilter(Generic[M]):
         self._tolerance = tolerance
         self._on_failure = on_failure
         self._fail_fast = fail_fast
+        self._policy = policy if type(policy) is not Exact else None
         self._pending: deque[_Entry[M]] = deque()  # arrival order, waiting or ready
         self._n_waiting = 0
         self._n_ready = 0
@@ -300,7 +312,7 @@ class MessageFilter(Generic[M]):
         ready = True
         for target in self._targets:
             for t in self._times(entry.stamp):
-                if buf.can_transform(target, entry.frame, t):
+                if buf.can_transform(target, entry.frame, t, policy=self._policy):
                     continue
                 if self._out_the_back(target, entry.frame, t):
                     self._drop(entry.msg, FilterFailureReason.OUT_THE_BACK)
@@ -353,7 +365,8 @@ class MessageFilter(Generic[M]):
                 for target in self._targets:
                     for t in self._times(entry.stamp):
                         await self._buffer.wait_for_transform(
-                            target, entry.frame, t, fail_fast=self._fail_fast
+                            target, entry.frame, t, fail_fast=self._fail_fast,
+                            policy=self._policy,
                         )
             except TransformException:
                 if entry.scope is scope and entry in self._pending:

@@ -60,6 +60,8 @@ from typing import Protocol
 
 from tfbus.clock import Clock
 from tfbus.core import BatchResult, frame_path
+from tfbus.core.policy import ExpireAfter
+from tfbus.core.results import BufferStatistics
 from tfbus.messages import TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -76,6 +78,7 @@ __all__ = [
     "MonitoredSink",
     "RateWindow",
     "TfSummary",
+    "expiry_line",
     "frame_chain",
     "link_rate",
 ]
@@ -535,6 +538,17 @@ class TfSummary:
     def transform_count(self) -> int:
         """Total number of transforms (every sample of every frame)."""
         return sum(f.count for f in self.frames.values())
+
+
+def expiry_line(stats: BufferStatistics, policy: ExpireAfter) -> str:
+    """The monitor's line for a buffer with frame expiry
+    (``cache_policy=expire_after(...)``): frames and links it holds now, and how many
+    links it has removed since it started, e.g. ``"buffer: 3 frames, 2 links; 5 frames
+    expired (no data for 2 s)"``."""
+    return (
+        f"buffer: {stats.frames} frames, {stats.links} links; {stats.frames_expired} "
+        f"frames expired (no data for {policy.after_ns / NSEC_PER_SEC:g} s)"
+    )
 
 
 class _Store(Protocol):

@@ -24,11 +24,13 @@ from tfbus.clock import ManualClock  # noqa: E402
 from tfbus.codecs.native import WireCodec  # noqa: E402
 from tfbus.core.policy import (  # noqa: E402
     Clamp,
+    ExpireAfter,
     Nearest,
     PolicyReport,
     PolicyResult,
     Previous,
     Window,
+    expire_after,
 )
 from tfbus.errors import (  # noqa: E402
     BackwardExtrapolationException,
@@ -92,10 +94,10 @@ class Setup:
 
 
 @asynccontextmanager
-async def served() -> AsyncIterator[Setup]:
+async def served(cache_policy: ExpireAfter | None = None) -> AsyncIterator[Setup]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     clock = ManualClock(Time(100))
-    buffer = Buffer(cache_time=10.0, clock=clock)
+    buffer = Buffer(cache_time=10.0, clock=clock, cache_policy=cache_policy)
     buffer.set_transform(ts("world", "base", 10, 1.0), "test")
     buffer.set_transform(ts("world", "base", 12, 3.0), "test")
     buffer.set_transform_static(ts("base", "laser", 0, 0.5), "test")
@@ -168,6 +170,27 @@ async def test_errors_come_back_as_the_same_tf2_classes_and_messages() -> None:
                 await s.client.lookup_transform(*args, timeout=0.0)
             assert type(remote.value) is cls
             assert str(remote.value) == str(local.value)
+
+
+async def test_a_frame_the_servers_buffer_expired_is_unknown_to_remote_lookups() -> None:
+    """The server's buffer forgets 'cup' (expire_after 5 s: its newest, 12 s, is older
+    than 20 - 5); the client gets tf2's LookupException, as the server's own lookup."""
+    async with served(cache_policy=expire_after(5.0)) as s:
+        s.buffer.set_transform(ts("world", "cup", 12, 4.0), "test")
+        t = await s.client.lookup_transform("world", "cup", Time(12), timeout=0.0)
+        assert t.transform.translation.x == 4.0
+        s.buffer.set_transform(ts("world", "base", 20, 5.0), "test")
+        assert s.buffer.statistics().frames_expired == 1
+        with pytest.raises(LookupException) as local:
+            s.buffer.lookup_transform("world", "cup", Time(12))
+        with pytest.raises(LookupException) as remote:
+            await s.client.lookup_transform("world", "cup", Time(12), timeout=0.0)
+        assert type(remote.value) is LookupException
+        assert str(remote.value) == str(local.value)
+        assert "cup" in str(remote.value)
+        assert await s.client.can_transform("world", "cup", Time(0), 0.0) is False
+        got = await s.client.lookup_transform("world", "laser", Time(20), timeout=0.0)
+        assert got.transform.translation.x == 5.5  # base's link is kept
 
 
 async def test_timeouts_run_on_the_servers_clock() -> None:
@@ -415,3 +438,30 @@ async def test_a_bad_policy_field_is_named() -> None:
                               "message": f"request field 'policy' has an invalid value {policy!r}"}
         t = await s.client.lookup_transform("world", "base", Time(0), timeout=0.0)
         assert t.transform.translation.x == pytest.approx(3.0)
+
+
+async def test_can_full_and_transform_carry_the_policy() -> None:
+    """can_transform, lookup_transform_full and transform with a policy answer as the
+    server's buffer does under it (base: x 1 at 10 s, x 3 at 12 s; laser static x 0.5)."""
+    async with served() as s:
+        assert await s.client.can_transform("world", "laser", Time(13), 0.0) is False
+        assert await s.client.can_transform(
+            "world", "laser", Time(13), 0.0, policy=Clamp(1.5)) is True
+        assert await s.client.can_transform(
+            "world", "laser", Time(13), 0.0, policy=Nearest(0.5)) is False
+        found = await s.client.lookup_transform_full(
+            "laser", Time(13), "laser", Time(10), "world", 0.0, policy=Previous())
+        local = s.buffer.lookup_transform_full(
+            "laser", Time(13), "laser", Time(10), "world", policy=Previous())
+        assert isinstance(found, PolicyResult) and found == local
+        assert found.transform.transform.translation.x == pytest.approx(-2.0)
+        assert found.report.max_abs_delta_ns == NS
+        p = PointStamped(Header(Time(13), "laser"), Point(1.0, 0.0, 0.0))
+        moved, report = await s.client.transform(p, "world", 0.0, policy=Clamp(1.5))
+        assert moved.point == Point(4.5, 0.0, 0.0) and moved.header.stamp == Time(13)
+        assert report == s.buffer.lookup_transform(
+            "world", "laser", Time(13), policy=Clamp(1.5)).report
+        with pytest.raises(ForwardExtrapolationException) as remote:
+            await s.client.lookup_transform_full(
+                "laser", Time(20), "laser", Time(10), "world", 0.0, policy=Nearest(0.5))
+        assert "into the future" in str(remote.value)

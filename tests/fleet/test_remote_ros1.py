@@ -46,6 +46,8 @@ from tfbus.errors import LookupException
 from tfbus.messages import (
     Header,
     LookupTransformGoal,
+    Point,
+    PointStamped,
     Quaternion,
     Transform,
     TransformStamped,
@@ -340,6 +342,15 @@ async def test_a_lookup_policy_is_refused_on_the_ros1_action() -> None:
             for policy in (Nearest(0.1), Clamp(0.1), Previous(), Window(0.1, 1.0)):
                 with pytest.raises(TypeError, match="cannot carry a lookup policy"):
                     await client.lookup_transform("base", "laser", Time(0), 1.0, policy=policy)
+                with pytest.raises(TypeError, match="cannot carry a lookup policy"):
+                    await client.can_transform("base", "laser", Time(0), 1.0, policy=policy)
+                with pytest.raises(TypeError, match="cannot carry a lookup policy"):
+                    await client.lookup_transform_full(
+                        "base", Time(0), "laser", Time(0), "base", 1.0, policy=policy)
+                with pytest.raises(TypeError, match="cannot carry a lookup policy"):
+                    await client.transform(
+                        PointStamped(Header(Time(0), "laser"), Point()), "base", 1.0,
+                        policy=policy)
             done = await client.lookup_transform("base", "laser", Time(0), 1.0, policy=Exact())
             assert tuple(done.transform.translation) == (1.0, 2.0, 3.0)
 

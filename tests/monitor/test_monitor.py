@@ -356,3 +356,39 @@ def test_the_command_line_asks_the_scheme_for_fleet_and_unknown_authority(
     src = BusSource("memory")
     src.sink.set_transforms([tf("base_link", "base_laser", T0)], "x", False)
     assert set(src.summary().authorities) == {"unknown"}
+
+
+def test_a_live_monitor_with_expire_after_drops_and_counts_expired_frames() -> None:
+    """``tfbus monitor --expire-after 2``: the buffer forgets 'cup' once the newest stamp
+    is more than 2 s past its last one (checked once per second of stamp time); it
+    leaves the Frames table and the buffer line counts it."""
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.core.policy import expire_after
+
+    src = BusSource("memory", cache_policy=expire_after(2.0))
+    src.sink.set_transforms([tf("map", "cup", T0), tf("map", "base", T0)], "robot")
+    text = _render(src)
+    assert _row(text, "cup")[1] == "map"
+    assert "buffer: 3 frames, 2 links; 0 frames expired (no data for 2 s)" in text
+    for k in range(1, 5):
+        src.sink.set_transforms([tf("map", "base", T0 + k * 1000 * MS)], "robot")
+    text = _render(src)
+    assert not [ln for ln in text.splitlines() if ln.split("│")[0].strip() == "cup"]
+    assert _row(text, "base")[1] == "map"
+    assert "buffer: 2 frames, 1 links; 1 frames expired (no data for 2 s)" in text
+    src.buffer().close()
+
+
+def test_monitor_refuses_expire_after_with_a_bag() -> None:
+    from click.testing import CliRunner
+
+    from tfbus.cli import cli
+
+    result = CliRunner().invoke(
+        cli, ["monitor", "--bag", "tests/data/webviz_turtle_tf_example.bag", "--expire-after", "2"]
+    )
+    assert result.exit_code == 2, result.output
+    assert "--expire-after applies to --bus sources only" in result.stderr
+    result = CliRunner().invoke(cli, ["monitor", "--bus", "memory", "--expire-after", "1e-300"])
+    assert result.exit_code == 2, result.output
+    assert "--expire-after: expire_after seconds must be > 0, got 1e-300" in result.stderr

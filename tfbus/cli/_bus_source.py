@@ -21,6 +21,7 @@ from tfbus.transports.spec import schemes
 if TYPE_CHECKING:
     from tfbus.buffer import Buffer
     from tfbus.bus import Bus, Subscription, Transport
+    from tfbus.core.policy import ExpireAfter
     from tfbus.fleet import FleetBuffer
     from tfbus.listener import TransformListener
     from tfbus.monitor import TfSummary
@@ -60,10 +61,12 @@ class BusSource(TfSource):
         use_sim_time: the clock (:attr:`clock`: receive times, timers, lookups) is a
             :class:`~tfbus.clock.SimClock` following ``/clock`` on the bus once attached
             (ROS's ``use_sim_time``), instead of the wall clock.
+        cache_policy: the buffer's frame expiry (``expire_after(seconds)``), or None.
     """
 
     def __init__(self, spec: str, *, name: str = "tfbus-cli", cache_time: float = 10.0,
-                 scan_topics: Sequence[str] = (), use_sim_time: bool = False) -> None:
+                 scan_topics: Sequence[str] = (), use_sim_time: bool = False,
+                 cache_policy: ExpireAfter | None = None) -> None:
         from tfbus.buffer import Buffer
         from tfbus.clock import Clock, SimClock, SystemClock
         from tfbus.monitor import MonitoredSink, TfSummary
@@ -77,7 +80,8 @@ class BusSource(TfSource):
         self.sim_clock: SimClock | None = SimClock() if use_sim_time else None
         """The simulated clock with ``use_sim_time`` (entered while attached), else None."""
         self.clock: Clock = self.sim_clock if self.sim_clock is not None else SystemClock()
-        self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock)
+        self._buffer: Buffer = Buffer(cache_time=cache_time, clock=self.clock,
+                                      cache_policy=cache_policy)
         self._summary = TfSummary()
         self.sink = MonitoredSink(self._buffer, self._summary, self.clock,
                                   attribute=self._attribute)

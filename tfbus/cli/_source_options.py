@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
@@ -17,6 +17,9 @@ from tfbus.cli._bus_source import BusSource
 from tfbus.cli._common import fail
 from tfbus.cli._tf_source import TfSource
 from tfbus.transports.spec import DEFAULT_BUS
+
+if TYPE_CHECKING:
+    from tfbus.core.policy import ExpireAfter
 
 __all__ = ["live_only", "source", "source_options"]
 
@@ -39,7 +42,7 @@ def source_options(f: F) -> F:
 
 
 def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli",
-           use_sim_time: bool = False) -> TfSource:
+           use_sim_time: bool = False, cache_policy: ExpireAfter | None = None) -> TfSource:
     """The source the options name: the bag, else the ``--bus`` spec, else the default
     bus (:data:`DEFAULT_BUS`, where the publishing commands publish); a usage error for
     both, and for ``--use-sim-time`` with a bag (a bag has its own times)."""
@@ -50,7 +53,7 @@ def source(bag: Path | None, bus: str | None = None, *, name: str = "tfbus-cli",
             fail("--use-sim-time applies to --bus sources only")
         return BagSource(bag)
     return BusSource(bus if bus is not None else DEFAULT_BUS, name=name,
-                     use_sim_time=use_sim_time)
+                     use_sim_time=use_sim_time, cache_policy=cache_policy)
 
 
 def live_only(src: TfSource, **options: object) -> None:

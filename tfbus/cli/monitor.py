@@ -104,7 +104,7 @@ def print_monitor(
 
     With a ``doctor`` watching the live bus (:func:`tfbus.cli.doctor.watch`), its findings
     so far follow (``tfbus doctor``'s table), or one line saying there are none."""
-    from tfbus.monitor import FrameSummary
+    from tfbus.monitor import FrameSummary, expiry_line
 
     now = live_src.clock.now() if live_src is not None else None
 
@@ -116,6 +116,11 @@ def print_monitor(
         return f"{rate(x):.3f}" + (" stale" if stale else "")
 
     selected = list(s.frames.values())
+    expiring = live_src.buffer() if live_src is not None else None
+    policy = expiring.cache_policy if expiring is not None else None
+    if expiring is not None and policy is not None:
+        # Frames the buffer has forgotten (expire_after) leave the table.
+        selected = [f for f in selected if expiring.frame_exists(f.child)]
     title = (f"RESULTS: for {literal(frames[0])} to {literal(frames[1])}" if frames
              else "RESULTS: for all Frames")
     if live_src is not None:
@@ -152,6 +157,8 @@ def print_monitor(
         line = transport_line(live_src)
         if line:
             out.print(line)
+    if expiring is not None and policy is not None:
+        out.print(expiry_line(expiring.statistics(), policy))
     if live_src is not None and doctor is not None:
         from tfbus.cli.doctor import findings_table, live_report
 
@@ -215,9 +222,12 @@ def liveliness_table(src: BusSource) -> Table:
               help="With --bus: stop after this many seconds (default: Ctrl-C).")
 @click.option("--interval", type=seconds(), default=None,
               help="With --bus: print the tables every this many seconds (default 1).")
+@click.option("--expire-after", "expire_seconds", type=seconds(), default=None,
+              help="With --bus: forget frames whose data stopped this many seconds (of "
+                   "stamp time) before the newest; they leave the table and are counted.")
 def command(
     frames: tuple[str, ...], bag: Path | None, bus: str | None, use_sim_time: bool,
-    duration: float | None, interval: float | None,
+    duration: float | None, interval: float | None, expire_seconds: float | None,
 ) -> int:
     """Per-frame rates, delays and broadcasters, like tf_monitor.
 
@@ -231,6 +241,9 @@ def command(
     with the broadcasters known through
     Zenoh liveliness (alive / gone); a line is printed as soon as a broadcaster appears
     ("[alive] ...") or its liveliness is lost because it exited or died ("[dead] ...").
+    With --expire-after S the buffer forgets frames whose data stopped S seconds of
+    stamp time before the newest (tf2 keeps them forever): they leave the Frames table
+    and a "buffer: ... frames expired" line counts them.
 
     \b
     Examples:
@@ -246,8 +259,17 @@ def command(
     """
     if len(frames) not in (0, 2):
         fail("give no frames, or exactly two: SOURCE TARGET")
-    src = source(bag, bus, name="tfbus-monitor", use_sim_time=use_sim_time)
-    live_only(src, duration=duration, interval=interval)
+    from tfbus.core.policy import expire_after
+
+    policy = None
+    if expire_seconds is not None:
+        try:
+            policy = expire_after(expire_seconds)
+        except ValueError as exc:  # a positive value below 1 ns
+            fail(f"--expire-after: {exc}")
+    src = source(bag, bus, name="tfbus-monitor", use_sim_time=use_sim_time,
+                 cache_policy=policy)
+    live_only(src, duration=duration, interval=interval, expire_after=expire_seconds)
     if isinstance(src, BusSource):
         if frames:
             src.summary().watch_chain(frames[0], frames[1])

@@ -26,7 +26,21 @@ cdef class CoreBase:
     cdef int64_t _last_stamp
     cdef object _last_values
     cdef bint _last_relinked
+    cdef list _free
+    cdef list _refs
+    cdef list _lparents
+    cdef list _heap
+    cdef int64_t _newest
+    cdef bint _expiring
+    cdef int64_t _expire_ns
+    cdef int64_t _expire_every
+    cdef int64_t _expire_due
+    cdef long long _frames_expired
     cdef object _register(self, str frame_id)
+    cdef int _name_parent(self, object cid, object pid) except -1
+    cdef int _unregister(self, object fid) except -1
+    cdef int _expire(self) except -1
+    cdef Py_ssize_t _cforget(self, int64_t older_than) except -1
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,

@@ -38,6 +38,7 @@ __all__ = [
 
 
 import numpy as np
+from heapq import heappop, heappush
 
 from libc.stdint cimport INT64_MAX, int64_t
 from libc.string cimport memcpy
@@ -357,6 +358,16 @@ cdef class CoreBase:
         self._generation = 0
         self._cache_ns = 0
         self._replace_repeated = False
+        self._free = []
+        self._refs = [0]
+        self._lparents = [None]
+        self._heap = []
+        self._newest = 0
+        self._expiring = False
+        self._expire_ns = 0
+        self._expire_every = 0
+        self._expire_due = INT64_MAX
+        self._frames_expired = 0
         self._memo = [None] * MEMO_SIZE
         for k in range(MEMO_SIZE):
             self._memo_gen[k] = -1
@@ -389,11 +400,114 @@ cdef class CoreBase:
         self._replace_repeated = replace
 
     cdef object _register(self, str frame_id):
-        cdef object fid = len(self._frame_names)
+        cdef object fid
+        if self._free:  # the id of a forgotten frame (its link and counts already reset)
+            fid = self._free.pop()
+            self._frame_ids[frame_id] = fid
+            self._frame_names[fid] = frame_id
+            return fid
+        fid = len(self._frame_names)
         self._frame_ids[frame_id] = fid
         self._frame_names.append(frame_id)
         self._caches.append(None)
+        self._refs.append(0)
+        self._lparents.append(None)
         return fid
+
+    cdef int _name_parent(self, object cid, object pid) except -1:
+        """Record that the link of ``cid`` named ``pid`` as its parent (once per pair):
+        ``pid`` stays known while that link does."""
+        cdef object ps = self._lparents[cid]
+        if ps is None:
+            self._lparents[cid] = (pid,)
+        elif pid in <tuple>ps:
+            return 0
+        else:
+            self._lparents[cid] = (<tuple>ps) + (pid,)
+        self._refs[pid] += 1
+        return 0
+
+    cdef int _unregister(self, object fid) except -1:
+        """Forget frame ``fid`` (no link, no link naming it): its id becomes unknown and
+        its number free for the next new frame."""
+        del self._frame_ids[self._frame_names[fid]]
+        self._frame_names[fid] = ""
+        self._authority.pop(fid, None)
+        self._free.append(fid)
+        return 0
+
+    # ------------------------------------------------------------------ expiry
+
+    def _forget(self, int64_t older_than):
+        """Remove every dynamic link whose newest sample is older than ``older_than``
+        (ns, strictly: ``newest < older_than``), as tf2 has no call for (ros/geometry2
+        #409, #239). ``BufferCore.forget`` documents the rule; returns the number of
+        links removed."""
+        return self._cforget(older_than)
+
+    cdef Py_ssize_t _cforget(self, int64_t older_than) except -1:
+        """``_forget`` (what ``expire_after`` calls, never a subclass's override)."""
+        cdef list heap = self._heap
+        cdef list caches = self._caches
+        cdef list refs = self._refs
+        cdef Py_ssize_t removed = 0
+        cdef int64_t newest
+        cdef object fid, cache, ps, p
+        while heap and <int64_t>(<tuple>heap[0])[0] < older_than:
+            fid = (<tuple>heappop(heap))[1]
+            cache = caches[fid]
+            if fid == 0 or not isinstance(cache, TimeCache):
+                continue
+            (<Link>cache).c_latest(&newest)
+            if newest >= older_than:
+                heappush(heap, (newest, fid))
+                continue
+            caches[fid] = None
+            self._authority.pop(fid, None)
+            ps = self._lparents[fid]
+            self._lparents[fid] = None
+            if ps is not None:
+                for p in <tuple>ps:
+                    refs[p] -= 1
+                    if refs[p] == 0 and caches[p] is None and p != 0:
+                        self._unregister(p)
+            if refs[fid] == 0:
+                self._unregister(fid)
+            removed += 1
+        if removed:
+            self._generation += 1
+        return removed
+
+    @property
+    def frames_expired(self):
+        """How many links ``expire_after`` has removed (``BufferCore.forget`` called
+        directly is not counted)."""
+        return self._frames_expired
+
+    @property
+    def expire_after_ns(self):
+        """``expire_after``'s age limit in ns; 0 when frames never expire."""
+        return self._expire_ns if self._expiring else 0
+
+    def _set_expiry(self, int64_t after_ns, int64_t every_ns):
+        """Remove, as data arrives, the links whose newest sample is more than
+        ``after_ns`` older than the newest dynamic stamp stored, checked whenever that
+        stamp has advanced ``every_ns`` since the last check."""
+        self._expire_ns = after_ns
+        self._expire_every = every_ns
+        self._expiring = True
+        self._expire_due = (INT64_MAX if self._newest > INT64_MAX - every_ns
+                            else self._newest + every_ns)
+
+    cdef int _expire(self) except -1:
+        """``expire_after``'s check (the newest stamp reached ``_expire_due``)."""
+        if not self._expiring:
+            self._expire_due = INT64_MAX
+            return 0
+        self._frames_expired += self._cforget(self._newest - self._expire_ns)
+        self._expire_due = (INT64_MAX if self._newest > INT64_MAX - self._expire_every
+                            else self._newest + self._expire_every)
+        return 0
 
     # ------------------------------------------------------------------ insert
 
@@ -411,7 +525,7 @@ cdef class CoreBase:
         cdef double v[7]
         cdef double norm2
         cdef int64_t stamp, old_stamp
-        cdef int code, k, old_parent
+        cdef int code, k, old_parent, ipid
         cdef bint same
         header = (<tuple>ts)[0]
         tf = (<tuple>ts)[2]
@@ -477,20 +591,26 @@ cdef class CoreBase:
             cid = self._register(child)
         cache = self._caches[cid]
         if cache is None:
-            cache = (
-                StaticCache() if is_static
-                else TimeCache(self._cache_ns, self._replace_repeated)
-            )
+            if is_static:
+                cache = StaticCache()
+            else:
+                cache = TimeCache(self._cache_ns, self._replace_repeated)
+                heappush(self._heap, (stamp, cid))
             self._caches[cid] = cache
         if pid is None:
             pid = self._register(parent)
+        if not is_static and stamp > self._newest:
+            self._newest = stamp
+        ipid = pid
         old_parent = (<Link>cache).c_latest(&old_stamp)
-        code = (<Link>cache).c_insert(stamp, pid, v)
+        if old_parent != ipid:
+            self._name_parent(cid, pid)
+        code = (<Link>cache).c_insert(stamp, ipid, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
         self._last_relinked = False
         if code == C_OK:
-            if old_parent != <int>pid:
+            if old_parent != ipid:
                 self._last_relinked = True
             elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
                 self._last_relinked = True
@@ -550,6 +670,8 @@ cdef class CoreBase:
                         refusals = []
                     refusals.append((code, self._last_child, self._last_stamp))
             i += 1
+        if self._newest >= self._expire_due:
+            self._expire()
         # TouchedFrames(ids) without its Python-level __init__ (one slot, set here).
         touched = <object>PyType_GenericAlloc(<PyTypeObject*>TouchedFrames, 0)
         Py_DECREF(touched)
@@ -575,6 +697,8 @@ cdef class CoreBase:
         if not isinstance(ts, TransformStamped):
             raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
         code = self._insert_one(ts, authority, is_static)
+        if self._newest >= self._expire_due:
+            self._expire()
         if code == C_OK:
             return True
         if code == C_INVALID:
@@ -825,13 +949,27 @@ cdef class CoreBase:
         ``BufferCore::clear``). As in tf2, the reserved frame 0 (``NO_PARENT``) is
         skipped: a link stored with child ``"NO_PARENT"`` keeps its samples."""
         cdef object cache
+        cdef Py_ssize_t fid
         self._generation += 1
         for cache in self._caches[1:]:
             if cache is not None:
                 cache.clear()
+        # Every dynamic link's newest stamp is 0 now: ``forget`` finds them first; the
+        # newest stamp stored starts over (a clock that jumped back: older stamps follow).
+        self._newest = 0
+        if self._expiring:
+            self._expire_due = self._expire_every
+        self._heap = [
+            (0, fid) for fid in range(1, len(self._caches))
+            if isinstance(self._caches[fid], TimeCache)
+        ]
 
     def get_frame_names(self):
-        """Every known frame id (children and parents), in registration order."""
+        """Every known frame id (children and parents), in the order of their numbers
+        (registration order; a frame registered after ``forget`` may take the number of
+        a forgotten one)."""
+        if self._free:
+            return [name for name in self._frame_names[1:] if name]
         return self._frame_names[1:]
 
     def frame_exists(self, frame_id):

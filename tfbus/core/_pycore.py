@@ -20,6 +20,7 @@ w), never normalised unless said so. Times are int nanoseconds.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from heapq import heappop, heappush
 from typing import Any, Final, Literal, TypeVar
 
 import numpy as np
@@ -273,16 +274,26 @@ class CoreBase:
         "_authority",
         "_cache_ns",
         "_caches",
+        "_expire_due",
+        "_expire_every",
+        "_expire_ns",
+        "_expiring",
         "_frame_ids",
         "_frame_names",
+        "_frames_expired",
+        "_free",
         "_generation",
+        "_heap",
         "_last_child",
         "_last_parent",
         "_last_relinked",
         "_last_stamp",
         "_last_values",
+        "_lparents",
         "_memo",
         "_memo_generation",
+        "_newest",
+        "_refs",
         "_replace_repeated",
     )
 
@@ -303,6 +314,21 @@ class CoreBase:
     _last_stamp: int
     _last_values: Tf7
     _last_relinked: bool
+    # Frame expiry (``forget``): the free ids of forgotten frames (reused by
+    # ``_register``), per id the number of links naming it as a parent (``_refs``) and the
+    # parents its own link has named (``_lparents``), a heap of ``(stamp, id)`` per
+    # dynamic link (the stamp at most its newest), the newest dynamic stamp stored, and
+    # ``expire_after``'s settings and count.
+    _free: list[int]
+    _refs: list[int]
+    _lparents: list[tuple[int, ...] | None]
+    _heap: list[tuple[int, int]]
+    _newest: int
+    _expiring: bool
+    _expire_ns: int
+    _expire_every: int
+    _expire_due: int
+    _frames_expired: int
 
     def __new__(cls: type[_Core], *args: Any, **kwargs: Any) -> _Core:
         self = super().__new__(cls)
@@ -319,6 +345,16 @@ class CoreBase:
         self._last_stamp = 0
         self._last_values = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
         self._last_relinked = False
+        self._free = []
+        self._refs = [0]
+        self._lparents = [None]
+        self._heap = []
+        self._newest = 0
+        self._expiring = False
+        self._expire_ns = 0
+        self._expire_every = 0
+        self._expire_due = _INT64_MAX
+        self._frames_expired = 0
         return self
 
     @property
@@ -356,11 +392,104 @@ class CoreBase:
         self._replace_repeated = bool(replace)
 
     def _register(self, frame_id: str) -> int:
+        free = self._free
+        if free:  # the id of a forgotten frame (its link and counts already reset)
+            fid = free.pop()
+            self._frame_ids[frame_id] = fid
+            self._frame_names[fid] = frame_id
+            return fid
         fid = len(self._frame_names)
         self._frame_ids[frame_id] = fid
         self._frame_names.append(frame_id)
         self._caches.append(None)
+        self._refs.append(0)
+        self._lparents.append(None)
         return fid
+
+    def _name_parent(self, cid: int, pid: int) -> None:
+        """Record that the link of ``cid`` named ``pid`` as its parent (once per pair):
+        ``pid`` stays known while that link does."""
+        ps = self._lparents[cid]
+        if ps is None:
+            self._lparents[cid] = (pid,)
+        elif pid in ps:
+            return
+        else:
+            self._lparents[cid] = (*ps, pid)
+        self._refs[pid] += 1
+
+    def _unregister(self, fid: int) -> None:
+        """Forget frame ``fid`` (no link, no link naming it): its id becomes unknown and
+        its number free for the next new frame."""
+        del self._frame_ids[self._frame_names[fid]]
+        self._frame_names[fid] = ""
+        self._authority.pop(fid, None)
+        self._free.append(fid)
+
+    # ------------------------------------------------------------------ expiry
+
+    def _forget(self, older_than: int) -> int:
+        """Remove every dynamic link whose newest sample is older than ``older_than``
+        (ns, strictly: ``newest < older_than``), as tf2 has no call for (ros/geometry2
+        #409, #239). ``BufferCore.forget`` documents the rule; returns the number of
+        links removed."""
+        older_than = _int64(older_than)
+        heap = self._heap
+        caches = self._caches
+        removed = 0
+        while heap and heap[0][0] < older_than:
+            _, fid = heappop(heap)
+            cache = caches[fid]
+            if fid == 0 or not isinstance(cache, TimeCache):
+                continue
+            newest = cache._c_latest()[0]
+            if newest >= older_than:
+                heappush(heap, (newest, fid))
+                continue
+            caches[fid] = None
+            self._authority.pop(fid, None)
+            ps = self._lparents[fid]
+            self._lparents[fid] = None
+            refs = self._refs
+            if ps is not None:
+                for p in ps:
+                    refs[p] -= 1
+                    if refs[p] == 0 and caches[p] is None and p != 0:
+                        self._unregister(p)
+            if refs[fid] == 0:
+                self._unregister(fid)
+            removed += 1
+        if removed:
+            self._generation += 1
+        return removed
+
+    @property
+    def frames_expired(self) -> int:
+        """How many links ``expire_after`` has removed (``BufferCore.forget`` called
+        directly is not counted)."""
+        return self._frames_expired
+
+    @property
+    def expire_after_ns(self) -> int:
+        """``expire_after``'s age limit in ns; 0 when frames never expire."""
+        return self._expire_ns if self._expiring else 0
+
+    def _set_expiry(self, after_ns: int, every_ns: int) -> None:
+        """Remove, as data arrives, the links whose newest sample is more than
+        ``after_ns`` older than the newest dynamic stamp stored, checked whenever that
+        stamp has advanced ``every_ns`` since the last check."""
+        self._expire_ns = _int64(after_ns)
+        self._expire_every = _int64(every_ns)
+        self._expiring = True
+        self._expire_due = _int64(min(self._newest + self._expire_every, _INT64_MAX))
+
+    def _expire(self) -> None:
+        """``expire_after``'s check (the newest stamp reached ``_expire_due``)."""
+        if not self._expiring:
+            self._expire_due = _INT64_MAX
+            return
+        self._frames_expired += CoreBase._forget(self, self._newest - self._expire_ns)
+        self._expire_due = _int64(min(self._newest + self._expire_every, _INT64_MAX))
 
     # ------------------------------------------------------------------ insert
 
@@ -434,15 +563,20 @@ class CoreBase:
             cid = self._register(child)
         cache = self._caches[cid]
         if cache is None:
-            cache = (
-                StaticCache() if is_static
-                else TimeCache(self._cache_ns, self._replace_repeated)
-            )
+            if is_static:
+                cache = StaticCache()
+            else:
+                cache = TimeCache(self._cache_ns, self._replace_repeated)
+                heappush(self._heap, (stamp, cid))
             self._caches[cid] = cache
         pid = self._frame_ids.get(parent)
         if pid is None:
             pid = self._register(parent)
+        if not is_static and stamp > self._newest:
+            self._newest = stamp
         _, old_parent = cache._c_latest()
+        if old_parent != pid:
+            self._name_parent(cid, pid)
         code = cache._c_insert(stamp, pid, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
@@ -517,6 +651,8 @@ class CoreBase:
                 else:
                     refusals.append((code, self._last_child, self._last_stamp))
         touched = TouchedFrames(ids)
+        if self._newest >= self._expire_due:
+            self._expire()
         if not (errors or refusals):
             return BatchResult(stored, 0, [], touched, relinked)
         return stored, errors, touched, relinked, refusals
@@ -542,6 +678,8 @@ class CoreBase:
         if not isinstance(ts, TransformStamped):
             raise TypeError(f"expected TransformStamped, got {type(ts).__name__}")
         code = self._insert_one(ts, authority, bool(is_static))
+        if self._newest >= self._expire_due:
+            self._expire()
         if code == OK:
             return True
         if code == INVALID:
@@ -777,9 +915,21 @@ class CoreBase:
         for cache in caches[1:]:
             if cache is not None:
                 cache.clear()
+        # Every dynamic link's newest stamp is 0 now: ``forget`` finds them first; the
+        # newest stamp stored starts over (a clock that jumped back: older stamps follow).
+        self._newest = 0
+        if self._expiring:
+            self._expire_due = self._expire_every
+        self._heap = [
+            (0, fid) for fid in range(1, len(caches)) if isinstance(caches[fid], TimeCache)
+        ]
 
     def get_frame_names(self) -> list[str]:
-        """Every known frame id (children and parents), in registration order."""
+        """Every known frame id (children and parents), in the order of their numbers
+        (registration order; a frame registered after ``forget`` may take the number of
+        a forgotten one)."""
+        if self._free:
+            return [name for name in self._frame_names[1:] if name]
         return self._frame_names[1:]
 
     def frame_exists(self, frame_id: str) -> bool:

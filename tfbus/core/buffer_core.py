@@ -56,6 +56,7 @@ from tfbus.core.batch import (
 from tfbus.core.policy import (
     Clamp,
     Exact,
+    ExpireAfter,
     LookupPolicy,
     Nearest,
     PolicyReport,
@@ -67,6 +68,7 @@ from tfbus.core.policy import (
 )
 from tfbus.core.results import (
     BatchResult,
+    BufferStatistics,
     SetResult,
     cache_time_ns,
     cap_message,
@@ -99,13 +101,14 @@ from tfbus.messages import (
     VelocityStamped,
 )
 from tfbus.ratelimit import CountLimitedLog
-from tfbus.time import Duration, Time
+from tfbus.time import TIME_MAX_NS, Duration, Time
 
 __all__ = [
     "COMPILED",
     "MAX_GRAPH_DEPTH",
     "BatchResult",
     "BufferCore",
+    "BufferStatistics",
     "FrameInfo",
     "OnRepeat",
     "SetResult",
@@ -207,12 +210,19 @@ class BufferCore(CoreBase):
             parent replace it (a stored transform; a publisher re-sending a corrected
             pose at the same stamp); an equal stamp older than the newest is still
             refused as TF_REPEATED_DATA. Static transforms always replace (tf2).
+        cache_policy: None (default, tf2: a frame is kept for the life of the buffer) or
+            :func:`~tfbus.core.policy.expire_after` ``(seconds)``: as data arrives, the
+            dynamic links whose newest sample is more than ``seconds`` older than the
+            newest dynamic stamp stored are removed by :meth:`forget` (at most once per
+            ``every`` of stamp time, 1 s by default), counted in
+            :meth:`statistics` ``.frames_expired``.
 
     Raises:
         TypeError: ``cache_time`` is not a number or Duration (checked before anything is
-            allocated).
+            allocated); ``cache_policy`` is not an ``expire_after(...)``.
         ValueError: ``cache_time`` is negative, infinite, NaN or beyond int64 ns;
-            ``on_repeat`` is neither ``"reject"`` nor ``"replace"``.
+            ``on_repeat`` is neither ``"reject"`` nor ``"replace"``; a ``cache_policy``
+            whose durations are not in [1, 2**63 - 1] ns.
 
     Frame ids are arbitrary strings compared exactly (a ``str`` subclass such as
     ``numpy.str_`` is taken as the string it is). ``set_transform`` strips one leading
@@ -226,7 +236,11 @@ class BufferCore(CoreBase):
     """
 
     def __init__(
-        self, cache_time: float | Duration = 10.0, *, on_repeat: OnRepeat = "reject"
+        self,
+        cache_time: float | Duration = 10.0,
+        *,
+        on_repeat: OnRepeat = "reject",
+        cache_policy: ExpireAfter | None = None,
     ) -> None:
         self._set_cache_time_ns(cache_time_ns(cache_time))
         if on_repeat != "reject":  # (the core's default: nothing to set)
@@ -235,7 +249,84 @@ class BufferCore(CoreBase):
                     f"on_repeat must be 'reject' or 'replace', got {on_repeat!r}"
                 )
             self._set_replace_repeated(True)
+        if cache_policy is not None:
+            if not isinstance(cache_policy, ExpireAfter):
+                raise TypeError(
+                    "cache_policy must be None or expire_after(seconds), got "
+                    f"{cache_policy!r}"
+                )
+            for name, ns in zip(("after_ns", "every_ns"), cache_policy, strict=True):
+                if type(ns) is not int or not 0 < ns <= TIME_MAX_NS:
+                    raise ValueError(
+                        f"cache_policy.{name} must be an int in [1, 2**63 - 1] ns, got {ns!r}"
+                    )
+            self._set_expiry(cache_policy.after_ns, cache_policy.every_ns)
+        self._cache_policy = cache_policy
         self._refusal_log = CountLimitedLog(logger, _REFUSAL_LOG_EVERY)
+
+    @property
+    def cache_policy(self) -> ExpireAfter | None:
+        """The frame expiry given at construction (``expire_after(...)``), or None."""
+        return self._cache_policy
+
+    def forget(self, older_than: Time | int) -> int:
+        """Remove the frames whose data stopped before ``older_than`` (what tf2 never
+        does: ros/geometry2 #239, #409; ``cache_policy=expire_after(...)`` calls this as
+        data arrives).
+
+        The rule, per dynamic link (a child frame and its parent): the link is removed
+        when its newest sample is older than ``older_than`` (``newest < older_than``),
+        whatever its children do; static links never expire. A frame id stays known
+        while it has a link or a remaining link has named it as a parent; else it
+        becomes unknown exactly as if never seen: lookups raise LookupException ("...
+        does not exist"), :meth:`get_frame_names`, :meth:`all_frames_as_string` and
+        :meth:`all_frames_as_yaml` leave it out, and a later transform registers it
+        anew (its number may be reused). A child whose parent's link was removed keeps
+        that parent, now a root: lookups across it raise ConnectivityException (two
+        trees), as tf2 reports unconnected frames. The buffer then answers every lookup
+        as a fresh buffer fed only the samples of the remaining links would.
+
+        Cost: O((r + k) log n) for r links removed and k links whose newest stamp moved
+        past ``older_than`` since the last call (each link is kept in a heap by the
+        newest stamp seen when last examined), never a scan of every frame; no cost on
+        insert but a heap push when a link is created.
+
+        Args:
+            older_than: a :class:`~tfbus.time.Time`, or int nanoseconds in
+                [0, 2**63 - 1].
+
+        Returns:
+            The number of links removed (frames whose own transform data expired).
+
+        Raises:
+            TypeError: ``older_than`` is neither a Time nor an int (a bool included).
+            ValueError: an int outside [0, 2**63 - 1].
+        """
+        if isinstance(older_than, Time):
+            ns = older_than.ns
+        elif type(older_than) is int or (
+            isinstance(older_than, (int, np.integer)) and not isinstance(older_than, bool)
+        ):
+            ns = int(older_than)
+            if not 0 <= ns <= TIME_MAX_NS:
+                raise ValueError(
+                    f"forget: older_than must be in [0, 2**63 - 1] ns, got {older_than!r}"
+                )
+        else:
+            raise TypeError(
+                "forget: older_than must be a tfbus Time or int nanoseconds, got "
+                f"{type(older_than).__name__} {older_than!r}"
+            )
+        return self._forget(ns)
+
+    def statistics(self) -> BufferStatistics:
+        """A snapshot of the buffer's counters: frames known, links, and frames expired
+        by ``cache_policy``."""
+        return BufferStatistics(
+            frames=len(self.get_frame_names()),
+            links=sum(1 for cache in self._caches[1:] if cache is not None),
+            frames_expired=self.frames_expired,
+        )
 
     @property
     def on_repeat(self) -> OnRepeat:
@@ -1016,16 +1107,31 @@ class BufferCore(CoreBase):
         source_frame: str,
         time: Time,
         return_debug_tuple: bool = False,
+        *,
+        policy: LookupPolicy | None = None,
     ) -> bool | tuple[bool, str]:
         """Whether :meth:`lookup_transform` would succeed (tf2 ``canTransform``). Never
         raises for missing data or bad ids.
 
+        ``policy`` (:mod:`tfbus.core.policy`): whether :meth:`lookup_transform` with that
+        policy would succeed (``None`` or ``Exact()``: tf2's rule).
+
         Returns:
             A bool, or ``(bool, tf2's error message)`` when ``return_debug_tuple`` is
             true (tf2_ros convention). The message is empty on success and for empty or
-            '/'-prefixed ids.
+            '/'-prefixed ids; under a policy it is the error that lookup would raise.
+
+        Raises:
+            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
         """
-        ok, msg = self._can_transform(target_frame, source_frame, time)
+        if policy is not None and type(policy) is not Exact:
+            found = self._policy_query(target_frame, source_frame, time, policy)
+            if isinstance(found, PolicyResult):
+                ok, msg = True, ""
+            else:
+                ok, msg = self._cannot(target_frame, source_frame, found)
+        else:
+            ok, msg = self._can_transform(target_frame, source_frame, time)
         return (ok, msg) if return_debug_tuple else ok
 
     def _can_transform(self, target_frame: str, source_frame: str, time: Time) -> tuple[
@@ -1037,6 +1143,12 @@ class BufferCore(CoreBase):
             raise not_a_time(time, err) from None
         if isinstance(out, TransformStamped):
             return True, ""
+        return self._cannot(target_frame, source_frame, out)
+
+    def _cannot(
+        self, target_frame: str, source_frame: str, out: tuple[int, ...]
+    ) -> tuple[bool, str]:
+        """``can_transform``'s ``(False, message)`` for a failed query."""
         code = out[0]
         if code in (INVALID_ARGUMENT, UNKNOWN_FRAME):
             # tf2 canTransform: empty / '/'-prefixed ids first (no message), then both

@@ -16,6 +16,7 @@ from tfbus.time import TIME_MAX_NS, Duration, Time
 __all__ = [
     "MAX_MESSAGE",
     "BatchResult",
+    "BufferStatistics",
     "SetResult",
     "TouchedFrames",
     "cache_time_ns",
@@ -83,6 +84,18 @@ class TouchedFrames(AbstractSet[str]):
 
     def __repr__(self) -> str:
         return f"TouchedFrames({sorted(self._frozen())!r})"
+
+
+class BufferStatistics(NamedTuple):
+    """A snapshot of a buffer's counters (:meth:`BufferCore.statistics
+    <tfbus.core.BufferCore.statistics>`)."""
+
+    frames: int
+    """Frame ids known now (children and parents)."""
+    links: int
+    """Links (child frames with a transform) stored now, static ones included."""
+    frames_expired: int
+    """Links removed by ``cache_policy=expire_after(...)`` since construction."""
 
 
 class BatchResult(NamedTuple):

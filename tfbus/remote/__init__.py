@@ -35,6 +35,7 @@ from tfbus.core.policy import (
     Exact,
     LookupPolicy,
     Nearest,
+    PolicyReport,
     PolicyResult,
     Previous,
     Window,
@@ -200,14 +201,7 @@ class BufferClient:
             TransportError if the bus closed; TypeError: a non-exact ``policy`` on a
             transport whose lookups cannot carry one (ROS 1), or not a policy.
         """
-        if policy is not None and type(policy) is not Exact:
-            policy_args(policy)  # a TypeError for anything else
-            if not getattr(self._client, "carries_policy", False):
-                raise TypeError(
-                    f"{type(self._client).__qualname__} cannot carry a lookup policy (the "
-                    "ROS LookupTransform action has no field for one): look up with "
-                    "policy= on a Buffer fed by a TransformListener instead"
-                )
+        if self._policy_client(policy) is not None:
             client: Any = self._client  # the Zenoh client: policy= beyond LookupClient
             answer: PolicyResult = await client.lookup_transform(
                 target_frame, source_frame, time, timeout, fail_fast=fail_fast, policy=policy
@@ -216,16 +210,59 @@ class BufferClient:
         return await self._client.lookup_transform(target_frame, source_frame, time, timeout,
                                                    fail_fast=fail_fast)
 
-    @coroutine_method
+    def _policy_client(self, policy: object) -> Any:
+        """The client to send a non-exact ``policy`` with (None for none or ``Exact()``).
+
+        Raises:
+            TypeError: ``policy`` is not a lookup policy, or the transport's lookups
+                cannot carry one (the ROS ``LookupTransform`` action, ROS 1 and ROS 2).
+        """
+        if policy is None or type(policy) is Exact:
+            return None
+        policy_args(policy)  # a TypeError for anything else
+        if not getattr(self._client, "carries_policy", False):
+            raise TypeError(
+                f"{type(self._client).__qualname__} cannot carry a lookup policy (the "
+                "ROS LookupTransform action has no field for one): look up with "
+                "policy= on a Buffer fed by a TransformListener instead"
+            )
+        return self._client
+
+    @overload
+    def lookup_transform_full(self, target_frame: str, target_time: Time,
+                              source_frame: str, source_time: Time, fixed_frame: str,
+                              timeout: float | Duration | None = None, *,
+                              fail_fast: bool = False,
+                              policy: Exact | None = None) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def lookup_transform_full(self, target_frame: str, target_time: Time,
+                              source_frame: str, source_time: Time, fixed_frame: str,
+                              timeout: float | Duration | None = None, *,
+                              fail_fast: bool = False,
+                              policy: Nearest | Clamp | Previous | Window
+                              ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def lookup_transform_full(self, target_frame: str, target_time: Time,
                                     source_frame: str, source_time: Time, fixed_frame: str,
                                     timeout: float | Duration | None = None, *,
-                                    fail_fast: bool = False) -> TransformStamped:
+                                    fail_fast: bool = False,
+                                    policy: LookupPolicy | None = None
+                                    ) -> TransformStamped | PolicyResult:
         """The server's ``lookup_transform_full_async`` (time travel through
-        ``fixed_frame``); ``fail_fast`` as :meth:`lookup_transform`.
+        ``fixed_frame``); ``fail_fast`` and ``policy`` as :meth:`lookup_transform` (a
+        non-exact policy applies to both legs and returns the server's
+        :class:`~tfbus.core.policy.PolicyResult`).
 
         Raises: as :meth:`lookup_transform`.
         """
+        client = self._policy_client(policy)
+        if client is not None:
+            answer: PolicyResult = await client.lookup_transform_full(
+                target_frame, target_time, source_frame, source_time, fixed_frame, timeout,
+                fail_fast=fail_fast, policy=policy)
+            return answer
         return await self._client.lookup_transform_full(
             target_frame, target_time, source_frame, source_time, fixed_frame, timeout,
             fail_fast=fail_fast)
@@ -233,27 +270,42 @@ class BufferClient:
     @coroutine_method
     async def can_transform(self, target_frame: str, source_frame: str, time: Time,
                             timeout: float | Duration | None = None, *,
-                            fail_fast: bool = False) -> bool:
+                            fail_fast: bool = False,
+                            policy: LookupPolicy | None = None) -> bool:
         """Whether the server's buffer has the transform within ``timeout``; False also
-        when the server does not answer in time. ``fail_fast`` as
-        :meth:`lookup_transform`.
+        when the server does not answer in time. ``fail_fast`` and ``policy`` as
+        :meth:`lookup_transform` (whether a lookup under the policy answers).
 
         Raises:
             ValueError: a bad timeout. TransportError: the bus closed.
+            TypeError: as :meth:`lookup_transform` for ``policy``.
         """
+        client = self._policy_client(policy)
+        if client is not None:
+            can: bool = await client.can_transform(target_frame, source_frame, time, timeout,
+                                                   fail_fast=fail_fast, policy=policy)
+            return can
         return await self._client.can_transform(target_frame, source_frame, time, timeout,
                                                 fail_fast=fail_fast)
 
     @coroutine_method
     async def transform(self, obj: _M, target_frame: str,
                         timeout: float | Duration | None = None, *,
-                        fail_fast: bool = False) -> _M:
+                        fail_fast: bool = False,
+                        policy: LookupPolicy | None = None) -> _M | tuple[_M, PolicyReport]:
         """Express a stamped object in ``target_frame`` (tf2_ros ``BufferClient.transform``):
-        the lookup is remote (``fail_fast`` as :meth:`lookup_transform`), the function
-        registered for ``type(obj)`` (:mod:`tfbus.convert`) is applied here.
+        the lookup is remote (``fail_fast`` and ``policy`` as :meth:`lookup_transform`),
+        the function registered for ``type(obj)`` (:mod:`tfbus.convert`) is applied
+        here. Under a non-exact ``policy``: ``(transformed object, PolicyReport)``.
 
         Raises:
-            TypeError: no transform function for ``type(obj)`` (before any lookup).
+            TypeError: no transform function for ``type(obj)`` (before any lookup), or
+                as :meth:`lookup_transform` for ``policy``.
             The lookup's errors, as :meth:`lookup_transform`.
         """
+        client = self._policy_client(policy)
+        if client is not None:
+            pair: tuple[_M, PolicyReport] = await client.transform(
+                obj, target_frame, timeout, fail_fast=fail_fast, policy=policy)
+            return pair
         return await self._client.transform(obj, target_frame, timeout, fail_fast=fail_fast)

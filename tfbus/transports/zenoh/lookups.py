@@ -22,7 +22,8 @@ true`` when the client asks for it (:meth:`tfbus.buffer.Buffer.wait_for_transfor
 server ignores the field and waits), and for a lookup
 under a non-exact policy (:mod:`tfbus.core.policy`) ``"policy": [kind, a, b]`` (kind
 ``"nearest"`` / ``"clamp"`` with ``a`` = max_delta ns, ``"previous"``, ``"window"`` with
-``a`` = past ns and ``b`` = future_wait ns; unused numbers 0); the reply is a
+``a`` = past ns and ``b`` = future_wait ns; unused numbers 0; on every op: a ``"can"``
+answers whether the policy can, a ``"full"`` applies it to both legs); the reply is a
 ``TransformStamped`` (a ``PolicyResult`` under a policy), ``{"can": bool}`` or
 ``{"error": <tf2 class name>, "message": ...}``, raised on the client as the same
 :mod:`tfbus.errors` class with the same message. As tf2_ros's ``buffer_server``
@@ -568,19 +569,24 @@ class BufferServer:
             source = _field(request, "source", "frame")
             source_time = _field(request, "source_time", "time")
             fixed = _field(request, "fixed", "frame")
+            full_policy = _policy_field(request)
             try:
                 return await buffer.lookup_transform_full_async(
                     target, target_time, source, source_time, fixed, timeout,
-                    fail_fast=fail_fast,
+                    fail_fast=fail_fast, policy=full_policy,
                 )
             except TimeoutException:
                 return buffer.lookup_transform_full(
-                    target, target_time, source, source_time, fixed
+                    target, target_time, source, source_time, fixed, policy=full_policy
                 )
         target = _field(request, "target", "frame")
         source = _field(request, "source", "frame")
         time = _field(request, "time", "time")
-        policy = _policy_field(request) if op == "lookup" else None
+        policy = _policy_field(request)
+        if op == "can":
+            return {"can": await buffer.can_transform_async(target, source, time, timeout,
+                                                            fail_fast=fail_fast,
+                                                            policy=policy)}
         if policy is not None:
             try:
                 return await buffer.lookup_transform_async(
@@ -588,9 +594,6 @@ class BufferServer:
                 )
             except TimeoutException:
                 return buffer.lookup_transform(target, source, time, policy=policy)
-        if op == "can":
-            return {"can": await buffer.can_transform_async(target, source, time, timeout,
-                                                            fail_fast=fail_fast)}
         try:
             return await buffer.lookup_transform_async(target, source, time, timeout,
                                                        fail_fast=fail_fast)
@@ -709,7 +712,35 @@ class BufferClient:
             return _typed(await self._ask(request, timeout, fail_fast), PolicyResult)
         return _typed(await self._ask(request, timeout, fail_fast), TransformStamped)
 
-    @coroutine_method
+    @overload
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[TransformStamped]: ...
+
+    @overload
+    def lookup_transform_full(
+        self,
+        target_frame: str,
+        target_time: Time,
+        source_frame: str,
+        source_time: Time,
+        fixed_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[PolicyResult]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def lookup_transform_full(
         self,
         target_frame: str,
@@ -720,15 +751,20 @@ class BufferClient:
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> TransformStamped:
+        policy: LookupPolicy | None = None,
+    ) -> TransformStamped | PolicyResult:
         """The server's ``lookup_transform_full_async`` (time travel through
-        ``fixed_frame``).
+        ``fixed_frame``); ``policy`` travels as the request's ``"policy"`` (the answer
+        is then the server's :class:`~tfbus.core.policy.PolicyResult`).
 
         Raises: as :meth:`lookup_transform`.
         """
         request: dict[str, Any] = {
             "op": "full", "target": target_frame, "target_time": target_time.ns,
             "source": source_frame, "source_time": source_time.ns, "fixed": fixed_frame}
+        if policy is not None and type(policy) is not Exact:
+            request["policy"] = _policy_to_wire(policy)
+            return _typed(await self._ask(request, timeout, fail_fast), PolicyResult)
         return _typed(await self._ask(request, timeout, fail_fast), TransformStamped)
 
     @coroutine_method
@@ -740,23 +776,48 @@ class BufferClient:
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
+        policy: LookupPolicy | None = None,
     ) -> bool:
         """Whether the server's buffer has the transform within ``timeout``
-        (:meth:`tfbus.buffer.Buffer.can_transform_async`, ``fail_fast`` too); False also
-        when the server does not answer in time.
+        (:meth:`tfbus.buffer.Buffer.can_transform_async`, ``fail_fast`` and ``policy``
+        too); False also when the server does not answer in time.
 
         Raises:
-            TransportError: the bus closed.
+            TransportError: the bus closed. TypeError: ``policy`` is not a lookup policy.
         """
         request: dict[str, Any] = {"op": "can", "target": target_frame,
                                    "source": source_frame, "time": time.ns}
+        if policy is not None and type(policy) is not Exact:
+            request["policy"] = _policy_to_wire(policy)
         try:
             answer = await self._ask(request, timeout, fail_fast)
         except TransformException:
             return False
         return isinstance(answer, dict) and answer.get("can") is True
 
-    @coroutine_method
+    @overload
+    def transform(
+        self,
+        obj: _M,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Exact | None = None,
+    ) -> Awaiting[_M]: ...
+
+    @overload
+    def transform(
+        self,
+        obj: _M,
+        target_frame: str,
+        timeout: float | Duration | None = None,
+        *,
+        fail_fast: bool = False,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> Awaiting[tuple[_M, PolicyReport]]: ...
+
+    @coroutine_method  # type: ignore[misc]
     async def transform(
         self,
         obj: _M,
@@ -764,15 +825,29 @@ class BufferClient:
         timeout: float | Duration | None = None,
         *,
         fail_fast: bool = False,
-    ) -> _M:
+        policy: LookupPolicy | None = None,
+    ) -> _M | tuple[_M, PolicyReport]:
         """Express a stamped object in ``target_frame`` (tf2_ros ``BufferClient.transform``):
         the lookup is remote, the function registered for ``type(obj)``
-        (:mod:`tfbus.convert`) is applied here.
+        (:mod:`tfbus.convert`) is applied here. Under a non-exact ``policy``,
+        ``(transformed object, PolicyReport)`` (as :meth:`tfbus.buffer.Buffer.transform`).
 
         Raises:
-            TypeError: no transform function for ``type(obj)`` (before any query).
+            TypeError: no transform function for ``type(obj)`` (before any query), or
+                ``policy`` is not a lookup policy.
             The lookup's errors, as :meth:`lookup_transform`.
         """
+        if policy is not None and type(policy) is not Exact:
+            from tfbus.buffer import Buffer, _header_of
+
+            do_transform = Buffer.registration.get(type(obj))
+            header = _header_of(obj)
+            found = await self.lookup_transform(
+                target_frame, header.frame_id, header.stamp, timeout, fail_fast=fail_fast,
+                policy=policy,
+            )
+            assert isinstance(found, PolicyResult)
+            return do_transform(obj, found.transform), found.report
         return await transform_remotely(self, obj, target_frame, timeout, fail_fast)
 
     async def _ask(self, request: dict[str, Any], timeout: float | Duration | None,
