@@ -1,0 +1,69 @@
+"""Generated tf recordings for the table tests: gaps, statics only at the start, frames
+that appear late, several authorities; written with :func:`tfbus.bag.write_bag`."""
+
+from __future__ import annotations
+
+import math
+import random
+from pathlib import Path
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.bag import TF_STATIC_TOPIC, TF_TOPIC, BagMessage, write_bag
+from tfbus.messages import TFMessage
+
+SEC = 1_000_000_000
+START = 1_700_000_000 * SEC
+"""Bag time of every recording's first message (a realistic epoch stamp)."""
+
+SUFFIX = {"ros1": ".bag", "mcap": ".mcap", "sqlite3": ".db3"}
+
+
+def ts(parent: str, child: str, ns: int, xyz: tuple[float, float, float],
+       yaw: float) -> TransformStamped:
+    """A transform rotating by ``yaw`` about z (unit quaternion)."""
+    return TransformStamped(
+        Header(Time.from_ns(ns), parent), child,
+        Transform(Vector3(*xyz), Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))),
+    )
+
+
+def messages(seed: int, seconds: float = 20.0, rate_hz: float = 20.0) -> list[BagMessage]:
+    """One robot's tf: statics (``base_link -> laser``, ``base_link -> imu``) only at the
+    start; ``map -> odom`` at 2 Hz with a gap from 40 % to 55 % of the span;
+    ``odom -> base_link`` at ``rate_hz`` with a gap from 70 % to 75 %; ``base_link ->
+    arm`` appearing at 50 % of the span. Header stamps lag bag time by 1-3 ms."""
+    rng = random.Random(seed)
+    out = [BagMessage(Time.from_ns(START), TF_STATIC_TOPIC, TFMessage([
+        ts("base_link", "laser", START, (0.2, 0.0, 0.3), 0.0),
+        ts("base_link", "imu", START, (0.0, 0.1, 0.1), math.pi / 2),
+    ]), "/static_publisher")]
+    span = int(seconds * SEC)
+    step = int(SEC / rate_hz)
+    phase = rng.uniform(0, 6.0)
+    for k in range(1, span // step):
+        bag_ns = START + k * step
+        frac = k * step / span
+        stamp = bag_ns - rng.randrange(1_000_000, 3_000_000)
+        t = (stamp - START) / SEC
+        tfs = []
+        if not 0.70 <= frac < 0.75:
+            tfs.append(ts("odom", "base_link", stamp, (math.cos(t + phase), math.sin(t), 0.0),
+                          0.3 * t + phase))
+        if frac >= 0.5 and k % 2 == 0:
+            tfs.append(ts("base_link", "arm", stamp, (0.1, 0.0, 0.5 + 0.1 * math.sin(3 * t)),
+                          math.sin(2 * t)))
+        if tfs:
+            out.append(BagMessage(Time.from_ns(bag_ns), TF_TOPIC, TFMessage(tfs), "/robot"))
+        if k % max(1, int(rate_hz / 2)) == 0 and not 0.40 <= frac < 0.55:
+            out.append(BagMessage(Time.from_ns(bag_ns + 1), TF_TOPIC, TFMessage([
+                ts("map", "odom", stamp, (0.01 * t, -0.02 * t, 0.0), 0.001 * t + seed)
+            ]), "/localizer"))
+    return out
+
+
+def write(directory: Path, name: str, fmt: str, seed: int, **kw: float) -> Path:
+    """Write :func:`messages` to ``directory/name`` in ``fmt`` (``ros1``, ``mcap``,
+    ``sqlite3``); the path of the bag (a ROS 2 bag folder for mcap and sqlite3)."""
+    path = directory / (name + (".bag" if fmt == "ros1" else ""))
+    write_bag(path, messages(seed, **kw), format=fmt)
+    return path
