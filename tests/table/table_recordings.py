@@ -67,3 +67,52 @@ def write(directory: Path, name: str, fmt: str, seed: int, **kw: float) -> Path:
     path = directory / (name + (".bag" if fmt == "ros1" else ""))
     write_bag(path, messages(seed, **kw), format=fmt)
     return path
+
+
+def write_mcap(path: Path, seed: int, chunk_size: int = 4096, **kw: float) -> Path:
+    """:func:`messages` as a bare ``.mcap`` file with small chunks (``chunk_size`` bytes,
+    zstd), so that a window is a few of many chunks: written by rosbags' writer (the ROS 2
+    way) and re-chunked record for record with the ``mcap`` package's own Writer."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    folder = write(path.parent, path.stem + "_ros2", "mcap", seed, **kw)
+    source = next(folder.glob("*.mcap"))
+    with source.open("rb") as f_in, path.open("wb") as f_out:
+        reader = make_reader(f_in)
+        writer = Writer(f_out, chunk_size=chunk_size)
+        writer.start(profile="ros2", library="tfbus tests")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            assert schema is not None
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
+                                                            schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id],
+                    dict(channel.metadata))
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time, message.sequence)
+        writer.finish()
+    return path
+
+
+def same_table(a: object, b: object) -> bool:
+    """Two lookup results equal column for column, floats by their IEEE bits (a NaN row
+    equals a NaN row, ``-0.0`` differs from ``0.0``)."""
+    import numpy as np
+    import pyarrow as pa
+
+    assert isinstance(a, pa.Table) and isinstance(b, pa.Table)
+    if a.column_names != b.column_names or a.num_rows != b.num_rows:
+        return False
+    for name in a.column_names:
+        x, y = a.column(name), b.column(name)
+        if pa.types.is_floating(x.type):
+            if not np.array_equal(x.to_numpy().view(np.int64), y.to_numpy().view(np.int64)):
+                return False
+        elif not x.equals(y):
+            return False
+    return True

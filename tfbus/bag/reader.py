@@ -47,7 +47,7 @@ from tfbus.time import Time
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
 
-__all__ = ["read_messages"]
+__all__ = ["read_messages", "read_window"]
 
 log = logging.getLogger(__name__)
 
@@ -101,6 +101,46 @@ def read_messages(
     if lo is not None and latched and TF_STATIC_TOPIC in topics:
         yield from _read(p, fmt, frozenset({TF_STATIC_TOPIC}), None, lo)
     yield from _read(p, fmt, topics, lo, hi)
+
+
+def read_window(
+    path: str | PathLike[str],
+    *,
+    start: Time | None = None,
+    end: Time | None = None,
+    topics: Collection[str] = DEFAULT_TOPICS,
+) -> Iterator[BagMessage]:
+    """A window of a bag: every ``/tf_static`` message of the whole file, then the other
+    topics' messages with bag time in ``[start, end)``, each part in bag-time order.
+
+    Statics are read over the whole file because a recording usually has them once, at
+    its start (and a late static publisher's after it): a window in the middle needs them
+    all. The window itself is read through each format's index, so only its part of the
+    file is read and held: MCAP through the summary's chunk index (the chunks whose time
+    range meets the window), ROS 1 through the bag's index records (rosbags), ROS 2
+    ``.db3`` by ``WHERE timestamp`` on the messages table's timestamp index (rosbags).
+
+    Args:
+        path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
+        start: first bag time of the window (inclusive); ``None``: from the beginning.
+        end: bag time the window ends at (exclusive); ``None``: to the end.
+        topics: the topics to read (default ``/tf`` and ``/tf_static``).
+
+    Yields:
+        :class:`BagMessage`: the statics, then the window.
+
+    Raises:
+        BagNotFoundError, BagFormatError, BagReadError: as :func:`read_messages`.
+        ValueError: ``end`` is before ``start``.
+    """
+    if start is not None and end is not None and end.ns < start.ns:
+        raise ValueError(f"end ({end.ns} ns) is before start ({start.ns} ns)")
+    wanted = frozenset(topics)
+    if TF_STATIC_TOPIC in wanted:
+        yield from read_messages(path, topics=(TF_STATIC_TOPIC,))
+    dynamic = wanted - {TF_STATIC_TOPIC}
+    if dynamic:
+        yield from read_messages(path, topics=dynamic, start=start, stop=end, latched=False)
 
 
 # --------------------------------------------------------------------------- sources
