@@ -3,9 +3,8 @@
 * :func:`lookup`: an Arrow table (or Polars / pandas DataFrame) of ``target_frame``,
   ``source_frame``, ``stamp`` rows answered against a :class:`~tfbus.core.BufferCore`, row
   for row, each row bit for bit ``lookup_transform`` or tf2's exception class and text;
-* :func:`lookup_recording` / :func:`lookup_recordings`: the same against recordings,
-  each file read only over the windows its rows need (:func:`tfbus.bag.load_buffer`'s
-  ``start`` / ``end``);
+* :func:`lookup_recording`: the same against a recording, whole or read only over the
+  windows its rows need (:func:`tfbus.bag.load_buffer`'s ``start`` / ``end``);
 * :func:`poses_every`: the queries for one frame pair every ``every`` seconds over a
   recording;
 * engines: :mod:`tfbus.table.polars`, :mod:`tfbus.table.duckdb`, :mod:`tfbus.table.ray`,
@@ -28,12 +27,22 @@ from tfbus.table.lookups import (  # noqa: E402  (after the extra check)
     lookup,
     result_schema,
 )
+from tfbus.table.recordings import (  # noqa: E402
+    DEFAULT_MARGIN,
+    lookup_recording,
+    output_schema,
+    poses_every,
+)
 
 __all__ = [
+    "DEFAULT_MARGIN",
     "OK",
     "QUERY_COLUMNS",
     "RESULT_COLUMNS",
     "as_arrow",
     "lookup",
+    "lookup_recording",
+    "output_schema",
+    "poses_every",
     "result_schema",
 ]
