@@ -5,6 +5,7 @@
   for row, each row bit for bit ``lookup_transform`` or tf2's exception class and text;
 * :func:`lookup_recording`: the same against a recording, whole or read only over the
   windows its rows need (:func:`tfbus.bag.load_buffer`'s ``start`` / ``end``);
+  :func:`lookup_by_recording`: rows that name their recording (a ``recording`` column);
 * :func:`poses_every`: the queries for one frame pair every ``every`` seconds over a
   recording;
 * engines: :mod:`tfbus.table.polars`, :mod:`tfbus.table.duckdb`, :mod:`tfbus.table.ray`,
@@ -29,6 +30,8 @@ from tfbus.table.lookups import (  # noqa: E402  (after the extra check)
 )
 from tfbus.table.recordings import (  # noqa: E402
     DEFAULT_MARGIN,
+    RecordingBuffers,
+    lookup_by_recording,
     lookup_recording,
     output_schema,
     poses_every,
@@ -39,8 +42,10 @@ __all__ = [
     "OK",
     "QUERY_COLUMNS",
     "RESULT_COLUMNS",
+    "RecordingBuffers",
     "as_arrow",
     "lookup",
+    "lookup_by_recording",
     "lookup_recording",
     "output_schema",
     "poses_every",

@@ -11,6 +11,7 @@ window cannot answer fails with tf2's exception for that window's data.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Iterator
 from os import PathLike
 from typing import TYPE_CHECKING
@@ -19,13 +20,20 @@ import numpy as np
 import numpy.typing as npt
 
 from tfbus.core import BufferCore
-from tfbus.table.lookups import as_arrow, lookup, result_schema
+from tfbus.table.lookups import RESULT_COLUMNS, as_arrow, lookup, result_schema
 from tfbus.time import NSEC_PER_SEC, Time
 
 if TYPE_CHECKING:
     import pyarrow as pa
 
-__all__ = ["DEFAULT_MARGIN", "lookup_recording", "output_schema", "poses_every"]
+__all__ = [
+    "DEFAULT_MARGIN",
+    "RecordingBuffers",
+    "lookup_by_recording",
+    "lookup_recording",
+    "output_schema",
+    "poses_every",
+]
 
 DEFAULT_MARGIN = 5.0
 """Seconds each window's buffer reaches beyond the window on both sides."""
@@ -180,3 +188,134 @@ def output_schema() -> pa.Schema:
 
 
 
+
+
+class RecordingBuffers:
+    """Whole-recording buffers by path, the ``maxsize`` most recently used kept (memory
+    bounded by ``maxsize`` recordings): what the engines' per-batch functions share
+    when the same recording's rows come in several batches.
+
+    Args:
+        maxsize: recordings kept loaded (>= 1).
+
+    Raises:
+        ValueError: ``maxsize`` < 1.
+    """
+
+    def __init__(self, maxsize: int = 2) -> None:
+        if isinstance(maxsize, bool) or not isinstance(maxsize, int) or maxsize < 1:
+            raise ValueError(f"maxsize must be an int >= 1, got {maxsize!r}")
+        self.maxsize = maxsize
+        self._kept: OrderedDict[str, BufferCore] = OrderedDict()
+        self.loads = 0
+        """How many times a recording was read (a measure of the cache's use)."""
+
+    def get(self, path: str) -> BufferCore:
+        """The buffer of the whole recording at ``path`` (``load_buffer(path)``).
+
+        Raises:
+            BagNotFoundError, BagFormatError, BagReadError: see
+                :func:`tfbus.bag.load_buffer`.
+        """
+        from tfbus.bag import load_buffer
+
+        core = self._kept.pop(path, None)
+        if core is None:
+            core = load_buffer(path)
+            self.loads += 1
+        self._kept[path] = core
+        while len(self._kept) > self.maxsize:
+            self._kept.popitem(last=False)
+        return core
+
+
+def lookup_by_recording(
+    queries: object,
+    *,
+    recording: str = "recording",
+    window: float | None = None,
+    margin: float = DEFAULT_MARGIN,
+    buffers: RecordingBuffers | None = None,
+    keep_columns: bool = True,
+) -> pa.Table:
+    """Answer rows that name their recording: each recording's rows against that file.
+
+    Args:
+        queries: rows with the query columns of :func:`~tfbus.table.lookup` and a
+            string column ``recording`` (a path or fsspec URL of each row's file).
+        recording: the name of that column.
+        window, margin: as :func:`lookup_recording` (None: whole files).
+        buffers: whole-file buffers to reuse across calls (window None); default a new
+            :class:`RecordingBuffers` for this call.
+        keep_columns: as in :func:`~tfbus.table.lookup`.
+
+    Returns:
+        The rows in the order of ``queries`` with :data:`~tfbus.table.RESULT_COLUMNS`.
+        A row whose recording cannot be read fails with ``status`` the error's class
+        (``BagNotFoundError``, ``BagFormatError``, ``BagReadError``) and its message;
+        the other recordings' rows are answered.
+
+    Raises:
+        ValueError, TypeError: as :func:`~tfbus.table.lookup`; no ``recording`` column.
+    """
+    import pyarrow as pa
+
+    from tfbus.errors import BagError
+
+    table = as_arrow(queries)
+    if recording not in table.column_names:
+        raise ValueError(f"queries has no column {recording!r} (the recording of each row)")
+    column = table.column(recording)
+    if not (pa.types.is_string(column.type) or pa.types.is_large_string(column.type)
+            or pa.types.is_dictionary(column.type)):
+        raise TypeError(f"queries column {recording!r} must hold paths, got {column.type}")
+    cache = buffers if buffers is not None else RecordingBuffers()
+    import pyarrow.compute as pc
+
+    encoded = pc.dictionary_encode(pc.fill_null(column.cast(pa.string()), "")).combine_chunks()
+    codes = encoded.indices.to_numpy(zero_copy_only=False)
+    names = encoded.dictionary.to_pylist()
+    parts: list[pa.Table] = []
+    order: list[npt.NDArray[np.int64]] = []
+    for code, name in enumerate(names):
+        rows = np.flatnonzero(codes == code)
+        part = table.take(pa.array(rows))
+        try:
+            if window is None:
+                answered = lookup(part, cache.get(name), keep_columns=keep_columns)
+            else:
+                answered = lookup_recording(name, part, window=window, margin=margin,
+                                            keep_columns=keep_columns)
+        except BagError as err:
+            answered = _failed(part, type(err).__name__, str(err), keep_columns)
+        parts.append(answered)
+        order.append(rows)
+    if not parts:
+        return lookup(table, BufferCore(), keep_columns=keep_columns)
+    merged = pa.concat_tables(parts)
+    inverse = np.empty(table.num_rows, dtype=np.int64)
+    inverse[np.concatenate(order)] = np.arange(table.num_rows)
+    return merged.take(pa.array(inverse))
+
+
+def _failed(part: pa.Table, status: str, message: str, keep_columns: bool) -> pa.Table:
+    """Every row of ``part`` failed with ``status`` and ``message`` (NaN values)."""
+    import pyarrow as pa
+
+    n = part.num_rows
+    columns: dict[str, pa.Array] = {
+        name: pa.array(np.full(n, np.nan)) for name in RESULT_COLUMNS[:7]
+    }
+    stamps = part.column("stamp") if "stamp" in part.column_names else None
+    columns["transform_stamp"] = (
+        pa.array(np.zeros(n, dtype=np.int64)) if stamps is None or stamps.type != pa.int64()
+        else stamps.combine_chunks()
+    )
+    columns["status"] = pa.array([status] * n, pa.string())
+    columns["message"] = pa.array([message] * n, pa.string())
+    if not keep_columns:
+        return pa.table(columns)
+    out = part
+    for name, column in columns.items():
+        out = out.append_column(name, column)
+    return out
