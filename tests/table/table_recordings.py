@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import random
 from pathlib import Path
+from typing import Any
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.bag import TF_STATIC_TOPIC, TF_TOPIC, BagMessage, write_bag
@@ -116,3 +117,61 @@ def same_table(a: object, b: object) -> bool:
         elif not x.equals(y):
             return False
     return True
+
+
+N_RECORDINGS = 20
+ROWS_PER_RECORDING = 60
+PAIRS = [("map", "laser"), ("odom", "base_link"), ("map", "arm"), ("base_link", "imu"),
+         ("odom", "nowhere"), ("laser", "arm")]
+
+
+def fleet(directory: Path) -> list[Path]:
+    """20 recordings of 12 s, the three formats in turn, each robot its own seed."""
+    paths = []
+    for i in range(N_RECORDINGS):
+        kind = ("ros1", "sqlite3", "mcap")[i % 3]
+        if kind == "mcap":
+            paths.append(write_mcap(directory / f"robot{i:02d}.mcap", seed=100 + i, seconds=12))
+        else:
+            paths.append(write(directory, f"robot{i:02d}", kind, seed=100 + i, seconds=12))
+    return paths
+
+
+def fleet_queries(paths: list[Path], seed: int = 0) -> Any:
+    """Rows naming their recording, recordings interleaved, stamps from before to after
+    each recording (0 included)."""
+    import numpy as np
+    import pyarrow as pa
+
+    rng = np.random.default_rng(seed)
+    n = len(paths) * ROWS_PER_RECORDING
+    which = rng.integers(0, len(paths), n)
+    pair = rng.integers(0, len(PAIRS), n)
+    stamps = START + rng.integers(-SEC, 13 * SEC, n)
+    stamps[rng.random(n) < 0.03] = 0
+    return pa.table({
+        "recording": [str(paths[k]) for k in which],
+        "target_frame": [PAIRS[k][0] for k in pair],
+        "source_frame": [PAIRS[k][1] for k in pair],
+        "stamp": pa.array(stamps, pa.int64()),
+    })
+
+
+def plain(queries: Any) -> Any:
+    """The plain path: per recording, ``lookup(rows, load_buffer(path))``, back in order."""
+    import numpy as np
+    import pyarrow as pa
+
+    from tfbus.bag import load_buffer
+    from tfbus.table import lookup
+
+    names = queries.column("recording").to_pylist()
+    parts, order = [], []
+    for name in sorted(set(names)):
+        rows = np.flatnonzero(np.array(names) == name)
+        parts.append(lookup(queries.take(pa.array(rows)), load_buffer(name)))
+        order.append(rows)
+    merged = pa.concat_tables(parts)
+    inverse = np.empty(queries.num_rows, dtype=np.int64)
+    inverse[np.concatenate(order)] = np.arange(queries.num_rows)
+    return merged.take(pa.array(inverse))

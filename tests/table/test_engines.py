@@ -13,7 +13,15 @@ import pytest
 pa = pytest.importorskip("pyarrow")
 pytest.importorskip("rosbags")
 
-from table_recordings import SEC, START, same_table, write, write_mcap  # noqa: E402
+from table_recordings import (  # noqa: E402
+    N_RECORDINGS,
+    SEC,
+    START,
+    fleet,
+    fleet_queries,
+    plain,
+    same_table,
+)
 
 from tfbus.bag import load_buffer  # noqa: E402
 from tfbus.table import (  # noqa: E402
@@ -23,54 +31,6 @@ from tfbus.table import (  # noqa: E402
     lookup_by_recording,
     lookup_recording,
 )
-
-N_RECORDINGS = 20
-ROWS_PER_RECORDING = 60
-PAIRS = [("map", "laser"), ("odom", "base_link"), ("map", "arm"), ("base_link", "imu"),
-         ("odom", "nowhere"), ("laser", "arm")]
-
-
-def fleet(directory: Path) -> list[Path]:
-    """20 recordings of 12 s, the three formats in turn, each robot its own seed."""
-    paths = []
-    for i in range(N_RECORDINGS):
-        kind = ("ros1", "sqlite3", "mcap")[i % 3]
-        if kind == "mcap":
-            paths.append(write_mcap(directory / f"robot{i:02d}.mcap", seed=100 + i, seconds=12))
-        else:
-            paths.append(write(directory, f"robot{i:02d}", kind, seed=100 + i, seconds=12))
-    return paths
-
-
-def fleet_queries(paths: list[Path], seed: int = 0) -> Any:
-    """Rows naming their recording, recordings interleaved, stamps from before to after
-    each recording (0 included)."""
-    rng = np.random.default_rng(seed)
-    n = len(paths) * ROWS_PER_RECORDING
-    which = rng.integers(0, len(paths), n)
-    pair = rng.integers(0, len(PAIRS), n)
-    stamps = START + rng.integers(-SEC, 13 * SEC, n)
-    stamps[rng.random(n) < 0.03] = 0
-    return pa.table({
-        "recording": [str(paths[k]) for k in which],
-        "target_frame": [PAIRS[k][0] for k in pair],
-        "source_frame": [PAIRS[k][1] for k in pair],
-        "stamp": pa.array(stamps, pa.int64()),
-    })
-
-
-def plain(queries: Any) -> Any:
-    """The plain path: per recording, ``lookup(rows, load_buffer(path))``, back in order."""
-    names = queries.column("recording").to_pylist()
-    parts, order = [], []
-    for name in sorted(set(names)):
-        rows = np.flatnonzero(np.array(names) == name)
-        parts.append(lookup(queries.take(pa.array(rows)), load_buffer(name)))
-        order.append(rows)
-    merged = pa.concat_tables(parts)
-    inverse = np.empty(queries.num_rows, dtype=np.int64)
-    inverse[np.concatenate(order)] = np.arange(queries.num_rows)
-    return merged.take(pa.array(inverse))
 
 
 @pytest.fixture(scope="module")
