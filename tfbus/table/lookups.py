@@ -128,8 +128,15 @@ def _frame_codes(table: pa.Table, name: str, required: bool) -> tuple[_I64, list
         raise TypeError(f"queries column {name!r} must hold strings, got {col.type}")
     if pa.types.is_null(kind):
         col = pa.chunked_array([pa.array([""] * len(col), pa.string())])
-    col = pc.fill_null(col.cast(pa.string()), "")
-    encoded = pc.dictionary_encode(col).combine_chunks()
+    if col.null_count:
+        col = pc.fill_null(col.cast(pa.string()), "")
+    if not pa.types.is_dictionary(col.type):
+        col = pc.dictionary_encode(col)
+    encoded = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+    if encoded.dictionary.type != pa.string():
+        # (large_string or string_view values: the same ids as Python strings)
+        encoded = pa.DictionaryArray.from_arrays(encoded.indices,
+                                                 encoded.dictionary.cast(pa.string()))
     codes = encoded.indices.to_numpy(zero_copy_only=False).astype(np.int64, copy=False)
     return codes, encoded.dictionary.to_pylist()
 
@@ -385,8 +392,9 @@ def lookup(queries: object, buffer: BufferCore, *, keep_columns: bool = True) ->
     source_frame, Time.from_ns(stamp))`` (``lookup_transform_full`` for full rows): the
     rows of a frame pair go through the core's ``batch_lookup`` (tf2
     ``BufferCore::lookupTransform`` / ``walkToTopParent`` per time, the path resolved
-    once); a ``stamp`` column of int64 without nulls in one chunk is handed to it without
-    a copy when the table has one frame pair.
+    once, the rows of a pair in time order); a ``stamp`` column of int64 without nulls
+    in one chunk, already in time order, is handed to it without a copy when the table
+    has one frame pair.
     """
     import pyarrow as pa
 
@@ -437,22 +445,35 @@ def lookup(queries: object, buffer: BufferCore, *, keep_columns: bool = True) ->
     else:
         f_key = None
         f_names = []
+    # Each frame pair's rows go to the kernel in time order (its walk then moves forward
+    # through each link's samples: about three times faster than random order).
+    in_place = False
     if n and good.all() and int(key.min()) == int(key.max()):
-        groups: list[_I64] = [np.arange(n, dtype=np.int64)]
+        if bool(np.all(stamps[1:] >= stamps[:-1])):
+            groups: list[_I64] = [np.arange(n, dtype=np.int64)]
+            in_place = True  # the stamp column itself is handed to the kernel
+        else:
+            groups = [np.argsort(stamps, kind="stable").astype(np.int64, copy=False)]
     else:
         order = np.flatnonzero(good)
-        order = order[np.argsort(key[order], kind="stable")]
+        if not bool(np.all(stamps[1:] >= stamps[:-1])):
+            order = order[np.argsort(stamps[order])]  # (equal stamps answer alike)
+        # Then by pair, stable (radix for up to 2**16 pair keys).
+        _, compact = np.unique(key, return_inverse=True)
+        compact = compact.reshape(-1)
+        small = compact.astype(np.uint16) if compact.size and compact.max() < 2**16 else compact
+        order = order[np.argsort(small[order], kind="stable")]
+        key = compact
         cuts = np.flatnonzero(np.diff(key[order])) + 1
         groups = np.split(order, cuts) if order.size else []
     for idx in groups:
         first = int(idx[0])
         target = t_names[int(t_codes[first])]
         source = s_names[int(s_codes[first])]
-        whole = idx.shape[0] == n
-        times = stamps if whole else stamps[idx]
+        times = stamps if in_place else stamps[idx]
         if f_key is not None and f_key[first]:
             fixed_id = f_names[int(f_key[first]) - 1]
-            src_times = src_stamps if whole else src_stamps[idx]
+            src_times = src_stamps if in_place else src_stamps[idx]
             _answer_full(buffer, batch, rows, idx, target, source, fixed_id,
                          np.ascontiguousarray(times), np.ascontiguousarray(src_times))
         else:
