@@ -45,15 +45,17 @@ def ray_cluster() -> Iterator[Any]:
         ray.shutdown()
 
 
-@pytest.mark.parametrize("window", [None, 4.0])
+@pytest.mark.parametrize(("window", "shuffle"), [(None, True), (4.0, True), (None, False)])
 def test_ray_data_agrees_with_the_plain_path(
-    ray_cluster: Any, expected: tuple[Any, Any], window: float | None
+    ray_cluster: Any, expected: tuple[Any, Any], window: float | None, shuffle: bool
 ) -> None:
     from tfbus.table import ray as tfray
 
     queries, want = expected
+    if not shuffle:  # rows ordered by recording, as read from per-recording files
+        queries = queries.sort_by("recording")
     ds = ray_cluster.data.from_arrow(queries).repartition(4)
-    got = tfray.lookup(ds, window=window, margin=5.0)
+    got = tfray.lookup(ds, window=window, margin=5.0, shuffle=shuffle)
     table = pa.concat_tables(list(got.iter_batches(batch_format="pyarrow",
                                                    batch_size=None)))
     result = _by_row(table, want.schema)
