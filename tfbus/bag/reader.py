@@ -21,7 +21,7 @@ import contextlib
 import logging
 import mmap
 import sqlite3
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from heapq import heappop, heappush
 from itertools import count
 from os import PathLike
@@ -446,7 +446,16 @@ def _raw_mcap(
     """
     with p.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
         stream = cast("IO[bytes]", mm)
-        items = _mcap_indexed(stream, len(mm), topics, lo, hi)
+
+        def release(offset: int, length: int) -> None:
+            # The chunk's bytes were copied out: drop its pages from this process's
+            # resident memory (a walk over a whole file then holds no more of it than a
+            # chunk; the kernel still caches the file).
+            start = offset - offset % mmap.PAGESIZE
+            with contextlib.suppress(OSError, ValueError, AttributeError):
+                mm.madvise(mmap.MADV_DONTNEED, start, offset + length - start)
+
+        items = _mcap_indexed(stream, len(mm), topics, lo, hi, release)
         if items is None:
             yield from scan_mcap(p, topics, lo, hi)
             return
@@ -454,7 +463,8 @@ def _raw_mcap(
 
 
 def _mcap_indexed(
-    stream: IO[bytes], size: int, topics: Collection[str], lo: int | None, hi: int | None
+    stream: IO[bytes], size: int, topics: Collection[str], lo: int | None, hi: int | None,
+    release: Callable[[int, int], None] | None = None,
 ) -> Iterator[RawItem] | None:
     """The tf messages of an MCAP file object in log-time order through its summary's
     chunk index (see :func:`_raw_mcap`): only the chunks that meet ``[lo, hi)`` and hold
@@ -465,13 +475,16 @@ def _mcap_indexed(
     summary = SeekingReader(stream, record_size_limit=size).get_summary()
     if summary is None or not summary.chunk_indexes:
         return None
-    return _mcap_chunks(stream, summary, topics, lo, hi)
+    return _mcap_chunks(stream, summary, topics, lo, hi, release)
 
 
 def _mcap_chunks(
-    stream: IO[bytes], summary: Any, topics: Collection[str], lo: int | None, hi: int | None
+    stream: IO[bytes], summary: Any, topics: Collection[str], lo: int | None, hi: int | None,
+    release: Callable[[int, int], None] | None = None,
 ) -> Iterator[RawItem]:
-    """The indexed read itself (:func:`_raw_mcap`), on any seekable file object."""
+    """The indexed read itself (:func:`_raw_mcap`), on any seekable file object;
+    ``release(offset, length)`` is told each chunk record read once its bytes are
+    copied out."""
     from mcap.data_stream import ReadDataStream
     from mcap.records import Chunk, Message
     from mcap.stream_reader import breakup_chunk
@@ -503,6 +516,8 @@ def _mcap_chunks(
             yield t, sources[cid], data, None
         stream.seek(index.chunk_start_offset + 9)  # opcode (1) + record length (8)
         chunk = Chunk.read(ReadDataStream(stream))
+        if release is not None:
+            release(index.chunk_start_offset, index.chunk_length)
         for record in breakup_chunk(chunk, validate_crc=True):
             if (
                 isinstance(record, Message)
