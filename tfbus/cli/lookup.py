@@ -64,6 +64,7 @@ def command(bags: tuple[str, ...], target: str, source: str, every: float, outpu
     """
     try:
         import pyarrow as pa
+        import pyarrow.compute as pc
         import pyarrow.parquet as pq
 
         from tfbus.table.recordings import output_schema, poses_every
@@ -94,8 +95,7 @@ def command(bags: tuple[str, ...], target: str, source: str, every: float, outpu
                     writer.write_table(part.add_column(0, "recording", name).cast(schema))
                     rows += part.num_rows
                     failed_rows += part.num_rows - int(
-                        pa.compute.sum(pa.compute.equal(part.column("status"), "ok")).as_py()
-                        or 0)
+                        pc.sum(pc.equal(part.column("status"), "ok")).as_py() or 0)
             except BagError as err:
                 problems += 1
                 progress.console.print(
