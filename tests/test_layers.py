@@ -66,6 +66,7 @@ LAYERS: dict[str, int] = {
     "demos": 5,
     "view": 5,
     "doctor": 5,  # tree diagnosis over bags (bag/) and live buses (listener sinks)
+    "table": 5,  # tf lookups as a table operator over recordings (Arrow, engines)
     "__main__": 5,
 }
 """Layer of each top-level module or package of ``tfbus`` (a package's submodules share

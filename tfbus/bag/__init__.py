@@ -31,9 +31,10 @@ The package, one job per module:
   :func:`detect_format`;
 * :mod:`~tfbus.bag.decode`: which codec (:mod:`tfbus.codecs`) decodes a connection's
   serialized ``TFMessage``;
-* :mod:`~tfbus.bag.reader`: :func:`read_messages`;
+* :mod:`~tfbus.bag.reader`: :func:`read_messages`, :func:`read_window` (statics of the
+  whole file plus one window, through the format's index);
 * :mod:`~tfbus.bag.salvage`: reading damaged files up to the damage;
-* :mod:`~tfbus.bag.loader`: :func:`load_buffer`;
+* :mod:`~tfbus.bag.loader`: :func:`load_buffer` (whole, or a window), :func:`iter_windows`;
 * :mod:`~tfbus.bag.playback`: :func:`replay`, :class:`ReplayControl` (pause, resume);
 * :mod:`~tfbus.bag.writer`: :func:`write_bag`, :class:`BagRecorder`;
 * :mod:`~tfbus.bag.summary`: :func:`summarize` (tf_monitor statistics, :mod:`tfbus.monitor`).
@@ -55,9 +56,9 @@ from tfbus.bag.formats import (
     BagMessage,
     detect_format,
 )
-from tfbus.bag.loader import load_buffer
+from tfbus.bag.loader import Window, iter_windows, load_buffer
 from tfbus.bag.playback import DEFAULT_CLOCK_HZ, ReplayControl, replay
-from tfbus.bag.reader import read_messages
+from tfbus.bag.reader import read_messages, read_window
 from tfbus.bag.summary import AuthoritySummary, BagSummary, FrameSummary, summarize
 from tfbus.bag.writer import BagRecorder, write_bag
 from tfbus.errors import BagError, BagFormatError, BagNotFoundError, BagReadError
@@ -80,9 +81,12 @@ __all__ = [
     "BagSummary",
     "FrameSummary",
     "ReplayControl",
+    "Window",
     "detect_format",
+    "iter_windows",
     "load_buffer",
     "read_messages",
+    "read_window",
     "replay",
     "summarize",
     "write_bag",

@@ -21,16 +21,17 @@ import contextlib
 import logging
 import mmap
 import sqlite3
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from heapq import heappop, heappush
 from itertools import count
 from os import PathLike
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, cast
+from typing import IO, TYPE_CHECKING, Any, Final, cast
 
 from tfbus.bag.decode import RawItem, Source, cdr_decoder, ros1_decoder
 from tfbus.bag.formats import (
     DEFAULT_TOPICS,
+    MCAP_MAGIC,
     ROS2_AUTHORITY,
     TF_MSGTYPES,
     TF_STATIC_TOPIC,
@@ -40,14 +41,14 @@ from tfbus.bag.formats import (
     fmt_time,
 )
 from tfbus.bag.salvage import mcap_channel_source, scan_mcap, scan_ros1
-from tfbus.errors import BagError, BagFormatError, BagReadError, ScanError
+from tfbus.errors import BagError, BagFormatError, BagNotFoundError, BagReadError, ScanError
 from tfbus.messages import TFMessage
 from tfbus.time import Time
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
 
-__all__ = ["read_messages"]
+__all__ = ["read_messages", "read_window"]
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +74,10 @@ def read_messages(
     """Iterate a bag's ``/tf`` and ``/tf_static`` messages in bag-time order.
 
     Args:
-        path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
+        path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file; or
+            an fsspec URL of an ``.mcap`` file (``http(s)://``, ``s3://``,
+            ``memory://``; ``file://`` is a local path), read by range requests through
+            its chunk index, not downloaded whole (needs fsspec: the ``table`` extra).
         topics: topic names to read; only ``tf2_msgs/TFMessage`` and ``tf/tfMessage``
             connections on them are used, every other topic is ignored.
         start: first bag time to yield (inclusive); ``None`` from the beginning.
@@ -93,14 +97,154 @@ def read_messages(
             yielded, saying where reading stopped (byte offset, last bag time). No other
             exception escapes a read.
     """
-    p = Path(path)
-    fmt = detect_format(p)
     topics = frozenset(topics)
     lo = None if start is None else start.ns
     hi = None if stop is None else stop.ns
+    url = remote_url(path)
+    if url is not None:
+        if lo is not None and latched and TF_STATIC_TOPIC in topics:
+            yield from _read_url(url, frozenset({TF_STATIC_TOPIC}), None, lo)
+        yield from _read_url(url, topics, lo, hi)
+        return
+    p = _local(path)
+    fmt = detect_format(p)
     if lo is not None and latched and TF_STATIC_TOPIC in topics:
         yield from _read(p, fmt, frozenset({TF_STATIC_TOPIC}), None, lo)
     yield from _read(p, fmt, topics, lo, hi)
+
+
+# --------------------------------------------------------------------------- URLs
+
+REMOTE_BLOCK_SIZE: Final = 64 * 1024
+"""Bytes of the read-ahead of a recording read through fsspec: each range request asks
+for what the reader needs plus this much."""
+
+
+def remote_url(path: str | PathLike[str]) -> str | None:
+    """``path`` when it is a URL that fsspec opens (``scheme://...``) other than
+    ``file://`` (a local path, read as one), else None."""
+    if isinstance(path, str) and "://" in path and not path.startswith("file://"):
+        return path
+    return None
+
+
+def _local(path: str | PathLike[str]) -> Path:
+    """A local path; a ``file://`` URL as its path."""
+    if isinstance(path, str) and path.startswith("file://"):
+        from urllib.parse import unquote, urlparse
+
+        return Path(unquote(urlparse(path).path))
+    return Path(path)
+
+
+def _read_url(
+    url: str, topics: frozenset[str], lo: int | None, hi: int | None
+) -> Iterator[BagMessage]:
+    """The tf messages of an MCAP file at an fsspec URL (``http(s)://``, ``s3://``,
+    ``memory://`` ...), in log-time order, read by range requests through the summary's
+    chunk index: the footer and summary, then only the chunks that meet ``[lo, hi)``.
+
+    Raises:
+        ImportError: fsspec (or the protocol's package) is not installed.
+        BagNotFoundError: nothing at the URL.
+        BagFormatError: not an MCAP file, or one without a chunk index (over a URL only
+            indexed MCAP files are read; ROS 1 and .db3 files need a local copy).
+        BagReadError: the file cannot be read or decoded, after what was read.
+    """
+    try:
+        import fsspec
+    except ImportError:
+        from tfbus.errors import MissingExtraError
+
+        raise MissingExtraError("tfbus.bag (a URL)", "fsspec", "table") from None
+    count = 0
+    last: int | None = None
+    try:
+        handle = fsspec.open(url, "rb", block_size=REMOTE_BLOCK_SIZE, cache_type="readahead")
+        f = handle.open()
+    except FileNotFoundError:
+        raise BagNotFoundError(f"{url}: no such file", url) from None
+    except (OSError, ValueError) as err:
+        raise BagReadError(f"cannot open: {describe(err)}", url, messages_read=0) from None
+    try:
+        head = f.read(16)
+        if not head.startswith(MCAP_MAGIC):
+            raise BagFormatError(f"{url}: over a URL only MCAP files are read (by range "
+                                 "requests); copy a ROS 1 .bag or .db3 file locally", url)
+        f.seek(0)
+        try:
+            items = _mcap_indexed(cast("IO[bytes]", f), int(f.size), topics, lo, hi)
+        except BagError:
+            raise
+        except Exception as err:
+            raise BagReadError(f"unreadable summary: {describe(err)}", url,
+                               messages_read=0) from None
+        if items is None:
+            raise BagFormatError(f"{url}: an MCAP file without a chunk index cannot be read "
+                                 "by range requests; copy it locally", url)
+        while True:
+            try:
+                item = next(items, None)
+            except BagError:
+                raise
+            except Exception as err:
+                raise BagReadError(describe(err), url, messages_read=count,
+                                   last_time=None if last is None else Time.from_ns(last)
+                                   ) from None
+            if item is None:
+                return
+            stamp, src, raw, _offset = item
+            try:
+                message = BagMessage(Time.from_ns(stamp), src.topic,
+                                     TFMessage(src.decode(raw)), src.authority)
+            except Exception as err:
+                raise BagReadError(f"corrupt {src.topic} message at bag time {stamp} ns: "
+                                   f"{describe(err)}", url, messages_read=count) from None
+            yield message
+            count += 1
+            last = stamp
+    finally:
+        f.close()
+
+
+def read_window(
+    path: str | PathLike[str],
+    *,
+    start: Time | None = None,
+    end: Time | None = None,
+    topics: Collection[str] = DEFAULT_TOPICS,
+) -> Iterator[BagMessage]:
+    """A window of a bag: every ``/tf_static`` message of the whole file, then the other
+    topics' messages with bag time in ``[start, end)``, each part in bag-time order.
+
+    Statics are read over the whole file because a recording usually has them once, at
+    its start (and a late static publisher's after it): a window in the middle needs them
+    all. The window itself is read through each format's index, so only its part of the
+    file is read and held: MCAP through the summary's chunk index (the chunks whose time
+    range meets the window), ROS 1 through the bag's index records (rosbags), ROS 2
+    ``.db3`` by ``WHERE timestamp`` on the messages table's timestamp index (rosbags).
+
+    Args:
+        path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
+        start: first bag time of the window (inclusive); ``None``: from the beginning.
+        end: bag time the window ends at (exclusive); ``None``: to the end.
+        topics: the topics to read (default ``/tf`` and ``/tf_static``).
+
+    Yields:
+        :class:`BagMessage`: the statics, then the window.
+
+    Raises:
+        BagNotFoundError, BagFormatError, BagReadError: as :func:`read_messages`.
+        ValueError: ``end`` is before ``start``.
+    """
+    if start is not None and end is not None and end.ns < start.ns:
+        raise ValueError(f"end ({end.ns} ns) is before start ({start.ns} ns)")
+    wanted = frozenset(topics)
+    if TF_STATIC_TOPIC in wanted:
+        yield from read_messages(path, topics=(TF_STATIC_TOPIC,))
+    dynamic = wanted - {TF_STATIC_TOPIC}
+    if dynamic:
+        yield from read_messages(path, topics=dynamic, start=start, stop=end, latched=False)
 
 
 # --------------------------------------------------------------------------- sources
@@ -300,55 +444,91 @@ def _raw_mcap(
     index) is read from the start by :func:`~tfbus.bag.salvage.scan_mcap`, which also
     stops at any damage it finds.
     """
-    from mcap.data_stream import ReadDataStream
+    with p.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        stream = cast("IO[bytes]", mm)
+
+        def release(offset: int, length: int) -> None:
+            # The chunk's bytes were copied out: drop its pages from this process's
+            # resident memory (a walk over a whole file then holds no more of it than a
+            # chunk; the kernel still caches the file).
+            start = offset - offset % mmap.PAGESIZE
+            with contextlib.suppress(OSError, ValueError, AttributeError):
+                mm.madvise(mmap.MADV_DONTNEED, start, offset + length - start)
+
+        items = _mcap_indexed(stream, len(mm), topics, lo, hi, release)
+        if items is None:
+            yield from scan_mcap(p, topics, lo, hi)
+            return
+        yield from items
+
+
+def _mcap_indexed(
+    stream: IO[bytes], size: int, topics: Collection[str], lo: int | None, hi: int | None,
+    release: Callable[[int, int], None] | None = None,
+) -> Iterator[RawItem] | None:
+    """The tf messages of an MCAP file object in log-time order through its summary's
+    chunk index (see :func:`_raw_mcap`): only the chunks that meet ``[lo, hi)`` and hold
+    a channel on ``topics`` are read. None when the file has no summary or no chunk index
+    (then it must be read from the start)."""
     from mcap.reader import SeekingReader
+
+    summary = SeekingReader(stream, record_size_limit=size).get_summary()
+    if summary is None or not summary.chunk_indexes:
+        return None
+    return _mcap_chunks(stream, summary, topics, lo, hi, release)
+
+
+def _mcap_chunks(
+    stream: IO[bytes], summary: Any, topics: Collection[str], lo: int | None, hi: int | None,
+    release: Callable[[int, int], None] | None = None,
+) -> Iterator[RawItem]:
+    """The indexed read itself (:func:`_raw_mcap`), on any seekable file object;
+    ``release(offset, length)`` is told each chunk record read once its bytes are
+    copied out."""
+    from mcap.data_stream import ReadDataStream
     from mcap.records import Chunk, Message
     from mcap.stream_reader import breakup_chunk
 
-    with p.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-        stream = cast("IO[bytes]", mm)
-        summary = SeekingReader(stream, record_size_limit=len(mm)).get_summary()
-        if summary is None or not summary.chunk_indexes:
-            yield from scan_mcap(p, topics, lo, hi)
-            return
-        sources: dict[int, Source] = {}
-        for channel in summary.channels.values():
-            schema = summary.schemas.get(channel.schema_id)
-            src = mcap_channel_source(channel, schema, topics)
-            if src is not None:
-                sources[channel.id] = src
-        if not sources:
-            return
-        chunks = sorted(
-            (
-                c for c in summary.chunk_indexes
-                if (lo is None or c.message_end_time >= lo)
-                and (hi is None or c.message_start_time < hi)
-                and (not c.message_index_offsets or not sources.keys().isdisjoint(
-                    c.message_index_offsets))
-            ),
-            key=lambda c: (c.message_start_time, c.chunk_start_offset),
-        )
-        heap: list[tuple[int, int, int, bytes]] = []
-        seq = count()
-        for index in chunks:
-            # Nothing in this chunk or a later one is older than its first log time.
-            while heap and heap[0][0] < index.message_start_time:
-                t, _n, cid, data = heappop(heap)
-                yield t, sources[cid], data, None
-            mm.seek(index.chunk_start_offset + 9)  # opcode (1) + record length (8)
-            chunk = Chunk.read(ReadDataStream(stream))
-            for record in breakup_chunk(chunk, validate_crc=True):
-                if (
-                    isinstance(record, Message)
-                    and record.channel_id in sources
-                    and (lo is None or record.log_time >= lo)
-                    and (hi is None or record.log_time < hi)
-                ):
-                    heappush(heap, (record.log_time, next(seq), record.channel_id, record.data))
-        while heap:
+    sources: dict[int, Source] = {}
+    for channel in summary.channels.values():
+        schema = summary.schemas.get(channel.schema_id)
+        src = mcap_channel_source(channel, schema, topics)
+        if src is not None:
+            sources[channel.id] = src
+    if not sources:
+        return
+    chunks = sorted(
+        (
+            c for c in summary.chunk_indexes
+            if (lo is None or c.message_end_time >= lo)
+            and (hi is None or c.message_start_time < hi)
+            and (not c.message_index_offsets or not sources.keys().isdisjoint(
+                c.message_index_offsets))
+        ),
+        key=lambda c: (c.message_start_time, c.chunk_start_offset),
+    )
+    heap: list[tuple[int, int, int, bytes]] = []
+    seq = count()
+    for index in chunks:
+        # Nothing in this chunk or a later one is older than its first log time.
+        while heap and heap[0][0] < index.message_start_time:
             t, _n, cid, data = heappop(heap)
             yield t, sources[cid], data, None
+        stream.seek(index.chunk_start_offset + 9)  # opcode (1) + record length (8)
+        chunk = Chunk.read(ReadDataStream(stream))
+        if release is not None:
+            release(index.chunk_start_offset, index.chunk_length)
+        for record in breakup_chunk(chunk, validate_crc=True):
+            if (
+                isinstance(record, Message)
+                and record.channel_id in sources
+                and (lo is None or record.log_time >= lo)
+                and (hi is None or record.log_time < hi)
+            ):
+                heappush(heap, (record.log_time, next(seq), record.channel_id, record.data))
+    while heap:
+        t, _n, cid, data = heappop(heap)
+        yield t, sources[cid], data, None
 
 
 # --------------------------------------------------------------------------- reading

@@ -18,6 +18,7 @@
     tfbus view --bag PATH                     the frames live in a browser (rviz's TF display)
     tfbus router                              Zenoh's router for fleets (tcp/127.0.0.1:7447)
     tfbus serve-buffer --bus SPEC             answer lookups for thin clients (tfbus.remote)
+    tfbus lookup --bag GLOB --target T --source S --every 0.1 -o poses.parquet
     tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
@@ -64,6 +65,7 @@ COMMANDS: tuple[str, ...] = (
     "router",
     "serve_buffer",
     "doctor",
+    "lookup",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 

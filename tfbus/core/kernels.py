@@ -12,6 +12,9 @@ Nothing outside :mod:`tfbus.core` imports ``_select``; it imports these names fr
 * ``apply_transforms``, ``lerp_rows``, ``slerp_rows``: the row kernels of the batched
   paths on ``(N, 7)`` float64 rows (x, y, z, qx, qy, qz, qw; metres) and ``(N, 3)`` points;
 * ``INVALID_ARGUMENT``: the core's error code of tf2's ``InvalidArgumentException``;
+* ``batch_lookup(core, target_frame, source_frame, times, out, stamps, ok) -> int`` and
+  ``CoreBase``: the batch kernel (every row bit for bit the single lookup's walk) and the
+  base class of the buffers it takes, for :mod:`tfbus.table`'s lookups;
 * ``core_description()``: which core runs, for ``--version`` and diagnostics.
 """
 
@@ -19,7 +22,9 @@ from __future__ import annotations
 
 from tfbus.core._select import (
     INVALID_ARGUMENT,
+    CoreBase,
     apply_transforms,
+    batch_lookup,
     core_description,
     lerp_rows,
     quat_multiply,
@@ -30,7 +35,9 @@ from tfbus.core._select import (
 
 __all__ = [
     "INVALID_ARGUMENT",
+    "CoreBase",
     "apply_transforms",
+    "batch_lookup",
     "core_description",
     "lerp_rows",
     "quat_multiply",

@@ -1,0 +1,280 @@
+"""tf lookups as a table operator over a fleet of recordings: rows/s per core.
+
+Writes R synthetic recordings (tfbus's own writer, MCAP; each 60 s of ``map -> odom``
+at 10 Hz and ``odom -> base_link`` at 50 Hz with a gap, statics once at the start) and Q
+queries spread over them (``map -> laser``, ``odom -> imu``, ``base_link -> laser``;
+stamps inside and outside the data), then times:
+
+* ``loop``: what a user writes today: per recording ``load_buffer``, then a Python loop
+  of ``BufferCore.lookup_transform`` per row (try/except for the rows tf2 refuses);
+* ``table.lookup``: per recording ``load_buffer``, then one ``tfbus.table.lookup`` of its
+  rows (same buffers; the lookups alone are timed for both, loading separately);
+* ``lookup_by_recording``: the rows naming their recording, loading included, one
+  process;
+* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)`` (the rows are ordered by
+  recording) on a local Ray cluster of 1 and 2 CPUs, loading
+  included (cluster start excluded).
+
+``--memory MB`` instead measures peak RSS (``VmHWM``, reset after the imports; a fresh
+process each; Linux) of a whole ``load_buffer`` vs a 10 s window
+(``load_buffer(start=, end=)``) and of a walk with ``iter_windows(width=10)`` over one
+generated MCAP of about MB megabytes.
+
+Prints figures only, with the machine's load average.
+
+    .venv/bin/python benchmarks/bench_table.py [--recordings 100] [--queries 1000000]
+        [--no-ray] [--memory 1000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import multiprocessing
+import os
+import random
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tfbus import Header, Quaternion, TFMessage, Time, Transform, TransformStamped, Vector3
+from tfbus.bag import BagMessage, load_buffer, write_bag
+
+SEC = 1_000_000_000
+T0 = 1_700_000_000 * SEC
+PAIRS = [("map", "laser"), ("odom", "imu"), ("base_link", "laser")]
+
+
+def _ts(parent: str, child: str, ns: int, x: float, yaw: float) -> TransformStamped:
+    return TransformStamped(
+        Header(Time.from_ns(ns), parent), child,
+        Transform(Vector3(x, 0.5 * x, 0.0),
+                  Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))))
+
+
+def recording(seed: int, seconds: float) -> list[BagMessage]:
+    """60 s of a robot's tf: statics at the start, map -> odom at 10 Hz, odom ->
+    base_link at 50 Hz with a gap from 40 % to 45 %."""
+    rng = random.Random(seed)
+    out = [BagMessage(Time.from_ns(T0), "/tf_static", TFMessage([
+        _ts("base_link", "laser", T0, 0.2, 0.0), _ts("base_link", "imu", T0, 0.1, 1.0)]),
+        "/static")]
+    steps = int(seconds * 50)
+    for k in range(1, steps):
+        ns = T0 + k * SEC // 50
+        t = k / 50
+        tfs = []
+        if not 0.40 <= k / steps < 0.45:
+            tfs.append(_ts("odom", "base_link", ns - rng.randrange(10**6), math.cos(t), 0.3 * t))
+        if k % 5 == 0:
+            tfs.append(_ts("map", "odom", ns, 0.01 * t, 0.001 * t + seed))
+        out.append(BagMessage(Time.from_ns(ns), "/tf", TFMessage(tfs), "/robot"))
+    return out
+
+
+def fleet(directory: Path, n: int, seconds: float) -> list[str]:
+    paths = []
+    for i in range(n):
+        folder = directory / f"robot{i:03d}"
+        write_bag(folder, recording(i, seconds), format="mcap")
+        paths.append(str(next(folder.glob("*.mcap"))))
+    return paths
+
+
+def queries(paths: list[str], n: int, seconds: float, outside: float = 0.0,
+            seed: int = 1) -> Any:
+    """``n`` rows over ``paths`` (sorted by recording); a fraction ``outside`` of them
+    1 s before or after the data (rows tf2 refuses with an ExtrapolationException)."""
+    import pyarrow as pa
+
+    rng = np.random.default_rng(seed)
+    which = np.sort(rng.integers(0, len(paths), n))
+    pair = rng.integers(0, len(PAIRS), n)
+    stamps = T0 + rng.integers(SEC // 2, int((seconds - 0.5) * SEC), n)
+    out = rng.random(n) < outside
+    stamps[out] = np.where(rng.random(int(out.sum())) < 0.5, T0 - SEC,
+                           T0 + int((seconds + 1) * SEC))
+    return pa.table({
+        "recording": pa.array([paths[k] for k in which]),
+        "target_frame": [PAIRS[k][0] for k in pair],
+        "source_frame": [PAIRS[k][1] for k in pair],
+        "stamp": pa.array(stamps, pa.int64()),
+    })
+
+
+def _groups(table: Any) -> list[tuple[str, Any]]:
+    import pyarrow.compute as pc
+
+    names = table.column("recording")
+    return [(name, table.filter(pc.equal(names, name)))
+            for name in pc.unique(names).to_pylist()]
+
+
+def bench_single(table: Any) -> dict[str, float]:
+    from tfbus.errors import TransformException
+    from tfbus.table import lookup, lookup_by_recording
+
+    groups = _groups(table)
+    t = time.perf_counter()
+    buffers = {name: load_buffer(name) for name, _ in groups}
+    load_s = time.perf_counter() - t
+    loop_s = 0.0
+    table_s = 0.0
+    ok_loop = ok_table = 0
+    for name, rows in groups:
+        buffer = buffers[name]
+        triples = list(zip(rows.column("target_frame").to_pylist(),
+                           rows.column("source_frame").to_pylist(),
+                           rows.column("stamp").to_pylist(), strict=True))
+        t = time.perf_counter()
+        for target, source, ns in triples:
+            try:
+                buffer.lookup_transform(target, source, Time.from_ns(ns))
+                ok_loop += 1
+            except TransformException:
+                pass
+        loop_s += time.perf_counter() - t
+        t = time.perf_counter()
+        result = lookup(rows, buffer)
+        table_s += time.perf_counter() - t
+        ok_table += result.column("status").to_pylist().count("ok")
+    assert ok_loop == ok_table, (ok_loop, ok_table)
+    t = time.perf_counter()
+    lookup_by_recording(table)
+    end_to_end = time.perf_counter() - t
+    n = table.num_rows
+    return {"load_s": load_s, "loop": n / loop_s, "table": n / table_s,
+            "end_to_end": n / end_to_end, "ok": ok_table / n}
+
+
+def _ray_run(table: Any, cpus: int, out: Any) -> None:
+    import ray
+
+    from tfbus.table import ray as tfray
+
+    ray.init(num_cpus=cpus, include_dashboard=False, log_to_driver=False,
+             configure_logging=False)
+    try:
+        ray.data.DataContext.get_current().enable_progress_bars = False
+        ds = ray.data.from_arrow(table).repartition(max(2, cpus * 4)).materialize()
+        t = time.perf_counter()
+        rows = tfray.lookup(ds, shuffle=False).count()
+        out.put((rows, time.perf_counter() - t))
+    finally:
+        ray.shutdown()
+
+
+def bench_ray(table: Any, cpus: int) -> float:
+    """Rows/s of tfbus.table.ray.lookup on a fresh local cluster of ``cpus`` CPUs (in a
+    child process, so each run has its own cluster)."""
+    ctx = multiprocessing.get_context("spawn")
+    out = ctx.Queue()
+    proc = ctx.Process(target=_ray_run, args=(table, cpus, out))
+    proc.start()
+    rows, seconds = out.get(timeout=3600)
+    proc.join(timeout=120)
+    assert rows == table.num_rows
+    return float(rows / seconds)
+
+
+# ------------------------------------------------------------------------ memory
+
+
+def _status_kb(field: str) -> int:
+    """A ``/proc/self/status`` field in kB (VmRSS: now; VmHWM: the peak)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise KeyError(field)
+
+
+def _peak(kind: str, path: str, out: Any) -> None:
+    """Peak resident memory of one kind of read, in a fresh process: the peak is reset
+    (``/proc/self/clear_refs``, Linux) after the imports, then read after the read."""
+    from tfbus.bag import iter_windows
+
+    load_buffer(path, start=Time.from_ns(T0), end=Time.from_ns(T0 + 1))  # (imports)
+    Path("/proc/self/clear_refs").write_text("5")
+    before = _status_kb("VmRSS")
+    t = time.perf_counter()
+    if kind == "whole":
+        load_buffer(path)
+    elif kind == "window":
+        load_buffer(path, start=Time.from_ns(T0 + 100 * SEC), end=Time.from_ns(T0 + 110 * SEC))
+    else:
+        for _w in iter_windows(path, 10.0, margin=1.0):
+            pass
+    out.put((kind, _status_kb("VmHWM") - before, _status_kb("VmHWM"),
+             time.perf_counter() - t))
+
+
+def bench_memory(directory: Path, megabytes: float) -> None:
+    # About 170 bytes a message with two transforms (MCAP, zstd-compressed chunks).
+    seconds = megabytes * 1e6 / (50 * 210)
+    folder = directory / "big"
+    t = time.perf_counter()
+    write_bag(folder, recording(7, seconds), format="mcap")
+    path = next(folder.glob("*.mcap"))
+    print(f"memory: {path.stat().st_size / 1e6:.0f} MB MCAP, {seconds:.0f} s of tf "
+          f"(written in {time.perf_counter() - t:.0f} s)")
+    ctx = multiprocessing.get_context("spawn")
+    for kind in ("window", "iter_windows", "whole"):
+        out = ctx.Queue()
+        proc = ctx.Process(target=_peak, args=(kind, str(path), out))
+        proc.start()
+        name, grown, peak, secs = out.get(timeout=3600)
+        proc.join(timeout=120)
+        print(f"  {name:13s} peak RSS {peak / 1024:6.0f} MB, {grown / 1024:6.1f} MB above "
+              f"the process before the read, in {secs:.1f} s")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--recordings", type=int, default=100)
+    ap.add_argument("--queries", type=int, default=1_000_000)
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--outside", type=float, default=0.0, metavar="FRACTION",
+                    help="fraction of rows outside the data (tf2 refuses them)")
+    ap.add_argument("--no-ray", action="store_true")
+    ap.add_argument("--memory", type=float, default=0.0, metavar="MB",
+                    help="measure peak memory on one recording of about MB megabytes")
+    args = ap.parse_args()
+    from tfbus.core import COMPILED
+
+    print(f"cpus={os.cpu_count()} load={os.getloadavg()[0]:.1f} "
+          f"core={'compiled' if COMPILED else 'pure-Python'}")
+    directory = Path(tempfile.mkdtemp(prefix="bench_table_"))
+    try:
+        if args.memory:
+            bench_memory(directory, args.memory)
+            return
+        t = time.perf_counter()
+        paths = fleet(directory, args.recordings, args.seconds)
+        table = queries(paths, args.queries, args.seconds, args.outside)
+        print(f"{args.recordings} recordings of {args.seconds:.0f} s, {args.queries} queries, "
+              f"{args.outside * 100:.0f} % outside the data "
+              f"(written in {time.perf_counter() - t:.1f} s)")
+        r = bench_single(table)
+        print(f"  load_buffer of every recording: {r['load_s']:.2f} s; "
+              f"{r['ok'] * 100:.0f} % of rows answered")
+        print(f"  loop (lookup_transform per row)   {r['loop']:12,.0f} rows/s")
+        print(f"  tfbus.table.lookup                {r['table']:12,.0f} rows/s  "
+              f"({r['table'] / r['loop']:.1f}x the loop)")
+        print(f"  lookup_by_recording (with loads)  {r['end_to_end']:12,.0f} rows/s")
+        if not args.no_ray:
+            one = bench_ray(table, 1)
+            two = bench_ray(table, 2)
+            print(f"  ray, 1 CPU (with loads)           {one:12,.0f} rows/s")
+            print(f"  ray, 2 CPUs (with loads)          {two:12,.0f} rows/s  "
+                  f"({two / one:.2f}x one CPU)")
+        print(f"load after: {os.getloadavg()[0]:.1f}")
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

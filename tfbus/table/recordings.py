@@ -1,0 +1,321 @@
+"""Lookups against recordings: a file's rows answered from that file, whole or window by
+window (:func:`tfbus.bag.load_buffer`'s ``start`` / ``end``, :func:`tfbus.bag.iter_windows`).
+
+A window is bag (receive) time ``[start, end)``; its buffer holds every static transform
+of the file and the ``/tf`` messages received from ``margin`` before to ``margin`` after
+it. A row answered from a window equals the whole file's answer when every link on its
+path has a sample within ``margin`` on each side of the row's stamp (the margin must be
+more than the links' longest gap plus the header-stamp-to-receive delay); a row the
+window cannot answer fails with tf2's exception for that window's data.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Iterator
+from os import PathLike
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from tfbus.core import BufferCore
+from tfbus.table.lookups import RESULT_COLUMNS, as_arrow, lookup, result_schema
+from tfbus.time import NSEC_PER_SEC, Time
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+__all__ = [
+    "DEFAULT_MARGIN",
+    "RecordingBuffers",
+    "lookup_by_recording",
+    "lookup_recording",
+    "output_schema",
+    "poses_every",
+]
+
+DEFAULT_MARGIN = 5.0
+"""Seconds each window's buffer reaches beyond the window on both sides."""
+
+
+def _seconds_ns(value: float, name: str, *, positive: bool) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+        raise ValueError(f"{name} must be a number of seconds, got {value!r}")
+    if value in (float("inf"), float("-inf")) or (value <= 0 if positive else value < 0):
+        raise ValueError(f"{name} must be {'> 0' if positive else '>= 0'} s, got {value!r}")
+    return round(value * NSEC_PER_SEC)
+
+
+def lookup_recording(
+    path: str | PathLike[str],
+    queries: object,
+    *,
+    window: float | None = None,
+    margin: float = DEFAULT_MARGIN,
+    keep_columns: bool = True,
+) -> pa.Table:
+    """Answer ``queries`` (see :func:`~tfbus.table.lookup`) against one recording.
+
+    Args:
+        path: a ROS 1 ``.bag``, a ROS 2 bag folder, or a ``.db3`` / ``.mcap`` file.
+        queries: the rows (Arrow table or Polars / pandas DataFrame).
+        window: None: load the whole file once (every row exactly as
+            ``load_buffer(path).lookup_transform``). Seconds: group the rows by window of
+            that width on ``stamp`` and load each window that has rows (plus ``margin``
+            on each side, and the file's statics) through the format's index; rows at
+            stamp 0 (the latest data) and tables with ``source_stamp`` (full lookups)
+            are answered from the whole file.
+        margin: seconds each window's buffer reaches beyond the window.
+        keep_columns: as in :func:`~tfbus.table.lookup`.
+
+    Returns:
+        The rows, in the order of ``queries``, with :data:`~tfbus.table.RESULT_COLUMNS`.
+
+    Raises:
+        ValueError: ``window`` is not positive or ``margin`` negative; as
+            :func:`~tfbus.table.lookup`.
+        BagNotFoundError, BagFormatError, BagReadError: see :func:`tfbus.bag.read_messages`.
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    from tfbus.bag import load_buffer
+
+    table = as_arrow(queries)
+    margin_ns = _seconds_ns(margin, "margin", positive=False)
+    if window is None:
+        return lookup(table, load_buffer(path), keep_columns=keep_columns)
+    width = _seconds_ns(window, "window", positive=True)
+    if "stamp" not in table.column_names:
+        return lookup(table, load_buffer(path), keep_columns=keep_columns)  # names it
+    stamps = table.column("stamp")
+    if pa.types.is_timestamp(stamps.type):
+        stamps = stamps.cast(pa.timestamp("ns", stamps.type.tz)).cast(pa.int64())
+    if not pa.types.is_integer(stamps.type) or table.num_rows == 0:
+        return lookup(table, load_buffer(path), keep_columns=keep_columns)
+    if "source_stamp" in table.column_names:
+        # A full lookup's two times need not fall in one window: use the whole file.
+        return lookup(table, load_buffer(path), keep_columns=keep_columns)
+    ns = np.asarray(pc.fill_null(stamps.cast(pa.int64()), -1).to_numpy(zero_copy_only=False))
+    # Slots: -2 stamp 0 (the latest data: the whole file), -1 a null or negative stamp
+    # (a row error: no data needed), k >= 0 the window of the stamp.
+    slot = np.where(ns > 0, ns // width, np.where(ns == 0, -2, -1))
+    parts: list[pa.Table] = []
+    order: list[npt.NDArray[np.int64]] = []
+    for k in np.unique(slot).tolist():
+        rows = np.flatnonzero(slot == k)
+        part = table.take(pa.array(rows))
+        if k == -2:
+            buffer = load_buffer(path)
+        elif k == -1:
+            buffer = BufferCore()
+        else:
+            lo = max(0, k * width - margin_ns)
+            hi = min(2**63 - 1, (k + 1) * width + margin_ns)
+            buffer = load_buffer(path, start=Time.from_ns(lo), end=Time.from_ns(hi))
+        parts.append(lookup(part, buffer, keep_columns=keep_columns))
+        order.append(rows)
+    merged = pa.concat_tables(parts)
+    inverse = np.empty(table.num_rows, dtype=np.int64)
+    inverse[np.concatenate(order)] = np.arange(table.num_rows)
+    return merged.take(pa.array(inverse))
+
+
+def poses_every(
+    path: str | PathLike[str],
+    target_frame: str,
+    source_frame: str,
+    every: float,
+    *,
+    window: float = 60.0,
+    margin: float = DEFAULT_MARGIN,
+) -> Iterator[pa.Table]:
+    """The pose of ``source_frame`` in ``target_frame`` every ``every`` seconds over a
+    recording, read window by window (:func:`tfbus.bag.iter_windows`: one pass, no more
+    than a window and two margins of messages held).
+
+    The stamps are ``t0 + k * every`` (``t0``: the first ``/tf`` message's bag time) from
+    each window's start to its last message (a window that received messages), each
+    looked up in that window's buffer.
+
+    Args:
+        path: the recording.
+        target_frame, source_frame: the frames (as in ``lookup_transform``).
+        every: seconds between stamps (> 0).
+        window: seconds per window (> 0).
+        margin: seconds each window's buffer reaches beyond it (>= 0).
+
+    Yields:
+        One Arrow table per window: ``target_frame``, ``source_frame``, ``stamp`` and
+        :data:`~tfbus.table.RESULT_COLUMNS`.
+
+    Raises:
+        ValueError: ``every`` or ``window`` not positive, ``margin`` negative.
+        BagNotFoundError, BagFormatError, BagReadError: see :func:`tfbus.bag.read_messages`.
+    """
+    import pyarrow as pa
+
+    from tfbus.bag import iter_windows
+
+    step = _seconds_ns(every, "every", positive=True)
+    _seconds_ns(window, "window", positive=True)
+    _seconds_ns(margin, "margin", positive=False)
+    t0: int | None = None
+    for w in iter_windows(path, window, margin=margin):
+        if t0 is None:
+            t0 = w.start.ns
+        first = t0 + -(-(w.start.ns - t0) // step) * step
+        stamps = np.arange(first, min(w.end.ns, w.last.ns + 1), step, dtype=np.int64)
+        if not stamps.size:
+            continue
+        n = stamps.shape[0]
+        queries = pa.table({
+            "target_frame": pa.array([target_frame] * n, pa.string()),
+            "source_frame": pa.array([source_frame] * n, pa.string()),
+            "stamp": pa.array(stamps),
+        })
+        yield lookup(queries, w.buffer)
+
+
+def output_schema() -> pa.Schema:
+    """The schema of :func:`poses_every`'s tables (query columns, then results)."""
+    import pyarrow as pa
+
+    head = pa.schema([("target_frame", pa.string()), ("source_frame", pa.string()),
+                      ("stamp", pa.int64())])
+    return pa.schema(list(head) + list(result_schema()))
+
+
+
+
+
+class RecordingBuffers:
+    """Whole-recording buffers by path, the ``maxsize`` most recently used kept (memory
+    bounded by ``maxsize`` recordings): what the engines' per-batch functions share
+    when the same recording's rows come in several batches.
+
+    Args:
+        maxsize: recordings kept loaded (>= 1).
+
+    Raises:
+        ValueError: ``maxsize`` < 1.
+    """
+
+    def __init__(self, maxsize: int = 2) -> None:
+        if isinstance(maxsize, bool) or not isinstance(maxsize, int) or maxsize < 1:
+            raise ValueError(f"maxsize must be an int >= 1, got {maxsize!r}")
+        self.maxsize = maxsize
+        self._kept: OrderedDict[str, BufferCore] = OrderedDict()
+        self.loads = 0
+        """How many times a recording was read (a measure of the cache's use)."""
+
+    def get(self, path: str) -> BufferCore:
+        """The buffer of the whole recording at ``path`` (``load_buffer(path)``).
+
+        Raises:
+            BagNotFoundError, BagFormatError, BagReadError: see
+                :func:`tfbus.bag.load_buffer`.
+        """
+        from tfbus.bag import load_buffer
+
+        core = self._kept.pop(path, None)
+        if core is None:
+            core = load_buffer(path)
+            self.loads += 1
+        self._kept[path] = core
+        while len(self._kept) > self.maxsize:
+            self._kept.popitem(last=False)
+        return core
+
+
+def lookup_by_recording(
+    queries: object,
+    *,
+    recording: str = "recording",
+    window: float | None = None,
+    margin: float = DEFAULT_MARGIN,
+    buffers: RecordingBuffers | None = None,
+    keep_columns: bool = True,
+) -> pa.Table:
+    """Answer rows that name their recording: each recording's rows against that file.
+
+    Args:
+        queries: rows with the query columns of :func:`~tfbus.table.lookup` and a
+            string column ``recording`` (a path or fsspec URL of each row's file).
+        recording: the name of that column.
+        window, margin: as :func:`lookup_recording` (None: whole files).
+        buffers: whole-file buffers to reuse across calls (window None); default a new
+            :class:`RecordingBuffers` for this call.
+        keep_columns: as in :func:`~tfbus.table.lookup`.
+
+    Returns:
+        The rows in the order of ``queries`` with :data:`~tfbus.table.RESULT_COLUMNS`.
+        A row whose recording cannot be read fails with ``status`` the error's class
+        (``BagNotFoundError``, ``BagFormatError``, ``BagReadError``) and its message;
+        the other recordings' rows are answered.
+
+    Raises:
+        ValueError, TypeError: as :func:`~tfbus.table.lookup`; no ``recording`` column.
+    """
+    import pyarrow as pa
+
+    from tfbus.errors import BagError
+
+    table = as_arrow(queries)
+    if recording not in table.column_names:
+        raise ValueError(f"queries has no column {recording!r} (the recording of each row)")
+    column = table.column(recording)
+    if not (pa.types.is_string(column.type) or pa.types.is_large_string(column.type)
+            or pa.types.is_dictionary(column.type)):
+        raise TypeError(f"queries column {recording!r} must hold paths, got {column.type}")
+    cache = buffers if buffers is not None else RecordingBuffers()
+    import pyarrow.compute as pc
+
+    encoded = pc.dictionary_encode(pc.fill_null(column.cast(pa.string()), "")).combine_chunks()
+    codes = encoded.indices.to_numpy(zero_copy_only=False)
+    names = encoded.dictionary.to_pylist()
+    parts: list[pa.Table] = []
+    order: list[npt.NDArray[np.int64]] = []
+    for code, name in enumerate(names):
+        rows = np.flatnonzero(codes == code)
+        part = table.take(pa.array(rows))
+        try:
+            if window is None:
+                answered = lookup(part, cache.get(name), keep_columns=keep_columns)
+            else:
+                answered = lookup_recording(name, part, window=window, margin=margin,
+                                            keep_columns=keep_columns)
+        except BagError as err:
+            answered = _failed(part, type(err).__name__, str(err), keep_columns)
+        parts.append(answered)
+        order.append(rows)
+    if not parts:
+        return lookup(table, BufferCore(), keep_columns=keep_columns)
+    merged = pa.concat_tables(parts)
+    inverse = np.empty(table.num_rows, dtype=np.int64)
+    inverse[np.concatenate(order)] = np.arange(table.num_rows)
+    return merged.take(pa.array(inverse))
+
+
+def _failed(part: pa.Table, status: str, message: str, keep_columns: bool) -> pa.Table:
+    """Every row of ``part`` failed with ``status`` and ``message`` (NaN values)."""
+    import pyarrow as pa
+
+    n = part.num_rows
+    columns: dict[str, pa.Array] = {
+        name: pa.array(np.full(n, np.nan)) for name in RESULT_COLUMNS[:7]
+    }
+    stamps = part.column("stamp") if "stamp" in part.column_names else None
+    columns["transform_stamp"] = (
+        pa.array(np.zeros(n, dtype=np.int64)) if stamps is None or stamps.type != pa.int64()
+        else stamps.combine_chunks()
+    )
+    columns["status"] = pa.array([status] * n, pa.string())
+    columns["message"] = pa.array([message] * n, pa.string())
+    if not keep_columns:
+        return pa.table(columns)
+    out = part
+    for name, column in columns.items():
+        out = out.append_column(name, column)
+    return out
