@@ -16,10 +16,12 @@ $(BIN)/python:
 	$(BIN)/python -m pip install -q --upgrade pip
 
 # Everything: every extra, the test tools and the docs tools (tests/test_docs.py builds
-# the site and runs every example of it).
+# the site and runs every example of it), and the table operator's engines (tests/table
+# runs it on Polars, DuckDB, Dask and a local Ray cluster; the other Pythons' core subset,
+# noxfile.py, needs none of them).
 $(STAMP): pyproject.toml setup.py $(wildcard tfbus/core/_c*.pyx tfbus/core/_c*.pxd tfbus/codecs/_c*.pyx tfbus/_c*.pyx) | $(BIN)/python
 	@echo "make: installing tfbus with every extra and the test and docs tools into $(VENV) (compiles the core with Cython; a few minutes the first time)"
-	$(BIN)/python -m pip install -q -e '.[all,test,docs]'
+	$(BIN)/python -m pip install -q -e '.[all,test,docs,table,dask,ray]'
 	touch $(STAMP) $(CORE_STAMP) $(DOCS_STAMP)
 
 # tfbus alone (its core dependencies), for the demo.
