@@ -28,6 +28,7 @@ cdef class CoreBase:
     cdef bint _last_relinked
     cdef object _register(self, str frame_id)
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
+    cdef object _problem(self, int code)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1
