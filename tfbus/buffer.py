@@ -355,10 +355,9 @@ class Buffer(BufferCore):
                 if not waiters:
                     del index[name]
         waiter.frames = _NO_FRAMES
-        future = waiter.future  # Wakeup.wake, inlined
+        future = waiter.future  # Wakeup.wake, inlined for asyncio
         if future is None:
-            assert waiter.event is not None
-            waiter.event.set()
+            waiter.wake()
         elif not future.done():
             future.set_result(None)
 

@@ -50,10 +50,9 @@ def wait_on(
 
 
 def woken(waiter: _Waiter[Any]) -> bool:
-    if waiter.future is not None:
+    if waiter.future is not None:  # asyncio
         return waiter.future.done()
-    assert waiter.event is not None
-    return waiter.event.is_set()
+    return waiter.woken  # trio
 
 
 @pytest.mark.parametrize("twin", sorted(CORES))

@@ -696,8 +696,8 @@ cdef class CoreBase:
         the transform ``_store_one`` stored last) is taken once. An exact wait (its
         ``exact`` is ``(target, source, time, fail_fast)``) whose lookup now succeeds is
         settled here: ``result`` := the transform, removed from ``index`` under each of
-        its ``frames`` (then empty), and woken (``future.set_result(None)`` unless done,
-        or ``event.set()``). Calls no Python code of the buffer.
+        its ``frames`` (then empty), and woken (``future.set_result(None)`` unless done
+        on asyncio, else its ``wake()``).
 
         Returns:
             None when nothing is left to do; else ``[(wait, failure)]`` for the buffer's
@@ -742,7 +742,7 @@ cdef class CoreBase:
                     waiter.frames = _NO_FRAMES
                     future = waiter.future
                     if future is None:
-                        waiter.event.set()
+                        waiter.wake()
                     elif not future.done():
                         future.set_result(None)
                     continue
