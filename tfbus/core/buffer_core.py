@@ -324,10 +324,10 @@ class BufferCore(CoreBase):
     ) -> BatchResult:
         """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
         listener uses. Per transform it is faster than a loop of :meth:`set_transform`
-        from about 5 transforms a call on; below that the result's fixed cost (the
-        :class:`BatchResult` and its frames) makes it slower, up to about twice the time
-        per transform at one transform a call (``make bench-check`` prints the ratio by
-        message size).
+        from about 10 transforms a call on; below that the result's fixed cost (the
+        :class:`BatchResult` and its frames) makes it slower, up to about 2.5 to 3 times
+        the time per transform at one transform a call (``make bench-check`` prints the
+        ratio by message size).
 
         Each item is handled exactly as :meth:`set_transform` (or
         :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
