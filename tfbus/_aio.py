@@ -8,8 +8,9 @@ and each with its portable anyio fallback next to it in the caller:
   an import of asyncio);
 * :class:`ShieldedYield` -- ``cancel_shielded_checkpoint`` as one yield on a done future
   (``Future._asyncio_future_blocking``);
-* :class:`Wakeup` -- a one-shot wake-up: a bare future of the loop on asyncio, an
-  ``anyio.Event`` elsewhere;
+* :class:`Wakeup` -- a one-shot wake-up: a bare future of the loop on asyncio, a parked
+  task on trio (``trio.lowlevel``, looked up in ``sys.modules``), an ``anyio.Event``
+  elsewhere;
 * :func:`wait_all_tasks_blocked` -- anyio's ``wait_all_tasks_blocked`` without its 0.1 s
   wall-clock sleeps on asyncio (``Task._fut_waiter``);
 * :func:`open_pumped_connection` -- a TCP connection read in the loop's read callback into
@@ -111,26 +112,45 @@ class ShieldedYield:
         yield future
 
 
+def _running_trio() -> Any:
+    """``trio.lowlevel`` when the caller runs in a trio task (``trio`` looked up in
+    ``sys.modules``, never imported here), else None."""
+    trio = sys.modules.get("trio")
+    if trio is None:
+        return None
+    try:
+        trio.lowlevel.current_task()
+    except RuntimeError:  # not inside trio.run
+        return None
+    return trio.lowlevel
+
+
 class Wakeup:
     """A one-shot wake-up for one waiting task: :meth:`wait` gives what it awaits (once),
     :meth:`wake` ends the wait (idempotent; harmless after the task was cancelled).
 
     On asyncio (``loop`` given) the task awaits a bare future of ``loop`` (what
     ``anyio.Event`` wraps twice: ``anyio.Event`` -> ``asyncio.Event`` -> a future per
-    waiter); elsewhere an ``anyio.Event``. Either is cancelled like any anyio checkpoint.
+    waiter). On trio the task parks itself (``trio.lowlevel.wait_task_rescheduled``) and
+    :meth:`wake` reschedules it (what ``trio.Event`` does through its ``ParkingLot``,
+    which ``anyio.Event`` wraps again); a cancellation aborts the park (trio's
+    ``Abort.SUCCEEDED``), as it does ``trio.Event.wait``. Elsewhere an ``anyio.Event``.
+    Each is cancelled like any anyio checkpoint.
 
     Args:
         loop: the running asyncio loop (:func:`running_asyncio_loop`), or None.
     """
 
-    __slots__ = ("event", "future")
+    __slots__ = ("event", "future", "task", "woken")
 
     def __init__(self, loop: AbstractEventLoop | None) -> None:
         self.future: Future[None] | None = None
         self.event: anyio.Event | None = None
+        self.task: Any = None  # trio: the parked task, while it is parked
+        self.woken = False  # trio: wake() was called
         if loop is not None:
             self.future = loop.create_future()
-        else:
+        elif _running_trio() is None:
             self.event = anyio.Event()
 
     def wait(self) -> Awaitable[object]:
@@ -139,17 +159,38 @@ class Wakeup:
         future = self.future
         if future is not None:
             return anyio.lowlevel.checkpoint() if future.done() else future
-        assert self.event is not None
-        return self.event.wait()
+        if self.event is not None:
+            return self.event.wait()
+        return self._park()
+
+    async def _park(self) -> None:
+        """trio: park this task until :meth:`wake` (or a checkpoint if already woken)."""
+        lowlevel = sys.modules["trio"].lowlevel
+        if self.woken:
+            await lowlevel.checkpoint()
+            return
+
+        def abort(_raise_cancel: object) -> Any:
+            self.task = None  # a later wake() is a no-op
+            return lowlevel.Abort.SUCCEEDED
+
+        self.task = lowlevel.current_task()
+        await lowlevel.wait_task_rescheduled(abort)
 
     def wake(self) -> None:
         """End the wait (idempotent; harmless after the task was cancelled)."""
         future = self.future
-        if future is None:
-            assert self.event is not None
+        if future is not None:
+            if not future.done():
+                future.set_result(None)
+        elif self.event is not None:
             self.event.set()
-        elif not future.done():
-            future.set_result(None)
+        else:
+            self.woken = True
+            task = self.task
+            if task is not None:
+                self.task = None
+                sys.modules["trio"].lowlevel.reschedule(task)
 
 
 async def wait_all_tasks_blocked() -> None:

@@ -46,6 +46,7 @@ from tfbus.core.policy import (
     Window,
     policy_args,
 )
+from tfbus.core.results import TouchedFrames
 from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import BufferClosedException, TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
@@ -62,6 +63,7 @@ _T = TypeVar("_T")
 _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
 _core_lookup_transform = BufferCore.lookup_transform
+_core_set_transform = BufferCore.set_transform  # the core's own (compiled or pure)
 
 
 class _Clearable(Protocol):
@@ -134,19 +136,26 @@ class _Waiter(Wakeup, Generic[_T]):
     returns or raises the TransformException that fails the wait. Indexed under
     ``frames`` (from ``frames_fn()``) while pending. :meth:`~tfbus._aio.Wakeup.wake` ends
     the wait (the answer came, or the deadline).
+
+    ``exact`` is ``(target, source, time, fail_fast)`` for a wait of
+    ``lookup_transform_async`` / ``wait_for_transform`` without a policy (``check`` is
+    then ``check_transform`` of those arguments): the recheck asks the core directly,
+    without the call through ``check``.
     """
 
-    __slots__ = ("check", "error", "frames", "frames_fn", "result")
+    __slots__ = ("check", "error", "exact", "frames", "frames_fn", "result")
 
     def __init__(
         self,
         check: Callable[[], _T | TransformException | None],
         frames_fn: Callable[[], frozenset[str]],
         loop: AbstractEventLoop | None,
+        exact: tuple[str, str, Time, bool] | None = None,
     ) -> None:
         super().__init__(loop)
         self.check = check
         self.frames_fn = frames_fn
+        self.exact = exact
         self.frames: frozenset[str] = frozenset()
         self.result: _T | None = None
         self.error: BaseException | None = None
@@ -274,17 +283,25 @@ class Buffer(BufferCore):
     ) -> BatchResult:
         """:meth:`BufferCore.set_transforms`, then the waits that depend on the frames
         it touched are re-checked, once per batch."""
-        result = super().set_transforms(transforms, authority, is_static)
-        if self._index and result.touched:
-            self._recheck_frames(result.touched, result.relinked)
+        r = self._store(transforms, authority, is_static)  # BufferCore.set_transforms
+        result = r if isinstance(r, BatchResult) else self._batch_result(r, authority)
+        if self._index:
+            touched = result.touched
+            # The ids recorded by the insert (repeats allowed; no set built for them).
+            names = touched._ids if type(touched) is TouchedFrames else touched
+            rest = self._settle(self._index, names)
+            if rest is not None:
+                self._recheck_rest(rest, result.relinked)
         return result
 
     def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
         """:meth:`BufferCore.set_transform`, then the waits that depend on the
         transform's two frames are re-checked (when it was stored)."""
-        stored = super().set_transform(transform, authority)
+        stored = _core_set_transform(self, transform, authority)
         if stored and self._index:
-            self._recheck_last()
+            rest = self._settle(self._index, None)
+            if rest is not None:
+                self._recheck_rest(rest, self._last_touched()[2])
         return stored
 
     def set_transform_static(
@@ -311,26 +328,41 @@ class Buffer(BufferCore):
         """Re-check the waits on the frames of the transform the core stored last (what
         it reports for one insert: its two ids, and whether the tree's shape may have
         changed)."""
-        child, parent, relinked = self._last_touched()
-        self._recheck_frames((child, parent), relinked)
+        rest = self._settle(self._index, None)
+        if rest is not None:
+            self._recheck_rest(rest, self._last_touched()[2])
 
-    def _recheck_frames(self, names: Iterable[str], relinked: bool) -> None:
-        index = self._index
-        due: set[_Waiter[Any]] = set()
-        for name in names:
-            waiters = index.get(name)
-            if waiters:
-                due.update(waiters)
-        for waiter in due:
-            self._recheck(waiter, relinked)
+    def _recheck_rest(
+        self, rest: list[tuple[Any, tuple[int, ...] | None]], relinked: bool
+    ) -> None:
+        """The waits the core's ``_settle`` left: an exact wait whose lookup failed
+        (its failure tuple) or another kind of wait (None)."""
+        for waiter, failure in rest:
+            self._recheck(waiter, relinked, failure)
 
-    def _recheck(self, waiter: _Waiter[Any], relinked: bool = True) -> None:
+    def _recheck(
+        self,
+        waiter: _Waiter[Any],
+        relinked: bool = True,
+        failure: tuple[int, ...] | None = None,
+    ) -> None:
         """One walk (the waiter's check); the frames it depends on are recomputed only if
-        the tree's shape may have changed, so an insert costs O(waiters it touches)."""
-        try:
-            result = waiter.check()
-        except TransformException as exc:
-            result = exc
+        the tree's shape may have changed, so an insert costs O(waiters it touches).
+        ``failure``: the failed lookup of an exact wait, just walked by ``_settle``."""
+        exact = waiter.exact
+        if exact is not None:  # check_transform(*exact), without the calls in between
+            target, source, time, fail_fast = exact
+            out = self._query(target, source, time) if failure is None else failure
+            result = (
+                out
+                if isinstance(out, TransformStamped)
+                else self._hopeless(target, source, out, time, fail_fast)
+            )
+        else:
+            try:
+                result = waiter.check()
+            except TransformException as exc:
+                result = exc
         if result is None:
             if relinked:
                 self._reindex(waiter, waiter.frames_fn())  # the path may have changed
@@ -347,7 +379,11 @@ class Buffer(BufferCore):
                 if not waiters:
                     del index[name]
         waiter.frames = _NO_FRAMES
-        waiter.wake()
+        future = waiter.future  # Wakeup.wake, inlined for asyncio
+        if future is None:
+            waiter.wake()
+        elif not future.done():
+            future.set_result(None)
 
     def _recheck_pending(self) -> None:
         """Re-evaluate every pending wait (after the buffer was cleared on a jump back)."""
@@ -447,7 +483,11 @@ class Buffer(BufferCore):
         frames: Callable[[], frozenset[str]],
         timeout: float | Duration | None,
         describe: Callable[[], str],
+        exact: tuple[str, str, Time, bool] | None = None,
     ) -> _T:
+        """Wait until ``check()`` gives an answer (or fails the wait), rechecked on every
+        insert of ``frames()``; ``exact``: ``check`` is ``check_transform(*exact)``
+        (see :class:`_Waiter`)."""
         if (
             timeout is not None
             and not (type(timeout) is float and math.isfinite(timeout))  # the common case
@@ -461,7 +501,7 @@ class Buffer(BufferCore):
             return result
         if self._closed:
             raise BufferClosedException(f"the buffer is closed: not waiting for {describe()}")
-        waiter: _Waiter[_T] = _Waiter(check, frames, running_asyncio_loop())
+        waiter: _Waiter[_T] = _Waiter(check, frames, running_asyncio_loop(), exact)
         self._reindex(waiter, frames())
         try:
             if timeout is None:
@@ -597,6 +637,7 @@ class Buffer(BufferCore):
             partial(self._frames_of, target_frame, source_frame, time),
             timeout,
             partial(self._describe, target_frame, source_frame, time),
+            (target_frame, source_frame, time, fail_fast),
         )
 
     @overload
@@ -661,6 +702,7 @@ class Buffer(BufferCore):
             partial(self._frames_of, target_frame, source_frame, time),
             timeout,
             partial(self._describe, target_frame, source_frame, time),
+            (target_frame, source_frame, time, fail_fast),
         )
 
     @overload
@@ -921,6 +963,7 @@ class Buffer(BufferCore):
                 partial(self._frames_of, target_frame, source, stamp),
                 timeout,
                 partial(self._describe, target_frame, source, stamp),
+                (target_frame, source, stamp, fail_fast),
             )
         result: _M = do_transform(obj, ts)
         return result

@@ -78,15 +78,14 @@ async def test_a_batch_insert_wakes_the_waits_it_completes_once() -> None:
     async with anyio.create_task_group() as tg:
         tg.start_soon(waiter)
         await settle()
-        waiter_obj = next(iter(buf._pending()))
-        check = waiter_obj.check
+        query = buf._query
 
-        def counting_check() -> TransformStamped | None:
+        def counting_query(target: str, source: str, time: Time) -> object:
             nonlocal checks
-            checks += 1
-            return check()
+            checks += (target, source) == ("map", "laser")  # the wait's lookup, walked
+            return query(target, source, time)
 
-        waiter_obj.check = counting_check  # type: ignore[method-assign]
+        buf._query = counting_query  # type: ignore[method-assign,assignment]
         report = buf.set_transforms(
             [
                 tf("map", "odom", T0, x=1.0),

@@ -312,9 +312,14 @@ cdef class TimeCache(Link):
         tail += 1
         self._tail = tail
         # pruneList: drop samples older than newest - cache_time (strict comparison).
+        # A steady stream drops one sample per insert: the next one is tried before the
+        # bisection (the same index: the first stamp >= horizon; st[tail - 1] is one).
         horizon = st[tail - 1] - self.cache_time_ns
         if st[head] < horizon:
-            self._head = _bisect_left(st, horizon, head, tail)
+            if st[head + 1] >= horizon:
+                self._head = head + 1
+            else:
+                self._head = _bisect_left(st, horizon, head + 1, tail)
         return C_OK
 
     cdef int _replace_newest(self, int parent, const double* v) except -1:

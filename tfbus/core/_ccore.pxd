@@ -42,6 +42,7 @@ cdef class CoreBase:
     cdef int _expire(self) except -1
     cdef Py_ssize_t _cforget(self, int64_t older_than) except -1
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
+    cdef object _problem(self, int code)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1

@@ -16,8 +16,10 @@ why), ``_query`` (``lookupTransform`` in one call: checks, memo, ``walkToTopPare
 frames an answer depends on), ``_cwalk`` and ``common_time`` (``getLatestCommonTime``),
 and the public ``clear``, ``get_frame_names``, ``frame_exists``, ``parent_of``,
 ``link_info``, ``extrapolation_detail`` through which ``BufferCore`` reads its state.
-Nothing here calls into the Python subclass: error *messages* and log lines are built by
-:mod:`tfbus.core.buffer_core` from the codes returned here.
+Error *messages* and log lines are built by :mod:`tfbus.core.buffer_core` from the codes
+returned here; the one call into the Python subclass is ``set_transform``'s (and
+``set_transform_static``'s) for a transform not stored: ``_not_stored(problem,
+authority)``, which logs the refusal or raises.
 
 The links are :mod:`tfbus.core._ccache`'s, the scalar math ``_cmath.pxd``'s inline
 functions; ``_ccore.pxd`` declares the table and the walk for the batch kernel
@@ -42,6 +44,7 @@ from heapq import heappop, heappush
 
 from libc.stdint cimport INT64_MAX, int64_t
 from libc.string cimport memcpy
+from cpython.dict cimport PyDict_GetItem
 from cpython.object cimport PyObject
 from cpython.unicode cimport PyUnicode_GET_LENGTH, PyUnicode_READ_CHAR
 
@@ -178,6 +181,40 @@ cdef object _time_of(int64_t ns):
     Py_DECREF(t)  # tp_alloc's reference, now owned by ``t``
     PyObject_GenericSetAttr(t, "_ns", ns)
     return t
+
+
+cdef extern from "Python.h":
+    ctypedef struct PyMemberDef:
+        int type
+        Py_ssize_t offset
+    ctypedef struct PyMemberDescrObject:
+        PyMemberDef* d_member
+
+# A member of type T_OBJECT_EX (Py_T_OBJECT_EX from 3.12 on; 16 in every CPython).
+cdef int _T_OBJECT_EX = 16
+
+
+cdef frozenset _NO_FRAMES = frozenset()
+
+cdef Py_ssize_t _NS_OFFSET = -1
+"""Where a ``Time``'s ``_ns`` slot lies in the object (from the slot's member descriptor;
+-1 if it is not a plain object slot): ``_stamp_ns`` reads it without the attribute
+lookup."""
+_ns_slot = Time.__dict__.get("_ns")
+if type(_ns_slot).__name__ == "member_descriptor":
+    if (<PyMemberDescrObject*><PyObject*>_ns_slot).d_member.type == _T_OBJECT_EX:
+        _NS_OFFSET = (<PyMemberDescrObject*><PyObject*>_ns_slot).d_member.offset
+
+
+cdef inline int64_t _stamp_ns(object stamp) except? -1:
+    """``stamp._ns`` of a ``Time`` (or subclass): the slot read in place for ``Time``
+    itself, the attribute otherwise."""
+    cdef PyObject* ns
+    if _NS_OFFSET >= 0 and type(stamp) is Time:
+        ns = (<PyObject**>((<char*><PyObject*>stamp) + _NS_OFFSET))[0]
+        if ns != NULL:
+            return <int64_t><object>ns
+    return stamp._ns
 
 
 # Validation outcomes of an inserted transform (beyond the cache's OK / OLD / REPEATED).
@@ -330,8 +367,9 @@ cdef int _climb_policy(list caches, int frame, int stop, int early, int64_t time
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
-    Nothing here calls into the subclass: inserts and queries return codes and data, and
-    ``tfbus.core`` turns them into tf2's messages, exceptions and log lines.
+    Inserts and queries return codes and data, and ``tfbus.core`` turns them into tf2's
+    messages, exceptions and log lines; the one call into the subclass is
+    ``set_transform``'s for a transform not stored (``_not_stored``).
 
     Read-only internals (for white-box tests and the batch kernel, never written from
     Python): ``_frame_ids`` (frame id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names``
@@ -525,7 +563,8 @@ cdef class CoreBase:
         cdef double v[7]
         cdef double norm2
         cdef int64_t stamp, old_stamp
-        cdef int code, k, old_parent, ipid
+        cdef int code, k, old_parent, pi
+        cdef Py_ssize_t ci
         cdef bint same
         header = (<tuple>ts)[0]
         tf = (<tuple>ts)[2]
@@ -584,38 +623,105 @@ cdef class CoreBase:
         ):
             self._last_values = (v[0], v[1], v[2], v[3], v[4], v[5], v[6])
             return C_INVALID
-        stamp = stamp_obj._ns
+        stamp = _stamp_ns(stamp_obj)
         self._last_stamp = stamp
         self._generation += 1
         if cid is None:
             cid = self._register(child)
-        cache = self._caches[cid]
+        ci = <Py_ssize_t>cid
+        cache = self._caches[ci]
         if cache is None:
             if is_static:
                 cache = StaticCache()
             else:
                 cache = TimeCache(self._cache_ns, self._replace_repeated)
                 heappush(self._heap, (stamp, cid))
-            self._caches[cid] = cache
+            self._caches[ci] = cache
         if pid is None:
             pid = self._register(parent)
         if not is_static and stamp > self._newest:
             self._newest = stamp
-        ipid = pid
+        pi = <int>pid
         old_parent = (<Link>cache).c_latest(&old_stamp)
-        if old_parent != ipid:
+        if old_parent != pi:
             self._name_parent(cid, pid)
-        code = (<Link>cache).c_insert(stamp, ipid, v)
+        code = (<Link>cache).c_insert(stamp, pi, v)
         # The tree's shape may have changed: a new or emptied link, another parent, or a
         # link that keeps one parent per sample.
         self._last_relinked = False
         if code == C_OK:
-            if old_parent != ipid:
+            if old_parent != pi:
                 self._last_relinked = True
-            elif isinstance(cache, TimeCache) and (<TimeCache>cache)._pa != NULL:
+            elif type(cache) is TimeCache and (<TimeCache>cache)._pa != NULL:
                 self._last_relinked = True
-            self._authority[cid] = authority
+            # The link's authority: stored only when it is another string object (a
+            # stream from one sender re-stores nothing).
+            if PyDict_GetItem(self._authority, cid) != <PyObject*>authority:
+                self._authority[cid] = authority
         return code
+
+    cdef object _problem(self, int code):
+        """What ``_store_one`` reports for a transform ``_insert_one`` did not store."""
+        if code == C_INVALID:
+            return (INVALID, self._last_parent, self._last_child, self._last_values)
+        return (code, self._last_child, self._last_stamp)
+
+    def set_transform(self, transform, str authority="default"):
+        """Store a dynamic transform (tf2 ``BufferCore::setTransform``).
+
+        Args:
+            transform: ``header.frame_id`` is the parent, ``child_frame_id`` the child,
+                ``header.stamp`` the time; translation in metres, rotation (x, y, z, w).
+            authority: who sent it (shown by ``all_frames_as_yaml``).
+
+        Returns:
+            True when stored (or, with ``on_repeat="replace"``, when it replaced the
+            link's newest sample); False when the link's cache refused it — TF_OLD_DATA
+            (older than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a
+            sample with this stamp exists) — which is logged (the first, then one per
+            1000).
+
+        Raises:
+            InvalidArgumentException: malformed transform — self transform, empty
+                frame id, NaN, ±Inf in the translation, or a quaternion whose squared
+                norm is not within 0.01 of 1; or a field of the wrong type (None, a str
+                or bool where a number belongs, an int beyond double range, ...). The
+                message names each field and value; ``.codes`` holds tf2's ``TF_*`` codes
+                in tf2's order. Nothing is stored, no frame is registered.
+            TypeError: ``transform`` is not a TransformStamped, or ``authority`` not a str.
+
+        The core's method, called with no Python frame in between (``BufferCore``
+        inherits it); a transform not stored goes to the subclass's ``_not_stored``
+        (the log line, or the exception).
+        """
+        cdef int code
+        if not isinstance(transform, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
+        code = self._insert_one(transform, authority, False)
+        if self._newest >= self._expire_due:
+            self._expire()
+        if code == C_OK:
+            return True
+        self._not_stored(self._problem(code), authority)
+        return False
+
+    def set_transform_static(self, transform, str authority="default"):
+        """Store a static transform: valid at all times, overwritten by every later send
+        (tf2 ``setTransform(..., is_static=true)``). Whether a link is static is fixed by
+        its first accepted transform, as in tf2.
+
+        Returns and raises as :meth:`set_transform`.
+        """
+        cdef int code
+        if not isinstance(transform, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
+        code = self._insert_one(transform, authority, True)
+        if self._newest >= self._expire_due:
+            self._expire()
+        if code == C_OK:
+            return True
+        self._not_stored(self._problem(code), authority)
+        return False
 
     def _store(self, transforms, str authority, bint is_static):
         """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
@@ -701,9 +807,7 @@ cdef class CoreBase:
             self._expire()
         if code == C_OK:
             return True
-        if code == C_INVALID:
-            return (INVALID, self._last_parent, self._last_child, self._last_values)
-        return (code, self._last_child, self._last_stamp)
+        return self._problem(code)
 
     def _last_touched(self):
         """``(child, parent, relinked)`` of the transform ``_store_one`` last stored: the
@@ -711,6 +815,68 @@ cdef class CoreBase:
         have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
         waits are pending."""
         return self._last_child, self._last_parent, self._last_relinked
+
+    def _settle(self, dict index, names):
+        """The recheck of ``tfbus.buffer.Buffer``'s waits after an insert, in one call:
+        every wait indexed in ``index`` (frame id -> set of waits) under one of
+        ``names`` (the ids the insert touched, repeats allowed; ``None``: the two ids of
+        the transform ``_store_one`` stored last) is taken once. An exact wait (its
+        ``exact`` is ``(target, source, time, fail_fast)``) whose lookup now succeeds is
+        settled here: ``result`` := the transform, removed from ``index`` under each of
+        its ``frames`` (then empty), and woken (``future.set_result(None)`` unless done
+        on asyncio, else its ``wake()``).
+
+        Returns:
+            None when nothing is left to do; else ``[(wait, failure)]`` for the buffer's
+            own recheck: an exact wait whose lookup failed (``failure``, ``_query``'s
+            tuple) or another wait (``failure`` None).
+        """
+        cdef list due
+        cdef list rest = None
+        cdef set first = None, union = None
+        cdef object ws, waiter, exact, out, name, future
+        if names is None:
+            names = (self._last_child, self._last_parent)
+        for name in names:
+            ws = index.get(name)
+            if ws is None or ws is first:
+                continue
+            if first is None:
+                first = <set>ws
+            elif union is None:
+                union = set(first)
+                union.update(<set>ws)
+            else:
+                union.update(<set>ws)
+        if first is None:
+            return None
+        # A copy: settling a wait edits the index's sets.
+        due = list(first) if union is None else list(union)
+        for waiter in due:
+            exact = waiter.exact
+            if exact is None:
+                out = None
+            else:
+                out = self._query((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
+                if isinstance(out, TransformStamped):
+                    waiter.result = out
+                    for name in waiter.frames:
+                        ws = index.get(name)
+                        if ws is not None:
+                            (<set>ws).discard(waiter)
+                            if not ws:
+                                del index[name]
+                    waiter.frames = _NO_FRAMES
+                    future = waiter.future
+                    if future is None:
+                        waiter.wake()
+                    elif not future.done():
+                        future.set_result(None)
+                    continue
+            if rest is None:
+                rest = []
+            rest.append((waiter, out))
+        return rest
 
     # ------------------------------------------------------------------ queries
 

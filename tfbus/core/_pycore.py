@@ -19,7 +19,7 @@ w), never normalised unless said so. Times are int nanoseconds.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from heapq import heappop, heappush
 from typing import Any, Final, Literal, TypeVar
 
@@ -252,11 +252,17 @@ def _bad_id(frame_id: str, which: int) -> tuple[int, int]:
 _Core = TypeVar("_Core", bound="CoreBase")
 
 
+_NO_FRAMES: Final[frozenset[str]] = frozenset()
+"""The frames of a settled wait (``CoreBase._settle``)."""
+
+
 class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
-    Nothing here calls into the subclass: inserts and queries return codes and data, and
-    ``tfbus.core`` turns them into tf2's messages, exceptions and log lines.
+    Inserts and queries return codes and data, and ``tfbus.core`` turns them into tf2's
+    messages, exceptions and log lines; the one call into the subclass is
+    ``set_transform``'s (and ``set_transform_static``'s) for a transform not stored:
+    ``_not_stored(problem, authority)``, which logs the refusal or raises.
 
     Internals (for white-box tests, never written from outside): ``_frame_ids`` (frame
     id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names`` (int id → frame id),
@@ -329,6 +335,8 @@ class CoreBase:
     _expire_every: int
     _expire_due: int
     _frames_expired: int
+    # BufferCore's: a transform set_transform did not store (the log line or exception).
+    _not_stored: Callable[[tuple[Any, ...], str], object]
 
     def __new__(cls: type[_Core], *args: Any, **kwargs: Any) -> _Core:
         self = super().__new__(cls)
@@ -657,6 +665,54 @@ class CoreBase:
             return BatchResult(stored, 0, [], touched, relinked)
         return stored, errors, touched, relinked, refusals
 
+    def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
+        """Store a dynamic transform (tf2 ``BufferCore::setTransform``).
+
+        Args:
+            transform: ``header.frame_id`` is the parent, ``child_frame_id`` the child,
+                ``header.stamp`` the time; translation in metres, rotation (x, y, z, w).
+            authority: who sent it (shown by ``all_frames_as_yaml``).
+
+        Returns:
+            True when stored (or, with ``on_repeat="replace"``, when it replaced the
+            link's newest sample); False when the link's cache refused it — TF_OLD_DATA
+            (older than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a
+            sample with this stamp exists) — which is logged (the first, then one per
+            1000).
+
+        Raises:
+            InvalidArgumentException: malformed transform — self transform, empty
+                frame id, NaN, ±Inf in the translation, or a quaternion whose squared
+                norm is not within 0.01 of 1; or a field of the wrong type (None, a str
+                or bool where a number belongs, an int beyond double range, ...). The
+                message names each field and value; ``.codes`` holds tf2's ``TF_*`` codes
+                in tf2's order. Nothing is stored, no frame is registered.
+            TypeError: ``transform`` is not a TransformStamped, or ``authority`` not a str.
+
+        The core's method (``BufferCore`` inherits it, as from the compiled twin); a
+        transform not stored goes to the subclass's ``_not_stored``.
+        """
+        r = self._store_one(transform, authority, False)
+        if r is True:
+            return True
+        self._not_stored(r, authority)
+        return False
+
+    def set_transform_static(
+        self, transform: TransformStamped, authority: str = "default"
+    ) -> bool:
+        """Store a static transform: valid at all times, overwritten by every later send
+        (tf2 ``setTransform(..., is_static=true)``). Whether a link is static is fixed by
+        its first accepted transform, as in tf2.
+
+        Returns and raises as :meth:`set_transform`.
+        """
+        r = self._store_one(transform, authority, True)
+        if r is True:
+            return True
+        self._not_stored(r, authority)
+        return False
+
     def _store_one(
         self, ts: Any, authority: str, is_static: bool
     ) -> Literal[True] | tuple[int, str, int] | tuple[int, str, str, Tf7]:
@@ -692,6 +748,69 @@ class CoreBase:
         have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
         waits are pending."""
         return self._last_child, self._last_parent, self._last_relinked
+
+    def _settle(
+        self, index: dict[str, set[Any]], names: Iterable[str] | None
+    ) -> list[tuple[Any, tuple[int, ...] | None]] | None:
+        """The recheck of ``tfbus.buffer.Buffer``'s waits after an insert, in one call:
+        every wait indexed in ``index`` (frame id -> set of waits) under one of
+        ``names`` (the ids the insert touched, repeats allowed; ``None``: the two ids of
+        the transform ``_store_one`` stored last) is taken once. An exact wait (its
+        ``exact`` is ``(target, source, time, fail_fast)``) whose lookup now succeeds is
+        settled here: ``result`` := the transform, removed from ``index`` under each of
+        its ``frames`` (then empty), and woken (``future.set_result(None)`` unless done
+        on asyncio, else its ``wake()``).
+
+        Returns:
+            None when nothing is left to do; else ``[(wait, failure)]`` for the buffer's
+            own recheck: an exact wait whose lookup failed (``failure``, ``_query``'s
+            tuple) or another wait (``failure`` None).
+        """
+        if names is None:
+            names = (self._last_child, self._last_parent)
+        first: set[Any] | None = None
+        union: set[Any] | None = None
+        for name in names:
+            ws = index.get(name)
+            if ws is None or ws is first:
+                continue
+            if first is None:
+                first = ws
+            elif union is None:
+                union = set(first)
+                union.update(ws)
+            else:
+                union.update(ws)
+        if first is None:
+            return None
+        # A copy: settling a wait edits the index's sets.
+        due = list(first) if union is None else list(union)
+        rest: list[tuple[Any, tuple[int, ...] | None]] | None = None
+        for waiter in due:
+            exact = waiter.exact
+            out: tuple[int, ...] | None = None
+            if exact is not None:
+                found = self._query(exact[0], exact[1], exact[2])
+                if isinstance(found, TransformStamped):
+                    waiter.result = found
+                    for name in waiter.frames:
+                        ws = index.get(name)
+                        if ws is not None:
+                            ws.discard(waiter)
+                            if not ws:
+                                del index[name]
+                    waiter.frames = _NO_FRAMES
+                    future = waiter.future
+                    if future is None:
+                        waiter.wake()
+                    elif not future.done():
+                        future.set_result(None)
+                    continue
+                out = found
+            if rest is None:
+                rest = []
+            rest.append((waiter, out))
+        return rest
 
     # ------------------------------------------------------------------ queries
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from typing import Any, Final, Literal, TypeAlias, overload
+from typing import TYPE_CHECKING, Any, Final, Literal, TypeAlias, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -70,6 +70,7 @@ from tfbus.core.results import (
     BatchResult,
     BufferStatistics,
     SetResult,
+    TouchedFrames,
     cache_time_ns,
     cap_message,
     not_a_time,
@@ -341,50 +342,50 @@ class BufferCore(CoreBase):
         """The history kept per dynamic link (``cache_time_ns`` as a Duration)."""
         return Duration.from_ns(self.cache_time_ns)
 
-    def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
-        """Store a dynamic transform (tf2 ``BufferCore::setTransform``).
+    if TYPE_CHECKING:
+        # At run time these two are the core's own methods (``CoreBase``, compiled or
+        # pure), inherited: the caller reaches the insert with no Python frame of this
+        # class in between, and a transform not stored comes back through
+        # ``_not_stored``. Declared here for the type checker and the API reference.
 
-        Args:
-            transform: ``header.frame_id`` is the parent, ``child_frame_id`` the child,
-                ``header.stamp`` the time; translation in metres, rotation (x, y, z, w).
-            authority: who sent it (shown by ``all_frames_as_yaml``).
+        def set_transform(
+            self, transform: TransformStamped, authority: str = "default"
+        ) -> bool:
+            """Store a dynamic transform (tf2 ``BufferCore::setTransform``).
 
-        Returns:
-            True when stored (or, with ``on_repeat="replace"``, when it replaced the
-            link's newest sample); False when the link's cache refused it — TF_OLD_DATA
-            (older than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a
-            sample with this stamp exists) — which is logged (the first, then one per
-            1000).
+            Args:
+                transform: ``header.frame_id`` is the parent, ``child_frame_id`` the child,
+                    ``header.stamp`` the time; translation in metres, rotation (x, y, z, w).
+                authority: who sent it (shown by ``all_frames_as_yaml``).
 
-        Raises:
-            InvalidArgumentException: malformed transform — self transform, empty
-                frame id, NaN, ±Inf in the translation, or a quaternion whose squared
-                norm is not within 0.01 of 1; or a field of the wrong type (None, a str
-                or bool where a number belongs, an int beyond double range, ...). The
-                message names each field and value; ``.codes`` holds tf2's ``TF_*`` codes
-                in tf2's order. Nothing is stored, no frame is registered.
-            TypeError: ``transform`` is not a TransformStamped.
-        """
-        r = self._store_one(transform, authority, False)
-        if r is True:
-            return True
-        self._not_stored(r, authority)
-        return False
+            Returns:
+                True when stored (or, with ``on_repeat="replace"``, when it replaced the
+                link's newest sample); False when the link's cache refused it — TF_OLD_DATA
+                (older than its newest stamp minus ``cache_time``) or TF_REPEATED_DATA (a
+                sample with this stamp exists) — which is logged (the first, then one per
+                1000).
 
-    def set_transform_static(
-        self, transform: TransformStamped, authority: str = "default"
-    ) -> bool:
-        """Store a static transform: valid at all times, overwritten by every later send
-        (tf2 ``setTransform(..., is_static=true)``). Whether a link is static is fixed by
-        its first accepted transform, as in tf2.
+            Raises:
+                InvalidArgumentException: malformed transform — self transform, empty
+                    frame id, NaN, ±Inf in the translation, or a quaternion whose squared
+                    norm is not within 0.01 of 1; or a field of the wrong type (None, a str
+                    or bool where a number belongs, an int beyond double range, ...). The
+                    message names each field and value; ``.codes`` holds tf2's ``TF_*`` codes
+                    in tf2's order. Nothing is stored, no frame is registered.
+                TypeError: ``transform`` is not a TransformStamped, or ``authority`` not a str.
+            """
+            return CoreBase.set_transform(self, transform, authority)
 
-        Returns and raises as :meth:`set_transform`.
-        """
-        r = self._store_one(transform, authority, True)
-        if r is True:
-            return True
-        self._not_stored(r, authority)
-        return False
+        def set_transform_static(
+            self, transform: TransformStamped, authority: str = "default"
+        ) -> bool:
+            """Store a static transform: valid at all times, overwritten by every later send
+            (tf2 ``setTransform(..., is_static=true)``). Whether a link is static is fixed by
+            its first accepted transform, as in tf2.
+
+            Returns and raises as :meth:`set_transform`.
+            """
+            return CoreBase.set_transform_static(self, transform, authority)
 
     def insert_transform(
         self, transform: TransformStamped, authority: str = "default", is_static: bool = False
@@ -414,10 +415,10 @@ class BufferCore(CoreBase):
     ) -> BatchResult:
         """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
         listener uses. Per transform it is faster than a loop of :meth:`set_transform`
-        from about 5 transforms a call on; below that the result's fixed cost (the
-        :class:`BatchResult` and its frames) makes it slower, up to about twice the time
-        per transform at one transform a call (``make bench-check`` prints the ratio by
-        message size).
+        from about 10 transforms a call on; below that the result's fixed cost (the
+        :class:`BatchResult` and its frames) makes it slower, up to about 2.5 to 3 times
+        the time per transform at one transform a call (``make bench-check`` prints the
+        ratio by message size).
 
         Each item is handled exactly as :meth:`set_transform` (or
         :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
@@ -432,6 +433,21 @@ class BufferCore(CoreBase):
         r = self._store(transforms, authority, is_static)
         if isinstance(r, BatchResult):  # the common case: nothing refused, nothing invalid
             return r
+        return self._batch_result(r, authority)
+
+    def _batch_result(
+        self,
+        r: tuple[
+            int,
+            list[tuple[int, Exception | tuple[str, str, Tf7]]],
+            TouchedFrames,
+            bool,
+            list[tuple[int, str, int]],
+        ],
+        authority: str,
+    ) -> BatchResult:
+        """The BatchResult of a batch ``_store`` refused or rejected some of: refusals
+        logged (count-limited), tf2's exception built for each invalid transform."""
         stored, problems, touched, relinked, refusals = r
         if refusals:
             self._log_refusals(refusals, authority)

@@ -1,0 +1,149 @@
+"""``CoreBase._settle``, the core's half of a Buffer's wake-up after an insert, on both
+twins (compiled and pure), on asyncio and trio: an exact wait whose lookup the insert
+completed is settled in the core (result, index, wake-up); what it cannot settle comes
+back to the buffer with the failure it just walked."""
+
+from __future__ import annotations
+
+import math
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus._aio import running_asyncio_loop
+from tfbus.buffer import _Waiter
+from tfbus.core import BufferCore, _pycore
+from tfbus.core.buffer_core import EXTRAPOLATION_ERROR
+
+_ccore = pytest.importorskip("tfbus.core._ccore", reason="the compiled core is not built here")
+
+pytestmark = pytest.mark.anyio
+
+CORES: dict[str, ModuleType] = {"compiled": _ccore, "pure": _pycore}
+T1 = Time(10)
+T2 = Time(12)
+
+
+def buffer_core(twin: str) -> BufferCore:
+    """``BufferCore``'s own methods over the given core's ``CoreBase``."""
+    body = {k: v for k, v in vars(BufferCore).items() if k not in {"__dict__", "__weakref__"}}
+    klass: type[BufferCore] = type("BufferCore", (CORES[twin].CoreBase,), body)
+    return klass()
+
+
+def tf(parent: str, child: str, stamp: Time, x: float) -> TransformStamped:
+    q = Quaternion(0.0, 0.0, math.sin(0.15), math.cos(0.15))
+    return TransformStamped(Header(stamp, parent), child, Transform(Vector3(x, 0.5, 0.0), q))
+
+
+def wait_on(
+    index: dict[str, set[Any]], frames: frozenset[str], exact: tuple[str, str, Time, bool] | None
+) -> _Waiter[Any]:
+    """A Buffer's wait (``tfbus.buffer._Waiter``), indexed under ``frames``."""
+    waiter: _Waiter[Any] = _Waiter(lambda: None, lambda: frames, running_asyncio_loop(), exact)
+    waiter.frames = frames
+    for name in frames:
+        index.setdefault(name, set()).add(waiter)
+    return waiter
+
+
+def woken(waiter: _Waiter[Any]) -> bool:
+    if waiter.future is not None:  # asyncio
+        return waiter.future.done()
+    return waiter.woken  # trio
+
+
+@pytest.mark.parametrize("twin", sorted(CORES))
+async def test_an_exact_wait_the_insert_completes_is_settled_in_the_core(twin: str) -> None:
+    core = buffer_core(twin)
+    assert core.set_transform(tf("map", "odom", T1, 1.0))
+    assert core.set_transform(tf("map", "odom", T2, 3.0))
+    index: dict[str, set[Any]] = {}
+    frames = frozenset({"map", "odom", "base"})
+    waiter = wait_on(index, frames, ("map", "base", Time(11), False))
+    other = wait_on(index, frozenset({"map", "laser"}), ("map", "laser", T1, False))
+    assert core.set_transform(tf("odom", "base", T1, 0.25))
+    # odom -> base is known at 10 only: the wait at 11 is not answered yet, and comes
+    # back with the failure of its walk (extrapolation into the future).
+    assert core._settle(index, None) == [(waiter, core._query("map", "base", Time(11)))]
+    assert core._query("map", "base", Time(11))[0] == EXTRAPOLATION_ERROR
+    assert waiter.result is None and not woken(waiter)
+    assert core.set_transform(tf("odom", "base", T2, 0.75))
+    assert core._settle(index, None) is None  # nothing left for the buffer
+    # Settled by this one: interpolated (map->odom x 2.0 at 11, odom->base x 0.5).
+    assert isinstance(waiter.result, TransformStamped)
+    assert waiter.result.header == Header(Time(11), "map")
+    assert waiter.result.child_frame_id == "base"
+    assert waiter.result == core.lookup_transform("map", "base", Time(11))
+    c, s = math.cos(0.3), math.sin(0.3)  # map->odom turns by 0.3 rad about z
+    x, y, z = waiter.result.transform.translation
+    assert (x, y, z) == pytest.approx((2.0 + 0.5 * c - 0.5 * s, 0.5 + 0.5 * s + 0.5 * c, 0.0))
+    assert woken(waiter)
+    assert waiter.frames == frozenset()
+    # Removed under each of its frames; the other wait (not touched) stays indexed.
+    assert index == {"map": {other}, "laser": {other}}
+    assert other.result is None and not woken(other)
+
+
+@pytest.mark.parametrize("twin", sorted(CORES))
+async def test_what_the_core_cannot_settle_comes_back_with_its_failure(twin: str) -> None:
+    core = buffer_core(twin)
+    assert core.set_transform(tf("map", "odom", T1, 1.0))
+    index: dict[str, set[Any]] = {}
+    late = wait_on(index, frozenset({"map", "odom"}), ("map", "odom", T2, False))
+    policy = wait_on(index, frozenset({"odom"}), None)  # a policy's wait: the buffer's check
+    assert core.set_transform(tf("map", "odom", Time(11), 2.0))
+    rest = core._settle(index, None)
+    assert rest is not None
+    by_wait = dict(rest)
+    assert set(by_wait) == {late, policy}
+    assert by_wait[policy] is None
+    failure = by_wait[late]
+    assert failure == core._query("map", "odom", T2)  # the walk it just did
+    assert failure is not None and failure[0] == EXTRAPOLATION_ERROR
+    # Neither is settled: both stay indexed, unwoken, for the buffer's own recheck.
+    assert index == {"map": {late}, "odom": {late, policy}}
+    assert not woken(late) and not woken(policy)
+
+
+@pytest.mark.parametrize("twin", sorted(CORES))
+async def test_a_batch_settles_each_wait_once_whatever_the_repeats(twin: str) -> None:
+    core = buffer_core(twin)
+    index: dict[str, set[Any]] = {}
+    waiter = wait_on(index, frozenset({"map", "odom", "base"}), ("map", "base", T1, False))
+    result = core.set_transforms(
+        [tf("map", "odom", T1, 1.0), tf("odom", "base", T1, 0.5)], "test"
+    )
+    assert result.stored == 2
+    calls = 0
+    query = core._query
+
+    def counting(target: str, source: str, time: Time) -> object:
+        nonlocal calls
+        calls += 1
+        return query(target, source, time)
+
+    core._query = counting  # type: ignore[method-assign,assignment]
+    # The ids as recorded (child, parent per transform: "odom" twice).
+    assert core._settle(index, ["odom", "map", "base", "odom"]) is None
+    assert calls == 1
+    assert waiter.result == core.lookup_transform("map", "base", T1)
+    assert index == {} and woken(waiter)
+
+
+async def test_both_twins_settle_with_the_same_transform_bit_for_bit() -> None:
+    results = []
+    for twin in sorted(CORES):
+        core = buffer_core(twin)
+        index: dict[str, set[Any]] = {}
+        waiter = wait_on(index, frozenset({"a", "b", "c"}), ("a", "c", Time(11), False))
+        for stamp, x in ((T1, 0.1), (T2, 0.7)):
+            core.set_transform(tf("a", "b", stamp, x))
+        core.set_transform(tf("b", "c", T1, 1.0 / 3.0))
+        core.set_transform(tf("b", "c", T2, 2.0 / 3.0))
+        assert core._settle(index, None) is None
+        results.append(waiter.result)
+    assert results[0] is not None
+    assert results[0] == results[1]  # every float equal (no -0.0 or NaN here)
