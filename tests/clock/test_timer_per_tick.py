@@ -8,8 +8,12 @@ from typing import Any
 import anyio
 import pytest
 
+from tfbus import Bus, SimClock
 from tfbus.clock import Clock, ManualClock, SystemClock, Tick, every
+from tfbus.errors import SimTimeStalled
+from tfbus.messages import Clock as ClockMessage
 from tfbus.time import Duration, Time
+from tfbus.topics import CLOCK_TOPIC
 
 pytestmark = pytest.mark.anyio
 
@@ -122,3 +126,18 @@ async def test_system_clock_backward_step_seen_elsewhere_reanchors_a_sleeping_ti
     assert after.expected.ns - stepped < int(period * 1e9) + 5 * 10**9
     assert after.index == before.index + 1
     assert after.overruns == 0
+
+
+async def test_every_on_a_sim_clock_with_a_wall_timeout_raises_sim_time_stalled(
+    anyio_backend: str,
+) -> None:
+    """A SimClock with a ``wall_timeout`` schedules no callbacks (its waits must notice a
+    stalled ``/clock``): the timer sleeps on it, and the stall ends the loop."""
+    async with Bus() as bus, SimClock(bus, wall_timeout=0.3) as clock:
+        bus.publish_nowait(CLOCK_TOPIC, ClockMessage(Time.from_sec(1.0)))
+        ticks: list[Tick] = []
+        with anyio.fail_after(30):  # the wall guard, not this bound, must end the wait
+            with pytest.raises(SimTimeStalled):
+                async for tick in every(0.5, clock=clock, immediate=True):
+                    ticks.append(tick)
+        assert [t.expected for t in ticks] == [Time.from_sec(1.0)]

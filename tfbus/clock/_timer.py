@@ -161,6 +161,10 @@ class PeriodicTimer:
             delay = Duration.from_ns(remaining_ns)  # exact: simulated deadlines are ns
         wakeup = Wakeup(loop)
         wake = wakeup.wake
+        cancel = clock.call_later(delay, wake)
+        if cancel is None:
+            await self._scope_wait(clock, deadline)
+            return
 
         def on_jump(old: Time, new: Time) -> None:
             self._jumped = True
@@ -168,26 +172,25 @@ class PeriodicTimer:
 
         unregister = clock.on_jump(on_jump)
         try:
-            cancel = clock.call_later(delay, wake)
-            if cancel is not None:
-                try:
-                    await wakeup.wait()
-                finally:
-                    cancel()
-                return
-            with anyio.CancelScope() as scope:
-
-                def cancel_on_jump(old: Time, new: Time) -> None:
-                    self._jumped = True
-                    scope.cancel()
-
-                unregister_scope = clock.on_jump(cancel_on_jump)
-                try:
-                    await clock.sleep_until(Time.from_ns(deadline))
-                finally:
-                    unregister_scope()
+            await wakeup.wait()
         finally:
+            cancel()
             unregister()
+
+    async def _scope_wait(self, clock: Clock, deadline: int) -> None:
+        """``clock.sleep_until(deadline)`` in a cancel scope that a backward jump cancels
+        (a clock whose ``call_later`` returns None)."""
+        with anyio.CancelScope() as scope:
+
+            def on_jump(old: Time, new: Time) -> None:
+                self._jumped = True
+                scope.cancel()
+
+            unregister = clock.on_jump(on_jump)
+            try:
+                await clock.sleep_until(Time.from_ns(deadline))
+            finally:
+                unregister()
 
     async def _trio_wait(self, trio: Any, clock: Clock, delay: float) -> None:
         """A :class:`~tfbus.clock.SystemClock` wait under trio: one ``trio.CancelScope``
