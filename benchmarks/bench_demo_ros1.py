@@ -16,6 +16,7 @@ is asserted. Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++.
 
     .venv/bin/python benchmarks/bench_demo_ros1.py            # 3 rounds of 20 s
     .venv/bin/python benchmarks/bench_demo_ros1.py --quick    # 3 rounds of 8 s
+    .venv/bin/python benchmarks/bench_demo_ros1.py --baseline /tmp/old-tree  # + that tree's pair
 """
 
 from __future__ import annotations
@@ -69,6 +70,10 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0] if __doc__ else "")
     parser.add_argument("--quick", action="store_true", help="rounds of 8 s instead of 20 s")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
+    parser.add_argument("--baseline", metavar="TREE", default=None,
+                        help="also run the tfbus pair from another checkout (e.g. a scratch "
+                             "worktree of an earlier commit, its .so files built) as a third "
+                             "side of each round, and print tfbus / that")  # fmt: skip
     args = parser.parse_args(argv)
     seconds = 8.0 if args.quick else 20.0
     why = ros1_missing(("roscpp", "tf"))
@@ -87,6 +92,11 @@ def main(argv: list[str] | None = None) -> None:
                 "tfbus demo pair": [[*TFBUS, "demo", "broadcaster", "--bus", uri],
                                     [*TFBUS, "demo", "listener", "--bus", uri]],
             }  # fmt: skip
+            if args.baseline is not None:
+                tree = str(Path(args.baseline).resolve())
+                base = ["env", f"PYTHONPATH={tree}", sys.executable, "-m", "tfbus.cli"]
+                sides["tfbus @ baseline"] = [[*base, "demo", "broadcaster", "--bus", uri],
+                                             [*base, "demo", "listener", "--bus", uri]]  # fmt: skip
             shares: dict[str, list[float]] = {name: [] for name in sides}
             print(f"seed demo over ROS 1: {args.rounds} rounds of {seconds:.0f} s, "
                   "broadcaster 100 Hz + listener 1 Hz, CPU of both processes")  # fmt: skip
@@ -102,9 +112,12 @@ def main(argv: list[str] | None = None) -> None:
     for name, values in shares.items():
         low, mid, high = (100 * f(values) for f in (min, statistics.median, max))
         print(f"  {name:18s} min {low:6.2f} %  median {mid:6.2f} %  max {high:6.2f} %")
-    cpp, ours = (statistics.median(v) for v in shares.values())
+    cpp, ours, *rest = (statistics.median(v) for v in shares.values())
     print(f"  ratio tfbus / C++ (medians) {ours / cpp:.2f}x (target <= 1.5x); "
           f"load {os.getloadavg()[0]:.1f}")  # fmt: skip
+    if rest:
+        print(f"  ratio tfbus @ baseline / C++ (medians) {rest[0] / cpp:.2f}x; "
+              f"tfbus / tfbus @ baseline {ours / rest[0]:.2f}x")  # fmt: skip
 
 
 if __name__ == "__main__":

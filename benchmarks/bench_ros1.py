@@ -1,7 +1,8 @@
 """ROS 1 interop speed: a C++ roscpp publisher on /tf, received at once by a C++ roscpp
 subscriber and by a tfbus process (``Bus(transport=Ros1Transport())``), same run.
 
-Prints, per scenario (rate x frames per message x seconds): one-way latency median and
+Prints, per scenario (rate x frames per message x seconds): each receiver's CPU time per
+message (``/proc/PID/stat``), one-way latency median and
 p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and tfbus,
 their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
 (target: none lost at 100 Hz x 50 frames for 60 s), with the 1-minute load average.
@@ -23,6 +24,8 @@ Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++. Everything o
     .venv/bin/python benchmarks/bench_ros1.py --quick   # 5 s and 10 s
     .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 5
     .venv/bin/python benchmarks/bench_ros1.py --modes queue  # the receive-latency row alone
+    .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 3 --modes callback,listener \
+        --skip-one-frame --baseline /tmp/old-tree   # receive CPU, alternated with that tree
 """
 
 from __future__ import annotations
@@ -160,38 +163,63 @@ def pct(values: list[float], q: float) -> float:
     return s[min(len(s) - 1, int(q * len(s)))]
 
 
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of a process so far (``/proc/PID/stat`` fields 14-15)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
 def scenario(
     master: Master, bins: Path, rate: float, frames: int, seconds: float, mode: str = "queue",
-    moving: bool = False,
+    moving: bool = False, cpu: list[tuple[float, float]] | None = None, tree: Path = ROOT,
 ) -> tuple[float, float, float, float, bool]:
     """One run (``mode``: see :data:`MODES`; ``moving``: every value changes in every
     message, else they are constant, see ``ros1/bench_pub.cpp``): prints its line; returns
-    C++ and tfbus median and p99, and whether tfbus received every transform sent."""
+    C++ and tfbus median and p99, and whether tfbus received every transform sent.
+
+    Each receiver's CPU time (user + system, ``/proc/PID/stat``) from the publisher's
+    start to its last message, per message received, is printed too and appended to
+    ``cpu`` as ``(C++ s, tfbus s)`` when given (10 ms clock ticks: run >= 10 s).
+    ``tree``: the checkout whose tfbus the tfbus side imports (``--baseline``)."""
     if mode == "listener":
         cpp = master.run(str(bins / "bench_listener"), str(frames))
     else:
         cpp = master.run(str(bins / "bench_sub"))
     env = dict(master.env)
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONPATH"] = str(tree)
     tfb = Proc([sys.executable, __file__, "--tfbus-sub", mode], env)
     cpp.wait_for("READY", 30)
     tfb.wait_for("READY", 60)
+    cpu0 = (cpu_seconds(cpp.proc.pid), cpu_seconds(tfb.proc.pid))
     pub = master.run(str(bins / "bench_pub"), str(rate), str(frames), str(seconds),
                      *(["moving"] if moving else []))
     m = pub.wait_for(r"sent (\d+) (\d+)", seconds + 60)
+    time.sleep(0.2)  # the last message's receipt (a benchmark, not a test)
+    c_cpu, t_cpu = (cpu_seconds(p.proc.pid) - c0
+                    for p, c0 in zip((cpp, tfb), cpu0, strict=True))  # fmt: skip
     pub.stop()
     sent_msgs, sent_tfs = int(m.group(1)), int(m.group(2))
     c_msgs, c_tfs, c_lat = report(cpp)
     t_msgs, t_tfs, t_lat = report(tfb)
     c50, c99 = statistics.median(c_lat), pct(c_lat, 0.99)
     t50, t99 = statistics.median(t_lat), pct(t_lat, 0.99)
+    c_cpu, t_cpu = c_cpu / max(c_msgs, 1), t_cpu / max(t_msgs, 1)
+    if cpu is not None:
+        cpu.append((c_cpu, t_cpu))
     load = os.getloadavg()[0]
     label = f"{mode}, moving" if moving else mode
+    if tree != ROOT:
+        label += " @ baseline"
     print(
         f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | {label:8s} | "
         f"load {load:4.2f} | "
         f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
         f"ratio {t50 / c50:4.2f} / {t99 / c99:4.2f} | "
+        f"CPU/msg C++ {c_cpu * 1e6:6.1f} us, tfbus {t_cpu * 1e6:6.1f} us, "
+        f"ratio {t_cpu / max(c_cpu, 1e-9):4.2f} | "
         f"received C++ {c_msgs}/{sent_msgs} msgs {c_tfs}/{sent_tfs} tfs, "
         f"tfbus {t_msgs}/{sent_msgs} msgs {t_tfs}/{sent_tfs} tfs "
         f"({t_tfs / seconds:,.0f} transforms/s)",
@@ -202,11 +230,26 @@ def scenario(
 
 def repeated(
     master: Master, bins: Path, rate: float, frames: int, seconds: float, repeat: int,
-    mode: str = "queue", moving: bool = False,
+    mode: str = "queue", moving: bool = False, baseline: Path | None = None,
 ) -> None:
-    """``repeat`` runs of one scenario, then the medians of their figures."""
-    runs = [scenario(master, bins, rate, frames, seconds, mode, moving) for _ in range(repeat)]
+    """``repeat`` runs of one scenario, then the medians of their figures; with a
+    ``baseline`` checkout, each run is followed by one whose tfbus side imports that
+    checkout's tfbus (alternated, same master), and the CPU medians of both are printed."""
+    cpu: list[tuple[float, float]] = []
+    base_cpu: list[tuple[float, float]] = []
+    runs = []
+    for _ in range(repeat):
+        runs.append(scenario(master, bins, rate, frames, seconds, mode, moving, cpu))
+        if baseline is not None:
+            scenario(master, bins, rate, frames, seconds, mode, moving, base_cpu, baseline)
     label = f"{mode}, moving" if moving else mode
+    for name, got in (("tfbus", cpu), ("tfbus @ baseline", base_cpu)):
+        if got:
+            per = [t / c for c, t in got]
+            print(f"  CPU per message, {label}: {name} / C++ min {min(per):.2f} median "
+                  f"{statistics.median(per):.2f} max {max(per):.2f} ({len(got)} runs; "
+                  f"{name} median {statistics.median(t for _, t in got) * 1e6:.1f} us, C++ "
+                  f"{statistics.median(c for c, _ in got) * 1e6:.1f} us)", flush=True)  # fmt: skip
     if repeat < 2:
         return
     c50, c99, t50, t99 = (statistics.median(r[i] for r in runs) for i in range(4))
@@ -232,6 +275,12 @@ def main() -> None:
         help="how the 50-frame scenario is received, comma separated (default: all; "
         "queue = the receive-latency target's row; the 1-frame scenario is always queue)",
     )
+    parser.add_argument("--baseline", metavar="TREE", default=None,
+                        help="alternate each run with one whose tfbus side imports the tfbus "
+                             "of another checkout (e.g. a scratch worktree of an earlier "
+                             "commit, its .so files built); prints both CPU medians")  # fmt: skip
+    parser.add_argument("--skip-one-frame", action="store_true",
+                        help="only the 50-frame scenarios")
     parser.add_argument("--tfbus-sub", choices=MODES, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.tfbus_sub:
@@ -250,14 +299,16 @@ def main() -> None:
         master = start_master(bins / "ros_home")
         try:
             print("latency median / p99, one-way, receive time - header.stamp (same run)")
-            repeated(master, bins, 100.0, 1, 5.0 if args.quick else 10.0, args.repeat)
+            base = None if args.baseline is None else Path(args.baseline).resolve()
+            if not args.skip_one_frame:
+                repeated(master, bins, 100.0, 1, 5.0 if args.quick else 10.0, args.repeat,
+                         baseline=base)  # fmt: skip
             for mode in modes:
-                repeated(
-                    master, bins, 100.0, 50, 10.0 if args.quick else 60.0, args.repeat, mode
-                )
+                repeated(master, bins, 100.0, 50, 10.0 if args.quick else 60.0, args.repeat,
+                         mode, baseline=base)  # fmt: skip
             if "queue" in modes:  # the same, every value changing in every message
                 repeated(master, bins, 100.0, 50, 10.0 if args.quick else 60.0, args.repeat,
-                         "queue", moving=True)
+                         "queue", moving=True, baseline=base)  # fmt: skip
         finally:
             master.stop()
 

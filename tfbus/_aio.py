@@ -15,7 +15,9 @@ and each with its portable anyio fallback next to it in the caller:
   wall-clock sleeps on asyncio (``Task._fut_waiter``);
 * :func:`open_pumped_connection` -- a TCP connection read in the loop's read callback into
   one kept buffer (``asyncio.BufferedProtocol``), for the ROS 1 transport's TCPROS
-  subscriber connections.
+  subscriber connections;
+* :func:`asyncio_transport_of` -- the ``asyncio.Transport`` under an anyio socket stream,
+  which the ROS 1 publisher writes a frame to from the publishing task.
 
 and, portable on every backend, :func:`exit_task_group`: how every tfbus context manager
 that owns a task group leaves it, so that the exception its body raised leaves it as
@@ -43,13 +45,14 @@ import anyio.lowlevel
 
 if TYPE_CHECKING:
     import asyncio
-    from asyncio import AbstractEventLoop, Future
+    from asyncio import AbstractEventLoop, Future, Transport
     from types import TracebackType
 
 __all__ = [
     "Awaiting",
     "ShieldedYield",
     "Wakeup",
+    "asyncio_transport_of",
     "coroutine_method",
     "exit_task_group",
     "open_pumped_connection",
@@ -314,6 +317,19 @@ async def open_pumped_connection(
         lambda: _pump_class()(feed, *events), host, port
     )
     return transport, pump
+
+
+def asyncio_transport_of(stream: object) -> Transport | None:
+    """The ``asyncio.Transport`` that anyio's asyncio ``SocketStream`` writes to (its
+    ``_transport``: ``send`` is ``transport.write`` and a checkpoint), or None for any
+    other stream (trio's, a test's fake). Writing to it directly is ``send`` without the
+    checkpoint, for a caller that keeps the order of what it writes itself.
+    """
+    asyncio = sys.modules.get("asyncio")
+    transport: object = getattr(stream, "_transport", None)
+    if asyncio is None or not isinstance(transport, asyncio.Transport):
+        return None
+    return cast("Transport", transport)
 
 
 # -- context managers: the body's exception leaves as itself -------------------------------

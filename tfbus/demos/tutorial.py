@@ -35,9 +35,11 @@ bus; each prints its summary line on exit (Ctrl-C / SIGTERM exit cleanly).
 from __future__ import annotations
 
 import signal
+from collections import deque
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
+from typing import Final
 
 import anyio
 import anyio.abc
@@ -62,6 +64,7 @@ from tfbus.time import Time
 
 __all__ = [
     "BROADCASTER_NAME",
+    "LATENESS_WINDOW",
     "LISTENER_NAME",
     "BroadcasterStatistics",
     "LookupStatistics",
@@ -108,15 +111,21 @@ def format_error(now: Time, error: TransformException) -> str:
     )
 
 
+LATENESS_WINDOW: Final = 100_000
+"""How many of the latest ticks' lateness :class:`BroadcasterStatistics` keeps (1000 s
+at the tutorial's 100 Hz)."""
+
+
 @dataclass
 class BroadcasterStatistics:
     """What the broadcaster did: transforms ``sent``, clock times of the first and last
-    send (ns), and each tick's lateness (ns) — the timer's jitter."""
+    send (ns), and the lateness (ns) of the latest :data:`LATENESS_WINDOW` ticks — the
+    timer's jitter (a window, so that a broadcaster left running keeps its memory)."""
 
     sent: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
-    lateness_ns: list[int] = field(default_factory=list)
+    lateness_ns: deque[int] = field(default_factory=lambda: deque(maxlen=LATENESS_WINDOW))
 
     def rate(self) -> float:
         """Measured broadcast rate in Hz (sends per second of clock time)."""
@@ -166,7 +175,9 @@ async def broadcaster_node(
     stats = stats if stats is not None else BroadcasterStatistics()
     async for tick in every(1.0 / rate, clock=clock, immediate=True):
         now = clock.now()
-        await broadcaster.send_transform(
+        # The timer's wait is this loop's checkpoint: publish without another one
+        # (``ros::Publisher::publish``, which robot_tf_publisher calls, never yields).
+        broadcaster.send_transform_nowait(
             TransformStamped(Header(now, "base_link"), "base_laser", LASER_OFFSET)
         )
         stats.sent += 1

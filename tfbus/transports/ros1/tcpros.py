@@ -5,6 +5,7 @@ wiki "ROS/TCPROS", "ROS/Connection Header"). The message itself is (de)serialise
 from __future__ import annotations
 
 import contextlib
+import socket
 import struct
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -14,11 +15,15 @@ import anyio
 import anyio.abc
 from anyio.streams.buffered import BufferedByteReceiveStream
 
+from tfbus._aio import asyncio_transport_of, running_asyncio_loop
+
 __all__ = [
     "MAX_HEADER_BYTES",
+    "DirectWrite",
     "FrameQueue",
     "FrameSplitter",
     "decode_header",
+    "direct_writer",
     "encode_header",
     "frame",
     "read_frame",
@@ -154,14 +159,27 @@ def frame(payload: bytes) -> bytes:
     return _U32.pack(len(payload)) + payload
 
 
+DirectWrite = Callable[[bytes], int]
+"""Write what a socket takes now without blocking: ``write(data)`` returns how many bytes
+of ``data`` went (0 if it would block); raises ``OSError`` if the socket failed."""
+
+
 class FrameQueue:
     """The frames still to send to one subscriber, oldest first, bounded: beyond
     ``max_frames`` frames, or ``max_bytes`` bytes when given (the newest frame is always
     kept), the oldest are dropped, as roscpp's per-subscriber queue drops them.
 
     Filled without blocking by the publishing side (:meth:`put`) and emptied by that
-    connection's own task only (:func:`serve_subscriber`): a subscriber that does not read
-    holds up no other, and no two tasks ever send on one stream.
+    connection's own task only (:meth:`send_to`): a subscriber that does not read holds up
+    no other, and no two tasks ever send on one stream at once.
+
+    While that task is idle (nothing queued, nothing being sent) and it gave a direct
+    writer, :meth:`put` writes the frame to the socket itself, as roscpp's
+    ``SubscriberLink::enqueueMessage`` writes from the publishing thread
+    (``Connection::write``, ``TransportTCP::write`` with a non-blocking socket): a message
+    then costs no wake-up of the connection's task. What the socket does not take at once
+    (the rest of a frame, or a frame it would block on) goes to that task; the rest of a
+    begun frame is never dropped.
 
     ``max_frames`` and ``max_bytes`` may be changed at any time; the next :meth:`put`
     applies them.
@@ -173,13 +191,31 @@ class FrameQueue:
         self.max_frames = max_frames
         self.max_bytes = max_bytes
         self._wake = anyio.Event()
+        self._rest = b""  # the unsent end of a frame put() began writing
+        self._idle = False  # the connection's task waits with nothing to send
+        self._direct: DirectWrite | None = None
+        self._on_sent: Callable[[], None] | None = None
 
     def __len__(self) -> int:
         return len(self._frames)
 
     def put(self, data: bytes) -> int:
-        """Queue one frame (with its length prefix); returns how many old frames were
-        dropped to keep within the bounds."""
+        """Send one frame (with its length prefix) now if the socket takes it, else queue
+        it; returns how many old frames were dropped to keep within the bounds."""
+        if self._idle and self._direct is not None:
+            try:
+                sent = self._direct(data)
+            except OSError:
+                sent = 0  # the connection's task meets the error and ends the connection
+            if sent == len(data):
+                if self._on_sent is not None:
+                    self._on_sent()
+                return 0
+            self._idle = False
+            self._wake.set()
+            if sent:
+                self._rest = data[sent:]
+                return 0
         frames = self._frames
         frames.append(data)
         self._size += len(data)
@@ -189,31 +225,84 @@ class FrameQueue:
         ):
             self._size -= len(frames.popleft())
             dropped += 1
+        self._idle = False
         self._wake.set()
         return dropped
 
     async def send_to(
-        self, stream: anyio.abc.ByteSendStream, on_sent: Callable[[], None] | None = None
+        self,
+        stream: anyio.abc.ByteSendStream,
+        on_sent: Callable[[], None] | None = None,
+        direct: DirectWrite | None = None,
     ) -> None:
         """Send the frames as they are queued (``on_sent`` after each), until the
         subscriber's socket fails: ``OSError``, :class:`anyio.BrokenResourceError` (a reset
         or a broken pipe) or :class:`anyio.ClosedResourceError` end this connection only
         and are not raised. Caught here, inside the connection's task group, and not
-        around it, where they would come out wrapped in an ``ExceptionGroup``."""
+        around it, where they would come out wrapped in an ``ExceptionGroup``.
+
+        ``direct``: how :meth:`put` writes to ``stream``'s socket while this task is
+        idle (see the class), or None to send every frame from this task."""
         frames = self._frames
+        self._on_sent = on_sent
+        self._direct = direct
         try:
             while True:
-                while frames:
+                if self._rest:
+                    data, self._rest = self._rest, b""
+                elif frames:
                     data = frames.popleft()
                     self._size -= len(data)
-                    await stream.send(data)
-                    if on_sent is not None:
-                        on_sent()
-                self._wake = anyio.Event()
-                if not frames:
+                else:
+                    self._wake = anyio.Event()
+                    self._idle = True
                     await self._wake.wait()
+                    continue
+                await stream.send(data)
+                if on_sent is not None:
+                    on_sent()
         except (OSError, anyio.BrokenResourceError, anyio.ClosedResourceError):
             return
+        finally:
+            self._idle = False
+            self._direct = None
+
+
+def direct_writer(stream: anyio.abc.SocketStream) -> DirectWrite | None:
+    """How :meth:`FrameQueue.put` writes to ``stream`` without blocking, or None.
+
+    On asyncio, the stream's transport (``transport.write`` while its buffer is empty:
+    what ``stream.send`` does, without the checkpoint); under trio, the socket itself
+    (``socket.send``: trio keeps no buffer of its own). A stream that gives neither (a
+    test's) sends every frame from the connection's task.
+    """
+    transport = asyncio_transport_of(stream)
+    if transport is not None:
+
+        def write_transport(data: bytes) -> int:
+            if transport.get_write_buffer_size() or transport.is_closing():
+                return 0
+            transport.write(data)
+            return len(data)
+
+        return write_transport
+    if running_asyncio_loop() is not None:
+        return None
+    try:
+        sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
+    except Exception:  # a stream without a socket: sends from its task only
+        return None
+    if not isinstance(sock, socket.socket):
+        return None
+    send = sock.send
+
+    def write_socket(data: bytes) -> int:
+        try:
+            return send(data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+
+    return write_socket
 
 
 async def serve_subscriber(
@@ -221,12 +310,13 @@ async def serve_subscriber(
 ) -> None:
     """Send ``frames`` to a connected subscriber (its header already answered) until it
     leaves: a subscriber sends nothing after its header, so any end of reading (EOF, a
-    reset, junk) means it left; a failed send ends the connection too. Returns, never
-    raises for the peer's doing (``TransportPublisherLink``'s counterpart, roscpp's
-    ``SubscriberLink``)."""
+    reset, junk) means it left; a failed send ends the connection too. Frames are
+    written from the publishing task while the connection is idle
+    (:func:`direct_writer`). Returns, never raises for the peer's doing
+    (``TransportPublisherLink``'s counterpart, roscpp's ``SubscriberLink``)."""
     async with anyio.create_task_group() as tg:
         tg.start_soon(_watch_closed, stream, tg.cancel_scope)
-        await frames.send_to(stream, on_sent)
+        await frames.send_to(stream, on_sent, direct_writer(stream))
         tg.cancel_scope.cancel()
 
 

@@ -1,0 +1,143 @@
+"""``every()`` per tick: one deadline wait, no anyio cancel scope; jumps still re-anchor."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import anyio
+import pytest
+
+from tfbus import Bus, SimClock
+from tfbus.clock import Clock, ManualClock, SystemClock, Tick, every
+from tfbus.errors import SimTimeStalled
+from tfbus.messages import Clock as ClockMessage
+from tfbus.time import Duration, Time
+from tfbus.topics import CLOCK_TOPIC
+
+pytestmark = pytest.mark.anyio
+
+T0 = Time(100)
+
+
+def _count_cancel_scopes(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Count ``anyio.CancelScope(...)`` made from now on (tfbus code calls it through the
+    ``anyio`` module)."""
+    made = [0]
+    real = anyio.CancelScope
+
+    def counting(*args: Any, **kwargs: Any) -> anyio.CancelScope:
+        made[0] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(anyio, "CancelScope", counting)
+    return made
+
+
+async def test_manual_clock_ticks_enter_no_cancel_scope(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """100 ticks of a 100 Hz timer: the deadline wait of each is a callback of the clock
+    (``call_later``) and a one-shot wake-up, not a cancel scope entered and left per
+    tick; the ticks are still exactly on the grid."""
+    clock = ManualClock(T0)
+    ticks: list[Tick] = []
+
+    async def run() -> None:
+        async for tick in every(0.01, clock=clock):
+            ticks.append(tick)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(run)
+        await clock.advance(0)
+        made = _count_cancel_scopes(monkeypatch)
+        await clock.advance(1.0)
+        assert made[0] == 0
+        monkeypatch.undo()
+        tg.cancel_scope.cancel()
+    assert [t.index for t in ticks] == list(range(100))
+    assert [t.expected for t in ticks] == [T0 + Duration.from_ns((i + 1) * 10_000_000)
+                                           for i in range(100)]
+    assert all(t.actual == t.expected for t in ticks)
+
+
+async def test_system_clock_ticks_enter_no_anyio_cancel_scope(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """On the wall clock too (asyncio: a loop timer and a future; trio: one trio cancel
+    scope with the deadline, ``trio.sleep``'s own cost)."""
+    made = _count_cancel_scopes(monkeypatch)
+    ticks: list[Tick] = []
+    timer = every(0.002, clock=SystemClock(), immediate=True)
+    async for tick in timer:
+        ticks.append(tick)
+        if len(ticks) == 5:
+            break
+    assert made[0] == 0
+    monkeypatch.undo()
+    first = ticks[0].expected
+    for tick in ticks:  # a loaded machine may skip deadlines; the phase is kept
+        assert (tick.expected - first).ns == tick.index * 2_000_000
+        assert tick.actual >= tick.expected
+
+
+class _SteppedWallClock:
+    """``time.time_ns`` plus an offset the test moves (a wall-clock step)."""
+
+    def __init__(self) -> None:
+        self.offset = 0
+        self.real = time.time_ns
+
+    def __call__(self) -> int:
+        return self.real() + self.offset
+
+
+async def test_system_clock_backward_step_seen_elsewhere_reanchors_a_sleeping_timer(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """A backward step of the wall clock that another task observes wakes the sleeping
+    timer, which re-anchors: the next deadline is one period after the time it read on
+    waking (``PeriodicTimer``'s jump policy), not the old schedule 100 s ahead."""
+    wall = _SteppedWallClock()
+    monkeypatch.setattr(time, "time_ns", wall)
+    clock: Clock = SystemClock(max_sleep=60.0)
+    period = 0.2
+    ticks: list[Tick] = []
+    stepped_at: list[int] = []
+    first = anyio.Event()
+
+    async def step_back() -> None:
+        await first.wait()
+        wall.offset -= 100 * 10**9
+        stepped_at.append(clock.now_ns())  # this reading sees the step: jump callbacks
+
+    with anyio.fail_after(30):  # ends a hung loop only
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(step_back)
+            async for tick in every(period, clock=clock, immediate=True):
+                ticks.append(tick)
+                first.set()
+                if len(ticks) == 2:
+                    break
+    (stepped,) = stepped_at
+    before, after = ticks
+    assert after.expected.ns < before.expected.ns - 99 * 10**9  # on the stepped-back clock
+    assert after.expected.ns >= stepped + int(period * 1e9)
+    assert after.expected.ns - stepped < int(period * 1e9) + 5 * 10**9
+    assert after.index == before.index + 1
+    assert after.overruns == 0
+
+
+async def test_every_on_a_sim_clock_with_a_wall_timeout_raises_sim_time_stalled(
+    anyio_backend: str,
+) -> None:
+    """A SimClock with a ``wall_timeout`` schedules no callbacks (its waits must notice a
+    stalled ``/clock``): the timer sleeps on it, and the stall ends the loop."""
+    async with Bus() as bus, SimClock(bus, wall_timeout=0.3) as clock:
+        bus.publish_nowait(CLOCK_TOPIC, ClockMessage(Time.from_sec(1.0)))
+        ticks: list[Tick] = []
+        with anyio.fail_after(30):  # the wall guard, not this bound, must end the wait
+            with pytest.raises(SimTimeStalled):
+                async for tick in every(0.5, clock=clock, immediate=True):
+                    ticks.append(tick)
+        assert [t.expected for t in ticks] == [Time.from_sec(1.0)]
