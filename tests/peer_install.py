@@ -36,6 +36,8 @@ INSTALL: dict[str, str] = {
     "chromium": "sudo bash scripts/install/install_chromium.sh",
     "ros2-env": "bash scripts/install/install_ros2_env.sh",
     "evo": "bash scripts/install/install_evo.sh",
+    "roslibjs": "bash scripts/install/install_roslibjs.sh",
+    "roslibpy": "bash scripts/install/install_roslibpy.sh",
 }
 
 # Skips that remain legitimate with every peer installed, by name: (test id pattern, fnmatch

@@ -65,6 +65,7 @@ LAYERS: dict[str, int] = {
     "remote": 5,  # lookups served over a transport (Zenoh queryable, ROS 1 action)
     "demos": 5,
     "view": 5,
+    "web": 5,  # tf for roslibjs / roslibpy web apps (rosbridge's ops; view's guard)
     "__main__": 5,
 }
 """Layer of each top-level module or package of ``tfbus`` (a package's submodules share

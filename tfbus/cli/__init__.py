@@ -17,6 +17,7 @@
     tfbus view --bag PATH                     the frames live in a browser (rviz's TF display)
     tfbus router                              Zenoh's router for fleets (tcp/127.0.0.1:7447)
     tfbus serve-buffer --bus SPEC             answer lookups for thin clients (tfbus.remote)
+    tfbus web --bus SPEC                      tf for roslibjs / roslibpy web apps (rosbridge)
     tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
@@ -62,6 +63,7 @@ COMMANDS: tuple[str, ...] = (
     "view",
     "router",
     "serve_buffer",
+    "web",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 
