@@ -19,7 +19,7 @@ import html
 import re
 import socket
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -184,6 +184,26 @@ class TfPage:
         self.panel_html = ""
         """The frame tree panel's HTML as last sent."""
         self.status_html = ""
+        self._connect_listeners: list[Callable[[], None]] = []
+        self.server.on_client_connect(self._client_connected)
+
+    # ------------------------------------------------------------------ viewers
+
+    def watched(self) -> bool:
+        """Whether a browser is connected now (one let in by :attr:`guard`)."""
+        return bool(self.server.get_clients())
+
+    def on_connect(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` each time a browser connects (from viser's thread: it must
+        be quick, thread-safe and must not raise)."""
+        with self._lock:
+            self._connect_listeners.append(listener)
+
+    def _client_connected(self, _client: Any) -> None:
+        with self._lock:
+            listeners = list(self._connect_listeners)
+        for listener in listeners:
+            listener()
 
     # ------------------------------------------------------------------ drawing
 
