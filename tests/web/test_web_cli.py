@@ -78,3 +78,10 @@ async def test_port_in_use_one_line() -> None:
     err = out.stderr.decode()
     assert out.returncode == 2 and f"cannot serve on 127.0.0.1:{port}" in err, err
     assert len(err.strip().splitlines()) <= 2 and "Traceback" not in err
+
+
+async def test_help_has_examples() -> None:
+    out = await anyio.run_process([sys.executable, "-m", "tfbus.cli", "web", "--help"],
+                                  env=ENV)
+    text = out.stdout.decode()
+    assert "Examples:" in text and "tfbus web --bus zenoh --port 9090" in text
