@@ -76,3 +76,37 @@ async def test_no_browser_no_drawing_a_browser_wakes_it_at_once(chromium: str,
         assert tuple(page.frames["arm"].position) != pytest.approx((7.0, 0.0, 0.0))
         tg.cancel_scope.cancel()
     buffer.close()
+
+
+def test_bag_player_plays_undrawn_with_no_browser(page: TfPage) -> None:
+    """A playing bag with nobody looking: its time goes on, nothing is drawn; the same
+    loop with a browser counted as present draws every tick."""
+    import threading
+    from pathlib import Path
+
+    from tfbus.view.player import BagPlayer
+    from tfbus.view.timeline import BagTimeline
+
+    bag = Path(__file__).resolve().parents[1] / "data" / "webviz_turtle_tf_example.bag"
+    player = BagPlayer(page, BagTimeline.read(bag))
+    drawn: list[float] = []
+    real = player.render
+    player.render = lambda: drawn.append(player.position) or real()  # type: ignore[method-assign]
+
+    def ticks(watched: bool) -> None:
+        stop = threading.Event()
+        t = [0.0]
+
+        def clock() -> float:  # 0.1 s of bag time per tick; stops itself after 20 ticks
+            t[0] += 0.1
+            if t[0] > 2.0:
+                stop.set()
+            return t[0]
+
+        page.watched = lambda: watched  # type: ignore[method-assign]
+        player.run(stop, clock=clock)
+
+    ticks(False)
+    assert drawn == [] and player.position == pytest.approx(1.9)
+    ticks(True)
+    assert len(drawn) == 19 and drawn[-1] == pytest.approx(3.8)
