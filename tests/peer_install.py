@@ -37,6 +37,8 @@ INSTALL: dict[str, str] = {
     "ros2-env": "bash scripts/install/install_ros2_env.sh",
     "evo": "bash scripts/install/install_evo.sh",
     "zenoh-ros2-sdk": "bash scripts/install/install_zenoh_ros2_sdk.sh",
+    "roslibjs": "bash scripts/install/install_roslibjs.sh",
+    "roslibpy": "bash scripts/install/install_roslibpy.sh",
 }
 
 # Skips that remain legitimate with every peer installed, by name: (test id pattern, fnmatch

@@ -67,6 +67,7 @@ LAYERS: dict[str, int] = {
     "view": 5,
     "doctor": 5,  # tree diagnosis over bags (bag/) and live buses (listener sinks)
     "table": 5,  # tf lookups as a table operator over recordings (Arrow, engines)
+    "web": 5,  # tf for roslibjs / roslibpy web apps (rosbridge's ops; view's guard)
     "__main__": 5,
 }
 """Layer of each top-level module or package of ``tfbus`` (a package's submodules share

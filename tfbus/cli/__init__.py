@@ -19,6 +19,7 @@
     tfbus router                              Zenoh's router for fleets (tcp/127.0.0.1:7447)
     tfbus serve-buffer --bus SPEC             answer lookups for thin clients (tfbus.remote)
     tfbus lookup --bag GLOB --target T --source S --every 0.1 -o poses.parquet
+    tfbus web --bus SPEC                      tf for roslibjs / roslibpy web apps (rosbridge)
     tfbus --version                           tfbus <version> (the core in use)
 
 One module per command (``tfbus/cli/<command>.py``, each defining ``command``), the
@@ -66,6 +67,7 @@ COMMANDS: tuple[str, ...] = (
     "serve_buffer",
     "doctor",
     "lookup",
+    "web",
 )
 """The command modules of ``tfbus/cli/``, in ``--help`` order: one line per command."""
 

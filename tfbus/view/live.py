@@ -45,7 +45,7 @@ from tfbus.messages import TFMessage, TransformStamped
 from tfbus.sensor_msgs import LaserScan
 from tfbus.time import Duration, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPICS
-from tfbus.transports._base import Backlogged
+from tfbus.transports._base import Backlogged, ThreadWakeup
 from tfbus.view.player import MAX_DRAW_HZ, draw_live
 from tfbus.view.scans import MAX_SCANS_BACK, project_scan
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene
@@ -166,6 +166,9 @@ class LiveView:
         self.deferred = 0
         """Redraws put off because the transport had not delivered all it received
         (:meth:`redraw`)."""
+        self.idle = 0
+        """Times the draw loop went to sleep with no browser connected (nothing drawn
+        until one connects; the first redraw is then immediate)."""
         self._drawn_at: Time | None = None
         self._fixed_known = anyio.Event()
         self._progress = anyio.Event()
@@ -184,9 +187,26 @@ class LiveView:
         async with anyio.create_task_group() as tg:
             await tg.start(self.follow, bus)
             self.render()
-            # on the view's clock, a deadline every 1/30 s (an overrun skips ticks)
-            async for _ in every(1.0 / MAX_DRAW_HZ, clock=self.clock):
-                self.redraw(bus)
+            wakeup = ThreadWakeup()
+            self.page.on_connect(wakeup.wake)
+            try:
+                # on the view's clock, a deadline every 1/30 s (an overrun skips ticks)
+                async for _ in every(1.0 / MAX_DRAW_HZ, clock=self.clock):
+                    if not self.watched():
+                        # nobody looks: draw nothing until a browser connects
+                        wakeup.rearm()
+                        while not self.watched():
+                            self.idle += 1
+                            await wakeup.wait()
+                            wakeup.rearm()
+                    self.redraw(bus)
+            finally:
+                wakeup.close()
+
+    def watched(self) -> bool:
+        """Whether anyone sees the redraws: a browser on the page, or a Foxglove server
+        (which cannot tell whether a client is connected, so it is always drawn for)."""
+        return self.foxglove is not None or self.page.watched()
 
     def redraw(self, bus: Bus) -> Scene | None:
         """One tick of the draw loop: :meth:`render` and return its scene, unless

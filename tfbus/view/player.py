@@ -151,14 +151,18 @@ class BagPlayer:
 
     def run(self, stop: threading.Event,
             clock: Callable[[], float] = _wall.monotonic) -> None:
-        """Play until ``stop`` is set, drawing at most :data:`MAX_DRAW_HZ` times a second."""
+        """Play until ``stop`` is set, drawing at most :data:`MAX_DRAW_HZ` times a second,
+        and only while a browser is connected (or a Foxglove server runs): with nobody
+        looking the bag's time goes on, undrawn, and the first tick after a browser
+        connects draws it."""
         period = 1.0 / MAX_DRAW_HZ
         last = clock()
         while not stop.is_set():
             now = clock()
             self.advance(now - last)
             last = now
-            if self.position != self._shown or self.playing.value:
+            watched = self.foxglove is not None or self.page.watched()
+            if watched and (self.position != self._shown or self.playing.value):
                 self.render()
                 self._shown = self.position
             stop.wait(period)
