@@ -193,6 +193,9 @@ INSTALLERS = {
     "install_ros1_rsp.sh": "ROS 1",
     "install_ros2_env.sh": "ROS 2",
     "install_tf2_msgs_py.sh": "tf2_geometry_msgs",
+    "install_zenoh_ros2_sdk.sh": "zenoh-ros2-sdk",
+    "install_roslibpy.sh": "roslibpy",
+    "install_roslibjs.sh": "roslibjs",
 }
 
 
