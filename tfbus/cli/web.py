@@ -52,24 +52,17 @@ def command(bus: str | None, bag: Path | None, host: str, port: int, token: str 
         import wsproto  # noqa: F401
     except ImportError:
         fail("the 'wsproto' package is not installed: pip install 'tfbus[web]'")
-    _check_port(host, port)
+    from tfbus.errors import PortInUseError
+    from tfbus.view.guard import check_port
+
+    try:
+        check_port(host, port)
+    except PortInUseError as err:
+        fail(str(err))
     if bag is not None:
         _serve_bag(bag, host, port, token, cache_time)
     else:
         _serve_bus(bus or "zenoh", host, port, token, cache_time)
-
-
-def _check_port(host: str, port: int) -> None:
-    """Fail with one line when ``host:port`` cannot be bound (taken, not an address here)."""
-    import socket
-
-    if port == 0:
-        return
-    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
-        try:
-            s.bind((host, port))
-        except OSError as err:
-            fail(f"cannot serve on {host}:{port}: {err.strerror or err}")
 
 
 def _announce(port: int, host: str, token: str | None) -> None:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import socket
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -61,6 +62,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_MAX_WAIT",
     "DEFAULT_SERVER_NAME",
+    "DOMAIN_ID_MAX",
     "MAX_FRAME_ID_BYTES",
     "PEERS_TOPIC",
     "Backlogged",
@@ -513,3 +515,29 @@ class ThreadWakeup:
         self._pending = False
         self._r.close()
         self._w.close()
+
+
+DOMAIN_ID_MAX: Final = 232
+"""Largest ROS 2 domain id: the largest DDS domain whose RTPS ports fit in 16 bits (RTPS
+2.x, 9.6.1.1; ROS 2's "domain ID" concept page gives the same bound). Every ROS 2 bus
+(DDS and rmw_zenoh) takes ids in 0..232."""
+
+
+def ros_domain_id(domain_id: int | None) -> int:
+    """The ROS 2 domain id of a bus: ``domain_id``, or when None ``ROS_DOMAIN_ID`` from
+    the environment (0 when unset or blank), as rcl's ``rcl_get_default_domain_id`` reads it.
+
+    Raises:
+        ValueError: ``ROS_DOMAIN_ID`` is not an integer, or the id is not an int in
+            0..:data:`DOMAIN_ID_MAX` (the message names the value).
+    """
+    if domain_id is None:
+        env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        try:
+            domain_id = int(env) if env else 0
+        except ValueError:
+            raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {env!r}") from None
+    if isinstance(domain_id, bool) or not isinstance(domain_id, int) \
+            or not 0 <= domain_id <= DOMAIN_ID_MAX:
+        raise ValueError(f"domain_id must be in 0..{DOMAIN_ID_MAX}, got {domain_id!r}")
+    return domain_id

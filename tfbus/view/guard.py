@@ -32,6 +32,7 @@ from __future__ import annotations
 import hmac
 import http
 import logging
+import socket
 import threading
 import time
 import types
@@ -39,6 +40,7 @@ import urllib.parse
 from collections.abc import Callable, Iterable
 from typing import Any, Final
 
+from tfbus.errors import PortInUseError
 from tfbus.ratelimit import RateLimitedLog
 
 __all__ = ["COOKIE", "LOG_PERIOD", "LOOPBACK_NAMES", "PageGuard", "install"]
@@ -251,3 +253,21 @@ def install(modules: Iterable[types.ModuleType] = ()) -> None:
         server = _Shim(ws_server, serve=_serve(ws_server.serve))
         aio = _Shim(websockets.asyncio, server=server)
         mod.websockets = _Shim(websockets, asyncio=aio)  # type: ignore[attr-defined]
+
+
+def check_port(host: str, port: int) -> None:
+    """Bind ``host:port`` once and let it go, so that a server started on it next fails
+    with one clear line rather than a traceback from inside its library (port 0: an
+    ephemeral port, nothing to check).
+
+    Raises:
+        PortInUseError: the port is taken, or ``host`` is not an address of this machine
+            (the message names both and the system's reason).
+    """
+    if port == 0:
+        return
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
+        try:
+            s.bind((host, port))
+        except OSError as err:
+            raise PortInUseError(f"cannot serve on {host}:{port}: {err.strerror or err}") from None

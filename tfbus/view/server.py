@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import html
 import re
-import socket
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -28,7 +27,7 @@ import numpy.typing as npt
 from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
-from tfbus.view.guard import PageGuard
+from tfbus.view.guard import PageGuard, check_port
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
 
@@ -59,16 +58,6 @@ def text(frame_id: object) -> str:
 
 def _h(value: object) -> str:
     return html.escape(text(value), quote=True)
-
-
-def _check_port(host: str, port: int) -> None:
-    if port == 0:
-        return
-    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as s:
-        try:
-            s.bind((host, port))
-        except OSError as err:
-            raise PortInUseError(f"cannot serve on {host}:{port}: {err.strerror}") from None
 
 
 def _wxyz(pose: TransformStamped) -> tuple[float, float, float, float]:
@@ -140,7 +129,7 @@ class TfPage:
 
         PageGuard(host, port, token)  # a bad token is refused before anything is bound
         guard.install()
-        _check_port(host, port)
+        check_port(host, port)
         self.server: Any = viser.ViserServer(host=host, port=port, verbose=False)
         self.port: int = int(self.server.get_port())
         if port and self.port != port:

@@ -92,6 +92,7 @@ from tfbus.transports._base import (
     PeerInfo,
     ThreadWakeup,
     TransportStatistics,
+    ros_domain_id,
 )
 from tfbus.transports.rmw_zenoh.wire import (
     ATTACHMENT_LABELLED,
@@ -105,7 +106,6 @@ from tfbus.transports.rmw_zenoh.wire import (
     TF_TYPE_HASH,
     Attachment,
     EndpointToken,
-    check_domain,
     check_namespace,
     check_node_name,
     data_key,
@@ -115,6 +115,7 @@ from tfbus.transports.rmw_zenoh.wire import (
     node_token,
     parse_token,
 )
+from tfbus.transports.zenoh.config import open_waiting
 
 __all__ = ["DEFAULT_ROUTER", "RmwZenohStatistics", "RmwZenohTransport", "rmw_zenoh_config"]
 
@@ -131,9 +132,6 @@ MAX_UNHEARD_TOPICS: Final = 256
 """A fleet listener keeps the statics of at most this many ``/<robot>/tf_static`` topics
 that nobody subscribed to yet (each at most ``max_transforms`` transforms), for the
 :class:`~tfbus.fleet.FleetBuffer` that subscribes once the robot's node appears."""
-_UNREACHABLE: Final = "Unable to connect to any of"
-_RETRY_FIRST: Final = 0.25
-_RETRY_MAX: Final = 2.0
 _SAMPLE: Final = 0
 _ALIVE_PUT: Final = 1
 _ALIVE_DEL: Final = 2
@@ -300,14 +298,7 @@ class RmwZenohTransport:
         max_tokens: int = 4096,
         connect_timeout: float | None = None,
     ) -> None:
-        if domain_id is None:
-            env = os.environ.get("ROS_DOMAIN_ID", "").strip()
-            try:
-                domain_id = int(env) if env else 0
-            except ValueError:
-                raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {env!r}") from None
-        check_domain(domain_id)
-        self._domain = domain_id
+        self._domain = ros_domain_id(domain_id)
         self._fleet = namespace == FLEET_NAMESPACE
         self._namespace = "/" if self._fleet else check_namespace(namespace)
         self._name = ros_node_name(name) if name is not None else default_node_name()
@@ -556,26 +547,10 @@ class RmwZenohTransport:
     # -- internals: session ------------------------------------------------------------------
 
     async def _open_waiting(self) -> zenoh.Session:
-        """Open the session, retrying while no ``connect`` endpoint answers."""
-        deadline = (None if self._connect_timeout is None
-                    else anyio.current_time() + self._connect_timeout)
-        delay = _RETRY_FIRST
-        quiet_until = anyio.current_time() + _RETRY_FIRST  # a router racing us: no line
-        while True:
-            try:
-                return await anyio.to_thread.run_sync(self._open_session)
-            except TransportError as err:
-                if _UNREACHABLE not in str(err):
-                    raise
-                now = anyio.current_time()
-                if deadline is not None and now >= deadline:
-                    raise TransportError(
-                        f"no Zenoh router answered within {self._connect_timeout:g} s "
-                        f"(connect_timeout): {err}") from err.__cause__
-                if now >= quiet_until:
-                    self._log.log(logging.WARNING, "waiting for a Zenoh router (%s)", err)
-                await anyio.sleep(delay if deadline is None else min(delay, deadline - now))
-                delay = min(delay * 2, _RETRY_MAX)
+        """Open the session, waiting for a router while no ``connect`` endpoint answers
+        (:func:`~tfbus.transports.zenoh.config.open_waiting`, bounded by
+        ``connect_timeout``)."""
+        return await open_waiting(self._open_session, self._config, self._connect_timeout, log)
 
     def _open_session(self) -> zenoh.Session:
         try:

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from tfbus.errors import WireDecodeError
+from tfbus.transports._base import DOMAIN_ID_MAX, ros_domain_id
 
 __all__ = [
     "ADMIN_SPACE",
@@ -82,8 +83,6 @@ rosidl's ``share/tf2_msgs/msg/TFMessage.json`` (ROS 2 Kilted, built by
 ``scripts/install/install_ros2_env.sh``), what ``rosidl_stringify_type_hash`` prints."""
 GID_SIZE: Final = 16
 """Bytes of a publisher GID (``RMW_GID_STORAGE_SIZE`` since Iron)."""
-DOMAIN_ID_MAX: Final = 232
-"""Largest ROS 2 domain id (``ROS_DOMAIN_ID``; as the ``ros2`` bus)."""
 ATTACHMENT_POSITIONAL: Final = "positional"
 """The 33-byte attachment: sequence number, source timestamp, GID, no labels."""
 ATTACHMENT_LABELLED: Final = "labelled"
@@ -194,10 +193,9 @@ def data_key(domain_id: int, topic: str, type_name: str = TF_DDS_TYPE,
 
 
 def check_domain(domain_id: int) -> None:
-    """Raises ValueError (naming the value) unless ``domain_id`` is an int in 0..232."""
-    if isinstance(domain_id, bool) or not isinstance(domain_id, int) \
-            or not 0 <= domain_id <= DOMAIN_ID_MAX:
-        raise ValueError(f"domain_id must be an integer in 0..{DOMAIN_ID_MAX}, got {domain_id!r}")
+    """Raises ValueError (naming the value) unless ``domain_id`` is an int in 0..232
+    (:func:`~tfbus.transports._base.ros_domain_id`'s rule)."""
+    ros_domain_id(domain_id)
 
 
 def _valid_name_token(token: str) -> bool:

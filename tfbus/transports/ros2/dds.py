@@ -42,6 +42,8 @@ from cyclonedds.idl.types import (
     uint64,
 )
 
+from tfbus.transports._base import DOMAIN_ID_MAX
+
 __all__ = [
     "CLOCK_TOPIC_DDS",
     "DOMAIN_ID_MAX",
@@ -68,9 +70,6 @@ TF_STATIC_TOPIC_DDS: Final = "rt/tf_static"
 """The DDS topic ROS 2 uses for ``/tf_static``."""
 CLOCK_TOPIC_DDS: Final = "rt/clock"
 """The DDS topic ROS 2 uses for ``/clock`` (simulated time)."""
-DOMAIN_ID_MAX: Final = 232
-"""Largest DDS domain id whose RTPS ports fit in 16 bits (RTPS 2.x, 9.6.1.1; ROS 2's
-"domain ID" concept page gives the same bound)."""
 
 
 # -- the ROS 2 types, as Cyclone announces them --------------------------------------------

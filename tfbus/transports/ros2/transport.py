@@ -108,9 +108,9 @@ from tfbus.transports._base import (
     BusLike,
     ThreadWakeup,
     TransportStatistics,
+    ros_domain_id,
 )
 from tfbus.transports.ros2.dds import (
-    DOMAIN_ID_MAX,
     TF_STATIC_TOPIC_DDS,
     TF_TOPIC_DDS,
     Clock_,
@@ -309,14 +309,7 @@ class Ros2Transport:
         max_transforms: int = 100_000,
         clock_topic: str | None = None,
     ) -> None:
-        if domain_id is None:
-            env = os.environ.get("ROS_DOMAIN_ID", "").strip()
-            try:
-                domain_id = int(env) if env else 0
-            except ValueError:
-                raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {env!r}") from None
-        if isinstance(domain_id, bool) or not 0 <= domain_id <= DOMAIN_ID_MAX:
-            raise ValueError(f"domain_id must be in 0..{DOMAIN_ID_MAX}, got {domain_id!r}")
+        domain_id = ros_domain_id(domain_id)
         if config is not None and (interfaces is not None or peers is not None):
             raise ValueError("give config= or interfaces=/peers=, not both")
         if max_batch < 1 or max_transforms < 1:

@@ -20,12 +20,15 @@ as :class:`~tfbus.errors.TransportError` (the ``ZError`` is its ``__cause__``).
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
+import anyio
+import anyio.to_thread
 import zenoh
 
 from tfbus.errors import TransportError
@@ -123,3 +126,67 @@ def default_name() -> str:
     """``"<program>-<pid>"``: the node name a transport uses when none is given."""
     prog = Path(sys.argv[0]).stem if sys.argv and sys.argv[0] else "python"
     return f"{prog or 'python'}-{os.getpid()}"
+
+
+UNREACHABLE: Final = "Unable to connect to any of"
+"""Zenoh's error text when none of the ``connect`` endpoints answers (a client whose
+router is not up): the one error :func:`open_waiting` waits out."""
+CONNECT_RETRY_FIRST: Final = 0.25
+"""Seconds before the first retry to open a session whose endpoints did not answer."""
+CONNECT_RETRY_MAX: Final = 2.0
+"""Longest wait between two retries, seconds."""
+CONNECT_LOG_PERIOD: Final = 5.0
+"""Seconds between two "waiting for a Zenoh router" log lines."""
+
+
+def connect_endpoints(config: zenoh.Config) -> str:
+    """The ``connect`` endpoints of ``config``, for a log line."""
+    try:
+        endpoints = json.loads(config.get_json("connect/endpoints"))
+        return ", ".join(str(e) for e in endpoints) or "no endpoint"
+    except (zenoh.ZError, ValueError, TypeError):
+        return "the configured endpoints"
+
+
+async def open_waiting(
+    open_session: Callable[[], zenoh.Session],
+    config: zenoh.Config,
+    connect_timeout: float | None,
+    log: logging.Logger,
+) -> zenoh.Session:
+    """Open a session with ``open_session`` (run in a worker thread; it raises
+    :class:`~tfbus.errors.TransportError` with Zenoh's text), retrying while no ``connect``
+    endpoint of ``config`` answers, as rmw_zenoh waits for its router: the first retry after
+    :data:`CONNECT_RETRY_FIRST` s, then doubling up to :data:`CONNECT_RETRY_MAX` s, one
+    warning line every :data:`CONNECT_LOG_PERIOD` s (none for a router that answers within
+    the first retry), until ``connect_timeout`` seconds (None: for ever). Each attempt
+    fails within milliseconds and the waits between them are cancellable (Ctrl-C ends a
+    waiting command at once).
+
+    Raises:
+        TransportError: any other error of ``open_session``, or no endpoint answered
+            within ``connect_timeout`` (the message names the option).
+    """
+    deadline = None if connect_timeout is None else anyio.current_time() + connect_timeout
+    delay = CONNECT_RETRY_FIRST
+    next_log = anyio.current_time() + CONNECT_RETRY_FIRST  # not for a router racing us
+    while True:
+        try:
+            return await anyio.to_thread.run_sync(open_session)
+        except TransportError as err:
+            if UNREACHABLE not in str(err):
+                raise
+            now = anyio.current_time()
+            if deadline is not None and now >= deadline:
+                raise TransportError(
+                    f"no Zenoh router or peer answered within {connect_timeout:g} s"
+                    f" (connect_timeout): {err}"
+                ) from err.__cause__
+            if now >= next_log:
+                next_log = now + CONNECT_LOG_PERIOD
+                log.warning(
+                    "waiting for a Zenoh router or peer at %s (is `tfbus router` running?);"
+                    " still trying", connect_endpoints(config)
+                )
+            await anyio.sleep(delay if deadline is None else min(delay, deadline - now))
+            delay = min(delay * 2, CONNECT_RETRY_MAX)

@@ -43,7 +43,6 @@ Errors of Zenoh itself (``zenoh.ZError``) are raised as
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import threading
@@ -77,6 +76,7 @@ from tfbus.transports.zenoh.config import (
     DEFAULT_PORT,
     ZenohConfigSource,
     default_name,
+    open_waiting,
     zenoh_config,
 )
 from tfbus.transports.zenoh.counters import ZenohStatistics
@@ -92,16 +92,6 @@ if TYPE_CHECKING:
 __all__ = ["ZenohStatistics", "ZenohTransport"]
 
 log = logging.getLogger("tfbus.transports.zenoh")
-
-UNREACHABLE: Final = "Unable to connect to any of"
-"""Zenoh's error text when none of the ``connect`` endpoints answers (a client whose
-router is not up): the one error :class:`ZenohTransport` waits out."""
-CONNECT_RETRY_FIRST: Final = 0.25
-"""Seconds before the first retry to open a session whose endpoints did not answer."""
-CONNECT_RETRY_MAX: Final = 2.0
-"""Longest wait between two retries, seconds."""
-CONNECT_LOG_PERIOD: Final = 5.0
-"""Seconds between two "waiting for a Zenoh router" log lines."""
 
 _LATCHED_DEFAULT: Final = (TF_STATIC_TOPIC,)
 _SAMPLE: Final = 0
@@ -699,44 +689,11 @@ class ZenohTransport:
 
     # -- internals: session -----------------------------------------------------------
 
-    def _connect_endpoints(self) -> str:
-        """The ``connect`` endpoints of the configuration, for a log line."""
-        try:
-            endpoints = json.loads(self._config.get_json("connect/endpoints"))
-            return ", ".join(str(e) for e in endpoints) or "no endpoint"
-        except (zenoh.ZError, ValueError, TypeError):
-            return "the configured endpoints"
-
     async def _open_waiting(self) -> zenoh.Session:
-        """Open the session, retrying while no ``connect`` endpoint answers (bounded by
-        ``connect_timeout``); each attempt fails within milliseconds, and the waits
-        between them are cancellable (Ctrl-C ends a waiting command at once)."""
-        deadline = (
-            None if self._connect_timeout is None
-            else anyio.current_time() + self._connect_timeout
-        )
-        delay = CONNECT_RETRY_FIRST
-        next_log = anyio.current_time() + CONNECT_RETRY_FIRST  # not for a router racing us
-        while True:
-            try:
-                return await anyio.to_thread.run_sync(self._open_session)
-            except TransportError as err:
-                if UNREACHABLE not in str(err):
-                    raise
-                now = anyio.current_time()
-                if deadline is not None and now >= deadline:
-                    raise TransportError(
-                        f"no Zenoh router or peer answered within {self._connect_timeout:g} s"
-                        f" (connect_timeout): {err}"
-                    ) from err.__cause__
-                if now >= next_log:
-                    next_log = now + CONNECT_LOG_PERIOD
-                    log.warning(
-                        "waiting for a Zenoh router or peer at %s (is `tfbus router` running?);"
-                        " still trying", self._connect_endpoints()
-                    )
-                await anyio.sleep(delay if deadline is None else min(delay, deadline - now))
-                delay = min(delay * 2, CONNECT_RETRY_MAX)
+        """Open the session, waiting for a router while no ``connect`` endpoint answers
+        (:func:`~tfbus.transports.zenoh.config.open_waiting`, bounded by
+        ``connect_timeout``)."""
+        return await open_waiting(self._open_session, self._config, self._connect_timeout, log)
 
     def _open_session(self) -> zenoh.Session:
         try:
