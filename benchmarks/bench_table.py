@@ -114,41 +114,151 @@ def _groups(table: Any) -> list[tuple[str, Any]]:
             for name in pc.unique(names).to_pylist()]
 
 
-def bench_single(table: Any) -> dict[str, float]:
+TF2_PYTHON = "/usr/bin/python3"
+"""Debian's python3 with ``python3-tf2`` (ROS 1 geometry2 0.7.6's tf2_py), as
+``benchmarks/bench_core.py`` runs it."""
+
+TF2_SCRIPT = r"""
+import json, sys, time
+import rospy, tf2_py
+from geometry_msgs.msg import TransformStamped
+NS = 10**9
+job = json.load(sys.stdin)
+cores = []
+for rec in job["recordings"]:
+    core = tf2_py.BufferCore(rospy.Duration(10**6))
+    for parent, child, ns, x, y, z, qx, qy, qz, qw, static in rec["transforms"]:
+        m = TransformStamped()
+        m.header.frame_id = parent
+        m.child_frame_id = child
+        m.header.stamp = rospy.Time(ns // NS, ns % NS)
+        t, r = m.transform.translation, m.transform.rotation
+        t.x, t.y, t.z, r.x, r.y, r.z, r.w = x, y, z, qx, qy, qz, qw
+        (core.set_transform_static if static else core.set_transform)(m, "bench")
+    cores.append((core, rec["queries"]))
+ok = 0
+start = time.process_time()
+for core, rows in cores:
+    lookup = core.lookup_transform_core
+    for target, source, ns in rows:
+        try:
+            lookup(target, source, rospy.Time(ns // NS, ns % NS))
+            ok += 1
+        except tf2_py.TransformException:
+            pass
+print(json.dumps({"cpu_s": time.process_time() - start, "ok": ok}))
+"""
+"""The tf2_py loop (what a user of tf2 writes: ``BufferCore.lookup_transform_core`` per
+row, try/except): fills one tf2 BufferCore per recording, then times the loop alone in
+CPU seconds. Never imports tfbus."""
+
+
+def tf2_job(groups: list[tuple[str, Any]], limit: int) -> dict[str, Any]:
+    """The first ``limit`` recordings' transforms (as :func:`load_buffer` reads them)
+    and rows, as JSON values for :data:`TF2_SCRIPT`."""
+    from tfbus.bag import read_messages
+
+    recordings = []
+    for name, rows in groups[:limit]:
+        transforms = []
+        for rec in read_messages(name):
+            for t in rec.message.transforms:
+                (x, y, z), (qx, qy, qz, qw) = t.transform
+                transforms.append([t.header.frame_id, t.child_frame_id, t.header.stamp.ns,
+                                   x, y, z, qx, qy, qz, qw, rec.is_static])
+        recordings.append({"transforms": transforms, "queries": [
+            list(r) for r in zip(rows.column("target_frame").to_pylist(),
+                                 rows.column("source_frame").to_pylist(),
+                                 rows.column("stamp").to_pylist(), strict=True)]})
+    return {"recordings": recordings}
+
+
+def tf2_round(job: dict[str, Any]) -> tuple[float, int, int] | str:
+    """One timed tf2_py loop: (CPU seconds, rows answered, rows), or why there is none."""
+    import json
+    import subprocess
+
+    if not Path(TF2_PYTHON).exists():
+        return f"no {TF2_PYTHON}"
+    run = subprocess.run([TF2_PYTHON, "-c", TF2_SCRIPT], input=json.dumps(job),
+                         capture_output=True, text=True, check=False, timeout=1800)
+    if run.returncode:
+        return f"tf2_py side failed: {run.stderr.strip()[-300:]}"
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    rows = sum(len(r["queries"]) for r in job["recordings"])
+    return float(out["cpu_s"]), int(out["ok"]), rows
+
+
+def _spread(rates: list[float]) -> str:
+    """min / median / max rows/s."""
+    return (f"{min(rates):12,.0f} {float(np.median(rates)):12,.0f} {max(rates):12,.0f}")
+
+
+def bench_single(table: Any, rounds: int, tf2_recordings: int) -> None:
+    """Rows/s per core (CPU time of this process: ``time.process_time``) of the tfbus
+    loop, the tf2_py loop (first ``tf2_recordings`` recordings) and
+    ``tfbus.table.lookup``, alternated over ``rounds`` rounds; then the whole path with
+    loading (wall time)."""
     from tfbus.errors import TransformException
     from tfbus.table import lookup, lookup_by_recording
 
     groups = _groups(table)
     t = time.perf_counter()
     buffers = {name: load_buffer(name) for name, _ in groups}
-    load_s = time.perf_counter() - t
-    loop_s = 0.0
-    table_s = 0.0
-    ok_loop = ok_table = 0
-    for name, rows in groups:
-        buffer = buffers[name]
-        triples = list(zip(rows.column("target_frame").to_pylist(),
-                           rows.column("source_frame").to_pylist(),
-                           rows.column("stamp").to_pylist(), strict=True))
-        t = time.perf_counter()
-        for target, source, ns in triples:
-            try:
-                buffer.lookup_transform(target, source, Time.from_ns(ns))
-                ok_loop += 1
-            except TransformException:
-                pass
-        loop_s += time.perf_counter() - t
-        t = time.perf_counter()
-        result = lookup(rows, buffer)
-        table_s += time.perf_counter() - t
-        ok_table += result.column("status").to_pylist().count("ok")
-    assert ok_loop == ok_table, (ok_loop, ok_table)
+    print(f"  load_buffer of every recording: {time.perf_counter() - t:.2f} s")
+    job = tf2_job(groups, tf2_recordings)
+    triples = {name: list(zip(rows.column("target_frame").to_pylist(),
+                              rows.column("source_frame").to_pylist(),
+                              rows.column("stamp").to_pylist(), strict=True))
+               for name, rows in groups}
+    n = table.num_rows
+    rates: dict[str, list[float]] = {"loop": [], "tf2": [], "table": []}
+    tf2_note = ""
+    for r in range(rounds):
+        ok_loop = 0
+        c = time.process_time()
+        for name, _rows in groups:
+            buffer = buffers[name]
+            for target, source, ns in triples[name]:
+                try:
+                    buffer.lookup_transform(target, source, Time.from_ns(ns))
+                    ok_loop += 1
+                except TransformException:
+                    pass
+        rates["loop"].append(n / (time.process_time() - c))
+        tf2 = tf2_round(job)
+        if isinstance(tf2, str):
+            tf2_note = tf2
+        else:
+            cpu_s, ok_tf2, tf2_rows = tf2
+            rates["tf2"].append(tf2_rows / cpu_s)
+        ok_table = 0
+        c = time.process_time()
+        results = [lookup(rows, buffers[name]) for name, rows in groups]
+        rates["table"].append(n / (time.process_time() - c))
+        oks = [res.column("status").to_pylist().count("ok") for res in results]
+        ok_table = sum(oks)
+        assert ok_loop == ok_table, (ok_loop, ok_table)
+        if not isinstance(tf2, str) and ok_tf2 != sum(oks[:len(job["recordings"])]):
+            print(f"  tf2_py answered {ok_tf2} rows, tfbus "
+                  f"{sum(oks[:len(job['recordings'])])} of the same")
+        print(f"  round {r + 1}: load {os.getloadavg()[0]:.1f}; {ok_table / n * 100:.0f} % "
+              f"of rows answered", flush=True)
+    print(f"  rows/s per core (CPU time), {rounds} rounds:        min       median          max")
+    print(f"  loop of tfbus lookup_transform     {_spread(rates['loop'])}")
+    if rates["tf2"]:
+        tf2_n = sum(len(r["queries"]) for r in job["recordings"])
+        print(f"  loop of tf2_py lookup_transform_core {_spread(rates['tf2'])}  "
+              f"({len(job['recordings'])} recordings, {tf2_n} rows)")
+    else:
+        print(f"  loop of tf2_py: not run ({tf2_note})")
+    print(f"  tfbus.table.lookup                 {_spread(rates['table'])}")
+    med = {k: float(np.median(v)) for k, v in rates.items() if v}
+    print(f"  table.lookup / tfbus loop: {med['table'] / med['loop']:.1f}x (medians)"
+          + (f"; / tf2_py loop: {med['table'] / med['tf2']:.1f}x" if "tf2" in med else ""))
     t = time.perf_counter()
     lookup_by_recording(table)
-    end_to_end = time.perf_counter() - t
-    n = table.num_rows
-    return {"load_s": load_s, "loop": n / loop_s, "table": n / table_s,
-            "end_to_end": n / end_to_end, "ok": ok_table / n}
+    print(f"  lookup_by_recording (with loads)   {n / (time.perf_counter() - t):12,.0f} rows/s")
 
 
 def _ray_run(table: Any, cpus: int, out: Any) -> None:
@@ -240,6 +350,9 @@ def main() -> None:
     ap.add_argument("--outside", type=float, default=0.0, metavar="FRACTION",
                     help="fraction of rows outside the data (tf2 refuses them)")
     ap.add_argument("--no-ray", action="store_true")
+    ap.add_argument("--rounds", type=int, default=3, help="alternated timing rounds (>= 3)")
+    ap.add_argument("--tf2-recordings", type=int, default=5, metavar="N",
+                    help="recordings the tf2_py loop runs on (its rows/s is per row)")
     ap.add_argument("--memory", type=float, default=0.0, metavar="MB",
                     help="measure peak memory on one recording of about MB megabytes")
     args = ap.parse_args()
@@ -258,13 +371,7 @@ def main() -> None:
         print(f"{args.recordings} recordings of {args.seconds:.0f} s, {args.queries} queries, "
               f"{args.outside * 100:.0f} % outside the data "
               f"(written in {time.perf_counter() - t:.1f} s)")
-        r = bench_single(table)
-        print(f"  load_buffer of every recording: {r['load_s']:.2f} s; "
-              f"{r['ok'] * 100:.0f} % of rows answered")
-        print(f"  loop (lookup_transform per row)   {r['loop']:12,.0f} rows/s")
-        print(f"  tfbus.table.lookup                {r['table']:12,.0f} rows/s  "
-              f"({r['table'] / r['loop']:.1f}x the loop)")
-        print(f"  lookup_by_recording (with loads)  {r['end_to_end']:12,.0f} rows/s")
+        bench_single(table, args.rounds, args.tf2_recordings)
         if not args.no_ray:
             one = bench_ray(table, 1)
             two = bench_ray(table, 2)

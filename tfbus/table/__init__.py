@@ -8,6 +8,8 @@
   :func:`lookup_by_recording`: rows that name their recording (a ``recording`` column);
 * :func:`poses_every`: the queries for one frame pair every ``every`` seconds over a
   recording;
+* :func:`summary`: one row per (file, link) of recordings (span, count, rate, largest
+  gap, authorities); :func:`findings`: one row per ``tfbus doctor`` finding;
 * engines: :mod:`tfbus.table.polars`, :mod:`tfbus.table.duckdb`, :mod:`tfbus.table.ray`,
   :mod:`tfbus.table.dask`.
 
@@ -36,18 +38,32 @@ from tfbus.table.recordings import (  # noqa: E402
     output_schema,
     poses_every,
 )
+from tfbus.table.summary import (  # noqa: E402
+    FINDING_COLUMNS,
+    SUMMARY_COLUMNS,
+    findings,
+    findings_schema,
+    summary,
+    summary_schema,
+)
 
 __all__ = [
     "DEFAULT_MARGIN",
+    "FINDING_COLUMNS",
     "OK",
     "QUERY_COLUMNS",
     "RESULT_COLUMNS",
+    "SUMMARY_COLUMNS",
     "RecordingBuffers",
     "as_arrow",
+    "findings",
+    "findings_schema",
     "lookup",
     "lookup_by_recording",
     "lookup_recording",
     "output_schema",
     "poses_every",
     "result_schema",
+    "summary",
+    "summary_schema",
 ]
