@@ -147,9 +147,13 @@ class TransformBroadcaster:
             anyio.ClosedResourceError: if the bus is closed.
             anyio.get_cancelled_exc_class(): if cancelled (before publishing).
         """
-        message = _as_message(transform)
-        if not message.transforms:
-            return
+        if type(transform) is TransformStamped:  # _as_message's first case, inline
+            _check(transform)
+            message = _new_message(TFMessage, ((transform,),))
+        else:
+            message = _as_message(transform)
+            if not message.transforms:
+                return
         # Bus.publish, inline: its checkpoint, the publish, its cancel-shielded yield.
         bus = self._bus
         maybe_cancelled = bus._maybe_cancelled

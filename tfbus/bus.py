@@ -503,8 +503,13 @@ class Bus:
                 sub._put(message)
         callbacks = self._callbacks.get(topic)
         if callbacks:
-            for cb in callbacks:
-                cb._call(message)
+            for cb in callbacks:  # CallbackSubscription._call, inline: one call fewer
+                cb._delivered += 1
+                counters.delivered += 1
+                try:
+                    cb._callback(message)
+                except Exception as exc:  # never the publisher's problem
+                    cb._failed(exc)
 
     def reaches(self, topic: str) -> bool:
         """Whether a message delivered on ``topic`` now reaches anyone: a subscription
