@@ -40,6 +40,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
+from itertools import repeat
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar, runtime_checkable
 
@@ -274,7 +275,8 @@ class Bus:
         loop = running_asyncio_loop()
         trio = None if loop is not None else _running_trio()
         if loop is not None:
-            self._after_publish = ShieldedYield(loop)
+            # A C callable giving the one ShieldedYield: no Python-level __call__.
+            self._after_publish = repeat(ShieldedYield(loop)).__next__
             self._maybe_cancelled = _asyncio_cancel_called(loop)
             self._before_publish = _backend_checkpoint_if_cancelled()
         elif trio is not None:
