@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from types import FrameType
 from typing import Any
 
@@ -18,6 +18,7 @@ from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import ManualClock
+from tfbus.core import BatchResult, BufferCore
 from tfbus.listener import TransformListener
 from tfbus.messages import (
     Header,
@@ -174,3 +175,30 @@ async def test_a_raising_callback_is_counted_and_the_others_still_get_the_messag
             assert (bad.statistics().delivered, bad.statistics().errors) == (2, 2)
             assert (good.statistics().delivered, good.statistics().errors) == (2, 0)
             assert bus.statistics()["/x"].delivered == 4
+
+
+async def test_a_buffer_that_overrides_set_transforms_gets_every_message_through_it() -> None:
+    """The one-transform store is taken only where it does what the batch store does:
+    a subclass's own ``set_transforms`` is still called for a message of one transform."""
+    batches: list[int] = []
+
+    class Counting(BufferCore):
+        def set_transforms(
+            self,
+            transforms: Iterable[TransformStamped],
+            authority: str = "default",
+            is_static: bool = False,
+        ) -> BatchResult:
+            items = list(transforms)
+            batches.append(len(items))
+            return super().set_transforms(items, authority, is_static)
+
+    core = Counting(cache_time=10.0)
+    clock = ManualClock(Time.from_sec(100.0))
+    async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
+        await TransformBroadcaster(bus).send_transform(_ts(100.0))
+        assert batches == [1]
+        assert listener.statistics().stored == 1
+        assert core.lookup_transform("world", "probe", Time.from_sec(100.0)).transform == (
+            _ts(100.0).transform
+        )

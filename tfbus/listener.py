@@ -5,7 +5,9 @@
     async with Bus() as bus, TransformListener(buffer, bus):
         ...   # buffer fills up with every transform broadcast on bus
 
-Each message is stored with one ``set_transforms`` call; one bad transform (invalid
+Each message is stored with one ``set_transforms`` call (a message of one transform
+into a ``BufferCore`` or ``Buffer`` with the core's own batch store: one
+``set_transform`` / ``set_transform_static`` call, counted alike); one bad transform (invalid
 input, data older than the cache, a repeated stamp) is counted and logged (rate-limited
 on the listener's clock, :mod:`tfbus.ratelimit`) and the valid ones beside it are
 stored. On each message the listener reads its clock and clears the buffer when time
@@ -153,10 +155,15 @@ class TransformListener:
         # the same checks, counts and wake-ups at a fraction of a one-item batch's cost.
         self._store_one: tuple[Callable[[Any, str], bool], Callable[[Any, str], bool]] | None
         self._store_one = None
+        # A subclass that overrides any of the three keeps the batch store.
+        kind: Any = type(buffer)
         if (
             isinstance(buffer, BufferCore)
             and "set_transforms" not in getattr(buffer, "__dict__", ())
-            and type(buffer).set_transforms in (Buffer.set_transforms, BufferCore.set_transforms)
+            and kind.set_transforms in (Buffer.set_transforms, BufferCore.set_transforms)
+            and kind.set_transform in (Buffer.set_transform, BufferCore.set_transform)
+            and kind.set_transform_static
+            in (Buffer.set_transform_static, BufferCore.set_transform_static)
         ):
             self._store_one = (buffer.set_transform, buffer.set_transform_static)
         self._log = RateLimitedLog(_log, log_period)
