@@ -46,7 +46,7 @@ import pstats
 import statistics
 import sys
 import time
-from collections.abc import Awaitable, Callable, Iterable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -61,7 +61,6 @@ from tfbus.broadcaster import TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.clock import SystemClock
-from tfbus.core import BatchResult
 from tfbus.demos.tutorial import run_demo
 from tfbus.listener import TransformListener
 from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
@@ -163,10 +162,11 @@ async def latency_run(
 ) -> LatencyResult:
     """``warmup + samples`` wake-ups; returns the last ``samples`` latencies.
 
-    ``instrument`` wraps this buffer's public ``set_transforms`` (which the listener
-    calls once per message) to time the stages: bus delivery and the listener task
-    getting scheduled; the store itself, which re-checks the waiter and sets its event;
-    and the awaiting task resuming (returning through ``lookup_transform_async``).
+    ``instrument`` wraps this buffer's public ``set_transform`` (which the listener
+    calls once per message of one transform) to time the stages: bus delivery (the
+    sender's checks, the publish and the listener's callback); the store itself, which
+    re-checks the waiter and wakes it; and the awaiting task resuming (returning through
+    ``lookup_transform_async``).
     """
     total = warmup + samples
     clock = SystemClock()
@@ -174,19 +174,15 @@ async def latency_run(
     store_in: list[int] = []
     store_out: list[int] = []
     if instrument:
-        untimed = buffer.set_transforms
+        untimed = buffer.set_transform
 
-        def timed(
-            transforms: Iterable[TransformStamped],
-            authority: str = "default",
-            is_static: bool = False,
-        ) -> BatchResult:
+        def timed(transform: TransformStamped, authority: str = "default") -> bool:
             store_in.append(time.perf_counter_ns())
-            result = untimed(transforms, authority, is_static)
+            stored = untimed(transform, authority)
             store_out.append(time.perf_counter_ns())
-            return result
+            return stored
 
-        buffer.set_transforms = timed  # type: ignore[method-assign]
+        buffer.set_transform = timed  # type: ignore[method-assign]
     t0 = clock.now().ns + 3600 * NS  # an hour ahead: a future time in every sense
     messages = [_probe(t0 + i * MS) for i in range(total + 1)]
     sent_at = [0] * (total + 1)

@@ -291,15 +291,20 @@ class CallbackSubscription:
         return self._closed
 
     def _call(self, message: object) -> None:
+        # Bus._deliver makes this call inline (the same four steps).
         self._delivered += 1
         self._counters.delivered += 1
         try:
             self._callback(message)
         except Exception as exc:  # never the publisher's problem
-            self._errors += 1
-            _CALLBACK_ERRORS.log(
-                logging.ERROR, "a %s callback raised %s: %s", self._topic, type(exc).__name__, exc
-            )
+            self._failed(exc)
+
+    def _failed(self, exc: Exception) -> None:
+        """Count and log (by count) an exception the callback raised."""
+        self._errors += 1
+        _CALLBACK_ERRORS.log(
+            logging.ERROR, "a %s callback raised %s: %s", self._topic, type(exc).__name__, exc
+        )
 
     def close(self) -> None:
         """Unregister (idempotent): the callback is not called again."""

@@ -1,0 +1,204 @@
+"""The publish path of ``TransformBroadcaster.send_transform``: what it costs in
+Python-level calls up to the listener's store, and the cancellation it checks first
+(anyio's ``checkpoint_if_cancelled`` semantics: any cancelled scope around the sender
+with no shielded scope in between, a deadline already past included)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Iterable
+from types import FrameType
+from typing import Any
+
+import anyio
+import pytest
+
+from tfbus.broadcaster import TransformBroadcaster
+from tfbus.buffer import Buffer
+from tfbus.bus import Bus
+from tfbus.clock import ManualClock
+from tfbus.core import BatchResult, BufferCore
+from tfbus.listener import TransformListener
+from tfbus.messages import (
+    Header,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
+from tfbus.time import Time
+
+pytestmark = pytest.mark.anyio
+
+# Python functions entered from ``await send_transform(ts)`` until the listener's store
+# (Buffer.set_transform) is called: send_transform, _check, the cancellation test
+# (asyncio: one function; trio: its checkpoint_if_cancelled and current_task),
+# publish_nowait, _deliver, the listener's _handle and its clock read: 7 on asyncio, 8 on
+# trio. The path before entered 15 on asyncio (anyio's checkpoint coroutine and its
+# task-state look-ups, Bus.publish, _as_message, TFMessage's __new__, the callback
+# subscription's _call) and 13 on trio.
+CALLS_BEFORE_STORE = 8
+
+
+def _ts(stamp_s: float) -> TransformStamped:
+    return TransformStamped(
+        Header(Time.from_sec(stamp_s), "world"),
+        "probe",
+        Transform(Vector3(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, 0.0, 1.0)),
+    )
+
+
+async def test_send_transform_reaches_the_store_in_few_python_calls() -> None:
+    clock = ManualClock(Time.from_sec(100.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    async with Bus() as bus, TransformListener(buffer, bus, clock=clock):
+        broadcaster = TransformBroadcaster(bus)
+        await broadcaster.send_transform(_ts(100.0))  # warm: every look-up made once
+        entered: list[str] = []
+        stored = False
+
+        def profile(frame: FrameType, event: str, arg: Any) -> None:
+            nonlocal stored
+            if event == "call" and not stored:
+                if frame.f_code.co_name in ("set_transform", "set_transforms"):
+                    stored = True
+                else:
+                    entered.append(frame.f_code.co_name)
+
+        message = _ts(100.5)
+        sys.setprofile(profile)
+        try:
+            await broadcaster.send_transform(message)
+        finally:
+            sys.setprofile(None)
+        assert stored
+        assert entered[:2] == ["send_transform", "_check"]
+        assert len(entered) <= CALLS_BEFORE_STORE, entered
+        assert buffer.lookup_transform("world", "probe", Time.from_sec(100.5)).transform == (
+            _ts(100.5).transform
+        )
+
+
+async def test_send_transform_in_a_cancelled_outer_scope_raises_and_sends_nothing() -> None:
+    async with Bus() as bus:
+        got: list[object] = []
+        with bus.subscribe_callback("/tf", got.append):
+            broadcaster = TransformBroadcaster(bus)
+            with anyio.CancelScope() as outer:
+                with anyio.CancelScope():  # not shielded: the outer cancellation reaches in
+                    outer.cancel()
+                    await broadcaster.send_transform(_ts(1.0))
+            assert outer.cancelled_caught
+            assert got == [] and broadcaster.sent == 0
+
+
+async def test_send_transform_past_its_deadline_raises_and_sends_nothing() -> None:
+    async with Bus() as bus:
+        got: list[object] = []
+        with bus.subscribe_callback("/tf", got.append):
+            broadcaster = TransformBroadcaster(bus)
+            with anyio.CancelScope(deadline=-math.inf) as scope:
+                await broadcaster.send_transform(_ts(1.0))
+            assert scope.cancelled_caught
+            assert got == [] and broadcaster.sent == 0
+
+
+async def test_send_transform_in_a_shielded_scope_inside_a_cancelled_one_is_sent() -> None:
+    async with Bus() as bus:
+        got: list[object] = []
+        with bus.subscribe_callback("/tf", got.append):
+            broadcaster = TransformBroadcaster(bus)
+            with anyio.CancelScope() as outer:
+                outer.cancel()
+                with anyio.CancelScope(shield=True):
+                    await broadcaster.send_transform(_ts(1.0))
+                    await bus.publish("/tf", got[0])
+            assert len(got) == 2 and broadcaster.sent == 1
+            first = got[0]
+            assert isinstance(first, TFMessage)
+            assert first.transforms[0].transform.translation == Vector3(1.0, 2.0, 3.0)
+
+
+async def test_listener_counts_one_transform_messages_as_one_item_batches() -> None:
+    """A message of one transform is stored with the buffer's set_transform(_static); its
+    counts are those of the same transform in a one-item list (the batch store)."""
+    clock = ManualClock(Time.from_sec(100.0))
+
+    def tf(child: str, stamp_s: float, x: float = 1.0) -> TransformStamped:
+        return TransformStamped(
+            Header(Time.from_sec(stamp_s), "world"),
+            child,
+            Transform(Vector3(x, 2.0, 3.0), Quaternion(0.0, 0.0, 0.0, 1.0)),
+        )
+
+    counts = []
+    wraps: tuple[Callable[[tuple[Any, ...]], Any], ...] = (tuple, list)
+    for wrap in wraps:
+        buffer = Buffer(cache_time=10.0, clock=clock)
+        async with Bus() as bus, TransformListener(buffer, bus, clock=clock) as listener:
+            for item in (
+                tf("a", 100.0),
+                tf("a", 100.0, x=9.0),  # repeated stamp: TF_REPEATED_DATA, refused
+                tf("a", 120.0),
+                tf("a", 100.5),  # older than cache_time before the newest: refused
+                tf("b", 100.0, x=math.nan),  # invalid
+                "junk",  # malformed
+            ):
+                bus.deliver_nowait("/tf", TFMessage(wrap((item,))))
+            bus.deliver_nowait("/tf_static", TFMessage(wrap((tf("s", 0.0, x=4.0),))))
+            stats = listener.statistics()
+            counts.append((stats.stored, stats.refused, stats.invalid, stats.malformed))
+            assert buffer.lookup_transform("world", "a", Time.from_sec(120.0)).transform == (
+                tf("a", 120.0).transform
+            )
+            assert buffer.lookup_transform("world", "s", Time.from_sec(500.0)).transform == (
+                tf("s", 0.0, x=4.0).transform
+            )
+    assert counts == [(3, 2, 1, 1), (3, 2, 1, 1)]
+
+
+async def test_a_raising_callback_is_counted_and_the_others_still_get_the_message() -> None:
+    async with Bus() as bus:
+        got: list[object] = []
+
+        def broken(message: object) -> None:
+            raise ValueError(f"cannot take {message!r}")
+
+        with bus.subscribe_callback("/x", broken) as bad, bus.subscribe_callback(
+            "/x", got.append
+        ) as good:
+            await bus.publish("/x", 1)
+            bus.publish_nowait("/x", 2)
+            assert got == [1, 2]
+            assert (bad.statistics().delivered, bad.statistics().errors) == (2, 2)
+            assert (good.statistics().delivered, good.statistics().errors) == (2, 0)
+            assert bus.statistics()["/x"].delivered == 4
+
+
+async def test_a_buffer_that_overrides_set_transforms_gets_every_message_through_it() -> None:
+    """The one-transform store is taken only where it does what the batch store does:
+    a subclass's own ``set_transforms`` is still called for a message of one transform."""
+    batches: list[int] = []
+
+    class Counting(BufferCore):
+        def set_transforms(
+            self,
+            transforms: Iterable[TransformStamped],
+            authority: str = "default",
+            is_static: bool = False,
+        ) -> BatchResult:
+            items = list(transforms)
+            batches.append(len(items))
+            return super().set_transforms(items, authority, is_static)
+
+    core = Counting(cache_time=10.0)
+    clock = ManualClock(Time.from_sec(100.0))
+    async with Bus() as bus, TransformListener(core, bus, clock=clock) as listener:
+        await TransformBroadcaster(bus).send_transform(_ts(100.0))
+        assert batches == [1]
+        assert listener.statistics().stored == 1
+        assert core.lookup_transform("world", "probe", Time.from_sec(100.0)).transform == (
+            _ts(100.0).transform
+        )
