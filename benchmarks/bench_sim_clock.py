@@ -1,12 +1,18 @@
 """Benchmark simulated time: what following ``/clock`` costs, and how late a sim-time
 wake-up is.
 
-    .venv/bin/python benchmarks/bench_sim_clock.py [--hz 1000] [--seconds 5] [--quick]
+    .venv/bin/python benchmarks/bench_sim_clock.py [--bus zenoh|ros1|ros2] [--hz 1000]
+        [--seconds 5] [--quick] [--backend asyncio|trio]
 
 A publisher process (this script, ``--role publisher``) sends ``rosgraph_msgs/Clock`` on
-``/clock`` over Zenoh (127.0.0.1, explicit endpoints, multicast scouting off) at ``--hz``,
-one simulated step of ``1/hz`` s per message (real time), on absolute deadlines. This
-process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
+``/clock`` at ``--hz``, one simulated step of ``1/hz`` s per message (real time), on
+absolute deadlines, over ``--bus``: Zenoh (127.0.0.1, explicit endpoints, multicast
+scouting off; the default), ROS 1 (a roscore started on 127.0.0.1 with ROS_IP=127.0.0.1,
+as the ROS 1 tests start it; the publisher is a tfbus ``Ros1Transport`` node sending raw
+``rosgraph_msgs/Clock`` frames over TCPROS) or ROS 2 (Cyclone DDS through tfbus's
+``Ros2Transport``, loopback only, a random domain id). This process follows it with a
+:class:`tfbus.SimClock` on its own bus (``clock_topic="/clock"`` on ROS 1 and ROS 2) and
+prints:
 
 1. **CPU cost of /clock at HZ**: this process's CPU time (``time.process_time``: every
    thread, Zenoh's included) per second of wall time over ``--seconds``, with the
@@ -31,6 +37,11 @@ process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
    every Zenoh runtime one worker thread, (f) (b) with Zenoh's
    ``transport/unicast/lowlatency`` (QoS off) on both sides.
    These are the floor any zenoh-python subscriber pays; ``--no-raw`` leaves them out.
+   On ROS 1 and ROS 2 the floor is instead a bare reader process of the same tfbus
+   publisher, with no tfbus code per message, idle and at ``--hz``: ROS 1 a TCPROS
+   subscriber made by hand (``registerSubscriber``, ``requestTopic``, the connection
+   header, a ``recv`` per wake-up of a reader thread, ``struct`` per frame); ROS 2 a
+   cyclonedds ``DataReader`` with the ``/clock`` QoS whose listener takes raw samples.
 
 Figures only: nothing here asserts a timing (a loaded machine shows it in the figures).
 """
@@ -466,7 +477,7 @@ def _sim_clock_cost_per_message(n: int = 100_000) -> float:
 
 async def main(args: argparse.Namespace) -> None:
     names = {"zenoh": "Zenoh", "ros1": "ROS 1 (TCPROS)", "ros2": "ROS 2 (Cyclone DDS)"}
-    print(f"tfbus sim-clock benchmark; Python {sys.version.split()[0]}; "
+    print(f"tfbus sim-clock benchmark; Python {sys.version.split()[0]}; {args.backend}; "
           f"{names[args.bus]} on 127.0.0.1; /clock at {args.hz:g} Hz, {args.seconds:g} s windows; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
@@ -540,6 +551,8 @@ if __name__ == "__main__":
                         help="the transport /clock travels on (ros1: a roscore on 127.0.0.1 "
                              "is started; ros2: Cyclone DDS, loopback, a random domain id)")
     parser.add_argument("--at", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--backend", default="asyncio", choices=["asyncio", "trio"],
+                        help="the follower's event loop (the publisher runs on asyncio)")
     parser.add_argument("--mode", default="callback", help=argparse.SUPPRESS)
     parser.add_argument("--zenoh", default="", help=argparse.SUPPRESS)
     parser.add_argument("--no-raw", dest="raw", action="store_false",
@@ -574,8 +587,8 @@ if __name__ == "__main__":
             master = start_master(Path(tmp) / "ros_home")
             try:
                 ns.at = master.uri
-                anyio.run(main, ns)
+                anyio.run(main, ns, backend=ns.backend)
             finally:
                 master.stop()
     else:
-        anyio.run(main, ns)
+        anyio.run(main, ns, backend=ns.backend)

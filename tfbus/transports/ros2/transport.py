@@ -31,7 +31,10 @@ and a ``Clock`` published on the bus is written to ROS 2, where nodes with
 subscription (``rclpy/time_source.py``: best effort, keep-last 1, volatile), which also
 matches reliable publishers; the writer is ``rclcpp::ClockQoS`` (``rclcpp/qos.cpp``: the
 sensor-data profile, best effort, volatile, keep-last 1), what ``ros2 bag play --clock``
-and simulators' ``/clock`` publishers use.
+and simulators' ``/clock`` publishers use. A SimClock follows the clock topic newest-only
+(:meth:`Ros2Transport.keep_newest`): Cyclone's listener thread takes and decodes each
+sample and wakes the event loop only when a sleeper's deadline is reached, time steps
+back, or 10 ms passed (:data:`NEWEST_MAX_DELAY`).
 
 **QoS** (``tf2_ros/qos.hpp``: ``DynamicBroadcasterQoS``, ``StaticBroadcasterQoS``,
 ``DynamicListenerQoS``, ``StaticListenerQoS``):
