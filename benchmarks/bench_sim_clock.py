@@ -1,12 +1,18 @@
 """Benchmark simulated time: what following ``/clock`` costs, and how late a sim-time
 wake-up is.
 
-    .venv/bin/python benchmarks/bench_sim_clock.py [--hz 1000] [--seconds 5] [--quick]
+    .venv/bin/python benchmarks/bench_sim_clock.py [--bus zenoh|ros1|ros2] [--hz 1000]
+        [--seconds 5] [--quick] [--backend asyncio|trio]
 
 A publisher process (this script, ``--role publisher``) sends ``rosgraph_msgs/Clock`` on
-``/clock`` over Zenoh (127.0.0.1, explicit endpoints, multicast scouting off) at ``--hz``,
-one simulated step of ``1/hz`` s per message (real time), on absolute deadlines. This
-process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
+``/clock`` at ``--hz``, one simulated step of ``1/hz`` s per message (real time), on
+absolute deadlines, over ``--bus``: Zenoh (127.0.0.1, explicit endpoints, multicast
+scouting off; the default), ROS 1 (a roscore started on 127.0.0.1 with ROS_IP=127.0.0.1,
+as the ROS 1 tests start it; the publisher is a tfbus ``Ros1Transport`` node sending raw
+``rosgraph_msgs/Clock`` frames over TCPROS) or ROS 2 (Cyclone DDS through tfbus's
+``Ros2Transport``, loopback only, a random domain id). This process follows it with a
+:class:`tfbus.SimClock` on its own bus (``clock_topic="/clock"`` on ROS 1 and ROS 2) and
+prints:
 
 1. **CPU cost of /clock at HZ**: this process's CPU time (``time.process_time``: every
    thread, Zenoh's included) per second of wall time over ``--seconds``, with the
@@ -31,6 +37,11 @@ process follows it with a :class:`tfbus.SimClock` on its own bus and prints:
    every Zenoh runtime one worker thread, (f) (b) with Zenoh's
    ``transport/unicast/lowlatency`` (QoS off) on both sides.
    These are the floor any zenoh-python subscriber pays; ``--no-raw`` leaves them out.
+   On ROS 1 and ROS 2 the floor is instead a bare reader process of the same tfbus
+   publisher, with no tfbus code per message, idle and at ``--hz``: ROS 1 a TCPROS
+   subscriber made by hand (``registerSubscriber``, ``requestTopic``, the connection
+   header, a ``recv`` per wake-up of a reader thread, ``struct`` per frame); ROS 2 a
+   cyclonedds ``DataReader`` with the ``/clock`` QoS whose listener takes raw samples.
 
 Figures only: nothing here asserts a timing (a loaded machine shows it in the figures).
 """
@@ -40,12 +51,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import random
 import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import anyio
 import anyio.to_thread
@@ -66,27 +80,62 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-async def publisher(port: int, hz: float, seconds: float) -> None:
-    """Publish /clock at ``hz`` (0: nothing) for ``seconds`` once a subscriber matches."""
-    transport = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="sim_clock_publisher")
+def make_transport(bus: str, at: str, role: str, clock: bool = True) -> Any:
+    """A transport on ``bus`` (``zenoh``: ``at`` is the port, the publisher listens;
+    ``ros1``: ``at`` is the master URI; ``ros2``: ``at`` is the domain id), named after
+    ``role``; ``clock``: it carries ``/clock`` (what a SimClock follows)."""
+    if bus == "zenoh":
+        side = "listen" if role == "publisher" else "connect"
+        return ZenohTransport(**{side: f"tcp/127.0.0.1:{at}"}, name=f"sim_clock_{role}")
+    if bus == "ros1":
+        from tfbus.transports.ros1 import Ros1Transport
+
+        return Ros1Transport(master_uri=at, host="127.0.0.1",
+                             node_name=f"/sim_clock_{role}_{os.getpid()}",
+                             clock_topic=CLOCK_TOPIC if clock else None)
+    from tfbus.transports.ros2 import Ros2Transport
+
+    return Ros2Transport(domain_id=int(at), clock_topic=CLOCK_TOPIC)
+
+
+async def publisher(bus_kind: str, at: str, hz: float, seconds: float) -> None:
+    """Publish /clock at ``hz`` (0: nothing) for ``seconds`` once a subscriber matches
+    (Zenoh, ROS 1; on ROS 2 at once: best effort, a reader that matches later misses
+    the first ones)."""
+    transport = make_transport(bus_kind, at, "publisher", clock=False)
     async with Bus(transport=transport) as bus:
+        send: Any = None
+        if bus_kind == "ros1":
+            from tfbus.codecs.ros1 import CLOCK_MD5SUM, CLOCK_TYPE, encode_clock
+
+            transport.advertise_raw(CLOCK_TOPIC, CLOCK_TYPE, CLOCK_MD5SUM)
+
+            def send(message: Clock) -> None:
+                transport.send_raw_nowait(CLOCK_TOPIC, encode_clock(message))
+        else:
+            def send(message: Clock) -> None:
+                bus.publish_nowait(CLOCK_TOPIC, message)
         print("LISTENING", flush=True)
         with anyio.fail_after(60):
-            await transport.wait_matching(CLOCK_TOPIC)
+            if bus_kind == "zenoh":
+                await transport.wait_matching(CLOCK_TOPIC)
+            elif bus_kind == "ros1":
+                while transport.connections(CLOCK_TOPIC)[1] == 0:
+                    await anyio.sleep(0.05)  # bounded by fail_after
         if hz <= 0:
             await anyio.sleep(seconds)
             return
         step_ns = round(1e9 / hz)
         t0 = anyio.current_time()
         for k in range(int(seconds * hz)):
-            bus.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(START.ns + k * step_ns)))
+            send(Clock(Time.from_ns(START.ns + k * step_ns)))
             await anyio.sleep(max(0.0, t0 + (k + 1) / hz - anyio.current_time()))
 
 
-def start_publisher(port: int, hz: float, seconds: float) -> subprocess.Popen[str]:
+def start_publisher(bus: str, at: str, hz: float, seconds: float) -> subprocess.Popen[str]:
     proc = subprocess.Popen(
-        [sys.executable, __file__, "--role", "publisher", "--port", str(port), "--hz", str(hz),
-         "--seconds", str(seconds)],
+        [sys.executable, __file__, "--role", "publisher", "--bus", bus, "--at", at,
+         "--hz", str(hz), "--seconds", str(seconds)],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     assert proc.stdout is not None
@@ -97,17 +146,19 @@ def start_publisher(port: int, hz: float, seconds: float) -> subprocess.Popen[st
     return proc
 
 
-async def follow(port: int, hz: float, seconds: float, wakeups: int,
+async def follow(bus_kind: str, at: str, hz: float, seconds: float, wakeups: int,
                  sim_clock: bool = True) -> dict[str, float]:
-    """Follow a publisher at ``hz``: CPU share over ``seconds``, then wake-up lateness
-    (``sim_clock`` False: a no-op subscriber on /clock instead of the SimClock, which
-    is the cost of receiving the topic alone)."""
+    """Follow a publisher at ``hz`` on ``bus_kind`` (``at``: :func:`make_transport`):
+    CPU share over ``seconds``, then wake-up lateness (``sim_clock`` False: a no-op
+    subscriber on /clock instead of the SimClock, which is the cost of receiving the
+    topic alone)."""
     settle = 1.5
     extra = (wakeups * 12 / hz + 5.0) if hz > 0 else 0.0
-    proc = start_publisher(port, hz, settle + seconds + extra + 2.0)
+    connect = 0.0 if bus_kind == "zenoh" else 60.0  # ROS: the first /clock is awaited
+    proc = start_publisher(bus_kind, at, hz, settle + seconds + extra + connect + 2.0)
     result: dict[str, float] = {}
     try:
-        transport = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="sim_clock_follower")
+        transport = make_transport(bus_kind, at, "follower")
         async with Bus(transport=transport) as bus, SimClock(bus) as clock:
             counted = [0]
             if not sim_clock:
@@ -121,6 +172,10 @@ async def follow(port: int, hz: float, seconds: float, wakeups: int,
             def received() -> int:
                 return clock.received if sim_clock else counted[0]
 
+            if hz > 0 and bus_kind != "zenoh":  # matched once the first /clock arrives
+                with anyio.fail_after(connect):
+                    while received() == 0:
+                        await anyio.sleep(0.05)  # bounded by fail_after
             await anyio.sleep(settle)
             received0 = received()
             wall0, cpu0 = time.perf_counter(), time.process_time()
@@ -267,6 +322,144 @@ def raw(hz: float, seconds: float, mode: str, env: dict[str, str], extra: str) -
         pub.wait(timeout=10)
 
 
+def ros1_floor_reader(master_uri: str, busy: bool, seconds: float) -> None:
+    """The ROS 1 floor (no tfbus per message): a bare TCPROS subscriber of /clock --
+    ``registerSubscriber`` at the master, ``requestTopic`` at the publisher, the
+    connection header, then one ``recv`` per wake-up of a reader thread and each
+    8-byte ``rosgraph_msgs/Clock`` frame unpacked with ``struct``. Prints this
+    process's CPU share over ``seconds`` as one JSON line (``busy``: once the first
+    message arrived)."""
+    import struct
+    import threading
+    import xmlrpc.client
+
+    from tfbus.codecs.ros1 import CLOCK_MD5SUM, CLOCK_TYPE
+
+    caller = f"/sim_clock_floor_{os.getpid()}"
+    master = xmlrpc.client.ServerProxy(master_uri)
+    deadline = time.monotonic() + 60
+    while True:  # the publisher registered before us: its URI is in the answer
+        _code, _status, uris = master.registerSubscriber(  # type: ignore[misc]
+            caller, CLOCK_TOPIC, CLOCK_TYPE, "http://127.0.0.1:9/")
+        if uris or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
+    for uri in reversed(uris):  # publishers of earlier runs (ended) may still be listed
+        try:
+            _code, _status, proto = xmlrpc.client.ServerProxy(uri).requestTopic(  # type: ignore[misc]
+                caller, CLOCK_TOPIC, [["TCPROS"]])
+            break
+        except OSError:
+            continue
+    else:
+        raise RuntimeError(f"no /clock publisher answers: {uris}")
+    sock = socket.create_connection((proto[1], proto[2]), timeout=60)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    fields = {"callerid": caller, "topic": CLOCK_TOPIC, "type": CLOCK_TYPE,
+              "md5sum": CLOCK_MD5SUM, "tcp_nodelay": "1"}
+    body = b"".join(len(f).to_bytes(4, "little") + f
+                    for f in (f"{k}={v}".encode() for k, v in fields.items()))
+    sock.sendall(len(body).to_bytes(4, "little") + body)
+    count = [-1]  # the publisher's connection header is the first frame
+    first = threading.Event()
+    unpack = struct.Struct("<II").unpack_from
+
+    def read() -> None:
+        buf = b""
+        while data := sock.recv(65536):
+            buf += data
+            pos = 0
+            while len(buf) - pos >= 4:
+                n = int.from_bytes(buf[pos:pos + 4], "little")
+                if len(buf) - pos - 4 < n:
+                    break
+                if count[0] >= 0:
+                    unpack(buf, pos + 4)  # secs, nsecs
+                    first.set()
+                count[0] += 1
+                pos += 4 + n
+            buf = buf[pos:]
+
+    threading.Thread(target=read, daemon=True).start()
+    if busy and not first.wait(60):
+        raise RuntimeError("no /clock within 60 s")
+    _measure(count, seconds)
+
+
+def ros2_floor_reader(domain_id: int, busy: bool, seconds: float) -> None:
+    """The ROS 2 floor (no tfbus per message): a bare cyclonedds reader of ``rt/clock``
+    with the ``/clock`` reader QoS (best effort, keep-last 1) whose
+    ``on_data_available`` listener takes the raw samples in Cyclone's thread and
+    unpacks each ``sec``/``nanosec`` with ``struct``. Prints this process's CPU share
+    over ``seconds`` as one JSON line (``busy``: once the first message arrived)."""
+    import struct
+    import threading
+
+    from cyclonedds import _clayer
+    from cyclonedds.core import Listener
+    from cyclonedds.domain import Domain, DomainParticipant
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    from tfbus.transports.ros2.dds import Clock_, cyclone_config
+    from tfbus.transports.ros2.transport import _ANY_STATE, CLOCK_READER_QOS
+
+    domain = Domain(domain_id, cyclone_config())
+    participant = DomainParticipant(domain_id)
+    count = [0]
+    first = threading.Event()
+    unpack = struct.Struct("<iI").unpack_from
+
+    def on_data(reader: Any) -> None:
+        samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, 64)
+        if isinstance(samples, int):
+            return
+        for data, info in samples:
+            if info.valid_data:
+                unpack(data, 4)  # after the 4-byte CDR encapsulation header
+                count[0] += 1
+        first.set()
+
+    topic = Topic(participant, "rt/clock", Clock_)
+    reader = DataReader(participant, topic, CLOCK_READER_QOS,
+                        listener=Listener(on_data_available=on_data))  # type: ignore[no-untyped-call]
+    if busy and not first.wait(60):
+        raise RuntimeError("no /clock within 60 s")
+    _measure(count, seconds)
+    del reader, domain
+
+
+def _measure(count: list[int], seconds: float) -> None:
+    """Print this process's CPU share and ``count``'s rate over ``seconds`` (after a
+    1.5 s settle) as one JSON line, and end the process (no teardown)."""
+    time.sleep(1.5)
+    n0, wall0, cpu0 = count[0], time.perf_counter(), time.process_time()
+    time.sleep(seconds)
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    print(json.dumps({"cpu_share": cpu / wall, "rate": (count[0] - n0) / wall}), flush=True)
+    os._exit(0)
+
+
+def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]:
+    """One floor measurement on ROS 1 / ROS 2: a tfbus publisher process at ``hz``
+    (0: nothing sent) and a bare reader process (:func:`ros1_floor_reader`,
+    :func:`ros2_floor_reader`)."""
+    pub = start_publisher(bus_kind, at, hz, seconds + 90)
+    try:
+        sub = subprocess.run(
+            [sys.executable, __file__, "--role", "floor-reader", "--bus", bus_kind, "--at", at,
+             "--hz", str(hz), "--seconds", str(seconds)],
+            capture_output=True, text=True, timeout=seconds + 90,
+        )  # fmt: skip
+        lines = sub.stdout.strip().splitlines()
+        if not lines:
+            raise RuntimeError(f"the floor reader failed: {sub.stderr[-2000:]}")
+        return dict(json.loads(lines[-1]))
+    finally:
+        pub.kill()
+        pub.wait(timeout=10)
+
+
 def _sim_clock_cost_per_message(n: int = 100_000) -> float:
     """Seconds of CPU per /clock a SimClock spends on its own (``_on_clock``, called as
     the bus delivers it; no transport), median of 5 runs of ``n``."""
@@ -283,11 +476,21 @@ def _sim_clock_cost_per_message(n: int = 100_000) -> float:
 
 
 async def main(args: argparse.Namespace) -> None:
-    print(f"tfbus sim-clock benchmark; Python {sys.version.split()[0]}; Zenoh on 127.0.0.1; "
-          f"/clock at {args.hz:g} Hz, {args.seconds:g} s windows")
-    idle = await follow(free_port(), 0.0, args.seconds, 0)
-    plain = await follow(free_port(), args.hz, args.seconds, 0, sim_clock=False)
-    busy = await follow(free_port(), args.hz, args.seconds, args.wakeups)
+    names = {"zenoh": "Zenoh", "ros1": "ROS 1 (TCPROS)", "ros2": "ROS 2 (Cyclone DDS)"}
+    print(f"tfbus sim-clock benchmark; Python {sys.version.split()[0]}; {args.backend}; "
+          f"{names[args.bus]} on 127.0.0.1; /clock at {args.hz:g} Hz, {args.seconds:g} s windows; "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+
+    def at() -> str:  # a fresh port / domain per run; ROS 1: this run's master
+        if args.bus == "zenoh":
+            return str(free_port())
+        if args.bus == "ros2":
+            return str(random.randint(1, 100))
+        return str(args.at)
+
+    idle = await follow(args.bus, at(), 0.0, args.seconds, 0)
+    plain = await follow(args.bus, at(), args.hz, args.seconds, 0, sim_clock=False)
+    busy = await follow(args.bus, at(), args.hz, args.seconds, args.wakeups)
     cost = busy["cpu_share"] - idle["cpu_share"]
     own = _sim_clock_cost_per_message()
     print()
@@ -313,7 +516,21 @@ async def main(args: argparse.Namespace) -> None:
     print(f"  task resumed (+ event-loop turn)  min {busy['resumed_min']:.3f}  median "
           f"{busy['resumed_median']:.3f}  max {busy['resumed_max']:.3f} steps")
     print(f"  dropped /clock {busy['dropped']:.0f}, jumps back {busy['jumps']:.0f}")
-    if args.raw:
+    if args.raw and args.bus != "zenoh":
+        print()
+        print(f"floor on {names[args.bus]} (no tfbus per message): a bare reader process's "
+              "CPU share of one core, the same publisher")
+        f_idle = await anyio.to_thread.run_sync(floor, args.bus, at(), 0.0, args.seconds)
+        f_busy = await anyio.to_thread.run_sync(floor, args.bus, at(), args.hz, args.seconds)
+        what = ("bare TCPROS reader (a recv per wake-up, struct per frame)" if args.bus == "ros1"
+                else "bare cyclonedds reader (raw take in the listener)")
+        print(f"  {what}, idle      {f_idle['cpu_share'] * 100:6.2f} %")
+        print(f"  {what}, /clock    {f_busy['cpu_share'] * 100:6.2f} %   "
+              f"({f_busy['rate']:.0f}/s received)")
+        print(f"  floor cost of /clock at {args.hz:g} Hz (busy - idle)         "
+              f"{(f_busy['cpu_share'] - f_idle['cpu_share']) * 100:6.2f} %   "
+              f"(tfbus SimClock: {cost * 100:.2f} %)")
+    elif args.raw:
         print()
         print(f"raw zenoh-python (no tfbus), 8-byte samples at {args.hz:g} Hz: the subscriber "
               "process's CPU share of one core")
@@ -328,7 +545,14 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--role", default="follower",
-                        choices=["follower", "publisher", "raw-publisher", "raw-subscriber"])
+                        choices=["follower", "publisher", "raw-publisher", "raw-subscriber",
+                                 "floor-reader"])
+    parser.add_argument("--bus", default="zenoh", choices=["zenoh", "ros1", "ros2"],
+                        help="the transport /clock travels on (ros1: a roscore on 127.0.0.1 "
+                             "is started; ros2: Cyclone DDS, loopback, a random domain id)")
+    parser.add_argument("--at", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--backend", default="asyncio", choices=["asyncio", "trio"],
+                        help="the follower's event loop (the publisher runs on asyncio)")
     parser.add_argument("--mode", default="callback", help=argparse.SUPPRESS)
     parser.add_argument("--zenoh", default="", help=argparse.SUPPRESS)
     parser.add_argument("--no-raw", dest="raw", action="store_false",
@@ -342,10 +566,29 @@ if __name__ == "__main__":
     if ns.quick:
         ns.seconds, ns.wakeups = 2.0, 50
     if ns.role == "publisher":
-        anyio.run(publisher, ns.port, ns.hz, ns.seconds)
+        anyio.run(publisher, ns.bus, ns.at, ns.hz, ns.seconds)
+    elif ns.role == "floor-reader":
+        if ns.bus == "ros1":
+            ros1_floor_reader(ns.at, ns.hz > 0, ns.seconds)
+        else:
+            ros2_floor_reader(int(ns.at), ns.hz > 0, ns.seconds)
     elif ns.role == "raw-publisher":
         raw_publisher(ns.port, ns.hz, ns.seconds, ns.zenoh)
     elif ns.role == "raw-subscriber":
         raw_subscriber(ns.port, ns.mode, ns.seconds, ns.zenoh)
+    elif ns.bus == "ros1":
+        sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "peers" / "ros1"))
+        from ros1_peers import ros1_missing, start_master
+
+        why = ros1_missing(("roscpp",))
+        if why is not None:
+            sys.exit(f"ROS 1 unavailable: {why}")
+        with tempfile.TemporaryDirectory() as tmp:
+            master = start_master(Path(tmp) / "ros_home")
+            try:
+                ns.at = master.uri
+                anyio.run(main, ns, backend=ns.backend)
+            finally:
+                master.stop()
     else:
-        anyio.run(main, ns)
+        anyio.run(main, ns, backend=ns.backend)

@@ -61,6 +61,8 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "robot_state": ([], ["--quick"], 900),
     "view": (["--seconds", "10"], ["--seconds", "3"], 900),
     "sim_clock": ([], ["--quick"], 600),
+    "sim_clock-ros1": (["--bus", "ros1"], ["--bus", "ros1", "--quick"], 900),
+    "sim_clock-ros2": (["--bus", "ros2"], ["--bus", "ros2", "--quick"], 900),
 }
 
 #: Pages whose ``perf-quote`` blocks are filled (performance.md has its own block).

@@ -984,8 +984,52 @@ async def test_tfbus_clock_to_a_tfbus_sim_clock_with_malformed_samples(anyio_bac
             writer.close()
     assert clock.dropped == 0 and clock.jumps == 0  # the junk never reached the bus
     stats = b_t.statistics()
-    assert stats.malformed >= 2 and stats.delivered == stats.received - stats.malformed
+    assert stats.malformed >= 2
+    assert stats.delivered + stats.coalesced == stats.received - stats.malformed
     assert a_t.statistics().sent >= 1 and a_t.statistics().send_errors == 0
+
+
+@pytest.mark.anyio
+async def test_sim_clock_follows_dds_clock_newest_only(anyio_backend: str) -> None:
+    """A SimClock on the ROS 2 transport follows /clock newest-only
+    (Ros2Transport.keep_newest): 300 samples sent back to back, stamps 1 ms apart, reach
+    the event loop only when due (the first, the sleeper's deadline, every 10 ms), the
+    rest counted in ``coalesced``; the clock ends at the last stamp; a step back is
+    delivered at once and counted as one jump."""
+    d = new_domain()
+    a_t = Ros2Transport(domain_id=d, clock_topic="/clock")
+    b_t = Ros2Transport(domain_id=d, clock_topic="/clock")
+    async with Bus(transport=a_t) as a, Bus(transport=b_t) as b, SimClock(b) as clock:
+        with anyio.fail_after(WAIT):
+            while clock.now() != Time(100):  # best effort, volatile: until matched
+                a.publish_nowait("/clock", Clock(Time(100)))
+                with anyio.move_on_after(0.1):
+                    await clock.sleep_until(Time(100))
+        received0, coalesced0 = b_t.statistics().received, b_t.statistics().coalesced
+        seen0 = clock.received
+        last = Time(100) + Duration.from_sec(0.3)
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(clock.sleep_until, last)
+            await anyio.sleep(0)  # the deadline is filed before the samples are sent
+            for k in range(1, 301):
+                a.publish_nowait("/clock", Clock(Time.from_ns(Time(100).ns + k * 1_000_000)))
+            with anyio.fail_after(WAIT):
+                while clock.now() != last:  # best effort: the last one again until heard
+                    a.publish_nowait("/clock", Clock(last))
+                    with anyio.move_on_after(0.1):
+                        await clock.sleep_until(last)
+        stats = b_t.statistics()
+        taken = stats.received - received0
+        seen = clock.received - seen0
+        assert 1 <= seen < taken  # the loop saw fewer samples than Cyclone delivered
+        assert stats.coalesced - coalesced0 == taken - seen
+        assert stats.delivered + stats.coalesced == stats.received - stats.malformed
+        assert clock.jumps == 0 and clock.dropped == 0
+        with anyio.fail_after(WAIT):
+            while clock.jumps == 0:  # a step back reaches the loop at once
+                a.publish_nowait("/clock", Clock(Time(50)))
+                await anyio.sleep(0.01)  # polling a bounded condition, not a fixed wait
+        assert clock.now() == Time(50) and clock.jumps == 1
 
 
 @pytest.mark.anyio

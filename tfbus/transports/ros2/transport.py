@@ -31,7 +31,10 @@ and a ``Clock`` published on the bus is written to ROS 2, where nodes with
 subscription (``rclpy/time_source.py``: best effort, keep-last 1, volatile), which also
 matches reliable publishers; the writer is ``rclcpp::ClockQoS`` (``rclcpp/qos.cpp``: the
 sensor-data profile, best effort, volatile, keep-last 1), what ``ros2 bag play --clock``
-and simulators' ``/clock`` publishers use.
+and simulators' ``/clock`` publishers use. A SimClock follows the clock topic newest-only
+(:meth:`Ros2Transport.keep_newest`): Cyclone's listener thread takes and decodes each
+sample and wakes the event loop only when a sleeper's deadline is reached, time steps
+back, or 10 ms passed (:data:`NEWEST_MAX_DELAY`).
 
 **QoS** (``tf2_ros/qos.hpp``: ``DynamicBroadcasterQoS``, ``StaticBroadcasterQoS``,
 ``DynamicListenerQoS``, ``StaticListenerQoS``):
@@ -82,6 +85,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -101,7 +105,7 @@ from cyclonedds.util import duration
 
 from tfbus.codecs.cdr import decode_clock, decode_tf, encode_clock, encode_tf
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
-from tfbus.messages import TFMessage, TransformStamped
+from tfbus.messages import Clock, TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
@@ -193,12 +197,101 @@ class Ros2Statistics(TransportStatistics):
         not_mapped: messages on topics other than ``/tf``, ``/tf_static`` and the clock
             topic (not sent).
         batches: event-loop wake-ups that took samples.
+        coalesced: clock samples replaced by a newer one before the event loop saw
+            them (the clock topic followed newest-only by a
+            :class:`~tfbus.clock.SimClock`: :meth:`Ros2Transport.keep_newest`).
     """
 
     send_dropped: int = 0
     not_connected: int = 0
     not_mapped: int = 0
     batches: int = 0
+    coalesced: int = 0
+
+
+NEWEST_MAX_DELAY: Final = 0.01
+"""Longest wall time, seconds, a clock sample followed newest-only
+(:meth:`Ros2Transport.keep_newest`) waits in Cyclone's thread while newer ones arrive: the
+bus receives the newest at least this often while ``/clock`` flows (as the Zenoh
+transport's ``NEWEST_MAX_DELAY``)."""
+
+
+class _NewestClock:
+    """The clock topic of a :class:`Ros2Transport` followed newest-only: Cyclone's
+    listener thread takes and decodes each sample, keeps only the newest, and queues it
+    for the event loop (waking it) when a follower says it is due, when it steps back
+    (the one kept before it is queued first), or :data:`NEWEST_MAX_DELAY` after the last
+    wake-up. Every access holds ``lock``."""
+
+    __slots__ = ("dues", "kept", "last_ns", "lock", "queue", "waked")
+
+    def __init__(self) -> None:
+        self.dues: tuple[Callable[[int], bool], ...] = ()
+        self.lock = threading.Lock()
+        self.kept: Clock | None = None  # the newest sample not queued yet
+        self.last_ns = -1  # the stamp of the last sample, -1 before one
+        self.waked = 0.0  # time.monotonic() of the last wake-up
+        self.queue: list[Clock] = []  # for the event loop, in order
+
+    def offer(self, message: Clock, stats: Ros2Statistics) -> bool:
+        """A decoded sample (``lock`` held): kept, or queued; True if the loop must wake."""
+        ns = message.clock.ns
+        pending, self.kept = self.kept, message  # stored before ``due`` reads
+        now = time.monotonic()
+        back = ns < self.last_ns
+        self.last_ns = ns
+        if back or now - self.waked >= NEWEST_MAX_DELAY or any(due(ns) for due in self.dues):
+            self.kept = None
+            self.waked = now
+            if pending is not None:
+                if back:
+                    self.queue.append(pending)
+                else:
+                    stats.coalesced += 1
+            self.queue.append(message)
+            return True
+        if pending is not None:
+            stats.coalesced += 1
+        return False
+
+    def take_all(self) -> list[Clock]:
+        """The queued samples and the one kept, in order, removed (``lock`` held)."""
+        out, self.queue = self.queue, []
+        if self.kept is not None:
+            out.append(self.kept)
+            self.kept = None
+        return out
+
+
+class Ros2ClockFollower:
+    """One follower of a :class:`Ros2Transport`'s clock topic kept newest-only (what
+    :meth:`Ros2Transport.keep_newest` returns; inert for a topic that is not the
+    transport's clock topic)."""
+
+    __slots__ = ("_due", "_transport")
+
+    def __init__(self, transport: Ros2Transport | None, due: Callable[[int], bool]) -> None:
+        self._transport = transport
+        self._due = due
+
+    def poke(self) -> None:
+        """Deliver the sample kept, if any, at the event loop's next turn (call it when
+        filing a deadline: a sample kept before the deadline existed may reach it)."""
+        if self._transport is not None:
+            self._transport._poke_clock()
+
+    def close(self) -> None:
+        """End this follower (idempotent); with none left the clock topic is delivered
+        sample by sample again, the sample kept first."""
+        transport, self._transport = self._transport, None
+        if transport is not None:
+            newest = transport._newest
+            with newest.lock:
+                dues = list(newest.dues)
+                if self._due in dues:
+                    dues.remove(self._due)
+                newest.dues = tuple(dues)
+            transport._wake_clock()
 
 
 # -- one Cyclone domain per (process, domain id), shared by the transports on it ------------
@@ -339,6 +432,7 @@ class Ros2Transport:
         self._statics: dict[str, TransformStamped] = {}
         self._endpoints: _Endpoints | None = None
         self._wakeup: ThreadWakeup | None = None
+        self._newest = _NewestClock()
         self._running = False
         self._closers: list[Callable[[], None]] = []
 
@@ -410,6 +504,35 @@ class Ros2Transport:
         """Call ``callback()`` (once) when the transport leaves the domain, before its
         participant and every endpoint made on it are deleted."""
         self._closers.append(callback)
+
+    def keep_newest(self, topic: str, due: Callable[[int], bool]) -> Ros2ClockFollower:
+        """Deliver the clock topic newest-only (rclpy's ``TimeSource`` subscribes to
+        ``/clock`` keep-last 1, ``time_source.py``): Cyclone's listener thread takes and
+        decodes each sample and keeps only the newest, waking the event loop when
+        ``due(stamp_ns)`` (called in Cyclone's thread, must not block) is true, when a
+        stamp is earlier than the previous one (a jump back: the kept sample and it are
+        delivered in order), or :data:`NEWEST_MAX_DELAY` after the last wake-up; every
+        wake-up also delivers whatever is kept. Samples replaced before the loop saw
+        them are counted in ``coalesced``, malformed ones in ``malformed`` (dropped).
+        A :class:`~tfbus.clock.SimClock` on a ROS 2 bus asks for this
+        (:class:`~tfbus.clock.KeepsNewest`): the loop runs when a sleeper's deadline
+        is reached, not at every ``/clock``. Several followers may keep the topic: a
+        sample is due when one says so.
+
+        Args:
+            topic: the topic; any other than ``clock_topic`` gets an inert follower.
+            due: ``due(stamp_ns) -> bool``, whether a sample must reach the loop now.
+
+        Returns:
+            the follower: :meth:`Ros2ClockFollower.poke` after filing a deadline,
+            :meth:`Ros2ClockFollower.close` to end it.
+        """
+        if topic != self._clock_topic:
+            return Ros2ClockFollower(None, due)
+        newest = self._newest
+        with newest.lock:
+            newest.dues = (*newest.dues, due)
+        return Ros2ClockFollower(self, due)
 
     def serve_lookups(self, buffer: Buffer, bus: object, *, name: str = "/tf2_buffer_server",
                       max_pending: int = 1000, max_per_peer: int = 100,
@@ -567,6 +690,49 @@ class Ros2Transport:
         if wakeup is not None:
             wakeup.wake()
 
+    def _on_clock_data(self, reader: DataReader[Any]) -> None:
+        # Cyclone's receive thread: followed newest-only, the samples are taken here and
+        # the loop woken only when one is due (keep_newest); else as every topic.
+        if self._newest.dues:
+            if self._offer_clock(reader):
+                self._on_data(reader)
+        else:
+            self._on_data(reader)
+
+    def _offer_clock(self, reader: DataReader[Any]) -> bool:
+        """Take and decode the clock samples waiting (Cyclone's thread or the loop), keep
+        the newest (:class:`_NewestClock`); True if the loop must wake. Taken under the
+        lock: samples two threads take are offered in the order they were taken."""
+        stats = self._stats
+        wake = False
+        newest = self._newest
+        with newest.lock:
+            samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, self._max_batch)
+            if isinstance(samples, int) or not samples:
+                return False
+            for data, info in samples:
+                if not info.valid_data:
+                    continue  # a writer left (unregister/dispose): no data
+                stats.received += 1
+                try:
+                    message = decode_clock(data)
+                except WireDecodeError:
+                    stats.malformed += 1
+                    continue
+                wake = newest.offer(message, stats) or wake
+        return wake
+
+    def _wake_clock(self) -> None:
+        """Wake the loop to deliver what the newest-only clock holds."""
+        wakeup = self._wakeup
+        if wakeup is not None:
+            wakeup.wake()
+
+    def _poke_clock(self) -> None:
+        """A deadline is being filed: deliver the clock sample kept, if any."""
+        if self._newest.kept is not None:
+            self._wake_clock()
+
     def _open(self) -> _Endpoints:
         _acquire_domain(self._domain_id, self._config)
         participant: DomainParticipant | None = None
@@ -592,7 +758,10 @@ class Ros2Transport:
                 clock = Topic(participant, self._clock_dds, Clock_)
                 writers[self._clock_topic] = DataWriter(participant, clock, CLOCK_WRITER_QOS)
                 readers[self._clock_topic] = DataReader(
-                    participant, clock, CLOCK_READER_QOS, listener=listener
+                    participant,
+                    clock,
+                    CLOCK_READER_QOS,
+                    listener=Listener(on_data_available=self._on_clock_data),  # type: ignore[no-untyped-call]
                 )
             return _Endpoints(participant, readers, writers)
         except DDSException as exc:
@@ -626,7 +795,20 @@ class Ros2Transport:
         await wakeup.serve(drain)
 
     def _take(self, bus: BusLike, topic: str, reader: DataReader[Any]) -> bool:
-        """Take, decode and deliver up to ``max_batch`` samples; True if it took that many."""
+        """Take, decode and deliver up to ``max_batch`` samples; True if it took that many.
+        The clock topic: what the newest-only follower holds first (in order), then, not
+        followed newest-only, the reader's samples."""
+        if topic == self._clock_topic:
+            newest = self._newest
+            if newest.dues:
+                self._offer_clock(reader)
+            with newest.lock:
+                held = newest.take_all()
+            if held:
+                bus.deliver_many_nowait(topic, held)
+                self._stats.delivered += len(held)
+            if newest.dues:
+                return False
         samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, self._max_batch)
         if isinstance(samples, int) or not samples:
             return False
