@@ -5,7 +5,7 @@ A ROS 1 bag (``--format mcap``: a ROS 2 bag folder holding one MCAP file) of abo
 ``--size-mb`` MB is written (streamed through tfbus's writer: a
 robot-like mix, 10 dynamic frames per /tf message at 100 Hz and one /tf_static), then
 each command runs in its own process and is timed; its peak anonymous RSS (``RssAnon``
-sampled every 20 ms: what it allocates) and its peak RSS (``ru_maxrss`` by ``os.wait4``,
+sampled every 20 ms: what it allocates) and its peak RSS (``VmHWM`` sampled likewise,
 which also counts the recording's pages the reader maps) are printed. ``diagnose()`` is
 also timed in this process (no interpreter start-up). The anonymous RSS should not grow
 with the file: the doctor keeps per-link state only.
