@@ -1,16 +1,18 @@
 """``tfbus doctor`` speed and memory: MB/s and peak RSS against ``tfbus bag-info`` on the
 same recording.
 
-A ROS 1 bag of about ``--size-mb`` MB is written (streamed through tfbus's writer: a
+A ROS 1 bag (``--format mcap``: a ROS 2 bag folder holding one MCAP file) of about
+``--size-mb`` MB is written (streamed through tfbus's writer: a
 robot-like mix, 10 dynamic frames per /tf message at 100 Hz and one /tf_static), then
 each command runs in its own process and is timed; its peak anonymous RSS (``RssAnon``
-sampled every 20 ms: what it allocates) and its peak RSS (``ru_maxrss`` by ``os.wait4``,
+sampled every 20 ms: what it allocates) and its peak RSS (``VmHWM`` sampled likewise,
 which also counts the recording's pages the reader maps) are printed. ``diagnose()`` is
 also timed in this process (no interpreter start-up). The anonymous RSS should not grow
 with the file: the doctor keeps per-link state only.
 Prints figures only.
 
-    .venv/bin/python benchmarks/bench_doctor.py [--size-mb 50] [--keep PATH]
+    .venv/bin/python benchmarks/bench_doctor.py [--size-mb 50] [--format ros1|mcap]
+        [--keep PATH]
 """
 
 from __future__ import annotations
@@ -65,18 +67,21 @@ def _status_kib(pid: int, key: str) -> int:
 def run_child(*args: str) -> tuple[float, float, float]:
     """Run ``python -m tfbus.cli ARGS``: (seconds, peak anonymous RSS MB, peak RSS MB).
 
-    Peak RSS (``ru_maxrss``) counts the pages of the recording the reader maps
-    (file-backed, given back under pressure); the anonymous RSS (``RssAnon``, sampled
-    every 20 ms) is the memory the process allocates."""
+    Peak RSS (``VmHWM``, the high-water mark of the process after its ``exec``; not
+    ``ru_maxrss``, which on Linux also counts this benchmark's own RSS copied by
+    ``fork`` before the ``exec``) counts the pages of the recording the reader maps
+    (file-backed, given back under pressure); the anonymous RSS (``RssAnon``) is the
+    memory the process allocates. Both are sampled every 20 ms."""
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     start = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "tfbus.cli", *args], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    anon = 0
+    anon = hwm = 0
     while True:
         anon = max(anon, _status_kib(proc.pid, "RssAnon"))
-        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        hwm = max(hwm, _status_kib(proc.pid, "VmHWM"))
+        pid, status, _usage = os.wait4(proc.pid, os.WNOHANG)
         if pid:
             break
         time.sleep(0.02)
@@ -84,22 +89,26 @@ def run_child(*args: str) -> tuple[float, float, float]:
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode not in (0, 1):
         raise SystemExit(f"tfbus {' '.join(args)} exited {proc.returncode}")
-    return elapsed, anon / 1024, usage.ru_maxrss / 1024  # KiB on Linux
+    return elapsed, anon / 1024, hwm / 1024
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size-mb", type=float, default=50.0, help="recording size (MB)")
+    parser.add_argument("--format", choices=("ros1", "mcap"), default="ros1",
+                        help="recording format (default ros1)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="write the recording here and keep it (default: a temp dir)")
     args = parser.parse_args()
     n = max(1, int(args.size_mb * 1e6 / BYTES_PER_MSG))
     tmp = Path(tempfile.mkdtemp(prefix="bench_doctor_"))
-    path = args.keep if args.keep is not None else tmp / "bench.bag"
+    default = tmp / ("bench.bag" if args.format == "ros1" else "bench")
+    path = args.keep if args.keep is not None else default
     try:
         start = time.perf_counter()
-        write_bag(path, messages(n))
-        size = path.stat().st_size / 1e6
+        write_bag(path, messages(n), format=args.format)
+        files = [path] if path.is_file() else list(path.iterdir())
+        size = sum(f.stat().st_size for f in files) / 1e6
         print(f"recording: {path} ({size:.1f} MB, {n + 1} messages, {n * PER_MSG + 1} "
               f"transforms), written in {time.perf_counter() - start:.1f} s")
         from tfbus.doctor import diagnose

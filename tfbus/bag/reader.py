@@ -2,7 +2,9 @@
 
 Which library reads what:
 
-* ROS 1 ``.bag`` and ROS 2 bag folders / ``.db3`` files: rosbags' indexed readers;
+* ROS 1 ``.bag``: chunk by chunk through its chunk-info records (:mod:`tfbus.bag.stream`),
+  in memory bounded by a chunk rather than by the message count;
+* ROS 2 bag folders / ``.db3`` files: rosbags' indexed reader;
 * a bare ``.mcap`` file: the format's own ``mcap`` package (``SeekingReader`` through the
   summary; a file written without a summary is read from the start).
 
@@ -41,6 +43,7 @@ from tfbus.bag.formats import (
     fmt_time,
 )
 from tfbus.bag.salvage import mcap_channel_source, scan_mcap, scan_ros1
+from tfbus.bag.stream import read_ros1_chunks
 from tfbus.errors import BagError, BagFormatError, BagNotFoundError, BagReadError, ScanError
 from tfbus.messages import TFMessage
 from tfbus.time import Time
@@ -87,8 +90,11 @@ def read_messages(
             transient-local subscriber joining at ``start`` would receive them.
 
     Yields:
-        :class:`BagMessage` (bag time, topic, TFMessage, authority). A damaged file
-        (truncated, or with no index) is read in file order up to the damage.
+        :class:`BagMessage` (bag time, topic, TFMessage, authority); in a ROS 1 bag,
+        equal bag times in connection order, then file order (as rosbags' reader). A
+        damaged file (truncated, or with no index) is read in file order up to the
+        damage. A ROS 1 bag or an MCAP file is read one chunk at a time: memory does not
+        grow with the message count.
 
     Raises:
         BagNotFoundError: the path does not exist.
@@ -541,6 +547,8 @@ def _indexed(
         if p.suffix != ".mcap":
             raise BagFormatError(f"{p}: an mcap file must be named *.mcap", p)
         return _raw_mcap(p, topics, lo, hi)
+    if fmt is BagFormat.ROS1:
+        return read_ros1_chunks(p, topics, lo, hi)
     return _raw_rosbags(p, fmt, topics, lo, hi)
 
 
