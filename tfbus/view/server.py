@@ -20,7 +20,7 @@ import re
 import socket
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -31,6 +31,9 @@ from tfbus.monitor import TfSummary
 from tfbus.view.guard import PageGuard
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
+
+if TYPE_CHECKING:
+    from tfbus.doctor import Finding
 
 __all__ = ["PortInUseError", "TfPage", "text"]
 
@@ -45,6 +48,11 @@ AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
 _PANEL_BOX = "overflow-x:auto;max-width:100%"
 _PANEL_TABLE = "font-size:0.75em;white-space:nowrap;border-spacing:0.6em 0"
 # cells never wrap (an id is one line); a table wider than the panel scrolls sideways
+
+MAX_FINDINGS_SHOWN = 50
+"""Findings listed in the page's doctor panel at most (the most severe first); the rest
+are counted in one line."""
+_LEVEL_COLOURS = {"error": "#d03030", "warning": "#c08000", "info": "#3070c0"}
 
 AXES_LENGTH = 0.25
 """Length of each drawn axis, metres."""
@@ -179,6 +187,10 @@ class TfPage:
         self.status = gui.add_html("")
         self.tree = gui.add_html("")
         self.notes = gui.add_html("")
+        with gui.add_folder("tf doctor"):
+            self.findings = gui.add_html("")
+        self.findings_html = ""
+        """The doctor panel's HTML as last sent (:meth:`set_findings`)."""
         self.notes_html = ""
         """The notes' HTML as last sent (:meth:`set_notes`)."""
         self.panel_html = ""
@@ -290,6 +302,38 @@ class TfPage:
             if value != self.notes_html:
                 self.notes_html = value
                 self.notes.content = value
+
+    def set_findings(self, findings: Sequence[Finding] | None, note: str = "") -> None:
+        """List ``tfbus doctor``'s findings in the page's "tf doctor" folder: per finding its
+        level, check, message, frames, senders and advice (every field as text: ids are
+        escaped as in the frame tree), the most severe first as
+        :meth:`~tfbus.doctor.Doctor.report` orders them, at most
+        :data:`MAX_FINDINGS_SHOWN`; ``note`` is a line above them (what was diagnosed).
+        ``None``: no diagnosis (the panel is empty); ``[]``: "no findings"."""
+        if findings is None:
+            value = ""
+        else:
+            items = []
+            for f in findings[:MAX_FINDINGS_SHOWN]:
+                level = str(f.level)
+                colour = _LEVEL_COLOURS.get(level, "inherit")
+                who = (f"<br>frames: {', '.join(_h(x) for x in f.frames)}" if f.frames else "")
+                who += (f"<br>senders: {', '.join(_h(x) for x in f.senders)}"
+                        if f.senders else "")
+                advice = f"<br><i>{_h(f.advice)}</i>" if f.advice else ""
+                items.append(
+                    f"<li class='tfbus-finding'><b style='color:{colour}'>{_h(level)}</b> "
+                    f"<code>{_h(f.check)}</code>: {_h(f.message)}{who}{advice}</li>")
+            more = len(findings) - MAX_FINDINGS_SHOWN
+            value = (
+                (f"<p>{_h(note)}</p>" if note else "")
+                + (f"<ul style='font-size:0.75em;padding-left:1.2em'>{''.join(items)}</ul>"
+                   if items else "<p>no findings</p>")
+                + (f"<p>and {more} more</p>" if more > 0 else ""))
+        with self._lock:
+            if value != self.findings_html:
+                self.findings_html = value
+                self.findings.content = value
 
     def _attach(self, frame_id: str, node: str) -> None:
         scene_api = self.server.scene
