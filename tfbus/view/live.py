@@ -312,13 +312,15 @@ class LiveView:
     # ---------------------------------------------------------------- drawing
 
     def render(self) -> Scene:
-        """One redraw: the frames at the buffer's latest data, the newest placeable scan
+        """One redraw: the frames at the buffer's latest data (in the fixed frame picked
+        in the page, else ``fixed_frame``), the newest placeable scan
         of each topic (projected only when it changed), and for Foxglove the server time,
         the statuses and the static transforms a new subscriber asked for."""
         now = self.clock.now()
         self._drawn_at = now
         scene = draw_live(self.page, self.buffer, self.summary, now,
-                          fixed_frame=self.fixed_frame, frame_timeout=self.frame_timeout)
+                          fixed_frame=self.page.fixed_frame_choice or self.fixed_frame,
+                          frame_timeout=self.frame_timeout)
         if scene.fixed_frame is not None and scene.frames:
             self.shown_fixed = scene.fixed_frame
             self._fixed_known.set()

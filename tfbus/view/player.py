@@ -36,7 +36,9 @@ class BagPlayer:
 
     The scene at bag time ``t`` is the buffer ``tfbus replay`` would have filled by
     then (:meth:`BagTimeline.buffer_at`), looked up at its latest time (``Time(0)``, as
-    rviz does), ages measured from ``t``.
+    rviz does), ages measured from ``t``, in the fixed frame picked in the page
+    (:attr:`TfPage.fixed_frame_choice`), else ``fixed_frame``; a change of the page's
+    display controls draws a paused bag again at once.
 
     The page's "tf doctor" panel lists ``tfbus doctor``'s findings on the bag's messages
     up to ``t`` (:meth:`diagnosis`; at the end of the slider, the whole file's, as
@@ -78,6 +80,7 @@ class BagPlayer:
         self.rate: Any = gui.add_slider("rate (x)", min=0.1, max=10.0, step=0.1,
                                         initial_value=rate)
         self._shown = -1.0
+        self._shown_version = -1
         self._doctor = Doctor(source="bag")
         self._doctor_upto = 0
         self._reported_upto = -1
@@ -116,7 +119,8 @@ class BagPlayer:
         """Draw the scene at :meth:`time` and return it."""
         t = self.time()
         core = self.timeline.buffer_at(t)
-        scene = build_scene(core, fixed_frame=self.fixed_frame, now=t,
+        fixed = self.page.fixed_frame_choice or self.fixed_frame
+        scene = build_scene(core, fixed_frame=fixed, now=t,
                             last_update=self.timeline.last_update(t),
                             frame_timeout=self.frame_timeout)
         self.page.draw(scene, self.summary)
@@ -208,9 +212,12 @@ class BagPlayer:
             self.advance(now - last)
             last = now
             watched = self.foxglove is not None or self.page.watched()
-            if watched and (self.position != self._shown or self.playing.value):
+            version = self.page.control_version
+            if watched and (self.position != self._shown or self.playing.value
+                            or version != self._shown_version):
                 self.render()
                 self._shown = self.position
+                self._shown_version = version
             stop.wait(period)
 
 

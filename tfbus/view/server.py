@@ -55,7 +55,9 @@ are counted in one line."""
 _LEVEL_COLOURS = {"error": "#d03030", "warning": "#c08000", "info": "#3070c0"}
 
 AXES_LENGTH = 0.25
-"""Length of each drawn axis, metres."""
+"""Length of each drawn axis, metres (the page's "axis length" slider starts there)."""
+MAX_FILTER_LENGTH = 200
+"""Characters a frame filter may have; a longer one is refused with an error line."""
 
 
 def text(frame_id: object) -> str:
@@ -105,9 +107,10 @@ def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     return out
 
 
-def _axes(pose: TransformStamped) -> list[list[tuple[float, float, float]]]:
+def _axes(pose: TransformStamped, length: float = AXES_LENGTH
+          ) -> list[list[tuple[float, float, float]]]:
     """The x, y, z axis segments of a frame at ``pose``: origin to origin + R e_k x
-    :data:`AXES_LENGTH`."""
+    ``length`` (metres)."""
     o = _xyz(pose)
     q = pose.transform.rotation
     x, y, z, w = q.x, q.y, q.z, q.w
@@ -116,8 +119,8 @@ def _axes(pose: TransformStamped) -> list[list[tuple[float, float, float]]]:
         (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
         (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)),
     )
-    return [[o, (o[0] + AXES_LENGTH * c[0], o[1] + AXES_LENGTH * c[1],
-                 o[2] + AXES_LENGTH * c[2])] for c in cols]
+    return [[o, (o[0] + length * c[0], o[1] + length * c[1],
+                 o[2] + length * c[2])] for c in cols]
 
 
 class TfPage:
@@ -185,6 +188,33 @@ class TfPage:
         gui = self.server.gui
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
+        self.control_version = 0
+        """Incremented each time a browser changes a display control (fixed frame,
+        filter, labels, axis length): a paused bag is drawn again at once."""
+        self.fixed_frame_choice: str | None = None
+        """The fixed frame picked in the page's dropdown (None: not picked; the scene's
+        own choice, ``--fixed-frame`` or the root of the largest tree, is used)."""
+        self.frame_filter: re.Pattern[str] | None = None
+        """The page's frame filter (``re.search`` on each id; None: every frame)."""
+        self.filter_error_html = ""
+        self._fixed_options: dict[str, str] = {}
+        with gui.add_folder("display"):
+            self.fixed_dropdown: Any = gui.add_dropdown(
+                "fixed frame", options=("",), initial_value="",
+                hint="the frame at the origin: every frame is looked up in it")
+            self.filter_box: Any = gui.add_text(
+                "frame filter", "", hint="a Python regular expression searched in each "
+                "frame id (re.search); empty: every frame")
+            self.filter_error = gui.add_html("")
+            self.labels_box: Any = gui.add_checkbox("labels", initial_value=True)
+            self.axis_length: Any = gui.add_slider(
+                "axis length (m)", min=0.05, max=2.0, step=0.05, initial_value=AXES_LENGTH)
+        self.fixed_dropdown.on_update(self._on_fixed)
+        self.filter_box.on_update(self._on_filter)
+        self.labels_box.on_update(self._on_control)
+        self.axis_length.on_update(self._on_control)
+        self._sent_labels: dict[str, bool] = {}
+        self._axes_length_sent = AXES_LENGTH
         self.tree = gui.add_html("")
         self.notes = gui.add_html("")
         with gui.add_folder("tf doctor"):
@@ -201,6 +231,67 @@ class TfPage:
         self._sent_visible: dict[str, bool] = {}
         self._connect_listeners: list[Callable[[], None]] = []
         self.server.on_client_connect(self._client_connected)
+
+    # ------------------------------------------------------------------ controls
+
+    def _on_fixed(self, event: Any) -> None:
+        if event.client is None:  # our own write (the scene's fixed frame shown)
+            return
+        with self._lock:
+            choice = self._fixed_options.get(str(self.fixed_dropdown.value))
+            if choice is not None:
+                self.fixed_frame_choice = choice
+                self.control_version += 1
+
+    def _on_filter(self, event: Any) -> None:
+        if event.client is None:
+            return
+        self.set_frame_filter(str(self.filter_box.value))
+
+    def _on_control(self, event: Any) -> None:
+        if event.client is not None:
+            with self._lock:
+                self.control_version += 1
+
+    def set_frame_filter(self, pattern: str) -> str | None:
+        """Show only the frames whose id matches ``pattern`` (``re.search``) (empty: every
+        frame). An invalid pattern (or one over :data:`MAX_FILTER_LENGTH` characters) is
+        not applied: the previous filter stays and the error is shown under the box and
+        returned."""
+        error: str | None = None
+        compiled: re.Pattern[str] | None = None
+        if len(pattern) > MAX_FILTER_LENGTH:
+            error = f"frame filter: longer than {MAX_FILTER_LENGTH} characters"
+        elif pattern:
+            try:
+                compiled = re.compile(pattern)
+            except re.error as err:
+                error = f"frame filter: invalid regular expression {pattern!r}: {err}"
+        value = "" if error is None else f"<p style='color:#d03030'>{_h(error)}</p>"
+        with self._lock:
+            if error is None:
+                self.frame_filter = compiled
+            if value != self.filter_error_html:
+                self.filter_error_html = value
+                self.filter_error.content = value
+            self.control_version += 1
+        return error
+
+    def shown(self, frame_id: str) -> bool:
+        """Whether the frame filter lets ``frame_id`` be drawn."""
+        pattern = self.frame_filter
+        return pattern is None or pattern.search(frame_id) is not None
+
+    def _show_fixed(self, scene: Scene) -> None:
+        """The dropdown's options (every frame id, as text, sorted) and value (the scene's
+        fixed frame)."""
+        options = {text(f.frame_id): f.frame_id for f in scene.frames}
+        if options.keys() != self._fixed_options.keys():
+            self._fixed_options = options
+            self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
+        shown = text(scene.fixed_frame) if scene.fixed_frame is not None else ""
+        if shown in options and self.fixed_dropdown.value != shown:
+            self.fixed_dropdown.value = shown
 
     # ------------------------------------------------------------------ viewers
 
@@ -247,7 +338,10 @@ class TfPage:
         axes: list[list[tuple[float, float, float]]] = []
         axes_colours: list[list[tuple[int, int, int]]] = []
         rows: dict[str, int] = {}
+        length = float(self.axis_length.value)
+        labels = bool(self.labels_box.value)
         for f in scene.frames:
+            drawn = f.visible and self.shown(f.frame_id)
             handle = self.frames.get(f.frame_id)
             if handle is None:
                 n = len(self.frames)
@@ -260,17 +354,20 @@ class TfPage:
                 if self._sent_poses.get(f.frame_id) != pose:
                     handle.position, handle.wxyz = pose
                     self._sent_poses[f.frame_id] = pose
-            if self._sent_visible.get(f.frame_id) is not f.visible:
-                handle.visible = f.visible
-                self._sent_visible[f.frame_id] = f.visible
-            if f.visible and f.pose is not None:
+            if self._sent_visible.get(f.frame_id) is not drawn:
+                handle.visible = drawn
+                self._sent_visible[f.frame_id] = drawn
+            if self._sent_labels.get(f.frame_id) is not labels:
+                self.labels[f.frame_id].visible = labels
+                self._sent_labels[f.frame_id] = labels
+            if drawn and f.pose is not None:
                 rows[f.frame_id] = len(axes)
-                axes.extend(_axes(f.pose))
+                axes.extend(_axes(f.pose, length))
                 for full in AXES_COLOURS:
                     c = _mix(f.colour if f.colour is not None else 0.0, full)
                     axes_colours.append([c, c])
             parent_pose = poses.get(f.parent) if f.parent is not None else None
-            if f.visible and f.pose is not None and parent_pose is not None:
+            if drawn and f.pose is not None and parent_pose is not None:
                 segments.append([_xyz(f.pose), _xyz(parent_pose)])
                 c = _mix(f.colour if f.colour is not None else 0.0)
                 colours.append([c, c])
@@ -282,6 +379,7 @@ class TfPage:
         self._axes_srgb = axes_colours
         if not self.camera_set:
             self.aim(scene)
+        self._show_fixed(scene)
         self._draw_panel(scene, stats, rates)
         msg = scene.message
         if msg is None and scene.fixed_frame is not None:
@@ -403,7 +501,11 @@ class TfPage:
     def _draw_panel(self, scene: Scene, stats: TfSummary | None,
                     rates: Mapping[str, float] | None) -> None:
         rows = []
+        hidden = 0
         for f in scene.frames:
+            if not self.shown(f.frame_id):
+                hidden += 1
+                continue
             fs = stats.frames.get(f.frame_id) if stats is not None else None
             rate = (rates or {}).get(f.frame_id, fs.rate if fs is not None else 0.0)
             who = fs.authority if fs is not None else (f.authority or "")
@@ -425,11 +527,13 @@ class TfPage:
                 f"<td>{hz}</td><td>{age}</td><td>{state}</td><td>{_h(who)}</td></tr>"
             )
         errors = [f"<li>{_h(f.frame_id)}: {_h(f.error)}</li>" for f in scene.frames
-                  if f.error is not None]
+                  if f.error is not None and self.shown(f.frame_id)]
         value = (
             f"<div style='{_PANEL_BOX}'><table style='{_PANEL_TABLE}'><tr><th>frame</th>"
             "<th>parent</th><th>Hz</th><th>age</th><th>state</th><th>broadcaster</th></tr>"
             + "".join(rows) + "</table></div>"
+            + (f"<p>{hidden} of {len(scene.frames)} frames left out by the filter</p>"
+               if hidden else "")
             + (f"<p>cannot place in [{_h(scene.fixed_frame)}]:</p><ul>{''.join(errors)}</ul>"
                if errors else "")
         )

@@ -1,0 +1,180 @@
+"""The display controls of ``tfbus view``'s page (tfbus/view/server.py, player.py,
+live.py), driven in headless Chromium through the DevTools protocol with real mouse and
+key events: the fixed frame picked in a dropdown (the scene re-rooted: every pose equals
+``lookup_transform(picked, frame)``), a regex frame filter (an invalid one shown as an
+error, the previous filter kept), a labels toggle and the axis length."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("viser")
+
+from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus.clock import ManualClock
+from tfbus.core import BufferCore
+from tfbus.monitor import TfSummary
+from tfbus.view.player import BagPlayer
+from tfbus.view.server import TfPage
+from tfbus.view.timeline import BagTimeline
+
+ROOT = Path(__file__).resolve().parents[2]
+TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
+
+
+@pytest.fixture(scope="module")
+def chromium() -> str:
+    import shutil
+
+    from peer_install import require
+
+    require("chromium", "install_chromium.sh", timeout=2400)
+    exe = shutil.which("chromium")
+    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
+    return exe
+
+
+def until(cond: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
+    """Poll ``cond`` (the server side of the page) for at most ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"never: {what}")
+        time.sleep(0.05)
+
+
+def _row(label: str) -> str:
+    """JS: the GUI row of the control labelled ``label``."""
+    return (f"[...document.querySelectorAll('label')].find(e => e.textContent === "
+            f"{json.dumps(label)}).closest('.mantine-Flex-root')")
+
+
+def _centre(c: object, selector_js: str) -> tuple[float, float]:
+    from cdp import Chromium
+
+    assert isinstance(c, Chromium)
+    r = c.wait(f"(() => {{ const e = {selector_js}; if (!e) return null; e.scrollIntoView("
+               "{block: 'center'}); const b = e.getBoundingClientRect(); "
+               "return [b.x + b.width / 2, b.y + b.height / 2]; })()")
+    return float(r[0]), float(r[1])
+
+
+def _type_into(c: object, selector_js: str, text: str, enter: bool = False) -> None:
+    from cdp import Chromium
+
+    assert isinstance(c, Chromium)
+    c.click(*_centre(c, selector_js))
+    c.js(f"(() => {{ const e = {selector_js}; e.focus(); e.select(); }})()")
+    c.type_text(text)
+    if enter:
+        c.key("Enter", "Enter", 13)
+
+
+@pytest.fixture
+def playing(page: TfPage) -> Iterator[BagPlayer]:
+    """The turtle bag paused at 5 s, its player's loop running as ``tfbus view --bag``."""
+    player = BagPlayer(page, BagTimeline.read(TURTLE), paused=True)
+    player.seek(5.0)
+    stop = threading.Event()
+    runner = threading.Thread(target=player.run, args=(stop,), daemon=True)
+    runner.start()
+    try:
+        yield player
+    finally:
+        stop.set()
+        runner.join(timeout=10)
+
+
+def test_controls_in_chromium_on_a_bag(chromium: str, page: TfPage, playing: BagPlayer,
+                                       tmp_path: Path) -> None:
+    from cdp import Chromium
+
+    core = playing.timeline.buffer_at(playing.time())
+    with Chromium(chromium) as c:
+        c.open(f"http://127.0.0.1:{page.port}/")
+        c.wait("document.body && document.body.innerText.includes('bag time 5.00')")
+        assert c.js(f"{_row('fixed frame')}.querySelector('input').value") == "world"
+        # the fixed frame picked in the dropdown: a click on it, a click on "turtle1"
+        c.click(*_centre(c, f"{_row('fixed frame')}.querySelector('input')"))
+        c.click(*_centre(c, "[...document.querySelectorAll('[role=option]')].find("
+                            "e => e.textContent === 'turtle1')"))
+        until(lambda: page.fixed_frame_choice == "turtle1", "turtle1 picked")
+        until(lambda: playing.last_scene is not None
+              and playing.last_scene.fixed_frame == "turtle1", "the scene re-rooted")
+        for name in ("world", "turtle1", "turtle2", "carrot"):
+            ref = core.lookup_transform("turtle1", name, Time(0)).transform.translation
+            assert tuple(page.frames[name].position) == pytest.approx(
+                (ref.x, ref.y, ref.z), rel=1e-5, abs=1e-8)
+        assert tuple(page.frames["turtle1"].position) == (0.0, 0.0, 0.0)
+        assert tuple(page.frames["world"].position) != (0.0, 0.0, 0.0)
+        c.wait("document.body.innerText.includes('fixed frame: turtle1')")
+        # a frame filter: only the turtles drawn and listed
+        _type_into(c, f"{_row('frame filter')}.querySelector('input')", "turtle")
+        until(lambda: not page.frames["world"].visible, "world filtered out")
+        assert [page.frames[n].visible for n in ("world", "turtle1", "turtle2", "carrot")] \
+            == [False, True, True, False]
+        c.wait("document.body.innerText.includes('2 of 4 frames left out by the filter')")
+        assert "<td>carrot</td>" not in c.html() and "<td>turtle2</td>" in c.html()
+        # an invalid one: said so, the previous filter kept, nothing broken
+        _type_into(c, f"{_row('frame filter')}.querySelector('input')", "turtle(")
+        c.wait("document.body.innerText.includes('frame filter: invalid regular expression')")
+        assert "missing ), unterminated subpattern" in c.js("document.body.innerText")
+        assert not page.frames["world"].visible and page.frames["turtle2"].visible
+        # labels off
+        assert page.labels["turtle1"].visible
+        c.click(*_centre(c, f"{_row('labels')}.querySelector('input')"))
+        until(lambda: not page.labels["turtle1"].visible, "labels hidden")
+        # axis length 1 m: turtle2's x axis is 1 m long
+        _type_into(c, f"{_row('axis length (m)')}.querySelector("
+                      "'input.mantine-NumberInput-input')", "1", enter=True)
+
+        def x_axis_length() -> float:
+            row = page.axes_rows.get("turtle2")
+            if row is None:
+                return 0.0
+            seg = np.asarray(page.axes.points[row], dtype=np.float64)
+            return float(np.linalg.norm(seg[1] - seg[0]))
+
+        until(lambda: abs(x_axis_length() - 1.0) < 1e-6, "1 m axes")
+        shot = c.screenshot(tmp_path / "controls.png")
+        assert len(shot) > 10_000
+
+
+def test_filter_and_fixed_frame_live(page: TfPage) -> None:
+    """Live (draw_live as LiveView.render calls it): the page's picked fixed frame and
+    filter apply to the next redraw; an over-long filter is refused with an error."""
+    from tfbus.view.player import draw_live
+    from tfbus.view.server import MAX_FILTER_LENGTH
+
+    clock = ManualClock(Time.from_sec(10.0))
+    core, stats = BufferCore(), TfSummary()
+    for child, parent, x in (("base", "odom", 1.0), ("arm", "base", 2.0)):
+        t = TransformStamped(Header(clock.now(), parent), child,
+                             Transform(Vector3(x, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+        core.set_transform(t, "bc")
+        stats.add(clock.now(), [t], "bc", static=False)
+    draw_live(page, core, stats, clock.now())
+    assert tuple(page.frames["arm"].position) == (3.0, 0.0, 0.0)
+    assert page.fixed_dropdown.options == ("arm", "base", "odom")
+    assert page.fixed_dropdown.value == "odom"
+    page.fixed_frame_choice = "base"
+    draw_live(page, core, stats, clock.now(), fixed_frame=page.fixed_frame_choice)
+    assert tuple(page.frames["arm"].position) == (2.0, 0.0, 0.0)
+    assert tuple(page.frames["odom"].position) == (-1.0, 0.0, 0.0)
+    assert page.fixed_dropdown.value == "base"
+    assert page.set_frame_filter("^(arm|odom)$") is None
+    draw_live(page, core, stats, clock.now(), fixed_frame="base")
+    assert not page.frames["base"].visible and page.frames["arm"].visible
+    err = page.set_frame_filter("a" * (MAX_FILTER_LENGTH + 1))
+    assert err == f"frame filter: longer than {MAX_FILTER_LENGTH} characters"
+    assert err in page.filter_error_html
+    assert page.set_frame_filter("") is None and page.filter_error_html == ""
+    draw_live(page, core, stats, clock.now(), fixed_frame="base")
+    assert page.frames["base"].visible
