@@ -102,9 +102,7 @@ def test_controls_in_chromium_on_a_bag(chromium: str, page: TfPage, playing: Bag
         c.wait("document.body && document.body.innerText.includes('bag time 5.00')")
         assert c.js(f"{_row('fixed frame')}.querySelector('input').value") == "world"
         # the fixed frame picked in the dropdown: a click on it, a click on "turtle1"
-        c.click(*_centre(c, f"{_row('fixed frame')}.querySelector('input')"))
-        c.click(*_centre(c, "[...document.querySelectorAll('[role=option]')].find("
-                            "e => e.textContent === 'turtle1')"))
+        _pick(c, "fixed frame", "turtle1")
         until(lambda: page.fixed_frame_choice == "turtle1", "turtle1 picked")
         until(lambda: playing.last_scene is not None
               and playing.last_scene.fixed_frame == "turtle1", "the scene re-rooted")
@@ -178,3 +176,86 @@ def test_filter_and_fixed_frame_live(page: TfPage) -> None:
     assert page.set_frame_filter("") is None and page.filter_error_html == ""
     draw_live(page, core, stats, clock.now(), fixed_frame="base")
     assert page.frames["base"].visible
+
+
+def _pick(c: object, label: str, option: str) -> None:
+    """Open the dropdown ``label`` and click its ``option`` (real mouse events)."""
+    from cdp import Chromium
+
+    assert isinstance(c, Chromium)
+    shown = ("[...document.querySelectorAll('[role=option]')].find(e => e.textContent === "
+             f"{json.dumps(option)} && e.getBoundingClientRect().height > 0)")
+    for _ in range(3):  # a click before the page settled may not open the list
+        c.click(*_centre(c, f"{_row(label)}.querySelector('input')"))
+        try:
+            c.wait(f"!!({shown})", timeout=5.0)
+            break
+        except TimeoutError:
+            c.key("Escape", "Escape", 27)
+    c.click(*_centre(c, shown))
+
+
+def test_two_frames_in_chromium(chromium: str, page: TfPage, playing: BagPlayer,
+                                tmp_path: Path) -> None:
+    """tf_monitor turtle2 carrot in the page: the chain through world, highlighted, and
+    carrot's pose in turtle2 equal to lookup_transform's."""
+    from cdp import Chromium
+
+    core = playing.timeline.buffer_at(playing.time())
+    ref = core.lookup_transform("turtle2", "carrot", Time(0)).transform
+    with Chromium(chromium) as c:
+        c.open(f"http://127.0.0.1:{page.port}/")
+        c.wait("document.body && document.body.innerText.includes('pick two frames')")
+        assert page.chain is None
+        _pick(c, "frame A", "turtle2")
+        until(lambda: page.pair_choice == ("turtle2", None), "A picked")
+        _pick(c, "frame B", "carrot")
+        until(lambda: page.pair_choice == ("turtle2", "carrot"), "B picked")
+        text = c.wait("(() => { const e = document.querySelector('.tfbus-pair'); "
+                      "return e && e.innerText.includes('carrot in turtle2') && e.innerText; })()")
+        assert "chain: turtle2 → world → turtle1 → carrot" in text
+        v, q = ref.translation, ref.rotation
+        assert f"translation [{v.x:.3f}, {v.y:.3f}, {v.z:.3f}] m" in text
+        assert f"rotation (x y z w) [{q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f}]" in text
+        assert "turtle1 → carrot: static" in text
+        assert playing.last_scene is not None
+        age = playing.last_scene.frame("turtle2").age
+        assert age is not None
+        assert f"world → turtle2: 0.0 Hz, age {age:.2f} s, /turtle2_tf_broadcaster" in text
+        # the chain's three links drawn over the scene, from each child to its parent
+        until(lambda: page.chain is not None and page.chain_count == 3, "chain drawn")
+        pts = np.asarray(page.chain.points, dtype=np.float64)
+        pos = {n: tuple(page.frames[n].position) for n in ("world", "turtle1", "turtle2",
+                                                           "carrot")}
+        for child, parent in (("turtle2", "world"), ("carrot", "turtle1"),
+                              ("turtle1", "world")):
+            want = np.asarray([pos[child], pos[parent]], dtype=np.float64)
+            assert any(np.allclose(seg, want, rtol=0, atol=1e-5) for seg in pts), child
+        c.screenshot(tmp_path / "pair.png")
+
+
+def test_two_frames_in_two_trees_and_markup(page: TfPage) -> None:
+    """A and B in different trees: no chain, tf2's message; ids with markup as text."""
+    from tfbus.view import build_scene
+
+    core = BufferCore()
+    odd = "<b>x</b>"
+    for child, parent in ((odd, "map"), ("b", "elsewhere")):
+        core.set_transform(TransformStamped(
+            Header(Time.from_sec(1.0), parent), child,
+            Transform(Vector3(1.0, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0))), "bc")
+    scene = build_scene(core, fixed_frame="map")
+    page.pair_choice = (odd, "map")
+    page.draw(scene, core=core)
+    assert "chain: &lt;b&gt;x&lt;/b&gt; &rarr; map" in page.pair_html
+    assert "map in &lt;b&gt;x&lt;/b&gt;: translation [-1.000, 0.000, 0.000] m" in page.pair_html
+    assert "<b>x</b>" not in page.pair_html and page.chain_count == 1
+    page.pair_choice = (odd, "b")
+    page.draw(scene, core=core)
+    assert "chain:" not in page.pair_html
+    err = str(core.try_lookup_transform(odd, "b", Time(0)))
+    assert "Could not find a connection" in err
+    import html as _html
+
+    assert _html.escape(err, quote=True) in page.pair_html
+    assert not page.chain.visible

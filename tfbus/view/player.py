@@ -123,7 +123,7 @@ class BagPlayer:
         scene = build_scene(core, fixed_frame=fixed, now=t,
                             last_update=self.timeline.last_update(t),
                             frame_timeout=self.frame_timeout)
-        self.page.draw(scene, self.summary)
+        self.page.draw(scene, self.summary, core=core)
         self._report_findings(t)
         self.scan_errors.clear()
         for track, projector in zip(self.scans, self._projectors, strict=True):
@@ -231,5 +231,5 @@ def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
     rates = {name: fs.recent_rate(now) for name, fs in summary.frames.items()}
     scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
                         frame_timeout=frame_timeout)
-    page.draw(scene, summary, rates)
+    page.draw(scene, summary, rates, core=core)
     return scene

@@ -15,6 +15,7 @@ from ids, so a ``/`` in an id cannot re-parent a node.
 
 from __future__ import annotations
 
+import functools
 import html
 import re
 import socket
@@ -25,9 +26,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from tfbus.core import BufferCore
 from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
+from tfbus.time import Time
 from tfbus.view.guard import PageGuard
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
@@ -43,6 +46,8 @@ FULL_COLOUR = (230, 140, 20)
 """Colour of a fresh link line (RGB 0-255); it fades to :data:`GREY`."""
 GREY = (128, 128, 128)
 """What a frame's axes and link line fade to at the frame timeout (rviz's TF display)."""
+CHAIN_COLOUR = (220, 0, 220)
+"""Colour of the links of the chain between the two frames picked in the page."""
 AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
 """Full colour of the x, y and z axis of a frame (RGB 0-255)."""
 _PANEL_BOX = "overflow-x:auto;max-width:100%"
@@ -209,6 +214,23 @@ class TfPage:
             self.labels_box: Any = gui.add_checkbox("labels", initial_value=True)
             self.axis_length: Any = gui.add_slider(
                 "axis length (m)", min=0.05, max=2.0, step=0.05, initial_value=AXES_LENGTH)
+        with gui.add_folder("two frames (tf_monitor A B)"):
+            self.pair_dropdowns: tuple[Any, Any] = (
+                gui.add_dropdown("frame A", options=("",), initial_value="",
+                                 hint="the target frame: B's pose is shown in A"),
+                gui.add_dropdown("frame B", options=("",), initial_value="",
+                                 hint="the source frame"))
+            self.pair = gui.add_html("")
+        self.pair_html = ""
+        """The two frames' panel as last sent: the chain and B's pose in A."""
+        self.pair_choice: tuple[str | None, str | None] = (None, None)
+        """The frames picked as A and B (None: not picked)."""
+        self.chain: Any = None
+        """The highlighted links of the chain between A and B (line segments)."""
+        self.chain_count = 0
+        self._pair_options: tuple[str, ...] = ()
+        for k, dropdown in enumerate(self.pair_dropdowns):
+            dropdown.on_update(functools.partial(self._on_pair, k=k))
         self.fixed_dropdown.on_update(self._on_fixed)
         self.filter_box.on_update(self._on_filter)
         self.labels_box.on_update(self._on_control)
@@ -242,6 +264,17 @@ class TfPage:
             if choice is not None:
                 self.fixed_frame_choice = choice
                 self.control_version += 1
+
+    def _on_pair(self, event: Any, k: int) -> None:
+        if event.client is None:
+            return
+        with self._lock:
+            value = str(self.pair_dropdowns[k].value)
+            frame = self._fixed_options.get(value)
+            pair = list(self.pair_choice)
+            pair[k] = frame
+            self.pair_choice = (pair[0], pair[1])
+            self.control_version += 1
 
     def _on_filter(self, event: Any) -> None:
         if event.client is None:
@@ -289,6 +322,8 @@ class TfPage:
         if options.keys() != self._fixed_options.keys():
             self._fixed_options = options
             self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
+            for dropdown in self.pair_dropdowns:
+                dropdown.options = ("", *sorted(options))
         shown = text(scene.fixed_frame) if scene.fixed_frame is not None else ""
         if shown in options and self.fixed_dropdown.value != shown:
             self.fixed_dropdown.value = shown
@@ -321,13 +356,17 @@ class TfPage:
             self.status.content = value
 
     def draw(self, scene: Scene, stats: TfSummary | None = None,
-             rates: Mapping[str, float] | None = None) -> None:
+             rates: Mapping[str, float] | None = None, core: BufferCore | None = None
+             ) -> None:
         """Show ``scene``: frames, labels, links, panel. ``stats`` gives broadcasters
-        and rates (Hz) when known; ``rates`` overrides a rate per frame."""
+        and rates (Hz) when known; ``rates`` overrides a rate per frame; ``core`` (the
+        buffer the scene was built from) answers the two frames' lookup
+        (:meth:`draw_pair`)."""
         # one batch: viser's loop is woken once per redraw, not once per changed value,
         # and a browser applies the redraw's poses together
         with self._lock, self.server.atomic():
             self._draw(scene, stats, rates)
+            self.draw_pair(scene, core, stats, rates)
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
@@ -385,6 +424,82 @@ class TfPage:
         if msg is None and scene.fixed_frame is not None:
             msg = f"fixed frame: {scene.fixed_frame}"
         self.set_status(msg)
+
+    def draw_pair(self, scene: Scene, core: BufferCore | None,
+                  stats: TfSummary | None = None,
+                  rates: Mapping[str, float] | None = None) -> None:
+        """The two frames picked in the page (:attr:`pair_choice`), as ``tf_monitor A B``
+        shows them (tf2_ros ``tf_monitor.cpp``): the chain of frames from A to B through
+        their closest common ancestor, each link's age, rate and broadcaster, and
+        ``lookup_transform(A, B, latest)`` (B's pose in A: translation in metres,
+        quaternion x y z w, roll pitch yaw in radians about fixed x, y, z) or tf2's
+        message when it fails; the chain's links are drawn over the scene in
+        :data:`CHAIN_COLOUR`. Called by :meth:`draw` (the caller holds the lock)."""
+        a, b = self.pair_choice
+        segments: list[list[tuple[float, float, float]]] = []
+        if a is None or b is None or core is None:
+            value = "<p>pick two frames</p>" if a is None or b is None else ""
+        else:
+            value, chain = self._pair_text(scene, core, a, b, stats, rates)
+            poses = {f.frame_id: f.pose for f in scene.frames}
+            for child, parent in chain:
+                pc, pp = poses.get(child), poses.get(parent)
+                if pc is not None and pp is not None:
+                    segments.append([_xyz(pc), _xyz(pp)])
+        colours = [[CHAIN_COLOUR, CHAIN_COLOUR] for _ in segments]
+        self.chain, self.chain_count = self._segments(
+            "/chain", self.chain, self.chain_count, segments, colours, 6.0)
+        if value != self.pair_html:
+            self.pair_html = value
+            self.pair.content = value
+
+    def _pair_text(self, scene: Scene, core: BufferCore, a: str, b: str,
+                   stats: TfSummary | None, rates: Mapping[str, float] | None
+                   ) -> tuple[str, list[tuple[str, str]]]:
+        """The pair panel's HTML and the chain's links (child, parent)."""
+        from transforms3d.euler import quat2euler
+
+        parents = {f.frame_id: f.parent for f in scene.frames if f.parent is not None}
+
+        def up(frame: str) -> list[str]:
+            out = [frame]
+            while out[-1] in parents and len(out) <= len(parents):
+                out.append(parents[out[-1]])
+            return out
+
+        ua, ub = up(a), up(b)
+        common = next((f for f in ua if f in ub), None)
+        links: list[tuple[str, str]] = []
+        lines = []
+        if common is not None:
+            path_a = ua[:ua.index(common) + 1]
+            path_b = ub[:ub.index(common)]
+            names = path_a + path_b[::-1]
+            links = [(c, parents[c]) for c in path_a[:-1]] + \
+                    [(c, parents[c]) for c in path_b[::-1]]  # in the chain's order
+            lines.append("chain: " + " &rarr; ".join(_h(n) for n in names))
+            views = {f.frame_id: f for f in scene.frames}
+            for child, parent in links:
+                fv = views.get(child)
+                fs = stats.frames.get(child) if stats is not None else None
+                rate = (rates or {}).get(child, fs.rate if fs is not None else 0.0)
+                static = fv is not None and fv.static
+                age = "" if fv is None or fv.age is None else f", age {fv.age:.2f} s"
+                hz = "static" if static else f"{rate:.1f} Hz"
+                who = fs.authority if fs is not None else (fv.authority if fv else "") or ""
+                lines.append(f"&nbsp;&nbsp;{_h(parent)} &rarr; {_h(child)}: {hz}{age}, "
+                             f"{_h(who)}")
+        out = core.try_lookup_transform(a, b, Time(0))
+        if isinstance(out, TransformStamped):
+            v, q = out.transform.translation, out.transform.rotation
+            roll, pitch, yaw = quat2euler((q.w, q.x, q.y, q.z), "sxyz")
+            lines.append(f"{_h(b)} in {_h(a)}: translation [{v.x:.3f}, {v.y:.3f}, {v.z:.3f}] m"
+                         f"<br>rotation (x y z w) [{q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f}]"
+                         f"<br>roll pitch yaw [{roll:.3f}, {pitch:.3f}, {yaw:.3f}] rad")
+        else:
+            lines.append(f"lookup_transform({_h(a)}, {_h(b)}): {_h(out)}")
+        return ("<p class='tfbus-pair' style='font-size:0.8em'>" + "<br>".join(lines)
+                + "</p>"), links
 
     def set_visuals(self, visuals: Sequence[LinkVisual]) -> None:
         """Link geometry (``--urdf``) to draw on each link's frame once it is drawn: a
