@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import html
+import itertools
 import re
 import socket
 import threading
@@ -26,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from tfbus.core import BufferCore
+from tfbus.core import BufferCore, frame_path
 from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
@@ -456,27 +457,18 @@ class TfPage:
     def _pair_text(self, scene: Scene, core: BufferCore, a: str, b: str,
                    stats: TfSummary | None, rates: Mapping[str, float] | None
                    ) -> tuple[str, list[tuple[str, str]]]:
-        """The pair panel's HTML and the chain's links (child, parent)."""
+        """The pair panel's HTML and the chain's links (child, parent), in the chain's
+        order (:func:`tfbus.core.frame_path`, tfbus's one frame path)."""
         from transforms3d.euler import quat2euler
 
         parents = {f.frame_id: f.parent for f in scene.frames if f.parent is not None}
-
-        def up(frame: str) -> list[str]:
-            out = [frame]
-            while out[-1] in parents and len(out) <= len(parents):
-                out.append(parents[out[-1]])
-            return out
-
-        ua, ub = up(a), up(b)
-        common = next((f for f in ua if f in ub), None)
+        names = frame_path(parents, a, b)
         links: list[tuple[str, str]] = []
         lines = []
-        if common is not None:
-            path_a = ua[:ua.index(common) + 1]
-            path_b = ub[:ub.index(common)]
-            names = path_a + path_b[::-1]
-            links = [(c, parents[c]) for c in path_a[:-1]] + \
-                    [(c, parents[c]) for c in path_b[::-1]]  # in the chain's order
+        if names is not None:
+            # each step up is the link (child, its parent); each step down the reverse
+            links = [(x, y) if parents.get(x) == y else (y, x)
+                     for x, y in itertools.pairwise(names)]
             lines.append("chain: " + " &rarr; ".join(_h(n) for n in names))
             views = {f.frame_id: f for f in scene.frames}
             for child, parent in links:
