@@ -198,8 +198,18 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
     assert isinstance(page, TfPage)
     src = BusSource(spec, name="tfbus-view", scan_topics=scan_topics,
                     use_sim_time=use_sim_time)
+    from tfbus.doctor import Doctor
+
+    doctor: Doctor | None = None
+    if not src.is_fleet:  # the doctor's findings in the page, fed by the view's listener
+        doctor = Doctor(source=spec)
+        add = doctor.add
+        src.sink.observers.append(
+            lambda now, transforms, authority, static: add(now, transforms, authority,
+                                                           static=static))
     view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
-                    frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge)
+                    frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge,
+                    doctor=doctor)
 
     async def body() -> None:
         assert src.bus is not None

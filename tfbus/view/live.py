@@ -54,12 +54,16 @@ if TYPE_CHECKING:
     from tfbus.buffer import Buffer
     from tfbus.bus import Bus
     from tfbus.clock import Clock
+    from tfbus.doctor import Doctor
     from tfbus.monitor import TfSummary
     from tfbus.subscription import Subscription
     from tfbus.view.foxglove_bridge import FoxgloveBridge
     from tfbus.view.server import TfPage
 
-__all__ = ["MAX_DRAW_STALL", "LiveView", "ScanFeed", "sweep"]
+__all__ = ["FINDINGS_PERIOD", "MAX_DRAW_STALL", "LiveView", "ScanFeed", "sweep"]
+
+FINDINGS_PERIOD = 1.0
+"""Seconds (the view's clock) between two reports of the doctor's findings live."""
 
 MAX_DRAW_STALL = 1.0
 """Seconds (the view's clock) a redraw may be put off while the transport's inbound
@@ -141,14 +145,21 @@ class LiveView:
         frame_timeout: seconds, as :func:`~tfbus.view.scene.fade`.
         scan_topics: LaserScan topics to draw.
         foxglove: a Foxglove server to relay ``/tf``, ``/tf_static`` and the scans to.
+        doctor: a :class:`~tfbus.doctor.Doctor` fed by the same listener (one of the
+            sink's ``observers``, as ``tfbus doctor --bus`` feeds one): its findings are
+            listed in the page's "tf doctor" panel, reported again at most every
+            :data:`FINDINGS_PERIOD` seconds of the view's clock. None: no panel.
     """
 
     def __init__(self, page: TfPage, buffer: Buffer, summary: TfSummary, clock: Clock,
                  *, fixed_frame: str | None = None,
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
                  scan_topics: Sequence[str] = (),
-                 foxglove: FoxgloveBridge | None = None) -> None:
+                 foxglove: FoxgloveBridge | None = None,
+                 doctor: Doctor | None = None) -> None:
         self.page = page
+        self.doctor = doctor
+        self._reported_at: Time | None = None
         self.buffer = buffer
         self.summary = summary
         self.clock = clock
@@ -301,18 +312,21 @@ class LiveView:
     # ---------------------------------------------------------------- drawing
 
     def render(self) -> Scene:
-        """One redraw: the frames at the buffer's latest data, the newest placeable scan
+        """One redraw: the frames at the buffer's latest data (in the fixed frame picked
+        in the page, else ``fixed_frame``), the newest placeable scan
         of each topic (projected only when it changed), and for Foxglove the server time,
         the statuses and the static transforms a new subscriber asked for."""
         now = self.clock.now()
         self._drawn_at = now
         scene = draw_live(self.page, self.buffer, self.summary, now,
-                          fixed_frame=self.fixed_frame, frame_timeout=self.frame_timeout)
+                          fixed_frame=self.page.fixed_frame_choice or self.fixed_frame,
+                          frame_timeout=self.frame_timeout)
         if scene.fixed_frame is not None and scene.frames:
             self.shown_fixed = scene.fixed_frame
             self._fixed_known.set()
         for feed in self.feeds.values():
             self._draw_feed(feed, self.shown_fixed)
+        self._report_findings(now)
         errors = [f.error for f in self.feeds.values() if f.error is not None]
         if errors and scene.message is None:
             self.page.set_status(f"fixed frame: {scene.fixed_frame}"
@@ -324,6 +338,17 @@ class LiveView:
             bridge.broadcast_time(now.ns)
             bridge.publish_errors(scene)
         return scene
+
+    def _report_findings(self, now: Time) -> None:
+        if self.doctor is None:
+            return
+        last = self._reported_at
+        if last is not None and 0 <= now.ns - last.ns < FINDINGS_PERIOD * 1e9:
+            return
+        self._reported_at = now
+        report = self.doctor.report(now=now)
+        self.page.set_findings(report.findings,
+                               f"{report.messages} tf messages received diagnosed")
 
     def _draw_feed(self, feed: ScanFeed, fixed: str | None) -> None:
         if fixed is None or not feed.ready:

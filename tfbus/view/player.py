@@ -10,6 +10,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from tfbus.core import BufferCore
+from tfbus.doctor import Doctor
 from tfbus.laser import LaserProjection
 from tfbus.monitor import TfSummary
 from tfbus.time import Time
@@ -23,6 +24,9 @@ __all__ = ["MAX_DRAW_HZ", "BagPlayer", "draw_live"]
 
 MAX_DRAW_HZ = 30.0
 """Drawing is down-sampled to this rate, whatever the rate of the transforms."""
+FINDINGS_PERIOD = 0.5
+"""Seconds between two reports of the doctor's findings while a bag plays (a seek, or
+a render while paused, reports at once)."""
 
 
 class BagPlayer:
@@ -32,7 +36,15 @@ class BagPlayer:
 
     The scene at bag time ``t`` is the buffer ``tfbus replay`` would have filled by
     then (:meth:`BagTimeline.buffer_at`), looked up at its latest time (``Time(0)``, as
-    rviz does), ages measured from ``t``.
+    rviz does), ages measured from ``t``, in the fixed frame picked in the page
+    (:attr:`TfPage.fixed_frame_choice`), else ``fixed_frame``; a change of the page's
+    display controls draws a paused bag again at once.
+
+    The page's "tf doctor" panel lists ``tfbus doctor``'s findings on the bag's messages
+    up to ``t`` (:meth:`diagnosis`; at the end of the slider, the whole file's, as
+    ``tfbus doctor BAG`` reports them), fed to one :class:`~tfbus.doctor.Doctor` as bag
+    time moves on and started again after a jump back; while playing it is reported again
+    at most every :data:`FINDINGS_PERIOD` seconds of wall time.
     """
 
     def __init__(self, page: TfPage, timeline: BagTimeline, *, fixed_frame: str | None = None,
@@ -68,6 +80,11 @@ class BagPlayer:
         self.rate: Any = gui.add_slider("rate (x)", min=0.1, max=10.0, step=0.1,
                                         initial_value=rate)
         self._shown = -1.0
+        self._shown_version = -1
+        self._doctor = Doctor(source="bag")
+        self._doctor_upto = 0
+        self._reported_upto = -1
+        self._reported_at = float("-inf")
 
         self.slider.on_update(self._on_slider)
         self.last_scene: Scene | None = None
@@ -102,10 +119,12 @@ class BagPlayer:
         """Draw the scene at :meth:`time` and return it."""
         t = self.time()
         core = self.timeline.buffer_at(t)
-        scene = build_scene(core, fixed_frame=self.fixed_frame, now=t,
+        fixed = self.page.fixed_frame_choice or self.fixed_frame
+        scene = build_scene(core, fixed_frame=fixed, now=t,
                             last_update=self.timeline.last_update(t),
                             frame_timeout=self.frame_timeout)
-        self.page.draw(scene, self.summary)
+        self.page.draw(scene, self.summary, core=core)
+        self._report_findings(t)
         self.scan_errors.clear()
         for track, projector in zip(self.scans, self._projectors, strict=True):
             pts = None
@@ -124,6 +143,37 @@ class BagPlayer:
             self._feed_foxglove(t, scene)
         self.last_scene = scene
         return scene
+
+    def diagnosis(self, t: Time) -> Doctor:
+        """The doctor fed with the bag's messages up to bag time ``t`` (receive time: the
+        record time, as :func:`~tfbus.doctor.diagnose` reads a bag); a damaged bag's
+        reason noted once every readable message is in."""
+        tl = self.timeline
+        n = bisect.bisect_right(tl.times, t.ns)
+        if n < self._doctor_upto:  # a jump back: diagnosed again from the start
+            self._doctor = Doctor(source="bag")
+            self._doctor_upto = 0
+        add = self._doctor.add
+        for i in range(self._doctor_upto, n):
+            transforms, authority, static = tl.messages[i]
+            add(tl.times[i], transforms, authority, static=static)
+        if n == len(tl.times) and tl.problem and self._doctor.damage is None:
+            self._doctor.note_damage(tl.problem)
+        self._doctor_upto = n
+        return self._doctor
+
+    def _report_findings(self, t: Time) -> None:
+        doctor = self.diagnosis(t)
+        now = _wall.monotonic()
+        if self._doctor_upto == self._reported_upto:
+            return
+        if self.playing.value and now - self._reported_at < FINDINGS_PERIOD:
+            return
+        self._reported_upto = self._doctor_upto
+        self._reported_at = now
+        report = doctor.report(now=t)
+        self.page.set_findings(report.findings, f"{report.messages} tf messages up to "
+                               f"bag time {self.position:.2f} s diagnosed")
 
     def _feed_foxglove(self, t: Time, scene: Scene) -> None:
         """Send Foxglove the bag's messages up to ``t`` not sent yet (after a jump back:
@@ -162,9 +212,12 @@ class BagPlayer:
             self.advance(now - last)
             last = now
             watched = self.foxglove is not None or self.page.watched()
-            if watched and (self.position != self._shown or self.playing.value):
+            version = self.page.control_version
+            if watched and (self.position != self._shown or self.playing.value
+                            or version != self._shown_version):
                 self.render()
                 self._shown = self.position
+                self._shown_version = version
             stop.wait(period)
 
 
@@ -178,5 +231,5 @@ def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
     rates = {name: fs.recent_rate(now) for name, fs in summary.frames.items()}
     scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
                         frame_timeout=frame_timeout)
-    page.draw(scene, summary, rates)
+    page.draw(scene, summary, rates, core=core)
     return scene

@@ -15,21 +15,28 @@ from ids, so a ``/`` in an id cannot re-parent a node.
 
 from __future__ import annotations
 
+import functools
 import html
+import itertools
 import re
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
+from tfbus.core import BufferCore, frame_path
 from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
+from tfbus.time import Time
 from tfbus.view.guard import PageGuard, check_port
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
+
+if TYPE_CHECKING:
+    from tfbus.doctor import Finding
 
 __all__ = ["PortInUseError", "TfPage", "text"]
 
@@ -39,14 +46,27 @@ FULL_COLOUR = (230, 140, 20)
 """Colour of a fresh link line (RGB 0-255); it fades to :data:`GREY`."""
 GREY = (128, 128, 128)
 """What a frame's axes and link line fade to at the frame timeout (rviz's TF display)."""
+CHAIN_COLOUR = (220, 0, 220)
+"""Colour of the links of the chain between the two frames picked in the page."""
 AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
 """Full colour of the x, y and z axis of a frame (RGB 0-255)."""
 _PANEL_BOX = "overflow-x:auto;max-width:100%"
 _PANEL_TABLE = "font-size:0.75em;white-space:nowrap;border-spacing:0.6em 0"
 # cells never wrap (an id is one line); a table wider than the panel scrolls sideways
 
+MAX_FINDINGS_SHOWN = 50
+"""Findings listed in the page's doctor panel at most (the most severe first); the rest
+are counted in one line."""
+_LEVEL_COLOURS = {"error": "#d03030", "warning": "#c08000", "info": "#3070c0"}
+
 AXES_LENGTH = 0.25
-"""Length of each drawn axis, metres."""
+"""Length of each drawn axis, metres (the page's "axis length" slider starts there)."""
+MAX_FILTER_LENGTH = 200
+"""Characters a frame filter may have; a longer one is refused with an error line."""
+FILTER_TIMEOUT = 0.01
+"""Seconds one frame filter search may take (the ``regex`` package's ``timeout``): a
+pattern that backtracks catastrophically (``(a|aa)+$``) is dropped, with an error line,
+instead of stalling the drawing loop (Python's own ``re`` cannot be interrupted)."""
 
 
 def text(frame_id: object) -> str:
@@ -86,9 +106,10 @@ def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     return out
 
 
-def _axes(pose: TransformStamped) -> list[list[tuple[float, float, float]]]:
+def _axes(pose: TransformStamped, length: float = AXES_LENGTH
+          ) -> list[list[tuple[float, float, float]]]:
     """The x, y, z axis segments of a frame at ``pose``: origin to origin + R e_k x
-    :data:`AXES_LENGTH`."""
+    ``length`` (metres)."""
     o = _xyz(pose)
     q = pose.transform.rotation
     x, y, z, w = q.x, q.y, q.z, q.w
@@ -97,8 +118,8 @@ def _axes(pose: TransformStamped) -> list[list[tuple[float, float, float]]]:
         (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
         (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)),
     )
-    return [[o, (o[0] + AXES_LENGTH * c[0], o[1] + AXES_LENGTH * c[1],
-                 o[2] + AXES_LENGTH * c[2])] for c in cols]
+    return [[o, (o[0] + length * c[0], o[1] + length * c[1],
+                 o[2] + length * c[2])] for c in cols]
 
 
 class TfPage:
@@ -166,8 +187,57 @@ class TfPage:
         gui = self.server.gui
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
+        self.control_version = 0
+        """Incremented each time a browser changes a display control (fixed frame,
+        filter, labels, axis length): a paused bag is drawn again at once."""
+        self.fixed_frame_choice: str | None = None
+        """The fixed frame picked in the page's dropdown (None: not picked; the scene's
+        own choice, ``--fixed-frame`` or the root of the largest tree, is used)."""
+        self.frame_filter: Any = None
+        """The page's frame filter (a compiled ``regex`` pattern searched in each id,
+        within :data:`FILTER_TIMEOUT` s; None: every frame)."""
+        self.filter_error_html = ""
+        self._fixed_options: dict[str, str] = {}
+        with gui.add_folder("display"):
+            self.fixed_dropdown: Any = gui.add_dropdown(
+                "fixed frame", options=("",), initial_value="",
+                hint="the frame at the origin: every frame is looked up in it")
+            self.filter_box: Any = gui.add_text(
+                "frame filter", "", hint="a Python regular expression searched in each "
+                "frame id; empty: every frame")
+            self.filter_error = gui.add_html("")
+            self.labels_box: Any = gui.add_checkbox("labels", initial_value=True)
+            self.axis_length: Any = gui.add_slider(
+                "axis length (m)", min=0.05, max=2.0, step=0.05, initial_value=AXES_LENGTH)
+        with gui.add_folder("two frames (tf_monitor A B)"):
+            self.pair_dropdowns: tuple[Any, Any] = (
+                gui.add_dropdown("frame A", options=("",), initial_value="",
+                                 hint="the target frame: B's pose is shown in A"),
+                gui.add_dropdown("frame B", options=("",), initial_value="",
+                                 hint="the source frame"))
+            self.pair = gui.add_html("")
+        self.pair_html = ""
+        """The two frames' panel as last sent: the chain and B's pose in A."""
+        self.pair_choice: tuple[str | None, str | None] = (None, None)
+        """The frames picked as A and B (None: not picked)."""
+        self.chain: Any = None
+        """The highlighted links of the chain between A and B (line segments)."""
+        self.chain_count = 0
+        self._pair_options: tuple[str, ...] = ()
+        for k, dropdown in enumerate(self.pair_dropdowns):
+            dropdown.on_update(functools.partial(self._on_pair, k=k))
+        self.fixed_dropdown.on_update(self._on_fixed)
+        self.filter_box.on_update(self._on_filter)
+        self.labels_box.on_update(self._on_control)
+        self.axis_length.on_update(self._on_control)
+        self._sent_labels: dict[str, bool] = {}
+        self._axes_length_sent = AXES_LENGTH
         self.tree = gui.add_html("")
         self.notes = gui.add_html("")
+        with gui.add_folder("tf doctor"):
+            self.findings = gui.add_html("")
+        self.findings_html = ""
+        """The doctor panel's HTML as last sent (:meth:`set_findings`)."""
         self.notes_html = ""
         """The notes' HTML as last sent (:meth:`set_notes`)."""
         self.panel_html = ""
@@ -178,6 +248,101 @@ class TfPage:
         self._sent_visible: dict[str, bool] = {}
         self._connect_listeners: list[Callable[[], None]] = []
         self.server.on_client_connect(self._client_connected)
+
+    # ------------------------------------------------------------------ controls
+
+    def _on_fixed(self, event: Any) -> None:
+        if event.client is None:  # our own write (the scene's fixed frame shown)
+            return
+        with self._lock:
+            choice = self._fixed_options.get(str(self.fixed_dropdown.value))
+            if choice is not None:
+                self.fixed_frame_choice = choice
+                self.control_version += 1
+
+    def _on_pair(self, event: Any, k: int) -> None:
+        if event.client is None:
+            return
+        with self._lock:
+            value = str(self.pair_dropdowns[k].value)
+            frame = self._fixed_options.get(value)
+            pair = list(self.pair_choice)
+            pair[k] = frame
+            self.pair_choice = (pair[0], pair[1])
+            self.control_version += 1
+
+    def _on_filter(self, event: Any) -> None:
+        if event.client is None:
+            return
+        self.set_frame_filter(str(self.filter_box.value))
+
+    def _on_control(self, event: Any) -> None:
+        if event.client is not None:
+            with self._lock:
+                self.control_version += 1
+
+    def set_frame_filter(self, pattern: str) -> str | None:
+        """Show only the frames whose id matches ``pattern`` (a regular expression
+        searched in the id, as rviz2's TF display filter; empty: every frame). An invalid
+        pattern (or one over :data:`MAX_FILTER_LENGTH` characters) is not applied: the
+        previous filter stays and the error is shown under the box and returned."""
+        import regex
+
+        error: str | None = None
+        compiled: Any = None
+        if len(pattern) > MAX_FILTER_LENGTH:
+            error = f"frame filter: longer than {MAX_FILTER_LENGTH} characters"
+        elif pattern:
+            try:
+                compiled = regex.compile(pattern)
+            except regex.error as err:
+                error = f"frame filter: invalid regular expression {pattern!r}: {err}"
+        self._filter_result(compiled, error)
+        return error
+
+    def _filter_result(self, compiled: Any, error: str | None) -> None:
+        with self._lock:
+            self._apply_filter(compiled, error)
+
+    def _apply_filter(self, compiled: Any, error: str | None) -> None:
+        """Set the filter (when ``error`` is None) and the error line under the box; the
+        caller holds ``_lock`` (the drawing loop does, while it calls :meth:`shown`)."""
+        value = "" if error is None else f"<p style='color:#d03030'>{_h(error)}</p>"
+        if error is None:
+            self.frame_filter = compiled
+        if value != self.filter_error_html:
+            self.filter_error_html = value
+            self.filter_error.content = value
+        self.control_version += 1
+
+    def shown(self, frame_id: str) -> bool:
+        """Whether the frame filter lets ``frame_id`` be drawn (called by the drawing
+        loop, under ``_lock``). A search that takes longer than :data:`FILTER_TIMEOUT` s
+        drops the filter (every frame is drawn) and says so under the box."""
+        pattern = self.frame_filter
+        if pattern is None:
+            return True
+        try:
+            return pattern.search(frame_id, timeout=FILTER_TIMEOUT) is not None
+        except TimeoutError:
+            # called while drawing, under _lock: no second acquire
+            self.frame_filter = None
+            self._apply_filter(None, f"frame filter: {pattern.pattern!r} took longer than "
+                                     f"{FILTER_TIMEOUT * 1000:g} ms on one frame id; not applied")
+            return True
+
+    def _show_fixed(self, scene: Scene) -> None:
+        """The dropdown's options (every frame id, as text, sorted) and value (the scene's
+        fixed frame)."""
+        options = {text(f.frame_id): f.frame_id for f in scene.frames}
+        if options.keys() != self._fixed_options.keys():
+            self._fixed_options = options
+            self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
+            for dropdown in self.pair_dropdowns:
+                dropdown.options = ("", *sorted(options))
+        shown = text(scene.fixed_frame) if scene.fixed_frame is not None else ""
+        if shown in options and self.fixed_dropdown.value != shown:
+            self.fixed_dropdown.value = shown
 
     # ------------------------------------------------------------------ viewers
 
@@ -207,13 +372,17 @@ class TfPage:
             self.status.content = value
 
     def draw(self, scene: Scene, stats: TfSummary | None = None,
-             rates: Mapping[str, float] | None = None) -> None:
+             rates: Mapping[str, float] | None = None, core: BufferCore | None = None
+             ) -> None:
         """Show ``scene``: frames, labels, links, panel. ``stats`` gives broadcasters
-        and rates (Hz) when known; ``rates`` overrides a rate per frame."""
+        and rates (Hz) when known; ``rates`` overrides a rate per frame; ``core`` (the
+        buffer the scene was built from) answers the two frames' lookup
+        (:meth:`draw_pair`)."""
         # one batch: viser's loop is woken once per redraw, not once per changed value,
         # and a browser applies the redraw's poses together
         with self._lock, self.server.atomic():
             self._draw(scene, stats, rates)
+            self.draw_pair(scene, core, stats, rates)
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
@@ -224,7 +393,10 @@ class TfPage:
         axes: list[list[tuple[float, float, float]]] = []
         axes_colours: list[list[tuple[int, int, int]]] = []
         rows: dict[str, int] = {}
+        length = float(self.axis_length.value)
+        labels = bool(self.labels_box.value)
         for f in scene.frames:
+            drawn = f.visible and self.shown(f.frame_id)
             handle = self.frames.get(f.frame_id)
             if handle is None:
                 n = len(self.frames)
@@ -237,17 +409,20 @@ class TfPage:
                 if self._sent_poses.get(f.frame_id) != pose:
                     handle.position, handle.wxyz = pose
                     self._sent_poses[f.frame_id] = pose
-            if self._sent_visible.get(f.frame_id) is not f.visible:
-                handle.visible = f.visible
-                self._sent_visible[f.frame_id] = f.visible
-            if f.visible and f.pose is not None:
+            if self._sent_visible.get(f.frame_id) is not drawn:
+                handle.visible = drawn
+                self._sent_visible[f.frame_id] = drawn
+            if self._sent_labels.get(f.frame_id) is not labels:
+                self.labels[f.frame_id].visible = labels
+                self._sent_labels[f.frame_id] = labels
+            if drawn and f.pose is not None:
                 rows[f.frame_id] = len(axes)
-                axes.extend(_axes(f.pose))
+                axes.extend(_axes(f.pose, length))
                 for full in AXES_COLOURS:
                     c = _mix(f.colour if f.colour is not None else 0.0, full)
                     axes_colours.append([c, c])
             parent_pose = poses.get(f.parent) if f.parent is not None else None
-            if f.visible and f.pose is not None and parent_pose is not None:
+            if drawn and f.pose is not None and parent_pose is not None:
                 segments.append([_xyz(f.pose), _xyz(parent_pose)])
                 c = _mix(f.colour if f.colour is not None else 0.0)
                 colours.append([c, c])
@@ -259,11 +434,79 @@ class TfPage:
         self._axes_srgb = axes_colours
         if not self.camera_set:
             self.aim(scene)
+        self._show_fixed(scene)
         self._draw_panel(scene, stats, rates)
         msg = scene.message
         if msg is None and scene.fixed_frame is not None:
             msg = f"fixed frame: {scene.fixed_frame}"
         self.set_status(msg)
+
+    def draw_pair(self, scene: Scene, core: BufferCore | None,
+                  stats: TfSummary | None = None,
+                  rates: Mapping[str, float] | None = None) -> None:
+        """The two frames picked in the page (:attr:`pair_choice`), as ``tf_monitor A B``
+        shows them (tf2_ros ``tf_monitor.cpp``): the chain of frames from A to B through
+        their closest common ancestor, each link's age, rate and broadcaster, and
+        ``lookup_transform(A, B, latest)`` (B's pose in A: translation in metres,
+        quaternion x y z w, roll pitch yaw in radians about fixed x, y, z) or tf2's
+        message when it fails; the chain's links are drawn over the scene in
+        :data:`CHAIN_COLOUR`. Called by :meth:`draw` (the caller holds the lock)."""
+        a, b = self.pair_choice
+        segments: list[list[tuple[float, float, float]]] = []
+        if a is None or b is None or core is None:
+            value = "<p>pick two frames</p>" if a is None or b is None else ""
+        else:
+            value, chain = self._pair_text(scene, core, a, b, stats, rates)
+            poses = {f.frame_id: f.pose for f in scene.frames}
+            for child, parent in chain:
+                pc, pp = poses.get(child), poses.get(parent)
+                if pc is not None and pp is not None:
+                    segments.append([_xyz(pc), _xyz(pp)])
+        colours = [[CHAIN_COLOUR, CHAIN_COLOUR] for _ in segments]
+        self.chain, self.chain_count = self._segments(
+            "/chain", self.chain, self.chain_count, segments, colours, 6.0)
+        if value != self.pair_html:
+            self.pair_html = value
+            self.pair.content = value
+
+    def _pair_text(self, scene: Scene, core: BufferCore, a: str, b: str,
+                   stats: TfSummary | None, rates: Mapping[str, float] | None
+                   ) -> tuple[str, list[tuple[str, str]]]:
+        """The pair panel's HTML and the chain's links (child, parent), in the chain's
+        order (:func:`tfbus.core.frame_path`, tfbus's one frame path)."""
+        from transforms3d.euler import quat2euler
+
+        parents = {f.frame_id: f.parent for f in scene.frames if f.parent is not None}
+        names = frame_path(parents, a, b)
+        links: list[tuple[str, str]] = []
+        lines = []
+        if names is not None:
+            # each step up is the link (child, its parent); each step down the reverse
+            links = [(x, y) if parents.get(x) == y else (y, x)
+                     for x, y in itertools.pairwise(names)]
+            lines.append("chain: " + " &rarr; ".join(_h(n) for n in names))
+            views = {f.frame_id: f for f in scene.frames}
+            for child, parent in links:
+                fv = views.get(child)
+                fs = stats.frames.get(child) if stats is not None else None
+                rate = (rates or {}).get(child, fs.rate if fs is not None else 0.0)
+                static = fv is not None and fv.static
+                age = "" if fv is None or fv.age is None else f", age {fv.age:.2f} s"
+                hz = "static" if static else f"{rate:.1f} Hz"
+                who = fs.authority if fs is not None else (fv.authority if fv else "") or ""
+                lines.append(f"&nbsp;&nbsp;{_h(parent)} &rarr; {_h(child)}: {hz}{age}, "
+                             f"{_h(who)}")
+        out = core.try_lookup_transform(a, b, Time(0))
+        if isinstance(out, TransformStamped):
+            v, q = out.transform.translation, out.transform.rotation
+            roll, pitch, yaw = quat2euler((q.w, q.x, q.y, q.z), "sxyz")
+            lines.append(f"{_h(b)} in {_h(a)}: translation [{v.x:.3f}, {v.y:.3f}, {v.z:.3f}] m"
+                         f"<br>rotation (x y z w) [{q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f}]"
+                         f"<br>roll pitch yaw [{roll:.3f}, {pitch:.3f}, {yaw:.3f}] rad")
+        else:
+            lines.append(f"lookup_transform({_h(a)}, {_h(b)}): {_h(out)}")
+        return ("<p class='tfbus-pair' style='font-size:0.8em'>" + "<br>".join(lines)
+                + "</p>"), links
 
     def set_visuals(self, visuals: Sequence[LinkVisual]) -> None:
         """Link geometry (``--urdf``) to draw on each link's frame once it is drawn: a
@@ -279,6 +522,38 @@ class TfPage:
             if value != self.notes_html:
                 self.notes_html = value
                 self.notes.content = value
+
+    def set_findings(self, findings: Sequence[Finding] | None, note: str = "") -> None:
+        """List ``tfbus doctor``'s findings in the page's "tf doctor" folder: per finding its
+        level, check, message, frames, senders and advice (every field as text: ids are
+        escaped as in the frame tree), the most severe first as
+        :meth:`~tfbus.doctor.Doctor.report` orders them, at most
+        :data:`MAX_FINDINGS_SHOWN`; ``note`` is a line above them (what was diagnosed).
+        ``None``: no diagnosis (the panel is empty); ``[]``: "no findings"."""
+        if findings is None:
+            value = ""
+        else:
+            items = []
+            for f in findings[:MAX_FINDINGS_SHOWN]:
+                level = str(f.level)
+                colour = _LEVEL_COLOURS.get(level, "inherit")
+                who = (f"<br>frames: {', '.join(_h(x) for x in f.frames)}" if f.frames else "")
+                who += (f"<br>senders: {', '.join(_h(x) for x in f.senders)}"
+                        if f.senders else "")
+                advice = f"<br><i>{_h(f.advice)}</i>" if f.advice else ""
+                items.append(
+                    f"<li class='tfbus-finding'><b style='color:{colour}'>{_h(level)}</b> "
+                    f"<code>{_h(f.check)}</code>: {_h(f.message)}{who}{advice}</li>")
+            more = len(findings) - MAX_FINDINGS_SHOWN
+            value = (
+                (f"<p>{_h(note)}</p>" if note else "")
+                + (f"<ul style='font-size:0.75em;padding-left:1.2em'>{''.join(items)}</ul>"
+                   if items else "<p>no findings</p>")
+                + (f"<p>and {more} more</p>" if more > 0 else ""))
+        with self._lock:
+            if value != self.findings_html:
+                self.findings_html = value
+                self.findings.content = value
 
     def _attach(self, frame_id: str, node: str) -> None:
         scene_api = self.server.scene
@@ -348,7 +623,11 @@ class TfPage:
     def _draw_panel(self, scene: Scene, stats: TfSummary | None,
                     rates: Mapping[str, float] | None) -> None:
         rows = []
+        hidden = 0
         for f in scene.frames:
+            if not self.shown(f.frame_id):
+                hidden += 1
+                continue
             fs = stats.frames.get(f.frame_id) if stats is not None else None
             rate = (rates or {}).get(f.frame_id, fs.rate if fs is not None else 0.0)
             who = fs.authority if fs is not None else (f.authority or "")
@@ -370,11 +649,13 @@ class TfPage:
                 f"<td>{hz}</td><td>{age}</td><td>{state}</td><td>{_h(who)}</td></tr>"
             )
         errors = [f"<li>{_h(f.frame_id)}: {_h(f.error)}</li>" for f in scene.frames
-                  if f.error is not None]
+                  if f.error is not None and self.shown(f.frame_id)]
         value = (
             f"<div style='{_PANEL_BOX}'><table style='{_PANEL_TABLE}'><tr><th>frame</th>"
             "<th>parent</th><th>Hz</th><th>age</th><th>state</th><th>broadcaster</th></tr>"
             + "".join(rows) + "</table></div>"
+            + (f"<p>{hidden} of {len(scene.frames)} frames left out by the filter</p>"
+               if hidden else "")
             + (f"<p>cannot place in [{_h(scene.fixed_frame)}]:</p><ul>{''.join(errors)}</ul>"
                if errors else "")
         )
