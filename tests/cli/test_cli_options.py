@@ -33,7 +33,7 @@ VALUES = ("nan", "inf", "-inf", "1e300", "1e-300", "", "garbage", "-1")
 URDF = ROOT / "demos" / "robot.urdf"
 ONE_LINE = re.compile(r"^tfbus( [a-z-]+)*: (error|warning): ")
 
-SERVERS = {"view"}
+SERVERS = {"view", "web"}
 """Commands that serve until a signal (no ``--duration``): run in a subprocess, ended by
 SIGTERM once they said they serve."""
 
@@ -68,6 +68,9 @@ def bases(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
         "router": ["--listen", f"tcp/127.0.0.1:{_free_port()}", "--duration", "0.05"],
         "serve-buffer": ["--bus", zenoh, "--duration", "0.05"],
         "doctor": ["--bag", bag],
+        "lookup": ["--bag", bag, "--target", "world", "--source", "turtle1", "--every", "1",
+                   "-o", str(out / "poses.parquet"), "-q"],
+        "web": ["--bag", bag, "--port", "0"],
     }
 
 
@@ -147,7 +150,7 @@ def _run_server(argv: list[str]) -> tuple[int, str]:
         err_lines = []
         for line in proc.stderr:  # EOF: it exited on its own
             err_lines.append(line)
-            if line.startswith("tfbus view: http://"):
+            if line.startswith(("tfbus view: http://", "tfbus web: ws://")):
                 proc.send_signal(signal.SIGTERM)
                 break
         out, rest = proc.communicate(timeout=60)
@@ -159,10 +162,12 @@ def _run_server(argv: list[str]) -> tuple[int, str]:
     return proc.returncode, "".join(err_lines) + rest + out
 
 
-def test_every_option_of_every_command_on_bad_values(bases: dict[str, list[str]]) -> None:
+def test_every_option_of_every_command_on_bad_values(
+        bases: dict[str, list[str]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Each parameter x nan, inf, -inf, 1e300, 1e-300, '', 'garbage', -1: exit status 2
     with one ``tfbus CMD: error:`` line, or a clean run / clean one-line error (1, 2);
     no traceback. A server command whose options pass serves and ends at SIGTERM."""
+    monkeypatch.chdir(tmp_path)  # a value taken as an output path lands here, not in the repo
     runner = CliRunner()
     cases = list(_cases(bases))
     assert len(cases) > 300

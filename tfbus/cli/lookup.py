@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from tfbus.cli._common import console, fail, literal, seconds, warn
+from tfbus.cli._common import MAX_SECONDS, FiniteFloat, console, fail, literal, seconds, warn
 from tfbus.errors import MissingExtraError
 
 __all__ = ["command"]
@@ -27,17 +27,24 @@ def _expand(patterns: tuple[str, ...]) -> list[Path]:
     return [Path(m) for m in found]
 
 
+MIN_STEP = 0.001
+"""Shortest ``--every`` and ``--window``, seconds (one pose a millisecond: above any tf
+rate; a shorter step would only multiply rows and windows without new data)."""
+
+
 @click.command("lookup")
 @click.option("--bag", "bags", multiple=True, required=True, metavar="GLOB",
               help="Recordings (.bag, .mcap, .db3, ROS 2 bag folders): a path or a glob "
                    "pattern ('recordings/*.mcap', '**' recursive); repeatable.")
 @click.option("--target", required=True, help="Frame to express the poses in (target_frame).")
 @click.option("--source", required=True, help="Frame whose pose is wanted (source_frame).")
-@click.option("--every", type=seconds(), required=True, metavar="SECONDS",
+@click.option("--every", type=FiniteFloat(min=MIN_STEP, max=MAX_SECONDS), required=True,
+              metavar="SECONDS",
               help="Seconds between two stamps (from each file's first /tf message).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Parquet file to write (replaced if it exists).")
-@click.option("--window", type=seconds(), default=60.0, show_default=True,
+@click.option("--window", type=FiniteFloat(min=MIN_STEP, max=MAX_SECONDS), default=60.0,
+              show_default=True,
               metavar="SECONDS", help="Each file is read window by window, this wide.")
 @click.option("--margin", type=seconds(zero=True), default=5.0, show_default=True,
               metavar="SECONDS",
@@ -83,8 +90,14 @@ def command(bags: tuple[str, ...], target: str, source: str, every: float, outpu
         TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(),
         console=console(err=True), disable=quiet, transient=False,
     )
-    output.parent.mkdir(parents=True, exist_ok=True)
-    with pq.ParquetWriter(output, schema) as writer, progress:
+    try:
+        if output.is_dir():
+            raise IsADirectoryError(21, "Is a directory")
+        output.parent.mkdir(parents=True, exist_ok=True)
+        opened = pq.ParquetWriter(output, schema)
+    except OSError as err:
+        fail(f"-o: cannot write {literal(output)}: {err.strerror or err}")
+    with opened as writer, progress:
         task = progress.add_task("recordings", total=len(paths))
         for path in paths:
             progress.update(task, description=f"lookup {literal(path.name)}")

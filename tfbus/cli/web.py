@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from tfbus.cli._common import HOST, bag_path, fail
+from tfbus.cli._common import HOST, FiniteFloat, bag_path, fail
 
 __all__ = ["command"]
 
@@ -26,7 +26,7 @@ __all__ = ["command"]
 @click.option("--token", default=None, metavar="SECRET",
               help="Let a client in from any name when its URL carries this secret "
                    "(ws://HOST:PORT/?token=SECRET).")
-@click.option("--cache-time", type=click.FloatRange(1.0, 3600.0), default=10.0,
+@click.option("--cache-time", type=FiniteFloat(min=1.0, max=3600.0), default=10.0,
               show_default=True, help="Seconds of transforms the buffer keeps.")
 def command(bus: str | None, bag: Path | None, host: str, port: int, token: str | None,
             cache_time: float) -> None:
