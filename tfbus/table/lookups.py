@@ -108,12 +108,12 @@ def _batch_for(core: BufferCore) -> _Batch:
     raise TypeError(f"buffer must be a tfbus BufferCore, got {type(core).__name__}")
 
 
-def _frame_codes(table: pa.Table, name: str, required: bool) -> tuple[_I64, list[str]] | None:
-    """A string column as (int64 codes, the distinct ids); a null id is the empty
-    string (tf2: "frame_ids cannot be empty")."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
+def _column(table: pa.Table, name: str, required: bool) -> pa.ChunkedArray | None:
+    """Column ``name`` of ``table``; None when it is absent and optional.
 
+    Raises:
+        ValueError: a required column is absent (the message names it and the columns).
+    """
     if name not in table.column_names:
         if required:
             raise ValueError(
@@ -121,7 +121,18 @@ def _frame_codes(table: pa.Table, name: str, required: bool) -> tuple[_I64, list
                 f"got {', '.join(table.column_names) or 'no columns'})"
             )
         return None
-    col = table.column(name)
+    return table.column(name)
+
+
+def _frame_codes(table: pa.Table, name: str, required: bool) -> tuple[_I64, list[str]] | None:
+    """A string column as (int64 codes, the distinct ids); a null id is the empty
+    string (tf2: "frame_ids cannot be empty")."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    col = _column(table, name, required)
+    if col is None:
+        return None
     kind = col.type.value_type if pa.types.is_dictionary(col.type) else col.type
     if not (pa.types.is_string(kind) or pa.types.is_large_string(kind)
             or pa.types.is_null(kind) or getattr(pa.types, "is_string_view", bool)(kind)):
@@ -149,14 +160,9 @@ def _stamps(
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    if name not in table.column_names:
-        if required:
-            raise ValueError(
-                f"queries has no column {name!r} (needs {', '.join(QUERY_COLUMNS)}; "
-                f"got {', '.join(table.column_names) or 'no columns'})"
-            )
+    col = _column(table, name, required)
+    if col is None:
         return None
-    col = table.column(name)
     if pa.types.is_timestamp(col.type):
         col = col.cast(pa.timestamp("ns", col.type.tz)).cast(pa.int64())
     elif pa.types.is_integer(col.type) and col.type != pa.int64():
