@@ -10,7 +10,11 @@ by its PID when the context exits.
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
+import os
+import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -42,7 +46,8 @@ class Chromium:
 
         self._proc = subprocess.Popen(
             [self.exe, *FLAGS, f"--user-data-dir={self._profile.name}", "about:blank"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True)  # its renderer and helper processes in our child's group
         active = Path(self._profile.name) / "DevToolsActivePort"
         deadline = time.monotonic() + self.timeout
         while not (active.exists() and len(active.read_text().splitlines()) >= 2):
@@ -62,10 +67,26 @@ class Chromium:
                  tb: TracebackType | None) -> None:
         if self._ws is not None:
             self._ws.close()
-        if self._proc is not None and self._proc.poll() is None:
-            self._proc.kill()  # the child we started, by its PID
-            self._proc.wait(timeout=self.timeout)
-        self._profile.cleanup()
+        if self._proc is not None:
+            # the child we started and the processes it started, by its PID (the group
+            # it leads): a renderer left alive would go on writing into the profile
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self._proc.pid, signal.SIGKILL)
+            if self._proc.poll() is None:
+                self._proc.wait(timeout=self.timeout)
+        deadline = time.monotonic() + self.timeout
+        while True:  # a helper process may still be exiting (bounded by ``timeout``)
+            try:
+                shutil.rmtree(self._profile.name)
+                break
+            except FileNotFoundError:
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
+        with contextlib.suppress(OSError):
+            self._profile.cleanup()
 
     def call(self, method: str, **params: Any) -> dict[str, Any]:
         """One CDP command; its ``result`` (events before the answer are skipped)."""
