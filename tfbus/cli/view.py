@@ -20,7 +20,9 @@ from tfbus.cli._common import HOST, FiniteFloat, bag_path, fail, seconds, use_si
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
 
 if TYPE_CHECKING:
+    from tfbus.view.clouds import CloudTrack
     from tfbus.view.foxglove_bridge import FoxgloveBridge
+    from tfbus.view.record import RecordControl
     from tfbus.view.scans import ScanTrack
 
 __all__ = ["command"]
@@ -47,6 +49,23 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
               help="Draw this topic's LaserScans (from the bag, or from the bus once their "
                    "transforms arrived), projected into the fixed frame "
                    "(tfbus.laser.LaserProjection). Repeatable.")
+@click.option("--cloud", "cloud_topics", multiple=True, metavar="TOPIC",
+              help="With --bag: draw this topic's PointCloud2s (x, y, z; at most 100 000 "
+                   "points each), placed in the fixed frame at each cloud's stamp. "
+                   "Repeatable.")
+@click.option("--record", "record_path", default=None, metavar="PATH",
+              type=click.Path(dir_okay=False, path_type=Path),
+              help="Record /tf, /tf_static and the scans and clouds shown to this new MCAP "
+                   "file from the start (ROS 2 CDR messages; tfbus.bag reads it).")
+@click.option("--record-dir", "record_dir", default=None, metavar="DIR",
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Let the page start and stop recordings, to files named in the page "
+                   "inside this folder only.")
+@click.option("--record-max-mb", type=FiniteFloat(0.001, 1e6), default=1024.0,
+              show_default=True, help="A recording ends by itself past this many MB of "
+                                      "messages.")
+@click.option("--record-max-seconds", type=seconds(), default=3600.0, show_default=True,
+              help="A recording ends by itself past this many seconds of log time.")
 @click.option("--foxglove", "foxglove_port", type=click.IntRange(0, 65535), default=None,
               metavar="PORT",
               help="Also serve the Foxglove WebSocket protocol on this port, on --host "
@@ -73,7 +92,9 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             port: int, paused: bool, rate: float, frame_timeout: float,
             scan_topics: tuple[str, ...], foxglove_port: int | None,
             urdf: Path | None, mesh_dirs: tuple[Path, ...], token: str | None,
-            use_sim_time: bool) -> None:
+            use_sim_time: bool, cloud_topics: tuple[str, ...] = (),
+            record_path: Path | None = None, record_dir: Path | None = None,
+            record_max_mb: float = 1024.0, record_max_seconds: float = 3600.0) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -82,6 +103,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
       tfbus view --bus zenoh --fixed-frame odom --port 8081
       tfbus view --bag tests/data/laser/drl_guardian_3.bag --scan /scan --fixed-frame odom
       tfbus view --bus zenoh --scan /scan --foxglove 8765
+      tfbus view --bag run.mcap --cloud /points --record-dir recordings
     """
     try:
         importlib.import_module("viser")
@@ -98,6 +120,12 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             PageGuard(host, port, token)
         except ValueError as err:
             fail(f"--token: {err}")
+    if cloud_topics and bag is None:
+        fail("--cloud: PointCloud2 topics are drawn from a --bag; the bus transports do not "
+             "carry PointCloud2 yet")
+    both = sorted(set(cloud_topics) & set(scan_topics))
+    if both:
+        fail(f"--cloud and --scan name the same topic: {', '.join(map(repr, both))}")
     if bus is not None and bag is None:
         from tfbus.cli._bus_spec import check_bus_spec
 
@@ -124,6 +152,22 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
                 tracks.append(ScanTrack.read(bag, topic))
             except ValueError as err:
                 fail(str(err))
+    clouds = []
+    if bag is not None:
+        from tfbus.view.clouds import CloudTrack
+
+        for topic in cloud_topics:
+            try:
+                clouds.append(CloudTrack.read(bag, topic))
+            except ValueError as err:
+                fail(str(err))
+    from tfbus.view.record import RecordControl, RecordError, record_path_check
+
+    if record_path is not None:
+        try:
+            record_path_check(record_path)
+        except RecordError as err:
+            fail(f"--record: {err}")
     try:
         page = TfPage(host, port, title=f"tfbus view: {bag if bag is not None else bus or 'zenoh'}",
                       token=token)
@@ -133,6 +177,15 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail(f"cannot serve on {host}:{port}: {err}")
     page.set_visuals(robot.visuals)
     page.set_notes(robot.notes)
+    record: RecordControl | None = None
+    if record_path is not None or record_dir is not None:
+        try:
+            record = RecordControl(page, directory=record_dir, path=record_path,
+                                   max_bytes=max(1, round(record_max_mb * 1e6)),
+                                   max_seconds=record_max_seconds)
+        except RecordError as err:
+            page.close()
+            fail(f"--record: {err}")
     stop = threading.Event()
 
     def on_signal(_sig: int, _frame: FrameType | None) -> None:
@@ -159,11 +212,16 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         click.echo(f"tfbus view: Foxglove ws://{host}:{bridge.port}", err=True)
     try:
         if bag is not None:
-            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop)
+            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop,
+                       clouds=clouds, record=record)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
-                       stop, use_sim_time=use_sim_time)
+                       stop, use_sim_time=use_sim_time, record=record)
     finally:
+        if record is not None:
+            record.close()
+            if record.recorder is not None:
+                click.echo(f"tfbus view: {record.recorder.describe()}", err=True)
         page.close()
         if bridge is not None:
             bridge.close()
@@ -171,7 +229,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
 
 def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
                paused: bool, rate: float, tracks: Sequence[ScanTrack],
-               bridge: FoxgloveBridge | None, stop: threading.Event) -> None:
+               bridge: FoxgloveBridge | None, stop: threading.Event, *,
+               clouds: Sequence[CloudTrack] = (), record: RecordControl | None = None) -> None:
     from tfbus.cli._bag_source import BagSource
     from tfbus.view.player import BagPlayer
     from tfbus.view.server import TfPage
@@ -182,14 +241,15 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     timeline = BagTimeline.read(bag)
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
                        paused=paused, rate=rate, summary=src.summary(), scans=tracks,
-                       foxglove=bridge)
+                       foxglove=bridge, clouds=clouds, record=record)
     player.render()
     player.run(stop)
 
 
 def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
                scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
-               stop: threading.Event, *, use_sim_time: bool = False) -> None:
+               stop: threading.Event, *, use_sim_time: bool = False,
+               record: RecordControl | None = None) -> None:
     from tfbus.cli._bus_source import BusSource
     from tfbus.cli._live_session import live, run_live
     from tfbus.view.live import LiveView
@@ -209,7 +269,7 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
                                                            static=static))
     view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
                     frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge,
-                    doctor=doctor)
+                    doctor=doctor, record=record)
 
     async def body() -> None:
         assert src.bus is not None

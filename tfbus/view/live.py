@@ -46,7 +46,9 @@ from tfbus.sensor_msgs import LaserScan
 from tfbus.time import Duration, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPICS
 from tfbus.transports._base import Backlogged, ThreadWakeup
-from tfbus.view.player import MAX_DRAW_HZ, draw_live
+from tfbus.view.clouds import CloudFeed
+from tfbus.view.player import CLOUD_COLOUR, MAX_DRAW_HZ, draw_live
+from tfbus.view.record import McapRecorder, RecordControl
 from tfbus.view.scans import MAX_SCANS_BACK, project_scan
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene
 
@@ -144,6 +146,9 @@ class LiveView:
         fixed_frame: the frame at the origin (None: the root of the largest tree).
         frame_timeout: seconds, as :func:`~tfbus.view.scene.fade`.
         scan_topics: LaserScan topics to draw.
+        cloud_topics: PointCloud2 topics to draw (:class:`~tfbus.view.clouds.CloudFeed`).
+        record: where ``/tf``, ``/tf_static``, the scans and the clouds received are
+            recorded while a recording is in progress (None: nowhere).
         foxglove: a Foxglove server to relay ``/tf``, ``/tf_static`` and the scans to.
         doctor: a :class:`~tfbus.doctor.Doctor` fed by the same listener (one of the
             sink's ``observers``, as ``tfbus doctor --bus`` feeds one): its findings are
@@ -156,7 +161,9 @@ class LiveView:
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
                  scan_topics: Sequence[str] = (),
                  foxglove: FoxgloveBridge | None = None,
-                 doctor: Doctor | None = None) -> None:
+                 doctor: Doctor | None = None,
+                 cloud_topics: Sequence[str] = (),
+                 record: RecordControl | None = None) -> None:
         self.page = page
         self.doctor = doctor
         self._reported_at: Time | None = None
@@ -168,6 +175,11 @@ class LiveView:
         self.foxglove = foxglove
         self.feeds = {t: ScanFeed(t) for t in dict.fromkeys(scan_topics)}
         """The scan topics' feeds, by topic."""
+        self.cloud_feeds = {t: CloudFeed(t) for t in dict.fromkeys(cloud_topics)}
+        """The PointCloud2 topics' feeds, by topic."""
+        self.record = record
+        self._rec_generation = 0
+        self._rec_statics: dict[str, TransformStamped] = {}
         self.bad_tf = 0
         """Messages on /tf or /tf_static that are not TFMessages (relay only)."""
         self.relayed = 0
@@ -242,7 +254,10 @@ class LiveView:
             for feed in self.feeds.values():
                 sub = bus.subscribe(feed.topic, queue_size=10)
                 tg.start_soon(self._follow_scans, feed, _ScanSource(sub, feed, self))
-            if self.foxglove is not None:
+            for cfeed in self.cloud_feeds.values():
+                tg.start_soon(self._follow_clouds, cfeed,
+                              bus.subscribe(cfeed.topic, queue_size=10))
+            if self.foxglove is not None or self.record is not None:
                 for topic in TF_TOPICS:
                     tg.start_soon(self._relay_tf, bus.subscribe(topic, queue_size=1000),
                                   topic == TF_STATIC_TOPIC)
@@ -291,23 +306,56 @@ class LiveView:
                 feed.passed += 1
                 self._changed()
 
+    async def _follow_clouds(self, feed: CloudFeed, sub: Subscription[Any]) -> None:
+        async for msg in sub:  # decoded (subsampled) on receipt; a bad one counted
+            kept = feed.take(msg)
+            rec = self._recorder()
+            if kept is not None and rec is not None:
+                rec.write_cloud(feed.topic, kept, self.clock.now().ns)
+            self._changed()
+
     async def _relay_tf(self, sub: Subscription[Any], static: bool) -> None:
         bridge = self.foxglove
-        assert bridge is not None
         async for msg in sub:
             if not isinstance(msg, TFMessage):
                 self.bad_tf += 1
+                continue
+            now = self.clock.now().ns
+            if self.record is not None:
+                rec = self._recorder()
+                if rec is not None:
+                    rec.write_tf(msg.transforms, static, now)
+                if static:  # the latest of each, for a recording started later
+                    for t in msg.transforms:
+                        self._rec_statics[t.child_frame_id] = t
+            if bridge is None:
                 continue
             if static:  # kept to send again; one Foxglove cannot carry is dropped once
                 for t in msg.transforms:
                     if bridge.fits(t.header.stamp):
                         self._statics[t.child_frame_id] = t
-            bridge.publish_transforms(msg.transforms, self.clock.now().ns, static=static)
+            bridge.publish_transforms(msg.transforms, now, static=static)
             self.relayed += 1
+
+    def _recorder(self) -> McapRecorder | None:
+        """The recording in progress; one started since the last message first gets
+        the latest static transform of each frame received so far."""
+        ctl = self.record
+        rec = ctl.active if ctl is not None else None
+        if ctl is None or rec is None:
+            return None
+        if ctl.generation != self._rec_generation:
+            self._rec_generation = ctl.generation
+            if self._rec_statics:
+                rec.write_tf(list(self._rec_statics.values()), True, self.clock.now().ns)
+        return rec
 
     def _relay_scan(self, topic: str, scan: LaserScan) -> None:
         if self.foxglove is not None:
             self.foxglove.publish_scan(topic, scan, self.clock.now().ns)
+        rec = self._recorder()
+        if rec is not None:
+            rec.write_scan(topic, scan, self.clock.now().ns)
 
     # ---------------------------------------------------------------- drawing
 
@@ -326,8 +374,15 @@ class LiveView:
             self._fixed_known.set()
         for feed in self.feeds.values():
             self._draw_feed(feed, self.shown_fixed)
-        self._report_findings(now)
         errors = [f.error for f in self.feeds.values() if f.error is not None]
+        for cfeed in self.cloud_feeds.values():
+            pts, changed = cfeed.project(self.shown_fixed, self.buffer)
+            if changed:
+                self.page.draw_points(cfeed.topic, pts, CLOUD_COLOUR)
+            errors += [e for e in (cfeed.error, cfeed.dropped.summary(cfeed.topic)) if e]
+        self._report_findings(now)
+        if self.record is not None:
+            self.record.show()
         if errors and scene.message is None:
             self.page.set_status(f"fixed frame: {scene.fixed_frame}"
                                  + "".join(f"   {e}" for e in errors))

@@ -14,13 +14,18 @@ from tfbus.doctor import Doctor
 from tfbus.laser import LaserProjection
 from tfbus.monitor import TfSummary
 from tfbus.time import Time
+from tfbus.view.clouds import CloudTrack
 from tfbus.view.foxglove_bridge import FoxgloveBridge
+from tfbus.view.record import RecordControl
 from tfbus.view.scans import ScanTrack
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene, build_scene
 from tfbus.view.server import TfPage
 from tfbus.view.timeline import BagTimeline
 
-__all__ = ["MAX_DRAW_HZ", "BagPlayer", "draw_live"]
+__all__ = ["CLOUD_COLOUR", "MAX_DRAW_HZ", "BagPlayer", "draw_live"]
+
+CLOUD_COLOUR = (230, 60, 160)
+"""Colour of a PointCloud2's points (RGB 0-255); a LaserScan's are blue."""
 
 MAX_DRAW_HZ = 30.0
 """Drawing is down-sampled to this rate, whatever the rate of the transforms."""
@@ -51,7 +56,9 @@ class BagPlayer:
                  frame_timeout: float = DEFAULT_FRAME_TIMEOUT, paused: bool = False,
                  rate: float = 1.0, summary: TfSummary | None = None,
                  scans: Sequence[ScanTrack] = (),
-                 foxglove: FoxgloveBridge | None = None) -> None:
+                 foxglove: FoxgloveBridge | None = None,
+                 clouds: Sequence[CloudTrack] = (),
+                 record: RecordControl | None = None) -> None:
         if not 0.1 <= rate <= 10.0:
             raise ValueError(f"rate must be between 0.1 and 10, got {rate!r}")
         self.page = page
@@ -60,6 +67,14 @@ class BagPlayer:
         self.frame_timeout = frame_timeout
         self.summary = summary
         self.scans = tuple(scans)
+        self.clouds = tuple(clouds)
+        """The PointCloud2 topics drawn (:class:`~tfbus.view.clouds.CloudTrack`)."""
+        self.record = record
+        """Where the bag's messages are recorded as they are played (None: nowhere)."""
+        self._rec_generation = 0
+        self._rec_upto = 0
+        self._rec_scans = [0 for _ in self.scans]
+        self._rec_clouds = [0 for _ in self.clouds]
         self.foxglove = foxglove
         self._fg_upto = 0
         self._fg_scan_upto = [0 for _ in self.scans]
@@ -133,6 +148,16 @@ class BagPlayer:
                 if why is not None:
                     self.scan_errors[track.topic] = why
             self.page.draw_points(track.topic, pts)
+        for ctrack in self.clouds:
+            cpts = None
+            if scene.fixed_frame is not None:
+                cpts, why = ctrack.project_at(t, scene.fixed_frame, core)
+                if why is not None:
+                    self.scan_errors[ctrack.topic] = why
+            problem = ctrack.problem()
+            if problem is not None:
+                self.scan_errors[ctrack.topic + " (dropped)"] = problem
+            self.page.draw_points(ctrack.topic, cpts, CLOUD_COLOUR)
         if scene.message is None and self.timeline.problem:
             self.page.set_status(self.timeline.problem)
         elif scene.frames:
@@ -141,6 +166,9 @@ class BagPlayer:
                                  + "".join(f"   {e}" for e in self.scan_errors.values()))
         if self.foxglove is not None:
             self._feed_foxglove(t, scene)
+        self._feed_record(t)
+        if self.record is not None:
+            self.record.show()
         self.last_scene = scene
         return scene
 
@@ -199,6 +227,40 @@ class BagPlayer:
         fg.broadcast_time(t.ns)
         fg.publish_errors(scene)
 
+    def _feed_record(self, t: Time) -> None:
+        """Write the bag's messages up to ``t`` not written yet to the recording in
+        progress, each at its record time (a jump back writes nothing again; past the
+        furthest point it goes on). A recording started at ``t`` first gets the bag's
+        ``/tf_static`` messages up to ``t``, so that it is complete on its own."""
+        ctl = self.record
+        rec = ctl.active if ctl is not None else None
+        if ctl is None or rec is None:
+            return
+        tl = self.timeline
+        n = bisect.bisect_right(tl.times, t.ns)
+        if ctl.generation != self._rec_generation:
+            self._rec_generation = ctl.generation
+            for i in range(n):
+                if tl.messages[i][2]:
+                    rec.write_tf(tl.messages[i][0], True, tl.times[i])
+            self._rec_upto = n
+            self._rec_scans = [bisect.bisect_right(s.times, t.ns) for s in self.scans]
+            self._rec_clouds = [bisect.bisect_right(c.times, t.ns) for c in self.clouds]
+        for i in range(self._rec_upto, n):
+            transforms, _authority, static = tl.messages[i]
+            rec.write_tf(transforms, static, tl.times[i])
+        self._rec_upto = max(self._rec_upto, n)
+        for k, track in enumerate(self.scans):
+            m = bisect.bisect_right(track.times, t.ns)
+            for i in range(self._rec_scans[k], m):
+                rec.write_scan(track.topic, track.scans[i], track.times[i])
+            self._rec_scans[k] = max(self._rec_scans[k], m)
+        for k, ctrack in enumerate(self.clouds):
+            m = bisect.bisect_right(ctrack.times, t.ns)
+            for i in range(self._rec_clouds[k], m):
+                rec.write_cloud(ctrack.topic, ctrack.clouds[i], ctrack.times[i])
+            self._rec_clouds[k] = max(self._rec_clouds[k], m)
+
     def run(self, stop: threading.Event,
             clock: Callable[[], float] = _wall.monotonic) -> None:
         """Play until ``stop`` is set, drawing at most :data:`MAX_DRAW_HZ` times a second,
@@ -211,6 +273,7 @@ class BagPlayer:
             now = clock()
             self.advance(now - last)
             last = now
+            self._feed_record(self.time())  # recorded whether or not a page looks
             watched = self.foxglove is not None or self.page.watched()
             version = self.page.control_version
             if watched and (self.position != self._shown or self.playing.value
