@@ -180,9 +180,10 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     record: RecordControl | None = None
     if record_path is not None or record_dir is not None:
         try:
-            record = RecordControl(page, directory=record_dir, path=record_path,
-                                   max_bytes=max(1, round(record_max_mb * 1e6)),
-                                   max_seconds=record_max_seconds)
+            record = RecordControl(
+                page, directory=record_dir, path=record_path,
+                max_bytes=max(1, round(record_max_mb * 1e6)), max_seconds=record_max_seconds,
+                on_end=lambda rec: click.echo(f"tfbus view: {rec.describe()}", err=True))
         except RecordError as err:
             page.close()
             fail(f"--record: {err}")
@@ -219,9 +220,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
                        stop, use_sim_time=use_sim_time, record=record)
     finally:
         if record is not None:
-            record.close()
-            if record.recorder is not None:
-                click.echo(f"tfbus view: {record.recorder.describe()}", err=True)
+            record.close()  # the recording in progress ends: its line is printed
         page.close()
         if bridge is not None:
             bridge.close()

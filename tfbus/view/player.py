@@ -73,6 +73,7 @@ class BagPlayer:
         """Where the bag's messages are recorded as they are played (None: nowhere)."""
         self._rec_generation = 0
         self._rec_upto = 0
+        self._rec_fed = timeline.start.ns
         self._rec_scans = [0 for _ in self.scans]
         self._rec_clouds = [0 for _ in self.clouds]
         self.foxglove = foxglove
@@ -231,21 +232,26 @@ class BagPlayer:
         """Write the bag's messages up to ``t`` not written yet to the recording in
         progress, each at its record time (a jump back writes nothing again; past the
         furthest point it goes on). A recording started at ``t`` first gets the bag's
-        ``/tf_static`` messages up to ``t``, so that it is complete on its own."""
+        ``/tf_static`` messages before ``t``, so that it is complete on its own, then
+        every message from ``t`` on (``t``: the bag time of the previous call, shown when
+        the recording was started, if earlier)."""
         ctl = self.record
         rec = ctl.active if ctl is not None else None
+        fed, self._rec_fed = self._rec_fed, t.ns
         if ctl is None or rec is None:
             return
         tl = self.timeline
         n = bisect.bisect_right(tl.times, t.ns)
         if ctl.generation != self._rec_generation:
             self._rec_generation = ctl.generation
-            for i in range(n):
+            since = min(t.ns, fed)
+            first = bisect.bisect_left(tl.times, since)
+            for i in range(first):
                 if tl.messages[i][2]:
                     rec.write_tf(tl.messages[i][0], True, tl.times[i])
-            self._rec_upto = n
-            self._rec_scans = [bisect.bisect_right(s.times, t.ns) for s in self.scans]
-            self._rec_clouds = [bisect.bisect_right(c.times, t.ns) for c in self.clouds]
+            self._rec_upto = first
+            self._rec_scans = [bisect.bisect_left(s.times, since) for s in self.scans]
+            self._rec_clouds = [bisect.bisect_left(c.times, since) for c in self.clouds]
         for i in range(self._rec_upto, n):
             transforms, _authority, static = tl.messages[i]
             rec.write_tf(transforms, static, tl.times[i])

@@ -24,7 +24,7 @@ import html
 import os
 import re
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -133,6 +133,8 @@ class McapRecorder:
         max_bytes: stop once the messages written would exceed this many bytes.
         max_seconds: stop at the first message more than this many seconds of log time
             after the first one.
+        on_end: called with the recorder once it has ended (stopped, or a cap reached;
+            the file is complete then).
 
     Raises:
         RecordError: the file exists, its folder does not exist or is not writable, or
@@ -141,7 +143,8 @@ class McapRecorder:
     """
 
     def __init__(self, path: Path, *, max_bytes: int = MAX_RECORD_BYTES,
-                 max_seconds: float = MAX_RECORD_SECONDS) -> None:
+                 max_seconds: float = MAX_RECORD_SECONDS,
+                 on_end: Callable[[McapRecorder], None] | None = None) -> None:
         import foxglove
         import foxglove.mcap
 
@@ -170,6 +173,7 @@ class McapRecorder:
         self.stopped: str | None = None
         """Why the recording ended (``"stopped"``, or the cap it reached), else None."""
         self._first: int | None = None
+        self._on_end = on_end
 
     def _channel(self, topic: str, msgtype: str) -> Any:
         ch = self._channels.get(topic)
@@ -232,6 +236,8 @@ class McapRecorder:
             for ch in self._channels.values():
                 ch.close()
             self._writer.close()
+            if self._on_end is not None:
+                self._on_end(self)
 
     def close(self, why: str = "stopped") -> None:
         """End the recording (the MCAP's summary and footer written); idempotent."""
@@ -260,7 +266,11 @@ class RecordControl:
 
     def __init__(self, page: TfPage | None = None, *, directory: Path | None = None,
                  path: Path | None = None, max_bytes: int = MAX_RECORD_BYTES,
-                 max_seconds: float = MAX_RECORD_SECONDS) -> None:
+                 max_seconds: float = MAX_RECORD_SECONDS,
+                 on_end: Callable[[McapRecorder], None] | None = None) -> None:
+        self.on_end = on_end
+        """Called with each recording once it has ended (``tfbus view`` prints its
+        :meth:`McapRecorder.describe` line)."""
         self.directory = directory
         self.max_bytes = max_bytes
         self.max_seconds = max_seconds
@@ -304,7 +314,7 @@ class RecordControl:
             if self.recorder is not None:
                 self.recorder.close()
             self.recorder = McapRecorder(path, max_bytes=self.max_bytes,
-                                         max_seconds=self.max_seconds)
+                                         max_seconds=self.max_seconds, on_end=self.on_end)
             self.generation += 1
             return self.recorder
 
