@@ -231,3 +231,88 @@ async def test_live_clouds_wait_for_their_transforms_and_hostile_ones_are_counte
         np.testing.assert_allclose(np.asarray(page.clouds["/points"].points), PLACED_2,
                                    atol=1e-6)
         assert feed.drawn == 2
+
+
+async def across(cond: Any) -> None:
+    """Wait for what another thread (Zenoh's) delivers until ``cond()`` (bounded: 30 s,
+    generous for a loaded machine)."""
+    with anyio.fail_after(30):
+        while not cond():
+            await anyio.sleep(0.005)
+
+
+@pytest.mark.anyio
+async def test_live_clouds_from_another_zenoh_bus(page: TfPage) -> None:
+    """``tfbus view --bus zenoh --cloud /points``: PointCloud2s published on one Zenoh bus
+    (tfbus's wire, data bit for bit) are drawn by a LiveView following another, on
+    127.0.0.1 (no scouting); one the wire refuses (a negative width) is counted by the
+    transport as malformed, ones whose layout does not fit by the feed, the valid ones
+    drawn."""
+    pytest.importorskip("zenoh")
+    import socket
+
+    from tfbus.transports.zenoh import ZenohTransport
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    clock = ManualClock(Time.from_sec(10.0))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    stats = TfSummary()
+    sink = MonitoredSink(buffer, stats, clock, lambda static: "peer")
+    view = LiveView(page, buffer, stats, clock, fixed_frame="odom", cloud_topics=["/points"])
+    feed = view.cloud_feeds["/points"]
+    robot = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="robot")
+    viewer = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="viewer")
+    async with Bus(transport=robot) as a, Bus(transport=viewer) as b, \
+            TransformListener(sink, b, clock=clock), anyio.create_task_group() as tg:
+        await tg.start(view.follow, b)
+        with anyio.fail_after(10):
+            await robot.wait_matching("/points")
+            await robot.wait_matching("/tf")
+            await robot.wait_matching("/tf_static")
+        await StaticTransformBroadcaster(a).send_transform(LIDAR)
+        tfb = TransformBroadcaster(a)
+        await tfb.send_transform(tf(10.0, "odom", "base", (1.0, 0.0, 0.0)))
+        await tfb.send_transform(tf(11.0, "odom", "base", (2.0, 0.0, 0.0)))
+        await across(lambda: stats.messages.get("/tf", 0) == 2
+                     and stats.messages.get("/tf_static", 0) == 1)
+        await a.publish("/points", dataclasses.replace(to_cloud(GOOD), width=-1))
+        for cloud, _ in HOSTILE[:3]:
+            assert isinstance(cloud, Cloud)
+            await a.publish("/points", to_cloud(cloud))
+        await a.publish("/points", to_cloud(CLOUD_1))
+        await across(lambda: feed.received == 4 and viewer.statistics().malformed == 1)
+        assert feed.dropped.bad == 3 and len(feed.ready) == 1
+        view.render()
+        np.testing.assert_allclose(np.asarray(page.clouds["/points"].points), PLACED_1,
+                                   atol=1e-6)
+        (_, header, pts) = feed.ready[0]
+        assert header == Header(Time.from_sec(10.5), "lidar")
+        np.testing.assert_array_equal(pts, cloud_points(to_cloud(CLOUD_1)))
+        tg.cancel_scope.cancel()
+    buffer.close()
+
+
+def test_the_wire_carries_a_cloud_bit_for_bit_and_refuses_wrong_types() -> None:
+    from tfbus.codecs.native import WireCodec
+    from tfbus.errors import WireDecodeError, WireLimitError
+
+    codec = WireCodec()
+    cloud = to_cloud(CLOUD_1)
+    back = codec.decode(codec.encode(cloud, sender=7, seq=3))
+    assert (back.sender, back.seq) == (7, 3)
+    got = back.message
+    assert isinstance(got, PointCloud2) and got.header == cloud.header
+    assert (got.height, got.width, got.fields, got.point_step, got.row_step, got.data,
+            got.is_bigendian, got.is_dense) == (
+        cloud.height, cloud.width, cloud.fields, cloud.point_step, cloud.row_step,
+        cloud.data, cloud.is_bigendian, cloud.is_dense)
+    bad = [dataclasses.replace(cloud, width=-1), dataclasses.replace(cloud, point_step=2**32),
+           dataclasses.replace(cloud, fields=[PointField("x", 0, 300)])]
+    for msg in bad:
+        with pytest.raises(WireDecodeError):
+            codec.decode(codec.encode(msg, sender=1, seq=1))
+    many = dataclasses.replace(cloud, fields=[PointField(f"f{k}", 0, 7) for k in range(257)])
+    with pytest.raises(WireLimitError):
+        codec.decode(codec.encode(many, sender=1, seq=1))

@@ -113,9 +113,9 @@ def test_cli_refuses_an_unwritable_record_path_in_one_line(tmp_path: Path) -> No
     result = CliRunner().invoke(cli, ["view", "--bag", str(TURTLE), "--port", "0",
                                       "--record-dir", str(tmp_path / "nodir")])
     assert result.exit_code == 2 and "'--record-dir'" in result.output
-    result = CliRunner().invoke(cli, ["view", "--bus", "memory", "--cloud", "/points"])
-    assert result.exit_code == 2 and "--cloud: PointCloud2 topics are drawn from a --bag" \
-        in result.output
+    result = CliRunner().invoke(cli, ["view", "--bus", "ros2", "--cloud", "/points"])
+    assert result.exit_code == 2 and "--cloud: PointCloud2 topics are carried by --bus " \
+        "zenoh and memory (and read from a --bag), not by 'ros2'" in result.output
 
 
 # ------------------------------------------------------------------ caps

@@ -28,6 +28,8 @@ if TYPE_CHECKING:
 __all__ = ["command"]
 
 NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
+CLOUD_SCHEMES = ("zenoh", "memory")
+"""The ``--bus`` schemes that carry PointCloud2 (tfbus's own wire; in-process)."""
 
 
 @click.command("view")
@@ -50,9 +52,9 @@ NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
                    "transforms arrived), projected into the fixed frame "
                    "(tfbus.laser.LaserProjection). Repeatable.")
 @click.option("--cloud", "cloud_topics", multiple=True, metavar="TOPIC",
-              help="With --bag: draw this topic's PointCloud2s (x, y, z; at most 100 000 "
-                   "points each), placed in the fixed frame at each cloud's stamp. "
-                   "Repeatable.")
+              help="Draw this topic's PointCloud2s (x, y, z; at most 100 000 points each), "
+                   "placed in the fixed frame at each cloud's stamp, from the bag or from a "
+                   "zenoh bus. Repeatable.")
 @click.option("--record", "record_path", default=None, metavar="PATH",
               type=click.Path(dir_okay=False, path_type=Path),
               help="Record /tf, /tf_static and the scans and clouds shown to this new MCAP "
@@ -121,8 +123,12 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         except ValueError as err:
             fail(f"--token: {err}")
     if cloud_topics and bag is None:
-        fail("--cloud: PointCloud2 topics are drawn from a --bag; the bus transports do not "
-             "carry PointCloud2 yet")
+        from tfbus.cli._bus_spec import parse_spec
+
+        scheme = parse_spec(bus or "zenoh").scheme
+        if scheme not in CLOUD_SCHEMES:
+            fail(f"--cloud: PointCloud2 topics are carried by --bus "
+                 f"{' and '.join(CLOUD_SCHEMES)} (and read from a --bag), not by {scheme!r}")
     both = sorted(set(cloud_topics) & set(scan_topics))
     if both:
         fail(f"--cloud and --scan name the same topic: {', '.join(map(repr, both))}")
@@ -217,7 +223,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
                        clouds=clouds, record=record)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
-                       stop, use_sim_time=use_sim_time, record=record)
+                       stop, use_sim_time=use_sim_time, record=record,
+                       cloud_topics=cloud_topics)
     finally:
         if record is not None:
             record.close()  # the recording in progress ends: its line is printed
@@ -248,7 +255,8 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
 def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
                scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
                stop: threading.Event, *, use_sim_time: bool = False,
-               record: RecordControl | None = None) -> None:
+               record: RecordControl | None = None,
+               cloud_topics: Sequence[str] = ()) -> None:
     from tfbus.cli._bus_source import BusSource
     from tfbus.cli._live_session import live, run_live
     from tfbus.view.live import LiveView
@@ -268,7 +276,7 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
                                                            static=static))
     view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
                     frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge,
-                    doctor=doctor, record=record)
+                    doctor=doctor, record=record, cloud_topics=cloud_topics)
 
     async def body() -> None:
         assert src.bus is not None

@@ -22,6 +22,14 @@ receiver can detect gaps and keep per-publisher order. ``tag`` names the message
   in order; angles radians, times seconds, ranges metres; ``ranges`` and ``intensities``
   msgpack ``bin`` of little-endian float32s, copied bit for bit, at most
   ``WireLimits.max_scan_beams`` each).
+* ``"PointCloud2"`` -- a :class:`~tfbus.sensor_msgs.PointCloud2`; ``body`` is
+  ``[stamp_ns, frame_id, height, width, fields, is_bigendian, point_step, row_step, data,
+  is_dense]`` (sensor_msgs' ``PointCloud2.msg`` in order), each field
+  ``[name, offset, datatype, count]`` (``PointField.msg``), ``data`` msgpack ``bin``
+  copied bit for bit (bounded by ``max_payload_bytes``), at most
+  ``WireLimits.max_cloud_fields`` fields. The wire checks types and ranges only: whether
+  the fields and sizes describe ``data`` is the receiver's to check
+  (:func:`tfbus.view.clouds.cloud_points`).
 * ``""`` -- a plain msgpack value (None, bool, int, float, str, bytes, list, dict).
 
 Decoding is defensive: a payload that is too large, not msgpack, of the wrong shape or
@@ -69,7 +77,7 @@ from tfbus.errors import (
     WireVersionError,
 )
 from tfbus.messages import Clock, TFMessage, TransformStamped
-from tfbus.sensor_msgs import LaserScan
+from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import TIME_MAX_NS, Time
 
 __all__ = [
@@ -106,6 +114,8 @@ _ID: Final[Any] = Annotated[int, msgspec.Meta(ge=1, le=_INT64_MAX)]  # sender id
 _TF_TAG: Final = "tf"
 _RAW_TAG: Final = ""
 _SCAN_TAG: Final = "LaserScan"
+_CLOUD_TAG: Final = "PointCloud2"
+_U32: Final[Any] = Annotated[int, msgspec.Meta(ge=0, le=2**32 - 1)]
 _F32_LE: Final = np.dtype("<f4")
 
 
@@ -124,6 +134,7 @@ class WireLimits:
         max_scan_beams: most beams (float32 values) in a LaserScan's ``ranges`` and in
             its ``intensities`` each (default 1 000 000; a 0.1 degree 360 degree laser
             has 3 600).
+        max_cloud_fields: most fields (``PointField``) of a PointCloud2 (default 256).
     """
 
     max_payload_bytes: int = 16 * 1024 * 1024
@@ -131,6 +142,7 @@ class WireLimits:
     max_frame_id_length: int = 256
     max_depth: int = 64
     max_scan_beams: int = 1_000_000
+    max_cloud_fields: int = 256
 
 
 class Decoded(NamedTuple):
@@ -187,7 +199,7 @@ def register_message_type(cls: type, tag: str | None = None) -> None:
         ValueError: if ``tag`` is empty, ``"tf"`` or already registered for another type.
     """
     name = cls.__qualname__ if tag is None else tag
-    if name in (_TF_TAG, _RAW_TAG, _SCAN_TAG):
+    if name in (_TF_TAG, _RAW_TAG, _SCAN_TAG, _CLOUD_TAG):
         raise ValueError(f"tag {name!r} is reserved")
     if _REGISTRY.get(name, cls) is not cls:
         raise ValueError(f"tag {name!r} is already registered for {_REGISTRY[name]!r}")
@@ -240,6 +252,9 @@ class WireCodec:
         self._raw_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder()
         self._scan_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(
             _scan_schema(self.limits)
+        )
+        self._cloud_decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(
+            _cloud_schema(self.limits)
         )
         self._typed: dict[str, Callable[[bytes | memoryview], object]] = {}
 
@@ -300,6 +315,8 @@ class WireCodec:
                 message: object = _m.TFMessage(_from_wire(self._tf_decoder.decode(body)))
             elif tag == _SCAN_TAG:
                 message = _scan_from_wire(self._scan_decoder.decode(body))
+            elif tag == _CLOUD_TAG:
+                message = _cloud_from_wire(self._cloud_decoder.decode(body))
             else:
                 check_depth(data, pos, self.limits.max_depth)
                 if tag == _RAW_TAG:
@@ -340,6 +357,9 @@ def _payload(encode: Callable[[object], bytes], message: object, sender: int,
     elif type(message) is LaserScan:
         tag = _SCAN_TAG
         body = _scan_to_wire(message)
+    elif type(message) is PointCloud2:
+        tag = _CLOUD_TAG
+        body = _cloud_to_wire(message)
     else:
         tag = _TAG_OF.get(type(message), _RAW_TAG)
         body = message
@@ -431,6 +451,65 @@ def _scan_from_wire(body: Any) -> LaserScan:
         _beams(body.ranges, "ranges"),
         _beams(body.intensities, "intensities"),
     )
+
+
+def _cloud_schema(limits: WireLimits) -> Any:
+    """The msgspec type of a PointCloud2 body under ``limits`` (every field typed; counts
+    and offsets uint32, datatypes uint8, as in ``PointField.msg``)."""
+    name = Annotated[str, msgspec.Meta(max_length=limits.max_frame_id_length)]
+    point_field = msgspec.defstruct(
+        "_WirePointField",
+        [("name", name), ("offset", _U32),
+         ("datatype", Annotated[int, msgspec.Meta(ge=0, le=255)]), ("count", _U32)],
+        array_like=True,
+        gc=False,
+    )
+    return msgspec.defstruct(
+        "_WirePointCloud2",
+        [
+            ("stamp", Annotated[int, msgspec.Meta(ge=0, le=TIME_MAX_NS)]),
+            ("frame_id", name),
+            ("height", _U32),
+            ("width", _U32),
+            ("fields", Annotated[list[point_field],  # type: ignore[valid-type]
+                                 msgspec.Meta(max_length=limits.max_cloud_fields)]),
+            ("is_bigendian", bool),
+            ("point_step", _U32),
+            ("row_step", _U32),
+            ("data", bytes),
+            ("is_dense", bool),
+        ],
+        array_like=True,
+        gc=False,
+    )
+
+
+def _cloud_to_wire(cloud: PointCloud2) -> tuple[object, ...]:
+    """A PointCloud2 as its wire body (see the module's docstring)."""
+    return (
+        cloud.header.stamp.ns,
+        cloud.header.frame_id,
+        int(cloud.height),
+        int(cloud.width),
+        [(f.name, int(f.offset), int(f.datatype), int(f.count)) for f in cloud.fields],
+        bool(cloud.is_bigendian),
+        int(cloud.point_step),
+        int(cloud.row_step),
+        bytes(cloud.data),
+        bool(cloud.is_dense),
+    )
+
+
+def _cloud_from_wire(body: Any) -> PointCloud2:
+    """The wire schema's PointCloud2 body as a :class:`~tfbus.sensor_msgs.PointCloud2`
+    (types and ranges already checked by the schema)."""
+    stamp = Time.__new__(Time)
+    stamp._ns = body.stamp
+    return PointCloud2(
+        _m.Header(stamp, body.frame_id), body.height, body.width,
+        [PointField(f.name, f.offset, f.datatype, f.count) for f in body.fields],
+        body.is_bigendian, body.point_step, body.row_step, body.data, body.is_dense,
+    )  # fmt: skip
 
 
 _new = tuple.__new__
