@@ -316,3 +316,54 @@ def test_the_wire_carries_a_cloud_bit_for_bit_and_refuses_wrong_types() -> None:
     many = dataclasses.replace(cloud, fields=[PointField(f"f{k}", 0, 7) for k in range(257)])
     with pytest.raises(WireLimitError):
         codec.decode(codec.encode(many, sender=1, seq=1))
+
+
+@pytest.fixture(scope="module")
+def chromium() -> str:
+    import shutil
+
+    from peer_install import require
+
+    require("chromium", "install_chromium.sh", timeout=2400)
+    exe = shutil.which("chromium")
+    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
+    return exe
+
+
+def test_a_bag_cloud_in_chromium_and_hostile_names_as_text(chromium: str, page: TfPage,
+                                                           tmp_path: Path) -> None:
+    """A ring of 2 000 points 2 m around the lidar, drawn in headless Chromium (the
+    screenshot shows it: magenta points around the base); a cloud whose field is named
+    ``<b>z</b>`` is dropped and its reason shown as text, no element made from it."""
+    from cdp import Chromium
+
+    angles = np.linspace(0.0, 2 * np.pi, 2000, endpoint=False)
+    ring = np.stack([2 * np.cos(angles), 2 * np.sin(angles), np.zeros_like(angles)], axis=1)
+    odd = dataclasses.replace(GOOD, fields=[("x", 0, 7, 1), ("y", 4, 7, 1),
+                                            ("<b>z</b>", 8, 7, 1)])
+    path = write_recording(tmp_path / "ring", "mcap", [
+        (9.0, "/tf_static", [LIDAR]),
+        (10.0, "/tf", [tf(10.0, "odom", "base", (1.0, 0.0, 0.0))]),
+        (10.1, "/points", odd),
+        (10.2, "/points", xyz_cloud(10.0, "lidar", ring.tolist())),
+    ])
+    track = CloudTrack.read(path, "/points")
+    player = BagPlayer(page, BagTimeline.read(path), fixed_frame="odom", paused=True,
+                       clouds=[track])
+    player.seek(10.5 - 9.0)
+    player.render()
+    assert "/points" in page.clouds, (player.scan_errors, track)
+    drawn = np.asarray(page.clouds["/points"].points)
+    # lidar (x, y, 0) is odom (1 - y, x, 0.5)
+    np.testing.assert_allclose(drawn, np.stack([1 - ring[:, 1], ring[:, 0],
+                                                np.full(len(ring), 0.5)], axis=1), atol=1e-6)
+    with Chromium(chromium) as c:
+        c.open(f"http://127.0.0.1:{page.port}/")
+        c.wait("document.body && document.body.innerText.includes('cloud(s) dropped')")
+        text = c.js("document.body.innerText")
+        assert "/points: 1 cloud(s) dropped (ValueError: PointCloud2 has no field 'z' " \
+            "(fields: ['<b>z</b>', 'x', 'y']))" in text
+        assert c.js("[...document.querySelectorAll('b')].filter(e => e.textContent === 'z')"
+                    ".length") == 0
+        shot = c.screenshot(tmp_path.parent / "cloud_ring.png")
+        assert len(shot) > 10_000

@@ -35,9 +35,9 @@ a render while paused, reports at once)."""
 
 
 class BagPlayer:
-    """A bag on a :class:`TfPage`: a time slider (seconds from the bag's start), a
-    "playing" checkbox and a rate slider (x0.1-x10); bag time advances at ``rate`` x
-    wall time while playing and stops at the end.
+    """A bag on a :class:`TfPage`: a time slider (seconds from the bag's start to its last
+    tf message, scan or cloud), a "playing" checkbox and a rate slider (x0.1-x10); bag
+    time advances at ``rate`` x wall time while playing and stops at the end.
 
     The scene at bag time ``t`` is the buffer ``tfbus replay`` would have filled by
     then (:meth:`BagTimeline.buffer_at`), looked up at its latest time (``Time(0)``, as
@@ -87,7 +87,10 @@ class BagPlayer:
         """Why a scan topic is not drawn at the bag time shown (tf2's message)."""
         self.position = 0.0
         """Seconds from the bag's start."""
-        self.duration = (timeline.end.ns - timeline.start.ns) / 1e9
+        end = max([timeline.end.ns] + [track.times[-1] for track in (*self.scans,
+                                                                   *self.clouds)
+                                       if track.times])  # a cloud after the last tf
+        self.duration = (end - timeline.start.ns) / 1e9
         gui = page.server.gui
         self._lock = threading.RLock()
         self.slider: Any = gui.add_slider("bag time (s)", min=0.0, max=max(self.duration, 0.01),
