@@ -394,6 +394,12 @@ class PortInUseError(OSError):
     one): :mod:`tfbus.view.server`."""
 
 
+class RecordError(ValueError):
+    """A recording of ``tfbus view`` cannot be started (:mod:`tfbus.view.record`): a name
+    that is not a plain file name, a file that exists, a folder that does not exist or
+    cannot be written (the message names it)."""
+
+
 class MissingExtraError(ModuleNotFoundError, TfbusError):
     """A subpackage of tfbus needs an optional dependency that is not installed.
 

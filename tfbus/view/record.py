@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tfbus.codecs.cdr import encode_scan, encode_tf
+from tfbus.errors import RecordError
 from tfbus.messages import TransformStamped
 from tfbus.sensor_msgs import LaserScan, PointCloud2
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -50,11 +51,6 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 _TF_TYPE = "tf2_msgs/msg/TFMessage"
 _SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 _CLOUD_TYPE = "sensor_msgs/msg/PointCloud2"
-
-
-class RecordError(ValueError):
-    """A recording cannot be started: a name that is not a plain file name, a file that
-    exists, a folder that does not exist or cannot be written (the message names it)."""
 
 
 def record_path(directory: Path, name: str) -> Path:
