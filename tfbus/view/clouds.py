@@ -106,8 +106,11 @@ def cloud_points(cloud: PointCloud2, cap: int = MAX_CLOUD_POINTS) -> _F32:
                          f"{width}, row_step {row}, point_step {step} need {need}")
     rows = np.ndarray((height, width), dtype=dtype, buffer=data, strides=(row, step))
     k = -(-n // max(1, cap))
-    idx = np.arange(0, n, k)
-    flat = rows[idx // width, idx % width]  # only the points kept are copied
+    if height == 1 or row == width * step:  # one run of points: a strided view
+        flat = np.ndarray((n,), dtype=dtype, buffer=data, strides=(step,))[::k]
+    else:  # padded rows: only the points kept are copied
+        idx = np.arange(0, n, k)
+        flat = rows[idx // width, idx % width]
     pts = np.empty((len(flat), 3), dtype=np.float32)
     for c, name in enumerate(_XYZ):
         pts[:, c] = flat[name]
