@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import math
+import os
 import re
 import signal
 import socket
@@ -138,10 +139,13 @@ def _check(argv: list[str], code: int, out: str, err: str) -> None:
         assert lines and ONE_LINE.match(lines[-1]), (argv, code, err)
 
 
-def _run_server(argv: list[str]) -> tuple[int, str]:
-    """``tfbus ARGV`` in a subprocess: ended by SIGTERM once it prints its address
+def _run_server(argv: list[str], cwd: Path = ROOT) -> tuple[int, str]:
+    """``tfbus ARGV`` in a subprocess in ``cwd`` (a value taken as an output path, such
+    as ``view --record``'s, lands there): ended by SIGTERM once it prints its address
     (bounded by a watchdog), or its own exit; (status, stderr)."""
-    proc = subprocess.Popen([sys.executable, "-m", "tfbus.cli", *argv], cwd=ROOT,
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)}
+    proc = subprocess.Popen([sys.executable, "-m", "tfbus.cli", *argv], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     watchdog = threading.Timer(60.0, proc.kill)
     watchdog.start()
@@ -193,7 +197,11 @@ def test_every_option_of_every_command_on_bad_values(
     started = [argv for runs in servers.values() for argv in (runs[0], runs[-1])]
     assert 0 < len(started) < 20
     with concurrent.futures.ThreadPoolExecutor(max_workers=4) as pool:
-        for argv, (code, err) in zip(started, pool.map(_run_server, started), strict=True):
+        folders = [tmp_path / f"server{k}" for k in range(len(started))]
+        for folder in folders:  # one each: what one writes is not another's input
+            folder.mkdir()
+        runs = pool.map(_run_server, started, folders)
+        for argv, (code, err) in zip(started, runs, strict=True):
             _check(argv, code, "", err)
 
 
