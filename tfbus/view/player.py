@@ -87,9 +87,9 @@ class BagPlayer:
         """Why a scan topic is not drawn at the bag time shown (tf2's message)."""
         self.position = 0.0
         """Seconds from the bag's start."""
-        end = max([timeline.end.ns] + [track.times[-1] for track in (*self.scans,
-                                                                   *self.clouds)
-                                       if track.times])  # a cloud after the last tf
+        lasts = [t.times[-1] for t in self.scans if t.times] + \
+            [c.times[-1] for c in self.clouds if c.times]
+        end = max([timeline.end.ns, *lasts])  # a scan or cloud after the last tf
         self.duration = (end - timeline.start.ns) / 1e9
         gui = page.server.gui
         self._lock = threading.RLock()
