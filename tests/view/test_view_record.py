@@ -118,6 +118,26 @@ def test_cli_refuses_an_unwritable_record_path_in_one_line(tmp_path: Path) -> No
         "zenoh and memory (and read from a --bag), not by 'ros2'" in result.output
 
 
+def test_the_page_starts_at_most_its_number_of_recordings(page: TfPage,
+                                                         tmp_path: Path) -> None:
+    from tfbus.view.record import MAX_PAGE_RECORDINGS
+
+    ctl = RecordControl(page, directory=tmp_path)
+    ctl.name_box.value = "first"
+    ctl._on_start(None)
+    assert ctl.active is not None and ctl.page_starts == 1
+    ctl.page_starts = MAX_PAGE_RECORDINGS - 1
+    ctl.name_box.value = "last"
+    ctl._on_start(None)  # the previous one ended, this one started
+    assert ctl.active is not None and ctl.active.path == tmp_path / "last.mcap"
+    ctl.name_box.value = "one-more"
+    ctl._on_start(None)
+    assert "100 recordings started from the page already" in ctl.status_html
+    assert ctl.active is not None and ctl.active.path == tmp_path / "last.mcap"
+    ctl.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["first.mcap", "last.mcap"]
+
+
 # ------------------------------------------------------------------ caps
 
 def test_the_size_and_duration_caps_end_a_recording_that_stays_readable(

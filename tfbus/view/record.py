@@ -40,13 +40,16 @@ from tfbus.view.server import text
 if TYPE_CHECKING:
     from tfbus.view.server import TfPage
 
-__all__ = ["MAX_RECORD_BYTES", "MAX_RECORD_SECONDS", "McapRecorder", "RecordControl",
-           "RecordError", "record_path", "record_path_check"]
+__all__ = ["MAX_PAGE_RECORDINGS", "MAX_RECORD_BYTES", "MAX_RECORD_SECONDS", "McapRecorder",
+           "RecordControl", "RecordError", "record_path", "record_path_check"]
 
 MAX_RECORD_BYTES = 1 << 30
 """Default cap of a recording: bytes of messages written (1 GiB)."""
 MAX_RECORD_SECONDS = 3600.0
 """Default cap of a recording: seconds of log time from its first message (one hour)."""
+MAX_PAGE_RECORDINGS = 100
+"""Recordings the page may start in one run of the view (each within its caps): a page
+cannot fill the record directory with files."""
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 _TF_TYPE = "tf2_msgs/msg/TFMessage"
 _SCAN_TYPE = "sensor_msgs/msg/LaserScan"
@@ -277,6 +280,8 @@ class RecordControl:
         """Incremented at each recording started."""
         self.status_html = ""
         """The page's record status line as last sent."""
+        self.page_starts = 0
+        """Recordings started from the page (at most :data:`MAX_PAGE_RECORDINGS`)."""
         self._page = page
         self._status: Any = None
         self.name_box: Any = None
@@ -324,7 +329,11 @@ class RecordControl:
     def _on_start(self, _event: Any) -> None:
         assert self.directory is not None and self.name_box is not None
         try:
+            if self.page_starts >= MAX_PAGE_RECORDINGS:
+                raise RecordError(f"{MAX_PAGE_RECORDINGS} recordings started from the page "
+                                  "already: no more in this run of the view")
             self.start(record_path(self.directory, str(self.name_box.value)))
+            self.page_starts += 1
         except RecordError as err:
             self._set(f"<p style='color:#d03030'>{html.escape(text(err))}</p>")
             return
