@@ -275,8 +275,11 @@ async def test_live_clouds_from_another_zenoh_bus(page: TfPage) -> None:
         tfb = TransformBroadcaster(a)
         await tfb.send_transform(tf(10.0, "odom", "base", (1.0, 0.0, 0.0)))
         await tfb.send_transform(tf(11.0, "odom", "base", (2.0, 0.0, 0.0)))
+        # The static transform can arrive twice: live, and again in the late-join reply
+        # of the latched topic when that query crosses the publication (the same
+        # transform; storing it again changes nothing).
         await across(lambda: stats.messages.get("/tf", 0) == 2
-                     and stats.messages.get("/tf_static", 0) == 1)
+                     and stats.messages.get("/tf_static", 0) >= 1)
         await a.publish("/points", dataclasses.replace(to_cloud(GOOD), width=-1))
         for cloud, _ in HOSTILE[:3]:
             assert isinstance(cloud, Cloud)
