@@ -77,6 +77,14 @@ def text(frame_id: object) -> str:
 
 
 def _h(value: object) -> str:
+    if isinstance(value, str):
+        return _h_str(value)
+    return html.escape(text(value), quote=True)
+
+
+@functools.lru_cache(maxsize=8192)
+def _h_str(value: str) -> str:
+    """:func:`_h` of a string, remembered (the panel writes each id on every redraw)."""
     return html.escape(text(value), quote=True)
 
 
@@ -90,6 +98,7 @@ def _xyz(pose: TransformStamped) -> tuple[float, float, float]:
     return (v.x, v.y, v.z)
 
 
+@functools.lru_cache(maxsize=4096)
 def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, int, int]:
     """``full`` faded towards :data:`GREY`: ``colour`` 1.0 is ``full``, 0.0 grey."""
     r, g, b = (round(grey + (f - grey) * colour) for f, grey in zip(full, GREY, strict=True))
@@ -100,10 +109,20 @@ def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """sRGB 0-255 as the linear 0-255 values viser's per-vertex line colours are (its
     client divides by 255 and three.js encodes the output as sRGB): sent so, a colour is
     shown as given (the IEC 61966-2-1 transfer function)."""
-    c = srgb.astype(np.float64) / 255.0
+    out: npt.NDArray[np.uint8] = _LINEAR[srgb]
+    return out
+
+
+def _linear_table() -> npt.NDArray[np.uint8]:
+    c = np.arange(256, dtype=np.float64) / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     out: npt.NDArray[np.uint8] = np.round(lin * 255.0).astype(np.uint8)
     return out
+
+
+_LINEAR = _linear_table()
+""":func:`_to_linear` of each sRGB value 0-255 (a table: a redraw converts every
+vertex colour)."""
 
 
 def _axes(pose: TransformStamped, length: float = AXES_LENGTH
@@ -120,6 +139,99 @@ def _axes(pose: TransformStamped, length: float = AXES_LENGTH
     )
     return [[o, (o[0] + length * c[0], o[1] + length * c[1],
                  o[2] + length * c[2])] for c in cols]
+
+
+def _send_pose(handle: Any, xyz: tuple[float, float, float],
+               wxyz: tuple[float, float, float, float] | None = None) -> None:
+    """Set a viser node's position (and orientation), one message each, the change
+    already known (:class:`DrawnFrame` compares exactly): queued as viser's own setters
+    queue it, without their ``np.allclose`` check of each value against the last one sent
+    (about 40 % of a redraw of 100 moving frames). A viser without that path (its
+    internals moved) gets the public setters."""
+    impl = getattr(handle, "_impl", None)
+    queue = getattr(getattr(impl, "api", None), "_queue_scene_message", None)
+    messages = _viser_messages()
+    if impl is None or queue is None or messages is None:
+        handle.position = xyz
+        if wxyz is not None:
+            handle.wxyz = wxyz
+        return
+    impl.position[:] = xyz
+    queue(messages.SetPositionMessage(impl.name, xyz))
+    if wxyz is not None:
+        impl.wxyz[:] = wxyz
+        queue(messages.SetOrientationMessage(impl.name, wxyz))
+
+
+@functools.cache
+def _viser_messages() -> Any:
+    """viser's message classes (``SetPositionMessage``, ``SetOrientationMessage``), or
+    None when this viser has them elsewhere."""
+    try:
+        from viser import _messages
+    except ImportError:
+        return None
+    if hasattr(_messages, "SetPositionMessage") and hasattr(_messages,
+                                                            "SetOrientationMessage"):
+        return _messages
+    return None
+
+
+class DrawnFrame:
+    """One frame as the page draws it: :attr:`position` (metres) and :attr:`wxyz` (unit
+    quaternion w, x, y, z) in the fixed frame as last drawn, :attr:`visible` (its axes
+    drawn), :attr:`name` (its scene node, the parent of its ``--urdf`` geometry).
+
+    What reaches a browser is only what it shows: the label gets a position (a label has
+    no orientation) while it is shown, the node a pose only when geometry hangs on it
+    (the axes and links of every frame are one line-segments node each), and each
+    message only when its value changed since the last one sent, compared exactly.
+    """
+
+    def __init__(self, node: Any, label: Any, posed: bool) -> None:
+        self.node = node
+        """The viser frame node (no axes of its own: hidden, or moved with its geometry)."""
+        self.label = label
+        """The viser label with the frame id as text."""
+        self.name: str = str(node.name)
+        self.position: npt.NDArray[np.float64] = np.zeros(3)
+        self.wxyz: npt.NDArray[np.float64] = np.array([1.0, 0.0, 0.0, 0.0])
+        self.visible = False
+        self.posed = posed
+        """Whether the node itself is moved (it carries ``--urdf`` geometry)."""
+        self._pose: tuple[tuple[float, float, float],
+                          tuple[float, float, float, float]] | None = None
+        self._label_at: tuple[float, float, float] | None = None
+        self._node_shown: bool | None = None
+        self._label_shown: bool | None = None
+
+    def place(self, xyz: tuple[float, float, float],
+              wxyz: tuple[float, float, float, float]) -> None:
+        """Put the frame at ``xyz`` (metres), ``wxyz`` in the fixed frame; nothing is
+        sent when the pose is the one already drawn."""
+        pose = (xyz, wxyz)
+        if pose == self._pose:
+            return
+        self._pose = pose
+        self.position = np.array(xyz, dtype=np.float64)
+        self.wxyz = np.array(wxyz, dtype=np.float64)
+        if self.posed:
+            _send_pose(self.node, xyz, wxyz)
+
+    def show(self, drawn: bool, labels: bool) -> None:
+        """Show or hide the frame (``drawn``) and its label (``drawn and labels``); a label
+        shown gets the frame's position first."""
+        self.visible = drawn
+        if drawn is not self._node_shown:
+            self.node.visible = drawn
+            self._node_shown = drawn
+        label = drawn and labels
+        if label and self._pose is not None and self._label_at != self._pose[0]:
+            _send_pose(self.label, self._pose[0])
+            self._label_at = self._pose[0]
+        if label is not self._label_shown:
+            self.label.visible = label
+            self._label_shown = label
 
 
 class TfPage:
@@ -165,9 +277,10 @@ class TfPage:
         self.server.scene.set_up_direction("+z")
         self.server.scene.add_grid("/grid", width=20.0, height=20.0, cell_size=1.0,
                                    section_size=5.0, plane="xy")
-        self.frames: dict[str, Any] = {}
-        """Scene handle of each frame id drawn (``position``, ``wxyz``, ``visible``)."""
+        self.frames: dict[str, DrawnFrame] = {}
+        """Each frame id drawn (``position``, ``wxyz``, ``visible``, ``name``)."""
         self.labels: dict[str, Any] = {}
+        """Viser label of each frame id drawn (``text``, ``visible``)."""
         self.camera_set = False
         """Whether the camera was aimed at the frames (once, at the first frames drawn)."""
         self.visuals: dict[str, list[Any]] = {}
@@ -181,6 +294,8 @@ class TfPage:
         """The line segments of every visible frame's axes (``points``, ``colors``:
         ``(3 N, 2, 3)``), three rows per frame in :attr:`axes_rows`' order."""
         self.axes_count = 0
+        self._segments_sent: dict[str, tuple[npt.NDArray[np.float32],
+                                             npt.NDArray[np.uint8]]] = {}
         self.axes_rows: dict[str, int] = {}
         """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
         self._axes_srgb: list[list[tuple[int, int, int]]] = []
@@ -230,7 +345,6 @@ class TfPage:
         self.filter_box.on_update(self._on_filter)
         self.labels_box.on_update(self._on_control)
         self.axis_length.on_update(self._on_control)
-        self._sent_labels: dict[str, bool] = {}
         self._axes_length_sent = AXES_LENGTH
         self.tree = gui.add_html("")
         self.notes = gui.add_html("")
@@ -243,9 +357,6 @@ class TfPage:
         self.panel_html = ""
         """The frame tree panel's HTML as last sent."""
         self.status_html = ""
-        self._sent_poses: dict[str, tuple[tuple[float, float, float],
-                                          tuple[float, float, float, float]]] = {}
-        self._sent_visible: dict[str, bool] = {}
         self._connect_listeners: list[Callable[[], None]] = []
         self.server.on_client_connect(self._client_connected)
 
@@ -386,7 +497,6 @@ class TfPage:
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
-        scene_api = self.server.scene
         poses = {f.frame_id: f.pose for f in scene.frames}
         segments: list[list[tuple[float, float, float]]] = []
         colours: list[list[tuple[int, int, int]]] = []
@@ -397,24 +507,12 @@ class TfPage:
         labels = bool(self.labels_box.value)
         for f in scene.frames:
             drawn = f.visible and self.shown(f.frame_id)
-            handle = self.frames.get(f.frame_id)
-            if handle is None:
-                n = len(self.frames)
-                handle = scene_api.add_frame(f"/tf/f{n}", show_axes=False)
-                self.frames[f.frame_id] = handle
-                self.labels[f.frame_id] = scene_api.add_label(f"/tf/f{n}/label", text(f.frame_id))
-                self._attach(f.frame_id, f"/tf/f{n}")
-            if f.pose is not None:  # (viser compares each with np.allclose: ~50 us)
-                pose = (_xyz(f.pose), _wxyz(f.pose))
-                if self._sent_poses.get(f.frame_id) != pose:
-                    handle.position, handle.wxyz = pose
-                    self._sent_poses[f.frame_id] = pose
-            if self._sent_visible.get(f.frame_id) is not drawn:
-                handle.visible = drawn
-                self._sent_visible[f.frame_id] = drawn
-            if self._sent_labels.get(f.frame_id) is not labels:
-                self.labels[f.frame_id].visible = labels
-                self._sent_labels[f.frame_id] = labels
+            record = self.frames.get(f.frame_id)
+            if record is None:
+                record = self._add_frame(f.frame_id)
+            if f.pose is not None:
+                record.place(_xyz(f.pose), _wxyz(f.pose))
+            record.show(drawn, labels)
             if drawn and f.pose is not None:
                 rows[f.frame_id] = len(axes)
                 axes.extend(_axes(f.pose, length))
@@ -555,7 +653,20 @@ class TfPage:
                 self.findings_html = value
                 self.findings.content = value
 
-    def _attach(self, frame_id: str, node: str) -> None:
+    def _add_frame(self, frame_id: str) -> DrawnFrame:
+        """The scene nodes of a frame seen for the first time: a frame node (parent of its
+        ``--urdf`` geometry) and a label, both named by number, never by id."""
+        scene_api = self.server.scene
+        n = len(self.frames)
+        node = scene_api.add_frame(f"/tf/f{n}", show_axes=False)
+        label = scene_api.add_label(f"/tf/l{n}", text(frame_id))
+        posed = self._attach(frame_id, f"/tf/f{n}")
+        record = DrawnFrame(node, label, posed)
+        self.frames[frame_id] = record
+        self.labels[frame_id] = label
+        return record
+
+    def _attach(self, frame_id: str, node: str) -> bool:
         scene_api = self.server.scene
         for k, v in enumerate(self._pending_visuals.pop(frame_id, [])):
             name = f"{node}/v{k}"
@@ -572,6 +683,7 @@ class TfPage:
                 h = scene_api.add_icosphere(name, radius=v.size[0], color=v.rgb,
                                             position=v.xyz, wxyz=v.wxyz)
             self.visuals.setdefault(frame_id, []).append(h)
+        return frame_id in self.visuals
 
     def aim(self, scene: Scene) -> None:
         """Point the browsers' initial camera at the drawn frames (their bounding box seen
@@ -593,13 +705,20 @@ class TfPage:
                   colours: list[list[tuple[int, int, int]]],
                   thickness: float) -> tuple[Any, int]:
         """Show ``segments`` as the line-segments node ``name`` (re-made when their number
-        changes, else updated in place; hidden when there are none)."""
+        changes, else updated in place; hidden when there are none; nothing sent when
+        points and colours are those already shown)."""
         if not segments:
             if handle is not None:
                 handle.visible = False
             return handle, count
         pts = np.asarray(segments, dtype=np.float32)
         cols = _to_linear(np.asarray(colours, dtype=np.uint8))
+        sent = self._segments_sent.get(name)
+        if handle is not None and len(segments) == count and handle.visible \
+                and sent is not None and np.array_equal(sent[0], pts) \
+                and np.array_equal(sent[1], cols):
+            return handle, count  # what the browser shows already: nothing sent
+        self._segments_sent[name] = (pts, cols)
         if handle is None or len(segments) != count:
             if handle is not None:
                 handle.remove()
