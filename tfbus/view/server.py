@@ -34,6 +34,14 @@ from tfbus.time import Time
 from tfbus.view.guard import PageGuard, check_port
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
+from tfbus.view.trails import (
+    DEFAULT_TRAIL_SECONDS,
+    MAX_TRAIL_SECONDS,
+    MIN_TRAIL_SECONDS,
+    Trail,
+    TrailSampler,
+    check_seconds,
+)
 
 if TYPE_CHECKING:
     from tfbus.doctor import Finding
@@ -48,6 +56,8 @@ GREY = (128, 128, 128)
 """What a frame's axes and link line fade to at the frame timeout (rviz's TF display)."""
 CHAIN_COLOUR = (220, 0, 220)
 """Colour of the links of the chain between the two frames picked in the page."""
+TRAIL_COLOUR = (0, 170, 200)
+"""Colour of the trail of the frame picked in the page's "trail" folder (RGB 0-255)."""
 AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
 """Full colour of the x, y and z axis of a frame (RGB 0-255)."""
 _PANEL_BOX = "overflow-x:auto;max-width:100%"
@@ -339,6 +349,29 @@ class TfPage:
         """The highlighted links of the chain between A and B (line segments)."""
         self.chain_count = 0
         self._pair_options: tuple[str, ...] = ()
+        with gui.add_folder("trail"):
+            self.trail_dropdown: Any = gui.add_dropdown(
+                "trail frame", options=("",), initial_value="",
+                hint="the frame whose origin's path in the fixed frame is drawn")
+            self.trail_seconds_box: Any = gui.add_number(
+                "trail seconds", initial_value=DEFAULT_TRAIL_SECONDS,
+                min=MIN_TRAIL_SECONDS, max=MAX_TRAIL_SECONDS, step=0.5,
+                hint="how far back the trail reaches")
+            self.trail_info = gui.add_html("")
+        self.trail_choice: str | None = None
+        """The frame whose trail is drawn (None: no trail, the default)."""
+        self.trail_seconds = DEFAULT_TRAIL_SECONDS
+        """How far back the trail reaches, seconds."""
+        self.trail: Trail | None = None
+        """The trail as last drawn (None: none drawn)."""
+        self.trail_html = ""
+        self.trail_line: Any = None
+        """The trail's line segments (``points``: ``(K - 1, 2, 3)``)."""
+        self.trail_count = 0
+        self._trail_error = ""
+        self._trails = TrailSampler()
+        self.trail_dropdown.on_update(self._on_trail)
+        self.trail_seconds_box.on_update(self._on_trail_seconds)
         for k, dropdown in enumerate(self.pair_dropdowns):
             dropdown.on_update(functools.partial(self._on_pair, k=k))
         self.fixed_dropdown.on_update(self._on_fixed)
@@ -380,6 +413,42 @@ class TfPage:
             pair = list(self.pair_choice)
             pair[k] = frame
             self.pair_choice = (pair[0], pair[1])
+            self.control_version += 1
+
+    def _on_trail(self, event: Any) -> None:
+        if event.client is None:
+            return
+        with self._lock:
+            self.trail_choice = self._fixed_options.get(str(self.trail_dropdown.value))
+            self.control_version += 1
+
+    def _on_trail_seconds(self, event: Any) -> None:
+        if event.client is None:
+            return
+        with self._lock:
+            try:
+                self.trail_seconds = check_seconds(self.trail_seconds_box.value)
+                self._trail_error = ""
+            except (TypeError, ValueError) as err:  # the previous duration stays
+                self._trail_error = str(err)
+            self.control_version += 1
+
+    def set_trail(self, frame_id: str | None, seconds: float | None = None) -> None:
+        """Draw the trail of ``frame_id`` (None: no trail) over the last ``seconds``
+        (None: unchanged), as the page's "trail" folder does (:mod:`tfbus.view.trails`).
+
+        Raises:
+            ValueError: ``seconds`` is not between :data:`~tfbus.view.trails.MIN_TRAIL_SECONDS`
+                and :data:`~tfbus.view.trails.MAX_TRAIL_SECONDS`.
+        """
+        with self._lock:
+            if seconds is not None:
+                self.trail_seconds = check_seconds(seconds)
+                self.trail_seconds_box.value = self.trail_seconds
+            self.trail_choice = frame_id
+            shown = "" if frame_id is None else text(frame_id)
+            if shown in self._fixed_options or not shown:
+                self.trail_dropdown.value = shown
             self.control_version += 1
 
     def _on_filter(self, event: Any) -> None:
@@ -449,7 +518,7 @@ class TfPage:
         if options.keys() != self._fixed_options.keys():
             self._fixed_options = options
             self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
-            for dropdown in self.pair_dropdowns:
+            for dropdown in (*self.pair_dropdowns, self.trail_dropdown):
                 dropdown.options = ("", *sorted(options))
         shown = text(scene.fixed_frame) if scene.fixed_frame is not None else ""
         if shown in options and self.fixed_dropdown.value != shown:
@@ -494,6 +563,37 @@ class TfPage:
         with self._lock, self.server.atomic():
             self._draw(scene, stats, rates)
             self.draw_pair(scene, core, stats, rates)
+            self.draw_trail(scene, core)
+
+    def draw_trail(self, scene: Scene, core: BufferCore | None) -> None:
+        """The trail of :attr:`trail_choice` over the last :attr:`trail_seconds` of
+        ``core`` in the scene's fixed frame (:class:`~tfbus.view.trails.TrailSampler`),
+        as line segments in :data:`TRAIL_COLOUR`, and a line saying its points and span
+        or tf2's message. Called by :meth:`draw` (the caller holds the lock)."""
+        frame = self.trail_choice
+        self.trail = None
+        segments: npt.NDArray[np.float64] = np.zeros((0, 2, 3))
+        value = ""
+        if frame is not None and core is not None and scene.fixed_frame is not None:
+            trail = self._trails.sample(core, scene.fixed_frame, frame, self.trail_seconds)
+            self.trail = trail
+            if trail.error is not None:
+                value = f"<p>trail of {_h(frame)}: {_h(trail.error)}</p>"
+            else:
+                span = (int(trail.stamps[-1]) - int(trail.stamps[0])) / 1e9
+                value = (f"<p class='tfbus-trail'>trail of {_h(frame)} in "
+                         f"{_h(scene.fixed_frame)}: {len(trail.points)} points over "
+                         f"{span:.2f} s</p>")
+                segments = trail.segments()
+        if self._trail_error:
+            value += f"<p style='color:#d03030'>{_h(self._trail_error)}</p>"
+        colours = np.empty((len(segments), 2, 3), dtype=np.uint8)
+        colours[:] = TRAIL_COLOUR
+        self.trail_line, self.trail_count = self._segments(
+            "/trail", self.trail_line, self.trail_count, segments, colours, 3.0)
+        if value != self.trail_html:
+            self.trail_html = value
+            self.trail_info.content = value
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
@@ -701,13 +801,13 @@ class TfPage:
         self.camera_set = True
 
     def _segments(self, name: str, handle: Any, count: int,
-                  segments: list[list[tuple[float, float, float]]],
-                  colours: list[list[tuple[int, int, int]]],
+                  segments: list[list[tuple[float, float, float]]] | npt.NDArray[np.float64],
+                  colours: list[list[tuple[int, int, int]]] | npt.NDArray[np.uint8],
                   thickness: float) -> tuple[Any, int]:
         """Show ``segments`` as the line-segments node ``name`` (re-made when their number
         changes, else updated in place; hidden when there are none; nothing sent when
         points and colours are those already shown)."""
-        if not segments:
+        if len(segments) == 0:
             if handle is not None:
                 handle.visible = False
             return handle, count
