@@ -135,20 +135,21 @@ _LINEAR = _linear_table()
 vertex colour)."""
 
 
-def _axes(pose: TransformStamped, length: float = AXES_LENGTH
-          ) -> list[list[tuple[float, float, float]]]:
-    """The x, y, z axis segments of a frame at ``pose``: origin to origin + R e_k x
-    ``length`` (metres)."""
-    o = _xyz(pose)
-    q = pose.transform.rotation
-    x, y, z, w = q.x, q.y, q.z, q.w
-    cols = (  # the columns of the rotation matrix of (x, y, z, w)
-        (1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)),
-        (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
-        (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)),
-    )
-    return [[o, (o[0] + length * c[0], o[1] + length * c[1],
-                 o[2] + length * c[2])] for c in cols]
+def _axes(origins: npt.NDArray[np.float64], quaternions: npt.NDArray[np.float64],
+          length: float = AXES_LENGTH) -> npt.NDArray[np.float64]:
+    """The x, y, z axis segments of frames at ``origins`` (``(N, 3)`` metres) turned by
+    ``quaternions`` (``(N, 4)`` x, y, z, w): ``(3 N, 2, 3)``, for each frame origin to
+    origin + R e_k x ``length`` (metres), k = x, y, z."""
+    x, y, z, w = quaternions.T
+    cols = np.stack([  # the columns of the rotation matrix of each (x, y, z, w)
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], -1),
+        np.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], -1),
+        np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)  # (N, 3 axes, 3)
+    starts = np.broadcast_to(origins[:, None, :], cols.shape)
+    out: npt.NDArray[np.float64] = np.stack([starts, starts + length * cols],
+                                            axis=2).reshape(-1, 2, 3)
+    return out
 
 
 def _send_pose(handle: Any, xyz: tuple[float, float, float],
@@ -600,7 +601,8 @@ class TfPage:
         poses = {f.frame_id: f.pose for f in scene.frames}
         segments: list[list[tuple[float, float, float]]] = []
         colours: list[list[tuple[int, int, int]]] = []
-        axes: list[list[tuple[float, float, float]]] = []
+        origins: list[tuple[float, float, float]] = []
+        quaternions: list[tuple[float, float, float, float]] = []
         axes_colours: list[list[tuple[int, int, int]]] = []
         rows: dict[str, int] = {}
         length = float(self.axis_length.value)
@@ -614,8 +616,10 @@ class TfPage:
                 record.place(_xyz(f.pose), _wxyz(f.pose))
             record.show(drawn, labels)
             if drawn and f.pose is not None:
-                rows[f.frame_id] = len(axes)
-                axes.extend(_axes(f.pose, length))
+                rows[f.frame_id] = 3 * len(origins)
+                q = f.pose.transform.rotation
+                origins.append(_xyz(f.pose))
+                quaternions.append((q.x, q.y, q.z, q.w))
                 for full in AXES_COLOURS:
                     c = _mix(f.colour if f.colour is not None else 0.0, full)
                     axes_colours.append([c, c])
@@ -626,6 +630,9 @@ class TfPage:
                 colours.append([c, c])
         self.links, self.link_count = self._segments(
             "/links", self.links, self.link_count, segments, colours, 2.0)
+        axes = (_axes(np.asarray(origins, dtype=np.float64),
+                      np.asarray(quaternions, dtype=np.float64), length)
+                if origins else np.zeros((0, 2, 3)))
         self.axes, self.axes_count = self._segments(
             "/axes", self.axes, self.axes_count, axes, axes_colours, 4.0)
         self.axes_rows = rows
