@@ -9,9 +9,11 @@ headless Chromium (started by the child in a session of its own, ended by that i
 open. Its process CPU over ``--seconds`` of wall time (after the page connected and
 1 s of settling) is printed, with the redraws a second and the mean time of one redraw,
 and the CPU of the same filling with no page (``feed only``, measured first for a third
-of ``--seconds``). With ``--before PATH`` (a checkout of tfbus, e.g. ``git worktree add
-/tmp/before HEAD~3`` with the compiled core copied in), children run that checkout's tfbus
-and this one's in turn, ``--rounds`` times each, and the means are compared.
+of ``--seconds``), and the drawing's own CPU: the view process's over the feed's, per
+redraw and at 30 redraws a second (a busy machine may not keep 30 a second). With
+``--before PATH`` (a checkout of tfbus, e.g. ``git worktree add /tmp/before HEAD~3`` with
+the compiled core copied in), children run that checkout's tfbus and this one's in turn,
+``--rounds`` times each, and the means are compared.
 
     .venv/bin/python benchmarks/bench_view_cost.py [--seconds 10] [--rounds 3] \\
         [--frames 100] [--before /tmp/before]
@@ -124,9 +126,14 @@ def main() -> None:
         cpu = statistics.fmean(r["cpu"] for r in runs)
         feed = statistics.fmean(r["feed"] for r in runs)
         each = ", ".join(f"{100 * r['cpu']:.1f}" for r in runs)
+        redraws = statistics.fmean(r["redraws"] for r in runs)
+        # the drawing's own CPU (over the feed) per redraw, and at 30 redraws a second
+        per = (cpu - feed) / max(redraws, 1e-9)
         print(f"  {name:<7} view process {100 * cpu:5.1f} % of one core ({each}); feed only "
-              f"{100 * feed:4.1f} %; {statistics.fmean(r['redraws'] for r in runs):.1f} "
-              f"redraws/s, {statistics.fmean(r['redraw_ms'] for r in runs):.2f} ms per redraw")
+              f"{100 * feed:4.1f} %; {redraws:.1f} redraws/s, "
+              f"{statistics.fmean(r['redraw_ms'] for r in runs):.2f} ms per redraw")
+        print(f"  {'':<7} drawing: {1e3 * per:5.2f} ms of CPU per redraw, "
+              f"{100 * per * DRAW_HZ:5.1f} % of one core at {DRAW_HZ:.0f} redraws/s")
 
 
 if __name__ == "__main__":
