@@ -212,32 +212,68 @@ def chromium() -> str:
     return exe
 
 
-@pytest.fixture
-def circling(page: TfPage, tmp_path: Path) -> Iterator[object]:
-    """The circle bag paused at 10 s, its player's loop running as ``tfbus view --bag``."""
-    from tfbus.view.player import BagPlayer
-    from tfbus.view.timeline import BagTimeline
+class Circling:
+    """The circle drawn on ``page`` by a thread as ``tfbus view`` draws it: a bag's player
+    paused at 10 s (its loop as ``--bag`` runs it), or a live buffer holding 1-21 s
+    redrawn 30 times a second (``draw_live``, as ``LiveView.render``)."""
 
-    player = BagPlayer(page, BagTimeline.read(_bag(tmp_path / "circle.bag")), paused=True)
-    player.seek(10.0)
-    stop = threading.Event()
-    runner = threading.Thread(target=player.run, args=(stop,), daemon=True)
-    runner.start()
+    def __init__(self, page: TfPage, kind: str, bag: Path) -> None:
+        from tfbus.view.player import BagPlayer
+        from tfbus.view.timeline import BagTimeline
+
+        self.kind = kind
+        self.stop = threading.Event()
+        self.lock = threading.Lock()
+        self.core = BufferCore(cache_time=30.0)
+        self.end_ns = 110_000_000_000 if kind == "bag" else 21_000_000_000
+        if kind == "bag":
+            player = BagPlayer(page, BagTimeline.read(_bag(bag)), paused=True)
+            player.seek(10.0)
+            self.thread = threading.Thread(target=player.run, args=(self.stop,), daemon=True)
+            self.ready = "bag time 10.00"
+        else:
+            feed(self.core, 1.0, 21.0)
+            self.thread = threading.Thread(target=self._live, args=(page,), daemon=True)
+            self.ready = "fixed frame: world"
+
+    def _live(self, page: TfPage) -> None:
+        from tfbus.monitor import TfSummary
+        from tfbus.view.player import draw_live
+
+        while not self.stop.is_set():
+            with self.lock:
+                draw_live(page, self.core, TfSummary(), Time.from_ns(self.end_ns))
+            self.stop.wait(1 / 30)
+
+    def more(self) -> None:
+        """Live: one more second of the circle (the trail must follow)."""
+        with self.lock:
+            feed(self.core, 21.02, 22.0)
+            self.end_ns = 22_000_000_000
+
+
+@pytest.fixture(params=["bag", "live"])
+def circling(request: pytest.FixtureRequest, page: TfPage, tmp_path: Path
+             ) -> Iterator[Circling]:
+    run = Circling(page, request.param, tmp_path / "circle.bag")
+    run.thread.start()
     try:
-        yield player
+        yield run
     finally:
-        stop.set()
-        runner.join(timeout=10)
+        run.stop.set()
+        run.thread.join(timeout=10)
 
 
-def test_trail_picked_in_chromium(chromium: str, page: TfPage, circling: object,
+def test_trail_picked_in_chromium(chromium: str, page: TfPage, circling: Circling,
                                   tmp_path: Path) -> None:
     from cdp import Chromium
     from test_view_controls import _pick, _row, _type_into, until
 
     with Chromium(chromium) as c:
         c.open(f"http://127.0.0.1:{page.port}/")
-        c.wait("document.body && document.body.innerText.includes('bag time 10.00')")
+        c.wait(f"document.body && document.body.innerText.includes({circling.ready!r})")
+        # the panel filled (the frame tree last): the controls no longer move
+        c.wait("document.body.innerHTML.includes('<td>robot</td><td>world</td>')")
         assert page.trail_line is None
         _pick(c, "trail frame", "robot")
         until(lambda: page.trail_choice == "robot", "robot picked")
@@ -248,9 +284,16 @@ def test_trail_picked_in_chromium(chromium: str, page: TfPage, circling: object,
         c.wait("document.body.innerText.includes('trail of robot in world: 2000 points "
                "over 3.00 s')")
         trail = page.trail
-        assert trail is not None and trail.stamps[-1] == 110_000_000_000
+        assert trail is not None and trail.stamps[-1] == circling.end_ns
         assert_on_circle(trail.stamps, trail.points)
         until(lambda: page.trail_line is not None and page.trail_line.visible
               and len(page.trail_line.points) == 1999, "the trail drawn")
-        shot = c.screenshot(tmp_path / "trail.png")
+        shot = c.screenshot(tmp_path / f"trail-{circling.kind}.png")
         assert len(shot) > 10_000
+        if circling.kind == "live":  # a second more: the trail ends at the new data
+            circling.more()
+            until(lambda: page.trail is not None
+                  and page.trail.stamps[-1] == 22_000_000_000, "the trail followed")
+            trail = page.trail
+            assert trail is not None and trail.stamps[0] >= 19_000_000_000
+            assert_on_circle(trail.stamps, trail.points)
