@@ -34,6 +34,14 @@ from tfbus.time import Time
 from tfbus.view.guard import PageGuard, check_port
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
+from tfbus.view.trails import (
+    DEFAULT_TRAIL_SECONDS,
+    MAX_TRAIL_SECONDS,
+    MIN_TRAIL_SECONDS,
+    Trail,
+    TrailSampler,
+    check_seconds,
+)
 
 if TYPE_CHECKING:
     from tfbus.doctor import Finding
@@ -48,6 +56,8 @@ GREY = (128, 128, 128)
 """What a frame's axes and link line fade to at the frame timeout (rviz's TF display)."""
 CHAIN_COLOUR = (220, 0, 220)
 """Colour of the links of the chain between the two frames picked in the page."""
+TRAIL_COLOUR = (0, 170, 200)
+"""Colour of the trail of the frame picked in the page's "trail" folder (RGB 0-255)."""
 AXES_COLOURS = ((230, 30, 30), (30, 190, 30), (40, 80, 240))
 """Full colour of the x, y and z axis of a frame (RGB 0-255)."""
 _PANEL_BOX = "overflow-x:auto;max-width:100%"
@@ -77,6 +87,14 @@ def text(frame_id: object) -> str:
 
 
 def _h(value: object) -> str:
+    if isinstance(value, str):
+        return _h_str(value)
+    return html.escape(text(value), quote=True)
+
+
+@functools.lru_cache(maxsize=8192)
+def _h_str(value: str) -> str:
+    """:func:`_h` of a string, remembered (the panel writes each id on every redraw)."""
     return html.escape(text(value), quote=True)
 
 
@@ -90,6 +108,7 @@ def _xyz(pose: TransformStamped) -> tuple[float, float, float]:
     return (v.x, v.y, v.z)
 
 
+@functools.lru_cache(maxsize=4096)
 def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, int, int]:
     """``full`` faded towards :data:`GREY`: ``colour`` 1.0 is ``full``, 0.0 grey."""
     r, g, b = (round(grey + (f - grey) * colour) for f, grey in zip(full, GREY, strict=True))
@@ -100,26 +119,130 @@ def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """sRGB 0-255 as the linear 0-255 values viser's per-vertex line colours are (its
     client divides by 255 and three.js encodes the output as sRGB): sent so, a colour is
     shown as given (the IEC 61966-2-1 transfer function)."""
-    c = srgb.astype(np.float64) / 255.0
+    out: npt.NDArray[np.uint8] = _LINEAR[srgb]
+    return out
+
+
+def _linear_table() -> npt.NDArray[np.uint8]:
+    c = np.arange(256, dtype=np.float64) / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     out: npt.NDArray[np.uint8] = np.round(lin * 255.0).astype(np.uint8)
     return out
 
 
-def _axes(pose: TransformStamped, length: float = AXES_LENGTH
-          ) -> list[list[tuple[float, float, float]]]:
-    """The x, y, z axis segments of a frame at ``pose``: origin to origin + R e_k x
-    ``length`` (metres)."""
-    o = _xyz(pose)
-    q = pose.transform.rotation
-    x, y, z, w = q.x, q.y, q.z, q.w
-    cols = (  # the columns of the rotation matrix of (x, y, z, w)
-        (1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)),
-        (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
-        (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)),
-    )
-    return [[o, (o[0] + length * c[0], o[1] + length * c[1],
-                 o[2] + length * c[2])] for c in cols]
+_LINEAR = _linear_table()
+""":func:`_to_linear` of each sRGB value 0-255 (a table: a redraw converts every
+vertex colour)."""
+
+
+def _axes(origins: npt.NDArray[np.float64], quaternions: npt.NDArray[np.float64],
+          length: float = AXES_LENGTH) -> npt.NDArray[np.float64]:
+    """The x, y, z axis segments of frames at ``origins`` (``(N, 3)`` metres) turned by
+    ``quaternions`` (``(N, 4)`` x, y, z, w): ``(3 N, 2, 3)``, for each frame origin to
+    origin + R e_k x ``length`` (metres), k = x, y, z."""
+    x, y, z, w = quaternions.T
+    cols = np.stack([  # the columns of the rotation matrix of each (x, y, z, w)
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], -1),
+        np.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], -1),
+        np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)  # (N, 3 axes, 3)
+    starts = np.broadcast_to(origins[:, None, :], cols.shape)
+    out: npt.NDArray[np.float64] = np.stack([starts, starts + length * cols],
+                                            axis=2).reshape(-1, 2, 3)
+    return out
+
+
+def _send_pose(handle: Any, xyz: tuple[float, float, float],
+               wxyz: tuple[float, float, float, float] | None = None) -> None:
+    """Set a viser node's position (and orientation), one message each, the change
+    already known (:class:`DrawnFrame` compares exactly): queued as viser's own setters
+    queue it, without their ``np.allclose`` check of each value against the last one sent
+    (about 40 % of a redraw of 100 moving frames). A viser without that path (its
+    internals moved) gets the public setters."""
+    impl = getattr(handle, "_impl", None)
+    queue = getattr(getattr(impl, "api", None), "_queue_scene_message", None)
+    messages = _viser_messages()
+    if impl is None or queue is None or messages is None:
+        handle.position = xyz
+        if wxyz is not None:
+            handle.wxyz = wxyz
+        return
+    impl.position[:] = xyz
+    queue(messages.SetPositionMessage(impl.name, xyz))
+    if wxyz is not None:
+        impl.wxyz[:] = wxyz
+        queue(messages.SetOrientationMessage(impl.name, wxyz))
+
+
+@functools.cache
+def _viser_messages() -> Any:
+    """viser's message classes (``SetPositionMessage``, ``SetOrientationMessage``), or
+    None when this viser has them elsewhere."""
+    try:
+        from viser import _messages
+    except ImportError:
+        return None
+    if hasattr(_messages, "SetPositionMessage") and hasattr(_messages,
+                                                            "SetOrientationMessage"):
+        return _messages
+    return None
+
+
+class DrawnFrame:
+    """One frame as the page draws it: :attr:`position` (metres) and :attr:`wxyz` (unit
+    quaternion w, x, y, z) in the fixed frame as last drawn, :attr:`visible` (its axes
+    drawn), :attr:`name` (its scene node, the parent of its ``--urdf`` geometry).
+
+    What reaches a browser is only what it shows: the label gets a position (a label has
+    no orientation) while it is shown, the node a pose only when geometry hangs on it
+    (the axes and links of every frame are one line-segments node each), and each
+    message only when its value changed since the last one sent, compared exactly.
+    """
+
+    def __init__(self, node: Any, label: Any, posed: bool) -> None:
+        self.node = node
+        """The viser frame node (no axes of its own: hidden, or moved with its geometry)."""
+        self.label = label
+        """The viser label with the frame id as text."""
+        self.name: str = str(node.name)
+        self.position: npt.NDArray[np.float64] = np.zeros(3)
+        self.wxyz: npt.NDArray[np.float64] = np.array([1.0, 0.0, 0.0, 0.0])
+        self.visible = False
+        self.posed = posed
+        """Whether the node itself is moved (it carries ``--urdf`` geometry)."""
+        self._pose: tuple[tuple[float, float, float],
+                          tuple[float, float, float, float]] | None = None
+        self._label_at: tuple[float, float, float] | None = None
+        self._node_shown: bool | None = None
+        self._label_shown: bool | None = None
+
+    def place(self, xyz: tuple[float, float, float],
+              wxyz: tuple[float, float, float, float]) -> None:
+        """Put the frame at ``xyz`` (metres), ``wxyz`` in the fixed frame; nothing is
+        sent when the pose is the one already drawn."""
+        pose = (xyz, wxyz)
+        if pose == self._pose:
+            return
+        self._pose = pose
+        self.position = np.array(xyz, dtype=np.float64)
+        self.wxyz = np.array(wxyz, dtype=np.float64)
+        if self.posed:
+            _send_pose(self.node, xyz, wxyz)
+
+    def show(self, drawn: bool, labels: bool) -> None:
+        """Show or hide the frame (``drawn``) and its label (``drawn and labels``); a label
+        shown gets the frame's position first."""
+        self.visible = drawn
+        if drawn is not self._node_shown:
+            self.node.visible = drawn
+            self._node_shown = drawn
+        label = drawn and labels
+        if label and self._pose is not None and self._label_at != self._pose[0]:
+            _send_pose(self.label, self._pose[0])
+            self._label_at = self._pose[0]
+        if label is not self._label_shown:
+            self.label.visible = label
+            self._label_shown = label
 
 
 class TfPage:
@@ -165,9 +288,10 @@ class TfPage:
         self.server.scene.set_up_direction("+z")
         self.server.scene.add_grid("/grid", width=20.0, height=20.0, cell_size=1.0,
                                    section_size=5.0, plane="xy")
-        self.frames: dict[str, Any] = {}
-        """Scene handle of each frame id drawn (``position``, ``wxyz``, ``visible``)."""
+        self.frames: dict[str, DrawnFrame] = {}
+        """Each frame id drawn (``position``, ``wxyz``, ``visible``, ``name``)."""
         self.labels: dict[str, Any] = {}
+        """Viser label of each frame id drawn (``text``, ``visible``)."""
         self.camera_set = False
         """Whether the camera was aimed at the frames (once, at the first frames drawn)."""
         self.visuals: dict[str, list[Any]] = {}
@@ -181,6 +305,8 @@ class TfPage:
         """The line segments of every visible frame's axes (``points``, ``colors``:
         ``(3 N, 2, 3)``), three rows per frame in :attr:`axes_rows`' order."""
         self.axes_count = 0
+        self._segments_sent: dict[str, tuple[npt.NDArray[np.float32],
+                                             npt.NDArray[np.uint8]]] = {}
         self.axes_rows: dict[str, int] = {}
         """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
         self._axes_srgb: list[list[tuple[int, int, int]]] = []
@@ -224,13 +350,35 @@ class TfPage:
         """The highlighted links of the chain between A and B (line segments)."""
         self.chain_count = 0
         self._pair_options: tuple[str, ...] = ()
+        with gui.add_folder("trail"):
+            self.trail_dropdown: Any = gui.add_dropdown(
+                "trail frame", options=("",), initial_value="",
+                hint="the frame whose origin's path in the fixed frame is drawn")
+            self.trail_seconds_box: Any = gui.add_number(
+                "trail seconds", initial_value=DEFAULT_TRAIL_SECONDS,
+                min=MIN_TRAIL_SECONDS, max=MAX_TRAIL_SECONDS, step=0.5,
+                hint="how far back the trail reaches")
+            self.trail_info = gui.add_html("")
+        self.trail_choice: str | None = None
+        """The frame whose trail is drawn (None: no trail, the default)."""
+        self.trail_seconds = DEFAULT_TRAIL_SECONDS
+        """How far back the trail reaches, seconds."""
+        self.trail: Trail | None = None
+        """The trail as last drawn (None: none drawn)."""
+        self.trail_html = ""
+        self.trail_line: Any = None
+        """The trail's line segments (``points``: ``(K - 1, 2, 3)``)."""
+        self.trail_count = 0
+        self._trail_error = ""
+        self._trails = TrailSampler()
+        self.trail_dropdown.on_update(self._on_trail)
+        self.trail_seconds_box.on_update(self._on_trail_seconds)
         for k, dropdown in enumerate(self.pair_dropdowns):
             dropdown.on_update(functools.partial(self._on_pair, k=k))
         self.fixed_dropdown.on_update(self._on_fixed)
         self.filter_box.on_update(self._on_filter)
         self.labels_box.on_update(self._on_control)
         self.axis_length.on_update(self._on_control)
-        self._sent_labels: dict[str, bool] = {}
         self._axes_length_sent = AXES_LENGTH
         self.tree = gui.add_html("")
         self.notes = gui.add_html("")
@@ -243,9 +391,6 @@ class TfPage:
         self.panel_html = ""
         """The frame tree panel's HTML as last sent."""
         self.status_html = ""
-        self._sent_poses: dict[str, tuple[tuple[float, float, float],
-                                          tuple[float, float, float, float]]] = {}
-        self._sent_visible: dict[str, bool] = {}
         self._connect_listeners: list[Callable[[], None]] = []
         self.server.on_client_connect(self._client_connected)
 
@@ -269,6 +414,42 @@ class TfPage:
             pair = list(self.pair_choice)
             pair[k] = frame
             self.pair_choice = (pair[0], pair[1])
+            self.control_version += 1
+
+    def _on_trail(self, event: Any) -> None:
+        if event.client is None:
+            return
+        with self._lock:
+            self.trail_choice = self._fixed_options.get(str(self.trail_dropdown.value))
+            self.control_version += 1
+
+    def _on_trail_seconds(self, event: Any) -> None:
+        if event.client is None:
+            return
+        with self._lock:
+            try:
+                self.trail_seconds = check_seconds(self.trail_seconds_box.value)
+                self._trail_error = ""
+            except (TypeError, ValueError) as err:  # the previous duration stays
+                self._trail_error = str(err)
+            self.control_version += 1
+
+    def set_trail(self, frame_id: str | None, seconds: float | None = None) -> None:
+        """Draw the trail of ``frame_id`` (None: no trail) over the last ``seconds``
+        (None: unchanged), as the page's "trail" folder does (:mod:`tfbus.view.trails`).
+
+        Raises:
+            ValueError: ``seconds`` is not between :data:`~tfbus.view.trails.MIN_TRAIL_SECONDS`
+                and :data:`~tfbus.view.trails.MAX_TRAIL_SECONDS`.
+        """
+        with self._lock:
+            if seconds is not None:
+                self.trail_seconds = check_seconds(seconds)
+                self.trail_seconds_box.value = self.trail_seconds
+            self.trail_choice = frame_id
+            shown = "" if frame_id is None else text(frame_id)
+            if shown in self._fixed_options or not shown:
+                self.trail_dropdown.value = shown
             self.control_version += 1
 
     def _on_filter(self, event: Any) -> None:
@@ -338,7 +519,7 @@ class TfPage:
         if options.keys() != self._fixed_options.keys():
             self._fixed_options = options
             self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
-            for dropdown in self.pair_dropdowns:
+            for dropdown in (*self.pair_dropdowns, self.trail_dropdown):
                 dropdown.options = ("", *sorted(options))
         shown = text(scene.fixed_frame) if scene.fixed_frame is not None else ""
         if shown in options and self.fixed_dropdown.value != shown:
@@ -383,41 +564,62 @@ class TfPage:
         with self._lock, self.server.atomic():
             self._draw(scene, stats, rates)
             self.draw_pair(scene, core, stats, rates)
+            self.draw_trail(scene, core)
+
+    def draw_trail(self, scene: Scene, core: BufferCore | None) -> None:
+        """The trail of :attr:`trail_choice` over the last :attr:`trail_seconds` of
+        ``core`` in the scene's fixed frame (:class:`~tfbus.view.trails.TrailSampler`),
+        as line segments in :data:`TRAIL_COLOUR`, and a line saying its points and span
+        or tf2's message. Called by :meth:`draw` (the caller holds the lock)."""
+        frame = self.trail_choice
+        self.trail = None
+        segments: npt.NDArray[np.float64] = np.zeros((0, 2, 3))
+        value = ""
+        if frame is not None and core is not None and scene.fixed_frame is not None:
+            trail = self._trails.sample(core, scene.fixed_frame, frame, self.trail_seconds)
+            self.trail = trail
+            if trail.error is not None:
+                value = f"<p>trail of {_h(frame)}: {_h(trail.error)}</p>"
+            else:
+                span = (int(trail.stamps[-1]) - int(trail.stamps[0])) / 1e9
+                value = (f"<p class='tfbus-trail'>trail of {_h(frame)} in "
+                         f"{_h(scene.fixed_frame)}: {len(trail.points)} points over "
+                         f"{span:.2f} s</p>")
+                segments = trail.segments()
+        if self._trail_error:
+            value += f"<p style='color:#d03030'>{_h(self._trail_error)}</p>"
+        colours = np.empty((len(segments), 2, 3), dtype=np.uint8)
+        colours[:] = TRAIL_COLOUR
+        self.trail_line, self.trail_count = self._segments(
+            "/trail", self.trail_line, self.trail_count, segments, colours, 3.0)
+        if value != self.trail_html:
+            self.trail_html = value
+            self.trail_info.content = value
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
-        scene_api = self.server.scene
         poses = {f.frame_id: f.pose for f in scene.frames}
         segments: list[list[tuple[float, float, float]]] = []
         colours: list[list[tuple[int, int, int]]] = []
-        axes: list[list[tuple[float, float, float]]] = []
+        origins: list[tuple[float, float, float]] = []
+        quaternions: list[tuple[float, float, float, float]] = []
         axes_colours: list[list[tuple[int, int, int]]] = []
         rows: dict[str, int] = {}
         length = float(self.axis_length.value)
         labels = bool(self.labels_box.value)
         for f in scene.frames:
             drawn = f.visible and self.shown(f.frame_id)
-            handle = self.frames.get(f.frame_id)
-            if handle is None:
-                n = len(self.frames)
-                handle = scene_api.add_frame(f"/tf/f{n}", show_axes=False)
-                self.frames[f.frame_id] = handle
-                self.labels[f.frame_id] = scene_api.add_label(f"/tf/f{n}/label", text(f.frame_id))
-                self._attach(f.frame_id, f"/tf/f{n}")
-            if f.pose is not None:  # (viser compares each with np.allclose: ~50 us)
-                pose = (_xyz(f.pose), _wxyz(f.pose))
-                if self._sent_poses.get(f.frame_id) != pose:
-                    handle.position, handle.wxyz = pose
-                    self._sent_poses[f.frame_id] = pose
-            if self._sent_visible.get(f.frame_id) is not drawn:
-                handle.visible = drawn
-                self._sent_visible[f.frame_id] = drawn
-            if self._sent_labels.get(f.frame_id) is not labels:
-                self.labels[f.frame_id].visible = labels
-                self._sent_labels[f.frame_id] = labels
+            record = self.frames.get(f.frame_id)
+            if record is None:
+                record = self._add_frame(f.frame_id)
+            if f.pose is not None:
+                record.place(_xyz(f.pose), _wxyz(f.pose))
+            record.show(drawn, labels)
             if drawn and f.pose is not None:
-                rows[f.frame_id] = len(axes)
-                axes.extend(_axes(f.pose, length))
+                rows[f.frame_id] = 3 * len(origins)
+                q = f.pose.transform.rotation
+                origins.append(_xyz(f.pose))
+                quaternions.append((q.x, q.y, q.z, q.w))
                 for full in AXES_COLOURS:
                     c = _mix(f.colour if f.colour is not None else 0.0, full)
                     axes_colours.append([c, c])
@@ -428,6 +630,9 @@ class TfPage:
                 colours.append([c, c])
         self.links, self.link_count = self._segments(
             "/links", self.links, self.link_count, segments, colours, 2.0)
+        axes = (_axes(np.asarray(origins, dtype=np.float64),
+                      np.asarray(quaternions, dtype=np.float64), length)
+                if origins else np.zeros((0, 2, 3)))
         self.axes, self.axes_count = self._segments(
             "/axes", self.axes, self.axes_count, axes, axes_colours, 4.0)
         self.axes_rows = rows
@@ -555,7 +760,20 @@ class TfPage:
                 self.findings_html = value
                 self.findings.content = value
 
-    def _attach(self, frame_id: str, node: str) -> None:
+    def _add_frame(self, frame_id: str) -> DrawnFrame:
+        """The scene nodes of a frame seen for the first time: a frame node (parent of its
+        ``--urdf`` geometry) and a label, both named by number, never by id."""
+        scene_api = self.server.scene
+        n = len(self.frames)
+        node = scene_api.add_frame(f"/tf/f{n}", show_axes=False)
+        label = scene_api.add_label(f"/tf/l{n}", text(frame_id))
+        posed = self._attach(frame_id, f"/tf/f{n}")
+        record = DrawnFrame(node, label, posed)
+        self.frames[frame_id] = record
+        self.labels[frame_id] = label
+        return record
+
+    def _attach(self, frame_id: str, node: str) -> bool:
         scene_api = self.server.scene
         for k, v in enumerate(self._pending_visuals.pop(frame_id, [])):
             name = f"{node}/v{k}"
@@ -572,6 +790,7 @@ class TfPage:
                 h = scene_api.add_icosphere(name, radius=v.size[0], color=v.rgb,
                                             position=v.xyz, wxyz=v.wxyz)
             self.visuals.setdefault(frame_id, []).append(h)
+        return frame_id in self.visuals
 
     def aim(self, scene: Scene) -> None:
         """Point the browsers' initial camera at the drawn frames (their bounding box seen
@@ -589,17 +808,24 @@ class TfPage:
         self.camera_set = True
 
     def _segments(self, name: str, handle: Any, count: int,
-                  segments: list[list[tuple[float, float, float]]],
-                  colours: list[list[tuple[int, int, int]]],
+                  segments: list[list[tuple[float, float, float]]] | npt.NDArray[np.float64],
+                  colours: list[list[tuple[int, int, int]]] | npt.NDArray[np.uint8],
                   thickness: float) -> tuple[Any, int]:
         """Show ``segments`` as the line-segments node ``name`` (re-made when their number
-        changes, else updated in place; hidden when there are none)."""
-        if not segments:
+        changes, else updated in place; hidden when there are none; nothing sent when
+        points and colours are those already shown)."""
+        if len(segments) == 0:
             if handle is not None:
                 handle.visible = False
             return handle, count
         pts = np.asarray(segments, dtype=np.float32)
         cols = _to_linear(np.asarray(colours, dtype=np.uint8))
+        sent = self._segments_sent.get(name)
+        if handle is not None and len(segments) == count and handle.visible \
+                and sent is not None and np.array_equal(sent[0], pts) \
+                and np.array_equal(sent[1], cols):
+            return handle, count  # what the browser shows already: nothing sent
+        self._segments_sent[name] = (pts, cols)
         if handle is None or len(segments) != count:
             if handle is not None:
                 handle.remove()
