@@ -170,21 +170,23 @@ async def broadcaster_node(
     bus: Bus, clock: Clock, rate: float = 100.0, stats: BroadcasterStatistics | None = None
 ) -> None:
     """The tutorial's ``robot_tf_publisher``: base_link → base_laser at ``rate`` Hz,
-    stamped with ``clock.now()``, on absolute deadlines. Runs until cancelled."""
+    stamped with the clock's now as each tick fires (the tick's ``actual`` time, the
+    clock read that woke it: robot_tf_publisher's ``ros::Time::now()`` after its
+    ``ros::Rate::sleep``), on absolute deadlines. Runs until cancelled."""
     broadcaster = TransformBroadcaster(bus)
     stats = stats if stats is not None else BroadcasterStatistics()
+    send = broadcaster.send_transform_nowait
     async for tick in every(1.0 / rate, clock=clock, immediate=True):
-        now = clock.now()
+        now = tick.actual  # one clock read a tick: the stamp, and the lateness below
         # The timer's wait is this loop's checkpoint: publish without another one
         # (``ros::Publisher::publish``, which robot_tf_publisher calls, never yields).
-        broadcaster.send_transform_nowait(
-            TransformStamped(Header(now, "base_link"), "base_laser", LASER_OFFSET)
-        )
+        send(TransformStamped(Header(now, "base_link"), "base_laser", LASER_OFFSET))
+        now_ns = now.ns
         stats.sent += 1
         if stats.first_ns is None:
-            stats.first_ns = now.ns
-        stats.last_ns = now.ns
-        stats.lateness_ns.append(tick.lateness.ns)
+            stats.first_ns = now_ns
+        stats.last_ns = now_ns
+        stats.lateness_ns.append(now_ns - tick.expected.ns)  # tick.lateness, without a Duration
 
 
 async def listener_node(

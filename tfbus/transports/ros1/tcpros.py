@@ -104,12 +104,14 @@ class FrameSplitter:
         limit: largest later frame (a message).
     """
 
-    __slots__ = ("_buf", "_first", "_limit", "_need", "_rest", "_sink")
+    __slots__ = ("_buf", "_first", "_limit", "_need", "_rest", "sink")
 
     def __init__(
         self, sink: Callable[[bytes | memoryview], object], first_limit: int, limit: int
     ) -> None:
-        self._sink = sink
+        self.sink = sink
+        """Called with each frame; may be replaced, e.g. by the first frame's call: the
+        frames after it go to the new one."""
         self._first = True
         self._limit = first_limit
         self._rest = limit
@@ -132,7 +134,6 @@ class FrameSplitter:
             data, self._buf = bytes(self._buf), bytearray()
         off, n = 0, len(data)
         unpack = _U32.unpack_from
-        sink = self._sink
         while n - off >= 4:
             (size,) = unpack(data, off)
             if size > self._limit:
@@ -147,7 +148,7 @@ class FrameSplitter:
                 self._limit = self._rest
             payload = data[off + 4 : end]
             off = end
-            sink(payload)
+            self.sink(payload)
         else:
             self._need = 4
         if off < n:

@@ -23,6 +23,7 @@ from anyio.streams.buffered import BufferedByteReceiveStream
 from anyio.streams.stapled import MultiListener
 
 from tfbus._aio import open_pumped_connection, running_asyncio_loop
+from tfbus.codecs import ros1 as ros1_codec
 from tfbus.codecs.ros1 import (
     CLOCK_MD5SUM,
     CLOCK_MSGDEF,
@@ -168,6 +169,15 @@ RawHandler = Callable[[bytes, str], None]
 """A raw topic's handler: ``handler(payload, callerid)`` (:meth:`Ros1Transport.subscribe_raw`)."""
 
 
+def _compiled_tf_decoder() -> Callable[[bytes | memoryview], list[TransformStamped]] | None:
+    """The codec's compiled ROS 1 ``TFMessage`` decoder (``TFCodec.decode`` without its
+    Python wrappers; raises the decoder's own errors, not ``WireDecodeError``), or None
+    where there is none (pure-Python core, big-endian host)."""
+    compiled: Callable[[bytes | memoryview], list[TransformStamped]] | None
+    compiled = ros1_codec._compiled_ros1
+    return compiled
+
+
 def tf_message_from(authority: str) -> type[TFMessage]:
     """A ``TFMessage`` subclass whose class attribute ``authority`` is ``authority``: the
     messages of one TCPROS connection are built with it, so that a
@@ -232,7 +242,39 @@ class _Inbound:
         self._message = tf_message_from(callerid)
         self.conn_id = self.node._open_conn(callerid, "i", self.topic)
         self.node._delivering.add((self.topic, self.uri))
+        if self._raw is None and not self._scan and not self._clock:
+            self.splitter.sink = self._tf_sink()
         self.header_or_end.set()
+
+    def _tf_sink(self) -> Callable[[bytes | memoryview], None]:
+        """What handles each later frame of a ``TFMessage`` topic: :meth:`_frame`'s
+        ``TFMessage`` branch with what it reads bound once, and the codec's compiled
+        decoder called directly (``tfbus.codecs._cwire._tf_from_ros1``, where
+        :meth:`TFCodec.decode <tfbus.codecs.ros1.TFCodec.decode>` goes through three
+        Python calls to reach it). A frame it cannot decode is decoded again by
+        ``TFCodec.decode``, which raises the ``WireDecodeError`` :meth:`_frame` would
+        (counted in ``malformed``; the connection ends). Each message is built as
+        ``tuple.__new__`` builds it, without the ``NamedTuple``'s Python ``__new__``."""
+        stats = self._stats
+        deliver = self._deliver
+        topic = self.topic
+        reference = self._decode
+        decode = _compiled_tf_decoder() or reference
+        make = tuple.__new__
+        message = self._message
+
+        def tf_frame(raw: bytes | memoryview) -> None:
+            stats.received += 1
+            try:
+                transforms = decode(raw)
+            except Exception:
+                transforms = None
+            if transforms is None:  # the reference raises the codec's WireDecodeError
+                transforms = reference(raw)
+            deliver(topic, make(message, (tuple(transforms),)))
+            stats.delivered += 1
+
+        return tf_frame
 
 
 def _is_global_name(topic: str) -> bool:
