@@ -86,7 +86,8 @@ def detect_format(path: str | PathLike[str]) -> BagFormat:
 
     Raises:
         BagNotFoundError: the path does not exist.
-        BagFormatError: not a ROS 1 bag, ROS 2 sqlite3 bag or MCAP file.
+        BagFormatError: not a ROS 1 bag, ROS 2 sqlite3 bag or MCAP file, or an MCAP
+            file not named ``*.mcap``.
     """
     p = Path(path)
     if not p.exists():
@@ -106,6 +107,8 @@ def detect_format(path: str | PathLike[str]) -> BagFormat:
     if head.startswith(ROS1_MAGIC):
         return BagFormat.ROS1
     if head.startswith(MCAP_MAGIC):
+        if p.suffix != ".mcap":  # rosbags opens a bare MCAP file by its suffix only
+            raise BagFormatError(f"{p}: an mcap file must be named *.mcap", p)
         return BagFormat.MCAP
     if head.startswith(SQLITE_MAGIC):
         return BagFormat.SQLITE3

@@ -544,8 +544,6 @@ def _indexed(
     p: Path, fmt: BagFormat, topics: frozenset[str], lo: int | None, hi: int | None
 ) -> Iterator[RawItem]:
     if fmt is BagFormat.MCAP and p.is_file():
-        if p.suffix != ".mcap":
-            raise BagFormatError(f"{p}: an mcap file must be named *.mcap", p)
         return _raw_mcap(p, topics, lo, hi)
     if fmt is BagFormat.ROS1:
         return read_ros1_chunks(p, topics, lo, hi)

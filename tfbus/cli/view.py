@@ -115,6 +115,10 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         fail("give --bag PATH or --bus SPEC, not both")
     if bag is not None and use_sim_time:
         fail("--use-sim-time applies to --bus sources only")
+    if bag is not None:  # before the page opens
+        from tfbus.cli._bag_source import check_bag
+
+        check_bag(bag)
     if token is not None:
         from tfbus.view.guard import PageGuard
 

@@ -60,6 +60,9 @@ def command(bus: str | None, bag: Path | None, host: str, port: int, token: str 
     except PortInUseError as err:
         fail(str(err))
     if bag is not None:
+        from tfbus.cli._bag_source import check_bag
+
+        check_bag(bag)
         _serve_bag(bag, host, port, token, cache_time)
     else:
         _serve_bus(bus or "zenoh", host, port, token, cache_time)
