@@ -39,7 +39,13 @@ def ray_cluster() -> Iterator[Any]:
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
              configure_logging=False, ignore_reinit_error=True)
     try:
-        ray.data.DataContext.get_current().enable_progress_bars = False
+        from ray.data.context import ShuffleStrategy
+
+        context = ray.data.DataContext.get_current()
+        context.enable_progress_bars = False
+        # The groupby by recording through Ray's sort-based pull shuffle (tasks): on these
+        # 1,200 rows about 4 s, against 11-15 s for the default hash shuffle's actors.
+        context.shuffle_strategy = ShuffleStrategy.SORT_SHUFFLE_PULL_BASED
         yield ray
     finally:
         ray.shutdown()
