@@ -11,9 +11,17 @@ stamps inside and outside the data), then times:
   rows (same buffers; the lookups alone are timed for both, loading separately);
 * ``lookup_by_recording``: the rows naming their recording, loading included, one
   process;
-* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)`` (the rows are ordered by
-  recording) on a local Ray cluster of 1 and 2 CPUs, loading
-  included (cluster start excluded).
+* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)``'s task (the rows ordered
+  by recording, in 8 blocks) on a local Ray cluster of 1 and 2 CPUs, alternated over
+  ``--rounds`` rounds, loading included (cluster start excluded): wall rows/s, each
+  worker's task CPU time (``time.process_time`` in the task) and rows per task-CPU
+  second, and the recordings each task read (checked: no more than its rows name). On a
+  shared machine the wall ratio follows the other jobs; the task CPU of the busiest
+  worker bounds what two idle cores can give.
+
+``--big MB`` writes a ~MB MB MCAP and ROS 1 bag (random-walk values, 10 links at 100 Hz),
+reads three 10 s windows and walks every window (``iter_windows``), each in a fresh
+process (peak RSS ``VmHWM``, MB/s), and deletes them.
 
 ``--memory MB`` instead measures peak RSS (``VmHWM``, reset after the imports; a fresh
 process each; Linux) of a whole ``load_buffer`` vs a 10 s window
@@ -23,7 +31,7 @@ generated MCAP of about MB megabytes.
 Prints figures only, with the machine's load average.
 
     .venv/bin/python benchmarks/bench_table.py [--recordings 100] [--queries 1000000]
-        [--no-ray] [--memory 1000]
+        [--no-ray | --ray-only] [--memory 1000] [--big 1000]
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ import random
 import shutil
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -261,34 +270,138 @@ def bench_single(table: Any, rounds: int, tf2_recordings: int) -> None:
     print(f"  lookup_by_recording (with loads)   {n / (time.perf_counter() - t):12,.0f} rows/s")
 
 
-def _ray_run(table: Any, cpus: int, out: Any) -> None:
-    import ray
+RAY_BLOCKS = 8
+"""Blocks of the query Dataset (slices of the table, recordings in order), the same for 1
+and 2 CPUs: the same tasks, spread over one or two workers."""
+
+
+def _ray_task(batch: Any) -> Any:
+    """``tfbus.table.ray``'s unshuffled task (``_answer_batch``, whole recordings, each
+    worker keeping 2), measured in the worker: the batch's answers plus constant columns
+    ``_pid``, ``_cpu_s`` (``time.process_time`` of the task), ``_loads`` (recordings read
+    by it: ``load_buffer`` calls) and ``_recordings`` (distinct recordings in it)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
 
     from tfbus.table import ray as tfray
 
+    buffers = tfray._WORKER_BUFFERS.get(2)
+    before = 0 if buffers is None else buffers.loads
+    c = time.process_time()
+    out = tfray._answer_batch(batch, "recording", None, 5.0, 2)
+    cpu = time.process_time() - c
+    loads = tfray._WORKER_BUFFERS[2].loads - before
+    n = out.num_rows
+    distinct = len(pc.unique(batch.column("recording")))
+    for name, value, kind in (("_pid", os.getpid(), pa.int64()), ("_cpu_s", cpu, pa.float64()),
+                              ("_loads", loads, pa.int64()),
+                              ("_recordings", distinct, pa.int64())):
+        out = out.append_column(name, pa.array(np.full(n, value), kind))
+    return out
+
+
+def _ray_warm(seconds: float) -> int:
+    """A task that imports what :func:`_ray_task` needs, holds its CPU ``seconds`` (so
+    that tasks started together run in distinct workers) and returns its process id."""
+    import tfbus.table.ray  # noqa: F401
+
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def _ray_run(table: Any, cpus: int, out: Any) -> None:
+    import sys
+
+    import pyarrow as pa
+    import ray
+    from ray import cloudpickle
+
+    # This script is no module the workers can import: its task goes by value.
+    cloudpickle.register_pickle_by_value(sys.modules[_ray_task.__module__])
     ray.init(num_cpus=cpus, include_dashboard=False, log_to_driver=False,
              configure_logging=False)
     try:
         ray.data.DataContext.get_current().enable_progress_bars = False
-        ds = ray.data.from_arrow(table).repartition(max(2, cpus * 4)).materialize()
+        step = -(-table.num_rows // RAY_BLOCKS)
+        ds = ray.data.from_arrow([table.slice(k * step, step) for k in range(RAY_BLOCKS)])
+        # ``cpus`` workers started, tfbus imported in each, before the clock starts: tasks
+        # that hold a CPU each for a second at once, until as many processes answered.
+        hold = ray.remote(num_cpus=1)(_ray_warm)
+        for _ in range(20):
+            if len(set(ray.get([hold.remote(1.0) for _ in range(cpus)], timeout=600))) == cpus:
+                break
         t = time.perf_counter()
-        rows = tfray.lookup(ds, shuffle=False).count()
-        out.put((rows, time.perf_counter() - t))
+        result = ds.map_batches(_ray_task, batch_format="pyarrow", batch_size=None,
+                                num_cpus=1.0)
+        stats: list[tuple[int, float, int, int, int]] = []
+        for batch in result.iter_batches(batch_format="pyarrow", batch_size=None):
+            if batch.num_rows:
+                row = batch.slice(0, 1).to_pylist()[0]
+                stats.append((row["_pid"], row["_cpu_s"], batch.num_rows, row["_loads"],
+                              row["_recordings"]))
+        wall = time.perf_counter() - t
+        pids = sorted({p for p, *_ in stats})
+        worker_cpu = {}
+        for pid in pids:  # the worker processes' whole CPU time (imports included)
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            worker_cpu[pid] = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        out.put((wall, stats, worker_cpu, pa.__version__))
     finally:
         ray.shutdown()
 
 
-def bench_ray(table: Any, cpus: int) -> float:
-    """Rows/s of tfbus.table.ray.lookup on a fresh local cluster of ``cpus`` CPUs (in a
-    child process, so each run has its own cluster)."""
+def bench_ray(table: Any, cpus: int) -> dict[str, Any]:
+    """One run of ``tfbus.table.ray``'s unshuffled task on a fresh local cluster of
+    ``cpus`` CPUs (in a child process, so each run has its own cluster), loading
+    included, cluster start excluded: wall seconds, per-worker task CPU seconds, rows,
+    recordings read."""
     ctx = multiprocessing.get_context("spawn")
     out = ctx.Queue()
     proc = ctx.Process(target=_ray_run, args=(table, cpus, out))
     proc.start()
-    rows, seconds = out.get(timeout=3600)
+    wall, stats, worker_cpu, _ = out.get(timeout=3600)
     proc.join(timeout=120)
-    assert rows == table.num_rows
-    return float(rows / seconds)
+    rows = sum(s[2] for s in stats)
+    assert rows == table.num_rows, (rows, table.num_rows)
+    per_worker: dict[int, float] = {}
+    for pid, cpu, _n, _loads, _recs in stats:
+        per_worker[pid] = per_worker.get(pid, 0.0) + cpu
+    return {"wall": wall, "rows": rows, "tasks": len(stats), "per_worker": per_worker,
+            "worker_cpu": worker_cpu, "loads": sum(s[3] for s in stats),
+            "batch_recordings": sum(s[4] for s in stats),
+            "load": os.getloadavg()[0]}
+
+
+def bench_ray_rounds(table: Any, rounds: int) -> None:
+    """Ray with 1 and 2 CPUs alternated over ``rounds`` rounds (the order swapped each
+    round): wall rows/s, task CPU per worker and rows per task-CPU-second, and the
+    recordings each task read (no more than the recordings of its rows)."""
+    import pyarrow.compute as pc
+
+    n_recordings = len(pc.unique(table.column("recording")))
+    runs: dict[int, list[dict[str, Any]]] = {1: [], 2: []}
+    for r in range(rounds):
+        for cpus in ((1, 2) if r % 2 == 0 else (2, 1)):
+            run = bench_ray(table, cpus)
+            runs[cpus].append(run)
+            cpu = sum(run["per_worker"].values())
+            workers = ", ".join(f"{c:.2f}" for c in sorted(run["per_worker"].values()))
+            assert run["loads"] <= run["batch_recordings"], run
+            print(f"  round {r + 1}, ray {cpus} CPU: {run['rows'] / run['wall']:10,.0f} rows/s "
+                  f"wall ({run['wall']:.1f} s); task CPU {cpu:.2f} s over "
+                  f"{len(run['per_worker'])} worker(s) [{workers}] = "
+                  f"{run['rows'] / cpu:10,.0f} rows/CPU-s; recordings read {run['loads']} "
+                  f"(tasks' recordings {run['batch_recordings']}, fleet {n_recordings}); "
+                  f"load {run['load']:.1f}", flush=True)
+    med = {c: {"wall": float(np.median([x["rows"] / x["wall"] for x in v])),
+               "cpu": float(np.median([x["rows"] / sum(x["per_worker"].values()) for x in v])),
+               "busiest": float(np.median([max(x["per_worker"].values()) for x in v]))}
+           for c, v in runs.items()}
+    print(f"  ray medians of {rounds}: wall {med[1]['wall']:,.0f} -> {med[2]['wall']:,.0f} "
+          f"rows/s ({med[2]['wall'] / med[1]['wall']:.2f}x); rows/CPU-s "
+          f"{med[1]['cpu']:,.0f} -> {med[2]['cpu']:,.0f}; busiest worker's task CPU "
+          f"{med[1]['busiest']:.2f} -> {med[2]['busiest']:.2f} s (a bound on the speed-up on "
+          f"idle cores: {med[1]['busiest'] / med[2]['busiest']:.2f}x)")
 
 
 # ------------------------------------------------------------------------ memory
@@ -342,6 +455,110 @@ def bench_memory(directory: Path, megabytes: float) -> None:
               f"the process before the read, in {secs:.1f} s")
 
 
+# ------------------------------------------------------------------- big recordings
+
+BIG_PER_MSG = 10
+"""Transforms per ``/tf`` message of the big recordings (a robot's dynamic links)."""
+
+
+def big_messages(n: int, seed: int = 3) -> Iterator[BagMessage]:
+    """One ``/tf_static`` (``base_link -> laser``), then ``n`` ``/tf`` messages at 100 Hz of
+    :data:`BIG_PER_MSG` links (``odom -> base_link -> link1 -> ... -> link9``) with
+    random-walk values (so that compressed MCAP chunks are not much smaller than ROS 1's),
+    bag time 2 ms after the header stamps. Streamed: nothing but the current message
+    held."""
+    rng = np.random.default_rng(seed)
+    yield BagMessage(Time.from_ns(T0), "/tf_static", TFMessage([
+        _ts("base_link", "laser", T0, 0.2, 0.0)]), "/static")
+    parents = ["odom", "base_link", *[f"link{j}" for j in range(1, BIG_PER_MSG - 1)]]
+    children = ["base_link", *[f"link{j}" for j in range(1, BIG_PER_MSG)]]
+    x = np.zeros(BIG_PER_MSG)
+    yaw = np.zeros(BIG_PER_MSG)
+    for k in range(n):
+        ns = T0 + k * 10_000_000
+        x += rng.normal(0.0, 0.01, BIG_PER_MSG)
+        yaw += rng.normal(0.0, 0.01, BIG_PER_MSG)
+        tfs = [_ts(parents[j], children[j], ns, float(x[j]), float(yaw[j]))
+               for j in range(BIG_PER_MSG)]
+        yield BagMessage(Time.from_ns(ns + 2_000_000), "/tf", TFMessage(tfs), "/robot")
+
+
+def write_big(directory: Path, fmt: str, megabytes: float) -> tuple[Path, int]:
+    """A recording of about ``megabytes`` MB (``fmt`` ``"mcap"``: a ROS 2 bag folder's
+    ``.mcap``; ``"ros1"``: a ``.bag``): the bytes per message measured on a 20,000-message
+    sample first, then the file streamed. Returns (path, messages)."""
+    sample = directory / f"sample_{fmt}"
+    write_bag(sample if fmt == "mcap" else sample.with_suffix(".bag"),
+              big_messages(20_000), format=fmt)
+    sample_file = next(sample.glob("*.mcap")) if fmt == "mcap" else sample.with_suffix(".bag")
+    per_msg = sample_file.stat().st_size / 20_000
+    shutil.rmtree(sample, ignore_errors=True)
+    sample.with_suffix(".bag").unlink(missing_ok=True)
+    n = max(1, int(megabytes * 1e6 / per_msg))
+    target = directory / ("big_mcap" if fmt == "mcap" else "big.bag")
+    write_bag(target, big_messages(n), format=fmt)
+    path = next(target.glob("*.mcap")) if fmt == "mcap" else target
+    return path, n
+
+
+def _big_read(kind: str, path: str, n: int, out: Any) -> None:
+    """One read of a big recording in a fresh process: peak RSS (``VmHWM``, reset after
+    the imports through ``/proc/self/clear_refs``), RSS before, seconds, CPU seconds and
+    what was read. ``kind``: ``windows`` (three 10 s windows at 10, 50 and 90 % of the
+    span, ``load_buffer(start=, end=)``) or ``iter_windows`` (every 10 s window of the
+    file, margin 1 s)."""
+    from tfbus.bag import iter_windows
+
+    load_buffer(path, start=Time.from_ns(T0), end=Time.from_ns(T0 + 1))  # (imports)
+    Path("/proc/self/clear_refs").write_text("5")
+    before = _status_kb("VmRSS")
+    t, c = time.perf_counter(), time.process_time()
+    span = n * 10_000_000
+    got = 0
+    if kind == "windows":
+        for frac in (0.1, 0.5, 0.9):
+            lo = T0 + int(frac * span)
+            buffer = load_buffer(path, start=Time.from_ns(lo), end=Time.from_ns(lo + 10 * SEC))
+            buffer.lookup_transform("odom", "link9", Time.from_ns(lo + 5 * SEC))
+            got += 1
+    else:
+        for w in iter_windows(path, 10.0, margin=1.0):
+            got += w.messages
+    out.put((kind, _status_kb("VmHWM"), before, time.perf_counter() - t,
+             time.process_time() - c, got))
+
+
+def bench_big(directory: Path, megabytes: float, formats: list[str]) -> None:
+    """Peak memory and MB/s of windowed reads of a ~``megabytes`` MB MCAP and ROS 1 bag
+    (each read in a fresh process; the files deleted after)."""
+    ctx = multiprocessing.get_context("spawn")
+    for fmt in formats:
+        t = time.perf_counter()
+        path, n = write_big(directory, fmt, megabytes)
+        size = path.stat().st_size
+        print(f"big {fmt}: {size / 1e6:,.0f} MB, {n:,} /tf messages of {BIG_PER_MSG} "
+              f"transforms ({n / 100:,.0f} s at 100 Hz), written in "
+              f"{time.perf_counter() - t:.0f} s; load {os.getloadavg()[0]:.1f}", flush=True)
+        try:
+            for kind in ("windows", "iter_windows"):
+                out = ctx.Queue()
+                proc = ctx.Process(target=_big_read, args=(kind, str(path), n, out))
+                proc.start()
+                name, peak, before, secs, cpu, got = out.get(timeout=7200)
+                proc.join(timeout=120)
+                rate = f"{size / 1e6 / secs:7.1f} MB/s of the file" if kind != "windows" \
+                    else "(three windows)"
+                print(f"  {name:13s} peak RSS {peak / 1024:6.0f} MB ({(peak - before) / 1024:6.1f} "
+                      f"MB above the process before), {secs:6.1f} s wall, {cpu:6.1f} s CPU "
+                      f"{rate}; {got:,} {'windows' if kind == 'windows' else 'messages'}; "
+                      f"load {os.getloadavg()[0]:.1f}", flush=True)
+        finally:
+            if fmt == "mcap":
+                shutil.rmtree(path.parent, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--recordings", type=int, default=100)
@@ -350,11 +567,17 @@ def main() -> None:
     ap.add_argument("--outside", type=float, default=0.0, metavar="FRACTION",
                     help="fraction of rows outside the data (tf2 refuses them)")
     ap.add_argument("--no-ray", action="store_true")
+    ap.add_argument("--ray-only", action="store_true",
+                    help="only the Ray rounds (1 and 2 CPUs alternated)")
     ap.add_argument("--rounds", type=int, default=3, help="alternated timing rounds (>= 3)")
     ap.add_argument("--tf2-recordings", type=int, default=5, metavar="N",
                     help="recordings the tf2_py loop runs on (its rows/s is per row)")
     ap.add_argument("--memory", type=float, default=0.0, metavar="MB",
                     help="measure peak memory on one recording of about MB megabytes")
+    ap.add_argument("--big", type=float, default=0.0, metavar="MB",
+                    help="peak memory and MB/s of windowed reads of a ~MB MB MCAP and "
+                         "ROS 1 bag (written, read, deleted)")
+    ap.add_argument("--big-formats", default="mcap,ros1", metavar="LIST")
     args = ap.parse_args()
     from tfbus.core import COMPILED
 
@@ -365,19 +588,19 @@ def main() -> None:
         if args.memory:
             bench_memory(directory, args.memory)
             return
+        if args.big:
+            bench_big(directory, args.big, args.big_formats.split(","))
+            return
         t = time.perf_counter()
         paths = fleet(directory, args.recordings, args.seconds)
         table = queries(paths, args.queries, args.seconds, args.outside)
         print(f"{args.recordings} recordings of {args.seconds:.0f} s, {args.queries} queries, "
               f"{args.outside * 100:.0f} % outside the data "
               f"(written in {time.perf_counter() - t:.1f} s)")
-        bench_single(table, args.rounds, args.tf2_recordings)
+        if not args.ray_only:
+            bench_single(table, args.rounds, args.tf2_recordings)
         if not args.no_ray:
-            one = bench_ray(table, 1)
-            two = bench_ray(table, 2)
-            print(f"  ray, 1 CPU (with loads)           {one:12,.0f} rows/s")
-            print(f"  ray, 2 CPUs (with loads)          {two:12,.0f} rows/s  "
-                  f"({two / one:.2f}x one CPU)")
+            bench_ray_rounds(table, args.rounds)
         print(f"load after: {os.getloadavg()[0]:.1f}")
     finally:
         shutil.rmtree(directory, ignore_errors=True)

@@ -155,3 +155,50 @@ def test_duckdb(expected: tuple[Any, Any], recordings: list[Path]) -> None:
         assert list(RESULT_COLUMNS) == rel.column_names[-len(RESULT_COLUMNS):]
     finally:
         con.close()
+
+
+def test_duckdb_table_macros_select_from_tf_lookup(
+    expected: tuple[Any, Any], recordings: list[Path]
+) -> None:
+    duckdb = pytest.importorskip("duckdb")
+    from tfbus.table import duckdb as tdb
+
+    queries, want = expected
+    con = duckdb.connect()
+    try:
+        buffers = tdb.register_recordings(con)
+        con.register("q", queries.append_column("i", pa.array(np.arange(queries.num_rows))))
+        got = con.sql("SELECT * FROM tf_lookup_recording(q) ORDER BY i").arrow()
+        got = got.read_all() if hasattr(got, "read_all") else got
+        assert got.column_names == [*queries.column_names, "i", *RESULT_COLUMNS]
+        assert same_table(got.drop_columns(["i"]).cast(want.schema), want)
+        assert buffers.loads == N_RECORDINGS  # the macro orders the rows by recording
+        path = str(recordings[7])
+        buffer = load_buffer(path)
+        tdb.register(con, buffer)
+        mine = queries.filter(pa.compute.equal(queries.column("recording"), path))
+        mine = mine.drop_columns(["recording"])
+        con.register("mine", mine)
+        con.execute("CREATE TEMP VIEW late AS SELECT * FROM mine WHERE stamp > "
+                    f"{START + 10 * SEC}")
+        one = con.sql("SELECT * FROM tf_lookup(mine)").arrow()
+        one = one.read_all() if hasattr(one, "read_all") else one
+        ref = lookup(mine, buffer)
+        assert same_table(one.cast(ref.schema), ref)
+        assert set(one.column("status").to_pylist()) >= {"ok", "LookupException"}
+        # The scalar UDF of the same name is still there, and a view is a table.
+        late = con.sql("SELECT count(*), count(*) FILTER (WHERE (r).status = 'ok') FROM "
+                       "(SELECT tf_lookup(target_frame, source_frame, stamp) AS r FROM late)"
+                       ).fetchall()[0]
+        n_late = sum(1 for s in mine.column("stamp").to_pylist() if s > START + 10 * SEC)
+        ok_late = sum(1 for s, st in zip(mine.column("stamp").to_pylist(),
+                                         ref.column("status").to_pylist(), strict=True)
+                      if s > START + 10 * SEC and st == "ok")
+        assert late == (n_late, ok_late)
+        assert con.sql("SELECT count(*) FROM tf_lookup(late)").fetchall() == [(n_late,)]
+        with pytest.raises(duckdb.CatalogException, match="nowhere"):
+            con.sql("SELECT * FROM tf_lookup(nowhere)").fetchall()
+        with pytest.raises(ValueError, match=r"name must be an SQL identifier.*'tf; DROP'"):
+            tdb.register(con, buffer, name="tf; DROP")
+    finally:
+        con.close()

@@ -166,8 +166,11 @@ def _read_url(
     count = 0
     last: int | None = None
     try:
-        handle = fsspec.open(url, "rb", block_size=REMOTE_BLOCK_SIZE, cache_type="readahead")
-        f = handle.open()
+        # The block size and cache are the file's options (``fs.open``), not the
+        # filesystem's: ``fsspec.open(url, **kw)`` hands ``kw`` to the filesystem, which
+        # s3fs passes on to botocore's session (a TypeError there).
+        fs, fs_path = fsspec.core.url_to_fs(url)
+        f = fs.open(fs_path, "rb", block_size=REMOTE_BLOCK_SIZE, cache_type="readahead")
     except FileNotFoundError:
         raise BagNotFoundError(f"{url}: no such file", url) from None
     except (OSError, ValueError) as err:

@@ -1,5 +1,6 @@
 """tf2 lookups in DuckDB SQL: a vectorised UDF (``type="arrow"``: one call of the core's
-batch kernel per DuckDB vector) returning a struct of the lookup's result.
+batch kernel per DuckDB vector) returning a struct of the lookup's result, and a table
+macro of the same name over a table of queries.
 
 ::
 
@@ -8,7 +9,14 @@ batch kernel per DuckDB vector) returning a struct of the lookup's result.
     con = duckdb.connect()
     register(con, buffer)                  # tf_lookup(target_frame, source_frame, stamp)
     con.sql("SELECT q.*, unnest(tf_lookup(target_frame, source_frame, stamp)) FROM q")
+    con.sql("SELECT * FROM tf_lookup(q)")  # the same rows: the table macro
     register_recordings(con)               # tf_lookup_recording(path, target, source, stamp)
+    con.sql("SELECT * FROM tf_lookup_recording(q)")   # q with a recording column
+
+DuckDB's Python API (1.x, 2.0) registers scalar functions only (``create_function``:
+native or Arrow UDFs), not table functions; the ``FROM name(table)`` form is a
+temporary table macro (``CREATE TEMP MACRO ... AS TABLE``, DuckDB's SQL) over the UDF
+and ``query_table``, so it lives on the connection, as the UDF does.
 
 Needs the ``table`` extra (pyarrow, duckdb).
 """
@@ -20,6 +28,8 @@ from typing import TYPE_CHECKING, Any
 from tfbus._extras import require
 
 require(__name__, "pyarrow", "duckdb", extra="table")
+
+import re  # noqa: E402
 
 import duckdb  # noqa: E402
 import pyarrow as pa  # noqa: E402
@@ -51,13 +61,37 @@ def _struct(result: pa.Table) -> pa.StructArray:
     )
 
 
+_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def _checked_name(name: object) -> str:
+    """``name`` when it is a plain SQL identifier (it is written into SQL text)."""
+    if not isinstance(name, str) or not _IDENTIFIER.fullmatch(name):
+        raise ValueError(f"name must be an SQL identifier ([A-Za-z_][A-Za-z0-9_]*), "
+                         f"got {name!r}")
+    return name
+
+
+def _table_macro(con: duckdb.DuckDBPyConnection, name: str, body: str) -> None:
+    """``CREATE OR REPLACE TEMP MACRO name(queries) AS TABLE body``: ``body`` reads
+    ``query_table(queries)``, the table or view named by the macro's argument."""
+    con.execute(f"CREATE OR REPLACE TEMP MACRO {name}(queries) AS TABLE {body}")
+
+
 def register(con: duckdb.DuckDBPyConnection, buffer: BufferCore, *,
              name: str = "tf_lookup") -> None:
     """Register ``name(target_frame VARCHAR, source_frame VARCHAR, stamp BIGINT)`` on
-    ``con``, answering against ``buffer`` (:func:`tfbus.table.lookup` per vector).
+    ``con``, answering against ``buffer`` (:func:`tfbus.table.lookup` per vector), and
+    the table macro ``name(queries)``: ``SELECT * FROM name(q)`` is every row of the
+    table or view ``q`` (columns ``target_frame``, ``source_frame``, ``stamp`` and any
+    others) followed by :data:`tfbus.table.RESULT_COLUMNS`.
 
     A NULL argument is a row error (``InvalidArgumentException``), not a NULL result.
+
+    Raises:
+        ValueError: ``name`` is not an SQL identifier.
     """
+    _checked_name(name)
 
     def answer(targets: Any, sources: Any, stamps: Any) -> pa.StructArray:
         table = pa.table({"target_frame": targets, "source_frame": sources, "stamp": stamps})
@@ -66,6 +100,8 @@ def register(con: duckdb.DuckDBPyConnection, buffer: BufferCore, *,
     connection: Any = con  # (duckdb's stubs take the UDF kinds as its own enum values)
     connection.create_function(name, answer, ["VARCHAR", "VARCHAR", "BIGINT"], result_type(),
                                type="arrow", null_handling="special", side_effects=False)
+    _table_macro(con, name, "SELECT *, unnest("
+                 f"{name}(target_frame, source_frame, stamp)) FROM query_table(queries)")
 
 
 def register_recordings(
@@ -76,11 +112,18 @@ def register_recordings(
 ) -> _recordings.RecordingBuffers:
     """Register ``name(recording VARCHAR, target_frame VARCHAR, source_frame VARCHAR,
     stamp BIGINT)``: each row against its recording, read whole and kept in ``buffers``
-    (default: the 2 most recently used recordings), so sort the rows by recording.
+    (default: the 2 most recently used recordings), so sort the rows by recording; and
+    the table macro ``name(queries)``: ``SELECT * FROM name(q)`` is every row of ``q``
+    (``recording``, ``target_frame``, ``source_frame``, ``stamp`` and any others),
+    ordered by ``recording``, followed by :data:`tfbus.table.RESULT_COLUMNS`.
 
     Returns:
         The :class:`~tfbus.table.RecordingBuffers` in use (its ``loads`` counts reads).
+
+    Raises:
+        ValueError: ``name`` is not an SQL identifier.
     """
+    _checked_name(name)
     cache = buffers if buffers is not None else _recordings.RecordingBuffers()
 
     def answer(paths: Any, targets: Any, sources: Any, stamps: Any) -> pa.StructArray:
@@ -93,6 +136,9 @@ def register_recordings(
     connection.create_function(name, answer, ["VARCHAR", "VARCHAR", "VARCHAR", "BIGINT"],
                                result_type(), type="arrow", null_handling="special",
                                side_effects=False)
+    _table_macro(con, name, "SELECT *, unnest("
+                 f"{name}(recording, target_frame, source_frame, stamp)) "
+                 "FROM (SELECT * FROM query_table(queries) ORDER BY recording)")
     return cache
 
 
