@@ -381,7 +381,8 @@ class TfPage:
         with self._lock, self.server.atomic():
             self._draw(scene, stats, rates)
             self.draw_pair(scene, core, stats, rates)
-            self.frame_tree.update(scene, self.shown if self.frame_filter is not None else None)
+            self.frame_tree.update(scene, self.shown if self.frame_filter is not None else None,
+                                   self.frame_filter)
             self.graph.update(scene)
 
     def _draw(self, scene: Scene, stats: TfSummary | None,

@@ -153,6 +153,7 @@ class FrameTree:
         """Times the tree's GUI was made anew (its rows changed)."""
         self._handles: list[Any] = []
         self._key: tuple[Any, ...] | None = None
+        self._inputs: tuple[Any, ...] | None = None
 
     def set_shown(self, frame_id: str, shown: bool) -> None:
         """Show or hide ``frame_id`` (as ticking its box does); drawn at the next redraw.
@@ -176,10 +177,17 @@ class FrameTree:
             self.set_shown(frame_id, bool(box.value))
             self._changed()
 
-    def update(self, scene: Scene, shown: Callable[[str], bool] | None = None) -> None:
-        """List ``scene``'s frames (module doc); ``shown`` is the page's frame filter.
-        The GUI is made again only when the listed rows change."""
+    def update(self, scene: Scene, shown: Callable[[str], bool] | None = None,
+               filter_key: object = None) -> None:
+        """List ``scene``'s frames (module doc); ``shown`` is the page's frame filter and
+        ``filter_key`` what it depends on (the compiled pattern). The rows are listed
+        again only when the links, the fixed frame or the filter changed (10 000 frames
+        take ~60 ms to list), the GUI made again only when the rows changed."""
         parents = {f.frame_id: f.parent for f in scene.frames if f.parent is not None}
+        inputs = (parents, len(scene.frames), scene.fixed_frame, filter_key, shown is None)
+        if inputs == self._inputs:
+            return
+        self._inputs = inputs
         rows, more = tree_rows(parents, (f.frame_id for f in scene.frames),
                                fixed_frame=scene.fixed_frame, keep=shown)
         key = (tuple(rows), more)
