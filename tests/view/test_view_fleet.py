@@ -215,3 +215,81 @@ async def test_two_robots_over_zenoh_in_chromium(chromium: str, page: TfPage) ->
 @pytest.fixture(params=["asyncio", "trio"])
 def anyio_backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
+
+
+def test_fleet_flag_needs_a_bag() -> None:
+    from click.testing import CliRunner
+
+    from tfbus.cli import cli
+
+    result = CliRunner().invoke(cli, ["view", "--fleet", "--bus", "memory", "--port", "0"])
+    assert result.exit_code == 2
+    assert result.stderr.strip() == ("tfbus view: error: --fleet applies to --bag only (a "
+                                     "namespace=* bus always has the robot selector)")
+
+
+@pytest.mark.anyio
+async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:  # noqa: F811
+    """``tfbus view --bus 'zenoh:mode=client&connect=...&namespace=*'`` as a process: two
+    robots publish through a Zenoh router on 127.0.0.1; the page lists both side by side
+    (each from its own map). SIGINT ends it with status 0; it is killed by PID if not."""
+    pytest.importorskip("zenoh")
+    import select
+    import signal
+    import subprocess
+    import sys
+
+    import anyio
+    from cdp import Chromium
+
+    from tfbus.bus import Bus
+    from tfbus.messages import TFMessage
+    from tfbus.transports.zenoh import ZenohTransport
+    from tfbus.transports.zenoh.router import ZenohRouter
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    port = free_port()
+    exe = Path(sys.executable).with_name("tfbus")
+    async with ZenohRouter(listen=endpoint):
+        proc = subprocess.Popen(
+            [str(exe), "view", "--bus", f"zenoh:mode=client&connect={endpoint}&namespace=*",
+             "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            text=True)
+        try:
+            assert proc.stderr is not None
+            ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait
+            assert ready, "tfbus view printed nothing in 60 s"
+            assert proc.stderr.readline().strip() == f"tfbus view: http://127.0.0.1:{port}/"
+            robots = [Bus(transport=ZenohTransport(connect=endpoint, config={"mode": "client"},
+                                                   namespace=f"robot{k}", name=f"r{k}"))
+                      for k in (1, 2)]
+            async with robots[0] as r1, robots[1] as r2:
+                def shown() -> str:
+                    with Chromium(chromium) as c:
+                        c.open(f"http://127.0.0.1:{port}/")
+                        return str(c.wait(
+                            "document.body && document.body.innerText.includes("
+                            "'robot2: fixed frame robot2/map') && document.body.innerText",
+                            timeout=60))
+
+                with anyio.fail_after(60):  # until the view hears both robots' statics
+                    async with anyio.create_task_group() as tg:
+                        async def publish() -> None:
+                            while True:  # latched statics, re-sent until the page shows them
+                                for r, x in ((r1, 1.0), (r2, 3.0)):
+                                    r.publish_nowait("/tf_static",
+                                                     TFMessage([tf("map", "base", x)]))
+                                await anyio.sleep(0.2)
+
+                        tg.start_soon(publish)
+                        text = await anyio.to_thread.run_sync(shown)
+                        tg.cancel_scope.cancel()
+            slot = max(MIN_SLOT, 3.0 + GAP)
+            assert "robot1: fixed frame robot1/map, x +0.00 m" in text
+            assert f"robot2: fixed frame robot2/map, x +{slot:.2f} m" in text
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=30) == 0
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=10)
