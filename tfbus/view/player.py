@@ -95,7 +95,9 @@ class BagPlayer:
         self.slider.on_update(self._on_slider)
         self.last_scene: Scene | None = None
         if timeline.times:  # the camera frames every frame the bag places by its end
-            page.aim(build_scene(timeline.buffer_at(timeline.end), fixed_frame=fixed_frame))
+            end = timeline.buffer_at(timeline.end)
+            page.aim(fleet.build(end, fixed_frame=fixed_frame) if fleet is not None
+                     else build_scene(end, fixed_frame=fixed_frame))
 
     def _on_slider(self, _event: Any) -> None:
         # a user's drag of the time slider (our own writes set the same value)
