@@ -89,6 +89,10 @@ CLOUD_SCHEMES = ("zenoh", "memory")
               default=DEFAULT_FRAME_TIMEOUT, show_default=True,
               help="Seconds without an update before a frame is hidden (it fades to grey "
                    "from a third of it, as rviz's TF display).")
+@click.option("--fleet", is_flag=True,
+              help="With --bag: its frames are a fleet's (robot/frame, as a namespace=* "
+                   "listener prefixes them): a robot selector, one robot or all side by "
+                   "side. A namespace=* bus always has it.")
 @use_sim_time_option
 def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: str,
             port: int, paused: bool, rate: float, frame_timeout: float,
@@ -96,7 +100,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             urdf: Path | None, mesh_dirs: tuple[Path, ...], token: str | None,
             use_sim_time: bool, cloud_topics: tuple[str, ...] = (),
             record_path: Path | None = None, record_dir: Path | None = None,
-            record_max_mb: float = 1024.0, record_max_seconds: float = 3600.0) -> None:
+            record_max_mb: float = 1024.0, record_max_seconds: float = 3600.0,
+            fleet: bool = False) -> None:
     """Serve a live 3D page of the frames (open the printed address in a browser).
 
     \b
@@ -119,6 +124,8 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
         from tfbus.cli._bag_source import check_bag
 
         check_bag(bag)
+    if fleet and bag is None:
+        fail("--fleet applies to --bag only (a namespace=* bus always has the robot selector)")
     if token is not None:
         from tfbus.view.guard import PageGuard
 
@@ -224,7 +231,7 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
     try:
         if bag is not None:
             _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop,
-                       clouds=clouds, record=record)
+                       clouds=clouds, record=record, fleet=fleet)
         else:
             _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
                        stop, use_sim_time=use_sim_time, record=record,
@@ -240,8 +247,10 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
 def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: float,
                paused: bool, rate: float, tracks: Sequence[ScanTrack],
                bridge: FoxgloveBridge | None, stop: threading.Event, *,
-               clouds: Sequence[CloudTrack] = (), record: RecordControl | None = None) -> None:
+               clouds: Sequence[CloudTrack] = (), record: RecordControl | None = None,
+               fleet: bool = False) -> None:
     from tfbus.cli._bag_source import BagSource
+    from tfbus.view.fleet import FleetView
     from tfbus.view.player import BagPlayer
     from tfbus.view.server import TfPage
     from tfbus.view.timeline import BagTimeline
@@ -251,7 +260,8 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     timeline = BagTimeline.read(bag)
     player = BagPlayer(page, timeline, fixed_frame=fixed_frame, frame_timeout=frame_timeout,
                        paused=paused, rate=rate, summary=src.summary(), scans=tracks,
-                       foxglove=bridge, clouds=clouds, record=record)
+                       foxglove=bridge, clouds=clouds, record=record,
+                       fleet=FleetView(page) if fleet else None)
     player.render()
     player.run(stop)
 
@@ -263,6 +273,7 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
                cloud_topics: Sequence[str] = ()) -> None:
     from tfbus.cli._bus_source import BusSource
     from tfbus.cli._live_session import live, run_live
+    from tfbus.view.fleet import FleetView
     from tfbus.view.live import LiveView
     from tfbus.view.server import TfPage
 
@@ -278,9 +289,12 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
         src.sink.observers.append(
             lambda now, transforms, authority, static: add(now, transforms, authority,
                                                            static=static))
+    fleet: FleetView | None = None
+    if src.is_fleet:  # a robot selector: the robots the fleet bus announces
+        fleet = FleetView(page, lambda: src.fleet.robots() if src.fleet is not None else ())
     view = LiveView(page, src.buffer(), src.summary(), src.clock, fixed_frame=fixed_frame,
                     frame_timeout=frame_timeout, scan_topics=scan_topics, foxglove=bridge,
-                    doctor=doctor, record=record, cloud_topics=cloud_topics)
+                    doctor=doctor, record=record, cloud_topics=cloud_topics, fleet=fleet)
 
     async def body() -> None:
         assert src.bus is not None

@@ -59,6 +59,7 @@ if TYPE_CHECKING:
     from tfbus.doctor import Doctor
     from tfbus.monitor import TfSummary
     from tfbus.subscription import Subscription
+    from tfbus.view.fleet import FleetView
     from tfbus.view.foxglove_bridge import FoxgloveBridge
     from tfbus.view.server import TfPage
 
@@ -154,6 +155,9 @@ class LiveView:
             sink's ``observers``, as ``tfbus doctor --bus`` feeds one): its findings are
             listed in the page's "tf doctor" panel, reported again at most every
             :data:`FINDINGS_PERIOD` seconds of the view's clock. None: no panel.
+        fleet: the robot selector of a fleet bus (``namespace=*``: frames prefixed with
+            each robot's name): one robot, or all side by side
+            (:class:`~tfbus.view.fleet.FleetView`).
     """
 
     def __init__(self, page: TfPage, buffer: Buffer, summary: TfSummary, clock: Clock,
@@ -163,8 +167,10 @@ class LiveView:
                  foxglove: FoxgloveBridge | None = None,
                  doctor: Doctor | None = None,
                  cloud_topics: Sequence[str] = (),
-                 record: RecordControl | None = None) -> None:
+                 record: RecordControl | None = None,
+                 fleet: FleetView | None = None) -> None:
         self.page = page
+        self.fleet = fleet
         self.doctor = doctor
         self._reported_at: Time | None = None
         self.buffer = buffer
@@ -368,7 +374,7 @@ class LiveView:
         self._drawn_at = now
         scene = draw_live(self.page, self.buffer, self.summary, now,
                           fixed_frame=self.page.fixed_frame_choice or self.fixed_frame,
-                          frame_timeout=self.frame_timeout)
+                          frame_timeout=self.frame_timeout, fleet=self.fleet)
         if scene.fixed_frame is not None and scene.frames:
             self.shown_fixed = scene.fixed_frame
             self._fixed_known.set()

@@ -7,7 +7,7 @@ import bisect
 import threading
 import time as _wall
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tfbus.core import BufferCore
 from tfbus.doctor import Doctor
@@ -21,6 +21,9 @@ from tfbus.view.scans import ScanTrack
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT, Scene, build_scene
 from tfbus.view.server import TfPage
 from tfbus.view.timeline import BagTimeline
+
+if TYPE_CHECKING:
+    from tfbus.view.fleet import FleetView
 
 __all__ = ["CLOUD_COLOUR", "MAX_DRAW_HZ", "BagPlayer", "draw_live"]
 
@@ -58,7 +61,8 @@ class BagPlayer:
                  scans: Sequence[ScanTrack] = (),
                  foxglove: FoxgloveBridge | None = None,
                  clouds: Sequence[CloudTrack] = (),
-                 record: RecordControl | None = None) -> None:
+                 record: RecordControl | None = None,
+                 fleet: FleetView | None = None) -> None:
         if not 0.1 <= rate <= 10.0:
             raise ValueError(f"rate must be between 0.1 and 10, got {rate!r}")
         self.page = page
@@ -77,6 +81,8 @@ class BagPlayer:
         self._rec_scans = [0 for _ in self.scans]
         self._rec_clouds = [0 for _ in self.clouds]
         self.foxglove = foxglove
+        self.fleet = fleet
+        """The robot selector when the bag's frames are a fleet's (``robot/frame``)."""
         self._fg_upto = 0
         self._fg_scan_upto = [0 for _ in self.scans]
         for track in self.scans:  # advertised from the start, before any scan is due
@@ -108,7 +114,9 @@ class BagPlayer:
         self.slider.on_update(self._on_slider)
         self.last_scene: Scene | None = None
         if timeline.times:  # the camera frames every frame the bag places by its end
-            page.aim(build_scene(timeline.buffer_at(timeline.end), fixed_frame=fixed_frame))
+            last = timeline.buffer_at(timeline.end)
+            page.aim(fleet.build(last, fixed_frame=fixed_frame) if fleet is not None
+                     else build_scene(last, fixed_frame=fixed_frame))
 
     def _on_slider(self, _event: Any) -> None:
         # a user's drag of the time slider (our own writes set the same value)
@@ -139,9 +147,14 @@ class BagPlayer:
         t = self.time()
         core = self.timeline.buffer_at(t)
         fixed = self.page.fixed_frame_choice or self.fixed_frame
-        scene = build_scene(core, fixed_frame=fixed, now=t,
-                            last_update=self.timeline.last_update(t),
-                            frame_timeout=self.frame_timeout)
+        if self.fleet is not None:
+            scene = self.fleet.build(core, fixed_frame=fixed, now=t,
+                                     last_update=self.timeline.last_update(t),
+                                     frame_timeout=self.frame_timeout)
+        else:
+            scene = build_scene(core, fixed_frame=fixed, now=t,
+                                last_update=self.timeline.last_update(t),
+                                frame_timeout=self.frame_timeout)
         self.page.draw(scene, self.summary, core=core)
         self._report_findings(t)
         self.scan_errors.clear()
@@ -295,13 +308,19 @@ class BagPlayer:
 
 def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
               fixed_frame: str | None = None,
-              frame_timeout: float = DEFAULT_FRAME_TIMEOUT) -> Scene:
+              frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
+              fleet: FleetView | None = None) -> Scene:
     """Draw a live buffer at its latest data; ages from each frame's last receive time
-    (``summary``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``."""
+    (``summary``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``; with
+    ``fleet``, the robots it picks (:meth:`~tfbus.view.fleet.FleetView.build`)."""
     last = {name: Time.from_ns(fs.last_received)
             for name, fs in summary.frames.items() if fs.last_received is not None}
     rates = {name: fs.recent_rate(now) for name, fs in summary.frames.items()}
-    scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
-                        frame_timeout=frame_timeout)
+    if fleet is not None:
+        scene = fleet.build(core, fixed_frame=fixed_frame, now=now, last_update=last,
+                            frame_timeout=frame_timeout)
+    else:
+        scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
+                            frame_timeout=frame_timeout)
     page.draw(scene, summary, rates, core=core)
     return scene

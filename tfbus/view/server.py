@@ -16,9 +16,7 @@ from ids, so a ``/`` in an id cannot re-parent a node.
 from __future__ import annotations
 
 import functools
-import html
 import itertools
-import re
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -31,6 +29,9 @@ from tfbus.errors import PortInUseError
 from tfbus.messages import TransformStamped
 from tfbus.monitor import TfSummary
 from tfbus.time import Time
+from tfbus.view.escape import html_text as _h
+from tfbus.view.escape import text
+from tfbus.view.graph import GraphView
 from tfbus.view.guard import PageGuard, check_port
 from tfbus.view.robot import LinkVisual
 from tfbus.view.scene import Scene
@@ -42,13 +43,12 @@ from tfbus.view.trails import (
     TrailSampler,
     check_seconds,
 )
+from tfbus.view.tree import FrameTree
 
 if TYPE_CHECKING:
     from tfbus.doctor import Finding
 
 __all__ = ["PortInUseError", "TfPage", "text"]
-
-_UNSAFE = re.compile(r"[\x00-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069]")
 
 FULL_COLOUR = (230, 140, 20)
 """Colour of a fresh link line (RGB 0-255); it fades to :data:`GREY`."""
@@ -77,25 +77,6 @@ FILTER_TIMEOUT = 0.01
 """Seconds one frame filter search may take (the ``regex`` package's ``timeout``): a
 pattern that backtracks catastrophically (``(a|aa)+$``) is dropped, with an error line,
 instead of stalling the drawing loop (Python's own ``re`` cannot be interrupted)."""
-
-
-def text(frame_id: object) -> str:
-    """An id as visible text: control and bidirectional characters as ``\\xNN`` /
-    ``\\uNNNN`` escapes (as ``tfbus`` prints them in a terminal)."""
-    return _UNSAFE.sub(lambda m: f"\\x{ord(m.group()):02x}" if ord(m.group()) < 0x100
-                       else f"\\u{ord(m.group()):04x}", str(frame_id))
-
-
-def _h(value: object) -> str:
-    if isinstance(value, str):
-        return _h_str(value)
-    return html.escape(text(value), quote=True)
-
-
-@functools.lru_cache(maxsize=8192)
-def _h_str(value: str) -> str:
-    """:func:`_h` of a string, remembered (the panel writes each id on every redraw)."""
-    return html.escape(text(value), quote=True)
 
 
 def _wxyz(pose: TransformStamped) -> tuple[float, float, float, float]:
@@ -382,8 +363,12 @@ class TfPage:
         self._axes_length_sent = AXES_LENGTH
         self.tree = gui.add_html("")
         self.notes = gui.add_html("")
+        self.frame_tree = FrameTree(gui, self._lock, self._controls_changed)
+        """The browsable frame tree with a show/hide box per frame (:mod:`tfbus.view.tree`)."""
         with gui.add_folder("tf doctor"):
             self.findings = gui.add_html("")
+        self.graph = GraphView(gui, self._lock, self._controls_changed)
+        """The graph view of the tree (:mod:`tfbus.view.graph`), drawn when ticked."""
         self.findings_html = ""
         """The doctor panel's HTML as last sent (:meth:`set_findings`)."""
         self.notes_html = ""
@@ -456,6 +441,11 @@ class TfPage:
         if event.client is None:
             return
         self.set_frame_filter(str(self.filter_box.value))
+
+    def _controls_changed(self) -> None:
+        """A display control changed (the caller holds ``_lock``): a paused bag is drawn
+        again at once."""
+        self.control_version += 1
 
     def _on_control(self, event: Any) -> None:
         if event.client is not None:
@@ -595,6 +585,9 @@ class TfPage:
         if value != self.trail_html:
             self.trail_html = value
             self.trail_info.content = value
+            self.frame_tree.update(scene, self.shown if self.frame_filter is not None else None,
+                                   self.frame_filter)
+            self.graph.update(scene)
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
@@ -607,8 +600,9 @@ class TfPage:
         rows: dict[str, int] = {}
         length = float(self.axis_length.value)
         labels = bool(self.labels_box.value)
+        hidden = self.frame_tree.hidden  # unticked in the page's frame tree
         for f in scene.frames:
-            drawn = f.visible and self.shown(f.frame_id)
+            drawn = f.visible and self.shown(f.frame_id) and f.frame_id not in hidden
             record = self.frames.get(f.frame_id)
             if record is None:
                 record = self._add_frame(f.frame_id)
@@ -628,6 +622,9 @@ class TfPage:
                 segments.append([_xyz(f.pose), _xyz(parent_pose)])
                 c = _mix(f.colour if f.colour is not None else 0.0)
                 colours.append([c, c])
+        for name, drawn_frame in self.frames.items():  # drawn before, not in this scene
+            if name not in poses and drawn_frame.visible:
+                drawn_frame.show(False, labels)
         self.links, self.link_count = self._segments(
             "/links", self.links, self.link_count, segments, colours, 2.0)
         axes = (_axes(np.asarray(origins, dtype=np.float64),
@@ -756,6 +753,7 @@ class TfPage:
                    if items else "<p>no findings</p>")
                 + (f"<p>and {more} more</p>" if more > 0 else ""))
         with self._lock:
+            self.graph.findings = tuple(findings or ())
             if value != self.findings_html:
                 self.findings_html = value
                 self.findings.content = value
@@ -913,5 +911,6 @@ class TfPage:
         """Stop the server (closes its port)."""
         from tfbus.view import guard
 
+        self.graph.close()
         self.server.stop()
         guard.unregister(self.guard)
