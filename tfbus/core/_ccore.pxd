@@ -31,6 +31,7 @@ cdef class CoreBase:
     cdef list _lparents
     cdef list _heap
     cdef int64_t _newest
+    cdef dict _waits
     cdef bint _expiring
     cdef int64_t _expire_ns
     cdef int64_t _expire_every
@@ -43,6 +44,8 @@ cdef class CoreBase:
     cdef Py_ssize_t _cforget(self, int64_t older_than) except -1
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
     cdef object _problem(self, int code)
+    cdef object _csettle(self, dict index, object names)
+    cdef object _cquery(self, object target, object source, object time)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1

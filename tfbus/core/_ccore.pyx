@@ -364,6 +364,28 @@ cdef int _climb_policy(list caches, int frame, int stop, int early, int64_t time
     reached[0] = frame
     return CLIMB_STOPPED
 
+cdef inline object _set_one(CoreBase core, object transform, str authority, bint is_static):
+    """``set_transform`` (``is_static`` False) and ``set_transform_static`` (True): the
+    insert, expiry when due, then the waits the insert answers settled in the core (when
+    ``core._waits`` holds any; the rest to the subclass's ``_recheck_rest``), or a
+    transform not stored to the subclass's ``_not_stored``."""
+    cdef int code
+    cdef object rest
+    if not isinstance(transform, TransformStamped):
+        raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
+    code = core._insert_one(transform, authority, is_static)
+    if core._newest >= core._expire_due:
+        core._expire()
+    if code == C_OK:
+        if core._waits:
+            rest = core._csettle(core._waits, None)
+            if rest is not None:
+                core._recheck_rest(rest, core._last_relinked)
+        return True
+    core._not_stored(core._problem(code), authority)
+    return False
+
+
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
@@ -406,6 +428,7 @@ cdef class CoreBase:
         self._expire_every = 0
         self._expire_due = INT64_MAX
         self._frames_expired = 0
+        self._waits = None
         self._memo = [None] * MEMO_SIZE
         for k in range(MEMO_SIZE):
             self._memo_gen[k] = -1
@@ -692,18 +715,11 @@ cdef class CoreBase:
 
         The core's method, called with no Python frame in between (``BufferCore``
         inherits it); a transform not stored goes to the subclass's ``_not_stored``
-        (the log line, or the exception).
+        (the log line, or the exception). With waits to settle (``_follow_waits``), a
+        stored transform settles them here (``_settle``), and what is left goes to the
+        subclass's ``_recheck_rest(rest, relinked)``.
         """
-        cdef int code
-        if not isinstance(transform, TransformStamped):
-            raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
-        code = self._insert_one(transform, authority, False)
-        if self._newest >= self._expire_due:
-            self._expire()
-        if code == C_OK:
-            return True
-        self._not_stored(self._problem(code), authority)
-        return False
+        return _set_one(self, transform, authority, False)
 
     def set_transform_static(self, transform, str authority="default"):
         """Store a static transform: valid at all times, overwritten by every later send
@@ -712,16 +728,7 @@ cdef class CoreBase:
 
         Returns and raises as :meth:`set_transform`.
         """
-        cdef int code
-        if not isinstance(transform, TransformStamped):
-            raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
-        code = self._insert_one(transform, authority, True)
-        if self._newest >= self._expire_due:
-            self._expire()
-        if code == C_OK:
-            return True
-        self._not_stored(self._problem(code), authority)
-        return False
+        return _set_one(self, transform, authority, True)
 
     def _store(self, transforms, str authority, bint is_static):
         """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
@@ -816,6 +823,65 @@ cdef class CoreBase:
         waits are pending."""
         return self._last_child, self._last_parent, self._last_relinked
 
+    @staticmethod
+    def _plain_transform(ts):
+        """Whether ``ts`` is a transform every ``set_transform`` accepts, by a quick test
+        of its common form: a ``TransformStamped`` of the message classes themselves (no
+        subclass), stamp a ``Time``, two different ``str`` ids, neither empty nor
+        '/'-prefixed, seven ``float`` values, a finite translation and a quaternion
+        whose squared norm (w² + x² + y² + z², tf2's order) is within 0.01 of 1.
+
+        False says only that the quick test does not decide (the broadcaster then asks
+        ``set_transform`` itself, the one authority on validity); never raises."""
+        cdef object header, tf, tr, rot, parent, child
+        cdef double x, y, z, qx, qy, qz, qw, s
+        cdef Py_ssize_t k
+        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
+            return False
+        header = (<tuple>ts)[0]
+        child = (<tuple>ts)[1]
+        tf = (<tuple>ts)[2]
+        if type(header) is not Header or len(<tuple>header) != 2:
+            return False
+        if type(tf) is not Transform or len(<tuple>tf) != 2:
+            return False
+        tr = (<tuple>tf)[0]
+        rot = (<tuple>tf)[1]
+        if type(tr) is not Vector3 or len(<tuple>tr) != 3:
+            return False
+        if type(rot) is not Quaternion or len(<tuple>rot) != 4:
+            return False
+        parent = (<tuple>header)[1]
+        if type((<tuple>header)[0]) is not Time or type(parent) is not str or type(child) is not str:
+            return False
+        if (not len(<str>parent) or not len(<str>child)
+                or PyUnicode_READ_CHAR(parent, 0) == 47 or PyUnicode_READ_CHAR(child, 0) == 47
+                or parent == child):
+            return False
+        for k in range(3):
+            if type((<tuple>tr)[k]) is not float:
+                return False
+        for k in range(4):
+            if type((<tuple>rot)[k]) is not float:
+                return False
+        x = (<tuple>tr)[0]
+        y = (<tuple>tr)[1]
+        z = (<tuple>tr)[2]
+        qx = (<tuple>rot)[0]
+        qy = (<tuple>rot)[1]
+        qz = (<tuple>rot)[2]
+        qw = (<tuple>rot)[3]
+        s = x + y + z
+        if s - s != 0.0:  # NaN or ±Inf anywhere makes the sum non-finite
+            return False
+        return fabs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+
+    def _follow_waits(self, dict index):
+        """Settle the waits of ``index`` (frame id -> set of waits, the subclass's own
+        dict, kept by reference) in every later ``set_transform`` and
+        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops."""
+        self._waits = index
+
     def _settle(self, dict index, names):
         """The recheck of ``tfbus.buffer.Buffer``'s waits after an insert, in one call:
         every wait indexed in ``index`` (frame id -> set of waits) under one of
@@ -831,6 +897,10 @@ cdef class CoreBase:
             own recheck: an exact wait whose lookup failed (``failure``, ``_query``'s
             tuple) or another wait (``failure`` None).
         """
+        return self._csettle(index, names)
+
+    cdef object _csettle(self, dict index, object names):
+        """:meth:`_settle`, callable from C with no Python call in between."""
         cdef list due
         cdef list rest = None
         cdef set first = None, union = None
@@ -857,7 +927,7 @@ cdef class CoreBase:
             if exact is None:
                 out = None
             else:
-                out = self._query((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
+                out = self._cquery((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
                 if isinstance(out, TransformStamped):
                     waiter.result = out
                     for name in waiter.frames:
@@ -903,6 +973,10 @@ cdef class CoreBase:
           common time minus cache_time (tf2's transformable-request test), i.e. waiting
           cannot help.
         """
+        return self._cquery(target, source, time)
+
+    cdef object _cquery(self, object target, object source, object time):
+        """:meth:`_query`, callable from C with no Python call in between."""
         cdef int64_t t = (<object>time)._ns
         cdef int64_t used, lct
         cdef int target_id, source_id, err, where = 0, gcode = 0
@@ -1362,7 +1436,7 @@ cdef class CoreBase:
             if source is None:
                 return (INVALID_ARGUMENT, 1)
         if target == source:
-            out = self._query(target, source, time)
+            out = self._cquery(target, source, time)
             return _named(PolicyResult, out, _named3(PolicyReport, (), (), 0))
         target_id = self._frame(target)
         if target_id < 0:
