@@ -31,12 +31,12 @@ cdef class CoreBase:
     cdef list _lparents
     cdef list _heap
     cdef int64_t _newest
-    cdef dict _waits
     cdef bint _expiring
     cdef int64_t _expire_ns
     cdef int64_t _expire_every
     cdef int64_t _expire_due
     cdef long long _frames_expired
+    cdef dict _waits
     cdef object _register(self, str frame_id)
     cdef int _name_parent(self, object cid, object pid) except -1
     cdef int _unregister(self, object fid) except -1
@@ -45,7 +45,6 @@ cdef class CoreBase:
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
     cdef object _problem(self, int code)
     cdef object _csettle(self, dict index, object names)
-    cdef object _cquery(self, object target, object source, object time)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1

@@ -260,9 +260,11 @@ class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
     Inserts and queries return codes and data, and ``tfbus.core`` turns them into tf2's
-    messages, exceptions and log lines; the one call into the subclass is
+    messages, exceptions and log lines; the calls into the subclass are
     ``set_transform``'s (and ``set_transform_static``'s) for a transform not stored:
-    ``_not_stored(problem, authority)``, which logs the refusal or raises.
+    ``_not_stored(problem, authority)``, which logs the refusal or raises, and, with
+    waits to settle (``_follow_waits``), for the waits the insert did not settle:
+    ``_recheck_rest(rest, relinked)``.
 
     Internals (for white-box tests, never written from outside): ``_frame_ids`` (frame
     id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names`` (int id → frame id),
