@@ -400,71 +400,6 @@ cdef inline object _set_one(CoreBase core, object transform, str authority, bint
     return _after_insert(core, code, authority)
 
 
-cdef inline object _query_of(CoreBase core, object target, object source, object time):
-    """``CoreBase._query`` (see there), callable from C with no call in between: the
-    body of ``_query`` itself, of the settle's lookups and of a policy's identity."""
-    cdef int64_t t = (<object>time)._ns
-    cdef int64_t used, lct
-    cdef int target_id, source_id, err, where = 0, gcode = 0
-    cdef double v[7]
-    cdef object hit, out, cache
-    cdef size_t slot
-    cdef bint expired
-    cdef Link link
-    cdef double st[7]
-    cdef int p = 0
-    if type(target) is not str:
-        target = _as_str(target)
-        if target is None:
-            return (INVALID_ARGUMENT, 0)
-    if type(source) is not str:
-        source = _as_str(source)
-        if source is None:
-            return (INVALID_ARGUMENT, 1)
-    # The memo slot of (target, source, t), by the ids' identity: an equal id in
-    # another string object only misses. A hit is the very query: same objects (the
-    # result holds them), same time, no insert or clear since.
-    slot = (((<size_t><PyObject*>target) >> 4) ^ ((<size_t><PyObject*>source) >> 3)
-            ^ <size_t>t ^ (<size_t>t >> 20)) & (MEMO_SIZE - 1)
-    if core._memo_gen[slot] == core._generation and core._memo_t[slot] == t:
-        hit = core._memo[slot]
-        if (<tuple>hit)[1] is source and (<tuple>(<tuple>hit)[0])[1] is target:
-            return hit
-    if target == source:
-        if t == 0:
-            # tf2 stamps the identity with the frame's newest sample; an unknown id
-            # maps to frame 0 (NO_PARENT), whose link exists only if "NO_PARENT" was
-            # stored as a child (lookupFrameNumber / getFrame).
-            cache = core._caches[core._frame_ids.get(target, 0)]
-            if cache is not None:
-                (<Link>cache).c_latest(&t)
-        _identity(v)
-        return _stamped(_time_of(t) if t != (<object>time)._ns else time, target, source, v)
-    target_id = core._frame(target)
-    if target_id < 0:
-        return _bad_id(<str>target, 0)
-    source_id = core._frame(source)
-    if source_id < 0:
-        return _bad_id(<str>source, 1)
-    used = t
-    err = core._walk(target_id, source_id, &used, v, &where)
-    if err != NO_ERROR:
-        if err != EXTRAPOLATION_ERROR:
-            return (err, 0)
-        expired = False
-        link = <Link>core._caches[where]
-        gcode = link.c_gather(used, st, &p)
-        if gcode != G_FUTURE and core._common(target_id, source_id, &lct) == NO_ERROR:
-            expired = lct != 0 and used < lct - core._cache_ns
-        return (err, where, used, expired)
-    out = _restamp(core._memo, slot, time if used == t and t != 0 else _time_of(used),
-                   target, source, v)
-    core._memo[slot] = out
-    core._memo_t[slot] = t
-    core._memo_gen[slot] = core._generation
-    return out
-
-
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
@@ -1008,7 +943,7 @@ cdef class CoreBase:
             if exact is None:
                 out = None
             else:
-                out = _query_of(self, (<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
+                out = self._query((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
                 if isinstance(out, TransformStamped):
                     waiter.result = out
                     for name in waiter.frames:
@@ -1054,7 +989,66 @@ cdef class CoreBase:
           common time minus cache_time (tf2's transformable-request test), i.e. waiting
           cannot help.
         """
-        return _query_of(self, target, source, time)
+        cdef int64_t t = (<object>time)._ns
+        cdef int64_t used, lct
+        cdef int target_id, source_id, err, where = 0, gcode = 0
+        cdef double v[7]
+        cdef object hit, out, cache
+        cdef size_t slot
+        cdef bint expired
+        cdef Link link
+        cdef double st[7]
+        cdef int p = 0
+        if type(target) is not str:
+            target = _as_str(target)
+            if target is None:
+                return (INVALID_ARGUMENT, 0)
+        if type(source) is not str:
+            source = _as_str(source)
+            if source is None:
+                return (INVALID_ARGUMENT, 1)
+        # The memo slot of (target, source, t), by the ids' identity: an equal id in
+        # another string object only misses. A hit is the very query: same objects (the
+        # result holds them), same time, no insert or clear since.
+        slot = (((<size_t><PyObject*>target) >> 4) ^ ((<size_t><PyObject*>source) >> 3)
+                ^ <size_t>t ^ (<size_t>t >> 20)) & (MEMO_SIZE - 1)
+        if self._memo_gen[slot] == self._generation and self._memo_t[slot] == t:
+            hit = self._memo[slot]
+            if (<tuple>hit)[1] is source and (<tuple>(<tuple>hit)[0])[1] is target:
+                return hit
+        if target == source:
+            if t == 0:
+                # tf2 stamps the identity with the frame's newest sample; an unknown id
+                # maps to frame 0 (NO_PARENT), whose link exists only if "NO_PARENT" was
+                # stored as a child (lookupFrameNumber / getFrame).
+                cache = self._caches[self._frame_ids.get(target, 0)]
+                if cache is not None:
+                    (<Link>cache).c_latest(&t)
+            _identity(v)
+            return _stamped(_time_of(t) if t != (<object>time)._ns else time, target, source, v)
+        target_id = self._frame(target)
+        if target_id < 0:
+            return _bad_id(<str>target, 0)
+        source_id = self._frame(source)
+        if source_id < 0:
+            return _bad_id(<str>source, 1)
+        used = t
+        err = self._walk(target_id, source_id, &used, v, &where)
+        if err != NO_ERROR:
+            if err != EXTRAPOLATION_ERROR:
+                return (err, 0)
+            expired = False
+            link = <Link>self._caches[where]
+            gcode = link.c_gather(used, st, &p)
+            if gcode != G_FUTURE and self._common(target_id, source_id, &lct) == NO_ERROR:
+                expired = lct != 0 and used < lct - self._cache_ns
+            return (err, where, used, expired)
+        out = _restamp(self._memo, slot, time if used == t and t != 0 else _time_of(used),
+                       target, source, v)
+        self._memo[slot] = out
+        self._memo_t[slot] = t
+        self._memo_gen[slot] = self._generation
+        return out
 
     def _chain(self, target_frame, source_frame, time=None):
         """The frames an answer for ``lookup_transform(target_frame, source_frame, time)``
@@ -1454,7 +1448,7 @@ cdef class CoreBase:
             if source is None:
                 return (INVALID_ARGUMENT, 1)
         if target == source:
-            out = _query_of(self, target, source, time)
+            out = self._query(target, source, time)
             return _named(PolicyResult, out, _named3(PolicyReport, (), (), 0))
         target_id = self._frame(target)
         if target_id < 0:
