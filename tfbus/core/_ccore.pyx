@@ -364,41 +364,6 @@ cdef int _climb_policy(list caches, int frame, int stop, int early, int64_t time
     reached[0] = frame
     return CLIMB_STOPPED
 
-cdef int _not_a_transform(object transform) except -1:
-    """The TypeError of an insert given something else than a TransformStamped."""
-    raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
-
-
-cdef object _after_insert(CoreBase core, int code, str authority):
-    """The rest of ``_set_one`` past the common case: a stored transform with waits to
-    settle (settled here, the rest to the subclass's ``_recheck_rest``), or a transform
-    not stored (to the subclass's ``_not_stored``)."""
-    cdef object rest
-    if code == C_OK:
-        rest = core._csettle(core._waits, None)
-        if rest is not None:
-            core._recheck_rest(rest, core._last_relinked)
-        return True
-    core._not_stored(core._problem(code), authority)
-    return False
-
-
-cdef inline object _set_one(CoreBase core, object transform, str authority, bint is_static):
-    """``set_transform`` (``is_static`` False) and ``set_transform_static`` (True): the
-    insert, expiry when due, then the waits the insert answers settled in the core (when
-    ``core._waits`` holds any; the rest to the subclass's ``_recheck_rest``), or a
-    transform not stored to the subclass's ``_not_stored``. The rare paths are functions
-    of their own (``_not_a_transform``, ``_after_insert``): the common one stays short."""
-    cdef int code
-    if not isinstance(transform, TransformStamped):
-        _not_a_transform(transform)
-    code = core._insert_one(transform, authority, is_static)
-    if core._newest >= core._expire_due:
-        core._expire()
-    if code == C_OK and not core._waits:
-        return True
-    return _after_insert(core, code, authority)
-
 
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
@@ -735,7 +700,24 @@ cdef class CoreBase:
         stored transform settles them here (``_settle``), and what is left goes to the
         subclass's ``_recheck_rest(rest, relinked)``.
         """
-        return _set_one(self, transform, authority, False)
+        # The body of set_transform_static too, not a shared helper: gcc 12 at -O2 keeps
+        # such a helper out of line, and an insert into a BufferCore then costs 5-10 %
+        # more (measured A/B, benchmarks/bench_check.py's rows and a 300-insert loop).
+        cdef int code
+        cdef object rest
+        if not isinstance(transform, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
+        code = self._insert_one(transform, authority, False)
+        if self._newest >= self._expire_due:
+            self._expire()
+        if code == C_OK:
+            if self._waits:
+                rest = self._csettle(self._waits, None)
+                if rest is not None:
+                    self._recheck_rest(rest, self._last_relinked)
+            return True
+        self._not_stored(self._problem(code), authority)
+        return False
 
     def set_transform_static(self, transform, str authority="default"):
         """Store a static transform: valid at all times, overwritten by every later send
@@ -744,7 +726,22 @@ cdef class CoreBase:
 
         Returns and raises as :meth:`set_transform`.
         """
-        return _set_one(self, transform, authority, True)
+        # set_transform's body (see there), with is_static True.
+        cdef int code
+        cdef object rest
+        if not isinstance(transform, TransformStamped):
+            raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
+        code = self._insert_one(transform, authority, True)
+        if self._newest >= self._expire_due:
+            self._expire()
+        if code == C_OK:
+            if self._waits:
+                rest = self._csettle(self._waits, None)
+                if rest is not None:
+                    self._recheck_rest(rest, self._last_relinked)
+            return True
+        self._not_stored(self._problem(code), authority)
+        return False
 
     def _store(self, transforms, str authority, bint is_static):
         """Store every :class:`~tfbus.messages.TransformStamped` of ``transforms``, in
