@@ -157,28 +157,25 @@ class Wakeup:
             self.event = anyio.Event()
 
     def wait(self) -> Awaitable[object]:
-        """What the waiting task awaits (once): a checkpoint even if already woken (a
-        ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does)."""
+        """What the waiting task awaits (once, at once): a checkpoint even if already
+        woken (a ``timeout=0`` poll must yield, as anyio's ``Event.wait`` does). On trio
+        the calling task is the one parked: trio's own ``wait_task_rescheduled``, with no
+        coroutine of tfbus around it."""
         future = self.future
         if future is not None:
             return anyio.lowlevel.checkpoint() if future.done() else future
         if self.event is not None:
             return self.event.wait()
-        return self._park()
-
-    async def _park(self) -> None:
-        """trio: park this task until :meth:`wake` (or a checkpoint if already woken)."""
         lowlevel = sys.modules["trio"].lowlevel
         if self.woken:
-            await lowlevel.checkpoint()
-            return
-
-        def abort(_raise_cancel: object) -> Any:
-            self.task = None  # a later wake() is a no-op
-            return lowlevel.Abort.SUCCEEDED
-
+            return lowlevel.checkpoint()  # type: ignore[no-any-return]
         self.task = lowlevel.current_task()
-        await lowlevel.wait_task_rescheduled(abort)
+        return lowlevel.wait_task_rescheduled(self._abort)  # type: ignore[no-any-return]
+
+    def _abort(self, _raise_cancel: object) -> Any:
+        """trio: the parked task is cancelled; a later :meth:`wake` is a no-op."""
+        self.task = None
+        return sys.modules["trio"].lowlevel.Abort.SUCCEEDED
 
     def wake(self) -> None:
         """End the wait (idempotent; harmless after the task was cancelled)."""

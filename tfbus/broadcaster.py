@@ -16,16 +16,17 @@ sending just the new ones is enough.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from math import isfinite
 from typing import ClassVar
 
 from tfbus.bus import Bus
 from tfbus.core import BufferCore
 from tfbus.messages import TFMessage, TransformStamped
-from tfbus.time import Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = ["StaticTransformBroadcaster", "TransformBroadcaster"]
+
+
+_plain_transform = BufferCore._plain_transform  # the core's (compiled or pure) quick test
 
 
 def _check(ts: TransformStamped) -> None:
@@ -33,34 +34,14 @@ def _check(ts: TransformStamped) -> None:
     ``BufferCore.set_transform`` raises (tf2 ``BufferCore::setTransformImpl``'s checks:
     self transform, empty frame id, NaN, infinite translation, quaternion norm).
 
-    The common case (plain floats, finite, a unit quaternion, two different ids without
-    a leading '/') passes a few comparisons; anything else is given to a scratch
-    BufferCore, the one authority on validity, which raises the very exception a
-    listener would have logged (and accepts what it accepts).
+    The common case (the message classes themselves, plain floats, finite, a unit
+    quaternion, two different ids without a leading '/') passes the core's quick test
+    (``CoreBase._plain_transform``: C code in the compiled core, no Python frame);
+    anything else is given to a scratch BufferCore, the one authority on validity, which
+    raises the very exception a listener would have logged (and accepts what it
+    accepts).
     """
-    try:
-        header = ts.header
-        parent = header.frame_id
-        child = ts.child_frame_id
-        transform = ts.transform
-        x, y, z = transform.translation
-        qx, qy, qz, qw = transform.rotation
-        # Chained ``is`` and ``!=``, not a slice per id: a third cheaper than the same
-        # tests spelled one by one.
-        plain = (
-            type(header.stamp) is Time
-            and type(parent) is type(child) is str
-            and parent != child
-            and parent != "" and child != ""
-            and parent[0] != "/" and child[0] != "/"
-            and type(x) is type(y) is type(z) is type(qx) is type(qy) is type(qz)
-            is type(qw) is float
-            and isfinite(x + y + z)  # NaN or ±Inf anywhere makes the sum non-finite
-            and abs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
-        )  # fmt: skip
-    except (TypeError, ValueError, AttributeError):
-        plain = False
-    if not plain:
+    if not _plain_transform(ts):
         BufferCore().set_transform(ts, "TransformBroadcaster")  # raises when invalid
 
 
@@ -148,7 +129,8 @@ class TransformBroadcaster:
             anyio.get_cancelled_exc_class(): if cancelled (before publishing).
         """
         if type(transform) is TransformStamped:  # _as_message's first case, inline
-            _check(transform)
+            if not _plain_transform(transform):  # _check, inline
+                BufferCore().set_transform(transform, "TransformBroadcaster")
             message = _new_message(TFMessage, ((transform,),))
         else:
             message = _as_message(transform)
@@ -159,7 +141,13 @@ class TransformBroadcaster:
         maybe_cancelled = bus._maybe_cancelled
         if maybe_cancelled is None or maybe_cancelled():
             await bus._before_publish()
-        bus.publish_nowait(self.topic, message)
+        # Bus.publish_nowait, inline (a TFMessage built here: nothing to type-check).
+        if bus._state != "open":
+            bus._check_open()
+        topic = self.topic
+        bus._deliver(topic, message)
+        if bus._transport is not None:
+            bus._transport.send_nowait(topic, message)
         self.sent += len(message.transforms)
         await bus._after_publish()
 

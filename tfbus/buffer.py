@@ -63,7 +63,6 @@ _T = TypeVar("_T")
 _NO_FRAMES: frozenset[str] = frozenset()
 _M = TypeVar("_M")
 _core_lookup_transform = BufferCore.lookup_transform
-_core_set_transform = BufferCore.set_transform  # the core's own (compiled or pure)
 
 
 class _Clearable(Protocol):
@@ -192,8 +191,11 @@ class Buffer(BufferCore):
             :class:`~tfbus.core.BufferCore`. A wait on a frame that expires keeps
             waiting: new data for it may still come.
 
-    Every synchronous method of BufferCore is available unchanged. Use from one event
-    loop (the one that runs its waits); not thread-safe.
+    Every synchronous method of BufferCore is available unchanged; an insert that
+    stores (``set_transform``, ``set_transform_static``, ``set_transforms``,
+    ``insert_transform``) re-checks the waits that depend on the frames it touched,
+    settling those it answers before it returns. Use from one event loop (the one that
+    runs its waits); not thread-safe.
 
     The waiting methods (``wait_for_transform``, ``transform``, ``transform_full`` and
     every ``*_async``) are coroutines: ``await`` them (tf2_ros's calls block instead).
@@ -217,6 +219,9 @@ class Buffer(BufferCore):
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
+        # set_transform and set_transform_static (the core's own methods) settle these
+        # waits in the core, and give the rest to _recheck_rest.
+        self._follow_waits(self._index)
         self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
         self._closed = False
         self._listeners = 0  # TransformListeners feeding this buffer now
@@ -293,26 +298,6 @@ class Buffer(BufferCore):
             if rest is not None:
                 self._recheck_rest(rest, result.relinked)
         return result
-
-    def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
-        """:meth:`BufferCore.set_transform`, then the waits that depend on the
-        transform's two frames are re-checked (when it was stored)."""
-        stored = _core_set_transform(self, transform, authority)
-        if stored and self._index:
-            rest = self._settle(self._index, None)
-            if rest is not None:
-                self._recheck_rest(rest, self._last_touched()[2])
-        return stored
-
-    def set_transform_static(
-        self, transform: TransformStamped, authority: str = "default"
-    ) -> bool:
-        """:meth:`BufferCore.set_transform_static`, then the waits re-checked as by
-        :meth:`set_transform`."""
-        stored = super().set_transform_static(transform, authority)
-        if stored and self._index:
-            self._recheck_last()
-        return stored
 
     def insert_transform(
         self, transform: TransformStamped, authority: str = "default", is_static: bool = False

@@ -288,45 +288,45 @@ class TransformListener:
         # than before fires its on_jump callbacks then (the clock owns the detection;
         # clear_on_jump_back's callback clears the sink).
         now_ns = self._now_ns()
-        topic = TF_STATIC_TOPIC if static else TF_TOPIC
-        if not isinstance(message, TFMessage):
-            self._malformed += 1
-            self._warn(
-                now_ns,
-                "ignoring a %s on %s: expected TFMessage",
-                type(message).__name__,
-                topic,
-            )
-            return
-        try:
-            transforms = iter(message.transforms)
-        except TypeError:
-            self._malformed += 1
-            self._warn(now_ns, "ignoring a TFMessage on %s: not iterable", topic)
-            return
         authority = self._authority
-        if self._publisher_authority and type(message) is not TFMessage:
-            named = getattr(type(message), "authority", None)
-            if isinstance(named, str) and named:
-                authority = named
+        if type(message) is not TFMessage:  # a subclass (or junk): checked and named
+            if not isinstance(message, TFMessage):
+                self._malformed += 1
+                self._warn(
+                    now_ns,
+                    "ignoring a %s on %s: expected TFMessage",
+                    type(message).__name__,
+                    TF_STATIC_TOPIC if static else TF_TOPIC,
+                )
+                return
+            if self._publisher_authority:
+                named = getattr(type(message), "authority", None)
+                if isinstance(named, str) and named:
+                    authority = named
+        transforms = message.transforms
         one = self._store_one
-        if one is not None and type(message.transforms) is tuple and len(message.transforms) == 1:
+        if one is not None and type(transforms) is tuple and len(transforms) == 1:
             # The one-transform store (see __init__), counted and logged as the items of
             # a batch below: stored, refused (False: TF_OLD_DATA or TF_REPEATED_DATA,
             # which the core logs), invalid (a TransformException), malformed (any other
             # Exception, e.g. TypeError for an item that is not a TransformStamped).
             try:
-                stored = one[static](message.transforms[0], authority)
+                stored = one[static](transforms[0], authority)
             except TransformException as invalid:
                 self._invalid += 1
-                self._warn(now_ns, "ignoring a transform on %s: %s", topic, invalid)
+                self._warn(
+                    now_ns,
+                    "ignoring a transform on %s: %s",
+                    TF_STATIC_TOPIC if static else TF_TOPIC,
+                    invalid,
+                )
                 return
             except Exception as malformed:
                 self._malformed += 1
                 self._warn(
                     now_ns,
                     "ignoring a malformed transform on %s: %s: %s",
-                    topic,
+                    TF_STATIC_TOPIC if static else TF_TOPIC,
                     type(malformed).__name__,
                     malformed,
                 )
@@ -336,8 +336,15 @@ class TransformListener:
             else:
                 self._refused += 1
             return
+        topic = TF_STATIC_TOPIC if static else TF_TOPIC
         try:
-            result = self._buffer.set_transforms(transforms, authority, static)
+            items = iter(transforms)
+        except TypeError:
+            self._malformed += 1
+            self._warn(now_ns, "ignoring a TFMessage on %s: not iterable", topic)
+            return
+        try:
+            result = self._buffer.set_transforms(items, authority, static)
         except Exception as bug:  # a sink that breaks its contract: count, never die
             self._malformed += 1
             self._warn(now_ns, "ignoring a TFMessage on %s: %s: %s", topic,

@@ -4,11 +4,16 @@ clock jumps; on asyncio and trio (anyio's pytest plugin), driven by ManualClock.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 import anyio
 import pytest
 
+import tfbus.buffer
+import tfbus.core
 from tfbus import (
     ExtrapolationException,
     Header,
@@ -24,7 +29,7 @@ from tfbus import (
     Vector3,
     Vector3Stamped,
 )
-from tfbus.buffer import Buffer
+from tfbus.buffer import Buffer, _Waiter
 from tfbus.clock import ManualClock, SystemClock
 from tfbus.core import MAX_GRAPH_DEPTH, SetResult
 from tfbus.time import Duration
@@ -66,11 +71,29 @@ async def test_wait_before_any_data_returns_when_data_arrives() -> None:
     assert buf.pending_waits == 0
 
 
-async def test_a_batch_insert_wakes_the_waits_it_completes_once() -> None:
+class _CountedWaiter(_Waiter[object]):
+    """A Buffer's wait that counts the reads of its ``exact`` (the recheck reads it once
+    per walk of the wait's lookup, in the compiled core's C code as in Python)."""
+
+    reads = 0
+
+    @property  # type: ignore[override]
+    def exact(self) -> tuple[str, str, Time, bool] | None:
+        type(self).reads += 1
+        return self._exact  # type: ignore[no-any-return]
+
+    @exact.setter
+    def exact(self, value: tuple[str, str, Time, bool] | None) -> None:
+        self._exact = value
+
+
+async def test_a_batch_insert_wakes_the_waits_it_completes_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     clock = ManualClock(T0)
     buf = Buffer(clock=clock)
-    checks = 0
     result: list[TransformStamped] = []
+    monkeypatch.setattr(tfbus.buffer, "_Waiter", _CountedWaiter)
 
     async def waiter() -> None:
         result.append(await buf.lookup_transform_async("map", "laser", T0))
@@ -78,14 +101,8 @@ async def test_a_batch_insert_wakes_the_waits_it_completes_once() -> None:
     async with anyio.create_task_group() as tg:
         tg.start_soon(waiter)
         await settle()
-        query = buf._query
-
-        def counting_query(target: str, source: str, time: Time) -> object:
-            nonlocal checks
-            checks += (target, source) == ("map", "laser")  # the wait's lookup, walked
-            return query(target, source, time)
-
-        buf._query = counting_query  # type: ignore[method-assign,assignment]
+        assert buf.pending_waits == 1
+        _CountedWaiter.reads = 0
         report = buf.set_transforms(
             [
                 tf("map", "odom", T0, x=1.0),
@@ -96,7 +113,7 @@ async def test_a_batch_insert_wakes_the_waits_it_completes_once() -> None:
             "test",
         )
         assert (report.stored, report.refused, len(report.errors)) == (3, 0, 1)
-    assert checks == 1  # rechecked once, after the whole batch, not per transform
+    assert _CountedWaiter.reads == 1  # rechecked once, after the whole batch, not per transform
     assert result[0].transform.translation.x == pytest.approx(3.5)
     assert buf.pending_waits == 0
 
@@ -499,3 +516,52 @@ async def test_a_zero_timeout_wait_is_still_a_checkpoint(clock: ManualClock | Sy
             assert not await buf.can_transform_async("a", "b", Time(0), timeout=0.0)
         assert ran == 1
     assert buf.pending_waits == 0
+
+
+@pytest.mark.parametrize("static", [False, True], ids=["set_transform", "set_transform_static"])
+async def test_an_insert_settles_a_wait_with_no_python_frame_of_the_buffer(static: bool) -> None:
+    """The core's own set_transform(_static) settles the wait it answers (result, index,
+    wake-up) before it returns: Buffer adds no Python frame of its own (it added one,
+    ``Buffer.set_transform``, before the core settled waits itself). Not counted: frames
+    of the core (the pure-Python core has them) and trio's wake-up itself
+    (``Wakeup.wake``, which reschedules the parked task; asyncio's is a future's
+    ``set_result``)."""
+
+    core_dir = str(Path(tfbus.core.__file__).parent)
+    tfbus_dir = str(Path(tfbus.__file__).parent)
+    wakeup = str(Path(tfbus.__file__).parent / "_aio.py")
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("map", "odom", T0, x=1.0))
+    result: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        result.append(await buf.lookup_transform_async("map", "base", T0))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        assert buf.pending_waits == 1
+        entered: list[str] = []
+
+        def profile(frame: Any, event: str, arg: Any) -> None:
+            name = frame.f_code.co_filename
+            if (
+                event == "call"
+                and name.startswith(tfbus_dir)
+                and not name.startswith(core_dir)
+                and name != wakeup
+            ):
+                entered.append(frame.f_code.co_qualname)
+
+        insert = buf.set_transform_static if static else buf.set_transform
+        message = tf("odom", "base", T0, x=2.0)
+        sys.setprofile(profile)
+        try:
+            assert insert(message)
+        finally:
+            sys.setprofile(None)
+        assert entered == []
+        assert buf.pending_waits == 0  # settled inside the insert, before any task ran
+        assert not result
+    assert result == [buf.lookup_transform("map", "base", T0)]
+    assert result[0].transform.translation.x == pytest.approx(3.0)

@@ -364,12 +364,15 @@ cdef int _climb_policy(list caches, int frame, int stop, int early, int64_t time
     reached[0] = frame
     return CLIMB_STOPPED
 
+
 cdef class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
     Inserts and queries return codes and data, and ``tfbus.core`` turns them into tf2's
-    messages, exceptions and log lines; the one call into the subclass is
-    ``set_transform``'s for a transform not stored (``_not_stored``).
+    messages, exceptions and log lines; the calls into the subclass are
+    ``set_transform``'s (and ``set_transform_static``'s) for a transform not stored
+    (``_not_stored``) and, with waits to settle (``_follow_waits``), for the waits the
+    insert did not settle (``_recheck_rest``).
 
     Read-only internals (for white-box tests and the batch kernel, never written from
     Python): ``_frame_ids`` (frame id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names``
@@ -406,6 +409,7 @@ cdef class CoreBase:
         self._expire_every = 0
         self._expire_due = INT64_MAX
         self._frames_expired = 0
+        self._waits = None
         self._memo = [None] * MEMO_SIZE
         for k in range(MEMO_SIZE):
             self._memo_gen[k] = -1
@@ -692,15 +696,25 @@ cdef class CoreBase:
 
         The core's method, called with no Python frame in between (``BufferCore``
         inherits it); a transform not stored goes to the subclass's ``_not_stored``
-        (the log line, or the exception).
+        (the log line, or the exception). With waits to settle (``_follow_waits``), a
+        stored transform settles them here (``_settle``), and what is left goes to the
+        subclass's ``_recheck_rest(rest, relinked)``.
         """
+        # The body of set_transform_static too, not a shared helper: gcc 12 at -O2 keeps
+        # such a helper out of line, and an insert into a BufferCore then costs 5-10 %
+        # more (measured A/B, benchmarks/bench_check.py's rows and a 300-insert loop).
         cdef int code
+        cdef object rest
         if not isinstance(transform, TransformStamped):
             raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
         code = self._insert_one(transform, authority, False)
         if self._newest >= self._expire_due:
             self._expire()
         if code == C_OK:
+            if self._waits:
+                rest = self._csettle(self._waits, None)
+                if rest is not None:
+                    self._recheck_rest(rest, self._last_relinked)
             return True
         self._not_stored(self._problem(code), authority)
         return False
@@ -712,13 +726,19 @@ cdef class CoreBase:
 
         Returns and raises as :meth:`set_transform`.
         """
+        # set_transform's body (see there), with is_static True.
         cdef int code
+        cdef object rest
         if not isinstance(transform, TransformStamped):
             raise TypeError(f"expected TransformStamped, got {type(transform).__name__}")
         code = self._insert_one(transform, authority, True)
         if self._newest >= self._expire_due:
             self._expire()
         if code == C_OK:
+            if self._waits:
+                rest = self._csettle(self._waits, None)
+                if rest is not None:
+                    self._recheck_rest(rest, self._last_relinked)
             return True
         self._not_stored(self._problem(code), authority)
         return False
@@ -816,6 +836,65 @@ cdef class CoreBase:
         waits are pending."""
         return self._last_child, self._last_parent, self._last_relinked
 
+    @staticmethod
+    def _plain_transform(ts):
+        """Whether ``ts`` is a transform every ``set_transform`` accepts, by a quick test
+        of its common form: a ``TransformStamped`` of the message classes themselves (no
+        subclass), stamp a ``Time``, two different ``str`` ids, neither empty nor
+        '/'-prefixed, seven ``float`` values, a finite translation and a quaternion
+        whose squared norm (w² + x² + y² + z², tf2's order) is within 0.01 of 1.
+
+        False says only that the quick test does not decide (the broadcaster then asks
+        ``set_transform`` itself, the one authority on validity); never raises."""
+        cdef object header, tf, tr, rot, parent, child
+        cdef double x, y, z, qx, qy, qz, qw, s
+        cdef Py_ssize_t k
+        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
+            return False
+        header = (<tuple>ts)[0]
+        child = (<tuple>ts)[1]
+        tf = (<tuple>ts)[2]
+        if type(header) is not Header or len(<tuple>header) != 2:
+            return False
+        if type(tf) is not Transform or len(<tuple>tf) != 2:
+            return False
+        tr = (<tuple>tf)[0]
+        rot = (<tuple>tf)[1]
+        if type(tr) is not Vector3 or len(<tuple>tr) != 3:
+            return False
+        if type(rot) is not Quaternion or len(<tuple>rot) != 4:
+            return False
+        parent = (<tuple>header)[1]
+        if type((<tuple>header)[0]) is not Time or type(parent) is not str or type(child) is not str:
+            return False
+        if (not len(<str>parent) or not len(<str>child)
+                or PyUnicode_READ_CHAR(parent, 0) == 47 or PyUnicode_READ_CHAR(child, 0) == 47
+                or parent == child):
+            return False
+        for k in range(3):
+            if type((<tuple>tr)[k]) is not float:
+                return False
+        for k in range(4):
+            if type((<tuple>rot)[k]) is not float:
+                return False
+        x = (<tuple>tr)[0]
+        y = (<tuple>tr)[1]
+        z = (<tuple>tr)[2]
+        qx = (<tuple>rot)[0]
+        qy = (<tuple>rot)[1]
+        qz = (<tuple>rot)[2]
+        qw = (<tuple>rot)[3]
+        s = x + y + z
+        if s - s != 0.0:  # NaN or ±Inf anywhere makes the sum non-finite
+            return False
+        return fabs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+
+    def _follow_waits(self, dict index):
+        """Settle the waits of ``index`` (frame id -> set of waits, the subclass's own
+        dict, kept by reference) in every later ``set_transform`` and
+        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops."""
+        self._waits = index
+
     def _settle(self, dict index, names):
         """The recheck of ``tfbus.buffer.Buffer``'s waits after an insert, in one call:
         every wait indexed in ``index`` (frame id -> set of waits) under one of
@@ -831,6 +910,10 @@ cdef class CoreBase:
             own recheck: an exact wait whose lookup failed (``failure``, ``_query``'s
             tuple) or another wait (``failure`` None).
         """
+        return self._csettle(index, names)
+
+    cdef object _csettle(self, dict index, object names):
+        """:meth:`_settle`, callable from C with no Python call in between."""
         cdef list due
         cdef list rest = None
         cdef set first = None, union = None

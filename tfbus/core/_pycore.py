@@ -260,9 +260,11 @@ class CoreBase:
     """Frame table and hot paths of :class:`tfbus.core.BufferCore` (which subclasses it).
 
     Inserts and queries return codes and data, and ``tfbus.core`` turns them into tf2's
-    messages, exceptions and log lines; the one call into the subclass is
+    messages, exceptions and log lines; the calls into the subclass are
     ``set_transform``'s (and ``set_transform_static``'s) for a transform not stored:
-    ``_not_stored(problem, authority)``, which logs the refusal or raises.
+    ``_not_stored(problem, authority)``, which logs the refusal or raises, and, with
+    waits to settle (``_follow_waits``), for the waits the insert did not settle:
+    ``_recheck_rest(rest, relinked)``.
 
     Internals (for white-box tests, never written from outside): ``_frame_ids`` (frame
     id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names`` (int id → frame id),
@@ -301,6 +303,7 @@ class CoreBase:
         "_newest",
         "_refs",
         "_replace_repeated",
+        "_waits",
     )
 
     _frame_ids: dict[str, int]
@@ -335,8 +338,12 @@ class CoreBase:
     _expire_every: int
     _expire_due: int
     _frames_expired: int
+    # The waits inserts settle (``_follow_waits``: the subclass's dict), or None.
+    _waits: dict[str, set[Any]] | None
     # BufferCore's: a transform set_transform did not store (the log line or exception).
     _not_stored: Callable[[tuple[Any, ...], str], object]
+    # The subclass's recheck of the waits ``_settle`` left (with ``_waits`` only).
+    _recheck_rest: Callable[[list[tuple[Any, tuple[int, ...] | None]], bool], None]
 
     def __new__(cls: type[_Core], *args: Any, **kwargs: Any) -> _Core:
         self = super().__new__(cls)
@@ -363,6 +370,7 @@ class CoreBase:
         self._expire_every = 0
         self._expire_due = _INT64_MAX
         self._frames_expired = 0
+        self._waits = None
         return self
 
     @property
@@ -690,13 +698,11 @@ class CoreBase:
             TypeError: ``transform`` is not a TransformStamped, or ``authority`` not a str.
 
         The core's method (``BufferCore`` inherits it, as from the compiled twin); a
-        transform not stored goes to the subclass's ``_not_stored``.
+        transform not stored goes to the subclass's ``_not_stored``. With waits to settle
+        (``_follow_waits``), a stored transform settles them here (``_settle``), and what
+        is left goes to the subclass's ``_recheck_rest(rest, relinked)``.
         """
-        r = self._store_one(transform, authority, False)
-        if r is True:
-            return True
-        self._not_stored(r, authority)
-        return False
+        return self._set_one(transform, authority, False)
 
     def set_transform_static(
         self, transform: TransformStamped, authority: str = "default"
@@ -707,8 +713,20 @@ class CoreBase:
 
         Returns and raises as :meth:`set_transform`.
         """
-        r = self._store_one(transform, authority, True)
+        return self._set_one(transform, authority, True)
+
+    def _set_one(self, transform: TransformStamped, authority: str, is_static: bool) -> bool:
+        """``set_transform`` (``is_static`` False) and ``set_transform_static`` (True): the
+        insert, expiry when due, then the waits the insert answers settled in the core
+        (when ``_waits`` holds any; the rest to the subclass's ``_recheck_rest``), or a
+        transform not stored to the subclass's ``_not_stored``."""
+        r = self._store_one(transform, authority, is_static)
         if r is True:
+            waits = self._waits
+            if waits:
+                rest = self._settle(waits, None)
+                if rest is not None:
+                    self._recheck_rest(rest, self._last_relinked)
             return True
         self._not_stored(r, authority)
         return False
@@ -748,6 +766,48 @@ class CoreBase:
         have (what ``_store`` reports per batch); read by ``tfbus.buffer.Buffer`` when
         waits are pending."""
         return self._last_child, self._last_parent, self._last_relinked
+
+    @staticmethod
+    def _plain_transform(ts: object) -> bool:
+        """Whether ``ts`` is a transform every ``set_transform`` accepts, by a quick test
+        of its common form: a ``TransformStamped`` of the message classes themselves (no
+        subclass), stamp a ``Time``, two different ``str`` ids, neither empty nor
+        '/'-prefixed, seven ``float`` values, a finite translation and a quaternion
+        whose squared norm (w² + x² + y² + z², tf2's order) is within 0.01 of 1.
+
+        False says only that the quick test does not decide (the broadcaster then asks
+        ``set_transform`` itself, the one authority on validity); never raises."""
+        if type(ts) is not TransformStamped or len(ts) != 3:
+            return False
+        header, child, tf = ts
+        if type(header) is not Header or len(header) != 2:
+            return False
+        if type(tf) is not Transform or len(tf) != 2:
+            return False
+        tr, rot = tf
+        if type(tr) is not Vector3 or len(tr) != 3:
+            return False
+        if type(rot) is not Quaternion or len(rot) != 4:
+            return False
+        stamp, parent = header
+        if type(stamp) is not Time or type(parent) is not str or type(child) is not str:
+            return False
+        if not parent or not child or parent[0] == "/" or child[0] == "/" or parent == child:
+            return False
+        if not all(type(value) is float for value in (*tr, *rot)):
+            return False
+        x, y, z = tr
+        qx, qy, qz, qw = rot
+        s = x + y + z
+        if s - s != 0.0:  # NaN or ±Inf anywhere makes the sum non-finite
+            return False
+        return abs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+
+    def _follow_waits(self, index: dict[str, set[Any]] | None) -> None:
+        """Settle the waits of ``index`` (frame id -> set of waits, the subclass's own
+        dict, kept by reference) in every later ``set_transform`` and
+        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops."""
+        self._waits = index
 
     def _settle(
         self, index: dict[str, set[Any]], names: Iterable[str] | None
