@@ -533,6 +533,12 @@ async def test_late_joiner_gets_the_valid_static_after_a_nan_resend() -> None:
     async with Bus(transport=ta) as a:
         a.publish_nowait("/tf_static", TFMessage((good,)))
         a.publish_nowait("/tf_static", TFMessage((nan,)))
+        # A's send thread has put both (the NaN one merged into the latched snapshot when
+        # it found the first still queued): B, started next, is a true late joiner. (B
+        # started before that put gets the static live, and the replies are duplicates.)
+        await wait_until(lambda: ta.statistics().sent + ta.statistics().send_merged == 2,
+                         timeout=15.0)
+        assert ta.statistics().send_queued == 0
         tb = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="B")
         async with Bus(transport=tb) as b:
             # a late joiner's session start and its query to A take seconds at load 8
