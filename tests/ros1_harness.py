@@ -1,7 +1,7 @@
-"""Real ROS 1 peers for the tests: pytest fixtures (a roscore per test, the tutorial's C++
-nodes) on top of ``peers/ros1/ros1_peers.py`` (Debian's roscore and tools, started and ended
-by PID on 127.0.0.1), which the benchmarks use too. The tutorial's nodes are this
-repository's C++ sources in ``peers/ros1/`` (built by its ``build.sh``).
+"""Real ROS 1 peers for the tests: pytest fixtures (a roscore per test or per module, the
+tutorial's C++ nodes) on top of ``peers/ros1/ros1_peers.py`` (Debian's roscore and tools,
+started and ended by PID on 127.0.0.1), which the benchmarks use too. The tutorial's nodes
+are this repository's C++ sources in ``peers/ros1/`` (built by its ``build.sh``).
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ __all__ = [
     "free_port",
     "master_env",
     "master_fixture",
+    "module_master_fixture",
     "ros1_fixture",
     "ros1_missing",
     "rostopic_scan_publisher",
@@ -73,7 +74,24 @@ def tutorial_nodes_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory)
 @pytest.fixture(name="master")
 def master_fixture(ros1: None, tmp_path: Path) -> Iterator[Master]:
     """A fresh roscore on a free loopback port; the test's environment points at it."""
-    m = start_master(tmp_path / "ros_home")
+    yield from _running_master(tmp_path / "ros_home")
+
+
+@pytest.fixture(scope="module", name="module_master")
+def module_master_fixture(ros1: None, tmp_path_factory: pytest.TempPathFactory
+                          ) -> Iterator[Master]:
+    """One roscore for every test of a module (started at its first use, stopped after
+    its last test), for modules whose tests each start and end their own nodes and
+    need no master without them: a roscore takes seconds to start and stop at load.
+    The environment points at it meanwhile. A module opts in with a ``master``
+    fixture of its own that returns this one."""
+    yield from _running_master(tmp_path_factory.mktemp("ros_home"))
+
+
+def _running_master(home: Path) -> Iterator[Master]:
+    """A roscore started in ``home`` with the environment pointing at it, until the
+    generator is closed: then it is stopped and the environment restored."""
+    m = start_master(home)
     saved = {k: os.environ.get(k) for k in ("ROS_MASTER_URI", "ROS_IP", "ROS_HOSTNAME")}
     os.environ["ROS_MASTER_URI"] = m.uri
     os.environ["ROS_IP"] = "127.0.0.1"

@@ -56,7 +56,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, cast
 
 from tfbus.clock import Clock
 from tfbus.core import BatchResult, frame_path
@@ -527,6 +527,18 @@ class TfSummary:
             if old in fs.authorities:
                 fs.authorities[new] = fs.authorities.get(new, 0) + fs.authorities.pop(old)
 
+    def forget(self, children: Iterable[str]) -> int:
+        """Drop the summaries of these child frames (a buffer with
+        ``cache_policy=expire_after(...)`` removed their links: ``BufferCore.forget``),
+        so that the tables and their memory follow what the buffer holds; a frame sent
+        again later starts a new summary. Broadcasters and chains keep what they
+        measured. Returns how many frames were dropped."""
+        dropped = 0
+        for child in children:
+            if self.frames.pop(child, None) is not None:
+                dropped += 1
+        return dropped
+
     @property
     def duration(self) -> float:
         """Seconds between the first and the last message received."""
@@ -565,6 +577,16 @@ class _Store(Protocol):
     def clear(self) -> None: ...
 
 
+class _Expiring(Protocol):
+    """What :class:`MonitoredSink` reads of a buffer that expires frames
+    (``BufferCore.frames_expired`` and ``get_parent``)."""
+
+    @property
+    def frames_expired(self) -> int: ...
+
+    def get_parent(self, frame_id: str) -> str | None: ...
+
+
 class MonitoredSink:
     """A :class:`~tfbus.listener.TransformSink` that stores into ``buffer`` and accounts
     every message in ``summary`` (receive time = ``clock.now()``): a
@@ -582,6 +604,11 @@ class MonitoredSink:
     :attr:`observers` are called with every message accounted, ``(receive time,
     transforms, authority as attributed, is_static)`` (``tfbus doctor`` watches a live bus
     through them).
+
+    When the buffer expires frames (``cache_policy=expire_after(...)``), the dynamic
+    frames whose link it removed leave ``summary`` as soon as it has removed them
+    (:meth:`TfSummary.forget`; checked when ``frames_expired`` grows, O(frames in the
+    summary) each time): the tables and the summary's memory follow the buffer.
     """
 
     def __init__(
@@ -602,6 +629,21 @@ class MonitoredSink:
         self.observers: list[Callable[[Time, Sequence[TransformStamped], str, bool], None]] = []
         """Called with each message accounted: (receive time, transforms, authority,
         is_static)."""
+        expired = getattr(buffer, "frames_expired", None)
+        self._expiring: _Expiring | None = (
+            cast("_Expiring", buffer)
+            if isinstance(expired, int) and hasattr(buffer, "get_parent") else None
+        )
+        self._expired_seen = expired if isinstance(expired, int) else 0
+
+    def _follow_expiry(self) -> None:
+        """Drop from the summary the dynamic frames whose link the buffer expired."""
+        buffer = self._expiring
+        if buffer is None or buffer.frames_expired == self._expired_seen:
+            return
+        self._expired_seen = buffer.frames_expired
+        self.summary.forget([child for child, fs in self.summary.frames.items()
+                             if not fs.static and buffer.get_parent(child) is None])
 
     def _account(self, transforms: Sequence[TransformStamped], authority: str,
                  static: bool) -> str:
@@ -622,12 +664,16 @@ class MonitoredSink:
         """Account for one message, then store it (``BufferCore.set_transforms``)."""
         items = list(transforms)
         authority = self._account(items, authority, is_static)
-        return self.buffer.set_transforms(items, authority, is_static)
+        result = self.buffer.set_transforms(items, authority, is_static)
+        self._follow_expiry()
+        return result
 
     def set_transform(self, transform: TransformStamped, authority: str, /) -> bool:
         """Account for and store one dynamic transform."""
         authority = self._account([transform], authority, False)
-        return self.buffer.set_transform(transform, authority)
+        stored = self.buffer.set_transform(transform, authority)
+        self._follow_expiry()
+        return stored
 
     def set_transform_static(self, transform: TransformStamped, authority: str, /) -> bool:
         """Account for and store one static transform."""

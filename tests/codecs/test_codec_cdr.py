@@ -122,10 +122,17 @@ def test_damaged_samples_say_what_is_wrong(patch: object, match: str) -> None:
         decode_tf(patch(raw))
 
 
+@pytest.fixture(scope="module")
+def msg_cdr() -> bytes:
+    """rosbags' bytes of MSG, made once (a typestore compiles its serialiser on first
+    use: half a second per example otherwise)."""
+    return _rosbags_cdr(MSG)
+
+
 @settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=200), st.integers(0, 400), st.integers(0, 255))
-def test_fuzz_only_wire_decode_errors(noise: bytes, where: int, byte: int) -> None:
-    raw = bytearray(_rosbags_cdr(MSG))
+def test_fuzz_only_wire_decode_errors(msg_cdr: bytes, noise: bytes, where: int, byte: int) -> None:
+    raw = bytearray(msg_cdr)
     raw[where % len(raw)] = byte
     for data in (bytes(raw), noise, b"\x00\x01\x00\x00" + noise):
         try:

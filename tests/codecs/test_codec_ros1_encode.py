@@ -39,6 +39,9 @@ def test_one_transform_is_the_roscpp_layout() -> None:
 
 _floats = st.floats(width=64)  # NaN, infinities and -0.0 included: compared as bytes
 _ids = st.text(max_size=12)
+_CODEC = TFCodec()
+"""One codec for every example: a ``TFCodec`` holds only its rosbags typestore, which
+compiles its (de)serialisers on first use (half a second each time a codec is made)."""
 
 
 @settings(max_examples=300, deadline=None)
@@ -56,7 +59,7 @@ _ids = st.text(max_size=12)
 def test_struct_writer_equals_rosbags_bit_for_bit(
     items: list[tuple[str, str, int, tuple[float, ...]]],
 ) -> None:
-    codec = TFCodec()
+    codec = _CODEC
     transforms = [_ts(p, c, ns, v) for p, c, ns, v in items]
     assert codec.encode(transforms) == codec.encode_generic(transforms)
     assert codec.encode(iter(transforms)) == codec.encode_generic(iter(transforms))

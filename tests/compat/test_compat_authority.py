@@ -14,7 +14,7 @@ from pathlib import Path
 import anyio
 import pytest
 import yaml
-from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
+from ros1_harness import Master, Proc, module_master_fixture, ros1_fixture  # noqa: F401
 
 from tfbus import Buffer, Bus, Time, TransformListener
 from tfbus.transports.ros1 import Ros1Transport
@@ -22,6 +22,12 @@ from tfbus.transports.ros1 import Ros1Transport
 pytestmark = pytest.mark.anyio
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(name="master")
+def master_fixture(module_master: Master) -> Master:
+    """The module's one roscore: each test starts and ends its own nodes on it."""
+    return module_master
 
 DEBIAN_LISTENER = """
 import json, rospy, tf2_ros, yaml

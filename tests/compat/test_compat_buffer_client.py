@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
+from ros1_harness import Master, Proc, module_master_fixture, ros1_fixture  # noqa: F401
 
 from tfbus import Buffer as TfbusBuffer
 from tfbus import Bus, ManualClock, Time
@@ -30,6 +30,13 @@ from tfbus.remote import BufferServer
 
 ROOT = Path(__file__).resolve().parents[2]
 Q = (0.0, 0.0, 0.3826834323650898, 0.9238795325112867)
+
+
+@pytest.fixture(name="master")
+def master_fixture(module_master: Master) -> Master:
+    """The module's one roscore: each test starts and ends its own nodes on it."""
+    return module_master
+
 
 # (name, method, args): the same calls on both clients (times in seconds, 0: latest)
 QUERIES: list[tuple[str, str, list[Any]]] = [

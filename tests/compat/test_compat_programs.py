@@ -23,11 +23,18 @@ from typing import Any
 import numpy as np
 import pytest
 from peer_install import peer_unavailable
-from ros1_harness import Master, Proc, master_fixture, ros1_fixture  # noqa: F401
+from ros1_harness import Master, Proc, module_master_fixture, ros1_fixture  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
 PROGRAMS = ROOT / "tests" / "compat" / "programs"
 INSTALLED = Path("/usr/lib/tf2_tools")
+
+
+@pytest.fixture(name="master")
+def master_fixture(module_master: Master) -> Master:
+    """The module's one roscore: each test starts and ends its own nodes on it."""
+    return module_master
+
 
 # the project's Python, Debian's ROS 1 packages appended after its own
 RUN_ON_TFBUS = (

@@ -24,7 +24,7 @@ import pytest
 from anyio.streams.buffered import BufferedByteReceiveStream
 from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures)
     Master,
-    master_fixture,
+    module_master_fixture,
     ros1_fixture,
     tfbus_cli,
 )
@@ -59,6 +59,12 @@ from tfbus.transports.ros1 import Ros1Transport
 from tfbus.transports.ros1.tcpros import encode_header, frame, read_frame
 
 BUFFER_SERVER = Path("/usr/lib/tf2_ros/buffer_server")
+
+
+@pytest.fixture(name="master")
+def master_fixture(module_master: Master) -> Master:
+    """The module's one roscore: each test starts and ends its own nodes on it."""
+    return module_master
 
 
 @asynccontextmanager

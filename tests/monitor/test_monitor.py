@@ -392,3 +392,39 @@ def test_monitor_refuses_expire_after_with_a_bag() -> None:
     result = CliRunner().invoke(cli, ["monitor", "--bus", "memory", "--expire-after", "1e-300"])
     assert result.exit_code == 2, result.output
     assert "--expire-after: expire_after seconds must be > 0, got 1e-300" in result.stderr
+
+
+def test_frames_the_buffer_forgot_leave_the_summary() -> None:
+    """``--expire-after 2``: 'cup' (map -> cup, dynamic, last stamped T0) keeps the static
+    'handle' under it, so the buffer still knows the frame id 'cup' once its own link
+    expired (``BufferCore.forget``: an id stays known while a link names it as a
+    parent). The summary drops cup's row all the same (the buffer has no map -> cup any
+    more), keeps the static 'handle' and the live 'base'; 200 frames each published once
+    and forgotten leave the summary too, which holds only what the buffer holds."""
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.core.policy import expire_after
+
+    src = BusSource("memory", cache_policy=expire_after(2.0))
+    src.sink.set_transforms([tf("map", "cup", T0), tf("map", "base", T0)], "robot")
+    src.sink.set_transforms([tf("cup", "handle", T0)], "robot", True)
+    assert set(src.summary().frames) == {"cup", "base", "handle"}
+    for k in range(1, 5):
+        src.sink.set_transforms([tf("map", "base", T0 + k * 1000 * MS)], "robot")
+    buffer = src.buffer()
+    assert buffer.frame_exists("cup") and buffer.get_parent("cup") is None
+    assert set(src.summary().frames) == {"base", "handle"}
+    text = _render(src)
+    assert not [ln for ln in text.splitlines() if ln.split("│")[0].strip() == "cup"]
+    assert _row(text, "handle")[1] == "cup" and _row(text, "handle")[3] == "static"
+    assert "buffer: 4 frames, 2 links; 1 frames expired (no data for 2 s)" in text
+    # Churn: a new object frame every 100 ms of stamp time, each sent once.
+    for k in range(200):
+        stamp = T0 + 5000 * MS + k * 100 * MS
+        src.sink.set_transforms([tf("map", f"obj{k}", stamp), tf("map", "base", stamp)],
+                                "robot")
+    frames = src.summary().frames
+    assert frames.keys() == {"base", "handle"} | {f"obj{k}" for k in range(200)
+                                                   if buffer.frame_exists(f"obj{k}")}
+    assert len(frames) <= 2 + 31  # objects of the last 3 s of stamps at most
+    assert buffer.statistics().frames_expired > 150
+    buffer.close()

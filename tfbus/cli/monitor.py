@@ -115,12 +115,11 @@ def print_monitor(
         stale = now is not None and x.stale(now)
         return f"{rate(x):.3f}" + (" stale" if stale else "")
 
+    # Frames the buffer has forgotten (expire_after) have left the summary already
+    # (MonitoredSink drops them as the buffer removes their links).
     selected = list(s.frames.values())
     expiring = live_src.buffer() if live_src is not None else None
     policy = expiring.cache_policy if expiring is not None else None
-    if expiring is not None and policy is not None:
-        # Frames the buffer has forgotten (expire_after) leave the table.
-        selected = [f for f in selected if expiring.frame_exists(f.child)]
     title = (f"RESULTS: for {literal(frames[0])} to {literal(frames[1])}" if frames
              else "RESULTS: for all Frames")
     if live_src is not None:
