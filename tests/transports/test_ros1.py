@@ -11,6 +11,7 @@ each with a bound.
 from __future__ import annotations
 
 import contextlib
+import functools
 import re
 import signal
 import socket
@@ -101,11 +102,18 @@ def test_connection_header_decoder_only_raises_value_error(raw: bytes) -> None:
     assert isinstance(out, dict)
 
 
+@functools.cache
+def _shared_codec() -> TFCodec:
+    """One codec for the property tests (building one makes a rosbags typestore, ~0.5 s;
+    its caches carried across examples are part of what those tests exercise)."""
+    return TFCodec()
+
+
 @settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=300))
 def test_message_decoder_only_raises_value_error(raw: bytes) -> None:
     """Hostile message bytes: a list of TransformStamped or ValueError, nothing else."""
-    codec = TFCodec()
+    codec = _shared_codec()
     try:
         out = codec.decode(raw)
     except ValueError:
@@ -135,7 +143,7 @@ def test_fast_decoder_equals_rosbags(
 ) -> None:
     """The struct decoder used on the wire gives exactly what rosbags' generic one gives
     (and what was encoded)."""
-    codec = TFCodec()
+    codec = _shared_codec()
     msg = [
         TransformStamped(
             Header(Time(sec, nsec), parent),
@@ -167,7 +175,7 @@ def test_fast_decoder_shares_equal_headers_only(
     """Runs of equal headers (few parents and stamps, so consecutive transforms often
     share one) decode as rosbags decodes them, whatever the seq numbers; a repeated
     message decodes the same from the string cache."""
-    codec = TFCodec()
+    codec = _shared_codec()
     msg = [
         TransformStamped(
             Header(Time(*stamp), parent), child, Transform(Vector3(*v[:3]), Quaternion(*v[3:]))
@@ -205,7 +213,7 @@ def test_fast_decoder_layout_cache(
 ) -> None:
     """Messages of 12+ transforms: the first of a layout is walked, later ones of the same
     count and size are unpacked whole; either way the values equal rosbags'."""
-    codec = TFCodec()
+    codec = _shared_codec()
     raw = codec.encode(
         TransformStamped(
             Header(Time(*stamp), parent), child, Transform(Vector3(*v[:3]), Quaternion(*v[3:]))

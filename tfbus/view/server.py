@@ -555,6 +555,9 @@ class TfPage:
             self._draw(scene, stats, rates)
             self.draw_pair(scene, core, stats, rates)
             self.draw_trail(scene, core)
+            self.frame_tree.update(scene, self.shown if self.frame_filter is not None else None,
+                                   self.frame_filter)
+            self.graph.update(scene)
 
     def draw_trail(self, scene: Scene, core: BufferCore | None) -> None:
         """The trail of :attr:`trail_choice` over the last :attr:`trail_seconds` of
@@ -585,9 +588,6 @@ class TfPage:
         if value != self.trail_html:
             self.trail_html = value
             self.trail_info.content = value
-            self.frame_tree.update(scene, self.shown if self.frame_filter is not None else None,
-                                   self.frame_filter)
-            self.graph.update(scene)
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None) -> None:
