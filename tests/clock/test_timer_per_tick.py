@@ -9,7 +9,7 @@ import anyio
 import pytest
 
 from tfbus import Bus, SimClock
-from tfbus.clock import Clock, ManualClock, SystemClock, Tick, every
+from tfbus.clock import Clock, ManualClock, PeriodicTimer, SystemClock, Tick, every
 from tfbus.errors import SimTimeStalled
 from tfbus.messages import Clock as ClockMessage
 from tfbus.time import Duration, Time
@@ -180,3 +180,43 @@ async def test_system_clock_tick_costs_at_most_ten_tfbus_calls(anyio_backend: st
         assert (tick.expected - first).ns == tick.index * 2_000_000
         assert tick.actual >= tick.expected
     assert ticks[-1].index == n + ticks[-1].overruns
+
+
+async def test_jump_callback_is_registered_once_per_timer_and_dropped_with_it(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """The timer's backward-jump callback is registered with the clock on its first
+    wait and kept across ticks (one entry, not one per tick); collecting the timer
+    unregisters it, so abandoned timers do not pile up callbacks on a shared clock."""
+    import gc
+
+    clock = ManualClock(T0)
+    registered = clock._jump  # the clock's jump callbacks (a len()-able registry)
+    registrations = [0]
+    real_on_jump = clock.on_jump
+
+    def counting_on_jump(*args: Any, **kwargs: Any) -> Any:
+        registrations[0] += 1
+        return real_on_jump(*args, **kwargs)
+
+    monkeypatch.setattr(clock, "on_jump", counting_on_jump)
+    timer = every(0.01, clock=clock)
+
+    async def run(periodic: PeriodicTimer, count: int) -> list[Tick]:
+        got: list[Tick] = []
+        async for tick in periodic:
+            got.append(tick)
+            if len(got) == count:
+                break
+        return got
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(run, timer, 50)
+        await clock.advance(0)
+        assert len(registered) == 1
+        await clock.advance(0.5)
+    assert len(registered) == 1
+    assert registrations[0] == 1  # 50 ticks, one registration
+    del timer, tg
+    gc.collect()
+    assert len(registered) == 0
