@@ -68,7 +68,9 @@ class PeriodicTimer:
     Each tick's wait is one deadline of the clock (``call_later`` and a one-shot wake-up;
     under trio on the wall clock one ``trio`` cancel scope with that deadline, as
     ``trio.sleep``) that the jump callback ends early; the clock is read with
-    ``now_ns()``. No anyio cancel scope is entered per tick.
+    ``now_ns()``. No anyio cancel scope is entered per tick, and the jump callback is
+    registered with the clock once per timer (on its first wait; unregistered when the
+    timer is collected), not per tick.
     """
 
     def __init__(
