@@ -9,7 +9,7 @@ import anyio
 import pytest
 
 from tfbus import Bus, SimClock
-from tfbus.clock import Clock, ManualClock, SystemClock, Tick, every
+from tfbus.clock import Clock, ManualClock, PeriodicTimer, SystemClock, Tick, every
 from tfbus.errors import SimTimeStalled
 from tfbus.messages import Clock as ClockMessage
 from tfbus.time import Duration, Time
@@ -141,3 +141,82 @@ async def test_every_on_a_sim_clock_with_a_wall_timeout_raises_sim_time_stalled(
                 async for tick in every(0.5, clock=clock, immediate=True):
                     ticks.append(tick)
         assert [t.expected for t in ticks] == [Time.from_sec(1.0)]
+
+
+async def test_system_clock_tick_costs_at_most_ten_tfbus_calls(anyio_backend: str) -> None:
+    """A waited tick of ``every()`` on the wall clock makes at most 10 Python calls into
+    tfbus (asyncio: two clock reads, the timer coroutine's start and resume, one entry
+    in the clock's timer queue (add, arm, fire, take due), one wake; trio: two clock
+    reads, the two coroutines' starts and resumes): the jump callback is registered once
+    per timer, not per tick, and the tick's stamps are built without ``Time.from_ns``.
+    The ticks keep their grid."""
+    import sys
+    from pathlib import Path
+
+    import tfbus
+
+    root = str(Path(tfbus.__file__).parent)
+    calls = [0]
+
+    def profile(frame: Any, event: str, arg: object) -> None:
+        if event == "call" and frame.f_code.co_filename.startswith(root):
+            calls[0] += 1
+
+    n = 40
+    ticks: list[Tick] = []
+    timer = every(0.002, clock=SystemClock(), immediate=True)
+    ticks.append(await timer.__anext__())  # the first (immediate) tick: not counted
+    sys.setprofile(profile)
+    try:
+        for _ in range(n):
+            ticks.append(await timer.__anext__())
+    finally:
+        sys.setprofile(None)
+    # A loaded machine may find a deadline already passed (no wait: fewer calls); +10
+    # for what runs once while the profiler is on (setting it up and off).
+    assert calls[0] <= 10 * n + 10, calls[0] / n
+    first = ticks[0].expected
+    for tick in ticks:
+        assert (tick.expected - first).ns == tick.index * 2_000_000
+        assert tick.actual >= tick.expected
+    assert ticks[-1].index == n + ticks[-1].overruns
+
+
+async def test_jump_callback_is_registered_once_per_timer_and_dropped_with_it(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """The timer's backward-jump callback is registered with the clock on its first
+    wait and kept across ticks (one entry, not one per tick); collecting the timer
+    unregisters it, so abandoned timers do not pile up callbacks on a shared clock."""
+    import gc
+
+    clock = ManualClock(T0)
+    registered = clock._jump  # the clock's jump callbacks (a len()-able registry)
+    registrations = [0]
+    real_on_jump = clock.on_jump
+
+    def counting_on_jump(*args: Any, **kwargs: Any) -> Any:
+        registrations[0] += 1
+        return real_on_jump(*args, **kwargs)
+
+    monkeypatch.setattr(clock, "on_jump", counting_on_jump)
+    timer = every(0.01, clock=clock)
+
+    async def run(periodic: PeriodicTimer, count: int) -> list[Tick]:
+        got: list[Tick] = []
+        async for tick in periodic:
+            got.append(tick)
+            if len(got) == count:
+                break
+        return got
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(run, timer, 50)
+        await clock.advance(0)
+        assert len(registered) == 1
+        await clock.advance(0.5)
+    assert len(registered) == 1
+    assert registrations[0] == 1  # 50 ticks, one registration
+    del timer, tg
+    gc.collect()
+    assert len(registered) == 0

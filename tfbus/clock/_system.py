@@ -279,8 +279,15 @@ class SystemClock:
             return _noop
         timers = self._timers
         if timers is None or timers.loop_ref() is not loop:
-            timers = self._timers = _AsyncioTimers(loop)
+            timers = self._asyncio_timers(loop)
         return timers.add(loop.time() + delay, callback)
+
+    def _asyncio_timers(self, loop: AbstractEventLoop) -> _AsyncioTimers:
+        """The :class:`_AsyncioTimers` of ``loop`` (made anew when the loop changed)."""
+        timers = self._timers
+        if timers is None or timers.loop_ref() is not loop:
+            timers = self._timers = _AsyncioTimers(loop)
+        return timers
 
     def _trio_call_later(
         self, delay: float, callback: Callable[[], object]

@@ -3,15 +3,29 @@
 from __future__ import annotations
 
 import sys
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from functools import partial
+from typing import TYPE_CHECKING
 
 import anyio
 
 from tfbus._aio import Wakeup, running_asyncio_loop
 from tfbus.clock._base import Clock
 from tfbus.clock._system import SystemClock
-from tfbus.time import NSEC_PER_SEC, Duration, Time, seconds_to_ns
+from tfbus.time import NSEC_PER_SEC, TIME_MAX_NS, Duration, Time, seconds_to_ns
+
+if TYPE_CHECKING:
+    from asyncio import AbstractEventLoop, Future
+
+_new_time = Time.__new__
+
+
+def _wake_future(future: Future[None]) -> None:
+    """End a timer's wait on ``future`` (idempotent; harmless once it is cancelled)."""
+    if not future.done():
+        future.set_result(None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +68,9 @@ class PeriodicTimer:
     Each tick's wait is one deadline of the clock (``call_later`` and a one-shot wake-up;
     under trio on the wall clock one ``trio`` cancel scope with that deadline, as
     ``trio.sleep``) that the jump callback ends early; the clock is read with
-    ``now_ns()``. No anyio cancel scope is entered per tick.
+    ``now_ns()``. No anyio cancel scope is entered per tick, and the jump callback is
+    registered with the clock once per timer (on its first wait; unregistered when the
+    timer is collected), not per tick.
     """
 
     def __init__(
@@ -80,6 +96,8 @@ class PeriodicTimer:
         self._overruns = 0
         self._last_seen_ns = 0
         self._jumped = False
+        self._wake: Callable[[], object] | None = None  # ends the wait in progress
+        self._jump_clock: Clock | None = None  # the clock on_jump was registered with
 
     @property
     def period(self) -> Duration:
@@ -94,48 +112,90 @@ class PeriodicTimer:
     def __aiter__(self) -> PeriodicTimer:
         return self
 
-    def _deadline(self, index: int) -> int:
-        assert self._anchor_ns is not None
-        return self._anchor_ns + (index - self._anchor_index) * self._period_ns
-
     def _reanchor(self, now_ns: int) -> None:
         self._anchor_index = self._next_index
         self._anchor_ns = now_ns + self._period_ns
 
+    def _watch_jumps(self, clock: Clock) -> None:
+        """Register this timer's one backward-jump callback with ``clock`` (on its first
+        wait; unregistered when the timer is collected). It wakes the wait in progress
+        (:attr:`_wake`), if any, and marks the schedule for re-anchoring; a jump while
+        no wait is in progress is left to the ``now_ns`` comparison, as before."""
+        ref = weakref.ref(self)
+
+        def on_jump(old: Time, new: Time) -> None:
+            timer = ref()
+            if timer is not None and (wake := timer._wake) is not None:
+                timer._jumped = True
+                wake()
+
+        self._jump_clock = clock
+        weakref.finalize(self, clock.on_jump(on_jump))
+
     async def __anext__(self) -> Tick:
         """Wait for the next deadline and return its tick.
+
+        Per tick on a :class:`~tfbus.clock.SystemClock` under asyncio: two clock reads,
+        one entry in the clock's timer queue and one bare future; the jump callback is
+        registered once per timer, not per tick.
 
         Raises:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled.
         """
         clock = self._clock
+        period_ns = self._period_ns
         if self._anchor_ns is None:
             now_ns = clock.now_ns()
             self._last_seen_ns = now_ns
             self._anchor_index = 0
-            self._anchor_ns = now_ns + (0 if self._immediate else self._period_ns)
+            self._anchor_ns = now_ns + (0 if self._immediate else period_ns)
+        if self._jump_clock is not clock:
+            self._watch_jumps(clock)
         while True:
             now_ns = clock.now_ns()
             if now_ns < self._last_seen_ns or self._jumped:
                 self._jumped = False
                 self._reanchor(now_ns)
             self._last_seen_ns = now_ns
-            deadline = self._deadline(self._next_index)
+            anchor_ns = self._anchor_ns
+            assert anchor_ns is not None
+            deadline = anchor_ns + (self._next_index - self._anchor_index) * period_ns
             if now_ns >= deadline:
                 # Latest deadline already passed; skip the older ones.
-                behind = (now_ns - deadline) // self._period_ns
+                behind = (now_ns - deadline) // period_ns
                 index = self._next_index + behind
                 self._overruns += behind
                 self._next_index = index + 1
-                return Tick(
-                    index=index,
-                    expected=Time.from_ns(self._deadline(index)),
-                    actual=Time.from_ns(now_ns),
-                    overruns=self._overruns,
-                )
-            await self._wait(clock, now_ns, deadline)
+                expected_ns = deadline + behind * period_ns
+                if not 0 <= expected_ns <= now_ns <= TIME_MAX_NS:
+                    Time.from_ns(expected_ns), Time.from_ns(now_ns)  # raises the range error
+                # Time.from_ns without its call (both checked in range just above).
+                expected = _new_time(Time)
+                expected._ns = expected_ns
+                actual = _new_time(Time)
+                actual._ns = now_ns
+                return Tick(index, expected, actual, self._overruns)
+            # The wait (see _wait): inline on the wall clock under asyncio, the demo's.
+            loop = running_asyncio_loop()
+            if loop is not None and type(clock) is SystemClock:
+                seconds = min((deadline - now_ns) / NSEC_PER_SEC, clock._max_sleep)
+                timers = clock._timers
+                if timers is None or timers.loop_ref() is not loop:
+                    timers = clock._asyncio_timers(loop)
+                future = loop.create_future()
+                self._wake = wake = partial(_wake_future, future)
+                cancel = timers.add(loop.time() + seconds, wake)
+                try:
+                    await future
+                finally:
+                    self._wake = None
+                    cancel()
+            else:
+                await self._wait(clock, loop, now_ns, deadline)
 
-    async def _wait(self, clock: Clock, now_ns: int, deadline: int) -> None:
+    async def _wait(
+        self, clock: Clock, loop: AbstractEventLoop | None, now_ns: int, deadline: int
+    ) -> None:
         """Sleep until ``deadline`` (ns of ``clock``) or a backward jump of ``clock``,
         whichever comes first; the caller re-reads the clock after it.
 
@@ -148,13 +208,20 @@ class PeriodicTimer:
         cancel scope that the jump callback cancels.
         """
         remaining_ns = deadline - now_ns
-        loop = running_asyncio_loop()
         if type(clock) is SystemClock:
             # Monotonic seconds (call_later's and trio's); waking at least every
             # max_sleep notices a wall-clock step, as SystemClock.sleep_until does.
             seconds = min(remaining_ns / NSEC_PER_SEC, clock._max_sleep)
             if loop is None and (trio := sys.modules.get("trio")) is not None:
-                await self._trio_wait(trio, clock, seconds)
+                # One trio cancel scope with the deadline, which the jump callback
+                # cancels (trio.sleep's own cost: the call_later path would wake its
+                # timer task and then this one).
+                with trio.CancelScope(deadline=trio.current_time() + seconds) as scope:
+                    self._wake = scope.cancel
+                    try:
+                        await trio.sleep_forever()
+                    finally:
+                        self._wake = None
                 return
             delay: float | Duration = seconds
         else:
@@ -165,48 +232,22 @@ class PeriodicTimer:
         if cancel is None:
             await self._scope_wait(clock, deadline)
             return
-
-        def on_jump(old: Time, new: Time) -> None:
-            self._jumped = True
-            wake()
-
-        unregister = clock.on_jump(on_jump)
+        self._wake = wake
         try:
             await wakeup.wait()
         finally:
+            self._wake = None
             cancel()
-            unregister()
 
     async def _scope_wait(self, clock: Clock, deadline: int) -> None:
         """``clock.sleep_until(deadline)`` in a cancel scope that a backward jump cancels
         (a clock whose ``call_later`` returns None)."""
         with anyio.CancelScope() as scope:
-
-            def on_jump(old: Time, new: Time) -> None:
-                self._jumped = True
-                scope.cancel()
-
-            unregister = clock.on_jump(on_jump)
+            self._wake = scope.cancel
             try:
                 await clock.sleep_until(Time.from_ns(deadline))
             finally:
-                unregister()
-
-    async def _trio_wait(self, trio: Any, clock: Clock, delay: float) -> None:
-        """A :class:`~tfbus.clock.SystemClock` wait under trio: one ``trio.CancelScope``
-        with the deadline, which the jump callback cancels (``trio.sleep``'s own cost:
-        the ``call_later`` path would wake its timer task and then this one)."""
-        with trio.CancelScope(deadline=trio.current_time() + delay) as scope:
-
-            def on_jump(old: Time, new: Time) -> None:
-                self._jumped = True
-                scope.cancel()
-
-            unregister = clock.on_jump(on_jump)
-            try:
-                await trio.sleep_forever()
-            finally:
-                unregister()
+                self._wake = None
 
     def __repr__(self) -> str:
         return (

@@ -616,15 +616,54 @@ _TF_HEADER = struct.Struct("<4I")  # seq, stamp.secs, stamp.nsecs, len(frame_id)
 _TF_POSE = struct.Struct("<7d")  # translation x y z, rotation x y z w
 
 
+_ONE_HEAD = struct.Struct("<5I")  # count 1, seq 0, stamp.secs, stamp.nsecs, len(frame_id)
+_PAIR_BYTES_MAX: Final = 4096  # frame pairs whose encoded ids are kept (then cleared)
+# (frame_id, child_frame_id) -> (len(frame_id as UTF-8), frame_id + len(child) + child)
+_pair_bytes: dict[tuple[str, str], tuple[int, bytes]] = {}
+
+
 def _encode_struct(transforms: Iterable[TransformStamped]) -> bytes:
     """One ROS 1 ``TFMessage``: ``uint32`` count, then per transform ``std_msgs/Header``
     (``seq`` 0, ``time`` as two ``uint32``, ``frame_id``), ``child_frame_id`` (strings
     as ``uint32`` length + UTF-8) and seven ``float64`` (``roscpp_serialization``,
     little endian).
 
+    A list or tuple of one transform (a broadcaster's tick) is written with the ids'
+    bytes (``frame_id``, ``child_frame_id``'s length and bytes) encoded once per frame
+    pair and kept (up to ``_PAIR_BYTES_MAX`` pairs, then cleared): one ``struct`` call
+    for the count and header, one for the pose, three parts joined; anything it cannot
+    write falls through to the loop, which writes it or names what is wrong.
+
     Raises:
         WireEncodeError: as :meth:`TFCodec.encode`.
     """
+    if (type(transforms) is list or type(transforms) is tuple) and len(transforms) == 1:
+        try:
+            one = transforms[0]
+            header = one.header
+            frame_id = header.frame_id
+            child = one.child_frame_id
+            pair = (frame_id, child)
+            ids = _pair_bytes.get(pair)
+            if ids is None and type(frame_id) is str and type(child) is str:
+                frame_bytes = frame_id.encode()
+                child_bytes = child.encode()
+                if len(_pair_bytes) >= _PAIR_BYTES_MAX:
+                    _pair_bytes.clear()
+                ids = _pair_bytes[pair] = (
+                    len(frame_bytes), frame_bytes + _U32.pack(len(child_bytes)) + child_bytes
+                )
+            sec, nsec = divmod(header.stamp.ns, NSEC_PER_SEC)
+            if ids is not None and 0 <= sec <= _SEC_MAX:
+                tr, q = one.transform.translation, one.transform.rotation
+                return b"".join((
+                    _ONE_HEAD.pack(1, 0, sec, nsec, ids[0]),
+                    ids[1],
+                    _TF_POSE.pack(float(tr.x), float(tr.y), float(tr.z),
+                                  float(q.x), float(q.y), float(q.z), float(q.w)),
+                ))  # fmt: skip
+        except (struct.error, UnicodeEncodeError, TypeError, AttributeError, ValueError):
+            pass  # the loop below raises the error that names the field
     parts: list[bytes] = [b""]
     append = parts.append
     header_pack, pose_pack, u32_pack = _TF_HEADER.pack, _TF_POSE.pack, _U32.pack
