@@ -187,30 +187,22 @@ class CloudTrack:
             ValueError: the bag has no ``sensor_msgs/PointCloud2`` topic of that name
                 (the message names the topic and lists the cloud topics it has).
         """
-        from rosbags.highlevel import AnyReader
+        from tfbus.view.scans import bag_topic_messages
 
         track = cls(topic)
         total = 0
-        with AnyReader([path]) as reader:
-            conns = [c for c in reader.connections
-                     if c.topic == topic and c.msgtype.endswith("PointCloud2")]
-            if not conns:
-                have = sorted({c.topic for c in reader.connections
-                               if c.msgtype.endswith("PointCloud2")})
-                raise ValueError(f"--cloud {topic!r}: no PointCloud2 topic of that name in "
-                                 f"{path} (cloud topics: {', '.join(have) or 'none'})")
-            for conn, t, raw in reader.messages(connections=conns):
-                try:
-                    cloud = cloud_from_ros(reader.deserialize(raw, conn.msgtype))
-                    pts = cloud_points(cloud, cap)
-                except Exception as err:  # an undecodable message or a bad layout
-                    track.dropped.drop(f"{type(err).__name__}: {err}")
-                    continue
-                if total + len(pts) > budget:
-                    track.not_kept += 1
-                    continue
-                total += len(pts)
-                track._keep(int(t), cloud.header, pts)
+        for t, decode in bag_topic_messages(path, topic, "PointCloud2", "--cloud", "cloud"):
+            try:
+                cloud = cloud_from_ros(decode())
+                pts = cloud_points(cloud, cap)
+            except Exception as err:  # an undecodable message or a bad layout
+                track.dropped.drop(f"{type(err).__name__}: {err}")
+                continue
+            if total + len(pts) > budget:
+                track.not_kept += 1
+                continue
+            total += len(pts)
+            track._keep(t, cloud.header, pts)
         return track
 
     def _keep(self, t: int, header: Header, pts: _F32) -> None:

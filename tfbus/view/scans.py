@@ -5,6 +5,7 @@ frame with tfbus's own :class:`~tfbus.laser.LaserProjection` (laser_geometry's
 from __future__ import annotations
 
 import bisect
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,9 @@ from tfbus.messages import Header
 from tfbus.sensor_msgs import LaserScan, read_points
 from tfbus.time import Time
 
-__all__ = ["MAX_SCANS_BACK", "ScanTrack", "project_scan", "scan_from_ros"]
+__all__ = [
+    "MAX_SCANS_BACK", "ScanTrack", "bag_topic_messages", "project_scan", "scan_from_ros",
+]
 
 MAX_SCANS_BACK = 10
 """How many scans :meth:`ScanTrack.project_at` goes back for one it can place."""
@@ -72,20 +75,10 @@ class ScanTrack:
             ValueError: the bag has no ``sensor_msgs/LaserScan`` topic of that name
                 (the message names the topic and lists the scan topics it has).
         """
-        from rosbags.highlevel import AnyReader
-
         track = cls(topic)
-        with AnyReader([path]) as reader:
-            conns = [c for c in reader.connections
-                     if c.topic == topic and c.msgtype.endswith("LaserScan")]
-            if not conns:
-                have = sorted({c.topic for c in reader.connections
-                               if c.msgtype.endswith("LaserScan")})
-                raise ValueError(f"--scan {topic!r}: no LaserScan topic of that name in "
-                                 f"{path} (scan topics: {', '.join(have) or 'none'})")
-            for conn, t, raw in reader.messages(connections=conns):
-                track.times.append(int(t))
-                track.scans.append(scan_from_ros(reader.deserialize(raw, conn.msgtype)))
+        for t, decode in bag_topic_messages(path, topic, "LaserScan", "--scan", "scan"):
+            track.times.append(t)
+            track.scans.append(scan_from_ros(decode()))
         return track
 
     def at(self, t: Time) -> LaserScan | None:
@@ -112,3 +105,27 @@ class ScanTrack:
                 if first_error is None:
                     first_error = f"{self.topic}: {err}"
         return None, None, first_error
+
+
+def bag_topic_messages(path: Path, topic: str, msgtype: str, option: str, kind: str
+                       ) -> Iterator[tuple[int, Any]]:
+    """``(record time ns, decode)`` for each ``topic`` message of a ``*/msgtype`` type in
+    the bag at ``path`` (rosbags' AnyReader: ROS 1 ``.bag``, ROS 2 bag folders, ``.db3``
+    and ``.mcap`` files), in record order; ``decode()`` deserialises it (and raises what
+    rosbags raises for a damaged message, left to the caller).
+
+    Raises:
+        ValueError: the bag has no such topic of that type: names ``option``, the topic
+            and the ``kind`` topics the bag has.
+    """
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([path]) as reader:
+        conns = [c for c in reader.connections
+                 if c.topic == topic and c.msgtype.endswith(msgtype)]
+        if not conns:
+            have = sorted({c.topic for c in reader.connections if c.msgtype.endswith(msgtype)})
+            raise ValueError(f"{option} {topic!r}: no {msgtype} topic of that name in "
+                             f"{path} ({kind} topics: {', '.join(have) or 'none'})")
+        for conn, t, raw in reader.messages(connections=conns):
+            yield int(t), lambda raw=raw, msgtype=conn.msgtype: reader.deserialize(raw, msgtype)
