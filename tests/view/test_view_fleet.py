@@ -264,13 +264,17 @@ async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:  # noq
                                                    namespace=f"robot{k}", name=f"r{k}"))
                       for k in (1, 2)]
             async with robots[0] as r1, robots[1] as r2:
-                def shown() -> str:
+                slot = max(MIN_SLOT, 3.0 + GAP)
+                want = ["robot1: fixed frame robot1/map, x +0.00 m",
+                        f"robot2: fixed frame robot2/map, x +{slot:.2f} m"]
+
+                def shown() -> str:  # until both robots are placed (each heard in its turn)
                     with Chromium(chromium) as c:
                         c.open(f"http://127.0.0.1:{port}/")
                         return str(c.wait(
-                            "document.body && document.body.innerText.includes("
-                            "'robot2: fixed frame robot2/map') && document.body.innerText",
-                            timeout=60))
+                            "document.body && " + " && ".join(
+                                f"document.body.innerText.includes({w!r})" for w in want)
+                            + " && document.body.innerText", timeout=60))
 
                 with anyio.fail_after(60):  # until the view hears both robots' statics
                     async with anyio.create_task_group() as tg:
@@ -284,9 +288,7 @@ async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:  # noq
                         tg.start_soon(publish)
                         text = await anyio.to_thread.run_sync(shown)
                         tg.cancel_scope.cancel()
-            slot = max(MIN_SLOT, 3.0 + GAP)
-            assert "robot1: fixed frame robot1/map, x +0.00 m" in text
-            assert f"robot2: fixed frame robot2/map, x +{slot:.2f} m" in text
+            assert all(w in text for w in want)
             proc.send_signal(signal.SIGINT)
             assert proc.wait(timeout=30) == 0
         finally:
