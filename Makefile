@@ -45,7 +45,7 @@ lint: $(STAMP)
 	$(BIN)/mypy --strict tfbus
 
 test: lint
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=30
 
 demo: $(CORE_STAMP)
 	@echo "make: running the tutorial demo for 10 s (a 100 Hz broadcaster and a 1 Hz listener on one bus)"
