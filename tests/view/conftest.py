@@ -11,6 +11,21 @@ if TYPE_CHECKING:
     from tfbus.view.server import TfPage
 
 
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """Debian's headless Chromium (installed by ``scripts/install/install_chromium.sh``
+    when missing; a failure under ``CI=true``, a skip naming the script elsewhere): the
+    path of its executable."""
+    import shutil
+
+    from peer_install import require
+
+    require("chromium", "install_chromium.sh", timeout=2400)
+    exe = shutil.which("chromium")
+    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
+    return exe
+
+
 @pytest.fixture
 def page() -> Iterator[TfPage]:
     """A viser page on 127.0.0.1 at a free port, stopped after the test (needs the

@@ -12,14 +12,12 @@ from __future__ import annotations
 import html
 import io
 import re
-import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import pytest
-from peer_install import require
 
 pytest.importorskip("viser")
 Image = pytest.importorskip("PIL.Image")  # viser's own dependency (through imageio)
@@ -38,14 +36,6 @@ TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--window-size=1280,800", "--virtual-time-budget=6000"]
-
-
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
 
 
 def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[bytes]:

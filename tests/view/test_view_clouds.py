@@ -321,18 +321,6 @@ def test_the_wire_carries_a_cloud_bit_for_bit_and_refuses_wrong_types() -> None:
         codec.decode(codec.encode(many, sender=1, seq=1))
 
 
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    import shutil
-
-    from peer_install import require
-
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
-
-
 def test_a_bag_cloud_in_chromium_and_hostile_names_as_text(chromium: str, page: TfPage,
                                                            tmp_path: Path) -> None:
     """A ring of 2 000 points 2 m around the lidar, drawn in headless Chromium (the

@@ -29,18 +29,6 @@ ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 
 
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    import shutil
-
-    from peer_install import require
-
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
-
-
 def until(cond: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
     """Poll ``cond`` (the server side of the page) for at most ``timeout`` seconds."""
     deadline = time.monotonic() + timeout
@@ -53,7 +41,7 @@ def until(cond: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
 def _row(label: str) -> str:
     """JS: the GUI row of the control labelled ``label``."""
     return (f"[...document.querySelectorAll('label')].find(e => e.textContent === "
-            f"{json.dumps(label)}).closest('.mantine-Flex-root')")
+            f"{json.dumps(label)})?.closest('.mantine-Flex-root')")
 
 
 def _centre(c: object, selector_js: str) -> tuple[float, float]:

@@ -160,18 +160,6 @@ async def test_live_findings_from_the_views_listener(page: TfPage) -> None:
 # ---------------------------------------------------------------- in headless Chromium
 
 
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    import shutil
-
-    from peer_install import require
-
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
-
-
 def _panel_text(c: object) -> str:
     from cdp import Chromium
 

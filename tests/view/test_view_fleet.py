@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("viser")
 
-from test_view_controls import _pick, chromium, until  # noqa: F401
+from test_view_controls import _pick, until
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.view.fleet import ALL_ROBOTS, GAP, MIN_SLOT, FleetView, robot_fixed_frame, robot_of
@@ -128,7 +128,7 @@ def free_port() -> int:
 
 
 @pytest.mark.anyio
-async def test_two_robots_over_zenoh_in_chromium(chromium: str, page: TfPage) -> None:  # noqa: F811
+async def test_two_robots_over_zenoh_in_chromium(chromium: str, page: TfPage) -> None:
     """robot1 and robot2 on their own namespaces through a Zenoh router; the view's
     fleet bus (``namespace=*``, FleetBuffer merged into the view's buffer through a
     MonitoredSink, as ``tfbus view --bus 'zenoh:namespace=*'`` wires it): all robots side
@@ -229,7 +229,7 @@ def test_fleet_flag_needs_a_bag() -> None:
 
 
 @pytest.mark.anyio
-async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:  # noqa: F811
+async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:
     """``tfbus view --bus 'zenoh:mode=client&connect=...&namespace=*'`` as a process: two
     robots publish through a Zenoh router on 127.0.0.1; the page lists both side by side
     (each from its own map). SIGINT ends it with status 0; it is killed by PID if not."""

@@ -18,7 +18,7 @@ pytest.importorskip("viser")
 if shutil.which("dot") is None:
     pytest.skip("Graphviz's dot is not installed", allow_module_level=True)
 
-from test_view_controls import chromium, until  # noqa: F401
+from test_view_controls import until
 from test_view_doctor import HOSTILE_FRAME, hostile_bag
 from test_view_tree import _toggle
 
@@ -162,7 +162,7 @@ def _tick_graph(c: object) -> None:
     c.wait("!!document.querySelector('svg.tfbus-graph')")
 
 
-def test_graph_on_a_bag_follows_the_slider(chromium: str, page: TfPage,  # noqa: F811
+def test_graph_on_a_bag_follows_the_slider(chromium: str, page: TfPage,
                                            tmp_path: Path) -> None:
     """The doctor's hostile bag: at 5 s the markup frame is a node (its id as text,
     outlined for ``leading_slash``), at 2 s it is not in the graph."""
@@ -201,7 +201,7 @@ def test_graph_on_a_bag_follows_the_slider(chromium: str, page: TfPage,  # noqa:
         runner.join(timeout=10)
 
 
-def test_graph_live_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:  # noqa: F811
+def test_graph_live_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> None:
     """Live (draw_live, as LiveView.render draws): hostile ids as node texts, states
     coloured as the clock moves on (base goes stale), no element made from an id."""
     from cdp import Chromium

@@ -5,14 +5,11 @@ once the browser has gone the loop sleeps again."""
 
 from __future__ import annotations
 
-import shutil
-
 import anyio
 import pytest
 
 pytest.importorskip("viser")
 
-from peer_install import require
 from test_view_browser import dom, row
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
@@ -26,14 +23,6 @@ from tfbus.view.live import LiveView
 from tfbus.view.server import TfPage
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
 
 
 async def test_no_browser_no_drawing_a_browser_wakes_it_at_once(chromium: str,

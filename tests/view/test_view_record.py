@@ -27,6 +27,7 @@ pytest.importorskip("viser")
 pytest.importorskip("foxglove")
 
 from recordings import S45, tf, write_recording, xyz_cloud
+from test_view_controls import _centre, _row, until
 
 from tfbus import Header, Time
 from tfbus.bag import read_messages
@@ -292,42 +293,9 @@ async def test_live_recording_reads_back_to_exactly_what_was_received(
 
 # ------------------------------------------------------------------ the page's control
 
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    import shutil
-
-    from peer_install import require
-
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
-
-
-def until(cond: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
-    """Poll ``cond`` (the server side of the page) for at most ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"never: {what}")
-        time.sleep(0.05)
-
-
-def _row(label: str) -> str:
-    return (f"[...document.querySelectorAll('label')].find(e => e.textContent === "
-            f"{json.dumps(label)})?.closest('.mantine-Flex-root')")
-
-
 def _button(label: str) -> str:
     return (f"[...document.querySelectorAll('button')].find(e => e.textContent === "
             f"{json.dumps(label)})")
-
-
-def _centre(c: Any, selector_js: str) -> tuple[float, float]:
-    r = c.wait(f"(() => {{ const e = {selector_js}; if (!e) return null; e.scrollIntoView("
-               "{block: 'center'}); const b = e.getBoundingClientRect(); "
-               "return [b.x + b.width / 2, b.y + b.height / 2]; })()")
-    return float(r[0]), float(r[1])
 
 
 def _name(c: Any, text: str) -> None:

@@ -200,18 +200,6 @@ def test_trail_follows_the_bag_slider(page: TfPage, tmp_path: Path) -> None:
                            trail.segments(), rtol=0, atol=1e-5)
 
 
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    import shutil
-
-    from peer_install import require
-
-    require("chromium", "install_chromium.sh", timeout=2400)
-    exe = shutil.which("chromium")
-    assert exe is not None, "install_chromium.sh said ready, but chromium is not on PATH"
-    return exe
-
-
 class Circling:
     """The circle drawn on ``page`` by a thread as ``tfbus view`` draws it: a bag's player
     paused at 10 s (its loop as ``--bag`` runs it), or a live buffer holding 1-21 s

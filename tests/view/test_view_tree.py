@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("viser")
 
-from test_view_controls import _centre, _pick, _row, chromium, until  # noqa: F401
+from test_view_controls import _centre, _pick, until
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.clock import ManualClock
@@ -135,7 +135,7 @@ def _toggle(c: object, label: str) -> None:
     raise AssertionError(f"the box of {label!r} did not change")
 
 
-def test_show_hide_in_chromium_on_a_bag(chromium: str, page: TfPage, playing: BagPlayer,  # noqa: F811
+def test_show_hide_in_chromium_on_a_bag(chromium: str, page: TfPage, playing: BagPlayer,
                                         tmp_path: Path) -> None:
     """The turtle bag: world > turtle1 > carrot, world > turtle2. Unticking turtle1 hides
     its axes and label, carrot (its child) stays; after re-rooting at turtle2 and moving
@@ -175,7 +175,7 @@ def test_show_hide_in_chromium_on_a_bag(chromium: str, page: TfPage, playing: Ba
 
 
 @pytest.mark.anyio
-async def test_show_hide_live_in_chromium(chromium: str, page: TfPage) -> None:  # noqa: F811
+async def test_show_hide_live_in_chromium(chromium: str, page: TfPage) -> None:
     """Live (LiveView.render is the draw loop's tick): a hostile id is a box label as
     text; unticking it hides it at the next redraw, a frame arriving later keeps it
     hidden, and its child stays drawn."""
