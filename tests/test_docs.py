@@ -20,6 +20,7 @@ import contextlib
 import functools
 import html.parser
 import http.server
+import os
 import re
 import shutil
 import signal
@@ -281,6 +282,7 @@ def _render(chromium: str, url: str) -> str:
              "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
              "--virtual-time-budget=5000", "--dump-dom", url],
             capture_output=True, text=True, timeout=120, check=False,
+            env={**os.environ, "TMPDIR": profile},
         )
     assert done.returncode == 0 and "<html" in done.stdout, done.stderr[-2000:]
     return done.stdout

@@ -14,6 +14,7 @@ a 60 s bound.
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -54,7 +55,8 @@ def shoot(exe: str, page: TfPage, out: Path, tries: int = 5) -> None:
             shot = Path(tmp) / f"{k}.png"
             subprocess.run([exe, *FLAGS, f"--user-data-dir={tmp}/profile{k}",
                             f"--screenshot={shot}", f"http://127.0.0.1:{page.port}/"],
-                           capture_output=True, timeout=60, check=True)
+                           capture_output=True, timeout=60, check=True,
+                           env={**os.environ, "TMPDIR": tmp})
             ink = _ink(shot)
             if ink > best:
                 best = ink

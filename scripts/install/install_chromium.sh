@@ -12,7 +12,7 @@ present() { dpkg_have $PKGS && command -v chromium >/dev/null 2>&1; }
 works() {
     local dir out rc
     dir="$(mktemp -d)"
-    out="$(timeout 60 chromium --headless --no-sandbox --disable-gpu --disable-quic \
+    out="$(TMPDIR="$dir" timeout 60 chromium --headless --no-sandbox --disable-gpu --disable-quic \
         --no-first-run --disable-background-networking --disable-component-update \
         --disable-sync --user-data-dir="$dir" --dump-dom \
         'data:text/html,<p id="p"></p><script>document.getElementById("p").textContent="rendered-"+(6*7)</script>' \

@@ -44,9 +44,14 @@ class Chromium:
     def __enter__(self) -> Chromium:
         from websockets.sync.client import connect
 
+        # Chromium keeps its singleton socket in a directory of its own under TMPDIR,
+        # which a killed browser leaves behind: inside the profile, it goes with it.
+        scratch = Path(self._profile.name) / "tmp"
+        scratch.mkdir()
         self._proc = subprocess.Popen(
             [self.exe, *FLAGS, f"--user-data-dir={self._profile.name}", "about:blank"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            env={**os.environ, "TMPDIR": str(scratch)},
             start_new_session=True)  # its renderer and helper processes in our child's group
         active = Path(self._profile.name) / "DevToolsActivePort"
         deadline = time.monotonic() + self.timeout

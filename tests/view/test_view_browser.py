@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import io
+import os
 import re
 import subprocess
 import tempfile
@@ -49,7 +50,8 @@ def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[by
         with tempfile.TemporaryDirectory(prefix="tfbus-view-chromium-") as profile:
             try:
                 done = subprocess.run([exe, *FLAGS, f"--user-data-dir={profile}", *extra, url],
-                                      capture_output=True, timeout=60, check=False)
+                                      capture_output=True, timeout=60, check=False,
+                                      env={**os.environ, "TMPDIR": profile})
             except subprocess.TimeoutExpired as exc:
                 stuck = exc.stderr or b""
                 continue

@@ -202,7 +202,8 @@ def test_another_origins_page_in_chromium_cannot_open_the_views_websocket(
                 [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update",
                  "--virtual-time-budget=5000", f"--user-data-dir={profile}", "--dump-dom",
-                 url], capture_output=True, timeout=90, check=False)
+                 url], capture_output=True, timeout=90, check=False,
+                env={**os.environ, "TMPDIR": profile})
         text = done.stdout.decode("utf-8", "replace")
         if "pending" not in text:
             break
@@ -376,7 +377,8 @@ for (const scheme of ["ws", "wss"]) {{
                 [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update",
                  f"--user-data-dir={profile}", f"http://127.0.0.1:{srv.server_address[1]}/"],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                env={**os.environ, "TMPDIR": profile})
             try:
                 assert reported.wait(90), "the page never reported"
             finally:
