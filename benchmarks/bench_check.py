@@ -1,7 +1,8 @@
-"""Speed regression guard: the core's targets against tf2_py and C++ tf2, PASS or FAIL.
+"""Speed regression guard: the speed targets against their peers, PASS or FAIL.
 
-    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP]
-    # or: make bench-check; GROUP is core, cpp, wakeup or ros1 (repeatable)
+    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP,...]
+    # or: make bench-check; GROUP is core, cpp, wakeup, ros1, ros1cpu, sensors, zenoh or
+    # demo (comma-separated, repeatable); --no-ros1 skips ros1, ros1cpu and demo
 
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
@@ -38,8 +39,22 @@ Rows (target):
 * ROS 1 receive latency, 100 Hz x 50 transforms, 10 s: <= 1.5x a roscpp subscriber in
   the same run (median of 3 runs, ``bench_ros1.py``), nothing lost; once with constant
   values (a robot's fixed joints) and once with every value changing in every message
-  (a robot moving every joint: nothing the decoder can share) (``--no-ros1`` skips
-  both).
+  (a robot moving every joint: nothing the decoder can share);
+* ROS 1 receive CPU per 50-transform message (``bench_ros1.scenario``, ``/proc``, 10 s
+  runs, 3 runs, callback and listener alternated): a tfbus callback subscription <= 1.2x
+  a roscpp callback, a ``TransformListener`` <= 1.0x ``tf2_ros``'s C++ listener;
+* sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 2x the C++
+  ``projectLaser``; 10^6 points through ``transform_points`` and ``do_transform_cloud``
+  <= 1.3x bare numpy ``pts @ R.T + t``;
+* Zenoh (``bench_latency.receive``, 3 rounds, paths alternated): bus latency <= 1.5x raw
+  zenoh-python at 10, 50, 100 and 1000 Hz (bus / raw+loop beside it: the hop from
+  Zenoh's thread to the loop is a floor outside tfbus); under 4 CPU hogs
+  (``bench_zenoh.run``, 3 runs): no ``/tf_static`` frame lost, every ``/tf`` message not
+  received counted by the sender (``send_dropped``) or the receiver (``lost``);
+* the seed demo over ROS 1 (``bench_demo_ros1.run_pair``, 3 rounds of 10 s, alternated):
+  the CPU of its two processes <= 1.5x the C++ tutorial pair's.
+
+A row whose peer cannot run here prints ``not run: <why>`` and fails.
 
 Prints one line per row, its figures, the target and PASS or FAIL, and the load average
 (2 cores are shared: only same-run ratios mean anything); exit status 1 if a row fails
