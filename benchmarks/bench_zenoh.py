@@ -182,7 +182,8 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> dict[str, float]:
                 stats = transport.statistics()
                 sent_tfs, send_dropped, statics = sent
                 held = sum(
-                    buffer.can_transform("world", f"static{k}", Time(0)) for k in range(statics)
+                    buffer.can_transform("world", f"static{k}", Time(0)) is True
+                    for k in range(statics)
                 )
                 lost = stats.lost - lost0
                 # Every /tf message of the flood holds frame f0 once, at its own stamp.
