@@ -55,10 +55,13 @@ demo: $(CORE_STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
 
-# The speed targets against tf2_py, PASS/FAIL per row (not part of `make test`:
-# no timing is a test). Run it before and after a change to the core (CONTRIBUTING.md).
+# The speed targets against their peers (tf2_py, C++ tf2, roscpp and tf2_ros, laser_geometry,
+# numpy, raw zenoh-python, the C++ tutorial pair), PASS/FAIL per row, about 15 minutes
+# (not part of `make test`: no timing is a test). Run it before and after a change to the
+# core (CONTRIBUTING.md); e.g. `make bench-check BENCH_CHECK_ARGS="--only sensors,zenoh"`.
+BENCH_CHECK_ARGS ?=
 bench-check: $(STAMP)
-	$(BIN)/python benchmarks/bench_check.py
+	$(BIN)/python benchmarks/bench_check.py $(BENCH_CHECK_ARGS)
 
 # The documentation site into site/, warnings are errors.
 docs: $(DOCS_STAMP)

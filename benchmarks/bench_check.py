@@ -1,7 +1,8 @@
-"""Speed regression guard: the core's targets against tf2_py and C++ tf2, PASS or FAIL.
+"""Speed regression guard: the speed targets against their peers, PASS or FAIL.
 
-    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP]
-    # or: make bench-check; GROUP is core, cpp, wakeup or ros1 (repeatable)
+    .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP,...]
+    # or: make bench-check; GROUP is core, cpp, wakeup, ros1, ros1cpu, sensors, zenoh or
+    # demo (comma-separated, repeatable); --no-ros1 skips ros1, ros1cpu and demo
 
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
@@ -38,8 +39,22 @@ Rows (target):
 * ROS 1 receive latency, 100 Hz x 50 transforms, 10 s: <= 1.5x a roscpp subscriber in
   the same run (median of 3 runs, ``bench_ros1.py``), nothing lost; once with constant
   values (a robot's fixed joints) and once with every value changing in every message
-  (a robot moving every joint: nothing the decoder can share) (``--no-ros1`` skips
-  both).
+  (a robot moving every joint: nothing the decoder can share);
+* ROS 1 receive CPU per 50-transform message (``bench_ros1.scenario``, ``/proc``, 10 s
+  runs, 3 runs, callback and listener alternated): a tfbus callback subscription <= 1.2x
+  a roscpp callback, a ``TransformListener`` <= 1.0x ``tf2_ros``'s C++ listener;
+* sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 2x the C++
+  ``projectLaser``; 10^6 points through ``transform_points`` and ``do_transform_cloud``
+  <= 1.3x bare numpy ``pts @ R.T + t``;
+* Zenoh (``bench_latency.receive``, 3 rounds, paths alternated): bus latency <= 1.5x raw
+  zenoh-python at 10, 50, 100 and 1000 Hz (bus / raw+loop beside it: the hop from
+  Zenoh's thread to the loop is a floor outside tfbus); under 4 CPU hogs
+  (``bench_zenoh.run``, 3 runs): no ``/tf_static`` frame lost, every ``/tf`` message not
+  received counted by the sender (``send_dropped``) or the receiver (``lost``);
+* the seed demo over ROS 1 (``bench_demo_ros1.run_pair``, 3 rounds of 10 s, alternated):
+  the CPU of its two processes <= 1.5x the C++ tutorial pair's.
+
+A row whose peer cannot run here prints ``not run: <why>`` and fails.
 
 Prints one line per row, its figures, the target and PASS or FAIL, and the load average
 (2 cores are shared: only same-run ratios mean anything); exit status 1 if a row fails
@@ -517,18 +532,290 @@ def ros1_rows(rows: Rows, runs: int) -> None:
         )
 
 
+def _groups(value: str) -> list[str]:
+    """``--only``'s value: group names, comma-separated.
+
+    Raises:
+        argparse.ArgumentTypeError: a name that is not one of :data:`GROUPS`."""
+    names = [v.strip() for v in value.split(",") if v.strip()]
+    bad = [n for n in names if n not in GROUPS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown group {', '.join(bad) or repr(value)} (groups: {', '.join(GROUPS)})"
+        )
+    return names
+
+
+def _not_run(rows: Rows, names: list[str], why: str) -> None:
+    """A FAIL row ``not run: why`` for each of ``names`` (a peer is missing)."""
+    for name in names:
+        rows.row(name, f"not run: {why}", False, "")
+
+
+def _load() -> str:
+    return f"load {os.getloadavg()[0]:.2f}"
+
+
+ROS1_CPU_TARGETS = {"callback": 1.2, "listener": 1.0}
+"""ROS 1 receive CPU per 50-transform message: a tfbus callback subscription over a roscpp
+callback, a tfbus ``TransformListener`` over ``tf2_ros``'s C++ listener."""
+
+ROS1_CPU_ROWS = {
+    "callback": "ROS 1 receive CPU/msg, callback vs roscpp",
+    "listener": "ROS 1 receive CPU/msg, listener vs tf2_ros C++",
+}
+ROS1_CPU_SECONDS = 10.0
+"""Seconds per CPU run: ``/proc`` counts CPU time in 10 ms ticks."""
+
+
+def ros1cpu_rows(rows: Rows, runs: int) -> None:
+    """ROS 1 receive CPU per message, 100 Hz x 50 transforms (``bench_ros1.scenario``):
+    each run has a C++ receiver and tfbus's receive the same publisher's messages at
+    once (``/proc/PID/stat``, 10 s runs), the callback and listener modes alternated,
+    ``runs`` times; each row judges the median of the per-run ratios."""
+    import bench_ros1
+    from ros1_peers import ros1_missing, start_master  # via bench_ros1
+
+    why = ros1_missing((*bench_ros1.BENCH_PACKAGES, "tf2_ros"))
+    if why is not None:
+        _not_run(rows, list(ROS1_CPU_ROWS.values()), why)
+        return
+    cpu: dict[str, list[tuple[float, float]]] = {mode: [] for mode in ROS1_CPU_ROWS}
+    loads: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        bins = Path(tmp)
+        bench_ros1.build(bins)
+        master = start_master(bins / "ros_home")
+        try:
+            for r in range(runs):
+                order = list(ROS1_CPU_ROWS) if r % 2 == 0 else list(ROS1_CPU_ROWS)[::-1]
+                for mode in order:
+                    bench_ros1.scenario(master, bins, 100.0, 50, ROS1_CPU_SECONDS, mode,
+                                        cpu=cpu[mode])  # fmt: skip
+                    loads.append(os.getloadavg()[0])
+        finally:
+            master.stop()
+    for mode, name in ROS1_CPU_ROWS.items():
+        target = ROS1_CPU_TARGETS[mode]
+        ratios = [t / max(c, 1e-9) for c, t in cpu[mode]]
+        c_med = statistics.median(c for c, _ in cpu[mode])
+        t_med = statistics.median(t for _, t in cpu[mode])
+        rows.row(
+            name,
+            f"{t_med * 1e6:.1f} vs {c_med * 1e6:.1f} us CPU = {_spread(ratios)}",
+            statistics.median(ratios) <= target,
+            f"<= {target:.1f}x C++",
+        )
+    print(f"  info  {'  load during the runs':46} {min(loads):.2f}..{max(loads):.2f}")
+
+
+LASER_BEAMS = 720
+LASER_REPS = 200
+CLOUD_POINTS = 1_000_000
+CLOUD_REPS = 2
+CLOUD_TARGET = 1.3
+LASER_TARGET = 2.0
+SENSOR_ROWS = [
+    "project_laser 720 beams vs C++ projectLaser",
+    "transform_points 10^6 points vs bare numpy",
+    "do_transform_cloud 10^6 points vs bare numpy",
+]
+
+
+def sensors_rows(rows: Rows, rounds: int) -> None:
+    """Sensor data, CPU time per call (``bench_sensors``): a 720-beam ``project_laser``
+    against the C++ ``laser_geometry::LaserProjection::projectLaser``, tfbus's round then
+    C++'s (<= 2x); 10^6 points through ``transform_points`` and ``do_transform_cloud``
+    against bare numpy ``pts @ R.T + t`` (<= 1.3x), the sides' order reversed every other
+    round; medians of the per-round ratios, min..max beside them."""
+    why = bench_sensors.laser_cpp_missing()
+    if why is not None:
+        _not_run(rows, SENSOR_ROWS[:1], why)
+    else:
+        side = bench_sensors.LaserSide(LASER_BEAMS)
+        ours: list[dict[str, float]] = []
+        theirs: list[dict[str, float]] = []
+        with tempfile.TemporaryDirectory() as tmp:
+            exe = bench_sensors.build_laser_cpp(Path(tmp))
+            for _ in range(rounds):
+                ours.append(side.round(LASER_REPS))
+                theirs.append(bench_sensors.laser_cpp_round(exe, LASER_BEAMS, LASER_REPS))
+        for key, label, judged in (("project", SENSOR_ROWS[0], True),
+                                   ("transform", "  transform_laser_scan_to_point_cloud vs C++",
+                                    False)):  # fmt: skip
+            a = [x[key] for x in ours]
+            b = [x[key] for x in theirs]
+            ratios = [p / q for p, q in zip(a, b, strict=True)]
+            figures = (f"{statistics.median(a) * 1e6:.1f} vs {statistics.median(b) * 1e6:.1f} "
+                       f"us CPU = {_spread(ratios)}")  # fmt: skip
+            if judged:
+                rows.row(label, figures, statistics.median(ratios) <= LASER_TARGET,
+                         f"<= {LASER_TARGET:.1f}x C++")  # fmt: skip
+            else:
+                print(f"  info  {label:46} {figures}")
+    sides = bench_sensors.cloud_sides(CLOUD_POINTS)
+    names = list(sides)
+    cloud: list[dict[str, float]] = []
+    for r in range(rounds):
+        order = names if r % 2 == 0 else names[::-1]
+        cloud.append(bench_sensors.cloud_round({n: sides[n] for n in order}, CLOUD_REPS))
+    bare = [x[bench_sensors.BARE] for x in cloud]
+    for name, label in zip(names[1:], SENSOR_ROWS[1:], strict=True):
+        a = [x[name] for x in cloud]
+        ratios = [p / q for p, q in zip(a, bare, strict=True)]
+        rows.row(
+            label,
+            f"{statistics.median(a) * 1e3:.2f} vs {statistics.median(bare) * 1e3:.2f} ms CPU, "
+            f"{bench_sensors._faults(sides[name])} faults = {_spread(ratios)}",
+            statistics.median(ratios) <= CLOUD_TARGET,
+            f"<= {CLOUD_TARGET:.1f}x numpy",
+        )
+    faults = bench_sensors._faults(sides[bench_sensors.BARE])
+    print(f"  info  {'  bare numpy page faults a call':46} {faults} ({_load()})")
+
+
+ZENOH_RATES = (10, 50, 100, 1000)
+ZENOH_TARGET = 1.5
+ZENOH_SECONDS = 1.0
+"""Seconds of probes per rate and path (at least 20 probes a rate)."""
+ZENOH_HOGS = 4
+"""CPU hogs of the load rows (on 2 cores: a load of about 4 and more)."""
+ZENOH_ROWS = [f"Zenoh bus latency {rate} Hz vs raw zenoh-python" for rate in ZENOH_RATES]
+ZENOH_ROWS += ["Zenoh under load: /tf_static frames lost",
+               "Zenoh under load: /tf drops counted"]  # fmt: skip
+
+
+def zenoh_rows(rows: Rows, rounds: int) -> None:
+    """Zenoh: one-way latency through the bus (``send_transform`` -> ``Bus(ZenohTransport)``
+    -> an awaiting ``wait_for_transform``) against raw zenoh-python ``put`` -> callback,
+    same configuration, two processes on 127.0.0.1 (``bench_latency.receive``), the paths
+    alternated (raw, raw+loop, bus, then the reverse), ``rounds`` rounds; per rate the
+    median of the per-round ratios of medians (<= 1.5x), bus / raw+loop beside it (the
+    thread-to-loop hop is a floor outside tfbus). Then under load (``bench_zenoh.run``:
+    :data:`ZENOH_HOGS` CPU hogs, a flood of 100-transform ``/tf`` messages with ``/tf_static``
+    frames sent during it), ``rounds`` runs: no ``/tf_static`` frame lost, and every ``/tf``
+    message not received counted by the sender (``send_dropped``) or the receiver
+    (``lost``)."""
+    import bench_latency
+    import bench_zenoh
+
+    args = bench_latency.options(["--seconds", str(ZENOH_SECONDS),
+                                  "--rates", ",".join(map(str, ZENOH_RATES))])  # fmt: skip
+    paths = ["raw", "raw+loop", "bus"]
+    meds: list[dict[str, dict[int, float]]] = []
+    for r in range(rounds):
+        got: dict[str, dict[int, float]] = {}
+        for path in paths if r % 2 == 0 else paths[::-1]:
+            lat = bench_latency.receive(args, "batched", path)
+            got[path] = {rate: statistics.median(v) for rate, v in lat.items() if v}
+        meds.append(got)
+        print(f"  (Zenoh latency round {r + 1}/{rounds}, {_load()})", flush=True)
+    for rate, name in zip(ZENOH_RATES, ZENOH_ROWS, strict=False):
+        try:
+            bus = [m["bus"][rate] for m in meds]
+            raw = [m["raw"][rate] for m in meds]
+            hop = [m["raw+loop"][rate] for m in meds]
+        except KeyError:
+            rows.row(name, "not run: no probe received at this rate", False, "")
+            continue
+        ratios = [p / q for p, q in zip(bus, raw, strict=True)]
+        over_hop = [p / q for p, q in zip(bus, hop, strict=True)]
+        rows.row(
+            name,
+            f"{statistics.median(bus):.0f} vs {statistics.median(raw):.0f} us = "
+            f"{_spread(ratios)}; bus/raw+loop {_spread(over_hop)}",
+            statistics.median(ratios) <= ZENOH_TARGET,
+            f"<= {ZENOH_TARGET:.1f}x raw",
+        )
+    zargs = bench_zenoh.options(["--probes", "200", "--seconds", "3", "--statics", "50",
+                                 "--hogs", str(ZENOH_HOGS)])  # fmt: skip
+    runs = []
+    for _ in range(rounds):
+        runs.append(bench_zenoh.run(zargs))
+    held = [int(x["statics_held"]) for x in runs]
+    sent = [int(x["statics_sent"]) for x in runs]
+    rows.row(
+        ZENOH_ROWS[-2],
+        f"held {'/'.join(map(str, held))} of {'/'.join(map(str, sent))} ({ZENOH_HOGS} hogs)",
+        all(h == s > 0 for h, s in zip(held, sent, strict=True)),
+        "0 lost",
+    )
+    def each(key: str) -> str:
+        return "/".join(str(int(x[key])) for x in runs)
+
+    figures = (
+        f"dropped: sender {each('send_dropped')}, receiver {each('lost')}, neither "
+        f"{each('unaccounted')} of {'/'.join(str(int(x['sent'] // x['batch'])) for x in runs)}"
+    )
+    rows.row(
+        ZENOH_ROWS[-1],
+        figures,
+        all(x["unaccounted"] == 0 for x in runs),
+        "every drop counted at an end",
+    )
+    print(f"  info  {'  load at the end':46} {_load()}")
+
+
+DEMO_TARGET = 1.5
+DEMO_SECONDS = 10.0
+DEMO_ROW = "seed demo over ROS 1, CPU vs C++ tutorial pair"
+
+
+def demo_rows(rows: Rows, rounds: int) -> None:
+    """The seed demo over ROS 1 (``bench_demo_ros1.run_pair``): the C++ tutorial pair and
+    tfbus's demo pair on one roscore, alternated (the order reversed every other round),
+    each pair's CPU (both processes, ``/proc``) over 10 s; the median of the per-round
+    ratios (<= 1.5x)."""
+    import bench_demo_ros1
+    from ros1_peers import ros1_missing, start_master
+
+    why = ros1_missing(bench_demo_ros1.DEMO_PACKAGES)
+    if why is not None:
+        _not_run(rows, [DEMO_ROW], why)
+        return
+    shares: dict[str, list[float]] = {}
+    with tempfile.TemporaryDirectory(prefix="tfbus-bench-demo-") as tmp:
+        out = Path(tmp) / "bin"
+        bench_demo_ros1.build(out)
+        master = start_master(Path(tmp) / "home")
+        try:
+            sides = bench_demo_ros1.pairs(out, f"ros1:{master.uri}")
+            names = list(sides)
+            for r in range(rounds):
+                for name in names if r % 2 == 0 else names[::-1]:
+                    share = sum(bench_demo_ros1.run_pair(master, sides[name], DEMO_SECONDS))
+                    shares.setdefault(name, []).append(share)
+                print(f"  (demo round {r + 1}/{rounds}, {_load()})", flush=True)
+        finally:
+            master.stop()
+    cpp, ours = (shares[n] for n in names)
+    ratios = [p / max(q, 1e-9) for p, q in zip(ours, cpp, strict=True)]
+    rows.row(
+        DEMO_ROW,
+        f"{statistics.median(ours) * 100:.2f} vs {statistics.median(cpp) * 100:.2f} % of a "
+        f"core = {_spread(ratios)}",
+        statistics.median(ratios) <= DEMO_TARGET,
+        f"<= {DEMO_TARGET:.1f}x C++",
+    )
+
+
+GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo")
+ROS1_GROUPS = ("ros1", "ros1cpu", "demo")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=5, help="interleaved rounds (default 5)")
-    parser.add_argument("--no-ros1", action="store_true", help="skip the ROS 1 row")
-    parser.add_argument("--only", choices=("core", "cpp", "wakeup", "ros1"), action="append",
-                        help="run only these groups of rows (repeatable; default all)")
+    parser.add_argument("--no-ros1", action="store_true", help="skip the ROS 1 groups")
+    parser.add_argument("--only", type=_groups, action="append",
+                        help="run only these groups of rows (comma-separated, repeatable; "
+                             f"default all): {', '.join(GROUPS)}")  # fmt: skip
     args = parser.parse_args(argv)
     if args.rounds < 3:
         parser.error("--rounds must be at least 3 (a median of per-round ratios)")
-    groups = set(args.only or ("core", "cpp", "wakeup", "ros1"))
+    groups = {g for chosen in args.only for g in chosen} if args.only else set(GROUPS)
     if args.no_ros1:
-        groups.discard("ros1")
+        groups -= set(ROS1_GROUPS)
     load0 = os.getloadavg()[0]
     print(
         f"bench-check: tfbus vs tf2_py and C++ tf2, {args.rounds} interleaved rounds "
@@ -547,6 +834,14 @@ def main(argv: list[str] | None = None) -> int:
         wakeup_rows(rows, args.rounds)
     if "ros1" in groups:
         ros1_rows(rows, 3)
+    if "ros1cpu" in groups:
+        ros1cpu_rows(rows, 3)
+    if "sensors" in groups:
+        sensors_rows(rows, args.rounds)
+    if "zenoh" in groups:
+        zenoh_rows(rows, 3)
+    if "demo" in groups:
+        demo_rows(rows, 3)
     print(f"{rows.failed} row(s) failed (load {load0:.2f} -> {os.getloadavg()[0]:.2f})")
     return 1 if rows.failed else 0
 

@@ -66,6 +66,29 @@ def run_pair(master: Master, commands: list[list[str]], seconds: float) -> list[
             p.stop(signal.SIGINT, timeout=10.0)
 
 
+DEMO_PACKAGES = ("roscpp", "tf")
+"""What the tutorial's C++ pair builds against."""
+
+
+def build(out: Path) -> None:
+    """The tutorial's C++ pair (``peers/ros1/build.sh``) built into ``out``.
+
+    Raises:
+        subprocess.CalledProcessError: the build failed."""
+    subprocess.run(["bash", str(ROOT / "peers" / "ros1" / "build.sh"), str(out)],
+                   check=True, capture_output=True, timeout=600)  # fmt: skip
+
+
+def pairs(out: Path, uri: str) -> dict[str, list[list[str]]]:
+    """The two sides' commands (broadcaster, listener) on the master ``uri``
+    (``ros1:http://...``): the C++ pair built into ``out``, and tfbus's demo pair."""
+    return {
+        "C++ tutorial pair": [[str(out / "tf_broadcaster")], [str(out / "tf_listener")]],
+        "tfbus demo pair": [[*TFBUS, "demo", "broadcaster", "--bus", uri],
+                            [*TFBUS, "demo", "listener", "--bus", uri]],
+    }  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0] if __doc__ else "")
     parser.add_argument("--quick", action="store_true", help="rounds of 8 s instead of 20 s")
@@ -76,22 +99,17 @@ def main(argv: list[str] | None = None) -> None:
                              "side of each round, and print tfbus / that")  # fmt: skip
     args = parser.parse_args(argv)
     seconds = 8.0 if args.quick else 20.0
-    why = ros1_missing(("roscpp", "tf"))
+    why = ros1_missing(DEMO_PACKAGES)
     if why:
         print(f"seed demo over ROS 1: unavailable ({why})")
         return
     with tempfile.TemporaryDirectory(prefix="tfbus-bench-demo-") as tmp:
         out = Path(tmp) / "bin"
-        subprocess.run(["bash", str(ROOT / "peers" / "ros1" / "build.sh"), str(out)],
-                       check=True, capture_output=True, timeout=600)  # fmt: skip
+        build(out)
         master = start_master(Path(tmp) / "home")
         try:
             uri = f"ros1:{master.uri}"
-            sides = {
-                "C++ tutorial pair": [[str(out / "tf_broadcaster")], [str(out / "tf_listener")]],
-                "tfbus demo pair": [[*TFBUS, "demo", "broadcaster", "--bus", uri],
-                                    [*TFBUS, "demo", "listener", "--bus", uri]],
-            }  # fmt: skip
+            sides = pairs(out, uri)
             if args.baseline is not None:
                 tree = str(Path(args.baseline).resolve())
                 base = ["env", f"PYTHONPATH={tree}", sys.executable, "-m", "tfbus.cli"]

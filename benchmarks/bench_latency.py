@@ -416,7 +416,11 @@ def _free_endpoint() -> str:
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
-def main() -> None:
+def options(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line (``argv``, default ``sys.argv[1:]``) parsed, ``rate_list`` added.
+
+    Raises:
+        SystemExit: a malformed option or ``--zenoh-config`` value."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--role", default="receiver", choices=["receiver", "sender"])
     parser.add_argument("--path", default="", help="sender: raw or bus")
@@ -432,9 +436,26 @@ def main() -> None:
     parser.add_argument("--breakdown", action="store_true", help="time the bus path's stages")
     parser.add_argument("--zenoh-config", action="append", default=[], metavar="PATH=JSON",
                         help="a Zenoh config value for every path's both processes (repeatable)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     args.rate_list = [float(r) for r in args.rates.split(",")]
     _overrides(args)  # a malformed --zenoh-config ends the run before anything starts
+    return args
+
+
+def receive(args: argparse.Namespace, mode: str, path: str) -> dict[int, list[float]]:
+    """One run of ``path`` (``raw``, ``raw+loop`` or ``bus``) with ``mode``'s publishers
+    (``batched`` or ``express``): a sender child on a free 127.0.0.1 port, this process
+    receiving; the one-way latencies in microseconds by rate."""
+    args.express = mode == "express"
+    endpoint = _free_endpoint()
+    if path == "bus":
+        got: dict[int, list[float]] = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
+        return got
+    return raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
+
+
+def main() -> None:
+    args = options()
     if args.role == "sender":
         if args.path == "raw":
             raw_sender(args)
@@ -451,13 +472,8 @@ def main() -> None:
     results: dict[tuple[str, str], dict[int, list[float]]] = {}
     for _ in range(args.rounds):  # paths alternate: each sees the same spells of load
         for mode in modes:
-            args.express = mode == "express"
             for path in paths:
-                endpoint = _free_endpoint()
-                if path == "bus":
-                    got = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
-                else:
-                    got = raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
+                got = receive(args, mode, path)
                 pooled = results.setdefault((mode, path), {})
                 for rate, lat in got.items():
                     pooled.setdefault(rate, []).extend(lat)

@@ -38,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -237,70 +238,90 @@ def _repeat(reps: int, fn: Any, *args: Any, **kwargs: Any) -> None:
         fn(*args, **kwargs)
 
 
+def laser_cpp_missing() -> str | None:
+    """Why the C++ laser_geometry cannot be built here, or None when it can."""
+    if shutil.which("g++") is None:
+        return "g++ not found"
+    if subprocess.run(["pkg-config", "--exists", "laser_geometry"], check=False).returncode:
+        return "laser_geometry not installed (bash scripts/install/install_laser_geometry.sh)"
+    return None
+
+
+def build_laser_cpp(out: Path) -> Path:
+    """``peers/debian/laser_geometry_bench.cpp`` built with g++ into ``out``; its path.
+
+    Raises:
+        subprocess.CalledProcessError: pkg-config or g++ failed."""
+    exe = out / "laser_geometry_bench"
+    flags = subprocess.run(
+        ["pkg-config", "--cflags", "--libs", "laser_geometry"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    subprocess.run(
+        ["g++", "-O2", "-o", str(exe),
+         str(HERE.parent / "peers" / "debian" / "laser_geometry_bench.cpp"), *flags],
+        check=True,
+    )  # fmt: skip
+    return exe
+
+
+class LaserSide:
+    """A ``beams``-beam scan, the odom tree it is transformed through, and the projector."""
+
+    def __init__(self, beams: int) -> None:
+        self.beams = beams
+        self.core = _laser_core()
+        self.scan = _scan(beams)
+        self.proj = LaserProjection()
+
+    def round(self, reps: int) -> dict[str, float]:
+        """tfbus's CPU seconds per scan (best of 5 runs of ``reps`` calls):
+        ``project`` (``project_laser``), ``transform`` (laser_geometry's interpolation)
+        and ``per_beam`` (a lookup per beam)."""
+        cpu = time.process_time
+        proj, scan, core = self.proj, self.scan, self.core
+        transform = proj.transform_laser_scan_to_point_cloud
+        return {
+            "project": best(lambda: _repeat(reps, proj.project_laser, scan), 5, clock=cpu) / reps,
+            "transform": best(
+                lambda: _repeat(reps, transform, "odom", scan, core), 5, clock=cpu
+            ) / reps,
+            "per_beam": best(
+                lambda: _repeat(reps, transform, "odom", scan, core, interpolation="per_beam"),
+                5,
+                clock=cpu,
+            ) / reps,
+        }  # fmt: skip
+
+
+def laser_cpp_round(exe: Path, beams: int, reps: int) -> dict[str, float]:
+    """The C++ laser_geometry's CPU seconds per scan: ``project`` (``projectLaser``) and
+    ``transform`` (``transformLaserScanToPointCloud``), best of its own runs."""
+    out = subprocess.run(
+        [str(exe)], input=f"{beams} {reps}", capture_output=True, text=True, check=True
+    ).stdout.split()
+    figures = dict(zip(out[::2], out[1::2], strict=True))
+    return {
+        "project": float(figures["project_ns"]) / 1e9,
+        "transform": float(figures["transform_ns"]) / 1e9,
+    }
+
+
 def bench_laser(beams: int, reps: int) -> None:
     print(f"\nlaser: a {beams}-beam scan projected / transformed into odom (CPU time)")
-    core = _laser_core()
-    scan = _scan(beams)
-    proj = LaserProjection()
-    have_cpp = (
-        shutil.which("g++") is not None
-        and not subprocess.run(["pkg-config", "--exists", "laser_geometry"], check=False).returncode
-    )
+    side = LaserSide(beams)
+    have_cpp = laser_cpp_missing() is None
     p = t = pb = cp = ct = math.inf
     with tempfile.TemporaryDirectory() as tmp:
-        exe = Path(tmp) / "bench"
-        if have_cpp:
-            flags = subprocess.run(
-                ["pkg-config", "--cflags", "--libs", "laser_geometry"],
-                capture_output=True,
-                text=True,
-                check=True,
-            ).stdout.split()
-            subprocess.run(
-                ["g++", "-O2", "-o", str(exe),
-                 str(HERE.parent / "peers" / "debian" / "laser_geometry_bench.cpp"), *flags],
-                check=True,
-            )
+        exe = build_laser_cpp(Path(tmp)) if have_cpp else None
         for _ in range(ROUNDS):  # alternate the sides; keep each one's best round
-            cpu = time.process_time
-            p = min(
-                p,
-                best(lambda: _repeat(reps, proj.project_laser, scan), 5, clock=cpu) / reps,
-            )
-            t = min(
-                t,
-                best(
-                    lambda: _repeat(
-                        reps, proj.transform_laser_scan_to_point_cloud, "odom", scan, core
-                    ),
-                    5,
-                    clock=cpu,
-                )
-                / reps,
-            )
-            pb = min(
-                pb,
-                best(
-                    lambda: _repeat(
-                        reps,
-                        proj.transform_laser_scan_to_point_cloud,
-                        "odom",
-                        scan,
-                        core,
-                        interpolation="per_beam",
-                    ),
-                    5,
-                    clock=cpu,
-                )
-                / reps,
-            )
-            if have_cpp:
-                out = subprocess.run(
-                    [str(exe)], input=f"{beams} {reps}", capture_output=True, text=True, check=True
-                ).stdout.split()
-                figures = dict(zip(out[::2], out[1::2], strict=True))
-                cp = min(cp, float(figures["project_ns"]) / 1e9)
-                ct = min(ct, float(figures["transform_ns"]) / 1e9)  # fmt: skip
+            ours = side.round(reps)
+            p, t, pb = min(p, ours["project"]), min(t, ours["transform"]), min(pb, ours["per_beam"])
+            if exe is not None:
+                theirs = laser_cpp_round(exe, beams, reps)
+                cp, ct = min(cp, theirs["project"]), min(ct, theirs["transform"])
     print(f"  tfbus project_laser                      {p * 1e6:8.1f} µs")
     print(f"  tfbus transform (laser_geometry interp.) {t * 1e6:8.1f} µs")
     print(f"  tfbus transform (per_beam lookups)       {pb * 1e6:8.1f} µs")
@@ -321,12 +342,18 @@ def _faults(fn: Any) -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
 
 
-def bench_cloud(n: int, reps: int) -> None:
+BARE = "bare numpy pts @ R.T + t"
+"""The point-cloud rows' reference: bare numpy on float64 ``(N, 3)`` points."""
+
+
+def cloud_sides(n: int) -> dict[str, Callable[[], object]]:
+    """The point-cloud sides on ``n`` points through one transform: :data:`BARE`,
+    ``transform_points`` (float64 ``(n, 3)``) and ``do_transform_cloud (float32)`` (a
+    ``PointCloud2``), each a call of no arguments."""
     from tfbus.convert import do_transform_cloud
     from tfbus.geometry import to_matrix, transform_points
     from tfbus.sensor_msgs import PointCloud2, PointField
 
-    print(f"\npoint cloud: {n} points through one transform (vs bare numpy pts @ R.T + t)")
     rng = np.random.default_rng(5)
     pts = rng.standard_normal((n, 3)) * 10.0
     q = np.array([0.1, 0.2, 0.3, 0.9])
@@ -340,20 +367,35 @@ def bench_cloud(n: int, reps: int) -> None:
         Header(Time(5), "odom"), "base_laser",
         Transform(Vector3(*t.tolist()), Quaternion(*q.tolist())),
     )  # fmt: skip
-    sides = {
-        "bare numpy pts @ R.T + t": lambda: pts @ rot.T + t,
+    return {
+        BARE: lambda: pts @ rot.T + t,
         "transform_points": lambda: transform_points(tf, pts),
         "do_transform_cloud (float32)": lambda: do_transform_cloud(cloud, tf),
     }
+
+
+def cloud_round(sides: dict[str, Callable[[], object]], reps: int) -> dict[str, float]:
+    """One round of every side, one after the other: each one's CPU seconds per call
+    (best of 3 runs of ``reps`` calls; numpy runs on one thread here)."""
+    times: dict[str, float] = {}
+    for name, fn in sides.items():
+        times[name] = math.inf
+        for _ in range(3):
+            t0 = time.process_time()
+            for _ in range(reps):
+                fn()
+            times[name] = min(times[name], (time.process_time() - t0) / reps)
+    return times
+
+
+def bench_cloud(n: int, reps: int) -> None:
+    print(f"\npoint cloud: {n} points through one transform (vs bare numpy pts @ R.T + t)")
+    sides = cloud_sides(n)
     times = {name: math.inf for name in sides}
     for _ in range(ROUNDS):  # alternate the sides; keep each one's best round (CPU time)
-        for name, fn in sides.items():
-            for _ in range(3):
-                t0 = time.process_time()
-                for _ in range(reps):
-                    fn()
-                times[name] = min(times[name], (time.process_time() - t0) / reps)
-    bare = times["bare numpy pts @ R.T + t"]
+        for name, v in cloud_round(sides, reps).items():
+            times[name] = min(times[name], v)
+    bare = times[BARE]
     for name, fn in sides.items():
         ratio = f"   ratio {times[name] / bare:.2f}x (target <= 1.3x)"
         if name.startswith("bare"):

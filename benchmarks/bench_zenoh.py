@@ -13,8 +13,15 @@ and a child it starts (the sender: Bus + TransformBroadcaster).
    valid TFMessages and for hostile payloads refused (1 000-deep nesting,
    stamps beyond int64, a flat 16 KB list walked by the nesting bound).
 
+Under load (``--hogs N``: N busy-looping processes this benchmark starts before the run
+and ends by PID after it), and with ``--statics N`` (N ``/tf_static`` transforms sent by a
+``StaticTransformBroadcaster`` during the flood, one frame each), the throughput line also
+gives ``/tf`` messages dropped as counted at each end (the sender's ``send_dropped``, the
+receiver's sequence-number ``lost``), the messages neither end received and the
+``/tf_static`` frames the receiver's Buffer holds of those sent.
+
 Usage: ``python benchmarks/bench_zenoh.py [--probes 2000] [--batch 100] [--seconds 3]
-[--wire-only]``.
+[--statics 0] [--hogs 0] [--wire-only]``.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ import subprocess
 import sys
 import time
 import timeit
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import anyio
@@ -37,7 +44,7 @@ import anyio.lowlevel
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tfbus.broadcaster import TransformBroadcaster
+from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
 from tfbus.codecs.native import WireCodec, WireError
@@ -66,6 +73,7 @@ async def sender(args: argparse.Namespace) -> None:
                 await anyio.sleep(0.01)
         await anyio.sleep(0.5)
         tf = TransformBroadcaster(bus)
+        static = StaticTransformBroadcaster(bus)
         for i in range(1, args.probes + 1):
             await tf.send_transform(_ts("probe", i, float(time.monotonic_ns())))
             await anyio.sleep(0.001)
@@ -74,17 +82,29 @@ async def sender(args: argparse.Namespace) -> None:
         stamp = 0
         end = time.monotonic() + args.seconds
         sent = 0
+        statics = 0
         while time.monotonic() < end:
             for _ in range(10):
                 stamp += 1
                 tf.send_transform_nowait([_ts(c, stamp, 1.0) for c in children])
                 sent += args.batch
+            if statics < args.statics:
+                await static.send_transform(_ts(f"static{statics}", 0, 1.0))
+                statics += 1
             await anyio.lowlevel.checkpoint()
-        bus.publish_nowait("/bench/done", sent)
+        await anyio.sleep(0.5)  # the flood's tail, before the totals
+        bus.publish_nowait("/bench/done", [sent, transport.statistics().send_dropped, statics])
         await anyio.sleep(1.0)
 
 
-async def receiver(args: argparse.Namespace, endpoint: str) -> None:
+async def receiver(args: argparse.Namespace, endpoint: str) -> dict[str, float]:
+    """The receiving side (this process): prints the latency and throughput lines and
+    returns their figures: ``latency_median_us``, ``timeouts``, ``transforms_per_s``,
+    ``sent``/``received`` (transforms; ``received`` counts the ``/tf_static`` ones too),
+    ``received_msgs`` (``/tf`` messages), ``batch``, ``send_dropped`` (counted
+    by the sender), ``lost`` (counted by this receiver, during the flood),
+    ``unaccounted`` (``/tf`` messages neither end counted),
+    ``statics_sent``/``statics_held``."""
     transport = ZenohTransport(listen=endpoint, name="bench-receiver")
     buffer = Buffer(cache_time=3600.0)
     async with Bus(transport=transport, queue_size=10_000) as bus:
@@ -105,6 +125,8 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> None:
                     str(args.batch),
                     "--seconds",
                     str(args.seconds),
+                    "--statics",
+                    str(args.statics),
                 ]
                 + (["--express"] if args.express else [])
                 + ["--congestion-control", args.congestion_control],
@@ -136,6 +158,7 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> None:
                     f"p99 {lat[int(len(lat) * 0.99) - 1]:.1f} us   max {lat[-1]:.1f} us"
                 )
                 # throughput
+                lost0 = transport.statistics().lost
                 t_first = None
                 stored0 = listener.statistics().stored
                 last_stored, t_last = stored0, time.perf_counter()
@@ -157,12 +180,42 @@ async def receiver(args: argparse.Namespace, endpoint: str) -> None:
                 got = last_stored - stored0
                 span = t_last - (t_first or t_last)
                 stats = transport.statistics()
+                sent_tfs, send_dropped, statics = sent
+                held = sum(
+                    buffer.can_transform("world", f"static{k}", Time(0)) is True
+                    for k in range(statics)
+                )
+                lost = stats.lost - lost0
+                # Every /tf message of the flood holds frame f0 once, at its own stamp.
+                tf_msgs = next(f.samples for f in buffer.frame_info() if f.child == "f0")
+                unaccounted = sent_tfs // args.batch - tf_msgs - lost - send_dropped
                 print(
                     f"throughput, batches of {args.batch} transforms into the Buffer: "
-                    f"{got / span / 1e6:.3f} M transforms/s "
-                    f"({got} of {sent} sent in {span:.2f} s; lost {stats.lost} messages, "
+                    f"{got / max(span, 1e-9) / 1e6:.3f} M transforms/s "
+                    f"({got} of {sent_tfs} sent in {span:.2f} s; lost {stats.lost} messages, "
                     f"{stats.batches} wake-ups for {stats.received} payloads)"
                 )
+                if args.statics or args.hogs:
+                    print(
+                        f"  /tf messages dropped: {send_dropped} counted by the sender, "
+                        f"{lost} by the receiver, {unaccounted} by neither; /tf_static: "
+                        f"{held} of {statics} frames held ({args.hogs} CPU hogs, load "
+                        f"{os.getloadavg()[0]:.2f})"
+                    )
+                return {
+                    "latency_median_us": statistics.median(lat),
+                    "timeouts": timeouts,
+                    "transforms_per_s": got / max(span, 1e-9),
+                    "sent": sent_tfs,
+                    "received": got,
+                    "received_msgs": tf_msgs,
+                    "batch": args.batch,
+                    "send_dropped": send_dropped,
+                    "lost": lost,
+                    "unaccounted": unaccounted,
+                    "statics_sent": statics,
+                    "statics_held": held,
+                }
             finally:
                 child.kill()
                 child.wait(timeout=10)
@@ -201,7 +254,42 @@ def wire_costs() -> None:
         print(f"  {label:52s} {len(payload):6d} B  {us:9.2f} us")
 
 
-def main() -> None:
+@contextlib.contextmanager
+def cpu_hogs(n: int) -> Iterator[list[int]]:
+    """``n`` busy-looping Python processes for the duration of the block (their PIDs
+    given); each is killed by its PID and waited for when the block ends."""
+    procs: list[subprocess.Popen[bytes]] = []
+    try:
+        for _ in range(n):
+            procs.append(subprocess.Popen([sys.executable, "-c", "while True: pass"]))
+        yield [p.pid for p in procs]
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait(timeout=10)
+
+
+def run(args: argparse.Namespace) -> dict[str, float]:
+    """The latency and throughput run of ``args`` (:func:`options`) on a free 127.0.0.1
+    port, under ``args.hogs`` CPU hogs: prints its lines, returns :func:`receiver`'s
+    figures."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    print(
+        f"bench_zenoh: backend={args.backend} express={args.express} "
+        f"congestion_control={args.congestion_control} (2 processes, "
+        f"127.0.0.1:{port})"
+    )
+    with cpu_hogs(args.hogs):
+        out: dict[str, float] = anyio.run(
+            receiver, args, f"tcp/127.0.0.1:{port}", backend=args.backend
+        )
+    return out
+
+
+def options(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line (``argv``, default ``sys.argv[1:]``) parsed."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--role", default="receiver", choices=["receiver", "sender"])
     parser.add_argument("--endpoint", default="")
@@ -211,23 +299,23 @@ def main() -> None:
     parser.add_argument("--express", action="store_true")
     parser.add_argument("--congestion-control", default="drop", choices=["drop", "block"])
     parser.add_argument("--backend", default="asyncio")
+    parser.add_argument("--statics", type=int, default=0,
+                        help="/tf_static frames sent during the flood")
+    parser.add_argument("--hogs", type=int, default=0,
+                        help="busy-looping processes started for the run (the load)")
     parser.add_argument("--wire-only", action="store_true")
-    args = parser.parse_args()
+    return parser.parse_args(argv)
+
+
+def main() -> None:
+    args = options()
     if args.role == "sender":
         anyio.run(sender, args, backend=args.backend)
         return
     wire_costs()
     if args.wire_only:
         return
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    print(
-        f"bench_zenoh: backend={args.backend} express={args.express} "
-        f"congestion_control={args.congestion_control} (2 processes, "
-        f"127.0.0.1:{port})"
-    )
-    anyio.run(receiver, args, f"tcp/127.0.0.1:{port}", backend=args.backend)
+    run(args)
 
 
 if __name__ == "__main__":

@@ -105,3 +105,47 @@ def test_bench_latency_refuses_a_zenoh_config_value_that_is_not_path_equals_json
     res = _bench_latency("--paths", "raw", "--rates", "50", "--seconds", "0.4",
                          "--zenoh-config", item)
     assert res.returncode == 1 and error in res.stderr
+
+
+def test_bench_check_sensors_group_names_its_rows_and_fails_a_row_whose_peer_is_missing(
+    tmp_path: Path,
+) -> None:
+    # No g++ on PATH (an empty directory): the C++ laser_geometry cannot be built, so its
+    # row is "not run" and FAILs; the point-cloud rows (numpy, always here) still run.
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_check.py"), "--only", "sensors",
+         "--rounds", "3"],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT), "PATH": str(tmp_path)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )  # fmt: skip
+    assert res.returncode == 1, res.stdout + res.stderr[-3000:]
+    lines = res.stdout.splitlines()
+    laser = [ln for ln in lines if "project_laser 720 beams vs C++ projectLaser" in ln]
+    assert len(laser) == 1 and laser[0].split()[0] == "FAIL", res.stdout
+    assert "not run: g++ not found" in laser[0]
+    for name in ("transform_points 10^6 points vs bare numpy",
+                 "do_transform_cloud 10^6 points vs bare numpy"):  # fmt: skip
+        row = [ln for ln in lines if name in ln]
+        assert len(row) == 1 and row[0].split()[0] in ("PASS", "FAIL"), res.stdout
+        assert "not run" not in row[0] and "target <= 1.3x numpy" in row[0]
+    assert not any("Zenoh" in ln or "ROS 1" in ln or "tf2_py" in ln.split("target")[0]
+                   for ln in lines[1:]), res.stdout  # fmt: skip
+
+
+def test_bench_check_refuses_an_unknown_group_and_names_the_groups() -> None:
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_check.py"), "--only", "sensors,laser"],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert res.returncode == 2
+    assert "unknown group laser" in res.stderr
+    assert "ros1cpu, sensors, zenoh, demo" in res.stderr

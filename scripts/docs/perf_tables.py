@@ -55,7 +55,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "ros2": ([], ["--lat-count", "100", "--flood-seconds", "2"], 1800),
     "ros1": (["--repeat", "3"], ["--quick", "--repeat", "3"], 1800),
     "sensors": ([], ["--quick"], 1800),
-    "check": ([], ["--rounds", "3", "--no-ros1"], 1800),
+    "check": ([], ["--rounds", "3", "--no-ros1"], 2400),
     "fleet": ([], ["--quick"], 1800),
     "compat": ([], [], 600),
     "robot_state": ([], ["--quick"], 900),
