@@ -683,9 +683,9 @@ class CoreBase:
         is_static: bool = False,
     ) -> BatchResult:
         """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
-        listener uses. Per transform it costs no more than a loop of
-        :meth:`set_transform` from two transforms a call on (the compiled twin; this
-        one is only as fast as Python); one transform a call pays the
+        listener uses. With the compiled twin it is cheaper per transform than a loop of
+        :meth:`set_transform` from about five transforms a call on (this twin is only as
+        fast as Python); one transform a call pays for the
         :class:`~tfbus.core.results.BatchResult` beside the insert.
 
         Each item is handled exactly as :meth:`set_transform` (or
