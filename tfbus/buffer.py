@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from functools import partial
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar, overload
 
@@ -31,7 +31,7 @@ import numpy.typing as npt
 from tfbus._aio import Awaiting, Wakeup, coroutine_method, running_asyncio_loop
 from tfbus.clock import Clock, JumpCallback, SystemClock, timeout_ns
 from tfbus.convert import TransformRegistration
-from tfbus.core import BatchResult, BufferCore, SetResult
+from tfbus.core import BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
 from tfbus.core.buffer_core import OnRepeat
 from tfbus.core.policy import (
@@ -46,7 +46,6 @@ from tfbus.core.policy import (
     Window,
     policy_args,
 )
-from tfbus.core.results import TouchedFrames
 from tfbus.core.velocity import check_velocity_arguments
 from tfbus.errors import BufferClosedException, TimeoutException, TransformException
 from tfbus.messages import Header, TransformStamped, Vector3, VelocityStamped
@@ -219,8 +218,8 @@ class Buffer(BufferCore):
         # The core (sans-I/O) limits its refusal log by count; with a clock, by time too.
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
-        # set_transform and set_transform_static (the core's own methods) settle these
-        # waits in the core, and give the rest to _recheck_rest.
+        # set_transform, set_transform_static and set_transforms (the core's own
+        # methods) settle these waits in the core, and give the rest to _recheck_rest.
         self._follow_waits(self._index)
         self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
         self._closed = False
@@ -279,25 +278,6 @@ class Buffer(BufferCore):
         return _core_lookup_transform(self, target_frame, source_frame, time)
 
     # ------------------------------------------------------------------ notification
-
-    def set_transforms(
-        self,
-        transforms: Iterable[TransformStamped],
-        authority: str = "default",
-        is_static: bool = False,
-    ) -> BatchResult:
-        """:meth:`BufferCore.set_transforms`, then the waits that depend on the frames
-        it touched are re-checked, once per batch."""
-        r = self._store(transforms, authority, is_static)  # BufferCore.set_transforms
-        result = r if isinstance(r, BatchResult) else self._batch_result(r, authority)
-        if self._index:
-            touched = result.touched
-            # The ids recorded by the insert (repeats allowed; no set built for them).
-            names = touched._ids if type(touched) is TouchedFrames else touched
-            rest = self._settle(self._index, names)
-            if rest is not None:
-                self._recheck_rest(rest, result.relinked)
-        return result
 
     def insert_transform(
         self, transform: TransformStamped, authority: str = "default", is_static: bool = False

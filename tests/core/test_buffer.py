@@ -565,3 +565,51 @@ async def test_an_insert_settles_a_wait_with_no_python_frame_of_the_buffer(stati
         assert not result
     assert result == [buf.lookup_transform("map", "base", T0)]
     assert result[0].transform.translation.x == pytest.approx(3.0)
+
+
+async def test_a_batch_settles_a_wait_with_no_python_frame_of_the_buffer() -> None:
+    """set_transforms is the core's own method, as set_transform is: it settles the
+    wait its batch answers (result, index, wake-up) before it returns, once per batch,
+    with no Python frame of Buffer or BufferCore (it had ``Buffer.set_transforms`` and
+    ``BufferCore.set_transforms``). Not counted: frames of the pure-Python core and
+    trio's wake-up itself (``Wakeup.wake``)."""
+
+    tfbus_dir = str(Path(tfbus.__file__).parent)
+    # The pure-Python core's frames: its own module and the TouchedFrames it builds.
+    twin = (str(Path(tfbus_dir, "core", "_py")), str(Path(tfbus_dir, "core", "results.py")))
+    wakeup = str(Path(tfbus.__file__).parent / "_aio.py")
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("map", "odom", T0, x=1.0))
+    result: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        result.append(await buf.lookup_transform_async("map", "base", T0))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        await settle()
+        assert buf.pending_waits == 1
+        entered: list[str] = []
+
+        def profile(frame: Any, event: str, arg: Any) -> None:
+            name = frame.f_code.co_filename
+            if (
+                event == "call"
+                and name.startswith(tfbus_dir)
+                and (tfbus.core.COMPILED or not name.startswith(twin))
+                and name != wakeup
+            ):
+                entered.append(frame.f_code.co_qualname)
+
+        batch = [tf("odom", "base", T0, x=2.0), tf("base", "laser", T0, x=0.5)]
+        sys.setprofile(profile)
+        try:
+            report = buf.set_transforms(batch)
+        finally:
+            sys.setprofile(None)
+        assert entered == []
+        assert (report.stored, set(report.touched)) == (2, {"odom", "base", "laser"})
+        assert buf.pending_waits == 0  # settled inside the insert, before any task ran
+        assert not result
+    assert result == [buf.lookup_transform("map", "base", T0)]
+    assert result[0].transform.translation.x == pytest.approx(3.0)

@@ -206,6 +206,81 @@ def test_a_dropped_lookup_result_is_recycled_and_a_kept_one_never_changes() -> N
     assert last.transform.translation.x == pytest.approx(1.0 + 3000 * 7_919e-9, rel=1e-12)
 
 
+@pytest.mark.skipif(not COMPILED, reason="the compiled core's result recycling")
+def test_a_dropped_batch_result_is_filled_in_again_and_a_kept_one_never_changes() -> None:
+    """set_transforms keeps the last BatchResult it built; when the caller dropped it
+    (with its TouchedFrames and errors list), the next batch fills it in again instead
+    of allocating a result, a TouchedFrames and two lists (tracemalloc's peak stays
+    put); a result the caller keeps, or its ``touched`` or ``errors``, is never
+    changed by a later batch."""
+    import tracemalloc
+
+    core = BufferCore()
+    # Static links: re-storing one writes its values in place (no cache growth).
+    batches = [[ts(f"c{i}", sec=1.0, x=float(k + i)) for i in range(4)] for k in range(400)]
+    insert = core.set_transforms
+    warm, measured = batches[:100], batches[100:]
+    for batch in warm:
+        insert(batch, "au", True)
+    tracemalloc.start()
+    try:
+        before, _ = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        for batch in measured:
+            insert(batch, "au", True)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak - before < 100  # a new result, frames and lists take ~300 bytes a batch
+    assert core.lookup_transform("base", "c3", Time(0)).transform.translation.x == 402.0
+
+    kept = insert(batches[0], "au", True)
+    touched = insert([ts("d", sec=2.0)], "au", True).touched
+    errors = insert([ts("e", sec=2.0)], "au", True).errors
+    later = [insert([ts("f", sec=3.0), ts("g", sec=3.0)], "au", True) for _ in range(3)]
+    assert kept == (4, 0, [], {"c0", "c1", "c2", "c3", "base"}, False)
+    assert sorted(kept.touched) == ["base", "c0", "c1", "c2", "c3"]
+    assert sorted(touched) == ["base", "d"] and errors == []
+    errors.append((0, ValueError("kept by the caller")))
+    assert insert([ts("h", sec=3.0)], "au", True) == (1, 0, [], {"h", "base"}, True)
+    assert later[0] == (2, 0, [], {"f", "g", "base"}, True)  # two new links
+    assert later[1] == later[2] == (2, 0, [], {"f", "g", "base"}, False)
+    assert later[1] is not later[0] and later[2] is not later[1]
+    assert len(errors) == 1 and sorted(touched) == ["base", "d"]
+
+
+def test_set_transforms_enters_no_python_frame_outside_the_core() -> None:
+    """BufferCore.set_transforms is the core's own method, as set_transform is: a batch
+    that stores reaches the inserts with no Python frame of tfbus in between (the
+    pure-Python core's own frames aside); it had one, ``BufferCore.set_transforms``."""
+    import sys
+    from pathlib import Path
+
+    import tfbus
+
+    tfbus_dir = str(Path(tfbus.__file__).parent)
+    # The pure-Python core's frames: its own module and the TouchedFrames it builds.
+    twin = (str(Path(tfbus_dir, "core", "_py")), str(Path(tfbus_dir, "core", "results.py")))
+    core = BufferCore()
+    entered: list[str] = []
+
+    def profile(frame: Any, event: str, arg: Any) -> None:
+        name = frame.f_code.co_filename
+        own = name.startswith(tfbus_dir) and (COMPILED or not name.startswith(twin))
+        if event == "call" and own:
+            entered.append(frame.f_code.co_qualname)
+
+    batch = [ts("a", sec=2.0), ts("b", parent="a", sec=2.0)]
+    sys.setprofile(profile)
+    try:
+        result = core.set_transforms(batch, "au")
+    finally:
+        sys.setprofile(None)
+    assert entered == []
+    assert result == (2, 0, [], {"a", "b", "base"}, True)
+    assert core.lookup_transform("base", "b", Time.from_sec(2.0)).transform.translation.x == 2.0
+
+
 @pytest.mark.parametrize("kind", [BufferCore, Buffer])
 def test_the_parent_of_a_frame_is_reached_by_one_public_name_get_parent(kind: type) -> None:
     """tf2's ``_getParent`` is ``get_parent(frame_id, time=Time(0))``; the core's

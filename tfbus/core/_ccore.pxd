@@ -37,6 +37,7 @@ cdef class CoreBase:
     cdef int64_t _expire_due
     cdef long long _frames_expired
     cdef dict _waits
+    cdef object _batch
     cdef object _register(self, str frame_id)
     cdef int _name_parent(self, object cid, object pid) except -1
     cdef int _unregister(self, object fid) except -1
@@ -45,6 +46,7 @@ cdef class CoreBase:
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
     cdef object _problem(self, int code)
     cdef object _csettle(self, dict index, object names)
+    cdef object _cstore(self, object transforms, str authority, bint is_static)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1

@@ -62,6 +62,12 @@ class CoreBase:
     def _store_one(
         self, ts: Any, authority: str, is_static: bool
     ) -> Literal[True] | tuple[int, str, int] | tuple[int, str, str, _Tf7]: ...
+    def set_transforms(
+        self,
+        transforms: Iterable[TransformStamped],
+        authority: str = "default",
+        is_static: bool = False,
+    ) -> BatchResult: ...
     def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool: ...
     def set_transform_static(
         self, transform: TransformStamped, authority: str = "default"

@@ -264,7 +264,8 @@ class CoreBase:
     ``set_transform``'s (and ``set_transform_static``'s) for a transform not stored:
     ``_not_stored(problem, authority)``, which logs the refusal or raises, and, with
     waits to settle (``_follow_waits``), for the waits the insert did not settle:
-    ``_recheck_rest(rest, relinked)``.
+    ``_recheck_rest(rest, relinked)``; ``set_transforms``' for a batch with a refusal or
+    an invalid item: ``_batch_result(r, authority)`` (log lines, tf2's exceptions).
 
     Internals (for white-box tests, never written from outside): ``_frame_ids`` (frame
     id → int id; 0 is tf2's ``NO_PARENT``), ``_frame_names`` (int id → frame id),
@@ -344,6 +345,8 @@ class CoreBase:
     _not_stored: Callable[[tuple[Any, ...], str], object]
     # The subclass's recheck of the waits ``_settle`` left (with ``_waits`` only).
     _recheck_rest: Callable[[list[tuple[Any, tuple[int, ...] | None]], bool], None]
+    # BufferCore's: the BatchResult of a batch ``_store`` refused or rejected some of.
+    _batch_result: Callable[[Any, str], BatchResult]
 
     def __new__(cls: type[_Core], *args: Any, **kwargs: Any) -> _Core:
         self = super().__new__(cls)
@@ -672,6 +675,55 @@ class CoreBase:
         if not (errors or refusals):
             return BatchResult(stored, 0, [], touched, relinked)
         return stored, errors, touched, relinked, refusals
+
+    def set_transforms(
+        self,
+        transforms: Iterable[TransformStamped],
+        authority: str = "default",
+        is_static: bool = False,
+    ) -> BatchResult:
+        """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
+        listener uses. With the compiled twin it is cheaper per transform than a loop of
+        :meth:`set_transform` from about five transforms a call on (this twin is only as
+        fast as Python); one transform a call pays for the
+        :class:`~tfbus.core.results.BatchResult` beside the insert.
+
+        Each item is handled exactly as :meth:`set_transform` (or
+        :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
+        malformed item is reported in ``errors`` instead of raising, and never stops the
+        items after it. Refusals (TF_OLD_DATA, TF_REPEATED_DATA) are logged, the first
+        of each kind then one per 1000.
+
+        Args:
+            transforms: an iterable of :class:`~tfbus.messages.TransformStamped`.
+            authority: who sent them (shown by ``all_frames_as_yaml``).
+            is_static: store them as :meth:`set_transform_static` does.
+
+        Returns:
+            A :class:`~tfbus.core.results.BatchResult`: counts, errors, and the frames it
+            touched (what a subclass needs to react to the insert).
+
+        Raises:
+            TypeError: ``authority`` is not a str.
+
+        The core's method (``BufferCore`` and ``Buffer`` inherit it, as from the compiled
+        twin). A batch with a refusal or an invalid item gets its result from the
+        subclass's ``_batch_result`` (log lines, tf2's exceptions). With waits to settle
+        (``_follow_waits``), the waits on the ids the batch touched are settled here,
+        once per batch (``_settle``), and what is left goes to the subclass's
+        ``_recheck_rest(rest, relinked)``.
+        """
+        r = self._store(transforms, authority, is_static)
+        result = r if type(r) is BatchResult else self._batch_result(r, authority)
+        waits = self._waits
+        if waits:
+            touched = result.touched
+            # The ids recorded by the insert (repeats allowed; no set built for them).
+            names = touched._ids if type(touched) is TouchedFrames else touched
+            rest = self._settle(waits, names)
+            if rest is not None:
+                self._recheck_rest(rest, result.relinked)
+        return result
 
     def set_transform(self, transform: TransformStamped, authority: str = "default") -> bool:
         """Store a dynamic transform (tf2 ``BufferCore::setTransform``).

@@ -343,7 +343,7 @@ class BufferCore(CoreBase):
         return Duration.from_ns(self.cache_time_ns)
 
     if TYPE_CHECKING:
-        # At run time these two are the core's own methods (``CoreBase``, compiled or
+        # At run time these three are the core's own methods (``CoreBase``, compiled or
         # pure), inherited: the caller reaches the insert with no Python frame of this
         # class in between, and a transform not stored comes back through
         # ``_not_stored``. Declared here for the type checker and the API reference.
@@ -387,6 +387,31 @@ class BufferCore(CoreBase):
             """
             return CoreBase.set_transform_static(self, transform, authority)
 
+        def set_transforms(
+            self,
+            transforms: Iterable[TransformStamped],
+            authority: str = "default",
+            is_static: bool = False,
+        ) -> BatchResult:
+            """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
+            listener uses. Per transform it is cheaper than a loop of
+            :meth:`set_transform` from about five transforms a call on and within a few
+            percent of it at two; one transform a call pays for the :class:`BatchResult`
+            beside the insert, about 1.2 to 1.4 times the loop's time (``make
+            bench-check`` prints the ratio by message size).
+
+            Each item is handled exactly as :meth:`set_transform` (or
+            :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
+            malformed item is reported in ``errors`` instead of raising, and never stops the
+            items after it. Refusals (TF_OLD_DATA, TF_REPEATED_DATA) are logged, the first
+            of each kind then one per 1000.
+
+            Returns:
+                A :class:`BatchResult`: counts, errors, and the frames it touched (what a
+                subclass needs to react to the insert, e.g. ``Buffer``'s waits).
+            """
+            return CoreBase.set_transforms(self, transforms, authority, is_static)
+
     def insert_transform(
         self, transform: TransformStamped, authority: str = "default", is_static: bool = False
     ) -> SetResult:
@@ -406,34 +431,6 @@ class BufferCore(CoreBase):
             raise invalid_transform_exception(parent, child, values, authority)
         self._log_refusals([problem], authority)
         return SetResult.OLD_DATA if problem[0] == OLD_DATA else SetResult.REPEATED_DATA
-
-    def set_transforms(
-        self,
-        transforms: Iterable[TransformStamped],
-        authority: str = "default",
-        is_static: bool = False,
-    ) -> BatchResult:
-        """Store a batch of transforms (a ``TFMessage``'s worth) in one call: what the
-        listener uses. Per transform it is faster than a loop of :meth:`set_transform`
-        from about 10 transforms a call on; below that the result's fixed cost (the
-        :class:`BatchResult` and its frames) makes it slower, up to about 2.5 to 3 times
-        the time per transform at one transform a call (``make bench-check`` prints the
-        ratio by message size).
-
-        Each item is handled exactly as :meth:`set_transform` (or
-        :meth:`set_transform_static` when ``is_static``) would, in order; an invalid or
-        malformed item is reported in ``errors`` instead of raising, and never stops the
-        items after it. Refusals (TF_OLD_DATA, TF_REPEATED_DATA) are logged, the first
-        of each kind then one per 1000.
-
-        Returns:
-            A :class:`BatchResult`: counts, errors, and the frames it touched (what a
-            subclass needs to react to the insert, e.g. ``Buffer``'s waits).
-        """
-        r = self._store(transforms, authority, is_static)
-        if isinstance(r, BatchResult):  # the common case: nothing refused, nothing invalid
-            return r
-        return self._batch_result(r, authority)
 
     def _batch_result(
         self,
