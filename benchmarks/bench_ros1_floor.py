@@ -26,7 +26,8 @@ Receivers (``--receivers``, comma separated; roscpp always runs):
 * ``listener`` -- a tfbus node with a :class:`~tfbus.TransformListener` into a ``Buffer``.
 
 A receiver's name followed by ``@uvloop`` (e.g. ``callback@uvloop``) runs its event loop
-on uvloop (``pip install uvloop``; anyio's ``use_uvloop``) instead of asyncio's own.
+on uvloop (``pip install uvloop``; anyio's ``use_uvloop``) instead of asyncio's own;
+``callback@trio`` and ``listener@trio`` run the tfbus node on trio.
 ``tf2_ros`` (the C++ ``tf2_ros::TransformListener`` into a ``tf2_ros::Buffer``,
 ``peers/ros1/bench_listener.cpp``) is printed beside roscpp, the ``listener`` row's peer.
 
@@ -175,6 +176,9 @@ def report_count() -> None:
 UVLOOP = False
 """Set in a child whose receiver ends ``@uvloop``."""
 
+TRIO = False
+"""Set in a child whose receiver ends ``@trio`` (``callback`` and ``listener`` only)."""
+
 
 def bare_thread(store: bool, wake: bool) -> None:
     """The ``thread``, ``thread+store`` and ``thread+wake`` receivers (a child process)."""
@@ -233,7 +237,10 @@ def tfbus_node(receiver: str) -> None:
             print("READY", flush=True)
             await anyio.sleep(3600)
 
-    anyio.run(main, backend_options={"use_uvloop": UVLOOP})
+    if TRIO:
+        anyio.run(main, backend="trio")
+    else:
+        anyio.run(main, backend_options={"use_uvloop": UVLOOP})
 
 
 def last_count(proc: Proc, before: int) -> int:
@@ -251,9 +258,9 @@ def cpu_seconds(pid: int) -> float:
 
 
 def child(receiver: str) -> None:
-    global UVLOOP
+    global UVLOOP, TRIO
     receiver, _, loop = receiver.partition("@")
-    UVLOOP = loop == "uvloop"
+    UVLOOP, TRIO = loop == "uvloop", loop == "trio"
     report_count()
     if receiver in ("asyncio", "asyncio+store", "asyncio+core"):
         bare_asyncio(receiver.endswith("+store"), receiver.endswith("+core"))
@@ -278,13 +285,20 @@ def main() -> None:
         help="seconds a window (default 12; /proc counts 10 ms ticks)",
     )
     parser.add_argument("--rate", type=float, default=100.0, help="messages/s (default 100)")
+    parser.add_argument("--baseline", metavar="TREE", default=None,
+                        help="also run each callback/listener receiver on the tfbus of another "
+                             "checkout (its .so files built), labelled '@ baseline'")  # fmt: skip
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         child(args.child)
         return
     receivers = [r for r in args.receivers.split(",") if r]
-    bad = [r for r in receivers if r.removesuffix("@uvloop") not in RECEIVERS]
+    bad = [
+        r for r in receivers
+        if r.removesuffix("@uvloop") not in RECEIVERS
+        and r not in ("callback@trio", "listener@trio")
+    ]  # fmt: skip
     if bad or not receivers:
         parser.error(f"--receivers: {bad or receivers!r}: choose from {', '.join(RECEIVERS)}")
     why = ros1_missing(("roscpp", "tf2_msgs"))
@@ -311,8 +325,14 @@ def main() -> None:
                                     str(seconds)))  # fmt: skip
             pids = {"roscpp": cpp.proc.pid, "tf2_ros": tf2.proc.pid}
             children: dict[str, Proc] = {}
-            for r in receivers:
-                proc = Proc([sys.executable, __file__, "--child", r], env)
+            runs = [(r, r, env) for r in receivers]
+            if args.baseline is not None:
+                base = str(Path(args.baseline).resolve())
+                base_env = {**env, "PYTHONPATH": os.pathsep.join([base, *path[1:]])}
+                runs += [(f"{r} @ baseline", r, base_env) for r in receivers
+                         if r.partition("@")[0] in ("callback", "listener")]  # fmt: skip
+            for r, what, run_env in runs:
+                proc = Proc([sys.executable, __file__, "--child", what], run_env)
                 procs.append(proc)
                 proc.wait_for("READY", 60)
                 pids[r] = proc.proc.pid
@@ -336,7 +356,7 @@ def main() -> None:
                     per_msg[name].append((cpu_seconds(pid) - before[name]) / messages * 1e6)
             print(f"{args.rate:.0f} Hz x {FRAMES} transforms, {args.rounds} windows of "
                   f"{args.seconds:.0f} s, load {os.getloadavg()[0]:.2f} (1 min)")  # fmt: skip
-            print("receiver        | CPU/msg us min / median / max | ratio to roscpp, "
+            print("receiver                   | CPU/msg us min / median / max | ratio to roscpp, "
                   "to tf2_ros min / median / max")  # fmt: skip
 
             def ratios(values: list[float], ref: str) -> str:
@@ -344,7 +364,7 @@ def main() -> None:
                 return f"{min(r):4.2f} / {statistics.median(r):4.2f} / {max(r):4.2f}"
 
             for name, values in per_msg.items():
-                print(f"{name:15s} | {min(values):6.1f} / {statistics.median(values):6.1f} / "
+                print(f"{name:26s} | {min(values):6.1f} / {statistics.median(values):6.1f} / "
                       f"{max(values):6.1f} | {ratios(values, 'roscpp')} | "
                       f"{ratios(values, 'tf2_ros')}", flush=True)  # fmt: skip
             received = ", ".join(f"{r} {n}" for r, n in got.items())
