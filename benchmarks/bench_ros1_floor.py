@@ -27,7 +27,10 @@ Receivers (``--receivers``, comma separated; roscpp always runs):
 
 A receiver's name followed by ``@uvloop`` (e.g. ``callback@uvloop``) runs its event loop
 on uvloop (``pip install uvloop``; anyio's ``use_uvloop``) instead of asyncio's own;
-``callback@trio`` and ``listener@trio`` run the tfbus node on trio.
+``callback@trio`` and ``listener@trio`` run the tfbus node on trio. A tfbus node's name
+followed by ``#S`` (e.g. ``listener#30``) checks the master every S seconds
+(``Ros1Transport(master_check_period=S)``; default 1 s: one ``lookupNode`` call a second,
+whose CPU is part of each message's share at 100 Hz).
 ``tf2_ros`` (the C++ ``tf2_ros::TransformListener`` into a ``tf2_ros::Buffer``,
 ``peers/ros1/bench_listener.cpp``) is printed beside roscpp, the ``listener`` row's peer.
 
@@ -176,6 +179,11 @@ def report_count() -> None:
 UVLOOP = False
 """Set in a child whose receiver ends ``@uvloop``."""
 
+CHECK_PERIOD = 1.0
+"""``Ros1Transport(master_check_period=...)`` of a tfbus-node receiver: a name ending
+``#S`` (e.g. ``callback#30``) sets S seconds (the default 1.0 is one ``lookupNode`` call
+to the master a second)."""
+
 TRIO = False
 """Set in a child whose receiver ends ``@trio`` (``callback`` and ``listener`` only)."""
 
@@ -226,7 +234,7 @@ def tfbus_node(receiver: str) -> None:
         RECEIVED[0] += 1
 
     async def main() -> None:
-        node = Ros1Transport(node_name=f"/floor_{os.getpid()}")
+        node = Ros1Transport(node_name=f"/floor_{os.getpid()}", master_check_period=CHECK_PERIOD)
         async with Bus(transport=node) as bus, contextlib.AsyncExitStack() as stack:
             if receiver == "listener":
                 listener = TransformListener(Buffer(), bus)
@@ -258,7 +266,9 @@ def cpu_seconds(pid: int) -> float:
 
 
 def child(receiver: str) -> None:
-    global UVLOOP, TRIO
+    global UVLOOP, TRIO, CHECK_PERIOD
+    receiver, _, period = receiver.partition("#")
+    CHECK_PERIOD = float(period or 1.0)
     receiver, _, loop = receiver.partition("@")
     UVLOOP, TRIO = loop == "uvloop", loop == "trio"
     report_count()
@@ -296,8 +306,8 @@ def main() -> None:
     receivers = [r for r in args.receivers.split(",") if r]
     bad = [
         r for r in receivers
-        if r.removesuffix("@uvloop") not in RECEIVERS
-        and r not in ("callback@trio", "listener@trio")
+        if r.partition("#")[0].removesuffix("@uvloop") not in RECEIVERS
+        and r.partition("#")[0] not in ("callback@trio", "listener@trio")
     ]  # fmt: skip
     if bad or not receivers:
         parser.error(f"--receivers: {bad or receivers!r}: choose from {', '.join(RECEIVERS)}")
