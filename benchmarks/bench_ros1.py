@@ -26,6 +26,12 @@ Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++. Everything o
     .venv/bin/python benchmarks/bench_ros1.py --modes queue  # the receive-latency row alone
     .venv/bin/python benchmarks/bench_ros1.py --quick --repeat 3 --modes callback,listener \
         --skip-one-frame --baseline /tmp/old-tree   # receive CPU, alternated with that tree
+    .venv/bin/python benchmarks/bench_ros1.py --quick --modes callback,listener --uvloop
+
+``--uvloop`` runs the tfbus side's event loop on uvloop (anyio's ``use_uvloop``; uvloop
+importable in the venv or on ``PYTHONPATH``, which the tfbus side inherits after the tree
+it imports): the asyncio loop's own cost per wake-up is most of the receive floor
+(``bench_ros1_floor.py``).
 """
 
 from __future__ import annotations
@@ -51,6 +57,10 @@ from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
 BENCH_PACKAGES = ("roscpp", "tf2_msgs")
 """What the C++ publisher and subscriber of ``peers/ros1/`` build against."""
+
+
+UVLOOP_ENV = "BENCH_ROS1_UVLOOP"
+"""Set to ``1`` in the tfbus side's environment by ``--uvloop``: its event loop is uvloop's."""
 
 
 def build(out: Path) -> None:
@@ -144,7 +154,7 @@ def tfbus_subscriber(mode: str) -> None:
                 if listener is not None:  # transforms received = transforms stored
                     counts[1] = listener.statistics().stored
 
-    anyio.run(main)
+    anyio.run(main, backend_options={"use_uvloop": os.environ.get(UVLOOP_ENV) == "1"})
     print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
     print("\n".join(f"{v:.3f}" for v in lat), flush=True)
 
@@ -189,7 +199,8 @@ def scenario(
     else:
         cpp = master.run(str(bins / "bench_sub"))
     env = dict(master.env)
-    env["PYTHONPATH"] = str(tree)
+    extra = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(ROOT)]
+    env["PYTHONPATH"] = os.pathsep.join([str(tree), *extra])  # e.g. where uvloop is
     tfb = Proc([sys.executable, __file__, "--tfbus-sub", mode], env)
     cpp.wait_for("READY", 30)
     tfb.wait_for("READY", 60)
@@ -213,6 +224,8 @@ def scenario(
     label = f"{mode}, moving" if moving else mode
     if tree != ROOT:
         label += " @ baseline"
+    if env.get(UVLOOP_ENV) == "1":
+        label += " @ uvloop"
     print(
         f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | {label:8s} | "
         f"load {load:4.2f} | "
@@ -279,6 +292,9 @@ def main() -> None:
                         help="alternate each run with one whose tfbus side imports the tfbus "
                              "of another checkout (e.g. a scratch worktree of an earlier "
                              "commit, its .so files built); prints both CPU medians")  # fmt: skip
+    parser.add_argument("--uvloop", action="store_true",
+                        help="run the tfbus side's asyncio loop on uvloop (anyio's use_uvloop; "
+                             "pip install uvloop)")  # fmt: skip
     parser.add_argument("--skip-one-frame", action="store_true",
                         help="only the 50-frame scenarios")
     parser.add_argument("--tfbus-sub", choices=MODES, help=argparse.SUPPRESS)
@@ -297,6 +313,8 @@ def main() -> None:
         bins = Path(tmp)
         build(bins)
         master = start_master(bins / "ros_home")
+        if args.uvloop:
+            master.env[UVLOOP_ENV] = "1"
         try:
             print("latency median / p99, one-way, receive time - header.stamp (same run)")
             base = None if args.baseline is None else Path(args.baseline).resolve()
