@@ -8,7 +8,13 @@ Debian's roscpp and tf). tfbus runs the same two nodes as ``tfbus demo broadcast
 terminals). Both pairs run on one roscore on 127.0.0.1, in alternating rounds; each round
 measures the CPU time (user + system, from ``/proc/PID/stat``) the two processes of a
 pair use over a window that starts once the listener prints its first tutorial line
-(start-up, imports and registration are not counted) and lasts ``--seconds``.
+(start-up, imports and registration are not counted) and lasts ``--seconds``. The CPU
+time is the sum of each thread's run time in nanoseconds (``/proc/PID/task/*/schedstat``,
+the scheduler's own account) rather than ``/proc/PID/stat``'s 10 ms ticks, which over an
+8 s window at ~1 % of a core counted 8 +- 1 ticks a process (a thread that ends inside the
+window loses its share; these nodes' threads live as long as the node). Each process's
+wake-ups per second (voluntary context switches of all its threads) are printed beside
+its CPU: the C++ nodes wake several times per message (roscpp's threads), tfbus's once.
 
 Prints each round, then per side the min/median/max CPU as a percentage of one core, the
 ratio tfbus / C++ (target <= 1.5x) and the 1-minute load average. Figures only; nothing
@@ -47,20 +53,46 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / TICK
 
 
-def run_pair(master: Master, commands: list[list[str]], seconds: float) -> list[float]:
+def cpu_and_wakeups(pid: int) -> tuple[float, int]:
+    """(CPU seconds, voluntary context switches) of a process's live threads so far: the
+    scheduler's run time in ns (``/proc/PID/task/TID/schedstat`` field 1) and the
+    ``voluntary_ctxt_switches`` of each thread's ``status``. Falls back to
+    :func:`cpu_seconds` where the kernel keeps no schedstat."""
+    cpu_ns = 0
+    wakeups = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            cpu_ns += int((task / "schedstat").read_text().split()[0])
+            status = (task / "status").read_text()
+        except FileNotFoundError:  # a thread that ended meanwhile, or no schedstat
+            if not (task / "schedstat").exists() and task.exists():
+                return cpu_seconds(pid), 0
+            continue
+        for line in status.splitlines():
+            if line.startswith("voluntary_ctxt_switches:"):
+                wakeups += int(line.split()[1])
+    return cpu_ns / 1e9, wakeups
+
+
+def run_pair(
+    master: Master, commands: list[list[str]], seconds: float
+) -> list[tuple[float, float]]:
     """Start a broadcaster and a listener, wait (bounded) for the listener's first tutorial
-    line, then measure both processes' CPU over ``seconds``: each one's share of a core."""
+    line, then measure both processes over ``seconds``: per process (share of a core,
+    wake-ups per second)."""
     procs: list[Proc] = []
     try:
         for cmd in commands:
             procs.append(master.run(*cmd))
         procs[1].wait_for(r"base_laser: \(1\.00, 0\.20\. 0\.00\) -----> base_link", timeout=60.0)
-        before = [cpu_seconds(p.proc.pid) for p in procs]
+        before = [cpu_and_wakeups(p.proc.pid) for p in procs]
         t0 = time.monotonic()
         time.sleep(seconds)  # the measurement window itself (a benchmark, not a test)
-        after = [cpu_seconds(p.proc.pid) for p in procs]
+        after = [cpu_and_wakeups(p.proc.pid) for p in procs]
         wall = time.monotonic() - t0
-        return [(a - b) / wall for a, b in zip(after, before, strict=True)]
+        return [
+            ((a[0] - b[0]) / wall, (a[1] - b[1]) / wall) for a, b in zip(after, before, strict=True)
+        ]
     finally:
         for p in reversed(procs):
             p.stop(signal.SIGINT, timeout=10.0)
@@ -116,21 +148,33 @@ def main(argv: list[str] | None = None) -> None:
                 sides["tfbus @ baseline"] = [[*base, "demo", "broadcaster", "--bus", uri],
                                              [*base, "demo", "listener", "--bus", uri]]  # fmt: skip
             shares: dict[str, list[float]] = {name: [] for name in sides}
+            parts: dict[str, list[tuple[float, float]]] = {name: [] for name in sides}
             print(f"seed demo over ROS 1: {args.rounds} rounds of {seconds:.0f} s, "
                   "broadcaster 100 Hz + listener 1 Hz, CPU of both processes")  # fmt: skip
             for k in range(args.rounds):
                 for name, commands in sides.items():
-                    broadcaster, listener = run_pair(master, commands, seconds)
+                    (broadcaster, b_wake), (listener, l_wake) = run_pair(master, commands,
+                                                                         seconds)  # fmt: skip
                     shares[name].append(broadcaster + listener)
+                    parts[name].append((broadcaster, listener))
                     print(f"  round {k + 1}  {name:18s} {(broadcaster + listener) * 100:6.2f} % "
-                          f"of a core (broadcaster {broadcaster * 100:.2f}, listener "
-                          f"{listener * 100:.2f})")  # fmt: skip
+                          f"of a core (broadcaster {broadcaster * 100:.2f}, {b_wake:.0f} "
+                          f"wake-ups/s; listener {listener * 100:.2f}, {l_wake:.0f} "
+                          "wake-ups/s)")  # fmt: skip
         finally:
             master.stop()
     for name, values in shares.items():
         low, mid, high = (100 * f(values) for f in (min, statistics.median, max))
-        print(f"  {name:18s} min {low:6.2f} %  median {mid:6.2f} %  max {high:6.2f} %")
+        b_mid = 100 * statistics.median(b for b, _ in parts[name])
+        l_mid = 100 * statistics.median(li for _, li in parts[name])
+        print(f"  {name:18s} min {low:6.2f} %  median {mid:6.2f} %  max {high:6.2f} %  "
+              f"(medians: broadcaster {b_mid:.2f} %, listener {l_mid:.2f} %)")  # fmt: skip
     cpp, ours, *rest = (statistics.median(v) for v in shares.values())
+    (cpp_b, our_b, *_), (cpp_l, our_l, *_) = (
+        [statistics.median(p[i] for p in v) for v in parts.values()] for i in (0, 1)
+    )
+    print(f"  split tfbus / C++ (medians): broadcaster {our_b / cpp_b:.2f}x, "
+          f"listener {our_l / cpp_l:.2f}x")  # fmt: skip
     print(f"  ratio tfbus / C++ (medians) {ours / cpp:.2f}x (target <= 1.5x); "
           f"load {os.getloadavg()[0]:.1f}")  # fmt: skip
     if rest:
