@@ -764,7 +764,7 @@ DEMO_ROW = "seed demo over ROS 1, CPU vs C++ tutorial pair"
 def demo_rows(rows: Rows, rounds: int) -> None:
     """The seed demo over ROS 1 (``bench_demo_ros1.run_pair``): the C++ tutorial pair and
     tfbus's demo pair on one roscore, alternated (the order reversed every other round),
-    each pair's CPU (both processes, ``/proc``) over 10 s; the median of the per-round
+    each pair's CPU (both processes, per-thread schedstat) over 10 s; the median of the per-round
     ratios (<= 1.5x)."""
     import bench_demo_ros1
     from ros1_peers import ros1_missing, start_master
@@ -783,7 +783,8 @@ def demo_rows(rows: Rows, rounds: int) -> None:
             names = list(sides)
             for r in range(rounds):
                 for name in names if r % 2 == 0 else names[::-1]:
-                    share = sum(bench_demo_ros1.run_pair(master, sides[name], DEMO_SECONDS))
+                    measured = bench_demo_ros1.run_pair(master, sides[name], DEMO_SECONDS)
+                    share = sum(cpu for cpu, _wakeups in measured)
                     shares.setdefault(name, []).append(share)
                 print(f"  (demo round {r + 1}/{rounds}, {_load()})", flush=True)
         finally:
