@@ -79,7 +79,8 @@ def balanced_dataset(
     if blocks is None:
         if isinstance(per_cpu, bool) or not isinstance(per_cpu, int) or per_cpu < 1:
             raise ValueError(f"per_cpu must be an int >= 1, got {per_cpu!r}")
-        blocks = max(1, per_cpu * int(ray.cluster_resources().get("CPU", 1)))
+        resources: dict[str, float] = ray.cluster_resources()  # type: ignore[no-untyped-call]
+        blocks = max(1, per_cpu * int(resources.get("CPU", 1)))
     parts = balanced_blocks(queries, blocks, recording=recording, load_cost=load_cost)
     kept = [part for part in parts if part.num_rows] or parts[:1]
     return ray.data.from_arrow(kept)
