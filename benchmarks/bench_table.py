@@ -11,13 +11,20 @@ stamps inside and outside the data), then times:
   rows (same buffers; the lookups alone are timed for both, loading separately);
 * ``lookup_by_recording``: the rows naming their recording, loading included, one
   process;
-* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)``'s task (the rows ordered
-  by recording, in 8 blocks) on a local Ray cluster of 1 and 2 CPUs, alternated over
-  ``--rounds`` rounds, loading included (cluster start excluded): wall rows/s, each
-  worker's task CPU time (``time.process_time`` in the task) and rows per task-CPU
-  second, and the recordings each task read (checked: no more than its rows name). On a
-  shared machine the wall ratio follows the other jobs; the task CPU of the busiest
-  worker bounds what two idle cores can give.
+* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)``'s task on a local Ray
+  cluster of 1 and 2 CPUs, alternated over ``--rounds`` rounds, loading included
+  (cluster start, worker start and Ray Data's per-cluster actors excluded: a long-lived
+  cluster has them; ``--ray-cold`` starts the actors inside the run). The same 4 blocks
+  for both (``--ray-blocks``): ``tfbus.table.ray.balanced_dataset``'s blocks of equal
+  cost, each recording in one (``--ray-split rows``: equal row slices of the rows
+  ordered by recording). Printed per run: wall rows/s; each worker's task CPU
+  (``time.process_time`` in the task), its process's CPU and its time in tasks; the
+  first task's start and the last one's end; the CPU of the driver (``getrusage``) and
+  of each of Ray's other processes (GCS, raylet, Ray Data's actors, ...: ``/proc`` per
+  PID) during the run, and their share of all the CPU used; the recordings each task read
+  (checked: no more than its rows name). On a shared machine the wall ratio follows the
+  other jobs; the CPU figures do not: the busiest worker's task CPU bounds what two idle
+  cores can give, and Ray's share is what its own processes take from them.
 
 ``--big MB`` writes a ~MB MB MCAP and ROS 1 bag (random-walk values, 10 links at 100 Hz),
 reads three 10 s windows and walks every window (``iter_windows``), each in a fresh
@@ -424,7 +431,8 @@ def bench_ray(table: Any, cpus: int, blocks: int = RAY_BLOCKS,
             "busy": busy, "worker_cpu": worker_cpu, "loads": sum(s[3] for s in stats),
             "batch_recordings": sum(s[4] for s in stats),
             "first": min(s[5] for s in stats), "last": max(s[6] for s in stats),
-            "driver": driver, "ray_cpu": ray_cpu, "load": os.getloadavg()[0]}
+            "driver": driver, "ray_cpu": ray_cpu, "load": os.getloadavg()[0],
+            "timeline": sorted((s[5], s[6], s[0], s[1]) for s in stats)}
 
 
 def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
@@ -462,6 +470,10 @@ def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
                   f"share {overhead / total * 100:.0f} % of {total:.2f} CPU-s; recordings "
                   f"read {run['loads']} (tasks' recordings {run['batch_recordings']}, fleet "
                   f"{n_recordings}); load {run['load']:.1f}", flush=True)
+            names = {pid: f"w{k}" for k, pid in enumerate(sorted(run["per_worker"]))}
+            print("    tasks (worker start-end s, task CPU s): " + ", ".join(
+                f"{names[pid]} {a:.2f}-{b:.2f} ({c:.2f})"
+                for a, b, pid, c in run["timeline"]), flush=True)
     med = {c: {"wall": float(np.median([x["rows"] / x["wall"] for x in v])),
                "cpu": float(np.median([x["rows"] / sum(x["per_worker"].values()) for x in v])),
                "busiest": float(np.median([max(x["per_worker"].values()) for x in v]))}
