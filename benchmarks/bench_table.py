@@ -14,7 +14,9 @@ stamps inside and outside the data), then times:
 * ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)``'s task on a local Ray
   cluster of 1 and 2 CPUs, alternated over ``--rounds`` rounds, loading included
   (cluster start, worker start and Ray Data's per-cluster actors excluded: a long-lived
-  cluster has them; ``--ray-cold`` starts the actors inside the run). The same 4 blocks
+  cluster has them; ``--ray-cold`` starts the actors inside the run), Ray Data's
+  per-operator resource reservation off (``--ray-reserve``: on, Ray's default, which
+  starts the second worker's first task 1-5 s late here). The same 4 blocks
   for both (``--ray-blocks``): ``tfbus.table.ray.balanced_dataset``'s blocks of equal
   cost, each recording in one (``--ray-split rows``: equal row slices of the rows
   ordered by recording). Printed per run: wall rows/s; each worker's task CPU
@@ -39,6 +41,7 @@ Prints figures only, with the machine's load average.
 
     .venv/bin/python benchmarks/bench_table.py [--recordings 100] [--queries 1000000]
         [--no-ray | --ray-only] [--ray-blocks 4] [--ray-split cost|rows] [--ray-cold]
+        [--ray-reserve]
         [--memory 1000] [--big 1000]
 """
 
@@ -344,7 +347,7 @@ def _ray_warm(seconds: float) -> int:
 
 
 def _ray_run(table: Any, cpus: int, blocks: int, split: str, warm_data: bool,
-             out: Any) -> None:
+             reserve: bool, out: Any) -> None:
     import resource
     import sys
 
@@ -359,7 +362,12 @@ def _ray_run(table: Any, cpus: int, blocks: int, split: str, warm_data: bool,
     ray.init(num_cpus=cpus, include_dashboard=False, log_to_driver=False,
              configure_logging=False)
     try:
-        ray.data.DataContext.get_current().enable_progress_bars = False
+        context = ray.data.DataContext.get_current()
+        context.enable_progress_bars = False
+        # Ray Data's per-operator resource reservation (on by default) holds the second
+        # task back by 1-5 s on a 2-CPU cluster (measured: the second worker's first
+        # start); off, both tasks start at once.
+        context.op_resource_reservation_enabled = reserve
         if split == "rows":
             step = -(-table.num_rows // blocks)
             ds = ray.data.from_arrow([table.slice(k * step, step) for k in range(blocks)])
@@ -408,7 +416,8 @@ def _ray_run(table: Any, cpus: int, blocks: int, split: str, warm_data: bool,
 
 
 def bench_ray(table: Any, cpus: int, blocks: int = RAY_BLOCKS,
-              split: str = "cost", warm_data: bool = True) -> dict[str, Any]:
+              split: str = "cost", warm_data: bool = True,
+              reserve: bool = False) -> dict[str, Any]:
     """One run of ``tfbus.table.ray``'s unshuffled task on a fresh local cluster of
     ``cpus`` CPUs (in a child process, so each run has its own cluster), loading
     included, cluster start excluded: wall seconds, per-worker task CPU seconds, rows,
@@ -416,7 +425,8 @@ def bench_ray(table: Any, cpus: int, blocks: int = RAY_BLOCKS,
     (``getrusage``) and of Ray's other processes (GCS, raylet, others) during the run."""
     ctx = multiprocessing.get_context("spawn")
     out = ctx.Queue()
-    proc = ctx.Process(target=_ray_run, args=(table, cpus, blocks, split, warm_data, out))
+    proc = ctx.Process(target=_ray_run, args=(table, cpus, blocks, split, warm_data, reserve,
+                                                   out))
     proc.start()
     wall, stats, worker_cpu, driver, ray_cpu, _ = out.get(timeout=3600)
     proc.join(timeout=120)
@@ -436,7 +446,8 @@ def bench_ray(table: Any, cpus: int, blocks: int = RAY_BLOCKS,
 
 
 def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
-                     split: str = "cost", warm_data: bool = True) -> None:
+                     split: str = "cost", warm_data: bool = True,
+                     reserve: bool = False) -> None:
     """Ray with 1 and 2 CPUs alternated over ``rounds`` rounds (the order swapped each
     round): wall rows/s, task CPU per worker and rows per task-CPU-second, the
     recordings each task read (no more than the recordings of its rows), each worker's
@@ -448,10 +459,11 @@ def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
     n_recordings = len(pc.unique(table.column("recording")))
     runs: dict[int, list[dict[str, Any]]] = {1: [], 2: []}
     print(f"  ray: {blocks} blocks ({'equal cost' if split == 'cost' else 'equal rows'}), "
-          f"Ray Data's actors {'started before' if warm_data else 'started in'} the run")
+          f"Ray Data's actors {'started before' if warm_data else 'started in'} the run, "
+          f"op_resource_reservation_enabled={reserve}")
     for r in range(rounds):
         for cpus in ((1, 2) if r % 2 == 0 else (2, 1)):
-            run = bench_ray(table, cpus, blocks, split, warm_data)
+            run = bench_ray(table, cpus, blocks, split, warm_data, reserve)
             runs[cpus].append(run)
             cpu = sum(run["per_worker"].values())
             workers = ", ".join(f"{c:.2f}" for c in sorted(run["per_worker"].values()))
@@ -474,15 +486,31 @@ def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
             print("    tasks (worker start-end s, task CPU s): " + ", ".join(
                 f"{names[pid]} {a:.2f}-{b:.2f} ({c:.2f})"
                 for a, b, pid, c in run["timeline"]), flush=True)
+    def floor(x: dict[str, Any]) -> float:
+        """The least wall time the run's CPU allows on two idle cores: its busiest
+        worker process's CPU, or its workers' CPU over what the driver and Ray's
+        processes leave of two cores (they take ``r`` CPU-seconds per wall second while
+        the Dataset runs: T = workers / (2 - r)), whichever is more."""
+        rate = (x["driver"] + sum(x["ray_cpu"].values())) / x["wall"]
+        workers = x["worker_cpu"].values()
+        return float(max(max(workers), sum(workers) / (2.0 - rate)))
+
     med = {c: {"wall": float(np.median([x["rows"] / x["wall"] for x in v])),
                "cpu": float(np.median([x["rows"] / sum(x["per_worker"].values()) for x in v])),
-               "busiest": float(np.median([max(x["per_worker"].values()) for x in v]))}
+               "busiest": float(np.median([max(x["per_worker"].values()) for x in v])),
+               "floor": float(np.median([floor(x) for x in v])),
+               "ray": float(np.median([(x["driver"] + sum(x["ray_cpu"].values())) / x["wall"]
+                                       for x in v]))}
            for c, v in runs.items()}
     print(f"  ray medians of {rounds}: wall {med[1]['wall']:,.0f} -> {med[2]['wall']:,.0f} "
           f"rows/s ({med[2]['wall'] / med[1]['wall']:.2f}x); rows/CPU-s "
           f"{med[1]['cpu']:,.0f} -> {med[2]['cpu']:,.0f}; busiest worker's task CPU "
           f"{med[1]['busiest']:.2f} -> {med[2]['busiest']:.2f} s (a bound on the speed-up on "
-          f"idle cores: {med[1]['busiest'] / med[2]['busiest']:.2f}x)")
+          f"idle cores: {med[1]['busiest'] / med[2]['busiest']:.2f}x); the driver and Ray's "
+          f"processes {med[1]['ray']:.2f} -> {med[2]['ray']:.2f} CPU-s per wall second; "
+          f"least wall the CPU allows on two idle cores {med[1]['floor']:.2f} -> "
+          f"{med[2]['floor']:.2f} s (a bound with Ray's own CPU counted: "
+          f"{med[1]['floor'] / med[2]['floor']:.2f}x)")
 
 
 # ------------------------------------------------------------------------ memory
@@ -655,6 +683,8 @@ def main() -> None:
     ap.add_argument("--ray-split", choices=("cost", "rows"), default="cost",
                     help="Ray blocks of equal cost, each recording in one (balanced_dataset), "
                          "or equal row slices")
+    ap.add_argument("--ray-reserve", action="store_true",
+                    help="keep Ray Data's per-operator resource reservation (its default)")
     ap.add_argument("--ray-cold", action="store_true",
                     help="start Ray Data's per-cluster actors inside the timed run")
     ap.add_argument("--rounds", type=int, default=3, help="alternated timing rounds (>= 3)")
@@ -689,7 +719,7 @@ def main() -> None:
             bench_single(table, args.rounds, args.tf2_recordings)
         if not args.no_ray:
             bench_ray_rounds(table, args.rounds, args.ray_blocks, args.ray_split,
-                             not args.ray_cold)
+                             not args.ray_cold, args.ray_reserve)
         print(f"load after: {os.getloadavg()[0]:.1f}")
     finally:
         shutil.rmtree(directory, ignore_errors=True)

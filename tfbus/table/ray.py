@@ -69,7 +69,10 @@ def balanced_dataset(
         recording, load_cost: as :func:`~tfbus.table.recordings.balanced_blocks`.
 
     Returns:
-        ``ray.data.from_arrow`` of the blocks (empty blocks left out).
+        ``ray.data.from_arrow`` of the blocks (empty blocks left out). On a small
+        cluster set ``ray.data.DataContext.get_current().op_resource_reservation_enabled
+        = False`` too: Ray Data's per-operator reservation otherwise starts the second
+        task a second or more after the first (docs/table.md).
 
     Raises:
         ValueError: ``blocks`` or ``per_cpu`` < 1; see ``balanced_blocks``.
