@@ -509,7 +509,7 @@ def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
           f"idle cores: {med[1]['busiest'] / med[2]['busiest']:.2f}x); the driver and Ray's "
           f"processes {med[1]['ray']:.2f} -> {med[2]['ray']:.2f} CPU-s per wall second; "
           f"least wall the CPU allows on two idle cores {med[1]['floor']:.2f} -> "
-          f"{med[2]['floor']:.2f} s (a bound with Ray's own CPU counted: "
+          f"{med[2]['floor']:.2f} s (their ratio, Ray's own CPU counted: "
           f"{med[1]['floor'] / med[2]['floor']:.2f}x)")
 
 
