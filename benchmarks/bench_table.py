@@ -11,13 +11,22 @@ stamps inside and outside the data), then times:
   rows (same buffers; the lookups alone are timed for both, loading separately);
 * ``lookup_by_recording``: the rows naming their recording, loading included, one
   process;
-* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)``'s task (the rows ordered
-  by recording, in 8 blocks) on a local Ray cluster of 1 and 2 CPUs, alternated over
-  ``--rounds`` rounds, loading included (cluster start excluded): wall rows/s, each
-  worker's task CPU time (``time.process_time`` in the task) and rows per task-CPU
-  second, and the recordings each task read (checked: no more than its rows name). On a
-  shared machine the wall ratio follows the other jobs; the task CPU of the busiest
-  worker bounds what two idle cores can give.
+* ``ray 1 / ray 2``: ``tfbus.table.ray.lookup(shuffle=False)``'s task on a local Ray
+  cluster of 1 and 2 CPUs, alternated over ``--rounds`` rounds, loading included
+  (cluster start, worker start and Ray Data's per-cluster actors excluded: a long-lived
+  cluster has them; ``--ray-cold`` starts the actors inside the run), Ray Data's
+  per-operator resource reservation off (``--ray-reserve``: on, Ray's default, which
+  starts the second worker's first task 1-5 s late here). The same 4 blocks
+  for both (``--ray-blocks``): ``tfbus.table.ray.balanced_dataset``'s blocks of equal
+  cost, each recording in one (``--ray-split rows``: equal row slices of the rows
+  ordered by recording). Printed per run: wall rows/s; each worker's task CPU
+  (``time.process_time`` in the task), its process's CPU and its time in tasks; the
+  first task's start and the last one's end; the CPU of the driver (``getrusage``) and
+  of each of Ray's other processes (GCS, raylet, Ray Data's actors, ...: ``/proc`` per
+  PID) during the run, and their share of all the CPU used; the recordings each task read
+  (checked: no more than its rows name). On a shared machine the wall ratio follows the
+  other jobs; the CPU figures do not: the busiest worker's task CPU bounds what two idle
+  cores can give, and Ray's share is what its own processes take from them.
 
 ``--big MB`` writes a ~MB MB MCAP and ROS 1 bag (random-walk values, 10 links at 100 Hz),
 reads three 10 s windows and walks every window (``iter_windows``), each in a fresh
@@ -31,7 +40,9 @@ generated MCAP of about MB megabytes.
 Prints figures only, with the machine's load average.
 
     .venv/bin/python benchmarks/bench_table.py [--recordings 100] [--queries 1000000]
-        [--no-ray | --ray-only] [--memory 1000] [--big 1000]
+        [--no-ray | --ray-only] [--ray-blocks 4] [--ray-split cost|rows] [--ray-cold]
+        [--ray-reserve]
+        [--memory 1000] [--big 1000]
 """
 
 from __future__ import annotations
@@ -270,21 +281,26 @@ def bench_single(table: Any, rounds: int, tf2_recordings: int) -> None:
     print(f"  lookup_by_recording (with loads)   {n / (time.perf_counter() - t):12,.0f} rows/s")
 
 
-RAY_BLOCKS = 8
-"""Blocks of the query Dataset (slices of the table, recordings in order), the same for 1
-and 2 CPUs: the same tasks, spread over one or two workers."""
+RAY_BLOCKS = 4
+"""Blocks of the query Dataset, the same for 1 and 2 CPUs (the same tasks, spread over
+one or two workers): by default ``tfbus.table.ray.balanced_dataset``'s blocks of equal
+cost (two per worker of the 2-CPU run, each recording in one block); ``--ray-split
+rows``: slices of equal row counts (recordings in order; a recording cut by a slice
+is read by both tasks)."""
 
 
 def _ray_task(batch: Any) -> Any:
     """``tfbus.table.ray``'s unshuffled task (``_answer_batch``, whole recordings, each
     worker keeping 2), measured in the worker: the batch's answers plus constant columns
     ``_pid``, ``_cpu_s`` (``time.process_time`` of the task), ``_loads`` (recordings read
-    by it: ``load_buffer`` calls) and ``_recordings`` (distinct recordings in it)."""
+    by it: ``load_buffer`` calls), ``_recordings`` (distinct recordings in it) and
+    ``_start`` / ``_end`` (``time.time()`` around the task)."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
     from tfbus.table import ray as tfray
 
+    start = time.time()
     buffers = tfray._WORKER_BUFFERS.get(2)
     before = 0 if buffers is None else buffers.loads
     c = time.process_time()
@@ -293,10 +309,31 @@ def _ray_task(batch: Any) -> Any:
     loads = tfray._WORKER_BUFFERS[2].loads - before
     n = out.num_rows
     distinct = len(pc.unique(batch.column("recording")))
+    end = time.time()
     for name, value, kind in (("_pid", os.getpid(), pa.int64()), ("_cpu_s", cpu, pa.float64()),
                               ("_loads", loads, pa.int64()),
-                              ("_recordings", distinct, pa.int64())):
+                              ("_recordings", distinct, pa.int64()),
+                              ("_start", start, pa.float64()), ("_end", end, pa.float64())):
         out = out.append_column(name, pa.array(np.full(n, value), kind))
+    return out
+
+
+def _cpu_by_process() -> dict[int, tuple[str, float]]:
+    """CPU seconds (user + system) of this process's descendants (a local Ray cluster:
+    GCS, raylet, workers, ...), by PID: (name, seconds), from ``/proc/PID/stat``."""
+    import psutil
+
+    out = {}
+    for child in psutil.Process().children(recursive=True):
+        try:
+            times = child.cpu_times()
+            name = child.name()
+            if name.startswith("python"):  # Ray's agents and monitors: by their script
+                scripts = [Path(a) for a in child.cmdline()[1:] if a.endswith(".py")]
+                name = "/".join(scripts[0].parts[-2:]) if scripts else name
+            out[child.pid] = (name, times.user + times.system)
+        except psutil.Error:
+            continue
     return out
 
 
@@ -309,99 +346,171 @@ def _ray_warm(seconds: float) -> int:
     return os.getpid()
 
 
-def _ray_run(table: Any, cpus: int, out: Any) -> None:
+def _ray_run(table: Any, cpus: int, blocks: int, split: str, warm_data: bool,
+             reserve: bool, out: Any) -> None:
+    import resource
     import sys
 
     import pyarrow as pa
     import ray
     from ray import cloudpickle
 
+    from tfbus.table import ray as tfray
+
     # This script is no module the workers can import: its task goes by value.
     cloudpickle.register_pickle_by_value(sys.modules[_ray_task.__module__])
     ray.init(num_cpus=cpus, include_dashboard=False, log_to_driver=False,
              configure_logging=False)
     try:
-        ray.data.DataContext.get_current().enable_progress_bars = False
-        step = -(-table.num_rows // RAY_BLOCKS)
-        ds = ray.data.from_arrow([table.slice(k * step, step) for k in range(RAY_BLOCKS)])
+        context = ray.data.DataContext.get_current()
+        context.enable_progress_bars = False
+        # Ray Data's per-operator resource reservation (on by default) holds the second
+        # task back by 1-5 s on a 2-CPU cluster (measured: the second worker's first
+        # start); off, both tasks start at once.
+        context.op_resource_reservation_enabled = reserve
+        if split == "rows":
+            step = -(-table.num_rows // blocks)
+            ds = ray.data.from_arrow([table.slice(k * step, step) for k in range(blocks)])
+        else:
+            ds = tfray.balanced_dataset(table, blocks=blocks)
         # ``cpus`` workers started, tfbus imported in each, before the clock starts: tasks
         # that hold a CPU each for a second at once, until as many processes answered.
         hold = ray.remote(num_cpus=1)(_ray_warm)
         for _ in range(20):
             if len(set(ray.get([hold.remote(1.0) for _ in range(cpus)], timeout=600))) == cpus:
                 break
+        if warm_data:
+            # Ray Data's per-cluster actors (``_StatsActor``, ``_AutoscalingCoordinatorActor``:
+            # about 1.2 CPU-s each to start, on this machine) started by a first tiny
+            # Dataset, as in a long-lived cluster, so that they do not take the run's cores.
+            ray.data.range(2, override_num_blocks=1).materialize()
+        before = _cpu_by_process()
+        usage = resource.getrusage(resource.RUSAGE_SELF)
         t = time.perf_counter()
+        t0 = time.time()
         result = ds.map_batches(_ray_task, batch_format="pyarrow", batch_size=None,
                                 num_cpus=1.0)
-        stats: list[tuple[int, float, int, int, int]] = []
+        stats: list[tuple[int, float, int, int, int, float, float]] = []
         for batch in result.iter_batches(batch_format="pyarrow", batch_size=None):
             if batch.num_rows:
                 row = batch.slice(0, 1).to_pylist()[0]
                 stats.append((row["_pid"], row["_cpu_s"], batch.num_rows, row["_loads"],
-                              row["_recordings"]))
+                              row["_recordings"], row["_start"] - t0, row["_end"] - t0))
         wall = time.perf_counter() - t
-        pids = sorted({p for p, *_ in stats})
+        after_usage = resource.getrusage(resource.RUSAGE_SELF)
+        after = _cpu_by_process()
+        driver = (after_usage.ru_utime + after_usage.ru_stime
+                  - usage.ru_utime - usage.ru_stime)
+        ray_cpu: dict[str, float] = {}  # Ray's processes other than the task workers
+        workers = {p for p, *_ in stats}
         worker_cpu = {}
-        for pid in pids:  # the worker processes' whole CPU time (imports included)
-            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-            worker_cpu[pid] = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-        out.put((wall, stats, worker_cpu, pa.__version__))
+        for pid, (name, seconds) in after.items():
+            used = seconds - before.get(pid, (name, 0.0))[1]
+            if pid in workers:
+                worker_cpu[pid] = used
+            else:
+                ray_cpu[name] = ray_cpu.get(name, 0.0) + used
+        out.put((wall, stats, worker_cpu, driver, ray_cpu, pa.__version__))
     finally:
         ray.shutdown()
 
 
-def bench_ray(table: Any, cpus: int) -> dict[str, Any]:
+def bench_ray(table: Any, cpus: int, blocks: int = RAY_BLOCKS,
+              split: str = "cost", warm_data: bool = True,
+              reserve: bool = False) -> dict[str, Any]:
     """One run of ``tfbus.table.ray``'s unshuffled task on a fresh local cluster of
     ``cpus`` CPUs (in a child process, so each run has its own cluster), loading
     included, cluster start excluded: wall seconds, per-worker task CPU seconds, rows,
-    recordings read."""
+    recordings read, each task's start and end, and the CPU seconds of the driver
+    (``getrusage``) and of Ray's other processes (GCS, raylet, others) during the run."""
     ctx = multiprocessing.get_context("spawn")
     out = ctx.Queue()
-    proc = ctx.Process(target=_ray_run, args=(table, cpus, out))
+    proc = ctx.Process(target=_ray_run, args=(table, cpus, blocks, split, warm_data, reserve,
+                                                   out))
     proc.start()
-    wall, stats, worker_cpu, _ = out.get(timeout=3600)
+    wall, stats, worker_cpu, driver, ray_cpu, _ = out.get(timeout=3600)
     proc.join(timeout=120)
     rows = sum(s[2] for s in stats)
     assert rows == table.num_rows, (rows, table.num_rows)
     per_worker: dict[int, float] = {}
-    for pid, cpu, _n, _loads, _recs in stats:
+    busy: dict[int, float] = {}
+    for pid, cpu, _n, _loads, _recs, start, end in stats:
         per_worker[pid] = per_worker.get(pid, 0.0) + cpu
+        busy[pid] = busy.get(pid, 0.0) + (end - start)
     return {"wall": wall, "rows": rows, "tasks": len(stats), "per_worker": per_worker,
-            "worker_cpu": worker_cpu, "loads": sum(s[3] for s in stats),
+            "busy": busy, "worker_cpu": worker_cpu, "loads": sum(s[3] for s in stats),
             "batch_recordings": sum(s[4] for s in stats),
-            "load": os.getloadavg()[0]}
+            "first": min(s[5] for s in stats), "last": max(s[6] for s in stats),
+            "driver": driver, "ray_cpu": ray_cpu, "load": os.getloadavg()[0],
+            "timeline": sorted((s[5], s[6], s[0], s[1]) for s in stats)}
 
 
-def bench_ray_rounds(table: Any, rounds: int) -> None:
+def bench_ray_rounds(table: Any, rounds: int, blocks: int = RAY_BLOCKS,
+                     split: str = "cost", warm_data: bool = True,
+                     reserve: bool = False) -> None:
     """Ray with 1 and 2 CPUs alternated over ``rounds`` rounds (the order swapped each
-    round): wall rows/s, task CPU per worker and rows per task-CPU-second, and the
-    recordings each task read (no more than the recordings of its rows)."""
+    round): wall rows/s, task CPU per worker and rows per task-CPU-second, the
+    recordings each task read (no more than the recordings of its rows), each worker's
+    time in tasks, the first task's start and the last's end, and the CPU of the driver
+    and of Ray's own processes during the run (figures that do not follow the machine's
+    other load: CPU seconds, not wall)."""
     import pyarrow.compute as pc
 
     n_recordings = len(pc.unique(table.column("recording")))
     runs: dict[int, list[dict[str, Any]]] = {1: [], 2: []}
+    print(f"  ray: {blocks} blocks ({'equal cost' if split == 'cost' else 'equal rows'}), "
+          f"Ray Data's actors {'started before' if warm_data else 'started in'} the run, "
+          f"op_resource_reservation_enabled={reserve}")
     for r in range(rounds):
         for cpus in ((1, 2) if r % 2 == 0 else (2, 1)):
-            run = bench_ray(table, cpus)
+            run = bench_ray(table, cpus, blocks, split, warm_data, reserve)
             runs[cpus].append(run)
             cpu = sum(run["per_worker"].values())
             workers = ", ".join(f"{c:.2f}" for c in sorted(run["per_worker"].values()))
+            busy = ", ".join(f"{c:.2f}" for c in sorted(run["busy"].values()))
+            process = ", ".join(f"{c:.2f}" for c in sorted(run["worker_cpu"].values()))
+            others = ", ".join(f"{k} {v:.2f}" for k, v in sorted(run["ray_cpu"].items()))
+            overhead = run["driver"] + sum(run["ray_cpu"].values())
+            total = overhead + sum(run["worker_cpu"].values())
             assert run["loads"] <= run["batch_recordings"], run
             print(f"  round {r + 1}, ray {cpus} CPU: {run['rows'] / run['wall']:10,.0f} rows/s "
-                  f"wall ({run['wall']:.1f} s); task CPU {cpu:.2f} s over "
+                  f"wall ({run['wall']:.2f} s); task CPU {cpu:.2f} s over "
                   f"{len(run['per_worker'])} worker(s) [{workers}] = "
-                  f"{run['rows'] / cpu:10,.0f} rows/CPU-s; recordings read {run['loads']} "
-                  f"(tasks' recordings {run['batch_recordings']}, fleet {n_recordings}); "
-                  f"load {run['load']:.1f}", flush=True)
+                  f"{run['rows'] / cpu:10,.0f} rows/CPU-s; worker process CPU [{process}]; "
+                  f"in tasks [{busy}] s, first start {run['first']:.2f} s, last end "
+                  f"{run['last']:.2f} s; driver CPU {run['driver']:.2f} s, {others}: Ray's "
+                  f"share {overhead / total * 100:.0f} % of {total:.2f} CPU-s; recordings "
+                  f"read {run['loads']} (tasks' recordings {run['batch_recordings']}, fleet "
+                  f"{n_recordings}); load {run['load']:.1f}", flush=True)
+            names = {pid: f"w{k}" for k, pid in enumerate(sorted(run["per_worker"]))}
+            print("    tasks (worker start-end s, task CPU s): " + ", ".join(
+                f"{names[pid]} {a:.2f}-{b:.2f} ({c:.2f})"
+                for a, b, pid, c in run["timeline"]), flush=True)
+    def floor(x: dict[str, Any]) -> float:
+        """The least wall time the run's CPU allows on two idle cores: its busiest
+        worker process's CPU, or its workers' CPU over what the driver and Ray's
+        processes leave of two cores (they take ``r`` CPU-seconds per wall second while
+        the Dataset runs: T = workers / (2 - r)), whichever is more."""
+        rate = (x["driver"] + sum(x["ray_cpu"].values())) / x["wall"]
+        workers = x["worker_cpu"].values()
+        return float(max(max(workers), sum(workers) / (2.0 - rate)))
+
     med = {c: {"wall": float(np.median([x["rows"] / x["wall"] for x in v])),
                "cpu": float(np.median([x["rows"] / sum(x["per_worker"].values()) for x in v])),
-               "busiest": float(np.median([max(x["per_worker"].values()) for x in v]))}
+               "busiest": float(np.median([max(x["per_worker"].values()) for x in v])),
+               "floor": float(np.median([floor(x) for x in v])),
+               "ray": float(np.median([(x["driver"] + sum(x["ray_cpu"].values())) / x["wall"]
+                                       for x in v]))}
            for c, v in runs.items()}
     print(f"  ray medians of {rounds}: wall {med[1]['wall']:,.0f} -> {med[2]['wall']:,.0f} "
           f"rows/s ({med[2]['wall'] / med[1]['wall']:.2f}x); rows/CPU-s "
           f"{med[1]['cpu']:,.0f} -> {med[2]['cpu']:,.0f}; busiest worker's task CPU "
           f"{med[1]['busiest']:.2f} -> {med[2]['busiest']:.2f} s (a bound on the speed-up on "
-          f"idle cores: {med[1]['busiest'] / med[2]['busiest']:.2f}x)")
+          f"idle cores: {med[1]['busiest'] / med[2]['busiest']:.2f}x); the driver and Ray's "
+          f"processes {med[1]['ray']:.2f} -> {med[2]['ray']:.2f} CPU-s per wall second; "
+          f"least wall the CPU allows on two idle cores {med[1]['floor']:.2f} -> "
+          f"{med[2]['floor']:.2f} s (their ratio, Ray's own CPU counted: "
+          f"{med[1]['floor'] / med[2]['floor']:.2f}x)")
 
 
 # ------------------------------------------------------------------------ memory
@@ -569,6 +678,15 @@ def main() -> None:
     ap.add_argument("--no-ray", action="store_true")
     ap.add_argument("--ray-only", action="store_true",
                     help="only the Ray rounds (1 and 2 CPUs alternated)")
+    ap.add_argument("--ray-blocks", type=int, default=RAY_BLOCKS, metavar="N",
+                    help="blocks of the Ray Dataset (the same for 1 and 2 CPUs)")
+    ap.add_argument("--ray-split", choices=("cost", "rows"), default="cost",
+                    help="Ray blocks of equal cost, each recording in one (balanced_dataset), "
+                         "or equal row slices")
+    ap.add_argument("--ray-reserve", action="store_true",
+                    help="keep Ray Data's per-operator resource reservation (its default)")
+    ap.add_argument("--ray-cold", action="store_true",
+                    help="start Ray Data's per-cluster actors inside the timed run")
     ap.add_argument("--rounds", type=int, default=3, help="alternated timing rounds (>= 3)")
     ap.add_argument("--tf2-recordings", type=int, default=5, metavar="N",
                     help="recordings the tf2_py loop runs on (its rows/s is per row)")
@@ -600,7 +718,8 @@ def main() -> None:
         if not args.ray_only:
             bench_single(table, args.rounds, args.tf2_recordings)
         if not args.no_ray:
-            bench_ray_rounds(table, args.rounds)
+            bench_ray_rounds(table, args.rounds, args.ray_blocks, args.ray_split,
+                             not args.ray_cold, args.ray_reserve)
         print(f"load after: {os.getloadavg()[0]:.1f}")
     finally:
         shutil.rmtree(directory, ignore_errors=True)

@@ -21,12 +21,14 @@ from tfbus._extras import require
 require(__name__, "pyarrow", "ray", extra="ray")
 
 from tfbus.table.recordings import (  # noqa: E402
+    DEFAULT_LOAD_COST,
     DEFAULT_MARGIN,
     RecordingBuffers,
+    balanced_blocks,
     lookup_by_recording,
 )
 
-__all__ = ["lookup"]
+__all__ = ["balanced_dataset", "lookup"]
 
 
 _WORKER_BUFFERS: dict[int, RecordingBuffers] = {}
@@ -41,6 +43,50 @@ def _answer_batch(batch: Any, recording: str, window: float | None, margin: floa
     buffers = _WORKER_BUFFERS.setdefault(keep, RecordingBuffers(keep))
     return lookup_by_recording(batch, recording=recording, window=window, margin=margin,
                                buffers=buffers)
+
+
+def balanced_dataset(
+    queries: Any,
+    *,
+    blocks: int | None = None,
+    per_cpu: int = 2,
+    recording: str = "recording",
+    load_cost: float | dict[str, float] = DEFAULT_LOAD_COST,
+) -> Any:
+    """A Ray Dataset of ``queries`` in blocks of about equal cost, each recording's rows
+    in one block (:func:`tfbus.table.recordings.balanced_blocks`): for
+    ``lookup(..., shuffle=False)``, whose tasks then read each recording once and take
+    about equal CPU time, so that no worker waits on another's last block.
+
+    Args:
+        queries: an Arrow table (or pandas / Polars DataFrame) with ``recording`` and
+            the query columns of :func:`tfbus.table.lookup`, in the driver's memory.
+        blocks: how many blocks; None: ``per_cpu`` times the cluster's CPUs
+            (``ray.cluster_resources()``; Ray initialised).
+        per_cpu: blocks per CPU when ``blocks`` is None (>= 1): one block per CPU has
+            the fewest tasks; two let a worker that runs behind (a busy core) hand over
+            part of its share.
+        recording, load_cost: as :func:`~tfbus.table.recordings.balanced_blocks`.
+
+    Returns:
+        ``ray.data.from_arrow`` of the blocks (empty blocks left out). On a small
+        cluster set ``ray.data.DataContext.get_current().op_resource_reservation_enabled
+        = False`` too: Ray Data's per-operator reservation otherwise starts the second
+        task a second or more after the first (docs/table.md).
+
+    Raises:
+        ValueError: ``blocks`` or ``per_cpu`` < 1; see ``balanced_blocks``.
+    """
+    import ray
+
+    if blocks is None:
+        if isinstance(per_cpu, bool) or not isinstance(per_cpu, int) or per_cpu < 1:
+            raise ValueError(f"per_cpu must be an int >= 1, got {per_cpu!r}")
+        resources: dict[str, float] = ray.cluster_resources()  # type: ignore[no-untyped-call]
+        blocks = max(1, per_cpu * int(resources.get("CPU", 1)))
+    parts = balanced_blocks(queries, blocks, recording=recording, load_cost=load_cost)
+    kept = [part for part in parts if part.num_rows] or parts[:1]
+    return ray.data.from_arrow(kept)
 
 
 def lookup(
@@ -68,7 +114,8 @@ def lookup(
             ordered by recording (read from per-recording files, or sorted): ``map_batches``
             tasks, each worker process keeping its ``keep`` most recently used recordings
             loaded (a recording whose rows span several batches is read once per worker
-            process that gets them).
+            process that gets them); :func:`balanced_dataset` makes such blocks of
+            equal cost, each recording in one block.
         keep: recordings each worker process keeps loaded (unshuffled path).
 
     Returns:

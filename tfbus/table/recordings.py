@@ -27,8 +27,10 @@ if TYPE_CHECKING:
     import pyarrow as pa
 
 __all__ = [
+    "DEFAULT_LOAD_COST",
     "DEFAULT_MARGIN",
     "RecordingBuffers",
+    "balanced_blocks",
     "lookup_by_recording",
     "lookup_recording",
     "output_schema",
@@ -37,6 +39,11 @@ __all__ = [
 
 DEFAULT_MARGIN = 5.0
 """Seconds each window's buffer reaches beyond the window on both sides."""
+
+DEFAULT_LOAD_COST = 100_000.0
+"""What reading one recording whole costs, in rows answered: on a 60 s recording of
+3,600 ``/tf`` messages (``benchmarks/bench_table.py``'s fleet) ``load_buffer`` takes
+about 50 ms and a row about 0.4 us, so one read weighs as much as about 10^5 rows."""
 
 
 def _seconds_ns(value: float, name: str, *, positive: bool) -> int:
@@ -117,8 +124,11 @@ def lookup_recording(
         parts.append(lookup(part, buffer, keep_columns=keep_columns))
         order.append(rows)
     merged = pa.concat_tables(parts)
+    placed = np.concatenate(order)
+    if np.array_equal(placed, np.arange(table.num_rows)):  # already in the input's order
+        return merged
     inverse = np.empty(table.num_rows, dtype=np.int64)
-    inverse[np.concatenate(order)] = np.arange(table.num_rows)
+    inverse[placed] = np.arange(table.num_rows)
     return merged.take(pa.array(inverse))
 
 
@@ -229,6 +239,78 @@ class RecordingBuffers:
         return core
 
 
+def balanced_blocks(
+    queries: object,
+    blocks: int,
+    *,
+    recording: str = "recording",
+    load_cost: float | dict[str, float] = DEFAULT_LOAD_COST,
+) -> list[pa.Table]:
+    """Split rows that name their recording into ``blocks`` tables of about equal cost,
+    each recording's rows in one table (so each recording is read by one task, once).
+
+    The cost of a recording is ``load_cost`` (its read, in rows) plus its row count;
+    the recordings are placed by longest processing time first (LPT, Graham 1969: the
+    costliest first, each into the block of least cost so far; ties to the lower
+    block, recordings of equal cost in order of first appearance), which keeps the
+    costliest block within 4/3 of the best split. Within a block the rows are grouped
+    by recording (recordings in order of first appearance in ``queries``), each
+    recording's rows in their order in ``queries``.
+
+    Args:
+        queries: an Arrow table (or pandas / Polars DataFrame) with a string column
+            ``recording``.
+        blocks: how many tables (>= 1); fewer recordings than ``blocks`` leave the
+            last ones empty (every table has ``queries``' schema).
+        recording: the name of the recording column.
+        load_cost: rows one read of a recording weighs (>= 0), one number for all or a
+            mapping from recording to its cost (e.g. its file size times rows per
+            byte; recordings it does not name cost :data:`DEFAULT_LOAD_COST`).
+
+    Returns:
+        ``blocks`` Arrow tables; together they hold every row of ``queries`` once.
+
+    Raises:
+        ValueError: ``blocks`` < 1, a negative ``load_cost``, no ``recording`` column.
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if isinstance(blocks, bool) or not isinstance(blocks, int) or blocks < 1:
+        raise ValueError(f"blocks must be an int >= 1, got {blocks!r}")
+    costs = load_cost if isinstance(load_cost, dict) else {}
+    default = DEFAULT_LOAD_COST if isinstance(load_cost, dict) else float(load_cost)
+    for name, value in [("load_cost", default), *costs.items()]:
+        if not float(value) >= 0.0:
+            raise ValueError(f"load_cost must be >= 0, got {value!r} for {name!r}")
+    table = as_arrow(queries)
+    if recording not in table.column_names:
+        raise ValueError(f"queries has no column {recording!r} (the recording of each row)")
+    column = table.column(recording)
+    encoded = pc.dictionary_encode(pc.fill_null(column.cast(pa.string()), "")).combine_chunks()
+    codes = np.asarray(encoded.indices.to_numpy(zero_copy_only=False), dtype=np.int64)
+    names = encoded.dictionary.to_pylist()
+    counts = np.bincount(codes, minlength=len(names))
+    cost = [float(costs.get(name, default)) + float(counts[code])
+            for code, name in enumerate(names)]
+    # LPT: costliest first (stable: equal costs keep their order of first appearance).
+    placed: list[list[int]] = [[] for _ in range(blocks)]
+    totals = [0.0] * blocks
+    for code in sorted(range(len(names)), key=lambda c: -cost[c]):
+        least = min(range(blocks), key=lambda b: totals[b])
+        placed[least].append(code)
+        totals[least] += cost[code]
+    # Each recording's row indices, in order (a stable sort by code).
+    order = np.argsort(codes, kind="stable")
+    starts = np.concatenate(([0], np.cumsum(counts)))
+    out = []
+    for members in placed:
+        rows = [order[starts[c]:starts[c + 1]] for c in sorted(members)]
+        take = np.concatenate(rows) if rows else np.empty(0, dtype=np.int64)
+        out.append(table.take(pa.array(take, pa.int64())))
+    return out
+
+
 def lookup_by_recording(
     queries: object,
     *,
@@ -277,9 +359,17 @@ def lookup_by_recording(
     names = encoded.dictionary.to_pylist()
     parts: list[pa.Table] = []
     order: list[npt.NDArray[np.int64]] = []
+    # Each recording's row indices (a stable sort by code); a recording whose rows are
+    # consecutive (rows grouped by recording, as balanced_blocks makes them) is a slice,
+    # not a copy.
+    by_code = np.argsort(codes, kind="stable")
+    bounds = np.concatenate(([0], np.cumsum(np.bincount(codes, minlength=len(names)))))
     for code, name in enumerate(names):
-        rows = np.flatnonzero(codes == code)
-        part = table.take(pa.array(rows))
+        rows = by_code[bounds[code]:bounds[code + 1]]
+        if rows.size and int(rows[-1]) - int(rows[0]) + 1 == rows.size:
+            part = table.slice(int(rows[0]), rows.size)
+        else:
+            part = table.take(pa.array(rows))
         try:
             if window is None:
                 answered = lookup(part, cache.get(name), keep_columns=keep_columns)
@@ -293,8 +383,11 @@ def lookup_by_recording(
     if not parts:
         return lookup(table, BufferCore(), keep_columns=keep_columns)
     merged = pa.concat_tables(parts)
+    placed = np.concatenate(order)
+    if np.array_equal(placed, np.arange(table.num_rows)):  # already in the input's order
+        return merged
     inverse = np.empty(table.num_rows, dtype=np.int64)
-    inverse[np.concatenate(order)] = np.arange(table.num_rows)
+    inverse[placed] = np.arange(table.num_rows)
     return merged.take(pa.array(inverse))
 
 
