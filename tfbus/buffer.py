@@ -221,8 +221,11 @@ class Buffer(BufferCore):
         self._refusal_log.clock = lambda: self.clock.now().ns / 1e9
         self._index: dict[str, set[_Waiter[Any]]] = {}
         # set_transform and set_transform_static (the core's own methods) settle these
-        # waits in the core, and give the rest to _recheck_rest.
-        self._follow_waits(self._index)
+        # waits in the core, and give the rest to _recheck_rest. A wait the core settles
+        # is left in the index and listed here, removed by the next _reindex or
+        # _pending: not on the path between the insert and the waiting task's resume.
+        self._settled: list[_Waiter[Any]] = []
+        self._follow_waits(self._index, self._settled)
         self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
         self._closed = False
         self._listeners = 0  # TransformListeners feeding this buffer now
@@ -378,7 +381,17 @@ class Buffer(BufferCore):
             self._recheck(waiter)
 
     def _pending(self) -> set[_Waiter[Any]]:
+        self._unindex_settled()
         return {w for ws in self._index.values() for w in ws}
+
+    def _unindex_settled(self) -> None:
+        """Remove from the index the waits the core settled since the last call (it
+        leaves them there, off the wake-up's path; see ``_follow_waits``)."""
+        settled = self._settled
+        if settled:
+            for waiter in settled:
+                self._unindex(waiter)
+            settled.clear()
 
     @property
     def pending_waits(self) -> int:
@@ -435,6 +448,8 @@ class Buffer(BufferCore):
     # ------------------------------------------------------------------ indexing
 
     def _reindex(self, waiter: _Waiter[Any], frames: frozenset[str]) -> None:
+        if self._settled:
+            self._unindex_settled()
         self._unindex(waiter)
         waiter.frames = frames
         for name in frames:
@@ -518,7 +533,7 @@ class Buffer(BufferCore):
                     finally:
                         cancel()
         finally:
-            if waiter.frames:  # not already unindexed by the recheck that woke it
+            if waiter.frames and waiter.result is None:  # not settled by an insert
                 self._unindex(waiter)
         found = waiter.result
         if found is not None:
@@ -759,7 +774,7 @@ class Buffer(BufferCore):
                 try:
                     await waiter.wait()
                 finally:
-                    if waiter.frames:  # not already unindexed by the recheck that woke it
+                    if waiter.frames and waiter.result is None:  # not settled by an insert
                         self._unindex(waiter)
                 found = waiter.result
                 if found is not None:

@@ -37,6 +37,7 @@ cdef class CoreBase:
     cdef int64_t _expire_due
     cdef long long _frames_expired
     cdef dict _waits
+    cdef list _settled
     cdef object _register(self, str frame_id)
     cdef int _name_parent(self, object cid, object pid) except -1
     cdef int _unregister(self, object fid) except -1
