@@ -46,6 +46,7 @@ cdef class CoreBase:
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
     cdef object _problem(self, int code)
     cdef object _csettle(self, dict index, object names)
+    cdef object _cquery(self, object target, object source, object time)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1

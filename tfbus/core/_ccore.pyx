@@ -950,7 +950,7 @@ cdef class CoreBase:
             if exact is None:
                 out = None
             else:
-                out = self._query((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
+                out = self._cquery((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
                 if isinstance(out, TransformStamped):
                     waiter.result = out
                     if settled is not None:
@@ -999,6 +999,10 @@ cdef class CoreBase:
           common time minus cache_time (tf2's transformable-request test), i.e. waiting
           cannot help.
         """
+        return self._cquery(target, source, time)
+
+    cdef object _cquery(self, object target, object source, object time):
+        """:meth:`_query`, callable from C with no Python call in between."""
         cdef int64_t t = (<object>time)._ns
         cdef int64_t used, lct
         cdef int target_id, source_id, err, where = 0, gcode = 0
