@@ -136,17 +136,18 @@ class _Waiter(Wakeup, Generic[_T]):
     the wait (the answer came, or the deadline).
 
     ``exact`` is ``(target, source, time, fail_fast)`` for a wait of
-    ``lookup_transform_async`` / ``wait_for_transform`` without a policy (``check`` is
-    then ``check_transform`` of those arguments): the recheck asks the core directly,
-    without the call through ``check``.
+    ``lookup_transform_async`` / ``wait_for_transform`` without a policy: the recheck
+    asks the core directly (``check_transform`` of those arguments; ``check`` and
+    ``frames_fn`` are then None: the buffer derives both from ``exact``, so such a wait
+    allocates no callables).
     """
 
     __slots__ = ("check", "error", "exact", "frames", "frames_fn", "result")
 
     def __init__(
         self,
-        check: Callable[[], _T | TransformException | None],
-        frames_fn: Callable[[], frozenset[str]],
+        check: Callable[[], _T | TransformException | None] | None,
+        frames_fn: Callable[[], frozenset[str]] | None,
         loop: AbstractEventLoop | None,
         exact: tuple[str, str, Time, bool] | None = None,
     ) -> None:
@@ -220,7 +221,11 @@ class Buffer(BufferCore):
         self._index: dict[str, set[_Waiter[Any]]] = {}
         # set_transform, set_transform_static and set_transforms (the core's own
         # methods) settle these waits in the core, and give the rest to _recheck_rest.
-        self._follow_waits(self._index)
+        # A wait the core settles is left in the index and listed here, removed by the
+        # next _reindex or _pending: not on the path between the insert and the waiting
+        # task's resume.
+        self._settled: list[_Waiter[Any]] = []
+        self._follow_waits(self._index, self._settled)
         self._unregister_jump = clear_on_jump_back(self, self.clock, then=self._recheck_pending)
         self._closed = False
         self._listeners = 0  # TransformListeners feeding this buffer now
@@ -324,13 +329,14 @@ class Buffer(BufferCore):
                 else self._hopeless(target, source, out, time, fail_fast)
             )
         else:
+            assert waiter.check is not None  # every wait but an exact one has its check
             try:
                 result = waiter.check()
             except TransformException as exc:
                 result = exc
         if result is None:
-            if relinked:
-                self._reindex(waiter, waiter.frames_fn())  # the path may have changed
+            if relinked:  # the path may have changed
+                self._reindex(waiter, self._waiter_frames(waiter))
             return
         if isinstance(result, TransformException):
             waiter.error = result
@@ -356,7 +362,17 @@ class Buffer(BufferCore):
             self._recheck(waiter)
 
     def _pending(self) -> set[_Waiter[Any]]:
+        self._unindex_settled()
         return {w for ws in self._index.values() for w in ws}
+
+    def _unindex_settled(self) -> None:
+        """Remove from the index the waits the core settled since the last call (it
+        leaves them there, off the wake-up's path; see ``_follow_waits``)."""
+        settled = self._settled
+        if settled:
+            for waiter in settled:
+                self._unindex(waiter)
+            settled.clear()
 
     @property
     def pending_waits(self) -> int:
@@ -413,6 +429,8 @@ class Buffer(BufferCore):
     # ------------------------------------------------------------------ indexing
 
     def _reindex(self, waiter: _Waiter[Any], frames: frozenset[str]) -> None:
+        if self._settled:
+            self._unindex_settled()
         self._unindex(waiter)
         waiter.frames = frames
         for name in frames:
@@ -441,6 +459,73 @@ class Buffer(BufferCore):
 
     def _frames_of(self, target: str, source: str, time: Time) -> frozenset[str]:
         return frozenset(self.chain_frames(target, source, time))
+
+    def _waiter_frames(self, waiter: _Waiter[Any]) -> frozenset[str]:
+        """The frames ``waiter`` depends on now (its ``frames_fn``, or for an exact wait
+        the chain of its lookup)."""
+        if waiter.frames_fn is not None:
+            return waiter.frames_fn()
+        assert waiter.exact is not None
+        return self._frames_of(waiter.exact[0], waiter.exact[1], waiter.exact[2])
+
+    async def _wait_exact(
+        self,
+        target: str,
+        source: str,
+        time: Time,
+        fail_fast: bool,
+        timeout: float | Duration | None,
+        checked: bool = False,
+    ) -> TransformStamped:
+        """:meth:`_wait` for ``check_transform(target, source, time, fail_fast)`` (the
+        exact waits of :meth:`lookup_transform_async` and :meth:`wait_for_transform`):
+        the same steps, with no callables built (the recheck and the index derive them
+        from the waiter's ``exact``) and the answer the insert's recheck stored in the
+        waiter returned as it is (never looked up again). ``checked``: the caller has
+        just asked ``check_transform`` (None: not answerable yet), with a timeout that is
+        None or a finite float."""
+        if not checked:
+            if timeout is not None and timeout_ns(timeout) is None:
+                timeout = None  # inf: no deadline (and NaN or a str raised here, up front)
+            result = self.check_transform(target, source, time, fail_fast)
+            if result is not None:
+                if isinstance(result, TransformException):
+                    raise result
+                return result
+        if self._closed:
+            raise BufferClosedException(
+                f"the buffer is closed: not waiting for {self._describe(target, source, time)}"
+            )
+        waiter: _Waiter[TransformStamped] = _Waiter(
+            None, None, running_asyncio_loop(), (target, source, time, fail_fast)
+        )
+        self._reindex(waiter, self._frames_of(target, source, time))
+        try:
+            if timeout is None:
+                await waiter.wait()
+            else:
+                cancel = self.clock.call_later(timeout, waiter.wake)
+                if cancel is None:
+                    with self.clock.move_on_after(timeout):
+                        await waiter.wait()
+                else:
+                    try:
+                        await waiter.wait()
+                    finally:
+                        cancel()
+        finally:
+            if waiter.frames and waiter.result is None:  # not settled by an insert
+                self._unindex(waiter)
+        found = waiter.result
+        if found is not None:
+            return found
+        if waiter.error is not None:
+            raise waiter.error
+        assert timeout is not None  # the deadline, not the data, ended the wait
+        seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
+        raise TimeoutException(
+            f"Timed out after {seconds:g} s waiting for {self._describe(target, source, time)}"
+        )
 
     async def _wait(
         self,
@@ -597,13 +682,10 @@ class Buffer(BufferCore):
                 if isinstance(found, TransformException):
                     raise found
                 return found
-        return await self._wait(
-            partial(self.check_transform, target_frame, source_frame, time, fail_fast),
-            partial(self._frames_of, target_frame, source_frame, time),
-            timeout,
-            partial(self._describe, target_frame, source_frame, time),
-            (target_frame, source_frame, time, fail_fast),
-        )
+            return await self._wait_exact(
+                target_frame, source_frame, time, fail_fast, timeout, checked=True
+            )
+        return await self._wait_exact(target_frame, source_frame, time, fail_fast, timeout)
 
     @overload
     def lookup_transform_async(
@@ -662,13 +744,28 @@ class Buffer(BufferCore):
                 if isinstance(found, TransformException):
                     raise found
                 return found
-        return await self._wait(
-            partial(self.check_transform, target_frame, source_frame, time, fail_fast),
-            partial(self._frames_of, target_frame, source_frame, time),
-            timeout,
-            partial(self._describe, target_frame, source_frame, time),
-            (target_frame, source_frame, time, fail_fast),
-        )
+            if timeout is None and not self._closed:
+                # _wait_exact without a deadline, inline: no coroutine of its own between
+                # this call and the future the insert's recheck completes.
+                exact = (target_frame, source_frame, time, fail_fast)
+                waiter: _Waiter[TransformStamped] = _Waiter(
+                    None, None, running_asyncio_loop(), exact
+                )
+                self._reindex(waiter, self._frames_of(target_frame, source_frame, time))
+                try:
+                    await waiter.wait()
+                finally:
+                    if waiter.frames and waiter.result is None:  # not settled by an insert
+                        self._unindex(waiter)
+                found = waiter.result
+                if found is not None:
+                    return found
+                assert waiter.error is not None  # no deadline: the data or a failure woke it
+                raise waiter.error
+            return await self._wait_exact(
+                target_frame, source_frame, time, fail_fast, timeout, checked=True
+            )
+        return await self._wait_exact(target_frame, source_frame, time, fail_fast, timeout)
 
     @overload
     def lookup_transform_full_async(

@@ -613,3 +613,79 @@ async def test_a_batch_settles_a_wait_with_no_python_frame_of_the_buffer() -> No
         assert not result
     assert result == [buf.lookup_transform("map", "base", T0)]
     assert result[0].transform.translation.x == pytest.approx(3.0)
+
+
+async def test_a_wait_without_deadline_resumes_in_lookup_transform_async_alone() -> None:
+    """An awaited exact lookup that has to wait, with no deadline: the Python frames of
+    ``tfbus/buffer.py`` entered while it sets up its wait and while it resumes. The wait
+    is set up with no callables built for it and resumes through
+    ``lookup_transform_async`` alone (no ``Buffer._wait`` coroutine between it and the
+    future the insert completes; a generator's resumption is a "call" to the profiler),
+    returning the transform the insert's recheck found."""
+    buffer_py = tfbus.buffer.__file__
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("map", "odom", T0, x=1.0))
+    result: list[TransformStamped] = []
+    entered: list[str] = []
+
+    def profile(frame: Any, event: str, arg: Any) -> None:
+        if event == "call" and frame.f_code.co_filename == buffer_py:
+            entered.append(frame.f_code.co_qualname)
+
+    async def waiter() -> None:
+        result.append(await buf.lookup_transform_async("map", "base", T0))
+
+    async with anyio.create_task_group() as tg:
+        sys.setprofile(profile)
+        try:
+            tg.start_soon(waiter)
+            await settle()
+        finally:
+            sys.setprofile(None)
+        assert buf.pending_waits == 1
+        assert entered == [
+            "Buffer.lookup_transform_async",
+            "_Waiter.__init__",
+            "Buffer._frames_of",
+            "Buffer._reindex",
+            "Buffer._unindex",
+        ]
+        entered.clear()
+        buf.set_transform(tf("odom", "base", T0, x=2.0))
+        sys.setprofile(profile)
+        try:
+            await settle()
+        finally:
+            sys.setprofile(None)
+        assert entered == ["Buffer.lookup_transform_async"]
+    assert result == [buf.lookup_transform("map", "base", T0)]
+    assert result[0].transform.translation.x == pytest.approx(3.0)
+
+
+async def test_an_insert_leaves_the_index_edits_of_the_wait_it_settles_to_the_next_wait() -> None:
+    """The insert that answers a wait wakes it without editing the buffer's index (off
+    the path between the insert and the task's resume); the next wait set up, or
+    ``pending_waits``, removes it. Memory stays bounded: 1 000 waits in a row leave at
+    most one settled wait listed and nothing else indexed."""
+    buf = Buffer(clock=ManualClock(T0))
+    buf.set_transform(tf("map", "odom", T0, x=1.0))
+    stamps = [Time.from_ns(T0.ns + k * 1000) for k in range(1, 1001)]
+    results: list[TransformStamped] = []
+
+    async def waiter() -> None:
+        for stamp in stamps:
+            results.append(await buf.lookup_transform_async("map", "odom", stamp))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(waiter)
+        for k, stamp in enumerate(stamps, 1):
+            await settle()
+            assert buf.pending_waits == 1
+            buf.set_transform(tf("map", "odom", stamp, x=float(k)))
+            # Woken and settled, still indexed until the next wait or pending_waits.
+            assert len(buf._settled) == 1
+            assert set(buf._index) == {"map", "odom"}
+            assert len(results) == k - 1
+    assert [r.transform.translation.x for r in results] == [float(k) for k in range(1, 1001)]
+    assert buf.pending_waits == 0
+    assert not buf._index and not buf._settled

@@ -216,3 +216,30 @@ async def test_both_twins_settle_with_the_same_transform_bit_for_bit() -> None:
         results.append(waiter.result)
     assert results[0] is not None
     assert results[0] == results[1]  # every float equal (no -0.0 or NaN here)
+
+
+@pytest.mark.parametrize("twin", sorted(CORES))
+async def test_a_settled_wait_is_listed_and_left_in_the_index_when_asked(twin: str) -> None:
+    """``_follow_waits(index, settled)`` (what a Buffer passes): the insert that answers
+    a wait settles it (result, wake-up) without editing ``index``; the wait is appended
+    to ``settled`` for the buffer to remove later, keeps its ``frames``, and a later
+    insert on the same frames skips it (settled once, listed once)."""
+    core = buffer_core(twin)
+    assert core.set_transform(tf("map", "odom", T1, 1.0))
+    index: dict[str, set[Any]] = {}
+    settled: list[Any] = []
+    core._follow_waits(index, settled)
+    frames = frozenset({"map", "odom"})
+    waiter = wait_on(index, frames, ("map", "odom", T2, False))
+    assert core.set_transform(tf("map", "odom", T2, 3.0))
+    assert woken(waiter)
+    assert waiter.result == core.lookup_transform("map", "odom", T2)
+    assert waiter.result.transform.translation.x == 3.0
+    assert settled == [waiter]
+    assert waiter.frames == frames
+    assert index == {"map": {waiter}, "odom": {waiter}}
+    first = waiter.result
+    assert core.set_transform(tf("map", "odom", Time(14), 5.0))
+    assert settled == [waiter]  # not settled again
+    assert waiter.result is first
+    assert core._settle(index, None) is None

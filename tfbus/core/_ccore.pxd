@@ -38,6 +38,7 @@ cdef class CoreBase:
     cdef long long _frames_expired
     cdef dict _waits
     cdef object _batch
+    cdef list _settled
     cdef object _register(self, str frame_id)
     cdef int _name_parent(self, object cid, object pid) except -1
     cdef int _unregister(self, object fid) except -1
@@ -47,6 +48,7 @@ cdef class CoreBase:
     cdef object _problem(self, int code)
     cdef object _csettle(self, dict index, object names)
     cdef object _cstore(self, object transforms, str authority, bint is_static)
+    cdef object _cquery(self, object target, object source, object time)
     cdef int _common(self, int target, int source, int64_t* out) except -1
     cdef int _walk(self, int target_id, int source_id, int64_t* time, double* out,
                    int* where) except -1

@@ -514,6 +514,7 @@ cdef class CoreBase:
         self._frames_expired = 0
         self._waits = None
         self._batch = None
+        self._settled = None
         self._memo = [None] * MEMO_SIZE
         for k in range(MEMO_SIZE):
             self._memo_gen[k] = -1
@@ -1094,11 +1095,15 @@ cdef class CoreBase:
             return False
         return fabs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
 
-    def _follow_waits(self, dict index):
+    def _follow_waits(self, dict index, list settled=None):
         """Settle the waits of ``index`` (frame id -> set of waits, the subclass's own
         dict, kept by reference) in every later ``set_transform`` and
-        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops."""
+        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops.
+        ``settled``: the subclass's list (kept by reference) that a settled wait is
+        appended to, left in ``index`` for the subclass to remove later (off the
+        wake-up's path); None: removed from ``index`` as it is settled."""
         self._waits = index
+        self._settled = settled
 
     def _settle(self, dict index, names):
         """The recheck of ``tfbus.buffer.Buffer``'s waits after an insert, in one call:
@@ -1107,8 +1112,10 @@ cdef class CoreBase:
         the transform ``_store_one`` stored last) is taken once. An exact wait (its
         ``exact`` is ``(target, source, time, fail_fast)``) whose lookup now succeeds is
         settled here: ``result`` := the transform, removed from ``index`` under each of
-        its ``frames`` (then empty), and woken (``future.set_result(None)`` unless done
-        on asyncio, else its ``wake()``).
+        its ``frames`` (then empty) or, with a ``settled`` list (:meth:`_follow_waits`),
+        appended to it and left in ``index`` (``frames`` kept; a wait with a ``result``
+        is skipped by every later settle), and woken (``future.set_result(None)`` unless
+        done on asyncio, else its ``wake()``).
 
         Returns:
             None when nothing is left to do; else ``[(wait, failure)]`` for the buffer's
@@ -1121,6 +1128,7 @@ cdef class CoreBase:
         """:meth:`_settle`, callable from C with no Python call in between."""
         cdef list due
         cdef list rest = None
+        cdef list settled = self._settled
         cdef set first = None, union = None
         cdef object ws, waiter, exact, out, name, future
         if names is None:
@@ -1138,23 +1146,28 @@ cdef class CoreBase:
                 union.update(<set>ws)
         if first is None:
             return None
-        # A copy: settling a wait edits the index's sets.
+        # A copy: settling a wait edits the index's sets (unless ``settled`` is kept).
         due = list(first) if union is None else list(union)
         for waiter in due:
+            if waiter.result is not None:
+                continue  # settled before, still in the index (``settled``)
             exact = waiter.exact
             if exact is None:
                 out = None
             else:
-                out = self._query((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
+                out = self._cquery((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
                 if isinstance(out, TransformStamped):
                     waiter.result = out
-                    for name in waiter.frames:
-                        ws = index.get(name)
-                        if ws is not None:
-                            (<set>ws).discard(waiter)
-                            if not ws:
-                                del index[name]
-                    waiter.frames = _NO_FRAMES
+                    if settled is not None:
+                        settled.append(waiter)
+                    else:
+                        for name in waiter.frames:
+                            ws = index.get(name)
+                            if ws is not None:
+                                (<set>ws).discard(waiter)
+                                if not ws:
+                                    del index[name]
+                        waiter.frames = _NO_FRAMES
                     future = waiter.future
                     if future is None:
                         waiter.wake()
@@ -1191,6 +1204,10 @@ cdef class CoreBase:
           common time minus cache_time (tf2's transformable-request test), i.e. waiting
           cannot help.
         """
+        return self._cquery(target, source, time)
+
+    cdef object _cquery(self, object target, object source, object time):
+        """:meth:`_query`, callable from C with no Python call in between."""
         cdef int64_t t = (<object>time)._ns
         cdef int64_t used, lct
         cdef int target_id, source_id, err, where = 0, gcode = 0

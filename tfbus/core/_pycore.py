@@ -305,6 +305,7 @@ class CoreBase:
         "_refs",
         "_replace_repeated",
         "_waits",
+        "_settled",
     )
 
     _frame_ids: dict[str, int]
@@ -341,6 +342,8 @@ class CoreBase:
     _frames_expired: int
     # The waits inserts settle (``_follow_waits``: the subclass's dict), or None.
     _waits: dict[str, set[Any]] | None
+    # Where a settled wait goes, left in ``_waits`` (``_follow_waits``), or None.
+    _settled: list[Any] | None
     # BufferCore's: a transform set_transform did not store (the log line or exception).
     _not_stored: Callable[[tuple[Any, ...], str], object]
     # The subclass's recheck of the waits ``_settle`` left (with ``_waits`` only).
@@ -374,6 +377,7 @@ class CoreBase:
         self._expire_due = _INT64_MAX
         self._frames_expired = 0
         self._waits = None
+        self._settled = None
         return self
 
     @property
@@ -855,11 +859,17 @@ class CoreBase:
             return False
         return abs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
 
-    def _follow_waits(self, index: dict[str, set[Any]] | None) -> None:
+    def _follow_waits(
+        self, index: dict[str, set[Any]] | None, settled: list[Any] | None = None
+    ) -> None:
         """Settle the waits of ``index`` (frame id -> set of waits, the subclass's own
         dict, kept by reference) in every later ``set_transform`` and
-        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops."""
+        ``set_transform_static`` that stores (see :meth:`_settle`); ``None`` stops.
+        ``settled``: the subclass's list (kept by reference) that a settled wait is
+        appended to, left in ``index`` for the subclass to remove later (off the
+        wake-up's path); None: removed from ``index`` as it is settled."""
         self._waits = index
+        self._settled = settled
 
     def _settle(
         self, index: dict[str, set[Any]], names: Iterable[str] | None
@@ -870,8 +880,10 @@ class CoreBase:
         the transform ``_store_one`` stored last) is taken once. An exact wait (its
         ``exact`` is ``(target, source, time, fail_fast)``) whose lookup now succeeds is
         settled here: ``result`` := the transform, removed from ``index`` under each of
-        its ``frames`` (then empty), and woken (``future.set_result(None)`` unless done
-        on asyncio, else its ``wake()``).
+        its ``frames`` (then empty) or, with a ``settled`` list (:meth:`_follow_waits`),
+        appended to it and left in ``index`` (``frames`` kept; a wait with a ``result``
+        is skipped by every later settle), and woken (``future.set_result(None)`` unless
+        done on asyncio, else its ``wake()``).
 
         Returns:
             None when nothing is left to do; else ``[(wait, failure)]`` for the buffer's
@@ -895,23 +907,29 @@ class CoreBase:
                 union.update(ws)
         if first is None:
             return None
-        # A copy: settling a wait edits the index's sets.
+        # A copy: settling a wait edits the index's sets (unless ``settled`` is kept).
         due = list(first) if union is None else list(union)
         rest: list[tuple[Any, tuple[int, ...] | None]] | None = None
+        settled = self._settled
         for waiter in due:
+            if waiter.result is not None:
+                continue  # settled before, still in the index (``settled``)
             exact = waiter.exact
             out: tuple[int, ...] | None = None
             if exact is not None:
                 found = self._query(exact[0], exact[1], exact[2])
                 if isinstance(found, TransformStamped):
                     waiter.result = found
-                    for name in waiter.frames:
-                        ws = index.get(name)
-                        if ws is not None:
-                            ws.discard(waiter)
-                            if not ws:
-                                del index[name]
-                    waiter.frames = _NO_FRAMES
+                    if settled is not None:
+                        settled.append(waiter)
+                    else:
+                        for name in waiter.frames:
+                            ws = index.get(name)
+                            if ws is not None:
+                                ws.discard(waiter)
+                                if not ws:
+                                    del index[name]
+                        waiter.frames = _NO_FRAMES
                     future = waiter.future
                     if future is None:
                         waiter.wake()
