@@ -304,8 +304,8 @@ class CoreBase:
         "_newest",
         "_refs",
         "_replace_repeated",
-        "_waits",
         "_settled",
+        "_waits",
     )
 
     _frame_ids: dict[str, int]
