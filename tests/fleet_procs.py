@@ -5,6 +5,7 @@ Helper module (not a test file); importable because ``tests/`` is on ``sys.path`
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import signal
@@ -38,7 +39,8 @@ class Proc:
         )
         self.lines: queue.Queue[str] = queue.Queue()
         self.seen: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
@@ -88,15 +90,18 @@ class Proc:
             return self.proc.wait(timeout)
 
     def rest(self, timeout: float = 10.0) -> list[str]:
-        """Every line, once the process has ended (bounded)."""
+        """Every line, once the process has ended and its output has been read to the end
+        (both bounded by ``timeout``: an exited child's last lines may still be in the pipe
+        when its exit status is already there)."""
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(max(deadline - time.monotonic(), 0.0))
+        self._reader.join(max(deadline - time.monotonic(), 0.0))
+        while True:
             try:
-                self.seen.append(self.lines.get(timeout=0.2))
+                self.seen.append(self.lines.get_nowait())
             except queue.Empty:
-                if self.proc.poll() is not None:
-                    break
-        return self.seen
+                return self.seen
 
     def kill(self) -> None:
         """SIGKILL the child by its PID if it still runs, and reap it."""

@@ -691,6 +691,7 @@ PURE_SUITE = [
 ]
 COMPILED_ONLY = [
     "tests/core/test_core.py::test_a_dropped_lookup_result_is_recycled_and_a_kept_one_never_changes",
+    "tests/core/test_core.py::test_a_dropped_batch_result_is_filled_in_again_and_a_kept_one_never_changes",
     "tests/core/test_batch_lookup.py::test_a_split_that_loses_to_one_thread_backs_off_to_one_thread",
 ]
 """Tests of what only the compiled core has (result recycling, the two-thread split): left

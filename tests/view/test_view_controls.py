@@ -200,8 +200,13 @@ def _pick(c: object, label: str, option: str) -> None:
     assert isinstance(c, Chromium)
     shown = ("[...document.querySelectorAll('[role=option]')].find(e => e.textContent === "
              f"{json.dumps(option)} && e.getBoundingClientRect().height > 0)")
+    # The list of the dropdown picked before may still be closing (a loaded machine): its
+    # options, shown, would be clicked in place of this one's.
+    closed = ("![...document.querySelectorAll('[role=option]')]"
+              ".some(e => e.getBoundingClientRect().height > 0)")
     value = f"{_row(label)}.querySelector('input').value === {json.dumps(option)}"
     for _ in range(3):  # a click before the page settled, or on a list still moving in
+        c.wait(closed, timeout=10.0)
         c.click(*_centre(c, f"{_row(label)}.querySelector('input')"))
         try:
             c.wait(f"!!({shown})", timeout=5.0)
