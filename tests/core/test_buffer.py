@@ -630,7 +630,11 @@ async def test_a_wait_without_deadline_resumes_in_lookup_transform_async_alone()
 
     def profile(frame: Any, event: str, arg: Any) -> None:
         if event == "call" and frame.f_code.co_filename == buffer_py:
-            entered.append(frame.f_code.co_qualname)
+            code = frame.f_code  # co_qualname from Python 3.11; on 3.10, self's class
+            qualname = getattr(code, "co_qualname", None)
+            if qualname is None:
+                qualname = f"{type(frame.f_locals['self']).__name__}.{code.co_name}"
+            entered.append(qualname)
 
     async def waiter() -> None:
         result.append(await buf.lookup_transform_async("map", "base", T0))
