@@ -518,64 +518,17 @@ async def test_a_zero_timeout_wait_is_still_a_checkpoint(clock: ManualClock | Sy
     assert buf.pending_waits == 0
 
 
-@pytest.mark.parametrize("static", [False, True], ids=["set_transform", "set_transform_static"])
-async def test_an_insert_settles_a_wait_with_no_python_frame_of_the_buffer(static: bool) -> None:
-    """The core's own set_transform(_static) settles the wait it answers (result, index,
-    wake-up) before it returns: Buffer adds no Python frame of its own (it added one,
-    ``Buffer.set_transform``, before the core settled waits itself). Not counted: frames
-    of the core (the pure-Python core has them) and trio's wake-up itself
-    (``Wakeup.wake``, which reschedules the parked task; asyncio's is a future's
-    ``set_result``)."""
-
-    core_dir = str(Path(tfbus.core.__file__).parent)
-    tfbus_dir = str(Path(tfbus.__file__).parent)
-    wakeup = str(Path(tfbus.__file__).parent / "_aio.py")
-    buf = Buffer(clock=ManualClock(T0))
-    buf.set_transform(tf("map", "odom", T0, x=1.0))
-    result: list[TransformStamped] = []
-
-    async def waiter() -> None:
-        result.append(await buf.lookup_transform_async("map", "base", T0))
-
-    async with anyio.create_task_group() as tg:
-        tg.start_soon(waiter)
-        await settle()
-        assert buf.pending_waits == 1
-        entered: list[str] = []
-
-        def profile(frame: Any, event: str, arg: Any) -> None:
-            name = frame.f_code.co_filename
-            if (
-                event == "call"
-                and name.startswith(tfbus_dir)
-                and not name.startswith(core_dir)
-                and name != wakeup
-            ):
-                entered.append(frame.f_code.co_qualname)
-
-        insert = buf.set_transform_static if static else buf.set_transform
-        message = tf("odom", "base", T0, x=2.0)
-        sys.setprofile(profile)
-        try:
-            assert insert(message)
-        finally:
-            sys.setprofile(None)
-        assert entered == []
-        assert buf.pending_waits == 0  # settled inside the insert, before any task ran
-        assert not result
-    assert result == [buf.lookup_transform("map", "base", T0)]
-    assert result[0].transform.translation.x == pytest.approx(3.0)
-
-
-async def test_a_batch_settles_a_wait_with_no_python_frame_of_the_buffer() -> None:
-    """set_transforms is the core's own method, as set_transform is: it settles the
-    wait its batch answers (result, index, wake-up) before it returns, once per batch,
-    with no Python frame of Buffer or BufferCore (it had ``Buffer.set_transforms`` and
-    ``BufferCore.set_transforms``). Not counted: frames of the pure-Python core and
-    trio's wake-up itself (``Wakeup.wake``)."""
+@pytest.mark.parametrize("insert", ["set_transform", "set_transform_static", "set_transforms"])
+async def test_an_insert_settles_a_wait_with_no_python_frame_of_the_buffer(insert: str) -> None:
+    """The core's own set_transform(_static) and set_transforms settle the wait they
+    answer (result, index, wake-up) before they return, a batch once per batch: Buffer
+    and BufferCore add no Python frame of their own (they added ``Buffer.set_transform``,
+    ``Buffer.set_transforms`` and ``BufferCore.set_transforms`` before the core settled
+    waits itself). Not counted: frames of the pure-Python core (its own module and the
+    TouchedFrames it builds) and trio's wake-up itself (``Wakeup.wake``, which reschedules
+    the parked task; asyncio's is a future's ``set_result``)."""
 
     tfbus_dir = str(Path(tfbus.__file__).parent)
-    # The pure-Python core's frames: its own module and the TouchedFrames it builds.
     twin = (str(Path(tfbus_dir, "core", "_py")), str(Path(tfbus_dir, "core", "results.py")))
     wakeup = str(Path(tfbus.__file__).parent / "_aio.py")
     buf = Buffer(clock=ManualClock(T0))
@@ -604,11 +557,17 @@ async def test_a_batch_settles_a_wait_with_no_python_frame_of_the_buffer() -> No
         batch = [tf("odom", "base", T0, x=2.0), tf("base", "laser", T0, x=0.5)]
         sys.setprofile(profile)
         try:
-            report = buf.set_transforms(batch)
+            if insert == "set_transforms":
+                answer: Any = buf.set_transforms(batch)
+            else:
+                answer = getattr(buf, insert)(batch[0])
         finally:
             sys.setprofile(None)
         assert entered == []
-        assert (report.stored, set(report.touched)) == (2, {"odom", "base", "laser"})
+        if insert == "set_transforms":
+            assert (answer.stored, set(answer.touched)) == (2, {"odom", "base", "laser"})
+        else:
+            assert answer
         assert buf.pending_waits == 0  # settled inside the insert, before any task ran
         assert not result
     assert result == [buf.lookup_transform("map", "base", T0)]
