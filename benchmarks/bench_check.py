@@ -290,8 +290,13 @@ class Rows:
         print(f"  {'PASS' if ok else 'FAIL'}  {name:46} {figures:48} target {target}", flush=True)
 
 
+def _ratios(ours: list[float], theirs: list[float]) -> list[float]:
+    """Per-round ratios ours / theirs (rounds paired in order)."""
+    return [a / b for a, b in zip(ours, theirs, strict=True)]
+
+
 def _ratio(ours: list[float], theirs: list[float]) -> float:
-    return statistics.median(a / b for a, b in zip(ours, theirs, strict=True))
+    return statistics.median(_ratios(ours, theirs))
 
 
 def core_rows(rows: Rows, rounds: int) -> None:
@@ -404,7 +409,7 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
             key = f"{depth}/{label}"
             a = [x["lookup_s"][key] for x in ours]
             b = [x["lookup_s"][key] for x in theirs]
-            ratios = [p / q for p, q in zip(a, b, strict=True)]
+            ratios = _ratios(a, b)
             figures = (
                 f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}"
             )
@@ -423,7 +428,7 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
     ):
         a = [x[key] for x in ours]
         b = [x[key] for x in theirs]
-        ratios = [p / q for p, q in zip(a, b, strict=True)]
+        ratios = _ratios(a, b)
         rows.row(
             label,
             f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}",
@@ -645,7 +650,7 @@ def sensors_rows(rows: Rows, rounds: int) -> None:
                                     False)):  # fmt: skip
             a = [x[key] for x in ours]
             b = [x[key] for x in theirs]
-            ratios = [p / q for p, q in zip(a, b, strict=True)]
+            ratios = _ratios(a, b)
             figures = (f"{statistics.median(a) * 1e6:.1f} vs {statistics.median(b) * 1e6:.1f} "
                        f"us CPU = {_spread(ratios)}")  # fmt: skip
             if judged:
@@ -662,7 +667,7 @@ def sensors_rows(rows: Rows, rounds: int) -> None:
     bare = [x[bench_sensors.BARE] for x in cloud]
     for name, label in zip(names[1:], SENSOR_ROWS[1:], strict=True):
         a = [x[name] for x in cloud]
-        ratios = [p / q for p, q in zip(a, bare, strict=True)]
+        ratios = _ratios(a, bare)
         rows.row(
             label,
             f"{statistics.median(a) * 1e3:.2f} vs {statistics.median(bare) * 1e3:.2f} ms CPU, "
@@ -718,8 +723,8 @@ def zenoh_rows(rows: Rows, rounds: int) -> None:
         except KeyError:
             rows.row(name, "not run: no probe received at this rate", False, "")
             continue
-        ratios = [p / q for p, q in zip(bus, raw, strict=True)]
-        over_hop = [p / q for p, q in zip(bus, hop, strict=True)]
+        ratios = _ratios(bus, raw)
+        over_hop = _ratios(bus, hop)
         rows.row(
             name,
             f"{statistics.median(bus):.0f} vs {statistics.median(raw):.0f} us = "
