@@ -28,6 +28,10 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--window-size=1280,800", "--remote-debugging-port=0",
          "--remote-debugging-address=127.0.0.1"]
 
+# what Chromium answers while a navigation swaps the page's document (or its process)
+_BETWEEN_DOCUMENTS = ("Not attached to an active page", "Cannot find context",
+                      "Execution context was destroyed", "Inspected target navigated")
+
 
 class Chromium:
     """One headless Chromium and one page of it, driven through CDP (``with Chromium(exe)
@@ -111,8 +115,24 @@ class Chromium:
                 return result
 
     def open(self, url: str) -> None:
-        """Navigate to ``url``."""
+        """Navigate to ``url`` and wait (bounded) until the new document has loaded.
+
+        Until then the page target can be between two documents: Chromium answers a
+        command sent there with "Not attached to an active page" or "Cannot find
+        context", which this wait rides out (any other error is raised)."""
         self.call("Page.navigate", url=url)
+        deadline = time.monotonic() + self.timeout
+        check = f"location.href === {json.dumps(url)} && document.readyState === 'complete'"
+        while True:
+            try:
+                if self.js(check):
+                    return
+            except RuntimeError as exc:
+                if not any(m in str(exc) for m in _BETWEEN_DOCUMENTS):
+                    raise
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"{url} never finished loading")
+            time.sleep(0.05)
 
     def js(self, expression: str) -> Any:
         """The value of ``expression`` in the page (awaited when a promise)."""
