@@ -211,12 +211,30 @@ cdef extern from *:
     /* Rows j0 <= j < j1 of a block, all in one interval (samples a, a + 7; bq = b with
        slerp's sign flip, d = 1 / sin(theta)): TimeCache::interpolate's lerp and tf2 slerp's
        (a sin((1 - r) theta) + b sin(r theta)) / sin(theta), the expressions of
-       _binterp_run lane by lane (separate multiplies and adds: no FMA in this target). */
+       _binterp_run lane by lane (separate multiplies and adds: no FMA in this target).
+       The rows before the first multiple of 4 are computed one by one; from there, whole
+       groups of 4 lanes are stored (no masked stores, slow on several x86 cores): lanes
+       past j1 in the last group get values that are either never read (a failed row, a
+       lane past the block's rows) or overwritten, as the caller fills the block's rows
+       in increasing order after this run. */
     static int tfb_avx2 = 0;
     #if defined(TFB_X86_64)
     static __attribute__((target("avx2"))) void tfb_interp_run_avx2(
             const double* a, const double* bq, double d, const double* rr, const double* sy,
             int j0, int j1, double (*st)[TFB_BLOCK]) {
+        int j, jv = (j0 + 3) & ~3;
+        for (j = j0; j < j1 && j < jv; j++) {
+            double r = rr[j], s = 1.0 - r, q0 = sy[j], q1 = sy[TFB_BLOCK + j];
+            st[0][j] = s * a[0] + r * a[7];
+            st[1][j] = s * a[1] + r * a[8];
+            st[2][j] = s * a[2] + r * a[9];
+            st[3][j] = (a[3] * q0 + bq[0] * q1) * d;
+            st[4][j] = (a[4] * q0 + bq[1] * q1) * d;
+            st[5][j] = (a[5] * q0 + bq[2] * q1) * d;
+            st[6][j] = (a[6] * q0 + bq[3] * q1) * d;
+        }
+        if (jv >= j1)
+            return;
         const __m256d one = _mm256_set1_pd(1.0), dd = _mm256_set1_pd(d);
         const __m256d a0 = _mm256_set1_pd(a[0]), a1 = _mm256_set1_pd(a[1]);
         const __m256d a2 = _mm256_set1_pd(a[2]), a3 = _mm256_set1_pd(a[3]);
@@ -225,22 +243,16 @@ cdef extern from *:
         const __m256d b1 = _mm256_set1_pd(a[8]), b2 = _mm256_set1_pd(a[9]);
         const __m256d c0 = _mm256_set1_pd(bq[0]), c1 = _mm256_set1_pd(bq[1]);
         const __m256d c2 = _mm256_set1_pd(bq[2]), c3 = _mm256_set1_pd(bq[3]);
-        const __m256i lanes = _mm256_set_epi64x(3, 2, 1, 0);
-        const __m256i lo = _mm256_set1_epi64x(j0 - 1), hi = _mm256_set1_epi64x(j1);
-        int j;
-        for (j = j0 & ~3; j < j1; j += 4) {
-            __m256i lane = _mm256_add_epi64(_mm256_set1_epi64x(j), lanes);
-            __m256i m = _mm256_and_si256(_mm256_cmpgt_epi64(lane, lo),
-                                         _mm256_cmpgt_epi64(hi, lane));
+        for (j = jv; j < j1; j += 4) {
             __m256d r = _mm256_loadu_pd(rr + j), s = _mm256_sub_pd(one, r);
             __m256d q0 = _mm256_loadu_pd(sy + j), q1 = _mm256_loadu_pd(sy + TFB_BLOCK + j);
-            _mm256_maskstore_pd(&st[0][j], m, _mm256_add_pd(_mm256_mul_pd(s, a0), _mm256_mul_pd(r, b0)));
-            _mm256_maskstore_pd(&st[1][j], m, _mm256_add_pd(_mm256_mul_pd(s, a1), _mm256_mul_pd(r, b1)));
-            _mm256_maskstore_pd(&st[2][j], m, _mm256_add_pd(_mm256_mul_pd(s, a2), _mm256_mul_pd(r, b2)));
-            _mm256_maskstore_pd(&st[3][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a3, q0), _mm256_mul_pd(c0, q1)), dd));
-            _mm256_maskstore_pd(&st[4][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a4, q0), _mm256_mul_pd(c1, q1)), dd));
-            _mm256_maskstore_pd(&st[5][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a5, q0), _mm256_mul_pd(c2, q1)), dd));
-            _mm256_maskstore_pd(&st[6][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a6, q0), _mm256_mul_pd(c3, q1)), dd));
+            _mm256_storeu_pd(&st[0][j], _mm256_add_pd(_mm256_mul_pd(s, a0), _mm256_mul_pd(r, b0)));
+            _mm256_storeu_pd(&st[1][j], _mm256_add_pd(_mm256_mul_pd(s, a1), _mm256_mul_pd(r, b1)));
+            _mm256_storeu_pd(&st[2][j], _mm256_add_pd(_mm256_mul_pd(s, a2), _mm256_mul_pd(r, b2)));
+            _mm256_storeu_pd(&st[3][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a3, q0), _mm256_mul_pd(c0, q1)), dd));
+            _mm256_storeu_pd(&st[4][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a4, q0), _mm256_mul_pd(c1, q1)), dd));
+            _mm256_storeu_pd(&st[5][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a5, q0), _mm256_mul_pd(c2, q1)), dd));
+            _mm256_storeu_pd(&st[6][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a6, q0), _mm256_mul_pd(c3, q1)), dd));
         }
     }
     #define TFB_INTERP_RUN_AVX2(a, bq, d, rr, sy, j0, j1, st) \
