@@ -248,7 +248,9 @@ def test_a_split_that_loses_to_one_thread_backs_off_to_one_thread() -> None:
         _cbatch._split_reset()
 
 
-@pytest.mark.parametrize("order", ["random", "reversed", "duplicated", "mixed", "short"])
+@pytest.mark.parametrize(
+    "order", ["random", "reversed", "reversed-duplicated", "duplicated", "mixed", "wide", "short"]
+)
 def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> None:
     """Unsorted times are walked sorted and written back to their rows: each row is the
     single lookup at its own time (bit for bit on the scalar loops), and the same bits
@@ -264,6 +266,9 @@ def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> Non
         "mixed": rng.permutation(
             np.r_[base[:3_000], [0] * 5, [1, 2, 5, 2_000_000_000] * 3, [10_000_008] * 7]
         ),
+        "reversed-duplicated": np.sort(np.repeat(base[:5_000], 4))[::-1].copy(),
+        # times too far apart to pack a time and its row into one int64 sort key
+        "wide": rng.permutation(np.r_[base[:3_000], [2**62, 2**61 + 5] * 3, [1] * 6]),
         "short": base[:63],  # below the rows from which unsorted times are sorted
     }[order]
     got = core.lookup_transforms("f0", "f8", times, errors="mask")
@@ -280,7 +285,8 @@ def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> Non
         else:
             assert got.valid[i]
             _check_row(got, i, single, simd)
-    assert (~got.valid).sum() == (12 if order == "mixed" else 0)  # before and after the data
+    # before and after the data
+    assert (~got.valid).sum() == (12 if order in ("mixed", "wide") else 0)
 
 
 def test_first_failing_time_decides_the_exception() -> None:

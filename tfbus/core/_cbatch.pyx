@@ -15,7 +15,7 @@ __all__ = [
 import numpy as np
 
 from libc.math cimport acos, fabs, sin, sqrt
-from libc.stdint cimport INT64_MAX, int32_t, int64_t
+from libc.stdint cimport INT64_MAX, int32_t, int64_t, uint64_t
 from libc.string cimport memcpy
 
 from tfbus.core._ccache cimport C_MAX_DEPTH, G_OK, Link, StaticCache, TimeCache, _link
@@ -110,6 +110,62 @@ cdef bint _nondecreasing(const int64_t* t, Py_ssize_t n) noexcept nogil:
         if t[i] < t[i - 1]:
             return False
     return True
+
+
+cdef bint _nonincreasing(const int64_t* t, Py_ssize_t n) noexcept nogil:
+    """Whether ``t[0] >= t[1] >= ... >= t[n - 1]``."""
+    cdef Py_ssize_t i
+    for i in range(1, n):
+        if t[i] > t[i - 1]:
+            return False
+    return True
+
+
+cdef tuple _bsorted(const int64_t[::1] times):
+    """The ``n`` times in non-decreasing order and, for each, its row in ``times`` (two
+    ``(n,) int64`` arrays; a row's value does not depend on the order it is walked in, so
+    equal times may come in any order). Non-increasing times are read backwards (no
+    sort). Otherwise, when ``(max - min) * 2**b`` fits in 63 bits (``b`` bits number the
+    rows), each time becomes one key ``(t - min) << b | row`` and numpy sorts the keys
+    (its SIMD sort of int64: ~3x faster than ``argsort`` on 10 000 times); else
+    ``np.argsort``."""
+    cdef Py_ssize_t n = times.shape[0], i
+    cdef int64_t lo, hi
+    cdef uint64_t span, mask
+    cdef int bits = 0
+    out_t = np.empty(n, dtype=np.int64)
+    out_r = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] ts = out_t
+    cdef int64_t[::1] rs = out_r
+    cdef int64_t[::1] keys
+    if _nonincreasing(&times[0], n):
+        for i in range(n):
+            ts[i] = times[n - 1 - i]
+            rs[i] = n - 1 - i
+        return out_t, out_r
+    lo = hi = times[0]
+    for i in range(1, n):
+        if times[i] < lo:
+            lo = times[i]
+        elif times[i] > hi:
+            hi = times[i]
+    while (<uint64_t>1 << bits) < <uint64_t>n:
+        bits += 1
+    span = <uint64_t>hi - <uint64_t>lo
+    if bits < 63 and span < (<uint64_t>1 << (63 - bits)):
+        mask = (<uint64_t>1 << bits) - 1
+        packed = np.empty(n, dtype=np.int64)
+        keys = packed
+        for i in range(n):
+            keys[i] = <int64_t>(((<uint64_t>times[i] - <uint64_t>lo) << bits) | <uint64_t>i)
+        packed.sort(kind="quicksort")  # keys are distinct: the order is unique
+        for i in range(n):
+            ts[i] = <int64_t>((<uint64_t>keys[i] >> bits) + <uint64_t>lo)
+            rs[i] = <int64_t>(<uint64_t>keys[i] & mask)
+        return out_t, out_r
+    arr = np.asarray(times)
+    order = np.argsort(arr, kind="quicksort").astype(np.int64, copy=False)
+    return arr.take(order), order
 
 
 cdef extern from *:
@@ -261,6 +317,20 @@ cdef extern from *:
     #define TFB_INTERP_RUN_AVX2(a, bq, d, rr, sy, j0, j1, st) 0
     #endif
 
+    /* n doubles (n even) := 0.0 in 16-byte stores: a block's scratch lanes. A memset
+       of a few hundred bytes compiles to `rep stos` here, whose start-up cost is a
+       large share of a block's gather on several x86 cores. */
+    static inline void tfb_zero(double* TFB_RESTRICT p, int n) {
+    #if defined(TFB_X86_64)
+        const __m128d z = _mm_setzero_pd();
+        int i;
+        for (i = 0; i < n; i += 2)
+            _mm_storeu_pd(p + i, z);
+    #else
+        memset(p, 0, (size_t)n * sizeof(double));
+    #endif
+    }
+
     /* The SIMD kernels this CPU runs (x86-64: AVX2), checked once at import. */
     /* slerp's per-time sines in vector lanes: glibc's libmvec (_ZGVdN4v_sin, the AVX2
        variant of sin in the x86-64 vector function ABI; at most 4 ulp from the correctly
@@ -303,6 +373,7 @@ cdef extern from *:
     int tfb_vsin_ok
     int tfb_simd_init() noexcept nogil
     void tfb_vsin_set(size_t address) noexcept nogil
+    void tfb_zero(double* p, int n) noexcept nogil
     bint TFB_SIN_LANES_VEC(const double* x, double* y) noexcept nogil
     bint TFB_INTERP_RUN_AVX2(const double* a, const double* bq, double d, const double* rr,
                              const double* sy, int j0, int j1,
@@ -429,8 +500,8 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     newest = stp[tail - 1]
     single = tail - head == 1
     cur = L.cur
-    memset(rr, 0, sizeof(rr))  # (lanes outside runs are computed, never stored)
-    memset(sx, 0, sizeof(sx))  # lanes without a sine compute sin(0)
+    tfb_zero(rr, _BLOCK)  # (lanes outside runs are computed, then overwritten or unread)
+    tfb_zero(sx, 2 * _BLOCK)  # lanes without a sine compute sin(0)
     # (1) locate
     for j in range(m):
         if not good[j]:
@@ -529,7 +600,7 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     # per-time transcendental calls): libmvec's vector sin where available (rows within
     # a few ulp of the scalar walk's), else libm's sin per row (bit for bit)
     if any_sin and not (vector_sin and TFB_SIN_LANES_VEC(sx, sy)):
-        memset(sy, 0, sizeof(sy))
+        tfb_zero(sy, 2 * _BLOCK)
         for j in range(m):
             if kind[j] == _K_INTERP and not szero[slot[j]]:
                 sy[j] = sin(sx[j])
@@ -953,9 +1024,7 @@ cdef Py_ssize_t _batch_lookup(CoreBase core, object target_frame, object source_
         if n_rows >= _SORT_ROWS and not _nondecreasing(row_times, n_rows):
             # The kernel's cursor and per-interval constants pay off on sorted times: walk
             # them sorted (numpy's argsort) and write each row back to its place.
-            arr = np.asarray(times)
-            sort_order = np.argsort(arr, kind="quicksort").astype(np.int64, copy=False)
-            sorted_times = arr.take(sort_order)
+            sorted_times, sort_order = _bsorted(times)
             row_times = &sorted_times[0]
             order = &sort_order[0]
         answered = _bsplit(src_links, ns, src_early, tgt_links, nt, tgt_early,
