@@ -15,6 +15,9 @@ way (``test_rows_without_sines_are_bit_exact_with_the_vector_sine``).
 from __future__ import annotations
 
 import math
+import os
+import threading
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -246,6 +249,110 @@ def test_a_split_that_loses_to_one_thread_backs_off_to_one_thread() -> None:
         assert _cbatch._split_after(900_000, 400_000, 4_096, 8_192, True) == 1
     finally:
         _cbatch._split_reset()
+
+
+def _threads_of_this_process() -> int:
+    return len(os.listdir("/proc/self/task"))
+
+
+@pytest.mark.skipif(not COMPILED, reason="the compiled kernel's two-thread split")
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in /proc")
+def test_the_split_keeps_one_worker_thread_and_ends_it() -> None:
+    """Every call that splits uses the same worker thread (started by the first, asleep
+    between calls): 12 split calls start one thread, which stays while idle, and
+    ``_worker_stop`` (run at exit) ends it; the next split starts a new one."""
+    from tfbus.core import _cbatch
+
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(4).integers(10, 999_000_000, 20_000))
+    want = core.lookup_transforms("f0", "f8", times[:8_000])  # one thread
+    assert _cbatch._worker_stop()
+    before = _threads_of_this_process()
+    started = _cbatch._worker_threads_started()
+    for _ in range(12):
+        _cbatch._split_reset()  # a split lost on a busy machine must not skip this one
+        got = core.lookup_transforms("f0", "f8", times)
+        assert np.array_equal(got.rotations[:8_000], want.rotations)
+        assert np.array_equal(got.translations[:8_000], want.translations)
+    assert _cbatch._worker_threads_started() == started + 1
+    assert _threads_of_this_process() == before + 1  # the worker waits for the next call
+    assert _cbatch._worker_stop()
+    for _ in range(5_000):  # bounded: the thread has left its loop and is ending
+        if _threads_of_this_process() == before:
+            break
+        time.sleep(0.001)
+    assert _threads_of_this_process() == before
+    _cbatch._split_reset()
+    core.lookup_transforms("f0", "f8", times)
+    assert _cbatch._worker_threads_started() == started + 2
+
+
+def test_concurrent_batches_from_two_threads_give_the_same_rows() -> None:
+    """Two Python threads batching at once (one may use the worker thread, the other
+    runs alone): every call's rows are those of a call made alone."""
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(5).integers(10, 999_000_000, 20_000))
+    want = core.lookup_transforms("f0", "f8", times)
+    results: list[TransformArray] = []
+
+    def run() -> None:
+        for _ in range(6):
+            results.append(core.lookup_transforms("f0", "f8", times))
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert len(results) == 12
+    for got in results:
+        assert np.array_equal(got.translations, want.translations)
+        assert np.array_equal(got.rotations, want.rotations)
+        assert np.array_equal(got.stamps, want.stamps)
+
+
+@pytest.mark.skipif(
+    not COMPILED,
+    reason="the pure-Python core's walks and inserts interleave between bytecodes",
+)
+def test_inserts_from_another_thread_during_batches_leave_the_rows_unchanged() -> None:
+    """Another Python thread inserting into the same links (at times after every queried
+    time, so no row's answer changes) while large batches run: the batch reads the
+    links' arrays, which an insert regrows, so no insert may run inside a batch; every
+    batch's rows are those of a batch made alone."""
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(6).integers(10, 999_000_000, 20_000))[::-1].copy()
+    want = core.lookup_transforms("f0", "f8", times)
+    done = threading.Event()
+
+    def insert() -> None:
+        j = 0
+        while not done.is_set() and j < 2_000_000:  # bounded
+            k = 1 + j % 8
+            core.set_transform(
+                TransformStamped(
+                    Header(Time.from_ns(2_000_000_000 + j * 1_000 + k), f"f{k - 1}"),
+                    f"f{k}",
+                    Transform(Vector3(0.1, 0.2, 0.3), Quaternion(0.0, 0.0, 0.0, 1.0)),
+                )
+            )
+            j += 1
+
+    inserter = threading.Thread(target=insert)
+    inserter.start()
+    differing = 0
+    try:
+        for _ in range(150):
+            got = core.lookup_transforms("f0", "f8", times)
+            same = np.array_equal(got.translations, want.translations) and np.array_equal(
+                got.rotations, want.rotations
+            )
+            differing += not same
+    finally:
+        done.set()
+        inserter.join(timeout=60)
+    assert not inserter.is_alive()
+    assert differing == 0
 
 
 @pytest.mark.parametrize(
