@@ -330,6 +330,25 @@ cdef extern from *:
     #define TFB_INTERP_RUN_AVX2(a, bq, d, rr, sy, j0, j1, st) 0
     #endif
 
+    /* Every lane of a block: slerp's ratio r = num / den (TimeCache::interpolate: the
+       integer ns offset over the interval, both as doubles) and the arguments of its two
+       per-time sines, (1 - r) theta and r theta: the divisions in vector lanes (IEEE
+       division rounds the same in every lane). Lanes without an interval hold num 0,
+       den 1, theta 0: r 0, both arguments 0. */
+    static TFB_CLONES void tfb_ratio_block(const double* TFB_RESTRICT num,
+                                           const double* TFB_RESTRICT den,
+                                           const double* TFB_RESTRICT th,
+                                           double* TFB_RESTRICT rr,
+                                           double* TFB_RESTRICT sx) {
+        int j;
+        for (j = 0; j < TFB_BLOCK; j++) {
+            double r = num[j] / den[j];
+            rr[j] = r;
+            sx[j] = (1.0 - r) * th[j];
+            sx[TFB_BLOCK + j] = r * th[j];
+        }
+    }
+
     /* n doubles (n even) := 0.0 in 16-byte stores: a block's scratch lanes. A memset
        of a few hundred bytes compiles to `rep stos` here, whose start-up cost is a
        large share of a block's gather on several x86 cores. */
@@ -387,6 +406,8 @@ cdef extern from *:
     int tfb_simd_init() noexcept nogil
     void tfb_vsin_set(size_t address) noexcept nogil
     void tfb_zero(double* p, int n) noexcept nogil
+    void tfb_ratio_block(const double* num, const double* den, const double* th,
+                         double* rr, double* sx) noexcept nogil
     bint TFB_SIN_LANES_VEC(const double* x, double* y) noexcept nogil
     bint TFB_INTERP_RUN_AVX2(const double* a, const double* bq, double d, const double* rr,
                              const double* sy, int j0, int j1,
@@ -487,6 +508,9 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     cdef Py_ssize_t idx[_BLOCK]
     cdef int slot[_BLOCK]
     cdef double rr[_BLOCK]
+    cdef double num[_BLOCK]
+    cdef double den[_BLOCK]
+    cdef double th[_BLOCK]
     cdef double sx[2 * _BLOCK]
     cdef double sy[2 * _BLOCK]
     # per interval met in this block (at most one per row)
@@ -514,10 +538,18 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     newest = stp[tail - 1]
     single = tail - head == 1
     cur = L.cur
-    tfb_zero(rr, _BLOCK)  # (lanes outside runs are computed, then overwritten or unread)
-    tfb_zero(sx, 2 * _BLOCK)  # lanes without a sine compute sin(0)
-    # (1) locate
+    # (1) locate; each row's ratio as num / den and its slerp angle (0: no sine), the
+    # divisions and the sines' arguments then in lanes (tfb_ratio_block); lanes without
+    # an interval: r = 0 / 1, angle 0 (they compute sin(0); outside runs their values
+    # are overwritten or never read)
+    for j in range(m, _BLOCK):
+        num[j] = 0.0
+        den[j] = 1.0
+        th[j] = 0.0
     for j in range(m):
+        num[j] = 0.0
+        den[j] = 1.0
+        th[j] = 0.0
         if not good[j]:
             kind[j] = _K_SKIP
             continue
@@ -531,11 +563,10 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
             kind[j] = _K_INTERP
             idx[j] = L.ci - 1
             slot[j] = cur_slot
-            r = <double>(t - L.ct0) / L.cspan
-            rr[j] = r
+            num[j] = <double>(t - L.ct0)  # r = num / den, as below
+            den[j] = L.cspan
             if not L.zero_angle:
-                sx[j] = (1.0 - r) * L.theta
-                sx[_BLOCK + j] = r * L.theta
+                th[j] = L.theta
                 any_sin = True
             continue
         kind[j] = _K_SKIP
@@ -602,14 +633,15 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
         kind[j] = _K_INTERP
         idx[j] = i - 1
         slot[j] = cur_slot
-        r = <double>(t - t0) / <double>span
-        rr[j] = r
+        # r = (t - t0) / span (TimeCache::interpolate's ratio, as _slerp is given it)
+        num[j] = <double>(t - t0)
+        den[j] = <double>span
         if not L.zero_angle:
-            # the arguments of tf2 slerp's per-time sines (as _slerp)
-            sx[j] = (1.0 - r) * L.theta
-            sx[_BLOCK + j] = r * L.theta
+            # the arguments of tf2 slerp's per-time sines, (1 - r) theta and r theta
+            th[j] = L.theta
             any_sin = True
     L.cur = cur
+    tfb_ratio_block(num, den, th, rr, sx)
     # (2) sin((1 - r) theta) in lanes 0..31, sin(r theta) in 32..63 (tf2 slerp's two
     # per-time transcendental calls): libmvec's vector sin where available (rows within
     # a few ulp of the scalar walk's), else libm's sin per row (bit for bit)
