@@ -808,14 +808,14 @@ cdef inline void _bchain(_BLink* links, int n, const int64_t* times, int m,
     bit-for-bit the scalar climb; lanes no longer good, or beyond ``m``, compute
     garbage that is never read)."""
     cdef int k
-    _bidentity_block(acc)
+    if n == 0 or links[0].check_only:
+        _bidentity_block(acc)
     for k in range(n):
-        _bgather(&links[k], times, m, good, st, vector_sin)
-        if links[k].check_only:
+        if k == 0 and not links[0].check_only:
+            _bgather(&links[0], times, m, good, acc, vector_sin)  # acc = the first link
             continue
-        if k == 0:
-            memcpy(acc, st, sizeof(double) * 7 * _BLOCK)
-        else:
+        _bgather(&links[k], times, m, good, st, vector_sin)
+        if not links[k].check_only:
             tfb_compose_block(acc, st)
 
 
