@@ -251,15 +251,15 @@ def test_a_split_that_loses_to_one_thread_backs_off_to_one_thread() -> None:
         _cbatch._split_reset()
 
 
-def _threads_of_this_process() -> int:
-    return len(os.listdir("/proc/self/task"))
+def _threads_of_this_process() -> set[str]:
+    return set(os.listdir("/proc/self/task"))
 
 
 @pytest.mark.skipif(not COMPILED, reason="the compiled kernel's two-thread split")
-@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads in /proc")
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="lists threads in /proc")
 def test_the_split_keeps_one_worker_thread_and_ends_it() -> None:
     """Every call that splits uses the same worker thread (started by the first, asleep
-    between calls): 12 split calls start one thread, which stays while idle, and
+    between calls): 12 split calls start one thread, the same one stays while idle, and
     ``_worker_stop`` (run at exit) ends it; the next split starts a new one."""
     from tfbus.core import _cbatch
 
@@ -269,19 +269,23 @@ def test_the_split_keeps_one_worker_thread_and_ends_it() -> None:
     assert _cbatch._worker_stop()
     before = _threads_of_this_process()
     started = _cbatch._worker_threads_started()
+    seen: list[set[str]] = []
     for _ in range(12):
         _cbatch._split_reset()  # a split lost on a busy machine must not skip this one
         got = core.lookup_transforms("f0", "f8", times)
         assert np.array_equal(got.rotations[:8_000], want.rotations)
         assert np.array_equal(got.translations[:8_000], want.translations)
+        seen.append(_threads_of_this_process() - before)
     assert _cbatch._worker_threads_started() == started + 1
-    assert _threads_of_this_process() == before + 1  # the worker waits for the next call
+    worker = seen[0]
+    assert len(worker) == 1  # one thread, waiting for the next call
+    assert all(new == worker for new in seen)  # the same thread after every call
     assert _cbatch._worker_stop()
     for _ in range(5_000):  # bounded: the thread has left its loop and is ending
-        if _threads_of_this_process() == before:
+        if worker.isdisjoint(_threads_of_this_process()):
             break
         time.sleep(0.001)
-    assert _threads_of_this_process() == before
+    assert worker.isdisjoint(_threads_of_this_process())
     _cbatch._split_reset()
     core.lookup_transforms("f0", "f8", times)
     assert _cbatch._worker_threads_started() == started + 2
