@@ -349,20 +349,6 @@ cdef extern from *:
         }
     }
 
-    /* n doubles (n even) := 0.0 in 16-byte stores: a block's scratch lanes. A memset
-       of a few hundred bytes compiles to `rep stos` here, whose start-up cost is a
-       large share of a block's gather on several x86 cores. */
-    static inline void tfb_zero(double* TFB_RESTRICT p, int n) {
-    #if defined(TFB_X86_64)
-        const __m128d z = _mm_setzero_pd();
-        int i;
-        for (i = 0; i < n; i += 2)
-            _mm_storeu_pd(p + i, z);
-    #else
-        memset(p, 0, (size_t)n * sizeof(double));
-    #endif
-    }
-
     /* The SIMD kernels this CPU runs (x86-64: AVX2), checked once at import. */
     /* slerp's per-time sines in vector lanes: glibc's libmvec (_ZGVdN4v_sin, the AVX2
        variant of sin in the x86-64 vector function ABI; at most 4 ulp from the correctly
@@ -405,7 +391,6 @@ cdef extern from *:
     int tfb_vsin_ok
     int tfb_simd_init() noexcept nogil
     void tfb_vsin_set(size_t address) noexcept nogil
-    void tfb_zero(double* p, int n) noexcept nogil
     void tfb_ratio_block(const double* num, const double* den, const double* th,
                          double* rr, double* sx) noexcept nogil
     bint TFB_SIN_LANES_VEC(const double* x, double* y) noexcept nogil
@@ -646,7 +631,7 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     # per-time transcendental calls): libmvec's vector sin where available (rows within
     # a few ulp of the scalar walk's), else libm's sin per row (bit for bit)
     if any_sin and not (vector_sin and TFB_SIN_LANES_VEC(sx, sy)):
-        tfb_zero(sy, 2 * _BLOCK)
+        memset(sy, 0, sizeof(sy))
         for j in range(m):
             if kind[j] == _K_INTERP and not szero[slot[j]]:
                 sy[j] = sin(sx[j])
