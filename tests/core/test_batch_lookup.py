@@ -15,6 +15,9 @@ way (``test_rows_without_sines_are_bit_exact_with_the_vector_sine``).
 from __future__ import annotations
 
 import math
+import os
+import threading
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -248,7 +251,117 @@ def test_a_split_that_loses_to_one_thread_backs_off_to_one_thread() -> None:
         _cbatch._split_reset()
 
 
-@pytest.mark.parametrize("order", ["random", "reversed", "duplicated", "mixed", "short"])
+def _threads_of_this_process() -> set[str]:
+    return set(os.listdir("/proc/self/task"))
+
+
+@pytest.mark.skipif(not COMPILED, reason="the compiled kernel's two-thread split")
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="lists threads in /proc")
+def test_the_split_keeps_one_worker_thread_and_ends_it() -> None:
+    """Every call that splits uses the same worker thread (started by the first, asleep
+    between calls): 12 split calls start one thread, the same one stays while idle, and
+    ``_worker_stop`` (run at exit) ends it; the next split starts a new one."""
+    from tfbus.core import _cbatch
+
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(4).integers(10, 999_000_000, 20_000))
+    want = core.lookup_transforms("f0", "f8", times[:8_000])  # one thread
+    assert _cbatch._worker_stop()
+    before = _threads_of_this_process()
+    started = _cbatch._worker_threads_started()
+    seen: list[set[str]] = []
+    for _ in range(12):
+        _cbatch._split_reset()  # a split lost on a busy machine must not skip this one
+        got = core.lookup_transforms("f0", "f8", times)
+        assert np.array_equal(got.rotations[:8_000], want.rotations)
+        assert np.array_equal(got.translations[:8_000], want.translations)
+        seen.append(_threads_of_this_process() - before)
+    assert _cbatch._worker_threads_started() == started + 1
+    worker = seen[0]
+    assert len(worker) == 1  # one thread, waiting for the next call
+    assert all(new == worker for new in seen)  # the same thread after every call
+    assert _cbatch._worker_stop()
+    for _ in range(5_000):  # bounded: the thread has left its loop and is ending
+        if worker.isdisjoint(_threads_of_this_process()):
+            break
+        time.sleep(0.001)
+    assert worker.isdisjoint(_threads_of_this_process())
+    _cbatch._split_reset()
+    core.lookup_transforms("f0", "f8", times)
+    assert _cbatch._worker_threads_started() == started + 2
+
+
+def test_concurrent_batches_from_two_threads_give_the_same_rows() -> None:
+    """Two Python threads batching at once (one may use the worker thread, the other
+    runs alone): every call's rows are those of a call made alone."""
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(5).integers(10, 999_000_000, 20_000))
+    want = core.lookup_transforms("f0", "f8", times)
+    results: list[TransformArray] = []
+
+    def run() -> None:
+        for _ in range(6):
+            results.append(core.lookup_transforms("f0", "f8", times))
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert len(results) == 12
+    for got in results:
+        assert np.array_equal(got.translations, want.translations)
+        assert np.array_equal(got.rotations, want.rotations)
+        assert np.array_equal(got.stamps, want.stamps)
+
+
+@pytest.mark.skipif(
+    not COMPILED,
+    reason="the pure-Python core's walks and inserts interleave between bytecodes",
+)
+def test_inserts_from_another_thread_during_batches_leave_the_rows_unchanged() -> None:
+    """Another Python thread inserting into the same links (at times after every queried
+    time, so no row's answer changes) while large batches run: the batch reads the
+    links' arrays, which an insert regrows, so no insert may run inside a batch; every
+    batch's rows are those of a batch made alone."""
+    core = _chain(8)
+    times = np.sort(np.random.default_rng(6).integers(10, 999_000_000, 20_000))[::-1].copy()
+    want = core.lookup_transforms("f0", "f8", times)
+    done = threading.Event()
+
+    def insert() -> None:
+        j = 0
+        while not done.is_set() and j < 2_000_000:  # bounded
+            k = 1 + j % 8
+            core.set_transform(
+                TransformStamped(
+                    Header(Time.from_ns(2_000_000_000 + j * 1_000 + k), f"f{k - 1}"),
+                    f"f{k}",
+                    Transform(Vector3(0.1, 0.2, 0.3), Quaternion(0.0, 0.0, 0.0, 1.0)),
+                )
+            )
+            j += 1
+
+    inserter = threading.Thread(target=insert)
+    inserter.start()
+    differing = 0
+    try:
+        for _ in range(150):
+            got = core.lookup_transforms("f0", "f8", times)
+            same = np.array_equal(got.translations, want.translations) and np.array_equal(
+                got.rotations, want.rotations
+            )
+            differing += not same
+    finally:
+        done.set()
+        inserter.join(timeout=60)
+    assert not inserter.is_alive()
+    assert differing == 0
+
+
+@pytest.mark.parametrize(
+    "order", ["random", "reversed", "reversed-duplicated", "duplicated", "mixed", "wide", "short"]
+)
 def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> None:
     """Unsorted times are walked sorted and written back to their rows: each row is the
     single lookup at its own time (bit for bit on the scalar loops), and the same bits
@@ -264,6 +377,9 @@ def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> Non
         "mixed": rng.permutation(
             np.r_[base[:3_000], [0] * 5, [1, 2, 5, 2_000_000_000] * 3, [10_000_008] * 7]
         ),
+        "reversed-duplicated": np.sort(np.repeat(base[:5_000], 4))[::-1].copy(),
+        # times too far apart to pack a time and its row into one int64 sort key
+        "wide": rng.permutation(np.r_[base[:3_000], [2**62, 2**61 + 5] * 3, [1] * 6]),
         "short": base[:63],  # below the rows from which unsorted times are sorted
     }[order]
     got = core.lookup_transforms("f0", "f8", times, errors="mask")
@@ -280,7 +396,8 @@ def test_rows_do_not_depend_on_the_order_of_times(simd: bool, order: str) -> Non
         else:
             assert got.valid[i]
             _check_row(got, i, single, simd)
-    assert (~got.valid).sum() == (12 if order == "mixed" else 0)  # before and after the data
+    # before and after the data
+    assert (~got.valid).sum() == (12 if order in ("mixed", "wide") else 0)
 
 
 def test_first_failing_time_decides_the_exception() -> None:

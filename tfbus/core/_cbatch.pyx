@@ -15,7 +15,7 @@ __all__ = [
 import numpy as np
 
 from libc.math cimport acos, fabs, sin, sqrt
-from libc.stdint cimport INT64_MAX, int32_t, int64_t
+from libc.stdint cimport INT64_MAX, int32_t, int64_t, uint64_t
 from libc.string cimport memcpy
 
 from tfbus.core._ccache cimport C_MAX_DEPTH, G_OK, Link, StaticCache, TimeCache, _link
@@ -43,6 +43,7 @@ from tfbus.core._ccore import NO_ERROR
 # go through ``CoreBase._walk``; rows that fail there too are left unanswered, and
 # ``tfbus.core.batch`` asks the single lookup for tf2's exception: no error is reproduced.
 
+import atexit
 import os
 from time import perf_counter_ns
 
@@ -62,6 +63,12 @@ cdef extern from "pythread.h":
     # CPython's lock free needs no GIL (it frees with PyMem_RawFree); Cython's
     # declaration of it lacks ``nogil``.
     void _free_lock_nogil "PyThread_free_lock"(PyThread_type_lock lock) noexcept nogil
+    ctypedef enum PyLockStatus:
+        PY_LOCK_FAILURE
+        PY_LOCK_ACQUIRED
+        PY_LOCK_INTR
+    PyLockStatus PyThread_acquire_lock_timed(PyThread_type_lock lock, long long microseconds,
+                                             int intr_flag) noexcept nogil
 
 cdef int _NCPU = os.cpu_count() or 1
 cdef Py_ssize_t _SPLIT_ROWS = 8192  # below this a second thread costs more than it saves
@@ -110,6 +117,62 @@ cdef bint _nondecreasing(const int64_t* t, Py_ssize_t n) noexcept nogil:
         if t[i] < t[i - 1]:
             return False
     return True
+
+
+cdef bint _nonincreasing(const int64_t* t, Py_ssize_t n) noexcept nogil:
+    """Whether ``t[0] >= t[1] >= ... >= t[n - 1]``."""
+    cdef Py_ssize_t i
+    for i in range(1, n):
+        if t[i] > t[i - 1]:
+            return False
+    return True
+
+
+cdef tuple _bsorted(const int64_t[::1] times):
+    """The ``n`` times in non-decreasing order and, for each, its row in ``times`` (two
+    ``(n,) int64`` arrays; a row's value does not depend on the order it is walked in, so
+    equal times may come in any order). Non-increasing times are read backwards (no
+    sort). Otherwise, when ``(max - min) * 2**b`` fits in 63 bits (``b`` bits number the
+    rows), each time becomes one key ``(t - min) << b | row`` and numpy sorts the keys
+    (its SIMD sort of int64: ~3x faster than ``argsort`` on 10 000 times); else
+    ``np.argsort``."""
+    cdef Py_ssize_t n = times.shape[0], i
+    cdef int64_t lo, hi
+    cdef uint64_t span, mask
+    cdef int bits = 0
+    out_t = np.empty(n, dtype=np.int64)
+    out_r = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] ts = out_t
+    cdef int64_t[::1] rs = out_r
+    cdef int64_t[::1] keys
+    if _nonincreasing(&times[0], n):
+        for i in range(n):
+            ts[i] = times[n - 1 - i]
+            rs[i] = n - 1 - i
+        return out_t, out_r
+    lo = hi = times[0]
+    for i in range(1, n):
+        if times[i] < lo:
+            lo = times[i]
+        elif times[i] > hi:
+            hi = times[i]
+    while (<uint64_t>1 << bits) < <uint64_t>n:
+        bits += 1
+    span = <uint64_t>hi - <uint64_t>lo
+    if bits < 63 and span < (<uint64_t>1 << (63 - bits)):
+        mask = (<uint64_t>1 << bits) - 1
+        packed = np.empty(n, dtype=np.int64)
+        keys = packed
+        for i in range(n):
+            keys[i] = <int64_t>(((<uint64_t>times[i] - <uint64_t>lo) << bits) | <uint64_t>i)
+        packed.sort(kind="quicksort")  # keys are distinct: the order is unique
+        for i in range(n):
+            ts[i] = <int64_t>((<uint64_t>keys[i] >> bits) + <uint64_t>lo)
+            rs[i] = <int64_t>(<uint64_t>keys[i] & mask)
+        return out_t, out_r
+    arr = np.asarray(times)
+    order = np.argsort(arr, kind="quicksort").astype(np.int64, copy=False)
+    return arr.take(order), order
 
 
 cdef extern from *:
@@ -191,6 +254,9 @@ cdef extern from *:
     static int tfb_cas(long* p, long expected, long desired) {
         return _InterlockedCompareExchange((volatile long*)p, desired, expected) == expected;
     }
+    static void* tfb_xchg(void** p, void* v) {
+        return _InterlockedExchangePointer((void* volatile*)p, v);
+    }
     #else
     static long tfb_fetch_add(long* p, long v) {
         return __atomic_fetch_add(p, v, __ATOMIC_SEQ_CST);
@@ -198,6 +264,9 @@ cdef extern from *:
     static int tfb_cas(long* p, long expected, long desired) {
         return __atomic_compare_exchange_n(p, &expected, desired, 0, __ATOMIC_SEQ_CST,
                                            __ATOMIC_SEQ_CST);
+    }
+    static void* tfb_xchg(void** p, void* v) {
+        return __atomic_exchange_n(p, v, __ATOMIC_SEQ_CST);
     }
     #endif
 
@@ -211,12 +280,30 @@ cdef extern from *:
     /* Rows j0 <= j < j1 of a block, all in one interval (samples a, a + 7; bq = b with
        slerp's sign flip, d = 1 / sin(theta)): TimeCache::interpolate's lerp and tf2 slerp's
        (a sin((1 - r) theta) + b sin(r theta)) / sin(theta), the expressions of
-       _binterp_run lane by lane (separate multiplies and adds: no FMA in this target). */
+       _binterp_run lane by lane (separate multiplies and adds: no FMA in this target).
+       The rows before the first multiple of 4 are computed one by one; from there, whole
+       groups of 4 lanes are stored (no masked stores, slow on several x86 cores): lanes
+       past j1 in the last group get values that are either never read (a failed row, a
+       lane past the block's rows) or overwritten, as the caller fills the block's rows
+       in increasing order after this run. */
     static int tfb_avx2 = 0;
     #if defined(TFB_X86_64)
     static __attribute__((target("avx2"))) void tfb_interp_run_avx2(
             const double* a, const double* bq, double d, const double* rr, const double* sy,
             int j0, int j1, double (*st)[TFB_BLOCK]) {
+        int j, jv = (j0 + 3) & ~3;
+        for (j = j0; j < j1 && j < jv; j++) {
+            double r = rr[j], s = 1.0 - r, q0 = sy[j], q1 = sy[TFB_BLOCK + j];
+            st[0][j] = s * a[0] + r * a[7];
+            st[1][j] = s * a[1] + r * a[8];
+            st[2][j] = s * a[2] + r * a[9];
+            st[3][j] = (a[3] * q0 + bq[0] * q1) * d;
+            st[4][j] = (a[4] * q0 + bq[1] * q1) * d;
+            st[5][j] = (a[5] * q0 + bq[2] * q1) * d;
+            st[6][j] = (a[6] * q0 + bq[3] * q1) * d;
+        }
+        if (jv >= j1)
+            return;
         const __m256d one = _mm256_set1_pd(1.0), dd = _mm256_set1_pd(d);
         const __m256d a0 = _mm256_set1_pd(a[0]), a1 = _mm256_set1_pd(a[1]);
         const __m256d a2 = _mm256_set1_pd(a[2]), a3 = _mm256_set1_pd(a[3]);
@@ -225,22 +312,16 @@ cdef extern from *:
         const __m256d b1 = _mm256_set1_pd(a[8]), b2 = _mm256_set1_pd(a[9]);
         const __m256d c0 = _mm256_set1_pd(bq[0]), c1 = _mm256_set1_pd(bq[1]);
         const __m256d c2 = _mm256_set1_pd(bq[2]), c3 = _mm256_set1_pd(bq[3]);
-        const __m256i lanes = _mm256_set_epi64x(3, 2, 1, 0);
-        const __m256i lo = _mm256_set1_epi64x(j0 - 1), hi = _mm256_set1_epi64x(j1);
-        int j;
-        for (j = j0 & ~3; j < j1; j += 4) {
-            __m256i lane = _mm256_add_epi64(_mm256_set1_epi64x(j), lanes);
-            __m256i m = _mm256_and_si256(_mm256_cmpgt_epi64(lane, lo),
-                                         _mm256_cmpgt_epi64(hi, lane));
+        for (j = jv; j < j1; j += 4) {
             __m256d r = _mm256_loadu_pd(rr + j), s = _mm256_sub_pd(one, r);
             __m256d q0 = _mm256_loadu_pd(sy + j), q1 = _mm256_loadu_pd(sy + TFB_BLOCK + j);
-            _mm256_maskstore_pd(&st[0][j], m, _mm256_add_pd(_mm256_mul_pd(s, a0), _mm256_mul_pd(r, b0)));
-            _mm256_maskstore_pd(&st[1][j], m, _mm256_add_pd(_mm256_mul_pd(s, a1), _mm256_mul_pd(r, b1)));
-            _mm256_maskstore_pd(&st[2][j], m, _mm256_add_pd(_mm256_mul_pd(s, a2), _mm256_mul_pd(r, b2)));
-            _mm256_maskstore_pd(&st[3][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a3, q0), _mm256_mul_pd(c0, q1)), dd));
-            _mm256_maskstore_pd(&st[4][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a4, q0), _mm256_mul_pd(c1, q1)), dd));
-            _mm256_maskstore_pd(&st[5][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a5, q0), _mm256_mul_pd(c2, q1)), dd));
-            _mm256_maskstore_pd(&st[6][j], m, _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a6, q0), _mm256_mul_pd(c3, q1)), dd));
+            _mm256_storeu_pd(&st[0][j], _mm256_add_pd(_mm256_mul_pd(s, a0), _mm256_mul_pd(r, b0)));
+            _mm256_storeu_pd(&st[1][j], _mm256_add_pd(_mm256_mul_pd(s, a1), _mm256_mul_pd(r, b1)));
+            _mm256_storeu_pd(&st[2][j], _mm256_add_pd(_mm256_mul_pd(s, a2), _mm256_mul_pd(r, b2)));
+            _mm256_storeu_pd(&st[3][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a3, q0), _mm256_mul_pd(c0, q1)), dd));
+            _mm256_storeu_pd(&st[4][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a4, q0), _mm256_mul_pd(c1, q1)), dd));
+            _mm256_storeu_pd(&st[5][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a5, q0), _mm256_mul_pd(c2, q1)), dd));
+            _mm256_storeu_pd(&st[6][j], _mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(a6, q0), _mm256_mul_pd(c3, q1)), dd));
         }
     }
     #define TFB_INTERP_RUN_AVX2(a, bq, d, rr, sy, j0, j1, st) \
@@ -248,6 +329,25 @@ cdef extern from *:
     #else
     #define TFB_INTERP_RUN_AVX2(a, bq, d, rr, sy, j0, j1, st) 0
     #endif
+
+    /* Every lane of a block: slerp's ratio r = num / den (TimeCache::interpolate: the
+       integer ns offset over the interval, both as doubles) and the arguments of its two
+       per-time sines, (1 - r) theta and r theta: the divisions in vector lanes (IEEE
+       division rounds the same in every lane). Lanes without an interval hold num 0,
+       den 1, theta 0: r 0, both arguments 0. */
+    static TFB_CLONES void tfb_ratio_block(const double* TFB_RESTRICT num,
+                                           const double* TFB_RESTRICT den,
+                                           const double* TFB_RESTRICT th,
+                                           double* TFB_RESTRICT rr,
+                                           double* TFB_RESTRICT sx) {
+        int j;
+        for (j = 0; j < TFB_BLOCK; j++) {
+            double r = num[j] / den[j];
+            rr[j] = r;
+            sx[j] = (1.0 - r) * th[j];
+            sx[TFB_BLOCK + j] = r * th[j];
+        }
+    }
 
     /* The SIMD kernels this CPU runs (x86-64: AVX2), checked once at import. */
     /* slerp's per-time sines in vector lanes: glibc's libmvec (_ZGVdN4v_sin, the AVX2
@@ -291,6 +391,8 @@ cdef extern from *:
     int tfb_vsin_ok
     int tfb_simd_init() noexcept nogil
     void tfb_vsin_set(size_t address) noexcept nogil
+    void tfb_ratio_block(const double* num, const double* den, const double* th,
+                         double* rr, double* sx) noexcept nogil
     bint TFB_SIN_LANES_VEC(const double* x, double* y) noexcept nogil
     bint TFB_INTERP_RUN_AVX2(const double* a, const double* bq, double d, const double* rr,
                              const double* sy, int j0, int j1,
@@ -300,6 +402,7 @@ cdef extern from *:
                         double (*out)[32]) noexcept nogil
     long tfb_fetch_add(long* p, long v) noexcept nogil
     bint tfb_cas(long* p, long expected, long desired) noexcept nogil
+    void* tfb_xchg(void** p, void* v) noexcept nogil
 
 
 cdef enum:
@@ -390,6 +493,9 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     cdef Py_ssize_t idx[_BLOCK]
     cdef int slot[_BLOCK]
     cdef double rr[_BLOCK]
+    cdef double num[_BLOCK]
+    cdef double den[_BLOCK]
+    cdef double th[_BLOCK]
     cdef double sx[2 * _BLOCK]
     cdef double sy[2 * _BLOCK]
     # per interval met in this block (at most one per row)
@@ -417,10 +523,18 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
     newest = stp[tail - 1]
     single = tail - head == 1
     cur = L.cur
-    memset(rr, 0, sizeof(rr))  # (lanes outside runs are computed, never stored)
-    memset(sx, 0, sizeof(sx))  # lanes without a sine compute sin(0)
-    # (1) locate
+    # (1) locate; each row's ratio as num / den and its slerp angle (0: no sine), the
+    # divisions and the sines' arguments then in lanes (tfb_ratio_block); lanes without
+    # an interval: r = 0 / 1, angle 0 (they compute sin(0); outside runs their values
+    # are overwritten or never read)
+    for j in range(m, _BLOCK):
+        num[j] = 0.0
+        den[j] = 1.0
+        th[j] = 0.0
     for j in range(m):
+        num[j] = 0.0
+        den[j] = 1.0
+        th[j] = 0.0
         if not good[j]:
             kind[j] = _K_SKIP
             continue
@@ -434,11 +548,10 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
             kind[j] = _K_INTERP
             idx[j] = L.ci - 1
             slot[j] = cur_slot
-            r = <double>(t - L.ct0) / L.cspan
-            rr[j] = r
+            num[j] = <double>(t - L.ct0)  # r = num / den, as below
+            den[j] = L.cspan
             if not L.zero_angle:
-                sx[j] = (1.0 - r) * L.theta
-                sx[_BLOCK + j] = r * L.theta
+                th[j] = L.theta
                 any_sin = True
             continue
         kind[j] = _K_SKIP
@@ -505,14 +618,15 @@ cdef void _bgather(_BLink* L, const int64_t* times, int m, signed char* good,
         kind[j] = _K_INTERP
         idx[j] = i - 1
         slot[j] = cur_slot
-        r = <double>(t - t0) / <double>span
-        rr[j] = r
+        # r = (t - t0) / span (TimeCache::interpolate's ratio, as _slerp is given it)
+        num[j] = <double>(t - t0)
+        den[j] = <double>span
         if not L.zero_angle:
-            # the arguments of tf2 slerp's per-time sines (as _slerp)
-            sx[j] = (1.0 - r) * L.theta
-            sx[_BLOCK + j] = r * L.theta
+            # the arguments of tf2 slerp's per-time sines, (1 - r) theta and r theta
+            th[j] = L.theta
             any_sin = True
     L.cur = cur
+    tfb_ratio_block(num, den, th, rr, sx)
     # (2) sin((1 - r) theta) in lanes 0..31, sin(r theta) in 32..63 (tf2 slerp's two
     # per-time transcendental calls): libmvec's vector sin where available (rows within
     # a few ulp of the scalar walk's), else libm's sin per row (bit for bit)
@@ -679,19 +793,19 @@ cdef inline void _bchain(_BLink* links, int n, const int64_t* times, int m,
     bit-for-bit the scalar climb; lanes no longer good, or beyond ``m``, compute
     garbage that is never read)."""
     cdef int k
-    _bidentity_block(acc)
+    if n == 0 or links[0].check_only:
+        _bidentity_block(acc)
     for k in range(n):
-        _bgather(&links[k], times, m, good, st, vector_sin)
-        if links[k].check_only:
+        if k == 0 and not links[0].check_only:
+            _bgather(&links[0], times, m, good, acc, vector_sin)  # acc = the first link
             continue
-        if k == 0:
-            memcpy(acc, st, sizeof(double) * 7 * _BLOCK)
-        else:
+        _bgather(&links[k], times, m, good, st, vector_sin)
+        if not links[k].check_only:
             tfb_compose_block(acc, st)
 
 
 cdef struct _BJob:
-    # the plan (copied: a worker may outlive a caller that stopped waiting for it)
+    # the plan and the rows of one call (the caller waits for a worker that took it)
     _BLink src[C_MAX_DEPTH_BATCH]
     _BLink tgt[C_MAX_DEPTH_BATCH]
     int ns
@@ -704,17 +818,9 @@ cdef struct _BJob:
     double* out
     signed char* ok
     long next_chunk  # atomic: the next chunk of _CHUNK rows to claim
-    long state  # atomic: _W_IDLE, then _W_RUNNING (worker) or _W_ABANDONED (caller)
     bint vector_sin  # slerp's per-time sines from libmvec (if found), else libm
     Py_ssize_t answered_worker
     Py_ssize_t rows_worker
-    PyThread_type_lock done
-
-
-cdef enum:
-    _W_IDLE = 0
-    _W_RUNNING = 1
-    _W_ABANDONED = 2
 
 
 cdef inline int _bstore(_BJob* job, Py_ssize_t rb, int m, const signed char* good,
@@ -780,34 +886,136 @@ cdef Py_ssize_t _brows(_BJob* job, Py_ssize_t* rows) noexcept nogil:
     return answered
 
 
+# The second thread: one per process, started by the first call that splits and then
+# kept, asleep on ``_w_wake`` between calls (a thread woken from sleep is scheduled sooner
+# than a new one, and nothing is created per call). A call hands its job over through
+# the one-slot mailbox ``_w_slot`` (atomic exchange: exactly one of the worker and the
+# caller takes a job back out). The caller waits (``_w_done``) only for a job the worker
+# took; a job still in the slot when the caller has done every row is taken back, so a
+# worker that did not get a core in time costs the caller nothing. Ended at interpreter
+# exit (``_worker_stop``, registered with atexit), forgotten in a forked child.
+cdef PyThread_type_lock _w_wake = NULL  # released once per job handed over
+cdef PyThread_type_lock _w_done = NULL  # released once per job the worker took
+cdef PyThread_type_lock _w_exited = NULL  # released by the worker as it ends
+cdef void* _w_slot = NULL  # the job waiting for the worker (atomic exchange only)
+cdef bint _w_quit = False  # set before the last wake: the worker ends
+cdef bint _w_running = False  # a worker thread is started (GIL held when read or set)
+cdef bint _w_busy = False  # a call is using the worker (GIL held when read or set)
+cdef long _w_started = 0  # worker threads started by this process (tests)
+
+
 cdef void _bworker(void* arg) noexcept nogil:
-    """The second thread: takes chunks if the caller has not finished them all before
-    it started (then it only frees the job), and releases ``done`` when finished."""
-    cdef _BJob* job = <_BJob*>arg
-    if not tfb_cas(&job.state, _W_IDLE, _W_RUNNING):
-        # the caller did every row and returned without waiting: the job is ours
-        _free_lock_nogil(job.done)
-        free(job)
-        return
-    job.answered_worker = _brows(job, &job.rows_worker)
-    PyThread_release_lock(job.done)  # last touch: the caller frees the job
+    """The worker's loop: sleep until woken, take the job in the slot (if the caller has
+    not taken it back), claim its chunks alongside the caller, release ``_w_done``;
+    end when woken with ``_w_quit`` set."""
+    cdef _BJob* job
+    cdef PyThread_type_lock wake = <PyThread_type_lock>arg
+    while True:
+        PyThread_acquire_lock(wake, WAIT_LOCK)
+        if _w_quit:
+            break
+        job = <_BJob*>tfb_xchg(&_w_slot, NULL)
+        if job == NULL:  # woken for a job its caller already took back
+            continue
+        job.answered_worker = _brows(job, &job.rows_worker)
+        PyThread_release_lock(_w_done)  # last touch of the job: the caller may free it
+    PyThread_release_lock(_w_exited)
+
+
+cdef bint _worker_ready() noexcept:
+    """Start the worker if it is not running; whether it is (GIL held)."""
+    global _w_wake, _w_done, _w_exited, _w_running, _w_quit, _w_started
+    if _w_running:
+        return True
+    _w_wake = PyThread_allocate_lock()
+    _w_done = PyThread_allocate_lock()
+    _w_exited = PyThread_allocate_lock()
+    if _w_wake == NULL or _w_done == NULL or _w_exited == NULL:
+        _worker_free_locks()
+        return False
+    PyThread_acquire_lock(_w_wake, WAIT_LOCK)
+    PyThread_acquire_lock(_w_done, WAIT_LOCK)
+    PyThread_acquire_lock(_w_exited, WAIT_LOCK)
+    _w_quit = False
+    if PyThread_start_new_thread(_bworker, _w_wake) == <unsigned long>-1:
+        _worker_free_locks()
+        return False
+    _w_running = True
+    _w_started += 1
+    return True
+
+
+cdef void _worker_free_locks() noexcept:
+    global _w_wake, _w_done, _w_exited
+    if _w_wake != NULL:
+        PyThread_free_lock(_w_wake)
+    if _w_done != NULL:
+        PyThread_free_lock(_w_done)
+    if _w_exited != NULL:
+        PyThread_free_lock(_w_exited)
+    _w_wake = _w_done = _w_exited = NULL
+
+
+def _worker_stop(double timeout=5.0):
+    """End the batched lookups' worker thread, if one is running, and wait for it
+    (at most ``timeout`` seconds); registered with :mod:`atexit`. The next call that
+    splits starts a new one. Returns whether no worker is left running. Not to be called
+    while a batch is running (a call in progress keeps the worker: returns False)."""
+    global _w_running, _w_quit
+    cdef bint ended
+    cdef long long us = <long long>(timeout * 1e6)
+    if not _w_running:
+        return True
+    if _w_busy:
+        return False
+    _w_quit = True
+    PyThread_release_lock(_w_wake)
+    with nogil:
+        ended = PyThread_acquire_lock_timed(_w_exited, us, 0) == PY_LOCK_ACQUIRED
+    if not ended:  # the worker did not get a core in time: it ends when it does
+        return False
+    _w_running = False
+    _worker_free_locks()
+    return True
+
+
+def _worker_forget():
+    """In a forked child: the parent's worker thread does not exist here (its locks are
+    left as they are, a few bytes); the next call that splits starts a new one."""
+    global _w_running, _w_busy, _w_wake, _w_done, _w_exited, _w_slot
+    _w_running = False
+    _w_busy = False
+    _w_wake = _w_done = _w_exited = NULL
+    _w_slot = NULL
+
+
+def _worker_threads_started():
+    """How many worker threads this process has started (tests: one, however many
+    calls split, until :func:`_worker_stop`)."""
+    return _w_started
+
+
+atexit.register(_worker_stop)
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_worker_forget)
 
 
 cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink* tgt,
                         int nt, bint tgt_early, const int64_t* times, const int64_t* order,
                         Py_ssize_t n_rows, double* out, signed char* ok,
                         bint vector_sin) except -1:
-    """``_brows`` over all rows; from ``_SPLIT_ROWS`` rows on (several CPUs), a second
-    thread claims chunks too. The split is dynamic (chunks of ``_CHUNK`` rows claimed
-    from a shared counter), and a worker that has not started when the rows are done is
-    not waited for. A machine busy with other work can still make the split lose (the
-    caller waits for a preempted worker's chunk): each split call is judged against the
-    caller's own pace (:func:`_split_verdict`), and after a losing one the next calls run
-    on one thread (1, 2, 4, ... up to 64 calls) before two are tried again."""
-    global _split_skip
+    """``_brows`` over all rows; from ``_SPLIT_ROWS`` rows on (several CPUs), the worker
+    thread (started once, then woken per call) claims chunks too. The split is dynamic
+    (chunks of ``_CHUNK`` rows claimed from a shared counter), and a job the worker has
+    not taken when the rows are done is taken back, not waited for. A machine busy with
+    other work can still make the split lose (the caller waits for a preempted worker's
+    chunk): each split call is judged against the caller's own pace
+    (:func:`_split_verdict`), and after a losing one the next calls run on one thread
+    (1, 2, 4, ... up to 64 calls) before two are tried again."""
+    global _split_skip, _w_busy
     cdef _BJob* job = <_BJob*>malloc(sizeof(_BJob))
     cdef Py_ssize_t answered, own_rows = 0
-    cdef bint threaded = n_rows >= _SPLIT_ROWS and _NCPU >= 2
+    cdef bint threaded = n_rows >= _SPLIT_ROWS and _NCPU >= 2 and not _w_busy
     cdef bint worker_ran = False
     cdef int64_t t0 = 0, t1 = 0
     if job == NULL:
@@ -827,35 +1035,30 @@ cdef Py_ssize_t _bsplit(const _BLink* src, int ns, bint src_early, const _BLink*
     job.out = out
     job.ok = ok
     job.next_chunk = 0
-    job.state = _W_IDLE
     job.vector_sin = vector_sin
     job.answered_worker = 0
     job.rows_worker = 0
-    job.done = NULL
     if threaded:
         t0 = perf_counter_ns()
-        job.done = PyThread_allocate_lock()
-        if job.done == NULL:
-            free(job)
-            raise MemoryError()
-        PyThread_acquire_lock(job.done, WAIT_LOCK)
-        if PyThread_start_new_thread(_bworker, job) == <unsigned long>-1:
-            PyThread_release_lock(job.done)
-            PyThread_free_lock(job.done)
-            job.done = NULL
-            threaded = False
-    with nogil:
-        answered = _brows(job, &own_rows)
+        threaded = _worker_ready()
+    if threaded:
+        _w_busy = True
+        tfb_xchg(&_w_slot, job)
+        PyThread_release_lock(_w_wake)
+    # From the hand-over to the wait nothing may raise: the worker may be using the job.
+    # The caller keeps the GIL throughout (its own rows and the wait): the plan points
+    # into the caches' arrays, which another Python thread's insert would regrow or
+    # overwrite.
+    answered = _brows(job, &own_rows)
     if threaded:
         t1 = perf_counter_ns()
-        with nogil:
-            if not tfb_cas(&job.state, _W_IDLE, _W_ABANDONED):
-                PyThread_acquire_lock(job.done, WAIT_LOCK)  # the worker is running: wait
-                answered += job.answered_worker
-                worker_ran = True
-                _free_lock_nogil(job.done)
-                free(job)
-            # else: the worker never started; it frees the job when it does
+        if tfb_xchg(&_w_slot, NULL) == NULL:  # the worker took the job: wait for it
+            PyThread_acquire_lock(_w_done, WAIT_LOCK)
+            worker_ran = True
+        _w_busy = False
+        if worker_ran:
+            answered += job.answered_worker
+        free(job)
         _split_verdict(perf_counter_ns() - t0, t1 - t0, own_rows, n_rows, worker_ran)
     else:
         free(job)
@@ -880,14 +1083,15 @@ def batch_lookup(CoreBase core, object target_frame, object source_frame,
     caller's (identity) case and returns -1 too.
 
     The path is resolved once; each time is then gathered and accumulated along it in C
-    (no GIL), in ``_walk``'s arithmetic order. ``times`` may come in any order: from 64
-    rows on, times that are not non-decreasing are walked sorted (numpy's argsort; the
+    in ``_walk``'s arithmetic order. ``times`` may come in any order: from 64
+    rows on, times that are not non-decreasing are walked sorted (``_bsorted``; the
     kernel's cursor and per-interval constants pay off on sorted times) and each row is
-    written back to its place (a row's value does not depend on the order). Rows that plan cannot take (time 0,
-    a link with several parents, a span >= 2**53 ns, a row missing data) go through
-    ``_walk`` itself. From 8192 rows on a machine with several CPUs, a second thread
-    claims chunks of rows alongside the caller (the caller keeps the GIL and waits for a
-    worker that has started, so nothing writes the buffer meanwhile).
+    written back to its place (a row's value does not depend on the order). Rows that
+    plan cannot take (time 0, a link with several parents, a span >= 2**53 ns, a row
+    missing data) go through ``_walk`` itself. From 8192 rows on a machine with several
+    CPUs, a worker thread (started once per process, asleep between calls) claims chunks
+    of rows alongside the caller; the caller keeps the GIL from the plan to the last row
+    (its own and the worker's), so no other thread writes the buffer meanwhile.
     """
     return _batch_lookup(core, target_frame, source_frame, times, out, stamps, ok, False)
 
@@ -929,6 +1133,17 @@ cdef Py_ssize_t _batch_lookup(CoreBase core, object target_frame, object source_
     source_id = core._frame(source_frame)
     if target_id < 0 or source_id < 0 or target_id == source_id:
         return -1
+    if n_rows:
+        row_times = &times[0]
+        if n_rows >= _SORT_ROWS and not _nondecreasing(row_times, n_rows):
+            # The kernel's cursor and per-interval constants pay off on sorted times: walk
+            # them sorted and write each row back to its place. Sorted before the plan is
+            # made: numpy's sort lets other threads run (and insert) meanwhile.
+            sorted_times, sort_order = _bsorted(times)
+            row_times = &sorted_times[0]
+            order = &sort_order[0]
+    # From the plan to the end of the rows the GIL is held: the plan points into the
+    # caches' arrays, which another thread's insert would regrow or overwrite.
     planned = _bplan_side(caches, source_id, 0, target_id, src_links, &ns, &top,
                           &src_early) == 0
     if planned and not src_early:
@@ -937,15 +1152,6 @@ cdef Py_ssize_t _batch_lookup(CoreBase core, object target_frame, object source_
         if planned and not tgt_early and frame != top:
             planned = False  # disconnected: the scalar walk reports it
     if planned and n_rows:
-        row_times = &times[0]
-        if n_rows >= _SORT_ROWS and not _nondecreasing(row_times, n_rows):
-            # The kernel's cursor and per-interval constants pay off on sorted times: walk
-            # them sorted (numpy's argsort) and write each row back to its place.
-            arr = np.asarray(times)
-            sort_order = np.argsort(arr, kind="quicksort").astype(np.int64, copy=False)
-            sorted_times = arr.take(sort_order)
-            row_times = &sorted_times[0]
-            order = &sort_order[0]
         answered = _bsplit(src_links, ns, src_early, tgt_links, nt, tgt_early,
                            row_times, order, n_rows, &out[0, 0], &ok[0], vector_sin)
     if answered == n_rows:
