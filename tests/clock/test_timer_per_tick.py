@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 from typing import Any
 
@@ -126,6 +127,45 @@ async def test_system_clock_backward_step_seen_elsewhere_reanchors_a_sleeping_ti
     assert after.expected.ns - stepped < int(period * 1e9) + 5 * 10**9
     assert after.index == before.index + 1
     assert after.overruns == 0
+
+
+async def test_a_jump_during_a_wall_clock_wait_leaves_no_timer_behind(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """A backward step that wakes a sleeping timer also takes its deadline off the
+    loop (asyncio: the jump callback cancels the loop timer before it sets the tick's
+    future), so that the old deadline, reached later, neither sets that future a second
+    time (an ``InvalidStateError`` reported by the loop) nor wakes anything: the loop's
+    exception handler is never called while three more ticks pass the old deadline."""
+    import asyncio
+
+    errors: list[dict[str, Any]] = []
+    if anyio_backend == "asyncio":
+        asyncio.get_running_loop().set_exception_handler(lambda _loop, ctx: errors.append(ctx))
+    wall = _SteppedWallClock()
+    monkeypatch.setattr(time, "time_ns", wall)
+    clock: Clock = SystemClock(max_sleep=60.0)
+    period = 0.05
+    ticks: list[Tick] = []
+    first = anyio.Event()
+
+    async def step_back() -> None:
+        await first.wait()
+        wall.offset -= 100 * 10**9
+        clock.now_ns()  # this reading sees the step: jump callbacks
+
+    with anyio.fail_after(30):  # ends a hung loop only
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(step_back)
+            async for tick in every(period, clock=clock, immediate=True):
+                ticks.append(tick)
+                first.set()
+                if len(ticks) == 5:
+                    break
+    assert ticks[1].expected.ns < ticks[0].expected.ns - 99 * 10**9  # re-anchored once
+    for before, after in itertools.pairwise(ticks[1:]):  # then on the new grid
+        assert (after.expected - before.expected).ns == (after.index - before.index) * 50_000_000
+    assert errors == []
 
 
 async def test_every_on_a_sim_clock_with_a_wall_timeout_raises_sim_time_stalled(

@@ -16,7 +16,7 @@ from tfbus.clock._system import SystemClock
 from tfbus.time import NSEC_PER_SEC, TIME_MAX_NS, Duration, Time, seconds_to_ns
 
 if TYPE_CHECKING:
-    from asyncio import AbstractEventLoop, Future
+    from asyncio import AbstractEventLoop, Future, TimerHandle
 
 _new_time = Time.__new__
 
@@ -98,6 +98,7 @@ class PeriodicTimer:
         self._jumped = False
         self._wake: Callable[[], object] | None = None  # ends the wait in progress
         self._future: Future[None] | None = None  # or the asyncio wall-clock wait's
+        self._handle: TimerHandle | None = None  # and its loop timer
         self._jump_clock: Clock | None = None  # the clock on_jump was registered with
 
     @property
@@ -131,6 +132,8 @@ class PeriodicTimer:
                 return
             if (future := timer._future) is not None:
                 timer._jumped = True
+                if (handle := timer._handle) is not None:
+                    handle.cancel()
                 _wake_future(future)
             elif (wake := timer._wake) is not None:
                 timer._jumped = True
@@ -183,17 +186,20 @@ class PeriodicTimer:
                 actual._ns = now_ns
                 return Tick(index, expected, actual, self._overruns)
             # The wait (see _wait), inline on the wall clock (the demo's): under asyncio
-            # one loop timer straight to an idempotent wake of one future (no entry in
-            # the clock's timer queue, no closure). The timer fires once and is done;
-            # it is cancelled only when the wait ends otherwise (a jump, a cancellation),
-            # so that no stale timer wakes the loop for nothing. Under trio one cancel
+            # one loop timer straight to the future's own set_result (no entry in the
+            # clock's timer queue, no Python frame). The timer fires once and is done;
+            # it is cancelled only when the wait ends otherwise (the jump callback
+            # cancels it before it wakes the future; a cancellation), so that it never
+            # sets a done future nor wakes the loop for nothing. Under trio one cancel
             # scope with the deadline (no coroutine of ours around it).
             loop = running_asyncio_loop()
             if type(clock) is SystemClock:
                 seconds = min((deadline - now_ns) / NSEC_PER_SEC, clock._max_sleep)
                 if loop is not None:
                     future = loop.create_future()
-                    handle = loop.call_at(loop.time() + seconds, _wake_future, future)
+                    self._handle = handle = loop.call_at(
+                        loop.time() + seconds, future.set_result, None
+                    )
                     self._future = future
                     try:
                         await future
@@ -202,8 +208,6 @@ class PeriodicTimer:
                         raise
                     finally:
                         self._future = None
-                    if self._jumped:
-                        handle.cancel()
                     continue
                 if (trio := sys.modules.get("trio")) is not None:
                     with trio.CancelScope(deadline=trio.current_time() + seconds) as scope:
