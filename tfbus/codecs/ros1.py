@@ -675,8 +675,9 @@ def _encode_struct(transforms: Iterable[TransformStamped], framed: bool = False)
                     _ONE_FRAMED.pack(ids[2], 1, 0, sec, nsec, ids[0]) if framed
                     else _ONE_HEAD.pack(1, 0, sec, nsec, ids[0]),
                     ids[1],
-                    _TF_POSE.pack(float(tr.x), float(tr.y), float(tr.z),
-                                  float(q.x), float(q.y), float(q.z), float(q.w)),
+                    # struct's "d" converts as float() does; what it refuses (a str)
+                    # goes to the loop below, which applies float() itself
+                    _TF_POSE.pack(tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w),
                 ))  # fmt: skip
         except (struct.error, UnicodeEncodeError, TypeError, AttributeError, ValueError):
             pass  # the loop below raises the error that names the field
