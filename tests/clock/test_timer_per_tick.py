@@ -185,13 +185,12 @@ async def test_every_on_a_sim_clock_with_a_wall_timeout_raises_sim_time_stalled(
 
 async def test_system_clock_tick_costs_at_most_six_tfbus_calls(anyio_backend: str) -> None:
     """A waited tick of ``every()`` on the wall clock makes at most 6 Python calls into
-    tfbus (asyncio: two clock reads, the loop lookup, the timer coroutine's start and
-    resume, the one wake of its future by a loop timer; trio: two clock reads, the loop
-    lookup, the coroutine's start and resume): no entry in the clock's timer queue
-    (add, arm, fire, take due: 4 more calls a tick on asyncio) and no inner wait
-    coroutine (2 more on trio). The jump callback is registered once per timer, not per
-    tick, and the tick's stamps are built without ``Time.from_ns``. The ticks keep their
-    grid."""
+    tfbus (5 on both backends: two clock reads, the loop lookup, the timer coroutine's
+    start and resume; the loop timer wakes the future with its own ``set_result``): no
+    entry in the clock's timer queue (add, arm, fire, take due and a wake: 5 more calls
+    a tick on asyncio) and no inner wait coroutine (2 more on trio). The jump callback
+    is registered once per timer, not per tick, and the tick's stamps are built without
+    ``Time.from_ns``. The ticks keep their grid."""
     import sys
     from pathlib import Path
 
