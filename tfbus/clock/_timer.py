@@ -223,7 +223,9 @@ class PeriodicTimer:
         self, clock: Clock, loop: AbstractEventLoop | None, now_ns: int, deadline: int
     ) -> None:
         """Sleep until ``deadline`` (ns of ``clock``) or a backward jump of ``clock``,
-        whichever comes first; the caller re-reads the clock after it.
+        whichever comes first; the caller re-reads the clock after it. (A
+        :class:`~tfbus.clock.SystemClock` under asyncio or trio waits inline in
+        :meth:`__anext__` instead.)
 
         One deadline callback (:meth:`Clock.call_later <tfbus.clock.Clock.call_later>`)
         and one one-shot wake-up per tick, which the deadline and the jump callback both
@@ -238,17 +240,6 @@ class PeriodicTimer:
             # Monotonic seconds (call_later's and trio's); waking at least every
             # max_sleep notices a wall-clock step, as SystemClock.sleep_until does.
             seconds = min(remaining_ns / NSEC_PER_SEC, clock._max_sleep)
-            if loop is None and (trio := sys.modules.get("trio")) is not None:
-                # One trio cancel scope with the deadline, which the jump callback
-                # cancels (trio.sleep's own cost: the call_later path would wake its
-                # timer task and then this one).
-                with trio.CancelScope(deadline=trio.current_time() + seconds) as scope:
-                    self._wake = scope.cancel
-                    try:
-                        await trio.sleep_forever()
-                    finally:
-                        self._wake = None
-                return
             delay: float | Duration = seconds
         else:
             delay = Duration.from_ns(remaining_ns)  # exact: simulated deadlines are ns
