@@ -186,19 +186,20 @@ class PeriodicTimer:
                 actual._ns = now_ns
                 return Tick(index, expected, actual, self._overruns)
             # The wait (see _wait), inline on the wall clock (the demo's): under asyncio
-            # one loop timer straight to the future's own set_result (no entry in the
-            # clock's timer queue, no Python frame). The timer fires once and is done;
-            # it is cancelled only when the wait ends otherwise (the jump callback
-            # cancels it before it wakes the future; a cancellation), so that it never
-            # sets a done future nor wakes the loop for nothing. Under trio one cancel
-            # scope with the deadline (no coroutine of ours around it).
+            # one loop timer straight to an idempotent wake of one future (no entry in
+            # the clock's timer queue, no closure): a cancellation handled in the same
+            # pass of the loop, before the timer, leaves a done future to it. The
+            # timer fires once and is done; it is cancelled only when the wait ends
+            # otherwise (the jump callback cancels it; a cancellation), so that no
+            # stale timer wakes the loop for nothing. Under trio one cancel scope with
+            # the deadline (no coroutine of ours around it).
             loop = running_asyncio_loop()
             if type(clock) is SystemClock:
                 seconds = min((deadline - now_ns) / NSEC_PER_SEC, clock._max_sleep)
                 if loop is not None:
                     future = loop.create_future()
                     self._handle = handle = loop.call_at(
-                        loop.time() + seconds, future.set_result, None
+                        loop.time() + seconds, _wake_future, future
                     )
                     self._future = future
                     try:
