@@ -6,7 +6,6 @@ import sys
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 from typing import TYPE_CHECKING
 
 import anyio
@@ -17,7 +16,7 @@ from tfbus.clock._system import SystemClock
 from tfbus.time import NSEC_PER_SEC, TIME_MAX_NS, Duration, Time, seconds_to_ns
 
 if TYPE_CHECKING:
-    from asyncio import AbstractEventLoop, Future
+    from asyncio import AbstractEventLoop, Future, TimerHandle
 
 _new_time = Time.__new__
 
@@ -65,9 +64,10 @@ class PeriodicTimer:
     A backward clock jump (``clock.on_jump``, or ``now()`` found below the previous
     reading) re-anchors the schedule: the next deadline becomes ``new_now + period``.
 
-    Each tick's wait is one deadline of the clock (``call_later`` and a one-shot wake-up;
-    under trio on the wall clock one ``trio`` cancel scope with that deadline, as
-    ``trio.sleep``) that the jump callback ends early; the clock is read with
+    Each tick's wait is one deadline of the clock (on the wall clock under asyncio one
+    ``loop.call_at`` timer and one future; under trio on the wall clock one ``trio``
+    cancel scope with that deadline, as ``trio.sleep``; otherwise ``call_later`` and a
+    one-shot wake-up) that the jump callback ends early; the clock is read with
     ``now_ns()``. No anyio cancel scope is entered per tick, and the jump callback is
     registered with the clock once per timer (on its first wait; unregistered when the
     timer is collected), not per tick.
@@ -97,6 +97,8 @@ class PeriodicTimer:
         self._last_seen_ns = 0
         self._jumped = False
         self._wake: Callable[[], object] | None = None  # ends the wait in progress
+        self._future: Future[None] | None = None  # or the asyncio wall-clock wait's
+        self._handle: TimerHandle | None = None  # and its loop timer
         self._jump_clock: Clock | None = None  # the clock on_jump was registered with
 
     @property
@@ -119,13 +121,21 @@ class PeriodicTimer:
     def _watch_jumps(self, clock: Clock) -> None:
         """Register this timer's one backward-jump callback with ``clock`` (on its first
         wait; unregistered when the timer is collected). It wakes the wait in progress
-        (:attr:`_wake`), if any, and marks the schedule for re-anchoring; a jump while
-        no wait is in progress is left to the ``now_ns`` comparison, as before."""
+        (:attr:`_future` or :attr:`_wake`), if any, and marks the schedule for
+        re-anchoring; a jump while no wait is in progress is left to the ``now_ns``
+        comparison, as before."""
         ref = weakref.ref(self)
 
         def on_jump(old: Time, new: Time) -> None:
             timer = ref()
-            if timer is not None and (wake := timer._wake) is not None:
+            if timer is None:
+                return
+            if (future := timer._future) is not None:
+                timer._jumped = True
+                if (handle := timer._handle) is not None:
+                    handle.cancel()
+                _wake_future(future)
+            elif (wake := timer._wake) is not None:
                 timer._jumped = True
                 wake()
 
@@ -136,7 +146,7 @@ class PeriodicTimer:
         """Wait for the next deadline and return its tick.
 
         Per tick on a :class:`~tfbus.clock.SystemClock` under asyncio: two clock reads,
-        one entry in the clock's timer queue and one bare future; the jump callback is
+        one loop timer (``loop.call_at``) and one bare future; the jump callback is
         registered once per timer, not per tick.
 
         Raises:
@@ -175,29 +185,48 @@ class PeriodicTimer:
                 actual = _new_time(Time)
                 actual._ns = now_ns
                 return Tick(index, expected, actual, self._overruns)
-            # The wait (see _wait): inline on the wall clock under asyncio, the demo's.
+            # The wait (see _wait), inline on the wall clock (the demo's): under asyncio
+            # one loop timer straight to an idempotent wake of one future (no entry in
+            # the clock's timer queue, no closure): a cancellation handled in the same
+            # pass of the loop, before the timer, leaves a done future to it. The
+            # timer fires once and is done; it is cancelled only when the wait ends
+            # otherwise (the jump callback cancels it; a cancellation), so that no
+            # stale timer wakes the loop for nothing. Under trio one cancel scope with
+            # the deadline (no coroutine of ours around it).
             loop = running_asyncio_loop()
-            if loop is not None and type(clock) is SystemClock:
+            if type(clock) is SystemClock:
                 seconds = min((deadline - now_ns) / NSEC_PER_SEC, clock._max_sleep)
-                timers = clock._timers
-                if timers is None or timers.loop_ref() is not loop:
-                    timers = clock._asyncio_timers(loop)
-                future = loop.create_future()
-                self._wake = wake = partial(_wake_future, future)
-                cancel = timers.add(loop.time() + seconds, wake)
-                try:
-                    await future
-                finally:
-                    self._wake = None
-                    cancel()
-            else:
-                await self._wait(clock, loop, now_ns, deadline)
+                if loop is not None:
+                    future = loop.create_future()
+                    self._handle = handle = loop.call_at(
+                        loop.time() + seconds, _wake_future, future
+                    )
+                    self._future = future
+                    try:
+                        await future
+                    except BaseException:
+                        handle.cancel()
+                        raise
+                    finally:
+                        self._future = None
+                    continue
+                if (trio := sys.modules.get("trio")) is not None:
+                    with trio.CancelScope(deadline=trio.current_time() + seconds) as scope:
+                        self._wake = scope.cancel
+                        try:
+                            await trio.sleep_forever()
+                        finally:
+                            self._wake = None
+                    continue
+            await self._wait(clock, loop, now_ns, deadline)
 
     async def _wait(
         self, clock: Clock, loop: AbstractEventLoop | None, now_ns: int, deadline: int
     ) -> None:
         """Sleep until ``deadline`` (ns of ``clock``) or a backward jump of ``clock``,
-        whichever comes first; the caller re-reads the clock after it.
+        whichever comes first; the caller re-reads the clock after it. (A
+        :class:`~tfbus.clock.SystemClock` under asyncio or trio waits inline in
+        :meth:`__anext__` instead.)
 
         One deadline callback (:meth:`Clock.call_later <tfbus.clock.Clock.call_later>`)
         and one one-shot wake-up per tick, which the deadline and the jump callback both
@@ -212,17 +241,6 @@ class PeriodicTimer:
             # Monotonic seconds (call_later's and trio's); waking at least every
             # max_sleep notices a wall-clock step, as SystemClock.sleep_until does.
             seconds = min(remaining_ns / NSEC_PER_SEC, clock._max_sleep)
-            if loop is None and (trio := sys.modules.get("trio")) is not None:
-                # One trio cancel scope with the deadline, which the jump callback
-                # cancels (trio.sleep's own cost: the call_later path would wake its
-                # timer task and then this one).
-                with trio.CancelScope(deadline=trio.current_time() + seconds) as scope:
-                    self._wake = scope.cancel
-                    try:
-                        await trio.sleep_forever()
-                    finally:
-                        self._wake = None
-                return
             delay: float | Duration = seconds
         else:
             delay = Duration.from_ns(remaining_ns)  # exact: simulated deadlines are ns

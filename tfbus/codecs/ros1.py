@@ -558,6 +558,16 @@ class TFCodec:
         """
         return _encode_struct(transforms)
 
+    def encode_framed(self, transforms: Iterable[TransformStamped]) -> bytes:
+        """:meth:`encode`'s bytes with their TCPROS length prefix (``uint32``, little
+        endian: ``roscpp``'s ``serializeMessage``, what a publisher writes to each
+        subscriber), made in the same join rather than copied after it.
+
+        Raises:
+            WireEncodeError: as :meth:`encode`.
+        """
+        return _encode_struct(transforms, True)
+
     def encode_generic(self, transforms: Iterable[TransformStamped]) -> bytes:
         """Serialise transforms as one ROS 1 ``TFMessage`` with rosbags' typestore
         (``serialize_ros1``): the reference of :meth:`encode`.
@@ -617,13 +627,17 @@ _TF_POSE = struct.Struct("<7d")  # translation x y z, rotation x y z w
 
 
 _ONE_HEAD = struct.Struct("<5I")  # count 1, seq 0, stamp.secs, stamp.nsecs, len(frame_id)
+_ONE_FRAMED = struct.Struct("<6I")  # the TCPROS length, then _ONE_HEAD's fields
+_ONE_FIXED: Final = _ONE_HEAD.size + _TF_POSE.size  # a one-transform message but its ids
 _PAIR_BYTES_MAX: Final = 4096  # frame pairs whose encoded ids are kept (then cleared)
-# (frame_id, child_frame_id) -> (len(frame_id as UTF-8), frame_id + len(child) + child)
-_pair_bytes: dict[tuple[str, str], tuple[int, bytes]] = {}
+# (frame_id, child_frame_id) -> (len(frame_id as UTF-8), frame_id + len(child) + child,
+# the message's length)
+_pair_bytes: dict[tuple[str, str], tuple[int, bytes, int]] = {}
 
 
-def _encode_struct(transforms: Iterable[TransformStamped]) -> bytes:
-    """One ROS 1 ``TFMessage``: ``uint32`` count, then per transform ``std_msgs/Header``
+def _encode_struct(transforms: Iterable[TransformStamped], framed: bool = False) -> bytes:
+    """One ROS 1 ``TFMessage`` (``framed``: with its TCPROS ``uint32`` length first):
+    ``uint32`` count, then per transform ``std_msgs/Header``
     (``seq`` 0, ``time`` as two ``uint32``, ``frame_id``), ``child_frame_id`` (strings
     as ``uint32`` length + UTF-8) and seven ``float64`` (``roscpp_serialization``,
     little endian).
@@ -650,17 +664,20 @@ def _encode_struct(transforms: Iterable[TransformStamped]) -> bytes:
                 child_bytes = child.encode()
                 if len(_pair_bytes) >= _PAIR_BYTES_MAX:
                     _pair_bytes.clear()
+                ids_bytes = frame_bytes + _U32.pack(len(child_bytes)) + child_bytes
                 ids = _pair_bytes[pair] = (
-                    len(frame_bytes), frame_bytes + _U32.pack(len(child_bytes)) + child_bytes
+                    len(frame_bytes), ids_bytes, _ONE_FIXED + len(ids_bytes)
                 )
             sec, nsec = divmod(header.stamp.ns, NSEC_PER_SEC)
             if ids is not None and 0 <= sec <= _SEC_MAX:
                 tr, q = one.transform.translation, one.transform.rotation
                 return b"".join((
-                    _ONE_HEAD.pack(1, 0, sec, nsec, ids[0]),
+                    _ONE_FRAMED.pack(ids[2], 1, 0, sec, nsec, ids[0]) if framed
+                    else _ONE_HEAD.pack(1, 0, sec, nsec, ids[0]),
                     ids[1],
-                    _TF_POSE.pack(float(tr.x), float(tr.y), float(tr.z),
-                                  float(q.x), float(q.y), float(q.z), float(q.w)),
+                    # struct's "d" converts as float() does; what it refuses (a str)
+                    # goes to the loop below, which applies float() itself
+                    _TF_POSE.pack(tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w),
                 ))  # fmt: skip
         except (struct.error, UnicodeEncodeError, TypeError, AttributeError, ValueError):
             pass  # the loop below raises the error that names the field
@@ -695,6 +712,9 @@ def _encode_struct(transforms: Iterable[TransformStamped]) -> bytes:
             f"(child_frame_id {child_frame_id!r:.80}): {exc}"
         ) from exc
     parts[0] = u32_pack(n)
+    if framed:
+        body = b"".join(parts)
+        return u32_pack(len(body)) + body
     return b"".join(parts)
 
 

@@ -561,7 +561,8 @@ class Ros1Transport:
         if topic not in self._published:
             self.advertise(topic)
         transforms: Iterable[TransformStamped] = message.transforms
-        if topic in _LATCHED:
+        latching = topic in _LATCHED
+        if latching:
             latched = self._latched.setdefault(topic, {})
             new = dict(latched)
             for ts in message.transforms:
@@ -569,15 +570,13 @@ class Ros1Transport:
                     new[ts.child_frame_id.lstrip("/")] = ts
             transforms = new.values()
         try:
-            payload = self._codec.encode(transforms)
+            framed = self._codec.encode_framed(transforms)  # the TCPROS frame, in one join
         except (ValueError, AttributeError, TypeError) as exc:
             self._stats.send_errors += 1
             _log.warning("ros1: dropping a message on %s: %s", topic, exc)
             return
-        if topic in _LATCHED:
+        if latching:
             self._latched[topic] = new
-        framed = frame(payload)
-        if topic in _LATCHED:
             self._latched_frame[topic] = framed
         for out in self._outgoing.get(topic, ()):
             self._stats.send_dropped += out.frames.put(framed)
