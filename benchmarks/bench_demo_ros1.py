@@ -39,39 +39,13 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers: one home, shared with the tests
 
+from proc_cpu import cpu_and_wakeups  # noqa: E402
 from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
-TICK = os.sysconf("SC_CLK_TCK")
 TFBUS = [sys.executable, "-m", "tfbus.cli"]
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU seconds of a process so far (``/proc/PID/stat`` fields 14-15)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICK
-
-
-def cpu_and_wakeups(pid: int) -> tuple[float, int]:
-    """(CPU seconds, voluntary context switches) of a process's live threads so far: the
-    scheduler's run time in ns (``/proc/PID/task/TID/schedstat`` field 1) and the
-    ``voluntary_ctxt_switches`` of each thread's ``status``. Falls back to
-    :func:`cpu_seconds` where the kernel keeps no schedstat."""
-    cpu_ns = 0
-    wakeups = 0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            cpu_ns += int((task / "schedstat").read_text().split()[0])
-            status = (task / "status").read_text()
-        except FileNotFoundError:  # a thread that ended meanwhile, or no schedstat
-            if not (task / "schedstat").exists() and task.exists():
-                return cpu_seconds(pid), 0
-            continue
-        for line in status.splitlines():
-            if line.startswith("voluntary_ctxt_switches:"):
-                wakeups += int(line.split()[1])
-    return cpu_ns / 1e9, wakeups
 
 
 def run_pair(

@@ -2,7 +2,8 @@
 subscriber and by a tfbus process (``Bus(transport=Ros1Transport())``), same run.
 
 Prints, per scenario (rate x frames per message x seconds): each receiver's CPU time per
-message (``/proc/PID/stat``), one-way latency median and
+message (each thread's scheduler run time in ns, ``/proc/PID/task/*/schedstat``:
+``benchmarks/proc_cpu.py``), one-way latency median and
 p99 (receive time - header.stamp, both on this machine's wall clock) for C++ and tfbus,
 their ratio (target: tfbus ≤ 1.5x C++), and messages/transforms received of those sent
 (target: none lost at 100 Hz x 50 frames for 60 s), with the 1-minute load average.
@@ -53,6 +54,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers: one home, shared with the tests
 
+from proc_cpu import cpu_seconds  # noqa: E402
 from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
 
 BENCH_PACKAGES = ("roscpp", "tf2_msgs")
@@ -173,15 +175,6 @@ def pct(values: list[float], q: float) -> float:
     return s[min(len(s) - 1, int(q * len(s)))]
 
 
-TICK = os.sysconf("SC_CLK_TCK")
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU seconds of a process so far (``/proc/PID/stat`` fields 14-15)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICK
-
-
 def scenario(
     master: Master, bins: Path, rate: float, frames: int, seconds: float, mode: str = "queue",
     moving: bool = False, cpu: list[tuple[float, float]] | None = None, tree: Path = ROOT,
@@ -190,9 +183,10 @@ def scenario(
     message, else they are constant, see ``ros1/bench_pub.cpp``): prints its line; returns
     C++ and tfbus median and p99, and whether tfbus received every transform sent.
 
-    Each receiver's CPU time (user + system, ``/proc/PID/stat``) from the publisher's
-    start to its last message, per message received, is printed too and appended to
-    ``cpu`` as ``(C++ s, tfbus s)`` when given (10 ms clock ticks: run >= 10 s).
+    Each receiver's CPU time (its threads' scheduler run time in ns,
+    :func:`proc_cpu.cpu_seconds`) from the publisher's start to its last message, per
+    message received, is printed too and appended to ``cpu`` as ``(C++ s, tfbus s)`` when
+    given.
     ``tree``: the checkout whose tfbus the tfbus side imports (``--baseline``)."""
     if mode == "listener":
         cpp = master.run(str(bins / "bench_listener"), str(frames))

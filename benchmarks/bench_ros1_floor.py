@@ -3,10 +3,11 @@ stream, beside a C++ roscpp subscriber of the same stream, same run.
 
 A C++ roscpp publisher (``peers/ros1/bench_pub.cpp``) sends ``/tf`` (50 transforms, about
 5 kB a message, 100 Hz by default). Every receiver below runs at once, in its own process,
-connected to that publisher; the CPU time of each (``/proc/PID/stat``, user + system) is
-read over the same windows (``--rounds`` windows of ``--seconds``) and divided by the
-messages sent in the window. Each window also gives each receiver's ratio to roscpp in that
-window (the machine's load moves all of them together); min / median / max are printed.
+connected to that publisher; the CPU time of each (its threads' scheduler run time in ns,
+``/proc/PID/task/*/schedstat``: ``benchmarks/proc_cpu.py``) is read over the same windows
+(``--rounds`` windows of ``--seconds``) and divided by the messages sent in the window.
+Each window also gives each receiver's ratio to roscpp in that window (the machine's load
+moves all of them together); min / median / max are printed.
 
 Receivers (``--receivers``, comma separated; roscpp always runs):
 
@@ -65,6 +66,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "peers" / "ros1"))
 
+from proc_cpu import cpu_seconds  # noqa: E402
 from ros1_peers import Proc, ros1_missing, start_master  # noqa: E402
 
 RECEIVERS = (
@@ -256,13 +258,6 @@ def last_count(proc: Proc, before: int) -> int:
     counts = [line for line in proc.drain() if line.startswith("COUNT ")]
     proc.seen.clear()
     return int(counts[-1].split()[1]) if counts else before
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU seconds of ``pid`` (``/proc/PID/stat``, fields 14 and 15)."""
-    with open(f"/proc/{pid}/stat", encoding="ascii") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def child(receiver: str) -> None:
