@@ -570,14 +570,15 @@ ROS1_CPU_ROWS = {
     "listener": "ROS 1 receive CPU/msg, listener vs tf2_ros C++",
 }
 ROS1_CPU_SECONDS = 10.0
-"""Seconds per CPU run: ``/proc`` counts CPU time in 10 ms ticks."""
+"""Seconds per CPU run (each receiver's CPU is its threads' scheduler time in ns)."""
 
 
 def ros1cpu_rows(rows: Rows, runs: int) -> None:
     """ROS 1 receive CPU per message, 100 Hz x 50 transforms (``bench_ros1.scenario``):
     each run has a C++ receiver and tfbus's receive the same publisher's messages at
-    once (``/proc/PID/stat``, 10 s runs), the callback and listener modes alternated,
-    ``runs`` times; each row judges the median of the per-run ratios."""
+    once (each thread's scheduler time in ns, ``benchmarks/proc_cpu.py``; 10 s runs),
+    the callback and listener modes alternated, ``runs`` times; each row judges the
+    median of the per-run ratios."""
     import bench_ros1
     from ros1_peers import ros1_missing, start_master  # via bench_ros1
 
