@@ -93,18 +93,13 @@ class _SteppedWallClock:
         return self.real() + self.offset
 
 
-async def test_system_clock_backward_step_seen_elsewhere_reanchors_a_sleeping_timer(
-    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
-) -> None:
-    """A backward step of the wall clock that another task observes wakes the sleeping
-    timer, which re-anchors: the next deadline is one period after the time it read on
-    waking (``PeriodicTimer``'s jump policy), not the old schedule 100 s ahead."""
-    wall = _SteppedWallClock()
-    monkeypatch.setattr(time, "time_ns", wall)
-    clock: Clock = SystemClock(max_sleep=60.0)
-    period = 0.2
+async def _ticks_with_a_step_back(
+    clock: Clock, wall: _SteppedWallClock, period: float, n: int, stepped_at: list[int]
+) -> list[Tick]:
+    """The first ``n`` ticks of ``every(period, clock=clock, immediate=True)`` while
+    another task steps ``wall`` back by 100 s once the first tick is in (the clock reading
+    that sees the step, which runs the jump callbacks, appended to ``stepped_at``)."""
     ticks: list[Tick] = []
-    stepped_at: list[int] = []
     first = anyio.Event()
 
     async def step_back() -> None:
@@ -118,8 +113,24 @@ async def test_system_clock_backward_step_seen_elsewhere_reanchors_a_sleeping_ti
             async for tick in every(period, clock=clock, immediate=True):
                 ticks.append(tick)
                 first.set()
-                if len(ticks) == 2:
+                if len(ticks) == n:
                     break
+    return ticks
+
+
+async def test_system_clock_backward_step_seen_elsewhere_reanchors_a_sleeping_timer(
+    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+) -> None:
+    """A backward step of the wall clock that another task observes wakes the sleeping
+    timer, which re-anchors: the next deadline is one period after the time it read on
+    waking (``PeriodicTimer``'s jump policy), not the old schedule 100 s ahead."""
+    wall = _SteppedWallClock()
+    monkeypatch.setattr(time, "time_ns", wall)
+    clock: Clock = SystemClock(max_sleep=60.0)
+    period = 0.2
+    stepped_at: list[int] = []
+
+    ticks = await _ticks_with_a_step_back(clock, wall, period, 2, stepped_at)
     (stepped,) = stepped_at
     before, after = ticks
     assert after.expected.ns < before.expected.ns - 99 * 10**9  # on the stepped-back clock
@@ -146,22 +157,8 @@ async def test_a_jump_during_a_wall_clock_wait_leaves_no_timer_behind(
     monkeypatch.setattr(time, "time_ns", wall)
     clock: Clock = SystemClock(max_sleep=60.0)
     period = 0.05
-    ticks: list[Tick] = []
-    first = anyio.Event()
 
-    async def step_back() -> None:
-        await first.wait()
-        wall.offset -= 100 * 10**9
-        clock.now_ns()  # this reading sees the step: jump callbacks
-
-    with anyio.fail_after(30):  # ends a hung loop only
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(step_back)
-            async for tick in every(period, clock=clock, immediate=True):
-                ticks.append(tick)
-                first.set()
-                if len(ticks) == 5:
-                    break
+    ticks = await _ticks_with_a_step_back(clock, wall, period, 5, [])
     assert ticks[1].expected.ns < ticks[0].expected.ns - 99 * 10**9  # re-anchored once
     for before, after in itertools.pairwise(ticks[1:]):  # then on the new grid
         assert (after.expected - before.expected).ns == (after.index - before.index) * 50_000_000

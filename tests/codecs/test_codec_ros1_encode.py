@@ -103,18 +103,10 @@ def test_one_transform_from_the_frame_pair_cache_equals_rosbags(
     assert codec.encode_framed((one,)) == framed
 
 
-def test_one_transform_encodes_its_frame_ids_once_per_frame_pair() -> None:
-    """A broadcaster's tick re-sends the same frame pair: after the first message the
-    ids are not re-encoded (no ``str.encode``) and the message is two ``struct`` packs
-    and one join (C calls counted with the profiler: 6 for the whole tick, at most 8
-    allowed, where encoding the ids, four packs and six appends took 15)."""
+def _c_calls(fn: Any, *args: Any) -> tuple[Any, list[str]]:
+    """``fn(*args)`` and the C functions it called, in order (``sys.setprofile``)."""
     import sys
 
-    codec = TFCodec()
-    first = _ts("world", "turtle_one_tick", 1_700_000_000_123_456_789,
-                (1.0, 2.0, 0.0, 0.0, 0.0, 0.3, 0.95))  # fmt: skip
-    later = first._replace(header=Header(Time.from_ns(1_700_000_000_133_456_789), "world"))
-    codec.encode([first])
     c_calls: list[str] = []
 
     def profile(frame: Any, event: str, arg: Any) -> None:
@@ -123,10 +115,24 @@ def test_one_transform_encodes_its_frame_ids_once_per_frame_pair() -> None:
 
     sys.setprofile(profile)
     try:
-        raw = codec.encode([later])
+        result = fn(*args)
     finally:
         sys.setprofile(None)
     c_calls.remove("setprofile")
+    return result, c_calls
+
+
+def test_one_transform_encodes_its_frame_ids_once_per_frame_pair() -> None:
+    """A broadcaster's tick re-sends the same frame pair: after the first message the
+    ids are not re-encoded (no ``str.encode``) and the message is two ``struct`` packs
+    and one join (C calls counted with the profiler: 6 for the whole tick, at most 8
+    allowed, where encoding the ids, four packs and six appends took 15)."""
+    codec = TFCodec()
+    first = _ts("world", "turtle_one_tick", 1_700_000_000_123_456_789,
+                (1.0, 2.0, 0.0, 0.0, 0.0, 0.3, 0.95))  # fmt: skip
+    later = first._replace(header=Header(Time.from_ns(1_700_000_000_133_456_789), "world"))
+    codec.encode([first])
+    raw, c_calls = _c_calls(codec.encode, [later])
     assert raw == codec.encode_generic([later])
     assert "str.encode" not in c_calls, c_calls
     assert len(c_calls) <= 8, c_calls
@@ -139,25 +145,12 @@ def test_a_ticks_tcpros_frame_is_one_join_with_its_length() -> None:
     calls counted with the profiler: 6, as for the bare message; the old
     ``encode`` + ``frame`` took 8). The bytes are rosbags' message after its
     ``uint32`` length."""
-    import sys
-
     codec = TFCodec()
     first = _ts("base_link", "base_laser", 1_700_000_000_123_456_789,
                 (0.1, 0.0, 0.2, 0.0, 0.0, 0.0, 1.0))  # fmt: skip
     later = first._replace(header=Header(Time.from_ns(1_700_000_000_133_456_789), "base_link"))
     codec.encode_framed([first])
-    c_calls: list[str] = []
-
-    def profile(frame: Any, event: str, arg: Any) -> None:
-        if event == "c_call":
-            c_calls.append(getattr(arg, "__qualname__", repr(arg)))
-
-    sys.setprofile(profile)
-    try:
-        raw = codec.encode_framed([later])
-    finally:
-        sys.setprofile(None)
-    c_calls.remove("setprofile")
+    raw, c_calls = _c_calls(codec.encode_framed, [later])
     reference = codec.encode_generic([later])
     assert raw == len(reference).to_bytes(4, "little") + reference
     assert len(reference) == 4 + 16 + 9 + 4 + 10 + 56
