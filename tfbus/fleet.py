@@ -253,7 +253,9 @@ class FleetBuffer:
     # -- lifecycle -----------------------------------------------------------------
 
     async def __aenter__(self) -> FleetBuffer:
-        """Subscribe to liveliness events and add the robots already alive.
+        """Subscribe to liveliness events and add the robots already alive; a fleet
+        transport then delivers the static transforms it kept for those robots before
+        they had a subscriber (``deliver_kept_statics``).
 
         Raises:
             RuntimeError: already entered.
@@ -262,10 +264,15 @@ class FleetBuffer:
         if self._peer_callback is not None:
             raise RuntimeError("this FleetBuffer is already running")
         self._peer_callback = self._bus.subscribe_callback(PEERS_TOPIC, self._on_peer)
-        alive = getattr(self._bus.transport, "alive", None)
+        transport = self._bus.transport
+        alive = getattr(transport, "alive", None)
         if callable(alive):
             for node_id, info in alive().items():
                 self._node_seen(node_id, info.name, info.topics)
+        # statics a fleet transport kept for those robots before they had a subscriber
+        kept = getattr(transport, "deliver_kept_statics", None)
+        if callable(kept):
+            kept()
         return self
 
     async def __aexit__(self, *exc: object) -> None:

@@ -324,6 +324,33 @@ async def test_fleet_buffer_over_rmw_zenoh() -> None:
                 assert fleet.robots()["robot1"].alive
 
 
+async def test_fleet_buffer_entered_after_the_robot_was_heard_gets_its_statics() -> None:
+    """A :class:`tfbus.fleet.FleetBuffer` entered only after the fleet listener heard
+    robot1's node and its static transform (kept: nobody subscribed to robot1's topics
+    yet), with no token of robot1 coming afterwards: entering subscribes to the robots
+    already alive and has the transport deliver what it kept, so the static is in
+    robot1's buffer at once."""
+    from tfbus.fleet import FleetBuffer
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    laser = ts("base_link", "base_laser", 1, 0.1)
+    async with ZenohRouter(listen=endpoint):
+        r1 = Bus(transport=transport(endpoint, "driver", namespace="robot1"))
+        async with r1:
+            r1.publish_nowait("/tf_static", TFMessage((laser,)))
+            fleet_t = transport(endpoint, "fleet", namespace="*")
+            async with Bus(transport=fleet_t) as fleet_bus:
+                # robot1's node and its static heard before any FleetBuffer subscribed
+                await wait_until(lambda: fleet_t.statistics().delivered >= 1 and any(
+                    p.name == "robot1/driver" and "/robot1/tf_static" in p.topics
+                    for p in fleet_t.alive().values()))
+                async with FleetBuffer(fleet_bus) as fleet:
+                    buffer = await fleet.wait_for_robot("robot1", timeout=20)
+                    got = await buffer.lookup_transform_async(
+                        "base_link", "base_laser", Time(0), 20.0)
+                    assert got.transform == laser.transform
+
+
 def test_bus_spec_options() -> None:
     t = open_transport("rmw_zenoh:domain=7&connect=tcp/127.0.0.1:7447&namespace=robot1"
                        "&attachment=labelled", default_name="tfbus-view")

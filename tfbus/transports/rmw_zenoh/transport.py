@@ -337,6 +337,7 @@ class RmwZenohTransport:
         self._token_node: dict[str, tuple[str, str]] = {}  # token -> (node key, bus topic)
         # fleet: statics of /<robot>/tf_static received before anyone subscribed to it
         self._unheard: dict[str, StaticLatch] = {}
+        self._recheck_unheard = False  # deliver_kept_statics: look again on the next drain
         self._log = CountLimitedLog(log, 1000, clock=time.monotonic)
 
     # -- public information ---------------------------------------------------------------
@@ -403,6 +404,21 @@ class RmwZenohTransport:
         topics it publishes."""
         return {key: PeerInfo(key, node.name, frozenset(node.topics))
                 for key, node in self._graph.items()}
+
+    def deliver_kept_statics(self) -> None:
+        """Deliver, on this transport's next pass in the event loop, the statics it kept
+        for fleet topics nobody subscribed to when they came (see the module docstring)
+        to those of the topics that have a subscriber now.
+
+        A robot's kept statics are otherwise delivered when a graph event comes (the
+        robot's node appearing, on which a :class:`~tfbus.fleet.FleetBuffer` subscribes
+        to its topics); a FleetBuffer that subscribes to the robots already alive calls
+        this, since every token of those robots may have come before it subscribed.
+        Never blocks, never raises; nothing happens when not running or nothing is kept."""
+        wakeup = self._wakeup
+        if self._unheard and wakeup is not None:
+            self._recheck_unheard = True
+            wakeup.wake()
 
     def __repr__(self) -> str:
         state = "running" if self._running else "stopped"
@@ -497,6 +513,7 @@ class RmwZenohTransport:
             self._graph.clear()
             self._token_node.clear()
             self._unheard.clear()
+            self._recheck_unheard = False
             with anyio.CancelScope(shield=True):
                 await anyio.to_thread.run_sync(_close_session, session, declared)
             wakeup.close()
@@ -658,6 +675,10 @@ class RmwZenohTransport:
                     bus.deliver_nowait(PEERS_TOPIC, event)
                 if events and self._unheard:
                     self._deliver_unheard(bus)
+        if self._recheck_unheard:
+            self._recheck_unheard = False
+            if self._unheard:
+                self._deliver_unheard(bus)
         return bool(inbox)
 
     def _deliver_unheard(self, bus: BusLike) -> None:
