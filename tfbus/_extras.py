@@ -21,7 +21,7 @@ __all__ = ["EXTRAS", "MissingExtraError", "extra_advice", "require"]
 EXTRAS: Final[dict[str, str]] = {
     "rosbags": "bag", "mcap": "bag", "zenoh": "zenoh", "msgspec": "zenoh",
     "cyclonedds": "ros2", "urdf_parser_py": "robot", "lxml": "robot", "viser": "view",
-    "foxglove": "view", "trio": "trio",
+    "foxglove": "view", "trio": "trio", "wsproto": "web",
 }
 """The extra (``pyproject.toml`` ``[project.optional-dependencies]``) that installs each
 importable top-level package tfbus uses optionally."""

@@ -65,6 +65,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, Final, Literal, NamedTuple
 
+from tfbus._extras import require
+
+require(__name__, "msgspec")
+
 import msgspec
 import numpy as np
 

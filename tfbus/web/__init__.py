@@ -11,6 +11,10 @@ frames, ``angular_thres``, ``trans_thres`` and ``rate`` applied server-side per 
 tf2_web_republisher does.
 """
 
+from tfbus._extras import require
+
+require(__name__, "wsproto")
+
 from tfbus.web.rosbridge import Session, TfPair
 from tfbus.web.server import TfWebServer
 
