@@ -39,6 +39,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -98,6 +99,55 @@ def step(name: str, cmd: Sequence[str | Path], *, timeout: float, cwd: Path | No
         FAILURES.append(name)
         print("    " + "\n    ".join(out.strip().splitlines()[-25:]), flush=True)
     return ok, out
+
+
+def serve_step(name: str, cmd: Sequence[str | Path], ready: str, *, cwd: Path,
+               env: dict[str, str], timeout: float = 120.0) -> None:
+    """Start a server command, wait (bounded) for its ``ready`` line, then Ctrl-C it: it
+    must have printed that line, exit 0, and print no error or traceback."""
+    t0 = time.perf_counter()
+    lines: list[str] = []
+    proc = subprocess.Popen([str(c) for c in cmd], cwd=cwd, env=env, text=True,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT)
+    assert proc.stdout is not None
+    deadline = time.monotonic() + timeout
+    try:
+        os.set_blocking(proc.stdout.fileno(), False)
+        buffer = ""
+        while time.monotonic() < deadline and ready not in buffer and proc.poll() is None:
+            chunk = proc.stdout.read()
+            if chunk:
+                buffer += chunk
+            else:
+                time.sleep(0.05)  # a poll of the pipe; the deadline bounds it
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            rest, _ = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            rest, _ = proc.communicate(timeout=60)
+        buffer += rest or ""
+        lines = buffer.splitlines()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=60)
+    problems = []
+    if ready not in "\n".join(lines):
+        problems.append(f"never printed {ready!r}")
+    if proc.returncode != 0:
+        problems.append(f"exit {proc.returncode} after Ctrl-C")
+    bad = [line for line in lines if "Traceback" in line or "error:" in line]
+    if bad:
+        problems.append(f"printed {bad[0]!r}")
+    why = "; ".join(problems)
+    print(f"  [{'FAIL' if why else 'ok'}] {name} ({time.perf_counter() - t0:.1f} s)"
+          + (f": {why}" if why else ""), flush=True)
+    if why:
+        FAILURES.append(name)
+        print("    " + "\n    ".join(lines[-25:]), flush=True)
 
 
 def fail(name: str, why: str) -> None:
@@ -287,6 +337,9 @@ def extra_commands(extra: str, bin_: Path, clone: Path, tmp: Path, env: dict[str
              tmp / f"frames-{extra}.gv"], **run)
     if "zenoh" in closed:
         step(f"[{extra}] tfbus router --help", [tfbus, "router", "--help"], **run)
+        serve_step(f"[{extra}] tfbus router on 127.0.0.1, then Ctrl-C",
+                   [tfbus, "router", "--listen", "tcp/127.0.0.1:0"], "listening on",
+                   cwd=clone, env=env)
         step(f"[{extra}] tfbus.transports.zenoh", [py, "-c",
              "import tfbus.transports.zenoh as z; print(z.__name__)"], **run)
     if "ros1" in closed:
@@ -306,8 +359,14 @@ def extra_commands(extra: str, bin_: Path, clone: Path, tmp: Path, env: dict[str
         readme_example(extra, py, clone, tmp, "trio")
     if "view" in closed:
         step(f"[{extra}] tfbus view --help", [tfbus, "view", "--help"], **run)
+        serve_step(f"[{extra}] tfbus view --bus memory, then Ctrl-C",
+                   [tfbus, "view", "--bus", "memory", "--port", "0"], "tfbus view: http://",
+                   cwd=clone, env=env)
     if "web" in closed:
         step(f"[{extra}] tfbus web --help", [tfbus, "web", "--help"], **run)
+        serve_step(f"[{extra}] tfbus web --bus memory, then Ctrl-C",
+                   [tfbus, "web", "--bus", "memory", "--port", "0"], "tfbus web: ws://",
+                   cwd=clone, env=env)
     if "table" in closed:
         parquet = tmp / f"poses-{extra}.parquet"
         step(f"[{extra}] tfbus lookup --bag", [tfbus, "lookup", "--bag", TURTLE_BAG,
