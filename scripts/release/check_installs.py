@@ -43,6 +43,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -107,29 +108,32 @@ def serve_step(name: str, cmd: Sequence[str | Path], ready: str, *, cwd: Path,
     must have printed that line, exit 0, and print no error or traceback."""
     t0 = time.perf_counter()
     lines: list[str] = []
+    seen = threading.Event()
     proc = subprocess.Popen([str(c) for c in cmd], cwd=cwd, env=env, text=True,
                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT)
-    assert proc.stdout is not None
-    deadline = time.monotonic() + timeout
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+            if ready in line:
+                seen.set()
+        seen.set()  # end of output: nothing more to wait for
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
     try:
-        os.set_blocking(proc.stdout.fileno(), False)
-        buffer = ""
-        while time.monotonic() < deadline and ready not in buffer and proc.poll() is None:
-            chunk = proc.stdout.read()
-            if chunk:
-                buffer += chunk
-            else:
-                time.sleep(0.05)  # a poll of the pipe; the deadline bounds it
+        seen.wait(timeout)
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
         try:
-            rest, _ = proc.communicate(timeout=60)
+            proc.wait(timeout=60)
         except subprocess.TimeoutExpired:
+            lines.append("(still running 60 s after Ctrl-C: killed)")
             proc.kill()
-            rest, _ = proc.communicate(timeout=60)
-        buffer += rest or ""
-        lines = buffer.splitlines()
+            proc.wait(timeout=60)
+        reader.join(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
