@@ -8,7 +8,7 @@ CORE_STAMP := $(VENV)/.installed-core
 DOCS_STAMP := $(VENV)/.installed-docs
 DIST_STAMP := $(VENV)/.installed-dist
 
-.PHONY: install test lint demo bench bench-check docs docs-serve perf-tables dist dist-check test-matrix clean
+.PHONY: install test lint demo check-installs bench bench-check docs docs-serve perf-tables dist dist-check test-matrix clean
 
 $(BIN)/python:
 	@echo "make: creating $(VENV) (a Python virtual environment for tfbus)"
@@ -51,6 +51,12 @@ demo: $(CORE_STAMP)
 	@echo "make: running the tutorial demo for 10 s (a 100 Hz broadcaster and a 1 Hz listener on one bus)"
 	$(BIN)/python demos/robot_setup_tf.py --duration 10
 	@echo 'next: . $(VENV)/bin/activate, then tfbus --help (or $(BIN)/tfbus --help without activating)'
+
+# What a new user gets, in fresh clones and new venvs (CI's first stage): `make demo`, a
+# plain `pip install .`, each extra alone, the lowest versions pyproject.toml allows; every
+# module imported in each (scripts/release/check_installs.py; about 5 minutes).
+check-installs:
+	$(PYTHON) scripts/release/check_installs.py
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
