@@ -34,6 +34,7 @@ from tfbus.convert import TransformRegistration
 from tfbus.core import BufferCore, SetResult
 from tfbus.core.batch import Errors, TimesLike, TransformArray, as_times
 from tfbus.core.buffer_core import OnRepeat
+from tfbus.core.cache import format_sec
 from tfbus.core.policy import (
     Clamp,
     Exact,
@@ -522,10 +523,9 @@ class Buffer(BufferCore):
         if waiter.error is not None:
             raise waiter.error
         assert timeout is not None  # the deadline, not the data, ended the wait
-        seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
         raise TimeoutException(
-            f"Timed out after {seconds:g} s waiting for {self._describe(target, source, time)}"
-        )
+            f"{_timed_out(timeout)} waiting for {self._describe(target, source, time)}"
+        ) from _failure(partial(_core_lookup_transform, self, target, source, time))
 
     async def _wait(
         self,
@@ -533,11 +533,14 @@ class Buffer(BufferCore):
         frames: Callable[[], frozenset[str]],
         timeout: float | Duration | None,
         describe: Callable[[], str],
+        retry: Callable[[], object],
         exact: tuple[str, str, Time, bool] | None = None,
     ) -> _T:
         """Wait until ``check()`` gives an answer (or fails the wait), rechecked on every
         insert of ``frames()``; ``exact``: ``check`` is ``check_transform(*exact)``
-        (see :class:`_Waiter`)."""
+        (see :class:`_Waiter`). ``retry``: the synchronous lookup the wait stands for;
+        at the deadline, the exception it raises is the TimeoutException's
+        ``__cause__``."""
         if (
             timeout is not None
             and not (type(timeout) is float and math.isfinite(timeout))  # the common case
@@ -576,8 +579,9 @@ class Buffer(BufferCore):
             raise waiter.error
         if waiter.result is None:  # the deadline, not the data, ended the wait
             assert timeout is not None
-            seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
-            raise TimeoutException(f"Timed out after {seconds:g} s waiting for {describe()}")
+            raise TimeoutException(
+                f"{_timed_out(timeout)} waiting for {describe()}"
+            ) from _failure(retry)
         return waiter.result
 
     async def _wait_policy(
@@ -590,6 +594,7 @@ class Buffer(BufferCore):
     ) -> PolicyResult:
         """An awaited lookup under a non-exact policy (``lookup_transform_async``)."""
         policy_args(policy)  # a TypeError for anything else, before any wait
+        timeout_ns(timeout)  # a str, bool or NaN timeout refused even when data is there
         if _waits_no_more(policy):
             return self._lookup_policy(target, source, time, policy)
         timeout = _policy_timeout(policy, timeout)
@@ -604,12 +609,13 @@ class Buffer(BufferCore):
             partial(self._frames_of, target, source, time),
             timeout,
             partial(self._describe, target, source, time),
+            partial(self._lookup_policy, target, source, time, policy),
         )
 
     def _describe(self, target: str, source: str, time: Time) -> str:
         answer = self.can_transform(target, source, time, return_debug_tuple=True)
         reason = answer[1] if isinstance(answer, tuple) else ""
-        what = f"transform from [{source}] to [{target}] at time {time.ns / 1e9:.9f}"
+        what = f"transform from [{source}] to [{target}] at time {format_sec(time.ns)}"
         return f"{what}: {reason}" if reason else what
 
     @overload
@@ -654,7 +660,10 @@ class Buffer(BufferCore):
         Args:
             timeout: seconds (or a Duration) of the buffer's clock (``clock.call_later``,
                 or ``clock.move_on_after`` for a clock that cannot schedule callbacks);
-                None or ``inf`` waits forever; NaN is a ValueError, a str a TypeError.
+                None or ``inf`` waits forever; 0 or a negative timeout does not wait (as
+                tf2_ros's ``can_transform``, whose wait loop never runs then): the data
+                there now, or TimeoutException at once; NaN is a ValueError, a str or
+                bool a TypeError (each naming the value, checked before any lookup).
             fail_fast: give up at once, not at the timeout, when the answer can never
                 come: the two frames are known and in different trees, or ``time`` is
                 older than the oldest stamp a link of the path can still accept (its
@@ -663,7 +672,10 @@ class Buffer(BufferCore):
 
         Raises:
             TimeoutException: not available within ``timeout``; the message says what
-                was missing (tf2's reason).
+                was missing (tf2's reason), and its ``__cause__`` is the exception the
+                lookup raised at the deadline: a ForwardExtrapolationException (the data
+                is not there yet), a LookupException (a frame was never heard of), a
+                ConnectivityException (the frames are in different trees), ...
             ExtrapolationException: ``time`` is older than the cache window of the path
                 (it can never become available); with ``fail_fast``, its subclass
                 BackwardExtrapolationException also when ``time`` is older than a
@@ -864,7 +876,11 @@ class Buffer(BufferCore):
                 f"{self._describe(target_frame, fixed_frame, target_time)}"
             )
 
-        return await self._wait(check, frames, timeout, describe)
+        return await self._wait(
+            check, frames, timeout, describe,
+            partial(self.lookup_transform_full, target_frame, target_time, source_frame,
+                    source_time, fixed_frame),
+        )
 
     async def _wait_full_policy(
         self,
@@ -878,6 +894,7 @@ class Buffer(BufferCore):
     ) -> PolicyResult:
         """``lookup_transform_full_async`` under a non-exact policy."""
         policy_args(policy)  # a TypeError for anything else, before any wait
+        timeout_ns(timeout)  # a str, bool or NaN timeout refused even when data is there
         def answer() -> PolicyResult:
             found = self.lookup_transform_full(
                 target_frame, target_time, source_frame, source_time, fixed_frame,
@@ -915,7 +932,7 @@ class Buffer(BufferCore):
             if isinstance(found, TransformException):
                 raise found
             return found
-        return await self._wait(check, frames, _policy_timeout(policy, timeout), describe)
+        return await self._wait(check, frames, _policy_timeout(policy, timeout), describe, answer)
 
     @coroutine_method
     async def can_transform_async(
@@ -1025,6 +1042,7 @@ class Buffer(BufferCore):
                 partial(self._frames_of, target_frame, source, stamp),
                 timeout,
                 partial(self._describe, target_frame, source, stamp),
+                partial(_core_lookup_transform, self, target_frame, source, stamp),
                 (target_frame, source, stamp, fail_fast),
             )
         result: _M = do_transform(obj, ts)
@@ -1256,7 +1274,37 @@ class Buffer(BufferCore):
         def describe() -> str:
             return "velocity: " + "; ".join(self._describe(t, s, time) for t, s in pairs)
 
-        return await self._wait(check, frames, timeout, describe)
+        def retry() -> VelocityStamped:
+            for target, source in pairs:
+                _core_lookup_transform(self, target, source, time)
+            return self.lookup_velocity_full(
+                tracking_frame, observation_frame, reference_frame, reference_point,
+                reference_point_frame, time, averaging_interval, method=method,
+            )
+
+        return await self._wait(check, frames, timeout, describe, retry)
+
+
+def _failure(lookup: Callable[[], object]) -> TransformException | None:
+    """The TransformException ``lookup()`` raises now (None if it answers): the reason an
+    awaited lookup gave up at its deadline, chained as its TimeoutException's
+    ``__cause__`` (a ForwardExtrapolationException: the data may still come; a
+    LookupException or ConnectivityException: the frames are unknown or apart)."""
+    try:
+        lookup()
+    except TransformException as exc:
+        return exc
+    return None
+
+
+def _timed_out(timeout: float | Duration) -> str:
+    """The start of a TimeoutException's message: ``Timed out after 2 s``; a negative
+    timeout, which does not wait (tf2_ros's ``can_transform`` loop never runs), reads
+    ``Timed out after 0 s (timeout=-1 s: a negative timeout does not wait)``."""
+    seconds = timeout.to_sec() if isinstance(timeout, Duration) else float(timeout)
+    if seconds < 0:
+        return f"Timed out after 0 s (timeout={seconds:g} s: a negative timeout does not wait)"
+    return f"Timed out after {seconds:g} s"
 
 
 def _header_of(obj: object) -> Header:

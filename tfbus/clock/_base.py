@@ -138,7 +138,8 @@ def timeout_ns(seconds: float | Duration | None, *, name: str = "timeout") -> in
     ):
         value = float(seconds)
         if math.isnan(value):
-            raise ValueError(f"{name} must not be NaN")
+            raise ValueError(f"{name} must not be NaN, got {seconds!r} (a timeout is seconds or a "
+                             "Duration; None or math.inf: no limit)")
         if math.isinf(value):
             return None if value > 0 else 0
     return seconds_to_ns(seconds, name=name)
