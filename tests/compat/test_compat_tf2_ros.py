@@ -176,3 +176,77 @@ def test_listener_on_a_non_bus_or_non_node_names_the_argument() -> None:
     long = "n" * 100
     with pytest.raises(TypeError, match=f"got str '{'n' * 59}\\.\\.\\.$"):
         tf2_ros.TransformListener(tf2_ros.Buffer(), long)
+
+
+def test_ros2_extrapolation_classes_are_tfbus_classes_and_raised() -> None:
+    """``from tf2_ros import ForwardExtrapolationException`` (and Backward-, NoData-)
+    gives the classes tfbus raises; a lookup of the compat buffer raises each."""
+    for name in ("ForwardExtrapolationException", "BackwardExtrapolationException",
+                 "NoDataForExtrapolationException"):
+        assert getattr(tf2_ros, name) is getattr(tfbus, name)
+        assert name in tf2_ros.__all__
+        assert issubclass(getattr(tf2_ros, name), tf2_ros.ExtrapolationException)
+    buf = tf2_ros.Buffer()
+    buf.set_transform(_yaw_tf("map", "base", RospyTime(1, 0), 1.0, 0.0), "a")
+    with pytest.raises(tf2_ros.NoDataForExtrapolationException):  # one sample, at 1 s
+        buf.lookup_transform("map", "base", RospyTime(2, 0))
+    buf.set_transform(_yaw_tf("map", "base", RospyTime(2, 0), 2.0, 0.0), "a")
+    with pytest.raises(tf2_ros.ForwardExtrapolationException):
+        buf.lookup_transform("map", "base", RospyTime(3, 0))
+    with pytest.raises(tf2_ros.BackwardExtrapolationException):
+        buf.lookup_transform("map", "base", RclpyTime(500_000_000), timeout=-1.0)
+    # ROS 2's tf2_py (tf2_py/src/tf2_py.cpp, geometry2 0.39.1) registers six exception
+    # classes and none of the extrapolation subclasses: the compat tf2_py the same six.
+    from tfbus.compat import tf2_py
+
+    exceptions = {n for n in tf2_py.__all__ if n.endswith("Exception")}
+    assert exceptions == {"TransformException", "ConnectivityException", "LookupException",
+                          "ExtrapolationException", "InvalidArgumentException",
+                          "TimeoutException"}
+    assert all(getattr(tf2_py, n) is getattr(tfbus, n) for n in exceptions)
+
+
+@pytest.mark.parametrize("cls", [tf2_ros.TransformBroadcaster,
+                                 tf2_ros.StaticTransformBroadcaster])
+def test_broadcaster_on_none_names_the_argument(cls: type[tf2_ros.TransformBroadcaster]) -> None:
+    """``TransformBroadcaster(None)`` (ROS 2's ``node`` not set yet) is refused, naming
+    the value and what is accepted; it silently joined the ROS 1 graph (no argument
+    keeps doing that, ROS 1's idiom)."""
+    with pytest.raises(TypeError) as info:
+        cls(None)
+    assert str(info.value) == (
+        f"{cls.__name__}: node must be an rclpy Node or a tfbus.Bus, got None (for ROS 1's "
+        f"graph at ROS_MASTER_URI give no argument: {cls.__name__}())")
+
+
+_FORMS = ("a duration (rclpy Duration, builtin_interfaces Duration, rospy Duration, tfbus "
+          "Duration) or seconds (int, float), or None")
+
+
+@pytest.mark.parametrize(("timeout", "error", "text"), [
+    ("x", TypeError, f"timeout must be {_FORMS}, got str 'x'"),
+    (True, TypeError, f"timeout must be {_FORMS}, got bool True"),
+    (Time(1), TypeError, f"timeout must be {_FORMS}, got Time Time(sec=1, nanosec=0)"),
+    (math.nan, ValueError, f"timeout must not be NaN, got nan ({_FORMS})"),
+])
+@pytest.mark.parametrize("call", ["lookup_transform", "lookup_transform_full",
+                                  "can_transform", "transform", "wait_for_transform_async"])
+def test_a_bad_timeout_names_itself_before_the_lookup(
+    call: str, timeout: object, error: type[Exception], text: str
+) -> None:
+    """``Buffer().lookup_transform('a', 'a', Time(0), timeout='x')`` answered (the
+    identity) without a word about the timeout; every timeout is checked first."""
+    buf = tf2_ros.Buffer()
+    calls = {
+        "lookup_transform": lambda: buf.lookup_transform("a", "a", Time(0), timeout=timeout),
+        "lookup_transform_full": lambda: buf.lookup_transform_full(
+            "a", Time(0), "a", Time(0), "a", timeout=timeout),
+        "can_transform": lambda: buf.can_transform("a", "a", Time(0), timeout=timeout),
+        "transform": lambda: buf.transform(
+            PointStamped(tfbus.Header(Time(0), "a"), tfbus.Point()), "a", timeout),
+        "wait_for_transform_async": lambda: buf.wait_for_transform_async(
+            "a", "a", Time(0), timeout=timeout),
+    }
+    with pytest.raises(error) as info:
+        calls[call]()
+    assert str(info.value) == text

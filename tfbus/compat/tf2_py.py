@@ -5,7 +5,13 @@ method names, argument order and return shapes, plus ROS 2 tf2_py's velocity met
 Every method converts its arguments (:mod:`tfbus.compat._args`) and calls the
 :class:`tfbus.BufferCore` method named in its docstring; results are tfbus types
 (``TransformStamped`` with ``header.stamp`` a :class:`tfbus.Time`) with tf2's field
-names. Exceptions are tfbus's, which are the classes exported here under tf2's names.
+names. Exceptions are tfbus's, which are the classes exported here under tf2's names:
+the six of ROS 2's ``tf2_py`` (``tf2_py/src/tf2_py.cpp`` registers TransformException,
+ConnectivityException, LookupException, ExtrapolationException,
+InvalidArgumentException, TimeoutException). ROS 2 tf2's extrapolation subclasses
+(Forward-, Backward-, NoDataForExtrapolationException) have no tf2_py class, so they are
+not exported here; tfbus raises them, and ``except ExtrapolationException`` catches them
+(``tfbus.compat.tf2_ros`` exports them by name).
 """
 
 from __future__ import annotations

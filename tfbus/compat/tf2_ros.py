@@ -25,7 +25,14 @@
 * Results in the caller's types (:mod:`tfbus.compat._types`): a rospy ``Time`` given,
   rospy messages and times returned; an rclpy one, rclpy's; a tfbus one, tfbus's.
 * tf2's exceptions, :class:`TransformRegistration`, :class:`ConvertRegistration`,
-  :func:`convert`, :func:`Stamped`.
+  :func:`convert`, :func:`Stamped`. With them ROS 2 tf2's extrapolation subclasses
+  ``ForwardExtrapolationException``, ``BackwardExtrapolationException`` and
+  ``NoDataForExtrapolationException`` (``tf2/exceptions.h``), the very classes tfbus
+  raises: ROS 2's Python ``tf2_py`` (``tf2_py/src/tf2_py.cpp``, geometry2 up to 0.39.1)
+  catches them as ``tf2::ExtrapolationException`` and registers no Python class for
+  them, so ``tf2_ros`` exports them here only (subclasses of the
+  ``ExtrapolationException`` exported here: ``except ExtrapolationException`` catches
+  them as in ROS 2).
 
 tf2_ros's submodule paths (``tf2_ros.buffer``, ``tf2_ros.buffer_interface``,
 ``tf2_ros.transform_listener``, ``tf2_ros.transform_broadcaster``,
@@ -43,6 +50,7 @@ import sys
 import types
 from collections.abc import Iterable
 from functools import partial
+from numbers import Real
 from typing import Any, cast
 
 import anyio
@@ -68,10 +76,13 @@ from tfbus.compat._loop import (
 from tfbus.compat._types import flavour_of, ros_message, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
 from tfbus.errors import (
+    BackwardExtrapolationException,
     ConnectivityException,
     ExtrapolationException,
+    ForwardExtrapolationException,
     InvalidArgumentException,
     LookupException,
+    NoDataForExtrapolationException,
     TimeoutException,
     TransformException,
 )
@@ -85,7 +96,7 @@ from tfbus.messages import (
     Vector3Stamped,
     WrenchStamped,
 )
-from tfbus.time import Time
+from tfbus.time import Duration, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports.ros1.action import ActionClient, action_client
 
@@ -94,15 +105,18 @@ _log = logging.getLogger("tfbus.compat")
 __all__ = [
     "DEFAULT_STATIC_TF_TOPIC",
     "DEFAULT_TF_TOPIC",
+    "BackwardExtrapolationException",
     "Buffer",
     "BufferClient",
     "BufferInterface",
     "ConnectivityException",
     "ConvertRegistration",
     "ExtrapolationException",
+    "ForwardExtrapolationException",
     "InvalidArgumentException",
     "LookupException",
     "LoopThreadError",
+    "NoDataForExtrapolationException",
     "Stamped",
     "StaticTransformBroadcaster",
     "TimeoutException",
@@ -133,12 +147,34 @@ TypeException = TypeError
 TypeError, exported under tf2_ros's name."""
 
 
-def _timeout(value: object) -> float | None:
-    """A ``timeout=`` in seconds for tfbus (None: wait forever); a zero duration (tf2's
-    default) means "do not wait"."""
+_TIMEOUT_FORMS = ("a duration (rclpy Duration, builtin_interfaces Duration, rospy "
+                  "Duration, tfbus Duration) or seconds (int, float), or None")
+
+
+def _timeout(value: object, name: str = "timeout") -> float | None:
+    """A ``timeout=`` in seconds for tfbus (None: wait forever, as ``math.inf``); zero
+    (tf2_ros's default ``Duration()``) and a negative duration do not wait (tf2_ros's
+    ``can_transform`` loop, ``while now < start + timeout``, never runs).
+
+    Raises:
+        TypeError: not a duration nor seconds (a str, a bool, a Time ...), naming
+            ``name``, the value and the accepted forms.
+        ValueError: NaN seconds.
+    """
     if value is None:
         return None
-    return to_duration(value).to_sec()
+    if isinstance(value, (bool, Time)) or not (
+        isinstance(value, Real) or hasattr(value, "nanoseconds")
+        or hasattr(value, "nanosec") or hasattr(value, "nsecs")
+        or isinstance(value, Duration)
+    ):
+        raise TypeError(f"{name} must be {_TIMEOUT_FORMS}, got {_describe(value)}")
+    if isinstance(value, Real) and math.isnan(float(value)):
+        raise ValueError(f"{name} must not be NaN, got {value!r} ({_TIMEOUT_FORMS})")
+    try:
+        return to_duration(value, name).to_sec()
+    except InvalidArgumentException:
+        raise TypeError(f"{name} must be {_TIMEOUT_FORMS}, got {_describe(value)}") from None
 
 
 def Stamped(obj: Any, stamp: object, frame_id: str) -> Any:
@@ -242,11 +278,12 @@ class Buffer:
     def _blocking(self, now: Any, wait: Any, timeout: object) -> Any:
         """``now()``; when it raises a TransformException and ``timeout`` is positive,
         ``wait(seconds)`` (a coroutine function) run in the background loop, this thread
-        blocked until it ends (woken by the arrival that answers it)."""
+        blocked until it ends (woken by the arrival that answers it). ``timeout`` is
+        checked first (:func:`_timeout`), whether or not a wait is needed."""
+        seconds = _timeout(timeout)
         try:
             return self._run(now)
         except TransformException:
-            seconds = _timeout(timeout)
             if seconds is not None and seconds <= 0.0:
                 raise
             if seconds is None and timeout is None:
@@ -308,7 +345,8 @@ class Buffer:
         self, target_frame: str, source_frame: str, time: object, timeout: object = None
     ) -> Any:
         """tf2_ros ``lookup_transform``, waiting up to ``timeout`` (a duration of any
-        flavour or seconds; None or zero: answer now) in the calling thread.
+        flavour or seconds; None, zero or negative: answer now, as tf2_ros, whose wait
+        loop ``while now < start + timeout`` never runs then) in the calling thread.
 
         Returns:
             the TransformStamped, a rospy / rclpy message when ``time`` is one of theirs.
@@ -317,6 +355,9 @@ class Buffer:
             LookupException, ConnectivityException, ExtrapolationException: now, or
                 when ``timeout`` passed without the data (tf2 raises the lookup's
                 exception after its wait too).
+            TypeError: ``timeout`` is not a duration nor seconds (a str, a bool ...);
+                ValueError: NaN. Both name the value and are checked before the lookup
+                (the same for every ``timeout`` of this class).
             LoopThreadError: a wait needed from an event loop's thread.
         """
         t = to_time(time)
@@ -492,11 +533,10 @@ class Buffer:
             TimeoutException: not within ``timeout`` (a duration or seconds; None:
                 no limit).
         """
-        t = to_time(time)
+        t, seconds = to_time(time), _timeout(timeout)
 
         async def wait() -> bool:
-            await self.buffer.wait_for_transform(target_frame, source_frame, t,
-                                                 _timeout(timeout))
+            await self.buffer.wait_for_transform(target_frame, source_frame, t, seconds)
             return True
 
         return self._awaitable(wait(), None)
@@ -515,10 +555,11 @@ class Buffer:
         (:meth:`tfbus.Buffer.lookup_transform_full_async`); an awaitable or an rclpy
         Future as :meth:`wait_for_transform_async`."""
         tt, st = to_time(target_time, "target_time"), to_time(source_time, "source_time")
+        seconds = _timeout(timeout)
 
         async def wait() -> bool:
             await self.buffer.lookup_transform_full_async(
-                target_frame, tt, source_frame, st, fixed_frame, _timeout(timeout))
+                target_frame, tt, source_frame, st, fixed_frame, seconds)
             return True
 
         return self._awaitable(wait(), None)
@@ -676,6 +717,11 @@ class TransformListener:
         self._subscriptions = []
 
 
+_NO_NODE: Any = object()
+"""The default of a broadcaster's ``node``: no argument given (ROS 1's idiom), told from
+an explicit ``None``."""
+
+
 class TransformBroadcaster:
     """tf2_ros ``TransformBroadcaster(node)``: ``sendTransform(t)`` publishes one
     transform or a list as one TFMessage on ``/tf`` — on an rclpy node (its own
@@ -684,15 +730,28 @@ class TransformBroadcaster:
     _topic = TF_TOPIC
     _static = False
 
-    def __init__(self, node: object = None, qos: object = None, **_ros_options: object) -> None:
-        """Publish on ``node`` (rclpy), on a tfbus :class:`~tfbus.Bus`, or — no node,
-        ROS 1's ``TransformBroadcaster()`` — on the ROS 1 graph at ``ROS_MASTER_URI``
-        (tfbus's ROS 1 transport in the background loop, advertised now as tf2_ros
-        does; ``queue_size`` and other rospy options accepted and unused)."""
+    def __init__(self, node: object = _NO_NODE, qos: object = None,
+                 **_ros_options: object) -> None:
+        """Publish on ``node`` (rclpy), on a tfbus :class:`~tfbus.Bus`, or — no
+        argument, ROS 1's ``TransformBroadcaster()`` — on the ROS 1 graph at
+        ``ROS_MASTER_URI`` (tfbus's ROS 1 transport in the background loop, advertised
+        now as tf2_ros does; ``queue_size`` and other rospy options accepted and unused).
+
+        Raises:
+            TypeError: ``node`` is given but is neither an rclpy Node nor a tfbus Bus
+                (``None`` included: ROS 2's ``TransformBroadcaster(node)`` needs a node,
+                most often a ``self.node`` not yet set); the message names the value and
+                what is accepted.
+        """
         self._bus_side: _Broadcaster | None = None
         self._publisher: Any = None
         self._background = False
         if node is None:
+            raise TypeError(
+                f"{type(self).__name__}: node must be an rclpy Node or a tfbus.Bus, got "
+                f"None (for ROS 1's graph at ROS_MASTER_URI give no argument: "
+                f"{type(self).__name__}())")
+        if node is _NO_NODE:
             bus = ros1_bus()
             self._bus_side = background.call(
                 _StaticBroadcaster if self._static else _Broadcaster, bus)
@@ -807,7 +866,8 @@ class BufferClient(Buffer):
         """
         super().__init__(debug=False)
         self.ns = ns
-        padding = 2.0 if timeout_padding is None else _timeout(timeout_padding)
+        padding = 2.0 if timeout_padding is None else _timeout(timeout_padding,
+                                                               "timeout_padding")
         if padding is None or not 0.0 <= padding < math.inf:
             raise ValueError(f"timeout_padding must be finite seconds >= 0, got "
                              f"{timeout_padding!r}")
