@@ -491,3 +491,38 @@ def test_db3_cut_short_is_truncated(tmp_path: Path, short: int) -> None:
     assert "truncated" in err.reason and err.offset == len(data) - short
     assert f"{len(data) - short} bytes of the {len(data)}" in err.reason
     assert got == full[: len(full) - last_leaf_rows] and len(got) == 476
+
+
+def _first_chunk(data: bytes) -> tuple[int, int]:
+    """Byte offset and length field of the first CHUNK record (opcode 0x06) of an MCAP
+    file: records are opcode (1 byte), length (uint64 little-endian), body."""
+    pos = 8  # the magic
+    while data[pos] != 0x06:
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    return pos, struct.unpack_from("<Q", data, pos + 1)[0]
+
+
+@pytest.mark.parametrize("how", ["cut", "patched"])
+def test_mcap_record_longer_than_the_file_names_the_file_and_the_damage(
+    tmp_path: Path, how: str
+) -> None:
+    """mcap's "CHUNK record has length 161977 that exceeds limit 100000" (its record size
+    limit is the file's size) reached the user as is: the error names the file, the
+    record, its length and the file's size, and says the file is cut short or damaged."""
+    data = (DATA / "nav2_like.mcap").read_bytes()
+    at, length = _first_chunk(data)
+    data = data[:100_000]  # a copy stopped part-way: no summary, the first chunk cut
+    if how == "patched":  # and the first chunk's length field damaged
+        length = 2**40
+        data = data[:at + 1] + struct.pack("<Q", length) + data[at + 9:]
+    bad = tmp_path / f"{how}.mcap"
+    bad.write_bytes(data)
+    messages, err = read_all(bad)
+    assert messages == []
+    assert isinstance(err, BagReadError)
+    assert err.offset == at and err.path == bad
+    assert str(err) == (
+        f"{bad}: the CHUNK record at byte {at} says it is {length} bytes long, more than "
+        f"the whole file ({len(data)} bytes): the file is cut short (copied or downloaded "
+        f"in part, or still being written) or damaged at that record; reading stopped "
+        f"(byte {at}, 0 tf message(s) read)")

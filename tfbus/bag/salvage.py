@@ -240,6 +240,22 @@ def mcap_channel_source(channel: Channel, schema: Schema | None, topics: Collect
     return Source(channel.topic, ROS2_AUTHORITY, decode)
 
 
+def _longer_than_file(mm: mmap.mmap, start: int, size: int) -> str:
+    """The reason of a record at byte ``start`` whose length field is more than the file's
+    ``size`` (``mcap``'s RecordLengthLimitExceeded: its record size limit is the file
+    size, the most any intact record can hold, so no setting could let it be read)."""
+    opcode, length = mm[start], int.from_bytes(mm[start + 1:start + 9], "little")
+    try:
+        from mcap.opcode import Opcode
+
+        name = Opcode(opcode).name
+    except (ImportError, ValueError):
+        name = f"opcode 0x{opcode:02x}"
+    return (f"the {name} record at byte {start} says it is {length} bytes long, more "
+            f"than the whole file ({size} bytes): the file is cut short (copied or "
+            f"downloaded in part, or still being written) or damaged at that record")
+
+
 def scan_mcap(
     p: Path, topics: Collection[str], lo: int | None, hi: int | None
 ) -> Iterator[RawItem]:
@@ -298,6 +314,9 @@ def scan_mcap(
                     reason = str(err).strip() or type(err).__name__
                     if type(err).__name__ == "EndOfFile":
                         reason = "truncated (file ends before the MCAP footer)"
+                    elif type(err).__name__ == "RecordLengthLimitExceeded":
+                        start = max(pos, len(MCAP_MAGIC))
+                        raise ScanError(_longer_than_file(mm, start, size), start) from None
                     raise ScanError(reason, pos) from None
                 yield from msgs
                 pos = mm.tell()
