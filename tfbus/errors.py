@@ -404,8 +404,10 @@ class MissingExtraError(ModuleNotFoundError, TfbusError):
     """A subpackage of tfbus needs an optional dependency that is not installed.
 
     A :class:`ModuleNotFoundError` (so ``except ImportError`` still catches it) whose
-    message names the package, the extra and the two ``pip install`` forms
-    (raised by :func:`tfbus._extras.require` at import of the subpackage).
+    message names the package, the extra and the two ``pip install`` forms, or for a
+    tfbus installed editable from a clone the ``pip install -e`` that keeps it so
+    (:func:`tfbus._extras.extra_advice`; raised by :func:`tfbus._extras.require` at
+    import of the subpackage).
 
     Attributes:
         name: the missing top-level package (as :class:`ModuleNotFoundError`'s).
@@ -414,8 +416,9 @@ class MissingExtraError(ModuleNotFoundError, TfbusError):
     """
 
     def __init__(self, needed_by: str, package: str, extra: str) -> None:
-        super().__init__(f"{needed_by} needs the '{package}' package: pip install "
-                         f"'tfbus[{extra}]' (from a clone of tfbus: pip install '.[{extra}]')",
-                         name=package)
+        from tfbus._extras import extra_advice  # (_extras imports this module)
+
+        super().__init__(f"{needed_by} needs the '{package}' package: "
+                         f"{extra_advice(package, extra)}", name=package)
         self.extra = extra
         self.needed_by = needed_by

@@ -275,9 +275,11 @@ def test_missing_click_names_the_extra() -> None:
     """``tfbus`` without click: one line naming tfbus[cli]."""
     proc = _without("click", ["--help"])
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    from tfbus._extras import extra_advice
+
     assert proc.stderr.strip() == (
-        "tfbus: error: the command line needs the 'click' package: pip install 'tfbus[cli]' "
-        "(from a clone of tfbus: pip install '.[cli]')"
+        f"tfbus: error: the command line needs the 'click' package: "
+        f"{extra_advice('click', 'cli')}"
     )
 
 

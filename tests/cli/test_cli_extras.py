@@ -35,7 +35,11 @@ def _child(package: str, code: str, *argv: str) -> subprocess.CompletedProcess[s
 
 
 def _advice(extra: str) -> str:
-    return f"pip install 'tfbus[{extra}]' (from a clone of tfbus: pip install '.[{extra}]')"
+    """The install advice the child prints: the same tfbus and interpreter as here (its
+    text, editable clone or not: tests/test_extras.py)."""
+    from tfbus._extras import extra_advice
+
+    return extra_advice("", extra)
 
 
 @pytest.mark.parametrize(("module", "package", "extra"), [

@@ -120,9 +120,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         missing = (getattr(err, "name", None) or "").partition(".")[0]
         if missing not in ("click", "rich"):
             raise
+        from tfbus._extras import extra_advice
+
         print(f"tfbus: error: the command line needs the '{missing}' package: "
-              "pip install 'tfbus[cli]' (from a clone of tfbus: pip install '.[cli]')",
-              file=sys.stderr)
+              f"{extra_advice(missing, 'cli')}", file=sys.stderr)
         return 2  # MISSING_EXTRA_STATUS (tfbus.cli._common needs click)
     common = importlib.import_module("tfbus.cli._common")
     code: int = common.run_main(argv)

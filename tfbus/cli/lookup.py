@@ -76,8 +76,9 @@ def command(bags: tuple[str, ...], target: str, source: str, every: float, outpu
 
         from tfbus.table.recordings import output_schema, poses_every
     except (ImportError, MissingExtraError):
-        fail("tfbus lookup needs the 'pyarrow' package: pip install 'tfbus[table]' "
-             "(from a clone of tfbus: pip install '.[table]')")
+        from tfbus._extras import extra_advice
+
+        fail(f"tfbus lookup needs the 'pyarrow' package: {extra_advice('pyarrow', 'table')}")
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from tfbus.errors import BagError
