@@ -6,7 +6,7 @@ Run: ``uvicorn examples.fastapi_app:app --host 127.0.0.1 --port 8000``, then
 * start-up: the lifespan opens the bus, the listener and the application's own tasks (the
   simulated odometry here) in that order, and leaves them in the reverse order;
 * a request awaits a transform up to 0.2 s in the future; its timeout becomes HTTP 504,
-  a frame the buffer has never heard of HTTP 404;
+  a frame the buffer has never heard of HTTP 404 (the timeout's ``__cause__``);
 * a client that disconnects cancels its request's task, and with it the wait;
 * shutdown: leaving the lifespan ends the tasks, then the listener, then the bus.
 """
@@ -24,6 +24,7 @@ from tfbus import (
     Bus,
     Duration,
     Header,
+    LookupException,
     Quaternion,
     SystemClock,
     TimeoutException,
@@ -73,10 +74,11 @@ async def transform(
     try:
         t = await buffer.lookup_transform_async(target, source, when, timeout=timeout)
     except TimeoutException as exc:
-        # frame_exists tells "never heard of it" (404) from "not yet" (504).
-        for frame in (target, source):
-            if not buffer.frame_exists(frame):
-                raise HTTPException(404, f"unknown frame {frame!r}") from exc
+        # The reason at the deadline, exc.__cause__, tells "never heard of it" (a
+        # LookupException: 404) from "not yet" (ForwardExtrapolationException ...: 504).
+        if isinstance(exc.__cause__, LookupException):
+            unknown = next(f for f in (target, source) if not buffer.frame_exists(f))
+            raise HTTPException(404, f"unknown frame {unknown!r}") from exc
         raise HTTPException(504, f"no transform within {timeout} s: {exc}") from exc
     v = t.transform.translation
     return {"stamp_ns": t.header.stamp.ns, "translation": [v.x, v.y, v.z]}
