@@ -14,8 +14,7 @@ from pathlib import Path
 import pytest
 
 import tfbus._extras
-from tfbus._extras import editable_clone, extra_advice
-from tfbus.errors import MissingExtraError
+from tfbus._extras import editable_clone, extra_advice, missing_extra
 
 CLONE = Path(tfbus._extras.__file__).resolve().parent.parent  # the tfbus imported here
 PLAIN = "pip install 'tfbus[bag]' (from a clone of tfbus: pip install '.[bag]')"
@@ -45,7 +44,7 @@ def test_editable_from_this_clone_gives_the_editable_command(
     expected = (f"{sys.executable} -m pip install -e '{CLONE}[bag]' (tfbus is installed "
                 f"editable from {CLONE}: -e keeps it so)")
     assert extra_advice("rosbags", "bag") == expected
-    assert str(MissingExtraError("tfbus.bag", "rosbags", "bag")) == (
+    assert str(missing_extra("tfbus.bag", "rosbags", "bag")) == (
         f"tfbus.bag needs the 'rosbags' package: {expected}")
 
 

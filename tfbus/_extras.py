@@ -24,7 +24,9 @@ from urllib.parse import unquote, urlparse
 
 from tfbus.errors import MissingExtraError
 
-__all__ = ["EXTRAS", "MissingExtraError", "editable_clone", "extra_advice", "require"]
+__all__ = [
+    "EXTRAS", "MissingExtraError", "editable_clone", "extra_advice", "missing_extra", "require",
+]
 
 EXTRAS: Final[dict[str, str]] = {
     "rosbags": "bag", "mcap": "bag", "zenoh": "zenoh", "msgspec": "zenoh",
@@ -94,4 +96,10 @@ def require(needed_by: str, *packages: str, extra: str | None = None) -> None:
     """
     for package in packages:
         if not _installed(package):
-            raise MissingExtraError(needed_by, package, extra or EXTRAS[package])
+            raise missing_extra(needed_by, package, extra or EXTRAS[package])
+
+
+def missing_extra(needed_by: str, package: str, extra: str) -> MissingExtraError:
+    """The :class:`MissingExtraError` for ``package`` (brought by ``extra``) that
+    ``needed_by`` lacks, with :func:`extra_advice`'s install command."""
+    return MissingExtraError(needed_by, package, extra, extra_advice(package, extra))

@@ -404,10 +404,10 @@ class MissingExtraError(ModuleNotFoundError, TfbusError):
     """A subpackage of tfbus needs an optional dependency that is not installed.
 
     A :class:`ModuleNotFoundError` (so ``except ImportError`` still catches it) whose
-    message names the package, the extra and the two ``pip install`` forms, or for a
-    tfbus installed editable from a clone the ``pip install -e`` that keeps it so
-    (:func:`tfbus._extras.extra_advice`; raised by :func:`tfbus._extras.require` at
-    import of the subpackage).
+    message names the package, the extra and how to install it: ``advice``, which
+    :func:`tfbus._extras.require` fills with :func:`tfbus._extras.extra_advice` (the two
+    ``pip install`` forms, or for a tfbus installed editable from a clone the
+    ``pip install -e`` that keeps it so) when it raises this at import of the subpackage.
 
     Attributes:
         name: the missing top-level package (as :class:`ModuleNotFoundError`'s).
@@ -415,10 +415,10 @@ class MissingExtraError(ModuleNotFoundError, TfbusError):
         needed_by: the tfbus module that needs it.
     """
 
-    def __init__(self, needed_by: str, package: str, extra: str) -> None:
-        from tfbus._extras import extra_advice  # (_extras imports this module)
-
-        super().__init__(f"{needed_by} needs the '{package}' package: "
-                         f"{extra_advice(package, extra)}", name=package)
+    def __init__(self, needed_by: str, package: str, extra: str, advice: str | None = None) -> None:
+        if advice is None:
+            advice = (f"pip install 'tfbus[{extra}]' (from a clone of tfbus: pip install "
+                      f"'.[{extra}]')")
+        super().__init__(f"{needed_by} needs the '{package}' package: {advice}", name=package)
         self.extra = extra
         self.needed_by = needed_by

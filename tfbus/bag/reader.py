@@ -160,9 +160,9 @@ def _read_url(
     try:
         import fsspec
     except ImportError:
-        from tfbus.errors import MissingExtraError
+        from tfbus._extras import missing_extra
 
-        raise MissingExtraError("tfbus.bag (a URL)", "fsspec", "table") from None
+        raise missing_extra("tfbus.bag (a URL)", "fsspec", "table") from None
     count = 0
     last: int | None = None
     try:
