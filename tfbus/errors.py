@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from enum import IntEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -65,6 +66,7 @@ __all__ = [
     "MissingExtraError",
     "NoDataForExtrapolationException",
     "SimTimeStalled",
+    "TF2Error",
     "TfbusError",
     "TimeoutException",
     "TransformException",
@@ -77,6 +79,7 @@ __all__ = [
     "WireVersionError",
     "tf2_error",
     "tf2_error_code",
+    "tf2_error_of",
 ]
 
 
@@ -212,6 +215,45 @@ def tf2_error(code: int, message: str) -> TransformException:
     """The exception a ``tf2_msgs/TF2Error`` with ``code`` and ``message`` stands for
     (:data:`TF2_ERROR_CLASSES`; an unknown code is a plain :class:`TransformException`)."""
     return TF2_ERROR_CLASSES.get(code, TransformException)(message)
+
+class TF2Error(IntEnum):
+    """ROS 2 tf2's error codes, one per exception class (``tf2/include/tf2/exceptions.hpp``
+    ``enum class TF2Error``, rolling): the per-row codes of a batched lookup under
+    ``errors="mask"`` (:attr:`tfbus.core.batch.TransformArray.error_codes`). Codes 0-6 are
+    also ``tf2_msgs/TF2Error``'s (the wire codes of the LookupTransform action, which has
+    no finer extrapolation codes: :func:`tf2_error_code`)."""
+
+    TF2_NO_ERROR = 0
+    TF2_LOOKUP_ERROR = 1
+    TF2_CONNECTIVITY_ERROR = 2
+    TF2_EXTRAPOLATION_ERROR = 3
+    TF2_INVALID_ARGUMENT_ERROR = 4
+    TF2_TIMEOUT_ERROR = 5
+    TF2_TRANSFORM_ERROR = 6
+    TF2_BACKWARD_EXTRAPOLATION_ERROR = 7
+    TF2_FORWARD_EXTRAPOLATION_ERROR = 8
+    TF2_NO_DATA_FOR_EXTRAPOLATION_ERROR = 9
+
+
+_TF2_ERROR_OF: tuple[tuple[type[TransformException], TF2Error], ...] = (
+    (BackwardExtrapolationException, TF2Error.TF2_BACKWARD_EXTRAPOLATION_ERROR),
+    (ForwardExtrapolationException, TF2Error.TF2_FORWARD_EXTRAPOLATION_ERROR),
+    (NoDataForExtrapolationException, TF2Error.TF2_NO_DATA_FOR_EXTRAPOLATION_ERROR),
+    (ExtrapolationException, TF2Error.TF2_EXTRAPOLATION_ERROR),
+    (LookupException, TF2Error.TF2_LOOKUP_ERROR),
+    (ConnectivityException, TF2Error.TF2_CONNECTIVITY_ERROR),
+    (InvalidArgumentException, TF2Error.TF2_INVALID_ARGUMENT_ERROR),
+    (TimeoutException, TF2Error.TF2_TIMEOUT_ERROR),
+)
+
+
+def tf2_error_of(exc: TransformException) -> TF2Error:
+    """ROS 2 tf2's :class:`TF2Error` code of ``exc``: its own class's (the extrapolation
+    subclasses before their base), ``TF2_TRANSFORM_ERROR`` for any other transform error
+    (e.g. :class:`BufferClosedException`)."""
+    return next((code for cls, code in _TF2_ERROR_OF if isinstance(exc, cls)),
+                TF2Error.TF2_TRANSFORM_ERROR)
+
 
 class SimTimeStalled(TfbusError, TimeoutError):
     """A wait on a :class:`~tfbus.clock.SimClock` saw no valid ``/clock`` message for the

@@ -42,6 +42,14 @@ from tfbus import (
 from tfbus.core import COMPILED
 from tfbus.core._select import IMPLEMENTATIONS, batch_lookup
 from tfbus.core.batch import TransformArray, as_times
+from tfbus.core.policy import Nearest
+from tfbus.errors import (
+    BackwardExtrapolationException,
+    ForwardExtrapolationException,
+    NoDataForExtrapolationException,
+    TF2Error,
+    tf2_error_of,
+)
 
 
 def _batch_simd(on: bool) -> bool:
@@ -180,12 +188,19 @@ def test_rows_equal_single_lookups(simd: bool, data: st.DataObject) -> None:
         else None
     )
     if masked is not None:
+        codes = masked.error_codes
+        assert codes.shape == (len(times),) and codes.dtype == np.uint8
         for i, ts in enumerate(singles):
             if isinstance(ts, Exception):
                 assert not masked.valid[i]
                 assert np.isnan(masked.translations[i]).all()
+                # The row says why: the single lookup's class, code and message.
+                assert type(masked.error(i)) is type(ts)
+                assert codes[i] == tf2_error_of(ts) != TF2Error.TF2_NO_ERROR
+                assert masked.error_message(i) == str(ts)
             else:
                 assert masked.valid[i]
+                assert codes[i] == 0 and masked.error(i) is None
                 _assert_within_1e12([*masked.translations[i], *masked.rotations[i]], _row(ts))
 
 
@@ -413,6 +428,64 @@ def test_first_failing_time_decides_the_exception() -> None:
     assert masked.valid.tolist() == [True, False, False, True]
     assert np.isnan(masked.rotations[1]).all()
     assert masked.stamps.tolist() == times
+
+
+def test_masked_rows_carry_ros2_tf2_codes_and_messages() -> None:
+    """A chain f0 <- f1 <- f2 sampled 0..1 s, f2 re-parented to a lone frame x at 1.5 s, a
+    link f0 <- f3 with one sample at 0.5 s: each row's code is ROS 2 tf2's TF2Error of the
+    exception the single lookup raises for it (tf2/include/tf2/exceptions.hpp)."""
+    core = _chain(2)
+    core.set_transform(_ts("f0", "f3", 500_000_000, (0, 0, 0, 0, 0, 0, 1)))
+    core.set_transform(_ts("x", "f2", 1_500_000_000, (0, 0, 0, 0, 0, 0, 1)))
+    rows = [
+        ("f0", "f2", 500_000_003, TF2Error.TF2_NO_ERROR, None),
+        ("f0", "f1", 0, TF2Error.TF2_NO_ERROR, None),
+        ("f0", "f1", 2_000_000_000, TF2Error.TF2_FORWARD_EXTRAPOLATION_ERROR,
+         ForwardExtrapolationException),
+        ("f1", "f2", 1, TF2Error.TF2_BACKWARD_EXTRAPOLATION_ERROR,
+         BackwardExtrapolationException),
+        ("f1", "f3", 600_000_000, TF2Error.TF2_NO_DATA_FOR_EXTRAPOLATION_ERROR,
+         NoDataForExtrapolationException),
+        ("f0", "f2", 1_500_000_000, TF2Error.TF2_CONNECTIVITY_ERROR, ConnectivityException),
+    ]
+    for target, source, ns, code, exc_type in rows:
+        got = core.lookup_transforms(target, source, [ns, ns], errors="mask")
+        assert got.error_codes.tolist() == [code, code], (target, source, ns)
+        if exc_type is None:
+            assert got.valid.all() and got.error(0) is None and got.error_message(-1) is None
+            continue
+        with pytest.raises(exc_type) as single:
+            core.lookup_transform(target, source, Time.from_ns(ns))
+        assert type(got.error(1)) is exc_type
+        assert got.error_message(0) == got.error_message(-2) == str(single.value)
+    with pytest.raises(IndexError, match="row 2 is out of range for 2 rows"):
+        got.error(2)
+    # One batch, mixed rows: answered rows 0, each failed row its own code.
+    mixed = core.lookup_transforms("f1", "f2", [1, 500_000_002, 2_000_000_000], errors="mask")
+    assert mixed.error_codes.tolist() == [7, 0, 8]
+    # lookup_transforms_full: a row failing on both legs keeps the source leg's reason,
+    # the leg the single call looks up first.
+    full = core.lookup_transforms_full(
+        "f1", [2_000_000_000, 2_000_000_000, 500_000_002], "f2", [1, 500_000_002, 500_000_002],
+        "f0", errors="mask",
+    )
+    assert full.error_codes.tolist() == [7, 8, 0]
+    with pytest.raises(BackwardExtrapolationException) as single:
+        core.lookup_transform_full(
+            "f1", Time.from_ns(2_000_000_000), "f2", Time.from_ns(1), "f0"
+        )
+    assert full.error_message(0) == str(single.value)
+    # A non-exact policy: each row as lookup_transform(..., policy=) raises it.
+    near = Nearest(0.001)
+    policy_rows = core.lookup_transforms(
+        "f1", "f2", [1, 500_000_002, 3_000_000_000], errors="mask", policy=near
+    )
+    assert policy_rows.valid.tolist() == [True, True, False]
+    assert policy_rows.error_codes.tolist() == [0, 0, tf2_error_of(policy_rows.error(2))]
+    with pytest.raises(TransformException) as single:
+        core.lookup_transform("f1", "f2", Time.from_ns(3_000_000_000), policy=near)
+    assert type(policy_rows.error(2)) is type(single.value)
+    assert policy_rows.error_message(2) == str(single.value)
 
 
 def test_frame_errors_match_the_single_lookup() -> None:

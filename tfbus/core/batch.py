@@ -18,13 +18,16 @@ No threads, no event loop; the awaitable twins are methods of :class:`tfbus.buff
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import operator
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Literal, TypeAlias, cast
 
 import numpy as np
 import numpy.typing as npt
 
 from tfbus.core.policy import PolicyReport
+from tfbus.errors import TransformException, tf2_error_of
+from tfbus.messages import TransformStamped
 from tfbus.time import Time
 
 __all__ = [
@@ -35,6 +38,7 @@ __all__ = [
     "check_errors",
     "compose_rows",
     "quat_rotate_rows",
+    "single_lookups",
 ]
 
 Errors: TypeAlias = Literal["raise", "mask"]
@@ -61,6 +65,12 @@ class TransformArray:
         child_frame_id: the source frame.
         valid: ``(N,) bool``; False only for rows that failed under ``errors="mask"``
             (their translation and rotation are NaN, their stamp the requested time).
+        error_codes: ``(N,) uint8``, each row's ROS 2 tf2 error code
+            (:class:`~tfbus.errors.TF2Error`): 0 for an answered row, else the code of the
+            exception the single ``lookup_transform`` raised for that row when the batch
+            was looked up (1 lookup, 2 connectivity, 4 invalid argument, 7 backward, 8
+            forward, 9 no data for extrapolation). :meth:`error` and
+            :meth:`error_message` give a row's exception and message.
         reports: for a lookup under a non-exact policy (:mod:`tfbus.core.policy`), each
             row's :class:`~tfbus.core.policy.PolicyReport` (None for a masked row);
             None for an exact lookup.
@@ -69,6 +79,7 @@ class TransformArray:
     """
 
     __slots__ = (
+        "_errors",
         "child_frame_id",
         "frame_id",
         "max_abs_delta_ns",
@@ -89,6 +100,7 @@ class TransformArray:
         valid: npt.NDArray[np.bool_] | None = None,
         *,
         reports: Sequence[PolicyReport | None] | None = None,
+        errors: Mapping[int, TransformException] | None = None,
     ) -> None:
         n = stamps.shape[0]
         if translations.shape != (n, 3) or rotations.shape != (n, 4):
@@ -102,6 +114,7 @@ class TransformArray:
         self.frame_id = frame_id
         self.child_frame_id = child_frame_id
         self.valid = np.ones(n, dtype=bool) if valid is None else valid
+        self._errors: dict[int, TransformException] = dict(errors) if errors else {}
         self.reports: tuple[PolicyReport | None, ...] | None = None
         self.max_abs_delta_ns: _I64 | None = None
         if reports is not None:
@@ -114,6 +127,37 @@ class TransformArray:
 
     def __len__(self) -> int:
         return int(self.stamps.shape[0])
+
+    @property
+    def error_codes(self) -> npt.NDArray[np.uint8]:
+        """``(N,) uint8``: each row's :class:`~tfbus.errors.TF2Error` code, 0 where the
+        row was answered (see the class's attributes)."""
+        codes = np.zeros(len(self), dtype=np.uint8)
+        for i, exc in self._errors.items():
+            codes[i] = tf2_error_of(exc)
+        return codes
+
+    def error(self, i: int) -> TransformException | None:
+        """The exception row ``i`` failed with under ``errors="mask"`` (the one the single
+        ``lookup_transform`` raised for it: class and message), None for an answered row.
+
+        Raises:
+            IndexError: ``i`` is not a row (negative indices count from the end).
+        """
+        n = len(self)
+        k = operator.index(i)
+        if not -n <= k < n:
+            raise IndexError(f"row {i!r} is out of range for {n} rows")
+        return self._errors.get(k % n)
+
+    def error_message(self, i: int) -> str | None:
+        """The message of row ``i``'s exception (:meth:`error`), None for an answered row.
+
+        Raises:
+            IndexError: ``i`` is not a row.
+        """
+        exc = self.error(i)
+        return None if exc is None else str(exc)
 
     def __repr__(self) -> str:
         return (
@@ -264,4 +308,32 @@ def compose_rows(leg2: TransformArray, leg1: TransformArray) -> TransformArray:
     )
     valid = leg1.valid & leg2.valid
     stamps = leg2.stamps.copy()
-    return TransformArray(stamps, trans, q, leg2.frame_id, leg1.child_frame_id, valid)
+    # A row failing on both legs keeps the source leg's exception: the single
+    # lookup_transform_full looks that leg up first.
+    errors = {**leg2._errors, **leg1._errors}
+    return TransformArray(stamps, trans, q, leg2.frame_id, leg1.child_frame_id, valid,
+                          errors=errors)
+
+
+def single_lookups(
+    lookup: Callable[[str, str, Time], TransformStamped],
+    target_frame: str,
+    source_frame: str,
+    times: _I64,
+    rows: Iterable[int],
+) -> Iterator[tuple[int, TransformStamped | TransformException]]:
+    """For each row of ``rows`` (indices into ``(N,) int64`` ns ``times``), what
+    ``lookup(target_frame, source_frame, Time(times[row]))`` returns or raises (tf2's
+    exception and message by construction), asked once per distinct time: how a batch
+    tells why the rows its kernel could not answer failed."""
+    seen: dict[int, TransformStamped | TransformException] = {}
+    for i in rows:
+        ns = int(times[i])
+        found = seen.get(ns)
+        if found is None:
+            try:
+                found = lookup(target_frame, source_frame, Time.from_ns(ns))
+            except TransformException as exc:
+                found = exc
+            seen[ns] = found
+        yield i, found

@@ -52,6 +52,7 @@ from tfbus.core.batch import (
     as_times,
     check_errors,
     compose_rows,
+    single_lookups,
 )
 from tfbus.core.policy import (
     Clamp,
@@ -813,7 +814,10 @@ class BufferCore(CoreBase):
             source_frame: frame the data is in.
             times: ``(N,) int64`` nanoseconds (or Times); 0 means latest, as in tf2.
             errors: ``"raise"`` (default) or ``"mask"``: failed rows become NaN with
-                ``valid[i] = False`` and the call does not raise for missing data.
+                ``valid[i] = False`` and the call does not raise for missing data; each
+                failed row's reason is the exception the single lookup raises for it
+                (asked once per distinct failing time): ``error_codes`` (ROS 2 tf2's
+                :class:`~tfbus.errors.TF2Error`), ``error(i)``, ``error_message(i)``.
 
         Returns:
             A :class:`~tfbus.core.batch.TransformArray` whose row i equals
@@ -861,14 +865,31 @@ class BufferCore(CoreBase):
             # An invalid or unknown frame id: the single lookup raises tf2's exception.
             self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[0]) if n else 0))
             raise AssertionError("lookup_transform accepted an id batch_lookup refused")
-        if answered != n:
-            bad = np.flatnonzero(ok == 0)
-            if errors == "raise":
-                self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[bad[0]])))
-                raise AssertionError("lookup_transform answered a time the walk could not")
-            out[bad] = math.nan
-            valid[bad] = False
-        return TransformArray(stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid)
+        if answered == n:
+            return TransformArray(
+                stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid
+            )
+        bad = np.flatnonzero(ok == 0)
+        if errors == "raise":
+            self.lookup_transform(target_frame, source_frame, Time.from_ns(int(t[bad[0]])))
+            raise AssertionError("lookup_transform answered a time the walk could not")
+        # Each masked row's reason: the single lookup's exception (once per distinct time).
+        failed: dict[int, TransformException] = {}
+        for i, found in single_lookups(
+            self.lookup_transform, target_frame, source_frame, t, bad.tolist()
+        ):
+            if isinstance(found, TransformException):
+                failed[i] = found
+            else:  # (the kernel and the single walk agree: not reached)
+                (x, y, z), (qx, qy, qz, qw) = found.transform
+                out[i] = (x, y, z, qx, qy, qz, qw)
+                stamps[i] = found.header.stamp.ns
+        rows = list(failed)
+        out[rows] = math.nan
+        valid[rows] = False
+        return TransformArray(
+            stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid, errors=failed
+        )
 
     def _policy_rows(
         self,
@@ -885,6 +906,7 @@ class BufferCore(CoreBase):
         stamps = t.copy()
         valid = np.ones(n, dtype=bool)
         reports: list[PolicyReport | None] = [None] * n
+        failed: dict[int, TransformException] = {}
         query = self._query_policy
         for i, ns in enumerate(t.tolist()):
             found = query(target_frame, source_frame, Time.from_ns(ns), args)
@@ -894,11 +916,14 @@ class BufferCore(CoreBase):
                 out[i] = (x, y, z, qx, qy, qz, qw)
                 stamps[i] = ts.header.stamp.ns
                 continue
+            failure = self._failure("lookupTransform", target_frame, source_frame, found)
             if errors == "raise" or found[0] in (INVALID_ARGUMENT, UNKNOWN_FRAME):
-                raise self._failure("lookupTransform", target_frame, source_frame, found)
+                raise failure
             valid[i] = False
+            failed[i] = failure
         return TransformArray(
-            stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid, reports=reports
+            stamps, out[:, :3], out[:, 3:], target_frame, source_frame, valid, reports=reports,
+            errors=failed,
         )
 
     def lookup_transforms_full(
@@ -978,6 +1003,7 @@ class BufferCore(CoreBase):
             rows.child_frame_id,
             rows.valid,
             reports=reports,
+            errors=rows._errors,
         )
 
     def transform_points(

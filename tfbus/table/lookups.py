@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tfbus.core import BufferCore, _pybatch, _pycore
-from tfbus.core.batch import TransformArray, compose_rows
+from tfbus.core.batch import TransformArray, compose_rows, single_lookups
 from tfbus.core.kernels import CoreBase, batch_lookup
 from tfbus.errors import TransformException
 from tfbus.time import Time
@@ -303,22 +303,15 @@ def _fail_rows(
     bad: npt.NDArray[np.bool_],
 ) -> None:
     """Each failed row's exception from the single lookup (one call per distinct time)."""
-    seen: dict[int, TransformException | None] = {}
-    for i in np.flatnonzero(bad).tolist():
-        ns = int(times[i])
-        if ns not in seen:
-            try:
-                single = core.lookup_transform(target, source, Time.from_ns(ns))
-            except TransformException as exc:
-                seen[ns] = exc
-            else:  # (the kernel and the single walk agree: not reached)
-                (x, y, z), (qx, qy, qz, qw) = single.transform
-                rows.values[:, int(idx[i])] = (x, y, z, qx, qy, qz, qw)
-                rows.stamps[int(idx[i])] = single.header.stamp.ns
-                continue
-        failure = seen[ns]
-        if failure is not None:
-            rows.fail_with(int(idx[i]), failure)
+    for i, found in single_lookups(
+        core.lookup_transform, target, source, times, np.flatnonzero(bad).tolist()
+    ):
+        if isinstance(found, TransformException):
+            rows.fail_with(int(idx[i]), found)
+        else:  # (the kernel and the single walk agree: not reached)
+            (x, y, z), (qx, qy, qz, qw) = found.transform
+            rows.values[:, int(idx[i])] = (x, y, z, qx, qy, qz, qw)
+            rows.stamps[int(idx[i])] = found.header.stamp.ns
 
 
 def _answer_full(
