@@ -15,6 +15,9 @@ Every wait and each client's share is bounded:
 * a message over :data:`~tfbus.web.rosbridge.MAX_MESSAGE_BYTES` is read no further than
   that and dropped, answered with a ``status``; subscriptions, goals and source frames
   per client are capped (:mod:`tfbus.web.rosbridge`);
+* a client that closes (a Close frame, RFC 6455 5.5.1) gets the Close reply and nothing
+  after it: messages for it from then on, and those still queued, are dropped and counted
+  (:attr:`Client.closed_drops`, :attr:`TfWebServer.dropped_closed`);
 * a connection that fails in any way is closed and counted
   (:attr:`TfWebServer.errors`), logged as one line per :data:`LOG_PERIOD`, never a
   traceback; the other clients go on.
@@ -22,7 +25,6 @@ Every wait and each client's share is bounded:
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import time
@@ -33,11 +35,13 @@ from typing import TYPE_CHECKING, Any, Final
 import anyio
 import anyio.abc
 from wsproto import ConnectionType, WSConnection
+from wsproto.connection import ConnectionState
 from wsproto.events import (
     AcceptConnection,
     BytesMessage,
     CloseConnection,
     Ping,
+    Pong,
     RejectConnection,
     Request,
     TextMessage,
@@ -81,6 +85,9 @@ class Client:
         """Pongs and the close frame: never dropped (at most a few)."""
         self.dropped = 0
         """Messages dropped from a full queue (the oldest first)."""
+        self.closed_drops = 0
+        """Messages not sent because the connection was closing or closed (a Close frame
+        received or sent: RFC 6455 5.5.1 allows no data frame after it)."""
         self.sent = 0
         """Messages written to the socket."""
         self.wake = anyio.Event()
@@ -88,7 +95,12 @@ class Client:
         self.ws = WSConnection(ConnectionType.SERVER)
 
     def push(self, message: dict[str, Any]) -> None:
-        """Queue one message (JSON text); a full queue drops its oldest, counted."""
+        """Queue one message (JSON text); a full queue drops its oldest, counted; on a
+        closing or closed connection the message is dropped, counted in
+        :attr:`closed_drops`."""
+        if self.ws.state is not ConnectionState.OPEN:
+            self.closed_drops += 1
+            return
         data = self.ws.send(TextMessage(json.dumps(message, separators=(",", ":"),
                                                    allow_nan=False)))
         if len(self.outbox) >= self.queue_size:
@@ -97,10 +109,22 @@ class Client:
         self.outbox.append(data)
         self.wake.set()
 
-    def push_control(self, data: bytes) -> None:
+    def push_control(self, event: Ping | Pong | CloseConnection) -> None:
+        """Queue a control frame (a pong, the Close reply) ahead of the messages; one the
+        connection's state no longer allows is dropped, counted in :attr:`closed_drops`."""
+        try:
+            data = self.ws.send(event)
+        except LocalProtocolError:
+            self.closed_drops += 1
+            return
         if len(self.control) < 4:
             self.control.append(data)
         self.wake.set()
+
+    def close_outbox(self) -> None:
+        """After a Close frame: the queued messages are never sent (counted)."""
+        self.closed_drops += len(self.outbox)
+        self.outbox.clear()
 
 
 class TfWebServer:
@@ -163,6 +187,9 @@ class TfWebServer:
         """Client requests answered with an error status (over every client so far)."""
         self.dropped = 0
         """Messages dropped from full client queues (over every client so far)."""
+        self.dropped_closed = 0
+        """Messages dropped because their client's connection was closing or closed
+        (over every client gone so far; :attr:`Client.closed_drops`)."""
 
     # ---------------------------------------------------------------- lookups
     def _lookup(self, target: str, source: str) -> TransformStamped:
@@ -195,11 +222,17 @@ class TfWebServer:
                 self.relay(topic, message)
 
     def relay(self, topic: str, message: TFMessage) -> None:
-        """Send a bus message on ``topic`` to every client subscribed to it."""
+        """Send a bus message on ``topic`` to every client subscribed to it (a client whose
+        connection is closing drops it, counted: :attr:`Client.closed_drops`)."""
         for client in list(self.clients):
-            out = client.session.tf_message(topic, message)
-            if out is not None:
-                client.push(out)
+            try:
+                out = client.session.tf_message(topic, message)
+                if out is not None:
+                    client.push(out)
+            except Exception as err:  # one client's failure: counted, the others served
+                self.errors += 1
+                _note("tfbus web: a message for one client failed (%s: %.80s; %d so far)",
+                      type(err).__name__, str(err), self.errors)
 
     async def _connection(self, stream: anyio.abc.ByteStream) -> None:
         client: Client | None = None
@@ -217,6 +250,7 @@ class TfWebServer:
                 self.clients.discard(client)
                 self.refused += client.session.refused
                 self.dropped += client.dropped
+                self.dropped_closed += client.closed_drops
 
     async def _handshake(self, stream: anyio.abc.ByteStream) -> Client | None:
         session = Session(self._lookup, self._topics)
@@ -324,11 +358,13 @@ class TfWebServer:
             ws.receive_data(data)
             for event in ws.events():
                 if isinstance(event, CloseConnection):
-                    with contextlib.suppress(LocalProtocolError):
-                        client.push_control(ws.send(event.response()))
+                    # The Close reply goes first and last: nothing queued follows it.
+                    self.clients.discard(client)
+                    client.push_control(event.response())
+                    client.close_outbox()
                     return
                 if isinstance(event, Ping):
-                    client.push_control(ws.send(event.response()))
+                    client.push_control(event.response())
                 elif isinstance(event, (TextMessage, BytesMessage)):
                     size += len(event.data)
                     binary = binary or isinstance(event, BytesMessage)
