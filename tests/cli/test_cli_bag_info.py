@@ -41,6 +41,20 @@ def test_bag_info_mcap() -> None:
     assert "mcap" in out and "34 (29 static links, 4 dynamic links, 4409 transforms)" in out
 
 
+@pytest.mark.parametrize(("bag", "frames", "links"), [(TURTLE, 4, 3), (NAV2, 34, 33)])
+def test_bag_info_and_doctor_count_the_same_frames(bag: Path, frames: int, links: int) -> None:
+    """Both count frame ids with the roots (turtle: world, turtle1, turtle2, carrot) and
+    links (child frames: one per parent -> child pair); each says which is which."""
+    code, out, _ = run("bag-info", str(bag))
+    assert code == 0
+    static, dynamic = out.split(f"frames:     {frames} (")[1].split(" dynamic links")[0] \
+        .split(" static links, ")
+    assert int(static) + int(dynamic) == links
+    code, out, _ = run("doctor", "--bag", str(bag))
+    assert code == 0
+    assert f" {frames} frames ({links} links), " in out.splitlines()[0]
+
+
 def test_bag_info_errors(tmp_path: Path) -> None:
     code, _, err = run("bag-info", str(tmp_path / "missing.bag"))
     assert_usage_error(code, err, "missing.bag")

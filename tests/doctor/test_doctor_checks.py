@@ -72,7 +72,9 @@ def test_every_check_has_a_recording_and_a_rule() -> None:
 def test_the_clean_robot_has_no_finding(tmp_path: Path) -> None:
     report = diagnose(write_ros1(tmp_path / "clean.bag", clean()))
     assert report.findings == ()
-    assert (report.messages, report.transforms, report.frames) == (601, 602, 4)
+    # Frame ids map, odom, base_link, base_footprint, laser; links: every one but map.
+    assert (report.messages, report.transforms, report.frames, report.links) == (601, 602,
+                                                                                5, 4)
     delays = {b.sender: b.median for b in report.broadcasters}
     assert delays == pytest.approx({"/amcl": AMCL_DELAY_NS / 1e9 + 1e-6,
                                     "/odometry": ODOM_DELAY_NS / 1e9 + 1e-6})
@@ -310,7 +312,7 @@ def test_memory_is_bounded_by_frames_and_senders_not_messages() -> None:
     held = sum(stat.size for stat in snapshot.statistics("filename"))
     assert 0 < held < 50_000  # bytes the doctor allocated and holds: per frame, not message
     report = d.report()
-    assert report.frames == 3
+    assert (report.frames, report.links) == (4, 3)  # map and f0..f2; the tracked links
     assert all(b.samples <= 64 for b in report.broadcasters)
     assert report.broadcasters[0].transforms == 60_000
     (found,) = report.by_check("too_many_frames")

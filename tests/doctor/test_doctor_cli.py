@@ -41,7 +41,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def test_a_clean_bag_exits_0_and_says_so(bags: dict[str, Path]) -> None:
     code, out, err = run("--bag", str(bags["clean"]), "--fail-on", "info")
     assert (code, err) == (0, "")
-    assert "601 messages, 602 transforms, 4 frames" in out
+    assert "601 messages, 602 transforms, 5 frames (4 links)" in out
     assert "no problems found" in out
     assert "/odometry" in out  # the broadcasters' delays table
 

@@ -54,7 +54,8 @@ def print_report(out: Console, report: Report) -> None:
     span = (report.end_ns - report.start_ns) / 1e9 if report.start_ns is not None \
         and report.end_ns is not None else 0.0
     out.print(f"tfbus doctor: {literal(report.source)}: {report.messages} messages, "
-              f"{report.transforms} transforms, {report.frames} frames, {span:.3f} s"
+              f"{report.transforms} transforms, {report.frames} frames ({report.links} "
+              f"links), {span:.3f} s"
               + (" (simulated time stamps)" if report.sim_time else ""))
     counts = {lv: sum(f.level.value == lv for f in report.findings) for lv in FAIL_ON[:3]}
     if not report.findings:

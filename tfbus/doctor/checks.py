@@ -627,8 +627,18 @@ class Doctor:
         findings.sort(key=lambda f: (-f.level.rank, f.check, f.frames, f.senders))
         return Report(
             source=self.source, findings=tuple(findings), messages=self.messages,
-            transforms=self.transforms, frames=len(self._links), start_ns=self.start,
+            transforms=self.transforms, frames=self._frame_count(),
+            links=len(self._links), start_ns=self.start,
             end_ns=self.end, sim_time=bool(self.sim_time), broadcasters=self.broadcasters())
+
+    def _frame_count(self) -> int:
+        """Frame ids of the tracked links, their parents (every parent seen) included."""
+        ids = set(self._links)
+        for link in self._links.values():
+            ids.update(link.parents)
+            if link.parent:
+                ids.add(link.parent)
+        return len(ids)
 
     @staticmethod
     def _finding(check: str, level: Level, message: str, *, frames: Sequence[str] = (),

@@ -132,8 +132,10 @@ class Report:
         findings: most severe first, then by check and frames.
         messages: tf messages read (both topics).
         transforms: transforms read.
-        frames: child frames seen (at most :attr:`~tfbus.doctor.Thresholds.max_frames`
-            tracked).
+        frames: frame ids seen, parents included (as ``tfbus bag-info`` and tf2's
+            ``BufferCore::getAllFrameNames`` count them), over the tracked links.
+        links: child frames seen, each with its parent (at most
+            :attr:`~tfbus.doctor.Thresholds.max_frames` tracked).
         start_ns, end_ns: receive times of the first and the last message (None: none).
         sim_time: the stamps are simulated time (far from the receive clock): delays are
             measured against the newest stamp, so clock offsets cannot be told.
@@ -145,6 +147,7 @@ class Report:
     messages: int = 0
     transforms: int = 0
     frames: int = 0
+    links: int = 0
     start_ns: int | None = None
     end_ns: int | None = None
     sim_time: bool = False
@@ -171,6 +174,7 @@ class Report:
             "messages": self.messages,
             "transforms": self.transforms,
             "frames": self.frames,
+            "links": self.links,
             "start_ns": self.start_ns,
             "end_ns": self.end_ns,
             "sim_time": self.sim_time,
@@ -196,15 +200,18 @@ REPORT_SCHEMA: Final[dict[str, Any]] = {
     "$id": "urn:tfbus:doctor-report:1",
     "title": "tfbus doctor report",
     "type": "object",
-    "required": ["schema_version", "source", "messages", "transforms", "frames", "start_ns",
-                 "end_ns", "sim_time", "counts", "findings", "broadcasters"],
+    "required": ["schema_version", "source", "messages", "transforms", "frames", "links",
+                 "start_ns", "end_ns", "sim_time", "counts", "findings", "broadcasters"],
     "additionalProperties": False,
     "properties": {
         "schema_version": {"const": SCHEMA_VERSION},
         "source": {"type": "string", "description": "the bag path or the bus spec"},
         "messages": {"type": "integer", "minimum": 0},
         "transforms": {"type": "integer", "minimum": 0},
-        "frames": {"type": "integer", "minimum": 0},
+        "frames": {"type": "integer", "minimum": 0,
+                   "description": "frame ids seen, parents included"},
+        "links": {"type": "integer", "minimum": 0,
+                  "description": "child frames seen (each with its parent)"},
         "start_ns": _NS,
         "end_ns": _NS,
         "sim_time": {"type": "boolean"},
