@@ -142,6 +142,14 @@ def test_iter_windows_walks_the_file_once_with_carry_over(
     windows = list(iter_windows(bags[fmt], 4.0, margin=6.0))
     assert [w.start.ns for w in windows] == [START + SEC // 20 + k * 4 * SEC for k in range(8)]
     assert sum(w.messages for w in windows) == len(dynamic)
+    # Each window's stamps: the header stamps of its own messages' transforms, sorted,
+    # once each; together every /tf stamp of the file.
+    for w in windows:
+        own = {ts.header.stamp.ns for m in dynamic if w.start.ns <= m.time.ns < w.end.ns
+               for ts in m.message.transforms}
+        assert w.stamps.tolist() == sorted(own)
+    assert sorted(s for w in windows for s in w.stamps.tolist()) == sorted(
+        {ts.header.stamp.ns for m in dynamic for ts in m.message.transforms})
     for w in windows:
         queries = _grid(w.start.ns, w.end.ns, 200)
         got = lookup(queries, w.buffer).to_pylist()

@@ -9,6 +9,9 @@ from collections.abc import Callable, Collection, Iterable, Iterator
 from os import PathLike
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
+import numpy as np
+import numpy.typing as npt
+
 from tfbus.bag.formats import DEFAULT_TOPICS, TF_STATIC_TOPIC, BagMessage
 from tfbus.bag.reader import read_messages, read_window
 from tfbus.errors import BagReadError
@@ -146,6 +149,10 @@ class Window(NamedTuple):
             messages received in ``[start - margin, end + margin)``.
         messages: how many ``/tf`` messages were received in ``[start, end)``.
         last: the bag time of the last of them.
+        stamps: the header stamps of their transforms, ``(M,) int64`` nanoseconds,
+            sorted, each once, stamp 0 (no time) left out: the data's own clock
+            (simulated time when the recording's is), which the bag (receive) time of
+            ``start`` / ``end`` is not.
     """
 
     start: Time
@@ -153,6 +160,7 @@ class Window(NamedTuple):
     buffer: BufferCore
     messages: int
     last: Time
+    stamps: npt.NDArray[np.int64]
 
 
 def iter_windows(
@@ -262,8 +270,11 @@ def _walk(
             span = (max(stamps) - min(stamps)) / NSEC_PER_SEC if stamps else 0.0
             core = BufferCore(cache_time=max(10.0, span + 1.0))
             _fill(core, statics, [(tss, auth) for _, tss, auth in held])
+            own = np.unique(np.fromiter(
+                (ts.header.stamp.ns for ns, tss, _ in held if w0 <= ns < w1 for ts in tss),
+                dtype=np.int64))
             yield Window(Time.from_ns(w0), Time.from_ns(w1), core, len(times),
-                         Time.from_ns(max(times)))
+                         Time.from_ns(max(times)), own[own != 0])
         later = [ns for ns, _, _ in held if ns >= w1]
         following = min(later) if later else (None if ahead is None else ahead[0])
         if following is None:

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_LOAD_COST",
     "DEFAULT_MARGIN",
+    "MAX_ROWS_PER_TABLE",
     "RecordingBuffers",
     "balanced_blocks",
     "lookup_by_recording",
@@ -132,6 +133,12 @@ def lookup_recording(
     return merged.take(pa.array(inverse))
 
 
+MAX_ROWS_PER_TABLE = 1 << 20
+"""Rows in one table :func:`poses_every` yields at most (a window whose stamps span more
+is answered in several tables from the same buffer: memory bounded by this, not by the
+span)."""
+
+
 def poses_every(
     path: str | PathLike[str],
     target_frame: str,
@@ -145,9 +152,20 @@ def poses_every(
     recording, read window by window (:func:`tfbus.bag.iter_windows`: one pass, no more
     than a window and two margins of messages held).
 
-    The stamps are ``t0 + k * every`` (``t0``: the first ``/tf`` message's bag time) from
-    each window's start to its last message (a window that received messages), each
-    looked up in that window's buffer.
+    The stamps follow the data's clock, the transforms' header stamps (simulated time
+    when the recording's is), as ``lookup_transform`` is asked by any tf2 program; not
+    the bag (receive) time, which the windows use to read the file. They are
+    ``t0 + k * every`` (``t0``: the earliest header stamp of the first window's ``/tf``
+    transforms), each once, over the header stamps of the ``/tf`` transforms
+    (:attr:`tfbus.bag.Window.stamps`): from the first to the last of every run of
+    stamps in which no two consecutive ones are more than ``window`` seconds apart, so
+    one stray stamp (a clock jump, a bogus header) adds at most one row, not a span.
+    Each stamp is looked up in the buffer of the window whose transforms reach it (a
+    stamp between two windows' transforms: the later window, which holds ``margin``
+    seconds of the data before it);
+    a stamp at or before one already written is not asked again (stamps that go back,
+    a simulation restarted in the recording, give rows only once they pass the latest).
+    ``/tf_static`` transforms do not place the grid.
 
     Args:
         path: the recording.
@@ -157,7 +175,8 @@ def poses_every(
         margin: seconds each window's buffer reaches beyond it (>= 0).
 
     Yields:
-        One Arrow table per window: ``target_frame``, ``source_frame``, ``stamp`` and
+        Arrow tables, one or more per window (at most :data:`MAX_ROWS_PER_TABLE` rows
+        each): ``target_frame``, ``source_frame``, ``stamp`` (ns, the data's clock) and
         :data:`~tfbus.table.RESULT_COLUMNS`.
 
     Raises:
@@ -169,23 +188,43 @@ def poses_every(
     from tfbus.bag import iter_windows
 
     step = _seconds_ns(every, "every", positive=True)
-    _seconds_ns(window, "window", positive=True)
+    gap = _seconds_ns(window, "window", positive=True)
     _seconds_ns(margin, "margin", positive=False)
     t0: int | None = None
+    next_k = 0  # the grid's next index not yet written: each stamp once
+    latest = 0  # the latest stamp of the windows so far
     for w in iter_windows(path, window, margin=margin):
-        if t0 is None:
-            t0 = w.start.ns
-        first = t0 + -(-(w.start.ns - t0) // step) * step
-        stamps = np.arange(first, min(w.end.ns, w.last.ns + 1), step, dtype=np.int64)
-        if not stamps.size:
+        if not w.stamps.size:
             continue
-        n = stamps.shape[0]
-        queries = pa.table({
-            "target_frame": pa.array([target_frame] * n, pa.string()),
-            "source_frame": pa.array([source_frame] * n, pa.string()),
-            "stamp": pa.array(stamps),
-        })
-        yield lookup(queries, w.buffer)
+        if t0 is None:
+            t0 = latest = int(w.stamps[0])
+        for lo, hi in _runs(w.stamps, gap):
+            # A run that goes on from the stamps before it (across a window's edge too)
+            # continues the grid from where it stopped; one after a longer gap starts at
+            # its own first stamp.
+            k_lo = next_k if lo - latest <= gap else max(next_k, -(-(lo - t0) // step))
+            latest = max(latest, hi)
+            k_hi = (hi - t0) // step
+            while k_lo <= k_hi:
+                k_end = min(k_hi, k_lo + MAX_ROWS_PER_TABLE - 1)
+                stamps = t0 + np.arange(k_lo, k_end + 1, dtype=np.int64) * step
+                n = stamps.shape[0]
+                queries = pa.table({
+                    "target_frame": pa.array([target_frame] * n, pa.string()),
+                    "source_frame": pa.array([source_frame] * n, pa.string()),
+                    "stamp": pa.array(stamps),
+                })
+                yield lookup(queries, w.buffer)
+                k_lo = next_k = k_end + 1
+
+
+def _runs(stamps: npt.NDArray[np.int64], gap: int) -> list[tuple[int, int]]:
+    """``(first, last)`` of each run of sorted ``stamps`` whose consecutive stamps are
+    at most ``gap`` ns apart."""
+    breaks = np.flatnonzero(np.diff(stamps) > gap)
+    firsts = np.concatenate(([0], breaks + 1))
+    lasts = np.concatenate((breaks, [stamps.shape[0] - 1]))
+    return [(int(stamps[a]), int(stamps[b])) for a, b in zip(firsts, lasts, strict=True)]
 
 
 def output_schema() -> pa.Schema:
