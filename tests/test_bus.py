@@ -511,3 +511,34 @@ async def test_publish_never_raises_cancellation_after_publishing() -> None:
                     steps.append("own not reached")
             assert own.cancelled_caught
             assert steps[-1] == "own published"
+
+
+async def test_topics_no_one_uses_any_more_keep_a_bounded_record() -> None:
+    """Subscribing to, publishing on and leaving 3 000 distinct topics (a fleet's robots
+    coming and going) leaves the counters of the MAX_IDLE_TOPICS latest idle topics and
+    of every topic still subscribed; a kept idle topic's counters go on when it is used
+    again."""
+    from tfbus.bus import MAX_IDLE_TOPICS
+
+    async with Bus() as bus:
+        kept = bus.subscribe("/kept")
+        await bus.publish("/kept", 1)
+        for i in range(3000):
+            cb = bus.subscribe_callback(f"/r{i}/tf", lambda _m: None)
+            sub = bus.subscribe(f"/r{i}/tf_static")
+            await bus.publish(f"/r{i}/tf", i)
+            cb.close()
+            sub.close()
+            await bus.publish(f"/nobody{i}", i)  # published with no subscriber
+        stats = bus.statistics()
+        assert len(stats) == MAX_IDLE_TOPICS + 1
+        assert stats["/kept"].published == 1 and stats["/kept"].subscribers == 1
+        assert "/r0/tf" not in stats and "/nobody2999" in stats
+        assert stats["/r2999/tf"].published == 1 and stats["/r2999/tf"].subscribers == 0
+        assert repr(bus).startswith(f"<Bus open topics={MAX_IDLE_TOPICS + 1} ")
+        cb = bus.subscribe_callback("/r2999/tf", lambda _m: None)
+        await bus.publish("/r2999/tf", 0)
+        assert bus.statistics()["/r2999/tf"].published == 2
+        assert bus.statistics()["/r2999/tf"].delivered == 2
+        cb.close()
+        assert kept.receive_nowait() == 1

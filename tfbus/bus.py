@@ -61,6 +61,7 @@ from tfbus.subscription import (
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
 __all__ = [
+    "MAX_IDLE_TOPICS",
     "TF_STATIC_TOPIC",
     "TF_TOPIC",
     "Bus",
@@ -76,6 +77,11 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 _TF_TOPICS: Final = frozenset({TF_TOPIC, TF_STATIC_TOPIC})
+
+MAX_IDLE_TOPICS: Final = 1024
+"""Topics without a subscriber whose counters a bus keeps (:meth:`Bus.statistics`), the
+latest to become idle; an older one's counters are dropped (they start again from 0 if
+the topic is used again)."""
 
 T = TypeVar("T")
 
@@ -240,6 +246,8 @@ class Bus:
         self._subscriptions: dict[str, list[Subscription[Any]]] = {}
         self._callbacks: dict[str, list[CallbackSubscription]] = {}
         self._topic_counters: dict[str, _TopicCounters] = {}
+        # Topics with counters and no subscription nor callback, the latest last.
+        self._idle_topics: dict[str, None] = {}
         self._latch = StaticLatch()
         self._task_group: anyio.abc.TaskGroup | None = None
         self._state = "new"  # "new" -> "open" -> "closed"
@@ -349,7 +357,23 @@ class Bus:
         counters = self._topic_counters.get(topic)
         if counters is None:
             counters = self._topic_counters[topic] = _TopicCounters()
+            if not self.reaches(topic):
+                self._went_idle(topic)
         return counters
+
+    def _went_idle(self, topic: str) -> None:
+        """``topic`` has no subscription nor callback now: its empty lists go, and its
+        counters are kept among the :data:`MAX_IDLE_TOPICS` latest idle topics' (memory
+        bounded by the topics in use, not by every topic ever used)."""
+        self._subscriptions.pop(topic, None)
+        self._callbacks.pop(topic, None)
+        self._idle_topics.pop(topic, None)
+        self._idle_topics[topic] = None
+        while len(self._idle_topics) > MAX_IDLE_TOPICS:
+            oldest = next(iter(self._idle_topics))
+            del self._idle_topics[oldest]
+            if not self.reaches(oldest):
+                self._topic_counters.pop(oldest, None)
 
     # -- subscribing --------------------------------------------------------------------
 
@@ -373,6 +397,7 @@ class Bus:
         if size < 1:
             raise ValueError(f"queue_size must be at least 1, got {size!r}")
         sub: Subscription[Any] = Subscription(self, topic, size)
+        self._idle_topics.pop(topic, None)
         subs = self._subscriptions.get(topic)
         if subs is None:
             self._subscriptions[topic] = [sub]
@@ -397,6 +422,7 @@ class Bus:
         """
         self._check_open()
         cb = CallbackSubscription(self, topic, callback)
+        self._idle_topics.pop(topic, None)
         # Copy-on-write: a delivery loop in progress keeps its own list.
         self._callbacks[topic] = [*self._callbacks.get(topic, ()), cb]
         if topic == TF_STATIC_TOPIC and self._latch:
@@ -407,12 +433,16 @@ class Bus:
         callbacks = self._callbacks.get(cb.topic)
         if callbacks is not None and cb in callbacks:
             self._callbacks[cb.topic] = [c for c in callbacks if c is not cb]
+            if not self.reaches(cb.topic):
+                self._went_idle(cb.topic)
 
     def _unsubscribe(self, sub: Subscription[Any]) -> None:
         subs = self._subscriptions.get(sub.topic)
         if subs is None or sub not in subs:
             return
         self._subscriptions[sub.topic] = [s for s in subs if s is not sub]
+        if not self.reaches(sub.topic):
+            self._went_idle(sub.topic)
 
     # -- publishing ---------------------------------------------------------------------
 
@@ -535,7 +565,10 @@ class Bus:
     # -- statistics ---------------------------------------------------------------------
 
     def statistics(self) -> dict[str, TopicStatistics]:
-        """Per topic (every topic published or subscribed to so far): its counters."""
+        """Per topic: its counters, for every topic subscribed to now and for the
+        :data:`MAX_IDLE_TOPICS` topics that most recently lost their last subscriber or
+        were first published with none (a bus that sees ever new topic names, a fleet's
+        robots coming and going, keeps a bounded record)."""
         return {
             topic: TopicStatistics(
                 topic=topic,

@@ -19,11 +19,14 @@ when it comes back, its nodes' latched ``/tf_static`` arrive again (the transpor
 every node that appears for them).
 
 What peers announce is bounded: at most ``max_robots`` robots are kept (a buffer and two
-subscriptions each); a namespace announced beyond that is not followed, counted in
-:attr:`FleetStatistics.robots_refused`. A robot gone for ``forget_after`` seconds of the
-fleet's clock is released (buffer, subscriptions and entry; counted in
-:attr:`FleetStatistics.released`), making room for others; if it comes back it is
-followed anew.
+subscriptions each). A robot gone for ``forget_after`` seconds of the fleet's clock is
+released (buffer, subscriptions and entry; counted in
+:attr:`FleetStatistics.released`); if it comes back it is followed anew. When
+``max_robots`` robots are kept, a newly announced robot takes the place of the one gone
+the longest (released early, counted in :attr:`FleetStatistics.evicted`), so names that
+were announced and went away cannot keep a live robot out; a namespace is refused
+(counted in :attr:`FleetStatistics.robots_refused`) only when every kept robot is
+alive.
 
 With ``merged=True`` there is one buffer (:attr:`FleetBuffer.merged`) holding every
 robot's frames with the robot's name as a prefix (``robot7/base_link``, tf_prefix style),
@@ -86,8 +89,12 @@ class FleetStatistics:
         dropped: messages on a robot's tf topics that were not a ``TFMessage``.
         gone: times a robot was reported gone.
         robots_refused: namespaces announced by a peer (liveliness) that were not
-            followed because ``max_robots`` robots were kept already.
+            followed because ``max_robots`` robots were kept and every one of them was
+            alive.
         released: robots released after being gone for ``forget_after`` seconds.
+        evicted: gone robots released before ``forget_after`` to make room for a newly
+            announced (or added) robot when ``max_robots`` robots were kept, the one
+            gone the longest first.
     """
 
     messages: int = 0
@@ -97,6 +104,7 @@ class FleetStatistics:
     gone: int = 0
     robots_refused: int = 0
     released: int = 0
+    evicted: int = 0
 
 
 @dataclass(slots=True)
@@ -107,6 +115,7 @@ class _Robot:
     broadcasters: set[str] = field(default_factory=set)  # node ids
     pinned: bool = False
     gone_ns: int | None = None  # the fleet clock's time when its last node went away
+    gone_seq: int = 0  # the order of going away (ties of gone_ns)
     messages: int = 0
     transforms: int = 0
     callbacks: list[CallbackSubscription] = field(default_factory=list)
@@ -141,8 +150,10 @@ class FleetBuffer:
         sink: (merged only) where the prefixed transforms go instead of the merged
             buffer's ``set_transforms`` (e.g. a :class:`~tfbus.monitor.MonitoredSink`
             around it); the authority given is the robot's broadcaster name.
-        max_robots: most robots kept at once (alive, gone or added); a namespace a peer
-            announces beyond that is refused and counted (``robots_refused``).
+        max_robots: most robots kept at once (alive, gone or added); when that many are
+            kept, a newly announced robot takes the place of the one gone the longest
+            (released early, counted in ``evicted``), and is refused and counted
+            (``robots_refused``) only when every kept robot is alive.
         forget_after: seconds of ``clock`` time after which a gone robot is released
             (``math.inf``: never). With ``merged=True`` the merged buffer keeps the
             frames it already stored (dynamic ones leave it after ``cache_time``).
@@ -291,7 +302,8 @@ class FleetBuffer:
 
         Raises:
             ValueError: an empty name or one containing ``/``.
-            RuntimeError: ``max_robots`` robots are kept already.
+            RuntimeError: ``max_robots`` robots are kept already, every one alive (a gone
+                one makes room, as for an announced robot).
         """
         entry = self._robot(robot)
         if entry is None:
@@ -323,7 +335,7 @@ class FleetBuffer:
             raise ValueError(f"robot name must be one non-empty chunk, got {robot!r}")
         if len(self._robots) >= self._max_robots:
             self._release_due()
-            if len(self._robots) >= self._max_robots:
+            if len(self._robots) >= self._max_robots and not self._release_longest_gone():
                 return None
         buffer = None if self._merged is not None else Buffer(self._cache_time, clock=self._clock)
         entry = self._robots[robot] = _Robot(robot, buffer)
@@ -378,6 +390,7 @@ class FleetBuffer:
         if not self._info(entry).alive:
             self._stats.gone += 1
             entry.gone_ns = self._time.now_ns()
+            entry.gone_seq = self._stats.gone
             self._schedule_release()
             self._notify("gone", entry)
 
@@ -406,11 +419,30 @@ class FleetBuffer:
         now = self._time.now_ns()
         for name, entry in list(self._robots.items()):
             if entry.gone_ns is not None and now - entry.gone_ns >= self._forget_ns:
-                for cb in entry.callbacks:
-                    cb.close()
-                del self._robots[name]
+                self._release(name)
                 self._stats.released += 1
         self._schedule_release()
+
+    def _release(self, name: str) -> None:
+        """Release one robot: its subscriptions closed, its buffer closed (waits on it
+        fail with BufferClosedException; what it stored stays readable by whoever holds
+        it) and its entry dropped."""
+        entry = self._robots.pop(name)
+        for cb in entry.callbacks:
+            cb.close()
+        if entry.buffer is not None:
+            entry.buffer.close()
+
+    def _release_longest_gone(self) -> bool:
+        """Make room (``max_robots`` kept): release the robot gone the longest, before its
+        ``forget_after`` (counted in ``evicted``); False when every kept robot is alive."""
+        gone = [(r.gone_ns, r.gone_seq, name) for name, r in self._robots.items()
+                if r.gone_ns is not None]
+        if not gone:
+            return False
+        self._release(min(gone)[2])
+        self._stats.evicted += 1
+        return True
 
     def _authority(self, entry: _Robot) -> str:
         names = sorted(entry.nodes[n] for n in entry.broadcasters if n in entry.nodes)
