@@ -8,11 +8,17 @@ Run: ``uvicorn examples.fastapi_app:app --host 127.0.0.1 --port 8000``, then
 * a request awaits a transform up to 0.2 s in the future; its timeout becomes HTTP 504,
   a frame the buffer has never heard of HTTP 404 (the timeout's ``__cause__``);
 * a client that disconnects cancels its request's task, and with it the wait;
-* shutdown: leaving the lifespan ends the tasks, then the listener, then the bus.
+* shutdown: SIGINT or SIGTERM closes the buffer at once, so requests still awaiting a
+  transform are answered 503 before the server waits for its open requests
+  (:func:`close_on_shutdown_signal`); leaving the lifespan then ends the tasks, the
+  listener and the bus. Under hypercorn on trio, ``examples/fastapi_hypercorn_trio.py``
+  runs this app with the same shutdown.
 """
 
 from __future__ import annotations
 
+import signal
+import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -21,6 +27,7 @@ from fastapi import FastAPI, HTTPException, Request
 
 from tfbus import (
     Buffer,
+    BufferClosedException,
     Bus,
     Duration,
     Header,
@@ -48,15 +55,43 @@ async def odometry(bus: Bus, clock: SystemClock) -> None:
             Transform(Vector3((now - start).to_sec(), 0.0, 0.0), Quaternion())))
 
 
+async def close_on_shutdown_signal(buffer: Buffer, stopping: anyio.Event) -> None:
+    """On SIGINT or SIGTERM: close ``buffer``, set ``stopping``, then hand the signal to
+    the server's own handler (uvicorn's), if it has one.
+
+    uvicorn (and hypercorn) first wait for the open requests to finish and only then run
+    the lifespan's exit, so a request awaiting a far-future transform would hold the
+    shutdown until its own timeout. Closed, the buffer ends every waiting lookup at once
+    with BufferClosedException (answered 503 below) and refuses the lookups that would
+    wait; the requests finish and the server's graceful shutdown goes on. A server run
+    from code waits on ``stopping`` instead (hypercorn's ``shutdown_trigger``). The
+    signals arrive here through anyio, in this task, not inside a signal handler.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return  # signals reach the main thread only (a test client's thread: none)
+    wanted = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.getsignal(s) for s in wanted}
+    with anyio.open_signal_receiver(*wanted) as signals:
+        async for signum in signals:
+            buffer.close()
+            stopping.set()
+            handler = previous[signum]
+            # Python's own SIGINT handler raises KeyboardInterrupt: not in this task.
+            if callable(handler) and handler is not signal.default_int_handler:
+                handler(signum, None)
+
+
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     clock = SystemClock()
     buffer = Buffer(clock=clock)
+    stopping = anyio.Event()
     # Bus outermost, the application's task group innermost: tasks that publish end
     # before the bus closes.  Pass Bus(ZenohTransport(...)) to listen to other processes.
     async with Bus() as bus, TransformListener(buffer, bus), anyio.create_task_group() as tg:
         tg.start_soon(odometry, bus, clock)
-        app.state.buffer, app.state.clock = buffer, clock
+        tg.start_soon(close_on_shutdown_signal, buffer, stopping)
+        app.state.buffer, app.state.clock, app.state.stopping = buffer, clock, stopping
         yield
         tg.cancel_scope.cancel()
 
@@ -73,6 +108,8 @@ async def transform(
     when = request.app.state.clock.now() + Duration.from_sec(ahead)
     try:
         t = await buffer.lookup_transform_async(target, source, when, timeout=timeout)
+    except BufferClosedException as exc:  # the server is shutting down
+        raise HTTPException(503, "shutting down: no transform will come") from exc
     except TimeoutException as exc:
         # The reason at the deadline, exc.__cause__, tells "never heard of it" (a
         # LookupException: 404) from "not yet" (ForwardExtrapolationException ...: 504).

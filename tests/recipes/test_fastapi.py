@@ -83,3 +83,93 @@ def test_served_by_uvicorn_and_shut_down_by_sigterm() -> None:
         assert not any("Traceback" in line for line in server.seen), server.seen
     finally:
         server.kill()
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _sigint_with_a_lookup_waiting(server: object, port: int) -> tuple[int, float, str]:
+    """A request awaiting a transform an hour ahead (timeout 3600 s) is waiting (the
+    app's /waits says so); SIGINT to the server's PID. Returns the request's status, the
+    seconds from the signal to its answer, and its body."""
+    import signal
+    import threading
+    import time
+
+    from .proc import Child
+
+    assert isinstance(server, Child)
+    answer: dict[str, object] = {}
+
+    def request() -> None:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=120) as client:
+            r = client.get("/transform/odom/base_link", params={"ahead": 3600,
+                                                                "timeout": 3600})
+            answer.update(status=r.status_code, body=r.text, at=time.monotonic())
+
+    waiter = threading.Thread(target=request, daemon=True)
+    waiter.start()
+    with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+        deadline = time.monotonic() + 60
+        while client.get("/waits").json()["pending"] != 1:
+            assert time.monotonic() < deadline, "the request never started waiting"
+            time.sleep(0.05)  # polling the app's own count, bounded by the deadline
+    sent = time.monotonic()
+    server.proc.send_signal(signal.SIGINT)
+    waiter.join(60)  # far less than the lookup's own 3600 s
+    assert not waiter.is_alive(), "the waiting request was not answered"
+    return int(answer["status"]), float(answer["at"]) - sent, str(answer["body"])  # type: ignore[arg-type]
+
+
+def test_sigint_to_uvicorn_answers_a_waiting_lookup_503_and_exits_0() -> None:
+    """Ctrl-C to a real uvicorn: uvicorn waits for open requests before the lifespan's
+    exit, so the recipe's signal task closes the buffer first: the request waiting on a
+    far-future transform is answered 503 at once, then uvicorn shuts down and exits 0,
+    with no traceback."""
+    pytest.importorskip("uvicorn")
+    from .proc import Child
+
+    port = _free_port()
+    server = Child("-m", "uvicorn", "examples.fastapi_app:app", "--host", "127.0.0.1",
+                   "--port", str(port))
+    try:
+        server.expect("INFO:     Application startup complete.")
+        status, seconds, body = _sigint_with_a_lookup_waiting(server, port)
+        assert status == 503 and "shutting down" in body
+        assert seconds < 30  # measured ~0.1 s (uvicorn's 0.1 s tick); bounded for load 8
+        assert server.proc.wait(60) == 0
+        lines = server.rest()
+        assert "INFO:     Application shutdown complete." in lines
+        assert not any("Traceback" in line or "CancelledError" in line for line in lines), lines
+    finally:
+        server.kill()
+
+
+def test_sigint_to_hypercorn_on_trio_answers_a_waiting_lookup_503_and_exits_0() -> None:
+    """The same application served by hypercorn on trio from code
+    (examples/fastapi_hypercorn_trio.py): the lifespan's signal task closes the buffer
+    and triggers hypercorn's shutdown."""
+    pytest.importorskip("hypercorn")
+    pytest.importorskip("trio")
+    from fleet_procs import Proc
+
+    from .proc import Child
+
+    port = _free_port()
+    server = Child("examples/fastapi_hypercorn_trio.py", str(port))
+    try:
+        Proc.expect(server, lambda line: "Running on http://127.0.0.1" in line, 60)
+        status, seconds, body = _sigint_with_a_lookup_waiting(server, port)
+        assert status == 503 and "shutting down" in body
+        assert seconds < 30
+        assert server.proc.wait(60) == 0
+        lines = server.rest()
+        assert "server stopped" in lines
+        assert not any("Traceback" in line or "Cancelled" in line for line in lines), lines
+    finally:
+        server.kill()
