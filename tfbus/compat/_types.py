@@ -14,8 +14,9 @@ dataclass with ROS's field names and defaults (ROS 2's: ``Quaternion.w = 1.0``).
 
 from __future__ import annotations
 
+import array
 import sys
-from dataclasses import dataclass, field, is_dataclass
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
 from tfbus.time import Time
@@ -67,19 +68,59 @@ def stamp_in(t: Time, like: object) -> Any:
     return t
 
 
+def _field_names(value: Any) -> tuple[str, ...] | None:
+    """The fields of a tfbus message (a NamedTuple or a dataclass), else None."""
+    names = getattr(value, "_fields", None)
+    if names is not None:
+        return tuple(names)
+    if is_dataclass(value) and not isinstance(value, type):
+        return tuple(f.name for f in fields(value))
+    return None
+
+
+def _element_class(dst: Any, element: Any) -> Any:
+    """The ROS message class for an ``element`` of a sequence field of the ROS message
+    ``dst``: the class of ``element``'s name in ``dst``'s own package (``Point32`` beside
+    ``geometry_msgs.msg.Polygon``, ``PointField`` beside ``sensor_msgs.msg.PointCloud2``),
+    else ``std_msgs.msg`` / ``geometry_msgs.msg`` / ``sensor_msgs.msg``'s."""
+    name = type(element).__name__
+    package = type(dst).__module__.rsplit(".", 1)[0]  # geometry_msgs.msg._polygon
+    for module in (package, "geometry_msgs.msg", "sensor_msgs.msg", "std_msgs.msg"):
+        try:
+            cls = getattr(sys.modules.get(module) or __import__(module, fromlist=[name]), name)
+        except Exception:
+            continue
+        if isinstance(cls, type):
+            return cls
+    return None
+
+
 def _assign(dst: Any, src: Any) -> Any:
-    """Copy the NamedTuple ``src``'s fields into the mutable message ``dst``
-    (recursively); returns ``dst``."""
-    for name in src._fields:
+    """Copy the tfbus message ``src``'s fields (a NamedTuple or dataclass) into the
+    mutable message ``dst`` (recursively: nested messages, sequences of messages in the
+    element class of ``dst``'s package, stamps in ``dst``'s time type, bytes into an
+    rclpy ``array.array`` field); returns ``dst``."""
+    for name in _field_names(src) or ():
         value = getattr(src, name)
         current = getattr(dst, name, None)
         if isinstance(value, Time):
             setattr(dst, name, stamp_in(value, current))
-        elif hasattr(value, "_fields") and current is not None and not isinstance(current, tuple):
+        elif _field_names(value) is not None and current is not None \
+                and _field_names(current) is None:
             _assign(current, value)
-        elif isinstance(value, tuple) and not hasattr(value, "_fields"):
-            setattr(dst, name, type(current)(value) if isinstance(current, (tuple, list))
-                    else list(value))
+        elif isinstance(value, (bytes, bytearray, memoryview)):
+            if isinstance(current, array.array):  # rclpy uint8[]: no per-byte check
+                setattr(dst, name, array.array(current.typecode, bytes(value)))
+            else:
+                setattr(dst, name, bytes(value))
+        elif isinstance(value, (tuple, list)) and _field_names(value) is None:
+            items = list(value)
+            if items and _field_names(items[0]) is not None:
+                cls = _element_class(dst, items[0])
+                if cls is not None:
+                    items = [_assign(cls(), item) for item in items]
+            setattr(dst, name, type(current)(items) if isinstance(current, (tuple, list))
+                    else items)
         else:
             setattr(dst, name, value)
     return dst
@@ -88,8 +129,9 @@ def _assign(dst: Any, src: Any) -> Any:
 def stamped_out(result: Any, like: Any) -> Any:
     """The tfbus message ``result`` as an instance of ``type(like)`` (a mutable ROS or
     fallback message, filled field by field), or ``result`` when ``like`` is a tfbus
-    (NamedTuple) message itself."""
-    if like is None or isinstance(like, tuple):
+    message itself (a NamedTuple, or a dataclass of :mod:`tfbus.sensor_msgs`), as
+    tf2_ros returns the caller's own message type."""
+    if like is None or isinstance(like, tuple) or type(like).__module__ == "tfbus.sensor_msgs":
         return result
     try:
         out = type(like)()

@@ -61,6 +61,7 @@ from tfbus.buffer import Buffer as _Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock
 from tfbus.compat import tf2_geometry_msgs as _geometry
+from tfbus.compat import tf2_sensor_msgs as _sensor
 from tfbus.compat._args import to_duration, to_stamped, to_time, to_transform_stamped
 from tfbus.compat._loop import (
     LoopThreadError,
@@ -73,7 +74,7 @@ from tfbus.compat._loop import (
     rospy_node_name,
     rospy_use_sim_time,
 )
-from tfbus.compat._types import flavour_of, ros_message, time_out
+from tfbus.compat._types import flavour_of, ros_message, stamped_out, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
 from tfbus.errors import (
     BackwardExtrapolationException,
@@ -136,6 +137,10 @@ _DEBIAN: dict[type, Any] = {
     WrenchStamped: _geometry.do_transform_wrench,
 }
 """The types Debian's tf2_geometry_msgs registers, transformed by its arithmetic."""
+
+_BY_FIELDS: dict[str, Any] = {"PointCloud2": _sensor.do_transform_cloud}
+"""ROS message types (by class name) that tfbus reads by their fields, as
+tf2_sensor_msgs registers ``PointCloud2``: the result in the message's own class."""
 
 DEFAULT_TF_TOPIC = TF_TOPIC
 """tf2_ros ``DEFAULT_TF_TOPIC`` (``"/tf"``)."""
@@ -445,10 +450,22 @@ class Buffer:
                          return_debug_tuple)
 
     def _apply(self, obj: Any, given: Any, ts: Any) -> Any:
+        """``obj`` (tfbus's reading of ``given``) transformed by ``ts``, in the type of
+        ``given`` (a ROS message in, the same class out, as tf2_ros returns)."""
         fn = _DEBIAN.get(type(obj))
         if fn is not None:
             return fn(given, ts)
-        return self.registration.get(type(obj))(obj, to_transform_stamped(ts))
+        try:
+            registered = self.registration.get(type(obj))
+        except TypeError:
+            # A ROS message of a type tfbus transforms by its fields (a rospy or rclpy
+            # PointCloud2, which tf2_sensor_msgs registers): that function, unless the
+            # program registered one for its class.
+            by_fields = _BY_FIELDS.get(type(obj).__name__)
+            if by_fields is None:
+                raise
+            return by_fields(given, ts)
+        return stamped_out(registered(obj, to_transform_stamped(ts)), given)
 
     def transform(
         self,
