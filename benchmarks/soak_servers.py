@@ -14,7 +14,18 @@ counted):
   ``tfbus serve-buffer`` run the whole time;
 * every ``--client-period`` s a new client process (``--role client``) opens a session,
   asks serve-buffer a lookup that is answered, one for a frame that never comes with no
-  timeout (cancelled after 1 s by the client), one with a 2 KB frame name, then leaves.
+  timeout (cancelled after 1 s by the client), one with a 2 KB frame name, then leaves;
+* ``tfbus web --bus`` serves rosbridge clients: one well-behaved client stays subscribed
+  to ``/tf`` the whole time (it must get messages in every 10 s window), while short
+  clients join, subscribe and leave at random: a close handshake, an aborted connection,
+  a half-open one, one that never reads, garbage (bad JSON, a binary frame, unknown ops),
+  a service call left behind;
+* ``tfbus view``'s page is fetched every 5 s by a well-behaved client, while others ask
+  unknown paths, send half a request and hold it, or open a websocket and abort it;
+* a fleet listener (``--role fleet``: a FleetBuffer on ``namespace=*``, ``max_robots``
+  20) follows a robot that stays (``keeper``, asked a lookup every 2 s) while robots
+  with ever new names come (``--role robot``, each its own namespace and process), send
+  for a moment and leave, by SIGINT or SIGKILL: the fleet fills and makes room.
 
 The resident memory (VmRSS) of every long-lived process is read after ``--warmup`` s and
 at the end; the soak passes when none grew by more than ``--max-growth-mb`` MB, no valid
@@ -23,6 +34,7 @@ Prints one line per process and a verdict; exits 1 on a failure. Not a test (it 
 minutes): ``benchmarks/results/soak_servers.txt`` keeps the last full run's output.
 
     .venv/bin/python benchmarks/soak_servers.py                      # 30 min, as measured
+    .venv/bin/python benchmarks/soak_servers.py --seconds 600 --warmup 300 --max-growth-mb 5
     .venv/bin/python benchmarks/soak_servers.py --seconds 60 --warmup 20
 """
 
@@ -171,6 +183,197 @@ def client(args: argparse.Namespace) -> None:
     anyio.run(main)
 
 
+def robot(args: argparse.Namespace) -> None:
+    """A robot in its own namespace: map -> base_link at 20 Hz until SIGINT."""
+    import anyio
+
+    from tfbus import Header, Quaternion, Time, Transform, TransformBroadcaster, TransformStamped
+    from tfbus import Vector3 as V3
+    from tfbus.transports.spec import open_bus
+
+    async def main() -> None:
+        async with open_bus(f"{args.bus}&namespace={args.name}") as bus:
+            tf = TransformBroadcaster(bus)
+            print("READY", flush=True)
+            with anyio.move_on_after(1e9):
+                async with anyio.create_task_group() as tg:
+
+                    async def stop() -> None:
+                        await _until_signal()
+                        tg.cancel_scope.cancel()
+
+                    tg.start_soon(stop)
+                    while True:
+                        now = Time.from_ns(time.time_ns())
+                        await tf.send_transform(TransformStamped(
+                            Header(now, "map"), "base_link",
+                            Transform(V3(1.0, 2.0, 0.0), Quaternion())))
+                        await anyio.sleep(0.05)
+
+    anyio.run(main)
+
+
+def fleet(args: argparse.Namespace) -> None:
+    """A fleet listener (max_robots 20); every 2 s a lookup of the keeper robot; at
+    SIGINT prints FLEET <answered> <missed> <robots kept> <gone> <evicted> <refused>."""
+    import anyio
+
+    from tfbus import Time
+    from tfbus.fleet import FleetBuffer
+    from tfbus.transports.spec import open_bus
+
+    async def main() -> None:
+        answered = missed = 0
+        async with open_bus(f"{args.bus}&namespace=*") as bus, \
+                FleetBuffer(bus, max_robots=20, forget_after=300.0) as robots:
+            await robots.wait_for_robot("keeper", timeout=60)
+            print("READY", flush=True)
+            async with anyio.create_task_group() as tg:
+
+                async def stop() -> None:
+                    await _until_signal()
+                    tg.cancel_scope.cancel()
+
+                tg.start_soon(stop)
+                while True:
+                    await anyio.sleep(2.0)
+                    try:
+                        t = await robots["keeper"].lookup_transform_async(
+                            "map", "base_link", Time(0), timeout=1.0)
+                        answered += t.transform.translation.x == 1.0
+                    except Exception:
+                        missed += 1
+            st = robots.statistics()
+            print(f"FLEET {answered} {missed} {len(robots)} {st.gone} {st.evicted} "
+                  f"{st.robots_refused}", flush=True)
+
+    anyio.run(main)
+
+
+class WebClient:
+    """A blocking rosbridge (websocket) client on 127.0.0.1 (wsproto over a socket)."""
+
+    def __init__(self, port: int, timeout: float = 10.0) -> None:
+        from wsproto import ConnectionType, WSConnection
+        from wsproto.events import AcceptConnection, Request
+
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+        self.ws = WSConnection(ConnectionType.CLIENT)
+        self.sock.sendall(self.ws.send(Request(host=f"127.0.0.1:{port}", target="/")))
+        self.pending: list[Any] = []
+        while not any(isinstance(e, AcceptConnection) for e in self.pending):
+            self._read()
+        self.pending.clear()
+
+    def _read(self) -> None:
+        data = self.sock.recv(65536)
+        if not data:
+            raise ConnectionError("closed by the server")
+        self.ws.receive_data(data)
+        self.pending.extend(self.ws.events())
+
+    def send(self, message: dict[str, Any]) -> None:
+        import json
+
+        from wsproto.events import TextMessage
+
+        self.sock.sendall(self.ws.send(TextMessage(json.dumps(message))))
+
+    def send_raw(self, event: Any) -> None:
+        self.sock.sendall(self.ws.send(event))
+
+    def messages(self, n: int) -> int:
+        """Read until ``n`` text messages came (or the socket's timeout); how many."""
+        from wsproto.events import TextMessage
+
+        got = 0
+        while got < n:
+            while self.pending:
+                if isinstance(self.pending.pop(0), TextMessage):
+                    got += 1
+            if got < n:
+                self._read()
+        return got
+
+    def close_handshake(self) -> None:
+        from wsproto.events import CloseConnection
+
+        self.send_raw(CloseConnection(code=1000))
+        with contextlib.suppress(OSError, ConnectionError):
+            while not any(isinstance(e, CloseConnection) for e in self.pending):
+                self._read()
+        self.sock.close()
+
+    def abort(self) -> None:
+        import struct
+
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        self.sock.close()
+
+
+def web_churn_once(port: int, kind: int) -> None:
+    """One short rosbridge client: join, subscribe /tf, read a little, leave in the way
+    ``kind`` names (mod 6)."""
+    from wsproto.events import BytesMessage, TextMessage
+
+    c = WebClient(port)
+    try:
+        c.send({"op": "subscribe", "topic": "/tf", "type": "tf2_msgs/TFMessage"})
+        c.messages(2)
+        way = kind % 6
+        if way == 0:
+            c.close_handshake()
+        elif way == 1:
+            c.abort()
+        elif way == 2:  # half-open: no more from us, then gone
+            c.sock.shutdown(socket.SHUT_WR)
+            time.sleep(0.5)
+            c.sock.close()
+        elif way == 3:  # never reads while /tf flows, then aborts
+            time.sleep(2.0)
+            c.abort()
+        elif way == 4:  # garbage
+            c.send_raw(TextMessage("{not json"))
+            c.send_raw(BytesMessage(b"\x00\xff" * 100))
+            c.send({"op": "no_such_op", "id": 7})
+            c.send({"op": "subscribe"})
+            c.send({"op": "subscribe", "topic": 5, "throttle_rate": "x"})
+            c.messages(1)
+            c.close_handshake()
+        else:  # a service call, left behind
+            c.send({"op": "call_service", "service": "/rosapi/topics", "id": "s1"})
+            c.abort()
+    except (OSError, ConnectionError):
+        c.sock.close()
+
+
+def view_churn_once(port: int, kind: int) -> bool:
+    """One view client: ``kind`` (mod 4) a page fetch, an unknown path, half a request
+    held 2 s, a websocket opened then aborted. True when the page answered as it should."""
+    import struct
+
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        way = kind % 4
+        if way == 0:
+            sock.sendall(f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                         "Connection: close\r\n\r\n".encode())
+            return sock.recv(64).startswith(b"HTTP/1.1 200")
+        if way == 1:
+            sock.sendall(f"GET /{'x' * 3000} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                         "Connection: close\r\n\r\n".encode())
+            return sock.recv(64).startswith(b"HTTP/1.1 ")
+        if way == 2:
+            sock.sendall(f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n".encode())
+            time.sleep(2.0)
+            return True
+        sock.sendall(f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                     "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                     "Sec-WebSocket-Version: 13\r\n\r\n".encode())
+        sock.recv(64)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        return True
+
+
 class Proc:
     """A child process whose stdout lines are collected by a thread."""
 
@@ -230,15 +433,75 @@ def run(args: argparse.Namespace) -> int:
     sub = Proc("listener", [*me, "--role", "sub"])
     sub.wait_line("READY", 60)
     view_port = _free_port()
+    web_port = _free_port()
     servers = [
         Proc("monitor", [*TFBUS, "monitor", "--bus", bus, "--interval", "10"]),
         Proc("view", [*TFBUS, "view", "--bus", bus, "--port", str(view_port)]),
         Proc("serve-buffer", [*TFBUS, "serve-buffer", "--bus", bus]),
+        Proc("web", [*TFBUS, "web", "--bus", bus, "--port", str(web_port)]),
     ]
+    keeper = Proc("robot keeper", [*me, "--role", "robot", "--name", "keeper"])
+    keeper.wait_line("READY", 60)
+    fleet_listener = Proc("fleet", [*me, "--role", "fleet"])
+    fleet_listener.wait_line("READY", 60)
+    servers.append(fleet_listener)
     pub = Proc("broadcaster", [*me, "--role", "pub", "--rate", str(args.rate),
                                "--frames", str(args.frames)])
     pub.wait_line("READY", 60)
-    watched = [router, sub, *servers, pub]
+    watched = [router, sub, *servers, pub, keeper]
+    stop = threading.Event()
+    churn = {"web": 0, "web_failed": 0, "view": 0, "view_bad": 0, "robots": 0}
+    windows: list[int] = []  # /tf messages the subscribed web client got per 10 s
+
+    def web_keeper() -> None:
+        c = WebClient(web_port, timeout=10.0)
+        c.send({"op": "subscribe", "topic": "/tf", "type": "tf2_msgs/TFMessage"})
+        while not stop.is_set():  # messages in each 10 s window (0: starved)
+            end, got = time.monotonic() + 10.0, 0
+            while time.monotonic() < end:
+                try:
+                    got += c.messages(1)
+                except (OSError, ConnectionError):
+                    break
+            windows.append(got)
+        c.close_handshake()
+
+    def web_churner() -> None:
+        k = 0
+        while not stop.wait(0.5):
+            try:
+                web_churn_once(web_port, k)
+                churn["web"] += 1
+            except (OSError, ConnectionError):
+                churn["web_failed"] += 1
+            k += 1
+
+    def view_churner() -> None:
+        k = 0
+        while not stop.wait(1.0):
+            try:
+                good = view_churn_once(view_port, k)
+            except OSError:
+                good = False
+            churn["view"] += 1
+            churn["view_bad"] += not good
+            k += 1
+
+    def robot_churner() -> None:
+        k = 0
+        while not stop.wait(3.0):
+            r = Proc("robot", [*me, "--role", "robot", "--name", f"churn{k}"])
+            with contextlib.suppress(RuntimeError):
+                r.wait_line("READY", 60)
+            time.sleep(1.0)
+            r.stop(signal.SIGINT if k % 2 else signal.SIGKILL)
+            churn["robots"] += 1
+            k += 1
+
+    threads = [threading.Thread(target=f, daemon=True)
+               for f in (web_keeper, web_churner, view_churner, robot_churner)]
+    for t in threads:
+        t.start()
     start = time.monotonic()
     clients_ok = clients_bad = 0
     rss0: dict[str, float] = {}
@@ -265,6 +528,9 @@ def run(args: argparse.Namespace) -> int:
         time.sleep(0.5)
     rss1 = {p.name: p.rss_mb() for p in watched}
     alive = all(p.proc.poll() is None for p in watched)
+    stop.set()
+    for t in threads:
+        t.join(60)
     pub.stop()
     sent = int(pub.wait_line("SENT", 30).split()[1])
     time.sleep(2.0)  # the listener drains what is in flight
@@ -272,8 +538,12 @@ def run(args: argparse.Namespace) -> int:
     received, repeats = map(int, sub.wait_line("RECEIVED", 30).split()[1:])
     for p in servers:
         p.stop()
+    answered_fleet, missed_fleet, kept, gone, evicted, refused = map(
+        int, fleet_listener.wait_line("FLEET", 30).split()[1:])
+    keeper.stop()
     router.stop()
-    traces = [p.name for p in [*servers, router] if any("Traceback" in ln for ln in p.err)]
+    traces = [p.name for p in [*servers, router, keeper]
+              if any("Traceback" in ln for ln in p.err)]
     print(f"soak: {args.seconds:.0f} s at {args.rate:g} Hz x {args.frames} frames over "
           f"a Zenoh router; {clients_ok + clients_bad} lookup clients")
     growth_ok = True
@@ -287,8 +557,18 @@ def run(args: argparse.Namespace) -> int:
     print(f"  transforms sent {sent}, received {received}, lost {lost} "
           f"(received again or out of order: {repeats})")
     print(f"  lookup clients answered right {clients_ok}, wrong or unanswered {clients_bad}")
+    starved = sum(1 for n in windows[:-1] if n == 0)  # the last window is cut short
+    print(f"  tfbus web: {churn['web']} short clients came and went ({churn['web_failed']} "
+          f"could not connect); the subscribed client got /tf in {len(windows) - starved} "
+          f"of {len(windows)} 10 s windows (min {min(windows[:-1] or [0])} messages)")
+    print(f"  tfbus view: {churn['view']} clients, {churn['view_bad']} answered wrong")
+    print(f"  fleet: {churn['robots']} robots came and went (gone {gone}, evicted {evicted}, "
+          f"refused {refused}, kept {kept}); the keeper's lookups answered {answered_fleet}, "
+          f"missed {missed_fleet}")
     print(f"  tracebacks on stderr: {traces or 'none'}")
-    ok = alive and growth_ok and lost == 0 and clients_bad == 0 and not traces
+    ok = (alive and growth_ok and lost == 0 and clients_bad == 0 and not traces
+          and starved == 0 and churn["web_failed"] == 0 and churn["view_bad"] == 0
+          and missed_fleet == 0 and answered_fleet > 0 and refused == 0)
     print("verdict:", "PASS" if ok else "FAIL")
     return 0 if ok else 1
 
@@ -301,9 +581,10 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=50)
     p.add_argument("--client-period", type=float, default=10.0)
     p.add_argument("--max-growth-mb", type=float, default=10.0)
-    p.add_argument("--role", choices=["run", "pub", "sub", "client"], default="run",
-                   help=argparse.SUPPRESS)
+    p.add_argument("--role", choices=["run", "pub", "sub", "client", "robot", "fleet"],
+                   default="run", help=argparse.SUPPRESS)
     p.add_argument("--bus", help=argparse.SUPPRESS)
+    p.add_argument("--name", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.role == "pub":
         publisher(args)
@@ -311,6 +592,10 @@ def main() -> None:
         subscriber(args)
     elif args.role == "client":
         client(args)
+    elif args.role == "robot":
+        robot(args)
+    elif args.role == "fleet":
+        fleet(args)
     else:
         sys.exit(run(args))
 
