@@ -107,9 +107,6 @@ def main() -> None:
         "vector3": (geometry.do_transform_vector3, vector),
         "pose": (geometry.do_transform_pose, pose),
         "wrench": (geometry.do_transform_wrench, wrench),
-        "transform": (geometry.do_transform_transform, inner),
-        "pose_with_covariance": (geometry.do_transform_pose_with_covariance_stamped, with_cov),
-        "polygon": (geometry.do_transform_polygon_stamped, polygon),
         "cloud": (sensor.do_transform_cloud, given_cloud),
     }
     for name, (fn, given) in cases.items():
@@ -129,9 +126,6 @@ def main() -> None:
         and ours.header == theirs.header and ours.point_step == theirs.point_step
         and ours.row_step == theirs.row_step and ours.width == theirs.width)
     results["cloud"]["points"] = [list(p) for p in point_cloud2.read_points(ours)]
-    covariance = geometry.do_transform_pose_with_covariance_stamped(with_cov, t)
-    results["pose_with_covariance"]["covariance_type"] = type(
-        covariance.pose.covariance).__name__
     print(json.dumps(results))
 
 

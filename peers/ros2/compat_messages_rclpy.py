@@ -110,9 +110,6 @@ def main() -> None:
         "pose_stamped": (geometry.do_transform_pose_stamped, pose),
         "pose": (geometry.do_transform_pose, plain),
         "wrench": (geometry.do_transform_wrench, wrench),
-        "transform": (geometry.do_transform_transform, inner),
-        "pose_with_covariance": (geometry.do_transform_pose_with_covariance_stamped, with_cov),
-        "polygon": (geometry.do_transform_polygon_stamped, polygon),
         "cloud": (sensor.do_transform_cloud, cloud()),
     }
     results: dict[str, Any] = {}

@@ -106,7 +106,7 @@ def _assign(dst: Any, src: Any) -> Any:
         if isinstance(value, Time):
             setattr(dst, name, stamp_in(value, current))
         elif _field_names(value) is not None and current is not None \
-                and _field_names(current) is None:
+                and not isinstance(current, tuple):
             _assign(current, value)
         elif isinstance(value, (bytes, bytearray, memoryview)):
             if isinstance(current, array.array):  # rclpy uint8[]: no per-byte check

@@ -127,11 +127,10 @@ def do_transform_vector3(vector3: Any, transform: Any) -> Any:
     return _out(_Vector3Stamped(ts.header, _rotate(ts, v)), vector3)
 
 
-def do_transform_transform(transform_in: Any, transform: Any) -> Any:
-    """``do_transform_transform``: :func:`tfbus.convert.do_transform_transform`, in the
-    type of ``transform_in``."""
-    return _out(_transform(to_transform_stamped(transform_in, "transform_in"),
-                           to_transform_stamped(transform)), transform_in)
+def do_transform_transform(transform_in: Any, transform: Any) -> _TransformStamped:
+    """``do_transform_transform``: :func:`tfbus.convert.do_transform_transform`."""
+    return _transform(to_transform_stamped(transform_in, "transform_in"),
+                      to_transform_stamped(transform))
 
 
 def do_transform_wrench(wrench: Any, transform: Any, *, lever_arm: bool = False) -> Any:
@@ -187,15 +186,17 @@ def do_transform_pose_stamped(pose: Any, transform: Any) -> Any:
         pose, "header") else pose, transform)
 
 
-def do_transform_pose_with_covariance_stamped(pose: Any, transform: Any) -> Any:
+def do_transform_pose_with_covariance_stamped(
+    pose: Any, transform: Any
+) -> PoseWithCovarianceStamped:
     """ROS 2 ``do_transform_pose_with_covariance_stamped``: the pose through KDL as
     :func:`do_transform_pose` (ROS 2 goes through ``tf2::fromMsg`` to a KDL frame: bit
     for bit, w = +1 for (x=1, w=0)∘(x=1, w=0)), the covariance rotated by
-    :func:`tfbus.convert.do_transform_pose_with_covariance`; in the type of ``pose``."""
+    :func:`tfbus.convert.do_transform_pose_with_covariance`."""
     ts = to_transform_stamped(transform)
     out = _pose_cov(_stamped(pose, PoseWithCovarianceStamped, "pose"), ts)
     given = _stamped(pose, PoseWithCovarianceStamped, "pose").pose.pose
-    return _out(out._replace(pose=out.pose._replace(pose=_pose_kdl(ts, given))), pose)
+    return out._replace(pose=out.pose._replace(pose=_pose_kdl(ts, given)))
 
 
 def transform_covariance(cov_in: Any, transform: Any) -> tuple[float, ...]:
@@ -204,8 +205,6 @@ def transform_covariance(cov_in: Any, transform: Any) -> tuple[float, ...]:
     return _covariance(cov_in, to_transform_stamped(transform))
 
 
-def do_transform_polygon_stamped(polygon: Any, transform: Any) -> Any:
-    """ROS 2 ``do_transform_polygon_stamped``: :func:`tfbus.convert.do_transform_polygon`,
-    in the type of ``polygon``."""
-    return _out(_polygon(_stamped(polygon, PolygonStamped, "polygon"),
-                         to_transform_stamped(transform)), polygon)
+def do_transform_polygon_stamped(polygon: Any, transform: Any) -> PolygonStamped:
+    """ROS 2 ``do_transform_polygon_stamped``: :func:`tfbus.convert.do_transform_polygon`."""
+    return _polygon(_stamped(polygon, PolygonStamped, "polygon"), to_transform_stamped(transform))

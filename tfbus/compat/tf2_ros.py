@@ -74,7 +74,7 @@ from tfbus.compat._loop import (
     rospy_node_name,
     rospy_use_sim_time,
 )
-from tfbus.compat._types import flavour_of, ros_message, stamped_out, time_out
+from tfbus.compat._types import flavour_of, ros_message, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
 from tfbus.errors import (
     BackwardExtrapolationException,
@@ -450,8 +450,9 @@ class Buffer:
                          return_debug_tuple)
 
     def _apply(self, obj: Any, given: Any, ts: Any) -> Any:
-        """``obj`` (tfbus's reading of ``given``) transformed by ``ts``, in the type of
-        ``given`` (a ROS message in, the same class out, as tf2_ros returns)."""
+        """``obj`` (tfbus's reading of ``given``) transformed by ``ts``: Debian's types and
+        a ROS ``PointCloud2`` in the type of ``given``, the other registered types as
+        their function returns."""
         fn = _DEBIAN.get(type(obj))
         if fn is not None:
             return fn(given, ts)
@@ -465,7 +466,7 @@ class Buffer:
             if by_fields is None:
                 raise
             return by_fields(given, ts)
-        return stamped_out(registered(obj, to_transform_stamped(ts)), given)
+        return registered(obj, to_transform_stamped(ts))
 
     def transform(
         self,
