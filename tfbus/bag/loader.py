@@ -264,17 +264,16 @@ def _walk(
             ahead = pull()
         while held and held[0][0] < w0 - margin_ns:
             held.popleft()
-        times = [ns for ns, _, _ in held if w0 <= ns < w1]
-        if times:
+        own = [(ns, tss) for ns, tss, _ in held if w0 <= ns < w1]  # received in the window
+        if own:
             stamps = [ts.header.stamp.ns for _, tss, _ in held for ts in tss]
             span = (max(stamps) - min(stamps)) / NSEC_PER_SEC if stamps else 0.0
             core = BufferCore(cache_time=max(10.0, span + 1.0))
             _fill(core, statics, [(tss, auth) for _, tss, auth in held])
-            own = np.unique(np.fromiter(
-                (ts.header.stamp.ns for ns, tss, _ in held if w0 <= ns < w1 for ts in tss),
-                dtype=np.int64))
-            yield Window(Time.from_ns(w0), Time.from_ns(w1), core, len(times),
-                         Time.from_ns(max(times)), own[own != 0])
+            own_stamps = np.unique(np.fromiter(
+                (ts.header.stamp.ns for _, tss in own for ts in tss), dtype=np.int64))
+            yield Window(Time.from_ns(w0), Time.from_ns(w1), core, len(own),
+                         Time.from_ns(max(ns for ns, _ in own)), own_stamps[own_stamps != 0])
         later = [ns for ns, _, _ in held if ns >= w1]
         following = min(later) if later else (None if ahead is None else ahead[0])
         if following is None:
