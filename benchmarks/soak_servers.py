@@ -77,6 +77,12 @@ async def _until_signal() -> None:
             return
 
 
+async def _cancel_on_signal(scope: Any) -> None:
+    """Cancel ``scope`` (a task group's cancel scope) at the first SIGINT or SIGTERM."""
+    await _until_signal()
+    scope.cancel()
+
+
 def publisher(args: argparse.Namespace) -> None:
     """Send on an absolute schedule until SIGINT; print SENT <transforms>."""
     import anyio
@@ -104,12 +110,7 @@ def publisher(args: argparse.Namespace) -> None:
             start = time.monotonic()
             print("READY", flush=True)
             async with anyio.create_task_group() as tg:
-
-                async def stop() -> None:
-                    await _until_signal()
-                    tg.cancel_scope.cancel()
-
-                tg.start_soon(stop)
+                tg.start_soon(_cancel_on_signal, tg.cancel_scope)
                 tick = 0
                 while True:
                     stamp = Time.from_ns(_T0 + tick * int(period * 1e9))
@@ -195,20 +196,14 @@ def robot(args: argparse.Namespace) -> None:
         async with open_bus(f"{args.bus}&namespace={args.name}") as bus:
             tf = TransformBroadcaster(bus)
             print("READY", flush=True)
-            with anyio.move_on_after(1e9):
-                async with anyio.create_task_group() as tg:
-
-                    async def stop() -> None:
-                        await _until_signal()
-                        tg.cancel_scope.cancel()
-
-                    tg.start_soon(stop)
-                    while True:
-                        now = Time.from_ns(time.time_ns())
-                        await tf.send_transform(TransformStamped(
-                            Header(now, "map"), "base_link",
-                            Transform(V3(1.0, 2.0, 0.0), Quaternion())))
-                        await anyio.sleep(0.05)
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(_cancel_on_signal, tg.cancel_scope)
+                while True:
+                    now = Time.from_ns(time.time_ns())
+                    await tf.send_transform(TransformStamped(
+                        Header(now, "map"), "base_link",
+                        Transform(V3(1.0, 2.0, 0.0), Quaternion())))
+                    await anyio.sleep(0.05)
 
     anyio.run(main)
 
@@ -229,12 +224,7 @@ def fleet(args: argparse.Namespace) -> None:
             await robots.wait_for_robot("keeper", timeout=60)
             print("READY", flush=True)
             async with anyio.create_task_group() as tg:
-
-                async def stop() -> None:
-                    await _until_signal()
-                    tg.cancel_scope.cancel()
-
-                tg.start_soon(stop)
+                tg.start_soon(_cancel_on_signal, tg.cancel_scope)
                 while True:
                     await anyio.sleep(2.0)
                     try:
