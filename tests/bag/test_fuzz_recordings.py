@@ -194,8 +194,8 @@ def ros1_layout(data: bytes) -> tuple[list[tuple[int, int]], list[tuple[int, int
             for at, name, value in _ros1_fields(data, off, hlen):
                 lengths.append((at, 4))
                 fields[name] = value
-            if b"size" in fields:  # a chunk's uncompressed size
-                lengths.append((fields[b"size"], 4))
+            if b"size" in fields:  # a chunk's uncompressed size (drawn 8 times as often)
+                lengths.extend([(fields[b"size"], 4)] * 8)
             for name in (b"index_pos", b"chunk_pos"):
                 if name in fields:
                     lengths.append((fields[name], 8))
@@ -224,7 +224,8 @@ def mcap_layout(data: bytes) -> tuple[list[tuple[int, int]], list[tuple[int, int
             if top:
                 spans.append((off, min(body + n, stop)))
             if op == 0x06 and body + 32 <= stop:  # Chunk
-                lengths.extend([(body + 16, 8), (body + 28, 4)])
+                # uncompressed size (drawn 8 times as often), compression name length
+                lengths.extend([(body + 16, 8)] * 8 + [(body + 28, 4)])
                 (clen,) = struct.unpack_from("<I", data, body + 28)
                 rec = body + 32 + clen
                 compression = data[body + 32:rec]
@@ -258,6 +259,13 @@ LAYOUT: dict[str, Callable[[bytes], tuple[list[tuple[int, int]], list[tuple[int,
 
 
 # ------------------------------------------------------------------ damage
+
+class Damaged(bytes):
+    """Damaged file contents, shown by their size (not their bytes) in reports."""
+
+    def __repr__(self) -> str:
+        return f"<{len(self)} bytes>"
+
 
 @st.composite
 def damage(draw: st.DrawFn, rec: Recording,
@@ -401,7 +409,7 @@ def check(rec: Recording, kind: str, damaged: bytes, at: int, reader: str) -> No
         assert err is not None, (kind, at)
         assert got == rec.messages[: len(got)], (kind, at)
     if kind == "length" and reader == "read_messages":
-        assert got == rec.messages[: len(got)], (kind, at)
+        assert got == (rec.messages[: len(got)] if err else rec.messages), (kind, at)
     if kind in ("duplicate", "swap") and reader == "read_messages":
         assert all(m in rec.messages for m in got), (kind, at)
 
@@ -411,7 +419,8 @@ def _fuzz(name: str) -> Callable[..., None]:
     @given(data=st.data())
     def test(recordings: dict[str, Recording], data: st.DataObject) -> None:
         rec = recordings[name]
-        kind, damaged, at = data.draw(damage(rec), label="damage")
+        kind, damaged, at = data.draw(damage(rec).map(lambda d: (d[0], Damaged(d[1]), d[2])),
+                                      label="damage")
         reader = data.draw(st.sampled_from(list(READERS)), label="reader")
         check(rec, kind, damaged, at, reader)
 
@@ -514,3 +523,138 @@ def test_absurd_lengths_of_the_fuzz_are_set_in_files() -> None:
     lengths, spans = mcap_layout(nav)
     assert spans[0][0] == len(MCAP_MAGIC) and nav[spans[-1][0]] == 0x02  # ends at the footer
     assert spans[-1][1] == len(nav) - len(MCAP_MAGIC)
+
+
+# ------------------------------------------------------------ minimal failing inputs
+
+def _second_chunk_size(data: bytes) -> int:
+    """Offset of the ``size`` value in the header of a ROS 1 bag's second chunk."""
+    starts = [off for off, hlen, _ in _ros1_records(data, len(ROS1_MAGIC), len(data))
+              if any(name == b"op" and data[v] == 0x05
+                     for _, name, v in _ros1_fields(data, off, hlen))]
+    assert len(starts) >= 2
+    off = starts[1]
+    (hlen,) = struct.unpack_from("<I", data, off)
+    return next(v for _, name, v in _ros1_fields(data, off, hlen) if name == b"size")
+
+
+@pytest.mark.parametrize(("compression", "size"), [
+    ("bz2", 0), ("lz4", 0), ("bz2", 1), ("lz4", 1), ("bz2", "one less"), ("lz4", "one less"),
+    ("lz4", 2**30), ("lz4", 2**32 - 1)])
+def test_ros1_chunk_size_that_does_not_match_its_data(
+        tmp_path: Path, recordings: dict[str, Recording], compression: str,
+        size: int | str) -> None:
+    """Found by the fuzz tests above: a compressed ROS 1 chunk whose header gives
+    ``size`` 0 was read as holding no record, its messages dropped with no error (79 of
+    80 messages, silently); an lz4 chunk whose ``size`` says 1 GiB or 4 GiB had a buffer
+    that large allocated (lz4's ``max_length``). Now the chunk's data must decompress to
+    exactly its size, in memory bounded by the data: the messages before the chunk, then
+    a BagReadError at the chunk naming the compression, and nothing allocated."""
+    rec = recordings[f"ros1_{compression}"]
+    at = _second_chunk_size(rec.data)
+    real = int.from_bytes(rec.data[at:at + 4], "little")
+    value = real - 1 if size == "one less" else int(size)
+    bad = tmp_path / "size.bag"
+    bad.write_bytes(rec.data[:at] + value.to_bytes(4, "little") + rec.data[at + 4:])
+    got, err = read_damaged(bad, "read_messages")
+    assert isinstance(err, BagReadError), repr(err)
+    assert not _memory_errors(err)
+    assert f"corrupt {compression} chunk" in err.reason and str(bad) in str(err)
+    assert 0 < len(got) < len(rec.messages) and got == rec.messages[: len(got)]
+    assert err.offset is not None and err.offset < at  # the chunk's record holds `at`
+
+
+def _first_chunk_without_content_size(data: bytes, size: int) -> bytes:
+    """``data`` (a zstd MCAP file) up to its first chunk, that chunk rewritten with its
+    records compressed by zstd without the frame's content size and ``size`` as its
+    uncompressed size; the file ends there (cut short: no summary)."""
+    import zstandard
+
+    _, spans = mcap_layout(data)
+    start = next(a for a, _ in spans if data[a] == 0x06)
+    body = start + 9
+    (clen,) = struct.unpack_from("<I", data, body + 28)
+    rec = body + 32 + clen
+    assert data[body + 32:rec] == b"zstd"
+    (rlen,) = struct.unpack_from("<Q", data, rec)
+    records = zstandard.ZstdDecompressor().decompress(data[rec + 8:rec + 8 + rlen])
+    packed = zstandard.ZstdCompressor(write_content_size=False).compress(records)
+    content = (data[body:body + 16] + struct.pack("<QI", size, 0) + struct.pack("<I", 4)
+               + b"zstd" + struct.pack("<Q", len(packed)) + packed)
+    return data[:start] + b"\x06" + struct.pack("<Q", len(content)) + content
+
+
+@pytest.mark.parametrize("size", [2**32, 2**40, 2**63, 2**64 - 1, 1])
+def test_mcap_chunk_size_that_does_not_match_its_data(
+        tmp_path: Path, recordings: dict[str, Recording], size: int) -> None:
+    """Found by the fuzz tests above: an MCAP zstd chunk whose uncompressed size says
+    2^63 stopped the read with "Python int too large to convert to C ssize_t"; zstd data
+    written without its content size had a buffer of the header's size allocated (4 GiB,
+    1 TiB). Now a BagReadError says the chunk's data decompresses to another size than
+    its header gives, and nothing that large is allocated."""
+    data = _first_chunk_without_content_size(recordings["mcap_zstd"].data, size)
+    bad = tmp_path / "size.mcap"
+    bad.write_bytes(data)
+    got, err = read_damaged(bad, "read_messages")
+    assert isinstance(err, BagReadError), repr(err)
+    assert not _memory_errors(err), "the chunk's size was allocated"
+    assert got == []
+    assert "corrupt zstd chunk: its data decompresses to" in err.reason, err.reason
+    assert f"the {size} bytes its header gives" in err.reason, err.reason
+    # the same chunk with its true size is read: the first chunk's messages
+    true = tmp_path / "true.mcap"
+    import zstandard
+
+    records_size = len(zstandard.ZstdDecompressor().decompressobj().decompress(
+        data[data.rindex(b"zstd") + 12:]))
+    true.write_bytes(_first_chunk_without_content_size(recordings["mcap_zstd"].data,
+                                                       records_size))
+    got, err = read_damaged(true, "read_messages")
+    assert isinstance(err, BagReadError) and "truncated" in err.reason, repr(err)
+    assert got and got == recordings["mcap_zstd"].messages[: len(got)]
+
+
+def _second_message_length(data: bytes) -> int:
+    """Offset of the length field of the second message record inside an MCAP file's
+    first (uncompressed) chunk."""
+    _, spans = mcap_layout(data)
+    start = next(a for a, _ in spans if data[a] == 0x06)
+    body = start + 9
+    (clen,) = struct.unpack_from("<I", data, body + 28)
+    off = body + 32 + clen + 8
+    seen = 0
+    while True:
+        op, length = struct.unpack_from("<BQ", data, off)
+        if op == 0x05:
+            seen += 1
+            if seen == 2:
+                return off + 1
+        off += 9 + length
+
+
+@pytest.mark.parametrize("length", [0, 1, 21, 2**32, 2**40, 2**63, 2**64 - 1])
+@pytest.mark.parametrize("summary", [True, False])
+def test_mcap_message_length_that_does_not_fit_its_chunk(
+        tmp_path: Path, recordings: dict[str, Recording], length: int, summary: bool) -> None:
+    """Found by the fuzz tests above: a message record in an MCAP chunk whose length is
+    under a message header's 22 bytes, or past the chunk's end, was read (``mcap``'s
+    ``read(length - 22)``) as one message holding the rest of the chunk: the read
+    returned 1 of 80 messages and no error (2^64 - 1 stopped it with "cannot fit 'int'
+    into an index-sized integer"). Now a BagReadError naming the record, after the
+    messages of the chunks before it (none: it is in the first chunk; a chunk is read
+    whole, as for a bad CRC), whether the file is read through its summary or, cut
+    short, from the start."""
+    data = recordings["mcap"].data
+    at = _second_message_length(data)
+    patched = data[:at] + struct.pack("<Q", length) + data[at + 8:]
+    if not summary:  # cut after the first chunk: read record by record
+        _, spans = mcap_layout(data)
+        patched = patched[:next(b for a, b in spans if data[a] == 0x06)]
+    bad = tmp_path / "length.mcap"
+    bad.write_bytes(patched)
+    got, err = read_damaged(bad, "read_messages")
+    assert isinstance(err, BagReadError), repr(err)
+    assert got == []
+    assert "corrupt chunk: its" in err.reason and str(bad) in str(err), err.reason
+    assert ("more than the" in err.reason) if length >= 22 else \
+        ("less than a message's 22-byte header" in err.reason), err.reason
