@@ -63,7 +63,7 @@ NAV2 = DATA / "nav2_like.mcap"
 ROS1_MAGIC = b"#ROSBAG V2.0\n"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
-FUZZ = settings(max_examples=150, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=80, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 ABSURD_U32 = [0xFFFFFFFF, 0x80000000, 0x7FFFFFFF, 0x10000000, 0]
@@ -440,7 +440,7 @@ test_fuzz_mcap_zstd = _fuzz("mcap_zstd")
 test_fuzz_mcap_lz4 = _fuzz("mcap_lz4")
 
 
-@settings(max_examples=20, deadline=None, derandomize=True, database=None,
+@settings(max_examples=12, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(data=st.data())
 def test_fuzz_recorded_files(data: st.DataObject) -> None:

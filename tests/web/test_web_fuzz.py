@@ -15,6 +15,7 @@ Hypothesis runs derandomized (the same examples on every run) and bounded
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -36,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
-FUZZ = settings(max_examples=300, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
@@ -87,7 +88,7 @@ _leaf = (st.none() | st.booleans()
          | st.integers(-(2**64), 2**64)
          | st.floats(allow_nan=True, allow_infinity=True)
          | st.text(max_size=12)
-         | st.sampled_from(EDGES))
+         | st.sampled_from(EDGES).map(copy.deepcopy))  # [] and {} are mutated later
 JSON = st.recursive(_leaf, lambda c: st.lists(c, max_size=4)
                     | st.dictionaries(st.text(max_size=10), c, max_size=4), max_leaves=12)
 
@@ -138,7 +139,8 @@ def mutated(draw: st.DrawFn) -> Any:
             value = parent[path[-1]]
             same = NUMBER_EDGES if isinstance(value, (int, float)) else \
                 STRING_EDGES if isinstance(value, str) else EDGES
-            parent[path[-1]] = draw(st.sampled_from(same) | st.sampled_from(EDGES))
+            parent[path[-1]] = draw((st.sampled_from(same) | st.sampled_from(EDGES)).map(
+                copy.deepcopy))
         elif isinstance(parent[path[-1]], dict):
             parent[path[-1]][draw(st.text(max_size=8))] = draw(JSON)
     return message
