@@ -219,7 +219,7 @@ HOSTILE: list[tuple[object, str]] = [
     ({"op": "call_service", "service": "/republish_tfs",
       "args": {**_goal(["a"]), "rate": float("nan")}}, "must be finite"),
     ({"op": "call_service", "service": "/republish_tfs", "args": {**_goal(["a"]), "rate": 0}},
-     "rate must be > 0"),
+     "rate must be at least 0.001 Hz"),
     ({"op": "call_service", "service": "/republish_tfs",
       "args": {**_goal(["a"]), "trans_thres": -1}}, "thresholds must be >= 0"),
     ({"op": "call_service", "service": "/republish_tfs",

@@ -42,7 +42,7 @@ from tfbus.bag.formats import (
     detect_format,
     fmt_time,
 )
-from tfbus.bag.salvage import mcap_channel_source, scan_mcap, scan_ros1
+from tfbus.bag.salvage import mcap_channel_source, mcap_chunk_records, scan_mcap, scan_ros1
 from tfbus.bag.stream import read_ros1_chunks
 from tfbus.errors import BagError, BagFormatError, BagNotFoundError, BagReadError, ScanError
 from tfbus.messages import TFMessage
@@ -445,7 +445,8 @@ def _raw_mcap(
     """Raw tf messages of an MCAP file in log-time order, through its summary.
 
     ``mcap``'s SeekingReader reads the summary; the chunks that hold tf are read and
-    decompressed (CRC checked) by ``mcap``'s ``Chunk.read`` / ``breakup_chunk``, in order
+    decompressed (CRC checked) by ``mcap``'s ``Chunk.read`` / ``breakup_chunk`` (through
+    :func:`~tfbus.bag.salvage.mcap_chunk_records`: memory bounded by the data), in order
     of their first log time, and merged by log time on a heap of plain tuples (ties: the
     order of the chunks, then of the records). This is the ordering SeekingReader's
     ``iter_messages(log_time_order=True)`` gives, at a third of its cost: its queue
@@ -496,7 +497,6 @@ def _mcap_chunks(
     copied out."""
     from mcap.data_stream import ReadDataStream
     from mcap.records import Chunk, Message
-    from mcap.stream_reader import breakup_chunk
 
     sources: dict[int, Source] = {}
     for channel in summary.channels.values():
@@ -527,7 +527,7 @@ def _mcap_chunks(
         chunk = Chunk.read(ReadDataStream(stream))
         if release is not None:
             release(index.chunk_start_offset, index.chunk_length)
-        for record in breakup_chunk(chunk, validate_crc=True):
+        for record in mcap_chunk_records(chunk):
             if (
                 isinstance(record, Message)
                 and record.channel_id in sources

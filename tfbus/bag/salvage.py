@@ -26,7 +26,7 @@ import mmap
 import struct
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, cast
+from typing import IO, TYPE_CHECKING, Any, cast
 
 from tfbus.bag.decode import RawItem, Source, cdr_decoder, ros1_decoder
 from tfbus.bag.formats import MCAP_MAGIC, ROS1_MAGIC, ROS2_AUTHORITY, TF_MSGTYPES
@@ -34,11 +34,12 @@ from tfbus.errors import ScanError
 from tfbus.time import NSEC_PER_SEC
 
 if TYPE_CHECKING:
-    from mcap.records import Channel, Schema
+    from mcap.records import Channel, Chunk, Schema
 
-__all__ = ["mcap_channel_source", "scan_mcap", "scan_ros1"]
+__all__ = ["mcap_channel_source", "mcap_chunk_records", "scan_mcap", "scan_ros1"]
 
 _U32 = struct.Struct("<I")
+_STEP = 1 << 20  # bytes a chunk's decompressed data grows by at a time
 # ROS 1 record ops (header field ``op``): message data, bag header, chunk, connection.
 _OP_MSG, _OP_HEADER, _OP_CHUNK, _OP_CONN = b"\x02", b"\x03", b"\x05", b"\x07"
 
@@ -97,7 +98,14 @@ def _ros1_records(
 
 
 def _decompress_ros1_chunk(head: dict[str, bytes], body: bytes, pos: int) -> bytes:
-    """A chunk's records, decompressed to at most the size its header states."""
+    """A chunk's records, decompressed to the size its header states, never more.
+
+    The output grows with what the data really holds, in steps of at most
+    :data:`_STEP` bytes, and stops one byte past the header's size: an absurd size
+    allocates nothing (lz4's ``max_length`` sizes its buffer by it at once). The data
+    must end where its compressed stream ends, at exactly that size: a size too small
+    (0 included) would otherwise drop the chunk's messages silently.
+    """
     compression = head.get("compression", b"none").decode(errors="replace")
     if compression == "none":
         return body
@@ -106,22 +114,44 @@ def _decompress_ros1_chunk(head: dict[str, bytes], body: bytes, pos: int) -> byt
         # without it nothing would bound what a small compressed chunk expands to.
         raise ScanError(f"corrupt {compression} chunk: no uncompressed size in its header",
                         pos)
-    size = limit = _U32.unpack(head["size"])[0]
+    size = _U32.unpack(head["size"])[0]
+    decompressor: Any
     try:
         if compression == "bz2":
-            inner = bz2.BZ2Decompressor().decompress(body, max_length=limit)
+            decompressor = bz2.BZ2Decompressor()
         elif compression == "lz4":
-            lz4frame = importlib.import_module("lz4.frame")
-            inner = lz4frame.LZ4FrameDecompressor().decompress(body, max_length=limit)
+            decompressor = importlib.import_module("lz4.frame").LZ4FrameDecompressor()
         else:
             raise ScanError(f"unknown chunk compression {compression!r}", pos)
+        inner = _bounded(decompressor, body, size)
     except ScanError:
         raise
     except Exception:
         raise ScanError(f"corrupt {compression} chunk", pos) from None
+    if len(inner) > size:
+        raise ScanError(f"corrupt {compression} chunk: its data decompresses to more than "
+                        f"the {size} bytes its header gives", pos)
+    if not decompressor.eof:
+        raise ScanError(f"corrupt {compression} chunk: its data ends before its compressed "
+                        "stream does", pos)
     if len(inner) != size:
-        raise ScanError(f"corrupt {compression} chunk (size differs from its header)", pos)
+        raise ScanError(f"corrupt {compression} chunk (size differs from its header: "
+                        f"{len(inner)} bytes, not {size})", pos)
     return bytes(inner)
+
+
+def _bounded(decompressor: Any, data: bytes, size: int) -> bytearray:
+    """What ``decompressor`` (bz2's or lz4.frame's, which take ``max_length``) makes of
+    ``data``, grown :data:`_STEP` bytes at a time and stopped one byte past ``size``:
+    memory follows what the data holds, never a size field."""
+    out = bytearray()
+    while len(out) <= size:
+        piece = decompressor.decompress(data, max_length=min(_STEP, size + 1 - len(out)))
+        data = b""
+        out += piece
+        if decompressor.eof or not piece:
+            break
+    return out
 
 
 def scan_ros1(
@@ -240,6 +270,99 @@ def mcap_channel_source(channel: Channel, schema: Schema | None, topics: Collect
     return Source(channel.topic, ROS2_AUTHORITY, decode)
 
 
+def mcap_chunk_records(chunk: Chunk) -> list[Any]:
+    """The records of an MCAP chunk (``mcap``'s ``breakup_chunk``, CRC checked), its data
+    decompressed here with memory bounded by what the data holds.
+
+    ``mcap`` hands the chunk's ``uncompressed_size`` to zstd as the output size: a damaged
+    size of 2^63 raised "Python int too large to convert to C ssize_t", and zstd data
+    written without its content size would have had a buffer of that size allocated. Here
+    zstd and lz4 data are decompressed :data:`_STEP` bytes at a time up to one byte past
+    that size, which they must fill exactly; then each record's length is checked
+    against the chunk (:func:`_framed_records`) before ``mcap`` parses the records.
+
+    Raises:
+        ValueError: an unknown compression; data that decompresses to another size than
+            the chunk's header gives, or does not decompress; a record whose length does
+            not fit the chunk.
+        Exception: what ``breakup_chunk`` raises on records that do not parse.
+    """
+    import dataclasses
+
+    from mcap.stream_reader import breakup_chunk
+
+    compression, size = chunk.compression, chunk.uncompressed_size
+    if compression not in ("", "zstd", "lz4"):
+        raise ValueError(f"unknown chunk compression {compression[:40]!r}")
+    if compression:
+        try:
+            if compression == "zstd":
+                zstandard = importlib.import_module("zstandard")
+                reader = zstandard.ZstdDecompressor().stream_reader(
+                    chunk.data, read_across_frames=True)
+                inner = bytearray()
+                while len(inner) <= size:
+                    piece = reader.read(min(_STEP, size + 1 - len(inner)))
+                    if not piece:
+                        break
+                    inner += piece
+            else:
+                lz4frame = importlib.import_module("lz4.frame")
+                inner = _bounded(lz4frame.LZ4FrameDecompressor(), chunk.data, size)
+        except ImportError:
+            return list(breakup_chunk(chunk, validate_crc=True))  # mcap names the package
+        except Exception as err:
+            raise ValueError(f"corrupt {compression} chunk: {_describe(err)}") from None
+        if len(inner) != size:
+            more = "more than" if len(inner) > size else f"{len(inner)} bytes, not"
+            raise ValueError(f"corrupt {compression} chunk: its data decompresses to {more} "
+                             f"the {size} bytes its header gives")
+        chunk = dataclasses.replace(chunk, compression="", data=bytes(inner))
+    parsed = _framed_records(chunk.data)
+    records = list(breakup_chunk(chunk, validate_crc=True))
+    if len(records) != parsed:
+        raise ValueError(f"corrupt chunk: {len(records)} records read where its framing "
+                         f"holds {parsed} (a record's fields overrun its length)")
+    return records
+
+
+_RECORD = struct.Struct("<BQ")
+_MESSAGE_HEADER = 22  # channel id (2), sequence (4), log time (8), publish time (8)
+
+
+def _framed_records(data: bytes) -> int:
+    """How many schema, channel and message records a chunk's (decompressed) records
+    hold, each record's length checked against what is left of the chunk.
+
+    ``mcap``'s ``breakup_chunk`` reads a message record's data with ``read(length -
+    22)``: a length under 22 read everything left in the chunk as that message's data,
+    a length past the chunk's end read what was left, and the chunk's later messages
+    were dropped without an error.
+
+    Raises:
+        ValueError: a record header cut short, a length past the chunk's end, a message
+            record shorter than a message's header.
+    """
+    off, end, known = 0, len(data), 0
+    while off < end:
+        if off + _RECORD.size > end:
+            raise ValueError(f"corrupt chunk: a record header cut short at byte {off} of "
+                             f"its {end} bytes of records")
+        op, length = _RECORD.unpack_from(data, off)
+        left = end - off - _RECORD.size
+        if length > left:
+            raise ValueError(f"corrupt chunk: its record at byte {off} (opcode 0x{op:02x}) "
+                             f"says it is {length} bytes long, more than the {left} left in "
+                             f"the chunk")
+        if op == 0x05 and length < _MESSAGE_HEADER:
+            raise ValueError(f"corrupt chunk: its message record at byte {off} is {length} "
+                             f"bytes long, less than a message's {_MESSAGE_HEADER}-byte "
+                             f"header")
+        known += op in (0x03, 0x04, 0x05)
+        off += _RECORD.size + length
+    return known
+
+
 def _longer_than_file(mm: mmap.mmap, start: int, size: int) -> str:
     """The reason of a record at byte ``start`` whose length field is more than the file's
     ``size`` (``mcap``'s RecordLengthLimitExceeded: its record size limit is the file
@@ -266,7 +389,7 @@ def scan_mcap(
     damaged record (cut short, bad CRC, bad compression, unknown schema or channel).
     """
     from mcap.records import Channel, Chunk, Message, Schema
-    from mcap.stream_reader import StreamReader, breakup_chunk
+    from mcap.stream_reader import StreamReader
 
     with p.open("rb") as f:
         size = p.stat().st_size
@@ -303,7 +426,7 @@ def scan_mcap(
                     if record is None:
                         return  # footer and closing magic read: complete
                     if isinstance(record, Chunk):
-                        inner = breakup_chunk(record, validate_crc=True)
+                        inner = mcap_chunk_records(record)
                         msgs = [m for r in inner for m in take(r, pos)]
                         msgs.sort(key=lambda m: m[0])
                     else:

@@ -55,6 +55,7 @@ __all__ = [
     "MAX_REPUBLISHERS",
     "MAX_SOURCE_FRAMES",
     "MAX_SUBSCRIPTIONS",
+    "MIN_RATE",
     "REPUBLISH_SERVICE",
     "SERVER_NAME",
     "Republisher",
@@ -83,6 +84,9 @@ MAX_SOURCE_FRAMES: Final = 1000
 """Source frames one goal or request may name."""
 MAX_RATE: Final = 100.0
 """Highest ``rate`` (Hz) a goal may ask; a higher one is served at this rate."""
+MIN_RATE: Final = 0.001
+"""Lowest ``rate`` (Hz) a goal may ask (one update each 1000 s); a lower one is refused
+(its period, in int64 nanoseconds, would soon be past any clock's time)."""
 MAX_TRANSFORMS: Final = 10_000
 """Transforms one published ``TFMessage`` may hold."""
 MAX_ID: Final = 256
@@ -143,15 +147,32 @@ def _number(obj: Mapping[str, Any], key: str, where: str, default: float | None 
     if key not in obj and default is not None:
         return default
     value = _get(obj, key, (int, float), where)
-    if not math.isfinite(value):
-        raise ValueError(f"{where}.{key} must be finite, got {value}")
-    return float(value)
+    try:
+        number = float(value)  # an integer beyond a double (JSON 1 followed by 400 zeros)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise ValueError(f"{where}.{key} must be finite, got {_short(value)}")
+    return number
+
+
+def _unicode(value: str) -> bool:
+    """Whether ``value`` is valid Unicode: no lone surrogate (a JSON ``"\\ud800"``
+    escape), so that it can be encoded as UTF-8, as a ROS string on a bus must be."""
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _name(obj: Mapping[str, Any], key: str, where: str) -> str:
     value: str = _get(obj, key, str, where)
     if len(value) > MAX_ID:
         raise ValueError(f"{where}.{key} is longer than {MAX_ID} characters")
+    if not _unicode(value):
+        raise ValueError(f"{where}.{key} must be valid Unicode (a lone surrogate cannot be "
+                         f"encoded as UTF-8), got {_short(value)}")
     return value
 
 
@@ -382,8 +403,9 @@ class Session:
     def _subscribe(self, m: Mapping[str, Any], now: Time) -> Outcome:
         topic = _name(m, "topic", "subscribe")
         kind = m.get("type", "")
-        if not isinstance(kind, str) or len(kind) > MAX_ID:
-            raise ValueError("subscribe.type must be a string")
+        if not isinstance(kind, str) or len(kind) > MAX_ID or not _unicode(kind):
+            raise ValueError(f"subscribe.type must be a string of at most {MAX_ID} "
+                             "characters (valid Unicode)")
         if topic not in _TF_TYPES and topic not in _ACTION_TOPICS and \
                 not any(r.topic == topic for r in self.republishers.values()):
             raise ValueError(f"topic {_short(topic)} is not served (only /tf, /tf_static "
@@ -464,9 +486,9 @@ class Session:
         if len(frames) > MAX_SOURCE_FRAMES:
             raise ValueError(f"goal.source_frames names {len(frames)} frames, over the "
                                 f"limit of {MAX_SOURCE_FRAMES}")
-        if not all(isinstance(f, str) and len(f) <= MAX_ID for f in frames):
+        if not all(isinstance(f, str) and len(f) <= MAX_ID and _unicode(f) for f in frames):
             raise ValueError(f"goal.source_frames must be strings of at most {MAX_ID} "
-                                "characters")
+                             "characters (valid Unicode)")
         target = _clean(_name(goal, "target_frame", w))
         angular = _number(goal, "angular_thres", w, 0.0)
         trans = _number(goal, "trans_thres", w, 0.0)
@@ -474,8 +496,8 @@ class Session:
         if angular < 0 or trans < 0:
             raise ValueError(f"thresholds must be >= 0, got angular_thres {angular}, "
                                 f"trans_thres {trans}")
-        if rate <= 0:
-            raise ValueError(f"goal.rate must be > 0 Hz, got {rate}")
+        if not rate >= MIN_RATE:
+            raise ValueError(f"goal.rate must be at least {MIN_RATE} Hz, got {rate}")
         if goal_id not in self.republishers and len(self.republishers) >= MAX_REPUBLISHERS:
             raise ValueError(f"over {MAX_REPUBLISHERS} goals on this connection")
         period = round(1e9 / min(rate, MAX_RATE))
