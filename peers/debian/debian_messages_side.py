@@ -82,6 +82,21 @@ def check(out: Any, given: Any) -> dict[str, Any]:
     return report
 
 
+def values(t: Any, inner: Any, with_cov: Any, polygon: Any) -> dict[str, Any]:
+    """The numbers of the transform, pose-with-covariance and polygon results, for the
+    test to check against the hand-computed transform."""
+    tr = geometry.do_transform_transform(inner, t)
+    pc = geometry.do_transform_pose_with_covariance_stamped(with_cov, t)
+    pg = geometry.do_transform_polygon_stamped(polygon, t)
+    v, q = tr.transform.translation, tr.transform.rotation
+    p, o = pc.pose.pose.position, pc.pose.pose.orientation
+    return {"transform": [tr.header.frame_id, tr.child_frame_id, v.x, v.y, v.z,
+                          q.x, q.y, q.z, q.w],
+            "pose_with_covariance": [p.x, p.y, p.z, o.x, o.y, o.z, o.w,
+                                     [float(c) for c in pc.pose.covariance]],
+            "polygon": [[pt.x, pt.y, pt.z] for pt in pg.polygon.points]}
+
+
 def main() -> None:
     t = transform()
     results: dict[str, Any] = {}
@@ -107,6 +122,9 @@ def main() -> None:
         "vector3": (geometry.do_transform_vector3, vector),
         "pose": (geometry.do_transform_pose, pose),
         "wrench": (geometry.do_transform_wrench, wrench),
+        "transform": (geometry.do_transform_transform, inner),
+        "pose_with_covariance": (geometry.do_transform_pose_with_covariance_stamped, with_cov),
+        "polygon": (geometry.do_transform_polygon_stamped, polygon),
         "cloud": (sensor.do_transform_cloud, given_cloud),
     }
     for name, (fn, given) in cases.items():
@@ -114,8 +132,10 @@ def main() -> None:
     # The same through Buffer.transform (the registered functions), point and cloud.
     buffer = tf2_ros.Buffer()
     buffer.set_transform(t, "side")
-    for name, given in (("buffer.transform point", point), ("buffer.transform cloud",
-                                                            cloud())):
+    for name, given in (("buffer.transform point", point),
+                        ("buffer.transform pose_with_covariance", with_cov),
+                        ("buffer.transform polygon", polygon),
+                        ("buffer.transform cloud", cloud())):
         given.header.frame_id = "laser"
         results[name] = check(buffer.transform(given, "map"), given)
     # The cloud's bytes equal Debian's tf2_sensor_msgs (Eigen, float32 stores).
@@ -126,6 +146,7 @@ def main() -> None:
         and ours.header == theirs.header and ours.point_step == theirs.point_step
         and ours.row_step == theirs.row_step and ours.width == theirs.width)
     results["cloud"]["points"] = [list(p) for p in point_cloud2.read_points(ours)]
+    results["values"] = values(t, inner, with_cov, polygon)
     print(json.dumps(results))
 
 

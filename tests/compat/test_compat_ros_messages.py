@@ -1,5 +1,6 @@
 """A ROS program keeps using compat's results as its own messages: the point, vector3,
-pose, wrench and cloud ``do_transform_*`` of ``tfbus.compat`` and ``Buffer.transform`` of
+pose, wrench, transform, pose-with-covariance, polygon and cloud ``do_transform_*`` of
+``tfbus.compat`` and ``Buffer.transform`` of
 them return, for a rospy or an rclpy message, a message of the same class, which takes a
 field assignment, serializes
 (genpy's ``serialize``, rclpy's ``serialize_message``) and reads back to the same bytes;
@@ -35,6 +36,25 @@ EXPECTED = [[float(np.float32(v)) for v in (0.28 * x - 0.96 * y + 1.0, 0.96 * x 
                                             z + 0.5, i)] for x, y, z, i in POINTS]
 
 
+# The transform, pose-with-covariance and polygon results (identity inner transform and
+# pose at the origin; covariance 0..35 row-major, each 3x3 block B rotated to R B Rᵀ;
+# Point32 vertices (1, 0, 0) and (0, 1, 0), float32 on the wire).
+R = np.array([[0.28, -0.96, 0.0], [0.96, 0.28, 0.0], [0.0, 0.0, 1.0]])
+COV = np.arange(36.0).reshape(6, 6)
+ROTATED = np.block([[R @ COV[i:i + 3, j:j + 3] @ R.T for j in (0, 3)] for i in (0, 3)])
+
+
+def _check_values(values: object) -> None:
+    assert isinstance(values, dict)
+    frame, child, *numbers = values["transform"]
+    assert (frame, child) == ("map", "tool")
+    assert numbers == pytest.approx([1.0, 2.0, 0.5, 0.0, 0.0, 0.6, 0.8], abs=1e-12)
+    *pose, covariance = values["pose_with_covariance"]
+    assert pose == pytest.approx([1.0, 2.0, 0.5, 0.0, 0.0, 0.6, 0.8], abs=1e-12)
+    assert np.allclose(np.array(covariance).reshape(6, 6), ROTATED, atol=1e-9)
+    assert np.allclose(values["polygon"], [[1.28, 2.96, 0.5], [0.04, 2.28, 0.5]], atol=1e-6)
+
+
 def _run(python: Path | str, side: Path, env: dict[str, str]) -> dict[str, object]:
     r = subprocess.run([str(python), str(side)], env=env, capture_output=True, text=True,
                        timeout=300, check=False)
@@ -50,9 +70,11 @@ def test_rospy_messages_in_rospy_messages_out() -> None:
     assert cloud.pop("equal") is True  # Debian's tf2_sensor_msgs, byte for byte
     assert cloud.pop("points") == EXPECTED
     assert cloud == OK
+    _check_values(report.pop("values"))
     assert report == {name: OK for name in (
-        "point", "vector3", "pose", "wrench", "buffer.transform point",
-        "buffer.transform cloud")}
+        "point", "vector3", "pose", "wrench", "transform", "pose_with_covariance", "polygon",
+        "buffer.transform point", "buffer.transform pose_with_covariance",
+        "buffer.transform polygon", "buffer.transform cloud")}
 
 
 def test_rclpy_messages_in_rclpy_messages_out() -> None:
@@ -67,6 +89,9 @@ def test_rclpy_messages_in_rclpy_messages_out() -> None:
     report = _run(ROS2_PYTHON, RCLPY_SIDE, env)
     assert report.pop("cloud_points") == EXPECTED
     assert report.pop("cloud_header") == ["map", 5, 250]  # the transform's header
+    _check_values(report.pop("values"))
     assert report == {name: OK for name in (
-        "point", "vector3", "pose_stamped", "pose", "wrench", "cloud",
-        "buffer.transform point", "buffer.transform cloud")}
+        "point", "vector3", "pose_stamped", "pose", "wrench", "transform",
+        "pose_with_covariance", "polygon", "cloud", "buffer.transform point",
+        "buffer.transform pose_with_covariance", "buffer.transform polygon",
+        "buffer.transform cloud")}

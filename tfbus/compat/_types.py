@@ -21,7 +21,8 @@ from typing import Any
 
 from tfbus.time import Time
 
-__all__ = ["flavour_of", "message_class", "stamp_in", "stamped_out", "time_out"]
+__all__ = ["flavour_of", "is_ros_message", "message_class", "ros_out", "stamp_in", "stamped_out",
+           "time_out"]
 
 ROS1 = "ros1"
 ROS2 = "ros2"
@@ -124,6 +125,23 @@ def _assign(dst: Any, src: Any) -> Any:
         else:
             setattr(dst, name, value)
     return dst
+
+
+def is_ros_message(value: object) -> bool:
+    """True for a rospy (genpy: ``_type`` and ``_md5sum`` on the class) or an rclpy
+    message (``get_fields_and_field_types`` on the class), not for a look-alike."""
+    cls = type(value)
+    return (hasattr(cls, "_type") and hasattr(cls, "_md5sum")) or hasattr(
+        cls, "get_fields_and_field_types")
+
+
+def ros_out(result: Any, given: Any) -> Any:
+    """``result`` (a tfbus message) in the class of ``given`` when ``given`` is a rospy or
+    rclpy message of the same type name, as tf2_geometry_msgs builds its results in
+    ``geometry_msgs.msg`` classes; else ``result`` as it is."""
+    if is_ros_message(given) and type(given).__name__ == type(result).__name__:
+        return stamped_out(result, given)
+    return result
 
 
 def stamped_out(result: Any, like: Any) -> Any:

@@ -22,7 +22,7 @@ from tfbus.compat._args import (
     to_transform_stamped,
     to_vector3,
 )
-from tfbus.compat._types import _assign, message_class, stamped_out
+from tfbus.compat._types import _assign, message_class, ros_out, stamped_out
 from tfbus.convert import do_transform_polygon as _polygon
 from tfbus.convert import do_transform_pose_with_covariance as _pose_cov
 from tfbus.convert import do_transform_transform as _transform
@@ -127,10 +127,12 @@ def do_transform_vector3(vector3: Any, transform: Any) -> Any:
     return _out(_Vector3Stamped(ts.header, _rotate(ts, v)), vector3)
 
 
-def do_transform_transform(transform_in: Any, transform: Any) -> _TransformStamped:
-    """``do_transform_transform``: :func:`tfbus.convert.do_transform_transform`."""
-    return _transform(to_transform_stamped(transform_in, "transform_in"),
-                      to_transform_stamped(transform))
+def do_transform_transform(transform_in: Any, transform: Any) -> Any:
+    """``do_transform_transform``: :func:`tfbus.convert.do_transform_transform`; a rospy
+    or rclpy TransformStamped in, the same class out (a tfbus TransformStamped for
+    anything else)."""
+    return ros_out(_transform(to_transform_stamped(transform_in, "transform_in"),
+                              to_transform_stamped(transform)), transform_in)
 
 
 def do_transform_wrench(wrench: Any, transform: Any, *, lever_arm: bool = False) -> Any:
@@ -186,17 +188,18 @@ def do_transform_pose_stamped(pose: Any, transform: Any) -> Any:
         pose, "header") else pose, transform)
 
 
-def do_transform_pose_with_covariance_stamped(
-    pose: Any, transform: Any
-) -> PoseWithCovarianceStamped:
+def do_transform_pose_with_covariance_stamped(pose: Any, transform: Any) -> Any:
     """ROS 2 ``do_transform_pose_with_covariance_stamped``: the pose through KDL as
     :func:`do_transform_pose` (ROS 2 goes through ``tf2::fromMsg`` to a KDL frame: bit
     for bit, w = +1 for (x=1, w=0)∘(x=1, w=0)), the covariance rotated by
-    :func:`tfbus.convert.do_transform_pose_with_covariance`."""
+    :func:`tfbus.convert.do_transform_pose_with_covariance`. A rospy or rclpy
+    PoseWithCovarianceStamped in, the same class out (as ROS 2's builds a
+    ``geometry_msgs.msg.PoseWithCovarianceStamped``); a tfbus value for anything else."""
     ts = to_transform_stamped(transform)
-    out = _pose_cov(_stamped(pose, PoseWithCovarianceStamped, "pose"), ts)
-    given = _stamped(pose, PoseWithCovarianceStamped, "pose").pose.pose
-    return out._replace(pose=out.pose._replace(pose=_pose_kdl(ts, given)))
+    ours = _stamped(pose, PoseWithCovarianceStamped, "pose")
+    out = _pose_cov(ours, ts)
+    return ros_out(out._replace(pose=out.pose._replace(pose=_pose_kdl(ts, ours.pose.pose))),
+                   pose)
 
 
 def transform_covariance(cov_in: Any, transform: Any) -> tuple[float, ...]:
@@ -205,6 +208,9 @@ def transform_covariance(cov_in: Any, transform: Any) -> tuple[float, ...]:
     return _covariance(cov_in, to_transform_stamped(transform))
 
 
-def do_transform_polygon_stamped(polygon: Any, transform: Any) -> PolygonStamped:
-    """ROS 2 ``do_transform_polygon_stamped``: :func:`tfbus.convert.do_transform_polygon`."""
-    return _polygon(_stamped(polygon, PolygonStamped, "polygon"), to_transform_stamped(transform))
+def do_transform_polygon_stamped(polygon: Any, transform: Any) -> Any:
+    """ROS 2 ``do_transform_polygon_stamped``: :func:`tfbus.convert.do_transform_polygon`;
+    a rospy or rclpy PolygonStamped in, the same class out (its ``Point32`` points); a
+    tfbus PolygonStamped for anything else."""
+    return ros_out(_polygon(_stamped(polygon, PolygonStamped, "polygon"),
+                            to_transform_stamped(transform)), polygon)

@@ -74,7 +74,7 @@ from tfbus.compat._loop import (
     rospy_node_name,
     rospy_use_sim_time,
 )
-from tfbus.compat._types import flavour_of, ros_message, time_out
+from tfbus.compat._types import flavour_of, ros_message, ros_out, time_out
 from tfbus.convert import ConvertRegistration, TransformRegistration, convert
 from tfbus.errors import (
     BackwardExtrapolationException,
@@ -452,7 +452,8 @@ class Buffer:
     def _apply(self, obj: Any, given: Any, ts: Any) -> Any:
         """``obj`` (tfbus's reading of ``given``) transformed by ``ts``: Debian's types and
         a ROS ``PointCloud2`` in the type of ``given``, the other registered types as
-        their function returns."""
+        their function returns (in the class of ``given`` when it is a rospy or rclpy
+        message of the type returned)."""
         fn = _DEBIAN.get(type(obj))
         if fn is not None:
             return fn(given, ts)
@@ -466,7 +467,9 @@ class Buffer:
             if by_fields is None:
                 raise
             return by_fields(given, ts)
-        return registered(obj, to_transform_stamped(ts))
+        # A registered tfbus function's result in the class of a rospy / rclpy message
+        # given (a PoseWithCovarianceStamped, PolygonStamped, TransformStamped...).
+        return ros_out(registered(obj, to_transform_stamped(ts)), given)
 
     def transform(
         self,
