@@ -374,7 +374,7 @@ def _spread(ratios: list[float]) -> str:
     return f"{statistics.median(ratios):.2f}x ({min(ratios):.2f}..{max(ratios):.2f})"
 
 
-CPP_TARGETS = {1: 1.3, 2: 1.1, 8: 1.0, 64: 1.0}
+CPP_TARGETS = {1: 1.1, 2: 1.0, 8: 0.7, 64: 1.0}
 """lookup_transform at depth d, never-repeated interpolated times: <= this x C++ tf2."""
 
 
@@ -448,7 +448,7 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
     )
 
 
-WAKE_TARGETS = {"direct": 1.5, "bus": 2.0}
+WAKE_TARGETS = {"direct": 1.3, "bus": 1.5}
 """Wake-up of an awaiting lookup over the plain Event floor: by a direct
 ``Buffer.set_transform``, and through ``send_transform`` -> bus -> listener -> buffer."""
 

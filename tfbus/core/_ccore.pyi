@@ -1,10 +1,10 @@
 """Type stubs for the compiled frame table and walk (``tfbus/core/_ccore.pyx``)."""
 
 from collections.abc import Iterable
-from typing import Any, Final, Literal
+from typing import Any, Final, Literal, overload
 
 from tfbus.core._ccache import Link
-from tfbus.core.policy import PolicyResult
+from tfbus.core.policy import Clamp, Exact, Nearest, PolicyResult, Previous, Window
 from tfbus.core.results import BatchResult, TouchedFrames
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
@@ -83,6 +83,19 @@ class CoreBase:
         self, index: dict[str, set[Any]], names: Iterable[str] | None
     ) -> list[tuple[Any, tuple[int, ...] | None]] | None: ...
     def _id_status(self, frame_id: object) -> int: ...
+    @overload
+    def lookup_transform(
+        self, target_frame: str, source_frame: str, time: Time, *, policy: Exact | None = None
+    ) -> TransformStamped: ...
+    @overload
+    def lookup_transform(
+        self,
+        target_frame: str,
+        source_frame: str,
+        time: Time,
+        *,
+        policy: Nearest | Clamp | Previous | Window,
+    ) -> PolicyResult: ...
     def _query(self, target: str, source: str, time: Time) -> TransformStamped | _Failure: ...
     def _query_policy(
         self, target: str, source: str, time: Time, policy: tuple[int, int, int]

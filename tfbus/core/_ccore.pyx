@@ -1192,6 +1192,22 @@ cdef class CoreBase:
         return _bad_id(name, 0)[0]
 
 
+    def lookup_transform(self, target_frame, source_frame, time, policy=None):
+        """``BufferCore.lookup_transform`` (documented there): the exact lookup entered
+        here, with no Python frame between the caller and the walk; a policy lookup, a
+        failure or a ``time`` that is not a Time goes on to ``BufferCore``'s
+        ``_lookup_by_policy`` / ``_lookup_failed``, which raise tf2's exceptions."""
+        cdef object out
+        if policy is not None:
+            return self._lookup_by_policy(target_frame, source_frame, time, policy)
+        try:
+            out = self._cquery(target_frame, source_frame, time)
+        except AttributeError as err:  # time._ns: not a Time
+            return self._lookup_failed(target_frame, source_frame, time, err)
+        if type(out) is TransformStamped:
+            return out
+        return self._lookup_failed(target_frame, source_frame, time, out)
+
     def _query(self, object target, object source, time):
         """``lookupTransform(target, source, time)`` in one call: the TransformStamped
         (built here, memoised until the next insert or clear), or a failure tuple:

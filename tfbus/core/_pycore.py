@@ -963,6 +963,25 @@ class CoreBase:
             return -1
         return fid
 
+    def lookup_transform(
+        self, target_frame: str, source_frame: str, time: Time, policy: object = None
+    ) -> Any:
+        """``BufferCore.lookup_transform`` (documented there): the compiled core's entry,
+        the same steps: a policy lookup, a failure or a ``time`` that is not a Time goes
+        on to ``BufferCore``'s ``_lookup_by_policy`` / ``_lookup_failed``."""
+        if policy is not None:
+            return self._lookup_by_policy(  # type: ignore[attr-defined]
+                target_frame, source_frame, time, policy)
+        try:
+            out = self._query(target_frame, source_frame, time)
+        except AttributeError as err:  # time._ns: not a Time
+            return self._lookup_failed(  # type: ignore[attr-defined]
+                target_frame, source_frame, time, err)
+        if type(out) is TransformStamped:
+            return out
+        return self._lookup_failed(  # type: ignore[attr-defined]
+            target_frame, source_frame, time, out)
+
     def _query(self, target: str, source: str, time: Time) -> TransformStamped | tuple[int, ...]:
         """``lookupTransform(target, source, time)`` in one call: the TransformStamped
         (built here, memoised until the next insert or clear), or a failure tuple:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Iterator
-from typing import TYPE_CHECKING, Any, Final, Literal, TypeAlias, overload
+from typing import TYPE_CHECKING, Any, Final, Literal, NoReturn, TypeAlias, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -529,85 +529,106 @@ class BufferCore(CoreBase):
 
     # ------------------------------------------------------------------ lookups
 
-    @overload
-    def lookup_transform(
-        self, target_frame: str, source_frame: str, time: Time, *, policy: Exact | None = None
-    ) -> TransformStamped: ...
+    if TYPE_CHECKING:
+        # At run time lookup_transform is the core's own (``CoreBase``, compiled or
+        # pure), inherited: an exact lookup reaches the walk with no Python frame of
+        # this class in between; a policy, a failure or a bad ``time`` comes back through
+        # ``_lookup_by_policy`` / ``_lookup_failed``. Declared here for the type checker
+        # and the API reference.
 
-    @overload
-    def lookup_transform(
-        self,
-        target_frame: str,
-        source_frame: str,
-        time: Time,
-        *,
-        policy: Nearest | Clamp | Previous | Window,
-    ) -> PolicyResult: ...
+        @overload
+        def lookup_transform(
+            self, target_frame: str, source_frame: str, time: Time, *, policy: Exact | None = None
+        ) -> TransformStamped: ...
 
-    # ``policy`` is keyword-only in the signatures above (what type checkers hold callers
-    # to), not in the function: a keyword-only default costs every exact lookup a dict
-    # lookup (CPython's __kwdefaults__), ~10% of a memoised answer.
-    def lookup_transform(
-        self,
-        target_frame: str,
-        source_frame: str,
-        time: Time,
-        policy: LookupPolicy | None = None,
+        @overload
+        def lookup_transform(
+            self,
+            target_frame: str,
+            source_frame: str,
+            time: Time,
+            *,
+            policy: Nearest | Clamp | Previous | Window,
+        ) -> PolicyResult: ...
+
+        # ``policy`` is keyword-only in the signatures above (what type checkers hold callers
+        # to), not in the core's method: a keyword-only default costs every exact lookup a dict
+        # lookup (CPython's __kwdefaults__), ~10% of a memoised answer.
+        def lookup_transform(
+            self,
+            target_frame: str,
+            source_frame: str,
+            time: Time,
+            policy: LookupPolicy | None = None,
+        ) -> TransformStamped | PolicyResult:
+            """The pose of ``source_frame`` in ``target_frame`` at ``time`` (tf2
+            ``lookupTransform``): it maps points from source into target coordinates.
+
+            Args:
+                target_frame: frame to express data in.
+                source_frame: frame the data is in.
+                time: when; ``Time(0)`` means the latest time the whole path has data for.
+
+            Returns:
+                TransformStamped with ``header.frame_id == target_frame``,
+                ``child_frame_id == source_frame`` and ``header.stamp`` the time used.
+                ``lookup_transform(x, x, t)`` is the identity for any string x.
+
+            Raises:
+                InvalidArgumentException: a frame id is empty or starts with '/'.
+                LookupException: a frame id is unknown, or the path contains a loop.
+                ConnectivityException: the frames are in different trees.
+                ExtrapolationException: a link on the path has no data at ``time``: its ROS 2
+                    subclass ``ForwardExtrapolationException`` (after the link's newest
+                    sample), ``BackwardExtrapolationException`` (before its oldest) or
+                    ``NoDataForExtrapolationException`` (one sample at another time, or none),
+                    as rolling tf2's ``TimeCache::findClosest`` chooses; tf2 0.7.6's message.
+                    Under a policy: for the first link the policy found no sample for, the
+                    exception and message of the exact lookup for that link.
+                TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
+
+            ``policy`` (:mod:`tfbus.core.policy`): how each link's sample is picked;
+            ``None`` or :class:`~tfbus.core.policy.Exact` is tf2's rule and returns the
+            TransformStamped. Any other policy (``Nearest(max_delta)``, ``Clamp(max_delta)``,
+            ``Previous()``, ``Window(past, future_wait)``) returns a
+            :class:`~tfbus.core.policy.PolicyResult` ``(transform, report)``: the report names
+            each link's sample stamp and the largest ``|stamp - time|``, so no approximation
+            is silent. Policy lookups are not memoised.
+
+            One compiled call validates, walks and builds the result. Successful results are
+            memoised until the next insert or ``clear()`` (64 slots, by the ids' identity and
+            the time), so repeating a query (many objects at one stamp, time 0 between
+            updates) costs a few compares.
+            """
+            if policy is None:
+                return CoreBase.lookup_transform(self, target_frame, source_frame, time)
+            return self._lookup_by_policy(target_frame, source_frame, time, policy)
+
+    def _lookup_by_policy(
+        self, target_frame: str, source_frame: str, time: Time, policy: object
     ) -> TransformStamped | PolicyResult:
-        """The pose of ``source_frame`` in ``target_frame`` at ``time`` (tf2
-        ``lookupTransform``): it maps points from source into target coordinates.
-
-        Args:
-            target_frame: frame to express data in.
-            source_frame: frame the data is in.
-            time: when; ``Time(0)`` means the latest time the whole path has data for.
-
-        Returns:
-            TransformStamped with ``header.frame_id == target_frame``,
-            ``child_frame_id == source_frame`` and ``header.stamp`` the time used.
-            ``lookup_transform(x, x, t)`` is the identity for any string x.
-
-        Raises:
-            InvalidArgumentException: a frame id is empty or starts with '/'.
-            LookupException: a frame id is unknown, or the path contains a loop.
-            ConnectivityException: the frames are in different trees.
-            ExtrapolationException: a link on the path has no data at ``time``: its ROS 2
-                subclass ``ForwardExtrapolationException`` (after the link's newest
-                sample), ``BackwardExtrapolationException`` (before its oldest) or
-                ``NoDataForExtrapolationException`` (one sample at another time, or none),
-                as rolling tf2's ``TimeCache::findClosest`` chooses; tf2 0.7.6's message.
-                Under a policy: for the first link the policy found no sample for, the
-                exception and message of the exact lookup for that link.
-            TypeError: ``policy`` is not a lookup policy, or ``time`` not a Time.
-
-        ``policy`` (:mod:`tfbus.core.policy`): how each link's sample is picked;
-        ``None`` or :class:`~tfbus.core.policy.Exact` is tf2's rule and returns the
-        TransformStamped. Any other policy (``Nearest(max_delta)``, ``Clamp(max_delta)``,
-        ``Previous()``, ``Window(past, future_wait)``) returns a
-        :class:`~tfbus.core.policy.PolicyResult` ``(transform, report)``: the report names
-        each link's sample stamp and the largest ``|stamp - time|``, so no approximation
-        is silent. Policy lookups are not memoised.
-
-        One compiled call validates, walks and builds the result. Successful results are
-        memoised until the next insert or ``clear()`` (64 slots, by the ids' identity and
-        the time), so repeating a query (many objects at one stamp, time 0 between
-        updates) costs a few compares.
-        """
-        if policy is not None and type(policy) is not Exact:
-            try:
-                found = self._query_policy(target_frame, source_frame, time, policy._args)
-            except AttributeError as err:
-                raise policy_error(policy, time, err) from None
-            if isinstance(found, PolicyResult):
-                return found
-            raise self._failure("lookupTransform", target_frame, source_frame, found)
+        """:meth:`lookup_transform` with a ``policy`` given: :class:`Exact` is the exact
+        lookup, any other policy its :class:`PolicyResult` (or raises)."""
+        if type(policy) is Exact:
+            return CoreBase.lookup_transform(self, target_frame, source_frame, time)
         try:
-            out = self._query(target_frame, source_frame, time)
-        except AttributeError as err:  # (no cost on the way through)
-            raise not_a_time(time, err) from None
-        if isinstance(out, TransformStamped):
-            return out
-        raise self._failure("lookupTransform", target_frame, source_frame, out)
+            found = self._query_policy(target_frame, source_frame, time,
+                                       policy._args)  # type: ignore[attr-defined]
+        except AttributeError as err:
+            raise policy_error(policy, time, err) from None
+        if isinstance(found, PolicyResult):
+            return found
+        raise self._failure("lookupTransform", target_frame, source_frame, found)
+
+    def _lookup_failed(
+        self, target_frame: str, source_frame: str, time: object,
+        why: tuple[int, ...] | AttributeError,
+    ) -> NoReturn:
+        """Raise what an exact lookup failed with: ``why`` is the core's failure tuple,
+        or the AttributeError of a ``time`` that is not a Time."""
+        if isinstance(why, AttributeError):
+            raise not_a_time(time, why) from None
+        raise self._failure("lookupTransform", target_frame, source_frame, why)
 
     def _policy_query(
         self, target_frame: str, source_frame: str, time: Time, policy: object
