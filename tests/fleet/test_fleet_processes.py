@@ -77,8 +77,8 @@ def test_router_robots_monitor_and_served_lookups() -> None:
         assert "Robots" in out
         cells = [[c for c in line.replace("│", " ").split()] for line in out.splitlines()]
         rows = {c[0]: c[1] for c in cells if c and c[0] in ("robotA", "robotB")}
-        assert rows == {"robotA": "alive", "robotB": "alive"}
-        assert "robotA/base_laser" in out and "robotB/laser" in out
+        assert rows == {"robotA": "alive", "robotB": "alive"}, out
+        assert "robotA/base_laser" in out and "robotB/laser" in out, out
         assert server.stop() == 0
         assert "answered" in server.rest()[-1]
     finally:
