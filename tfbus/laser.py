@@ -128,6 +128,9 @@ def _end_time(scan: LaserScan) -> Time:
 
 _INTENSITY, _INDEX, _DISTANCE, _TIMESTAMP, _VIEWPOINT = 0x01, 0x02, 0x04, 0x08, 0x10
 _FIELDS: dict[tuple[str, ...], list[PointField]] = {}  # PointField lists by layout
+_CHANNELS = _INTENSITY | _INDEX | _DISTANCE | _TIMESTAMP | _VIEWPOINT
+# (fields, point step) by channel flags (at most 32 entries: the flags above only)
+_LAYOUT_OF: dict[int, tuple[list[PointField], int]] = {}
 
 
 def _compiled_projector() -> type[Projector] | None:
@@ -160,6 +163,18 @@ def _layout(opts: int) -> tuple[str, ...]:
     if opts & _VIEWPOINT:
         names += ["vp_x", "vp_y", "vp_z"]
     return tuple(names)
+
+
+def _fields_of(names: tuple[str, ...]) -> list[PointField]:
+    """The PointFields of a cloud of 4-byte ``names`` (``index`` int32, the rest float32),
+    kept in ``_FIELDS``."""
+    fields = _FIELDS.get(names)
+    if fields is None:
+        fields = _FIELDS[names] = [
+            PointField(name, 4 * k, PointField.INT32 if name == "index" else PointField.FLOAT32)
+            for k, name in enumerate(names)
+        ]
+    return fields
 
 
 class LaserProjection:
@@ -236,18 +251,21 @@ class LaserProjection:
     def _cloud_bytes(
         header: Header, names: tuple[str, ...], width: int, data: bytes
     ) -> PointCloud2:
-        fields = _FIELDS.get(names)
-        if fields is None:
-            fields = _FIELDS[names] = [
-                PointField(name, 4 * k, PointField.INT32 if name == "index" else PointField.FLOAT32)
-                for k, name in enumerate(names)
-            ]
+        fields = _FIELDS.get(names) or _fields_of(names)
         step = 4 * len(names)
-        return PointCloud2(
-            header=header, height=1, width=width, is_bigendian=False,
-            fields=list(fields), point_step=step, row_step=step * width, data=data,
-            is_dense=False,
-        )  # fmt: skip
+        # PointCloud2's fields in order: header, height, width, fields, is_bigendian,
+        # point_step, row_step, data, is_dense (positional: half the keyword call's time)
+        return PointCloud2(header, 1, width, list(fields), False, step, step * width, data,
+                           False)
+
+    @staticmethod
+    def _layout_of(opts: int) -> tuple[list[PointField], int]:
+        """The cloud's fields and point step for the channel flags ``opts``."""
+        found = _LAYOUT_OF.get(opts)
+        if found is None:
+            names = _layout(opts)
+            found = _LAYOUT_OF[opts] = (_fields_of(names), 4 * len(names))
+        return found
 
     def project_laser(
         self,
@@ -288,7 +306,10 @@ class LaserProjection:
             cutoff = float(scan.range_max) if range_cutoff < 0 else float(range_cutoff)
             data, kept = projector.project(ranges, intensities, opts, cutoff,
                                            scan.range_min, scan.time_increment)  # fmt: skip
-            return self._cloud_bytes(scan.header, _layout(opts), kept, data)
+            layout = _LAYOUT_OF.get(opts & _CHANNELS)
+            fields, step = layout if layout is not None else self._layout_of(opts & _CHANNELS)
+            return PointCloud2(scan.header, 1, kept, list(fields), False, step, step * kept,
+                               data, False)  # positional, as in _cloud_bytes
         with np.errstate(all="ignore"):
             names, _, cols = self._project(scan, range_cutoff, opts)
         return self._cloud(scan.header, names, cols)
