@@ -32,7 +32,7 @@ Behaviour, as tf2_ros and roscpp do it:
   ``StaticTransformBroadcaster``), which a subscriber connecting later receives first;
 * several publishers per topic; publishers that appear later (``publisherUpdate``); a
   dropped connection is retried while its publisher is still registered; a restarted
-  master is noticed (``lookupNode`` every ``master_check_period``) and this node
+  master is noticed (``lookupNode`` every ``master_check_period``, 5 s) and this node
   registers again, without restarting tfbus;
 * bad input costs one connection at most: a malformed header, an oversized or
   undecodable TCPROS frame closes that connection only and is counted in
