@@ -12,7 +12,8 @@ transform into a ``BufferCore`` (stored or refused with ``InvalidArgumentExcepti
 every ``/clock`` a ``Time`` in range. ROS 1's compiled decoder and its pure twin give the
 same verdict on every input. Covered: TFMessage, ``rosgraph_msgs/Clock``, LaserScan and
 the ``LookupTransform`` goal of each codec, the ROS 2 action's ``SendGoal`` request, TCPROS
-connection headers and frame splitting, rmw_zenoh attachments and liveliness tokens.
+connection headers and frame splitting, rmw_zenoh attachments and liveliness tokens, and
+the key expressions a Zenoh peer may publish on (tfbus's bus and fleet keys).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ from tfbus.sensor_msgs import LaserScan
 from tfbus.time import TIME_MAX_NS
 from tfbus.transports.rmw_zenoh import wire as rmw
 from tfbus.transports.ros1.tcpros import FrameSplitter, decode_header, encode_header, frame
+from tfbus.transports.zenoh.fleet_keys import FleetKeySpace
+from tfbus.transports.zenoh.keys import KeySpace, parse_topic_key, topic_key
 
 FUZZ = settings(max_examples=150, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -348,3 +351,28 @@ def test_mutated_liveliness_tokens_parse_or_raise_wire_errors(token: str,
     out = _decode(rmw.parse_token, key, rmw.EndpointToken)
     if out is not None:
         assert out.domain_id >= 0
+
+
+KEY_PARTS = st.sampled_from(["tfbus", "tf", "tf_static", "@alive", "@latch", "robot7", "%",
+                             "%41", "t%66", "%zz", "*", "**", "$*", "", "ü", "a b", "@", "x" * 300,
+                             "0123abcd", "%C3%A9", "%c3%a9"]) | st.text(max_size=8)
+KEYS = st.lists(KEY_PARTS, min_size=1, max_size=7).map("/".join)
+
+
+@FUZZ
+@given(key=KEYS, reply=st.booleans())
+@example(key="tfbus/r%31/tf", reply=False)
+@example(key="tfbus/robot7/@latch/node/tf", reply=True)
+def test_any_key_a_peer_publishes_on_maps_to_one_topic_or_none(key: str, reply: bool) -> None:
+    """Keys a Zenoh peer may publish or declare liveliness on: a topic only for the one
+    canonical spelling of it (so access rules on keys cannot be bypassed), else None."""
+    topic = parse_topic_key(key)
+    if topic is not None:
+        assert topic_key(topic) == key
+    for space in (KeySpace(), KeySpace(namespace="robot7"), FleetKeySpace()):
+        found = space.topic_of(key, reply)
+        assert found is None or (isinstance(found, str) and found.startswith("/"))
+        if found is not None and not reply:
+            assert space.data(found) == key
+        alive = space.parse_alive(key)
+        assert alive is None or isinstance(alive.node_id, str)
