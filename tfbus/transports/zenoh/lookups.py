@@ -87,7 +87,6 @@ from tfbus.core.policy import (
 )
 from tfbus.errors import (
     InvalidArgumentException,
-    TimeoutException,
     TransformException,
     TransportError,
     WireError,
@@ -97,6 +96,7 @@ from tfbus.time import Duration, Time
 from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
     DEFAULT_SERVER_NAME,
+    LOOKUPS_OWN_ERROR,
     MAX_FRAME_ID_BYTES,
     ServerStatistics,
     transform_remotely,
@@ -575,7 +575,7 @@ class BufferServer:
                     target, target_time, source, source_time, fixed, timeout,
                     fail_fast=fail_fast, policy=full_policy,
                 )
-            except TimeoutException:
+            except LOOKUPS_OWN_ERROR:
                 return buffer.lookup_transform_full(
                     target, target_time, source, source_time, fixed, policy=full_policy
                 )
@@ -592,14 +592,15 @@ class BufferServer:
                 return await buffer.lookup_transform_async(
                     target, source, time, timeout, policy=policy
                 )
-            except TimeoutException:
+            except LOOKUPS_OWN_ERROR:
                 return buffer.lookup_transform(target, source, time, policy=policy)
         try:
             return await buffer.lookup_transform_async(target, source, time, timeout,
                                                        fail_fast=fail_fast)
-        except TimeoutException:
-            # tf2_ros buffer_server.cpp checkTransforms: once the goal times out, the
-            # answer is lookupTransform's own result or error (LookupException, ...).
+        except LOOKUPS_OWN_ERROR:
+            # tf2_ros buffer_server.cpp checkTransforms: once the goal times out (or
+            # an argument can never be valid), the answer is lookupTransform's own
+            # result or error (LookupException, ...), in its order of checks.
             return buffer.lookup_transform(target, source, time)
 
     def _reply_error(self, query: zenoh.Query, exc: TransformException) -> None:
