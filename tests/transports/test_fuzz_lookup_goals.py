@@ -473,3 +473,33 @@ def test_unknown_target_with_an_invalid_source_is_tf2s_lookup_error(
         assert str(raised.value) == message
 
     anyio.run(zenoh, backend=anyio_backend)
+
+
+@pytest.mark.parametrize("argument", ["target_frame", "source_frame", "fixed_frame"])
+def test_zenoh_client_names_a_frame_id_it_cannot_send(anyio_backend: str,
+                                                      argument: str) -> None:
+    """A lone surrogate in a frame id (a str can hold one, UTF-8 cannot carry it) made
+    the Zenoh client's lookup raise msgspec's "can't encode character" as a
+    WireEncodeError naming no argument; it names the argument and the value (and the
+    goal encoders of ROS 1 and ROS 2 do likewise: ``tests/codecs/test_fuzz_wire.py``)."""
+    pytest.importorskip("zenoh")
+    from tfbus.bus import Bus
+    from tfbus.errors import WireEncodeError
+    from tfbus.transports.zenoh import ZenohTransport
+    from tfbus.transports.zenoh.lookups import BufferClient
+
+    frames = {"target_frame": "map", "source_frame": "base", "fixed_frame": "odom",
+              argument: "ma\ud800p"}
+
+    async def main() -> None:
+        client = BufferClient(Bus(transport=ZenohTransport(listen="tcp/127.0.0.1:0")))
+        with pytest.raises(WireEncodeError, match=rf"^{argument} 'ma\\ud800p' cannot be sent"):
+            await client.lookup_transform_full(frames["target_frame"], Time(0),
+                                               frames["source_frame"], Time(0),
+                                               frames["fixed_frame"], 1.0)
+        if argument != "fixed_frame":
+            with pytest.raises(WireEncodeError, match=rf"^{argument} 'ma\\ud800p'"):
+                await client.lookup_transform(frames["target_frame"],
+                                              frames["source_frame"], Time(0), 1.0)
+
+    anyio.run(main, backend=anyio_backend)
