@@ -363,7 +363,7 @@ _ACTION: dict[str, tuple[bytes, Callable[[bytes], Any], Callable[[Any], bytes]]]
 }
 
 
-@fuzz(400)
+@fuzz(300)
 @given(st.sampled_from(sorted(_ACTION)).flatmap(
     lambda kind: st.tuples(st.just(kind), mutated(_ACTION[kind][0]))))
 def test_action_sample_mutants_only_decode_errors(case: tuple[str, bytes]) -> None:

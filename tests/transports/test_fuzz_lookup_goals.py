@@ -168,15 +168,18 @@ def _not_utf8(raw: bytes, frame: str) -> bytes:
     return raw.replace(old, (3).to_bytes(4, "little") + b"\xed\xa0\x80", 1)
 
 
-async def _ros1_answers(goal_payloads: list[bytes]) -> tuple[list[Any], Any, Buffer]:
-    """Send the goals to a ROS 1 server, then ``VALID``; advance the buffer's clock past
-    ``max_wait``: (the results it sent, its statistics, the buffer)."""
+async def _ros1_answers(goal_payloads: list[bytes], cancels: tuple[bytes, ...] = ()
+                        ) -> tuple[list[Any], Any, Buffer]:
+    """Send the goals (and cancel requests) to a ROS 1 server, then ``VALID``; advance the
+    buffer's clock past ``max_wait``: (the results it sent, its statistics, the buffer)."""
     buf, clock = filled_buffer()
     node = _Node()
     with anyio.fail_after(WALL):
         async with Ros1Server(node, buf, max_wait=MAX_WAIT) as server:
             for raw in goal_payloads:
                 node.handlers[GOAL](raw, "/peer")
+            for raw in cancels:
+                node.handlers[CANCEL](raw, "/peer")
             node.handlers[GOAL](ros1.encode_lookup_goal(VALID), "/peer")
             await clock.advance(MAX_WAIT + 1.0)
             stats = server.statistics()
@@ -257,6 +260,29 @@ def test_ros1_server_survives_mutated_goal_bytes(anyio_backend: str, raw: bytes)
     assert answer[0].error == tf2_answer(buf, decoded)[1]
 
 
+_CANCEL = ros1.encode_goal_id(Time(4), "g-full")
+
+
+@fuzz(100)
+@given(raw=_mutants(_CANCEL))
+def test_ros1_server_survives_mutated_cancel_requests(anyio_backend: str, raw: bytes) -> None:
+    """Mutants of an ``actionlib_msgs/GoalID`` cancel request sent after a fixed-frame
+    goal: the goal is answered (SUCCEEDED) or PREEMPTED by a cancel that still names it,
+    a cancel that does not decode is counted malformed, and the valid goal after them is
+    answered."""
+    results, stats, _buf = anyio.run(_ros1_answers, [_ADVANCED], (raw,),
+                                     backend=anyio_backend)
+    _check_valid_answered(results)
+    full = [r for r in results if r.goal_id == "g-full"]
+    assert len(full) == 1 and full[0].status in (2, 3)  # PREEMPTED or SUCCEEDED
+    try:
+        ros1.decode_goal_id(raw)
+    except WireDecodeError:
+        assert stats.malformed == 1 and full[0].status == 3
+    else:
+        assert stats.malformed == 0
+
+
 # -- ROS 2: the action server's lookup of a decoded goal ------------------------------------
 
 ros2_times = st.one_of(st.just(Time(0)), st.sampled_from([Time(10, 500_000_000), Time(11)]),
@@ -333,7 +359,7 @@ zenoh_requests = st.one_of(
 )
 
 
-@fuzz(200)
+@fuzz(150)
 @given(request=zenoh_requests)
 def test_zenoh_server_answers_every_request(anyio_backend: str,
                                             request: dict[str, Any]) -> None:

@@ -161,7 +161,7 @@ def token_mutants(draw: st.DrawFn) -> str:
     return "/".join(chunks)
 
 
-@fuzz(400)
+@fuzz(300)
 @given(token_mutants())
 def test_token_mutants_only_decode_errors(key: str) -> None:
     """Mutated liveliness tokens: an EndpointToken as rmw_zenoh's graph cache reads it
@@ -242,7 +242,7 @@ _KEYS = [_SPACE.data("/tf"), _SPACE.data("/tf_static"), _SPACE.data("/a b/ü"),
          _SPACE.alive("0123abcd", "")]
 
 
-@fuzz(400)
+@fuzz(300)
 @given(st.sampled_from(_KEYS).flatmap(
     lambda k: mutants(k.encode()).map(lambda b: b.decode("utf-8", "replace"))))
 def test_key_mutants_map_to_one_topic_or_none(key: str) -> None:
