@@ -43,7 +43,8 @@ rmw_fastrtps_shared_cpp ``__rmw_take_response`` keeps only the replies whose
 
 **Errors.** Decoding raises :class:`~tfbus.errors.WireDecodeError` and nothing else;
 encoding raises :class:`~tfbus.errors.WireEncodeError` for a value the wire cannot carry
-(a stamp outside int32 seconds, a NUL in a frame id, a goal id that is not 16 bytes).
+(a stamp outside int32 seconds, a NUL or a lone surrogate in a frame id, a goal id that is
+not 16 bytes), naming the field.
 """
 
 from __future__ import annotations
@@ -174,7 +175,11 @@ class _Writer:
         if "\0" in text:
             raise WireEncodeError(f"{what} holds a NUL character, which a CDR string cannot "
                                   f"carry: {text!r:.100}")
-        raw = text.encode()
+        try:
+            raw = text.encode()
+        except UnicodeEncodeError:
+            raise WireEncodeError(f"{what} is not UTF-8 encodable (a lone surrogate): "
+                                  f"{text!r:.100}") from None
         self.put("<I", 4, len(raw) + 1)
         self.parts.append(raw + b"\0")
         self.pos += len(raw) + 1
@@ -303,9 +308,9 @@ def encode_send_goal_request(request_id: RequestId, goal: LookupGoal) -> bytes:
     """A ``LookupTransform_SendGoal_Request`` sample (request identity, goal id, goal).
 
     Raises:
-        WireEncodeError: a goal id that is not 16 bytes, a frame id with a NUL, a time
-            outside int32 seconds, a negative or NaN timeout (named). A timeout of 2**31 s
-            or more is sent as the longest ``Duration``.
+        WireEncodeError: a goal id that is not 16 bytes, a frame id with a NUL or a lone
+            surrogate, a time outside int32 seconds, a negative or NaN timeout (named). A
+            timeout of 2**31 s or more is sent as the longest ``Duration``.
     """
     w = _Writer(request_id)
     _write_goal(w, goal)
@@ -407,7 +412,7 @@ def encode_get_result_response(request_id: RequestId, result: LookupResult) -> b
 
     Raises:
         WireEncodeError: a stamp outside int32 seconds, a frame id or error string with a
-            NUL, a status outside int8 or an error code outside uint8.
+            NUL or a lone surrogate, a status outside int8 or an error code outside uint8.
     """
     w = _Writer(request_id)
     _write_result(w, result)
@@ -577,8 +582,8 @@ def encode_lookup_goal(message: LookupTransformGoal) -> bytes:
     ``Duration``.
 
     Raises:
-        WireEncodeError: a goal id that is not a UUID, a frame id with a NUL, a time
-            outside int32 seconds, a negative or NaN timeout (named).
+        WireEncodeError: a goal id that is not a UUID, a frame id with a NUL or a lone
+            surrogate, a time outside int32 seconds, a negative or NaN timeout (named).
     """
     g = message
     w = _Writer(None)

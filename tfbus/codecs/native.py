@@ -121,6 +121,7 @@ _SCAN_TAG: Final = "LaserScan"
 _CLOUD_TAG: Final = "PointCloud2"
 _U32: Final[Any] = Annotated[int, msgspec.Meta(ge=0, le=2**32 - 1)]
 _F32_LE: Final = np.dtype("<f4")
+_F32_MAX: Final = float(np.finfo(np.float32).max)
 
 
 @dataclass(frozen=True, slots=True)
@@ -285,7 +286,8 @@ class WireCodec:
         Raises:
             WireDecodeError: bad magic byte, bad msgpack, wrong shape or field type, a
                 stamp outside [0, 2**63) ns, a sender id or sequence number outside
-                [1, 2**63), or any other failure of the decoder (nesting too deep included).
+                [1, 2**63), a finite LaserScan angle, time or range beyond float32, or any
+                other failure of the decoder (nesting too deep included).
             WireVersionError: a tfbus payload of another format version.
             WireLimitError: payload too large, too many transforms, frame id too long,
                 nesting too deep, a LaserScan with more than ``limits.max_scan_beams``
@@ -440,7 +442,17 @@ def _beams(data: bytes, name: str) -> Any:
 
 def _scan_from_wire(body: Any) -> LaserScan:
     """The wire schema's LaserScan body as a :class:`~tfbus.sensor_msgs.LaserScan` (bounds
-    and types already checked by the schema)."""
+    and types already checked by the schema).
+
+    Raises:
+        WireDecodeError: a finite angle, time or range beyond float32's range (the type of
+            ``LaserScan.msg``'s fields; tfbus writes float32 values, and casting a larger
+            one made it infinite with a numpy overflow warning), naming the field.
+    """
+    for name in _SCAN_FLOATS:
+        value = getattr(body, name)
+        if abs(value) > _F32_MAX and value - value == 0.0:  # finite, past float32
+            raise WireDecodeError(f"LaserScan.{name} {value!r} is outside float32's range")
     stamp = Time.__new__(Time)
     stamp._ns = body.stamp
     return LaserScan(

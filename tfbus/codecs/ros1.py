@@ -905,8 +905,18 @@ _POSE = struct.Struct("<7d")
 _ACTION_ERRORS: Final = (struct.error, UnicodeDecodeError, ValueError, OverflowError)
 
 
-def _string(text: str) -> bytes:
-    raw = text.encode()
+def _string(text: str, field: str) -> bytes:
+    """A ROS 1 string (``uint32`` length, UTF-8 bytes).
+
+    Raises:
+        WireEncodeError: ``text`` is not a str or cannot be UTF-8 (a lone surrogate),
+            naming ``field`` and the value.
+    """
+    try:
+        raw = text.encode()
+    except (AttributeError, UnicodeEncodeError):
+        raise WireEncodeError(f"{field} must be a str of Unicode characters (UTF-8 "
+                              f"encodable), got {text!r:.100}") from None
     return _U32.pack(len(raw)) + raw
 
 
@@ -921,7 +931,7 @@ def _time(t: Time, field: str) -> bytes:
 
 def _header(stamp: Time, field: str) -> bytes:
     """A ``std_msgs/Header`` with ``seq`` 0 and no frame id (actionlib's messages)."""
-    return _U32.pack(0) + _time(stamp, field) + _string("")
+    return _U32.pack(0) + _time(stamp, field) + _string("", "header.frame_id")
 
 
 class _Reader:
@@ -961,7 +971,8 @@ def encode_lookup_goal(message: LookupTransformGoal) -> bytes:
 
     Raises:
         WireEncodeError: a time at or after 2**32 s (past ROS 1 time, uint32 seconds),
-            naming the field, or a timeout that is not a finite number.
+            naming the field, a timeout that is not a finite number, or a goal id or
+            frame id that is not a str UTF-8 can carry (a lone surrogate), named.
     """
     g = message
     if not isinstance(g.timeout, (int, float)) or not math.isfinite(g.timeout):
@@ -975,10 +986,11 @@ def encode_lookup_goal(message: LookupTransformGoal) -> bytes:
                               "fit a ROS 1 duration (int32 seconds)") from None
     return b"".join((
         _header(g.goal_stamp, "goal_stamp"),
-        _time(g.goal_stamp, "goal_stamp"), _string(g.goal_id),
-        _string(g.target_frame), _string(g.source_frame),
+        _time(g.goal_stamp, "goal_stamp"), _string(g.goal_id, "goal_id"),
+        _string(g.target_frame, "goal.target_frame"),
+        _string(g.source_frame, "goal.source_frame"),
         _time(g.source_time, "source_time"), duration,
-        _time(g.target_time, "target_time"), _string(g.fixed_frame),
+        _time(g.target_time, "target_time"), _string(g.fixed_frame, "goal.fixed_frame"),
         _U8.pack(1 if g.advanced else 0),
     ))
 
@@ -1011,7 +1023,8 @@ def decode_lookup_goal(data: bytes | memoryview) -> LookupTransformGoal:
 
 def _goal_status(goal_id: str, stamp: Time, status: int, text: str) -> bytes:
     """An ``actionlib_msgs/GoalStatus``."""
-    return _time(stamp, "goal_stamp") + _string(goal_id) + _U8.pack(status) + _string(text)
+    return (_time(stamp, "goal_stamp") + _string(goal_id, "goal_id") + _U8.pack(status)
+            + _string(text, "status.text"))
 
 
 def encode_lookup_result(message: LookupTransformResult) -> bytes:
@@ -1022,7 +1035,8 @@ def encode_lookup_result(message: LookupTransformResult) -> bytes:
 
     Raises:
         WireEncodeError: a stamp at or after 2**32 s (past ROS 1 time), naming the field,
-            or a status or error code outside uint8.
+            a status or error code outside uint8, or a string (frame id, goal id, status
+            text, error string) UTF-8 cannot carry (a lone surrogate), named.
     """
     m = message
     t = m.transform.transform
@@ -1033,12 +1047,13 @@ def encode_lookup_result(message: LookupTransformResult) -> bytes:
                               f"{m.error!r} is not a uint8") from None
     return b"".join((
         _header(m.stamp, "stamp"),
-        _time(m.goal_stamp, "goal_stamp"), _string(m.goal_id), codes[0],
-        _string(m.status_text),
+        _time(m.goal_stamp, "goal_stamp"), _string(m.goal_id, "goal_id"), codes[0],
+        _string(m.status_text, "status.text"),
         _U32.pack(0), _time(m.transform.header.stamp, "transform.header.stamp"),
-        _string(m.transform.header.frame_id), _string(m.transform.child_frame_id),
+        _string(m.transform.header.frame_id, "result.transform.header.frame_id"),
+        _string(m.transform.child_frame_id, "result.transform.child_frame_id"),
         _POSE.pack(*t.translation, *t.rotation),
-        codes[1], _string(m.error_string),
+        codes[1], _string(m.error_string, "result.error.error_string"),
     ))
 
 
@@ -1073,9 +1088,9 @@ def encode_goal_id(stamp: Time, goal_id: str) -> bytes:
     client cancels its goal with ``GoalID(stamp=0, id=goal_id)``).
 
     Raises:
-        WireEncodeError: a stamp at or after 2**32 s.
+        WireEncodeError: a stamp at or after 2**32 s, or a goal id UTF-8 cannot carry.
     """
-    return _time(stamp, "stamp") + _string(goal_id)
+    return _time(stamp, "stamp") + _string(goal_id, "goal_id")
 
 
 def decode_goal_id(data: bytes | memoryview) -> tuple[Time, str]:

@@ -49,6 +49,7 @@ import anyio
 import anyio.lowlevel
 
 from tfbus._aio import running_asyncio_loop
+from tfbus.errors import InvalidArgumentException, TimeoutException
 from tfbus.time import Duration
 from tfbus.topics import PEERS_TOPIC, TF_TOPICS
 
@@ -63,6 +64,7 @@ __all__ = [
     "DEFAULT_MAX_WAIT",
     "DEFAULT_SERVER_NAME",
     "DOMAIN_ID_MAX",
+    "LOOKUPS_OWN_ERROR",
     "MAX_FRAME_ID_BYTES",
     "PEERS_TOPIC",
     "Backlogged",
@@ -189,6 +191,18 @@ action ``/tf2_buffer_server``)."""
 DEFAULT_MAX_WAIT: Final = 60.0
 """Seconds a lookup server waits for one lookup at most, by default (tf2_ros's
 ``buffer_server`` waits for as long as the goal's timeout asks)."""
+
+LOOKUPS_OWN_ERROR: Final = (TimeoutException, InvalidArgumentException)
+"""The errors of an awaited lookup after which a lookup server answers with the
+synchronous lookup's own result or error, as tf2_ros ``buffer_server.cpp``
+(``checkTransforms``: once a goal's timeout expires, ``lookupTransform``'s answer). A
+:class:`~tfbus.errors.TimeoutException` is that timeout. An
+:class:`~tfbus.errors.InvalidArgumentException` is an argument that can never be valid (an
+empty frame id, a leading ``/``): the awaited lookup refuses it at once, having checked
+every argument first, whereas tf2's ``canTransform`` answers false until the timeout and
+``lookupTransform`` then checks the target frame before the source; so for an unknown
+target frame and an empty source frame tf2's server answers ``LookupException`` (code 1),
+and so do tfbus's servers (at once: waiting cannot change the answer)."""
 
 MAX_FRAME_ID_BYTES: Final = 1024
 """Longest frame id (UTF-8 bytes) a lookup server over Zenoh looks up. tf2 accepts any

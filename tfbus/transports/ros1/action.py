@@ -75,6 +75,7 @@ from tfbus.messages import (
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
 from tfbus.transports._base import (
+    LOOKUPS_OWN_ERROR,
     ServerStatistics,
     action_client_limits,
     goal_timeout,
@@ -505,7 +506,9 @@ class LookupActionServer:
 
     async def _lookup(self, goal: LookupTransformGoal,
                       timeout: float) -> tuple[TransformStamped, int, str]:
-        """The goal's transform, or its ``TF2Error`` code and message."""
+        """The goal's transform, or its ``TF2Error`` code and message (at the timeout,
+        or for an argument that can never be valid, the synchronous lookup's own:
+        :data:`~tfbus.transports._base.LOOKUPS_OWN_ERROR`)."""
         buffer = self._buffer
         g = goal
         try:
@@ -514,7 +517,7 @@ class LookupActionServer:
                     ts = await buffer.lookup_transform_full_async(
                         g.target_frame, g.target_time, g.source_frame, g.source_time,
                         g.fixed_frame, timeout)
-                except errors.TimeoutException:  # buffer_server.cpp: lookup's own error
+                except LOOKUPS_OWN_ERROR:  # buffer_server.cpp: lookup's own error
                     ts = buffer.lookup_transform_full(
                         g.target_frame, g.target_time, g.source_frame, g.source_time,
                         g.fixed_frame)
@@ -522,7 +525,7 @@ class LookupActionServer:
                 try:
                     ts = await buffer.lookup_transform_async(
                         g.target_frame, g.source_frame, g.source_time, timeout)
-                except errors.TimeoutException:
+                except LOOKUPS_OWN_ERROR:
                     ts = buffer.lookup_transform(g.target_frame, g.source_frame,
                                                  g.source_time)
         except TransformException as exc:

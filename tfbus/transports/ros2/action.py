@@ -95,6 +95,7 @@ from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
 from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
+    LOOKUPS_OWN_ERROR,
     ServerStatistics,
     ThreadWakeup,
     action_client_limits,
@@ -590,7 +591,8 @@ class LookupActionServer:
 
     async def _lookup(self, goal: LookupGoal, timeout: float) -> LookupResult:
         """The goal's transform, or its ``TF2Error`` (``buffer_server.cpp``: at the
-        timeout the lookup's own error, not a timeout)."""
+        timeout the lookup's own error, not a timeout;
+        :data:`~tfbus.transports._base.LOOKUPS_OWN_ERROR`)."""
         buffer = self._buffer
         g = goal
         try:
@@ -599,7 +601,7 @@ class LookupActionServer:
                     ts = await buffer.lookup_transform_full_async(
                         g.target_frame, g.target_time, g.source_frame, g.source_time,
                         g.fixed_frame, timeout)
-                except errors.TimeoutException:
+                except LOOKUPS_OWN_ERROR:
                     ts = buffer.lookup_transform_full(
                         g.target_frame, g.target_time, g.source_frame, g.source_time,
                         g.fixed_frame)
@@ -607,7 +609,7 @@ class LookupActionServer:
                 try:
                     ts = await buffer.lookup_transform_async(
                         g.target_frame, g.source_frame, g.source_time, timeout)
-                except errors.TimeoutException:
+                except LOOKUPS_OWN_ERROR:
                     ts = buffer.lookup_transform(g.target_frame, g.source_frame,
                                                  g.source_time)
         except TransformException as exc:

@@ -87,9 +87,9 @@ from tfbus.core.policy import (
 )
 from tfbus.errors import (
     InvalidArgumentException,
-    TimeoutException,
     TransformException,
     TransportError,
+    WireEncodeError,
     WireError,
 )
 from tfbus.messages import TransformStamped
@@ -97,6 +97,7 @@ from tfbus.time import Duration, Time
 from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
     DEFAULT_SERVER_NAME,
+    LOOKUPS_OWN_ERROR,
     MAX_FRAME_ID_BYTES,
     ServerStatistics,
     transform_remotely,
@@ -134,6 +135,8 @@ _EXCEPTIONS: Final[Mapping[str, type[TransformException]]] = {
     )
 }
 _OPS: Final = ("lookup", "full", "can")
+_ARGUMENTS: Final = {"target": "target_frame", "source": "source_frame",
+                     "fixed": "fixed_frame"}  # request field -> lookup argument
 _MAX_REQUEST_BYTES: Final = 16 << 10  # a request with 4 frame ids of 1 KiB is smaller
 _MAX_ID_CHARS: Final = 64
 # A lookup that may wait longer than this (server seconds) holds a liveliness token so
@@ -575,7 +578,7 @@ class BufferServer:
                     target, target_time, source, source_time, fixed, timeout,
                     fail_fast=fail_fast, policy=full_policy,
                 )
-            except TimeoutException:
+            except LOOKUPS_OWN_ERROR:
                 return buffer.lookup_transform_full(
                     target, target_time, source, source_time, fixed, policy=full_policy
                 )
@@ -592,14 +595,15 @@ class BufferServer:
                 return await buffer.lookup_transform_async(
                     target, source, time, timeout, policy=policy
                 )
-            except TimeoutException:
+            except LOOKUPS_OWN_ERROR:
                 return buffer.lookup_transform(target, source, time, policy=policy)
         try:
             return await buffer.lookup_transform_async(target, source, time, timeout,
                                                        fail_fast=fail_fast)
-        except TimeoutException:
-            # tf2_ros buffer_server.cpp checkTransforms: once the goal times out, the
-            # answer is lookupTransform's own result or error (LookupException, ...).
+        except LOOKUPS_OWN_ERROR:
+            # tf2_ros buffer_server.cpp checkTransforms: once the goal times out (or
+            # an argument can never be valid), the answer is lookupTransform's own
+            # result or error (LookupException, ...), in its order of checks.
             return buffer.lookup_transform(target, source, time)
 
     def _reply_error(self, query: zenoh.Query, exc: TransformException) -> None:
@@ -703,7 +707,8 @@ class BufferClient:
         Raises:
             The server's tf2 exception (same class, same message); TimeoutException if
             no answer came within the padded timeout; TransportError if the bus closed;
-            TypeError: ``policy`` is not a lookup policy.
+            TypeError: ``policy`` is not a lookup policy; WireEncodeError: a frame id
+            that cannot be sent (a lone surrogate), naming the argument and value.
         """
         request: dict[str, Any] = {"op": "lookup", "target": target_frame,
                                    "source": source_frame, "time": time.ns}
@@ -784,6 +789,7 @@ class BufferClient:
 
         Raises:
             TransportError: the bus closed. TypeError: ``policy`` is not a lookup policy.
+            WireEncodeError: a frame id that cannot be sent (a lone surrogate), named.
         """
         request: dict[str, Any] = {"op": "can", "target": target_frame,
                                    "source": source_frame, "time": time.ns}
@@ -872,7 +878,18 @@ class BufferClient:
             lookup_id = secrets.token_hex(16)
             request["id"] = lookup_id
         request["query_timeout"] = wall
-        payload = self._codec.encode(request, sender=self._sender, seq=1)
+        try:
+            payload = self._codec.encode(request, sender=self._sender, seq=1)
+        except WireEncodeError:
+            for name, value in request.items():  # name the argument that cannot be sent
+                if isinstance(value, str) and not value.isascii():
+                    try:
+                        value.encode()
+                    except UnicodeEncodeError:
+                        raise WireEncodeError(
+                            f"{_ARGUMENTS.get(name, name)} {value!r:.100} cannot be sent: "
+                            "not UTF-8 encodable (a lone surrogate)") from None
+            raise
         session = _session(self._transport)
         replies = await _query(session, self._key, payload, wall, lookup_id)
         for data in replies:
