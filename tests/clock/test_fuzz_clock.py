@@ -17,10 +17,11 @@ from typing import Any
 
 import anyio
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from tfbus import Bus, SimClock
+from tfbus.clock import every
 from tfbus.codecs import cdr, native, ros1
 from tfbus.errors import WireError
 from tfbus.messages import Clock
@@ -112,3 +113,168 @@ def test_any_run_of_clock_samples_keeps_the_clock_consistent(
     backend: str, samples: list[tuple[str, bytes] | int]
 ) -> None:
     anyio.run(_run, samples, backend=backend)
+
+
+# ------------------------------------------------------------------ timers and jump callbacks
+
+PERIOD_NS = 1_000_000_000
+MAX_STEP_NS = 10**18  # SimClock's default max_forward_step, 1e9 s
+EDGE_NS = [0, 1, PERIOD_NS, 2**31 * 10**9 - 1, (2**32 - 1) * 10**9 + 999_999_999,
+           TIME_MAX_NS - PERIOD_NS, TIME_MAX_NS - 1, TIME_MAX_NS]
+"""Stamps at the edges of each middleware's time (ROS 2's int32 and ROS 1's uint32
+seconds) and of :class:`~tfbus.time.Time` itself (int64 nanoseconds)."""
+
+STEP = st.one_of(
+    st.sampled_from(EDGE_NS),
+    st.integers(0, TIME_MAX_NS),
+    st.sampled_from(["same", "back", "forward", "junk"]),
+)
+
+
+async def _timer_run(steps: list[int | str], wall_timeout: float | None) -> None:
+    """Publish ``steps`` on /clock with a 1 s timer and a jump callback running; check
+    each against a model of SimClock (rclpy's TimeSource: a jump back is taken and
+    reported; the first sample at any time; later ones more than max_forward_step ahead
+    dropped), then that the timer still ticks on the next valid samples."""
+    async with Bus() as bus, SimClock(bus, wall_timeout=wall_timeout) as clock:
+        reported: list[tuple[int, int]] = []
+        clock.on_jump(lambda old, new: reported.append((old.ns, new.ns)))
+        ticks: list[Any] = []
+
+        async def timer() -> None:
+            async for tick in every(PERIOD_NS / 1e9, clock=clock):
+                ticks.append((tick, clock.now_ns()))
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(timer)
+            await anyio.wait_all_tasks_blocked()
+            now, accepted, jumps = 0, 0, []
+            for step in steps:
+                if step == "junk":
+                    bus.publish_nowait(CLOCK_TOPIC, Clock(-1))  # type: ignore[arg-type]
+                    continue
+                ns = {"same": now, "back": max(now - PERIOD_NS, 0),
+                      "forward": min(now + PERIOD_NS // 2, TIME_MAX_NS)}.get(step, step)
+                assert isinstance(ns, int)
+                bus.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(ns)))
+                if not accepted or ns - now <= MAX_STEP_NS:
+                    if ns < now:
+                        jumps.append((now, ns))
+                    now, accepted = ns, accepted + 1
+                await anyio.wait_all_tasks_blocked()  # the timer runs after each sample
+                assert clock.now_ns() == now
+            assert reported == jumps
+            assert clock.jumps == len(jumps) and clock.accepted == accepted
+            for tick, at in ticks:  # every tick at a deadline reached, read in range
+                assert tick.expected.ns <= tick.actual.ns == at <= TIME_MAX_NS
+            # After any of it, the timer ticks at the next valid samples (from a jump
+            # back to 0 when there is no room left before the end of Time).
+            if now + 2 * PERIOD_NS > TIME_MAX_NS:
+                now = 0
+                bus.publish_nowait(CLOCK_TOPIC, Clock(Time(0)))
+                await anyio.wait_all_tasks_blocked()
+            seen = len(ticks)
+            for k in (1, 2):
+                bus.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(now + k * PERIOD_NS)))
+                await anyio.wait_all_tasks_blocked()
+            assert len(ticks) >= seen + 2
+            assert ticks[-1][0].actual.ns == now + 2 * PERIOD_NS
+            tg.cancel_scope.cancel()
+
+
+@pytest.mark.parametrize("wall_timeout", [None, 600.0], ids=["unbounded", "wall_timeout"])
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+@settings(max_examples=150, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(steps=st.lists(STEP, max_size=20))
+@example(steps=[TIME_MAX_NS - 1])
+def test_a_timer_and_jump_callbacks_follow_any_run_of_clock_samples(
+    backend: str, wall_timeout: float | None, steps: list[int | str]
+) -> None:
+    anyio.run(_timer_run, steps, wall_timeout, backend=backend)
+
+
+@pytest.mark.anyio
+async def test_a_timer_within_one_period_of_the_end_of_time_waits_for_a_jump_back() -> None:
+    """A /clock of 2**63 - 1 ns (the last Time; a sample a Zenoh peer may send) leaves no
+    room for a timer's next deadline: the timer waits (before: a SimClock with a
+    wall_timeout raised ValueError "Time beyond int64 nanoseconds" out of the timer),
+    then ticks on from a jump back."""
+    async with Bus() as bus, SimClock(bus, wall_timeout=600.0) as clock:
+        bus.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(TIME_MAX_NS)))
+        ticks: list[Time] = []
+
+        async def timer() -> None:
+            async for tick in every(1.0, clock=clock):
+                ticks.append(tick.expected)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(timer)
+            await anyio.wait_all_tasks_blocked()
+            assert ticks == []
+            bus.publish_nowait(CLOCK_TOPIC, Clock(Time(100)))  # jump back: re-anchored
+            await anyio.wait_all_tasks_blocked()
+            bus.publish_nowait(CLOCK_TOPIC, Clock(Time(101)))
+            await anyio.wait_all_tasks_blocked()
+            assert ticks == [Time(101)]
+            tg.cancel_scope.cancel()
+        assert clock.jumps == 1
+
+
+# ------------------------------------------------------------------ Zenoh: the newest-only stamp
+
+def _native_clock(sender: int, seq: int, tag: str, stamp: object) -> bytes:
+    """A tfbus wire payload of a ``Clock`` with any envelope values (msgpack)."""
+    import msgspec
+
+    return bytes([native.MAGIC, native.WIRE_VERSION]) + msgspec.msgpack.encode(
+        [sender, seq, tag, [stamp]]
+    )
+
+
+ENVELOPE_INTS = st.sampled_from([0, 1, 2**63 - 1, 2**63, 2**64 - 1, -1, -(2**63)])
+
+
+@st.composite
+def native_clock_payload(draw: st.DrawFn) -> bytes:
+    """A ``Clock`` payload of tfbus's Zenoh wire with edge envelope values, or a valid
+    one mutated (bits flipped, cut, extended)."""
+    stamp = draw(st.sampled_from([0, TIME_MAX_NS, TIME_MAX_NS + 1, -1, 2**64 - 1, 1.5, True])
+                 | st.integers(0, TIME_MAX_NS))
+    sender = draw(ENVELOPE_INTS | st.integers(1, 2**63 - 1))
+    seq = draw(ENVELOPE_INTS | st.integers(1, 2**63 - 1))
+    tag = draw(st.sampled_from(["Clock", "Clocj", "TFMessage", ""]))
+    raw = bytearray(_native_clock(sender, seq, tag, stamp))
+    for _ in range(draw(st.integers(0, 2))):
+        op = draw(st.sampled_from(["flip", "cut", "extend"]))
+        if op == "cut":
+            del raw[draw(st.integers(0, len(raw))):]
+        elif op == "extend":
+            raw += draw(st.binary(max_size=8))
+        elif raw:
+            raw[draw(st.integers(0, len(raw) - 1))] ^= 1 << draw(st.integers(0, 7))
+    return bytes(raw)
+
+
+@settings(max_examples=400, deadline=None, derandomize=True, database=None)
+@given(payload=native_clock_payload())
+@example(payload=_native_clock(1, -1, "Clock", 5))
+@example(payload=_native_clock(2**64 - 1, 1, "Clock", 5))
+def test_the_zenoh_newest_only_stamp_reads_exactly_the_clocks_the_decoder_accepts(
+    payload: bytes,
+) -> None:
+    """Zenoh's thread reads each /clock's stamp with a light decoder to decide which
+    sample to keep (``clock_stamp``); a sample it keeps replaces the one kept before.
+    It gives a stamp exactly for the payloads the event loop's full decoder takes as a
+    Clock, with the same stamp, so a sample that will be dropped never takes the place of
+    a good one (before: a sender id or sequence number outside [1, 2**63) was read as a
+    stamp, and the good sample it replaced was lost)."""
+    pytest.importorskip("zenoh")
+    from tfbus.transports.zenoh.transport import clock_stamp
+
+    try:
+        message = native.WireCodec().decode(payload).message
+    except WireError:
+        message = None
+    expected = message.clock.ns if isinstance(message, Clock) else None
+    assert clock_stamp(payload) == expected

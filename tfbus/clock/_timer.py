@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import weakref
 from collections.abc import Callable
@@ -259,11 +260,18 @@ class PeriodicTimer:
 
     async def _scope_wait(self, clock: Clock, deadline: int) -> None:
         """``clock.sleep_until(deadline)`` in a cancel scope that a backward jump cancels
-        (a clock whose ``call_later`` returns None)."""
+        (a clock whose ``call_later`` returns None). A deadline past the end of
+        :class:`~tfbus.time.Time` (``TIME_MAX_NS``: a clock within one period of it, as
+        a ``/clock`` of 2**63 - 1 ns sets a SimClock) is never reached: the wait lasts
+        until a jump back (or the clock's own bound, a SimClock's ``wall_timeout``), as
+        :meth:`ManualClock.sleep <tfbus.clock.ManualClock.sleep>` past the end does."""
         with anyio.CancelScope() as scope:
             self._wake = scope.cancel
             try:
-                await clock.sleep_until(Time.from_ns(deadline))
+                if deadline > TIME_MAX_NS:
+                    await clock.sleep(math.inf)
+                else:
+                    await clock.sleep_until(Time.from_ns(deadline))
             finally:
                 self._wake = None
 

@@ -44,30 +44,50 @@ def encode_header(fields: Mapping[str, str]) -> bytes:
 
 
 def decode_header(body: bytes) -> dict[str, str]:
-    """Parse the body of a connection header (without its total-length prefix).
+    """Parse the body of a connection header (without its total-length prefix). A field
+    given twice keeps its last value, as roscpp's ``Header::parse`` does (each
+    ``key=value`` line is stored into one map in order).
 
     Raises:
-        ValueError: a field runs past the end, has no ``=``, or is not UTF-8.
+        ValueError: a field runs past the end, has no ``=``, or is not UTF-8; the message
+            names the field (its first bytes) and its byte offset in ``body``.
     """
     out: dict[str, str] = {}
     off, n = 0, len(body)
     while off < n:
         if off + 4 > n:
-            raise ValueError(f"connection header: truncated field length at byte {off}")
+            raise ValueError(
+                f"connection header: truncated field length at byte {off} "
+                f"({n - off} bytes left, 4 needed)"
+            )
         (flen,) = _U32.unpack_from(body, off)
         off += 4
         if flen > n - off:
             raise ValueError(
-                f"connection header: field of {flen} bytes at byte {off} runs past the end"
+                f"connection header: field of {flen} bytes at byte {off} runs past the end "
+                f"({n - off} bytes left)"
             )
-        key, eq, value = body[off : off + flen].partition(b"=")
-        off += flen
+        field = body[off : off + flen]
+        key, eq, value = field.partition(b"=")
         if not eq:
-            raise ValueError("connection header: a field without '='")
+            raise ValueError(
+                f"connection header: field {field[:60]!r} at byte {off} has no '='"
+            )
         try:
-            out[key.decode()] = value.decode()
+            name = key.decode()
         except UnicodeDecodeError as exc:
-            raise ValueError(f"connection header: not UTF-8 ({exc})") from exc
+            raise ValueError(
+                f"connection header: the name of field {field[:60]!r} at byte {off} is not "
+                f"UTF-8 ({exc.reason} at byte {off + exc.start})"
+            ) from None
+        try:
+            out[name] = value.decode()
+        except UnicodeDecodeError as exc:
+            raise ValueError(
+                f"connection header: field {name[:60]!r} at byte {off} is not UTF-8 "
+                f"({exc.reason} at byte {off + len(key) + 1 + exc.start})"
+            ) from None
+        off += flen
     return out
 
 

@@ -222,19 +222,25 @@ class NewestFollower:
 
 
 _CLOCK_PAYLOAD: Final = msgspec.msgpack.Decoder(tuple[int, int, str, tuple[int]])
+_INT64_MAX: Final = 2**63 - 1  # the largest sender id and sequence number of the wire
 
 
 def clock_stamp(payload: bytes) -> int | None:
     """The stamp (int ns) of a tfbus wire payload of a ``Clock`` (:mod:`tfbus.codecs.native`:
     magic byte, version, then ``[sender, seq, "Clock", [ns]]``), read by one typed msgspec
-    decoder (about 1 us, a ninth of the full decode); None for anything else."""
+    decoder (about 1 us, a ninth of the full decode); None for anything else, and for
+    every payload :meth:`WireCodec.decode <tfbus.codecs.native.WireCodec.decode>` refuses
+    (a sender id or sequence number outside [1, 2**63), as it checks them): a sample the
+    event loop will drop must never take the place of the good one kept."""
     if len(payload) < 2 or payload[0] != MAGIC or payload[1] != WIRE_VERSION:
         return None
     try:
-        _sender, _seq, tag, (ns,) = _CLOCK_PAYLOAD.decode(memoryview(payload)[2:])
+        sender, seq, tag, (ns,) = _CLOCK_PAYLOAD.decode(memoryview(payload)[2:])
     except (msgspec.DecodeError, ValueError):
         return None
-    return ns if tag == "Clock" and 0 <= ns <= TIME_MAX_NS else None
+    if tag != "Clock" or not (0 < sender <= _INT64_MAX and 0 < seq <= _INT64_MAX):
+        return None
+    return ns if 0 <= ns <= TIME_MAX_NS else None
 
 
 @dataclass(slots=True)
