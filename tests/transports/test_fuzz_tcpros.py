@@ -515,3 +515,46 @@ async def test_a_node_under_hostile_tcpros_peers_counts_them_and_serves_valid_on
                     sub.bus_info())
             assert pub.statistics().malformed == len(HOSTILE_HEADERS)
             tg.cancel_scope.cancel()
+
+
+class _Dropper(Recorder):
+    """A bus whose subscribers keep nothing (only the count)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.count = 0
+
+    def deliver_nowait(self, topic: str, message: object) -> None:
+        self.count += 1
+
+
+@pytest.mark.skipif(
+    ros1_codec._compiled_ros1 is None, reason="no compiled ROS 1 decoder (pure-Python core)"
+)
+def test_long_frame_ids_at_every_position_are_not_held_after_their_message() -> None:
+    """A publisher sends message after message, each with one long ASCII frame id at a
+    new position behind short non-ASCII ones; once delivered and dropped by the
+    subscribers, nothing of them stays (before: the compiled decoder kept every ASCII id
+    it decoded at each of its 4096 positions, whatever its length: about a message's
+    worth of ids per position, here 6 MB after 200 messages of 30 kB)."""
+    import tracemalloc
+
+    long_id = "x" * 30_000
+    data = encode_header(_header_fields("/tf", "/long_ids")) + b"".join(
+        frame(ros1_codec.encode_tf(
+            [_ts("ü", "ü", _T0, 0.0)] * k + [_ts(long_id + str(k), "c", _T0, 0.0)]
+        ))
+        for k in range(200)
+    )
+    node = _node()
+    bus = _Dropper()
+    link = ros1_transport._Inbound(node, bus, "/tf", "http://127.0.0.1:1/")  # type: ignore[arg-type]
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        link.splitter.feed(data)
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert bus.count == 200
+    assert held < 2_000_000, f"{held / 1e6:.1f} MB held after the messages were dropped"
