@@ -184,7 +184,7 @@ async def _timer_run(steps: list[int | str], wall_timeout: float | None) -> None
 
 @pytest.mark.parametrize("wall_timeout", [None, 600.0], ids=["unbounded", "wall_timeout"])
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
-@settings(max_examples=150, deadline=None, derandomize=True, database=None,
+@settings(max_examples=100, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(steps=st.lists(STEP, max_size=20))
 @example(steps=[TIME_MAX_NS - 1])

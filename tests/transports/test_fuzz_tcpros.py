@@ -69,7 +69,7 @@ from tfbus.transports.ros1.tcpros import (
     read_frame,
 )
 
-FUZZ = settings(max_examples=500, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=300, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 ABSURD_U32 = [0, 1, 3, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF, MAX_HEADER_BYTES,
               MAX_HEADER_BYTES + 1]
