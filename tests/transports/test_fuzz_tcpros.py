@@ -69,7 +69,7 @@ from tfbus.transports.ros1.tcpros import (
     read_frame,
 )
 
-FUZZ = settings(max_examples=500, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=300, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 ABSURD_U32 = [0, 1, 3, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF, MAX_HEADER_BYTES,
               MAX_HEADER_BYTES + 1]
@@ -124,10 +124,14 @@ def _tf_lengths(raw: bytes) -> list[int]:
 def stream(draw: st.DrawFn, topic: str) -> bytes:
     """A publisher's TCPROS stream on ``topic``, valid or mutated."""
     fields = _header_fields(topic, draw(st.sampled_from(["/talker", "", "/" + "n" * 200])))
-    if draw(st.booleans()):
-        fields["md5sum"] = "*"  # a subscriber's wildcard, accepted from a publisher too
-    if draw(st.integers(0, 9)) == 0:
-        fields["error"] = "no such topic"  # a refusal (TransportError)
+    fields["md5sum"] = draw(st.sampled_from([
+        fields["md5sum"],
+        "*",  # a subscriber's wildcard, accepted from a publisher too
+        "f" * 5000,  # huge: refused in one short line
+    ]))
+    fields["type"] = draw(st.sampled_from([fields["type"], "t" * 5000]))
+    if draw(st.integers(0, 9)) == 0:  # a refusal (TransportError), short or huge
+        fields["error"] = draw(st.sampled_from(["no such topic", "e" * 5000]))
     header = encode_header(fields)
     parts: list[bytes] = [header]
     lengths = [(0, off) for off in _header_lengths(fields)]  # (part, offset in it)
@@ -326,6 +330,21 @@ def test_a_field_given_twice_keeps_its_last_value_as_in_roscpp() -> None:
                 link.splitter.feed(whole + frames)
 
 
+@pytest.mark.parametrize(("field", "error"), [("md5sum", ValueError),
+                                              ("error", TransportError)])
+def test_a_huge_header_value_is_refused_in_one_short_line(field: str,
+                                                          error: type[Exception]) -> None:
+    """A publisher's 60 kB md5sum or error text ends the connection with an error (and a
+    log line) naming the field in its first 80 or 200 characters (before: the whole
+    value went into the message and the warning)."""
+    fields = _header_fields("/tf") | {field: "f" * 60_000}
+    link = ros1_transport._Inbound(_node(), Recorder(), "/tf", "http://127.0.0.1:1/")  # type: ignore[arg-type]
+    with pytest.raises(error) as raised:
+        link.splitter.feed(encode_header(fields))
+    assert len(str(raised.value)) < 300
+    assert ("sends md5sum 'fff" if field == "md5sum" else "refused /tf: fff") in str(raised.value)
+
+
 @pytest.mark.parametrize(
     ("body", "message"),
     [
@@ -487,9 +506,12 @@ async def test_a_node_under_hostile_tcpros_peers_counts_them_and_serves_valid_on
                         {"callerid": "/x", "topic": "/tf", "md5sum": "f" * 60_000}))
                     answer = b""
                     with suppress(anyio.EndOfStream, anyio.BrokenResourceError):
-                        while len(answer) < 4 + 4 + 6:
+                        while len(answer) < 4096:  # until the server closes (bounded)
                             answer += await client.receive()
-            assert answer[8:14] == b"error="
+            refusal = decode_header(answer[4:])["error"]
+            assert refusal.startswith("/good does not publish") or refusal.startswith(
+                "md5sum mismatch: 'ffff")
+            assert len(refusal) < 200  # one short line, not the 60 kB it was sent
             await _until(lambda: pub.statistics().malformed == len(HOSTILE_HEADERS))
             # 2. a subscriber node after it: served by the good publisher, and fed the
             # hostile publisher's sessions
@@ -515,3 +537,46 @@ async def test_a_node_under_hostile_tcpros_peers_counts_them_and_serves_valid_on
                     sub.bus_info())
             assert pub.statistics().malformed == len(HOSTILE_HEADERS)
             tg.cancel_scope.cancel()
+
+
+class _Dropper(Recorder):
+    """A bus whose subscribers keep nothing (only the count)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.count = 0
+
+    def deliver_nowait(self, topic: str, message: object) -> None:
+        self.count += 1
+
+
+@pytest.mark.skipif(
+    ros1_codec._compiled_ros1 is None, reason="no compiled ROS 1 decoder (pure-Python core)"
+)
+def test_long_frame_ids_at_every_position_are_not_held_after_their_message() -> None:
+    """A publisher sends message after message, each with one long ASCII frame id at a
+    new position behind short non-ASCII ones; once delivered and dropped by the
+    subscribers, nothing of them stays (before: the compiled decoder kept every ASCII id
+    it decoded at each of its 4096 positions, whatever its length: about a message's
+    worth of ids per position, here 6 MB after 200 messages of 30 kB)."""
+    import tracemalloc
+
+    long_id = "x" * 30_000
+    data = encode_header(_header_fields("/tf", "/long_ids")) + b"".join(
+        frame(ros1_codec.encode_tf(
+            [_ts("ü", "ü", _T0, 0.0)] * k + [_ts(long_id + str(k), "c", _T0, 0.0)]
+        ))
+        for k in range(200)
+    )
+    node = _node()
+    bus = _Dropper()
+    link = ros1_transport._Inbound(node, bus, "/tf", "http://127.0.0.1:1/")  # type: ignore[arg-type]
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        link.splitter.feed(data)
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert bus.count == 200
+    assert held < 2_000_000, f"{held / 1e6:.1f} MB held after the messages were dropped"

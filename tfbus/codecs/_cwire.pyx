@@ -35,8 +35,13 @@ cdef extern from "Python.h":
 # Frame ids by their position in a message: a publisher sends the same ids message
 # after message, so an id whose bytes equal the ASCII str decoded last time at the same
 # position is that (immutable) str again, not a new one. Compared byte for byte on
-# every use; a different id replaces it. Positions past _ROS1_ID_SLOTS are decoded.
+# every use; a different id replaces it. Positions past _ROS1_ID_SLOTS are decoded. Only
+# ids of at most _ROS1_ID_MAX bytes are kept (as the pure-Python twin's
+# _STR_CACHE_KEY_MAX): what the cache holds stays under 4096 * 256 bytes per list,
+# whatever ids a publisher sends (a long id at every position, kept by non-ASCII ids at
+# the positions before it, would otherwise hold up to 4096 messages' worth of ids).
 DEF _ROS1_ID_SLOTS = 4096
+DEF _ROS1_ID_MAX = 256
 cdef list _ros1_children = [None] * _ROS1_ID_SLOTS
 cdef list _ros1_frames = [None] * _ROS1_ID_SLOTS
 
@@ -50,7 +55,7 @@ cdef inline object _ros1_id(list cache, Py_ssize_t k, const unsigned char* s, ui
                 and memcmp(PyUnicode_DATA(cached), s, n) == 0):
             return cached
     cdef object text = PyUnicode_DecodeUTF8(<const char*>s, n, NULL)
-    if k < _ROS1_ID_SLOTS and PyUnicode_IS_ASCII(text):
+    if k < _ROS1_ID_SLOTS and n <= _ROS1_ID_MAX and PyUnicode_IS_ASCII(text):
         cache[k] = text
     return text
 

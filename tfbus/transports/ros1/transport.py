@@ -234,10 +234,13 @@ class _Inbound:
             return
         header = decode_header(bytes(raw))
         if "error" in header:
-            raise TransportError(f"publisher {self.uri} refused {self.topic}: {header['error']}")
+            raise TransportError(
+                f"publisher {self.uri:.200} refused {self.topic}: {header['error']:.200}"
+            )
         if header.get("md5sum") not in (self._md5, "*"):
             raise ValueError(
-                f"publisher {self.uri} sends md5sum {header.get('md5sum')!r} on {self.topic}"
+                f"publisher {self.uri:.200} sends md5sum {header.get('md5sum')!r:.80} "
+                f"on {self.topic}"
             )
         callerid = header.get("callerid") or self.uri
         self.callerid = callerid
@@ -1052,9 +1055,9 @@ class Ros1Transport:
             ours = self._topic_md5(topic)
             if topic not in self._published or md5 not in (ours, "*"):
                 why = (
-                    f"{self._name} does not publish {topic!r}"
+                    f"{self._name} does not publish {topic!r:.200}"
                     if topic not in self._published
-                    else f"md5sum mismatch: {md5!r} != {ours}"
+                    else f"md5sum mismatch: {md5!r:.80} != {ours}"
                 )
                 with contextlib.suppress(OSError, anyio.BrokenResourceError):
                     await stream.send(encode_header({"error": why}))

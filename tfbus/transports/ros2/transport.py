@@ -199,7 +199,8 @@ class Ros2Statistics(TransportStatistics):
         batches: event-loop wake-ups that took samples.
         coalesced: clock samples replaced by a newer one before the event loop saw
             them (the clock topic followed newest-only by a
-            :class:`~tfbus.clock.SimClock`: :meth:`Ros2Transport.keep_newest`).
+            :class:`~tfbus.clock.SimClock`: :meth:`Ros2Transport.keep_newest`), or
+            dropped, oldest first, beyond :data:`NEWEST_MAX_QUEUED` waiting for it.
     """
 
     send_dropped: int = 0
@@ -214,6 +215,11 @@ NEWEST_MAX_DELAY: Final = 0.01
 (:meth:`Ros2Transport.keep_newest`) waits in Cyclone's thread while newer ones arrive: the
 bus receives the newest at least this often while ``/clock`` flows (as the Zenoh
 transport's ``NEWEST_MAX_DELAY``)."""
+NEWEST_MAX_QUEUED: Final = 1024
+"""Most clock samples followed newest-only that wait for the event loop at once (each
+step back queues one, however fast a publisher steps back and however long the loop is
+busy); beyond it the oldest are dropped and counted in ``coalesced``, as the Zenoh
+transport bounds its inbound queue."""
 
 
 class _NewestClock:
@@ -248,7 +254,11 @@ class _NewestClock:
                     self.queue.append(pending)
                 else:
                     stats.coalesced += 1
-            self.queue.append(message)
+            queue = self.queue
+            queue.append(message)
+            if len(queue) > NEWEST_MAX_QUEUED:  # the oldest go: memory stays bounded
+                stats.coalesced += len(queue) - NEWEST_MAX_QUEUED
+                del queue[: len(queue) - NEWEST_MAX_QUEUED]
             return True
         if pending is not None:
             stats.coalesced += 1
