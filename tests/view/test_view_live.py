@@ -331,8 +331,9 @@ async def test_redraws_wait_until_the_zenoh_intake_caught_up(page: TfPage) -> No
             await robot.wait_matching("/tf")
         tfb = TransformBroadcaster(a)
         await tfb.send_transform(odom_to_laser(10.0, 1.0))
-        await until(lambda: stats.messages.get("/tf", 0) == 1)
-        assert viewer.pending == 0
+        # the first /tf delivered and nothing else left in the intake (a liveliness or
+        # latch sample may still be queued when the /tf is counted, on a loaded machine)
+        await until(lambda: stats.messages.get("/tf", 0) == 1 and viewer.pending == 0)
         assert view.redraw(b) is not None and view.deferred == 0
         assert page.frames["base_laser"].position == pytest.approx((1.0, 0.0, 0.0))
 
