@@ -25,10 +25,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 msgspec = pytest.importorskip("msgspec")
+
+from fuzz_support import fuzz, mutants  # noqa: E402
 
 from tfbus.codecs import cdr  # noqa: E402
 from tfbus.codecs import lookup_action_cdr as lac  # noqa: E402
@@ -50,71 +52,13 @@ from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField  # noqa: E402
 from tfbus.time import Time  # noqa: E402
 
 
-def fuzz(examples: int) -> settings:
-    """Deterministic, bounded hypothesis settings (no example database, no deadline)."""
-    return settings(derandomize=True, database=None, deadline=None,
-                    max_examples=examples, suppress_health_check=list(HealthCheck))
-
-
-# -- mutations of a valid payload ---------------------------------------------------------
-
-ABSURD: tuple[bytes, ...] = (
-    b"\xff\xff\xff\xff", b"\x7f\xff\xff\xff", b"\x00\x00\x00\x80", b"\x00\x00\x00\x00",
-    b"\x01\x00\x00\x00",
-    b"\xdd\xff\xff\xff\xff",  # msgpack array32 of 2**32 - 1 items
-    b"\xdf\x7f\xff\xff\xff",  # map32 of 2**31 - 1 pairs
-    b"\xdb\xff\xff\xff\xff",  # str32 of 4 GiB
-    b"\xc6\xff\xff\xff\xff",  # bin32 of 4 GiB
-    b"\xcf\xff\xff\xff\xff\xff\xff\xff\xff",  # uint64 max
-    b"\xd3\x80\x00\x00\x00\x00\x00\x00\x00",  # int64 min
-    b"\xcb\x7f\xf8\x00\x00\x00\x00\x00\x01",  # float64 NaN with a payload
-    b"\xcb\x7f\xf0\x00\x00\x00\x00\x00\x00",  # float64 +inf
-    b"\x00" * 8,
-)
-"""Lengths, counts and values a hostile or broken peer may put anywhere: CDR ``uint32``
-lengths (both byte orders), msgpack container and string heads, extreme numbers."""
-
-
-@st.composite
-def mutated(draw: st.DrawFn, valid: bytes) -> bytes:
-    """``valid`` changed by 1 to 4 mutations: flip a bit, cut short, extend, splice an
-    absurd length over the bytes at a place or insert one there, swap two runs, repeat a
-    run."""
-    out = bytearray(valid)
-    for _ in range(draw(st.integers(1, 4))):
-        n = len(out)
-        op = draw(st.sampled_from(["flip", "cut", "extend", "splice", "insert", "swap",
-                                   "repeat"]))
-        at = draw(st.integers(0, n))
-        if op == "flip" and n:
-            out[at % n] ^= 1 << draw(st.integers(0, 7))
-        elif op == "cut":
-            del out[at:]
-        elif op == "extend":
-            out += draw(st.binary(min_size=1, max_size=24))
-        elif op == "splice":
-            value = draw(st.sampled_from(ABSURD))
-            out[at:at + len(value)] = value
-        elif op == "insert":
-            out[at:at] = draw(st.sampled_from(ABSURD))
-        elif op == "swap" and n >= 2:
-            k = draw(st.integers(1, max(1, min(8, n // 2))))
-            a, b = draw(st.integers(0, n - k)), draw(st.integers(0, n - k))
-            out[a:a + k], out[b:b + k] = out[b:b + k], out[a:a + k]
-        elif op == "repeat" and n:
-            k = draw(st.integers(1, min(16, n)))
-            a = draw(st.integers(0, n - k))
-            out[at:at] = out[a:a + k]
-    return bytes(out)
-
-
 def test_mutations_reach_past_the_header() -> None:
     """The strategy's own check: most mutants keep a valid prefix (what makes them reach
     deep into a decoder) and some differ from the original."""
     seen: list[bytes] = []
 
     @fuzz(100)
-    @given(mutated(bytes(range(64))))
+    @given(mutants(bytes(range(64))))
     def collect(data: bytes) -> None:
         seen.append(data)
 
@@ -166,7 +110,7 @@ def _fixed_point(codec: wire.WireCodec, decoded: wire.Decoded) -> None:
 
 
 @fuzz(300)
-@given(st.sampled_from(sorted(_NATIVE)).flatmap(lambda tag: mutated(_NATIVE[tag])))
+@given(st.sampled_from(sorted(_NATIVE)).flatmap(lambda tag: mutants(_NATIVE[tag])))
 def test_native_decoder_raises_only_wire_errors_on_mutants(data: bytes) -> None:
     """Mutants of a payload of every tag (TFMessage, registered types, LaserScan,
     PointCloud2, a plain map as the lookup server receives): a decoded message or a
@@ -195,7 +139,7 @@ def _general_path_tf(codec: wire.WireCodec, data: bytes) -> TFMessage:
 
 
 @fuzz(150)
-@given(mutated(_NATIVE["tf"]))
+@given(mutants(_NATIVE["tf"]))
 def test_native_fast_and_general_paths_agree(data: bytes) -> None:
     """The typed fast path (one msgspec schema for the whole envelope) and the general
     path (envelope by hand, then the body's schema) accept and refuse the same TFMessage
@@ -307,7 +251,7 @@ def _same(a: tuple[TransformStamped, ...], b: tuple[TransformStamped, ...]) -> b
 
 
 @fuzz(150)
-@given(st.sampled_from(sorted(_TF_CDR)).flatmap(lambda kind: mutated(_TF_CDR[kind])))
+@given(st.sampled_from(sorted(_TF_CDR)).flatmap(lambda kind: mutants(_TF_CDR[kind])))
 def test_cdr_tf_mutants_only_decode_errors_and_agree_with_rosbags(
         rosbags_tf: Callable[[bytes], tuple[TransformStamped, ...] | None], data: bytes) -> None:
     """Mutants of an XCDR1 TFMessage (little- and big-endian): a TFMessage or a
@@ -365,7 +309,7 @@ _ACTION: dict[str, tuple[bytes, Callable[[bytes], Any], Callable[[Any], bytes]]]
 
 @fuzz(300)
 @given(st.sampled_from(sorted(_ACTION)).flatmap(
-    lambda kind: st.tuples(st.just(kind), mutated(_ACTION[kind][0]))))
+    lambda kind: st.tuples(st.just(kind), mutants(_ACTION[kind][0]))))
 def test_action_sample_mutants_only_decode_errors(case: tuple[str, bytes]) -> None:
     """Mutants of every sample of the action's services and status topic: the value or
     a WireDecodeError; what decodes is a fixed point (encoded again and decoded, the same

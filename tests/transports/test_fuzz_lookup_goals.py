@@ -25,7 +25,8 @@ from typing import Any
 
 import anyio
 import pytest
-from hypothesis import HealthCheck, given, settings
+from fuzz_support import fuzz
+from hypothesis import given
 from hypothesis import strategies as st
 
 from tfbus.buffer import Buffer
@@ -50,12 +51,6 @@ from tfbus.transports.ros1.action import LookupActionServer as Ros1Server
 
 WALL = 20.0  # seconds: the wall-clock bound of one example (never reached when it passes)
 MAX_WAIT = 30.0  # the servers' max_wait (seconds of the buffer's clock)
-
-
-def fuzz(examples: int) -> settings:
-    """Deterministic, bounded hypothesis settings (no example database, no deadline)."""
-    return settings(derandomize=True, database=None, deadline=None,
-                    max_examples=examples, suppress_health_check=list(HealthCheck))
 
 
 def _ts(parent: str, child: str, sec: int, x: float) -> TransformStamped:

@@ -23,11 +23,13 @@ from typing import Any
 
 import anyio
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 zenoh = pytest.importorskip("zenoh")
 msgspec = pytest.importorskip("msgspec")
+
+from fuzz_support import fuzz, mutants, mutate  # noqa: E402
 
 from tfbus.codecs import cdr  # noqa: E402
 from tfbus.codecs import native as wire  # noqa: E402
@@ -44,58 +46,6 @@ from tfbus.time import Time  # noqa: E402
 from tfbus.transports.rmw_zenoh import wire as rmw  # noqa: E402
 from tfbus.transports.zenoh.keys import KeySpace  # noqa: E402
 from tfbus.transports.zenoh.sequence import SequenceTracker  # noqa: E402
-
-
-def fuzz(examples: int) -> settings:
-    """Deterministic, bounded hypothesis settings (no example database, no deadline)."""
-    return settings(derandomize=True, database=None, deadline=None,
-                    max_examples=examples, suppress_health_check=list(HealthCheck))
-
-
-ABSURD: tuple[bytes, ...] = (
-    b"\xff\xff\xff\xff", b"\x7f\xff\xff\xff", b"\x00\x00\x00\x80", b"\x00\x00\x00\x00",
-    b"\xdd\xff\xff\xff\xff", b"\xdf\x7f\xff\xff\xff", b"\xdb\xff\xff\xff\xff",
-    b"\xc6\xff\xff\xff\xff", b"\xcf\xff\xff\xff\xff\xff\xff\xff\xff",
-    b"\xd3\x80\x00\x00\x00\x00\x00\x00\x00", b"\xcb\x7f\xf8\x00\x00\x00\x00\x00\x01",
-)
-"""CDR ``uint32`` lengths (both byte orders), msgpack container and string heads, extreme
-msgpack numbers: what a broken or hostile peer puts where a length or a value goes."""
-
-
-def mutate(valid: bytes, rng: random.Random) -> bytes:
-    """``valid`` changed by 1 to 4 mutations drawn from ``rng``: flip a bit, cut, extend,
-    splice an absurd length over the bytes at a place or insert one there, swap two runs,
-    repeat a run."""
-    out = bytearray(valid)
-    for _ in range(rng.randint(1, 4)):
-        n = len(out)
-        op = rng.randrange(7)
-        at = rng.randint(0, n)
-        if op == 0 and n:
-            out[at % n] ^= 1 << rng.randrange(8)
-        elif op == 1:
-            del out[at:]
-        elif op == 2:
-            out += rng.randbytes(rng.randint(1, 24))
-        elif op == 3:
-            value = rng.choice(ABSURD)
-            out[at:at + len(value)] = value
-        elif op == 4:
-            out[at:at] = rng.choice(ABSURD)
-        elif op == 5 and n >= 2:
-            k = rng.randint(1, max(1, min(8, n // 2)))
-            a, b = rng.randint(0, n - k), rng.randint(0, n - k)
-            out[a:a + k], out[b:b + k] = out[b:b + k], out[a:a + k]
-        elif op == 6 and n:
-            k = rng.randint(1, min(16, n))
-            a = rng.randint(0, n - k)
-            out[at:at] = out[a:a + k]
-    return bytes(out)
-
-
-def mutants(valid: bytes) -> st.SearchStrategy[bytes]:
-    """Hypothesis strategy of :func:`mutate` of ``valid``."""
-    return st.randoms(use_true_random=False).map(lambda rng: mutate(valid, rng))
 
 
 def ts(parent: str, child: str, ns: int, x: float) -> TransformStamped:
