@@ -339,7 +339,12 @@ async def test_live_controls_and_findings_in_chromium(chromium: str, page: TfPag
                 c.wait("document.body && document.body.innerText.includes('leading_slash')")
                 _pick(c, "fixed frame", "base")
                 until(lambda: page.fixed_frame_choice == "base", "base picked")
+                # viser's control panel sends its GUI updates through one sender that
+                # keeps only the latest message of a 50 ms window (its client's
+                # makeThrottledMessageSender): a pick made before the previous one went
+                # out replaces it, so each pick is awaited at the server.
                 _pick(c, "frame A", "arm")
+                until(lambda: page.pair_choice == ("arm", None), "A picked")
                 _pick(c, "frame B", "odom")
                 until(lambda: page.pair_choice == ("arm", "odom"), "A and B picked")
                 return str(c.js("document.body.innerText"))
