@@ -40,9 +40,11 @@ Rows (target):
   the same run (median of 3 runs, ``bench_ros1.py``), nothing lost; once with constant
   values (a robot's fixed joints) and once with every value changing in every message
   (a robot moving every joint: nothing the decoder can share);
-* ROS 1 receive CPU per 50-transform message (``bench_ros1.scenario``, ``/proc``, 10 s
-  runs, 3 runs, callback and listener alternated): a tfbus callback subscription <= 1.5x
-  a roscpp callback, a ``TransformListener`` <= 1.15x ``tf2_ros``'s C++ listener;
+* ROS 1 receive CPU per 50-transform message, 100 Hz (``bench_ros1_floor.measure``,
+  ``/proc``: every receiver on one stream at once, 5 windows of 12 s after all are
+  connected): a tfbus callback subscription <= 1.5x a roscpp callback and <= 1.2x a bare
+  asyncio reader (split and decode), a ``TransformListener`` <= 1.15x ``tf2_ros``'s C++
+  listener and <= 1.2x the bare reader storing into a ``Buffer``;
 * sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 1.5x the C++
   ``projectLaser``; 10^6 points through ``transform_points`` and ``do_transform_cloud``
   <= 1.2x bare numpy ``pts @ R.T + t``;
@@ -577,51 +579,60 @@ ROS1_CPU_ROWS = {
     "callback": "ROS 1 receive CPU/msg, callback vs roscpp",
     "listener": "ROS 1 receive CPU/msg, listener vs tf2_ros C++",
 }
-ROS1_CPU_SECONDS = 10.0
-"""Seconds per CPU run (each receiver's CPU is its threads' scheduler time in ns)."""
+ROS1_FLOOR_ROWS = {
+    "callback": "ROS 1 receive CPU/msg, callback vs bare reader",
+    "listener": "ROS 1 receive CPU/msg, listener vs bare + store",
+}
+ROS1_PEERS = {"callback": ("roscpp", "asyncio"), "listener": ("tf2_ros", "asyncio+store")}
+"""Each tfbus receiver's C++ peer and its Python floor (``bench_ros1_floor``'s receivers: a
+bare asyncio ``BufferedProtocol`` splitting and decoding each frame, and the same storing
+each message into a ``Buffer``)."""
+ROS1_FLOOR_TARGET = 1.2
+ROS1_CPU_SECONDS = 12.0
+"""Seconds per window (each receiver's CPU is its threads' scheduler time in ns)."""
 
 
-def ros1cpu_rows(rows: Rows, runs: int) -> None:
-    """ROS 1 receive CPU per message, 100 Hz x 50 transforms (``bench_ros1.scenario``):
-    each run has a C++ receiver and tfbus's receive the same publisher's messages at
-    once (each thread's scheduler time in ns, ``benchmarks/proc_cpu.py``; 10 s runs),
-    the callback and listener modes alternated, ``runs`` times; each row judges the
-    median of the per-run ratios."""
-    import bench_ros1
-    from ros1_peers import ros1_missing, start_master  # via bench_ros1
+def ros1cpu_rows(rows: Rows, rounds: int) -> None:
+    """ROS 1 receive CPU per message, 100 Hz x 50 transforms (``bench_ros1_floor.measure``):
+    roscpp, tf2_ros's C++ listener, a tfbus callback subscription, a tfbus
+    ``TransformListener`` and the two bare Python readers receive one publisher's stream at
+    once, each in its own process, and each one's CPU (its threads' scheduler time in ns,
+    ``benchmarks/proc_cpu.py``) is read over the same ``rounds`` windows, after every
+    receiver is connected and past its first messages (connection set-up is not receive
+    CPU); each row judges the median of the per-window ratios."""
+    import bench_ros1_floor
+    from ros1_peers import ros1_missing
 
-    why = ros1_missing((*bench_ros1.BENCH_PACKAGES, "tf2_ros"))
+    names = [*ROS1_CPU_ROWS.values(), *ROS1_FLOOR_ROWS.values()]
+    why = ros1_missing(("roscpp", "tf2_msgs", "tf2_ros"))
     if why is not None:
-        _not_run(rows, list(ROS1_CPU_ROWS.values()), why)
+        _not_run(rows, names, why)
         return
-    cpu: dict[str, list[tuple[float, float]]] = {mode: [] for mode in ROS1_CPU_ROWS}
-    loads: list[float] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        bins = Path(tmp)
-        bench_ros1.build(bins)
-        master = start_master(bins / "ros_home")
-        try:
-            for r in range(runs):
-                order = list(ROS1_CPU_ROWS) if r % 2 == 0 else list(ROS1_CPU_ROWS)[::-1]
-                for mode in order:
-                    bench_ros1.scenario(master, bins, 100.0, 50, ROS1_CPU_SECONDS, mode,
-                                        cpu=cpu[mode])  # fmt: skip
-                    loads.append(os.getloadavg()[0])
-        finally:
-            master.stop()
-    for mode, name in ROS1_CPU_ROWS.items():
-        target = ROS1_CPU_TARGETS[mode]
-        ratios = [t / max(c, 1e-9) for c, t in cpu[mode]]
-        c_med = statistics.median(c for c, _ in cpu[mode])
-        t_med = statistics.median(t for _, t in cpu[mode])
-        rows.row(
-            name,
-            f"{t_med * 1e6:.1f} vs {c_med * 1e6:.1f} us CPU = {_spread(ratios)}",
-            statistics.median(ratios) <= target,
-            f"<= {target:.1f}x C++",
-        )
-    print(f"  info  {'  load during the runs':46} {min(loads):.2f}..{max(loads):.2f}")
-
+    receivers = ["asyncio", "asyncio+store", "callback", "listener"]
+    got = bench_ros1_floor.measure(receivers, rounds, ROS1_CPU_SECONDS)
+    per_msg = got.per_msg
+    for mode in ROS1_CPU_ROWS:
+        peer, floor = ROS1_PEERS[mode]
+        ours = statistics.median(per_msg[mode])
+        for name, ref, target, what in (
+            (ROS1_CPU_ROWS[mode], peer, ROS1_CPU_TARGETS[mode], "C++"),
+            (ROS1_FLOOR_ROWS[mode], floor, ROS1_FLOOR_TARGET, "the bare reader"),
+        ):
+            ratios = got.ratios(per_msg[mode], ref)
+            rows.row(
+                name,
+                f"{ours:.1f} vs {statistics.median(per_msg[ref]):.1f} us CPU = {_spread(ratios)}",
+                statistics.median(ratios) <= target,
+                f"<= {target:.2f}x {what}",
+            )
+    for floor, peer in (("asyncio", "roscpp"), ("asyncio+store", "tf2_ros")):
+        print(f"  info  {f'  floor: bare {floor} reader vs {peer}':46} "
+              f"{_spread(got.ratios(per_msg[floor], peer))}")
+    lost = {r: n for r, n in got.received.items() if n < got.sent - 2 * rounds}
+    print(f"  info  {'  messages received in the windows':46} "
+          + ", ".join(f"{r} {n}" for r, n in got.received.items())
+          + f" of ~{got.sent:.0f} sent" + (f" (short: {', '.join(lost)})" if lost else ""))
+    print(f"  info  {'  load at the end':46} {got.load:.2f}")
 
 LASER_BEAMS = 720
 LASER_REPS = 200
@@ -853,7 +864,7 @@ def main(argv: list[str] | None = None) -> int:
     if "ros1" in groups:
         ros1_rows(rows, 3)
     if "ros1cpu" in groups:
-        ros1cpu_rows(rows, 3)
+        ros1cpu_rows(rows, 5)
     if "sensors" in groups:
         sensors_rows(rows, args.rounds)
     if "zenoh" in groups:

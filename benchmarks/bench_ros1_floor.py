@@ -30,8 +30,8 @@ A receiver's name followed by ``@uvloop`` (e.g. ``callback@uvloop``) runs its ev
 on uvloop (``pip install uvloop``; anyio's ``use_uvloop``) instead of asyncio's own;
 ``callback@trio`` and ``listener@trio`` run the tfbus node on trio. A tfbus node's name
 followed by ``#S`` (e.g. ``listener#30``) checks the master every S seconds
-(``Ros1Transport(master_check_period=S)``; default 1 s: one ``lookupNode`` call a second,
-whose CPU is part of each message's share at 100 Hz).
+(``Ros1Transport(master_check_period=S)``; default the transport's 5 s: one ``lookupNode``
+call to the master, whose CPU is part of each message's share at 100 Hz).
 ``tf2_ros`` (the C++ ``tf2_ros::TransformListener`` into a ``tf2_ros::Buffer``,
 ``peers/ros1/bench_listener.cpp``) is printed beside roscpp, the ``listener`` row's peer.
 
@@ -49,6 +49,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import os
 import socket
 import statistics
@@ -181,10 +182,10 @@ def report_count() -> None:
 UVLOOP = False
 """Set in a child whose receiver ends ``@uvloop``."""
 
-CHECK_PERIOD = 1.0
+CHECK_PERIOD: float | None = None
 """``Ros1Transport(master_check_period=...)`` of a tfbus-node receiver: a name ending
-``#S`` (e.g. ``callback#30``) sets S seconds (the default 1.0 is one ``lookupNode`` call
-to the master a second)."""
+``#S`` (e.g. ``callback#30``) sets S seconds; None (no ``#S``) keeps the transport's
+default (one ``lookupNode`` call to the master every 5 s)."""
 
 TRIO = False
 """Set in a child whose receiver ends ``@trio`` (``callback`` and ``listener`` only)."""
@@ -236,7 +237,9 @@ def tfbus_node(receiver: str) -> None:
         RECEIVED[0] += 1
 
     async def main() -> None:
-        node = Ros1Transport(node_name=f"/floor_{os.getpid()}", master_check_period=CHECK_PERIOD)
+        node = (Ros1Transport(node_name=f"/floor_{os.getpid()}") if CHECK_PERIOD is None
+                else Ros1Transport(node_name=f"/floor_{os.getpid()}",
+                                   master_check_period=CHECK_PERIOD))
         async with Bus(transport=node) as bus, contextlib.AsyncExitStack() as stack:
             if receiver == "listener":
                 listener = TransformListener(Buffer(), bus)
@@ -263,7 +266,7 @@ def last_count(proc: Proc, before: int) -> int:
 def child(receiver: str) -> None:
     global UVLOOP, TRIO, CHECK_PERIOD
     receiver, _, period = receiver.partition("#")
-    CHECK_PERIOD = float(period or 1.0)
+    CHECK_PERIOD = float(period) if period else None
     receiver, _, loop = receiver.partition("@")
     UVLOOP, TRIO = loop == "uvloop", loop == "trio"
     report_count()
@@ -309,6 +312,50 @@ def main() -> None:
     why = ros1_missing(("roscpp", "tf2_msgs"))
     if why is not None:
         sys.exit(f"ROS 1 unavailable: {why}")
+    result = measure(receivers, args.rounds, args.seconds, args.rate, args.baseline)
+    per_msg = result.per_msg
+    print(f"{args.rate:.0f} Hz x {FRAMES} transforms, {args.rounds} windows of "
+          f"{args.seconds:.0f} s, load {result.load:.2f} (1 min)")  # fmt: skip
+    print("receiver                   | CPU/msg us min / median / max | ratio to roscpp, "
+          "to tf2_ros min / median / max")  # fmt: skip
+
+    def ratios(values: list[float], ref: str) -> str:
+        r = result.ratios(values, ref)
+        return f"{min(r):4.2f} / {statistics.median(r):4.2f} / {max(r):4.2f}"
+
+    for name, values in per_msg.items():
+        print(f"{name:26s} | {min(values):6.1f} / {statistics.median(values):6.1f} / "
+              f"{max(values):6.1f} | {ratios(values, 'roscpp')} | "
+              f"{ratios(values, 'tf2_ros')}", flush=True)  # fmt: skip
+    received = ", ".join(f"{r} {n}" for r, n in result.received.items())
+    print(f"messages received in the windows (0.5 s steps) of ~{result.sent:.0f} sent: "
+          f"{received}")
+
+
+@dataclasses.dataclass
+class Measured:
+    """What :func:`measure` found: per receiver (``roscpp``, ``tf2_ros`` and each Python
+    receiver), its CPU per message in each window (microseconds); messages received by
+    each Python receiver in the windows, of ``sent``; the 1-minute load at the end."""
+
+    per_msg: dict[str, list[float]]
+    received: dict[str, int]
+    sent: float
+    load: float
+
+    def ratios(self, values: list[float], ref: str) -> list[float]:
+        """``values`` over receiver ``ref``'s, window by window."""
+        return [v / max(c, 1e-9) for v, c in zip(values, self.per_msg[ref], strict=True)]
+
+
+def measure(receivers: list[str], rounds: int, seconds: float, rate: float = 100.0,
+            baseline: str | None = None) -> Measured:
+    """Run roscpp, tf2_ros's C++ listener and every receiver of ``receivers`` (each in its
+    own process) on one C++ publisher's ``/tf`` (``FRAMES`` transforms a message at
+    ``rate``), wait 3 s (every receiver connected and past its first messages), then read
+    each one's CPU over ``rounds`` windows of ``seconds``. ``baseline``: also run each
+    callback/listener receiver on the tfbus of that checkout, labelled ``@ baseline``.
+    Needs Debian's ROS 1 and g++."""
     import bench_ros1
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -325,14 +372,14 @@ def main() -> None:
             tf2 = master.run(str(bins / "bench_listener"), str(FRAMES))
             procs.append(tf2)
             tf2.wait_for("READY", 30)
-            seconds = args.rounds * args.seconds + 20
-            procs.append(master.run(str(bins / "bench_pub"), str(args.rate), str(FRAMES),
-                                    str(seconds)))  # fmt: skip
+            total = rounds * seconds + 20
+            procs.append(master.run(str(bins / "bench_pub"), str(rate), str(FRAMES),
+                                    str(total)))  # fmt: skip
             pids = {"roscpp": cpp.proc.pid, "tf2_ros": tf2.proc.pid}
             children: dict[str, Proc] = {}
             runs = [(r, r, env) for r in receivers]
-            if args.baseline is not None:
-                base = str(Path(args.baseline).resolve())
+            if baseline is not None:
+                base = str(Path(baseline).resolve())
                 base_env = {**env, "PYTHONPATH": os.pathsep.join([base, *path[1:]])}
                 runs += [(f"{r} @ baseline", r, base_env) for r in receivers
                          if r.partition("@")[0] in ("callback", "listener")]  # fmt: skip
@@ -347,38 +394,23 @@ def main() -> None:
             sent = 0.0
             time.sleep(3.0)  # every receiver connected and past its first messages
             per_msg: dict[str, list[float]] = {name: [] for name in pids}
-            for _ in range(args.rounds):
+            for _ in range(rounds):
                 before = {name: cpu_seconds(pid) for name, pid in pids.items()}
                 t0 = time.monotonic()
                 n0 = {r: last_count(p, n1[r]) for r, p in children.items()}
-                time.sleep(args.seconds)
-                messages = (time.monotonic() - t0) * args.rate
+                time.sleep(seconds)
+                messages = (time.monotonic() - t0) * rate
                 for r, p in children.items():
                     n1[r] = last_count(p, n0[r])
                     got[r] += n1[r] - n0[r]
                 sent += messages
                 for name, pid in pids.items():
                     per_msg[name].append((cpu_seconds(pid) - before[name]) / messages * 1e6)
-            print(f"{args.rate:.0f} Hz x {FRAMES} transforms, {args.rounds} windows of "
-                  f"{args.seconds:.0f} s, load {os.getloadavg()[0]:.2f} (1 min)")  # fmt: skip
-            print("receiver                   | CPU/msg us min / median / max | ratio to roscpp, "
-                  "to tf2_ros min / median / max")  # fmt: skip
-
-            def ratios(values: list[float], ref: str) -> str:
-                r = [v / max(c, 1e-9) for v, c in zip(values, per_msg[ref], strict=True)]
-                return f"{min(r):4.2f} / {statistics.median(r):4.2f} / {max(r):4.2f}"
-
-            for name, values in per_msg.items():
-                print(f"{name:26s} | {min(values):6.1f} / {statistics.median(values):6.1f} / "
-                      f"{max(values):6.1f} | {ratios(values, 'roscpp')} | "
-                      f"{ratios(values, 'tf2_ros')}", flush=True)  # fmt: skip
-            received = ", ".join(f"{r} {n}" for r, n in got.items())
-            print(f"messages received in the windows (0.5 s steps) of ~{sent:.0f} sent: {received}")
+            return Measured(per_msg, got, sent, os.getloadavg()[0])
         finally:
             for proc in reversed(procs):
                 proc.stop()
             master.stop()
-
 
 if __name__ == "__main__":
     main()
