@@ -1,8 +1,8 @@
 """Speed regression guard: the speed targets against their peers, PASS or FAIL.
 
     .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP,...]
-    # or: make bench-check; GROUP is core, cpp, wakeup, ros1, ros1cpu, sensors, zenoh or
-    # demo (comma-separated, repeatable); --no-ros1 skips ros1, ros1cpu and demo
+    # or: make bench-check; GROUP is core, cpp, wakeup, ros1, ros1cpu, sensors, zenoh,
+    # demo or view (comma-separated, repeatable); --no-ros1 skips ros1, ros1cpu and demo
 
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
@@ -54,7 +54,11 @@ Rows (target):
   (``bench_zenoh.run``, 3 runs): no ``/tf_static`` frame lost, every ``/tf`` message not
   received counted by the sender (``send_dropped``) or the receiver (``lost``);
 * the seed demo over ROS 1 (``bench_demo_ros1.run_pair``, 3 rounds of 10 s, alternated):
-  the CPU of its two processes <= 1.5x the C++ tutorial pair's.
+  the CPU of its two processes <= 1.5x the C++ tutorial pair's;
+* the ``tfbus view --bus zenoh`` process following 100 Hz x 100 frames from another
+  process (``bench_view_process.measure``, 3 windows of 8 s a phase, a bare
+  ``TransformListener`` process on the same stream beside it): <= 5 % of a core with no
+  browser, <= 15 % with one page.
 
 A row whose peer cannot run here prints ``not run: <why>`` and fails.
 
@@ -72,6 +76,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS threads would
 
 import argparse
 import json
+import shutil
 import statistics
 import subprocess
 import sys
@@ -828,8 +833,48 @@ def demo_rows(rows: Rows, rounds: int) -> None:
     )
 
 
-GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo")
+GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo", "view")
 ROS1_GROUPS = ("ros1", "ros1cpu", "demo")
+
+
+VIEW_TARGETS = {"idle": 0.05, "page": 0.15}
+"""The share of one core of the ``tfbus view --bus zenoh`` process following 100 Hz x 100
+frames: with no browser, and with one page (drawn at most 30 times a second)."""
+VIEW_ROWS = {
+    "idle": "tfbus view process CPU, no browser",
+    "page": "tfbus view process CPU, one page at 30 Hz",
+}
+VIEW_SECONDS = 8.0
+
+
+def view_rows(rows: Rows, rounds: int) -> None:
+    """The real ``tfbus view`` command's CPU (``bench_view_process.measure``): a source
+    process sends 100 moving frames at 100 Hz over Zenoh; the view and a bare
+    ``TransformListener`` process (the floor of any follower) receive it; each one's CPU
+    over ``rounds`` windows with no browser, then with one headless Chromium page; each
+    row judges the median window against its absolute target, the floor beside it."""
+    import bench_view_process
+
+    got = bench_view_process.measure(rounds, VIEW_SECONDS)
+    for phase, name in VIEW_ROWS.items():
+        share = got.share[phase]
+        if not share:
+            why = "no chromium on PATH" if shutil.which("chromium") is None else "no page"
+            _not_run(rows, [name], why)
+            continue
+        view = statistics.median(share["view"])
+        floor = statistics.median(share["listener"])
+        rows.row(
+            name,
+            f"{view:.1%} of a core ({_pct_spread(share['view'])}); listener floor {floor:.1%}",
+            view <= VIEW_TARGETS[phase],
+            f"<= {VIEW_TARGETS[phase]:.0%} of a core",
+        )
+    print(f"  info  {'  load at the end':46} {got.load:.2f}")
+
+
+def _pct_spread(values: list[float]) -> str:
+    return f"{min(values):.1%}..{max(values):.1%}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -871,6 +916,8 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_rows(rows, 3)
     if "demo" in groups:
         demo_rows(rows, 3)
+    if "view" in groups:
+        view_rows(rows, 3)
     print(f"{rows.failed} row(s) failed (load {load0:.2f} -> {os.getloadavg()[0]:.2f})")
     return 1 if rows.failed else 0
 

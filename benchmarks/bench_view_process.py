@@ -1,0 +1,263 @@
+"""The CPU of the real ``tfbus view --bus zenoh`` process following a live 100 Hz x
+100-frame source in another process, with no browser and with one page, beside a bare
+``TransformListener`` process on the same stream (the receive every follower pays).
+
+Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting off, as
+``ZenohTransport`` configures itself):
+
+* ``source``: a ``Bus(ZenohTransport(listen=...))`` publishing ``bench_view``'s 100
+  moving frames (a chain of 10, the rest leaves) as one ``/tf`` message every 10 ms;
+* ``listener``: a ``Bus(ZenohTransport(connect=...))`` with a ``TransformListener`` into a
+  ``Buffer`` and nothing else: the floor of any process that follows this stream;
+* ``view``: the command line a user runs, ``tfbus view --bus zenoh?connect=... --port P``
+  (``python -m tfbus.cli``), which also keeps ``tfbus monitor``'s tables and ``tfbus
+  doctor``'s checks for its page.
+
+Each one's CPU (its threads' scheduler run time in ns, ``benchmarks/proc_cpu.py``) is read
+over ``--rounds`` windows of ``--seconds`` with no browser (after the view has settled),
+then again with one headless Chromium page open on the view (started here in a session
+of its own, ended by that id; the page counts as connected once its websocket is an
+established TCP connection to the view's port). Prints each process's share of one core
+per window (min / median / max), and the view over the listener floor. Figures only;
+nothing is asserted. Needs ``chromium`` on PATH for the page phase.
+
+    .venv/bin/python benchmarks/bench_view_process.py [--seconds 8] [--rounds 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from proc_cpu import cpu_seconds  # noqa: E402
+
+RATE = 100.0
+"""/tf messages a second from the source."""
+
+CHROMIUM_FLAGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--window-size=1280,800", "--remote-debugging-port=0",
+]  # fmt: skip
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def source(port: int) -> None:
+    """The child that publishes the frames (until SIGINT/SIGTERM)."""
+    import anyio
+    import bench_view
+
+    from tfbus.bus import Bus
+    from tfbus.clock import every
+    from tfbus.messages import TFMessage
+    from tfbus.transports.zenoh import ZenohTransport
+
+    async def main() -> None:
+        transport = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="view-source")
+        async with Bus(transport=transport) as bus:
+            print("READY", flush=True)
+            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async with anyio.create_task_group() as tg:
+
+                    async def publish() -> None:
+                        async for _ in every(1.0 / RATE):
+                            await bus.publish("/tf", TFMessage(bench_view.transforms(time.time())))
+
+                    tg.start_soon(publish)
+                    async for _ in signals:
+                        tg.cancel_scope.cancel()
+
+    anyio.run(main)
+
+
+def listener(port: int) -> None:
+    """The floor child: a TransformListener into a Buffer (until SIGINT/SIGTERM)."""
+    import anyio
+
+    from tfbus import Buffer, Bus, TransformListener
+    from tfbus.transports.zenoh import ZenohTransport
+
+    async def main() -> None:
+        transport = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="view-floor")
+        async with Bus(transport=transport) as bus, TransformListener(Buffer(), bus):
+            print("READY", flush=True)
+            with anyio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async for _ in signals:
+                    return
+
+    anyio.run(main)
+
+
+def established(port: int) -> int:
+    """Established TCP connections to local ``port`` (``/proc/net/tcp``, ``tcp6``)."""
+    n = 0
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if int(fields[1].rsplit(":", 1)[1], 16) == port and fields[3] == "01":
+                n += 1
+    return n
+
+
+@dataclasses.dataclass
+class Measured:
+    """Per phase (``idle``, ``page``) and process (``source``, ``listener``, ``view``):
+    its share of one core in each window (0.01 = 1 %); ``page_shown``: whether a page
+    connected (False without chromium, or when none connected within 60 s)."""
+
+    share: dict[str, dict[str, list[float]]]
+    page_shown: bool
+    load: float
+
+
+def _wait_line(proc: subprocess.Popen[str], want: Callable[[str], bool], what: str) -> str:
+    assert proc.stdout is not None
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        if want(line):
+            return line
+    raise SystemExit(f"bench_view_process: {what} did not start within 60 s")
+
+
+def measure(rounds: int, seconds: float) -> Measured:
+    """Start the three processes, then read their CPU over ``rounds`` windows of
+    ``seconds`` with no browser and again with one page (see the module docstring)."""
+    zport, vport = _free_port(), _free_port()
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)}  # fmt: skip
+    procs: dict[str, subprocess.Popen[str]] = {}
+    share: dict[str, dict[str, list[float]]] = {"idle": {}, "page": {}}
+    shown = False
+    try:
+        for name in ("source", "listener"):
+            procs[name] = subprocess.Popen(
+                [sys.executable, __file__, f"--{name}", str(zport)], env=env,
+                stdout=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+            _wait_line(procs[name], lambda line: line.startswith("READY"), name)
+        procs["view"] = subprocess.Popen(
+            [sys.executable, "-c", "from tfbus.cli import main; main()", "view", "--bus",
+             f"zenoh?connect=tcp/127.0.0.1:{zport}", "--port", str(vport)],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, text=True,
+            start_new_session=True)  # fmt: skip
+        deadline = time.monotonic() + 60
+        while not _listening(vport) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(3.0)  # the view connected to the source and past its first messages
+
+        def windows(phase: str) -> None:
+            for _ in range(rounds):
+                before = {n: cpu_seconds(p.pid) for n, p in procs.items()}
+                t0 = time.monotonic()
+                time.sleep(seconds)
+                wall = time.monotonic() - t0
+                for n, p in procs.items():
+                    share[phase].setdefault(n, []).append((cpu_seconds(p.pid) - before[n]) / wall)
+
+        windows("idle")
+        exe = shutil.which("chromium")
+        if exe is not None:
+            with tempfile.TemporaryDirectory(prefix="tfbus-bench-view-",
+                                             ignore_cleanup_errors=True) as profile:
+                browser = subprocess.Popen(
+                    [exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                     f"http://127.0.0.1:{vport}/"],
+                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                    start_new_session=True)  # fmt: skip
+                try:
+                    deadline = time.monotonic() + 60
+                    while not established(vport) and time.monotonic() < deadline:
+                        time.sleep(0.1)
+                    shown = established(vport) > 0
+                    if shown:
+                        time.sleep(3.0)  # the page loaded and drawing at its rate
+                        windows("page")
+                finally:  # the browser this started, and its renderers (its own session)
+                    os.killpg(browser.pid, signal.SIGKILL)
+                    browser.wait(timeout=30)
+        return Measured(share, shown, os.getloadavg()[0])
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in procs.values():
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=20)
+
+
+def _listening(port: int) -> bool:
+    """Whether something accepts TCP connections on 127.0.0.1:``port``."""
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+def _spread(values: list[float]) -> str:
+    return (f"{100 * min(values):5.1f} / {100 * statistics.median(values):5.1f} / "
+            f"{100 * max(values):5.1f} %")  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=8.0, help="seconds a window")
+    parser.add_argument("--rounds", type=int, default=3, help="windows a phase")
+    parser.add_argument("--source", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--listener", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.source is not None:
+        source(args.source)
+        return
+    if args.listener is not None:
+        listener(args.listener)
+        return
+    got = measure(args.rounds, args.seconds)
+    print(f"tfbus view --bus zenoh following {RATE:.0f} Hz x 100 frames from another process; "
+          f"{args.rounds} windows of {args.seconds:g} s a phase; share of one core "
+          "min / median / max")  # fmt: skip
+    for phase, label in (("idle", "no browser"), ("page", "one page")):
+        if not got.share[phase]:
+            why = "no chromium on PATH" if shutil.which("chromium") is None else "no page"
+            print(f"  {label:<11} not measured: {why}")
+            continue
+        for name in ("view", "listener", "source"):
+            print(f"  {label:<11} {name:<9} {_spread(got.share[phase][name])}")
+        over = [v - f for v, f in zip(got.share[phase]["view"], got.share[phase]["listener"],
+                                      strict=True)]  # fmt: skip
+        print(f"  {label:<11} view - listener floor {_spread(over)}")
+    print(f"load {got.load:.2f} (1 min) at the end")
+
+
+if __name__ == "__main__":
+    main()
