@@ -164,20 +164,25 @@ class RateWindow:
         """Account one sample (ns); False when ``distinct`` and ``value`` is held already
         (a repeated stamp: not kept again)."""
         self.last_received = received
-        if self.distinct and value in self._values:
+        distinct = self.distinct
+        if distinct and value in self._values:
             return False
         seq = self._seq
-        self._seq += 1
-        self._samples.append((seq, received, value))
-        if self.distinct:
+        self._seq = seq + 1
+        samples = self._samples
+        samples.append((seq, received, value))
+        if distinct:
             self._values.add(value)
-        while self._lo and self._lo[-1][1] >= value:
-            self._lo.pop()
-        self._lo.append((seq, value))
-        while self._hi and self._hi[-1][1] <= value:
-            self._hi.pop()
-        self._hi.append((seq, value))
-        if len(self._samples) > self.maxlen:
+        entry = (seq, value)
+        lo = self._lo
+        while lo and lo[-1][1] >= value:
+            lo.pop()
+        lo.append(entry)
+        hi = self._hi
+        while hi and hi[-1][1] <= value:
+            hi.pop()
+        hi.append(entry)
+        if len(samples) > self.maxlen:
             self._pop()
         return True
 
@@ -437,43 +442,63 @@ class TfSummary:
         auth.last = t
         auth.received.add(t, t)
         touched = False
-        for ts in transforms:
-            if not (
-                isinstance(ts, TransformStamped)
-                and isinstance(ts.child_frame_id, str)
-                and isinstance(ts.header.frame_id, str)
-                and isinstance(ts.header.stamp, Time)
-            ):
-                continue
-            child = ts.child_frame_id
-            fs = self.frames.get(child)
-            if fs is None or fs.static != static:
-                fs = self.frames[child] = FrameSummary(child, ts.header.frame_id, static)
-            fs.parent = ts.header.frame_id
-            fs.count += 1
-            fs.authorities[authority] = fs.authorities.get(authority, 0) + 1
-            ns = ts.header.stamp.ns
-            if static:  # no rate: a stamp other than the last one counts as new
-                fs.distinct_stamps += ns != fs.last_stamp
-            elif fs.received.add(t, ns):
-                fs.distinct_stamps += 1
-            if fs.first_stamp is None or ns < fs.first_stamp:
-                fs.first_stamp = ns
-            if fs.last_stamp is None or ns > fs.last_stamp:
-                fs.last_stamp = ns
-            if static:
-                continue
-            touched = True
-            if self.sim_time is None:
-                self.sim_time = abs(t - ns) / NSEC_PER_SEC > SIM_TIME_GAP
-            self._newest_stamp = max(self._newest_stamp, ns)
-            d = ((self._newest_stamp if self.sim_time else t) - ns) / NSEC_PER_SEC
-            fs.delay_sum += d
-            fs.delay_count += 1
-            fs.delay_max = max(fs.delay_max, d)
-            auth.delay_sum += d
-            auth.delay_count += 1
-            auth.delay_max = max(auth.delay_max, d)
+        frames = self.frames
+        sim_time = self.sim_time
+        newest = self._newest_stamp
+        # The broadcaster's delay figures, kept in locals over the message and written
+        # back once (the same additions in the same order as one attribute at a time).
+        a_sum, a_count, a_max = auth.delay_sum, auth.delay_count, auth.delay_max
+        try:
+            for ts in transforms:
+                if not isinstance(ts, TransformStamped):
+                    continue
+                child = ts.child_frame_id
+                if not isinstance(child, str):
+                    continue
+                header = ts.header
+                parent = header.frame_id
+                if not isinstance(parent, str):
+                    continue
+                stamp = header.stamp
+                if not isinstance(stamp, Time):
+                    continue
+                fs = frames.get(child)
+                if fs is None or fs.static != static:
+                    fs = frames[child] = FrameSummary(child, parent, static)
+                fs.parent = parent
+                fs.count += 1
+                senders = fs.authorities
+                senders[authority] = senders.get(authority, 0) + 1
+                ns = stamp._ns
+                if static:  # no rate: a stamp other than the last one counts as new
+                    fs.distinct_stamps += ns != fs.last_stamp
+                elif fs.received.add(t, ns):
+                    fs.distinct_stamps += 1
+                first = fs.first_stamp
+                if first is None or ns < first:
+                    fs.first_stamp = ns
+                last = fs.last_stamp
+                if last is None or ns > last:
+                    fs.last_stamp = ns
+                if static:
+                    continue
+                touched = True
+                if sim_time is None:
+                    sim_time = self.sim_time = abs(t - ns) / NSEC_PER_SEC > SIM_TIME_GAP
+                if ns > newest:
+                    newest = ns
+                d = ((newest if sim_time else t) - ns) / NSEC_PER_SEC
+                fs.delay_sum += d
+                fs.delay_count += 1
+                if d > fs.delay_max:
+                    fs.delay_max = d
+                a_sum += d
+                a_count += 1
+                if d > a_max:
+                    a_max = d
+        finally:
+            self._newest_stamp = newest
+            auth.delay_sum, auth.delay_count, auth.delay_max = a_sum, a_count, a_max
         if touched:
             reference = self._newest_stamp if self.sim_time else t
             for chain in self.chains:

@@ -98,6 +98,10 @@ class BusSource(TfSource):
         """The robots of a fleet bus (``namespace=*``) while attached."""
         self._scheme = schemes().get(self.bus_spec.scheme)
         self._peer_aware = self._scheme is not None and self._scheme.peer_aware
+        # The attached transport when it is PeerAware (checked once: an isinstance of a
+        # runtime-checkable Protocol costs microseconds, and the authority of every
+        # message asks for the live broadcasters).
+        self._peers: PeerAware | None = None
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -136,8 +140,8 @@ class BusSource(TfSource):
         """The live broadcasters now (a :class:`~tfbus.transports._base.PeerAware`
         transport's ``broadcasters()``); empty when detached or on a transport without
         liveliness."""
-        transport = self.transport
-        return dict(transport.broadcasters()) if isinstance(transport, PeerAware) else {}
+        peers = self._peers
+        return dict(peers.broadcasters()) if peers is not None else {}
 
     @contextlib.asynccontextmanager
     async def attach(
@@ -167,6 +171,7 @@ class BusSource(TfSource):
             async with Bus(transport=transport, queue_size=10_000) as bus, \
                     self._following_clock(bus):
                 self.transport = transport
+                self._peers = peer_aware
                 self.bus = bus
                 if self.is_fleet:
                     from tfbus.fleet import FleetBuffer
@@ -188,6 +193,7 @@ class BusSource(TfSource):
                     finally:
                         tg.cancel_scope.cancel()
         self.transport = None
+        self._peers = None
         self.bus = None
 
     def _following_clock(self, bus: Bus) -> contextlib.AbstractAsyncContextManager[object]:

@@ -344,13 +344,15 @@ class Doctor:
             self.start = t
         if self.end is None or t > self.end:
             self.end = t
+        add_one = self._add_one
         for ts in transforms:
-            if not (isinstance(ts, TransformStamped) and isinstance(ts.child_frame_id, str)
-                    and isinstance(ts.header.frame_id, str)
-                    and isinstance(ts.header.stamp, Time)):
+            if not (isinstance(ts, TransformStamped) and isinstance(ts.child_frame_id, str)):
+                continue
+            header = ts.header
+            if not (isinstance(header.frame_id, str) and isinstance(header.stamp, Time)):
                 continue
             self.transforms += 1
-            self._add_one(t, ts, sender, static)
+            add_one(t, ts, sender, static)
 
     def _link(self, child: str) -> _Link | None:
         link = self._links.get(child)
@@ -387,7 +389,7 @@ class Doctor:
             link.static_values[sender] = (parent, tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w)
             return
         assert mean is not None and sample is not None
-        stamp = ts.header.stamp.ns
+        stamp = ts.header.stamp._ns  # a Time (checked by add)
         # delay: receive time - stamp (against the newest stamp in simulated time)
         if self.sim_time is None:
             self.sim_time = abs(t - stamp) / NSEC_PER_SEC > SIM_TIME_GAP
