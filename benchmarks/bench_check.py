@@ -76,7 +76,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS threads would
 
 import argparse
 import json
-import shutil
 import statistics
 import subprocess
 import sys
@@ -859,8 +858,7 @@ def view_rows(rows: Rows, rounds: int) -> None:
     for phase, name in VIEW_ROWS.items():
         share = got.share[phase]
         if not share:
-            why = "no chromium on PATH" if shutil.which("chromium") is None else "no page"
-            _not_run(rows, [name], why)
+            _not_run(rows, [name], got.why)
             continue
         view = statistics.median(share["view"])
         floor = statistics.median(share["listener"])

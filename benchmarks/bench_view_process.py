@@ -133,6 +133,8 @@ class Measured:
     share: dict[str, dict[str, list[float]]]
     page_shown: bool
     load: float
+    why: str = ""
+    """Why no page was measured, when none was."""
 
 
 def _wait_line(proc: subprocess.Popen[str], want: Callable[[str], bool], what: str) -> str:
@@ -156,6 +158,7 @@ def measure(rounds: int, seconds: float) -> Measured:
     procs: dict[str, subprocess.Popen[str]] = {}
     share: dict[str, dict[str, list[float]]] = {"idle": {}, "page": {}}
     shown = False
+    why = ""
     try:
         for name in ("source", "listener"):
             procs[name] = subprocess.Popen(
@@ -192,17 +195,25 @@ def measure(rounds: int, seconds: float) -> Measured:
                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                     start_new_session=True)  # fmt: skip
                 try:
-                    deadline = time.monotonic() + 60
-                    while not established(vport) and time.monotonic() < deadline:
+                    deadline = time.monotonic() + 120
+                    while (not established(vport) and browser.poll() is None
+                           and time.monotonic() < deadline):
                         time.sleep(0.1)
                     shown = established(vport) > 0
                     if shown:
                         time.sleep(3.0)  # the page loaded and drawing at its rate
                         windows("page")
+                    else:
+                        why = (f"no page connected within 120 s (chromium "
+                               f"{'running' if browser.poll() is None else 'exited'}, view "
+                               f"{'running' if procs['view'].poll() is None else 'exited'}, "
+                               f"port {'open' if _listening(vport) else 'closed'})")
                 finally:  # the browser this started, and its renderers (its own session)
                     os.killpg(browser.pid, signal.SIGKILL)
                     browser.wait(timeout=30)
-        return Measured(share, shown, os.getloadavg()[0])
+        else:
+            why = "no chromium on PATH"
+        return Measured(share, shown, os.getloadavg()[0], why)
     finally:
         for p in procs.values():
             if p.poll() is None:
@@ -248,8 +259,7 @@ def main() -> None:
           "min / median / max")  # fmt: skip
     for phase, label in (("idle", "no browser"), ("page", "one page")):
         if not got.share[phase]:
-            why = "no chromium on PATH" if shutil.which("chromium") is None else "no page"
-            print(f"  {label:<11} not measured: {why}")
+            print(f"  {label:<11} not measured: {got.why}")
             continue
         for name in ("view", "listener", "source"):
             print(f"  {label:<11} {name:<9} {_spread(got.share[phase][name])}")
