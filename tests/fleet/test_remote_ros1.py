@@ -155,16 +155,31 @@ import rospy, tf2_ros
 rospy.init_node("debian_buffer_client", anonymous=True)
 client = tf2_ros.BufferClient("/tf2_buffer_server")
 print("server", client.wait_for_server(rospy.Duration(30)), flush=True)
-t = client.lookup_transform("base", "laser", rospy.Time(0), rospy.Duration(1))
+
+def asked(lookup, *args):
+    # rospy's SimpleActionClient drops a result that arrives before send_goal has
+    # returned ("Got a transition callback on a goal handle that we're not tracking",
+    # ros/actionlib#206, never fixed) and then times out: a fast server on a loaded
+    # machine. The goal is asked again, at most twice, and each loss is printed.
+    for attempt in range(3):
+        try:
+            return lookup(*args)
+        except tf2_ros.TimeoutException:
+            if attempt == 2:
+                raise
+            print("lost_result", flush=True)
+
+t = asked(client.lookup_transform, "base", "laser", rospy.Time(0), rospy.Duration(1))
 v = t.transform.translation
 print("result", t.header.frame_id, t.child_frame_id, v.x, v.y, v.z, flush=True)
 try:
-    client.lookup_transform("base", "ghost", rospy.Time(0), rospy.Duration(0))
+    asked(client.lookup_transform, "base", "ghost", rospy.Time(0), rospy.Duration(0))
 except tf2_ros.LookupException as e:
     print("lookup_error", str(e), flush=True)
-t = client.lookup_transform_full("laser", rospy.Time(0), "laser", rospy.Time(0), "base",
-                                 rospy.Duration(1))
+t = asked(client.lookup_transform_full, "laser", rospy.Time(0), "laser", rospy.Time(0),
+          "base", rospy.Duration(1))
 print("full", t.transform.translation.x, flush=True)
+print("done", flush=True)
 """
 
 
@@ -198,8 +213,12 @@ def test_debians_buffer_client_gets_answers_from_tfbus(master: Master, backend: 
                 assert await anyio.to_thread.run_sync(wait, r"lookup_error .*") == \
                     f"lookup_error {expected_error}"
                 assert await anyio.to_thread.run_sync(wait, r"full .*") == "full 0.0"
+                await anyio.to_thread.run_sync(wait, r"^done$")
+                lost = sum(line.strip() == "lost_result" for line in client.seen)
                 s = server.statistics()
-                assert (s.requests, s.answered, s.errors, s.malformed) == (3, 2, 1, 0)
+                # every goal answered, those whose result the client lost included
+                assert (s.requests, s.answered, s.errors, s.malformed) == \
+                    (3 + lost, 2 + lost, 1, 0), (s, lost)
             finally:
                 client.stop()
 
