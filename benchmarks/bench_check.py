@@ -2,7 +2,8 @@
 
     .venv/bin/python benchmarks/bench_check.py [--rounds 5] [--no-ros1] [--only GROUP,...]
     # or: make bench-check; GROUP is core, cpp, wakeup, ros1, ros1cpu, sensors, zenoh,
-    # demo or view (comma-separated, repeatable); --no-ros1 skips ros1, ros1cpu and demo
+    # demo, view or clock (comma-separated, repeatable); --no-ros1 skips ros1, ros1cpu,
+    # demo and clock's ROS 1 row
 
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
@@ -75,6 +76,8 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS threads would spin
 
 import argparse
+import contextlib
+import functools
 import json
 import statistics
 import subprocess
@@ -840,8 +843,91 @@ def demo_rows(rows: Rows, rounds: int) -> None:
     )
 
 
-GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo", "view")
+GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo", "view",
+          "clock")
 ROS1_GROUPS = ("ros1", "ros1cpu", "demo")
+
+CLOCK_TARGET = 1.2
+"""Following ``/clock`` at :data:`CLOCK_HZ`: a ``SimClock`` process's CPU over that of a
+bare reader of the same stream on the same middleware (each busy minus idle)."""
+CLOCK_HZ = 1000.0
+CLOCK_SECONDS = 5.0
+CLOCK_ROWS = {
+    "zenoh": "following /clock at 1 kHz, Zenoh",
+    "ros2": "following /clock at 1 kHz, ROS 2",
+    "ros1": "following /clock at 1 kHz, ROS 1",
+}
+CLOCK_FLOORS = {
+    "zenoh": "raw zenoh-python callback",
+    "ros2": "bare cyclonedds take",
+    "ros1": "bare TCPROS reader",
+}
+
+
+def clock_rows(rows: Rows, rounds: int, ros1: bool) -> None:
+    """Following ``/clock`` at 1 kHz from a tfbus publisher process over Zenoh, ROS 2
+    (Cyclone DDS) and ROS 1 (``bench_sim_clock.measure``): a ``SimClock`` process's CPU
+    and a bare reader's (Zenoh: a raw zenoh-python subscriber's no-op callback on the
+    publisher's key; ROS 2: a cyclonedds reader taking raw samples in its listener; ROS 1:
+    a hand-made TCPROS subscriber), each busy minus idle, alternated over ``rounds``
+    rounds; the median of the per-round ratios (<= :data:`CLOCK_TARGET`)."""
+    import random
+
+    import bench_sim_clock
+
+    for bus_kind, name in CLOCK_ROWS.items():
+        if bus_kind == "ros1" and not ros1:
+            continue  # --no-ros1
+        with contextlib.ExitStack() as stack:
+            if bus_kind == "zenoh":  # a free port a run
+                at: Callable[[], str] = lambda: str(bench_sim_clock.free_port())  # noqa: E731
+            elif bus_kind == "ros2":  # a random domain id a run
+                why = _ros2_missing()
+                if why is not None:
+                    _not_run(rows, [name], why)
+                    continue
+                at = lambda: str(random.randint(1, 100))  # noqa: E731
+            else:  # one roscore for the row's runs
+                import bench_ros1  # noqa: F401  (puts peers/ros1 on the path)
+                from ros1_peers import ros1_missing, start_master
+
+                why = ros1_missing(("roscpp",))
+                if why is not None:
+                    _not_run(rows, [name], why)
+                    continue
+                tmp = stack.enter_context(
+                    tempfile.TemporaryDirectory(prefix="tfbus-bench-clock-"))
+                master = start_master(Path(tmp) / "home")
+                stack.callback(master.stop)
+                at = functools.partial(str, master.uri)
+            got = bench_sim_clock.measure(bus_kind, at, CLOCK_HZ, CLOCK_SECONDS, rounds)
+        # a floor measured at or below zero (noise on an idle reader) counts as 0.01 %
+        ratios = [a / max(b, 1e-4) for a, b in zip(got.tfbus, got.bare, strict=True)]
+        rows.row(
+            name,
+            f"{statistics.median(got.tfbus):.2%} vs {statistics.median(got.bare):.2%} of a "
+            f"core = {_spread(ratios)}",
+            statistics.median(ratios) <= CLOCK_TARGET,
+            f"<= {CLOCK_TARGET:.1f}x {CLOCK_FLOORS[bus_kind]}",
+        )
+        print(f"  info  {'    /clock a second taken, tfbus / bare':46} "
+              f"{statistics.median(got.tfbus_rate):.0f} / {statistics.median(got.bare_rate):.0f}"
+              f" (tfbus's event loop; newest-only on Zenoh and ROS 2)")
+        where = ", ".join(
+            f"{kind} {statistics.median(t[kind] for t in got.tfbus_threads):.2%} / "
+            f"{statistics.median(t[kind] for t in got.bare_threads):.2%}"
+            for kind in bench_sim_clock.THREAD_KINDS
+        )
+        print(f"  info  {'    by thread, tfbus / bare':46} {where}")
+
+
+def _ros2_missing() -> str | None:
+    """Why the ROS 2 rows cannot run here (cyclonedds not installed), else None."""
+    try:
+        import cyclonedds  # noqa: F401
+    except ImportError:
+        return "cyclonedds is not installed (the ros2 extra)"
+    return None
 
 
 VIEW_TARGETS = {"idle": 0.05, "page": 0.15}
@@ -924,6 +1010,8 @@ def main(argv: list[str] | None = None) -> int:
         demo_rows(rows, 3)
     if "view" in groups:
         view_rows(rows, 3)
+    if "clock" in groups:
+        clock_rows(rows, 3, ros1=not args.no_ros1)
     print(f"{rows.failed} row(s) failed (load {load0:.2f} -> {os.getloadavg()[0]:.2f})")
     return 1 if rows.failed else 0
 

@@ -58,6 +58,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -178,10 +180,12 @@ async def follow(bus_kind: str, at: str, hz: float, seconds: float, wakeups: int
                         await anyio.sleep(0.05)  # bounded by fail_after
             await anyio.sleep(settle)
             received0 = received()
-            wall0, cpu0 = time.perf_counter(), time.process_time()
+            wall0, cpu0, threads0 = time.perf_counter(), time.process_time(), thread_times()
             await anyio.sleep(seconds)
             wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+            threads = _shares(threads0, thread_times(), wall)
             result["cpu_share"] = cpu / wall
+            result.update({f"threads_{k}": v for k, v in threads.items()})
             result["rate"] = (received() - received0) / wall
             if hz > 0 and wakeups:
                 step_ns = round(1e9 / hz)
@@ -429,20 +433,83 @@ def ros2_floor_reader(domain_id: int, busy: bool, seconds: float) -> None:
     del reader, domain
 
 
+def zenoh_floor_reader(port: int, busy: bool, seconds: float) -> None:
+    """The Zenoh floor (no tfbus per message): a raw zenoh-python session configured as
+    ``ZenohTransport`` configures itself (:func:`~tfbus.transports.zenoh.config.zenoh_config`:
+    peer mode, multicast scouting off, connecting to the publisher at 127.0.0.1) whose
+    subscriber on the tfbus publisher's ``/clock`` key counts each sample in a no-op
+    Python callback. Prints this process's CPU share over ``seconds`` as one JSON line
+    (``busy``: once the first sample arrived)."""
+    import threading
+
+    import zenoh
+
+    from tfbus.transports.zenoh.config import zenoh_config
+    from tfbus.transports.zenoh.keys import KeySpace
+
+    config, _fallback = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
+    session = zenoh.open(config)
+    count = [0]
+    first = threading.Event()
+
+    def on_sample(_sample: object) -> None:
+        count[0] += 1
+        first.set()
+
+    subscriber = session.declare_subscriber(KeySpace().data(CLOCK_TOPIC), on_sample)
+    if busy and not first.wait(60):
+        raise RuntimeError("no /clock within 60 s")
+    _measure(count, seconds)
+    del subscriber
+
+
+THREAD_KINDS = ("main", "python", "middleware")
+"""How :func:`thread_times` groups a process's threads: ``main`` (the main thread: a
+follower's event loop; a bare reader's main thread only sleeps), ``python`` (other threads
+named ``python``: the middleware's Python callback threads, a bare reader's reading
+thread, anyio's worker threads) and ``middleware`` (threads the middleware named: Zenoh's
+``rx-N`` / ``net-N`` / ``tx-N``, Cyclone's ``recvUC`` / ``tev`` / ...)."""
+
+
+def thread_times() -> dict[str, int]:
+    """This process's live threads' scheduler run time so far, in ns, by kind
+    (:data:`THREAD_KINDS`; ``/proc/self/task/TID/schedstat``, field 1, as
+    ``proc_cpu.cpu_seconds`` reads it)."""
+    pid = str(os.getpid())
+    out = dict.fromkeys(THREAD_KINDS, 0)
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            comm = Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip()
+            ns = int(Path(f"/proc/{pid}/task/{tid}/schedstat").read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            continue  # a thread that ended meanwhile
+        kind = "main" if tid == pid else "python" if comm.startswith("python") else "middleware"
+        out[kind] += ns
+    return out
+
+
+def _shares(before: dict[str, int], after: dict[str, int], wall: float) -> dict[str, float]:
+    """Each thread kind's share of one core between two :func:`thread_times`."""
+    return {k: (after[k] - before[k]) / 1e9 / wall for k in THREAD_KINDS}
+
+
 def _measure(count: list[int], seconds: float) -> None:
-    """Print this process's CPU share and ``count``'s rate over ``seconds`` (after a
-    1.5 s settle) as one JSON line, and end the process (no teardown)."""
+    """Print this process's CPU share (and each thread kind's, :func:`thread_times`) and
+    ``count``'s rate over ``seconds`` (after a 1.5 s settle) as one JSON line, and end
+    the process (no teardown)."""
     time.sleep(1.5)
-    n0, wall0, cpu0 = count[0], time.perf_counter(), time.process_time()
+    n0, wall0, cpu0, threads0 = count[0], time.perf_counter(), time.process_time(), thread_times()
     time.sleep(seconds)
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-    print(json.dumps({"cpu_share": cpu / wall, "rate": (count[0] - n0) / wall}), flush=True)
+    threads = _shares(threads0, thread_times(), wall)
+    print(json.dumps({"cpu_share": cpu / wall, "rate": (count[0] - n0) / wall,
+                      "threads": threads}), flush=True)
     os._exit(0)
 
 
 def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]:
-    """One floor measurement on ROS 1 / ROS 2: a tfbus publisher process at ``hz``
-    (0: nothing sent) and a bare reader process (:func:`ros1_floor_reader`,
+    """One floor measurement: a tfbus publisher process at ``hz`` (0: nothing sent) and a
+    bare reader process (:func:`zenoh_floor_reader`, :func:`ros1_floor_reader`,
     :func:`ros2_floor_reader`)."""
     pub = start_publisher(bus_kind, at, hz, seconds + 90)
     try:
@@ -458,6 +525,58 @@ def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]
     finally:
         pub.kill()
         pub.wait(timeout=10)
+
+
+def follower(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]:
+    """One follower measurement in a process of its own (``--role sim-follower``: a
+    ``SimClock`` on a bus of ``bus_kind`` and :func:`follow`'s publisher at ``hz``, 0:
+    nothing sent): its CPU share over ``seconds`` and the /clock messages a second its
+    event loop took (over Zenoh and ROS 2, newest-only: fewer than ``hz``)."""
+    sub = subprocess.run(
+        [sys.executable, __file__, "--role", "sim-follower", "--bus", bus_kind, "--at", at,
+         "--hz", str(hz), "--seconds", str(seconds)],
+        capture_output=True, text=True, timeout=seconds + 150,
+    )  # fmt: skip
+    lines = sub.stdout.strip().splitlines()
+    if not lines:
+        raise RuntimeError(f"the follower failed: {sub.stderr[-2000:]}")
+    return dict(json.loads(lines[-1]))
+
+
+@dataclass
+class FollowCost:
+    """Per round, the share of one core that following ``/clock`` costs (busy minus
+    idle, 0.01 = 1 %): ``tfbus``, a ``SimClock`` process; ``bare``, the bare reader of
+    the same stream on the same middleware (:func:`floor`); and what each took a second
+    while busy (``tfbus_rate`` is the event loop's, newest-only over Zenoh and ROS 2)."""
+
+    tfbus: list[float] = field(default_factory=list)
+    bare: list[float] = field(default_factory=list)
+    tfbus_rate: list[float] = field(default_factory=list)
+    bare_rate: list[float] = field(default_factory=list)
+    tfbus_threads: list[dict[str, float]] = field(default_factory=list)
+    """Per round, each thread kind's share (busy minus idle, :data:`THREAD_KINDS`)."""
+    bare_threads: list[dict[str, float]] = field(default_factory=list)
+
+
+def measure(bus_kind: str, at: Callable[[], str], hz: float, seconds: float,
+            rounds: int) -> FollowCost:
+    """``rounds`` rounds of: a ``SimClock`` process following a tfbus publisher at
+    ``hz`` and at 0 Hz (:func:`follower`), and the bare reader of the same publisher at
+    ``hz`` and at 0 Hz (:func:`floor`), the two sides alternated (the order reversed
+    every other round); ``at()`` gives each run its port, domain id or master URI."""
+    got = FollowCost()
+    for r in range(rounds):
+        sides = ("tfbus", "bare") if r % 2 == 0 else ("bare", "tfbus")
+        for side in sides:
+            run = follower if side == "tfbus" else floor
+            idle = run(bus_kind, at(), 0.0, seconds)
+            busy = run(bus_kind, at(), hz, seconds)
+            getattr(got, side).append(busy["cpu_share"] - idle["cpu_share"])
+            getattr(got, f"{side}_rate").append(busy["rate"])
+            getattr(got, f"{side}_threads").append(
+                {k: busy["threads"][k] - idle["threads"][k] for k in THREAD_KINDS})
+    return got
 
 
 def _sim_clock_cost_per_message(n: int = 100_000) -> float:
@@ -546,7 +665,7 @@ if __name__ == "__main__":
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--role", default="follower",
                         choices=["follower", "publisher", "raw-publisher", "raw-subscriber",
-                                 "floor-reader"])
+                                 "floor-reader", "sim-follower"])
     parser.add_argument("--bus", default="zenoh", choices=["zenoh", "ros1", "ros2"],
                         help="the transport /clock travels on (ros1: a roscore on 127.0.0.1 "
                              "is started; ros2: Cyclone DDS, loopback, a random domain id)")
@@ -567,9 +686,16 @@ if __name__ == "__main__":
         ns.seconds, ns.wakeups = 2.0, 50
     if ns.role == "publisher":
         anyio.run(publisher, ns.bus, ns.at, ns.hz, ns.seconds)
+    elif ns.role == "sim-follower":
+        got = anyio.run(follow, ns.bus, ns.at, ns.hz, ns.seconds, 0, backend=ns.backend)
+        threads = {k: got[f"threads_{k}"] for k in THREAD_KINDS}
+        print(json.dumps({"cpu_share": got["cpu_share"], "rate": got["rate"],
+                          "threads": threads}), flush=True)
     elif ns.role == "floor-reader":
         if ns.bus == "ros1":
             ros1_floor_reader(ns.at, ns.hz > 0, ns.seconds)
+        elif ns.bus == "zenoh":
+            zenoh_floor_reader(int(ns.at), ns.hz > 0, ns.seconds)
         else:
             ros2_floor_reader(int(ns.at), ns.hz > 0, ns.seconds)
     elif ns.role == "raw-publisher":

@@ -56,6 +56,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "ros1": (["--repeat", "3"], ["--quick", "--repeat", "3"], 1800),
     "sensors": ([], ["--quick"], 1800),
     "check": ([], ["--rounds", "3", "--no-ros1"], 2400),
+    "check-clock": (["--only", "clock"], ["--only", "clock"], 1800),
     "ros1_floor": (["--receivers", "asyncio,asyncio+store,callback,listener"],
                    ["--receivers", "asyncio,asyncio+store,callback,listener", "--rounds", "2",
                     "--seconds", "6"], 900),
