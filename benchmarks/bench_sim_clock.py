@@ -507,10 +507,11 @@ def _measure(count: list[int], seconds: float) -> None:
     os._exit(0)
 
 
-def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]:
+def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, Any]:
     """One floor measurement: a tfbus publisher process at ``hz`` (0: nothing sent) and a
     bare reader process (:func:`zenoh_floor_reader`, :func:`ros1_floor_reader`,
-    :func:`ros2_floor_reader`)."""
+    :func:`ros2_floor_reader`): its CPU share, rate and thread kinds' shares, as
+    :func:`follower`."""
     pub = start_publisher(bus_kind, at, hz, seconds + 90)
     try:
         sub = subprocess.run(
@@ -527,11 +528,12 @@ def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]
         pub.wait(timeout=10)
 
 
-def follower(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, float]:
+def follower(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, Any]:
     """One follower measurement in a process of its own (``--role sim-follower``: a
     ``SimClock`` on a bus of ``bus_kind`` and :func:`follow`'s publisher at ``hz``, 0:
     nothing sent): its CPU share over ``seconds`` and the /clock messages a second its
-    event loop took (over Zenoh and ROS 2, newest-only: fewer than ``hz``)."""
+    event loop took (over Zenoh and ROS 2, newest-only: fewer than ``hz``), and each
+    thread kind's share (``threads``, :func:`thread_times`)."""
     sub = subprocess.run(
         [sys.executable, __file__, "--role", "sim-follower", "--bus", bus_kind, "--at", at,
          "--hz", str(hz), "--seconds", str(seconds)],
