@@ -309,9 +309,11 @@ def _wheels(procs: Procs, tmp_path: Path) -> Proc:
     return procs.peer("gated_tf_feeder.py", str(spec), "--rate", "30")
 
 
-def _start_feeding(feeder: Proc) -> None:
-    """SIGUSR1 once the program's listener subscribed to the feeder's /tf."""
-    feeder.wait_for(r"^SUBSCRIBERS [1-9]", timeout=WAIT)
+def _start_feeding(feeder: Proc, subscribers: int = 1) -> None:
+    """SIGUSR1 once ``subscribers`` subscriptions (the program's listener, and the echo
+    peer where a test compares with what it recorded) matched the feeder's /tf: a
+    subscription matched later would miss the first samples."""
+    feeder.wait_for(rf"^SUBSCRIBERS ([{subscribers}-9]|[1-9][0-9])", timeout=WAIT)
     feeder.proc.send_signal(signal.SIGUSR1)
 
 
@@ -354,7 +356,9 @@ def test_async_waits_for_transform(procs: Procs, tmp_path: Path) -> None:
     broadcaster = procs.program("static_broadcaster")
     program = procs.program("async_waits_for_transform")
     program.wait_for(r"Waiting for transform from sonar_2 to starboard_wheel", timeout=WAIT)
-    _start_feeding(feeder)
+    # the echo peer records from the first sample, which may be the one that answers
+    # (tf2_py fed a recording without it cannot look up its stamp: CI saw that)
+    _start_feeding(feeder, subscribers=2)
     # the first await was answered by the data sent during it (no LookupException first)
     outcome = program.wait_for(r"\]: (Got|failed to get transform) (.*)$", timeout=WAIT)
     assert outcome.group(1) == "Got", outcome.group(0)
@@ -365,6 +369,7 @@ def test_async_waits_for_transform(procs: Procs, tmp_path: Path) -> None:
         t["stamp"][0] * 1_000_000_000 + t["stamp"][1] > ns for t in _timed_edges(ms))
         and len(_edges(ms, "/tf_static")) == 5)
     want = _debian(messages, [["starboard_wheel", "sonar_2", got["stamp"]]])["lookups"][0]
+    assert "stamp" in want, (want, got["stamp"], _timed_edges(messages)[:3])
     assert want["stamp"][0] == got["stamp"][0]  # ROS 1 tf2_py: a double's nanoseconds
     assert want["stamp"][1] == pytest.approx(got["stamp"][1], abs=1000)
     assert got["t"] == pytest.approx(want["t"], abs=1e-12)
