@@ -473,16 +473,12 @@ thread, anyio's worker threads) and ``middleware`` (threads the middleware named
 
 def thread_times() -> dict[str, int]:
     """This process's live threads' scheduler run time so far, in ns, by kind
-    (:data:`THREAD_KINDS`; ``/proc/self/task/TID/schedstat``, field 1, as
-    ``proc_cpu.cpu_seconds`` reads it)."""
+    (:data:`THREAD_KINDS`; ``proc_cpu.thread_run_ns``)."""
+    from proc_cpu import thread_run_ns
+
     pid = str(os.getpid())
     out = dict.fromkeys(THREAD_KINDS, 0)
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        try:
-            comm = Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip()
-            ns = int(Path(f"/proc/{pid}/task/{tid}/schedstat").read_text().split()[0])
-        except (OSError, ValueError, IndexError):
-            continue  # a thread that ended meanwhile
+    for tid, (comm, ns) in thread_run_ns(os.getpid()).items():
         kind = "main" if tid == pid else "python" if comm.startswith("python") else "middleware"
         out[kind] += ns
     return out
@@ -514,18 +510,28 @@ def floor(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, Any]:
     :func:`follower`."""
     pub = start_publisher(bus_kind, at, hz, seconds + 90)
     try:
-        sub = subprocess.run(
-            [sys.executable, __file__, "--role", "floor-reader", "--bus", bus_kind, "--at", at,
-             "--hz", str(hz), "--seconds", str(seconds)],
-            capture_output=True, text=True, timeout=seconds + 90,
-        )  # fmt: skip
-        lines = sub.stdout.strip().splitlines()
-        if not lines:
-            raise RuntimeError(f"the floor reader failed: {sub.stderr[-2000:]}")
-        return dict(json.loads(lines[-1]))
+        return _measured_child("floor-reader", bus_kind, at, hz, seconds, seconds + 90)
     finally:
         pub.kill()
         pub.wait(timeout=10)
+
+
+def _measured_child(role: str, bus_kind: str, at: str, hz: float, seconds: float,
+                    timeout: float) -> dict[str, Any]:
+    """Run this script as ``--role role`` (bounded by ``timeout`` s) and return the JSON
+    line it prints last (:func:`_measure`'s, or the ``sim-follower``'s).
+
+    Raises:
+        RuntimeError: it printed nothing (its error output's end quoted)."""
+    sub = subprocess.run(
+        [sys.executable, __file__, "--role", role, "--bus", bus_kind, "--at", at,
+         "--hz", str(hz), "--seconds", str(seconds)],
+        capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+    lines = sub.stdout.strip().splitlines()
+    if not lines:
+        raise RuntimeError(f"the {role} failed: {sub.stderr[-2000:]}")
+    return dict(json.loads(lines[-1]))
 
 
 def follower(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, Any]:
@@ -534,15 +540,7 @@ def follower(bus_kind: str, at: str, hz: float, seconds: float) -> dict[str, Any
     nothing sent): its CPU share over ``seconds`` and the /clock messages a second its
     event loop took (over Zenoh and ROS 2, newest-only: fewer than ``hz``), and each
     thread kind's share (``threads``, :func:`thread_times`)."""
-    sub = subprocess.run(
-        [sys.executable, __file__, "--role", "sim-follower", "--bus", bus_kind, "--at", at,
-         "--hz", str(hz), "--seconds", str(seconds)],
-        capture_output=True, text=True, timeout=seconds + 150,
-    )  # fmt: skip
-    lines = sub.stdout.strip().splitlines()
-    if not lines:
-        raise RuntimeError(f"the follower failed: {sub.stderr[-2000:]}")
-    return dict(json.loads(lines[-1]))
+    return _measured_child("sim-follower", bus_kind, at, hz, seconds, seconds + 150)
 
 
 @dataclass

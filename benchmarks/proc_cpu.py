@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["cpu_and_wakeups", "cpu_seconds", "tick_seconds"]
+__all__ = ["cpu_and_wakeups", "cpu_seconds", "thread_run_ns", "tick_seconds"]
 
 TICK = os.sysconf("SC_CLK_TCK")
 """Clock ticks per second of ``/proc/PID/stat``'s times (100 on Linux)."""
@@ -62,3 +62,21 @@ def cpu_seconds(pid: int) -> float:
     Raises:
         FileNotFoundError: no process ``pid``."""
     return cpu_and_wakeups(pid)[0]
+
+
+def thread_run_ns(pid: int) -> dict[str, tuple[str, int]]:
+    """Each live thread of a process: its id -> (its name, ``/proc/PID/task/TID/comm``;
+    its scheduler run time so far in ns, ``schedstat`` field 1). A thread that ends while
+    it is read is left out.
+
+    Raises:
+        FileNotFoundError: no process ``pid``."""
+    out: dict[str, tuple[str, int]] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            comm = (task / "comm").read_text().strip()
+            ns = int((task / "schedstat").read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            continue
+        out[task.name] = (comm, ns)
+    return out

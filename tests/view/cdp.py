@@ -33,6 +33,30 @@ _BETWEEN_DOCUMENTS = ("Not attached to an active page", "Cannot find context",
                       "Execution context was destroyed", "Inspected target navigated")
 
 
+def end_chromium(proc: subprocess.Popen[bytes] | None, profile: str, timeout: float) -> None:
+    """End a Chromium we started with ``start_new_session=True`` and the processes it
+    started (by its PID: the group it leads; a renderer left alive would go on writing
+    into the profile), then remove its ``profile``: a helper still exiting may write into
+    it after the browser has gone (``Directory not empty``), so the removal is retried
+    for at most ``timeout`` seconds."""
+    if proc is not None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.wait(timeout=timeout)
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            shutil.rmtree(profile)
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+
+
 class Chromium:
     """One headless Chromium and one page of it, driven through CDP (``with Chromium(exe)
     as c: c.open(url)``). Every wait is bounded (``timeout`` seconds)."""
@@ -76,24 +100,7 @@ class Chromium:
                  tb: TracebackType | None) -> None:
         if self._ws is not None:
             self._ws.close()
-        if self._proc is not None:
-            # the child we started and the processes it started, by its PID (the group
-            # it leads): a renderer left alive would go on writing into the profile
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(self._proc.pid, signal.SIGKILL)
-            if self._proc.poll() is None:
-                self._proc.wait(timeout=self.timeout)
-        deadline = time.monotonic() + self.timeout
-        while True:  # a helper process may still be exiting (bounded by ``timeout``)
-            try:
-                shutil.rmtree(self._profile.name)
-                break
-            except FileNotFoundError:
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.1)
+        end_chromium(self._proc, self._profile.name, self.timeout)
         with contextlib.suppress(OSError):
             self._profile.cleanup()
 

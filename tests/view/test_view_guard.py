@@ -8,11 +8,9 @@ counted and logged as one line, never a traceback. Plain sockets with forged hea
 from __future__ import annotations
 
 import base64
-import contextlib
 import http.server
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import tempfile
@@ -214,27 +212,6 @@ def test_another_origins_page_in_chromium_cannot_open_the_views_websocket(
     assert not any(r.startswith("open") for r in results)
 
 
-def _end_chromium(browser: subprocess.Popen[bytes], profile: str, timeout: float = 30.0) -> None:
-    """End the Chromium we started and the processes it started (the group its PID leads,
-    ``start_new_session``), then remove its profile: a helper still exiting may write into
-    it after the browser itself has gone (CI saw ``Directory not empty: 'Default'``), so the
-    removal is retried until it succeeds, for at most ``timeout`` seconds."""
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(browser.pid, signal.SIGKILL)
-    browser.wait(timeout)
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            shutil.rmtree(profile)
-            return
-        except FileNotFoundError:
-            return
-        except OSError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.1)
-
-
 def test_view_token_option_is_checked_before_anything_is_served() -> None:
     """``tfbus view --token`` with a space or empty: one usage line, exit status 2."""
     from click.testing import CliRunner
@@ -406,7 +383,9 @@ for (const scheme of ["ws", "wss"]) {{
         try:
             assert reported.wait(90), "the page never reported"
         finally:
-            _end_chromium(browser, profile)
+            from cdp import end_chromium
+
+            end_chromium(browser, profile, 30.0)
         assert results == ["refused-refused"]
     finally:
         srv.shutdown()
