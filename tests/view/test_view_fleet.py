@@ -15,6 +15,7 @@ import pytest
 
 pytest.importorskip("viser")
 
+from proc_lines import ProcLines
 from test_view_controls import _pick, until
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
@@ -234,7 +235,6 @@ async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:
     robots publish through a Zenoh router on 127.0.0.1; the page lists both side by side
     (each from its own map). SIGINT ends it with status 0; it is killed by PID if not."""
     pytest.importorskip("zenoh")
-    import select
     import signal
     import subprocess
     import sys
@@ -256,10 +256,7 @@ async def test_command_on_a_fleet_bus_in_chromium(chromium: str) -> None:
              "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
             text=True)
         try:
-            assert proc.stderr is not None
-            ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait
-            assert ready, "tfbus view printed nothing in 60 s"
-            assert proc.stderr.readline().strip() == f"tfbus view: http://127.0.0.1:{port}/"
+            assert ProcLines(proc).first() == f"tfbus view: http://127.0.0.1:{port}/"
             robots = [Bus(transport=ZenohTransport(connect=endpoint, config={"mode": "client"},
                                                    namespace=f"robot{k}", name=f"r{k}"))
                       for k in (1, 2)]

@@ -16,6 +16,7 @@ import pytest
 
 pytest.importorskip("viser")
 
+from proc_lines import ProcLines
 from ros1_harness import master_fixture, ros1_fixture  # noqa: F401  (registers fixtures)
 
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
@@ -250,7 +251,6 @@ def test_command_view_bus_ros1_subscribes_to_the_scan(master: Any) -> None:
     registers as a subscriber of /scan, and its slave API lists /scan as a
     sensor_msgs/LaserScan subscription (the type rostopic's publisher must match);
     SIGINT ends it with status 0."""
-    import select
     import signal
     import socket
     import subprocess
@@ -267,10 +267,7 @@ def test_command_view_bus_ros1_subscribes_to_the_scan(master: Any) -> None:
                              "--port", str(port)], env=master.env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        assert proc.stderr is not None
-        ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
-        assert ready, "tfbus view printed nothing in 60 s"
-        assert proc.stderr.readline().strip() == f"tfbus view: http://127.0.0.1:{port}/"
+        assert ProcLines(proc).first() == f"tfbus view: http://127.0.0.1:{port}/"
         nodes: list[str] = []
         deadline = time.monotonic() + 40
         while not nodes and time.monotonic() < deadline:  # bounded: registration

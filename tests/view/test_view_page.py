@@ -16,6 +16,8 @@ from click.testing import CliRunner
 
 pytest.importorskip("viser")
 
+from proc_lines import ProcLines
+
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.bag import load_buffer
 from tfbus.cli import cli
@@ -214,7 +216,6 @@ def test_command_live_bus_with_scan_and_foxglove() -> None:
     /scan to a client (subprotocol foxglove.sdk.v1); SIGINT ends it with status 0."""
     import asyncio
     import json
-    import select
     import signal
     import subprocess
 
@@ -243,12 +244,7 @@ def test_command_live_bus_with_scan_and_foxglove() -> None:
         return topics
 
     try:
-        assert proc.stderr is not None
-        lines = []
-        for _ in range(2):
-            ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
-            assert ready, "tfbus view printed nothing in 60 s"
-            lines.append(proc.stderr.readline().strip())
+        lines = ProcLines(proc).until(lambda ls: len(ls) >= 2)
         assert lines == [f"tfbus view: http://127.0.0.1:{ports[0]}/",
                          f"tfbus view: Foxglove ws://127.0.0.1:{ports[1]}"]
         with urllib.request.urlopen(f"http://127.0.0.1:{ports[0]}/", timeout=10) as resp:
@@ -265,7 +261,6 @@ def test_command_live_bus_with_scan_and_foxglove() -> None:
 def test_command_serves_a_bag_and_stops_on_sigint() -> None:
     """``tfbus view --bag`` as a process: it prints its address, serves the page on
     127.0.0.1, and SIGINT ends it with status 0 (waits bounded; killed by PID if not)."""
-    import select
     import signal
     import subprocess
 
@@ -277,11 +272,7 @@ def test_command_serves_a_bag_and_stops_on_sigint() -> None:
                              "--paused"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     try:
-        assert proc.stderr is not None
-        ready, _, _ = select.select([proc.stderr], [], [], 60)  # bounded wait for output
-        assert ready, "tfbus view printed nothing in 60 s"
-        line = proc.stderr.readline()  # the first line is the address
-        assert line.strip() == f"tfbus view: http://127.0.0.1:{port}/"
+        assert ProcLines(proc).first() == f"tfbus view: http://127.0.0.1:{port}/"
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as resp:
             assert resp.status == 200
         proc.send_signal(signal.SIGINT)

@@ -7,13 +7,11 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import signal
 import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -26,6 +24,7 @@ from click.testing import CliRunner
 pytest.importorskip("viser")
 pytest.importorskip("foxglove")
 
+from proc_lines import ProcLines
 from recordings import S45, tf, write_recording, xyz_cloud
 from test_view_controls import _centre, _row, until
 
@@ -430,18 +429,8 @@ def test_command_records_a_bag_until_its_cap_and_says_so(tmp_path: Path) -> None
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     bag = [(m.time.ns, m.topic, tuple(m.message.transforms)) for m in read_messages(TURTLE)]
     want = [m for m in bag if m[0] - bag[0][0] <= 2_000_000_000]
-    lines: list[str] = []
     try:
-        assert proc.stderr is not None
-        deadline = time.monotonic() + 120
-        while not any("recorded (" in line for line in lines):
-            left = deadline - time.monotonic()
-            assert left > 0, f"no end of recording printed in 120 s: {lines}"
-            ready, _, _ = select.select([proc.stderr], [], [], left)
-            if ready:
-                line = proc.stderr.readline()
-                assert line, f"tfbus view ended: {lines}"
-                lines.append(line.strip())
+        lines = ProcLines(proc).until(lambda ls: any("recorded (" in line for line in ls), 120)
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0
     finally:
