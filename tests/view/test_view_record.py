@@ -438,6 +438,8 @@ def test_command_records_a_bag_until_its_cap_and_says_so(tmp_path: Path) -> None
             proc.kill()
             proc.wait(timeout=10)
     assert lines[0] == f"tfbus view: http://127.0.0.1:{port}/"
-    assert lines[-1].startswith(f"tfbus view: recorded (reached its cap of 2 s) cli.mcap: "
+    ended = [line for line in lines if "recorded (" in line]
+    assert len(ended) == 1, lines
+    assert ended[0].startswith(f"tfbus view: recorded (reached its cap of 2 s) cli.mcap: "
                                 f"{len(want)} messages, ")
     assert read_back(out) == want
