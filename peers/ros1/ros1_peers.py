@@ -11,6 +11,7 @@ with the ``bench`` extra alone; the tests' fixtures (``tests/ros1_harness.py``) 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import re
@@ -73,6 +74,19 @@ def _path_env() -> dict[str, str]:
     env = dict(os.environ)
     env["PATH"] = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
     return env
+
+
+def _children(pid: int) -> list[int]:
+    """The PIDs of the live processes whose parent is ``pid`` (``/proc/*/stat``, field 4)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # a process that ended meanwhile
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
 
 
 class Proc:
@@ -144,14 +158,21 @@ class Proc:
                 return list(self.seen)
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
-        """End the process by its PID and wait for it; the exit code."""
+        """End the process by its PID and wait for it; the exit code. If ``sig`` does not
+        end it within ``timeout`` s it is killed, and so are the processes it started (by
+        their PIDs, read before it is killed): roscore starts rosmaster and rosout in
+        sessions of their own, which a killed roscore would leave running."""
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
+                children = _children(self.proc.pid)
                 self.proc.kill()
                 self.proc.wait(5)
+                for child in children:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(child, signal.SIGKILL)
         self._reader.join(timeout=2.0)
         return int(self.proc.returncode)
 
