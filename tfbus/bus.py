@@ -554,6 +554,12 @@ class Bus:
             or bool(self._callbacks.get(topic))
         )
 
+    def listeners(self, topic: str) -> int:
+        """How many subscriptions and callbacks on ``topic`` receive it here now (a
+        newest-only transport asks, from its own thread, whether ``topic`` has listeners
+        besides the :class:`~tfbus.clock.SimClock` following it newest-only)."""
+        return len(self._subscriptions.get(topic, ())) + len(self._callbacks.get(topic, ()))
+
     def latched_statics(self) -> TFMessage:
         """One ``TFMessage`` of the latest static transform of every child frame.
 

@@ -985,7 +985,7 @@ async def test_tfbus_clock_to_a_tfbus_sim_clock_with_malformed_samples(anyio_bac
     assert clock.dropped == 0 and clock.jumps == 0  # the junk never reached the bus
     stats = b_t.statistics()
     assert stats.malformed >= 2
-    assert stats.delivered + stats.coalesced == stats.received - stats.malformed
+    assert stats.delivered + stats.coalesced + stats.kept == stats.received - stats.malformed
     assert a_t.statistics().sent >= 1 and a_t.statistics().send_errors == 0
 
 
@@ -1033,6 +1033,35 @@ async def test_sim_clock_follows_dds_clock_newest_only(anyio_backend: str) -> No
 
 
 @pytest.mark.anyio
+async def test_sim_clock_reads_the_newest_dds_clock_kept(anyio_backend: str) -> None:
+    """On the ROS 2 transport, with no deadline filed and no other listener of /clock,
+    a SimClock's ``now()`` reads the newest stamp Cyclone's thread kept, with no
+    delivery to the event loop (``kept`` in the statistics); a jump back delivered makes
+    the stamps kept before it no longer the time."""
+    d = new_domain()
+    a_t = Ros2Transport(domain_id=d, clock_topic="/clock")
+    b_t = Ros2Transport(domain_id=d, clock_topic="/clock")
+    async with Bus(transport=a_t) as a, Bus(transport=b_t) as b, SimClock(b) as clock:
+
+        async def publish_until_now(t: Time) -> None:
+            with anyio.fail_after(WAIT):
+                while clock.now() != t:  # best effort, volatile: until heard
+                    a.publish_nowait("/clock", Clock(t))
+                    await anyio.sleep(0.01)  # polling a bounded condition
+
+        await publish_until_now(Time(100))
+        seen = clock.received
+        for sec in range(101, 111):
+            await publish_until_now(Time(sec))
+        assert clock.received - seen <= 2  # not one per /clock, not one per 10 ms
+        assert b_t.statistics().kept == 1
+        await publish_until_now(Time(50))  # a jump back: delivered at once
+        assert clock.jumps == 1
+        await publish_until_now(Time(60))  # before the 110 s kept earlier: the time
+        assert clock.now() == Time(60) and clock.jumps == 1 and clock.dropped == 0
+
+
+@pytest.mark.anyio
 async def test_rclpy_simulator_drives_a_tfbus_sim_clock(
     anyio_backend: str, peers: Callable[..., Peer], tmp_path: Path
 ) -> None:
@@ -1064,7 +1093,9 @@ async def test_rclpy_simulator_drives_a_tfbus_sim_clock(
     assert got.transform == Transform(Vector3(0.1, 0.0, 0.2), Quaternion(0.0, 0.0, 0.0, 1.0))
     assert wall < WAIT  # ~0.1 s at 10x; bounded only (no timing assertion)
     assert clock.dropped == 0 and clock.jumps == 0
-    assert transport.statistics().malformed == 0 and clock.accepted >= 10
+    # the loop was given /clock at its deadlines; the transport took every step
+    stats = transport.statistics()
+    assert stats.malformed == 0 and stats.received >= 10 and clock.accepted >= 2
 
 
 @pytest.mark.anyio

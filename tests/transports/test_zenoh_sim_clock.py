@@ -152,3 +152,84 @@ async def test_clock_is_followed_newest_only_between_deadlines() -> None:
         a.publish_nowait(CLOCK_TOPIC, TFMessage(()))
         await publish_until_read(503 * MS)
         assert (clock.dropped, clock.jumps) == (2, 1)
+
+
+async def test_now_reads_the_newest_clock_kept_with_no_wake_up() -> None:
+    """With no deadline filed and no other listener of /clock on the bus, the event loop
+    is given only the first /clock: ``now()`` reads each newer stamp Zenoh's thread kept
+    (it never lags the newest heard), a sleep is filed from that time, a jump back
+    delivered makes the stamps kept before it no longer the time (the steps after it
+    are), and a step ahead of ``max_forward_step`` from the newest time is dropped while
+    smaller ones, however far from the last stamp delivered, are not. Before: the loop
+    was woken every 10 ms to be given the newest, and ``now()`` lagged it meanwhile."""
+    port = free_port()
+    sim = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="simulator")
+    app = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="app")
+    async with (
+        Bus(transport=sim) as a,
+        Bus(transport=app) as b,
+        SimClock(b, max_forward_step=1.0) as clock,
+    ):
+        with anyio.fail_after(10):
+            await sim.wait_matching(CLOCK_TOPIC)
+
+        async def publish_until_now(ns: int) -> None:
+            with anyio.fail_after(10):
+                while clock.now_ns() != ns:
+                    a.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(ns)))
+                    await anyio.sleep(0.02)  # polling a bounded condition
+
+        await publish_until_now(1000 * MS)
+        received = clock.received
+        # 0.5 s steps for 5 s: each within max_forward_step of the one before, the last
+        # 5 s past the last stamp the loop was given
+        for k in range(1, 11):
+            await publish_until_now((1000 + 500 * k) * MS)
+        assert clock.now() == Time.from_ns(6000 * MS)
+        assert clock.received - received <= 2  # not one per /clock, not one per 10 ms
+        assert clock.dropped == 0
+        # a sleep is filed from the newest time: it ends at 6.25 s, not 1.25 s
+        async with anyio.create_task_group() as tg:
+            woke: list[int] = []
+
+            async def sleeper() -> None:
+                await clock.sleep(0.25)
+                woke.append(clock.now_ns())
+
+            tg.start_soon(sleeper)
+            await publish_until_now(6100 * MS)
+            assert woke == []
+            await publish_until_now(6250 * MS)
+        assert woke and woke[0] >= 6250 * MS
+        # a step of more than max_forward_step from the newest time: dropped
+        a.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(8000 * MS)))
+        with anyio.fail_after(10):
+            while clock.dropped == 0:
+                await anyio.sleep(0.02)  # polling a bounded condition
+        assert clock.now_ns() == 6250 * MS
+        # a jump back to 3 s, then 4 s (before the 6.25 s kept earlier): the time
+        await publish_until_now(3000 * MS)
+        assert clock.jumps == 1
+        await publish_until_now(4000 * MS)
+        assert clock.now() == Time.from_ns(4000 * MS) and clock.jumps == 1
+
+
+async def test_other_listeners_of_clock_still_get_it_every_10_ms() -> None:
+    """A subscriber of /clock beside the SimClock on the same bus gets /clock at least
+    every 10 ms of wall time while it flows (the transport's ``NEWEST_MAX_DELAY``), not
+    only at the clock's deadlines."""
+    port = free_port()
+    sim = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="simulator")
+    app = ZenohTransport(connect=f"tcp/127.0.0.1:{port}", name="app")
+    async with Bus(transport=sim) as a, Bus(transport=app) as b, SimClock(b) as clock:
+        heard: list[object] = []
+        b.subscribe_callback(CLOCK_TOPIC, heard.append)
+        with anyio.fail_after(10):
+            await sim.wait_matching(CLOCK_TOPIC)
+        with anyio.fail_after(10):
+            ns = 1000 * MS
+            while len(heard) < 5:  # 5 deliveries: more than the first /clock
+                ns += MS
+                a.publish_nowait(CLOCK_TOPIC, Clock(Time.from_ns(ns)))
+                await anyio.sleep(0.005)  # a /clock every 5 ms, until heard 5 times
+        assert clock.jumps == 0 and clock.dropped == 0

@@ -34,6 +34,17 @@ ahead of the time it reads (about 31.7 years); a message further ahead is droppe
 class NewestFollow(Protocol):
     """What :meth:`KeepsNewest.keep_newest` returns."""
 
+    @property
+    def newest_ns(self) -> int:
+        """The stamp (ns) of the newest sample the transport's thread kept because no
+        follower needed it yet (a step forward, within the follower's bounds): the time
+        now; -1 when there is none. Read from the event loop."""
+        ...
+
+    def stepped_back(self) -> None:
+        """The follower delivered a jump back: the stamps kept before it are no longer
+        the time (``newest_ns`` is -1 until the next sample kept)."""
+
     def poke(self) -> None:
         """Deliver the sample kept, if any, at the event loop's next turn."""
 
@@ -63,7 +74,9 @@ class SimClockStatistics:
         received: messages delivered on the clock's topic, valid or not (over Zenoh
             and ROS 2, where ``/clock`` is followed newest-only, the ones the event loop
             saw; the transport counts the skipped ones as ``coalesced``).
-        accepted: valid ``/clock`` messages that set the time (equal stamps included).
+        accepted: valid ``/clock`` messages delivered that set the time (equal stamps
+            included; over Zenoh and ROS 2, the stamps ``now()`` read from the
+            transport's thread in between are not counted).
         dropped: messages dropped: not a ``Clock`` of a :class:`~tfbus.time.Time`, or
             more than ``max_forward_step`` seconds ahead of ``now()``.
         jumps: backward jumps of simulated time (each ``/clock`` earlier than ``now()``).
@@ -160,13 +173,14 @@ class SimClock:
       ``/clock`` newest-only: the transport's thread (Zenoh's, Cyclone's listener)
       decodes each ``/clock`` and wakes the event loop only when it reaches the earliest deadline
       filed on this clock, steps back, is the first, is more than ``max_forward_step``
-      ahead, or a ``wall_timeout`` wait is running (then at every ``/clock``), and at
-      least every 10 ms of wall time while ``/clock`` flows
-      (:data:`~tfbus.transports.zenoh.transport.NEWEST_MAX_DELAY`): the samples in
-      between are skipped (counted by the transport as ``coalesced``, not here), as a
-      keep-last-1 ``/clock`` subscription of rclpy skips them, and ``now()`` may lag the
-      newest ``/clock`` by that much. A ``/clock`` at 1 kHz then costs one event-loop
-      wake-up per deadline or per 10 ms, not per message.
+      ahead, or a ``wall_timeout`` wait is running (then at every ``/clock``); the
+      samples in between are not delivered (counted by the transport as ``coalesced``,
+      not here: a keep-last-1 ``/clock`` subscription of rclpy skips samples too), and
+      ``now()`` reads the newest one the thread kept (``NewestFollow.newest_ns``), so it
+      never lags the newest ``/clock`` heard. A ``/clock`` at 1 kHz then costs one
+      event-loop wake-up per deadline, not per message. Other listeners of the topic on
+      the same bus get it at least every 10 ms of wall time
+      (:data:`~tfbus.transports.zenoh.transport.NEWEST_MAX_DELAY`).
     * A message that is not a ``Clock`` holding a :class:`~tfbus.time.Time` (a negative
       or non-integer stamp cannot be one), or one more than ``max_forward_step`` seconds
       ahead of ``now()`` once a first ``/clock`` was accepted, is dropped, counted in
@@ -247,6 +261,8 @@ class SimClock:
         self._interleaved = 0
         # (now() before the last jump back, its size), until time is back there: ns
         self._jumped: tuple[int, int] | None = None
+        # in the delivery of a /clock: now() is its stamp for the deadlines it reaches
+        self._delivering = False
         self._logs = CountLimitedLog(_log, 1000)
 
     # -- lifecycle --------------------------------------------------------------------
@@ -297,6 +313,7 @@ class SimClock:
         """Unsubscribe; the body's exception, if any, leaves as itself. ``now()`` keeps
         the last time read."""
         if self._newest is not None:
+            self._catch_up()  # now() keeps the newest time heard
             self._newest.close()
             self._newest = None
         if self._subscription is not None:
@@ -327,7 +344,8 @@ class SimClock:
 
     @property
     def accepted(self) -> int:
-        """Valid ``/clock`` messages that set the time (equal stamps included)."""
+        """Valid ``/clock`` messages delivered that set the time (equal stamps
+        included; see :class:`SimClockStatistics`)."""
         return self._accepted
 
     @property
@@ -354,9 +372,12 @@ class SimClock:
                 self._topic,
             )
             return
+        # the time the event loop was given (jumps are seen from it), and now(), which
+        # may be ahead of it by a newer stamp the transport kept (steps are bounded by it)
         now_ns = self._core.now_ns()
         new_ns = stamp.ns
-        if self._accepted and self._max_step_ns is not None and new_ns - now_ns > self._max_step_ns:
+        if (self._accepted and self._max_step_ns is not None
+                and new_ns - self.now_ns() > self._max_step_ns):
             self._dropped += 1
             self._logs.log(
                 logging.WARNING,
@@ -364,7 +385,7 @@ class SimClock:
                 self._topic,
                 new_ns / 1e9,
                 self._max_step_ns / 1e9,
-                now_ns / 1e9,
+                self.now_ns() / 1e9,
             )
             return
         self._accepted += 1
@@ -375,6 +396,8 @@ class SimClock:
         if new_ns < now_ns:
             self._jumps += 1
             self._jumped = (now_ns, now_ns - new_ns)
+            if self._newest is not None:
+                self._newest.stepped_back()
             self._logs.log(
                 logging.WARNING,
                 "simulated time on %s jumped back from %.9f s to %.9f s",
@@ -397,7 +420,12 @@ class SimClock:
                         new_ns / 1e9,
                         now_ns / 1e9,
                     )
-        self._core.set_nowait(stamp)
+        # the deadlines this /clock reaches run in its delivery, reading it as now()
+        self._delivering = True
+        try:
+            self._core.set_nowait(stamp)
+        finally:
+            self._delivering = False
 
     def _due(self, stamp_ns: int) -> bool:
         """Whether a ``/clock`` of ``stamp_ns`` the transport's thread holds must reach
@@ -408,25 +436,56 @@ class SimClock:
         if self._guards or self._jumped is not None or not self._accepted:
             return True
         core = self._core
-        if self._max_step_ns is not None and stamp_ns - core.now_ns() > self._max_step_ns:
+        limit = self._max_step_ns
+        # now() is at least the time the loop was given: checked against that first
+        if limit is not None and stamp_ns - core._now_ns > limit \
+                and stamp_ns - self.now_ns() > limit:
             return True
-        return stamp_ns >= core._next_deadline_ns()
+        try:  # ManualClock._next_deadline_ns, inline (a call per /clock in this thread)
+            return bool(stamp_ns >= core._sleepers[0][0])
+        except IndexError:  # no deadline (or the loop took the last one meanwhile)
+            return False
+
+    def _catch_up(self) -> None:
+        """Give the deadline machinery the newest time the transport kept (deadlines
+        are filed from it, and those it reaches are due)."""
+        newest = self._newest
+        if newest is not None and self._accepted:
+            kept = newest.newest_ns
+            if kept > self._core.now_ns():
+                self._core.set_nowait(Time.from_ns(kept))
 
     def _poke(self) -> None:
-        """A deadline is being filed: a ``/clock`` the transport holds may reach it."""
+        """A deadline is being filed: it is filed from the newest time kept, and a
+        ``/clock`` the transport holds may reach it."""
         newest = self._newest
         if newest is not None:
+            self._catch_up()
             newest.poke()
 
     # -- Clock protocol ---------------------------------------------------------------
 
     def now(self) -> Time:
-        """The simulated time: the newest accepted ``/clock``, ``Time(0)`` before any."""
+        """The simulated time: the newest accepted ``/clock``, ``Time(0)`` before any
+        (on a newest-only transport, the newest one its thread kept, if newer than the
+        last one the event loop was given; in the delivery of a ``/clock``, as in the
+        callbacks of the deadlines it reaches, that ``/clock``)."""
+        newest = self._newest
+        if newest is not None and self._accepted and not self._delivering:
+            kept = newest.newest_ns
+            if kept > self._core.now_ns():
+                return Time.from_ns(kept)
         return self._core.now()
 
     def now_ns(self) -> int:
         """:meth:`now` as int nanoseconds."""
-        return self._core.now_ns()
+        core_ns = self._core.now_ns()
+        newest = self._newest
+        if newest is not None and self._accepted and not self._delivering:
+            kept = newest.newest_ns
+            if kept > core_ns:
+                return kept
+        return core_ns
 
     async def sleep_until(self, t: Time) -> None:
         """Return once a ``/clock`` at ``t`` or later has arrived (after a checkpoint if

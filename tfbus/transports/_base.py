@@ -97,6 +97,16 @@ class BusLike(Protocol):
 
 
 
+def heard_beyond(bus: object, topic: str, followers: int) -> bool:
+    """Whether ``topic`` has listeners on ``bus`` besides its ``followers`` newest-only
+    followers (a :class:`~tfbus.clock.SimClock` each, with one callback on the topic):
+    such listeners get the topic at least every ``NEWEST_MAX_DELAY`` of the transport.
+    True for a bus that cannot tell (no ``listeners``). Safe from a transport's thread
+    (two reads of the bus's tables)."""
+    listeners = getattr(bus, "listeners", None)
+    return listeners is None or int(listeners(topic)) > followers
+
+
 _TF_TOPICS: Final = frozenset(TF_TOPICS)
 
 

@@ -112,6 +112,7 @@ from tfbus.transports._base import (
     BusLike,
     ThreadWakeup,
     TransportStatistics,
+    heard_beyond,
     ros_domain_id,
 )
 from tfbus.transports.ros2.dds import (
@@ -201,6 +202,9 @@ class Ros2Statistics(TransportStatistics):
             them (the clock topic followed newest-only by a
             :class:`~tfbus.clock.SimClock`: :meth:`Ros2Transport.keep_newest`), or
             dropped, oldest first, beyond :data:`NEWEST_MAX_QUEUED` waiting for it.
+        kept: clock samples taken and held newest-only, not delivered (yet) when the copy
+            was made: 0 or 1 (the one whose stamp the follower reads as the time). Every
+            sample taken is delivered, coalesced, kept or malformed.
     """
 
     send_dropped: int = 0
@@ -208,13 +212,16 @@ class Ros2Statistics(TransportStatistics):
     not_mapped: int = 0
     batches: int = 0
     coalesced: int = 0
+    kept: int = 0
 
 
 NEWEST_MAX_DELAY: Final = 0.01
 """Longest wall time, seconds, a clock sample followed newest-only
-(:meth:`Ros2Transport.keep_newest`) waits in Cyclone's thread while newer ones arrive: the
-bus receives the newest at least this often while ``/clock`` flows (as the Zenoh
-transport's ``NEWEST_MAX_DELAY``)."""
+(:meth:`Ros2Transport.keep_newest`) waits in Cyclone's thread while newer ones arrive,
+when the bus has listeners on the clock topic besides its followers: they receive the
+newest at least this often while ``/clock`` flows (as the Zenoh transport's
+``NEWEST_MAX_DELAY``). The followers read the newest stamp kept
+(:attr:`Ros2ClockFollower.newest_ns`)."""
 NEWEST_MAX_QUEUED: Final = 1024
 """Most clock samples followed newest-only that wait for the event loop at once (each
 step back queues one, however fast a publisher steps back and however long the loop is
@@ -227,17 +234,28 @@ class _NewestClock:
     listener thread takes and decodes each sample, keeps only the newest, and queues it
     for the event loop (waking it) when a follower says it is due, when it steps back
     (the one kept before it is queued first), or :data:`NEWEST_MAX_DELAY` after the last
-    wake-up. Every access holds ``lock``."""
+    wake-up while ``heard_beyond()`` (the bus has other listeners on the topic).
+    :attr:`kept_ns` is the stamp the followers read as the time meanwhile. Every access
+    but the followers' read of :attr:`kept_ns` holds ``lock``."""
 
-    __slots__ = ("dues", "kept", "last_ns", "lock", "queue", "waked")
+    __slots__ = ("dues", "heard_beyond", "kept", "kept_ns", "last_ns", "lock", "queue",
+                 "waked")
 
     def __init__(self) -> None:
         self.dues: tuple[Callable[[int], bool], ...] = ()
         self.lock = threading.Lock()
         self.kept: Clock | None = None  # the newest sample not queued yet
         self.last_ns = -1  # the stamp of the last sample, -1 before one
-        self.waked = 0.0  # time.monotonic() of the last wake-up
+        self.waked = 0.0  # time.monotonic() of the last wake-up (or listeners check)
         self.queue: list[Clock] = []  # for the event loop, in order
+        self.heard_beyond: Callable[[int], bool] = lambda followers: True
+        """Whether the bus has listeners on the topic besides ``followers`` (set while
+        the transport runs)."""
+        self.kept_ns = -1
+        """The newest stamp (ns) of a sample kept because no follower needed it yet: a
+        step forward from every sample before it, within every follower's bounds, so a
+        follower may read it as the time; -1 before one and after a jump back the loop
+        delivered (:meth:`Ros2ClockFollower.stepped_back`). Raised only here."""
 
     def offer(self, message: Clock, stats: Ros2Statistics) -> bool:
         """A decoded sample (``lock`` held): kept, or queued; True if the loop must wake."""
@@ -246,7 +264,16 @@ class _NewestClock:
         now = time.monotonic()
         back = ns < self.last_ns
         self.last_ns = ns
-        if back or now - self.waked >= NEWEST_MAX_DELAY or any(due(ns) for due in self.dues):
+        wake = back
+        if not back:
+            for due in self.dues:
+                if due(ns):
+                    wake = True
+                    break
+        if not wake and now - self.waked >= NEWEST_MAX_DELAY:
+            self.waked = now  # the bus's listeners are counted at most this often
+            wake = self.heard_beyond(len(self.dues))
+        if wake:
             self.kept = None
             self.waked = now
             if pending is not None:
@@ -260,6 +287,8 @@ class _NewestClock:
                 stats.coalesced += len(queue) - NEWEST_MAX_QUEUED
                 del queue[: len(queue) - NEWEST_MAX_QUEUED]
             return True
+        if ns > self.kept_ns:
+            self.kept_ns = ns
         if pending is not None:
             stats.coalesced += 1
         return False
@@ -283,6 +312,20 @@ class Ros2ClockFollower:
     def __init__(self, transport: Ros2Transport | None, due: Callable[[int], bool]) -> None:
         self._transport = transport
         self._due = due
+
+    @property
+    def newest_ns(self) -> int:
+        """The stamp (ns) of the newest clock sample Cyclone's thread kept for no
+        follower's need yet: a time the follower may read as now; -1 when there is none
+        (or once closed, or inert)."""
+        transport = self._transport
+        return -1 if transport is None else transport._newest.kept_ns
+
+    def stepped_back(self) -> None:
+        """The follower took a jump back: the stamps kept before it are no longer the
+        time."""
+        if self._transport is not None:
+            self._transport._newest.kept_ns = -1
 
     def poke(self) -> None:
         """Deliver the sample kept, if any, at the event loop's next turn (call it when
@@ -495,7 +538,7 @@ class Ros2Transport:
 
     def statistics(self) -> Ros2Statistics:
         """A copy of the counters (see :class:`Ros2Statistics`)."""
-        return replace(self._stats)
+        return replace(self._stats, kept=int(self._newest.kept is not None))
 
     def participant(self) -> DomainParticipant:
         """The DomainParticipant of the running transport, on which other endpoints of
@@ -521,9 +564,12 @@ class Ros2Transport:
         decodes each sample and keeps only the newest, waking the event loop when
         ``due(stamp_ns)`` (called in Cyclone's thread, must not block) is true, when a
         stamp is earlier than the previous one (a jump back: the kept sample and it are
-        delivered in order), or :data:`NEWEST_MAX_DELAY` after the last wake-up; every
-        wake-up also delivers whatever is kept. Samples replaced before the loop saw
-        them are counted in ``coalesced``, malformed ones in ``malformed`` (dropped).
+        delivered in order), or :data:`NEWEST_MAX_DELAY` after the last wake-up while the
+        bus has listeners on the topic besides the followers; every wake-up also delivers
+        whatever is kept. The stamp of the newest sample kept is the follower's
+        :attr:`~Ros2ClockFollower.newest_ns`, which a SimClock reads as its time.
+        Samples replaced before the loop saw them are counted in ``coalesced``,
+        malformed ones in ``malformed`` (dropped).
         A :class:`~tfbus.clock.SimClock` on a ROS 2 bus asks for this
         (:class:`~tfbus.clock.KeepsNewest`): the loop runs when a sleeper's deadline
         is reached, not at every ``/clock``. Several followers may keep the topic: a
@@ -541,6 +587,8 @@ class Ros2Transport:
             return Ros2ClockFollower(None, due)
         newest = self._newest
         with newest.lock:
+            if not newest.dues:  # a stamp kept for followers gone is no time of this one
+                newest.kept_ns = -1
             newest.dues = (*newest.dues, due)
         return Ros2ClockFollower(self, due)
 
@@ -605,6 +653,10 @@ class Ros2Transport:
         wakeup = ThreadWakeup()
         self._wakeup = wakeup
         endpoints: _Endpoints | None = None
+        clock_topic = self._clock_topic
+        if clock_topic is not None:
+            self._newest.heard_beyond = lambda followers: heard_beyond(bus, clock_topic,
+                                                                       followers)
         try:
             with anyio.CancelScope(shield=True):  # a cancelled open must still be closed
                 endpoints = await anyio.to_thread.run_sync(self._open)
@@ -619,6 +671,7 @@ class Ros2Transport:
             self._running = False
             self._endpoints = None
             self._wakeup = None
+            self._newest.heard_beyond = lambda followers: True
             closers, self._closers = self._closers, []
             for close in closers:
                 close()

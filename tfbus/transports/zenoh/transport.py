@@ -11,8 +11,9 @@ entries are dropped and counted.
 
 A topic a :class:`~tfbus.clock.SimClock` follows (``/clock``) is kept newest-only
 (:meth:`ZenohTransport.keep_newest`): Zenoh's thread reads each stamp and keeps the newest
-sample, waking the loop only when it reaches the clock's earliest deadline, steps back, or
-:data:`NEWEST_MAX_DELAY` has passed -- a ``/clock`` at 1 kHz is not a wake-up per message.
+sample, whose stamp the clock reads as its time, waking the loop only when it reaches the
+clock's earliest deadline or steps back (and every :data:`NEWEST_MAX_DELAY` while the bus
+has other listeners on the topic) -- a ``/clock`` at 1 kHz is not a wake-up per message.
 
 Received bytes never end the bus: every payload that does not decode, of any kind, is a
 counted, dropped message (:class:`ZenohStatistics`), and sequence numbers that jump
@@ -71,7 +72,7 @@ from tfbus.messages import TFMessage
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS
 from tfbus.topics import TF_STATIC_TOPIC
-from tfbus.transports._base import BusLike, ThreadWakeup
+from tfbus.transports._base import BusLike, ThreadWakeup, heard_beyond
 from tfbus.transports.zenoh.config import (
     DEFAULT_PORT,
     ZenohConfigSource,
@@ -101,10 +102,14 @@ _ALIVE_DEL: Final = 3
 _MATCHING: Final = 4
 _REQUERY: Final = 5
 _NEWEST: Final = 6  # a sample of a newest-only topic: no gap counted in ``lost``
+_PUT: Final = zenoh.SampleKind.PUT  # looked up once: compared on every sample
 NEWEST_MAX_DELAY: Final = 0.01
 """Longest wall time, seconds, a sample of a newest-only topic
-(:meth:`ZenohTransport.keep_newest`) waits in Zenoh's thread while newer ones arrive:
-the bus receives the newest at least this often while the topic flows."""
+(:meth:`ZenohTransport.keep_newest`) waits in Zenoh's thread while newer ones arrive,
+when the bus has listeners on the topic besides its followers (a subscriber of
+``/clock`` beside a :class:`~tfbus.clock.SimClock`): they receive the newest at least
+this often while the topic flows. The followers themselves read the newest stamp kept
+(:attr:`NewestFollower.newest_ns`) and need no such delivery."""
 LATCH_QUERY_RETRIES: Final = 3
 """Times a late-joiner query that got no reply at all is asked again (after 0.1, 0.2 and
 0.4 s): a node's liveliness token can reach a peer before the route to its latch
@@ -116,11 +121,13 @@ class NewestOnly:
     """A newest-only topic of a :class:`ZenohTransport` (:meth:`ZenohTransport.keep_newest`):
     Zenoh's thread keeps only the newest sample and wakes the event loop when a follower
     says a sample is due, on a step back, or :data:`NEWEST_MAX_DELAY` after the last
-    wake-up. :meth:`poke` (event loop) delivers the sample kept, if any; :meth:`close`
-    ends one follower's interest (with none left, every sample is delivered again)."""
+    wake-up while the bus has other listeners on the topic. :attr:`kept_ns` is the
+    stamp the followers read as the time meanwhile. :meth:`poke` (event loop) delivers
+    the sample kept, if any; :meth:`close` ends one follower's interest (with none left,
+    every sample is delivered again)."""
 
     __slots__ = ("_dues", "_key", "_last_ns", "_lock", "_topic", "_transport", "_waked",
-                 "payload")
+                 "kept_ns", "payload")
 
     def __init__(self, transport: ZenohTransport, topic: str, key: str) -> None:
         self._transport = transport
@@ -129,8 +136,14 @@ class NewestOnly:
         self._dues: tuple[Callable[[int], bool], ...] = ()
         self._lock = threading.Lock()
         self._last_ns = -1  # the stamp of the last sample, -1 before one
-        self._waked = 0.0  # time.monotonic() of the last wake-up
+        self._waked = 0.0  # time.monotonic() of the last wake-up (or listeners check)
         self.payload: bytes | None = None  # the newest sample not delivered yet
+        self.kept_ns = -1
+        """The newest stamp (ns) of a sample Zenoh's thread kept because no follower
+        needed it yet: a step forward from every sample before it, within every
+        follower's bounds, so a follower may read it as the time; -1 before one, and
+        again after :meth:`stepped_back`. Raised only by Zenoh's thread, never lowered
+        but by the event loop (a jump back it has delivered)."""
 
     @property
     def topic(self) -> str:
@@ -162,6 +175,11 @@ class NewestOnly:
             del transport._newest[self._key]
         self.poke()
 
+    def stepped_back(self) -> None:
+        """The event loop delivered a jump back: the stamps kept before it are no longer
+        the time (:attr:`kept_ns` is -1 until a sample after it is kept)."""
+        self.kept_ns = -1
+
     def offer(self, payload: bytes) -> None:
         """A sample of the topic (Zenoh's thread): kept, or queued and the loop woken --
         after the one kept before it when it steps back or does not decode (the jump is
@@ -172,8 +190,16 @@ class NewestOnly:
             ns = clock_stamp(payload)
             now = time.monotonic()
             ordered = ns is None or ns < self._last_ns
-            if ns is None or ordered or now - self._waked >= NEWEST_MAX_DELAY \
-                    or any(due(ns) for due in self._dues):
+            wake = ordered  # a step back, or no Clock (ns None)
+            if ns is not None and not ordered:
+                for due in self._dues:
+                    if due(ns):
+                        wake = True
+                        break
+            if not wake and now - self._waked >= NEWEST_MAX_DELAY:
+                self._waked = now  # the bus's listeners are counted at most this often
+                wake = heard_beyond(transport._bus, self._topic, len(self._dues))
+            if wake:
                 self.payload = None
                 self._waked = now
                 if ns is not None:
@@ -185,7 +211,10 @@ class NewestOnly:
                         transport._stats.coalesced += 1
                 transport._push((_NEWEST, self._key, payload))
                 return
+            assert ns is not None  # a sample with no stamp woke the loop
             self._last_ns = ns
+            if ns > self.kept_ns:
+                self.kept_ns = ns
             if pending is not None:
                 transport._stats.coalesced += 1
 
@@ -207,6 +236,19 @@ class NewestFollower:
     def __init__(self, newest: NewestOnly, due: Callable[[int], bool]) -> None:
         self._newest: NewestOnly | None = newest
         self._due = due
+
+    @property
+    def newest_ns(self) -> int:
+        """The stamp (ns) of the newest sample Zenoh's thread kept for no follower's
+        need yet (:attr:`NewestOnly.kept_ns`): a time the follower may read as now; -1
+        when there is none (or once closed)."""
+        newest = self._newest
+        return -1 if newest is None else newest.kept_ns
+
+    def stepped_back(self) -> None:
+        """The follower took a jump back (:meth:`NewestOnly.stepped_back`)."""
+        if self._newest is not None:
+            self._newest.stepped_back()
 
     def poke(self) -> None:
         """Deliver the sample kept, if any, at the event loop's next turn (call it when
@@ -380,6 +422,8 @@ class ZenohTransport:
         self._peers = PeerTable(self._keys, self._latched, max_peers=max_peers)
         self._inbox: deque[tuple[int, str, bytes]] = deque(maxlen=max_pending)
         self._wakeup: ThreadWakeup | None = None
+        # The bus being run (read by Zenoh's thread: its listeners of a newest-only topic).
+        self._bus: BusLike | None = None
         self._session: zenoh.Session | None = None
         self._node_id = ""
         self._running = False
@@ -493,11 +537,13 @@ class ZenohTransport:
         block) is true, when a stamp is earlier than the previous one (a jump back: the
         kept sample and it are delivered in order), when a sample is not a tfbus ``Clock``
         payload (delivered at once: the loop decodes, counts and drops it), or
-        :data:`NEWEST_MAX_DELAY` after the last wake-up; every wake-up also delivers
-        whatever is kept. Samples replaced before the loop saw them are counted in
-        ``coalesced``. A
-        :class:`~tfbus.clock.SimClock` on a Zenoh bus asks for this: the loop runs
-        only when a sleeper's deadline is reached, not at every ``/clock``.
+        :data:`NEWEST_MAX_DELAY` after the last wake-up while the bus has listeners on
+        ``topic`` besides the followers; every wake-up also delivers whatever is kept.
+        Samples replaced before the loop saw them are counted in ``coalesced``. The
+        stamp of the newest sample kept is the follower's
+        :attr:`~NewestFollower.newest_ns`. A :class:`~tfbus.clock.SimClock` on a Zenoh
+        bus asks for this and reads that stamp as its time: the loop runs only when a
+        sleeper's deadline is reached, not at every ``/clock``.
 
         Several followers may keep one topic: a sample is due when one says so.
 
@@ -565,6 +611,7 @@ class ZenohTransport:
         session = await self._open_waiting()
         wakeup = ThreadWakeup()
         declared: list[Any] = []
+        self._bus = bus
         try:
             try:
                 self._declare(session, declared, wakeup)
@@ -585,6 +632,7 @@ class ZenohTransport:
             self._stats.not_connected += len(self._take_sends())
             self._session = None
             self._wakeup = None
+            self._bus = None
             for outlet in self._outlets.values():
                 outlet.publisher = None
                 outlet.token = None
@@ -800,7 +848,7 @@ class ZenohTransport:
             wakeup.wake()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        if sample.kind == zenoh.SampleKind.PUT:
+        if sample.kind == _PUT:
             key = str(sample.key_expr)
             newest = self._newest.get(key) if self._newest else None
             if newest is not None:
