@@ -441,9 +441,14 @@ class SimClock:
         if limit is not None and stamp_ns - core._now_ns > limit \
                 and stamp_ns - self.now_ns() > limit:
             return True
-        try:  # ManualClock._next_deadline_ns, inline (a call per /clock in this thread)
-            return bool(stamp_ns >= core._sleepers[0][0])
-        except IndexError:  # no deadline (or the loop took the last one meanwhile)
+        # ManualClock._next_deadline_ns, inline (a call per /clock in this thread), and
+        # with no exception raised when there is no deadline (the common case)
+        sleepers = core._sleepers
+        if not sleepers:
+            return False
+        try:
+            return bool(stamp_ns >= sleepers[0][0])
+        except IndexError:  # the loop took the last one meanwhile
             return False
 
     def _catch_up(self) -> None:

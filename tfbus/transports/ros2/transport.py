@@ -259,7 +259,7 @@ class _NewestClock:
 
     def offer(self, message: Clock, stats: Ros2Statistics) -> bool:
         """A decoded sample (``lock`` held): kept, or queued; True if the loop must wake."""
-        ns = message.clock.ns
+        ns = message.clock._ns  # Time.ns, without the property's call
         pending, self.kept = self.kept, message  # stored before ``due`` reads
         now = time.monotonic()
         back = ns < self.last_ns
