@@ -912,7 +912,7 @@ def clock_rows(rows: Rows, rounds: int, ros1: bool) -> None:
         )
         print(f"  info  {'    /clock a second taken, tfbus / bare':46} "
               f"{statistics.median(got.tfbus_rate):.0f} / {statistics.median(got.bare_rate):.0f}"
-              f" (tfbus's event loop; newest-only on Zenoh and ROS 2)")
+              f" (tfbus's event loop; /clock is followed newest-only)")
         where = ", ".join(
             f"{kind} {statistics.median(t[kind] for t in got.tfbus_threads):.2%} / "
             f"{statistics.median(t[kind] for t in got.bare_threads):.2%}"

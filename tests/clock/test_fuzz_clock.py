@@ -357,9 +357,10 @@ def _offer_all(stamps: list[int], dues: list[bool]) -> tuple[list[Clock], list[C
     """Offer ``/clock`` samples of ``stamps`` (ns) to a ROS 2 transport's newest-only
     clock, as Cyclone's listener thread does, the follower answering ``dues`` in turn;
     returns (offered, what the event loop then takes, coalesced)."""
-    from tfbus.transports.ros2.transport import Ros2Statistics, _NewestClock
+    from tfbus.transports._newest import NewestClock
+    from tfbus.transports.ros2.transport import Ros2Statistics
 
-    newest = _NewestClock()
+    newest = NewestClock()
     answers = iter(dues * (len(stamps) // max(len(dues), 1) + 1) or [False] * len(stamps))
     newest.dues = (lambda ns: next(answers, False),)
     stats = Ros2Statistics()
@@ -400,7 +401,7 @@ def test_ros2_newest_only_clock_queue_is_bounded_under_steps_back() -> None:
     one kept) and counts the rest as coalesced (before: it grew without bound, one entry
     per step back)."""
     pytest.importorskip("cyclonedds")
-    from tfbus.transports.ros2.transport import NEWEST_MAX_QUEUED
+    from tfbus.transports._newest import NEWEST_MAX_QUEUED
 
     n = 3 * NEWEST_MAX_QUEUED
     offered, held, coalesced = _offer_all([10**9 * (5 + i % 2 * 5) for i in range(n)], [False])

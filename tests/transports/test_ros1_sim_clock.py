@@ -187,3 +187,79 @@ async def test_rosbag_play_clock_drives_lookups_equal_to_tf2_ros(master: Master)
     # by up to ~1e-7 between these 16 ms-apart samples (the same offline, from the bag).
     for (_, a), (_, b) in zip(ours, theirs, strict=True):
         assert a == pytest.approx(b, abs=1e-6)
+
+
+MS = 1_000_000
+
+
+async def test_sim_clock_follows_ros1_clock_newest_only(master: Master) -> None:
+    """A SimClock on a ROS 1 bus follows /clock newest-only: the clock connection is read
+    by a thread of its own that keeps the newest message, so with no deadline filed the
+    event loop is given only the first /clock while ``now()`` reads each newer one; a
+    sleep's deadline brings its /clock to the loop; a jump back is delivered at once
+    and the stamps kept before it are no longer the time; every message read is
+    delivered, coalesced or kept (the transport's counters). A plain subscriber of
+    /clock on a bus with no SimClock gets every message."""
+    from tfbus.codecs.ros1 import CLOCK_MD5SUM, CLOCK_TYPE, encode_clock
+    from tfbus.messages import Clock
+
+    sim = Ros1Transport(master_uri=master.uri, node_name="/clock_source")
+    app = Ros1Transport(master_uri=master.uri, node_name="/clock_follower",
+                        clock_topic="/clock")
+    sim.advertise_raw("/clock", CLOCK_TYPE, CLOCK_MD5SUM)
+    async with Bus(transport=sim), Bus(transport=app) as b, SimClock(b) as clock:
+
+        async def publish_until_now(ns: int) -> None:
+            with anyio.fail_after(40):  # the master and the connection at first
+                while clock.now_ns() != ns:
+                    sim.send_raw_nowait("/clock", encode_clock(Clock(Time.from_ns(ns))))
+                    await anyio.sleep(0.02)  # polling a bounded condition
+
+        await publish_until_now(1000 * MS)
+        seen = clock.received
+        for k in range(1, 21):
+            await publish_until_now((1000 + 100 * k) * MS)
+        assert clock.now() == Time.from_ns(3000 * MS)
+        assert clock.received - seen <= 2  # not one per /clock
+        async with anyio.create_task_group() as tg:
+            woke: list[int] = []
+            filed = anyio.Event()
+
+            async def sleeper() -> None:
+                filed.set()  # the sleep below is filed before this task first waits
+                await clock.sleep(0.5)  # filed from the newest time: until 3.5 s
+                woke.append(clock.now_ns())
+
+            tg.start_soon(sleeper)
+            await filed.wait()
+            await publish_until_now(3200 * MS)
+            assert woke == []
+            await publish_until_now(3500 * MS)
+        assert woke and woke[0] >= 3500 * MS
+        await publish_until_now(2000 * MS)  # a jump back
+        assert clock.jumps == 1
+        await publish_until_now(2500 * MS)  # before the 3.5 s kept earlier: the time
+        assert clock.now() == Time.from_ns(2500 * MS) and clock.jumps == 1
+        assert clock.dropped == 0
+    stats = app.statistics()
+    assert stats.malformed == 0 and stats.coalesced >= 1
+    assert stats.delivered + stats.coalesced + stats.kept == stats.received
+
+    plain = Ros1Transport(master_uri=master.uri, node_name="/clock_listener",
+                          clock_topic="/clock")
+    heard: list[object] = []
+    async with Bus(transport=sim) as a, Bus(transport=plain) as b:
+        b.subscribe_callback("/clock", heard.append)
+        with anyio.fail_after(40):
+            while len(heard) < 3:  # the connection, then each message sent
+                sim.send_raw_nowait("/clock", encode_clock(Clock(Time(7))))
+                await anyio.sleep(0.05)  # polling a bounded condition
+        n = len(heard)
+        for sec in range(8, 18):
+            sim.send_raw_nowait("/clock", encode_clock(Clock(Time(sec))))
+        with anyio.fail_after(40):
+            while len(heard) < n + 10:  # each of the 10, none coalesced
+                await anyio.sleep(0.02)  # polling a bounded condition
+        assert heard[-10:] == [Clock(Time(sec)) for sec in range(8, 18)]
+        assert plain.statistics().coalesced == 0
+        del a

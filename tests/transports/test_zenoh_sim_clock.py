@@ -191,12 +191,15 @@ async def test_now_reads_the_newest_clock_kept_with_no_wake_up() -> None:
         # a sleep is filed from the newest time: it ends at 6.25 s, not 1.25 s
         async with anyio.create_task_group() as tg:
             woke: list[int] = []
+            filed = anyio.Event()
 
             async def sleeper() -> None:
+                filed.set()  # the sleep below is filed before this task first waits
                 await clock.sleep(0.25)
                 woke.append(clock.now_ns())
 
             tg.start_soon(sleeper)
+            await filed.wait()
             await publish_until_now(6100 * MS)
             assert woke == []
             await publish_until_now(6250 * MS)

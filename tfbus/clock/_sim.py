@@ -71,11 +71,11 @@ class SimClockStatistics:
     the clock was made.
 
     Attributes:
-        received: messages delivered on the clock's topic, valid or not (over Zenoh
-            and ROS 2, where ``/clock`` is followed newest-only, the ones the event loop
-            saw; the transport counts the skipped ones as ``coalesced``).
+        received: messages delivered on the clock's topic, valid or not (over Zenoh,
+            ROS 1 and ROS 2, where ``/clock`` is followed newest-only, the ones the
+            event loop saw; the transport counts the skipped ones as ``coalesced``).
         accepted: valid ``/clock`` messages delivered that set the time (equal stamps
-            included; over Zenoh and ROS 2, the stamps ``now()`` read from the
+            included; over Zenoh, ROS 1 and ROS 2, the stamps ``now()`` read from the
             transport's thread in between are not counted).
         dropped: messages dropped: not a ``Clock`` of a :class:`~tfbus.time.Time`, or
             more than ``max_forward_step`` seconds ahead of ``now()``.
@@ -169,10 +169,11 @@ class SimClock:
       topic (the first, then one in a thousand); a looping bag, which runs on from its
       start, is not.
     * On a bus whose transport delivers a topic newest-only (:class:`KeepsNewest`: the
-      Zenoh transport, and the ROS 2 transport's ``clock_topic``), the clock asks for
-      ``/clock`` newest-only: the transport's thread (Zenoh's, Cyclone's listener)
-      decodes each ``/clock`` and wakes the event loop only when it reaches the earliest deadline
-      filed on this clock, steps back, is the first, is more than ``max_forward_step``
+      Zenoh transport, and the ROS 1 and ROS 2 transports' ``clock_topic``), the clock
+      asks for ``/clock`` newest-only: the transport's thread (Zenoh's, Cyclone's
+      listener, the ROS 1 clock connection's reader) decodes each ``/clock`` and wakes
+      the event loop only when it reaches the earliest deadline filed on this clock,
+      steps back, is the first, is more than ``max_forward_step``
       ahead, or a ``wall_timeout`` wait is running (then at every ``/clock``); the
       samples in between are not delivered (counted by the transport as ``coalesced``,
       not here: a keep-last-1 ``/clock`` subscription of rclpy skips samples too), and

@@ -882,12 +882,22 @@ def decode_clock(data: bytes | memoryview) -> Clock:
         WireDecodeError: not exactly 8 bytes, or ``nsecs`` of a billion or more (the
             ROS 1 time normal form).
     """
-    if len(data) != _TIME.size:
+    if len(data) != 8:
         raise WireDecodeError(f"malformed {CLOCK_TYPE}: {len(data)} bytes, expected 8")
-    sec, nsec = _TIME.unpack(data)
+    sec, nsec = _unpack_time(data)
     if nsec >= NSEC_PER_SEC:
         raise WireDecodeError(f"malformed {CLOCK_TYPE}: clock.nsecs {nsec} >= 1e9")
-    return Clock(Time.from_ns(sec * NSEC_PER_SEC + nsec))
+    # Time.from_ns and Clock(...) without their Python calls: a uint32 sec and a nsec
+    # below 1e9 are always within Time's range (a /clock at 1 kHz decodes in a thread
+    # of its own: tfbus.transports.ros1.transport.Ros1Transport._clock_frame)
+    stamp = _new_time(Time)
+    stamp._ns = sec * NSEC_PER_SEC + nsec
+    return _new_tuple(Clock, (stamp,))
+
+
+_unpack_time = _TIME.unpack
+_new_time = Time.__new__
+_new_tuple = tuple.__new__
 
 
 # -- tf2_msgs/LookupTransform over actionlib ----------------------------------------------

@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import ipaddress
 import logging
 import os
 import secrets
 import socket
 import struct
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, NoReturn, TypeVar
 from urllib.parse import urlsplit
 
 import anyio
@@ -41,7 +43,8 @@ from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
-from tfbus.transports._base import BusLike, TransportStatistics
+from tfbus.transports._base import BusLike, ThreadWakeup, TransportStatistics, heard_beyond
+from tfbus.transports._newest import ClockFollower, NewestClock
 
 if TYPE_CHECKING:
     from tfbus.buffer import Buffer
@@ -110,6 +113,13 @@ class Ros1Statistics(TransportStatistics):
             ``EMFILE``: out of file descriptors); the listener backs off and goes on.
         publishers_dropped: publisher URIs not followed because a topic already had
             :data:`MAX_PUBLISHERS` of them.
+        coalesced: ``clock_topic`` messages replaced by a newer one before the event
+            loop saw them (followed newest-only by a :class:`~tfbus.clock.SimClock`:
+            :meth:`Ros1Transport.keep_newest`), or dropped, oldest first, beyond
+            :data:`~tfbus.transports._newest.NEWEST_MAX_QUEUED` waiting for it.
+        kept: ``clock_topic`` messages held newest-only, not delivered (yet) when the
+            copy was made: 0 or 1 (the one whose stamp the follower reads as the time).
+            Every clock message received is delivered, coalesced, kept or malformed.
     """
 
     send_dropped: int = 0
@@ -121,6 +131,8 @@ class Ros1Statistics(TransportStatistics):
     bad_requests: int = 0
     accept_errors: int = 0
     publishers_dropped: int = 0
+    coalesced: int = 0
+    kept: int = 0
 
 
 def _default_name() -> str:
@@ -191,6 +203,99 @@ def tf_message_from(authority: str) -> type[TFMessage]:
     return type("TFMessage", (TFMessage,), {"__slots__": (), "authority": authority})
 
 
+_T = TypeVar("_T")
+
+
+class _ClockConnection:
+    """The socket of one clock-topic connection, read by a worker thread
+    (:meth:`Ros1Transport._pump_clock`): :meth:`call` runs a blocking step in that thread,
+    :meth:`end` (event loop) unblocks it and closes the socket -- at once when no step
+    runs, else by the step as it returns, so a socket is never closed under a thread
+    still reading it."""
+
+    __slots__ = ("busy", "ended", "lock", "sock")
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.sock: socket.socket | None = None
+        self.busy = False
+        self.ended = False
+
+    def call(self, step: Callable[..., _T], *args: Any) -> _T:
+        """Run ``step(*args)`` (a worker thread).
+
+        Raises:
+            anyio.EndOfStream: the connection was ended before the step began.
+            Exception: what ``step`` raises.
+        """
+        with self.lock:
+            if self.ended:
+                raise anyio.EndOfStream
+            self.busy = True
+        try:
+            return step(*args)
+        finally:
+            with self.lock:
+                self.busy = False
+                if self.ended and self.sock is not None:
+                    self.sock.close()
+
+    def open(self, host: str, port: int, hello: bytes, timeout: float,
+             splitter: FrameSplitter) -> list[bytes | memoryview]:
+        """Connect, send our connection header, read until the publisher's header has
+        arrived (each read bounded by ``timeout``); returns it and the frames read with
+        it (a worker thread, through :meth:`call`)."""
+        sock = socket.create_connection((host, port), timeout=timeout)
+        with self.lock:
+            self.sock = sock  # closed by call() as this step returns, if ended meanwhile
+            if self.ended:
+                raise anyio.EndOfStream
+        _set_nodelay(sock)
+        sock.sendall(hello)
+        frames: list[bytes | memoryview] = []
+        splitter.sink = lambda raw: frames.append(bytes(raw))
+        while not frames:
+            data = sock.recv(_CLOCK_READ_BYTES)
+            if not data:
+                raise anyio.EndOfStream
+            splitter.feed(data)
+        return frames
+
+    def read(self, splitter: FrameSplitter) -> NoReturn:
+        """Read the connection until it ends, each read's frames to ``splitter`` (a
+        worker thread, through :meth:`call`).
+
+        Raises:
+            anyio.EndOfStream: the publisher closed the connection, or :meth:`end`.
+            OSError: the connection failed.
+            Exception: what the splitter's sink raises (a malformed message).
+        """
+        sock = self.sock
+        assert sock is not None
+        sock.settimeout(None)  # a publisher may be silent for long: only end() stops it
+        while True:
+            data = sock.recv(_CLOCK_READ_BYTES)
+            if not data:
+                raise anyio.EndOfStream
+            splitter.feed(data)
+
+    def end(self) -> None:
+        """Unblock a step reading the socket and close it (event loop; idempotent)."""
+        with self.lock:
+            self.ended = True
+            sock = self.sock
+            if sock is None:
+                return
+            with contextlib.suppress(OSError):
+                sock.shutdown(socket.SHUT_RDWR)
+            if not self.busy:
+                sock.close()
+
+
+_CLOCK_READ_BYTES: Final = 65536
+"""Bytes one read of a clock connection takes at most."""
+
+
 class _Inbound:
     """What one connection to a publisher receives, frame by frame: the publisher's
     connection header, then messages, each decoded and delivered to the bus at once
@@ -225,8 +330,6 @@ class _Inbound:
                 self._raw(bytes(raw), self.callerid)
             elif self._scan:  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, decode_scan(raw))
-            elif self._clock:  # WireDecodeError: counted in malformed
-                self._deliver(self.topic, decode_clock(raw))
             else:
                 transforms = self._decode(raw)  # WireDecodeError: counted in malformed
                 self._deliver(self.topic, self._message(tuple(transforms)))
@@ -247,7 +350,9 @@ class _Inbound:
         self._message = tf_message_from(callerid)
         self.conn_id = self.node._open_conn(callerid, "i", self.topic)
         self.node._delivering.add((self.topic, self.uri))
-        if self._raw is None and not self._scan and not self._clock:
+        if self._clock:  # kept newest-only, delivered by the node (its _drain_clock)
+            self.splitter.sink = self.node._clock_frame
+        elif self._raw is None and not self._scan:
             self.splitter.sink = self._tf_sink()
         self.header_or_end.set()
 
@@ -312,8 +417,9 @@ class Ros1Transport:
             simulated time, :data:`~tfbus.topics.CLOCK_TOPIC`): each message is delivered
             to the bus as a :class:`~tfbus.messages.Clock`
             (:func:`~tfbus.codecs.ros1.decode_clock`), what a
-            :class:`~tfbus.clock.SimClock` on the bus follows; default ``None``: not
-            subscribed. Receive only.
+            :class:`~tfbus.clock.SimClock` on the bus follows (newest-only while one
+            does: :meth:`keep_newest`; each connection of the topic is read by a thread
+            of its own); default ``None``: not subscribed. Receive only.
         queue_size: frames queued per subscriber connection before the oldest is dropped.
         max_message_bytes: largest accepted TCPROS frame; a larger one closes the
             connection (counted as malformed).
@@ -411,6 +517,10 @@ class Ros1Transport:
         self._shutdown_reason: str | None = None
         self._running = False
         self._bus: BusLike | None = None
+        # clock_topic: read by each connection's own thread, kept newest-only while a
+        # SimClock follows it (keep_newest), handed to the loop through this wake-up
+        self._newest = NewestClock()
+        self._clock_wakeup: ThreadWakeup | None = None
 
     # -- public ------------------------------------------------------------------------
 
@@ -441,7 +551,37 @@ class Ros1Transport:
 
     def statistics(self) -> Ros1Statistics:
         """A copy of the counters (see :class:`Ros1Statistics`)."""
-        return replace(self._stats)
+        newest = self._newest
+        return replace(self._stats, received=self._stats.received + newest.taken,
+                       kept=int(newest.kept is not None))
+
+    def keep_newest(self, topic: str, due: Callable[[int], bool]) -> ClockFollower:
+        """Deliver ``clock_topic`` newest-only (as rclpy's ``TimeSource`` subscribes to
+        ``/clock`` keep-last 1, ``time_source.py``; rospy delivers every message): the
+        thread reading each clock connection decodes each message and keeps only the
+        newest, waking the event loop when ``due(stamp_ns)`` (called in that thread,
+        must not block) is true, when a stamp is earlier than the previous one (a jump
+        back: the kept message and it are delivered in order), or
+        :data:`~tfbus.transports._newest.NEWEST_MAX_DELAY` after the last wake-up while
+        the bus has listeners on the topic besides the followers; every wake-up also
+        delivers whatever is kept. The stamp of the newest message kept is the
+        follower's :attr:`~tfbus.transports._newest.ClockFollower.newest_ns`, which a
+        :class:`~tfbus.clock.SimClock` on a ROS 1 bus reads as its time: the loop runs
+        when a sleeper's deadline is reached, not at every ``/clock``. Messages replaced
+        before the loop saw them are counted in ``coalesced``. Several followers may
+        keep the topic: a message is due when one says so.
+
+        Args:
+            topic: the topic; any other than ``clock_topic`` gets an inert follower.
+            due: ``due(stamp_ns) -> bool``, whether a message must reach the loop now.
+
+        Returns:
+            the follower: ``poke()`` after filing a deadline, ``close()`` to end it.
+        """
+        if topic != self._clock_topic:
+            return ClockFollower(None, self._wake_clock, due)
+        self._newest.follow(due)
+        return ClockFollower(self._newest, self._wake_clock, due)
 
     def serve_lookups(self, buffer: Buffer, bus: object, *, name: str = "/tf2_buffer_server",
                       max_pending: int = 1000, max_wait: float = 60.0) -> LookupActionServer:
@@ -515,6 +655,12 @@ class Ros1Transport:
             self._request_limiter = anyio.CapacityLimiter(MAX_CONCURRENT_REQUESTS)
             async with anyio.create_task_group() as tg:
                 self._tg = tg
+                clock_topic = self._clock_topic
+                if clock_topic is not None:
+                    wakeup = self._clock_wakeup = ThreadWakeup()
+                    self._newest.heard_beyond = lambda followers: heard_beyond(
+                        bus, clock_topic, followers)
+                    tg.start_soon(wakeup.serve, self._drain_clock)
                 tg.start_soon(
                     serve_listener, api_listener, server.handle, "slave API", self._on_accept_error
                 )
@@ -530,6 +676,10 @@ class Ros1Transport:
                 await anyio.sleep_forever()
         finally:
             self._tg = None
+            if self._clock_wakeup is not None:
+                self._clock_wakeup.close()
+                self._clock_wakeup = None
+            self._newest.heard_beyond = lambda followers: True
             with anyio.CancelScope(shield=True):
                 if self._registered:
                     with anyio.move_on_after(_UNREGISTER_DEADLINE):
@@ -968,13 +1118,82 @@ class Ros1Transport:
         )
         try:
             loop = running_asyncio_loop()  # None under trio, also in guest mode
-            if loop is not None:
+            if topic == self._clock_topic:
+                await self._pump_clock(link, host, port, hello)
+            elif loop is not None:
                 await self._pump_asyncio(loop, link, host, port, hello)
             else:
                 await self._pump_stream(link, host, port, hello)
         finally:
             if link.conn_id:
                 self._close_conn(link.conn_id)
+
+    async def _pump_clock(self, link: _Inbound, host: str, port: int, hello: bytes) -> None:
+        """The clock topic, on any backend: the connection is read by a thread of its
+        own (roscpp reads in its poll thread too), which decodes each message and keeps
+        it newest-only while a :class:`~tfbus.clock.SimClock` follows the topic
+        (:meth:`keep_newest`), waking the event loop only when one is due, or for every
+        message when none follows; the connection header is checked in the event loop.
+        A ``/clock`` at 1 kHz then costs no event-loop wake-up per message."""
+        timeout = max(self._timeout, 1.0)
+        conn = _ClockConnection()
+        # the connection's own thread: not one of anyio's default pool for its lifetime
+        run = functools.partial(anyio.to_thread.run_sync, abandon_on_cancel=True,
+                                limiter=anyio.CapacityLimiter(1))
+        try:
+            with anyio.fail_after(timeout):
+                frames = await run(conn.call, conn.open, host, port, hello, timeout,
+                                   link.splitter)
+            link._frame(frames[0])  # the header: refused or wrong md5sum raise here
+            sink = self._clock_frame  # what link._frame made the splitter's sink
+            for raw in frames[1:]:  # messages read with the header
+                sink(raw)
+            link.splitter.sink = sink
+            await run(conn.call, conn.read, link.splitter)
+        finally:
+            conn.end()
+
+    def _clock_frame(self, raw: bytes | memoryview) -> None:
+        """One message of a clock connection (its thread): decoded, then kept or queued
+        for the event loop (:class:`~tfbus.transports._newest.NewestClock`).
+
+        Raises:
+            WireDecodeError: not a ``rosgraph_msgs/Clock`` (the connection ends; counted
+                in ``malformed``).
+        """
+        newest = self._newest
+        try:
+            message = decode_clock(raw)
+        except Exception:
+            with newest.lock:
+                newest.taken += 1  # received, then counted malformed by the caller
+            raise
+        with newest.lock:
+            newest.taken += 1
+            wake = newest.offer(message, self._stats)
+        if wake:
+            self._wake_clock()
+
+    def _wake_clock(self) -> None:
+        """Wake the loop to deliver what the newest-only clock holds (any thread)."""
+        wakeup = self._clock_wakeup
+        if wakeup is not None:
+            wakeup.wake()
+
+    def _drain_clock(self, woken: bool) -> bool:
+        """Deliver the clock messages the connections' threads queued and the one kept
+        (event loop)."""
+        newest = self._newest
+        with newest.lock:
+            held = newest.take_all()
+            taken, newest.taken = newest.taken, 0
+        stats = self._stats
+        stats.received += taken
+        bus, topic = self._bus, self._clock_topic
+        if held and bus is not None and topic is not None:
+            bus.deliver_many_nowait(topic, held)
+            stats.delivered += len(held)
+        return False
 
     async def _pump_asyncio(
         self, loop: asyncio.AbstractEventLoop, link: _Inbound, host: str, port: int, hello: bytes

@@ -85,7 +85,6 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
-import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -105,7 +104,7 @@ from cyclonedds.util import duration
 
 from tfbus.codecs.cdr import decode_clock, decode_tf, encode_clock, encode_tf
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
-from tfbus.messages import Clock, TFMessage, TransformStamped
+from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports._base import (
     DEFAULT_MAX_WAIT,
@@ -115,6 +114,9 @@ from tfbus.transports._base import (
     heard_beyond,
     ros_domain_id,
 )
+from tfbus.transports._newest import NEWEST_MAX_DELAY as NEWEST_MAX_DELAY
+from tfbus.transports._newest import NEWEST_MAX_QUEUED as NEWEST_MAX_QUEUED
+from tfbus.transports._newest import ClockFollower, NewestClock
 from tfbus.transports.ros2.dds import (
     TF_STATIC_TOPIC_DDS,
     TF_TOPIC_DDS,
@@ -215,136 +217,14 @@ class Ros2Statistics(TransportStatistics):
     kept: int = 0
 
 
-NEWEST_MAX_DELAY: Final = 0.01
-"""Longest wall time, seconds, a clock sample followed newest-only
-(:meth:`Ros2Transport.keep_newest`) waits in Cyclone's thread while newer ones arrive,
-when the bus has listeners on the clock topic besides its followers: they receive the
-newest at least this often while ``/clock`` flows (as the Zenoh transport's
-``NEWEST_MAX_DELAY``). The followers read the newest stamp kept
-(:attr:`Ros2ClockFollower.newest_ns`)."""
-NEWEST_MAX_QUEUED: Final = 1024
-"""Most clock samples followed newest-only that wait for the event loop at once (each
-step back queues one, however fast a publisher steps back and however long the loop is
-busy); beyond it the oldest are dropped and counted in ``coalesced``, as the Zenoh
-transport bounds its inbound queue."""
-
-
-class _NewestClock:
-    """The clock topic of a :class:`Ros2Transport` followed newest-only: Cyclone's
-    listener thread takes and decodes each sample, keeps only the newest, and queues it
-    for the event loop (waking it) when a follower says it is due, when it steps back
-    (the one kept before it is queued first), or :data:`NEWEST_MAX_DELAY` after the last
-    wake-up while ``heard_beyond()`` (the bus has other listeners on the topic).
-    :attr:`kept_ns` is the stamp the followers read as the time meanwhile. Every access
-    but the followers' read of :attr:`kept_ns` holds ``lock``."""
-
-    __slots__ = ("dues", "heard_beyond", "kept", "kept_ns", "last_ns", "lock", "queue",
-                 "waked")
-
-    def __init__(self) -> None:
-        self.dues: tuple[Callable[[int], bool], ...] = ()
-        self.lock = threading.Lock()
-        self.kept: Clock | None = None  # the newest sample not queued yet
-        self.last_ns = -1  # the stamp of the last sample, -1 before one
-        self.waked = 0.0  # time.monotonic() of the last wake-up (or listeners check)
-        self.queue: list[Clock] = []  # for the event loop, in order
-        self.heard_beyond: Callable[[int], bool] = lambda followers: True
-        """Whether the bus has listeners on the topic besides ``followers`` (set while
-        the transport runs)."""
-        self.kept_ns = -1
-        """The newest stamp (ns) of a sample kept because no follower needed it yet: a
-        step forward from every sample before it, within every follower's bounds, so a
-        follower may read it as the time; -1 before one and after a jump back the loop
-        delivered (:meth:`Ros2ClockFollower.stepped_back`). Raised only here."""
-
-    def offer(self, message: Clock, stats: Ros2Statistics) -> bool:
-        """A decoded sample (``lock`` held): kept, or queued; True if the loop must wake."""
-        ns = message.clock._ns  # Time.ns, without the property's call
-        pending, self.kept = self.kept, message  # stored before ``due`` reads
-        now = time.monotonic()
-        back = ns < self.last_ns
-        self.last_ns = ns
-        wake = back
-        if not back:
-            for due in self.dues:
-                if due(ns):
-                    wake = True
-                    break
-        if not wake and now - self.waked >= NEWEST_MAX_DELAY:
-            self.waked = now  # the bus's listeners are counted at most this often
-            wake = self.heard_beyond(len(self.dues))
-        if wake:
-            self.kept = None
-            self.waked = now
-            if pending is not None:
-                if back:
-                    self.queue.append(pending)
-                else:
-                    stats.coalesced += 1
-            queue = self.queue
-            queue.append(message)
-            if len(queue) > NEWEST_MAX_QUEUED:  # the oldest go: memory stays bounded
-                stats.coalesced += len(queue) - NEWEST_MAX_QUEUED
-                del queue[: len(queue) - NEWEST_MAX_QUEUED]
-            return True
-        if ns > self.kept_ns:
-            self.kept_ns = ns
-        if pending is not None:
-            stats.coalesced += 1
-        return False
-
-    def take_all(self) -> list[Clock]:
-        """The queued samples and the one kept, in order, removed (``lock`` held)."""
-        out, self.queue = self.queue, []
-        if self.kept is not None:
-            out.append(self.kept)
-            self.kept = None
-        return out
-
-
-class Ros2ClockFollower:
+class Ros2ClockFollower(ClockFollower):
     """One follower of a :class:`Ros2Transport`'s clock topic kept newest-only (what
     :meth:`Ros2Transport.keep_newest` returns; inert for a topic that is not the
-    transport's clock topic)."""
+    transport's clock topic): :attr:`newest_ns` is the stamp of the newest sample
+    Cyclone's thread kept, :meth:`poke` after filing a deadline, :meth:`close` to end
+    it (:class:`~tfbus.transports._newest.ClockFollower`)."""
 
-    __slots__ = ("_due", "_transport")
-
-    def __init__(self, transport: Ros2Transport | None, due: Callable[[int], bool]) -> None:
-        self._transport = transport
-        self._due = due
-
-    @property
-    def newest_ns(self) -> int:
-        """The stamp (ns) of the newest clock sample Cyclone's thread kept for no
-        follower's need yet: a time the follower may read as now; -1 when there is none
-        (or once closed, or inert)."""
-        transport = self._transport
-        return -1 if transport is None else transport._newest.kept_ns
-
-    def stepped_back(self) -> None:
-        """The follower took a jump back: the stamps kept before it are no longer the
-        time."""
-        if self._transport is not None:
-            self._transport._newest.kept_ns = -1
-
-    def poke(self) -> None:
-        """Deliver the sample kept, if any, at the event loop's next turn (call it when
-        filing a deadline: a sample kept before the deadline existed may reach it)."""
-        if self._transport is not None:
-            self._transport._poke_clock()
-
-    def close(self) -> None:
-        """End this follower (idempotent); with none left the clock topic is delivered
-        sample by sample again, the sample kept first."""
-        transport, self._transport = self._transport, None
-        if transport is not None:
-            newest = transport._newest
-            with newest.lock:
-                dues = list(newest.dues)
-                if self._due in dues:
-                    dues.remove(self._due)
-                newest.dues = tuple(dues)
-            transport._wake_clock()
+    __slots__ = ()
 
 
 # -- one Cyclone domain per (process, domain id), shared by the transports on it ------------
@@ -485,7 +365,7 @@ class Ros2Transport:
         self._statics: dict[str, TransformStamped] = {}
         self._endpoints: _Endpoints | None = None
         self._wakeup: ThreadWakeup | None = None
-        self._newest = _NewestClock()
+        self._newest = NewestClock()
         self._running = False
         self._closers: list[Callable[[], None]] = []
 
@@ -584,13 +464,9 @@ class Ros2Transport:
             :meth:`Ros2ClockFollower.close` to end it.
         """
         if topic != self._clock_topic:
-            return Ros2ClockFollower(None, due)
-        newest = self._newest
-        with newest.lock:
-            if not newest.dues:  # a stamp kept for followers gone is no time of this one
-                newest.kept_ns = -1
-            newest.dues = (*newest.dues, due)
-        return Ros2ClockFollower(self, due)
+            return Ros2ClockFollower(None, self._wake_clock, due)
+        self._newest.follow(due)
+        return Ros2ClockFollower(self._newest, self._wake_clock, due)
 
     def serve_lookups(self, buffer: Buffer, bus: object, *, name: str = "/tf2_buffer_server",
                       max_pending: int = 1000, max_per_peer: int = 100,
@@ -764,8 +640,9 @@ class Ros2Transport:
 
     def _offer_clock(self, reader: DataReader[Any]) -> bool:
         """Take and decode the clock samples waiting (Cyclone's thread or the loop), keep
-        the newest (:class:`_NewestClock`); True if the loop must wake. Taken under the
-        lock: samples two threads take are offered in the order they were taken."""
+        the newest (:class:`~tfbus.transports._newest.NewestClock`); True if the loop
+        must wake. Taken under the lock: samples two threads take are offered in the
+        order they were taken."""
         stats = self._stats
         wake = False
         newest = self._newest
@@ -790,11 +667,6 @@ class Ros2Transport:
         wakeup = self._wakeup
         if wakeup is not None:
             wakeup.wake()
-
-    def _poke_clock(self) -> None:
-        """A deadline is being filed: deliver the clock sample kept, if any."""
-        if self._newest.kept is not None:
-            self._wake_clock()
 
     def _open(self) -> _Endpoints:
         _acquire_domain(self._domain_id, self._config)

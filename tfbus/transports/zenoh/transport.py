@@ -73,6 +73,7 @@ from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS
 from tfbus.topics import TF_STATIC_TOPIC
 from tfbus.transports._base import BusLike, ThreadWakeup, heard_beyond
+from tfbus.transports._newest import any_due
 from tfbus.transports.zenoh.config import (
     DEFAULT_PORT,
     ZenohConfigSource,
@@ -190,12 +191,8 @@ class NewestOnly:
             ns = clock_stamp(payload)
             now = time.monotonic()
             ordered = ns is None or ns < self._last_ns
-            wake = ordered  # a step back, or no Clock (ns None)
-            if ns is not None and not ordered:
-                for due in self._dues:
-                    if due(ns):
-                        wake = True
-                        break
+            # a step back, no Clock (ns None), or a follower's due
+            wake = ns is None or ordered or any_due(self._dues, ns)
             if not wake and now - self._waked >= NEWEST_MAX_DELAY:
                 self._waked = now  # the bus's listeners are counted at most this often
                 wake = heard_beyond(transport._bus, self._topic, len(self._dues))
