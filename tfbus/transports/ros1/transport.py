@@ -552,8 +552,9 @@ class Ros1Transport:
     def statistics(self) -> Ros1Statistics:
         """A copy of the counters (see :class:`Ros1Statistics`)."""
         newest = self._newest
-        return replace(self._stats, received=self._stats.received + newest.taken,
-                       kept=int(newest.kept is not None))
+        with newest.lock:  # the clock threads count under it: one consistent copy
+            return replace(self._stats, received=self._stats.received + newest.taken,
+                           kept=int(newest.kept is not None))
 
     def keep_newest(self, topic: str, due: Callable[[int], bool]) -> ClockFollower:
         """Deliver ``clock_topic`` newest-only (as rclpy's ``TimeSource`` subscribes to

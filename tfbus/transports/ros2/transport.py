@@ -418,7 +418,9 @@ class Ros2Transport:
 
     def statistics(self) -> Ros2Statistics:
         """A copy of the counters (see :class:`Ros2Statistics`)."""
-        return replace(self._stats, kept=int(self._newest.kept is not None))
+        newest = self._newest
+        with newest.lock:  # Cyclone's thread counts the clock under it: one consistent copy
+            return replace(self._stats, kept=int(newest.kept is not None))
 
     def participant(self) -> DomainParticipant:
         """The DomainParticipant of the running transport, on which other endpoints of
