@@ -17,6 +17,7 @@ Prints ``READY`` once both exist; ends on SIGINT (rospy's handler)."""
 
 import json
 import sys
+import threading
 
 sys.path.append("/usr/lib/python3/dist-packages")
 
@@ -29,11 +30,14 @@ from geometry_msgs.msg import Twist
 def main() -> None:
     rospy.init_node("turtlesim_peer")
 
+    printing = threading.Lock()  # rospy calls back in a thread per publisher connection
+
     def on_twist(message: Twist) -> None:
         lin, ang = message.linear, message.angular
-        print(json.dumps({"callerid": message._connection_header.get("callerid", ""),
-                          "linear": [lin.x, lin.y, lin.z], "angular": [ang.x, ang.y, ang.z]}),
-              flush=True)
+        line = json.dumps({"callerid": message._connection_header.get("callerid", ""),
+                           "linear": [lin.x, lin.y, lin.z], "angular": [ang.x, ang.y, ang.z]})
+        with printing:
+            print(line, flush=True)
 
     rospy.Service("/spawn", turtlesim.srv.Spawn,
                   lambda request: turtlesim.srv.SpawnResponse(request.name))
