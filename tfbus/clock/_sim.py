@@ -454,9 +454,10 @@ class SimClock:
 
     def _catch_up(self) -> None:
         """Give the deadline machinery the newest time the transport kept (deadlines
-        are filed from it, and those it reaches are due)."""
+        are filed from it, and those it reaches are due); not inside the delivery of a
+        ``/clock``, where ``now()`` is that ``/clock`` and deadlines are filed from it."""
         newest = self._newest
-        if newest is not None and self._accepted:
+        if newest is not None and self._accepted and not self._delivering:
             kept = newest.newest_ns
             if kept > self._core.now_ns():
                 self._core.set_nowait(Time.from_ns(kept))
