@@ -456,11 +456,9 @@ class SimClock:
         """Give the deadline machinery the newest time the transport kept (deadlines
         are filed from it, and those it reaches are due); not inside the delivery of a
         ``/clock``, where ``now()`` is that ``/clock`` and deadlines are filed from it."""
-        newest = self._newest
-        if newest is not None and self._accepted and not self._delivering:
-            kept = newest.newest_ns
-            if kept > self._core.now_ns():
-                self._core.set_nowait(Time.from_ns(kept))
+        ns = self.now_ns()
+        if ns > self._core.now_ns():
+            self._core.set_nowait(Time.from_ns(ns))
 
     def _poke(self) -> None:
         """A deadline is being filed: it is filed from the newest time kept, and a
@@ -477,12 +475,7 @@ class SimClock:
         (on a newest-only transport, the newest one its thread kept, if newer than the
         last one the event loop was given; in the delivery of a ``/clock``, as in the
         callbacks of the deadlines it reaches, that ``/clock``)."""
-        newest = self._newest
-        if newest is not None and self._accepted and not self._delivering:
-            kept = newest.newest_ns
-            if kept > self._core.now_ns():
-                return Time.from_ns(kept)
-        return self._core.now()
+        return Time.from_ns(self.now_ns())
 
     def now_ns(self) -> int:
         """:meth:`now` as int nanoseconds."""

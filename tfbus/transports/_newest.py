@@ -17,13 +17,15 @@ from collections.abc import Callable
 from typing import Final, Protocol
 
 from tfbus.messages import Clock
+from tfbus.transports._base import heard_beyond
 
 NEWEST_MAX_DELAY: Final = 0.01
 """Longest wall time, seconds, a clock sample followed newest-only waits in the receiving
-thread while newer ones arrive, when the bus has listeners on the clock topic besides its
-followers: they receive the newest at least this often while ``/clock`` flows (as the
-Zenoh transport's ``NEWEST_MAX_DELAY``). The followers read the newest stamp kept
-(:attr:`ClockFollower.newest_ns`)."""
+thread (every transport's: Zenoh's, Cyclone's, a ROS 1 clock connection's) while newer
+ones arrive, when the bus has listeners on the clock topic besides its followers (a
+subscriber of ``/clock`` beside a :class:`~tfbus.clock.SimClock`): they receive the
+newest at least this often while ``/clock`` flows. The followers read the newest stamp
+kept (:attr:`ClockFollower.newest_ns`) and need no such delivery."""
 NEWEST_MAX_QUEUED: Final = 1024
 """Most clock samples followed newest-only that wait for the event loop at once (each
 step back queues one, however fast a publisher steps back and however long the loop is
@@ -52,12 +54,13 @@ class NewestClock:
     sample (:meth:`offer`), which keeps only the newest and queues it for the event loop
     (waking it) when a follower says it is due, when it steps back (the one kept before
     it is queued first), or :data:`NEWEST_MAX_DELAY` after the last wake-up while
-    ``heard_beyond()`` (the bus has other listeners on the topic). :attr:`kept_ns` is the
+    :attr:`bus` has other listeners on :attr:`topic`
+    (:func:`~tfbus.transports._base.heard_beyond`). :attr:`kept_ns` is the
     stamp the followers read as the time meanwhile. Every access but the followers' read
     of :attr:`kept_ns` holds ``lock``."""
 
-    __slots__ = ("dues", "heard_beyond", "kept", "kept_ns", "last_ns", "lock", "queue",
-                 "taken", "waked")
+    __slots__ = ("bus", "dues", "kept", "kept_ns", "last_ns", "lock", "queue", "taken",
+                 "topic", "waked")
 
     def __init__(self) -> None:
         self.dues: tuple[Callable[[int], bool], ...] = ()
@@ -67,9 +70,11 @@ class NewestClock:
         self.waked = 0.0  # time.monotonic() of the last wake-up (or listeners check)
         self.queue: list[Clock] = []  # for the event loop, in order
         self.taken = 0  # samples received by the thread not yet counted by the loop
-        self.heard_beyond: Callable[[int], bool] = lambda followers: True
-        """Whether the bus has listeners on the topic besides ``followers`` (set while
-        the transport runs)."""
+        self.bus: object = None
+        """The bus the transport runs under (None when it does not run): whether it has
+        listeners on :attr:`topic` besides the followers."""
+        self.topic = ""
+        """The clock topic, as the bus names it."""
         self.kept_ns = -1
         """The newest stamp (ns) of a sample kept because no follower needed it yet: a
         step forward from every sample before it, within every follower's bounds, so a
@@ -87,7 +92,7 @@ class NewestClock:
         wake = back or not self.dues or any_due(self.dues, ns)
         if not wake and now - self.waked >= NEWEST_MAX_DELAY:
             self.waked = now  # the bus's listeners are counted at most this often
-            wake = self.heard_beyond(len(self.dues))
+            wake = heard_beyond(self.bus, self.topic, len(self.dues))
         if wake:
             self.kept = None
             self.waked = now

@@ -43,7 +43,7 @@ from tfbus.errors import TransportError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import CountLimitedLog
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
-from tfbus.transports._base import BusLike, ThreadWakeup, TransportStatistics, heard_beyond
+from tfbus.transports._base import BusLike, ThreadWakeup, TransportStatistics
 from tfbus.transports._newest import ClockFollower, NewestClock
 
 if TYPE_CHECKING:
@@ -659,8 +659,7 @@ class Ros1Transport:
                 clock_topic = self._clock_topic
                 if clock_topic is not None:
                     wakeup = self._clock_wakeup = ThreadWakeup()
-                    self._newest.heard_beyond = lambda followers: heard_beyond(
-                        bus, clock_topic, followers)
+                    self._newest.bus, self._newest.topic = bus, clock_topic
                     tg.start_soon(wakeup.serve, self._drain_clock)
                 tg.start_soon(
                     serve_listener, api_listener, server.handle, "slave API", self._on_accept_error
@@ -680,7 +679,7 @@ class Ros1Transport:
             if self._clock_wakeup is not None:
                 self._clock_wakeup.close()
                 self._clock_wakeup = None
-            self._newest.heard_beyond = lambda followers: True
+            self._newest.bus = None
             with anyio.CancelScope(shield=True):
                 if self._registered:
                     with anyio.move_on_after(_UNREGISTER_DEADLINE):
@@ -1145,11 +1144,11 @@ class Ros1Transport:
             with anyio.fail_after(timeout):
                 frames = await run(conn.call, conn.open, host, port, hello, timeout,
                                    link.splitter)
-            link._frame(frames[0])  # the header: refused or wrong md5sum raise here
-            sink = self._clock_frame  # what link._frame made the splitter's sink
+            # the header: refused or wrong md5sum raise here; it makes the splitter's
+            # sink self._clock_frame, which the reads below feed
+            link._frame(frames[0])
             for raw in frames[1:]:  # messages read with the header
-                sink(raw)
-            link.splitter.sink = sink
+                self._clock_frame(raw)
             await run(conn.call, conn.read, link.splitter)
         finally:
             conn.end()

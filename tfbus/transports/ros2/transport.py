@@ -111,7 +111,6 @@ from tfbus.transports._base import (
     BusLike,
     ThreadWakeup,
     TransportStatistics,
-    heard_beyond,
     ros_domain_id,
 )
 from tfbus.transports._newest import NEWEST_MAX_DELAY as NEWEST_MAX_DELAY
@@ -531,10 +530,8 @@ class Ros2Transport:
         wakeup = ThreadWakeup()
         self._wakeup = wakeup
         endpoints: _Endpoints | None = None
-        clock_topic = self._clock_topic
-        if clock_topic is not None:
-            self._newest.heard_beyond = lambda followers: heard_beyond(bus, clock_topic,
-                                                                       followers)
+        if self._clock_topic is not None:
+            self._newest.bus, self._newest.topic = bus, self._clock_topic
         try:
             with anyio.CancelScope(shield=True):  # a cancelled open must still be closed
                 endpoints = await anyio.to_thread.run_sync(self._open)
@@ -549,7 +546,7 @@ class Ros2Transport:
             self._running = False
             self._endpoints = None
             self._wakeup = None
-            self._newest.heard_beyond = lambda followers: True
+            self._newest.bus = None
             closers, self._closers = self._closers, []
             for close in closers:
                 close()

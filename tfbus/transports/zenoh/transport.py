@@ -73,6 +73,7 @@ from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import TIME_MAX_NS
 from tfbus.topics import TF_STATIC_TOPIC
 from tfbus.transports._base import BusLike, ThreadWakeup, heard_beyond
+from tfbus.transports._newest import NEWEST_MAX_DELAY as NEWEST_MAX_DELAY
 from tfbus.transports._newest import any_due
 from tfbus.transports.zenoh.config import (
     DEFAULT_PORT,
@@ -104,13 +105,6 @@ _MATCHING: Final = 4
 _REQUERY: Final = 5
 _NEWEST: Final = 6  # a sample of a newest-only topic: no gap counted in ``lost``
 _PUT: Final = zenoh.SampleKind.PUT  # looked up once: compared on every sample
-NEWEST_MAX_DELAY: Final = 0.01
-"""Longest wall time, seconds, a sample of a newest-only topic
-(:meth:`ZenohTransport.keep_newest`) waits in Zenoh's thread while newer ones arrive,
-when the bus has listeners on the topic besides its followers (a subscriber of
-``/clock`` beside a :class:`~tfbus.clock.SimClock`): they receive the newest at least
-this often while the topic flows. The followers themselves read the newest stamp kept
-(:attr:`NewestFollower.newest_ns`) and need no such delivery."""
 LATCH_QUERY_RETRIES: Final = 3
 """Times a late-joiner query that got no reply at all is asked again (after 0.1, 0.2 and
 0.4 s): a node's liveliness token can reach a peer before the route to its latch
