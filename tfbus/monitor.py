@@ -38,7 +38,8 @@ Definitions (one for every tool: ``tfbus frames``, ``monitor`` and ``bag-info``)
   of them (:meth:`FrameSummary.recent_rate`, :meth:`AuthoritySummary.recent_rate`), as
   tf_monitor keeps only its last 1000 samples per frame and per broadcaster. The window
   is a :class:`RateWindow`: memory is bounded whatever the run time, and a rate costs
-  O(1) amortized per call (samples leave the window once).
+  O(1) amortized per call while the stamps held arrived in order (samples leave the
+  window once).
 * **stale**: a frame or broadcaster silent for more than :data:`STALE_PERIODS` of its
   own periods (and at least :data:`STALE_AFTER` seconds) has stopped: its recent rate is
   0.0 and :meth:`RateWindow.stale` says so.
@@ -53,6 +54,7 @@ spin), tf2 ``BufferCore::_chainAsVector`` for the chain's order.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -105,9 +107,13 @@ class RateWindow:
     at most ``maxlen`` of them: ``(receive time, value)`` in ns, value the header stamp
     (``distinct``: a repeated stamp is kept once, as tf2 keeps it) or the receive time.
 
-    Memory is ``O(maxlen)``; :meth:`add` and :meth:`rate` are O(1) amortized (each
-    sample enters and leaves once; the oldest and newest values are kept by sliding
-    minimum and maximum queues).
+    Memory is ``O(maxlen)``: two queues of plain ints, no object per sample. While the
+    values held arrived in order (each newer than the one before it: the common case),
+    :meth:`add` and :meth:`rate` are O(1) amortized (each sample enters and leaves once;
+    the oldest value held is the smallest, the newest the largest; a repeated stamp is
+    found by bisection). A value that arrives out of order is remembered until it leaves
+    the window; meanwhile the values held are also kept in a set (built once, O(held),
+    then updated with each sample) and a rate reads the smallest and largest by a scan.
 
     Args:
         window: seconds of receive time (> 0).
@@ -118,8 +124,8 @@ class RateWindow:
         ValueError: ``window`` not finite and > 0, or ``maxlen`` < 2.
     """
 
-    __slots__ = ("_hi", "_lo", "_samples", "_seq", "_values", "distinct", "last_received",
-                 "maxlen", "window_ns")
+    __slots__ = ("_held", "_out_of_order", "_received", "_seq", "_values", "distinct",
+                 "last_received", "maxlen", "window_ns")
 
     def __init__(self, window: float = RATE_WINDOW, maxlen: int = RECENT_SAMPLES, *,
                  distinct: bool = True) -> None:
@@ -132,15 +138,18 @@ class RateWindow:
         self.distinct = distinct
         self.last_received: int | None = None
         """Receive time (ns) of the newest sample added, repeated ones included."""
-        self._samples: deque[tuple[int, int, int]] = deque()  # (seq, received, value)
-        self._values: set[int] = set()
-        self._lo: deque[tuple[int, int]] = deque()  # (seq, value), values increasing
-        self._hi: deque[tuple[int, int]] = deque()  # (seq, value), values decreasing
-        self._seq = 0
+        self._received: deque[int] = deque()  # receive times, oldest sample first
+        self._values: deque[int] = deque()  # the samples' values, in the same order
+        # Sequence numbers of the samples held that were added out of order (a value
+        # below the one added before it): while there are none, the values held do not
+        # decrease from the oldest sample to the newest (with ``distinct``, increase).
+        self._out_of_order: deque[int] = deque()
+        self._seq = 0  # sequence number of the next sample kept
+        self._held: set[int] | None = None  # distinct: the values held, while out of order
 
     def __len__(self) -> int:
         """Samples held now (at most :attr:`maxlen`)."""
-        return len(self._samples)
+        return len(self._values)
 
     def __eq__(self, other: object) -> bool:
         """Same settings and the same samples held (receive time, value)."""
@@ -148,57 +157,68 @@ class RateWindow:
             return NotImplemented
         return ((self.window_ns, self.maxlen, self.distinct, self.last_received)
                 == (other.window_ns, other.maxlen, other.distinct, other.last_received)
-                and [s[1:] for s in self._samples] == [s[1:] for s in other._samples])
+                and self._received == other._received and self._values == other._values)
 
     __hash__ = None  # type: ignore[assignment]
 
     def values(self) -> set[int]:
         """The values held now (distinct header stamps for a frame)."""
-        return {v for _, _, v in self._samples}
+        return set(self._values)
 
     def values_by_time(self) -> list[int]:
         """The receive times (ns) of the samples held now, oldest first."""
-        return [r for _, r, _ in self._samples]
+        return list(self._received)
 
     def add(self, received: int, value: int) -> bool:
         """Account one sample (ns); False when ``distinct`` and ``value`` is held already
         (a repeated stamp: not kept again)."""
         self.last_received = received
-        distinct = self.distinct
-        if distinct and value in self._values:
-            return False
-        seq = self._seq
-        self._seq = seq + 1
-        samples = self._samples
-        samples.append((seq, received, value))
-        if distinct:
-            self._values.add(value)
-        entry = (seq, value)
-        lo = self._lo
-        while lo and lo[-1][1] >= value:
-            lo.pop()
-        lo.append(entry)
-        hi = self._hi
-        while hi and hi[-1][1] <= value:
-            hi.pop()
-        hi.append(entry)
-        if len(samples) > self.maxlen:
+        values = self._values
+        if values:
+            last = values[-1]
+            if self.distinct:
+                held = self._held
+                if held is not None:  # out of order: the set answers
+                    if value in held:
+                        return False
+                    held.add(value)
+                    if value < last:
+                        self._out_of_order.append(self._seq)
+                elif value <= last:  # in order so far: the values held increase
+                    at = bisect_left(values, value)
+                    if values[at] == value:
+                        return False
+                    self._out_of_order.append(self._seq)
+                    held = self._held = set(values)
+                    held.add(value)
+            elif value < last:
+                self._out_of_order.append(self._seq)
+        self._seq += 1
+        values.append(value)
+        self._received.append(received)
+        if len(values) > self.maxlen:
             self._pop()
         return True
 
     def _pop(self) -> None:
-        seq, _, value = self._samples.popleft()
-        if self.distinct:
-            self._values.discard(value)
-        if self._lo and self._lo[0][0] <= seq:
-            self._lo.popleft()
-        if self._hi and self._hi[0][0] <= seq:
-            self._hi.popleft()
+        value = self._values.popleft()
+        self._received.popleft()
+        out = self._out_of_order
+        if out:
+            if out[0] == self._seq - len(self._values) - 1:  # the oldest sample's number
+                out.popleft()
+            held = self._held
+            if held is not None:
+                if out:
+                    held.discard(value)
+                else:  # in order again
+                    self._held = None
 
     def age(self, now: Time) -> None:
         """Let go of the samples received more than ``window`` seconds before ``now``."""
         start = now.ns - self.window_ns
-        while self._samples and self._samples[0][1] < start:
+        received = self._received
+        while received and received[0] < start:
             self._pop()
 
     def stale(self, now: Time) -> bool:
@@ -212,9 +232,12 @@ class RateWindow:
         return silent > max(STALE_AFTER, STALE_PERIODS * period)
 
     def _span_rate(self) -> float:
-        if len(self._samples) < 2:
+        values = self._values
+        if len(values) < 2:
             return 0.0
-        return link_rate(len(self._samples), self._lo[0][1], self._hi[0][1])
+        if self._out_of_order:
+            return link_rate(len(values), min(values), max(values))
+        return link_rate(len(values), values[0], values[-1])
 
     def rate(self, now: Time) -> float:
         """``(samples - 1) / (newest - oldest value)`` in Hz over the window ending at
@@ -222,11 +245,11 @@ class RateWindow:
         :meth:`stale`. Samples received after ``now`` (a clock that went back) are
         not counted."""
         self.age(now)
-        if self._samples and self._samples[-1][1] > now.ns:
-            kept = [(r, v) for _, r, v in self._samples if r <= now.ns]
-            if len(kept) < 2:
+        received = self._received
+        if received and received[-1] > now.ns:
+            vals = [v for r, v in zip(received, self._values, strict=True) if r <= now.ns]
+            if len(vals) < 2:
                 return 0.0
-            vals = [v for _, v in kept]
             return link_rate(len(vals), min(vals), max(vals))
         return 0.0 if self.stale(now) else self._span_rate()
 
@@ -241,7 +264,7 @@ def link_rate(distinct_stamps: int, oldest_ns: int, newest_ns: int) -> float:
     return (distinct_stamps - 1) / span
 
 
-@dataclass
+@dataclass(slots=True)
 class FrameSummary:
     """The summary of one child frame: its parent, who sends it, its stamps and delays.
 
@@ -312,7 +335,7 @@ class FrameSummary:
         return (self.last_stamp - self.first_stamp) / NSEC_PER_SEC
 
 
-@dataclass
+@dataclass(slots=True)
 class AuthoritySummary:
     """Per broadcaster (authority): messages received and their transforms' delays."""
 

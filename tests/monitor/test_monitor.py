@@ -428,3 +428,77 @@ def test_frames_the_buffer_forgot_leave_the_summary() -> None:
     assert len(frames) <= 2 + 31  # objects of the last 3 s of stamps at most
     assert buffer.statistics().frames_expired > 150
     buffer.close()
+
+
+class _NaiveWindow:
+    """The recent-rate window by its definition, with no cleverness: a list of (receive
+    time, value) samples, a repeated value refused when ``distinct``, the oldest dropped
+    beyond ``maxlen`` or ``window_ns`` before now, the rate over the smallest and largest
+    value held."""
+
+    def __init__(self, window_ns: int, maxlen: int, distinct: bool) -> None:
+        self.window_ns, self.maxlen, self.distinct = window_ns, maxlen, distinct
+        self.samples: list[tuple[int, int]] = []
+        self.last: int | None = None
+
+    def add(self, received: int, value: int) -> bool:
+        self.last = received
+        if self.distinct and value in [v for _, v in self.samples]:
+            return False
+        self.samples.append((received, value))
+        del self.samples[:-self.maxlen]
+        return True
+
+    def age(self, now: int) -> None:
+        while self.samples and self.samples[0][0] < now - self.window_ns:
+            del self.samples[0]
+
+    def span_rate(self, samples: list[tuple[int, int]]) -> float:
+        vals = [v for _, v in samples]
+        return link_rate(len(vals), min(vals), max(vals)) if len(vals) >= 2 else 0.0
+
+    def rate(self, now: int) -> float:
+        from tfbus.monitor import STALE_AFTER, STALE_PERIODS
+
+        self.age(now)
+        if self.samples and self.samples[-1][0] > now:
+            return self.span_rate([s for s in self.samples if s[0] <= now])
+        if self.last is None:
+            return 0.0
+        rate = self.span_rate(self.samples)
+        period = 1.0 / rate if rate > 0 else 0.0
+        stale = (now - self.last) / 1e9 > max(STALE_AFTER, STALE_PERIODS * period)
+        return 0.0 if stale else rate
+
+
+@pytest.mark.parametrize("distinct", [True, False])
+def test_rate_window_matches_its_definition_on_any_order(distinct: bool) -> None:
+    """RateWindow against :class:`_NaiveWindow` on streams in order, reversed, random,
+    with repeated values and receive times that go back: the same answer to every add,
+    the same samples held, values and rates (hypothesis)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from tfbus.monitor import RateWindow
+
+    step = st.tuples(st.integers(0, 3), st.integers(0, 40), st.integers(-5, 5))
+
+    @settings(max_examples=300, deadline=None, derandomize=True)
+    @given(st.integers(2, 6), st.lists(step, max_size=60), st.sampled_from(["up", "down", "any"]))
+    def check(maxlen: int, steps: list[tuple[int, int, int]], order: str) -> None:
+        w = RateWindow(0.5, maxlen, distinct=distinct)
+        ref = _NaiveWindow(w.window_ns, maxlen, distinct)
+        received = T0
+        for i, (kind, value, jump) in enumerate(steps):
+            received += jump * 100 * MS
+            stamp = {"up": i // 2, "down": -(i // 2), "any": value}[order] * 10 * MS + T0
+            if kind == 3:  # read the rate at a time that may be before the last add
+                now = Time.from_ns(received)
+                assert w.rate(now) == ref.rate(received)
+            else:
+                assert w.add(received, stamp) == ref.add(received, stamp)
+            assert w.values_by_time() == [r for r, _ in ref.samples]
+            assert w.values() == {v for _, v in ref.samples}
+            assert len(w) == len(ref.samples)
+
+    check()

@@ -234,7 +234,7 @@ class _Link:
         "drop_worst", "dynamic", "first_gap", "gap_count", "gap_largest", "gap_senders", "hot",
         "intervals",
         "last_gap", "last_received", "newest", "old_data", "order_span", "out_of_order",
-        "parent", "parents", "period", "recent", "recent_set", "repeat_span", "repeated",
+        "parent", "parents", "period", "recent", "repeat_span", "repeated",
         "sender_stamp", "static", "static_values",
     )
 
@@ -251,8 +251,9 @@ class _Link:
         self.hot: tuple[str, str, bool, _Span, _Span, list[float] | None,
                         _Sample | None] | None = None
         self.newest: int | None = None
-        self.recent: deque[int] = deque()
-        self.recent_set: set[int] = set()
+        # the last stamps kept (a repeated one is looked for here only when a stamp is
+        # not newer than the newest: 32 ints scanned, no set to keep on the common path)
+        self.recent: deque[int] = deque(maxlen=_RECENT_STAMPS)
         self.repeated: dict[str, int] = {}
         self.repeat_span: _Span | None = None
         self.out_of_order: dict[str, int] = {}
@@ -402,11 +403,7 @@ class Doctor:
         newest = link.newest
         if newest is not None and stamp > newest:
             # in order (the common case): newer than every stamp held, so not repeated
-            recent = link.recent
-            recent.append(stamp)
-            link.recent_set.add(stamp)
-            if len(recent) > _RECENT_STAMPS:
-                link.recent_set.discard(recent.popleft())
+            link.recent.append(stamp)
             link.sender_stamp[sender] = stamp
             self._interval(link, t, stamp, newest, sender)
         else:
@@ -472,15 +469,12 @@ class Doctor:
 
     def _stamps(self, link: _Link, t: int, stamp: int, sender: str) -> None:
         # repeated stamps (TF_REPEATED_DATA) and out-of-order ones, by sender
-        if stamp in link.recent_set:
+        if stamp in link.recent:
             link.repeated[sender] = link.repeated.get(sender, 0) + 1
             link.repeat_span = link.repeat_span or _Span(t)
             link.repeat_span.add(t)
             return
         link.recent.append(stamp)
-        link.recent_set.add(stamp)
-        if len(link.recent) > _RECENT_STAMPS:
-            link.recent_set.discard(link.recent.popleft())
         before = link.sender_stamp.get(sender)
         link.sender_stamp[sender] = stamp if before is None else max(before, stamp)
         if before is not None and stamp < before:
