@@ -246,8 +246,9 @@ class RateWindow:
         not counted."""
         self.age(now)
         received = self._received
-        if received and received[-1] > now.ns:
-            vals = [v for r, v in zip(received, self._values, strict=True) if r <= now.ns]
+        now_ns = now.ns
+        if received and received[-1] > now_ns:
+            vals = [v for r, v in zip(received, self._values, strict=True) if r <= now_ns]
             if len(vals) < 2:
                 return 0.0
             return link_rate(len(vals), min(vals), max(vals))

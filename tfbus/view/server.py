@@ -96,6 +96,12 @@ def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, 
     return (r, g, b)
 
 
+@functools.lru_cache(maxsize=4096)
+def _axes_mix(colour: float) -> tuple[tuple[tuple[int, int, int], tuple[int, int, int]], ...]:
+    """The x, y and z axes' :func:`_mix` of ``colour``, each as a segment's two ends."""
+    return tuple((c, c) for c in (_mix(colour, full) for full in AXES_COLOURS))
+
+
 def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """sRGB 0-255 as the linear 0-255 values viser's per-vertex line colours are (its
     client divides by 255 and three.js encodes the output as sRGB): sent so, a colour is
@@ -186,8 +192,6 @@ class DrawnFrame:
         self.label = label
         """The viser label with the frame id as text."""
         self.name: str = str(node.name)
-        self.position: npt.NDArray[np.float64] = np.zeros(3)
-        self.wxyz: npt.NDArray[np.float64] = np.array([1.0, 0.0, 0.0, 0.0])
         self.visible = False
         self.posed = posed
         """Whether the node itself is moved (it carries ``--urdf`` geometry)."""
@@ -205,10 +209,21 @@ class DrawnFrame:
         if pose == self._pose:
             return
         self._pose = pose
-        self.position = np.array(xyz, dtype=np.float64)
-        self.wxyz = np.array(wxyz, dtype=np.float64)
         if self.posed:
             _send_pose(self.node, xyz, wxyz)
+
+    @property
+    def position(self) -> npt.NDArray[np.float64]:
+        """``(3,) float64``, metres: the position last drawn (zeros before any)."""
+        return np.array(self._pose[0] if self._pose is not None else (0.0, 0.0, 0.0),
+                        dtype=np.float64)
+
+    @property
+    def wxyz(self) -> npt.NDArray[np.float64]:
+        """``(4,) float64``: the orientation last drawn, a unit quaternion w, x, y, z
+        (the identity before any)."""
+        return np.array(self._pose[1] if self._pose is not None else (1.0, 0.0, 0.0, 0.0),
+                        dtype=np.float64)
 
     def show(self, drawn: bool, labels: bool) -> None:
         """Show or hide the frame (``drawn``) and its label (``drawn and labels``); a label
@@ -290,7 +305,7 @@ class TfPage:
                                              npt.NDArray[np.uint8]]] = {}
         self.axes_rows: dict[str, int] = {}
         """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
-        self._axes_srgb: list[list[tuple[int, int, int]]] = []
+        self._axes_srgb: list[Sequence[tuple[int, int, int]]] = []
         gui = self.server.gui
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
@@ -596,7 +611,7 @@ class TfPage:
         colours: list[list[tuple[int, int, int]]] = []
         origins: list[tuple[float, float, float]] = []
         quaternions: list[tuple[float, float, float, float]] = []
-        axes_colours: list[list[tuple[int, int, int]]] = []
+        axes_colours: list[Sequence[tuple[int, int, int]]] = []
         rows: dict[str, int] = {}
         length = float(self.axis_length.value)
         labels = bool(self.labels_box.value)
@@ -606,21 +621,25 @@ class TfPage:
             record = self.frames.get(f.frame_id)
             if record is None:
                 record = self._add_frame(f.frame_id)
-            if f.pose is not None:
-                record.place(_xyz(f.pose), _wxyz(f.pose))
+            pose = f.pose
+            if pose is None:
+                record.show(drawn, labels)
+                continue
+            xyz = _xyz(pose)
+            record.place(xyz, _wxyz(pose))
             record.show(drawn, labels)
-            if drawn and f.pose is not None:
-                rows[f.frame_id] = 3 * len(origins)
-                q = f.pose.transform.rotation
-                origins.append(_xyz(f.pose))
-                quaternions.append((q.x, q.y, q.z, q.w))
-                for full in AXES_COLOURS:
-                    c = _mix(f.colour if f.colour is not None else 0.0, full)
-                    axes_colours.append([c, c])
+            if not drawn:
+                continue
+            colour = f.colour if f.colour is not None else 0.0
+            rows[f.frame_id] = 3 * len(origins)
+            q = pose.transform.rotation
+            origins.append(xyz)
+            quaternions.append((q.x, q.y, q.z, q.w))
+            axes_colours.extend(_axes_mix(colour))
             parent_pose = poses.get(f.parent) if f.parent is not None else None
-            if drawn and f.pose is not None and parent_pose is not None:
-                segments.append([_xyz(f.pose), _xyz(parent_pose)])
-                c = _mix(f.colour if f.colour is not None else 0.0)
+            if parent_pose is not None:
+                segments.append([xyz, _xyz(parent_pose)])
+                c = _mix(colour)
                 colours.append([c, c])
         for name, drawn_frame in self.frames.items():  # drawn before, not in this scene
             if name not in poses and drawn_frame.visible:
@@ -807,7 +826,7 @@ class TfPage:
 
     def _segments(self, name: str, handle: Any, count: int,
                   segments: list[list[tuple[float, float, float]]] | npt.NDArray[np.float64],
-                  colours: list[list[tuple[int, int, int]]] | npt.NDArray[np.uint8],
+                  colours: Sequence[Sequence[tuple[int, int, int]]] | npt.NDArray[np.uint8],
                   thickness: float) -> tuple[Any, int]:
         """Show ``segments`` as the line-segments node ``name`` (re-made when their number
         changes, else updated in place; hidden when there are none; nothing sent when
