@@ -222,6 +222,24 @@ def _feed(doctor: Doctor, t_ns: int, *tfs: object, sender: str = "/a",
     doctor.add(t_ns, tfs, sender, static=static)  # type: ignore[arg-type]
 
 
+def test_every_slashed_id_is_counted_whatever_came_before_it() -> None:
+    """A leading '/' is counted on every transform that has one, also after the same
+    link arrived again and again without it, or after an id slashed twice ("//b",
+    "//p": stored as "/b" and "/p") that the once-slashed "/b" and "/p" would match
+    once stripped of nothing."""
+    d = Doctor()
+    for k in range(3):
+        _feed(d, T0 + k * MS, tf("p", "b", T0 + k * MS))
+    _feed(d, T0 + 3 * MS, tf("/p", "/b", T0 + 3 * MS))
+    for k in range(4, 6):
+        _feed(d, T0 + k * MS, tf("//p", "//b", T0 + k * MS))
+    for k in range(6, 9):
+        _feed(d, T0 + k * MS, tf("/p", "/b", T0 + k * MS))
+    found = {f.frames[0]: f.counts["transforms"] for f in d.report().by_check("leading_slash")}
+    assert found == {"/b": 4, "/p": 4, "//b": 2, "//p": 2}
+    assert d.transforms == 9
+
+
 def test_stamps_older_than_the_cache_are_an_error() -> None:
     """A stamp 11 s behind the frame's newest (tf2's cache_time 10 s): TF_OLD_DATA."""
     d = Doctor()

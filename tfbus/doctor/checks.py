@@ -367,24 +367,28 @@ class Doctor:
     def _add_one(self, t: int, ts: TransformStamped, sender: str, static: bool) -> None:
         child = ts.child_frame_id
         parent = ts.header.frame_id
-        if child.startswith("/"):  # tf2 (ROS 1, and tfbus) stores it without the slash
-            self._slash(child, "child_frame_id", sender, t)
-            child = child[1:]
-        if parent.startswith("/"):
-            self._slash(parent, "frame_id", sender, t)
-            parent = parent[1:]
-        link = self._links.get(child) or self._link(child)
-        if link is None:
-            return
-        link.last_received = t
-        hot = link.hot
+        link = self._links.get(child)
+        hot = link.hot if link is not None else None
         if hot is not None and hot[0] == parent and hot[1] == sender and hot[2] is static:
             # the same parent, sender and topic as the link's last message: no lookups
+            # (and no slash to strip: the links and their parents are kept without it)
+            assert link is not None
             hot[3].add(t)
             hot[4].add(t)
             mean, sample = hot[5], hot[6]
         else:
+            if child.startswith("/"):  # tf2 (ROS 1, and tfbus) stores it without the slash
+                self._slash(child, "child_frame_id", sender, t)
+                child = child[1:]
+                link = None
+            if parent.startswith("/"):
+                self._slash(parent, "frame_id", sender, t)
+                parent = parent[1:]
+            link = link or self._link(child)
+            if link is None:
+                return
             mean, sample = self._relook(link, t, parent, sender, static)
+        link.last_received = t
         if static:
             tr, rot = ts.transform.translation, ts.transform.rotation
             link.static_values[sender] = (parent, tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w)
@@ -436,7 +440,10 @@ class Doctor:
             sample = self._delays.get(sender)
             if sample is None:
                 sample = self._delays[sender] = _Sample(self.thresholds.delay_samples)
-        link.hot = (parent, sender, static, span, sspan, mean, sample)
+        # The hot entry lets a later message skip the slash checks (see _add_one): not
+        # kept for an id that still starts with '/' once one was stripped ("//a").
+        link.hot = (None if parent.startswith("/") or link.child.startswith("/")
+                    else (parent, sender, static, span, sspan, mean, sample))
         return mean, sample
 
     def _slash(self, frame_id: str, role: str, sender: str, t: int) -> None:
