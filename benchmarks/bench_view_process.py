@@ -169,7 +169,7 @@ def measure(rounds: int, seconds: float) -> Measured:
             [sys.executable, "-c", "from tfbus.cli import main; main()", "view", "--bus",
              f"zenoh?connect=tcp/127.0.0.1:{zport}", "--port", str(vport)],
             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, text=True,
-            start_new_session=True)  # fmt: skip
+            start_new_session=True, cwd=ROOT)  # fmt: skip (``-c`` puts the cwd first on sys.path)
         deadline = time.monotonic() + 60
         while not _listening(vport) and time.monotonic() < deadline:
             time.sleep(0.1)
