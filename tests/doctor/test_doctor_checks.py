@@ -223,10 +223,10 @@ def _feed(doctor: Doctor, t_ns: int, *tfs: object, sender: str = "/a",
 
 
 def test_every_slashed_id_is_counted_whatever_came_before_it() -> None:
-    """A leading '/' is counted on every transform that has one, also after the same
-    link arrived again and again without it, or after an id slashed twice ("//b",
-    "//p": stored as "/b" and "/p") that the once-slashed "/b" and "/p" would match
-    once stripped of nothing."""
+    """A leading '/' is counted on every transform that has one: also after the same
+    link arrived again and again without it, and after ids slashed twice ("//b", "//p",
+    whose link is stored as "/b" under "/p": the very strings a once-slashed "/p" ->
+    "/b" carries before its slash is stripped)."""
     d = Doctor()
     for k in range(3):
         _feed(d, T0 + k * MS, tf("p", "b", T0 + k * MS))

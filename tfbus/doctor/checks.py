@@ -368,11 +368,10 @@ class Doctor:
         child = ts.child_frame_id
         parent = ts.header.frame_id
         link = self._links.get(child)
-        hot = link.hot if link is not None else None
-        if hot is not None and hot[0] == parent and hot[1] == sender and hot[2] is static:
+        if (link is not None and (hot := link.hot) is not None and hot[0] == parent
+                and hot[1] == sender and hot[2] is static):
             # the same parent, sender and topic as the link's last message: no lookups
             # (and no slash to strip: the links and their parents are kept without it)
-            assert link is not None
             hot[3].add(t)
             hot[4].add(t)
             mean, sample = hot[5], hot[6]
@@ -380,7 +379,7 @@ class Doctor:
             if child.startswith("/"):  # tf2 (ROS 1, and tfbus) stores it without the slash
                 self._slash(child, "child_frame_id", sender, t)
                 child = child[1:]
-                link = None
+                link = None  # the link of the id without the slash, looked up below
             if parent.startswith("/"):
                 self._slash(parent, "frame_id", sender, t)
                 parent = parent[1:]
