@@ -1,8 +1,12 @@
-"""Type stubs for the compiled ROS 1 wire decoder (``tfbus/codecs/_cwire.pyx``)."""
+"""Type stubs for the compiled wire decoders (``tfbus/codecs/_cwire.pyx``)."""
 
-from tfbus.messages import TransformStamped
+from tfbus.messages import TFMessage, TransformStamped
 
 def _tf_from_ros1(buf: memoryview | bytes) -> list[TransformStamped]: ...
 
 _REUSES: bool
 """Whether this build refills the objects of a decoded message nobody holds any more."""
+
+def _tf_from_native(
+    buf: bytes, max_transforms: int, max_id: int
+) -> tuple[int, int, TFMessage] | None: ...

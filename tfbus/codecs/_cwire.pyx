@@ -1,11 +1,14 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
 # cython: initializedcheck=False, embedsignature=True
-"""ROS 1 wire, compiled: ``_tf_from_ros1`` turns a ROS 1 serialised ``TFMessage`` into
+"""Wire decoders, compiled: ``_tf_from_ros1`` turns a ROS 1 serialised ``TFMessage`` into
 TransformStamped values, built in C like the lookups' results (the fast path of
 :func:`tfbus.codecs.ros1.decode_tf`; the pure-Python twin is
-:func:`tfbus.codecs.ros1.decode_ros1_struct`). It uses the compiled core's C helpers
-(``tfbus/core/_ccore.pxd``, ``_cresults.pxd``), so it is built with the compiled core and
-loaded only with it (:mod:`tfbus.codecs.ros1` chooses)."""
+:func:`tfbus.codecs.ros1.decode_ros1_struct`), and ``_tf_from_native`` does the same for a
+TFMessage payload of tfbus's own wire in the form tfbus writes it (the fast path of
+:meth:`tfbus.codecs.native.WireCodec.decode`; msgspec's schema decodes everything else).
+They use the compiled core's C helpers (``tfbus/core/_ccore.pxd``, ``_cresults.pxd``), so
+they are built with the compiled core and loaded only with it (:mod:`tfbus.codecs.ros1`
+and :mod:`tfbus.codecs.native` choose)."""
 
 from cpython.float cimport PyFloat_FromDouble
 from cpython.object cimport PyObject
@@ -15,15 +18,15 @@ from cpython.unicode cimport PyUnicode_GET_LENGTH
 from libc.stdint cimport int64_t
 
 from tfbus.core._ccore cimport _time_of
-from tfbus.core._cresults cimport PyObject_GC_UnTrack, _named, _named3, _named4
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.core._cresults cimport PyObject_GC_UnTrack, _named, _named1, _named3, _named4
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
 
 from struct import error as _StructError
 
-from cpython.list cimport PyList_New, PyList_SET_ITEM
+from cpython.list cimport PyList_AsTuple, PyList_New, PyList_SET_ITEM
 from cpython.unicode cimport PyUnicode_DecodeUTF8
-from libc.stdint cimport uint32_t
+from libc.stdint cimport uint32_t, uint64_t
 from libc.string cimport memcmp
 
 
@@ -289,3 +292,197 @@ def _tf_from_ros1(const unsigned char[::1] buf):
             ts = _named3(TransformStamped, header, child, _ros1_transform(k, v, NULL))
         out[k] = ts
     return out
+
+
+# -- tfbus's own wire (msgpack, tfbus.codecs.native) ---------------------------------------
+# Frame ids by position, as for ROS 1 above, in lists of their own (a process may follow
+# both wires).
+cdef list _native_children = [None] * _ROS1_ID_SLOTS
+cdef list _native_frames = [None] * _ROS1_ID_SLOTS
+
+
+cdef inline uint64_t _be(const unsigned char* p, int n) noexcept:
+    """The big-endian unsigned integer of the ``n`` bytes at ``p`` (msgpack's order)."""
+    cdef uint64_t v = 0
+    cdef int i
+    for i in range(n):
+        v = (v << 8) | p[i]
+    return v
+
+
+cdef inline Py_ssize_t _array(const unsigned char* p, Py_ssize_t size, Py_ssize_t* off) noexcept:
+    """The length of the msgpack array at ``p[off]`` (fixarray, array 16, array 32), its
+    header skipped; -1 when it is not an array or is cut short."""
+    cdef Py_ssize_t o = off[0]
+    cdef unsigned char b
+    if o >= size:
+        return -1
+    b = p[o]
+    if 0x90 <= b <= 0x9f:
+        off[0] = o + 1
+        return b & 0x0f
+    if b == 0xdc and o + 3 <= size:
+        off[0] = o + 3
+        return <Py_ssize_t>_be(p + o + 1, 2)
+    if b == 0xdd and o + 5 <= size:
+        off[0] = o + 5
+        return <Py_ssize_t>_be(p + o + 1, 4)
+    return -1
+
+
+cdef inline int _uint63(const unsigned char* p, Py_ssize_t size, Py_ssize_t* off,
+                        int64_t* out) noexcept:
+    """The msgpack integer at ``p[off]`` when it is in [0, 2**63): 1 and ``out`` set, its
+    bytes skipped; 0 for anything else (another type, a negative value, cut short)."""
+    cdef Py_ssize_t o = off[0]
+    cdef unsigned char b
+    cdef int n
+    cdef uint64_t v
+    if o >= size:
+        return 0
+    b = p[o]
+    if b <= 0x7f:
+        out[0] = b
+        off[0] = o + 1
+        return 1
+    if 0xcc <= b <= 0xcf:  # uint 8, 16, 32, 64
+        n = 1 << (b - 0xcc)
+    elif 0xd0 <= b <= 0xd3:  # int 8, 16, 32, 64: a non-negative value only
+        n = 1 << (b - 0xd0)
+        if o + 1 < size and p[o + 1] & 0x80:
+            return 0
+    else:
+        return 0
+    if o + 1 + n > size:
+        return 0
+    v = _be(p + o + 1, n)
+    if v > <uint64_t>0x7fffffffffffffff:
+        return 0
+    out[0] = <int64_t>v
+    off[0] = o + 1 + n
+    return 1
+
+
+cdef inline object _native_id(list cache, Py_ssize_t k, const unsigned char* p,
+                              Py_ssize_t size, Py_ssize_t* off, Py_ssize_t max_length):
+    """The msgpack str at ``p[off]`` (fixstr, str 8, 16, 32), its bytes skipped: the one
+    cached at ``k`` when equal (see ``_ros1_id``); None when it is not a str, is cut short,
+    is not UTF-8 or is longer than ``max_length`` characters."""
+    cdef Py_ssize_t o = off[0], n
+    cdef unsigned char b
+    cdef object text
+    if o >= size:
+        return None
+    b = p[o]
+    if 0xa0 <= b <= 0xbf:
+        n = b & 0x1f
+        o += 1
+    elif 0xd9 <= b <= 0xdb:
+        if o + 1 + (1 << (b - 0xd9)) > size:
+            return None
+        n = <Py_ssize_t>_be(p + o + 1, 1 << (b - 0xd9))
+        o += 1 + (1 << (b - 0xd9))
+    else:
+        return None
+    if n > size - o:
+        return None
+    off[0] = o + n
+    try:
+        text = _ros1_id(cache, k, p + o, <uint32_t>n)
+    except UnicodeDecodeError:
+        return None
+    if PyUnicode_GET_LENGTH(text) > max_length:
+        return None
+    return text
+
+
+cdef inline int _float64s(const unsigned char* p, Py_ssize_t size, Py_ssize_t* off,
+                          double* out, Py_ssize_t n) noexcept:
+    """An array of exactly ``n`` msgpack float 64s at ``p[off]`` into ``out``: 1, its bytes
+    skipped; 0 for anything else."""
+    cdef Py_ssize_t i
+    cdef uint64_t bits
+    if _array(p, size, off) != n:
+        return 0
+    for i in range(n):
+        if off[0] + 9 > size or p[off[0]] != 0xcb:
+            return 0
+        bits = _be(p + off[0] + 1, 8)
+        memcpy(&out[i], &bits, 8)
+        off[0] += 9
+    return 1
+
+
+def _tf_from_native(const unsigned char[::1] buf, Py_ssize_t max_transforms,
+                    Py_ssize_t max_id):
+    """A tfbus wire payload (``tfbus.codecs.native``: ``MAGIC``, the version, then the
+    msgpack array ``[sender, seq, "tf", body]``) of a TFMessage in the form tfbus writes
+    it, decoded in C: ``(sender, seq, TFMessage)``, the values ``WireCodec``'s msgspec
+    schema decodes from it (equal, tested; an ASCII frame id equal to the one at the same
+    position of the last message is that message's str, and a transform whose header
+    bytes equal the previous transform's shares its Header). None for anything else,
+    which the caller decodes by that schema (and which raises what is wrong with it):
+    another tag, a sender or sequence number outside [1, 2**63), an array of another
+    length, an integer or float 32 where a float 64 is, a stamp outside [0, 2**63) ns,
+    an id that is not UTF-8 or longer than ``max_id`` characters, more than
+    ``max_transforms`` transforms, bytes left over. The magic byte and version are the
+    caller's to check (bytes 0 and 1 are skipped)."""
+    cdef Py_ssize_t size = buf.shape[0], off = 2, n, k, head, hlen = 0, prev = -1
+    cdef const unsigned char* p
+    cdef int64_t sender, seq, stamp, last_stamp = -1
+    cdef double v[7]
+    cdef object header = None, time = None, frame, child, vec, tf
+    cdef list out
+    if size < 2:
+        return None
+    p = &buf[0]
+    if _array(p, size, &off) != 4:
+        return None
+    if not _uint63(p, size, &off, &sender) or not _uint63(p, size, &off, &seq):
+        return None
+    if sender == 0 or seq == 0:
+        return None
+    if off + 3 > size or p[off] != 0xa2 or p[off + 1] != 0x74 or p[off + 2] != 0x66:  # "tf"
+        return None
+    off += 3
+    n = _array(p, size, &off)
+    # Every transform takes more than 64 bytes: a count the payload cannot hold is not
+    # allocated for.
+    if n < 0 or n > max_transforms or n > (size - off) // 64:
+        return None
+    out = PyList_New(n)
+    for k in range(n):  # as in _tf_from_ros1: no NULL slot if a transform is refused
+        Py_INCREF(None)
+        PyList_SET_ITEM(out, k, None)
+    for k in range(n):
+        if _array(p, size, &off) != 3:
+            return None
+        head = off
+        if _array(p, size, &off) != 2 or not _uint63(p, size, &off, &stamp):
+            return None
+        frame = _native_id(_native_frames, k, p, size, &off, max_id)
+        if frame is None:
+            return None
+        if not (prev >= 0 and hlen == off - head and memcmp(p + prev, p + head, hlen) == 0):
+            if stamp != last_stamp:  # the transforms of a message often share a stamp
+                time = _time_of(stamp)
+                last_stamp = stamp
+            header = _named(Header, time, frame)
+            prev = head
+            hlen = off - head
+        child = _native_id(_native_children, k, p, size, &off, max_id)
+        if child is None:
+            return None
+        if (_array(p, size, &off) != 2 or not _float64s(p, size, &off, v, 3)
+                or not _float64s(p, size, &off, v + 3, 4)):
+            return None
+        vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
+                      PyFloat_FromDouble(v[2]))
+        PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
+        tf = _named(Transform, vec, _named4(Quaternion, v[3], v[4], v[5], v[6]))
+        PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
+        out[k] = _named3(TransformStamped, header, child, tf)
+    if off != size:
+        return None
+    return sender, seq, _named1(TFMessage, PyList_AsTuple(out))
+

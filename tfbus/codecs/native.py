@@ -59,6 +59,7 @@ that are not msgpack (truncated, reserved byte ``0xc1``).
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import secrets
 from collections.abc import Callable, Sequence
@@ -73,6 +74,7 @@ import msgspec
 import numpy as np
 
 from tfbus import messages as _m
+from tfbus.core import COMPILED
 from tfbus.errors import (
     WireDecodeError,
     WireEncodeError,
@@ -262,6 +264,8 @@ class WireCodec:
             _cloud_schema(self.limits)
         )
         self._typed: dict[str, Callable[[bytes | memoryview], object]] = {}
+        self._max_transforms = self.limits.max_transforms
+        self._max_id = self.limits.max_frame_id_length
 
     # -- encoding -------------------------------------------------------------------
 
@@ -281,7 +285,11 @@ class WireCodec:
 
         A TFMessage body is decoded by a fixed schema (no part of it is decoded
         generically, so no nesting can make it recurse); any other body is first walked
-        without decoding and refused if nested deeper than ``limits.max_depth``.
+        without decoding and refused if nested deeper than ``limits.max_depth``. With the
+        compiled core, a TFMessage in the form tfbus writes it (float 64s, the envelope's
+        four fields, nothing left over) is decoded in C first
+        (``tfbus.codecs._cwire._tf_from_native``: the schema's values, its limits); any
+        other payload goes to the schema.
 
         Raises:
             WireDecodeError: bad magic byte, bad msgpack, wrong shape or field type, a
@@ -303,6 +311,19 @@ class WireCodec:
                 f"wire format version {payload[1]}, this tfbus speaks {WIRE_VERSION}"
             )
         data = payload if type(payload) is bytes else bytes(payload)
+        if _compiled_tf is not None:  # a TFMessage as tfbus writes it, built in C
+            fast = _compiled_tf(data, self._max_transforms, self._max_id)
+            if fast is not None:
+                return _new(Decoded, fast)
+        return self._decode_schema(data)
+
+    def _decode_schema(self, data: bytes) -> Decoded:
+        """:meth:`decode` by msgspec's schemas (its checks of the magic byte, version and
+        size done): what the compiled decoder returns None for, and every payload without
+        the compiled core.
+
+        Raises: as :meth:`decode`.
+        """
         view = memoryview(data)
         try:  # the fast path: a well-formed TFMessage, decoded by one typed schema
             env = self._tf_envelope_decoder.decode(view[2:])
@@ -531,6 +552,27 @@ def _cloud_from_wire(body: Any) -> PointCloud2:
 _new = tuple.__new__
 _TransformStamped = _m.TransformStamped
 _Header = _m.Header
+
+
+def _compiled_decoder() -> Callable[[bytes, int, int], tuple[int, int, TFMessage] | None] | None:
+    """The compiled decoder of a TFMessage payload in the form tfbus writes it
+    (``tfbus.codecs._cwire._tf_from_native``: objects built in C with the compiled core's
+    helpers) when the compiled core is loaded (:data:`tfbus.core.COMPILED`: not with
+    ``TFBUS_PURE_PYTHON``) and the extension is installed; else None (msgspec's schema
+    decodes every payload). An extension that is installed but fails to import raises,
+    as the core's do."""
+    if not COMPILED or importlib.util.find_spec("tfbus.codecs._cwire") is None:
+        return None
+    from tfbus.codecs import _cwire
+
+    decode: Callable[[bytes, int, int], tuple[int, int, TFMessage] | None]
+    decode = _cwire._tf_from_native
+    return decode
+
+
+_compiled_tf = _compiled_decoder()
+"""The compiled TFMessage decoder (``None`` for anything but a TFMessage as tfbus writes
+it, equal values otherwise: tested), where there is one."""
 
 
 def _from_wire(items: Any) -> tuple[_m.TransformStamped, ...]:

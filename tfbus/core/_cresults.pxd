@@ -18,6 +18,16 @@ cdef extern from "Python.h":
     void PyObject_GC_UnTrack(void* op)
 
 
+cdef inline object _named1(object cls, object a):
+    """``tuple.__new__(cls, (a,))`` for a NamedTuple class of one field."""
+    cdef PyObject* p = PyType_GenericAlloc(<PyTypeObject*>cls, 1)
+    cdef object obj = <object>p
+    Py_DECREF(obj)
+    Py_INCREF(a)
+    PyTuple_SET_ITEM(obj, 0, a)
+    return obj
+
+
 cdef inline object _named(object cls, object a, object b):
     """``tuple.__new__(cls, (a, b))`` for a NamedTuple class, without its Python-level
     ``__new__`` (what ``tuple_subtype_new`` does, minus the argument tuple)."""

@@ -1,0 +1,249 @@
+"""The compiled decoder of tfbus's own wire (``tfbus.codecs._cwire._tf_from_native``, what
+``WireCodec.decode`` tries first with the compiled core): on a TFMessage written as tfbus
+writes it, the values msgspec's schema decodes (``WireCodec._decode_schema``), bit for bit
+and of the same types; on anything else None, so that the schema decodes it or names what
+is wrong. Encodings another msgpack writer may choose (wider array or str headers, an
+integer or float 32 for a float, a signed integer for a stamp) are checked against the
+schema by hand-built payloads. No I/O."""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
+
+msgspec = pytest.importorskip("msgspec")
+
+from tfbus.codecs import native as wire  # noqa: E402
+from tfbus.errors import WireError, WireLimitError  # noqa: E402
+from tfbus.messages import (  # noqa: E402
+    Header,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
+from tfbus.time import TIME_MAX_NS, Time  # noqa: E402
+
+compiled = wire._compiled_tf
+pytestmark = pytest.mark.skipif(
+    compiled is None, reason="the compiled core is not built here (pure-Python install)"
+)
+HEAD = bytes([wire.MAGIC, wire.WIRE_VERSION])
+PROPERTY = settings(max_examples=200, deadline=None, derandomize=True, database=None,
+                    suppress_health_check=[HealthCheck.too_slow])
+LIMITS = wire.WireLimits()
+
+
+def _exact(decoded: Any) -> tuple[Any, ...]:
+    """A Decoded as comparable values: types named, every float by its bits (NaN payloads
+    and -0.0 told apart)."""
+    sender, seq, message = decoded
+    rows = []
+    for t in message.transforms:
+        tr, rot = t.transform.translation, t.transform.rotation
+        floats = (*tr, *rot)
+        rows.append((
+            type(t), type(t.header), type(t.header.stamp), type(t.transform), type(tr),
+            type(rot), tuple(type(f) for f in floats), t.header.stamp.ns,
+            t.header.frame_id, t.child_frame_id, struct.pack("<7d", *floats),
+        ))
+    return sender, seq, type(message), type(message.transforms), rows
+
+
+def _both(codec: wire.WireCodec, payload: bytes) -> tuple[Any, Any]:
+    """(what the compiled decoder returns, what the schema decodes or the WireError type)."""
+    assert compiled is not None
+    fast = compiled(payload, codec.limits.max_transforms, codec.limits.max_frame_id_length)
+    try:
+        schema: Any = codec._decode_schema(payload)
+    except WireError as exc:
+        schema = type(exc)
+    return fast, schema
+
+
+frame_ids = st.text(min_size=1, max_size=12).filter(lambda s: not s.startswith("/"))
+floats = st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from(
+    [0.0, -0.0, math.nan, -math.nan, struct.unpack("<d", b"\x01\x00\x00\x00\x00\x00\xf8\x7f")[0]]
+)
+stamps = st.integers(0, TIME_MAX_NS) | st.sampled_from([0, 1, 127, 128, 2**32, TIME_MAX_NS])
+
+
+@st.composite
+def tf_messages(draw: st.DrawFn) -> TFMessage:
+    n = draw(st.integers(0, 6))
+    shared = draw(stamps)
+    out = []
+    for _ in range(n):
+        stamp = shared if draw(st.booleans()) else draw(stamps)
+        values = [draw(floats) for _ in range(7)]
+        out.append(TransformStamped(
+            Header(Time.from_ns(stamp), draw(frame_ids)), draw(frame_ids),
+            Transform(Vector3(*values[:3]), Quaternion(*values[3:])),
+        ))
+    return TFMessage(tuple(out))
+
+
+@PROPERTY
+@given(message=tf_messages(), sender=st.integers(1, 2**63 - 1), seq=st.integers(1, 2**63 - 1))
+@example(message=TFMessage(()), sender=1, seq=1)
+def test_what_tfbus_writes_decodes_to_the_schema_values(
+    message: TFMessage, sender: int, seq: int
+) -> None:
+    codec = wire.WireCodec()
+    payload = codec.encode(message, sender=sender, seq=seq)
+    fast, schema = _both(codec, payload)
+    assert fast is not None
+    assert _exact(fast) == _exact(schema)
+    # decode() is the compiled path here, twice (the ids cached by position the second
+    # time) and from a bytearray or a memoryview alike
+    for again in (payload, payload, bytearray(payload), memoryview(payload)):
+        assert _exact(codec.decode(again)) == _exact(schema)
+
+
+@PROPERTY
+@given(data=st.data())
+def test_damaged_payloads_decode_as_the_schema_does_or_are_left_to_it(
+    data: st.DataObject,
+) -> None:
+    codec = wire.WireCodec()
+    payload = bytearray(codec.encode(data.draw(tf_messages()), sender=3, seq=9))
+    for _ in range(data.draw(st.integers(1, 3))):
+        kind = data.draw(st.sampled_from(["flip", "cut", "extend", "set"]))
+        if kind == "flip" and len(payload) > 2:
+            i = data.draw(st.integers(2, len(payload) - 1))
+            payload[i] ^= 1 << data.draw(st.integers(0, 7))
+        elif kind == "cut":
+            del payload[data.draw(st.integers(2, len(payload))):]
+        elif kind == "extend":
+            payload += data.draw(st.binary(min_size=1, max_size=8))
+        elif len(payload) > 2:
+            payload[data.draw(st.integers(2, len(payload) - 1))] = data.draw(st.integers(0, 255))
+    fast, schema = _both(codec, bytes(payload))
+    if fast is not None:
+        assert isinstance(schema, tuple), schema
+        assert _exact(fast) == _exact(schema)
+
+
+def _item(stamp: bytes = b"\x05", frame: bytes = b"\xa1a", child: bytes = b"\xa1b",
+          vec: bytes | None = None, rot: bytes | None = None) -> bytes:
+    f64 = b"\xcb" + struct.pack(">d", 0.5)
+    vec = b"\x93" + f64 * 3 if vec is None else vec
+    rot = b"\x94" + f64 * 3 + b"\xcb" + struct.pack(">d", 1.0) if rot is None else rot
+    return b"\x93\x92" + stamp + frame + child + b"\x92" + vec + rot
+
+
+def _payload(items: bytes, count: bytes = b"\x91", tag: bytes = b"\xa2tf",
+             sender: bytes = b"\x01", seq: bytes = b"\x02", head: bytes = b"\x94") -> bytes:
+    return HEAD + head + sender + seq + tag + count + items
+
+
+def test_the_hand_built_plain_payload_is_decoded_in_c() -> None:
+    fast, schema = _both(wire.WireCodec(), _payload(_item()))
+    assert fast is not None and _exact(fast) == _exact(schema)
+    assert fast[2].transforms[0].transform.rotation == Quaternion(0.5, 0.5, 0.5, 1.0)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        pytest.param(_payload(_item(), head=b"\xdc\x00\x04"), id="array 16 envelope"),
+        pytest.param(_payload(_item(), count=b"\xdd\x00\x00\x00\x01"), id="array 32 body"),
+        pytest.param(_payload(_item(), sender=b"\xcf" + (7).to_bytes(8, "big")),
+                     id="uint 64 sender"),
+        pytest.param(_payload(_item(), seq=b"\xd3" + (9).to_bytes(8, "big")), id="int 64 seq"),
+        pytest.param(_payload(_item(stamp=b"\xd0\x05")), id="int 8 stamp"),
+        pytest.param(_payload(_item(stamp=b"\xcf" + (2**63 - 1).to_bytes(8, "big"))),
+                     id="largest stamp"),
+        pytest.param(_payload(_item(frame=b"\xd9\x01a")), id="str 8 frame id"),
+        pytest.param(_payload(_item(child=b"\xdb\x00\x00\x00\x01b")), id="str 32 child id"),
+        pytest.param(_payload(_item(vec=b"\xdc\x00\x03" + (b"\xcb" + bytes(8)) * 3)),
+                     id="array 16 translation"),
+    ],
+)
+def test_other_writers_headers_decode_as_the_schema_does(payload: bytes) -> None:
+    fast, schema = _both(wire.WireCodec(), payload)
+    assert isinstance(schema, tuple)
+    assert fast is not None and _exact(fast) == _exact(schema)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        pytest.param(_payload(_item(vec=b"\x93\x01\x02\x03")), id="integers for floats"),
+        pytest.param(_payload(_item(vec=b"\x93" + (b"\xca" + struct.pack(">f", 0.5)) * 3)),
+                     id="float 32s"),
+        pytest.param(_payload(_item(), tag=b"\xd9\x02tf"), id="str 8 tag"),
+        pytest.param(_payload(_item(stamp=b"\xff")), id="negative stamp"),
+        pytest.param(_payload(_item(stamp=b"\xcf" + (2**63).to_bytes(8, "big"))),
+                     id="stamp of 2**63"),
+        pytest.param(_payload(_item(), sender=b"\x00"), id="sender 0"),
+        pytest.param(_payload(_item(), seq=b"\xcf" + (2**63).to_bytes(8, "big")),
+                     id="seq of 2**63"),
+        pytest.param(_payload(_item(frame=b"\xa2\xc3\x28")), id="frame id not UTF-8"),
+        pytest.param(_payload(_item(frame=b"\xc4\x01a")), id="bin frame id"),
+        pytest.param(_payload(_item() + b"\x00"), id="a byte left over"),
+        pytest.param(_payload(_item() * 2), id="fewer transforms counted than sent"),
+        pytest.param(_payload(_item(), count=b"\x92"), id="more transforms counted than sent"),
+        pytest.param(_payload(_item(), head=b"\x95") + b"\x00", id="five envelope fields"),
+        pytest.param(_payload(_item(vec=b"\x92" + (b"\xcb" + bytes(8)) * 2)),
+                     id="two coordinates"),
+        pytest.param(_payload(_item(), tag=b"\xa2tg"), id="another tag"),
+        pytest.param(_payload(_item())[:-3], id="cut short"),
+    ],
+)
+def test_anything_else_is_left_to_the_schema(payload: bytes) -> None:
+    codec = wire.WireCodec()
+    fast, schema = _both(codec, payload)
+    assert fast is None
+    # and decode() answers what the schema answers
+    if isinstance(schema, tuple):
+        assert _exact(codec.decode(payload)) == _exact(schema)
+    else:
+        with pytest.raises(schema):
+            codec.decode(payload)
+
+
+def test_the_limits_are_the_codecs() -> None:
+    limits = wire.WireLimits(max_transforms=2, max_frame_id_length=3)
+    codec = wire.WireCodec(limits)
+    at = codec.encode(TFMessage((_ts("abc", "ü12"), _ts("abc", "d"))), sender=1, seq=1)
+    fast, schema = _both(codec, at)
+    assert fast is not None and _exact(fast) == _exact(schema)
+    for over in (
+        codec.encode(TFMessage((_ts("abc", "d"),) * 3), sender=1, seq=1),
+        codec.encode(TFMessage((_ts("abcd", "e"),)), sender=1, seq=1),
+        codec.encode(TFMessage((_ts("a", "ü123"),)), sender=1, seq=1),
+    ):
+        fast, schema = _both(codec, over)
+        assert fast is None and schema is WireLimitError
+        with pytest.raises(WireLimitError):
+            codec.decode(over)
+
+
+def test_a_count_the_payload_cannot_hold_allocates_nothing() -> None:
+    huge = _payload(_item(), count=b"\xdd\xff\xff\xff\xff")
+    fast, schema = _both(wire.WireCodec(), huge)
+    assert fast is None and isinstance(schema, type) and issubclass(schema, WireError)
+
+
+def test_an_ascii_id_seen_at_the_same_position_is_the_same_str() -> None:
+    codec = wire.WireCodec()
+    message = TFMessage((_ts("map", "odom"), _ts("odom", "bäse")))
+    first = codec.decode(codec.encode(message, sender=1, seq=1)).message.transforms
+    second = codec.decode(codec.encode(message, sender=1, seq=2)).message.transforms
+    assert second[0].header.frame_id is first[0].header.frame_id
+    assert second[0].child_frame_id is first[0].child_frame_id
+    assert second[1].child_frame_id == "bäse"  # not ASCII: decoded again, equal
+    other = codec.decode(codec.encode(TFMessage((_ts("world", "odom"),)), sender=1, seq=3))
+    assert other.message.transforms[0].header.frame_id == "world"
+
+
+def _ts(parent: str, child: str) -> TransformStamped:
+    return TransformStamped(Header(Time(3, 4), parent), child,
+                            Transform(Vector3(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, 0.6, 0.8)))
