@@ -243,3 +243,56 @@ async def test_a_settled_wait_is_listed_and_left_in_the_index_when_asked(twin: s
     assert settled == [waiter]  # not settled again
     assert waiter.result is first
     assert core._settle(index, None) is None
+
+
+def counted_wait(
+    index: dict[str, set[Any]], frames: frozenset[str], exact: tuple[str, str, Time, bool]
+) -> _CountedWaiter:
+    waiter = _CountedWaiter(lambda: None, lambda: frames, running_asyncio_loop(), exact)
+    waiter.frames = frames
+    for name in frames:
+        index.setdefault(name, set()).add(waiter)
+    return waiter
+
+
+@pytest.mark.parametrize("twin", sorted(CORES))
+@pytest.mark.parametrize("batch", [False, True], ids=["one insert", "a batch"])
+async def test_with_a_settled_list_each_wait_under_the_ids_is_taken_once(
+    twin: str, batch: bool
+) -> None:
+    """A Buffer's settle (``settled`` kept): the waits under the ids an insert touched
+    (its two ids, or a batch's with repeats) -- one under both, one under either alone,
+    one under a third id of the batch -- are each read and settled once, listed once,
+    and the index is left as it was; a wait the data does not answer comes back once
+    with its failure."""
+    core = buffer_core(twin)
+    for transform in (tf("map", "odom", T1, 1.0), tf("odom", "base", T1, 2.0),
+                      tf("odom", "base", T2, 4.0), tf("map", "odom", T2, 3.0)):
+        assert core.set_transform(transform)  # the last insert's ids: odom, map
+    index: dict[str, set[Any]] = {}
+    settled: list[Any] = []
+    core._follow_waits(index, settled)
+    both = counted_wait(index, frozenset({"map", "odom"}), ("map", "odom", T2, False))
+    parent_only = counted_wait(index, frozenset({"map"}), ("map", "odom", T2, False))
+    child_only = counted_wait(index, frozenset({"odom"}), ("odom", "map", T2, False))
+    later = counted_wait(index, frozenset({"map", "odom"}), ("map", "odom", Time(99), False))
+    third = counted_wait(index, frozenset({"base"}), ("odom", "base", T2, False))
+    before = {name: set(ws) for name, ws in index.items()}
+    _CountedWaiter.reads = 0
+    if batch:
+        rest = core._settle(index, ["odom", "map", "base", "odom", "map"])
+        answered = [both, parent_only, child_only, third]
+    else:
+        rest = core._settle(index, None)
+        answered = [both, parent_only, child_only]
+        assert third.result is None and not woken(third)
+    assert _CountedWaiter.reads == len(answered) + 1  # and ``later``'s, once
+    assert rest is not None and [waiter for waiter, _ in rest] == [later]
+    assert rest[0][1][0] == EXTRAPOLATION_ERROR
+    assert sorted(map(id, settled)) == sorted(map(id, answered))
+    for waiter in answered:
+        assert woken(waiter)
+        assert waiter.exact is not None
+        assert waiter.result == core.lookup_transform(*waiter.exact[:3])
+    assert not woken(later) and later.result is None
+    assert index == before

@@ -47,6 +47,7 @@ cdef class CoreBase:
     cdef int _insert_one(self, object ts, str authority, bint is_static) except -1
     cdef object _problem(self, int code)
     cdef object _csettle(self, dict index, object names)
+    cdef list _settle_one(self, object waiter, dict index, list settled, list rest)
     cdef object _cstore(self, object transforms, str authority, bint is_static)
     cdef object _cquery(self, object target, object source, object time)
     cdef int _common(self, int target, int source, int64_t* out) except -1

@@ -1129,54 +1129,93 @@ cdef class CoreBase:
         cdef list due
         cdef list rest = None
         cdef list settled = self._settled
-        cdef set first = None, union = None
-        cdef object ws, waiter, exact, out, name, future
+        cdef set first = None, second = None, union = None
+        cdef object ws, waiter, name
         if names is None:
-            names = (self._last_child, self._last_parent)
-        for name in names:
-            ws = index.get(name)
-            if ws is None or ws is first:
-                continue
+            # the insert's two ids, with no tuple of them
+            first = index.get(self._last_child)
+            ws = index.get(self._last_parent)
             if first is None:
+                if ws is None:
+                    return None
                 first = <set>ws
-            elif union is None:
-                union = set(first)
-                union.update(<set>ws)
-            else:
-                union.update(<set>ws)
-        if first is None:
-            return None
-        # A copy: settling a wait edits the index's sets (unless ``settled`` is kept).
-        due = list(first) if union is None else list(union)
-        for waiter in due:
-            if waiter.result is not None:
-                continue  # settled before, still in the index (``settled``)
-            exact = waiter.exact
-            if exact is None:
-                out = None
-            else:
-                out = self._cquery((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
-                if isinstance(out, TransformStamped):
-                    waiter.result = out
-                    if settled is not None:
-                        settled.append(waiter)
-                    else:
-                        for name in waiter.frames:
-                            ws = index.get(name)
-                            if ws is not None:
-                                (<set>ws).discard(waiter)
-                                if not ws:
-                                    del index[name]
-                        waiter.frames = _NO_FRAMES
-                    future = waiter.future
-                    if future is None:
-                        waiter.wake()
-                    elif not future.done():
-                        future.set_result(None)
+            elif ws is not None and ws is not first:
+                second = <set>ws
+        else:
+            for name in names:
+                ws = index.get(name)
+                if ws is None or ws is first or ws is second:
                     continue
-            if rest is None:
-                rest = []
-            rest.append((waiter, out))
+                if first is None:
+                    first = <set>ws
+                elif second is None:
+                    second = <set>ws
+                elif union is None:
+                    union = set(first)
+                    union.update(second)
+                    union.update(<set>ws)
+                else:
+                    union.update(<set>ws)
+            if first is None:
+                return None
+        if settled is not None and union is None:
+            # Nothing edits the index's sets while they are walked (a settled wait stays
+            # in them, listed in ``settled``; a wake-up runs no code of anyone's): the
+            # sets themselves, no copy; the second's waits that are in the first are
+            # taken once.
+            for waiter in first:
+                rest = self._settle_one(waiter, index, settled, rest)
+            if second is not None:
+                for waiter in second:
+                    if waiter not in first:
+                        rest = self._settle_one(waiter, index, settled, rest)
+            return rest
+        # A copy: settling a wait edits the index's sets.
+        if union is not None:
+            due = list(union)
+        else:
+            due = list(first)
+            if second is not None:
+                for waiter in second:
+                    if waiter not in first:
+                        due.append(waiter)
+        for waiter in due:
+            rest = self._settle_one(waiter, index, settled, rest)
+        return rest
+
+    cdef list _settle_one(self, object waiter, dict index, list settled, list rest):
+        """One wait of :meth:`_csettle`: settled and woken when it is exact and its lookup
+        now succeeds; else appended to ``rest`` (made when None) with its failure (or
+        None); ``rest`` returned."""
+        cdef object exact, out, name, ws, future
+        if waiter.result is not None:
+            return rest  # settled before, still in the index (``settled``)
+        exact = waiter.exact
+        if exact is None:
+            out = None
+        else:
+            out = self._cquery((<tuple>exact)[0], (<tuple>exact)[1], (<tuple>exact)[2])
+            if type(out) is TransformStamped:  # else a failure tuple
+                waiter.result = out
+                if settled is not None:
+                    settled.append(waiter)
+                else:
+                    for name in waiter.frames:
+                        ws = index.get(name)
+                        if ws is not None:
+                            (<set>ws).discard(waiter)
+                            if not ws:
+                                del index[name]
+                    waiter.frames = _NO_FRAMES
+                future = waiter.future
+                if future is None:
+                    waiter.wake()
+                elif not future.done():
+                    future.set_result(None)
+                return rest
+        if rest is None:
+            rest = []
+        rest.append((waiter, out))
         return rest
 
     # ------------------------------------------------------------------ queries
