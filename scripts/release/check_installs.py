@@ -270,10 +270,20 @@ def stage_core(python: str, clone: Path, tmp: Path) -> None:
 
 
 def versions(python: Path, env: dict[str, str]) -> None:
-    """Print the versions a venv resolved for tfbus's direct dependencies."""
-    code = ("import importlib.metadata as m, re; print(', '.join(sorted("
-            "f'{n}=={m.version(n)}' for n in {re.split(r'[ ;<>=!~\\[]', r)[0] "
-            "for r in m.requires('tfbus') or () if 'extra ==' not in r})))")
+    """Print the versions a venv resolved for tfbus's direct dependencies (one whose
+    environment marker leaves it out here, e.g. ``exceptiongroup`` on Python >= 3.11, is
+    named as not installed)."""
+    code = (
+        "import importlib.metadata as m, re\n"
+        "names = {re.split(r'[ ;<>=!~\\[]', r)[0]\n"
+        "         for r in m.requires('tfbus') or () if 'extra ==' not in r}\n"
+        "def version(n):\n"
+        "    try:\n"
+        "        return f'{n}=={m.version(n)}'\n"
+        "    except m.PackageNotFoundError:\n"
+        "        return f'{n} (not installed: its marker leaves it out)'\n"
+        "print(', '.join(sorted(version(n) for n in names)))\n"
+    )
     done = subprocess.run([str(python), "-c", code], capture_output=True, text=True,
                           timeout=60, env=env, check=False)
     print(f"    resolved: {done.stdout.strip() or done.stderr.strip()[-300:]}", flush=True)
