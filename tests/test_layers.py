@@ -223,12 +223,15 @@ def test_only_the_core_imports_its_selection() -> None:
 
 
 def test_the_compiled_ros1_decoder_is_a_codec() -> None:
-    """The compiled ROS 1 ``TFMessage`` decoder lives under ``codecs/`` (``_cwire.pyx``,
-    chosen by ``codecs/ros1.py``), not in the core: no codec imports the core's selection
-    or its kernels, and nothing in ``core/`` imports a codec."""
+    """The compiled ``TFMessage`` decoders live under ``codecs/`` (``_cwire.pyx``, found by
+    ``tfbus.codecs._compiled_wire`` for ``codecs/ros1.py`` and ``codecs/native.py``), not in
+    the core: no codec imports the core's selection or its kernels, and nothing in
+    ``core/`` imports a codec."""
     graph = _graph()
     assert "tfbus.codecs._cwire" in MODULES and "tfbus.core._cwire" not in MODULES
-    assert "tfbus.codecs._cwire" in graph["tfbus.codecs.ros1"]
+    assert "tfbus.codecs._cwire" in graph["tfbus.codecs"]
+    for codec in ("tfbus.codecs.ros1", "tfbus.codecs.native"):
+        assert "tfbus.codecs" in graph[codec], f"{codec} does not use _compiled_wire"
     codecs_into_core = sorted(
         _where(importer, line)
         for importer, edges in graph.items() if importer.startswith("tfbus.codecs")

@@ -67,6 +67,11 @@ def _both(codec: wire.WireCodec, payload: bytes) -> tuple[Any, Any]:
     return fast, schema
 
 
+def _ts(parent: str, child: str) -> TransformStamped:
+    return TransformStamped(Header(Time(3, 4), parent), child,
+                            Transform(Vector3(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, 0.6, 0.8)))
+
+
 frame_ids = st.text(min_size=1, max_size=12).filter(lambda s: not s.startswith("/"))
 floats = st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from(
     [0.0, -0.0, math.nan, -math.nan, struct.unpack("<d", b"\x01\x00\x00\x00\x00\x00\xf8\x7f")[0]]
@@ -243,7 +248,3 @@ def test_an_ascii_id_seen_at_the_same_position_is_the_same_str() -> None:
     other = codec.decode(codec.encode(TFMessage((_ts("world", "odom"),)), sender=1, seq=3))
     assert other.message.transforms[0].header.frame_id == "world"
 
-
-def _ts(parent: str, child: str) -> TransformStamped:
-    return TransformStamped(Header(Time(3, 4), parent), child,
-                            Transform(Vector3(1.0, 2.0, 3.0), Quaternion(0.0, 0.0, 0.6, 0.8)))

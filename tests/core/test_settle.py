@@ -6,6 +6,7 @@ back to the buffer with the failure it just walked."""
 from __future__ import annotations
 
 import math
+from functools import partial
 from types import ModuleType
 from typing import Any
 
@@ -39,10 +40,13 @@ def tf(parent: str, child: str, stamp: Time, x: float) -> TransformStamped:
 
 
 def wait_on(
-    index: dict[str, set[Any]], frames: frozenset[str], exact: tuple[str, str, Time, bool] | None
+    index: dict[str, set[Any]],
+    frames: frozenset[str],
+    exact: tuple[str, str, Time, bool] | None,
+    kind: type[_Waiter[Any]] = _Waiter,
 ) -> _Waiter[Any]:
-    """A Buffer's wait (``tfbus.buffer._Waiter``), indexed under ``frames``."""
-    waiter: _Waiter[Any] = _Waiter(lambda: None, lambda: frames, running_asyncio_loop(), exact)
+    """A Buffer's wait (``tfbus.buffer._Waiter``, or ``kind``), indexed under ``frames``."""
+    waiter: _Waiter[Any] = kind(lambda: None, lambda: frames, running_asyncio_loop(), exact)
     waiter.frames = frames
     for name in frames:
         index.setdefault(name, set()).add(waiter)
@@ -245,16 +249,6 @@ async def test_a_settled_wait_is_listed_and_left_in_the_index_when_asked(twin: s
     assert core._settle(index, None) is None
 
 
-def counted_wait(
-    index: dict[str, set[Any]], frames: frozenset[str], exact: tuple[str, str, Time, bool]
-) -> _CountedWaiter:
-    waiter = _CountedWaiter(lambda: None, lambda: frames, running_asyncio_loop(), exact)
-    waiter.frames = frames
-    for name in frames:
-        index.setdefault(name, set()).add(waiter)
-    return waiter
-
-
 @pytest.mark.parametrize("twin", sorted(CORES))
 @pytest.mark.parametrize("batch", [False, True], ids=["one insert", "a batch"])
 async def test_with_a_settled_list_each_wait_under_the_ids_is_taken_once(
@@ -272,11 +266,12 @@ async def test_with_a_settled_list_each_wait_under_the_ids_is_taken_once(
     index: dict[str, set[Any]] = {}
     settled: list[Any] = []
     core._follow_waits(index, settled)
-    both = counted_wait(index, frozenset({"map", "odom"}), ("map", "odom", T2, False))
-    parent_only = counted_wait(index, frozenset({"map"}), ("map", "odom", T2, False))
-    child_only = counted_wait(index, frozenset({"odom"}), ("odom", "map", T2, False))
-    later = counted_wait(index, frozenset({"map", "odom"}), ("map", "odom", Time(99), False))
-    third = counted_wait(index, frozenset({"base"}), ("odom", "base", T2, False))
+    wait = partial(wait_on, index, kind=_CountedWaiter)
+    both = wait(frozenset({"map", "odom"}), ("map", "odom", T2, False))
+    parent_only = wait(frozenset({"map"}), ("map", "odom", T2, False))
+    child_only = wait(frozenset({"odom"}), ("odom", "map", T2, False))
+    later = wait(frozenset({"map", "odom"}), ("map", "odom", Time(99), False))
+    third = wait(frozenset({"base"}), ("odom", "base", T2, False))
     before = {name: set(ws) for name, ws in index.items()}
     _CountedWaiter.reads = 0
     if batch:

@@ -17,4 +17,23 @@ package imports none of the codecs (``native`` needs ``msgspec``, ``ros1``'s ros
 parts need ``rosbags``).
 """
 
+from __future__ import annotations
+
+import importlib.util
+from types import ModuleType
+
 __all__: list[str] = []
+
+
+def _compiled_wire() -> ModuleType | None:
+    """The compiled wire decoders (:mod:`tfbus.codecs._cwire`, objects built in C with the
+    compiled core's helpers) when the compiled core is loaded (:data:`tfbus.core.COMPILED`:
+    not with ``TFBUS_PURE_PYTHON``) and the extension is installed; else None. An
+    extension that is installed but fails to import raises, as the core's do."""
+    from tfbus.core import COMPILED
+
+    if not COMPILED or importlib.util.find_spec("tfbus.codecs._cwire") is None:
+        return None
+    from tfbus.codecs import _cwire
+
+    return _cwire

@@ -370,6 +370,7 @@ cdef inline object _native_id(list cache, Py_ssize_t k, const unsigned char* p,
     is not UTF-8 or is longer than ``max_length`` characters."""
     cdef Py_ssize_t o = off[0], n
     cdef unsigned char b
+    cdef int width
     cdef object text
     if o >= size:
         return None
@@ -378,10 +379,11 @@ cdef inline object _native_id(list cache, Py_ssize_t k, const unsigned char* p,
         n = b & 0x1f
         o += 1
     elif 0xd9 <= b <= 0xdb:
-        if o + 1 + (1 << (b - 0xd9)) > size:
+        width = 1 << (b - 0xd9)  # bytes of the length: 1, 2, 4
+        if o + 1 + width > size:
             return None
-        n = <Py_ssize_t>_be(p + o + 1, 1 << (b - 0xd9))
-        o += 1 + (1 << (b - 0xd9))
+        n = <Py_ssize_t>_be(p + o + 1, width)
+        o += 1 + width
     else:
         return None
     if n > size - o:

@@ -59,7 +59,6 @@ that are not msgpack (truncated, reserved byte ``0xc1``).
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import secrets
 from collections.abc import Callable, Sequence
@@ -74,7 +73,7 @@ import msgspec
 import numpy as np
 
 from tfbus import messages as _m
-from tfbus.core import COMPILED
+from tfbus.codecs import _compiled_wire
 from tfbus.errors import (
     WireDecodeError,
     WireEncodeError,
@@ -556,17 +555,13 @@ _Header = _m.Header
 
 def _compiled_decoder() -> Callable[[bytes, int, int], tuple[int, int, TFMessage] | None] | None:
     """The compiled decoder of a TFMessage payload in the form tfbus writes it
-    (``tfbus.codecs._cwire._tf_from_native``: objects built in C with the compiled core's
-    helpers) when the compiled core is loaded (:data:`tfbus.core.COMPILED`: not with
-    ``TFBUS_PURE_PYTHON``) and the extension is installed; else None (msgspec's schema
-    decodes every payload). An extension that is installed but fails to import raises,
-    as the core's do."""
-    if not COMPILED or importlib.util.find_spec("tfbus.codecs._cwire") is None:
+    (``_cwire._tf_from_native``, where :func:`tfbus.codecs._compiled_wire` finds the
+    compiled wire decoders); else None (msgspec's schema decodes every payload)."""
+    wire = _compiled_wire()
+    if wire is None:
         return None
-    from tfbus.codecs import _cwire
-
     decode: Callable[[bytes, int, int], tuple[int, int, TFMessage] | None]
-    decode = _cwire._tf_from_native
+    decode = wire._tf_from_native
     return decode
 
 

@@ -43,7 +43,6 @@ Wire layout: ROS wiki "ROS/TCPROS" and ``roscpp_serialization``; the message is
 from __future__ import annotations
 
 import functools
-import importlib.util
 import math
 import struct
 import sys
@@ -53,7 +52,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from tfbus.core import COMPILED
+from tfbus.codecs import _compiled_wire
 from tfbus.errors import WireDecodeError, WireEncodeError
 from tfbus.messages import (
     Clock,
@@ -220,18 +219,13 @@ layout, and the frame id lengths then child id lengths it assumes."""
 
 
 def _compiled_decoder() -> Callable[[bytes | memoryview], list[TransformStamped]] | None:
-    """The compiled ROS 1 TFMessage decoder (:mod:`tfbus.codecs._cwire`, objects built in C
-    with the compiled core's helpers) when the compiled core is loaded
-    (:data:`tfbus.core.COMPILED`: not with ``TFBUS_PURE_PYTHON``), the host is little
-    endian and the extension is installed; else None (:func:`decode_ros1_struct` decodes).
-    An extension that is installed but fails to import raises, as the core's do."""
-    if not COMPILED or sys.byteorder != "little":
+    """The compiled ROS 1 TFMessage decoder (``_cwire._tf_from_ros1``, where
+    :func:`tfbus.codecs._compiled_wire` finds the compiled wire decoders) on a little-endian
+    host; else None (:func:`decode_ros1_struct` decodes)."""
+    wire = _compiled_wire()
+    if wire is None or sys.byteorder != "little":
         return None
-    if importlib.util.find_spec("tfbus.codecs._cwire") is None:
-        return None
-    from tfbus.codecs import _cwire
-
-    decode: Callable[[bytes | memoryview], list[TransformStamped]] = _cwire._tf_from_ros1
+    decode: Callable[[bytes | memoryview], list[TransformStamped]] = wire._tf_from_ros1
     return decode
 
 

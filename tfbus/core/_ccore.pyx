@@ -1126,7 +1126,6 @@ cdef class CoreBase:
 
     cdef object _csettle(self, dict index, object names):
         """:meth:`_settle`, callable from C with no Python call in between."""
-        cdef list due
         cdef list rest = None
         cdef list settled = self._settled
         cdef set first = None, second = None, union = None
@@ -1158,29 +1157,25 @@ cdef class CoreBase:
                     union.update(<set>ws)
             if first is None:
                 return None
-        if settled is not None and union is None:
-            # Nothing edits the index's sets while they are walked (a settled wait stays
-            # in them, listed in ``settled``; a wake-up runs no code of anyone's): the
-            # sets themselves, no copy; the second's waits that are in the first are
-            # taken once.
-            for waiter in first:
+        if union is None and settled is None:
+            # Settling a wait edits the index's sets: a copy of them is walked.
+            union = set(first)
+            if second is not None:
+                union.update(second)
+        if union is not None:  # a set of its own, which nothing else edits
+            for waiter in union:
                 rest = self._settle_one(waiter, index, settled, rest)
-            if second is not None:
-                for waiter in second:
-                    if waiter not in first:
-                        rest = self._settle_one(waiter, index, settled, rest)
             return rest
-        # A copy: settling a wait edits the index's sets.
-        if union is not None:
-            due = list(union)
-        else:
-            due = list(first)
-            if second is not None:
-                for waiter in second:
-                    if waiter not in first:
-                        due.append(waiter)
-        for waiter in due:
+        # With ``settled`` kept nothing edits the index's sets while they are walked (a
+        # settled wait stays in them, listed in ``settled``; a wake-up runs no code of
+        # anyone's): the sets themselves, no copy; the second's waits that are in the
+        # first are taken once.
+        for waiter in first:
             rest = self._settle_one(waiter, index, settled, rest)
+        if second is not None:
+            for waiter in second:
+                if waiter not in first:
+                    rest = self._settle_one(waiter, index, settled, rest)
         return rest
 
     cdef list _settle_one(self, object waiter, dict index, list settled, list rest):
