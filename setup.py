@@ -1,6 +1,7 @@
-"""Build the compiled core (``tfbus/core/_c*.pyx``, and the ROS 1 decoder
-``tfbus/codecs/_cwire.pyx``; Cython), optionally; everything else is
-in pyproject.toml.
+"""Build the compiled core (``tfbus/core/_c*.pyx``, the wire decoders
+``tfbus/codecs/_cwire.pyx``, the laser projection ``tfbus/_claser.pyx`` and the listener's
+message handler ``tfbus/_clistener.pyx``; Cython), optionally; everything else is in
+pyproject.toml.
 
 The extensions are an accelerator, never a requirement: tfbus has a pure-Python core with
 the same behaviour (``tfbus.core.COMPILED`` says which one is loaded).
@@ -54,6 +55,10 @@ COMPILED_SENSORS = ("_claser",)
 """Compiled sensor kernels (``tfbus/<name>.pyx``): ``_claser``, laser_geometry's
 projection for :meth:`tfbus.laser.LaserProjection.project_laser`; used with the compiled
 core, the numpy path otherwise."""
+COMPILED_LISTENER = ("_clistener",)
+"""The compiled message handler of a ``TransformListener`` (``tfbus/<name>.pyx``):
+``_clistener``, a message of one transform stored with no Python frame; used with the
+compiled core, the listener's own ``_handle`` otherwise."""
 REQUIRE_EXTENSIONS = _flag("TFBUS_REQUIRE_EXTENSIONS")
 
 _FALLBACK = """
@@ -153,7 +158,7 @@ def _extensions() -> list[Extension]:
     ]
     exts += [
         Extension(f"tfbus.{name}", [f"tfbus/{name}.pyx"], extra_compile_args=extra)
-        for name in COMPILED_SENSORS
+        for name in (*COMPILED_SENSORS, *COMPILED_LISTENER)
     ]
     return list(cythonize(exts, language_level=3))
 

@@ -48,6 +48,7 @@ LAYERS: dict[str, int] = {
     # 3: awaitable tf2_ros pieces
     "buffer": 3,
     "listener": 3,
+    "_clistener": 3,  # compiled message handler of the listener (listener.py's kernel)
     "broadcaster": 3,
     "fleet": 3,
     "session": 3,  # a bus, buffer, listener and broadcasters held by a background task

@@ -13,6 +13,11 @@ on the listener's clock, :mod:`tfbus.ratelimit`) and the valid ones beside it ar
 stored. On each message the listener reads its clock and clears the buffer when time
 jumped back (tf2_ros ``TransformListener``). Objects that are not ``TFMessage``s are
 counted and skipped. The listener never dies of bad input.
+
+With the compiled core, a message of one transform is stored by the compiled handler
+:class:`tfbus._clistener.InlineHandler` (no Python frame between the bus and the store;
+the same counts, warnings and clock read as :meth:`TransformListener._handle`, which
+handles every other message, and every message with the pure-Python core).
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import partial
 from types import TracebackType
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import anyio
 import anyio.abc
@@ -31,15 +36,36 @@ from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer, clear_on_jump_back
 from tfbus.bus import Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
-from tfbus.core import BatchResult, BufferCore
+from tfbus.core import COMPILED, BatchResult, BufferCore
 from tfbus.errors import TransformException
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import RateLimitedLog
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 
+if TYPE_CHECKING:
+    from tfbus._clistener import InlineHandler
+
 __all__ = ["ListenerStatistics", "TransformListener", "TransformSink"]
 
 _log = logging.getLogger(__name__)
+
+
+def _compiled_handler() -> type[InlineHandler] | None:
+    """The compiled message handler (:class:`tfbus._clistener.InlineHandler`: a message of
+    one transform stored with no Python frame) when the compiled core is in use
+    (``tfbus.core.COMPILED``: not under ``TFBUS_PURE_PYTHON``), else None: the
+    listener's own ``_handle`` handles every message."""
+    if not COMPILED:
+        return None
+    try:
+        from tfbus._clistener import InlineHandler as compiled
+    except ImportError:  # a build without extensions
+        return None
+    return compiled
+
+
+_HANDLER = _compiled_handler()
+"""The compiled handler class, or None; read when a listener subscribes."""
 
 
 class TransformSink(Protocol):
@@ -144,6 +170,7 @@ class TransformListener:
         self._queue_size = queue_size
         self._inline = inline
         self._callbacks: list[CallbackSubscription] = []
+        self._handlers: list[InlineHandler] = []  # the compiled ones: their counts
         if clock is None:
             clock = buffer.clock if isinstance(buffer, Buffer) else SystemClock()
         self._clock = clock
@@ -197,11 +224,11 @@ class TransformListener:
         self._unfollow_jumps = clear_on_jump_back(self._buffer, self._clock)
         if self._inline:
             self._callbacks = [
-                self._bus.subscribe_callback(TF_STATIC_TOPIC, partial(self._handle, True))
+                self._bus.subscribe_callback(TF_STATIC_TOPIC, self._handler(True))
             ]
             try:
                 self._callbacks.append(
-                    self._bus.subscribe_callback(TF_TOPIC, partial(self._handle, False))
+                    self._bus.subscribe_callback(TF_TOPIC, self._handler(False))
                 )
             except BaseException:
                 self._callbacks[0].close()
@@ -250,6 +277,17 @@ class TransformListener:
         finally:
             for sub in self._subs:
                 sub.close()
+
+    def _handler(self, static: bool) -> Callable[[object], None]:
+        """The bus callback of one topic: the compiled handler
+        (:class:`tfbus._clistener.InlineHandler`) when it is built and the buffer has the
+        one-transform store, else :meth:`_handle` for that topic."""
+        store = self._store_one
+        if _HANDLER is None or store is None:
+            return partial(self._handle, static)
+        handler = _HANDLER(self, static, store[static], self._now_ns, self._authority)
+        self._handlers.append(handler)
+        return handler
 
     def _feed_started(self) -> None:
         if isinstance(self._buffer, Buffer):
@@ -312,24 +350,8 @@ class TransformListener:
             # Exception, e.g. TypeError for an item that is not a TransformStamped).
             try:
                 stored = one[static](transforms[0], authority)
-            except TransformException as invalid:
-                self._invalid += 1
-                self._warn(
-                    now_ns,
-                    "ignoring a transform on %s: %s",
-                    TF_STATIC_TOPIC if static else TF_TOPIC,
-                    invalid,
-                )
-                return
-            except Exception as malformed:
-                self._malformed += 1
-                self._warn(
-                    now_ns,
-                    "ignoring a malformed transform on %s: %s: %s",
-                    TF_STATIC_TOPIC if static else TF_TOPIC,
-                    type(malformed).__name__,
-                    malformed,
-                )
+            except Exception as failed:
+                self._store_failed(static, now_ns, failed)
                 return
             if stored:
                 self._stored += 1
@@ -353,25 +375,33 @@ class TransformListener:
         self._stored += result.stored
         self._refused += result.refused
         for _, exc in result.errors:
-            if isinstance(exc, TransformException):
-                self._invalid += 1
-                self._warn(now_ns, "ignoring a transform on %s: %s", topic, exc)
-            else:
-                self._malformed += 1
-                self._warn(
-                    now_ns,
-                    "ignoring a malformed transform on %s: %s: %s",
-                    topic,
-                    type(exc).__name__,
-                    exc,
-                )
+            self._store_failed(static, now_ns, exc)
+
+    def _store_failed(self, static: bool, now_ns: int, failed: Exception) -> None:
+        """Count and log a one-transform store that raised: invalid (a
+        ``TransformException``) or malformed (any other ``Exception``, e.g. ``TypeError``
+        for an item that is not a TransformStamped), as the items of a batch are."""
+        topic = TF_STATIC_TOPIC if static else TF_TOPIC
+        if isinstance(failed, TransformException):
+            self._invalid += 1
+            self._warn(now_ns, "ignoring a transform on %s: %s", topic, failed)
+        else:
+            self._malformed += 1
+            self._warn(
+                now_ns,
+                "ignoring a malformed transform on %s: %s: %s",
+                topic,
+                type(failed).__name__,
+                failed,
+            )
 
     def statistics(self) -> ListenerStatistics:
         """A snapshot of the listener's counters."""
+        handlers = self._handlers
         return ListenerStatistics(
-            messages=self._messages,
-            stored=self._stored,
-            refused=self._refused,
+            messages=self._messages + sum(h.messages for h in handlers),
+            stored=self._stored + sum(h.stored for h in handlers),
+            refused=self._refused + sum(h.refused for h in handlers),
             invalid=self._invalid,
             malformed=self._malformed,
             dropped=sum(sub.statistics().dropped for sub in self._subs),
