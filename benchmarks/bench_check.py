@@ -58,8 +58,8 @@ Rows (target):
   the CPU of its two processes <= 1.5x the C++ tutorial pair's;
 * the ``tfbus view --bus zenoh`` process following 100 Hz x 100 frames from another
   process (``bench_view_process.measure``, 3 windows of 8 s a phase, a bare
-  ``TransformListener`` process on the same stream beside it): <= 5 % of a core with no
-  browser, <= 15 % with one page.
+  ``TransformListener`` process and a raw zenoh-python subscriber on the same stream
+  beside it): <= 5 % of a core with no browser, <= 15 % with one page.
 
 A row whose peer cannot run here prints ``not run: <why>`` and fails.
 
@@ -942,8 +942,10 @@ VIEW_SECONDS = 8.0
 
 def view_rows(rows: Rows, rounds: int) -> None:
     """The real ``tfbus view`` command's CPU (``bench_view_process.measure``): a source
-    process sends 100 moving frames at 100 Hz over Zenoh; the view and a bare
-    ``TransformListener`` process (the floor of any follower) receive it; each one's CPU
+    process sends 100 moving frames at 100 Hz over Zenoh; the view, a bare
+    ``TransformListener`` process (the floor of any follower) and a raw zenoh-python
+    subscriber with a no-op callback (the floor of any zenoh-python process) receive it;
+    each one's CPU
     over ``rounds`` windows with no browser, then with one headless Chromium page; each
     row judges the median window against its absolute target, the floor beside it."""
     import bench_view_process
@@ -956,9 +958,11 @@ def view_rows(rows: Rows, rounds: int) -> None:
             continue
         view = statistics.median(share["view"])
         floor = statistics.median(share["listener"])
+        raw = statistics.median(share["raw"])
         rows.row(
             name,
-            f"{view:.1%} of a core ({_pct_spread(share['view'])}); listener floor {floor:.1%}",
+            f"{view:.1%} of a core ({_pct_spread(share['view'])}); listener floor {floor:.1%}, "
+            f"raw Zenoh subscriber {raw:.1%}",
             view <= VIEW_TARGETS[phase],
             f"<= {VIEW_TARGETS[phase]:.0%} of a core",
         )

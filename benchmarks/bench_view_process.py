@@ -9,6 +9,10 @@ Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting o
   moving frames (a chain of 10, the rest leaves) as one ``/tf`` message every 10 ms;
 * ``listener``: a ``Bus(ZenohTransport(connect=...))`` with a ``TransformListener`` into a
   ``Buffer`` and nothing else: the floor of any process that follows this stream;
+* ``raw``: a raw zenoh-python session configured as ``ZenohTransport`` configures itself
+  (``tfbus.transports.zenoh.config.zenoh_config``) whose subscriber on the source's ``/tf``
+  key counts each sample in a no-op Python callback: the floor of any zenoh-python
+  subscriber of this stream, before any decode (no tfbus code per message);
 * ``view``: the command line a user runs, ``tfbus view --bus zenoh?connect=... --port P``
   (``python -m tfbus.cli``), which also keeps ``tfbus monitor``'s tables and ``tfbus
   doctor``'s checks for its page.
@@ -109,6 +113,38 @@ def listener(port: int) -> None:
     anyio.run(main)
 
 
+def raw(port: int) -> None:
+    """The raw Zenoh floor child: a no-op subscriber of the source's ``/tf`` key (until
+    SIGINT/SIGTERM)."""
+    import threading
+
+    import zenoh
+
+    from tfbus.topics import TF_TOPIC
+    from tfbus.transports.zenoh.config import zenoh_config
+    from tfbus.transports.zenoh.keys import KeySpace
+
+    config, _fallback = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
+    session = zenoh.open(config)
+    count = [0]
+    first = threading.Event()
+    stop = threading.Event()
+
+    def on_sample(_sample: object) -> None:
+        count[0] += 1
+        first.set()
+
+    subscriber = session.declare_subscriber(KeySpace().data(TF_TOPIC), on_sample)
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    if not first.wait(60):
+        raise SystemExit("bench_view_process: the raw subscriber heard nothing in 60 s")
+    print("READY", flush=True)
+    stop.wait()
+    subscriber.undeclare()
+    session.close()
+
+
 def established(port: int) -> int:
     """Established TCP connections to local ``port`` (``/proc/net/tcp``, ``tcp6``)."""
     n = 0
@@ -160,7 +196,7 @@ def measure(rounds: int, seconds: float) -> Measured:
     shown = False
     why = ""
     try:
-        for name in ("source", "listener"):
+        for name in ("source", "listener", "raw"):
             procs[name] = subprocess.Popen(
                 [sys.executable, __file__, f"--{name}", str(zport)], env=env,
                 stdout=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
@@ -246,7 +282,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="windows a phase")
     parser.add_argument("--source", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--listener", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--raw", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.raw is not None:
+        raw(args.raw)
+        return
     if args.source is not None:
         source(args.source)
         return
@@ -261,7 +301,7 @@ def main() -> None:
         if not got.share[phase]:
             print(f"  {label:<11} not measured: {got.why}")
             continue
-        for name in ("view", "listener", "source"):
+        for name in ("view", "listener", "raw", "source"):
             print(f"  {label:<11} {name:<9} {_spread(got.share[phase][name])}")
         over = [v - f for v, f in zip(got.share[phase]["view"], got.share[phase]["listener"],
                                       strict=True)]  # fmt: skip
