@@ -323,6 +323,71 @@ async def plain_floor_run(samples: int, warmup: int, backend: str) -> LatencyRes
     return LatencyResult([woke_at[i] - sent_at[i] for i in kept])
 
 
+def _cancel_check(backend: str) -> Callable[[], Awaitable[None]]:
+    """The cancellation check a publish makes before it publishes, as the bus makes it
+    (``Bus.publish``: anyio's ``checkpoint_if_cancelled`` semantics): on asyncio the
+    bus's walk of the task's anyio cancel scopes (``tfbus.bus._asyncio_cancel_called``;
+    anyio's checkpoint is awaited only when it finds one cancelled), on trio trio's own
+    ``checkpoint_if_cancelled``."""
+    if backend == "trio":
+        import trio
+
+        return trio.lowlevel.checkpoint_if_cancelled
+    import asyncio
+
+    from tfbus.bus import _asyncio_cancel_called
+
+    cancel_called = _asyncio_cancel_called(asyncio.get_running_loop())
+    assert cancel_called is not None, "this anyio keeps no cancel scopes tfbus can read"
+
+    async def check() -> None:
+        if cancel_called():
+            await anyio.lowlevel.checkpoint_if_cancelled()
+
+    return check
+
+
+async def checked_floor_run(samples: int, warmup: int, backend: str) -> LatencyResult:
+    """:func:`plain_floor_run` with the cancellation check every publish makes before
+    publishing (:func:`_cancel_check`) between the first time read and ``set()``: the
+    floor of a wake-up by anything that keeps anyio's rule that an ``await`` of it checks
+    for cancellation first, as ``send_transform`` does (no bus, no listener, no buffer)."""
+    total = warmup + samples
+    events = [anyio.Event() for _ in range(total + 1)]
+    sent_at = [0] * (total + 1)
+    woke_at = [0] * (total + 1)
+    done = 0
+    waiting = False
+    yield_now = _native_yield(backend)
+    check = _cancel_check(backend)
+    async with anyio.create_task_group() as tg:
+
+        async def waiter() -> None:
+            nonlocal done, waiting
+            for i in range(1, total + 1):
+                waiting = True
+                await events[i].wait()
+                woke_at[i] = time.perf_counter_ns()
+                waiting = False
+                done = i
+
+        tg.start_soon(waiter)
+        gc.collect()
+        for i in range(1, total + 1):
+            while done != i - 1 or not waiting:
+                await anyio.lowlevel.checkpoint()
+            for _ in range(3):
+                await anyio.lowlevel.checkpoint()
+            sent_at[i] = time.perf_counter_ns()
+            await check()
+            events[i].set()
+            await yield_now()
+        while done != total:
+            await anyio.lowlevel.checkpoint()
+    kept = range(warmup + 1, total + 1)
+    return LatencyResult([woke_at[i] - sent_at[i] for i in kept])
+
+
 async def direct_run(samples: int, warmup: int, backend: str) -> LatencyResult:
     """A wake-up by a direct insert: one task awaits ``buffer.lookup_transform_async``
     for a stamp not held yet, another calls ``buffer.set_transform`` with it and yields

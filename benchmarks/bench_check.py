@@ -490,21 +490,27 @@ def split_row(rows: Rows, ours: list[dict[str, Any]]) -> None:
 def wakeup_rows(rows: Rows, repeats: int) -> None:
     """Each repeat measures the plain floor (``bench_bus.plain_floor_run``: ``set()``,
     the loop's own yield, the waiter resumes), then the direct insert and the bus path;
-    each row judges the median of the per-repeat ratios (min..max beside it)."""
+    each row judges the median of the per-repeat ratios (min..max beside it). Beside
+    them, for information: the floor with anyio's public checkpoint, and the floor with
+    the cancellation check a publish makes before it publishes
+    (``bench_bus.checked_floor_run``)."""
     cfg = bench_bus.QUICK
     n, warm = cfg.latency_samples, cfg.latency_warmup
     for backend in bench_bus.BACKENDS:
-        ratios: dict[str, list[float]] = {"direct": [], "bus": [], "anyio_floor": []}
+        ratios: dict[str, list[float]] = {"direct": [], "bus": [], "anyio_floor": [],
+                                          "checked_floor": []}
         floors: list[float] = []
         for _ in range(repeats):
             floor = anyio.run(bench_bus.plain_floor_run, n, warm, backend, backend=backend)
             old_floor = anyio.run(bench_bus.event_floor_run, n, warm, backend=backend)
+            checked = anyio.run(bench_bus.checked_floor_run, n, warm, backend, backend=backend)
             direct = anyio.run(bench_bus.direct_run, n, warm, backend, backend=backend)
             bus = anyio.run(bench_bus.latency_run, n, warm, None, backend=backend)
             floors.append(floor.median_ms * 1e3)
             ratios["direct"].append(direct.median_ms / floor.median_ms)
             ratios["bus"].append(bus.median_ms / floor.median_ms)
             ratios["anyio_floor"].append(old_floor.median_ms / floor.median_ms)
+            ratios["checked_floor"].append(checked.median_ms / floor.median_ms)
         for key, label in (("direct", "direct insert"), ("bus", "through the bus")):
             target = WAKE_TARGETS[key]
             rows.row(
@@ -516,6 +522,10 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
         print(
             f"  info  {'  floor with an anyio checkpoint (old floor)':46} "
             f"{_spread(ratios['anyio_floor'])} of the plain floor"
+        )
+        print(
+            f"  info  {'  floor with a publish cancellation check':46} "
+            f"{_spread(ratios['checked_floor'])} of the plain floor"
         )
 
 

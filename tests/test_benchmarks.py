@@ -149,3 +149,45 @@ def test_bench_check_refuses_an_unknown_group_and_names_the_groups() -> None:
     assert res.returncode == 2
     assert "unknown group laser" in res.stderr
     assert "ros1cpu, sensors, zenoh, demo" in res.stderr
+
+
+
+_CHECKED_FLOOR = """
+import sys
+import anyio
+import bench_bus
+
+backend = sys.argv[1]
+
+
+async def main() -> None:
+    check = bench_bus._cancel_check(backend)
+    with anyio.CancelScope() as scope:
+        scope.cancel()
+        await check()
+        raise AssertionError("the check did not raise in a cancelled scope")
+    assert scope.cancelled_caught
+    await check()
+    got = await bench_bus.checked_floor_run(5, 1, backend)
+    assert len(got.samples_ns) == 5 and all(ns > 0 for ns in got.samples_ns)
+    print("checked")
+
+
+anyio.run(main, backend=backend)
+"""
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_the_checked_wake_up_floor_checks_for_cancellation_as_a_publish_does(
+    backend: str,
+) -> None:
+    """``bench_bus.checked_floor_run`` (the wake-up floor with the check a publish makes
+    before publishing, beside ``make bench-check``'s wake-up rows) runs on both backends,
+    and its check is a real one: inside a cancelled scope it raises the cancellation, as
+    ``send_transform`` does, and outside one it returns. (In a child interpreter: a
+    benchmark module puts the checkout on ``sys.path``.)"""
+    done = subprocess.run(
+        [sys.executable, "-c", _CHECKED_FLOOR, backend], cwd=ROOT / "benchmarks",
+        capture_output=True, text=True, timeout=120,
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "checked", done.stderr[-3000:]
