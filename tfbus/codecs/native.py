@@ -570,6 +570,18 @@ _compiled_tf = _compiled_decoder()
 it, equal values otherwise: tested), where there is one."""
 
 
+def _compiled_clock_stamp() -> Callable[[bytes, int, int], int] | None:
+    """The compiled reader of the stamp of a ``Clock`` payload in the form tfbus writes it
+    (``_cwire._clock_stamp_native(payload, MAGIC, WIRE_VERSION)``: the stamp in int ns,
+    or -1 for anything it does not read), where :func:`tfbus.codecs._compiled_wire` finds
+    the compiled wire decoders; else None."""
+    wire = _compiled_wire()
+    if wire is None:
+        return None
+    read: Callable[[bytes, int, int], int] = wire._clock_stamp_native
+    return read
+
+
 def _from_wire(items: Any) -> tuple[_m.TransformStamped, ...]:
     """The wire schema's items as TransformStamped NamedTuples (the values are already
     checked: :class:`~tfbus.time.Time` is built without re-validating)."""
