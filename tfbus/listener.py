@@ -378,9 +378,10 @@ class TransformListener:
             self._store_failed(static, now_ns, exc)
 
     def _store_failed(self, static: bool, now_ns: int, failed: Exception) -> None:
-        """Count and log a one-transform store that raised: invalid (a
-        ``TransformException``) or malformed (any other ``Exception``, e.g. ``TypeError``
-        for an item that is not a TransformStamped), as the items of a batch are."""
+        """Count and log a transform the buffer did not take because it raised: the
+        exception of a one-transform store (here or in the compiled handler) or one of a
+        batch's ``errors``. Invalid: a ``TransformException``; malformed: any other
+        ``Exception`` (e.g. ``TypeError`` for an item that is not a TransformStamped)."""
         topic = TF_STATIC_TOPIC if static else TF_TOPIC
         if isinstance(failed, TransformException):
             self._invalid += 1
