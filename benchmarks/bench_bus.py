@@ -284,11 +284,15 @@ def _native_yield(backend: str) -> Callable[[], Awaitable[None]]:
     return partial(asyncio.sleep, 0)
 
 
-async def plain_floor_run(samples: int, warmup: int, backend: str) -> LatencyResult:
+async def plain_floor_run(
+    samples: int, warmup: int, backend: str,
+    check: Callable[[], Awaitable[None]] | None = None,
+) -> LatencyResult:
     """The plain floor of a wake-up: ``event.set()`` on a bare ``anyio.Event``, then the
     setter yields with the loop's own cheapest yield and the awaiting task resumes.
-    ``perf_counter_ns()`` right before ``set()`` to right after the waiter's ``await``
-    returns (the hand-off protocol of :func:`event_floor_run`)."""
+    ``perf_counter_ns()`` right before ``set()`` (before ``await check()``, when given) to
+    right after the waiter's ``await`` returns (the hand-off protocol of
+    :func:`event_floor_run`)."""
     total = warmup + samples
     events = [anyio.Event() for _ in range(total + 1)]
     sent_at = [0] * (total + 1)
@@ -314,7 +318,11 @@ async def plain_floor_run(samples: int, warmup: int, backend: str) -> LatencyRes
                 await anyio.lowlevel.checkpoint()
             for _ in range(3):
                 await anyio.lowlevel.checkpoint()
-            sent_at[i] = time.perf_counter_ns()
+            if check is None:
+                sent_at[i] = time.perf_counter_ns()
+            else:
+                sent_at[i] = time.perf_counter_ns()
+                await check()
             events[i].set()
             await yield_now()
         while done != total:
@@ -352,40 +360,7 @@ async def checked_floor_run(samples: int, warmup: int, backend: str) -> LatencyR
     publishing (:func:`_cancel_check`) between the first time read and ``set()``: the
     floor of a wake-up by anything that keeps anyio's rule that an ``await`` of it checks
     for cancellation first, as ``send_transform`` does (no bus, no listener, no buffer)."""
-    total = warmup + samples
-    events = [anyio.Event() for _ in range(total + 1)]
-    sent_at = [0] * (total + 1)
-    woke_at = [0] * (total + 1)
-    done = 0
-    waiting = False
-    yield_now = _native_yield(backend)
-    check = _cancel_check(backend)
-    async with anyio.create_task_group() as tg:
-
-        async def waiter() -> None:
-            nonlocal done, waiting
-            for i in range(1, total + 1):
-                waiting = True
-                await events[i].wait()
-                woke_at[i] = time.perf_counter_ns()
-                waiting = False
-                done = i
-
-        tg.start_soon(waiter)
-        gc.collect()
-        for i in range(1, total + 1):
-            while done != i - 1 or not waiting:
-                await anyio.lowlevel.checkpoint()
-            for _ in range(3):
-                await anyio.lowlevel.checkpoint()
-            sent_at[i] = time.perf_counter_ns()
-            await check()
-            events[i].set()
-            await yield_now()
-        while done != total:
-            await anyio.lowlevel.checkpoint()
-    kept = range(warmup + 1, total + 1)
-    return LatencyResult([woke_at[i] - sent_at[i] for i in kept])
+    return await plain_floor_run(samples, warmup, backend, _cancel_check(backend))
 
 
 async def direct_run(samples: int, warmup: int, backend: str) -> LatencyResult:
