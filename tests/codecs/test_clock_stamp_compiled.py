@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 
 pytest.importorskip("zenoh")
 
-from tfbus.codecs import native as wire  # noqa: E402
-from tfbus.messages import Clock  # noqa: E402
-from tfbus.time import TIME_MAX_NS, Time  # noqa: E402
-from tfbus.transports.zenoh.transport import (  # noqa: E402
+from tfbus.codecs import native as wire
+from tfbus.messages import Clock
+from tfbus.time import TIME_MAX_NS, Time
+from tfbus.transports.zenoh.transport import (
     _clock_stamp_schema,
     clock_stamp,
 )
