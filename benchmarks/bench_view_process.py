@@ -11,8 +11,9 @@ Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting o
   ``Buffer`` and nothing else: the floor of any process that follows this stream;
 * ``raw``: a raw zenoh-python session configured as ``ZenohTransport`` configures itself
   (``tfbus.transports.zenoh.config.zenoh_config``) whose subscriber on the source's ``/tf``
-  key counts each sample in a no-op Python callback: the floor of any zenoh-python
-  subscriber of this stream, before any decode (no tfbus code per message);
+  key hands each sample to a Python callback that only marks the first one heard: the
+  floor of any zenoh-python subscriber of this stream, before any decode (no tfbus code
+  per message);
 * ``view``: the command line a user runs, ``tfbus view --bus zenoh?connect=... --port P``
   (``python -m tfbus.cli``), which also keeps ``tfbus monitor``'s tables and ``tfbus
   doctor``'s checks for its page.
@@ -126,12 +127,10 @@ def raw(port: int) -> None:
 
     config, _fallback = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
     session = zenoh.open(config)
-    count = [0]
     first = threading.Event()
     stop = threading.Event()
 
     def on_sample(_sample: object) -> None:
-        count[0] += 1
         first.set()
 
     subscriber = session.declare_subscriber(KeySpace().data(TF_TOPIC), on_sample)

@@ -12,8 +12,8 @@ message type, a subclass of ``TFMessage``, zero or several transforms, a ``trans
 that is not a tuple) goes to the listener's own ``_handle``, which counts, checks and logs
 it; a store that raises goes to the listener's ``_store_failed`` (counted as invalid or
 malformed, and logged), as in ``_handle``. Same behaviour as ``_handle`` alone (the
-pure-Python path, ``TFBUS_PURE_PYTHON``), which ``tests/test_broadcaster_listener.py``
-runs beside this one.
+pure-Python path, ``TFBUS_PURE_PYTHON``), which ``tests/test_listener_handler.py`` runs
+beside this one.
 """
 
 from tfbus.messages import TFMessage
