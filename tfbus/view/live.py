@@ -17,6 +17,10 @@ times a second and, from the same bus:
   subscribes to ``/tf_static``, as a latched topic), each scan as ``foxglove.LaserScan``,
   the clock's time as the server time and tf's errors as statuses.
 
+The frame table beside the scene is refreshed at most every :data:`TABLE_PERIOD` seconds
+(sooner when frames come or go, or a control changes): a redraw that does not refresh
+it reads no rates.
+
 Drawing never lets the intake fall behind: a redraw is put off (counted in
 :attr:`LiveView.deferred`) while the bus's transport still holds received messages it
 has not delivered (:class:`~tfbus.transports._base.Backlogged`, Zenoh's inbound queue),
@@ -63,10 +67,16 @@ if TYPE_CHECKING:
     from tfbus.view.foxglove_bridge import FoxgloveBridge
     from tfbus.view.server import TfPage
 
-__all__ = ["FINDINGS_PERIOD", "MAX_DRAW_STALL", "LiveView", "ScanFeed", "sweep"]
+__all__ = ["FINDINGS_PERIOD", "MAX_DRAW_STALL", "TABLE_PERIOD", "LiveView", "ScanFeed", "sweep"]
 
 FINDINGS_PERIOD = 1.0
 """Seconds (the view's clock) between two reports of the doctor's findings live."""
+
+TABLE_PERIOD = 0.25
+"""Seconds (the view's clock) between two refreshes of the page's frame table live (its
+rate, age, state and broadcaster per frame, read by a person: ``tf_monitor`` prints once
+a second); the scene itself is redrawn at every tick. A new frame, a frame gone, or a
+change of the page's controls refreshes the table at the next redraw."""
 
 MAX_DRAW_STALL = 1.0
 """Seconds (the view's clock) a redraw may be put off while the transport's inbound
@@ -173,6 +183,8 @@ class LiveView:
         self.fleet = fleet
         self.doctor = doctor
         self._reported_at: Time | None = None
+        self._table_at: Time | None = None
+        self._table_key: tuple[int, int] | None = None
         self.buffer = buffer
         self.summary = summary
         self.clock = clock
@@ -374,7 +386,8 @@ class LiveView:
         self._drawn_at = now
         scene = draw_live(self.page, self.buffer, self.summary, now,
                           fixed_frame=self.page.fixed_frame_choice or self.fixed_frame,
-                          frame_timeout=self.frame_timeout, fleet=self.fleet)
+                          frame_timeout=self.frame_timeout, fleet=self.fleet,
+                          table=self._table_due(now))
         if scene.fixed_frame is not None and scene.frames:
             self.shown_fixed = scene.fixed_frame
             self._fixed_known.set()
@@ -399,6 +412,19 @@ class LiveView:
             bridge.broadcast_time(now.ns)
             bridge.publish_errors(scene)
         return scene
+
+    def _table_due(self, now: Time) -> bool:
+        """Whether this redraw refreshes the frame table (:data:`TABLE_PERIOD`): the
+        first one, one :data:`TABLE_PERIOD` after the last refresh (or with a clock that
+        went back), or when the number of frames or the page's controls changed."""
+        key = (len(self.summary.frames), self.page.control_version)
+        last = self._table_at
+        if (last is not None and key == self._table_key
+                and 0 <= now.ns - last.ns < TABLE_PERIOD * 1e9):
+            return False
+        self._table_at = now
+        self._table_key = key
+        return True
 
     def _report_findings(self, now: Time) -> None:
         if self.doctor is None:

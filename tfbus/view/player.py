@@ -6,7 +6,7 @@ from __future__ import annotations
 import bisect
 import threading
 import time as _wall
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from tfbus.core import BufferCore
@@ -25,7 +25,7 @@ from tfbus.view.timeline import BagTimeline
 if TYPE_CHECKING:
     from tfbus.view.fleet import FleetView
 
-__all__ = ["CLOUD_COLOUR", "MAX_DRAW_HZ", "BagPlayer", "draw_live"]
+__all__ = ["CLOUD_COLOUR", "MAX_DRAW_HZ", "BagPlayer", "RecentRates", "draw_live"]
 
 CLOUD_COLOUR = (230, 60, 160)
 """Colour of a PointCloud2's points (RGB 0-255); a LaserScan's are blue."""
@@ -306,21 +306,45 @@ class BagPlayer:
             stop.wait(period)
 
 
+class RecentRates(Mapping[str, float]):
+    """Each frame's recent rate in Hz, :meth:`FrameSummary.recent_rate
+    <tfbus.monitor.FrameSummary.recent_rate>` at ``now``, read from ``summary`` when a
+    frame's rate is asked for (the frame table and the two frames' chain read them; a
+    redraw that shows neither reads none). Keys: the child frame ids of
+    ``summary.frames``; a missing one raises ``KeyError``."""
+
+    __slots__ = ("_frames", "_now")
+
+    def __init__(self, summary: TfSummary, now: Time) -> None:
+        self._frames = summary.frames
+        self._now = now
+
+    def __getitem__(self, frame_id: str) -> float:
+        return self._frames[frame_id].recent_rate(self._now)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._frames)
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+
 def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
               fixed_frame: str | None = None,
               frame_timeout: float = DEFAULT_FRAME_TIMEOUT,
-              fleet: FleetView | None = None) -> Scene:
+              fleet: FleetView | None = None, table: bool = True) -> Scene:
     """Draw a live buffer at its latest data; ages from each frame's last receive time
     (``summary``, as :class:`~tfbus.monitor.MonitoredSink` records it) to ``now``; with
-    ``fleet``, the robots it picks (:meth:`~tfbus.view.fleet.FleetView.build`)."""
+    ``fleet``, the robots it picks (:meth:`~tfbus.view.fleet.FleetView.build`). The
+    frame table is written only with ``table`` (:meth:`TfPage.draw`); rates are the
+    frames' recent rates at ``now`` (:class:`RecentRates`)."""
     last = {name: Time.from_ns(fs.last_received)
             for name, fs in summary.frames.items() if fs.last_received is not None}
-    rates = {name: fs.recent_rate(now) for name, fs in summary.frames.items()}
     if fleet is not None:
         scene = fleet.build(core, fixed_frame=fixed_frame, now=now, last_update=last,
                             frame_timeout=frame_timeout)
     else:
         scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
                             frame_timeout=frame_timeout)
-    page.draw(scene, summary, rates, core=core)
+    page.draw(scene, summary, RecentRates(summary, now), core=core, table=table)
     return scene

@@ -103,27 +103,49 @@ def _parents(core: BufferCore) -> dict[str, str]:
     return {i.child: i.parent for i in core.frame_info() if i.parent != NO_PARENT}
 
 
-def default_fixed_frame(core: BufferCore) -> str | None:
-    """The root of the largest tree (most frames; the first registered on a tie), as rviz
-    users pick ``map``/``odom``/``world``; ``None`` for an empty buffer. A loop has no
-    root: its frames count for none."""
-    parents = _parents(core)
-    names = core.get_frame_names()
+def _largest_root(names: list[str], parents: Mapping[str, str]) -> str | None:
+    """:func:`default_fixed_frame` of the frames ``names`` (registration order) linked
+    by ``parents`` (child -> parent). Each frame's root is found once: a walk up stops
+    at the first frame whose root is already known, and every frame it passed gets that
+    root, so the whole tree costs O(frames) however deep it is. A frame on a loop, or
+    below one, has no root."""
+    roots: dict[str, str | None] = {}
     sizes: dict[str, int] = {}
     for name in names:
-        seen = {name}
-        root = name
-        while root in parents:
-            root = parents[root]
-            if root in seen:
+        path: list[str] = []
+        on_path: set[str] = set()
+        frame = name
+        root: str | None
+        while True:
+            if frame in roots:
+                root = roots[frame]
                 break
-            seen.add(root)
-        else:
+            parent = parents.get(frame)
+            if parent is None:
+                root = frame
+                roots[frame] = frame
+                break
+            if frame in on_path:  # a loop: no root for any frame on this walk
+                root = None
+                break
+            path.append(frame)
+            on_path.add(frame)
+            frame = parent
+        for passed in path:
+            roots[passed] = root
+        if root is not None:
             sizes[root] = sizes.get(root, 0) + 1
     if not sizes:
         return None
     order = {n: i for i, n in enumerate(names)}
     return max(sizes, key=lambda r: (sizes[r], -order.get(r, 0)))
+
+
+def default_fixed_frame(core: BufferCore) -> str | None:
+    """The root of the largest tree (most frames; the first registered on a tie), as rviz
+    users pick ``map``/``odom``/``world``; ``None`` for an empty buffer. A loop has no
+    root: its frames count for none."""
+    return _largest_root(core.get_frame_names(), _parents(core))
 
 
 def build_scene(
@@ -158,11 +180,12 @@ def build_scene(
     """
     fade(None, frame_timeout)  # validates the timeout
     names = core.get_frame_names()
-    if fixed_frame is None:
-        fixed_frame = default_fixed_frame(core)
+    info = {i.child: i for i in core.frame_info()}
+    if fixed_frame is None:  # default_fixed_frame, from the frame_info read here
+        fixed_frame = _largest_root(
+            names, {c: i.parent for c, i in info.items() if i.parent != NO_PARENT})
     if not names or fixed_frame is None:
         return Scene(fixed_frame, time, (), "no transforms received (no /tf or /tf_static)")
-    info = {i.child: i for i in core.frame_info()}
     views: list[FrameView] = []
     for name in names:
         fi = info.get(name)

@@ -558,16 +558,16 @@ class TfPage:
             self.status.content = value
 
     def draw(self, scene: Scene, stats: TfSummary | None = None,
-             rates: Mapping[str, float] | None = None, core: BufferCore | None = None
-             ) -> None:
-        """Show ``scene``: frames, labels, links, panel. ``stats`` gives broadcasters
-        and rates (Hz) when known; ``rates`` overrides a rate per frame; ``core`` (the
-        buffer the scene was built from) answers the two frames' lookup
-        (:meth:`draw_pair`)."""
+             rates: Mapping[str, float] | None = None, core: BufferCore | None = None,
+             *, table: bool = True) -> None:
+        """Show ``scene``: frames, labels, links, and with ``table`` the frame table
+        (else the table shown stays as it is). ``stats`` gives broadcasters and rates
+        (Hz) when known; ``rates`` overrides a rate per frame; ``core`` (the buffer the
+        scene was built from) answers the two frames' lookup (:meth:`draw_pair`)."""
         # one batch: viser's loop is woken once per redraw, not once per changed value,
         # and a browser applies the redraw's poses together
         with self._lock, self.server.atomic():
-            self._draw(scene, stats, rates)
+            self._draw(scene, stats, rates, table)
             self.draw_pair(scene, core, stats, rates)
             self.draw_trail(scene, core)
             self.frame_tree.update(scene, self.shown if self.frame_filter is not None else None,
@@ -605,7 +605,7 @@ class TfPage:
             self.trail_info.content = value
 
     def _draw(self, scene: Scene, stats: TfSummary | None,
-              rates: Mapping[str, float] | None) -> None:
+              rates: Mapping[str, float] | None, table: bool = True) -> None:
         poses = {f.frame_id: f.pose for f in scene.frames}
         segments: list[list[tuple[float, float, float]]] = []
         colours: list[list[tuple[int, int, int]]] = []
@@ -656,7 +656,8 @@ class TfPage:
         if not self.camera_set:
             self.aim(scene)
         self._show_fixed(scene)
-        self._draw_panel(scene, stats, rates)
+        if table:
+            self._draw_panel(scene, stats, rates)
         msg = scene.message
         if msg is None and scene.fixed_frame is not None:
             msg = f"fixed frame: {scene.fixed_frame}"
