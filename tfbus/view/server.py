@@ -97,9 +97,27 @@ def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, 
 
 
 @functools.lru_cache(maxsize=4096)
-def _axes_mix(colour: float) -> tuple[tuple[tuple[int, int, int], tuple[int, int, int]], ...]:
-    """The x, y and z axes' :func:`_mix` of ``colour``, each as a segment's two ends."""
-    return tuple((c, c) for c in (_mix(colour, full) for full in AXES_COLOURS))
+def _axes_block(colour: float) -> npt.NDArray[np.uint8]:
+    """The x, y and z axes' :func:`_mix` of ``colour`` as a read-only ``(3, 2, 3) uint8``
+    array (sRGB 0-255; each axis segment's two ends): a redraw joins one per frame."""
+    block = np.array([(c, c) for c in (_mix(colour, full) for full in AXES_COLOURS)],
+                     dtype=np.uint8)
+    block.setflags(write=False)
+    return block
+
+
+@functools.lru_cache(maxsize=4096)
+def _link_block(colour: float) -> npt.NDArray[np.uint8]:
+    """:func:`_mix` of ``colour`` as a read-only ``(1, 2, 3) uint8`` array (a link
+    segment's two ends, sRGB 0-255)."""
+    c = _mix(colour)
+    block = np.array([(c, c)], dtype=np.uint8)
+    block.setflags(write=False)
+    return block
+
+
+_NO_COLOURS: npt.NDArray[np.uint8] = np.zeros((0, 2, 3), dtype=np.uint8)
+_NO_COLOURS.setflags(write=False)
 
 
 def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
@@ -305,7 +323,7 @@ class TfPage:
                                              npt.NDArray[np.uint8]]] = {}
         self.axes_rows: dict[str, int] = {}
         """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
-        self._axes_srgb: list[Sequence[tuple[int, int, int]]] = []
+        self._axes_srgb: npt.NDArray[np.uint8] = _NO_COLOURS  # (3 N, 2, 3) sRGB, as drawn
         gui = self.server.gui
         self._title = gui.add_html(f"<b>{_h(title)}</b>")
         self.status = gui.add_html("")
@@ -608,10 +626,10 @@ class TfPage:
               rates: Mapping[str, float] | None, table: bool = True) -> None:
         poses = {f.frame_id: f.pose for f in scene.frames}
         segments: list[list[tuple[float, float, float]]] = []
-        colours: list[list[tuple[int, int, int]]] = []
+        colours: list[npt.NDArray[np.uint8]] = []  # one (1, 2, 3) block per segment
         origins: list[tuple[float, float, float]] = []
         quaternions: list[tuple[float, float, float, float]] = []
-        axes_colours: list[Sequence[tuple[int, int, int]]] = []
+        axes_blocks: list[npt.NDArray[np.uint8]] = []  # one (3, 2, 3) block per frame
         rows: dict[str, int] = {}
         length = float(self.axis_length.value)
         labels = bool(self.labels_box.value)
@@ -635,24 +653,25 @@ class TfPage:
             q = pose.transform.rotation
             origins.append(xyz)
             quaternions.append((q.x, q.y, q.z, q.w))
-            axes_colours.extend(_axes_mix(colour))
+            axes_blocks.append(_axes_block(colour))
             parent_pose = poses.get(f.parent) if f.parent is not None else None
             if parent_pose is not None:
                 segments.append([xyz, _xyz(parent_pose)])
-                c = _mix(colour)
-                colours.append([c, c])
+                colours.append(_link_block(colour))
         for name, drawn_frame in self.frames.items():  # drawn before, not in this scene
             if name not in poses and drawn_frame.visible:
                 drawn_frame.show(False, labels)
         self.links, self.link_count = self._segments(
-            "/links", self.links, self.link_count, segments, colours, 2.0)
+            "/links", self.links, self.link_count, segments,
+            np.concatenate(colours) if colours else _NO_COLOURS, 2.0)
         axes = (_axes(np.asarray(origins, dtype=np.float64),
                       np.asarray(quaternions, dtype=np.float64), length)
                 if origins else np.zeros((0, 2, 3)))
+        axes_srgb = np.concatenate(axes_blocks) if axes_blocks else _NO_COLOURS
         self.axes, self.axes_count = self._segments(
-            "/axes", self.axes, self.axes_count, axes, axes_colours, 4.0)
+            "/axes", self.axes, self.axes_count, axes, axes_srgb, 4.0)
         self.axes_rows = rows
-        self._axes_srgb = axes_colours
+        self._axes_srgb = axes_srgb
         if not self.camera_set:
             self.aim(scene)
         self._show_fixed(scene)
@@ -862,7 +881,8 @@ class TfPage:
         row = self.axes_rows.get(frame_id)
         if row is None or self.axes is None or not self.axes.visible:
             return None
-        return tuple((c[0][0], c[0][1], c[0][2]) for c in self._axes_srgb[row:row + 3])
+        return tuple((int(c[0, 0]), int(c[0, 1]), int(c[0, 2]))
+                     for c in self._axes_srgb[row:row + 3])
 
     def _draw_panel(self, scene: Scene, stats: TfSummary | None,
                     rates: Mapping[str, float] | None) -> None:
