@@ -345,15 +345,66 @@ class Doctor:
             self.start = t
         if self.end is None or t > self.end:
             self.end = t
-        add_one = self._add_one
-        for ts in transforms:
-            if not (isinstance(ts, TransformStamped) and isinstance(ts.child_frame_id, str)):
-                continue
-            header = ts.header
-            if not (isinstance(header.frame_id, str) and isinstance(header.stamp, Time)):
-                continue
-            self.transforms += 1
-            add_one(t, ts, sender, static)
+        links = self._links
+        # the newest stamp held over the message, written back once (a dynamic transform
+        # reads it and may raise it; nothing else reads it meanwhile)
+        newest_stamp = self._newest_stamp
+        sim_time = self.sim_time
+        counted = 0
+        try:
+            for ts in transforms:
+                if not isinstance(ts, TransformStamped):
+                    continue
+                child = ts.child_frame_id
+                if not isinstance(child, str):
+                    continue
+                header = ts.header
+                parent = header.frame_id
+                when = header.stamp
+                if not (isinstance(parent, str) and isinstance(when, Time)):
+                    continue
+                counted += 1
+                link = links.get(child)
+                if (link is not None and (hot := link.hot) is not None and hot[0] == parent
+                        and hot[1] == sender and hot[2] is static):
+                    # the same parent, sender and topic as the link's last message: no
+                    # lookups (and no slash to strip: links and parents are kept without)
+                    hot[3].add(t)
+                    hot[4].add(t)
+                    mean, sample = hot[5], hot[6]
+                else:
+                    found = self._find(child, parent, sender, static, t)
+                    if found is None:
+                        continue
+                    link, parent, mean, sample = found
+                link.last_received = t
+                if static:
+                    tr, rot = ts.transform.translation, ts.transform.rotation
+                    link.static_values[sender] = (parent, tr.x, tr.y, tr.z,
+                                                  rot.x, rot.y, rot.z, rot.w)
+                    continue
+                assert mean is not None and sample is not None
+                stamp = when._ns
+                # delay: receive time - stamp (against the newest stamp in simulated time)
+                if sim_time is None:
+                    sim_time = self.sim_time = abs(t - stamp) / NSEC_PER_SEC > SIM_TIME_GAP
+                if stamp > newest_stamp:
+                    newest_stamp = stamp
+                d = ((newest_stamp if sim_time else t) - stamp) / NSEC_PER_SEC
+                mean[0] += d
+                mean[1] += 1
+                sample.add(d)
+                newest = link.newest
+                if newest is not None and stamp > newest:
+                    # in order (the common case): newer than every stamp held, not repeated
+                    link.recent.append(stamp)
+                    link.sender_stamp[sender] = stamp
+                    self._interval(link, t, stamp, newest, sender)
+                else:
+                    self._stamps(link, t, stamp, sender)
+        finally:
+            self._newest_stamp = newest_stamp
+            self.transforms += counted
 
     def _link(self, child: str) -> _Link | None:
         link = self._links.get(child)
@@ -364,53 +415,26 @@ class Doctor:
             link = self._links[child] = _Link(child)
         return link
 
-    def _add_one(self, t: int, ts: TransformStamped, sender: str, static: bool) -> None:
-        child = ts.child_frame_id
-        parent = ts.header.frame_id
-        link = self._links.get(child)
-        if (link is not None and (hot := link.hot) is not None and hot[0] == parent
-                and hot[1] == sender and hot[2] is static):
-            # the same parent, sender and topic as the link's last message: no lookups
-            # (and no slash to strip: the links and their parents are kept without it)
-            hot[3].add(t)
-            hot[4].add(t)
-            mean, sample = hot[5], hot[6]
+    def _find(self, child: str, parent: str, sender: str, static: bool, t: int
+              ) -> tuple[_Link, str, list[float] | None, _Sample | None] | None:
+        """A transform whose link has no hot entry for it (another parent, sender or
+        topic than its last message, a new link, a slash to strip): its link, its parent
+        without a leading slash and, for a dynamic one, its sender's delay tables
+        (:meth:`_relook`); None when the link is untracked (:attr:`Thresholds.max_frames`)."""
+        link = None
+        if child.startswith("/"):  # tf2 (ROS 1, and tfbus) stores it without the slash
+            self._slash(child, "child_frame_id", sender, t)
+            child = child[1:]
         else:
-            if child.startswith("/"):  # tf2 (ROS 1, and tfbus) stores it without the slash
-                self._slash(child, "child_frame_id", sender, t)
-                child = child[1:]
-                link = None  # the link of the id without the slash, looked up below
-            if parent.startswith("/"):
-                self._slash(parent, "frame_id", sender, t)
-                parent = parent[1:]
-            link = link or self._link(child)
-            if link is None:
-                return
-            mean, sample = self._relook(link, t, parent, sender, static)
-        link.last_received = t
-        if static:
-            tr, rot = ts.transform.translation, ts.transform.rotation
-            link.static_values[sender] = (parent, tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w)
-            return
-        assert mean is not None and sample is not None
-        stamp = ts.header.stamp._ns  # a Time (checked by add)
-        # delay: receive time - stamp (against the newest stamp in simulated time)
-        if self.sim_time is None:
-            self.sim_time = abs(t - stamp) / NSEC_PER_SEC > SIM_TIME_GAP
-        if stamp > self._newest_stamp:
-            self._newest_stamp = stamp
-        d = ((self._newest_stamp if self.sim_time else t) - stamp) / NSEC_PER_SEC
-        mean[0] += d
-        mean[1] += 1
-        sample.add(d)
-        newest = link.newest
-        if newest is not None and stamp > newest:
-            # in order (the common case): newer than every stamp held, so not repeated
-            link.recent.append(stamp)
-            link.sender_stamp[sender] = stamp
-            self._interval(link, t, stamp, newest, sender)
-        else:
-            self._stamps(link, t, stamp, sender)
+            link = self._links.get(child)
+        if parent.startswith("/"):
+            self._slash(parent, "frame_id", sender, t)
+            parent = parent[1:]
+        link = link or self._link(child)
+        if link is None:
+            return None
+        mean, sample = self._relook(link, t, parent, sender, static)
+        return link, parent, mean, sample
 
     def _relook(self, link: _Link, t: int, parent: str, sender: str, static: bool
                 ) -> tuple[list[float] | None, _Sample | None]:
