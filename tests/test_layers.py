@@ -557,7 +557,7 @@ def test_middleware_threads_reach_the_loop_only_through_thread_wakeup() -> None:
 FRAME_WALK_HOMES: dict[str, set[str]] = {
     "tfbus.core.buffer_core": {"up"},  # frame_path: tfbus's one frame path
     "tfbus.compat.tf2_py": {"_walk_chain"},  # tf2_py 0.7.6 ``_chain``
-    "tfbus.view.scene": {"default_fixed_frame"},  # each frame's root (a walk, not a chain)
+    "tfbus.view.scene": {"_largest_root"},  # each frame's root (a walk, not a chain)
 }
 """The functions that walk a frame's ancestors by name (a loop over ``get_parent`` or a
 ``parents`` mapping), by module: the frame path has one home in the core and tf2_py's
@@ -570,6 +570,10 @@ def _walks_parents(loop: ast.While) -> bool:
             return True
         if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name)
                 and node.value.id == "parents"):
+            return True
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "get" and isinstance(node.func.value, ast.Name)
+                and node.func.value.id == "parents"):
             return True
     return False
 
