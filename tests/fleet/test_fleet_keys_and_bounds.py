@@ -187,3 +187,84 @@ def test_peer_table_bounds_topics_per_node_and_checks_its_arguments() -> None:
         PeerTable(keys, frozenset(), max_peers=0)
     with pytest.raises(ValueError, match="max_topics must be at least 1, got 0"):
         PeerTable(keys, frozenset(), max_topics=0)
+
+
+def test_a_fleet_latches_each_robots_static_topic_by_its_robot_name() -> None:
+    from tfbus.transports.zenoh.peers import PeerTable
+
+    keys = FleetKeySpace("tfbus")
+    assert keys.robot_topic("/r1/tf_static") == "/tf_static"
+    assert keys.robot_topic("/r1/a/b") == "/a/b"
+    assert keys.robot_topic("/tf") == "/tf"  # the root namespace
+    table = PeerTable(keys, frozenset({"/tf_static"}))
+    node = table.update(True, "tfbus/r1/@alive/aa11/robot")
+    static = table.update(True, "tfbus/r1/@alive/aa11/robot/tf_static")
+    dynamic = table.update(True, "tfbus/r1/@alive/aa11/robot/tf")
+    assert node is not None and static is not None and dynamic is not None
+    # asked when it appears, and again when it starts publishing a latched topic
+    assert (node[1], static[1], dynamic[1]) == (True, True, False)
+    assert static[0].topic == "/r1/tf_static"
+
+
+async def test_a_fleet_asks_a_robot_for_its_static_when_the_robot_starts_publishing_it() -> None:
+    """A robot's node token comes before its static (a bus starts, then publishes): the
+    fleet's queries on the node find nothing latched, and when the robot's ``/tf_static``
+    token appears the fleet asks again and gets the static (its live put may precede the
+    route to the fleet and be lost: the latch is what a late joiner can count on)."""
+    from tfbus.transports.zenoh.transport import LATCH_QUERY_RETRIES
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, namespace="*",
+                               name="fleet")
+    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
+    queries: list[str] = []  # appended in Zenoh's thread
+    latched: list[bytes] = []
+
+    def on_query(query: zenoh.Query) -> None:
+        with query:
+            queries.append(str(query.key_expr))
+            if latched:
+                query.reply("tfbus/r1/@latch/aa11/tf_static", latched[0])
+
+    async with ZenohRouter(listen=endpoint), Bus(transport=transport) as fbus, \
+            FleetBuffer(fbus) as fleet:
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            queryable = session.declare_queryable("tfbus/r1/@latch/aa11/**", on_query)
+            liveliness = session.liveliness()
+            node = liveliness.declare_token("tfbus/r1/@alive/aa11/robot")
+            await fleet.wait_for_robot("r1", timeout=10)
+            # asked when it appeared, and again while nothing answered
+            await wait_until(lambda: len(queries) == 1 + LATCH_QUERY_RETRIES)
+            latched.append(tf_payload("laser", 0.25, 1))
+            static = liveliness.declare_token("tfbus/r1/@alive/aa11/robot/tf_static")
+            await wait_until(lambda: fleet["r1"].can_transform("map", "laser", Time(0)))
+            assert fleet["r1"].lookup_transform("map", "laser", Time(0)).transform \
+                .translation.x == 0.25
+            assert len(queries) == 2 + LATCH_QUERY_RETRIES
+            assert transport.statistics().latched_replies == 1
+            static.undeclare()
+            node.undeclare()
+            queryable.undeclare()
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+
+
+async def test_a_static_a_fleet_publishes_for_a_robot_reaches_the_robots_late_joiner() -> None:
+    from tfbus.buffer import Buffer
+    from tfbus.listener import TransformListener
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+
+    def bus(namespace: str, name: str) -> Bus:
+        return Bus(transport=ZenohTransport(connect=endpoint, config={"mode": "client"},
+                                            namespace=namespace, name=name))
+
+    static = TransformStamped(Header(Time(0), "base"), "laser",
+                              Transform(Vector3(0.5, 0, 0), Quaternion()))
+    async with ZenohRouter(listen=endpoint), bus("*", "fleet") as fbus:
+        fbus.publish_nowait("/r7/tf_static", TFMessage([static]))
+        buffer = Buffer()
+        async with bus("r7", "late") as r7, TransformListener(buffer, r7):
+            await wait_until(lambda: buffer.can_transform("base", "laser", Time(0)))
+        assert buffer.lookup_transform("base", "laser", Time(0)).transform.translation.x == 0.5

@@ -122,6 +122,12 @@ class FleetKeySpace(KeySpace):
             f"{topic_key(rest)}"
         )
 
+    def robot_topic(self, topic: str) -> str:
+        """``/robot7/tf_static`` -> ``/tf_static``: the name robot7's own bus gives a
+        namespaced topic, so that a fleet's ``latched_topics`` (``/tf_static``) covers
+        every robot's (``/robot7/tf_static``) as each robot's bus latches its own."""
+        return self._split(topic)[1]
+
     def topic_of(self, key: str, reply: bool = False) -> str | None:
         """``tfbus/robot7/tf`` -> ``/robot7/tf`` (with ``reply``: a latch key's topic,
         namespaced); None for a key that is not one of the fleet's or not its one

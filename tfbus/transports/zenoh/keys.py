@@ -164,6 +164,12 @@ class KeySpace:
             self._cache[cache_key] = topic
         return topic
 
+    def robot_topic(self, topic: str) -> str:
+        """The name a robot's own bus gives ``topic`` (what ``latched_topics`` lists):
+        ``topic`` itself; a fleet's key space drops the namespace
+        (:meth:`~tfbus.transports.zenoh.fleet_keys.FleetKeySpace.robot_topic`)."""
+        return topic
+
     def parse_alive(self, key: str) -> AliveKey | None:
         """The node, name and topic of a liveliness key; None if it is not one of ours
         or not its canonical spelling (:func:`parse_chunk`)."""

@@ -96,7 +96,7 @@ class PeerTable:
             if topic:
                 info = PeerInfo(node_id, name, info.topics | {topic})
             self._peers[node_id] = info
-            query = not topic or topic in self._latched
+            query = not topic or self._keys.robot_topic(topic) in self._latched
         elif not topic:
             self._peers.pop(node_id, None)
         elif info is not None:

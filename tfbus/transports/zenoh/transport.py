@@ -336,7 +336,10 @@ class ZenohTransport:
         name: this node's name as others see it (default ``"<program>-<pid>"``).
         topics: the remote topics to receive (default: all under the namespace).
         latched_topics: topics whose last message (``TFMessage``: last valid transform
-            per child frame) is served to late joiners (default ``("/tf_static",)``).
+            per child frame) is served to late joiners (default ``("/tf_static",)``);
+            a fleet listener reads them in every robot's namespace (``/tf_static``
+            latches ``/robot1/tf_static``, and a robot starting to publish it is asked
+            for it).
         limits: wire-format bounds applied to received payloads.
         max_pending: capacity of the inbound queue between Zenoh threads and the event
             loop, entries; when full the oldest are dropped and counted.
@@ -809,7 +812,7 @@ class ZenohTransport:
         outlet = self._outlets.get(topic)
         if outlet is None:
             outlet = self._outlets[topic] = _Outlet(
-                topic, self._keys.data(topic), topic in self._latched
+                topic, self._keys.data(topic), self._keys.robot_topic(topic) in self._latched
             )
             if self._session is not None:
                 try:
