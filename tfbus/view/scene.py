@@ -9,11 +9,11 @@ frames (``/tf_static``) never fade: a static transform holds for ever, as tf2 tr
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Final
 
-from tfbus.core import BufferCore
+from tfbus.core import BufferCore, FrameInfo
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
 
@@ -99,8 +99,9 @@ class Scene:
         raise KeyError(frame_id)
 
 
-def _parents(core: BufferCore) -> dict[str, str]:
-    return {i.child: i.parent for i in core.frame_info() if i.parent != NO_PARENT}
+def _parents(infos: Iterable[FrameInfo]) -> dict[str, str]:
+    """Child -> parent of every frame with a parent (``frame_info`` entries)."""
+    return {i.child: i.parent for i in infos if i.parent != NO_PARENT}
 
 
 def _largest_root(names: list[str], parents: Mapping[str, str]) -> str | None:
@@ -145,7 +146,7 @@ def default_fixed_frame(core: BufferCore) -> str | None:
     """The root of the largest tree (most frames; the first registered on a tie), as rviz
     users pick ``map``/``odom``/``world``; ``None`` for an empty buffer. A loop has no
     root: its frames count for none."""
-    return _largest_root(core.get_frame_names(), _parents(core))
+    return _largest_root(core.get_frame_names(), _parents(core.frame_info()))
 
 
 def build_scene(
@@ -182,8 +183,7 @@ def build_scene(
     names = core.get_frame_names()
     info = {i.child: i for i in core.frame_info()}
     if fixed_frame is None:  # default_fixed_frame, from the frame_info read here
-        fixed_frame = _largest_root(
-            names, {c: i.parent for c, i in info.items() if i.parent != NO_PARENT})
+        fixed_frame = _largest_root(names, _parents(info.values()))
     if not names or fixed_frame is None:
         return Scene(fixed_frame, time, (), "no transforms received (no /tf or /tf_static)")
     views: list[FrameView] = []

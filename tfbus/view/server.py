@@ -100,24 +100,25 @@ def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, 
 def _axes_block(colour: float) -> npt.NDArray[np.uint8]:
     """The x, y and z axes' :func:`_mix` of ``colour`` as a read-only ``(3, 2, 3) uint8``
     array (sRGB 0-255; each axis segment's two ends): a redraw joins one per frame."""
-    block = np.array([(c, c) for c in (_mix(colour, full) for full in AXES_COLOURS)],
-                     dtype=np.uint8)
-    block.setflags(write=False)
-    return block
+    return _segment_block([_mix(colour, full) for full in AXES_COLOURS])
 
 
 @functools.lru_cache(maxsize=4096)
 def _link_block(colour: float) -> npt.NDArray[np.uint8]:
     """:func:`_mix` of ``colour`` as a read-only ``(1, 2, 3) uint8`` array (a link
     segment's two ends, sRGB 0-255)."""
-    c = _mix(colour)
-    block = np.array([(c, c)], dtype=np.uint8)
+    return _segment_block([_mix(colour)])
+
+
+def _segment_block(colours: list[tuple[int, int, int]]) -> npt.NDArray[np.uint8]:
+    """A read-only ``(len(colours), 2, 3) uint8`` array: each segment's two ends in its
+    sRGB colour (cached blocks are shared by every redraw, so none may be written)."""
+    block = np.array([(c, c) for c in colours], dtype=np.uint8).reshape(len(colours), 2, 3)
     block.setflags(write=False)
     return block
 
 
-_NO_COLOURS: npt.NDArray[np.uint8] = np.zeros((0, 2, 3), dtype=np.uint8)
-_NO_COLOURS.setflags(write=False)
+_NO_COLOURS: npt.NDArray[np.uint8] = _segment_block([])
 
 
 def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
