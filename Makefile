@@ -62,7 +62,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_core.py
 
 # The speed targets against their peers (tf2_py, C++ tf2, roscpp and tf2_ros, laser_geometry,
-# numpy, raw zenoh-python, the C++ tutorial pair), PASS/FAIL per row, about 15 minutes
+# numpy, raw zenoh-python, the C++ tutorial pair), PASS/FAIL per row, about 20 minutes
 # (not part of `make test`: no timing is a test). Run it before and after a change to the
 # core (CONTRIBUTING.md); e.g. `make bench-check BENCH_CHECK_ARGS="--only sensors,zenoh"`.
 BENCH_CHECK_ARGS ?=

@@ -8,8 +8,8 @@
 Runs the cases of the speed targets' table in the same run as the real tf2 (``tf2_py`` under
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
 ``peers/debian/tf2_check_side.py``), in interleaved rounds (tfbus's side, then tf2's,
-``--rounds`` times), and judges the median of the per-round ratios, so that a machine
-shared with other work slows both sides of a ratio alike. Each side's figure in a round is
+``--rounds`` times, 5 by default, in every group), and judges the median of the per-round
+ratios, so that a machine shared with other work slows both sides of a ratio alike. Each side's figure in a round is
 the best of 3 runs.
 
 Rows (target):
@@ -38,26 +38,26 @@ Rows (target):
   ``Buffer.set_transform`` (<= 1.3x) and through ``send_transform`` -> bus -> listener ->
   buffer (<= 1.5x), asyncio and trio (median of per-repeat ratios, min..max beside it);
 * ROS 1 receive latency, 100 Hz x 50 transforms, 10 s: <= 1.5x a roscpp subscriber in
-  the same run (median of 3 runs, ``bench_ros1.py``), nothing lost; once with constant
+  the same run (median of ``--rounds`` runs, ``bench_ros1.py``), nothing lost; once with constant
   values (a robot's fixed joints) and once with every value changing in every message
   (a robot moving every joint: nothing the decoder can share);
 * ROS 1 receive CPU per 50-transform message, 100 Hz (``bench_ros1_floor.measure``,
-  ``/proc``: every receiver on one stream at once, 5 windows of 12 s after all are
+  ``/proc``: every receiver on one stream at once, ``--rounds`` windows of 12 s after all are
   connected): a tfbus callback subscription <= 1.5x a roscpp callback and <= 1.2x a bare
   asyncio reader (split and decode), a ``TransformListener`` <= 1.15x ``tf2_ros``'s C++
   listener and <= 1.2x the bare reader storing into a ``Buffer``;
 * sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 1.5x the C++
   ``projectLaser``; 10^6 points through ``transform_points`` and ``do_transform_cloud``
   <= 1.2x bare numpy ``pts @ R.T + t``;
-* Zenoh (``bench_latency.receive``, 3 rounds, paths alternated): bus latency <= 1.15x raw
+* Zenoh (``bench_latency.receive``, ``--rounds`` rounds, paths alternated): bus latency <= 1.15x raw
   zenoh-python plus the hop from Zenoh's thread to the loop (``raw+loop``, a floor outside
   tfbus) at 10, 50, 100 and 1000 Hz, bus / raw beside it; under 4 CPU hogs
-  (``bench_zenoh.run``, 3 runs): no ``/tf_static`` frame lost, every ``/tf`` message not
+  (``bench_zenoh.run``, ``--rounds`` runs): no ``/tf_static`` frame lost, every ``/tf`` message not
   received counted by the sender (``send_dropped``) or the receiver (``lost``);
-* the seed demo over ROS 1 (``bench_demo_ros1.run_pair``, 3 rounds of 10 s, alternated):
+* the seed demo over ROS 1 (``bench_demo_ros1.run_pair``, ``--rounds`` rounds of 10 s, alternated):
   the CPU of its two processes <= 1.5x the C++ tutorial pair's;
 * the ``tfbus view --bus zenoh`` process following 100 Hz x 100 frames from another
-  process (``bench_view_process.measure``, 3 windows of 8 s a phase, a bare
+  process (``bench_view_process.measure``, ``--rounds`` windows of 8 s a phase, a bare
   ``TransformListener`` process and a raw zenoh-python subscriber on the same stream
   beside it): <= 5 % of a core with no browser, <= 15 % with one page.
 
@@ -489,7 +489,9 @@ def split_row(rows: Rows, ours: list[dict[str, Any]]) -> None:
 
 def wakeup_rows(rows: Rows, repeats: int) -> None:
     """Each repeat measures the plain floor (``bench_bus.plain_floor_run``: ``set()``,
-    the loop's own yield, the waiter resumes), then the direct insert and the bus path;
+    the loop's own yield, the waiter resumes), then the direct insert and the bus path,
+    then the floor again: a repeat's floor is the mean of the two, so that a machine
+    speeding up or slowing down during the repeat moves both sides of its ratios alike;
     each row judges the median of the per-repeat ratios (min..max beside it). Beside
     them, for information: the floor with anyio's public checkpoint, and the floor with
     the cancellation check a publish makes before it publishes
@@ -506,11 +508,13 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
             checked = anyio.run(bench_bus.checked_floor_run, n, warm, backend, backend=backend)
             direct = anyio.run(bench_bus.direct_run, n, warm, backend, backend=backend)
             bus = anyio.run(bench_bus.latency_run, n, warm, None, backend=backend)
-            floors.append(floor.median_ms * 1e3)
-            ratios["direct"].append(direct.median_ms / floor.median_ms)
-            ratios["bus"].append(bus.median_ms / floor.median_ms)
-            ratios["anyio_floor"].append(old_floor.median_ms / floor.median_ms)
-            ratios["checked_floor"].append(checked.median_ms / floor.median_ms)
+            after = anyio.run(bench_bus.plain_floor_run, n, warm, backend, backend=backend)
+            floor_ms = (floor.median_ms + after.median_ms) / 2
+            floors.append(floor_ms * 1e3)
+            ratios["direct"].append(direct.median_ms / floor_ms)
+            ratios["bus"].append(bus.median_ms / floor_ms)
+            ratios["anyio_floor"].append(old_floor.median_ms / floor_ms)
+            ratios["checked_floor"].append(checked.median_ms / floor_ms)
         for key, label in (("direct", "direct insert"), ("bus", "through the bus")):
             target = WAKE_TARGETS[key]
             rows.row(
@@ -1013,19 +1017,19 @@ def main(argv: list[str] | None = None) -> int:
     if "wakeup" in groups:
         wakeup_rows(rows, args.rounds)
     if "ros1" in groups:
-        ros1_rows(rows, 3)
+        ros1_rows(rows, args.rounds)
     if "ros1cpu" in groups:
-        ros1cpu_rows(rows, 5)
+        ros1cpu_rows(rows, args.rounds)
     if "sensors" in groups:
         sensors_rows(rows, args.rounds)
     if "zenoh" in groups:
-        zenoh_rows(rows, 3)
+        zenoh_rows(rows, args.rounds)
     if "demo" in groups:
-        demo_rows(rows, 3)
+        demo_rows(rows, args.rounds)
     if "view" in groups:
-        view_rows(rows, 3)
+        view_rows(rows, args.rounds)
     if "clock" in groups:
-        clock_rows(rows, 3, ros1=not args.no_ros1)
+        clock_rows(rows, args.rounds, ros1=not args.no_ros1)
     print(f"{rows.failed} row(s) failed (load {load0:.2f} -> {os.getloadavg()[0]:.2f})")
     return 1 if rows.failed else 0
 
