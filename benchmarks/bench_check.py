@@ -9,8 +9,8 @@ Runs the cases of the speed targets' table in the same run as the real tf2 (``tf
 ``/usr/bin/python3``, Debian python3-tf2, ROS 1 geometry2 0.7.6;
 ``peers/debian/tf2_check_side.py``), in interleaved rounds (tfbus's side, then tf2's,
 ``--rounds`` times, 5 by default, in every group), and judges the median of the per-round
-ratios, so that a machine shared with other work slows both sides of a ratio alike. Each side's figure in a round is
-the best of 3 runs.
+ratios, so that a machine shared with other work slows both sides of a ratio alike. Each
+side's figure in a round is the best of 3 runs.
 
 Rows (target):
 
