@@ -7,8 +7,9 @@ on keys of its choosing. Every wait is bounded; time is advanced on a ManualCloc
 
 from __future__ import annotations
 
+import contextlib
 import socket
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 
 import anyio
 import pytest
@@ -40,6 +41,18 @@ def tf_payload(child: str, x: float, seq: int) -> bytes:
     return wire.WireCodec().encode(TFMessage([t]), sender=77, seq=seq)
 
 
+@contextlib.asynccontextmanager
+async def raw_session(endpoint: str) -> AsyncIterator[zenoh.Session]:
+    """A raw zenoh-python client session on ``endpoint`` (a peer that declares what a test
+    makes up), closed on the way out."""
+    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
+    session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+    try:
+        yield session
+    finally:
+        await anyio.to_thread.run_sync(session.close)
+
+
 async def wait_until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
     with anyio.fail_after(timeout):
         while not predicate():
@@ -63,30 +76,25 @@ async def test_a_percent_encoded_alias_of_a_namespace_is_refused_and_counted() -
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, namespace="*",
                                name="fleet")
-    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
     async with ZenohRouter(listen=endpoint), Bus(transport=transport) as fbus, \
-            FleetBuffer(fbus) as fleet:
-        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
-        try:
-            liveliness = session.liveliness()
-            alias = liveliness.declare_token("tfbus/r%31/@alive/aa11/intruder")
-            real = liveliness.declare_token("tfbus/r2/@alive/bb22/robot")
-            await fleet.wait_for_robot("r2", timeout=10)
-            await wait_until(lambda: transport.statistics().refused_tokens == 1)
-            session.put("tfbus/r%31/tf", tf_payload("base", 9.0, 1))
-            session.put("tfbus/r2/tf", tf_payload("base", 2.0, 1))
-            await wait_until(lambda: fleet.statistics().messages == 1
-                             and transport.statistics().refused_keys == 1)
-            assert "r1" not in fleet and list(fleet) == ["r2"]
-            assert fleet["r2"].lookup_transform("map", "base", Time(0)).transform \
-                .translation.x == 2.0
-            stats = transport.statistics()  # delivered: r2 appearing, its /tf
-            assert (stats.refused_keys, stats.refused_tokens, stats.delivered) == (1, 1, 2)
-            assert stats.dropped == 1
-            alias.undeclare()
-            real.undeclare()
-        finally:
-            await anyio.to_thread.run_sync(session.close)
+            FleetBuffer(fbus) as fleet, raw_session(endpoint) as session:
+        liveliness = session.liveliness()
+        alias = liveliness.declare_token("tfbus/r%31/@alive/aa11/intruder")
+        real = liveliness.declare_token("tfbus/r2/@alive/bb22/robot")
+        await fleet.wait_for_robot("r2", timeout=10)
+        await wait_until(lambda: transport.statistics().refused_tokens == 1)
+        session.put("tfbus/r%31/tf", tf_payload("base", 9.0, 1))
+        session.put("tfbus/r2/tf", tf_payload("base", 2.0, 1))
+        await wait_until(lambda: fleet.statistics().messages == 1
+                         and transport.statistics().refused_keys == 1)
+        assert "r1" not in fleet and list(fleet) == ["r2"]
+        assert fleet["r2"].lookup_transform("map", "base", Time(0)).transform \
+            .translation.x == 2.0
+        stats = transport.statistics()  # delivered: r2 appearing, its /tf
+        assert (stats.refused_keys, stats.refused_tokens, stats.delivered) == (1, 1, 2)
+        assert stats.dropped == 1
+        alias.undeclare()
+        real.undeclare()
 
 
 async def test_announced_namespaces_are_bounded_and_gone_ones_released() -> None:
@@ -94,37 +102,33 @@ async def test_announced_namespaces_are_bounded_and_gone_ones_released() -> None
     clock = ManualClock(Time(1000))
     transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, namespace="*",
                                name="fleet")
-    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
     async with ZenohRouter(listen=endpoint), Bus(transport=transport) as fbus, \
-            FleetBuffer(fbus, max_robots=3, forget_after=60, clock=clock) as fleet:
-        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
-        try:
-            liveliness = session.liveliness()
-            tokens = {f"ns{i}": liveliness.declare_token(f"tfbus/ns{i}/@alive/{i:04x}/n")
-                      for i in range(5)}
-            await wait_until(lambda: fleet.statistics().robots_refused == 2)
-            kept = sorted(fleet)
-            assert len(kept) == 3 and len(fbus.transport.alive()) == 5  # type: ignore[attr-defined]
-            # a kept robot goes away: shown as gone until forget_after has passed
-            tokens.pop(kept[0]).undeclare()
-            await wait_until(lambda: fleet.statistics().gone == 1)
-            clock.advance_nowait(59.0)
-            assert fleet.robots()[kept[0]].alive is False and len(fleet) == 3
-            clock.advance_nowait(1.0)  # 60 s gone: released by the fleet's clock
-            await wait_until(lambda: fleet.statistics().released == 1)
-            assert kept[0] not in fleet and len(fleet) == 2
-            # room again: a new namespace is followed, the next one refused
-            tokens["ns5"] = liveliness.declare_token("tfbus/ns5/@alive/0005/n")
-            await fleet.wait_for_robot("ns5", timeout=10)
-            tokens["ns6"] = liveliness.declare_token("tfbus/ns6/@alive/0006/n")
-            await wait_until(lambda: fleet.statistics().robots_refused == 3)
-            assert len(fleet) == 3 and "ns6" not in fleet
-            with pytest.raises(RuntimeError, match="max_robots=3"):
-                fleet.add_robot("manual")
-            for token in tokens.values():
-                token.undeclare()
-        finally:
-            await anyio.to_thread.run_sync(session.close)
+            FleetBuffer(fbus, max_robots=3, forget_after=60, clock=clock) as fleet, \
+            raw_session(endpoint) as session:
+        liveliness = session.liveliness()
+        tokens = {f"ns{i}": liveliness.declare_token(f"tfbus/ns{i}/@alive/{i:04x}/n")
+                  for i in range(5)}
+        await wait_until(lambda: fleet.statistics().robots_refused == 2)
+        kept = sorted(fleet)
+        assert len(kept) == 3 and len(fbus.transport.alive()) == 5  # type: ignore[attr-defined]
+        # a kept robot goes away: shown as gone until forget_after has passed
+        tokens.pop(kept[0]).undeclare()
+        await wait_until(lambda: fleet.statistics().gone == 1)
+        clock.advance_nowait(59.0)
+        assert fleet.robots()[kept[0]].alive is False and len(fleet) == 3
+        clock.advance_nowait(1.0)  # 60 s gone: released by the fleet's clock
+        await wait_until(lambda: fleet.statistics().released == 1)
+        assert kept[0] not in fleet and len(fleet) == 2
+        # room again: a new namespace is followed, the next one refused
+        tokens["ns5"] = liveliness.declare_token("tfbus/ns5/@alive/0005/n")
+        await fleet.wait_for_robot("ns5", timeout=10)
+        tokens["ns6"] = liveliness.declare_token("tfbus/ns6/@alive/0006/n")
+        await wait_until(lambda: fleet.statistics().robots_refused == 3)
+        assert len(fleet) == 3 and "ns6" not in fleet
+        with pytest.raises(RuntimeError, match="max_robots=3"):
+            fleet.add_robot("manual")
+        for token in tokens.values():
+            token.undeclare()
 
 
 def test_bounds_are_checked() -> None:
@@ -142,32 +146,28 @@ async def test_live_nodes_are_bounded_whatever_a_peer_declares() -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, name="me",
                                max_peers=3)
-    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
-    async with ZenohRouter(listen=endpoint), Bus(transport=transport):
-        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
-        try:
-            liveliness = session.liveliness()
-            tokens = [liveliness.declare_token(f"tfbus/@alive/{i:04x}/fake") for i in range(6)]
-            tokens.append(liveliness.declare_token(f"tfbus/@alive/{'f' * 65}/long"))
-            await wait_until(lambda: transport.statistics().peers_over_limit == 4)
-            assert len(transport.alive()) == 3
-            # topics of a tracked node are bounded too (256 by default): one more is fine
-            first = sorted(transport.alive())[0]
-            topic = liveliness.declare_token(f"tfbus/@alive/{first}/fake/tf")
-            await wait_until(lambda: "/tf" in transport.alive()[first].topics)
-            # a tracked node goes: its place is free for a new one
-            gone = tokens.pop(int(first, 16))
-            topic.undeclare()
-            gone.undeclare()
-            await wait_until(lambda: first not in transport.alive())
-            tokens.append(liveliness.declare_token("tfbus/@alive/abcd/late"))
-            await wait_until(lambda: "abcd" in transport.alive())
-            assert len(transport.alive()) == 3
-            assert transport.statistics().peers_over_limit == 4
-            for token in tokens:
-                token.undeclare()
-        finally:
-            await anyio.to_thread.run_sync(session.close)
+    async with ZenohRouter(listen=endpoint), Bus(transport=transport), \
+            raw_session(endpoint) as session:
+        liveliness = session.liveliness()
+        tokens = [liveliness.declare_token(f"tfbus/@alive/{i:04x}/fake") for i in range(6)]
+        tokens.append(liveliness.declare_token(f"tfbus/@alive/{'f' * 65}/long"))
+        await wait_until(lambda: transport.statistics().peers_over_limit == 4)
+        assert len(transport.alive()) == 3
+        # topics of a tracked node are bounded too (256 by default): one more is fine
+        first = sorted(transport.alive())[0]
+        topic = liveliness.declare_token(f"tfbus/@alive/{first}/fake/tf")
+        await wait_until(lambda: "/tf" in transport.alive()[first].topics)
+        # a tracked node goes: its place is free for a new one
+        gone = tokens.pop(int(first, 16))
+        topic.undeclare()
+        gone.undeclare()
+        await wait_until(lambda: first not in transport.alive())
+        tokens.append(liveliness.declare_token("tfbus/@alive/abcd/late"))
+        await wait_until(lambda: "abcd" in transport.alive())
+        assert len(transport.alive()) == 3
+        assert transport.statistics().peers_over_limit == 4
+        for token in tokens:
+            token.undeclare()
 
 
 def test_peer_table_bounds_topics_per_node_and_checks_its_arguments() -> None:
@@ -216,7 +216,6 @@ async def test_a_fleet_asks_a_robot_for_its_static_when_the_robot_starts_publish
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     transport = ZenohTransport(connect=endpoint, config={"mode": "client"}, namespace="*",
                                name="fleet")
-    cfg, _ = zenoh_config(connect=endpoint, config={"mode": "client"})
     queries: list[str] = []  # appended in Zenoh's thread
     latched: list[bytes] = []
 
@@ -227,27 +226,23 @@ async def test_a_fleet_asks_a_robot_for_its_static_when_the_robot_starts_publish
                 query.reply("tfbus/r1/@latch/aa11/tf_static", latched[0])
 
     async with ZenohRouter(listen=endpoint), Bus(transport=transport) as fbus, \
-            FleetBuffer(fbus) as fleet:
-        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
-        try:
-            queryable = session.declare_queryable("tfbus/r1/@latch/aa11/**", on_query)
-            liveliness = session.liveliness()
-            node = liveliness.declare_token("tfbus/r1/@alive/aa11/robot")
-            await fleet.wait_for_robot("r1", timeout=10)
-            # asked when it appeared, and again while nothing answered
-            await wait_until(lambda: len(queries) == 1 + LATCH_QUERY_RETRIES)
-            latched.append(tf_payload("laser", 0.25, 1))
-            static = liveliness.declare_token("tfbus/r1/@alive/aa11/robot/tf_static")
-            await wait_until(lambda: fleet["r1"].can_transform("map", "laser", Time(0)))
-            assert fleet["r1"].lookup_transform("map", "laser", Time(0)).transform \
-                .translation.x == 0.25
-            assert len(queries) == 2 + LATCH_QUERY_RETRIES
-            assert transport.statistics().latched_replies == 1
-            static.undeclare()
-            node.undeclare()
-            queryable.undeclare()
-        finally:
-            await anyio.to_thread.run_sync(session.close)
+            FleetBuffer(fbus) as fleet, raw_session(endpoint) as session:
+        queryable = session.declare_queryable("tfbus/r1/@latch/aa11/**", on_query)
+        liveliness = session.liveliness()
+        node = liveliness.declare_token("tfbus/r1/@alive/aa11/robot")
+        await fleet.wait_for_robot("r1", timeout=10)
+        # asked when it appeared, and again while nothing answered
+        await wait_until(lambda: len(queries) == 1 + LATCH_QUERY_RETRIES)
+        latched.append(tf_payload("laser", 0.25, 1))
+        static = liveliness.declare_token("tfbus/r1/@alive/aa11/robot/tf_static")
+        await wait_until(lambda: fleet["r1"].can_transform("map", "laser", Time(0)))
+        assert fleet["r1"].lookup_transform("map", "laser", Time(0)).transform \
+            .translation.x == 0.25
+        assert len(queries) == 2 + LATCH_QUERY_RETRIES
+        assert transport.statistics().latched_replies == 1
+        static.undeclare()
+        node.undeclare()
+        queryable.undeclare()
 
 
 async def test_a_static_a_fleet_publishes_for_a_robot_reaches_the_robots_late_joiner() -> None:
