@@ -248,3 +248,157 @@ def test_an_ascii_id_seen_at_the_same_position_is_the_same_str() -> None:
     other = codec.decode(codec.encode(TFMessage((_ts("world", "odom"),)), sender=1, seq=3))
     assert other.message.transforms[0].header.frame_id == "world"
 
+
+
+def _moving(codec: wire.WireCodec, *values: tuple[float, ...], stamp: int = 1,
+            seq: int = 1) -> tuple[TransformStamped, ...]:
+    """The compiled decode of a tfbus TFMessage of ``map -> c<k>`` transforms of 7 values
+    each (its Decoded's transforms)."""
+    assert compiled is not None
+    message = TFMessage(tuple(
+        TransformStamped(Header(Time.from_ns(stamp), "map"), f"c{k}",
+                         Transform(Vector3(*v[:3]), Quaternion(*v[3:])))
+        for k, v in enumerate(values)))
+    payload = codec.encode(message, sender=1, seq=seq)
+    decoded = compiled(payload, LIMITS.max_transforms, LIMITS.max_frame_id_length)
+    assert decoded is not None
+    assert _exact(decoded) == _exact(codec._decode_schema(payload))
+    transforms: tuple[TransformStamped, ...] = decoded[2].transforms
+    return transforms
+
+
+def test_repeated_values_are_the_earlier_transforms_and_changed_bytes_are_new() -> None:
+    """As the ROS 1 decoder: a transform whose 7 values are byte for byte those at the
+    same position of the last message is that message's Transform; one with only the
+    translation (or the rotation) equal shares that part; other bytes (-0.0 after 0.0
+    included) give a new value."""
+    codec = wire.WireCodec()
+    one = (1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0)
+    two = (4.0, 5.0, 6.0, 0.0, 0.0, 0.6, 0.8)
+    first = _moving(codec, one, two, one)
+    again = _moving(codec, one, two, one, stamp=2, seq=2)
+    assert [a.transform is f.transform for a, f in zip(again, first, strict=True)] == [True] * 3
+    assert again[0].header.stamp.ns == 2  # the stamps are read anew
+    moved = _moving(codec, (1.0, 2.0, 3.0, 0.0, 0.0, 0.6, 0.8),
+                    (7.0, 5.0, 6.0, 0.0, 0.0, 0.6, 0.8), two, seq=3)
+    assert moved[0].transform.translation is again[0].transform.translation
+    assert moved[0].transform.rotation == Quaternion(0.0, 0.0, 0.6, 0.8)
+    assert moved[1].transform.rotation is again[1].transform.rotation
+    assert moved[1].transform.translation == Vector3(7.0, 5.0, 6.0)
+    assert moved[2].transform == Transform(Vector3(*two[:3]), Quaternion(*two[3:]))
+    signed = _moving(codec, (-0.0, 2.0, 3.0, 0.0, 0.0, 0.6, 0.8), seq=4)
+    assert struct.pack("<d", signed[0].transform.translation.x) == struct.pack("<d", -0.0)
+
+
+def test_the_two_wires_keep_their_own_positions() -> None:
+    """A process may follow tfbus's wire and ROS 1 at once: each wire's position 0 gives
+    its own last values, whatever the other decoded in between."""
+    from tfbus.codecs import ros1
+
+    codec, tf_codec = wire.WireCodec(), ros1.TFCodec()
+    here = (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    there = TransformStamped(Header(Time(1, 0), "map"), "c0",
+                             Transform(Vector3(9.0, 0.0, 0.0), Quaternion()))
+    native_first = _moving(codec, here)
+    ros1_first = ros1.decode_tf(tf_codec.encode([there])).transforms
+    native_again = _moving(codec, here, seq=2)
+    ros1_again = ros1.decode_tf(tf_codec.encode([there])).transforms
+    assert native_again[0].transform is native_first[0].transform
+    assert ros1_again[0].transform == there.transform
+    if ros1._compiled_ros1 is not None:
+        assert ros1_again[0].transform is ros1_first[0].transform
+
+
+def _reuses() -> bool:
+    from tfbus.codecs import _cwire
+
+    return bool(_cwire._REUSES)
+
+
+def test_a_message_nobody_holds_is_refilled_and_what_is_held_never_changes() -> None:
+    """As the ROS 1 decoder: the objects of the message decoded two messages earlier that
+    nothing references any more are refilled in place with the new values; a message, a
+    transform, a Transform, a Vector3, a Quaternion or a float a user still holds keeps
+    its values, and a new object takes its place."""
+    codec = wire.WireCodec()
+
+    def moving(j: int) -> tuple[TransformStamped, ...]:
+        return _moving(codec, *[(float(k + j), 0.5 * j, -1.0, 0.0, 0.0, 0.01 * j, 1.0)
+                                for k in range(5)], stamp=j, seq=j)
+
+    first = moving(1)
+    ids = [(id(t), id(t.transform), id(t.transform.translation), id(t.transform.rotation))
+           for t in first]
+    del first
+    second = moving(2)  # the previous message is usually still held (an async for)
+    third = moving(3)
+    if _reuses():
+        assert [(id(t), id(t.transform), id(t.transform.translation),
+                 id(t.transform.rotation)) for t in third] == ids
+    assert second[0].transform.translation == Vector3(2.0, 1.0, -1.0)
+    ts, tf = third[0], third[1].transform
+    vec, rot = third[2].transform.translation, third[3].transform.rotation
+    z = third[4].transform.rotation.z
+    snapshot = (struct.pack("<q", ts.header.stamp.ns), tuple(ts.transform.translation),
+                tuple(tf.translation) + tuple(tf.rotation), tuple(vec), tuple(rot))
+    del second, third
+    for j in range(4, 9):
+        out = moving(j)
+        assert [tuple(t.transform.translation) for t in out] == [
+            (k + j, 0.5 * j, -1.0) for k in range(5)]
+        assert (struct.pack("<q", ts.header.stamp.ns), tuple(ts.transform.translation),
+                tuple(tf.translation) + tuple(tf.rotation), tuple(vec), tuple(rot)) == snapshot
+        assert z == 0.03 and ts.child_frame_id == "c0"
+        assert out[0] is not ts and out[1].transform is not tf
+        assert out[2].transform.translation is not vec
+        assert out[3].transform.rotation is not rot
+        assert out[4].transform.rotation.z is not z
+        del out
+
+
+_values = st.sampled_from([0.0, -0.0, 1.0, 2.5, math.nan])
+
+
+@PROPERTY
+@given(st.lists(st.tuples(
+    st.lists(st.tuples(_values, st.booleans()), min_size=28, max_size=28),
+    st.integers(0, 4),
+    st.lists(st.integers(0, 5), max_size=4),
+), min_size=1, max_size=12))
+def test_refilling_never_changes_what_is_held_and_decodes_as_the_schema(
+    steps: list[tuple[list[tuple[float, bool]], int, list[int]]],
+) -> None:
+    """Messages of 0-4 transforms whose values repeat or change at random; after each
+    decode some of what it gave is kept (the transforms, a transform, a Transform, a
+    Vector3, a Quaternion or a float) and the rest dropped. Every decode equals the
+    schema's, bit for bit (:func:`_moving`), and nothing kept ever changes."""
+    codec = wire.WireCodec()
+    kept: list[tuple[object, bytes]] = []
+
+    def bits(obj: object) -> bytes:
+        if isinstance(obj, float):
+            return struct.pack("<d", obj)
+        if isinstance(obj, TransformStamped):
+            return (struct.pack("<q", obj.header.stamp.ns) + obj.child_frame_id.encode()
+                    + bits(obj.transform))
+        if isinstance(obj, tuple) and not isinstance(obj, (Transform, Vector3, Quaternion)):
+            return b"".join(bits(t) for t in obj)
+        if isinstance(obj, Transform):
+            return struct.pack("<7d", *obj.translation, *obj.rotation)
+        assert isinstance(obj, (Vector3, Quaternion))
+        return struct.pack(f"<{len(obj)}d", *obj)
+
+    for stamp, (values, n, keep) in enumerate(steps, start=1):
+        vals = [v if same else v + stamp for v, same in values]  # floats all
+        out = _moving(codec, *[tuple(vals[7 * i: 7 * i + 7]) for i in range(n)],
+                      stamp=stamp, seq=stamp)
+        for choice in keep:
+            if choice == 0 or not out:
+                kept.append((out, bits(out)))
+                continue
+            ts = out[choice % len(out)]
+            part = [ts, ts, ts.transform, ts.transform.translation, ts.transform.rotation,
+                    ts.transform.rotation.w][choice]
+            kept.append((part, bits(part)))
+        del out
+        assert all(bits(obj) == snap for obj, snap in kept)

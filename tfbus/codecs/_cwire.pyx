@@ -15,7 +15,7 @@ and :mod:`tfbus.codecs.native` choose)."""
 from cpython.float cimport PyFloat_FromDouble
 from cpython.object cimport PyObject
 from cpython.ref cimport Py_DECREF, Py_INCREF
-from libc.string cimport memcpy
+from libc.string cimport memcpy, memset
 from cpython.unicode cimport PyUnicode_GET_LENGTH
 from libc.stdint cimport int64_t
 
@@ -71,9 +71,7 @@ cdef inline object _ros1_id(list cache, Py_ssize_t k, const unsigned char* s, ui
 # or 32 bytes equal those decoded last time at the same position is that (immutable)
 # value again, not new floats and tuples. Compared byte for byte (so 0.0 and -0.0, or two
 # NaN payloads, are told apart) on every use; different bytes replace it.
-cdef list _ros1_transforms = [None] * _ROS1_ID_SLOTS
-cdef double _ros1_values[_ROS1_ID_SLOTS][7]
-
+#
 # Values that change (a robot moving every joint) cannot be shared; but the objects of a
 # message nobody holds any more can be used again, as CPython's ``zip`` reuses its result
 # tuple when only it holds it (``zip_next``, Objects/bltinmodule.c). Each position keeps
@@ -113,8 +111,26 @@ _REUSES = bool(TFBUS_REUSE)
 """Whether this build refills the objects nobody holds any more (False on CPython 3.14+
 and free-threaded builds)."""
 
-cdef list _ros1_spares = [None] * (2 * _ROS1_ID_SLOTS)
-cdef unsigned char _ros1_turn[_ROS1_ID_SLOTS]
+
+cdef class _Positions:
+    """What the decodes of one wire left at each position of a message (the first
+    ``_ROS1_ID_SLOTS``): the last Transform and its 7 doubles, and the TransformStampeds
+    of the last two decodes (``turn`` says which of the two a position gives next)."""
+
+    cdef list transforms
+    cdef list spares
+    cdef double values[_ROS1_ID_SLOTS * 7]
+    cdef unsigned char turn[_ROS1_ID_SLOTS]
+
+    def __cinit__(self):
+        self.transforms = [None] * _ROS1_ID_SLOTS
+        self.spares = [None] * (2 * _ROS1_ID_SLOTS)
+        memset(self.turn, 0, _ROS1_ID_SLOTS)
+
+
+# One per wire: a process may follow both, with different values at the same positions.
+cdef _Positions _ros1_at = _Positions()
+cdef _Positions _native_at = _Positions()
 
 
 cdef inline PyObject* _sole_item(PyObject* t, Py_ssize_t i) noexcept:
@@ -150,18 +166,19 @@ cdef inline void _fill(PyObject* t, const double* v, Py_ssize_t n):
             _replace(t, i, PyFloat_FromDouble(v[i]))
 
 
-cdef inline object _ros1_transform(Py_ssize_t k, const double* v, PyObject* spare):
+cdef inline object _transform(_Positions at, Py_ssize_t k, const double* v,
+                              PyObject* spare):
     """The Transform of the 7 doubles ``v`` (translation x y z, rotation x y z w): the
-    one cached at ``k``, or one sharing its Vector3 or Quaternion, when the bytes match;
-    else ``spare`` (a Transform only this module references, or NULL) refilled, or a new
-    one."""
+    one ``at`` position ``k`` holds, or one sharing its Vector3 or Quaternion, when the
+    bytes match; else ``spare`` (a Transform only this module references, or NULL)
+    refilled, or a new one."""
     cdef object cached = None, vec = None, rot = None, tf
     cdef double* old
     cdef PyObject* part
     if k < _ROS1_ID_SLOTS:
-        cached = _ros1_transforms[k]
+        cached = at.transforms[k]
         if cached is not None:
-            old = _ros1_values[k]
+            old = at.values + 7 * k
             if memcmp(old, v, 7 * sizeof(double)) == 0:
                 return cached
             if memcmp(old, v, 3 * sizeof(double)) == 0:
@@ -192,9 +209,38 @@ cdef inline object _ros1_transform(Py_ssize_t k, const double* v, PyObject* spar
         tf = _named(Transform, vec, rot)
         PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
     if k < _ROS1_ID_SLOTS:
-        _ros1_transforms[k] = tf
-        memcpy(_ros1_values[k], v, 7 * sizeof(double))
+        at.transforms[k] = tf
+        memcpy(at.values + 7 * k, v, 7 * sizeof(double))
     return tf
+
+
+cdef inline object _stamped(_Positions at, Py_ssize_t k, object header, object child,
+                            const double* v):
+    """The TransformStamped at position ``k`` of a message: ``header``, ``child`` and the
+    Transform of the 7 doubles ``v`` (:func:`_transform`), in the object this position
+    gave two decodes ago when nothing else references it any more (refilled), else a
+    new one; kept for the decode after next."""
+    cdef Py_ssize_t slot
+    cdef PyObject* held
+    cdef object ts
+    if not TFBUS_REUSE or k >= _ROS1_ID_SLOTS:
+        return _named3(TransformStamped, header, child, _transform(at, k, v, NULL))
+    # Take this position's TransformStamped of two decodes ago out of its slot: held by
+    # ``ts`` alone when nobody else holds it (then it, and whatever of it only it holds,
+    # is refilled; nothing else can reach it meanwhile).
+    slot = 2 * k + at.turn[k]
+    at.turn[k] ^= 1
+    held = _list_item(<PyObject*>at.spares, slot)
+    if held != <PyObject*>None and _refcnt(held) == 1:
+        ts = <object>held
+        at.spares[slot] = None
+        _replace(held, 2, _transform(at, k, v, _sole_item(held, 2)))
+        _replace(held, 0, header)
+        _replace(held, 1, child)
+    else:
+        ts = _named3(TransformStamped, header, child, _transform(at, k, v, NULL))
+    at.spares[slot] = ts
+    return ts
 
 
 cdef inline uint32_t _u32le(const unsigned char* p) noexcept:
@@ -228,9 +274,7 @@ def _tf_from_ros1(const unsigned char[::1] buf):
     cdef const unsigned char* p
     cdef uint32_t n, flen, clen, sec, nsec
     cdef double v[7]
-    cdef object header = None, child, ts, tf, spare = None
-    cdef Py_ssize_t slot
-    cdef PyObject* held
+    cdef object header = None, child
     cdef list out
     if size < 4:
         raise _StructError("message shorter than its contents")
@@ -271,28 +315,7 @@ def _tf_from_ros1(const unsigned char[::1] buf):
         off += 4 + clen
         memcpy(v, p + off, 7 * sizeof(double))
         off += 56
-        if TFBUS_REUSE and k < _ROS1_ID_SLOTS:
-            # Take this position's TransformStamped of two decodes ago out of its slot:
-            # held by ``spare`` alone when nobody else holds it (then it, and whatever of
-            # it only it holds, is refilled; nothing else can reach it meanwhile).
-            slot = 2 * k + _ros1_turn[k]
-            _ros1_turn[k] ^= 1
-            held = _list_item(<PyObject*>_ros1_spares, slot)
-            if held != <PyObject*>None and _refcnt(held) == 1:
-                spare = <object>held
-                _ros1_spares[slot] = None
-                tf = _ros1_transform(k, v, _sole_item(held, 2))
-                _replace(held, 0, header)
-                _replace(held, 1, child)
-                _replace(held, 2, tf)
-                ts = spare
-                spare = None
-            else:
-                ts = _named3(TransformStamped, header, child, _ros1_transform(k, v, NULL))
-            _ros1_spares[slot] = ts
-        else:
-            ts = _named3(TransformStamped, header, child, _ros1_transform(k, v, NULL))
-        out[k] = ts
+        out[k] = _stamped(_ros1_at, k, header, child, v)
     return out
 
 
@@ -423,8 +446,10 @@ def _tf_from_native(const unsigned char[::1] buf, Py_ssize_t max_transforms,
     msgpack array ``[sender, seq, "tf", body]``) of a TFMessage in the form tfbus writes
     it, decoded in C: ``(sender, seq, TFMessage)``, the values ``WireCodec``'s msgspec
     schema decodes from it (equal, tested; an ASCII frame id equal to the one at the same
-    position of the last message is that message's str, and a transform whose header
-    bytes equal the previous transform's shares its Header). None for anything else,
+    position of the last message is that message's str, a transform whose header
+    bytes equal the previous transform's shares its Header, and its values and objects
+    are shared and refilled by position as ``_tf_from_ros1``'s are, in positions of this
+    wire's own). None for anything else,
     which the caller decodes by that schema (and which raises what is wrong with it):
     another tag, a sender or sequence number outside [1, 2**63), an array of another
     length, an integer or float 32 where a float 64 is, a stamp outside [0, 2**63) ns,
@@ -435,7 +460,7 @@ def _tf_from_native(const unsigned char[::1] buf, Py_ssize_t max_transforms,
     cdef const unsigned char* p
     cdef int64_t sender, seq, stamp, last_stamp = -1
     cdef double v[7]
-    cdef object header = None, time = None, frame, child, vec, tf
+    cdef object header = None, time = None, frame, child
     cdef list out
     if size < 2:
         return None
@@ -480,12 +505,7 @@ def _tf_from_native(const unsigned char[::1] buf, Py_ssize_t max_transforms,
         if (_array(p, size, &off) != 2 or not _float64s(p, size, &off, v, 3)
                 or not _float64s(p, size, &off, v + 3, 4)):
             return None
-        vec = _named3(Vector3, PyFloat_FromDouble(v[0]), PyFloat_FromDouble(v[1]),
-                      PyFloat_FromDouble(v[2]))
-        PyObject_GC_UnTrack(<PyObject*>vec)  # three floats: never part of a cycle
-        tf = _named(Transform, vec, _named4(Quaternion, v[3], v[4], v[5], v[6]))
-        PyObject_GC_UnTrack(<PyObject*>tf)  # two untracked tuples: never part of a cycle
-        out[k] = _named3(TransformStamped, header, child, tf)
+        out[k] = _stamped(_native_at, k, header, child, v)
     if off != size:
         return None
     return sender, seq, _named1(TFMessage, PyList_AsTuple(out))
