@@ -26,7 +26,14 @@ established TCP connection to the view's port). Prints each process's share of o
 per window (min / median / max), and the view over the listener floor. Figures only;
 nothing is asserted. Needs ``chromium`` on PATH for the page phase.
 
+``--baseline TREE`` also runs a listener and a view imported from another checkout's
+tfbus (its compiled modules built in place) on the same source, in the same windows
+(``listener@base``, ``view@base``; the page opens on this tree's view only, so
+``view@base`` is printed with no browser): a change's effect measured side by side,
+free of the machine's drift between runs.
+
     .venv/bin/python benchmarks/bench_view_process.py [--seconds 8] [--rounds 3]
+        [--baseline /tmp/old-tree]
 """
 
 from __future__ import annotations
@@ -184,9 +191,10 @@ def _wait_line(proc: subprocess.Popen[str], want: Callable[[str], bool], what: s
     raise SystemExit(f"bench_view_process: {what} did not start within 60 s")
 
 
-def measure(rounds: int, seconds: float) -> Measured:
+def measure(rounds: int, seconds: float, baseline: Path | None = None) -> Measured:
     """Start the three processes, then read their CPU over ``rounds`` windows of
-    ``seconds`` with no browser and again with one page (see the module docstring)."""
+    ``seconds`` with no browser and again with one page (see the module docstring);
+    with ``baseline``, also a listener and a view of that checkout's tfbus."""
     zport, vport = _free_port(), _free_port()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)}  # fmt: skip
@@ -200,13 +208,25 @@ def measure(rounds: int, seconds: float) -> Measured:
                 [sys.executable, __file__, f"--{name}", str(zport)], env=env,
                 stdout=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
             _wait_line(procs[name], lambda line: line.startswith("READY"), name)
-        procs["view"] = subprocess.Popen(
-            [sys.executable, "-c", "from tfbus.cli import main; main()", "view", "--bus",
-             f"zenoh?connect=tcp/127.0.0.1:{zport}", "--port", str(vport)],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, text=True,
-            start_new_session=True, cwd=ROOT)  # fmt: skip (``-c`` puts the cwd first on sys.path)
+        views = [("view", ROOT, env, vport)]
+        if baseline is not None:
+            base_env = {**os.environ, "PYTHONPATH": str(baseline)}
+            procs["listener@base"] = subprocess.Popen(
+                [sys.executable, __file__, "--listener", str(zport)], env=base_env,
+                stdout=subprocess.PIPE, text=True, start_new_session=True, cwd=baseline,
+            )  # fmt: skip
+            _wait_line(procs["listener@base"], lambda line: line.startswith("READY"),
+                       "listener@base")
+            views.append(("view@base", baseline, base_env, _free_port()))
+        for name, tree, view_env, port in views:  # ``-c`` puts the cwd first on sys.path
+            procs[name] = subprocess.Popen(
+                [sys.executable, "-c", "from tfbus.cli import main; main()", "view", "--bus",
+                 f"zenoh?connect=tcp/127.0.0.1:{zport}", "--port", str(port)],
+                env=view_env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, text=True,
+                start_new_session=True, cwd=tree)  # fmt: skip
         deadline = time.monotonic() + 60
-        while not _listening(vport) and time.monotonic() < deadline:
+        while (not all(_listening(port) for *_, port in views)
+               and time.monotonic() < deadline):
             time.sleep(0.1)
         time.sleep(3.0)  # the view connected to the source and past its first messages
 
@@ -279,6 +299,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=8.0, help="seconds a window")
     parser.add_argument("--rounds", type=int, default=3, help="windows a phase")
+    parser.add_argument("--baseline", type=Path, metavar="TREE",
+                        help="also a listener and a view of this checkout's tfbus")
     parser.add_argument("--source", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--listener", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--raw", type=int, help=argparse.SUPPRESS)
@@ -292,7 +314,7 @@ def main() -> None:
     if args.listener is not None:
         listener(args.listener)
         return
-    got = measure(args.rounds, args.seconds)
+    got = measure(args.rounds, args.seconds, args.baseline)
     print(f"tfbus view --bus zenoh following {RATE:.0f} Hz x 100 frames from another process; "
           f"{args.rounds} windows of {args.seconds:g} s a phase; share of one core "
           "min / median / max")  # fmt: skip
@@ -300,8 +322,9 @@ def main() -> None:
         if not got.share[phase]:
             print(f"  {label:<11} not measured: {got.why}")
             continue
-        for name in ("view", "listener", "raw", "source"):
-            print(f"  {label:<11} {name:<9} {_spread(got.share[phase][name])}")
+        for name in ("view", "listener", "raw", "source", "view@base", "listener@base"):
+            if name in got.share[phase] and (phase == "idle" or name != "view@base"):
+                print(f"  {label:<11} {name:<13} {_spread(got.share[phase][name])}")
         over = [v - f for v, f in zip(got.share[phase]["view"], got.share[phase]["listener"],
                                       strict=True)]  # fmt: skip
         print(f"  {label:<11} view - listener floor {_spread(over)}")
