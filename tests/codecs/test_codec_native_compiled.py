@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Sequence
 from typing import Any
 
 import pytest
+import refill_laws
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -315,45 +317,17 @@ def _reuses() -> bool:
     return bool(_cwire._REUSES)
 
 
+def _decode(values: Sequence[tuple[float, ...]], stamp: int) -> tuple[TransformStamped, ...]:
+    """:func:`_moving` as :mod:`refill_laws` calls it (stamp ``stamp`` ns)."""
+    return _moving(wire.WireCodec(), *values, stamp=stamp, seq=stamp)
+
+
 def test_a_message_nobody_holds_is_refilled_and_what_is_held_never_changes() -> None:
     """As the ROS 1 decoder: the objects of the message decoded two messages earlier that
     nothing references any more are refilled in place with the new values; a message, a
     transform, a Transform, a Vector3, a Quaternion or a float a user still holds keeps
     its values, and a new object takes its place."""
-    codec = wire.WireCodec()
-
-    def moving(j: int) -> tuple[TransformStamped, ...]:
-        return _moving(codec, *[(float(k + j), 0.5 * j, -1.0, 0.0, 0.0, 0.01 * j, 1.0)
-                                for k in range(5)], stamp=j, seq=j)
-
-    first = moving(1)
-    ids = [(id(t), id(t.transform), id(t.transform.translation), id(t.transform.rotation))
-           for t in first]
-    del first
-    second = moving(2)  # the previous message is usually still held (an async for)
-    third = moving(3)
-    if _reuses():
-        assert [(id(t), id(t.transform), id(t.transform.translation),
-                 id(t.transform.rotation)) for t in third] == ids
-    assert second[0].transform.translation == Vector3(2.0, 1.0, -1.0)
-    ts, tf = third[0], third[1].transform
-    vec, rot = third[2].transform.translation, third[3].transform.rotation
-    z = third[4].transform.rotation.z
-    snapshot = (struct.pack("<q", ts.header.stamp.ns), tuple(ts.transform.translation),
-                tuple(tf.translation) + tuple(tf.rotation), tuple(vec), tuple(rot))
-    del second, third
-    for j in range(4, 9):
-        out = moving(j)
-        assert [tuple(t.transform.translation) for t in out] == [
-            (k + j, 0.5 * j, -1.0) for k in range(5)]
-        assert (struct.pack("<q", ts.header.stamp.ns), tuple(ts.transform.translation),
-                tuple(tf.translation) + tuple(tf.rotation), tuple(vec), tuple(rot)) == snapshot
-        assert z == 0.03 and ts.child_frame_id == "c0"
-        assert out[0] is not ts and out[1].transform is not tf
-        assert out[2].transform.translation is not vec
-        assert out[3].transform.rotation is not rot
-        assert out[4].transform.rotation.z is not z
-        del out
+    refill_laws.check_refilled_and_held(_decode, _reuses())
 
 
 _values = st.sampled_from([0.0, -0.0, 1.0, 2.5, math.nan])
@@ -372,33 +346,4 @@ def test_refilling_never_changes_what_is_held_and_decodes_as_the_schema(
     decode some of what it gave is kept (the transforms, a transform, a Transform, a
     Vector3, a Quaternion or a float) and the rest dropped. Every decode equals the
     schema's, bit for bit (:func:`_moving`), and nothing kept ever changes."""
-    codec = wire.WireCodec()
-    kept: list[tuple[object, bytes]] = []
-
-    def bits(obj: object) -> bytes:
-        if isinstance(obj, float):
-            return struct.pack("<d", obj)
-        if isinstance(obj, TransformStamped):
-            return (struct.pack("<q", obj.header.stamp.ns) + obj.child_frame_id.encode()
-                    + bits(obj.transform))
-        if isinstance(obj, tuple) and not isinstance(obj, (Transform, Vector3, Quaternion)):
-            return b"".join(bits(t) for t in obj)
-        if isinstance(obj, Transform):
-            return struct.pack("<7d", *obj.translation, *obj.rotation)
-        assert isinstance(obj, (Vector3, Quaternion))
-        return struct.pack(f"<{len(obj)}d", *obj)
-
-    for stamp, (values, n, keep) in enumerate(steps, start=1):
-        vals = [v if same else v + stamp for v, same in values]  # floats all
-        out = _moving(codec, *[tuple(vals[7 * i: 7 * i + 7]) for i in range(n)],
-                      stamp=stamp, seq=stamp)
-        for choice in keep:
-            if choice == 0 or not out:
-                kept.append((out, bits(out)))
-                continue
-            ts = out[choice % len(out)]
-            part = [ts, ts, ts.transform, ts.transform.translation, ts.transform.rotation,
-                    ts.transform.rotation.w][choice]
-            kept.append((part, bits(part)))
-        del out
-        assert all(bits(obj) == snap for obj, snap in kept)
+    refill_laws.check_nothing_held_changes(_decode, steps)

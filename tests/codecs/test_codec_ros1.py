@@ -7,8 +7,10 @@ deserialiser; a short payload and a bad UTF-8 id fail alike (the codec's one err
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 
 import pytest
+import refill_laws
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -174,8 +176,16 @@ def test_repeated_values_are_the_earlier_transforms_and_changed_bytes_are_new() 
                                              *t.transform.rotation) for t in twin]
 
 
-def _bits(ts: TransformStamped) -> bytes:
-    return struct.pack("<7d", *ts.transform.translation, *ts.transform.rotation)
+def _decode(values: Sequence[tuple[float, ...]], stamp: int) -> list[TransformStamped]:
+    """The compiled decode of a ROS 1 TFMessage of ``map -> c<k>`` transforms stamped
+    ``stamp`` s (:mod:`refill_laws`), equal to the struct decoder's bit for bit."""
+    f = dec._compiled_ros1
+    assert f is not None
+    raw = _raw_tf(*values, stamp=stamp)
+    out = f(raw)
+    twin = dec.decode_ros1_struct(raw)
+    assert out == twin and refill_laws.bits(out) == refill_laws.bits(twin)
+    return out
 
 
 def _reuses() -> bool:
@@ -190,46 +200,7 @@ def test_a_message_nobody_holds_is_refilled_and_what_is_held_never_changes() -> 
     any more are refilled in place: the same TransformStamped, Transform, Vector3 and
     Quaternion, with the new bytes. A message, a transform, a rotation or a float a user
     still holds keeps its values, and a new object takes its place."""
-    f = dec._compiled_ros1
-    assert f is not None
-
-    def moving(j: int) -> list[TransformStamped]:
-        return f(_raw_tf(*[(k + j, 0.5 * j, -1.0, 0.0, 0.0, 0.01 * j, 1.0) for k in range(5)],
-                         stamp=j))
-
-    first = moving(1)
-    ids = [(id(t), id(t.transform), id(t.transform.translation), id(t.transform.rotation))
-           for t in first]
-    del first
-    second = moving(2)  # the previous message is usually still held (an async for)
-    third = moving(3)
-    if _reuses():
-        assert [(id(t), id(t.transform), id(t.transform.translation),
-                 id(t.transform.rotation)) for t in third] == ids
-    twin = dec.decode_ros1_struct(_raw_tf(
-        *[(k + 3, 1.5, -1.0, 0.0, 0.0, 0.03, 1.0) for k in range(5)], stamp=3))
-    assert third == twin and [_bits(t) for t in third] == [_bits(t) for t in twin]
-    assert second[0].transform.translation == Vector3(2.0, 1.0, -1.0)
-    # Held parts, one per position: a whole transform, a Transform, a Vector3, a
-    # Quaternion, a float.
-    ts, tf = third[0], third[1].transform
-    vec, rot = third[2].transform.translation, third[3].transform.rotation
-    z = third[4].transform.rotation.z
-    snapshot = (_bits(ts), tuple(tf.translation) + tuple(tf.rotation), tuple(vec), tuple(rot))
-    del second, third
-    for j in range(4, 9):
-        out = moving(j)
-        assert [_bits(t) for t in out] == [
-            struct.pack("<7d", k + j, 0.5 * j, -1.0, 0.0, 0.0, 0.01 * j, 1.0) for k in range(5)]
-        assert ts.header.stamp.ns == 3_000_000_000 and ts.child_frame_id == "c0"
-        assert (_bits(ts), tuple(tf.translation) + tuple(tf.rotation), tuple(vec),
-                tuple(rot)) == snapshot
-        assert z == 0.03
-        assert out[0] is not ts and out[1].transform is not tf
-        assert out[2].transform.translation is not vec
-        assert out[3].transform.rotation is not rot
-        assert out[4].transform.rotation.z is not z
-        del out
+    refill_laws.check_refilled_and_held(_decode, _reuses())
 
 
 def _value_and_same(byte: int) -> tuple[float, bool]:
@@ -256,38 +227,7 @@ def test_refilling_never_changes_what_is_held_and_decodes_as_the_twin(
     decode the caller keeps some of what it got (a message, a transform, a Transform, a
     Vector3, a Quaternion or a float) and drops the rest. Every decode equals the struct
     decoder's, bit for bit, and nothing kept ever changes."""
-    f = dec._compiled_ros1
-    assert f is not None
-    kept: list[tuple[object, bytes]] = []
-
-    def bits(obj: object) -> bytes:
-        if isinstance(obj, float):
-            return struct.pack("<d", obj)
-        if isinstance(obj, TransformStamped):
-            return struct.pack("<q", obj.header.stamp.ns) + obj.child_frame_id.encode() + _bits(obj)
-        if isinstance(obj, list):
-            return b"".join(bits(t) for t in obj)
-        if isinstance(obj, Transform):
-            return struct.pack("<7d", *obj.translation, *obj.rotation)
-        assert isinstance(obj, (Vector3, Quaternion))
-        return struct.pack(f"<{len(obj)}d", *obj)
-
-    for stamp, (values, n, keep) in enumerate(steps):
-        vals = [v if same else v + stamp for v, same in values]
-        raw = _raw_tf(*[tuple(vals[7 * i: 7 * i + 7]) for i in range(n)], stamp=stamp)
-        out = f(raw)
-        twin = dec.decode_ros1_struct(raw)
-        assert out == twin and [_bits(t) for t in out] == [_bits(t) for t in twin]
-        for choice in keep:
-            if choice == 0 or not out:
-                kept.append((out, bits(out)))
-                continue
-            ts = out[choice % len(out)]
-            part = [ts, ts, ts.transform, ts.transform.translation, ts.transform.rotation,
-                    ts.transform.rotation.w][choice]
-            kept.append((part, bits(part)))
-        del out, twin
-        assert all(bits(obj) == snap for obj, snap in kept)
+    refill_laws.check_nothing_held_changes(_decode, steps)
 
 
 # -- sensor_msgs/LaserScan (a real ROS 1 laser in tfbus view) ----------------------------
