@@ -10,6 +10,8 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Sequence
 
+from hypothesis import strategies as st
+
 from tfbus.messages import Quaternion, Transform, TransformStamped, Vector3
 
 Decode = Callable[[Sequence[tuple[float, ...]], int], Sequence[TransformStamped]]
@@ -76,8 +78,25 @@ def check_refilled_and_held(decode: Decode, reuses: bool) -> None:
         del out
 
 
+Step = tuple[Sequence[tuple[float, bool]], int, Sequence[int]]
+"""One message of :func:`check_nothing_held_changes`: 28 ``(value, repeats)`` pairs, the
+number of transforms (0..4) and what to keep."""
+
+
+def steps(values: Sequence[float]) -> st.SearchStrategy[list[Step]]:
+    """1-12 steps of :func:`check_nothing_held_changes`, each value one of ``values``.
+    A step's 28 pairs are drawn as 28 bytes (one draw instead of 56, a tenth of the
+    generation time): byte ``b`` is ``values[b % len(values)]``, repeated when
+    ``b // len(values)`` is odd."""
+    k = len(values)
+    pairs = st.binary(min_size=28, max_size=28).map(
+        lambda data: [(values[b % k], bool((b // k) % 2)) for b in data])
+    return st.lists(st.tuples(pairs, st.integers(0, 4), st.lists(st.integers(0, 5), max_size=4)),
+                    min_size=1, max_size=12)
+
+
 def check_nothing_held_changes(
-    decode: Decode, steps: Sequence[tuple[Sequence[tuple[float, bool]], int, Sequence[int]]]
+    decode: Decode, steps: Sequence[Step]
 ) -> None:
     """Messages of ``n`` transforms (each step: 28 ``(value, repeats)`` pairs, ``n`` in
     0..4, and what to keep); a value that does not repeat is moved by the step's number.

@@ -330,17 +330,10 @@ def test_a_message_nobody_holds_is_refilled_and_what_is_held_never_changes() -> 
     refill_laws.check_refilled_and_held(_decode, _reuses())
 
 
-_values = st.sampled_from([0.0, -0.0, 1.0, 2.5, math.nan])
-
-
 @PROPERTY
-@given(st.lists(st.tuples(
-    st.lists(st.tuples(_values, st.booleans()), min_size=28, max_size=28),
-    st.integers(0, 4),
-    st.lists(st.integers(0, 5), max_size=4),
-), min_size=1, max_size=12))
+@given(refill_laws.steps((0.0, -0.0, 1.0, 2.5, math.nan)))
 def test_refilling_never_changes_what_is_held_and_decodes_as_the_schema(
-    steps: list[tuple[list[tuple[float, bool]], int, list[int]]],
+    steps: list[refill_laws.Step],
 ) -> None:
     """Messages of 0-4 transforms whose values repeat or change at random; after each
     decode some of what it gave is kept (the transforms, a transform, a Transform, a

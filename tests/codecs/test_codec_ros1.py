@@ -203,25 +203,10 @@ def test_a_message_nobody_holds_is_refilled_and_what_is_held_never_changes() -> 
     refill_laws.check_refilled_and_held(_decode, _reuses())
 
 
-def _value_and_same(byte: int) -> tuple[float, bool]:
-    """One of 0.0, -0.0, 1.0, 2.5 (bits 0-1) and whether it repeats (bit 2)."""
-    return (0.0, -0.0, 1.0, 2.5)[byte & 3], bool(byte & 4)
-
-
-# The 28 (value, repeats) pairs of a step drawn as 28 bytes: one draw instead of 56 (the
-# same pairs, a tenth of the generation time).
-_step_values = st.binary(min_size=7 * 4, max_size=7 * 4).map(
-    lambda data: [_value_and_same(b) for b in data])
-
-
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.tuples(
-    _step_values,
-    st.integers(0, 4),
-    st.lists(st.integers(0, 5), max_size=4),
-), min_size=1, max_size=12))
+@given(refill_laws.steps((0.0, -0.0, 1.0, 2.5)))
 def test_refilling_never_changes_what_is_held_and_decodes_as_the_twin(
-    steps: list[tuple[list[tuple[float, bool]], int, list[int]]],
+    steps: list[refill_laws.Step],
 ) -> None:
     """Messages of 0-4 transforms whose values repeat or change at random; after each
     decode the caller keeps some of what it got (a message, a transform, a Transform, a
