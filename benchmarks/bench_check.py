@@ -25,14 +25,15 @@ Rows (target):
   (wall time; the CPU time of both threads printed beside it); and at N = 8192 (the
   two-thread split) never slower per time than at N = 8191 (one thread);
 * against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``,
-  built here with g++ and pkg-config; ``bench_core.cpp_scenario``), alternated rounds,
-  each side's thread CPU time per call (best run; preemption by other work stays out),
-  each row the median of the per-round ratios with their min..max: ``lookup_transform``
+  built here with g++ and pkg-config; ``bench_core.cpp_scenario``), at least 7 rounds of
+  3 alternated passes a side (each side's best pass: the machine's speed drifts for
+  seconds at a time), each side's thread CPU time per call (best run; preemption by other
+  work stays out), each row the median of the per-round ratios with their min..max: ``lookup_transform``
   on chains of depth 1, 2, 8 and 64 at never-repeated interpolated times spread over
   10 s of history (<= 1.1x, 1.0x, 0.7x, 1.0x; the same with times in the newest 100 ms
   for information); ``set_transform`` on a star of 10 links, a fresh buffer's first 200
   samples per link (<= 1.3x: no fill phase) and the steady state, a full 10 s cache
-  (<= 1.0x); memory per sample, RSS growth of 200 000 samples (<= 1.0x);
+  (<= 1.0x), each with its ratio within +-20 % of its median over the rounds; memory per sample, RSS growth of 200 000 samples (<= 1.0x);
 * wake-up of a waiting lookup against the plain floor (``bench_bus.plain_floor_run``:
   a bare ``anyio.Event`` set, the loop's own yield, the waiter resumes), by a direct
   ``Buffer.set_transform`` (<= 1.3x) and through ``send_transform`` -> bus -> listener ->
@@ -47,7 +48,7 @@ Rows (target):
   asyncio reader (split and decode), a ``TransformListener`` <= 1.15x ``tf2_ros``'s C++
   listener and <= 1.2x the bare reader storing into a ``Buffer``;
 * sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 1.5x the C++
-  ``projectLaser``; 10^6 points through ``transform_points`` and ``do_transform_cloud``
+  ``projectLaser`` (3 alternated passes a side in each round, each side's best); 10^6 points through ``transform_points`` and ``do_transform_cloud``
   <= 1.2x bare numpy ``pts @ R.T + t``;
 * Zenoh (``bench_latency.receive``, ``--rounds`` rounds, paths alternated): bus latency <= 1.15x raw
   zenoh-python plus the hop from Zenoh's thread to the loop (``raw+loop``, a floor outside
@@ -392,10 +393,52 @@ def _half_range(values: list[float]) -> float:
     return (max(values) - min(values)) / 2 / statistics.median(values)
 
 
+PASSES = 3
+"""Passes per side in a round against a compiled peer (C++ tf2, C++ laser_geometry),
+alternated (tfbus, the peer, tfbus, ...): each side's figure in the round is its best
+pass, figure by figure. This machine's speed changes for a second or more at a time
+(every call of both sides, Python and C++ alike, 1.6-1.8x slower for such a stretch),
+longer than one pass (under a second): a round of one pass a side judged one side's
+slow stretch against the other's fast one (C++ set_transform 420 ns in one round
+against 190-230 in the six others; tfbus project_laser 5.4-6.1 us in half the rounds
+against 3.2-3.6 us in the others)."""
+
+SPREAD_TARGET = 0.20
+"""The set_transform rows' ratio must also keep within +- this share of its median over
+:data:`CPP_ROUNDS` rounds (the targets' table asks for a spread under +-20 % over 7)."""
+
+CPP_ROUNDS = 7
+"""At least this many rounds in the C++ tf2 group (a round there takes about 3 s)."""
+
+
+def _best(results: list[Any]) -> Any:
+    """The figure-by-figure minimum of ``results`` (equal-shaped dicts of floats, nested
+    dicts allowed): each figure's best pass."""
+    first = results[0]
+    if isinstance(first, dict):
+        return {key: _best([r[key] for r in results]) for key in first}
+    return min(results)
+
+
+def _alternated(
+    ours: Callable[[], Any], theirs: Callable[[], Any], passes: int = PASSES
+) -> tuple[Any, Any]:
+    """One round of :data:`PASSES` alternated passes, ``ours()`` then ``theirs()``: each
+    side's best pass (:func:`_best`)."""
+    a: list[Any] = []
+    b: list[Any] = []
+    for _ in range(passes):
+        a.append(ours())
+        b.append(theirs())
+    return _best(a), _best(b)
+
+
 def cpp_rows(rows: Rows, rounds: int) -> None:
     """The core rows against Debian's ``tf2::BufferCore`` called from C++
-    (``tf2_buffer_core_bench.cpp``): tfbus's round, then C++'s, ``rounds`` times; each
-    row judges the median of the per-round ratios and prints min..max beside it."""
+    (``tf2_buffer_core_bench.cpp``): ``rounds`` rounds (at least :data:`CPP_ROUNDS`) of
+    :data:`PASSES` alternated passes a side (:func:`_alternated`: each side's best pass);
+    each row judges the median of the per-round ratios and prints min..max beside it; the
+    set_transform rows also their spread (:data:`SPREAD_TARGET`)."""
     names = [f"lookup_transform depth {d} vs C++ tf2" for d in CPP_TARGETS]
     names += ["set_transform, first 200 samples vs C++", "set_transform, steady vs C++",
               "memory per sample (RSS) vs C++"]  # fmt: skip
@@ -409,10 +452,13 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
         ours_side = bench_core.CppSideOurs(sc)
         ours: list[dict[str, Any]] = []
         theirs: list[dict[str, Any]] = []
+        rounds = max(rounds, CPP_ROUNDS)
         for r in range(rounds):
             print(f"  (C++ round {r + 1}/{rounds}, load {os.getloadavg()[0]:.2f})", flush=True)
-            ours.append(ours_side.round())
-            theirs.append(bench_core.cpp_round(exe, sc))
+            mine, peer = _alternated(ours_side.round, functools.partial(bench_core.cpp_round,
+                                                                        exe, sc))  # fmt: skip
+            ours.append(mine)
+            theirs.append(peer)
     mem = bench_core.tfbus_memory_fresh(sc["mem_frames"], sc["mem_samples"])
 
     def ns(v: float) -> str:
@@ -443,15 +489,14 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
         a = [x[key] for x in ours]
         b = [x[key] for x in theirs]
         ratios = _ratios(a, b)
+        spread = _half_range(ratios)
         rows.row(
             label,
-            f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}",
-            statistics.median(ratios) <= target,
-            f"<= {target:.1f}x C++",
+            f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}, "
+            f"+-{spread:.0%} over {len(ratios)} rounds",
+            statistics.median(ratios) <= target and spread <= SPREAD_TARGET,
+            f"<= {target:.1f}x C++, +-{SPREAD_TARGET:.0%}",
         )
-        print(f"  info  {'    spread of the ratio over the rounds':46} "
-              f"+-{_half_range(ratios):.0%} of its median ({len(ratios)} rounds; "
-              "target within +-20%)")
     fills = [x["fill_s"] / x["steady_s"] for x in ours]
     print(f"  info  {'  tfbus first 200 / tfbus steady':46} {_spread(fills)}")
     theirs_rss = statistics.median(x["rss_bytes_per_sample"] for x in theirs)
@@ -678,8 +723,8 @@ SENSOR_ROWS = [
 
 def sensors_rows(rows: Rows, rounds: int) -> None:
     """Sensor data, CPU time per call (``bench_sensors``): a 720-beam ``project_laser``
-    against the C++ ``laser_geometry::LaserProjection::projectLaser``, tfbus's round then
-    C++'s (<= 1.5x); 10^6 points through ``transform_points`` and ``do_transform_cloud``
+    against the C++ ``laser_geometry::LaserProjection::projectLaser``, :data:`PASSES`
+    alternated passes a side in each round, each side's best pass (<= 1.5x); 10^6 points through ``transform_points`` and ``do_transform_cloud``
     against bare numpy ``pts @ R.T + t`` (<= 1.2x), the sides' order reversed every other
     round; medians of the per-round ratios, min..max beside them."""
     why = bench_sensors.laser_cpp_missing()
@@ -692,8 +737,13 @@ def sensors_rows(rows: Rows, rounds: int) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             exe = bench_sensors.build_laser_cpp(Path(tmp))
             for _ in range(rounds):
-                ours.append(side.round(LASER_REPS))
-                theirs.append(bench_sensors.laser_cpp_round(exe, LASER_BEAMS, LASER_REPS))
+                mine, peer = _alternated(
+                    functools.partial(side.round, LASER_REPS),
+                    functools.partial(bench_sensors.laser_cpp_round, exe, LASER_BEAMS,
+                                      LASER_REPS),
+                )  # fmt: skip
+                ours.append(mine)
+                theirs.append(peer)
         for key, label, judged in (("project", SENSOR_ROWS[0], True),
                                    ("transform", "  transform_laser_scan_to_point_cloud vs C++",
                                     False)):  # fmt: skip
