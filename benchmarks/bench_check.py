@@ -24,17 +24,16 @@ Rows (target):
   sorted, random, reversed and duplicated: <= 0.03x a tf2_py loop and <= 120 ns/time
   (wall time; the CPU time of both threads printed beside it); and at N = 8192 (the
   two-thread split) never slower per time than at N = 8191 (one thread);
-* against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``,
-  built here with g++ and pkg-config; ``bench_core.cpp_scenario``), at least 7 rounds of
-  3 alternated passes a side (each side's best pass: the machine's speed drifts for
-  seconds at a time), each side's thread CPU time per call (best run; preemption by other
-  work stays out), each row the median of the per-round ratios with their min..max:
-  ``lookup_transform`` on chains of depth 1, 2, 8 and 64 at never-repeated interpolated
-  times spread over 10 s of history (<= 1.1x, 1.0x, 0.7x, 1.0x; the same with times in the newest 100 ms
-  for information); ``set_transform`` on a star of 10 links, a fresh buffer's first 200
-  samples per link (<= 1.3x: no fill phase) and the steady state, a full 10 s cache
-  (<= 1.0x), each with its ratio within +-20 % of its median over the rounds; memory per
-  sample, RSS growth of 200 000 samples (<= 1.0x);
+* against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``, built here
+  with g++ and pkg-config; ``bench_core.cpp_scenario``), at least 7 rounds of 3 alternated passes
+  a side (each side's best pass: the machine's speed drifts for seconds at a time), each side's
+  thread CPU time per call (best run; preemption by other work stays out), each row the median of
+  the per-round ratios with their min..max: ``lookup_transform`` on chains of depth 1, 2, 8 and 64
+  at never-repeated interpolated times spread over 10 s of history (<= 1.1x, 1.0x, 0.7x, 1.0x; the
+  same with times in the newest 100 ms for information); ``set_transform`` on a star of 10 links,
+  a fresh buffer's first 200 samples per link (<= 1.3x: no fill phase) and the steady state, a
+  full 10 s cache (<= 1.0x), each with its ratio within +-20 % of its median over the rounds;
+  memory per sample, RSS growth of 200 000 samples (<= 1.0x);
 * wake-up of a waiting lookup against the plain floor (``bench_bus.plain_floor_run``:
   a bare ``anyio.Event`` set, the loop's own yield, the waiter resumes), by a direct
   ``Buffer.set_transform`` (<= 1.3x) and through ``send_transform`` -> bus -> listener ->
@@ -49,8 +48,8 @@ Rows (target):
   asyncio reader (split and decode), a ``TransformListener`` <= 1.15x ``tf2_ros``'s C++
   listener and <= 1.2x the bare reader storing into a ``Buffer``;
 * sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 1.5x the C++
-  ``projectLaser`` (3 alternated passes a side in each round, each side's best); 10^6
-  points through ``transform_points`` and ``do_transform_cloud`` <= 1.2x bare numpy ``pts @ R.T + t``;
+  ``projectLaser`` (3 alternated passes a side in each round, each side's best); 10^6 points
+  through ``transform_points`` and ``do_transform_cloud`` <= 1.2x bare numpy ``pts @ R.T + t``;
 * Zenoh (``bench_latency.receive``, ``--rounds`` rounds, paths alternated): bus latency <= 1.15x raw
   zenoh-python plus the hop from Zenoh's thread to the loop (``raw+loop``, a floor outside
   tfbus) at 10, 50, 100 and 1000 Hz, bus / raw beside it; under 4 CPU hogs
@@ -726,8 +725,9 @@ def sensors_rows(rows: Rows, rounds: int) -> None:
     """Sensor data, CPU time per call (``bench_sensors``): a 720-beam ``project_laser``
     against the C++ ``laser_geometry::LaserProjection::projectLaser``, :data:`PASSES`
     alternated passes a side in each round, each side's best pass (<= 1.5x); 10^6 points
-    through ``transform_points`` and ``do_transform_cloud`` against bare numpy ``pts @ R.T
-    + t`` (<= 1.2x), the sides' order reversed every other round; medians of the per-round ratios, min..max beside them."""
+    through ``transform_points`` and ``do_transform_cloud`` against bare numpy
+    ``pts @ R.T + t`` (<= 1.2x), the sides' order reversed every other round; medians of
+    the per-round ratios, min..max beside them."""
     why = bench_sensors.laser_cpp_missing()
     if why is not None:
         _not_run(rows, SENSOR_ROWS[:1], why)
