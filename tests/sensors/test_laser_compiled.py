@@ -70,3 +70,34 @@ def test_short_intensities_are_refused_on_both_paths() -> None:
     for projection in (LaserProjection(), numpy_path):
         with pytest.raises(ValueError, match="intensities has 5 values for 10 ranges"):
             projection.project_laser(scan, -1.0, 1)
+
+
+@pytest.mark.parametrize("intensities", [True, False])
+def test_scans_whose_every_beam_is_kept_give_the_same_cloud(intensities: bool) -> None:
+    """Every beam kept (the usual scan: no resize of the cloud's bytes), in every layout."""
+    rng = np.random.default_rng(11)
+    compiled, numpy_path = LaserProjection(), LaserProjection()
+    numpy_path._projector = None
+    for opts in range(32):
+        scan = _scan(rng, 721, intensities=intensities, geometry=opts % 4)
+        scan.ranges = rng.uniform(scan.range_min, scan.range_max, 721).astype(np.float32)
+        scan.ranges[0] = np.float32(scan.range_min)  # the lower bound is kept
+        want = numpy_path.project_laser(scan, -1.0, opts)
+        got = compiled.project_laser(scan, -1.0, opts)
+        assert got.width == 721
+        assert _cloud_fields(got) == _cloud_fields(want), opts
+
+
+def test_clouds_cut_to_their_kept_beams_are_whole_objects() -> None:
+    """A cloud whose bytes were cut to the kept beams owns them: they keep their value
+    after later projections (which allocate and cut clouds of their own)."""
+    rng = np.random.default_rng(12)
+    projection = LaserProjection()
+    scans = [_scan(rng, 300, intensities=True, geometry=0) for _ in range(20)]
+    clouds = [projection.project_laser(scan) for scan in scans]
+    copies = [bytes(bytearray(cloud.data)) for cloud in clouds]
+    for scan in scans:
+        projection.project_laser(scan)
+    assert all(cloud.width < 300 for cloud in clouds)
+    assert [cloud.data for cloud in clouds] == copies
+    assert all(len(c.data) == c.width * c.point_step for c in clouds)
