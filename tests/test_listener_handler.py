@@ -69,6 +69,8 @@ def _deliveries() -> Iterator[tuple[str, object]]:
     yield TF_TOPIC, TFMessage((ts("q", rotation=Quaternion(0.0, 0.0, 0.0, 2.0)),))  # invalid
     yield TF_TOPIC, TFMessage(("junk",))  # type: ignore[arg-type]  # malformed item
     yield TF_TOPIC, TFMessage((ts("b"), ts("c"), ts("b")))  # a batch: 2 stored, 1 refused
+    yield TF_TOPIC, TFMessage((ts("i"), ts("nan2", x=math.nan)))  # a batch: 1 stored, 1 invalid
+    yield TF_TOPIC, _NamedMessage((ts("j"), ts("k", T0 + Duration(1))))  # batch, publisher's
     yield TF_TOPIC, TFMessage(())  # nothing
     yield TF_TOPIC, TFMessage([ts("d")])  # a list of one: the batch path, stored
     yield TF_TOPIC, _NamedMessage((ts("e"),))  # the publisher's authority
@@ -77,6 +79,15 @@ def _deliveries() -> Iterator[tuple[str, object]]:
     yield TF_STATIC_TOPIC, TFMessage((ts("fixed", parent="a"),))  # static, stored
     yield TF_STATIC_TOPIC, TFMessage((ts("fixed2", x=math.inf, parent="a"),))  # invalid
     yield TF_STATIC_TOPIC, TFMessage((ts("g", parent="fixed"), ts("h", parent="fixed")))
+
+
+def _frame(frames: str, child: str) -> str:
+    """``child``'s entry in ``all_frames_as_yaml``: its line and the indented ones below."""
+    lines = frames.split("\n")
+    start = next(i for i, line in enumerate(lines) if line.rstrip() == f"{child}:")
+    end = next((i for i in range(start + 1, len(lines))
+                if lines[i] and not lines[i].startswith(" ")), len(lines))  # fmt: skip
+    return "\n".join(lines[start:end])
 
 
 async def _run(handler: object, sink_kind: str, monkeypatch: pytest.MonkeyPatch,
@@ -122,20 +133,23 @@ async def test_each_handler_counts_stores_and_warns_as_tf2_ros_would(
         pytest.skip("the compiled handler is not built (pure-Python install or core)")
     got = await _run(COMPILED if handler == "compiled" else None, "Buffer", monkeypatch,
                      caplog)
-    # 16 deliveries, all counted as messages; stored: a, a@+1, b, c, d, e, fixed, g, h;
-    # refused: a repeated, a too old, b repeated; invalid: nan, q, fixed2; malformed:
-    # the "junk" item, the str, TFMessage(42).
+    # 18 deliveries, all counted as messages; stored: a, a@+1, b, c, i, j, k, d, e, fixed,
+    # g, h; refused: a repeated, a too old, b repeated; invalid: nan, q, nan2, fixed2;
+    # malformed: the "junk" item, the str, TFMessage(42).
     assert got.statistics == ListenerStatistics(
-        messages=16, stored=9, refused=3, invalid=3, malformed=3, dropped=0)
-    assert got.clock_reads == 16  # one clock read a message (tf2_ros ROS 1 listener)
+        messages=18, stored=12, refused=3, invalid=4, malformed=3, dropped=0)
+    assert got.clock_reads == 18  # one clock read a message (tf2_ros ROS 1 listener)
     warned = "\n".join(got.warnings)
-    for word in ("nan", "'q'", "fixed2", "malformed transform on /tf: TypeError",
+    for word in ("nan", "'q'", "nan2", "fixed2", "malformed transform on /tf: TypeError",
                  "ignoring a str on /tf", "/tf_static"):
         assert word in warned, (word, warned)
-    assert "/ros1_publisher" in got.frames  # the subclass's authority, kept
-    for child in ("a", "b", "c", "d", "e", "fixed", "g", "h"):
+    for child in ("e", "j", "k"):  # the subclass's authority, kept (one and a batch)
+        assert "broadcaster: '/ros1_publisher'" in _frame(got.frames, child), child
+    for child in ("a", "b", "c", "i", "d", "fixed", "g", "h"):
+        assert "broadcaster: 'default_authority'" in _frame(got.frames, child), child
+    for child in ("a", "b", "c", "d", "e", "i", "j", "k", "fixed", "g", "h"):
         assert f"\n{child}:" in f"\n{got.frames}", (child, got.frames)
-    for child in ("nan", "q", "fixed2"):
+    for child in ("nan", "q", "nan2", "fixed2"):
         assert f"\n{child}:" not in f"\n{got.frames}"
 
 
@@ -159,3 +173,35 @@ async def test_the_compiled_handler_serves_only_a_store_of_one_transform(
         assert listener._handlers == []
     assert seen == [1]
     assert listener.statistics().stored == 1
+
+
+@pytest.mark.skipif(COMPILED is None, reason="the compiled handler is not built (a pure-"
+                    "Python install, or TFBUS_PURE_PYTHON)")
+async def test_the_compiled_handler_stores_batches_and_named_messages_itself() -> None:
+    """Messages of several transforms and a publisher's TFMessage subclass (the ROS 1
+    transport's) are stored by the compiled handler, not handed to ``_handle``; a list of
+    transforms and a message that is not a TFMessage are."""
+    clock = ManualClock(T0)
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    async with Bus() as bus, TransformListener(buffer, bus, clock=clock) as listener:
+        handed: list[object] = []
+        handle = listener._handle
+
+        def spy(static: bool, message: object) -> None:
+            handed.append(message)
+            handle(static, message)
+
+        listener._handle = spy  # type: ignore[method-assign]
+        batch = TFMessage((ts("a"), ts("b")))
+        named = _NamedMessage((ts("c"), ts("d")))
+        listed = TFMessage([ts("e")])
+        bus.deliver_nowait(TF_TOPIC, batch)
+        bus.deliver_nowait(TF_TOPIC, named)
+        bus.deliver_nowait(TF_TOPIC, _NamedMessage((ts("f"),)))
+        bus.deliver_nowait(TF_TOPIC, listed)
+        bus.deliver_nowait(TF_TOPIC, "junk")
+        assert handed == [listed, "junk"]
+        assert sum(h.messages for h in listener._handlers) == 3
+        assert sum(h.stored for h in listener._handlers) == 5
+        assert listener.statistics().stored == 6
+    buffer.close()

@@ -13,7 +13,9 @@ class InlineHandler:
         listener: Any,
         static: bool,
         store: Callable[[Any, str], bool],
+        store_many: Callable[[Any, str, bool], Any],
         now_ns: Callable[[], int],
         authority: str,
+        publisher_authority: bool,
     ) -> None: ...
     def __call__(self, message: object) -> None: ...

@@ -2,18 +2,22 @@
 """The compiled message handler of :class:`tfbus.listener.TransformListener`: what the bus
 calls, inside each publish or delivery on ``/tf`` or ``/tf_static``, to store a message.
 
-A ``TFMessage`` of one ``TransformStamped`` (what a broadcaster sends per
-``send_transform`` of one transform, and what the ROS 1 and Zenoh transports deliver per
-such message) is stored here with no Python frame: the count of messages, the listener's
-clock read (tf2_ros ``TransformListener::subscription_callback_impl`` reads the time on each
-message), the store (``set_transform`` or ``set_transform_static`` of the buffer, the
-listener's one-transform store) and the count of what it did. Anything else (another
-message type, a subclass of ``TFMessage``, zero or several transforms, a ``transforms``
-that is not a tuple) goes to the listener's own ``_handle``, which counts, checks and logs
-it; a store that raises goes to the listener's ``_store_failed`` (counted as invalid or
-malformed, and logged), as in ``_handle``. Same behaviour as ``_handle`` alone (the
-pure-Python path, ``TFBUS_PURE_PYTHON``), which ``tests/test_listener_handler.py`` runs
-beside this one.
+A ``TFMessage`` whose ``transforms`` is a tuple (what a broadcaster sends, and what the
+ROS 1 and Zenoh transports deliver) is stored here with no Python frame: the count of
+messages, the listener's clock read (tf2_ros ``TransformListener::subscription_callback_impl``
+reads the time on each message), the store and the count of what it did. A message of one
+transform goes to the listener's one-transform store (``set_transform`` or
+``set_transform_static`` of the buffer), any other tuple to the buffer's
+``set_transforms`` (one call a message, as in ``_handle``). A subclass of ``TFMessage``
+(the ROS 1 transport's per-publisher class) is stored under the authority its class
+names (its ``authority``, a non-empty str), when the listener records publishers'
+authorities. Anything else (another message type, a ``transforms`` that is not a tuple)
+goes to the listener's own ``_handle``, which counts, checks and logs it; a transform
+the buffer refuses by raising goes to the listener's ``_store_failed`` (counted as
+invalid or malformed, and logged), and a ``set_transforms`` that raises to its
+``_sink_failed``, as in ``_handle``. Same behaviour as ``_handle`` alone (the pure-Python
+path, ``TFBUS_PURE_PYTHON``), which ``tests/test_listener_handler.py`` runs beside this
+one.
 """
 
 from tfbus.messages import TFMessage
@@ -21,54 +25,82 @@ from tfbus.messages import TFMessage
 
 cdef class InlineHandler:
     """``handler(message)``: store one ``/tf`` (``static`` False) or ``/tf_static``
-    (``static`` True) message into ``listener``'s buffer through ``store`` (the buffer's
-    ``set_transform`` or ``set_transform_static``: ``store(transform, authority) ->
-    bool``, True when stored). ``now_ns()`` is the listener's clock read (int nanoseconds).
+    (``static`` True) message into ``listener``'s buffer: a message of one transform
+    through ``store`` (the buffer's ``set_transform`` or ``set_transform_static``:
+    ``store(transform, authority) -> bool``, True when stored), any other through
+    ``store_many`` (the buffer's ``set_transforms``: ``store_many(transforms, authority,
+    static)`` -> its result's ``stored``, ``refused`` and ``errors``). ``now_ns()`` is the
+    listener's clock read (int nanoseconds); ``authority`` what the transforms are stored
+    under, or, when ``publisher_authority``, the ``authority`` a ``TFMessage`` subclass
+    names.
 
     ``messages``, ``stored`` and ``refused`` count the messages this handler stored itself
-    (one transform each), which the listener adds to its own counters; every other message
-    is counted by the listener.
+    and what the buffer did with their transforms, which the listener adds to its own
+    counters; every other message is counted by the listener.
     """
 
     cdef object _listener
     cdef object _store
+    cdef object _store_many
     cdef object _now_ns
     cdef object _authority
     cdef bint _static
+    cdef bint _publisher_authority
     cdef readonly long long messages
-    """Messages of one transform handled here."""
+    """Messages handled here."""
     cdef readonly long long stored
-    """Of those, transforms the buffer stored."""
+    """Of their transforms, those the buffer stored."""
     cdef readonly long long refused
-    """Of those, transforms the buffer refused without raising (old or repeated data)."""
+    """Of their transforms, those the buffer refused without raising (old or repeated
+    data)."""
 
-    def __cinit__(self, listener, bint static, store, now_ns, str authority):
+    def __cinit__(self, listener, bint static, store, store_many, now_ns, str authority,
+                  bint publisher_authority):
         self._listener = listener
         self._static = static
         self._store = store
+        self._store_many = store_many
         self._now_ns = now_ns
         self._authority = authority
+        self._publisher_authority = publisher_authority
         self.messages = 0
         self.stored = 0
         self.refused = 0
 
     def __call__(self, message):
-        cdef object transforms, now, stored
+        cdef object transforms, now, stored, result, named
+        cdef object authority = self._authority
         if type(message) is not TFMessage:
-            self._listener._handle(self._static, message)
-            return
+            if not isinstance(message, TFMessage):
+                self._listener._handle(self._static, message)
+                return
+            if self._publisher_authority:
+                named = getattr(type(message), "authority", None)
+                if isinstance(named, str) and named:
+                    authority = named
         transforms = (<tuple>message)[0]
-        if type(transforms) is not tuple or len(<tuple>transforms) != 1:
+        if type(transforms) is not tuple:
             self._listener._handle(self._static, message)
             return
         self.messages += 1
         now = self._now_ns()
-        try:
-            stored = self._store((<tuple>transforms)[0], self._authority)
-        except Exception as exc:
-            self._listener._store_failed(self._static, now, exc)
+        if len(<tuple>transforms) == 1:
+            try:
+                stored = self._store((<tuple>transforms)[0], authority)
+            except Exception as exc:
+                self._listener._store_failed(self._static, now, exc)
+                return
+            if stored:
+                self.stored += 1
+            else:
+                self.refused += 1
             return
-        if stored:
-            self.stored += 1
-        else:
-            self.refused += 1
+        try:
+            result = self._store_many(iter(transforms), authority, self._static)
+        except Exception as exc:
+            self._listener._sink_failed(self._static, now, exc)
+            return
+        self.stored += result.stored
+        self.refused += result.refused
+        for _, failed in result.errors:
+            self._listener._store_failed(self._static, now, failed)

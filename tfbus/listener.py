@@ -14,10 +14,12 @@ stored. On each message the listener reads its clock and clears the buffer when 
 jumped back (tf2_ros ``TransformListener``). Objects that are not ``TFMessage``s are
 counted and skipped. The listener never dies of bad input.
 
-With the compiled core, a message of one transform is stored by the compiled handler
+With the compiled core, a ``TFMessage`` whose transforms are a tuple (what a broadcaster
+and every transport deliver) is stored by the compiled handler
 :class:`tfbus._clistener.InlineHandler` (no Python frame between the bus and the store;
-the same counts, warnings and clock read as :meth:`TransformListener._handle`, which
-handles every other message, and every message with the pure-Python core).
+the same counts, warnings, authorities and clock read as
+:meth:`TransformListener._handle`, which handles every other message, and every message
+with the pure-Python core).
 """
 
 from __future__ import annotations
@@ -51,8 +53,8 @@ _log = logging.getLogger(__name__)
 
 
 def _compiled_handler() -> type[InlineHandler] | None:
-    """The compiled message handler (:class:`tfbus._clistener.InlineHandler`: a message of
-    one transform stored with no Python frame) when the compiled core is in use
+    """The compiled message handler (:class:`tfbus._clistener.InlineHandler`: a message
+    stored with no Python frame) when the compiled core is in use
     (``tfbus.core.COMPILED``: not under ``TFBUS_PURE_PYTHON``), else None: the
     listener's own ``_handle`` handles every message."""
     if not COMPILED:
@@ -285,7 +287,8 @@ class TransformListener:
         store = self._store_one
         if _HANDLER is None or store is None:
             return partial(self._handle, static)
-        handler = _HANDLER(self, static, store[static], self._now_ns, self._authority)
+        handler = _HANDLER(self, static, store[static], self._buffer.set_transforms,
+                           self._now_ns, self._authority, self._publisher_authority)
         self._handlers.append(handler)
         return handler
 
@@ -368,14 +371,20 @@ class TransformListener:
         try:
             result = self._buffer.set_transforms(items, authority, static)
         except Exception as bug:  # a sink that breaks its contract: count, never die
-            self._malformed += 1
-            self._warn(now_ns, "ignoring a TFMessage on %s: %s: %s", topic,
-                       type(bug).__name__, bug)
+            self._sink_failed(static, now_ns, bug)
             return
         self._stored += result.stored
         self._refused += result.refused
         for _, exc in result.errors:
             self._store_failed(static, now_ns, exc)
+
+    def _sink_failed(self, static: bool, now_ns: int, bug: Exception) -> None:
+        """Count and log a message whose ``set_transforms`` raised (a sink that breaks its
+        contract: it should return each item's error instead), as malformed; here or in
+        the compiled handler. Never raised to the publisher."""
+        self._malformed += 1
+        self._warn(now_ns, "ignoring a TFMessage on %s: %s: %s",
+                   TF_STATIC_TOPIC if static else TF_TOPIC, type(bug).__name__, bug)
 
     def _store_failed(self, static: bool, now_ns: int, failed: Exception) -> None:
         """Count and log a transform the buffer did not take because it raised: the
