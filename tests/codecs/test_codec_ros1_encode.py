@@ -1,4 +1,6 @@
-"""ROS 1 ``TFMessage`` writing by :mod:`struct`: rosbags' ``serialize_ros1`` bytes, bit for
+"""ROS 1 ``TFMessage`` writing, in C (``tfbus.codecs._cwire._tf_to_ros1``, with the
+compiled core, for the common form of a message) and by :mod:`struct` (everything else,
+and every message without the compiled core): rosbags' ``serialize_ros1`` bytes, bit for
 bit (``TFCodec.encode_generic`` is that reference), and errors that name the transform."""
 
 from __future__ import annotations
@@ -15,7 +17,28 @@ from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vect
 from tfbus.time import Time
 
 pytest.importorskip("rosbags")
-from tfbus.codecs.ros1 import TFCodec, encode_tf  # needs rosbags (checked above)
+from tfbus.codecs import ros1  # needs rosbags (checked above)
+from tfbus.codecs.ros1 import TFCodec, encode_tf
+
+COMPILED = ros1._compiled_encode
+"""The compiled writer, or None (a pure-Python install or ``TFBUS_PURE_PYTHON``)."""
+
+
+def _struct_only(fn: Any, *args: Any) -> Any:
+    """``fn(*args)`` with the compiled writer switched off: the :mod:`struct` writer's
+    bytes (what a pure-Python install writes)."""
+    saved = ros1._compiled_encode
+    ros1._compiled_encode = None
+    try:
+        return fn(*args)
+    finally:
+        ros1._compiled_encode = saved
+
+
+@pytest.fixture
+def struct_writer(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The :mod:`struct` writer alone (the compiled one switched off)."""
+    monkeypatch.setattr(ros1, "_compiled_encode", None)
 
 
 def _ts(parent: Any, child: Any, ns: int, v: tuple[Any, ...]) -> TransformStamped:
@@ -62,11 +85,16 @@ def test_struct_writer_equals_rosbags_bit_for_bit(
     codec = _CODEC
     transforms = [_ts(p, c, ns, v) for p, c, ns, v in items]
     reference = codec.encode_generic(transforms)
-    assert codec.encode(transforms) == reference
-    assert codec.encode(iter(transforms)) == codec.encode_generic(iter(transforms))
     framed = len(reference).to_bytes(4, "little") + reference  # TCPROS: u32 length first
-    assert codec.encode_framed(transforms) == framed
-    assert codec.encode_framed(iter(transforms)) == framed
+    for writer in (lambda fn, *args: fn(*args), _struct_only):
+        assert writer(codec.encode, transforms) == reference
+        assert writer(codec.encode, tuple(transforms)) == reference
+        assert writer(codec.encode, iter(transforms)) == codec.encode_generic(iter(transforms))
+        assert writer(codec.encode_framed, transforms) == framed
+        assert writer(codec.encode_framed, iter(transforms)) == framed
+    if COMPILED is not None:  # the common form: written in C, not handed to struct
+        assert COMPILED(transforms, False) == reference
+        assert COMPILED(tuple(transforms), True) == framed
 
 
 def test_bad_fields_are_refused_naming_the_transform() -> None:
@@ -95,12 +123,13 @@ def test_one_transform_from_the_frame_pair_cache_equals_rosbags(
     codec = TFCodec()
     one = _ts(parent, child, ns, v)
     reference = codec.encode_generic([one])
-    assert codec.encode([one]) == reference
-    assert codec.encode((one,)) == reference
-    assert codec.encode([one]) == reference
     framed = len(reference).to_bytes(4, "little") + reference  # TCPROS: u32 length first
-    assert codec.encode_framed([one]) == framed
-    assert codec.encode_framed((one,)) == framed
+    for writer in (lambda fn, *args: fn(*args), _struct_only):
+        assert writer(codec.encode, [one]) == reference
+        assert writer(codec.encode, (one,)) == reference
+        assert writer(codec.encode, [one]) == reference
+        assert writer(codec.encode_framed, [one]) == framed
+        assert writer(codec.encode_framed, (one,)) == framed
 
 
 def _c_calls(fn: Any, *args: Any) -> tuple[Any, list[str]]:
@@ -122,7 +151,7 @@ def _c_calls(fn: Any, *args: Any) -> tuple[Any, list[str]]:
     return result, c_calls
 
 
-def test_one_transform_encodes_its_frame_ids_once_per_frame_pair() -> None:
+def test_one_transform_encodes_its_frame_ids_once_per_frame_pair(struct_writer: None) -> None:
     """A broadcaster's tick re-sends the same frame pair: after the first message the
     ids are not re-encoded (no ``str.encode``) and the message is two ``struct`` packs
     and one join (C calls counted with the profiler: 6 for the whole tick, at most 8
@@ -138,7 +167,7 @@ def test_one_transform_encodes_its_frame_ids_once_per_frame_pair() -> None:
     assert len(c_calls) <= 8, c_calls
 
 
-def test_a_ticks_tcpros_frame_is_one_join_with_its_length() -> None:
+def test_a_ticks_tcpros_frame_is_one_join_with_its_length(struct_writer: None) -> None:
     """A broadcaster's tick framed for TCPROS (``encode_framed``, what the ROS 1
     publisher writes): the length prefix is packed with the header (one ``struct``
     call) inside the same join, not a second pack and a copy of the whole message (C
@@ -158,7 +187,7 @@ def test_a_ticks_tcpros_frame_is_one_join_with_its_length() -> None:
     assert c_calls.count("Struct.pack") == 2, c_calls
 
 
-def test_frame_pair_cache_is_bounded() -> None:
+def test_frame_pair_cache_is_bounded(struct_writer: None) -> None:
     """Many distinct frame pairs (a peer naming a new child every message) keep at most
     ``_PAIR_BYTES_MAX`` pairs' bytes, and every message is still rosbags' bytes."""
     from tfbus.codecs import ros1
@@ -170,3 +199,38 @@ def test_frame_pair_cache_is_bounded() -> None:
         if i % 997 == 0:
             assert raw == codec.encode_generic([one])
         assert len(ros1._pair_bytes) <= ros1._PAIR_BYTES_MAX
+
+
+@pytest.mark.skipif(COMPILED is None, reason="the compiled writer is built with the "
+                    "compiled core only (a pure-Python install, or TFBUS_PURE_PYTHON)")
+def test_the_compiled_writer_hands_back_what_is_not_the_common_form() -> None:
+    """What the C writer does not write (values that are ints or numpy floats, an id
+    with a lone surrogate, a stamp ROS 1 cannot carry, a subclass of the message
+    classes, a generator) is None from it: the struct writer writes it, converting with
+    ``float()``, or raises the error naming the transform."""
+    import numpy as np
+
+    codec = TFCodec()
+    good = _ts("map", "a", 5, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+    assert COMPILED([good], False) == codec.encode_generic([good])
+    assert COMPILED([], True) == b"\x04\x00\x00\x00\x00\x00\x00\x00"
+
+    class _Sub(TransformStamped):
+        pass
+
+    others: list[Any] = [
+        [good, _ts("map", "b", 5, (0, 0, 0, 0, 0, 0, 1))],
+        [_ts("map", "c", 5, (np.float64(0.5), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))],
+        [_ts("map", "\udc80", 5, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))],
+        [_ts("map", "d", 2**31 * 10**9, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))],
+        [_Sub(*good)],
+        iter([good]),
+        {"a": good}.values(),
+    ]
+    for message in others:
+        assert COMPILED(message, False) is None, message
+    for message in others[:2] + others[4:5]:  # written by struct, as rosbags does
+        assert codec.encode(message) == codec.encode_generic(message)
+    for message in others[2:4]:
+        with pytest.raises(WireEncodeError, match=r"transforms\[0\]|outside ROS 1's time"):
+            codec.encode(message)

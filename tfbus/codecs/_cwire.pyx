@@ -537,3 +537,128 @@ def _clock_stamp_native(bytes payload, int magic, int version):
     if _array(p, size, &off) != 1 or not _uint63(p, size, &off, &ns) or off != size:
         return -1
     return ns
+
+
+# -- writing a ROS 1 TFMessage -----------------------------------------------------------
+
+cdef extern from "Python.h":
+    const char* PyUnicode_AsUTF8AndSize(object unicode, Py_ssize_t* size) except NULL
+    double PyFloat_AS_DOUBLE(object o)
+    object PyBytes_FromStringAndSize(const char* v, Py_ssize_t size)
+    char* PyBytes_AS_STRING(object o)
+
+DEF _SEC_MAX = 2147483647  # ROS 1 time as written: 0 .. 2**31-1 s (rosbags' int32)
+DEF _ONE_FIXED = 16 + 4 + 56  # seq, secs, nsecs, len(frame_id); len(child); 7 float64
+
+
+cdef inline char* _put_u32(char* p, uint32_t v) noexcept:
+    p[0] = <char> (v & 0xFF)
+    p[1] = <char> ((v >> 8) & 0xFF)
+    p[2] = <char> ((v >> 16) & 0xFF)
+    p[3] = <char> ((v >> 24) & 0xFF)
+    return p + 4
+
+
+cdef inline char* _put_f64(char* p, double d) noexcept:
+    cdef uint64_t bits
+    cdef int i
+    memcpy(&bits, &d, 8)
+    for i in range(8):
+        p[i] = <char> ((bits >> (8 * i)) & 0xFF)
+    return p + 8
+
+
+cdef inline bint _plain_values(object tf) noexcept:
+    """Whether ``tf`` is a ``Transform`` of a ``Vector3`` and a ``Quaternion`` of the
+    message classes themselves holding seven ``float``s."""
+    cdef object tr, rot
+    cdef Py_ssize_t k
+    if type(tf) is not Transform or len(<tuple>tf) != 2:
+        return False
+    tr = (<tuple>tf)[0]
+    rot = (<tuple>tf)[1]
+    if type(tr) is not Vector3 or len(<tuple>tr) != 3:
+        return False
+    if type(rot) is not Quaternion or len(<tuple>rot) != 4:
+        return False
+    for k in range(3):
+        if type((<tuple>tr)[k]) is not float:
+            return False
+    for k in range(4):
+        if type((<tuple>rot)[k]) is not float:
+            return False
+    return True
+
+
+def _tf_to_ros1(transforms, bint framed):
+    """The ROS 1 ``TFMessage`` bytes of ``transforms`` (``framed``: the TCPROS ``uint32``
+    length first), as :func:`tfbus.codecs.ros1._encode_struct` writes them (roscpp's
+    layout: ``uint32`` count, then per transform ``seq`` 0, ``secs``, ``nsecs``,
+    ``frame_id``, ``child_frame_id`` as ``uint32`` length + UTF-8, seven ``float64``;
+    little endian), for its common form: a list or tuple of ``TransformStamped`` of the
+    message classes themselves, ``str`` ids that are UTF-8, seven ``float`` values, a
+    ``Time`` stamp within ROS 1's 0 .. 2**31-1 s. None for anything else: the Python
+    writer then writes it (it converts with ``float()``) or names what is wrong. Each
+    id's UTF-8 is the one CPython keeps in the str (made once per str, none for ASCII)."""
+    cdef Py_ssize_t n, k, size, total = 4
+    cdef Py_ssize_t parent_len, child_len
+    cdef object ts, header, stamp, parent, child, tf, tr, rot
+    cdef const char* parent_utf8
+    cdef const char* child_utf8
+    cdef int64_t ns
+    cdef char* p
+    if type(transforms) is not list and type(transforms) is not tuple:
+        return None
+    n = len(transforms)
+    for k in range(n):
+        ts = transforms[k]
+        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
+            return None
+        header = (<tuple>ts)[0]
+        child = (<tuple>ts)[1]
+        if type(header) is not Header or len(<tuple>header) != 2:
+            return None
+        stamp = (<tuple>header)[0]
+        parent = (<tuple>header)[1]
+        if type(stamp) is not Time or type(parent) is not str or type(child) is not str:
+            return None
+        if not _plain_values((<tuple>ts)[2]):
+            return None
+        ns = stamp._ns
+        if ns < 0 or ns // 1000000000 > _SEC_MAX:
+            return None
+        try:
+            PyUnicode_AsUTF8AndSize(parent, &parent_len)
+            PyUnicode_AsUTF8AndSize(child, &child_len)
+        except UnicodeEncodeError:  # a lone surrogate: the Python writer names it
+            return None
+        total += _ONE_FIXED + parent_len + child_len
+    data = PyBytes_FromStringAndSize(NULL, total + 4 if framed else total)
+    p = PyBytes_AS_STRING(data)
+    if framed:
+        p = _put_u32(p, <uint32_t> total)
+    p = _put_u32(p, <uint32_t> n)
+    for k in range(n):
+        ts = transforms[k]
+        header = (<tuple>ts)[0]
+        child = (<tuple>ts)[1]
+        ns = (<tuple>header)[0]._ns
+        parent_utf8 = PyUnicode_AsUTF8AndSize((<tuple>header)[1], &parent_len)
+        child_utf8 = PyUnicode_AsUTF8AndSize(child, &child_len)
+        p = _put_u32(p, 0)  # seq
+        p = _put_u32(p, <uint32_t> (ns // 1000000000))
+        p = _put_u32(p, <uint32_t> (ns % 1000000000))
+        p = _put_u32(p, <uint32_t> parent_len)
+        memcpy(p, parent_utf8, parent_len)
+        p += parent_len
+        p = _put_u32(p, <uint32_t> child_len)
+        memcpy(p, child_utf8, child_len)
+        p += child_len
+        tf = (<tuple>ts)[2]
+        tr = (<tuple>tf)[0]
+        rot = (<tuple>tf)[1]
+        for size in range(3):
+            p = _put_f64(p, PyFloat_AS_DOUBLE((<tuple>tr)[size]))
+        for size in range(4):
+            p = _put_f64(p, PyFloat_AS_DOUBLE((<tuple>rot)[size]))
+    return data

@@ -235,6 +235,21 @@ _compiled_ros1: Callable[[bytes | memoryview], list[TransformStamped]] | None = 
 """The compiled ROS 1 TFMessage decoder (objects built in C), where there is one."""
 
 
+def _compiled_encoder() -> Callable[[Iterable[TransformStamped], bool], bytes | None] | None:
+    """The compiled ROS 1 TFMessage writer (``_cwire._tf_to_ros1``: the bytes of
+    :func:`_encode_struct` for the common form of a message, None for anything else)
+    where :func:`tfbus.codecs._compiled_wire` finds the compiled wire code; else None."""
+    wire = _compiled_wire()
+    if wire is None:
+        return None
+    encode: Callable[[Iterable[TransformStamped], bool], bytes | None] = wire._tf_to_ros1
+    return encode
+
+
+_compiled_encode = _compiled_encoder()
+"""The compiled ROS 1 TFMessage writer, where there is one."""
+
+
 def _decode_ros1_compiled_or_struct(raw: bytes | memoryview) -> list[TransformStamped]:
     """Decode a ROS 1 serialized TFMessage (little endian, Header with ``seq``).
 
@@ -560,6 +575,10 @@ class TFCodec:
         Raises:
             WireEncodeError: as :meth:`encode`.
         """
+        if _compiled_encode is not None:  # the common form, written in C
+            data = _compiled_encode(transforms, True)
+            if data is not None:
+                return data
         return _encode_struct(transforms, True)
 
     def encode_generic(self, transforms: Iterable[TransformStamped]) -> bytes:
@@ -642,9 +661,17 @@ def _encode_struct(transforms: Iterable[TransformStamped], framed: bool = False)
     for the count and header, one for the pose, three parts joined; anything it cannot
     write falls through to the loop, which writes it or names what is wrong.
 
+    With the compiled core, a message of the common form (a list or tuple of the message
+    classes themselves, ``float`` values, UTF-8 ids, a stamp ROS 1 can carry) is written
+    in C (``tfbus.codecs._cwire._tf_to_ros1``: the same bytes, tested).
+
     Raises:
         WireEncodeError: as :meth:`TFCodec.encode`.
     """
+    if _compiled_encode is not None:
+        data = _compiled_encode(transforms, framed)
+        if data is not None:
+            return data
     if (type(transforms) is list or type(transforms) is tuple) and len(transforms) == 1:
         try:
             one = transforms[0]
