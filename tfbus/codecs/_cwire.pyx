@@ -7,7 +7,9 @@ TransformStamped values, built in C like the lookups' results (the fast path of
 TFMessage payload of tfbus's own wire in the form tfbus writes it (the fast path of
 :meth:`tfbus.codecs.native.WireCodec.decode`; msgspec's schema decodes everything else);
 ``_clock_stamp_native`` reads the stamp of a ``Clock`` payload of that wire (the fast path
-of :func:`tfbus.transports.zenoh.transport.clock_stamp`).
+of :func:`tfbus.transports.zenoh.transport.clock_stamp`), and ``_tf_to_ros1`` writes a ROS 1
+``TFMessage`` of the common form (the fast path of :func:`tfbus.codecs.ros1._encode_struct`
+and ``TFCodec.encode_framed``).
 They use the compiled core's C helpers (``tfbus/core/_ccore.pxd``, ``_cresults.pxd``), so
 they are built with the compiled core and loaded only with it (:mod:`tfbus.codecs.ros1`
 and :mod:`tfbus.codecs.native` choose)."""
