@@ -21,7 +21,7 @@ from libc.string cimport memcpy, memset
 from cpython.unicode cimport PyUnicode_GET_LENGTH
 from libc.stdint cimport int64_t
 
-from tfbus.core._ccore cimport _time_of
+from tfbus.core._ccore cimport _plain_values, _time_of
 from tfbus.core._cresults cimport PyObject_GC_UnTrack, _named, _named1, _named3, _named4
 from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
@@ -568,28 +568,6 @@ cdef inline char* _put_f64(char* p, double d) noexcept:
     for i in range(8):
         p[i] = <char> ((bits >> (8 * i)) & 0xFF)
     return p + 8
-
-
-cdef inline bint _plain_values(object tf) noexcept:
-    """Whether ``tf`` is a ``Transform`` of a ``Vector3`` and a ``Quaternion`` of the
-    message classes themselves holding seven ``float``s."""
-    cdef object tr, rot
-    cdef Py_ssize_t k
-    if type(tf) is not Transform or len(<tuple>tf) != 2:
-        return False
-    tr = (<tuple>tf)[0]
-    rot = (<tuple>tf)[1]
-    if type(tr) is not Vector3 or len(<tuple>tr) != 3:
-        return False
-    if type(rot) is not Quaternion or len(<tuple>rot) != 4:
-        return False
-    for k in range(3):
-        if type((<tuple>tr)[k]) is not float:
-            return False
-    for k in range(4):
-        if type((<tuple>rot)[k]) is not float:
-            return False
-    return True
 
 
 def _tf_to_ros1(transforms, bint framed):

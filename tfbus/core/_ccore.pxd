@@ -71,3 +71,4 @@ cdef int _climb(list caches, int frame, int stop, int early, int64_t time, doubl
                 int* reached) except -1
 
 cdef object _time_of(int64_t ns)
+cdef bint _plain_values(object tf) noexcept

@@ -201,6 +201,30 @@ cdef object _restamp(list memo, size_t slot, object stamp, str target, str sourc
     return <object>old
 
 
+cdef bint _plain_values(object tf) noexcept:
+    """Whether ``tf`` is a ``Transform`` of a ``Vector3`` and a ``Quaternion`` of the
+    message classes themselves (no subclass) holding seven ``float``s: the values' part
+    of the common form of a transform (``_plain_transform``; the compiled ROS 1 writer's
+    test)."""
+    cdef object tr, rot
+    cdef Py_ssize_t k
+    if type(tf) is not Transform or len(<tuple>tf) != 2:
+        return False
+    tr = (<tuple>tf)[0]
+    rot = (<tuple>tf)[1]
+    if type(tr) is not Vector3 or len(<tuple>tr) != 3:
+        return False
+    if type(rot) is not Quaternion or len(<tuple>rot) != 4:
+        return False
+    for k in range(3):
+        if type((<tuple>tr)[k]) is not float:
+            return False
+    for k in range(4):
+        if type((<tuple>rot)[k]) is not float:
+            return False
+    return True
+
+
 cdef object _time_of(int64_t ns):
     """``Time.from_ns(ns)`` for a valid ns, without re-validating it: the instance from
     the type's ``tp_alloc`` (what ``object.__new__`` does, minus looking up and calling
@@ -1054,7 +1078,6 @@ cdef class CoreBase:
         ``set_transform`` itself, the one authority on validity); never raises."""
         cdef object header, tf, tr, rot, parent, child
         cdef double x, y, z, qx, qy, qz, qw, s
-        cdef Py_ssize_t k
         if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
             return False
         header = (<tuple>ts)[0]
@@ -1062,14 +1085,10 @@ cdef class CoreBase:
         tf = (<tuple>ts)[2]
         if type(header) is not Header or len(<tuple>header) != 2:
             return False
-        if type(tf) is not Transform or len(<tuple>tf) != 2:
+        if not _plain_values(tf):
             return False
         tr = (<tuple>tf)[0]
         rot = (<tuple>tf)[1]
-        if type(tr) is not Vector3 or len(<tuple>tr) != 3:
-            return False
-        if type(rot) is not Quaternion or len(<tuple>rot) != 4:
-            return False
         parent = (<tuple>header)[1]
         if type((<tuple>header)[0]) is not Time or type(parent) is not str or type(child) is not str:
             return False
@@ -1077,12 +1096,6 @@ cdef class CoreBase:
                 or PyUnicode_READ_CHAR(parent, 0) == 47 or PyUnicode_READ_CHAR(child, 0) == 47
                 or parent == child):
             return False
-        for k in range(3):
-            if type((<tuple>tr)[k]) is not float:
-                return False
-        for k in range(4):
-            if type((<tuple>rot)[k]) is not float:
-                return False
         x = (<tuple>tr)[0]
         y = (<tuple>tr)[1]
         z = (<tuple>tr)[2]
