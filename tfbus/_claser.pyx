@@ -206,7 +206,7 @@ cdef class Projector:
         cdef const float* intensity = (&intensities[0] if n and opts & F_INTENSITY
                                        else NULL)
         cdef bint common = layout == 0 or layout == F_INDEX or layout == F_INTENSITY | F_INDEX
-        if n < NOGIL_BEAMS:  # a short scan: letting other threads run costs more than it
+        if n < NOGIL_BEAMS:  # a short scan: handing the GIL over costs more than it saves
             kept = _points(r, intensity, self._cos, self._sin, out, n, layout, fields,
                            range_cutoff, range_min, time_increment, common)
         else:
