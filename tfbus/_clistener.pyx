@@ -70,15 +70,17 @@ cdef class InlineHandler:
     def __call__(self, message):
         cdef object transforms, now, stored, result, named
         cdef object authority = self._authority
-        if type(message) is not TFMessage:
-            if not isinstance(message, TFMessage):
-                self._listener._handle(self._static, message)
-                return
+        if type(message) is TFMessage:
+            transforms = (<tuple>message)[0]
+        elif isinstance(message, TFMessage):
             if self._publisher_authority:
                 named = getattr(type(message), "authority", None)
                 if isinstance(named, str) and named:
                     authority = named
-        transforms = (<tuple>message)[0]
+            transforms = message.transforms  # as _handle reads it (a subclass may override)
+        else:
+            self._listener._handle(self._static, message)
+            return
         if type(transforms) is not tuple:
             self._listener._handle(self._static, message)
             return
