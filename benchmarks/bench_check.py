@@ -397,7 +397,7 @@ PASSES = 3
 """Passes per side in a round against a compiled peer (C++ tf2, C++ laser_geometry),
 alternated (tfbus, the peer, tfbus, ...): each side's figure in the round is its best
 pass, figure by figure. This machine's speed changes for a second or more at a time
-(every call of both sides, Python and C++ alike, 1.6-1.8x slower for such a stretch),
+(every call of both sides, Python and C++ alike, 1.6-2x slower for such a stretch),
 longer than one pass (under a second): a round of one pass a side judged one side's
 slow stretch against the other's fast one (C++ set_transform 420 ns in one round
 against 190-230 in the six others; tfbus project_laser 5.4-6.1 us in half the rounds
