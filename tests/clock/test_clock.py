@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 import tracemalloc
+from collections.abc import Callable
 from typing import Any
 
 import anyio
@@ -876,17 +878,42 @@ def _system_entries(clock: SystemClock) -> int:
 
 
 async def test_system_call_later_fires_in_order_and_cancelled_calls_never_run() -> None:
+    """Calls scheduled out of order fire in the order of their deadlines. Each deadline
+    is known to lie between the loop's time read just before and just after its
+    ``call_later`` plus the delay (the process may be preempted between two calls on a
+    loaded machine, which moves the later-scheduled deadlines): every call must come
+    no later than any call whose deadline is surely after its own."""
     clock = SystemClock()
     calls: list[str] = []
     done = anyio.Event()
-    clock.call_later(0.003, lambda: (calls.append("last"), done.set()))
-    clock.call_later(0.002, lambda: calls.append("second"))
-    cancel = clock.call_later(0.001, lambda: calls.append("cancelled"))
-    clock.call_later(Duration.from_sec(0.0015), lambda: calls.append("first"))
+    deadlines: dict[str, tuple[float, float]] = {}  # earliest, latest (the loop's time)
+
+    def call(name: str) -> None:
+        calls.append(name)
+        if len(calls) == 3:
+            done.set()
+
+    def schedule(delay: float | Duration, name: str) -> Callable[[], None] | None:
+        seconds = delay.to_sec() if isinstance(delay, Duration) else delay
+        before = anyio.current_time()
+        cancel = clock.call_later(delay, lambda: call(name))
+        deadlines[name] = (before + seconds, anyio.current_time() + seconds)
+        return cancel
+
+    schedule(0.003, "last")
+    schedule(0.002, "second")
+    cancel = schedule(0.001, "cancelled")
+    schedule(Duration.from_sec(0.0015), "first")
+    assert cancel is not None
     cancel()
     with anyio.fail_after(5):  # a bound, not a sleep: the callbacks end the wait
         await done.wait()
-    assert calls == ["first", "second", "last"]
+    assert sorted(calls) == ["first", "last", "second"]  # each once; the cancelled never
+    for earlier, later in itertools.pairwise(calls):
+        assert deadlines[earlier][0] <= deadlines[later][1], (calls, deadlines)
+    if all(deadlines[a][1] < deadlines[b][0] for a, b in (("first", "second"),
+                                                        ("second", "last"))):  # fmt: skip
+        assert calls == ["first", "second", "last"]  # not preempted: the exact order
     clock.call_later(0, lambda: calls.append("now"))  # due now: called at once
     assert calls[-1] == "now"
     assert clock.call_later(math.inf, lambda: calls.append("never")) is not None
