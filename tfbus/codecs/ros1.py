@@ -555,16 +555,21 @@ class TFCodec:
 
     def encode(self, transforms: Iterable[TransformStamped]) -> bytes:
         """Serialise transforms as one ROS 1 ``TFMessage`` (each header's ``seq`` 0, as
-        tf2_ros writes it) with :mod:`struct` (:func:`_encode_struct`): the bytes of
-        rosbags' ``serialize_ros1`` (:meth:`encode_generic`, the reference it is tested
-        against), 10x faster for one transform, as roscpp's ``serialize`` writes each
-        field in turn.
+        tf2_ros writes it), in C with the compiled core for the common form of a message
+        (``tfbus.codecs._cwire._tf_to_ros1``), else with :mod:`struct`
+        (:func:`_encode_struct`): the bytes of rosbags' ``serialize_ros1``
+        (:meth:`encode_generic`, the reference both are tested against), as roscpp's
+        ``serialize`` writes each field in turn.
 
         Raises:
             WireEncodeError: a stamp before 1970 or from 2038-01-19 on (rosbags writes
                 ROS 1's ``time.sec`` as int32; ROS 1 itself reads uint32), or a field of
                 the wrong type, naming the frame (a ``ValueError``).
         """
+        if _compiled_encode is not None:  # the common form, written in C
+            data = _compiled_encode(transforms, False)
+            if data is not None:
+                return data
         return _encode_struct(transforms)
 
     def encode_framed(self, transforms: Iterable[TransformStamped]) -> bytes:
@@ -661,17 +666,15 @@ def _encode_struct(transforms: Iterable[TransformStamped], framed: bool = False)
     for the count and header, one for the pose, three parts joined; anything it cannot
     write falls through to the loop, which writes it or names what is wrong.
 
-    With the compiled core, a message of the common form (a list or tuple of the message
-    classes themselves, ``float`` values, UTF-8 ids, a stamp ROS 1 can carry) is written
-    in C (``tfbus.codecs._cwire._tf_to_ros1``: the same bytes, tested).
+    With the compiled core, :meth:`TFCodec.encode` and :meth:`TFCodec.encode_framed` write
+    a message of the common form (a list or tuple of the message classes themselves,
+    ``float`` values, UTF-8 ids, a stamp ROS 1 can carry) in C
+    (``tfbus.codecs._cwire._tf_to_ros1``: the same bytes, tested) and call this for the
+    rest.
 
     Raises:
         WireEncodeError: as :meth:`TFCodec.encode`.
     """
-    if _compiled_encode is not None:
-        data = _compiled_encode(transforms, framed)
-        if data is not None:
-            return data
     if (type(transforms) is list or type(transforms) is tuple) and len(transforms) == 1:
         try:
             one = transforms[0]
