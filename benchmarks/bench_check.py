@@ -60,7 +60,10 @@ Rows (target):
 * the ``tfbus view --bus zenoh`` process following 100 Hz x 100 frames from another
   process (``bench_view_process.measure``, ``--rounds`` windows of 8 s a phase, a bare
   ``TransformListener`` process and a raw zenoh-python subscriber on the same stream
-  beside it): <= 5 % of a core with no browser, <= 15 % with one page.
+  beside it): <= 5 % of a core with no browser, <= 15 % with one page; beside the page
+  row, for information, the viser floor: a bare viser server drawing the same page (a label
+  per frame moved, the axes and the links as one line-segments node each) at 30 Hz for one
+  page, its poses made by numpy, no tfbus code (``bench_view_process.viser_floor``).
 
 A row whose peer cannot run here prints ``not run: <why>`` and fails.
 
@@ -1012,7 +1015,9 @@ def view_rows(rows: Rows, rounds: int) -> None:
     subscriber with a no-op callback (the floor of any zenoh-python process) receive it;
     each one's CPU
     over ``rounds`` windows with no browser, then with one headless Chromium page; each
-    row judges the median window against its absolute target, the floor beside it."""
+    row judges the median window against its absolute target, the floors beside it; then
+    the viser floor drawing the same page for a page of its own (printed beside the page
+    row)."""
     import bench_view_process
 
     got = bench_view_process.measure(rounds, VIEW_SECONDS)
@@ -1031,6 +1036,12 @@ def view_rows(rows: Rows, rounds: int) -> None:
             view <= VIEW_TARGETS[phase],
             f"<= {VIEW_TARGETS[phase]:.0%} of a core",
         )
+        drawing = got.share["floor"].get("viser")
+        if phase == "page" and drawing:
+            viser = statistics.median(drawing)
+            print(f"  info  {'  viser floor: the same page, viser alone':46} "
+                  f"{viser:.1%} of a core ({_pct_spread(drawing)}); view / (listener floor + "
+                  f"viser floor) {view / (floor + viser):.2f}x")
     print(f"  info  {'  load at the end':46} {got.load:.2f}")
 
 

@@ -14,6 +14,10 @@ Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting o
   key hands each sample to a Python callback that only marks the first one heard: the
   floor of any zenoh-python subscriber of this stream, before any decode (no tfbus code
   per message);
+* ``viser``: a bare viser server (:func:`viser_floor`) drawing the page the view draws
+  for these frames (a label per frame moved, the axes and the links as one line-segments
+  node each) 30 times a second while a browser is connected, its poses made by numpy:
+  the floor of any viser program showing this page, with no tfbus code;
 * ``view``: the command line a user runs, ``tfbus view --bus zenoh?connect=... --port P``
   (``python -m tfbus.cli``), which also keeps ``tfbus monitor``'s tables and ``tfbus
   doctor``'s checks for its page.
@@ -21,10 +25,12 @@ Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting o
 Each one's CPU (its threads' scheduler run time in ns, ``benchmarks/proc_cpu.py``) is read
 over ``--rounds`` windows of ``--seconds`` with no browser (after the view has settled),
 then again with one headless Chromium page open on the view (started here in a session
-of its own, ended by that id; the page counts as connected once its websocket is an
-established TCP connection to the view's port). Prints each process's share of one core
-per window (min / median / max), and the view over the listener floor. Figures only;
-nothing is asserted. Needs ``chromium`` on PATH for the page phase.
+of its own, ended by that id; the page counts as connected once a TCP connection to the
+view's port is established), then with one page open on the viser floor instead (the
+view idle again). Prints each process's share of one core per window (min / median /
+max), the view over the listener floor, and the view with a page against the listener
+floor plus the viser floor. Figures only; nothing is asserted. Needs ``chromium`` on PATH
+for the page phases.
 
 ``--baseline TREE`` also runs a listener and a view imported from another checkout's
 tfbus (its compiled modules built in place) on the same source, in the same windows
@@ -51,6 +57,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -151,6 +158,93 @@ def raw(port: int) -> None:
     session.close()
 
 
+DRAW_HZ = 30.0
+"""Redraws a second of the viser floor (the view's own most: ``MAX_DRAW_HZ``)."""
+FRAMES = 100
+"""Frames the viser floor draws (the source's)."""
+AXIS = 0.25
+"""Length of each drawn axis of the viser floor, metres (the view's default)."""
+
+
+def viser_floor(port: int) -> None:
+    """The drawing floor child (until SIGINT/SIGTERM): a bare viser server on 127.0.0.1
+    ``port`` with the scene nodes the view makes for 100 frames (a grid, a hidden frame
+    node and a label per frame, one line-segments node of every frame's x y z axes and one
+    of the links), redrawn :data:`DRAW_HZ` times a second while a browser is connected,
+    every frame moving: each redraw sends the same messages a redraw of the view sends
+    (a position per label, queued as the view queues it, without viser's setters' check
+    of each value; the axes' and the links' points and colours, one message each) inside
+    ``server.atomic()``, the poses made by numpy from the time: what any viser program
+    pays to show this page, with no tfbus code."""
+    import asyncio
+
+    import numpy as np
+    import viser
+
+    try:
+        from viser import _messages
+    except ImportError:
+        _messages = None
+    import logging
+
+    # a probe of the port (no HTTP request) is not worth a traceback on stderr
+    logging.getLogger("websockets").setLevel(logging.CRITICAL)
+    server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+    server.scene.add_grid("/grid", width=20.0, height=20.0, cell_size=1.0)
+    labels = [server.scene.add_label(f"/tf/l{i}", f"f{i}") for i in range(FRAMES)]
+    for i in range(FRAMES):
+        server.scene.add_frame(f"/tf/f{i}", show_axes=False)
+    queue = getattr(getattr(labels[0]._impl, "api", None), "_queue_scene_message", None)
+    set_position = getattr(_messages, "SetPositionMessage", None)
+    axis_colours = np.array([[(230, 30, 30)] * 2, [(30, 190, 30)] * 2, [(40, 80, 240)] * 2],
+                            dtype=np.uint8)  # fmt: skip
+    segments: dict[str, Any] = {}
+    stop = asyncio.Event()
+
+    def draw(t: float) -> None:
+        a = 0.1 * t + np.arange(FRAMES)
+        xyz = np.stack([0.5 * np.cos(a), 0.5 * np.sin(a), np.full(FRAMES, 0.1)], -1)
+        c, s = np.cos(a), np.sin(a)  # each frame turned by a about z
+        cols = np.stack([np.stack([c, s, 0 * a], -1), np.stack([-s, c, 0 * a], -1),
+                         np.broadcast_to([0.0, 0.0, 1.0], (FRAMES, 3))], 1)  # fmt: skip
+        starts = np.broadcast_to(xyz[:, None, :], cols.shape)
+        axes = np.stack([starts, starts + AXIS * cols], 2).reshape(-1, 2, 3).astype(np.float32)
+        links = np.stack([xyz[1:], xyz[:-1]], 1).astype(np.float32)
+        with server.atomic():
+            for label, p in zip(labels, xyz.tolist(), strict=True):
+                if queue is None or set_position is None:
+                    label.position = p
+                    continue
+                label._impl.position[:] = p
+                queue(set_position(label._impl.name, tuple(p)))
+            for name, pts, colours, width in (
+                ("/axes", axes, np.tile(axis_colours, (FRAMES, 1, 1)), 4.0),
+                ("/links", links, np.full((len(links), 2, 3), 200, dtype=np.uint8), 2.0),
+            ):
+                handle = segments.get(name)
+                if handle is None:
+                    segments[name] = server.scene.add_line_segments(
+                        name, pts, colours, thickness=width, thickness_units="screen")
+                else:
+                    handle.points = pts
+                    handle.colors = colours
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGINT, stop.set)
+        loop.add_signal_handler(signal.SIGTERM, stop.set)
+        print("READY", flush=True)
+        deadline = loop.time()
+        while not stop.is_set():
+            deadline = max(deadline + 1.0 / DRAW_HZ, loop.time())
+            await asyncio.sleep(deadline - loop.time())
+            if server.get_clients():
+                draw(time.time())
+
+    asyncio.run(main())
+    server.stop()
+
+
 def established(port: int) -> int:
     """Established TCP connections to local ``port`` (``/proc/net/tcp``, ``tcp6``)."""
     n = 0
@@ -168,9 +262,11 @@ def established(port: int) -> int:
 
 @dataclasses.dataclass
 class Measured:
-    """Per phase (``idle``, ``page``) and process (``source``, ``listener``, ``view``):
-    its share of one core in each window (0.01 = 1 %); ``page_shown``: whether a page
-    connected (False without chromium, or when none connected within 60 s)."""
+    """Per phase (``idle``: no browser; ``page``: a page on the view; ``floor``: a page
+    on the viser floor) and process (``source``, ``listener``, ``raw``, ``viser``,
+    ``view``): its share of one core in each window (0.01 = 1 %); ``page_shown``: whether
+    a page connected to the view (False without chromium, or when none connected within
+    120 s)."""
 
     share: dict[str, dict[str, list[float]]]
     page_shown: bool
@@ -192,20 +288,22 @@ def _wait_line(proc: subprocess.Popen[str], want: Callable[[str], bool], what: s
 
 
 def measure(rounds: int, seconds: float, baseline: Path | None = None) -> Measured:
-    """Start the three processes, then read their CPU over ``rounds`` windows of
-    ``seconds`` with no browser and again with one page (see the module docstring);
+    """Start the processes, then read their CPU over ``rounds`` windows of ``seconds``
+    with no browser, with one page on the view, and with one page on the viser floor
+    (see the module docstring);
     with ``baseline``, also a listener and a view of that checkout's tfbus."""
-    zport, vport = _free_port(), _free_port()
+    zport, vport, fport = _free_port(), _free_port(), _free_port()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)}  # fmt: skip
     procs: dict[str, subprocess.Popen[str]] = {}
-    share: dict[str, dict[str, list[float]]] = {"idle": {}, "page": {}}
+    share: dict[str, dict[str, list[float]]] = {"idle": {}, "page": {}, "floor": {}}
     shown = False
     why = ""
     try:
-        for name in ("source", "listener", "raw"):
+        for name, port in (("source", zport), ("listener", zport), ("raw", zport),
+                           ("viser", fport)):  # fmt: skip
             procs[name] = subprocess.Popen(
-                [sys.executable, __file__, f"--{name}", str(zport)], env=env,
+                [sys.executable, __file__, f"--{name}", str(port)], env=env,
                 stdout=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
             _wait_line(procs[name], lambda line: line.startswith("READY"), name)
         views = [("view", ROOT, env, vport)]
@@ -241,33 +339,17 @@ def measure(rounds: int, seconds: float, baseline: Path | None = None) -> Measur
 
         windows("idle")
         exe = shutil.which("chromium")
-        if exe is not None:
-            with tempfile.TemporaryDirectory(prefix="tfbus-bench-view-",
-                                             ignore_cleanup_errors=True) as profile:
-                browser = subprocess.Popen(
-                    [exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
-                     f"http://127.0.0.1:{vport}/"],
-                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                    start_new_session=True)  # fmt: skip
-                try:
-                    deadline = time.monotonic() + 120
-                    while (not established(vport) and browser.poll() is None
-                           and time.monotonic() < deadline):
-                        time.sleep(0.1)
-                    shown = established(vport) > 0
-                    if shown:
-                        time.sleep(3.0)  # the page loaded and drawing at its rate
-                        windows("page")
-                    else:
-                        why = (f"no page connected within 120 s (chromium "
-                               f"{'running' if browser.poll() is None else 'exited'}, view "
-                               f"{'running' if procs['view'].poll() is None else 'exited'}, "
-                               f"port {'open' if _listening(vport) else 'closed'})")
-                finally:  # the browser this started, and its renderers (its own session)
-                    os.killpg(browser.pid, signal.SIGKILL)
-                    browser.wait(timeout=30)
-        else:
+        if exe is None:
             why = "no chromium on PATH"
+        else:
+            why = _with_page(exe, vport, lambda: windows("page"),
+                             lambda: procs["view"].poll() is None)  # fmt: skip
+            shown = not why
+            if shown:  # the same page drawn by viser alone, the view idle again
+                floor_why = _with_page(exe, fport, lambda: windows("floor"),
+                                       lambda: procs["viser"].poll() is None)  # fmt: skip
+                if floor_why:
+                    why = f"viser floor: {floor_why}"
         return Measured(share, shown, os.getloadavg()[0], why)
     finally:
         for p in procs.values():
@@ -279,6 +361,37 @@ def measure(rounds: int, seconds: float, baseline: Path | None = None) -> Measur
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(timeout=20)
+
+
+def _with_page(exe: str, port: int, measure: Callable[[], None],
+               alive: Callable[[], bool]) -> str:
+    """Open one headless Chromium page on 127.0.0.1 ``port`` (a session of its own,
+    ended by that id), wait (at most 120 s) until its websocket is connected and 3 s
+    more, call ``measure``, close the browser; "" when measured, else why not."""
+    with tempfile.TemporaryDirectory(prefix="tfbus-bench-view-",
+                                     ignore_cleanup_errors=True) as profile:
+        browser = subprocess.Popen(
+            [exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"http://127.0.0.1:{port}/"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        try:
+            deadline = time.monotonic() + 120
+            connected = False
+            while browser.poll() is None and time.monotonic() < deadline:
+                connected = established(port) > 0
+                if connected:
+                    break
+                time.sleep(0.1)
+            if not connected:
+                return (f"no page connected within 120 s (chromium "
+                        f"{'running' if browser.poll() is None else 'exited'}, server "
+                        f"{'running' if alive() else 'exited'}, "
+                        f"port {'open' if _listening(port) else 'closed'})")
+            time.sleep(3.0)  # the page loaded and drawing at its rate
+            measure()
+            return ""
+        finally:  # the browser this started, and its renderers (its own session)
+            os.killpg(browser.pid, signal.SIGKILL)
+            browser.wait(timeout=30)
 
 
 def _listening(port: int) -> bool:
@@ -304,9 +417,13 @@ def main() -> None:
     parser.add_argument("--source", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--listener", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--raw", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--viser", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.raw is not None:
         raw(args.raw)
+        return
+    if args.viser is not None:
+        viser_floor(args.viser)
         return
     if args.source is not None:
         source(args.source)
@@ -328,6 +445,13 @@ def main() -> None:
         over = [v - f for v, f in zip(got.share[phase]["view"], got.share[phase]["listener"],
                                       strict=True)]  # fmt: skip
         print(f"  {label:<11} view - listener floor {_spread(over)}")
+    floor = got.share["floor"].get("viser")
+    if floor:
+        print(f"  viser page  viser floor   {_spread(floor)}")
+        page = statistics.median(got.share["page"]["view"])
+        both = (statistics.median(got.share["page"]["listener"]) + statistics.median(floor))
+        print(f"  one page    view {100 * page:.1f} % vs listener + viser floor "
+              f"{100 * both:.1f} % (medians): {page / both:.2f}x")
     print(f"load {got.load:.2f} (1 min) at the end")
 
 
