@@ -127,6 +127,48 @@ def test_stale_and_hidden_with_manual_clock() -> None:
     assert short.frame("c").colour == pytest.approx((20.0 - 15.5) / (20.0 * 2 / 3))
 
 
+def test_receive_times_in_nanoseconds_give_the_same_scene() -> None:
+    """``last_update_ns`` (a live view's integer receive times) is read as ``last_update``
+    is: the same ages, fades and hidden frames, frame for frame; a frame missing from it
+    has no age."""
+    clock = ManualClock(Time.from_sec(100.0))
+    core = chain_core()
+    last = {"a": clock.now(), "b": Time.from_sec(92.5), "c": Time.from_sec(84.0)}
+    clock.advance_nowait(1.25)
+    by_time = build_scene(core, now=clock.now(), last_update=last)
+    by_ns = build_scene(core, now=clock.now(),
+                        last_update_ns={name: t.ns for name, t in last.items()})
+    assert by_ns == by_time
+    ages = {f.frame_id: f.age for f in by_ns.frames}
+    assert ages == {"world": None, "a": 1.25, "b": 8.75, "c": 17.25, "other": None,
+                    "lone": None, "s": None}
+    assert by_ns.frame("c").colour is None and by_ns.frame("lone").age is None
+    # given both, the nanoseconds are read
+    assert build_scene(core, now=clock.now(), last_update={"a": Time.from_sec(0.0)},
+                       last_update_ns={"a": last["a"].ns}).frame("a").age == 1.25
+
+
+def test_frame_view_is_a_frozen_dataclass() -> None:
+    """The view of a frame keeps the dataclass's contract however it is built: fields
+    by position or keyword (``authority`` defaults to None), equality and hash by value,
+    no attribute can be set."""
+    import dataclasses
+
+    from tfbus.view import FrameView
+
+    by_position = FrameView("b", "a", False, None, "no pose", 2.0, 1.0)
+    by_keyword = FrameView(frame_id="b", parent="a", static=False, pose=None,
+                           error="no pose", age=2.0, colour=1.0, authority=None)
+    assert by_position == by_keyword and hash(by_position) == hash(by_keyword)
+    assert dataclasses.astuple(by_position) == ("b", "a", False, None, "no pose", 2.0, 1.0,
+                                                None)
+    assert by_position != dataclasses.replace(by_position, authority="x")
+    assert repr(by_position).startswith("FrameView(frame_id='b', parent='a'")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        by_position.age = 3.0  # type: ignore[misc]
+    assert not by_position.visible and by_position.stale is False
+
+
 def test_markup_and_control_characters_kept_as_text() -> None:
     core = BufferCore()
     odd = "<b>x</b>\x1b[31m*bold*\n[link](javascript:alert(1))"

@@ -338,13 +338,14 @@ def draw_live(page: TfPage, core: BufferCore, summary: TfSummary, now: Time, *,
     ``fleet``, the robots it picks (:meth:`~tfbus.view.fleet.FleetView.build`). The
     frame table is written only with ``table`` (:meth:`TfPage.draw`); rates are the
     frames' recent rates at ``now`` (:class:`RecentRates`)."""
-    last = {name: Time.from_ns(fs.last_received)
+    last = {name: fs.last_received
             for name, fs in summary.frames.items() if fs.last_received is not None}
     if fleet is not None:
-        scene = fleet.build(core, fixed_frame=fixed_frame, now=now, last_update=last,
+        scene = fleet.build(core, fixed_frame=fixed_frame, now=now,
+                            last_update={name: Time.from_ns(t) for name, t in last.items()},
                             frame_timeout=frame_timeout)
     else:
-        scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update=last,
+        scene = build_scene(core, fixed_frame=fixed_frame, now=now, last_update_ns=last,
                             frame_timeout=frame_timeout)
     page.draw(scene, summary, RecentRates(summary, now), core=core, table=table)
     return scene
