@@ -43,10 +43,18 @@ def bus(endpoint: str, namespace: str, name: str) -> Bus:
         connect=endpoint, config={"mode": "client"}, namespace=namespace, name=name))
 
 
-async def wait_until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.02)
+async def wait_until(predicate: Callable[[], bool], timeout: float = 10.0,
+                     seen: Callable[[], object] | None = None) -> None:
+    """Poll ``predicate`` until it holds, at most ``timeout`` s; on timeout the failure
+    says what ``seen()`` reports (counters of the parties involved)."""
+    try:
+        with anyio.fail_after(timeout):
+            while not predicate():
+                await anyio.sleep(0.02)
+    except TimeoutError:
+        if seen is None:
+            raise
+        raise AssertionError(f"not within {timeout} s; seen: {seen()!r}") from None
 
 
 def test_fleet_key_space_maps_namespaces_to_topic_prefixes() -> None:
@@ -90,7 +98,9 @@ async def test_one_buffer_per_robot_and_gone_robots() -> None:
                 for r, x in ((r1, 1.0), (r2, 3.0)):
                     await wait_until(lambda r=r: r.transport.matching("/tf"))  # type: ignore[union-attr]
                     r.publish_nowait("/tf", TFMessage([ts("map", "base", 5, x)]))
-                await wait_until(lambda: fleet.statistics().messages == 4)
+                await wait_until(lambda: fleet.statistics().messages == 4, seen=lambda: (
+                    fleet.statistics(), fleet.robots(),
+                    [b.transport.statistics() for b in (fbus, r1, r2)]))  # type: ignore[union-attr]
                 t1 = fleet["robot1"].lookup_transform("map", "laser", Time(0))
                 t2 = fleet["robot2"].lookup_transform("map", "laser", Time(0))
                 assert t1.transform.translation.x == pytest.approx(1.5)
