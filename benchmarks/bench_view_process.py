@@ -177,6 +177,7 @@ def viser_floor(port: int) -> None:
     ``server.atomic()``, the poses made by numpy from the time: what any viser program
     pays to show this page, with no tfbus code."""
     import asyncio
+    import logging
 
     import numpy as np
     import viser
@@ -185,8 +186,6 @@ def viser_floor(port: int) -> None:
         from viser import _messages
     except ImportError:
         _messages = None
-    import logging
-
     # a probe of the port (no HTTP request) is not worth a traceback on stderr
     logging.getLogger("websockets").setLevel(logging.CRITICAL)
     server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
@@ -366,8 +365,9 @@ def measure(rounds: int, seconds: float, baseline: Path | None = None) -> Measur
 def _with_page(exe: str, port: int, measure: Callable[[], None],
                alive: Callable[[], bool]) -> str:
     """Open one headless Chromium page on 127.0.0.1 ``port`` (a session of its own,
-    ended by that id), wait (at most 120 s) until its websocket is connected and 3 s
-    more, call ``measure``, close the browser; "" when measured, else why not."""
+    ended by that id), wait (at most 120 s) until it holds a TCP connection to the port
+    and 3 s more (the page loaded, its websocket drawing), call ``measure``, close the
+    browser; "" when measured, else why not (``alive``: whether the server still runs)."""
     with tempfile.TemporaryDirectory(prefix="tfbus-bench-view-",
                                      ignore_cleanup_errors=True) as profile:
         browser = subprocess.Popen(
