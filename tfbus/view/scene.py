@@ -13,7 +13,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Final, cast
 
-from tfbus.core import BufferCore, FrameInfo
+from tfbus.core import BufferCore
 from tfbus.messages import TransformStamped
 from tfbus.time import Time
 
@@ -115,9 +115,10 @@ class Scene:
         raise KeyError(frame_id)
 
 
-def _parents(infos: Iterable[FrameInfo]) -> dict[str, str]:
-    """Child -> parent of every frame with a parent (``frame_info`` entries)."""
-    return {i.child: i.parent for i in infos if i.parent != NO_PARENT}
+def _parents(links: Iterable[tuple[str, str, str, bool, int, int, int]]) -> dict[str, str]:
+    """Child -> parent of every frame with a parent, from the core's ``link_info``
+    tuples (``frame_info``'s entries unnamed: child, parent, ...)."""
+    return {link[0]: link[1] for link in links if link[1] != NO_PARENT}
 
 
 def _largest_root(names: list[str], parents: Mapping[str, str]) -> str | None:
@@ -169,7 +170,7 @@ def default_fixed_frame(core: BufferCore) -> str | None:
     """The root of the largest tree (most frames; the first registered on a tie), as rviz
     users pick ``map``/``odom``/``world``; ``None`` for an empty buffer. A loop has no
     root: its frames count for none."""
-    return _largest_root(core.get_frame_names(), _parents(core.frame_info()))
+    return _largest_root(core.get_frame_names(), _parents(core.link_info()))
 
 
 def build_scene(
@@ -212,8 +213,7 @@ def build_scene(
     # is_static, ...): one FrameInfo fewer per frame and redraw
     info = {i[0]: i for i in core.link_info()}
     if fixed_frame is None:  # default_fixed_frame, from the links read here
-        fixed_frame = _largest_root(names, {c: i[1] for c, i in info.items()
-                                            if i[1] != NO_PARENT})
+        fixed_frame = _largest_root(names, _parents(info.values()))
     if not names or fixed_frame is None:
         return Scene(fixed_frame, time, (), "no transforms received (no /tf or /tf_static)")
     received: Mapping[str, int] | None = last_update_ns
