@@ -874,9 +874,13 @@ DEMO_ROW = "seed demo over ROS 1, CPU vs C++ tutorial pair"
 
 def demo_rows(rows: Rows, rounds: int) -> None:
     """The seed demo over ROS 1 (``bench_demo_ros1.run_pair``): the C++ tutorial pair and
-    tfbus's demo pair on one roscore, alternated (the order reversed every other round),
-    each pair's CPU (both processes, per-thread schedstat) over 10 s; the median of the per-round
-    ratios (<= 1.5x)."""
+    tfbus's demo pair on one roscore, and the Python floor pair
+    (``bench_demo_ros1.floor_broadcaster`` / ``floor_listener``: asyncio, a timer, a
+    socket write a message, the bare reader + store; no master, no tfbus layers),
+    alternated (the order reversed every other round), each pair's CPU (both processes,
+    per-thread schedstat) over 10 s; the row judges the median of the per-round ratios
+    tfbus / C++ (<= 1.5x); the floor's own ratios to C++ and tfbus's to the floor are
+    printed beside it."""
     import bench_demo_ros1
     from ros1_peers import ros1_missing, start_master
 
@@ -885,22 +889,24 @@ def demo_rows(rows: Rows, rounds: int) -> None:
         _not_run(rows, [DEMO_ROW], why)
         return
     shares: dict[str, list[float]] = {}
+    parts: dict[str, list[tuple[float, float]]] = {}
     with tempfile.TemporaryDirectory(prefix="tfbus-bench-demo-") as tmp:
         out = Path(tmp) / "bin"
         bench_demo_ros1.build(out)
         master = start_master(Path(tmp) / "home")
         try:
-            sides = bench_demo_ros1.pairs(out, f"ros1:{master.uri}")
+            sides = bench_demo_ros1.pairs(out, f"ros1:{master.uri}", floor=True)
             names = list(sides)
             for r in range(rounds):
                 for name in names if r % 2 == 0 else names[::-1]:
                     measured = bench_demo_ros1.run_pair(master, sides[name], DEMO_SECONDS)
-                    share = sum(cpu for cpu, _wakeups in measured)
-                    shares.setdefault(name, []).append(share)
+                    (broadcaster, _), (listener, _) = measured
+                    shares.setdefault(name, []).append(broadcaster + listener)
+                    parts.setdefault(name, []).append((broadcaster, listener))
                 print(f"  (demo round {r + 1}/{rounds}, {_load()})", flush=True)
         finally:
             master.stop()
-    cpp, ours = (shares[n] for n in names)
+    cpp, ours, floor = (shares[n] for n in names)
     ratios = [p / max(q, 1e-9) for p, q in zip(ours, cpp, strict=True)]
     rows.row(
         DEMO_ROW,
@@ -909,6 +915,16 @@ def demo_rows(rows: Rows, rounds: int) -> None:
         statistics.median(ratios) <= DEMO_TARGET,
         f"<= {DEMO_TARGET:.1f}x C++",
     )
+    floor_cpp = [p / max(q, 1e-9) for p, q in zip(floor, cpp, strict=True)]
+    ours_floor = [p / max(q, 1e-9) for p, q in zip(ours, floor, strict=True)]
+    print(f"  info  {'  Python floor pair vs C++':46} {statistics.median(floor) * 100:.2f} % "
+          f"= {_spread(floor_cpp)} (asyncio, a socket write a message, bare reader + store)")
+    print(f"  info  {'  tfbus demo pair vs the Python floor':46} {_spread(ours_floor)}")
+    print(f"  info  {'  by process (medians), % of a core':46} " + ", ".join(
+        f"{label} {statistics.median(b for b, _ in parts[n]) * 100:.2f} + "
+        f"{statistics.median(li for _, li in parts[n]) * 100:.2f}"
+        for label, n in zip(("C++", "tfbus", "floor"), names, strict=True)
+    ) + " (broadcaster + listener)")
 
 
 GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo", "view",

@@ -30,12 +30,14 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import socket
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -85,14 +87,158 @@ def build(out: Path) -> None:
                    check=True, capture_output=True, timeout=600)  # fmt: skip
 
 
-def pairs(out: Path, uri: str) -> dict[str, list[list[str]]]:
-    """The two sides' commands (broadcaster, listener) on the master ``uri``
-    (``ros1:http://...``): the C++ pair built into ``out``, and tfbus's demo pair."""
-    return {
+FLOOR = "Python floor pair"
+"""The side :func:`floor_broadcaster` and :func:`floor_listener` make (see them)."""
+
+
+def pairs(out: Path, uri: str, floor: bool = False) -> dict[str, list[list[str]]]:
+    """The sides' commands (broadcaster, listener) on the master ``uri``
+    (``ros1:http://...``): the C++ pair built into ``out``, tfbus's demo pair and, with
+    ``floor``, the Python floor pair (:data:`FLOOR`, on a free 127.0.0.1 port of its
+    own; no master)."""
+    sides = {
         "C++ tutorial pair": [[str(out / "tf_broadcaster")], [str(out / "tf_listener")]],
         "tfbus demo pair": [[*TFBUS, "demo", "broadcaster", "--bus", uri],
                             [*TFBUS, "demo", "listener", "--bus", uri]],
     }  # fmt: skip
+    if floor:
+        port = str(_free_port())
+        here = [sys.executable, str(Path(__file__).resolve())]
+        sides[FLOOR] = [[*here, "--floor-broadcaster", port], [*here, "--floor-listener", port]]
+    return sides
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def floor_broadcaster(port: int, rate: float = 100.0) -> None:
+    """The floor of the tutorial's broadcaster in Python (a child process, run until
+    killed): one asyncio task on absolute deadlines at ``rate`` Hz (``asyncio.sleep`` to
+    each) reads the wall clock, writes the stamp and sequence number into one TCPROS
+    frame of a one-transform ``TFMessage`` (base_link -> base_laser, serialised once at
+    start by tfbus's codec) and writes it to each connected listener's socket
+    (``transport.write``). What any asyncio node pays to send the tutorial's stream:
+    the loop's wake-up, a timer, a clock read and a socket write a message; no master, no
+    bus, no transport layers, no serialisation a message. Listens on 127.0.0.1:``port``;
+    a listener is sent a TCPROS connection header first. The process imports tfbus's
+    ROS 1 transport first (a tfbus-sized process: cache misses a wake-up grow with the
+    process, not with the work)."""
+    import asyncio
+    import struct
+
+    import tfbus.transports.ros1.transport  # noqa: F401  (a tfbus-sized process)
+    from tfbus.codecs.ros1 import TF_MD5SUM, TFCodec
+    from tfbus.demos.tutorial import LASER_OFFSET
+    from tfbus.messages import Header, TransformStamped
+    from tfbus.time import Time
+    from tfbus.transports.ros1.tcpros import encode_header
+
+    frame = bytearray(TFCodec().encode_framed(
+        [TransformStamped(Header(Time(0), "base_link"), "base_laser", LASER_OFFSET)]))
+    # uint32 frame length, uint32 array length, then the header: uint32 seq, time
+    if struct.unpack_from("<III", frame, 8) != (0, 0, 0):
+        raise SystemExit("the frame's layout is not the one expected")
+    hello = encode_header({"callerid": "/floor_broadcaster", "topic": "/tf",
+                           "md5sum": TF_MD5SUM, "type": "tf2_msgs/TFMessage"})  # fmt: skip
+    listeners: list[asyncio.BaseTransport] = []
+
+    class Link(asyncio.Protocol):
+        def connection_made(self, transport: asyncio.BaseTransport) -> None:
+            assert isinstance(transport, asyncio.Transport)
+            transport.get_extra_info("socket").setsockopt(
+                socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            transport.write(hello)
+            listeners.append(transport)
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            listeners[:] = [t for t in listeners if not t.is_closing()]
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        await loop.create_server(Link, "127.0.0.1", port)
+        pack_into = struct.pack_into
+        period = 1.0 / rate
+        deadline = loop.time()
+        seq = 0
+        while True:
+            ns = time.time_ns()
+            seq += 1
+            pack_into("<III", frame, 8, seq, ns // 1_000_000_000, ns % 1_000_000_000)
+            data = bytes(frame)
+            for transport in listeners:
+                transport.write(data)  # type: ignore[attr-defined]
+            deadline += period
+            await asyncio.sleep(deadline - loop.time())
+
+    asyncio.run(main())
+
+
+def floor_listener(port: int) -> None:
+    """The floor of the tutorial's listener in Python (a child process, run until
+    killed): connects to :func:`floor_broadcaster` on 127.0.0.1:``port`` (retrying, 60 s
+    at most); the asyncio loop's read callback splits the TCPROS frames
+    (``tfbus.transports.ros1.tcpros.FrameSplitter``), decodes each with tfbus's compiled
+    decoder and stores its transforms in a tfbus ``Buffer`` (``set_transforms``: the
+    bare reader + store of ``bench_ros1_floor.py``); a task wakes every second
+    (``asyncio.sleep`` to absolute deadlines), transforms (1.0, 0.2, 0.0) from base_laser
+    into base_link at the latest time (``Buffer.lookup_transform``,
+    ``do_transform_point``) and prints the tutorial's line. No master, no bus, no
+    listener layers."""
+    import asyncio
+
+    import tfbus.transports.ros1.transport  # noqa: F401  (a tfbus-sized process)
+    from tfbus import Buffer
+    from tfbus.codecs import ros1 as ros1_codec
+    from tfbus.convert import do_transform_point
+    from tfbus.demos.tutorial import LASER_POINT, format_info
+    from tfbus.messages import Header, PointStamped
+    from tfbus.time import Time
+    from tfbus.transports.ros1.tcpros import FrameSplitter
+
+    buffer = Buffer()
+    decode = ros1_codec._compiled_ros1 or ros1_codec.TFCodec().decode
+    store = buffer.set_transforms
+
+    def sink(raw: Any) -> None:
+        store(iter(decode(raw)), "/floor_broadcaster", False)
+
+    splitter = FrameSplitter(lambda _header: setattr(splitter, "sink", sink), 1 << 20, 1 << 24)
+
+    class Reader(asyncio.BufferedProtocol):
+        def __init__(self) -> None:
+            self.view = memoryview(bytearray(65536))
+
+        def get_buffer(self, sizehint: int) -> memoryview:
+            return self.view
+
+        def buffer_updated(self, nbytes: int) -> None:
+            splitter.feed(self.view[:nbytes])
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        for _ in range(3000):  # 60 s
+            try:
+                transport, _ = await loop.create_connection(Reader, "127.0.0.1", port)
+                break
+            except OSError:
+                await asyncio.sleep(0.02)
+        else:
+            raise SystemExit(f"no floor broadcaster on port {port} within 60 s")
+        transport.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        laser = PointStamped(Header(Time(0), "base_laser"), LASER_POINT)
+        deadline = loop.time()
+        while True:
+            deadline += 1.0
+            await asyncio.sleep(deadline - loop.time())
+            if buffer.can_transform("base_link", "base_laser", Time(0)):
+                ts = buffer.lookup_transform("base_link", "base_laser", Time(0))
+                print(format_info(buffer.clock.now(), laser, do_transform_point(laser, ts)),
+                      flush=True)
+
+    asyncio.run(main())
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -103,7 +249,18 @@ def main(argv: list[str] | None = None) -> None:
                         help="also run the tfbus pair from another checkout (e.g. a scratch "
                              "worktree of an earlier commit, its .so files built) as a third "
                              "side of each round, and print tfbus / that")  # fmt: skip
+    parser.add_argument("--floor", action="store_true",
+                        help="also run the Python floor pair (floor_broadcaster, "
+                             "floor_listener) as a side of each round")  # fmt: skip
+    parser.add_argument("--floor-broadcaster", type=int, metavar="PORT", help=argparse.SUPPRESS)
+    parser.add_argument("--floor-listener", type=int, metavar="PORT", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.floor_broadcaster is not None:
+        floor_broadcaster(args.floor_broadcaster)
+        return
+    if args.floor_listener is not None:
+        floor_listener(args.floor_listener)
+        return
     seconds = 8.0 if args.quick else 20.0
     why = ros1_missing(DEMO_PACKAGES)
     if why:
@@ -115,7 +272,7 @@ def main(argv: list[str] | None = None) -> None:
         master = start_master(Path(tmp) / "home")
         try:
             uri = f"ros1:{master.uri}"
-            sides = pairs(out, uri)
+            sides = pairs(out, uri, floor=args.floor)
             if args.baseline is not None:
                 tree = str(Path(args.baseline).resolve())
                 base = ["env", f"PYTHONPATH={tree}", sys.executable, "-m", "tfbus.cli"]
@@ -143,18 +300,25 @@ def main(argv: list[str] | None = None) -> None:
         l_mid = 100 * statistics.median(li for _, li in parts[name])
         print(f"  {name:18s} min {low:6.2f} %  median {mid:6.2f} %  max {high:6.2f} %  "
               f"(medians: broadcaster {b_mid:.2f} %, listener {l_mid:.2f} %)")  # fmt: skip
-    cpp, ours, *rest = (statistics.median(v) for v in shares.values())
-    (cpp_b, our_b, *_), (cpp_l, our_l, *_) = (
-        [statistics.median(p[i] for p in v) for v in parts.values()] for i in (0, 1)
-    )
+    med = {name: statistics.median(v) for name, v in shares.items()}
+    split = {name: [statistics.median(p[i] for p in v) for i in (0, 1)]
+             for name, v in parts.items()}  # fmt: skip
+    cpp, ours = med["C++ tutorial pair"], med["tfbus demo pair"]
+    (cpp_b, cpp_l), (our_b, our_l) = split["C++ tutorial pair"], split["tfbus demo pair"]
     print(f"  split tfbus / C++ (medians): broadcaster {our_b / cpp_b:.2f}x, "
           f"listener {our_l / cpp_l:.2f}x")  # fmt: skip
     print(f"  ratio tfbus / C++ (medians) {ours / cpp:.2f}x (target <= 1.5x); "
           f"load {os.getloadavg()[0]:.1f}")  # fmt: skip
-    if rest:
-        print(f"  ratio tfbus @ baseline / C++ (medians) {rest[0] / cpp:.2f}x; "
-              f"tfbus / tfbus @ baseline {ours / rest[0]:.2f}x")  # fmt: skip
-
+    if FLOOR in med:
+        floor_b, floor_l = split[FLOOR]
+        print(f"  floor: {FLOOR} / C++ {med[FLOOR] / cpp:.2f}x (broadcaster "
+              f"{floor_b / cpp_b:.2f}x, listener {floor_l / cpp_l:.2f}x); tfbus / floor "
+              f"{ours / med[FLOOR]:.2f}x (broadcaster {our_b / floor_b:.2f}x, listener "
+              f"{our_l / floor_l:.2f}x)")  # fmt: skip
+    if "tfbus @ baseline" in med:
+        base = med["tfbus @ baseline"]
+        print(f"  ratio tfbus @ baseline / C++ (medians) {base / cpp:.2f}x; "
+              f"tfbus / tfbus @ baseline {ours / base:.2f}x")  # fmt: skip
 
 if __name__ == "__main__":
     main()
