@@ -41,6 +41,7 @@ import argparse
 import contextlib
 import os
 import signal
+import socket
 import statistics
 import subprocess
 import sys
@@ -93,7 +94,7 @@ def build(out: Path) -> None:
     )
 
 
-MODES = ("queue", "callback", "listener")
+MODES = ("queue", "callback", "listener", "floor")
 """How each side receives, per ``--modes``:
 
 * ``queue``: C++ ``bench_sub`` (a roscpp subscription callback) vs a tfbus queued
@@ -106,6 +107,9 @@ MODES = ("queue", "callback", "listener")
   message's last transform is stored) vs a tfbus ``TransformListener`` into a ``Buffer``
   (time taken by a callback subscribed after the listener's, so when the whole message
   is stored).
+* ``floor``: the same C++ subscriber vs the Python floor of ``queue``
+  (:func:`floor_subscriber`: a bare asyncio reader handing each message to a task
+  through an ``asyncio.Queue``, no tfbus between them), printed in the tfbus columns.
 """
 
 
@@ -157,6 +161,79 @@ def tfbus_subscriber(mode: str) -> None:
                     counts[1] = listener.statistics().stored
 
     anyio.run(main, backend_options={"use_uvloop": os.environ.get(UVLOOP_ENV) == "1"})
+    print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
+    print("\n".join(f"{v:.3f}" for v in lat), flush=True)
+
+
+def floor_subscriber() -> None:
+    """The Python floor of the ``queue`` row (a child process, the ``floor`` mode): no
+    tfbus between the socket and the waiting task. The bare asyncio reader of
+    ``bench_ros1_floor.py`` (the publisher's endpoint asked of the master, asyncio's read
+    callback splitting the frames with ``FrameSplitter``, each message decoded by the
+    codec's compiled decoder) puts each message's transforms into an ``asyncio.Queue``; a
+    task awaiting it takes the receive time, as the tfbus side's ``async for`` does. The
+    same READY line (printed before it connects: the publisher, started after it, waits
+    for its second subscriber) and report as :func:`tfbus_subscriber`; its CPU figure also
+    counts its polls of the master for the publisher's endpoint, after READY. The process
+    imports tfbus's ROS 1 transport first (a tfbus-sized process)."""
+    import asyncio
+
+    import bench_ros1_floor
+
+    from tfbus.codecs import ros1 as ros1_codec
+
+    # READY at once: the publisher is started after it, and waits for its second
+    # subscriber (this one) before it sends; the endpoint is asked of it once it runs.
+    print("READY", flush=True)
+    host, port, hello, splitter, _ = bench_ros1_floor._connect(False)
+    decode = ros1_codec._compiled_ros1 or ros1_codec.TFCodec().decode
+    queue: asyncio.Queue[Any] = asyncio.Queue()
+    put = queue.put_nowait
+    lat: list[float] = []
+    counts = [0, 0]
+
+    def message(raw: Any) -> None:
+        put(decode(raw))
+
+    def header(_raw: Any) -> None:  # the publisher's connection header
+        splitter.sink = message
+
+    splitter.sink = header
+
+    class Reader(asyncio.BufferedProtocol):
+        def __init__(self) -> None:
+            self.view = memoryview(bytearray(65536))
+
+        def get_buffer(self, sizehint: int) -> memoryview:
+            return self.view
+
+        def buffer_updated(self, nbytes: int) -> None:
+            splitter.feed(self.view[:nbytes])
+
+    async def consume() -> None:
+        while True:
+            transforms = await queue.get()
+            now = time.time_ns()
+            counts[0] += 1
+            counts[1] += len(transforms)
+            if transforms:
+                lat.append((now - transforms[0].header.stamp.ns) / 1e3)
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        stop = asyncio.Event()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        transport, _ = await loop.create_connection(Reader, host, port)
+        transport.get_extra_info("socket").setsockopt(
+            socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        transport.write(hello)
+        task = asyncio.create_task(consume())
+        await stop.wait()
+        task.cancel()
+        transport.close()
+
+    asyncio.run(main())
     print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
     print("\n".join(f"{v:.3f}" for v in lat), flush=True)
 
@@ -220,15 +297,16 @@ def scenario(
         label += " @ baseline"
     if env.get(UVLOOP_ENV) == "1":
         label += " @ uvloop"
+    side = "floor" if mode == "floor" else "tfbus"  # the Python side's name
     print(
         f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | {label:8s} | "
         f"load {load:4.2f} | "
-        f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
+        f"C++ {c50:7.1f} / {c99:7.1f} us | {side} {t50:7.1f} / {t99:7.1f} us | "
         f"ratio {t50 / c50:4.2f} / {t99 / c99:4.2f} | "
-        f"CPU/msg C++ {c_cpu * 1e6:6.1f} us, tfbus {t_cpu * 1e6:6.1f} us, "
+        f"CPU/msg C++ {c_cpu * 1e6:6.1f} us, {side} {t_cpu * 1e6:6.1f} us, "
         f"ratio {t_cpu / max(c_cpu, 1e-9):4.2f} | "
         f"received C++ {c_msgs}/{sent_msgs} msgs {c_tfs}/{sent_tfs} tfs, "
-        f"tfbus {t_msgs}/{sent_msgs} msgs {t_tfs}/{sent_tfs} tfs "
+        f"{side} {t_msgs}/{sent_msgs} msgs {t_tfs}/{sent_tfs} tfs "
         f"({t_tfs / seconds:,.0f} transforms/s)",
         flush=True,
     )
@@ -250,7 +328,8 @@ def repeated(
         if baseline is not None:
             scenario(master, bins, rate, frames, seconds, mode, moving, base_cpu, baseline)
     label = f"{mode}, moving" if moving else mode
-    for name, got in (("tfbus", cpu), ("tfbus @ baseline", base_cpu)):
+    side = "floor" if mode == "floor" else "tfbus"  # the Python side's name
+    for name, got in ((side, cpu), ("tfbus @ baseline", base_cpu)):
         if got:
             per = [t / c for c, t in got]
             print(f"  CPU per message, {label}: {name} / C++ min {min(per):.2f} median "
@@ -265,7 +344,7 @@ def repeated(
     print(
         f"{rate:5.0f} Hz x {frames:3d} frames x {seconds:4.0f} s | {label:8s} | "
         f"median of {repeat} runs | "
-        f"C++ {c50:7.1f} / {c99:7.1f} us | tfbus {t50:7.1f} / {t99:7.1f} us | "
+        f"C++ {c50:7.1f} / {c99:7.1f} us | {side} {t50:7.1f} / {t99:7.1f} us | "
         f"ratio {ratio:4.2f} / {ratio99:4.2f} (median of per-run ratios) | "
         f"runs with every transform received: {sum(r[4] for r in runs)}/{repeat}",
         flush=True,
@@ -291,8 +370,11 @@ def main() -> None:
                              "pip install uvloop)")  # fmt: skip
     parser.add_argument("--skip-one-frame", action="store_true",
                         help="only the 50-frame scenarios")
-    parser.add_argument("--tfbus-sub", choices=MODES, help=argparse.SUPPRESS)
+    parser.add_argument("--tfbus-sub", choices=(*MODES, "floor"), help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.tfbus_sub == "floor":
+        floor_subscriber()
+        return
     if args.tfbus_sub:
         tfbus_subscriber(args.tfbus_sub)
         return
