@@ -28,6 +28,7 @@ is asserted. Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import socket
@@ -173,7 +174,8 @@ def floor_broadcaster(port: int, rate: float = 100.0) -> None:
             deadline += period
             await asyncio.sleep(deadline - loop.time())
 
-    asyncio.run(main())
+    with contextlib.suppress(KeyboardInterrupt):  # SIGINT ends it (run_pair's stop)
+        asyncio.run(main())
 
 
 def floor_listener(port: int) -> None:
@@ -238,7 +240,8 @@ def floor_listener(port: int) -> None:
                 print(format_info(buffer.clock.now(), laser, do_transform_point(laser, ts)),
                       flush=True)
 
-    asyncio.run(main())
+    with contextlib.suppress(KeyboardInterrupt):  # SIGINT ends it (run_pair's stop)
+        asyncio.run(main())
 
 
 def main(argv: list[str] | None = None) -> None:

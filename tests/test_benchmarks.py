@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -191,3 +193,31 @@ def test_the_checked_wake_up_floor_checks_for_cancellation_as_a_publish_does(
         capture_output=True, text=True, timeout=120,
     )
     assert done.returncode == 0 and done.stdout.strip() == "checked", done.stderr[-3000:]
+
+
+def test_the_seed_demo_floor_pair_prints_the_tutorial_line() -> None:
+    """``bench_demo_ros1.py``'s Python floor pair (beside ``make bench-check``'s seed demo
+    row) needs no ROS, only a socket of its own on 127.0.0.1, and does the demo's job: its
+    listener prints the tutorial's line for its broadcaster's transform (base_laser 10 cm
+    forward and 20 cm up of base_link: (1.0, 0.2, 0.0) -> (1.1, 0.2, 0.2)), and both end
+    quietly on SIGINT, as ``run_pair`` ends them."""
+    import ros1_peers
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = str(s.getsockname()[1])
+    script = str(ROOT / "benchmarks" / "bench_demo_ros1.py")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    broadcaster = ros1_peers.Proc([sys.executable, script, "--floor-broadcaster", port], env)
+    try:
+        listener = ros1_peers.Proc([sys.executable, script, "--floor-listener", port], env)
+        try:
+            line = listener.wait_for(
+                r"base_laser: \(1\.00, 0\.20\. 0\.00\) -----> base_link: \((.*)\) at time",
+                timeout=60.0,
+            )
+            assert line.group(1) == "1.10, 0.20, 0.20"
+        finally:
+            assert listener.stop(signal.SIGINT, timeout=30.0) == 0, listener.drain()
+    finally:
+        assert broadcaster.stop(signal.SIGINT, timeout=30.0) == 0, broadcaster.drain()

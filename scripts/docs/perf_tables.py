@@ -203,8 +203,8 @@ def main() -> int:
     unknown = set(names) - set(BENCHMARKS)
     if unknown:
         parser.error(f"unknown benchmark(s): {', '.join(sorted(unknown))}")
-    current = PAGE.read_text(encoding="utf-8")
     if args.check:
+        current = PAGE.read_text(encoding="utf-8")
         stale = [PAGE] if rewrite(current) != current else []
         try:
             stale += [p for p in QUOTING if fill_quotes(t := p.read_text("utf-8")) != t]
@@ -217,6 +217,8 @@ def main() -> int:
     if args.run:
         for name in names:
             run_benchmark(name, args.quick)
+    # Read after the runs: the page may have been edited while they ran (tens of minutes).
+    current = PAGE.read_text(encoding="utf-8")
     PAGE.write_text(rewrite(current), encoding="utf-8")
     print(f"rewrote {PAGE.relative_to(ROOT)}")
     try:
