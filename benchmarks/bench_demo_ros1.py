@@ -191,6 +191,8 @@ def floor_listener(port: int) -> None:
     listener layers."""
     import asyncio
 
+    from bench_ros1_floor import SplitReader
+
     import tfbus.transports.ros1.transport  # noqa: F401  (a tfbus-sized process)
     from tfbus import Buffer
     from tfbus.codecs import ros1 as ros1_codec
@@ -209,21 +211,12 @@ def floor_listener(port: int) -> None:
 
     splitter = FrameSplitter(lambda _header: setattr(splitter, "sink", sink), 1 << 20, 1 << 24)
 
-    class Reader(asyncio.BufferedProtocol):
-        def __init__(self) -> None:
-            self.view = memoryview(bytearray(65536))
-
-        def get_buffer(self, sizehint: int) -> memoryview:
-            return self.view
-
-        def buffer_updated(self, nbytes: int) -> None:
-            splitter.feed(self.view[:nbytes])
-
     async def main() -> None:
         loop = asyncio.get_running_loop()
         for _ in range(3000):  # 60 s
             try:
-                transport, _ = await loop.create_connection(Reader, "127.0.0.1", port)
+                transport, _ = await loop.create_connection(
+                    lambda: SplitReader(splitter), "127.0.0.1", port)
                 break
             except OSError:
                 await asyncio.sleep(0.02)

@@ -200,16 +200,6 @@ def floor_subscriber() -> None:
 
     splitter.sink = header
 
-    class Reader(asyncio.BufferedProtocol):
-        def __init__(self) -> None:
-            self.view = memoryview(bytearray(65536))
-
-        def get_buffer(self, sizehint: int) -> memoryview:
-            return self.view
-
-        def buffer_updated(self, nbytes: int) -> None:
-            splitter.feed(self.view[:nbytes])
-
     async def consume() -> None:
         while True:
             transforms = await queue.get()
@@ -224,7 +214,8 @@ def floor_subscriber() -> None:
         stop = asyncio.Event()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
-        transport, _ = await loop.create_connection(Reader, host, port)
+        transport, _ = await loop.create_connection(
+            lambda: bench_ros1_floor.SplitReader(splitter), host, port)
         transport.get_extra_info("socket").setsockopt(
             socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.write(hello)

@@ -120,29 +120,36 @@ def _connect(store: bool, core: bool = False) -> tuple[str, int, bytes, Any, Cal
     return host, port, hello, splitter, sink
 
 
+class SplitReader(asyncio.BufferedProtocol):
+    """asyncio's read callback feeding a TCPROS ``FrameSplitter``: each read lands in one
+    64 KiB buffer and is fed as a view of it (a frame inside one read is not copied);
+    ``ended``, when given, is done once the connection is lost."""
+
+    def __init__(self, splitter: Any, ended: asyncio.Future[None] | None = None) -> None:
+        self.view = memoryview(bytearray(65536))
+        self.splitter = splitter
+        self.ended = ended
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self.view
+
+    def buffer_updated(self, nbytes: int) -> None:
+        self.splitter.feed(self.view[:nbytes])
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self.ended is not None and not self.ended.done():
+            self.ended.set_result(None)
+
+
 def bare_asyncio(store: bool, core: bool = False) -> None:
     """The ``asyncio``, ``asyncio+store`` and ``asyncio+core`` receivers (a child process)."""
     host, port, hello, splitter, _ = _connect(store or core, core)
 
-    class Reader(asyncio.BufferedProtocol):
-        def __init__(self, ended: asyncio.Future[None]) -> None:
-            self.view = memoryview(bytearray(65536))
-            self.ended = ended
-
-        def get_buffer(self, sizehint: int) -> memoryview:
-            return self.view
-
-        def buffer_updated(self, nbytes: int) -> None:
-            splitter.feed(self.view[:nbytes])
-
-        def connection_lost(self, exc: Exception | None) -> None:
-            if not self.ended.done():
-                self.ended.set_result(None)
-
     async def main() -> None:
         loop = asyncio.get_running_loop()
         ended: asyncio.Future[None] = loop.create_future()
-        transport, _ = await loop.create_connection(lambda: Reader(ended), host, port)
+        transport, _ = await loop.create_connection(
+            lambda: SplitReader(splitter, ended), host, port)
         transport.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.write(hello)
         print("READY", flush=True)
