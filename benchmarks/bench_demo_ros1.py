@@ -117,7 +117,7 @@ def _free_port() -> int:
 
 def floor_broadcaster(port: int, rate: float = 100.0) -> None:
     """The floor of the tutorial's broadcaster in Python (a child process, run until
-    killed): one asyncio task on absolute deadlines at ``rate`` Hz (``asyncio.sleep`` to
+    SIGINT): one asyncio task on absolute deadlines at ``rate`` Hz (``asyncio.sleep`` to
     each) reads the wall clock, writes the stamp and sequence number into one TCPROS
     frame of a one-transform ``TFMessage`` (base_link -> base_laser, serialised once at
     start by tfbus's codec) and writes it to each connected listener's socket
@@ -144,11 +144,11 @@ def floor_broadcaster(port: int, rate: float = 100.0) -> None:
         raise SystemExit("the frame's layout is not the one expected")
     hello = encode_header({"callerid": "/floor_broadcaster", "topic": "/tf",
                            "md5sum": TF_MD5SUM, "type": "tf2_msgs/TFMessage"})  # fmt: skip
-    listeners: list[asyncio.BaseTransport] = []
+    listeners: list[asyncio.Transport] = []
 
     class Link(asyncio.Protocol):
         def connection_made(self, transport: asyncio.BaseTransport) -> None:
-            assert isinstance(transport, asyncio.Transport)
+            assert isinstance(transport, asyncio.Transport)  # a TCP connection's
             transport.get_extra_info("socket").setsockopt(
                 socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             transport.write(hello)
@@ -170,7 +170,7 @@ def floor_broadcaster(port: int, rate: float = 100.0) -> None:
             pack_into("<III", frame, 8, seq, ns // 1_000_000_000, ns % 1_000_000_000)
             data = bytes(frame)
             for transport in listeners:
-                transport.write(data)  # type: ignore[attr-defined]
+                transport.write(data)
             deadline += period
             await asyncio.sleep(deadline - loop.time())
 
@@ -180,7 +180,7 @@ def floor_broadcaster(port: int, rate: float = 100.0) -> None:
 
 def floor_listener(port: int) -> None:
     """The floor of the tutorial's listener in Python (a child process, run until
-    killed): connects to :func:`floor_broadcaster` on 127.0.0.1:``port`` (retrying, 60 s
+    SIGINT): connects to :func:`floor_broadcaster` on 127.0.0.1:``port`` (retrying, 60 s
     at most); the asyncio loop's read callback splits the TCPROS frames
     (``tfbus.transports.ros1.tcpros.FrameSplitter``), decodes each with tfbus's compiled
     decoder and stores its transforms in a tfbus ``Buffer`` (``set_transforms``: the
@@ -315,6 +315,7 @@ def main(argv: list[str] | None = None) -> None:
         base = med["tfbus @ baseline"]
         print(f"  ratio tfbus @ baseline / C++ (medians) {base / cpp:.2f}x; "
               f"tfbus / tfbus @ baseline {ours / base:.2f}x")  # fmt: skip
+
 
 if __name__ == "__main__":
     main()
