@@ -900,8 +900,7 @@ def demo_rows(rows: Rows, rounds: int) -> None:
     if why is not None:
         _not_run(rows, [DEMO_ROW], why)
         return
-    shares: dict[str, list[float]] = {}
-    parts: dict[str, list[tuple[float, float]]] = {}
+    parts: dict[str, list[tuple[float, float]]] = {}  # (broadcaster, listener) a round
     with tempfile.TemporaryDirectory(prefix="tfbus-bench-demo-") as tmp:
         out = Path(tmp) / "bin"
         bench_demo_ros1.build(out)
@@ -913,12 +912,11 @@ def demo_rows(rows: Rows, rounds: int) -> None:
                 for name in names if r % 2 == 0 else names[::-1]:
                     measured = bench_demo_ros1.run_pair(master, sides[name], DEMO_SECONDS)
                     (broadcaster, _), (listener, _) = measured
-                    shares.setdefault(name, []).append(broadcaster + listener)
                     parts.setdefault(name, []).append((broadcaster, listener))
                 print(f"  (demo round {r + 1}/{rounds}, {_load()})", flush=True)
         finally:
             master.stop()
-    cpp, ours, floor = (shares[n] for n in names)
+    cpp, ours, floor = ([b + li for b, li in parts[n]] for n in names)
     ratios = [p / max(q, 1e-9) for p, q in zip(ours, cpp, strict=True)]
     rows.row(
         DEMO_ROW,

@@ -46,7 +46,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "peers" / "ros1"))  # the ROS 1 peers: one home, shared with the tests
 
 from proc_cpu import cpu_and_wakeups  # noqa: E402
-from ros1_peers import Master, Proc, ros1_missing, start_master  # noqa: E402
+from ros1_peers import Master, Proc, free_port, ros1_missing, start_master  # noqa: E402
 
 TFBUS = [sys.executable, "-m", "tfbus.cli"]
 
@@ -103,16 +103,10 @@ def pairs(out: Path, uri: str, floor: bool = False) -> dict[str, list[list[str]]
                             [*TFBUS, "demo", "listener", "--bus", uri]],
     }  # fmt: skip
     if floor:
-        port = str(_free_port())
+        port = str(free_port())
         here = [sys.executable, str(Path(__file__).resolve())]
         sides[FLOOR] = [[*here, "--floor-broadcaster", port], [*here, "--floor-listener", port]]
     return sides
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def floor_broadcaster(port: int, rate: float = 100.0) -> None:

@@ -161,6 +161,12 @@ def tfbus_subscriber(mode: str) -> None:
                     counts[1] = listener.statistics().stored
 
     anyio.run(main, backend_options={"use_uvloop": os.environ.get(UVLOOP_ENV) == "1"})
+    _print_report(counts, lat)
+
+
+def _print_report(counts: list[int], lat: list[float]) -> None:
+    """A Python side's report, as ``bench_sub`` prints it (read by :func:`report`):
+    messages and transforms received, then each latency in us."""
     print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
     print("\n".join(f"{v:.3f}" for v in lat), flush=True)
 
@@ -225,8 +231,7 @@ def floor_subscriber() -> None:
         transport.close()
 
     asyncio.run(main())
-    print(f"received {counts[0]} {counts[1]}\nlatencies", flush=True)
-    print("\n".join(f"{v:.3f}" for v in lat), flush=True)
+    _print_report(counts, lat)
 
 
 def report(proc: Proc) -> tuple[int, int, list[float]]:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -203,9 +202,7 @@ def test_the_seed_demo_floor_pair_prints_the_tutorial_line() -> None:
     quietly on SIGINT, as ``run_pair`` ends them."""
     import ros1_peers
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = str(s.getsockname()[1])
+    port = str(ros1_peers.free_port())
     script = str(ROOT / "benchmarks" / "bench_demo_ros1.py")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     broadcaster = ros1_peers.Proc([sys.executable, script, "--floor-broadcaster", port], env)
