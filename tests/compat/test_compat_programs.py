@@ -93,8 +93,11 @@ def _echo_block(proc: Proc) -> list[float]:
 def test_echo_matches_debian(master: Master, feed: object, tmp_path: Path) -> None:
     program = _patched("echo.py", tmp_path / "tfbus")
     args = ["map", "tool", "-r", "5", "-p", "9"]
-    debian = master.run("/usr/bin/python3", str(INSTALLED / "echo.py"), *args)
-    ours = Proc([sys.executable, "-c", RUN_ON_TFBUS, str(program), *args],
+    # side by side under their own node names (a ROS remapping): both call
+    # rospy.init_node("echo"), and the master shuts down the first of two same-named nodes
+    debian = master.run("/usr/bin/python3", str(INSTALLED / "echo.py"), *args,
+                        "__name:=echo_debian")
+    ours = Proc([sys.executable, "-c", RUN_ON_TFBUS, str(program), *args, "__name:=echo_tfbus"],
                 _tfbus_env(master), cwd=tmp_path)
     try:
         want, got = _echo_block(debian), _echo_block(ours)
