@@ -25,10 +25,11 @@ Rows (target):
   (wall time; the CPU time of both threads printed beside it); and at N = 8192 (the
   two-thread split) never slower per time than at N = 8191 (one thread);
 * against Debian's ``tf2::BufferCore`` called from C++ (``tf2_buffer_core_bench.cpp``, built here
-  with g++ and pkg-config; ``bench_core.cpp_scenario``), at least 7 rounds of 3 alternated passes
-  a side (each side's best pass: the machine's speed drifts for seconds at a time), each side's
-  thread CPU time per call (best run; preemption by other work stays out), each row the median of
-  the per-round ratios with their min..max: ``lookup_transform`` on chains of depth 1, 2, 8 and 64
+  with g++ and pkg-config; ``bench_core.cpp_scenario``), at least 7 rounds of measurements paired
+  on one CPU (``cpp_round``: the C++ side in its ``--serve`` process, the two sides alternated a
+  measurement at a time; this machine's CPUs run at different speeds for seconds at a time),
+  each side's thread CPU time per call (preemption by other work stays out), a round's ratio the
+  median of its pairs', each row the median of the per-round ratios with their min..max: ``lookup_transform`` on chains of depth 1, 2, 8 and 64
   at never-repeated interpolated times spread over 10 s of history (<= 1.1x, 1.0x, 0.7x, 1.0x; the
   same with times in the newest 100 ms for information); ``set_transform`` on a star of 10 links,
   a fresh buffer's first 200 samples per link (<= 1.3x: no fill phase) and the steady state, a
@@ -48,7 +49,8 @@ Rows (target):
   asyncio reader (split and decode), a ``TransformListener`` <= 1.15x ``tf2_ros``'s C++
   listener and <= 1.2x the bare reader storing into a ``Buffer``;
 * sensor data, CPU time (``bench_sensors``): a 720-beam ``project_laser`` <= 1.5x the C++
-  ``projectLaser`` (3 alternated passes a side in each round, each side's best); 10^6 points
+  ``projectLaser`` (3 alternated passes a side in each round, each side's best, on one CPU);
+  10^6 points
   through ``transform_points`` and ``do_transform_cloud`` <= 1.2x bare numpy ``pts @ R.T + t``;
 * Zenoh (``bench_latency.receive``, ``--rounds`` rounds, paths alternated): bus latency <= 1.15x raw
   zenoh-python plus the hop from Zenoh's thread to the loop (``raw+loop``, a floor outside
@@ -88,7 +90,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -397,9 +399,9 @@ def _half_range(values: list[float]) -> float:
 
 
 PASSES = 3
-"""Passes per side in a round against a compiled peer (C++ tf2, C++ laser_geometry),
-alternated (tfbus, the peer, tfbus, ...): each side's figure in the round is its best
-pass, figure by figure. This machine's speed changes for a second or more at a time
+"""Passes per side in a round against the C++ laser_geometry, alternated (tfbus, the
+peer, tfbus, ...): each side's figure in the round is its best pass, figure by figure
+(the C++ tf2 group pairs single measurements instead: :func:`_paired`). This machine's speed changes for a second or more at a time
 (every call of both sides, Python and C++ alike, 1.6-2x slower for such a stretch),
 longer than one pass (under a second): a round of one pass a side judged one side's
 slow stretch against the other's fast one (C++ set_transform 420 ns in one round
@@ -411,7 +413,13 @@ SPREAD_TARGET = 0.20
 :data:`CPP_ROUNDS` rounds (the targets' table asks for a spread under +-20 % over 7)."""
 
 CPP_ROUNDS = 7
-"""At least this many rounds in the C++ tf2 group (a round there takes about 3 s)."""
+"""At least this many rounds in the C++ tf2 group (a round there takes about 2 s)."""
+
+CPP_PAIRS = {"lookup": 6, "fill": 20, "steady": 9}
+"""Paired measurements per figure in a round of the C++ tf2 group (:func:`_paired`): a
+lookup repeat (5 000 calls, the scenario's repeats in turn), a fresh buffer's fill (2 000
+calls) and a steady-state run (5 000 calls after an untimed warm-up) each take 0.4-50 ms a
+side, so both sides of a pair run within milliseconds of each other."""
 
 
 def _best(results: list[Any]) -> Any:
@@ -436,12 +444,84 @@ def _alternated(
     return _best(a), _best(b)
 
 
+def _paired(
+    ours: Callable[[int], float], theirs: Callable[[int], float], pairs: int
+) -> tuple[float, float, float]:
+    """``pairs`` paired measurements, ``ours(k)`` and ``theirs(k)`` one right after the
+    other (ours first in even pairs, theirs first in odd ones): each side's best and the
+    median of the pairs' ratios ours / theirs. This machine's speed changes by up to 2x
+    for a second or more at a time (:data:`PASSES`); both sides of a pair, milliseconds
+    apart, run at the same speed, so a pair's ratio is free of it, where each side's best
+    over a round of whole passes judged one side's fast stretch against the other's slow
+    one (set_transform's per-round ratios 0.36..1.13 in one run of seven such rounds)."""
+    a: list[float] = []
+    b: list[float] = []
+    for k in range(pairs):
+        if k % 2:
+            theirs_s = theirs(k)
+            ours_s = ours(k)
+        else:
+            ours_s = ours(k)
+            theirs_s = theirs(k)
+        a.append(ours_s)
+        b.append(theirs_s)
+    return min(a), min(b), statistics.median(x / y for x, y in zip(a, b, strict=True))
+
+
+@contextlib.contextmanager
+def _same_cpu(pid: int | None = None) -> Iterator[None]:
+    """This thread and process ``pid`` (and the processes this thread starts in the block,
+    which inherit its CPUs) pinned to one CPU, the lowest this thread may use, for the
+    block; this thread's CPUs restored after it. This machine's CPUs do not run at
+    one speed: for seconds to minutes at a time one runs every call of both sides up to 2x
+    slower than the other (one C++ set_transform pass 260-290 ns on one, 500-580 on the
+    other, in the same minute), and a process that moves between them changes speed with
+    it; two processes on one CPU run at its speed alike, and alternated measurements
+    (:func:`_paired`) never run at once."""
+    if not hasattr(os, "sched_setaffinity"):  # not Linux: as scheduled
+        yield
+        return
+    before = os.sched_getaffinity(0)
+    cpu = {min(before)}
+    os.sched_setaffinity(0, cpu)
+    try:
+        if pid is not None:
+            os.sched_setaffinity(pid, cpu)
+        yield
+    finally:
+        os.sched_setaffinity(0, before)
+
+
+def cpp_round(ours: bench_core.CppSideOurs, theirs: bench_core.CppServer) -> dict[str, Any]:
+    """One round of the C++ tf2 group: each figure's paired measurements (:func:`_paired`,
+    :data:`CPP_PAIRS`), tfbus in this thread, C++ tf2 in its ``--serve`` process:
+    ``{key: (ours best s, theirs best s, median pair ratio)}``, keys ``"<depth>/interp"``,
+    ``"<depth>/recent"``, ``"fill_s"``, ``"steady_s"``."""
+    repeats = ours.sc["repeats"]
+    out: dict[str, Any] = {}
+    for depth in ours.sc["depths"]:
+        for label in ("interp", "recent"):
+            out[f"{depth}/{label}"] = _paired(
+                lambda k, d=depth, lb=label: ours.lookup(d, lb, k % repeats),
+                lambda k, d=depth, lb=label: theirs.measure(f"lookup {d} {lb} {k % repeats}"),
+                CPP_PAIRS["lookup"],
+            )
+    out["fill_s"] = _paired(lambda _k: ours.fill(), lambda _k: theirs.measure("fill"),
+                            CPP_PAIRS["fill"])
+    out["steady_s"] = _paired(lambda _k: ours.steady(), lambda _k: theirs.measure("steady"),
+                              CPP_PAIRS["steady"])
+    return out
+
+
 def cpp_rows(rows: Rows, rounds: int) -> None:
     """The core rows against Debian's ``tf2::BufferCore`` called from C++
-    (``tf2_buffer_core_bench.cpp``): ``rounds`` rounds (at least :data:`CPP_ROUNDS`) of
-    :data:`PASSES` alternated passes a side (:func:`_alternated`: each side's best pass);
-    each row judges the median of the per-round ratios and prints min..max beside it; the
-    set_transform rows also their spread (:data:`SPREAD_TARGET`)."""
+    (``tf2_buffer_core_bench.cpp``, its ``--serve`` mode): ``rounds`` rounds (at least
+    :data:`CPP_ROUNDS`) of paired measurements (:func:`cpp_round`); a round's ratio for a
+    figure is the median of its pairs' ratios; each row judges the median of the per-round
+    ratios and prints min..max beside it (each side's figure: the median over the rounds
+    of its best measurement in a round); the set_transform rows also their spread
+    (:data:`SPREAD_TARGET`). Memory per sample: one run of the program's one-shot mode (a
+    fresh process) against tfbus in a fresh interpreter."""
     names = [f"lookup_transform depth {d} vs C++ tf2" for d in CPP_TARGETS]
     names += ["set_transform, first 200 samples vs C++", "set_transform, steady vs C++",
               "memory per sample (RSS) vs C++"]  # fmt: skip
@@ -453,56 +533,50 @@ def cpp_rows(rows: Rows, rounds: int) -> None:
             return
         sc = bench_core.cpp_scenario(repeats=RUNS)
         ours_side = bench_core.CppSideOurs(sc)
-        ours: list[dict[str, Any]] = []
-        theirs: list[dict[str, Any]] = []
+        results: list[dict[str, Any]] = []
         rounds = max(rounds, CPP_ROUNDS)
-        for r in range(rounds):
-            print(f"  (C++ round {r + 1}/{rounds}, load {os.getloadavg()[0]:.2f})", flush=True)
-            mine, peer = _alternated(ours_side.round, functools.partial(bench_core.cpp_round,
-                                                                        exe, sc))  # fmt: skip
-            ours.append(mine)
-            theirs.append(peer)
+        with bench_core.CppServer(exe, sc) as server, _same_cpu(server.proc.pid):
+            for r in range(rounds):
+                print(f"  (C++ round {r + 1}/{rounds}, load {os.getloadavg()[0]:.2f})", flush=True)
+                results.append(cpp_round(ours_side, server))
+        theirs_rss = bench_core.cpp_round(exe, sc)["rss_bytes_per_sample"]
     mem = bench_core.tfbus_memory_fresh(sc["mem_frames"], sc["mem_samples"])
 
     def ns(v: float) -> str:
         return f"{v * 1e9:,.0f} ns CPU"
 
+    def figures(key: str) -> tuple[list[float], str]:
+        ratios = [x[key][2] for x in results]
+        a = statistics.median(x[key][0] for x in results)
+        b = statistics.median(x[key][1] for x in results)
+        return ratios, f"{ns(a)} vs {ns(b)} = {_spread(ratios)}"
+
     for depth, target in CPP_TARGETS.items():
         for label in ("interp", "recent"):
-            key = f"{depth}/{label}"
-            a = [x["lookup_s"][key] for x in ours]
-            b = [x["lookup_s"][key] for x in theirs]
-            ratios = _ratios(a, b)
-            figures = (
-                f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}"
-            )
+            ratios, text = figures(f"{depth}/{label}")
             if label == "interp":
                 rows.row(
                     f"lookup_transform depth {depth} vs C++ tf2",
-                    figures,
+                    text,
                     statistics.median(ratios) <= target,
                     f"<= {target:.1f}x C++",
                 )
             else:
-                print(f"  info  {'  the same, times in the newest 100 ms':46} {figures}")
+                print(f"  info  {'  the same, times in the newest 100 ms':46} {text}")
     for key, label, target in (
         ("fill_s", "set_transform, first 200 samples vs C++", 1.3),
         ("steady_s", "set_transform, steady vs C++", 1.0),
     ):
-        a = [x[key] for x in ours]
-        b = [x[key] for x in theirs]
-        ratios = _ratios(a, b)
+        ratios, text = figures(key)
         spread = _half_range(ratios)
         rows.row(
             label,
-            f"{ns(statistics.median(a))} vs {ns(statistics.median(b))} = {_spread(ratios)}, "
-            f"+-{spread:.0%} over {len(ratios)} rounds",
+            f"{text}, +-{spread:.0%} over {len(ratios)} rounds",
             statistics.median(ratios) <= target and spread <= SPREAD_TARGET,
             f"<= {target:.1f}x C++, +-{SPREAD_TARGET:.0%}",
         )
-    fills = [x["fill_s"] / x["steady_s"] for x in ours]
+    fills = [x["fill_s"][0] / x["steady_s"][0] for x in results]
     print(f"  info  {'  tfbus first 200 / tfbus steady':46} {_spread(fills)}")
-    theirs_rss = statistics.median(x["rss_bytes_per_sample"] for x in theirs)
     q = mem["rss_bytes_per_sample"] / theirs_rss
     rows.row(
         "memory per sample (RSS) vs C++",
@@ -752,14 +826,15 @@ def sensors_rows(rows: Rows, rounds: int) -> None:
         theirs: list[dict[str, float]] = []
         with tempfile.TemporaryDirectory() as tmp:
             exe = bench_sensors.build_laser_cpp(Path(tmp))
-            for _ in range(rounds):
-                mine, peer = _alternated(
-                    functools.partial(side.round, LASER_REPS),
-                    functools.partial(bench_sensors.laser_cpp_round, exe, LASER_BEAMS,
-                                      LASER_REPS),
-                )  # fmt: skip
-                ours.append(mine)
-                theirs.append(peer)
+            with _same_cpu():  # each C++ pass a child of this thread: on its CPU
+                for _ in range(rounds):
+                    mine, peer = _alternated(
+                        functools.partial(side.round, LASER_REPS),
+                        functools.partial(bench_sensors.laser_cpp_round, exe, LASER_BEAMS,
+                                          LASER_REPS),
+                    )  # fmt: skip
+                    ours.append(mine)
+                    theirs.append(peer)
         for key, label, judged in (("project", SENSOR_ROWS[0], True),
                                    ("transform", "  transform_laser_scan_to_point_cloud vs C++",
                                     False)):  # fmt: skip

@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import select
 import shutil
 import subprocess
 import sys
@@ -418,9 +419,87 @@ def _star(sc: dict[str, Any], first: int, count: int) -> list[TransformStamped]:
     ]
 
 
+class CppServer:
+    """A ``tf2_buffer_core_bench --serve`` process on scenario ``sc``: one C++ measurement
+    per :meth:`measure` (this process's thread CPU seconds per call of one ``fill``,
+    ``steady`` or ``lookup D interp|recent R``, as :class:`CppSideOurs`'s methods of the
+    same names measure tfbus), so that a caller can alternate the two sides a measurement
+    at a time. A context manager: the process is ended on exit (``quit``, then killed by
+    its PID if it has not ended within 10 s).
+
+    Raises:
+        RuntimeError: the program failed or answered something else than a number (its
+            stderr), or did not answer within ``timeout`` s.
+    """
+
+    def __init__(self, exe: Path, sc: dict[str, Any], timeout: float = 60.0) -> None:
+        self.timeout = timeout
+        self.proc = subprocess.Popen(
+            [str(exe), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True,
+        )
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(_cpp_input(sc))
+        self.proc.stdin.flush()
+        ready = self._line()
+        if ready != "READY":
+            err = self.close()
+            raise RuntimeError(f"C++ tf2 side did not start: {ready!r} {err.strip()[-300:]}")
+
+    def _line(self) -> str:
+        out = self.proc.stdout
+        assert out is not None
+        readable, _, _ = select.select([out], [], [], self.timeout)
+        line = out.readline() if readable else ""
+        if not line:
+            err = self.close()
+            raise RuntimeError(f"C++ tf2 side gave no answer: {err.strip()[-300:]}")
+        return line.strip()
+
+    def measure(self, command: str) -> float:
+        """The C++ side's CPU seconds per call of ``command`` (one measurement)."""
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(command + "\n")
+        self.proc.stdin.flush()
+        return float(self._line())
+
+    def close(self) -> str:
+        """End the process (``quit``; killed if it has not ended within 10 s); returns
+        what it wrote on stderr (once; empty after)."""
+        if self.proc.stderr is None or self.proc.stderr.closed:
+            return ""
+        if self.proc.poll() is None:
+            try:
+                assert self.proc.stdin is not None
+                self.proc.stdin.write("quit\n")
+                self.proc.stdin.close()
+            except (BrokenPipeError, OSError):
+                pass
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=10)
+        err = self.proc.stderr.read()
+        for stream in (self.proc.stdout, self.proc.stderr):
+            if stream is not None:
+                stream.close()
+        return err
+
+    def __enter__(self) -> CppServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 class CppSideOurs:
     """tfbus's half of the C++ reference rows: the buffers and messages built once, each
-    :meth:`round` measuring what one run of ``tf2_buffer_core_bench`` measures."""
+    :meth:`round` measuring what one run of ``tf2_buffer_core_bench`` measures, and each
+    of :meth:`fill`, :meth:`steady` and :meth:`lookup` what one command of its
+    ``--serve`` mode measures (:class:`CppServer`). Times are this thread's CPU seconds
+    per call (``time.thread_time``, as the C++ side's ``CLOCK_THREAD_CPUTIME_ID``: other
+    work preempting either side on a shared machine stays out of the ratios)."""
 
     def __init__(self, sc: dict[str, Any]) -> None:
         self.sc = sc
@@ -434,45 +513,55 @@ class CppSideOurs:
             ]
             for label, key in (("interp", "spread_ns"), ("recent", "recent_ns"))
         }
-        self.fill = _star(sc, 0, sc["fill_samples"])
+        self.fill_messages = _star(sc, 0, sc["fill_samples"])
         self.warm = _star(sc, 0, sc["steady_warm"])
-        self.steady = _star(sc, sc["steady_warm"], sc["steady_samples"])
+        self.steady_messages = _star(sc, sc["steady_warm"], sc["steady_samples"])
+
+    def lookup(self, depth: int, label: str, r: int) -> float:
+        """Seconds per call of repeat ``r``'s lookups from f0 to the depth ``depth`` leaf
+        (``label`` ``interp`` or ``recent``)."""
+        clock = time.thread_time
+        lookup = self.chains[depth].lookup_transform
+        leaf = f"f{depth}"
+        run = self.times[label][r]
+        start = clock()
+        for t in run:
+            lookup("f0", leaf, t)
+        return (clock() - start) / len(run)
+
+    def fill(self) -> float:
+        """Seconds per ``set_transform`` of a fresh buffer's first samples of each link."""
+        clock = time.thread_time
+        setter = BufferCore(cache_time=self.sc["cache_time_s"]).set_transform
+        messages = self.fill_messages
+        start = clock()
+        for m in messages:
+            setter(m, "bench")
+        return (clock() - start) / len(messages)
+
+    def steady(self) -> float:
+        """Seconds per ``set_transform`` once every link holds a full cache (a buffer
+        warmed untimed first)."""
+        clock = time.thread_time
+        setter = BufferCore(cache_time=self.sc["cache_time_s"]).set_transform
+        for m in self.warm:
+            setter(m, "bench")
+        messages = self.steady_messages
+        start = clock()
+        for m in messages:
+            setter(m, "bench")
+        return (clock() - start) / len(messages)
 
     def round(self) -> dict[str, Any]:
-        """This thread's CPU seconds per call, best run (``time.thread_time``, as the C++
-        side's ``CLOCK_THREAD_CPUTIME_ID``: other work preempting either side on a
-        shared machine stays out of the ratios)."""
+        """Seconds per call, best run of each figure (the one-shot program's shape)."""
         sc = self.sc
-        clock = time.thread_time
-        lookups: dict[str, float] = {}
-        for depth, core in self.chains.items():
-            leaf = f"f{depth}"
-            lookup = core.lookup_transform
-            for label, runs in self.times.items():
-                best = float("inf")
-                for run in runs:
-                    start = clock()
-                    for t in run:
-                        lookup("f0", leaf, t)
-                    best = min(best, (clock() - start) / len(run))
-                lookups[f"{depth}/{label}"] = best
-        cache_time = sc["cache_time_s"]
-        fill = float("inf")
-        for _ in range(sc["fill_buffers"]):
-            setter = BufferCore(cache_time=cache_time).set_transform
-            start = clock()
-            for m in self.fill:
-                setter(m, "bench")
-            fill = min(fill, (clock() - start) / len(self.fill))
-        steady = float("inf")
-        for _ in range(sc["repeats"]):
-            setter = BufferCore(cache_time=cache_time).set_transform
-            for m in self.warm:
-                setter(m, "bench")
-            start = clock()
-            for m in self.steady:
-                setter(m, "bench")
-            steady = min(steady, (clock() - start) / len(self.steady))
+        lookups = {
+            f"{depth}/{label}": min(self.lookup(depth, label, r) for r in range(sc["repeats"]))
+            for depth in self.chains
+            for label in self.times
+        }
+        fill = min(self.fill() for _ in range(sc["fill_buffers"]))
+        steady = min(self.steady() for _ in range(sc["repeats"]))
         return {"lookup_s": lookups, "fill_s": fill, "steady_s": steady}
 
 

@@ -14,6 +14,16 @@
 //   mem_frames mem_samples                         memory per sample (RSS growth), frame by frame
 // stdout, one JSON object, CPU seconds per call (this thread's, best run) and bytes per sample:
 //   {"lookup_s": {"<depth>/interp": s, "<depth>/recent": s, ...}, "fill_s": s, "steady_s": s, "rss_bytes_per_sample": b}
+//
+// With --serve: the same scenario on stdin, then "READY" on stdout, then one measurement per
+// command read from stdin, its CPU seconds per call on a line of its own (flushed), until
+// "quit" or the end of stdin; no memory figure. Commands:
+//   fill                  one fresh buffer's first fill_samples samples per link
+//   steady                one buffer warmed with steady_warm samples per link, then timed
+//   lookup D L R          the depth D chain (D one of the depths), L interp or recent, the
+//                         calls of repeat R (0 <= R < repeats)
+// bench_check.py alternates them with tfbus's same measurement a pair at a time, so that
+// both sides of a pair run within milliseconds of each other, at the same machine speed.
 #include <tf2/buffer_core.h>
 
 #include <algorithm>
@@ -21,6 +31,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
+#include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -67,107 +79,182 @@ int64_t rss_bytes() {
 
 std::string name(const char* prefix, int i) { return prefix + std::to_string(i); }
 
-}  // namespace
+struct Scenario {
+  int64_t cache_ns = 0, period = 0, t0 = 0, n_stamps = 0;
+  std::vector<int> depths;
+  int calls = 0, repeats = 0;
+  std::vector<ros::Time> queries, recent;
+  int fill_links = 0, fill_samples = 0, fill_buffers = 0;
+  int steady_links = 0, steady_warm = 0, steady_samples = 0;
+  int mem_frames = 0, mem_samples = 0;
+};
 
-int main() {
-  int64_t cache_ns, period, t0, n_stamps;
-  std::cin >> cache_ns >> period >> t0 >> n_stamps;
-  int n_depths;
+bool read_scenario(Scenario& sc) {
+  std::cin >> sc.cache_ns >> sc.period >> sc.t0 >> sc.n_stamps;
+  int n_depths = 0;
   std::cin >> n_depths;
-  std::vector<int> depths(n_depths);
-  for (int& d : depths) std::cin >> d;
-  int calls, repeats;
-  std::cin >> calls >> repeats;
-  std::vector<ros::Time> queries(static_cast<size_t>(calls) * repeats);
-  std::vector<ros::Time> recent(queries.size());
-  for (std::vector<ros::Time>* set : {&queries, &recent})
+  if (!std::cin || n_depths < 0 || n_depths > 1000) return false;
+  sc.depths.resize(n_depths);
+  for (int& d : sc.depths) std::cin >> d;
+  std::cin >> sc.calls >> sc.repeats;
+  if (!std::cin || sc.calls <= 0 || sc.repeats <= 0) return false;
+  sc.queries.resize(static_cast<size_t>(sc.calls) * sc.repeats);
+  sc.recent.resize(sc.queries.size());
+  for (std::vector<ros::Time>* set : {&sc.queries, &sc.recent})
     for (ros::Time& q : *set) {
       int64_t ns;
       std::cin >> ns;
       q = ros_time(ns);
     }
-  int fill_links, fill_samples, fill_buffers, steady_links, steady_warm, steady_samples;
-  int mem_frames, mem_samples;
-  std::cin >> fill_links >> fill_samples >> fill_buffers >> steady_links >> steady_warm >>
-      steady_samples >> mem_frames >> mem_samples;
-  if (!std::cin) {
+  std::cin >> sc.fill_links >> sc.fill_samples >> sc.fill_buffers >> sc.steady_links >>
+      sc.steady_warm >> sc.steady_samples >> sc.mem_frames >> sc.mem_samples;
+  return static_cast<bool>(std::cin);
+}
+
+const std::string AUTHORITY = "bench";
+
+// The chain f0 <- f1 <- ... <- f<depth>, n_stamps samples per link.
+std::unique_ptr<tf2::BufferCore> chain(const Scenario& sc, const ros::Duration& cache_time,
+                                       int depth) {
+  std::unique_ptr<tf2::BufferCore> core(new tf2::BufferCore(cache_time));
+  for (int64_t k = 0; k < sc.n_stamps; ++k)
+    for (int i = 0; i < depth; ++i)
+      core->setTransform(message(name("f", i), name("f", i + 1), sc.t0 + k * sc.period, k + i),
+                         AUTHORITY);
+  return core;
+}
+
+// CPU seconds per call of one repeat's lookups from f0 to the leaf.
+double lookup_once(tf2::BufferCore& core, int depth, const std::vector<ros::Time>& times,
+                   int calls, int r) {
+  const std::string root = "f0", leaf = name("f", depth);
+  double sink = 0;
+  double start = now();
+  for (int c = 0; c < calls; ++c)
+    sink += core.lookupTransform(root, leaf, times[r * calls + c]).transform.translation.x;
+  double per_call = (now() - start) / calls;
+  if (sink == 12345.678) std::cerr << sink;  // keep the results alive
+  return per_call;
+}
+
+// set_transform by phase: a link's first fill_samples samples in a fresh buffer, and the
+// steady state (a full cache, pruning on every insert). A star root <- c<i>, stamps in
+// order, every link at each stamp in turn (a robot's tree at 100 Hz).
+std::vector<geometry_msgs::TransformStamped> star(const Scenario& sc, int links, int first,
+                                                  int count) {
+  std::vector<geometry_msgs::TransformStamped> out;
+  for (int k = first; k < first + count; ++k)
+    for (int i = 0; i < links; ++i)
+      out.push_back(message("root", name("c", i), sc.t0 + k * sc.period, k + i));
+  return out;
+}
+
+double fill_once(const ros::Duration& cache_time,
+                 const std::vector<geometry_msgs::TransformStamped>& fill) {
+  tf2::BufferCore core(cache_time);
+  double start = now();
+  for (const auto& m : fill) core.setTransform(m, AUTHORITY);
+  return (now() - start) / fill.size();
+}
+
+double steady_once(const Scenario& sc, const ros::Duration& cache_time,
+                   const std::vector<geometry_msgs::TransformStamped>& steady) {
+  tf2::BufferCore core(cache_time);
+  for (int k = 0; k < sc.steady_warm; ++k)
+    for (int i = 0; i < sc.steady_links; ++i)
+      core.setTransform(message("root", name("c", i), sc.t0 + k * sc.period, k + i), AUTHORITY);
+  double start = now();
+  for (const auto& m : steady) core.setTransform(m, AUTHORITY);
+  return (now() - start) / steady.size();
+}
+
+// --serve: one measurement per command (see the head of this file).
+int serve(const Scenario& sc, const ros::Duration& cache_time) {
+  std::map<int, std::unique_ptr<tf2::BufferCore>> chains;
+  for (int depth : sc.depths) chains[depth] = chain(sc, cache_time, depth);
+  const auto fill = star(sc, sc.fill_links, 0, sc.fill_samples);
+  const auto steady = star(sc, sc.steady_links, sc.steady_warm, sc.steady_samples);
+  std::cout.precision(17);
+  std::cout << "READY" << std::endl;
+  std::string command;
+  while (std::cin >> command && command != "quit") {
+    double s;
+    if (command == "fill") {
+      s = fill_once(cache_time, fill);
+    } else if (command == "steady") {
+      s = steady_once(sc, cache_time, steady);
+    } else if (command == "lookup") {
+      int depth = -1, r = -1;
+      std::string label;
+      std::cin >> depth >> label >> r;
+      auto found = chains.find(depth);
+      if (!std::cin || found == chains.end() || (label != "interp" && label != "recent") ||
+          r < 0 || r >= sc.repeats) {
+        std::cerr << "bad lookup command\n";
+        return 2;
+      }
+      s = lookup_once(*found->second, depth, label == "interp" ? sc.queries : sc.recent,
+                      sc.calls, r);
+    } else {
+      std::cerr << "unknown command: " << command << "\n";
+      return 2;
+    }
+    std::cout << s << std::endl;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Scenario sc;
+  if (!read_scenario(sc)) {
     std::cerr << "bad scenario on stdin\n";
     return 2;
   }
-  const ros::Duration cache_time(static_cast<double>(cache_ns) / NS);
-  const std::string authority = "bench";
+  const ros::Duration cache_time(static_cast<double>(sc.cache_ns) / NS);
+  if (argc > 1 && std::string(argv[1]) == "--serve") return serve(sc, cache_time);
 
   // Memory first, in a fresh process: RSS growth of a buffer of mem_frames x mem_samples.
   double rss_per_sample;
   {
     tf2::BufferCore core(cache_time);
-    geometry_msgs::TransformStamped m = message("root", "c0", t0, 3);
+    geometry_msgs::TransformStamped m = message("root", "c0", sc.t0, 3);
     int64_t before = rss_bytes();
-    for (int f = 0; f < mem_frames; ++f) {
+    for (int f = 0; f < sc.mem_frames; ++f) {
       m.child_frame_id = name("c", f);
-      for (int k = 0; k < mem_samples; ++k) {
-        m.header.stamp = ros_time(t0 + k * period);
-        core.setTransform(m, authority);
+      for (int k = 0; k < sc.mem_samples; ++k) {
+        m.header.stamp = ros_time(sc.t0 + k * sc.period);
+        core.setTransform(m, AUTHORITY);
       }
     }
-    rss_per_sample = static_cast<double>(rss_bytes() - before) / (mem_frames * mem_samples);
+    rss_per_sample = static_cast<double>(rss_bytes() - before) / (sc.mem_frames * sc.mem_samples);
   }
 
   // Lookups on chains, at interpolated times never repeated.
   std::cout.precision(17);
   std::cout << "{\"lookup_s\": {";
-  for (size_t di = 0; di < depths.size(); ++di) {
-    int depth = depths[di];
-    tf2::BufferCore core(cache_time);
-    for (int64_t k = 0; k < n_stamps; ++k)
-      for (int i = 0; i < depth; ++i)
-        core.setTransform(message(name("f", i), name("f", i + 1), t0 + k * period, k + i),
-                          authority);
-    const std::string root = "f0", leaf = name("f", depth);
+  for (size_t di = 0; di < sc.depths.size(); ++di) {
+    int depth = sc.depths[di];
+    auto core = chain(sc, cache_time, depth);
     for (const char* label : {"interp", "recent"}) {
-      const std::vector<ros::Time>& times = label[0] == 'i' ? queries : recent;
-      double best = 1e30, sink = 0;
-      for (int r = 0; r < repeats; ++r) {
-        double start = now();
-        for (int c = 0; c < calls; ++c)
-          sink += core.lookupTransform(root, leaf, times[r * calls + c]).transform.translation.x;
-        best = std::min(best, (now() - start) / calls);
-      }
-      if (sink == 12345.678) std::cerr << sink;  // keep the results alive
+      const std::vector<ros::Time>& times = label[0] == 'i' ? sc.queries : sc.recent;
+      double best = 1e30;
+      for (int r = 0; r < sc.repeats; ++r)
+        best = std::min(best, lookup_once(*core, depth, times, sc.calls, r));
       std::cout << (di || label[0] == 'r' ? ", " : "") << "\"" << depth << "/" << label
                 << "\": " << best;
     }
   }
   std::cout << "}";
 
-  // set_transform by phase: a link's first fill_samples samples in a fresh buffer, and the
-  // steady state (a full cache, pruning on every insert). A star root <- c<i>, stamps in
-  // order, every link at each stamp in turn (a robot's tree at 100 Hz).
-  std::vector<geometry_msgs::TransformStamped> fill;
-  for (int k = 0; k < fill_samples; ++k)
-    for (int i = 0; i < fill_links; ++i)
-      fill.push_back(message("root", name("c", i), t0 + k * period, k + i));
+  const auto fill = star(sc, sc.fill_links, 0, sc.fill_samples);
   double best_fill = 1e30;
-  for (int b = 0; b < fill_buffers; ++b) {
-    tf2::BufferCore core(cache_time);
-    double start = now();
-    for (const auto& m : fill) core.setTransform(m, authority);
-    best_fill = std::min(best_fill, (now() - start) / fill.size());
-  }
-  std::vector<geometry_msgs::TransformStamped> steady;
-  for (int k = steady_warm; k < steady_warm + steady_samples; ++k)
-    for (int i = 0; i < steady_links; ++i)
-      steady.push_back(message("root", name("c", i), t0 + k * period, k + i));
+  for (int b = 0; b < sc.fill_buffers; ++b) best_fill = std::min(best_fill, fill_once(cache_time, fill));
+  const auto steady = star(sc, sc.steady_links, sc.steady_warm, sc.steady_samples);
   double best_steady = 1e30;
-  for (int r = 0; r < repeats; ++r) {
-    tf2::BufferCore core(cache_time);
-    for (int k = 0; k < steady_warm; ++k)
-      for (int i = 0; i < steady_links; ++i)
-        core.setTransform(message("root", name("c", i), t0 + k * period, k + i), authority);
-    double start = now();
-    for (const auto& m : steady) core.setTransform(m, authority);
-    best_steady = std::min(best_steady, (now() - start) / steady.size());
-  }
+  for (int r = 0; r < sc.repeats; ++r)
+    best_steady = std::min(best_steady, steady_once(sc, cache_time, steady));
   std::cout << ", \"fill_s\": " << best_fill << ", \"steady_s\": " << best_steady
             << ", \"rss_bytes_per_sample\": " << rss_per_sample << "}" << std::endl;
   return 0;
