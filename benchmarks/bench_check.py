@@ -29,9 +29,10 @@ Rows (target):
   on one CPU (``cpp_round``: the C++ side in its ``--serve`` process, the two sides alternated a
   measurement at a time; this machine's CPUs run at different speeds for seconds at a time),
   each side's thread CPU time per call (preemption by other work stays out), a round's ratio the
-  median of its pairs', each row the median of the per-round ratios with their min..max: ``lookup_transform`` on chains of depth 1, 2, 8 and 64
-  at never-repeated interpolated times spread over 10 s of history (<= 1.1x, 1.0x, 0.7x, 1.0x; the
-  same with times in the newest 100 ms for information); ``set_transform`` on a star of 10 links,
+  median of its pairs', each row the median of the per-round ratios with their min..max:
+  ``lookup_transform`` on chains of depth 1, 2, 8 and 64 at never-repeated interpolated times
+  spread over 10 s of history (<= 1.1x, 1.0x, 0.7x, 1.0x; the same with times in the newest
+  100 ms for information); ``set_transform`` on a star of 10 links,
   a fresh buffer's first 200 samples per link (<= 1.3x: no fill phase) and the steady state, a
   full 10 s cache (<= 1.0x), each with its ratio within +-20 % of its median over the rounds;
   memory per sample, RSS growth of 200 000 samples (<= 1.0x);
@@ -401,12 +402,11 @@ def _half_range(values: list[float]) -> float:
 PASSES = 3
 """Passes per side in a round against the C++ laser_geometry, alternated (tfbus, the
 peer, tfbus, ...): each side's figure in the round is its best pass, figure by figure
-(the C++ tf2 group pairs single measurements instead: :func:`_paired`). This machine's speed changes for a second or more at a time
-(every call of both sides, Python and C++ alike, 1.6-2x slower for such a stretch),
-longer than one pass (under a second): a round of one pass a side judged one side's
-slow stretch against the other's fast one (C++ set_transform 420 ns in one round
-against 190-230 in the six others; tfbus project_laser 5.4-6.1 us in half the rounds
-against 3.2-3.6 us in the others)."""
+(the C++ tf2 group pairs single measurements instead: :func:`_paired`). This machine's
+speed changes for a second or more at a time (every call of both sides, Python and C++
+alike, 1.6-2x slower for such a stretch), longer than one pass (under a second): a
+round of one pass a side judged one side's slow stretch against the other's fast one
+(tfbus project_laser 5.4-6.1 us in half the rounds against 3.2-3.6 us in the others)."""
 
 SPREAD_TARGET = 0.20
 """The set_transform rows' ratio must also keep within +- this share of its median over
