@@ -496,8 +496,24 @@ class TfSummary:
                 ns = stamp._ns
                 if static:  # no rate: a stamp other than the last one counts as new
                     fs.distinct_stamps += ns != fs.last_stamp
-                elif fs.received.add(t, ns):
-                    fs.distinct_stamps += 1
+                else:
+                    window = fs.received
+                    values = window._values
+                    if (values and ns > values[-1] and window._held is None
+                            and not window._out_of_order):
+                        # RateWindow.add's common case, inline: a stamp newer than every
+                        # one held, all held in order (then also _pop's)
+                        window.last_received = t
+                        window._seq += 1
+                        values.append(ns)
+                        received = window._received
+                        received.append(t)
+                        if len(values) > window.maxlen:
+                            values.popleft()
+                            received.popleft()
+                        fs.distinct_stamps += 1
+                    elif window.add(t, ns):
+                        fs.distinct_stamps += 1
                 first = fs.first_stamp
                 if first is None or ns < first:
                     fs.first_stamp = ns

@@ -502,3 +502,55 @@ def test_rate_window_matches_its_definition_on_any_order(distinct: bool) -> None
             assert len(w) == len(ref.samples)
 
     check()
+
+
+def test_a_frames_window_is_the_rate_window_fed_each_transform() -> None:
+    """``TfSummary.add`` keeps each dynamic frame's recent samples as
+    ``RateWindow.add(receive time, stamp)`` of each transform would, on streams in
+    order, reversed, random, repeated and with receive times that go back, over the
+    window's bound: the same window (``RateWindow.__eq__``: the samples held and their
+    order) and ``distinct_stamps`` the adds that kept a sample (hypothesis)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from tfbus.monitor import RECENT_SAMPLES, RateWindow
+
+    step = st.tuples(st.integers(0, 2), st.integers(0, 40), st.integers(-2, 5))
+
+    @settings(max_examples=200, deadline=None, derandomize=True)
+    @given(st.lists(step, max_size=80), st.sampled_from(["up", "down", "any"]))
+    def check(steps: list[tuple[int, int, int]], order: str) -> None:
+        summary = TfSummary()
+        ref = {"a": RateWindow(), "b": RateWindow()}
+        kept = {"a": 0, "b": 0}
+        received = T0
+        for i, (frames, value, jump) in enumerate(steps):
+            received += jump * 10 * MS
+            stamp = {"up": i, "down": -i, "any": value}[order] * 10 * MS + T0
+            children = ("a", "b", "ab")[frames]
+            summary.add(Time.from_ns(received), [tf("world", c, stamp) for c in children],
+                        "default", static=False)
+            for c in children:
+                kept[c] += ref[c].add(received, stamp)
+        for c, window in ref.items():
+            if c in summary.frames:
+                assert summary.frames[c].received == window
+                assert summary.frames[c].distinct_stamps == kept[c]
+
+    check()
+    # past the bound, every 97th stamp late (out of order): each later sample pushes the
+    # oldest out, and a late stamp held makes the rate read the smallest and largest held
+    summary = TfSummary()
+    window = RateWindow()
+    for i in range(2 * RECENT_SAMPLES + 50):
+        received = T0 + i * MS
+        stamp = received - (50 * MS - 1 if i % 97 == 96 else 0)
+        summary.add(Time.from_ns(received), [tf("world", "a", stamp)], "default",
+                    static=False)
+        window.add(received, stamp)
+        if i % 10 == 0:
+            now = Time.from_ns(received)
+            assert summary.frames["a"].received.rate(now) == window.rate(now)
+            assert summary.frames["a"].received == window
+    assert summary.frames["a"].received == window
+    assert len(window) == RECENT_SAMPLES

@@ -204,11 +204,15 @@ class _Sample:
 
     def add(self, x: float) -> None:
         if self.n % self.stride == 0:
-            self.values.append(x)
-            if len(self.values) >= self.cap:
-                self.values = self.values[::2]
-                self.stride *= 2
+            self.keep(x)
         self.n += 1
+
+    def keep(self, x: float) -> None:
+        """Keep ``x`` (a value :meth:`add` samples), thinning the sample at ``cap``."""
+        self.values.append(x)
+        if len(self.values) >= self.cap:
+            self.values = self.values[::2]
+            self.stride *= 2
 
     def quantile(self, q: float) -> float:
         v = sorted(self.values)
@@ -351,6 +355,12 @@ class Doctor:
         newest_stamp = self._newest_stamp
         sim_time = self.sim_time
         counted = 0
+        # _interval's thresholds, read once a message for its common case inline below
+        th = self.thresholds
+        rate_window, gap_periods, rate_drop = th.rate_window, th.gap_periods, th.rate_drop
+        gap_min_ns = th.gap_min * NSEC_PER_SEC
+        settled = 2 * rate_window
+        alpha = self._alpha
         try:
             for ts in transforms:
                 if not isinstance(ts, TransformStamped):
@@ -368,9 +378,20 @@ class Doctor:
                 if (link is not None and (hot := link.hot) is not None and hot[0] == parent
                         and hot[1] == sender and hot[2] is static):
                     # the same parent, sender and topic as the link's last message: no
-                    # lookups (and no slash to strip: links and parents are kept without)
-                    hot[3].add(t)
-                    hot[4].add(t)
+                    # lookups (and no slash to strip: links and parents are kept without);
+                    # its two spans' add(t), inline
+                    span = hot[3]
+                    span.count += 1
+                    if t > span.last:
+                        span.last = t
+                    elif t < span.first:
+                        span.first = t
+                    span = hot[4]
+                    span.count += 1
+                    if t > span.last:
+                        span.last = t
+                    elif t < span.first:
+                        span.first = t
                     mean, sample = hot[5], hot[6]
                 else:
                     found = self._find(child, parent, sender, static, t)
@@ -393,13 +414,30 @@ class Doctor:
                 d = ((newest_stamp if sim_time else t) - stamp) / NSEC_PER_SEC
                 mean[0] += d
                 mean[1] += 1
-                sample.add(d)
+                if sample.n % sample.stride == 0:  # sample.add(d), inline
+                    sample.keep(d)
+                sample.n += 1
                 newest = link.newest
                 if newest is not None and stamp > newest:
                     # in order (the common case): newer than every stamp held, not repeated
                     link.recent.append(stamp)
                     link.sender_stamp[sender] = stamp
-                    self._interval(link, t, stamp, newest, sender)
+                    p = link.period
+                    interval = float(stamp - newest)
+                    if p is None or (link.intervals >= rate_window and interval > gap_periods * p
+                                     and interval > gap_min_ns):
+                        self._interval(link, t, stamp, newest, sender)  # the first, or a gap
+                    else:  # _interval's common case, inline: the moving average moves
+                        link.newest = stamp
+                        intervals = link.intervals = link.intervals + 1
+                        link.consecutive_gaps = 0
+                        p = link.period = p + alpha * (interval - p)
+                        if intervals > settled:
+                            baseline = link.baseline
+                            if baseline is None or p < baseline:
+                                link.baseline = baseline = p
+                            if p * rate_drop > baseline:
+                                self._dropped(link, t, p)
                 else:
                     self._stamps(link, t, stamp, sender)
         finally:
@@ -523,7 +561,8 @@ class Doctor:
 
     def _interval(self, link: _Link, t: int, stamp: int, newest: int, sender: str) -> None:
         """A stamp newer than the frame's newest: rates and gaps over the increasing
-        stamps."""
+        stamps (:meth:`add` makes the common case, no gap after the first interval,
+        itself)."""
         th = self.thresholds
         link.newest = stamp
         d = float(stamp - newest)
@@ -552,9 +591,15 @@ class Doctor:
         if link.baseline is None or p < link.baseline:
             link.baseline = p
         if p * th.rate_drop > link.baseline:
-            link.drop_first = t if link.drop_first is None else link.drop_first
-            link.drop_last = t
-            link.drop_worst = max(link.drop_worst, p)
+            self._dropped(link, t, p)
+
+    @staticmethod
+    def _dropped(link: _Link, t: int, p: float) -> None:
+        """The link's moving-average period ``p`` (ns) is a dropped rate at receive time
+        ``t``."""
+        link.drop_first = t if link.drop_first is None else link.drop_first
+        link.drop_last = t
+        link.drop_worst = max(link.drop_worst, p)
 
     def note_damage(self, reason: str) -> None:
         """Record that the source was damaged (a :class:`~tfbus.errors.BagReadError`'s
