@@ -1,6 +1,6 @@
 // The C++ reference of the core rows (bench_check.py, bench_core.py): Debian's tf2
 // (ROS 1 geometry2 0.7.6) tf2::BufferCore called from C++, the same scenarios as tfbus's side
-// (tf2_cpp.py hands them over on stdin and parses the one JSON line printed on stdout).
+// (bench_core.py hands them over on stdin and parses the one JSON line printed on stdout).
 // Build: g++ -O2 -o tf2_buffer_core_bench tf2_buffer_core_bench.cpp $(pkg-config --cflags --libs tf2)
 //
 // stdin, whitespace separated integers:
