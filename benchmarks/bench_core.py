@@ -495,11 +495,11 @@ class CppServer:
 
 class CppSideOurs:
     """tfbus's half of the C++ reference rows: the buffers and messages built once, each
-    :meth:`round` measuring what one run of ``tf2_buffer_core_bench`` measures, and each
-    of :meth:`fill`, :meth:`steady` and :meth:`lookup` what one command of its
-    ``--serve`` mode measures (:class:`CppServer`). Times are this thread's CPU seconds
-    per call (``time.thread_time``, as the C++ side's ``CLOCK_THREAD_CPUTIME_ID``: other
-    work preempting either side on a shared machine stays out of the ratios)."""
+    of :meth:`fill`, :meth:`steady` and :meth:`lookup` measuring what one command of
+    ``tf2_buffer_core_bench --serve`` measures (:class:`CppServer`). Times are this
+    thread's CPU seconds per call (``time.thread_time``, as the C++ side's
+    ``CLOCK_THREAD_CPUTIME_ID``: other work preempting either side on a shared machine
+    stays out of the ratios)."""
 
     def __init__(self, sc: dict[str, Any]) -> None:
         self.sc = sc
@@ -551,18 +551,6 @@ class CppSideOurs:
         for m in messages:
             setter(m, "bench")
         return (clock() - start) / len(messages)
-
-    def round(self) -> dict[str, Any]:
-        """Seconds per call, best run of each figure (the one-shot program's shape)."""
-        sc = self.sc
-        lookups = {
-            f"{depth}/{label}": min(self.lookup(depth, label, r) for r in range(sc["repeats"]))
-            for depth in self.chains
-            for label in self.times
-        }
-        fill = min(self.fill() for _ in range(sc["fill_buffers"]))
-        steady = min(self.steady() for _ in range(sc["repeats"]))
-        return {"lookup_s": lookups, "fill_s": fill, "steady_s": steady}
 
 
 _MEMORY_CHILD = """
