@@ -1,15 +1,17 @@
 # cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
 # cython: initializedcheck=False, embedsignature=True
-"""Wire decoders, compiled: ``_tf_from_ros1`` turns a ROS 1 serialised ``TFMessage`` into
-TransformStamped values, built in C like the lookups' results (the fast path of
+"""Wire decoders and writers, compiled: ``_tf_from_ros1`` turns a ROS 1 serialised
+``TFMessage`` into TransformStamped values, built in C like the lookups' results (the fast path of
 :func:`tfbus.codecs.ros1.decode_tf`; the pure-Python twin is
 :func:`tfbus.codecs.ros1.decode_ros1_struct`), and ``_tf_from_native`` does the same for a
 TFMessage payload of tfbus's own wire in the form tfbus writes it (the fast path of
 :meth:`tfbus.codecs.native.WireCodec.decode`; msgspec's schema decodes everything else);
 ``_clock_stamp_native`` reads the stamp of a ``Clock`` payload of that wire (the fast path
-of :func:`tfbus.transports.zenoh.transport.clock_stamp`), and ``_tf_to_ros1`` writes a ROS 1
+of :func:`tfbus.transports.zenoh.transport.clock_stamp`), ``_tf_to_ros1`` writes a ROS 1
 ``TFMessage`` of the common form (the fast path of :func:`tfbus.codecs.ros1._encode_struct`
-and ``TFCodec.encode_framed``).
+and ``TFCodec.encode_framed``), and ``_tf_to_native`` writes a TFMessage payload of tfbus's
+own wire of that form, the bytes msgspec writes (the fast path of
+:meth:`tfbus.codecs.native.WireCodec.encode`).
 They use the compiled core's C helpers (``tfbus/core/_ccore.pxd``, ``_cresults.pxd``), so
 they are built with the compiled core and loaded only with it (:mod:`tfbus.codecs.ros1`
 and :mod:`tfbus.codecs.native` choose)."""
@@ -641,4 +643,191 @@ def _tf_to_ros1(transforms, bint framed):
             p = _put_f64(p, PyFloat_AS_DOUBLE((<tuple>tr)[size]))
         for size in range(4):
             p = _put_f64(p, PyFloat_AS_DOUBLE((<tuple>rot)[size]))
+    return data
+
+
+# -- writing a TFMessage payload of tfbus's own wire ----------------------------------------
+
+cdef inline Py_ssize_t _uint_size(uint64_t v) noexcept:
+    """Bytes of msgpack's shortest form of the unsigned integer ``v`` (positive fixint,
+    uint 8, 16, 32, 64), as msgspec writes a non-negative int."""
+    if v < 0x80:
+        return 1
+    if v < 0x100:
+        return 2
+    if v < 0x10000:
+        return 3
+    if v < 0x100000000:
+        return 5
+    return 9
+
+
+cdef inline char* _put_be(char* p, uint64_t v, int n) noexcept:
+    """The ``n`` low bytes of ``v``, big-endian (msgpack's order)."""
+    cdef int i
+    for i in range(n):
+        p[i] = <char> ((v >> (8 * (n - 1 - i))) & 0xFF)
+    return p + n
+
+
+cdef inline char* _put_uint(char* p, uint64_t v) noexcept:
+    """``v`` in msgpack's shortest unsigned form (:func:`_uint_size` bytes)."""
+    if v < 0x80:
+        p[0] = <char> v
+        return p + 1
+    if v < 0x100:
+        p[0] = <char> 0xcc
+        return _put_be(p + 1, v, 1)
+    if v < 0x10000:
+        p[0] = <char> 0xcd
+        return _put_be(p + 1, v, 2)
+    if v < 0x100000000:
+        p[0] = <char> 0xce
+        return _put_be(p + 1, v, 4)
+    p[0] = <char> 0xcf
+    return _put_be(p + 1, v, 8)
+
+
+cdef inline Py_ssize_t _head_size(Py_ssize_t n, Py_ssize_t fixed) noexcept:
+    """Bytes of the head of a msgpack str (``fixed`` 32) or array (``fixed`` 16) of
+    length ``n``: its fix form below ``fixed``, then the 8- (str only), 16- and 32-bit
+    forms, as msgspec writes them."""
+    if n < fixed:
+        return 1
+    if fixed == 32 and n < 0x100:
+        return 2
+    if n < 0x10000:
+        return 3
+    return 5
+
+
+cdef inline char* _put_str_head(char* p, Py_ssize_t n) noexcept:
+    if n < 32:
+        p[0] = <char> (0xa0 | n)
+        return p + 1
+    if n < 0x100:
+        p[0] = <char> 0xd9
+        return _put_be(p + 1, <uint64_t> n, 1)
+    if n < 0x10000:
+        p[0] = <char> 0xda
+        return _put_be(p + 1, <uint64_t> n, 2)
+    p[0] = <char> 0xdb
+    return _put_be(p + 1, <uint64_t> n, 4)
+
+
+cdef inline char* _put_array_head(char* p, Py_ssize_t n) noexcept:
+    if n < 16:
+        p[0] = <char> (0x90 | n)
+        return p + 1
+    if n < 0x10000:
+        p[0] = <char> 0xdc
+        return _put_be(p + 1, <uint64_t> n, 2)
+    p[0] = <char> 0xdd
+    return _put_be(p + 1, <uint64_t> n, 4)
+
+
+cdef inline char* _put_f64_be(char* p, double d) noexcept:
+    """A msgpack float 64 (``0xcb``, then the IEEE 754 bits big-endian), as msgspec writes
+    every Python float."""
+    cdef uint64_t bits
+    memcpy(&bits, &d, 8)
+    p[0] = <char> 0xcb
+    return _put_be(p + 1, bits, 8)
+
+
+DEF _NATIVE_FIXED = 1 + 1 + 1 + 1 + 4 * 9 + 1 + 3 * 9  # a transform's heads and floats
+
+
+def _tf_to_native(transforms, sender, seq, int magic, int version):
+    """The tfbus wire payload of a TFMessage of ``transforms`` from ``sender`` with
+    sequence number ``seq`` (``magic``, ``version``, then the msgpack array ``[sender,
+    seq, "tf", body]``), byte for byte what :meth:`tfbus.codecs.native.WireCodec.encode`
+    has msgspec write (tested), for the common form: a list or tuple of
+    ``TransformStamped`` of the message classes themselves, ``str`` ids that are UTF-8,
+    seven ``float`` values, a ``Time`` stamp, an ``int`` sender and sequence number in
+    [0, 2**64). msgspec's forms: each NamedTuple an array of its fields, a stamp its int
+    nanoseconds, every int and the length of every str and array in its shortest form,
+    every float a float 64. None for anything else: msgspec then writes it, or says what
+    cannot be written. Each id's UTF-8 is the one CPython keeps in the str, as in
+    :func:`_tf_to_ros1`."""
+    cdef Py_ssize_t n, k, i, total, parent_len, child_len
+    cdef object ts, header, stamp, parent, child, tf, tr, rot
+    cdef const char* parent_utf8
+    cdef const char* child_utf8
+    cdef int64_t ns
+    cdef uint64_t who, number
+    cdef char* p
+    if type(transforms) is not list and type(transforms) is not tuple:
+        return None
+    if type(sender) is not int or type(seq) is not int:
+        return None
+    try:
+        who = sender
+        number = seq
+    except OverflowError:  # negative, or 2**64 or more: msgspec writes or names it
+        return None
+    n = len(transforms)
+    total = 2 + 1 + _uint_size(who) + _uint_size(number) + 3 + _head_size(n, 16)
+    for k in range(n):
+        ts = transforms[k]
+        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
+            return None
+        header = (<tuple>ts)[0]
+        child = (<tuple>ts)[1]
+        if type(header) is not Header or len(<tuple>header) != 2:
+            return None
+        stamp = (<tuple>header)[0]
+        parent = (<tuple>header)[1]
+        if type(stamp) is not Time or type(parent) is not str or type(child) is not str:
+            return None
+        if not _plain_values((<tuple>ts)[2]):
+            return None
+        ns = stamp._ns
+        if ns < 0:
+            return None
+        try:
+            PyUnicode_AsUTF8AndSize(parent, &parent_len)
+            PyUnicode_AsUTF8AndSize(child, &child_len)
+        except UnicodeEncodeError:  # a lone surrogate: msgspec names it
+            return None
+        total += (_NATIVE_FIXED + _uint_size(<uint64_t> ns) + _head_size(parent_len, 32)
+                  + parent_len + _head_size(child_len, 32) + child_len)
+    data = PyBytes_FromStringAndSize(NULL, total)
+    p = PyBytes_AS_STRING(data)
+    p[0] = <char> magic
+    p[1] = <char> version
+    p[2] = <char> 0x94  # [sender, seq, tag, body]
+    p = _put_uint(p + 3, who)
+    p = _put_uint(p, number)
+    p[0] = <char> 0xa2  # "tf"
+    p[1] = <char> 0x74
+    p[2] = <char> 0x66
+    p = _put_array_head(p + 3, n)
+    for k in range(n):
+        ts = transforms[k]
+        header = (<tuple>ts)[0]
+        child = (<tuple>ts)[1]
+        ns = (<tuple>header)[0]._ns
+        parent_utf8 = PyUnicode_AsUTF8AndSize((<tuple>header)[1], &parent_len)
+        child_utf8 = PyUnicode_AsUTF8AndSize(child, &child_len)
+        p[0] = <char> 0x93  # [header, child_frame_id, transform]
+        p[1] = <char> 0x92  # [stamp, frame_id]
+        p = _put_uint(p + 2, <uint64_t> ns)
+        p = _put_str_head(p, parent_len)
+        memcpy(p, parent_utf8, parent_len)
+        p = _put_str_head(p + parent_len, child_len)
+        memcpy(p, child_utf8, child_len)
+        p += child_len
+        tf = (<tuple>ts)[2]
+        tr = (<tuple>tf)[0]
+        rot = (<tuple>tf)[1]
+        p[0] = <char> 0x92  # [translation, rotation]
+        p[1] = <char> 0x93
+        p += 2
+        for i in range(3):
+            p = _put_f64_be(p, PyFloat_AS_DOUBLE((<tuple>tr)[i]))
+        p[0] = <char> 0x94
+        p += 1
+        for i in range(4):
+            p = _put_f64_be(p, PyFloat_AS_DOUBLE((<tuple>rot)[i]))
     return data

@@ -271,10 +271,19 @@ class WireCodec:
     def encode(self, message: object, *, sender: int, seq: int) -> bytes:
         """The payload for ``message`` from ``sender`` with sequence number ``seq``.
 
+        With the compiled core, a TFMessage (the class itself) of the common form
+        (``TransformStamped`` of the message classes, ``str`` ids, ``float`` values, a
+        ``Time`` stamp) is written in C (``tfbus.codecs._cwire._tf_to_native``: the bytes
+        msgspec writes, tested); anything else by msgspec.
+
         Raises:
             WireEncodeError: if the message type is neither a TFMessage, a registered
                 type nor a plain msgpack value, or a field cannot be encoded.
         """
+        if type(message) is _TFMessage and _compiled_tf_writer is not None:
+            payload = _compiled_tf_writer(message[0], sender, seq, MAGIC, WIRE_VERSION)
+            if payload is not None:
+                return payload
         return _payload(self._encoder.encode, message, sender, seq)
 
     # -- decoding -------------------------------------------------------------------
@@ -549,6 +558,7 @@ def _cloud_from_wire(body: Any) -> PointCloud2:
 
 
 _new = tuple.__new__
+_TFMessage = _m.TFMessage
 _TransformStamped = _m.TransformStamped
 _Header = _m.Header
 
@@ -568,6 +578,23 @@ def _compiled_decoder() -> Callable[[bytes, int, int], tuple[int, int, TFMessage
 _compiled_tf = _compiled_decoder()
 """The compiled TFMessage decoder (``None`` for anything but a TFMessage as tfbus writes
 it, equal values otherwise: tested), where there is one."""
+
+
+def _compiled_writer() -> Callable[[object, object, object, int, int], bytes | None] | None:
+    """The compiled writer of a TFMessage payload of the common form
+    (``_cwire._tf_to_native(transforms, sender, seq, MAGIC, WIRE_VERSION)``: the bytes
+    msgspec writes, or None for anything else), where :func:`tfbus.codecs._compiled_wire`
+    finds the compiled wire module; else None (msgspec writes every payload)."""
+    wire = _compiled_wire()
+    if wire is None:
+        return None
+    write: Callable[[object, object, object, int, int], bytes | None] = wire._tf_to_native
+    return write
+
+
+_compiled_tf_writer = _compiled_writer()
+"""The compiled TFMessage writer (the bytes msgspec writes, or None: tested), where there
+is one."""
 
 
 def _compiled_clock_stamp() -> Callable[[bytes, int, int], int] | None:
