@@ -751,7 +751,7 @@ def _tf_to_native(transforms, sender, seq, int magic, int version):
     cannot be written. Each id's UTF-8 is the one CPython keeps in the str, as in
     :func:`_tf_to_ros1`."""
     cdef Py_ssize_t n, k, i, total, parent_len, child_len
-    cdef object ts, header, stamp, parent, child, tf, tr, rot
+    cdef object ts, header, stamp, parent, child, tf, tr, rot, ns_held
     cdef const char* parent_utf8
     cdef const char* child_utf8
     cdef int64_t ns
@@ -782,7 +782,13 @@ def _tf_to_native(transforms, sender, seq, int magic, int version):
             return None
         if not _plain_values((<tuple>ts)[2]):
             return None
-        ns = stamp._ns
+        ns_held = stamp._ns
+        if type(ns_held) is not int:
+            return None  # not a Time as Time makes it: msgspec writes what it holds
+        try:
+            ns = ns_held
+        except OverflowError:
+            return None
         if ns < 0:
             return None
         try:
