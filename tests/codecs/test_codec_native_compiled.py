@@ -61,7 +61,8 @@ def _exact(decoded: Any) -> tuple[Any, ...]:
 def _both(codec: wire.WireCodec, payload: bytes) -> tuple[Any, Any]:
     """(what the compiled decoder returns, what the schema decodes or the WireError type)."""
     assert compiled is not None
-    fast = compiled(payload, codec.limits.max_transforms, codec.limits.max_frame_id_length)
+    fast = compiled(payload, codec.limits.max_payload_bytes, codec.limits.max_transforms,
+                    codec.limits.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION)
     try:
         schema: Any = codec._decode_schema(payload)
     except WireError as exc:
@@ -262,7 +263,8 @@ def _moving(codec: wire.WireCodec, *values: tuple[float, ...], stamp: int = 1,
                          Transform(Vector3(*v[:3]), Quaternion(*v[3:])))
         for k, v in enumerate(values)))
     payload = codec.encode(message, sender=1, seq=seq)
-    decoded = compiled(payload, LIMITS.max_transforms, LIMITS.max_frame_id_length)
+    decoded = compiled(payload, LIMITS.max_payload_bytes, LIMITS.max_transforms,
+                       LIMITS.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION)
     assert decoded is not None
     assert _exact(decoded) == _exact(codec._decode_schema(payload))
     transforms: tuple[TransformStamped, ...] = decoded[2].transforms
@@ -340,3 +342,29 @@ def test_refilling_never_changes_what_is_held_and_decodes_as_the_schema(
     Vector3, a Quaternion or a float) and the rest dropped. Every decode equals the
     schema's, bit for bit (:func:`_moving`), and nothing kept ever changes."""
     refill_laws.check_nothing_held_changes(_decode, steps)
+
+
+def test_what_the_checks_refuse_is_left_to_them() -> None:
+    """A payload over the size limit, too short, or of another magic byte or version is
+    None from the compiled decoder, and ``decode`` names it as before."""
+    from tfbus.errors import WireDecodeError, WireVersionError
+
+    assert compiled is not None
+    good = _payload(_item())
+    small = wire.WireCodec(wire.WireLimits(max_payload_bytes=len(good) - 1))
+    cases: list[tuple[wire.WireCodec, bytes, type[WireError]]] = [
+        (small, good, WireLimitError),
+        (wire.WireCodec(), good[:1], WireDecodeError),
+        (wire.WireCodec(), b"\x00" + good[1:], WireDecodeError),
+        (wire.WireCodec(), good[:1] + bytes([wire.WIRE_VERSION + 1]) + good[2:], WireVersionError),
+    ]
+    for codec, payload, error in cases:
+        limits = codec.limits
+        assert compiled(payload, limits.max_payload_bytes, limits.max_transforms,
+                        limits.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION) is None
+        with pytest.raises(error):
+            codec.decode(payload)
+        with pytest.raises(error):
+            codec.decode(memoryview(payload))
+    at_limit = wire.WireCodec(wire.WireLimits(max_payload_bytes=len(good)))
+    assert at_limit.decode(good).message == wire.WireCodec().decode(good).message

@@ -8,7 +8,7 @@ _REUSES: bool
 """Whether this build refills the objects of a decoded message nobody holds any more."""
 
 def _tf_from_native(
-    buf: bytes, max_transforms: int, max_id: int
+    payload: bytes, max_bytes: int, max_transforms: int, max_id: int, magic: int, version: int
 ) -> tuple[int, int, TFMessage] | None: ...
 
 def _clock_stamp_native(payload: bytes, magic: int, version: int) -> int: ...

@@ -16,6 +16,7 @@ They use the compiled core's C helpers (``tfbus/core/_ccore.pxd``, ``_cresults.p
 they are built with the compiled core and loaded only with it (:mod:`tfbus.codecs.ros1`
 and :mod:`tfbus.codecs.native` choose)."""
 
+from cpython.bytes cimport PyBytes_AS_STRING, PyBytes_GET_SIZE
 from cpython.float cimport PyFloat_FromDouble
 from cpython.object cimport PyObject
 from cpython.ref cimport Py_DECREF, Py_INCREF
@@ -444,9 +445,9 @@ cdef inline int _float64s(const unsigned char* p, Py_ssize_t size, Py_ssize_t* o
     return 1
 
 
-def _tf_from_native(const unsigned char[::1] buf, Py_ssize_t max_transforms,
-                    Py_ssize_t max_id):
-    """A tfbus wire payload (``tfbus.codecs.native``: ``MAGIC``, the version, then the
+def _tf_from_native(bytes payload not None, Py_ssize_t max_bytes, Py_ssize_t max_transforms,
+                    Py_ssize_t max_id, int magic, int version):
+    """A tfbus wire payload (``tfbus.codecs.native``: ``magic``, ``version``, then the
     msgpack array ``[sender, seq, "tf", body]``) of a TFMessage in the form tfbus writes
     it, decoded in C: ``(sender, seq, TFMessage)``, the values ``WireCodec``'s msgspec
     schema decodes from it (equal, tested; an ASCII frame id equal to the one at the same
@@ -458,17 +459,18 @@ def _tf_from_native(const unsigned char[::1] buf, Py_ssize_t max_transforms,
     another tag, a sender or sequence number outside [1, 2**63), an array of another
     length, an integer or float 32 where a float 64 is, a stamp outside [0, 2**63) ns,
     an id that is not UTF-8 or longer than ``max_id`` characters, more than
-    ``max_transforms`` transforms, bytes left over. The magic byte and version are the
-    caller's to check (bytes 0 and 1 are skipped)."""
-    cdef Py_ssize_t size = buf.shape[0], off = 2, n, k, head, hlen = 0, prev = -1
-    cdef const unsigned char* p
+    ``max_transforms`` transforms, bytes left over; and a payload of more than ``max_bytes``
+    bytes, fewer than 2, or another magic byte or version, which the caller's checks then
+    name."""
+    cdef Py_ssize_t size = PyBytes_GET_SIZE(payload), off = 2, n, k, head, hlen = 0
+    cdef Py_ssize_t prev = -1
+    cdef const unsigned char* p = <const unsigned char*> PyBytes_AS_STRING(payload)
     cdef int64_t sender, seq, stamp, last_stamp = -1
     cdef double v[7]
     cdef object header = None, time = None, frame, child
     cdef list out
-    if size < 2:
+    if size < 2 or size > max_bytes or p[0] != magic or p[1] != version:
         return None
-    p = &buf[0]
     if _array(p, size, &off) != 4:
         return None
     if not _uint63(p, size, &off, &sender) or not _uint63(p, size, &off, &seq):
@@ -549,7 +551,6 @@ cdef extern from "Python.h":
     const char* PyUnicode_AsUTF8AndSize(object unicode, Py_ssize_t* size) except NULL
     double PyFloat_AS_DOUBLE(object o)
     object PyBytes_FromStringAndSize(const char* v, Py_ssize_t size)
-    char* PyBytes_AS_STRING(object o)
 
 DEF _SEC_MAX = 2147483647  # ROS 1 time as written: 0 .. 2**31-1 s (rosbags' int32)
 DEF _ONE_FIXED = 16 + 4 + 56  # seq, secs, nsecs, len(frame_id); len(child); 7 float64

@@ -263,6 +263,7 @@ class WireCodec:
             _cloud_schema(self.limits)
         )
         self._typed: dict[str, Callable[[bytes | memoryview], object]] = {}
+        self._max_bytes = self.limits.max_payload_bytes
         self._max_transforms = self.limits.max_transforms
         self._max_id = self.limits.max_frame_id_length
 
@@ -295,9 +296,10 @@ class WireCodec:
         generically, so no nesting can make it recurse); any other body is first walked
         without decoding and refused if nested deeper than ``limits.max_depth``. With the
         compiled core, a TFMessage in the form tfbus writes it (float 64s, the envelope's
-        four fields, nothing left over) is decoded in C first
-        (``tfbus.codecs._cwire._tf_from_native``: the schema's values, its limits); any
-        other payload goes to the schema.
+        four fields, nothing left over) is decoded in C first, with the checks of its
+        size, magic byte and version (``tfbus.codecs._cwire._tf_from_native``: the
+        schema's values, its limits); any other payload goes to those checks and the
+        schema.
 
         Raises:
             WireDecodeError: bad magic byte, bad msgpack, wrong shape or field type, a
@@ -309,20 +311,21 @@ class WireCodec:
                 nesting too deep, a LaserScan with more than ``limits.max_scan_beams``
                 beams.
         """
-        n = len(payload)
-        if n > self.limits.max_payload_bytes:
-            raise WireLimitError(f"payload of {n} bytes exceeds {self.limits.max_payload_bytes}")
-        if n < 2 or payload[0] != MAGIC:
-            raise WireDecodeError("not a tfbus payload (bad magic byte)")
-        if payload[1] != WIRE_VERSION:
-            raise WireVersionError(
-                f"wire format version {payload[1]}, this tfbus speaks {WIRE_VERSION}"
-            )
         data = payload if type(payload) is bytes else bytes(payload)
-        if _compiled_tf is not None:  # a TFMessage as tfbus writes it, built in C
-            fast = _compiled_tf(data, self._max_transforms, self._max_id)
+        if _compiled_tf is not None:  # a TFMessage as tfbus writes it (checked), built in C
+            fast = _compiled_tf(data, self._max_bytes, self._max_transforms, self._max_id,
+                                MAGIC, WIRE_VERSION)
             if fast is not None:
                 return _new(Decoded, fast)
+        n = len(data)
+        if n > self.limits.max_payload_bytes:
+            raise WireLimitError(f"payload of {n} bytes exceeds {self.limits.max_payload_bytes}")
+        if n < 2 or data[0] != MAGIC:
+            raise WireDecodeError("not a tfbus payload (bad magic byte)")
+        if data[1] != WIRE_VERSION:
+            raise WireVersionError(
+                f"wire format version {data[1]}, this tfbus speaks {WIRE_VERSION}"
+            )
         return self._decode_schema(data)
 
     def _decode_schema(self, data: bytes) -> Decoded:
@@ -563,14 +566,16 @@ _TransformStamped = _m.TransformStamped
 _Header = _m.Header
 
 
-def _compiled_decoder() -> Callable[[bytes, int, int], tuple[int, int, TFMessage] | None] | None:
+def _compiled_decoder() -> (
+    Callable[[bytes, int, int, int, int, int], tuple[int, int, TFMessage] | None] | None
+):
     """The compiled decoder of a TFMessage payload in the form tfbus writes it
     (``_cwire._tf_from_native``, where :func:`tfbus.codecs._compiled_wire` finds the
     compiled wire decoders); else None (msgspec's schema decodes every payload)."""
     wire = _compiled_wire()
     if wire is None:
         return None
-    decode: Callable[[bytes, int, int], tuple[int, int, TFMessage] | None]
+    decode: Callable[[bytes, int, int, int, int, int], tuple[int, int, TFMessage] | None]
     decode = wire._tf_from_native
     return decode
 
