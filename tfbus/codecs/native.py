@@ -311,8 +311,10 @@ class WireCodec:
                 nesting too deep, a LaserScan with more than ``limits.max_scan_beams``
                 beams.
         """
-        data = payload if type(payload) is bytes else bytes(payload)
-        if _compiled_tf is not None:  # a TFMessage as tfbus writes it (checked), built in C
+        data = payload
+        if type(data) is not bytes and len(data) <= self._max_bytes:
+            data = bytes(data)  # copied only within the limit
+        if _compiled_tf is not None and type(data) is bytes:  # checked and built in C
             fast = _compiled_tf(data, self._max_bytes, self._max_transforms, self._max_id,
                                 MAGIC, WIRE_VERSION)
             if fast is not None:
@@ -326,7 +328,7 @@ class WireCodec:
             raise WireVersionError(
                 f"wire format version {data[1]}, this tfbus speaks {WIRE_VERSION}"
             )
-        return self._decode_schema(data)
+        return self._decode_schema(bytes(data))
 
     def _decode_schema(self, data: bytes) -> Decoded:
         """:meth:`decode` by msgspec's schemas (its checks of the magic byte, version and
