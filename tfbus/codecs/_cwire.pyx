@@ -573,6 +573,44 @@ cdef inline char* _put_f64(char* p, double d) noexcept:
     return p + 8
 
 
+cdef inline int64_t _common_form(object ts, Py_ssize_t* parent_len, Py_ssize_t* child_len) except -2:
+    """The stamp (int ns, ``>= 0``) of ``ts`` when it has the common form both writers
+    write: a ``TransformStamped`` of the message classes themselves (no subclass), a
+    ``Time`` stamp holding an int in [0, 2**63), ``str`` ids that are UTF-8 (their
+    lengths in bytes put in ``parent_len`` and ``child_len``: the UTF-8 CPython keeps in
+    the str, made once per str, none for ASCII) and seven ``float`` values; -1 for
+    anything else."""
+    cdef object header, stamp, parent, child, held
+    cdef int64_t ns
+    if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
+        return -1
+    header = (<tuple>ts)[0]
+    child = (<tuple>ts)[1]
+    if type(header) is not Header or len(<tuple>header) != 2:
+        return -1
+    stamp = (<tuple>header)[0]
+    parent = (<tuple>header)[1]
+    if type(stamp) is not Time or type(parent) is not str or type(child) is not str:
+        return -1
+    if not _plain_values((<tuple>ts)[2]):
+        return -1
+    held = stamp._ns
+    if type(held) is not int:
+        return -1  # not a Time as Time makes it
+    try:
+        ns = held
+    except OverflowError:
+        return -1
+    if ns < 0:
+        return -1
+    try:
+        PyUnicode_AsUTF8AndSize(parent, parent_len)
+        PyUnicode_AsUTF8AndSize(child, child_len)
+    except UnicodeEncodeError:  # a lone surrogate
+        return -1
+    return ns
+
+
 def _tf_to_ros1(transforms, bint framed):
     """The ROS 1 ``TFMessage`` bytes of ``transforms`` (``framed``: the TCPROS ``uint32``
     length first), as :func:`tfbus.codecs.ros1._encode_struct` writes them (roscpp's
@@ -585,7 +623,7 @@ def _tf_to_ros1(transforms, bint framed):
     id's UTF-8 is the one CPython keeps in the str (made once per str, none for ASCII)."""
     cdef Py_ssize_t n, k, size, total = 4
     cdef Py_ssize_t parent_len, child_len
-    cdef object ts, header, stamp, parent, child, tf, tr, rot
+    cdef object ts, header, child, tf, tr, rot
     cdef const char* parent_utf8
     cdef const char* child_utf8
     cdef int64_t ns
@@ -594,27 +632,9 @@ def _tf_to_ros1(transforms, bint framed):
         return None
     n = len(transforms)
     for k in range(n):
-        ts = transforms[k]
-        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
-            return None
-        header = (<tuple>ts)[0]
-        child = (<tuple>ts)[1]
-        if type(header) is not Header or len(<tuple>header) != 2:
-            return None
-        stamp = (<tuple>header)[0]
-        parent = (<tuple>header)[1]
-        if type(stamp) is not Time or type(parent) is not str or type(child) is not str:
-            return None
-        if not _plain_values((<tuple>ts)[2]):
-            return None
-        ns = stamp._ns
+        ns = _common_form(transforms[k], &parent_len, &child_len)
         if ns < 0 or ns // 1000000000 > _SEC_MAX:
-            return None
-        try:
-            PyUnicode_AsUTF8AndSize(parent, &parent_len)
-            PyUnicode_AsUTF8AndSize(child, &child_len)
-        except UnicodeEncodeError:  # a lone surrogate: the Python writer names it
-            return None
+            return None  # the Python writer writes it or names what is wrong
         total += _ONE_FIXED + parent_len + child_len
     data = PyBytes_FromStringAndSize(NULL, total + 4 if framed else total)
     p = PyBytes_AS_STRING(data)
@@ -702,28 +722,21 @@ cdef inline Py_ssize_t _head_size(Py_ssize_t n, Py_ssize_t fixed) noexcept:
     return 5
 
 
-cdef inline char* _put_str_head(char* p, Py_ssize_t n) noexcept:
-    if n < 32:
-        p[0] = <char> (0xa0 | n)
+cdef inline char* _put_head(char* p, Py_ssize_t n, Py_ssize_t fixed) noexcept:
+    """The head :func:`_head_size` counts: of a str (``fixed`` 32: fixstr ``0xa0 | n``, str
+    8, 16, 32 ``0xd9``-``0xdb``) or an array (``fixed`` 16: fixarray ``0x90 | n``, array
+    16, 32 ``0xdc``, ``0xdd``) of length ``n``."""
+    cdef bint text = fixed == 32
+    if n < fixed:
+        p[0] = <char> ((0xa0 if text else 0x90) | n)
         return p + 1
-    if n < 0x100:
+    if text and n < 0x100:
         p[0] = <char> 0xd9
         return _put_be(p + 1, <uint64_t> n, 1)
     if n < 0x10000:
-        p[0] = <char> 0xda
+        p[0] = <char> (0xda if text else 0xdc)
         return _put_be(p + 1, <uint64_t> n, 2)
-    p[0] = <char> 0xdb
-    return _put_be(p + 1, <uint64_t> n, 4)
-
-
-cdef inline char* _put_array_head(char* p, Py_ssize_t n) noexcept:
-    if n < 16:
-        p[0] = <char> (0x90 | n)
-        return p + 1
-    if n < 0x10000:
-        p[0] = <char> 0xdc
-        return _put_be(p + 1, <uint64_t> n, 2)
-    p[0] = <char> 0xdd
+    p[0] = <char> (0xdb if text else 0xdd)
     return _put_be(p + 1, <uint64_t> n, 4)
 
 
@@ -752,7 +765,7 @@ def _tf_to_native(transforms, sender, seq, int magic, int version):
     cannot be written. Each id's UTF-8 is the one CPython keeps in the str, as in
     :func:`_tf_to_ros1`."""
     cdef Py_ssize_t n, k, i, total, parent_len, child_len
-    cdef object ts, header, stamp, parent, child, tf, tr, rot, ns_held
+    cdef object ts, header, child, tf, tr, rot
     cdef const char* parent_utf8
     cdef const char* child_utf8
     cdef int64_t ns
@@ -770,33 +783,9 @@ def _tf_to_native(transforms, sender, seq, int magic, int version):
     n = len(transforms)
     total = 2 + 1 + _uint_size(who) + _uint_size(number) + 3 + _head_size(n, 16)
     for k in range(n):
-        ts = transforms[k]
-        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
-            return None
-        header = (<tuple>ts)[0]
-        child = (<tuple>ts)[1]
-        if type(header) is not Header or len(<tuple>header) != 2:
-            return None
-        stamp = (<tuple>header)[0]
-        parent = (<tuple>header)[1]
-        if type(stamp) is not Time or type(parent) is not str or type(child) is not str:
-            return None
-        if not _plain_values((<tuple>ts)[2]):
-            return None
-        ns_held = stamp._ns
-        if type(ns_held) is not int:
-            return None  # not a Time as Time makes it: msgspec writes what it holds
-        try:
-            ns = ns_held
-        except OverflowError:
-            return None
+        ns = _common_form(transforms[k], &parent_len, &child_len)
         if ns < 0:
-            return None
-        try:
-            PyUnicode_AsUTF8AndSize(parent, &parent_len)
-            PyUnicode_AsUTF8AndSize(child, &child_len)
-        except UnicodeEncodeError:  # a lone surrogate: msgspec names it
-            return None
+            return None  # msgspec writes it or names what cannot be written
         total += (_NATIVE_FIXED + _uint_size(<uint64_t> ns) + _head_size(parent_len, 32)
                   + parent_len + _head_size(child_len, 32) + child_len)
     data = PyBytes_FromStringAndSize(NULL, total)
@@ -809,7 +798,7 @@ def _tf_to_native(transforms, sender, seq, int magic, int version):
     p[0] = <char> 0xa2  # "tf"
     p[1] = <char> 0x74
     p[2] = <char> 0x66
-    p = _put_array_head(p + 3, n)
+    p = _put_head(p + 3, n, 16)
     for k in range(n):
         ts = transforms[k]
         header = (<tuple>ts)[0]
@@ -820,9 +809,9 @@ def _tf_to_native(transforms, sender, seq, int magic, int version):
         p[0] = <char> 0x93  # [header, child_frame_id, transform]
         p[1] = <char> 0x92  # [stamp, frame_id]
         p = _put_uint(p + 2, <uint64_t> ns)
-        p = _put_str_head(p, parent_len)
+        p = _put_head(p, parent_len, 32)
         memcpy(p, parent_utf8, parent_len)
-        p = _put_str_head(p + parent_len, child_len)
+        p = _put_head(p + parent_len, child_len, 32)
         memcpy(p, child_utf8, child_len)
         p += child_len
         tf = (<tuple>ts)[2]
