@@ -227,6 +227,10 @@ def test_the_compiled_writer_hands_back_what_is_not_the_common_form() -> None:
         iter([good]),
         {"a": good}.values(),
     ]
+    for held in (1.5, -1, 2**63):  # a Time holding what Time never makes
+        stamp = Time.__new__(Time)
+        stamp._ns = held
+        others.append([TransformStamped(Header(stamp, "map"), "e", good.transform)])
     for message in others:
         assert COMPILED(message, False) is None, message
     for message in others[:2] + others[4:5]:  # written by struct, as rosbags does
