@@ -58,11 +58,16 @@ def _exact(decoded: Any) -> tuple[Any, ...]:
     return sender, seq, type(message), type(message.transforms), rows
 
 
+def _fast(payload: bytes, limits: wire.WireLimits = LIMITS) -> Any:
+    """What the compiled decoder makes of ``payload`` under ``limits``."""
+    assert compiled is not None
+    return compiled(payload, limits.max_payload_bytes, limits.max_transforms,
+                    limits.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION)
+
+
 def _both(codec: wire.WireCodec, payload: bytes) -> tuple[Any, Any]:
     """(what the compiled decoder returns, what the schema decodes or the WireError type)."""
-    assert compiled is not None
-    fast = compiled(payload, codec.limits.max_payload_bytes, codec.limits.max_transforms,
-                    codec.limits.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION)
+    fast = _fast(payload, codec.limits)
     try:
         schema: Any = codec._decode_schema(payload)
     except WireError as exc:
@@ -257,14 +262,12 @@ def _moving(codec: wire.WireCodec, *values: tuple[float, ...], stamp: int = 1,
             seq: int = 1) -> tuple[TransformStamped, ...]:
     """The compiled decode of a tfbus TFMessage of ``map -> c<k>`` transforms of 7 values
     each (its Decoded's transforms)."""
-    assert compiled is not None
     message = TFMessage(tuple(
         TransformStamped(Header(Time.from_ns(stamp), "map"), f"c{k}",
                          Transform(Vector3(*v[:3]), Quaternion(*v[3:])))
         for k, v in enumerate(values)))
     payload = codec.encode(message, sender=1, seq=seq)
-    decoded = compiled(payload, LIMITS.max_payload_bytes, LIMITS.max_transforms,
-                       LIMITS.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION)
+    decoded = _fast(payload)
     assert decoded is not None
     assert _exact(decoded) == _exact(codec._decode_schema(payload))
     transforms: tuple[TransformStamped, ...] = decoded[2].transforms
@@ -349,7 +352,6 @@ def test_what_the_checks_refuse_is_left_to_them() -> None:
     None from the compiled decoder, and ``decode`` names it as before."""
     from tfbus.errors import WireDecodeError, WireVersionError
 
-    assert compiled is not None
     good = _payload(_item())
     small = wire.WireCodec(wire.WireLimits(max_payload_bytes=len(good) - 1))
     cases: list[tuple[wire.WireCodec, bytes, type[WireError]]] = [
@@ -359,9 +361,7 @@ def test_what_the_checks_refuse_is_left_to_them() -> None:
         (wire.WireCodec(), good[:1] + bytes([wire.WIRE_VERSION + 1]) + good[2:], WireVersionError),
     ]
     for codec, payload, error in cases:
-        limits = codec.limits
-        assert compiled(payload, limits.max_payload_bytes, limits.max_transforms,
-                        limits.max_frame_id_length, wire.MAGIC, wire.WIRE_VERSION) is None
+        assert _fast(payload, codec.limits) is None
         with pytest.raises(error):
             codec.decode(payload)
         with pytest.raises(error):
