@@ -553,6 +553,55 @@ async def test_late_joiner_gets_the_valid_static_after_a_nan_resend() -> None:
             assert b.latched_statics() == TFMessage((good,))
 
 
+def test_a_late_joiner_is_served_what_was_handed_to_zenoh_numbered_as_it() -> None:
+    """The latch a late joiner is served holds what the latched topic's payloads 1..n
+    held, numbered n, from the moment payload n is handed to Zenoh's worker: a query
+    while a static still waits in the send queue is served the previous snapshot
+    (nothing before the first), so the reply and the live payload with one number
+    always hold the same transforms -- also when a second static is merged into the
+    waiting one -- and a receiver keeps one of them without losing the other's."""
+    from tfbus.transports.zenoh import transport as zt
+
+    tr = ZenohTransport(name="latch")
+    outlet = tr._outlet("/tf_static")
+    put: list[bytes] = []
+
+    class Publisher:  # Zenoh's publisher, as the worker thread uses it
+        def put(self, payload: bytes) -> None:
+            put.append(payload)
+
+    outlet.publisher, outlet.queued = Publisher(), True  # type: ignore[assignment]
+    laser, camera = ts("laser", 1, 1.5), ts("camera", 1, 0.5)
+
+    def served() -> tuple[int, TFMessage] | None:
+        if outlet.latched_payload is None:
+            return None
+        d = tr._codec.decode(outlet.latched_payload)
+        assert isinstance(d.message, TFMessage)
+        return d.seq, d.message
+
+    tr.send_nowait("/tf_static", TFMessage((laser,)))
+    assert served() is None  # payload 1 still waits: nothing handed over yet
+    tr.send_nowait("/tf_static", TFMessage((camera,)))  # merged into the waiting one
+    assert served() is None and tr.statistics().send_merged == 1
+    assert zt._put_all(tr._take_sends()) == (1, [])
+    live = tr._codec.decode(put[-1])
+    assert served() == (1, live.message) and live.seq == 1
+    assert {t.child_frame_id for t in live.message.transforms} == {"laser", "camera"}
+    tr.send_nowait("/tf_static", TFMessage((ts("wheel", 1, 0.1),)))
+    assert served() == (1, live.message)  # 2 waits: 1's snapshot is still served
+    zt._put_all(tr._take_sends())
+    now = served()
+    assert now is not None and now[0] == 2 and len(now[1].transforms) == 3
+    assert tr._codec.decode(put[-1]).message == TFMessage((ts("wheel", 1, 0.1),))
+    # a receiver served the reply numbered 2 before the live payloads: it held them both
+    rx = ZenohTransport(name="rx")
+    assert rx._receive(zt._REPLY, "/tf_static", outlet.latched_payload or b"") is not None
+    assert rx._receive(zt._SAMPLE, "/tf_static", put[0]) is None
+    assert rx._receive(zt._SAMPLE, "/tf_static", put[1]) is None
+    assert rx.statistics().duplicates == 2
+
+
 def test_a_latched_message_is_delivered_once_when_the_reply_races_the_live_one() -> None:
     """A node that starts publishing ``/tf_static`` is queried by its peers (its new
     topic token) while its first message is on the way: the live payload and the reply

@@ -61,6 +61,19 @@ def test_sequence_tracker_tells_a_late_joiner_reply_from_news() -> None:
     assert not tracker.reply_is_news(10, topic, 2)  # 1..2 since the restart arrived live
     tracker.forget(10)
     assert tracker.reply_is_news(10, topic, 2)
+    # Asked twice (the node appeared, then started publishing): the same reply twice,
+    # before the live payload; one delivered. An older reply after it is not news either;
+    # a newer one is.
+    assert tracker.reply_is_news(11, topic, 1)
+    assert not tracker.reply_is_news(11, topic, 1)
+    assert tracker.observe(11, topic, 1) == (0, False)
+    assert not tracker.live_is_news(11, topic, 1)
+    assert tracker.reply_is_news(12, topic, 3) and not tracker.reply_is_news(12, topic, 2)
+    assert tracker.reply_is_news(12, topic, 4)
+    # A reply numbered 0 (asked while the first message waited to be put: nothing of the
+    # stream yet) is remembered as delivered too.
+    assert tracker.reply_is_news(13, topic, 0) and not tracker.reply_is_news(13, topic, 0)
+    assert tracker.observe(13, topic, 1) == (0, False) and tracker.live_is_news(13, topic, 1)
     small = SequenceTracker(max_senders=2)
     for sender in range(1, 10):
         assert small.reply_is_news(sender, topic, 1)

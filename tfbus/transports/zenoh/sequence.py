@@ -23,15 +23,19 @@ class SequenceTracker:
     full, which only means the next payload of each stream starts it again).
 
     It also tells a late-joiner reply (the sender's latched payload, which carries the
-    number of the last payload it sent on that topic) from news: a reply numbered ``n``
-    repeats what a stream already delivered when every payload 1..n of it arrived live
-    (:meth:`reply_is_news`), and a live payload numbered ``n`` or less repeats what a
-    reply numbered ``n`` delivered (:meth:`live_is_news`). A reply and a live payload
-    travel different routes, so a receiver that joins while a latched topic is
-    published gets both; ROS 1 latching (sent on connect, then the stream) and DDS
-    transient-local durability (deduplicated by writer sequence numbers) deliver such a
-    message once. A payload that reached no subscriber does not count as delivered
-    (:meth:`unseen`): a subscriber that came after it still gets the reply.
+    number of the last payload it handed to Zenoh on that topic and holds what payloads
+    1..n of it held) from news: a reply numbered ``n`` repeats what a stream already
+    delivered when every payload 1..n of it arrived live, or when a reply numbered
+    ``n`` or later was delivered (a node answers every query that reaches it, so a
+    receiver that asks twice, when the node appears and when it starts publishing a
+    latched topic, gets the same reply twice) (:meth:`reply_is_news`); a live payload
+    numbered ``n`` or less repeats what a reply numbered ``n`` delivered
+    (:meth:`live_is_news`). A reply and a live payload travel different routes, so a
+    receiver that joins while a latched topic is published gets both; ROS 1 latching
+    (sent on connect, then the stream) and DDS transient-local durability
+    (deduplicated by writer sequence numbers) deliver such a message once. A payload
+    that reached no subscriber does not count as delivered (:meth:`unseen`): a
+    subscriber that came after it still gets the reply.
     """
 
     def __init__(self, max_gap: int = 100_000, max_senders: int = 4096) -> None:
@@ -73,16 +77,19 @@ class SequenceTracker:
         return 0, True
 
     def reply_is_news(self, sender: int, topic: str, seq: int) -> bool:
-        """Whether a late-joiner reply numbered ``seq`` may hold something the stream
-        did not deliver live (False when payloads 1..seq all arrived live); a reply that
-        is news is remembered for :meth:`live_is_news`."""
+        """Whether a late-joiner reply numbered ``seq`` may hold something not yet
+        delivered: False when payloads 1..seq all arrived live or a reply numbered
+        ``seq`` or later was delivered; a reply that is news is remembered for
+        :meth:`live_is_news` and the next replies."""
         key = (sender, topic)
         if key in self._whole and self._last[key] >= seq:
             return False
+        replied = self._replied.get(key)
+        if replied is not None and seq <= replied:
+            return False
         if len(self._replied) >= self.max_senders:
             self._replied.clear()
-        if seq > self._replied.get(key, 0):
-            self._replied[key] = seq
+        self._replied[key] = seq
         return True
 
     def live_is_news(self, sender: int, topic: str, seq: int) -> bool:

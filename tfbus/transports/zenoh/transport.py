@@ -21,7 +21,8 @@ implausibly are reported as resets, not as billions of lost messages.
 
 Late joiners: each transport serves the latched topics it has *itself* published
 (``/tf_static`` merged per child frame by a :class:`~tfbus.latch.StaticLatch`) on a
-queryable answered in Zenoh's thread from the bytes last latched
+queryable answered in Zenoh's thread from the latched snapshot of what it has handed to
+Zenoh, numbered as its last payload handed over
 (:mod:`tfbus.transports.zenoh.queryable`, the home of tfbus's Zenoh queryables); when
 a node appears (liveliness), the others query it, so a listener started after a static
 broadcaster -- or a broadcaster whose first publish raced the connection --
@@ -304,6 +305,7 @@ class _Pending:
     outlet: _Outlet
     publisher: zenoh.Publisher
     payload: bytes
+    latched: bytes | None = None  # what the latch serves once this one is handed over
 
 
 @dataclass(slots=True)
@@ -682,21 +684,22 @@ class ZenohTransport:
             self._log.log(logging.WARNING, "dropping a message on %s: %s", topic, exc)
             return
         outlet.seq = seq
-        if outlet.latched:
-            self._latch(outlet, message, payload)
-        if pending is not None and outlet.latched_payload is not None:
-            pending.payload = outlet.latched_payload  # not yet handed to Zenoh
+        latched = self._latch(outlet, message, payload) if outlet.latched else None
+        if pending is not None and latched is not None:
+            pending.payload = pending.latched = latched  # not yet handed to Zenoh
             self._stats.send_merged += 1
             return
         publisher = outlet.publisher
         if publisher is None:
+            if latched is not None:
+                outlet.latched_payload = latched  # never put: served to late joiners now
             if self._running:
                 self._stats.send_errors += 1
             else:
                 self._stats.not_connected += 1
             return
         if outlet.queued:
-            self._enqueue(_Pending(outlet, publisher, payload))
+            self._enqueue(_Pending(outlet, publisher, payload, latched))
             return
         try:
             publisher.put(payload)
@@ -732,6 +735,9 @@ class ZenohTransport:
         self._send_unlatched = 0
         for item in batch:
             item.outlet.pending = None  # handed over: a newer latched message is queued anew
+            if item.latched is not None:
+                # One reference assignment: the queryable thread reads old or new bytes.
+                item.outlet.latched_payload = item.latched
         return batch
 
     async def _send_loop(self) -> None:
@@ -843,13 +849,21 @@ class ZenohTransport:
             self._keys.alive(self._node_id, self._name, outlet.topic)
         )
 
-    def _latch(self, outlet: _Outlet, message: object, payload: bytes) -> None:
+    def _latch(self, outlet: _Outlet, message: object, payload: bytes) -> bytes:
+        """The payload a late joiner is served once ``message`` (numbered
+        ``outlet.seq``, written as ``payload``) is handed to Zenoh: the latched snapshot
+        (every valid transform per child frame) of a ``TFMessage``, else the message.
+
+        It is served from the handover on, not before: a reply numbered ``n`` then
+        holds what the stream's payloads 1..n held, no more, so that a receiver that
+        got the reply can drop the live payload ``n`` as a copy of it (and the reply to
+        a query that comes while ``n`` still waits is the previous snapshot, numbered
+        ``n - 1``: ``n`` itself is still to be put)."""
         if isinstance(message, TFMessage):
             outlet.latch.add(message)
             snapshot = outlet.latch.message()
             payload = self._codec.encode(snapshot, sender=self._sender, seq=outlet.seq)
-        # One reference assignment: the queryable thread reads either old or new bytes.
-        outlet.latched_payload = payload
+        return payload
 
     # -- internals: Zenoh threads (keep short, never block) ---------------------------
 
