@@ -29,12 +29,15 @@ ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
 
 
-def until(cond: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
-    """Poll ``cond`` (the server side of the page) for at most ``timeout`` seconds."""
+def until(cond: Callable[[], bool], what: str, timeout: float = 30.0,
+          seen: Callable[[], object] | None = None) -> None:
+    """Poll ``cond`` (the server side of the page) for at most ``timeout`` seconds; on a
+    timeout the error says what ``seen`` returns then (the state that was found)."""
     deadline = time.monotonic() + timeout
     while not cond():
         if time.monotonic() > deadline:
-            raise AssertionError(f"never: {what}")
+            found = "" if seen is None else f" (found {seen()!r})"
+            raise AssertionError(f"never: {what}{found}")
         time.sleep(0.05)
 
 
@@ -48,9 +51,13 @@ def _centre(c: object, selector_js: str) -> tuple[float, float]:
     from cdp import Chromium
 
     assert isinstance(c, Chromium)
+    # Only once the element is what a click there hits (a list still closing over it, or
+    # a layout still moving, would take the click).
     r = c.wait(f"(() => {{ const e = {selector_js}; if (!e) return null; e.scrollIntoView("
                "{block: 'center'}); const b = e.getBoundingClientRect(); "
-               "return [b.x + b.width / 2, b.y + b.height / 2]; })()")
+               "const x = b.x + b.width / 2, y = b.y + b.height / 2; "
+               "const hit = document.elementFromPoint(x, y); "
+               "return hit && (hit === e || e.contains(hit)) ? [x, y] : null; })()")
     return float(r[0]), float(r[1])
 
 
@@ -198,16 +205,21 @@ def _pick(c: object, label: str, option: str) -> None:
     from cdp import Chromium
 
     assert isinstance(c, Chromium)
-    shown = ("[...document.querySelectorAll('[role=option]')].find(e => e.textContent === "
-             f"{json.dumps(option)} && e.getBoundingClientRect().height > 0)")
+    inp = f"{_row(label)}.querySelector('input')"
+    # the option in this dropdown's own list: the one its input names (aria-controls)
+    # while open, so that a click another list took is never taken for this one's
+    shown = (f"(() => {{ const i = {inp}; const l = i && i.getAttribute('aria-expanded') "
+             "=== 'true' && document.getElementById(i.getAttribute('aria-controls')); "
+             "return l ? [...l.querySelectorAll('[role=option]')].find(e => e.textContent "
+             f"=== {json.dumps(option)} && e.getBoundingClientRect().height > 0) : null; }})()")
     # The list of the dropdown picked before may still be closing (a loaded machine): its
     # options, shown, would be clicked in place of this one's.
     closed = ("![...document.querySelectorAll('[role=option]')]"
               ".some(e => e.getBoundingClientRect().height > 0)")
-    value = f"{_row(label)}.querySelector('input').value === {json.dumps(option)}"
+    value = f"{inp}.value === {json.dumps(option)}"
     for _ in range(3):  # a click before the page settled, or on a list still moving in
         c.wait(closed, timeout=10.0)
-        c.click(*_centre(c, f"{_row(label)}.querySelector('input')"))
+        c.click(*_centre(c, inp))
         try:
             c.wait(f"!!({shown})", timeout=5.0)
             now = _centre(c, shown)
@@ -344,9 +356,11 @@ async def test_live_controls_and_findings_in_chromium(chromium: str, page: TfPag
                 # makeThrottledMessageSender): a pick made before the previous one went
                 # out replaces it, so each pick is awaited at the server.
                 _pick(c, "frame A", "arm")
-                until(lambda: page.pair_choice == ("arm", None), "A picked")
+                until(lambda: page.pair_choice == ("arm", None), "A picked",
+                      seen=lambda: (page.pair_choice, page.fixed_frame_choice))
                 _pick(c, "frame B", "odom")
-                until(lambda: page.pair_choice == ("arm", "odom"), "A and B picked")
+                until(lambda: page.pair_choice == ("arm", "odom"), "A and B picked",
+                      seen=lambda: (page.pair_choice, page.fixed_frame_choice))
                 return str(c.js("document.body.innerText"))
 
         text = await anyio.to_thread.run_sync(browse)
