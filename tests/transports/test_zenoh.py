@@ -587,6 +587,7 @@ def test_a_late_joiner_is_served_what_was_handed_to_zenoh_numbered_as_it() -> No
     assert zt._put_all(tr._take_sends()) == (1, [])
     live = tr._codec.decode(put[-1])
     assert served() == (1, live.message) and live.seq == 1
+    assert outlet.latched_payload == put[-1]  # the merged snapshot is what was put
     assert {t.child_frame_id for t in live.message.transforms} == {"laser", "camera"}
     tr.send_nowait("/tf_static", TFMessage((ts("wheel", 1, 0.1),)))
     assert served() == (1, live.message)  # 2 waits: 1's snapshot is still served
