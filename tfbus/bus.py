@@ -505,7 +505,10 @@ class Bus:
             if self._state == "closed":
                 return
             self._check_open()
-        self._counters(topic).remote += 1
+        counters = self._topic_counters.get(topic)  # _counters, inline: a call fewer
+        if counters is None:
+            counters = self._counters(topic)
+        counters.remote += 1
         self._deliver(topic, message)
 
     def deliver_many_nowait(self, topic: str, messages: Iterable[object]) -> None:

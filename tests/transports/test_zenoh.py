@@ -215,7 +215,7 @@ async def test_two_buses_exchange_in_order_and_statics_and_peers() -> None:
 
 
 @pytest.mark.anyio
-async def test_malformed_payloads_are_dropped_and_counted() -> None:
+async def test_malformed_payloads_are_dropped_and_counted_and_a_delete_ignored() -> None:
     port = free_port()
     transport = ZenohTransport(
         listen=f"tcp/127.0.0.1:{port}", name="victim", limits=wire.WireLimits(max_transforms=10)
@@ -232,8 +232,11 @@ async def test_malformed_payloads_are_dropped_and_counted() -> None:
             bad_version = bytes([wire.MAGIC, wire.WIRE_VERSION + 1]) + good[2:]
             too_many = codec.encode(TFMessage((ts("x", 1),) * 11), sender=6, seq=1)
             last = codec.encode(TFMessage((ts("ok", 2),)), sender=5, seq=2)
-            for payload in [good, b"\x00garbage", good[:-3], bad_version, too_many, b"", last]:
+            for payload in [good, b"\x00garbage", good[:-3], bad_version, too_many, b""]:
                 raw.put(payload)
+            # a DELETE on the key carries no message: ignored, unlike the empty PUT above
+            raw.delete()
+            raw.put(last)
             with anyio.fail_after(5):
                 first = await sub.receive()
                 second = await sub.receive()

@@ -184,7 +184,11 @@ class NewestOnly:
         transport = self._transport
         with self._lock:
             pending, self.payload = self.payload, payload  # stored before ``due`` reads
-            ns = clock_stamp(payload)
+            # clock_stamp, its compiled reader inline (one Python call fewer a sample)
+            ns: int | None = (_COMPILED_STAMP(payload, MAGIC, WIRE_VERSION)
+                  if _COMPILED_STAMP is not None and type(payload) is bytes else -1)
+            if ns is None or ns < 0:
+                ns = _clock_stamp_schema(payload)
             now = time.monotonic()
             ordered = ns is None or ns < self._last_ns
             # a step back, no Clock (ns None), or a follower's due (any_due, inline for
@@ -877,13 +881,19 @@ class ZenohTransport:
             wakeup.wake()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        if sample.kind == _PUT:
-            key = str(sample.key_expr)
-            newest = self._newest.get(key) if self._newest else None
-            if newest is not None:
-                newest.offer(sample.payload.to_bytes())
-                return
-            self._push((_SAMPLE, key, sample.payload.to_bytes()))
+        # A DELETE (``session.delete`` on a data key) carries no payload and no message:
+        # ignored. Its kind is asked only of an empty payload (an empty PUT is a message
+        # that does not decode: counted as malformed): every sample read in Zenoh's thread
+        # is one getter of zenoh-python fewer.
+        payload = sample.payload.to_bytes()
+        if not payload and sample.kind != _PUT:
+            return
+        key = str(sample.key_expr)
+        newest = self._newest.get(key) if self._newest else None
+        if newest is not None:
+            newest.offer(payload)
+            return
+        self._push((_SAMPLE, key, payload))
 
     def _on_reply(self, reply: zenoh.Reply) -> None:
         sample = reply.ok
