@@ -260,15 +260,19 @@ def native_clock_payload(draw: st.DrawFn) -> bytes:
 @given(payload=native_clock_payload())
 @example(payload=_native_clock(1, -1, "Clock", 5))
 @example(payload=_native_clock(2**64 - 1, 1, "Clock", 5))
+# another writer's encoding (the tag as a str 8): the schema reads it, not the C reader
+@example(payload=bytes([native.MAGIC, native.WIRE_VERSION]) + b"\x94\x05\x07\xd9\x05Clock\x91"
+         + b"\xcf" + (1_500_000_000).to_bytes(8, "big"))
 def test_the_zenoh_newest_only_stamp_reads_exactly_the_clocks_the_decoder_accepts(
     payload: bytes,
 ) -> None:
     """Zenoh's thread reads each /clock's stamp with a light decoder to decide which
-    sample to keep (``clock_stamp``); a sample it keeps replaces the one kept before.
-    It gives a stamp exactly for the payloads the event loop's full decoder takes as a
-    Clock, with the same stamp, so a sample that will be dropped never takes the place of
-    a good one (before: a sender id or sequence number outside [1, 2**63) was read as a
-    stamp, and the good sample it replaced was lost)."""
+    sample to keep (``clock_stamp``, and ``NewestOnly.offer``, which reads it the same
+    way inline); a sample it keeps replaces the one kept before. It gives a stamp exactly
+    for the payloads the event loop's full decoder takes as a Clock, with the same stamp,
+    so a sample that will be dropped never takes the place of a good one (before: a
+    sender id or sequence number outside [1, 2**63) was read as a stamp, and the good
+    sample it replaced was lost)."""
     pytest.importorskip("zenoh")
     from tfbus.transports.zenoh.transport import clock_stamp
 
@@ -278,6 +282,48 @@ def test_the_zenoh_newest_only_stamp_reads_exactly_the_clocks_the_decoder_accept
         message = None
     expected = message.clock.ns if isinstance(message, Clock) else None
     assert clock_stamp(payload) == expected
+    assert _stamp_offered(payload) == expected
+
+
+class _Stats:
+    coalesced = 0
+
+
+class _Listeners:
+    """A bus with no listener on ``/clock`` but the follower (``heard_beyond`` asks)."""
+
+    def listeners(self, topic: str) -> int:
+        return 0
+
+
+class _Transport:
+    """What ``NewestOnly.offer`` touches of its transport: the queue and the counters."""
+
+    def __init__(self) -> None:
+        self.pushed: list[object] = []
+        self._stats = _Stats()
+        self._bus = _Listeners()
+
+    def _push(self, item: object) -> None:
+        self.pushed.append(item)
+
+
+def _stamp_offered(payload: bytes) -> int | None:
+    """The stamp ``NewestOnly.offer`` reads from ``payload`` (its follower's ``due`` is
+    asked with it), or None when it read none (then the sample is queued for the loop,
+    which drops it: checked)."""
+    from tfbus.transports.zenoh.transport import NewestOnly
+
+    seen: list[int] = []
+    transport = _Transport()
+    newest = NewestOnly(transport, CLOCK_TOPIC, "tfbus/clock")  # type: ignore[arg-type]
+    newest.follow(lambda ns: seen.append(ns) or False)
+    newest.offer(payload)
+    if seen:
+        assert transport.pushed == [] and newest.kept_ns == seen[0]  # kept, not queued
+        return seen[0]
+    assert [item[2] for item in transport.pushed] == [payload]  # type: ignore[index]
+    return None
 
 
 @pytest.mark.anyio
