@@ -185,10 +185,9 @@ class NewestOnly:
         with self._lock:
             pending, self.payload = self.payload, payload  # stored before ``due`` reads
             # clock_stamp, its compiled reader inline (one Python call fewer a sample)
-            ns: int | None = (_COMPILED_STAMP(payload, MAGIC, WIRE_VERSION)
-                  if _COMPILED_STAMP is not None and type(payload) is bytes else -1)
-            if ns is None or ns < 0:
-                ns = _clock_stamp_schema(payload)
+            fast = (_COMPILED_STAMP(payload, MAGIC, WIRE_VERSION)
+                    if _COMPILED_STAMP is not None and type(payload) is bytes else -1)
+            ns = fast if fast >= 0 else _clock_stamp_schema(payload)
             now = time.monotonic()
             ordered = ns is None or ns < self._last_ns
             # a step back, no Clock (ns None), or a follower's due (any_due, inline for
