@@ -32,8 +32,6 @@ from functools import cache
 from pathlib import Path
 from typing import Any, Final, TypeAlias
 
-import pytest
-
 from tfbus import (
     Duration,
     Header,
@@ -66,10 +64,12 @@ __all__ = [
     "run_case",
 ]
 
-DEVIATIONS: Final = pytest.StashKey[dict[str, list[str]]]()
-"""Where ``test_level1`` records, per case id, the ops that differ from tf2 by design
-(``config.stash``); ``conftest.pytest_terminal_summary`` sums them up in one line at the
-end of a run and lists them with ``-v``."""
+DEVIATIONS: Final = "tf2_deviations"
+"""The name under which ``test_level1`` records the ops of its case that differ from tf2 by
+design, ``(case id, [line per op])``, in its report's ``user_properties`` (which reach the
+main process from pytest-xdist's workers, where ``config.stash`` would not);
+``conftest.pytest_terminal_summary`` sums them up in one line at the end of a run and lists
+them with ``-v``."""
 
 CORPUS: Final = Path(__file__).parent / "data" / "public.jsonl.gz"
 

@@ -45,10 +45,8 @@ def pytest_terminal_summary(
 ) -> None:
     """The intended deviation from tf2 (±Inf translations rejected) in one line at the end
     of a run that met it, instead of one warning per case; ``-v`` lists every op."""
-    from conformance import DEVIATIONS
-
     _skip_summary(terminalreporter, config)
-    found = config.stash.get(DEVIATIONS, {})
+    found = _DEVIATIONS
     if not found:
         return
     ops = sum(len(lines) for lines in found.values())
@@ -65,14 +63,23 @@ def pytest_terminal_summary(
 
 # Every skip of the run (not expected failures): (node id, reason), in order.
 _SKIPS: list[tuple[str, str]] = []
+# The corpus ops that differ from tf2 by design, by case id (conformance.DEVIATIONS).
+_DEVIATIONS: dict[str, list[str]] = {}
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
-    """Keep every skip with its reason, for the summary and the CI check below."""
+    """Keep every skip with its reason, for the summary and the CI check below, and the
+    corpus's deviations a test reported (in the main process, pytest-xdist's workers' too)."""
+    from conformance import DEVIATIONS
+
     if report.skipped and not hasattr(report, "wasxfail"):
         longrepr = report.longrepr
         reason = longrepr[2] if isinstance(longrepr, tuple) else str(longrepr)
         _SKIPS.append((report.nodeid, reason.removeprefix("Skipped: ")))
+    for name, value in report.user_properties:
+        if name == DEVIATIONS and report.when == "call":
+            case_id, lines = value
+            _DEVIATIONS[case_id] = list(lines)
 
 
 def _unexpected_skips() -> list[tuple[str, str]]:

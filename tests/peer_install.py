@@ -19,6 +19,7 @@ import fnmatch
 import os
 import re
 import subprocess
+import tempfile
 from pathlib import Path
 from typing import NoReturn
 
@@ -26,6 +27,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = ROOT / "scripts" / "install"
+LOCK_TIMEOUT = 75
+"""flock(1)'s exit status when another process held an install script's lock too long."""
 
 # The command that installs each peer (what a skip outside CI tells the user to run).
 INSTALL: dict[str, str] = {
@@ -76,17 +79,27 @@ def peer_unavailable(peer: str, reason: str) -> NoReturn:
 
 def install(peer: str, script: str, timeout: float = 1900.0) -> str:
     """Run ``scripts/install/<script>`` (idempotent) and return its ``ready`` line; when it exits
-    non-zero or does not finish in ``timeout`` seconds, :func:`peer_unavailable`."""
+    non-zero, waits over ``timeout`` seconds for another process's run of the same script or
+    does not finish within twice that, :func:`peer_unavailable`."""
+    # One run of a script at a time across the processes of a run (``make test``'s
+    # pytest-xdist workers): flock(1) holds a lock file of its own per script while it runs,
+    # so a second worker needing the same peer waits (within ``timeout``), then finds it
+    # installed, instead of a second apt-get or venv build beside the first.
+    lock = Path(tempfile.gettempdir()) / f"tfbus-peer-install-{os.getuid()}-{script}.lock"
+    wait = max(1, int(timeout))
     try:
         out = subprocess.run(
-            ["bash", str(SCRIPTS / script)],
+            ["flock", "--wait", str(wait), "--conflict-exit-code", str(LOCK_TIMEOUT),
+             str(lock), "bash", str(SCRIPTS / script)],
             capture_output=True,
             text=True,
-            timeout=timeout,
+            timeout=2 * timeout,
             check=False,
-        )
+        )  # fmt: skip
     except subprocess.TimeoutExpired:
-        peer_unavailable(peer, f"scripts/install/{script} did not finish in {timeout:.0f} s")
+        peer_unavailable(peer, f"scripts/install/{script} did not finish in {2 * timeout:.0f} s")
+    if out.returncode == LOCK_TIMEOUT:
+        peer_unavailable(peer, f"another process ran scripts/install/{script} for over {wait} s")
     lines = out.stdout.strip().splitlines()
     if out.returncode != 0:
         why = next((ln for ln in lines if "unavailable" in ln), None)

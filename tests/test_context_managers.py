@@ -11,7 +11,6 @@ the loopback Cyclone configuration, ROS 1 on the harness's own roscore.
 
 from __future__ import annotations
 
-import random
 import socket
 import sys
 from collections.abc import AsyncIterator, Callable
@@ -22,6 +21,7 @@ from typing import Any
 import anyio
 import anyio.abc
 import pytest
+from dds_domains import new_domain
 from ros1_harness import (  # noqa: F401  (the *_fixture names register fixtures)
     Master,
     master_fixture,
@@ -96,7 +96,7 @@ async def test_bus_over_ros2() -> None:
     pytest.importorskip("cyclonedds", reason="needs the ros2 extra: pip install 'tfbus[ros2]'")
     from tfbus.transports.ros2 import Ros2Transport
 
-    domain = random.SystemRandom().randint(101, 200)  # test_ros2.py takes 1..100
+    domain = new_domain()
     await _assert_leaves_as_itself(lambda: Bus(transport=Ros2Transport(domain_id=domain)))
 
 

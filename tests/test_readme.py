@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import importlib.metadata
 import os
-import random
 import re
 import socket
 import subprocess
@@ -15,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from dds_domains import new_domain
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -154,7 +154,7 @@ def test_python_block_runs_as_a_script(line: int, code: str, tmp_path: Path) -> 
     random DDS domain on loopback, a ROS 1 master URI where nothing listens."""
     script = tmp_path / f"readme_line_{line}.py"
     script.write_text(code, encoding="utf-8")
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(100, 200)), ROS_IP="127.0.0.1",
+    env = dict(os.environ, ROS_DOMAIN_ID=str(new_domain()), ROS_IP="127.0.0.1",
                ROS_MASTER_URI=f"http://127.0.0.1:{_closed_port()}")
     try:
         done = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env,

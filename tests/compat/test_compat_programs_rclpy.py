@@ -17,7 +17,6 @@ import json
 import math
 import os
 import queue
-import random
 import re
 import signal
 import subprocess
@@ -29,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from dds_domains import new_domain
 from peer_install import peer_unavailable, require
 from ros1_harness import Proc, ros1_fixture  # noqa: F401
 
@@ -82,7 +82,7 @@ def ros2_fixture(ros_python: Path) -> Iterator[dict[str, str]]:
     site = os.pathsep.join(dict.fromkeys([paths["purelib"], paths["platlib"]]))
     env = dict(
         os.environ,
-        ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)),
+        ROS_DOMAIN_ID=str(new_domain()),
         RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         FASTDDS_DEFAULT_PROFILES_FILE=str(PEERS / "fastdds_lo.xml"),

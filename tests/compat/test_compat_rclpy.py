@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import subprocess
 import sys
 import sysconfig
 from pathlib import Path
 
 import pytest
+from dds_domains import new_domain
 from peer_install import peer_unavailable, require
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,7 +58,7 @@ def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
     site = os.pathsep.join(dict.fromkeys([paths["purelib"], paths["platlib"]]))
     env = dict(
         os.environ,
-        ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)),
+        ROS_DOMAIN_ID=str(new_domain()),
         RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         FASTDDS_DEFAULT_PROFILES_FILE=str(profile),
@@ -105,7 +105,7 @@ def test_buffer_under_an_rclpy_node_with_use_sim_time_follows_clock(
     site = os.pathsep.join(dict.fromkeys([paths["purelib"], paths["platlib"]]))
     env = dict(
         os.environ,
-        ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)),
+        ROS_DOMAIN_ID=str(new_domain()),
         RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         FASTDDS_DEFAULT_PROFILES_FILE=str(profile),

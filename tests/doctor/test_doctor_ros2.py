@@ -8,11 +8,11 @@ children are ended by PID."""
 from __future__ import annotations
 
 import json
-import random
 import subprocess
 import sys
 
 import pytest
+from dds_domains import new_domain
 
 pytest.importorskip("cyclonedds")
 
@@ -20,7 +20,7 @@ from doctor_procs import ROOT, Child, child_env
 
 
 def test_static_and_dynamic_over_ros2() -> None:
-    domain = random.SystemRandom().randint(150, 220)
+    domain = new_domain()
     spec = f"ros2:domain={domain}"
     env = child_env()
     env.pop("CYCLONEDDS_URI", None)  # the transport's defaults: loopback, no multicast

@@ -17,7 +17,6 @@ import json
 import math
 import os
 import queue
-import random
 import re
 import signal
 import subprocess
@@ -31,6 +30,7 @@ from typing import Any
 
 import anyio
 import pytest
+from dds_domains import new_domain
 from peer_install import peer_unavailable, require
 
 pytest.importorskip("cyclonedds", reason="needs the ros2 extra: pip install 'tfbus[ros2]'")
@@ -82,18 +82,6 @@ ROS_VENV_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 INSTALL = ROOT / "scripts" / "install" / "install_ros2_env.sh"
 WAIT = 30.0  # bound of every wait on a peer (Fast DDS -> Cyclone takes 3-4 s to match)
 
-_rng = random.SystemRandom()
-_used_domains: set[int] = set()
-
-
-def new_domain() -> int:
-    """A random ROS_DOMAIN_ID (1..100) not used before in this run."""
-    for _ in range(1000):
-        d = _rng.randint(1, 100)
-        if d not in _used_domains:
-            _used_domains.add(d)
-            return d
-    raise RuntimeError("no free domain id left")
 
 
 @pytest.fixture(params=["asyncio", "trio"])

@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import random
 import subprocess
 import sys
 from collections.abc import AsyncIterator, Callable
@@ -29,6 +28,7 @@ from typing import Any
 
 import anyio
 import pytest
+from dds_domains import new_domain
 from peer_install import peer_unavailable, require
 
 pytest.importorskip("cyclonedds", reason="needs the ros2 extra: pip install 'tfbus[ros2]'")
@@ -50,19 +50,6 @@ PEER = ROOT / "peers" / "ros2" / "lookup_action_codec_peer.py"
 ROS_VENV_PYTHON = ROOT / ".venv-ros2" / "bin" / "python"
 WAIT = 30.0  # bound of every wait on DDS discovery and answers
 
-_rng = random.SystemRandom()
-_used_domains: set[int] = set()
-
-
-def new_domain() -> int:
-    """A random ROS_DOMAIN_ID in 101..232 not used before in this run
-    (tests/transports/test_ros2.py takes 1..100)."""
-    free = sorted(set(range(101, 233)) - _used_domains)
-    if not free:
-        raise RuntimeError("no free domain id left")
-    d = _rng.choice(free)
-    _used_domains.add(d)
-    return d
 
 
 @pytest.fixture(params=["asyncio", "trio"])
