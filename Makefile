@@ -44,8 +44,13 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy --strict tfbus
 
+# The suite on PYTEST_WORKERS pytest-xdist worker processes, each test file whole on one
+# (its module fixtures set up once); most tests wait on other processes (peers, browsers,
+# servers), so two workers on two cores take about 60 % of one's time. PYTEST_WORKERS=0
+# runs it in this one process.
+PYTEST_WORKERS ?= 2
 test: lint
-	$(BIN)/python -m pytest -q --durations=30
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile --durations=30
 
 demo: $(CORE_STAMP)
 	@echo "make: running the tutorial demo for 10 s (a 100 Hz broadcaster and a 1 Hz listener on one bus)"
