@@ -80,6 +80,24 @@ async def test_listener_without_broadcaster_prints_the_error_line() -> None:
         tg.cancel_scope.cancel()
 
 
+async def test_broadcaster_counts_the_ticks_its_timer_skipped_when_late() -> None:
+    """A loop late by over a period (time jumps 35 ms while it does not run) gets the
+    latest passed tick at once and the older ones skipped, counted in ``skipped``
+    (``PeriodicTimer``'s overrun policy, ``rcl_timer``'s)."""
+    clock = ManualClock(START)
+    stats = BroadcasterStatistics()
+    async with Bus() as bus, anyio.create_task_group() as tg:
+        tg.start_soon(broadcaster_node, bus, clock, 100.0, stats)
+        await anyio.wait_all_tasks_blocked()
+        assert (stats.sent, stats.skipped) == (1, 0)  # the immediate first tick
+        clock.advance_nowait(0.035)  # the 10, 20 and 30 ms deadlines pass unseen
+        await anyio.wait_all_tasks_blocked()
+        assert (stats.sent, stats.skipped) == (2, 2)  # 30 ms fired, 10 and 20 skipped
+        await clock.advance(0.005)  # 40 ms: on schedule again
+        assert (stats.sent, stats.skipped) == (3, 2)
+        tg.cancel_scope.cancel()
+
+
 def test_main_rejects_bad_rates(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", "--rate", "0"]) == 2
     err = capsys.readouterr().err.strip()

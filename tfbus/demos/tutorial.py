@@ -123,6 +123,10 @@ class BroadcasterStatistics:
     timer's jitter (a window, so that a broadcaster left running keeps its memory)."""
 
     sent: int = 0
+    skipped: int = 0
+    """Ticks the timer skipped because the loop was late for them by a period or more
+    (:class:`~tfbus.clock.PeriodicTimer`'s overrun policy, ``rcl_timer``'s): on a
+    starved machine the broadcast rate is ``rate * sent / (sent + skipped)``."""
     first_ns: int | None = None
     last_ns: int | None = None
     lateness_ns: deque[int] = field(default_factory=lambda: deque(maxlen=LATENESS_WINDOW))
@@ -183,6 +187,7 @@ async def broadcaster_node(
         send(TransformStamped(Header(now, "base_link"), "base_laser", LASER_OFFSET))
         now_ns = now.ns
         stats.sent += 1
+        stats.skipped = tick.overruns
         if stats.first_ns is None:
             stats.first_ns = now_ns
         stats.last_ns = now_ns
