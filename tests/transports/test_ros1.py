@@ -417,9 +417,9 @@ async def test_tfbus_broadcaster_feeds_cpp_listener_at_100_hz(
     more, the timer skips the ticks it missed, as ``rcl_timer`` does: then the rate
     those ticks make, ± 1 Hz)."""
     transport = Ros1Transport(master_uri=master.uri, node_name="/robot_tf_publisher")
-    stats = BroadcasterStatistics()
+    ticks = BroadcasterStatistics()
     async with Bus(transport=transport) as bus, anyio.create_task_group() as tg:
-        tg.start_soon(broadcaster_node, bus, SystemClock(), 100.0, stats)
+        tg.start_soon(broadcaster_node, bus, SystemClock(), 100.0, ticks)
         listener = master.run(str(tutorial_nodes / "tf_listener"))
         hz = master.run("rostopic", "hz", "/tf", "-w", "300")
         try:
@@ -433,10 +433,10 @@ async def test_tfbus_broadcaster_feeds_cpp_listener_at_100_hz(
             rates: list[float] = []
             for i in range(6):
                 if i == 3:  # the steady reports' span starts
-                    sent, skipped = stats.sent, stats.skipped
+                    sent, skipped = ticks.sent, ticks.skipped
                 m = await anyio.to_thread.run_sync(hz.wait_for, r"average rate: ([\d.]+)", 20.0)
                 rates.append(float(m.group(1)))
-            sent, skipped = stats.sent - sent, stats.skipped - skipped
+            sent, skipped = ticks.sent - sent, ticks.skipped - skipped
         finally:
             listener.stop()
             hz.stop()
