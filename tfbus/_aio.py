@@ -8,6 +8,8 @@ and each with its portable anyio fallback next to it in the caller:
   an import of asyncio);
 * :class:`ShieldedYield` -- ``cancel_shielded_checkpoint`` as one yield on a done future
   (``Future._asyncio_future_blocking``);
+* :func:`timer_delay` -- the delay to arm a loop timer with so that it fires no earlier
+  than asked on a loop whose timers count whole milliseconds (uvloop's);
 * :class:`Wakeup` -- a one-shot wake-up: a bare future of the loop on asyncio, a parked
   task on trio (``trio.lowlevel``, looked up in ``sys.modules``), an ``anyio.Event``
   elsewhere;
@@ -16,8 +18,9 @@ and each with its portable anyio fallback next to it in the caller:
 * :func:`open_pumped_connection` -- a TCP connection read in the loop's read callback into
   one kept buffer (``asyncio.BufferedProtocol``), for the ROS 1 transport's TCPROS
   subscriber connections;
-* :func:`asyncio_transport_of` -- the ``asyncio.Transport`` under an anyio socket stream,
-  which the ROS 1 publisher writes a frame to from the publishing task.
+* :func:`asyncio_transport_of` -- the ``asyncio.Transport`` under an anyio socket stream
+  (uvloop's own transport on uvloop), which the ROS 1 publisher writes a frame to from the
+  publishing task.
 
 and, portable on every backend, :func:`exit_task_group`: how every tfbus context manager
 that owns a task group leaves it, so that the exception its body raised leaves it as
@@ -33,6 +36,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
 import re
 import sys
 import warnings
@@ -49,6 +53,7 @@ if TYPE_CHECKING:
     from types import TracebackType
 
 __all__ = [
+    "MILLISECOND_TIMERS",
     "Awaiting",
     "ShieldedYield",
     "Wakeup",
@@ -57,6 +62,7 @@ __all__ = [
     "exit_task_group",
     "open_pumped_connection",
     "running_asyncio_loop",
+    "timer_delay",
     "wait_all_tasks_blocked",
 ]
 
@@ -79,6 +85,35 @@ def running_asyncio_loop() -> AbstractEventLoop | None:
     if asyncio.current_task(loop) is None:
         return None  # a callback of the loop, not a task: e.g. trio in guest mode
     return loop
+
+
+MILLISECOND_TIMERS: dict[type, bool] = {}
+"""Per event loop class met so far: whether its timers count whole milliseconds
+(uvloop's), filled by :func:`timer_delay`; a hot path reads it first (``.get(type(loop),
+True)``) and calls :func:`timer_delay` only when it is not known to be False."""
+
+
+def timer_delay(loop: AbstractEventLoop, seconds: float) -> float:
+    """The delay to give ``loop.call_later`` (or ``loop.call_at(loop.time() + delay)``)
+    for a timer that must not fire before ``seconds`` (> 0) have passed.
+
+    asyncio's own loop keeps a timer's time as a float and runs it once its time has
+    come: ``seconds`` itself. uvloop's counts whole milliseconds of libuv's clock, which
+    it reads truncated to the millisecond (``Loop.call_later``: ``round(delay * 1000)``
+    milliseconds, and a delay that rounds to 0 runs at the loop's next turn; libuv
+    ``uv_timer_start`` from ``uv_now``): a timer fires up to a millisecond early, and a
+    deadline re-armed for what is left of it then runs at every turn of the loop until
+    the deadline passes (a busy loop of up to half a millisecond a deadline). There the
+    delay is rounded up to a whole millisecond, plus one: the timer fires once, at or
+    after ``seconds``, at most 2 ms late (uvloop's own granularity).
+    """
+    kind = type(loop)
+    coarse = MILLISECOND_TIMERS.get(kind)
+    if coarse is None:
+        coarse = MILLISECOND_TIMERS[kind] = _module_root(loop) == "uvloop"
+    if not coarse:
+        return seconds
+    return (math.ceil(seconds * 1000.0 - 1e-6) + 1) / 1000.0
 
 
 class ShieldedYield:
@@ -320,13 +355,23 @@ def asyncio_transport_of(stream: object) -> Transport | None:
     """The ``asyncio.Transport`` that anyio's asyncio ``SocketStream`` writes to (its
     ``_transport``: ``send`` is ``transport.write`` and a checkpoint), or None for any
     other stream (trio's, a test's fake). Writing to it directly is ``send`` without the
-    checkpoint, for a caller that keeps the order of what it writes itself.
+    checkpoint, for a caller that keeps the order of what it writes itself. On uvloop the
+    transport is uvloop's own (``uvloop.loop.TCPTransport``, not an ``asyncio.Transport``
+    subclass, with the same ``write``, ``get_write_buffer_size`` and ``is_closing``).
     """
     asyncio = sys.modules.get("asyncio")
     transport: object = getattr(stream, "_transport", None)
-    if asyncio is None or not isinstance(transport, asyncio.Transport):
+    if asyncio is None or transport is None:
+        return None
+    if not isinstance(transport, asyncio.Transport) and _module_root(transport) != "uvloop":
         return None
     return cast("Transport", transport)
+
+
+def _module_root(obj: object) -> str:
+    """The top-level package of ``obj``'s class (``"uvloop"`` for uvloop's loop and
+    transports)."""
+    return type(obj).__module__.partition(".")[0]
 
 
 # -- context managers: the body's exception leaves as itself -------------------------------

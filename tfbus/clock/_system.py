@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import anyio
 import anyio.lowlevel
 
-from tfbus._aio import running_asyncio_loop
+from tfbus._aio import MILLISECOND_TIMERS, running_asyncio_loop, timer_delay
 from tfbus.clock._base import (
     JumpCallback,
     _JumpCallbacks,
@@ -195,7 +195,8 @@ class SystemClock:
         return ns
 
     async def sleep_until(self, t: Time) -> None:
-        """Return once the wall clock reads ``>= t``.
+        """Return once the wall clock reads ``>= t`` (on uvloop, whose timers count
+        whole milliseconds, up to 2 ms after: :func:`tfbus._aio.timer_delay`).
 
         Raises:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled meanwhile.
@@ -204,8 +205,14 @@ class SystemClock:
         if remaining <= 0:
             await anyio.lowlevel.checkpoint()
             return
+        loop = running_asyncio_loop()
+        coarse = loop is not None and MILLISECOND_TIMERS.get(type(loop), True)
         while remaining > 0:
-            await anyio.sleep(min(remaining / NSEC_PER_SEC, self._max_sleep))
+            seconds = min(remaining / NSEC_PER_SEC, self._max_sleep)
+            if coarse:  # uvloop's timers: rounded up, not a busy loop at the end
+                assert loop is not None
+                seconds = timer_delay(loop, seconds)
+            await anyio.sleep(seconds)
             remaining = t.ns - self.now().ns
 
     async def sleep(self, seconds: float | Duration) -> None:

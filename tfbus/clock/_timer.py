@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import anyio
 
-from tfbus._aio import Wakeup, running_asyncio_loop
+from tfbus._aio import MILLISECOND_TIMERS, Wakeup, running_asyncio_loop, timer_delay
 from tfbus.clock._base import Clock
 from tfbus.clock._system import SystemClock
 from tfbus.time import NSEC_PER_SEC, TIME_MAX_NS, Duration, Time, seconds_to_ns
@@ -198,6 +198,8 @@ class PeriodicTimer:
             if type(clock) is SystemClock:
                 seconds = min((deadline - now_ns) / NSEC_PER_SEC, clock._max_sleep)
                 if loop is not None:
+                    if MILLISECOND_TIMERS.get(type(loop), True):  # uvloop's timers: rounded up
+                        seconds = timer_delay(loop, seconds)
                     future = loop.create_future()
                     self._handle = handle = loop.call_at(
                         loop.time() + seconds, _wake_future, future
