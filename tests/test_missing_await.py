@@ -21,11 +21,18 @@ from typing import Any
 import anyio
 import numpy as np
 import pytest
+from event_loops import backends_with_uvloop, uvloop_backend
 
 from tfbus import Buffer, Header, Point, PointStamped, Time, Transform, TransformStamped, Vector3
 from tfbus.clock import ManualClock
 
 pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=backends_with_uvloop(), scope="module")
+def anyio_backend(request: pytest.FixtureRequest) -> object:
+    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
+    return uvloop_backend(request.param)
 
 ODOM_IN_MAP = (1.0, 2.0, 3.0)  # map -> odom at 5 s; at 4 s it was (0, 2, 3): 1 m/s along x
 P_ODOM = PointStamped(Header(Time(0), "odom"), Point(1.0, 0.0, 0.0))
@@ -131,7 +138,7 @@ async def test_a_call_never_awaited_warns_naming_the_missing_await(method: str) 
 
 
 async def test_a_wait_without_await_is_a_coroutine_for_task_groups_and_tasks(
-    anyio_backend: str,
+    anyio_backend_name: str,
 ) -> None:
     """What tasks need from a coroutine: started by a task group (trio checks for a
     :class:`collections.abc.Coroutine`), run as an asyncio task, and a wait for data that
@@ -156,7 +163,7 @@ async def test_a_wait_without_await_is_a_coroutine_for_task_groups_and_tasks(
         )
     assert [translation(ts) for ts in got] == [ODOM_IN_MAP]
     assert buffer.pending_waits == 0
-    if anyio_backend == "asyncio":
+    if anyio_backend_name == "asyncio":
         import asyncio
 
         task = asyncio.create_task(buffer.transform(P_ODOM, "map"))

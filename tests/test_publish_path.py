@@ -14,6 +14,7 @@ from typing import Any
 
 import anyio
 import pytest
+from event_loops import backends_with_uvloop, uvloop_backend
 
 import tfbus.core
 import tfbus.listener
@@ -34,6 +35,12 @@ from tfbus.messages import (
 from tfbus.time import Time
 
 pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=backends_with_uvloop(), scope="module")
+def anyio_backend(request: pytest.FixtureRequest) -> object:
+    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
+    return uvloop_backend(request.param)
 
 # Python functions entered from ``await send_transform(ts)`` until the listener's store
 # (the core's set_transform: C code in the compiled core): send_transform, the
@@ -59,7 +66,9 @@ def _ts(stamp_s: float) -> TransformStamped:
     )
 
 
-async def test_send_transform_reaches_the_store_in_few_python_calls(anyio_backend: str) -> None:
+async def test_send_transform_reaches_the_store_in_few_python_calls(
+    anyio_backend_name: str,
+) -> None:
     clock = ManualClock(Time.from_sec(100.0))
     buffer = Buffer(cache_time=10.0, clock=clock)
     async with Bus() as bus, TransformListener(buffer, bus, clock=clock):
@@ -87,7 +96,7 @@ async def test_send_transform_reaches_the_store_in_few_python_calls(anyio_backen
         assert entered[0] == "send_transform"
         assert "_check" not in entered and "publish_nowait" not in entered
         assert entered[-2:] == LAST_CALLS, entered
-        assert len(entered) <= CALLS_BEFORE_STORE[anyio_backend], entered
+        assert len(entered) <= CALLS_BEFORE_STORE[anyio_backend_name], entered
         assert buffer.lookup_transform("world", "probe", Time.from_sec(100.5)).transform == (
             _ts(100.5).transform
         )

@@ -13,6 +13,7 @@ import anyio
 import anyio.lowlevel
 import numpy as np
 import pytest
+from event_loops import backends_with_uvloop, uvloop_backend
 
 from tfbus.buffer import Buffer
 from tfbus.clock import Clock, ManualClock, PeriodicTimer, SystemClock, Tick, every, timeout_ns
@@ -21,6 +22,12 @@ from tfbus.messages import Header, Transform, TransformStamped, Vector3
 from tfbus.time import Duration, Time
 
 pytestmark = pytest.mark.anyio
+
+
+@pytest.fixture(params=backends_with_uvloop(), scope="module")
+def anyio_backend(request: pytest.FixtureRequest) -> object:
+    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
+    return uvloop_backend(request.param)
 
 
 T0 = Time(100)
@@ -80,6 +87,32 @@ async def test_system_clock_sleep_until_past_returns_at_once(
         scope.cancel()
         await clock.sleep_until(Time(0))
     assert scope.cancelled_caught  # it was a checkpoint: the pending cancel was delivered
+
+
+async def test_system_clock_sleep_until_arms_one_timer_and_never_returns_early(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each ``sleep_until`` a few milliseconds ahead returns at or after its deadline,
+    after at most two timers (one, and another when a timer fires a hair early), on every
+    loop. On uvloop, whose timers count whole milliseconds, a timer armed for the exact
+    rest fires up to a millisecond early, and the sub-millisecond rest rounds to a timer
+    run at once: without the delay rounded up (``tfbus._aio.timer_delay``) each deadline
+    ended in a busy loop of such timers."""
+    armed: list[float] = []
+    real_sleep = anyio.sleep
+
+    async def counting_sleep(seconds: float) -> None:
+        armed.append(seconds)
+        await real_sleep(seconds)
+
+    monkeypatch.setattr(anyio, "sleep", counting_sleep)
+    clock = SystemClock()
+    n = 20
+    for k in range(n):
+        deadline = Time.from_ns(clock.now().ns + 2_300_000 + 97_000 * k)  # 2.3 .. 4.1 ms
+        await clock.sleep_until(deadline)
+        assert clock.now() >= deadline
+    assert len(armed) <= 2 * n, armed
 
 
 async def test_manual_clock_now_and_advance() -> None:
@@ -389,12 +422,12 @@ async def test_timer_on_system_clock_ticks() -> None:
 
 
 async def test_advance_100_ticks_never_uses_anyios_sleeping_helper(
-    monkeypatch: pytest.MonkeyPatch, anyio_backend: str
+    monkeypatch: pytest.MonkeyPatch, anyio_backend_name: str
 ) -> None:
     """No wall-clock sleeping inside advance: anyio's asyncio ``wait_all_tasks_blocked``
     sleeps 0.1 s per runnable task, so on asyncio the clock must not call it (the wall
     time of this is printed by benchmarks/bench_clock.py)."""
-    if anyio_backend == "asyncio":
+    if anyio_backend_name == "asyncio":
 
         async def forbidden() -> None:
             raise AssertionError("anyio.wait_all_tasks_blocked sleeps on asyncio")
@@ -929,11 +962,11 @@ async def test_system_call_later_sweeps_cancelled_entries() -> None:
 
 
 async def test_system_call_later_reports_a_failing_callback_and_runs_the_rest(
-    anyio_backend: str, caplog: pytest.LogCaptureFixture
+    anyio_backend_name: str, caplog: pytest.LogCaptureFixture
 ) -> None:
     clock = SystemClock()
     reported: list[BaseException] = []
-    if anyio_backend == "asyncio":
+    if anyio_backend_name == "asyncio":
         import asyncio
 
         asyncio.get_running_loop().set_exception_handler(
@@ -948,7 +981,7 @@ async def test_system_call_later_reports_a_failing_callback_and_runs_the_rest(
     clock.call_later(0.002, done.set)
     with anyio.fail_after(5):
         await done.wait()
-    if anyio_backend == "asyncio":
+    if anyio_backend_name == "asyncio":
         assert [str(e) for e in reported] == ["boom"]
     else:
         assert "boom" in caplog.text
@@ -958,11 +991,11 @@ def test_system_call_later_outside_an_event_loop_is_none() -> None:
     assert SystemClock().call_later(1.0, lambda: None) is None
 
 
-async def test_running_asyncio_loop_only_in_asyncio_tasks(anyio_backend: str) -> None:
+async def test_running_asyncio_loop_only_in_asyncio_tasks(anyio_backend_name: str) -> None:
     from tfbus._aio import running_asyncio_loop
 
     loop = running_asyncio_loop()
-    if anyio_backend == "asyncio":
+    if anyio_backend_name == "asyncio":
         import asyncio
 
         assert loop is asyncio.get_running_loop()
