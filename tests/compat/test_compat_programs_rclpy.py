@@ -138,8 +138,9 @@ def _ends_on_sigint(p: Proc) -> float:
     code = p.proc.wait(timeout=30.0)
     took = time.monotonic() - start
     rest = p.drain()
-    assert code == 0, rest[-30:]
-    assert not [line for line in p.seen + rest if "Traceback" in line], rest[-30:]
+    tail = "\n".join(rest[-30:])  # the program's last lines, whole (a traceback's end)
+    assert code == 0, tail
+    assert not [line for line in p.seen + rest if "Traceback" in line], tail
     assert took < 10.0  # a bound for a loaded machine
     return took
 
