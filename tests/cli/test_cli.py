@@ -295,12 +295,14 @@ def test_missing_rosbags_names_the_extra(tmp_path: Path) -> None:
     assert len(lines) == 1 and "pip install 'tfbus[bag]'" in lines[0]
 
 
-def test_missing_trio_is_one_line() -> None:
-    """--backend trio without trio: one line saying what to install."""
-    proc = _without("trio", ["demo", "--backend", "trio", "--duration", "0"])
+@pytest.mark.parametrize("loop", ["trio", "uvloop"])
+def test_missing_event_loop_package_is_one_line(loop: str) -> None:
+    """--backend trio without trio, --backend uvloop without uvloop: one line saying what
+    to install."""
+    proc = _without(loop, ["demo", "--backend", loop, "--duration", "0"])
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip() == (
-        "tfbus demo: error: --backend trio needs the 'trio' package: pip install trio"
+        f"tfbus demo: error: --backend {loop} needs the '{loop}' package: pip install {loop}"
     )
 
 

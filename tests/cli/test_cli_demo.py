@@ -105,11 +105,11 @@ SUMMARY = re.compile(r"^(\d+) scans projected, \d+ dropped; wall error mean/max 
                      r"per_beam [\d.]+/[\d.]+$")
 
 
-@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+@pytest.mark.parametrize("backend", ["asyncio", "trio", "uvloop"])
 def test_demo_laser_runs_for_its_duration_and_prints_the_summary(backend: str) -> None:
     pytest.importorskip("tfbus.demos.laser", reason="tfbus.demos.laser not present")
-    if backend == "trio":
-        pytest.importorskip("trio")
+    if backend != "asyncio":
+        pytest.importorskip(backend)
     # --duration given to the group applies to the role, as for listener/broadcaster
     code, out, err = run("demo", "--duration", "0.4", "laser", "--beams", "90",
                          "--scan-rate", "20", "--odom-rate", "100", "--backend", backend)

@@ -239,6 +239,15 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     return rv if isinstance(rv, int) else 0
 
 
+def anyio_run_args(loop: str) -> dict[str, Any]:
+    """``anyio.run``'s keyword arguments for the event loop a command runs on: ``asyncio``
+    (asyncio's own loop), ``trio``, or ``uvloop`` (anyio's asyncio backend on uvloop's
+    loop, its ``use_uvloop`` option; the caller has checked that uvloop is installed)."""
+    if loop == "uvloop":
+        return {"backend": "asyncio", "backend_options": {"use_uvloop": True}}
+    return {"backend": loop}
+
+
 def interrupted(err: BaseException) -> bool:
     """Whether ``err`` is Ctrl-C: a ``KeyboardInterrupt``, or an exception group (trio
     and anyio task groups wrap what a task raised) holding nothing else."""

@@ -9,7 +9,7 @@ import signal
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
-from tfbus.cli._common import error, interrupted
+from tfbus.cli._common import anyio_run_args, error, interrupted
 
 if TYPE_CHECKING:
     import anyio
@@ -40,12 +40,14 @@ def _bus_error_in(err: BaseException) -> BaseException | None:
 
 
 def run_live(main: Callable[[], Awaitable[None]], *, backend: str = "asyncio") -> int | None:
-    """``anyio.run(main)``; None when it ran, 1 (after a one-line error) when the bus
-    could not be opened, 130 on a Ctrl-C before the signal handler was installed."""
+    """``anyio.run(main)`` on ``backend`` (``asyncio``, ``trio`` or ``uvloop``:
+    :func:`~tfbus.cli._common.anyio_run_args`); None when it ran, 1 (after a one-line
+    error) when the bus could not be opened, 130 on a Ctrl-C before the signal handler
+    was installed."""
     import anyio
 
     try:
-        anyio.run(main, backend=backend)
+        anyio.run(main, **anyio_run_args(backend))
     except KeyboardInterrupt:  # Ctrl-C while the session was still opening
         return 130
     except Exception as err:

@@ -13,6 +13,7 @@ import click
 
 from tfbus.cli._bus_spec import check_bus_spec
 from tfbus.cli._common import (
+    anyio_run_args,
     error,
     fail,
     hertz,
@@ -34,8 +35,10 @@ def _demo_options(*, rate: bool, listen_rate: bool) -> Callable[[F], F]:
     """The options of ``tfbus demo`` and its roles (all default to None: demo's own)."""
 
     def decorate(f: F) -> F:
-        f = click.option("--backend", type=click.Choice(["asyncio", "trio"]), default=None,
-                         help="Event loop (default asyncio).")(f)
+        f = click.option("--backend", type=click.Choice(["asyncio", "trio", "uvloop"]),
+                         default=None,
+                         help="Event loop (default asyncio; uvloop: asyncio on uvloop's "
+                              "loop).")(f)
         if listen_rate:
             f = click.option("--listen-rate", type=hertz(),
                              default=None, help="Listener rate, Hz (default 1).")(f)
@@ -56,11 +59,11 @@ def _inherit(ctx: click.Context, **options: Any) -> dict[str, Any]:
 
 def _backend(name: str | None) -> str:
     backend = name or "asyncio"
-    if backend == "trio":
+    if backend in ("trio", "uvloop"):
         try:
-            importlib.import_module("trio")
+            importlib.import_module(backend)
         except ImportError:
-            fail("--backend trio needs the 'trio' package: pip install trio")
+            fail(f"--backend {backend} needs the '{backend}' package: pip install {backend}")
     return backend
 
 
@@ -78,7 +81,7 @@ def run_both(*, duration: float | None, rate: float, listen_rate: float, backend
         anyio.run(
             lambda: run_demo(duration=duration, rate=rate, listen_rate=listen_rate,
                              handle_signals=True, out=_print_line),
-            backend=backend,
+            **anyio_run_args(backend),
         )
     except BaseException as err:
         if not interrupted(err):
@@ -253,7 +256,7 @@ def run_laser(*, duration: float | None, backend: str, beams: int, scan_rate: fl
             tg.cancel_scope.cancel()
 
     try:
-        anyio.run(main, backend=backend)
+        anyio.run(main, **anyio_run_args(backend))
     except BaseException as err:
         if not interrupted(err):
             raise
