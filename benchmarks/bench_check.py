@@ -85,6 +85,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS threads would
 import argparse
 import contextlib
 import functools
+import importlib.util
 import json
 import statistics
 import subprocess
@@ -756,7 +757,10 @@ def ros1cpu_rows(rows: Rows, rounds: int) -> None:
     once, each in its own process, and each one's CPU (its threads' scheduler time in ns,
     ``benchmarks/proc_cpu.py``) is read over the same ``rounds`` windows, after every
     receiver is connected and past its first messages (connection set-up is not receive
-    CPU); each row judges the median of the per-window ratios."""
+    CPU); each row judges the median of the per-window ratios. Where uvloop is installed,
+    the same two tfbus nodes on uvloop's event loop receive the stream in the same windows,
+    printed for information against the C++ peers and against the nodes on asyncio's own
+    loop."""
     import bench_ros1_floor
     from ros1_peers import ros1_missing
 
@@ -766,6 +770,9 @@ def ros1cpu_rows(rows: Rows, rounds: int) -> None:
         _not_run(rows, names, why)
         return
     receivers = ["asyncio", "asyncio+store", "callback", "listener"]
+    uvloop = importlib.util.find_spec("uvloop") is not None
+    if uvloop:  # the same two tfbus nodes on uvloop's event loop, for information
+        receivers += ["callback@uvloop", "listener@uvloop"]
     got = bench_ros1_floor.measure(receivers, rounds, ROS1_CPU_SECONDS, ROS1_RATE)
     per_msg = got.per_msg
     # CPU per message is over the messages sent in the windows: a receiver that missed
@@ -791,6 +798,15 @@ def ros1cpu_rows(rows: Rows, rounds: int) -> None:
     for floor, peer in (("asyncio", "roscpp"), ("asyncio+store", "tf2_ros")):
         print(f"  info  {f'  floor: bare {floor} reader vs {peer}':46} "
               f"{_spread(got.ratios(per_msg[floor], peer))}")
+    for mode in ROS1_CPU_ROWS:
+        label = f"  {mode} on uvloop vs {ROS1_PEERS[mode][0]}"
+        if not uvloop:
+            print(f"  info  {label:46} not run: uvloop is not installed")
+            continue
+        node = f"{mode}@uvloop"
+        print(f"  info  {label:46} {statistics.median(per_msg[node]):.1f} us CPU = "
+              f"{_spread(got.ratios(per_msg[node], ROS1_PEERS[mode][0]))}; "
+              f"{_spread(got.ratios(per_msg[node], mode))} of the node on asyncio's loop")
     counts = ", ".join(f"{r} {n}" for r, n in got.received.items())
     missing = f" (short: {', '.join(sorted(short))})" if short else ""
     print(f"  info  {'  messages received in the windows':46} {counts} of ~{got.sent:.0f} "
@@ -967,7 +983,8 @@ def demo_rows(rows: Rows, rounds: int) -> None:
     alternated (the order reversed every other round), each pair's CPU (both processes,
     per-thread schedstat) over 10 s; the row judges the median of the per-round ratios
     tfbus / C++ (<= 1.5x); the floor's own ratios to C++ and tfbus's to the floor are
-    printed beside it."""
+    printed beside it, and, where uvloop is installed, tfbus's pair run with ``--backend
+    uvloop`` in the same rounds, for information."""
     import bench_demo_ros1
     from ros1_peers import ros1_missing, start_master
 
@@ -981,7 +998,9 @@ def demo_rows(rows: Rows, rounds: int) -> None:
         bench_demo_ros1.build(out)
         master = start_master(Path(tmp) / "home")
         try:
-            sides = bench_demo_ros1.pairs(out, f"ros1:{master.uri}", floor=True)
+            uvloop = importlib.util.find_spec("uvloop") is not None
+            sides = bench_demo_ros1.pairs(out, f"ros1:{master.uri}", floor=True,
+                                          uvloop=uvloop)
             names = list(sides)
             for r in range(rounds):
                 for name in names if r % 2 == 0 else names[::-1]:
@@ -991,7 +1010,7 @@ def demo_rows(rows: Rows, rounds: int) -> None:
                 print(f"  (demo round {r + 1}/{rounds}, {_load()})", flush=True)
         finally:
             master.stop()
-    cpp, ours, floor = ([b + li for b, li in parts[n]] for n in names)
+    cpp, ours, floor = ([b + li for b, li in parts[n]] for n in names[:3])
     ratios = [p / max(q, 1e-9) for p, q in zip(ours, cpp, strict=True)]
     rows.row(
         DEMO_ROW,
@@ -1008,8 +1027,17 @@ def demo_rows(rows: Rows, rounds: int) -> None:
     print(f"  info  {'  by process (medians), % of a core':46} " + ", ".join(
         f"{label} {statistics.median(b for b, _ in parts[n]) * 100:.2f} + "
         f"{statistics.median(li for _, li in parts[n]) * 100:.2f}"
-        for label, n in zip(("C++", "tfbus", "floor"), names, strict=True)
+        for label, n in zip(("C++", "tfbus", "floor"), names[:3], strict=True)
     ) + " (broadcaster + listener)")
+    label = "  tfbus demo pair on uvloop vs C++"
+    if bench_demo_ros1.UVLOOP not in parts:
+        print(f"  info  {label:46} not run: uvloop is not installed")
+        return
+    on_uvloop = [b + li for b, li in parts[bench_demo_ros1.UVLOOP]]
+    uv_cpp = [p / max(q, 1e-9) for p, q in zip(on_uvloop, cpp, strict=True)]
+    uv_ours = [p / max(q, 1e-9) for p, q in zip(on_uvloop, ours, strict=True)]
+    print(f"  info  {label:46} {statistics.median(on_uvloop) * 100:.2f} % = {_spread(uv_cpp)}; "
+          f"{_spread(uv_ours)} of the pair on asyncio's loop (--backend uvloop)")
 
 
 GROUPS = ("core", "cpp", "wakeup", "ros1", "ros1cpu", "sensors", "zenoh", "demo", "view",

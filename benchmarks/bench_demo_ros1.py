@@ -23,6 +23,7 @@ is asserted. Needs Debian's ROS 1 (``scripts/install/install_ros1.sh``) and g++.
     .venv/bin/python benchmarks/bench_demo_ros1.py            # 3 rounds of 20 s
     .venv/bin/python benchmarks/bench_demo_ros1.py --quick    # 3 rounds of 8 s
     .venv/bin/python benchmarks/bench_demo_ros1.py --baseline /tmp/old-tree  # + that tree's pair
+    .venv/bin/python benchmarks/bench_demo_ros1.py --uvloop   # + the pair on --backend uvloop
 """
 
 from __future__ import annotations
@@ -92,11 +93,16 @@ FLOOR = "Python floor pair"
 """The side :func:`floor_broadcaster` and :func:`floor_listener` make (see them)."""
 
 
-def pairs(out: Path, uri: str, floor: bool = False) -> dict[str, list[list[str]]]:
+UVLOOP = "tfbus pair on uvloop"
+"""The side of tfbus's demo pair run with ``--backend uvloop`` (asyncio on uvloop's loop)."""
+
+
+def pairs(out: Path, uri: str, floor: bool = False,
+          uvloop: bool = False) -> dict[str, list[list[str]]]:
     """The sides' commands (broadcaster, listener) on the master ``uri``
     (``ros1:http://...``): the C++ pair built into ``out``, tfbus's demo pair and, with
     ``floor``, the Python floor pair (:data:`FLOOR`, on a free 127.0.0.1 port of its
-    own; no master)."""
+    own; no master); with ``uvloop``, tfbus's demo pair on uvloop (:data:`UVLOOP`)."""
     sides = {
         "C++ tutorial pair": [[str(out / "tf_broadcaster")], [str(out / "tf_listener")]],
         "tfbus demo pair": [[*TFBUS, "demo", "broadcaster", "--bus", uri],
@@ -106,6 +112,9 @@ def pairs(out: Path, uri: str, floor: bool = False) -> dict[str, list[list[str]]
         port = str(free_port())
         here = [sys.executable, str(Path(__file__).resolve())]
         sides[FLOOR] = [[*here, "--floor-broadcaster", port], [*here, "--floor-listener", port]]
+    if uvloop:
+        sides[UVLOOP] = [[*TFBUS, "demo", "broadcaster", "--bus", uri, "--backend", "uvloop"],
+                         [*TFBUS, "demo", "listener", "--bus", uri, "--backend", "uvloop"]]
     return sides
 
 
@@ -242,6 +251,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--floor", action="store_true",
                         help="also run the Python floor pair (floor_broadcaster, "
                              "floor_listener) as a side of each round")  # fmt: skip
+    parser.add_argument("--uvloop", action="store_true",
+                        help="also run tfbus's demo pair with --backend uvloop as a side of "
+                             "each round (pip install uvloop)")  # fmt: skip
     parser.add_argument("--floor-broadcaster", type=int, metavar="PORT", help=argparse.SUPPRESS)
     parser.add_argument("--floor-listener", type=int, metavar="PORT", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -262,7 +274,7 @@ def main(argv: list[str] | None = None) -> None:
         master = start_master(Path(tmp) / "home")
         try:
             uri = f"ros1:{master.uri}"
-            sides = pairs(out, uri, floor=args.floor)
+            sides = pairs(out, uri, floor=args.floor, uvloop=args.uvloop)
             if args.baseline is not None:
                 tree = str(Path(args.baseline).resolve())
                 base = ["env", f"PYTHONPATH={tree}", sys.executable, "-m", "tfbus.cli"]
@@ -305,6 +317,11 @@ def main(argv: list[str] | None = None) -> None:
               f"{floor_b / cpp_b:.2f}x, listener {floor_l / cpp_l:.2f}x); tfbus / floor "
               f"{ours / med[FLOOR]:.2f}x (broadcaster {our_b / floor_b:.2f}x, listener "
               f"{our_l / floor_l:.2f}x)")  # fmt: skip
+    if UVLOOP in med:
+        uv_b, uv_l = split[UVLOOP]
+        print(f"  {UVLOOP} / C++ {med[UVLOOP] / cpp:.2f}x (broadcaster {uv_b / cpp_b:.2f}x, "
+              f"listener {uv_l / cpp_l:.2f}x); on uvloop / on asyncio's loop "
+              f"{med[UVLOOP] / ours:.2f}x")  # fmt: skip
     if "tfbus @ baseline" in med:
         base = med["tfbus @ baseline"]
         print(f"  ratio tfbus @ baseline / C++ (medians) {base / cpp:.2f}x; "
