@@ -57,6 +57,8 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "sensors": ([], ["--quick"], 1800),
     "check": ([], ["--rounds", "3", "--no-ros1"], 2400),
     "check-clock": (["--only", "clock"], ["--only", "clock"], 1800),
+    "check-ros1cpu": (["--only", "ros1cpu"], ["--only", "ros1cpu", "--rounds", "3"], 900),
+    "check-demo": (["--only", "demo"], ["--only", "demo", "--rounds", "3"], 1200),
     "ros1_floor": (["--receivers", "asyncio,asyncio+store,callback,listener"],
                    ["--receivers", "asyncio,asyncio+store,callback,listener", "--rounds", "2",
                     "--seconds", "6"], 900),
