@@ -104,8 +104,9 @@ def timer_delay(loop: AbstractEventLoop, seconds: float) -> float:
     ``uv_timer_start`` from ``uv_now``): a timer fires up to a millisecond early, and a
     deadline re-armed for what is left of it then runs at every turn of the loop until
     the deadline passes (a busy loop of up to half a millisecond a deadline). There the
-    delay is rounded up to a whole millisecond, plus one: the timer fires once, at or
-    after ``seconds``, at most 2 ms late (uvloop's own granularity).
+    delay is rounded up to a whole millisecond, plus one: the timer fires once, never
+    before ``seconds``, and less than 3 ms after (the rounding, and libuv's clock read in
+    whole milliseconds when the timer is armed and when it is run) on an idle loop.
     """
     kind = type(loop)
     coarse = MILLISECOND_TIMERS.get(kind)

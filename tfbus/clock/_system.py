@@ -196,7 +196,7 @@ class SystemClock:
 
     async def sleep_until(self, t: Time) -> None:
         """Return once the wall clock reads ``>= t`` (on uvloop, whose timers count
-        whole milliseconds, up to 2 ms after: :func:`tfbus._aio.timer_delay`).
+        whole milliseconds, up to 3 ms after: :func:`tfbus._aio.timer_delay`).
 
         Raises:
             anyio.get_cancelled_exc_class(): if the calling task is cancelled meanwhile.
