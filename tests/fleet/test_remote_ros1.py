@@ -208,7 +208,8 @@ def test_debians_buffer_client_gets_answers_from_tfbus(master: Master, backend: 
                     return client.wait_for(pattern, timeout=60.0).group(0)
 
                 assert await anyio.to_thread.run_sync(wait, r"server \S+") == "server True"
-                assert await anyio.to_thread.run_sync(wait, r"result .*") == \
+                # "^": the result line, not a "lost_result laser" line before it
+                assert await anyio.to_thread.run_sync(wait, r"^result .*") == \
                     "result base laser 1.0 2.0 3.0"
                 assert await anyio.to_thread.run_sync(wait, r"lookup_error .*") == \
                     f"lookup_error {expected_error}"
@@ -247,7 +248,7 @@ def test_serve_buffer_command_answers_debians_buffer_client(master: Master) -> N
             'rospy.Duration(1))', 'rospy.Duration(20))')
         client = master.run("/usr/bin/python3", "-c", script)
         assert client.wait_for(r"server \S+", timeout=60).group(0) == "server True"
-        assert client.wait_for(r"result .*", timeout=60).group(0) == \
+        assert client.wait_for(r"^result .*", timeout=60).group(0) == \
             "result base laser 1.0 2.0 3.0"
         # one node: /tf, /tf_static and the action's five topics
         info = subprocess.run(["rosnode", "info", node], env=master.env,
