@@ -3,13 +3,9 @@
 Every ``pytest.mark.anyio`` test runs on asyncio and on trio (``anyio_backend`` in
 ``conftest.py``). A module whose code under test takes asyncio shortcuts that depend on
 the loop's implementation (its timers, its transports' writes; :mod:`tfbus._aio`) runs on
-uvloop as well, by defining its own fixture::
+uvloop as well, by importing this module's fixture, whose name is ``anyio_backend``::
 
-    from event_loops import backends_with_uvloop
-
-    @pytest.fixture(params=backends_with_uvloop(), scope="module")
-    def anyio_backend(request: pytest.FixtureRequest) -> object:
-        return uvloop_backend(request.param)
+    from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 uvloop's timers count whole milliseconds and its transports are not ``asyncio.Transport``
 subclasses: the two differences tfbus handles (:func:`tfbus._aio.timer_delay`,
@@ -24,7 +20,7 @@ import importlib.util
 
 import pytest
 
-__all__ = ["UVLOOP", "backends_with_uvloop", "uvloop_backend"]
+__all__ = ["UVLOOP", "anyio_backend_with_uvloop", "backends_with_uvloop", "uvloop_backend"]
 
 UVLOOP = ("asyncio", {"use_uvloop": True})
 """anyio's asyncio backend on uvloop's event loop (anyio's ``use_uvloop`` option)."""
@@ -42,3 +38,10 @@ def uvloop_backend(param: object) -> object:
     if param == UVLOOP and importlib.util.find_spec("uvloop") is None:
         pytest.skip("uvloop is not installed (the test extra installs it on CPython off Windows)")
     return param
+
+
+@pytest.fixture(params=backends_with_uvloop(), scope="module", name="anyio_backend")
+def anyio_backend_with_uvloop(request: pytest.FixtureRequest) -> object:
+    """The ``anyio_backend`` of a module that imports it: asyncio, trio and uvloop
+    (:func:`uvloop_backend`), each for the whole module."""
+    return uvloop_backend(request.param)

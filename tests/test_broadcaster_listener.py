@@ -8,7 +8,7 @@ from collections.abc import Iterable
 
 import anyio
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus import MemoryTransport
 from tfbus.broadcaster import StaticTransformBroadcaster, TransformBroadcaster
@@ -22,12 +22,6 @@ from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformSt
 from tfbus.time import Duration, Time
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 
 T0 = Time(1_248_138_528)

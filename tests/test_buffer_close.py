@@ -11,7 +11,7 @@ from typing import Any
 
 import anyio
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus import (
     Buffer,
@@ -29,12 +29,6 @@ from tfbus.clock import ManualClock
 from tfbus.time import Time
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 
 def make_buffer() -> Buffer:

@@ -9,7 +9,7 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus.bus import (
     TF_STATIC_TOPIC,
@@ -26,12 +26,6 @@ from tfbus.time import Time
 from tfbus.transports.memory import MemoryTransport
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 
 def ts(child: str, x: float = 0.0, parent: str = "base_link", sec: int = 1) -> TransformStamped:

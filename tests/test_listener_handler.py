@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 import tfbus.listener
 from tfbus.buffer import Buffer
@@ -24,12 +24,6 @@ from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformSt
 from tfbus.time import Duration, Time
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 T0 = Time(1_700_000_000)
 COMPILED = tfbus.listener._HANDLER

@@ -21,18 +21,12 @@ from typing import Any
 import anyio
 import numpy as np
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus import Buffer, Header, Point, PointStamped, Time, Transform, TransformStamped, Vector3
 from tfbus.clock import ManualClock
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 ODOM_IN_MAP = (1.0, 2.0, 3.0)  # map -> odom at 5 s; at 4 s it was (0, 2, 3): 1 m/s along x
 P_ODOM = PointStamped(Header(Time(0), "odom"), Point(1.0, 0.0, 0.0))

@@ -14,7 +14,7 @@ from typing import Any
 
 import anyio
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 import tfbus.core
 import tfbus.listener
@@ -35,12 +35,6 @@ from tfbus.messages import (
 from tfbus.time import Time
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 # Python functions entered from ``await send_transform(ts)`` until the listener's store
 # (the core's set_transform: C code in the compiled core): send_transform, the

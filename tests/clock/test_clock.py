@@ -13,7 +13,7 @@ import anyio
 import anyio.lowlevel
 import numpy as np
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus.buffer import Buffer
 from tfbus.clock import Clock, ManualClock, PeriodicTimer, SystemClock, Tick, every, timeout_ns
@@ -22,12 +22,6 @@ from tfbus.messages import Header, Transform, TransformStamped, Vector3
 from tfbus.time import Duration, Time
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 
 T0 = Time(100)

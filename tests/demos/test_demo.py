@@ -8,7 +8,7 @@ import re
 
 import anyio
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus import Time
 from tfbus.buffer import Buffer
@@ -19,12 +19,6 @@ from tfbus.demos.tutorial import BroadcasterStatistics, broadcaster_node, listen
 from tfbus.listener import TransformListener
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 START = Time(1248138527, 200_823_000)
 INFO = re.compile(

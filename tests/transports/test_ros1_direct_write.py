@@ -13,17 +13,11 @@ from collections.abc import AsyncIterator
 import anyio
 import anyio.abc
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus.transports.ros1.tcpros import FrameQueue, frame, serve_subscriber
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 
 @contextlib.asynccontextmanager

@@ -14,7 +14,7 @@ from types import FrameType
 from typing import Any
 
 import pytest
-from event_loops import backends_with_uvloop, uvloop_backend
+from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 
 from tfbus import Bus, Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.codecs import ros1 as ros1_codec
@@ -25,12 +25,6 @@ from tfbus.transports.ros1 import transport as ros1_transport
 from tfbus.transports.ros1.tcpros import FrameSplitter, frame
 
 pytestmark = pytest.mark.anyio
-
-
-@pytest.fixture(params=backends_with_uvloop(), scope="module")
-def anyio_backend(request: pytest.FixtureRequest) -> object:
-    """asyncio, trio and uvloop (``tests/event_loops.py``)."""
-    return uvloop_backend(request.param)
 
 # Python functions entered from the splitter's feed until the bus's callback: feed, the
 # TFMessage frame handler, Bus.deliver_nowait, its counters look-up and Bus._deliver.
