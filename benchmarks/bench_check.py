@@ -63,7 +63,9 @@ Rows (target):
 * the ``tfbus view --bus zenoh`` process following 100 Hz x 100 frames from another
   process (``bench_view_process.measure``, ``--rounds`` windows of 8 s a phase, a bare
   ``TransformListener`` process and a raw zenoh-python subscriber on the same stream
-  beside it): <= 5 % of a core with no browser, <= 15 % with one page; beside the page
+  beside it): <= 5 % of a core with no browser, <= 15 % with one page; beside each row,
+  for information, the accounting floor: the view's listener, tables and checks with no
+  page server (``bench_view_process.accounting``); beside the page
   row, for information, the viser floor: a bare viser server drawing the same page (a label
   per frame moved, the axes and the links as one line-segments node each) at 30 Hz for one
   page, its poses made by numpy, no tfbus code (``bench_view_process.viser_floor``).
@@ -1140,7 +1142,9 @@ VIEW_SECONDS = 8.0
 def view_rows(rows: Rows, rounds: int) -> None:
     """The real ``tfbus view`` command's CPU (``bench_view_process.measure``): a source
     process sends 100 moving frames at 100 Hz over Zenoh; the view, a bare
-    ``TransformListener`` process (the floor of any follower) and a raw zenoh-python
+    ``TransformListener`` process (the floor of any follower), the view's own receive path
+    with no page server (its listener, ``tfbus monitor``'s tables and ``tfbus doctor``'s
+    checks: the accounting floor, printed beside) and a raw zenoh-python
     subscriber with a no-op callback (the floor of any zenoh-python process) receive it;
     each one's CPU
     over ``rounds`` windows with no browser, then with one headless Chromium page; each
@@ -1165,6 +1169,10 @@ def view_rows(rows: Rows, rounds: int) -> None:
             view <= VIEW_TARGETS[phase],
             f"<= {VIEW_TARGETS[phase]:.0%} of a core",
         )
+        accounting = statistics.median(share["accounting"])
+        print(f"  info  {'  accounting floor: the view, no page server':46} "
+              f"{accounting:.1%} of a core ({_pct_spread(share['accounting'])}): the "
+              f"listener + tables + checks")
         drawing = got.share["floor"].get("viser")
         if phase == "page" and drawing:
             viser = statistics.median(drawing)

@@ -9,6 +9,12 @@ Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting o
   moving frames (a chain of 10, the rest leaves) as one ``/tf`` message every 10 ms;
 * ``listener``: a ``Bus(ZenohTransport(connect=...))`` with a ``TransformListener`` into a
   ``Buffer`` and nothing else: the floor of any process that follows this stream;
+* ``accounting``: the view's own receive path with no page server: ``tfbus view``'s
+  :class:`~tfbus.cli._bus_source.BusSource` (a ``TransformListener`` into a ``Buffer``
+  through a :class:`~tfbus.monitor.MonitoredSink` keeping ``tfbus monitor``'s tables,
+  broadcasters attributed) and a :class:`~tfbus.doctor.Doctor` fed by it, wired as
+  ``tfbus view`` wires them (``tfbus.cli.view._serve_bus``): what the view pays for the
+  tables and checks its page shows, before any drawing;
 * ``raw``: a raw zenoh-python session configured as ``ZenohTransport`` configures itself
   (``tfbus.transports.zenoh.config.zenoh_config``) whose subscriber on the source's ``/tf``
   key hands each sample to a Python callback that only marks the first one heard: the
@@ -126,6 +132,30 @@ def listener(port: int) -> None:
                     return
 
     anyio.run(main)
+
+
+def accounting(port: int) -> None:
+    """The accounting floor child: ``tfbus view``'s bus source and doctor, no page (until
+    SIGINT/SIGTERM)."""
+    import anyio
+
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.cli._live_session import live, run_live
+    from tfbus.doctor import Doctor
+
+    spec = f"zenoh?connect=tcp/127.0.0.1:{port}"
+    src = BusSource(spec, name="view-accounting")
+    doctor = Doctor(source=spec)
+    add = doctor.add
+    src.sink.observers.append(
+        lambda now, transforms, authority, static: add(now, transforms, authority,
+                                                       static=static))  # fmt: skip
+
+    async def body() -> None:
+        print("READY", flush=True)
+        await anyio.sleep_forever()
+
+    run_live(lambda: live(src, None, body))
 
 
 def raw(port: int) -> None:
@@ -262,10 +292,10 @@ def established(port: int) -> int:
 @dataclasses.dataclass
 class Measured:
     """Per phase (``idle``: no browser; ``page``: a page on the view; ``floor``: a page
-    on the viser floor) and process (``source``, ``listener``, ``raw``, ``viser``,
-    ``view``): its share of one core in each window (0.01 = 1 %); ``page_shown``: whether
-    a page connected to the view (False without chromium, or when none connected within
-    120 s)."""
+    on the viser floor) and process (``source``, ``listener``, ``accounting``, ``raw``,
+    ``viser``, ``view``): its share of one core in each window (0.01 = 1 %);
+    ``page_shown``: whether a page connected to the view (False without chromium, or when
+    none connected within 120 s)."""
 
     share: dict[str, dict[str, list[float]]]
     page_shown: bool
@@ -299,8 +329,8 @@ def measure(rounds: int, seconds: float, baseline: Path | None = None) -> Measur
     shown = False
     why = ""
     try:
-        for name, port in (("source", zport), ("listener", zport), ("raw", zport),
-                           ("viser", fport)):  # fmt: skip
+        for name, port in (("source", zport), ("listener", zport), ("accounting", zport),
+                           ("raw", zport), ("viser", fport)):  # fmt: skip
             procs[name] = subprocess.Popen(
                 [sys.executable, __file__, f"--{name}", str(port)], env=env,
                 stdout=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
@@ -416,11 +446,15 @@ def main() -> None:
                         help="also a listener and a view of this checkout's tfbus")
     parser.add_argument("--source", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--listener", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--accounting", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--raw", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--viser", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.raw is not None:
         raw(args.raw)
+        return
+    if args.accounting is not None:
+        accounting(args.accounting)
         return
     if args.viser is not None:
         viser_floor(args.viser)
@@ -439,12 +473,16 @@ def main() -> None:
         if not got.share[phase]:
             print(f"  {label:<11} not measured: {got.why}")
             continue
-        for name in ("view", "listener", "raw", "source", "view@base", "listener@base"):
+        for name in ("view", "listener", "accounting", "raw", "source", "view@base",
+                     "listener@base"):
             if name in got.share[phase] and (phase == "idle" or name != "view@base"):
                 print(f"  {label:<11} {name:<13} {_spread(got.share[phase][name])}")
         over = [v - f for v, f in zip(got.share[phase]["view"], got.share[phase]["listener"],
                                       strict=True)]  # fmt: skip
         print(f"  {label:<11} view - listener floor {_spread(over)}")
+        own = [v - a for v, a in zip(got.share[phase]["view"], got.share[phase]["accounting"],
+                                     strict=True)]  # fmt: skip
+        print(f"  {label:<11} view - accounting floor {_spread(own)}")
     floor = got.share["floor"].get("viser")
     if floor:
         print(f"  viser page  viser floor   {_spread(floor)}")
