@@ -12,8 +12,8 @@ Processes, all on 127.0.0.1 (Zenoh with explicit endpoints, multicast scouting o
 * ``accounting``: the view's own receive path with no page server: ``tfbus view``'s
   :class:`~tfbus.cli._bus_source.BusSource` (a ``TransformListener`` into a ``Buffer``
   through a :class:`~tfbus.monitor.MonitoredSink` keeping ``tfbus monitor``'s tables,
-  broadcasters attributed) and a :class:`~tfbus.doctor.Doctor` fed by it, wired as
-  ``tfbus view`` wires them (``tfbus.cli.view._serve_bus``): what the view pays for the
+  broadcasters attributed) and a :class:`~tfbus.doctor.Doctor` fed by it, wired by the
+  view's own ``tfbus.cli.view.page_doctor``: what the view pays for the
   tables and checks its page shows, before any drawing;
 * ``raw``: a raw zenoh-python session configured as ``ZenohTransport`` configures itself
   (``tfbus.transports.zenoh.config.zenoh_config``) whose subscriber on the source's ``/tf``
@@ -141,15 +141,11 @@ def accounting(port: int) -> None:
 
     from tfbus.cli._bus_source import BusSource
     from tfbus.cli._live_session import live, run_live
-    from tfbus.doctor import Doctor
+    from tfbus.cli.view import page_doctor
 
     spec = f"zenoh?connect=tcp/127.0.0.1:{port}"
     src = BusSource(spec, name="view-accounting")
-    doctor = Doctor(source=spec)
-    add = doctor.add
-    src.sink.observers.append(
-        lambda now, transforms, authority, static: add(now, transforms, authority,
-                                                       static=static))  # fmt: skip
+    page_doctor(src, spec)
 
     async def body() -> None:
         print("READY", flush=True)

@@ -20,6 +20,8 @@ from tfbus.cli._common import HOST, FiniteFloat, bag_path, fail, seconds, use_si
 from tfbus.view.scene import DEFAULT_FRAME_TIMEOUT
 
 if TYPE_CHECKING:
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.doctor import Doctor
     from tfbus.view.clouds import CloudTrack
     from tfbus.view.foxglove_bridge import FoxgloveBridge
     from tfbus.view.record import RecordControl
@@ -266,6 +268,21 @@ def _serve_bag(page: object, bag: Path, fixed_frame: str | None, frame_timeout: 
     player.run(stop)
 
 
+def page_doctor(src: BusSource, spec: str) -> Doctor:
+    """The :class:`~tfbus.doctor.Doctor` whose findings a live view's page shows: fed every
+    message ``src``'s monitor sink accounts (one of its observers: receive time,
+    transforms, authority as attributed, whether static), as ``tfbus view --bus spec``
+    wires it. Call before ``src`` is attached."""
+    from tfbus.doctor import Doctor
+
+    doctor = Doctor(source=spec)
+    add = doctor.add
+    src.sink.observers.append(
+        lambda now, transforms, authority, static: add(now, transforms, authority,
+                                                       static=static))
+    return doctor
+
+
 def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: float,
                scan_topics: Sequence[str], bridge: FoxgloveBridge | None,
                stop: threading.Event, *, use_sim_time: bool = False,
@@ -280,15 +297,8 @@ def _serve_bus(page: object, spec: str, fixed_frame: str | None, frame_timeout: 
     assert isinstance(page, TfPage)
     src = BusSource(spec, name="tfbus-view", scan_topics=scan_topics,
                     use_sim_time=use_sim_time)
-    from tfbus.doctor import Doctor
-
-    doctor: Doctor | None = None
-    if not src.is_fleet:  # the doctor's findings in the page, fed by the view's listener
-        doctor = Doctor(source=spec)
-        add = doctor.add
-        src.sink.observers.append(
-            lambda now, transforms, authority, static: add(now, transforms, authority,
-                                                           static=static))
+    # the doctor's findings in the page, fed by the view's listener
+    doctor = None if src.is_fleet else page_doctor(src, spec)
     fleet: FleetView | None = None
     if src.is_fleet:  # a robot selector: the robots the fleet bus announces
         fleet = FleetView(page, lambda: src.fleet.robots() if src.fleet is not None else ())
