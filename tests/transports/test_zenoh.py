@@ -248,6 +248,51 @@ async def test_malformed_payloads_are_dropped_and_counted_and_a_delete_ignored()
             await anyio.to_thread.run_sync(session.close)
 
 
+@pytest.mark.anyio
+async def test_received_topics_keys_are_declared_once_up_to_the_bound(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each data key a transport receives a valid message on is declared to its session
+    as a key expression once (Zenoh then keeps the route of its samples), at most
+    MAX_ROUTE_KEYS of them; a key beyond the bound, or whose only payload does not
+    decode, is received as before and not declared; closing the bus forgets them."""
+    from tfbus.transports.zenoh import transport as zenoh_transport
+
+    monkeypatch.setattr(zenoh_transport, "MAX_ROUTE_KEYS", 3)
+    port = free_port()
+    transport = ZenohTransport(listen=f"tcp/127.0.0.1:{port}", name="receiver")
+    cfg, _ = zenoh_config(connect=f"tcp/127.0.0.1:{port}")
+    topics = [f"/t{i}" for i in range(5)]
+    codec = wire.WireCodec()
+    async with Bus(transport=transport) as bus:
+        subs = {topic: bus.subscribe(topic) for topic in [*topics, "/bad"]}
+        session = await anyio.to_thread.run_sync(zenoh.open, cfg)
+        try:
+            raws = {t: session.declare_publisher(f"tfbus{t}", congestion_control=BLOCK)
+                    for t in [*topics, "/bad"]}
+            await wait_until(lambda: all(r.matching_status.matching for r in raws.values()))
+            raws["/bad"].put(b"\x00garbage")
+            for seq in (1, 2):  # every topic twice: declared at its first message only
+                for i, topic in enumerate(topics):
+                    raws[topic].put(codec.encode(TFMessage((ts(f"c{i}", seq),)), sender=7,
+                                                 seq=seq))
+            with anyio.fail_after(5):
+                for topic in topics:
+                    for seq in (1, 2):
+                        got = await subs[topic].receive()
+                        assert got.transforms[0].header.stamp.ns == seq
+            declared = transport._route_keys
+            assert len(declared) == 3
+            assert set(declared) <= {f"tfbus{t}" for t in topics}
+            for key, expr in declared.items():
+                assert isinstance(expr, zenoh.KeyExpr) and str(expr) == key
+            assert transport.statistics().malformed == 1
+            assert subs["/bad"].statistics().queued == 0
+        finally:
+            await anyio.to_thread.run_sync(session.close)
+    assert transport._route_keys == {}
+
+
 def laser_scan(sec: float, n: int = 720) -> Any:
     import numpy as np
 

@@ -112,6 +112,16 @@ LATCH_QUERY_RETRIES: Final = 3
 0.4 s): a node's liveliness token can reach a peer before the route to its latch
 queryable does, and such a query ends with nothing."""
 _CONGESTION: Final = ("drop", "block")
+MAX_ROUTE_KEYS: Final = 256
+"""Most data keys a :class:`ZenohTransport` declares to its session as key expressions of
+their own (:meth:`zenoh.Session.declare_keyexpr`), one for each topic it receives, the
+first ones first. The transport subscribes to every topic with one wildcard expression;
+Zenoh keeps the route of a sample (which local subscribers it reaches) on a resource of
+the session's, and a key no local declaration names has none, so Zenoh's receiving
+thread computes its route again for every sample (measured: following ``/clock`` at
+1 kHz cost about 1 % of a core more than with an exact subscriber;
+``benchmarks/bench_sim_clock.py``). A key declared once keeps its route cached; keys
+beyond the bound (a peer inventing topic names) are received as before, uncached."""
 
 
 class NewestOnly:
@@ -451,6 +461,9 @@ class ZenohTransport:
         self._log = CountLimitedLog(log, 1000, clock=time.monotonic)
         self._matching_changed: anyio.Event | None = None
         self._newest: dict[str, NewestOnly] = {}  # by key: topics kept newest-only
+        # Data keys received, declared to the session (MAX_ROUTE_KEYS): each value is the
+        # declared zenoh.KeyExpr, or None where Zenoh refused the declaration.
+        self._route_keys: dict[str, zenoh.KeyExpr | None] = {}
 
     # -- public information -----------------------------------------------------------
 
@@ -659,6 +672,7 @@ class ZenohTransport:
                 outlet.matching_listener = None
             self._node_id = ""
             self._peers.clear()
+            self._route_keys.clear()  # declared on the session closing below
             self._matching_changed = None  # bound to this event loop
             with anyio.CancelScope(shield=True):
                 await anyio.to_thread.run_sync(_close_session, session, declared)
@@ -944,6 +958,8 @@ class ZenohTransport:
                 message = self._receive(kind, topic, payload, bus)
                 if message is None or topic is None:
                     continue
+                if kind != _REPLY and key not in self._route_keys:
+                    self._declare_route(key)
             elif kind == _REQUERY:
                 if self._running and key in self._peers.alive():
                     self._query_latched(key, payload[0])
@@ -980,6 +996,19 @@ class ZenohTransport:
                     if message is not None:
                         self._deliver(bus, newest.topic, [message])
         return bool(inbox)
+
+    def _declare_route(self, key: str) -> None:
+        """Declare ``key``, the data key of a topic received, to the session
+        (:data:`MAX_ROUTE_KEYS`: Zenoh then keeps its samples' route), at most once."""
+        session = self._session
+        if session is None or len(self._route_keys) >= MAX_ROUTE_KEYS:
+            return
+        try:
+            declared: zenoh.KeyExpr | None = session.declare_keyexpr(key)
+        except zenoh.ZError as exc:  # never a reason to drop the sample: uncached
+            declared = None
+            self._log.log(logging.DEBUG, "cannot declare key %s: %s", key, exc)
+        self._route_keys[key] = declared
 
     def _receive(
         self, kind: int, topic: str | None, payload: bytes, bus: BusLike | None = None
