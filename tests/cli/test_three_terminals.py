@@ -462,18 +462,25 @@ def test_listener_with_use_sim_time_prints_one_line_per_simulated_second() -> No
             assert all(matches), lines
             nows = [_sec(m.group(1)) for m in matches if m]
             stamps = [_sec(m.group(2)) for m in matches if m]
-            # Simulated time: 100 s and on, not the wall clock's 1.7e9 s; a line per
-            # simulated second (0.1 s of wall time at 10x); a /clock may be lost on the
-            # way (Zenoh drops under load), so a tick may land one step (0.1 s) late.
+            # Simulated time: 100 s and on, not the wall clock's 1.7e9 s.
             assert all(100.0 <= t < 100.0 + 120 * 10 for t in nows), lines
-            assert all(abs(b - a - 1.0) <= 0.1 + 1e-6 for a, b in pairwise(nows)), nows
-            # One grid for all ticks (no drift): every tick is on the first one's phase,
-            # or one step (0.1 s) late.
-            phases = sorted({round(t * 10) % 10 for t in nows})  # tenths of a second
-            assert len(phases) == 1 or (
-                len(phases) == 2 and (phases[1] - phases[0]) % 10 in (1, 9)), nows
-            # The lookup at Time(0) answers the newest /tf: stamped at or just before now.
-            assert all(0.0 <= n - s <= 0.3 for n, s in zip(nows, stamps, strict=True)), lines
+            # A line per simulated second on one grid (no drift). A tick prints the time it
+            # reads when it runs, never before its deadline and late by what the listener
+            # was kept from running meanwhile: the simulator steps 0.1 s a 10 ms of wall
+            # time, so a listener held off the CPU for 40 ms on a loaded machine (seen at
+            # load 8) prints a time 0.4 s past its deadline, as a /clock lost on the way
+            # (Zenoh drops under load) makes it 0.1 s late. The grid's phase is the one
+            # that leaves every tick late by the least (at most 0.5 s: half a period, so
+            # a grid 1 s apart stays unambiguous), and the deadlines are 1 s apart.
+            tenths = [round(t * 10) for t in nows]
+            lags = min(([(k - phase) % 10 for k in tenths] for phase in range(10)), key=max)
+            assert max(lags) <= 5, nows
+            deadlines = [k - lag for k, lag in zip(tenths, lags, strict=True)]
+            assert all(b - a == 10 for a, b in pairwise(deadlines)), nows
+            # The lookup at Time(0) answers the newest /tf: stamped at or just before the
+            # time the tick reads (0.3 s, and the tick's lateness).
+            assert all(0.0 <= n - s <= 0.3 + lag / 10 + 1e-6
+                       for n, s, lag in zip(nows, stamps, lags, strict=True)), lines
             assert listener.finish(signal.SIGINT) == 0
 
             echo = Tfbus("echo", "base_link", "base_laser", "--use-sim-time", "--bus",
