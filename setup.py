@@ -1,7 +1,7 @@
 """Build the compiled core (``tfbus/core/_c*.pyx``, the wire decoders
-``tfbus/codecs/_cwire.pyx``, the laser projection ``tfbus/_claser.pyx`` and the listener's
-message handler ``tfbus/_clistener.pyx``; Cython), optionally; everything else is in
-pyproject.toml.
+``tfbus/codecs/_cwire.pyx``, the laser projection ``tfbus/_claser.pyx``, the listener's
+message handler ``tfbus/_clistener.pyx`` and the doctor's accounting
+``tfbus/doctor/_cchecks.pyx``; Cython), optionally; everything else is in pyproject.toml.
 
 The extensions are an accelerator, never a requirement: tfbus has a pure-Python core with
 the same behaviour (``tfbus.core.COMPILED`` says which one is loaded).
@@ -59,6 +59,10 @@ COMPILED_LISTENER = ("_clistener",)
 """The compiled message handler of a ``TransformListener`` (``tfbus/<name>.pyx``):
 ``_clistener``, a message of one transform stored with no Python frame; used with the
 compiled core, the listener's own ``_handle`` otherwise."""
+COMPILED_DOCTOR = ("_cchecks",)
+"""The compiled accounting of ``tfbus doctor``'s checks (``tfbus/doctor/<name>.pyx``):
+``_cchecks``, the loop of ``Doctor.add`` over a message's transforms on typed per-link
+fields; used with the compiled core, ``Doctor.add``'s own loop otherwise."""
 REQUIRE_EXTENSIONS = _flag("TFBUS_REQUIRE_EXTENSIONS")
 
 _FALLBACK = """
@@ -153,7 +157,8 @@ def _extensions() -> list[Extension]:
     exts = [
         Extension(f"tfbus.{package}.{name}", [f"tfbus/{package}/{name}.pyx"],
                   extra_compile_args=extra)
-        for package, names in (("core", COMPILED_MODULES), ("codecs", COMPILED_CODECS))
+        for package, names in (("core", COMPILED_MODULES), ("codecs", COMPILED_CODECS),
+                               ("doctor", COMPILED_DOCTOR))
         for name in names
     ]
     exts += [

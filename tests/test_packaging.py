@@ -87,6 +87,7 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
         *(f"tfbus/core/_c{job}.{ext}" for job in ("math", "cache", "core", "batch")
           for ext in ("pyx", "pyi")),
         "tfbus/codecs/_cwire.pyx", "tfbus/codecs/_cwire.pyi",
+        "tfbus/doctor/_cchecks.pyx", "tfbus/doctor/_cchecks.pyi",
         *(f"tfbus/core/_c{job}.pxd" for job in ("math", "cache", "core", "results")),
         "tfbus/_claser.pyx", "tfbus/_claser.pyi", "tfbus/_clistener.pyx", "tfbus/_clistener.pyi",
         *(f"tfbus/core/_py{job}.py" for job in ("math", "cache", "core", "batch")),

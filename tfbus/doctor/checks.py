@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, fields
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
-from tfbus.core import frame_path
+from tfbus.core import COMPILED, frame_path
 from tfbus.doctor.report import BroadcasterDelay, Finding, Level, Report
 from tfbus.messages import TransformStamped
 from tfbus.monitor import SIM_TIME_GAP
@@ -166,10 +166,74 @@ OVERFLOW: Final = "..."
 """The sender name under which broadcasters beyond :attr:`Thresholds.max_senders` count."""
 
 
-class _Span:
-    """Messages counted over a receive-time span."""
+class _SpanFields:
+    """The fields of :class:`_Span` (the pure twin of ``_cchecks.SpanFields``)."""
 
     __slots__ = ("count", "first", "last")
+    count: int
+    first: int
+    last: int
+
+
+class _SampleFields:
+    """The fields of :class:`_Sample` (the pure twin of ``_cchecks.SampleFields``)."""
+
+    __slots__ = ("cap", "n", "stride", "values")
+    cap: int
+    n: int
+    stride: int
+    values: list[float]
+
+
+class _LinkFields:
+    """The fields of :class:`_Link` (the pure twin of ``_cchecks.LinkFields``)."""
+
+    __slots__ = (
+        "baseline", "child", "consecutive_gaps", "delay", "drop_first", "drop_last",
+        "drop_worst", "dynamic", "first_gap", "gap_count", "gap_largest", "gap_senders", "hot",
+        "intervals",
+        "last_gap", "last_received", "newest", "old_data", "order_span", "out_of_order",
+        "parent", "parents", "period", "recent", "repeat_span", "repeated",
+        "sender_stamp", "static", "static_values",
+    )
+
+
+_COMPILED_MAX_WINDOW: Final = 2**61
+"""``Thresholds.rate_window`` below which the compiled loop runs (its interval counts are
+C 64-bit ints)."""
+
+_Account = Callable[["Doctor", int, Iterable[TransformStamped], str, bool, float], None]
+
+
+def _compiled_accounting() -> tuple[type, type, type, _Account | None]:
+    """The per-link field classes and :meth:`Doctor.add`'s compiled loop
+    (:mod:`tfbus.doctor._cchecks`) when the compiled core is in use (``tfbus.core.COMPILED``:
+    not under ``TFBUS_PURE_PYTHON``) and that module is built; else the pure field classes
+    and None (``Doctor.add``'s own loop)."""
+    if COMPILED:
+        try:
+            from tfbus.doctor import _cchecks
+        except ImportError:  # a build without extensions
+            pass
+        else:
+            return (_cchecks.SpanFields, _cchecks.SampleFields, _cchecks.LinkFields,
+                    _cchecks.account)
+    return _SpanFields, _SampleFields, _LinkFields, None
+
+
+if TYPE_CHECKING:
+    _SpanBase = _SpanFields
+    _SampleBase = _SampleFields
+    _LinkBase = _LinkFields
+    _ACCOUNT: _Account | None
+else:
+    _SpanBase, _SampleBase, _LinkBase, _ACCOUNT = _compiled_accounting()
+
+
+class _Span(_SpanBase):
+    """Messages counted over a receive-time span."""
+
+    __slots__ = ()
 
     def __init__(self, t: int) -> None:
         self.count = 0
@@ -189,12 +253,12 @@ class _Span:
         self.last = max(self.last, other.last)
 
 
-class _Sample:
+class _Sample(_SampleBase):
     """A bounded, deterministic sample of a stream of numbers: every value until
     ``cap``, then every other one kept and the stride doubled (the sample stays spread
     over the whole run)."""
 
-    __slots__ = ("cap", "n", "stride", "values")
+    __slots__ = ()
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
@@ -230,17 +294,10 @@ MAX_LOOPS: Final = 100
 further ones are counted in the report's ``too_many_frames``-style ``loops_untracked``."""
 
 
-class _Link:
+class _Link(_LinkBase):
     """Everything the checks keep about one child frame."""
 
-    __slots__ = (
-        "baseline", "child", "consecutive_gaps", "delay", "drop_first", "drop_last",
-        "drop_worst", "dynamic", "first_gap", "gap_count", "gap_largest", "gap_senders", "hot",
-        "intervals",
-        "last_gap", "last_received", "newest", "old_data", "order_span", "out_of_order",
-        "parent", "parents", "period", "recent", "repeat_span", "repeated",
-        "sender_stamp", "static", "static_values",
-    )
+    __slots__ = ()
 
     def __init__(self, child: str) -> None:
         self.child = child
@@ -324,6 +381,8 @@ class Doctor:
         self._alpha = 2.0 / (t.rate_window + 1)
         self._cache_ns = round(t.cache_time * NSEC_PER_SEC)
         self._senders: set[str] = set()
+        # the compiled loop of add, when built (its counters of intervals are C ints)
+        self._account = _ACCOUNT if t.rate_window < _COMPILED_MAX_WINDOW else None
         self._slashed: dict[str, tuple[_Span, set[str], str]] = {}
 
     # ------------------------------------------------------------------ feeding
@@ -349,6 +408,10 @@ class Doctor:
             self.start = t
         if self.end is None or t > self.end:
             self.end = t
+        account = self._account
+        if account is not None:  # the loop below, compiled
+            account(self, t, transforms, sender, static, SIM_TIME_GAP)
+            return
         links = self._links
         # the newest stamp held over the message, written back once (a dynamic transform
         # reads it and may raise it; nothing else reads it meanwhile)

@@ -1,0 +1,26 @@
+from collections.abc import Iterable
+from typing import Any
+
+from tfbus.messages import TransformStamped
+
+class SpanFields:
+    count: int
+    first: int
+    last: int
+
+class SampleFields:
+    cap: int
+    n: int
+    stride: int
+    values: list[float]
+
+class LinkFields: ...
+
+def account(
+    doctor: Any,
+    t: int,
+    transforms: Iterable[TransformStamped],
+    sender: str,
+    static: bool,
+    sim_time_gap: float,
+) -> None: ...

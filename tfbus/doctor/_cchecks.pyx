@@ -1,0 +1,208 @@
+# cython: language_level=3, boundscheck=False, wraparound=False
+"""The compiled accounting of ``tfbus doctor``'s checks: :func:`account` runs the loop of
+:meth:`tfbus.doctor.checks.Doctor.add` over a message's transforms, on the fields of the
+per-link state declared here (:class:`SpanFields`, :class:`SampleFields`,
+:class:`LinkFields`: the bases of the doctor's ``_Span``, ``_Sample`` and ``_Link``,
+whose methods stay in ``checks.py``), with the typed fields read and written in C and no
+Python frame per transform. What is not the common case (a new link, another parent,
+sender or topic, a stamp not newer than the newest, a gap, a rate drop) is handed to the
+same methods of the doctor as in ``Doctor.add``; the values are computed with the same
+operations in the same order (IEEE doubles, no fused multiply-add), so both give the
+same report, which ``tests/doctor/test_compiled_accounting.py`` checks on the same
+streams. Used with the compiled core (``tfbus.core.COMPILED``), ``Doctor.add``'s own
+loop otherwise.
+"""
+
+from cpython.long cimport PyLong_AsLongLongAndOverflow
+
+from tfbus.messages import Header, TransformStamped
+from tfbus.time import NSEC_PER_SEC, Time
+
+cdef double _NSEC = 1e9
+cdef long long _EXACT = 1LL << 53  # ints up to this convert to a double exactly
+
+
+cdef class SpanFields:
+    """The fields of a count over a receive-time span: ``count``, ``first`` and ``last``
+    receive times (ns)."""
+
+    cdef public long long count
+    cdef public object first
+    cdef public object last
+
+
+cdef class SampleFields:
+    """The fields of a bounded sample of numbers: ``cap``, ``n`` values offered,
+    ``stride`` (every ``stride``-th kept), ``values`` kept."""
+
+    cdef public object cap
+    cdef public long long n
+    cdef public long long stride
+    cdef public list values
+
+
+cdef class LinkFields:
+    """The fields of the doctor's state of one child frame (``checks._Link`` documents
+    them)."""
+
+    cdef public object baseline, child, delay, drop_first, drop_last, drop_worst, dynamic
+    cdef public object first_gap, gap_largest, gap_senders, hot, last_gap, last_received
+    cdef public object newest, order_span, out_of_order, parent, parents, period, recent
+    cdef public object repeat_span, repeated, sender_stamp, static, static_values
+    cdef public long long consecutive_gaps, gap_count, intervals, old_data
+
+
+cdef inline void _count(SpanFields span, object t) except *:
+    """``_Span.add(t)``: one more message, received at ``t``."""
+    span.count += 1
+    if t > span.last:
+        span.last = t
+    elif t < span.first:
+        span.first = t
+
+
+def account(doctor, object t, transforms, str sender, bint static, object sim_time_gap):
+    """Account the transforms of one message received at ``t`` (int ns) from ``sender``
+    (already bounded by the doctor) into ``doctor`` (a ``Doctor``): ``Doctor.add``'s loop
+    and its ``finally`` (the newest stamp and the count of transforms written back).
+    ``sim_time_gap``: :data:`tfbus.monitor.SIM_TIME_GAP` (seconds).
+
+    Raises:
+        Exception: whatever ``Doctor.add``'s own loop raises on the same input (a header
+            without ``frame_id`` or ``stamp``), after writing back what was accounted.
+    """
+    cdef dict links = doctor._links
+    cdef object newest_stamp = doctor._newest_stamp
+    cdef object sim_time = doctor.sim_time
+    cdef long long counted = 0
+    th = doctor.thresholds
+    cdef long long rate_window = th.rate_window
+    cdef double gap_periods = th.gap_periods
+    cdef double rate_drop = th.rate_drop
+    gap_min_ns = th.gap_min * NSEC_PER_SEC  # compared as Python compares it (in a gap)
+    cdef long long settled = 2 * rate_window
+    cdef double alpha = doctor._alpha
+    cdef LinkFields link
+    cdef SampleFields sample
+    cdef tuple hot
+    cdef object ts, child, header, parent, when, stamp, newest, p, baseline, mean, found
+    cdef object diff
+    cdef long long di
+    cdef int overflow
+    cdef double d, interval, pd, bd
+    cdef long long intervals
+    try:
+        for ts in transforms:
+            if type(ts) is TransformStamped:
+                header = (<tuple>ts)[0]
+                child = (<tuple>ts)[1]
+            elif isinstance(ts, TransformStamped):
+                child = ts.child_frame_id
+                header = None
+            else:
+                continue
+            if not isinstance(child, str):
+                continue
+            if header is None:
+                header = ts.header
+            if type(header) is Header:
+                parent = (<tuple>header)[1]
+                when = (<tuple>header)[0]
+            else:
+                parent = header.frame_id
+                when = header.stamp
+            if not (isinstance(parent, str) and isinstance(when, Time)):
+                continue
+            counted += 1
+            found_link = links.get(child)
+            link = None
+            if found_link is not None and isinstance(found_link, LinkFields):
+                link = <LinkFields>found_link
+                if link.hot is not None:
+                    hot = <tuple>link.hot
+                    if not (hot[0] == parent and hot[1] == sender and hot[2] is static):
+                        link = None
+                else:
+                    link = None
+            if link is not None:
+                # the same parent, sender and topic as the link's last message: its two
+                # spans counted here
+                _count(<SpanFields>hot[3], t)
+                _count(<SpanFields>hot[4], t)
+                mean = hot[5]
+                sample_obj = hot[6]
+            else:
+                found = doctor._find(child, parent, sender, static, t)
+                if found is None:
+                    continue
+                link = <LinkFields>(<tuple>found)[0]
+                parent = (<tuple>found)[1]
+                mean = (<tuple>found)[2]
+                sample_obj = (<tuple>found)[3]
+            link.last_received = t
+            if static:
+                tr = ts.transform
+                tt = tr.translation
+                rot = tr.rotation
+                link.static_values[sender] = (parent, tt.x, tt.y, tt.z,
+                                              rot.x, rot.y, rot.z, rot.w)
+                continue
+            sample = <SampleFields?>sample_obj
+            stamp = when._ns
+            # delay: receive time - stamp (against the newest stamp in simulated time)
+            if sim_time is None:
+                sim_time = abs(t - stamp) / NSEC_PER_SEC > sim_time_gap
+                doctor.sim_time = sim_time
+            if stamp > newest_stamp:
+                newest_stamp = stamp
+            diff = (newest_stamp if sim_time else t) - stamp
+            overflow = 1
+            if type(diff) is int:
+                di = PyLong_AsLongLongAndOverflow(diff, &overflow)
+            if overflow == 0 and -_EXACT <= di <= _EXACT:
+                # int / int of two ints a double holds exactly: one correctly rounded
+                # division, the quotient Python's true division gives
+                d = <double>di / _NSEC
+            else:
+                d = diff / NSEC_PER_SEC
+            (<list>mean)[0] = <double>(<list>mean)[0] + d
+            (<list>mean)[1] = (<list>mean)[1] + 1
+            if sample.n % sample.stride == 0:
+                sample_obj.keep(d)
+            sample.n += 1
+            newest = link.newest
+            if newest is not None and stamp > newest:
+                # in order (the common case): newer than every stamp held, not repeated
+                link.recent.append(stamp)
+                (<dict>link.sender_stamp)[sender] = stamp
+                p = link.period
+                interval = <double>(stamp - newest)
+                if p is None:
+                    doctor._interval(link, t, stamp, newest, sender)
+                    continue
+                pd = p
+                if (link.intervals >= rate_window and interval > gap_periods * pd
+                        and interval > gap_min_ns):
+                    doctor._interval(link, t, stamp, newest, sender)  # a gap
+                    continue
+                # _interval's common case: the moving average moves
+                link.newest = stamp
+                link.intervals += 1
+                intervals = link.intervals
+                link.consecutive_gaps = 0
+                pd = pd + alpha * (interval - pd)
+                link.period = pd
+                if intervals > settled:
+                    baseline = link.baseline
+                    if baseline is None or pd < <double>baseline:
+                        link.baseline = pd
+                        bd = pd
+                    else:
+                        bd = baseline
+                    if pd * rate_drop > bd:
+                        doctor._dropped(link, t, pd)
+            else:
+                doctor._stamps(link, t, stamp, sender)
+    finally:
+        doctor._newest_stamp = newest_stamp
+        doctor.transforms += counted
