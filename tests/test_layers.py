@@ -53,6 +53,7 @@ LAYERS: dict[str, int] = {
     "fleet": 3,
     "session": 3,  # a bus, buffer, listener and broadcasters held by a background task
     "monitor": 3,  # tf_monitor's summaries over a sink (bag/ and cli/ use them)
+    "_cmonitor": 3,  # compiled accounting of tf_monitor's tables (monitor.py's kernel)
     # 4: recordings, statistics, sensors, transports (packages count as one entry)
     "bag": 4,
     "filters": 4,

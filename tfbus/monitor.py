@@ -57,11 +57,11 @@ import math
 from bisect import bisect_left
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, cast
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING, Protocol, TypeVar, cast
 
 from tfbus.clock import Clock
-from tfbus.core import BatchResult, frame_path
+from tfbus.core import COMPILED, BatchResult, frame_path
 from tfbus.core.policy import ExpireAfter
 from tfbus.core.results import BufferStatistics
 from tfbus.messages import TransformStamped
@@ -102,7 +102,69 @@ STALE_AFTER = 1.0
 """... and silent for at least this many seconds (a stale verdict is never quicker)."""
 
 
-class RateWindow:
+class _RateWindowFields:
+    """The fields of :class:`RateWindow` (the pure twin of ``_cmonitor.RateWindowFields``)."""
+
+    __slots__ = ("_held", "_out_of_order", "_received", "_seq", "_values", "distinct",
+                 "last_received", "maxlen", "window_ns")
+
+
+class _FrameFields:
+    """The fields of :class:`FrameSummary` (the pure twin of ``_cmonitor.FrameFields``)."""
+
+    __slots__ = ("authorities", "child", "count", "delay_count", "delay_max", "delay_sum",
+                 "distinct_stamps", "first_stamp", "last_stamp", "parent", "received", "static")
+
+
+class _AuthorityFields:
+    """The fields of :class:`AuthoritySummary` (the pure twin of
+    ``_cmonitor.AuthorityFields``)."""
+
+    __slots__ = ("authority", "delay_count", "delay_max", "delay_sum", "first", "last",
+                 "messages", "received")
+
+
+_Account = Callable[..., bool]
+
+
+def _compiled_tables() -> tuple[type, type, type, _Account | None]:
+    """The field classes of the tables and :meth:`TfSummary.add`'s compiled loop
+    (:mod:`tfbus._cmonitor`) when the compiled core is in use (``tfbus.core.COMPILED``: not
+    under ``TFBUS_PURE_PYTHON``) and that module is built; else the pure field classes and
+    None (``TfSummary.add``'s own loop)."""
+    if COMPILED:
+        try:
+            from tfbus import _cmonitor
+        except ImportError:  # a build without extensions
+            pass
+        else:
+            return (_cmonitor.RateWindowFields, _cmonitor.FrameFields,
+                    _cmonitor.AuthorityFields, _cmonitor.account)
+    return _RateWindowFields, _FrameFields, _AuthorityFields, None
+
+
+if TYPE_CHECKING:
+    _RateWindowBase = _RateWindowFields
+    _FrameBase = _FrameFields
+    _AuthorityBase = _AuthorityFields
+    _ACCOUNT: _Account | None
+else:
+    _RateWindowBase, _FrameBase, _AuthorityBase, _ACCOUNT = _compiled_tables()
+
+_T = TypeVar("_T")
+
+
+def _fields_on_base(cls: type[_T]) -> type[_T]:
+    """A dataclass whose fields live on its base (the field classes above): the class
+    attributes ``@dataclass`` leaves for defaults would hide them, so they go (its
+    ``__init__`` keeps its own copy of each default)."""
+    for f in fields(cls):  # type: ignore[arg-type]
+        if f.name in cls.__dict__:
+            delattr(cls, f.name)
+    return cls
+
+
+class RateWindow(_RateWindowBase):
     """The samples of one frame (or broadcaster) received in the last ``window`` seconds,
     at most ``maxlen`` of them: ``(receive time, value)`` in ns, value the header stamp
     (``distinct``: a repeated stamp is kept once, as tf2 keeps it) or the receive time.
@@ -124,8 +186,7 @@ class RateWindow:
         ValueError: ``window`` not finite and > 0, or ``maxlen`` < 2.
     """
 
-    __slots__ = ("_held", "_out_of_order", "_received", "_seq", "_values", "distinct",
-                 "last_received", "maxlen", "window_ns")
+    __slots__ = ()
 
     def __init__(self, window: float = RATE_WINDOW, maxlen: int = RECENT_SAMPLES, *,
                  distinct: bool = True) -> None:
@@ -265,8 +326,9 @@ def link_rate(distinct_stamps: int, oldest_ns: int, newest_ns: int) -> float:
     return (distinct_stamps - 1) / span
 
 
-@dataclass(slots=True)
-class FrameSummary:
+@_fields_on_base
+@dataclass
+class FrameSummary(_FrameBase):
     """The summary of one child frame: its parent, who sends it, its stamps and delays.
 
     Stamps are header stamps in ns; delays are seconds (see the module docstring).
@@ -274,6 +336,7 @@ class FrameSummary:
     (module docstring); memory is bounded (:class:`RateWindow`).
     """
 
+    __slots__ = ()
     child: str
     parent: str
     static: bool
@@ -336,10 +399,12 @@ class FrameSummary:
         return (self.last_stamp - self.first_stamp) / NSEC_PER_SEC
 
 
-@dataclass(slots=True)
-class AuthoritySummary:
+@_fields_on_base
+@dataclass
+class AuthoritySummary(_AuthorityBase):
     """Per broadcaster (authority): messages received and their transforms' delays."""
 
+    __slots__ = ()
     authority: str
     messages: int = 0
     first: int | None = None
@@ -465,6 +530,19 @@ class TfSummary:
             auth.first = t
         auth.last = t
         auth.received.add(t, t)
+        if _ACCOUNT is not None:  # _account, compiled
+            touched = _ACCOUNT(self, FrameSummary, t, transforms, authority, static, auth,
+                              SIM_TIME_GAP)
+        else:
+            touched = self._account(t, transforms, authority, static, auth)
+        if touched:
+            reference = self._newest_stamp if self.sim_time else t
+            for chain in self.chains:
+                self._sample_chain(chain, reference)
+
+    def _account(self, t: int, transforms: Iterable[TransformStamped], authority: str,
+                 static: bool, auth: AuthoritySummary) -> bool:
+        """:meth:`add`'s loop over the message's transforms; whether one was dynamic."""
         touched = False
         frames = self.frames
         sim_time = self.sim_time
@@ -539,10 +617,7 @@ class TfSummary:
         finally:
             self._newest_stamp = newest
             auth.delay_sum, auth.delay_count, auth.delay_max = a_sum, a_count, a_max
-        if touched:
-            reference = self._newest_stamp if self.sim_time else t
-            for chain in self.chains:
-                self._sample_chain(chain, reference)
+        return touched
 
     def _sample_chain(self, chain: ChainDelay, reference: int) -> None:
         chain.frames = self.chain(chain.source, chain.target)

@@ -125,6 +125,17 @@ def test_what_a_peer_sends_gives_the_same_state_and_report() -> None:
 
 
 @needs_compiled
+def test_more_delays_than_a_sample_keeps_give_the_same_state_and_report() -> None:
+    # Thresholds.delay_samples (1024) per sender at most: then every other one, and so on
+    records = [(T0 + i * 10**7, "/tf", "/odometry",
+                [tf("odom", "base_link", T0 + i * 10**7 - 10**6),
+                 tf("base_link", "laser", T0 + i * 10**7 - 2 * 10**6)]) for i in range(1500)]
+    compiled, pure = feed(records, True), feed(records, False)
+    assert compiled._delays["/odometry"].stride > 1
+    assert state(compiled) == state(pure)
+
+
+@needs_compiled
 def test_simulated_time_gives_the_same_state_and_report() -> None:
     # stamps near 0 while the receive clock is near 1.7e18: delays against the newest stamp
     records = [(T0 + i * 10**7, "/tf", "/sim", [tf("odom", "base_link", 10**6 + i * 10**7),

@@ -1,0 +1,227 @@
+"""``TfSummary.add``'s two loops over a message's transforms, the compiled one
+(``tfbus._cmonitor.account``, on the typed fields of the tables) and ``TfSummary.add``'s
+own (the pure-Python path, ``TFBUS_PURE_PYTHON``), leave the same tables, bit for bit: on
+every recording of the doctor's fault set, on what only a peer sends (junk items,
+subclasses, repeated and out-of-order stamps, stamps far from the receive clock, a receive
+time beyond 64 bits), in simulated time, on random streams, and against the pure-Python
+core in a process of its own."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import tfbus.monitor
+from tfbus.messages import Header, TransformStamped
+from tfbus.monitor import RateWindow, TfSummary
+from tfbus.time import Time
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "doctor"))
+
+from doctor_faults import FAULTS, T0, Record, tf  # noqa: E402
+
+COMPILED = tfbus.monitor._ACCOUNT
+
+needs_compiled = pytest.mark.skipif(
+    COMPILED is None,
+    reason="the compiled tables are not in use (TFBUS_PURE_PYTHON, or no extensions)")
+
+
+def _window(w: RateWindow) -> list[Any]:
+    return [w.window_ns, w.maxlen, w.distinct, w.last_received, list(w._received),
+            list(w._values), list(w._out_of_order), w._seq,
+            None if w._held is None else sorted(w._held)]
+
+
+def state(summary: TfSummary) -> str:
+    """Everything the tables keep, as exact text (floats by repr)."""
+    frames = {child: [f.child, f.parent, f.static, f.authorities, f.count, f.distinct_stamps,
+                      f.first_stamp, f.last_stamp, f.delay_sum, f.delay_count, f.delay_max,
+                      _window(f.received)]
+              for child, f in sorted(summary.frames.items())}
+    authorities = {name: [a.authority, a.messages, a.first, a.last, a.delay_sum,
+                          a.delay_count, a.delay_max, _window(a.received)]
+                   for name, a in sorted(summary.authorities.items())}
+    chains = [[c.source, c.target, c.frames, c.delay_sum, c.delay_count, c.delay_max]
+              for c in summary.chains]
+    whole = [summary.start, summary.end, summary.messages, frames, authorities,
+             summary.sim_time, summary._newest_stamp, chains]
+    return json.dumps(whole, default=repr, sort_keys=True)
+
+
+def feed(records: Iterable[Record], compiled: bool) -> TfSummary:
+    summary = TfSummary()
+    summary.watch_chain("map", "base_link")
+    was = tfbus.monitor._ACCOUNT
+    tfbus.monitor._ACCOUNT = COMPILED if compiled else None
+    try:
+        for t, topic, caller, transforms in records:
+            summary.add(Time.from_ns(t) if t < 2**63 else _Late(t),
+                        transforms, caller, static=topic == "/tf_static")
+    finally:
+        tfbus.monitor._ACCOUNT = was
+    return summary
+
+
+class _Late(Time):
+    """A receive time beyond 64 bits (a Time only a hand-made call builds)."""
+
+    def __init__(self, ns: int) -> None:
+        self._ns = ns
+
+
+def _sorted(records: list[Record]) -> list[Record]:
+    return sorted(records, key=lambda r: r[0])
+
+
+@needs_compiled
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+def test_every_fault_recording_gives_the_same_tables(fault: str) -> None:
+    records = _sorted(FAULTS[fault]())
+    assert state(feed(records, True)) == state(feed(records, False))
+
+
+class _Stamped(TransformStamped):
+    """A subclass of TransformStamped (read by attribute, as TfSummary.add reads it)."""
+
+
+class _Header(Header):
+    """A subclass of Header."""
+
+
+def peer_stream() -> list[Record]:
+    """What only a peer or a hand-made call sends, between ordinary transforms."""
+    out: list[Record] = []
+    ms = 1_000_000
+    for i in range(80):
+        t = T0 + i * 10 * ms
+        items: list[Any] = [tf("odom", "base_link", t - 5 * ms)]
+        if i % 7 == 0:
+            items.append("junk")
+        if i % 11 == 0:
+            items.append(TransformStamped(Header(Time.from_ns(t), "odom"), 5))  # type: ignore[arg-type]
+        if i % 13 == 0:
+            items.append(TransformStamped(Header(5, "odom"), "x"))  # type: ignore[arg-type]
+            items.append(TransformStamped(Header(Time.from_ns(t), 7), "y"))  # type: ignore[arg-type]
+        if i % 5 == 0:
+            base = tf("map", "odom", t - 20 * ms)
+            items.append(_Stamped(_Header(*base.header), base.child_frame_id, base.transform))
+        if i % 9 == 0:  # a repeated stamp, then one out of order
+            items.append(tf("odom", "base_link", t - 5 * ms))
+            items.append(tf("odom", "base_link", t - 45 * ms))
+        if i == 30:  # a stamp far behind the receive clock: a delay beyond 2**53 ns
+            items.append(tf("odom", "far", 1))
+        if i == 50:  # the frame now static, then dynamic again
+            out.append((t, "/tf_static", "/rsp", [tf("odom", "base_link", t)]))
+        out.append((t, "/tf", "/peer" if i % 3 else "/other", items))
+    out.append((2**70, "/tf", "/peer", [tf("odom", "base_link", T0 + 10**9)]))  # beyond 64 bits
+    return out
+
+
+@needs_compiled
+def test_what_a_peer_sends_gives_the_same_tables() -> None:
+    records = peer_stream()
+    assert state(feed(records, True)) == state(feed(records, False))
+
+
+@needs_compiled
+def test_more_samples_than_a_window_holds_give_the_same_tables() -> None:
+    # RECENT_SAMPLES (1000) per frame at most: the oldest leave as new ones come
+    records = [(T0 + i * 10**7, "/tf", "/odometry",
+                [tf("odom", "base_link", T0 + i * 10**7 - 10**6)]) for i in range(1500)]
+    compiled, pure = feed(records, True), feed(records, False)
+    assert len(compiled.frames["base_link"].received) == tfbus.monitor.RECENT_SAMPLES
+    assert state(compiled) == state(pure)
+
+
+@needs_compiled
+def test_simulated_time_gives_the_same_tables() -> None:
+    records = [(T0 + i * 10**7, "/tf", "/sim", [tf("odom", "base_link", 10**6 + i * 10**7),
+                                               tf("map", "odom", 10**6 + (i // 2) * 2 * 10**7)])
+               for i in range(300)]
+    compiled, pure = feed(records, True), feed(records, False)
+    assert compiled.sim_time is True
+    assert state(compiled) == state(pure)
+
+
+@needs_compiled
+def test_a_header_that_is_not_one_raises_the_same_after_the_same_accounting() -> None:
+    good = tf("odom", "base_link", T0)
+    bad = TransformStamped(5, "x")  # type: ignore[arg-type]
+    summaries = [feed([], compiled) for compiled in (True, False)]
+    for summary, compiled in zip(summaries, (True, False), strict=True):
+        tfbus.monitor._ACCOUNT = COMPILED if compiled else None
+        try:
+            with pytest.raises(AttributeError):
+                summary.add(Time.from_ns(T0 + 10**6), [good, bad], "/a", static=False)
+        finally:
+            tfbus.monitor._ACCOUNT = COMPILED
+    assert state(summaries[0]) == state(summaries[1])
+    assert summaries[0].frames["base_link"].count == 1  # accounted before the bad item
+
+
+_stream = st.lists(
+    st.tuples(
+        st.integers(0, 3 * 10**8),  # receive time step, ns
+        st.sampled_from(["/tf", "/tf", "/tf", "/tf_static"]),
+        st.sampled_from(["/a", "/b", "/a"]),
+        st.lists(st.tuples(st.sampled_from(["map", "odom", "base_link"]),
+                           st.sampled_from(["odom", "base_link", "laser"]),
+                           st.integers(-3 * 10**8, 10**8)),  # stamp relative to receive time
+                 min_size=1, max_size=4),
+    ),
+    max_size=150,
+)
+
+
+@needs_compiled
+@settings(max_examples=60, deadline=None)
+@given(_stream)
+def test_random_streams_give_the_same_tables(
+    steps: list[tuple[int, str, str, list[tuple[str, str, int]]]],
+) -> None:
+    t = T0
+    records: list[Record] = []
+    for step, topic, caller, links in steps:
+        t += step
+        records.append((t, topic, caller,
+                        [tf(parent, child, max(t + rel, 0)) for parent, child, rel in links]))
+    assert state(feed(records, True)) == state(feed(records, False))
+
+
+_PURE_SCRIPT = """
+import sys
+sys.path[:0] = [{here!r}, {doctor!r}]
+import test_compiled_tables as t
+from doctor_faults import FAULTS
+assert t.COMPILED is None
+streams = {{name: t._sorted(f()) for name, f in FAULTS.items()}}
+streams["peer"] = t.peer_stream()
+for name in sorted(streams):
+    print(name, t.state(t.feed(streams[name], False)))
+"""
+
+
+@needs_compiled
+def test_the_pure_python_core_gives_the_same_tables() -> None:
+    # the pure twin's own field classes (slots), in a process with TFBUS_PURE_PYTHON
+    env = {**os.environ, "TFBUS_PURE_PYTHON": "1"}
+    script = _PURE_SCRIPT.format(here=str(HERE), doctor=str(HERE.parent / "doctor"))
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                         text=True, timeout=120, check=True).stdout
+    pure = dict(line.split(" ", 1) for line in out.splitlines())
+    streams = {name: _sorted(f()) for name, f in FAULTS.items()}
+    streams["peer"] = peer_stream()
+    assert sorted(pure) == sorted(streams)
+    for name, records in streams.items():
+        assert state(feed(records, True)) == pure[name], name
