@@ -59,6 +59,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "check-clock": (["--only", "clock"], ["--only", "clock"], 1800),
     "check-ros1cpu": (["--only", "ros1cpu"], ["--only", "ros1cpu", "--rounds", "3"], 900),
     "check-demo": (["--only", "demo"], ["--only", "demo", "--rounds", "3"], 1200),
+    "check-view": (["--only", "view"], ["--only", "view", "--rounds", "3"], 1200),
     "ros1_floor": (["--receivers", "asyncio,asyncio+store,callback,listener"],
                    ["--receivers", "asyncio,asyncio+store,callback,listener", "--rounds", "2",
                     "--seconds", "6"], 900),
