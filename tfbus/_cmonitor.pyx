@@ -59,7 +59,7 @@ cdef inline double _seconds(object diff):
     return diff / NSEC_PER_SEC
 
 
-def account(summary, frame_summary, object t, transforms, str authority, bint static,
+def account(summary, frame_summary, object t, transforms, object authority, bint static,
             AuthorityFields auth, object sim_time_gap):
     """Account the transforms of one message received at ``t`` (int ns) from
     ``authority`` into ``summary`` (a ``TfSummary``): ``TfSummary.add``'s loop and its

@@ -45,13 +45,14 @@ def _window(w: RateWindow) -> list[Any]:
 
 def state(summary: TfSummary) -> str:
     """Everything the tables keep, as exact text (floats by repr)."""
-    frames = {child: [f.child, f.parent, f.static, f.authorities, f.count, f.distinct_stamps,
+    frames = {child: [f.child, f.parent, f.static,
+                      {repr(k): v for k, v in f.authorities.items()}, f.count, f.distinct_stamps,
                       f.first_stamp, f.last_stamp, f.delay_sum, f.delay_count, f.delay_max,
                       _window(f.received)]
               for child, f in sorted(summary.frames.items())}
-    authorities = {name: [a.authority, a.messages, a.first, a.last, a.delay_sum,
-                          a.delay_count, a.delay_max, _window(a.received)]
-                   for name, a in sorted(summary.authorities.items())}
+    authorities = {repr(name): [a.authority, a.messages, a.first, a.last, a.delay_sum,
+                                a.delay_count, a.delay_max, _window(a.received)]
+                   for name, a in summary.authorities.items()}
     chains = [[c.source, c.target, c.frames, c.delay_sum, c.delay_count, c.delay_max]
               for c in summary.chains]
     whole = [summary.start, summary.end, summary.messages, frames, authorities,
@@ -124,6 +125,8 @@ def peer_stream() -> list[Record]:
         if i == 50:  # the frame now static, then dynamic again
             out.append((t, "/tf_static", "/rsp", [tf("odom", "base_link", t)]))
         out.append((t, "/tf", "/peer" if i % 3 else "/other", items))
+        if i == 60:  # an authority that is not a str (TfSummary.add takes any key)
+            out.append((t, "/tf", 7, [tf("odom", "base_link", t)]))  # type: ignore[list-item]
     out.append((2**70, "/tf", "/peer", [tf("odom", "base_link", T0 + 10**9)]))  # beyond 64 bits
     return out
 
