@@ -3,8 +3,9 @@ the turtle bag and from a live buffer; the screenshot is not blank, the frame na
 the page's text, a frame whose broadcaster stopped is shown stale then hidden, and an id
 with markup stays text.
 
-Chromium runs as a child process with a fresh profile, killed (by its PID, through
-``subprocess.run``'s timeout) if it outlives the bound; everything is on 127.0.0.1.
+Chromium runs as a child process in a session of its own with a fresh profile; after
+each run (and when it outlives the bound) the process group it leads is ended by its PID
+and the profile removed (``cdp.end_chromium``); everything is on 127.0.0.1.
 """
 
 from __future__ import annotations
@@ -43,22 +44,28 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[bytes]:
     """One headless Chromium run on ``url``, with a fresh profile. A run that outlives 60 s
-    is killed (``subprocess.run``'s timeout kills the child we started) and run again, at
-    most 3 times: on a loaded machine headless Chromium sometimes never ends its
-    virtual-time budget (CI saw one such hang under ``nox``); a page that never loads still
-    fails after the third."""
+    is ended and run again, at most 3 times: on a loaded machine headless Chromium
+    sometimes never ends its virtual-time budget (CI saw one such hang under ``nox``); a
+    page that never loads still fails after the third. After each run the processes it
+    started are ended with it (its process group) and its profile removed, retried while a
+    helper still exiting writes into it (``cdp.end_chromium``)."""
+    from cdp import end_chromium
+
     stuck = b""
     for _ in range(3):
-        with tempfile.TemporaryDirectory(prefix="tfbus-view-chromium-") as profile:
-            try:
-                done = subprocess.run([exe, *FLAGS, f"--user-data-dir={profile}", *extra, url],
-                                      capture_output=True, timeout=60, check=False,
-                                      env={**os.environ, "TMPDIR": profile})
-            except subprocess.TimeoutExpired as exc:
-                stuck = exc.stderr or b""
-                continue
-        assert done.returncode == 0, done.stderr[-2000:]
-        return done
+        profile = tempfile.mkdtemp(prefix="tfbus-view-chromium-")
+        proc = subprocess.Popen([exe, *FLAGS, f"--user-data-dir={profile}", *extra, url],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                env={**os.environ, "TMPDIR": profile}, start_new_session=True)
+        try:
+            out, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            end_chromium(proc, profile, 30)
+            stuck = proc.communicate(timeout=30)[1] or b""
+            continue
+        end_chromium(proc, profile, 30)
+        assert proc.returncode == 0, err[-2000:]
+        return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
     pytest.fail(f"chromium did not finish in 3 runs of 60 s: {stuck[-2000:]!r}")
 
 
