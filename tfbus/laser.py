@@ -39,8 +39,8 @@ import numpy as np
 import numpy.typing as npt
 
 from tfbus.buffer import Buffer
-from tfbus.core import COMPILED, BufferCore
-from tfbus.core.kernels import apply_transforms, lerp_rows, slerp_rows
+from tfbus.core import BufferCore
+from tfbus.core.kernels import apply_transforms, compiled_extension, lerp_rows, slerp_rows
 from tfbus.messages import Header
 from tfbus.sensor_msgs import LaserScan, PointCloud2, PointField
 from tfbus.time import Duration, Time
@@ -134,15 +134,13 @@ _LAYOUT_OF: dict[int, tuple[list[PointField], int]] = {}
 
 
 def _compiled_projector() -> type[Projector] | None:
-    """The compiled projection (:mod:`tfbus._claser`) when the compiled core is in use
-    (``tfbus.core.COMPILED``: not under ``TFBUS_PURE_PYTHON``) on a little-endian machine
-    (it writes the cloud's bytes in native order), else None: the numpy path."""
-    if not COMPILED or sys.byteorder != "little":
+    """The compiled projection (:mod:`tfbus._claser`, where
+    :func:`~tfbus.core.kernels.compiled_extension` finds it) on a little-endian machine (it
+    writes the cloud's bytes in native order), else None: the numpy path."""
+    module = compiled_extension("tfbus._claser") if sys.byteorder == "little" else None
+    if module is None:
         return None
-    try:
-        from tfbus._claser import Projector as compiled
-    except ImportError:  # a build without extensions
-        return None
+    compiled: type[Projector] = module.Projector
     return compiled
 
 

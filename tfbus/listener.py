@@ -38,7 +38,8 @@ from tfbus._aio import exit_task_group
 from tfbus.buffer import Buffer, clear_on_jump_back
 from tfbus.bus import Bus, CallbackSubscription, Subscription
 from tfbus.clock import Clock, SystemClock
-from tfbus.core import COMPILED, BatchResult, BufferCore
+from tfbus.core import BatchResult, BufferCore
+from tfbus.core.kernels import compiled_extension
 from tfbus.errors import TransformException
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.ratelimit import RateLimitedLog
@@ -54,15 +55,12 @@ _log = logging.getLogger(__name__)
 
 def _compiled_handler() -> type[InlineHandler] | None:
     """The compiled message handler (:class:`tfbus._clistener.InlineHandler`: a message
-    stored with no Python frame) when the compiled core is in use
-    (``tfbus.core.COMPILED``: not under ``TFBUS_PURE_PYTHON``), else None: the
-    listener's own ``_handle`` handles every message."""
-    if not COMPILED:
+    stored with no Python frame, where :func:`~tfbus.core.kernels.compiled_extension` finds
+    it), else None: the listener's own ``_handle`` handles every message."""
+    module = compiled_extension("tfbus._clistener")
+    if module is None:
         return None
-    try:
-        from tfbus._clistener import InlineHandler as compiled
-    except ImportError:  # a build without extensions
-        return None
+    compiled: type[InlineHandler] = module.InlineHandler
     return compiled
 
 

@@ -61,7 +61,8 @@ from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Protocol, TypeVar, cast
 
 from tfbus.clock import Clock
-from tfbus.core import COMPILED, BatchResult, frame_path
+from tfbus.core import BatchResult, frame_path
+from tfbus.core.kernels import compiled_extension
 from tfbus.core.policy import ExpireAfter
 from tfbus.core.results import BufferStatistics
 from tfbus.messages import TransformStamped
@@ -129,18 +130,12 @@ _Account = Callable[..., bool]
 
 def _compiled_tables() -> tuple[type, type, type, _Account | None]:
     """The field classes of the tables and :meth:`TfSummary.add`'s compiled loop
-    (:mod:`tfbus._cmonitor`) when the compiled core is in use (``tfbus.core.COMPILED``: not
-    under ``TFBUS_PURE_PYTHON``) and that module is built; else the pure field classes and
-    None (``TfSummary.add``'s own loop)."""
-    if COMPILED:
-        try:
-            from tfbus import _cmonitor
-        except ImportError:  # a build without extensions
-            pass
-        else:
-            return (_cmonitor.RateWindowFields, _cmonitor.FrameFields,
-                    _cmonitor.AuthorityFields, _cmonitor.account)
-    return _RateWindowFields, _FrameFields, _AuthorityFields, None
+    (:mod:`tfbus._cmonitor`, where :func:`~tfbus.core.kernels.compiled_extension` finds
+    it); else the pure field classes and None (``TfSummary.add``'s own loop)."""
+    module = compiled_extension("tfbus._cmonitor")
+    if module is None:
+        return _RateWindowFields, _FrameFields, _AuthorityFields, None
+    return module.RateWindowFields, module.FrameFields, module.AuthorityFields, module.account
 
 
 if TYPE_CHECKING:

@@ -147,7 +147,7 @@ def test_both_cores_export_the_same_names(compiled: Any, pure: Any) -> None:
 
 def test_the_selection_exports_every_core_name() -> None:
     own = {"COMPILED", "COMPILED_MODULES", "ENV_PURE_PYTHON", "PURE_FALLBACK_WARNING",
-           "core_description", "fallback_warning",
+           "compiled_extension", "core_description", "fallback_warning",
            "shadowed_install"}  # fmt: skip
     every = {n for _, pure in TWINS for n in pure.__all__}
     assert every | own == set(_select.__all__)
@@ -220,6 +220,36 @@ def test_a_broken_compiled_core_is_an_error_not_a_fallback() -> None:
                           timeout=120)  # fmt: skip
     assert done.returncode != 0
     assert "tfbus.messages" in done.stderr
+
+
+def test_a_compiled_extension_above_the_core_by_the_same_rule(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``compiled_extension``: the module when the compiled core is loaded and the module
+    is installed, None when it is not installed or the pure core is loaded, and an error
+    (not None) when it is installed but cannot load."""
+    loaded = _select.COMPILED
+    package = tmp_path / "tfbus_probe_extensions"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "fine.py").write_text("VALUE = 7\n")
+    (package / "broken.py").write_text("import tfbus_probe_missing_dependency\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        monkeypatch.setattr(_select, "COMPILED", True)
+        assert _select.compiled_extension("tfbus_probe_extensions.fine").VALUE == 7
+        assert _select.compiled_extension("tfbus_probe_extensions.absent") is None
+        with pytest.raises(ImportError, match="tfbus_probe_missing_dependency"):
+            _select.compiled_extension("tfbus_probe_extensions.broken")
+        monkeypatch.setattr(_select, "COMPILED", False)
+        assert _select.compiled_extension("tfbus_probe_extensions.fine") is None
+    finally:
+        for name in [m for m in sys.modules if m.startswith("tfbus_probe_extensions")]:
+            del sys.modules[name]
+    monkeypatch.setattr(_select, "COMPILED", loaded)
+    for name in ("tfbus._clistener", "tfbus._claser", "tfbus._cmonitor", "tfbus.doctor._cchecks"):
+        # found exactly when the compiled core is loaded (the suite builds them with it)
+        assert (_select.compiled_extension(name) is not None) is loaded, name
 
 
 # --------------------------------------------------------------------------- scalar math

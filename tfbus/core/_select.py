@@ -19,10 +19,13 @@ batch kernel        :mod:`tfbus.core._cbatch`  :mod:`tfbus.core._pybatch`
 A compiled module that exists but fails to import (an ABI mismatch, a broken build) is
 an error, never a silent fallback. ``COMPILED`` says which core is loaded (re-exported as
 ``tfbus.core.COMPILED``), :func:`core_description` says it in words (``tfbus
---version`` prints it). When the pure core is loaded because the compiled one is absent
-(not asked for with ``TFBUS_PURE_PYTHON``), one warning line is logged at import on the
-``tfbus`` logger (:data:`PURE_FALLBACK_WARNING`). Every other module imports the core's
-names from here.
+--version`` prints it). The compiled modules above the core (the listener's handler,
+the laser projection, the tables' and the doctor's accounting) are found by
+:func:`compiled_extension`, by the same rule (the wire codecs, below the core's kernels,
+by ``tfbus.codecs._compiled_wire``). When the pure core is loaded because the
+compiled one is absent (not asked for with ``TFBUS_PURE_PYTHON``), one warning line is
+logged at import on the ``tfbus`` logger (:data:`PURE_FALLBACK_WARNING`). Every other
+module imports the core's names from here.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ __all__ = [
     "TimeCache",
     "apply_transforms",
     "batch_lookup",
+    "compiled_extension",
     "compose",
     "compose_full",
     "core_description",
@@ -105,6 +109,22 @@ whether they are the compiled ones."""
 
 IMPLEMENTATION: Final = IMPLEMENTATIONS[2]
 """The loaded core's frame table and walk (``_ccore`` or ``_pycore``): the core proper."""
+
+def compiled_extension(name: str) -> ModuleType | None:
+    """The compiled extension ``name`` (a dotted module name, e.g. ``tfbus._clistener``)
+    when the compiled core is loaded (:data:`COMPILED`: built, and ``TFBUS_PURE_PYTHON``
+    not set) and the extension is installed; else None, and its caller runs its pure-Python
+    twin. An extension that is installed but fails to import raises, as the core's own
+    modules do (:func:`_load`): never a silent fallback.
+
+    Raises:
+        ImportError: the extension is installed but cannot be imported (an ABI mismatch,
+            a broken build).
+    """
+    if not COMPILED or importlib.util.find_spec(name) is None:
+        return None
+    return importlib.import_module(name)
+
 
 PURE_FALLBACK_WARNING: Final = (
     "tfbus: the compiled core (tfbus.core._c*) is not installed, using the pure-Python core "

@@ -15,7 +15,10 @@ Nothing outside :mod:`tfbus.core` imports ``_select``; it imports these names fr
 * ``batch_lookup(core, target_frame, source_frame, times, out, stamps, ok) -> int`` and
   ``CoreBase``: the batch kernel (every row bit for bit the single lookup's walk) and the
   base class of the buffers it takes, for :mod:`tfbus.table`'s lookups;
-* ``core_description()``: which core runs, for ``--version`` and diagnostics.
+* ``core_description()``: which core runs, for ``--version`` and diagnostics;
+* ``compiled_extension(name)``: a compiled module above the core (the listener's
+  handler, the laser projection, the tables' and the doctor's accounting) when the
+  compiled core is loaded and the module is installed, else None.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from tfbus.core._select import (
     CoreBase,
     apply_transforms,
     batch_lookup,
+    compiled_extension,
     core_description,
     lerp_rows,
     quat_multiply,
@@ -38,6 +42,7 @@ __all__ = [
     "CoreBase",
     "apply_transforms",
     "batch_lookup",
+    "compiled_extension",
     "core_description",
     "lerp_rows",
     "quat_multiply",

@@ -15,7 +15,8 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Final
 
-from tfbus.core import COMPILED, frame_path
+from tfbus.core import frame_path
+from tfbus.core.kernels import compiled_extension
 from tfbus.doctor.report import BroadcasterDelay, Finding, Level, Report
 from tfbus.messages import TransformStamped
 from tfbus.monitor import SIM_TIME_GAP
@@ -207,18 +208,12 @@ _Account = Callable[["Doctor", int, Iterable[TransformStamped], str, bool, float
 
 def _compiled_accounting() -> tuple[type, type, type, _Account | None]:
     """The per-link field classes and :meth:`Doctor.add`'s compiled loop
-    (:mod:`tfbus.doctor._cchecks`) when the compiled core is in use (``tfbus.core.COMPILED``:
-    not under ``TFBUS_PURE_PYTHON``) and that module is built; else the pure field classes
-    and None (``Doctor.add``'s own loop)."""
-    if COMPILED:
-        try:
-            from tfbus.doctor import _cchecks
-        except ImportError:  # a build without extensions
-            pass
-        else:
-            return (_cchecks.SpanFields, _cchecks.SampleFields, _cchecks.LinkFields,
-                    _cchecks.account)
-    return _SpanFields, _SampleFields, _LinkFields, None
+    (:mod:`tfbus.doctor._cchecks`, where :func:`~tfbus.core.kernels.compiled_extension`
+    finds it); else the pure field classes and None (``Doctor.add``'s own loop)."""
+    module = compiled_extension("tfbus.doctor._cchecks")
+    if module is None:
+        return _SpanFields, _SampleFields, _LinkFields, None
+    return module.SpanFields, module.SampleFields, module.LinkFields, module.account
 
 
 if TYPE_CHECKING:
