@@ -12,13 +12,9 @@ tables, which ``tests/monitor/test_compiled_tables.py`` checks on the same strea
 with the compiled core (``tfbus.core.COMPILED``), ``TfSummary.add``'s own loop otherwise.
 """
 
-from cpython.long cimport PyLong_AsLongLongAndOverflow
-
+from tfbus._cdelay cimport delay_seconds
 from tfbus.messages import Header, TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
-
-cdef double _NSEC = 1e9
-cdef long long _EXACT = 1LL << 53  # ints up to this convert to a double exactly
 
 
 cdef class RateWindowFields:
@@ -44,19 +40,6 @@ cdef class AuthorityFields:
     cdef public object authority, first, last, received
     cdef public long long messages, delay_count
     cdef public double delay_sum, delay_max
-
-
-cdef inline double _seconds(object diff):
-    """``diff / NSEC_PER_SEC`` as Python computes it for an int ``diff`` (ns)."""
-    cdef int overflow = 1
-    cdef long long di = 0
-    if type(diff) is int:
-        di = PyLong_AsLongLongAndOverflow(diff, &overflow)
-    if overflow == 0 and -_EXACT <= di <= _EXACT:
-        # int / int of two ints a double holds exactly: one correctly rounded division,
-        # the quotient Python's true division gives
-        return <double>di / _NSEC
-    return diff / NSEC_PER_SEC
 
 
 def account(summary, frame_summary, object t, transforms, object authority, bint static,
@@ -154,7 +137,7 @@ def account(summary, frame_summary, object t, transforms, object authority, bint
                 summary.sim_time = sim_time
             if ns > newest:
                 newest = ns
-            d = _seconds((newest if sim_time else t) - ns)
+            d = delay_seconds((newest if sim_time else t) - ns)
             fs.delay_sum += d
             fs.delay_count += 1
             if d > fs.delay_max:

@@ -13,13 +13,10 @@ streams. Used with the compiled core (``tfbus.core.COMPILED``), ``Doctor.add``'s
 loop otherwise.
 """
 
-from cpython.long cimport PyLong_AsLongLongAndOverflow
-
+from tfbus._cdelay cimport delay_seconds
 from tfbus.messages import Header, TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
 
-cdef double _NSEC = 1e9
-cdef long long _EXACT = 1LL << 53  # ints up to this convert to a double exactly
 
 
 cdef class SpanFields:
@@ -86,9 +83,6 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
     cdef SampleFields sample
     cdef tuple hot
     cdef object ts, child, header, parent, when, stamp, newest, p, baseline, mean, found
-    cdef object diff
-    cdef long long di
-    cdef int overflow
     cdef double d, interval, pd, bd
     cdef long long intervals
     try:
@@ -155,16 +149,7 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
                 doctor.sim_time = sim_time
             if stamp > newest_stamp:
                 newest_stamp = stamp
-            diff = (newest_stamp if sim_time else t) - stamp
-            overflow = 1
-            if type(diff) is int:
-                di = PyLong_AsLongLongAndOverflow(diff, &overflow)
-            if overflow == 0 and -_EXACT <= di <= _EXACT:
-                # int / int of two ints a double holds exactly: one correctly rounded
-                # division, the quotient Python's true division gives
-                d = <double>di / _NSEC
-            else:
-                d = diff / NSEC_PER_SEC
+            d = delay_seconds((newest_stamp if sim_time else t) - stamp)
             (<list>mean)[0] = <double>(<list>mean)[0] + d
             (<list>mean)[1] = (<list>mean)[1] + 1
             if sample.n % sample.stride == 0:
