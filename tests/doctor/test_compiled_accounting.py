@@ -9,25 +9,29 @@ in a process of its own."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 from collections.abc import Iterable
-from pathlib import Path
 from typing import Any
 
 import pytest
 from doctor_faults import FAULTS, T0, Record, tf
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from twin_streams import (
+    MS,
+    by_receive_time,
+    named_streams,
+    peer_items,
+    pure_states,
+    records_of,
+    stream_strategy,
+)
 
 import tfbus.doctor.checks
 from tfbus.doctor import Doctor, Thresholds
-from tfbus.messages import Header, TransformStamped
-from tfbus.time import Time
+from tfbus.messages import TransformStamped
 
 COMPILED = tfbus.doctor.checks._ACCOUNT
-HERE = Path(__file__).resolve().parent
 
 needs_compiled = pytest.mark.skipif(
     COMPILED is None,
@@ -73,45 +77,21 @@ def feed(records: Iterable[Record], compiled: bool,
     return doctor
 
 
-def _sorted(records: list[Record]) -> list[Record]:
-    return sorted(records, key=lambda r: r[0])
-
-
 @needs_compiled
 @pytest.mark.parametrize("fault", sorted(FAULTS))
 def test_every_fault_gives_the_same_state_and_report(fault: str) -> None:
-    records = _sorted(FAULTS[fault]())
+    records = by_receive_time(FAULTS[fault]())
     assert state(feed(records, True)) == state(feed(records, False))
-
-
-class _Stamped(TransformStamped):
-    """A subclass of TransformStamped (read by attribute, as Doctor.add reads it)."""
-
-
-class _Header(Header):
-    """A subclass of Header."""
 
 
 def peer_stream() -> list[Record]:
     """What only a peer or a hand-made call sends, between ordinary transforms."""
     out: list[Record] = []
-    ms = 1_000_000
     for i in range(60):
-        t = T0 + i * 10 * ms
-        items: list[Any] = [tf("odom", "base_link", t - 5 * ms)]
-        if i % 7 == 0:
-            items.append("junk")
-        if i % 11 == 0:
-            items.append(TransformStamped(Header(Time.from_ns(t), "odom"), 5))  # type: ignore[arg-type]
-        if i % 13 == 0:
-            items.append(TransformStamped(Header(5, "odom"), "x"))  # type: ignore[arg-type]
-        if i % 5 == 0:
-            base = tf("map", "odom", t - 20 * ms)
-            items.append(_Stamped(_Header(*base.header), base.child_frame_id, base.transform))
-        if i == 30:  # a stamp far behind the receive clock: a delay beyond 2**53 ns
-            items.append(tf("odom", "far", 1))
+        t = T0 + i * 10 * MS
+        items = peer_items(i, t)
         if i == 40:  # the same link under a leading slash, then stamped ahead
-            items.append(tf("/odom", "/base_link", t + 50 * ms))
+            items.append(tf("/odom", "/base_link", t + 50 * MS))
         out.append((t, "/tf", "/peer" if i % 3 else "/other", items))
     out.append((T0 + 2 * 10**9, "/tf_static", "/rsp", [tf("base_link", "laser", T0, 0.2)]))
     out.append((2**70, "/tf", "/peer", [tf("odom", "base_link", T0 + 10**9)]))  # beyond 64 bits
@@ -159,18 +139,8 @@ def test_a_header_that_is_not_one_raises_the_same_after_the_same_accounting() ->
     assert doctors[0].transforms == 1  # what came before the bad item, written back
 
 
-_stream = st.lists(
-    st.tuples(
-        st.integers(0, 3 * 10**8),  # receive time step, ns
-        st.sampled_from(["/tf", "/tf", "/tf", "/tf_static"]),
-        st.sampled_from(["/a", "/b", "/a"]),
-        st.lists(st.tuples(st.sampled_from(["map", "odom", "/odom", "base_link"]),
-                           st.sampled_from(["odom", "base_link", "laser", "/laser"]),
-                           st.integers(-3 * 10**8, 10**8)),  # stamp relative to receive time
-                 min_size=1, max_size=4),
-    ),
-    max_size=120,
-)
+_stream = stream_strategy(["map", "odom", "/odom", "base_link"],
+                          ["odom", "base_link", "laser", "/laser"], max_size=120)
 
 
 @needs_compiled
@@ -179,39 +149,15 @@ _stream = st.lists(
 def test_random_streams_give_the_same_state_and_report(
     steps: list[tuple[int, str, str, list[tuple[str, str, int]]]], window: int
 ) -> None:
-    t = T0
-    records: list[Record] = []
-    for step, topic, caller, links in steps:
-        t += step
-        records.append((t, topic, caller,
-                        [tf(parent, child, max(t + rel, 0)) for parent, child, rel in links]))
+    records = records_of(steps)
     thresholds = Thresholds(rate_window=window, gap_min=0.05)
     assert state(feed(records, True, thresholds)) == state(feed(records, False, thresholds))
 
 
-_PURE_SCRIPT = """
-import sys
-sys.path[:0] = [{tests!r}, {doctor!r}]
-import test_compiled_accounting as t
-from doctor_faults import FAULTS
-assert t.COMPILED is None
-streams = {{name: t._sorted(f()) for name, f in FAULTS.items()}}
-streams["peer"] = t.peer_stream()
-for name in sorted(streams):
-    print(name, t.state(t.feed(streams[name], False)))
-"""
-
-
 @needs_compiled
 def test_the_pure_python_core_gives_the_same_state_and_report() -> None:
-    # the pure twin's own field classes (slots), in a process with TFBUS_PURE_PYTHON
-    env = {**os.environ, "TFBUS_PURE_PYTHON": "1"}
-    script = _PURE_SCRIPT.format(tests=str(HERE.parent), doctor=str(HERE))
-    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
-                         text=True, timeout=120, check=True).stdout
-    pure = dict(line.split(" ", 1) for line in out.splitlines())
-    streams = {name: _sorted(f()) for name, f in FAULTS.items()}
-    streams["peer"] = peer_stream()
+    pure = pure_states(__file__)
+    streams = named_streams(sys.modules[__name__])
     assert sorted(pure) == sorted(streams)
     for name, records in streams.items():
         assert state(feed(records, True)) == pure[name], name

@@ -9,8 +9,6 @@ core in a process of its own."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -18,17 +16,24 @@ from typing import Any
 
 import pytest
 from hypothesis import given, settings
-from hypothesis import strategies as st
 
 import tfbus.monitor
 from tfbus.messages import Header, TransformStamped
 from tfbus.monitor import RateWindow, TfSummary
 from tfbus.time import Time
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "doctor"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "doctor"))
 
-from doctor_faults import FAULTS, T0, Record, tf  # noqa: E402
+from doctor_faults import FAULTS, T0, Record, tf
+from twin_streams import (
+    MS,
+    by_receive_time,
+    named_streams,
+    peer_items,
+    pure_states,
+    records_of,
+    stream_strategy,
+)
 
 COMPILED = tfbus.monitor._ACCOUNT
 
@@ -81,47 +86,24 @@ class _Late(Time):
         self._ns = ns
 
 
-def _sorted(records: list[Record]) -> list[Record]:
-    return sorted(records, key=lambda r: r[0])
-
-
 @needs_compiled
 @pytest.mark.parametrize("fault", sorted(FAULTS))
 def test_every_fault_recording_gives_the_same_tables(fault: str) -> None:
-    records = _sorted(FAULTS[fault]())
+    records = by_receive_time(FAULTS[fault]())
     assert state(feed(records, True)) == state(feed(records, False))
-
-
-class _Stamped(TransformStamped):
-    """A subclass of TransformStamped (read by attribute, as TfSummary.add reads it)."""
-
-
-class _Header(Header):
-    """A subclass of Header."""
 
 
 def peer_stream() -> list[Record]:
     """What only a peer or a hand-made call sends, between ordinary transforms."""
     out: list[Record] = []
-    ms = 1_000_000
     for i in range(80):
-        t = T0 + i * 10 * ms
-        items: list[Any] = [tf("odom", "base_link", t - 5 * ms)]
-        if i % 7 == 0:
-            items.append("junk")
-        if i % 11 == 0:
-            items.append(TransformStamped(Header(Time.from_ns(t), "odom"), 5))  # type: ignore[arg-type]
-        if i % 13 == 0:
-            items.append(TransformStamped(Header(5, "odom"), "x"))  # type: ignore[arg-type]
+        t = T0 + i * 10 * MS
+        items = peer_items(i, t)
+        if i % 13 == 0:  # a parent that is not a str
             items.append(TransformStamped(Header(Time.from_ns(t), 7), "y"))  # type: ignore[arg-type]
-        if i % 5 == 0:
-            base = tf("map", "odom", t - 20 * ms)
-            items.append(_Stamped(_Header(*base.header), base.child_frame_id, base.transform))
         if i % 9 == 0:  # a repeated stamp, then one out of order
-            items.append(tf("odom", "base_link", t - 5 * ms))
-            items.append(tf("odom", "base_link", t - 45 * ms))
-        if i == 30:  # a stamp far behind the receive clock: a delay beyond 2**53 ns
-            items.append(tf("odom", "far", 1))
+            items.append(tf("odom", "base_link", t - 5 * MS))
+            items.append(tf("odom", "base_link", t - 45 * MS))
         if i == 50:  # the frame now static, then dynamic again
             out.append((t, "/tf_static", "/rsp", [tf("odom", "base_link", t)]))
         out.append((t, "/tf", "/peer" if i % 3 else "/other", items))
@@ -173,18 +155,8 @@ def test_a_header_that_is_not_one_raises_the_same_after_the_same_accounting() ->
     assert summaries[0].frames["base_link"].count == 1  # accounted before the bad item
 
 
-_stream = st.lists(
-    st.tuples(
-        st.integers(0, 3 * 10**8),  # receive time step, ns
-        st.sampled_from(["/tf", "/tf", "/tf", "/tf_static"]),
-        st.sampled_from(["/a", "/b", "/a"]),
-        st.lists(st.tuples(st.sampled_from(["map", "odom", "base_link"]),
-                           st.sampled_from(["odom", "base_link", "laser"]),
-                           st.integers(-3 * 10**8, 10**8)),  # stamp relative to receive time
-                 min_size=1, max_size=4),
-    ),
-    max_size=150,
-)
+_stream = stream_strategy(["map", "odom", "base_link"], ["odom", "base_link", "laser"],
+                          max_size=150)
 
 
 @needs_compiled
@@ -193,38 +165,14 @@ _stream = st.lists(
 def test_random_streams_give_the_same_tables(
     steps: list[tuple[int, str, str, list[tuple[str, str, int]]]],
 ) -> None:
-    t = T0
-    records: list[Record] = []
-    for step, topic, caller, links in steps:
-        t += step
-        records.append((t, topic, caller,
-                        [tf(parent, child, max(t + rel, 0)) for parent, child, rel in links]))
+    records = records_of(steps)
     assert state(feed(records, True)) == state(feed(records, False))
-
-
-_PURE_SCRIPT = """
-import sys
-sys.path[:0] = [{here!r}, {doctor!r}]
-import test_compiled_tables as t
-from doctor_faults import FAULTS
-assert t.COMPILED is None
-streams = {{name: t._sorted(f()) for name, f in FAULTS.items()}}
-streams["peer"] = t.peer_stream()
-for name in sorted(streams):
-    print(name, t.state(t.feed(streams[name], False)))
-"""
 
 
 @needs_compiled
 def test_the_pure_python_core_gives_the_same_tables() -> None:
-    # the pure twin's own field classes (slots), in a process with TFBUS_PURE_PYTHON
-    env = {**os.environ, "TFBUS_PURE_PYTHON": "1"}
-    script = _PURE_SCRIPT.format(here=str(HERE), doctor=str(HERE.parent / "doctor"))
-    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
-                         text=True, timeout=120, check=True).stdout
-    pure = dict(line.split(" ", 1) for line in out.splitlines())
-    streams = {name: _sorted(f()) for name, f in FAULTS.items()}
-    streams["peer"] = peer_stream()
+    pure = pure_states(__file__)
+    streams = named_streams(sys.modules[__name__])
     assert sorted(pure) == sorted(streams)
     for name, records in streams.items():
         assert state(feed(records, True)) == pure[name], name
