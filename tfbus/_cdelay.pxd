@@ -9,10 +9,10 @@ from cpython.long cimport PyLong_AsLongLongAndOverflow
 
 cdef inline double delay_seconds(object diff) except? -1.0:
     """``diff / NSEC_PER_SEC`` (``tfbus.time``: 10**9) as Python computes it, for ``diff``
-    an int of nanoseconds. A ``diff`` a double holds
-    exactly (an int of at most 53 bits) is divided in C: one correctly rounded division of
-    two exactly held doubles, the quotient Python's true division of two ints gives; any
-    other ``diff`` (wider, or not an int) is divided by Python.
+    an int of nanoseconds. A ``diff`` a double holds exactly (an int of at most 53 bits)
+    is divided in C: one correctly rounded division of two exactly held doubles, the
+    quotient Python's true division of two ints gives; any other ``diff`` (wider, or not
+    an int) is divided by Python.
 
     Raises:
         Exception: what ``diff / NSEC_PER_SEC`` raises.

@@ -110,6 +110,7 @@ whether they are the compiled ones."""
 IMPLEMENTATION: Final = IMPLEMENTATIONS[2]
 """The loaded core's frame table and walk (``_ccore`` or ``_pycore``): the core proper."""
 
+
 def compiled_extension(name: str) -> ModuleType | None:
     """The compiled extension ``name`` (a dotted module name, e.g. ``tfbus._clistener``)
     when the compiled core is loaded (:data:`COMPILED`: built, and ``TFBUS_PURE_PYTHON``

@@ -18,7 +18,6 @@ from tfbus.messages import Header, TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
 
 
-
 cdef class SpanFields:
     """The fields of a count over a receive-time span: ``count``, ``first`` and ``last``
     receive times (ns)."""
