@@ -171,6 +171,17 @@ def test_filter_and_fixed_frame_live(page: TfPage) -> None:
     assert page.set_frame_filter("") is None and page.filter_error_html == ""
     draw_live(page, core, stats, clock.now(), fixed_frame="base")
     assert page.frames["base"].visible
+    # a frame that appears later is offered at the next redraw, in every dropdown
+    t = TransformStamped(Header(clock.now(), "arm"), "grip\x07per",
+                         Transform(Vector3(0.5, 0.0, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+    core.set_transform(t, "bc")
+    stats.add(clock.now(), [t], "bc", static=False)
+    draw_live(page, core, stats, clock.now(), fixed_frame="base")
+    offered = ("arm", "base", "grip\\x07per", "odom")
+    assert page.fixed_dropdown.options == offered
+    assert page.trail_dropdown.options == ("", *offered)
+    assert all(d.options == ("", *offered) for d in page.pair_dropdowns)
+    assert page._fixed_options["grip\\x07per"] == "grip\x07per"
 
 
 def test_a_filter_that_backtracks_for_ever_is_dropped_not_run(page: TfPage) -> None:

@@ -339,6 +339,7 @@ class TfPage:
         within :data:`FILTER_TIMEOUT` s; None: every frame)."""
         self.filter_error_html = ""
         self._fixed_options: dict[str, str] = {}
+        self._fixed_ids: tuple[str, ...] | None = None  # the frame ids they were made of
         with gui.add_folder("display"):
             self.fixed_dropdown: Any = gui.add_dropdown(
                 "fixed frame", options=("",), initial_value="",
@@ -538,15 +539,20 @@ class TfPage:
 
     def _show_fixed(self, scene: Scene) -> None:
         """The dropdown's options (every frame id, as text, sorted) and value (the scene's
-        fixed frame)."""
-        options = {text(f.frame_id): f.frame_id for f in scene.frames}
-        if options.keys() != self._fixed_options.keys():
-            self._fixed_options = options
-            self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
-            for dropdown in (*self.pair_dropdowns, self.trail_dropdown):
-                dropdown.options = ("", *sorted(options))
+        fixed frame). The options are made again only when the scene's frame ids are not
+        those of the last redraw (each id is escaped to make them: a redraw of 100
+        frames whose ids did not change spent a tenth of its own time there)."""
+        ids = tuple([f.frame_id for f in scene.frames])
+        if ids != self._fixed_ids:
+            self._fixed_ids = ids
+            options = {text(frame_id): frame_id for frame_id in ids}
+            if options.keys() != self._fixed_options.keys():
+                self._fixed_options = options
+                self.fixed_dropdown.options = tuple(sorted(options)) or ("",)
+                for dropdown in (*self.pair_dropdowns, self.trail_dropdown):
+                    dropdown.options = ("", *sorted(options))
         shown = text(scene.fixed_frame) if scene.fixed_frame is not None else ""
-        if shown in options and self.fixed_dropdown.value != shown:
+        if shown in self._fixed_options and self.fixed_dropdown.value != shown:
             self.fixed_dropdown.value = shown
 
     # ------------------------------------------------------------------ viewers
@@ -626,7 +632,7 @@ class TfPage:
     def _draw(self, scene: Scene, stats: TfSummary | None,
               rates: Mapping[str, float] | None, table: bool = True) -> None:
         poses = {f.frame_id: f.pose for f in scene.frames}
-        segments: list[list[tuple[float, float, float]]] = []
+        ends: list[float] = []  # each link's two ends, x y z each: one flat list
         colours: list[npt.NDArray[np.uint8]] = []  # one (1, 2, 3) block per segment
         origins: list[tuple[float, float, float]] = []
         quaternions: list[tuple[float, float, float, float]] = []
@@ -657,13 +663,15 @@ class TfPage:
             axes_blocks.append(_axes_block(colour))
             parent_pose = poses.get(f.parent) if f.parent is not None else None
             if parent_pose is not None:
-                segments.append([xyz, _xyz(parent_pose)])
+                ends += xyz
+                ends += _xyz(parent_pose)
                 colours.append(_link_block(colour))
         for name, drawn_frame in self.frames.items():  # drawn before, not in this scene
             if name not in poses and drawn_frame.visible:
                 drawn_frame.show(False, labels)
         self.links, self.link_count = self._segments(
-            "/links", self.links, self.link_count, segments,
+            "/links", self.links, self.link_count,
+            np.array(ends, dtype=np.float32).reshape(-1, 2, 3),
             np.concatenate(colours) if colours else _NO_COLOURS, 2.0)
         axes = (_axes(np.asarray(origins, dtype=np.float64),
                       np.asarray(quaternions, dtype=np.float64), length)
@@ -846,12 +854,15 @@ class TfPage:
         self.camera_set = True
 
     def _segments(self, name: str, handle: Any, count: int,
-                  segments: list[list[tuple[float, float, float]]] | npt.NDArray[np.float64],
+                  segments: (list[list[tuple[float, float, float]]] | npt.NDArray[np.float64]
+                             | npt.NDArray[np.float32]),
                   colours: Sequence[Sequence[tuple[int, int, int]]] | npt.NDArray[np.uint8],
                   thickness: float) -> tuple[Any, int]:
-        """Show ``segments`` as the line-segments node ``name`` (re-made when their number
-        changes, else updated in place; hidden when there are none; nothing sent when
-        points and colours are those already shown)."""
+        """Show ``segments`` (``(N, 2, 3)``: each segment's two ends, metres in the fixed
+        frame; sent as float32) in ``colours`` (``(N, 2, 3)`` sRGB 0-255) as the
+        line-segments node ``name`` (re-made when their number changes, else updated in
+        place; hidden when there are none; nothing sent when points and colours are those
+        already shown)."""
         if len(segments) == 0:
             if handle is not None:
                 handle.visible = False
