@@ -39,7 +39,8 @@ Rows (target):
 * wake-up of a waiting lookup against the plain floor (``bench_bus.plain_floor_run``:
   a bare ``anyio.Event`` set, the loop's own yield, the waiter resumes), by a direct
   ``Buffer.set_transform`` (<= 1.3x) and through ``send_transform`` -> bus -> listener ->
-  buffer (<= 1.5x), asyncio and trio (median of per-repeat ratios, min..max beside it);
+  buffer (<= 1.5x), asyncio and trio (median of per-repeat ratios, min..max beside it; a
+  run's figure the mean of its middle 60 % of samples: trio's wake-ups have two modes);
 * ROS 1 receive latency, 100 Hz x 50 transforms, 10 s: <= 1.5x a roscpp subscriber in
   the same run (median of ``--rounds`` runs, ``bench_ros1.py``), nothing lost; once with constant
   values (a robot's fixed joints) and once with every value changing in every message
@@ -617,7 +618,10 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
     the loop's own yield, the waiter resumes), then the direct insert and the bus path,
     then the floor again: a repeat's floor is the mean of the two, so that a machine
     speeding up or slowing down during the repeat moves both sides of its ratios alike;
-    each row judges the median of the per-repeat ratios (min..max beside it). Beside
+    each run's figure is the mean of its middle 60 % of samples
+    (``LatencyResult.middle_mean_ms``: a trio wake-up has two modes of equal weight,
+    trio's random order of a batch of ready tasks, and a median falls in either); each
+    row judges the median of the per-repeat ratios (min..max beside it). Beside
     them, for information: the floor with anyio's public checkpoint, and the floor with
     the cancellation check a publish makes before it publishes
     (``bench_bus.checked_floor_run``)."""
@@ -634,12 +638,12 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
             direct = anyio.run(bench_bus.direct_run, n, warm, backend, backend=backend)
             bus = anyio.run(bench_bus.latency_run, n, warm, None, backend=backend)
             after = anyio.run(bench_bus.plain_floor_run, n, warm, backend, backend=backend)
-            floor_ms = (floor.median_ms + after.median_ms) / 2
+            floor_ms = (floor.middle_mean_ms + after.middle_mean_ms) / 2
             floors.append(floor_ms * 1e3)
-            ratios["direct"].append(direct.median_ms / floor_ms)
-            ratios["bus"].append(bus.median_ms / floor_ms)
-            ratios["anyio_floor"].append(old_floor.median_ms / floor_ms)
-            ratios["checked_floor"].append(checked.median_ms / floor_ms)
+            ratios["direct"].append(direct.middle_mean_ms / floor_ms)
+            ratios["bus"].append(bus.middle_mean_ms / floor_ms)
+            ratios["anyio_floor"].append(old_floor.middle_mean_ms / floor_ms)
+            ratios["checked_floor"].append(checked.middle_mean_ms / floor_ms)
         for key, label in (("direct", "direct insert"), ("bus", "through the bus")):
             target = WAKE_TARGETS[key]
             rows.row(
