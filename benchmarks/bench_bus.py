@@ -349,29 +349,23 @@ async def plain_floor_run(
 def _cancel_check(backend: str) -> Callable[[], Awaitable[None]]:
     """The cancellation check a publish makes before it publishes, as the bus makes it
     (``Bus.publish``: anyio's ``checkpoint_if_cancelled`` semantics): on asyncio the
-    bus's walk of the task's anyio cancel scopes (``tfbus.bus._asyncio_cancel_called``),
-    on trio its reading of the task's cancel status (``tfbus.bus._trio_cancel_called``);
-    the loop's checkpoint is awaited only when they find the task cancelled."""
+    bus's walk of the task's anyio cancel scopes (``tfbus.bus._asyncio_cancel_called``;
+    anyio's checkpoint is awaited only when it finds one cancelled), on trio trio's own
+    ``checkpoint_if_cancelled``."""
     if backend == "trio":
         import trio
 
-        from tfbus.bus import _trio_cancel_called
+        return trio.lowlevel.checkpoint_if_cancelled
+    import asyncio
 
-        cancel_called = _trio_cancel_called(trio.lowlevel)
-        assert cancel_called is not None, "this trio keeps no cancel status tfbus can read"
-        checkpoint_if_cancelled = trio.lowlevel.checkpoint_if_cancelled
-    else:
-        import asyncio
+    from tfbus.bus import _asyncio_cancel_called
 
-        from tfbus.bus import _asyncio_cancel_called
-
-        cancel_called = _asyncio_cancel_called(asyncio.get_running_loop())
-        assert cancel_called is not None, "this anyio keeps no cancel scopes tfbus can read"
-        checkpoint_if_cancelled = anyio.lowlevel.checkpoint_if_cancelled
+    cancel_called = _asyncio_cancel_called(asyncio.get_running_loop())
+    assert cancel_called is not None, "this anyio keeps no cancel scopes tfbus can read"
 
     async def check() -> None:
         if cancel_called():
-            await checkpoint_if_cancelled()
+            await anyio.lowlevel.checkpoint_if_cancelled()
 
     return check
 

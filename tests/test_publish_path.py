@@ -38,14 +38,14 @@ pytestmark = pytest.mark.anyio
 
 # Python functions entered from ``await send_transform(ts)`` until the listener's store
 # (the core's set_transform: C code in the compiled core): send_transform, the
-# cancellation test (asyncio: one function; trio: one function and trio's current_task),
-# the bus's _deliver, the listener's _handle (not with the compiled message handler,
-# tfbus._clistener, which is C) and its clock read: 5 on asyncio, 6 on trio, one fewer
-# each with the compiled handler (the core's own frames, which the pure-Python core adds,
-# are not counted). The path before entered 7 on asyncio and 8 on trio (the broadcaster's
-# _check, Bus.publish_nowait, Buffer.set_transform), and 15 and 13 before that (anyio's
-# checkpoint coroutine and its task-state look-ups, Bus.publish, _as_message, TFMessage's
-# __new__, the callback subscription's _call).
+# cancellation test (asyncio: one function; trio: its checkpoint_if_cancelled and
+# current_task), the bus's _deliver, the listener's _handle (not with the compiled
+# message handler, tfbus._clistener, which is C) and its clock read: 5 on asyncio, 6 on
+# trio, one fewer each with the compiled handler (the core's own frames, which the
+# pure-Python core adds, are not counted). The path before entered 7 on asyncio and 8 on
+# trio (the broadcaster's _check, Bus.publish_nowait, Buffer.set_transform), and 15 and
+# 13 before that (anyio's checkpoint coroutine and its task-state look-ups, Bus.publish,
+# _as_message, TFMessage's __new__, the callback subscription's _call).
 HANDLED_IN_C = tfbus.listener._HANDLER is not None
 CALLS_BEFORE_STORE = {"asyncio": 5 - HANDLED_IN_C, "trio": 6 - HANDLED_IN_C}
 LAST_CALLS = ["_deliver", "now_ns"] if HANDLED_IN_C else ["_handle", "now_ns"]
@@ -134,44 +134,6 @@ async def test_send_transform_in_a_shielded_scope_inside_a_cancelled_one_is_sent
             first = got[0]
             assert isinstance(first, TFMessage)
             assert first.transforms[0].transform.translation == Vector3(1.0, 2.0, 3.0)
-
-
-async def test_send_transform_is_a_checkpoint_and_checks_cancellation_without_awaiting(
-    anyio_backend_name: str,
-) -> None:
-    """An uncancelled publish decides in a plain function that the checkpoint before it
-    need not be awaited (no coroutine made for it), and is still a checkpoint by the
-    loop's own account: on trio ``trio.testing.assert_checkpoints`` (a cancel point and a
-    schedule point, as trio's ``checkpoint_if_cancelled`` and
-    ``cancel_shielded_checkpoint`` count them); a cancelled one raises before sending
-    (the tests above)."""
-    async with Bus() as bus:
-        assert bus._maybe_cancelled is not None  # both loops: the plain check
-        broadcaster = TransformBroadcaster(bus)
-        if anyio_backend_name == "trio":
-            import trio.testing
-
-            with trio.testing.assert_checkpoints():
-                await broadcaster.send_transform(_ts(1.0))
-            with trio.testing.assert_checkpoints():
-                await bus.publish("/x", 1)
-        awaited: list[str] = []
-        before = bus._before_publish
-
-        async def counted() -> None:
-            awaited.append("checkpoint")
-            await before()
-
-        bus._before_publish = counted
-        sent = broadcaster.sent
-        await broadcaster.send_transform(_ts(2.0))
-        await bus.publish("/x", 2)
-        assert awaited == []  # not cancelled: the checkpoint was not awaited
-        with anyio.CancelScope() as scope:
-            scope.cancel()
-            await broadcaster.send_transform(_ts(3.0))
-        assert scope.cancelled_caught and awaited == ["checkpoint"]
-        assert broadcaster.sent == sent + 1  # the cancelled one sent nothing
 
 
 async def test_listener_counts_one_transform_messages_as_one_item_batches() -> None:

@@ -166,46 +166,6 @@ def _asyncio_cancel_called(loop: Any) -> Callable[[], bool] | None:
     return cancel_called
 
 
-def _trio_cancel_called(trio_lowlevel: Any) -> Callable[[], bool] | None:
-    """On trio, a plain function doing what ``trio.lowlevel.checkpoint_if_cancelled``
-    does before it checkpoints (``trio/_core/_run.py``): whether the calling task's
-    cancel status is effectively cancelled (a cancelled scope around it, a deadline past
-    included, with no shielded one in between) or it is the main task with a
-    KeyboardInterrupt pending; when neither, the task's count of cancel points goes up by
-    one, as trio's own does (``trio.testing.assert_checkpoints`` reads it). A publish
-    awaits trio's checkpoint only when it answers True, so an uncancelled publish creates
-    no coroutine for it (about 0.8 us of a wake-up through the bus on trio).
-
-    ``trio_lowlevel``: ``trio.lowlevel`` (:func:`tfbus._aio._running_trio`), called from
-    a trio task. None when trio's tasks do not keep these fields (``_cancel_status`` and
-    its ``effectively_cancelled``, ``_runner`` and its ``main_task`` and ``ki_pending``,
-    ``_cancel_points``): the bus then awaits trio's checkpoint every time.
-    """
-    current_task = trio_lowlevel.current_task
-    task = current_task()
-    status = getattr(task, "_cancel_status", None)
-    runner = getattr(task, "_runner", None)
-    if not (
-        isinstance(getattr(status, "effectively_cancelled", None), bool)
-        and hasattr(runner, "main_task")
-        and isinstance(getattr(runner, "ki_pending", None), bool)
-        and isinstance(getattr(task, "_cancel_points", None), int)
-    ):
-        return None  # pragma: no cover - another trio layout: trio's own checkpoint
-
-    def cancel_called() -> bool:
-        task = current_task()
-        runner = task._runner
-        if task._cancel_status.effectively_cancelled or (
-            task is runner.main_task and runner.ki_pending
-        ):
-            return True
-        task._cancel_points += 1
-        return False
-
-    return cancel_called
-
-
 def _scope_cancelled(scope: Any) -> bool:
     """Whether ``scope`` or an enclosing scope up to the first shielded one (included)
     was cancelled: anyio's ``checkpoint_if_cancelled`` walk."""
@@ -301,7 +261,7 @@ class Bus:
             anyio.lowlevel.cancel_shielded_checkpoint
         )
         # Whether the checkpoint before a publish must be awaited (it raises only when
-        # this answers True); None: always await it.
+        # this answers True); None: always await it (trio's makes its own check at once).
         self._maybe_cancelled: Callable[[], bool] | None = None
 
     @property
@@ -330,7 +290,6 @@ class Bus:
         elif trio is not None:
             # trio's own pair, which anyio's trio backend wraps in one more coroutine each.
             self._after_publish = trio.cancel_shielded_checkpoint
-            self._maybe_cancelled = _trio_cancel_called(trio)
             self._before_publish = trio.checkpoint_if_cancelled
         else:
             self._after_publish = _backend_cancel_shielded_checkpoint()
