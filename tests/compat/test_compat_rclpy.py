@@ -51,7 +51,11 @@ def ros_python_fixture() -> Path:
     return ROS_PYTHON
 
 
-def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
+def _run_peer(ros_python: Path, tmp_path: Path, script: Path) -> subprocess.CompletedProcess[str]:
+    """``script`` run to its end under the ROS 2 venv's python, on a random domain, Fast DDS
+    on 127.0.0.1 only; it must exit with status 0."""
+    if sys.version_info[:2] != (3, 11):
+        pytest.skip("the ROS 2 venv is Python 3.11: this environment's packages cannot be shared")
     profile = tmp_path / "fastdds_lo.xml"
     profile.write_text(FASTDDS_LOOPBACK)
     paths = sysconfig.get_paths()  # the test runner's own environment (anyio, numpy, ...)
@@ -67,12 +71,14 @@ def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
         PYTHONUNBUFFERED="1",
     )
     env.pop("ROS_LOCALHOST_ONLY", None)
-    if sys.version_info[:2] != (3, 11):
-        pytest.skip("the ROS 2 venv is Python 3.11: this environment's packages cannot be shared")
-    r = subprocess.run([str(ros_python), str(PEER)], env=env, capture_output=True, text=True,
+    r = subprocess.run([str(ros_python), str(script)], env=env, capture_output=True, text=True,
                        timeout=120, check=False)
     assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
-    answer = json.loads(r.stdout.strip().splitlines()[-1])
+    return r
+
+
+def test_listener_on_an_rclpy_node(ros_python: Path, tmp_path: Path) -> None:
+    answer = json.loads(_run_peer(ros_python, tmp_path, PEER).stdout.strip().splitlines()[-1])
     assert answer == {
         "frame_id": "map",
         "child_frame_id": "laser",
@@ -99,25 +105,7 @@ def test_buffer_under_an_rclpy_node_with_use_sim_time_follows_clock(
     under a node whose ``use_sim_time`` is true run on a SimClock following ``/clock``
     as the node hears it: the same time as the node's own rclpy clock; a ``/clock``
     2e9 s ahead is counted and dropped. A node without it stays on the system clock."""
-    profile = tmp_path / "fastdds_lo.xml"
-    profile.write_text(FASTDDS_LOOPBACK)
-    paths = sysconfig.get_paths()
-    site = os.pathsep.join(dict.fromkeys([paths["purelib"], paths["platlib"]]))
-    env = dict(
-        os.environ,
-        ROS_DOMAIN_ID=str(new_domain()),
-        RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-        FASTDDS_DEFAULT_PROFILES_FILE=str(profile),
-        PYTHONPATH=os.pathsep.join([str(ROOT), site]),
-        PYTHONUNBUFFERED="1",
-    )
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    if sys.version_info[:2] != (3, 11):
-        pytest.skip("the ROS 2 venv is Python 3.11: this environment's packages cannot be shared")
-    r = subprocess.run([str(ros_python), str(SIM_TIME_PEER)], env=env, capture_output=True,
-                       text=True, timeout=120, check=False)
-    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
+    r = _run_peer(ros_python, tmp_path, SIM_TIME_PEER)
     answer = json.loads(r.stdout.strip().splitlines()[-1])
     published = answer.pop("published_ns")
     assert published > 101_000_000_000 and published % 100_000_000 == 0
@@ -133,3 +121,28 @@ def test_buffer_under_an_rclpy_node_with_use_sim_time_follows_clock(
         "wall_clock": "SystemClock",
         "wall_now_after_2020": True,
     }
+
+
+MALFORMED_PEER = ROOT / "peers" / "ros2" / "compat_malformed_peer.py"
+
+
+def test_an_undecodable_tf_message_on_an_rclpy_node_is_counted_and_dropped(
+    ros_python: Path, tmp_path: Path
+) -> None:
+    """Among valid ``/tf`` messages, three the listener cannot decode (a stamp before 1970,
+    a frame id that is not UTF-8, a truncated sample: see the peer's docstring) are
+    counted, logged once and dropped; the node keeps spinning and stores the messages
+    after them; a NaN transform is refused alone, the valid one beside it stored."""
+    r = _run_peer(ros_python, tmp_path, MALFORMED_PEER)
+    answer = json.loads(r.stdout.strip().splitlines()[-1])
+    assert answer["malformed"] == 3
+    # map -> base halfway between x = 1 (1 s) and 2 (2 s), then base -> laser 0.5
+    assert answer["map_laser_x_at_1.5"] == 2.0
+    assert answer["ghost"] is False
+    frames = sorted(line[:-2] for line in answer["yaml"].splitlines() if line.endswith(": "))
+    assert frames == ["base", "laser"]  # no "ghost" and nothing from the malformed ones
+    warnings = [line for line in r.stderr.splitlines() if "cannot be decoded" in line]
+    assert len(warnings) == 1, r.stderr[-2000:]  # one line per 5 s, the rest counted
+    assert "TransformListener: a TFMessage on /tf that cannot be decoded was dropped" in (
+        warnings[0])
+    assert "Traceback" not in r.stderr

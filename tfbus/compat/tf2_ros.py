@@ -47,6 +47,7 @@ import contextlib
 import logging
 import math
 import sys
+import time as _wallclock
 import types
 from collections.abc import Iterable
 from functools import partial
@@ -60,6 +61,7 @@ from tfbus.broadcaster import TransformBroadcaster as _Broadcaster
 from tfbus.buffer import Buffer as _Buffer
 from tfbus.bus import Bus
 from tfbus.clock import Clock
+from tfbus.codecs.cdr import decode_tf
 from tfbus.compat import tf2_geometry_msgs as _geometry
 from tfbus.compat import tf2_sensor_msgs as _sensor
 from tfbus.compat._args import to_duration, to_stamped, to_time, to_transform_stamped
@@ -86,6 +88,7 @@ from tfbus.errors import (
     NoDataForExtrapolationException,
     TimeoutException,
     TransformException,
+    WireDecodeError,
 )
 from tfbus.listener import TransformListener as _Listener
 from tfbus.messages import (
@@ -97,11 +100,13 @@ from tfbus.messages import (
     Vector3Stamped,
     WrenchStamped,
 )
+from tfbus.ratelimit import CountLimitedLog
 from tfbus.time import Duration, Time
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports.ros1.action import ActionClient, action_client
 
 _log = logging.getLogger("tfbus.compat")
+_malformed_log = CountLimitedLog(_log, 1, period=5.0, clock=_wallclock.monotonic)
 
 __all__ = [
     "DEFAULT_STATIC_TF_TOPIC",
@@ -636,13 +641,23 @@ def _check_node(who: str, node: object, method: str) -> None:
 class TransformListener:
     """tf2_ros ``TransformListener(buffer, node)``: fills ``buffer`` (a compat
     :class:`Buffer` or a :class:`tfbus.Buffer`) from an rclpy node's ``/tf`` and
-    ``/tf_static`` (subscribed here, as ROS 2 does; messages taken by their fields), or,
+    ``/tf_static`` (subscribed here, as ROS 2 does, with the same QoS; messages taken
+    serialized and decoded by tfbus's CDR codec), or,
     with ``bus=``, from a tfbus bus through :class:`tfbus.TransformListener` (enter it
     with ``async with``), or — ROS 1's ``TransformListener(buffer)``, no node — from the
     ROS 1 graph at ``ROS_MASTER_URI``: tfbus's own ROS 1 transport
     (:func:`tfbus.compat._loop.ros1_bus`, one node per process, named after the rospy
     node plus ``_tf2``) in the process's background loop, listening at once and until
-    the program ends."""
+    the program ends.
+
+    Attributes:
+        malformed: on an rclpy node, the TFMessages that could not be decoded (a
+            truncated sample, a frame id that is not UTF-8, a stamp before 1970): each
+            is counted, logged (at most one line per 5 s) and dropped; the node's other
+            messages are stored as usual. Transforms that decode but are invalid (NaN,
+            a zero quaternion, an empty frame id) are refused one by one by the buffer,
+            as tf2's ``setTransform`` does.
+    """
 
     def __init__(
         self, buffer: Buffer | _Buffer, node: object = None, *, bus: Bus | None = None,
@@ -663,6 +678,7 @@ class TransformListener:
         self._inner: _Listener | None = None
         self._subscriptions: list[Any] = []
         self.group: Any = None  # rclpy: the subscriptions' ReentrantCallbackGroup
+        self.malformed = 0  # rclpy: TFMessages dropped because they cannot be decoded
         if bus is not None or _is_bus(node):
             chosen = bus if bus is not None else node
             if not isinstance(chosen, Bus):
@@ -682,7 +698,16 @@ class TransformListener:
         """The two subscriptions of ROS 2's ``tf2_ros/transform_listener.py``: same QoS,
         and their own ``ReentrantCallbackGroup``, so that a callback of the node's
         default (mutually exclusive) group may block in ``lookup_transform(...,
-        timeout)`` under a ``MultiThreadedExecutor`` while ``/tf`` is still delivered."""
+        timeout)`` under a ``MultiThreadedExecutor`` while ``/tf`` is still delivered.
+
+        Taken serialized (``raw=True``) and decoded by :func:`tfbus.codecs.cdr.decode_tf`
+        in the callback, not by rclpy: rclpy builds a message object by running the
+        message classes' Python code inside ``take_message``
+        (``rclpy/src/rclpy/subscription.cpp``), so a SIGINT landing there becomes a
+        ``RuntimeError`` ("Unable to convert call argument '0' to Python object") out of
+        ``rclpy.spin`` instead of the ``KeyboardInterrupt`` a program catches to end.
+        Taken as bytes, no Python code runs inside the take, and the interrupt arrives
+        in Python code, as itself."""
         from rclpy.callback_groups import (  # type: ignore[import-not-found]
             ReentrantCallbackGroup,
         )
@@ -701,23 +726,30 @@ class TransformListener:
         self.group = ReentrantCallbackGroup()
         self._subscriptions = [
             node.create_subscription(RosTFMessage, TF_TOPIC, self._on_tf, dynamic,
-                                     callback_group=self.group),
+                                     callback_group=self.group, raw=True),
             node.create_subscription(RosTFMessage, TF_STATIC_TOPIC, self._on_static, static,
-                                     callback_group=self.group),
+                                     callback_group=self.group, raw=True),
         ]
 
-    def _set(self, message: Any, static: bool) -> None:
-        ours = [to_transform_stamped(t) for t in message.transforms]
+    def _set(self, data: bytes, static: bool) -> None:
+        try:
+            ours = decode_tf(data).transforms
+        except WireDecodeError as exc:
+            self.malformed += 1
+            _malformed_log.log(logging.WARNING, "TransformListener: a TFMessage on %s that "
+                               "cannot be decoded was dropped: %s",
+                               TF_STATIC_TOPIC if static else TF_TOPIC, exc)
+            return
         if self._compat is not None and self._compat._owned:  # the background loop's
             background.call(self.buffer.set_transforms, ours, "default_authority", static)
         else:
             self.buffer.set_transforms(ours, "default_authority", is_static=static)
 
-    def _on_tf(self, message: Any) -> None:
-        self._set(message, False)
+    def _on_tf(self, data: bytes) -> None:
+        self._set(data, False)
 
-    def _on_static(self, message: Any) -> None:
-        self._set(message, True)
+    def _on_static(self, data: bytes) -> None:
+        self._set(data, True)
 
     async def __aenter__(self) -> TransformListener:
         """Start the bus listener (a node's subscriptions are live already)."""
