@@ -106,6 +106,12 @@ class Procs:
         return self._start([str(ROS_PYTHON), "-c", RUN_MAIN, str(PROGRAMS / f"{name}.py"),
                             *args])
 
+    def program_interrupted_in_take(self, name: str) -> Proc:
+        """The program ``NAME`` as :meth:`program` runs it, sent SIGINT at the first Python
+        code rclpy runs inside a ``take_message`` (``peers/ros2/sigint_in_take.py``)."""
+        return self._start([str(ROS_PYTHON), str(PEERS / "sigint_in_take.py"),
+                            str(PROGRAMS / f"{name}.py")])
+
     def peer(self, script: str, *args: str) -> Proc:
         p = self._start([str(ROS_PYTHON), str(PEERS / script), *args])
         p.wait_for(r"^READY$", timeout=WAIT)
@@ -331,6 +337,25 @@ def test_waits_for_transform(procs: Procs, tmp_path: Path) -> None:
     assert not [line for line in program.seen if "no longer available" in line]
     print(f"waits_for_transform, SIGINT to exit: {_ends_on_sigint(program):.3f} s")
     _ends_on_sigint(broadcaster)
+
+
+def test_a_sigint_while_rclpy_takes_a_message_ends_the_program(
+    procs: Procs, tmp_path: Path
+) -> None:
+    """examples_tf2_py frame_dumper following a 30 Hz ``/tf`` stream ends on a SIGINT
+    whenever it lands, as the program's ``except KeyboardInterrupt`` expects: rclpy's
+    ``take_message`` turns a ``KeyboardInterrupt`` raised in the Python code it runs to
+    build a message into a ``RuntimeError`` out of ``rclpy.spin`` (status 1, a traceback),
+    so the listener takes ``/tf`` serialized and no Python code runs inside a take. The
+    runner sends SIGINT at the first Python call inside one, should there be any."""
+    feeder = _wheels(procs, tmp_path)
+    dumper = procs.program_interrupted_in_take("frame_dumper")
+    dumper.wait_for(r"^\[\]$", timeout=WAIT)
+    _start_feeding(feeder)
+    for _ in range(2):  # two whole dumps with the wheel: dozens of messages taken
+        dumper.wait_for(r"^starboard_wheel: $", timeout=WAIT)
+    assert not [line for line in dumper.seen if "SIGINT INSIDE" in line]
+    print(f"frame_dumper under a stream, SIGINT to exit: {_ends_on_sigint(dumper):.3f} s")
 
 
 _FLOAT = r"(-?[0-9.e+-]+|nan|inf)"
