@@ -20,7 +20,6 @@ import contextlib
 import functools
 import html.parser
 import http.server
-import os
 import re
 import shutil
 import signal
@@ -274,18 +273,21 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
 
 
 def _render(chromium: str, url: str) -> str:
-    """The DOM after Chromium loaded ``url`` and ran its scripts."""
-    with tempfile.TemporaryDirectory(prefix="tfbus-chromium-") as profile:
-        done = subprocess.run(
-            [chromium, "--headless", "--no-sandbox", "--disable-gpu",
-             "--disable-background-networking", "--disable-component-update",
-             "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
-             "--virtual-time-budget=5000", "--dump-dom", url],
-            capture_output=True, text=True, timeout=120, check=False,
-            env={**os.environ, "TMPDIR": profile},
-        )
-    assert done.returncode == 0 and "<html" in done.stdout, done.stderr[-2000:]
-    return done.stdout
+    """The DOM after Chromium loaded ``url`` and ran its scripts (a fresh profile, the
+    browser's processes ended and the profile removed after the run:
+    ``headless_chromium.run_headless``)."""
+    from headless_chromium import run_headless
+
+    done = run_headless(
+        chromium,
+        ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync", "--no-first-run",
+         "--virtual-time-budget=5000", "--dump-dom"],
+        url, timeout=120.0,
+    )
+    out = done.stdout.decode("utf-8", "replace")
+    assert done.returncode == 0 and "<html" in out, done.stderr[-2000:]
+    return out
 
 
 def _fetch(url: str) -> str:

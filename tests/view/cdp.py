@@ -4,7 +4,7 @@ real input events), wait for a condition with a bound, take a screenshot.
 
 Chromium is a child process with a fresh profile on 127.0.0.1 (``--remote-debugging-port=0``:
 it picks a free port and writes it to ``DevToolsActivePort`` in the profile); it is ended
-by its PID when the context exits.
+by its PID when the context exits (``headless_chromium.end_chromium``).
 """
 
 from __future__ import annotations
@@ -13,8 +13,6 @@ import base64
 import contextlib
 import json
 import os
-import shutil
-import signal
 import subprocess
 import tempfile
 import time
@@ -22,6 +20,8 @@ import urllib.request
 from pathlib import Path
 from types import TracebackType
 from typing import Any
+
+from headless_chromium import end_chromium
 
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -31,30 +31,6 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 # what Chromium answers while a navigation swaps the page's document (or its process)
 _BETWEEN_DOCUMENTS = ("Not attached to an active page", "Cannot find context",
                       "Execution context was destroyed", "Inspected target navigated")
-
-
-def end_chromium(proc: subprocess.Popen[bytes] | None, profile: str, timeout: float) -> None:
-    """End a Chromium we started with ``start_new_session=True`` and the processes it
-    started (by its PID: the group it leads; a renderer left alive would go on writing
-    into the profile), then remove its ``profile``: a helper still exiting may write into
-    it after the browser has gone (``Directory not empty``), so the removal is retried
-    for at most ``timeout`` seconds."""
-    if proc is not None:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        if proc.poll() is None:
-            proc.wait(timeout=timeout)
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            shutil.rmtree(profile)
-            return
-        except FileNotFoundError:
-            return
-        except OSError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.1)
 
 
 class Chromium:

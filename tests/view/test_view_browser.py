@@ -5,17 +5,15 @@ with markup stays text.
 
 Chromium runs as a child process in a session of its own with a fresh profile; after
 each run (and when it outlives the bound) the process group it leads is ended by its PID
-and the profile removed (``cdp.end_chromium``); everything is on 127.0.0.1.
+and the profile removed (``headless_chromium.end_chromium``); everything is on 127.0.0.1.
 """
 
 from __future__ import annotations
 
 import html
 import io
-import os
 import re
 import subprocess
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -43,30 +41,17 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 
 def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[bytes]:
-    """One headless Chromium run on ``url``, with a fresh profile. A run that outlives 60 s
-    is ended and run again, at most 3 times: on a loaded machine headless Chromium
-    sometimes never ends its virtual-time budget (CI saw one such hang under ``nox``); a
-    page that never loads still fails after the third. After each run the processes it
-    started are ended with it (its process group) and its profile removed, retried while a
-    helper still exiting writes into it (``cdp.end_chromium``)."""
-    from cdp import end_chromium
+    """One headless Chromium run on ``url``, with a fresh profile, ended with the
+    processes it started and its profile removed (``headless_chromium.run_headless``: a
+    run that outlives 60 s is run again, at most 3 times). It must exit with status 0."""
+    from headless_chromium import run_headless
 
-    stuck = b""
-    for _ in range(3):
-        profile = tempfile.mkdtemp(prefix="tfbus-view-chromium-")
-        proc = subprocess.Popen([exe, *FLAGS, f"--user-data-dir={profile}", *extra, url],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                env={**os.environ, "TMPDIR": profile}, start_new_session=True)
-        try:
-            out, err = proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            end_chromium(proc, profile, 30)
-            stuck = proc.communicate(timeout=30)[1] or b""
-            continue
-        end_chromium(proc, profile, 30)
-        assert proc.returncode == 0, err[-2000:]
-        return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
-    pytest.fail(f"chromium did not finish in 3 runs of 60 s: {stuck[-2000:]!r}")
+    try:
+        done = run_headless(exe, [*FLAGS, *extra], url, prefix="tfbus-view-chromium-")
+    except TimeoutError as exc:
+        pytest.fail(str(exc))
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done
 
 
 def dom(exe: str, url: str, until: str) -> str:

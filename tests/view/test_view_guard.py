@@ -196,14 +196,14 @@ def test_another_origins_page_in_chromium_cannot_open_the_views_websocket(
         pytest.skip("Debian chromium not installed (scripts/install/install_chromium.sh)")
     url, results = attacker
     text = ""
+    from headless_chromium import run_headless
+
     for _ in range(3):  # a loaded machine can end the virtual-time budget too early
-        with tempfile.TemporaryDirectory(prefix="tfbus-view-guard-") as profile:
-            done = subprocess.run(
-                [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update",
-                 "--virtual-time-budget=5000", f"--user-data-dir={profile}", "--dump-dom",
-                 url], capture_output=True, timeout=90, check=False,
-                env={**os.environ, "TMPDIR": profile})
+        done = run_headless(
+            exe, ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update",
+                  "--virtual-time-budget=5000", "--dump-dom"],
+            url, timeout=90.0, prefix="tfbus-view-guard-")
         text = done.stdout.decode("utf-8", "replace")
         if "pending" not in text:
             break
@@ -383,7 +383,7 @@ for (const scheme of ["ws", "wss"]) {{
         try:
             assert reported.wait(90), "the page never reported"
         finally:
-            from cdp import end_chromium
+            from headless_chromium import end_chromium
 
             end_chromium(browser, profile, 30.0)
         assert results == ["refused-refused"]
