@@ -118,3 +118,47 @@ def test_rospy_use_sim_time_makes_the_compat_buffer_follow_clock(master: Master)
         for proc in (clock, publisher):
             if proc is not None:
                 proc.stop()
+
+
+LATE_SENDER = """
+import sys
+sys.path.append("/usr/lib/python3/dist-packages")
+import rospy
+from geometry_msgs.msg import TransformStamped
+from tfbus.compat import tf2_ros
+from tfbus.compat._loop import background
+rospy.init_node("compat_late_sender")
+t = TransformStamped()
+t.header.frame_id, t.child_frame_id = "map", "late"
+t.transform.rotation.w = 1.0
+broadcaster = tf2_ros.TransformBroadcaster()
+broadcaster.sendTransform(t)
+print("SENT", background.running, flush=True)
+rospy.signal_shutdown("done")  # its hook stops the background loop
+loop_thread = background._thread
+loop_thread.join(30)
+print("STOPPED", loop_thread.is_alive(), flush=True)
+broadcaster.sendTransform(t)  # what a rospy callback still running may do now
+tf2_ros.TransformBroadcaster().sendTransform(t)
+tf2_ros.StaticTransformBroadcaster().sendTransform(t)
+print("AFTER", background.running, flush=True)
+"""
+"""A rospy program that sends transforms after its shutdown began."""
+
+
+def test_transforms_sent_after_rospy_shutdown_are_dropped_quietly(master: Master) -> None:
+    """Once rospy's shutdown has begun (its hook stops the background loop), a
+    ``sendTransform`` (a rospy callback still running, e.g. turtle_tf2's broadcaster on a
+    last pose) sends nothing and raises nothing, as a rospy publisher does then
+    (``rospy/topics.py``: a publish to a topic closed by the shutdown returns); new
+    broadcasters do not start the loop again; the program ends with status 0."""
+    program = Proc([sys.executable, "-c", LATE_SENDER], _env(master), cwd=ROOT)
+    try:
+        assert program.wait_for(r"^SENT (\w+)$", timeout=60.0).group(1) == "True"
+        assert program.wait_for(r"^STOPPED (\w+)$", timeout=60.0).group(1) == "False"
+        assert program.wait_for(r"^AFTER (\w+)$", timeout=60.0).group(1) == "False"
+        assert program.proc.wait(timeout=30.0) == 0
+        lines = program.drain()
+        assert not [line for line in lines if "Traceback" in line], lines[-20:]
+    finally:
+        program.stop()

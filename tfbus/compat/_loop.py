@@ -232,6 +232,21 @@ def rospy_node_name() -> str | None:
     return None
 
 
+def rospy_shutting_down() -> bool:
+    """Whether rospy is initialised and its shutdown has begun
+    (``rospy.core.is_shutdown_requested()``: set before rospy runs its client hooks, one
+    of which stops the background loop, and kept until the process ends); False without
+    rospy or when it cannot say."""
+    rospy = sys.modules.get("rospy")
+    if rospy is None:
+        return False
+    try:
+        return bool(rospy.core.is_initialized()
+                    and (rospy.core.is_shutdown_requested() or rospy.core.is_shutdown()))
+    except Exception:
+        return False
+
+
 def rospy_use_sim_time() -> bool:
     """Whether rospy is initialised and the ``/use_sim_time`` parameter is true: what
     makes ``rospy.Time.now()`` simulated time (``rospy/impl/simtime.py``,

@@ -74,6 +74,7 @@ from tfbus.compat._loop import (
     ros1_bus,
     ros1_sim_clock,
     rospy_node_name,
+    rospy_shutting_down,
     rospy_use_sim_time,
 )
 from tfbus.compat._types import flavour_of, ros_message, ros_out, time_out
@@ -805,10 +806,14 @@ class TransformBroadcaster:
                 f"None (for ROS 1's graph at ROS_MASTER_URI give no argument: "
                 f"{type(self).__name__}())")
         if node is _NO_NODE:
-            bus = ros1_bus()
-            self._bus_side = background.call(
-                _StaticBroadcaster if self._static else _Broadcaster, bus)
             self._background = True
+            if not rospy_shutting_down():  # else nothing will be sent: see sendTransform
+                try:
+                    self._bus_side = background.call(
+                        _StaticBroadcaster if self._static else _Broadcaster, ros1_bus())
+                except Exception:
+                    if not rospy_shutting_down():
+                        raise
         elif isinstance(node, Bus):
             self._bus_side = _StaticBroadcaster(node) if self._static else _Broadcaster(node)
         else:
@@ -825,7 +830,9 @@ class TransformBroadcaster:
         self._latched: dict[str, TransformStamped] = {}
 
     def sendTransform(self, transform: Any) -> None:
-        """Publish ``transform`` (one, or an iterable of them, any flavour).
+        """Publish ``transform`` (one, or an iterable of them, any flavour). On the ROS 1
+        graph, once rospy's shutdown has begun (``rospy.signal_shutdown``, Ctrl-C),
+        nothing is sent and nothing is raised, as rospy's own publishers do then.
 
         Raises:
             InvalidArgumentException: a transform without ROS's fields (named).
@@ -837,8 +844,19 @@ class TransformBroadcaster:
         if self._static:  # tf2_ros keeps every static transform sent, by child frame
             self._latched.update((t.child_frame_id, t) for t in ours)
             ours = list(self._latched.values())
-        if self._bus_side is not None and self._background:
-            background.call(self._bus_side.send_transform_nowait, ours)
+        if self._background:
+            # Once rospy's shutdown has begun, the background loop leaves the ROS 1 graph
+            # (a hook of rospy's shutdown stops it) and a transform is dropped quietly, as
+            # rospy drops a publish to a topic its shutdown closed (``rospy/topics.py``,
+            # ``_PublisherImpl.publish``); a callback of rospy's threads sending then
+            # neither fails nor starts the loop again.
+            if self._bus_side is None or rospy_shutting_down():
+                return
+            try:
+                background.call(self._bus_side.send_transform_nowait, ours)
+            except Exception:
+                if not rospy_shutting_down():
+                    raise
         elif self._bus_side is not None:
             self._bus_side.send_transform_nowait(ours)
         else:
