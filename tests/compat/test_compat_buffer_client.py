@@ -76,6 +76,9 @@ for name, method, args in queries:
 print("RESULTS", json.dumps(out), flush=True)
 """.replace("TIMES", repr({"lookup_transform": (2,), "lookup_transform_full": (1, 3),
                           "can_transform": (2,)}))
+PADDING = 30.0
+"""Seconds a client waits for the server's answer beyond a lookup's timeout
+(``timeout_padding``) where the server does answer."""
 _TF2_NAMES = {"LookupException", "ConnectivityException", "ExtrapolationException",
               "InvalidArgumentException", "TimeoutException", "TransformException"}
 _TIMES = {"lookup_transform": (2,), "lookup_transform_full": (1, 3), "can_transform": (2,)}
@@ -137,12 +140,15 @@ def test_buffer_client_matches_debians_on_the_real_buffer_server(
                    "transform: {translation: {x: 0.5}, rotation: {w: 1.0}}}]}"),
     ]
     try:
-        client = tf2_ros.BufferClient("tf2_buffer_server")
+        # the padding bounds the wait for the server's answer beyond a lookup's own
+        # timeout (tf2_ros's default: 2 s), which a loaded machine can outrun: both
+        # clients get 30 s, and each answer still comes as soon as the server sends it
+        client = tf2_ros.BufferClient("tf2_buffer_server", timeout_padding=PADDING)
         assert client.wait_for_server(60.0) is True
         # the server has the data before either client asks (the static and the /tf feed)
         assert client.lookup_transform("map", "laser", Time(0), 30.0) is not None
         assert client.can_transform("map", "tip", Time(0), 30.0) is True
-        theirs = _debian(master, "tf2_buffer_server", QUERIES)
+        theirs = _debian(master, "tf2_buffer_server", QUERIES, padding=PADDING)
         ours = _ours(client, QUERIES)
         # the action's topics are on the process's one tfbus node, beside /tf
         node = ros1_bus().transport.node_name
@@ -208,7 +214,7 @@ def test_buffer_client_on_tfbus_server_and_cancel_on_timeout(
     frozen = TfbusBuffer(10.0, clock=ManualClock(Time.from_sec(100.0)))
     held = background.enter(_served(frozen, master.uri, "/frozen_server",
                                     name="/frozen_server", max_wait=60.0))
-    client = tf2_ros.BufferClient("tf2_buffer_server")
+    client = tf2_ros.BufferClient("tf2_buffer_server", timeout_padding=PADDING)
     assert client.wait_for_server(60.0) is True
     t = client.lookup_transform("map", "laser", Time(0), 1.0)
     assert (t.header.frame_id, t.child_frame_id) == ("map", "laser")
