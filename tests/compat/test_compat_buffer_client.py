@@ -51,21 +51,24 @@ QUERIES: list[tuple[str, str, list[Any]]] = [
 ]
 
 DEBIAN_CLIENT = """
-import json, sys, rospy, tf2_ros
+import json, sys, time, rospy, tf2_ros
 rospy.init_node("debian_buffer_client")
 ns, queries = sys.argv[1], json.loads(sys.argv[2])
 client = tf2_ros.BufferClient(ns, timeout_padding=rospy.Duration(float(sys.argv[3])))
 print("SERVER", client.wait_for_server(rospy.Duration(float(sys.argv[4]))), flush=True)
-out = {}
+out, took = {}, {}
 for name, method, args in queries:
     args = [rospy.Time.from_sec(a) if i in TIMES.get(method, ()) else a
             for i, a in enumerate(args)]
     args[-1] = rospy.Duration.from_sec(args[-1])
+    start = time.monotonic()
     try:
         t = getattr(client, method)(*args)
     except Exception as exc:
         out[name] = ["error", type(exc).__name__, str(exc)]
         continue
+    finally:
+        took[name] = time.monotonic() - start
     if isinstance(t, bool):
         out[name] = ["bool", t]
         continue
@@ -74,9 +77,10 @@ for name, method, args in queries:
                  [t.header.stamp.secs, t.header.stamp.nsecs], [tr.x, tr.y, tr.z],
                  [q.x, q.y, q.z, q.w]]
 print("RESULTS", json.dumps(out), flush=True)
+print("TOOK", json.dumps(took), flush=True)
 """.replace("TIMES", repr({"lookup_transform": (2,), "lookup_transform_full": (1, 3),
                           "can_transform": (2,)}))
-PADDING = 30.0
+PADDING = 10.0
 """Seconds a client waits for the server's answer beyond a lookup's timeout
 (``timeout_padding``) where the server does answer."""
 _TF2_NAMES = {"LookupException", "ConnectivityException", "ExtrapolationException",
@@ -105,13 +109,27 @@ def _ours(client: tf2_ros.BufferClient, queries: list[tuple[str, str, list[Any]]
 
 
 def _debian(master: Master, ns: str, queries: list[tuple[str, str, list[Any]]],
-            padding: float = 2.0, wait: float = 30.0) -> dict[str, list[Any]]:
-    proc = Proc(["/usr/bin/python3", "-c", DEBIAN_CLIENT, ns, json.dumps(queries),
-                 str(padding), str(wait)], master.env, cwd=ROOT)
-    try:
-        return json.loads(proc.wait_for(r"^RESULTS (.*)$", 120.0).group(1))  # type: ignore[no-any-return]
-    finally:
-        proc.stop()
+            padding: float = 2.0, wait: float = 30.0, runs: int = 1) -> dict[str, list[Any]]:
+    """Debian's rospy ``tf2_ros.BufferClient`` asked ``queries``: its answers by name.
+
+    With ``runs`` > 1, where the server answers every query: a query whose client gave up
+    waiting for the server's answer (it took ``timeout + padding`` or more: the answer was
+    lost between the server and Debian's client, which CI saw twice on a loaded machine,
+    a ``TimeoutException`` or a ``can_transform`` False that the server never sent) is
+    asked again, all of them in a new client, up to ``runs`` clients."""
+    for run in range(1, runs + 1):
+        proc = Proc(["/usr/bin/python3", "-c", DEBIAN_CLIENT, ns, json.dumps(queries),
+                     str(padding), str(wait)], master.env, cwd=ROOT)
+        try:
+            out: dict[str, list[Any]] = json.loads(proc.wait_for(r"^RESULTS (.*)$", 240.0).group(1))
+            took: dict[str, float] = json.loads(proc.wait_for(r"^TOOK (.*)$", 30.0).group(1))
+        finally:
+            proc.stop()
+        lost = [name for name, _, args in queries if took[name] >= args[-1] + padding]
+        if not lost or run == runs:
+            break
+        print(f"Debian's client lost the answers to {lost}: asked again")
+    return out
 
 
 @pytest.fixture(name="loop")
@@ -142,13 +160,13 @@ def test_buffer_client_matches_debians_on_the_real_buffer_server(
     try:
         # the padding bounds the wait for the server's answer beyond a lookup's own
         # timeout (tf2_ros's default: 2 s), which a loaded machine can outrun: both
-        # clients get 30 s, and each answer still comes as soon as the server sends it
+        # clients get 10 s, and each answer still comes as soon as the server sends it
         client = tf2_ros.BufferClient("tf2_buffer_server", timeout_padding=PADDING)
         assert client.wait_for_server(60.0) is True
         # the server has the data before either client asks (the static and the /tf feed)
         assert client.lookup_transform("map", "laser", Time(0), 30.0) is not None
         assert client.can_transform("map", "tip", Time(0), 30.0) is True
-        theirs = _debian(master, "tf2_buffer_server", QUERIES, padding=PADDING)
+        theirs = _debian(master, "tf2_buffer_server", QUERIES, padding=PADDING, runs=3)
         ours = _ours(client, QUERIES)
         # the action's topics are on the process's one tfbus node, beside /tf
         node = ros1_bus().transport.node_name
