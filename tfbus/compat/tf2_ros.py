@@ -49,10 +49,10 @@ import math
 import sys
 import time as _wallclock
 import types
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from functools import partial
 from numbers import Real
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import anyio
 
@@ -107,6 +107,7 @@ from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
 from tfbus.transports.ros1.action import ActionClient, action_client
 
 _log = logging.getLogger("tfbus.compat")
+_T = TypeVar("_T")
 _malformed_log = CountLimitedLog(_log, 1, period=5.0, clock=_wallclock.monotonic)
 
 __all__ = [
@@ -625,6 +626,27 @@ def _is_bus(value: object) -> bool:
     return isinstance(value, Bus)
 
 
+def _unless_rospy_ended(work: Callable[[], _T]) -> _T | None:
+    """``work()`` (a call into the background loop that carries the ROS 1 graph), or
+    None, nothing done, once rospy's shutdown has begun (:func:`rospy_shutting_down`),
+    also when it began during the call and made it fail. A hook of rospy's shutdown stops
+    the loop, which leaves the graph; a callback of rospy's threads still sending then
+    neither fails nor starts the loop again, as rospy drops a publish to a topic its
+    shutdown closed (``rospy/topics.py``, ``_PublisherImpl.publish``).
+
+    Raises:
+        whatever ``work`` raises outside rospy's shutdown.
+    """
+    if rospy_shutting_down():
+        return None
+    try:
+        return work()
+    except Exception:
+        if rospy_shutting_down():
+            return None
+        raise
+
+
 def _describe(value: object) -> str:
     """``value``'s type and a short repr, for an error message."""
     text = repr(value)
@@ -806,14 +828,9 @@ class TransformBroadcaster:
                 f"None (for ROS 1's graph at ROS_MASTER_URI give no argument: "
                 f"{type(self).__name__}())")
         if node is _NO_NODE:
-            self._background = True
-            if not rospy_shutting_down():  # else nothing will be sent: see sendTransform
-                try:
-                    self._bus_side = background.call(
-                        _StaticBroadcaster if self._static else _Broadcaster, ros1_bus())
-                except Exception:
-                    if not rospy_shutting_down():
-                        raise
+            self._background = True  # None once rospy's shutdown began: nothing is sent
+            kind = _StaticBroadcaster if self._static else _Broadcaster
+            self._bus_side = _unless_rospy_ended(lambda: background.call(kind, ros1_bus()))
         elif isinstance(node, Bus):
             self._bus_side = _StaticBroadcaster(node) if self._static else _Broadcaster(node)
         else:
@@ -845,18 +862,10 @@ class TransformBroadcaster:
             self._latched.update((t.child_frame_id, t) for t in ours)
             ours = list(self._latched.values())
         if self._background:
-            # Once rospy's shutdown has begun, the background loop leaves the ROS 1 graph
-            # (a hook of rospy's shutdown stops it) and a transform is dropped quietly, as
-            # rospy drops a publish to a topic its shutdown closed (``rospy/topics.py``,
-            # ``_PublisherImpl.publish``); a callback of rospy's threads sending then
-            # neither fails nor starts the loop again.
-            if self._bus_side is None or rospy_shutting_down():
-                return
-            try:
-                background.call(self._bus_side.send_transform_nowait, ours)
-            except Exception:
-                if not rospy_shutting_down():
-                    raise
+            bus_side = self._bus_side
+            if bus_side is not None:
+                _unless_rospy_ended(
+                    lambda: background.call(bus_side.send_transform_nowait, ours))
         elif self._bus_side is not None:
             self._bus_side.send_transform_nowait(ours)
         else:
