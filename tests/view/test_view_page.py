@@ -283,6 +283,29 @@ def test_command_serves_a_bag_and_stops_on_sigint() -> None:
             proc.wait(timeout=10)
 
 
+def test_axes_segments_are_the_turned_unit_axes_for_every_frame_at_once() -> None:
+    """The axes of many frames, made in one matrix product of the quaternions' pairwise
+    products: each frame's segment k runs from its origin to origin + length x column k
+    of its rotation matrix, as transforms3d's ``quat2mat`` gives it (w, x, y, z order
+    there), for random unit quaternions of either sign; no frames, no segments."""
+    import transforms3d.quaternions as tq
+
+    from tfbus.view.server import _axes
+
+    rng = np.random.default_rng(20261128)
+    quats = rng.normal(size=(200, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    origins = rng.uniform(-50.0, 50.0, size=(200, 3))
+    segs = _axes(origins, quats, 0.4).reshape(200, 3, 2, 3)
+    for i, (x, y, z, w) in enumerate(quats):
+        rot = tq.quat2mat([w, x, y, z])
+        for k in range(3):
+            np.testing.assert_allclose(segs[i, k, 0], origins[i], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(segs[i, k, 1], origins[i] + 0.4 * rot[:, k],
+                                       rtol=0, atol=1e-12)
+    assert _axes(np.zeros((0, 3)), np.zeros((0, 4))).shape == (0, 2, 3)
+
+
 def test_axes_fade_to_grey_then_hide_as_rviz(page: TfPage) -> None:
     """rviz's TF display: full colour for a third of the frame timeout, then fading to
     grey, then hidden; the axes' colours and ends are read back from the server's node."""

@@ -141,43 +141,87 @@ _LINEAR = _linear_table()
 vertex colour)."""
 
 
-def _axes(origins: npt.NDArray[np.float64], quaternions: npt.NDArray[np.float64],
-          length: float = AXES_LENGTH) -> npt.NDArray[np.float64]:
-    """The x, y, z axis segments of frames at ``origins`` (``(N, 3)`` metres) turned by
-    ``quaternions`` (``(N, 4)`` x, y, z, w): ``(3 N, 2, 3)``, for each frame origin to
-    origin + R e_k x ``length`` (metres), k = x, y, z."""
-    x, y, z, w = quaternions.T
-    cols = np.stack([  # the columns of the rotation matrix of each (x, y, z, w)
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], -1),
-        np.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], -1),
-        np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], axis=1)  # (N, 3 axes, 3)
-    starts = np.broadcast_to(origins[:, None, :], cols.shape)
-    out: npt.NDArray[np.float64] = np.stack([starts, starts + length * cols],
-                                            axis=2).reshape(-1, 2, 3)
+def _rotation_products() -> npt.NDArray[np.float64]:
+    """``(16, 9)``: the rotation matrix of a unit quaternion (x, y, z, w) as a linear map
+    of its pairwise products ``q_i q_j`` (row ``4 i + j``, i, j = x, y, z, w = 0..3),
+    minus the identity: column ``3 k + r`` is entry r of the matrix's column k (the unit
+    vector of axis k turned). The products' coefficients are those of the usual
+    quaternion-to-matrix formula (e.g. ``transforms3d.quaternions.quat2mat``)."""
+    x, y, z, w = range(4)
+    terms = {  # (column k, entry r): [(coefficient, i, j)]; the diagonal's 1 is added apart
+        (0, 0): [(-2, y, y), (-2, z, z)], (0, 1): [(2, x, y), (2, w, z)],
+        (0, 2): [(2, x, z), (-2, w, y)], (1, 0): [(2, x, y), (-2, w, z)],
+        (1, 1): [(-2, x, x), (-2, z, z)], (1, 2): [(2, y, z), (2, w, x)],
+        (2, 0): [(2, x, z), (2, w, y)], (2, 1): [(2, y, z), (-2, w, x)],
+        (2, 2): [(-2, x, x), (-2, y, y)],
+    }  # fmt: skip
+    out = np.zeros((16, 9))
+    for (k, r), products in terms.items():
+        for c, i, j in products:
+            out[4 * i + j, 3 * k + r] += c
     return out
 
 
-def _send_pose(handle: Any, xyz: tuple[float, float, float],
-               wxyz: tuple[float, float, float, float] | None = None) -> None:
-    """Set a viser node's position (and orientation), one message each, the change
+_ROTATION_PRODUCTS = _rotation_products()
+_EYE9 = np.eye(3).ravel()
+
+
+def _axes(origins: npt.NDArray[np.float64], quaternions: npt.NDArray[np.float64],
+          length: float = AXES_LENGTH) -> npt.NDArray[np.float64]:
+    """The x, y, z axis segments of frames at ``origins`` (``(N, 3)`` metres) turned by
+    ``quaternions`` (``(N, 4)`` x, y, z, w, unit): ``(3 N, 2, 3)``, for each frame origin
+    to origin + R e_k x ``length`` (metres), k = x, y, z. R is made from the quaternion's
+    pairwise products in one matrix product (:func:`_rotation_products`): a handful of
+    array operations for every frame at once, whatever their number."""
+    n = len(quaternions)
+    products = (quaternions[:, :, None] * quaternions[:, None, :]).reshape(n, 16)
+    cols = (products @ _ROTATION_PRODUCTS + _EYE9).reshape(n, 3, 3)  # (N, 3 axes, 3)
+    out = np.empty((n, 3, 2, 3))
+    out[:, :, 0, :] = origins[:, None, :]
+    np.multiply(cols, length, out=out[:, :, 1, :])
+    out[:, :, 1, :] += origins[:, None, :]
+    return out.reshape(-1, 2, 3)
+
+
+class _PoseSender:
+    """Sets one viser node's position (and orientation), one message each, the change
     already known (:class:`DrawnFrame` compares exactly): queued as viser's own setters
     queue it, without their ``np.allclose`` check of each value against the last one sent
-    (about 40 % of a redraw of 100 moving frames). A viser without that path (its
-    internals moved) gets the public setters."""
-    impl = getattr(handle, "_impl", None)
-    queue = getattr(getattr(impl, "api", None), "_queue_scene_message", None)
-    messages = _viser_messages()
-    if impl is None or queue is None or messages is None:
-        handle.position = xyz
+    (about 40 % of a redraw of 100 moving frames). The node's internals and viser's
+    queue are looked up once, when the sender is made (a redraw sends one label position
+    per frame). A viser without that path (its internals moved) gets the public setters."""
+
+    __slots__ = ("_handle", "_impl", "_name", "_orientation", "_position", "_queue")
+
+    def __init__(self, handle: Any) -> None:
+        self._handle = handle
+        impl = getattr(handle, "_impl", None)
+        queue = getattr(getattr(impl, "api", None), "_queue_scene_message", None)
+        messages = _viser_messages()
+        if impl is None or queue is None or messages is None:
+            self._impl: Any = None
+            return
+        self._impl = impl
+        self._name = impl.name
+        self._queue = queue
+        self._position = messages.SetPositionMessage
+        self._orientation = messages.SetOrientationMessage
+
+    def send(self, xyz: tuple[float, float, float],
+             wxyz: tuple[float, float, float, float] | None = None) -> None:
+        """Move the node to ``xyz`` (metres) and, when given, turn it to ``wxyz`` (a unit
+        quaternion w, x, y, z)."""
+        impl = self._impl
+        if impl is None:
+            self._handle.position = xyz
+            if wxyz is not None:
+                self._handle.wxyz = wxyz
+            return
+        impl.position[:] = xyz
+        self._queue(self._position(self._name, xyz))
         if wxyz is not None:
-            handle.wxyz = wxyz
-        return
-    impl.position[:] = xyz
-    queue(messages.SetPositionMessage(impl.name, xyz))
-    if wxyz is not None:
-        impl.wxyz[:] = wxyz
-        queue(messages.SetOrientationMessage(impl.name, wxyz))
+            impl.wxyz[:] = wxyz
+            self._queue(self._orientation(self._name, wxyz))
 
 
 @functools.cache
@@ -219,6 +263,8 @@ class DrawnFrame:
         self._label_at: tuple[float, float, float] | None = None
         self._node_shown: bool | None = None
         self._label_shown: bool | None = None
+        self._node_sender = _PoseSender(node)
+        self._label_sender = _PoseSender(label)
 
     def place(self, xyz: tuple[float, float, float],
               wxyz: tuple[float, float, float, float]) -> None:
@@ -229,7 +275,7 @@ class DrawnFrame:
             return
         self._pose = pose
         if self.posed:
-            _send_pose(self.node, xyz, wxyz)
+            self._node_sender.send(xyz, wxyz)
 
     @property
     def position(self) -> npt.NDArray[np.float64]:
@@ -252,9 +298,10 @@ class DrawnFrame:
             self.node.visible = drawn
             self._node_shown = drawn
         label = drawn and labels
-        if label and self._pose is not None and self._label_at != self._pose[0]:
-            _send_pose(self.label, self._pose[0])
-            self._label_at = self._pose[0]
+        pose = self._pose
+        if label and pose is not None and self._label_at != pose[0]:
+            self._label_sender.send(pose[0])
+            self._label_at = pose[0]
         if label is not self._label_shown:
             self.label.visible = label
             self._label_shown = label
@@ -320,7 +367,8 @@ class TfPage:
         """The line segments of every visible frame's axes (``points``, ``colors``:
         ``(3 N, 2, 3)``), three rows per frame in :attr:`axes_rows`' order."""
         self.axes_count = 0
-        self._segments_sent: dict[str, tuple[npt.NDArray[np.float32],
+        # each line-segments node's points, sRGB colours and linear colours as last sent
+        self._segments_sent: dict[str, tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8],
                                              npt.NDArray[np.uint8]]] = {}
         self.axes_rows: dict[str, int] = {}
         """First row in :attr:`axes` of each frame drawn now (hidden frames have none)."""
@@ -641,27 +689,36 @@ class TfPage:
         length = float(self.axis_length.value)
         labels = bool(self.labels_box.value)
         hidden = self.frame_tree.hidden  # unticked in the page's frame tree
+        frames = self.frames
+        # the filter's test only while a filter is set (it drops itself on a timeout)
+        shown = self.shown if self.frame_filter is not None else None
         for f in scene.frames:
-            drawn = f.visible and self.shown(f.frame_id) and f.frame_id not in hidden
-            record = self.frames.get(f.frame_id)
-            if record is None:
-                record = self._add_frame(f.frame_id)
+            frame_id = f.frame_id
             pose = f.pose
+            colour = f.colour
+            drawn = (pose is not None and colour is not None  # f.visible
+                     and (shown is None or shown(frame_id)) and frame_id not in hidden)
+            record = frames.get(frame_id)
+            if record is None:
+                record = self._add_frame(frame_id)
             if pose is None:
                 record.show(drawn, labels)
                 continue
-            xyz = _xyz(pose)
-            record.place(xyz, _wxyz(pose))
+            tr = pose.transform
+            v = tr.translation
+            q = tr.rotation
+            xyz = (v.x, v.y, v.z)
+            record.place(xyz, (q.w, q.x, q.y, q.z))
             record.show(drawn, labels)
             if not drawn:
                 continue
-            colour = f.colour if f.colour is not None else 0.0
-            rows[f.frame_id] = 3 * len(origins)
-            q = pose.transform.rotation
+            assert colour is not None  # drawn: visible
+            rows[frame_id] = 3 * len(origins)
             origins.append(xyz)
             quaternions.append((q.x, q.y, q.z, q.w))
             axes_blocks.append(_axes_block(colour))
-            parent_pose = poses.get(f.parent) if f.parent is not None else None
+            parent = f.parent
+            parent_pose = poses.get(parent) if parent is not None else None
             if parent_pose is not None:
                 ends += xyz
                 ends += _xyz(parent_pose)
@@ -868,21 +925,28 @@ class TfPage:
                 handle.visible = False
             return handle, count
         pts = np.asarray(segments, dtype=np.float32)
-        cols = _to_linear(np.asarray(colours, dtype=np.uint8))
+        srgb = np.asarray(colours, dtype=np.uint8)
         sent = self._segments_sent.get(name)
-        if handle is not None and len(segments) == count and handle.visible \
-                and sent is not None and np.array_equal(sent[0], pts) \
-                and np.array_equal(sent[1], cols):
-            return handle, count  # what the browser shows already: nothing sent
-        self._segments_sent[name] = (pts, cols)
-        if handle is None or len(segments) != count:
+        same_count = handle is not None and len(segments) == count
+        same_pts = same_cols = False
+        if same_count and sent is not None and handle.visible:
+            same_pts = np.array_equal(sent[0], pts)
+            same_cols = np.array_equal(sent[1], srgb)
+            if same_pts and same_cols:
+                return handle, count  # what the browser shows already: nothing sent
+        # the colours as sent (linear), converted again only when they changed
+        cols = sent[2] if same_cols and sent is not None else _to_linear(srgb)
+        self._segments_sent[name] = (pts, srgb, cols)
+        if handle is None or not same_count:
             if handle is not None:
                 handle.remove()
             handle = self.server.scene.add_line_segments(
                 name, pts, cols, thickness=thickness, thickness_units="screen")
-        else:
-            handle.points = pts
-            handle.colors = cols
+        else:  # only what changed is given to viser (whose setters compare again)
+            if not same_pts:
+                handle.points = pts
+            if not same_cols:
+                handle.colors = cols
             handle.visible = True
         return handle, len(segments)
 
