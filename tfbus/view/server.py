@@ -141,28 +141,30 @@ _LINEAR = _linear_table()
 vertex colour)."""
 
 
-def _rotation_products() -> npt.NDArray[np.float64]:
-    """``(16, 9)``: the rotation matrix of a unit quaternion (x, y, z, w) as a linear map
-    of its pairwise products ``q_i q_j`` (row ``4 i + j``, i, j = x, y, z, w = 0..3),
-    minus the identity: column ``3 k + r`` is entry r of the matrix's column k (the unit
-    vector of axis k turned). The products' coefficients are those of the usual
-    quaternion-to-matrix formula (e.g. ``transforms3d.quaternions.quat2mat``)."""
+def _rotation_terms() -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float64],
+                                npt.NDArray[np.intp], npt.NDArray[np.float64]]:
+    """The rotation matrix of a unit quaternion (x, y, z, w) minus the identity, entry by
+    entry, as two of its pairwise products ``q_i q_j`` (index ``4 i + j``, i, j = x, y,
+    z, w = 0..3) times a coefficient each: ``(first, first_coefficient, second,
+    second_coefficient)``, ``(9,)`` each, entry ``3 k + r`` being entry r of the
+    matrix's column k (the unit vector of axis k turned). The coefficients are those of
+    the usual quaternion-to-matrix formula (e.g. ``transforms3d.quaternions.quat2mat``)."""
     x, y, z, w = range(4)
-    terms = {  # (column k, entry r): [(coefficient, i, j)]; the diagonal's 1 is added apart
-        (0, 0): [(-2, y, y), (-2, z, z)], (0, 1): [(2, x, y), (2, w, z)],
-        (0, 2): [(2, x, z), (-2, w, y)], (1, 0): [(2, x, y), (-2, w, z)],
-        (1, 1): [(-2, x, x), (-2, z, z)], (1, 2): [(2, y, z), (2, w, x)],
-        (2, 0): [(2, x, z), (2, w, y)], (2, 1): [(2, y, z), (-2, w, x)],
-        (2, 2): [(-2, x, x), (-2, y, y)],
+    terms = {  # (column k, entry r): the two (coefficient, i, j); the diagonal's 1 apart
+        (0, 0): ((-2, y, y), (-2, z, z)), (0, 1): ((2, x, y), (2, w, z)),
+        (0, 2): ((2, x, z), (-2, w, y)), (1, 0): ((2, x, y), (-2, w, z)),
+        (1, 1): ((-2, x, x), (-2, z, z)), (1, 2): ((2, y, z), (2, w, x)),
+        (2, 0): ((2, x, z), (2, w, y)), (2, 1): ((2, y, z), (-2, w, x)),
+        (2, 2): ((-2, x, x), (-2, y, y)),
     }  # fmt: skip
-    out = np.zeros((16, 9))
-    for (k, r), products in terms.items():
-        for c, i, j in products:
-            out[4 * i + j, 3 * k + r] += c
-    return out
+    ordered = [terms[divmod(e, 3)] for e in range(9)]
+    return (np.array([4 * i + j for (_, i, j), _ in ordered], dtype=np.intp),
+            np.array([float(c) for (c, _, _), _ in ordered]),
+            np.array([4 * i + j for _, (_, i, j) in ordered], dtype=np.intp),
+            np.array([float(c) for _, (c, _, _) in ordered]))
 
 
-_ROTATION_PRODUCTS = _rotation_products()
+_FIRST, _FIRST_COEFFICIENT, _SECOND, _SECOND_COEFFICIENT = _rotation_terms()
 _EYE9 = np.eye(3).ravel()
 
 
@@ -171,11 +173,12 @@ def _axes(origins: npt.NDArray[np.float64], quaternions: npt.NDArray[np.float64]
     """The x, y, z axis segments of frames at ``origins`` (``(N, 3)`` metres) turned by
     ``quaternions`` (``(N, 4)`` x, y, z, w, unit): ``(3 N, 2, 3)``, for each frame origin
     to origin + R e_k x ``length`` (metres), k = x, y, z. R is made from the quaternion's
-    pairwise products in one matrix product (:func:`_rotation_products`): a handful of
-    array operations for every frame at once, whatever their number."""
+    pairwise products (:func:`_rotation_terms`): a handful of array operations for every
+    frame at once, whatever their number (and no BLAS call, whose threads would spin)."""
     n = len(quaternions)
     products = (quaternions[:, :, None] * quaternions[:, None, :]).reshape(n, 16)
-    cols = (products @ _ROTATION_PRODUCTS + _EYE9).reshape(n, 3, 3)  # (N, 3 axes, 3)
+    cols = (products[:, _FIRST] * _FIRST_COEFFICIENT
+            + products[:, _SECOND] * _SECOND_COEFFICIENT + _EYE9).reshape(n, 3, 3)
     out = np.empty((n, 3, 2, 3))
     out[:, :, 0, :] = origins[:, None, :]
     np.multiply(cols, length, out=out[:, :, 1, :])
