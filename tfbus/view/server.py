@@ -121,6 +121,24 @@ def _segment_block(colours: list[tuple[int, int, int]]) -> npt.NDArray[np.uint8]
 _NO_COLOURS: npt.NDArray[np.uint8] = _segment_block([])
 
 
+def _blocks(fades: list[float],
+            block: Callable[[float], npt.NDArray[np.uint8]]) -> npt.NDArray[np.uint8]:
+    """``block(fade)`` of each of ``fades``, one after the other: ``(K len(fades), 2, 3)
+    uint8`` (sRGB 0-255) for blocks of ``K`` segments. Made once per distinct fade (a
+    redraw of live frames has one or a few), then gathered for every frame at once."""
+    if not fades:
+        return _NO_COLOURS
+    first = fades[0]
+    if fades.count(first) == len(fades):  # one fade (all full colour, say): one block
+        one = block(first)
+        return np.broadcast_to(one, (len(fades), *one.shape)).reshape(-1, 2, 3)
+    index: dict[float, int] = {}
+    which = [index.setdefault(f, len(index)) for f in fades]
+    table = np.stack([block(f) for f in index])
+    out: npt.NDArray[np.uint8] = table[np.asarray(which, dtype=np.intp)].reshape(-1, 2, 3)
+    return out
+
+
 def _to_linear(srgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """sRGB 0-255 as the linear 0-255 values viser's per-vertex line colours are (its
     client divides by 255 and three.js encodes the output as sRGB): sent so, a colour is
@@ -684,10 +702,10 @@ class TfPage:
               rates: Mapping[str, float] | None, table: bool = True) -> None:
         poses = {f.frame_id: f.pose for f in scene.frames}
         ends: list[float] = []  # each link's two ends, x y z each: one flat list
-        colours: list[npt.NDArray[np.uint8]] = []  # one (1, 2, 3) block per segment
+        link_fades: list[float] = []  # each link's colour (its child's fade)
         origins: list[tuple[float, float, float]] = []
         quaternions: list[tuple[float, float, float, float]] = []
-        axes_blocks: list[npt.NDArray[np.uint8]] = []  # one (3, 2, 3) block per frame
+        axes_fades: list[float] = []  # each drawn frame's colour (fade)
         rows: dict[str, int] = {}
         length = float(self.axis_length.value)
         labels = bool(self.labels_box.value)
@@ -719,24 +737,24 @@ class TfPage:
             rows[frame_id] = 3 * len(origins)
             origins.append(xyz)
             quaternions.append((q.x, q.y, q.z, q.w))
-            axes_blocks.append(_axes_block(colour))
+            axes_fades.append(colour)
             parent = f.parent
             parent_pose = poses.get(parent) if parent is not None else None
             if parent_pose is not None:
                 ends += xyz
                 ends += _xyz(parent_pose)
-                colours.append(_link_block(colour))
+                link_fades.append(colour)
         for name, drawn_frame in self.frames.items():  # drawn before, not in this scene
             if name not in poses and drawn_frame.visible:
                 drawn_frame.show(False, labels)
         self.links, self.link_count = self._segments(
             "/links", self.links, self.link_count,
             np.array(ends, dtype=np.float32).reshape(-1, 2, 3),
-            np.concatenate(colours) if colours else _NO_COLOURS, 2.0)
+            _blocks(link_fades, _link_block), 2.0)
         axes = (_axes(np.asarray(origins, dtype=np.float64),
                       np.asarray(quaternions, dtype=np.float64), length)
                 if origins else np.zeros((0, 2, 3)))
-        axes_srgb = np.concatenate(axes_blocks) if axes_blocks else _NO_COLOURS
+        axes_srgb = _blocks(axes_fades, _axes_block)
         self.axes, self.axes_count = self._segments(
             "/axes", self.axes, self.axes_count, axes, axes_srgb, 4.0)
         self.axes_rows = rows
