@@ -306,6 +306,26 @@ def test_axes_segments_are_the_turned_unit_axes_for_every_frame_at_once() -> Non
     assert _axes(np.zeros((0, 3)), np.zeros((0, 4))).shape == (0, 2, 3)
 
 
+def test_colour_blocks_of_many_frames_are_each_frames_block_in_order() -> None:
+    """The axes' and links' colours of a redraw, made once per distinct fade and gathered:
+    exactly each frame's own block one after the other, whether every fade is the same,
+    a few differ (0.0 and -0.0 alike), or there are none."""
+    import random
+
+    from tfbus.view.server import _axes_block, _blocks, _link_block
+
+    rng = random.Random(20261128)
+    pool = [1.0, 0.0, -0.0, 0.5, 0.25, 0.123456]
+    for _ in range(200):
+        fades = [rng.choice(pool[:rng.randint(1, len(pool))])
+                 for _ in range(rng.randint(1, 60))]
+        for block in (_axes_block, _link_block):
+            expected = np.concatenate([block(f) for f in fades])
+            got = _blocks(fades, block)
+            assert got.dtype == np.uint8 and np.array_equal(got, expected)
+    assert _blocks([], _axes_block).shape == (0, 2, 3)
+
+
 def test_axes_fade_to_grey_then_hide_as_rviz(page: TfPage) -> None:
     """rviz's TF display: full colour for a third of the frame timeout, then fading to
     grey, then hidden; the axes' colours and ends are read back from the server's node."""
