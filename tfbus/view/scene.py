@@ -221,9 +221,6 @@ def build_scene(
         received = {name: t.ns for name, t in last_update.items()}
     now_ns = now.ns if now is not None else None
     lookup = core.try_lookup_transform
-    # fade(age, frame_timeout) inline below: the same arithmetic, its numbers read once
-    third = frame_timeout / 3.0
-    faded_span = frame_timeout - third
     views: list[FrameView] = []
     for name in names:
         fi = info.get(name)
@@ -236,16 +233,12 @@ def build_scene(
         pose = out if isinstance(out, TransformStamped) else None
         error = None if pose is not None else str(out)
         age: float | None = None
-        colour: float | None = 1.0  # fade(None): full colour
         if not static and now_ns is not None and received is not None:
             last = received.get(name)
             if last is not None:
                 age = max(0.0, (now_ns - last) / 1e9)
-                if age > frame_timeout:
-                    colour = None
-                elif age > third:
-                    colour = (frame_timeout - age) / faded_span
-        views.append(FrameView(name, parent, static, pose, error, age, colour, authority))
+        views.append(FrameView(name, parent, static, pose, error, age,
+                               fade(age, frame_timeout), authority))
     message = None
     if not core.frame_exists(fixed_frame):
         message = f"fixed frame [{fixed_frame}] does not exist"

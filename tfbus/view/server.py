@@ -79,11 +79,6 @@ pattern that backtracks catastrophically (``(a|aa)+$``) is dropped, with an erro
 instead of stalling the drawing loop (Python's own ``re`` cannot be interrupted)."""
 
 
-def _wxyz(pose: TransformStamped) -> tuple[float, float, float, float]:
-    q = pose.transform.rotation
-    return (q.w, q.x, q.y, q.z)
-
-
 def _xyz(pose: TransformStamped) -> tuple[float, float, float]:
     v = pose.transform.translation
     return (v.x, v.y, v.z)
