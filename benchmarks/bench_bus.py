@@ -50,7 +50,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 import anyio
 import anyio.lowlevel
@@ -63,8 +63,9 @@ from tfbus.bus import Bus
 from tfbus.clock import SystemClock
 from tfbus.demos.tutorial import run_demo
 from tfbus.listener import TransformListener
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
+from tfbus.topics import TF_TOPIC
 
 NS = 1_000_000_000
 MS = 1_000_000
@@ -172,8 +173,16 @@ def _probe(stamp_ns: int) -> TransformStamped:
     )
 
 
+HANDLER: Final = "handler"
+CHECKED: Final = "checked handler"
+DELIVERY: Final = "delivery"
+PARTS: Final = (HANDLER, CHECKED, DELIVERY)
+"""The parts of the bus path :func:`latency_run` can time alone (its ``part``)."""
+
+
 async def latency_run(
-    samples: int, warmup: int, timeout: float | None, instrument: bool = False
+    samples: int, warmup: int, timeout: float | None, instrument: bool = False,
+    part: str | None = None,
 ) -> LatencyResult:
     """``warmup + samples`` wake-ups; returns the last ``samples`` latencies.
 
@@ -182,7 +191,24 @@ async def latency_run(
     sender's checks, the publish and the listener's callback); the store itself, which
     re-checks the waiter and wakes it; and the awaiting task resuming (returning through
     ``lookup_transform_async``).
+
+    ``part`` (one of :data:`PARTS`) times a part of the bus path instead of
+    ``send_transform``: the sender hands each transform, as a ``TFMessage`` built before
+    the first time read, to
+
+    * :data:`HANDLER`: the listener's message handler, the callback the bus calls (the
+      listener's clock read, the store, the waiter re-checked and woken);
+    * :data:`CHECKED`: the same after the cancellation check a publish makes first
+      (``send_transform``'s, as it makes it on this backend);
+    * :data:`DELIVERY`: the check, then the bus's delivery (its counters and its walk of
+      the topic's subscriptions and callbacks, which calls the handler);
+
+    then yields as a publish does (the bus's own cancel-shielded yield). What
+    ``send_transform`` adds to :data:`DELIVERY` is the broadcaster's own work: the
+    message built and checked, the bus's state and transport read, the count, the call.
     """
+    if part is not None and part not in PARTS:
+        raise ValueError(f"part must be one of {PARTS}, not {part!r}")
     total = warmup + samples
     clock = SystemClock()
     buffer = Buffer(cache_time=10.0, clock=clock)
@@ -224,6 +250,11 @@ async def latency_run(
                     done = i  # the next lookup registers before this task yields again
 
             tg.start_soon(waiter)
+            # the parts' pieces: the bus's own, as send_transform reaches them
+            framed = [TFMessage((m,)) for m in messages] if part is not None else []
+            handler = bus._callbacks[TF_TOPIC][0]._callback if part is not None else None
+            maybe_cancelled, before = bus._maybe_cancelled, bus._before_publish
+            deliver, after = bus._deliver, bus._after_publish
             gc.collect()
             for i in range(1, total + 1):
                 # Wait until the waiter finished sample i-1 and is blocked on sample i.
@@ -232,7 +263,16 @@ async def latency_run(
                 for _ in range(3):  # let the timeout task (if any) arm its sleep
                     await anyio.lowlevel.checkpoint()
                 sent_at[i] = time.perf_counter_ns()
-                await broadcaster.send_transform(messages[i])
+                if part is None:
+                    await broadcaster.send_transform(messages[i])
+                    continue
+                if part is not HANDLER and (maybe_cancelled is None or maybe_cancelled()):
+                    await before()
+                if part is DELIVERY:
+                    deliver(TF_TOPIC, framed[i])
+                else:
+                    handler(framed[i])
+                await after()
             while done != total:
                 await anyio.lowlevel.checkpoint()
     finally:

@@ -624,18 +624,24 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
     row judges the median of the per-repeat ratios (min..max beside it). Beside
     them, for information: the floor with anyio's public checkpoint, and the floor with
     the cancellation check a publish makes before it publishes
-    (``bench_bus.checked_floor_run``)."""
+    (``bench_bus.checked_floor_run``), and the bus path taken apart
+    (``bench_bus.latency_run``'s ``part``: the listener's handler alone, after the
+    cancellation check, and through the bus's delivery; the row itself adds the
+    broadcaster's own work)."""
     cfg = bench_bus.QUICK
     n, warm = cfg.latency_samples, cfg.latency_warmup
     for backend in bench_bus.BACKENDS:
         ratios: dict[str, list[float]] = {"direct": [], "bus": [], "anyio_floor": [],
                                           "checked_floor": []}
+        ratios.update((part, []) for part in bench_bus.PARTS)
         floors: list[float] = []
         for _ in range(repeats):
             floor = anyio.run(bench_bus.plain_floor_run, n, warm, backend, backend=backend)
             old_floor = anyio.run(bench_bus.event_floor_run, n, warm, backend=backend)
             checked = anyio.run(bench_bus.checked_floor_run, n, warm, backend, backend=backend)
             direct = anyio.run(bench_bus.direct_run, n, warm, backend, backend=backend)
+            parts = {part: anyio.run(bench_bus.latency_run, n, warm, None, False, part,
+                                     backend=backend) for part in bench_bus.PARTS}
             bus = anyio.run(bench_bus.latency_run, n, warm, None, backend=backend)
             after = anyio.run(bench_bus.plain_floor_run, n, warm, backend, backend=backend)
             floor_ms = (floor.middle_mean_ms + after.middle_mean_ms) / 2
@@ -644,6 +650,8 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
             ratios["bus"].append(bus.middle_mean_ms / floor_ms)
             ratios["anyio_floor"].append(old_floor.middle_mean_ms / floor_ms)
             ratios["checked_floor"].append(checked.middle_mean_ms / floor_ms)
+            for part, got in parts.items():
+                ratios[part].append(got.middle_mean_ms / floor_ms)
         for key, label in (("direct", "direct insert"), ("bus", "through the bus")):
             target = WAKE_TARGETS[key]
             rows.row(
@@ -660,6 +668,10 @@ def wakeup_rows(rows: Rows, repeats: int) -> None:
             f"  info  {'  floor with a publish cancellation check':46} "
             f"{_spread(ratios['checked_floor'])} of the plain floor"
         )
+        for part, label in ((bench_bus.HANDLER, "bus path in parts: the listener's handler"),
+                            (bench_bus.CHECKED, "  + the publish cancellation check"),
+                            (bench_bus.DELIVERY, "  + the bus's delivery")):
+            print(f"  info  {'  ' + label:46} {_spread(ratios[part])} of the plain floor")
 
 
 def ros1_rows(rows: Rows, runs: int) -> None:

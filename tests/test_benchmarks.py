@@ -194,6 +194,43 @@ def test_the_checked_wake_up_floor_checks_for_cancellation_as_a_publish_does(
     assert done.returncode == 0 and done.stdout.strip() == "checked", done.stderr[-3000:]
 
 
+_BUS_PARTS = """
+import sys
+import anyio
+import bench_bus
+
+backend = sys.argv[1]
+
+
+async def main() -> None:
+    for part in bench_bus.PARTS:
+        got = await bench_bus.latency_run(5, 1, None, False, part)
+        assert len(got.samples_ns) == 5 and all(ns > 0 for ns in got.samples_ns), part
+    try:
+        await bench_bus.latency_run(5, 1, None, False, "nothing")
+    except ValueError:
+        print("parts")
+
+
+anyio.run(main, backend=backend)
+"""
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_the_bus_path_in_parts_wakes_the_waiter_for_every_part(backend: str) -> None:
+    """``bench_bus.latency_run``'s parts (the listener's handler alone, after the publish
+    cancellation check, through the bus's delivery: ``make bench-check``'s wake-up info
+    rows) each wake the awaiting lookup for every sample on both backends (a part that
+    stored nothing would leave the waiter blocked until the time limit), and a part
+    that is not one of them is refused. (In a child interpreter: a benchmark module puts
+    the checkout on ``sys.path``.)"""
+    done = subprocess.run(
+        [sys.executable, "-c", _BUS_PARTS, backend], cwd=ROOT / "benchmarks",
+        capture_output=True, text=True, timeout=120,
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "parts", done.stderr[-3000:]
+
+
 def test_the_seed_demo_floor_pair_prints_the_tutorial_line() -> None:
     """``bench_demo_ros1.py``'s Python floor pair (beside ``make bench-check``'s seed demo
     row) needs no ROS, only a socket of its own on 127.0.0.1, and does the demo's job: its
