@@ -56,7 +56,8 @@ Rows (target):
   through ``transform_points`` and ``do_transform_cloud`` <= 1.2x bare numpy ``pts @ R.T + t``;
 * Zenoh (``bench_latency.receive``, ``--rounds`` rounds, paths alternated): bus latency <= 1.15x raw
   zenoh-python plus the hop from Zenoh's thread to the loop (``raw+loop``, a floor outside
-  tfbus) at 10, 50, 100 and 1000 Hz, bus / raw beside it; under 4 CPU hogs
+  tfbus) at 10, 50, 100 and 1000 Hz, bus / raw beside it, and for information bus / the
+  same floor with its sender on an event loop too (``raw+loops``); under 4 CPU hogs
   (``bench_zenoh.run``, ``--rounds`` runs): no ``/tf_static`` frame lost, every ``/tf`` message not
   received counted by the sender (``send_dropped``) or the receiver (``lost``);
 * the seed demo over ROS 1 (``bench_demo_ros1.run_pair``, ``--rounds`` rounds of 10 s, alternated):
@@ -920,9 +921,12 @@ def zenoh_rows(rows: Rows, rounds: int) -> None:
     """Zenoh: one-way latency through the bus (``send_transform`` -> ``Bus(ZenohTransport)``
     -> an awaiting ``wait_for_transform``) against raw zenoh-python ``put`` -> callback,
     same configuration, two processes on 127.0.0.1 (``bench_latency.receive``), the paths
-    alternated (raw, raw+loop, bus, then the reverse), ``rounds`` rounds; per rate the
-    median of the per-round ratios of bus / raw+loop (<= :data:`ZENOH_TARGET`; the
-    thread-to-loop hop is a floor outside tfbus), bus / raw beside it. Then under load
+    alternated (raw, raw+loop, raw+loops, bus, then the reverse), ``rounds`` rounds; per
+    rate the median of the per-round ratios of bus / raw+loop (<= :data:`ZENOH_TARGET`;
+    the thread-to-loop hop is a floor outside tfbus), bus / raw beside it, and, for
+    information, bus / raw+loops: the floor whose sender also puts from a task of an event
+    loop, as the bus's sender does (what the sender's loop does after each ``put`` runs
+    while Zenoh sends the sample). Then under load
     (``bench_zenoh.run``:
     :data:`ZENOH_HOGS` CPU hogs, a flood of 100-transform ``/tf`` messages with ``/tf_static``
     frames sent during it), ``rounds`` runs: no ``/tf_static`` frame lost, and every ``/tf``
@@ -933,7 +937,7 @@ def zenoh_rows(rows: Rows, rounds: int) -> None:
 
     args = bench_latency.options(["--seconds", str(ZENOH_SECONDS),
                                   "--rates", ",".join(map(str, ZENOH_RATES))])  # fmt: skip
-    paths = ["raw", "raw+loop", "bus"]
+    paths = ["raw", "raw+loop", "raw+loops", "bus"]
     meds: list[dict[str, dict[int, float]]] = []
     for r in range(rounds):
         got: dict[str, dict[int, float]] = {}
@@ -947,6 +951,7 @@ def zenoh_rows(rows: Rows, rounds: int) -> None:
             bus = [m["bus"][rate] for m in meds]
             raw = [m["raw"][rate] for m in meds]
             hop = [m["raw+loop"][rate] for m in meds]
+            loops = [m["raw+loops"][rate] for m in meds]
         except KeyError:
             rows.row(name, "not run: no probe received at this rate", False, "")
             continue
@@ -959,6 +964,9 @@ def zenoh_rows(rows: Rows, rounds: int) -> None:
             statistics.median(over_hop) <= ZENOH_TARGET,
             f"<= {ZENOH_TARGET:.2f}x raw+loop",
         )
+        print(f"  info  {'  the sender on a loop too (raw+loops)':46} "
+              f"{statistics.median(loops):.0f} vs raw+loop {statistics.median(hop):.0f} us; "
+              f"bus/raw+loops {_spread(_ratios(bus, loops))}")
     zargs = bench_zenoh.options(["--probes", "200", "--seconds", "3", "--statics", "50",
                                  "--hogs", str(ZENOH_HOGS)])  # fmt: skip
     runs = []

@@ -16,6 +16,10 @@ Paths measured, each with Zenoh's default batching and with ``express`` publishe
   ``TrioToken.run_sync_soon`` into a memory channel) and the latency taken when the task
   awaiting it resumes: the thread hop and task wake-up any awaiting Python program on
   Zenoh pays;
+* ``raw+loops``: ``raw+loop`` whose sender also runs an event loop of ``--backend``: its
+  ``put`` made by a task paced with ``anyio.sleep`` (:func:`raw_loop_sender`), as an
+  async program's are: what the sender's loop does after each ``put`` (the task's next
+  sleep, the loop's timer and poll) runs while Zenoh sends the sample;
 * ``bus``: ``TransformBroadcaster.send_transform`` on a ``Bus(ZenohTransport)`` ->
   a lookup awaiting that stamp (``Buffer.wait_for_transform``) on the receiver's bus.
 
@@ -136,6 +140,25 @@ def raw_sender(args: argparse.Namespace) -> None:
         time.sleep(0.5)
 
 
+async def raw_loop_sender(args: argparse.Namespace) -> None:
+    """:func:`raw_sender`'s puts made by a task of an event loop, paced with
+    ``anyio.sleep`` (the ``raw+loops`` path's sender)."""
+    cfg, _ = zenoh_config(connect=args.endpoint, config=_overrides(args))
+    with zenoh.open(cfg) as session:
+        publisher = session.declare_publisher(RAW_KEY, express=args.express)
+        with anyio.fail_after(30):
+            while not publisher.matching_status.matching:
+                await anyio.sleep(0.01)
+        await anyio.sleep(START_DELAY)
+        start = time.monotonic()
+        for rate, offset in _pace(args.rate_list, args.seconds):
+            delay = start + offset - time.monotonic()
+            if delay > 0:
+                await anyio.sleep(delay)
+            publisher.put(PROBE.pack(rate, time.monotonic_ns()))
+        await anyio.sleep(0.5)
+
+
 async def bus_sender(args: argparse.Namespace) -> None:
     transport = ZenohTransport(connect=args.endpoint, name="latency-sender", express=args.express,
                                config=_overrides(args))
@@ -213,7 +236,8 @@ def _total(args: argparse.Namespace) -> int:
     return len(_pace(args.rate_list, args.seconds))
 
 
-def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dict[int, list[float]]:
+def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool,
+                 sender: str = "raw") -> dict[int, list[float]]:
     lat: dict[int, list[float]] = {}
     total = _total(args)
     done = threading.Event()
@@ -235,7 +259,7 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
         cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
         with zenoh.open(cfg) as session:
             session.declare_subscriber(RAW_KEY, callback)
-            child = _child(args, "raw", endpoint)
+            child = _child(args, sender, endpoint)
             try:
                 limit = 60 + 2 * args.seconds * len(args.rate_list)
                 with anyio.move_on_after(limit):
@@ -270,7 +294,7 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
         cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
         with zenoh.open(cfg) as session:
             session.declare_subscriber(RAW_KEY, callback)
-            child = _child(args, "raw", endpoint)
+            child = _child(args, sender, endpoint)
             try:
                 with trio.move_on_after(60 + 2 * args.seconds * len(args.rate_list)):
                     while count[0] < total:
@@ -301,7 +325,7 @@ def raw_receiver(args: argparse.Namespace, endpoint: str, loop_hop: bool) -> dic
     cfg, _ = zenoh_config(listen=endpoint, config=_overrides(args))
     with zenoh.open(cfg) as session:
         session.declare_subscriber(RAW_KEY, callback)
-        child = _child(args, "raw", endpoint)
+        child = _child(args, sender, endpoint)
         try:
             deadline = time.monotonic() + 60 + 2 * args.seconds * len(args.rate_list)
             while not done.wait(0.05) and time.monotonic() < deadline:
@@ -423,7 +447,7 @@ def options(argv: list[str] | None = None) -> argparse.Namespace:
         SystemExit: a malformed option or ``--zenoh-config`` value."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--role", default="receiver", choices=["receiver", "sender"])
-    parser.add_argument("--path", default="", help="sender: raw or bus")
+    parser.add_argument("--path", default="", help="sender: raw, raw-loop or bus")
     parser.add_argument("--endpoint", default="")
     parser.add_argument("--seconds", type=float, default=2.0, help="seconds per rate")
     parser.add_argument("--rates", default="10,50,100,1000")
@@ -443,14 +467,16 @@ def options(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def receive(args: argparse.Namespace, mode: str, path: str) -> dict[int, list[float]]:
-    """One run of ``path`` (``raw``, ``raw+loop`` or ``bus``) with ``mode``'s publishers
-    (``batched`` or ``express``): a sender child on a free 127.0.0.1 port, this process
-    receiving; the one-way latencies in microseconds by rate."""
+    """One run of ``path`` (``raw``, ``raw+loop``, ``raw+loops`` or ``bus``) with
+    ``mode``'s publishers (``batched`` or ``express``): a sender child on a free 127.0.0.1
+    port, this process receiving; the one-way latencies in microseconds by rate."""
     args.express = mode == "express"
     endpoint = _free_endpoint()
     if path == "bus":
         got: dict[int, list[float]] = anyio.run(bus_receiver, args, endpoint, backend=args.backend)
         return got
+    if path == "raw+loops":
+        return raw_receiver(args, endpoint, loop_hop=True, sender="raw-loop")
     return raw_receiver(args, endpoint, loop_hop=path == "raw+loop")
 
 
@@ -459,6 +485,8 @@ def main() -> None:
     if args.role == "sender":
         if args.path == "raw":
             raw_sender(args)
+        elif args.path == "raw-loop":
+            anyio.run(raw_loop_sender, args, backend=args.backend)
         else:
             anyio.run(bus_sender, args, backend=args.backend)
         return

@@ -58,6 +58,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str], int]] = {
     "check": ([], ["--rounds", "3", "--no-ros1"], 2400),
     "check-clock": (["--only", "clock"], ["--only", "clock"], 1800),
     "check-wakeup": (["--only", "wakeup"], ["--only", "wakeup", "--rounds", "3"], 600),
+    "check-zenoh": (["--only", "zenoh"], ["--only", "zenoh", "--rounds", "3"], 1200),
     "check-ros1cpu": (["--only", "ros1cpu"], ["--only", "ros1cpu", "--rounds", "3"], 900),
     "check-demo": (["--only", "demo"], ["--only", "demo", "--rounds", "3"], 1200),
     "check-view": (["--only", "view"], ["--only", "view", "--rounds", "3"], 1200),
