@@ -255,6 +255,7 @@ async def latency_run(
             handler = bus._callbacks[TF_TOPIC][0]._callback if part is not None else None
             maybe_cancelled, before = bus._maybe_cancelled, bus._before_publish
             deliver, after = bus._deliver, bus._after_publish
+            checked, through_bus = part in (CHECKED, DELIVERY), part == DELIVERY
             gc.collect()
             for i in range(1, total + 1):
                 # Wait until the waiter finished sample i-1 and is blocked on sample i.
@@ -266,9 +267,9 @@ async def latency_run(
                 if part is None:
                     await broadcaster.send_transform(messages[i])
                     continue
-                if part is not HANDLER and (maybe_cancelled is None or maybe_cancelled()):
+                if checked and (maybe_cancelled is None or maybe_cancelled()):
                     await before()
-                if part is DELIVERY:
+                if through_bus:
                     deliver(TF_TOPIC, framed[i])
                 else:
                     handler(framed[i])
