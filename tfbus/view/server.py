@@ -94,7 +94,8 @@ def _mix(colour: float, full: tuple[int, int, int] = FULL_COLOUR) -> tuple[int, 
 @functools.lru_cache(maxsize=4096)
 def _axes_block(colour: float) -> npt.NDArray[np.uint8]:
     """The x, y and z axes' :func:`_mix` of ``colour`` as a read-only ``(3, 2, 3) uint8``
-    array (sRGB 0-255; each axis segment's two ends): a redraw joins one per frame."""
+    array (sRGB 0-255; each axis segment's two ends): a redraw gathers one per frame
+    (:func:`_blocks`)."""
     return _segment_block([_mix(colour, full) for full in AXES_COLOURS])
 
 
