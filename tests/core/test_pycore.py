@@ -362,6 +362,53 @@ def test_links_bit_for_bit(ops: list[tuple[str, int, int, float]], ct: int, stat
         same(lambda c: _link_state(links[c]))
 
 
+@st.composite
+def stamp_runs(draw: st.DrawFn) -> list[int]:
+    """Sorted unique stamps (ns) as links hold them: a steady rate (with or without
+    jitter), bursts and pauses, or anything; up to 300 samples."""
+    n = draw(st.integers(0, 300))
+    base = draw(st.integers(1, 10**12))
+    kind = draw(st.sampled_from(["steady", "jitter", "bursts", "any"]))
+    period = draw(st.integers(1, 10**8))
+    if kind == "steady":
+        return [base + k * period for k in range(n)]
+    if kind == "jitter":
+        stamps = [base + k * period + draw(st.integers(0, period // 3)) for k in range(n)]
+    elif kind == "bursts":
+        gaps = draw(st.lists(st.sampled_from([1, 2, period, 50 * period]), min_size=n,
+                             max_size=n))
+        stamps = [base + sum(gaps[: k + 1]) for k in range(n)]
+    else:
+        stamps = draw(st.lists(st.integers(base, base + 10**10), min_size=n, max_size=n))
+    return sorted(set(stamps))
+
+
+@SETTINGS
+@given(st.lists(stamp_runs(), min_size=1, max_size=4), st.data())
+def test_gathers_across_links_bit_for_bit(runs: list[list[int]], data: st.DataObject) -> None:
+    """Gathers at any time, alternating between links whose samples differ (a link
+    published at a steady rate, with jitter, in bursts, anyhow): each answer is the
+    pure twin's (the compiled search starts from where the time would lie were the
+    stamps evenly spaced, and from the interval the previous gather of any link found)."""
+    links = {name: [m.TimeCache(2**70) for _ in runs] for name, m in CORES.items()}
+    for k, stamps in enumerate(runs):
+        for j, stamp in enumerate(stamps):
+            for name in CORES:
+                links[name][k].insert(stamp, 1 + k, _row(j))
+    everything = [t for stamps in runs for t in stamps]
+    lo, hi = (min(everything), max(everything)) if everything else (1, 10)
+    times = st.one_of(
+        st.sampled_from(everything) if everything else st.just(lo),
+        st.sampled_from(everything).map(lambda t: t + 1) if everything else st.just(hi),
+        st.sampled_from(everything).map(lambda t: max(t - 1, 1)) if everything else st.just(lo),
+        st.integers(max(lo - 10, 1), hi + 10),
+    )
+    for _ in range(data.draw(st.integers(1, 60))):
+        k = data.draw(st.integers(0, len(runs) - 1))
+        t = data.draw(times)
+        same(lambda c, k=k, t=t: links[c][k].gather(t))
+
+
 def test_link_argument_errors_alike() -> None:
     cases: list[Callable[[Any], Any]] = [
         lambda m: m.TimeCache(10).insert(1, 1, (0.0,) * 6),

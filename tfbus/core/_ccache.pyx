@@ -46,7 +46,25 @@ from cpython.mem cimport PyMem_RawFree, PyMem_RawMalloc, PyMem_RawRealloc
 from libc.stdint cimport INT64_MAX, int32_t, int64_t
 from libc.string cimport memcpy, memmove
 
-from tfbus.core._cmath cimport EXACT_SPAN, _bisect_left, _slerp
+from tfbus.core._cmath cimport EXACT_SPAN, _bisect_left, _search_left, _slerp
+
+cdef extern from *:
+    """
+    /* The last interval found is shared by every link (read and written with the GIL
+       held); a free-threaded build does not keep it (each gather searches). */
+    #ifdef Py_GIL_DISABLED
+    #define TFBUS_FOUND_HINT 0
+    #else
+    #define TFBUS_FOUND_HINT 1
+    #endif
+    """
+    const bint TFBUS_FOUND_HINT
+
+cdef Py_ssize_t _found = 0
+"""How many samples from its link's newest one (1: the newest) the newer sample of the
+interval the last ``TimeCache.c_gather`` search found lies: a hint for the next search,
+checked against the samples before use."""
+
 
 # insert outcomes (tf2 cache insertData)
 OK = 0
@@ -356,6 +374,7 @@ cdef class TimeCache(Link):
         return 0
 
     cdef int c_gather(self, int64_t time, double* out, int* parent) except -1:
+        global _found
         cdef Py_ssize_t head = self._head, tail = self._tail, i, i0
         cdef const int64_t* st = self._st
         cdef const double* a
@@ -376,7 +395,16 @@ cdef class TimeCache(Link):
             elif time > newest:
                 return G_FUTURE
             else:
-                i = _bisect_left(st, time, head, tail)
+                # The interval the last search of any link found (counted from the
+                # link's newest sample), if it holds the time: the links of a tree
+                # published together share their stamps, so a walk finds each link after
+                # the first in two compares; else a search (_search_left: bisect_left's
+                # index, found from where the time would lie at a steady rate).
+                i = tail - _found
+                if not (i > head and i < tail and st[i - 1] < time and time <= st[i]):
+                    i = _search_left(st, time, head, tail)
+                    if TFBUS_FOUND_HINT:
+                        _found = tail - i
                 if st[i] != time:
                     if i == head:
                         return G_PAST
