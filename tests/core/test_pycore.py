@@ -388,8 +388,9 @@ def stamp_runs(draw: st.DrawFn) -> list[int]:
 def test_gathers_across_links_bit_for_bit(runs: list[list[int]], data: st.DataObject) -> None:
     """Gathers at any time, alternating between links whose samples differ (a link
     published at a steady rate, with jitter, in bursts, anyhow): each answer is the
-    pure twin's (the compiled search starts from where the time would lie were the
-    stamps evenly spaced, and from the interval the previous gather of any link found)."""
+    pure twin's, which bisects (the compiled gather first tries the interval the previous
+    search of any link found, then searches from where the time would lie were the
+    stamps evenly spaced)."""
     links = {name: [m.TimeCache(2**70) for _ in runs] for name, m in CORES.items()}
     for k, stamps in enumerate(runs):
         for j, stamp in enumerate(stamps):
