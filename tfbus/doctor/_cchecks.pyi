@@ -14,7 +14,12 @@ class SampleFields:
     stride: int
     values: list[float]
 
-class LinkFields: ...
+class MeanFields:
+    total: float
+    count: int
+
+class LinkFields:
+    period: float | None
 
 def account(
     doctor: Any,

@@ -37,15 +37,39 @@ cdef class SampleFields:
     cdef public list values
 
 
+cdef class MeanFields:
+    """The fields of a running mean: ``total`` (the sum of the values) and ``count``,
+    updated in place (no new number object per value)."""
+
+    cdef public double total
+    cdef public long long count
+
+
 cdef class LinkFields:
     """The fields of the doctor's state of one child frame (``checks._Link`` documents
-    them)."""
+    them). ``period`` (ns, or None before the second stamp) is held as a C double and a
+    flag: the moving average moves with every stamp, and no float is made for it."""
 
     cdef public object baseline, child, delay, drop_first, drop_last, drop_worst, dynamic
     cdef public object first_gap, gap_largest, gap_senders, hot, last_gap, last_received
-    cdef public object newest, order_span, out_of_order, parent, parents, period, recent
+    cdef public object newest, order_span, out_of_order, parent, parents, recent
     cdef public object repeat_span, repeated, sender_stamp, static, static_values
     cdef public long long consecutive_gaps, gap_count, intervals, old_data
+    cdef double _period
+    cdef bint _has_period
+
+    @property
+    def period(self):
+        """The moving average of the stamp intervals, ns (float), or None."""
+        return self._period if self._has_period else None
+
+    @period.setter
+    def period(self, value):
+        if value is None:
+            self._has_period = False
+        else:
+            self._period = value
+            self._has_period = True
 
 
 cdef inline void _count(SpanFields span, object t) except *:
@@ -81,7 +105,8 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
     cdef LinkFields link
     cdef SampleFields sample
     cdef tuple hot
-    cdef object ts, child, header, parent, when, stamp, newest, p, baseline, mean, found
+    cdef MeanFields mean
+    cdef object ts, child, header, parent, when, stamp, newest, baseline, found
     cdef double d, interval, pd, bd
     cdef long long intervals
     try:
@@ -122,7 +147,7 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
                 # spans counted here
                 _count(<SpanFields>hot[3], t)
                 _count(<SpanFields>hot[4], t)
-                mean = hot[5]
+                mean = <MeanFields?>hot[5] if not static else None
                 sample_obj = hot[6]
             else:
                 found = doctor._find(child, parent, sender, static, t)
@@ -130,7 +155,7 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
                     continue
                 link = <LinkFields>(<tuple>found)[0]
                 parent = (<tuple>found)[1]
-                mean = (<tuple>found)[2]
+                mean = <MeanFields?>(<tuple>found)[2] if not static else None
                 sample_obj = (<tuple>found)[3]
             link.last_received = t
             if static:
@@ -149,8 +174,8 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
             if stamp > newest_stamp:
                 newest_stamp = stamp
             d = delay_seconds((newest_stamp if sim_time else t) - stamp)
-            (<list>mean)[0] = <double>(<list>mean)[0] + d
-            (<list>mean)[1] = (<list>mean)[1] + 1
+            mean.total = mean.total + d
+            mean.count += 1
             if sample.n % sample.stride == 0:
                 sample_obj.keep(d)
             sample.n += 1
@@ -159,12 +184,11 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
                 # in order (the common case): newer than every stamp held, not repeated
                 link.recent.append(stamp)
                 (<dict>link.sender_stamp)[sender] = stamp
-                p = link.period
                 interval = <double>(stamp - newest)
-                if p is None:
+                if not link._has_period:
                     doctor._interval(link, t, stamp, newest, sender)
                     continue
-                pd = p
+                pd = link._period
                 if (link.intervals >= rate_window and interval > gap_periods * pd
                         and interval > gap_min_ns):
                     doctor._interval(link, t, stamp, newest, sender)  # a gap
@@ -175,7 +199,7 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
                 intervals = link.intervals
                 link.consecutive_gaps = 0
                 pd = pd + alpha * (interval - pd)
-                link.period = pd
+                link._period = pd
                 if intervals > settled:
                     baseline = link.baseline
                     if baseline is None or pd < <double>baseline:

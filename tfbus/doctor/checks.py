@@ -186,6 +186,14 @@ class _SampleFields:
     values: list[float]
 
 
+class _MeanFields:
+    """The fields of :class:`_Mean` (the pure twin of ``_cchecks.MeanFields``)."""
+
+    __slots__ = ("count", "total")
+    total: float
+    count: int
+
+
 class _LinkFields:
     """The fields of :class:`_Link` (the pure twin of ``_cchecks.LinkFields``)."""
 
@@ -206,23 +214,25 @@ C 64-bit ints)."""
 _Account = Callable[["Doctor", int, Iterable[TransformStamped], str, bool, float], None]
 
 
-def _compiled_accounting() -> tuple[type, type, type, _Account | None]:
+def _compiled_accounting() -> tuple[type, type, type, type, _Account | None]:
     """The per-link field classes and :meth:`Doctor.add`'s compiled loop
     (:mod:`tfbus.doctor._cchecks`, where :func:`~tfbus.core.kernels.compiled_extension`
     finds it); else the pure field classes and None (``Doctor.add``'s own loop)."""
     module = compiled_extension("tfbus.doctor._cchecks")
     if module is None:
-        return _SpanFields, _SampleFields, _LinkFields, None
-    return module.SpanFields, module.SampleFields, module.LinkFields, module.account
+        return _SpanFields, _SampleFields, _MeanFields, _LinkFields, None
+    return (module.SpanFields, module.SampleFields, module.MeanFields, module.LinkFields,
+            module.account)
 
 
 if TYPE_CHECKING:
     _SpanBase = _SpanFields
     _SampleBase = _SampleFields
+    _MeanBase = _MeanFields
     _LinkBase = _LinkFields
     _ACCOUNT: _Account | None
 else:
-    _SpanBase, _SampleBase, _LinkBase, _ACCOUNT = _compiled_accounting()
+    _SpanBase, _SampleBase, _MeanBase, _LinkBase, _ACCOUNT = _compiled_accounting()
 
 
 class _Span(_SpanBase):
@@ -283,6 +293,32 @@ class _Sample(_SampleBase):
         return v[lo] + (v[hi] - v[lo]) * (pos - lo)
 
 
+class _Mean(_MeanBase):
+    """A running mean of a sender's delays on one link: ``total`` (seconds) over
+    ``count`` values, updated in place."""
+
+    __slots__ = ()
+
+    def __init__(self) -> None:
+        self.total = 0.0
+        self.count = 0
+
+    def add(self, other: _Mean) -> None:
+        """Count ``other``'s values too (a sender renamed into another)."""
+        self.total += other.total
+        self.count += other.count
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, _Mean):
+            return NotImplemented
+        return (self.total, self.count) == (other.total, other.count)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"_Mean(total={self.total!r}, count={self.count!r})"
+
+
 _RECENT_STAMPS = 32  # stamps per frame kept to tell a repeated one (tf2's cache holds more)
 MAX_LOOPS: Final = 100
 """Distinct loops remembered (a peer re-parenting frames at random cannot grow memory);
@@ -302,9 +338,9 @@ class _Link(_LinkBase):
         self.dynamic: dict[str, _Span] = {}
         self.static_values: dict[str, tuple[object, ...]] = {}
         self.sender_stamp: dict[str, int] = {}
-        self.delay: dict[str, list[float]] = {}  # sender -> [sum of delays s, count]
+        self.delay: dict[str, _Mean] = {}  # sender -> the mean of its delays (s)
         # the last message's (parent, sender, static) and its spans and delay tables
-        self.hot: tuple[str, str, bool, _Span, _Span, list[float] | None,
+        self.hot: tuple[str, str, bool, _Span, _Span, _Mean | None,
                         _Sample | None] | None = None
         self.newest: int | None = None
         # the last stamps kept (a repeated one is looked for here only when a stamp is
@@ -470,8 +506,8 @@ class Doctor:
                 if stamp > newest_stamp:
                     newest_stamp = stamp
                 d = ((newest_stamp if sim_time else t) - stamp) / NSEC_PER_SEC
-                mean[0] += d
-                mean[1] += 1
+                mean.total += d
+                mean.count += 1
                 if sample.n % sample.stride == 0:  # sample.add(d), inline
                     sample.keep(d)
                 sample.n += 1
@@ -512,7 +548,7 @@ class Doctor:
         return link
 
     def _find(self, child: str, parent: str, sender: str, static: bool, t: int
-              ) -> tuple[_Link, str, list[float] | None, _Sample | None] | None:
+              ) -> tuple[_Link, str, _Mean | None, _Sample | None] | None:
         """A transform whose link has no hot entry for it (another parent, sender or
         topic than its last message, a new link, a slash to strip): its link, its parent
         without a leading slash and, for a dynamic one, its sender's delay tables
@@ -533,7 +569,7 @@ class Doctor:
         return link, parent, mean, sample
 
     def _relook(self, link: _Link, t: int, parent: str, sender: str, static: bool
-                ) -> tuple[list[float] | None, _Sample | None]:
+                ) -> tuple[_Mean | None, _Sample | None]:
         """Account a message whose parent, sender or topic differs from the link's last:
         the span tables looked up (and bounded), a new parent checked for a loop."""
         span = link.parents.get(parent)
@@ -552,10 +588,12 @@ class Doctor:
                 sender = OVERFLOW
             sspan = senders.setdefault(sender, _Span(t))
         sspan.add(t)
-        mean: list[float] | None = None
+        mean: _Mean | None = None
         sample: _Sample | None = None
         if not static:
-            mean = link.delay.setdefault(sender, [0.0, 0])
+            mean = link.delay.get(sender)
+            if mean is None:
+                mean = link.delay[sender] = _Mean()
             sample = self._delays.get(sender)
             if sample is None:
                 sample = self._delays[sender] = _Sample(self.thresholds.delay_samples)
@@ -694,10 +732,11 @@ class Doctor:
                 stamp = link.sender_stamp.pop(old)
                 link.sender_stamp[new] = max(stamp, link.sender_stamp.get(new, stamp))
             if old in link.delay:
-                d = link.delay.pop(old)
-                mean = link.delay.setdefault(new, [0.0, 0])
-                mean[0] += d[0]
-                mean[1] += d[1]
+                moved = link.delay.pop(old)
+                mean = link.delay.get(new)
+                if mean is None:
+                    mean = link.delay[new] = _Mean()
+                mean.add(moved)
             if old in link.gap_senders:
                 link.gap_senders.discard(old)
                 link.gap_senders.add(new)
@@ -1052,8 +1091,8 @@ class Doctor:
             frames = self._frames_of(b.sender)
             start, end = self._span(frames, b.sender)
             means = {c: m for c in frames
-                     if (d := self._links[c].delay.get(b.sender)) and d[1] >= th.min_samples
-                     for m in (d[0] / d[1],)}
+                     if (d := self._links[c].delay.get(b.sender)) and d.count >= th.min_samples
+                     for m in (d.total / d.count,)}
             ahead = {c: m for c, m in means.items() if m < -th.ahead}
             if not self.sim_time and ahead and len(ahead) == len(means):
                 out.append(self._finding(
