@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections import deque
 from collections.abc import Iterable
 from typing import Any
 
@@ -27,6 +28,7 @@ from twin_streams import (
     stream_strategy,
 )
 
+import tfbus.doctor._cchecks
 import tfbus.doctor.checks
 from tfbus.doctor import Doctor, Thresholds
 from tfbus.messages import TransformStamped
@@ -137,6 +139,42 @@ def test_a_header_that_is_not_one_raises_the_same_after_the_same_accounting() ->
                        static=False)
     assert state(doctors[0]) == state(doctors[1])
     assert doctors[0].transforms == 1  # what came before the bad item, written back
+
+
+@needs_compiled
+def test_repeats_beyond_the_stamps_a_link_keeps_give_the_same_state_and_report() -> None:
+    # 100 stamps in order, then stamps the link still holds (repeated) and stamps it let go
+    # (older than the last 32: out of order), then in order again
+    stamps = [T0 + i * 10**7 for i in range(100)]
+    again = [stamps[i] for i in (99, 90, 68, 67, 66, 40, 10, 0)] + [T0 + 200 * 10**7]
+    records = [(T0 + k * 10**7 + 10**6, "/tf", "/odometry", [tf("odom", "base_link", s)])
+               for k, s in enumerate(stamps + again)]
+    compiled, pure = feed(records, True), feed(records, False)
+    link = compiled._links["base_link"]
+    assert link.repeated == {"/odometry": 3}  # 99, 90, 68: among the newest 32 held
+    assert link.out_of_order == {"/odometry": 5}  # 67, 66, 40, 10, 0: let go, older
+    assert list(link.recent) == (stamps[74:] + [stamps[i] for i in (67, 66, 40, 10, 0)]
+                                 + [T0 + 200 * 10**7])
+    assert state(compiled) == state(pure)
+
+
+@needs_compiled
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.integers(0, 60)), max_size=120))
+def test_a_links_recent_stamps_behave_as_the_pure_deque(
+    steps: list[tuple[bool, int]]
+) -> None:
+    link = tfbus.doctor.checks._Link("base_link")
+    twin: deque[int] = deque(maxlen=tfbus.doctor.checks._RECENT_STAMPS)
+    for append, stamp in steps:
+        if append:
+            link.recent.append(stamp)
+            twin.append(stamp)
+        else:
+            assert (stamp in link.recent) == (stamp in twin)
+        assert list(link.recent) == list(twin)
+        assert len(link.recent) == len(twin)
+    assert tfbus.doctor._cchecks.RECENT_STAMPS == tfbus.doctor.checks._RECENT_STAMPS
 
 
 _stream = stream_strategy(["map", "odom", "/odom", "base_link"],

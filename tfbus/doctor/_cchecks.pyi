@@ -1,4 +1,4 @@
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 from tfbus.messages import TransformStamped
@@ -18,8 +18,18 @@ class MeanFields:
     total: float
     count: int
 
+RECENT_STAMPS: int
+
+class RecentStamps:
+    def append(self, stamp: int) -> None: ...
+    def __contains__(self, stamp: object) -> bool: ...
+    def __len__(self) -> int: ...
+    def __iter__(self) -> Iterator[int]: ...
+
 class LinkFields:
     period: float | None
+    newest: int | None
+    recent: RecentStamps
 
 def account(
     doctor: Any,

@@ -13,6 +13,8 @@ streams. Used with the compiled core (``tfbus.core.COMPILED``), ``Doctor.add``'s
 loop otherwise.
 """
 
+from libc.stdint cimport int64_t
+
 from tfbus._cdelay cimport delay_seconds
 from tfbus.messages import Header, TransformStamped
 from tfbus.time import NSEC_PER_SEC, Time
@@ -45,18 +47,60 @@ cdef class MeanFields:
     cdef public long long count
 
 
+cdef enum:
+    RECENT_STAMPS_HELD = 32  # checks._RECENT_STAMPS: the stamps a link keeps to tell a repeat
+
+
+RECENT_STAMPS = RECENT_STAMPS_HELD
+"""The stamps :attr:`LinkFields.recent` holds (``checks._RECENT_STAMPS``)."""
+
+
 cdef class LinkFields:
     """The fields of the doctor's state of one child frame (``checks._Link`` documents
-    them). ``period`` (ns, or None before the second stamp) is held as a C double and a
-    flag: the moving average moves with every stamp, and no float is made for it."""
+    them). Held in C, so that a stamp in order touches no Python number: ``period`` (ns,
+    or None before the second stamp) as a double and a flag; ``newest`` (ns, or None) as
+    a 64-bit int and a flag (a :class:`~tfbus.time.Time`'s nanoseconds are in [0,
+    2**63)); ``recent``, the last :data:`RECENT_STAMPS` stamps kept, as a ring of 64-bit
+    ints (a :class:`RecentStamps` view reads and appends to it, as the pure twin's
+    ``deque(maxlen=32)``)."""
 
     cdef public object baseline, child, delay, drop_first, drop_last, drop_worst, dynamic
     cdef public object first_gap, gap_largest, gap_senders, hot, last_gap, last_received
-    cdef public object newest, order_span, out_of_order, parent, parents, recent
+    cdef public object order_span, out_of_order, parent, parents
     cdef public object repeat_span, repeated, sender_stamp, static, static_values
     cdef public long long consecutive_gaps, gap_count, intervals, old_data
     cdef double _period
     cdef bint _has_period
+    cdef bint _has_newest
+    cdef int64_t _newest
+    cdef int _recent_oldest  # the ring's index of the oldest stamp held
+    cdef int _recent_count
+    cdef int64_t _recent[RECENT_STAMPS_HELD]
+
+    @property
+    def newest(self):
+        """The newest stamp (ns, int), or None."""
+        return self._newest if self._has_newest else None
+
+    @newest.setter
+    def newest(self, value):
+        if value is None:
+            self._has_newest = False
+        else:
+            self._newest = value
+            self._has_newest = True
+
+    @property
+    def recent(self):
+        """The last stamps kept (ns, oldest first): a :class:`RecentStamps` view."""
+        return RecentStamps(self)
+
+    @recent.setter
+    def recent(self, stamps):
+        self._recent_oldest = 0
+        self._recent_count = 0
+        for stamp in stamps:
+            _remember(self, stamp)
 
     @property
     def period(self):
@@ -70,6 +114,69 @@ cdef class LinkFields:
         else:
             self._period = value
             self._has_period = True
+
+
+cdef inline void _remember(LinkFields link, int64_t stamp) noexcept:
+    """Keep ``stamp`` in ``link``'s ring, the oldest one let go when it is full
+    (``deque.append`` with a ``maxlen``)."""
+    cdef int at = link._recent_oldest + link._recent_count
+    if link._recent_count < RECENT_STAMPS_HELD:
+        link._recent_count += 1
+    else:
+        link._recent_oldest += 1
+        if link._recent_oldest == RECENT_STAMPS_HELD:
+            link._recent_oldest = 0
+    if at >= RECENT_STAMPS_HELD:
+        at -= RECENT_STAMPS_HELD
+    link._recent[at] = stamp
+
+
+cdef class RecentStamps:
+    """A view of a :class:`LinkFields`'s ring of recent stamps (ns), with what the doctor
+    asks of its pure twin's ``deque(maxlen=32)``: ``append``, ``in``, ``len`` and
+    iteration, oldest first.
+
+    Raises:
+        OverflowError, TypeError: ``append`` of a value that is not an int in
+            [-2**63, 2**63).
+    """
+
+    cdef LinkFields _link
+
+    def __cinit__(self, LinkFields link):
+        self._link = link
+
+    def append(self, stamp):
+        """Keep ``stamp`` (the oldest one let go once :data:`RECENT_STAMPS` are held)."""
+        _remember(self._link, stamp)
+
+    def __contains__(self, stamp):
+        cdef LinkFields link = self._link
+        cdef int i, at
+        if not isinstance(stamp, int) or not (-2**63 <= stamp < 2**63):
+            return False
+        cdef int64_t s = stamp
+        for i in range(link._recent_count):
+            at = link._recent_oldest + i
+            if at >= RECENT_STAMPS_HELD:
+                at -= RECENT_STAMPS_HELD
+            if link._recent[at] == s:
+                return True
+        return False
+
+    def __len__(self):
+        return self._link._recent_count
+
+    def __iter__(self):
+        cdef LinkFields link = self._link
+        cdef int i, at
+        out = []
+        for i in range(link._recent_count):
+            at = link._recent_oldest + i
+            if at >= RECENT_STAMPS_HELD:
+                at -= RECENT_STAMPS_HELD
+            out.append(link._recent[at])
+        return iter(out)
 
 
 cdef inline void _count(SpanFields span, object t) except *:
@@ -108,6 +215,7 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
     cdef MeanFields mean
     cdef object ts, child, header, parent, when, stamp, newest, baseline, found
     cdef double d, interval, pd, bd
+    cdef int64_t s64
     cdef long long intervals
     try:
         for ts in transforms:
@@ -179,22 +287,22 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
             if sample.n % sample.stride == 0:
                 sample_obj.keep(d)
             sample.n += 1
-            newest = link.newest
-            if newest is not None and stamp > newest:
+            s64 = stamp  # a Time's nanoseconds: in [0, 2**63)
+            if link._has_newest and s64 > link._newest:
                 # in order (the common case): newer than every stamp held, not repeated
-                link.recent.append(stamp)
+                _remember(link, s64)
                 (<dict>link.sender_stamp)[sender] = stamp
-                interval = <double>(stamp - newest)
+                interval = <double>(s64 - link._newest)
                 if not link._has_period:
-                    doctor._interval(link, t, stamp, newest, sender)
+                    doctor._interval(link, t, stamp, link._newest, sender)
                     continue
                 pd = link._period
                 if (link.intervals >= rate_window and interval > gap_periods * pd
                         and interval > gap_min_ns):
-                    doctor._interval(link, t, stamp, newest, sender)  # a gap
+                    doctor._interval(link, t, stamp, link._newest, sender)  # a gap
                     continue
                 # _interval's common case: the moving average moves
-                link.newest = stamp
+                link._newest = s64
                 link.intervals += 1
                 intervals = link.intervals
                 link.consecutive_gaps = 0
