@@ -10,6 +10,7 @@ class RateWindowFields:
     last_received: int | None
 
 class FrameFields:
+    authorities: dict[str, int]
     count: int
     distinct_stamps: int
     delay_count: int

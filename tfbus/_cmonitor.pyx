@@ -27,11 +27,39 @@ cdef class RateWindowFields:
 
 
 cdef class FrameFields:
-    """The fields of a :class:`~tfbus.monitor.FrameSummary`."""
+    """The fields of a :class:`~tfbus.monitor.FrameSummary`. ``authorities`` (broadcaster
+    -> transforms) is a dict whose newest broadcaster's count grows in a C counter, added
+    to the dict when another broadcaster sends the frame or anyone reads ``authorities``:
+    a stream from one broadcaster makes no int and writes no dict entry per transform."""
 
-    cdef public object child, parent, static, authorities, first_stamp, last_stamp, received
+    cdef public object child, parent, static, first_stamp, last_stamp, received
     cdef public long long count, distinct_stamps, delay_count
     cdef public double delay_sum, delay_max
+    cdef dict _authorities
+    cdef object _counting  # the broadcaster _uncounted counts for (a key of _authorities)
+    cdef long long _uncounted
+
+    @property
+    def authorities(self):
+        """Transforms received by broadcaster (a dict; its counts are current)."""
+        _settle_count(self)
+        return self._authorities
+
+    @authorities.setter
+    def authorities(self, value):
+        _settle_count(self)
+        self._authorities = value
+        self._counting = None
+
+
+cdef inline void _settle_count(FrameFields fs) except *:
+    """Add the counted transforms of ``fs``'s current broadcaster to its dict entry."""
+    if fs._uncounted:
+        if fs._counting in fs._authorities:
+            fs._authorities[fs._counting] = fs._authorities[fs._counting] + fs._uncounted
+        else:  # the entry was taken out (a rename): the count goes to a new one
+            fs._authorities[fs._counting] = fs._uncounted
+        fs._uncounted = 0
 
 
 cdef class AuthorityFields:
@@ -100,8 +128,14 @@ def account(summary, frame_summary, object t, transforms, object authority, bint
             fs = <FrameFields>found
             fs.parent = parent
             fs.count += 1
-            senders = fs.authorities
-            (<dict>senders)[authority] = (<dict>senders).get(authority, 0) + 1
+            if fs._counting is not authority:
+                if not (fs._counting is not None and fs._counting == authority):
+                    _settle_count(fs)
+                    senders = fs._authorities
+                    if authority not in <dict>senders:
+                        (<dict>senders)[authority] = 0
+                    fs._counting = authority
+            fs._uncounted += 1
             ns = stamp._ns
             if static:  # no rate: a stamp other than the last one counts as new
                 fs.distinct_stamps += ns != fs.last_stamp

@@ -51,7 +51,8 @@ def _window(w: RateWindow) -> list[Any]:
 def state(summary: TfSummary) -> str:
     """Everything the tables keep, as exact text (floats by repr)."""
     frames = {child: [f.child, f.parent, f.static,
-                      {repr(k): v for k, v in f.authorities.items()}, f.count, f.distinct_stamps,
+                      [[repr(k), v] for k, v in f.authorities.items()], f.authority,
+                      f.count, f.distinct_stamps,
                       f.first_stamp, f.last_stamp, f.delay_sum, f.delay_count, f.delay_max,
                       _window(f.received)]
               for child, f in sorted(summary.frames.items())}
@@ -153,6 +154,40 @@ def test_a_header_that_is_not_one_raises_the_same_after_the_same_accounting() ->
             tfbus.monitor._ACCOUNT = COMPILED
     assert state(summaries[0]) == state(summaries[1])
     assert summaries[0].frames["base_link"].count == 1  # accounted before the bad item
+
+
+@needs_compiled
+def test_broadcasters_taking_turns_and_renamed_give_the_same_tables() -> None:
+    # a frame's broadcasters in turn, runs of each, one renamed into another (its counts
+    # moved), the counts read between messages: counts and their order the same
+    def run(compiled: bool) -> tuple[str, list[str]]:
+        summary = feed([], compiled)
+        was = tfbus.monitor._ACCOUNT
+        tfbus.monitor._ACCOUNT = COMPILED if compiled else None
+        seen = []
+        try:
+            for i, name in enumerate(["/b", "/a", "/a", "/c", "/b", "/b", "/b", "/a", "/c"] * 3):
+                t = T0 + i * 10 * MS
+                summary.add(Time.from_ns(t), [tf("odom", "base_link", t),
+                                              tf("base_link", "laser", t)], name, static=False)
+                if i % 4 == 0:
+                    seen.append(repr(list(summary.frames["laser"].authorities.items())))
+                if i == 5:  # /b sends the next message too: counted under a new /b
+                    summary.rename_authority("/b", "/a")
+                if i == 20:
+                    summary.rename_authority("/c", "/d")
+        finally:
+            tfbus.monitor._ACCOUNT = was
+        return state(summary), seen
+
+    compiled, pure = run(True), run(False)
+    assert compiled == pure
+    # by hand: /b 3, /a 2, /c 1 up to message 5; /b renamed /a (5, in /a's place); then
+    # /b 6 (new, last), /a 11, /c 4 up to message 20; /c renamed /d (4, last); then /c 2
+    # (new, last), /b 9, /a 12
+    laser = json.loads(compiled[0])[3]["laser"]
+    assert laser[3] == [["'/a'", 12], ["'/b'", 9], ["'/d'", 4], ["'/c'", 2]]
+    assert laser[4] == "/a"
 
 
 _stream = stream_strategy(["map", "odom", "base_link"], ["odom", "base_link", "laser"],
