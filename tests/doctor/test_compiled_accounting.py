@@ -52,7 +52,7 @@ def state(doctor: Doctor) -> str:
             link.parent, {k: _span(v) for k, v in link.parents.items()},
             {k: _span(v) for k, v in link.static.items()},
             {k: _span(v) for k, v in link.dynamic.items()},
-            link.static_values, link.sender_stamp, link.delay,
+            link.static_values, list(link.sender_stamp.items()), list(link.delay.items()),
             None if link.hot is None else list(link.hot[:3]), link.newest, list(link.recent),
             link.repeated, _span(link.repeat_span), link.out_of_order, link.old_data,
             _span(link.order_span), link.last_received, link.period, link.intervals,
@@ -156,6 +156,35 @@ def test_repeats_beyond_the_stamps_a_link_keeps_give_the_same_state_and_report()
     assert list(link.recent) == (stamps[74:] + [stamps[i] for i in (67, 66, 40, 10, 0)]
                                  + [T0 + 200 * 10**7])
     assert state(compiled) == state(pure)
+
+
+@needs_compiled
+def test_senders_taking_turns_and_renamed_give_the_same_state_and_report() -> None:
+    # a link's senders in turn, runs of each, one renamed while it still sends (its
+    # entries moved, then a new one for it), the state read between messages
+    def run(compiled: bool) -> tuple[str, list[str]]:
+        doctor = feed([], compiled)
+        seen = []
+        for i, name in enumerate(["/b", "/a", "/a", "/c", "/b", "/b", "/b", "/a", "/c"] * 3):
+            t = T0 + i * 10 * MS
+            doctor.add(t, [tf("odom", "base_link", t - MS)], name, static=False)
+            if i % 4 == 0:
+                seen.append(repr(list(doctor._links["base_link"].sender_stamp.items())))
+            if i == 5:
+                doctor.rename_authority("/b", "/a")
+            if i == 20:
+                doctor.rename_authority("/c", "/d")
+        return state(doctor), seen
+
+    compiled, pure = run(True), run(False)
+    assert compiled == pure
+    # /b's entry moved into /a's at message 5, a new /b from message 6; /c's into a new /d
+    # at message 20, a new /c from message 21: each the newest stamp its sender sent
+    newest = {n: T0 + i * 10 * MS - MS for i, n in enumerate(
+        ["/b", "/a", "/a", "/c", "/b", "/b", "/b", "/a", "/c"] * 3)}
+    assert json.loads(compiled[0])[8]["base_link"][5] == [
+        ["/a", newest["/a"]], ["/b", newest["/b"]], ["/d", T0 + 17 * 10 * MS - MS],
+        ["/c", newest["/c"]]]
 
 
 @needs_compiled

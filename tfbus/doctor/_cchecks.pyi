@@ -30,6 +30,7 @@ class LinkFields:
     period: float | None
     newest: int | None
     recent: RecentStamps
+    sender_stamp: dict[str, int]
 
 def account(
     doctor: Any,

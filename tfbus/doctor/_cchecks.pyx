@@ -62,12 +62,14 @@ cdef class LinkFields:
     a 64-bit int and a flag (a :class:`~tfbus.time.Time`'s nanoseconds are in [0,
     2**63)); ``recent``, the last :data:`RECENT_STAMPS` stamps kept, as a ring of 64-bit
     ints (a :class:`RecentStamps` view reads and appends to it, as the pure twin's
-    ``deque(maxlen=32)``)."""
+    ``deque(maxlen=32)``); ``sender_stamp``, a dict whose current sender's newest stamp
+    is held in C and written to the dict when another sender stamps the link or anyone
+    reads ``sender_stamp``."""
 
     cdef public object baseline, child, delay, drop_first, drop_last, drop_worst, dynamic
     cdef public object first_gap, gap_largest, gap_senders, hot, last_gap, last_received
     cdef public object order_span, out_of_order, parent, parents
-    cdef public object repeat_span, repeated, sender_stamp, static, static_values
+    cdef public object repeat_span, repeated, static, static_values
     cdef public long long consecutive_gaps, gap_count, intervals, old_data
     cdef double _period
     cdef bint _has_period
@@ -76,6 +78,23 @@ cdef class LinkFields:
     cdef int _recent_oldest  # the ring's index of the oldest stamp held
     cdef int _recent_count
     cdef int64_t _recent[RECENT_STAMPS_HELD]
+    cdef dict _sender_stamp
+    cdef object _stamping  # the sender whose newest stamp _unwritten holds (a key)
+    cdef int64_t _unwritten
+    cdef bint _has_unwritten
+
+    @property
+    def sender_stamp(self):
+        """Each sender's newest stamp (ns) on this link (a dict; its values are
+        current)."""
+        _write_stamp(self)
+        return self._sender_stamp
+
+    @sender_stamp.setter
+    def sender_stamp(self, value):
+        _write_stamp(self)
+        self._sender_stamp = value
+        self._stamping = None
 
     @property
     def newest(self):
@@ -129,6 +148,13 @@ cdef inline void _remember(LinkFields link, int64_t stamp) noexcept:
     if at >= RECENT_STAMPS_HELD:
         at -= RECENT_STAMPS_HELD
     link._recent[at] = stamp
+
+
+cdef inline void _write_stamp(LinkFields link) except *:
+    """Write the newest stamp held for ``link``'s current sender to its dict entry."""
+    if link._has_unwritten:
+        link._sender_stamp[link._stamping] = link._unwritten
+        link._has_unwritten = False
 
 
 cdef class RecentStamps:
@@ -291,7 +317,14 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
             if link._has_newest and s64 > link._newest:
                 # in order (the common case): newer than every stamp held, not repeated
                 _remember(link, s64)
-                (<dict>link.sender_stamp)[sender] = stamp
+                if link._stamping is sender or (link._stamping is not None
+                                                and link._stamping == sender):
+                    link._unwritten = s64
+                    link._has_unwritten = True
+                else:  # another sender: its entry written now (the dict's order kept)
+                    _write_stamp(link)
+                    link._sender_stamp[sender] = stamp
+                    link._stamping = sender
                 interval = <double>(s64 - link._newest)
                 if not link._has_period:
                     doctor._interval(link, t, stamp, link._newest, sender)
