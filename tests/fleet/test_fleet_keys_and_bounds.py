@@ -183,6 +183,12 @@ def test_peer_table_bounds_topics_per_node_and_checks_its_arguments() -> None:
     assert table.update(True, keys.alive("n1", "a", "/tf")) is not None  # already tracked
     assert table.alive()["n1"].topics == frozenset({"/tf", "/tf_static"})
     assert table.over_limit == 1
+    # the version counts the updates applied (4), not the one refused; then a clear
+    assert table.version == 4
+    table.update(False, keys.alive("n1", "a", "/tf"))
+    assert table.version == 5 and table.alive()["n1"].topics == frozenset({"/tf_static"})
+    table.clear()
+    assert table.version == 6 and not table.alive()
     with pytest.raises(ValueError, match="max_peers must be at least 1, got 0"):
         PeerTable(keys, frozenset(), max_peers=0)
     with pytest.raises(ValueError, match="max_topics must be at least 1, got 0"):

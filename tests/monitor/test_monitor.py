@@ -5,6 +5,8 @@ trio, time driven by ManualClock)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import anyio
 import pytest
 
@@ -324,6 +326,57 @@ async def test_a_second_broadcaster_does_not_make_the_first_unattributed() -> No
     assert stats.authorities["robot_tf_publisher"].messages == 2
     # odom -> base_link appeared while both were alive: nothing says whose it is.
     assert stats.frames["base_link"].authority == "unattributed"
+
+
+class _Peers:
+    """A PeerAware transport's liveliness as ``BusSource`` reads it: ``broadcasters()``
+    (its calls counted) and ``peers_version``."""
+
+    peers_topic = "/tfbus/peers"
+    node_id = "self"
+
+    def __init__(self) -> None:
+        self.alive: dict[str, Any] = {}
+        self.peers_version = 0
+        self.calls = 0
+
+    def broadcasters(self) -> dict[str, Any]:
+        self.calls += 1
+        return dict(self.alive)
+
+
+def test_the_attribution_reads_the_broadcasters_again_only_when_the_peers_change() -> None:
+    """Every message's sender is named from the live broadcasters: read from the
+    transport once per change of its ``peers_version``, not once per message, with the
+    same names as before (one broadcaster: it; two: the frame's own or "unattributed";
+    none: "unknown")."""
+    from tfbus.cli._bus_source import BusSource
+    from tfbus.transports.zenoh import PeerInfo
+
+    src = BusSource("zenoh?connect=tcp/127.0.0.1:1")
+    peers = _Peers()
+    src._peers = peers  # type: ignore[assignment]
+    peers.alive["a1"] = PeerInfo("a1", "robot_tf_publisher", frozenset({"/tf"}))
+    peers.peers_version = 1
+    for i in range(5):
+        src.sink.set_transforms([tf("base_link", "base_laser", T0 + i * MS)], "x", False)
+    assert peers.calls == 1
+    peers.alive["b2"] = PeerInfo("b2", "odom_publisher", frozenset({"/tf", "/tf_static"}))
+    peers.peers_version = 2
+    for i in range(5, 8):
+        src.sink.set_transforms([tf("base_link", "base_laser", T0 + i * MS)], "x", False)
+        src.sink.set_transforms([tf("odom", "base_link", T0 + i * MS)], "x", False)
+    src.sink.set_transforms([tf("base_link", "laser_mount", T0)], "x", True)
+    assert peers.calls == 2
+    del peers.alive["a1"], peers.alive["b2"]
+    peers.peers_version = 3
+    src.sink.set_transforms([tf("map", "odom", T0)], "x", False)
+    assert peers.calls == 3
+    stats = src.summary()
+    assert stats.frames["base_laser"].authorities == {"robot_tf_publisher": 8}
+    assert stats.frames["base_link"].authorities == {"unattributed": 3}
+    assert stats.frames["laser_mount"].authorities == {"odom_publisher": 1}  # /tf_static
+    assert stats.frames["odom"].authorities == {"unknown": 1}
 
 
 def test_the_command_line_asks_the_scheme_for_fleet_and_unknown_authority(

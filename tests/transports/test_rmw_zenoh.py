@@ -135,6 +135,7 @@ async def test_tf_both_ways_and_static_late_join_between_two_tfbus_nodes() -> No
         async with Bus(transport=a_t) as a:
             a.publish_nowait("/tf_static", static)  # before the listener exists
             b_t = transport(endpoint, "viewer")
+            before = b_t.peers_version
             async with Bus(transport=b_t) as b, b.subscribe("/tf_static") as b_static, \
                     b.subscribe("/tf") as b_tf, a.subscribe("/tf") as a_tf:
                 with anyio.fail_after(15):
@@ -149,6 +150,8 @@ async def test_tf_both_ways_and_static_late_join_between_two_tfbus_nodes() -> No
                     (p.name, p.topics) for p in b_t.broadcasters().values()
                 ] == [("robot_a", {"/tf", "/tf_static"})])
                 assert isinstance(b_t, PeerAware)
+                # the graph changed since the start: what was derived from it is stale
+                assert b_t.peers_version > before
             stats = b_t.statistics()
             assert stats.delivered >= 2 and stats.malformed == stats.no_attachment == 0
             assert a_t.statistics().sent >= 2

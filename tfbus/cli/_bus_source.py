@@ -102,6 +102,10 @@ class BusSource(TfSource):
         # runtime-checkable Protocol costs microseconds, and the authority of every
         # message asks for the live broadcasters).
         self._peers: PeerAware | None = None
+        # The live broadcasters' names on /tf and /tf_static, with the transport's
+        # ``peers_version`` they were read at: every message asks for them, and they
+        # change only when the transport's peers do.
+        self._names: tuple[int, frozenset[str], frozenset[str]] | None = None
 
     def buffer(self) -> Buffer:
         return self._buffer
@@ -194,6 +198,7 @@ class BusSource(TfSource):
                         tg.cancel_scope.cancel()
         self.transport = None
         self._peers = None
+        self._names = None
         self.bus = None
 
     def _following_clock(self, bus: Bus) -> contextlib.AbstractAsyncContextManager[object]:
@@ -203,22 +208,34 @@ class BusSource(TfSource):
             return contextlib.nullcontext()
         return self.sim_clock.attach(bus)
 
+    def _broadcaster_names(self, static: bool) -> frozenset[str]:
+        """The names of the live broadcasters publishing ``/tf_static`` (``static``) or
+        ``/tf`` (:meth:`alive_broadcasters`): read again only when the transport's
+        ``peers_version`` changed (every time, on a transport without one)."""
+        version = getattr(self._peers, "peers_version", None)
+        names = self._names
+        if names is None or not isinstance(version, int) or names[0] != version:
+            alive = list(self.alive_broadcasters().values())
+            names = (version if isinstance(version, int) else -1,
+                     frozenset(p.name for p in alive if TF_TOPIC in p.topics),
+                     frozenset(p.name for p in alive if TF_STATIC_TOPIC in p.topics))
+            self._names = names if isinstance(version, int) else None
+        return names[2] if static else names[1]
+
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:
             named = self._scheme.unknown_authority if self._scheme is not None else None
             return named or _UNKNOWN_AUTHORITY
-        topic = TF_STATIC_TOPIC if static else TF_TOPIC
-        names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
+        names = self._broadcaster_names(static)
         if len(names) == 1:
-            return names.pop()
+            return next(iter(names))
         return _SHARED_AUTHORITY if names else _UNKNOWN_AUTHORITY
 
     def _attribute(self, static: bool, transforms: Sequence[object]) -> str:
         name = self._authority(static)
         if name != _SHARED_AUTHORITY:
             return name
-        topic = TF_STATIC_TOPIC if static else TF_TOPIC
-        names = {p.name for p in self.alive_broadcasters().values() if topic in p.topics}
+        names = self._broadcaster_names(static)
         frames = self._summary.frames
         owners = set()
         for ts in transforms:

@@ -164,6 +164,11 @@ class PeerAware(Protocol):
     peer appears, disappears or starts/stops publishing a topic. The command line asks
     ``isinstance(transport, PeerAware)`` (a runtime-checkable Protocol) instead of
     testing a scheme name.
+
+    A transport may also have ``peers_version``, an int that changes whenever its peers
+    or their topics may have changed (Zenoh's and rmw_zenoh's have): a reader that
+    derives something from :meth:`broadcasters` for every message (the command line's
+    sender of each message) reads them again only when it changed.
     """
 
     peers_topic: str

@@ -334,6 +334,7 @@ class RmwZenohTransport:
         self._zid = ""
         self._running = False
         self._graph: dict[str, _Node] = {}  # node key -> node
+        self._graph_version = 0  # counts the graph's changes of nodes and their topics
         self._token_node: dict[str, tuple[str, str]] = {}  # token -> (node key, bus topic)
         # fleet: statics of /<robot>/tf_static received before anyone subscribed to it
         self._unheard: dict[str, StaticLatch] = {}
@@ -393,6 +394,13 @@ class RmwZenohTransport:
     def statistics(self) -> RmwZenohStatistics:
         """A copy of the counters (:class:`RmwZenohStatistics`)."""
         return replace(self._stats)
+
+    @property
+    def peers_version(self) -> int:
+        """A number that changes whenever the live nodes or the topics they publish may
+        have changed (:meth:`alive`, :meth:`broadcasters`): what a reader derived from
+        them holds while it is the same."""
+        return self._graph_version
 
     def broadcasters(self) -> dict[str, PeerInfo]:
         """The live remote nodes that publish ``/tf`` or ``/tf_static`` (as this bus
@@ -511,6 +519,7 @@ class RmwZenohTransport:
             self._wakeup = None
             self._zid = ""
             self._graph.clear()
+            self._graph_version += 1
             self._token_node.clear()
             self._unheard.clear()
             self._recheck_unheard = False
@@ -671,6 +680,8 @@ class RmwZenohTransport:
                 self._receive(bus, key, payload or b"", attachment)
             else:
                 events = self._graph_update(kind == _ALIVE_PUT, key)
+                if events:  # a node or one of its topics came or went
+                    self._graph_version += 1
                 for event in events:
                     bus.deliver_nowait(PEERS_TOPIC, event)
                 if events and self._unheard:

@@ -68,6 +68,10 @@ class PeerTable:
         self.over_limit = 0
         """Liveliness tokens ignored because they would pass ``max_peers`` or
         ``max_topics``, or name a node id longer than :data:`MAX_NODE_ID_LENGTH`."""
+        self.version = 0
+        """Counts the changes of the table (:meth:`update` applied, :meth:`clear`): what
+        a reader derived from :meth:`alive` or :meth:`broadcasters` holds while it is
+        the same."""
 
     def update(self, alive: bool, key: str) -> tuple[PeerEvent, bool] | None:
         """Apply one liveliness event: ``(event, query_latched)`` or None to ignore it.
@@ -101,6 +105,7 @@ class PeerTable:
             self._peers.pop(node_id, None)
         elif info is not None:
             self._peers[node_id] = PeerInfo(node_id, info.name, info.topics - {topic})
+        self.version += 1
         return PeerEvent(alive, node_id, name, topic), query
 
     def alive(self) -> dict[str, PeerInfo]:
@@ -115,6 +120,7 @@ class PeerTable:
         """Forget every node (the transport stopped; ``refused`` is kept)."""
         self._peers.clear()
         self.own_id = ""
+        self.version += 1
 
     def __len__(self) -> int:
         """The number of live nodes."""

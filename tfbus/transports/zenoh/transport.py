@@ -488,6 +488,13 @@ class ZenohTransport:
         return self._node_id
 
     @property
+    def peers_version(self) -> int:
+        """A number that changes whenever the live peers or the topics they publish may
+        have changed (:meth:`alive`, :meth:`broadcasters`): what a reader derived from
+        them holds while it is the same."""
+        return self._peers.version
+
+    @property
     def session(self) -> zenoh.Session | None:
         """The open Zenoh session while running (for :mod:`tfbus.remote`'s queryables),
         else None."""
