@@ -57,7 +57,7 @@ RECENT_STAMPS = RECENT_STAMPS_HELD
 
 cdef class LinkFields:
     """The fields of the doctor's state of one child frame (``checks._Link`` documents
-    them). Held in C, so that a stamp in order touches no Python number: ``period`` (ns,
+    them). Held in C, so that a stamp in order makes no Python number: ``period`` (ns,
     or None before the second stamp) as a double and a flag; ``newest`` (ns, or None) as
     a 64-bit int and a flag (a :class:`~tfbus.time.Time`'s nanoseconds are in [0,
     2**63)); ``recent``, the last :data:`RECENT_STAMPS` stamps kept, as a ring of 64-bit
@@ -239,7 +239,7 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
     cdef SampleFields sample
     cdef tuple hot
     cdef MeanFields mean
-    cdef object ts, child, header, parent, when, stamp, newest, baseline, found
+    cdef object ts, child, header, parent, when, stamp, baseline, found
     cdef double d, interval, pd, bd
     cdef int64_t s64
     cdef long long intervals
