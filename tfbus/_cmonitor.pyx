@@ -128,13 +128,15 @@ def account(summary, frame_summary, object t, transforms, object authority, bint
             fs = <FrameFields>found
             fs.parent = parent
             fs.count += 1
-            if fs._counting is not authority:
-                if not (fs._counting is not None and fs._counting == authority):
-                    _settle_count(fs)
-                    senders = fs._authorities
-                    if authority not in <dict>senders:
-                        (<dict>senders)[authority] = 0
-                    fs._counting = authority
+            if fs._counting is not authority and (fs._counting is None
+                                                  or fs._counting != authority):
+                # another broadcaster: its entry made now, where the pure loop makes it
+                # (the dict's order kept), its count added when it is settled
+                _settle_count(fs)
+                senders = fs._authorities
+                if authority not in <dict>senders:
+                    (<dict>senders)[authority] = 0
+                fs._counting = authority
             fs._uncounted += 1
             ns = stamp._ns
             if static:  # no rate: a stamp other than the last one counts as new

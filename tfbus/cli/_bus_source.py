@@ -213,14 +213,14 @@ class BusSource(TfSource):
         ``/tf`` (:meth:`alive_broadcasters`): read again only when the transport's
         ``peers_version`` changed (every time, on a transport without one)."""
         version = getattr(self._peers, "peers_version", None)
-        names = self._names
-        if names is None or not isinstance(version, int) or names[0] != version:
-            alive = list(self.alive_broadcasters().values())
-            names = (version if isinstance(version, int) else -1,
-                     frozenset(p.name for p in alive if TF_TOPIC in p.topics),
-                     frozenset(p.name for p in alive if TF_STATIC_TOPIC in p.topics))
-            self._names = names if isinstance(version, int) else None
-        return names[2] if static else names[1]
+        cached = self._names
+        if isinstance(version, int) and cached is not None and cached[0] == version:
+            return cached[2] if static else cached[1]
+        alive = list(self.alive_broadcasters().values())
+        dynamic = frozenset(p.name for p in alive if TF_TOPIC in p.topics)
+        latched = frozenset(p.name for p in alive if TF_STATIC_TOPIC in p.topics)
+        self._names = (version, dynamic, latched) if isinstance(version, int) else None
+        return latched if static else dynamic
 
     def _authority(self, static: bool) -> str:
         if not self.has_liveliness:

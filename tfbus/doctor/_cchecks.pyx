@@ -160,7 +160,8 @@ cdef inline void _write_stamp(LinkFields link) except *:
 cdef class RecentStamps:
     """A view of a :class:`LinkFields`'s ring of recent stamps (ns), with what the doctor
     asks of its pure twin's ``deque(maxlen=32)``: ``append``, ``in``, ``len`` and
-    iteration, oldest first.
+    iteration, oldest first (``in`` compares as the deque does, on the stamps as ints;
+    the doctor asks it only of a stamp not newer than the newest).
 
     Raises:
         OverflowError, TypeError: ``append`` of a value that is not an int in
@@ -177,23 +178,16 @@ cdef class RecentStamps:
         _remember(self._link, stamp)
 
     def __contains__(self, stamp):
-        cdef LinkFields link = self._link
-        cdef int i, at
-        if not isinstance(stamp, int) or not (-2**63 <= stamp < 2**63):
-            return False
-        cdef int64_t s = stamp
-        for i in range(link._recent_count):
-            at = link._recent_oldest + i
-            if at >= RECENT_STAMPS_HELD:
-                at -= RECENT_STAMPS_HELD
-            if link._recent[at] == s:
-                return True
-        return False
+        return stamp in self._stamps()
 
     def __len__(self):
         return self._link._recent_count
 
     def __iter__(self):
+        return iter(self._stamps())
+
+    cdef list _stamps(self):
+        """The stamps held, oldest first."""
         cdef LinkFields link = self._link
         cdef int i, at
         out = []
@@ -202,7 +196,7 @@ cdef class RecentStamps:
             if at >= RECENT_STAMPS_HELD:
                 at -= RECENT_STAMPS_HELD
             out.append(link._recent[at])
-        return iter(out)
+        return out
 
 
 cdef inline void _count(SpanFields span, object t) except *:
@@ -317,14 +311,15 @@ def account(doctor, object t, transforms, str sender, bint static, object sim_ti
             if link._has_newest and s64 > link._newest:
                 # in order (the common case): newer than every stamp held, not repeated
                 _remember(link, s64)
-                if link._stamping is sender or (link._stamping is not None
-                                                and link._stamping == sender):
-                    link._unwritten = s64
-                    link._has_unwritten = True
-                else:  # another sender: its entry written now (the dict's order kept)
+                if link._stamping is not sender and (link._stamping is None
+                                                     or link._stamping != sender):
+                    # another sender: its entry written now (the dict's order kept)
                     _write_stamp(link)
                     link._sender_stamp[sender] = stamp
                     link._stamping = sender
+                else:
+                    link._unwritten = s64
+                    link._has_unwritten = True
                 interval = <double>(s64 - link._newest)
                 if not link._has_period:
                     doctor._interval(link, t, stamp, link._newest, sender)
