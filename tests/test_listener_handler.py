@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -17,7 +19,7 @@ from event_loops import anyio_backend_with_uvloop  # noqa: F401  (the fixture)
 import tfbus.listener
 from tfbus.buffer import Buffer
 from tfbus.bus import TF_STATIC_TOPIC, TF_TOPIC, Bus
-from tfbus.clock import ManualClock
+from tfbus.clock import ManualClock, SystemClock
 from tfbus.core import BufferCore
 from tfbus.listener import ListenerStatistics, TransformListener
 from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
@@ -205,4 +207,40 @@ async def test_the_compiled_handler_stores_batches_and_named_messages_itself() -
         assert sum(h.messages for h in listener._handlers) == 3
         assert sum(h.stored for h in listener._handlers) == 5
         assert listener.statistics().stored == 6
+    buffer.close()
+
+
+@pytest.mark.parametrize("handler", ["compiled", "python"])
+async def test_a_system_clock_is_read_per_message_with_its_jump_back_reported(
+    handler: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The compiled handler reads a SystemClock's wall clock in C: the same reading
+    (``time.time_ns``'s clock), recorded as the clock's latest, and a time earlier than
+    the latest fires the clock's jump callbacks with (latest, now), as ``now_ns`` does."""
+    if handler == "compiled" and COMPILED is None:
+        pytest.skip("the compiled handler is not built (pure-Python install or core)")
+    monkeypatch.setattr(tfbus.listener, "_HANDLER", COMPILED if handler == "compiled" else None)
+    clock = SystemClock()
+    jumps: list[tuple[Time, Time]] = []
+    clock.on_jump(lambda old, new: jumps.append((old, new)))
+    buffer = Buffer(cache_time=10.0, clock=clock)
+    async with Bus() as bus, TransformListener(buffer, bus, clock=clock) as listener:
+        assert len(listener._handlers) == (handler == "compiled") * 2  # /tf, /tf_static
+        entered: list[str] = []
+        before = time.time_ns()
+        sys.setprofile(lambda frame, event, _arg: entered.append(frame.f_code.co_name)
+                       if event == "call" else None)
+        try:
+            bus.deliver_nowait(TF_TOPIC, TFMessage((ts("a", Time.from_ns(before)),)))
+        finally:
+            sys.setprofile(None)
+        after = time.time_ns()
+        assert before <= clock._latest_ns <= after and jumps == []
+        assert ("now_ns" in entered) == (handler == "python"), entered
+        ahead = after + 3600 * 10**9  # as if read an hour ahead, then the clock stepped back
+        clock._latest_ns = ahead
+        await bus.publish(TF_TOPIC, TFMessage((ts("a", Time.from_ns(after + 1)),)))
+        assert len(jumps) == 1 and jumps[0][0] == Time.from_ns(ahead)
+        assert after <= jumps[0][1].ns == clock._latest_ns <= time.time_ns()
+        assert listener.statistics().messages == 2
     buffer.close()

@@ -20,7 +20,34 @@ path, ``TFBUS_PURE_PYTHON``), which ``tests/test_listener_handler.py`` runs besi
 one.
 """
 
+from cpython.time cimport time_ns as _time_ns
+
+from tfbus.clock import SystemClock
 from tfbus.messages import TFMessage
+from tfbus.time import Time
+
+
+cdef object _system_clock_of(object now_ns):
+    """The clock ``now_ns`` reads when it is ``SystemClock.now_ns`` itself, bound to an
+    instance of exactly :class:`~tfbus.clock.SystemClock` (read here by
+    :func:`_system_now_ns`); else None (``now_ns`` is called)."""
+    cdef object clock = getattr(now_ns, "__self__", None)
+    if type(clock) is SystemClock and getattr(now_ns, "__func__", None) is SystemClock.now_ns:
+        return clock
+    return None
+
+
+cdef object _system_now_ns(object clock):
+    """``clock.now_ns()`` of a :class:`~tfbus.clock.SystemClock`, in C: the same wall
+    clock (``time.time_ns``'s, CPython's own system clock read), the same record of the
+    latest time read, the same jump callbacks fired when it went backwards, in the same
+    order."""
+    cdef object ns = _time_ns()
+    cdef object latest = clock._latest_ns
+    clock._latest_ns = ns
+    if ns < latest:
+        clock._jump.fire(Time.from_ns(latest), Time.from_ns(ns))
+    return ns
 
 
 cdef class InlineHandler:
@@ -30,7 +57,8 @@ cdef class InlineHandler:
     ``store(transform, authority) -> bool``, True when stored), any other through
     ``store_many`` (the buffer's ``set_transforms``: ``store_many(transforms, authority,
     static)`` -> its result's ``stored``, ``refused`` and ``errors``). ``now_ns()`` is the
-    listener's clock read (int nanoseconds); ``authority`` what the transforms are stored
+    listener's clock read (int nanoseconds; a :class:`~tfbus.clock.SystemClock`'s own
+    ``now_ns`` is read in C, with the same effects); ``authority`` what the transforms are stored
     under, or, when ``publisher_authority``, the ``authority`` a ``TFMessage`` subclass
     names.
 
@@ -43,6 +71,7 @@ cdef class InlineHandler:
     cdef object _store
     cdef object _store_many
     cdef object _now_ns
+    cdef object _system_clock  # the SystemClock now_ns reads, read in C; or None
     cdef object _authority
     cdef bint _static
     cdef bint _publisher_authority
@@ -61,6 +90,7 @@ cdef class InlineHandler:
         self._store = store
         self._store_many = store_many
         self._now_ns = now_ns
+        self._system_clock = _system_clock_of(now_ns)
         self._authority = authority
         self._publisher_authority = publisher_authority
         self.messages = 0
@@ -85,7 +115,10 @@ cdef class InlineHandler:
             self._listener._handle(self._static, message)
             return
         self.messages += 1
-        now = self._now_ns()
+        if self._system_clock is not None:
+            now = _system_now_ns(self._system_clock)
+        else:
+            now = self._now_ns()
         if len(<tuple>transforms) == 1:
             try:
                 stored = self._store((<tuple>transforms)[0], authority)
