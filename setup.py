@@ -1,8 +1,8 @@
 """Build the compiled core (``tfbus/core/_c*.pyx``, the wire decoders
 ``tfbus/codecs/_cwire.pyx``, the laser projection ``tfbus/_claser.pyx``, the listener's
-message handler ``tfbus/_clistener.pyx``, the accounting of tf_monitor's tables
-``tfbus/_cmonitor.pyx`` and of the doctor's checks ``tfbus/doctor/_cchecks.pyx``; Cython),
-optionally; everything else is in pyproject.toml.
+message handler ``tfbus/_clistener.pyx``, the bus's delivery ``tfbus/_cbus.pyx``, the
+accounting of tf_monitor's tables ``tfbus/_cmonitor.pyx`` and of the doctor's checks
+``tfbus/doctor/_cchecks.pyx``; Cython), optionally; everything else is in pyproject.toml.
 
 The extensions are an accelerator, never a requirement: tfbus has a pure-Python core with
 the same behaviour (``tfbus.core.COMPILED`` says which one is loaded).
@@ -60,6 +60,10 @@ COMPILED_LISTENER = ("_clistener",)
 """The compiled message handler of a ``TransformListener`` (``tfbus/<name>.pyx``):
 ``_clistener``, a message of one transform stored with no Python frame; used with the
 compiled core, the listener's own ``_handle`` otherwise."""
+COMPILED_BUS = ("_cbus",)
+"""The compiled delivery of the in-process bus (``tfbus/<name>.pyx``): ``_cbus``, a
+publish's walk of its topic's subscribers and counters and the cancellation test before
+it, with no Python frame; used with the compiled core, ``Bus``'s own code otherwise."""
 COMPILED_TABLES = ("_cmonitor",)
 """The compiled accounting of tf_monitor's tables (``tfbus/<name>.pyx``): ``_cmonitor``,
 the loop of ``TfSummary.add`` over a message's transforms on typed fields; used with the
@@ -168,7 +172,7 @@ def _extensions() -> list[Extension]:
     ]
     exts += [
         Extension(f"tfbus.{name}", [f"tfbus/{name}.pyx"], extra_compile_args=extra)
-        for name in (*COMPILED_SENSORS, *COMPILED_LISTENER, *COMPILED_TABLES)
+        for name in (*COMPILED_SENSORS, *COMPILED_LISTENER, *COMPILED_BUS, *COMPILED_TABLES)
     ]
     return list(cythonize(exts, language_level=3))
 

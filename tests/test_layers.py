@@ -42,6 +42,7 @@ LAYERS: dict[str, int] = {
     # 2: the bus and time sources
     "_aio": 2,  # every CPython-asyncio shortcut (bus, clocks, buffer, transports use it)
     "bus": 2,
+    "_cbus": 2,  # compiled delivery, cancellation test and yield of the bus (bus.py's kernel)
     "clock": 2,
     "latch": 2,
     "subscription": 2,

@@ -91,6 +91,7 @@ def test_sdist_carries_everything_needed_to_build_and_test(sdist: Path) -> None:
         *(f"tfbus/core/_c{job}.pxd" for job in ("math", "cache", "core", "results")),
         "tfbus/_claser.pyx", "tfbus/_claser.pyi", "tfbus/_clistener.pyx", "tfbus/_clistener.pyi",
         "tfbus/_cmonitor.pyx", "tfbus/_cmonitor.pyi", "tfbus/_cdelay.pxd",
+        "tfbus/_cbus.pyx", "tfbus/_cbus.pyi",
         *(f"tfbus/core/_py{job}.py" for job in ("math", "cache", "core", "batch")),
         "tests/core/test_conformance.py", "tests/conformance.py", "tests/data/public.jsonl.gz",
         "docs/index.md", "mkdocs.yml",

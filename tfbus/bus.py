@@ -42,13 +42,14 @@ from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from itertools import repeat
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar, runtime_checkable
+from typing import Any, Final, Protocol, TypeVar, runtime_checkable
 
 import anyio
 import anyio.abc
 import anyio.lowlevel
 
 from tfbus._aio import ShieldedYield, _running_trio, exit_task_group, running_asyncio_loop
+from tfbus.core.kernels import compiled_extension
 from tfbus.latch import StaticLatch
 from tfbus.messages import TFMessage
 from tfbus.subscription import (
@@ -85,8 +86,11 @@ the topic is used again)."""
 
 T = TypeVar("T")
 
-if TYPE_CHECKING:
-    pass
+_COMPILED = compiled_extension("tfbus._cbus")
+"""The compiled delivery, cancellation test and yield after a publish (:mod:`tfbus._cbus`,
+where :func:`~tfbus.core.kernels.compiled_extension` finds it), or None: the pure-Python
+ones (``Bus._deliver_each``, :func:`_asyncio_cancel_called`'s closure,
+:class:`~tfbus._aio.ShieldedYield`)."""
 
 
 def _backend_checkpoint_if_cancelled() -> Callable[[], Awaitable[None]]:
@@ -121,7 +125,9 @@ def _asyncio_cancel_called(loop: Any) -> Callable[[], bool] | None:
 
     The calling task is read from asyncio's table of ``loop``'s current tasks, and its
     anyio state from the ``WeakKeyDictionary``'s own dict, where present (two Python
-    calls fewer on CPython 3.11); else through ``asyncio.current_task`` and ``get``.
+    calls fewer on CPython 3.11); else through ``asyncio.current_task`` and ``get``. With
+    those tables and the compiled core, the walk is ``tfbus._cbus.AsyncioCancelCalled``'s
+    (C code, no Python frame).
 
     None when anyio's asyncio backend does not keep these (``_task_states``, a
     ``CancelScope``'s ``_cancel_called``, ``_shield`` and ``_parent_scope``): the bus then
@@ -148,6 +154,10 @@ def _asyncio_cancel_called(loop: Any) -> Callable[[], bool] | None:
             return state is not None and _scope_cancelled(state.cancel_scope)
 
         return cancel_called_portable
+
+    if _COMPILED is not None:  # the same walk in C
+        compiled: Callable[[], bool] = _COMPILED.AsyncioCancelCalled(loop, tasks, states).called
+        return compiled
 
     def cancel_called() -> bool:
         task = tasks.get(loop)
@@ -249,6 +259,16 @@ class Bus:
         # Topics with counters and no subscription nor callback, the latest last.
         self._idle_topics: dict[str, None] = {}
         self._latch = StaticLatch()
+        # What every publish and remote delivery runs: compiled, on these very objects,
+        # with the compiled core; else _deliver_each.
+        self._deliver: Callable[[str, object], None] = (
+            self._deliver_each
+            if _COMPILED is None
+            else _COMPILED.Delivery(
+                self._latch, self._topic_counters, self._subscriptions, self._callbacks,
+                self._counters,
+            ).deliver
+        )
         self._task_group: anyio.abc.TaskGroup | None = None
         self._state = "new"  # "new" -> "open" -> "closed"
         # Called once when the bus closes (a TransformListener on it: its buffer's waits).
@@ -284,7 +304,9 @@ class Bus:
         trio = None if loop is not None else _running_trio()
         if loop is not None:
             # A C callable giving the one ShieldedYield: no Python-level __call__.
-            self._after_publish = repeat(ShieldedYield(loop)).__next__
+            shielded_yield = ShieldedYield(loop) if _COMPILED is None else (
+                _COMPILED.ShieldedYield(loop))
+            self._after_publish = repeat(shielded_yield).__next__
             self._maybe_cancelled = _asyncio_cancel_called(loop)
             self._before_publish = _backend_checkpoint_if_cancelled()
         elif trio is not None:
@@ -525,7 +547,10 @@ class Bus:
             self._counters(topic).remote += 1
             self._deliver(topic, message)
 
-    def _deliver(self, topic: str, message: object) -> None:
+    def _deliver_each(self, topic: str, message: object) -> None:
+        """Deliver ``message`` here: ``/tf_static`` latched, the topic's counters, each
+        queued subscription's ``_put`` and each callback (counted; what it raises goes to
+        its subscription's ``_failed``). The pure twin of ``tfbus._cbus.Delivery``."""
         if topic == TF_STATIC_TOPIC:
             self._latch.add(message)
         counters = self._topic_counters.get(topic)

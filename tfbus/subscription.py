@@ -12,11 +12,12 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Any, Final, Generic, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Generic, Protocol, TypeVar
 
 import anyio
 import anyio.lowlevel
 
+from tfbus.core.kernels import compiled_extension
 from tfbus.ratelimit import CountLimitedLog
 
 __all__ = [
@@ -67,7 +68,10 @@ class SubscriptionStatistics:
     tasks_waiting_receive: int
 
 
-class _TopicCounters:
+class _PyTopicCounters:
+    """The counters of one topic on one bus (the pure twin of
+    ``tfbus._cbus.TopicCounters``, whose docstring says what each counts)."""
+
     __slots__ = ("delivered", "dropped", "published", "remote")
 
     def __init__(self) -> None:
@@ -75,6 +79,31 @@ class _TopicCounters:
         self.remote = 0
         self.delivered = 0
         self.dropped = 0
+
+
+class _CallbackFields:
+    """The fields of :class:`CallbackSubscription` a bus's delivery counts and calls (the
+    pure twin of ``tfbus._cbus.CallbackFields``)."""
+
+    __slots__ = ("_callback", "_counters", "_delivered")
+
+
+def _compiled_fields() -> tuple[type, type]:
+    """The classes of a topic's counters and of a callback subscription's delivered
+    fields: the compiled ones (:mod:`tfbus._cbus`, where
+    :func:`~tfbus.core.kernels.compiled_extension` finds it, which the compiled delivery
+    counts in C), else their pure twins."""
+    module = compiled_extension("tfbus._cbus")
+    if module is None:
+        return _PyTopicCounters, _CallbackFields
+    return module.TopicCounters, module.CallbackFields
+
+
+if TYPE_CHECKING:
+    _TopicCounters = _PyTopicCounters
+    _CallbackBase = _CallbackFields
+else:
+    _TopicCounters, _CallbackBase = _compiled_fields()
 
 
 class Subscription(Generic[T]):
@@ -259,7 +288,7 @@ class Subscription(Generic[T]):
         )
 
 
-class CallbackSubscription:
+class CallbackSubscription(_CallbackBase):
     """A function called with every message delivered on one topic, inside the publish or
     delivery itself (no queue, no task switch). Made by :meth:`~tfbus.bus.Bus.subscribe_callback`;
     registered until :meth:`close` (or ``with``-block exit) or until the bus closes.
