@@ -61,9 +61,10 @@ COMPILED_LISTENER = ("_clistener",)
 ``_clistener``, a message of one transform stored with no Python frame; used with the
 compiled core, the listener's own ``_handle`` otherwise."""
 COMPILED_BUS = ("_cbus",)
-"""The compiled delivery of the in-process bus (``tfbus/<name>.pyx``): ``_cbus``, a
-publish's walk of its topic's subscribers and counters and the cancellation test before
-it, with no Python frame; used with the compiled core, ``Bus``'s own code otherwise."""
+"""The compiled publish path of the in-process bus (``tfbus/<name>.pyx``): ``_cbus``, a
+publish's walk of its topic's subscribers and counters, the cancellation test before it
+and the yield after it on asyncio, with no Python frame; used with the compiled core,
+``Bus``'s own code otherwise."""
 COMPILED_TABLES = ("_cmonitor",)
 """The compiled accounting of tf_monitor's tables (``tfbus/<name>.pyx``): ``_cmonitor``,
 the loop of ``TfSummary.add`` over a message's transforms on typed fields; used with the

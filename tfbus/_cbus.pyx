@@ -18,10 +18,10 @@ callback subscriber (a :class:`~tfbus.listener.TransformListener`'s handler).
 * :class:`ShieldedYield` -- the yield after a publish on asyncio
   (``tfbus._aio.ShieldedYield``), stepped in C.
 
-Each does what the pure-Python code beside it does (``Bus._deliver_each``,
-the ``_asyncio_cancel_called`` closure, ``tfbus._aio.ShieldedYield``), in the same order; used with the compiled core
-(``tfbus.core.COMPILED``), the pure-Python code otherwise. ``tests/test_bus_compiled.py``
-runs both on the same publishes.
+Each does what the pure-Python code beside it does (``Bus._deliver_each``, the
+``_asyncio_cancel_called`` closure, ``tfbus._aio.ShieldedYield``), in the same order;
+used with the compiled core (``tfbus.core.COMPILED``), the pure-Python code otherwise.
+``tests/test_bus_compiled.py`` runs both on the same publishes.
 """
 
 cimport cython

@@ -58,9 +58,9 @@ cdef class InlineHandler:
     ``store_many`` (the buffer's ``set_transforms``: ``store_many(transforms, authority,
     static)`` -> its result's ``stored``, ``refused`` and ``errors``). ``now_ns()`` is the
     listener's clock read (int nanoseconds; a :class:`~tfbus.clock.SystemClock`'s own
-    ``now_ns`` is read in C, with the same effects); ``authority`` what the transforms are stored
-    under, or, when ``publisher_authority``, the ``authority`` a ``TFMessage`` subclass
-    names.
+    ``now_ns`` is read in C, with the same effects); ``authority`` what the transforms are
+    stored under, or, when ``publisher_authority``, the ``authority`` a ``TFMessage``
+    subclass names.
 
     ``messages``, ``stored`` and ``refused`` count the messages this handler stored itself
     and what the buffer did with their transforms, which the listener adds to its own
