@@ -304,8 +304,8 @@ class Bus:
         trio = None if loop is not None else _running_trio()
         if loop is not None:
             # A C callable giving the one ShieldedYield: no Python-level __call__.
-            shielded_yield = ShieldedYield(loop) if _COMPILED is None else (
-                _COMPILED.ShieldedYield(loop))
+            yield_type = ShieldedYield if _COMPILED is None else _COMPILED.ShieldedYield
+            shielded_yield = yield_type(loop)
             self._after_publish = repeat(shielded_yield).__next__
             self._maybe_cancelled = _asyncio_cancel_called(loop)
             self._before_publish = _backend_checkpoint_if_cancelled()

@@ -27,7 +27,8 @@ from tfbus.transports.ros1.tcpros import FrameSplitter, frame
 pytestmark = pytest.mark.anyio
 
 # Python functions entered from the splitter's feed until the bus's callback: feed, the
-# TFMessage frame handler, Bus.deliver_nowait, its counters look-up and Bus._deliver.
+# TFMessage frame handler, Bus.deliver_nowait, its counters look-up and the bus's delivery
+# (Bus._deliver_each; C code with the compiled core, so one fewer there).
 # The general handler entered 9: feed, _frame, TFCodec.decode, _decode_transforms,
 # _decode_ros1_compiled_or_struct, TFMessage's __new__ and the three of the bus.
 CALLS_BEFORE_CALLBACK = 5
