@@ -27,6 +27,9 @@ __all__ = ["StaticTransformBroadcaster", "TransformBroadcaster"]
 
 
 _plain_transform = BufferCore._plain_transform  # the core's (compiled or pure) quick test
+# The same test, and the message of the one transform it accepts, in one call (C code
+# in the compiled core, no Python frame).
+_message_of_one = BufferCore._message_of_one
 
 
 def _check(ts: TransformStamped) -> None:
@@ -45,14 +48,13 @@ def _check(ts: TransformStamped) -> None:
         BufferCore().set_transform(ts, "TransformBroadcaster")  # raises when invalid
 
 
-# TFMessage's NamedTuple __new__ is a Python function around this C call.
-_new_message = tuple.__new__
-
-
 def _as_message(transform: TransformStamped | Iterable[TransformStamped]) -> TFMessage:
+    """The message a send of ``transform`` publishes, every transform checked (see
+    :func:`_check`). The senders ask ``_message_of_one`` first (the common case: one
+    transform the quick test accepts), and this only when it answers None."""
     if isinstance(transform, TransformStamped):
         _check(transform)
-        return _new_message(TFMessage, ((transform,),))  # TFMessage((transform,))
+        return TFMessage((transform,))
     try:
         transforms = tuple(transform)
     except TypeError:
@@ -110,9 +112,11 @@ class TransformBroadcaster:
             RuntimeError: if the bus is not open yet.
             anyio.ClosedResourceError: if the bus is closed.
         """
-        message = _as_message(transform)
-        if not message.transforms:
-            return
+        message = _message_of_one(transform)  # the common case: one call, no frame
+        if message is None:
+            message = _as_message(transform)
+            if not message.transforms:
+                return
         self._bus.publish_nowait(self.topic, message)
         self.sent += len(message.transforms)
 
@@ -128,11 +132,8 @@ class TransformBroadcaster:
             anyio.ClosedResourceError: if the bus is closed.
             anyio.get_cancelled_exc_class(): if cancelled (before publishing).
         """
-        if type(transform) is TransformStamped:  # _as_message's first case, inline
-            if not _plain_transform(transform):  # _check, inline
-                BufferCore().set_transform(transform, "TransformBroadcaster")
-            message = _new_message(TFMessage, ((transform,),))
-        else:
+        message = _message_of_one(transform)  # _as_message's common case, inline
+        if message is None:
             message = _as_message(transform)
             if not message.transforms:
                 return

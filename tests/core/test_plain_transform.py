@@ -1,5 +1,6 @@
 """``CoreBase._plain_transform``, the broadcaster's quick test of a transform before it
-is published, on both twins (compiled and pure): the same answer bit for bit, True only
+is published, and ``CoreBase._message_of_one``, that test and the message of the one
+transform it accepts, on both twins (compiled and pure): the same answer bit for bit, True only
 for what ``set_transform`` accepts (tf2 ``BufferCore::setTransformImpl``'s checks), and
 for a transform of the message classes with float values exactly what it accepts,
 except two forms it leaves to the core: a translation whose sum overflows, and a
@@ -13,7 +14,7 @@ from types import ModuleType
 
 import pytest
 
-from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+from tfbus import Header, Quaternion, TFMessage, Time, Transform, TransformStamped, Vector3
 from tfbus.core import BufferCore, _pycore
 from tfbus.errors import InvalidArgumentException
 
@@ -116,3 +117,21 @@ def test_both_twins_answer_alike() -> None:
         assert plain("compiled", case) == plain("pure", case), case
     # None of the odd forms is decided by the quick test (the broadcaster asks the core).
     assert not any(plain("compiled", case) for case in odd)
+
+
+def test_the_message_of_one_is_the_tfmessage_of_what_the_quick_test_accepts() -> None:
+    cases: list[object] = [*float_cases(), None, "map", (1, 2, 3),
+                           ts()._replace(header=Header(5, "map"))]  # type: ignore[arg-type]
+    made = 0
+    for twin in sorted(CORES):
+        for case in cases:
+            message = CORES[twin].CoreBase._message_of_one(case)
+            if not plain(twin, case):
+                assert message is None, (twin, case)
+                continue
+            made += 1
+            assert type(message) is TFMessage
+            assert message == TFMessage((case,))  # type: ignore[arg-type]
+            assert type(message.transforms) is tuple and message.transforms[0] is case
+            assert message.transforms == (case,) and len(message) == 1
+    assert made == 2 * 38  # the accepted float transforms of each twin

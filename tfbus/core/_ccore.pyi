@@ -6,7 +6,7 @@ from typing import Any, Final, Literal, overload
 from tfbus.core._ccache import Link
 from tfbus.core.policy import Clamp, Exact, Nearest, PolicyResult, Previous, Window
 from tfbus.core.results import BatchResult, TouchedFrames
-from tfbus.messages import TransformStamped
+from tfbus.messages import TFMessage, TransformStamped
 from tfbus.time import Time
 
 NO_ERROR: Final[int]
@@ -76,6 +76,8 @@ class CoreBase:
     def _last_touched(self) -> tuple[str, str, bool]: ...
     @staticmethod
     def _plain_transform(ts: object) -> bool: ...
+    @staticmethod
+    def _message_of_one(ts: object) -> TFMessage | None: ...
     def _follow_waits(
         self, index: dict[str, set[Any]] | None, settled: list[Any] | None = None
     ) -> None: ...

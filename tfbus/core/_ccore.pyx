@@ -66,7 +66,7 @@ from tfbus.core._cresults cimport (
     _named3, _named4, _named5,
 )
 from tfbus.errors import InvalidArgumentException
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
 from tfbus.core.policy import PolicyReport, PolicyResult
 from tfbus.core.results import BatchResult, TouchedFrames
@@ -223,6 +223,56 @@ cdef bint _plain_values(object tf) noexcept:
         if type((<tuple>rot)[k]) is not float:
             return False
     return True
+
+
+cdef bint _plain_stamped(object ts) noexcept:
+    """``CoreBase._plain_transform``'s test (see it)."""
+    cdef object header, tf, tr, rot, parent, child
+    cdef double x, y, z, qx, qy, qz, qw, s
+    if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
+        return False
+    header = (<tuple>ts)[0]
+    child = (<tuple>ts)[1]
+    tf = (<tuple>ts)[2]
+    if type(header) is not Header or len(<tuple>header) != 2:
+        return False
+    if not _plain_values(tf):
+        return False
+    tr = (<tuple>tf)[0]
+    rot = (<tuple>tf)[1]
+    parent = (<tuple>header)[1]
+    if type((<tuple>header)[0]) is not Time or type(parent) is not str or type(child) is not str:
+        return False
+    if (not len(<str>parent) or not len(<str>child)
+            or PyUnicode_READ_CHAR(parent, 0) == 47 or PyUnicode_READ_CHAR(child, 0) == 47
+            or parent == child):
+        return False
+    x = (<tuple>tr)[0]
+    y = (<tuple>tr)[1]
+    z = (<tuple>tr)[2]
+    qx = (<tuple>rot)[0]
+    qy = (<tuple>rot)[1]
+    qz = (<tuple>rot)[2]
+    qw = (<tuple>rot)[3]
+    s = x + y + z
+    if s - s != 0.0:  # NaN or ±Inf anywhere makes the sum non-finite
+        return False
+    return fabs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+
+
+cdef object _message_of(object ts):
+    """``TFMessage((ts,))``, the message's tuple allocated by the type (what
+    ``tuple.__new__`` does for a subclass, minus building and copying its argument)."""
+    cdef tuple transforms = (ts,)
+    cdef PyObject* p = (<PyTypeObject*>TFMessage).tp_alloc(<PyTypeObject*>TFMessage, 1)
+    cdef object message
+    if p == NULL:
+        raise MemoryError()
+    message = <object>p
+    Py_DECREF(message)  # tp_alloc's reference, now owned by ``message``
+    Py_INCREF(transforms)
+    PyTuple_SET_ITEM(message, 0, transforms)
+    return message
 
 
 cdef object _time_of(int64_t ns):
@@ -1076,37 +1126,18 @@ cdef class CoreBase:
 
         False says only that the quick test does not decide (the broadcaster then asks
         ``set_transform`` itself, the one authority on validity); never raises."""
-        cdef object header, tf, tr, rot, parent, child
-        cdef double x, y, z, qx, qy, qz, qw, s
-        if type(ts) is not TransformStamped or len(<tuple>ts) != 3:
-            return False
-        header = (<tuple>ts)[0]
-        child = (<tuple>ts)[1]
-        tf = (<tuple>ts)[2]
-        if type(header) is not Header or len(<tuple>header) != 2:
-            return False
-        if not _plain_values(tf):
-            return False
-        tr = (<tuple>tf)[0]
-        rot = (<tuple>tf)[1]
-        parent = (<tuple>header)[1]
-        if type((<tuple>header)[0]) is not Time or type(parent) is not str or type(child) is not str:
-            return False
-        if (not len(<str>parent) or not len(<str>child)
-                or PyUnicode_READ_CHAR(parent, 0) == 47 or PyUnicode_READ_CHAR(child, 0) == 47
-                or parent == child):
-            return False
-        x = (<tuple>tr)[0]
-        y = (<tuple>tr)[1]
-        z = (<tuple>tr)[2]
-        qx = (<tuple>rot)[0]
-        qy = (<tuple>rot)[1]
-        qz = (<tuple>rot)[2]
-        qw = (<tuple>rot)[3]
-        s = x + y + z
-        if s - s != 0.0:  # NaN or ±Inf anywhere makes the sum non-finite
-            return False
-        return fabs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+        return _plain_stamped(ts)
+
+    @staticmethod
+    def _message_of_one(ts):
+        """The ``TFMessage`` of ``ts`` alone when :meth:`_plain_transform` accepts it
+        (made in C: the message's tuple and its one-item tuple of transforms, as
+        ``TFMessage((ts,))`` makes them), else None (the broadcaster then checks ``ts``
+        and makes the message in Python). What a broadcaster's send of one transform
+        needs, in one call; never raises but MemoryError."""
+        if not _plain_stamped(ts):
+            return None
+        return _message_of(ts)
 
     def _follow_waits(self, dict index, list settled=None):
         """Settle the waits of ``index`` (frame id -> set of waits, the subclass's own

@@ -47,7 +47,7 @@ from tfbus.core._pymath import (
 from tfbus.core.policy import PolicyReport, PolicyResult
 from tfbus.core.results import BatchResult, TouchedFrames
 from tfbus.errors import InvalidArgumentException
-from tfbus.messages import Header, Quaternion, Transform, TransformStamped, Vector3
+from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from tfbus.time import Time
 
 __all__ = [
@@ -858,6 +858,18 @@ class CoreBase:
         if s - s != 0.0:  # NaN or ±Inf anywhere makes the sum non-finite
             return False
         return abs(qw * qw + qx * qx + qy * qy + qz * qz - 1.0) < 0.01  # False for NaN
+
+    @staticmethod
+    def _message_of_one(ts: object) -> TFMessage | None:
+        """The ``TFMessage`` of ``ts`` alone (``TFMessage((ts,))``) when
+        :meth:`_plain_transform` accepts it, else None (the broadcaster then checks ``ts``
+        and makes the message itself). What a broadcaster's send of one transform needs,
+        in one call; never raises."""
+        if not CoreBase._plain_transform(ts):
+            return None
+        # TFMessage((ts,)) without the Python frame of the NamedTuple's __new__
+        message: TFMessage = tuple.__new__(TFMessage, ((ts,),))
+        return message
 
     def _follow_waits(
         self, index: dict[str, set[Any]] | None, settled: list[Any] | None = None
