@@ -39,13 +39,14 @@ pytestmark = pytest.mark.anyio
 
 # Python functions entered from ``await send_transform(ts)`` until the listener's store
 # (the core's set_transform: C code in the compiled core): send_transform, the
-# cancellation test (asyncio: one function; trio: its checkpoint_if_cancelled and
-# current_task), the bus's delivery, the listener's _handle (not with the compiled
-# message handler, tfbus._clistener, which is C) and its clock read: 5 on asyncio, 6 on
-# trio; with the compiled core, the handler, the delivery and asyncio's cancellation test
-# are C (tfbus._clistener, tfbus._cbus), leaving 2 on asyncio and 4 on trio (the core's
-# own frames, which the pure-Python core adds, are not counted). The path before entered
-# 7 on asyncio and 8 on trio (the broadcaster's _check, Bus.publish_nowait,
+# cancellation test (one function, on asyncio and on trio), the bus's delivery, the
+# listener's _handle (not with the compiled message handler, tfbus._clistener, which is
+# C) and its clock read: 5; with the compiled core, the handler, the delivery and
+# asyncio's cancellation test are C (tfbus._clistener, tfbus._cbus), leaving 2 on asyncio
+# and 3 on trio (the core's own frames, which the pure-Python core adds, are not
+# counted: its test of the transform and the message it makes). The path before entered
+# 6 on trio (trio's checkpoint_if_cancelled and current_task for the test), 7 on asyncio
+# and 8 on trio before that (the broadcaster's _check, Bus.publish_nowait,
 # Buffer.set_transform), and 15 and 13 before that (anyio's checkpoint coroutine and its
 # task-state look-ups, Bus.publish, _as_message, TFMessage's __new__, the callback
 # subscription's _call).
@@ -53,7 +54,7 @@ HANDLED_IN_C = tfbus.listener._HANDLER is not None
 DELIVERED_IN_C = tfbus.bus._COMPILED is not None
 CALLS_BEFORE_STORE = {
     "asyncio": 5 - HANDLED_IN_C - 2 * DELIVERED_IN_C,
-    "trio": 6 - HANDLED_IN_C - DELIVERED_IN_C,
+    "trio": 5 - HANDLED_IN_C - DELIVERED_IN_C,
 }
 # The last two: the delivery (unless compiled) or what came before it, then the clock read
 # (a ManualClock's: Python code; a SystemClock's is read in C by the compiled handler).
@@ -98,12 +99,13 @@ async def test_send_transform_reaches_the_store_in_few_python_calls(
             sys.setprofile(None)
         assert entered[0] == "send_transform"
         assert "_check" not in entered and "publish_nowait" not in entered
+        assert "checkpoint_if_cancelled" not in entered, entered  # the test answered False
         assert entered[-1] == "now_ns", entered
         if DELIVERY:
             assert entered[-2:-1] == DELIVERY, entered
         else:
             assert "_deliver_each" not in entered and "_handle" not in entered, entered
-        assert len(entered) <= CALLS_BEFORE_STORE[anyio_backend_name], entered
+        assert len(entered) == CALLS_BEFORE_STORE[anyio_backend_name], entered
         assert buffer.lookup_transform("world", "probe", Time.from_sec(100.5)).transform == (
             _ts(100.5).transform
         )
@@ -230,3 +232,80 @@ async def test_a_buffer_that_overrides_set_transforms_gets_every_message_through
         assert core.lookup_transform("world", "probe", Time.from_sec(100.0)).transform == (
             _ts(100.0).transform
         )
+
+
+def test_the_trio_cancellation_test_answers_as_trios_own_checkpoint() -> None:
+    """The bus's test before a publish on trio answers as trio's
+    ``checkpoint_if_cancelled`` decides (True: it would checkpoint and raise; the bus then
+    awaits it), case by case, and counts the task's cancel point as that function does
+    when it answers False."""
+    trio = pytest.importorskip("trio")
+
+    async def main() -> None:
+        called = tfbus.bus._trio_cancel_called(trio.lowlevel)
+        assert called is not None, "this trio keeps no cancellation state tfbus can read"
+
+        async def trio_says() -> tuple[bool, int]:
+            task = trio.lowlevel.current_task()
+            before = task._cancel_points
+            try:
+                await trio.lowlevel.checkpoint_if_cancelled()
+            except trio.Cancelled:
+                return True, task._cancel_points - before
+            return False, task._cancel_points - before
+
+        async def both() -> tuple[bool, int]:
+            task = trio.lowlevel.current_task()
+            before = task._cancel_points
+            ours = called()
+            counted = task._cancel_points - before
+            theirs, their_count = await trio_says()
+            assert ours == theirs
+            if not ours:  # (answering True, trio's own checkpoint, awaited next, counts)
+                assert counted == their_count
+            return ours, counted
+
+        assert await both() == (False, 1)  # no scope cancelled
+        with trio.CancelScope() as scope:
+            scope.cancel()
+            assert await both() == (True, 0)
+            with trio.CancelScope(shield=True):
+                assert await both() == (False, 1)  # shielded from it
+                with trio.CancelScope() as inner:
+                    inner.cancel()
+                    assert await both() == (True, 0)  # cancelled inside the shield
+        with trio.CancelScope(deadline=-math.inf):
+            assert await both() == (True, 0)  # a deadline already past
+        answers: list[tuple[bool, int]] = []
+
+        async def child() -> None:
+            answers.append(await both())
+            nursery.cancel_scope.cancel()
+            answers.append(await both())  # its nursery's scope, cancelled by the child
+
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(child)
+        assert answers == [(False, 1), (True, 0)]
+        # A KeyboardInterrupt pending: True for the run's main task (this one) only; not
+        # asked of trio, which would raise it (the flag is set and cleared with no
+        # checkpoint in between, where trio would deliver it).
+        runner = trio.lowlevel.current_task()._runner
+        assert runner.main_task is trio.lowlevel.current_task()
+        pending: list[bool] = []
+
+        def with_ki_pending() -> None:
+            runner.ki_pending = True
+            try:
+                pending.append(called())
+            finally:
+                runner.ki_pending = False
+
+        async def other() -> None:
+            with_ki_pending()
+
+        with_ki_pending()
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(other)
+        assert pending == [True, False] and called() is False
+
+    trio.run(main)

@@ -38,6 +38,7 @@ logged, never passed to the publisher.
 from __future__ import annotations
 
 import logging
+import sys
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from itertools import repeat
@@ -176,6 +177,49 @@ def _asyncio_cancel_called(loop: Any) -> Callable[[], bool] | None:
     return cancel_called
 
 
+def _trio_cancel_called(lowlevel: Any) -> Callable[[], bool] | None:
+    """On trio (``lowlevel``: ``trio.lowlevel``, called in a trio task), a plain function
+    answering what ``trio.lowlevel.checkpoint_if_cancelled`` finds out before it
+    checkpoints: whether the calling task's cancel status is effectively cancelled, or the
+    task is the run's main task with a KeyboardInterrupt pending (trio
+    ``_core/_run.py``: ``checkpoint_if_cancelled``, over the same fields). Answering
+    False, it counts the task's cancel point (``Task._cancel_points``) as that function
+    does on its uncancelled path. A publish awaits the checkpoint only when it answers
+    True, so an uncancelled publish creates no coroutine for it (two Python calls and a
+    coroutine of the bus path on trio).
+
+    The calling task is the one trio's ``current_task`` reads (the run's thread-local
+    context). None when trio does not keep these fields (the task's ``_cancel_status``
+    with its ``effectively_cancelled``, ``_runner`` with its ``main_task`` and
+    ``ki_pending``, ``_cancel_points``; that context): the bus then awaits the public
+    checkpoint every time.
+    """
+    task = lowlevel.current_task()
+    run = sys.modules.get("trio._core._run")
+    context: Any = getattr(run, "GLOBAL_RUN_CONTEXT", None)
+    status = getattr(task, "_cancel_status", None)
+    runner = getattr(task, "_runner", None)
+    if (
+        getattr(context, "task", None) is not task
+        or type(getattr(status, "effectively_cancelled", None)) is not bool
+        or not hasattr(runner, "main_task")
+        or type(getattr(runner, "ki_pending", None)) is not bool
+        or type(getattr(task, "_cancel_points", None)) is not int
+    ):
+        return None  # pragma: no cover - another trio layout: the public checkpoint
+
+    def cancel_called() -> bool:
+        task = context.task
+        if task._cancel_status.effectively_cancelled or (
+            task is task._runner.main_task and task._runner.ki_pending
+        ):
+            return True
+        task._cancel_points += 1
+        return False
+
+    return cancel_called
+
+
 def _scope_cancelled(scope: Any) -> bool:
     """Whether ``scope`` or an enclosing scope up to the first shielded one (included)
     was cancelled: anyio's ``checkpoint_if_cancelled`` walk."""
@@ -281,7 +325,8 @@ class Bus:
             anyio.lowlevel.cancel_shielded_checkpoint
         )
         # Whether the checkpoint before a publish must be awaited (it raises only when
-        # this answers True); None: always await it (trio's makes its own check at once).
+        # this answers True); None: always await it (a backend whose cancellation state
+        # tfbus cannot read).
         self._maybe_cancelled: Callable[[], bool] | None = None
 
     @property
@@ -313,6 +358,7 @@ class Bus:
             # trio's own pair, which anyio's trio backend wraps in one more coroutine each.
             self._after_publish = trio.cancel_shielded_checkpoint
             self._before_publish = trio.checkpoint_if_cancelled
+            self._maybe_cancelled = _trio_cancel_called(trio)
         else:
             self._after_publish = _backend_cancel_shielded_checkpoint()
             self._before_publish = _backend_checkpoint_if_cancelled()
