@@ -168,6 +168,35 @@ def test_trail_drawn_live_on_the_page(page: TfPage) -> None:
         page.set_trail("robot", 0.0)
 
 
+def test_a_redraw_never_shows_no_trail_while_one_is_drawn(page: TfPage) -> None:
+    """``page.trail`` is read from other threads (the page's, an embedding app's): while a
+    redraw samples the trail again, it is still the trail drawn before, and then the new
+    one; never None in between."""
+    from tfbus.monitor import TfSummary
+    from tfbus.view.player import draw_live
+
+    core = BufferCore(cache_time=30.0)
+    feed(core, 1.0, 21.0)
+    page.set_trail("robot", 5.0)
+    draw_live(page, core, TfSummary(), Time.from_sec(21.0))
+    before = page.trail
+    assert before is not None and before.error is None
+    seen: list[object] = []
+    sample = page._trails.sample
+
+    def watched(*args: object, **kwargs: object) -> object:
+        seen.append(page.trail)  # what another thread would read during the sampling
+        return sample(*args, **kwargs)  # type: ignore[arg-type]
+
+    page._trails.sample = watched  # type: ignore[method-assign]
+    page.set_trail("robot", 3.0)
+    draw_live(page, core, TfSummary(), Time.from_sec(21.0))
+    assert seen == [before]
+    after = page.trail
+    assert after is not None and after is not before
+    assert after.stamps[-1] == 21_000_000_000 and after.stamps[0] >= 18_000_000_000
+
+
 def _bag(path: Path) -> Path:
     from tfbus.bag.formats import BagMessage
     from tfbus.bag.writer import write_bag

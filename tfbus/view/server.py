@@ -670,12 +670,11 @@ class TfPage:
         as line segments in :data:`TRAIL_COLOUR`, and a line saying its points and span
         or tf2's message. Called by :meth:`draw` (the caller holds the lock)."""
         frame = self.trail_choice
-        self.trail = None
+        trail: Trail | None = None
         segments: npt.NDArray[np.float64] = np.zeros((0, 2, 3))
         value = ""
         if frame is not None and core is not None and scene.fixed_frame is not None:
             trail = self._trails.sample(core, scene.fixed_frame, frame, self.trail_seconds)
-            self.trail = trail
             if trail.error is not None:
                 value = f"<p>trail of {_h(frame)}: {_h(trail.error)}</p>"
             else:
@@ -684,6 +683,9 @@ class TfPage:
                          f"{_h(scene.fixed_frame)}: {len(trail.points)} points over "
                          f"{span:.2f} s</p>")
                 segments = trail.segments()
+        # Set once, sampled: a reader in another thread (a test's, an embedding app's)
+        # sees the trail drawn before or this one, never None while one is drawn.
+        self.trail = trail
         if self._trail_error:
             value += f"<p style='color:#d03030'>{_h(self._trail_error)}</p>"
         colours = np.empty((len(segments), 2, 3), dtype=np.uint8)
