@@ -8,6 +8,7 @@ Every Zenoh session here uses explicit 127.0.0.1 endpoints with multicast scouti
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import queue
@@ -718,6 +719,138 @@ async def test_a_latched_message_that_reached_no_one_is_delivered_by_the_reply()
         assert fleet["robot3"].can_transform("base", "laser", Time(0))
         assert tr.statistics().duplicates == 1
         assert fleet.statistics().messages == 2
+
+
+@pytest.mark.anyio
+async def test_drained_samples_in_order_are_taken_inline_and_counted_as_each_one_alone() -> None:
+    """The receive loop takes a sample of a data key it has had a valid sample on, whose
+    payload is a TFMessage the compiled decoder reads, numbered next in its stream with
+    no reply of it delivered at or after that number, without the per-payload path
+    (``_receive``, ``SequenceTracker.observe``). What it delivers and counts is what the
+    per-payload path delivers and counts for the same entries, taken alone (a transport
+    with no compiled decoder), entry by entry: in order, a repeat, a gap, a reply ahead
+    of the live stream and the live payloads it already held, a second sender, a
+    malformed payload, a refused key, a clock, a topic nobody follows (its stream then
+    not remembered as delivered) and the same stream once somebody does."""
+    from tfbus.messages import Clock
+    from tfbus.subscription import CallbackSubscription
+    from tfbus.transports.zenoh import transport as zt
+
+    encoder = ZenohTransport(name="encoder")
+
+    def pay(message: object, sender: int, seq: int) -> bytes:
+        return encoder._codec.encode(message, sender=sender, seq=seq)
+
+    keys = encoder._keys
+    tf_key, other_key, clock_key = keys.data("/tf"), keys.data("/other"), keys.data("/clock")
+    latch_key = keys.latch("n1", "/tf")
+
+    def tf(n: int) -> TFMessage:
+        return TFMessage((ts("laser", n, 0.1 * n),))
+
+    entries: list[tuple[int, str, bytes]] = [
+        (zt._SAMPLE, tf_key, pay(tf(1), 5, 1)),  # the key's first: per payload
+        (zt._SAMPLE, tf_key, pay(tf(2), 5, 2)),
+        (zt._SAMPLE, tf_key, pay(tf(3), 5, 3)),
+        (zt._SAMPLE, tf_key, pay(tf(3), 5, 3)),  # the same number again: a reset
+        (zt._SAMPLE, tf_key, pay(tf(6), 5, 6)),  # two lost
+        (zt._REPLY, latch_key, pay(tf(8), 5, 8)),  # a reply ahead of the live stream
+        (zt._SAMPLE, tf_key, pay(tf(7), 5, 7)),  # held by the reply: duplicates
+        (zt._SAMPLE, tf_key, pay(tf(8), 5, 8)),
+        (zt._SAMPLE, tf_key, pay(tf(9), 5, 9)),
+        (zt._SAMPLE, tf_key, pay(tf(1), 6, 1)),  # another sender's stream
+        (zt._SAMPLE, tf_key, pay(tf(2), 6, 2)),
+        (zt._SAMPLE, tf_key, HEAD + b"\x93junk"),  # malformed
+        (zt._SAMPLE, "elsewhere/tf", pay(tf(3), 6, 3)),  # not this bus's key
+        (zt._SAMPLE, tf_key, pay(tf(3), 6, 3)),
+        (zt._SAMPLE, clock_key, pay(Clock(Time(4)), 5, 1)),
+        (zt._SAMPLE, clock_key, pay(Clock(Time(5)), 5, 2)),
+        (zt._SAMPLE, other_key, pay(tf(1), 7, 1)),  # nobody follows /other yet
+        (zt._SAMPLE, other_key, pay(tf(2), 7, 2)),
+    ]
+    followed = (zt._SAMPLE, other_key, pay(tf(1), 8, 1))  # a whole stream from 1
+    unfollowed = (zt._SAMPLE, other_key, pay(tf(2), 8, 2))  # taken inline, reaching no one
+    later = [(zt._REPLY, keys.latch("n2", "/other"), pay(tf(2), 7, 2)),  # news: unseen
+             (zt._SAMPLE, other_key, pay(tf(3), 7, 3)),
+             (zt._REPLY, keys.latch("n3", "/other"), pay(tf(2), 8, 2)),  # news: unseen
+             (zt._SAMPLE, other_key, pay(tf(3), 8, 3)),
+             (zt._SAMPLE, tf_key, pay(tf(10), 5, 10))]  # fmt: skip
+
+    async def run(compiled: bool) -> tuple[list[tuple[str, object]], dict[str, int], int]:
+        tr = ZenohTransport(name="rx")
+        if not compiled:
+            tr._tf_decoder = None
+        per_payload = 0
+        receive = tr._receive
+
+        def counted(*args: Any) -> object | None:
+            nonlocal per_payload
+            per_payload += 1
+            return receive(*args)
+
+        tr._receive = counted  # type: ignore[method-assign]
+        got: list[tuple[str, object]] = []
+        async with Bus() as bus:
+            for topic in ("/tf", "/clock"):
+                bus.subscribe_callback(topic, lambda m, t=topic: got.append((t, m)))
+            def other() -> CallbackSubscription:
+                return bus.subscribe_callback("/other", lambda m: got.append(("/other", m)))
+
+            for entry in [*entries, followed, unfollowed]:  # one entry a batch
+                following = other() if entry is followed else None
+                tr._inbox.append(entry)
+                assert not tr._drain(bus, True)
+                if following is not None:
+                    following.close()
+            other()
+            tr._inbox.extend(later)  # one batch
+            assert not tr._drain(bus, True)
+        stats = dataclasses.asdict(tr.statistics())
+        return got, stats, per_payload
+
+    inline, inline_stats, inline_calls = await run(compiled=True)
+    alone, alone_stats, alone_calls = await run(compiled=False)
+    if wire._compiled_tf is None:
+        pytest.skip("no compiled core: every payload takes the per-payload path")
+    assert inline == alone and inline_stats == alone_stats
+    assert [m for t, m in inline if t == "/tf"] == [
+        tf(1), tf(2), tf(3), tf(3), tf(6), tf(8), tf(9), tf(1), tf(2), tf(3), tf(10)]
+    assert [t for t, _ in inline].count("/clock") == 2
+    assert [m for t, m in inline if t == "/other"] == [tf(1), tf(2), tf(3), tf(2), tf(3)]
+    assert (inline_stats["received"], inline_stats["delivered"]) == (25, 21)
+    assert (inline_stats["lost"], inline_stats["resets"], inline_stats["duplicates"]) == (2, 1, 2)
+    assert (inline_stats["malformed"], inline_stats["refused_keys"]) == (1, 1)
+    assert inline_stats["batches"] == len(entries) + 3
+    # taken inline: /tf 2, 3, 9, 10 of sender 5 and 2, 3 of sender 6; /other 2 and 3 of
+    # senders 7 and 8 (each 2 reaching no one, each 3 after the reply of 2 delivered)
+    assert alone_calls == len(entries) + 2 + len(later)
+    assert inline_calls == alone_calls - 10
+
+
+def test_a_sample_over_the_inbox_bound_drops_the_oldest_and_is_counted() -> None:
+    """Zenoh's thread queues each sample for the event loop in a bounded inbox: past
+    ``max_pending`` entries the oldest is dropped and counted in ``overflow``, and the
+    loop's wake-up is asked for once until it is served."""
+    from types import SimpleNamespace
+
+    from tfbus.transports._base import ThreadWakeup
+
+    tr = ZenohTransport(name="rx", max_pending=3)
+    key = tr._keys.data("/tf")
+
+    def sample(n: int) -> Any:
+        payload = SimpleNamespace(to_bytes=lambda: bytes([n]))
+        return SimpleNamespace(payload=payload, kind=zenoh.SampleKind.PUT, key_expr=key)
+
+    wakeup = tr._wakeup = ThreadWakeup()
+    try:
+        for n in range(1, 6):
+            tr._on_sample(sample(n))
+        assert [p for _, _, p in tr._inbox] == [b"\x03", b"\x04", b"\x05"]
+        assert tr.statistics().overflow == 2
+        assert wakeup._r.recv(16) == b"\0"  # one wake-up for the burst
+    finally:
+        wakeup.close()
 
 
 # -- bus specs and errors ----------------------------------------------------------------

@@ -77,4 +77,4 @@ def test_sequence_tracker_tells_a_late_joiner_reply_from_news() -> None:
     small = SequenceTracker(max_senders=2)
     for sender in range(1, 10):
         assert small.reply_is_news(sender, topic, 1)
-    assert len(small._replied) <= 2
+    assert len(small.replied_seq) <= 2

@@ -159,6 +159,19 @@ class Decoded(NamedTuple):
     message: object
 
 
+class CompiledTFDecoder(NamedTuple):
+    """:meth:`WireCodec.tf_decoder`: the compiled decoder of a TFMessage payload and the
+    arguments it takes after the payload (the codec's limits, the format's magic byte
+    and version)."""
+
+    decode: Callable[[bytes, int, int, int, int, int], tuple[int, int, TFMessage] | None]
+    max_bytes: int
+    max_transforms: int
+    max_id: int
+    magic: int
+    version: int
+
+
 class _OutEnvelope(msgspec.Struct, array_like=True):
     sender: int
     seq: int
@@ -288,6 +301,19 @@ class WireCodec:
         return _payload(self._encoder.encode, message, sender, seq)
 
     # -- decoding -------------------------------------------------------------------
+
+    def tf_decoder(self) -> CompiledTFDecoder | None:
+        """The first step of :meth:`decode` for a TFMessage, to be called per payload
+        without this method's Python frame: ``decode(payload, max_bytes, max_transforms,
+        max_id, magic, version)`` with this codec's limits answers ``(sender, seq,
+        TFMessage)`` for a ``bytes`` payload of a TFMessage in the form tfbus writes it
+        (what :meth:`decode` returns for it, equal: tested), None for any other payload,
+        which :meth:`decode` then checks and decodes (raising what is wrong with it).
+        None without the compiled core."""
+        if _compiled_tf is None:
+            return None
+        return CompiledTFDecoder(_compiled_tf, self._max_bytes, self._max_transforms,
+                                 self._max_id, MAGIC, WIRE_VERSION)  # fmt: skip
 
     def decode(self, payload: bytes | bytearray | memoryview) -> Decoded:
         """Decode one payload; nothing else than a :class:`WireError` ever escapes.

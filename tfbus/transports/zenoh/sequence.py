@@ -44,9 +44,14 @@ class SequenceTracker:
             raise ValueError("max_gap and max_senders must be at least 1")
         self.max_gap = max_gap
         self.max_senders = max_senders
-        self._last: dict[tuple[int, str], int] = {}
+        self.last_seq: dict[tuple[int, str], int] = {}
+        """The last number received of each stream ``(sender, topic)``."""
         self._whole: set[tuple[int, str]] = set()  # streams received 1, 2, ... without a gap
-        self._replied: dict[tuple[int, str], int] = {}  # number of the last reply delivered
+        self.replied_seq: dict[tuple[int, str], int] = {}
+        """The number of the last reply delivered of each stream that had one. A
+        receive loop that finds a live payload numbered ``last_seq + 1`` of a stream
+        whose ``replied_seq`` is lower (or absent) may store its number in ``last_seq``
+        itself: what :meth:`observe` and :meth:`live_is_news` do with it."""
 
     def observe(self, sender: int, topic: str, seq: int) -> tuple[int, bool]:
         """Record ``seq`` of the stream ``(sender, topic)``: ``(lost, reset)``.
@@ -55,7 +60,7 @@ class SequenceTracker:
         order or at the stream's start); ``reset`` is True when the step is implausible.
         """
         key = (sender, topic)
-        table = self._last
+        table = self.last_seq
         last = table.get(key)
         if last is None:
             if len(table) >= self.max_senders:
@@ -71,7 +76,7 @@ class SequenceTracker:
         self._whole.discard(key)
         if 1 < step <= self.max_gap + 1:
             return step - 1, False
-        self._replied.pop(key, None)  # a restarted stream numbers from 1 again
+        self.replied_seq.pop(key, None)  # a restarted stream numbers from 1 again
         if seq == 1:
             self._whole.add(key)
         return 0, True
@@ -82,20 +87,20 @@ class SequenceTracker:
         ``seq`` or later was delivered; a reply that is news is remembered for
         :meth:`live_is_news` and the next replies."""
         key = (sender, topic)
-        if key in self._whole and self._last[key] >= seq:
+        if key in self._whole and self.last_seq[key] >= seq:
             return False
-        replied = self._replied.get(key)
+        replied = self.replied_seq.get(key)
         if replied is not None and seq <= replied:
             return False
-        if len(self._replied) >= self.max_senders:
-            self._replied.clear()
-        self._replied[key] = seq
+        if len(self.replied_seq) >= self.max_senders:
+            self.replied_seq.clear()
+        self.replied_seq[key] = seq
         return True
 
     def live_is_news(self, sender: int, topic: str, seq: int) -> bool:
         """Whether a live payload numbered ``seq`` (already :meth:`observe` d) is not
         one that a delivered reply already held (numbered ``seq`` or later)."""
-        return seq > self._replied.get((sender, topic), 0)
+        return seq > self.replied_seq.get((sender, topic), 0)
 
     def unseen(self, sender: int, topic: str) -> None:
         """A payload of the stream ``(sender, topic)`` reached no one (nothing was
@@ -103,21 +108,21 @@ class SequenceTracker:
         copy a duplicate, so a reply or live payload carrying it is news again."""
         key = (sender, topic)
         self._whole.discard(key)
-        self._replied.pop(key, None)
+        self.replied_seq.pop(key, None)
 
     def forget(self, sender: int) -> None:
         """Drop every stream of ``sender`` (e.g. when that node went away)."""
-        for key in [k for k in self._last if k[0] == sender]:
-            del self._last[key]
+        for key in [k for k in self.last_seq if k[0] == sender]:
+            del self.last_seq[key]
             self._whole.discard(key)
-        for key in [k for k in self._replied if k[0] == sender]:
-            del self._replied[key]
+        for key in [k for k in self.replied_seq if k[0] == sender]:
+            del self.replied_seq[key]
 
     def _clear(self) -> None:
-        self._last.clear()
+        self.last_seq.clear()
         self._whole.clear()
-        self._replied.clear()
+        self.replied_seq.clear()
 
     def __len__(self) -> int:
         """The number of streams tracked now."""
-        return len(self._last)
+        return len(self.last_seq)
