@@ -3,17 +3,18 @@ the turtle bag and from a live buffer; the screenshot is not blank, the frame na
 the page's text, a frame whose broadcaster stopped is shown stale then hidden, and an id
 with markup stays text.
 
-Chromium runs as a child process in a session of its own with a fresh profile; after
-each run (and when it outlives the bound) the process group it leads is ended by its PID
-and the profile removed (``headless_chromium.end_chromium``); everything is on 127.0.0.1.
+Chromium runs as a child process in a session of its own with a fresh profile, driven
+through CDP (``tests/view/cdp.py``: every wait on the page bounded); when it is done (or a
+wait outlives its bound) the process group it leads is ended by its PID and the profile
+removed (``headless_chromium.end_chromium``); everything is on 127.0.0.1.
 """
 
 from __future__ import annotations
 
 import html
 import io
+import json
 import re
-import subprocess
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -35,49 +36,54 @@ from tfbus.view.timeline import BagTimeline  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--window-size=1280,800", "--virtual-time-budget=6000"]
-
-
-def _chromium(exe: str, url: str, *extra: str) -> subprocess.CompletedProcess[bytes]:
-    """One headless Chromium run on ``url``, with a fresh profile, ended with the
-    processes it started and its profile removed (``headless_chromium.run_headless``: a
-    run that outlives 60 s is run again, at most 3 times). It must exit with status 0."""
-    from headless_chromium import run_headless
-
-    try:
-        done = run_headless(exe, [*FLAGS, *extra], url, prefix="tfbus-view-chromium-")
-    except TimeoutError as exc:
-        pytest.fail(str(exc))
-    assert done.returncode == 0, done.stderr[-2000:]
-    return done
-
-
 def dom(exe: str, url: str, until: str) -> str:
-    """The page's DOM after the viser client connected and drew what the server sent:
-    loaded again (at most 4 times) while ``until`` is not in it yet (a loaded machine can
-    end Chromium's virtual-time budget before the websocket delivered the panel)."""
-    for _ in range(4):
-        text = _chromium(exe, url, "--dump-dom").stdout.decode("utf-8", "replace")
-        if until in text:
-            break
-    return text
+    """The page's DOM once ``until`` is in it: one headless Chromium opens ``url`` through
+    CDP (``tests/view/cdp.py``) and the DOM is read again until the viser client has drawn
+    what the server sent (at most 60 s; a page that never shows it fails with that
+    text). A wait on the page itself, not on Chromium's virtual-time budget: a loaded
+    machine made a cold ``--dump-dom`` run outlive its bound three times over."""
+    from cdp import Chromium
+
+    with Chromium(exe) as c:
+        c.open(url)
+        c.wait(f"document.documentElement.outerHTML.includes({json.dumps(until)})")
+        return c.html()
 
 
-def screenshot(exe: str, url: str, path: Path) -> Any:
-    """A screenshot of ``url``, taken again (at most 4 times) while it is one flat colour: on
-    a loaded machine Chromium's virtual-time budget can end before the websocket delivered
-    the scene (CI saw one all-white shot under ``nox``). A page that never draws still fails
-    the caller's assertions on the last shot."""
-    for _ in range(4):
-        _chromium(exe, url, f"--screenshot={path}")
-        assert path.stat().st_size > 0
-        shot = Image.open(io.BytesIO(path.read_bytes()))
-        lo, hi = shot.convert("L").getextrema()
-        if hi - lo > 100:
-            break
-    return shot
+SCENE = (330, 260, 930, 740)
+"""A box of the 1280 x 800 page that only the 3D scene draws into (left of the side
+panel, below viser's notices, above its orientation gizmo): flat until the scene is
+drawn."""
+
+
+def _scene_drawn(shot: Any) -> bool:
+    """Whether the scene box of ``shot`` holds more than one flat colour (grid lines,
+    axes, labels drawn)."""
+    lo, hi = shot.convert("L").crop(SCENE).getextrema()
+    return bool(hi - lo > 100)
+
+
+def screenshot(exe: str, url: str, path: Path, until: str, timeout: float = 60.0) -> Any:
+    """A screenshot of ``url`` (also written to ``path``) in one headless Chromium driven
+    through CDP, once the page's text holds ``until`` (what the server sent is there)
+    and its scene is drawn (:func:`_scene_drawn`; the viser client fades its scene in
+    after loading and draws as the websocket delivers it, slower on a loaded machine):
+    each waited for at most ``timeout`` seconds. The last shot either way: a page that
+    never draws fails the caller's assertions on it."""
+    from cdp import Chromium
+
+    with Chromium(exe) as c:
+        # the viewport of 1280 x 800 CSS pixels that ``--window-size`` gives ``--screenshot``
+        c.call("Emulation.setDeviceMetricsOverride", width=1280, height=800,
+               deviceScaleFactor=1, mobile=False)
+        c.open(url)
+        c.wait(f"document.body.innerText.includes({json.dumps(until)})", timeout)
+        deadline = time.monotonic() + timeout
+        while True:
+            shot = Image.open(io.BytesIO(c.screenshot(path)))
+            if _scene_drawn(shot) or time.monotonic() > deadline:
+                return shot
+            time.sleep(0.2)
 
 
 def row(page_dom: str, frame_text: str) -> list[str]:
@@ -93,9 +99,10 @@ def test_bag_page_in_chromium(chromium: str, page: TfPage, tmp_path: Path) -> No
     player.seek(10.0)
     player.render()
     url = f"http://127.0.0.1:{page.port}/"
-    shot = screenshot(chromium, url, tmp_path / "turtle.png")
+    shot = screenshot(chromium, url, tmp_path / "turtle.png", "bag time 10.00 / 21.50 s")
     grey = shot.convert("L")
     assert grey.size == (1280, 800)
+    assert _scene_drawn(shot)  # the scene itself, not only the panel
     lo, hi = grey.getextrema()
     assert hi - lo > 100  # not a blank canvas: grid lines, axes, labels, the panel
     colours = len(shot.convert("RGB").getcolors(maxcolors=1 << 24) or [])
