@@ -36,6 +36,8 @@ from tfbus.view.timeline import BagTimeline  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 TURTLE = ROOT / "tests" / "data" / "webviz_turtle_tf_example.bag"
+
+
 def dom(exe: str, url: str, until: str) -> str:
     """The page's DOM once ``until`` is in it: one headless Chromium opens ``url`` through
     CDP (``tests/view/cdp.py``) and the DOM is read again until the viser client has drawn
