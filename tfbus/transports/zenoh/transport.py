@@ -920,14 +920,7 @@ class ZenohTransport:
         if newest is not None:
             newest.offer(payload)
             return
-        # _push, inline: a Python frame fewer on every message in Zenoh's thread
-        inbox = self._inbox
-        if len(inbox) >= self._max_pending:
-            self._stats.overflow += 1  # deque(maxlen) drops the oldest entry
-        inbox.append((_SAMPLE, key, payload))
-        wakeup = self._wakeup
-        if wakeup is not None:
-            wakeup.wake()
+        self._push((_SAMPLE, key, payload))
 
     def _on_reply(self, reply: zenoh.Reply) -> None:
         sample = reply.ok
