@@ -7,7 +7,8 @@
 TFMessage payload of tfbus's own wire in the form tfbus writes it (the fast path of
 :meth:`tfbus.codecs.native.WireCodec.decode`; msgspec's schema decodes everything else);
 ``_clock_stamp_native`` reads the stamp of a ``Clock`` payload of that wire (the fast path
-of :func:`tfbus.transports.zenoh.transport.clock_stamp`), ``_tf_to_ros1`` writes a ROS 1
+of :func:`tfbus.transports.zenoh.transport.clock_stamp`), ``_clock_from_cdr`` a ROS 2
+``Clock`` sample (the fast path of :func:`tfbus.codecs.cdr.decode_clock`), ``_tf_to_ros1`` writes a ROS 1
 ``TFMessage`` of the common form (the fast path of :func:`tfbus.codecs.ros1._encode_struct`
 and ``TFCodec.encode_framed``), and ``_tf_to_native`` writes a TFMessage payload of tfbus's
 own wire of that form, the bytes msgspec writes (the fast path of
@@ -26,7 +27,8 @@ from libc.stdint cimport int64_t
 
 from tfbus.core._ccore cimport _plain_values, _time_of
 from tfbus.core._cresults cimport PyObject_GC_UnTrack, _named, _named1, _named3, _named4
-from tfbus.messages import Header, Quaternion, TFMessage, Transform, TransformStamped, Vector3
+from tfbus.messages import (Clock, Header, Quaternion, TFMessage, Transform, TransformStamped,
+                            Vector3)
 from tfbus.time import Time
 
 from struct import error as _StructError
@@ -544,6 +546,38 @@ def _clock_stamp_native(bytes payload, int magic, int version):
         return -1
     return ns
 
+
+
+cdef inline uint32_t _u32be(const unsigned char* p) noexcept:
+    return (<uint32_t>p[0] << 24) | (<uint32_t>p[1] << 16) | (<uint32_t>p[2] << 8) | p[3]
+
+
+def _clock_from_cdr(object data):
+    """The :class:`~tfbus.messages.Clock` of a serialized ``rosgraph_msgs/msg/Clock`` (the
+    encapsulation header, then ``builtin_interfaces/Time``: int32 ``sec``, uint32
+    ``nanosec``; XCDR1 or ``PLAIN_CDR2``, either byte order), built in C: what
+    :func:`tfbus.codecs.cdr.decode_clock` returns for it (its stamp ``sec * 10**9 +
+    nanosec`` ns). None for anything that function refuses or that is not ``bytes`` (the
+    caller then asks it, for its answer or its ``WireDecodeError``: equal wherever this
+    one answers, tested)."""
+    if type(data) is not bytes:
+        return None
+    cdef const unsigned char* p = <const unsigned char*>PyBytes_AS_STRING(data)
+    cdef Py_ssize_t size = PyBytes_GET_SIZE(data)
+    cdef uint32_t sec, nanosec
+    if size < 12 or p[0] != 0:
+        return None
+    if p[1] == 0x01 or p[1] == 0x07:  # CDR_LE, CDR2_LE
+        sec = _u32le(p + 4)
+        nanosec = _u32le(p + 8)
+    elif p[1] == 0x00 or p[1] == 0x06:  # CDR_BE, CDR2_BE
+        sec = _u32be(p + 4)
+        nanosec = _u32be(p + 8)
+    else:
+        return None
+    if sec > 2147483647 or nanosec >= 1000000000:  # a negative int32 sec; not normalized
+        return None
+    return _named1(Clock, _time_of(<int64_t>sec * 1000000000 + nanosec))
 
 # -- writing a ROS 1 TFMessage -----------------------------------------------------------
 

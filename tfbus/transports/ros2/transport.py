@@ -102,7 +102,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from tfbus.codecs.cdr import decode_clock, decode_tf, encode_clock, encode_tf
+from tfbus.codecs.cdr import _compiled_clock, decode_clock, decode_tf, encode_clock, encode_tf
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -645,6 +645,7 @@ class Ros2Transport:
         stats = self._stats
         wake = False
         newest = self._newest
+        read = _compiled_clock
         with newest.lock:
             samples = _clayer.ddspy_take(reader._ref, _ANY_STATE, self._max_batch)
             if isinstance(samples, int) or not samples:
@@ -653,11 +654,15 @@ class Ros2Transport:
                 if not info.valid_data:
                     continue  # a writer left (unregister/dispose): no data
                 stats.received += 1
-                try:
-                    message = decode_clock(data)
-                except WireDecodeError:
-                    stats.malformed += 1
-                    continue
+                # the compiled reader first (no Python frame); decode_clock's own checks
+                # for what it does not read (its answer or its WireDecodeError)
+                message = read(data) if read is not None else None
+                if message is None:
+                    try:
+                        message = decode_clock(data)
+                    except WireDecodeError:
+                        stats.malformed += 1
+                        continue
                 wake = newest.offer(message, stats) or wake
         return wake
 
