@@ -6,13 +6,15 @@ Needs the ``tfbus[view]`` extra (viser); without it the command says so in one l
 
 from __future__ import annotations
 
+import gc
 import importlib
 import signal
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 import click
 
@@ -32,6 +34,35 @@ __all__ = ["command"]
 NEEDS_EXTRA = "the 'viser' package is not installed: pip install 'tfbus[view]'"
 CLOUD_SCHEMES = ("zenoh", "memory")
 """The ``--bus`` schemes that carry PointCloud2 (tfbus's own wire; in-process)."""
+
+YOUNG_GC_THRESHOLD: Final = 10_000
+"""The garbage collector's young-generation threshold (the first of
+``gc.set_threshold``'s values: container objects allocated, less those freed, between two
+collections of the young generation) while ``tfbus view`` serves, when the process's own
+is lower (CPython's default is 700). A redraw of a live page makes several hundred
+container objects that live until the next redraw (the scene's frame views and poses,
+viser's messages): at the default nearly every redraw set off a collection of the young
+generation, which walked the scene it had just made, and they moved on to the older
+generations' collections. Most of them are freed by reference counting before a
+collection comes round at this threshold, so far fewer collections walk about as many
+live objects each (:func:`young_gc_threshold`)."""
+
+
+@contextmanager
+def young_gc_threshold(threshold: int) -> Iterator[None]:
+    """Raise the garbage collector's young-generation threshold to ``threshold`` for the
+    body, when it is lower (a threshold of 0, the collector disabled, is left so; the
+    older generations' thresholds are kept), and restore the thresholds found after it,
+    however it ends (an exception leaves as itself). Cyclic garbage waits for at most
+    ``threshold`` allocations more; nothing else changes (Python's ``gc`` module:
+    ``gc.set_threshold``)."""
+    before = gc.get_threshold()
+    if 0 < before[0] < threshold:
+        gc.set_threshold(threshold, *before[1:])
+    try:
+        yield
+    finally:
+        gc.set_threshold(*before)
 
 
 @click.command("view")
@@ -231,13 +262,14 @@ def command(bag: Path | None, bus: str | None, fixed_frame: str | None, host: st
             fail(str(err))
         click.echo(f"tfbus view: Foxglove ws://{host}:{bridge.port}", err=True)
     try:
-        if bag is not None:
-            _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge, stop,
-                       clouds=clouds, record=record, fleet=fleet)
-        else:
-            _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics, bridge,
-                       stop, use_sim_time=use_sim_time, record=record,
-                       cloud_topics=cloud_topics)
+        with young_gc_threshold(YOUNG_GC_THRESHOLD):
+            if bag is not None:
+                _serve_bag(page, bag, fixed_frame, frame_timeout, paused, rate, tracks, bridge,
+                           stop, clouds=clouds, record=record, fleet=fleet)
+            else:
+                _serve_bus(page, bus or "zenoh", fixed_frame, frame_timeout, scan_topics,
+                           bridge, stop, use_sim_time=use_sim_time, record=record,
+                           cloud_topics=cloud_topics)
     finally:
         if record is not None:
             record.close()  # the recording in progress ends: its line is printed
