@@ -21,7 +21,8 @@ sleeps), phases 3 and 4 again with one headless Chromium page connected (started
 in a session of its own, ended by that id; skipped without ``chromium`` on PATH), whose CPU is not
 counted (it is another process). Prints the process CPU per wall second of each phase, the
 redraws a second and the mean time of one redraw, and the scans received, passed and
-drawn.
+drawn. Every phase runs with the garbage collector's young-generation threshold ``tfbus
+view`` serves with (:func:`tfbus.cli.view.young_gc_threshold`).
 
     .venv/bin/python benchmarks/bench_view.py [--seconds 5] [--frames 100]
 """
@@ -46,6 +47,7 @@ import numpy as np
 from tfbus import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 from tfbus.buffer import Buffer
 from tfbus.bus import Bus
+from tfbus.cli.view import YOUNG_GC_THRESHOLD, young_gc_threshold
 from tfbus.clock import SystemClock, every
 from tfbus.listener import TransformListener
 from tfbus.messages import TFMessage
@@ -202,14 +204,16 @@ def main() -> None:
     args = ap.parse_args()
     FRAMES = args.frames
     s = args.seconds
-    base = anyio.run(phase, s, None, False)
-    page = TfPage("127.0.0.1", 0)
-    try:
-        idle = anyio.run(phase, s, page, False)
-    finally:
-        page.close()
-    view, shown = _page_phase(s, False)
-    scans, _ = _page_phase(s, True)
+    # every phase with the garbage collector's thresholds the command serves with
+    with young_gc_threshold(YOUNG_GC_THRESHOLD):
+        base = anyio.run(phase, s, None, False)
+        page = TfPage("127.0.0.1", 0)
+        try:
+            idle = anyio.run(phase, s, page, False)
+        finally:
+            page.close()
+        view, shown = _page_phase(s, False)
+        scans, _ = _page_phase(s, True)
     print(f"live source {RATE:.0f} Hz x {FRAMES} frames + {SCAN_RATE:.0f} Hz x {BEAMS}-beam "
           f"scans on an in-process bus, {s:g} s wall per phase")
     print(f"  source + listener:        {100 * base.cpu:5.1f} % of one core")
