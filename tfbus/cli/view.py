@@ -39,10 +39,10 @@ YOUNG_GC_THRESHOLD: Final = 10_000
 """The garbage collector's young-generation threshold (the first of
 ``gc.set_threshold``'s values: container objects allocated, less those freed, between two
 collections of the young generation) while ``tfbus view`` serves, when the process's own
-is lower (CPython's default is 700). A redraw of a live page makes several hundred
-container objects that live until the next redraw (the scene's frame views and poses,
-viser's messages): at the default nearly every redraw set off a collection of the young
-generation, which walked the scene it had just made, and they moved on to the older
+is lower (CPython's default is 700, 2000 from Python 3.13). A redraw of a live page makes
+several hundred container objects that live until the next redraw (the scene's frame
+views and poses, viser's messages): at 700 nearly every redraw set off a collection of the
+young generation, which walked the scene it had just made, and they moved on to the older
 generations' collections. Most of them are freed by reference counting before a
 collection comes round at this threshold, so far fewer collections walk about as many
 live objects each (:func:`young_gc_threshold`)."""

@@ -8,8 +8,8 @@ TFMessage payload of tfbus's own wire in the form tfbus writes it (the fast path
 :meth:`tfbus.codecs.native.WireCodec.decode`; msgspec's schema decodes everything else);
 ``_clock_stamp_native`` reads the stamp of a ``Clock`` payload of that wire (the fast path
 of :func:`tfbus.transports.zenoh.transport.clock_stamp`), ``_clock_from_cdr`` a ROS 2
-``Clock`` sample (the fast path of :func:`tfbus.codecs.cdr.decode_clock`), ``_tf_to_ros1`` writes a ROS 1
-``TFMessage`` of the common form (the fast path of :func:`tfbus.codecs.ros1._encode_struct`
+``Clock`` sample (the fast path of :func:`tfbus.codecs.cdr.decode_clock`), ``_tf_to_ros1``
+writes a ROS 1 ``TFMessage`` of the common form (the fast path of :func:`tfbus.codecs.ros1._encode_struct`
 and ``TFCodec.encode_framed``), and ``_tf_to_native`` writes a TFMessage payload of tfbus's
 own wire of that form, the bytes msgspec writes (the fast path of
 :meth:`tfbus.codecs.native.WireCodec.encode`).
@@ -547,7 +547,6 @@ def _clock_stamp_native(bytes payload, int magic, int version):
     return ns
 
 
-
 cdef inline uint32_t _u32be(const unsigned char* p) noexcept:
     return (<uint32_t>p[0] << 24) | (<uint32_t>p[1] << 16) | (<uint32_t>p[2] << 8) | p[3]
 
@@ -578,6 +577,7 @@ def _clock_from_cdr(object data):
     if sec > 2147483647 or nanosec >= 1000000000:  # a negative int32 sec; not normalized
         return None
     return _named1(Clock, _time_of(<int64_t>sec * 1000000000 + nanosec))
+
 
 # -- writing a ROS 1 TFMessage -----------------------------------------------------------
 
