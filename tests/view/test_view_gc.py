@@ -7,6 +7,7 @@ the process its thresholds back when it returns."""
 from __future__ import annotations
 
 import gc
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -59,6 +60,19 @@ def test_an_exception_leaves_as_itself_with_the_thresholds_restored() -> None:
     assert gc.get_threshold() == (700, 10, 10)
 
 
+@pytest.fixture
+def _signal_handlers() -> Iterator[None]:
+    """The command installs its own SIGINT and SIGTERM handlers: the test's process gets
+    its own back."""
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+
+
+@pytest.mark.usefixtures("_signal_handlers")
 def test_the_view_command_serves_under_the_raised_threshold(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
