@@ -102,7 +102,14 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from tfbus.codecs.cdr import _compiled_clock, decode_clock, decode_tf, encode_clock, encode_tf
+from tfbus.codecs.cdr import (
+    _compiled_clock,
+    _decode_clock_struct,
+    decode_clock,
+    decode_tf,
+    encode_clock,
+    encode_tf,
+)
 from tfbus.errors import TransportError, WireDecodeError, WireEncodeError
 from tfbus.messages import TFMessage, TransformStamped
 from tfbus.topics import TF_STATIC_TOPIC, TF_TOPIC
@@ -654,12 +661,13 @@ class Ros2Transport:
                 if not info.valid_data:
                     continue  # a writer left (unregister/dispose): no data
                 stats.received += 1
-                # the compiled reader first (no Python frame); decode_clock's own checks
-                # for what it does not read (its answer or its WireDecodeError)
+                # decode_clock's two readings, each asked once: the compiled one (no
+                # Python frame), then the struct one for what it does not read (its answer
+                # or its WireDecodeError)
                 message = read(data) if read is not None else None
                 if message is None:
                     try:
-                        message = decode_clock(data)
+                        message = _decode_clock_struct(data)
                     except WireDecodeError:
                         stats.malformed += 1
                         continue
